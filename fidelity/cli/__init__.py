@@ -1,0 +1,60 @@
+"""The ``fidelity`` command line: a thin layer over the library.
+
+Each subcommand lives in its own module ``fidelity/cli/<name>.py`` and is registered in
+:data:`COMMANDS`; modules are imported only when their command runs (or for ``--help``), so a
+slow import (Mitsuba, onnxruntime) never delays another command.
+
+Errors caused by input (:class:`fidelity.errors.FidelityError`) print one line on stderr and
+exit with code 2. ``fidelity gate`` additionally uses exit code 1 for a failed gate.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from typing import Any
+
+import click
+
+from fidelity import __version__
+from fidelity.errors import FidelityError
+
+#: command name -> "module:attribute" of its click command.
+COMMANDS: dict[str, str] = {
+    "calibrate": "fidelity.cli.calibrate:calibrate",
+}
+
+
+class LazyGroup(click.Group):
+    """A click group whose subcommands are imported on first use."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(COMMANDS)
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        target = COMMANDS.get(cmd_name)
+        if target is None:
+            return None
+        module_name, attr = target.split(":")
+        return getattr(importlib.import_module(module_name), attr)
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except FidelityError as exc:
+            click.echo(f"fidelity: error: {exc}", err=True)
+            sys.exit(exc.exit_code)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="fidelity")
+def main() -> None:
+    """Colour fidelity of simulated cameras, and what its error costs object detectors.
+
+    \b
+    Start with:  fidelity check          (render the built-in camera, measure, predict, verdict)
+                 fidelity calibrate      (the SAFE-COLOR calibration table)
+    """
+
+
+__all__ = ["COMMANDS", "main"]

@@ -1,0 +1,36 @@
+"""Errors that reach the user.
+
+Every failure caused by input (a missing file, a corrupt image, an unknown name, an unreachable
+target) raises a :class:`FidelityError`. The command line prints its message as one line on
+stderr and exits with code 2; no traceback.
+"""
+
+from __future__ import annotations
+
+
+class FidelityError(Exception):
+    """An error caused by the user's input, with a message that names the input and the problem."""
+
+    exit_code: int = 2
+
+
+class InputFileError(FidelityError):
+    """A file is missing, unreadable, truncated or of the wrong kind."""
+
+
+class InvalidValueError(FidelityError):
+    """A value is out of its domain (NaN, out of range, wrong shape)."""
+
+
+class UnknownNameError(FidelityError):
+    """A name (method, transform, chart, camera, table) is not in its registry."""
+
+
+class UnreachableTargetError(FidelityError):
+    """A target ΔE cannot be reached by a transform inside its parameter range."""
+
+
+def unknown_name(kind: str, name: str, known: object) -> UnknownNameError:
+    """Build an :class:`UnknownNameError` listing the names that are known."""
+    names = ", ".join(sorted(str(k) for k in known))  # type: ignore[attr-defined]
+    return UnknownNameError(f"unknown {kind} {name!r}; known: {names}")

@@ -1,0 +1,75 @@
+"""Atomic file output and input checks shared by every command.
+
+Outputs are written to a temporary file in the destination folder and renamed into place, so a
+reader never sees a half-written file and an interrupted run leaves no partial output. Inputs are
+never written to: :func:`atomic_output` refuses a destination that is one of the declared inputs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+from fidelity.errors import InputFileError
+
+
+@contextlib.contextmanager
+def atomic_output(
+    path: str | os.PathLike[str], protect: Iterable[str | os.PathLike[str]] = ()
+) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it to ``path`` when the block succeeds.
+
+    ``protect`` lists input paths that must never be overwritten; naming one of them as output
+    raises :class:`InputFileError`.
+    """
+    target = Path(path)
+    for p in protect:
+        if Path(p).exists() and target.exists() and target.resolve() == Path(p).resolve():
+            raise InputFileError(f"{target}: refusing to write over an input file")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp" + target.suffix,
+                               dir=target.parent)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        os.replace(tmp_path, target)
+    finally:
+        if tmp_path.exists():
+            tmp_path.unlink()
+
+
+def write_text_atomic(path: str | os.PathLike[str], text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically and return the path."""
+    with atomic_output(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return Path(path)
+
+
+def write_bytes_atomic(path: str | os.PathLike[str], data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically and return the path."""
+    with atomic_output(path) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
+def write_json_atomic(path: str | os.PathLike[str], obj: Any) -> Path:
+    """Write ``obj`` as indented JSON (NaN is rejected: not valid JSON) atomically."""
+    return write_text_atomic(path, json.dumps(obj, indent=2, allow_nan=False) + "\n")
+
+
+def require_file(path: str | os.PathLike[str], what: str = "input file") -> Path:
+    """Return ``path`` as a :class:`Path` if it is an existing readable file, else raise."""
+    p = Path(path)
+    if not p.exists():
+        raise InputFileError(f"{p}: {what} does not exist")
+    if not p.is_file():
+        raise InputFileError(f"{p}: {what} is not a regular file")
+    if not os.access(p, os.R_OK):
+        raise InputFileError(f"{p}: {what} is not readable")
+    return p

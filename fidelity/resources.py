@@ -1,0 +1,35 @@
+"""Locate the data that ships with fidelity (charts, scene templates, package data).
+
+``charts/`` and ``scenes/`` live at the top of the source tree; a wheel carries them as
+``fidelity/_resources/``. Package data proper (calibration and prediction tables, built-in
+cameras) lives in ``fidelity/data/``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fidelity.errors import InputFileError
+
+_PACKAGE = Path(__file__).resolve().parent
+
+
+def resource_dir(kind: str) -> Path:
+    """Folder of shipped resources of ``kind`` (``"charts"``, ``"scenes"``, ``"data"``)."""
+    if kind == "data":
+        return _PACKAGE / "data"
+    for candidate in (_PACKAGE / "_resources" / kind, _PACKAGE.parent / kind):
+        if candidate.is_dir():
+            return candidate
+    raise InputFileError(f"resource folder {kind!r} not found next to the fidelity package")
+
+
+def shared_dir() -> Path | None:
+    """The project's shared data folder: ``$FIDELITY_SHARED`` or ``../shared`` beside the repo."""
+    import os
+
+    env = os.environ.get("FIDELITY_SHARED")
+    if env:
+        return Path(env) if Path(env).is_dir() else None
+    candidate = _PACKAGE.parent.parent / "shared"
+    return candidate if candidate.is_dir() else None
