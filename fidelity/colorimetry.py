@@ -1,0 +1,460 @@
+"""Colorimetry: sRGB transfer functions, sRGB <-> CIE XYZ <-> CIELAB, and colour differences.
+
+Conventions (the SAFE-COLOR conventions, ``shared/reference/safecolor.md``):
+
+- sRGB is IEC 61966-2-1:1999: piecewise transfer function with thresholds 0.04045 (encoded) and
+  0.0031308 (linear), exponent 2.4; primaries R (0.64, 0.33), G (0.30, 0.60), B (0.15, 0.06).
+- The RGB <-> XYZ matrix is derived from the primaries and the D65 chromaticity
+  (0.3127, 0.3290), so that sRGB white (1, 1, 1) maps to exactly L* = 100, a* = b* = 0.
+- CIELAB is CIE 1976 L*a*b* (CIE 15:2004) relative to D65 with the CIE 1931 2° observer, XYZ
+  scaled so that the white has Y = 1. The exact CIE constants ε = 216/24389 and κ = 24389/27.
+- ΔE00 is CIEDE2000 with kL = kC = kH = 1 (CIE 142-2001; Sharma, Wu & Dalal 2005).
+
+Every function is vectorised over any leading shape ``(..., 3)``; float32 input gives float32
+output and float64 gives float64 (other inputs are computed in float64). Inputs are never
+modified.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fidelity.errors import InvalidValueError, unknown_name
+
+__all__ = [
+    "CIE_EPSILON",
+    "CIE_KAPPA",
+    "DELTA_E_METHODS",
+    "MATRIX_LINEAR_SRGB_TO_XYZ",
+    "MATRIX_XYZ_TO_LINEAR_SRGB",
+    "WHITEPOINT_D65_XY",
+    "WHITEPOINT_D65_XYZ",
+    "delinearize_srgb",
+    "delta_e",
+    "delta_e_1976",
+    "delta_e_2000",
+    "delta_e_2000_components",
+    "lab_to_srgb",
+    "lab_to_xyz",
+    "linear_srgb_to_xyz",
+    "linearize_srgb",
+    "normalised_primary_matrix",
+    "srgb_to_lab",
+    "srgb_to_xyz",
+    "xyz_to_lab",
+    "xyz_to_linear_srgb",
+    "xyz_to_srgb",
+]
+
+FloatArray = NDArray[np.floating[Any]]
+
+#: CIE 15:2004 constants of the L* function: ε = (6/29)^3 and κ = (29/3)^3.
+CIE_EPSILON: float = 216.0 / 24389.0
+CIE_KAPPA: float = 24389.0 / 27.0
+
+#: CIE D65 chromaticity (CIE 1931 2° observer) as used by IEC 61966-2-1.
+WHITEPOINT_D65_XY: tuple[float, float] = (0.3127, 0.3290)
+
+_SRGB_PRIMARIES_XY = ((0.64, 0.33), (0.30, 0.60), (0.15, 0.06))
+
+
+def _xy_to_xyz(xy: ArrayLike) -> NDArray[np.float64]:
+    """CIE xy chromaticity to XYZ with Y = 1."""
+    x, y = np.asarray(xy, dtype=np.float64)
+    return np.array([x / y, 1.0, (1.0 - x - y) / y])
+
+
+def normalised_primary_matrix(
+    primaries_xy: ArrayLike, whitepoint_xy: ArrayLike
+) -> NDArray[np.float64]:
+    """The 3x3 matrix from linear RGB to XYZ for RGB primaries and a white point.
+
+    SMPTE RP 177-1993, section 3.3: the columns are the primaries' XYZ (Y = 1) scaled so that
+    RGB (1, 1, 1) maps to the white point's XYZ with Y = 1.
+
+    ``primaries_xy``: (3, 2) chromaticities of R, G, B; ``whitepoint_xy``: (2,).
+    """
+    p = np.asarray(primaries_xy, dtype=np.float64)
+    columns = np.stack([_xy_to_xyz(c) for c in p], axis=1)
+    scale = np.linalg.solve(columns, _xy_to_xyz(whitepoint_xy))
+    return columns * scale
+
+
+#: Linear sRGB -> XYZ (D65, Y of white = 1), derived from the IEC 61966-2-1 primaries.
+MATRIX_LINEAR_SRGB_TO_XYZ: NDArray[np.float64] = normalised_primary_matrix(
+    _SRGB_PRIMARIES_XY, WHITEPOINT_D65_XY
+)
+#: XYZ -> linear sRGB, the exact inverse of :data:`MATRIX_LINEAR_SRGB_TO_XYZ`.
+MATRIX_XYZ_TO_LINEAR_SRGB: NDArray[np.float64] = np.linalg.inv(MATRIX_LINEAR_SRGB_TO_XYZ)
+#: XYZ of the D65 white with Y = 1: (0.95046, 1, 1.08906).
+WHITEPOINT_D65_XYZ: NDArray[np.float64] = _xy_to_xyz(WHITEPOINT_D65_XY)
+
+MATRIX_LINEAR_SRGB_TO_XYZ.setflags(write=False)
+MATRIX_XYZ_TO_LINEAR_SRGB.setflags(write=False)
+WHITEPOINT_D65_XYZ.setflags(write=False)
+
+
+def _as_float(a: ArrayLike) -> FloatArray:
+    """``a`` as a float array: float32 and float64 kept, everything else as float64."""
+    arr = np.asarray(a)
+    if arr.dtype in (np.float32, np.float64):
+        return arr
+    return arr.astype(np.float64)
+
+
+def _check_last_axis(a: FloatArray, name: str) -> None:
+    if a.ndim == 0 or a.shape[-1] != 3:
+        raise InvalidValueError(f"{name} must have shape (..., 3), got {a.shape}")
+
+
+# --------------------------------------------------------------------------------------------
+# sRGB transfer function (IEC 61966-2-1:1999, section 5.2)
+# --------------------------------------------------------------------------------------------
+
+
+def linearize_srgb(v: ArrayLike) -> FloatArray:
+    """sRGB electro-optical transfer: encoded value V' -> linear value V.
+
+    IEC 61966-2-1: V = V'/12.92 for V' <= 0.04045, else ((V' + 0.055)/1.055)^2.4.
+    Domain: any real (values below 0.04045, negatives included, follow the linear segment;
+    values above 1 follow the power segment). Range: same extension of [0, 1].
+    """
+    x = _as_float(v)
+    dtype = x.dtype.type
+    power = np.power((np.maximum(x, dtype(0.04045)) + dtype(0.055)) / dtype(1.055), dtype(2.4))
+    return np.where(x <= dtype(0.04045), x / dtype(12.92), power)
+
+
+def delinearize_srgb(v: ArrayLike) -> FloatArray:
+    """sRGB inverse transfer: linear value V -> encoded value V'.
+
+    IEC 61966-2-1: V' = 12.92 V for V <= 0.0031308, else 1.055 V^(1/2.4) - 0.055.
+    Domain: any real (negatives follow the linear segment). Range: extension of [0, 1].
+    """
+    x = _as_float(v)
+    dtype = x.dtype.type
+    power = dtype(1.055) * np.power(np.maximum(x, dtype(0.0031308)), dtype(1.0 / 2.4)) - dtype(
+        0.055
+    )
+    return np.where(x <= dtype(0.0031308), x * dtype(12.92), power)
+
+
+# --------------------------------------------------------------------------------------------
+# sRGB <-> XYZ <-> CIELAB
+# --------------------------------------------------------------------------------------------
+
+
+def _matmul_last(a: FloatArray, m: NDArray[np.float64]) -> FloatArray:
+    return a @ m.T.astype(a.dtype, copy=False)
+
+
+def linear_srgb_to_xyz(rgb: ArrayLike) -> FloatArray:
+    """Linear sRGB (..., 3) -> CIE XYZ (..., 3), D65, Y of white = 1 (IEC 61966-2-1)."""
+    a = _as_float(rgb)
+    _check_last_axis(a, "rgb")
+    return _matmul_last(a, MATRIX_LINEAR_SRGB_TO_XYZ)
+
+
+def xyz_to_linear_srgb(xyz: ArrayLike) -> FloatArray:
+    """CIE XYZ (..., 3), D65, Y of white = 1 -> linear sRGB (..., 3), unclipped."""
+    a = _as_float(xyz)
+    _check_last_axis(a, "xyz")
+    return _matmul_last(a, MATRIX_XYZ_TO_LINEAR_SRGB)
+
+
+def srgb_to_xyz(rgb: ArrayLike) -> FloatArray:
+    """Encoded sRGB (..., 3), nominally [0, 1] -> CIE XYZ (..., 3) with Y of white = 1."""
+    return linear_srgb_to_xyz(linearize_srgb(rgb))
+
+
+def xyz_to_srgb(xyz: ArrayLike) -> FloatArray:
+    """CIE XYZ (..., 3), Y of white = 1 -> encoded sRGB (..., 3), unclipped."""
+    return delinearize_srgb(xyz_to_linear_srgb(xyz))
+
+
+def xyz_to_lab(xyz: ArrayLike, white: ArrayLike = WHITEPOINT_D65_XYZ) -> FloatArray:
+    """CIE XYZ -> CIE 1976 L*a*b* (CIE 15:2004, section 8.2.1).
+
+    ``xyz``: (..., 3) with the white ``white`` (3,) on the same scale (default D65, Y = 1).
+    Range: L* in [0, 100] for 0 <= Y <= Y_white; a*, b* unbounded.
+    """
+    a = _as_float(xyz)
+    _check_last_axis(a, "xyz")
+    dtype = a.dtype.type
+    t = a / np.asarray(white, dtype=a.dtype)
+    f = np.where(
+        t > dtype(CIE_EPSILON),
+        np.cbrt(t),
+        (dtype(CIE_KAPPA) * t + dtype(16.0)) / dtype(116.0),
+    )
+    fx, fy, fz = f[..., 0], f[..., 1], f[..., 2]
+    return np.stack(
+        [dtype(116.0) * fy - dtype(16.0), dtype(500.0) * (fx - fy), dtype(200.0) * (fy - fz)],
+        axis=-1,
+    )
+
+
+def lab_to_xyz(lab: ArrayLike, white: ArrayLike = WHITEPOINT_D65_XYZ) -> FloatArray:
+    """CIE 1976 L*a*b* -> CIE XYZ on the scale of ``white`` (CIE 15:2004, inverse of 8.2.1)."""
+    a = _as_float(lab)
+    _check_last_axis(a, "lab")
+    dtype = a.dtype.type
+    L = a[..., 0]
+    fy = (L + dtype(16.0)) / dtype(116.0)
+    f = np.stack([fy + a[..., 1] / dtype(500.0), fy, fy - a[..., 2] / dtype(200.0)], axis=-1)
+    f3 = f * f * f
+    t = np.where(f3 > dtype(CIE_EPSILON), f3, (dtype(116.0) * f - dtype(16.0)) / dtype(CIE_KAPPA))
+    # Y follows from L* directly (CIE 15:2004), which is exact on the linear segment.
+    t[..., 1] = np.where(L > dtype(CIE_KAPPA * CIE_EPSILON), f3[..., 1], L / dtype(CIE_KAPPA))
+    return t * np.asarray(white, dtype=a.dtype)
+
+
+def srgb_to_lab(rgb: ArrayLike) -> FloatArray:
+    """Encoded sRGB (..., 3) -> CIELAB relative to D65 (the SAFE-COLOR RGB2Lab)."""
+    return xyz_to_lab(srgb_to_xyz(rgb))
+
+
+def lab_to_srgb(lab: ArrayLike) -> FloatArray:
+    """CIELAB relative to D65 (..., 3) -> encoded sRGB (..., 3), unclipped (SAFE-COLOR Lab2RGB)."""
+    return xyz_to_srgb(lab_to_xyz(lab))
+
+
+# --------------------------------------------------------------------------------------------
+# Colour differences
+# --------------------------------------------------------------------------------------------
+
+_TWO_PI = 2.0 * np.pi
+_POW25_7 = 25.0**7
+_DEG = np.pi / 180.0
+
+
+def _result_dtype(lab1: ArrayLike, lab2: ArrayLike) -> type[np.floating[Any]]:
+    """float32 when both inputs are float32, else float64."""
+    both32 = np.asarray(lab1).dtype == np.float32 and np.asarray(lab2).dtype == np.float32
+    return np.float32 if both32 else np.float64
+
+
+def _lab_pair(lab1: ArrayLike, lab2: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Both CIELAB inputs as float64 (differences are computed in float64 for accuracy)."""
+    a = np.asarray(lab1)
+    b = np.asarray(lab2)
+    a = a.astype(np.float64, copy=False)
+    b = b.astype(np.float64, copy=False)
+    _check_last_axis(a, "lab1")
+    _check_last_axis(b, "lab2")
+    return a, b
+
+
+#: Pairs per block: the block's temporaries stay in the CPU cache instead of main memory.
+_BLOCK = 8192
+
+
+def _ciede2000_block(
+    L1: FloatArray, a1: FloatArray, b1: FloatArray,
+    L2: FloatArray, a2: FloatArray, b2: FloatArray,
+    components: bool,
+) -> list[FloatArray]:
+    """CIEDE2000 on 1-D contiguous component arrays; see :func:`delta_e_2000`.
+
+    Sharma, Wu & Dalal (2005) eq. 2-22, rewritten to do less work with identical results:
+    hue angles are handled as unit vectors (a'/C', b/C'), so the mean hue h̄' is the bisector
+    of the shorter arc (which is what eq. 14's case split computes) and needs one arctan2
+    instead of two; ΔH' = 2 sqrt(C1'C2') sin(Δh'/2) = sqrt(C1'C2') |u1 - u2| (the chord) with
+    the sign of the cross product; the cosines of T come from one (cos, sin) pair by the
+    multiple-angle formulas; powers are products. No degree/radian round trips.
+    """
+    dt = L1.dtype.type
+    b1s = b1 * b1
+    b2s = b2 * b2
+    c7 = np.sqrt(a1 * a1 + b1s)
+    c7 += np.sqrt(a2 * a2 + b2s)
+    c7 *= dt(0.5)  # C̄*ab
+    cm = c7.copy()
+    c7 *= c7
+    c7 *= c7 * c7
+    c7 *= cm  # C̄^7
+    g1 = c7 / (c7 + dt(_POW25_7))
+    np.sqrt(g1, out=g1)
+    g1 *= dt(-0.5)
+    g1 += dt(1.5)  # 1 + G
+    a1p = a1 * g1
+    a2p = a2 * g1
+    c1p = np.sqrt(a1p * a1p + b1s)
+    c2p = np.sqrt(a2p * a2p + b2s)
+
+    # Unit hue vectors; an achromatic colour (C' = 0) takes the other colour's hue, which is
+    # eq. 10 and 14's rule for C1'C2' = 0 (Δh' = 0, h̄' = h1' + h2' with h' = 0 when C' = 0).
+    z1 = c1p == 0
+    z2 = c2p == 0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        x1 = a1p / c1p
+        y1 = b1 / c1p
+        x2 = a2p / c2p
+        y2 = b2 / c2p
+    if z1.any() or z2.any():
+        both = z1 & z2
+        x1 = np.where(z1, np.where(both, dt(1.0), x2), x1)
+        y1 = np.where(z1, np.where(both, dt(0.0), y2), y1)
+        x2 = np.where(z2, x1, x2)
+        y2 = np.where(z2, y1, y2)
+
+    # Hues exactly 180° apart (eq. 10 and 14 at their boundary; Sharma's pair 14): the cross
+    # product a1' b2 - b1 a2' of the raw (a', b) vectors is then exactly zero, and the pair takes
+    # the "|h2' - h1'| <= 180°" branch, as the formula prescribes for equality: h̄' is the
+    # arithmetic mean of the hues in [0°, 360°) and Δh' = h2' - h1'. Deciding this from the exact
+    # geometry, not from rounded arctan2 values, makes the result deterministic.
+    cross = a1p * b2 - b1 * a2p
+    antipodal = (cross == 0) & (x1 * x2 + y1 * y2 < 0)
+    sign = np.sign(cross)
+    bx = x1 + x2
+    by = y1 + y2
+    if antipodal.any():
+        h1 = np.mod(np.arctan2(y1, x1), dt(_TWO_PI))
+        h2 = np.mod(np.arctan2(y2, x2), dt(_TWO_PI))
+        first_lower = h1 <= h2  # h̄' = min + 90°: rotate the lower hue's vector by +90°
+        bx = np.where(antipodal, np.where(first_lower, -y1, -y2), bx)
+        by = np.where(antipodal, np.where(first_lower, x1, x2), by)
+        sign = np.where(antipodal, np.where(first_lower, dt(1.0), dt(-1.0)), sign)
+
+    chord = (x1 - x2) ** 2
+    chord += (y1 - y2) ** 2
+    np.sqrt(chord, out=chord)
+    dH = np.sqrt(c1p * c2p)
+    dH *= chord
+    dH *= sign
+    dL = L2 - L1
+    dC = c2p - c1p
+    if components:
+        return [dL, dC, dH]
+
+    norm = np.sqrt(bx * bx + by * by)
+    c = bx / norm
+    s = by / norm
+    hbar = np.arctan2(s, c)
+    hbar += np.where(hbar < 0, dt(_TWO_PI), dt(0.0))
+    # T = 1 - .17 cos(h-30°) + .24 cos 2h + .32 cos(3h+6°) - .20 cos(4h-63°)   (eq. 15)
+    cc = c * c
+    c2 = dt(2.0) * cc - dt(1.0)
+    s2 = dt(2.0) * s * c
+    c3 = c * (dt(4.0) * cc - dt(3.0))
+    s3 = s * (dt(4.0) * cc - dt(1.0))
+    c4 = dt(2.0) * c2 * c2 - dt(1.0)
+    s4 = dt(2.0) * s2 * c2
+    T = dt(1.0) - dt(0.17 * np.cos(30 * _DEG)) * c
+    T -= dt(0.17 * np.sin(30 * _DEG)) * s
+    T += dt(0.24) * c2
+    T += dt(0.32 * np.cos(6 * _DEG)) * c3
+    T -= dt(0.32 * np.sin(6 * _DEG)) * s3
+    T -= dt(0.20 * np.cos(63 * _DEG)) * c4
+    T -= dt(0.20 * np.sin(63 * _DEG)) * s4
+    lbar = (L1 + L2) * dt(0.5) - dt(50.0)
+    lbar *= lbar
+    SL = dt(0.015) * lbar / np.sqrt(dt(20.0) + lbar)
+    SL += dt(1.0)
+    cbarp = (c1p + c2p) * dt(0.5)
+    SC = dt(1.0) + dt(0.045) * cbarp
+    SH = cbarp * T
+    SH *= dt(0.015)
+    SH += dt(1.0)
+    cb7 = cbarp * cbarp
+    cb7 *= cb7 * cb7
+    cb7 *= cbarp
+    RC = cb7 / (cb7 + dt(_POW25_7))
+    np.sqrt(RC, out=RC)
+    # Δθ = 30° exp(-((h̄' - 275°)/25°)^2); R_T = -sin(2 Δθ) R_C    (eq. 17-20)
+    z = hbar - dt(275.0 * _DEG)
+    z *= dt(1.0 / (25.0 * _DEG))
+    z *= z
+    np.negative(z, out=z)
+    np.exp(z, out=z)
+    z *= dt(60.0 * _DEG)
+    RT = np.sin(z, out=z)
+    RT *= RC
+    RT *= dt(2.0)  # R_C = 2 sqrt(C̄'^7 / (C̄'^7 + 25^7))
+    dL /= SL
+    dC /= SC
+    dH /= SH
+    out = dL * dL
+    out += dC * dC
+    out += dH * dH
+    dC *= dH
+    dC *= RT
+    out -= dC  # R_T = -sin(2Δθ) R_C
+    return [np.sqrt(out, out=out)]
+
+
+def _ciede2000(
+    lab1: ArrayLike, lab2: ArrayLike, components: bool
+) -> list[FloatArray]:
+    """Run :func:`_ciede2000_block` over cache-sized blocks of the broadcast inputs."""
+    out_dtype = _result_dtype(lab1, lab2)
+    p, q = _lab_pair(lab1, lab2)
+    p, q = np.broadcast_arrays(p, q)
+    shape = p.shape[:-1]
+    p2 = p.reshape(-1, 3)
+    q2 = q.reshape(-1, 3)
+    n = p2.shape[0]
+    n_out = 3 if components else 1
+    outs = [np.empty(n, dtype=p.dtype) for _ in range(n_out)]
+    for i in range(0, n, _BLOCK):
+        j = min(i + _BLOCK, n)
+        pc = np.ascontiguousarray(p2[i:j].T)
+        qc = np.ascontiguousarray(q2[i:j].T)
+        res = _ciede2000_block(pc[0], pc[1], pc[2], qc[0], qc[1], qc[2], components)
+        for o, r in zip(outs, res, strict=True):
+            o[i:j] = r
+    return [o.reshape(shape).astype(out_dtype, copy=False) for o in outs]
+
+
+def delta_e_2000(lab1: ArrayLike, lab2: ArrayLike) -> FloatArray:
+    """CIEDE2000 colour difference ΔE00 between two CIELAB colours, kL = kC = kH = 1.
+
+    CIE 142-2001; implementation notes and test data: G. Sharma, W. Wu, E. N. Dalal, Color
+    Res. Appl. 30(1), 2005 (all 34 test pairs reproduced to 1e-4).
+
+    ``lab1``, ``lab2``: (..., 3) broadcastable CIELAB arrays (L* in [0, 100], a*, b* real).
+    Returns (...,) ΔE00 >= 0, symmetric in its arguments. Computed in float64; float32 inputs
+    give a float32 result.
+    Hues exactly 180° apart take the |Δh'| <= 180° branch deterministically (see source).
+    """
+    return _ciede2000(lab1, lab2, components=False)[0]
+
+
+def delta_e_2000_components(
+    lab1: ArrayLike, lab2: ArrayLike
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The unweighted CIEDE2000 differences (ΔL', ΔC', ΔH') of ``lab2`` relative to ``lab1``.
+
+    Sharma et al. 2005, eq. 8-11: ΔL' = L2 - L1, ΔC' = C2' - C1', ΔH' = 2 sqrt(C1' C2')
+    sin(Δh'/2). Positive ΔL' means lighter, positive ΔC' more chromatic than ``lab1``.
+    """
+    dL, dC, dH = _ciede2000(lab1, lab2, components=True)
+    return dL, dC, dH
+
+
+def delta_e_1976(lab1: ArrayLike, lab2: ArrayLike) -> FloatArray:
+    """CIE 1976 colour difference ΔE*ab: Euclidean distance in CIELAB (CIE 15:2004)."""
+    out_dtype = _result_dtype(lab1, lab2)
+    p, q = _lab_pair(lab1, lab2)
+    d = q - p
+    return np.sqrt(np.sum(d * d, axis=-1)).astype(out_dtype, copy=False)
+
+
+#: Colour-difference methods by name, for ``delta_e(..., method=...)``.
+DELTA_E_METHODS: dict[str, Callable[[ArrayLike, ArrayLike], FloatArray]] = {
+    "CIE 2000": delta_e_2000,
+    "CIE 1976": delta_e_1976,
+}
+
+
+def delta_e(lab1: ArrayLike, lab2: ArrayLike, method: str = "CIE 2000") -> FloatArray:
+    """Colour difference between CIELAB colours by a method of :data:`DELTA_E_METHODS`."""
+    try:
+        fn = DELTA_E_METHODS[method]
+    except KeyError:
+        raise unknown_name("colour-difference method", method, DELTA_E_METHODS) from None
+    return fn(lab1, lab2)
