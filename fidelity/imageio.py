@@ -1,0 +1,300 @@
+"""Read chart images: OpenEXR (half/float, any channel naming, layers and parts), Radiance HDR,
+TIFF and PNG (8/16 bit, float TIFF), JPEG, through OpenImageIO.
+
+Every image comes back as an ``(H, W, 3)`` float32 array of R, G, B plus the facts needed to
+interpret it: the file format, its pixel type, the channels that were used and whether the values
+are most likely scene-linear (floating-point formats: EXR, HDR, float TIFF) or display-encoded
+sRGB (integer formats, normalised by OpenImageIO to [0, 1]: ``v / (2**bits - 1)``).
+
+Channel naming: a colour channel is recognised by the last dot-separated component of its name,
+case-insensitively: ``R``/``red``, ``G``/``green``, ``B``/``blue`` (so ``R``, ``diffuse.R``,
+``beauty.red`` all work). Layers are the dot prefixes (``diffuse`` in ``diffuse.R``) and, in
+multi-part EXR files, the part names. Without ``layer`` the unprefixed ``R, G, B`` are used;
+if there are none and exactly one layer has all three, that layer is used.
+
+Errors (all :class:`fidelity.errors.InputFileError`, naming the file): missing, not an image,
+truncated or corrupt, one colour channel only (greyscale), channels that are not R, G, B,
+an unknown layer or an ambiguous choice of layers.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import tempfile
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fidelity.errors import InputFileError
+from fidelity.fileio import require_file
+
+#: Pixel types that hold scene-linear data by convention.
+FLOAT_PIXEL_TYPES = frozenset({"half", "float", "double"})
+
+_COLOUR_NAMES = {
+    "r": "R", "red": "R",
+    "g": "G", "green": "G",
+    "b": "B", "blue": "B",
+}
+_ALPHA_NAMES = {"a", "alpha"}
+
+
+@dataclass(frozen=True)
+class Image:
+    """An image read from disk.
+
+    ``pixels`` is ``(H, W, 3)`` float32 R, G, B. Integer formats are normalised to [0, 1] by
+    ``v / (2**bits - 1)``; floating-point formats keep their values (NaN, Inf and negative values
+    included: the audit counts and excludes them). ``encoding`` is the likely encoding of the
+    values: ``"linear"`` for floating-point pixel types, ``"srgb"`` otherwise.
+    """
+
+    pixels: np.ndarray
+    path: Path
+    file_format: str
+    pixel_type: str
+    channels: tuple[str, str, str]
+    layer: str | None
+    encoding: str
+    colorspace: str | None = None
+    all_channels: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def height(self) -> int:
+        """Image height in pixels."""
+        return int(self.pixels.shape[0])
+
+    @property
+    def width(self) -> int:
+        """Image width in pixels."""
+        return int(self.pixels.shape[1])
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready description (without the pixels)."""
+        return {
+            "path": str(self.path),
+            "format": self.file_format,
+            "pixel_type": self.pixel_type,
+            "width": self.width,
+            "height": self.height,
+            "channels": list(self.channels),
+            "layer": self.layer,
+            "encoding_guess": self.encoding,
+            "colorspace": self.colorspace,
+        }
+
+
+def file_sha256(path: str | os.PathLike[str]) -> str:
+    """SHA-256 hex digest of a file's bytes (for report provenance)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+@contextlib.contextmanager
+def _quiet_stderr() -> Iterator[None]:
+    """Silence C libraries (libpng, libjpeg) that print to file descriptor 2 while reading.
+
+    Their messages are reported through OpenImageIO's error string instead, as one line.
+    """
+    try:
+        saved = os.dup(2)
+    except OSError:  # no usable fd 2: nothing to silence
+        yield
+        return
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+
+
+def _one_line(text: str) -> str:
+    """Collapse a (possibly multi-line) library message into one line."""
+    parts = [p.strip() for p in str(text).splitlines() if p.strip()]
+    seen: list[str] = []
+    for p in parts:
+        if p not in seen:
+            seen.append(p)
+    return "; ".join(seen)
+
+
+def _split_channel(name: str) -> tuple[str | None, str]:
+    """``"diffuse.R"`` -> ``("diffuse", "R")``; ``"R"`` -> ``(None, "R")``."""
+    if "." in name:
+        prefix, last = name.rsplit(".", 1)
+        return prefix, last
+    return None, name
+
+
+@dataclass(frozen=True)
+class _Part:
+    index: int
+    name: str | None
+    channels: tuple[str, ...]
+
+
+def _rgb_of(channels: tuple[str, ...], prefix: str | None) -> dict[str, int]:
+    """Indices of R, G, B among ``channels`` whose layer prefix is ``prefix``."""
+    found: dict[str, int] = {}
+    for idx, ch in enumerate(channels):
+        pre, last = _split_channel(ch)
+        if pre != prefix:
+            continue
+        key = _COLOUR_NAMES.get(last.lower())
+        if key is not None and key not in found:
+            found[key] = idx
+    return found
+
+
+def _layers_of(part: _Part) -> list[str | None]:
+    prefixes: list[str | None] = []
+    for ch in part.channels:
+        pre, _ = _split_channel(ch)
+        if pre not in prefixes:
+            prefixes.append(pre)
+    return prefixes
+
+
+def _describe_channels(parts: list[_Part]) -> str:
+    out = []
+    for part in parts:
+        names = ", ".join(part.channels)
+        out.append(f"part {part.name!r}: {names}" if len(parts) > 1 else names)
+    return "; ".join(out)
+
+
+def _rgb_layers(parts: list[_Part]) -> list[str]:
+    """Names of the layers that hold R, G, B (part names and channel prefixes)."""
+    names: list[str] = []
+    for part in parts:
+        for pre in _layers_of(part):
+            if len(_rgb_of(part.channels, pre)) == 3:
+                label = pre if pre is not None else part.name
+                if label is not None and label not in names:
+                    names.append(label)
+    return names
+
+
+def _choose(parts: list[_Part], layer: str | None, path: Path) -> tuple[_Part, str | None, dict[str, int]]:
+    """Pick the part, the channel prefix and the R, G, B indices to read."""
+    if layer is not None:
+        for part in parts:  # a channel prefix
+            rgb = _rgb_of(part.channels, layer)
+            if len(rgb) == 3:
+                return part, layer, rgb
+        for part in parts:  # a part name: its unprefixed channels
+            if part.name == layer:
+                rgb = _rgb_of(part.channels, None)
+                if len(rgb) == 3:
+                    return part, None, rgb
+        known = _rgb_layers(parts)
+        raise InputFileError(
+            f"{path}: no layer {layer!r} with R, G, B channels; layers with R, G, B: "
+            f"{', '.join(known) if known else 'none'} (channels: {_describe_channels(parts)})"
+        )
+    for part in parts:
+        rgb = _rgb_of(part.channels, None)
+        if len(rgb) == 3:
+            return part, None, rgb
+    candidates = [(part, pre) for part in parts for pre in _layers_of(part)
+                  if pre is not None and len(_rgb_of(part.channels, pre)) == 3]
+    if len(candidates) == 1:
+        part, pre = candidates[0]
+        return part, pre, _rgb_of(part.channels, pre)
+    if len(candidates) > 1:
+        names = ", ".join(str(pre) for _, pre in candidates)
+        raise InputFileError(f"{path}: several layers hold R, G, B ({names}); choose one with --layer")
+    colour = [ch for part in parts for ch in part.channels
+              if _split_channel(ch)[1].lower() not in _ALPHA_NAMES]
+    if len(colour) == 1 or all(len([c for c in p.channels if _split_channel(c)[1].lower()
+                                    not in _ALPHA_NAMES]) == 1 for p in parts):
+        raise InputFileError(
+            f"{path}: one-channel image ({_describe_channels(parts)}); a colour chart needs "
+            f"R, G, B"
+        )
+    raise InputFileError(
+        f"{path}: unknown channels ({_describe_channels(parts)}); expected R, G, B "
+        f"(or <layer>.R, <layer>.G, <layer>.B)"
+    )
+
+
+def read_image(path: str | os.PathLike[str], layer: str | None = None) -> Image:
+    """Read an image as ``(H, W, 3)`` float32 R, G, B.
+
+    Parameters
+    ----------
+    path
+        EXR, HDR, TIFF, PNG, JPEG or any other format OpenImageIO reads.
+    layer
+        EXR layer (channel prefix such as ``diffuse`` for ``diffuse.R``) or part name.
+
+    Raises
+    ------
+    InputFileError
+        Missing, unreadable, truncated or corrupt file; one-channel image; channels that are not
+        R, G, B; unknown or ambiguous layer. The message names the file.
+    """
+    import OpenImageIO as oiio
+
+    p = require_file(path, "image")
+    with _quiet_stderr():
+        inp = oiio.ImageInput.open(str(p))
+        if inp is None:
+            msg = _one_line(oiio.geterror()) or "unknown reason"
+            raise InputFileError(f"{p}: cannot read image ({msg})")
+        try:
+            parts: list[_Part] = []
+            k = 0
+            while inp.seek_subimage(k, 0):
+                spec = inp.spec()
+                name = spec.getattribute("name")
+                parts.append(_Part(k, str(name) if name else None, tuple(spec.channelnames)))
+                k += 1
+            inp.geterror()  # seeking past the last part sets an error: clear it
+            part, prefix, rgb = _choose(parts, layer, p)
+            if not inp.seek_subimage(part.index, 0):
+                raise InputFileError(f"{p}: cannot read part {part.index} ({_one_line(inp.geterror())})")
+            spec = inp.spec()
+            if spec.width < 1 or spec.height < 1:
+                raise InputFileError(f"{p}: empty image ({spec.width}x{spec.height})")
+            data = inp.read_image(part.index, 0, 0, spec.nchannels, "float")
+            err = _one_line(inp.geterror())
+            if data is None or err:
+                raise InputFileError(f"{p}: truncated or corrupt image ({err or 'read failed'})")
+            file_format = str(inp.format_name())
+            pixel_type = str(spec.format)
+            colorspace = spec.getattribute("oiio:ColorSpace")
+        finally:
+            inp.close()
+    arr = np.asarray(data, dtype=np.float32)
+    if arr.ndim == 2:
+        arr = arr[:, :, None]
+    if arr.ndim == 4:  # deep / volume: take the first slice
+        arr = arr[0]
+    pixels = np.ascontiguousarray(arr[:, :, [rgb["R"], rgb["G"], rgb["B"]]])
+    channels = tuple(part.channels[rgb[c]] for c in ("R", "G", "B"))
+    encoding = "linear" if pixel_type in FLOAT_PIXEL_TYPES else "srgb"
+    return Image(
+        pixels=pixels,
+        path=p,
+        file_format=file_format,
+        pixel_type=pixel_type,
+        channels=channels,  # type: ignore[arg-type]
+        layer=prefix if prefix is not None else (part.name if layer is not None else None),
+        encoding=encoding,
+        colorspace=str(colorspace) if colorspace else None,
+        all_channels=tuple(ch for prt in parts for ch in prt.channels),
+    )
+
+
+__all__ = ["FLOAT_PIXEL_TYPES", "Image", "file_sha256", "read_image"]

@@ -1,0 +1,241 @@
+"""Locate the 24 patches of a 4 x 6 colour chart in an image from its four corner patches.
+
+The user gives the image positions of the centres of the four corner patches in this order:
+dark skin, bluish green, black, white, i.e. the chart's top-left, top-right, bottom-right and
+bottom-left patch as seen on the chart (any rotation, mirroring or perspective in the image is
+allowed). In chart *grid* coordinates ``(u, v)`` the centre of the patch in column ``c``, row
+``r`` is ``(c, r)``; so the corner centres are ``(0, 0), (5, 0), (5, 3), (0, 3)``, one grid unit
+is the patch pitch, and a projective map (homography) ``H`` takes the grid to the image:
+``(x, y, 1)^T ~ H (u, v, 1)^T`` (Hartley & Zisserman, *Multiple View Geometry*, 2nd ed.,
+Alg. 4.1, DLT from four correspondences).
+
+Image coordinates are in pixels, ``x`` along a row (column index), ``y`` down (row index),
+with the centre of pixel ``(i, j)`` at ``x = j, y = i``. A patch is sampled in a central square
+window of ``window`` patch pitches per side (default 0.5), taken in grid coordinates so that it
+follows perspective: a pixel belongs to the window of patch ``(c, r)`` when its centre maps to
+``|u - c| <= window/2`` and ``|v - r| <= window/2``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from fidelity.errors import InvalidValueError
+
+#: Names of the corner patches, in the order the corners are given.
+CORNER_PATCHES: tuple[str, str, str, str] = ("dark skin", "bluish green", "black", "white")
+#: Default side of the central sampling window, in patch pitches.
+DEFAULT_WINDOW = 0.5
+#: Fewest pixels a sampling window may hold before the chart counts as too small to sample.
+MIN_WINDOW_PIXELS = 9
+
+
+def parse_corners(text: str | Sequence[float]) -> np.ndarray:
+    """Parse ``"X1,Y1,X2,Y2,X3,Y3,X4,Y4"`` (or 8 numbers) into a ``(4, 2)`` float64 array."""
+    if isinstance(text, str):
+        items = [t for t in text.replace(";", ",").replace(" ", ",").split(",") if t.strip()]
+        try:
+            values = [float(t) for t in items]
+        except ValueError:
+            raise InvalidValueError(
+                f"--corners {text!r}: expected 8 numbers X1,Y1,X2,Y2,X3,Y3,X4,Y4"
+            ) from None
+    else:
+        values = [float(v) for v in text]
+    if len(values) != 8:
+        raise InvalidValueError(
+            f"--corners {text!r}: expected 8 numbers X1,Y1,X2,Y2,X3,Y3,X4,Y4 "
+            f"(centres of the {', '.join(CORNER_PATCHES)} patches), got {len(values)}"
+        )
+    arr = np.asarray(values, dtype=np.float64).reshape(4, 2)
+    if not np.all(np.isfinite(arr)):
+        raise InvalidValueError(f"--corners {text!r}: corners must be finite numbers")
+    return arr
+
+
+def homography_from_points(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """The 3 x 3 homography ``H`` with ``dst ~ H src`` from four point pairs (DLT).
+
+    ``src`` and ``dst`` are ``(4, 2)``; ``H`` is normalised to ``H[2, 2] = 1``. Raises
+    :class:`InvalidValueError` when three of the points are collinear (no unique map).
+    """
+    src = np.asarray(src, dtype=np.float64)
+    dst = np.asarray(dst, dtype=np.float64)
+    for name, pts in (("source", src), ("corner", dst)):
+        for skip in range(4):
+            tri = np.delete(pts, skip, axis=0)
+            area = abs(np.cross(tri[1] - tri[0], tri[2] - tri[0])) / 2.0
+            scale = max(float(np.ptp(pts[:, 0])), float(np.ptp(pts[:, 1])), 1e-12)
+            if area <= 1e-9 * scale * scale:
+                raise InvalidValueError(
+                    f"{name} points are degenerate (three of them are collinear or coincide): "
+                    f"{pts.tolist()}"
+                )
+    rows = []
+    for (u, v), (x, y) in zip(src, dst, strict=True):
+        rows.append([u, v, 1, 0, 0, 0, -x * u, -x * v, -x])
+        rows.append([0, 0, 0, u, v, 1, -y * u, -y * v, -y])
+    _, _, vt = np.linalg.svd(np.asarray(rows))
+    h = vt[-1].reshape(3, 3)
+    if abs(h[2, 2]) < 1e-15:
+        raise InvalidValueError("corner points give a degenerate homography")
+    return h / h[2, 2]
+
+
+def apply_homography(h: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Map ``(..., 2)`` points through ``h``: ``(x, y) = (h @ (u, v, 1))[:2] / w``."""
+    pts = np.asarray(points, dtype=np.float64)
+    hom = pts @ h[:, :2].T + h[:, 2]
+    return hom[..., :2] / hom[..., 2:3]
+
+
+@dataclass(frozen=True)
+class ChartLocation:
+    """Where the chart's patches lie in an image.
+
+    ``homography`` maps grid ``(u, v)`` to image ``(x, y)``; ``centres`` is ``(24, 2)`` image
+    ``(x, y)`` of the patch centres in row-major order; ``windows[k]`` is a tuple of row and
+    column index arrays of the pixels in patch ``k``'s sampling window; ``pitch_px`` is the
+    smallest distance between neighbouring patch centres in pixels.
+    """
+
+    corners: np.ndarray
+    homography: np.ndarray
+    centres: np.ndarray
+    windows: tuple[tuple[np.ndarray, np.ndarray], ...]
+    window: float
+    pitch_px: float
+    rows: int
+    cols: int
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON-ready summary (corners, centres, window size and pixel counts)."""
+        return {
+            "corners": self.corners.tolist(),
+            "corner_patches": list(CORNER_PATCHES),
+            "homography": self.homography.tolist(),
+            "centres": np.round(self.centres, 3).tolist(),
+            "window_pitch_fraction": self.window,
+            "window_pixels": [int(len(w[0])) for w in self.windows],
+            "pitch_px": round(self.pitch_px, 3),
+        }
+
+
+def grid_centres(rows: int = 4, cols: int = 6) -> np.ndarray:
+    """Grid coordinates ``(u, v) = (c, r)`` of the patch centres, row-major, ``(rows*cols, 2)``."""
+    r, c = np.mgrid[0:rows, 0:cols]
+    return np.stack([c.ravel(), r.ravel()], axis=-1).astype(np.float64)
+
+
+def locate_chart(
+    corners: np.ndarray | str | Sequence[float],
+    image_shape: tuple[int, ...],
+    *,
+    rows: int = 4,
+    cols: int = 6,
+    window: float = DEFAULT_WINDOW,
+    min_pixels: int = MIN_WINDOW_PIXELS,
+    patch_names: Sequence[str] | None = None,
+) -> ChartLocation:
+    """Locate every patch of a ``rows`` x ``cols`` chart from its four corner-patch centres.
+
+    Parameters
+    ----------
+    corners
+        ``(4, 2)`` image ``(x, y)`` of the centres of the dark skin, bluish green, black and
+        white patches (or the ``"X1,Y1,...,X4,Y4"`` string).
+    image_shape
+        ``(H, W, ...)`` of the image.
+    window
+        Side of the central sampling square in patch pitches, in (0, 1].
+
+    Raises
+    ------
+    InvalidValueError
+        Corners outside the image, degenerate corners, a sampling window that leaves the image
+        or crosses the horizon of the perspective, or a chart too small to sample (a window
+        with fewer than ``min_pixels`` pixels).
+    """
+    if not 0.0 < window <= 1.0:
+        raise InvalidValueError(f"sampling window {window} must be in (0, 1] patch pitches")
+    pts = parse_corners(corners) if isinstance(corners, str) else np.asarray(corners, np.float64)
+    if pts.shape != (4, 2):
+        raise InvalidValueError(f"corners must be 4 (x, y) points, got shape {pts.shape}")
+    height, width = int(image_shape[0]), int(image_shape[1])
+    names = list(patch_names) if patch_names is not None else [
+        f"patch {k + 1}" for k in range(rows * cols)]
+    for name, (x, y) in zip(CORNER_PATCHES, pts, strict=True):
+        if not (-0.5 <= x <= width - 0.5 and -0.5 <= y <= height - 0.5):
+            raise InvalidValueError(
+                f"corner {name!r} at ({x:g}, {y:g}) is outside the {width}x{height} image "
+                f"(x in [0, {width - 1}], y in [0, {height - 1}])"
+            )
+    grid_corners = np.array([[0, 0], [cols - 1, 0], [cols - 1, rows - 1], [0, rows - 1]], float)
+    h = homography_from_points(grid_corners, pts)
+    h_inv = np.linalg.inv(h)
+    grid = grid_centres(rows, cols)
+    half = window / 2.0
+    offsets = np.array([[-half, -half], [half, -half], [half, half], [-half, half]])
+    # Every window corner must lie on the same side of the horizon (w > 0 after the map).
+    all_window_corners = (grid[:, None, :] + offsets[None, :, :]).reshape(-1, 2)
+    w = all_window_corners @ h[2, :2] + h[2, 2]
+    if np.any(w <= 0):
+        raise InvalidValueError("corners give a perspective in which the chart crosses the horizon")
+    centres = apply_homography(h, grid)
+    windows: list[tuple[np.ndarray, np.ndarray]] = []
+    for k, (u0, v0) in enumerate(grid):
+        quad = apply_homography(h, offsets + (u0, v0))
+        if (quad[:, 0].min() < -0.5 or quad[:, 0].max() > width - 0.5
+                or quad[:, 1].min() < -0.5 or quad[:, 1].max() > height - 0.5):
+            raise InvalidValueError(
+                f"patch {names[k]!r} lies outside the {width}x{height} image "
+                f"(check --corners: centres of {', '.join(CORNER_PATCHES)})"
+            )
+        x0 = max(int(np.floor(quad[:, 0].min())), 0)
+        x1 = min(int(np.ceil(quad[:, 0].max())), width - 1)
+        y0 = max(int(np.floor(quad[:, 1].min())), 0)
+        y1 = min(int(np.ceil(quad[:, 1].max())), height - 1)
+        yy, xx = np.mgrid[y0:y1 + 1, x0:x1 + 1]
+        uv = apply_homography(h_inv, np.stack([xx.ravel(), yy.ravel()], axis=-1).astype(float))
+        inside = (np.abs(uv[:, 0] - u0) <= half + 1e-9) & (np.abs(uv[:, 1] - v0) <= half + 1e-9)
+        windows.append((yy.ravel()[inside], xx.ravel()[inside]))
+    c2 = centres.reshape(rows, cols, 2)
+    steps = np.concatenate([
+        np.linalg.norm(np.diff(c2, axis=1), axis=-1).ravel(),
+        np.linalg.norm(np.diff(c2, axis=0), axis=-1).ravel(),
+    ])
+    pitch = float(steps.min())
+    counts = [len(wi[0]) for wi in windows]
+    k_min = int(np.argmin(counts))
+    if counts[k_min] < min_pixels:
+        raise InvalidValueError(
+            f"chart too small to sample: patch {names[k_min]!r} has {counts[k_min]} pixel(s) in "
+            f"its central window (need at least {min_pixels}); patch pitch is about {pitch:.1f} "
+            f"px, need at least {np.sqrt(min_pixels) / window:.0f} px"
+        )
+    return ChartLocation(
+        corners=pts, homography=h, centres=centres, windows=tuple(windows), window=window,
+        pitch_px=pitch, rows=rows, cols=cols,
+    )
+
+
+def sample_patches(pixels: np.ndarray, location: ChartLocation) -> list[np.ndarray]:
+    """The ``(n_k, C)`` pixel values inside each patch's sampling window, row-major."""
+    return [pixels[rr, cc] for rr, cc in location.windows]
+
+
+__all__ = [
+    "CORNER_PATCHES",
+    "DEFAULT_WINDOW",
+    "MIN_WINDOW_PIXELS",
+    "ChartLocation",
+    "apply_homography",
+    "grid_centres",
+    "homography_from_points",
+    "locate_chart",
+    "parse_corners",
+    "sample_patches",
+]

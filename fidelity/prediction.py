@@ -1,0 +1,567 @@
+"""Predict what a chart's colour error costs object detectors: ΔE00 -> ΔmAP, ΔAP person/bicycle.
+
+Prediction tables are JSON files in ``fidelity/data/prediction/<name>.json`` (the registry is
+the folder: a table is available as soon as its file is there); the schema is in
+``CORE_API.md`` ("Prediction table schema"). Each table holds worst-case curves ΔE -> loss for
+detector size classes ``n, s, m, l, x`` or ``any``. Columns:
+
+- ``dmap_points``: percentage points of COCO mAP@[.50:.95], ``100 * (baseline - transformed)``;
+- ``dmap_relative``: percent of the baseline mAP, ``100 * (baseline - transformed) / baseline``;
+- ``dap_person_points``, ``dap_bicycle_points``: percentage points of the class AP.
+
+Until the project's measured tables exist the default is ``safecolor-2025``, built only from the
+SAFE-COLOR paper's published statements (each point cites its statement); switch the default by
+changing :data:`DEFAULT_TABLE`.
+
+Interpolation (``method=``, default: the table's ``"interpolation"`` key, else ``"pchip"``):
+
+- ``"pchip"``: monotone piecewise cubic Hermite (Fritsch & Carlson, SIAM J. Numer. Anal. 17,
+  1980), ``scipy.interpolate.PchipInterpolator``;
+- ``"linear"``: the chord between neighbouring points (an upper bound when the loss is convex in
+  ΔE and the points are upper bounds);
+- ``"step"``: the next point at or above ΔE (the strictest reading of upper bounds).
+
+Before interpolating, each column is replaced by its running maximum over ΔE (an upper
+envelope, so that predictions never decrease with ΔE even if measured points are noisy).
+Outside a column's ΔE range the answer is conservative and flagged: below the first point, the
+first point's value; above the last, the ceiling (total loss: 100 % relative; the curve's
+``baseline_map`` in points when known, else 100 points). Nothing is extrapolated.
+
+When a size class has no curve of its own, the ``any`` curve (the worst over all sizes) answers
+and the result says so; when several curves match (one per model) the worst (largest) value
+answers.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fidelity.errors import InputFileError, InvalidValueError, unknown_name
+from fidelity.resources import resource_dir
+
+#: The table used when none is named. Switch to the project's measured table once it lands.
+DEFAULT_TABLE = "safecolor-2025"
+
+#: Loss columns of a prediction table, in output order.
+COLUMNS: tuple[str, ...] = ("dmap_points", "dmap_relative", "dap_person_points",
+                            "dap_bicycle_points")
+#: Detector size classes (Ultralytics nano ... extra large) and ``any``.
+SIZES: tuple[str, ...] = ("n", "s", "m", "l", "x", "any")
+#: ``--class`` choices -> the column that measures that class's loss in points.
+CLASS_COLUMNS: dict[str, str] = {
+    "all": "dmap_points",
+    "person": "dap_person_points",
+    "bicycle": "dap_bicycle_points",
+}
+#: Largest possible loss in each column (total loss) when nothing better is known.
+CEILING = 100.0
+
+_KINDS = ("published-bounds", "measured")
+
+
+def prediction_dir() -> Path:
+    """The folder of shipped prediction tables (the registry)."""
+    return resource_dir("data") / "prediction"
+
+
+def available_tables() -> list[str]:
+    """Names of the prediction tables in the registry folder, sorted."""
+    folder = prediction_dir()
+    return sorted(p.stem for p in folder.glob("*.json")) if folder.is_dir() else []
+
+
+@dataclass(frozen=True)
+class Curve:
+    """One worst-case curve of a table: ``delta_e`` (n,) and each column's (n,) values
+    (NaN where the table has null), for a detector ``size`` and optional ``model``."""
+
+    size: str
+    model: str | None
+    delta_e: np.ndarray
+    values: dict[str, np.ndarray]
+    sources: tuple[str, ...]
+    worst_transforms: tuple[str | None, ...]
+    baseline_map: float | None = None
+
+
+@dataclass(frozen=True)
+class PredictionTable:
+    """A prediction table read from JSON (see the module docstring and CORE_API.md)."""
+
+    name: str
+    title: str
+    kind: str
+    provenance: dict[str, Any]
+    units: dict[str, str]
+    curves: tuple[Curve, ...]
+    interpolation: str = "pchip"
+    path: Path | None = None
+    raw: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    def sizes(self) -> list[str]:
+        """Size classes that have a curve of their own."""
+        return sorted({c.size for c in self.curves}, key=SIZES.index)
+
+    def select(self, size: str = "any") -> tuple[list[Curve], str]:
+        """Curves that answer for ``size`` and the size they were made for.
+
+        A size with its own curves gets those; otherwise the ``any`` curves (worst over every
+        size); a table without ``any`` curves then answers with all its curves (worst case).
+        """
+        if size not in SIZES:
+            raise unknown_name("detector size", size, SIZES)
+        own = [c for c in self.curves if c.size == size]
+        if own:
+            return own, size
+        anyc = [c for c in self.curves if c.size == "any"]
+        if anyc:
+            return anyc, "any"
+        return list(self.curves), "worst of " + ",".join(self.sizes())
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready identification of the table (name, title, kind, provenance, units)."""
+        return {
+            "name": self.name,
+            "title": self.title,
+            "kind": self.kind,
+            "interpolation": self.interpolation,
+            "path": str(self.path) if self.path else None,
+            "provenance": self.provenance,
+            "units": self.units,
+        }
+
+
+def _number(value: Any, where: str) -> float:
+    if value is None:
+        return math.nan
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InvalidValueError(f"{where}: expected a number or null, got {value!r}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise InvalidValueError(f"{where}: {v} is not finite")
+    return v
+
+
+def parse_prediction_table(obj: dict[str, Any], origin: str = "<table>") -> PredictionTable:
+    """Validate a prediction-table JSON object and build a :class:`PredictionTable`."""
+    if not isinstance(obj, dict):
+        raise InputFileError(f"{origin}: a prediction table must be a JSON object")
+    for key in ("name", "kind", "curves"):
+        if key not in obj:
+            raise InputFileError(f"{origin}: prediction table lacks {key!r}")
+    if obj["kind"] not in _KINDS:
+        raise InputFileError(f"{origin}: kind {obj['kind']!r} is not one of {', '.join(_KINDS)}")
+    interpolation = obj.get("interpolation", "pchip")
+    if interpolation not in INTERPOLATIONS:
+        raise InputFileError(f"{origin}: unknown interpolation {interpolation!r}")
+    curves = []
+    for i, c in enumerate(obj["curves"]):
+        where = f"{origin}: curves[{i}]"
+        size = c.get("size", "any")
+        if size not in SIZES:
+            raise InputFileError(f"{where}: size {size!r} is not one of {', '.join(SIZES)}")
+        pts = c.get("points") or []
+        if not pts:
+            raise InputFileError(f"{where}: no points")
+        pts = sorted(pts, key=lambda p: float(p["delta_e"]))
+        de = np.array([_number(p.get("delta_e"), f"{where}.delta_e") for p in pts])
+        if np.any(np.isnan(de)) or np.any(de < 0) or np.any(np.diff(de) <= 0):
+            raise InputFileError(f"{where}: delta_e values must be distinct numbers >= 0")
+        values = {col: np.array([_number(p.get(col), f"{where}.{col}") for p in pts])
+                  for col in COLUMNS}
+        baseline = c.get("baseline_map")
+        curves.append(Curve(
+            size=size,
+            model=c.get("model"),
+            delta_e=de,
+            values=values,
+            sources=tuple(str(p.get("source", "")) for p in pts),
+            worst_transforms=tuple(p.get("worst_transform") for p in pts),
+            baseline_map=float(baseline) if baseline is not None else None,
+        ))
+    return PredictionTable(
+        name=str(obj["name"]),
+        title=str(obj.get("title", obj["name"])),
+        kind=str(obj["kind"]),
+        provenance=dict(obj.get("provenance", {})),
+        units=dict(obj.get("units", {})),
+        curves=tuple(curves),
+        interpolation=str(interpolation),
+        raw=obj,
+    )
+
+
+def load_prediction_table(name_or_path: str | os.PathLike[str] | None = None) -> PredictionTable:
+    """Load a table by registry name (``safecolor-2025``, ...) or from a JSON file path.
+
+    ``None`` loads :data:`DEFAULT_TABLE`. Raises :class:`UnknownNameError` for an unknown name
+    and :class:`InputFileError` for an unreadable or malformed file.
+    """
+    name = DEFAULT_TABLE if name_or_path is None else str(name_or_path)
+    path = Path(name)
+    if not (path.suffix == ".json" or os.sep in name or "/" in name):
+        path = prediction_dir() / f"{name}.json"
+        if not path.is_file():
+            raise unknown_name("prediction table", name, available_tables())
+    if not path.is_file():
+        raise InputFileError(f"{path}: prediction table does not exist")
+    try:
+        obj = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputFileError(f"{path}: not a readable JSON prediction table ({exc})") from None
+    table = parse_prediction_table(obj, str(path))
+    return PredictionTable(**{**table.__dict__, "path": path})
+
+
+# --------------------------------------------------------------------------- interpolation
+
+def _interp_pchip(x: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
+    from scipy.interpolate import PchipInterpolator
+
+    if len(x) == 1:
+        return np.full_like(t, y[0])
+    return PchipInterpolator(x, y, extrapolate=False)(t)
+
+
+def _interp_linear(x: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
+    return np.interp(t, x, y)
+
+
+def _interp_step(x: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
+    idx = np.clip(np.searchsorted(x, t - 1e-12, side="left"), 0, len(x) - 1)
+    return y[idx]
+
+
+#: Interpolation methods, by name (each takes x ascending, y non-decreasing, t inside [x0, xn]).
+INTERPOLATIONS: dict[str, Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]] = {
+    "pchip": _interp_pchip,
+    "linear": _interp_linear,
+    "step": _interp_step,
+}
+
+
+@dataclass(frozen=True)
+class ColumnPrediction:
+    """One column's answer: ``value`` and how it was obtained.
+
+    ``status`` is ``"interpolated"`` (inside the column's ΔE range), ``"below-range"`` (ΔE below
+    the first point: the first point's value, an upper bound because loss grows with ΔE),
+    ``"above-range"`` (beyond the last point: the ceiling, total loss) or ``"no-data"``.
+    """
+
+    value: float | None
+    status: str
+    delta_e_range: tuple[float, float] | None
+    note: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {"value": self.value, "status": self.status,
+                "delta_e_range": list(self.delta_e_range) if self.delta_e_range else None,
+                "note": self.note}
+
+
+def _column_values(curve: Curve, column: str, delta_e: np.ndarray, method: str,
+                   ceiling: float) -> tuple[np.ndarray, np.ndarray, tuple[float, float] | None]:
+    """Values and status codes (0 inside, -1 below, +1 above, 2 no data) of one curve column."""
+    y_all = curve.values[column]
+    ok = ~np.isnan(y_all)
+    if not np.any(ok):
+        return np.full(delta_e.shape, np.nan), np.full(delta_e.shape, 2), None
+    x = curve.delta_e[ok]
+    y = np.maximum.accumulate(y_all[ok])
+    lo, hi = float(x[0]), float(x[-1])
+    inside = (delta_e >= lo) & (delta_e <= hi)
+    out = np.empty(delta_e.shape)
+    status = np.zeros(delta_e.shape, dtype=int)
+    if np.any(inside):
+        out[inside] = INTERPOLATIONS[method](x, y, delta_e[inside])
+    below = delta_e < lo
+    out[below] = y[0]
+    status[below] = -1
+    above = delta_e > hi
+    out[above] = ceiling
+    status[above] = 1
+    return out, status, (lo, hi)
+
+
+def predict_curve(
+    delta_e: Sequence[float] | np.ndarray,
+    column: str = "dmap_points",
+    *,
+    size: str = "any",
+    table: PredictionTable | str | None = None,
+    method: str | None = None,
+) -> np.ndarray:
+    """Vectorised worst-case prediction of one ``column`` at every ``delta_e`` (for plots).
+
+    Returns NaN where the table has no data for the column. Values outside the range follow the
+    conservative rules of the module docstring.
+    """
+    tab = table if isinstance(table, PredictionTable) else load_prediction_table(table)
+    if column not in COLUMNS:
+        raise unknown_name("prediction column", column, COLUMNS)
+    m = method or tab.interpolation
+    if m not in INTERPOLATIONS:
+        raise unknown_name("interpolation method", m, INTERPOLATIONS)
+    t = np.atleast_1d(np.asarray(delta_e, dtype=np.float64))
+    curves, _ = tab.select(size)
+    best = np.full(t.shape, np.nan)
+    for c in curves:
+        ceiling = c.baseline_map if (column == "dmap_points" and c.baseline_map) else CEILING
+        v, _, _ = _column_values(c, column, t, m, ceiling)
+        best = np.fmax(best, v)
+    return best
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """The predicted detection loss for one chart ΔE (see :func:`predict`)."""
+
+    delta_e: float
+    size: str
+    size_used: str
+    columns: dict[str, ColumnPrediction]
+    table: PredictionTable
+    method: str
+    baseline_map: float | None
+    transforms: list[dict[str, Any]]
+    notes: list[str]
+
+    @property
+    def dmap_points(self) -> float | None:
+        """Predicted ΔmAP in percentage points (upper bound for published tables)."""
+        return self.columns["dmap_points"].value
+
+    @property
+    def dmap_relative(self) -> float | None:
+        """Predicted ΔmAP in percent of the baseline mAP."""
+        return self.columns["dmap_relative"].value
+
+    @property
+    def dap_person_points(self) -> float | None:
+        """Predicted person ΔAP in percentage points."""
+        return self.columns["dap_person_points"].value
+
+    @property
+    def dap_bicycle_points(self) -> float | None:
+        """Predicted bicycle ΔAP in percentage points."""
+        return self.columns["dap_bicycle_points"].value
+
+    @property
+    def out_of_range(self) -> bool:
+        """True when any column was answered outside its table range."""
+        return any(c.status in ("below-range", "above-range") for c in self.columns.values())
+
+    def value(self, cls: str = "all", unit: str = "points") -> float | None:
+        """The loss for ``cls`` (``all``, ``person``, ``bicycle``) in ``unit``."""
+        if cls not in CLASS_COLUMNS:
+            raise unknown_name("class", cls, CLASS_COLUMNS)
+        if unit == "relative":
+            if cls != "all":
+                raise InvalidValueError(f"--class {cls}: only 'all' has a relative ΔmAP; use points")
+            return self.dmap_relative
+        if unit != "points":
+            raise unknown_name("unit", unit, ("points", "relative"))
+        return self.columns[CLASS_COLUMNS[cls]].value
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form with at least ``dmap_points``, ``dmap_relative``,
+        ``dap_person_points``, ``dap_bicycle_points``, ``table`` and ``transforms``."""
+        return {
+            "delta_e": self.delta_e,
+            "size": self.size,
+            "size_used": self.size_used,
+            **{col: self.columns[col].value for col in COLUMNS},
+            "bound": self.table.kind == "published-bounds",
+            "out_of_range": self.out_of_range,
+            "columns": {col: c.to_dict() for col, c in self.columns.items()},
+            "interpolation": self.method,
+            "baseline_map": self.baseline_map,
+            "table": self.table.summary(),
+            "transforms": self.transforms,
+            "notes": self.notes,
+        }
+
+
+def predict(
+    delta_e: float,
+    size: str = "any",
+    table: PredictionTable | str | None = None,
+    *,
+    method: str | None = None,
+    baseline_map: float | None = None,
+    transforms: bool = True,
+) -> Prediction:
+    """Predict the worst-case detection loss of a chart's mean ΔE00.
+
+    Parameters
+    ----------
+    delta_e
+        The chart ΔE (mean CIEDE2000 over the 24 patches), >= 0.
+    size
+        Detector size class ``n, s, m, l, x`` or ``any``.
+    table
+        Table name, path or object; ``None`` is :data:`DEFAULT_TABLE`.
+    method
+        Interpolation (``pchip``, ``linear``, ``step``); default the table's own.
+    baseline_map
+        Baseline mAP@[.50:.95] in percent (0, 100] of the detector, when known. It resolves the
+        paper's points-vs-relative ambiguity conservatively: for ``published-bounds`` tables the
+        relative loss becomes ``max(X, 100 * X / baseline_map)``; the points ceiling above the
+        range becomes ``baseline_map``.
+    transforms
+        Also list the SAFE-COLOR transform parameters that produce ``delta_e`` on the chart
+        (from the shipped calibration table).
+    """
+    de = float(delta_e)
+    if not math.isfinite(de) or de < 0:
+        raise InvalidValueError(f"ΔE {delta_e!r} must be a finite number >= 0")
+    if baseline_map is not None and not (0 < float(baseline_map) <= 100):
+        raise InvalidValueError(f"baseline mAP {baseline_map!r} must be in (0, 100] percent")
+    tab = table if isinstance(table, PredictionTable) else load_prediction_table(table)
+    m = method or tab.interpolation
+    if m not in INTERPOLATIONS:
+        raise unknown_name("interpolation method", m, INTERPOLATIONS)
+    curves, size_used = tab.select(size)
+    notes: list[str] = []
+    if size_used != size:
+        notes.append(f"table {tab.name!r} has no curve for size {size!r}; the {size_used!r} "
+                     f"curve (worst case over sizes) answers")
+    t = np.array([de])
+    columns: dict[str, ColumnPrediction] = {}
+    for col in COLUMNS:
+        best_v, best_s, rng = math.nan, 2, None
+        for c in curves:
+            ceiling = CEILING
+            if col == "dmap_points":
+                ceiling = c.baseline_map or (float(baseline_map) if baseline_map else CEILING)
+            v, s, r = _column_values(c, col, t, m, ceiling)
+            if r is not None and (math.isnan(best_v) or v[0] > best_v):
+                best_v, best_s, rng = float(v[0]), int(s[0]), r
+        if math.isnan(best_v):
+            columns[col] = ColumnPrediction(None, "no-data", None,
+                                            f"table {tab.name!r} has no {col} data")
+            continue
+        status = {0: "interpolated", -1: "below-range", 1: "above-range"}[best_s]
+        assert rng is not None
+        if status == "interpolated":
+            note = f"{m} interpolation inside ΔE {rng[0]:g}..{rng[1]:g}"
+        elif status == "below-range":
+            note = (f"ΔE {de:g} is below the table's range ({rng[0]:g}..{rng[1]:g}); answered "
+                    f"with the value at ΔE {rng[0]:g} (an upper bound: loss grows with ΔE)")
+        else:
+            note = (f"ΔE {de:g} is beyond the table's range ({rng[0]:g}..{rng[1]:g}); no "
+                    f"extrapolation: answered with the ceiling (total loss)")
+        if (col == "dmap_relative" and tab.kind == "published-bounds" and baseline_map
+                and columns.get("dmap_points") and columns["dmap_points"].value is not None):
+            pts = columns["dmap_points"].value
+            alt = min(CEILING, 100.0 * pts / float(baseline_map))
+            if alt > best_v:
+                note += (f"; raised to 100*{pts:.4g}/{float(baseline_map):g} = {alt:.4g} % "
+                         f"(the paper's percent read as points)")
+                best_v = alt
+        if tab.kind == "published-bounds":
+            note = "upper bound; " + note
+        columns[col] = ColumnPrediction(best_v, status, rng, note)
+    if tab.kind == "published-bounds":
+        notes.append("published-bounds table: values are upper bounds (worst case over the "
+                      "paper's transforms and detectors), not expectations")
+        if baseline_map is None:
+            notes.append("ΔmAP points vs relative: the paper's '%' is ambiguous; dmap_points is "
+                         "safe under both readings, dmap_relative only under the relative "
+                         "reading (give the detector's baseline mAP to bound it under both)")
+    for col, cp in columns.items():
+        if cp.status == "above-range":
+            notes.append(f"{col}: ΔE {de:g} is beyond the table ({cp.note})")
+    return Prediction(
+        delta_e=de, size=size, size_used=size_used, columns=columns, table=tab, method=m,
+        baseline_map=float(baseline_map) if baseline_map is not None else None,
+        transforms=transform_parameters(de) if transforms else [], notes=notes,
+    )
+
+
+def transform_parameters(delta_e: float, calibration: Any = None) -> list[dict[str, Any]]:
+    """The SAFE-COLOR transform parameters that give chart ΔE ``delta_e``, one per transform.
+
+    Read from the shipped calibration table (``fidelity.calibration.load_calibration_table()``):
+    at a calibrated target the table's parameter; between two reachable targets the parameter
+    interpolated linearly in ΔE between the bracketing targets (both given); below the first
+    target between the identity (at the chart's baseline ΔE) and the first target. A ΔE a
+    transform cannot reach is reported as unreachable, not as a number.
+    """
+    if calibration is None:
+        from fidelity.calibration import load_calibration_table
+
+        calibration = load_calibration_table()
+    from fidelity.transforms import TRANSFORMS
+
+    baseline = float(calibration.baseline_delta_e)
+    by_transform: dict[str, list[Any]] = {}
+    for e in calibration.entries:
+        by_transform.setdefault(e.transform, []).append(e)
+    out: list[dict[str, Any]] = []
+    for name, entries in by_transform.items():
+        entries = sorted(entries, key=lambda e: float(e.target))
+        spec = TRANSFORMS.get(name)
+        identity = float(spec.identity) if spec is not None else None
+        nodes: list[tuple[float, float]] = []
+        if identity is not None:
+            nodes.append((baseline, identity))
+        unreachable_from = None
+        for e in entries:
+            if e.reachable and e.param is not None:
+                nodes.append((float(e.delta_e if e.delta_e is not None else e.target),
+                              float(e.param)))
+            elif unreachable_from is None:
+                unreachable_from = float(e.target)
+        row: dict[str, Any] = {"transform": name, "delta_e": delta_e}
+        exact = [e for e in entries if abs(float(e.target) - delta_e) < 1e-9]
+        if exact and exact[0].reachable and exact[0].param is not None:
+            row.update(param=float(exact[0].param), reachable=True, method="calibrated",
+                       bracket=None)
+        elif delta_e < baseline:
+            row.update(param=None, reachable=False, method="below the chart's baseline ΔE "
+                       f"{baseline:.4g}", bracket=None)
+        else:
+            below = [n for n in nodes if n[0] <= delta_e]
+            above = [n for n in nodes if n[0] >= delta_e]
+            if below and above and (unreachable_from is None or delta_e < unreachable_from):
+                (e0, p0), (e1, p1) = below[-1], above[0]
+                p = p0 if e1 == e0 else p0 + (p1 - p0) * (delta_e - e0) / (e1 - e0)
+                row.update(param=float(p), reachable=True, method="interpolated",
+                           bracket=[{"delta_e": e0, "param": p0}, {"delta_e": e1, "param": p1}])
+            else:
+                row.update(param=None, reachable=False,
+                           method="unreachable within the transform's range", bracket=None)
+        out.append(row)
+    return out
+
+
+__all__ = [
+    "CEILING",
+    "CLASS_COLUMNS",
+    "COLUMNS",
+    "DEFAULT_TABLE",
+    "INTERPOLATIONS",
+    "SIZES",
+    "ColumnPrediction",
+    "Curve",
+    "Prediction",
+    "PredictionTable",
+    "available_tables",
+    "load_prediction_table",
+    "parse_prediction_table",
+    "predict",
+    "predict_curve",
+    "prediction_dir",
+    "transform_parameters",
+]
