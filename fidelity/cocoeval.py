@@ -48,7 +48,6 @@ class CocoScore:
 
 def load_annotations(path: str | os.PathLike[str]) -> Any:
     """Load a COCO annotation file into a quiet ``pycocotools.coco.COCO`` object."""
-    from pycocotools.coco import COCO
 
     p = Path(path)
     if not p.is_file():

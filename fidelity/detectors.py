@@ -198,13 +198,10 @@ def resize_bilinear(image: np.ndarray, height: int, width: int) -> np.ndarray:
 
     y0, y1, fy = axis(height, src_h)
     x0, x1, fx = axis(width, src_w)
-    img = image.astype(np.float32)
-    top = img[y0]
-    bot = img[y1]
-    rows = top + (bot - top) * fy[:, None, None]
+    top = image[y0].astype(np.float32)
+    rows = top + (image[y1].astype(np.float32) - top) * fy[:, None, None]
     left = rows[:, x0]
-    right = rows[:, x1]
-    return left + (right - left) * fx[None, :, None]
+    return left + (rows[:, x1] - left) * fx[None, :, None]
 
 
 @dataclass(frozen=True)
@@ -223,20 +220,24 @@ def preprocess(rgb: np.ndarray, layout: ModelLayout) -> tuple[np.ndarray, Letter
     th, tw = layout.input_size
     h, w = rgb.shape[:2]
     r = min(th / h, tw / w)
-    canvas = np.full((th, tw, 3), 114.0, dtype=np.float32)
+    x = np.full((1, 3, th, tw), 114.0, dtype=np.float32)
     if layout.kind == "yolox":
         nh, nw = int(h * r), int(w * r)
-        canvas[:nh, :nw] = resize_bilinear(rgb, nh, nw)
-        x = canvas[:, :, ::-1]  # BGR, 0-255
+        top = left = 0
+        order = (2, 1, 0)  # BGR, 0-255
         box = Letterbox(r, 0.0, 0.0)
     else:
         nw, nh = int(round(w * r)), int(round(h * r))
         dw, dh = (tw - nw) / 2, (th - nh) / 2
         top, left = int(round(dh - 0.1)), int(round(dw - 0.1))
-        canvas[top:top + nh, left:left + nw] = resize_bilinear(rgb, nh, nw)
-        x = canvas * np.float32(1 / 255)
+        order = (0, 1, 2)  # RGB
         box = Letterbox(r, float(left), float(top))
-    return np.ascontiguousarray(x.transpose(2, 0, 1)[None]), box
+    resized = resize_bilinear(rgb, nh, nw)
+    for c, src in enumerate(order):
+        x[0, c, top:top + nh, left:left + nw] = resized[:, :, src]
+    if layout.kind != "yolox":
+        x *= np.float32(1 / 255)
+    return x, box
 
 
 # --------------------------------------------------------------------------------------------

@@ -22,6 +22,10 @@ from fidelity.errors import FidelityError
 #: command name -> "module:attribute" of its click command.
 COMMANDS: dict[str, str] = {
     "calibrate": "fidelity.cli.calibrate:calibrate",
+    "dataset": "fidelity.cli.dataset:dataset",
+    "evaluate": "fidelity.cli.evaluate:evaluate",
+    "sweep": "fidelity.cli.sweep:sweep",
+    "tables": "fidelity.cli.tables:tables",
 }
 
 

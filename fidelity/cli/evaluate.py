@@ -1,0 +1,72 @@
+"""``fidelity evaluate``: run one ONNX detector on a COCO image folder and score it."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import click
+
+
+@click.command()
+@click.option("--model", "model", required=True, type=click.Path(dir_okay=False),
+              help="ONNX detector (Ultralytics 1x84xN, YOLOv10 1x300x6 or YOLOX 1xNx85).")
+@click.option("--images", required=True, type=click.Path(file_okay=False),
+              help="Folder with the images named in the annotations.")
+@click.option("--annotations", required=True, type=click.Path(dir_okay=False),
+              help="COCO instances JSON (box annotations).")
+@click.option("--limit", type=click.IntRange(min=1), default=None,
+              help="Evaluate only the first N images by image id.")
+@click.option("--threads", type=click.IntRange(min=1), default=None,
+              help="onnxruntime intra-op threads (default: all cores).")
+@click.option("--provider", type=click.Choice(["auto", "cpu", "cuda"]), default="auto",
+              show_default=True, help="Execution provider (auto: CUDA if present).")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
+              help="Write map, map50, ap (class -> AP), images, seconds as JSON (fractions).")
+@click.option("--classes", default="person,bicycle,car,motorcycle,bus,truck,traffic light,stop sign",
+              show_default=True, help="Classes whose AP is printed (all are in --json).")
+@click.option("--progress/--no-progress", default=True, show_default=True)
+def evaluate(model: str, images: str, annotations: str, limit: int | None, threads: int | None,
+             provider: str, json_path: str | None, classes: str, progress: bool) -> None:
+    """Run a detector on a COCO image folder and print COCO box AP (pycocotools)."""
+    from tqdm import tqdm
+
+    from fidelity.cocoeval import evaluate_detections, load_annotations
+    from fidelity.detectors import Detector
+    from fidelity.errors import InputFileError
+    from fidelity.fileio import write_json_atomic
+    from fidelity.jpeg import read_jpeg
+
+    det = Detector(model, threads=threads, provider=provider)
+    coco = load_annotations(annotations)
+    ids = sorted(coco.getImgIds())[:limit] if limit else sorted(coco.getImgIds())
+    folder = Path(images)
+    if not folder.is_dir():
+        raise InputFileError(f"{folder}: image folder does not exist")
+    t0 = time.perf_counter()
+    dets = {}
+    for i in tqdm(ids, desc=det.name, unit="img", disable=not progress):
+        rgb, _ = read_jpeg(folder / coco.imgs[i]["file_name"])
+        dets[i] = det(rgb)
+    infer_s = time.perf_counter() - t0
+    score = evaluate_detections(coco, dets, ids)
+    seconds = time.perf_counter() - t0
+    info = det.describe()
+    conv = info["conventions"]
+    click.echo(f"model      {det.name}  layout {info['layout']}  input {info['input_size']}  "
+               f"providers {','.join(info['providers'])}")
+    click.echo(f"settings   conf {conv['conf']}  iou {conv['iou']}  max_det {conv['max_det']}  "
+               f"({conv['source']})")
+    click.echo(f"images     {len(ids)}  detections {score.detections}  "
+               f"{len(ids) / infer_s:.1f} img/s inference  {seconds:.1f} s total")
+    click.echo(f"mAP        {score.map:.4f}   (AP@[.50:.95], fraction)")
+    click.echo(f"AP50       {score.map50:.4f}")
+    for name in [c.strip() for c in classes.split(",") if c.strip()]:
+        v = score.ap.get(name)
+        click.echo(f"AP {name:<14} {'n/a (no ground truth)' if v is None else f'{v:.4f}'}")
+    if json_path:
+        payload = score.to_dict() | {"seconds": seconds, "detector": info,
+                                     "annotations": str(annotations), "images_dir": str(images)}
+        write_json_atomic(json_path, payload)
+        click.echo(f"wrote {json_path}")
+

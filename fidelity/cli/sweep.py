@@ -1,0 +1,65 @@
+"""``fidelity sweep``: every (model, transform, ΔE) cell into a resumable SQLite store."""
+
+from __future__ import annotations
+
+import click
+
+
+def _targets(text: str) -> list[float]:
+    from fidelity.errors import InvalidValueError
+
+    try:
+        vals = [float(t) for t in text.split(",") if t.strip()]
+    except ValueError as exc:
+        raise InvalidValueError(f"--targets {text!r}: not a comma-separated list of numbers") \
+            from exc
+    if not vals or any(v < 0 for v in vals):
+        raise InvalidValueError(f"--targets {text!r}: need non-negative ΔE values")
+    return vals
+
+
+def _transforms(text: str) -> list[str]:
+    from fidelity.errors import unknown_name
+    from fidelity.transforms import TRANSFORMS
+
+    if text == "all":
+        return list(TRANSFORMS)
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    for n in names:
+        if n not in TRANSFORMS:
+            raise unknown_name("transform", n, TRANSFORMS)
+    return names
+
+
+@click.command()
+@click.option("--models", required=True,
+              help="Comma-separated ONNX files, each optionally PATH@N (first N images by id).")
+@click.option("--images", required=True, type=click.Path(file_okay=False))
+@click.option("--annotations", required=True, type=click.Path(dir_okay=False))
+@click.option("--transforms", default="all", show_default=True,
+              help="'all' or comma-separated transform names.")
+@click.option("--targets", default="0,1,2,3,4,5,6,8,10,12,15,18,21,24", show_default=True,
+              help="Chart ΔE targets; 0 is the baseline (decode + re-encode only).")
+@click.option("--out", required=True, type=click.Path(file_okay=False),
+              help="Folder of the results store (sweep.sqlite); rerun to resume.")
+@click.option("--threads", type=click.IntRange(min=1), default=1, show_default=True,
+              help="onnxruntime intra-op threads.")
+@click.option("--provider", type=click.Choice(["auto", "cpu", "cuda"]), default="auto",
+              show_default=True)
+@click.option("--rescore", is_flag=True, help="Only recompute scores from stored detections.")
+def sweep(models: str, images: str, annotations: str, transforms: str, targets: str, out: str,
+          threads: int, provider: str, rescore: bool) -> None:
+    """Run (or resume) the COCO sweep; progress is logged one line per cell on stderr."""
+    from fidelity.sweep import ModelSpec, SweepStore, run_sweep
+    from fidelity.sweep import rescore as do_rescore
+
+    if rescore:
+        n = do_rescore(SweepStore(out, create=False), annotations)
+        click.echo(f"rescored {n} cells in {out}")
+        return
+    specs = [ModelSpec.parse(m.strip()) for m in models.split(",") if m.strip()]
+    store = run_sweep(specs, images, annotations, out, _transforms(transforms),
+                      _targets(targets), threads=threads, provider=provider)
+    cells = store.cells()
+    done = sum(c["status"] == "done" for c in cells)
+    click.echo(f"{done} cells done, {len(cells) - done} unreachable; store {store.path}")

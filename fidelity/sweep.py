@@ -1,0 +1,341 @@
+"""The COCO sweep: every (model, transform, ΔE target) cell, in a crash-safe SQLite store.
+
+Pipeline per cell, all in memory (equivalent to writing the transformed JPEG files and reading
+them back, as SAFE-COLOR did): decoded original (cached in RAM) -> 8-bit transform
+(:class:`fidelity.dataset.PixelMap`, exact) -> JPEG encode with the original's tables and
+subsampling -> decode -> detector -> raw detections.
+
+Store (``<out>/sweep.sqlite``, WAL journal, ``synchronous=FULL``):
+
+* ``detections(model, transform, target, image_id, n, dets)``: raw detections of every image,
+  (n, 6) float32 ``x1, y1, x2, y2, score, class`` (zlib), committed every few images; so a
+  ``kill -9`` loses at most one uncommitted batch and re-scoring needs no inference.
+* ``cells(model, transform, target, param, status, reason, images, map, map50, map75, ap,
+  seconds, finished)``: one row per finished cell (``status`` ``done`` or ``unreachable``).
+* ``models(model, file, sha256, limit_images, settings)`` and ``meta(key, value)``: provenance.
+
+A rerun skips finished cells and the images already stored in unfinished ones.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import sqlite3
+import sys
+import time
+import zlib
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fidelity.errors import InputFileError, InvalidValueError
+
+#: Default targets of the sweep (issue 5): ΔE 0 is the baseline.
+SWEEP_TARGETS: tuple[float, ...] = (0, 1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 18, 21, 24)
+
+STORE_NAME = "sweep.sqlite"
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS models (
+    model TEXT PRIMARY KEY, file TEXT, sha256 TEXT, limit_images INTEGER, settings TEXT);
+CREATE TABLE IF NOT EXISTS cells (
+    model TEXT NOT NULL, transform TEXT NOT NULL, target REAL NOT NULL,
+    param REAL, status TEXT NOT NULL, reason TEXT, images INTEGER,
+    map REAL, map50 REAL, map75 REAL, ap TEXT, seconds REAL, finished TEXT,
+    PRIMARY KEY (model, transform, target));
+CREATE TABLE IF NOT EXISTS detections (
+    model TEXT NOT NULL, transform TEXT NOT NULL, target REAL NOT NULL,
+    image_id INTEGER NOT NULL, n INTEGER NOT NULL, dets BLOB NOT NULL,
+    PRIMARY KEY (model, transform, target, image_id));
+"""
+
+
+def pack_detections(d: np.ndarray) -> bytes:
+    """(n, 6) detections -> zlib-compressed float32 bytes."""
+    return zlib.compress(np.ascontiguousarray(d, dtype=np.float32).tobytes(), 1)
+
+
+def unpack_detections(blob: bytes) -> np.ndarray:
+    """Inverse of :func:`pack_detections`."""
+    return np.frombuffer(zlib.decompress(blob), dtype=np.float32).reshape(-1, 6)
+
+
+class SweepStore:
+    """The SQLite results store of a sweep (see module docstring)."""
+
+    def __init__(self, folder: str | os.PathLike[str], *, create: bool = True) -> None:
+        self.folder = Path(folder)
+        self.path = self.folder / STORE_NAME
+        if not create and not self.path.is_file():
+            raise InputFileError(f"{self.folder}: no sweep store ({STORE_NAME}) in this folder")
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.db = sqlite3.connect(str(self.path), timeout=60)
+        self.db.execute("PRAGMA journal_mode=WAL")
+        self.db.execute("PRAGMA synchronous=FULL")
+        self.db.executescript(_SCHEMA)
+        self.db.commit()
+
+    def close(self) -> None:
+        """Close the connection."""
+        self.db.close()
+
+    # meta -----------------------------------------------------------------------------------
+    def set_meta(self, key: str, value: Any) -> None:
+        """Store a JSON-serialisable provenance value."""
+        with self.db:
+            self.db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (key, json.dumps(value)))
+
+    def meta(self) -> dict[str, Any]:
+        """All provenance values."""
+        return {k: json.loads(v) for k, v in self.db.execute("SELECT key, value FROM meta")}
+
+    def register_model(self, model: str, file: str, sha256: str, limit: int | None,
+                       settings: dict[str, Any]) -> None:
+        """Record a model; a different file under the same name is an error (not mixed)."""
+        row = self.db.execute("SELECT sha256, limit_images FROM models WHERE model=?",
+                              (model,)).fetchone()
+        if row and row[0] != sha256:
+            raise InvalidValueError(f"store {self.path}: model {model!r} was swept from a "
+                                    f"different file (sha256 {row[0][:16]} != {sha256[:16]})")
+        with self.db:
+            self.db.execute("INSERT OR REPLACE INTO models VALUES (?, ?, ?, ?, ?)",
+                            (model, file, sha256, limit, json.dumps(settings)))
+
+    def models(self) -> dict[str, dict[str, Any]]:
+        """Registered models: name -> file, sha256, limit_images, settings."""
+        out = {}
+        for m, f, s, lim, st in self.db.execute("SELECT * FROM models"):
+            out[m] = {"file": f, "sha256": s, "limit_images": lim, "settings": json.loads(st)}
+        return out
+
+    # detections -----------------------------------------------------------------------------
+    def stored_images(self, model: str, transform: str, target: float) -> set[int]:
+        """Image ids whose detections are stored for this cell."""
+        rows = self.db.execute("SELECT image_id FROM detections WHERE model=? AND transform=? "
+                               "AND target=?", (model, transform, float(target)))
+        return {r[0] for r in rows}
+
+    def add_detections(self, model: str, transform: str, target: float,
+                       rows: Iterable[tuple[int, np.ndarray]]) -> None:
+        """Store (image_id, detections) pairs in one transaction."""
+        with self.db:
+            self.db.executemany(
+                "INSERT OR REPLACE INTO detections VALUES (?, ?, ?, ?, ?, ?)",
+                [(model, transform, float(target), int(i), len(d), pack_detections(d))
+                 for i, d in rows])
+
+    def detections(self, model: str, transform: str, target: float) -> dict[int, np.ndarray]:
+        """All stored detections of a cell: image_id -> (n, 6)."""
+        rows = self.db.execute("SELECT image_id, dets FROM detections WHERE model=? AND "
+                               "transform=? AND target=?", (model, transform, float(target)))
+        return {i: unpack_detections(b) for i, b in rows}
+
+    # cells ----------------------------------------------------------------------------------
+    def cell(self, model: str, transform: str, target: float) -> dict[str, Any] | None:
+        """A finished cell's row, or None."""
+        cur = self.db.execute("SELECT * FROM cells WHERE model=? AND transform=? AND target=?",
+                              (model, transform, float(target)))
+        row = cur.fetchone()
+        return _cell_dict(cur, row) if row else None
+
+    def cells(self) -> list[dict[str, Any]]:
+        """All finished cells (done and unreachable)."""
+        cur = self.db.execute("SELECT * FROM cells ORDER BY model, transform, target")
+        return [_cell_dict(cur, r) for r in cur.fetchall()]
+
+    def finish_cell(self, model: str, transform: str, target: float, *, param: float | None,
+                    status: str, reason: str | None = None, images: int | None = None,
+                    score: Any = None, seconds: float | None = None) -> None:
+        """Record a finished (or unreachable) cell."""
+        with self.db:
+            self.db.execute(
+                "INSERT OR REPLACE INTO cells VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                (model, transform, float(target), param, status, reason, images,
+                 None if score is None else score.map, None if score is None else score.map50,
+                 None if score is None else score.map75,
+                 None if score is None else json.dumps(score.ap), seconds,
+                 time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())))
+
+
+def _cell_dict(cur: sqlite3.Cursor, row: Sequence[Any]) -> dict[str, Any]:
+    d = {c[0]: v for c, v in zip(cur.description, row, strict=True)}
+    d["ap"] = json.loads(d["ap"]) if d.get("ap") else None
+    return d
+
+
+def file_sha256(path: str | os.PathLike[str]) -> str:
+    """SHA-256 of a file (hex)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """A model to sweep: its ONNX file and how many images (first N by image id; None = all)."""
+
+    path: Path
+    limit: int | None = None
+
+    @classmethod
+    def parse(cls, text: str) -> ModelSpec:
+        """``path.onnx`` or ``path.onnx@N`` (first N images by id)."""
+        if "@" in text:
+            p, n = text.rsplit("@", 1)
+            try:
+                lim = int(n)
+            except ValueError as exc:
+                raise InvalidValueError(f"model {text!r}: image limit {n!r} is not an integer") \
+                    from exc
+            if lim < 1:
+                raise InvalidValueError(f"model {text!r}: image limit must be >= 1")
+            return cls(Path(p), lim)
+        return cls(Path(text), None)
+
+
+def plan_cells(transforms: Sequence[str], targets: Sequence[float]) -> list[tuple[str, float]]:
+    """Cell order within a model: baseline first, then ascending ΔE, transforms in given order."""
+    cells: list[tuple[str, float]] = []
+    if 0 in targets:
+        cells.append(("baseline", 0.0))
+    for e in sorted(t for t in targets if t != 0):
+        for t in transforms:
+            cells.append((t, float(e)))
+    return cells
+
+
+class ImageCache:
+    """Decoded originals kept in RAM (uint8 RGB + JPEG settings), loaded on first use."""
+
+    def __init__(self, folder: Path, coco: Any) -> None:
+        self.folder = folder
+        self.coco = coco
+        self._cache: dict[int, tuple[np.ndarray, Any]] = {}
+
+    def get(self, image_id: int) -> tuple[np.ndarray, Any]:
+        """(rgb, settings) of an image id."""
+        from fidelity.jpeg import read_jpeg
+
+        hit = self._cache.get(image_id)
+        if hit is None:
+            hit = read_jpeg(self.folder / self.coco.imgs[image_id]["file_name"])
+            self._cache[image_id] = hit
+        return hit
+
+
+def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
+              annotations: str | os.PathLike[str], out: str | os.PathLike[str],
+              transforms: Sequence[str], targets: Sequence[float], *, threads: int | None = 1,
+              provider: str = "auto", batch_commit: int = 25,
+              log: Callable[[str], None] | None = None, progress: bool = False) -> SweepStore:
+    """Run (or resume) every cell of the grid for each model in order; returns the store."""
+    import platform
+
+    import onnxruntime
+
+    from fidelity.cocoeval import evaluate_detections, load_annotations
+    from fidelity.dataset import BASELINE, PixelMap, calibrated_param
+    from fidelity.detectors import Detector
+    from fidelity.jpeg import roundtrip_jpeg
+
+    say = log or (lambda s: print(s, file=sys.stderr, flush=True))
+    img_dir = Path(images)
+    if not img_dir.is_dir():
+        raise InputFileError(f"{img_dir}: image folder does not exist")
+    coco = load_annotations(annotations)
+    all_ids = sorted(coco.getImgIds())
+    missing = [i for i in all_ids if not (img_dir / coco.imgs[i]["file_name"]).is_file()]
+    if missing:
+        raise InputFileError(f"{img_dir}: {len(missing)} annotated images missing, e.g. "
+                             f"{coco.imgs[missing[0]]['file_name']}")
+    store = SweepStore(out)
+    store.set_meta("versions", {"python": platform.python_version(),
+                                "onnxruntime": onnxruntime.__version__,
+                                "numpy": np.__version__, "fidelity": _fidelity_version()})
+    store.set_meta("data", {"images": str(img_dir), "annotations": str(annotations),
+                            "image_count": len(all_ids)})
+    store.set_meta("machine", {"platform": platform.platform(), "cpus": os.cpu_count(),
+                               "threads": threads})
+    cache = ImageCache(img_dir, coco)
+    grid = plan_cells(transforms, targets)
+    params: dict[tuple[str, float], tuple[float | None, str | None]] = {}
+    for spec in models:
+        det = Detector(spec.path, threads=threads, provider=provider)
+        ids = all_ids[: spec.limit] if spec.limit else all_ids
+        store.register_model(det.name, spec.path.name, file_sha256(spec.path), spec.limit,
+                             det.describe())
+        for transform, target in grid:
+            if store.cell(det.name, transform, target):
+                continue
+            if transform == BASELINE:
+                param, reason = None, None
+            else:
+                key = (transform, target)
+                if key not in params:
+                    params[key] = calibrated_param(transform, target)
+                param, reason = params[key]
+                if param is None:
+                    store.finish_cell(det.name, transform, target, param=None,
+                                      status="unreachable", reason=reason)
+                    say(f"{det.name} {transform} ΔE {target:g}: unreachable ({reason})")
+                    continue
+            t0 = time.perf_counter()
+            pm = PixelMap.build(transform, param)
+            have = store.stored_images(det.name, transform, target)
+            todo = [i for i in ids if i not in have]
+            batch: list[tuple[int, np.ndarray]] = []
+            for i in todo:
+                rgb, settings = cache.get(i)
+                seen = roundtrip_jpeg(pm(rgb), settings)
+                batch.append((i, det(seen)))
+                if len(batch) >= batch_commit:
+                    store.add_detections(det.name, transform, target, batch)
+                    batch = []
+            if batch:
+                store.add_detections(det.name, transform, target, batch)
+            dets = store.detections(det.name, transform, target)
+            score = evaluate_detections(coco, dets, ids)
+            dt = time.perf_counter() - t0
+            store.finish_cell(det.name, transform, target, param=param, status="done",
+                              images=len(ids), score=score, seconds=dt)
+            say(f"{time.strftime('%H:%M:%S')} {det.name} {transform} ΔE {target:g} "
+                f"param={param} mAP={score.map:.4f} AP50={score.map50:.4f} "
+                f"person={score.ap.get('person')} images={len(ids)} new={len(todo)} "
+                f"{dt:.1f}s ({len(todo) / dt if dt else 0:.1f} img/s)")
+        del det
+    return store
+
+
+def rescore(store: SweepStore, annotations: str | os.PathLike[str]) -> int:
+    """Recompute every done cell's scores from the stored detections (no inference)."""
+    from fidelity.cocoeval import evaluate_detections, load_annotations
+
+    coco = load_annotations(annotations)
+    ids_all = sorted(coco.getImgIds())
+    models = store.models()
+    n = 0
+    for c in store.cells():
+        if c["status"] != "done":
+            continue
+        lim = models.get(c["model"], {}).get("limit_images")
+        ids = ids_all[:lim] if lim else ids_all
+        score = evaluate_detections(coco, store.detections(c["model"], c["transform"],
+                                                           c["target"]), ids)
+        store.finish_cell(c["model"], c["transform"], c["target"], param=c["param"],
+                          status="done", images=len(ids), score=score, seconds=c["seconds"])
+        n += 1
+    return n
+
+
+def _fidelity_version() -> str:
+    from fidelity import __version__
+
+    return __version__
