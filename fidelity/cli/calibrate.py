@@ -1,0 +1,92 @@
+"""``fidelity calibrate``: the SAFE-COLOR calibration table."""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+
+import click
+import numpy as np
+
+from fidelity.calibration import (
+    DEFAULT_TARGETS,
+    calibration_table,
+    calibration_table_csv,
+    calibration_table_text,
+)
+from fidelity.charts import DEFAULT_CHART, load_chart
+from fidelity.errors import InvalidValueError
+from fidelity.fileio import write_json_atomic, write_text_atomic
+from fidelity.transforms import TRANSFORMS, get_transform
+
+
+def parse_number_list(text: str, what: str) -> list[float]:
+    """Parse "1,2,3" and ranges "1-12" (inclusive, step 1) into a list of numbers."""
+    values: list[float] = []
+    for part in (p.strip() for p in text.split(",")):
+        if not part:
+            continue
+        m = re.fullmatch(r"(\d+(?:\.\d*)?)-(\d+(?:\.\d*)?)", part)
+        try:
+            if m:
+                lo, hi = float(m.group(1)), float(m.group(2))
+                values.extend(float(v) for v in np.arange(lo, hi + 0.5, 1.0) if v <= hi + 1e-9)
+            else:
+                values.append(float(part))
+        except ValueError:
+            raise InvalidValueError(f"{what}: cannot read {part!r} as a number or a range a-b") from None
+    if not values:
+        raise InvalidValueError(f"{what}: no values given")
+    return values
+
+
+@click.command()
+@click.option("--chart", default=DEFAULT_CHART, show_default=True,
+              help="Built-in chart name or path to a chart JSON file.")
+@click.option("--targets", default=None,
+              help="Comma-separated target ΔE values or ranges (e.g. '1-12,15,18'). "
+                   "Default: 1..12, 15, 18, ..., 45.")
+@click.option("--transforms", "transform_names", default=None,
+              help=f"Comma-separated transforms (default: all ten): {', '.join(TRANSFORMS)}.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the table as JSON.")
+@click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the table as CSV.")
+@click.option("--markdown", "md_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the table as Markdown.")
+@click.option("--quiet", "-q", is_flag=True, help="Do not print the table.")
+def calibrate(chart: str, targets: str | None, transform_names: str | None,
+              json_path: Path | None, csv_path: Path | None, md_path: Path | None,
+              quiet: bool) -> None:
+    """Print the SAFE-COLOR calibration table.
+
+    For each transform and target ΔE, the parameter that puts the chart at that mean CIEDE2000
+    from its reference (Brent's method to |ΔE - target| <= 1e-4). Unreachable targets show '-'.
+    """
+    c = load_chart(chart)
+    tlist = DEFAULT_TARGETS if targets is None else parse_number_list(targets, "--targets")
+    names = None
+    if transform_names:
+        names = [n.strip() for n in transform_names.split(",") if n.strip()]
+        for n in names:
+            get_transform(n)
+    t0 = time.perf_counter()
+    table = calibration_table(c, tlist, names)
+    seconds = time.perf_counter() - t0
+    if json_path:
+        write_json_atomic(json_path, table.to_dict())
+    if csv_path:
+        write_text_atomic(csv_path, calibration_table_csv(table))
+    if md_path:
+        title = f"# SAFE-COLOR calibration table: chart `{table.chart}`\n\n"
+        body = calibration_table_text(table, markdown=True)
+        regen = ("\nRegenerate with `fidelity calibrate --json fidelity/data/calibration-safecolor.json "
+                 "--csv reports/calibration/calibration-safecolor.csv --markdown "
+                 "reports/calibration/calibration-safecolor.md`.\n")
+        write_text_atomic(md_path, title + body + regen)
+    if not quiet:
+        click.echo(calibration_table_text(table))
+        click.echo(f"{len(table.entries)} entries in {seconds:.2f} s; "
+                   f"largest |ΔE - target| = "
+                   f"{max((abs(e.delta_e - e.target) for e in table.entries if e.reachable), default=0):.1e}")
