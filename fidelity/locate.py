@@ -67,7 +67,8 @@ def homography_from_points(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     for name, pts in (("source", src), ("corner", dst)):
         for skip in range(4):
             tri = np.delete(pts, skip, axis=0)
-            area = abs(np.cross(tri[1] - tri[0], tri[2] - tri[0])) / 2.0
+            (ax, ay), (bx, by) = tri[1] - tri[0], tri[2] - tri[0]
+            area = abs(ax * by - ay * bx) / 2.0
             scale = max(float(np.ptp(pts[:, 0])), float(np.ptp(pts[:, 1])), 1e-12)
             if area <= 1e-9 * scale * scale:
                 raise InvalidValueError(
