@@ -264,6 +264,9 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
                             "image_count": len(all_ids)})
     store.set_meta("machine", {"platform": platform.platform(), "cpus": os.cpu_count(),
                                "threads": threads})
+    store.set_meta("grid", {"transforms": list(transforms), "targets": list(targets),
+                            "models": [f"{m.path.name}@{m.limit or len(all_ids)}"
+                                       for m in models]})
     cache = ImageCache(img_dir, coco)
     grid = plan_cells(transforms, targets)
     params: dict[tuple[str, float], tuple[float | None, str | None]] = {}

@@ -1,0 +1,549 @@
+"""Worst-case tables, plots and reports from a sweep store.
+
+Definitions (all derived from the finished cells of :mod:`fidelity.sweep`):
+
+* ΔmAP in points: ``dmap_points = 100 * (mAP_baseline - mAP_cell)`` (percentage points of
+  COCO mAP@[.50:.95]); relative: ``dmap_relative = 100 * (mAP_baseline - mAP_cell) /
+  mAP_baseline`` (percent of the baseline mAP). The baseline is the same model on the same
+  images decoded and re-encoded without transform (ΔE 0). The same for ΔAP of person and bicycle.
+* Worst case of a model at ΔE: the transform with the largest ``dmap_points`` among the
+  finished, reachable cells at that ΔE (``worst_transform``). Person and bicycle columns are
+  worst cases of their own (the largest ΔAP over the same transforms), so each column is an
+  upper envelope over transforms, as a prediction bound needs.
+* Worst case of a size class (n, s, m, l, x): the largest value over the models of that size.
+* A row lists how many transforms were finished at its ΔE (``transforms_done`` of
+  ``transforms_reachable``); rows with missing transforms are marked partial.
+
+Paper comparison (SAFE-COLOR findings, ``shared/reference/safecolor.md``) is computed by
+:func:`compare_with_paper` from the same numbers.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import math
+import os
+import re
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fidelity.errors import InputFileError
+
+#: Classes called safety-critical by SAFE-COLOR.
+SAFETY_CLASSES: tuple[str, ...] = ("person", "bicycle")
+
+
+def model_size(model: str) -> str:
+    """Size class of a model from its name: nano/n -> "n", ... , else "any".
+
+    ``yolo11n-int8dyn`` -> n, ``yolov8s`` -> s, ``yolox_nano`` -> n, ``yolox_tiny`` -> n.
+    """
+    m = model.lower()
+    if "nano" in m or "tiny" in m:
+        return "n"
+    hit = re.search(r"(?:yolo(?:v\d+|\d+|x)?)[-_]?([nsmlx])(?:\b|[-_.]|u|$)", m)
+    return hit.group(1) if hit else "any"
+
+
+def _delta(base: float | None, value: float | None) -> tuple[float | None, float | None]:
+    if base is None or value is None:
+        return None, None
+    pts = 100.0 * (base - value)
+    rel = 100.0 * (base - value) / base if base > 0 else None
+    return pts, rel
+
+
+def cell_deltas(cells: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
+    """Per model: every done transformed cell with its ΔmAP and ΔAP (points and relative).
+
+    Cells of a model without a finished baseline are left out.
+    """
+    by_model: dict[str, list[dict[str, Any]]] = {}
+    base = {c["model"]: c for c in cells if c["transform"] == "baseline" and c["status"] == "done"}
+    for c in cells:
+        if c["transform"] == "baseline" or c["model"] not in base:
+            continue
+        b = base[c["model"]]
+        row: dict[str, Any] = {"model": c["model"], "transform": c["transform"],
+                               "delta_e": float(c["target"]), "param": c["param"],
+                               "status": c["status"], "reason": c.get("reason"),
+                               "images": c.get("images")}
+        if c["status"] == "done":
+            row["map"] = c["map"]
+            row["map50"] = c["map50"]
+            row["dmap_points"], row["dmap_relative"] = _delta(b["map"], c["map"])
+            for cls in SAFETY_CLASSES:
+                bv = (b.get("ap") or {}).get(cls)
+                cv = (c.get("ap") or {}).get(cls)
+                row[f"ap_{cls}"] = cv
+                row[f"dap_{cls}_points"], row[f"dap_{cls}_relative"] = _delta(bv, cv)
+        by_model.setdefault(c["model"], []).append(row)
+    return by_model
+
+
+def _max_or_none(values: list[float | None]) -> float | None:
+    v = [x for x in values if x is not None and math.isfinite(x)]
+    return max(v) if v else None
+
+
+def worst_case_rows(rows: Sequence[dict[str, Any]], baseline: dict[str, Any],
+                    transforms: Sequence[str] | None = None) -> list[dict[str, Any]]:
+    """Worst case over transforms at each ΔE for one model (see module docstring)."""
+    by_de: dict[float, list[dict[str, Any]]] = {}
+    for r in rows:
+        by_de.setdefault(r["delta_e"], []).append(r)
+    out = [{"delta_e": 0.0, "worst_transform": None, "dmap_points": 0.0, "dmap_relative": 0.0,
+            "dap_person_points": 0.0, "dap_bicycle_points": 0.0, "dap_person_relative": 0.0,
+            "dap_bicycle_relative": 0.0, "map": baseline["map"], "transforms_done": 0,
+            "transforms_reachable": 0, "unreachable": [], "partial": False}]
+    for de in sorted(by_de):
+        group = by_de[de]
+        done = [r for r in group if r["status"] == "done"]
+        unreachable = sorted(r["transform"] for r in group if r["status"] == "unreachable")
+        if not done:
+            continue
+        worst = max(done, key=lambda r: r["dmap_points"])
+        reachable = (len(transforms) - len(unreachable)) if transforms else len(done)
+        out.append({
+            "delta_e": de, "worst_transform": worst["transform"],
+            "dmap_points": worst["dmap_points"], "dmap_relative": worst["dmap_relative"],
+            "map": worst["map"],
+            "dap_person_points": _max_or_none([r.get("dap_person_points") for r in done]),
+            "dap_bicycle_points": _max_or_none([r.get("dap_bicycle_points") for r in done]),
+            "dap_person_relative": _max_or_none([r.get("dap_person_relative") for r in done]),
+            "dap_bicycle_relative": _max_or_none([r.get("dap_bicycle_relative") for r in done]),
+            "transforms_done": len(done), "transforms_reachable": reachable,
+            "unreachable": unreachable, "partial": len(done) < reachable,
+        })
+    return out
+
+
+def size_class_rows(per_model: dict[str, list[dict[str, Any]]]) -> dict[str, list[dict[str, Any]]]:
+    """Worst case over the models of each size class, per ΔE."""
+    groups: dict[str, list[str]] = {}
+    for m in per_model:
+        groups.setdefault(model_size(m), []).append(m)
+    out: dict[str, list[dict[str, Any]]] = {}
+    for size, models in sorted(groups.items()):
+        des = sorted({r["delta_e"] for m in models for r in per_model[m]})
+        rows = []
+        for de in des:
+            cand = [(m, r) for m in models for r in per_model[m] if r["delta_e"] == de]
+            m, w = max(cand, key=lambda mr: mr[1]["dmap_points"])
+            rows.append({
+                "delta_e": de, "worst_model": m, "worst_transform": w["worst_transform"],
+                "dmap_points": w["dmap_points"],
+                "dmap_relative": _max_or_none([r["dmap_relative"] for _, r in cand]),
+                "dap_person_points": _max_or_none([r["dap_person_points"] for _, r in cand]),
+                "dap_bicycle_points": _max_or_none([r["dap_bicycle_points"] for _, r in cand]),
+                "models": len(cand), "partial": any(r["partial"] for _, r in cand)
+                or len(cand) < len(models),
+            })
+        out[size] = rows
+    return out
+
+
+def build_tables(store: Any) -> dict[str, Any]:
+    """Everything the report needs, from a :class:`fidelity.sweep.SweepStore`."""
+    cells = store.cells()
+    if not cells:
+        raise InputFileError(f"{store.path}: the sweep store has no finished cells yet")
+    models = store.models()
+    deltas = cell_deltas(cells)
+    baselines = {c["model"]: c for c in cells if c["transform"] == "baseline"
+                 and c["status"] == "done"}
+    grid = store.meta().get("grid") or {}
+    planned = grid.get("transforms")
+    if not planned:
+        from fidelity.transforms import TRANSFORMS
+
+        planned = list(TRANSFORMS)
+    seen = {c["transform"] for c in cells if c["transform"] != "baseline"}
+    transforms = sorted(set(planned) | seen)
+    per_model = {m: worst_case_rows(rows, baselines[m], transforms)
+                 for m, rows in deltas.items()}
+    for m in baselines:
+        per_model.setdefault(m, worst_case_rows([], baselines[m], transforms))
+    return {
+        "models": {m: {**models.get(m, {}), "size": model_size(m),
+                       "baseline_map": baselines[m]["map"],
+                       "baseline_map50": baselines[m]["map50"],
+                       "baseline_ap": {k: baselines[m]["ap"].get(k) for k in SAFETY_CLASSES},
+                       "images": baselines[m]["images"]} for m in baselines},
+        "cells": deltas,
+        "worst_case": per_model,
+        "size_classes": size_class_rows(per_model),
+        "meta": store.meta(),
+        "transforms": transforms,
+        "cells_done": sum(c["status"] == "done" for c in cells),
+        "cells_unreachable": sum(c["status"] == "unreachable" for c in cells),
+    }
+
+
+def compare_with_paper(tables: dict[str, Any]) -> list[dict[str, Any]]:
+    """Check the SAFE-COLOR findings against our measurements; one dict per finding.
+
+    Each has ``claim``, ``verdict`` ("agrees", "disagrees", "not enough data") and ``evidence``.
+    """
+    out: list[dict[str, Any]] = []
+    cells = [r for rows in tables["cells"].values() for r in rows if r["status"] == "done"]
+    # 1. harm ranking: mean relative ΔmAP per transform over the ΔE values (<= 12, which every
+    #    transform reaches on the chart) measured for every transform, for every model.
+    planned = list(tables["transforms"])
+    vals: dict[tuple[str, str, float], float] = {
+        (r["model"], r["transform"], r["delta_e"]): r["dmap_relative"] for r in cells
+        if r["dmap_relative"] is not None}
+    models = sorted(tables["cells"])
+    common = sorted(d for d in {k[2] for k in vals} if d <= 12 and all(
+        (m, t, d) in vals for m in models for t in planned))
+    if common:
+        mean = {t: float(np.mean([vals[(m, t, d)] for m in models for d in common]))
+                for t in planned}
+        order = sorted(mean, key=mean.get, reverse=True)
+        ev = ", ".join(f"{t} {mean[t]:.2f} %" for t in order)
+        where = f"mean relative ΔmAP at ΔE {common} over {', '.join(models)}: "
+        out.append({"claim": "contrast increase and decrease hurt detection most",
+                    "verdict": "agrees" if set(order[:2]) == {"contrast-inc", "contrast-dec"}
+                    else "partly agrees" if set(order[:2]) & {"contrast-inc", "contrast-dec"}
+                    else "disagrees",
+                    "evidence": where + ev})
+        out.append({"claim": "hue changes hurt least",
+                    "verdict": "agrees" if order[-1] == "hue" else "disagrees",
+                    "evidence": f"mildest: {order[-1]} ({mean[order[-1]]:.2f} %); hue "
+                                f"{mean['hue']:.2f} %, rank {order.index('hue') + 1} of "
+                                f"{len(order)} (1 = most harmful)"})
+    else:
+        for claim in ("contrast increase and decrease hurt detection most",
+                      "hue changes hurt least"):
+            out.append({"claim": claim, "verdict": "not enough data",
+                        "evidence": "no ΔE <= 12 measured for all transforms yet"})
+    worst = [(r["worst_transform"], r["delta_e"], r["partial"])
+             for rows in tables["worst_case"].values() for r in rows
+             if r["worst_transform"] and r["delta_e"] <= 24]
+    if worst:
+        wset = {w for w, _, _ in worst}
+        ok = wset <= {"contrast-inc", "contrast-dec", "saturation-inc"}
+        others = sorted(f"{w} at ΔE {d:g}" for w, d, _ in worst
+                        if w not in {"contrast-inc", "contrast-dec", "saturation-inc"})
+        verdict = "agrees" if ok else "disagrees"
+        if any(p for _, _, p in worst):
+            verdict = "so far " + verdict + " (incomplete)"
+        out.append({"claim": "worst case up to ΔE 24 is contrast-inc, contrast-dec or "
+                             "saturation-inc",
+                    "verdict": verdict,
+                    "evidence": "worst transforms seen: " + ", ".join(sorted(wset))
+                    + (f"; exceptions: {', '.join(others)}" if others else "")})
+    for limit, bound in ((3, 1.0), (6, 3.0), (12, 10.0)):
+        vals = [(m, r) for m, rows in tables["worst_case"].items() for r in rows
+                if 0 < r["delta_e"] <= limit]
+        if not vals:
+            out.append({"claim": f"ΔE ≤ {limit} keeps worst-case ΔmAP below {bound:g} %",
+                        "verdict": "not enough data", "evidence": "no cells"})
+            continue
+        m_rel, r_rel = max(vals, key=lambda mr: mr[1]["dmap_relative"] or 0)
+        m_pts, r_pts = max(vals, key=lambda mr: mr[1]["dmap_points"] or 0)
+        rel, pts = r_rel["dmap_relative"], r_pts["dmap_points"]
+        verdict = ("agrees" if rel < bound else
+                   "agrees only if read as points" if pts < bound else "disagrees")
+        partial = any(r["partial"] for _, r in vals)
+        missing_de = sorted({d for d in (1, 2, 3, 4, 5, 6, 8, 10, 12) if d <= limit}
+                            - {r["delta_e"] for _, r in vals})
+        if verdict != "disagrees" and (partial or missing_de):
+            verdict = "so far " + verdict + " (incomplete)"
+        out.append({"claim": f"ΔE ≤ {limit} keeps worst-case ΔmAP below {bound:g} %",
+                    "verdict": verdict,
+                    "evidence": f"largest relative loss {rel:.2f} % ({m_rel}, "
+                                f"{r_rel['worst_transform']} at ΔE {r_rel['delta_e']:g}); "
+                                f"largest loss in points {pts:.2f} ({m_pts}, "
+                                f"{r_pts['worst_transform']} at ΔE {r_pts['delta_e']:g}); "
+                                f"{sum(r['transforms_done'] for _, r in vals)} cells"
+                                + (f"; ΔE not yet measured: {missing_de}" if missing_de else "")})
+    for cls in SAFETY_CLASSES:
+        more = total = 0
+        for r in cells:
+            rel_c = r.get(f"dap_{cls}_relative")
+            if rel_c is None or r["dmap_relative"] is None or r["dmap_relative"] <= 0.5:
+                continue
+            total += 1
+            more += rel_c > r["dmap_relative"]
+        out.append({"claim": f"{cls} is more sensitive than the mean (relative ΔAP > ΔmAP)",
+                    "verdict": "not enough data" if total == 0 else
+                    ("agrees" if more > total / 2 else "disagrees"),
+                    "evidence": f"{cls} lost more (relative) than mAP in {more} of {total} "
+                                "cells with ΔmAP > 0.5 %"})
+    return out
+
+
+def prediction_table(tables: dict[str, Any], name: str = "coco1000-measured") -> dict[str, Any]:
+    """A measured prediction table (CORE_API prediction-table schema) from the worst cases."""
+    meta = tables["meta"]
+    curves = []
+    for size, rows in tables["size_classes"].items():
+        curves.append({"size": size, "model": None, "points": [
+            _point(r, f"worst over {r['models']} model(s) of size {size}") for r in rows]})
+    for m, rows in tables["worst_case"].items():
+        curves.append({"size": tables["models"][m]["size"], "model": m,
+                       "baseline_map": tables["models"][m]["baseline_map"],
+                       "points": [_point(r, f"{m} worst case over "
+                                            f"{r['transforms_done']} transforms") for r in rows]})
+    return {
+        "name": name,
+        "title": "Measured worst-case detection loss on the shared COCO val2017 subset",
+        "kind": "measured",
+        "interpolation": "linear",
+        "provenance": {
+            "source": "fidelity sweep (issue 5): SAFE-COLOR transforms calibrated on the chart, "
+                      "JPEG re-encoded with original tables, ONNX detectors, pycocotools",
+            "models": {m: {k: v for k, v in info.items() if k in ("file", "sha256", "size",
+                                                                   "limit_images", "images",
+                                                                   "baseline_map")}
+                       | {"conventions": (info.get("settings") or {}).get("conventions")}
+                       for m, info in tables["models"].items()},
+            "images": meta.get("data"), "versions": meta.get("versions"),
+            "machine": meta.get("machine"),
+            "cells_done": tables["cells_done"], "cells_unreachable": tables["cells_unreachable"],
+            "worst_case": "per ΔE the transform with the largest ΔmAP in points; person and "
+                          "bicycle columns are their own worst case over the same transforms",
+            "partial_points": [f"{c['model'] or c['size']} ΔE {p['delta_e']:g}"
+                               for c in curves for p in c["points"] if p.get("partial")],
+        },
+        "units": {
+            "dmap_points": "percentage points of mAP@[.50:.95] (100*(baseline-transformed))",
+            "dmap_relative": "percent of the baseline mAP",
+            "dap_person_points": "percentage points of person AP@[.50:.95]",
+            "dap_bicycle_points": "percentage points of bicycle AP@[.50:.95]",
+        },
+        "curves": curves,
+    }
+
+
+def _point(r: dict[str, Any], source: str) -> dict[str, Any]:
+    return {"delta_e": r["delta_e"], "dmap_points": _round(r["dmap_points"]),
+            "dmap_relative": _round(r["dmap_relative"]),
+            "dap_person_points": _round(r["dap_person_points"]),
+            "dap_bicycle_points": _round(r["dap_bicycle_points"]),
+            "worst_transform": r["worst_transform"], "source": source,
+            "partial": bool(r.get("partial"))}
+
+
+def _round(v: float | None, nd: int = 4) -> float | None:
+    return None if v is None else round(float(v), nd)
+
+
+# --------------------------------------------------------------------------------------------
+# Plots and report
+
+
+def _fig_png(fig: Any) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+    return buf.getvalue()
+
+
+def make_plots(tables: dict[str, Any]) -> dict[str, bytes]:
+    """PNG plots: mAP vs ΔE per transform (per model), worst case per model, log degradation."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out: dict[str, bytes] = {}
+    for m, rows in tables["cells"].items():
+        base = tables["models"][m]["baseline_map"]
+        fig, ax = plt.subplots(figsize=(7, 4.5))
+        for t in tables["transforms"]:
+            pts = sorted((r["delta_e"], r["map"]) for r in rows
+                         if r["transform"] == t and r["status"] == "done")
+            if pts:
+                x, y = zip(*([(0.0, base)] + pts), strict=True)
+                ax.plot(x, np.asarray(y) * 100, marker="o", ms=3, label=t)
+        ax.set_xlabel("chart ΔE00 (mean over 24 patches)")
+        ax.set_ylabel("mAP@[.50:.95] (%)")
+        ax.set_title(f"{m}: mAP against ΔE per transform")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=2)
+        out[f"map_vs_de_{m}.png"] = _fig_png(fig)
+        plt.close(fig)
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for m, rows in tables["worst_case"].items():
+        x = [r["delta_e"] for r in rows]
+        a1.plot(x, [r["dmap_relative"] for r in rows], marker="o", ms=3, label=m)
+        pos = [(r["delta_e"], r["dmap_relative"]) for r in rows
+               if r["dmap_relative"] and r["dmap_relative"] > 0]
+        if pos:
+            a2.semilogy(*zip(*pos, strict=True), marker="o", ms=3, label=m)
+    for ax in (a1, a2):
+        ax.axhline(1, color="grey", lw=0.8, ls=":")
+        ax.axhline(3, color="grey", lw=0.8, ls="--")
+        ax.axhline(10, color="grey", lw=0.8, ls="-.")
+        ax.set_xlabel("chart ΔE00")
+        ax.grid(alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
+    a1.set_ylabel("worst-case ΔmAP (% of baseline)")
+    a1.set_title("worst case per model")
+    a2.set_ylabel("worst-case ΔmAP (% of baseline, log)")
+    a2.set_title("degradation on a log scale")
+    out["worst_case.png"] = _fig_png(fig)
+    plt.close(fig)
+    return out
+
+
+def _fmt(v: Any, nd: int = 2) -> str:
+    if v is None:
+        return "–"
+    if isinstance(v, float):
+        return f"{v:.{nd}f}"
+    return str(v)
+
+
+def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
+                    plots: Sequence[str] = ()) -> str:
+    """The Markdown report."""
+    meta = tables["meta"]
+    lines = ["# COCO benchmark: measured cost of colour error", ""]
+    lines.append(f"Cells finished: {tables['cells_done']} done, {tables['cells_unreachable']} "
+                 "unreachable (transform cannot reach the ΔE on the chart).")
+    v = meta.get("versions", {})
+    lines.append(f"Versions: {', '.join(f'{k} {x}' for k, x in v.items())}. "
+                 f"Machine: {meta.get('machine', {})}.")
+    d = meta.get("data", {})
+    lines.append(f"Images: {d.get('image_count')} shared COCO val2017 images "
+                 "(person-biased subset, see shared/coco/PROVENANCE.md); a model swept on "
+                 "fewer uses the first N by image id.")
+    lines += ["", "ΔmAP in **points** = 100·(mAP₀ − mAP); **relative** = 100·(mAP₀ − mAP)/mAP₀. "
+              "ΔAP person/bicycle in points, each the worst over transforms at that ΔE.", ""]
+    lines += ["## Models", "", "| model | size | images | baseline mAP | AP50 | AP person | "
+              "AP bicycle | conventions |", "|---|---|---|---|---|---|---|---|"]
+    for m, info in tables["models"].items():
+        conv = (info.get("settings") or {}).get("conventions", {})
+        ap = info["baseline_ap"]
+        lines.append(f"| {m} | {info['size']} | {info['images']} | {info['baseline_map']:.4f} | "
+                     f"{info['baseline_map50']:.4f} | {_fmt(ap.get('person'), 4)} | "
+                     f"{_fmt(ap.get('bicycle'), 4)} | conf {conv.get('conf')}, iou "
+                     f"{conv.get('iou')}, max_det {conv.get('max_det')} |")
+    lines += ["", "## Comparison with SAFE-COLOR", "", "| paper's finding | ours | evidence |",
+              "|---|---|---|"]
+    for c in comparison:
+        lines.append(f"| {c['claim']} | **{c['verdict']}** | {c['evidence']} |")
+    for m, rows in tables["worst_case"].items():
+        lines += ["", f"## Worst case: {m}", "",
+                  "| ΔE | worst transform | ΔmAP points | ΔmAP relative % | ΔAP person pts | "
+                  "ΔAP bicycle pts | transforms done | unreachable |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for r in rows[1:]:
+            lines.append(f"| {r['delta_e']:g} | {r['worst_transform']} | "
+                         f"{_fmt(r['dmap_points'])} | {_fmt(r['dmap_relative'])} | "
+                         f"{_fmt(r['dap_person_points'])} | {_fmt(r['dap_bicycle_points'])} | "
+                         f"{r['transforms_done']}/{r['transforms_reachable']}"
+                         f"{' (partial)' if r['partial'] else ''} | "
+                         f"{', '.join(r['unreachable']) or '–'} |")
+    for size, rows in tables["size_classes"].items():
+        lines += ["", f"## Worst case: size class {size}", "",
+                  "| ΔE | worst model | worst transform | ΔmAP points | ΔmAP relative % | "
+                  "ΔAP person pts | ΔAP bicycle pts |", "|---|---|---|---|---|---|---|"]
+        for r in rows[1:]:
+            lines.append(f"| {r['delta_e']:g} | {r['worst_model']} | {r['worst_transform']} | "
+                         f"{_fmt(r['dmap_points'])} | {_fmt(r['dmap_relative'])} | "
+                         f"{_fmt(r['dap_person_points'])} | {_fmt(r['dap_bicycle_points'])} |")
+    for m, rows in tables["cells"].items():
+        lines += ["", f"## All cells: {m}", "", "| transform | ΔE | param | mAP | ΔmAP pts | "
+                  "ΔmAP rel % | ΔAP person pts | ΔAP bicycle pts |", "|---|---|---|---|---|---|---|---|"]
+        for r in sorted(rows, key=lambda r: (r["transform"], r["delta_e"])):
+            if r["status"] != "done":
+                lines.append(f"| {r['transform']} | {r['delta_e']:g} | – | unreachable | | | | |")
+                continue
+            lines.append(f"| {r['transform']} | {r['delta_e']:g} | {r['param']:.4f} | "
+                         f"{r['map']:.4f} | {_fmt(r['dmap_points'])} | "
+                         f"{_fmt(r['dmap_relative'])} | {_fmt(r['dap_person_points'])} | "
+                         f"{_fmt(r['dap_bicycle_points'])} |")
+    if plots:
+        lines += ["", "## Plots", ""] + [f"![{p}]({p})" for p in plots]
+    return "\n".join(lines) + "\n"
+
+
+def report_html(markdown: str, plots: dict[str, bytes]) -> str:
+    """A self-contained HTML page: the Markdown tables as HTML plus the plots inlined."""
+    body: list[str] = []
+    in_table = False
+    for line in markdown.splitlines():
+        if line.startswith("|"):
+            cells = [c.strip() for c in line.strip("|").split("|")]
+            if set("".join(cells)) <= set("-: "):
+                continue
+            if not in_table:
+                body.append("<table>")
+                in_table = True
+                tag = "th"
+            else:
+                tag = "td"
+            body.append("<tr>" + "".join(f"<{tag}>{_inline(c)}</{tag}>" for c in cells) + "</tr>")
+            continue
+        if in_table:
+            body.append("</table>")
+            in_table = False
+        if line.startswith("!["):
+            name = line[line.index("(") + 1:-1]
+            if name in plots:
+                b64 = base64.b64encode(plots[name]).decode()
+                body.append(f'<p><img alt="{html.escape(name)}" src="data:image/png;base64,'
+                            f'{b64}"></p>')
+        elif line.startswith("# "):
+            body.append(f"<h1>{html.escape(line[2:])}</h1>")
+        elif line.startswith("## "):
+            body.append(f"<h2>{html.escape(line[3:])}</h2>")
+        elif line.strip():
+            body.append(f"<p>{_inline(line)}</p>")
+    if in_table:
+        body.append("</table>")
+    style = ("body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:"
+             "collapse;font-size:13px}td,th{border:1px solid #ccc;padding:2px 6px}img{max-width:"
+             "100%}")
+    return (f"<!doctype html><html><head><meta charset='utf-8'><title>COCO benchmark</title>"
+            f"<style>{style}</style></head><body>{''.join(body)}</body></html>\n")
+
+
+def _inline(text: str) -> str:
+    t = html.escape(text)
+    return re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", t)
+
+
+def write_report(store: Any, out_dir: str | os.PathLike[str],
+                 prediction_path: str | os.PathLike[str] | None = None,
+                 name: str = "coco1000-measured") -> dict[str, Path]:
+    """Write report.md, report.html, tables.json, plots and (optionally) the prediction table."""
+    from fidelity.fileio import write_bytes_atomic, write_json_atomic, write_text_atomic
+
+    out = Path(out_dir)
+    tables = build_tables(store)
+    comparison = compare_with_paper(tables)
+    plots = make_plots(tables)
+    md = report_markdown(tables, comparison, sorted(plots))
+    written = {}
+    for fname, data in plots.items():
+        written[fname] = write_bytes_atomic(out / fname, data)
+    written["report.md"] = write_text_atomic(out / "report.md", md)
+    written["report.html"] = write_text_atomic(out / "report.html", report_html(md, plots))
+    written["tables.json"] = write_json_atomic(out / "tables.json", _jsonable(
+        {"tables": {k: v for k, v in tables.items()}, "comparison": comparison}))
+    if prediction_path is not None:
+        written["prediction"] = write_json_atomic(prediction_path,
+                                                  _jsonable(prediction_table(tables, name)))
+    return written
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
