@@ -1,0 +1,20 @@
+"""Shared test fixtures: locations of the project's data and of ../shared."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from fidelity.resources import shared_dir
+
+DATA = Path(__file__).parent / "data"
+
+
+@pytest.fixture(scope="session")
+def shared() -> Path:
+    """The shared data folder (../shared or $FIDELITY_SHARED); skips the test when absent."""
+    path = shared_dir()
+    if path is None:
+        pytest.skip("../shared (or $FIDELITY_SHARED) is not present: COCO images and ONNX models needed")
+    return path

@@ -1,0 +1,55 @@
+"""``fidelity calibrate`` end to end through the command line."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from fidelity.charts import load_chart
+from fidelity.cli import main
+
+
+def test_calibrate_writes_json_and_csv(tmp_path: Path) -> None:
+    runner = CliRunner()
+    res = runner.invoke(main, ["calibrate", "--targets", "1-3,30", "--transforms", "hue,saturation-inc",
+                               "--json", str(tmp_path / "t.json"), "--csv", str(tmp_path / "t.csv")])
+    assert res.exit_code == 0, res.output
+    assert "baseline" in res.output and "saturation-inc" in res.output
+    doc = json.loads((tmp_path / "t.json").read_text())
+    assert set(doc) == {"chart", "baseline_delta_e", "entries"}
+    assert len(doc["entries"]) == 8
+    unreachable = [e for e in doc["entries"] if not e["reachable"]]
+    assert [(e["transform"], e["target"], e["param"]) for e in unreachable] == [("saturation-inc", 30.0, None)]
+    rows = list(csv.DictReader((tmp_path / "t.csv").open()))
+    assert rows[0]["transform"] == "hue" and float(rows[2]["target"]) == 3.0
+
+
+def test_calibrate_another_chart(tmp_path: Path) -> None:
+    doc = load_chart().to_dict()
+    doc["name"] = "greys"
+    doc["layout"] = {"rows": 1, "cols": 6}
+    doc["patches"] = doc["patches"][18:]
+    chart = tmp_path / "greys.json"
+    chart.write_text(json.dumps(doc))
+    res = CliRunner().invoke(main, ["calibrate", "--chart", str(chart), "--targets", "2",
+                                    "--transforms", "brightness-inc", "--json", str(tmp_path / "g.json")])
+    assert res.exit_code == 0, res.output
+    out = json.loads((tmp_path / "g.json").read_text())
+    assert out["chart"] == "greys" and out["entries"][0]["reachable"]
+
+
+def test_calibrate_errors_exit_2_with_one_line(tmp_path: Path) -> None:
+    runner = CliRunner()
+    for args, match in [
+        (["calibrate", "--chart", "nope"], "unknown chart 'nope'"),
+        (["calibrate", "--targets", "x"], "--targets"),
+        (["calibrate", "--transforms", "contrast"], "unknown transform 'contrast'"),
+        (["calibrate", "--chart", str(tmp_path / "missing.json")], "does not exist"),
+    ]:
+        res = runner.invoke(main, args)
+        assert res.exit_code == 2, (args, res.output)
+        assert match in res.output
+        assert "Traceback" not in res.output
