@@ -489,14 +489,18 @@ def predict(
     )
 
 
-def transform_parameters(delta_e: float, calibration: Any = None) -> list[dict[str, Any]]:
+def transform_parameters(delta_e: float, calibration: Any = None, *,
+                         solve: bool = True) -> list[dict[str, Any]]:
     """The SAFE-COLOR transform parameters that give chart ΔE ``delta_e``, one per transform.
 
-    Read from the shipped calibration table (``fidelity.calibration.load_calibration_table()``):
-    at a calibrated target the table's parameter; between two reachable targets the parameter
-    interpolated linearly in ΔE between the bracketing targets (both given); below the first
-    target between the identity (at the chart's baseline ΔE) and the first target. A ΔE a
-    transform cannot reach is reported as unreachable, not as a number.
+    From the shipped calibration table (``fidelity.calibration.load_calibration_table()``): at
+    a calibrated target, the table's parameter (``method: "calibrated"``). Between targets the
+    table's two bracketing entries are given (``bracket``) and the parameter is solved on the
+    chart for this exact ΔE (``fidelity.calibration.calibrate_transform``, ``method: "solved"``),
+    or, with ``solve=False``, interpolated linearly in ΔE between the bracket
+    (``method: "interpolated"``; below the first target the identity at the chart's baseline ΔE
+    is the lower end). A ΔE below the chart's baseline or beyond a transform's reach is
+    reported as unreachable (``param: null``), not as a number.
     """
     if calibration is None:
         from fidelity.calibration import load_calibration_table
@@ -512,36 +516,43 @@ def transform_parameters(delta_e: float, calibration: Any = None) -> list[dict[s
     for name, entries in by_transform.items():
         entries = sorted(entries, key=lambda e: float(e.target))
         spec = TRANSFORMS.get(name)
-        identity = float(spec.identity) if spec is not None else None
         nodes: list[tuple[float, float]] = []
-        if identity is not None:
-            nodes.append((baseline, identity))
+        if spec is not None:
+            nodes.append((baseline, float(spec.identity)))
         unreachable_from = None
         for e in entries:
             if e.reachable and e.param is not None:
-                nodes.append((float(e.delta_e if e.delta_e is not None else e.target),
-                              float(e.param)))
+                nodes.append((float(e.target), float(e.param)))
             elif unreachable_from is None:
                 unreachable_from = float(e.target)
-        row: dict[str, Any] = {"transform": name, "delta_e": delta_e}
+        row: dict[str, Any] = {"transform": name, "delta_e": delta_e, "param": None,
+                               "reachable": False, "method": None, "bracket": None}
         exact = [e for e in entries if abs(float(e.target) - delta_e) < 1e-9]
+        below = [n for n in nodes if n[0] <= delta_e]
+        above = [n for n in nodes if n[0] >= delta_e]
+        if below and above:
+            row["bracket"] = [{"delta_e": below[-1][0], "param": below[-1][1]},
+                              {"delta_e": above[0][0], "param": above[0][1]}]
         if exact and exact[0].reachable and exact[0].param is not None:
             row.update(param=float(exact[0].param), reachable=True, method="calibrated",
                        bracket=None)
-        elif delta_e < baseline:
-            row.update(param=None, reachable=False, method="below the chart's baseline ΔE "
-                       f"{baseline:.4g}", bracket=None)
-        else:
-            below = [n for n in nodes if n[0] <= delta_e]
-            above = [n for n in nodes if n[0] >= delta_e]
-            if below and above and (unreachable_from is None or delta_e < unreachable_from):
-                (e0, p0), (e1, p1) = below[-1], above[0]
-                p = p0 if e1 == e0 else p0 + (p1 - p0) * (delta_e - e0) / (e1 - e0)
-                row.update(param=float(p), reachable=True, method="interpolated",
-                           bracket=[{"delta_e": e0, "param": p0}, {"delta_e": e1, "param": p1}])
+        elif delta_e <= baseline:
+            row.update(method=f"unreachable: at or below the chart's baseline ΔE {baseline:.4g}")
+        elif solve:
+            from fidelity.calibration import calibrate_transform
+
+            entry = calibrate_transform(name, delta_e)
+            if entry.reachable and entry.param is not None:
+                row.update(param=float(entry.param), reachable=True, method="solved")
             else:
-                row.update(param=None, reachable=False,
-                           method="unreachable within the transform's range", bracket=None)
+                row.update(method=f"unreachable: the transform reaches at most ΔE "
+                                  f"{entry.delta_e:.4g}")
+        elif row["bracket"] and (unreachable_from is None or delta_e < unreachable_from):
+            (e0, p0), (e1, p1) = below[-1], above[0]
+            p = p0 if e1 == e0 else p0 + (p1 - p0) * (delta_e - e0) / (e1 - e0)
+            row.update(param=float(p), reachable=True, method="interpolated")
+        else:
+            row.update(method="unreachable within the transform's range")
         out.append(row)
     return out
 

@@ -1,0 +1,191 @@
+"""Prediction tables: the published-bounds default against the paper's statements, interpolation,
+out-of-range answers, the registry, and the transform parameters at a ΔE."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+
+import numpy as np
+import pytest
+
+from fidelity import prediction as pr
+from fidelity.errors import FidelityError, InputFileError, UnknownNameError
+from fidelity.resources import shared_dir
+
+
+def test_default_table_is_the_published_bounds():
+    table = pr.load_prediction_table()
+    assert pr.DEFAULT_TABLE == "safecolor-2025" and table.name == "safecolor-2025"
+    assert table.kind == "published-bounds"
+    assert "safecolor-2025" in pr.available_tables()
+
+
+@pytest.mark.parametrize("delta_e,column,bound", [
+    (3.0, "dmap_points", 1.0),          # ΔE ≤ 3 keeps ΔmAP below 1 %
+    (6.0, "dmap_points", 3.0),          # ΔE ≤ 6: every model keeps ΔmAP < 3 %
+    (12.0, "dmap_points", 10.0),        # ΔE ≤ 12 keeps it below 10 %
+    (3.0, "dmap_relative", 1.0),
+    (3.0, "dap_person_points", 1.0),    # person: ΔAP below 1 % needs ΔE ≤ 3
+    (1.0, "dap_bicycle_points", 1.0),   # bicycle: ΔAP below 1 % needs ΔE ≤ 1
+    (11.0, "dap_bicycle_points", 11.0),  # ΔE 11 for ΔAP below 11 %
+    (24.0, "dmap_relative", 100.0),     # at ΔE 24 mAP drops to 0
+])
+def test_published_statements(delta_e, column, bound):
+    p = pr.predict(delta_e, transforms=False)
+    assert p.columns[column].value == pytest.approx(bound)
+    # and everywhere below the statement's ΔE the prediction stays within the bound
+    for de in np.linspace(0, delta_e, 13):
+        assert pr.predict(de, transforms=False).columns[column].value <= bound + 1e-12
+
+
+def test_bicycle_one_delta_e_per_point_between_1_and_11():
+    for de in (1.0, 2.5, 4.0, 7.5, 11.0):
+        assert pr.predict(de, transforms=False).dap_bicycle_points == pytest.approx(de)
+
+
+def test_every_point_cites_a_statement_of_the_paper():
+    shared = shared_dir()
+    if shared is None or not (shared / "reference" / "safecolor.md").is_file():
+        pytest.skip("../shared/reference/safecolor.md not available")
+    text = (shared / "reference" / "safecolor.md").read_text(encoding="utf-8")
+    norm = " ".join(text.split())
+    table = pr.load_prediction_table("safecolor-2025")
+    for curve in table.curves:
+        for src in curve.sources:
+            quotes = re.findall(r"'([^']+)'", src)
+            assert quotes, f"point without a quoted statement: {src}"
+            for q in quotes:
+                for piece in q.replace("[ΔmAP] ", "").split(" ... "):
+                    assert " ".join(piece.split()) in norm, piece
+
+
+def test_predictions_are_monotone_and_conservative_beyond_range():
+    grid = np.linspace(0, 40, 401)
+    for col in pr.COLUMNS:
+        v = pr.predict_curve(grid, col)
+        assert np.all(np.diff(v) >= -1e-12), col
+    far = pr.predict(30.0, transforms=False)
+    assert far.out_of_range
+    assert far.columns["dmap_points"].status == "above-range"
+    assert far.dmap_points == 100.0 and far.dmap_relative == 100.0
+    assert any("beyond the table" in n for n in far.notes)
+
+
+def test_points_vs_relative_with_a_baseline():
+    p = pr.predict(6.0, baseline_map=37.5, transforms=False)
+    assert p.dmap_points == pytest.approx(3.0)
+    # the paper's "3 %" read as points is 3/37.5 = 8 % of the baseline: the larger bound wins
+    assert p.dmap_relative == pytest.approx(100 * 3.0 / 37.5)
+    assert "read as points" in p.columns["dmap_relative"].note
+    plain = pr.predict(6.0, transforms=False)
+    assert plain.dmap_relative == pytest.approx(3.0)
+    assert any("ambiguous" in n for n in plain.notes)
+    with pytest.raises(FidelityError, match="baseline mAP"):
+        pr.predict(6.0, baseline_map=0.0)
+
+
+def _measured_table() -> dict:
+    def pts(values):
+        return [{"delta_e": de, "dmap_points": v, "dmap_relative": 2 * v, "dap_person_points": v,
+                 "dap_bicycle_points": None, "worst_transform": "contrast-inc", "source": "test"}
+                for de, v in values]
+
+    return {
+        "name": "measured-test", "title": "t", "kind": "measured", "provenance": {},
+        "units": {}, "curves": [
+            {"size": "n", "model": "a", "points": pts([(1, 0.2), (3, 0.5), (6, 0.4), (12, 4.0)])},
+            {"size": "n", "model": "b", "points": pts([(1, 0.1), (3, 0.9), (6, 1.5), (12, 3.0)])},
+            {"size": "x", "model": "c", "points": pts([(2, 0.05), (12, 1.0)])},
+        ],
+    }
+
+
+def test_measured_table_worst_model_pchip_running_max():
+    table = pr.parse_prediction_table(_measured_table())
+    assert table.interpolation == "pchip"
+    p = pr.predict(3.0, size="n", table=table, transforms=False)
+    assert p.dmap_points == pytest.approx(0.9)  # worst of the two n models
+    # model a dips at ΔE 6 (0.4 < 0.5): its running maximum keeps it at 0.5; model b's 1.5 wins
+    assert pr.predict(6.0, size="n", table=table, transforms=False).dmap_points == pytest.approx(1.5)
+    v = pr.predict_curve(np.linspace(1, 12, 111), size="n", table=table)
+    assert np.all(np.diff(v) >= -1e-12)
+    # PCHIP passes through the points and stays inside each interval's values
+    assert pr.predict(12.0, size="n", table=table, transforms=False).dmap_points == pytest.approx(4.0)
+    mid = pr.predict(9.0, size="n", table=table, method="pchip", transforms=False).dmap_points
+    assert 1.5 <= mid <= 4.0
+    # linear and step for comparison (closed forms)
+    assert pr.predict(9.0, size="x", table=table, method="linear", transforms=False).dmap_points == pytest.approx(0.05 + 0.95 * 0.7)
+    assert pr.predict(9.0, size="x", table=table, method="step", transforms=False).dmap_points == pytest.approx(1.0)
+
+
+def test_measured_table_ranges_and_sizes():
+    table = pr.parse_prediction_table(_measured_table())
+    below = pr.predict(1.0, size="x", table=table, transforms=False)
+    assert below.columns["dmap_points"].status == "below-range"
+    assert below.dmap_points == pytest.approx(0.05)  # the first point: loss grows with ΔE
+    assert below.dap_bicycle_points is None
+    assert below.columns["dap_bicycle_points"].status == "no-data"
+    m = pr.predict(5.0, size="m", table=table, transforms=False)
+    assert m.size_used.startswith("worst of")
+    assert any("no curve for size 'm'" in n for n in m.notes)
+    with pytest.raises(UnknownNameError, match="detector size"):
+        pr.predict(5.0, size="xl", table=table)
+
+
+def test_registry_picks_up_files(tmp_path, monkeypatch):
+    shutil.copy(pr.prediction_dir() / "safecolor-2025.json", tmp_path)
+    (tmp_path / "measured-test.json").write_text(json.dumps(_measured_table()))
+    monkeypatch.setattr(pr, "prediction_dir", lambda: tmp_path)
+    assert pr.available_tables() == ["measured-test", "safecolor-2025"]
+    assert pr.load_prediction_table("measured-test").kind == "measured"
+    assert pr.predict(3.0, size="n", table="measured-test", transforms=False).dmap_points == pytest.approx(0.9)
+    with pytest.raises(UnknownNameError, match=r"unknown prediction table 'nope'; known: measured-test, safecolor-2025"):
+        pr.load_prediction_table("nope")
+    (tmp_path / "broken.json").write_text("{not json")
+    with pytest.raises(InputFileError, match="broken.json"):
+        pr.load_prediction_table("broken")
+    bad = _measured_table()
+    bad["kind"] = "guess"
+    with pytest.raises(InputFileError, match="kind"):
+        pr.parse_prediction_table(bad)
+
+
+def test_transform_parameters_match_the_published_calibration():
+    # safecolor.md: contrast-dec at ΔE 1 = 0.9535; gamma-inc at 12 = 1.5509; hue at 3 = 5.3371;
+    # pull_mean at 6 = 0.7263 (4 decimals)
+    for de, name, want in [(1, "contrast-dec", 0.9535), (12, "gamma-inc", 1.5509),
+                           (3, "hue", 5.3371), (6, "pull_mean", 0.7263)]:
+        rows = {r["transform"]: r for r in pr.transform_parameters(de)}
+        assert rows[name]["param"] == pytest.approx(want, abs=2e-3)
+        assert rows[name]["method"] == "calibrated"
+
+
+def test_transform_parameters_between_targets_reach_that_delta_e():
+    from fidelity.charts import load_chart
+    from fidelity.measure import chart_delta_e
+    from fidelity.transforms import apply_transform
+
+    chart = load_chart("safecolor")
+    rows = pr.transform_parameters(2.5)
+    assert len(rows) == 10
+    for r in rows:
+        assert r["reachable"] and r["method"] == "solved"
+        lo, hi = sorted(b["param"] for b in r["bracket"])
+        assert lo <= r["param"] <= hi
+        assert chart_delta_e(apply_transform(chart.srgb, r["transform"], r["param"]), chart.lab) == pytest.approx(2.5, rel=3e-3)
+    interp = {r["transform"]: r for r in pr.transform_parameters(2.5, solve=False)}
+    assert interp["hue"]["method"] == "interpolated"
+    assert all(not r["reachable"] for r in pr.transform_parameters(0.1))
+    far = {r["transform"]: r for r in pr.transform_parameters(30.0)}
+    assert far["contrast-dec"]["param"] is None and "at most" in far["contrast-dec"]["method"]
+
+
+def test_prediction_dict_keys():
+    d = pr.predict(4.0).to_dict()
+    for key in ("dmap_points", "dmap_relative", "dap_person_points", "dap_bicycle_points",
+                "table", "transforms"):
+        assert key in d
+    assert d["table"]["name"] == "safecolor-2025" and "provenance" in d["table"]
+    json.dumps(d, allow_nan=False)
