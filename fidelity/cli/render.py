@@ -1,0 +1,134 @@
+"""``fidelity render``: render the spectral chart through a camera model and measure ΔE00."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+import numpy as np
+
+from fidelity.camera import DEFAULT_CAMERA
+from fidelity.fileio import atomic_output, write_json_atomic
+from fidelity.render import REFERENCES, RENDERERS, ChartRender, render_chart
+from fidelity.spectral import CHROMATIC_ADAPTATION_METHODS, GRID_STEP_NM, SPECTRA_SETS
+
+
+def write_exr(path: Path, image: np.ndarray) -> Path:
+    """Write (H, W, 3) float32 camera RGB as a scanline EXR (channels R, G, B), atomically."""
+    import OpenImageIO as oiio
+
+    img = np.ascontiguousarray(image, dtype=np.float32)
+    with atomic_output(path) as tmp:
+        out = oiio.ImageOutput.create(str(path))
+        if out is None:
+            raise click.ClickException(f"{path}: cannot create EXR writer ({oiio.geterror()})")
+        spec = oiio.ImageSpec(img.shape[1], img.shape[0], 3, oiio.FLOAT)
+        spec.channelnames = ("R", "G", "B")
+        spec.attribute("compression", "zip")
+        spec.attribute("fidelity:content", "linear camera RGB (raw, after exposure/noise)")
+        if not out.open(str(tmp), spec):
+            raise click.ClickException(f"{path}: cannot write EXR ({out.geterror()})")
+        out.write_image(img)
+        out.close()
+    return path
+
+
+def write_png(path: Path, image: np.ndarray, bits: int) -> Path:
+    """Write (H, W, 3) encoded sRGB in [0, 1] as an 8- or 16-bit PNG, atomically."""
+    import OpenImageIO as oiio
+
+    if bits > 8:
+        data, fmt = np.round(np.clip(image, 0, 1) * 65535).astype(np.uint16), oiio.UINT16
+    else:
+        data, fmt = np.round(np.clip(image, 0, 1) * 255).astype(np.uint8), oiio.UINT8
+    with atomic_output(path) as tmp:
+        out = oiio.ImageOutput.create(str(path))
+        spec = oiio.ImageSpec(data.shape[1], data.shape[0], 3, fmt)
+        spec.attribute("oiio:ColorSpace", "sRGB")
+        if out is None or not out.open(str(tmp), spec):
+            raise click.ClickException(f"{path}: cannot write PNG ({oiio.geterror()})")
+        out.write_image(np.ascontiguousarray(data))
+        out.close()
+    return path
+
+
+def format_report(r: ChartRender) -> str:
+    """Human-readable per-patch table and summary."""
+    m = r.measurement
+    lines = [
+        f"{'#':>2} {'patch':<14} {'camera RGB':^26} {'sRGB':^20} {'Lab':^20} {'ref Lab':^20} {'ΔE00':>6}"
+    ]
+    for i, name in enumerate(m.patch_names):
+        cam = " ".join(f"{v:8.4f}" for v in r.camera_rgb[i])
+        srgb = " ".join(f"{v:6.3f}" for v in m.srgb[i])
+        lab = " ".join(f"{v:6.1f}" for v in m.lab[i])
+        ref = " ".join(f"{v:6.1f}" for v in m.reference_lab[i])
+        lines.append(f"{i + 1:>2} {name:<14} {cam} {srgb} {lab} {ref} {m.delta_e[i]:6.2f}")
+    variant = f" ({r.variant}, spp {r.settings.get('spp')})" if r.variant else ""
+    lines.append(
+        f"camera {r.camera.name}, illuminant {r.settings['illuminant']}, reference "
+        f"{r.settings['reference']}, renderer {r.renderer}{variant}: mean ΔE00 "
+        f"{m.mean_delta_e:.3f}, max {m.max_delta_e:.3f} ({m.worst_patch}), {r.seconds:.2f} s"
+    )
+    return "\n".join(lines)
+
+
+@click.command()
+@click.option("--camera", default=DEFAULT_CAMERA, show_default=True,
+              help="Built-in camera name (see --list-cameras) or a TOML/YAML camera file.")
+@click.option("--illuminant", default="D65", show_default=True,
+              help="D65, D50, A, F2, F11, LED (CIE LED-B4), any colour-science illuminant "
+                   "name, or a CSV SPD file (wavelength nm, power).")
+@click.option("--renderer", type=click.Choice(RENDERERS), default="closed-form",
+              show_default=True)
+@click.option("--spp", type=click.IntRange(min=1), default=None,
+              help="Mitsuba samples per pixel (default: the benchmarked default).")
+@click.option("--pixels-per-patch", type=click.IntRange(min=2), default=None,
+              help="Patch side in pixels (default: 32, Mitsuba's benchmarked default).")
+@click.option("--reference", type=click.Choice(REFERENCES), default="scene", show_default=True,
+              help="scene: the chart's colours under this illuminant, adapted to D65; "
+                   "safecolor: the SAFE-COLOR Lab table (not scene-consistent).")
+@click.option("--spectra", type=click.Choice(sorted(SPECTRA_SETS)), default="BabelColor Average",
+              show_default=True, help="Patch reflectance set.")
+@click.option("--cat", type=click.Choice(CHROMATIC_ADAPTATION_METHODS), default="Bradford",
+              show_default=True, help="Chromatic adaptation of the scene reference to D65.")
+@click.option("--step", type=float, default=GRID_STEP_NM, show_default=True,
+              help="Spectral grid step in nm (380-780 nm).")
+@click.option("--seed", type=int, default=None, help="Noise/sampler seed (default: camera's).")
+@click.option("--variant", default=None, help="Force a Mitsuba variant (default: probed).")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Folder for chart_linear.exr (camera RGB, float32) and chart_display.png.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              default=None, help="Write the full result as JSON.")
+@click.option("--list-cameras", is_flag=True, help="List the built-in cameras and exit.")
+@click.option("--quiet", "-q", is_flag=True, help="Print only the summary line.")
+def render(camera: str, illuminant: str, renderer: str, spp: int | None,
+           pixels_per_patch: int | None, reference: str, spectra: str, cat: str, step: float,
+           seed: int | None, variant: str | None, out_dir: Path | None, json_path: Path | None,
+           list_cameras: bool, quiet: bool) -> None:
+    """Render the spectral Macbeth chart through a camera model and measure ΔE00 per patch.
+
+    The closed form (default) integrates reflectance x illuminant x sensitivity per patch;
+    --renderer mitsuba renders the same scene with Mitsuba 3 (llvm_ad_spectral when libLLVM >= 16
+    is found, else scalar_spectral). Both go through the camera's ISP and are measured against
+    the scene-consistent reference (or --reference safecolor).
+    """
+    from fidelity.camera import available_cameras, load_camera
+
+    if list_cameras:
+        for name in available_cameras():
+            click.echo(f"{name:<18} {load_camera(name).description}")
+        return
+    result = render_chart(camera, illuminant, renderer, spp=spp, reference=reference,
+                          spectra=spectra, seed=seed, pixels_per_patch=pixels_per_patch,
+                          cat=cat, step=step, variant=variant)
+    report = result.to_dict()
+    if out_dir is not None:
+        exr = write_exr(out_dir / "chart_linear.exr", result.linear_image)
+        bits = result.camera.quantisation_bits or 16
+        png = write_png(out_dir / "chart_display.png", result.display_image, bits)
+        report["files"] = {"linear_exr": str(exr), "display_png": str(png)}
+    if json_path is not None:
+        write_json_atomic(json_path, report)
+    text = format_report(result)
+    click.echo(text.splitlines()[-1] if quiet else text)

@@ -1,0 +1,351 @@
+"""Render the spectral chart with Mitsuba 3 (spectral variants) into camera raw RGB.
+
+Why this agrees with the closed form: the chart is flat, convex and Lambertian, lit by one
+directional emitter along its normal. Every point receives the same irradiance E(l) and no
+light from any other surface (nothing can occlude or inter-reflect on a plane), so the
+``direct`` integrator computes exactly L(l) = R(l) E(l) / pi per pixel; the camera channel is
+the spectral integral ``int L(l) S_c(l) dl`` that ``specfilm`` estimates by Monte Carlo over
+wavelengths. Multiplying by pi / sum(E ybar dl) gives the units of
+:func:`fidelity.camera.camera_response`. Path tracing would add nothing but cost; what remains
+is the wavelength-sampling noise of the Monte Carlo estimate, which the benchmark
+(``benchmarks/bench_render.py``) measures against the closed form.
+
+``specfilm`` needs non-negative channel sensitivities, so a channel with negative lobes (the
+ideal camera's) is rendered as two channels, S+ = max(S, 0) and S- = max(-S, 0), and recombined
+as S+ - S- (integration is linear).
+
+Variant choice: ``llvm_ad_spectral`` (vectorised, JIT-compiled) needs libLLVM >= 16; with an
+older one Dr.Jit aborts the whole process, so :func:`probe_variant` tries the variant in a
+subprocess with ``DRJIT_LIBLLVM_PATH`` pointing at the newest libLLVM >= 16 it finds
+(:func:`find_libllvm`), and falls back to ``scalar_spectral`` (no LLVM needed). The variant
+that ran is reported.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import re
+import subprocess
+import sys
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fidelity.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
+from fidelity.resources import resource_dir
+from fidelity.spectral import GRID_END_NM, GRID_START_NM, GRID_STEP_NM, cie_1931_cmfs
+
+FloatArray = NDArray[np.float64]
+
+#: Variants in order of preference (the first that passes the probe runs).
+PREFERRED_VARIANTS: tuple[str, ...] = ("llvm_ad_spectral", "scalar_spectral")
+
+#: Cheapest settings within 0.02 mean ΔE00 of the closed form (benchmarks/bench_render.py,
+#: reports/render/): samples per pixel and pixels per patch side.
+DEFAULT_SPP: int = 16
+DEFAULT_PIXELS_PER_PATCH: int = 32
+
+#: Sampler of the template (stratified per dimension, so the wavelength dimension converges much
+#: faster than with "independent"; see reports/render/) and the samplers the benchmark sweeps.
+DEFAULT_SAMPLER: str = "multijitter"
+SAMPLERS: tuple[str, ...] = ("independent", "multijitter", "stratified", "ldsampler")
+
+#: Minimum libLLVM major version for Dr.Jit's LLVM backend.
+MIN_LLVM_VERSION: int = 16
+
+_LIB_DIRS = (
+    "/usr/lib/x86_64-linux-gnu",
+    "/usr/lib/aarch64-linux-gnu",
+    "/usr/lib64",
+    "/usr/lib",
+    "/usr/local/lib",
+    "/opt/homebrew/opt/llvm/lib",
+    "/usr/local/opt/llvm/lib",
+)
+
+
+class MitsubaUnavailableError(FidelityError):
+    """No Mitsuba spectral variant can run on this machine."""
+
+
+def _llvm_version(path: Path) -> int | None:
+    m = re.search(r"libLLVM[-.]?(\d+)", path.name) or re.search(r"libLLVM\.so\.(\d+)", path.name)
+    if m:
+        return int(m.group(1))
+    m = re.search(r"llvm-(\d+)", str(path))
+    return int(m.group(1)) if m else None
+
+
+def find_libllvm(min_version: int = MIN_LLVM_VERSION) -> Path | None:
+    """Newest libLLVM shared library with major version >= ``min_version``, or None.
+
+    ``$DRJIT_LIBLLVM_PATH`` wins when it names an existing file. Otherwise the usual library
+    folders (and ``/usr/lib/llvm-*/lib``) are searched for ``libLLVM-<N>.so`` /
+    ``libLLVM.so.<N>`` / ``libLLVM.dylib``.
+    """
+    env = os.environ.get("DRJIT_LIBLLVM_PATH")
+    if env and Path(env).is_file():
+        return Path(env)
+    candidates: list[tuple[int, Path]] = []
+    dirs = [Path(d) for d in _LIB_DIRS] + sorted(Path("/usr/lib").glob("llvm-*/lib"))
+    for d in dirs:
+        if not d.is_dir():
+            continue
+        for p in d.glob("libLLVM*"):
+            v = _llvm_version(p)
+            if v is not None and v >= min_version and p.is_file():
+                candidates.append((v, p))
+    if not candidates:
+        return None
+    candidates.sort(key=lambda vp: (vp[0], -len(str(vp[1]))))
+    return candidates[-1][1]
+
+
+_PROBE_CODE = """
+import sys
+import mitsuba as mi
+mi.set_variant(sys.argv[1])
+scene = mi.load_dict({"type": "scene", "integrator": {"type": "direct"},
+    "sensor": {"type": "orthographic", "film": {"type": "specfilm", "width": 4, "height": 4,
+        "c": {"type": "regular", "wavelength_min": 400, "wavelength_max": 700,
+              "values": "1, 1"}},
+        "sampler": {"type": "independent", "sample_count": 1}},
+    "emitter": {"type": "directional", "direction": [0, 0, -1]},
+    "shape": {"type": "rectangle"}})
+img = mi.render(scene)
+print("probe-ok", float(mi.TensorXf(img).numpy().mean()) >= 0)
+"""
+
+
+@dataclass(frozen=True)
+class VariantProbe:
+    """Outcome of :func:`probe_variant`: the chosen ``variant``, the libLLVM used, and why."""
+
+    variant: str
+    libllvm: str | None
+    notes: tuple[str, ...]
+
+
+def _run_probe(variant: str, env: dict[str, str], timeout: float) -> tuple[bool, str]:
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-c", _PROBE_CODE, variant], env=env, capture_output=True,
+            text=True, timeout=timeout, check=False,
+        )
+    except subprocess.TimeoutExpired:
+        return False, f"{variant}: probe timed out after {timeout:g} s"
+    if proc.returncode == 0 and "probe-ok True" in proc.stdout:
+        return True, f"{variant}: ok"
+    tail = (proc.stderr.strip().splitlines() or ["no message"])[-1][:200]
+    return False, f"{variant}: probe failed (exit {proc.returncode}: {tail})"
+
+
+@lru_cache(maxsize=8)
+def probe_variant(preferred: tuple[str, ...] = PREFERRED_VARIANTS, timeout: float = 120.0) -> VariantProbe:
+    """Pick the first variant of ``preferred`` that renders a tiny scene in a subprocess.
+
+    LLVM variants are tried only when :func:`find_libllvm` finds libLLVM >= 16, with
+    ``DRJIT_LIBLLVM_PATH`` set to it. Raises :class:`MitsubaUnavailableError` when none works.
+    The result is cached per process.
+    """
+    notes: list[str] = []
+    lib = find_libllvm()
+    for variant in preferred:
+        env = dict(os.environ)
+        if variant.startswith("llvm"):
+            if lib is None:
+                notes.append(f"{variant}: skipped, no libLLVM >= {MIN_LLVM_VERSION} found")
+                continue
+            env["DRJIT_LIBLLVM_PATH"] = str(lib)
+        ok, note = _run_probe(variant, env, timeout)
+        notes.append(note)
+        if ok:
+            return VariantProbe(variant, str(lib) if variant.startswith("llvm") else None,
+                                tuple(notes))
+    raise MitsubaUnavailableError("no Mitsuba spectral variant works here: " + "; ".join(notes))
+
+
+def _activate(variant: str) -> Any:
+    """Import mitsuba with ``variant`` set (DRJIT_LIBLLVM_PATH set first for LLVM variants)."""
+    if variant.startswith("llvm"):
+        probe_variant((variant,))  # aborts in the subprocess, not here, if LLVM is unusable
+    if "DRJIT_LIBLLVM_PATH" not in os.environ and "mitsuba" not in sys.modules:
+        # Dr.Jit reads this when its LLVM backend first loads: set it before the first import,
+        # whatever the variant, so a later LLVM variant in this process finds the right library.
+        lib = find_libllvm()
+        if lib is not None:
+            os.environ["DRJIT_LIBLLVM_PATH"] = str(lib)
+    import mitsuba as mi
+
+    if variant not in mi.variants():
+        raise InvalidValueError(f"Mitsuba variant {variant!r} is not built; have {mi.variants()}")
+    mi.set_variant(variant)
+    return mi
+
+
+# --------------------------------------------------------------------------------------------
+# Scene
+# --------------------------------------------------------------------------------------------
+
+
+def load_template(path: str | Path | None = None) -> dict[str, Any]:
+    """The scene template (``scenes/spectral_chart.json`` unless ``path`` is given)."""
+    p = Path(path) if path else resource_dir("scenes") / "spectral_chart.json"
+    try:
+        return json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise InputFileError(f"{p}: cannot read the Mitsuba scene template ({exc})") from exc
+
+
+def _regular(values: ArrayLike, step: float) -> dict[str, Any]:
+    v = np.asarray(values, dtype=np.float64)
+    end = GRID_START_NM + step * (v.size - 1)
+    return {"type": "regular", "wavelength_min": GRID_START_NM, "wavelength_max": end,
+            "values": ", ".join(f"{x:.8g}" for x in v)}
+
+
+def split_channels(sensitivities: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Split (N, 3) sensitivities into non-negative film channels (N, K) and a (3, K) recombination.
+
+    camera = film @ recombination.T; channels that are identically zero are dropped.
+    """
+    s = np.asarray(sensitivities, dtype=np.float64)
+    cols: list[FloatArray] = []
+    rec: list[tuple[int, float]] = []
+    for c in range(s.shape[1]):
+        for sign in (1.0, -1.0):
+            part = np.maximum(sign * s[:, c], 0.0)
+            if np.any(part > 0):
+                cols.append(part)
+                rec.append((c, sign))
+    recombine = np.zeros((s.shape[1], len(cols)))
+    for k, (c, sign) in enumerate(rec):
+        recombine[c, k] = sign
+    return np.stack(cols, axis=1), recombine
+
+
+def build_scene_dict(
+    reflectance: ArrayLike,
+    illuminant: ArrayLike,
+    film_channels: ArrayLike,
+    layout: Any,
+    spp: int,
+    step: float = GRID_STEP_NM,
+    template: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Fill the template: patch rectangles, emitter SPD, film channels, sensor framing.
+
+    ``reflectance`` (24, N), ``illuminant`` (N,), ``film_channels`` (N, K) on the grid;
+    ``layout`` a :class:`fidelity.render.ChartLayout` (1 world unit = 1 pixel).
+    """
+    import mitsuba as mi
+
+    t = copy.deepcopy(template if template is not None else load_template())
+    t.pop("_comment", None)
+    patch = t.pop("patch")
+    sensor = t["sensor"]
+    height_above = float(sensor.pop("camera_height", 10.0))
+    w, h = layout.width, layout.height
+    # Orthographic: camera-space x in [-1, 1] spans the film width (y follows the aspect
+    # ratio), so a uniform scale of w/2 frames the w x h chart exactly.
+    sensor["to_world"] = mi.ScalarTransform4f().look_at(
+        origin=[w / 2, h / 2, height_above], target=[w / 2, h / 2, 0.0], up=[0.0, 1.0, 0.0]
+    ) @ mi.ScalarTransform4f().scale([w / 2, w / 2, 1.0])
+    film = sensor["film"]
+    film["width"], film["height"] = w, h
+    fc = np.asarray(film_channels, dtype=np.float64)
+    for k in range(fc.shape[1]):
+        film[f"s{k:02d}"] = _regular(fc[:, k], step)
+    sensor["sampler"]["sample_count"] = int(spp)
+    t["emitter"]["irradiance"] = _regular(illuminant, step)
+    refl = np.asarray(reflectance, dtype=np.float64)
+    for i in range(refl.shape[0]):
+        y0, y1, x0, x1 = layout.patch_box(i)
+        # image row y counts down from the top; world y counts up.
+        cx, cy = (x0 + x1) / 2, h - (y0 + y1) / 2
+        shape = copy.deepcopy(patch)
+        shape["to_world"] = mi.ScalarTransform4f().translate([cx, cy, 0.0]) @ (
+            mi.ScalarTransform4f().scale([(x1 - x0) / 2, (y1 - y0) / 2, 1.0]))
+        shape["bsdf"]["reflectance"] = _regular(refl[i], step)
+        t[f"patch{i:02d}"] = shape
+    return t
+
+
+@dataclass(frozen=True)
+class MitsubaImage:
+    """A Mitsuba render in camera raw units (H, W, 3), with the variant and timings."""
+
+    image: FloatArray
+    variant: str
+    libllvm: str | None
+    spp: int
+    sampler: str
+    seconds_render: float
+    probe_notes: tuple[str, ...]
+
+
+def render_raw(
+    reflectance: ArrayLike,
+    illuminant: ArrayLike,
+    sensitivities: ArrayLike,
+    layout: Any,
+    *,
+    spp: int = DEFAULT_SPP,
+    step: float = GRID_STEP_NM,
+    variant: str | None = None,
+    seed: int = 0,
+    sampler: str | None = None,
+) -> MitsubaImage:
+    """Render the chart and return camera raw RGB in :func:`fidelity.camera.camera_response` units.
+
+    raw_c = pi * film_c / sum(E ybar dl), film_c = sum_k recombine[c, k] * specfilm channel k.
+    ``variant`` None probes (:func:`probe_variant`); ``seed`` seeds the sampler; ``sampler``
+    a Mitsuba sampler plugin (default :data:`DEFAULT_SAMPLER`, from the template).
+    """
+    import time
+
+    if spp < 1:
+        raise InvalidValueError(f"spp must be >= 1, got {spp}")
+    probe = probe_variant() if variant is None else probe_variant((variant,))
+    mi = _activate(probe.variant)
+    channels, recombine = split_channels(sensitivities)
+    e = np.asarray(illuminant, dtype=np.float64)
+    template = load_template()
+    if sampler is not None:
+        if sampler not in SAMPLERS:
+            raise unknown_name("Mitsuba sampler", sampler, SAMPLERS)
+        template["sensor"]["sampler"]["type"] = sampler
+    used_sampler = template["sensor"]["sampler"]["type"]
+    scene = mi.load_dict(build_scene_dict(reflectance, e, channels, layout, spp, step, template))
+    t0 = time.perf_counter()
+    img = np.asarray(mi.render(scene, seed=int(seed), spp=int(spp)), dtype=np.float64)
+    seconds = time.perf_counter() - t0
+    norm = float(e @ cie_1931_cmfs(step)[:, 1]) * step
+    raw = (img.reshape(layout.height, layout.width, -1) @ recombine.T) * (np.pi / norm)
+    return MitsubaImage(raw, probe.variant, probe.libllvm, int(spp), used_sampler, seconds,
+                        probe.notes)
+
+
+__all__ = [
+    "DEFAULT_PIXELS_PER_PATCH",
+    "DEFAULT_SAMPLER",
+    "SAMPLERS",
+    "DEFAULT_SPP",
+    "GRID_END_NM",
+    "PREFERRED_VARIANTS",
+    "MitsubaImage",
+    "MitsubaUnavailableError",
+    "VariantProbe",
+    "build_scene_dict",
+    "find_libllvm",
+    "load_template",
+    "probe_variant",
+    "render_raw",
+    "split_channels",
+]
