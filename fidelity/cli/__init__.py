@@ -24,6 +24,7 @@ COMMANDS: dict[str, str] = {
     "calibrate": "fidelity.cli.calibrate:calibrate",
     "dataset": "fidelity.cli.dataset:dataset",
     "evaluate": "fidelity.cli.evaluate:evaluate",
+    "render": "fidelity.cli.render:render",
     "sweep": "fidelity.cli.sweep:sweep",
     "tables": "fidelity.cli.tables:tables",
 }
