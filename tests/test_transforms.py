@@ -6,6 +6,7 @@ import colour
 import numpy as np
 import pytest
 
+from benchmarks.colour_reference import reference_transform
 from fidelity.errors import InvalidValueError, UnknownNameError
 from fidelity.transforms import (
     TRANSFORMS,
@@ -14,9 +15,9 @@ from fidelity.transforms import (
     rgb_to_hsv,
 )
 
-D65_XY = np.array([0.3127, 0.3290])
-SRGB = colour.RGB_COLOURSPACES["sRGB"].copy()
-SRGB.use_derived_transformation_matrices(True)
+
+def _ref(name: str, rgb: np.ndarray, p: float) -> np.ndarray:
+    return reference_transform(name, rgb, p)
 
 
 def _rgb(n: int = 4000, seed: int = 0) -> np.ndarray:
@@ -25,39 +26,6 @@ def _rgb(n: int = 4000, seed: int = 0) -> np.ndarray:
     rgb[:10] = np.linspace(0, 1, 10)[:, None]  # greys, black and white
     rgb[10:13] = np.eye(3)  # primaries
     return rgb
-
-
-# Plain reference implementations of Table I with colour-science building blocks.
-def _ref_hsv_op(rgb: np.ndarray, fn) -> np.ndarray:  # type: ignore[no-untyped-def]
-    return colour.HSV_to_RGB(fn(colour.RGB_to_HSV(rgb)))
-
-
-def _ref(name: str, rgb: np.ndarray, p: float) -> np.ndarray:
-    if name.startswith("brightness"):
-        return np.clip(rgb + p, 0, 1)
-    if name.startswith("contrast"):
-        return np.clip(0.5 + p * (rgb - 0.5), 0, 1)
-    if name.startswith("gamma"):
-        lin = colour.models.eotf_sRGB(rgb)
-        return np.clip(colour.models.eotf_inverse_sRGB(lin**p), 0, 1)
-    if name.startswith("saturation"):
-        def sat(hsv: np.ndarray) -> np.ndarray:
-            hsv = hsv.copy()
-            hsv[..., 1] = np.clip(hsv[..., 1] * p, 0, 1)
-            return hsv
-        return _ref_hsv_op(rgb, sat)
-    if name == "hue":
-        def rot(hsv: np.ndarray) -> np.ndarray:
-            hsv = hsv.copy()
-            hsv[..., 0] = np.mod(hsv[..., 0] + p / 360.0, 1.0)
-            return hsv
-        return _ref_hsv_op(rgb, rot)
-    if name == "pull_mean":
-        lab = colour.XYZ_to_Lab(colour.RGB_to_XYZ(rgb, SRGB, apply_cctf_decoding=True), D65_XY)
-        m = lab.reshape(-1, 3).mean(axis=0)
-        xyz = colour.Lab_to_XYZ(m + p * (lab - m), D65_XY)
-        return np.clip(colour.XYZ_to_RGB(xyz, SRGB, apply_cctf_encoding=True), 0, 1)
-    raise AssertionError(name)
 
 
 PARAMS = {
