@@ -236,7 +236,7 @@ def preprocess(rgb: np.ndarray, layout: ModelLayout) -> tuple[np.ndarray, Letter
     for c, src in enumerate(order):
         x[0, c, top:top + nh, left:left + nw] = resized[:, :, src]
     if layout.kind != "yolox":
-        x *= np.float32(1 / 255)
+        x /= np.float32(255.0)
     return x, box
 
 

@@ -1,0 +1,105 @@
+"""COCO AP against hand-computed values (101-point interpolated AP, IoU thresholds .50:.95)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fidelity.cocoeval import (
+    coco_from_dict,
+    detections_to_coco,
+    evaluate_detections,
+    load_annotations,
+)
+from fidelity.detectors import COCO80_CATEGORY_IDS, COCO80_NAMES
+from fidelity.errors import InputFileError, InvalidValueError
+
+
+def _gt(boxes: dict[int, list[tuple[int, list[float]]]]) -> object:
+    cats = [{"id": c, "name": n} for c, n in zip(COCO80_CATEGORY_IDS, COCO80_NAMES, strict=True)]
+    images, anns = [], []
+    for img_id, items in boxes.items():
+        images.append({"id": img_id, "width": 200, "height": 200, "file_name": f"{img_id}.jpg"})
+        for cat, (x, y, w, h) in items:
+            anns.append({"id": len(anns) + 1, "image_id": img_id, "category_id": cat,
+                         "bbox": [x, y, w, h], "area": w * h, "iscrowd": 0})
+    return coco_from_dict({"images": images, "annotations": anns, "categories": cats})
+
+
+def det(x: float, y: float, w: float, h: float, s: float, cls: int) -> list[float]:
+    return [x, y, x + w, y + h, s, cls]
+
+
+def test_perfect_detection_is_ap_one() -> None:
+    gt = _gt({1: [(1, [10, 10, 50, 80])]})
+    score = evaluate_detections(gt, {1: np.array([det(10, 10, 50, 80, 0.9, 0)])})
+    assert score.map == pytest.approx(1.0) and score.ap["person"] == pytest.approx(1.0)
+    assert score.ap["bicycle"] is None  # no ground truth: not a number
+
+
+def test_false_positive_ranked_first_halves_ap() -> None:
+    # FP (score 0.95) then TP (0.9): precision 1/2 at recall 1 -> 101-point AP = 0.5
+    gt = _gt({1: [(1, [10, 10, 50, 80])]})
+    d = np.array([det(120, 120, 40, 40, 0.95, 0), det(10, 10, 50, 80, 0.9, 0)])
+    assert evaluate_detections(gt, {1: d}).map == pytest.approx(0.5)
+    # TP ranked first: the FP after it does not lower the interpolated precision -> 1.0
+    d2 = np.array([det(120, 120, 40, 40, 0.5, 0), det(10, 10, 50, 80, 0.9, 0)])
+    assert evaluate_detections(gt, {1: d2}).map == pytest.approx(1.0)
+
+
+def test_iou_thresholds_count() -> None:
+    # Box shifted by 10 px in x on a 100x100 GT: IoU = 90*100 / (110*100) = 0.818
+    # -> true positive at thresholds .50 ... .80 (7 of 10) -> AP = 0.7, AP50 = 1
+    gt = _gt({1: [(3, [0, 0, 100, 100])]})
+    score = evaluate_detections(gt, {1: np.array([det(10, 0, 100, 100, 0.8, 2)])})
+    assert score.map == pytest.approx(0.7)
+    assert score.map50 == pytest.approx(1.0)
+    assert score.ap["car"] == pytest.approx(0.7)
+
+
+def test_missed_image_counts_and_mean_over_classes() -> None:
+    gt = _gt({1: [(1, [10, 10, 50, 80])], 2: [(2, [0, 0, 60, 60])]})
+    # person found; bicycle image gets no detections -> AP person 1, bicycle 0, mean 0.5
+    score = evaluate_detections(gt, {1: np.array([det(10, 10, 50, 80, 0.9, 0)])}, [1, 2])
+    assert score.ap["person"] == pytest.approx(1.0) and score.ap["bicycle"] == pytest.approx(0.0)
+    assert score.map == pytest.approx(0.5) and score.images == 2
+
+
+def test_no_detections_at_all() -> None:
+    gt = _gt({1: [(1, [10, 10, 50, 80])]})
+    assert evaluate_detections(gt, {}, [1]).map == 0.0
+
+
+def test_bad_inputs(tmp_path) -> None:
+    gt = _gt({1: [(1, [10, 10, 50, 80])]})
+    with pytest.raises(InvalidValueError, match="not in the annotations"):
+        evaluate_detections(gt, {7: np.zeros((0, 6))})
+    with pytest.raises(InvalidValueError, match="no images"):
+        evaluate_detections(gt, {})
+    with pytest.raises(InputFileError, match="does not exist"):
+        load_annotations(tmp_path / "missing.json")
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"images": []}')
+    with pytest.raises(InputFileError, match="annotations"):
+        load_annotations(bad)
+
+
+def test_detection_json_uses_xywh_and_category_ids() -> None:
+    out = detections_to_coco(5, np.array([det(1, 2, 3, 4, 0.5, 1)]))
+    assert out == [{"image_id": 5, "category_id": 2, "bbox": [1.0, 2.0, 3.0, 4.0], "score": 0.5}]
+
+
+@pytest.mark.shared
+def test_shared_ground_truth_scores_one(shared) -> None:
+    coco = load_annotations(shared / "coco/annotations/instances_val2017_subset.json")
+    ids = sorted(coco.getImgIds())[:200]
+    cats = sorted(coco.getCatIds())
+    dets = {}
+    for i in ids:
+        rows = [[x, y, x + w, y + h, 1.0, cats.index(a["category_id"])]
+                for a in coco.imgToAnns[i] if not a["iscrowd"]
+                for x, y, w, h in [a["bbox"]]]
+        dets[i] = np.array(rows, dtype=np.float64).reshape(-1, 6)
+    score = evaluate_detections(coco, dets, ids)
+    assert score.map == pytest.approx(1.0, abs=1e-3)
+    assert score.ap["person"] == pytest.approx(1.0, abs=1e-3)

@@ -1,0 +1,166 @@
+"""Exact 8-bit fast transforms, JPEG re-encoding with original settings, dataset writing."""
+
+from __future__ import annotations
+
+import colorsys
+import hashlib
+import io
+
+import numpy as np
+import pytest
+from PIL import Image, ImageCms, JpegImagePlugin
+
+from fidelity.calibration import calibrate_transform
+from fidelity.dataset import (
+    CHANNELWISE,
+    PixelMap,
+    calibrated_param,
+    list_images,
+    reference_transform,
+    to_uint8,
+    write_grid,
+    write_transformed_dataset,
+)
+from fidelity.errors import InputFileError, UnreachableTargetError
+from fidelity.jpeg import decode_jpeg, encode_jpeg, read_jpeg
+from fidelity.transforms import TRANSFORMS
+
+
+def natural_image(h: int = 96, w: int = 128, seed: int = 0) -> np.ndarray:
+    """Smooth gradients plus noise: many distinct colours, like a photo."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:h, 0:w]
+    base = np.stack([x / w, y / h, 0.5 + 0.5 * np.sin(x / 9.0) * np.cos(y / 7.0)], -1)
+    return to_uint8(np.clip(base + rng.normal(0, 0.05, base.shape), 0, 1))
+
+
+@pytest.mark.parametrize("name", sorted(TRANSFORMS))
+def test_fast_path_equals_reference_bit_for_bit(name: str) -> None:
+    img = natural_image()
+    target = 6.0
+    param = calibrate_transform(name, target).param
+    assert param is not None
+    pm = PixelMap.build(name, param, chunk=1 << 22)
+    assert pm.kind == ("channel" if name in CHANNELWISE else
+                       "image" if name == "pull_mean" else "cube")
+    fast = pm(img)
+    ref = reference_transform(img, name, param)
+    assert fast.dtype == np.uint8 and np.array_equal(fast, ref)
+
+
+def test_hue_reference_agrees_with_colorsys() -> None:
+    """The slow reference itself, against Python's colorsys HSV (an independent HSV)."""
+    img = natural_image(8, 8, seed=3)
+    out = reference_transform(img, "hue", 40.0)
+    for p, q in zip(img.reshape(-1, 3), out.reshape(-1, 3), strict=True):
+        h, s, v = colorsys.rgb_to_hsv(*(p / 255.0))
+        expect = np.rint(np.array(colorsys.hsv_to_rgb((h + 40 / 360) % 1, s, v)) * 255)
+        assert np.abs(q.astype(int) - expect).max() <= 1
+
+
+def test_contrast_lut_closed_form() -> None:
+    pm = PixelMap.build("contrast-inc", 2.0)
+    v = np.arange(256, dtype=np.uint8)
+    expect = np.rint(np.clip(0.5 + 2.0 * (v / 255 - 0.5), 0, 1) * 255)
+    np.testing.assert_array_equal(pm.lut, expect)
+
+
+def test_baseline_is_identity() -> None:
+    img = natural_image()
+    assert np.array_equal(PixelMap.build("baseline", None)(img), img)
+
+
+def test_unreachable_and_baseline_params() -> None:
+    assert calibrated_param("contrast-inc", 0) == (None, None)
+    p, reason = calibrated_param("saturation-inc", 24)
+    assert p is None and "cannot reach" in reason
+
+
+def _jpeg(img: np.ndarray, **kw) -> bytes:
+    buf = io.BytesIO()
+    Image.fromarray(img).save(buf, "JPEG", **kw)
+    return buf.getvalue()
+
+
+def _settings_of(data: bytes) -> tuple[dict, int, str, bytes | None]:
+    with Image.open(io.BytesIO(data)) as im:
+        return (im.quantization, JpegImagePlugin.get_sampling(im) if im.mode == "RGB" else -1,
+                im.mode, im.info.get("icc_profile"))
+
+
+@pytest.mark.parametrize("sub,quality", [(0, 90), (2, 60), (1, 75)])
+def test_reencode_keeps_tables_and_subsampling(sub: int, quality: int) -> None:
+    data = _jpeg(natural_image(), quality=quality, subsampling=sub)
+    rgb, settings = decode_jpeg(data)
+    out = encode_jpeg(rgb, settings)
+    q0, s0, _, _ = _settings_of(data)
+    q1, s1, _, _ = _settings_of(out)
+    assert q1 == q0 and s1 == s0 == sub
+
+
+def test_grayscale_and_icc_rules() -> None:
+    grey = natural_image()[..., 1]
+    data = _jpeg(grey, quality=80)
+    rgb, settings = decode_jpeg(data)
+    assert rgb.shape[2] == 3 and np.array_equal(rgb[..., 0], rgb[..., 2])
+    out = encode_jpeg(PixelMap.build("contrast-inc", 1.5)(rgb), settings)
+    q, _, mode, _ = _settings_of(out)
+    assert mode == "L" and q == _settings_of(data)[0]
+    icc = ImageCms.ImageCmsProfile(ImageCms.createProfile("sRGB")).tobytes()
+    data = _jpeg(natural_image(), quality=85, icc_profile=icc)
+    rgb, settings = decode_jpeg(data)
+    # pixel values are taken as stored (no colour management): same as decoding without ICC
+    with Image.open(io.BytesIO(data)) as im:
+        assert np.array_equal(rgb, np.asarray(im.convert("RGB")))
+    assert _settings_of(encode_jpeg(rgb, settings))[3] == icc
+
+
+def test_bad_jpeg_inputs(tmp_path) -> None:
+    png = tmp_path / "a.jpg"
+    Image.fromarray(natural_image()).save(png, "PNG")
+    with pytest.raises(InputFileError, match="not a JPEG"):
+        read_jpeg(png)
+    (tmp_path / "b.jpg").write_bytes(b"junk")
+    with pytest.raises(InputFileError, match="cannot decode"):
+        read_jpeg(tmp_path / "b.jpg")
+
+
+def _sha(p) -> str:
+    return hashlib.sha256(p.read_bytes()).hexdigest()
+
+
+def test_write_dataset_atomic_resumable_parallel(tmp_path) -> None:
+    src = tmp_path / "src"
+    src.mkdir()
+    for i in range(4):
+        (src / f"{i:03d}.jpg").write_bytes(_jpeg(natural_image(seed=i), quality=70,
+                                                 subsampling=2))
+    before = {p.name: _sha(p) for p in src.iterdir()}
+    files = list_images(src)
+    out = tmp_path / "out"
+    r = write_transformed_dataset(files, out, "hue", 3.0, workers=2, progress=False)
+    assert r["written"] == 4 and r["param"] == pytest.approx(5.3363, abs=1e-3)
+    sub = out / "hue_de3"
+    written = {p.name: p.stat().st_mtime_ns for p in sub.iterdir()}
+    assert sorted(written) == sorted(before)  # no temporary files left behind
+    r2 = write_transformed_dataset(files, out, "hue", 3.0, workers=1, progress=False)
+    assert r2["written"] == 0 and r2["skipped"] == 4
+    assert {p.name: p.stat().st_mtime_ns for p in sub.iterdir()} == written
+    assert {p.name: _sha(p) for p in src.iterdir()} == before  # originals untouched
+    # the written file decodes to the re-encoded transformed image
+    rgb, settings = read_jpeg(src / "001.jpg")
+    expect = decode_jpeg(encode_jpeg(reference_transform(rgb, "hue", r["param"]), settings))[0]
+    assert np.array_equal(read_jpeg(sub / "001.jpg")[0], expect)
+    # baseline: decode + re-encode only
+    write_transformed_dataset(files, out, "hue", 0, progress=False)
+    assert np.array_equal(read_jpeg(out / "baseline" / "001.jpg")[0],
+                          decode_jpeg(encode_jpeg(rgb, settings))[0])
+    res = write_grid(files[:1], tmp_path / "grid", ["saturation-inc"], [0, 24], progress=False)
+    assert "skipped_reason" in res[1] and "cannot reach" in res[1]["skipped_reason"]
+    with pytest.raises(UnreachableTargetError):
+        write_transformed_dataset(files, out, "saturation-inc", 24, progress=False)
+    inplace = tmp_path / "x" / "baseline"
+    inplace.mkdir(parents=True)
+    (inplace / "a.jpg").write_bytes((src / "000.jpg").read_bytes())
+    with pytest.raises(InputFileError, match="overwrite an input"):
+        write_transformed_dataset(list_images(inplace), tmp_path / "x", "hue", 0, progress=False)
