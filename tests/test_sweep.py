@@ -1,0 +1,157 @@
+"""Sweep store durability (kill -9), resume without redoing cells, and the CI slice."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.sweep import ModelSpec, SweepStore, pack_detections, plan_cells, unpack_detections
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_pack_roundtrip() -> None:
+    d = np.random.default_rng(0).uniform(0, 600, (57, 6)).astype(np.float32)
+    assert np.array_equal(unpack_detections(pack_detections(d)), d)
+    assert unpack_detections(pack_detections(np.zeros((0, 6)))).shape == (0, 6)
+
+
+def test_plan_and_model_spec() -> None:
+    cells = plan_cells(["a", "b"], [3, 0, 1])
+    assert cells == [("baseline", 0.0), ("a", 1.0), ("b", 1.0), ("a", 3.0), ("b", 3.0)]
+    assert ModelSpec.parse("m.onnx@250") == ModelSpec(Path("m.onnx"), 250)
+    assert ModelSpec.parse("m.onnx").limit is None
+    with pytest.raises(InvalidValueError):
+        ModelSpec.parse("m.onnx@x")
+
+
+def test_store_survives_kill_9(tmp_path) -> None:
+    """A process killed with SIGKILL keeps every committed batch; the store reopens cleanly."""
+    script = textwrap.dedent(f"""
+        import os, signal, numpy as np
+        from fidelity.sweep import SweepStore
+        s = SweepStore({str(tmp_path)!r})
+        for i in range(5):
+            s.add_detections("m", "hue", 3, [(i, np.full((2, 6), i, np.float32))])
+        s.db.execute("BEGIN")
+        s.db.execute("INSERT INTO detections VALUES ('m','hue',3.0,99,0,x'00')")
+        os.kill(os.getpid(), signal.SIGKILL)
+    """)
+    proc = subprocess.run([sys.executable, "-c", script], cwd=REPO)
+    assert proc.returncode == -signal.SIGKILL
+    store = SweepStore(tmp_path)
+    assert store.stored_images("m", "hue", 3) == {0, 1, 2, 3, 4}  # 99 was never committed
+    assert store.detections("m", "hue", 3)[4][0, 0] == 4
+    with pytest.raises(InputFileError, match="no sweep store"):
+        SweepStore(tmp_path / "elsewhere", create=False)
+
+
+def test_model_file_change_is_refused(tmp_path) -> None:
+    s = SweepStore(tmp_path)
+    s.register_model("m", "m.onnx", "aa" * 32, None, {})
+    with pytest.raises(InvalidValueError, match="different file"):
+        s.register_model("m", "m.onnx", "bb" * 32, None, {})
+
+
+# ----------------------------------------------------------------------------- CI slice
+
+
+@pytest.fixture(scope="module")
+def coco(shared):
+    return (shared / "coco/val2017", shared / "coco/annotations/instances_val2017_subset.json",
+            shared / "models/yolox_nano.onnx")
+
+
+@pytest.mark.shared
+def test_ci_slice_sweep_resume_rescore(coco, tmp_path) -> None:
+    """A few images, one model, two targets; checked against a direct second computation."""
+    from fidelity.calibration import calibrate_transform
+    from fidelity.cocoeval import evaluate_detections, load_annotations
+    from fidelity.dataset import reference_transform
+    from fidelity.detectors import Detector
+    from fidelity.jpeg import read_jpeg, roundtrip_jpeg
+    from fidelity.sweep import rescore, run_sweep
+
+    images, ann, model = coco
+    store = run_sweep([ModelSpec(model, 4)], images, ann, tmp_path,
+                      ["contrast-inc", "saturation-inc"], [0, 15], threads=2, log=lambda s: None)
+    cells = {(c["transform"], c["target"]): c for c in store.cells()}
+    assert set(cells) == {("baseline", 0), ("contrast-inc", 15), ("saturation-inc", 15)}
+    assert cells[("saturation-inc", 15)]["status"] == "unreachable"
+    assert "cannot reach" in cells[("saturation-inc", 15)]["reason"]
+    param = calibrate_transform("contrast-inc", 15).param
+    assert cells[("contrast-inc", 15)]["param"] == pytest.approx(param)
+
+    # second method: transformed JPEG written and read back, detector, pycocotools
+    gt = load_annotations(ann)
+    ids = sorted(gt.getImgIds())[:4]
+    det = Detector(model, threads=2)
+    for transform, p in (("baseline", None), ("contrast-inc", param)):
+        dets = {}
+        for i in ids:
+            rgb, settings = read_jpeg(images / gt.imgs[i]["file_name"])
+            t = rgb if p is None else reference_transform(rgb, transform, p)
+            dets[i] = det(roundtrip_jpeg(t, settings))
+        direct = evaluate_detections(gt, dets, ids)
+        cell = cells[(transform, 0 if p is None else 15)]
+        assert cell["map"] == pytest.approx(direct.map, abs=1e-9)
+        assert cell["ap"]["person"] == pytest.approx(direct.ap["person"], abs=1e-9)
+    assert cells[("contrast-inc", 15)]["map"] < cells[("baseline", 0)]["map"]
+
+    # resume: nothing is redone
+    before = {(c["transform"], c["target"]): c["finished"] for c in store.cells()}
+    time.sleep(1.1)
+    again = run_sweep([ModelSpec(model, 4)], images, ann, tmp_path,
+                      ["contrast-inc", "saturation-inc"], [0, 15], threads=2, log=lambda s: None)
+    assert {(c["transform"], c["target"]): c["finished"] for c in again.cells()} == before
+
+    # re-scoring from the stored detections needs no inference and gives the same numbers
+    assert rescore(again, ann) == 2
+    assert again.cell("yolox_nano", "contrast-inc", 15)["map"] == pytest.approx(
+        cells[("contrast-inc", 15)]["map"], abs=1e-12)
+
+
+@pytest.mark.shared
+def test_kill_9_mid_cell_then_resume(coco, tmp_path) -> None:
+    """kill -9 a running sweep mid-cell; the rerun keeps the stored images and finishes."""
+    images, ann, model = coco
+    script = textwrap.dedent(f"""
+        from pathlib import Path
+        from fidelity.sweep import ModelSpec, run_sweep
+        run_sweep([ModelSpec(Path({str(model)!r}), 30)], {str(images)!r}, {str(ann)!r},
+                  {str(tmp_path)!r}, [], [0], threads=1, batch_commit=2, log=lambda s: None)
+    """)
+    proc = subprocess.Popen([sys.executable, "-c", script], cwd=REPO,
+                            env={**os.environ, "OMP_NUM_THREADS": "1"})
+    store = SweepStore(tmp_path)
+    deadline = time.time() + 60
+    n = 0
+    while time.time() < deadline and proc.poll() is None:
+        n = len(store.stored_images("yolox_nano", "baseline", 0))
+        if n >= 4:
+            break
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    kept = store.detections("yolox_nano", "baseline", 0)
+    assert 4 <= len(kept) < 30, "kill came too late to test a mid-cell resume"
+    assert store.cell("yolox_nano", "baseline", 0) is None
+    from fidelity.sweep import run_sweep
+
+    run_sweep([ModelSpec(model, 30)], images, ann, tmp_path, [], [0], threads=2,
+              log=lambda s: None)
+    done = store.cell("yolox_nano", "baseline", 0)
+    assert done is not None and done["images"] == 30
+    after = store.detections("yolox_nano", "baseline", 0)
+    assert len(after) == 30
+    for i, d in kept.items():
+        assert np.array_equal(after[i], d)

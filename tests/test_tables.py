@@ -1,0 +1,107 @@
+"""Worst-case tables, paper comparison and report from a hand-made store (hand-computed values)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import pytest
+
+from fidelity.prediction import parse_prediction_table
+from fidelity.sweep import SweepStore
+from fidelity.tables import (
+    build_tables,
+    compare_with_paper,
+    model_size,
+    prediction_table,
+    write_report,
+)
+
+TRANSFORMS = ["contrast-inc", "hue", "saturation-inc"]
+
+
+def score(m: float, person: float, bicycle: float) -> SimpleNamespace:
+    return SimpleNamespace(map=m, map50=m + 0.2, map75=m, ap={"person": person,
+                                                              "bicycle": bicycle})
+
+
+@pytest.fixture
+def store(tmp_path) -> SweepStore:
+    s = SweepStore(tmp_path)
+    s.set_meta("grid", {"transforms": TRANSFORMS, "targets": [0, 3, 6]})
+    for model, base in (("yolo11n", 0.50), ("yolov8n", 0.40), ("yolov8s", 0.45)):
+        s.register_model(model, model + ".onnx", model * 4, None, {"conventions": {"conf": 0.001}})
+        s.finish_cell(model, "baseline", 0, param=None, status="done", images=10,
+                      score=score(base, 0.6, 0.3))
+    f = s.finish_cell
+    # yolo11n: at ΔE 3 contrast-inc loses 5 points (10 %), hue 0.5 points
+    f("yolo11n", "contrast-inc", 3, param=1.1, status="done", images=10,
+      score=score(0.45, 0.54, 0.27))
+    f("yolo11n", "hue", 3, param=5.0, status="done", images=10, score=score(0.495, 0.5, 0.3))
+    f("yolo11n", "saturation-inc", 3, param=1.2, status="done", images=10,
+      score=score(0.48, 0.59, 0.2))
+    f("yolo11n", "saturation-inc", 6, param=None, status="unreachable", reason="r")
+    f("yolo11n", "contrast-inc", 6, param=1.3, status="done", images=10,
+      score=score(0.40, 0.50, 0.25))
+    # yolov8n: only one transform finished at ΔE 3 (partial row); 2 points = 5 %
+    f("yolov8n", "hue", 3, param=5.0, status="done", images=10, score=score(0.38, 0.6, 0.3))
+    return s
+
+
+def test_model_size() -> None:
+    assert [model_size(m) for m in ("yolo11n-int8dyn", "yolov8s", "yolox_nano", "yolov10x",
+                                    "yolov5mu", "detr")] == ["n", "s", "n", "x", "m", "any"]
+
+
+def test_worst_case_rows_by_hand(store) -> None:
+    t = build_tables(store)
+    rows = {r["delta_e"]: r for r in t["worst_case"]["yolo11n"]}
+    r3 = rows[3.0]
+    assert r3["worst_transform"] == "contrast-inc"
+    assert r3["dmap_points"] == pytest.approx(5.0) and r3["dmap_relative"] == pytest.approx(10.0)
+    # person and bicycle are their own worst cases: hue for person (10 pts), sat for bicycle
+    assert r3["dap_person_points"] == pytest.approx(10.0)
+    assert r3["dap_bicycle_points"] == pytest.approx(10.0)
+    assert r3["transforms_done"] == 3 and not r3["partial"]
+    r6 = rows[6.0]
+    assert r6["unreachable"] == ["saturation-inc"] and r6["transforms_reachable"] == 2
+    assert r6["partial"]  # hue at ΔE 6 is missing
+    v8 = {r["delta_e"]: r for r in t["worst_case"]["yolov8n"]}[3.0]
+    assert v8["partial"] and v8["dmap_relative"] == pytest.approx(5.0)
+    # size class n: worst over yolo11n and yolov8n
+    n3 = {r["delta_e"]: r for r in t["size_classes"]["n"]}[3.0]
+    assert n3["worst_model"] == "yolo11n" and n3["dmap_points"] == pytest.approx(5.0)
+    assert "s" in t["size_classes"] and t["models"]["yolov8s"]["size"] == "s"
+
+
+def test_paper_comparison_verdicts(store) -> None:
+    claims = {c["claim"]: c for c in compare_with_paper(build_tables(store))}
+    c3 = claims["ΔE ≤ 3 keeps worst-case ΔmAP below 1 %"]
+    assert c3["verdict"] == "disagrees" and "10.00 %" in c3["evidence"]
+    person = claims["person is more sensitive than the mean (relative ΔAP > ΔmAP)"]
+    # cells with ΔmAP > 0.5 %: 11n c-inc@3 (10 vs 10: not more), sat@3 (1.7 vs 4: no),
+    # hue@3 (16.7 vs 1: yes), c-inc@6 (16.7 vs 20: no), v8n hue@3 (0 vs 5: no) -> 1 of 5
+    assert person["verdict"] == "disagrees" and "1 of 5" in person["evidence"]
+    # not every transform has ΔE <= 12 for every model: ranking not claimed
+    assert claims["hue changes hurt least"]["verdict"] == "not enough data"
+
+
+def test_prediction_table_follows_schema(store) -> None:
+    obj = prediction_table(build_tables(store))
+    table = parse_prediction_table(obj, "test")
+    assert obj["kind"] == "measured"
+    sizes = {c["size"] for c in obj["curves"] if c["model"] is None}
+    assert sizes == {"n", "s"}
+    n = next(c for c in obj["curves"] if c["model"] is None and c["size"] == "n")
+    assert [p["delta_e"] for p in n["points"]] == [0.0, 3.0, 6.0]
+    assert n["points"][1]["dmap_points"] == pytest.approx(5.0)
+    assert table.curves
+
+
+def test_report_files(store, tmp_path) -> None:
+    out = tmp_path / "rep"
+    written = write_report(store, out, tmp_path / "pred.json")
+    md = (out / "report.md").read_text()
+    assert "| 3 | contrast-inc | 5.00 | 10.00 |" in md
+    assert (out / "report.html").read_text().count("<img") == len(
+        [k for k in written if k.endswith(".png")]) >= 2
+    assert (out / "worst_case.png").read_bytes()[:4] == b"\x89PNG"
