@@ -21,6 +21,10 @@ from fidelity.errors import FidelityError
 
 #: command name -> "module:attribute" of its click command.
 COMMANDS: dict[str, str] = {
+    "audit": "fidelity.cli.audit:audit",
+    "check": "fidelity.cli.check:check",
+    "gate": "fidelity.cli.gate:gate",
+    "predict": "fidelity.cli.predict:predict_cmd",
     "calibrate": "fidelity.cli.calibrate:calibrate",
     "dataset": "fidelity.cli.dataset:dataset",
     "evaluate": "fidelity.cli.evaluate:evaluate",
