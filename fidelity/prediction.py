@@ -150,6 +150,17 @@ def _number(value: Any, where: str) -> float:
     return v
 
 
+def _baseline_percent(value: Any, where: str) -> float | None:
+    """A curve's ``baseline_map`` in percent: a fraction in (0, 1] (pycocotools' scale) is
+    multiplied by 100; larger values are taken as percent already."""
+    if value is None:
+        return None
+    v = _number(value, f"{where}.baseline_map")
+    if not 0 < v <= 100:
+        raise InvalidValueError(f"{where}.baseline_map {v} must be in (0, 1] or (1, 100]")
+    return v * 100.0 if v <= 1.0 else v
+
+
 def parse_prediction_table(obj: dict[str, Any], origin: str = "<table>") -> PredictionTable:
     """Validate a prediction-table JSON object and build a :class:`PredictionTable`."""
     if not isinstance(obj, dict):
@@ -185,7 +196,7 @@ def parse_prediction_table(obj: dict[str, Any], origin: str = "<table>") -> Pred
             values=values,
             sources=tuple(str(p.get("source", "")) for p in pts),
             worst_transforms=tuple(p.get("worst_transform") for p in pts),
-            baseline_map=float(baseline) if baseline is not None else None,
+            baseline_map=_baseline_percent(baseline, where),
         ))
     return PredictionTable(
         name=str(obj["name"]),

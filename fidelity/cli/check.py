@@ -1,0 +1,60 @@
+"""``fidelity check``: render a camera's chart, measure, predict, verdict, report."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from fidelity.cli.gate import camera_report, write_outputs
+from fidelity.prediction import SIZES
+from fidelity.verdict import DEFAULT_MAX_DELTA_E, Criterion
+
+#: Where ``fidelity check`` writes its report unless told otherwise.
+DEFAULT_OUTPUT_DIR = "fidelity-report"
+
+
+@click.command()
+@click.option("--camera", default=None,
+              help="Camera model: built-in name or TOML path (default: the built-in realistic "
+                   "camera, fidelity.camera.DEFAULT_CAMERA).")
+@click.option("--illuminant", default="D65", show_default=True, help="Scene illuminant.")
+@click.option("--renderer", default="closed-form", show_default=True,
+              help="closed-form (exact, fast) or mitsuba (spectral path tracer).")
+@click.option("--reference", type=click.Choice(["scene", "safecolor"]), default="scene",
+              show_default=True, help="Reference colours: the scene's spectra or the paper's Lab.")
+@click.option("--max-delta-e", type=float, default=DEFAULT_MAX_DELTA_E, show_default=True,
+              help="Pass when the mean ΔE00 <= X (SAFE-COLOR: ΔE <= 3 keeps ΔmAP below 1 %).")
+@click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
+              help="Detector size class for the predicted loss.")
+@click.option("--table", default=None, help="Prediction table (name or JSON path).")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              default=DEFAULT_OUTPUT_DIR, show_default=True,
+              help="Folder for report.html and report.json.")
+def check(camera: str | None, illuminant: str, renderer: str, reference: str,
+          max_delta_e: float, size: str, table: str | None, out_dir: Path) -> None:
+    """Is this camera model's colour good enough for perception testing?
+
+    Renders the spectral colour chart through the camera, measures ΔE00, predicts the detection
+    loss and prints a verdict (exit 0 pass, 1 fail, 2 error); writes an HTML and a JSON report.
+    """
+    from fidelity.camera import DEFAULT_CAMERA
+
+    cam = camera or DEFAULT_CAMERA
+    report, prediction, verdict = camera_report(
+        cam, command="check", illuminant=illuminant, renderer=renderer, reference=reference,
+        size=size, table=table, criterion=Criterion("max-delta-e", max_delta_e))
+    assert verdict is not None
+    html_path, json_path = out_dir / "report.html", out_dir / "report.json"
+    write_outputs(report, prediction, json_path=json_path, html_path=html_path)
+    from fidelity.report import summary_lines
+
+    src = report["source"]
+    variant = f" ({src['variant']})" if src.get("variant") else ""
+    click.echo(f"fidelity check: camera {src['camera']}, illuminant {illuminant}, "
+               f"{src['renderer']} renderer{variant}, {reference} reference")
+    for line in summary_lines(report):
+        click.echo("  " + line)
+    click.echo(f"  report: {html_path} (JSON: {json_path})")
+    sys.exit(verdict.exit_code)

@@ -1,0 +1,202 @@
+"""``fidelity gate``: pass/fail for CI on an image's chart or a camera model's render.
+
+Exit codes: 0 pass, 1 fail, 2 error (one line on stderr, no traceback; with ``--junit`` the
+error is also written as a JUnit ``<error>``). The helpers here (measuring an image or a camera
+into a report) are shared by ``fidelity audit`` and ``fidelity check``.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import click
+
+from fidelity.errors import FidelityError
+from fidelity.prediction import CLASS_COLUMNS, SIZES, Prediction, predict
+from fidelity.verdict import EXIT_ERROR, Criterion, Verdict, evaluate
+
+PATH = click.Path(dir_okay=False, path_type=Path)
+
+
+def image_report(
+    image: Path, corners: str, *, command: str, encoding: str | None, exposure: str | None,
+    layer: str | None, reference: str, illuminant: str, size: str, table: str | None,
+    criterion: Criterion | None = None,
+) -> tuple[dict[str, Any], Prediction, Verdict | None]:
+    """Audit ``image`` and build its report (measurement, prediction, optional verdict)."""
+    from fidelity.audit import audit_image
+    from fidelity.report import build_report
+
+    result = audit_image(image, corners, layer=layer, encoding=encoding, exposure=exposure,
+                         reference=reference, illuminant=illuminant)
+    prediction = predict(result.mean_delta_e, size=size, table=table)
+    verdict = evaluate(result.mean_delta_e, prediction, criterion) if criterion else None
+    info = dict(result.image or {})
+    source = {"type": "image", **info, "corners": result.location.corners.tolist(),
+              "exposure_mode": result.exposure_mode, "reference": result.reference.name}
+    report = build_report(
+        command, result.measurement, source=source, prediction=prediction, verdict=verdict,
+        exposure_ev=result.exposure_ev, bad_pixels=result.bad_pixels,
+        patch_extras=[{"valid_pixels": int(n),
+                       "bad_pixels": int(result.bad_pixels["per_patch"].get(name, 0))}
+                      for name, n in zip(result.reference.patch_names, result.valid_pixels,
+                                         strict=True)],
+        conventions={"reference": result.reference.conventions,
+                     "audit": "patches located by the homography of the 4x6 grid from the corner "
+                              "patch centres; central window of "
+                              f"{result.location.window:g} pitch; mean in linear light; "
+                              "exposure on the neutral patches (EV) unless fixed; sRGB encoded "
+                              "and clipped to [0, 1]"},
+        details={"location": result.location.to_dict(),
+                 "clipped_patches": list(result.clipped_patches),
+                 "encoding": result.encoding},
+    )
+    return report, prediction, verdict
+
+
+def camera_report(
+    camera: str, *, command: str, illuminant: str, renderer: str, reference: str, size: str,
+    table: str | None, criterion: Criterion | None = None, seed: int | None = None,
+) -> tuple[dict[str, Any], Prediction, Verdict | None]:
+    """Render ``camera``'s chart (:func:`fidelity.render.render_chart`) and build its report."""
+    from fidelity.render import render_chart
+    from fidelity.report import build_report
+
+    render = render_chart(camera, illuminant, renderer, reference=reference, seed=seed)
+    m = render.measurement
+    prediction = predict(m.mean_delta_e, size=size, table=table)
+    verdict = evaluate(m.mean_delta_e, prediction, criterion) if criterion else None
+    rd = render.to_dict()
+    source = {"type": "render", "camera": getattr(render.camera, "name", str(camera)),
+              "illuminant": illuminant, "renderer": render.renderer, "variant": render.variant,
+              "seconds": render.seconds, "reference": reference}
+    report = build_report(
+        command, m, source=source, prediction=prediction, verdict=verdict,
+        conventions={"render": rd.get("conventions", {})},
+        details={"camera": rd.get("camera"), "settings": rd.get("settings")},
+    )
+    return report, prediction, verdict
+
+
+def write_outputs(report: dict[str, Any], prediction: Prediction, *, json_path: Path | None,
+                  html_path: Path | None, protect: tuple[str, ...] = ()) -> list[Path]:
+    """Write the JSON and HTML reports that were asked for; return their paths."""
+    from fidelity.report import write_html_report, write_json_report
+
+    written = []
+    if json_path is not None:
+        written.append(write_json_report(json_path, report, protect=protect))
+    if html_path is not None:
+        written.append(write_html_report(html_path, report, prediction, protect=protect))
+    return written
+
+
+def make_criterion(max_delta_e: float | None, max_dmap: float | None, cls: str | None,
+                   unit: str) -> Criterion:
+    """The gate's criterion from its options (exactly one of the two limits)."""
+    if (max_delta_e is None) == (max_dmap is None):
+        raise click.UsageError("give exactly one of --max-delta-e X or --max-dmap P")
+    if max_delta_e is not None:
+        if cls is not None:
+            raise click.UsageError("--class goes with --max-dmap, not --max-delta-e")
+        return Criterion("max-delta-e", float(max_delta_e))
+    return Criterion("max-dmap", float(max_dmap), cls or "all", unit)  # type: ignore[arg-type]
+
+
+def _fail(message: str, junit: Path | None, name: str, seconds: float) -> None:
+    """Report an error as one stderr line (and a JUnit error), exit 2."""
+    if junit is not None:
+        try:
+            from fidelity.report import write_junit
+
+            write_junit(junit, None, name=name, error=message, seconds=seconds)
+        except Exception:  # noqa: BLE001 - the error line below matters more
+            pass
+    click.echo(f"fidelity: error: {message}", err=True)
+    sys.exit(EXIT_ERROR)
+
+
+@click.command()
+@click.argument("image", required=False, type=PATH)
+@click.option("--corners", help="Image with --corners X1,Y1,...,X4,Y4: centres of the dark skin, "
+              "bluish green, black and white patches.")
+@click.option("--camera", help="Camera model (built-in name or TOML path) instead of an image.")
+@click.option("--max-delta-e", type=float, help="Pass when the chart's mean ΔE00 <= X.")
+@click.option("--max-dmap", type=float, help="Pass when the predicted ΔmAP (or class ΔAP) <= P.")
+@click.option("--class", "cls", type=click.Choice(list(CLASS_COLUMNS)),
+              help="Class of --max-dmap: all (mAP, default), person, bicycle.")
+@click.option("--unit", type=click.Choice(["points", "relative"]), default="points",
+              show_default=True, help="Unit of --max-dmap: percentage points or % of baseline.")
+@click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
+              help="Detector size class of the prediction.")
+@click.option("--table", default=None, help="Prediction table (name or JSON path).")
+@click.option("--encoding", type=click.Choice(["linear", "srgb"]), default=None,
+              help="Image pixel encoding (default: linear for float formats, else sRGB).")
+@click.option("--exposure", default=None, help="Image exposure: auto or a fixed EV.")
+@click.option("--layer", default=None, help="EXR layer or part name.")
+@click.option("--reference", default=None,
+              help="Reference: safecolor (image default) or scene (camera default).")
+@click.option("--illuminant", default="D65", show_default=True, help="Scene illuminant.")
+@click.option("--renderer", default="closed-form", show_default=True,
+              help="Camera renderer: closed-form or mitsuba.")
+@click.option("--junit", type=PATH, help="Write JUnit XML (one test case: this gate).")
+@click.option("--json", "json_path", type=PATH, help="Write the JSON report.")
+@click.option("--html", "html_path", type=PATH, help="Write the HTML report.")
+def gate(image: Path | None, corners: str | None, camera: str | None, max_delta_e: float | None,
+         max_dmap: float | None, cls: str | None, unit: str, size: str, table: str | None,
+         encoding: str | None, exposure: str | None, layer: str | None, reference: str | None,
+         illuminant: str, renderer: str, junit: Path | None, json_path: Path | None,
+         html_path: Path | None) -> None:
+    """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 error.
+
+    \b
+    fidelity gate render.exr --corners 102,88,610,95,604,420,98,414 --max-delta-e 3
+    fidelity gate --camera nikon-5100 --max-dmap 1 --class person --junit colour.xml
+    """
+    if (image is None) == (camera is None):
+        raise click.UsageError("give an IMAGE (with --corners) or --camera, not both")
+    if image is not None and not corners:
+        raise click.UsageError("an IMAGE needs --corners X1,Y1,X2,Y2,X3,Y3,X4,Y4")
+    criterion_args = (max_delta_e, max_dmap, cls, unit)
+    name = f"colour fidelity of {image if image is not None else camera}"
+    t0 = time.perf_counter()
+    try:
+        criterion = make_criterion(*criterion_args)
+        name += f": {criterion.describe()}"
+        if image is not None:
+            report, prediction, verdict = image_report(
+                image, corners or "", command="gate", encoding=encoding, exposure=exposure,
+                layer=layer, reference=reference or "safecolor", illuminant=illuminant,
+                size=size, table=table, criterion=criterion)
+            protect: tuple[str, ...] = (str(image),)
+        else:
+            report, prediction, verdict = camera_report(
+                camera or "", command="gate", illuminant=illuminant, renderer=renderer,
+                reference=reference or "scene", size=size, table=table, criterion=criterion)
+            protect = ()
+        assert verdict is not None
+        write_outputs(report, prediction, json_path=json_path, html_path=html_path,
+                      protect=protect)
+        if junit is not None:
+            from fidelity.report import write_junit
+
+            write_junit(junit, report, name=name, seconds=time.perf_counter() - t0)
+    except click.ClickException:
+        raise
+    except FidelityError as exc:
+        _fail(str(exc), junit, name, time.perf_counter() - t0)
+    except Exception as exc:  # noqa: BLE001 - a gate must answer 2, never a traceback
+        _fail(f"unexpected {type(exc).__name__}: {exc}".replace("\n", " "), junit, name,
+              time.perf_counter() - t0)
+    for line in _short(report):
+        click.echo(line)
+    sys.exit(verdict.exit_code)
+
+
+def _short(report: dict[str, Any]) -> list[str]:
+    from fidelity.report import summary_lines
+
+    return summary_lines(report)

@@ -1,0 +1,94 @@
+"""``fidelity check``: render the default camera, measure, predict, verdict, write the report."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import colour
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from fidelity.cli import main
+
+
+def run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def default_check(tmp_path_factory):
+    """``fidelity check`` with no arguments, run in an empty folder."""
+    import os
+
+    folder = tmp_path_factory.mktemp("check")
+    old = os.getcwd()
+    os.chdir(folder)
+    try:
+        result = run("check")
+    finally:
+        os.chdir(old)
+    return folder, result
+
+
+def test_no_arguments_prints_a_verdict_and_writes_the_report(default_check):
+    from fidelity.camera import DEFAULT_CAMERA
+
+    folder, r = default_check
+    assert r.exit_code in (0, 1), r.output
+    out = r.stdout
+    assert f"camera {DEFAULT_CAMERA}" in out
+    m = re.search(r"chart ΔE00: mean (\d+\.\d+), max (\d+\.\d+)", out)
+    assert m, out
+    assert re.search(r"predicted ΔmAP: <= \d+\.\d+ percentage points, <= \d+\.\d+ % of baseline", out)
+    verdict = "PASS" if r.exit_code == 0 else "FAIL"
+    assert re.search(rf"{verdict}: mean ΔE00 {m.group(1)} (<=|>) 3\b", out)
+    assert "report: fidelity-report/report.html" in out
+    assert (folder / "fidelity-report" / "report.html").is_file()
+    doc = json.loads((folder / "fidelity-report" / "report.json").read_text())
+    assert doc["command"] == "check" and doc["source"]["type"] == "render"
+    assert f"{doc['mean_delta_e']:.2f}" == m.group(1)
+    assert doc["verdict"]["passed"] == (doc["mean_delta_e"] <= 3.0)
+    assert len(out.strip().splitlines()) <= 8  # short and readable
+
+
+def test_report_numbers_agree_with_colour_science(default_check):
+    jsonschema = pytest.importorskip("jsonschema")
+    from fidelity.report import report_schema
+
+    folder, _ = default_check
+    doc = json.loads((folder / "fidelity-report" / "report.json").read_text())
+    jsonschema.validate(doc, report_schema())
+    srgb = np.array([p["srgb"] for p in doc["patches"]])
+    ref = np.array([p["reference_lab"] for p in doc["patches"]])
+    lab = colour.XYZ_to_Lab(colour.sRGB_to_XYZ(srgb))
+    de = colour.delta_E(lab, ref, method="CIE 2000")
+    # colour-science uses the 4-decimal IEC matrix: Lab agrees to about 0.01, ΔE to a few 1e-3
+    assert doc["mean_delta_e"] == pytest.approx(float(de.mean()), abs=5e-3)
+    assert doc["max_delta_e"] == pytest.approx(float(de.max()), abs=5e-3)
+    # the published bound: ΔE <= 3 keeps ΔmAP below 1 %; chord (0, 0)-(3, 1) below ΔE 3
+    if doc["mean_delta_e"] <= 3:
+        assert doc["prediction"]["dmap_points"] == pytest.approx(doc["mean_delta_e"] / 3.0)
+    html = (folder / "fidelity-report" / "report.html").read_text()
+    assert html.count("data:image/png;base64,") == 3
+    for text in ("Provenance", "safecolor-2025", doc["provenance"]["version"], "Conventions"):
+        assert text in html
+
+
+def test_ideal_camera_passes_and_a_strict_limit_fails(tmp_path):
+    r = run("check", "--camera", "ideal", "--out", tmp_path / "ideal")
+    assert r.exit_code == 0, r.output
+    assert "PASS" in r.stdout
+    doc = json.loads((tmp_path / "ideal" / "report.json").read_text())
+    assert doc["mean_delta_e"] < 0.05  # the ideal camera sees the scene reference exactly
+    r = run("check", "--max-delta-e", "0.01", "--out", tmp_path / "strict")
+    assert r.exit_code == 1 and "FAIL" in r.stdout
+
+
+def test_unknown_camera_is_one_line_exit_2(tmp_path):
+    r = run("check", "--camera", "no-such-camera", "--out", tmp_path / "x")
+    assert r.exit_code == 2
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "unknown camera 'no-such-camera'" in lines[0]
+    assert not (tmp_path / "x").exists()

@@ -1,0 +1,231 @@
+"""``fidelity gate`` / ``audit`` / ``predict`` on the command line: exit codes, reports, JUnit,
+and one clear stderr line for every kind of bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import colour
+import numpy as np
+import OpenEXR
+import pytest
+from click.testing import CliRunner
+from PIL import Image as PILImage
+from test_audit import corners_of, draw_chart, expected_delta_e, write_exr, write_png8
+
+from fidelity.charts import load_chart
+from fidelity.cli import main
+from fidelity.errors import InvalidValueError
+from fidelity.prediction import predict
+from fidelity.transforms import apply_transform
+from fidelity.verdict import Criterion, evaluate
+
+CHART = load_chart("safecolor")
+SRGB = apply_transform(CHART.srgb, "contrast-inc", 1.3)
+
+
+@pytest.fixture(scope="module")
+def png(tmp_path_factory) -> tuple[Path, float]:
+    """An 8-bit chart image and its chart ΔE (colour-science on the stored values)."""
+    path = tmp_path_factory.mktemp("img") / "chart.png"
+    write_png8(path, draw_chart(SRGB))
+    return path, expected_delta_e(np.rint(SRGB * 255) / 255, CHART.lab)
+
+
+def run(*args: str):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def one_error_line(result) -> str:
+    lines = [ln for ln in result.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("fidelity: error: ")
+    assert "Traceback" not in result.output
+    return lines[0]
+
+
+def test_gate_pass_and_fail_on_delta_e(png, tmp_path):
+    path, de = png
+    ok = run("gate", path, "--corners", corners_of(), "--max-delta-e", f"{de + 0.1:.3f}")
+    assert ok.exit_code == 0, ok.output
+    assert "PASS" in ok.stdout
+    bad = run("gate", path, "--corners", corners_of(), "--max-delta-e", f"{de - 0.1:.3f}",
+              "--junit", tmp_path / "j.xml", "--json", tmp_path / "r.json", "--html", tmp_path / "r.html")
+    assert bad.exit_code == 1, bad.output
+    assert re.search(rf"FAIL: mean ΔE00 {de:.2f} > ", bad.stdout)
+    root = ET.parse(tmp_path / "j.xml").getroot()
+    suite = root.find("testsuite")
+    assert root.get("failures") == "1" and suite.get("tests") == "1"
+    props = {p.get("name"): p.get("value") for p in suite.iter("property")}
+    assert float(props["mean_delta_e"]) == pytest.approx(de, abs=0.02)
+    assert suite.find("testcase/failure") is not None
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["verdict"]["passed"] is False
+    assert report["mean_delta_e"] == pytest.approx(de, abs=0.02)
+    html = (tmp_path / "r.html").read_text()
+    assert html.count("data:image/png;base64,") == 3
+    assert report["provenance"]["input_sha256"] in html
+
+
+def test_gate_on_predicted_person_loss(png):
+    path, de = png
+    # safecolor-2025, person: ΔAP < 1 at ΔE 3 and 100 (AP 0) at ΔE 24, chord between them
+    person = 1.0 + (de - 3.0) * 99.0 / 21.0
+    assert 3 < de < 24
+    ok = run("gate", path, "--corners", corners_of(), "--max-dmap", f"{person + 0.2:.3f}", "--class", "person")
+    assert ok.exit_code == 0, ok.output
+    bad = run("gate", path, "--corners", corners_of(), "--max-dmap", f"{person - 0.2:.3f}", "--class", "person")
+    assert bad.exit_code == 1
+    assert re.search(rf"predicted person ΔAP {person:.1f}\d points \(upper bound\) >", bad.stdout)
+
+
+def test_gate_camera(tmp_path):
+    r = run("gate", "--camera", "ideal", "--max-delta-e", "0.05", "--junit", tmp_path / "j.xml")
+    assert r.exit_code == 0, r.output
+    assert ET.parse(tmp_path / "j.xml").getroot().get("failures") == "0"
+
+
+def test_report_json_matches_the_schema(png, tmp_path):
+    jsonschema = pytest.importorskip("jsonschema")
+    from fidelity.report import report_schema
+
+    path, _ = png
+    r = run("audit", path, "--corners", corners_of(), "--json", tmp_path / "a.json")
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "a.json").read_text())
+    jsonschema.validate(doc, report_schema())
+    assert doc["command"] == "audit" and doc["verdict"] is None
+    for key in ("mean_delta_e", "max_delta_e", "patches", "exposure_ev", "bad_pixels"):
+        assert key in doc
+    # the per-patch Lab in the report agrees with colour-science's ΔE00 against the reference
+    lab = np.array([p["lab"] for p in doc["patches"]])
+    ref = np.array([p["reference_lab"] for p in doc["patches"]])
+    np.testing.assert_allclose([p["delta_e"] for p in doc["patches"]],
+                               colour.delta_E(lab, ref, method="CIE 2000"), atol=1e-6)
+    bad = dict(doc)
+    bad["mean_delta_e"] = "large"
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(bad, report_schema())
+
+
+def test_audit_linear_exr_cli(tmp_path):
+    scale = 0.3
+    write_exr(tmp_path / "c.exr", colour.cctf_decoding(draw_chart(SRGB), function="sRGB") * scale)
+    r = run("audit", tmp_path / "c.exr", "--corners", corners_of(), "--exposure", f"{-math.log2(scale)}",
+            "--json", tmp_path / "a.json")
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "a.json").read_text())
+    assert doc["mean_delta_e"] == pytest.approx(expected_delta_e(SRGB, CHART.lab), abs=0.02)
+    assert doc["source"]["format"] == "openexr" and doc["exposure_ev"] == pytest.approx(-math.log2(scale))
+
+
+def test_predict_cli(tmp_path):
+    r = run("predict", "--delta-e", "4.5", "--class", "bicycle", "--json", tmp_path / "p.json")
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "p.json").read_text())
+    # chords between the published bounds: ΔmAP (3, 1)-(6, 3); bicycle ΔAP = ΔE between 1 and 11
+    assert doc["dmap_points"] == pytest.approx(2.0)
+    assert doc["dap_bicycle_points"] == pytest.approx(4.5)
+    assert doc["table"]["name"] == "safecolor-2025"
+    assert len(doc["transforms"]) == 10
+    assert r.stdout.splitlines()[1].strip().startswith("bicycle ΔAP: <= 4.50")
+    assert run("predict", "--list-tables").stdout.startswith("safecolor-2025 (default)")
+
+
+def test_verdict_logic():
+    p = predict(5.0, transforms=False)
+    v = evaluate(5.0, p, Criterion("max-dmap", 3.0))
+    assert v.passed and v.value == pytest.approx(1 + 2 * 2 / 3)
+    assert not evaluate(5.0, p, Criterion("max-delta-e", 4.99)).passed
+    assert evaluate(5.0, p, Criterion("max-delta-e", 5.0)).passed
+    far = evaluate(30.0, predict(30.0, transforms=False), Criterion("max-dmap", 50.0))
+    assert not far.passed and far.conservative
+    with pytest.raises(InvalidValueError, match="relative"):
+        Criterion("max-dmap", 1.0, "person", "relative")
+    with pytest.raises(InvalidValueError):
+        Criterion("max-delta-e", -1.0)
+
+
+# ----------------------------------------------------------------------------- bad input
+
+def _truncated_png(tmp: Path) -> Path:
+    write_png8(tmp / "full.png", draw_chart(SRGB))
+    data = (tmp / "full.png").read_bytes()
+    (tmp / "cut.png").write_bytes(data[: len(data) // 2])
+    return tmp / "cut.png"
+
+
+def _one_channel(tmp: Path) -> Path:
+    PILImage.fromarray(np.zeros((260, 300), np.uint8), "L").save(tmp / "grey.png")
+    return tmp / "grey.png"
+
+
+def _unknown_channels(tmp: Path) -> Path:
+    z = np.zeros((260, 300), np.float32)
+    OpenEXR.File({}, {"X": z, "Y": z, "Z": z}).write(str(tmp / "xyz.exr"))
+    return tmp / "xyz.exr"
+
+
+@pytest.mark.parametrize("make,corners,pattern", [
+    (lambda t: t / "missing.png", None, r"missing\.png: image does not exist"),
+    (_truncated_png, None, r"cut\.png: truncated or corrupt"),
+    (_one_channel, None, r"grey\.png: one-channel image"),
+    (_unknown_channels, None, r"xyz\.exr: unknown channels \(X, Y, Z\)"),
+    ("png", "5,5,290,5,290,9000,5,250", r"chart\.png: corner 'black' at \(290, 9000\) is outside"),
+    ("png", "100,100,110,100,110,106,100,106", r"chart\.png: chart too small to sample"),
+])
+def test_bad_image_input(png, tmp_path, make, corners, pattern):
+    path = png[0] if make == "png" else make(tmp_path)
+    for cmd in (["audit"], ["gate", "--max-delta-e", "3"]):
+        r = run(*cmd, path, "--corners", corners or corners_of())
+        assert r.exit_code == 2, r.output
+        assert re.search(pattern, one_error_line(r)), r.stderr
+
+
+def test_unknown_camera_and_table(png, tmp_path):
+    r = run("gate", "--camera", "no-such-camera", "--max-delta-e", "3", "--junit", tmp_path / "j.xml")
+    assert r.exit_code == 2
+    assert "unknown camera 'no-such-camera'" in one_error_line(r)
+    err = ET.parse(tmp_path / "j.xml").getroot().find("testsuite/testcase/error")
+    assert err is not None and "no-such-camera" in err.get("message")
+    r = run("gate", png[0], "--corners", corners_of(), "--max-delta-e", "3", "--table", "nope")
+    assert r.exit_code == 2 and "unknown prediction table 'nope'" in one_error_line(r)
+    r = run("predict", "--delta-e", "2", "--table", "nope")
+    assert r.exit_code == 2 and "unknown prediction table 'nope'" in one_error_line(r)
+
+
+def test_usage_errors_exit_2(png):
+    assert run("gate", png[0], "--max-delta-e", "3").exit_code == 2  # no --corners
+    assert run("gate", png[0], "--corners", corners_of()).exit_code == 2  # no criterion
+    assert run("gate", "--camera", "ideal", "--max-delta-e", "3", "--max-dmap", "1").exit_code == 2
+    assert run("gate", "--camera", "ideal", "--max-delta-e", "3", "--class", "person").exit_code == 2
+    assert run("predict").exit_code == 2
+    assert run("audit", png[0]).exit_code == 2  # --corners is required
+    assert run("gate", "--camera", "ideal", "--max-delta-e", "abc").exit_code == 2
+
+
+def test_unexpected_exception_in_gate_exits_2(png, monkeypatch):
+    import fidelity.cli.gate as gate_mod
+
+    def boom(*a, **k):
+        raise RuntimeError("disk on fire\nsecond line")
+
+    monkeypatch.setattr(gate_mod, "image_report", boom)
+    r = run("gate", png[0], "--corners", corners_of(), "--max-delta-e", "3")
+    assert r.exit_code == 2
+    assert "unexpected RuntimeError: disk on fire second line" in one_error_line(r)
+
+
+def test_report_never_overwrites_the_input(png, tmp_path):
+    import shutil
+
+    src = tmp_path / "in.png"
+    shutil.copy(png[0], src)
+    before = src.read_bytes()
+    r = run("gate", src, "--corners", corners_of(), "--max-delta-e", "3", "--json", src)
+    assert r.exit_code == 2 and "input file" in one_error_line(r)
+    assert src.read_bytes() == before
