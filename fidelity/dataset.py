@@ -115,40 +115,55 @@ class PixelMap:
             return a.copy()
         if self.kind == "channel":
             assert self.lut is not None
-            return self.lut[a]
+            return np.take(self.lut, a)
         if self.kind == "cube":
             assert self.lut is not None
-            idx = (a[..., 0].astype(np.uint32) << 16) | (a[..., 1].astype(np.uint32) << 8) | a[..., 2]
-            return self.lut[idx]
+            idx = a[..., 0].astype(np.uint32)
+            idx <<= 8
+            idx |= a[..., 1]
+            idx <<= 8
+            idx |= a[..., 2]
+            return np.take(self.lut, idx, axis=0)
         assert self.param is not None
         if self.name == "pull_mean":
-            return pull_mean_uint8(a, self.param)
+            if self.lut is None:
+                self.lut = np.empty(1 << 24, dtype=np.int32)  # colour -> index scratch table
+            return pull_mean_uint8(a, self.param, self.lut)
         return reference_transform(a, self.name, self.param)
 
 
-def pull_mean_uint8(rgb8: np.ndarray, alpha: float) -> np.ndarray:
-    """Exact 8-bit ``pull_mean``, evaluated once per distinct colour of the image.
+def pull_mean_uint8(rgb8: np.ndarray, alpha: float, scratch: np.ndarray | None = None
+                    ) -> np.ndarray:
+    """Exact 8-bit ``pull_mean``, with the Lab <-> sRGB work done once per distinct colour.
 
     Same arithmetic as :func:`fidelity.transforms.pull_mean` on ``rgb8 / 255`` in float64: the
-    per-pixel Lab array is rebuilt from the per-colour Lab values (identical numbers), its mean
-    taken over all pixels exactly as the reference does, and the Lab -> sRGB step (the costly
-    part) runs on the distinct colours only (a natural 640x480 image has ~40k of ~300k pixels).
+    per-pixel Lab array is rebuilt from the per-colour Lab values (identical numbers) and its mean
+    taken over all pixels exactly as the reference does; the conversions run on the distinct
+    colours only (a natural 640x480 image has ~40k of ~300k pixels). ``scratch``: optional int32
+    array of 2^24 entries reused as a colour -> index table (saves the allocation per image).
     """
     from fidelity.colorimetry import lab_to_srgb, srgb_to_lab
 
     a = np.asarray(rgb8)
     packed = ((a[..., 0].astype(np.uint32) << 16) | (a[..., 1].astype(np.uint32) << 8)
               | a[..., 2]).ravel()
-    uniq, inverse = np.unique(packed, return_inverse=True)
+    srt = np.sort(packed)
+    first = np.empty(srt.size, dtype=bool)
+    first[:1] = True
+    np.not_equal(srt[1:], srt[:-1], out=first[1:])
+    uniq = srt[first]
+    table = scratch if scratch is not None else np.empty(1 << 24, dtype=np.int32)
+    table[uniq] = np.arange(uniq.size, dtype=np.int32)
+    inverse = table[packed]
     rgb_u = np.empty((uniq.size, 3), dtype=np.float64)
     rgb_u[:, 0] = (uniq >> 16) & 255
     rgb_u[:, 1] = (uniq >> 8) & 255
     rgb_u[:, 2] = uniq & 255
     lab_u = srgb_to_lab(rgb_u / 255.0)
-    mean = lab_u[inverse.ravel()].mean(axis=0)
+    mean = np.take(lab_u, inverse, axis=0).mean(axis=0)
     pulled = mean + np.float64(alpha) * (lab_u - mean)
     out_u = to_uint8(np.clip(lab_to_srgb(pulled), 0.0, 1.0))
-    return out_u[inverse.ravel()].reshape(a.shape)
+    return np.take(out_u, inverse, axis=0).reshape(a.shape)
 
 
 # --------------------------------------------------------------------------------------------

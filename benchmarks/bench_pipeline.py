@@ -1,0 +1,185 @@
+"""Images per second for each stage of the COCO pipeline, with the anchors side by side.
+
+Stages (per image, in memory): decode JPEG -> transform (8-bit fast path) -> encode JPEG with
+the original tables -> decode again -> detector inference (+ decode/NMS) -> COCO scoring.
+
+Anchors timed in the same run:
+* "plain": a plain Pillow + colour-science implementation of the same transforms (float
+  image from Pillow, colour.RGB_to_HSV / HSV_to_RGB, colour.cctf_decoding / cctf_encoding,
+  colour.XYZ_to_Lab / Lab_to_XYZ, round, back to a Pillow image).
+* "floor": just decoding and re-encoding the JPEG (Pillow), no transform.
+
+Requirement (issue 5): transform stage >= 5x faster than "plain" and within 2x of "floor".
+
+Usage: python benchmarks/bench_pipeline.py [--images N] [--model yolox_nano.onnx]
+       [--json reports/bench_pipeline.json]   (needs ../shared or $FIDELITY_SHARED)
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+
+def plain_transform(img, name: str, param: float):  # type: ignore[no-untyped-def]
+    """Pillow image -> Pillow image with colour-science, float64 (the anchor)."""
+    import colour
+    from PIL import Image
+
+    x = np.asarray(img, dtype=np.float64) / 255.0
+    if name.startswith("brightness"):
+        y = np.clip(x + param, 0, 1)
+    elif name.startswith("contrast"):
+        y = np.clip(0.5 + param * (x - 0.5), 0, 1)
+    elif name.startswith("gamma"):
+        lin = colour.cctf_decoding(x, function="sRGB")
+        y = np.clip(colour.cctf_encoding(np.clip(lin, 0, 1) ** param, function="sRGB"), 0, 1)
+    elif name.startswith("saturation") or name == "hue":
+        hsv = colour.RGB_to_HSV(x)
+        if name == "hue":
+            hsv[..., 0] = np.mod(hsv[..., 0] + param / 360.0, 1.0)
+        else:
+            hsv[..., 1] = np.clip(hsv[..., 1] * param, 0, 1)
+        y = np.clip(colour.HSV_to_RGB(hsv), 0, 1)
+    elif name == "pull_mean":
+        cs = colour.RGB_COLOURSPACES["sRGB"]
+        d65 = cs.whitepoint
+        lab = colour.XYZ_to_Lab(colour.RGB_to_XYZ(x, cs, apply_cctf_decoding=True), d65)
+        m = lab.reshape(-1, 3).mean(0)
+        xyz = colour.Lab_to_XYZ(m + param * (lab - m), d65)
+        y = np.clip(colour.XYZ_to_RGB(xyz, cs, apply_cctf_encoding=True), 0, 1)
+    else:
+        raise ValueError(name)
+    return Image.fromarray(np.rint(y * 255).astype(np.uint8))
+
+
+def timed(fn, reps: int = 1) -> tuple[float, object]:  # type: ignore[no-untyped-def]
+    t = time.perf_counter()
+    for _ in range(reps):
+        out = fn()
+    return time.perf_counter() - t, out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--images", type=int, default=30)
+    ap.add_argument("--model", default="yolox_nano.onnx")
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--target", type=float, default=6.0)
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args()
+
+    import colour
+    import onnxruntime
+    from PIL import Image
+
+    from fidelity.calibration import calibrate_transform
+    from fidelity.cocoeval import evaluate_detections, load_annotations
+    from fidelity.dataset import PixelMap, reference_transform
+    from fidelity.detectors import Detector
+    from fidelity.jpeg import decode_jpeg, encode_jpeg
+    from fidelity.resources import shared_dir
+    from fidelity.transforms import TRANSFORMS
+
+    shared = shared_dir()
+    if shared is None:
+        print("skipped: ../shared (COCO images, models) not present", file=sys.stderr)
+        return 0
+    coco = load_annotations(shared / "coco/annotations/instances_val2017_subset.json")
+    ids = sorted(coco.getImgIds())[: args.images]
+    raw = {i: (shared / "coco/val2017" / coco.imgs[i]["file_name"]).read_bytes() for i in ids}
+    n = len(ids)
+
+    res: dict[str, object] = {}
+    t_dec, dec = timed(lambda: {i: decode_jpeg(b) for i, b in raw.items()})
+    res["decode_ms"] = 1000 * t_dec / n
+
+    def pil_floor() -> None:
+        for b in raw.values():
+            im = Image.open(io.BytesIO(b))
+            im.load()
+            buf = io.BytesIO()
+            im.save(buf, "JPEG", qtables=im.quantization)
+
+    t_floor, _ = timed(pil_floor)
+    res["floor_decode_reencode_ms"] = 1000 * t_floor / n
+
+    per_transform = {}
+    checks = {}
+    for name in TRANSFORMS:
+        param = calibrate_transform(name, args.target).param
+        assert param is not None
+        t_build, pm = timed(lambda name=name, param=param: PixelMap.build(name, param))
+        pm(dec[ids[0]][0])  # warm up (scratch tables)
+        t_fast, outs = timed(lambda pm=pm: [pm(dec[i][0]) for i in ids])
+        k = min(n, 8)
+        pil = {i: Image.open(io.BytesIO(raw[i])).convert("RGB") for i in ids[:k]}
+        t_plain, plain = timed(lambda name=name, param=param, pil=pil, k=k:
+                               [plain_transform(pil[i], name, param) for i in ids[:k]])
+        diff = max(int(np.abs(np.asarray(p, dtype=int) - o.astype(int)).max())
+                   for p, o in zip(plain, outs, strict=False))
+        exact = all(np.array_equal(reference_transform(dec[i][0], name, param), o)
+                    for i, o in zip(ids[:3], outs, strict=False))
+        per_transform[name] = {
+            "param": param, "fast_ms": 1000 * t_fast / n, "plain_ms": 1000 * t_plain / k,
+            "table_build_s": t_build,
+            "speedup_vs_plain": (t_plain / k) / (t_fast / n),
+            "ratio_to_floor": (t_fast / n) / (t_floor / n),
+        }
+        checks[name] = {"equals_reference_on_3_images": exact, "max_code_diff_vs_plain": diff}
+    res["transform"] = per_transform
+    res["transform_mean_ms"] = float(np.mean([v["fast_ms"] for v in per_transform.values()]))
+    res["plain_mean_ms"] = float(np.mean([v["plain_ms"] for v in per_transform.values()]))
+    res["checks"] = checks
+
+    pm = PixelMap.build("contrast-inc", calibrate_transform("contrast-inc", args.target).param)
+    tr = {i: pm(dec[i][0]) for i in ids}
+    t_enc, enc = timed(lambda: {i: encode_jpeg(tr[i], dec[i][1]) for i in ids})
+    res["encode_ms"] = 1000 * t_enc / n
+    t_dec2, seen = timed(lambda: {i: decode_jpeg(b)[0] for i, b in enc.items()})
+    res["decode_again_ms"] = 1000 * t_dec2 / n
+    det = Detector(shared / "models" / args.model, threads=args.threads)
+    det(seen[ids[0]])
+    t_inf, dets = timed(lambda: {i: det(seen[i]) for i in ids})
+    res["inference_ms"] = 1000 * t_inf / n
+    t_score, score = timed(lambda: evaluate_detections(coco, dets, ids))
+    res["scoring_ms"] = 1000 * t_score / n
+    res["total_ms"] = (res["decode_ms"] + res["transform_mean_ms"] + res["encode_ms"]
+                       + res["decode_again_ms"] + res["inference_ms"] + res["scoring_ms"])
+    res["images"] = n
+    res["model"] = args.model
+    res["threads"] = args.threads
+    res["machine"] = {"platform": platform.platform(), "cpus": os.cpu_count(),
+                      "python": platform.python_version(), "numpy": np.__version__,
+                      "onnxruntime": onnxruntime.__version__, "colour": colour.__version__,
+                      "note": "shared 2-core machine; a background sweep used one core"}
+
+    print(f"{n} images, {args.model}, {args.threads} thread(s); ms per image (images/s)")
+    for k in ("decode_ms", "transform_mean_ms", "encode_ms", "decode_again_ms", "inference_ms",
+              "scoring_ms", "total_ms", "floor_decode_reencode_ms", "plain_mean_ms"):
+        v = float(res[k])  # type: ignore[arg-type]
+        print(f"  {k:<26} {v:8.2f} ms  ({1000 / v:7.1f} img/s)")
+    print(f"  {'transform':<16} {'fast ms':>8} {'plain ms':>9} {'x plain':>8} {'/ floor':>8} exact")
+    for k, v in per_transform.items():
+        print(f"  {k:<16} {v['fast_ms']:8.2f} {v['plain_ms']:9.2f} "
+              f"{v['speedup_vs_plain']:8.1f} {v['ratio_to_floor']:8.2f} "
+              f"{checks[k]['equals_reference_on_3_images']}")
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(res, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
