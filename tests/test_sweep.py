@@ -155,3 +155,51 @@ def test_kill_9_mid_cell_then_resume(coco, tmp_path) -> None:
     assert len(after) == 30
     for i, d in kept.items():
         assert np.array_equal(after[i], d)
+
+
+# ----------------------------------------------------------------------------- command line
+
+
+def test_cli_errors_are_one_line(tmp_path) -> None:
+    from click.testing import CliRunner
+
+    from fidelity.cli import main
+
+    r = CliRunner().invoke(main, ["tables", str(tmp_path)])
+    assert r.exit_code == 2 and "no sweep store" in r.output and "Traceback" not in r.output
+    r = CliRunner().invoke(main, ["evaluate", "--model", str(tmp_path / "m.onnx"), "--images",
+                                  str(tmp_path), "--annotations", str(tmp_path / "a.json")])
+    assert r.exit_code == 2 and "model file does not exist" in r.output
+
+
+@pytest.mark.shared
+def test_cli_evaluate_sweep_tables(coco, tmp_path) -> None:
+    import json
+
+    from click.testing import CliRunner
+
+    from fidelity.cli import main
+
+    images, ann, model = coco
+    run = CliRunner().invoke
+    r = run(main, ["evaluate", "--model", str(model), "--images", str(images), "--annotations",
+                   str(ann), "--limit", "3", "--threads", "2", "--no-progress", "--json",
+                   str(tmp_path / "ev.json")])
+    assert r.exit_code == 0, r.output
+    ev = json.loads((tmp_path / "ev.json").read_text())
+    assert ev["images"] == 3 and 0 < ev["map"] <= 1 and 0 <= ev["map50"] <= 1
+    assert all(v is None or 0 <= v <= 1 for v in ev["ap"].values()) and ev["seconds"] > 0
+    assert "conf 0.01" in r.output and "iou 0.65" in r.output
+    out = tmp_path / "sw"
+    r = run(main, ["sweep", "--models", f"{model}@2", "--images", str(images), "--annotations",
+                   str(ann), "--transforms", "contrast-dec", "--targets", "0,24", "--out",
+                   str(out), "--threads", "2"])
+    assert r.exit_code == 0, r.output
+    r = run(main, ["tables", str(out), "--out", str(tmp_path / "rep"), "--prediction",
+                   str(tmp_path / "p.json")])
+    assert r.exit_code == 0, r.output
+    md = (tmp_path / "rep" / "report.md").read_text()
+    assert "| 24 | contrast-dec |" in md  # a near-uniform grey image: the worst case at ΔE 24
+    r = run(main, ["sweep", "--models", str(model), "--images", str(images), "--annotations",
+                   str(ann), "--transforms", "sharpen", "--out", str(out)])
+    assert r.exit_code == 2 and "unknown transform" in r.output
