@@ -279,7 +279,7 @@ def audit_pixels(
                     if np.any(np.abs(srgb_unclipped[k] - srgb[k]) > 1e-12))
     noise = np.array([np.clip(cm.delinearize_srgb(s * scale), 0, 1).std(axis=0)
                       for s in linear_samples])
-    _, whole = _bad_counts(arr.reshape(-1, 3).astype(np.float64, copy=False))
+    _, whole = _bad_counts(arr.reshape(-1, 3))
     bad_pixels = {**totals, "per_patch": per_patch, "image": whole,
                   "rule": "a pixel with NaN, +-Inf or a negative value in any channel is "
                           "excluded; counts in sampling windows (image: whole image)"}

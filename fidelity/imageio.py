@@ -179,8 +179,8 @@ def _rgb_layers(parts: list[_Part]) -> list[str]:
     for part in parts:
         for pre in _layers_of(part):
             if len(_rgb_of(part.channels, pre)) == 3:
-                label = pre if pre is not None else part.name
-                if label is not None and label not in names:
+                label = pre if pre is not None else (part.name or "(unnamed: plain R, G, B)")
+                if label not in names:
                     names.append(label)
     return names
 

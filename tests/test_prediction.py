@@ -97,7 +97,7 @@ def _measured_table() -> dict:
         "units": {}, "curves": [
             {"size": "n", "model": "a", "points": pts([(1, 0.2), (3, 0.5), (6, 0.4), (12, 4.0)])},
             {"size": "n", "model": "b", "points": pts([(1, 0.1), (3, 0.9), (6, 1.5), (12, 3.0)])},
-            {"size": "x", "model": "c", "points": pts([(2, 0.05), (12, 1.0)])},
+            {"size": "x", "model": "c", "baseline_map": 0.42, "points": pts([(2, 0.05), (12, 1.0)])},
         ],
     }
 
@@ -127,6 +127,10 @@ def test_measured_table_ranges_and_sizes():
     assert below.dmap_points == pytest.approx(0.05)  # the first point: loss grows with ΔE
     assert below.dap_bicycle_points is None
     assert below.columns["dap_bicycle_points"].status == "no-data"
+    beyond = pr.predict(20.0, size="x", table=table, transforms=False)
+    # beyond the range: total loss, i.e. the model's whole baseline (0.42 as a fraction = 42 points)
+    assert beyond.dmap_points == pytest.approx(42.0) and beyond.dmap_relative == 100.0
+    assert beyond.columns["dmap_points"].status == "above-range"
     m = pr.predict(5.0, size="m", table=table, transforms=False)
     assert m.size_used.startswith("worst of")
     assert any("no curve for size 'm'" in n for n in m.notes)
