@@ -215,7 +215,7 @@ def locate_chart(
         raise InvalidValueError(
             f"chart too small to sample: patch {names[k_min]!r} has {counts[k_min]} pixel(s) in "
             f"its central window (need at least {min_pixels}); patch pitch is about {pitch:.1f} "
-            f"px, need at least {np.sqrt(min_pixels) / window:.0f} px"
+            f"px, need about {np.sqrt(min_pixels) / window:.0f} px or more"
         )
     return ChartLocation(
         corners=pts, homography=h, centres=centres, windows=tuple(windows), window=window,
