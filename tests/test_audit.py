@@ -225,3 +225,21 @@ def test_audit_dict_has_the_documented_keys(tmp_path, chart):
     assert len(d["patches"]) == 24
     assert {"delta_e", "delta_l", "delta_c", "delta_h"} <= set(d["patches"][0])
     assert len(d["image"]["sha256"]) == 64
+
+
+def test_srgb_input_with_auto_exposure(tmp_path, chart):
+    """An underexposed 8-bit image (linear light x 0.5 before encoding) is brought back by
+    --exposure auto: EV = +1 and the ΔE of the properly exposed chart, within 8-bit rounding."""
+    srgb = apply_transform(chart.srgb, "hue", 10.0)
+    dark = colour.cctf_encoding(colour.cctf_decoding(srgb, function="sRGB") * 0.5, function="sRGB")
+    write_png8(tmp_path / "dark.png", draw_chart(dark))
+    fixed = audit_image(tmp_path / "dark.png", corners_of())
+    auto = audit_image(tmp_path / "dark.png", corners_of(), exposure="auto")
+    assert auto.exposure_mode == "auto" and auto.exposure_ev == pytest.approx(1.0, abs=0.02)
+    assert fixed.exposure_ev == 0.0 and fixed.mean_delta_e > auto.mean_delta_e + 3
+    assert abs(auto.mean_delta_e - expected_delta_e(srgb, chart.lab)) < 0.2  # 8-bit rounding x2
+    # exactly: the stored 8-bit values, decoded, scaled by the found EV, encoded (colour-science)
+    stored = np.rint(dark * 255) / 255
+    lifted = colour.cctf_encoding(colour.cctf_decoding(stored, function="sRGB") * 2 ** auto.exposure_ev,
+                                  function="sRGB")
+    assert abs(auto.mean_delta_e - expected_delta_e(np.clip(lifted, 0, 1), chart.lab)) < 0.02
