@@ -204,6 +204,7 @@ def test_usage_errors_exit_2(png):
     assert run("gate", "--camera", "ideal", "--max-delta-e", "3", "--max-dmap", "1").exit_code == 2
     assert run("gate", "--camera", "ideal", "--max-delta-e", "3", "--class", "person").exit_code == 2
     assert run("predict").exit_code == 2
+    assert run("gate", "--camera", "ideal", "--corners", corners_of(), "--max-delta-e", "3").exit_code == 2
     assert run("audit", png[0]).exit_code == 2  # --corners is required
     assert run("gate", "--camera", "ideal", "--max-delta-e", "abc").exit_code == 2
 

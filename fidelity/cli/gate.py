@@ -160,6 +160,9 @@ def gate(image: Path | None, corners: str | None, camera: str | None, max_delta_
         raise click.UsageError("give an IMAGE (with --corners) or --camera, not both")
     if image is not None and not corners:
         raise click.UsageError("an IMAGE needs --corners X1,Y1,X2,Y2,X3,Y3,X4,Y4")
+    if camera is not None and any(v is not None for v in (corners, encoding, exposure, layer)):
+        raise click.UsageError("--corners, --encoding, --exposure and --layer apply to an IMAGE, "
+                               "not to --camera")
     criterion_args = (max_delta_e, max_dmap, cls, unit)
     name = f"colour fidelity of {image if image is not None else camera}"
     t0 = time.perf_counter()
