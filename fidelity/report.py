@@ -289,7 +289,7 @@ def plot_prediction_curve(prediction: Prediction, limit_dmap: float | None = Non
     ax.set_title(f"table {prediction.table.name} ({prediction.table.kind}), size "
                  f"{prediction.size_used}, {prediction.method} interpolation", fontsize=9)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="upper left")
+    ax.legend(fontsize=7, loc="lower right")
     return _png(fig)
 
 
