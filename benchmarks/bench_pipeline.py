@@ -175,6 +175,20 @@ def main() -> int:
         print(f"  {k:<16} {v['fast_ms']:8.2f} {v['plain_ms']:9.2f} "
               f"{v['speedup_vs_plain']:8.1f} {v['ratio_to_floor']:8.2f} "
               f"{checks[k]['equals_reference_on_3_images']}")
+    speed = res["plain_mean_ms"] / res["transform_mean_ms"]  # type: ignore[operator]
+    floor = res["transform_mean_ms"] / res["floor_decode_reencode_ms"]  # type: ignore[operator]
+    res["requirement"] = {
+        "mean_speedup_vs_plain": speed, "mean_ratio_to_floor": floor,
+        "speedup_ok": speed >= 5, "floor_ok": floor <= 2,
+        "transforms_below_5x": [k for k, v in per_transform.items()
+                                if v["speedup_vs_plain"] < 5],
+        "transforms_above_2x_floor": [k for k, v in per_transform.items()
+                                      if v["ratio_to_floor"] > 2],
+    }
+    print(f"transform stage, mean over the ten transforms: {speed:.1f}x faster than plain "
+          f"(need >= 5x), {floor:.2f}x the decode+re-encode floor (need <= 2x)")
+    print(f"  per transform below 5x: {res['requirement']['transforms_below_5x']}; "
+          f"above 2x floor: {res['requirement']['transforms_above_2x_floor']}")
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(res, indent=2) + "\n")

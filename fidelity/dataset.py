@@ -76,6 +76,7 @@ class PixelMap:
     kind: str  # "identity", "channel", "cube", "image"
     lut: np.ndarray | None = None
     build_seconds: float = 0.0
+    lut16: np.ndarray | None = None
 
     @classmethod
     def build(cls, name: str, param: float | None, chunk: int = 1 << 20) -> PixelMap:
@@ -98,8 +99,13 @@ class PixelMap:
             out = to_uint8(apply_transform(v, name, float(param)))
             if not (np.array_equal(out[:, 0], out[:, 1]) and np.array_equal(out[:, 0], out[:, 2])):
                 raise InvalidValueError(f"transform {name} is not channel-wise")
-            return cls(name, float(param), "channel", np.ascontiguousarray(out[:, 0]),
-                       time.perf_counter() - t0)
+            lut8 = np.ascontiguousarray(out[:, 0])
+            # pair table: one uint16 lookup maps two neighbouring bytes at once
+            pair = np.arange(1 << 16, dtype=np.uint16).view(np.uint8).reshape(-1, 2)
+            lut16 = np.ascontiguousarray(lut8[pair]).view(np.uint16).ravel()
+            pm = cls(name, float(param), "channel", lut8, time.perf_counter() - t0)
+            pm.lut16 = lut16
+            return pm
         lut = np.empty((1 << 24, 3), dtype=np.uint8)
         for s in range(0, 1 << 24, chunk):
             e = min(s + chunk, 1 << 24)
@@ -115,6 +121,9 @@ class PixelMap:
             return a.copy()
         if self.kind == "channel":
             assert self.lut is not None
+            if self.lut16 is not None and a.flags.c_contiguous and a.size % 2 == 0:
+                flat = a.reshape(-1).view(np.uint16)
+                return np.take(self.lut16, flat).view(np.uint8).reshape(a.shape)
             return np.take(self.lut, a)
         if self.kind == "cube":
             assert self.lut is not None
