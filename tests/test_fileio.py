@@ -1,0 +1,48 @@
+"""Atomic outputs: no partial files, never over an input, ordinary permissions."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from fidelity.errors import InputFileError
+from fidelity.fileio import atomic_output, require_file, write_json_atomic, write_text_atomic
+
+
+def test_atomic_write_leaves_no_partial_file_on_error(tmp_path: Path) -> None:
+    target = tmp_path / "out.txt"
+    target.write_text("old")
+    with pytest.raises(RuntimeError), atomic_output(target) as tmp:
+        tmp.write_text("half")
+        raise RuntimeError("interrupted")
+    assert target.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["out.txt"]
+
+
+def test_outputs_follow_the_umask(tmp_path: Path) -> None:
+    old = os.umask(0o022)
+    try:
+        p = write_text_atomic(tmp_path / "sub" / "r.txt", "x")
+    finally:
+        os.umask(old)
+    assert p.stat().st_mode & 0o777 == 0o644
+
+
+def test_refuses_to_write_over_an_input(tmp_path: Path) -> None:
+    src = tmp_path / "in.json"
+    src.write_text("{}")
+    with pytest.raises(InputFileError, match="over an input"), atomic_output(src, protect=[src]):
+        pass
+    assert src.read_text() == "{}"
+
+
+def test_json_rejects_nan_and_require_file_names_the_problem(tmp_path: Path) -> None:
+    with pytest.raises(ValueError):
+        write_json_atomic(tmp_path / "x.json", {"a": float("nan")})
+    assert not (tmp_path / "x.json").exists()
+    with pytest.raises(InputFileError, match="does not exist"):
+        require_file(tmp_path / "missing.png", "image")
+    with pytest.raises(InputFileError, match="not a regular file"):
+        require_file(tmp_path, "image")
