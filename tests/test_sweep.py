@@ -14,7 +14,14 @@ import numpy as np
 import pytest
 
 from fidelity.errors import InputFileError, InvalidValueError
-from fidelity.sweep import ModelSpec, SweepStore, pack_detections, plan_cells, unpack_detections
+from fidelity.sweep import (
+    ModelSpec,
+    SweepStore,
+    pack_detections,
+    plan_cells,
+    plan_phases,
+    unpack_detections,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -28,6 +35,14 @@ def test_pack_roundtrip() -> None:
 def test_plan_and_model_spec() -> None:
     cells = plan_cells(["a", "b"], [3, 0, 1])
     assert cells == [("baseline", 0.0), ("a", 1.0), ("b", 1.0), ("a", 3.0), ("b", 3.0)]
+    phases = plan_phases(2, ["a"], [0, 1, 2, 3])
+    assert phases == [(0, [("baseline", 0.0), ("a", 1.0), ("a", 3.0)]),
+                      (1, [("baseline", 0.0), ("a", 1.0), ("a", 3.0)]),
+                      (0, [("a", 2.0)]), (1, [("a", 2.0)])]
+    assert plan_phases(2, ["a"], [0, 2], "ascending") == [(0, plan_cells(["a"], [0, 2])),
+                                                          (1, plan_cells(["a"], [0, 2]))]
+    with pytest.raises(InvalidValueError):
+        plan_phases(1, ["a"], [1], "random")
     assert ModelSpec.parse("m.onnx@250") == ModelSpec(Path("m.onnx"), 250)
     assert ModelSpec.parse("m.onnx").limit is None
     with pytest.raises(InvalidValueError):

@@ -46,9 +46,13 @@ def _transforms(text: str) -> list[str]:
               help="onnxruntime intra-op threads.")
 @click.option("--provider", type=click.Choice(["auto", "cpu", "cuda"]), default="auto",
               show_default=True)
+@click.option("--order", type=click.Choice(["priority", "ascending"]), default="priority",
+              show_default=True,
+              help="priority: every model's ΔE 1, 3, 6, 12, 24 cells first (the paper's "
+                   "thresholds), then the rest; ascending: model by model, ΔE ascending.")
 @click.option("--rescore", is_flag=True, help="Only recompute scores from stored detections.")
 def sweep(models: str, images: str, annotations: str, transforms: str, targets: str, out: str,
-          threads: int, provider: str, rescore: bool) -> None:
+          threads: int, provider: str, order: str, rescore: bool) -> None:
     """Run (or resume) the COCO sweep; progress is logged one line per cell on stderr."""
     from fidelity.sweep import ModelSpec, SweepStore, run_sweep
     from fidelity.sweep import rescore as do_rescore
@@ -59,7 +63,7 @@ def sweep(models: str, images: str, annotations: str, transforms: str, targets: 
         return
     specs = [ModelSpec.parse(m.strip()) for m in models.split(",") if m.strip()]
     store = run_sweep(specs, images, annotations, out, _transforms(transforms),
-                      _targets(targets), threads=threads, provider=provider)
+                      _targets(targets), threads=threads, provider=provider, order=order)
     cells = store.cells()
     done = sum(c["status"] == "done" for c in cells)
     click.echo(f"{done} cells done, {len(cells) - done} unreachable; store {store.path}")
