@@ -372,11 +372,16 @@ def make_plots(tables: dict[str, Any]) -> dict[str, bytes]:
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
     for m, rows in tables["worst_case"].items():
         x = [r["delta_e"] for r in rows]
-        a1.plot(x, [r["dmap_relative"] for r in rows], marker="o", ms=3, label=m)
+        (line,) = a1.plot(x, [r["dmap_relative"] for r in rows], marker="o", ms=3, label=m)
+        part = [(r["delta_e"], r["dmap_relative"]) for r in rows if r["partial"]]
+        if part:
+            a1.plot(*zip(*part, strict=True), ls="none", marker="o", ms=8, mfc="white",
+                    color=line.get_color())
         pos = [(r["delta_e"], r["dmap_relative"]) for r in rows
                if r["dmap_relative"] and r["dmap_relative"] > 0]
         if pos:
-            a2.semilogy(*zip(*pos, strict=True), marker="o", ms=3, label=m)
+            a2.semilogy(*zip(*pos, strict=True), marker="o", ms=3, label=m,
+                        color=line.get_color())
     for ax in (a1, a2):
         ax.axhline(1, color="grey", lw=0.8, ls=":")
         ax.axhline(3, color="grey", lw=0.8, ls="--")
@@ -386,7 +391,7 @@ def make_plots(tables: dict[str, Any]) -> dict[str, bytes]:
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8)
     a1.set_ylabel("worst-case ΔmAP (% of baseline)")
-    a1.set_title("worst case per model")
+    a1.set_title("worst case per model (open circle: not all transforms done)")
     a2.set_ylabel("worst-case ΔmAP (% of baseline, log)")
     a2.set_title("degradation on a log scale")
     out["worst_case.png"] = _fig_png(fig)
