@@ -32,9 +32,9 @@ def _transforms(text: str) -> list[str]:
 
 
 @click.command()
-@click.option("--models", required=True,
+@click.option("--models", default=None,
               help="Comma-separated ONNX files, each optionally PATH@N (first N images by id).")
-@click.option("--images", required=True, type=click.Path(file_okay=False))
+@click.option("--images", default=None, type=click.Path(file_okay=False))
 @click.option("--annotations", required=True, type=click.Path(dir_okay=False))
 @click.option("--transforms", default="all", show_default=True,
               help="'all' or comma-separated transform names.")
@@ -51,9 +51,16 @@ def _transforms(text: str) -> list[str]:
               help="priority: every model's ΔE 1, 3, 6, 12, 24 cells first (the paper's "
                    "thresholds), then the rest; ascending: model by model, ΔE ascending.")
 @click.option("--rescore", is_flag=True, help="Only recompute scores from stored detections.")
-def sweep(models: str, images: str, annotations: str, transforms: str, targets: str, out: str,
+def sweep(models: str | None, images: str | None, annotations: str, transforms: str, targets: str, out: str,
           threads: int, provider: str, order: str, rescore: bool) -> None:
-    """Run (or resume) the COCO sweep; progress is logged one line per cell on stderr."""
+    """Run (or resume) the COCO sweep; progress is logged one line per cell on stderr.
+
+    \b
+    Example:
+      fidelity sweep --models yolox_nano.onnx,yolo11n.onnx@250 --images val2017 \\
+          --annotations instances.json --out DIR        (rerun the same line to resume)
+      fidelity sweep --rescore --annotations instances.json --out DIR
+    """
     from fidelity.sweep import ModelSpec, SweepStore, run_sweep
     from fidelity.sweep import rescore as do_rescore
 
@@ -61,6 +68,10 @@ def sweep(models: str, images: str, annotations: str, transforms: str, targets: 
         n = do_rescore(SweepStore(out, create=False), annotations)
         click.echo(f"rescored {n} cells in {out}")
         return
+    if not models or not images:
+        from fidelity.errors import InvalidValueError
+
+        raise InvalidValueError("--models and --images are needed (except with --rescore)")
     specs = [ModelSpec.parse(m.strip()) for m in models.split(",") if m.strip()]
     store = run_sweep(specs, images, annotations, out, _transforms(transforms),
                       _targets(targets), threads=threads, provider=provider, order=order)
