@@ -282,9 +282,13 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
         raise InputFileError(f"{img_dir}: {len(missing)} annotated images missing, e.g. "
                              f"{coco.imgs[missing[0]]['file_name']}")
     store = SweepStore(out)
+    import PIL
+
     store.set_meta("versions", {"python": platform.python_version(),
                                 "onnxruntime": onnxruntime.__version__,
-                                "numpy": np.__version__, "fidelity": _fidelity_version()})
+                                "numpy": np.__version__, "Pillow": PIL.__version__,
+                                "pycocotools": _dist_version("pycocotools"),
+                                "fidelity": _fidelity_version()})
     store.set_meta("data", {"images": str(img_dir), "annotations": str(annotations),
                             "image_count": len(all_ids)})
     store.set_meta("machine", {"platform": platform.platform(), "cpus": os.cpu_count(),
@@ -365,6 +369,15 @@ def rescore(store: SweepStore, annotations: str | os.PathLike[str]) -> int:
                           status="done", images=len(ids), score=score, seconds=c["seconds"])
         n += 1
     return n
+
+
+def _dist_version(name: str) -> str | None:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version(name)
+    except PackageNotFoundError:
+        return None
 
 
 def _fidelity_version() -> str:

@@ -421,6 +421,21 @@ def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
     lines.append(f"Images: {d.get('image_count')} shared COCO val2017 images "
                  "(person-biased subset, see shared/coco/PROVENANCE.md); a model swept on "
                  "fewer uses the first N by image id.")
+    lines += ["", "Method: each image is decoded as sRGB code values (ICC profiles not applied), "
+              "transformed with the parameter calibrated on the chart for (transform, ΔE) "
+              "(fidelity.calibration, full precision; listed per cell below), rounded to 8 bit "
+              "(exact 8-bit tables, equal to the float64 reference), JPEG-encoded with the "
+              "original quantization tables and subsampling, decoded, and passed to the "
+              "detector; ΔE 0 is the baseline (decode and re-encode only). Scoring: pycocotools "
+              "COCOeval, bbox. Detections of every image are stored, so any cell can be "
+              "re-scored without inference (`fidelity sweep --rescore`)."]
+    for m, info in tables["models"].items():
+        st = info.get("settings") or {}
+        lines.append(f"- {m}: file {info.get('file')} (sha256 {str(info.get('sha256'))[:16]}), "
+                     f"layout {st.get('layout')}, input {st.get('input_size')}, providers "
+                     f"{st.get('providers')}, {st.get('threads')} intra-op thread(s); "
+                     f"{(st.get('conventions') or {}).get('source')}; "
+                     f"{(st.get('conventions') or {}).get('preprocess')}.")
     lines += ["", "ΔmAP in **points** = 100·(mAP₀ − mAP); **relative** = 100·(mAP₀ − mAP)/mAP₀. "
               "ΔAP person/bicycle in points, each the worst over transforms at that ΔE.", ""]
     lines += ["## Models", "", "| model | size | images | baseline mAP | AP50 | AP person | "
