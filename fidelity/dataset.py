@@ -223,6 +223,8 @@ def list_images(folder: str | os.PathLike[str]) -> list[Path]:
     return files
 
 
+#: Per-process cache of the last built table, so that a pool worker builds a 256^3 table once
+#: per subset and not once per image (each worker process has its own copy).
 _WORKER_MAP: dict[tuple[str, float | None], PixelMap] = {}
 
 
