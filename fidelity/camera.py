@@ -48,7 +48,7 @@ and no quantisation outputs unclipped float linear sRGB (an EXR-like output); it
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -696,7 +696,7 @@ def available_cameras() -> list[str]:
 @lru_cache(maxsize=16)
 def _load_builtin(name: str) -> CameraModel:
     cam = read_camera_file(_builtin_dir() / f"{name}.toml")
-    return CameraModel(**{**cam.__dict__, "source": f"built-in {name}"})
+    return replace(cam, source=f"built-in {name}")
 
 
 def load_camera(name_or_path: str | Path) -> CameraModel:

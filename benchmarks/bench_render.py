@@ -1,0 +1,346 @@
+"""Speed against error of the Mitsuba chart renderer, with the closed form as anchor (issue 3.5).
+
+Sweeps Mitsuba's settings -- variant (llvm_ad_spectral, scalar_spectral), sampler
+(independent, multijitter), samples per pixel and pixels per patch -- renders the chart with
+each, and measures the mean over patches of ΔE00 between the Mitsuba and the closed-form
+measurement (same camera, same ISP, noise and quantisation off so only the renderer differs).
+Each setting runs with several sampler seeds; the error of a setting is its worst seed. The
+closed-form render is timed in the same run and every time is also given as a ratio to it.
+
+The default chosen is the cheapest setting (median wall time of render_chart on the probed
+variant) whose worst-seed error is <= 0.02 ΔE00 for every camera benchmarked and on every
+variant, and whose time on the slowest variant is < 30 s.
+
+    python benchmarks/bench_render.py --out reports/render [--seeds 3] [--quick]
+
+Writes bench_render.json (machines), index.html + speed_vs_error.png (people), README.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import html
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fidelity.camera import Noise, load_camera
+from fidelity.colorimetry import delta_e_2000
+from fidelity.fileio import atomic_output, write_json_atomic, write_text_atomic
+from fidelity.render import render_chart
+
+TARGET = 0.02
+TIME_LIMIT_S = 30.0
+
+
+def machine_info() -> dict[str, Any]:
+    """Describe the machine and software the benchmark ran on."""
+    import drjit
+    import mitsuba
+
+    from fidelity import mitsuba_render as mr
+
+    cpu = platform.processor() or ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    mem = None
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemTotal"):
+                mem = round(int(line.split()[1]) / 1024**2, 1)
+    except OSError:
+        pass
+    load = os.getloadavg() if hasattr(os, "getloadavg") else None
+    lib = mr.find_libllvm()
+    return {
+        "cpu": cpu,
+        "logical_cpus": os.cpu_count(),
+        "memory_gib": mem,
+        "load_average_at_start": load,
+        "platform": platform.platform(),
+        "python": sys.version.split()[0],
+        "mitsuba": mitsuba.__version__,
+        "drjit": drjit.__version__,
+        "numpy": np.__version__,
+        "libllvm": str(lib) if lib else None,
+        "note": "shared 2-core machine; other jobs may have run at the same time",
+    }
+
+
+def bench_cameras() -> dict[str, Any]:
+    """Cameras benchmarked: ideal (negative lobes: 6 film channels) and the default without
+    noise and quantisation (so only the renderer differs)."""
+    nikon = load_camera("nikon-5100")
+    nikon = dataclasses.replace(nikon, noise=Noise(), quantisation_bits=None,
+                                name="nikon-5100 (no noise, float)")
+    return {"ideal": load_camera("ideal"), "nikon-5100": nikon}
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    from fidelity import mitsuba_render as mr
+
+    cameras = bench_cameras()
+    probe = mr.probe_variant()
+    variants = [probe.variant] + [v for v in ("scalar_spectral",) if v != probe.variant]
+    pixels = [8, 16, 32] if args.quick else [8, 16, 32, 64]
+    # perfect squares: the multijitter sampler would round other counts up to a w x h grid
+    spps = [4, 16, 64] if args.quick else [4, 16, 36, 64, 144, 256]
+    seeds = list(range(args.seeds))
+
+    # anchor: closed form (timed in the same run) and the reference measurement per camera
+    closed: dict[str, Any] = {}
+    for name, cam in cameras.items():
+        render_chart(cam, "D65")  # warm caches
+        times = []
+        for _ in range(5):
+            t = time.perf_counter()
+            r = render_chart(cam, "D65")
+            times.append(time.perf_counter() - t)
+        closed[name] = {"lab": r.measurement.lab, "seconds": statistics.median(times)}
+    anchor_s = statistics.median(c["seconds"] for c in closed.values())
+    print(f"closed form: {anchor_s * 1000:.1f} ms per render (anchor)", flush=True)
+
+    rows: list[dict[str, Any]] = []
+    for variant in variants:
+        render_chart("ideal", "D65", "mitsuba", spp=4, pixels_per_patch=8, variant=variant)  # JIT warm-up
+        samplers = ["independent", "multijitter"] if variant == probe.variant else ["multijitter"]
+        for sampler in samplers:
+            for ppp in pixels:
+                for spp in spps:
+                    for cam_name, cam in cameras.items():
+                        if cam_name != "ideal" and sampler != "multijitter":
+                            continue
+                        errs, times, rtimes = [], [], []
+                        for seed in seeds:
+                            t = time.perf_counter()
+                            r = render_chart(cam, "D65", "mitsuba", spp=spp, pixels_per_patch=ppp,
+                                             variant=variant, sampler=sampler, seed=seed)
+                            times.append(time.perf_counter() - t)
+                            rtimes.append(r.conventions["mitsuba"]["render_seconds"])
+                            errs.append(float(np.mean(delta_e_2000(r.measurement.lab,
+                                                                   closed[cam_name]["lab"]))))
+                        row = {
+                            "variant": variant, "sampler": sampler, "pixels_per_patch": ppp,
+                            "spp": spp, "camera": cam_name, "seeds": len(seeds),
+                            "mean_delta_e_vs_closed_form": errs,
+                            "worst_delta_e": max(errs), "median_delta_e": statistics.median(errs),
+                            "seconds": statistics.median(times),
+                            "mitsuba_render_seconds": statistics.median(rtimes),
+                            "ratio_to_closed_form": statistics.median(times) / anchor_s,
+                        }
+                        rows.append(row)
+                        print(f"{variant:17s} {sampler:11s} ppp {ppp:3d} spp {spp:4d} "
+                              f"{cam_name:10s} ΔE worst {row['worst_delta_e']:.4f} "
+                              f"{row['seconds']:7.3f} s  x{row['ratio_to_closed_form']:.0f} "
+                              "closed form", flush=True)
+    return {"probe": dataclasses.asdict(probe), "variants": variants, "rows": rows,
+            "closed_form_seconds": anchor_s, "pixels": pixels, "spps": spps}
+
+
+def choose_default(result: dict[str, Any], min_pixels: int = 1) -> dict[str, Any] | None:
+    """Cheapest (sampler, ppp, spp) with ppp >= ``min_pixels``, within TARGET on every camera
+    and variant, < 30 s on every variant; cost = time on the probed (first) variant."""
+    rows = result["rows"]
+    main_variant = result["variants"][0]
+    best = None
+    keys = {(r["sampler"], r["pixels_per_patch"], r["spp"]) for r in rows}
+    for key in sorted(keys):
+        if key[1] < min_pixels:
+            continue
+        sel = [r for r in rows if (r["sampler"], r["pixels_per_patch"], r["spp"]) == key]
+        if {r["variant"] for r in sel} != set(result["variants"]):
+            continue
+        if len({r["camera"] for r in sel}) < 2:
+            continue
+        if any(r["worst_delta_e"] > TARGET for r in sel):
+            continue
+        if any(r["seconds"] >= TIME_LIMIT_S for r in sel):
+            continue
+        cost = max(r["seconds"] for r in sel if r["variant"] == main_variant)
+        if best is None or cost < best["seconds"]:
+            best = {"sampler": key[0], "pixels_per_patch": key[1], "spp": key[2],
+                    "seconds": cost, "variant": main_variant,
+                    "worst_delta_e": max(r["worst_delta_e"] for r in sel),
+                    "seconds_by_variant": {v: max(r["seconds"] for r in sel if r["variant"] == v)
+                                           for v in result["variants"]}}
+    return best
+
+
+def plot(result: dict[str, Any], path: Path) -> None:
+    """Time against error, one line per (variant, sampler, pixels per patch) along spp."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(9, 6))
+    rows = [r for r in result["rows"] if r["camera"] == "ideal"]
+    styles = {"llvm_ad_spectral": "-", "scalar_spectral": "--"}
+    markers = {8: "o", 16: "s", 32: "^", 64: "D"}
+    colors = {"independent": "tab:red", "multijitter": "tab:blue"}
+    groups = sorted({(r["variant"], r["sampler"], r["pixels_per_patch"]) for r in rows})
+    for variant, sampler, ppp in groups:
+        sel = sorted((r for r in rows if (r["variant"], r["sampler"], r["pixels_per_patch"]) ==
+                      (variant, sampler, ppp)), key=lambda r: r["spp"])
+        ax.plot([r["seconds"] for r in sel], [r["worst_delta_e"] for r in sel],
+                linestyle=styles.get(variant, ":"), marker=markers.get(ppp, "x"),
+                color=colors.get(sampler, "k"), alpha=0.8,
+                label=f"{variant.split('_')[0]} {sampler} {ppp} px")
+        for r in sel:
+            ax.annotate(str(r["spp"]), (r["seconds"], r["worst_delta_e"]), fontsize=6,
+                        xytext=(2, 2), textcoords="offset points")
+    ax.axhline(TARGET, color="k", linewidth=0.8)
+    ax.text(min(r["seconds"] for r in rows), TARGET * 1.08,
+            f"target {TARGET} ΔE00", fontsize=8)
+    for key, color, label in (("default", "green", "chosen default"),
+                              ("cheapest_any_layout", "orange", "cheapest at any layout")):
+        d = result.get(key)
+        if d:
+            ax.scatter([d["seconds"]], [d["worst_delta_e"]], s=200, facecolors="none",
+                       edgecolors=color, linewidths=2, zorder=5,
+                       label=f"{label} (worst over cameras, variants)")
+    ax.axvline(result["closed_form_seconds"], color="grey", linewidth=0.8, linestyle=":")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("wall time of render_chart (s, median over seeds; dotted: closed form)")
+    ax.set_ylabel("mean ΔE00 vs closed form (worst of seeds), ideal camera, D65")
+    ax.set_title("Mitsuba 3 spectral chart: time vs error (numbers: spp)")
+    ax.legend(fontsize=7, ncol=2)
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    with atomic_output(path) as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)
+
+
+def table(rows: list[dict[str, Any]], anchor: float) -> list[list[str]]:
+    out = []
+    for r in sorted(rows, key=lambda r: (r["camera"], r["variant"], r["sampler"],
+                                         r["pixels_per_patch"], r["spp"])):
+        out.append([r["camera"], r["variant"], r["sampler"], str(r["pixels_per_patch"]),
+                    str(r["spp"]), f"{r['worst_delta_e']:.4f}", f"{r['median_delta_e']:.4f}",
+                    f"{r['seconds']:.3f}", f"{r['mitsuba_render_seconds']:.3f}",
+                    f"{r['seconds'] / anchor:.0f}"])
+    return out
+
+
+HEAD = ["camera", "variant", "sampler", "px/patch", "spp", "ΔE worst", "ΔE median",
+        "time s", "mitsuba s", "x closed form"]
+
+
+def write_reports(result: dict[str, Any], out: Path) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    plot(result, out / "speed_vs_error.png")
+    rows = table(result["rows"], result["closed_form_seconds"])
+    d = result["default"]
+    m = result["machine"]
+    summary = (
+        f"Default chosen: sampler {d['sampler']}, {d['pixels_per_patch']} px per patch, "
+        f"{d['spp']} spp: worst mean ΔE00 vs closed form {d['worst_delta_e']:.4f} "
+        f"(target {TARGET}); {d['seconds']:.2f} s on {d['variant']}, "
+        + ", ".join(f"{v}: {s:.2f} s" for v, s in d["seconds_by_variant"].items())
+        if d else "No setting met the target."
+    )
+    c = result.get("cheapest_any_layout")
+    if c:
+        summary += (f". Cheapest at any layout: {c['sampler']}, {c['pixels_per_patch']} px, "
+                    f"{c['spp']} spp ({c['seconds']:.2f} s, worst ΔE00 {c['worst_delta_e']:.4f}); "
+                    f"the default keeps the closed form's {result['default_min_pixels_per_patch']}"
+                    " px per patch so both renderers share one layout and one camera-noise field")
+    md = [
+        "# Mitsuba render: speed against error (issue 3, item 5)",
+        "",
+        "Generated by `python benchmarks/bench_render.py --out reports/render` "
+        f"on {result['date']}.",
+        "",
+        f"Machine: {m['cpu']}, {m['logical_cpus']} logical CPUs, {m['memory_gib']} GiB, "
+        f"{m['platform']}, Python {m['python']}, Mitsuba {m['mitsuba']}, Dr.Jit {m['drjit']}, "
+        f"libLLVM {m['libllvm']}. {m['note']}; load average at start {m['load_average_at_start']}.",
+        "",
+        "Error: mean over the 24 patches of ΔE00 between the Mitsuba and the closed-form "
+        "measurement (same camera, noise and quantisation off), worst of "
+        f"{result['seeds']} sampler seeds. Time: median wall time of the whole `render_chart` "
+        f"call; the closed form takes {result['closed_form_seconds'] * 1000:.1f} ms (anchor).",
+        "",
+        f"**{summary}**",
+        "",
+        "![time vs error](speed_vs_error.png)",
+        "",
+        "| " + " | ".join(HEAD) + " |",
+        "|" + "---|" * len(HEAD),
+        *["| " + " | ".join(r) + " |" for r in rows],
+        "",
+    ]
+    write_text_atomic(out / "README.md", "\n".join(md))
+    cells = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>\n"
+                    for r in rows)
+    page = f"""<!doctype html><html><head><meta charset="utf-8">
+<title>fidelity: Mitsuba render speed vs error</title>
+<style>body{{font-family:sans-serif;max-width:1000px;margin:2em auto}}
+table{{border-collapse:collapse;font-size:12px}}td,th{{border:1px solid #ccc;padding:2px 6px;
+text-align:right}}</style></head><body>
+<h1>Mitsuba render: speed against error</h1>
+<p>{html.escape(md[4])}</p><p>{html.escape(md[6])}</p><p>{html.escape(md[8])}</p>
+<p><b>{html.escape(summary)}</b></p>
+<img src="speed_vs_error.png" alt="time vs error" width="900">
+<table><tr>{''.join(f'<th>{html.escape(h)}</th>' for h in HEAD)}</tr>
+{cells}</table></body></html>
+"""
+    write_text_atomic(out / "index.html", page)
+    write_json_atomic(out / "bench_render.json", result)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=Path("reports/render"))
+    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--quick", action="store_true", help="smaller grid (for a smoke run)")
+    ap.add_argument("--from-json", type=Path, default=None,
+                    help="re-choose and re-write the reports from an earlier bench_render.json")
+    args = ap.parse_args(argv)
+    from fidelity.render import CLOSED_FORM_PIXELS_PER_PATCH
+
+    if args.from_json:
+        result = json.loads(args.from_json.read_text(encoding="utf-8"))
+    else:
+        t0 = time.perf_counter()
+        machine = machine_info()
+        result = run(args)
+        result["seeds"] = args.seeds
+        result["machine"] = machine
+        result["date"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+        result["benchmark_seconds"] = time.perf_counter() - t0
+        try:
+            result["git_commit"] = subprocess.run(
+                ["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=False
+            ).stdout.strip() or None
+        except OSError:
+            result["git_commit"] = None
+    # Default: same layout as the closed form (its window of 16 x 16 px averages the default
+    # camera's sensor noise; with one layout, seeded camera noise falls on the same pixels in
+    # both renderers), cheapest spp within the target there.
+    result["cheapest_any_layout"] = choose_default(result)
+    result["default_min_pixels_per_patch"] = CLOSED_FORM_PIXELS_PER_PATCH
+    result["default"] = choose_default(result, min_pixels=CLOSED_FORM_PIXELS_PER_PATCH)
+    write_reports(result, args.out)
+    print(json.dumps({"default": result["default"],
+                      "cheapest_any_layout": result["cheapest_any_layout"]}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
