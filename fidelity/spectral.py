@@ -9,11 +9,12 @@ sampling error of line spectra) is obtained with ``step=``.
 
 Resampling rule (one rule, no hidden smoothing): tabulated data are linearly interpolated onto
 the grid (``numpy.interp``). Outside their tabulated range, *reflectances* are held constant at
-their end values (CIE 15:2018 section 7.2.2 recommends this for reflectance; BabelColor data stop
-at 730 nm), while *illuminants* and *sensitivities* are zero (no light, no response).
+their end values (the nearest measured value, the usual practice of CIE 15 and ASTM E308;
+BabelColor data stop at 730 nm), while *illuminants* and *sensitivities* are zero (no light,
+no response).
 
-Integration rule: a Riemann sum on the uniform grid (CIE 15:2018 eq. 7.1, ASTM E308 "1 nm
-table" practice), ``sum_i f(lambda_i) * dlambda``. Tristimulus values are normalised so that the
+Integration rule: a Riemann sum on the uniform grid (the summation of CIE 15:2018 section 7,
+as in ASTM E308 with 1 nm tables), ``sum_i f(lambda_i) * dlambda``. Tristimulus values are normalised so that the
 perfect reflecting diffuser under the illuminant has Y = 1 (not 100):
 
     X = k * sum_i R(l_i) E(l_i) xbar(l_i) dl,   k = 1 / sum_i E(l_i) ybar(l_i) dl.
@@ -311,7 +312,7 @@ def tristimulus(
     """CIE XYZ of reflectances under an illuminant and of the illuminant's white (Y_white = 1).
 
     ``reflectance`` (..., N) and ``illuminant`` (N,) on :func:`wavelength_grid` (``step``).
-    Returns (XYZ (..., 3), XYZ_white (3,)); CIE 15:2018 eqs. 7.1-7.3 with k = 1/sum(E ybar dl).
+    Returns (XYZ (..., 3), XYZ_white (3,)); CIE 15:2018 section 7 with k = 1/sum(E ybar dl).
     """
     e = np.asarray(illuminant, dtype=np.float64)
     cmfs = _cmfs(float(step))

@@ -18,8 +18,12 @@ from fidelity.spectral import load_illuminant, load_patch_spectra
 mi = pytest.importorskip("mitsuba")
 mr = pytest.importorskip("fidelity.mitsuba_render")
 
-OLD_LLVM = [p for p in ("/usr/lib/x86_64-linux-gnu/libLLVM-15.so",
-                        "/usr/lib/x86_64-linux-gnu/libLLVM-14.so") if Path(p).is_file()]
+# installed libLLVM < 16, newest first (Debian's LLVM 15 makes Dr.Jit abort the process)
+OLD_LLVM = sorted(
+    (str(p) for d in mr._LIB_DIRS if Path(d).is_dir() for p in Path(d).glob("libLLVM*")
+     if p.is_file() and (mr._llvm_version(p) or 99) < mr.MIN_LLVM_VERSION),
+    key=lambda p: mr._llvm_version(Path(p)) or 0, reverse=True,
+)
 
 
 def test_find_libllvm_returns_a_new_enough_library(monkeypatch) -> None:
