@@ -7,24 +7,14 @@ Writes reports/benchmarks/delta_e.json.  Run:  python -m benchmarks.bench_delta_
 from __future__ import annotations
 
 import argparse
-import time
 from pathlib import Path
 
 import colour
 import numpy as np
 
-from benchmarks.machine import machine_info
+from benchmarks.machine import best_time, machine_info
 from fidelity.colorimetry import delta_e_2000
 from fidelity.fileio import write_json_atomic
-
-
-def best_time(fn, repeats: int) -> float:  # type: ignore[no-untyped-def]
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
 
 
 def main() -> None:

@@ -9,25 +9,15 @@ Run:  python -m benchmarks.bench_transforms
 from __future__ import annotations
 
 import argparse
-import time
 from pathlib import Path
 
 import numpy as np
 
 from benchmarks.colour_reference import reference_transform
-from benchmarks.machine import machine_info
+from benchmarks.machine import best_time, machine_info
 from fidelity.calibration import load_calibration_table
 from fidelity.fileio import write_json_atomic
 from fidelity.transforms import TRANSFORMS
-
-
-def best_time(fn, repeats: int) -> float:  # type: ignore[no-untyped-def]
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
 
 
 def main() -> None:

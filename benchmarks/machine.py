@@ -1,9 +1,11 @@
-"""Describe the machine a benchmark ran on (printed and stored with every result)."""
+"""Shared benchmark helpers: the machine a benchmark ran on, and best-of-N timing."""
 
 from __future__ import annotations
 
 import os
 import platform
+import time
+from collections.abc import Callable
 from typing import Any
 
 
@@ -34,3 +36,13 @@ def machine_info() -> dict[str, Any]:
     except ImportError:  # pragma: no cover
         pass
     return info
+
+
+def best_time(fn: Callable[[], object], repeats: int) -> float:
+    """Best (smallest) wall time in seconds of ``repeats`` calls of ``fn``."""
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return min(times)
