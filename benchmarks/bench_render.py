@@ -14,6 +14,7 @@ variant, and whose time on the slowest variant is < 30 s.
     python benchmarks/bench_render.py --out reports/render [--seeds 3] [--quick]
 
 Writes bench_render.json (machines), index.html + speed_vs_error.png (people), README.md.
+Resumable: an interrupted run continues from bench_render.partial.jsonl in the output folder.
 """
 
 from __future__ import annotations
@@ -114,6 +115,17 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     anchor_s = statistics.median(c["seconds"] for c in closed.values())
     print(f"closed form: {anchor_s * 1000:.1f} ms per render (anchor)", flush=True)
 
+    # resumable: finished rows are appended to a JSON-lines file and skipped on a re-run
+    partial = args.out / "bench_render.partial.jsonl"
+    done: dict[tuple, dict[str, Any]] = {}
+    if partial.is_file():
+        for line in partial.read_text(encoding="utf-8").splitlines():
+            if line.strip():
+                r = json.loads(line)
+                done[(r["variant"], r["sampler"], r["pixels_per_patch"], r["spp"], r["camera"],
+                      r["seeds"])] = r
+        print(f"resuming: {len(done)} settings already measured in {partial}", flush=True)
+    args.out.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
     for variant in variants:
         render_chart("ideal", "D65", "mitsuba", spp=4, pixels_per_patch=8, variant=variant)  # JIT warm-up
@@ -123,6 +135,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 for spp in spps:
                     for cam_name, cam in cameras.items():
                         if cam_name != "ideal" and sampler != "multijitter":
+                            continue
+                        key = (variant, sampler, ppp, spp, cam_name, len(seeds))
+                        if key in done:
+                            rows.append(done[key])
                             continue
                         errs, times, rtimes = [], [], []
                         for seed in seeds:
@@ -143,6 +159,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                             "ratio_to_closed_form": statistics.median(times) / anchor_s,
                         }
                         rows.append(row)
+                        with partial.open("a", encoding="utf-8") as fh:
+                            fh.write(json.dumps(row) + "\n")
                         print(f"{variant:17s} {sampler:11s} ppp {ppp:3d} spp {spp:4d} "
                               f"{cam_name:10s} ΔE worst {row['worst_delta_e']:.4f} "
                               f"{row['seconds']:7.3f} s  x{row['ratio_to_closed_form']:.0f} "
@@ -337,6 +355,9 @@ def main(argv: list[str] | None = None) -> int:
     result["default_min_pixels_per_patch"] = CLOSED_FORM_PIXELS_PER_PATCH
     result["default"] = choose_default(result, min_pixels=CLOSED_FORM_PIXELS_PER_PATCH)
     write_reports(result, args.out)
+    partial = args.out / "bench_render.partial.jsonl"
+    if partial.is_file() and not args.from_json:
+        partial.unlink()  # the complete result is in bench_render.json
     print(json.dumps({"default": result["default"],
                       "cheapest_any_layout": result["cheapest_any_layout"]}, indent=1))
     return 0
