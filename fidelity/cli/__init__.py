@@ -31,6 +31,7 @@ COMMANDS: dict[str, str] = {
     "render": "fidelity.cli.render:render",
     "sweep": "fidelity.cli.sweep:sweep",
     "tables": "fidelity.cli.tables:tables",
+    "validate": "fidelity.cli.validate:validate",
 }
 
 

@@ -1,0 +1,483 @@
+"""Emulate a camera's colour rendering on ordinary sRGB images.
+
+A camera model (:mod:`fidelity.camera`) is spectral: it needs reflectances, not pixels. To see
+what its colour errors cost a detector on COCO photographs we fit a *colour mapping* from the
+reference colour of a surface (what an ideal camera would record: the scene-consistent sRGB of
+:func:`fidelity.spectral.scene_reference`) to the colour the camera outputs for the same
+surface, and apply that mapping to every pixel of an image. Spectral detail the image no longer
+has (metamerism) cannot be recovered; the fit is the best colour-to-colour estimate.
+
+Training colours (:data:`TRAINING_SETS`): the 24 chart patches that the camera is measured on,
+and, for ``"colour-science"``, every further reflectance that colour-science ships:
+
+* the 190 training reflectances of AMPAS rawtoaces v1
+  (``colour.characterisation.read_training_data_rawtoaces_v1``);
+* the CIE 13.3 / CIE 2024 test colour samples (``colour.quality.SDS_TCS``) and the NIST CQS
+  9.0 and 7.4 samples (``colour.quality.SDS_VS``);
+* the other ColorChecker data sets in ``colour.SDS_COLOURCHECKERS`` (N. Ohta, ISO 17321-1, PMC).
+
+For each reflectance R under the test-case illuminant E the reference is
+``sRGB(M_cat XYZ(R, E))`` (CIE 1931 2°, Bradford to D65, IEC 61966-2-1), *clipped to [0, 1]*
+because an 8-bit image can only hold that; the target is the camera's output for R with the
+camera's own exposure, white balance and CCM (metered and fitted on the chart, exactly as
+:func:`fidelity.render.render_chart` does, noise-free).
+
+Methods (:data:`EMULATION_METHODS`, ``method=``):
+
+* ``"root-polynomial"`` (default): ``out = Q(T(P(linearize(srgb))))``: ``P`` is a
+  root-polynomial colour correction (Finlayson, Mackiewicz & Hurlbert, "Color Correction Using
+  Root-Polynomial Regression", IEEE TIP 24(5), 2015), degree 2 (terms R, G, B, sqrt(RG),
+  sqrt(GB), sqrt(RB)), fitted by least squares in linear light with
+  ``colour.characterisation.matrix_colour_correction(..., method="Finlayson 2015", degree=2,
+  root_polynomial_expansion=True)``, from reference linear sRGB to the camera's linear signal
+  before its tone curve; ``T`` and ``Q`` are the camera's own tone curve and quantisation
+  (:func:`fidelity.camera.apply_tone_curve`, :func:`fidelity.camera.quantise`). Root-polynomial
+  terms are homogeneous of degree 1, so the mapping scales with exposure like the camera does
+  (a shaded red maps to a shaded camera-red).
+* ``"lut3d"``: a 33^3 3D LUT on encoded sRGB: the root-polynomial mapping sampled on the grid
+  plus a Gaussian radial-basis interpolation (``scipy.interpolate.RBFInterpolator``) of its
+  residuals at the training colours, so the LUT bends towards every training colour; applied by
+  trilinear interpolation, then the camera's quantisation.
+
+Applying to 8-bit images (:meth:`Emulation.apply_uint8`) uses a full 256^3 table (48 MiB)
+evaluated once per emulation on all 16,777,216 code triples, then rounded
+``rint(clip(x, 0, 1) * 255)`` like :func:`fidelity.dataset.to_uint8`; an image then costs one
+table look-up per pixel.
+
+Accuracy (:func:`emulation_accuracy`): the chart reference, as an 8-bit image, goes through the
+same table; the result is compared patch by patch with the camera's rendered chart
+(:func:`fidelity.render.render_chart`) in CIEDE2000.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fidelity.camera import (
+    CameraModel,
+    apply_tone_curve,
+    camera_response,
+    develop,
+    exposure_gain,
+    load_camera,
+    quantise,
+)
+from fidelity.errors import InvalidValueError, unknown_name
+from fidelity.spectral import (
+    GRID_STEP_NM,
+    load_illuminant,
+    load_patch_spectra,
+    matrix_chromatic_adaptation,
+    resample,
+    tristimulus,
+    wavelength_grid,
+)
+
+FloatArray = NDArray[np.float64]
+
+#: LUT grid size of the ``lut3d`` method (points per axis).
+LUT_SIZE: int = 33
+#: Gaussian RBF width (encoded sRGB units) and smoothing of the ``lut3d`` residual fit.
+LUT_RBF_WIDTH: float = 0.08
+LUT_RBF_SMOOTHING: float = 1e-4
+#: Degree of the root-polynomial expansion (Finlayson et al. 2015).
+ROOT_POLYNOMIAL_DEGREE: int = 2
+
+
+# --------------------------------------------------------------------------------------------
+# Training reflectances
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ReflectanceSet:
+    """Reflectances (K, N) on :func:`fidelity.spectral.wavelength_grid` with names and sources."""
+
+    name: str
+    names: tuple[str, ...]
+    reflectance: FloatArray
+    sources: dict[str, int]
+
+
+def _msds_rows(wavelengths: ArrayLike, values: ArrayLike) -> FloatArray:
+    """Resample (N, K) tabulated reflectances to the grid; (K, M); ends held constant."""
+    return resample(np.asarray(wavelengths, float), np.asarray(values, float),
+                    wavelength_grid(), extrapolation="constant").T
+
+
+@lru_cache(maxsize=4)
+def _colour_science_reflectances(chart_spectra: str) -> ReflectanceSet:
+    import colour
+
+    names: list[str] = []
+    rows: list[FloatArray] = []
+    sources: dict[str, int] = {}
+
+    def add(label: str, items: list[tuple[str, FloatArray]]) -> None:
+        sources[label] = len(items)
+        for n, r in items:
+            names.append(f"{label}: {n}")
+            rows.append(r)
+
+    chart = load_patch_spectra(chart_spectra)
+    add(f"chart ({chart.name})", list(zip(chart.patch_names, chart.on_grid(), strict=True)))
+    t = colour.characterisation.read_training_data_rawtoaces_v1()
+    vals = _msds_rows(t.wavelengths, t.values)
+    add("rawtoaces v1 training data", list(zip(map(str, t.labels), vals, strict=True)))
+    for label, group in (("CIE TCS", colour.quality.SDS_TCS), ("NIST CQS VS", colour.quality.SDS_VS)):
+        items = []
+        for set_name, sds in group.items():
+            for k, sd in sds.items():
+                items.append((f"{set_name} {k}", _msds_rows(sd.wavelengths, sd.values[:, None])[0]))
+        add(label, items)
+    items = []
+    for set_name in ("ColorChecker N Ohta", "ISO 17321-1", "PMC"):
+        for k, sd in colour.SDS_COLOURCHECKERS[set_name].items():
+            items.append((f"{set_name} {k}", _msds_rows(sd.wavelengths, sd.values[:, None])[0]))
+    add("ColourChecker sets", items)
+    refl = np.clip(np.vstack(rows), 0.0, None)
+    refl.setflags(write=False)
+    return ReflectanceSet("colour-science", tuple(names), refl, sources)
+
+
+def _chart_only(chart_spectra: str) -> ReflectanceSet:
+    chart = load_patch_spectra(chart_spectra)
+    return ReflectanceSet("chart", tuple(chart.patch_names), chart.on_grid(),
+                          {f"chart ({chart.name})": 24})
+
+
+#: Training sets by name: function(chart_spectra) -> ReflectanceSet.
+TRAINING_SETS: dict[str, Callable[[str], ReflectanceSet]] = {
+    "chart": _chart_only,
+    "colour-science": _colour_science_reflectances,
+}
+
+
+def training_reflectances(name: str = "colour-science",
+                          chart_spectra: str = "BabelColor Average") -> ReflectanceSet:
+    """The named training set (:data:`TRAINING_SETS`); the chart patches always come first."""
+    if name not in TRAINING_SETS:
+        raise unknown_name("training set", name, TRAINING_SETS)
+    return TRAINING_SETS[name](chart_spectra)
+
+
+# --------------------------------------------------------------------------------------------
+# Reference and camera colours of reflectances
+# --------------------------------------------------------------------------------------------
+
+
+def reference_linear_srgb(reflectance: ArrayLike, illuminant: str = "D65",
+                          cat: str = "Bradford") -> FloatArray:
+    """Scene-consistent reference linear sRGB (..., 3) of reflectances (..., N) on the grid.
+
+    Same convention as :func:`fidelity.spectral.scene_reference`: XYZ under the illuminant
+    (Y_white = 1), adapted by ``cat`` to the sRGB D65 white, IEC 61966-2-1 matrix; unclipped.
+    """
+    from fidelity import colorimetry as cm
+
+    ill = load_illuminant(illuminant)
+    xyz, white = tristimulus(reflectance, ill.on_grid())
+    m = matrix_chromatic_adaptation(white, cm.WHITEPOINT_D65_XYZ, cat)
+    return cm.xyz_to_linear_srgb(xyz @ m.T)
+
+
+@dataclass(frozen=True)
+class CameraSamples:
+    """Reference and camera colours of a reflectance set under one illuminant.
+
+    ``reference_srgb`` (K, 3) encoded sRGB clipped to [0, 1] (what an 8-bit image holds);
+    ``camera_linear`` (K, 3) the camera's linear signal after white balance and CCM, before the
+    tone curve; ``camera_srgb`` (K, 3) the camera's output as encoded sRGB (clipped to [0, 1]).
+    """
+
+    names: tuple[str, ...]
+    reference_srgb: FloatArray
+    camera_linear: FloatArray
+    camera_srgb: FloatArray
+
+
+def camera_samples(camera: CameraModel, illuminant: str, reflectances: ReflectanceSet,
+                   chart_spectra: str = "BabelColor Average") -> CameraSamples:
+    """Noise-free camera output for every reflectance, metered and balanced on the chart.
+
+    Exposure (auto metering), white balance (white-patch, grey-world) and the fitted CCM use the
+    chart exactly as :func:`fidelity.render.render_chart` does; vignetting and noise (spatial
+    and random effects, not colour rendering) are left out.
+    """
+    from fidelity.colorimetry import delinearize_srgb
+
+    ill = load_illuminant(illuminant)
+    e, sens = ill.on_grid(), camera.sensitivities.on_grid()
+    chart_raw = camera_response(load_patch_spectra(chart_spectra).on_grid(), e, sens, GRID_STEP_NM)
+    gain = exposure_gain(camera.exposure, chart_raw)
+    raw = camera_response(reflectances.reflectance, e, sens, GRID_STEP_NM) * gain
+    dev = develop(camera, raw[None], chart_raw * gain, ill, spectra=chart_spectra)
+    linear = (raw * dev.white_balance_gains) @ dev.ccm.T
+    ref = np.clip(delinearize_srgb(reference_linear_srgb(reflectances.reflectance, illuminant)),
+                  0.0, 1.0)
+    return CameraSamples(reflectances.names, ref, linear, np.clip(dev.srgb[0], 0.0, 1.0))
+
+
+def camera_output_srgb(camera: CameraModel, linear: ArrayLike) -> FloatArray:
+    """The camera's output stage on its linear signal: tone curve, quantisation, then encoded
+    sRGB clipped to [0, 1] (a linear-output camera is encoded with the sRGB curve)."""
+    from fidelity.colorimetry import delinearize_srgb
+
+    out = apply_tone_curve(linear, camera.tone)
+    if camera.quantisation_bits is not None:
+        out = quantise(out, camera.quantisation_bits)
+    if camera.output_encoding == "linear":
+        out = delinearize_srgb(out)
+    return np.clip(out, 0.0, 1.0)
+
+
+# --------------------------------------------------------------------------------------------
+# Root-polynomial regression
+# --------------------------------------------------------------------------------------------
+
+
+def root_polynomial_terms(rgb: ArrayLike) -> FloatArray:
+    """Degree-2 root-polynomial expansion (..., 6): R, G, B, sqrt(RG), sqrt(GB), sqrt(RB).
+
+    Finlayson et al. 2015, eq. 6; the same terms and order as colour-science's
+    ``polynomial_expansion_Finlayson2015(rgb, 2, root_polynomial_expansion=True)``. Products
+    of negative values are clipped to 0 under the root (inputs here are >= 0).
+    """
+    a = np.asarray(rgb, dtype=np.float64)
+    r, g, b = a[..., 0], a[..., 1], a[..., 2]
+    return np.stack([r, g, b, np.sqrt(np.maximum(r * g, 0.0)), np.sqrt(np.maximum(g * b, 0.0)),
+                     np.sqrt(np.maximum(r * b, 0.0))], axis=-1)
+
+
+def fit_root_polynomial(source: ArrayLike, target: ArrayLike) -> FloatArray:
+    """Least-squares root-polynomial matrix (3, 6) mapping ``source`` (K, 3) to ``target``.
+
+    Uses ``colour.characterisation.matrix_colour_correction`` (method "Finlayson 2015",
+    degree 2, root-polynomial expansion). K must be >= 6.
+    """
+    import colour
+
+    s, t = np.asarray(source, float), np.asarray(target, float)
+    if s.ndim != 2 or s.shape[1] != 3 or s.shape != t.shape or s.shape[0] < 6:
+        raise InvalidValueError(f"root-polynomial fit needs matching (K >= 6, 3) arrays, got "
+                                f"{s.shape} and {t.shape}")
+    m = colour.characterisation.matrix_colour_correction(
+        s, t, method="Finlayson 2015", degree=ROOT_POLYNOMIAL_DEGREE,
+        root_polynomial_expansion=True)
+    return np.asarray(m, dtype=np.float64).reshape(3, 6)
+
+
+# --------------------------------------------------------------------------------------------
+# Emulation
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class Emulation:
+    """A fitted colour mapping reference sRGB -> camera output sRGB (see module docstring)."""
+
+    camera: CameraModel
+    illuminant: str
+    method: str
+    training: str
+    matrix: FloatArray
+    lut: FloatArray | None
+    samples: CameraSamples
+    fit_seconds: float
+    _cube: NDArray[np.uint8] | None = field(default=None, repr=False)
+
+    # float path -------------------------------------------------------------------------------
+    def _root_poly(self, srgb: FloatArray) -> FloatArray:
+        """Root-polynomial part + camera output stage, without quantisation for the LUT."""
+        from fidelity.colorimetry import linearize_srgb
+
+        lin = linearize_srgb(np.clip(srgb, 0.0, 1.0))
+        return root_polynomial_terms(lin) @ self.matrix.T
+
+    def apply(self, srgb: ArrayLike) -> FloatArray:
+        """Map encoded reference sRGB (..., 3) in [0, 1] to the camera's encoded output sRGB."""
+        x = np.asarray(srgb, dtype=np.float64)
+        if x.shape[-1] != 3:
+            raise InvalidValueError(f"colours must be (..., 3), got {x.shape}")
+        if self.method == "root-polynomial":
+            return camera_output_srgb(self.camera, self._root_poly(x))
+        assert self.lut is not None
+        out = _trilinear(self.lut, np.clip(x, 0.0, 1.0))
+        if self.camera.quantisation_bits is not None:
+            out = quantise(out, self.camera.quantisation_bits)
+        return np.clip(out, 0.0, 1.0)
+
+    # 8-bit path -------------------------------------------------------------------------------
+    def cube(self, chunk: int = 1 << 20) -> NDArray[np.uint8]:
+        """The (2^24, 3) uint8 table of :meth:`apply` on every 8-bit triple (built once)."""
+        if self._cube is None:
+            from fidelity.dataset import _all_triples, to_uint8
+
+            table = np.empty((1 << 24, 3), dtype=np.uint8)
+            for s in range(0, 1 << 24, chunk):
+                e = min(s + chunk, 1 << 24)
+                table[s:e] = to_uint8(self.apply(_all_triples(s, e)))
+            self._cube = table
+        return self._cube
+
+    def apply_uint8(self, rgb8: ArrayLike) -> NDArray[np.uint8]:
+        """Apply to an (H, W, 3) uint8 image through :meth:`cube`; returns a new uint8 image."""
+        a = np.asarray(rgb8)
+        if a.dtype != np.uint8 or a.shape[-1] != 3:
+            raise InvalidValueError(f"image must be (..., 3) uint8, got {a.shape} {a.dtype}")
+        idx = (a[..., 0].astype(np.uint32) << 16) | (a[..., 1].astype(np.uint32) << 8) | a[..., 2]
+        return self.cube()[idx]
+
+    def describe(self) -> dict[str, Any]:
+        """JSON-ready description: method, training set, matrix, sizes, fit time."""
+        return {"method": self.method, "training": self.training,
+                "training_colours": len(self.samples.names), "illuminant": self.illuminant,
+                "root_polynomial_matrix": self.matrix.round(6).tolist(),
+                "lut_size": None if self.lut is None else int(self.lut.shape[0]),
+                "fit_seconds": self.fit_seconds}
+
+
+def _trilinear(lut: FloatArray, x: FloatArray) -> FloatArray:
+    """Trilinear interpolation of an (n, n, n, 3) LUT on [0, 1]^3 at x (..., 3)."""
+    n = lut.shape[0]
+    p = x * (n - 1)
+    i0 = np.clip(np.floor(p).astype(np.int64), 0, n - 2)
+    f = p - i0
+    out = np.zeros(x.shape, dtype=np.float64)
+    for dr in (0, 1):
+        wr = f[..., 0] if dr else 1 - f[..., 0]
+        for dg in (0, 1):
+            wg = f[..., 1] if dg else 1 - f[..., 1]
+            for db in (0, 1):
+                wb = f[..., 2] if db else 1 - f[..., 2]
+                out += (wr * wg * wb)[..., None] * lut[i0[..., 0] + dr, i0[..., 1] + dg,
+                                                       i0[..., 2] + db]
+    return out
+
+
+def _fit_lut3d(emu: Emulation) -> FloatArray:
+    """33^3 LUT: root-polynomial output + Gaussian-RBF residuals at the training colours."""
+    from scipy.interpolate import RBFInterpolator
+
+    s = emu.samples
+    base = camera_output_srgb_noquant(emu.camera, emu._root_poly(s.reference_srgb))
+    rbf = RBFInterpolator(s.reference_srgb, s.camera_srgb - base, kernel="gaussian",
+                          epsilon=1.0 / LUT_RBF_WIDTH, smoothing=LUT_RBF_SMOOTHING, degree=-1)
+    g = np.linspace(0.0, 1.0, LUT_SIZE)
+    grid = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    lut = camera_output_srgb_noquant(emu.camera, emu._root_poly(grid)) + rbf(grid)
+    return np.clip(lut, 0.0, 1.0).reshape(LUT_SIZE, LUT_SIZE, LUT_SIZE, 3)
+
+
+def camera_output_srgb_noquant(camera: CameraModel, linear: ArrayLike) -> FloatArray:
+    """:func:`camera_output_srgb` without the quantisation stage (for LUT building)."""
+    return camera_output_srgb(replace(camera, quantisation_bits=None), linear)
+
+
+#: Emulation methods (module docstring).
+EMULATION_METHODS: tuple[str, ...] = ("root-polynomial", "lut3d")
+
+
+def fit_emulation(camera: CameraModel | str, illuminant: str = "D65",
+                  method: str = "root-polynomial", training: str = "colour-science",
+                  chart_spectra: str = "BabelColor Average") -> Emulation:
+    """Fit the colour mapping of ``camera`` under ``illuminant`` (module docstring).
+
+    ``method`` in :data:`EMULATION_METHODS`; ``training`` in :data:`TRAINING_SETS`.
+    """
+    if method not in EMULATION_METHODS:
+        raise unknown_name("emulation method", method, EMULATION_METHODS)
+    t0 = time.perf_counter()
+    cam = camera if isinstance(camera, CameraModel) else load_camera(camera)
+    refl = training_reflectances(training, chart_spectra)
+    samples = camera_samples(cam, illuminant, refl, chart_spectra)
+    from fidelity.colorimetry import linearize_srgb
+
+    matrix = fit_root_polynomial(linearize_srgb(samples.reference_srgb), samples.camera_linear)
+    emu = Emulation(cam, illuminant, method, training, matrix, None, samples, 0.0)
+    if method == "lut3d":
+        emu.lut = _fit_lut3d(emu)
+    emu.fit_seconds = time.perf_counter() - t0
+    return emu
+
+
+@dataclass(frozen=True)
+class EmulationAccuracy:
+    """How well an emulation reproduces the camera (CIEDE2000, see :func:`emulation_accuracy`).
+
+    ``chart_delta_e`` (24,): ΔE00 between the emulated chart (8-bit reference chart through the
+    256^3 table) and the camera's rendered chart, per patch; ``training_delta_e`` (K,): the same
+    on every training colour (float path); ``camera_chart_delta_e`` and
+    ``emulated_chart_delta_e``: the chart ΔE (mean ΔE00 against the scene reference) of the
+    camera and of the emulated chart.
+    """
+
+    patch_names: tuple[str, ...]
+    chart_delta_e: FloatArray
+    training_delta_e: FloatArray
+    camera_chart_delta_e: float
+    emulated_chart_delta_e: float
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary with per-patch values."""
+        return {
+            "chart_mean_delta_e": float(self.chart_delta_e.mean()),
+            "chart_max_delta_e": float(self.chart_delta_e.max()),
+            "chart_worst_patch": self.patch_names[int(np.argmax(self.chart_delta_e))],
+            "training_mean_delta_e": float(self.training_delta_e.mean()),
+            "training_p95_delta_e": float(np.percentile(self.training_delta_e, 95)),
+            "training_colours": int(self.training_delta_e.size),
+            "camera_chart_delta_e": self.camera_chart_delta_e,
+            "emulated_chart_delta_e": self.emulated_chart_delta_e,
+            "patches": {n: float(d) for n, d in zip(self.patch_names, self.chart_delta_e,
+                                                    strict=True)},
+        }
+
+
+def emulation_accuracy(emu: Emulation, chart_spectra: str = "BabelColor Average"
+                       ) -> EmulationAccuracy:
+    """Check the emulation against the camera's own rendered chart (module docstring)."""
+    from fidelity.colorimetry import delta_e_2000, srgb_to_lab
+    from fidelity.dataset import to_uint8
+    from fidelity.render import render_chart
+    from fidelity.spectral import scene_reference
+
+    render = render_chart(emu.camera, emu.illuminant, spectra=chart_spectra)
+    cam_srgb = np.clip(render.measurement.srgb, 0.0, 1.0)
+    ref = scene_reference(emu.illuminant, chart_spectra)
+    # the 8-bit chart through the 8-bit path; apply() on code/255 rounded by to_uint8 is what
+    # every entry of cube() holds, so this equals apply_uint8 without building the table
+    chart8 = to_uint8(ref.srgb)
+    emulated = to_uint8(emu.apply(chart8.astype(np.float64) / 255.0)).astype(np.float64) / 255.0
+    d_chart = delta_e_2000(srgb_to_lab(emulated), srgb_to_lab(cam_srgb))
+    d_train = delta_e_2000(srgb_to_lab(emu.apply(emu.samples.reference_srgb)),
+                           srgb_to_lab(emu.samples.camera_srgb))
+    emulated_de = float(delta_e_2000(srgb_to_lab(emulated), ref.lab).mean())
+    return EmulationAccuracy(tuple(ref.patch_names), d_chart, d_train,
+                             float(render.measurement.mean_delta_e), emulated_de)
+
+
+__all__ = [
+    "EMULATION_METHODS",
+    "LUT_SIZE",
+    "TRAINING_SETS",
+    "CameraSamples",
+    "Emulation",
+    "EmulationAccuracy",
+    "ReflectanceSet",
+    "camera_output_srgb",
+    "camera_samples",
+    "emulation_accuracy",
+    "fit_emulation",
+    "fit_root_polynomial",
+    "reference_linear_srgb",
+    "root_polynomial_terms",
+    "training_reflectances",
+]
