@@ -43,6 +43,10 @@ output is clipped to [0, 1], as a real encoded image is. A camera with a ``linea
 and no quantisation outputs unclipped float linear sRGB (an EXR-like output); it is measured as
 :func:`fidelity.colorimetry.delinearize_srgb` of those values, unclipped, so out-of-gamut patches
 (e.g. cyan) are measured exactly and an ideal camera measures ΔE00 ~ 0.
+
+Measurement rule: a display-referred output is read as encoded sRGB, which is what a viewer or
+a detector assumes; a ``gamma`` or ``lut`` curve that differs from the sRGB encoding therefore
+shows up as colour error, as it should.
 """
 
 from __future__ import annotations
@@ -636,6 +640,8 @@ def camera_from_dict(data: Any, origin: str = "<dict>", base_dir: Path | None = 
             raise r.error("lut", "needs >= 2 points with strictly increasing inputs")
         if arr[0, 0] > 0 or arr[-1, 0] < 1:
             raise r.error("lut", "inputs must span [0, 1]")
+        if np.any(arr[:, 1] < 0) or np.any(arr[:, 1] > 1):
+            raise r.error("lut", "outputs must lie in [0, 1]")
         lut = tuple((float(a), float(b)) for a, b in arr)
     tone = ToneCurve(curve, gamma, lut)
 

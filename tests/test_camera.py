@@ -220,3 +220,10 @@ def test_unparseable_and_unknown_cameras(tmp_path) -> None:
         load_camera("leica-m")
     with pytest.raises(InputFileError, match="does not exist"):
         load_camera(tmp_path / "missing.toml")
+
+
+def test_lut_outputs_must_be_display_values(tmp_path) -> None:
+    path = tmp_path / "lut.toml"
+    path.write_text('[tone]\ncurve = "lut"\nlut = [[0, 0], [1, 1.5]]\n')
+    with pytest.raises(InputFileError, match=r"\[tone\]\.lut: outputs must lie in \[0, 1\]"):
+        load_camera(path)
