@@ -152,3 +152,29 @@ def test_render_cli_bad_camera_file_is_one_line_exit_2(tmp_path) -> None:
     assert res.exit_code == 2
     assert "bad.yaml" in res.output and "[quantisation].bits" in res.output
     assert "Traceback" not in res.output
+
+
+def test_gamma_tone_curve_is_measured_as_srgb(tmp_path) -> None:
+    """A gamma-2.2 encoding read as sRGB: expected error from colour-science's sRGB decoding."""
+    from fidelity.spectral import scene_reference
+
+    cam = tmp_path / "gamma.toml"
+    cam.write_text('[white_balance]\nmethod = "illuminant"\n[tone]\ncurve = "gamma"\ngamma = 2.2\n')
+    r = render_chart(str(cam), "D65")
+    ref = scene_reference("D65")
+    encoded = np.clip(ref.linear_srgb, 0, 1) ** (1 / 2.2)
+    seen = colour.XYZ_to_Lab(colour.sRGB_to_XYZ(encoded), SRGB_D65_XY)
+    expected = delta_e_2000(seen, ref.lab)
+    np.testing.assert_allclose(r.measurement.delta_e, expected, atol=0.01)
+    assert 0.3 < r.measurement.mean_delta_e < 5
+
+
+@pytest.mark.parametrize(("name", "key"), [("D50", "D50"), ("F2", "FL2"), ("F11", "FL11"),
+                                           ("LED", "LED-B4"), ("A", "A")])
+def test_named_illuminants_are_the_cie_tables(name: str, key: str) -> None:
+    from fidelity.spectral import load_illuminant
+
+    ill = load_illuminant(name)
+    np.testing.assert_allclose(ill.values, colour.SDS_ILLUMINANTS[key].values)
+    r = render_chart("ideal", name)
+    assert np.isfinite(r.measurement.mean_delta_e)
