@@ -17,8 +17,8 @@ as S+ - S- (integration is linear).
 Variant choice: ``llvm_ad_spectral`` (vectorised, JIT-compiled) needs libLLVM >= 16; with an
 older one Dr.Jit aborts the whole process, so :func:`probe_variant` tries the variant in a
 subprocess with ``DRJIT_LIBLLVM_PATH`` pointing at the newest libLLVM >= 16 it finds
-(:func:`find_libllvm`), and falls back to ``scalar_spectral`` (no LLVM needed). The variant
-that ran is reported.
+(:func:`libllvm_candidates`: a user's ``DRJIT_LIBLLVM_PATH`` first, then the newest installed
+one), and falls back to ``scalar_spectral`` (no LLVM needed). The variant that ran is reported.
 """
 
 from __future__ import annotations
@@ -85,6 +85,21 @@ def _llvm_version(path: Path) -> int | None:
     return int(m.group(1)) if m else None
 
 
+def _installed_libllvm(min_version: int) -> list[tuple[int, Path]]:
+    """(version, path) of libLLVM >= ``min_version`` in the usual folders, newest last."""
+    candidates: list[tuple[int, Path]] = []
+    dirs = [Path(d) for d in _LIB_DIRS] + sorted(Path("/usr/lib").glob("llvm-*/lib"))
+    for d in dirs:
+        if not d.is_dir():
+            continue
+        for p in d.glob("libLLVM*"):
+            v = _llvm_version(p)
+            if v is not None and v >= min_version and p.is_file():
+                candidates.append((v, p))
+    candidates.sort(key=lambda vp: (vp[0], -len(str(vp[1]))))
+    return candidates
+
+
 def find_libllvm(min_version: int = MIN_LLVM_VERSION) -> Path | None:
     """Newest libLLVM shared library with major version >= ``min_version``, or None.
 
@@ -95,19 +110,21 @@ def find_libllvm(min_version: int = MIN_LLVM_VERSION) -> Path | None:
     env = os.environ.get("DRJIT_LIBLLVM_PATH")
     if env and Path(env).is_file():
         return Path(env)
-    candidates: list[tuple[int, Path]] = []
-    dirs = [Path(d) for d in _LIB_DIRS] + sorted(Path("/usr/lib").glob("llvm-*/lib"))
-    for d in dirs:
-        if not d.is_dir():
-            continue
-        for p in d.glob("libLLVM*"):
-            v = _llvm_version(p)
-            if v is not None and v >= min_version and p.is_file():
-                candidates.append((v, p))
-    if not candidates:
-        return None
-    candidates.sort(key=lambda vp: (vp[0], -len(str(vp[1]))))
-    return candidates[-1][1]
+    found = _installed_libllvm(min_version)
+    return found[-1][1] if found else None
+
+
+def libllvm_candidates(min_version: int = MIN_LLVM_VERSION) -> list[Path]:
+    """Libraries to try for an LLVM variant, in order: ``$DRJIT_LIBLLVM_PATH`` (if it is a
+    file), then the newest installed libLLVM >= ``min_version`` if that is another file."""
+    out: list[Path] = []
+    env = os.environ.get("DRJIT_LIBLLVM_PATH")
+    if env and Path(env).is_file():
+        out.append(Path(env))
+    found = _installed_libllvm(min_version)
+    if found and all(found[-1][1].resolve() != p.resolve() for p in out):
+        out.append(found[-1][1])
+    return out
 
 
 _PROBE_CODE = """
@@ -153,37 +170,50 @@ def _run_probe(variant: str, env: dict[str, str], timeout: float) -> tuple[bool,
 def probe_variant(preferred: tuple[str, ...] = PREFERRED_VARIANTS, timeout: float = 120.0) -> VariantProbe:
     """Pick the first variant of ``preferred`` that renders a tiny scene in a subprocess.
 
-    LLVM variants are tried only when :func:`find_libllvm` finds libLLVM >= 16, with
-    ``DRJIT_LIBLLVM_PATH`` set to it. Raises :class:`MitsubaUnavailableError` when none works.
+    LLVM variants are tried with ``DRJIT_LIBLLVM_PATH`` set to each of
+    :func:`libllvm_candidates` in turn. Raises :class:`MitsubaUnavailableError` when none works.
     The result is cached per process.
     """
     notes: list[str] = []
-    lib = find_libllvm()
     for variant in preferred:
-        env = dict(os.environ)
-        if variant.startswith("llvm"):
-            if lib is None:
-                notes.append(f"{variant}: skipped, no libLLVM >= {MIN_LLVM_VERSION} found")
-                continue
-            env["DRJIT_LIBLLVM_PATH"] = str(lib)
-        ok, note = _run_probe(variant, env, timeout)
-        notes.append(note)
-        if ok:
-            return VariantProbe(variant, str(lib) if variant.startswith("llvm") else None,
-                                tuple(notes))
+        if not variant.startswith("llvm"):
+            ok, note = _run_probe(variant, dict(os.environ), timeout)
+            notes.append(note)
+            if ok:
+                return VariantProbe(variant, None, tuple(notes))
+            continue
+        libs = libllvm_candidates()
+        if not libs:
+            notes.append(f"{variant}: skipped, no libLLVM >= {MIN_LLVM_VERSION} found")
+        for lib in libs:
+            ok, note = _run_probe(variant, dict(os.environ, DRJIT_LIBLLVM_PATH=str(lib)), timeout)
+            notes.append(f"{note} [{lib}]")
+            if ok:
+                return VariantProbe(variant, str(lib), tuple(notes))
     raise MitsubaUnavailableError("no Mitsuba spectral variant works here: " + "; ".join(notes))
 
 
 def _activate(variant: str) -> Any:
     """Import mitsuba with ``variant`` set (DRJIT_LIBLLVM_PATH set first for LLVM variants)."""
+    lib: str | None = None
     if variant.startswith("llvm"):
-        probe_variant((variant,))  # aborts in the subprocess, not here, if LLVM is unusable
-    if "DRJIT_LIBLLVM_PATH" not in os.environ and "mitsuba" not in sys.modules:
-        # Dr.Jit reads this when its LLVM backend first loads: set it before the first import,
-        # whatever the variant, so a later LLVM variant in this process finds the right library.
-        lib = find_libllvm()
-        if lib is not None:
-            os.environ["DRJIT_LIBLLVM_PATH"] = str(lib)
+        lib = probe_variant((variant,)).libllvm  # an unusable LLVM aborts the probe, not us
+    elif "DRJIT_LIBLLVM_PATH" not in os.environ:
+        found = find_libllvm()
+        lib = str(found) if found else None
+    current = os.environ.get("DRJIT_LIBLLVM_PATH")
+    if lib and current != lib:
+        # Dr.Jit loads the library named here when it is imported (without one it retries when
+        # an LLVM variant is first set). A different library already loaded would abort the
+        # process on first use, so refuse instead of crashing.
+        if "drjit" in sys.modules and current and variant.startswith("llvm"):
+            raise MitsubaUnavailableError(
+                f"Dr.Jit was imported with DRJIT_LIBLLVM_PATH={current}, which does not work "
+                f"for {variant}; {lib} does: set DRJIT_LIBLLVM_PATH={lib} before starting, "
+                "or use variant scalar_spectral"
+            )
+        if "drjit" not in sys.modules or not current:
+            os.environ["DRJIT_LIBLLVM_PATH"] = lib
     import mitsuba as mi
 
     if variant not in mi.variants():
@@ -317,7 +347,15 @@ def render_raw(
     if spp < 1:
         raise InvalidValueError(f"spp must be >= 1, got {spp}")
     probe = probe_variant() if variant is None else probe_variant((variant,))
-    mi = _activate(probe.variant)
+    try:
+        mi = _activate(probe.variant)
+    except MitsubaUnavailableError as exc:
+        fallback = [v for v in PREFERRED_VARIANTS if not v.startswith("llvm")]
+        if variant is not None or not fallback:
+            raise
+        probe = probe_variant(tuple(fallback))
+        probe = VariantProbe(probe.variant, None, (*probe.notes, f"in-process: {exc}"))
+        mi = _activate(probe.variant)
     channels, recombine = split_channels(sensitivities)
     e = np.asarray(illuminant, dtype=np.float64)
     template = load_template()
@@ -350,6 +388,7 @@ __all__ = [
     "VariantProbe",
     "build_scene_dict",
     "find_libllvm",
+    "libllvm_candidates",
     "load_template",
     "probe_variant",
     "render_raw",

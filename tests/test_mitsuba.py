@@ -121,3 +121,29 @@ def test_render_cli_with_mitsuba_reports_the_variant(tmp_path) -> None:
     assert d["renderer"] == "mitsuba" and d["variant"] in mr.PREFERRED_VARIANTS
     assert d["variant"] in res.output and d["settings"]["spp"] == 16
     assert len(d["patches"]) == 24 and d["mean_delta_e"] < 1.0
+
+
+@pytest.mark.skipif(not OLD_LLVM, reason="no old libLLVM (< 16) installed")
+def test_a_users_old_llvm_is_tried_first_then_the_good_one(monkeypatch) -> None:
+    monkeypatch.setenv("DRJIT_LIBLLVM_PATH", OLD_LLVM[0])
+    cands = mr.libllvm_candidates()
+    assert str(cands[0]) == OLD_LLVM[0]
+    if len(cands) < 2:
+        pytest.skip("no libLLVM >= 16 to fall back to")
+    assert (mr._llvm_version(cands[1]) or 0) >= mr.MIN_LLVM_VERSION
+
+
+@pytest.mark.skipif(not OLD_LLVM, reason="no old libLLVM (< 16) installed")
+def test_old_llvm_loaded_at_import_never_aborts_the_process() -> None:
+    """Dr.Jit imported with an old LLVM: the render falls back instead of aborting."""
+    import subprocess
+    import sys
+
+    code = ("import mitsuba\nfrom fidelity.render import render_chart\n"
+            "r = render_chart('ideal', 'D65', 'mitsuba', spp=4, pixels_per_patch=4)\n"
+            "print('variant', r.variant)\n")
+    env = dict(os.environ, DRJIT_LIBLLVM_PATH=OLD_LLVM[0])
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                          timeout=300, check=False)
+    assert proc.returncode == 0, proc.stderr[-500:]
+    assert "variant scalar_spectral" in proc.stdout
