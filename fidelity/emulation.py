@@ -82,6 +82,9 @@ from fidelity.spectral import (
 
 FloatArray = NDArray[np.float64]
 
+#: Version of the fitting procedure; stored with results so that a changed fit is not mixed
+#: with old detections (bump on any change that alters fitted mappings).
+EMULATION_VERSION: int = 2
 #: LUT grid size of the ``lut3d`` method (points per axis).
 LUT_SIZE: int = 33
 #: Gaussian RBF width (encoded sRGB units) and smoothing of the ``lut3d`` residual fit.
@@ -193,12 +196,15 @@ class CameraSamples:
     """Reference and camera colours of a reflectance set under one illuminant.
 
     ``reference_srgb`` (K, 3) encoded sRGB clipped to [0, 1] (what an 8-bit image holds);
+    ``reference_linear`` (K, 3) unclipped linear sRGB (out-of-gamut colours keep components
+    < 0 or > 1; the fit uses these, so that an exact camera fits to the identity);
     ``camera_linear`` (K, 3) the camera's linear signal after white balance and CCM, before the
     tone curve; ``camera_srgb`` (K, 3) the camera's output as encoded sRGB (clipped to [0, 1]).
     """
 
     names: tuple[str, ...]
     reference_srgb: FloatArray
+    reference_linear: FloatArray
     camera_linear: FloatArray
     camera_srgb: FloatArray
 
@@ -220,9 +226,9 @@ def camera_samples(camera: CameraModel, illuminant: str, reflectances: Reflectan
     raw = camera_response(reflectances.reflectance, e, sens, GRID_STEP_NM) * gain
     dev = develop(camera, raw[None], chart_raw * gain, ill, spectra=chart_spectra)
     linear = (raw * dev.white_balance_gains) @ dev.ccm.T
-    ref = np.clip(delinearize_srgb(reference_linear_srgb(reflectances.reflectance, illuminant)),
-                  0.0, 1.0)
-    return CameraSamples(reflectances.names, ref, linear, np.clip(dev.srgb[0], 0.0, 1.0))
+    ref_lin = reference_linear_srgb(reflectances.reflectance, illuminant)
+    ref = np.clip(delinearize_srgb(ref_lin), 0.0, 1.0)
+    return CameraSamples(reflectances.names, ref, ref_lin, linear, np.clip(dev.srgb[0], 0.0, 1.0))
 
 
 def camera_output_srgb(camera: CameraModel, linear: ArrayLike) -> FloatArray:
@@ -246,14 +252,18 @@ def camera_output_srgb(camera: CameraModel, linear: ArrayLike) -> FloatArray:
 def root_polynomial_terms(rgb: ArrayLike) -> FloatArray:
     """Degree-2 root-polynomial expansion (..., 6): R, G, B, sqrt(RG), sqrt(GB), sqrt(RB).
 
-    Finlayson et al. 2015, eq. 6; the same terms and order as colour-science's
-    ``polynomial_expansion_Finlayson2015(rgb, 2, root_polynomial_expansion=True)``. Products
-    of negative values are clipped to 0 under the root (inputs here are >= 0).
+    Finlayson et al. 2015, eq. 6; the same terms, order and sign convention as colour-science's
+    ``polynomial_expansion_Finlayson2015(rgb, 2, root_polynomial_expansion=True)``: the root
+    is sign-preserving, ``spow(x, 1/2) = sign(x) sqrt(|x|)`` (matters only for out-of-gamut
+    training colours with negative components; image inputs are >= 0).
     """
     a = np.asarray(rgb, dtype=np.float64)
     r, g, b = a[..., 0], a[..., 1], a[..., 2]
-    return np.stack([r, g, b, np.sqrt(np.maximum(r * g, 0.0)), np.sqrt(np.maximum(g * b, 0.0)),
-                     np.sqrt(np.maximum(r * b, 0.0))], axis=-1)
+
+    def spow(x: FloatArray) -> FloatArray:
+        return np.sign(x) * np.sqrt(np.abs(x))
+
+    return np.stack([r, g, b, spow(r * g), spow(g * b), spow(r * b)], axis=-1)
 
 
 def fit_root_polynomial(source: ArrayLike, target: ArrayLike) -> FloatArray:
@@ -398,9 +408,7 @@ def fit_emulation(camera: CameraModel | str, illuminant: str = "D65",
     cam = camera if isinstance(camera, CameraModel) else load_camera(camera)
     refl = training_reflectances(training, chart_spectra)
     samples = camera_samples(cam, illuminant, refl, chart_spectra)
-    from fidelity.colorimetry import linearize_srgb
-
-    matrix = fit_root_polynomial(linearize_srgb(samples.reference_srgb), samples.camera_linear)
+    matrix = fit_root_polynomial(samples.reference_linear, samples.camera_linear)
     emu = Emulation(cam, illuminant, method, training, matrix, None, samples, 0.0)
     if method == "lut3d":
         emu.lut = _fit_lut3d(emu)
@@ -466,6 +474,7 @@ def emulation_accuracy(emu: Emulation, chart_spectra: str = "BabelColor Average"
 
 __all__ = [
     "EMULATION_METHODS",
+    "EMULATION_VERSION",
     "LUT_SIZE",
     "TRAINING_SETS",
     "CameraSamples",

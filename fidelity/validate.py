@@ -38,13 +38,13 @@ import platform
 import sqlite3
 import sys
 import time
-import tomllib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import tomllib
 
 from fidelity.errors import InputFileError, InvalidValueError
 
@@ -348,11 +348,16 @@ def _fold_scores(coco: Any, dets: dict[int, np.ndarray], ids: Sequence[int]) -> 
 def prepare_case(case: CameraCase, store: ValidationStore, method: str, training: str,
                  cache: Any, image_ids: Sequence[int]) -> tuple[Any, dict[str, Any]]:
     """Render, measure, fit the emulation and check it; the record is stored (resumable)."""
-    from fidelity.emulation import EMULATION_METHODS, emulation_accuracy, fit_emulation
+    from fidelity.emulation import (
+        EMULATION_METHODS,
+        EMULATION_VERSION,
+        emulation_accuracy,
+        fit_emulation,
+    )
     from fidelity.render import render_chart
 
     key = json.dumps({"sha256": case.sha256, "illuminant": case.illuminant, "method": method,
-                      "training": training})
+                      "training": training, "emulation_version": EMULATION_VERSION})
     have = store.case(case.name)
     if have and have[0] != key:
         raise InvalidValueError(f"store {store.path}: camera {case.name!r} was run with another "
@@ -581,6 +586,433 @@ def collect_results(store: ValidationStore, tables: Sequence[str] | None = None,
             "meta": store.meta()}
 
 
+# --------------------------------------------------------------------------------------------
+# Report
+# --------------------------------------------------------------------------------------------
+
+_CLASS_TITLES = {"all": "mAP@[.50:.95] (all classes)", "person": "AP person",
+                 "bicycle": "AP bicycle", "all-relative": "mAP relative to baseline"}
+
+
+def _fmt(v: float | None, nd: int = 2) -> str:
+    return "–" if v is None else f"{v:.{nd}f}"
+
+
+def _spearman(x: Sequence[float], y: Sequence[float]) -> float | None:
+    """Spearman rank correlation (scipy.stats.spearmanr); None for fewer than 3 pairs."""
+    if len(x) < 3:
+        return None
+    from scipy.stats import spearmanr
+
+    r = spearmanr(x, y).statistic
+    return None if not np.isfinite(r) else float(r)
+
+
+def failure_reason(row: dict[str, Any], cls: str, camera: dict[str, Any]) -> str:
+    """One-paragraph, data-derived explanation of a bound failure (for the report).
+
+    Combines: the excess over the bound in units of the measurement's standard error; where on
+    the table the prediction came from (status); the direction of the chart error (shares of
+    |ΔL'|, |ΔC'|, |ΔH'|, signed mean ΔL' and ΔC', lightness contrast ratio, neutral cast); and
+    the image-level ΔE00 of the emulation compared with the chart ΔE.
+    """
+    b = row["bound"][cls]
+    prof = camera["profile"]
+    parts = [f"measured {b['measured']:.2f} > predicted {b['predicted']:.2f} "
+             f"(excess {b['excess']:.2f}"]
+    se = b.get("se")
+    if se:
+        parts[0] += f", {b['excess'] / se:.1f} SE; SE {se:.2f})"
+        parts.append("inside sampling noise (excess < 2 SE)" if b["excess"] < 2 * se else
+                     "larger than the sampling noise (excess >= 2 SE)")
+    else:
+        parts[0] += ")"
+    if b.get("status") == "below-range":
+        parts.append("the chart ΔE lies below the table's first point, so the bound there is the "
+                     "first point's value")
+    parts.append(f"chart error mostly {prof['dominant']} (|ΔL'| {prof['share_l']:.0%}, "
+                 f"|ΔC'| {prof['share_c']:.0%}, |ΔH'| {prof['share_h']:.0%}; mean ΔL' "
+                 f"{prof['mean_dl']:+.1f}, mean ΔC' {prof['mean_dc']:+.1f}, contrast ratio "
+                 f"{prof['contrast_ratio']:.2f}, neutral cast a*,b* "
+                 f"{prof['neutral_cast_ab'][0]:+.1f},{prof['neutral_cast_ab'][1]:+.1f})")
+    ide = camera.get("image_delta_e", {})
+    if ide:
+        parts.append(f"on photos the emulation moves colours by ΔE00 {ide['mean']:.1f} on average "
+                     f"(p95 {ide['p95']:.1f}) against chart ΔE {camera['chart_delta_e']:.1f}")
+    return "; ".join(parts) + "."
+
+
+def _plot_scatter(rows: list[dict[str, Any]], table: str, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    classes = ("all", "person", "bicycle")
+    fig, axes = plt.subplots(1, 3, figsize=(15, 5))
+    models = sorted({r["model"] for r in rows})
+    markers = dict(zip(models, "osD^v", strict=False))
+    for ax, cls in zip(axes, classes, strict=True):
+        col = LOSS_COLUMNS[cls]
+        lo, hi = 0.0, 1.0
+        for m in models:
+            pts = [(r["predicted"][table][col], r["measured"][col], r["se"][col] or 0.0)
+                   for r in rows if r["model"] == m and r["predicted"][table][col] is not None
+                   and r["measured"][col] is not None]
+            if not pts:
+                continue
+            p, y, s = (np.array(v) for v in zip(*pts, strict=True))
+            ax.errorbar(p, y, yerr=2 * s, fmt=markers[m], ms=5, alpha=0.8, capsize=2,
+                        label=f"{m} (±2 SE)")
+            lo, hi = min(lo, y.min() - 2 * s.max(), p.min()), max(hi, y.max() + 2 * s.max(),
+                                                                 p.max())
+        ax.plot([lo, hi], [lo, hi], "k--", lw=1, label="identity (measured = predicted)")
+        ax.fill_between([lo, hi], [lo, hi], [lo, lo], color="tab:green", alpha=0.06,
+                        label="bound holds")
+        ax.set_xscale("symlog", linthresh=1.0)
+        ax.set_yscale("symlog", linthresh=1.0)
+        ax.set_xlabel(f"predicted Δ{_CLASS_TITLES[cls]} (points, {table})")
+        ax.set_ylabel("measured loss (points)")
+        ax.set_title(_CLASS_TITLES[cls])
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _plot_vs_delta_e(rows: list[dict[str, Any]], tables: Sequence[str], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from fidelity.prediction import predict_curve
+
+    classes = ("all", "person", "bicycle")
+    fig, axes = plt.subplots(1, 3, figsize=(15, 5))
+    models = sorted({r["model"] for r in rows})
+    xmax = max([r["chart_delta_e"] for r in rows] + [6.0]) * 1.05
+    grid = np.linspace(0, xmax, 300)
+    for ax, cls in zip(axes, classes, strict=True):
+        col = LOSS_COLUMNS[cls]
+        for m, mk in zip(models, "osD^v", strict=False):
+            pts = [(r["chart_delta_e"], r["measured"][col], r["se"][col] or 0.0) for r in rows
+                   if r["model"] == m and r["measured"][col] is not None]
+            if pts:
+                x, y, s = (np.array(v) for v in zip(*pts, strict=True))
+                ax.errorbar(x, y, yerr=2 * s, fmt=mk, ms=5, alpha=0.8, capsize=2,
+                            label=f"measured, {m}")
+        for t, ls in zip(tables, ("-", "--", ":", "-."), strict=False):
+            try:
+                y = predict_curve(grid, col, size="n", table=t)
+            except Exception:  # noqa: BLE001 - a table without this column is skipped
+                continue
+            if np.all(np.isnan(y)):
+                continue
+            ax.plot(grid, y, ls, color="k", lw=1.2, label=f"worst case, {t}")
+        ax.axhline(0, color="grey", lw=0.5)
+        ax.set_yscale("symlog", linthresh=1.0)
+        ax.set_xlabel("chart ΔE00 of the camera (mean over 24 patches)")
+        ax.set_ylabel(f"loss of {_CLASS_TITLES[cls]} (points)")
+        ax.set_title(_CLASS_TITLES[cls])
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _plot_emulation(cameras: dict[str, dict[str, Any]], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = sorted(cameras, key=lambda k: cameras[k]["chart_delta_e"])
+    fig, ax = plt.subplots(figsize=(12, 4.5))
+    x = np.arange(len(names))
+    acc = [cameras[n]["emulation"]["accuracy"] for n in names]
+    ax.bar(x - 0.2, [a["chart_mean_delta_e"] for a in acc], 0.4, label="mean ΔE00 (chart)")
+    ax.bar(x + 0.2, [a["chart_max_delta_e"] for a in acc], 0.4, label="max ΔE00 (chart)")
+    ax.set_xticks(x, names, rotation=75, ha="right", fontsize=7)
+    ax.set_ylabel("ΔE00 emulated vs camera")
+    ax.set_title("Emulation accuracy: fitted mapping applied to the 8-bit reference chart vs the "
+                 "camera's rendered chart")
+    ax.legend()
+    ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def report_markdown(results: dict[str, Any], figures: dict[str, str]) -> str:
+    """The Markdown report (see :func:`write_report`)."""
+    rows, summ, cams, meta = (results["rows"], results["summary"], results["cameras"],
+                              results["meta"])
+    bound = summ["bound_table"]
+    models = results["models"]
+    lines: list[str] = []
+    add = lines.append
+    add("# Validation: predicted against measured detection loss for realistic camera models\n")
+    add("Generated by `fidelity validate` (fidelity/validate.py) from the results store; every "
+        "number below is computed from stored detections and chart renders.\n")
+    add("## What was run\n")
+    data = meta.get("data", {})
+    add(f"- Images: COCO val2017 subset at `{data.get('images')}` "
+        f"({data.get('image_count')} annotated images), annotations `{data.get('annotations')}`.")
+    for m, info in sorted(models.items()):
+        n = info["limit_images"] or data.get("image_count")
+        add(f"- Model `{m}` (`{info['file']}`, sha256 {info['sha256'][:16]}…): first {n} images by "
+            f"id; layout {info['settings'].get('layout')}, input "
+            f"{info['settings'].get('input_size')}, conventions "
+            f"{info['settings'].get('conventions')}, threads {info['settings'].get('threads')}.")
+    add(f"- Cameras: {len(cams)} camera files from `cameras/` (listed below with their scene "
+        "illuminants); chart rendered in closed form; ΔE = mean CIEDE2000 over the 24 patches "
+        "against the scene-consistent reference.")
+    st = meta.get("settings", {})
+    add(f"- Emulation: `{st.get('emulation_method')}` fitted on `{st.get('training')}` "
+        "reflectances (chart + colour-science spectral data); JPEG: "
+        f"{st.get('jpeg')}. ΔE = 0 baseline: the same round trip without colour change.")
+    add(f"- Prediction: `fidelity.prediction.predict(chart ΔE, size='n', baseline_map=...)` with "
+        f"tables {', '.join(f'`{t}`' for t in summ['tables'])}; the bound tested is `{bound}`.")
+    add(f"- Standard errors: {FOLDS} interleaved image folds, SE = std(fold loss)/√{FOLDS}.")
+    add(f"- Versions: {meta.get('versions')}; machine: {meta.get('machine')}.")
+    finished = sorted({r['camera'] for r in rows})
+    add(f"- Finished: {len(rows)} (camera, model) cells, {len(finished)} of {len(cams)} cameras "
+        "with at least one model.\n")
+
+    add(f"## Does the worst-case table (`{bound}`) bound the measured loss?\n")
+    add("| class | cells within bound | within bound up to 2 SE | cameras within bound (all models) | share |")
+    add("|---|---|---|---|---|")
+    for cls in LOSS_COLUMNS:
+        s = summ[cls]
+        share = "–" if s["share_cameras_within"] is None else f"{100 * s['share_cameras_within']:.0f} %"
+        add(f"| {cls} | {s['within']}/{s['cells']} | {s['within_2se']}/{s['cells']} | "
+            f"{s['cameras_within']}/{s['cameras']} | {share} |")
+    add("")
+    for t in summ["tables"]:
+        xs = [(r["predicted"][t]["dmap_points"], r["measured"]["dmap_points"]) for r in rows
+              if r["predicted"][t]["dmap_points"] is not None]
+        if xs:
+            p, m = zip(*xs, strict=True)
+            err = np.array(m) - np.array(p)
+            add(f"- `{t}` ({rows[0]['predicted'][t]['kind']}): mAP measured − predicted: median "
+                f"{np.median(err):+.2f} points, max {err.max():+.2f}; Spearman ρ(predicted, "
+                f"measured) = {_fmt(_spearman(p, m))}; within for "
+                f"{int(np.sum(err <= 0))}/{len(err)} cells.")
+    de = [r["chart_delta_e"] for r in rows]
+    add(f"- Spearman ρ(chart ΔE, measured ΔmAP) = "
+        f"{_fmt(_spearman(de, [r['measured']['dmap_points'] for r in rows]))}.\n")
+
+    for key, title in (("scatter", "Predicted against measured (identity line dashed)"),
+                       ("vs_delta_e", "Measured loss against chart ΔE with the worst-case curves"),
+                       ("emulation", "Emulation accuracy")):
+        for f in figures.get(key, "").split(";"):
+            if f:
+                add(f"### {title}\n\n![{title}]({f})\n")
+
+    add("## Every case where the bound fails\n")
+    any_fail = False
+    for cls in ("all", "all-relative", "person", "bicycle"):
+        fails = [r for r in rows if r["bound"][cls]["within"] is False]
+        if not fails:
+            continue
+        any_fail = True
+        add(f"### {_CLASS_TITLES[cls]}\n")
+        for r in sorted(fails, key=lambda r: -r["bound"][cls]["excess"]):
+            add(f"- **{r['camera']}** / {r['model']} ({r['illuminant']}, chart ΔE "
+                f"{r['chart_delta_e']:.2f}): {failure_reason(r, cls, cams[r['camera']])}")
+        add("")
+    if not any_fail:
+        add("None: every finished cell is within the bound.\n")
+
+    add("## Per camera\n")
+    add("Losses in percentage points (positive = worse than the baseline), measured ± SE; "
+        f"predicted = `{bound}`.\n")
+    add("| camera | illuminant | chart ΔE | dominant error (L/C/H share) | contrast | photo ΔE00 | "
+        "model | ΔmAP meas. | ΔmAP pred. | Δperson meas. | Δperson pred. | Δbicycle meas. | "
+        "Δbicycle pred. |")
+    add("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in sorted(rows, key=lambda r: (r["chart_delta_e"], r["model"])):
+        c = cams[r["camera"]]
+        pr = c["profile"]
+        b = r["bound"]
+
+        def cell(k: str, b: dict[str, Any] = b) -> str:
+            v = b[k]
+            if v["measured"] is None:
+                return "–"
+            s = f"{v['measured']:.2f}" + (f" ± {v['se']:.2f}" if v.get("se") else "")
+            return f"**{s}**" if v["within"] is False else s
+
+        add(f"| {r['camera']} | {r['illuminant']} | {r['chart_delta_e']:.2f} | {pr['dominant']} "
+            f"({pr['share_l']:.2f}/{pr['share_c']:.2f}/{pr['share_h']:.2f}) | "
+            f"{pr['contrast_ratio']:.2f} | {_fmt(c.get('image_delta_e', {}).get('mean'), 1)} | "
+            f"{r['model']} | {cell('all')} | {_fmt(b['all']['predicted'])} | {cell('person')} | "
+            f"{_fmt(b['person']['predicted'])} | {cell('bicycle')} | "
+            f"{_fmt(b['bicycle']['predicted'])} |")
+    add("\nBold: measured loss above the worst-case prediction.\n")
+    other = [t for t in summ["tables"] if t != bound]
+    if other:
+        add("Other tables' predictions of ΔmAP (points):\n")
+        add("| camera | model | chart ΔE | measured | " + " | ".join(other) + " |")
+        add("|---|---|---|---|" + "---|" * len(other))
+        for r in sorted(rows, key=lambda r: (r["chart_delta_e"], r["model"])):
+            add(f"| {r['camera']} | {r['model']} | {r['chart_delta_e']:.2f} | "
+                f"{_fmt(r['measured']['dmap_points'])} | "
+                + " | ".join(_fmt(r["predicted"][t]["dmap_points"]) for t in other) + " |")
+        add("")
+
+    add("## Emulation accuracy\n")
+    add("The fitted mapping is applied to the reference chart as an 8-bit image (the same 256³ "
+        "table used on COCO) and compared with the camera's own rendered chart (CIEDE2000 per "
+        "patch). Training: mean and 95th percentile over all training colours (in-sample). "
+        "Chart ΔE columns: the camera's chart ΔE and the emulated chart's, both against the "
+        "reference.\n")
+    add("| camera | illuminant | chart ΔE camera | chart ΔE emulated | chart mean | chart max "
+        "(patch) | training mean | training p95 | other method chart mean / max |")
+    add("|---|---|---|---|---|---|---|---|---|")
+    accs = []
+    for name in sorted(cams, key=lambda k: cams[k]["chart_delta_e"]):
+        c = cams[name]
+        a = c["emulation"]["accuracy"]
+        accs.append(a)
+        oth = "; ".join(f"{k}: {v['chart_mean_delta_e']:.2f} / {v['chart_max_delta_e']:.2f}"
+                        for k, v in c["emulation"].get("other_methods", {}).items())
+        add(f"| {name} | {c['illuminant']} | {a['camera_chart_delta_e']:.2f} | "
+            f"{a['emulated_chart_delta_e']:.2f} | {a['chart_mean_delta_e']:.2f} | "
+            f"{a['chart_max_delta_e']:.2f} ({a['chart_worst_patch']}) | "
+            f"{a['training_mean_delta_e']:.2f} | {a['training_p95_delta_e']:.2f} | {oth} |")
+    if accs:
+        means = np.array([a["chart_mean_delta_e"] for a in accs])
+        maxes = np.array([a["chart_max_delta_e"] for a in accs])
+        gap = np.array([abs(a["emulated_chart_delta_e"] - a["camera_chart_delta_e"]) for a in accs])
+        add(f"\nOver {len(accs)} cameras: chart mean ΔE00 (emulated vs camera) at most "
+            f"{means.max():.2f} (median {np.median(means):.2f}); worst single patch "
+            f"{maxes.max():.2f}; the emulated chart's ΔE differs from the camera's by at most "
+            f"{gap.max():.2f}.\n")
+
+    add("## Cameras\n")
+    add("| camera | illuminant | description |")
+    add("|---|---|---|")
+    for name in sorted(cams):
+        add(f"| {name} | {cams[name]['illuminant']} | {cams[name]['description']} |")
+    add("")
+    add("## Baselines (ΔE = 0: JPEG round trip only)\n")
+    for m, b in sorted(results["baselines"].items()):
+        add(f"- `{m}`: mAP {b['map']:.4f}, AP50 {b['map50']:.4f}, person "
+            f"{_fmt(b['ap'].get('person'), 4)}, bicycle {_fmt(b['ap'].get('bicycle'), 4)} on "
+            f"{b['images']} images.")
+    add("")
+    return "\n".join(lines)
+
+
+def write_report(results: dict[str, Any], out_dir: str | os.PathLike[str]) -> list[Path]:
+    """Write ``validation.md``, ``validation.html``, ``validation.json`` and PNG plots.
+
+    Plots: predicted vs measured with the identity line per class (all, person, bicycle), one
+    figure per prediction table; measured loss against chart ΔE with the tables' worst-case
+    curves; emulation accuracy per camera. Files are written atomically.
+    """
+    from fidelity.fileio import write_bytes_atomic, write_json_atomic, write_text_atomic
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = results["rows"]
+    figures: dict[str, str] = {}
+    written: list[Path] = []
+
+    def png(name: str, fn: Callable[[Path], None]) -> str:
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as tmp:
+            p = Path(tmp) / name
+            fn(p)
+            written.append(write_bytes_atomic(out / name, p.read_bytes()))
+        return name
+
+    if rows:
+        bound = results["summary"]["bound_table"]
+        order = [bound] + [t for t in results["summary"]["tables"] if t != bound]
+        figures["scatter"] = ";".join(
+            png(f"predicted-vs-measured-{t}.png", lambda p, t=t: _plot_scatter(rows, t, p))
+            for t in order)
+        figures["vs_delta_e"] = png("loss-vs-chart-delta-e.png",
+                                    lambda p: _plot_vs_delta_e(rows, order, p))
+    if results["cameras"]:
+        figures["emulation"] = png("emulation-accuracy.png",
+                                   lambda p: _plot_emulation(results["cameras"], p))
+    md = report_markdown(results, figures)
+    written.append(write_text_atomic(out / "validation.md", md))
+    written.append(write_text_atomic(out / "validation.html", _markdown_to_html(md)))
+    written.append(write_json_atomic(out / "validation.json", _json_safe(results)))
+    return written
+
+
+def _json_safe(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_json_safe(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, np.generic):
+        return _json_safe(obj.item())
+    return obj
+
+
+def _markdown_to_html(md: str) -> str:
+    """Minimal Markdown -> HTML for this report: headings, lists, pipe tables, images, bold,
+    inline code. (No external dependency; the report's Markdown is generated, not free-form.)"""
+    import html
+    import re
+
+    def inline(s: str) -> str:
+        s = html.escape(s)
+        s = re.sub(r"!\[([^\]]*)\]\(([^)]+)\)", r'<img alt="\1" src="\2" style="max-width:100%">', s)
+        s = re.sub(r"\*\*([^*]+)\*\*", r"<b>\1</b>", s)
+        return re.sub(r"`([^`]+)`", r"<code>\1</code>", s)
+
+    out = ["<!DOCTYPE html><html><head><meta charset='utf-8'><title>fidelity validation</title>"
+           "<style>body{font-family:sans-serif;max-width:1400px;margin:2em auto;padding:0 1em}"
+           "table{border-collapse:collapse;font-size:12px}td,th{border:1px solid #ccc;"
+           "padding:2px 6px}th{background:#eee}code{background:#f4f4f4}</style></head><body>"]
+    in_list = in_table = False
+    for line in md.splitlines():
+        if in_list and not line.startswith("- "):
+            out.append("</ul>")
+            in_list = False
+        if in_table and not line.startswith("|"):
+            out.append("</table>")
+            in_table = False
+        if line.startswith("#"):
+            level = len(line) - len(line.lstrip("#"))
+            out.append(f"<h{level}>{inline(line[level:].strip())}</h{level}>")
+        elif line.startswith("- "):
+            if not in_list:
+                out.append("<ul>")
+                in_list = True
+            out.append(f"<li>{inline(line[2:])}</li>")
+        elif line.startswith("|"):
+            cells = [c.strip() for c in line.strip().strip("|").split("|")]
+            if all(set(c) <= {"-", ":"} for c in cells):
+                continue
+            tag = "th" if not in_table else "td"
+            if not in_table:
+                out.append("<table>")
+                in_table = True
+            out.append("<tr>" + "".join(f"<{tag}>{inline(c)}</{tag}>" for c in cells) + "</tr>")
+        elif line.strip():
+            out.append(f"<p>{inline(line)}</p>")
+    if in_list:
+        out.append("</ul>")
+    if in_table:
+        out.append("</table>")
+    out.append("</body></html>")
+    return "\n".join(out) + "\n"
+
+
 __all__ = [
     "BASELINE",
     "CLASSES",
@@ -596,14 +1028,6 @@ __all__ = [
     "predictions_for",
     "prepare_case",
     "run_validation",
+    "write_report",
 ]
 
-
-def write_report(results: dict[str, Any], out_dir: str | os.PathLike[str]) -> list[Path]:
-    """Placeholder replaced below."""
-    from fidelity.fileio import write_json_atomic
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(out / "validation.json", results)
-    return [out / "validation.json"]
