@@ -332,8 +332,9 @@ def _fold_scores(coco: Any, dets: dict[int, np.ndarray], ids: Sequence[int]) -> 
     from fidelity.cocoeval import evaluate_detections
 
     out = []
-    for k in range(FOLDS):
-        fold = list(ids[k::FOLDS])
+    n = min(FOLDS, len(ids))  # fewer images than folds: one image per fold
+    for k in range(n if n >= 2 else 0):
+        fold = list(ids[k::n])
         s = evaluate_detections(coco, dets, fold)
         out.append({"map": s.map, "person": s.ap.get("person"), "bicycle": s.ap.get("bicycle"),
                     "images": len(fold)})

@@ -1,0 +1,149 @@
+"""Tests for fidelity.emulation against closed forms and colour-science."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fidelity.camera import camera_from_dict
+from fidelity.colorimetry import delinearize_srgb, linearize_srgb
+from fidelity.emulation import (
+    EMULATION_METHODS,
+    _trilinear,
+    camera_samples,
+    emulation_accuracy,
+    fit_emulation,
+    fit_root_polynomial,
+    root_polynomial_terms,
+    training_reflectances,
+)
+from fidelity.errors import UnknownNameError
+
+#: Rotation of linear RGB by -30 degrees about the grey axis (cameras/bad-hue-rotation.toml).
+HUE_MATRIX = np.array([[0.91068, 0.33333, -0.24402], [-0.24402, 0.91068, 0.33333],
+                       [0.33333, -0.24402, 0.91068]])
+
+
+def matrix_camera(matrix: np.ndarray, tone: str = "srgb", bits: int | None = None):
+    """Exact (CIE CMF) sensor + a given CCM: its colour rendering has a closed form."""
+    d = {"name": "m", "sensitivities": {"source": "ideal"},
+         "white_balance": {"method": "illuminant"},
+         "ccm": {"method": "matrix", "matrix": matrix.tolist()}, "tone": {"curve": tone}}
+    if bits:
+        d["quantisation"] = {"bits": bits}
+    return camera_from_dict(d)
+
+
+def closed_form(x: np.ndarray, matrix: np.ndarray) -> np.ndarray:
+    """sRGB encode(clip(M @ linearize(x))) -- the matrix camera's output for reference x."""
+    return delinearize_srgb(np.clip(linearize_srgb(x) @ matrix.T, 0.0, 1.0))
+
+
+def test_root_polynomial_terms_match_colour_science() -> None:
+    import colour
+
+    rng = np.random.default_rng(1)
+    x = rng.normal(0.3, 0.4, (200, 3))  # includes negative components (out of gamut)
+    ref = colour.characterisation.polynomial_expansion_Finlayson2015(x, 2, True)
+    np.testing.assert_allclose(root_polynomial_terms(x), ref, atol=1e-12)
+
+
+def test_fit_root_polynomial_recovers_a_known_mapping() -> None:
+    rng = np.random.default_rng(2)
+    m = rng.normal(0, 0.3, (3, 6)) + np.hstack([np.eye(3), np.zeros((3, 3))])
+    x = rng.uniform(0, 1, (60, 3))
+    y = root_polynomial_terms(x) @ m.T
+    np.testing.assert_allclose(fit_root_polynomial(x, y), m, atol=1e-9)
+
+
+def test_training_set_holds_chart_and_colour_science_data() -> None:
+    s = training_reflectances("colour-science")
+    chart = training_reflectances("chart")
+    np.testing.assert_array_equal(s.reflectance[:24], chart.reflectance)
+    assert [n.split(": ", 1)[1] for n in s.names[:24]] == list(chart.names)
+    assert s.sources["rawtoaces v1 training data"] == 190
+    assert s.reflectance.shape[0] == sum(s.sources.values()) > 300
+    assert np.all(s.reflectance >= 0)
+
+
+@pytest.mark.parametrize("method", EMULATION_METHODS)
+def test_exact_camera_emulates_to_identity(method: str) -> None:
+    cam = camera_from_dict({"name": "i", "sensitivities": {"source": "ideal"},
+                            "white_balance": {"method": "illuminant"}, "tone": {"curve": "linear"}})
+    emu = fit_emulation(cam, "D65", method)
+    x = np.random.default_rng(3).uniform(0, 1, (3000, 3))
+    # white balance gains of the tabulated D65 vs the sRGB white differ by ~1e-4
+    assert np.abs(emu.apply(x) - x).max() < 2e-3
+
+
+@pytest.mark.parametrize("training", ["chart", "colour-science"])
+def test_matrix_camera_is_emulated_in_closed_form(training: str) -> None:
+    emu = fit_emulation(matrix_camera(HUE_MATRIX), "D65", "root-polynomial", training)
+    np.testing.assert_allclose(emu.matrix[:, 3:], 0.0, atol=1e-3)  # no root terms needed
+    x = np.random.default_rng(4).uniform(0, 1, (3000, 3))
+    assert np.abs(emu.apply(x) - closed_form(x, HUE_MATRIX)).max() < 2e-3
+
+
+def test_quantisation_is_applied() -> None:
+    emu = fit_emulation(matrix_camera(np.eye(3), bits=3), "D65", "root-polynomial", "chart")
+    y = emu.apply(np.random.default_rng(5).uniform(0, 1, (500, 3)))
+    np.testing.assert_allclose(y * 7, np.round(y * 7), atol=1e-9)
+
+
+def test_camera_samples_agree_with_the_renderer() -> None:
+    """Independent paths: render_chart paints and samples an image; camera_samples does not."""
+    from fidelity.render import render_chart
+
+    cam = camera_from_dict({"name": "n", "sensitivities": {"source": "Nikon 5100 (NPL)"},
+                            "exposure": {"mode": "auto"},
+                            "white_balance": {"method": "grey-world"},
+                            "ccm": {"method": "fit"}, "tone": {"curve": "srgb"}})
+    s = camera_samples(cam, "A", training_reflectances("chart"))
+    r = render_chart(cam, "A")
+    np.testing.assert_allclose(s.camera_srgb, np.clip(r.measurement.srgb, 0, 1), atol=1e-9)
+    np.testing.assert_allclose(s.reference_srgb, np.clip(r.measurement.reference_srgb, 0, 1),
+                               atol=1e-9)
+
+
+def test_trilinear_is_exact_for_affine_functions() -> None:
+    g = np.linspace(0, 1, 5)
+    grid = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1)
+    a = np.array([[0.2, 0.5, -0.1], [0.0, 1.0, 0.3], [0.7, -0.2, 0.1]])
+    lut = grid @ a.T + 0.05
+    x = np.random.default_rng(6).uniform(0, 1, (100, 3))
+    np.testing.assert_allclose(_trilinear(lut, x), x @ a.T + 0.05, atol=1e-12)
+
+
+def test_lut3d_reproduces_training_colours_better_in_sample() -> None:
+    cam = camera_from_dict({"name": "s", "sensitivities": {"source": "Sigma SDMerrill (NPL)"},
+                            "exposure": {"mode": "auto"},
+                            "white_balance": {"method": "illuminant"},
+                            "ccm": {"method": "fit"}, "tone": {"curve": "srgb"}})
+    from fidelity.colorimetry import delta_e_2000, srgb_to_lab
+
+    errs = {}
+    for m in EMULATION_METHODS:
+        emu = fit_emulation(cam, "F11", m)
+        s = emu.samples
+        errs[m] = delta_e_2000(srgb_to_lab(emu.apply(s.reference_srgb)),
+                               srgb_to_lab(s.camera_srgb)).mean()
+    assert errs["lut3d"] < errs["root-polynomial"] < 3.0
+
+
+def test_apply_uint8_equals_float_path_and_accuracy_is_small() -> None:
+    emu = fit_emulation(matrix_camera(HUE_MATRIX), "D65", "root-polynomial", "chart")
+    img = np.random.default_rng(7).integers(0, 256, (8, 9, 3), dtype=np.uint8)
+    from fidelity.dataset import to_uint8
+
+    np.testing.assert_array_equal(emu.apply_uint8(img), to_uint8(emu.apply(img / 255.0)))
+    acc = emulation_accuracy(emu).to_dict()
+    # the only differences left: 8-bit rounding of the chart and out-of-gamut (cyan) clipping
+    assert acc["chart_mean_delta_e"] < 0.5
+    assert abs(acc["emulated_chart_delta_e"] - acc["camera_chart_delta_e"]) < 0.5
+
+
+def test_unknown_method_and_training_are_named() -> None:
+    with pytest.raises(UnknownNameError, match="emulation method"):
+        fit_emulation(matrix_camera(np.eye(3)), method="spline")
+    with pytest.raises(UnknownNameError, match="training set"):
+        training_reflectances("munsell")

@@ -1,0 +1,225 @@
+"""Tests for fidelity.validate: suite loading, error profiles, scoring logic, a tiny real run."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from fidelity.errors import InputFileError
+from fidelity.validate import (
+    BASELINE,
+    FOLDS,
+    ValidationStore,
+    chart_error_profile,
+    collect_results,
+    load_suite,
+    write_report,
+)
+
+REPO = Path(__file__).resolve().parent.parent
+CAMERAS = REPO / "cameras"
+
+IDEAL = """name = "{name}"
+[sensitivities]
+source = "ideal"
+[white_balance]
+method = "illuminant"
+[tone]
+curve = "srgb"
+"""
+
+
+def make_suite(folder: Path, names: list[str], suite: str | None = None) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    for n in names:
+        (folder / f"{n}.toml").write_text(IDEAL.format(name=n))
+    if suite is not None:
+        (folder / "suite.toml").write_text(suite)
+    return folder
+
+
+# --------------------------------------------------------------------------------- suite
+
+
+def test_repository_suite_spans_the_required_cases() -> None:
+    cases = load_suite(CAMERAS)
+    assert len(cases) >= 20
+    ills = {c.illuminant for c in cases}
+    assert {"D65", "A", "F11", "LED"} <= ills
+    text = {c.name: c.path.read_text() for c in cases}
+    assert any("Nikon 5100" in t for t in text.values())
+    assert any("Sigma SDMerrill" in t for t in text.values())
+    assert any('fit_method = "Finlayson 2015"' in t for t in text.values())
+    assert any('curve = "lut"' in t or 'curve = "gamma"' in t for t in text.values())
+    assert sum(n.startswith("bad-") for n in text) >= 3
+    for n, t in text.items():  # every file documents what it models
+        assert t.startswith("#") and "description" in t, n
+    assert (CAMERAS / "README.md").is_file()
+
+
+def test_suite_illuminants_and_default(tmp_path: Path) -> None:
+    d = make_suite(tmp_path / "s", ["a", "b"], 'default_illuminant = "F11"\n[illuminant]\na = "A"\n')
+    cases = {c.name: c.illuminant for c in load_suite(d)}
+    assert cases == {"a": "A", "b": "F11"}
+    d2 = make_suite(tmp_path / "s2", ["c"])
+    assert load_suite(d2)[0].illuminant == "D65"
+
+
+@pytest.mark.parametrize("suite, match", [
+    ('[illuminant]\nghost = "A"\n', "ghost"),
+    ('colour = 1\n', "unknown field"),
+    ('[illuminant]\na = "sunset"\n', "sunset"),
+    ('[illuminant\n', "invalid TOML"),
+])
+def test_bad_suite_files_are_named(tmp_path: Path, suite: str, match: str) -> None:
+    d = make_suite(tmp_path / "s", ["a"], suite)
+    with pytest.raises(InputFileError, match=match):
+        load_suite(d)
+
+
+def test_bad_folders(tmp_path: Path) -> None:
+    with pytest.raises(InputFileError, match="does not exist"):
+        load_suite(tmp_path / "missing")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputFileError, match="no camera files"):
+        load_suite(tmp_path / "empty")
+    d = make_suite(tmp_path / "r", [BASELINE])
+    with pytest.raises(InputFileError, match="reserved"):
+        load_suite(d)
+    d = make_suite(tmp_path / "x", ["a"])
+    (d / "b.toml").write_text('name = "b"\n[tone]\ncurve = "sigmoid"\n')
+    with pytest.raises(InputFileError, match="b.toml"):
+        load_suite(d)
+
+
+# --------------------------------------------------------------------------------- profile
+
+
+def test_error_profile_of_a_pure_lightness_shift() -> None:
+    """A pure L* shift: CIEDE2000's ΔL' is exactly the shift, ΔC' = ΔH' = 0 (Sharma 2005)."""
+    from fidelity.charts import load_chart
+    from fidelity.colorimetry import lab_to_srgb
+    from fidelity.measure import measure_chart
+
+    chart = load_chart()
+    lab = chart.lab + np.array([3.0, 0.0, 0.0])
+    m = measure_chart(lab_to_srgb(lab), chart.lab, chart.patch_names)
+    p = chart_error_profile(m)
+    assert p["dominant"] == "lightness"
+    assert p["mean_dl"] == pytest.approx(3.0, abs=1e-6)
+    assert p["share_l"] == pytest.approx(1.0, abs=1e-6)
+    assert p["contrast_ratio"] == pytest.approx(1.0, abs=1e-9)
+
+
+def test_error_profile_of_a_chroma_scaling() -> None:
+    from fidelity.charts import load_chart
+    from fidelity.colorimetry import lab_to_srgb
+    from fidelity.measure import measure_chart
+
+    chart = load_chart()
+    lab = chart.lab * np.array([1.0, 0.6, 0.6])  # less chroma, same hue and lightness
+    p = chart_error_profile(measure_chart(lab_to_srgb(lab), chart.lab, chart.patch_names))
+    assert p["dominant"] == "chroma" and p["mean_dc"] < 0
+    assert p["share_h"] < 1e-6
+
+
+# --------------------------------------------------------------------------------- scoring
+
+
+def _score(m: float, person: float, bicycle: float | None, images: int = 10) -> SimpleNamespace:
+    return SimpleNamespace(images=images, map=m, map50=m, ap={"person": person, "bicycle": bicycle})
+
+
+def test_collect_results_losses_standard_errors_and_bound(tmp_path: Path) -> None:
+    st = ValidationStore(tmp_path / "store")
+    st.register_model("det", "det.onnx", "0" * 64, None, {})
+    base_folds = [{"map": 0.40, "person": 0.5, "bicycle": 0.3, "images": 2}] * FOLDS
+    st.finish_cell("det", BASELINE, _score(0.40, 0.50, 0.30), base_folds, 1.0)
+    fold_maps = [0.39, 0.38, 0.40, 0.37, 0.36]
+    folds = [{"map": v, "person": 0.5, "bicycle": 0.3, "images": 2} for v in fold_maps]
+    st.finish_cell("det", "cam", _score(0.38, 0.45, 0.30), folds, 1.0)
+    profile = {"dominant": "hue", "share_l": 0.2, "share_c": 0.2, "share_h": 0.6, "mean_dl": 0.0,
+               "mean_dc": 0.0, "contrast_ratio": 1.0, "neutral_cast_ab": [0.0, 0.0]}
+    st.set_case("cam", "k", {"illuminant": "D65", "chart_delta_e": 2.0, "profile": profile,
+                             "description": "test", "emulation": {"accuracy": {
+                                 "chart_mean_delta_e": 0.3, "chart_max_delta_e": 0.9,
+                                 "chart_worst_patch": "cyan", "training_mean_delta_e": 0.4,
+                                 "training_p95_delta_e": 1.0, "camera_chart_delta_e": 2.0,
+                                 "emulated_chart_delta_e": 2.1}}})
+    res = collect_results(st, tables=["safecolor-2025"], bound_table="safecolor-2025")
+    (row,) = res["rows"]
+    assert row["measured"]["dmap_points"] == pytest.approx(2.0)
+    assert row["measured"]["dmap_relative"] == pytest.approx(5.0)
+    assert row["measured"]["dap_person_points"] == pytest.approx(5.0)
+    assert row["measured"]["dap_bicycle_points"] == pytest.approx(0.0)
+    d = 100 * (0.40 - np.array(fold_maps))
+    assert row["se"]["dmap_points"] == pytest.approx(d.std(ddof=1) / np.sqrt(FOLDS))
+    # safecolor-2025 (linear): ΔE 2 lies between (0, 0) and (3, 1 point): 2/3 point for mAP
+    assert row["bound"]["all"]["predicted"] == pytest.approx(2 / 3)
+    assert row["bound"]["all"]["within"] is False
+    assert row["bound"]["bicycle"]["within"] is True
+    s = res["summary"]
+    assert s["all"]["cameras"] == 1 and s["all"]["cameras_within"] == 0
+    assert s["all"]["failures"] == [("cam", "det")]
+    paths = write_report(res, tmp_path / "report")
+    md = (tmp_path / "report" / "validation.md").read_text()
+    assert "**cam** / det" in md and "1.9 SE" in md and "inside sampling noise" in md
+    assert {p.name for p in paths} >= {"validation.md", "validation.html", "validation.json",
+                                       "predicted-vs-measured-safecolor-2025.png"}
+    json.loads((tmp_path / "report" / "validation.json").read_text())
+
+
+def test_cli_needs_models_unless_report_only(tmp_path: Path) -> None:
+    from fidelity.cli import main
+
+    d = make_suite(tmp_path / "s", ["a"])
+    r = CliRunner().invoke(main, ["validate", "--cameras", str(d), "--out", str(tmp_path / "o"),
+                                  "--store", str(tmp_path / "st")])
+    assert r.exit_code == 2 and "--models" in r.output
+    r = CliRunner().invoke(main, ["validate", "--cameras", str(d), "--out", str(tmp_path / "o"),
+                                  "--store", str(tmp_path / "none"), "--report-only"])
+    assert r.exit_code == 2 and "no validation store" in r.output
+
+
+# --------------------------------------------------------------------------------- real slice
+
+
+@pytest.mark.shared
+@pytest.mark.slow
+def test_tiny_real_run_is_resumable(shared: Path, tmp_path: Path) -> None:
+    """Two cameras, YOLOX-nano, 4 images: a full run, then a rerun that does no new work."""
+    from fidelity.cli import main
+
+    model = shared / "models" / "yolox_nano.onnx"
+    images = shared / "coco" / "val2017"
+    ann = shared / "coco" / "annotations" / "instances_val2017_subset.json"
+    if not (model.is_file() and images.is_dir() and ann.is_file()):
+        pytest.skip("shared COCO slice or yolox_nano.onnx missing")
+    suite = tmp_path / "cams"
+    suite.mkdir()
+    for n in ("ideal-srgb8", "bad-hue-rotation"):
+        shutil.copy(CAMERAS / f"{n}.toml", suite)
+    args = ["validate", "--cameras", str(suite), "--models", str(model), "--images", str(images),
+            "--annotations", str(ann), "--out", str(tmp_path / "rep"), "--store",
+            str(tmp_path / "st"), "--limit", "4", "--no-progress"]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 0, r.output
+    st = ValidationStore(tmp_path / "st", create=False)
+    cells = {c["camera"]: c for c in st.cells()}
+    assert set(cells) == {BASELINE, "ideal-srgb8", "bad-hue-rotation"}
+    assert all(c["images"] == 4 for c in cells.values())
+    info = st.cases()["ideal-srgb8"]
+    assert info["chart_delta_e"] < 0.5
+    assert info["emulation"]["accuracy"]["chart_max_delta_e"] < 1.5
+    before = {k: c["finished"] for k, c in cells.items()}
+    r2 = CliRunner().invoke(main, args)
+    assert r2.exit_code == 0, r2.output
+    assert {c["camera"]: c["finished"] for c in st.cells()} == before
+    md = (tmp_path / "rep" / "validation.md").read_text()
+    assert "bad-hue-rotation" in md and "yolox_nano" in md
