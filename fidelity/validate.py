@@ -643,6 +643,17 @@ def failure_reason(row: dict[str, Any], cls: str, camera: dict[str, Any]) -> str
     return "; ".join(parts) + "."
 
 
+def _plain_ticks(ax: Any) -> None:
+    """Symlog axes labelled with plain numbers (0.5, 1, 10) instead of powers of ten."""
+    from matplotlib.ticker import FuncFormatter, SymmetricalLogLocator
+
+    for axis in (ax.xaxis, ax.yaxis):
+        if axis.get_scale() == "symlog":
+            axis.set_major_locator(SymmetricalLogLocator(base=10, linthresh=1.0,
+                                                         subs=[1.0, 2.0, 5.0]))
+            axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+
+
 def _plot_scatter(rows: list[dict[str, Any]], table: str, path: Path) -> None:
     import matplotlib
 
@@ -672,6 +683,7 @@ def _plot_scatter(rows: list[dict[str, Any]], table: str, path: Path) -> None:
                         label="bound holds")
         ax.set_xscale("symlog", linthresh=1.0)
         ax.set_yscale("symlog", linthresh=1.0)
+        _plain_ticks(ax)
         ax.set_xlabel(f"predicted Δ{_CLASS_TITLES[cls]} (points, {table})")
         ax.set_ylabel("measured loss (points)")
         ax.set_title(_CLASS_TITLES[cls])
@@ -714,6 +726,7 @@ def _plot_vs_delta_e(rows: list[dict[str, Any]], tables: Sequence[str], path: Pa
             ax.plot(grid, y, ls, color="k", lw=1.2, label=f"worst case, {t}")
         ax.axhline(0, color="grey", lw=0.5)
         ax.set_yscale("symlog", linthresh=1.0)
+        _plain_ticks(ax)
         ax.set_xlabel("chart ΔE00 of the camera (mean over 24 patches)")
         ax.set_ylabel(f"loss of {_CLASS_TITLES[cls]} (points)")
         ax.set_title(_CLASS_TITLES[cls])
@@ -747,8 +760,10 @@ def _plot_emulation(cameras: dict[str, dict[str, Any]], path: Path) -> None:
     plt.close(fig)
 
 
-def report_markdown(results: dict[str, Any], figures: dict[str, str]) -> str:
-    """The Markdown report (see :func:`write_report`)."""
+def report_markdown(results: dict[str, Any], figures: dict[str, str],
+                    notes: str | None = None) -> str:
+    """The Markdown report (see :func:`write_report`); ``notes`` (Markdown) is included as the
+    "Analysis" section."""
     rows, summ, cams, meta = (results["rows"], results["summary"], results["cameras"],
                               results["meta"])
     bound = summ["bound_table"]
@@ -783,6 +798,9 @@ def report_markdown(results: dict[str, Any], figures: dict[str, str]) -> str:
     add(f"- Finished: {len(rows)} (camera, model) cells, {len(finished)} of {len(cams)} cameras "
         "with at least one model.\n")
 
+    if notes:
+        add("## Analysis\n")
+        add(notes.strip() + "\n")
     add(f"## Does the worst-case table (`{bound}`) bound the measured loss?\n")
     add("| class | cells within bound | within bound up to 2 SE | cameras within bound (all models) | share |")
     add("|---|---|---|---|---|")
@@ -909,7 +927,8 @@ def report_markdown(results: dict[str, Any], figures: dict[str, str]) -> str:
     return "\n".join(lines)
 
 
-def write_report(results: dict[str, Any], out_dir: str | os.PathLike[str]) -> list[Path]:
+def write_report(results: dict[str, Any], out_dir: str | os.PathLike[str],
+                 notes: str | None = None) -> list[Path]:
     """Write ``validation.md``, ``validation.html``, ``validation.json`` and PNG plots.
 
     Plots: predicted vs measured with the identity line per class (all, person, bicycle), one
@@ -944,7 +963,7 @@ def write_report(results: dict[str, Any], out_dir: str | os.PathLike[str]) -> li
     if results["cameras"]:
         figures["emulation"] = png("emulation-accuracy.png",
                                    lambda p: _plot_emulation(results["cameras"], p))
-    md = report_markdown(results, figures)
+    md = report_markdown(results, figures, notes)
     written.append(write_text_atomic(out / "validation.md", md))
     written.append(write_text_atomic(out / "validation.html", _markdown_to_html(md)))
     written.append(write_json_atomic(out / "validation.json", _json_safe(results)))

@@ -34,11 +34,13 @@ import click
                    "table of fidelity predict).")
 @click.option("--report-only", is_flag=True,
               help="Only write the report from what the store holds (no inference).")
+@click.option("--notes", default=None, type=click.Path(dir_okay=False, exists=True),
+              help="Markdown file with a written analysis, included in the report.")
 @click.option("--no-progress", is_flag=True, help="No progress bars.")
 def validate(cameras: str, models: str | None, images: str | None, annotations: str | None,
              out: str, limit: int | None, store: str | None, method: str, training: str,
              threads: int, provider: str, bound_table: str | None, report_only: bool,
-             no_progress: bool) -> None:
+             notes: str | None, no_progress: bool) -> None:
     """Render every camera's chart, predict its ΔmAP, emulate it on COCO and measure ΔmAP.
 
     \b
@@ -81,7 +83,10 @@ def validate(cameras: str, models: str | None, images: str | None, annotations: 
     from fidelity.validate import write_report
 
     results = collect_results(st, bound_table=bound_table)
-    paths = write_report(results, out)
+    from pathlib import Path
+
+    paths = write_report(results, out,
+                         notes=Path(notes).read_text(encoding="utf-8") if notes else None)
     s = results["summary"]
     click.echo(f"{len(results['rows'])} (camera, model) cells; bound table {s['bound_table']}: "
                f"mAP within bound for {s['all']['cameras_within']}/{s['all']['cameras']} cameras")
