@@ -156,16 +156,25 @@ def _chart_only(chart_spectra: str) -> ReflectanceSet:
                           {f"chart ({chart.name})": 24})
 
 
-#: Training sets by name: function(chart_spectra) -> ReflectanceSet.
+def _without_chart(chart_spectra: str) -> ReflectanceSet:
+    full = _colour_science_reflectances(chart_spectra)
+    sources = {k: v for k, v in full.sources.items() if not k.startswith("chart")}
+    return ReflectanceSet("colour-science-no-chart", full.names[24:], full.reflectance[24:],
+                          sources)
+
+
+#: Training sets by name: function(chart_spectra) -> ReflectanceSet. ``colour-science-no-chart``
+#: leaves the 24 measured chart patches out, so that accuracy on the chart is out of sample.
 TRAINING_SETS: dict[str, Callable[[str], ReflectanceSet]] = {
     "chart": _chart_only,
     "colour-science": _colour_science_reflectances,
+    "colour-science-no-chart": _without_chart,
 }
 
 
 def training_reflectances(name: str = "colour-science",
                           chart_spectra: str = "BabelColor Average") -> ReflectanceSet:
-    """The named training set (:data:`TRAINING_SETS`); the chart patches always come first."""
+    """The named training set (:data:`TRAINING_SETS`); the chart patches, when in it, first."""
     if name not in TRAINING_SETS:
         raise unknown_name("training set", name, TRAINING_SETS)
     return TRAINING_SETS[name](chart_spectra)

@@ -514,14 +514,29 @@ def _se(base_folds: list[dict[str, Any]], folds: list[dict[str, Any]], key: str)
     return float(np.std(d, ddof=1) / math.sqrt(len(d)))
 
 
+def holdout_accuracy(cases: Sequence[CameraCase], method: str = "root-polynomial"
+                     ) -> dict[str, dict[str, Any]]:
+    """Out-of-sample emulation accuracy per camera: the mapping fitted on the colour-science
+    reflectances *without* the 24 chart patches, checked on the chart
+    (:func:`fidelity.emulation.emulation_accuracy`)."""
+    from fidelity.emulation import emulation_accuracy, fit_emulation
+
+    return {c.name: emulation_accuracy(fit_emulation(c.path, c.illuminant, method,
+                                                     "colour-science-no-chart")).to_dict()
+            for c in cases}
+
+
 def collect_results(store: ValidationStore, tables: Sequence[str] | None = None,
-                    bound_table: str | None = None) -> dict[str, Any]:
+                    bound_table: str | None = None,
+                    suite: Sequence[CameraCase] | None = None) -> dict[str, Any]:
     """Predicted against measured losses of every finished (camera, model) cell.
 
     ``tables``: prediction tables to evaluate (default: all available); ``bound_table``: the
     worst-case table whose bound is tested (default :data:`fidelity.prediction.DEFAULT_TABLE`).
     Returns a JSON-ready dict with ``rows`` (one per camera and model), ``summary``,
-    ``cameras`` (chart and emulation records), ``models`` and provenance.
+    ``cameras`` (chart and emulation records), ``models`` and provenance. With ``suite`` (the
+    camera cases), each stored camera also gets its out-of-sample emulation accuracy
+    (:func:`holdout_accuracy`) under ``emulation.holdout``.
     """
     from fidelity.prediction import DEFAULT_TABLE, available_tables
 
@@ -530,6 +545,11 @@ def collect_results(store: ValidationStore, tables: Sequence[str] | None = None,
     if bound not in tabs:
         tabs.append(bound)
     cases = store.cases()
+    if suite:
+        method = store.meta().get("settings", {}).get("emulation_method", "root-polynomial")
+        hold = holdout_accuracy([c for c in suite if c.name in cases], method)
+        for name, acc in hold.items():
+            cases[name].setdefault("emulation", {})["holdout"] = acc
     cells = {(c["model"], c["camera"]): c for c in store.cells()}
     models = store.models()
     rows = []
@@ -889,19 +909,24 @@ def report_markdown(results: dict[str, Any], figures: dict[str, str],
         "patch). Training: mean and 95th percentile over all training colours (in-sample). "
         "Chart ΔE columns: the camera's chart ΔE and the emulated chart's, both against the "
         "reference.\n")
+    add("Held out: the same method fitted without the 24 chart spectra, checked on the chart "
+        "(out of sample).\n")
     add("| camera | illuminant | chart ΔE camera | chart ΔE emulated | chart mean | chart max "
-        "(patch) | training mean | training p95 | other method chart mean / max |")
-    add("|---|---|---|---|---|---|---|---|---|")
+        "(patch) | held-out chart mean / max | training mean | training p95 | "
+        "other method chart mean / max |")
+    add("|---|---|---|---|---|---|---|---|---|---|")
     accs = []
     for name in sorted(cams, key=lambda k: cams[k]["chart_delta_e"]):
         c = cams[name]
         a = c["emulation"]["accuracy"]
         accs.append(a)
+        h = c["emulation"].get("holdout")
+        hold = "–" if not h else f"{h['chart_mean_delta_e']:.2f} / {h['chart_max_delta_e']:.2f}"
         oth = "; ".join(f"{k}: {v['chart_mean_delta_e']:.2f} / {v['chart_max_delta_e']:.2f}"
                         for k, v in c["emulation"].get("other_methods", {}).items())
         add(f"| {name} | {c['illuminant']} | {a['camera_chart_delta_e']:.2f} | "
             f"{a['emulated_chart_delta_e']:.2f} | {a['chart_mean_delta_e']:.2f} | "
-            f"{a['chart_max_delta_e']:.2f} ({a['chart_worst_patch']}) | "
+            f"{a['chart_max_delta_e']:.2f} ({a['chart_worst_patch']}) | {hold} | "
             f"{a['training_mean_delta_e']:.2f} | {a['training_p95_delta_e']:.2f} | {oth} |")
     if accs:
         means = np.array([a["chart_mean_delta_e"] for a in accs])
@@ -910,7 +935,14 @@ def report_markdown(results: dict[str, Any], figures: dict[str, str],
         add(f"\nOver {len(accs)} cameras: chart mean ΔE00 (emulated vs camera) at most "
             f"{means.max():.2f} (median {np.median(means):.2f}); worst single patch "
             f"{maxes.max():.2f}; the emulated chart's ΔE differs from the camera's by at most "
-            f"{gap.max():.2f}.\n")
+            f"{gap.max():.2f}.")
+        hs = [cams[n]["emulation"]["holdout"] for n in cams if cams[n]["emulation"].get("holdout")]
+        if hs:
+            hm = np.array([h["chart_mean_delta_e"] for h in hs])
+            add(f"Held out (chart spectra not in the fit): chart mean ΔE00 at most {hm.max():.2f} "
+                f"(median {np.median(hm):.2f}); worst single patch "
+                f"{max(h['chart_max_delta_e'] for h in hs):.2f}.")
+        add("")
 
     add("## Cameras\n")
     add("| camera | illuminant | description |")
@@ -1043,6 +1075,7 @@ __all__ = [
     "chart_error_profile",
     "collect_results",
     "default_store",
+    "holdout_accuracy",
     "image_delta_e",
     "load_suite",
     "predictions_for",

@@ -147,3 +147,11 @@ def test_unknown_method_and_training_are_named() -> None:
         fit_emulation(matrix_camera(np.eye(3)), method="spline")
     with pytest.raises(UnknownNameError, match="training set"):
         training_reflectances("munsell")
+
+
+def test_holdout_training_set_leaves_the_chart_out() -> None:
+    full = training_reflectances("colour-science")
+    held = training_reflectances("colour-science-no-chart")
+    assert len(held.names) == len(full.names) - 24
+    assert not any(n.startswith("chart") for n in held.names)
+    np.testing.assert_array_equal(held.reflectance, full.reflectance[24:])

@@ -82,7 +82,7 @@ def validate(cameras: str, models: str | None, images: str | None, annotations: 
                             progress=not no_progress)
     from fidelity.validate import write_report
 
-    results = collect_results(st, bound_table=bound_table)
+    results = collect_results(st, bound_table=bound_table, suite=cases)
     from pathlib import Path
 
     paths = write_report(results, out,
