@@ -20,7 +20,7 @@ from test_audit import corners_of, draw_chart, expected_delta_e, write_exr, writ
 from fidelity.charts import load_chart
 from fidelity.cli import main
 from fidelity.errors import InvalidValueError
-from fidelity.prediction import predict
+from fidelity.prediction import DEFAULT_TABLE, predict
 from fidelity.transforms import apply_transform
 from fidelity.verdict import Criterion, evaluate
 
@@ -124,7 +124,8 @@ def test_audit_linear_exr_cli(tmp_path):
 
 
 def test_predict_cli(tmp_path):
-    r = run("predict", "--delta-e", "4.5", "--class", "bicycle", "--json", tmp_path / "p.json")
+    r = run("predict", "--delta-e", "4.5", "--class", "bicycle", "--table", "safecolor-2025",
+            "--json", tmp_path / "p.json")
     assert r.exit_code == 0, r.output
     doc = json.loads((tmp_path / "p.json").read_text())
     # chords between the published bounds: ΔmAP (3, 1)-(6, 3); bicycle ΔAP = ΔE between 1 and 11
@@ -133,7 +134,9 @@ def test_predict_cli(tmp_path):
     assert doc["table"]["name"] == "safecolor-2025"
     assert len(doc["transforms"]) == 10
     assert r.stdout.splitlines()[1].strip().startswith("bicycle ΔAP: <= 4.50")
-    assert run("predict", "--list-tables").stdout.startswith("safecolor-2025 (default)")
+    listing = run("predict", "--list-tables").stdout.splitlines()
+    assert any(line.startswith("safecolor-2025") for line in listing)
+    assert [line.split(" ")[0] for line in listing if "(default)" in line] == [DEFAULT_TABLE]
 
 
 def test_verdict_logic():
