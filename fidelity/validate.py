@@ -841,8 +841,18 @@ def report_markdown(results: dict[str, Any], figures: dict[str, str],
                 f"measured) = {_fmt(_spearman(p, m))}; within for "
                 f"{int(np.sum(err <= 0))}/{len(err)} cells.")
     de = [r["chart_delta_e"] for r in rows]
-    add(f"- Spearman ρ(chart ΔE, measured ΔmAP) = "
-        f"{_fmt(_spearman(de, [r['measured']['dmap_points'] for r in rows]))}.\n")
+    loss = [r["measured"]["dmap_points"] for r in rows]
+    add(f"- Spearman ρ(chart ΔE, measured ΔmAP) = {_fmt(_spearman(de, loss))}; ρ(photo ΔE00 of "
+        "the emulation on COCO images, measured ΔmAP) = "
+        f"{_fmt(_spearman([cams[r['camera']].get('image_delta_e', {}).get('mean', np.nan) for r in rows], loss))}"
+        " (all cells, both models).")
+    for m in sorted({r["model"] for r in rows}):
+        mr = [r for r in rows if r["model"] == m]
+        add(f"  - `{m}`: ρ(chart ΔE, ΔmAP) = "
+            f"{_fmt(_spearman([r['chart_delta_e'] for r in mr], [r['measured']['dmap_points'] for r in mr]))}"
+            f" over {len(mr)} cameras; largest measured ΔmAP "
+            f"{max(r['measured']['dmap_points'] for r in mr):.2f} points.")
+    add("")
 
     for key, title in (("scatter", "Predicted against measured (identity line dashed)"),
                        ("vs_delta_e", "Measured loss against chart ΔE with the worst-case curves"),
@@ -1032,6 +1042,8 @@ def _markdown_to_html(md: str) -> str:
            "padding:2px 6px}th{background:#eee}code{background:#f4f4f4}</style></head><body>"]
     in_list = in_table = False
     for line in md.splitlines():
+        if line.startswith("  - "):  # one nesting level is shown as a plain item
+            line = line[2:]
         if in_list and not line.startswith("- "):
             out.append("</ul>")
             in_list = False
