@@ -105,3 +105,18 @@ def test_report_files(store, tmp_path) -> None:
     assert (out / "report.html").read_text().count("<img") == len(
         [k for k in written if k.endswith(".png")]) >= 2
     assert (out / "worst_case.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_ranking_claims_by_hand(tmp_path) -> None:
+    s = SweepStore(tmp_path)
+    s.set_meta("grid", {"transforms": ["contrast-dec", "contrast-inc", "hue"], "targets": [0, 6]})
+    s.register_model("m", "m.onnx", "cc" * 32, None, {})
+    s.finish_cell("m", "baseline", 0, param=None, status="done", images=5,
+                  score=score(0.5, 0.6, 0.3))
+    for t, m in (("contrast-dec", 0.46), ("contrast-inc", 0.45), ("hue", 0.495)):
+        s.finish_cell("m", t, 6, param=1.0, status="done", images=5, score=score(m, 0.6, 0.3))
+    claims = {c["claim"]: c for c in compare_with_paper(build_tables(s))}
+    most = claims["contrast increase and decrease hurt detection most"]
+    assert most["verdict"] == "agrees" and "contrast-inc 10.00 %" in most["evidence"]
+    least = claims["hue changes hurt least"]
+    assert least["verdict"] == "agrees" and "hue (1.00 %)" in least["evidence"]
