@@ -1026,7 +1026,7 @@ def _json_safe(obj: Any) -> Any:
 
 def _markdown_to_html(md: str) -> str:
     """Minimal Markdown -> HTML for this report: headings, lists, pipe tables, images, bold,
-    inline code. (No external dependency; the report's Markdown is generated, not free-form.)"""
+    inline code, fenced code blocks. (No external dependency; the report's Markdown is generated, not free-form.)"""
     import html
     import re
 
@@ -1040,8 +1040,15 @@ def _markdown_to_html(md: str) -> str:
            "<style>body{font-family:sans-serif;max-width:1400px;margin:2em auto;padding:0 1em}"
            "table{border-collapse:collapse;font-size:12px}td,th{border:1px solid #ccc;"
            "padding:2px 6px}th{background:#eee}code{background:#f4f4f4}</style></head><body>"]
-    in_list = in_table = False
+    in_list = in_table = in_code = False
     for line in md.splitlines():
+        if line.startswith("```"):
+            out.append("</pre>" if in_code else "<pre>")
+            in_code = not in_code
+            continue
+        if in_code:
+            out.append(html.escape(line))
+            continue
         if line.startswith("  - "):  # one nesting level is shown as a plain item
             line = line[2:]
         if in_list and not line.startswith("- "):
