@@ -1034,6 +1034,7 @@ def _markdown_to_html(md: str) -> str:
         s = html.escape(s)
         s = re.sub(r"!\[([^\]]*)\]\(([^)]+)\)", r'<img alt="\1" src="\2" style="max-width:100%">', s)
         s = re.sub(r"\*\*([^*]+)\*\*", r"<b>\1</b>", s)
+        s = re.sub(r"(?<![*\w])\*([^*\s][^*]*)\*(?![*\w])", r"<i>\1</i>", s)
         return re.sub(r"`([^`]+)`", r"<code>\1</code>", s)
 
     out = ["<!DOCTYPE html><html><head><meta charset='utf-8'><title>fidelity validation</title>"
@@ -1041,6 +1042,7 @@ def _markdown_to_html(md: str) -> str:
            "table{border-collapse:collapse;font-size:12px}td,th{border:1px solid #ccc;"
            "padding:2px 6px}th{background:#eee}code{background:#f4f4f4}</style></head><body>"]
     in_list = in_table = in_code = False
+    prev_blank = True
     for line in md.splitlines():
         if line.startswith("```"):
             out.append("</pre>" if in_code else "<pre>")
@@ -1075,7 +1077,11 @@ def _markdown_to_html(md: str) -> str:
                 in_table = True
             out.append("<tr>" + "".join(f"<{tag}>{inline(c)}</{tag}>" for c in cells) + "</tr>")
         elif line.strip():
-            out.append(f"<p>{inline(line)}</p>")
+            if out[-1].endswith("</p>") and not prev_blank:  # continue the paragraph
+                out[-1] = out[-1][:-4] + " " + inline(line) + "</p>"
+            else:
+                out.append(f"<p>{inline(line)}</p>")
+        prev_blank = not line.strip()
     if in_list:
         out.append("</ul>")
     if in_table:
