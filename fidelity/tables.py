@@ -519,8 +519,12 @@ def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
         lines += ["", f"## Worst case: size class {size}", "",
                   "| ΔE | worst model | worst transform | ΔmAP points | ΔmAP relative % | "
                   "ΔAP person pts | ΔAP bicycle pts |", "|---|---|---|---|---|---|---|"]
+        lines.insert(len(lines) - 2, "Each column is its own worst case over the models of "
+                     "this size (and their transforms); partial: a model or transform missing.")
+        lines.insert(len(lines) - 2, "")
         for r in rows[1:]:
-            lines.append(f"| {r['delta_e']:g} | {r['worst_model']} | {r['worst_transform']} | "
+            lines.append(f"| {r['delta_e']:g}{' (partial)' if r['partial'] else ''} | "
+                         f"{r['worst_model']} | {r['worst_transform']} | "
                          f"{_fmt(r['dmap_points'])} | {_fmt(r['dmap_relative'])} | "
                          f"{_fmt(r['dap_person_points'])} | {_fmt(r['dap_bicycle_points'])} |")
     for m, rows in tables["cells"].items():
