@@ -28,8 +28,8 @@ first point's value; above the last, the ceiling (total loss: 100 % relative; th
 ``baseline_map`` in points when known, else 100 points). Nothing is extrapolated.
 
 When a size class has no curve of its own, the ``any`` curve (the worst over all sizes) answers
-and the result says so; when several curves match (one per model) the worst (largest) value
-answers.
+and the result says so. A size's aggregate curve (``model`` null) answers for it; without one,
+when several per-model curves match, the worst (largest) value answers.
 """
 
 from __future__ import annotations
@@ -115,16 +115,26 @@ class PredictionTable:
 
         A size with its own curves gets those; otherwise the ``any`` curves (worst over every
         size); a table without ``any`` curves then answers with all its curves (worst case).
+        Among the curves of one size, the table's aggregate curve (``model`` null: its own
+        worst case over the models of that size) answers when it has one; per-model curves
+        answer (worst of them) only when it has none. A per-model curve that covers a narrower
+        ΔE range, e.g. a model still being measured, then cannot turn every answer beyond that
+        range into the total-loss ceiling.
         """
         if size not in SIZES:
             raise unknown_name("detector size", size, SIZES)
+
+        def preferred(curves: list[Curve]) -> list[Curve]:
+            aggregate = [c for c in curves if c.model is None]
+            return aggregate or curves
+
         own = [c for c in self.curves if c.size == size]
         if own:
-            return own, size
+            return preferred(own), size
         anyc = [c for c in self.curves if c.size == "any"]
         if anyc:
-            return anyc, "any"
-        return list(self.curves), "worst of " + ",".join(self.sizes())
+            return preferred(anyc), "any"
+        return preferred(list(self.curves)), "worst of " + ",".join(self.sizes())
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready identification of the table (name, title, kind, provenance, units)."""

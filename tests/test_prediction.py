@@ -120,6 +120,28 @@ def test_measured_table_worst_model_pchip_running_max():
     assert pr.predict(9.0, size="x", table=table, method="step", transforms=False).dmap_points == pytest.approx(1.0)
 
 
+def test_a_sizes_aggregate_curve_answers_before_its_per_model_curves():
+    # A table with an aggregate curve for size n (worst over its measured models, ΔE 0..12)
+    # and a per-model curve still being measured (ΔE 0..1). The aggregate answers for size n:
+    # at ΔE 4.5 the linear chord (3, 0.9)-(6, 1.5) gives 1.2, not the total-loss ceiling that
+    # the narrow curve alone would answer beyond ΔE 1.
+    doc = _measured_table()
+    doc["interpolation"] = "linear"
+    worst = {"size": "n", "model": None, "points": [
+        {"delta_e": de, "dmap_points": v, "dmap_relative": None, "dap_person_points": None,
+         "dap_bicycle_points": None, "worst_transform": None, "source": "test"}
+        for de, v in [(0, 0.0), (3, 0.9), (6, 1.5), (12, 4.0)]]}
+    narrow = {"size": "n", "model": "d", "baseline_map": 0.4, "points": [
+        {"delta_e": de, "dmap_points": v, "dmap_relative": None, "dap_person_points": None,
+         "dap_bicycle_points": None, "worst_transform": None, "source": "test"}
+        for de, v in [(0, 0.0), (1, 0.3)]]}
+    doc["curves"] = [*doc["curves"], worst, narrow]
+    table = pr.parse_prediction_table(doc)
+    p = pr.predict(4.5, size="n", table=table, transforms=False)
+    assert p.columns["dmap_points"].status == "interpolated"
+    assert p.dmap_points == pytest.approx(1.2)
+
+
 def test_measured_table_ranges_and_sizes():
     table = pr.parse_prediction_table(_measured_table())
     below = pr.predict(1.0, size="x", table=table, transforms=False)

@@ -92,8 +92,14 @@ def test_prediction_table_follows_schema(store) -> None:
     sizes = {c["size"] for c in obj["curves"] if c["model"] is None}
     assert sizes == {"n", "s"}
     n = next(c for c in obj["curves"] if c["model"] is None and c["size"] == "n")
-    assert [p["delta_e"] for p in n["points"]] == [0.0, 3.0, 6.0]
+    # ΔE 6 is partial for every model (hue not measured): a partial row could understate the
+    # worst case, so it stays out of the prediction table and provenance lists it.
+    assert [p["delta_e"] for p in n["points"]] == [0.0, 3.0]
     assert n["points"][1]["dmap_points"] == pytest.approx(5.0)
+    assert "yolo11n" in n["points"][1]["source"] and "yolov8n" not in n["points"][1]["source"]
+    omitted = obj["provenance"]["omitted_partial_points"]
+    assert "n ΔE 6" in omitted and "yolo11n ΔE 6" in omitted and "yolov8n ΔE 3" in omitted
+    assert all(not p["partial"] for c in obj["curves"] for p in c["points"])
     assert table.curves
 
 
