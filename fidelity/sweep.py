@@ -25,7 +25,6 @@ import os
 import sqlite3
 import sys
 import time
-import zlib
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.resultstore import ResultsStore, pack_detections, unpack_detections
 
 #: Default targets of the sweep (issue 5): ΔE 0 is the baseline.
 SWEEP_TARGETS: tuple[float, ...] = (0, 1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 18, 21, 24)
@@ -41,9 +41,6 @@ SWEEP_TARGETS: tuple[float, ...] = (0, 1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 18, 21, 
 STORE_NAME = "sweep.sqlite"
 
 _SCHEMA = """
-CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
-CREATE TABLE IF NOT EXISTS models (
-    model TEXT PRIMARY KEY, file TEXT, sha256 TEXT, limit_images INTEGER, settings TEXT);
 CREATE TABLE IF NOT EXISTS cells (
     model TEXT NOT NULL, transform TEXT NOT NULL, target REAL NOT NULL,
     param REAL, status TEXT NOT NULL, reason TEXT, images INTEGER,
@@ -56,63 +53,12 @@ CREATE TABLE IF NOT EXISTS detections (
 """
 
 
-def pack_detections(d: np.ndarray) -> bytes:
-    """(n, 6) detections -> zlib-compressed float32 bytes."""
-    return zlib.compress(np.ascontiguousarray(d, dtype=np.float32).tobytes(), 1)
-
-
-def unpack_detections(blob: bytes) -> np.ndarray:
-    """Inverse of :func:`pack_detections`."""
-    return np.frombuffer(zlib.decompress(blob), dtype=np.float32).reshape(-1, 6)
-
-
-class SweepStore:
+class SweepStore(ResultsStore):
     """The SQLite results store of a sweep (see module docstring)."""
 
-    def __init__(self, folder: str | os.PathLike[str], *, create: bool = True) -> None:
-        self.folder = Path(folder)
-        self.path = self.folder / STORE_NAME
-        if not create and not self.path.is_file():
-            raise InputFileError(f"{self.folder}: no sweep store ({STORE_NAME}) in this folder")
-        self.folder.mkdir(parents=True, exist_ok=True)
-        self.db = sqlite3.connect(str(self.path), timeout=60)
-        self.db.execute("PRAGMA journal_mode=WAL")
-        self.db.execute("PRAGMA synchronous=FULL")
-        self.db.executescript(_SCHEMA)
-        self.db.commit()
-
-    def close(self) -> None:
-        """Close the connection."""
-        self.db.close()
-
-    # meta -----------------------------------------------------------------------------------
-    def set_meta(self, key: str, value: Any) -> None:
-        """Store a JSON-serialisable provenance value."""
-        with self.db:
-            self.db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (key, json.dumps(value)))
-
-    def meta(self) -> dict[str, Any]:
-        """All provenance values."""
-        return {k: json.loads(v) for k, v in self.db.execute("SELECT key, value FROM meta")}
-
-    def register_model(self, model: str, file: str, sha256: str, limit: int | None,
-                       settings: dict[str, Any]) -> None:
-        """Record a model; a different file under the same name is an error (not mixed)."""
-        row = self.db.execute("SELECT sha256, limit_images FROM models WHERE model=?",
-                              (model,)).fetchone()
-        if row and row[0] != sha256:
-            raise InvalidValueError(f"store {self.path}: model {model!r} was swept from a "
-                                    f"different file (sha256 {row[0][:16]} != {sha256[:16]})")
-        with self.db:
-            self.db.execute("INSERT OR REPLACE INTO models VALUES (?, ?, ?, ?, ?)",
-                            (model, file, sha256, limit, json.dumps(settings)))
-
-    def models(self) -> dict[str, dict[str, Any]]:
-        """Registered models: name -> file, sha256, limit_images, settings."""
-        out = {}
-        for m, f, s, lim, st in self.db.execute("SELECT * FROM models"):
-            out[m] = {"file": f, "sha256": s, "limit_images": lim, "settings": json.loads(st)}
-        return out
+    store_name = STORE_NAME
+    kind = "sweep"
+    schema = _SCHEMA
 
     # detections -----------------------------------------------------------------------------
     def stored_images(self, model: str, transform: str, target: float) -> set[int]:

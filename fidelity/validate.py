@@ -35,7 +35,6 @@ import json
 import math
 import os
 import platform
-import sqlite3
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -47,6 +46,7 @@ import numpy as np
 import tomllib
 
 from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.resultstore import ResultsStore, pack_detections, unpack_detections
 
 STORE_NAME = "validation.sqlite"
 SUITE_FILE = "suite.toml"
@@ -209,9 +209,6 @@ def image_delta_e(emu: Any, images: Sequence[np.ndarray]) -> dict[str, float]:
 # --------------------------------------------------------------------------------------------
 
 _SCHEMA = """
-CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
-CREATE TABLE IF NOT EXISTS models (
-    model TEXT PRIMARY KEY, file TEXT, sha256 TEXT, limit_images INTEGER, settings TEXT);
 CREATE TABLE IF NOT EXISTS cases (camera TEXT PRIMARY KEY, key TEXT NOT NULL, info TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS cells (
     model TEXT NOT NULL, camera TEXT NOT NULL, images INTEGER, map REAL, map50 REAL,
@@ -222,50 +219,19 @@ CREATE TABLE IF NOT EXISTS detections (
 """
 
 
-class ValidationStore:
+class ValidationStore(ResultsStore):
     """The crash-safe SQLite store of a validation run (module docstring)."""
 
-    def __init__(self, folder: str | os.PathLike[str], *, create: bool = True) -> None:
-        self.folder = Path(folder)
-        self.path = self.folder / STORE_NAME
-        if not create and not self.path.is_file():
-            raise InputFileError(f"{self.folder}: no validation store ({STORE_NAME}) there")
-        self.folder.mkdir(parents=True, exist_ok=True)
-        self.db = sqlite3.connect(str(self.path), timeout=60)
-        self.db.execute("PRAGMA journal_mode=WAL")
-        self.db.execute("PRAGMA synchronous=FULL")
-        self.db.executescript(_SCHEMA)
-        self.db.commit()
+    store_name = STORE_NAME
+    kind = "validation"
+    schema = _SCHEMA
 
-    def close(self) -> None:
-        """Close the connection."""
-        self.db.close()
-
-    def set_meta(self, key: str, value: Any) -> None:
-        """Store a JSON-serialisable provenance value."""
-        with self.db:
-            self.db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (key, json.dumps(value)))
-
-    def meta(self) -> dict[str, Any]:
-        """All provenance values."""
-        return {k: json.loads(v) for k, v in self.db.execute("SELECT key, value FROM meta")}
-
-    def register_model(self, model: str, file: str, sha256: str, limit: int | None,
-                       settings: dict[str, Any]) -> None:
-        """Record a model; a different file under the same name is an error."""
-        row = self.db.execute("SELECT sha256, limit_images FROM models WHERE model=?",
-                              (model,)).fetchone()
-        if row and (row[0] != sha256 or row[1] != limit):
-            raise InvalidValueError(f"store {self.path}: model {model!r} was run from another "
-                                    f"file or image limit; use a new --store")
-        with self.db:
-            self.db.execute("INSERT OR REPLACE INTO models VALUES (?, ?, ?, ?, ?)",
-                            (model, file, sha256, limit, json.dumps(settings)))
-
-    def models(self) -> dict[str, dict[str, Any]]:
-        """Registered models: name -> file, sha256, limit_images, settings."""
-        return {m: {"file": f, "sha256": s, "limit_images": lim, "settings": json.loads(st)}
-                for m, f, s, lim, st in self.db.execute("SELECT * FROM models")}
+    def _model_conflict(self, stored_sha256: str, stored_limit: int | None, sha256: str,
+                        limit: int | None) -> str | None:
+        """A validation compares cameras on one image set: the image limit must match too."""
+        if stored_sha256 != sha256 or stored_limit != limit:
+            return "was run from another file or image limit; use a new --store"
+        return None
 
     def case(self, camera: str) -> tuple[str, dict[str, Any]] | None:
         """(key, info) of a camera's chart/prediction/emulation record, or None."""
@@ -289,8 +255,6 @@ class ValidationStore:
 
     def add_detections(self, model: str, camera: str, rows: list[tuple[int, np.ndarray]]) -> None:
         """Store (image_id, detections) pairs in one transaction."""
-        from fidelity.sweep import pack_detections
-
         with self.db:
             self.db.executemany("INSERT OR REPLACE INTO detections VALUES (?, ?, ?, ?, ?)",
                                 [(model, camera, int(i), len(d), pack_detections(d))
@@ -298,8 +262,6 @@ class ValidationStore:
 
     def detections(self, model: str, camera: str) -> dict[int, np.ndarray]:
         """Stored detections of a cell: image_id -> (n, 6)."""
-        from fidelity.sweep import unpack_detections
-
         return {i: unpack_detections(b) for i, b in self.db.execute(
             "SELECT image_id, dets FROM detections WHERE model=? AND camera=?", (model, camera))}
 

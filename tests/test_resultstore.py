@@ -1,0 +1,47 @@
+"""The shared results store: crash-safe provenance and the model-identity rules of each store."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.resultstore import pack_detections, unpack_detections
+from fidelity.sweep import SweepStore
+from fidelity.validate import ValidationStore
+
+
+def test_detections_round_trip_as_float32() -> None:
+    d = np.array([[1.5, 2.0, 30.25, 40.0, 0.9, 3.0]])
+    np.testing.assert_array_equal(unpack_detections(pack_detections(d)), d.astype(np.float32))
+
+
+@pytest.mark.parametrize("store_cls", [SweepStore, ValidationStore])
+def test_meta_and_models_survive_reopening(tmp_path: Path, store_cls: type) -> None:
+    s = store_cls(tmp_path)
+    s.set_meta("grid", {"targets": [0, 3]})
+    s.register_model("m", "m.onnx", "aa" * 32, 100, {"conf": 0.001})
+    s.close()
+    again = store_cls(tmp_path, create=False)
+    assert again.meta() == {"grid": {"targets": [0, 3]}}
+    assert again.models()["m"] == {"file": "m.onnx", "sha256": "aa" * 32, "limit_images": 100,
+                                   "settings": {"conf": 0.001}}
+    with pytest.raises(InputFileError, match=store_cls.store_name):
+        store_cls(tmp_path / "elsewhere", create=False)
+
+
+def test_the_sweep_may_change_a_models_image_limit_but_not_its_file(tmp_path: Path) -> None:
+    s = SweepStore(tmp_path)
+    s.register_model("m", "m.onnx", "aa" * 32, 100, {})
+    s.register_model("m", "m.onnx", "aa" * 32, 250, {})  # extend the run over the same model
+    with pytest.raises(InvalidValueError, match="different file"):
+        s.register_model("m", "m.onnx", "bb" * 32, 250, {})
+
+
+def test_a_validation_keeps_one_image_set_per_model(tmp_path: Path) -> None:
+    s = ValidationStore(tmp_path)
+    s.register_model("m", "m.onnx", "aa" * 32, 100, {})
+    with pytest.raises(InvalidValueError, match="image limit"):
+        s.register_model("m", "m.onnx", "aa" * 32, 250, {})
