@@ -62,6 +62,26 @@ def load_annotations(path: str | os.PathLike[str]) -> Any:
     return coco_from_dict(data)
 
 
+def load_annotated_images(
+    images: str | os.PathLike[str], annotations: str | os.PathLike[str]
+) -> tuple[Path, Any, list[int]]:
+    """The image folder, its COCO annotations and the image ids (ascending) of a run.
+
+    Every annotated image must be present in ``images``; a missing folder or image is an
+    :class:`~fidelity.errors.InputFileError` naming it.
+    """
+    img_dir = Path(images)
+    if not img_dir.is_dir():
+        raise InputFileError(f"{img_dir}: image folder does not exist")
+    coco = load_annotations(annotations)
+    all_ids = sorted(coco.getImgIds())
+    missing = [i for i in all_ids if not (img_dir / coco.imgs[i]["file_name"]).is_file()]
+    if missing:
+        raise InputFileError(f"{img_dir}: {len(missing)} annotated images missing, e.g. "
+                             f"{coco.imgs[missing[0]]['file_name']}")
+    return img_dir, coco, all_ids
+
+
 def coco_from_dict(data: Mapping[str, Any]) -> Any:
     """Build a ``COCO`` object from an in-memory annotation dict (no printing)."""
     from pycocotools.coco import COCO

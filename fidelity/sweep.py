@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.errors import InvalidValueError
 from fidelity.resultstore import ResultsStore, pack_detections, unpack_detections
 
 #: Default targets of the sweep (issue 5): ΔE 0 is the baseline.
@@ -212,21 +212,13 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
 
     import onnxruntime
 
-    from fidelity.cocoeval import evaluate_detections, load_annotations
+    from fidelity.cocoeval import evaluate_detections, load_annotated_images
     from fidelity.dataset import BASELINE, PixelMap, calibrated_param
     from fidelity.detectors import Detector
     from fidelity.jpeg import roundtrip_jpeg
 
     say = log or (lambda s: print(s, file=sys.stderr, flush=True))
-    img_dir = Path(images)
-    if not img_dir.is_dir():
-        raise InputFileError(f"{img_dir}: image folder does not exist")
-    coco = load_annotations(annotations)
-    all_ids = sorted(coco.getImgIds())
-    missing = [i for i in all_ids if not (img_dir / coco.imgs[i]["file_name"]).is_file()]
-    if missing:
-        raise InputFileError(f"{img_dir}: {len(missing)} annotated images missing, e.g. "
-                             f"{coco.imgs[missing[0]]['file_name']}")
+    img_dir, coco, all_ids = load_annotated_images(images, annotations)
     store = SweepStore(out)
     import PIL
 

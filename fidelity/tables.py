@@ -338,7 +338,7 @@ def prediction_table(tables: dict[str, Any], name: str = "coco1000-measured") ->
                                                                    "baseline_map")}
                        | {"conventions": (info.get("settings") or {}).get("conventions")}
                        for m, info in tables["models"].items()},
-            "images": meta.get("data"), "versions": meta.get("versions"),
+            "images": _portable_paths(meta.get("data")), "versions": meta.get("versions"),
             "machine": meta.get("machine"),
             "cells_done": tables["cells_done"], "cells_unreachable": tables["cells_unreachable"],
             "worst_case": "per ΔE the transform with the largest ΔmAP in points; person and "
@@ -353,6 +353,14 @@ def prediction_table(tables: dict[str, Any], name: str = "coco1000-measured") ->
         },
         "curves": curves,
     }
+
+
+def _portable_paths(data: Any) -> Any:
+    """Provenance that names the data, not the machine: paths cut to their last two parts."""
+    if not isinstance(data, dict):
+        return data
+    return {k: str(Path(*Path(v).parts[-2:])) if isinstance(v, str) and os.sep in v else v
+            for k, v in data.items()}
 
 
 def _point(r: dict[str, Any], source: str) -> dict[str, Any]:

@@ -368,21 +368,13 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[Any],
     import onnxruntime
     from tqdm import tqdm
 
-    from fidelity.cocoeval import evaluate_detections, load_annotations
+    from fidelity.cocoeval import evaluate_detections, load_annotated_images
     from fidelity.detectors import Detector
     from fidelity.jpeg import roundtrip_jpeg
     from fidelity.sweep import ImageCache, file_sha256
 
     say = log or (lambda s: print(s, file=sys.stderr, flush=True))
-    img_dir = Path(images)
-    if not img_dir.is_dir():
-        raise InputFileError(f"{img_dir}: image folder does not exist")
-    coco = load_annotations(annotations)
-    all_ids = sorted(coco.getImgIds())
-    missing = [i for i in all_ids if not (img_dir / coco.imgs[i]["file_name"]).is_file()]
-    if missing:
-        raise InputFileError(f"{img_dir}: {len(missing)} annotated images missing, e.g. "
-                             f"{coco.imgs[missing[0]]['file_name']}")
+    img_dir, coco, all_ids = load_annotated_images(images, annotations)
     store = ValidationStore(store_dir)
     from fidelity import __version__
 

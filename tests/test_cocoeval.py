@@ -103,3 +103,26 @@ def test_shared_ground_truth_scores_one(shared) -> None:
     score = evaluate_detections(coco, dets, ids)
     assert score.map == pytest.approx(1.0, abs=1e-3)
     assert score.ap["person"] == pytest.approx(1.0, abs=1e-3)
+
+
+def test_load_annotated_images_names_what_is_missing(tmp_path) -> None:
+    import json as _json
+
+    from fidelity.cocoeval import load_annotated_images
+    from fidelity.errors import InputFileError
+
+    doc = {"images": [{"id": 2, "file_name": "b.jpg", "width": 4, "height": 4},
+                      {"id": 1, "file_name": "a.jpg", "width": 4, "height": 4}],
+           "annotations": [], "categories": [{"id": 1, "name": "person"}]}
+    ann = tmp_path / "ann.json"
+    ann.write_text(_json.dumps(doc))
+    folder = tmp_path / "img"
+    with pytest.raises(InputFileError, match="image folder does not exist"):
+        load_annotated_images(folder, ann)
+    folder.mkdir()
+    (folder / "a.jpg").write_bytes(b"")
+    with pytest.raises(InputFileError, match="1 annotated images missing, e.g. b.jpg"):
+        load_annotated_images(folder, ann)
+    (folder / "b.jpg").write_bytes(b"")
+    img_dir, coco, ids = load_annotated_images(folder, ann)
+    assert img_dir == folder and ids == [1, 2] and coco.imgs[2]["file_name"] == "b.jpg"
