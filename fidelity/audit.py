@@ -309,7 +309,8 @@ def audit_image(
     HDR, float TIFF), sRGB for integer pixels (PNG, JPEG, 8/16-bit TIFF). Errors name the file.
     """
     from fidelity.errors import FidelityError
-    from fidelity.imageio import file_sha256, read_image
+    from fidelity.fileio import file_sha256
+    from fidelity.imageio import read_image
 
     img = read_image(path, layer=layer)
     info = img.to_dict()

@@ -8,6 +8,7 @@ never written to: :func:`atomic_output` refuses a destination that is one of the
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import os
 import tempfile
@@ -77,3 +78,12 @@ def require_file(path: str | os.PathLike[str], what: str = "input file") -> Path
     if not os.access(p, os.R_OK):
         raise InputFileError(f"{p}: {what} is not readable")
     return p
+
+
+def file_sha256(path: str | os.PathLike[str]) -> str:
+    """SHA-256 hex digest of a file's bytes, read in 1 MiB blocks (provenance of inputs)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()

@@ -20,7 +20,6 @@ an unknown layer or an ambiguous choice of layers.
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import os
 import tempfile
 from collections.abc import Iterator
@@ -87,15 +86,6 @@ class Image:
             "encoding_guess": self.encoding,
             "colorspace": self.colorspace,
         }
-
-
-def file_sha256(path: str | os.PathLike[str]) -> str:
-    """SHA-256 hex digest of a file's bytes (for report provenance)."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 @contextlib.contextmanager
@@ -297,4 +287,4 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None) -> Image:
     )
 
 
-__all__ = ["FLOAT_PIXEL_TYPES", "Image", "file_sha256", "read_image"]
+__all__ = ["FLOAT_PIXEL_TYPES", "Image", "read_image"]

@@ -61,7 +61,7 @@ def report_schema() -> dict[str, Any]:
 def _sha256_or_none(path: str | os.PathLike[str] | None) -> str | None:
     if not path:
         return None
-    from fidelity.imageio import file_sha256
+    from fidelity.fileio import file_sha256
 
     try:
         return file_sha256(path)

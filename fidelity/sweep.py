@@ -19,7 +19,6 @@ A rerun skips finished cells and the images already stored in unfinished ones.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import sqlite3
@@ -33,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from fidelity.errors import InvalidValueError
+from fidelity.fileio import file_sha256
 from fidelity.resultstore import ResultsStore, pack_detections, unpack_detections
 
 #: Default targets of the sweep (issue 5): ΔE 0 is the baseline.
@@ -113,15 +113,6 @@ def _cell_dict(cur: sqlite3.Cursor, row: Sequence[Any]) -> dict[str, Any]:
     d = {c[0]: v for c, v in zip(cur.description, row, strict=True)}
     d["ap"] = json.loads(d["ap"]) if d.get("ap") else None
     return d
-
-
-def file_sha256(path: str | os.PathLike[str]) -> str:
-    """SHA-256 of a file (hex)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 @dataclass(frozen=True)

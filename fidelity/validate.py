@@ -30,7 +30,6 @@ error (use a new store). The default store is outside the repository:
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -46,6 +45,7 @@ import numpy as np
 import tomllib
 
 from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.fileio import file_sha256
 from fidelity.resultstore import ResultsStore, pack_detections, unpack_detections
 
 STORE_NAME = "validation.sqlite"
@@ -135,7 +135,7 @@ def load_suite(folder: str | os.PathLike[str]) -> list[CameraCase]:
             load_illuminant(ill)
         except Exception as exc:  # noqa: BLE001 - re-raised naming the suite file
             raise InputFileError(f"{suite}: camera {p.stem}: {exc}") from None
-        cases.append(CameraCase(p.stem, p, ill, hashlib.sha256(p.read_bytes()).hexdigest()))
+        cases.append(CameraCase(p.stem, p, ill, file_sha256(p)))
     return cases
 
 
@@ -371,7 +371,7 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[Any],
     from fidelity.cocoeval import evaluate_detections, load_annotated_images
     from fidelity.detectors import Detector
     from fidelity.jpeg import roundtrip_jpeg
-    from fidelity.sweep import ImageCache, file_sha256
+    from fidelity.sweep import ImageCache
 
     say = log or (lambda s: print(s, file=sys.stderr, flush=True))
     img_dir, coco, all_ids = load_annotated_images(images, annotations)

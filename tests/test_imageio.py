@@ -15,7 +15,8 @@ import pytest
 from PIL import Image as PILImage
 
 from fidelity.errors import InputFileError
-from fidelity.imageio import file_sha256, read_image
+from fidelity.fileio import file_sha256
+from fidelity.imageio import read_image
 
 RNG = np.random.default_rng(4)
 RGB = RNG.uniform(0.0, 4.0, size=(12, 17, 3)).astype(np.float32)
