@@ -186,13 +186,14 @@ def _solve(
 
     for params, des in curves:
         diff = des - target
-        exact = np.flatnonzero(diff == 0.0)
-        crossing = np.flatnonzero(np.sign(diff[:-1]) * np.sign(diff[1:]) < 0)
-        candidates = sorted([(int(i), None) for i in exact] + [(int(i), "b") for i in crossing])
+        exact = np.flatnonzero(diff == 0.0)  # a grid point on the target
+        crossing = np.flatnonzero(np.sign(diff[:-1]) * np.sign(diff[1:]) < 0)  # interval [i, i+1]
+        candidates = sorted([(int(i), True) for i in exact] + [(int(i), False) for i in crossing],
+                            key=lambda c: c[0])  # nearest the identity first
         if not candidates:
             continue
-        i, kind = candidates[0]
-        if kind is None:
+        i, on_grid = candidates[0]
+        if on_grid:
             x = float(params[i])
         else:
             a, b = float(params[i]), float(params[i + 1])
