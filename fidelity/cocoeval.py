@@ -1,4 +1,4 @@
-"""COCO box AP with pycocotools as the reference implementation.
+"""COCO box AP with pycocotools as the reference implementation (faster-coco-eval as fast path).
 
 mAP is COCO AP@[.50:.05:.95] (area "all", maxDets 100) averaged over the categories that have
 ground truth in the evaluated images; AP50 at IoU 0.5; per-class AP is the same average for one
@@ -16,7 +16,7 @@ import contextlib
 import io
 import json
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -107,32 +107,24 @@ def detections_to_coco(image_id: int, detections: np.ndarray,
     return out
 
 
-def evaluate_detections(coco_gt: Any, detections: Mapping[int, np.ndarray],
-                        image_ids: Sequence[int] | None = None) -> CocoScore:
-    """Score per-image (K, 6) detections against ground truth with pycocotools ``COCOeval``.
-
-    ``image_ids``: the images evaluated (default: the keys of ``detections``). An image without
-    detections still counts (its ground truth is missed).
-    """
-    from pycocotools.cocoeval import COCOeval
-
-    ids = sorted(int(i) for i in (image_ids if image_ids is not None else detections))
-    if not ids:
-        raise InvalidValueError("no images to evaluate")
-    known = set(coco_gt.getImgIds())
-    missing = [i for i in ids if i not in known]
-    if missing:
-        raise InvalidValueError(f"image ids not in the annotations: {missing[:5]}")
+def _coco_results(coco_gt: Any, detections: Mapping[int, np.ndarray],
+                  ids: Sequence[int]) -> list[dict[str, Any]]:
     cat_ids = sorted(coco_gt.getCatIds())
-    if len(cat_ids) == len(COCO80_CATEGORY_IDS):
-        mapping: Sequence[int] = cat_ids
-    else:
-        mapping = COCO80_CATEGORY_IDS
+    mapping: Sequence[int] = cat_ids if len(cat_ids) == len(COCO80_CATEGORY_IDS) \
+        else COCO80_CATEGORY_IDS
     results: list[dict[str, Any]] = []
     for i in ids:
         det = detections.get(i)
         if det is not None and len(det):
             results.extend(detections_to_coco(i, det, mapping))
+    return results
+
+
+def _accumulate_pycocotools(coco_gt: Any, results: list[dict[str, Any]],
+                            ids: Sequence[int]) -> tuple[np.ndarray, list[int], np.ndarray]:
+    """(precision (T, R, K, A, M), catIds, stats) with the official ``pycocotools.COCOeval``."""
+    from pycocotools.cocoeval import COCOeval
+
     with contextlib.redirect_stdout(io.StringIO()):
         if results:
             coco_dt = coco_gt.loadRes(results)
@@ -140,17 +132,97 @@ def evaluate_detections(coco_gt: Any, detections: Mapping[int, np.ndarray],
             coco_dt = coco_from_dict({"images": coco_gt.dataset["images"], "annotations": [],
                                       "categories": coco_gt.dataset["categories"]})
         ev = COCOeval(coco_gt, coco_dt, "bbox")
-        ev.params.imgIds = ids
+        ev.params.imgIds = list(ids)
         ev.evaluate()
         ev.accumulate()
         ev.summarize()
-    precision = ev.eval["precision"]  # (T, R, K, A, M)
+    return ev.eval["precision"], list(ev.params.catIds), np.asarray(ev.stats, dtype=np.float64)
+
+
+def _accumulate_faster_coco_eval(coco_gt: Any, results: list[dict[str, Any]],
+                                 ids: Sequence[int]) -> tuple[np.ndarray, list[int], np.ndarray]:
+    """The same with ``faster_coco_eval.COCOeval_faster`` (C++ evaluate/accumulate).
+
+    The ground truth is rebuilt from ``coco_gt.dataset`` (a pycocotools ``COCO``), so both
+    methods score exactly the same annotations.
+    """
+    import logging
+
+    from faster_coco_eval import COCO as FasterCOCO
+    from faster_coco_eval import COCOeval_faster
+
+    quiet = logging.getLogger("faster_coco_eval").debug
+    gt = FasterCOCO(dict(coco_gt.dataset), print_function=quiet)
+    if results:
+        dt = gt.loadRes(results)
+    else:
+        dt = FasterCOCO({"images": coco_gt.dataset["images"], "annotations": [],
+                         "categories": coco_gt.dataset["categories"]}, print_function=quiet)
+    ev = COCOeval_faster(gt, dt, "bbox", print_function=quiet)
+    ev.params.imgIds = list(ids)
+    ev.evaluate()
+    ev.accumulate()
+    ev.summarize()
+    return (np.asarray(ev.eval["precision"]), list(ev.params.catIds),
+            np.asarray(ev.stats[:12], dtype=np.float64))
+
+
+#: COCO box scorers, by ``method=`` name. ``pycocotools`` is the reference; ``faster-coco-eval``
+#: (same algorithm in C++) is the fast path, used only because
+#: ``tests/test_cocoeval.py`` shows it agrees with pycocotools to 1e-4 on our data.
+COCO_SCORERS: dict[str, Callable[[Any, list[dict[str, Any]], Sequence[int]],
+                                 tuple[np.ndarray, list[int], np.ndarray]]] = {
+    "pycocotools": _accumulate_pycocotools,
+    "faster-coco-eval": _accumulate_faster_coco_eval,
+}
+
+
+def scorer_available(method: str) -> bool:
+    """Whether the package behind scorer ``method`` can be imported."""
+    import importlib.util
+
+    module = {"pycocotools": "pycocotools", "faster-coco-eval": "faster_coco_eval"}.get(method)
+    if module is None:
+        from fidelity.errors import unknown_name
+
+        raise unknown_name("COCO scorer", method, list(COCO_SCORERS) + ["auto"])
+    return importlib.util.find_spec(module) is not None
+
+
+def resolve_scorer(method: str = "auto") -> str:
+    """``auto``: ``faster-coco-eval`` when installed, else ``pycocotools``; else ``method``."""
+    if method == "auto":
+        return "faster-coco-eval" if scorer_available("faster-coco-eval") else "pycocotools"
+    if not scorer_available(method):
+        raise InvalidValueError(f"COCO scorer {method!r} is not installed")
+    return method
+
+
+def evaluate_detections(coco_gt: Any, detections: Mapping[int, np.ndarray],
+                        image_ids: Sequence[int] | None = None,
+                        method: str = "pycocotools") -> CocoScore:
+    """Score per-image (K, 6) detections against ground truth with COCO box AP.
+
+    ``image_ids``: the images evaluated (default: the keys of ``detections``). An image without
+    detections still counts (its ground truth is missed). ``method``: a key of
+    :data:`COCO_SCORERS` or ``"auto"`` (:func:`resolve_scorer`).
+    """
+    ids = sorted(int(i) for i in (image_ids if image_ids is not None else detections))
+    if not ids:
+        raise InvalidValueError("no images to evaluate")
+    known = set(coco_gt.getImgIds())
+    missing = [i for i in ids if i not in known]
+    if missing:
+        raise InvalidValueError(f"image ids not in the annotations: {missing[:5]}")
+    scorer = COCO_SCORERS[resolve_scorer(method)]
+    results = _coco_results(coco_gt, detections, ids)
+    precision, cat_list, stats_arr = scorer(coco_gt, results, ids)
     ap: dict[str, float | None] = {}
     names = {c["id"]: c["name"] for c in coco_gt.dataset["categories"]}
-    for k, cid in enumerate(ev.params.catIds):
+    for k, cid in enumerate(cat_list):
         p = precision[:, :, k, 0, -1]
         p = p[p > -1]
         ap[names[cid]] = float(np.mean(p)) if p.size else None
-    stats = tuple(float(s) for s in ev.stats)
+    stats = tuple(float(s) for s in stats_arr)
     return CocoScore(map=max(stats[0], 0.0), map50=max(stats[1], 0.0), map75=max(stats[2], 0.0),
                      ap=ap, images=len(ids), detections=len(results), stats=stats)

@@ -12,7 +12,8 @@ Store (``<out>/sweep.sqlite``, WAL journal, ``synchronous=FULL``):
   ``kill -9`` loses at most one uncommitted batch and re-scoring needs no inference.
 * ``cells(model, transform, target, param, status, reason, images, map, map50, map75, ap,
   seconds, finished)``: one row per finished cell (``status`` ``done`` or ``unreachable``).
-* ``models(model, file, sha256, limit_images, settings)`` and ``meta(key, value)``: provenance.
+* ``models(model, file, sha256, limit_images, settings)`` and ``meta(key, value)``: provenance
+  (versions, data, grid, machine, and ``scorers``: the COCO AP implementations that scored it).
 
 A rerun skips finished cells and the images already stored in unfinished ones.
 """
@@ -81,6 +82,40 @@ class SweepStore(ResultsStore):
         rows = self.db.execute("SELECT image_id, dets FROM detections WHERE model=? AND "
                                "transform=? AND target=?", (model, transform, float(target)))
         return {i: unpack_detections(b) for i, b in rows}
+
+    # provenance -----------------------------------------------------------------------------
+    def scorers(self) -> list[dict[str, Any]]:
+        """The COCO AP implementations that scored this store, oldest first.
+
+        Each entry is ``{"scorer": name, "since": ISO time or None}``: cells finished from
+        ``since`` on (None: from the start) were scored by it. Stores written before the scorer
+        was recorded were scored by pycocotools.
+        """
+        raw = self.meta().get("scorers")
+        if raw is None:
+            return [{"scorer": "pycocotools", "since": None}] if self.cells() else []
+        return [r if isinstance(r, dict) else {"scorer": r, "since": None} for r in raw]
+
+    def record_scorer(self, method: str, *, all_cells: bool = False) -> list[dict[str, Any]]:
+        """Record that ``method`` scores the cells finished from now on (``all_cells``: all)."""
+        now = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+        used = [] if all_cells else self.scorers()
+        if not used or used[-1]["scorer"] != method:
+            used.append({"scorer": method, "since": None if all_cells or not used else now})
+        self.set_meta("scorers", used)
+        return used
+
+    def scorer_of(self, cell: dict[str, Any]) -> str | None:
+        """Which scorer scored a finished cell (from :meth:`scorers` and its ``finished``).
+
+        Times have 1 s resolution; a cell finished in the second a scorer was recorded counts
+        for the earlier one (a run loads its data and models for seconds before its first cell).
+        """
+        name = None
+        for entry in self.scorers():
+            if entry["since"] is None or (cell.get("finished") or "") > entry["since"]:
+                name = entry["scorer"]
+        return name
 
     # cells ----------------------------------------------------------------------------------
     def cell(self, model: str, transform: str, target: float) -> dict[str, Any] | None:
@@ -197,19 +232,24 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
               annotations: str | os.PathLike[str], out: str | os.PathLike[str],
               transforms: Sequence[str], targets: Sequence[float], *, threads: int | None = 1,
               provider: str = "auto", batch_commit: int = 25, order: str = "priority",
-              log: Callable[[str], None] | None = None, progress: bool = False) -> SweepStore:
-    """Run (or resume) every cell of the grid for each model in order; returns the store."""
+              scorer: str = "auto", log: Callable[[str], None] | None = None, progress: bool = False) -> SweepStore:
+    """Run (or resume) every cell of the grid for each model in order; returns the store.
+
+    ``scorer``: COCO AP implementation (:data:`fidelity.cocoeval.COCO_SCORERS` or ``"auto"``);
+    it is recorded in the store's ``meta`` and in each cell's log line.
+    """
     import platform
 
     import onnxruntime
 
-    from fidelity.cocoeval import evaluate_detections, load_annotated_images
+    from fidelity.cocoeval import evaluate_detections, load_annotated_images, resolve_scorer
     from fidelity.dataset import BASELINE, PixelMap, calibrated_param
     from fidelity.detectors import Detector
     from fidelity.jpeg import roundtrip_jpeg
 
     say = log or (lambda s: print(s, file=sys.stderr, flush=True))
     img_dir, coco, all_ids = load_annotated_images(images, annotations)
+    method = resolve_scorer(scorer)
     store = SweepStore(out)
     import PIL
 
@@ -217,9 +257,11 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
                                 "onnxruntime": onnxruntime.__version__,
                                 "numpy": np.__version__, "Pillow": PIL.__version__,
                                 "pycocotools": _dist_version("pycocotools"),
+                                "faster-coco-eval": _dist_version("faster-coco-eval"),
                                 "fidelity": _fidelity_version()})
     store.set_meta("data", {"images": str(img_dir), "annotations": str(annotations),
                             "image_count": len(all_ids)})
+    store.record_scorer(method)
     store.set_meta("machine", {"platform": platform.platform(), "cpus": os.cpu_count(),
                                "threads": threads})
     store.set_meta("grid", {"transforms": list(transforms), "targets": list(targets),
@@ -268,7 +310,7 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
             if batch:
                 store.add_detections(det.name, transform, target, batch)
             dets = store.detections(det.name, transform, target)
-            score = evaluate_detections(coco, dets, ids)
+            score = evaluate_detections(coco, dets, ids, method=method)
             dt = time.perf_counter() - t0
             store.finish_cell(det.name, transform, target, param=param, status="done",
                               images=len(ids), score=score, seconds=dt)
@@ -279,10 +321,11 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     return store
 
 
-def rescore(store: SweepStore, annotations: str | os.PathLike[str]) -> int:
+def rescore(store: SweepStore, annotations: str | os.PathLike[str], method: str = "auto") -> int:
     """Recompute every done cell's scores from the stored detections (no inference)."""
-    from fidelity.cocoeval import evaluate_detections, load_annotations
+    from fidelity.cocoeval import evaluate_detections, load_annotations, resolve_scorer
 
+    method = resolve_scorer(method)
     coco = load_annotations(annotations)
     ids_all = sorted(coco.getImgIds())
     models = store.models()
@@ -293,10 +336,11 @@ def rescore(store: SweepStore, annotations: str | os.PathLike[str]) -> int:
         lim = models.get(c["model"], {}).get("limit_images")
         ids = ids_all[:lim] if lim else ids_all
         score = evaluate_detections(coco, store.detections(c["model"], c["transform"],
-                                                           c["target"]), ids)
+                                                           c["target"]), ids, method=method)
         store.finish_cell(c["model"], c["transform"], c["target"], param=c["param"],
                           status="done", images=len(ids), score=score, seconds=c["seconds"])
         n += 1
+    store.record_scorer(method, all_cells=True)
     return n
 
 

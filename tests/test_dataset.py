@@ -172,3 +172,19 @@ def test_write_dataset_atomic_resumable_parallel(tmp_path) -> None:
     (inplace / "a.jpg").write_bytes((src / "000.jpg").read_bytes())
     with pytest.raises(InputFileError, match="overwrite an input"):
         write_transformed_dataset(list_images(inplace), tmp_path / "x", "hue", 0, progress=False)
+
+
+@pytest.mark.shared
+def test_pull_mean_fast_path_equals_reference_on_real_images(shared) -> None:
+    """The per-colour pull_mean (count-weighted mean Lab) gives the reference's codes exactly."""
+    from fidelity.dataset import pull_mean_uint8
+    from fidelity.jpeg import read_jpeg
+
+    files = sorted((shared / "coco/val2017").glob("*.jpg"))[:20]
+    assert len(files) == 20
+    scratch = np.empty(1 << 24, dtype=np.int32)
+    for f in files:
+        img = read_jpeg(f)[0]
+        for alpha in (0.95, 0.5):
+            assert np.array_equal(pull_mean_uint8(img, alpha, scratch),
+                                  reference_transform(img, "pull_mean", alpha)), (f.name, alpha)

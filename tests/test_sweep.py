@@ -116,7 +116,7 @@ def test_ci_slice_sweep_resume_rescore(coco, tmp_path) -> None:
             rgb, settings = read_jpeg(images / gt.imgs[i]["file_name"])
             t = rgb if p is None else reference_transform(rgb, transform, p)
             dets[i] = det(roundtrip_jpeg(t, settings))
-        direct = evaluate_detections(gt, dets, ids)
+        direct = evaluate_detections(gt, dets, ids, method="pycocotools")  # the reference
         cell = cells[(transform, 0 if p is None else 15)]
         assert cell["map"] == pytest.approx(direct.map, abs=1e-9)
         assert cell["ap"]["person"] == pytest.approx(direct.ap["person"], abs=1e-9)
@@ -129,8 +129,17 @@ def test_ci_slice_sweep_resume_rescore(coco, tmp_path) -> None:
                       ["contrast-inc", "saturation-inc"], [0, 15], threads=2, log=lambda s: None)
     assert {(c["transform"], c["target"]): c["finished"] for c in again.cells()} == before
 
+    from fidelity.cocoeval import resolve_scorer
+
+    assert [e["scorer"] for e in again.scorers()] == [resolve_scorer("auto")]
+    assert again.scorer_of(again.cells()[0]) == resolve_scorer("auto")
     # re-scoring from the stored detections needs no inference and gives the same numbers
-    assert rescore(again, ann) == 2
+    assert rescore(again, ann, method="pycocotools") == 2
+    assert again.scorers() == [{"scorer": "pycocotools", "since": None}]
+    # a store scored by pycocotools, then resumed with another scorer, says which cell had which
+    again.record_scorer("faster-coco-eval")
+    assert again.scorer_of(again.cells()[0]) == "pycocotools"
+    assert again.scorer_of({"finished": "2999-01-01T00:00:00Z"}) == "faster-coco-eval"
     assert again.cell("yolox_nano", "contrast-inc", 15)["map"] == pytest.approx(
         cells[("contrast-inc", 15)]["map"], abs=1e-12)
 

@@ -25,13 +25,18 @@ import click
               help="Write map, map50, ap (class -> AP), images, seconds as JSON (fractions).")
 @click.option("--classes", default="person,bicycle,car,motorcycle,bus,truck,traffic light,stop sign",
               show_default=True, help="Classes whose AP is printed (all are in --json).")
+@click.option("--scorer", type=click.Choice(["auto", "pycocotools", "faster-coco-eval"]),
+              default="auto", show_default=True,
+              help="COCO AP implementation: pycocotools (reference) or faster-coco-eval (same "
+                   "numbers to 1e-4, tested; ~6x faster); auto: faster-coco-eval if installed.")
 @click.option("--progress/--no-progress", default=True, show_default=True)
 def evaluate(model: str, images: str, annotations: str, limit: int | None, threads: int | None,
-             provider: str, json_path: str | None, classes: str, progress: bool) -> None:
-    """Run a detector on a COCO image folder and print COCO box AP (pycocotools)."""
+             provider: str, json_path: str | None, classes: str, scorer: str,
+             progress: bool) -> None:
+    """Run a detector on a COCO image folder and print COCO box AP."""
     from tqdm import tqdm
 
-    from fidelity.cocoeval import evaluate_detections, load_annotations
+    from fidelity.cocoeval import evaluate_detections, load_annotations, resolve_scorer
     from fidelity.detectors import Detector
     from fidelity.errors import InputFileError
     from fidelity.fileio import write_json_atomic
@@ -49,7 +54,8 @@ def evaluate(model: str, images: str, annotations: str, limit: int | None, threa
         rgb, _ = read_jpeg(folder / coco.imgs[i]["file_name"])
         dets[i] = det(rgb)
     infer_s = time.perf_counter() - t0
-    score = evaluate_detections(coco, dets, ids)
+    method = resolve_scorer(scorer)
+    score = evaluate_detections(coco, dets, ids, method=method)
     seconds = time.perf_counter() - t0
     info = det.describe()
     conv = info["conventions"]
@@ -58,7 +64,7 @@ def evaluate(model: str, images: str, annotations: str, limit: int | None, threa
     click.echo(f"settings   conf {conv['conf']}  iou {conv['iou']}  max_det {conv['max_det']}  "
                f"({conv['source']})")
     click.echo(f"images     {len(ids)}  detections {score.detections}  "
-               f"{len(ids) / infer_s:.1f} img/s inference  {seconds:.1f} s total")
+               f"{len(ids) / infer_s:.1f} img/s inference  {seconds:.1f} s total  (scored by {method})")
     click.echo(f"mAP        {score.map:.4f}   (AP@[.50:.95], fraction)")
     click.echo(f"AP50       {score.map50:.4f}")
     for name in [c.strip() for c in classes.split(",") if c.strip()]:
@@ -66,7 +72,8 @@ def evaluate(model: str, images: str, annotations: str, limit: int | None, threa
         click.echo(f"AP {name:<14} {'n/a (no ground truth)' if v is None else f'{v:.4f}'}")
     if json_path:
         payload = score.to_dict() | {"seconds": seconds, "detector": info,
-                                     "annotations": str(annotations), "images_dir": str(images)}
+                                     "annotations": str(annotations), "images_dir": str(images),
+                                     "scorer": method}
         write_json_atomic(json_path, payload)
         click.echo(f"wrote {json_path}")
 

@@ -50,9 +50,13 @@ def _transforms(text: str) -> list[str]:
               show_default=True,
               help="priority: every model's ΔE 1, 3, 6, 12, 24 cells first (the paper's "
                    "thresholds), then the rest; ascending: model by model, ΔE ascending.")
+@click.option("--scorer", type=click.Choice(["auto", "pycocotools", "faster-coco-eval"]),
+              default="auto", show_default=True,
+              help="COCO AP implementation: pycocotools (reference) or faster-coco-eval (same "
+                   "numbers to 1e-4, tested; ~6x faster); auto: faster-coco-eval if installed.")
 @click.option("--rescore", is_flag=True, help="Only recompute scores from stored detections.")
 def sweep(models: str | None, images: str | None, annotations: str, transforms: str, targets: str, out: str,
-          threads: int, provider: str, order: str, rescore: bool) -> None:
+          threads: int, provider: str, order: str, scorer: str, rescore: bool) -> None:
     """Run (or resume) the COCO sweep; progress is logged one line per cell on stderr.
 
     \b
@@ -65,7 +69,7 @@ def sweep(models: str | None, images: str | None, annotations: str, transforms: 
     from fidelity.sweep import rescore as do_rescore
 
     if rescore:
-        n = do_rescore(SweepStore(out, create=False), annotations)
+        n = do_rescore(SweepStore(out, create=False), annotations, method=scorer)
         click.echo(f"rescored {n} cells in {out}")
         return
     if not models or not images:
@@ -74,7 +78,8 @@ def sweep(models: str | None, images: str | None, annotations: str, transforms: 
         raise InvalidValueError("--models and --images are needed (except with --rescore)")
     specs = [ModelSpec.parse(m.strip()) for m in models.split(",") if m.strip()]
     store = run_sweep(specs, images, annotations, out, _transforms(transforms),
-                      _targets(targets), threads=threads, provider=provider, order=order)
+                      _targets(targets), threads=threads, provider=provider, order=order,
+                      scorer=scorer)
     cells = store.cells()
     done = sum(c["status"] == "done" for c in cells)
     click.echo(f"{done} cells done, {len(cells) - done} unreachable; store {store.path}")

@@ -1,0 +1,122 @@
+"""COCO scoring: faster-coco-eval against pycocotools on the sweep's own stored detections.
+
+Two things, on real data (a sweep store, ``fidelity sweep --out DIR``):
+
+* Agreement: every finished cell is re-scored from its stored detections with faster-coco-eval
+  and compared with pycocotools (the reference): with the stored numbers for the cells the sweep
+  scored with pycocotools (``SweepStore.scorer_of``), with a fresh pycocotools run for the
+  others. The largest absolute difference over mAP, AP50, AP75 and every class AP is reported. The issue's
+  rule: faster-coco-eval may be the fast path only if it agrees to 1e-4.
+* Speed: on a sample of cells, both scorers timed side by side (best of ``--repeats``) on the
+  same detections; the ratio is printed.
+
+Usage: python benchmarks/bench_scoring.py STORE_DIR --annotations instances.json
+       [--sample 6] [--repeats 2] [--json reports/coco/bench_scoring.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from machine import best_time, machine_info  # noqa: E402
+
+
+def _max_difference(ref: dict, score) -> float:  # type: ignore[no-untyped-def]
+    """Largest |Δ| between a stored cell (map, map50, map75, ap) and a CocoScore."""
+    diffs = [abs(ref["map"] - score.map), abs(ref["map50"] - score.map50),
+             abs(ref["map75"] - score.map75)]
+    for name, ap in (ref["ap"] or {}).items():
+        other = score.ap.get(name)
+        if (ap is None) != (other is None):
+            return float("inf")
+        if ap is not None:
+            diffs.append(abs(ap - other))
+    return float(max(diffs))
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("store", type=Path)
+    ap.add_argument("--annotations", type=Path, required=True)
+    ap.add_argument("--sample", type=int, default=6, help="cells timed with both scorers")
+    ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args()
+
+    from fidelity.cocoeval import evaluate_detections, load_annotations
+    from fidelity.fileio import write_json_atomic
+    from fidelity.sweep import SweepStore
+
+    store = SweepStore(args.store, create=False)
+    scorer_of = store.scorer_of
+    coco = load_annotations(args.annotations)
+    ids_all = sorted(coco.getImgIds())
+    models = store.models()
+    cells = [c for c in store.cells() if c["status"] == "done"]
+
+    worst, n, t0 = 0.0, 0, time.perf_counter()
+    worst_cell = None
+    for c in cells:
+        lim = models[c["model"]]["limit_images"]
+        ids = ids_all[:lim] if lim else ids_all
+        dets = store.detections(c["model"], c["transform"], c["target"])
+        fast = evaluate_detections(coco, dets, ids, method="faster-coco-eval")
+        # cells the sweep scored with pycocotools are compared with their stored numbers; the
+        # others are scored with pycocotools here
+        ref = c if scorer_of(c) == "pycocotools" else evaluate_detections(
+            coco, dets, ids, method="pycocotools").to_dict()
+        d = _max_difference(ref, fast)
+        n += 1
+        if d > worst:
+            worst, worst_cell = d, f"{c['model']} {c['transform']} ΔE {c['target']:g}"
+        if n % 25 == 0:
+            print(f"{n}/{len(cells)} cells, largest difference so far {worst:.2e}",
+                  file=sys.stderr, flush=True)
+    agree_s = time.perf_counter() - t0
+
+    rng = np.random.default_rng(0)
+    sample = [cells[i] for i in rng.choice(len(cells), min(args.sample, len(cells)),
+                                           replace=False)]
+    timing = []
+    for c in sample:
+        lim = models[c["model"]]["limit_images"]
+        ids = ids_all[:lim] if lim else ids_all
+        dets = store.detections(c["model"], c["transform"], c["target"])
+        t_ref, t_fast = (best_time(lambda m=m, d=dets, i=ids: evaluate_detections(coco, d, i,
+                                                                                  method=m),
+                                   args.repeats)
+                         for m in ("pycocotools", "faster-coco-eval"))
+        timing.append({"cell": f"{c['model']} {c['transform']} ΔE {c['target']:g}",
+                       "images": len(ids), "pycocotools_s": t_ref, "faster_coco_eval_s": t_fast,
+                       "ratio": t_ref / t_fast})
+        print(f"{timing[-1]['cell']:<40} {len(ids):>5} img  pycocotools {t_ref:6.2f} s  "
+              f"faster-coco-eval {t_fast:6.2f} s  {t_ref / t_fast:4.1f}x", flush=True)
+
+    from importlib.metadata import version
+
+    result = {
+        "store": args.store.name, "cells_compared": n, "largest_difference": worst,
+        "largest_difference_cell": worst_cell, "tolerance": 1e-4, "agrees": worst <= 1e-4,
+        "agreement_seconds": agree_s, "timing": timing,
+        "median_speedup": float(np.median([t["ratio"] for t in timing])) if timing else None,
+        "versions": {"pycocotools": version("pycocotools"),
+                     "faster-coco-eval": version("faster-coco-eval")},
+        "machine": machine_info(),
+        "note": "timed on the shared 2-core machine while the sweep used both cores",
+    }
+    print(f"{n} cells: largest |Δ| over stats and class AP {worst:.2e} ({worst_cell}); "
+          f"agrees to 1e-4: {result['agrees']}; median speed-up {result['median_speedup']:.1f}x")
+    if args.json:
+        write_json_atomic(args.json, result)
+        print(f"wrote {args.json}")
+    return 0 if result["agrees"] else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
