@@ -183,7 +183,7 @@ def build_tables(store: Any) -> dict[str, Any]:
         "cells": deltas,
         "worst_case": per_model,
         "size_classes": size_class_rows(per_model),
-        "meta": store.meta(),
+        "meta": store.meta() | {"scorers": store.scorers()},
         "transforms": transforms,
         "cells_done": sum(c["status"] == "done" for c in cells),
         "cells_unreachable": sum(c["status"] == "unreachable" for c in cells),
@@ -332,7 +332,8 @@ def prediction_table(tables: dict[str, Any], name: str = "coco1000-measured") ->
         "interpolation": "linear",
         "provenance": {
             "source": "fidelity sweep (issue 5): SAFE-COLOR transforms calibrated on the chart, "
-                      "JPEG re-encoded with original tables, ONNX detectors, pycocotools",
+                      "JPEG re-encoded with original tables, ONNX detectors, COCO box AP ("
+                      + _scorer_words(meta.get("scorers")) + ")",
             "models": {m: {k: v for k, v in info.items() if k in ("file", "sha256", "size",
                                                                    "limit_images", "images",
                                                                    "baseline_map")}
@@ -448,6 +449,15 @@ def _fmt(v: Any, nd: int = 2) -> str:
     return str(v)
 
 
+def _scorer_words(scorers: Sequence[dict[str, Any]] | None) -> str:
+    """Which COCO scorers scored the store's cells, in words."""
+    if not scorers:
+        return "pycocotools"
+    parts = [f"{e['scorer']}" + (f" from {e['since']}" if e.get("since") else "")
+             for e in scorers]
+    return ", then ".join(parts)
+
+
 def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
                     plots: Sequence[str] = ()) -> str:
     """The Markdown report."""
@@ -467,8 +477,9 @@ def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
               "(fidelity.calibration, full precision; listed per cell below), rounded to 8 bit "
               "(exact 8-bit tables, equal to the float64 reference), JPEG-encoded with the "
               "original quantization tables and subsampling, decoded, and passed to the "
-              "detector; ΔE 0 is the baseline (decode and re-encode only). Scoring: pycocotools "
-              "COCOeval, bbox. Detections of every image are stored, so any cell can be "
+              "detector; ΔE 0 is the baseline (decode and re-encode only). Scoring: COCO box AP "
+              f"({_scorer_words(meta.get('scorers'))}; faster-coco-eval agrees with the "
+              "pycocotools reference to 1e-4, tested). Detections of every image are stored, so any cell can be "
               "re-scored without inference (`fidelity sweep --rescore`)."]
     for m, info in tables["models"].items():
         st = info.get("settings") or {}
