@@ -15,7 +15,11 @@ Store (``<out>/sweep.sqlite``, WAL journal, ``synchronous=FULL``):
 * ``models(model, file, sha256, limit_images, settings)`` and ``meta(key, value)``: provenance
   (versions, data, grid, machine, and ``scorers``: the COCO AP implementations that scored it).
 
-A rerun skips finished cells and the images already stored in unfinished ones.
+A rerun skips finished cells and the images already stored in unfinished ones. A rerun with a
+model's image limit raised (``model.onnx@N``) extends its finished cells: only the new images
+are run, the stored ones are kept, and each cell is re-scored on the first N images (baseline
+first, so that a store caught mid-extension still pairs every cell with a baseline on the same
+images: :func:`fidelity.tables.cell_deltas` leaves out cells scored on another image count).
 """
 
 from __future__ import annotations
@@ -281,8 +285,11 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
         det = detectors[index]
         ids = all_ids[: spec.limit] if spec.limit else all_ids
         for transform, target in grid:
-            if store.cell(det.name, transform, target):
+            finished = store.cell(det.name, transform, target)
+            if finished and (finished["status"] != "done" or finished["images"] == len(ids)):
                 continue
+            # not finished, or finished on another image count (the model's limit was raised:
+            # only the new images are run; or lowered: re-scored on the first N, no inference)
             if transform == BASELINE:
                 param, reason = None, None
             else:

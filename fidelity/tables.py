@@ -61,7 +61,9 @@ def _delta(base: float | None, value: float | None) -> tuple[float | None, float
 def cell_deltas(cells: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
     """Per model: every done transformed cell with its ΔmAP and ΔAP (points and relative).
 
-    Cells of a model without a finished baseline are left out.
+    Cells of a model without a finished baseline are left out, and so are done cells scored on
+    another number of images than their model's baseline (a sweep caught while extending a
+    model's image limit): a ΔmAP needs both scores on the same images.
     """
     by_model: dict[str, list[dict[str, Any]]] = {}
     base = {c["model"]: c for c in cells if c["transform"] == "baseline" and c["status"] == "done"}
@@ -69,6 +71,8 @@ def cell_deltas(cells: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any
         if c["transform"] == "baseline" or c["model"] not in base:
             continue
         b = base[c["model"]]
+        if c["status"] == "done" and c.get("images") != b.get("images"):
+            continue
         row: dict[str, Any] = {"model": c["model"], "transform": c["transform"],
                                "delta_e": float(c["target"]), "param": c["param"],
                                "status": c["status"], "reason": c.get("reason"),

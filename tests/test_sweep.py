@@ -227,3 +227,46 @@ def test_cli_evaluate_sweep_tables(coco, tmp_path) -> None:
     r = run(main, ["sweep", "--models", str(model), "--images", str(images), "--annotations",
                    str(ann), "--transforms", "sharpen", "--out", str(out)])
     assert r.exit_code == 2 and "unknown transform" in r.output
+
+
+@pytest.mark.shared
+def test_raising_and_lowering_a_model_limit(coco, tmp_path) -> None:
+    """model@3 then model@6: only the 3 new images are run; @2 re-scores without inference."""
+    from fidelity.cocoeval import evaluate_detections, load_annotations
+    from fidelity.sweep import run_sweep
+    from fidelity.tables import cell_deltas
+
+    images, ann, model = coco
+    quiet = {"threads": 1, "log": lambda s: None}
+    store = run_sweep([ModelSpec(model, 3)], images, ann, tmp_path, ["contrast-inc"], [0, 6],
+                      **quiet)
+    first = store.detections("yolox_nano", "contrast-inc", 6)
+    assert sorted(c["images"] for c in store.cells()) == [3, 3]
+
+    # a store caught mid-extension: the baseline is on 6 images, the cell still on 3
+    gt = load_annotations(ann)
+    ids6 = sorted(gt.getImgIds())[:6]
+    cells = store.cells()
+    base = next(c for c in cells if c["transform"] == "baseline") | {"images": 6}
+    assert cell_deltas([base] + [c for c in cells if c["transform"] != "baseline"]) == {}
+
+    lines: list[str] = []
+    store = run_sweep([ModelSpec(model, 6)], images, ann, tmp_path, ["contrast-inc"], [0, 6],
+                      threads=1, log=lines.append)
+    assert sorted(c["images"] for c in store.cells()) == [6, 6]
+    assert all("new=3 " in line for line in lines), lines
+    after = store.detections("yolox_nano", "contrast-inc", 6)
+    assert sorted(after) == ids6
+    for i, d in first.items():  # the stored images were not run again
+        assert np.array_equal(after[i], d)
+    cell = store.cell("yolox_nano", "contrast-inc", 6)
+    assert cell["map"] == pytest.approx(evaluate_detections(gt, after, ids6).map, abs=1e-12)
+
+    lines.clear()
+    store = run_sweep([ModelSpec(model, 2)], images, ann, tmp_path, ["contrast-inc"], [0, 6],
+                      threads=1, log=lines.append)
+    assert all("new=0 " in line for line in lines) and len(lines) == 2
+    cell = store.cell("yolox_nano", "contrast-inc", 6)
+    assert cell["images"] == 2
+    assert cell["map"] == pytest.approx(evaluate_detections(gt, after, ids6[:2]).map, abs=1e-12)
+    assert len(cell_deltas(store.cells())["yolox_nano"]) == 1
