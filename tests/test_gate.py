@@ -76,9 +76,11 @@ def test_gate_on_predicted_person_loss(png):
     # safecolor-2025, person: ΔAP < 1 at ΔE 3 and 100 (AP 0) at ΔE 24, chord between them
     person = 1.0 + (de - 3.0) * 99.0 / 21.0
     assert 3 < de < 24
-    ok = run("gate", path, "--corners", corners_of(), "--max-dmap", f"{person + 0.2:.3f}", "--class", "person")
+    ok = run("gate", path, "--corners", corners_of(), "--max-dmap", f"{person + 0.2:.3f}", "--class", "person",
+             "--table", "safecolor-2025")
     assert ok.exit_code == 0, ok.output
-    bad = run("gate", path, "--corners", corners_of(), "--max-dmap", f"{person - 0.2:.3f}", "--class", "person")
+    bad = run("gate", path, "--corners", corners_of(), "--max-dmap", f"{person - 0.2:.3f}", "--class", "person",
+              "--table", "safecolor-2025")
     assert bad.exit_code == 1
     assert re.search(rf"predicted person ΔAP {person:.1f}\d points \(upper bound\) >", bad.stdout)
 
@@ -140,12 +142,13 @@ def test_predict_cli(tmp_path):
 
 
 def test_verdict_logic():
-    p = predict(5.0, transforms=False)
+    p = predict(5.0, table="safecolor-2025", transforms=False)
     v = evaluate(5.0, p, Criterion("max-dmap", 3.0))
     assert v.passed and v.value == pytest.approx(1 + 2 * 2 / 3)
     assert not evaluate(5.0, p, Criterion("max-delta-e", 4.99)).passed
     assert evaluate(5.0, p, Criterion("max-delta-e", 5.0)).passed
-    far = evaluate(30.0, predict(30.0, transforms=False), Criterion("max-dmap", 50.0))
+    far = evaluate(30.0, predict(30.0, table="safecolor-2025", transforms=False),
+                   Criterion("max-dmap", 50.0))
     assert not far.passed and far.conservative
     with pytest.raises(InvalidValueError, match="relative"):
         Criterion("max-dmap", 1.0, "person", "relative")

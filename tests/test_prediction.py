@@ -14,6 +14,9 @@ from fidelity import prediction as pr
 from fidelity.errors import FidelityError, InputFileError, UnknownNameError
 from fidelity.resources import shared_dir
 
+#: The published-bounds table, named explicitly (the statements below are the paper's).
+SC = "safecolor-2025"
+
 
 def test_default_table_is_the_published_bounds():
     table = pr.load_prediction_table()
@@ -33,16 +36,16 @@ def test_default_table_is_the_published_bounds():
     (24.0, "dmap_relative", 100.0),     # at ΔE 24 mAP drops to 0
 ])
 def test_published_statements(delta_e, column, bound):
-    p = pr.predict(delta_e, transforms=False)
+    p = pr.predict(delta_e, table=SC, transforms=False)
     assert p.columns[column].value == pytest.approx(bound)
     # and everywhere below the statement's ΔE the prediction stays within the bound
     for de in np.linspace(0, delta_e, 13):
-        assert pr.predict(de, transforms=False).columns[column].value <= bound + 1e-12
+        assert pr.predict(de, table=SC, transforms=False).columns[column].value <= bound + 1e-12
 
 
 def test_bicycle_one_delta_e_per_point_between_1_and_11():
     for de in (1.0, 2.5, 4.0, 7.5, 11.0):
-        assert pr.predict(de, transforms=False).dap_bicycle_points == pytest.approx(de)
+        assert pr.predict(de, table=SC, transforms=False).dap_bicycle_points == pytest.approx(de)
 
 
 def test_every_point_cites_a_statement_of_the_paper():
@@ -64,26 +67,34 @@ def test_every_point_cites_a_statement_of_the_paper():
 def test_predictions_are_monotone_and_conservative_beyond_range():
     grid = np.linspace(0, 40, 401)
     for col in pr.COLUMNS:
-        v = pr.predict_curve(grid, col)
+        v = pr.predict_curve(grid, col, table=SC)
         assert np.all(np.diff(v) >= -1e-12), col
-    far = pr.predict(30.0, transforms=False)
+    far = pr.predict(30.0, table=SC, transforms=False)
     assert far.out_of_range
     assert far.columns["dmap_points"].status == "above-range"
     assert far.dmap_points == 100.0 and far.dmap_relative == 100.0
     assert any("beyond the table" in n for n in far.notes)
 
 
+@pytest.mark.parametrize("name", pr.available_tables())
+def test_every_shipped_table_predicts_monotone_losses(name):
+    grid = np.linspace(0, 40, 161)
+    for col in pr.COLUMNS:
+        v = pr.predict_curve(grid, col, table=name)
+        assert np.all(np.isfinite(v)) and np.all(np.diff(v) >= -1e-12), (name, col)
+
+
 def test_points_vs_relative_with_a_baseline():
-    p = pr.predict(6.0, baseline_map=37.5, transforms=False)
+    p = pr.predict(6.0, table=SC, baseline_map=37.5, transforms=False)
     assert p.dmap_points == pytest.approx(3.0)
     # the paper's "3 %" read as points is 3/37.5 = 8 % of the baseline: the larger bound wins
     assert p.dmap_relative == pytest.approx(100 * 3.0 / 37.5)
     assert "read as points" in p.columns["dmap_relative"].note
-    plain = pr.predict(6.0, transforms=False)
+    plain = pr.predict(6.0, table=SC, transforms=False)
     assert plain.dmap_relative == pytest.approx(3.0)
     assert any("ambiguous" in n for n in plain.notes)
     with pytest.raises(FidelityError, match="baseline mAP"):
-        pr.predict(6.0, baseline_map=0.0)
+        pr.predict(6.0, table=SC, baseline_map=0.0)
 
 
 def _measured_table() -> dict:
@@ -209,7 +220,7 @@ def test_transform_parameters_between_targets_reach_that_delta_e():
 
 
 def test_prediction_dict_keys():
-    d = pr.predict(4.0).to_dict()
+    d = pr.predict(4.0, table=SC).to_dict()
     for key in ("dmap_points", "dmap_relative", "dap_person_points", "dap_bicycle_points",
                 "table", "transforms"):
         assert key in d
