@@ -226,3 +226,42 @@ def evaluate_detections(coco_gt: Any, detections: Mapping[int, np.ndarray],
     stats = tuple(float(s) for s in stats_arr)
     return CocoScore(map=max(stats[0], 0.0), map50=max(stats[1], 0.0), map75=max(stats[2], 0.0),
                      ap=ap, images=len(ids), detections=len(results), stats=stats)
+
+
+#: Interleaved image folds used for standard errors (validation and sweep tables).
+FOLDS: int = 5
+
+
+def score_folds(coco_gt: Any, detections: Mapping[int, np.ndarray], image_ids: Sequence[int],
+                folds: int = FOLDS, method: str = "pycocotools") -> list[dict[str, Any]]:
+    """Scores of ``folds`` interleaved image folds (``ids[k::folds]``), for standard errors.
+
+    Returns one dict per fold with ``map``, ``person``, ``bicycle`` (AP fractions, None without
+    ground truth) and ``images``. With fewer images than folds each image is a fold; with fewer
+    than 2 images, no folds. The standard error of a paired difference d between two runs on
+    the same images is ``std(d_k, ddof=1) / sqrt(K)`` over the folds (the folds are disjoint
+    and together cover every image).
+    """
+    ids = sorted(int(i) for i in image_ids)
+    n = min(int(folds), len(ids))
+    out = []
+    for k in range(n if n >= 2 else 0):
+        fold = ids[k::n]
+        s = evaluate_detections(coco_gt, detections, fold, method=method)
+        out.append({"map": s.map, "person": s.ap.get("person"), "bicycle": s.ap.get("bicycle"),
+                    "images": len(fold)})
+    return out
+
+
+def paired_standard_error(base: Sequence[float | None], other: Sequence[float | None],
+                          scale: float = 100.0) -> float | None:
+    """SE of ``scale * mean(base - other)`` from per-fold values (None where a fold lacks one).
+
+    ``std(d_k, ddof=1) / sqrt(K)`` over the folds where both values exist; None with fewer
+    than 2 such folds.
+    """
+    d = [scale * (b - o) for b, o in zip(base, other, strict=True)
+         if b is not None and o is not None]
+    if len(d) < 2:
+        return None
+    return float(np.std(d, ddof=1) / np.sqrt(len(d)))

@@ -12,6 +12,9 @@ Store (``<out>/sweep.sqlite``, WAL journal, ``synchronous=FULL``):
   ``kill -9`` loses at most one uncommitted batch and re-scoring needs no inference.
 * ``cells(model, transform, target, param, status, reason, images, map, map50, map75, ap,
   seconds, finished)``: one row per finished cell (``status`` ``done`` or ``unreachable``).
+* ``folds(model, transform, target, images, folds)``: per-fold scores of a finished cell
+  (:func:`fidelity.cocoeval.score_folds`), computed from the stored detections when a report
+  asks for standard errors, and kept.
 * ``models(model, file, sha256, limit_images, settings)`` and ``meta(key, value)``: provenance
   (versions, data, grid, machine, and ``scorers``: the COCO AP implementations that scored it).
 
@@ -55,6 +58,10 @@ CREATE TABLE IF NOT EXISTS detections (
     model TEXT NOT NULL, transform TEXT NOT NULL, target REAL NOT NULL,
     image_id INTEGER NOT NULL, n INTEGER NOT NULL, dets BLOB NOT NULL,
     PRIMARY KEY (model, transform, target, image_id));
+CREATE TABLE IF NOT EXISTS folds (
+    model TEXT NOT NULL, transform TEXT NOT NULL, target REAL NOT NULL,
+    images INTEGER NOT NULL, folds TEXT NOT NULL,
+    PRIMARY KEY (model, transform, target));
 """
 
 
@@ -120,6 +127,22 @@ class SweepStore(ResultsStore):
             if entry["since"] is None or (cell.get("finished") or "") > entry["since"]:
                 name = entry["scorer"]
         return name
+
+    def fold_scores(self, coco: Any, model: str, transform: str, target: float,
+                    image_ids: Sequence[int], method: str = "auto") -> list[dict[str, Any]]:
+        """Per-fold scores of a cell on ``image_ids`` (cached in the ``folds`` table)."""
+        from fidelity.cocoeval import score_folds
+
+        row = self.db.execute("SELECT images, folds FROM folds WHERE model=? AND transform=? "
+                              "AND target=?", (model, transform, float(target))).fetchone()
+        if row and row[0] == len(image_ids):
+            return list(json.loads(row[1]))
+        folds = score_folds(coco, self.detections(model, transform, target), image_ids,
+                            method=method)
+        with self.db:
+            self.db.execute("INSERT OR REPLACE INTO folds VALUES (?, ?, ?, ?, ?)",
+                            (model, transform, float(target), len(image_ids), json.dumps(folds)))
+        return folds
 
     # cells ----------------------------------------------------------------------------------
     def cell(self, model: str, transform: str, target: float) -> dict[str, Any] | None:

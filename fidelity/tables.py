@@ -116,6 +116,7 @@ def worst_case_rows(rows: Sequence[dict[str, Any]], baseline: dict[str, Any],
         out.append({
             "delta_e": de, "worst_transform": worst["transform"],
             "dmap_points": worst["dmap_points"], "dmap_relative": worst["dmap_relative"],
+            "dmap_points_se": worst.get("dmap_points_se"),
             "map": worst["map"],
             "dap_person_points": _max_or_none([r.get("dap_person_points") for r in done]),
             "dap_bicycle_points": _max_or_none([r.get("dap_bicycle_points") for r in done]),
@@ -146,7 +147,7 @@ def size_class_rows(per_model: dict[str, list[dict[str, Any]]]) -> dict[str, lis
             m, w = max(cand, key=lambda mr: mr[1]["dmap_points"])
             rows.append({
                 "delta_e": de, "worst_model": m, "worst_transform": w["worst_transform"],
-                "dmap_points": w["dmap_points"],
+                "dmap_points": w["dmap_points"], "dmap_points_se": w.get("dmap_points_se"),
                 "dmap_relative": _max_or_none([r["dmap_relative"] for _, r in cand]),
                 "dap_person_points": _max_or_none([r["dap_person_points"] for _, r in cand]),
                 "dap_bicycle_points": _max_or_none([r["dap_bicycle_points"] for _, r in cand]),
@@ -157,8 +158,41 @@ def size_class_rows(per_model: dict[str, list[dict[str, Any]]]) -> dict[str, lis
     return out
 
 
-def build_tables(store: Any) -> dict[str, Any]:
-    """Everything the report needs, from a :class:`fidelity.sweep.SweepStore`."""
+def add_standard_errors(store: Any, coco: Any, deltas: dict[str, list[dict[str, Any]]],
+                        baselines: dict[str, dict[str, Any]], method: str = "auto",
+                        progress: bool = False) -> None:
+    """Add ``dmap_points_se``, ``dap_person_points_se``, ``dap_bicycle_points_se`` to rows.
+
+    Paired standard errors over :data:`fidelity.cocoeval.FOLDS` interleaved image folds: per
+    fold the loss of the cell against the baseline on the same images,
+    ``SE = std(loss_k, ddof=1) / sqrt(K)`` (:func:`fidelity.cocoeval.paired_standard_error`).
+    Fold scores are computed from the stored detections (no inference) and cached in the store.
+    """
+    from tqdm import tqdm
+
+    from fidelity.cocoeval import paired_standard_error
+
+    ids_all = sorted(coco.getImgIds())
+    todo = [(m, r) for m, rows in deltas.items() for r in rows if r["status"] == "done"]
+    base_folds: dict[str, list[dict[str, Any]]] = {}
+    for m, r in tqdm(todo, desc="fold scores", unit="cell", disable=not progress):
+        ids = ids_all[: baselines[m]["images"]]
+        if m not in base_folds:
+            base_folds[m] = store.fold_scores(coco, m, "baseline", 0.0, ids, method)
+        folds = store.fold_scores(coco, m, r["transform"], r["delta_e"], ids, method)
+        for key, col in (("map", "dmap_points_se"), ("person", "dap_person_points_se"),
+                         ("bicycle", "dap_bicycle_points_se")):
+            r[col] = paired_standard_error([f[key] for f in base_folds[m]],
+                                           [f[key] for f in folds])
+
+
+def build_tables(store: Any, coco: Any = None, *, method: str = "auto",
+                 progress: bool = False) -> dict[str, Any]:
+    """Everything the report needs, from a :class:`fidelity.sweep.SweepStore`.
+
+    ``coco``: the sweep's annotations (pycocotools ``COCO``); when given, every done cell gets
+    paired fold standard errors (:func:`add_standard_errors`), else none.
+    """
     cells = store.cells()
     if not cells:
         raise InputFileError(f"{store.path}: the sweep store has no finished cells yet")
@@ -166,6 +200,8 @@ def build_tables(store: Any) -> dict[str, Any]:
     deltas = cell_deltas(cells)
     baselines = {c["model"]: c for c in cells if c["transform"] == "baseline"
                  and c["status"] == "done"}
+    if coco is not None:
+        add_standard_errors(store, coco, deltas, baselines, method, progress)
     grid = store.meta().get("grid") or {}
     planned = grid.get("transforms")
     if not planned:
@@ -191,6 +227,7 @@ def build_tables(store: Any) -> dict[str, Any]:
         "transforms": transforms,
         "cells_done": sum(c["status"] == "done" for c in cells),
         "cells_unreachable": sum(c["status"] == "unreachable" for c in cells),
+        "standard_errors": coco is not None,
     }
 
 
@@ -277,8 +314,12 @@ def compare_with_paper(tables: dict[str, Any]) -> list[dict[str, Any]]:
         m_rel, r_rel = max(vals, key=lambda mr: mr[1]["dmap_relative"] or 0)
         m_pts, r_pts = max(vals, key=lambda mr: mr[1]["dmap_points"] or 0)
         rel, pts = r_rel["dmap_relative"], r_pts["dmap_points"]
+        se = r_pts.get("dmap_points_se")
         verdict = ("agrees" if rel < bound else
                    "agrees only if read as points" if pts < bound else "disagrees")
+        if verdict == "disagrees" and se and pts - bound < 2 * se:
+            verdict = "disagrees, but within 2 SE of the bound in points"
+        pts_text = f"{pts:.2f}" + (f" ± {se:.2f} SE" if se else "")
         partial = any(r["partial"] for _, r in vals)
         missing_de = sorted({d for d in (1, 2, 3, 4, 5, 6, 8, 10, 12) if d <= limit}
                             - {r["delta_e"] for _, r in vals})
@@ -288,7 +329,7 @@ def compare_with_paper(tables: dict[str, Any]) -> list[dict[str, Any]]:
                     "verdict": verdict,
                     "evidence": f"largest relative loss {rel:.2f} % ({m_rel}, "
                                 f"{r_rel['worst_transform']} at ΔE {r_rel['delta_e']:g}); "
-                                f"largest loss in points {pts:.2f} ({m_pts}, "
+                                f"largest loss in points {pts_text} ({m_pts}, "
                                 f"{r_pts['worst_transform']} at ΔE {r_pts['delta_e']:g}); "
                                 f"{sum(r['transforms_done'] for _, r in vals)} cells"
                                 + (f"; ΔE not yet measured: {missing_de}" if missing_de else "")})
@@ -493,7 +534,19 @@ def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
                      f"{(st.get('conventions') or {}).get('source')}; "
                      f"{(st.get('conventions') or {}).get('preprocess')}.")
     lines += ["", "ΔmAP in **points** = 100·(mAP₀ − mAP); **relative** = 100·(mAP₀ − mAP)/mAP₀. "
-              "ΔAP person/bicycle in points, each the worst over transforms at that ΔE.", ""]
+              "ΔAP person/bicycle in points, each the worst over transforms at that ΔE."]
+    if tables.get("standard_errors"):
+        ses = [r["dmap_points_se"] for rows in tables["cells"].values() for r in rows
+               if r.get("dmap_points_se") is not None]
+        lines.append("± values are standard errors of ΔmAP in points, paired over 5 "
+                     "interleaved image folds (SE = sd of the per-fold losses / √5); median "
+                     + ", ".join(f"{m} {float(np.median(s)):.2f}" for m, s in (
+                         (m, [r["dmap_points_se"] for r in rows
+                              if r.get("dmap_points_se") is not None])
+                         for m, rows in tables["cells"].items()) if s)
+                     + f" points ({len(ses)} cells). A worst case over ten transforms is "
+                     "biased upwards by this noise.")
+    lines.append("")
     lines += ["## Models", "", "| model | size | images | baseline mAP | AP50 | AP person | "
               "AP bicycle | conventions |", "|---|---|---|---|---|---|---|---|"]
     for m, info in tables["models"].items():
@@ -545,8 +598,10 @@ def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
                   "ΔAP bicycle pts | transforms done | unreachable |",
                   "|---|---|---|---|---|---|---|---|"]
         for r in rows[1:]:
+            se = r.get("dmap_points_se")
             lines.append(f"| {r['delta_e']:g} | {r['worst_transform']} | "
-                         f"{_fmt(r['dmap_points'])} | {_fmt(r['dmap_relative'])} | "
+                         f"{_fmt(r['dmap_points'])}{f' ± {se:.2f}' if se else ''} | "
+                         f"{_fmt(r['dmap_relative'])} | "
                          f"{_fmt(r['dap_person_points'])} | {_fmt(r['dap_bicycle_points'])} | "
                          f"{r['transforms_done']}/{r['transforms_reachable']}"
                          f"{' (partial)' if r['partial'] else ''} | "
@@ -627,12 +682,16 @@ def _inline(text: str) -> str:
 
 def write_report(store: Any, out_dir: str | os.PathLike[str],
                  prediction_path: str | os.PathLike[str] | None = None,
-                 name: str = "coco1000-measured") -> dict[str, Path]:
-    """Write report.md, report.html, tables.json, plots and (optionally) the prediction table."""
+                 name: str = "coco1000-measured", coco: Any = None,
+                 progress: bool = False) -> dict[str, Path]:
+    """Write report.md, report.html, tables.json, plots and (optionally) the prediction table.
+
+    ``coco``: annotations for standard errors (see :func:`build_tables`).
+    """
     from fidelity.fileio import write_bytes_atomic, write_json_atomic, write_text_atomic
 
     out = Path(out_dir)
-    tables = build_tables(store)
+    tables = build_tables(store, coco, progress=progress)
     comparison = compare_with_paper(tables)
     plots = make_plots(tables)
     md = report_markdown(tables, comparison, sorted(plots))

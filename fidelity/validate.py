@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 import tomllib
 
+from fidelity.cocoeval import FOLDS  # interleaved image folds for standard errors
 from fidelity.errors import InputFileError, InvalidValueError
 from fidelity.fileio import file_sha256
 from fidelity.resultstore import ResultsStore, pack_detections, unpack_detections
@@ -51,8 +52,6 @@ from fidelity.resultstore import ResultsStore, pack_detections, unpack_detection
 STORE_NAME = "validation.sqlite"
 SUITE_FILE = "suite.toml"
 BASELINE = "baseline"
-#: Number of interleaved image folds for the standard error of a measured loss.
-FOLDS: int = 5
 #: Classes compared (``all`` = mAP@[.50:.95] over the 80 COCO classes).
 CLASSES: tuple[str, ...] = ("all", "person", "bicycle")
 #: Loss columns compared (prediction-table column names).
@@ -291,16 +290,9 @@ class ValidationStore(ResultsStore):
 
 
 def _fold_scores(coco: Any, dets: dict[int, np.ndarray], ids: Sequence[int]) -> list[dict[str, Any]]:
-    from fidelity.cocoeval import evaluate_detections
+    from fidelity.cocoeval import score_folds
 
-    out = []
-    n = min(FOLDS, len(ids))  # fewer images than folds: one image per fold
-    for k in range(n if n >= 2 else 0):
-        fold = list(ids[k::n])
-        s = evaluate_detections(coco, dets, fold)
-        out.append({"map": s.map, "person": s.ap.get("person"), "bicycle": s.ap.get("bicycle"),
-                    "images": len(fold)})
-    return out
+    return score_folds(coco, dets, ids, FOLDS)
 
 
 # --------------------------------------------------------------------------------------------
@@ -461,11 +453,9 @@ def _loss(base: float | None, value: float | None) -> float | None:
 
 
 def _se(base_folds: list[dict[str, Any]], folds: list[dict[str, Any]], key: str) -> float | None:
-    d = [100.0 * (b[key] - f[key]) for b, f in zip(base_folds, folds, strict=True)
-         if b.get(key) is not None and f.get(key) is not None]
-    if len(d) < 2:
-        return None
-    return float(np.std(d, ddof=1) / math.sqrt(len(d)))
+    from fidelity.cocoeval import paired_standard_error
+
+    return paired_standard_error([b.get(key) for b in base_folds], [f.get(key) for f in folds])
 
 
 def holdout_accuracy(cases: Sequence[CameraCase], method: str = "root-polynomial"

@@ -224,6 +224,7 @@ def test_cli_evaluate_sweep_tables(coco, tmp_path) -> None:
     assert r.exit_code == 0, r.output
     md = (tmp_path / "rep" / "report.md").read_text()
     assert "| 24 | contrast-dec |" in md  # a near-uniform grey image: the worst case at ΔE 24
+    assert "paired over 5 interleaved image folds" in md  # annotations found via the store
     r = run(main, ["sweep", "--models", str(model), "--images", str(images), "--annotations",
                    str(ann), "--transforms", "sharpen", "--out", str(out)])
     assert r.exit_code == 2 and "unknown transform" in r.output
@@ -270,3 +271,29 @@ def test_raising_and_lowering_a_model_limit(coco, tmp_path) -> None:
     assert cell["images"] == 2
     assert cell["map"] == pytest.approx(evaluate_detections(gt, after, ids6[:2]).map, abs=1e-12)
     assert len(cell_deltas(store.cells())["yolox_nano"]) == 1
+
+
+@pytest.mark.shared
+def test_fold_standard_errors_in_tables(coco, tmp_path) -> None:
+    """Paired fold SEs of ΔmAP equal a direct per-fold computation, and are cached."""
+    from fidelity.cocoeval import evaluate_detections, load_annotations
+    from fidelity.sweep import run_sweep
+    from fidelity.tables import build_tables
+
+    images, ann, model = coco
+    store = run_sweep([ModelSpec(model, 12)], images, ann, tmp_path, ["contrast-inc"], [0, 12],
+                      threads=2, log=lambda s: None)
+    gt = load_annotations(ann)
+    tables = build_tables(store, gt)
+    row = tables["cells"]["yolox_nano"][0]
+    ids = sorted(gt.getImgIds())[:12]
+    base = store.detections("yolox_nano", "baseline", 0)
+    cell = store.detections("yolox_nano", "contrast-inc", 12)
+    losses = [100 * (evaluate_detections(gt, base, ids[k::5], method="pycocotools").map
+                     - evaluate_detections(gt, cell, ids[k::5], method="pycocotools").map)
+              for k in range(5)]
+    assert row["dmap_points_se"] == pytest.approx(np.std(losses, ddof=1) / np.sqrt(5), abs=1e-9)
+    assert tables["worst_case"]["yolox_nano"][1]["dmap_points_se"] == row["dmap_points_se"]
+    n = store.db.execute("SELECT COUNT(*) FROM folds").fetchone()[0]
+    assert n == 2  # baseline and the cell, kept for the next report
+    assert build_tables(store)["cells"]["yolox_nano"][0].get("dmap_points_se") is None
