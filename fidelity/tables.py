@@ -414,6 +414,7 @@ def _point(r: dict[str, Any], source: str) -> dict[str, Any]:
             "dmap_relative": _round(r["dmap_relative"]),
             "dap_person_points": _round(r["dap_person_points"]),
             "dap_bicycle_points": _round(r["dap_bicycle_points"]),
+            "dmap_points_se": _round(r.get("dmap_points_se")),
             "worst_transform": r["worst_transform"], "source": source,
             "partial": bool(r.get("partial"))}
 
