@@ -484,7 +484,8 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
         def f(v: Any) -> str:
             return "n/a" if v is None else f"{b}{v:.2f}"
 
-        kind = "upper bound, " if pred.get("bound") else ""
+        kind = ("upper bound, " if pred.get("bound") else
+                "measured worst case, " if pred["table"].get("kind") == "measured" else "")
         lines.append(f"predicted ΔmAP: {f(pred['dmap_points'])} percentage points, "
                      f"{f(pred['dmap_relative'])} % of baseline ({kind}table "
                      f"{pred['table']['name']}, size {pred['size_used']})")

@@ -18,11 +18,24 @@ from fidelity.resources import shared_dir
 SC = "safecolor-2025"
 
 
-def test_default_table_is_the_published_bounds():
+def test_default_table_is_the_measured_sweep_covering_its_plan():
+    """The default is the project's measured table, complete: every model at every sweep ΔE."""
+    from fidelity.sweep import SWEEP_TARGETS
+
     table = pr.load_prediction_table()
-    assert pr.DEFAULT_TABLE == "safecolor-2025" and table.name == "safecolor-2025"
-    assert table.kind == "published-bounds"
-    assert "safecolor-2025" in pr.available_tables()
+    assert pr.DEFAULT_TABLE == "coco1000-measured" == table.name and table.kind == "measured"
+    prov = table.provenance
+    assert prov["omitted_partial_points"] == []
+    models = prov["models"]
+    assert set(models) == {"yolox_nano", "yolo11n-int8dyn", "yolov8n-int8dyn", "yolov10n-int8dyn"}
+    for info in models.values():
+        assert len(info["sha256"]) == 64 and info["images"] >= 100 and info["conventions"]
+    assert prov["images"] and prov["versions"]["onnxruntime"]
+    for curve in table.curves:  # the aggregate and every model: ΔE 0 ... 24, nothing missing
+        assert list(curve.delta_e) == [float(t) for t in SWEEP_TARGETS], curve.model
+        assert not np.isnan(curve.values["dmap_points"]).any(), curve.model
+    # the published bounds stay available by name
+    assert pr.load_prediction_table("safecolor-2025").kind == "published-bounds"
 
 
 @pytest.mark.parametrize("delta_e,column,bound", [
