@@ -91,6 +91,8 @@ class Curve:
     sources: tuple[str, ...]
     worst_transforms: tuple[str | None, ...]
     baseline_map: float | None = None
+    #: standard error of ``dmap_points`` at each point (measured tables; NaN where unknown)
+    dmap_points_se: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -208,6 +210,9 @@ def parse_prediction_table(obj: dict[str, Any], origin: str = "<table>") -> Pred
             sources=tuple(str(p.get("source", "")) for p in pts),
             worst_transforms=tuple(p.get("worst_transform") for p in pts),
             baseline_map=_baseline_percent(baseline, where),
+            dmap_points_se=(np.array([_number(p.get("dmap_points_se"), f"{where}.dmap_points_se")
+                                      for p in pts])
+                            if any("dmap_points_se" in p for p in pts) else None),
         ))
     return PredictionTable(
         name=str(obj["name"]),
@@ -460,6 +465,7 @@ def predict(
                      f"curve (worst case over sizes) answers")
     t = np.array([de])
     columns: dict[str, ColumnPrediction] = {}
+    answering: Curve | None = None
     for col in COLUMNS:
         best_v, best_s, rng = math.nan, 2, None
         for c in curves:
@@ -469,6 +475,8 @@ def predict(
             v, s, r = _column_values(c, col, t, m, ceiling)
             if r is not None and (math.isnan(best_v) or v[0] > best_v):
                 best_v, best_s, rng = float(v[0]), int(s[0]), r
+                if col == "dmap_points":
+                    answering = c
         if math.isnan(best_v):
             columns[col] = ColumnPrediction(None, "no-data", None,
                                             f"table {tab.name!r} has no {col} data")
@@ -501,6 +509,14 @@ def predict(
             notes.append("ΔmAP points vs relative: the paper's '%' is ambiguous; dmap_points is "
                          "safe under both readings, dmap_relative only under the relative "
                          "reading (give the detector's baseline mAP to bound it under both)")
+    if tab.kind == "measured":
+        notes.append("measured table: values are the worst loss measured over the transforms "
+                     "(and models) at each ΔE, with sampling error, not a guaranteed bound")
+        se = _bracketing_se(answering, de)
+        if se:
+            notes.append(f"sampling error of the measured ΔmAP points around ΔE {de:g}: SE "
+                         + (f"{se[0]:.2f}" if se[0] == se[1] else f"{se[0]:.2f}-{se[1]:.2f}")
+                         + " points")
     for col, cp in columns.items():
         if cp.status == "above-range":
             notes.append(f"{col}: ΔE {de:g} is beyond the table ({cp.note})")
@@ -509,6 +525,18 @@ def predict(
         baseline_map=float(baseline_map) if baseline_map is not None else None,
         transforms=transform_parameters(de) if transforms else [], notes=notes,
     )
+
+
+def _bracketing_se(curve: Curve | None, delta_e: float) -> tuple[float, float] | None:
+    """(min, max) SE of ``dmap_points`` at the table points next to ``delta_e`` (None: unknown)."""
+    if curve is None or curve.dmap_points_se is None:
+        return None
+    x = curve.delta_e
+    hi = int(np.searchsorted(x, delta_e, side="left"))
+    idx = {min(hi, len(x) - 1)} | ({hi - 1} if hi > 0 and x[min(hi, len(x) - 1)] != delta_e else set())
+    vals = [float(curve.dmap_points_se[i]) for i in sorted(idx)
+            if math.isfinite(curve.dmap_points_se[i])]
+    return (min(vals), max(vals)) if vals else None
 
 
 def transform_parameters(delta_e: float, calibration: Any = None, *,

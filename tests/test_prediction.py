@@ -126,6 +126,24 @@ def _measured_table() -> dict:
     }
 
 
+def test_measured_table_reports_the_sampling_error_of_its_points():
+    doc = _measured_table()
+    plain = pr.predict(3.0, size="n", table=pr.parse_prediction_table(doc), transforms=False)
+    assert any("not a guaranteed bound" in n for n in plain.notes)
+    assert not any("SE" in n for n in plain.notes)  # no SEs in the file: none reported
+    for curve, ses in zip(doc["curves"][:2], ([0.1, 0.3, 0.2, 0.5], [0.15, 0.25, 0.4, 0.6]),
+                          strict=True):
+        for point, se in zip(curve["points"], ses, strict=True):
+            point["dmap_points_se"] = se
+    table = pr.parse_prediction_table(doc)
+    # model b answers (worst) at ΔE 3 exactly: its point's SE
+    at3 = pr.predict(3.0, size="n", table=table, transforms=False)
+    assert "around ΔE 3: SE 0.25 points" in " ".join(at3.notes)
+    # between ΔE 3 and 6: the SEs of model b's two bracketing points
+    at4 = pr.predict(4.0, size="n", table=table, transforms=False)
+    assert "around ΔE 4: SE 0.25-0.40 points" in " ".join(at4.notes)
+
+
 def test_measured_table_worst_model_pchip_running_max():
     table = pr.parse_prediction_table(_measured_table())
     assert table.interpolation == "pchip"
