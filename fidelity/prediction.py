@@ -532,11 +532,12 @@ def _bracketing_se(curve: Curve | None, delta_e: float) -> tuple[float, float] |
     if curve is None or curve.dmap_points_se is None:
         return None
     x = curve.delta_e
-    hi = int(np.searchsorted(x, delta_e, side="left"))
-    idx = {min(hi, len(x) - 1)} | ({hi - 1} if hi > 0 and x[min(hi, len(x) - 1)] != delta_e else set())
-    vals = [float(curve.dmap_points_se[i]) for i in sorted(idx)
-            if math.isfinite(curve.dmap_points_se[i])]
-    return (min(vals), max(vals)) if vals else None
+    i = int(np.searchsorted(x, delta_e))  # first point at or above delta_e
+    between = 0 < i < len(x) and x[i] != delta_e
+    hi = min(i, len(x) - 1)
+    se = curve.dmap_points_se[hi - 1 if between else hi: hi + 1]
+    se = se[np.isfinite(se)]
+    return (float(se.min()), float(se.max())) if se.size else None
 
 
 def transform_parameters(delta_e: float, calibration: Any = None, *,

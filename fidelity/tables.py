@@ -537,16 +537,13 @@ def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
     lines += ["", "ΔmAP in **points** = 100·(mAP₀ − mAP); **relative** = 100·(mAP₀ − mAP)/mAP₀. "
               "ΔAP person/bicycle in points, each the worst over transforms at that ΔE."]
     if tables.get("standard_errors"):
-        ses = [r["dmap_points_se"] for rows in tables["cells"].values() for r in rows
-               if r.get("dmap_points_se") is not None]
+        ses = {m: [r["dmap_points_se"] for r in rows if r.get("dmap_points_se") is not None]
+               for m, rows in tables["cells"].items()}
+        medians = ", ".join(f"{m} {float(np.median(s)):.2f}" for m, s in ses.items() if s)
         lines.append("± values are standard errors of ΔmAP in points, paired over 5 "
-                     "interleaved image folds (SE = sd of the per-fold losses / √5); median "
-                     + ", ".join(f"{m} {float(np.median(s)):.2f}" for m, s in (
-                         (m, [r["dmap_points_se"] for r in rows
-                              if r.get("dmap_points_se") is not None])
-                         for m, rows in tables["cells"].items()) if s)
-                     + f" points ({len(ses)} cells). A worst case over ten transforms is "
-                     "biased upwards by this noise.")
+                     f"interleaved image folds (SE = sd of the per-fold losses / √5); median "
+                     f"{medians} points ({sum(map(len, ses.values()))} cells). A worst case "
+                     "over ten transforms is biased upwards by this noise.")
     lines.append("")
     lines += ["## Models", "", "| model | size | images | baseline mAP | AP50 | AP person | "
               "AP bicycle | conventions |", "|---|---|---|---|---|---|---|---|"]

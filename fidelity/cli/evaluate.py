@@ -7,6 +7,14 @@ from pathlib import Path
 
 import click
 
+from fidelity.cocoeval import COCO_SCORERS
+
+#: ``--scorer``, shared by the commands that score COCO AP (evaluate, sweep).
+scorer_option = click.option(
+    "--scorer", type=click.Choice(["auto", *COCO_SCORERS]), default="auto", show_default=True,
+    help="COCO AP implementation: pycocotools (reference) or faster-coco-eval (same numbers "
+         "to 1e-4, tested; ~6x faster); auto: faster-coco-eval if installed.")
+
 
 @click.command()
 @click.option("--model", "model", required=True, type=click.Path(dir_okay=False),
@@ -25,10 +33,7 @@ import click
               help="Write map, map50, ap (class -> AP), images, seconds as JSON (fractions).")
 @click.option("--classes", default="person,bicycle,car,motorcycle,bus,truck,traffic light,stop sign",
               show_default=True, help="Classes whose AP is printed (all are in --json).")
-@click.option("--scorer", type=click.Choice(["auto", "pycocotools", "faster-coco-eval"]),
-              default="auto", show_default=True,
-              help="COCO AP implementation: pycocotools (reference) or faster-coco-eval (same "
-                   "numbers to 1e-4, tested; ~6x faster); auto: faster-coco-eval if installed.")
+@scorer_option
 @click.option("--progress/--no-progress", default=True, show_default=True)
 def evaluate(model: str, images: str, annotations: str, limit: int | None, threads: int | None,
              provider: str, json_path: str | None, classes: str, scorer: str,

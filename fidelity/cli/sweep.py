@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import click
 
+from fidelity.cli.evaluate import scorer_option
+
 
 def _targets(text: str) -> list[float]:
     from fidelity.errors import InvalidValueError
@@ -50,10 +52,7 @@ def _transforms(text: str) -> list[str]:
               show_default=True,
               help="priority: every model's ΔE 1, 3, 6, 12, 24 cells first (the paper's "
                    "thresholds), then the rest; ascending: model by model, ΔE ascending.")
-@click.option("--scorer", type=click.Choice(["auto", "pycocotools", "faster-coco-eval"]),
-              default="auto", show_default=True,
-              help="COCO AP implementation: pycocotools (reference) or faster-coco-eval (same "
-                   "numbers to 1e-4, tested; ~6x faster); auto: faster-coco-eval if installed.")
+@scorer_option
 @click.option("--rescore", is_flag=True, help="Only recompute scores from stored detections.")
 def sweep(models: str | None, images: str | None, annotations: str, transforms: str, targets: str, out: str,
           threads: int, provider: str, order: str, scorer: str, rescore: bool) -> None:

@@ -33,14 +33,14 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
     if standard_errors:
         from fidelity.cocoeval import load_annotations
 
-        path = annotations or (store.meta().get("data") or {}).get("annotations")
-        if path and Path(path).is_file():
-            coco = load_annotations(path)
-        elif annotations:
-            coco = load_annotations(annotations)  # names the missing file
+        recorded = (store.meta().get("data") or {}).get("annotations")
+        if annotations:  # given: it must load (a missing file is an error naming it)
+            coco = load_annotations(annotations)
+        elif recorded and Path(recorded).is_file():
+            coco = load_annotations(recorded)
         else:
-            click.echo(f"no annotations ({path or 'none recorded'}): report without standard "
-                       "errors (pass --annotations)", err=True)
+            click.echo(f"no annotations ({recorded or 'none recorded'}): report without "
+                       "standard errors (pass --annotations)", err=True)
     written = write_report(store, out or Path(store_dir) / "report", prediction, name, coco,
                            progress)
     for k, p in written.items():
