@@ -21,8 +21,8 @@ Store (``<out>/sweep.sqlite``, WAL journal, ``synchronous=FULL``):
 A rerun skips finished cells and the images already stored in unfinished ones. A rerun with a
 model's image limit raised (``model.onnx@N``) extends its finished cells: only the new images
 are run, the stored ones are kept, and each cell is re-scored on the first N images (baseline
-first, so that a store caught mid-extension still pairs every cell with a baseline on the same
-images: :func:`fidelity.tables.cell_deltas` leaves out cells scored on another image count).
+first). A store caught mid-extension holds cells on two image counts; its report scores every
+cell of a model on the smaller one (:func:`fidelity.tables.align_image_counts`).
 """
 
 from __future__ import annotations

@@ -90,6 +90,45 @@ def cell_deltas(cells: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any
     return by_model
 
 
+def align_image_counts(store: Any, coco: Any, cells: Sequence[dict[str, Any]],
+                       method: str = "auto", progress: bool = False
+                       ) -> tuple[list[dict[str, Any]], dict[str, dict[str, Any]]]:
+    """Every done cell of a model scored on the same images: the first N by image id.
+
+    N is the fewest images any done cell of the model (baseline included) was scored on. A sweep
+    caught while extending a model's image limit (``model.onnx@N`` raised) holds cells on the
+    old and on the new count; the cells on more images are re-scored here on the first N from
+    their stored detections (no inference; the store is not changed), so that every ΔmAP pairs
+    a cell with its baseline on the same images and no row of the worst-case table is left
+    partial. Returns the cells (re-scored ones carry ``rescored_from``, their stored count) and
+    per model ``{"images": N, "rescored": k, "stored": sorted stored counts}``.
+    """
+    from tqdm import tqdm
+
+    from fidelity.cocoeval import evaluate_detections, resolve_scorer
+
+    method = resolve_scorer(method)
+    ids_all = sorted(coco.getImgIds())
+    counts: dict[str, set[int]] = {}
+    for c in cells:
+        if c["status"] == "done" and c.get("images"):
+            counts.setdefault(c["model"], set()).add(int(c["images"]))
+    common = {m: min(n) for m, n in counts.items()}
+    todo = [c for c in cells if c["status"] == "done" and c.get("images")
+            and c["images"] > common[c["model"]]]
+    rescored: dict[int, dict[str, Any]] = {}
+    for c in tqdm(todo, desc="aligning image counts", unit="cell", disable=not progress):
+        ids = ids_all[: common[c["model"]]]
+        s = evaluate_detections(coco, store.detections(c["model"], c["transform"], c["target"]),
+                                ids, method=method)
+        rescored[id(c)] = c | {"map": s.map, "map50": s.map50, "map75": s.map75, "ap": s.ap,
+                               "images": s.images, "rescored_from": c["images"]}
+    out = [rescored.get(id(c), c) for c in cells]
+    info = {m: {"images": common[m], "stored": sorted(counts[m]),
+                "rescored": sum(c["model"] == m for c in todo)} for m in common}
+    return out, info
+
+
 def _max_or_none(values: list[float | None]) -> float | None:
     v = [x for x in values if x is not None and math.isfinite(x)]
     return max(v) if v else None
@@ -190,13 +229,18 @@ def build_tables(store: Any, coco: Any = None, *, method: str = "auto",
                  progress: bool = False) -> dict[str, Any]:
     """Everything the report needs, from a :class:`fidelity.sweep.SweepStore`.
 
-    ``coco``: the sweep's annotations (pycocotools ``COCO``); when given, every done cell gets
-    paired fold standard errors (:func:`add_standard_errors`), else none.
+    ``coco``: the sweep's annotations (pycocotools ``COCO``); when given, every model's cells
+    are scored on one image count (:func:`align_image_counts`) and every done cell gets paired
+    fold standard errors (:func:`add_standard_errors`). Without it, cells scored on another
+    image count than their baseline are left out (:func:`cell_deltas`) and there are no SEs.
     """
     cells = store.cells()
     if not cells:
         raise InputFileError(f"{store.path}: the sweep store has no finished cells yet")
     models = store.models()
+    aligned: dict[str, dict[str, Any]] = {}
+    if coco is not None:
+        cells, aligned = align_image_counts(store, coco, cells, method, progress)
     deltas = cell_deltas(cells)
     baselines = {c["model"]: c for c in cells if c["transform"] == "baseline"
                  and c["status"] == "done"}
@@ -228,6 +272,7 @@ def build_tables(store: Any, coco: Any = None, *, method: str = "auto",
         "cells_done": sum(c["status"] == "done" for c in cells),
         "cells_unreachable": sum(c["status"] == "unreachable" for c in cells),
         "standard_errors": coco is not None,
+        "aligned": aligned,
     }
 
 
@@ -390,6 +435,7 @@ def prediction_table(tables: dict[str, Any], name: str = "coco1000-measured") ->
             "worst_case": "per ΔE the transform with the largest ΔmAP in points; person and "
                           "bicycle columns are their own worst case over the same transforms",
             "omitted_partial_points": omitted,
+            "aligned_image_counts": tables.get("aligned") or {},
         },
         "units": {
             "dmap_points": "percentage points of mAP@[.50:.95] (100*(baseline-transformed))",
@@ -518,6 +564,13 @@ def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
     lines.append(f"Images: {d.get('image_count')} shared COCO val2017 images "
                  "(person-biased subset, see shared/coco/PROVENANCE.md); a model swept on "
                  "fewer uses the first N by image id.")
+    for m, a in (tables.get("aligned") or {}).items():
+        if a["rescored"]:
+            lines.append(f"- {m}: caught while its image limit was being raised (cells on "
+                         f"{' and '.join(map(str, a['stored']))} images); reported on the first "
+                         f"{a['images']}, so that every ΔmAP pairs a cell with its baseline on "
+                         f"the same images (cells re-scored from their stored detections: "
+                         f"{a['rescored']}).")
     lines += ["", "Method: each image is decoded as sRGB code values (ICC profiles not applied), "
               "transformed with the parameter calibrated on the chart for (transform, ΔE) "
               "(fidelity.calibration, full precision; listed per cell below), rounded to 8 bit "

@@ -274,6 +274,38 @@ def test_raising_and_lowering_a_model_limit(coco, tmp_path) -> None:
 
 
 @pytest.mark.shared
+def test_tables_of_a_store_caught_mid_extension(coco, tmp_path) -> None:
+    """Baseline extended to 6 images, the cell still on 3: both are reported on the first 3."""
+    from fidelity.cocoeval import evaluate_detections, load_annotations
+    from fidelity.sweep import run_sweep
+    from fidelity.tables import build_tables, report_markdown
+
+    images, ann, model = coco
+    quiet = {"threads": 1, "log": lambda s: None}
+    run_sweep([ModelSpec(model, 3)], images, ann, tmp_path, ["contrast-inc"], [0, 6], **quiet)
+    store = run_sweep([ModelSpec(model, 6)], images, ann, tmp_path, ["contrast-inc"], [0],
+                      **quiet)
+    assert {c["transform"]: c["images"] for c in store.cells()} == {"baseline": 6,
+                                                                     "contrast-inc": 3}
+    assert build_tables(store)["cells"] == {}  # without annotations: left out, as before
+
+    gt = load_annotations(ann)
+    ids3 = sorted(gt.getImgIds())[:3]
+    tables = build_tables(store, gt)
+    assert tables["aligned"] == {"yolox_nano": {"images": 3, "stored": [3, 6], "rescored": 1}}
+    assert tables["models"]["yolox_nano"]["images"] == 3
+    base = evaluate_detections(gt, store.detections("yolox_nano", "baseline", 0), ids3,
+                               method="pycocotools").map
+    cell = evaluate_detections(gt, store.detections("yolox_nano", "contrast-inc", 6), ids3,
+                               method="pycocotools").map
+    (row,) = tables["cells"]["yolox_nano"]
+    assert row["dmap_points"] == pytest.approx(100 * (base - cell), abs=1e-6)
+    assert not tables["worst_case"]["yolox_nano"][1]["partial"]
+    assert store.cell("yolox_nano", "baseline", 0)["images"] == 6  # the store is not changed
+    assert "reported on the first 3, so that every" in report_markdown(tables, [])
+
+
+@pytest.mark.shared
 def test_fold_standard_errors_in_tables(coco, tmp_path) -> None:
     """Paired fold SEs of ΔmAP equal a direct per-fold computation, and are cached."""
     from fidelity.cocoeval import evaluate_detections, load_annotations
