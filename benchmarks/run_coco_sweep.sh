@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# The COCO sweep of issue 5, towards all four shared detectors on all 1000 shared images, in
+# phases. Each phase runs only what is missing (finished cells are skipped, a raised image limit
+# runs only the new images), so rerunning this script resumes it; finished phases take seconds.
+#   1. YOLOv10n and YOLOv8n on 250 images (YOLO11n on 250, YOLOX-nano on 1000)
+#   2. YOLO11n on 1000 (~65 ms/image on 2 cores: ~2.5 h)
+#   3. YOLOv10n and YOLOv8n on 500, 4. on 1000 (~175 ms/image: ~1.7 h per model per 250 images)
+# `fidelity tables OUT` reports a store caught mid-phase on each model's common image count.
+# Usage: benchmarks/run_coco_sweep.sh [OUT]   (shared data: $FIDELITY_SHARED, default ../shared)
+# Long: run it detached, e.g. setsid nohup benchmarks/run_coco_sweep.sh >> sweep.log 2>&1 &
+set -euo pipefail
+cd "$(dirname "$0")/.."
+S=$(cd "${FIDELITY_SHARED:-../shared}" && pwd)  # absolute: the store records the paths
+OUT=${1:-$HOME/.cache/fidelity/sweep-coco1000}
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
+phase() {
+  nice -n 5 python -m fidelity sweep \
+    --models "$S/models/yolox_nano.onnx,$S/models/yolo11n-int8dyn.onnx@$1,$S/models/yolov10n-int8dyn.onnx@$2,$S/models/yolov8n-int8dyn.onnx@$3" \
+    --images "$S/coco/val2017" --annotations "$S/coco/annotations/instances_val2017_subset.json" \
+    --transforms all --targets 0,1,2,3,4,5,6,8,10,12,15,18,21,24 --threads 2 --provider cpu \
+    --out "$OUT"
+}
+phase 250 250 250
+phase 1000 250 250
+phase 1000 500 500
+phase 1000 1000 1000
