@@ -84,6 +84,7 @@ def main() -> int:
     ap.add_argument("--target", type=float, default=6.0)
     ap.add_argument("--repeats", type=int, default=3, help="best of N for every timing")
     ap.add_argument("--json", default=None)
+    ap.add_argument("--note", default="", help="conditions to record with the machine")
     args = ap.parse_args()
 
     import onnxruntime
@@ -174,7 +175,7 @@ def main() -> int:
     res["repeats"] = R
     res["machine"] = machine_info() | {
         "onnxruntime": onnxruntime.__version__,
-        "note": "shared 2-core machine; the background COCO sweep ran on both cores meanwhile"}
+        "note": args.note}
 
     print(f"{n} images, {args.model}, {args.threads} thread(s); ms per image (images/s)")
     for k in ("decode_ms", "transform_mean_ms", "encode_ms", "decode_again_ms", "inference_ms",

@@ -12,7 +12,8 @@ transform except ``pull_mean`` is a pure per-pixel function of the RGB triple:
   built by evaluating :func:`fidelity.transforms.apply_transform` on the 256 code values.
 * saturation and hue mix channels: a 256^3-entry table (48 MiB of uint8) built once per
   (transform, parameter) by evaluating the same reference function on all 16,777,216 triples.
-* ``pull_mean`` depends on the image's mean Lab, so it runs the reference function per image.
+* ``pull_mean`` depends on the image's mean Lab, so it runs per image, on the image's distinct
+  colours (:func:`pull_mean_uint8`).
 
 The tables are built from the reference function itself, evaluated in float64 on ``code/255``,
 then rounded exactly like the slow path (:func:`to_uint8`), so the fast path equals the
@@ -78,6 +79,7 @@ class PixelMap:
     lut: np.ndarray | None = None
     build_seconds: float = 0.0
     lut16: np.ndarray | None = None
+    workspace: PullMeanWorkspace | None = None
 
     @classmethod
     def build(cls, name: str, param: float | None, chunk: int = 1 << 20) -> PixelMap:
@@ -136,26 +138,27 @@ class PixelMap:
             return np.take(self.lut, idx, axis=0)
         assert self.param is not None
         if self.name == "pull_mean":
-            if self.lut is None:
-                self.lut = np.empty(1 << 24, dtype=np.int32)  # colour -> index scratch table
-            return pull_mean_uint8(a, self.param, self.lut)
+            if self.workspace is None:
+                self.workspace = PullMeanWorkspace()
+            return pull_mean_uint8(a, self.param, self.workspace)
         return reference_transform(a, self.name, self.param)
 
 
-def pull_mean_uint8(rgb8: np.ndarray, alpha: float, scratch: np.ndarray | None = None
-                    ) -> np.ndarray:
+def pull_mean_uint8(rgb8: np.ndarray, alpha: float,
+                    workspace: PullMeanWorkspace | None = None) -> np.ndarray:
     """Exact 8-bit ``pull_mean``, with the Lab <-> sRGB work done once per distinct colour.
 
     Same arithmetic per colour as :func:`fidelity.transforms.pull_mean` on ``rgb8 / 255`` in
     float64 (sRGB decoding through a 256-entry table of the same function's values), on the
-    distinct colours only (a natural 640x480 image has ~40k of ~300k pixels). The mean Lab is
-    the count-weighted sum over distinct colours divided by the pixel count: the same number as
-    the reference's sum over pixels up to the order of additions (a few ulp), which changed no
-    8-bit code on 300 COCO images at three α (tests/test_dataset.py checks 20 of them on every
-    run). ``scratch``: optional int32 array of 2^24 entries reused as the colour -> index table.
+    distinct colours only (a natural 640x480 image has 40k-180k of ~300k pixels). The mean Lab
+    is the count-weighted sum over distinct colours divided by the pixel count: the same number
+    as the reference's sum over pixels up to the order of additions (a few ulp), which changed
+    no 8-bit code on 1000 COCO images (tests/test_dataset.py checks 20 of them on every run).
+    ``workspace``: optional :class:`PullMeanWorkspace` reused between images, so that the
+    colour table and the float planes are not allocated (and page-faulted) for every image.
+    Domain: (..., 3) uint8 sRGB codes, α in [0, 1]; range: uint8 codes of the same shape.
     """
-    from fidelity.colorimetry import lab_to_srgb, linear_srgb_to_xyz, xyz_to_lab
-
+    ws = workspace if workspace is not None else PullMeanWorkspace()
     a = np.asarray(rgb8)
     packed = a[..., 0].astype(np.uint32)
     packed <<= 8
@@ -170,18 +173,152 @@ def pull_mean_uint8(rgb8: np.ndarray, alpha: float, scratch: np.ndarray | None =
     starts = np.flatnonzero(first)
     uniq = srt[starts]
     counts = np.diff(starts, append=srt.size).astype(np.float64)
-    table = scratch if scratch is not None else np.empty(1 << 24, dtype=np.int32)
+    table = ws.table()
     table[uniq] = np.arange(uniq.size, dtype=np.int32)
-    inverse = table[packed]
-    codes = np.empty((uniq.size, 3), dtype=np.uint8)
-    codes[:, 0] = uniq >> 16
-    codes[:, 1] = uniq >> 8
-    codes[:, 2] = uniq
-    lab_u = xyz_to_lab(linear_srgb_to_xyz(_srgb_linear_table()[codes]))
-    mean = (counts @ lab_u) / srt.size
-    pulled = mean + np.float64(alpha) * (lab_u - mean)
-    out_u = to_uint8(lab_to_srgb(pulled))
+    inverse = np.take(table, packed)
+    n = uniq.size
+    codes = ws.plane("codes", n, False, np.uint8)
+    np.right_shift(uniq, 16, out=codes[:, 0], casting="unsafe")
+    np.right_shift(uniq, 8, out=codes[:, 1], casting="unsafe")
+    np.copyto(codes[:, 2], uniq, casting="unsafe")
+    lab = ws.lab_of_codes(codes)
+    mean = (lab @ counts) / srt.size
+    lab -= mean[:, None]
+    lab *= np.float64(alpha)
+    lab += mean[:, None]  # = mean + α (lab - mean)
+    out_u = ws.codes_of_lab(lab)
     return np.take(out_u, inverse, axis=0).reshape(a.shape)
+
+
+class PullMeanWorkspace:
+    """Reusable buffers of :func:`pull_mean_uint8`, and its per-colour colour science.
+
+    :meth:`lab_of_codes` and :meth:`codes_of_lab` repeat, operation for operation (the same
+    float64 operations in the same order), :func:`fidelity.colorimetry.srgb_to_lab` on
+    ``code / 255`` and :func:`to_uint8` of :func:`fidelity.colorimetry.lab_to_srgb`, but on
+    channel planes (3, n), ``chunk`` colours at a time, in buffers kept between calls: fresh
+    multi-MiB temporaries cost more in page faults and cache misses than the arithmetic does
+    (benchmarks/bench_pipeline.py times ``pull_mean``; chunks of 8192 colours were fastest). The
+    piecewise branches (the linear segments near black) are evaluated only where they apply.
+    The 3x3 products run as (3, 3) @ (3, n) instead of the reference's (n, 3) @ (3, 3); with
+    OpenBLAS both give the same bits (tests/test_dataset.py checks the codes, exact, and the
+    Lab values, to 1e-12). Not thread-safe: one workspace per thread or process.
+    """
+
+    def __init__(self, chunk: int = 8192) -> None:
+        self.chunk = int(chunk)
+        self._table: np.ndarray | None = None
+        self._planes: dict[str, np.ndarray] = {}
+
+    def table(self) -> np.ndarray:
+        """The colour (24-bit packed) -> index table, 2^24 int32 (64 MiB), made on first use."""
+        if self._table is None:
+            self._table = np.empty(1 << 24, dtype=np.int32)
+        return self._table
+
+    def plane(self, key: str, n: int, planar: bool = True, dtype: Any = np.float64
+              ) -> np.ndarray:
+        """Buffer ``key`` as a (3, n) view (``planar``) or an (n, 3) one, grown as needed."""
+        buf = self._planes.get(key)
+        axis = 1 if planar else 0
+        if buf is None or buf.shape[axis] < n or buf.dtype != np.dtype(dtype):
+            size = max(n, 1024)
+            buf = np.empty((3, size) if planar else (size, 3), dtype=dtype)
+            self._planes[key] = buf
+        return buf[:, :n] if planar else buf[:n]
+
+    def lab_of_codes(self, codes: np.ndarray) -> np.ndarray:
+        """CIELAB (3, N) of sRGB code triples (N, 3) uint8; a view into the workspace."""
+        n = codes.shape[0]
+        lab = self.plane("lab", n)
+        for s in range(0, n, self.chunk):
+            e = min(s + self.chunk, n)
+            self._lab_chunk(codes[s:e], lab[:, s:e])
+        return lab
+
+    def codes_of_lab(self, lab: np.ndarray) -> np.ndarray:
+        """sRGB code triples (N, 3) uint8 of CIELAB (3, N): ``rint(clip(Lab2RGB, 0, 1) 255)``."""
+        n = lab.shape[1]
+        out = self.plane("codes_out", n, False, np.uint8)
+        for s in range(0, n, self.chunk):
+            e = min(s + self.chunk, n)
+            self._codes_chunk(lab[:, s:e], out[s:e])
+        return out
+
+    def _lab_chunk(self, codes: np.ndarray, lab: np.ndarray) -> None:
+        from fidelity.colorimetry import (
+            CIE_EPSILON,
+            CIE_KAPPA,
+            MATRIX_LINEAR_SRGB_TO_XYZ,
+            WHITEPOINT_D65_XYZ,
+        )
+
+        n = codes.shape[0]
+        lin = self.plane("lin", n)
+        np.take(_srgb_linear_table(), codes.T, out=lin)
+        t = self.plane("t", n)
+        np.matmul(MATRIX_LINEAR_SRGB_TO_XYZ, lin, out=t)  # XYZ (3, N)
+        t /= np.asarray(WHITEPOINT_D65_XYZ)[:, None]
+        f = self.plane("f", n)
+        np.cbrt(t, out=f)
+        low = self.plane("mask", n, dtype=bool)
+        np.less_equal(t, CIE_EPSILON, out=low)
+        for i in range(3):  # (κ t + 16) / 116 at and below ε (few colours: computed there only)
+            sel = low[i]
+            if sel.any():
+                f[i][sel] = (CIE_KAPPA * t[i][sel] + 16.0) / 116.0
+        np.multiply(f[1], 116.0, out=lab[0])
+        lab[0] -= 16.0
+        np.subtract(f[0], f[1], out=lab[1])
+        lab[1] *= 500.0
+        np.subtract(f[1], f[2], out=lab[2])
+        lab[2] *= 200.0
+
+    def _codes_chunk(self, lab: np.ndarray, out: np.ndarray) -> None:
+        from fidelity.colorimetry import (
+            CIE_EPSILON,
+            CIE_KAPPA,
+            MATRIX_XYZ_TO_LINEAR_SRGB,
+            WHITEPOINT_D65_XYZ,
+        )
+
+        n = lab.shape[1]
+        L = lab[0]
+        f = self.plane("f", n)
+        fy = f[1]
+        np.add(L, 16.0, out=fy)
+        fy /= 116.0
+        np.divide(lab[1], 500.0, out=f[0])
+        f[0] += fy  # fy + a / 500
+        np.divide(lab[2], 200.0, out=f[2])
+        np.subtract(fy, f[2], out=f[2])  # fy - b / 200
+        t = self.plane("t", n)
+        np.multiply(f, f, out=t)
+        t *= f  # f * f * f
+        low = self.plane("mask", n, dtype=bool)
+        np.less_equal(t, CIE_EPSILON, out=low)
+        np.less_equal(L, CIE_KAPPA * CIE_EPSILON, out=low[1])
+        for i in range(3):  # (116 f - 16) / κ at and below ε; Y: L / κ at and below κ ε
+            sel = low[i]
+            if sel.any():
+                t[i][sel] = L[sel] / CIE_KAPPA if i == 1 else (116.0 * f[i][sel] - 16.0) / CIE_KAPPA
+        t *= np.asarray(WHITEPOINT_D65_XYZ)[:, None]
+        x = self.plane("lin", n)
+        np.matmul(MATRIX_XYZ_TO_LINEAR_SRGB, t, out=x)  # linear sRGB (3, N)
+        p = f  # reused: sRGB encoding, as fidelity.colorimetry (the power branch above
+        with np.errstate(invalid="ignore"):  # 0.0031308, where max(x, 0.0031308) = x;
+            np.power(x, 1.0 / 2.4, out=p)  # NaN below 0 is overwritten just after)
+        p *= 1.055
+        p -= 0.055
+        np.less_equal(x, 0.0031308, out=low)
+        for i in range(3):
+            sel = low[i]
+            if sel.any():
+                p[i][sel] = x[i][sel] * 12.92
+        np.clip(p, 0.0, 1.0, out=p)  # to_uint8
+        p *= 255.0
+        np.rint(p, out=p)
+        np.copyto(out, p.T, casting="unsafe")
 
 
 @functools.cache

@@ -177,14 +177,46 @@ def test_write_dataset_atomic_resumable_parallel(tmp_path) -> None:
 @pytest.mark.shared
 def test_pull_mean_fast_path_equals_reference_on_real_images(shared) -> None:
     """The per-colour pull_mean (count-weighted mean Lab) gives the reference's codes exactly."""
-    from fidelity.dataset import pull_mean_uint8
+    from fidelity.dataset import PullMeanWorkspace, pull_mean_uint8
     from fidelity.jpeg import read_jpeg
 
     files = sorted((shared / "coco/val2017").glob("*.jpg"))[:20]
     assert len(files) == 20
-    scratch = np.empty(1 << 24, dtype=np.int32)
+    workspace = PullMeanWorkspace()  # reused across images of different sizes, as in a sweep
     for f in files:
         img = read_jpeg(f)[0]
         for alpha in (0.95, 0.5):
-            assert np.array_equal(pull_mean_uint8(img, alpha, scratch),
+            assert np.array_equal(pull_mean_uint8(img, alpha, workspace),
                                   reference_transform(img, "pull_mean", alpha)), (f.name, alpha)
+
+
+def test_pull_mean_workspace_repeats_the_colorimetry() -> None:
+    """Per-colour Lab round trip of the pull_mean fast path against fidelity.colorimetry.
+
+    Codes exact and Lab to 1e-12 on every code value of each channel, random triples, random
+    Lab values in and far out of gamut (negative L, huge chroma: the clipped branch) and the
+    near-black linear segments, with chunks small enough that several chunks and a short last
+    chunk are used.
+    """
+    from fidelity.colorimetry import lab_to_srgb, srgb_to_lab
+    from fidelity.dataset import PullMeanWorkspace, pull_mean_uint8, to_uint8
+
+    rng = np.random.default_rng(7)
+    codes = rng.integers(0, 256, (5000, 3)).astype(np.uint8)
+    codes[:256] = np.arange(256, dtype=np.uint8)[:, None]
+    codes[256:512, 0] = np.arange(256)
+    codes[256:512, 1:] = 0
+    ws = PullMeanWorkspace(chunk=777)
+    lab = ws.lab_of_codes(codes)
+    np.testing.assert_allclose(lab.T, srgb_to_lab(codes / 255.0), rtol=0, atol=1e-12)
+    labs = np.concatenate([srgb_to_lab(codes / 255.0),
+                           rng.uniform([-10.0, -200.0, -200.0], [120.0, 200.0, 200.0], (5000, 3)),
+                           rng.uniform([0.0, -3.0, -3.0], [9.0, 3.0, 3.0], (2000, 3))])
+    got = ws.codes_of_lab(np.ascontiguousarray(labs.T))
+    assert np.array_equal(got, to_uint8(lab_to_srgb(labs)))
+    # tiny images (fewer colours than channels) and a workspace shrinking back to them
+    for n in (1, 2, 3, 4, 2000):
+        img = rng.integers(0, 256, (1, n, 3)).astype(np.uint8)
+        for alpha in (0.0, 0.3, 1.0):
+            assert np.array_equal(pull_mean_uint8(img, alpha, ws),
+                                  reference_transform(img, "pull_mean", alpha)), (n, alpha)
