@@ -26,7 +26,7 @@ import io
 import math
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -195,6 +195,83 @@ def size_class_rows(per_model: dict[str, list[dict[str, Any]]]) -> dict[str, lis
             })
         out[size] = rows
     return out
+
+
+def class_breakdown(coco: Any, baseline: Mapping[int, np.ndarray], cell: Mapping[int, np.ndarray],
+                    image_ids: Sequence[int], method: str = "auto") -> list[dict[str, Any]]:
+    """Which classes a cell's ΔmAP comes from: per class ΔAP and its share of the ΔmAP.
+
+    COCO mAP@[.50:.95] is the unweighted mean of the per-class APs over the K classes that have
+    ground truth in the evaluated images (COCO evaluation, Lin et al. 2014; classes without
+    ground truth are skipped), so ΔmAP = Σ_c ΔAP_c / K: a class with one box weighs as much as
+    person with thousands, and one detection ranked below a false positive halves that class's
+    AP. ``baseline``, ``cell``: per-image (K, 6) detections (:mod:`fidelity.sweep` store);
+    ``image_ids``: the images both are scored on. Returns one row per class with ground truth:
+    ``name``, ``boxes`` (non-crowd ground-truth boxes in the images), ``ap_baseline``, ``ap``
+    (fractions), ``dap_points`` = 100 (AP₀ − AP), ``share_points`` = ``dap_points`` / K, sorted
+    by share, largest loss first. The shares sum to the ΔmAP in points.
+    """
+    from collections import Counter
+
+    from fidelity.cocoeval import evaluate_detections
+
+    ids = sorted(int(i) for i in image_ids)
+    b = evaluate_detections(coco, baseline, ids, method=method)
+    c = evaluate_detections(coco, cell, ids, method=method)
+    boxes = Counter(coco.cats[a["category_id"]]["name"]
+                    for a in coco.loadAnns(coco.getAnnIds(imgIds=ids)) if not a.get("iscrowd"))
+    names = [n for n, v in b.ap.items() if v is not None and c.ap.get(n) is not None]
+    rows = [{"name": n, "boxes": int(boxes.get(n, 0)), "ap_baseline": b.ap[n], "ap": c.ap[n],
+             "dap_points": 100.0 * (b.ap[n] - c.ap[n])} for n in names]  # type: ignore[operator]
+    for r in rows:
+        r["share_points"] = r["dap_points"] / len(rows)
+    return sorted(rows, key=lambda r: (-r["share_points"], r["name"]))
+
+
+def explain_cell(store: Any, coco: Any, model: str, transform: str, target: float, *,
+                 images: int | None = None, rare_boxes: int = 5, method: str = "auto"
+                 ) -> dict[str, Any]:
+    """:func:`class_breakdown` of one stored cell against its model's baseline.
+
+    Both are scored from their stored detections on the first N images by id: N = ``images``,
+    at most the smaller of the two cells' counts, which is the default (a report built while
+    the model's limit is raised uses the model's common count: pass it to compare). ``rare``
+    and ``common`` split the classes at
+    ``rare_boxes`` ground-truth boxes: how many classes, their mean ΔAP and the points of ΔmAP
+    they account for. Raises :class:`~fidelity.errors.InvalidValueError` naming the cell when it
+    or the baseline is not a finished cell of the store.
+    """
+    from fidelity.errors import InvalidValueError
+
+    found = {}
+    for t, e in ((transform, float(target)), ("baseline", 0.0)):
+        rec = store.cell(model, t, e)
+        if rec is None or rec["status"] != "done":
+            have = sorted({x["model"] for x in store.cells()})
+            state = "not in the store" if rec is None else f"{rec['status']}"
+            raise InvalidValueError(f"cell {model} {t} ΔE {e:g}: {state} (models: "
+                                    f"{', '.join(have) or 'none'})")
+        found[t] = rec
+    n = min(int(found[transform]["images"]), int(found["baseline"]["images"]))
+    if images is not None:
+        if not 0 < images <= n:
+            raise InvalidValueError(f"cell {model} {transform} ΔE {float(target):g}: --images "
+                                    f"{images} is not in 1..{n} (images stored for the cell "
+                                    "and its baseline)")
+        n = int(images)
+    ids = sorted(coco.getImgIds())[:n]
+    rows = class_breakdown(coco, store.detections(model, "baseline", 0.0),
+                           store.detections(model, transform, float(target)), ids, method)
+
+    def part(sel: list[dict[str, Any]]) -> dict[str, Any]:
+        return {"classes": len(sel),
+                "mean_dap_points": float(np.mean([r["dap_points"] for r in sel])) if sel else None,
+                "share_points": float(sum(r["share_points"] for r in sel))}
+
+    return {"model": model, "transform": transform, "delta_e": float(target), "images": n,
+            "dmap_points": float(sum(r["share_points"] for r in rows)), "rare_boxes": rare_boxes,
+            "rare": part([r for r in rows if r["boxes"] <= rare_boxes]),
+            "common": part([r for r in rows if r["boxes"] > rare_boxes]), "classes": rows}
 
 
 def add_standard_errors(store: Any, coco: Any, deltas: dict[str, list[dict[str, Any]]],

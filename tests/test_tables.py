@@ -126,3 +126,88 @@ def test_ranking_claims_by_hand(tmp_path) -> None:
     assert most["verdict"] == "agrees" and "contrast-inc 10.00 %" in most["evidence"]
     least = claims["hue changes hurt least"]
     assert least["verdict"] == "agrees" and "hue (1.00 %)" in least["evidence"]
+
+
+def _explain_store(tmp_path):  # type: ignore[no-untyped-def]
+    """Ground truth: a person box on images 1-3, one bicycle box on image 4 (4 images)."""
+    import numpy as np
+
+    from fidelity.cocoeval import coco_from_dict
+    from fidelity.detectors import COCO80_CATEGORY_IDS, COCO80_NAMES
+
+    cats = [{"id": c, "name": n} for c, n in zip(COCO80_CATEGORY_IDS, COCO80_NAMES, strict=True)]
+    imgs = [{"id": i, "width": 200, "height": 200, "file_name": f"{i}.jpg"} for i in (1, 2, 3, 4)]
+    anns = [{"id": i, "image_id": i, "category_id": 1, "bbox": [10, 10, 50, 80], "area": 4000,
+             "iscrowd": 0} for i in (1, 2, 3)]
+    anns.append({"id": 4, "image_id": 4, "category_id": 2, "bbox": [20, 20, 60, 60],
+                 "area": 3600, "iscrowd": 0})
+    coco = coco_from_dict({"images": imgs, "annotations": anns, "categories": cats})
+
+    def d(*rows: tuple[float, ...]) -> np.ndarray:
+        return np.array(rows, dtype=np.float32).reshape(-1, 6)
+
+    person = {i: d((10, 10, 60, 90, 0.9, 0)) for i in (1, 2, 3)}
+    base = person | {4: d((20, 20, 80, 80, 0.8, 1))}
+    # the cell: the bicycle found, but below a false bicycle on image 1 -> AP 1/2
+    cell = person | {1: d((10, 10, 60, 90, 0.9, 0), (120, 120, 160, 160, 0.95, 1)),
+                     4: d((20, 20, 80, 80, 0.8, 1))}
+    s = SweepStore(tmp_path)
+    s.register_model("m", "m.onnx", "m" * 4, None, {})
+    for t, e, dets in (("baseline", 0, base), ("hue", 3, cell)):
+        s.add_detections("m", t, e, dets.items())
+        s.finish_cell("m", t, e, param=None if t == "baseline" else 5.0, status="done",
+                      images=4, score=score(0.5, 0.5, 0.5))
+    return s, coco, base, cell
+
+
+def test_class_breakdown_by_hand(tmp_path) -> None:
+    """One bicycle box ranked below a false positive: bicycle AP 1 -> 1/2, ΔmAP = 50/2 points."""
+    from fidelity.cocoeval import evaluate_detections
+    from fidelity.errors import InvalidValueError
+    from fidelity.tables import class_breakdown, explain_cell
+
+    s, coco, base, cell = _explain_store(tmp_path)
+    rows = class_breakdown(coco, base, cell, [1, 2, 3, 4])
+    assert [(r["name"], r["boxes"]) for r in rows] == [("bicycle", 1), ("person", 3)]
+    assert rows[0]["ap_baseline"] == pytest.approx(1.0) and rows[0]["ap"] == pytest.approx(0.5)
+    assert rows[0]["dap_points"] == pytest.approx(50.0)
+    assert rows[0]["share_points"] == pytest.approx(25.0) and rows[1]["share_points"] == 0
+    direct = evaluate_detections(coco, base, method="pycocotools").map - evaluate_detections(
+        coco, cell, method="pycocotools").map
+    assert sum(r["share_points"] for r in rows) == pytest.approx(100 * direct)
+
+    r = explain_cell(s, coco, "m", "hue", 3, rare_boxes=1)
+    assert r["images"] == 4 and r["dmap_points"] == pytest.approx(25.0)
+    assert r["rare"] == {"classes": 1, "mean_dap_points": pytest.approx(50.0),
+                         "share_points": pytest.approx(25.0)}
+    assert r["common"]["classes"] == 1 and r["common"]["share_points"] == pytest.approx(0.0)
+    with pytest.raises(InvalidValueError, match="cell m hue ΔE 6: not in the store"):
+        explain_cell(s, coco, "m", "hue", 6)
+    # on the first 3 images only persons, found alike: nothing lost
+    assert explain_cell(s, coco, "m", "hue", 3, images=3)["dmap_points"] == pytest.approx(0.0)
+    with pytest.raises(InvalidValueError, match="--images 5 is not in 1..4"):
+        explain_cell(s, coco, "m", "hue", 3, images=5)
+
+
+def test_tables_explain_command(tmp_path) -> None:
+    """`fidelity tables DIR --explain` prints the breakdown and writes it as JSON."""
+    import json
+
+    from click.testing import CliRunner
+
+    from fidelity.cli import main
+
+    s, coco, _, _ = _explain_store(tmp_path / "store")
+    ann = tmp_path / "ann.json"
+    ann.write_text(json.dumps(coco.dataset))
+    out = tmp_path / "x.json"
+    res = CliRunner().invoke(main, ["tables", str(tmp_path / "store"), "--annotations", str(ann),
+                                    "--explain", "m:hue:3", "--rare-boxes", "1",
+                                    "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "ΔmAP 25.00 points, the mean of ΔAP over 2 classes" in res.output
+    assert "classes with <= 1 boxes (1): mean ΔAP 50.00 points" in res.output
+    assert json.loads(out.read_text())["classes"][0]["name"] == "bicycle"
+    bad = CliRunner().invoke(main, ["tables", str(tmp_path / "store"), "--annotations",
+                                    str(ann), "--explain", "m-hue-3"])
+    assert bad.exit_code != 0 and "expected MODEL:TRANSFORM:ΔE" in bad.output

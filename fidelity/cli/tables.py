@@ -19,10 +19,29 @@ import click
 @click.option("--standard-errors/--no-standard-errors", default=True, show_default=True,
               help="Paired standard errors over 5 image folds, from the stored detections "
                    "(computed once, then cached in the store).")
+@click.option("--explain", "explain", default=None, metavar="MODEL:TRANSFORM:ΔE",
+              help="Instead of the report: which classes one cell's ΔmAP comes from (per-class "
+                   "ΔAP and share of the ΔmAP, from the stored detections), e.g. "
+                   "yolov10n-int8dyn:pull_mean:1.")
+@click.option("--rare-boxes", default=5, show_default=True, type=click.IntRange(min=0),
+              help="With --explain: classes with at most this many ground-truth boxes in the "
+                   "images count as rare.")
+@click.option("--images", "explain_images", default=None, type=click.IntRange(min=1),
+              help="With --explain: score on the first N images by id (default: all that the "
+                   "cell and its baseline share).")
+@click.option("--top", default=10, show_default=True, type=click.IntRange(min=1),
+              help="With --explain: classes listed (largest loss first).")
+@click.option("--json", "json_path", default=None, type=click.Path(dir_okay=False),
+              help="With --explain: also write the breakdown as JSON.")
 @click.option("--progress/--no-progress", default=True, show_default=True)
 def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
-           annotations: str | None, standard_errors: bool, progress: bool) -> None:
-    """Worst case per model and size class, paper comparison, plots, Markdown/HTML report."""
+           annotations: str | None, standard_errors: bool, explain: str | None,
+           rare_boxes: int, explain_images: int | None, top: int, json_path: str | None,
+           progress: bool) -> None:
+    """Worst case per model and size class, paper comparison, plots, Markdown/HTML report.
+
+    With --explain MODEL:TRANSFORM:ΔE: the classes one cell's ΔmAP comes from, instead.
+    """
     from pathlib import Path
 
     from fidelity.sweep import SweepStore
@@ -30,6 +49,9 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
 
     store = SweepStore(store_dir, create=False)
     coco = None
+    if explain:
+        _explain(store, explain, annotations, rare_boxes, explain_images, top, json_path)
+        return
     if standard_errors:
         from fidelity.cocoeval import load_annotations
 
@@ -45,3 +67,44 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
                            progress)
     for k, p in written.items():
         click.echo(f"{k:<14} {p}")
+
+
+def _explain(store: object, spec: str, annotations: str | None, rare_boxes: int,
+             images: int | None, top: int, json_path: str | None) -> None:
+    from pathlib import Path
+
+    from fidelity.cocoeval import load_annotations
+    from fidelity.errors import InvalidValueError
+    from fidelity.tables import explain_cell
+
+    parts = spec.rsplit(":", 2)
+    try:
+        model, transform, target = parts[0], parts[1], float(parts[2])
+    except (IndexError, ValueError):
+        raise InvalidValueError(f"--explain {spec!r}: expected MODEL:TRANSFORM:ΔE, e.g. "
+                                "yolov10n-int8dyn:pull_mean:1") from None
+    recorded = (store.meta().get("data") or {}).get("annotations")  # type: ignore[attr-defined]
+    path = annotations or recorded
+    if not path or not (annotations or Path(path).is_file()):
+        raise InvalidValueError(f"--explain needs the COCO annotations ({path or 'none recorded'}"
+                                " is not there): pass --annotations")
+    r = explain_cell(store, load_annotations(path), model, transform, target, images=images,
+                     rare_boxes=rare_boxes)
+    click.echo(f"{model} {transform} ΔE {target:g} on {r['images']} images: ΔmAP "
+               f"{r['dmap_points']:.2f} points, the mean of ΔAP over {len(r['classes'])} classes")
+    for key, word in (("rare", f"<= {rare_boxes}"), ("common", f"> {rare_boxes}")):
+        p = r[key]
+        if p["classes"]:
+            click.echo(f"  classes with {word} boxes ({p['classes']}): mean ΔAP "
+                       f"{p['mean_dap_points']:.2f} points, {p['share_points']:.2f} points of "
+                       "the ΔmAP")
+    click.echo(f"  {'class':<16} {'boxes':>5} {'AP base':>8} {'AP':>8} {'ΔAP pts':>8} "
+               f"{'share pts':>9}")
+    for c in r["classes"][:top]:
+        click.echo(f"  {c['name']:<16} {c['boxes']:>5} {c['ap_baseline']:>8.4f} {c['ap']:>8.4f} "
+                   f"{c['dap_points']:>8.2f} {c['share_points']:>9.2f}")
+    if json_path:
+        from fidelity.fileio import write_json_atomic
+
+        write_json_atomic(json_path, r)
+        click.echo(f"  JSON: {json_path}")
