@@ -151,12 +151,14 @@ def _explain_store(tmp_path):  # type: ignore[no-untyped-def]
     # the cell: the bicycle found, but below a false bicycle on image 1 -> AP 1/2
     cell = person | {1: d((10, 10, 60, 90, 0.9, 0), (120, 120, 160, 160, 0.95, 1)),
                      4: d((20, 20, 80, 80, 0.8, 1))}
+    from fidelity.cocoeval import evaluate_detections
+
     s = SweepStore(tmp_path)
     s.register_model("m", "m.onnx", "m" * 4, None, {})
     for t, e, dets in (("baseline", 0, base), ("hue", 3, cell)):
         s.add_detections("m", t, e, dets.items())
         s.finish_cell("m", t, e, param=None if t == "baseline" else 5.0, status="done",
-                      images=4, score=score(0.5, 0.5, 0.5))
+                      images=4, score=evaluate_detections(coco, dets, [1, 2, 3, 4]))
     return s, coco, base, cell
 
 
@@ -211,3 +213,24 @@ def test_tables_explain_command(tmp_path) -> None:
     bad = CliRunner().invoke(main, ["tables", str(tmp_path / "store"), "--annotations",
                                     str(ann), "--explain", "m-hue-3"])
     assert bad.exit_code != 0 and "expected MODEL:TRANSFORM:ΔE" in bad.output
+
+
+def test_worst_case_rows_carry_the_rare_class_share(tmp_path) -> None:
+    """With annotations, each worst-case row says how much of its ΔmAP rare classes make."""
+    from fidelity.tables import build_tables, report_markdown
+
+    s, coco, _, _ = _explain_store(tmp_path)
+    t = build_tables(s, coco)
+    row = t["worst_case"]["m"][1]
+    assert row["delta_e"] == 3 and row["dmap_points"] == pytest.approx(25.0)
+    # person (3 boxes) and bicycle (1 box) are both rare at the default of 5 boxes
+    assert row["dmap_points_rare"] == pytest.approx(25.0)
+    assert (row["rare_classes"], row["classes"]) == (2, 2)
+    md = report_markdown(t, [])
+    assert "| ΔE | worst transform | ΔmAP points | of which rare |" in md
+    assert "the 2 of 2 classes with at most 5 ground-truth boxes" in md
+    assert "of which rare" not in report_markdown(build_tables(s), [])  # no annotations
+    from fidelity.tables import compare_with_paper
+
+    (de3,) = [c for c in compare_with_paper(t) if c["claim"].startswith("ΔE ≤ 3")]
+    assert "of which 25.00 from the 2 classes with at most 5 boxes" in de3["evidence"]
