@@ -7,7 +7,8 @@
 #   3. YOLOv10n and YOLOv8n on 500, 4. on 1000, the two side by side with one thread each: int8
 #      ConvInteger scales 1.75x from 1 to 2 threads (353 -> 202 ms/image for YOLOv8n), so two
 #      one-thread processes get more through 2 cores; their detections are bit-identical to
-#      the two-thread runs' (checked on 6 images per model). ~4.5 h per 250 images for the pair.
+#      the two-thread runs' (checked on 6 images per model). By these timings 250 more images
+#      take the pair ~3.2 h (one after the other on two threads: ~3.7 h).
 # `fidelity tables OUT` reports a store caught mid-phase on each model's common image count.
 # Usage: benchmarks/run_coco_sweep.sh [OUT]   (shared data: $FIDELITY_SHARED, default ../shared)
 # Long: run it detached, e.g. setsid nohup benchmarks/run_coco_sweep.sh >> sweep.log 2>&1 &
