@@ -35,6 +35,13 @@ from typing import Any
 
 import numpy as np
 
+from fidelity.colorimetry import (
+    CIE_EPSILON,
+    CIE_KAPPA,
+    MATRIX_LINEAR_SRGB_TO_XYZ,
+    MATRIX_XYZ_TO_LINEAR_SRGB,
+    WHITEPOINT_D65_XYZ,
+)
 from fidelity.errors import InputFileError, InvalidValueError
 
 #: Transforms that act on each channel separately with the same 1-D function.
@@ -246,13 +253,6 @@ class PullMeanWorkspace:
         return out
 
     def _lab_chunk(self, codes: np.ndarray, lab: np.ndarray) -> None:
-        from fidelity.colorimetry import (
-            CIE_EPSILON,
-            CIE_KAPPA,
-            MATRIX_LINEAR_SRGB_TO_XYZ,
-            WHITEPOINT_D65_XYZ,
-        )
-
         n = codes.shape[0]
         lin = self.plane("lin", n)
         np.take(_srgb_linear_table(), codes.T, out=lin)
@@ -275,13 +275,6 @@ class PullMeanWorkspace:
         lab[2] *= 200.0
 
     def _codes_chunk(self, lab: np.ndarray, out: np.ndarray) -> None:
-        from fidelity.colorimetry import (
-            CIE_EPSILON,
-            CIE_KAPPA,
-            MATRIX_XYZ_TO_LINEAR_SRGB,
-            WHITEPOINT_D65_XYZ,
-        )
-
         n = lab.shape[1]
         L = lab[0]
         f = self.plane("f", n)
