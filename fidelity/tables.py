@@ -243,38 +243,32 @@ def _breakdown(ap_base: Mapping[str, float | None], ap_cell: Mapping[str, float 
 RARE_BOXES = 5
 
 
-def add_rare_class_shares(store: Any, coco: Any, per_model: dict[str, list[dict[str, Any]]],
-                          baselines: dict[str, dict[str, Any]], method: str = "auto",
-                          rare_boxes: int = RARE_BOXES, progress: bool = False) -> None:
+def add_rare_class_shares(coco: Any, per_model: dict[str, list[dict[str, Any]]],
+                          cells: Sequence[dict[str, Any]], baselines: dict[str, dict[str, Any]],
+                          rare_boxes: int = RARE_BOXES) -> None:
     """Add ``dmap_points_rare``, ``rare_classes``, ``classes`` to the worst-case rows.
 
     ``dmap_points_rare``: the points of the row's ΔmAP that come from classes with at most
-    ``rare_boxes`` ground-truth boxes in the model's images (:func:`class_breakdown` of the worst
-    transform's cell against the baseline, from the stored detections); ``rare_classes`` of
-    ``classes`` such classes. COCO mAP weighs every present class alike, so on a few hundred
-    images these rows can be moved by one re-ranked detection of a one-box class.
+    ``rare_boxes`` ground-truth boxes in the model's images (:func:`class_breakdown` of the
+    worst transform's cell against the baseline, from the per-class APs the cells were scored
+    with, so that the shares add up to the row's ΔmAP); ``rare_classes`` of ``classes`` such
+    classes. COCO mAP weighs every present class alike, so on a few hundred images these rows
+    can be moved by one re-ranked detection of a one-box class.
     """
-    from tqdm import tqdm
-
-    from fidelity.cocoeval import evaluate_detections
-
     ids_all = sorted(coco.getImgIds())
-    todo = [(m, r) for m, rows in per_model.items() for r in rows
-            if r["delta_e"] > 0 and r.get("worst_transform")]
-    base_ap: dict[str, tuple[Mapping[str, float | None], dict[str, int]]] = {}
-    for m, r in tqdm(todo, desc="rare-class shares", unit="row", disable=not progress):
-        ids = ids_all[: baselines[m]["images"]]
-        if m not in base_ap:
-            b = evaluate_detections(coco, store.detections(m, "baseline", 0.0), ids,
-                                    method=method)
-            base_ap[m] = (b.ap, box_counts(coco, ids))
-        c = evaluate_detections(coco, store.detections(m, r["worst_transform"], r["delta_e"]),
-                                ids, method=method)
-        rows = _breakdown(base_ap[m][0], c.ap, base_ap[m][1])
-        rare = [x for x in rows if x["boxes"] <= rare_boxes]
-        r["dmap_points_rare"] = float(sum(x["share_points"] for x in rare))
-        r["rare_classes"] = len(rare)
-        r["classes"] = len(rows)
+    ap = {(c["model"], c["transform"], float(c["target"])): c.get("ap") or {}
+          for c in cells if c["status"] == "done"}
+    boxes = {m: box_counts(coco, ids_all[: b["images"]]) for m, b in baselines.items()}
+    for m, rows in per_model.items():
+        for r in rows:
+            if r["delta_e"] <= 0 or not r.get("worst_transform"):
+                continue
+            shares = _breakdown(baselines[m].get("ap") or {},
+                                ap[(m, r["worst_transform"], float(r["delta_e"]))], boxes[m])
+            rare = [x for x in shares if x["boxes"] <= rare_boxes]
+            r["dmap_points_rare"] = float(sum(x["share_points"] for x in rare))
+            r["rare_classes"] = len(rare)
+            r["classes"] = len(shares)
 
 
 def explain_cell(store: Any, coco: Any, model: str, transform: str, target: float, *,
@@ -385,7 +379,7 @@ def build_tables(store: Any, coco: Any = None, *, method: str = "auto",
     for m in baselines:
         per_model.setdefault(m, worst_case_rows([], baselines[m], transforms))
     if coco is not None:
-        add_rare_class_shares(store, coco, per_model, baselines, method, progress=progress)
+        add_rare_class_shares(coco, per_model, cells, baselines)
     return {
         "models": {m: {**models.get(m, {}), "size": model_size(m),
                        "baseline_map": baselines[m]["map"],
