@@ -272,7 +272,8 @@ def add_rare_class_shares(coco: Any, per_model: dict[str, list[dict[str, Any]]],
 
 
 def explain_cell(store: Any, coco: Any, model: str, transform: str, target: float, *,
-                 images: int | None = None, rare_boxes: int = 5, method: str = "auto"
+                 images: int | None = None, rare_boxes: int = RARE_BOXES,
+                 method: str = "auto"
                  ) -> dict[str, Any]:
     """:func:`class_breakdown` of one stored cell against its model's baseline.
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import click
 
+from fidelity.tables import RARE_BOXES
+
 
 @click.command()
 @click.argument("store_dir", type=click.Path(file_okay=False))
@@ -23,7 +25,8 @@ import click
               help="Instead of the report: which classes one cell's ΔmAP comes from (per-class "
                    "ΔAP and share of the ΔmAP, from the stored detections), e.g. "
                    "yolov10n-int8dyn:pull_mean:1.")
-@click.option("--rare-boxes", default=5, show_default=True, type=click.IntRange(min=0),
+@click.option("--rare-boxes", default=RARE_BOXES, show_default=True,
+              type=click.IntRange(min=0),
               help="With --explain: classes with at most this many ground-truth boxes in the "
                    "images count as rare.")
 @click.option("--images", "explain_images", default=None, type=click.IntRange(min=1),
