@@ -89,13 +89,26 @@ class ResultsStore:
 
     def register_model(self, model: str, file: str, sha256: str, limit: int | None,
                        settings: dict[str, Any]) -> None:
-        """Record a model; a conflicting registration (see :meth:`_model_conflict`) is an error."""
-        row = self.db.execute("SELECT sha256, limit_images FROM models WHERE model=?",
+        """Record a model; a conflicting registration (see :meth:`_model_conflict`) is an error.
+
+        A registration that changes the image limit or a setting (a sweep extended with other
+        threads, say) keeps what it replaced under ``settings["earlier"]``: one entry per
+        replaced registration, ``{"limit_images": ..., <settings that differed>}``, oldest
+        first, so that a store's provenance covers every run that made its detections.
+        """
+        row = self.db.execute("SELECT sha256, limit_images, settings FROM models WHERE model=?",
                               (model,)).fetchone()
         if row:
             why = self._model_conflict(row[0], row[1], sha256, limit)
             if why:
                 raise InvalidValueError(f"store {self.path}: model {model!r} {why}")
+            old = json.loads(row[2])
+            earlier = old.pop("earlier", [])
+            changed = {k: v for k, v in old.items() if settings.get(k) != v}
+            if changed or row[1] != limit:
+                earlier.append({"limit_images": row[1]} | changed)
+            if earlier:
+                settings = settings | {"earlier": earlier}
         with self.db:
             self.db.execute("INSERT OR REPLACE INTO models VALUES (?, ?, ?, ?, ?)",
                             (model, file, sha256, limit, json.dumps(settings)))

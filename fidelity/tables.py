@@ -556,6 +556,8 @@ def prediction_table(tables: dict[str, Any], name: str = "coco1000-measured") ->
                                                                    "limit_images", "images",
                                                                    "baseline_map")}
                        | {"conventions": (info.get("settings") or {}).get("conventions")}
+                       | ({"earlier_runs": (info.get("settings") or {})["earlier"]}
+                          if (info.get("settings") or {}).get("earlier") else {})
                        for m, info in tables["models"].items()},
             "images": _portable_paths(meta.get("data")), "versions": meta.get("versions"),
             "machine": meta.get("machine"),
@@ -669,6 +671,25 @@ def _fmt(v: Any, nd: int = 2) -> str:
     return str(v)
 
 
+def _run_history_words(info: dict[str, Any]) -> str:
+    """The sweep runs behind a model's cells, in words (its latest registration and the
+    registrations it replaced, see :meth:`fidelity.resultstore.ResultsStore.register_model`)."""
+    st = info.get("settings") or {}
+    limit, images = info.get("limit_images"), info.get("images")
+    words = ""
+    if limit and images and limit != images:
+        words += (f" Latest run registered for the first {limit} images; reported on the "
+                  f"{images} that every cell has.")
+    earlier = st.get("earlier") or []
+    if earlier:
+        runs = "; ".join(
+            f"first {e.get('limit_images') or 'all'} images"
+            + "".join(f", {k} {e[k]}" for k in ("threads", "providers") if k in e)
+            for e in earlier)
+        words += f" Earlier runs over the same file (oldest first): {runs}."
+    return words
+
+
 def _scorer_words(scorers: Sequence[dict[str, Any]] | None) -> str:
     """Which COCO scorers scored the store's cells, in words."""
     if not scorers:
@@ -714,7 +735,8 @@ def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
                      f"layout {st.get('layout')}, input {st.get('input_size')}, providers "
                      f"{st.get('providers')}, {st.get('threads')} intra-op thread(s); "
                      f"{(st.get('conventions') or {}).get('source')}; "
-                     f"{(st.get('conventions') or {}).get('preprocess')}.")
+                     f"{(st.get('conventions') or {}).get('preprocess')}."
+                     + _run_history_words(info))
     lines += ["", "ΔmAP in **points** = 100·(mAP₀ − mAP); **relative** = 100·(mAP₀ − mAP)/mAP₀. "
               "ΔAP person/bicycle in points, each the worst over transforms at that ΔE."]
     if tables.get("standard_errors"):

@@ -40,6 +40,20 @@ def test_the_sweep_may_change_a_models_image_limit_but_not_its_file(tmp_path: Pa
         s.register_model("m", "m.onnx", "bb" * 32, 250, {})
 
 
+def test_an_extended_sweep_keeps_the_registrations_it_replaced(tmp_path: Path) -> None:
+    s = SweepStore(tmp_path)
+    s.register_model("m", "m.onnx", "aa" * 32, 250, {"threads": 2, "conf": 0.001})
+    s.register_model("m", "m.onnx", "aa" * 32, 250, {"threads": 2, "conf": 0.001})  # a resume
+    assert "earlier" not in s.models()["m"]["settings"]
+    s.register_model("m", "m.onnx", "aa" * 32, 500, {"threads": 1, "conf": 0.001})
+    s.register_model("m", "m.onnx", "aa" * 32, 1000, {"threads": 1, "conf": 0.001})
+    got = s.models()["m"]
+    assert got["limit_images"] == 1000
+    assert got["settings"] == {"threads": 1, "conf": 0.001,
+                               "earlier": [{"limit_images": 250, "threads": 2},
+                                           {"limit_images": 500}]}
+
+
 def test_a_validation_keeps_one_image_set_per_model(tmp_path: Path) -> None:
     s = ValidationStore(tmp_path)
     s.register_model("m", "m.onnx", "aa" * 32, 100, {})

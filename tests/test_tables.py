@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
@@ -113,6 +115,23 @@ def test_report_files(store, tmp_path) -> None:
     assert (out / "worst_case.png").read_bytes()[:4] == b"\x89PNG"
 
 
+def test_report_names_every_run_behind_a_models_cells(store, tmp_path) -> None:
+    # yolov8n was swept without an image limit (10 cells on 10 images), then registered again
+    # for the first 20 with one thread (an extension caught before any new cell finished): the
+    # report names both runs and says the cells are reported on 10 images.
+    store.register_model("yolov8n", "yolov8n.onnx", "yolov8n" * 4, 20, {"threads": 1})
+    written = write_report(store, tmp_path / "rep", tmp_path / "pred.json")
+    md = (tmp_path / "rep" / "report.md").read_text()
+    line = next(x for x in md.splitlines() if x.startswith("- yolov8n: file"))
+    assert "1 intra-op thread(s)" in line
+    assert "registered for the first 20 images; reported on the 10 that every cell has" in line
+    assert "Earlier runs over the same file (oldest first): first all images." in line
+    prov = json.loads(Path(written["prediction"]).read_text())["provenance"]["models"]
+    assert prov["yolov8n"]["earlier_runs"] == [{"limit_images": None,
+                                                "conventions": {"conf": 0.001}}]
+    assert "earlier_runs" not in prov["yolo11n"]
+
+
 def test_ranking_claims_by_hand(tmp_path) -> None:
     s = SweepStore(tmp_path)
     s.set_meta("grid", {"transforms": ["contrast-dec", "contrast-inc", "hue"], "targets": [0, 6]})
@@ -193,7 +212,6 @@ def test_class_breakdown_by_hand(tmp_path) -> None:
 
 def test_tables_explain_command(tmp_path) -> None:
     """`fidelity tables DIR --explain` prints the breakdown and writes it as JSON."""
-    import json
 
     from click.testing import CliRunner
 
