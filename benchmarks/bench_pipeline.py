@@ -24,6 +24,8 @@ import io
 import os
 import sys
 import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -33,8 +35,11 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from machine import machine_info  # noqa: E402
 
+if TYPE_CHECKING:
+    from PIL import Image
 
-def plain_transform(img, name: str, param: float):  # type: ignore[no-untyped-def]
+
+def plain_transform(img: Image.Image, name: str, param: float) -> Image.Image:
     """Pillow image -> Pillow image with colour-science, float64 (the anchor)."""
     import colour
     from PIL import Image
@@ -66,7 +71,7 @@ def plain_transform(img, name: str, param: float):  # type: ignore[no-untyped-de
     return Image.fromarray(np.rint(y * 255).astype(np.uint8))
 
 
-def timed(fn, reps: int = 1) -> tuple[float, object]:  # type: ignore[no-untyped-def]
+def timed(fn: Callable[[], object], reps: int = 1) -> tuple[float, object]:
     """Best (smallest) wall time of ``reps`` calls, and the last call's result."""
     best = float("inf")
     for _ in range(reps):

@@ -20,14 +20,18 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from machine import best_time, machine_info  # noqa: E402
 
+if TYPE_CHECKING:
+    from fidelity.cocoeval import CocoScore
 
-def _max_difference(ref: dict, score) -> float:  # type: ignore[no-untyped-def]
+
+def _max_difference(ref: dict[str, Any], score: CocoScore) -> float:
     """Largest |Δ| between a stored cell (map, map50, map75, ap) and a CocoScore."""
     diffs = [abs(ref["map"] - score.map), abs(ref["map50"] - score.map50),
              abs(ref["map75"] - score.map75)]

@@ -6,6 +6,8 @@ from colour-science's HSV, sRGB transfer, RGB <-> XYZ and Lab functions, with no
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import colour
 import numpy as np
 
@@ -14,7 +16,8 @@ SRGB = colour.RGB_COLOURSPACES["sRGB"].copy()
 SRGB.use_derived_transformation_matrices(True)
 
 
-def _hsv_op(rgb: np.ndarray, channel: int, fn) -> np.ndarray:  # type: ignore[no-untyped-def]
+def _hsv_op(rgb: np.ndarray, channel: int,
+            fn: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
     hsv = colour.RGB_to_HSV(rgb)
     hsv[..., channel] = fn(hsv[..., channel])
     return colour.HSV_to_RGB(hsv)

@@ -26,7 +26,7 @@ import io
 import math
 import os
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -530,7 +530,8 @@ def prediction_table(tables: dict[str, Any], name: str = "coco1000-measured") ->
     curves = []
     omitted: list[str] = []
 
-    def complete_points(label: str, rows: list[dict[str, Any]], source) -> list[dict[str, Any]]:  # type: ignore[no-untyped-def]
+    def complete_points(label: str, rows: list[dict[str, Any]],
+                        source: Callable[[dict[str, Any]], str]) -> list[dict[str, Any]]:
         omitted.extend(f"{label} ΔE {r['delta_e']:g}" for r in rows if r["partial"])
         return [_point(r, source(r)) for r in rows if not r["partial"]]
 
