@@ -156,6 +156,7 @@ def worst_case_rows(rows: Sequence[dict[str, Any]], baseline: dict[str, Any],
             "delta_e": de, "worst_transform": worst["transform"],
             "dmap_points": worst["dmap_points"], "dmap_relative": worst["dmap_relative"],
             "dmap_points_se": worst.get("dmap_points_se"),
+            "dmap_relative_se": worst.get("dmap_relative_se"),
             "map": worst["map"],
             "dap_person_points": _max_or_none([r.get("dap_person_points") for r in done]),
             "dap_bicycle_points": _max_or_none([r.get("dap_bicycle_points") for r in done]),
@@ -321,7 +322,8 @@ def explain_cell(store: Any, coco: Any, model: str, transform: str, target: floa
 def add_standard_errors(store: Any, coco: Any, deltas: dict[str, list[dict[str, Any]]],
                         baselines: dict[str, dict[str, Any]], method: str = "auto",
                         progress: bool = False) -> None:
-    """Add ``dmap_points_se``, ``dap_person_points_se``, ``dap_bicycle_points_se`` to rows.
+    """Add ``dmap_points_se``, ``dmap_relative_se``, ``dap_person_points_se``,
+    ``dap_bicycle_points_se`` to rows.
 
     Paired standard errors over :data:`fidelity.cocoeval.FOLDS` interleaved image folds: per
     fold the loss of the cell against the baseline on the same images,
@@ -344,6 +346,8 @@ def add_standard_errors(store: Any, coco: Any, deltas: dict[str, list[dict[str, 
                          ("bicycle", "dap_bicycle_points_se")):
             r[col] = paired_standard_error([f[key] for f in base_folds[m]],
                                            [f[key] for f in folds])
+        r["dmap_relative_se"] = paired_standard_error([f["map"] for f in base_folds[m]],
+                                                      [f["map"] for f in folds], relative=True)
 
 
 def build_tables(store: Any, coco: Any = None, *, method: str = "auto",
@@ -489,6 +493,8 @@ def compare_with_paper(tables: dict[str, Any]) -> list[dict[str, Any]]:
         if verdict == "disagrees" and se and pts - bound < 2 * se:
             verdict = "disagrees, but within 2 SE of the bound in points"
         pts_text = f"{pts:.2f}" + (f" ± {se:.2f} SE" if se else "")
+        se_rel = r_rel.get("dmap_relative_se")
+        rel_text = f"{rel:.2f} %" + (f" ± {se_rel:.2f} SE" if se_rel else "")
         if r_pts.get("dmap_points_rare") is not None:
             pts_text += (f", of which {r_pts['dmap_points_rare']:.2f} from the "
                          f"{r_pts['rare_classes']} classes with at most "
@@ -500,7 +506,7 @@ def compare_with_paper(tables: dict[str, Any]) -> list[dict[str, Any]]:
             verdict = "so far " + verdict + " (incomplete)"
         out.append({"claim": f"ΔE ≤ {limit} keeps worst-case ΔmAP below {bound:g} %",
                     "verdict": verdict,
-                    "evidence": f"largest relative loss {rel:.2f} % ({m_rel}, "
+                    "evidence": f"largest relative loss {rel_text} ({m_rel}, "
                                 f"{r_rel['worst_transform']} at ΔE {r_rel['delta_e']:g}); "
                                 f"largest loss in points {pts_text} ({m_pts}, "
                                 f"{r_pts['worst_transform']} at ΔE {r_pts['delta_e']:g}); "
@@ -635,30 +641,45 @@ def make_plots(tables: dict[str, Any]) -> dict[str, bytes]:
         out[f"map_vs_de_{m}.png"] = _fig_png(fig)
         plt.close(fig)
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    lowest = np.inf  # smallest positive loss: the log axis starts just below it
     for m, rows in tables["worst_case"].items():
-        x = [r["delta_e"] for r in rows]
-        (line,) = a1.plot(x, [r["dmap_relative"] for r in rows], marker="o", ms=3, label=m)
+        x = np.array([r["delta_e"] for r in rows], dtype=float)
+        y = np.array([r["dmap_relative"] for r in rows], dtype=float)
+        se = np.array([np.nan if r.get("dmap_relative_se") is None
+                       else 2.0 * r["dmap_relative_se"] for r in rows], dtype=float)
+        (line,) = a1.plot(x, y, marker="o", ms=3, label=m)
+        colour_ = line.get_color()
+        bars = np.isfinite(se)
+        if bars.any():
+            a1.errorbar(x[bars], y[bars], yerr=se[bars], ls="none", color=colour_, lw=0.8,
+                        capsize=2)
         part = [(r["delta_e"], r["dmap_relative"]) for r in rows if r["partial"]]
         if part:
             a1.plot(*zip(*part, strict=True), ls="none", marker="o", ms=8, mfc="white",
-                    color=line.get_color())
-        pos = [(r["delta_e"], r["dmap_relative"]) for r in rows
-               if r["dmap_relative"] and r["dmap_relative"] > 0]
-        if pos:
-            a2.semilogy(*zip(*pos, strict=True), marker="o", ms=3, label=m,
-                        color=line.get_color())
+                    color=colour_)
+        pos = y > 0
+        if pos.any():
+            lowest = min(lowest, float(y[pos].min()))
+            a2.semilogy(x[pos], y[pos], marker="o", ms=3, label=m, color=colour_)
+            b = pos & bars
+            if b.any():  # on the log axis a bar stops just above zero
+                lower = np.minimum(se[b], 0.95 * y[b])
+                a2.errorbar(x[b], y[b], yerr=[lower, se[b]], ls="none", color=colour_,
+                            lw=0.8, capsize=2)
+    # SAFE-COLOR's claims as the step they make: < 1 % up to ΔE 3, < 3 % to 6, < 10 % to 12
     for ax in (a1, a2):
-        ax.axhline(1, color="grey", lw=0.8, ls=":")
-        ax.axhline(3, color="grey", lw=0.8, ls="--")
-        ax.axhline(10, color="grey", lw=0.8, ls="-.")
+        ax.step([0, 3, 6, 12], [1, 1, 3, 10], where="pre", color="black", lw=1, ls="--",
+                label="SAFE-COLOR bound (1 / 3 / 10 %)")
         ax.set_xlabel("chart ΔE00")
         ax.grid(alpha=0.3)
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8)
+        ax.legend(fontsize=8)
     a1.set_ylabel("worst-case ΔmAP (% of baseline)")
-    a1.set_title("worst case per model (open circle: not all transforms done)")
+    a1.set_title("worst case per model, ±2 SE (open circle: not all transforms done)",
+                 fontsize=10)
+    if np.isfinite(lowest):  # bars reaching towards zero are cut at the axis
+        a2.set_ylim(bottom=min(0.5, lowest / 2))
     a2.set_ylabel("worst-case ΔmAP (% of baseline, log)")
-    a2.set_title("degradation on a log scale")
+    a2.set_title("degradation on a log scale, ±2 SE", fontsize=10)
     out["worst_case.png"] = _fig_png(fig)
     plt.close(fig)
     return out
@@ -744,9 +765,10 @@ def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
         ses = {m: [r["dmap_points_se"] for r in rows if r.get("dmap_points_se") is not None]
                for m, rows in tables["cells"].items()}
         medians = ", ".join(f"{m} {float(np.median(s)):.2f}" for m, s in ses.items() if s)
-        lines.append("± values are standard errors of ΔmAP in points, paired over 5 "
-                     f"interleaved image folds (SE = sd of the per-fold losses / √5); median "
-                     f"{medians} points ({sum(map(len, ses.values()))} cells). A worst case "
+        lines.append("± values are standard errors of ΔmAP, paired over 5 interleaved image "
+                     "folds (SE = sd of the per-fold losses / √5; for relative ΔmAP each "
+                     "fold's loss as a share of that fold's baseline); in points median "
+                     f"{medians} ({sum(map(len, ses.values()))} cells). A worst case "
                      "over ten transforms is biased upwards by this noise.")
     lines.append("")
     lines += ["## Models", "", "| model | size | images | baseline mAP | AP50 | AP person | "
@@ -811,11 +833,11 @@ def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
                   "unreachable |", "|---|---|---|" + ("---|" if rare_col else "")
                   + "---|---|---|---|---|"]
         for r in rows[1:]:
-            se = r.get("dmap_points_se")
+            se, se_rel = r.get("dmap_points_se"), r.get("dmap_relative_se")
             rare = f"{_fmt(r.get('dmap_points_rare'))} | " if rare_col else ""
             lines.append(f"| {r['delta_e']:g} | {r['worst_transform']} | "
                          f"{_fmt(r['dmap_points'])}{f' ± {se:.2f}' if se else ''} | {rare}"
-                         f"{_fmt(r['dmap_relative'])} | "
+                         f"{_fmt(r['dmap_relative'])}{f' ± {se_rel:.2f}' if se_rel else ''} | "
                          f"{_fmt(r['dap_person_points'])} | {_fmt(r['dap_bicycle_points'])} | "
                          f"{r['transforms_done']}/{r['transforms_reachable']}"
                          f"{' (partial)' if r['partial'] else ''} | "

@@ -15,6 +15,7 @@ from fidelity.cocoeval import (
     detections_to_coco,
     evaluate_detections,
     load_annotations,
+    paired_standard_error,
 )
 from fidelity.detectors import COCO80_CATEGORY_IDS, COCO80_NAMES
 from fidelity.errors import InputFileError, InvalidValueError
@@ -217,3 +218,15 @@ def test_scorer_names() -> None:
     assert resolve_scorer("pycocotools") == "pycocotools"
     with pytest.raises(UnknownNameError, match="unknown COCO scorer 'cocoapi'"):
         resolve_scorer("cocoapi")
+
+
+def test_paired_standard_errors_in_points_and_relative_by_hand() -> None:
+    # three folds, each losing half its baseline: relative losses 50, 50, 50 % (no spread);
+    # in points 25, 20, 30 (sd 5, SE 5/sqrt 3). A fold without a value is left out.
+    base, other = [0.5, 0.4, 0.6, None], [0.25, 0.2, 0.3, 0.1]
+    assert paired_standard_error(base, other) == pytest.approx(5 / np.sqrt(3))
+    assert paired_standard_error(base, other, relative=True) == pytest.approx(0.0, abs=1e-12)
+    # relative losses 50 and 25 %: sd 25/sqrt 2, SE 12.5; a zero baseline fold is left out
+    assert paired_standard_error([0.4, 0.4, 0.0], [0.2, 0.3, 0.0], relative=True) == \
+        pytest.approx(12.5)
+    assert paired_standard_error([0.4], [0.2]) is None

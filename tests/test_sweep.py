@@ -321,11 +321,16 @@ def test_fold_standard_errors_in_tables(coco, tmp_path) -> None:
     ids = sorted(gt.getImgIds())[:12]
     base = store.detections("yolox_nano", "baseline", 0)
     cell = store.detections("yolox_nano", "contrast-inc", 12)
-    losses = [100 * (evaluate_detections(gt, base, ids[k::5], method="pycocotools").map
-                     - evaluate_detections(gt, cell, ids[k::5], method="pycocotools").map)
-              for k in range(5)]
+    b = [evaluate_detections(gt, base, ids[k::5], method="pycocotools").map for k in range(5)]
+    c = [evaluate_detections(gt, cell, ids[k::5], method="pycocotools").map for k in range(5)]
+    losses = [100 * (bk - ck) for bk, ck in zip(b, c, strict=True)]
     assert row["dmap_points_se"] == pytest.approx(np.std(losses, ddof=1) / np.sqrt(5), abs=1e-9)
-    assert tables["worst_case"]["yolox_nano"][1]["dmap_points_se"] == row["dmap_points_se"]
+    rel = [100 * (bk - ck) / bk for bk, ck in zip(b, c, strict=True) if bk > 0]
+    assert row["dmap_relative_se"] == pytest.approx(np.std(rel, ddof=1) / np.sqrt(len(rel)),
+                                                    abs=1e-9)
+    worst = tables["worst_case"]["yolox_nano"][1]
+    assert (worst["dmap_points_se"], worst["dmap_relative_se"]) == (
+        row["dmap_points_se"], row["dmap_relative_se"])
     n = store.db.execute("SELECT COUNT(*) FROM folds").fetchone()[0]
     assert n == 2  # baseline and the cell, kept for the next report
     assert build_tables(store)["cells"]["yolox_nano"][0].get("dmap_points_se") is None
