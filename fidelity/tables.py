@@ -342,12 +342,12 @@ def add_standard_errors(store: Any, coco: Any, deltas: dict[str, list[dict[str, 
         if m not in base_folds:
             base_folds[m] = store.fold_scores(coco, m, "baseline", 0.0, ids, method)
         folds = store.fold_scores(coco, m, r["transform"], r["delta_e"], ids, method)
-        for key, col in (("map", "dmap_points_se"), ("person", "dap_person_points_se"),
-                         ("bicycle", "dap_bicycle_points_se")):
+        for key, col, relative in (("map", "dmap_points_se", False),
+                                   ("map", "dmap_relative_se", True),
+                                   ("person", "dap_person_points_se", False),
+                                   ("bicycle", "dap_bicycle_points_se", False)):
             r[col] = paired_standard_error([f[key] for f in base_folds[m]],
-                                           [f[key] for f in folds])
-        r["dmap_relative_se"] = paired_standard_error([f["map"] for f in base_folds[m]],
-                                                      [f["map"] for f in folds], relative=True)
+                                           [f[key] for f in folds], relative=relative)
 
 
 def build_tables(store: Any, coco: Any = None, *, method: str = "auto",
