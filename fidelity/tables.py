@@ -693,6 +693,15 @@ def _fmt(v: Any, nd: int = 2) -> str:
     return str(v)
 
 
+def _conventions_words(conv: dict) -> str:
+    """The post-processing thresholds in words: no NMS for an end-to-end head, no cap if None."""
+    iou = conv.get("iou")
+    max_det = conv.get("max_det")
+    return (f"conf {conv.get('conf')}, "
+            + ("no NMS (end-to-end)" if iou is None else f"NMS IoU {iou}") + ", "
+            + ("no detection cap" if max_det is None else f"max_det {max_det}"))
+
+
 def _run_history_words(info: dict[str, Any]) -> str:
     """The sweep runs behind a model's cells, in words (its latest registration and the
     registrations it replaced, see :meth:`fidelity.resultstore.ResultsStore.register_model`)."""
@@ -778,8 +787,7 @@ def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
         ap = info["baseline_ap"]
         lines.append(f"| {m} | {info['size']} | {info['images']} | {info['baseline_map']:.4f} | "
                      f"{info['baseline_map50']:.4f} | {_fmt(ap.get('person'), 4)} | "
-                     f"{_fmt(ap.get('bicycle'), 4)} | conf {conv.get('conf')}, iou "
-                     f"{conv.get('iou')}, max_det {conv.get('max_det')} |")
+                     f"{_fmt(ap.get('bicycle'), 4)} | {_conventions_words(conv)} |")
     grid = meta.get("grid") or {}
     targets = sorted({float(t) for t in grid.get("targets", []) if float(t) > 0}
                      | {r["delta_e"] for rows in tables["cells"].values() for r in rows})

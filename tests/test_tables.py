@@ -252,3 +252,14 @@ def test_worst_case_rows_carry_the_rare_class_share(tmp_path) -> None:
 
     (de3,) = [c for c in compare_with_paper(t) if c["claim"].startswith("ΔE ≤ 3")]
     assert "of which 25.00 from the 2 classes with at most 5 boxes" in de3["evidence"]
+
+
+def test_model_conventions_are_said_in_words():
+    from fidelity.tables import _conventions_words
+
+    assert _conventions_words({"conf": 0.001, "iou": 0.7, "max_det": 300}) == (
+        "conf 0.001, NMS IoU 0.7, max_det 300")
+    assert _conventions_words({"conf": 0.001, "iou": None, "max_det": 300}) == (
+        "conf 0.001, no NMS (end-to-end), max_det 300")
+    assert _conventions_words({"conf": 0.01, "iou": 0.65, "max_det": None}) == (
+        "conf 0.01, NMS IoU 0.65, no detection cap")
