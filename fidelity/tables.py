@@ -432,9 +432,13 @@ def compare_with_paper(tables: dict[str, Any]) -> list[dict[str, Any]]:
         order = sorted(mean, key=mean.get, reverse=True)
         ranks = {m: sorted(pm, key=pm.get, reverse=True) for m, pm in per_model.items()}
         ev = ", ".join(f"{t} {mean[t]:.2f} %" for t in order)
-        where = ("mean relative ΔmAP ("
-                 + "; ".join(f"{m} at ΔE {', '.join(f'{d:g}' for d in used[m])}"
-                             for m in used) + "): ")
+        lists = {m: ", ".join(f"{d:g}" for d in ds) for m, ds in used.items()}
+        if len(set(lists.values())) == 1:
+            which = "every model" if len(used) > 1 else next(iter(used))
+            where = f"mean relative ΔmAP ({which} at ΔE {next(iter(lists.values()))}): "
+        else:
+            where = ("mean relative ΔmAP ("
+                     + "; ".join(f"{m} at ΔE {lists[m]}" for m in used) + "): ")
         top = {"contrast-inc", "contrast-dec"}
         per = "; ".join(f"{m}: top two {', '.join(r[:2])}, mildest {r[-1]}"
                         for m, r in ranks.items())

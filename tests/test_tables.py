@@ -145,6 +145,17 @@ def test_ranking_claims_by_hand(tmp_path) -> None:
     assert most["verdict"] == "agrees" and "contrast-inc 10.00 %" in most["evidence"]
     least = claims["hue changes hurt least"]
     assert least["verdict"] == "agrees" and "hue (1.00 %)" in least["evidence"]
+    assert "(m at ΔE 6)" in most["evidence"]
+    # two models measured at the same ΔE: said once, for every model
+    s.register_model("k", "k.onnx", "dd" * 32, None, {})
+    s.finish_cell("k", "baseline", 0, param=None, status="done", images=5,
+                  score=score(0.5, 0.6, 0.3))
+    for t, m in (("contrast-dec", 0.40), ("contrast-inc", 0.45), ("hue", 0.49)):
+        s.finish_cell("k", t, 6, param=1.0, status="done", images=5, score=score(m, 0.6, 0.3))
+    claims = {c["claim"]: c for c in compare_with_paper(build_tables(s))}
+    most = claims["contrast increase and decrease hurt detection most"]
+    assert "(every model at ΔE 6)" in most["evidence"]
+    assert "contrast-dec 14.00 %, contrast-inc 10.00 %, hue 1.50 %" in most["evidence"]
 
 
 def _explain_store(tmp_path):  # type: ignore[no-untyped-def]
