@@ -90,18 +90,52 @@ def cell_deltas(cells: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any
     return by_model
 
 
+def parse_image_caps(spec: str | None, models: Sequence[str]) -> dict[str, int]:
+    """``"500"`` (every model) or ``"yolov8n-int8dyn=500,yolov10n-int8dyn=500"`` -> model -> N.
+
+    Raises :class:`fidelity.errors.InvalidValueError` naming the entry for a count that is not
+    a positive integer or a model the store does not hold.
+    """
+    from fidelity.errors import InvalidValueError
+
+    caps: dict[str, int] = {}
+    for entry in (spec or "").split(","):
+        entry = entry.strip()
+        if not entry:
+            continue
+        model, _, count = entry.rpartition("=")
+        try:
+            n = int(count)
+        except ValueError:
+            n = 0
+        if n < 1:
+            raise InvalidValueError(f"--images {entry!r}: expected N or MODEL=N with N a "
+                                    "positive integer")
+        if not model:
+            caps |= {m: n for m in models}
+        elif model not in models:
+            raise InvalidValueError(f"--images {entry!r}: no model {model!r} in the store "
+                                    f"(it holds {', '.join(sorted(models)) or 'none'})")
+        else:
+            caps[model] = n
+    return caps
+
+
 def align_image_counts(store: Any, coco: Any, cells: Sequence[dict[str, Any]],
-                       method: str = "auto", progress: bool = False
+                       method: str = "auto", progress: bool = False,
+                       images: Mapping[str, int] | None = None
                        ) -> tuple[list[dict[str, Any]], dict[str, dict[str, Any]]]:
     """Every done cell of a model scored on the same images: the first N by image id.
 
-    N is the fewest images any done cell of the model (baseline included) was scored on. A sweep
-    caught while extending a model's image limit (``model.onnx@N`` raised) holds cells on the
-    old and on the new count; the cells on more images are re-scored here on the first N from
-    their stored detections (no inference; the store is not changed), so that every ΔmAP pairs
-    a cell with its baseline on the same images and no row of the worst-case table is left
-    partial. Returns the cells (re-scored ones carry ``rescored_from``, their stored count) and
-    per model ``{"images": N, "rescored": k, "stored": sorted stored counts}``.
+    N is the fewest images any done cell of the model (baseline included) was scored on, or
+    ``images[model]`` where that is fewer (a report on an earlier state of a sweep that has
+    moved on). A sweep caught while extending a model's image limit (``model.onnx@N`` raised)
+    holds cells on the old and on the new count; the cells on more images are re-scored here
+    on the first N from their stored detections (no inference; the store is not changed), so
+    that every ΔmAP pairs a cell with its baseline on the same images and no row of the
+    worst-case table is left partial. Returns the cells (re-scored ones carry
+    ``rescored_from``, their stored count) and per model ``{"images": N, "rescored": k,
+    "stored": sorted stored counts, "capped": whether images[model] set N}``.
     """
     from tqdm import tqdm
 
@@ -114,6 +148,9 @@ def align_image_counts(store: Any, coco: Any, cells: Sequence[dict[str, Any]],
         if c["status"] == "done" and c.get("images"):
             counts.setdefault(c["model"], set()).add(int(c["images"]))
     common = {m: min(n) for m, n in counts.items()}
+    caps = dict(images or {})
+    capped = {m for m in common if m in caps and caps[m] < common[m]}
+    common |= {m: caps[m] for m in capped}
     todo = [c for c in cells if c["status"] == "done" and c.get("images")
             and c["images"] > common[c["model"]]]
     rescored: dict[int, dict[str, Any]] = {}
@@ -125,7 +162,8 @@ def align_image_counts(store: Any, coco: Any, cells: Sequence[dict[str, Any]],
                                "images": s.images, "rescored_from": c["images"]}
     out = [rescored.get(id(c), c) for c in cells]
     info = {m: {"images": common[m], "stored": sorted(counts[m]),
-                "rescored": sum(c["model"] == m for c in todo)} for m in common}
+                "rescored": sum(c["model"] == m for c in todo), "capped": m in capped}
+            for m in common}
     return out, info
 
 
@@ -351,21 +389,28 @@ def add_standard_errors(store: Any, coco: Any, deltas: dict[str, list[dict[str, 
 
 
 def build_tables(store: Any, coco: Any = None, *, method: str = "auto",
-                 progress: bool = False) -> dict[str, Any]:
+                 progress: bool = False, images: Mapping[str, int] | None = None
+                 ) -> dict[str, Any]:
     """Everything the report needs, from a :class:`fidelity.sweep.SweepStore`.
 
     ``coco``: the sweep's annotations (pycocotools ``COCO``); when given, every model's cells
-    are scored on one image count (:func:`align_image_counts`) and every done cell gets paired
-    fold standard errors (:func:`add_standard_errors`). Without it, cells scored on another
-    image count than their baseline are left out (:func:`cell_deltas`) and there are no SEs.
+    are scored on one image count (:func:`align_image_counts`; ``images`` caps it per model)
+    and every done cell gets paired fold standard errors (:func:`add_standard_errors`).
+    Without it, cells scored on another image count than their baseline are left out
+    (:func:`cell_deltas`), there are no SEs, and ``images`` is an error.
     """
     cells = store.cells()
     if not cells:
         raise InputFileError(f"{store.path}: the sweep store has no finished cells yet")
     models = store.models()
     aligned: dict[str, dict[str, Any]] = {}
+    if images and coco is None:
+        from fidelity.errors import InvalidValueError
+
+        raise InvalidValueError("--images needs the COCO annotations, to re-score cells on "
+                                "fewer images: pass --annotations")
     if coco is not None:
-        cells, aligned = align_image_counts(store, coco, cells, method, progress)
+        cells, aligned = align_image_counts(store, coco, cells, method, progress, images)
     deltas = cell_deltas(cells)
     baselines = {c["model"]: c for c in cells if c["transform"] == "baseline"
                  and c["status"] == "done"}
@@ -390,7 +435,8 @@ def build_tables(store: Any, coco: Any = None, *, method: str = "auto",
                        "baseline_map": baselines[m]["map"],
                        "baseline_map50": baselines[m]["map50"],
                        "baseline_ap": {k: baselines[m]["ap"].get(k) for k in SAFETY_CLASSES},
-                       "images": baselines[m]["images"]} for m in baselines},
+                       "images": baselines[m]["images"],
+                       "capped": bool(aligned.get(m, {}).get("capped"))} for m in baselines},
         "cells": deltas,
         "worst_case": per_model,
         "size_classes": size_class_rows(per_model),
@@ -713,8 +759,9 @@ def _run_history_words(info: dict[str, Any]) -> str:
     limit, images = info.get("limit_images"), info.get("images")
     words = ""
     if limit and images and limit != images:
+        which = "first {} asked for (`--images`)" if info.get("capped") else "{} that every cell has"
         words += (f" Latest run registered for the first {limit} images; reported on the "
-                  f"{images} that every cell has.")
+                  f"{which.format(images)}.")
     earlier = st.get("earlier") or []
     if earlier:
         runs = "; ".join(
@@ -749,7 +796,11 @@ def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
                  "(person-biased subset, see shared/coco/PROVENANCE.md); a model swept on "
                  "fewer uses the first N by image id.")
     for m, a in (tables.get("aligned") or {}).items():
-        if a["rescored"]:
+        if a.get("capped"):
+            lines.append(f"- {m}: reported on the first {a['images']} images, as asked "
+                         f"(`--images`; cells stored on {' and '.join(map(str, a['stored']))} "
+                         f"images, re-scored from their stored detections: {a['rescored']}).")
+        elif a["rescored"]:
             lines.append(f"- {m}: caught while its image limit was being raised (cells on "
                          f"{' and '.join(map(str, a['stored']))} images); reported on the first "
                          f"{a['images']}, so that every ΔmAP pairs a cell with its baseline on "
@@ -931,15 +982,17 @@ def _inline(text: str) -> str:
 def write_report(store: Any, out_dir: str | os.PathLike[str],
                  prediction_path: str | os.PathLike[str] | None = None,
                  name: str = "coco1000-measured", coco: Any = None,
-                 progress: bool = False) -> dict[str, Path]:
+                 progress: bool = False, images: Mapping[str, int] | None = None
+                 ) -> dict[str, Path]:
     """Write report.md, report.html, tables.json, plots and (optionally) the prediction table.
 
-    ``coco``: annotations for standard errors (see :func:`build_tables`).
+    ``coco``: annotations for standard errors; ``images``: per-model image caps (see
+    :func:`build_tables`).
     """
     from fidelity.fileio import write_bytes_atomic, write_json_atomic, write_text_atomic
 
     out = Path(out_dir)
-    tables = build_tables(store, coco, progress=progress)
+    tables = build_tables(store, coco, progress=progress, images=images)
     comparison = compare_with_paper(tables)
     plots = make_plots(tables)
     md = report_markdown(tables, comparison, sorted(plots))

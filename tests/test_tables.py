@@ -274,3 +274,34 @@ def test_model_conventions_are_said_in_words():
         "conf 0.001, no NMS (end-to-end), max_det 300")
     assert _conventions_words({"conf": 0.01, "iou": 0.65, "max_det": None}) == (
         "conf 0.01, NMS IoU 0.65, no detection cap")
+
+
+def test_image_caps_are_parsed_and_bad_ones_named() -> None:
+    from fidelity.errors import InvalidValueError
+    from fidelity.tables import parse_image_caps
+
+    models = ["a", "b-int8"]
+    assert parse_image_caps(None, models) == {}
+    assert parse_image_caps("500", models) == {"a": 500, "b-int8": 500}
+    assert parse_image_caps("b-int8=250", models) == {"b-int8": 250}
+    assert parse_image_caps("1000, b-int8=250", models) == {"a": 1000, "b-int8": 250}
+    with pytest.raises(InvalidValueError, match="no model 'c' in the store .it holds a, b-int8"):
+        parse_image_caps("c=5", models)
+    for bad in ("0", "a=x", "a=-3"):
+        with pytest.raises(InvalidValueError, match=f"--images {bad!r}: expected N or MODEL=N"):
+            parse_image_caps(bad, models)
+
+
+def test_tables_images_without_annotations_is_one_line_exit_2(store, tmp_path) -> None:
+    from click.testing import CliRunner
+
+    from fidelity.cli import main
+
+    res = CliRunner().invoke(main, ["tables", str(store.path.parent), "--no-standard-errors",
+                                    "--images", "2", "--out", str(tmp_path / "r")])
+    assert res.exit_code == 2
+    assert "--images re-scores cells from the annotations" in res.output
+    res = CliRunner().invoke(main, ["tables", str(store.path.parent), "--images", "nope=2",
+                                    "--out", str(tmp_path / "r")])
+    assert res.exit_code == 2 and "no model 'nope' in the store" in res.output
+    assert not (tmp_path / "r").exists()

@@ -29,9 +29,11 @@ from fidelity.tables import RARE_BOXES
               type=click.IntRange(min=0),
               help="With --explain: classes with at most this many ground-truth boxes in the "
                    "images count as rare.")
-@click.option("--images", "explain_images", default=None, type=click.IntRange(min=1),
-              help="With --explain: score on the first N images by id (default: all that the "
-                   "cell and its baseline share).")
+@click.option("--images", "images", default=None, metavar="N|MODEL=N[,...]",
+              help="Report on at most the first N images by id, for every model (N) or the "
+                   "models named (MODEL=N), re-scoring stored detections: an earlier state of "
+                   "a sweep that has moved on (default: all that every cell of a model has). "
+                   "With --explain: the cell is scored on the first N.")
 @click.option("--top", default=10, show_default=True, type=click.IntRange(min=1),
               help="With --explain: classes listed (largest loss first).")
 @click.option("--json", "json_path", default=None, type=click.Path(dir_okay=False),
@@ -39,7 +41,7 @@ from fidelity.tables import RARE_BOXES
 @click.option("--progress/--no-progress", default=True, show_default=True)
 def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
            annotations: str | None, standard_errors: bool, explain: str | None,
-           rare_boxes: int, explain_images: int | None, top: int, json_path: str | None,
+           rare_boxes: int, images: str | None, top: int, json_path: str | None,
            progress: bool) -> None:
     """Worst case per model and size class, paper comparison, plots, Markdown/HTML report.
 
@@ -48,13 +50,19 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
     from pathlib import Path
 
     from fidelity.sweep import SweepStore
-    from fidelity.tables import write_report
+    from fidelity.tables import parse_image_caps, write_report
 
     store = SweepStore(store_dir, create=False)
     coco = None
+    caps = parse_image_caps(images, list(store.models()))
     if explain:
-        _explain(store, explain, annotations, rare_boxes, explain_images, top, json_path)
+        _explain(store, explain, annotations, rare_boxes, caps, top, json_path)
         return
+    if caps and not standard_errors:
+        from fidelity.errors import InvalidValueError
+
+        raise InvalidValueError("--images re-scores cells from the annotations: it cannot be "
+                                "combined with --no-standard-errors")
     if standard_errors:
         from fidelity.cocoeval import load_annotations
 
@@ -67,13 +75,13 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
             click.echo(f"no annotations ({recorded or 'none recorded'}): report without "
                        "standard errors (pass --annotations)", err=True)
     written = write_report(store, out or Path(store_dir) / "report", prediction, name, coco,
-                           progress)
+                           progress, caps)
     for k, p in written.items():
         click.echo(f"{k:<14} {p}")
 
 
 def _explain(store: object, spec: str, annotations: str | None, rare_boxes: int,
-             images: int | None, top: int, json_path: str | None) -> None:
+             caps: dict[str, int], top: int, json_path: str | None) -> None:
     from pathlib import Path
 
     from fidelity.cocoeval import load_annotations
@@ -91,7 +99,8 @@ def _explain(store: object, spec: str, annotations: str | None, rare_boxes: int,
     if not path or not (annotations or Path(path).is_file()):
         raise InvalidValueError(f"--explain needs the COCO annotations ({path or 'none recorded'}"
                                 " is not there): pass --annotations")
-    r = explain_cell(store, load_annotations(path), model, transform, target, images=images,
+    r = explain_cell(store, load_annotations(path), model, transform, target,
+                     images=caps.get(model),
                      rare_boxes=rare_boxes)
     click.echo(f"{model} {transform} ΔE {target:g} on {r['images']} images: ΔmAP "
                f"{r['dmap_points']:.2f} points, the mean of ΔAP over {len(r['classes'])} classes")
