@@ -78,7 +78,8 @@ def test_worst_case_rows_by_hand(store) -> None:
 def test_paper_comparison_verdicts(store) -> None:
     claims = {c["claim"]: c for c in compare_with_paper(build_tables(store))}
     c3 = claims["ΔE ≤ 3 keeps worst-case ΔmAP below 1 %"]
-    assert c3["verdict"] == "disagrees" and "10.00 %" in c3["evidence"]
+    assert c3["verdict"].startswith("disagrees: exceeded in points and as a share")
+    assert "10.00 %" in c3["evidence"]
     person = claims["person is more sensitive than the mean (relative ΔAP > ΔmAP)"]
     # cells with ΔmAP > 0.5 %: 11n c-inc@3 (10 vs 10: not more), sat@3 (1.7 vs 4: no),
     # hue@3 (16.7 vs 1: yes), c-inc@6 (16.7 vs 20: no), v8n hue@3 (0 vs 5: no) -> 1 of 5
@@ -305,3 +306,26 @@ def test_tables_images_without_annotations_is_one_line_exit_2(store, tmp_path) -
                                     "--out", str(tmp_path / "r")])
     assert res.exit_code == 2 and "no model 'nope' in the store" in res.output
     assert not (tmp_path / "r").exists()
+
+
+def test_threshold_verdicts_by_hand() -> None:
+    """Both readings of the paper's "%", each exceedance set against 2 standard errors."""
+    from fidelity.tables import _threshold_verdict
+
+    def row(pts: float, rel: float, se_pts: float | None = None,
+            se_rel: float | None = None) -> dict:
+        return {"dmap_points": pts, "dmap_relative": rel, "dmap_points_se": se_pts,
+                "dmap_relative_se": se_rel}
+
+    assert _threshold_verdict([row(0.5, 0.9, 0.1, 0.2)], 1.0) == "agrees"
+    # 0.76 points but 1.97 % of baseline, SE 1.02: inside 2 SE
+    assert _threshold_verdict([row(0.76, 1.97, 0.41, 1.02)], 1.0) == (
+        "agrees if read as points; exceeded as a share of baseline (within 2 SE)")
+    # one row far above in relative terms decides "beyond", even if not the largest
+    rows = [row(3.06, 8.0, 0.64, 1.47), row(2.33, 8.69, 0.91, 2.54), row(2.9, 7.6, 0.34, 0.88)]
+    assert _threshold_verdict(rows, 3.0) == (
+        "disagrees: exceeded in points (within 2 SE) and as a share of baseline (beyond 2 SE)")
+    assert _threshold_verdict([row(3.06, 8.0, 0.01, 4.0)], 3.0) == (
+        "disagrees: exceeded in points (beyond 2 SE) and as a share of baseline (within 2 SE)")
+    assert _threshold_verdict([row(2.0, 5.0)], 3.0) == (
+        "agrees if read as points; exceeded as a share of baseline")
