@@ -466,13 +466,15 @@ def _threshold_verdict(rows: Sequence[dict[str, Any]], bound: float) -> str:
     The paper's "%" may be points or a share of the baseline, so both are tested: "agrees" if
     every relative loss is below the bound; "agrees if read as points" if only the points are;
     else "disagrees". Each exceedance is qualified "within 2 SE" where no row exceeds the
-    bound by more than twice its standard error in that unit, else "beyond 2 SE" (the worst case over ten noisy
-    transforms is biased upwards by about one SE); without standard errors, unqualified.
+    bound by more than twice its standard error in that unit, else "beyond 2 SE" (the worst
+    case over ten noisy transforms is biased upwards by about one SE); without standard
+    errors, unqualified.
     """
     rel = max((r.get("dmap_relative") or 0.0) for r in rows)
     pts = max((r.get("dmap_points") or 0.0) for r in rows)
     if rel < bound:
         return "agrees"
+
     def by(key: str) -> str:
         if not any(r.get(key + "_se") for r in rows):  # no standard errors: no qualifier
             return ""
@@ -774,7 +776,7 @@ def _fmt(v: Any, nd: int = 2) -> str:
     return str(v)
 
 
-def _conventions_words(conv: dict) -> str:
+def _conventions_words(conv: dict[str, Any]) -> str:
     """The post-processing thresholds in words: no NMS for an end-to-end head, no cap if None."""
     iou = conv.get("iou")
     max_det = conv.get("max_det")
