@@ -295,27 +295,25 @@ def test_tables_of_a_store_caught_mid_extension(coco, tmp_path) -> None:
     assert tables["aligned"] == {"yolox_nano": {"images": 3, "stored": [3, 6], "rescored": 1,
                                                 "capped": False}}
     assert tables["models"]["yolox_nano"]["images"] == 3
-    base = evaluate_detections(gt, store.detections("yolox_nano", "baseline", 0), ids3,
-                               method="pycocotools").map
-    cell = evaluate_detections(gt, store.detections("yolox_nano", "contrast-inc", 6), ids3,
-                               method="pycocotools").map
+
+    def direct_dmap(ids: list[int]) -> float:  # pycocotools on the stored detections
+        base, cell = (evaluate_detections(gt, store.detections("yolox_nano", t, e), ids,
+                                          method="pycocotools").map
+                      for t, e in (("baseline", 0), ("contrast-inc", 6)))
+        return 100 * (base - cell)
+
     (row,) = tables["cells"]["yolox_nano"]
-    assert row["dmap_points"] == pytest.approx(100 * (base - cell), abs=1e-6)
+    assert row["dmap_points"] == pytest.approx(direct_dmap(ids3), abs=1e-6)
     assert not tables["worst_case"]["yolox_nano"][1]["partial"]
     assert store.cell("yolox_nano", "baseline", 0)["images"] == 6  # the store is not changed
     assert "reported on the first 3, so that every" in report_markdown(tables, [])
 
     # an earlier state asked for: both cells re-scored on the first 2 images
-    ids2 = ids3[:2]
     capped = build_tables(store, gt, images={"yolox_nano": 2})
     assert capped["aligned"]["yolox_nano"] == {"images": 2, "stored": [3, 6], "rescored": 2,
                                                "capped": True}
-    base2 = evaluate_detections(gt, store.detections("yolox_nano", "baseline", 0), ids2,
-                                method="pycocotools").map
-    cell2 = evaluate_detections(gt, store.detections("yolox_nano", "contrast-inc", 6), ids2,
-                                method="pycocotools").map
     (row,) = capped["cells"]["yolox_nano"]
-    assert row["dmap_points"] == pytest.approx(100 * (base2 - cell2), abs=1e-6)
+    assert row["dmap_points"] == pytest.approx(direct_dmap(ids3[:2]), abs=1e-6)
     assert "reported on the first 2 images, as asked (`--images`" in report_markdown(capped, [])
     # a cap above what every cell has changes nothing
     assert build_tables(store, gt, images={"yolox_nano": 5})["aligned"]["yolox_nano"][

@@ -133,14 +133,19 @@ def test_report_names_every_run_behind_a_models_cells(store, tmp_path) -> None:
     assert "earlier_runs" not in prov["yolo11n"]
 
 
+def _model_at_de6(s: SweepStore, model: str, maps: dict[str, float]) -> None:
+    """A model with baseline mAP 0.5 and the given mAP per transform at ΔE 6."""
+    s.register_model(model, model + ".onnx", model * 64, None, {})
+    s.finish_cell(model, "baseline", 0, param=None, status="done", images=5,
+                  score=score(0.5, 0.6, 0.3))
+    for t, m in maps.items():
+        s.finish_cell(model, t, 6, param=1.0, status="done", images=5, score=score(m, 0.6, 0.3))
+
+
 def test_ranking_claims_by_hand(tmp_path) -> None:
     s = SweepStore(tmp_path)
     s.set_meta("grid", {"transforms": ["contrast-dec", "contrast-inc", "hue"], "targets": [0, 6]})
-    s.register_model("m", "m.onnx", "cc" * 32, None, {})
-    s.finish_cell("m", "baseline", 0, param=None, status="done", images=5,
-                  score=score(0.5, 0.6, 0.3))
-    for t, m in (("contrast-dec", 0.46), ("contrast-inc", 0.45), ("hue", 0.495)):
-        s.finish_cell("m", t, 6, param=1.0, status="done", images=5, score=score(m, 0.6, 0.3))
+    _model_at_de6(s, "m", {"contrast-dec": 0.46, "contrast-inc": 0.45, "hue": 0.495})
     claims = {c["claim"]: c for c in compare_with_paper(build_tables(s))}
     most = claims["contrast increase and decrease hurt detection most"]
     assert most["verdict"] == "agrees" and "contrast-inc 10.00 %" in most["evidence"]
@@ -148,11 +153,7 @@ def test_ranking_claims_by_hand(tmp_path) -> None:
     assert least["verdict"] == "agrees" and "hue (1.00 %)" in least["evidence"]
     assert "(m at ΔE 6)" in most["evidence"]
     # two models measured at the same ΔE: said once, for every model
-    s.register_model("k", "k.onnx", "dd" * 32, None, {})
-    s.finish_cell("k", "baseline", 0, param=None, status="done", images=5,
-                  score=score(0.5, 0.6, 0.3))
-    for t, m in (("contrast-dec", 0.40), ("contrast-inc", 0.45), ("hue", 0.49)):
-        s.finish_cell("k", t, 6, param=1.0, status="done", images=5, score=score(m, 0.6, 0.3))
+    _model_at_de6(s, "k", {"contrast-dec": 0.40, "contrast-inc": 0.45, "hue": 0.49})
     claims = {c["claim"]: c for c in compare_with_paper(build_tables(s))}
     most = claims["contrast increase and decrease hurt detection most"]
     assert "(every model at ΔE 6)" in most["evidence"]
