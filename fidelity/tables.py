@@ -435,8 +435,7 @@ def build_tables(store: Any, coco: Any = None, *, method: str = "auto",
                        "baseline_map": baselines[m]["map"],
                        "baseline_map50": baselines[m]["map50"],
                        "baseline_ap": {k: baselines[m]["ap"].get(k) for k in SAFETY_CLASSES},
-                       "images": baselines[m]["images"],
-                       "capped": bool(aligned.get(m, {}).get("capped"))} for m in baselines},
+                       "images": baselines[m]["images"]} for m in baselines},
         "cells": deltas,
         "worst_case": per_model,
         "size_classes": size_class_rows(per_model),
@@ -785,16 +784,18 @@ def _conventions_words(conv: dict[str, Any]) -> str:
             + ("no detection cap" if max_det is None else f"max_det {max_det}"))
 
 
-def _run_history_words(info: dict[str, Any]) -> str:
+def _run_history_words(info: dict[str, Any], capped: bool = False) -> str:
     """The sweep runs behind a model's cells, in words (its latest registration and the
-    registrations it replaced, see :meth:`fidelity.resultstore.ResultsStore.register_model`)."""
+    registrations it replaced, see :meth:`fidelity.resultstore.ResultsStore.register_model`);
+    ``capped``: the image count was asked for (``--images``), not set by the cells."""
     st = info.get("settings") or {}
     limit, images = info.get("limit_images"), info.get("images")
     words = ""
     if limit and images and limit != images:
-        which = "first {} asked for (`--images`)" if info.get("capped") else "{} that every cell has"
+        which = f"first {images} asked for (`--images`)" if capped else (
+            f"{images} that every cell has")
         words += (f" Latest run registered for the first {limit} images; reported on the "
-                  f"{which.format(images)}.")
+                  f"{which}.")
     earlier = st.get("earlier") or []
     if earlier:
         runs = "; ".join(
@@ -855,7 +856,8 @@ def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
                      f"{st.get('providers')}, {st.get('threads')} intra-op thread(s); "
                      f"{(st.get('conventions') or {}).get('source')}; "
                      f"{(st.get('conventions') or {}).get('preprocess')}."
-                     + _run_history_words(info))
+                     + _run_history_words(
+                         info, bool((tables.get("aligned") or {}).get(m, {}).get("capped"))))
     lines += ["", "ΔmAP in **points** = 100·(mAP₀ − mAP); **relative** = 100·(mAP₀ − mAP)/mAP₀. "
               "ΔAP person/bicycle in points, each the worst over transforms at that ΔE."]
     if tables.get("standard_errors"):

@@ -314,7 +314,9 @@ def test_tables_of_a_store_caught_mid_extension(coco, tmp_path) -> None:
                                                "capped": True}
     (row,) = capped["cells"]["yolox_nano"]
     assert row["dmap_points"] == pytest.approx(direct_dmap(ids3[:2]), abs=1e-6)
-    assert "reported on the first 2 images, as asked (`--images`" in report_markdown(capped, [])
+    md = report_markdown(capped, [])
+    assert "reported on the first 2 images, as asked (`--images`" in md
+    assert "registered for the first 6 images; reported on the first 2 asked for" in md
     # a cap above what every cell has changes nothing
     assert build_tables(store, gt, images={"yolox_nano": 5})["aligned"]["yolox_nano"][
         "images"] == 3
