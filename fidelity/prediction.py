@@ -120,7 +120,9 @@ class PredictionTable:
         size); a table without ``any`` curves then answers with all its curves (worst case).
         Among the curves of one size, the table's aggregate curve (``model`` null: its own
         worst case over the models of that size) answers when it has one; per-model curves
-        answer (worst of them) only when it has none. A per-model curve that covers a narrower
+        answer (worst of them) only when it has none. A table with neither the size asked
+        for nor ``any`` answers with the worst case over the sizes it has, named by them
+        (``"n"`` for a table of nano detectors, ``"n,s"`` for two sizes). A per-model curve that covers a narrower
         ΔE range, e.g. a model still being measured, then cannot turn every answer beyond that
         range into the total-loss ceiling.
         """
@@ -137,7 +139,7 @@ class PredictionTable:
         anyc = [c for c in self.curves if c.size == "any"]
         if anyc:
             return preferred(anyc), "any"
-        return preferred(list(self.curves)), "worst of " + ",".join(self.sizes())
+        return preferred(list(self.curves)), ",".join(self.sizes())
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready identification of the table (name, title, kind, provenance, units)."""
@@ -460,9 +462,15 @@ def predict(
         raise unknown_name("interpolation method", m, INTERPOLATIONS)
     curves, size_used = tab.select(size)
     notes: list[str] = []
-    if size_used != size:
-        notes.append(f"table {tab.name!r} has no curve for size {size!r}; the {size_used!r} "
-                     f"curve (worst case over sizes) answers")
+    if size_used == "any" and size != "any":
+        notes.append(f"table {tab.name!r} has no curve for size {size!r}; its 'any' curve "
+                     f"(worst case over every size) answers")
+    elif size_used != size:
+        sizes = tab.sizes()
+        have = (f"only size {sizes[0]} detectors" if len(sizes) == 1
+                else "sizes " + ", ".join(sizes))
+        notes.append(f"table {tab.name!r} has no curve for size {size!r} (it has {have}); "
+                     f"their worst case answers")
     t = np.array([de])
     columns: dict[str, ColumnPrediction] = {}
     answering: Curve | None = None

@@ -286,7 +286,7 @@ def plot_prediction_curve(prediction: Prediction, limit_dmap: float | None = Non
     ax.set_yscale("symlog", linthresh=1.0)
     ax.set_ylim(0, 105)
     ax.set_xlim(0, xmax)
-    ax.set_title(f"table {prediction.table.name} ({prediction.table.kind}), size "
+    ax.set_title(f"table {prediction.table.name} ({prediction.table.kind}), detector size "
                  f"{prediction.size_used}, {prediction.method} interpolation", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="lower right")
@@ -347,7 +347,7 @@ def render_html(report: dict[str, Any], prediction: Prediction | None = None) ->
             ("predicted ΔmAP, % of baseline", b + _fmt(pred["dmap_relative"])),
             ("predicted person ΔAP, points", b + _fmt(pred["dap_person_points"])),
             ("predicted bicycle ΔAP, points", b + _fmt(pred["dap_bicycle_points"])),
-            ("prediction table", e(f"{pred['table']['name']} ({pred['table']['kind']}), size "
+            ("prediction table", e(f"{pred['table']['name']} ({pred['table']['kind']}), detector size "
                                    f"{pred['size_used']}")),
         ]
     parts.append("<h2>Summary</h2><table>" + "".join(
@@ -488,7 +488,7 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
                 "measured worst case, " if pred["table"].get("kind") == "measured" else "")
         lines.append(f"predicted ΔmAP: {f(pred['dmap_points'])} percentage points, "
                      f"{f(pred['dmap_relative'])} % of baseline ({kind}table "
-                     f"{pred['table']['name']}, size {pred['size_used']})")
+                     f"{pred['table']['name']}, detector size {pred['size_used']})")
         lines.append(f"predicted ΔAP: person {f(pred['dap_person_points'])} points, bicycle "
                      f"{f(pred['dap_bicycle_points'])} points")
         if pred.get("out_of_range"):

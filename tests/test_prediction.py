@@ -196,8 +196,9 @@ def test_measured_table_ranges_and_sizes():
     assert beyond.dmap_points == pytest.approx(42.0) and beyond.dmap_relative == 100.0
     assert beyond.columns["dmap_points"].status == "above-range"
     m = pr.predict(5.0, size="m", table=table, transforms=False)
-    assert m.size_used.startswith("worst of")
-    assert any("no curve for size 'm'" in n for n in m.notes)
+    assert m.size_used == ",".join(table.sizes()) and "m" not in table.sizes()
+    assert any("no curve for size 'm'" in n and "their worst case answers" in n
+               for n in m.notes)
     with pytest.raises(UnknownNameError, match="detector size"):
         pr.predict(5.0, size="xl", table=table)
 

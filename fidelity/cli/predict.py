@@ -55,7 +55,7 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
         "person": f"person ΔAP: {f(p.dap_person_points)} percentage points",
         "bicycle": f"bicycle ΔAP: {f(p.dap_bicycle_points)} percentage points",
     }
-    click.echo(f"ΔE00 {p.delta_e:g} -> table {p.table.name} ({p.table.kind}), size "
+    click.echo(f"ΔE00 {p.delta_e:g} -> table {p.table.name} ({p.table.kind}), detector size "
                f"{p.size_used}, {p.method} interpolation")
     click.echo("  " + lines[cls])
     for k, line in lines.items():
