@@ -3,7 +3,8 @@
 Steps (each a pure function of arrays; :func:`audit_image` adds the file reading):
 
 1. Locate the 24 patches from the four corner-patch centres (:mod:`fidelity.locate`) and take
-   the pixels of each patch's central sampling window.
+   the pixels of each patch's central sampling window. Without given corners the chart is
+   found first (:func:`fidelity.detect.detect_chart`); everything after that is the same.
 2. Exclude bad pixels: a pixel with NaN, +-Inf or a negative value in any channel. They are
    counted (per kind, per patch, and over the whole image). A patch keeps its measurement only
    if at least ``min_valid_fraction`` of its window (and at least ``MIN_VALID_PIXELS``) is
@@ -37,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from fidelity import colorimetry as cm
+from fidelity.detect import ChartDetection, detect_chart
 from fidelity.errors import InvalidValueError, unknown_name
 from fidelity.locate import DEFAULT_WINDOW, ChartLocation, locate_chart, sample_patches
 from fidelity.measure import ChartMeasurement, measure_chart
@@ -150,6 +152,7 @@ class AuditResult:
     location: ChartLocation
     reference: Reference
     image: dict[str, Any] | None = None
+    detection: ChartDetection | None = None
 
     @property
     def mean_delta_e(self) -> float:
@@ -176,6 +179,7 @@ class AuditResult:
             clipped_patches=list(self.clipped_patches),
             reference=self.reference.name,
             location=self.location.to_dict(),
+            detection=self.detection.to_dict() if self.detection else None,
             image=self.image,
         )
         return d
@@ -194,7 +198,7 @@ def _bad_counts(values: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
 
 def audit_pixels(
     pixels: np.ndarray,
-    corners: np.ndarray | str | Sequence[float],
+    corners: np.ndarray | str | Sequence[float] | None = None,
     *,
     encoding: str = "linear",
     exposure: float | str | None = None,
@@ -203,6 +207,7 @@ def audit_pixels(
     window: float = DEFAULT_WINDOW,
     min_valid_fraction: float = MIN_VALID_FRACTION,
     image: dict[str, Any] | None = None,
+    detection: str = "segmentation",
 ) -> AuditResult:
     """Audit a chart in an ``(H, W, 3)`` image array (see the module docstring).
 
@@ -212,7 +217,8 @@ def audit_pixels(
         ``(H, W, 3)`` values, linear or encoded sRGB (``encoding``).
     corners
         Centres of the dark skin, bluish green, black and white patches, ``(4, 2)`` image
-        ``(x, y)`` or ``"X1,Y1,...,X4,Y4"``.
+        ``(x, y)`` or ``"X1,Y1,...,X4,Y4"``; ``None``: find the chart
+        (:func:`fidelity.detect.detect_chart` with ``detection``).
     exposure
         ``"auto"`` (fit on the neutral patches), a fixed EV (scale ``2**EV``), or ``None``:
         auto for linear input, 0 for sRGB-encoded input.
@@ -240,6 +246,11 @@ def audit_pixels(
         if not math.isfinite(float(exposure)):
             raise InvalidValueError(f"--exposure {exposure!r} must be finite")
         mode = "fixed"
+    found = None
+    if corners is None:
+        found = detect_chart(arr, encoding=encoding, method=detection, rows=ref.rows,
+                             cols=ref.cols)
+        corners = found.corners
     loc = locate_chart(corners, arr.shape, rows=ref.rows, cols=ref.cols, window=window,
                        patch_names=ref.patch_names)
     samples = sample_patches(arr, loc)
@@ -288,13 +299,13 @@ def audit_pixels(
     return AuditResult(
         measurement=measurement, exposure_ev=ev, exposure_mode=mode, encoding=encoding,
         bad_pixels=bad_pixels, valid_pixels=tuple(valid_counts), clipped_patches=clipped,
-        location=loc, reference=ref, image=image,
+        location=loc, reference=ref, image=image, detection=found,
     )
 
 
 def audit_image(
     path: str | os.PathLike[str],
-    corners: np.ndarray | str | Sequence[float],
+    corners: np.ndarray | str | Sequence[float] | None = None,
     *,
     layer: str | None = None,
     encoding: str | None = None,
@@ -302,6 +313,7 @@ def audit_image(
     reference: str | Reference = DEFAULT_REFERENCE,
     illuminant: str = "D65",
     window: float = DEFAULT_WINDOW,
+    detection: str = "segmentation",
 ) -> AuditResult:
     """Read an image (:func:`fidelity.imageio.read_image`) and audit its chart.
 
@@ -319,7 +331,7 @@ def audit_image(
     try:
         return audit_pixels(img.pixels, corners, encoding=enc, exposure=exposure,
                             reference=reference, illuminant=illuminant, window=window,
-                            image={**info, "encoding": enc})
+                            image={**info, "encoding": enc}, detection=detection)
     except FidelityError as exc:
         raise type(exc)(f"{img.path}: {exc}") from None
 

@@ -18,6 +18,7 @@ follows perspective: a pixel belongs to the window of patch ``(c, r)`` when its 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -57,30 +58,52 @@ def parse_corners(text: str | Sequence[float]) -> np.ndarray:
 
 
 def homography_from_points(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """The 3 x 3 homography ``H`` with ``dst ~ H src`` from four point pairs (DLT).
+    """The 3 x 3 homography ``H`` with ``dst ~ H src`` from four or more point pairs.
 
-    ``src`` and ``dst`` are ``(4, 2)``; ``H`` is normalised to ``H[2, 2] = 1``. Raises
-    :class:`InvalidValueError` when three of the points are collinear (no unique map).
+    Normalised DLT (Hartley & Zisserman, *Multiple View Geometry*, 2nd ed., Alg. 4.2): each
+    point set is moved to its centroid and scaled to mean distance sqrt(2), the DLT is solved by
+    SVD, and the normalisation undone. Four pairs give the exact map; more give the algebraic
+    least-squares fit. ``src`` and ``dst`` are ``(N, 2)``, ``N >= 4``; ``H`` is normalised to
+    ``H[2, 2] = 1``. Raises :class:`InvalidValueError` when four points have three collinear
+    ones, or more points all lie on one line (no unique map).
     """
     src = np.asarray(src, dtype=np.float64)
     dst = np.asarray(dst, dtype=np.float64)
+    if src.shape != dst.shape or src.ndim != 2 or src.shape[1] != 2 or len(src) < 4:
+        raise InvalidValueError(f"a homography needs N >= 4 point pairs of shape (N, 2), got "
+                                f"{src.shape} and {dst.shape}")
     for name, pts in (("source", src), ("corner", dst)):
-        for skip in range(4):
-            tri = np.delete(pts, skip, axis=0)
-            (ax, ay), (bx, by) = tri[1] - tri[0], tri[2] - tri[0]
-            area = abs(ax * by - ay * bx) / 2.0
-            scale = max(float(np.ptp(pts[:, 0])), float(np.ptp(pts[:, 1])), 1e-12)
-            if area <= 1e-9 * scale * scale:
-                raise InvalidValueError(
-                    f"{name} points are degenerate (three of them are collinear or coincide): "
-                    f"{pts.tolist()}"
-                )
+        scale = max(float(np.ptp(pts[:, 0])), float(np.ptp(pts[:, 1])), 1e-12)
+        if len(pts) == 4:
+            for skip in range(4):
+                tri = np.delete(pts, skip, axis=0)
+                (ax, ay), (bx, by) = tri[1] - tri[0], tri[2] - tri[0]
+                area = abs(ax * by - ay * bx) / 2.0
+                if area <= 1e-9 * scale * scale:
+                    raise InvalidValueError(
+                        f"{name} points are degenerate (three of them are collinear or "
+                        f"coincide): {pts.tolist()}"
+                    )
+        else:
+            spread = np.linalg.svd(pts - pts.mean(axis=0), compute_uv=False)
+            if spread[-1] <= 1e-9 * scale:
+                raise InvalidValueError(f"{name} points are degenerate (all on one line)")
+
+    def normaliser(pts: np.ndarray) -> np.ndarray:
+        centre = pts.mean(axis=0)
+        mean_dist = float(np.mean(np.linalg.norm(pts - centre, axis=-1)))
+        s = math.sqrt(2.0) / mean_dist
+        return np.array([[s, 0, -s * centre[0]], [0, s, -s * centre[1]], [0, 0, 1.0]])
+
+    t_src, t_dst = normaliser(src), normaliser(dst)
+    a = src @ t_src[:2, :2].T + t_src[:2, 2]
+    b = dst @ t_dst[:2, :2].T + t_dst[:2, 2]
     rows = []
-    for (u, v), (x, y) in zip(src, dst, strict=True):
+    for (u, v), (x, y) in zip(a, b, strict=True):
         rows.append([u, v, 1, 0, 0, 0, -x * u, -x * v, -x])
         rows.append([0, 0, 0, u, v, 1, -y * u, -y * v, -y])
     _, _, vt = np.linalg.svd(np.asarray(rows))
-    h = vt[-1].reshape(3, 3)
+    h = np.linalg.inv(t_dst) @ vt[-1].reshape(3, 3) @ t_src
     if abs(h[2, 2]) < 1e-15:
         raise InvalidValueError("corner points give a degenerate homography")
     return h / h[2, 2]

@@ -8,7 +8,7 @@ The JSON report (``schema_version`` :data:`SCHEMA_VERSION`) is described by the 
   ``delta_l``, ``delta_c``, ``delta_h``, ``lab``, ``reference_lab``, ``srgb``, ...): the chart
   measurement (CIEDE2000, Lab D65);
 - ``exposure_ev``, ``bad_pixels``: the audit of an image (``null`` for a render);
-- ``source``: the image (path, sha256, format, layer, corners, encoding) or the render
+- ``source``: the image (path, sha256, format, layer, corners, how they were found, encoding) or the render
   (camera, illuminant, renderer, variant, seconds);
 - ``prediction``: ΔE -> ΔmAP (:meth:`fidelity.prediction.Prediction.to_dict`);
 - ``verdict``: pass/fail of the criterion (:meth:`fidelity.verdict.Verdict.to_dict`);
@@ -223,6 +223,52 @@ def plot_swatches(report: dict[str, Any]) -> str:
     return _png(fig)
 
 
+def plot_chart_location(pixels: np.ndarray, location: Any, *, encoding: str = "linear",
+                        exposure_ev: float = 0.0, found: bool = False) -> str:
+    """Base64 PNG: the image with every patch's sampling window outlined and numbered.
+
+    ``location`` is a :class:`fidelity.locate.ChartLocation`. Linear pixels are shown at the
+    audit's exposure (``2**exposure_ev``), sRGB-encoded; NaN/Inf show as black. The corner
+    patches are labelled, so a wrong orientation or a grid off the patches is seen at once.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from fidelity import colorimetry as cm
+    from fidelity.locate import CORNER_PATCHES, apply_homography
+
+    arr = np.asarray(pixels, dtype=np.float64)
+    arr = np.where(np.isfinite(arr), arr, 0.0)
+    if encoding == "linear":
+        arr = cm.delinearize_srgb(np.clip(arr * 2.0 ** exposure_ev, 0.0, 1.0))
+    arr = np.clip(arr, 0.0, 1.0)
+    height, width = arr.shape[:2]
+    fig, ax = plt.subplots(figsize=(7.2, 7.2 * height / max(width, 1)))
+    ax.imshow(arr, interpolation="antialiased")
+    half = location.window / 2.0
+    square = np.array([[-half, -half], [half, -half], [half, half], [-half, half],
+                       [-half, -half]])
+    cols = location.cols
+    for k in range(location.rows * cols):
+        r, c = divmod(k, cols)
+        quad = apply_homography(location.homography, square + (c, r))
+        ax.plot(quad[:, 0], quad[:, 1], color="white", lw=0.8)
+        ax.plot(quad[:, 0], quad[:, 1], color="black", lw=0.8, ls=(0, (2, 2)))
+        ax.text(*location.centres[k], str(k + 1), ha="center", va="center", fontsize=6,
+                color="white", bbox={"facecolor": "black", "alpha": 0.5, "pad": 0.5, "lw": 0})
+    for name, (x, y) in zip(CORNER_PATCHES, location.corners, strict=True):
+        ax.text(x, y + location.pitch_px * 0.3, name, fontsize=6, color="yellow", ha="center",
+                va="top", bbox={"facecolor": "black", "alpha": 0.6, "pad": 0.5, "lw": 0})
+    ax.set_xlim(-0.5, width - 0.5)
+    ax.set_ylim(height - 0.5, -0.5)
+    how = "found in the image" if found else "from --corners"
+    ax.set_title(f"sampling windows ({location.window:g} patch pitch), corners {how}", fontsize=9)
+    ax.axis("off")
+    return _png(fig)
+
+
 def plot_delta_e_bars(report: dict[str, Any], limit: float | None = None) -> str:
     """Base64 PNG: ΔE00 per patch as bars, with the mean (and the ΔE limit, if any)."""
     import matplotlib
@@ -315,8 +361,11 @@ def _fmt(v: Any, nd: int = 2) -> str:
     return html.escape(str(v))
 
 
-def render_html(report: dict[str, Any], prediction: Prediction | None = None) -> str:
-    """The self-contained HTML report of a JSON report (plots embedded as base64 PNG)."""
+def render_html(report: dict[str, Any], prediction: Prediction | None = None,
+                location_png: str | None = None) -> str:
+    """The self-contained HTML report of a JSON report (plots embedded as base64 PNG).
+
+    ``location_png``: the base64 PNG of :func:`plot_chart_location`, shown for an image."""
     e = html.escape
     verdict = report.get("verdict")
     src = report.get("source") or {}
@@ -363,6 +412,9 @@ def render_html(report: dict[str, Any], prediction: Prediction | None = None) ->
             limit_de = crit["limit"]
         elif crit["cls"] == "all" and crit["unit"] == "points":
             limit_dmap = crit["limit"]
+    if location_png:
+        parts.append("<h2>Where the patches were sampled</h2>"
+                     f"<img alt='sampling windows' src='data:image/png;base64,{location_png}'>")
     parts.append("<h2>Chart: reference against measured</h2>"
                  f"<img alt='swatches' src='data:image/png;base64,{plot_swatches(report)}'>")
     parts.append("<h2>ΔE00 per patch</h2>"
@@ -413,10 +465,11 @@ def render_html(report: dict[str, Any], prediction: Prediction | None = None) ->
 
 
 def write_html_report(path: str | os.PathLike[str], report: dict[str, Any],
-                      prediction: Prediction | None = None, protect: tuple[str, ...] = ()) -> Path:
+                      prediction: Prediction | None = None, protect: tuple[str, ...] = (),
+                      location_png: str | None = None) -> Path:
     """Write the HTML report atomically."""
     _refuse_inputs(path, protect)
-    return write_text_atomic(path, render_html(report, prediction))
+    return write_text_atomic(path, render_html(report, prediction, location_png))
 
 
 # --------------------------------------------------------------------------------- JUnit
@@ -471,8 +524,14 @@ def write_junit(path: str | os.PathLike[str], report: dict[str, Any] | None, *, 
 
 def summary_lines(report: dict[str, Any]) -> list[str]:
     """A short, readable verdict for the terminal."""
-    lines = [f"chart ΔE00: mean {report['mean_delta_e']:.2f}, max {report['max_delta_e']:.2f} "
-             f"({report.get('worst_patch')})"]
+    lines = []
+    found = (report.get("source") or {}).get("corners_found")
+    if found:
+        lines.append(f"chart found ({found['method']}, {found['swatches']} of 24 patch outlines "
+                     f"fitted, orientation {found['orientation']}): --corners "
+                     f"{found['corners_text']}")
+    lines.append(f"chart ΔE00: mean {report['mean_delta_e']:.2f}, max "
+                 f"{report['max_delta_e']:.2f} ({report.get('worst_patch')})")
     if report.get("exposure_ev") is not None:
         bp = report.get("bad_pixels") or {}
         lines.append(f"exposure correction {report['exposure_ev']:+.2f} EV; bad pixels "
@@ -505,6 +564,7 @@ __all__ = [
     "plot_delta_e_bars",
     "plot_prediction_curve",
     "plot_swatches",
+    "plot_chart_location",
     "render_html",
     "report_schema",
     "report_schema_path",

@@ -67,7 +67,7 @@ def test_gate_pass_and_fail_on_delta_e(png, tmp_path):
     assert report["verdict"]["passed"] is False
     assert report["mean_delta_e"] == pytest.approx(de, abs=0.02)
     html = (tmp_path / "r.html").read_text()
-    assert html.count("data:image/png;base64,") == 3
+    assert html.count("data:image/png;base64,") == 4  # sampling windows, swatches, bars, curve
     assert report["provenance"]["input_sha256"] in html
 
 
@@ -204,14 +204,22 @@ def test_unknown_camera_and_table(png, tmp_path):
     assert r.exit_code == 2 and "unknown prediction table 'nope'" in one_error_line(r)
 
 
+def test_without_corners_the_chart_is_found_and_gated_the_same(png):
+    path, de = png
+    given = run("gate", path, "--corners", corners_of(), "--max-delta-e", f"{de + 0.1:.3f}")
+    found = run("gate", path, "--max-delta-e", f"{de + 0.1:.3f}")
+    assert found.exit_code == given.exit_code == 0, found.output
+    assert found.stdout.startswith("chart found (segmentation")
+    assert found.stdout.splitlines()[1:] == given.stdout.splitlines()
+    assert run("gate", path, "--max-delta-e", f"{de - 0.1:.3f}").exit_code == 1
+
+
 def test_usage_errors_exit_2(png):
-    assert run("gate", png[0], "--max-delta-e", "3").exit_code == 2  # no --corners
     assert run("gate", png[0], "--corners", corners_of()).exit_code == 2  # no criterion
     assert run("gate", "--camera", "ideal", "--max-delta-e", "3", "--max-dmap", "1").exit_code == 2
     assert run("gate", "--camera", "ideal", "--max-delta-e", "3", "--class", "person").exit_code == 2
     assert run("predict").exit_code == 2
     assert run("gate", "--camera", "ideal", "--corners", corners_of(), "--max-delta-e", "3").exit_code == 2
-    assert run("audit", png[0]).exit_code == 2  # --corners is required
     assert run("gate", "--camera", "ideal", "--max-delta-e", "abc").exit_code == 2
 
 

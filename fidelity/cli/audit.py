@@ -12,10 +12,11 @@ from fidelity.prediction import SIZES
 
 @click.command()
 @click.argument("image", type=PATH)
-@click.option("--corners", required=True,
+@click.option("--corners", default=None,
               help="X1,Y1,X2,Y2,X3,Y3,X4,Y4: image centres of the dark skin, bluish green, black "
                    "and white patches (the chart's top-left, top-right, bottom-right, "
-                   "bottom-left patch as seen); pixel (row i, column j) is at x=j, y=i.")
+                   "bottom-left patch as seen); pixel (row i, column j) is at x=j, y=i. "
+                   "Default: the chart is found in the image and the corners printed.")
 @click.option("--encoding", type=click.Choice(["linear", "srgb"]), default=None,
               help="Pixel encoding (default: linear for EXR/HDR/float TIFF, sRGB otherwise).")
 @click.option("--exposure", default=None,
@@ -33,19 +34,21 @@ from fidelity.prediction import SIZES
 @click.option("--json", "json_path", type=PATH, help="Write the JSON report here.")
 @click.option("--html", "html_path", type=PATH, help="Write the HTML report here.")
 @click.option("--quiet", "-q", is_flag=True, help="Print nothing.")
-def audit(image: Path, corners: str, encoding: str | None, exposure: str | None,
+def audit(image: Path, corners: str | None, encoding: str | None, exposure: str | None,
           layer: str | None, reference: str, illuminant: str, size: str, table: str | None,
           json_path: Path | None, html_path: Path | None, quiet: bool) -> None:
     """Measure the chart in IMAGE: ΔE00 per patch, mean and max, exposure, bad pixels.
 
     \b
-    fidelity audit render.exr --corners 102,88,610,95,604,420,98,414 --json audit.json
+    fidelity audit render.exr --json audit.json
+    fidelity audit photo.jpg --corners 102,88,610,95,604,420,98,414
     """
-    report, prediction, _ = image_report(
+    report, prediction, _, figure = image_report(
         image, corners, command="audit", encoding=encoding, exposure=exposure, layer=layer,
-        reference=reference, illuminant=illuminant, size=size, table=table)
+        reference=reference, illuminant=illuminant, size=size, table=table,
+        location_figure=html_path is not None)
     written = write_outputs(report, prediction, json_path=json_path, html_path=html_path,
-                            protect=(str(image),))
+                            protect=(str(image),), location_png=figure)
     if not quiet:
         from fidelity.report import summary_lines
 

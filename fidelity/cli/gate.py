@@ -22,20 +22,25 @@ PATH = click.Path(dir_okay=False, path_type=Path)
 
 
 def image_report(
-    image: Path, corners: str, *, command: str, encoding: str | None, exposure: str | None,
+    image: Path, corners: str | None, *, command: str, encoding: str | None, exposure: str | None,
     layer: str | None, reference: str, illuminant: str, size: str, table: str | None,
-    criterion: Criterion | None = None,
-) -> tuple[dict[str, Any], Prediction, Verdict | None]:
-    """Audit ``image`` and build its report (measurement, prediction, optional verdict)."""
+    criterion: Criterion | None = None, location_figure: bool = False,
+) -> tuple[dict[str, Any], Prediction, Verdict | None, str | None]:
+    """Audit ``image`` and build its report (measurement, prediction, optional verdict), and
+    with ``location_figure`` the base64 PNG of where the patches were sampled (for HTML).
+
+    ``corners`` ``None`` (or empty): the chart is found in the image
+    (:func:`fidelity.detect.detect_chart`); the corners it found go into the report."""
     from fidelity.audit import audit_image
     from fidelity.report import build_report
 
-    result = audit_image(image, corners, layer=layer, encoding=encoding, exposure=exposure,
+    result = audit_image(image, corners or None, layer=layer, encoding=encoding, exposure=exposure,
                          reference=reference, illuminant=illuminant)
     prediction = predict(result.mean_delta_e, size=size, table=table)
     verdict = evaluate(result.mean_delta_e, prediction, criterion) if criterion else None
     info = dict(result.image or {})
     source = {"type": "image", **info, "corners": result.location.corners.tolist(),
+              "corners_found": result.detection.to_dict() if result.detection else None,
               "exposure_mode": result.exposure_mode, "reference": result.reference.name}
     report = build_report(
         command, result.measurement, source=source, prediction=prediction, verdict=verdict,
@@ -54,7 +59,15 @@ def image_report(
                  "clipped_patches": list(result.clipped_patches),
                  "encoding": result.encoding},
     )
-    return report, prediction, verdict
+    figure = None
+    if location_figure:
+        from fidelity.imageio import read_image
+        from fidelity.report import plot_chart_location
+
+        figure = plot_chart_location(read_image(image, layer=layer).pixels, result.location,
+                                     encoding=result.encoding, exposure_ev=result.exposure_ev,
+                                     found=result.detection is not None)
+    return report, prediction, verdict, figure
 
 
 def camera_report(
@@ -82,7 +95,8 @@ def camera_report(
 
 
 def write_outputs(report: dict[str, Any], prediction: Prediction, *, json_path: Path | None,
-                  html_path: Path | None, protect: tuple[str, ...] = ()) -> list[Path]:
+                  html_path: Path | None, protect: tuple[str, ...] = (),
+                  location_png: str | None = None) -> list[Path]:
     """Write the JSON and HTML reports that were asked for; return their paths."""
     from fidelity.report import write_html_report, write_json_report
 
@@ -90,7 +104,8 @@ def write_outputs(report: dict[str, Any], prediction: Prediction, *, json_path: 
     if json_path is not None:
         written.append(write_json_report(json_path, report, protect=protect))
     if html_path is not None:
-        written.append(write_html_report(html_path, report, prediction, protect=protect))
+        written.append(write_html_report(html_path, report, prediction, protect=protect,
+                                         location_png=location_png))
     return written
 
 
@@ -121,8 +136,8 @@ def _fail(message: str, junit: Path | None, name: str, seconds: float) -> None:
 
 @click.command()
 @click.argument("image", required=False, type=PATH)
-@click.option("--corners", help="Image with --corners X1,Y1,...,X4,Y4: centres of the dark skin, "
-              "bluish green, black and white patches.")
+@click.option("--corners", help="X1,Y1,...,X4,Y4: centres of the dark skin, bluish green, black "
+              "and white patches in IMAGE (default: the chart is found).")
 @click.option("--camera", help="Camera model (built-in name or TOML path) instead of an image.")
 @click.option("--max-delta-e", type=float, help="Pass when the chart's mean ΔE00 <= X.")
 @click.option("--max-dmap", type=float, help="Pass when the predicted ΔmAP (or class ΔAP) <= P.")
@@ -153,13 +168,12 @@ def gate(image: Path | None, corners: str | None, camera: str | None, max_delta_
     """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 error.
 
     \b
-    fidelity gate render.exr --corners 102,88,610,95,604,420,98,414 --max-delta-e 3
+    fidelity gate render.exr --max-delta-e 3
+    fidelity gate photo.jpg --corners 102,88,610,95,604,420,98,414 --max-delta-e 3
     fidelity gate --camera nikon-5100 --max-dmap 1 --class person --junit colour.xml
     """
     if (image is None) == (camera is None):
-        raise click.UsageError("give an IMAGE (with --corners) or --camera, not both")
-    if image is not None and not corners:
-        raise click.UsageError("an IMAGE needs --corners X1,Y1,X2,Y2,X3,Y3,X4,Y4")
+        raise click.UsageError("give an IMAGE or --camera, not both")
     if camera is not None and any(v is not None for v in (corners, encoding, exposure, layer)):
         raise click.UsageError("--corners, --encoding, --exposure and --layer apply to an IMAGE, "
                                "not to --camera")
@@ -170,19 +184,20 @@ def gate(image: Path | None, corners: str | None, camera: str | None, max_delta_
         criterion = make_criterion(*criterion_args)
         name += f": {criterion.describe()}"
         if image is not None:
-            report, prediction, verdict = image_report(
-                image, corners or "", command="gate", encoding=encoding, exposure=exposure,
+            report, prediction, verdict, figure = image_report(
+                image, corners, command="gate", encoding=encoding, exposure=exposure,
                 layer=layer, reference=reference or "safecolor", illuminant=illuminant,
-                size=size, table=table, criterion=criterion)
+                size=size, table=table, criterion=criterion,
+                location_figure=html_path is not None)
             protect: tuple[str, ...] = (str(image),)
         else:
             report, prediction, verdict = camera_report(
                 camera or "", command="gate", illuminant=illuminant, renderer=renderer,
                 reference=reference or "scene", size=size, table=table, criterion=criterion)
-            protect = ()
+            protect, figure = (), None
         assert verdict is not None
         write_outputs(report, prediction, json_path=json_path, html_path=html_path,
-                      protect=protect)
+                      protect=protect, location_png=figure)
         if junit is not None:
             from fidelity.report import write_junit
 

@@ -1,0 +1,87 @@
+"""Benchmark: finding the chart (fidelity.detect) against colour-checker-detection's own outline.
+
+Synthetic scenes with known geometry (the test suite's cases: frontal, tilted with perspective,
+upside down, a quarter turn in a portrait image, mirrored, small), each with three cameras: the
+reference colours, a contrast-inc camera and a desaturating one (ΔE of several units). For each
+the corner error (largest distance of a corner-patch centre from the truth, in % of the patch
+pitch) and the time, best of N, of
+
+- anchor: colour-checker-detection's segmentation outline alone (``refine=False``: its chart
+  quadrilateral, with our orientation check so that a mirrored chart is comparable), and
+- fidelity: the same detection, refined by fitting the grid to the patch outlines.
+
+Also the time of the audit itself with given corners, so the cost of not typing them shows.
+Writes reports/benchmarks/detect.json.  Run:  python -m benchmarks.bench_detect [--repeats N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.machine import best_time, machine_info
+from fidelity import colorimetry as cm
+from fidelity.audit import audit_pixels
+from fidelity.detect import detect_chart
+from fidelity.fileio import write_json_atomic
+from fidelity.transforms import apply_transform
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "tests"))
+from test_detect import CASES, CHART, GRID_CORNERS, map_points, scene  # noqa: E402
+
+CAMERAS = {"reference": None, "contrast-inc 1.4": ("contrast-inc", 1.4),
+           "saturation-dec 0.5": ("saturation-dec", 0.5)}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--out", type=Path,
+                    default=Path(__file__).parents[1] / "reports/benchmarks/detect.json")
+    args = ap.parse_args()
+    rows = []
+    print(f"{'case':26s} {'camera':20s} {'anchor err':>10s} {'fidelity err':>12s} "
+          f"{'anchor s':>9s} {'fidelity s':>10s} {'audit s':>8s}")
+    for case, (h, size) in CASES.items():
+        truth = map_points(h, GRID_CORNERS)
+        pitch = float(np.linalg.norm(truth[1] - truth[0]) / 5)
+        for camera, transform in CAMERAS.items():
+            srgb = apply_transform(CHART.srgb, *transform) if transform else CHART.srgb
+            img = scene(h, size, cm.linearize_srgb(np.clip(srgb, 0, 1)))
+            anchor = detect_chart(img, refine=False)
+            ours = detect_chart(img)
+            err_a = float(np.linalg.norm(anchor.corners - truth, axis=-1).max()) / pitch * 100
+            err_o = float(np.linalg.norm(ours.corners - truth, axis=-1).max()) / pitch * 100
+            t_a = best_time(lambda img=img: detect_chart(img, refine=False), args.repeats)
+            t_o = best_time(lambda img=img: detect_chart(img), args.repeats)
+            t_audit = best_time(lambda img=img, c=truth: audit_pixels(img, c), args.repeats)
+            rows.append({"case": case, "camera": camera, "image": f"{size[1]}x{size[0]}",
+                         "pitch_px": round(pitch, 2),
+                         "corner_error_percent_pitch": {"anchor": round(err_a, 3),
+                                                        "fidelity": round(err_o, 3)},
+                         "swatches_fitted": ours.swatches, "orientation": ours.orientation,
+                         "seconds": {"anchor": t_a, "fidelity": t_o, "audit_given_corners": t_audit}})
+            print(f"{case:26s} {camera:20s} {err_a:9.2f}% {err_o:11.2f}% {t_a:9.3f} {t_o:10.3f} "
+                  f"{t_audit:8.3f}")
+    ea = np.array([r["corner_error_percent_pitch"]["anchor"] for r in rows])
+    eo = np.array([r["corner_error_percent_pitch"]["fidelity"] for r in rows])
+    ta = np.array([r["seconds"]["anchor"] for r in rows])
+    to = np.array([r["seconds"]["fidelity"] for r in rows])
+    summary = {"worst_error_percent_pitch": {"anchor": float(ea.max()), "fidelity": float(eo.max())},
+               "median_error_percent_pitch": {"anchor": float(np.median(ea)),
+                                              "fidelity": float(np.median(eo))},
+               "median_time_ratio_fidelity_over_anchor": float(np.median(to / ta))}
+    print(f"corner error, % of patch pitch: worst {ea.max():.2f} (anchor) vs {eo.max():.2f} "
+          f"(fidelity), median {np.median(ea):.2f} vs {np.median(eo):.2f}; time ratio "
+          f"fidelity/anchor {np.median(to / ta):.2f}x (median)")
+    write_json_atomic(args.out, {"benchmark": "chart detection on synthetic scenes",
+                                 "repeats": args.repeats, "cases": rows, "summary": summary,
+                                 "machine": machine_info()})
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

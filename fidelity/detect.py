@@ -1,0 +1,363 @@
+"""Find a 4 x 6 colour chart in an image, so that an audit needs no hand-given corners.
+
+The result is the same four numbers a user would give with ``--corners``: the image centres of
+the dark skin, bluish green, black and white patches (:mod:`fidelity.locate` conventions:
+``x`` along a row, ``y`` down, pixel ``(i, j)`` at ``x = j, y = i``). Everything after that,
+sampling windows, bad pixels, exposure and ΔE00, is the audit's own and does not depend on how
+the corners were found.
+
+Methods (:data:`CHART_DETECTION_METHODS`):
+
+``segmentation``
+    colour-checker-detection's segmentation detector (Colour Developers, *Colour - Checker
+    Detection*, ``detect_colour_checkers_segmentation``): adaptive thresholding at a working
+    width of 1440 px, square swatch contours, clusters of swatches with the chart's 3:2 aspect
+    ratio; the chart's orientation (which corner is dark skin) is the rotation whose sampled
+    colours are closest to the ColorChecker reference. Its chart outline is coarse (it encloses
+    the swatches and part of the gaps), so the corners are refined here: every swatch contour
+    the detector found is assigned to the grid cell its centre falls in (within 0.3 patch
+    pitches of the cell centre, through the coarse outline), and a homography grid -> image is
+    fitted to all assigned swatch centres by the normalised DLT
+    (:func:`fidelity.locate.homography_from_points`), leaving out swatches whose centre lies
+    more than three times the median distance off the fit (a contour merged with a dark
+    frame). With fewer than six assigned swatches the coarse outline answers. The detector
+    keeps only clusters of swatches with about the chart's aspect ratio
+    (:data:`ASPECT_RATIO_RANGE`, wider than its own default) and square-ish swatches, so a
+    chart under strong perspective is not found; give ``--corners`` for it. A mirrored chart (seen from behind a mirror) is not recognised
+    as such; give ``--corners`` for it.
+
+Input: ``(H, W, 3)`` linear or sRGB-encoded RGB of any scale (HDR welcome). NaN, Inf and
+negative values count as black for finding the chart only; the image is scaled so that its 99th
+percentile of the brightest channel is 1 and clipped to [0, 1] (the detector's domain).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fidelity import colorimetry as cm
+from fidelity.errors import FidelityError, InvalidValueError, unknown_name
+from fidelity.locate import CORNER_PATCHES, apply_homography, homography_from_points
+
+#: Largest distance (in patch pitches) between a swatch centre and the grid cell centre it is
+#: assigned to when the coarse outline is refined.
+ASSIGN_TOLERANCE = 0.3
+#: Aspect ratios (long / short side of the swatch cluster's smallest enclosing rectangle) that
+#: can be a 3:2 chart. The detector's default, 1.35-1.65, loses a chart seen under a little
+#: perspective (a 5 % keystone gives 1.30); false clusters are caught by the orientation check.
+ASPECT_RATIO_RANGE = (1.1, 2.0)
+#: The best orientation's score must be below this fraction of the next best, else what was
+#: found is not taken for a ColorChecker (a real chart, even with ΔE 20 of colour error, scores
+#: at most 0.56 of its next orientation in the tests).
+ORIENTATION_MARGIN = 0.8
+#: Fewest assigned swatches for the refined fit (else the detector's outline answers).
+MIN_REFINE_SWATCHES = 6
+#: A swatch centre farther from the fitted grid than this many times the median distance is
+#: left out of the refined fit.
+OUTLIER_FACTOR = 3.0
+
+
+@dataclass(frozen=True)
+class ChartDetection:
+    """A chart found in an image.
+
+    ``corners`` is ``(4, 2)`` image ``(x, y)`` of the dark skin, bluish green, black and white
+    patch centres; ``candidates`` the number of charts the detector found (the first answers);
+    ``swatches`` the number of patches whose own contour refined the fit (0: the detector's
+    outline answered); ``residual_px`` the RMS distance, in image pixels, between those swatch
+    centres and the fitted grid (NaN without refinement); ``orientation`` the grid symmetry
+    (:data:`GRID_SYMMETRIES`) that put the patches in order, relative to the detector's own
+    answer.
+    """
+
+    corners: np.ndarray
+    method: str
+    candidates: int
+    swatches: int
+    residual_px: float
+    orientation: str = "as found"
+
+    def corners_text(self) -> str:
+        """The corners as ``--corners`` takes them: ``X1,Y1,...,X4,Y4`` (0.1 px)."""
+        return ",".join(f"{v:.1f}" for v in self.corners.ravel())
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready record of the detection."""
+        return {
+            "method": self.method,
+            "corners": np.round(self.corners, 3).tolist(),
+            "corner_patches": list(CORNER_PATCHES),
+            "corners_text": self.corners_text(),
+            "candidates": self.candidates,
+            "swatches": self.swatches,
+            "residual_px": None if math.isnan(self.residual_px) else round(self.residual_px, 3),
+            "orientation": self.orientation,
+        }
+
+
+def detection_image(pixels: np.ndarray, encoding: str = "linear") -> np.ndarray:
+    """The float32 linear image in [0, 1] that the detector sees (see the module docstring)."""
+    arr = np.asarray(pixels, dtype=np.float64)
+    if arr.ndim != 3 or arr.shape[2] != 3:
+        raise InvalidValueError(f"image must be (H, W, 3), got shape {arr.shape}")
+    arr = np.where(np.isfinite(arr), arr, 0.0)
+    arr = np.maximum(arr, 0.0)
+    if encoding == "srgb":
+        arr = cm.linearize_srgb(np.clip(arr, 0.0, 1.0))
+    peak = float(np.percentile(arr.max(axis=-1), 99.0))
+    if peak <= 0.0:
+        raise InvalidValueError("no colour chart found: the image is black")
+    return np.clip(arr / peak, 0.0, 1.0).astype(np.float32)
+
+
+def _working_to_image(points: np.ndarray, shape: tuple[int, int], working_width: int
+                      ) -> np.ndarray:
+    """Map working-image ``(x, y)`` back to the original image.
+
+    colour-checker-detection turns a portrait image 90 degrees clockwise, then resizes it to
+    ``working_width`` (OpenCV pixel-centre convention ``x_src = (x_dst + 0.5) / s - 0.5``).
+    """
+    height, width = shape
+    rotated = width < height
+    w2, h2 = (height, width) if rotated else (width, height)
+    working_height = int(h2 / (w2 / working_width))
+    x = (points[:, 0] + 0.5) * w2 / working_width - 0.5
+    y = (points[:, 1] + 0.5) * h2 / working_height - 0.5
+    if rotated:  # clockwise turn: x' = (H - 1) - y, y' = x
+        x, y = y, (height - 1) - x
+    return np.stack([x, y], axis=-1)
+
+
+def _detect_segmentation(image: np.ndarray, rows: int, cols: int, refine: bool = True
+                         ) -> ChartDetection:
+    try:
+        import colour_checker_detection as ccd
+        from colour_checker_detection.detection.segmentation import (
+            SETTINGS_SEGMENTATION_COLORCHECKER_CLASSIC as settings,
+        )
+    except ImportError as exc:  # OpenCV needs libGL; say so rather than a bare ImportError
+        raise FidelityError(
+            f"chart detection needs colour-checker-detection and OpenCV ({exc}); install them "
+            f"(and libgl1) or give --corners") from None
+    if (rows, cols) != (settings["swatches_vertical"], settings["swatches_horizontal"]):
+        raise InvalidValueError(f"chart detection knows the 4 x 6 ColorChecker only, not "
+                                f"{rows} x {cols}")
+    found: dict[str, Any] = {}
+
+    def segmenter(img: np.ndarray, **kwargs: Any) -> Any:
+        data = ccd.segmenter_default(img, **kwargs)
+        found["swatches"] = np.asarray(data.swatches, dtype=np.float64)
+        return data
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        charts = ccd.detect_colour_checkers_segmentation(
+            image, segmenter=segmenter, additional_data=True,
+            aspect_ratio_minimum=ASPECT_RATIO_RANGE[0], aspect_ratio_maximum=ASPECT_RATIO_RANGE[1])
+    if not charts:
+        raise InvalidValueError("no colour chart found (segmentation); give --corners "
+                                "X1,Y1,...,X4,Y4")
+    ww, wh = int(settings["working_width"]), int(settings["working_height"])
+    quad = np.asarray(charts[0].quadrilateral, dtype=np.float64)
+    # Outline corner k goes to rectangle corner k (below), so edge 1 -> 2 must be a long side;
+    # the detector's orientation check knows rotations only, and for a mirrored chart it can
+    # answer with a quarter turn. The patch order is decided in _oriented_corners.
+    if np.linalg.norm(quad[2] - quad[1]) < np.linalg.norm(quad[1] - quad[0]):
+        quad = np.roll(quad, 1, axis=0)
+    # The detector samples swatch (c, r) at ((c + 0.5) ww / cols, (r + 0.5) wh / rows) of the
+    # rectangle its outline is warped onto, outline corner k going to rectangle corner k.
+    rect = np.array([[ww, 0], [ww, wh], [0, wh], [0, 0]], dtype=np.float64)
+    rect_to_working = homography_from_points(rect, quad)
+    pitch = np.array([ww / cols, wh / rows])
+    grid_to_rect = np.array([[pitch[0], 0, 0.5 * pitch[0]], [0, pitch[1], 0.5 * pitch[1]],
+                             [0, 0, 1.0]])
+    coarse = rect_to_working @ grid_to_rect  # grid (u, v) -> working image
+    swatches = found.get("swatches", np.empty((0, 4, 2)))
+    matched_grid: list[tuple[float, float]] = []
+    matched_img: list[np.ndarray] = []
+    if len(swatches):
+        centres = swatches.reshape(-1, 4, 2).mean(axis=1)
+        uv = apply_homography(np.linalg.inv(coarse), centres)
+        cell = np.rint(uv)
+        dist = np.linalg.norm(uv - cell, axis=-1)
+        ok = ((dist <= ASSIGN_TOLERANCE) & (cell[:, 0] >= 0) & (cell[:, 0] < cols)
+              & (cell[:, 1] >= 0) & (cell[:, 1] < rows))
+        best: dict[tuple[int, int], int] = {}
+        for k in np.flatnonzero(ok):
+            key = (int(cell[k, 0]), int(cell[k, 1]))
+            if key not in best or dist[k] < dist[best[key]]:
+                best[key] = int(k)
+        matched_grid = [(float(u), float(v)) for u, v in best]
+        matched_img = [centres[k] for k in best.values()]
+    n = len(matched_grid)
+    shape = image.shape[:2]
+    cells = _corner_cells(rows, cols)
+    # the coarse outline as a grid -> image map (through the four corner cells)
+    grid_to_image = homography_from_points(
+        cells, _working_to_image(apply_homography(coarse, cells), shape, ww))
+    residual, used = math.nan, 0
+    if refine and n >= MIN_REFINE_SWATCHES and len({u for u, _ in matched_grid}) >= 2 \
+            and len({v for _, v in matched_grid}) >= 2:
+        src = np.asarray(matched_grid)
+        dst = _working_to_image(np.asarray(matched_img), shape, ww)
+        refined = _robust_homography(src, dst)
+        if refined is not None:
+            grid_to_image, keep = refined
+            used = int(keep.sum())
+            residual = float(np.sqrt(np.mean(np.sum(
+                (apply_homography(grid_to_image, src[keep]) - dst[keep]) ** 2, axis=-1))))
+    corners, symmetry = _oriented_corners(image, grid_to_image, rows, cols)
+    return ChartDetection(corners=corners, method="segmentation", candidates=len(charts),
+                          swatches=used, residual_px=residual, orientation=symmetry)
+
+
+def _robust_homography(src: np.ndarray, dst: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Least-squares grid -> image homography that leaves out swatches which do not fit.
+
+    A swatch whose contour merged with its surroundings (the black patch with a dark frame,
+    say) has a displaced centre. Fit, drop the points whose distance to the fit exceeds
+    ``OUTLIER_FACTOR`` times the median distance (and 0.5 px), refit; up to three rounds, never
+    below :data:`MIN_REFINE_SWATCHES` points. Returns the map and the mask of points kept.
+    """
+    keep = np.ones(len(src), dtype=bool)
+    h = None
+    for _ in range(3):
+        try:
+            h = homography_from_points(src[keep], dst[keep])
+        except InvalidValueError:
+            return None
+        dist = np.linalg.norm(apply_homography(h, src) - dst, axis=-1)
+        limit = max(OUTLIER_FACTOR * float(np.median(dist[keep])), 0.5)
+        new = keep & (dist <= limit)
+        if new.sum() == keep.sum() or new.sum() < MIN_REFINE_SWATCHES:
+            break
+        keep = new
+    return (h, keep) if h is not None else None
+
+
+#: The symmetries of a rows x cols grid that keep its shape, as maps of grid ``(u, v)``.
+GRID_SYMMETRIES: dict[str, Callable[[np.ndarray, int, int], np.ndarray]] = {
+    "as found": lambda g, rows, cols: g,
+    "turned 180 degrees": lambda g, rows, cols: np.stack(
+        [cols - 1 - g[:, 0], rows - 1 - g[:, 1]], axis=-1),
+    "mirrored left-right": lambda g, rows, cols: np.stack([cols - 1 - g[:, 0], g[:, 1]], axis=-1),
+    "mirrored top-bottom": lambda g, rows, cols: np.stack([g[:, 0], rows - 1 - g[:, 1]], axis=-1),
+}
+
+
+def orientation_score(measured: np.ndarray, reference: np.ndarray) -> float:
+    """How far ``(n, 3)`` measured linear RGB is from the reference, whatever the exposure.
+
+    The mean squared difference of ``log(rgb + 1e-3)`` after removing the best common offset
+    (a global exposure scale); a wrong patch order mixes dark with light and grey with colour,
+    and scores far worse than any plausible camera error.
+    """
+    d = np.log(np.maximum(measured, 0.0) + 1e-3) - np.log(np.maximum(reference, 0.0) + 1e-3)
+    return float(np.mean((d - d.mean()) ** 2))
+
+
+def _oriented_corners(image: np.ndarray, grid_to_image: np.ndarray, rows: int, cols: int
+                      ) -> tuple[np.ndarray, str]:
+    """Corner-patch centres under the grid symmetry whose patch colours fit the reference best.
+
+    The detector tells rotations apart by its own reference, not mirror images; the four
+    symmetries of the grid (:data:`GRID_SYMMETRIES`) are scored here by
+    :func:`orientation_score` of the patch means (central 0.3 x 0.3 patch pitch) against the
+    default chart's linear sRGB. A best score above :data:`ORIENTATION_MARGIN` times the next
+    one means the swatches found are not a ColorChecker: an error.
+    """
+    from fidelity.charts import load_chart
+    from fidelity.locate import locate_chart, sample_patches
+
+    chart = load_chart()
+    reference = cm.linearize_srgb(chart.srgb)
+    cells = _corner_cells(rows, cols)
+    best: tuple[float, str, np.ndarray] | None = None
+    scores: list[float] = []
+    for name, symmetry in GRID_SYMMETRIES.items():
+        corners = apply_homography(grid_to_image, symmetry(cells, rows, cols))
+        try:
+            location = locate_chart(corners, image.shape, rows=rows, cols=cols, window=0.3,
+                                    min_pixels=1)
+        except InvalidValueError:
+            continue
+        means = np.array([s.mean(axis=0) for s in sample_patches(image, location)])
+        score = orientation_score(means, reference)
+        scores.append(score)
+        if best is None or score < best[0]:
+            best = (score, name, corners)
+    if best is None:
+        raise InvalidValueError("no colour chart found: the chart found lies partly outside "
+                                "the image; give --corners X1,Y1,...,X4,Y4")
+    ranked = sorted(scores)
+    if len(ranked) > 1 and ranked[0] > ORIENTATION_MARGIN * ranked[1]:
+        raise InvalidValueError(
+            f"no colour chart found: the patches of what looked like a chart match no "
+            f"orientation of the ColorChecker clearly (scores {ranked[0]:.2f} and "
+            f"{ranked[1]:.2f}); give --corners X1,Y1,...,X4,Y4")
+    return best[2], best[1]
+
+
+def _corner_cells(rows: int, cols: int) -> np.ndarray:
+    """Grid ``(u, v)`` of the corner patches in :data:`CORNER_PATCHES` order."""
+    return np.array([[0, 0], [cols - 1, 0], [cols - 1, rows - 1], [0, rows - 1]], dtype=float)
+
+
+#: Chart detection methods by name.
+CHART_DETECTION_METHODS: dict[str, Callable[..., ChartDetection]] = {
+    "segmentation": _detect_segmentation,
+}
+
+
+def detect_chart(
+    pixels: np.ndarray,
+    *,
+    encoding: str = "linear",
+    method: str = "segmentation",
+    rows: int = 4,
+    cols: int = 6,
+    refine: bool = True,
+) -> ChartDetection:
+    """Find the chart in an ``(H, W, 3)`` image and return its corner-patch centres.
+
+    Parameters
+    ----------
+    pixels
+        Linear or sRGB-encoded RGB (``encoding``), any scale; NaN/Inf/negative count as black.
+    method
+        A key of :data:`CHART_DETECTION_METHODS`.
+    refine
+        Fit the grid to the patch outlines found (default); ``False`` keeps the detector's
+        chart outline (the benchmark's anchor).
+
+    Raises
+    ------
+    InvalidValueError
+        No chart found (the message suggests ``--corners``), or a black image.
+    """
+    if method not in CHART_DETECTION_METHODS:
+        raise unknown_name("chart detection method", method, CHART_DETECTION_METHODS)
+    if encoding not in ("linear", "srgb"):
+        raise unknown_name("encoding", encoding, ("linear", "srgb"))
+    image = detection_image(pixels, encoding)
+    return CHART_DETECTION_METHODS[method](image, rows, cols, refine=refine)
+
+
+__all__ = [
+    "ASPECT_RATIO_RANGE",
+    "ASSIGN_TOLERANCE",
+    "CHART_DETECTION_METHODS",
+    "MIN_REFINE_SWATCHES",
+    "ORIENTATION_MARGIN",
+    "OUTLIER_FACTOR",
+    "ChartDetection",
+    "detect_chart",
+    "detection_image",
+]
