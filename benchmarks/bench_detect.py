@@ -30,7 +30,10 @@ from fidelity.fileio import write_json_atomic
 from fidelity.transforms import apply_transform
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "tests"))
-from test_detect import CASES, CHART, GRID_CORNERS, map_points, scene  # noqa: E402
+from test_detect import CASES, CHART, GRID_CORNERS, grid_homography, map_points, scene  # noqa: E402
+
+#: The test suite's scenes, and a small chart in a large frame (tiled search, crop pass).
+SCENES = {**CASES, "small in 2400x1800": (grid_homography(30, -0.15, (1900, 500)), (1800, 2400))}
 
 CAMERAS = {"reference": None, "contrast-inc 1.4": ("contrast-inc", 1.4),
            "saturation-dec 0.5": ("saturation-dec", 0.5)}
@@ -45,7 +48,7 @@ def main() -> None:
     rows = []
     print(f"{'case':26s} {'camera':20s} {'anchor err':>10s} {'fidelity err':>12s} "
           f"{'anchor s':>9s} {'fidelity s':>10s} {'audit s':>8s}")
-    for case, (h, size) in CASES.items():
+    for case, (h, size) in SCENES.items():
         truth = map_points(h, GRID_CORNERS)
         pitch = float(np.linalg.norm(truth[1] - truth[0]) / 5)
         for camera, transform in CAMERAS.items():

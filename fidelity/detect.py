@@ -26,6 +26,15 @@ Methods (:data:`CHART_DETECTION_METHODS`):
     chart under strong perspective is not found; give ``--corners`` for it. A mirrored chart (seen from behind a mirror) is not recognised
     as such; give ``--corners`` for it.
 
+Passes (:func:`detect_chart`, any method): the whole image first; when that finds nothing and
+the image is large (:data:`TILED_SEARCH_SIDE`), nine half-size tiles overlapping by half; then,
+with refinement, once more on the chart's surroundings (corner centres plus 1.5 patch pitches)
+when they are under half an image larger than the detector's working width
+(:data:`CROP_PASS_MIN_SIDE`), since the detector works at a fixed width and a small chart
+gains resolution there (a 4000 x 3000 synthetic photo: corner error 4.2 % of a pitch from the
+whole frame, 0.3 % from the crop). The crop's answer is kept only if it agrees with the first
+within a quarter pitch. Found this way: charts down to about 7.5 % of the image width.
+
 Input: ``(H, W, 3)`` linear or sRGB-encoded RGB of any scale (HDR welcome). NaN, Inf and
 negative values count as black for finding the chart only; the image is scaled so that its 99th
 percentile of the brightest channel is 1 and clipped to [0, 1] (the detector's domain).
@@ -36,7 +45,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -56,6 +65,13 @@ ASPECT_RATIO_RANGE = (1.1, 2.0)
 #: found is not taken for a ColorChecker (a real chart, even with ΔE 20 of colour error, scores
 #: at most 0.56 of its next orientation in the tests).
 ORIENTATION_MARGIN = 0.8
+#: Images at least this many pixels on their long side are searched in tiles when the whole
+#: frame shows no chart (the detector works at 1440 px width, where a small chart in a large
+#: image has patches too small to segment).
+TILED_SEARCH_SIDE = 2400
+#: The crop pass runs only on images wider (long side) than the detector's working width of
+#: 1440 px: a smaller image is already seen at full resolution, and a crop would add time only.
+CROP_PASS_MIN_SIDE = 1440
 #: Fewest assigned swatches for the refined fit (else the detector's outline answers).
 MIN_REFINE_SWATCHES = 6
 #: A swatch centre farther from the fitted grid than this many times the median distance is
@@ -73,7 +89,7 @@ class ChartDetection:
     outline answered); ``residual_px`` the RMS distance, in image pixels, between those swatch
     centres and the fitted grid (NaN without refinement); ``orientation`` the grid symmetry
     (:data:`GRID_SYMMETRIES`) that put the patches in order, relative to the detector's own
-    answer.
+    answer; ``region`` the ``(x0, y0, x1, y1)`` part of the image the answer was found in.
     """
 
     corners: np.ndarray
@@ -82,6 +98,7 @@ class ChartDetection:
     swatches: int
     residual_px: float
     orientation: str = "as found"
+    region: tuple[int, int, int, int] | None = None
 
     def corners_text(self) -> str:
         """The corners as ``--corners`` takes them: ``X1,Y1,...,X4,Y4`` (0.1 px)."""
@@ -98,6 +115,7 @@ class ChartDetection:
             "swatches": self.swatches,
             "residual_px": None if math.isnan(self.residual_px) else round(self.residual_px, 3),
             "orientation": self.orientation,
+            "region": list(self.region) if self.region else None,
         }
 
 
@@ -347,16 +365,82 @@ def detect_chart(
     if encoding not in ("linear", "srgb"):
         raise unknown_name("encoding", encoding, ("linear", "srgb"))
     image = detection_image(pixels, encoding)
-    return CHART_DETECTION_METHODS[method](image, rows, cols, refine=refine)
+    find = CHART_DETECTION_METHODS[method]
+    height, width = image.shape[:2]
+
+    def within(region: tuple[int, int, int, int]) -> ChartDetection:
+        x0, y0, x1, y1 = region
+        found = find(image[y0:y1, x0:x1], rows, cols, refine=refine)
+        return replace(found, corners=found.corners + (x0, y0), region=region)
+
+    whole = (0, 0, width, height)
+    try:
+        found = within(whole)
+    except InvalidValueError as exc:
+        found = None
+        for region in _tiles(width, height) if max(width, height) >= TILED_SEARCH_SIDE else []:
+            try:
+                found = within(region)
+                break
+            except InvalidValueError:
+                continue
+        if found is None:
+            raise exc from None
+    if not refine:
+        return found
+    # Second pass on the chart's surroundings: the detector works at a fixed width, so a chart
+    # that fills a small part of the image gains resolution (and the fit accuracy) here.
+    crop = _chart_region(found.corners, width, height)
+    if (max(width, height) <= CROP_PASS_MIN_SIDE
+            or (crop[2] - crop[0]) * (crop[3] - crop[1]) > 0.5 * width * height):
+        return found  # the detector already saw the chart at full resolution or better
+    try:
+        closer = within(crop)
+    except InvalidValueError:
+        return found
+    pitch = _pitch(found.corners, rows, cols)
+    if np.linalg.norm(closer.corners - found.corners, axis=-1).max() > 0.25 * pitch:
+        return found  # the passes disagree on the chart: keep the first
+    return closer
+
+
+def _pitch(corners: np.ndarray, rows: int, cols: int) -> float:
+    """Smallest patch pitch along the chart's edges, in pixels, from the corner centres."""
+    c = np.asarray(corners)
+    return float(min(np.linalg.norm(c[1] - c[0]) / (cols - 1), np.linalg.norm(c[2] - c[1]) /
+                     (rows - 1), np.linalg.norm(c[2] - c[3]) / (cols - 1),
+                     np.linalg.norm(c[3] - c[0]) / (rows - 1)))
+
+
+def _chart_region(corners: np.ndarray, width: int, height: int, rows: int = 4, cols: int = 6
+                  ) -> tuple[int, int, int, int]:
+    """``(x0, y0, x1, y1)`` around the chart: corner centres plus 1.5 patch pitches."""
+    margin = 1.5 * max(_pitch(corners, rows, cols), 1.0)
+    x0 = max(int(np.floor(corners[:, 0].min() - margin)), 0)
+    y0 = max(int(np.floor(corners[:, 1].min() - margin)), 0)
+    x1 = min(int(np.ceil(corners[:, 0].max() + margin)) + 1, width)
+    y1 = min(int(np.ceil(corners[:, 1].max() + margin)) + 1, height)
+    return x0, y0, x1, y1
+
+
+def _tiles(width: int, height: int) -> list[tuple[int, int, int, int]]:
+    """Half-size tiles overlapping by half (3 x 3): any chart smaller than a quarter of the
+    image lies whole in one of them."""
+    tw, th = (width + 1) // 2, (height + 1) // 2
+    xs = [0, (width - tw) // 2, width - tw]
+    ys = [0, (height - th) // 2, height - th]
+    return [(x, y, x + tw, y + th) for y in ys for x in xs]
 
 
 __all__ = [
     "ASPECT_RATIO_RANGE",
     "ASSIGN_TOLERANCE",
+    "CROP_PASS_MIN_SIDE",
     "CHART_DETECTION_METHODS",
     "MIN_REFINE_SWATCHES",
     "ORIENTATION_MARGIN",
     "OUTLIER_FACTOR",
+    "TILED_SEARCH_SIDE",
     "ChartDetection",
     "detect_chart",
     "detection_image",

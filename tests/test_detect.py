@@ -80,6 +80,17 @@ def test_corners_found_in_every_orientation(case):
     assert found.swatches >= 6 and found.candidates >= 1
 
 
+def test_small_chart_in_a_large_image_is_searched_in_tiles_and_refined_on_a_crop():
+    # 180 px wide in a 2400 px frame: too small at the detector's 1440 px working width
+    h = grid_homography(30, -0.15, (1900, 500))
+    found = detect_chart(scene(h, (1800, 2400)))
+    truth = map_points(h, GRID_CORNERS)
+    assert np.linalg.norm(found.corners - truth, axis=-1).max() < 0.03 * 30
+    x0, y0, x1, y1 = found.region
+    assert (x1 - x0) < 400 and (y1 - y0) < 400  # the answer came from the chart's surroundings
+    assert x0 <= truth[:, 0].min() and truth[:, 0].max() <= x1
+
+
 def test_hdr_input_with_bad_pixels_and_the_audit_it_feeds():
     h, size = CASES["tilted with perspective"]
     camera = apply_transform(CHART.srgb, "saturation-inc", 1.2)  # a camera with colour error
