@@ -5,8 +5,10 @@ Steps (each a pure function of arrays; :func:`audit_image` adds the file reading
 1. Locate the 24 patches from the four corner-patch centres (:mod:`fidelity.locate`) and take
    the pixels of each patch's central sampling window. Without given corners the chart is
    found first (:func:`fidelity.detect.detect_chart`); everything after that is the same.
-2. Exclude bad pixels: a pixel with NaN, +-Inf or a negative value in any channel. They are
-   counted (per kind, per patch, and over the whole image). A patch keeps its measurement only
+2. Exclude bad pixels: a pixel with NaN or +-Inf in any channel. They are counted (per kind,
+   per patch, and over the whole image). Pixels with a negative channel are counted too and by
+   default kept (:data:`NEGATIVE_RULES`: scene-linear renders of out-of-gamut colours have
+   them), or excluded with ``negatives="exclude"``. A patch keeps its measurement only
    if at least ``min_valid_fraction`` of its window (and at least ``MIN_VALID_PIXELS``) is
    valid; otherwise the audit fails with an error naming the patch.
 3. Average each patch in linear light: linear input as it is, sRGB-encoded input decoded with
@@ -49,6 +51,10 @@ ENCODINGS = ("linear", "srgb")
 SCENE_REFERENCE = "scene"
 #: Default reference: the SAFE-COLOR chart (the paper's Lab values).
 DEFAULT_REFERENCE = "safecolor"
+#: What a finite negative channel value does: ``keep`` it in the linear-light mean (an
+#: out-of-gamut colour rendered into sRGB primaries, such as the chart's cyan in a spectral
+#: render, has one; the encoded mean is clipped like any stored image), or ``exclude`` the pixel.
+NEGATIVE_RULES = ("keep", "exclude")
 #: Fewest valid pixels a patch needs, whatever its window size.
 MIN_VALID_PIXELS = 4
 #: Default fraction of a window's pixels that must be valid.
@@ -185,13 +191,17 @@ class AuditResult:
         return d
 
 
-def _bad_counts(values: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
-    """Mask of bad pixels (any channel NaN, +-Inf or < 0) of ``(n, 3)`` values and counts."""
+def _bad_counts(values: np.ndarray, negatives: str = "exclude"
+                ) -> tuple[np.ndarray, dict[str, int]]:
+    """Mask of excluded pixels of ``(n, 3)`` values and counts.
+
+    A pixel with a NaN or +-Inf channel is always excluded; one with a negative channel is
+    counted, and excluded only for ``negatives="exclude"``. ``total`` counts the excluded."""
     nan = np.isnan(values).any(axis=-1)
     inf = np.isinf(values).any(axis=-1)
     with np.errstate(invalid="ignore"):
         neg = (values < 0).any(axis=-1)
-    bad = nan | inf | neg
+    bad = nan | inf | neg if negatives == "exclude" else nan | inf
     return bad, {"nan": int(nan.sum()), "inf": int(inf.sum()), "negative": int(neg.sum()),
                  "total": int(bad.sum())}
 
@@ -208,6 +218,7 @@ def audit_pixels(
     min_valid_fraction: float = MIN_VALID_FRACTION,
     image: dict[str, Any] | None = None,
     detection: str = "segmentation",
+    negatives: str = "keep",
 ) -> AuditResult:
     """Audit a chart in an ``(H, W, 3)`` image array (see the module docstring).
 
@@ -227,6 +238,8 @@ def audit_pixels(
     """
     if encoding not in ENCODINGS:
         raise unknown_name("encoding", encoding, ENCODINGS)
+    if negatives not in NEGATIVE_RULES:
+        raise unknown_name("rule for negative values", negatives, NEGATIVE_RULES)
     arr = np.asarray(pixels)
     if arr.ndim != 3 or arr.shape[2] != 3:
         raise InvalidValueError(f"image must be (H, W, 3), got shape {arr.shape}")
@@ -262,7 +275,7 @@ def audit_pixels(
     linear_samples: list[np.ndarray] = []
     for k, vals in enumerate(samples):
         vals64 = np.asarray(vals, dtype=np.float64)
-        bad, counts = _bad_counts(vals64)
+        bad, counts = _bad_counts(vals64, negatives)
         for key in totals:
             totals[key] += counts[key]
         if counts["total"]:
@@ -270,10 +283,11 @@ def audit_pixels(
         good = vals64[~bad]
         need = max(MIN_VALID_PIXELS, int(math.ceil(min_valid_fraction * len(vals64))))
         if len(good) < need:
+            negative = (f", {counts['negative']} negative" if negatives == "exclude" else "")
             raise InvalidValueError(
                 f"patch {ref.patch_names[k]!r}: only {len(good)} of {len(vals64)} pixels are "
-                f"valid ({counts['nan']} NaN, {counts['inf']} Inf, {counts['negative']} "
-                f"negative); need at least {need}"
+                f"valid ({counts['nan']} NaN, {counts['inf']} Inf{negative}); need at least "
+                f"{need}"
             )
         lin = good if encoding == "linear" else cm.linearize_srgb(good)
         linear_samples.append(lin)
@@ -290,10 +304,14 @@ def audit_pixels(
                     if np.any(np.abs(srgb_unclipped[k] - srgb[k]) > 1e-12))
     noise = np.array([np.clip(cm.delinearize_srgb(s * scale), 0, 1).std(axis=0)
                       for s in linear_samples])
-    _, whole = _bad_counts(arr.reshape(-1, 3))
-    bad_pixels = {**totals, "per_patch": per_patch, "image": whole,
-                  "rule": "a pixel with NaN, +-Inf or a negative value in any channel is "
-                          "excluded; counts in sampling windows (image: whole image)"}
+    _, whole = _bad_counts(arr.reshape(-1, 3), negatives)
+    rule = ("a pixel with NaN, +-Inf or a negative value in any channel is excluded"
+            if negatives == "exclude" else
+            "a pixel with NaN or +-Inf in any channel is excluded; negative values are counted "
+            "and kept in the linear mean")
+    bad_pixels = {**totals, "per_patch": per_patch, "image": whole, "negatives": negatives,
+                  "rule": f"{rule}; counts in sampling windows (image: whole image); total: "
+                          f"pixels excluded"}
     measurement = measure_chart(srgb, ref.lab, ref.patch_names, reference_srgb=ref.srgb,
                                 noise=noise)
     return AuditResult(
@@ -314,6 +332,7 @@ def audit_image(
     illuminant: str = "D65",
     window: float = DEFAULT_WINDOW,
     detection: str = "segmentation",
+    negatives: str = "keep",
 ) -> AuditResult:
     """Read an image (:func:`fidelity.imageio.read_image`) and audit its chart.
 
@@ -331,7 +350,8 @@ def audit_image(
     try:
         return audit_pixels(img.pixels, corners, encoding=enc, exposure=exposure,
                             reference=reference, illuminant=illuminant, window=window,
-                            image={**info, "encoding": enc}, detection=detection)
+                            image={**info, "encoding": enc}, detection=detection,
+                            negatives=negatives)
     except FidelityError as exc:
         raise type(exc)(f"{img.path}: {exc}") from None
 
@@ -340,6 +360,7 @@ __all__ = [
     "DEFAULT_REFERENCE",
     "ENCODINGS",
     "MIN_VALID_FRACTION",
+    "NEGATIVE_RULES",
     "MIN_VALID_PIXELS",
     "SCENE_REFERENCE",
     "AuditResult",

@@ -19,7 +19,7 @@ from PIL import Image as PILImage
 
 from fidelity.audit import audit_image, audit_pixels, exposure_from_neutrals
 from fidelity.charts import load_chart
-from fidelity.errors import FidelityError, InvalidValueError
+from fidelity.errors import FidelityError, InvalidValueError, UnknownNameError
 from fidelity.transforms import apply_transform
 
 #: A known homography grid (u, v) -> image (x, y): rotation, anisotropic scale, perspective.
@@ -183,12 +183,34 @@ def test_bad_pixels_counted_and_excluded(chart):
     x, y = np.rint(centres[1]).astype(int)
     dirty[y, x] = [0.2, -0.1, 0.2]
     dirty[0, 0] = np.nan  # outside every sampling window
-    result = audit_pixels(dirty, corners_of(), encoding="linear", exposure=0.0)
+    result = audit_pixels(dirty, corners_of(), encoding="linear", exposure=0.0,
+                          negatives="exclude")
     bp = result.bad_pixels
     assert (bp["nan"], bp["inf"], bp["negative"], bp["total"]) == (1, 1, 1, 3)
     assert bp["per_patch"] == {"purplish blue": 2, "magenta": 1}
     assert bp["image"]["total"] == 4
     assert result.mean_delta_e == pytest.approx(clean.mean_delta_e, abs=1e-9)
+    # by default a negative value is counted but kept: NaN/Inf alone are excluded
+    kept = audit_pixels(dirty, corners_of(), encoding="linear", exposure=0.0).bad_pixels
+    assert (kept["negative"], kept["total"], kept["per_patch"]) == (1, 2, {"purplish blue": 2})
+
+
+def test_negative_values_of_out_of_gamut_colours_are_kept_in_the_linear_mean(chart):
+    # a scene-linear render of a colour outside sRGB: red below zero over the whole patch
+    lin = colour.cctf_decoding(chart.srgb, function="sRGB")
+    lin[17] = [-0.02, 0.18, 0.33]  # "cyan"
+    img = draw_chart(lin)
+    with pytest.raises(InvalidValueError, match="'cyan': only 0 of"):
+        audit_pixels(img, corners_of(), encoding="linear", exposure=0.0, negatives="exclude")
+    result = audit_pixels(img, corners_of(), encoding="linear", exposure=0.0)
+    assert result.bad_pixels["negative"] == result.valid_pixels[17]
+    assert "cyan" in result.clipped_patches
+    # expected: the patch mean (flat) encoded as sRGB and clipped, by colour-science
+    expected = np.clip(colour.cctf_encoding(np.clip(lin, 0, None), function="sRGB"), 0, 1)
+    np.testing.assert_allclose(result.measurement.srgb, expected, atol=1e-9)
+    assert result.mean_delta_e == pytest.approx(expected_delta_e(expected, chart.lab), abs=0.02)
+    with pytest.raises(UnknownNameError, match="rule for negative values"):
+        audit_pixels(img, corners_of(), negatives="clip")
 
 
 def test_patch_with_too_few_valid_pixels_is_named(chart):

@@ -147,3 +147,52 @@ def test_old_llvm_loaded_at_import_never_aborts_the_process() -> None:
                           timeout=300, check=False)
     assert proc.returncode == 0, proc.stderr[-500:]
     assert "variant scalar_spectral" in proc.stdout
+
+
+def test_oblique_path_traced_render_is_found_and_audited_like_the_frontal_closed_form() -> None:
+    """A renderer's HDR output seen at an angle: Mitsuba renders the chart on a dark body on a
+    grey table through a perspective camera (tilted, turned); the audit finds the chart without
+    corners and measures what it measures on the frontal closed form (same spectra, ideal
+    camera, so scene-linear sRGB with the cyan's red below zero)."""
+    from fidelity.audit import audit_pixels
+    from fidelity.camera import ideal_sensitivities
+    from fidelity.spectral import cie_1931_cmfs
+
+    probe = mr.probe_variant()
+    mi_ = mr._activate(probe.variant)
+    step = 5.0
+    refl = load_patch_spectra("BabelColor Average").on_grid(step)
+    e = load_illuminant("D65").on_grid(step)
+    sens = ideal_sensitivities().on_grid(step)
+    channels, recombine = mr.split_channels(sens)
+    layout = ChartLayout.for_patch_size(16)
+    w, h = layout.width, layout.height
+    scene = mr.build_scene_dict(refl, e, channels, layout, 32, step)
+    t = mi_.ScalarTransform4f
+
+    def grey(v: float) -> dict:
+        return {"type": "diffuse", "reflectance": {"type": "spectrum", "value": v}}
+
+    scene["chart_body"] = {"type": "rectangle", "bsdf": grey(0.03),
+                           "to_world": t().translate([w / 2, h / 2, -0.05]) @ t().scale([w / 2, h / 2, 1])}
+    scene["table"] = {"type": "rectangle", "bsdf": grey(0.3),
+                      "to_world": t().translate([w / 2, h / 2, -2.0]) @ t().scale([4 * w, 4 * h, 1])}
+    sensor = scene["sensor"]
+    sensor["type"], sensor["fov"] = "perspective", 45.0
+    sensor["to_world"] = t().look_at(origin=[w / 2 + 0.45 * w, h / 2 - 0.55 * h, 1.5 * w],
+                                     target=[w / 2, h / 2, 0], up=[0.2, 1, 0])
+    sensor["film"]["width"], sensor["film"]["height"] = 400, 300
+    film = np.asarray(mi_.render(mi_.load_dict(scene), seed=0, spp=32), dtype=np.float64)
+    raw = (film.reshape(300, 400, -1) @ recombine.T) * (np.pi / (float(e @ cie_1931_cmfs(step)[:, 1]) * step))
+    assert raw.min() < 0  # the cyan is outside sRGB: its red is negative
+    oblique = audit_pixels(raw, None, encoding="linear", reference="scene")
+    assert oblique.detection is not None and oblique.detection.swatches >= 12
+
+    frontal_img = layout.paint(camera_response(refl, e, sens, step))
+    centres = [((x0 + x1 - 1) / 2, (y0 + y1 - 1) / 2)
+               for y0, y1, x0, x1 in (layout.patch_box(i) for i in (0, 5, 23, 18))]
+    frontal = audit_pixels(frontal_img, np.array(centres), encoding="linear", reference="scene")
+    print(f"oblique {oblique.mean_delta_e:.4f} frontal {frontal.mean_delta_e:.4f} worst patch "
+          f"{np.abs(oblique.measurement.delta_e - frontal.measurement.delta_e).max():.4f}")
+    assert abs(oblique.mean_delta_e - frontal.mean_delta_e) < 0.05
+    assert np.abs(oblique.measurement.delta_e - frontal.measurement.delta_e).max() < 0.2

@@ -25,6 +25,7 @@ def image_report(
     image: Path, corners: str | None, *, command: str, encoding: str | None, exposure: str | None,
     layer: str | None, reference: str, illuminant: str, size: str, table: str | None,
     criterion: Criterion | None = None, location_figure: bool = False,
+    negatives: str = "keep",
 ) -> tuple[dict[str, Any], Prediction, Verdict | None, str | None]:
     """Audit ``image`` and build its report (measurement, prediction, optional verdict), and
     with ``location_figure`` the base64 PNG of where the patches were sampled (for HTML).
@@ -35,7 +36,7 @@ def image_report(
     from fidelity.report import build_report
 
     result = audit_image(image, corners or None, layer=layer, encoding=encoding, exposure=exposure,
-                         reference=reference, illuminant=illuminant)
+                         reference=reference, illuminant=illuminant, negatives=negatives)
     prediction = predict(result.mean_delta_e, size=size, table=table)
     verdict = evaluate(result.mean_delta_e, prediction, criterion) if criterion else None
     info = dict(result.image or {})
@@ -152,6 +153,9 @@ def _fail(message: str, junit: Path | None, name: str, seconds: float) -> None:
               help="Image pixel encoding (default: linear for float formats, else sRGB).")
 @click.option("--exposure", default=None, help="Image exposure: auto or a fixed EV.")
 @click.option("--layer", default=None, help="EXR layer or part name.")
+@click.option("--negatives", type=click.Choice(["keep", "exclude"]), default="keep",
+              show_default=True, help="Image pixels with a negative channel: keep them in the "
+              "linear mean (out-of-gamut colours) or exclude them like NaN/Inf.")
 @click.option("--reference", default=None,
               help="Reference: safecolor (image default) or scene (camera default).")
 @click.option("--illuminant", default="D65", show_default=True, help="Scene illuminant.")
@@ -162,8 +166,8 @@ def _fail(message: str, junit: Path | None, name: str, seconds: float) -> None:
 @click.option("--html", "html_path", type=PATH, help="Write the HTML report.")
 def gate(image: Path | None, corners: str | None, camera: str | None, max_delta_e: float | None,
          max_dmap: float | None, cls: str | None, unit: str, size: str, table: str | None,
-         encoding: str | None, exposure: str | None, layer: str | None, reference: str | None,
-         illuminant: str, renderer: str, junit: Path | None, json_path: Path | None,
+         encoding: str | None, exposure: str | None, layer: str | None, negatives: str,
+         reference: str | None, illuminant: str, renderer: str, junit: Path | None, json_path: Path | None,
          html_path: Path | None) -> None:
     """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 error.
 
@@ -188,7 +192,7 @@ def gate(image: Path | None, corners: str | None, camera: str | None, max_delta_
                 image, corners, command="gate", encoding=encoding, exposure=exposure,
                 layer=layer, reference=reference or "safecolor", illuminant=illuminant,
                 size=size, table=table, criterion=criterion,
-                location_figure=html_path is not None)
+                location_figure=html_path is not None, negatives=negatives)
             protect: tuple[str, ...] = (str(image),)
         else:
             report, prediction, verdict = camera_report(
