@@ -197,22 +197,8 @@ def _detect_segmentation(image: np.ndarray, rows: int, cols: int, refine: bool =
                              [0, 0, 1.0]])
     coarse = rect_to_working @ grid_to_rect  # grid (u, v) -> working image
     swatches = found.get("swatches", np.empty((0, 4, 2)))
-    matched_grid: list[tuple[float, float]] = []
-    matched_img: list[np.ndarray] = []
-    if len(swatches):
-        centres = swatches.reshape(-1, 4, 2).mean(axis=1)
-        uv = apply_homography(np.linalg.inv(coarse), centres)
-        cell = np.rint(uv)
-        dist = np.linalg.norm(uv - cell, axis=-1)
-        ok = ((dist <= ASSIGN_TOLERANCE) & (cell[:, 0] >= 0) & (cell[:, 0] < cols)
-              & (cell[:, 1] >= 0) & (cell[:, 1] < rows))
-        best: dict[tuple[int, int], int] = {}
-        for k in np.flatnonzero(ok):
-            key = (int(cell[k, 0]), int(cell[k, 1]))
-            if key not in best or dist[k] < dist[best[key]]:
-                best[key] = int(k)
-        matched_grid = [(float(u), float(v)) for u, v in best]
-        matched_img = [centres[k] for k in best.values()]
+    matched_grid, matched_img = _assign_swatches(swatches.reshape(-1, 4, 2).mean(axis=1),
+                                                 coarse, rows, cols)
     n = len(matched_grid)
     shape = image.shape[:2]
     cells = _corner_cells(rows, cols)
@@ -233,6 +219,28 @@ def _detect_segmentation(image: np.ndarray, rows: int, cols: int, refine: bool =
     corners, symmetry = _oriented_corners(image, grid_to_image, rows, cols)
     return ChartDetection(corners=corners, method="segmentation", candidates=len(charts),
                           swatches=used, residual_px=residual, orientation=symmetry)
+
+
+def _assign_swatches(centres: np.ndarray, grid_to_working: np.ndarray, rows: int, cols: int
+                     ) -> tuple[list[tuple[float, float]], list[np.ndarray]]:
+    """Swatch centres assigned to grid cells: ``(u, v)`` cells and the centres that sit there.
+
+    A centre belongs to the cell nearest to where the coarse outline puts it, if within
+    :data:`ASSIGN_TOLERANCE` patch pitches; of several in one cell the nearest is kept.
+    """
+    if not len(centres):
+        return [], []
+    uv = apply_homography(np.linalg.inv(grid_to_working), centres)
+    cell = np.rint(uv)
+    dist = np.linalg.norm(uv - cell, axis=-1)
+    ok = ((dist <= ASSIGN_TOLERANCE) & (cell[:, 0] >= 0) & (cell[:, 0] < cols)
+          & (cell[:, 1] >= 0) & (cell[:, 1] < rows))
+    best: dict[tuple[int, int], int] = {}
+    for k in np.flatnonzero(ok):
+        key = (int(cell[k, 0]), int(cell[k, 1]))
+        if key not in best or dist[k] < dist[best[key]]:
+            best[key] = int(k)
+    return [(float(u), float(v)) for u, v in best], [centres[k] for k in best.values()]
 
 
 def _robust_homography(src: np.ndarray, dst: np.ndarray
