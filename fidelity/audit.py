@@ -25,8 +25,12 @@ Steps (each a pure function of arrays; :func:`audit_image` adds the file reading
    clipped are listed), convert to CIELAB D65 and compare with the reference by CIEDE2000
    (:func:`fidelity.measure.measure_chart`); the chart ΔE is the mean over the 24 patches.
 
-Input pixels are taken as linear or encoded sRGB (Rec. 709 primaries, D65 white): a camera's
-native RGB must be converted to sRGB before auditing.
+Input pixels are taken as linear or encoded sRGB (Rec. 709 primaries, D65 white), or in another
+RGB colourspace (``colourspace``: ACEScg, ITU-R BT.2020, ... or an EXR's chromaticities), whose
+linear patch means are converted to linear sRGB first
+(:func:`fidelity.colorimetry.matrix_rgb_to_linear_srgb`; encoded input is decoded with the sRGB
+transfer function whatever its primaries). A camera's native RGB must be converted before
+auditing.
 """
 
 from __future__ import annotations
@@ -159,6 +163,7 @@ class AuditResult:
     reference: Reference
     image: dict[str, Any] | None = None
     detection: ChartDetection | None = None
+    colourspace: str = "sRGB"
 
     @property
     def mean_delta_e(self) -> float:
@@ -186,6 +191,7 @@ class AuditResult:
             reference=self.reference.name,
             location=self.location.to_dict(),
             detection=self.detection.to_dict() if self.detection else None,
+            colourspace=self.colourspace,
             image=self.image,
         )
         return d
@@ -219,6 +225,7 @@ def audit_pixels(
     image: dict[str, Any] | None = None,
     detection: str = "segmentation",
     negatives: str = "keep",
+    colourspace: str | Sequence[float] = "sRGB",
 ) -> AuditResult:
     """Audit a chart in an ``(H, W, 3)`` image array (see the module docstring).
 
@@ -235,7 +242,11 @@ def audit_pixels(
         auto for linear input, 0 for sRGB-encoded input.
     reference
         ``"safecolor"`` (the paper's chart), ``"scene"`` or a chart name/path.
+    colourspace
+        RGB primaries of the pixels: a colour-science name or 8 chromaticities (see
+        :func:`fidelity.colorimetry.matrix_rgb_to_linear_srgb`).
     """
+    to_srgb = cm.matrix_rgb_to_linear_srgb(colourspace)
     if encoding not in ENCODINGS:
         raise unknown_name("encoding", encoding, ENCODINGS)
     if negatives not in NEGATIVE_RULES:
@@ -290,6 +301,8 @@ def audit_pixels(
                 f"{need}"
             )
         lin = good if encoding == "linear" else cm.linearize_srgb(good)
+        if not np.array_equal(to_srgb, np.eye(3)):
+            lin = lin @ to_srgb.T
         linear_samples.append(lin)
         means[k] = lin.mean(axis=0)
         valid_counts.append(len(good))
@@ -318,7 +331,14 @@ def audit_pixels(
         measurement=measurement, exposure_ev=ev, exposure_mode=mode, encoding=encoding,
         bad_pixels=bad_pixels, valid_pixels=tuple(valid_counts), clipped_patches=clipped,
         location=loc, reference=ref, image=image, detection=found,
+        colourspace=_colourspace_name(colourspace),
     )
+
+
+def _colourspace_name(colourspace: str | Sequence[float]) -> str:
+    if isinstance(colourspace, str):
+        return colourspace
+    return "chromaticities " + ",".join(f"{float(v):.5g}" for v in colourspace)
 
 
 def audit_image(
@@ -333,11 +353,14 @@ def audit_image(
     window: float = DEFAULT_WINDOW,
     detection: str = "segmentation",
     negatives: str = "keep",
+    colourspace: str | Sequence[float] | None = None,
 ) -> AuditResult:
     """Read an image (:func:`fidelity.imageio.read_image`) and audit its chart.
 
     ``encoding=None`` takes the file's likely encoding: linear for floating-point pixels (EXR,
-    HDR, float TIFF), sRGB for integer pixels (PNG, JPEG, 8/16-bit TIFF). Errors name the file.
+    HDR, float TIFF), sRGB for integer pixels (PNG, JPEG, 8/16-bit TIFF). ``colourspace=None``
+    takes the file's OpenEXR ``chromaticities`` attribute when it has one, else sRGB. Errors name
+    the file.
     """
     from fidelity.errors import FidelityError
     from fidelity.fileio import file_sha256
@@ -351,7 +374,9 @@ def audit_image(
         return audit_pixels(img.pixels, corners, encoding=enc, exposure=exposure,
                             reference=reference, illuminant=illuminant, window=window,
                             image={**info, "encoding": enc}, detection=detection,
-                            negatives=negatives)
+                            negatives=negatives,
+                            colourspace=(colourspace if colourspace is not None
+                                         else img.chromaticities or "sRGB"))
     except FidelityError as exc:
         raise type(exc)(f"{img.path}: {exc}") from None
 

@@ -33,7 +33,9 @@ __all__ = [
     "MATRIX_XYZ_TO_LINEAR_SRGB",
     "WHITEPOINT_D65_XY",
     "WHITEPOINT_D65_XYZ",
+    "COMMON_RGB_COLOURSPACES",
     "delinearize_srgb",
+    "matrix_rgb_to_linear_srgb",
     "delta_e",
     "delta_e_1976",
     "delta_e_2000",
@@ -458,3 +460,60 @@ def delta_e(lab1: ArrayLike, lab2: ArrayLike, method: str = "CIE 2000") -> Float
     except KeyError:
         raise unknown_name("colour-difference method", method, DELTA_E_METHODS) from None
     return fn(lab1, lab2)
+
+
+#: Names of colour-science RGB colourspaces that renderers commonly write (any key of
+#: ``colour.RGB_COLOURSPACES`` is accepted).
+COMMON_RGB_COLOURSPACES: tuple[str, ...] = (
+    "sRGB", "ACEScg", "ACES2065-1", "ITU-R BT.2020", "Display P3", "Adobe RGB (1998)",
+)
+
+
+def matrix_rgb_to_linear_srgb(
+    colourspace: str | ArrayLike = "sRGB", chromatic_adaptation: str = "Bradford"
+) -> NDArray[np.float64]:
+    """The 3 x 3 matrix ``M`` with ``linear sRGB = M @ linear RGB`` of ``colourspace``.
+
+    Parameters
+    ----------
+    colourspace
+        A name of ``colour.RGB_COLOURSPACES`` (``"ACEScg"``, ``"ITU-R BT.2020"``,
+        ``"Display P3"``, ...; case-insensitive), or the 8 numbers of OpenEXR's
+        ``chromaticities`` attribute: ``Rx, Ry, Gx, Gy, Bx, By, Wx, Wy`` (CIE 1931 xy).
+    chromatic_adaptation
+        Transform that adapts the colourspace's white to D65 when they differ (ACES: about
+        D60), a name of ``colour.CHROMATIC_ADAPTATION_TRANSFORMS``.
+
+    Each side's RGB -> XYZ matrix is the normalised primary matrix of its primaries and white
+    (SMPTE RP 177-1993), via ``colour.matrix_RGB_to_RGB``; the result is exact identity for
+    sRGB. Linear values only: a transfer function is not part of the matrix.
+    """
+    import colour
+
+    if isinstance(colourspace, str):
+        spaces = {k.lower(): k for k in colour.RGB_COLOURSPACES}
+        key = spaces.get(colourspace.strip().lower())
+        if key is None:
+            raise unknown_name("RGB colourspace", colourspace, COMMON_RGB_COLOURSPACES)
+        source = colour.RGB_COLOURSPACES[key]
+        if key == "sRGB":
+            return np.eye(3)
+    else:
+        xy = np.asarray(colourspace, dtype=np.float64).ravel()
+        if xy.shape != (8,) or not np.all(np.isfinite(xy)) or np.any(xy[1::2] <= 0):
+            raise InvalidValueError(f"chromaticities {np.asarray(colourspace).tolist()!r}: "
+                                    f"expected 8 finite numbers Rx, Ry, Gx, Gy, Bx, By, Wx, Wy "
+                                    f"with y > 0")
+        source = colour.RGB_Colourspace("chromaticities", xy[:6].reshape(3, 2), xy[6:],
+                                        use_derived_matrix_RGB_to_XYZ=True,
+                                        use_derived_matrix_XYZ_to_RGB=True)
+        if np.allclose(xy, [0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290], atol=5e-5):
+            return np.eye(3)
+    if chromatic_adaptation not in colour.CHROMATIC_ADAPTATION_TRANSFORMS:
+        raise unknown_name("chromatic adaptation transform", chromatic_adaptation,
+                           tuple(colour.CHROMATIC_ADAPTATION_TRANSFORMS))
+    srgb = colour.RGB_COLOURSPACES["sRGB"].copy()  # derived matrix, as MATRIX_XYZ_TO_LINEAR_SRGB
+    srgb.use_derived_matrix_RGB_to_XYZ = True
+    srgb.use_derived_matrix_XYZ_to_RGB = True
+    return np.asarray(colour.matrix_RGB_to_RGB(source, srgb, chromatic_adaptation),
+                      dtype=np.float64)

@@ -51,6 +51,8 @@ class Image:
     ``v / (2**bits - 1)``; floating-point formats keep their values (NaN, Inf and negative values
     included: the audit counts and excludes them). ``encoding`` is the likely encoding of the
     values: ``"linear"`` for floating-point pixel types, ``"srgb"`` otherwise.
+    ``chromaticities`` is OpenEXR's standard attribute of the same name when the file has it:
+    ``Rx, Ry, Gx, Gy, Bx, By, Wx, Wy`` of the RGB primaries and white (CIE 1931 xy).
     """
 
     pixels: np.ndarray
@@ -62,6 +64,7 @@ class Image:
     encoding: str
     colorspace: str | None = None
     all_channels: tuple[str, ...] = field(default_factory=tuple)
+    chromaticities: tuple[float, ...] | None = None
 
     @property
     def height(self) -> int:
@@ -85,6 +88,7 @@ class Image:
             "layer": self.layer,
             "encoding_guess": self.encoding,
             "colorspace": self.colorspace,
+            "chromaticities": list(self.chromaticities) if self.chromaticities else None,
         }
 
 
@@ -264,6 +268,7 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None) -> Image:
             file_format = str(inp.format_name())
             pixel_type = str(spec.format)
             colorspace = spec.getattribute("oiio:ColorSpace")
+            chroma = spec.getattribute("chromaticities")
         finally:
             inp.close()
     arr = np.asarray(data, dtype=np.float32)
@@ -284,6 +289,8 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None) -> Image:
         encoding=encoding,
         colorspace=str(colorspace) if colorspace else None,
         all_channels=tuple(ch for prt in parts for ch in prt.channels),
+        chromaticities=(tuple(float(v) for v in chroma)
+                        if isinstance(chroma, (tuple, list)) and len(chroma) == 8 else None),
     )
 
 

@@ -530,6 +530,9 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
         lines.append(f"chart found ({found['method']}, {found['swatches']} of 24 patch outlines "
                      f"fitted, orientation {found['orientation']}): --corners "
                      f"{found['corners_text']}")
+    space = (report.get("source") or {}).get("colourspace")
+    if space and space != "sRGB":
+        lines.append(f"RGB primaries: {space}, converted to linear sRGB")
     lines.append(f"chart ΔE00: mean {report['mean_delta_e']:.2f}, max "
                  f"{report['max_delta_e']:.2f} ({report.get('worst_patch')})")
     if report.get("exposure_ev") is not None:

@@ -155,3 +155,28 @@ def test_lab_xyz_round_trip_including_the_linear_segment() -> None:
     np.testing.assert_allclose(xyz_to_lab(xyz), colour.XYZ_to_Lab(xyz, D65_XY), atol=1e-9)
     lab32 = xyz_to_lab(xyz.astype(np.float32))
     assert lab32.dtype == np.float32
+
+
+#: ITU-R BT.2087-0, Annex 1: linear BT.2020 RGB -> linear BT.709 RGB (published to 4 decimals).
+BT2087_2020_TO_709 = np.array([[1.6605, -0.5876, -0.0728],
+                               [-0.1246, 1.1329, -0.0083],
+                               [-0.0182, -0.1006, 1.1187]])
+
+
+def test_rgb_colourspace_matrix_against_the_published_bt2087_matrix() -> None:
+    from fidelity.colorimetry import matrix_rgb_to_linear_srgb
+
+    np.testing.assert_allclose(matrix_rgb_to_linear_srgb("ITU-R BT.2020"), BT2087_2020_TO_709,
+                               atol=6e-5)
+    # the same primaries given as OpenEXR chromaticities; names are case-insensitive
+    xy = (0.708, 0.292, 0.170, 0.797, 0.131, 0.046, 0.3127, 0.3290)
+    np.testing.assert_allclose(matrix_rgb_to_linear_srgb(xy),
+                               matrix_rgb_to_linear_srgb("itu-r bt.2020"), atol=1e-12)
+    assert np.array_equal(matrix_rgb_to_linear_srgb("sRGB"), np.eye(3))
+    # ACES (white about D60) is adapted to D65: its white becomes the sRGB white
+    np.testing.assert_allclose(matrix_rgb_to_linear_srgb("ACEScg") @ np.ones(3), np.ones(3),
+                               atol=1e-6)
+    with pytest.raises(UnknownNameError, match="RGB colourspace"):
+        matrix_rgb_to_linear_srgb("ProPhoto-ish")
+    with pytest.raises(InvalidValueError, match="chromaticities"):
+        matrix_rgb_to_linear_srgb((0.7, 0.3, 0.2))

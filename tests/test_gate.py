@@ -244,3 +244,35 @@ def test_report_never_overwrites_the_input(png, tmp_path):
     r = run("gate", src, "--corners", corners_of(), "--max-delta-e", "3", "--json", src)
     assert r.exit_code == 2 and "input file" in one_error_line(r)
     assert src.read_bytes() == before
+
+
+def test_exr_in_bt2020_primaries_is_converted_by_its_chromaticities_attribute(tmp_path):
+    """Test data built with the published BT.2087 matrix (not fidelity's): the audit of a
+    BT.2020 render equals the audit of the same chart in sRGB primaries."""
+    from test_colorimetry import BT2087_2020_TO_709
+
+    lin709 = colour.cctf_decoding(CHART.srgb, function="sRGB")
+    lin2020 = lin709 @ np.linalg.inv(BT2087_2020_TO_709).T
+    srgb_exr, bt2020_exr, bare_exr = (tmp_path / n for n in ("a.exr", "b.exr", "c.exr"))
+    write_exr(srgb_exr, draw_chart(lin709).astype(np.float32))
+    data = {c: np.ascontiguousarray(draw_chart(lin2020)[..., i]).astype(np.float32)
+            for i, c in enumerate("RGB")}
+    header = {"compression": OpenEXR.ZIP_COMPRESSION,
+              "chromaticities": (0.708, 0.292, 0.170, 0.797, 0.131, 0.046, 0.3127, 0.3290)}
+    OpenEXR.File(header, data).write(str(bt2020_exr))
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION}, data).write(str(bare_exr))
+
+    def mean_de(*args: object) -> float:
+        r = run("audit", *args, "--corners", corners_of(), "--json", tmp_path / "r.json")
+        assert r.exit_code == 0, r.output
+        return json.loads((tmp_path / "r.json").read_text())["mean_delta_e"]
+
+    want = mean_de(srgb_exr)
+    assert mean_de(bt2020_exr) == pytest.approx(want, abs=0.01)
+    assert "RGB primaries: chromaticities 0.708" in run("audit", bt2020_exr, "--corners",
+                                                        corners_of()).stdout
+    assert mean_de(bare_exr, "--colourspace", "ITU-R BT.2020") == pytest.approx(want, abs=0.01)
+    assert mean_de(bare_exr) > want + 3  # taken as sRGB primaries: desaturated, visibly wrong
+    r = run("audit", bare_exr, "--corners", corners_of(), "--colourspace", "BT.2021")
+    assert r.exit_code == 2 and "unknown RGB colourspace 'BT.2021'" in one_error_line(r)
+    assert str(bare_exr) in one_error_line(r)

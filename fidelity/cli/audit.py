@@ -23,6 +23,9 @@ from fidelity.prediction import SIZES
               help="auto (neutral patches; default for linear input) or a fixed EV "
                    "(pixels x 2**EV; default 0 for sRGB input).")
 @click.option("--layer", default=None, help="EXR layer (e.g. 'diffuse' for diffuse.R) or part.")
+@click.option("--colourspace", default=None,
+              help="RGB primaries of the pixels: a colour-science name (ACEScg, 'ITU-R BT.2020', "
+                   "'Display P3', ...). Default: the EXR's chromaticities attribute, else sRGB.")
 @click.option("--negatives", type=click.Choice(["keep", "exclude"]), default="keep",
               show_default=True, help="Pixels with a negative channel: keep them in the linear "
               "mean (out-of-gamut colours in a scene-linear render) or exclude them like NaN/Inf.")
@@ -38,7 +41,7 @@ from fidelity.prediction import SIZES
 @click.option("--html", "html_path", type=PATH, help="Write the HTML report here.")
 @click.option("--quiet", "-q", is_flag=True, help="Print nothing.")
 def audit(image: Path, corners: str | None, encoding: str | None, exposure: str | None,
-          layer: str | None, negatives: str, reference: str, illuminant: str, size: str, table: str | None,
+          layer: str | None, colourspace: str | None, negatives: str, reference: str, illuminant: str, size: str, table: str | None,
           json_path: Path | None, html_path: Path | None, quiet: bool) -> None:
     """Measure the chart in IMAGE: ΔE00 per patch, mean and max, exposure, bad pixels.
 
@@ -49,7 +52,8 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
     report, prediction, _, figure = image_report(
         image, corners, command="audit", encoding=encoding, exposure=exposure, layer=layer,
         reference=reference, illuminant=illuminant, size=size, table=table,
-        location_figure=html_path is not None, negatives=negatives)
+        location_figure=html_path is not None, negatives=negatives,
+        colourspace=colourspace)
     written = write_outputs(report, prediction, json_path=json_path, html_path=html_path,
                             protect=(str(image),), location_png=figure)
     if not quiet:

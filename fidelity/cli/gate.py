@@ -25,7 +25,7 @@ def image_report(
     image: Path, corners: str | None, *, command: str, encoding: str | None, exposure: str | None,
     layer: str | None, reference: str, illuminant: str, size: str, table: str | None,
     criterion: Criterion | None = None, location_figure: bool = False,
-    negatives: str = "keep",
+    negatives: str = "keep", colourspace: str | None = None,
 ) -> tuple[dict[str, Any], Prediction, Verdict | None, str | None]:
     """Audit ``image`` and build its report (measurement, prediction, optional verdict), and
     with ``location_figure`` the base64 PNG of where the patches were sampled (for HTML).
@@ -36,12 +36,14 @@ def image_report(
     from fidelity.report import build_report
 
     result = audit_image(image, corners or None, layer=layer, encoding=encoding, exposure=exposure,
-                         reference=reference, illuminant=illuminant, negatives=negatives)
+                         reference=reference, illuminant=illuminant, negatives=negatives,
+                         colourspace=colourspace)
     prediction = predict(result.mean_delta_e, size=size, table=table)
     verdict = evaluate(result.mean_delta_e, prediction, criterion) if criterion else None
     info = dict(result.image or {})
     source = {"type": "image", **info, "corners": result.location.corners.tolist(),
               "corners_found": result.detection.to_dict() if result.detection else None,
+              "colourspace": result.colourspace,
               "exposure_mode": result.exposure_mode, "reference": result.reference.name}
     report = build_report(
         command, result.measurement, source=source, prediction=prediction, verdict=verdict,
@@ -153,6 +155,9 @@ def _fail(message: str, junit: Path | None, name: str, seconds: float) -> None:
               help="Image pixel encoding (default: linear for float formats, else sRGB).")
 @click.option("--exposure", default=None, help="Image exposure: auto or a fixed EV.")
 @click.option("--layer", default=None, help="EXR layer or part name.")
+@click.option("--colourspace", default=None,
+              help="RGB primaries of the pixels: a colour-science name (ACEScg, 'ITU-R BT.2020', "
+                   "'Display P3', ...). Default: the EXR's chromaticities attribute, else sRGB.")
 @click.option("--negatives", type=click.Choice(["keep", "exclude"]), default="keep",
               show_default=True, help="Image pixels with a negative channel: keep them in the "
               "linear mean (out-of-gamut colours) or exclude them like NaN/Inf.")
@@ -166,7 +171,8 @@ def _fail(message: str, junit: Path | None, name: str, seconds: float) -> None:
 @click.option("--html", "html_path", type=PATH, help="Write the HTML report.")
 def gate(image: Path | None, corners: str | None, camera: str | None, max_delta_e: float | None,
          max_dmap: float | None, cls: str | None, unit: str, size: str, table: str | None,
-         encoding: str | None, exposure: str | None, layer: str | None, negatives: str,
+         encoding: str | None, exposure: str | None, layer: str | None,
+         colourspace: str | None, negatives: str,
          reference: str | None, illuminant: str, renderer: str, junit: Path | None, json_path: Path | None,
          html_path: Path | None) -> None:
     """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 error.
@@ -178,9 +184,10 @@ def gate(image: Path | None, corners: str | None, camera: str | None, max_delta_
     """
     if (image is None) == (camera is None):
         raise click.UsageError("give an IMAGE or --camera, not both")
-    if camera is not None and any(v is not None for v in (corners, encoding, exposure, layer)):
-        raise click.UsageError("--corners, --encoding, --exposure and --layer apply to an IMAGE, "
-                               "not to --camera")
+    if camera is not None and any(v is not None for v in (corners, encoding, exposure, layer,
+                                                          colourspace)):
+        raise click.UsageError("--corners, --encoding, --exposure, --layer and --colourspace "
+                               "apply to an IMAGE, not to --camera")
     criterion_args = (max_delta_e, max_dmap, cls, unit)
     name = f"colour fidelity of {image if image is not None else camera}"
     t0 = time.perf_counter()
@@ -192,7 +199,8 @@ def gate(image: Path | None, corners: str | None, camera: str | None, max_delta_
                 image, corners, command="gate", encoding=encoding, exposure=exposure,
                 layer=layer, reference=reference or "safecolor", illuminant=illuminant,
                 size=size, table=table, criterion=criterion,
-                location_figure=html_path is not None, negatives=negatives)
+                location_figure=html_path is not None, negatives=negatives,
+                colourspace=colourspace)
             protect: tuple[str, ...] = (str(image),)
         else:
             report, prediction, verdict = camera_report(
