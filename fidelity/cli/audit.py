@@ -41,8 +41,8 @@ from fidelity.prediction import SIZES
 @click.option("--html", "html_path", type=PATH, help="Write the HTML report here.")
 @click.option("--quiet", "-q", is_flag=True, help="Print nothing.")
 def audit(image: Path, corners: str | None, encoding: str | None, exposure: str | None,
-          layer: str | None, colourspace: str | None, negatives: str, reference: str, illuminant: str, size: str, table: str | None,
-          json_path: Path | None, html_path: Path | None, quiet: bool) -> None:
+          layer: str | None, colourspace: str | None, negatives: str, reference: str,
+          illuminant: str, size: str, table: str | None, json_path: Path | None, html_path: Path | None, quiet: bool) -> None:
     """Measure the chart in IMAGE: ΔE00 per patch, mean and max, exposure, bad pixels.
 
     \b

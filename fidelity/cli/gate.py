@@ -172,8 +172,8 @@ def _fail(message: str, junit: Path | None, name: str, seconds: float) -> None:
 def gate(image: Path | None, corners: str | None, camera: str | None, max_delta_e: float | None,
          max_dmap: float | None, cls: str | None, unit: str, size: str, table: str | None,
          encoding: str | None, exposure: str | None, layer: str | None,
-         colourspace: str | None, negatives: str,
-         reference: str | None, illuminant: str, renderer: str, junit: Path | None, json_path: Path | None,
+         colourspace: str | None, negatives: str, reference: str | None, illuminant: str,
+         renderer: str, junit: Path | None, json_path: Path | None,
          html_path: Path | None) -> None:
     """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 error.
 
