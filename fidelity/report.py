@@ -537,8 +537,10 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
                  f"{report['max_delta_e']:.2f} ({report.get('worst_patch')})")
     if report.get("exposure_ev") is not None:
         bp = report.get("bad_pixels") or {}
+        kept = (f"; pixels with a negative channel kept in the mean: {bp['negative']}"
+                if bp.get("negative") and bp.get("negatives") == "keep" else "")
         lines.append(f"exposure correction {report['exposure_ev']:+.2f} EV; bad pixels "
-                     f"excluded: {bp.get('total', 0)}")
+                     f"excluded: {bp.get('total', 0)}{kept}")
     pred = report.get("prediction")
     if pred:
         b = "<= " if pred.get("bound") else ""
