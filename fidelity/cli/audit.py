@@ -6,7 +6,13 @@ from pathlib import Path
 
 import click
 
-from fidelity.cli.gate import PATH, image_report, write_outputs
+from fidelity.cli.gate import (
+    PATH,
+    colourspace_option,
+    image_report,
+    negatives_option,
+    write_outputs,
+)
 from fidelity.prediction import SIZES
 
 
@@ -23,12 +29,8 @@ from fidelity.prediction import SIZES
               help="auto (neutral patches; default for linear input) or a fixed EV "
                    "(pixels x 2**EV; default 0 for sRGB input).")
 @click.option("--layer", default=None, help="EXR layer (e.g. 'diffuse' for diffuse.R) or part.")
-@click.option("--colourspace", default=None,
-              help="RGB primaries of the pixels: a colour-science name (ACEScg, 'ITU-R BT.2020', "
-                   "'Display P3', ...). Default: the EXR's chromaticities attribute, else sRGB.")
-@click.option("--negatives", type=click.Choice(["keep", "exclude"]), default="keep",
-              show_default=True, help="Pixels with a negative channel: keep them in the linear "
-              "mean (out-of-gamut colours in a scene-linear render) or exclude them like NaN/Inf.")
+@colourspace_option
+@negatives_option
 @click.option("--reference", default="safecolor", show_default=True,
               help="safecolor (the paper's Lab), scene (BabelColor spectra under --illuminant) "
                    "or a chart JSON.")

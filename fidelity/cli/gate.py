@@ -21,6 +21,17 @@ from fidelity.verdict import EXIT_ERROR, Criterion, Verdict, evaluate
 PATH = click.Path(dir_okay=False, path_type=Path)
 
 
+#: Image options shared by ``audit`` and ``gate``.
+colourspace_option = click.option(
+    "--colourspace", default=None,
+    help="RGB primaries of the pixels: a colour-science name (ACEScg, 'ITU-R BT.2020', "
+         "'Display P3', ...). Default: the EXR's chromaticities attribute, else sRGB.")
+negatives_option = click.option(
+    "--negatives", type=click.Choice(["keep", "exclude"]), default="keep", show_default=True,
+    help="Pixels with a negative channel: keep them in the linear mean (out-of-gamut colours in "
+         "a scene-linear render) or exclude them like NaN/Inf.")
+
+
 def image_report(
     image: Path, corners: str | None, *, command: str, encoding: str | None, exposure: str | None,
     layer: str | None, reference: str, illuminant: str, size: str, table: str | None,
@@ -155,12 +166,8 @@ def _fail(message: str, junit: Path | None, name: str, seconds: float) -> None:
               help="Image pixel encoding (default: linear for float formats, else sRGB).")
 @click.option("--exposure", default=None, help="Image exposure: auto or a fixed EV.")
 @click.option("--layer", default=None, help="EXR layer or part name.")
-@click.option("--colourspace", default=None,
-              help="RGB primaries of the pixels: a colour-science name (ACEScg, 'ITU-R BT.2020', "
-                   "'Display P3', ...). Default: the EXR's chromaticities attribute, else sRGB.")
-@click.option("--negatives", type=click.Choice(["keep", "exclude"]), default="keep",
-              show_default=True, help="Image pixels with a negative channel: keep them in the "
-              "linear mean (out-of-gamut colours) or exclude them like NaN/Inf.")
+@colourspace_option
+@negatives_option
 @click.option("--reference", default=None,
               help="Reference: safecolor (image default) or scene (camera default).")
 @click.option("--illuminant", default="D65", show_default=True, help="Scene illuminant.")
