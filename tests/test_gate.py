@@ -276,3 +276,16 @@ def test_exr_in_bt2020_primaries_is_converted_by_its_chromaticities_attribute(tm
     r = run("audit", bare_exr, "--corners", corners_of(), "--colourspace", "BT.2021")
     assert r.exit_code == 2 and "unknown RGB colourspace 'BT.2021'" in one_error_line(r)
     assert str(bare_exr) in one_error_line(r)
+
+
+def test_negative_values_are_kept_by_default_and_said_so(tmp_path):
+    lin = colour.cctf_decoding(CHART.srgb, function="sRGB")
+    lin[17] = [-0.02, 0.18, 0.33]  # the cyan of a scene-linear render: red below zero
+    path = tmp_path / "neg.exr"
+    write_exr(path, draw_chart(lin).astype(np.float32))
+    kept = run("audit", path, "--corners", corners_of())
+    assert kept.exit_code == 0, kept.output
+    n = int(re.search(r"negative channel kept in the mean: (\d+)", kept.stdout).group(1))
+    assert n > 100
+    excluded = run("audit", path, "--corners", corners_of(), "--negatives", "exclude")
+    assert excluded.exit_code == 2 and "'cyan': only 0 of" in one_error_line(excluded)
