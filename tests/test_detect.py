@@ -163,3 +163,14 @@ def test_homography_least_squares_from_many_points():
     assert np.abs(map_points(fit, GRID_CORNERS) - map_points(h, GRID_CORNERS)).max() < 0.6
     with pytest.raises(InvalidValueError, match="all on one line"):
         homography_from_points(np.c_[np.arange(6.0), np.zeros(6)], xy[:6])
+
+
+def test_missing_opencv_is_a_clear_error_that_suggests_corners(monkeypatch):
+    import sys
+
+    from fidelity.errors import FidelityError
+
+    monkeypatch.setitem(sys.modules, "colour_checker_detection", None)  # import fails
+    h, size = CASES["frontal"]
+    with pytest.raises(FidelityError, match="needs colour-checker-detection and OpenCV.*--corners"):
+        detect_chart(scene(h, size))
