@@ -300,28 +300,30 @@ def _oriented_corners(image: np.ndarray, grid_to_image: np.ndarray, rows: int, c
     one means the swatches found are not a ColorChecker: an error.
     """
     from fidelity.charts import load_chart
-    from fidelity.locate import locate_chart, sample_patches
+    from fidelity.locate import grid_centres, locate_chart, sample_patches
 
-    chart = load_chart()
-    reference = cm.linearize_srgb(chart.srgb)
+    reference = cm.linearize_srgb(load_chart().srgb)
     cells = _corner_cells(rows, cols)
+    # Every symmetry maps the grid onto itself, so its patches are the ones found, reordered:
+    # sample once, then score each order.
+    try:
+        location = locate_chart(apply_homography(grid_to_image, cells), image.shape, rows=rows,
+                                cols=cols, window=0.3, min_pixels=1)
+    except InvalidValueError:
+        raise InvalidValueError("no colour chart found: the chart found lies partly outside "
+                                "the image; give --corners X1,Y1,...,X4,Y4") from None
+    means = np.array([s.mean(axis=0) for s in sample_patches(image, location)])
+    grid = grid_centres(rows, cols)
     best: tuple[float, str, np.ndarray] | None = None
     scores: list[float] = []
     for name, symmetry in GRID_SYMMETRIES.items():
-        corners = apply_homography(grid_to_image, symmetry(cells, rows, cols))
-        try:
-            location = locate_chart(corners, image.shape, rows=rows, cols=cols, window=0.3,
-                                    min_pixels=1)
-        except InvalidValueError:
-            continue
-        means = np.array([s.mean(axis=0) for s in sample_patches(image, location)])
-        score = orientation_score(means, reference)
+        moved = np.rint(symmetry(grid, rows, cols)).astype(int)
+        order = moved[:, 1] * cols + moved[:, 0]  # patch k is seen where grid cell order[k] is
+        score = orientation_score(means[order], reference)
         scores.append(score)
         if best is None or score < best[0]:
-            best = (score, name, corners)
-    if best is None:
-        raise InvalidValueError("no colour chart found: the chart found lies partly outside "
-                                "the image; give --corners X1,Y1,...,X4,Y4")
+            best = (score, name, apply_homography(grid_to_image, symmetry(cells, rows, cols)))
+    assert best is not None
     ranked = sorted(scores)
     if len(ranked) > 1 and ranked[0] > ORIENTATION_MARGIN * ranked[1]:
         raise InvalidValueError(
