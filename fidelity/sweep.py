@@ -222,12 +222,19 @@ def plan_phases(n_models: int, transforms: Sequence[str], targets: Sequence[floa
 
     ``"ascending"``: each model in turn, all its cells (:func:`plan_cells`). ``"priority"``:
     first every model's baseline and :data:`PRIORITY_TARGETS` cells, then every model's rest,
-    so that a partial run already covers the paper's thresholds for all models.
+    so that a partial run already covers the paper's thresholds for all models. ``"reverse"``:
+    the priority order backwards, for a second process that shares a model's cells with one
+    running in priority order (they meet in the middle; at most the cell they meet on is
+    computed twice, with identical detections).
     """
     if order == "ascending":
         return [(m, plan_cells(transforms, targets)) for m in range(n_models)]
+    if order == "reverse":
+        return [(m, cells[::-1]) for m, cells in
+                plan_phases(n_models, transforms, targets, "priority")[::-1]]
     if order != "priority":
-        raise InvalidValueError(f"order {order!r}: expected 'priority' or 'ascending'")
+        raise InvalidValueError(
+            f"order {order!r}: expected 'priority', 'ascending' or 'reverse'")
     first = [t for t in targets if t == 0 or t in PRIORITY_TARGETS]
     rest = [t for t in targets if t not in first]
     phases = [(m, plan_cells(transforms, first)) for m in range(n_models)]

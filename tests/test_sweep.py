@@ -41,6 +41,10 @@ def test_plan_and_model_spec() -> None:
                       (0, [("a", 2.0)]), (1, [("a", 2.0)])]
     assert plan_phases(2, ["a"], [0, 2], "ascending") == [(0, plan_cells(["a"], [0, 2])),
                                                           (1, plan_cells(["a"], [0, 2]))]
+    reverse = plan_phases(2, ["a"], [0, 1, 2, 3], "reverse")
+    assert reverse == [(1, [("a", 2.0)]), (0, [("a", 2.0)]),
+                       (1, [("a", 3.0), ("a", 1.0), ("baseline", 0.0)]),
+                       (0, [("a", 3.0), ("a", 1.0), ("baseline", 0.0)])]
     with pytest.raises(InvalidValueError):
         plan_phases(1, ["a"], [1], "random")
     assert ModelSpec.parse("m.onnx@250") == ModelSpec(Path("m.onnx"), 250)
@@ -179,6 +183,37 @@ def test_kill_9_mid_cell_then_resume(coco, tmp_path) -> None:
     assert len(after) == 30
     for i, d in kept.items():
         assert np.array_equal(after[i], d)
+
+
+@pytest.mark.shared
+def test_two_processes_share_one_models_cells(coco, tmp_path) -> None:
+    """Priority and reverse order on one store at once: every cell once, as one process has it."""
+    from fidelity.sweep import run_sweep
+
+    images, ann, model = coco
+    grid = (["contrast-inc", "hue"], [0, 3, 6])
+    procs = [subprocess.Popen([sys.executable, "-m", "fidelity", "sweep", "--models",
+                               f"{model}@5", "--images", str(images), "--annotations", str(ann),
+                               "--transforms", ",".join(grid[0]), "--targets", "0,3,6",
+                               "--threads", "1", "--order", order, "--out", str(tmp_path / "two")],
+                              cwd=REPO, stderr=subprocess.PIPE, text=True)
+             for order in ("priority", "reverse")]
+    logs = [p.communicate(timeout=300)[1] for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], logs
+    single = run_sweep([ModelSpec(model, 5)], images, ann, tmp_path / "one", *grid, threads=1,
+                       log=lambda s: None)
+    shared = SweepStore(tmp_path / "two")
+    expect = {(c["transform"], c["target"]): c for c in single.cells()}
+    got = {(c["transform"], c["target"]): c for c in shared.cells()}
+    assert set(got) == set(expect) and len(got) == 5
+    for key, cell in expect.items():
+        assert got[key]["images"] == 5
+        assert got[key]["map"] == pytest.approx(cell["map"], abs=1e-12)
+        a, b = shared.detections("yolox_nano", *key), single.detections("yolox_nano", *key)
+        assert a.keys() == b.keys() and all(np.array_equal(a[i], b[i]) for i in a)
+    # no cell was run twice except, at most, the one the two orders met on
+    done = [sum(" images=5 " in line for line in log.splitlines()) for log in logs]
+    assert len(expect) <= sum(done) <= len(expect) + 1, logs
 
 
 # ----------------------------------------------------------------------------- command line

@@ -48,10 +48,12 @@ def _transforms(text: str) -> list[str]:
               help="onnxruntime intra-op threads.")
 @click.option("--provider", type=click.Choice(["auto", "cpu", "cuda"]), default="auto",
               show_default=True)
-@click.option("--order", type=click.Choice(["priority", "ascending"]), default="priority",
-              show_default=True,
+@click.option("--order", type=click.Choice(["priority", "ascending", "reverse"]),
+              default="priority", show_default=True,
               help="priority: every model's ΔE 1, 3, 6, 12, 24 cells first (the paper's "
-                   "thresholds), then the rest; ascending: model by model, ΔE ascending.")
+                   "thresholds), then the rest; ascending: model by model, ΔE ascending; "
+                   "reverse: priority backwards, to let a second process share the cells "
+                   "of one already running on the same --out.")
 @scorer_option
 @click.option("--rescore", is_flag=True, help="Only recompute scores from stored detections.")
 def sweep(models: str | None, images: str | None, annotations: str, transforms: str, targets: str, out: str,
