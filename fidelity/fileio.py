@@ -12,7 +12,7 @@ import hashlib
 import json
 import os
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -66,6 +66,37 @@ def write_bytes_atomic(path: str | os.PathLike[str], data: bytes) -> Path:
 def write_json_atomic(path: str | os.PathLike[str], obj: Any) -> Path:
     """Write ``obj`` as indented JSON (NaN is rejected: not valid JSON) atomically."""
     return write_text_atomic(path, json.dumps(obj, indent=2, allow_nan=False) + "\n")
+
+
+PathLike = str | os.PathLike[str]
+
+
+def check_outputs(outputs: Mapping[str, PathLike | None],
+                  inputs: Mapping[str, PathLike | None] = {}) -> None:  # noqa: B006 - read only
+    """Refuse, before any work is done, an output that is an input or is named twice.
+
+    ``outputs`` and ``inputs`` map a label (the option, e.g. ``"--junit"``) to a path or
+    ``None`` (not given). An input that does not exist as a file is skipped (built-in names such
+    as a camera or table name); an output is the same file as an input when both name one
+    existing file (:func:`os.path.samefile`, so links and relative paths are seen through).
+    Raises :class:`InputFileError` naming the output, its option and the input.
+    """
+    given = {k: Path(v) for k, v in outputs.items() if v is not None}
+    files = {k: Path(v) for k, v in inputs.items() if v is not None and Path(v).is_file()}
+    for out_label, out in given.items():
+        if not out.exists():
+            continue
+        for in_label, src in files.items():
+            if os.path.samefile(out, src):
+                raise InputFileError(f"{out}: {out_label} names the input {in_label} "
+                                     f"({src}); refusing to write over an input file")
+    seen: dict[Path, str] = {}
+    for out_label, out in given.items():
+        key = out.resolve()
+        if key in seen:
+            raise InputFileError(f"{out}: named by both {seen[key]} and {out_label}; give each "
+                                 "output its own file")
+        seen[key] = out_label
 
 
 def require_file(path: str | os.PathLike[str], what: str = "input file") -> Path:

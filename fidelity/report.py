@@ -541,6 +541,10 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
                 if bp.get("negative") and bp.get("negatives") == "keep" else "")
         lines.append(f"exposure correction {report['exposure_ev']:+.2f} EV; bad pixels "
                      f"excluded: {bp.get('total', 0)}{kept}")
+        clipped = (report.get("details") or {}).get("clipped_patches")
+        if clipped:
+            lines.append("outside [0, 1] in sRGB, clipped like a stored image: "
+                         + ", ".join(clipped))
     pred = report.get("prediction")
     if pred:
         b = "<= " if pred.get("bound") else ""

@@ -8,7 +8,13 @@ from pathlib import Path
 import pytest
 
 from fidelity.errors import InputFileError
-from fidelity.fileio import atomic_output, require_file, write_json_atomic, write_text_atomic
+from fidelity.fileio import (
+    atomic_output,
+    check_outputs,
+    require_file,
+    write_json_atomic,
+    write_text_atomic,
+)
 
 
 def test_atomic_write_leaves_no_partial_file_on_error(tmp_path: Path) -> None:
@@ -46,3 +52,17 @@ def test_json_rejects_nan_and_require_file_names_the_problem(tmp_path: Path) -> 
         require_file(tmp_path / "missing.png", "image")
     with pytest.raises(InputFileError, match="not a regular file"):
         require_file(tmp_path, "image")
+
+
+def test_check_outputs_sees_through_links_and_relative_paths(tmp_path: Path, monkeypatch) -> None:
+    src = tmp_path / "in.exr"
+    src.write_bytes(b"x")
+    (tmp_path / "link.exr").symlink_to(src)
+    monkeypatch.chdir(tmp_path)
+    for out in ("in.exr", "./in.exr", "link.exr", str(src)):
+        with pytest.raises(InputFileError, match=r"--json names the input IMAGE \(.*in.exr\)"):
+            check_outputs({"--json": out}, {"IMAGE": src})
+    check_outputs({"--json": "new.json", "--html": None}, {"IMAGE": src, "--table": "name"})
+    with pytest.raises(InputFileError, match="named by both --json and --junit"):
+        check_outputs({"--json": "r.xml", "--junit": "./r.xml"})
+    assert src.read_bytes() == b"x"

@@ -244,6 +244,25 @@ def test_report_never_overwrites_the_input(png, tmp_path):
     r = run("gate", src, "--corners", corners_of(), "--max-delta-e", "3", "--json", src)
     assert r.exit_code == 2 and "input file" in one_error_line(r)
     assert src.read_bytes() == before
+    # --junit too, also on the error path that writes a JUnit error case
+    r = run("gate", src, "--corners", corners_of(), "--max-delta-e", "3", "--junit", src)
+    assert r.exit_code == 2 and "--junit names the input IMAGE" in one_error_line(r)
+    assert src.read_bytes() == before
+    table = tmp_path / "table.json"
+    table.write_text((Path(__file__).parents[1] / "fidelity/data/prediction"
+                      / f"{DEFAULT_TABLE}.json").read_text())
+    for args in (("gate", "--camera", "ideal", "--max-delta-e", "3", "--table", table,
+                  "--junit", table),
+                 ("predict", "--delta-e", "3", "--table", table, "--json", table),
+                 ("audit", src, "--corners", corners_of(), "--table", table, "--html", table),
+                 ("calibrate", "--chart", table, "--json", table)):
+        before_table = table.read_bytes()
+        r = run(*args)
+        assert r.exit_code == 2 and "refusing to write over an input" in one_error_line(r), args
+        assert table.read_bytes() == before_table
+    r = run("gate", src, "--corners", corners_of(), "--max-delta-e", "3",
+            "--json", tmp_path / "r", "--html", tmp_path / "r")
+    assert r.exit_code == 2 and "named by both --json and --html" in one_error_line(r)
 
 
 def test_exr_in_bt2020_primaries_is_converted_by_its_chromaticities_attribute(tmp_path):
@@ -287,5 +306,6 @@ def test_negative_values_are_kept_by_default_and_said_so(tmp_path):
     assert kept.exit_code == 0, kept.output
     n = int(re.search(r"negative channel kept in the mean: (\d+)", kept.stdout).group(1))
     assert n > 100
+    assert "outside [0, 1] in sRGB, clipped like a stored image: cyan\n" in kept.stdout
     excluded = run("audit", path, "--corners", corners_of(), "--negatives", "exclude")
     assert excluded.exit_code == 2 and "'cyan': only 0 of" in one_error_line(excluded)

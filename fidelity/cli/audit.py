@@ -51,6 +51,11 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
     fidelity audit render.exr --json audit.json
     fidelity audit photo.jpg --corners 102,88,610,95,604,420,98,414
     """
+    from fidelity.fileio import check_outputs
+
+    check_outputs({"--json": json_path, "--html": html_path},
+                  {"IMAGE": image, "--table": table, "--reference": reference,
+                   "--illuminant": illuminant})
     report, prediction, _, figure = image_report(
         image, corners, command="audit", encoding=encoding, exposure=exposure, layer=layer,
         reference=reference, illuminant=illuminant, size=size, table=table,

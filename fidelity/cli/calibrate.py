@@ -64,6 +64,10 @@ def calibrate(chart: str, targets: str | None, transform_names: str | None,
     For each transform and target ΔE, the parameter that puts the chart at that mean CIEDE2000
     from its reference (Brent's method to |ΔE - target| <= 1e-4). Unreachable targets show '-'.
     """
+    from fidelity.fileio import check_outputs
+
+    check_outputs({"--json": json_path, "--csv": csv_path, "--markdown": md_path},
+                  {"--chart": chart})
     c = load_chart(chart)
     tlist = DEFAULT_TARGETS if targets is None else parse_number_list(targets, "--targets")
     names = None

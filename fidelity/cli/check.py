@@ -40,13 +40,16 @@ def check(camera: str | None, illuminant: str, renderer: str, reference: str,
     loss and prints a verdict (exit 0 pass, 1 fail, 2 error); writes an HTML and a JSON report.
     """
     from fidelity.camera import DEFAULT_CAMERA
+    from fidelity.fileio import check_outputs
 
     cam = camera or DEFAULT_CAMERA
+    html_path, json_path = out_dir / "report.html", out_dir / "report.json"
+    check_outputs({"--out (report.html)": html_path, "--out (report.json)": json_path},
+                  {"--camera": cam, "--table": table, "--illuminant": illuminant})
     report, prediction, verdict = camera_report(
         cam, command="check", illuminant=illuminant, renderer=renderer, reference=reference,
         size=size, table=table, criterion=Criterion("max-delta-e", max_delta_e))
     assert verdict is not None
-    html_path, json_path = out_dir / "report.html", out_dir / "report.json"
     write_outputs(report, prediction, json_path=json_path, html_path=html_path)
     from fidelity.report import summary_lines
 

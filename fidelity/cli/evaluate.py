@@ -44,9 +44,10 @@ def evaluate(model: str, images: str, annotations: str, limit: int | None, threa
     from fidelity.cocoeval import evaluate_detections, load_annotations, resolve_scorer
     from fidelity.detectors import Detector
     from fidelity.errors import InputFileError
-    from fidelity.fileio import write_json_atomic
+    from fidelity.fileio import check_outputs, write_json_atomic
     from fidelity.jpeg import read_jpeg
 
+    check_outputs({"--json": json_path}, {"--model": model, "--annotations": annotations})
     det = Detector(model, threads=threads, provider=provider)
     coco = load_annotations(annotations)
     ids = sorted(coco.getImgIds())[:limit] if limit else sorted(coco.getImgIds())

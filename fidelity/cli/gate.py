@@ -199,6 +199,14 @@ def gate(image: Path | None, corners: str | None, camera: str | None, max_delta_
     name = f"colour fidelity of {image if image is not None else camera}"
     t0 = time.perf_counter()
     try:
+        from fidelity.fileio import check_outputs
+
+        check_outputs({"--junit": junit, "--json": json_path, "--html": html_path},
+                      {"IMAGE": image, "--camera": camera, "--table": table,
+                       "--reference": reference, "--illuminant": illuminant})
+    except FidelityError as exc:  # no JUnit file either: it may be the input named
+        _fail(str(exc), None, name, time.perf_counter() - t0)
+    try:
         criterion = make_criterion(*criterion_args)
         name += f": {criterion.describe()}"
         if image is not None:

@@ -44,6 +44,9 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
         return
     if delta_e is None:
         raise click.UsageError("--delta-e X is required")
+    from fidelity.fileio import check_outputs
+
+    check_outputs({"--json": json_path}, {"--table": table})
     p = predict(delta_e, size=size, table=table, method=method, baseline_map=baseline_map)
     b = "<= " if p.table.kind == "published-bounds" else ""
 

@@ -97,7 +97,9 @@ def format_report(r: ChartRender) -> str:
 @click.option("--seed", type=int, default=None, help="Noise/sampler seed (default: camera's).")
 @click.option("--variant", default=None, help="Force a Mitsuba variant (default: probed).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Folder for chart_linear.exr (camera RGB, float32) and chart_display.png.")
+              help="Folder for chart_linear.exr (raw camera RGB before white balance and colour "
+                   "correction, float32) and chart_display.png (the developed sRGB image: "
+                   "audit this one to check the render).")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="Write the full result as JSON.")
 @click.option("--list-cameras", is_flag=True, help="List the built-in cameras and exit.")
@@ -119,6 +121,12 @@ def render(camera: str, illuminant: str, renderer: str, spp: int | None,
         for name in available_cameras():
             click.echo(f"{name:<18} {load_camera(name).description}")
         return
+    from fidelity.fileio import check_outputs
+
+    files = {} if out_dir is None else {f"--out ({name})": out_dir / name for name in
+                                        ("chart_linear.exr", "chart_display.png")}
+    check_outputs({**files, "--json": json_path},
+                  {"--camera": camera, "--illuminant": illuminant})
     result = render_chart(camera, illuminant, renderer, spp=spp, reference=reference,
                           spectra=spectra, seed=seed, pixels_per_patch=pixels_per_patch,
                           cat=cat, step=step, variant=variant)

@@ -49,9 +49,12 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
     """
     from pathlib import Path
 
+    from fidelity.fileio import check_outputs
     from fidelity.sweep import SweepStore
     from fidelity.tables import parse_image_caps, write_report
 
+    check_outputs({"--prediction": prediction, "--json": json_path},
+                  {"--annotations": annotations})
     store = SweepStore(store_dir, create=False)
     coco = None
     caps = parse_image_caps(images, list(store.models()))

@@ -50,9 +50,11 @@ def validate(cameras: str, models: str | None, images: str | None, annotations: 
       (rerun the same line to resume; add --report-only to rebuild the report)
     """
     from dataclasses import replace
+    from pathlib import Path
 
     from fidelity.emulation import EMULATION_METHODS, TRAINING_SETS
     from fidelity.errors import InvalidValueError, unknown_name
+    from fidelity.fileio import check_outputs
     from fidelity.sweep import ModelSpec
     from fidelity.validate import (
         ValidationStore,
@@ -62,6 +64,9 @@ def validate(cameras: str, models: str | None, images: str | None, annotations: 
         run_validation,
     )
 
+    check_outputs({f"--out ({n})": Path(out) / n
+                   for n in ("validation.md", "validation.html", "validation.json")},
+                  {"--notes": notes, "--annotations": annotations, "--cameras": cameras})
     if method not in EMULATION_METHODS:
         raise unknown_name("emulation method", method, EMULATION_METHODS)
     if training not in TRAINING_SETS:
@@ -83,8 +88,6 @@ def validate(cameras: str, models: str | None, images: str | None, annotations: 
     from fidelity.validate import write_report
 
     results = collect_results(st, bound_table=bound_table, suite=cases)
-    from pathlib import Path
-
     paths = write_report(results, out,
                          notes=Path(notes).read_text(encoding="utf-8") if notes else None)
     s = results["summary"]
