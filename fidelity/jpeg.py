@@ -83,7 +83,9 @@ def decode_jpeg(data: bytes, source: str = "<bytes>") -> tuple[np.ndarray, JpegS
             settings = _settings(im, source)
             im.load()
             arr = np.asarray(im)
-    except (UnidentifiedImageError, OSError) as exc:
+    except UnidentifiedImageError as exc:
+        raise InputFileError(f"{source}: not an image file (no known image header)") from exc
+    except OSError as exc:  # truncated or corrupt data
         raise InputFileError(f"{source}: cannot decode JPEG: {exc}") from exc
     if arr.ndim == 2:
         arr = np.repeat(arr[:, :, None], 3, axis=2)

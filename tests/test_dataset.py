@@ -129,8 +129,13 @@ def test_bad_jpeg_inputs(tmp_path) -> None:
     with pytest.raises(InputFileError, match="not a JPEG"):
         read_jpeg(png)
     (tmp_path / "b.jpg").write_bytes(b"junk")
-    with pytest.raises(InputFileError, match="cannot decode"):
+    with pytest.raises(InputFileError, match=r"b\.jpg: not an image file \(no known image header\)$"):
         read_jpeg(tmp_path / "b.jpg")
+    good = io.BytesIO()
+    Image.fromarray(natural_image()).save(good, "JPEG")
+    (tmp_path / "c.jpg").write_bytes(good.getvalue()[: len(good.getvalue()) // 2])
+    with pytest.raises(InputFileError, match=r"c\.jpg: cannot decode JPEG: image file is truncated"):
+        read_jpeg(tmp_path / "c.jpg")
 
 
 def _sha(p) -> str:
