@@ -25,8 +25,10 @@ Interpolation (``method=``, default: the table's ``"interpolation"`` key, else `
 Before interpolating, each column is replaced by its running maximum over ΔE (an upper
 envelope, so that predictions never decrease with ΔE even if measured points are noisy).
 Outside a column's ΔE range the answer is conservative and flagged: below the first point, the
-first point's value; above the last, the ceiling (total loss: 100 % relative; the curve's
-``baseline_map`` in points when known, else 100 points). Nothing is extrapolated.
+first point's value; above the last, the ceiling: total loss, 100 % relative and, in points, the
+baseline itself (:func:`points_ceiling`: the curve's ``baseline_map`` / ``baseline_ap``, else
+the detector's baseline mAP given by the caller, else the largest baseline of the table's curves,
+else 100 points). Nothing is extrapolated.
 
 When a size class has no curve of its own, the ``any`` curve (the worst over all sizes) answers
 and the result says so. A size's aggregate curve (``model`` null) answers for it; without one,
@@ -93,6 +95,14 @@ class Curve:
     baseline_map: float | None = None
     #: standard error of ``dmap_points`` at each point (measured tables; NaN where unknown)
     dmap_points_se: np.ndarray | None = None
+    #: baseline AP in percent per class column (``dap_person_points`` ...), where known
+    baseline_ap: dict[str, float] = field(default_factory=dict)
+
+    def baseline_points(self, column: str) -> float | None:
+        """The curve's baseline in percent for a points column (None: unknown or relative)."""
+        if column == "dmap_points":
+            return self.baseline_map
+        return self.baseline_ap.get(column)
 
 
 @dataclass(frozen=True)
@@ -204,6 +214,12 @@ def parse_prediction_table(obj: dict[str, Any], origin: str = "<table>") -> Pred
         values = {col: np.array([_number(p.get(col), f"{where}.{col}") for p in pts])
                   for col in COLUMNS}
         baseline = c.get("baseline_map")
+        ap = c.get("baseline_ap") or {}
+        if not isinstance(ap, dict):
+            raise InputFileError(f"{where}.baseline_ap: expected an object (class -> AP)")
+        baseline_ap = {col: _baseline_percent(ap[cls], f"{where}.baseline_ap.{cls}")
+                       for cls, col in CLASS_COLUMNS.items() if cls != "all"
+                       and ap.get(cls) is not None}
         curves.append(Curve(
             size=size,
             model=c.get("model"),
@@ -212,6 +228,7 @@ def parse_prediction_table(obj: dict[str, Any], origin: str = "<table>") -> Pred
             sources=tuple(str(p.get("source", "")) for p in pts),
             worst_transforms=tuple(p.get("worst_transform") for p in pts),
             baseline_map=_baseline_percent(baseline, where),
+            baseline_ap={k: v for k, v in baseline_ap.items() if v is not None},
             dmap_points_se=(np.array([_number(p.get("dmap_points_se"), f"{where}.dmap_points_se")
                                       for p in pts])
                             if any("dmap_points_se" in p for p in pts) else None),
@@ -298,6 +315,35 @@ class ColumnPrediction:
                 "note": self.note}
 
 
+def points_ceiling(curve: Curve, column: str, curves: Sequence[Curve],
+                   baseline_map: float | None = None) -> float:
+    """The total-loss ceiling of ``column`` for ``curve`` above its ΔE range.
+
+    Relative columns: 100 %. Points columns: the baseline in percent (losing everything loses
+    the baseline): the curve's own (``baseline_map``, ``baseline_ap``); else, for mAP, the
+    detector's ``baseline_map`` given by the caller; else the largest of ``curves``' baselines
+    (an aggregate curve's models); else 100 points (nothing known).
+    """
+    if not column.endswith("_points"):
+        return CEILING
+    own = curve.baseline_points(column)
+    if own:
+        return own
+    if column == "dmap_points" and baseline_map:
+        return float(baseline_map)
+    known = [b for c in curves if (b := c.baseline_points(column))]
+    return max(known) if known else CEILING
+
+
+def _ceiling_words(column: str, value: float | None) -> str:
+    """How a total-loss ceiling was set, in words (for notes)."""
+    if column == "dmap_relative":
+        return "100 %"
+    if value is None or value >= CEILING:
+        return "100 points (no baseline known)"
+    return f"{value:.4g} points (the baseline)"
+
+
 def _column_values(curve: Curve, column: str, delta_e: np.ndarray, method: str,
                    ceiling: float) -> tuple[np.ndarray, np.ndarray, tuple[float, float] | None]:
     """Values and status codes (0 inside, -1 below, +1 above, 2 no data) of one curve column."""
@@ -317,7 +363,7 @@ def _column_values(curve: Curve, column: str, delta_e: np.ndarray, method: str,
     out[below] = y[0]
     status[below] = -1
     above = delta_e > hi
-    out[above] = ceiling
+    out[above] = max(ceiling, float(y[-1]))  # never below the curve (rounded table values)
     status[above] = 1
     return out, status, (lo, hi)
 
@@ -345,8 +391,7 @@ def predict_curve(
     curves, _ = tab.select(size)
     best = np.full(t.shape, np.nan)
     for c in curves:
-        ceiling = c.baseline_map if (column == "dmap_points" and c.baseline_map) else CEILING
-        v, _, _ = _column_values(c, column, t, m, ceiling)
+        v, _, _ = _column_values(c, column, t, m, points_ceiling(c, column, tab.curves))
         best = np.fmax(best, v)
     return best
 
@@ -477,10 +522,8 @@ def predict(
     for col in COLUMNS:
         best_v, best_s, rng = math.nan, 2, None
         for c in curves:
-            ceiling = CEILING
-            if col == "dmap_points":
-                ceiling = c.baseline_map or (float(baseline_map) if baseline_map else CEILING)
-            v, s, r = _column_values(c, col, t, m, ceiling)
+            v, s, r = _column_values(c, col, t, m,
+                                     points_ceiling(c, col, tab.curves, baseline_map))
             if r is not None and (math.isnan(best_v) or v[0] > best_v):
                 best_v, best_s, rng = float(v[0]), int(s[0]), r
                 if col == "dmap_points":
@@ -498,7 +541,7 @@ def predict(
                     f"with the value at ΔE {rng[0]:g} (an upper bound: loss grows with ΔE)")
         else:
             note = (f"ΔE {de:g} is beyond the table's range ({rng[0]:g}..{rng[1]:g}); no "
-                    f"extrapolation: answered with the ceiling (total loss)")
+                    f"extrapolation: total loss, {_ceiling_words(col, best_v)}")
         if (col == "dmap_relative" and tab.kind == "published-bounds" and baseline_map
                 and columns.get("dmap_points") and columns["dmap_points"].value is not None):
             pts = columns["dmap_points"].value
@@ -525,9 +568,16 @@ def predict(
             notes.append(f"sampling error of the measured ΔmAP points around ΔE {de:g}: SE "
                          + (f"{se[0]:.2f}" if se[0] == se[1] else f"{se[0]:.2f}-{se[1]:.2f}")
                          + " points")
-    for col, cp in columns.items():
-        if cp.status == "above-range":
-            notes.append(f"{col}: ΔE {de:g} is beyond the table ({cp.note})")
+    above = {col: cp for col, cp in columns.items() if cp.status == "above-range"}
+    if above:
+        rng = next(iter(above.values())).delta_e_range
+        assert rng is not None
+        labels = {"dmap_points": "ΔmAP", "dmap_relative": "ΔmAP",
+                  "dap_person_points": "person ΔAP", "dap_bicycle_points": "bicycle ΔAP"}
+        notes.append(f"ΔE {de:g} is beyond the table's range ({rng[0]:g}..{rng[1]:g}); no "
+                     "extrapolation: total loss, " + "; ".join(
+                         f"{labels[col]} {_ceiling_words(col, cp.value)}"
+                         for col, cp in above.items() if cp.value is not None))
     return Prediction(
         delta_e=de, size=size, size_used=size_used, columns=columns, table=tab, method=m,
         baseline_map=float(baseline_map) if baseline_map is not None else None,

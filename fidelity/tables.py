@@ -630,6 +630,7 @@ def prediction_table(tables: dict[str, Any], name: str = "coco1000-measured") ->
     for m, rows in tables["worst_case"].items():
         curves.append({"size": tables["models"][m]["size"], "model": m,
                        "baseline_map": tables["models"][m]["baseline_map"],
+                       "baseline_ap": tables["models"][m].get("baseline_ap") or {},
                        "points": complete_points(m, rows, lambda r, m=m: f"{m} worst case over "
                                                  f"{r['transforms_done']} transforms")})
     return {

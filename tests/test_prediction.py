@@ -184,6 +184,38 @@ def test_a_sizes_aggregate_curve_answers_before_its_per_model_curves():
     assert p.dmap_points == pytest.approx(1.2)
 
 
+def test_total_loss_beyond_the_range_is_the_baseline_in_points():
+    """Above the last ΔE every points column is the baseline itself (losing everything loses
+    the baseline), for an aggregate curve the largest of its models' baselines."""
+    def pts(values):
+        return [{"delta_e": de, "dmap_points": v, "dmap_relative": 100 * v / 40,
+                 "dap_person_points": v, "dap_bicycle_points": v, "worst_transform": None,
+                 "source": "test"} for de, v in values]
+
+    doc = {"name": "t", "kind": "measured", "interpolation": "linear", "curves": [
+        {"size": "n", "model": None, "points": pts([(0, 0.0), (12, 9.0)])},
+        {"size": "n", "model": "a", "baseline_map": 0.30, "baseline_ap": {"person": 0.5},
+         "points": pts([(0, 0.0), (12, 9.0)])},
+        {"size": "n", "model": "b", "baseline_map": 0.38, "baseline_ap": {"person": 0.45,
+                                                                          "bicycle": None},
+         "points": pts([(0, 0.0), (12, 8.0)])}]}
+    table = pr.parse_prediction_table(doc)
+    far = pr.predict(20.0, size="n", table=table, transforms=False)
+    assert far.dmap_points == pytest.approx(38.0)  # largest baseline mAP of the size's models
+    assert far.dap_person_points == pytest.approx(50.0)  # largest person baseline AP
+    assert far.dap_bicycle_points == 100.0  # no bicycle baseline known: 100 points
+    assert far.dmap_relative == 100.0
+    note = next(n for n in far.notes if "beyond the table's range (0..12)" in n)
+    assert "ΔmAP 38 points (the baseline); ΔmAP 100 %; person ΔAP 50 points" in note
+    assert "bicycle ΔAP 100 points (no baseline known)" in note
+    # the caller's detector baseline bounds an aggregate curve's mAP loss
+    assert pr.predict(20.0, size="n", table=table, transforms=False,
+                      baseline_map=25.0).dmap_points == pytest.approx(25.0)
+    assert pr.predict_curve([20.0], "dap_person_points", size="n", table=table)[0] == 50.0
+    with pytest.raises(InputFileError, match=r"curves\[0\]\.baseline_ap: expected an object"):
+        pr.parse_prediction_table({**doc, "curves": [{**doc["curves"][1], "baseline_ap": [1]}]})
+
+
 def test_measured_table_ranges_and_sizes():
     table = pr.parse_prediction_table(_measured_table())
     below = pr.predict(1.0, size="x", table=table, transforms=False)
