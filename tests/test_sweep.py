@@ -232,6 +232,26 @@ def test_cli_errors_are_one_line(tmp_path) -> None:
 
 
 @pytest.mark.shared
+def test_evaluate_names_missing_images_before_inference(coco, tmp_path) -> None:
+    import json
+
+    from click.testing import CliRunner
+
+    from fidelity.cli import main
+
+    images, ann, model = coco
+    data = json.loads(ann.read_text())
+    first = min(data["images"], key=lambda im: im["id"])
+    folder = tmp_path / "subset"
+    folder.mkdir()
+    (folder / first["file_name"]).symlink_to(images / first["file_name"])
+    r = CliRunner().invoke(main, ["evaluate", "--model", str(model), "--images", str(folder),
+                                  "--annotations", str(ann), "--limit", "3", "--no-progress"])
+    assert r.exit_code == 2 and "Traceback" not in r.output
+    assert f"{folder}: 2 of the 3 annotated images to evaluate are missing, e.g. " in r.output
+
+
+@pytest.mark.shared
 def test_cli_evaluate_sweep_tables(coco, tmp_path) -> None:
     import json
 

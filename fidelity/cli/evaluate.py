@@ -54,6 +54,10 @@ def evaluate(model: str, images: str, annotations: str, limit: int | None, threa
     folder = Path(images)
     if not folder.is_dir():
         raise InputFileError(f"{folder}: image folder does not exist")
+    missing = [i for i in ids if not (folder / coco.imgs[i]["file_name"]).is_file()]
+    if missing:  # before any inference
+        raise InputFileError(f"{folder}: {len(missing)} of the {len(ids)} annotated images "
+                             f"to evaluate are missing, e.g. {coco.imgs[missing[0]]['file_name']}")
     t0 = time.perf_counter()
     dets = {}
     for i in tqdm(ids, desc=det.name, unit="img", disable=not progress):
