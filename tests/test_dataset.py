@@ -179,6 +179,46 @@ def test_write_dataset_atomic_resumable_parallel(tmp_path) -> None:
         write_transformed_dataset(list_images(inplace), tmp_path / "x", "hue", 0, progress=False)
 
 
+def test_dataset_command(tmp_path) -> None:
+    """The CLI: one cell, a rerun that keeps what exists, the grid form with an unreachable
+    cell, and errors as one line with exit 2."""
+    from click.testing import CliRunner
+
+    from fidelity.cli import main
+
+    src = tmp_path / "src"
+    src.mkdir()
+    for i in range(3):
+        (src / f"{i:03d}.jpg").write_bytes(_jpeg(natural_image(seed=i), quality=80,
+                                                 subsampling=2))
+    before = {p.name: _sha(p) for p in src.iterdir()}
+
+    def run(*args: object):
+        return CliRunner().invoke(main, ["dataset", "--images", str(src), "--out",
+                                         str(tmp_path / "out"), "--no-progress",
+                                         *map(str, args)])
+
+    r = run("--transform", "contrast-inc", "--delta-e", "3")  # default: one worker per core
+    param = calibrate_transform("contrast-inc", 3.0).param
+    assert r.exit_code == 0, r.output
+    assert f"contrast-inc_de3: param {param:.6g}, wrote 3, kept 0 existing" in r.output
+    assert sorted(p.name for p in (tmp_path / "out/contrast-inc_de3").iterdir()) == sorted(before)
+    r = run("--transform", "contrast-inc", "--delta-e", "3", "--workers", "1")
+    assert "wrote 0, kept 3 existing" in r.output
+    r = run("--transform", "saturation-inc,hue", "--delta-e", "0,15")
+    assert r.exit_code == 0, r.output
+    assert "baseline: param -, wrote 3" in r.output
+    assert "saturation-inc_de15: skipped: " in r.output and "cannot reach" in r.output
+    assert "hue_de15: param" in r.output
+    assert {p.name: _sha(p) for p in src.iterdir()} == before  # originals untouched
+    for args, message in (((), "give --transform and --delta-e"),
+                          (("--transform", "contrast-up", "--delta-e", "3"), "contrast-up"),
+                          (("--transform", "hue", "--delta-e", "3", "--param", "5",
+                            "--workers", "0"), "--workers")):
+        r = run(*args)
+        assert r.exit_code == 2 and message in r.output and "Traceback" not in r.output, r.output
+
+
 @pytest.mark.shared
 def test_pull_mean_fast_path_equals_reference_on_real_images(shared) -> None:
     """The per-colour pull_mean (count-weighted mean Lab) gives the reference's codes exactly."""

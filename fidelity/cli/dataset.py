@@ -16,12 +16,17 @@ import click
               help="Chart ΔE target, or comma-separated targets (grid form); 0 = baseline.")
 @click.option("--param", type=float, default=None,
               help="Use this transform parameter instead of the calibrated one (single cell).")
-@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Parallel worker processes.")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Parallel worker processes (default: one per CPU core this process may use).")
 @click.option("--progress/--no-progress", default=True, show_default=True)
 def dataset(images: str, out: str, transform: str | None, delta_e: str | None,
-            param: float | None, workers: int, progress: bool) -> None:
+            param: float | None, workers: int | None, progress: bool) -> None:
     """Write transformed JPEGs (original quantization tables and subsampling); reruns resume."""
+    import os
+
+    if workers is None:
+        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
+            os.cpu_count() or 1)
     from fidelity.cli.sweep import _targets, _transforms
     from fidelity.dataset import list_images, write_grid, write_transformed_dataset
     from fidelity.errors import InvalidValueError
