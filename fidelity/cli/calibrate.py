@@ -91,6 +91,8 @@ def calibrate(chart: str, targets: str | None, transform_names: str | None,
         write_text_atomic(md_path, title + body + regen)
     if not quiet:
         click.echo(calibration_table_text(table))
-        click.echo(f"{len(table.entries)} entries in {seconds:.2f} s; "
-                   f"largest |ΔE - target| = "
-                   f"{max((abs(e.delta_e - e.target) for e in table.entries if e.reachable), default=0):.1e}")
+        reached = [abs(e.delta_e - e.target) for e in table.entries if e.reachable]
+        n = len(table.entries)
+        click.echo(f"{n} {'entry' if n == 1 else 'entries'} ({len(reached)} reachable) in "
+                   f"{seconds:.2f} s" + (f"; largest |ΔE - target| = {max(reached):.1e}"
+                                         if reached else ""))
