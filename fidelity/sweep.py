@@ -266,15 +266,19 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
               annotations: str | os.PathLike[str], out: str | os.PathLike[str],
               transforms: Sequence[str], targets: Sequence[float], *, threads: int | None = 1,
               provider: str = "auto", batch_commit: int = 25, order: str = "priority",
-              scorer: str = "auto", log: Callable[[str], None] | None = None, progress: bool = False) -> SweepStore:
+              scorer: str = "auto", log: Callable[[str], None] | None = None,
+              progress: bool = False) -> SweepStore:
     """Run (or resume) every cell of the grid for each model in order; returns the store.
 
     ``scorer``: COCO AP implementation (:data:`fidelity.cocoeval.COCO_SCORERS` or ``"auto"``);
-    it is recorded in the store's ``meta`` and in each cell's log line.
+    it is recorded in the store's ``meta`` and in each cell's log line. ``log`` receives one
+    line per finished cell, numbered ``[k/N]`` in the run order (N: every planned cell, k
+    counts finished ones too); ``progress`` adds a progress bar over a cell's images.
     """
     import platform
 
     import onnxruntime
+    from tqdm import tqdm
 
     from fidelity.cocoeval import evaluate_detections, load_annotated_images, resolve_scorer
     from fidelity.dataset import BASELINE, PixelMap, calibrated_param
@@ -304,7 +308,9 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     cache = ImageCache(img_dir, coco)
     params: dict[tuple[str, float], tuple[float | None, str | None]] = {}
     detectors: dict[int, Any] = {}
-    for index, grid in plan_phases(len(models), transforms, targets, order):
+    plan = plan_phases(len(models), transforms, targets, order)
+    total, k = sum(len(grid) for _, grid in plan), 0
+    for index, grid in plan:
         spec = models[index]
         if index not in detectors:
             detectors.clear()  # one session at a time
@@ -315,6 +321,7 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
         det = detectors[index]
         ids = all_ids[: spec.limit] if spec.limit else all_ids
         for transform, target in grid:
+            k += 1
             finished = store.cell(det.name, transform, target)
             if finished and (finished["status"] != "done" or finished["images"] == len(ids)):
                 continue
@@ -330,14 +337,16 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
                 if param is None:
                     store.finish_cell(det.name, transform, target, param=None,
                                       status="unreachable", reason=reason)
-                    say(f"{det.name} {transform} ΔE {target:g}: unreachable ({reason})")
+                    say(f"[{k}/{total}] {det.name} {transform} ΔE {target:g}: unreachable "
+                        f"({reason})")
                     continue
             t0 = time.perf_counter()
             pm = PixelMap.build(transform, param)
             have = store.stored_images(det.name, transform, target)
             todo = [i for i in ids if i not in have]
             batch: list[tuple[int, np.ndarray]] = []
-            for i in todo:
+            for i in tqdm(todo, desc=f"[{k}/{total}] {det.name} {transform} ΔE {target:g}",
+                          unit="img", disable=not progress, leave=False):
                 rgb, settings = cache.get(i)
                 seen = roundtrip_jpeg(pm(rgb), settings)
                 batch.append((i, det(seen)))
@@ -351,7 +360,7 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
             dt = time.perf_counter() - t0
             store.finish_cell(det.name, transform, target, param=param, status="done",
                               images=len(ids), score=score, seconds=dt)
-            say(f"{time.strftime('%H:%M:%S')} {det.name} {transform} ΔE {target:g} "
+            say(f"{time.strftime('%H:%M:%S')} [{k}/{total}] {det.name} {transform} ΔE {target:g} "
                 f"param={param} mAP={score.map:.4f} AP50={score.map50:.4f} "
                 f"person={score.ap.get('person')} images={len(ids)} new={len(todo)} "
                 f"{dt:.1f}s ({len(todo) / dt if dt else 0:.1f} img/s)")

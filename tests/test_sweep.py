@@ -213,6 +213,11 @@ def test_two_processes_share_one_models_cells(coco, tmp_path) -> None:
         assert a.keys() == b.keys() and all(np.array_equal(a[i], b[i]) for i in a)
     # no cell was run twice except, at most, the one the two orders met on
     done = [sum(" images=5 " in line for line in log.splitlines()) for log in logs]
+    # each cell line says where it stands in the run order: [k/N] over the 5 planned cells
+    ks = [[int(ln.split("[")[1].split("/")[0]) for ln in log.splitlines() if "/5] yolox_nano" in ln]
+          for log in logs]
+    assert sum(map(len, ks)) >= 5 and all(1 <= k <= 5 for kk in ks for k in kk)
+    assert all(kk == sorted(kk) for kk in ks)  # k counts in each process's own order
     assert len(expect) <= sum(done) <= len(expect) + 1, logs
 
 

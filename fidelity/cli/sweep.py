@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 import click
 
 from fidelity.cli.evaluate import scorer_option
@@ -56,9 +58,12 @@ def _transforms(text: str) -> list[str]:
                    "of one already running on the same --out.")
 @scorer_option
 @click.option("--rescore", is_flag=True, help="Only recompute scores from stored detections.")
-def sweep(models: str | None, images: str | None, annotations: str, transforms: str, targets: str, out: str,
-          threads: int, provider: str, order: str, scorer: str, rescore: bool) -> None:
-    """Run (or resume) the COCO sweep; progress is logged one line per cell on stderr.
+@click.option("--progress/--no-progress", default=None,
+              help="Progress bar over each cell's images (default: when stderr is a terminal).")
+def sweep(models: str | None, images: str | None, annotations: str, transforms: str,
+          targets: str, out: str, threads: int, provider: str, order: str, scorer: str,
+          rescore: bool, progress: bool | None) -> None:
+    """Run (or resume) the COCO sweep; one line per finished cell on stderr ([k/N] cells).
 
     \b
     Example:
@@ -80,7 +85,8 @@ def sweep(models: str | None, images: str | None, annotations: str, transforms: 
     specs = [ModelSpec.parse(m.strip()) for m in models.split(",") if m.strip()]
     store = run_sweep(specs, images, annotations, out, _transforms(transforms),
                       _targets(targets), threads=threads, provider=provider, order=order,
-                      scorer=scorer)
+                      scorer=scorer,
+                      progress=sys.stderr.isatty() if progress is None else progress)
     cells = store.cells()
     done = sum(c["status"] == "done" for c in cells)
     click.echo(f"{done} cells done, {len(cells) - done} unreachable; store {store.path}")
