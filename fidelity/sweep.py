@@ -367,6 +367,55 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     return store
 
 
+def sweep_status(store: SweepStore, pace_cells: int = 10) -> list[dict[str, Any]]:
+    """Where a sweep stands, per registered model, from the store alone (no annotations).
+
+    For each model: ``images`` (the image count its cells are run on: its registered limit,
+    else the image folder's count), ``planned`` (cells of the grid the store last ran:
+    baseline and every transform at every non-zero target), ``done`` (on ``images`` images),
+    ``unreachable``, ``to_do`` (the rest), ``under_way`` (unfinished cells with stored
+    detections: ``(transform, target, stored images)``), ``images_to_do`` (detections still
+    missing over the cells to do), ``pace_s`` (median seconds between the last ``pace_cells``
+    finished cells of the model: wall time per cell, whatever else runs beside it; None with
+    fewer than 3) and ``left_s`` (``to_do * pace_s``, a rough guide). Safe while a sweep writes.
+    """
+    import datetime
+
+    meta = store.meta()
+    grid = meta.get("grid") or {}
+    planned = plan_cells(grid.get("transforms") or [], grid.get("targets") or [])
+    image_count = (meta.get("data") or {}).get("image_count")
+    stored: dict[tuple[str, str, float], int] = {
+        (m, t, float(e)): n for m, t, e, n in store.db.execute(
+            "SELECT model, transform, target, COUNT(*) FROM detections "
+            "GROUP BY model, transform, target")}
+    cells: dict[str, dict[tuple[str, float], dict[str, Any]]] = {}
+    for c in store.cells():
+        cells.setdefault(c["model"], {})[(c["transform"], float(c["target"]))] = c
+    out = []
+    for model, info in store.models().items():
+        n = info.get("limit_images") or image_count
+        mine = cells.get(model, {})
+        done = [c for c in mine.values() if c["status"] == "done" and c["images"] == n]
+        unreachable = [k for k, c in mine.items() if c["status"] == "unreachable"]
+        finished = {k for k, c in mine.items() if c["status"] == "unreachable" or
+                    (c["status"] == "done" and c["images"] == n)}
+        to_do = [k for k in planned if k not in finished]
+        under_way = [(t, e, stored[(model, t, e)]) for t, e in to_do  # more than last scored
+                     if stored.get((model, t, e), 0) > ((mine.get((t, e)) or {}).get("images")
+                                                        or 0)]
+        images_to_do = sum(max(0, (n or 0) - stored.get((model, t, e), 0)) for t, e in to_do)
+        stamps = sorted(datetime.datetime.strptime(c["finished"], "%Y-%m-%dT%H:%M:%SZ")
+                        for c in done if c.get("finished"))[-pace_cells:]
+        gaps = [(b - a).total_seconds() for a, b in zip(stamps, stamps[1:], strict=False)]
+        pace = float(np.median(gaps)) if len(gaps) >= 2 else None
+        out.append({"model": model, "images": n, "planned": len(planned), "done": len(done),
+                    "unreachable": len(unreachable), "to_do": len(to_do),
+                    "under_way": under_way, "images_to_do": images_to_do, "pace_s": pace,
+                    "left_s": None if pace is None else pace * len(to_do)})
+    return out
+
+
 def rescore(store: SweepStore, annotations: str | os.PathLike[str], method: str = "auto") -> int:
     """Recompute every done cell's scores from the stored detections (no inference)."""
     from fidelity.cocoeval import evaluate_detections, load_annotations, resolve_scorer

@@ -53,6 +53,43 @@ def test_plan_and_model_spec() -> None:
         ModelSpec.parse("m.onnx@x")
 
 
+def test_status_of_a_store_being_extended(tmp_path) -> None:
+    """Counts from a store built by hand: done on the model's count, unreachable, one cell
+    scored on fewer images and extended (under way), one not started; pace from timestamps."""
+    from click.testing import CliRunner
+
+    from fidelity.cli import main
+    from fidelity.sweep import sweep_status
+
+    s = SweepStore(tmp_path)
+    s.set_meta("grid", {"transforms": ["a", "b", "c"], "targets": [0, 3, 6]})
+    s.set_meta("data", {"image_count": 10})
+    s.register_model("m", "m.onnx", "0" * 64, 4, {})
+    s.register_model("all", "all.onnx", "1" * 64, None, {})
+    det = np.zeros((1, 6), np.float32)
+    for t, e in (("baseline", 0), ("a", 3), ("b", 3)):
+        s.finish_cell("m", t, e, param=1.0, status="done", images=4, seconds=1.0)
+    s.finish_cell("m", "c", 3, param=None, status="unreachable", reason="r")
+    s.finish_cell("m", "a", 6, param=1.0, status="done", images=2, seconds=1.0)  # before
+    s.add_detections("m", "a", 6, [(i, det) for i in range(3)])  # extension: 3 of 4 stored
+    with s.db:  # finished 60 s and 180 s apart: median pace 120 s
+        for (t, e), stamp in zip((("baseline", 0), ("a", 3), ("b", 3)),
+                                 ("2026-01-01T00:00:00Z", "2026-01-01T00:01:00Z",
+                                  "2026-01-01T00:04:00Z"), strict=True):
+            s.db.execute("UPDATE cells SET finished=? WHERE model='m' AND transform=? AND "
+                         "target=?", (stamp, t, float(e)))
+    m, full = sorted(sweep_status(s), key=lambda r: r["model"] != "m")
+    assert (m["images"], m["planned"], m["done"], m["unreachable"], m["to_do"]) == (4, 7, 3, 1, 3)
+    assert m["under_way"] == [("a", 6.0, 3)]
+    assert m["images_to_do"] == 1 + 4 + 4  # a@6 needs one more; b@6 and c@6 all four
+    assert m["pace_s"] == 120.0 and m["left_s"] == 360.0
+    assert (full["images"], full["done"], full["to_do"], full["pace_s"]) == (10, 0, 7, None)
+    r = CliRunner().invoke(main, ["sweep", "--status", "--out", str(tmp_path)])
+    assert r.exit_code == 0, r.output
+    assert "2.0 min per cell, about 0.1 h left" in r.output
+    assert "under way: a ΔE 6, 3 of 4 images stored" in r.output
+
+
 def test_store_survives_kill_9(tmp_path) -> None:
     """A process killed with SIGKILL keeps every committed batch; the store reopens cleanly."""
     script = textwrap.dedent(f"""

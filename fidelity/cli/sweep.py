@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from typing import Any
 
 import click
 
@@ -39,7 +40,8 @@ def _transforms(text: str) -> list[str]:
 @click.option("--models", default=None,
               help="Comma-separated ONNX files, each optionally PATH@N (first N images by id).")
 @click.option("--images", default=None, type=click.Path(file_okay=False))
-@click.option("--annotations", required=True, type=click.Path(dir_okay=False))
+@click.option("--annotations", type=click.Path(dir_okay=False),
+              help="COCO annotations of the images (needed except with --status).")
 @click.option("--transforms", default="all", show_default=True,
               help="'all' or comma-separated transform names.")
 @click.option("--targets", default="0,1,2,3,4,5,6,8,10,12,15,18,21,24", show_default=True,
@@ -58,11 +60,14 @@ def _transforms(text: str) -> list[str]:
                    "of one already running on the same --out.")
 @scorer_option
 @click.option("--rescore", is_flag=True, help="Only recompute scores from stored detections.")
+@click.option("--status", is_flag=True,
+              help="Only say where the store in --out stands (per model: cells done, to do, "
+                   "under way, pace); safe while a sweep runs.")
 @click.option("--progress/--no-progress", default=None,
               help="Progress bar over each cell's images (default: when stderr is a terminal).")
-def sweep(models: str | None, images: str | None, annotations: str, transforms: str,
+def sweep(models: str | None, images: str | None, annotations: str | None, transforms: str,
           targets: str, out: str, threads: int, provider: str, order: str, scorer: str,
-          rescore: bool, progress: bool | None) -> None:
+          rescore: bool, status: bool, progress: bool | None) -> None:
     """Run (or resume) the COCO sweep; one line per finished cell on stderr ([k/N] cells).
 
     \b
@@ -74,6 +79,11 @@ def sweep(models: str | None, images: str | None, annotations: str, transforms: 
     from fidelity.sweep import ModelSpec, SweepStore, run_sweep
     from fidelity.sweep import rescore as do_rescore
 
+    if status:
+        _print_status(SweepStore(out, create=False))
+        return
+    if not annotations:
+        raise click.UsageError("--annotations is needed (except with --status)")
     if rescore:
         n = do_rescore(SweepStore(out, create=False), annotations, method=scorer)
         click.echo(f"rescored {n} cells in {out}")
@@ -90,3 +100,22 @@ def sweep(models: str | None, images: str | None, annotations: str, transforms: 
     cells = store.cells()
     done = sum(c["status"] == "done" for c in cells)
     click.echo(f"{done} cells done, {len(cells) - done} unreachable; store {store.path}")
+
+
+def _print_status(store: Any) -> None:
+    from fidelity.sweep import sweep_status
+
+    rows = sweep_status(store)
+    click.echo(f"store {store.path}")
+    click.echo(f"{'model':<18} {'images':>6} {' done':<9} {'unreachable':>11} {'to do':>5}  "
+               "pace and time left")
+    for r in rows:
+        pace = ("finished" if not r["to_do"] else "" if r["pace_s"] is None else
+                f"{r['pace_s'] / 60:.1f} min per cell, about {r['left_s'] / 3600:.1f} h left")
+        click.echo(f"{r['model']:<18} {r['images'] or '-':>6} {r['done']:>4}/{r['planned']:<4}"
+                   f"{r['unreachable']:>11} {r['to_do']:>5}  {pace}")
+        for t, e, n in r["under_way"]:
+            click.echo(f"{'':<18} under way: {t} ΔE {e:g}, {n} of {r['images']} images stored")
+    if any(r["to_do"] for r in rows):
+        click.echo("pace: median time between a model's last finished cells (whatever ran "
+                   "beside it); rerun the sweep's command line to resume")
