@@ -297,7 +297,8 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
                                 "pycocotools": _dist_version("pycocotools"),
                                 "faster-coco-eval": _dist_version("faster-coco-eval"),
                                 "fidelity": _fidelity_version()})
-    store.set_meta("data", {"images": str(img_dir), "annotations": str(annotations),
+    store.set_meta("data", {"images": str(Path(img_dir).resolve()),
+                            "annotations": str(Path(annotations).resolve()),
                             "image_count": len(all_ids)})
     store.record_scorer(method)
     store.set_meta("machine", {"platform": platform.platform(), "cpus": os.cpu_count(),

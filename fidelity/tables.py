@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from fidelity.errors import InputFileError
+from fidelity.fileio import portable_paths
 
 #: Classes called safety-critical by SAFE-COLOR.
 SAFETY_CLASSES: tuple[str, ...] = ("person", "bicycle")
@@ -649,7 +650,7 @@ def prediction_table(tables: dict[str, Any], name: str = "coco1000-measured") ->
                        | ({"earlier_runs": (info.get("settings") or {})["earlier"]}
                           if (info.get("settings") or {}).get("earlier") else {})
                        for m, info in tables["models"].items()},
-            "images": _portable_paths(meta.get("data")), "versions": meta.get("versions"),
+            "images": portable_paths(meta.get("data")), "versions": meta.get("versions"),
             "machine": meta.get("machine"),
             "cells_done": tables["cells_done"], "cells_unreachable": tables["cells_unreachable"],
             "worst_case": "per ΔE the transform with the largest ΔmAP in points; person and "
@@ -665,14 +666,6 @@ def prediction_table(tables: dict[str, Any], name: str = "coco1000-measured") ->
         },
         "curves": curves,
     }
-
-
-def _portable_paths(data: Any) -> Any:
-    """Provenance that names the data, not the machine: paths cut to their last two parts."""
-    if not isinstance(data, dict):
-        return data
-    return {k: str(Path(*Path(v).parts[-2:])) if isinstance(v, str) and os.sep in v else v
-            for k, v in data.items()}
 
 
 def _point(r: dict[str, Any], source: str) -> dict[str, Any]:

@@ -173,6 +173,17 @@ def test_collect_results_losses_standard_errors_and_bound(tmp_path: Path) -> Non
     assert {p.name for p in paths} >= {"validation.md", "validation.html", "validation.json",
                                        "predicted-vs-measured-safecolor-2025.png"}
     json.loads((tmp_path / "report" / "validation.json").read_text())
+    # a stored camera that is not in the suite given (renamed or removed) is left out, and said
+    from fidelity.validate import CameraCase
+
+    other = CameraCase("other", tmp_path / "other.toml", "D65", "0" * 64)
+    res = collect_results(st, tables=["safecolor-2025"], bound_table="safecolor-2025",
+                          suite=[other])
+    assert res["rows"] == [] and res["summary"]["not_in_suite"] == ["cam"]
+    assert "cam" not in res["cameras"]
+    write_report(res, tmp_path / "report2")
+    assert ("- Left out: 1 camera(s) in the store but not in the suite given (renamed or removed "
+            "camera files): cam.") in (tmp_path / "report2" / "validation.md").read_text()
 
 
 def test_cli_needs_models_unless_report_only(tmp_path: Path) -> None:
