@@ -52,13 +52,13 @@ shows up as colour error, as it should.
 from __future__ import annotations
 
 import math
+import tomllib
 from dataclasses import asdict, dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tomllib
 from numpy.typing import ArrayLike, NDArray
 
 from fidelity.errors import InputFileError, InvalidValueError, unknown_name

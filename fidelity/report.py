@@ -142,7 +142,7 @@ def build_report(
     report = {
         "schema_version": SCHEMA_VERSION,
         "command": command,
-        "created": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "created": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
         "mean_delta_e": m["mean_delta_e"],
         "max_delta_e": m["max_delta_e"],
         "worst_patch": m.get("worst_patch"),

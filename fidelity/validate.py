@@ -36,13 +36,13 @@ import os
 import platform
 import sys
 import time
+import tomllib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tomllib
 
 from fidelity.cocoeval import FOLDS  # interleaved image folds for standard errors
 from fidelity.errors import InputFileError, InvalidValueError

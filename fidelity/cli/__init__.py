@@ -24,6 +24,7 @@ COMMANDS: dict[str, str] = {
     "audit": "fidelity.cli.audit:audit",
     "check": "fidelity.cli.check:check",
     "gate": "fidelity.cli.gate:gate",
+    "info": "fidelity.cli.info:info",
     "predict": "fidelity.cli.predict:predict_cmd",
     "calibrate": "fidelity.cli.calibrate:calibrate",
     "dataset": "fidelity.cli.dataset:dataset",

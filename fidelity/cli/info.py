@@ -1,0 +1,53 @@
+"""``fidelity info``: what this installation can do (for bug reports and CI logs)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+@click.command()
+@click.option("--probe/--no-probe", default=True, show_default=True,
+              help="Probe which Mitsuba variant renders here (a few seconds).")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              default=None, help="Also write it as JSON.")
+def info(probe: bool, json_path: Path | None) -> None:
+    """Versions, Mitsuba variant, ONNX providers, chart detection, shared data found."""
+    from fidelity.environment import describe_environment
+
+    env = describe_environment(probe=probe)
+    click.echo(f"fidelity {env['fidelity']}, Python {env['python']}, {env['platform']}, "
+               f"{env['cpus']} CPU(s)")
+    deps = env["dependencies"]
+    click.echo("dependencies: " + ", ".join(f"{k} {v or 'MISSING'}" for k, v in deps.items()))
+    m = env["mitsuba"]
+    if not m["probed"]:
+        click.echo("mitsuba: not probed (--probe)")
+    elif m.get("variant"):
+        lib = f" with libLLVM {m['libllvm']}" if m.get("libllvm") else ""
+        click.echo(f"mitsuba: renders with {m['variant']}{lib}")
+    else:
+        click.echo(f"mitsuba: unavailable ({m.get('error')}); the closed form renders")
+    o = env["onnxruntime"]
+    click.echo(f"onnxruntime: providers {', '.join(o.get('available', []))}; detectors use "
+               f"{', '.join(o.get('used', []))}")
+    click.echo(f"COCO scorer (auto): {env['coco_scorer']}")
+    c = env["chart_detection"]
+    click.echo("chart detection: " + (f"usable (OpenCV {c['opencv']})" if c["usable"] else
+                                      f"unusable, give --corners ({c['error']})"))
+    s = env["shared"]
+    if s["folder"] is None:
+        click.echo(f"shared data: not found (looked in {s['looked_in']}); COCO commands need "
+                   "paths, the shared-data tests are skipped")
+    else:
+        click.echo(f"shared data: {s['folder']}: {len(s['models'])} ONNX models "
+                   f"({', '.join(s['models'])}), {s['coco_images']} COCO images, annotations "
+                   f"{', '.join(s['coco_annotations']) or 'none'}")
+    t = env["prediction_tables"]
+    click.echo(f"prediction tables: {', '.join(t['available'])} (default {t['default']})")
+    if json_path is not None:
+        from fidelity.fileio import write_json_atomic
+
+        write_json_atomic(json_path, env)
+        click.echo(f"wrote {json_path}")

@@ -1,0 +1,113 @@
+"""What this installation can do: versions, Mitsuba variant, ONNX providers, data found.
+
+:func:`describe_environment` gathers it as a JSON-ready dict for ``fidelity info`` (and for bug
+reports and CI logs): the version of every dependency the installed ``fidelity`` distribution
+declares (read from its metadata, so the list cannot drift from ``pyproject.toml``), which
+Mitsuba variant renders here and with which libLLVM (the probe of
+:func:`fidelity.mitsuba_render.probe_variant`, run in a subprocess), onnxruntime's execution
+providers and the ones a detector would use, the COCO scorer ``auto`` picks, whether chart
+detection (colour-checker-detection with OpenCV) is usable, the shared data folder and what it
+holds, and the prediction tables shipped.
+
+Nothing here changes state; a check that fails is reported as such, never raised.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import re
+from importlib import metadata
+from typing import Any
+
+__all__ = ["describe_environment", "dependency_versions"]
+
+
+def dependency_versions(distribution: str = "fidelity") -> dict[str, str | None]:
+    """Installed version of each requirement ``distribution`` declares (extras excluded);
+    None for a requirement that is not installed."""
+    try:
+        requires = metadata.requires(distribution) or []
+    except metadata.PackageNotFoundError:
+        return {}
+    out: dict[str, str | None] = {}
+    for req in requires:
+        if "extra ==" in req:
+            continue
+        name = re.split(r"[\s<>=!~;\[]", req, maxsplit=1)[0]
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = None
+    return out
+
+
+def _mitsuba(probe: bool) -> dict[str, Any]:
+    if not probe:
+        return {"probed": False}
+    from fidelity.errors import FidelityError
+    from fidelity.mitsuba_render import probe_variant
+
+    try:
+        p = probe_variant()
+    except FidelityError as exc:
+        return {"probed": True, "variant": None, "error": str(exc)}
+    return {"probed": True, "variant": p.variant, "libllvm": p.libllvm, "notes": list(p.notes)}
+
+
+def _onnxruntime() -> dict[str, Any]:
+    try:
+        import onnxruntime as ort
+    except ImportError as exc:  # pragma: no cover - a declared dependency
+        return {"error": str(exc)}
+    from fidelity.detectors import default_providers
+
+    return {"available": list(ort.get_available_providers()), "used": default_providers(),
+            "device": ort.get_device()}
+
+
+def _chart_detection() -> dict[str, Any]:
+    try:
+        import colour_checker_detection  # noqa: F401
+        import cv2
+    except ImportError as exc:
+        return {"usable": False, "error": f"{type(exc).__name__}: {exc}"}
+    return {"usable": True, "opencv": cv2.__version__}
+
+
+def _shared() -> dict[str, Any]:
+    from fidelity.resources import shared_dir
+
+    folder = shared_dir()
+    if folder is None:
+        return {"folder": None, "looked_in": os.environ.get("FIDELITY_SHARED") or "../shared "
+                "beside the source tree ($FIDELITY_SHARED unset)"}
+    ann = folder / "coco" / "annotations"
+    images = folder / "coco" / "val2017"
+    return {"folder": str(folder),
+            "models": sorted(p.name for p in (folder / "models").glob("*.onnx")),
+            "coco_images": sum(1 for _ in images.glob("*.jpg")) if images.is_dir() else 0,
+            "coco_annotations": sorted(p.name for p in ann.glob("*.json"))}
+
+
+def describe_environment(probe: bool = True) -> dict[str, Any]:
+    """The installation's capabilities (module docstring); ``probe``: run the Mitsuba probe
+    (a few seconds, subprocesses)."""
+    from fidelity import __version__
+    from fidelity.cocoeval import resolve_scorer
+    from fidelity.prediction import DEFAULT_TABLE, available_tables
+
+    return {
+        "fidelity": __version__,
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+        "cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+        else os.cpu_count(),
+        "dependencies": dependency_versions(),
+        "mitsuba": _mitsuba(probe),
+        "onnxruntime": _onnxruntime(),
+        "coco_scorer": resolve_scorer("auto"),
+        "chart_detection": _chart_detection(),
+        "shared": _shared(),
+        "prediction_tables": {"default": DEFAULT_TABLE, "available": available_tables()},
+    }

@@ -1,0 +1,56 @@
+"""``fidelity info``: the environment report against independent readings of the same facts."""
+
+from __future__ import annotations
+
+import json
+import re
+import tomllib
+from importlib import metadata
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from fidelity.cli import main
+from fidelity.resources import shared_dir
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_info_reports_every_declared_dependency_and_the_setup(tmp_path: Path) -> None:
+    r = CliRunner().invoke(main, ["info", "--no-probe", "--json", str(tmp_path / "env.json")])
+    assert r.exit_code == 0, r.output
+    env = json.loads((tmp_path / "env.json").read_text())
+    declared = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["dependencies"]
+    names = {re.split(r"[<>=!~;\[ ]", d, maxsplit=1)[0].lower() for d in declared}
+    assert {k.lower() for k in env["dependencies"]} == names
+    for name, version in env["dependencies"].items():
+        assert version == metadata.version(name), name
+        assert f"{name} {version}" in r.output
+    import onnxruntime
+
+    assert env["onnxruntime"]["available"] == onnxruntime.get_available_providers()
+    assert env["onnxruntime"]["used"][-1] == "CPUExecutionProvider"
+    assert env["mitsuba"] == {"probed": False} and "mitsuba: not probed" in r.output
+    assert env["prediction_tables"]["default"] in env["prediction_tables"]["available"]
+    folder = shared_dir()
+    if folder is None:
+        assert env["shared"]["folder"] is None and "shared data: not found" in r.output
+    else:
+        assert env["shared"]["folder"] == str(folder)
+        assert env["shared"]["models"] == sorted(p.name for p in folder.glob("models/*.onnx"))
+        assert env["shared"]["coco_images"] == len(list(folder.glob("coco/val2017/*.jpg")))
+
+
+def test_info_says_which_mitsuba_variant_renders() -> None:
+    from fidelity.environment import describe_environment
+    from fidelity.errors import FidelityError
+    from fidelity.mitsuba_render import probe_variant
+
+    m = describe_environment(probe=True)["mitsuba"]
+    try:
+        expect = probe_variant().variant
+    except FidelityError:
+        expect = None
+    assert m["variant"] == expect
+    if expect is not None:
+        assert any(note.startswith(f"{expect}: ok") for note in m["notes"])
