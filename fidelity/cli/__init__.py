@@ -64,7 +64,8 @@ def main() -> None:
 
     \b
     Start with:  fidelity check          (render the built-in camera, measure, predict, verdict)
-                 fidelity calibrate      (the SAFE-COLOR calibration table)
+                 fidelity audit IMAGE    (measure the chart in a render or photo)
+                 fidelity gate IMAGE --max-delta-e 3   (pass/fail for CI)
     """
 
 
