@@ -30,6 +30,8 @@ import json
 import os
 import platform
 import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree as ET
@@ -474,50 +476,74 @@ def write_html_report(path: str | os.PathLike[str], report: dict[str, Any],
 
 # --------------------------------------------------------------------------------- JUnit
 
-def junit_xml(report: dict[str, Any] | None, *, name: str, error: str | None = None,
-              seconds: float = 0.0) -> str:
-    """JUnit XML with one test case: the gate. A failed gate is a ``<failure>``, an error
-    (exit code 2) an ``<error>``; the measured values are ``<properties>``."""
-    suite = ET.Element("testsuite", name="fidelity", tests="1",
-                       failures="0", errors="0", skipped="0", time=f"{seconds:.3f}")
-    props = ET.SubElement(suite, "properties")  # JUnit: properties precede the test cases
-    case = ET.SubElement(suite, "testcase", classname="fidelity.gate", name=name,
-                         time=f"{seconds:.3f}")
-    if error is not None:
-        suite.set("errors", "1")
-        ET.SubElement(case, "error", message=error, type="FidelityError").text = error
-    elif report is not None:
-        pred = report.get("prediction") or {}
-        for key, value in (("mean_delta_e", report.get("mean_delta_e")),
-                           ("max_delta_e", report.get("max_delta_e")),
-                           ("worst_patch", report.get("worst_patch")),
-                           ("dmap_points", pred.get("dmap_points")),
-                           ("dmap_relative", pred.get("dmap_relative")),
-                           ("dap_person_points", pred.get("dap_person_points")),
-                           ("dap_bicycle_points", pred.get("dap_bicycle_points")),
-                           ("prediction_table", (pred.get("table") or {}).get("name")),
-                           ("input_sha256", report["provenance"].get("input_sha256")),
-                           ("fidelity_version", report["provenance"]["version"])):
-            ET.SubElement(props, "property", name=key, value="" if value is None else str(value))
-        verdict = report.get("verdict")
+@dataclass(frozen=True)
+class GateCase:
+    """One gated input for JUnit: its test-case ``name``, its ``report`` (None on error), the
+    ``error`` message (exit code 2) and the ``seconds`` it took."""
+
+    name: str
+    report: dict[str, Any] | None = None
+    error: str | None = None
+    seconds: float = 0.0
+
+
+def _junit_properties(report: dict[str, Any]) -> list[tuple[str, str]]:
+    pred = report.get("prediction") or {}
+    values = (("mean_delta_e", report.get("mean_delta_e")),
+              ("max_delta_e", report.get("max_delta_e")),
+              ("worst_patch", report.get("worst_patch")),
+              ("dmap_points", pred.get("dmap_points")),
+              ("dmap_relative", pred.get("dmap_relative")),
+              ("dap_person_points", pred.get("dap_person_points")),
+              ("dap_bicycle_points", pred.get("dap_bicycle_points")),
+              ("prediction_table", (pred.get("table") or {}).get("name")),
+              ("input_sha256", report["provenance"].get("input_sha256")),
+              ("fidelity_version", report["provenance"]["version"]))
+    return [(k, "" if v is None else str(v)) for k, v in values]
+
+
+def junit_xml(cases: Sequence[GateCase]) -> str:
+    """JUnit XML, one test case per gated input. A failed gate is a ``<failure>``, an error
+    (exit code 2) an ``<error>``; the measured values are ``<properties>``: of the test suite
+    when there is one case (JUnit's classic place), of each test case when there are several
+    (the form pytest's ``record_property`` writes, read by Jenkins and GitLab)."""
+    total = sum(c.seconds for c in cases)
+    suite = ET.Element("testsuite", name="fidelity", tests=str(len(cases)), failures="0",
+                       errors="0", skipped="0", time=f"{total:.3f}")
+    suite_props = ET.SubElement(suite, "properties")  # JUnit: properties precede test cases
+    failures = errors = 0
+    for c in cases:
+        case = ET.SubElement(suite, "testcase", classname="fidelity.gate", name=c.name,
+                             time=f"{c.seconds:.3f}")
+        if c.error is not None:
+            errors += 1
+            ET.SubElement(case, "error", message=c.error, type="FidelityError").text = c.error
+            continue
+        if c.report is None:
+            continue
+        props = suite_props if len(cases) == 1 else ET.SubElement(case, "properties")
+        for key, value in _junit_properties(c.report):
+            ET.SubElement(props, "property", name=key, value=value)
+        verdict = c.report.get("verdict")
         if verdict and not verdict["passed"]:
-            suite.set("failures", "1")
+            failures += 1
             ET.SubElement(case, "failure", message=verdict["message"],
                           type="GateFailure").text = verdict["message"]
-        ET.SubElement(case, "system-out").text = "\n".join(summary_lines(report))
-    if not len(props):
-        suite.remove(props)
-    root = ET.Element("testsuites", name="fidelity", tests="1",
-                      failures=suite.get("failures", "0"), errors=suite.get("errors", "0"))
+        ET.SubElement(case, "system-out").text = "\n".join(summary_lines(c.report))
+    suite.set("failures", str(failures))
+    suite.set("errors", str(errors))
+    if not len(suite_props):
+        suite.remove(suite_props)
+    root = ET.Element("testsuites", name="fidelity", tests=str(len(cases)),
+                      failures=str(failures), errors=str(errors))
     root.append(suite)
     ET.indent(root)
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
-def write_junit(path: str | os.PathLike[str], report: dict[str, Any] | None, *, name: str,
-                error: str | None = None, seconds: float = 0.0) -> Path:
+def write_junit(path: str | os.PathLike[str], cases: Sequence[GateCase]) -> Path:
     """Write JUnit XML atomically (see :func:`junit_xml`)."""
-    return write_text_atomic(path, junit_xml(report, name=name, error=error, seconds=seconds))
+    return write_text_atomic(path, junit_xml(cases))
 
 
 # ------------------------------------------------------------------------------ terminal
@@ -569,6 +595,7 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
 __all__ = [
     "SCHEMA_VERSION",
     "build_report",
+    "GateCase",
     "junit_xml",
     "plot_delta_e_bars",
     "plot_prediction_curve",

@@ -71,6 +71,56 @@ def test_gate_pass_and_fail_on_delta_e(png, tmp_path):
     assert report["provenance"]["input_sha256"] in html
 
 
+def test_gate_several_images_one_junit_case_each(png, tmp_path):
+    """Three renders: one passes, one fails, one cannot be measured: exit 2, a JUnit suite of
+    three cases with their own properties, one JSON and HTML report per measured image."""
+    import shutil
+
+    path, de = png
+    good = tmp_path / "day.png"
+    shutil.copy(path, good)
+    worse = tmp_path / "dusk.png"
+    bad_srgb = apply_transform(CHART.srgb, "contrast-inc", 1.8)
+    write_png8(worse, draw_chart(bad_srgb))
+    worse_de = expected_delta_e(np.rint(bad_srgb * 255) / 255, CHART.lab)
+    limit = f"{de + 0.1:.3f}"
+    assert worse_de > de + 0.1
+    cut = _truncated_png(tmp_path)
+    out = tmp_path / "reports"
+    r = run("gate", good, worse, cut, "--corners", corners_of(), "--max-delta-e", limit,
+            "--junit", tmp_path / "j.xml", "--json", out, "--html", out)
+    assert r.exit_code == 2, r.output
+    assert f"{good}:\n  chart ΔE00: mean {de:.2f}" in r.stdout
+    assert re.search(rf"  FAIL: mean ΔE00 {worse_de:.2f} > ", r.stdout)
+    assert f"{cut}: error" in r.stdout and "truncated or corrupt" in r.stderr
+    assert "gate: 1 of 3 passed, 1 failed, 1 could not be measured" in r.stdout
+    suite = ET.parse(tmp_path / "j.xml").getroot().find("testsuite")
+    assert (suite.get("tests"), suite.get("failures"), suite.get("errors")) == ("3", "1", "1")
+    cases = suite.findall("testcase")
+    assert [c.get("name").split(":")[0] for c in cases] == [
+        f"colour fidelity of {p}" for p in (good, worse, cut)]
+    means = [float(c.find("properties/property[@name='mean_delta_e']").get("value"))
+             for c in cases[:2]]
+    assert means == pytest.approx([de, worse_de], abs=0.02)
+    assert cases[1].find("failure") is not None and cases[2].find("error") is not None
+    assert sorted(p.name for p in out.iterdir()) == ["day.png.html", "day.png.json",
+                                                     "dusk.png.html", "dusk.png.json"]
+    assert json.loads((out / "dusk.png.json").read_text())["verdict"]["passed"] is False
+    # without the broken one: exit 1; all passing: exit 0
+    assert run("gate", good, worse, "--corners", corners_of(), "--max-delta-e",
+               limit).exit_code == 1
+    assert run("gate", good, good.rename(tmp_path / "noon.png"), "--corners", corners_of(),
+               "--max-delta-e", limit).exit_code == 2  # day.png was renamed away: missing
+    ok = run("gate", tmp_path / "noon.png", "--corners", corners_of(), "--max-delta-e", limit)
+    assert ok.exit_code == 0
+    # two images of one name cannot share a report folder
+    (tmp_path / "a").mkdir()
+    shutil.copy(tmp_path / "noon.png", tmp_path / "a" / "noon.png")
+    r = run("gate", tmp_path / "noon.png", tmp_path / "a" / "noon.png", "--corners",
+            corners_of(), "--max-delta-e", limit, "--json", out)
+    assert r.exit_code == 2 and "several images are named noon.png" in one_error_line(r)
+
+
 def test_gate_on_predicted_person_loss(png):
     path, de = png
     # safecolor-2025, person: ΔAP < 1 at ΔE 3 and 100 (AP 0) at ΔE 24, chord between them

@@ -135,23 +135,39 @@ def make_criterion(max_delta_e: float | None, max_dmap: float | None, cls: str |
     return Criterion("max-dmap", float(max_dmap), cls or "all", unit)  # type: ignore[arg-type]
 
 
-def _fail(message: str, junit: Path | None, name: str, seconds: float) -> None:
-    """Report an error as one stderr line (and a JUnit error), exit 2."""
-    if junit is not None:
-        try:
-            from fidelity.report import write_junit
-
-            write_junit(junit, None, name=name, error=message, seconds=seconds)
-        except Exception:  # noqa: BLE001 - the error line below matters more
-            pass
+def _error_line(message: str) -> None:
     click.echo(f"fidelity: error: {message}", err=True)
-    sys.exit(EXIT_ERROR)
+
+
+def _write_junit(junit: Path, cases: list[Any]) -> None:
+    """Write the JUnit file; a failure to write it is an error (exit 2)."""
+    from fidelity.report import write_junit
+
+    try:
+        write_junit(junit, cases)
+    except (FidelityError, OSError) as exc:
+        _error_line(f"{junit}: cannot write JUnit XML: {exc}")
+        sys.exit(EXIT_ERROR)
+
+
+def _per_image_paths(images: tuple[Path, ...], folder: Path | None,
+                     suffix: str) -> list[Path | None]:
+    """Report paths of several images in ``folder``: the image's file name + ``suffix``."""
+    if folder is None:
+        return [None] * len(images)
+    names = [img.name for img in images]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise FidelityError(f"several images are named {', '.join(twice)}: their reports in "
+                            f"{folder} would collide; gate them in separate runs")
+    return [folder / f"{n}{suffix}" for n in names]
 
 
 @click.command()
-@click.argument("image", required=False, type=PATH)
+@click.argument("images", nargs=-1, type=PATH)
 @click.option("--corners", help="X1,Y1,...,X4,Y4: centres of the dark skin, bluish green, black "
-              "and white patches in IMAGE (default: the chart is found).")
+              "and white patches in IMAGE (default: the chart is found); with several images, "
+              "for all of them.")
 @click.option("--camera", help="Camera model (built-in name or TOML path) instead of an image.")
 @click.option("--max-delta-e", type=float, help="Pass when the chart's mean ΔE00 <= X.")
 @click.option("--max-dmap", type=float, help="Pass when the predicted ΔmAP (or class ΔAP) <= P.")
@@ -173,14 +189,16 @@ def _fail(message: str, junit: Path | None, name: str, seconds: float) -> None:
 @click.option("--illuminant", default="D65", show_default=True, help="Scene illuminant.")
 @click.option("--renderer", default="closed-form", show_default=True,
               help="Camera renderer: closed-form or mitsuba.")
-@click.option("--junit", type=PATH, help="Write JUnit XML (one test case: this gate).")
-@click.option("--json", "json_path", type=PATH, help="Write the JSON report.")
-@click.option("--html", "html_path", type=PATH, help="Write the HTML report.")
-def gate(image: Path | None, corners: str | None, camera: str | None, max_delta_e: float | None,
-         max_dmap: float | None, cls: str | None, unit: str, size: str, table: str | None,
-         encoding: str | None, exposure: str | None, layer: str | None,
-         colourspace: str | None, negatives: str, reference: str | None, illuminant: str,
-         renderer: str, junit: Path | None, json_path: Path | None,
+@click.option("--junit", type=PATH, help="Write JUnit XML (one test case per image or camera).")
+@click.option("--json", "json_path", type=click.Path(path_type=Path),
+              help="Write the JSON report (several images: a folder, one report per image).")
+@click.option("--html", "html_path", type=click.Path(path_type=Path),
+              help="Write the HTML report (several images: a folder, one report per image).")
+def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
+         max_delta_e: float | None, max_dmap: float | None, cls: str | None, unit: str,
+         size: str, table: str | None, encoding: str | None, exposure: str | None,
+         layer: str | None, colourspace: str | None, negatives: str, reference: str | None,
+         illuminant: str, renderer: str, junit: Path | None, json_path: Path | None,
          html_path: Path | None) -> None:
     """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 error.
 
@@ -188,57 +206,100 @@ def gate(image: Path | None, corners: str | None, camera: str | None, max_delta_
     fidelity gate render.exr --max-delta-e 3
     fidelity gate photo.jpg --corners 102,88,610,95,604,420,98,414 --max-delta-e 3
     fidelity gate --camera nikon-5100 --max-dmap 1 --class person --junit colour.xml
+    fidelity gate day.exr dusk.exr tunnel.exr --max-delta-e 3 --junit colour.xml
+
+    Several IMAGEs are gated one by one (one JUnit test case each; --json and --html name
+    folders that get IMAGE-NAME.json / .html); the exit code is 2 if any image could not be
+    measured, else 1 if any failed, else 0.
     """
-    if (image is None) == (camera is None):
-        raise click.UsageError("give an IMAGE or --camera, not both")
+    if images and camera is not None:
+        raise click.UsageError("give IMAGE(s) or --camera, not both")
+    if not images and camera is None:
+        raise click.UsageError("give one or more IMAGEs, or --camera")
     if camera is not None and any(v is not None for v in (corners, encoding, exposure, layer,
                                                           colourspace)):
         raise click.UsageError("--corners, --encoding, --exposure, --layer and --colourspace "
                                "apply to an IMAGE, not to --camera")
-    criterion_args = (max_delta_e, max_dmap, cls, unit)
-    name = f"colour fidelity of {image if image is not None else camera}"
-    t0 = time.perf_counter()
+    many = len(images) > 1
     try:
         from fidelity.fileio import check_outputs
 
-        check_outputs({"--junit": junit, "--json": json_path, "--html": html_path},
-                      {"IMAGE": image, "--camera": camera, "--table": table,
-                       "--reference": reference, "--illuminant": illuminant})
-    except FidelityError as exc:  # no JUnit file either: it may be the input named
-        _fail(str(exc), None, name, time.perf_counter() - t0)
-    try:
-        criterion = make_criterion(*criterion_args)
-        name += f": {criterion.describe()}"
-        if image is not None:
-            report, prediction, verdict, figure = image_report(
-                image, corners, command="gate", encoding=encoding, exposure=exposure,
-                layer=layer, reference=reference or "safecolor", illuminant=illuminant,
-                size=size, table=table, criterion=criterion,
-                location_figure=html_path is not None, negatives=negatives,
-                colourspace=colourspace)
-            protect: tuple[str, ...] = (str(image),)
+        if many:
+            json_paths = _per_image_paths(images, json_path, ".json")
+            html_paths = _per_image_paths(images, html_path, ".html")
         else:
-            report, prediction, verdict = camera_report(
-                camera or "", command="gate", illuminant=illuminant, renderer=renderer,
-                reference=reference or "scene", size=size, table=table, criterion=criterion)
-            protect, figure = (), None
-        assert verdict is not None
-        write_outputs(report, prediction, json_path=json_path, html_path=html_path,
-                      protect=protect, location_png=figure)
-        if junit is not None:
-            from fidelity.report import write_junit
+            json_paths, html_paths = [json_path], [html_path]
+        outputs: dict[str, Path | None] = {"--junit": junit}
+        for img, jp, hp in zip(images or (None,), json_paths, html_paths, strict=True):
+            outputs[f"--json ({img})" if many else "--json"] = jp
+            outputs[f"--html ({img})" if many else "--html"] = hp
+        check_outputs(outputs, {"--camera": camera, "--table": table, "--reference": reference,
+                                "--illuminant": illuminant}
+                      | {(f"IMAGE {img}" if many else "IMAGE"): img for img in images})
+    except FidelityError as exc:  # no JUnit file either: it may be the input named
+        _error_line(str(exc))
+        sys.exit(EXIT_ERROR)
 
-            write_junit(junit, report, name=name, seconds=time.perf_counter() - t0)
-    except click.ClickException:
-        raise
+    from fidelity.report import GateCase
+
+    try:
+        criterion = make_criterion(max_delta_e, max_dmap, cls, unit)
     except FidelityError as exc:
-        _fail(str(exc), junit, name, time.perf_counter() - t0)
-    except Exception as exc:  # noqa: BLE001 - a gate must answer 2, never a traceback
-        _fail(f"unexpected {type(exc).__name__}: {exc}".replace("\n", " "), junit, name,
-              time.perf_counter() - t0)
-    for line in _short(report):
-        click.echo(line)
-    sys.exit(verdict.exit_code)
+        if junit is not None:
+            subject = ", ".join(map(str, images)) if images else camera
+            _write_junit(junit, [GateCase(f"colour fidelity of {subject}", error=str(exc))])
+        _error_line(str(exc))
+        sys.exit(EXIT_ERROR)
+    cases: list[GateCase] = []
+    codes: list[int] = []
+    for img, jp, hp in zip(images or (None,), json_paths, html_paths, strict=True):
+        name = f"colour fidelity of {img if img is not None else camera}: {criterion.describe()}"
+        t0 = time.perf_counter()
+        try:
+            if img is not None:
+                report, prediction, verdict, figure = image_report(
+                    img, corners, command="gate", encoding=encoding, exposure=exposure,
+                    layer=layer, reference=reference or "safecolor", illuminant=illuminant,
+                    size=size, table=table, criterion=criterion,
+                    location_figure=hp is not None, negatives=negatives,
+                    colourspace=colourspace)
+                protect: tuple[str, ...] = tuple(str(i) for i in images)
+            else:
+                report, prediction, verdict = camera_report(
+                    camera or "", command="gate", illuminant=illuminant, renderer=renderer,
+                    reference=reference or "scene", size=size, table=table,
+                    criterion=criterion)
+                protect, figure = (), None
+            assert verdict is not None
+            write_outputs(report, prediction, json_path=jp, html_path=hp, protect=protect,
+                          location_png=figure)
+        except FidelityError as exc:
+            cases.append(GateCase(name, error=str(exc), seconds=time.perf_counter() - t0))
+        except Exception as exc:  # noqa: BLE001 - a gate must answer 2, never a traceback
+            message = f"unexpected {type(exc).__name__}: {exc}".replace("\n", " ")
+            cases.append(GateCase(name, error=message, seconds=time.perf_counter() - t0))
+        else:
+            cases.append(GateCase(name, report=report, seconds=time.perf_counter() - t0))
+        case = cases[-1]
+        if case.error is not None:
+            codes.append(EXIT_ERROR)
+            if many:
+                click.echo(f"{img}: error")
+            _error_line(case.error)
+            continue
+        codes.append(verdict.exit_code)
+        if many:
+            click.echo(f"{img}:")
+        for line in _short(report):
+            click.echo(("  " if many else "") + line)
+    if junit is not None:
+        _write_junit(junit, cases)
+    if many:
+        failed = sum(c == 1 for c in codes)
+        errors = sum(c == EXIT_ERROR for c in codes)
+        click.echo(f"gate: {codes.count(0)} of {len(codes)} passed, {failed} failed, "
+                   f"{errors} could not be measured")
+    sys.exit(EXIT_ERROR if EXIT_ERROR in codes else max(codes))
 
 
 def _short(report: dict[str, Any]) -> list[str]:
