@@ -79,11 +79,14 @@ def check_outputs(outputs: Mapping[str, PathLike | None],
     ``None`` (not given). An input that does not exist as a file is skipped (built-in names such
     as a camera or table name); an output is the same file as an input when both name one
     existing file (:func:`os.path.samefile`, so links and relative paths are seen through).
-    Raises :class:`InputFileError` naming the output, its option and the input.
+    Raises :class:`InputFileError` naming the output, its option and the input; also for an
+    output that is an existing folder.
     """
     given = {k: Path(v) for k, v in outputs.items() if v is not None}
     files = {k: Path(v) for k, v in inputs.items() if v is not None and Path(v).is_file()}
     for out_label, out in given.items():
+        if out.is_dir():
+            raise InputFileError(f"{out}: {out_label} names a folder; give a file name")
         if not out.exists():
             continue
         for in_label, src in files.items():

@@ -65,4 +65,6 @@ def test_check_outputs_sees_through_links_and_relative_paths(tmp_path: Path, mon
     check_outputs({"--json": "new.json", "--html": None}, {"IMAGE": src, "--table": "name"})
     with pytest.raises(InputFileError, match="named by both --json and --junit"):
         check_outputs({"--json": "r.xml", "--junit": "./r.xml"})
+    with pytest.raises(InputFileError, match="--html names a folder; give a file name"):
+        check_outputs({"--html": tmp_path})
     assert src.read_bytes() == b"x"

@@ -111,14 +111,18 @@ def test_gate_several_images_one_junit_case_each(png, tmp_path):
                limit).exit_code == 1
     assert run("gate", good, good.rename(tmp_path / "noon.png"), "--corners", corners_of(),
                "--max-delta-e", limit).exit_code == 2  # day.png was renamed away: missing
-    ok = run("gate", tmp_path / "noon.png", "--corners", corners_of(), "--max-delta-e", limit)
-    assert ok.exit_code == 0
+    ok = run("gate", tmp_path / "noon.png", "--corners", corners_of(), "--max-delta-e", limit,
+             "--json", out)  # an existing folder: the report goes in it
+    assert ok.exit_code == 0 and (out / "noon.png.json").is_file()
     # two images of one name cannot share a report folder
     (tmp_path / "a").mkdir()
     shutil.copy(tmp_path / "noon.png", tmp_path / "a" / "noon.png")
     r = run("gate", tmp_path / "noon.png", tmp_path / "a" / "noon.png", "--corners",
             corners_of(), "--max-delta-e", limit, "--json", out)
     assert r.exit_code == 2 and "several images are named noon.png" in one_error_line(r)
+    r = run("audit", tmp_path / "noon.png", "--corners", corners_of(), "--json", out,
+            "--html", out)
+    assert r.exit_code == 0 and {"noon.png.json", "noon.png.html"} <= {p.name for p in out.iterdir()}
 
 
 def test_gate_on_predicted_person_loss(png):

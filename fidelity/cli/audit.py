@@ -39,8 +39,10 @@ from fidelity.prediction import SIZES
 @click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
               help="Detector size class for the predicted loss.")
 @click.option("--table", default=None, help="Prediction table (name or JSON path).")
-@click.option("--json", "json_path", type=PATH, help="Write the JSON report here.")
-@click.option("--html", "html_path", type=PATH, help="Write the HTML report here.")
+@click.option("--json", "json_path", type=click.Path(path_type=Path),
+              help="Write the JSON report here (a folder: IMAGE-NAME.json in it).")
+@click.option("--html", "html_path", type=click.Path(path_type=Path),
+              help="Write the HTML report here (a folder: IMAGE-NAME.html in it).")
 @click.option("--quiet", "-q", is_flag=True, help="Print nothing.")
 def audit(image: Path, corners: str | None, encoding: str | None, exposure: str | None,
           layer: str | None, colourspace: str | None, negatives: str, reference: str,
@@ -53,6 +55,11 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
     """
     from fidelity.fileio import check_outputs
 
+    # an existing folder gets IMAGE-NAME.json / .html, as in `fidelity gate`
+    if json_path is not None and json_path.is_dir():
+        json_path = json_path / f"{image.name}.json"
+    if html_path is not None and html_path.is_dir():
+        html_path = html_path / f"{image.name}.html"
     check_outputs({"--json": json_path, "--html": html_path},
                   {"IMAGE": image, "--table": table, "--reference": reference,
                    "--illuminant": illuminant})

@@ -209,8 +209,8 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
     fidelity gate day.exr dusk.exr tunnel.exr --max-delta-e 3 --junit colour.xml
 
     Several IMAGEs are gated one by one (one JUnit test case each; --json and --html name
-    folders that get IMAGE-NAME.json / .html); the exit code is 2 if any image could not be
-    measured, else 1 if any failed, else 0.
+    folders that get IMAGE-NAME.json / .html, as an existing folder does for one image); the
+    exit code is 2 if any image could not be measured, else 1 if any failed, else 0.
     """
     if images and camera is not None:
         raise click.UsageError("give IMAGE(s) or --camera, not both")
@@ -224,11 +224,11 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
     try:
         from fidelity.fileio import check_outputs
 
-        if many:
-            json_paths = _per_image_paths(images, json_path, ".json")
-            html_paths = _per_image_paths(images, html_path, ".html")
-        else:
-            json_paths, html_paths = [json_path], [html_path]
+        # a folder (always so with several images) gets one report per image
+        json_paths = (_per_image_paths(images, json_path, ".json")
+                      if images and (many or (json_path and json_path.is_dir())) else [json_path])
+        html_paths = (_per_image_paths(images, html_path, ".html")
+                      if images and (many or (html_path and html_path.is_dir())) else [html_path])
         outputs: dict[str, Path | None] = {"--junit": junit}
         for img, jp, hp in zip(images or (None,), json_paths, html_paths, strict=True):
             outputs[f"--json ({img})" if many else "--json"] = jp
