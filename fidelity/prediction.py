@@ -397,6 +397,75 @@ def predict_curve(
 
 
 @dataclass(frozen=True)
+class DeltaELimit:
+    """The largest chart ΔE whose predicted loss stays within a limit (:func:`delta_e_limit`).
+
+    ``delta_e``: that ΔE (None: even the table's first point predicts more); ``status``:
+    ``"inside"`` (the loss reaches the limit inside the table's range), ``"whole-range"`` (it
+    stays within the limit up to the table's last ΔE; beyond it the ceiling, total loss,
+    applies) or ``"none"``; ``loss_at_limit``: the predicted loss there.
+    """
+
+    max_loss: float
+    column: str
+    delta_e: float | None
+    status: str
+    loss_at_limit: float | None
+    table: str
+    size_used: str
+    delta_e_range: tuple[float, float]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {"max_loss": self.max_loss, "column": self.column, "delta_e": self.delta_e,
+                "status": self.status, "loss_at_limit": self.loss_at_limit,
+                "table": self.table, "size_used": self.size_used,
+                "delta_e_range": list(self.delta_e_range)}
+
+
+def delta_e_limit(max_loss: float, column: str = "dmap_points", *, size: str = "any",
+                  table: PredictionTable | str | None = None, method: str | None = None,
+                  tol: float = 1e-6) -> DeltaELimit:
+    """The largest chart ΔE at which the predicted ``column`` loss is still <= ``max_loss``:
+    the inverse of :func:`predict_curve`, for setting a gate's ΔE threshold from a loss budget.
+
+    Predictions are non-decreasing in ΔE (each column is its running maximum before
+    interpolation, and the interpolations keep that order), so the ΔE values within the
+    budget form one interval from 0; its upper end is found by bisection to ``tol``. Searched
+    inside the range of the table's curves for ``size``; ``max_loss`` in the column's unit
+    (points, or percent of baseline for ``dmap_relative``).
+    """
+    tab = table if isinstance(table, PredictionTable) else load_prediction_table(table)
+    if column not in COLUMNS:
+        raise unknown_name("prediction column", column, COLUMNS)
+    if not math.isfinite(max_loss) or max_loss < 0:
+        raise InvalidValueError(f"loss limit {max_loss!r} must be a finite number >= 0")
+    curves, size_used = tab.select(size)
+    ranges = [(float(c.delta_e[0]), float(c.delta_e[-1])) for c in curves
+              if np.any(~np.isnan(c.values[column]))]
+    if not ranges:
+        raise InvalidValueError(f"table {tab.name!r} has no {column} data for size {size!r}")
+    lo, hi = min(r[0] for r in ranges), min(r[1] for r in ranges)
+
+    def f(x: float) -> float:
+        return float(predict_curve([x], column, size=size, table=tab, method=method)[0])
+
+    def result(de: float | None, status: str) -> DeltaELimit:
+        return DeltaELimit(float(max_loss), column, de, status,
+                           None if de is None else f(de), tab.name, size_used, (lo, hi))
+
+    if f(lo) > max_loss:
+        return result(None, "none")
+    if f(hi) <= max_loss:
+        return result(hi, "whole-range")
+    a, b = lo, hi  # f(a) <= max_loss < f(b)
+    while b - a > tol:
+        mid = 0.5 * (a + b)
+        a, b = (mid, b) if f(mid) <= max_loss else (a, mid)
+    return result(a, "inside")
+
+
+@dataclass(frozen=True)
 class Prediction:
     """The predicted detection loss for one chart ΔE (see :func:`predict`)."""
 
@@ -675,9 +744,11 @@ __all__ = [
     "SIZES",
     "ColumnPrediction",
     "Curve",
+    "DeltaELimit",
     "Prediction",
     "PredictionTable",
     "available_tables",
+    "delta_e_limit",
     "load_prediction_table",
     "parse_prediction_table",
     "predict",

@@ -810,8 +810,9 @@ def _scorer_words(scorers: Sequence[dict[str, Any]] | None) -> str:
 
 
 def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
-                    plots: Sequence[str] = ()) -> str:
-    """The Markdown report."""
+                    plots: Sequence[str] = (),
+                    limits: list[dict[str, Any]] | None = None) -> str:
+    """The Markdown report (``limits``: :func:`delta_e_limits`, after the paper comparison)."""
     meta = tables["meta"]
     lines = ["# COCO benchmark: measured cost of colour error", ""]
     lines.append(f"Cells finished: {tables['cells_done']} done, {tables['cells_unreachable']} "
@@ -908,6 +909,8 @@ def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
               "|---|---|---|"]
     for c in comparison:
         lines.append(f"| {c['claim']} | **{c['verdict']}** | {c['evidence']} |")
+    if limits:
+        lines += _limits_markdown(limits)
     rare_n = tables.get("rare_boxes")
     for m, rows in tables["worst_case"].items():
         rare_col = rare_n is not None and any("dmap_points_rare" in r for r in rows)
@@ -1023,19 +1026,74 @@ def write_report(store: Any, out_dir: str | os.PathLike[str],
     out = Path(out_dir)
     tables = build_tables(store, coco, progress=progress, images=images)
     comparison = compare_with_paper(tables)
+    limits = delta_e_limits(tables)
     plots = make_plots(tables)
-    md = report_markdown(tables, comparison, sorted(plots))
+    md = report_markdown(tables, comparison, sorted(plots), limits)
     written = {}
     for fname, data in plots.items():
         written[fname] = write_bytes_atomic(out / fname, data)
     written["report.md"] = write_text_atomic(out / "report.md", md)
     written["report.html"] = write_text_atomic(out / "report.html", report_html(md, plots))
     written["tables.json"] = write_json_atomic(out / "tables.json", _jsonable(
-        {"tables": {k: v for k, v in tables.items()}, "comparison": comparison}))
+        {"tables": {k: v for k, v in tables.items()}, "comparison": comparison,
+         "delta_e_limits": limits}))
     if prediction_path is not None:
         written["prediction"] = write_json_atomic(prediction_path,
                                                   _jsonable(prediction_table(tables, name)))
     return written
+
+
+#: Loss budgets of :func:`delta_e_limits`: the paper's 1 / 3 / 10, read both ways.
+LIMIT_BUDGETS: tuple[tuple[str, float], ...] = (
+    ("dmap_relative", 1.0), ("dmap_relative", 3.0), ("dmap_relative", 10.0),
+    ("dmap_points", 1.0), ("dmap_points", 3.0), ("dmap_points", 10.0))
+
+
+def delta_e_limits(tables: dict[str, Any]) -> list[dict[str, Any]]:
+    """The chart ΔE limits the measured worst cases imply, against the paper's ΔE 3 / 6 / 12.
+
+    For every curve of the measured prediction table (each size class's worst case over its
+    models, and each model's), the largest chart ΔE whose predicted loss stays within each of
+    :data:`LIMIT_BUDGETS` (:func:`fidelity.prediction.delta_e_limit`: the curves as ``fidelity
+    predict`` uses them, running maximum, linear between the measured ΔE).
+    """
+    from dataclasses import replace
+
+    from fidelity.prediction import delta_e_limit, parse_prediction_table
+
+    table = parse_prediction_table(_jsonable(prediction_table(tables)))
+    out = []
+    for curve in table.curves:
+        if len(curve.delta_e) < 2:  # only the baseline measured: nothing to say
+            continue
+        one = replace(table, curves=(curve,))
+        limits = []
+        for column, budget in LIMIT_BUDGETS:
+            lim = delta_e_limit(budget, column, size=curve.size, table=one)
+            limits.append({"column": column, "budget": budget, "delta_e": lim.delta_e,
+                           "status": lim.status})
+        out.append({"size": curve.size, "model": curve.model, "limits": limits})
+    return out
+
+
+def _limits_markdown(limits: list[dict[str, Any]]) -> list[str]:
+    def cell(x: dict[str, Any]) -> str:
+        if x["status"] == "none":
+            return "none"
+        return f"{x['delta_e']:.2f}" + ("+" if x["status"] == "whole-range" else "")
+
+    head = [f"≤ {b:g} %" if c == "dmap_relative" else f"≤ {b:g} pts" for c, b in LIMIT_BUDGETS]
+    lines = ["", "## ΔE limits our worst cases imply", "",
+             "The largest chart ΔE00 at which the worst-case ΔmAP stays within each budget, as "
+             "`fidelity predict --max-dmap P [--unit relative]` computes it from the curves "
+             "(running maximum, linear between measured ΔE). SAFE-COLOR's thresholds: ΔE 3 for "
+             "1 %, 6 for 3 %, 12 for 10 %. \"+\" = the budget holds over the whole table.", "",
+             "| curve | " + " | ".join(head) + " |", "|---|" + "---|" * len(head)]
+    for row in limits:
+        name = (f"size {row['size']} (worst of its models)" if row["model"] is None
+                else row["model"])
+        lines.append(f"| {name} | " + " | ".join(cell(x) for x in row["limits"]) + " |")
+    return lines
 
 
 def _jsonable(obj: Any) -> Any:

@@ -290,3 +290,78 @@ def test_prediction_dict_keys():
         assert key in d
     assert d["table"]["name"] == "safecolor-2025" and "provenance" in d["table"]
     json.dumps(d, allow_nan=False)
+
+
+def _one_curve(points, interpolation="linear"):
+    return pr.parse_prediction_table({
+        "name": "limit-test", "kind": "measured", "interpolation": interpolation, "curves": [
+            {"size": "n", "model": "m", "points": [
+                {"delta_e": de, "dmap_points": v, "dmap_relative": 10 * v,
+                 "dap_person_points": v, "dap_bicycle_points": None, "worst_transform": None,
+                 "source": "test"} for de, v in points]}]})
+
+
+def test_delta_e_limit_inverts_the_prediction_closed_form():
+    table = _one_curve([(0, 0.0), (6, 3.0), (12, 9.0)])
+    # chords: 0.5 points per ΔE to 6, then 1 per ΔE: 1 point at ΔE 2, 6 points at ΔE 9
+    assert pr.delta_e_limit(1.0, table=table).delta_e == pytest.approx(2.0, abs=1e-5)
+    lim = pr.delta_e_limit(6.0, table=table)
+    assert lim.status == "inside" and lim.delta_e == pytest.approx(9.0, abs=1e-5)
+    assert lim.loss_at_limit == pytest.approx(6.0, abs=1e-5)
+    assert pr.delta_e_limit(30.0, "dmap_relative", table=table).delta_e == pytest.approx(6.0, abs=1e-5)
+    # a dip is lifted to the running maximum: the loss stays at 1 from ΔE 3 to 6
+    dip = _one_curve([(0, 0.0), (3, 1.0), (6, 0.5), (9, 2.0)])
+    assert pr.delta_e_limit(1.0, table=dip).delta_e == pytest.approx(6.0, abs=1e-5)
+    whole = pr.delta_e_limit(9.0, table=table)
+    assert whole.status == "whole-range" and whole.delta_e == 12.0
+    assert pr.delta_e_limit(1.0, "dap_bicycle_points", table=_measured_table_bicycle()).status == "none"
+    with pytest.raises(FidelityError, match="no dap_bicycle_points data"):
+        pr.delta_e_limit(1.0, "dap_bicycle_points", table=table)
+    with pytest.raises(FidelityError, match="must be a finite number >= 0"):
+        pr.delta_e_limit(-1.0, table=table)
+
+
+def _measured_table_bicycle():
+    """A curve whose first point (ΔE 1) already loses 2 points in every column."""
+    doc = {"name": "b", "kind": "measured", "interpolation": "linear", "curves": [
+        {"size": "n", "model": "m", "points": [
+            {"delta_e": de, "dmap_points": v, "dmap_relative": v, "dap_person_points": v,
+             "dap_bicycle_points": v, "worst_transform": None, "source": "t"}
+            for de, v in [(1, 2.0), (6, 3.0)]]}]}
+    return pr.parse_prediction_table(doc)
+
+
+@pytest.mark.parametrize("name", pr.available_tables())
+@pytest.mark.parametrize("column", ["dmap_points", "dmap_relative", "dap_person_points"])
+def test_delta_e_limit_agrees_with_a_root_finder_on_shipped_tables(name, column):
+    """Second method: scipy's brentq on predict_curve - budget, where the loss crosses it."""
+    from scipy.optimize import brentq
+
+    for budget in (1.0, 3.0, 10.0):
+        lim = pr.delta_e_limit(budget, column, table=name)
+        if lim.status != "inside":
+            continue
+        def g(x: float, budget: float = budget) -> float:
+            return pr.predict_curve([x], column, table=name)[0] - budget
+
+        root = brentq(g, lim.delta_e_range[0], lim.delta_e_range[1], xtol=1e-9)
+        # the crossing is unique unless the curve is flat at the budget (then brentq may land
+        # anywhere on the flat part, never beyond the limit)
+        assert root <= lim.delta_e + 1e-5
+        assert g(lim.delta_e) <= 1e-9 and g(lim.delta_e + 1e-4) > 0
+
+
+def test_predict_command_gives_the_delta_e_limit(tmp_path):
+    from click.testing import CliRunner
+
+    from fidelity.cli import main
+
+    r = CliRunner().invoke(main, ["predict", "--max-dmap", "1", "--table", "safecolor-2025",
+                                  "--json", str(tmp_path / "l.json")])
+    assert r.exit_code == 0, r.output
+    # the paper's table: ΔE 3 -> 1, so the limit is ΔE 3 exactly
+    assert "chart ΔE00 <= 3.00 keeps the predicted ΔmAP <= 1 points" in r.output
+    assert "fidelity gate IMAGE --max-delta-e 3.00" in r.output
+    assert json.loads((tmp_path / "l.json").read_text())["delta_e"] == pytest.approx(3.0)
+    r = CliRunner().invoke(main, ["predict", "--max-dmap", "1", "--delta-e", "2"])
+    assert r.exit_code == 2 and "give --delta-e X or --max-dmap P" in r.output

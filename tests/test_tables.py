@@ -106,6 +106,23 @@ def test_prediction_table_follows_schema(store) -> None:
     assert table.curves
 
 
+def test_delta_e_limits_by_hand(store) -> None:
+    """yolo11n's curve: ΔE 0 -> 0, ΔE 3 -> 5 points = 10 % (linear between): 1 point at ΔE
+    0.6, 3 points at 1.8; 1 % at 0.3, 3 % at 0.9; 10 % and 10 points hold to the end (ΔE 3)."""
+    from fidelity.tables import delta_e_limits, report_markdown
+
+    tables = build_tables(store)
+    limits = {(r["size"], r["model"]): r["limits"] for r in delta_e_limits(tables)}
+    assert ("n", "yolov8n") not in limits  # its ΔE 3 row is partial: only the baseline left
+    got = [(x["delta_e"], x["status"]) for x in limits[("n", "yolo11n")]]
+    want = [(0.3, "inside"), (0.9, "inside"), (3.0, "whole-range"),
+            (0.6, "inside"), (1.8, "inside"), (3.0, "whole-range")]
+    for (de, status), (w, ws) in zip(got, want, strict=True):
+        assert de == pytest.approx(w, abs=1e-5) and status == ws
+    md = report_markdown(tables, compare_with_paper(tables), (), delta_e_limits(tables))
+    assert "| yolo11n | 0.30 | 0.90 | 3.00+ | 0.60 | 1.80 | 3.00+ |" in md
+
+
 def test_report_files(store, tmp_path) -> None:
     out = tmp_path / "rep"
     written = write_report(store, out, tmp_path / "pred.json")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import click
@@ -23,16 +24,24 @@ from fidelity.prediction import CLASS_COLUMNS, INTERPOLATIONS, SIZES, available_
 @click.option("--baseline-map", type=float, default=None,
               help="The detector's baseline mAP@[.50:.95] in percent, if known: bounds the "
                    "relative loss under both readings of the paper's '%'.")
+@click.option("--max-dmap", type=float, default=None,
+              help="Instead of --delta-e: the largest chart ΔE whose predicted loss (of "
+                   "--class, in --unit) stays <= P, e.g. for a gate's --max-delta-e.")
+@click.option("--unit", type=click.Choice(["points", "relative"]), default="points",
+              show_default=True, help="Unit of --max-dmap: percentage points or % of baseline "
+                                      "(relative: --class all only).")
 @click.option("--json", "json_path", type=PATH, help="Write the prediction as JSON.")
 @click.option("--list-tables", is_flag=True, help="List the prediction tables and exit.")
 def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
-                method: str | None, baseline_map: float | None, json_path: Path | None,
-                list_tables: bool) -> None:
+                method: str | None, baseline_map: float | None, max_dmap: float | None,
+                unit: str, json_path: Path | None, list_tables: bool) -> None:
     """Predict what a chart ΔE costs detectors: ΔmAP (points and % of baseline), ΔAP person and
-    bicycle, and the SAFE-COLOR transform parameters that produce this ΔE on the chart.
+    bicycle, and the SAFE-COLOR transform parameters that produce this ΔE on the chart; or,
+    with --max-dmap, the largest chart ΔE that keeps the predicted loss within a budget.
 
     \b
     fidelity predict --delta-e 4.2 --class person --json predict.json
+    fidelity predict --max-dmap 1 --unit relative      # ΔE limit for <= 1 % of baseline mAP
     """
     if list_tables:
         from fidelity.prediction import DEFAULT_TABLE, load_prediction_table
@@ -42,11 +51,14 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
             mark = " (default)" if name == DEFAULT_TABLE else ""
             click.echo(f"{name}{mark}: {t.kind}, sizes {', '.join(t.sizes())} - {t.title}")
         return
-    if delta_e is None:
-        raise click.UsageError("--delta-e X is required")
+    if (delta_e is None) == (max_dmap is None):
+        raise click.UsageError("give --delta-e X or --max-dmap P")
     from fidelity.fileio import check_outputs
 
     check_outputs({"--json": json_path}, {"--table": table})
+    if max_dmap is not None:
+        _print_limit(max_dmap, cls, unit, size, table, method, json_path)
+        return
     p = predict(delta_e, size=size, table=table, method=method, baseline_map=baseline_map)
     b = "<= " if p.table.kind == "published-bounds" else ""
 
@@ -75,4 +87,36 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
         from fidelity.report import _clean
 
         write_json_atomic(json_path, _clean(p.to_dict()))
+        click.echo(f"wrote {json_path}")
+
+
+def _print_limit(max_dmap: float, cls: str, unit: str, size: str, table: str | None,
+                 method: str | None, json_path: Path | None) -> None:
+    from fidelity.errors import InvalidValueError
+    from fidelity.prediction import delta_e_limit
+
+    if unit == "relative" and cls != "all":
+        raise InvalidValueError(f"--class {cls}: a relative limit exists only for the mean over "
+                                "all classes; use points")
+    column = "dmap_relative" if unit == "relative" else CLASS_COLUMNS[cls]
+    lim = delta_e_limit(max_dmap, column, size=size, table=table, method=method)
+    what = {"dmap_points": "ΔmAP", "dmap_relative": "ΔmAP", "dap_person_points": "person ΔAP",
+            "dap_bicycle_points": "bicycle ΔAP"}[column]
+    budget = f"{what} <= {max_dmap:g} {'%' if unit == 'relative' else 'points'}"
+    where = f"table {lim.table}, detector size {lim.size_used}"
+    if lim.status == "none":
+        click.echo(f"no chart ΔE keeps the predicted {budget} ({where}: "
+                   f"{lim.delta_e_range[0]:g} already predicts more)")
+    elif lim.status == "whole-range":
+        click.echo(f"chart ΔE00 <= {lim.delta_e:.2f} (the whole table) keeps the predicted "
+                   f"{budget} ({where}); beyond ΔE {lim.delta_e_range[1]:g} nothing is known")
+    else:  # rounded down to 0.01 (the bisection's 1e-6 below the limit does not count)
+        de = math.floor((lim.delta_e + 1e-6) * 100) / 100
+        click.echo(f"chart ΔE00 <= {de:.2f} keeps the predicted {budget} ({where}; "
+                   f"{lim.loss_at_limit:.2f} at ΔE {lim.delta_e:.4f})")
+        click.echo(f"  gate with: fidelity gate IMAGE --max-delta-e {de:.2f}")
+    if json_path is not None:
+        from fidelity.fileio import write_json_atomic
+
+        write_json_atomic(json_path, lim.to_dict())
         click.echo(f"wrote {json_path}")
