@@ -11,6 +11,7 @@ from fidelity.cli.gate import (
     colourspace_option,
     image_report,
     negatives_option,
+    report_paths,
     write_outputs,
 )
 from fidelity.prediction import SIZES
@@ -56,10 +57,8 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
     from fidelity.fileio import check_outputs
 
     # an existing folder gets IMAGE-NAME.json / .html, as in `fidelity gate`
-    if json_path is not None and json_path.is_dir():
-        json_path = json_path / f"{image.name}.json"
-    if html_path is not None and html_path.is_dir():
-        html_path = html_path / f"{image.name}.html"
+    (json_path,) = report_paths((image,), json_path, ".json")
+    (html_path,) = report_paths((image,), html_path, ".html")
     check_outputs({"--json": json_path, "--html": html_path},
                   {"IMAGE": image, "--table": table, "--reference": reference,
                    "--illuminant": illuminant})

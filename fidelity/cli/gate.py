@@ -150,17 +150,20 @@ def _write_junit(junit: Path, cases: list[Any]) -> None:
         sys.exit(EXIT_ERROR)
 
 
-def _per_image_paths(images: tuple[Path, ...], folder: Path | None,
-                     suffix: str) -> list[Path | None]:
-    """Report paths of several images in ``folder``: the image's file name + ``suffix``."""
-    if folder is None:
+def report_paths(images: tuple[Path, ...], path: Path | None, suffix: str, *,
+                 folder: bool = False) -> list[Path | None]:
+    """Where each image's report goes: ``path`` itself, or, when ``path`` is a folder
+    (``folder``, or an existing directory), the image's file name + ``suffix`` in it."""
+    if path is None:
         return [None] * len(images)
+    if not (folder or path.is_dir()):
+        return [path] * len(images)
     names = [img.name for img in images]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise FidelityError(f"several images are named {', '.join(twice)}: their reports in "
-                            f"{folder} would collide; gate them in separate runs")
-    return [folder / f"{n}{suffix}" for n in names]
+                            f"{path} would collide; gate them in separate runs")
+    return [path / f"{n}{suffix}" for n in names]
 
 
 @click.command()
@@ -224,13 +227,12 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
     try:
         from fidelity.fileio import check_outputs
 
-        # a folder (always so with several images) gets one report per image
-        json_paths = (_per_image_paths(images, json_path, ".json")
-                      if images and (many or (json_path and json_path.is_dir())) else [json_path])
-        html_paths = (_per_image_paths(images, html_path, ".html")
-                      if images and (many or (html_path and html_path.is_dir())) else [html_path])
+        # a folder (always so with several images) gets one report per image (or camera)
+        subjects = images or (Path(camera or ""),)
+        json_paths = report_paths(subjects, json_path, ".json", folder=many)
+        html_paths = report_paths(subjects, html_path, ".html", folder=many)
         outputs: dict[str, Path | None] = {"--junit": junit}
-        for img, jp, hp in zip(images or (None,), json_paths, html_paths, strict=True):
+        for img, jp, hp in zip(subjects, json_paths, html_paths, strict=True):
             outputs[f"--json ({img})" if many else "--json"] = jp
             outputs[f"--html ({img})" if many else "--html"] = hp
         check_outputs(outputs, {"--camera": camera, "--table": table, "--reference": reference,
@@ -250,47 +252,50 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
             _write_junit(junit, [GateCase(f"colour fidelity of {subject}", error=str(exc))])
         _error_line(str(exc))
         sys.exit(EXIT_ERROR)
-    cases: list[GateCase] = []
-    codes: list[int] = []
-    for img, jp, hp in zip(images or (None,), json_paths, html_paths, strict=True):
-        name = f"colour fidelity of {img if img is not None else camera}: {criterion.describe()}"
+    image_options = dict(corners=corners, command="gate", encoding=encoding, exposure=exposure,
+                         layer=layer, reference=reference or "safecolor",
+                         illuminant=illuminant, size=size, table=table, criterion=criterion,
+                         negatives=negatives, colourspace=colourspace)
+
+    def measure(subject: Path, jp: Path | None, hp: Path | None) -> tuple[GateCase, int]:
+        """Gate one image (or the camera); its outputs written; errors become the case's."""
+        name = f"colour fidelity of {subject if images else camera}: {criterion.describe()}"
         t0 = time.perf_counter()
         try:
-            if img is not None:
+            if images:
                 report, prediction, verdict, figure = image_report(
-                    img, corners, command="gate", encoding=encoding, exposure=exposure,
-                    layer=layer, reference=reference or "safecolor", illuminant=illuminant,
-                    size=size, table=table, criterion=criterion,
-                    location_figure=hp is not None, negatives=negatives,
-                    colourspace=colourspace)
-                protect: tuple[str, ...] = tuple(str(i) for i in images)
+                    subject, location_figure=hp is not None, **image_options)
             else:
                 report, prediction, verdict = camera_report(
                     camera or "", command="gate", illuminant=illuminant, renderer=renderer,
                     reference=reference or "scene", size=size, table=table,
                     criterion=criterion)
-                protect, figure = (), None
+                figure = None
             assert verdict is not None
-            write_outputs(report, prediction, json_path=jp, html_path=hp, protect=protect,
-                          location_png=figure)
+            write_outputs(report, prediction, json_path=jp, html_path=hp,
+                          protect=tuple(map(str, images)), location_png=figure)
         except FidelityError as exc:
-            cases.append(GateCase(name, error=str(exc), seconds=time.perf_counter() - t0))
+            message = str(exc)
         except Exception as exc:  # noqa: BLE001 - a gate must answer 2, never a traceback
             message = f"unexpected {type(exc).__name__}: {exc}".replace("\n", " ")
-            cases.append(GateCase(name, error=message, seconds=time.perf_counter() - t0))
         else:
-            cases.append(GateCase(name, report=report, seconds=time.perf_counter() - t0))
-        case = cases[-1]
+            return GateCase(name, report=report, seconds=time.perf_counter() - t0), \
+                verdict.exit_code
+        return GateCase(name, error=message, seconds=time.perf_counter() - t0), EXIT_ERROR
+
+    cases: list[GateCase] = []
+    codes: list[int] = []
+    for subject, jp, hp in zip(subjects, json_paths, html_paths, strict=True):
+        case, code = measure(subject, jp, hp)
+        cases.append(case)
+        codes.append(code)
+        if many:
+            click.echo(f"{subject}:" if case.error is None else f"{subject}: error")
         if case.error is not None:
-            codes.append(EXIT_ERROR)
-            if many:
-                click.echo(f"{img}: error")
             _error_line(case.error)
             continue
-        codes.append(verdict.exit_code)
-        if many:
-            click.echo(f"{img}:")
-        for line in _short(report):
+        assert case.report is not None
+        for line in _short(case.report):
             click.echo(("  " if many else "") + line)
     if junit is not None:
         _write_junit(junit, cases)
