@@ -397,17 +397,15 @@ def sweep_status(store: SweepStore, pace_cells: int = 10) -> list[dict[str, Any]
     for model, info in store.models().items():
         n = info.get("limit_images") or image_count
         mine = cells.get(model, {})
-        done = [c for c in mine.values() if c["status"] == "done" and c["images"] == n]
-        unreachable = [k for k, c in mine.items() if c["status"] == "unreachable"]
-        finished = {k for k, c in mine.items() if c["status"] == "unreachable" or
-                    (c["status"] == "done" and c["images"] == n)}
-        to_do = [k for k in planned if k not in finished]
+        done = {k: c for k, c in mine.items() if c["status"] == "done" and c["images"] == n}
+        unreachable = {k for k, c in mine.items() if c["status"] == "unreachable"}
+        to_do = [k for k in planned if k not in done and k not in unreachable]
         under_way = [(t, e, stored[(model, t, e)]) for t, e in to_do  # more than last scored
                      if stored.get((model, t, e), 0) > ((mine.get((t, e)) or {}).get("images")
                                                         or 0)]
         images_to_do = sum(max(0, (n or 0) - stored.get((model, t, e), 0)) for t, e in to_do)
         stamps = sorted(datetime.datetime.strptime(c["finished"], "%Y-%m-%dT%H:%M:%SZ")
-                        for c in done if c.get("finished"))[-pace_cells:]
+                        for c in done.values() if c.get("finished"))[-pace_cells:]
         gaps = [(b - a).total_seconds() for a, b in zip(stamps, stamps[1:], strict=False)]
         pace = float(np.median(gaps)) if len(gaps) >= 2 else None
         out.append({"model": model, "images": n, "planned": len(planned), "done": len(done),
