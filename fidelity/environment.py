@@ -20,7 +20,14 @@ import re
 from importlib import metadata
 from typing import Any
 
-__all__ = ["describe_environment", "dependency_versions"]
+__all__ = ["available_cpus", "describe_environment", "dependency_versions"]
+
+
+def available_cpus() -> int:
+    """CPU cores this process may run on (its affinity where the OS tells, else all)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 def dependency_versions(distribution: str = "fidelity") -> dict[str, str | None]:
@@ -101,8 +108,7 @@ def describe_environment(probe: bool = True) -> dict[str, Any]:
         "fidelity": __version__,
         "python": platform.python_version(),
         "platform": platform.platform(),
-        "cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-        else os.cpu_count(),
+        "cpus": available_cpus(),
         "dependencies": dependency_versions(),
         "mitsuba": _mitsuba(probe),
         "onnxruntime": _onnxruntime(),

@@ -72,7 +72,7 @@ PathLike = str | os.PathLike[str]
 
 
 def check_outputs(outputs: Mapping[str, PathLike | None],
-                  inputs: Mapping[str, PathLike | None] = {}) -> None:  # noqa: B006 - read only
+                  inputs: Mapping[str, PathLike | None] | None = None) -> None:
     """Refuse, before any work is done, an output that is an input or is named twice.
 
     ``outputs`` and ``inputs`` map a label (the option, e.g. ``"--junit"``) to a path or
@@ -83,7 +83,8 @@ def check_outputs(outputs: Mapping[str, PathLike | None],
     output that is an existing folder.
     """
     given = {k: Path(v) for k, v in outputs.items() if v is not None}
-    files = {k: Path(v) for k, v in inputs.items() if v is not None and Path(v).is_file()}
+    files = {k: Path(v) for k, v in (inputs or {}).items()
+             if v is not None and Path(v).is_file()}
     for out_label, out in given.items():
         if out.is_dir():
             raise InputFileError(f"{out}: {out_label} names a folder; give a file name")

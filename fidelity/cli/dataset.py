@@ -22,11 +22,10 @@ import click
 def dataset(images: str, out: str, transform: str | None, delta_e: str | None,
             param: float | None, workers: int | None, progress: bool) -> None:
     """Write transformed JPEGs (original quantization tables and subsampling); reruns resume."""
-    import os
+    from fidelity.environment import available_cpus
 
     if workers is None:
-        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
-            os.cpu_count() or 1)
+        workers = available_cpus()
     from fidelity.cli.sweep import _targets, _transforms
     from fidelity.dataset import list_images, write_grid, write_transformed_dataset
     from fidelity.errors import InvalidValueError
