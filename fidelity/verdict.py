@@ -48,7 +48,7 @@ class Criterion:
             raise unknown_name("gate criterion", self.kind, CRITERIA)
         if not (isinstance(self.limit, (int, float)) and math.isfinite(self.limit)
                 and self.limit >= 0):
-            raise InvalidValueError(f"gate limit {self.limit!r} must be a finite number >= 0")
+            raise InvalidValueError(f"limit {self.limit!r} must be a finite number >= 0")
         if self.cls not in CLASS_COLUMNS:
             raise unknown_name("class", self.cls, CLASS_COLUMNS)
         if self.unit not in UNITS:
@@ -57,6 +57,12 @@ class Criterion:
             raise InvalidValueError(
                 f"--class {self.cls}: a relative limit exists only for the mean over all "
                 f"classes; use points")
+
+    @property
+    def column(self) -> str:
+        """The prediction column a ``max-dmap`` criterion reads (``dmap_relative`` or the
+        class's points column)."""
+        return "dmap_relative" if self.unit == "relative" else CLASS_COLUMNS[self.cls]
 
     def describe(self) -> str:
         """``"mean ΔE00 <= 3"`` or ``"predicted person ΔAP <= 1 points"``."""
@@ -112,8 +118,7 @@ def evaluate(mean_delta_e: float, prediction: Prediction | None, criterion: Crit
     if prediction is None:
         raise InvalidValueError("a --max-dmap gate needs a prediction")
     value = prediction.value(criterion.cls, criterion.unit)
-    column = "dmap_relative" if criterion.unit == "relative" else CLASS_COLUMNS[criterion.cls]
-    col = prediction.columns[column]
+    col = prediction.columns[criterion.column]
     what = criterion.describe().removeprefix("predicted ").split(" <=")[0]
     unit = "points" if criterion.unit == "points" else "%"
     if value is None:

@@ -360,7 +360,7 @@ def test_predict_command_gives_the_delta_e_limit(tmp_path):
                                   "--json", str(tmp_path / "l.json")])
     assert r.exit_code == 0, r.output
     # the paper's table: ΔE 3 -> 1, so the limit is ΔE 3 exactly
-    assert "chart ΔE00 <= 3.00 keeps the predicted ΔmAP <= 1 points" in r.output
+    assert "chart ΔE00 <= 3.00 keeps the predicted ΔmAP <= 1 percentage points" in r.output
     assert "fidelity gate IMAGE --max-delta-e 3.00" in r.output
     assert json.loads((tmp_path / "l.json").read_text())["delta_e"] == pytest.approx(3.0)
     r = CliRunner().invoke(main, ["predict", "--max-dmap", "1", "--delta-e", "2"])

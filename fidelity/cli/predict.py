@@ -92,17 +92,12 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
 
 def _print_limit(max_dmap: float, cls: str, unit: str, size: str, table: str | None,
                  method: str | None, json_path: Path | None) -> None:
-    from fidelity.errors import InvalidValueError
     from fidelity.prediction import delta_e_limit
+    from fidelity.verdict import Criterion
 
-    if unit == "relative" and cls != "all":
-        raise InvalidValueError(f"--class {cls}: a relative limit exists only for the mean over "
-                                "all classes; use points")
-    column = "dmap_relative" if unit == "relative" else CLASS_COLUMNS[cls]
-    lim = delta_e_limit(max_dmap, column, size=size, table=table, method=method)
-    what = {"dmap_points": "ΔmAP", "dmap_relative": "ΔmAP", "dap_person_points": "person ΔAP",
-            "dap_bicycle_points": "bicycle ΔAP"}[column]
-    budget = f"{what} <= {max_dmap:g} {'%' if unit == 'relative' else 'points'}"
+    criterion = Criterion("max-dmap", max_dmap, cls, unit)  # checks the class and unit
+    lim = delta_e_limit(max_dmap, criterion.column, size=size, table=table, method=method)
+    budget = criterion.describe().removeprefix("predicted ")
     where = f"table {lim.table}, detector size {lim.size_used}"
     if lim.status == "none":
         click.echo(f"no chart ΔE keeps the predicted {budget} ({where}: "
