@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import os
 import sqlite3
+import time
 import zlib
 from pathlib import Path
 from typing import Any, ClassVar
@@ -40,6 +41,35 @@ def unpack_detections(blob: bytes) -> np.ndarray:
     return np.frombuffer(zlib.decompress(blob), dtype=np.float32).reshape(-1, 6)
 
 
+#: Seconds a store waits for another process's lock before giving up.
+BUSY_TIMEOUT_S = 60.0
+
+
+def _enter_wal_mode(db: sqlite3.Connection, path: Path) -> None:
+    """Switch to WAL, waiting while another process holds the file.
+
+    SQLite answers ``PRAGMA journal_mode=WAL`` with "database is locked" at once, without its
+    busy handler, while another connection is creating or switching the same file (two sweep
+    processes started together on a new store), so the switch is retried with backoff up to
+    :data:`BUSY_TIMEOUT_S`.
+    """
+    deadline = time.monotonic() + BUSY_TIMEOUT_S
+    delay = 0.005
+    while True:
+        try:
+            mode = db.execute("PRAGMA journal_mode=WAL").fetchone()[0]
+        except sqlite3.OperationalError as exc:
+            if "locked" not in str(exc) or time.monotonic() > deadline:
+                raise InputFileError(f"{path}: cannot open the store: {exc}") from exc
+        else:
+            if str(mode).lower() == "wal":
+                return
+            if time.monotonic() > deadline:
+                raise InputFileError(f"{path}: cannot switch the store to WAL (mode {mode})")
+        time.sleep(delay)
+        delay = min(2 * delay, 0.25)
+
+
 class ResultsStore:
     """Base of the results stores: connection, provenance (``meta``) and registered models.
 
@@ -57,8 +87,8 @@ class ResultsStore:
         if not create and not self.path.is_file():
             raise InputFileError(f"{self.folder}: no {self.kind} store ({self.store_name}) in this folder")
         self.folder.mkdir(parents=True, exist_ok=True)
-        self.db = sqlite3.connect(str(self.path), timeout=60)
-        self.db.execute("PRAGMA journal_mode=WAL")
+        self.db = sqlite3.connect(str(self.path), timeout=BUSY_TIMEOUT_S)
+        _enter_wal_mode(self.db, self.path)
         self.db.execute("PRAGMA synchronous=FULL")
         self.db.executescript(_COMMON_SCHEMA + self.schema)
         self.db.commit()

@@ -59,3 +59,35 @@ def test_a_validation_keeps_one_image_set_per_model(tmp_path: Path) -> None:
     s.register_model("m", "m.onnx", "aa" * 32, 100, {})
     with pytest.raises(InvalidValueError, match="image limit"):
         s.register_model("m", "m.onnx", "aa" * 32, 250, {})
+
+
+def _open_together(folder: str, barrier: object, results: object) -> None:
+    import traceback
+
+    barrier.wait()  # type: ignore[attr-defined]
+    try:
+        store = SweepStore(folder)
+        store.set_meta("opened", True)
+        results.put("ok")  # type: ignore[attr-defined]
+    except Exception:  # noqa: BLE001 - reported to the test
+        results.put(traceback.format_exc())  # type: ignore[attr-defined]
+
+
+def test_two_processes_creating_one_store_at_once(tmp_path: Path) -> None:
+    """SQLite refuses the switch to WAL at once ("database is locked", no busy wait) while
+    another connection creates the same file; before the store retried it, about one process
+    in three failed here (two sweep processes started together on a new --out)."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context("fork")
+    failures = []
+    for i in range(30):
+        barrier, results = ctx.Barrier(2), ctx.Queue()
+        procs = [ctx.Process(target=_open_together, args=(str(tmp_path / f"s{i}"), barrier,
+                                                          results)) for _ in range(2)]
+        for p in procs:
+            p.start()
+        for p in procs:
+            p.join(timeout=120)
+        failures += [r for r in (results.get(timeout=10) for _ in procs) if r != "ok"]
+    assert not failures, failures[0]

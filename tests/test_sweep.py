@@ -236,7 +236,8 @@ def test_two_processes_share_one_models_cells(coco, tmp_path) -> None:
                               cwd=REPO, stderr=subprocess.PIPE, text=True)
              for order in ("priority", "reverse")]
     logs = [p.communicate(timeout=300)[1] for p in procs]
-    assert [p.returncode for p in procs] == [0, 0], logs
+    assert [p.returncode for p in procs] == [0, 0], "\n---\n".join(
+        "\n".join(log.splitlines()[-15:]) for log in logs)  # the tracebacks' ends, in full
     single = run_sweep([ModelSpec(model, 5)], images, ann, tmp_path / "one", *grid, threads=1,
                        log=lambda s: None)
     shared = SweepStore(tmp_path / "two")
