@@ -117,7 +117,7 @@ def require_file(path: str | os.PathLike[str], what: str = "input file") -> Path
 
 def portable_paths(data: Any) -> Any:
     """Provenance that names the data, not the machine: in a dict, every string that is a path
-    is cut to its last two parts (``/work/shared/coco/val2017`` -> ``coco/val2017``)."""
+    is cut to its last two parts (``/data/shared/coco/val2017`` -> ``coco/val2017``)."""
     if not isinstance(data, dict):
         return data
     return {k: str(Path(*Path(v).parts[-2:])) if isinstance(v, str) and os.sep in v else v
