@@ -177,11 +177,9 @@ def write_json_report(path: str | os.PathLike[str], report: dict[str, Any],
 
 
 def _refuse_inputs(path: str | os.PathLike[str], protect: tuple[str, ...]) -> None:
-    from fidelity.errors import InputFileError
+    from fidelity.fileio import check_outputs
 
-    for p in protect:
-        if p and Path(p).exists() and Path(path).exists() and Path(p).resolve() == Path(path).resolve():
-            raise InputFileError(f"{path}: refusing to write a report over an input file")
+    check_outputs({"report": path}, {f"input {i + 1}": p for i, p in enumerate(protect) if p})
 
 
 # --------------------------------------------------------------------------------- plots
