@@ -415,6 +415,14 @@ class DeltaELimit:
     size_used: str
     delta_e_range: tuple[float, float]
 
+    def rounded_down(self, decimals: int = 2) -> float | None:
+        """``delta_e`` rounded *down* to ``decimals`` places: a printed limit that is safe to gate
+        on (the bisection ends up to 1e-6 below the exact limit; that does not count)."""
+        if self.delta_e is None:
+            return None
+        scale = 10.0 ** decimals
+        return math.floor((self.delta_e + 1e-6) * scale) / scale
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
         return {"max_loss": self.max_loss, "column": self.column, "delta_e": self.delta_e,

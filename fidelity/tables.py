@@ -1071,7 +1071,7 @@ def delta_e_limits(tables: dict[str, Any]) -> list[dict[str, Any]]:
         for column, budget in LIMIT_BUDGETS:
             lim = delta_e_limit(budget, column, size=curve.size, table=one)
             limits.append({"column": column, "budget": budget, "delta_e": lim.delta_e,
-                           "status": lim.status})
+                           "delta_e_rounded_down": lim.rounded_down(), "status": lim.status})
         out.append({"size": curve.size, "model": curve.model, "limits": limits})
     return out
 
@@ -1080,14 +1080,15 @@ def _limits_markdown(limits: list[dict[str, Any]]) -> list[str]:
     def cell(x: dict[str, Any]) -> str:
         if x["status"] == "none":
             return "none"
-        return f"{x['delta_e']:.2f}" + ("+" if x["status"] == "whole-range" else "")
+        return f"{x['delta_e_rounded_down']:.2f}" + ("+" if x["status"] == "whole-range" else "")
 
     head = [f"≤ {b:g} %" if c == "dmap_relative" else f"≤ {b:g} pts" for c, b in LIMIT_BUDGETS]
     lines = ["", "## ΔE limits our worst cases imply", "",
              "The largest chart ΔE00 at which the worst-case ΔmAP stays within each budget, as "
              "`fidelity predict --max-dmap P [--unit relative]` computes it from the curves "
-             "(running maximum, linear between measured ΔE). SAFE-COLOR's thresholds: ΔE 3 for "
-             "1 %, 6 for 3 %, 12 for 10 %. \"+\" = the budget holds over the whole table.", "",
+             "(running maximum, linear between measured ΔE; rounded down to 0.01 as `predict` "
+             "prints it). SAFE-COLOR's thresholds: ΔE 3 for 1 %, 6 for 3 %, 12 for 10 %. "
+             "\"+\" = the budget holds over the whole table.", "",
              "| curve | " + " | ".join(head) + " |", "|---|" + "---|" * len(head)]
     for row in limits:
         name = (f"size {row['size']} (worst of its models)" if row["model"] is None

@@ -365,3 +365,18 @@ def test_predict_command_gives_the_delta_e_limit(tmp_path):
     assert json.loads((tmp_path / "l.json").read_text())["delta_e"] == pytest.approx(3.0)
     r = CliRunner().invoke(main, ["predict", "--max-dmap", "1", "--delta-e", "2"])
     assert r.exit_code == 2 and "give --delta-e X or --max-dmap P" in r.output
+
+
+def test_delta_e_limit_rounds_down_for_printing():
+    """A printed limit must be safe to gate on: never rounded up past the exact limit."""
+    from fidelity.prediction import DeltaELimit
+
+    def lim(de: float | None) -> DeltaELimit:
+        return DeltaELimit(1.0, "dmap_points", de, "inside", 1.0, "t", "n", (0.0, 24.0))
+
+    assert lim(3.6561).rounded_down() == 3.65  # round() would print 3.66, beyond the limit
+    assert lim(2.9999995).rounded_down() == 3.00  # the bisection's last 1e-6 below 3 does not count
+    assert lim(2.998).rounded_down() == 2.99
+    assert lim(0.0).rounded_down() == 0.0
+    assert lim(6.4399).rounded_down(1) == 6.4
+    assert lim(None).rounded_down() is None

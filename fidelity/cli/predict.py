@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import click
@@ -105,8 +104,8 @@ def _print_limit(max_dmap: float, cls: str, unit: str, size: str, table: str | N
     elif lim.status == "whole-range":
         click.echo(f"chart ΔE00 <= {lim.delta_e:.2f} (the whole table) keeps the predicted "
                    f"{budget} ({where}); beyond ΔE {lim.delta_e_range[1]:g} nothing is known")
-    else:  # rounded down to 0.01 (the bisection's 1e-6 below the limit does not count)
-        de = math.floor((lim.delta_e + 1e-6) * 100) / 100
+    else:
+        de = lim.rounded_down()
         click.echo(f"chart ΔE00 <= {de:.2f} keeps the predicted {budget} ({where}; "
                    f"{lim.loss_at_limit:.2f} at ΔE {lim.delta_e:.4f})")
         click.echo(f"  gate with: fidelity gate IMAGE --max-delta-e {de:.2f}")
