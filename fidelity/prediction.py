@@ -416,12 +416,8 @@ class DeltaELimit:
     delta_e_range: tuple[float, float]
 
     def rounded_down(self, decimals: int = 2) -> float | None:
-        """``delta_e`` rounded *down* to ``decimals`` places: a printed limit that is safe to gate
-        on (the bisection ends up to 1e-6 below the exact limit; that does not count)."""
-        if self.delta_e is None:
-            return None
-        scale = 10.0 ** decimals
-        return math.floor((self.delta_e + 1e-6) * scale) / scale
+        """``delta_e`` as :func:`limit_rounded_down` prints it (None stays None)."""
+        return None if self.delta_e is None else limit_rounded_down(self.delta_e, decimals)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
@@ -429,6 +425,14 @@ class DeltaELimit:
                 "status": self.status, "loss_at_limit": self.loss_at_limit,
                 "table": self.table, "size_used": self.size_used,
                 "delta_e_range": list(self.delta_e_range)}
+
+
+def limit_rounded_down(delta_e: float, decimals: int = 2) -> float:
+    """A ΔE limit rounded *down* to ``decimals`` places: a printed limit that is safe to gate on
+    (:func:`delta_e_limit`'s bisection ends up to 1e-6 below the exact limit; that does not
+    count, so 2.9999995 prints as 3.00, while 3.6561 prints as 3.65, not 3.66)."""
+    scale = 10.0 ** decimals
+    return math.floor((delta_e + 1e-6) * scale) / scale
 
 
 def delta_e_limit(max_loss: float, column: str = "dmap_points", *, size: str = "any",

@@ -1071,16 +1071,19 @@ def delta_e_limits(tables: dict[str, Any]) -> list[dict[str, Any]]:
         for column, budget in LIMIT_BUDGETS:
             lim = delta_e_limit(budget, column, size=curve.size, table=one)
             limits.append({"column": column, "budget": budget, "delta_e": lim.delta_e,
-                           "delta_e_rounded_down": lim.rounded_down(), "status": lim.status})
+                           "status": lim.status})
         out.append({"size": curve.size, "model": curve.model, "limits": limits})
     return out
 
 
 def _limits_markdown(limits: list[dict[str, Any]]) -> list[str]:
+    from fidelity.prediction import limit_rounded_down
+
     def cell(x: dict[str, Any]) -> str:
         if x["status"] == "none":
             return "none"
-        return f"{x['delta_e_rounded_down']:.2f}" + ("+" if x["status"] == "whole-range" else "")
+        return (f"{limit_rounded_down(x['delta_e']):.2f}"
+                + ("+" if x["status"] == "whole-range" else ""))
 
     head = [f"≤ {b:g} %" if c == "dmap_relative" else f"≤ {b:g} pts" for c, b in LIMIT_BUDGETS]
     lines = ["", "## ΔE limits our worst cases imply", "",
