@@ -1,4 +1,4 @@
-"""Benchmark: fidelity.colorimetry.delta_e_2000 against colour.delta_E(method="CIE 2000").
+"""Benchmark: fidelity.colour.colorimetry.delta_e_2000 against colour.delta_E(method="CIE 2000").
 
 Same inputs, same run, best of N repeats; prints the speed ratio and the largest difference.
 Writes reports/benchmarks/delta_e.json.  Run:  python -m benchmarks.bench_delta_e [--pairs N]
@@ -13,7 +13,7 @@ import colour
 import numpy as np
 
 from benchmarks.machine import best_time, machine_info
-from fidelity.colorimetry import delta_e_2000
+from fidelity.colour.colorimetry import delta_e_2000
 from fidelity.fileio import write_json_atomic
 
 

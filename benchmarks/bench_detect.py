@@ -1,4 +1,4 @@
-"""Benchmark: finding the chart (fidelity.detect) against colour-checker-detection's own outline.
+"""Benchmark: finding the chart (fidelity.chart.find) against colour-checker-detection's own outline.
 
 Synthetic scenes with known geometry (the test suite's cases: frontal, tilted with perspective,
 upside down, a quarter turn in a portrait image, mirrored, small), each with three cameras: the
@@ -23,11 +23,11 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.machine import best_time, machine_info
-from fidelity import colorimetry as cm
-from fidelity.audit import audit_pixels
-from fidelity.detect import detect_chart
+from fidelity.colour import colorimetry as cm
+from fidelity.chart.audit import audit_pixels
+from fidelity.chart.find import detect_chart
 from fidelity.fileio import write_json_atomic
-from fidelity.transforms import apply_transform
+from fidelity.prediction.transforms import apply_transform
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "tests"))
 from test_detect import CASES, CHART, GRID_CORNERS, grid_homography, map_points, scene  # noqa: E402

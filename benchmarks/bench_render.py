@@ -34,10 +34,10 @@ from typing import Any
 
 import numpy as np
 
-from fidelity.camera import Noise, load_camera
-from fidelity.colorimetry import delta_e_2000
+from fidelity.camera.model import Noise, load_camera
+from fidelity.colour.colorimetry import delta_e_2000
 from fidelity.fileio import atomic_output, write_json_atomic, write_text_atomic
-from fidelity.render import render_chart
+from fidelity.camera.render import render_chart
 
 TARGET = 0.02
 TIME_LIMIT_S = 30.0
@@ -48,7 +48,7 @@ def machine_info() -> dict[str, Any]:
     import drjit
     import mitsuba
 
-    from fidelity import mitsuba_render as mr
+    from fidelity.camera import mitsuba as mr
 
     cpu = platform.processor() or ""
     try:
@@ -92,7 +92,7 @@ def bench_cameras() -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from fidelity import mitsuba_render as mr
+    from fidelity.camera import mitsuba as mr
 
     cameras = bench_cameras()
     probe = mr.probe_variant()
@@ -330,7 +330,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--from-json", type=Path, default=None,
                     help="re-choose and re-write the reports from an earlier bench_render.json")
     args = ap.parse_args(argv)
-    from fidelity.render import CLOSED_FORM_PIXELS_PER_PATCH
+    from fidelity.camera.render import CLOSED_FORM_PIXELS_PER_PATCH
 
     if args.from_json:
         result = json.loads(args.from_json.read_text(encoding="utf-8"))

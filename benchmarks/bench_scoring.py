@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from machine import best_time, machine_info  # noqa: E402
 
 if TYPE_CHECKING:
-    from fidelity.cocoeval import CocoScore
+    from fidelity.coco.scoring import CocoScore
 
 
 def _max_difference(ref: dict[str, Any], score: CocoScore) -> float:
@@ -56,9 +56,9 @@ def main() -> int:
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
 
-    from fidelity.cocoeval import evaluate_detections, load_annotations
+    from fidelity.coco.scoring import evaluate_detections, load_annotations
     from fidelity.fileio import write_json_atomic
-    from fidelity.sweep import SweepStore
+    from fidelity.coco.sweep import SweepStore
 
     store = SweepStore(args.store, create=False)
     scorer_of = store.scorer_of

@@ -4,7 +4,7 @@
 reports and CI logs): the version of every dependency the installed ``fidelity`` distribution
 declares (read from its metadata, so the list cannot drift from ``pyproject.toml``), which
 Mitsuba variant renders here and with which libLLVM (the probe of
-:func:`fidelity.mitsuba_render.probe_variant`, run in a subprocess), onnxruntime's execution
+:func:`fidelity.camera.mitsuba.probe_variant`, run in a subprocess), onnxruntime's execution
 providers and the ones a detector would use, the COCO scorer ``auto`` picks, whether chart
 detection (colour-checker-detection with OpenCV) is usable, the shared data folder and what it
 holds, and the prediction tables shipped.
@@ -53,7 +53,7 @@ def _mitsuba(probe: bool) -> dict[str, Any]:
     if not probe:
         return {"probed": False}
     from fidelity.errors import FidelityError
-    from fidelity.mitsuba_render import probe_variant
+    from fidelity.camera.mitsuba import probe_variant
 
     try:
         p = probe_variant()
@@ -67,7 +67,7 @@ def _onnxruntime() -> dict[str, Any]:
         import onnxruntime as ort
     except ImportError as exc:  # pragma: no cover - a declared dependency
         return {"error": str(exc)}
-    from fidelity.detectors import default_providers
+    from fidelity.coco.detectors import default_providers
 
     return {"available": list(ort.get_available_providers()), "used": default_providers(),
             "device": ort.get_device()}
@@ -101,8 +101,8 @@ def describe_environment(probe: bool = True) -> dict[str, Any]:
     """The installation's capabilities (module docstring); ``probe``: run the Mitsuba probe
     (a few seconds, subprocesses)."""
     from fidelity import __version__
-    from fidelity.cocoeval import resolve_scorer
-    from fidelity.prediction import DEFAULT_TABLE, available_tables
+    from fidelity.coco.scoring import resolve_scorer
+    from fidelity.prediction.table import DEFAULT_TABLE, available_tables
 
     return {
         "fidelity": __version__,

@@ -1,6 +1,6 @@
 """Audit of synthetic chart images: known transform, known homography, known exposure.
 
-The images are drawn here, independently of fidelity.locate: every pixel is mapped back to chart
+The images are drawn here, independently of fidelity.chart.locate: every pixel is mapped back to chart
 grid coordinates through the inverse of a known homography and given the colour of the patch it
 falls in. The expected chart ΔE is computed with colour-science (a second implementation of
 sRGB -> XYZ -> Lab -> CIEDE2000), PNGs are written with Pillow and EXRs with the OpenEXR module.
@@ -17,10 +17,10 @@ import OpenEXR
 import pytest
 from PIL import Image as PILImage
 
-from fidelity.audit import audit_image, audit_pixels, exposure_from_neutrals
-from fidelity.charts import load_chart
+from fidelity.chart.audit import audit_image, audit_pixels, exposure_from_neutrals
+from fidelity.colour.charts import load_chart
 from fidelity.errors import FidelityError, InvalidValueError, UnknownNameError
-from fidelity.transforms import apply_transform
+from fidelity.prediction.transforms import apply_transform
 
 #: A known homography grid (u, v) -> image (x, y): rotation, anisotropic scale, perspective.
 KNOWN_H = np.array([
@@ -58,7 +58,7 @@ def corners_of(h: np.ndarray = KNOWN_H) -> str:
 
 
 def expected_delta_e(srgb: np.ndarray, reference_lab: np.ndarray) -> float:
-    """Mean CIEDE2000 by colour-science (independent of fidelity.colorimetry)."""
+    """Mean CIEDE2000 by colour-science (independent of fidelity.colour.colorimetry)."""
     xyz = colour.sRGB_to_XYZ(srgb)
     lab = colour.XYZ_to_Lab(xyz, colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"])
     return float(np.mean(colour.delta_E(lab, reference_lab, method="CIE 2000")))

@@ -6,7 +6,7 @@ import colour
 import numpy as np
 import pytest
 
-from fidelity.calibration import (
+from fidelity.prediction.calibration import (
     DEFAULT_TARGETS,
     TOLERANCE,
     calibrate_transform,
@@ -15,9 +15,9 @@ from fidelity.calibration import (
     load_calibration_table,
     transform_delta_e,
 )
-from fidelity.charts import load_chart
+from fidelity.colour.charts import load_chart
 from fidelity.errors import InvalidValueError, UnreachableTargetError
-from fidelity.transforms import TRANSFORMS
+from fidelity.prediction.transforms import TRANSFORMS
 
 D65_XY = np.array([0.3127, 0.3290])
 SRGB = colour.RGB_COLOURSPACES["sRGB"].copy()

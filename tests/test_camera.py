@@ -7,7 +7,7 @@ import colour
 import numpy as np
 import pytest
 
-from fidelity.camera import (
+from fidelity.camera.model import (
     DEFAULT_CAMERA,
     WHITE_PATCH_INDEX,
     CameraModel,
@@ -29,7 +29,7 @@ from fidelity.camera import (
     white_balance_gains,
 )
 from fidelity.errors import InputFileError, UnknownNameError
-from fidelity.spectral import load_illuminant, load_patch_spectra, scene_reference, tristimulus
+from fidelity.colour.spectral import load_illuminant, load_patch_spectra, scene_reference, tristimulus
 
 
 def _patches_under(ill: str = "D65"):
@@ -62,7 +62,7 @@ def test_real_camera_sensitivities_from_colour_science() -> None:
 
 
 def test_exposure_modes() -> None:
-    from fidelity.camera import Exposure
+    from fidelity.camera.model import Exposure
 
     p = np.array([[0.2, 0.4, 0.1], [0.5, 0.3, 0.2]])
     assert exposure_gain(Exposure("none"), p) == 1.0

@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from fidelity.cli import main
-from fidelity.prediction import DEFAULT_TABLE, prediction_dir
+from fidelity.prediction.table import DEFAULT_TABLE, prediction_dir
 
 
 def run(*args):
@@ -50,7 +50,7 @@ def _default_table_chord(delta_e: float) -> float:
 
 
 def test_no_arguments_prints_a_verdict_and_writes_the_report(default_check):
-    from fidelity.camera import DEFAULT_CAMERA
+    from fidelity.camera.model import DEFAULT_CAMERA
 
     folder, r = default_check
     assert r.exit_code in (0, 1), r.output
@@ -83,7 +83,7 @@ def test_readme_example_is_what_check_prints(default_check):
 
 def test_report_numbers_agree_with_colour_science(default_check):
     jsonschema = pytest.importorskip("jsonschema")
-    from fidelity.report import report_schema
+    from fidelity.report.chart import report_schema
 
     folder, _ = default_check
     doc = json.loads((folder / "fidelity-report" / "report.json").read_text())

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from click.testing import CliRunner
 
-from fidelity.charts import load_chart
+from fidelity.colour.charts import load_chart
 from fidelity.cli import main
 
 

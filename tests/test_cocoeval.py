@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fidelity.cocoeval import (
+from fidelity.coco.scoring import (
     COCO_SCORERS,
     coco_from_dict,
     detections_to_coco,
@@ -17,7 +17,7 @@ from fidelity.cocoeval import (
     load_annotations,
     paired_standard_error,
 )
-from fidelity.detectors import COCO80_CATEGORY_IDS, COCO80_NAMES
+from fidelity.coco.detectors import COCO80_CATEGORY_IDS, COCO80_NAMES
 from fidelity.errors import InputFileError, InvalidValueError
 
 
@@ -122,7 +122,7 @@ def test_shared_ground_truth_scores_one(shared) -> None:
 def test_load_annotated_images_names_what_is_missing(tmp_path) -> None:
     import json as _json
 
-    from fidelity.cocoeval import load_annotated_images
+    from fidelity.coco.scoring import load_annotated_images
     from fidelity.errors import InputFileError
 
     doc = {"images": [{"id": 2, "file_name": "b.jpg", "width": 4, "height": 4},
@@ -198,8 +198,8 @@ def test_faster_coco_eval_agrees_with_pycocotools_on_shared_annotations(shared) 
 @pytest.mark.shared
 def test_faster_coco_eval_agrees_on_real_detector_output(shared) -> None:
     """YOLOX-nano on 40 shared images: both scorers give the same numbers to 1e-4."""
-    from fidelity.detectors import Detector
-    from fidelity.jpeg import read_jpeg
+    from fidelity.coco.detectors import Detector
+    from fidelity.coco.jpeg import read_jpeg
 
     coco = load_annotations(shared / "coco/annotations/instances_val2017_subset.json")
     ids = sorted(coco.getImgIds())[:40]
@@ -211,7 +211,7 @@ def test_faster_coco_eval_agrees_on_real_detector_output(shared) -> None:
 
 
 def test_scorer_names() -> None:
-    from fidelity.cocoeval import resolve_scorer
+    from fidelity.coco.scoring import resolve_scorer
     from fidelity.errors import UnknownNameError
 
     assert resolve_scorer("auto") in COCO_SCORERS

@@ -8,7 +8,7 @@ import colour
 import numpy as np
 import pytest
 
-from fidelity.colorimetry import (
+from fidelity.colour.colorimetry import (
     MATRIX_LINEAR_SRGB_TO_XYZ,
     WHITEPOINT_D65_XYZ,
     delinearize_srgb,
@@ -164,7 +164,7 @@ BT2087_2020_TO_709 = np.array([[1.6605, -0.5876, -0.0728],
 
 
 def test_rgb_colourspace_matrix_against_the_published_bt2087_matrix() -> None:
-    from fidelity.colorimetry import matrix_rgb_to_linear_srgb
+    from fidelity.colour.colorimetry import matrix_rgb_to_linear_srgb
 
     np.testing.assert_allclose(matrix_rgb_to_linear_srgb("ITU-R BT.2020"), BT2087_2020_TO_709,
                                atol=6e-5)

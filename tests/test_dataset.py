@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from PIL import Image, ImageCms, JpegImagePlugin
 
-from fidelity.calibration import calibrate_transform
-from fidelity.dataset import (
+from fidelity.prediction.calibration import calibrate_transform
+from fidelity.coco.dataset import (
     CHANNELWISE,
     PixelMap,
     calibrated_param,
@@ -22,8 +22,8 @@ from fidelity.dataset import (
     write_transformed_dataset,
 )
 from fidelity.errors import InputFileError, UnreachableTargetError
-from fidelity.jpeg import decode_jpeg, encode_jpeg, read_jpeg
-from fidelity.transforms import TRANSFORMS
+from fidelity.coco.jpeg import decode_jpeg, encode_jpeg, read_jpeg
+from fidelity.prediction.transforms import TRANSFORMS
 
 
 def natural_image(h: int = 96, w: int = 128, seed: int = 0) -> np.ndarray:
@@ -222,8 +222,8 @@ def test_dataset_command(tmp_path) -> None:
 @pytest.mark.shared
 def test_pull_mean_fast_path_equals_reference_on_real_images(shared) -> None:
     """The per-colour pull_mean (count-weighted mean Lab) gives the reference's codes exactly."""
-    from fidelity.dataset import PullMeanWorkspace, pull_mean_uint8
-    from fidelity.jpeg import read_jpeg
+    from fidelity.coco.dataset import PullMeanWorkspace, pull_mean_uint8
+    from fidelity.coco.jpeg import read_jpeg
 
     files = sorted((shared / "coco/val2017").glob("*.jpg"))[:20]
     assert len(files) == 20
@@ -236,15 +236,15 @@ def test_pull_mean_fast_path_equals_reference_on_real_images(shared) -> None:
 
 
 def test_pull_mean_workspace_repeats_the_colorimetry() -> None:
-    """Per-colour Lab round trip of the pull_mean fast path against fidelity.colorimetry.
+    """Per-colour Lab round trip of the pull_mean fast path against fidelity.colour.colorimetry.
 
     Codes exact and Lab to 1e-12 on every code value of each channel, random triples, random
     Lab values in and far out of gamut (negative L, huge chroma: the clipped branch) and the
     near-black linear segments, with chunks small enough that several chunks and a short last
     chunk are used.
     """
-    from fidelity.colorimetry import lab_to_srgb, srgb_to_lab
-    from fidelity.dataset import PullMeanWorkspace, pull_mean_uint8, to_uint8
+    from fidelity.colour.colorimetry import lab_to_srgb, srgb_to_lab
+    from fidelity.coco.dataset import PullMeanWorkspace, pull_mean_uint8, to_uint8
 
     rng = np.random.default_rng(7)
     codes = rng.integers(0, 256, (5000, 3)).astype(np.uint8)

@@ -2,7 +2,7 @@
 
 Each image is drawn through a homography built here in closed form (rotation, scale,
 perspective; :func:`test_audit.draw_chart`), so the true corner-patch centres are known
-independently of fidelity.locate. Checked: the corners found lie within 3 % of a patch pitch of
+independently of fidelity.chart.locate. Checked: the corners found lie within 3 % of a patch pitch of
 the truth (the detector's own outline is off by 7-38 %; benchmarks/bench_detect.py), in every
 orientation the grid allows (turned, quarter-turned in a portrait image, mirrored) and on HDR
 input with NaN/Inf; the audit then measures the same ΔE as with the true
@@ -18,14 +18,14 @@ import pytest
 from click.testing import CliRunner
 from test_audit import GRID_CORNERS, draw_chart, expected_delta_e, map_points, write_exr, write_png8
 
-from fidelity import colorimetry as cm
-from fidelity.audit import audit_pixels
-from fidelity.charts import load_chart
+from fidelity.colour import colorimetry as cm
+from fidelity.chart.audit import audit_pixels
+from fidelity.colour.charts import load_chart
 from fidelity.cli import main
-from fidelity.detect import detect_chart, orientation_score
+from fidelity.chart.find import detect_chart, orientation_score
 from fidelity.errors import InvalidValueError, UnknownNameError
-from fidelity.locate import homography_from_points
-from fidelity.transforms import apply_transform
+from fidelity.chart.locate import homography_from_points
+from fidelity.prediction.transforms import apply_transform
 
 CHART = load_chart("safecolor")
 LINEAR = cm.linearize_srgb(CHART.srgb)

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from fidelity.detectors import (
+from fidelity.coco.detectors import (
     COCO80_CATEGORY_IDS,
     COCO80_NAMES,
     Detector,
@@ -176,7 +176,7 @@ def test_missing_model_file(tmp_path) -> None:
 def test_shared_models_find_annotated_people(shared) -> None:
     """Every shared model: layout from the model, and it finds a ground-truth person."""
     ann = json.loads((shared / "coco/annotations/instances_val2017_subset.json").read_text())
-    from fidelity.jpeg import read_jpeg
+    from fidelity.coco.jpeg import read_jpeg
 
     img = ann["images"][0]
     gts = [a["bbox"] for a in ann["annotations"]

@@ -1,13 +1,13 @@
-"""Tests for fidelity.emulation against closed forms and colour-science."""
+"""Tests for fidelity.coco.emulation against closed forms and colour-science."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from fidelity.camera import camera_from_dict
-from fidelity.colorimetry import delinearize_srgb, linearize_srgb
-from fidelity.emulation import (
+from fidelity.camera.model import camera_from_dict
+from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
+from fidelity.coco.emulation import (
     EMULATION_METHODS,
     _trilinear,
     camera_samples,
@@ -92,7 +92,7 @@ def test_quantisation_is_applied() -> None:
 
 def test_camera_samples_agree_with_the_renderer() -> None:
     """Independent paths: render_chart paints and samples an image; camera_samples does not."""
-    from fidelity.render import render_chart
+    from fidelity.camera.render import render_chart
 
     cam = camera_from_dict({"name": "n", "sensitivities": {"source": "Nikon 5100 (NPL)"},
                             "exposure": {"mode": "auto"},
@@ -119,7 +119,7 @@ def test_lut3d_reproduces_training_colours_better_in_sample() -> None:
                             "exposure": {"mode": "auto"},
                             "white_balance": {"method": "illuminant"},
                             "ccm": {"method": "fit"}, "tone": {"curve": "srgb"}})
-    from fidelity.colorimetry import delta_e_2000, srgb_to_lab
+    from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
 
     errs = {}
     for m in EMULATION_METHODS:
@@ -133,7 +133,7 @@ def test_lut3d_reproduces_training_colours_better_in_sample() -> None:
 def test_apply_uint8_equals_float_path_and_accuracy_is_small() -> None:
     emu = fit_emulation(matrix_camera(HUE_MATRIX), "D65", "root-polynomial", "chart")
     img = np.random.default_rng(7).integers(0, 256, (8, 9, 3), dtype=np.uint8)
-    from fidelity.dataset import to_uint8
+    from fidelity.coco.dataset import to_uint8
 
     np.testing.assert_array_equal(emu.apply_uint8(img), to_uint8(emu.apply(img / 255.0)))
     acc = emulation_accuracy(emu).to_dict()

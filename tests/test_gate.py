@@ -17,12 +17,12 @@ from click.testing import CliRunner
 from PIL import Image as PILImage
 from test_audit import corners_of, draw_chart, expected_delta_e, write_exr, write_png8
 
-from fidelity.charts import load_chart
+from fidelity.colour.charts import load_chart
 from fidelity.cli import main
 from fidelity.errors import InvalidValueError
-from fidelity.prediction import DEFAULT_TABLE, predict
-from fidelity.transforms import apply_transform
-from fidelity.verdict import Criterion, evaluate
+from fidelity.prediction.table import DEFAULT_TABLE, predict
+from fidelity.prediction.transforms import apply_transform
+from fidelity.prediction.verdict import Criterion, evaluate
 
 CHART = load_chart("safecolor")
 SRGB = apply_transform(CHART.srgb, "contrast-inc", 1.3)
@@ -147,7 +147,7 @@ def test_gate_camera(tmp_path):
 
 def test_report_json_matches_the_schema(png, tmp_path):
     jsonschema = pytest.importorskip("jsonschema")
-    from fidelity.report import report_schema
+    from fidelity.report.chart import report_schema
 
     path, _ = png
     r = run("audit", path, "--corners", corners_of(), "--json", tmp_path / "a.json")

@@ -1,7 +1,7 @@
 """Image reading: formats, channel naming, layers, and every kind of bad file.
 
 Files are written by independent writers (the OpenEXR module, Pillow; OpenImageIO only for
-formats they cannot write) and read back through fidelity.imageio.
+formats they cannot write) and read back through fidelity.chart.image.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from PIL import Image as PILImage
 
 from fidelity.errors import InputFileError
 from fidelity.fileio import file_sha256
-from fidelity.imageio import read_image
+from fidelity.chart.image import read_image
 
 RNG = np.random.default_rng(4)
 RGB = RNG.uniform(0.0, 4.0, size=(12, 17, 3)).astype(np.float32)

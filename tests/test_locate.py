@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fidelity.errors import InvalidValueError
-from fidelity.locate import (
+from fidelity.chart.locate import (
     apply_homography,
     grid_centres,
     homography_from_points,

@@ -10,13 +10,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fidelity.camera import camera_response, load_camera
-from fidelity.colorimetry import delta_e_2000
-from fidelity.render import ChartLayout, render_chart, sample_patches
-from fidelity.spectral import load_illuminant, load_patch_spectra
+from fidelity.camera.model import camera_response, load_camera
+from fidelity.colour.colorimetry import delta_e_2000
+from fidelity.camera.render import ChartLayout, render_chart, sample_patches
+from fidelity.colour.spectral import load_illuminant, load_patch_spectra
 
 mi = pytest.importorskip("mitsuba")
-mr = pytest.importorskip("fidelity.mitsuba_render")
+mr = pytest.importorskip("fidelity.camera.mitsuba")
 
 # installed libLLVM < 16, newest first (Debian's LLVM 15 makes Dr.Jit abort the process)
 OLD_LLVM = sorted(
@@ -139,7 +139,7 @@ def test_old_llvm_loaded_at_import_never_aborts_the_process() -> None:
     import subprocess
     import sys
 
-    code = ("import mitsuba\nfrom fidelity.render import render_chart\n"
+    code = ("import mitsuba\nfrom fidelity.camera.render import render_chart\n"
             "r = render_chart('ideal', 'D65', 'mitsuba', spp=4, pixels_per_patch=4)\n"
             "print('variant', r.variant)\n")
     env = dict(os.environ, DRJIT_LIBLLVM_PATH=OLD_LLVM[0])
@@ -154,9 +154,9 @@ def test_oblique_path_traced_render_is_found_and_audited_like_the_frontal_closed
     grey table through a perspective camera (tilted, turned); the audit finds the chart without
     corners and measures what it measures on the frontal closed form (same spectra, ideal
     camera, so scene-linear sRGB with the cyan's red below zero)."""
-    from fidelity.audit import audit_pixels
-    from fidelity.camera import ideal_sensitivities
-    from fidelity.spectral import cie_1931_cmfs
+    from fidelity.chart.audit import audit_pixels
+    from fidelity.camera.model import ideal_sensitivities
+    from fidelity.colour.spectral import cie_1931_cmfs
 
     probe = mr.probe_variant()
     mi_ = mr._activate(probe.variant)

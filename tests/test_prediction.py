@@ -10,7 +10,7 @@ import shutil
 import numpy as np
 import pytest
 
-from fidelity import prediction as pr
+from fidelity.prediction import table as pr
 from fidelity.errors import FidelityError, InputFileError, UnknownNameError
 from fidelity.resources import shared_dir
 
@@ -20,7 +20,7 @@ SC = "safecolor-2025"
 
 def test_default_table_is_the_measured_sweep_covering_its_plan():
     """The default is the project's measured table, complete: every model at every sweep ΔE."""
-    from fidelity.sweep import SWEEP_TARGETS
+    from fidelity.coco.sweep import SWEEP_TARGETS
 
     table = pr.load_prediction_table()
     assert pr.DEFAULT_TABLE == "coco1000-measured" == table.name and table.kind == "measured"
@@ -264,9 +264,9 @@ def test_transform_parameters_match_the_published_calibration():
 
 
 def test_transform_parameters_between_targets_reach_that_delta_e():
-    from fidelity.charts import load_chart
-    from fidelity.measure import chart_delta_e
-    from fidelity.transforms import apply_transform
+    from fidelity.colour.charts import load_chart
+    from fidelity.chart.measure import chart_delta_e
+    from fidelity.prediction.transforms import apply_transform
 
     chart = load_chart("safecolor")
     rows = pr.transform_parameters(2.5)
@@ -369,7 +369,7 @@ def test_predict_command_gives_the_delta_e_limit(tmp_path):
 
 def test_delta_e_limit_rounds_down_for_printing():
     """A printed limit must be safe to gate on: never rounded up past the exact limit."""
-    from fidelity.prediction import DeltaELimit
+    from fidelity.prediction.table import DeltaELimit
 
     def lim(de: float | None) -> DeltaELimit:
         return DeltaELimit(1.0, "dmap_points", de, "inside", 1.0, "t", "n", (0.0, 24.0))

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from fidelity.camera import DEFAULT_CAMERA
-from fidelity.charts import load_chart
+from fidelity.camera.model import DEFAULT_CAMERA
+from fidelity.colour.charts import load_chart
 from fidelity.cli import main
-from fidelity.colorimetry import WHITEPOINT_D65_XYZ, delta_e_2000
+from fidelity.colour.colorimetry import WHITEPOINT_D65_XYZ, delta_e_2000
 from fidelity.errors import UnknownNameError
-from fidelity.render import ChartLayout, render_chart, sample_patches
+from fidelity.camera.render import ChartLayout, render_chart, sample_patches
 
 SRGB_D65_XY = np.array([0.3127, 0.3290])
 
@@ -156,7 +156,7 @@ def test_render_cli_bad_camera_file_is_one_line_exit_2(tmp_path) -> None:
 
 def test_gamma_tone_curve_is_measured_as_srgb(tmp_path) -> None:
     """A gamma-2.2 encoding read as sRGB: expected error from colour-science's sRGB decoding."""
-    from fidelity.spectral import scene_reference
+    from fidelity.colour.spectral import scene_reference
 
     cam = tmp_path / "gamma.toml"
     cam.write_text('[white_balance]\nmethod = "illuminant"\n[tone]\ncurve = "gamma"\ngamma = 2.2\n')
@@ -172,7 +172,7 @@ def test_gamma_tone_curve_is_measured_as_srgb(tmp_path) -> None:
 @pytest.mark.parametrize(("name", "key"), [("D50", "D50"), ("F2", "FL2"), ("F11", "FL11"),
                                            ("LED", "LED-B4"), ("A", "A")])
 def test_named_illuminants_are_the_cie_tables(name: str, key: str) -> None:
-    from fidelity.spectral import load_illuminant
+    from fidelity.colour.spectral import load_illuminant
 
     ill = load_illuminant(name)
     np.testing.assert_allclose(ill.values, colour.SDS_ILLUMINANTS[key].values)

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from fidelity.errors import InputFileError, InvalidValueError
-from fidelity.resultstore import pack_detections, unpack_detections
-from fidelity.sweep import SweepStore
-from fidelity.validate import ValidationStore
+from fidelity.coco.store import pack_detections, unpack_detections
+from fidelity.coco.sweep import SweepStore
+from fidelity.coco.validate import ValidationStore
 
 
 def test_detections_round_trip_as_float32() -> None:

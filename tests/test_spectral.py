@@ -7,10 +7,10 @@ import colour
 import numpy as np
 import pytest
 
-from fidelity.charts import load_chart
-from fidelity.colorimetry import WHITEPOINT_D65_XYZ, delta_e_2000
+from fidelity.colour.charts import load_chart
+from fidelity.colour.colorimetry import WHITEPOINT_D65_XYZ, delta_e_2000
 from fidelity.errors import FidelityError, InputFileError, InvalidValueError, UnknownNameError
-from fidelity.spectral import (
+from fidelity.colour.spectral import (
     SPECTRA_SETS,
     WAVELENGTHS_NM,
     load_illuminant,

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from fidelity.errors import InputFileError, InvalidValueError
-from fidelity.sweep import (
+from fidelity.coco.sweep import (
     ModelSpec,
     SweepStore,
     pack_detections,
@@ -59,7 +59,7 @@ def test_status_of_a_store_being_extended(tmp_path) -> None:
     from click.testing import CliRunner
 
     from fidelity.cli import main
-    from fidelity.sweep import sweep_status
+    from fidelity.coco.sweep import sweep_status
 
     s = SweepStore(tmp_path)
     s.set_meta("grid", {"transforms": ["a", "b", "c"], "targets": [0, 3, 6]})
@@ -94,7 +94,7 @@ def test_store_survives_kill_9(tmp_path) -> None:
     """A process killed with SIGKILL keeps every committed batch; the store reopens cleanly."""
     script = textwrap.dedent(f"""
         import os, signal, numpy as np
-        from fidelity.sweep import SweepStore
+        from fidelity.coco.sweep import SweepStore
         s = SweepStore({str(tmp_path)!r})
         for i in range(5):
             s.add_detections("m", "hue", 3, [(i, np.full((2, 6), i, np.float32))])
@@ -130,12 +130,12 @@ def coco(shared):
 @pytest.mark.shared
 def test_ci_slice_sweep_resume_rescore(coco, tmp_path) -> None:
     """A few images, one model, two targets; checked against a direct second computation."""
-    from fidelity.calibration import calibrate_transform
-    from fidelity.cocoeval import evaluate_detections, load_annotations
-    from fidelity.dataset import reference_transform
-    from fidelity.detectors import Detector
-    from fidelity.jpeg import read_jpeg, roundtrip_jpeg
-    from fidelity.sweep import rescore, run_sweep
+    from fidelity.prediction.calibration import calibrate_transform
+    from fidelity.coco.scoring import evaluate_detections, load_annotations
+    from fidelity.coco.dataset import reference_transform
+    from fidelity.coco.detectors import Detector
+    from fidelity.coco.jpeg import read_jpeg, roundtrip_jpeg
+    from fidelity.coco.sweep import rescore, run_sweep
 
     images, ann, model = coco
     store = run_sweep([ModelSpec(model, 4)], images, ann, tmp_path,
@@ -170,7 +170,7 @@ def test_ci_slice_sweep_resume_rescore(coco, tmp_path) -> None:
                       ["contrast-inc", "saturation-inc"], [0, 15], threads=2, log=lambda s: None)
     assert {(c["transform"], c["target"]): c["finished"] for c in again.cells()} == before
 
-    from fidelity.cocoeval import resolve_scorer
+    from fidelity.coco.scoring import resolve_scorer
 
     assert [e["scorer"] for e in again.scorers()] == [resolve_scorer("auto")]
     assert again.scorer_of(again.cells()[0]) == resolve_scorer("auto")
@@ -191,7 +191,7 @@ def test_kill_9_mid_cell_then_resume(coco, tmp_path) -> None:
     images, ann, model = coco
     script = textwrap.dedent(f"""
         from pathlib import Path
-        from fidelity.sweep import ModelSpec, run_sweep
+        from fidelity.coco.sweep import ModelSpec, run_sweep
         run_sweep([ModelSpec(Path({str(model)!r}), 30)], {str(images)!r}, {str(ann)!r},
                   {str(tmp_path)!r}, [], [0], threads=1, batch_commit=2, log=lambda s: None)
     """)
@@ -210,7 +210,7 @@ def test_kill_9_mid_cell_then_resume(coco, tmp_path) -> None:
     kept = store.detections("yolox_nano", "baseline", 0)
     assert 4 <= len(kept) < 30, "kill came too late to test a mid-cell resume"
     assert store.cell("yolox_nano", "baseline", 0) is None
-    from fidelity.sweep import run_sweep
+    from fidelity.coco.sweep import run_sweep
 
     run_sweep([ModelSpec(model, 30)], images, ann, tmp_path, [], [0], threads=2,
               log=lambda s: None)
@@ -225,7 +225,7 @@ def test_kill_9_mid_cell_then_resume(coco, tmp_path) -> None:
 @pytest.mark.shared
 def test_two_processes_share_one_models_cells(coco, tmp_path) -> None:
     """Priority and reverse order on one store at once: every cell once, as one process has it."""
-    from fidelity.sweep import run_sweep
+    from fidelity.coco.sweep import run_sweep
 
     images, ann, model = coco
     grid = (["contrast-inc", "hue"], [0, 3, 6])
@@ -331,9 +331,9 @@ def test_cli_evaluate_sweep_tables(coco, tmp_path) -> None:
 @pytest.mark.shared
 def test_raising_and_lowering_a_model_limit(coco, tmp_path) -> None:
     """model@3 then model@6: only the 3 new images are run; @2 re-scores without inference."""
-    from fidelity.cocoeval import evaluate_detections, load_annotations
-    from fidelity.sweep import run_sweep
-    from fidelity.tables import cell_deltas
+    from fidelity.coco.scoring import evaluate_detections, load_annotations
+    from fidelity.coco.sweep import run_sweep
+    from fidelity.coco.tables import cell_deltas
 
     images, ann, model = coco
     quiet = {"threads": 1, "log": lambda s: None}
@@ -374,9 +374,9 @@ def test_raising_and_lowering_a_model_limit(coco, tmp_path) -> None:
 @pytest.mark.shared
 def test_tables_of_a_store_caught_mid_extension(coco, tmp_path) -> None:
     """Baseline extended to 6 images, the cell still on 3: both are reported on the first 3."""
-    from fidelity.cocoeval import evaluate_detections, load_annotations
-    from fidelity.sweep import run_sweep
-    from fidelity.tables import build_tables, report_markdown
+    from fidelity.coco.scoring import evaluate_detections, load_annotations
+    from fidelity.coco.sweep import run_sweep
+    from fidelity.coco.tables import build_tables, report_markdown
 
     images, ann, model = coco
     quiet = {"threads": 1, "log": lambda s: None}
@@ -423,9 +423,9 @@ def test_tables_of_a_store_caught_mid_extension(coco, tmp_path) -> None:
 @pytest.mark.shared
 def test_fold_standard_errors_in_tables(coco, tmp_path) -> None:
     """Paired fold SEs of ΔmAP equal a direct per-fold computation, and are cached."""
-    from fidelity.cocoeval import evaluate_detections, load_annotations
-    from fidelity.sweep import run_sweep
-    from fidelity.tables import build_tables
+    from fidelity.coco.scoring import evaluate_detections, load_annotations
+    from fidelity.coco.sweep import run_sweep
+    from fidelity.coco.tables import build_tables
 
     images, ann, model = coco
     store = run_sweep([ModelSpec(model, 12)], images, ann, tmp_path, ["contrast-inc"], [0, 12],

@@ -8,9 +8,9 @@ from types import SimpleNamespace
 
 import pytest
 
-from fidelity.prediction import parse_prediction_table
-from fidelity.sweep import SweepStore
-from fidelity.tables import (
+from fidelity.prediction.table import parse_prediction_table
+from fidelity.coco.sweep import SweepStore
+from fidelity.coco.tables import (
     build_tables,
     compare_with_paper,
     model_size,
@@ -109,7 +109,7 @@ def test_prediction_table_follows_schema(store) -> None:
 def test_delta_e_limits_by_hand(store) -> None:
     """yolo11n's curve: ΔE 0 -> 0, ΔE 3 -> 5 points = 10 % (linear between): 1 point at ΔE
     0.6, 3 points at 1.8; 1 % at 0.3, 3 % at 0.9; 10 % and 10 points hold to the end (ΔE 3)."""
-    from fidelity.tables import delta_e_limits, report_markdown
+    from fidelity.coco.tables import delta_e_limits, report_markdown
 
     tables = build_tables(store)
     limits = {(r["size"], r["model"]): r["limits"] for r in delta_e_limits(tables)}
@@ -181,8 +181,8 @@ def _explain_store(tmp_path):  # type: ignore[no-untyped-def]
     """Ground truth: a person box on images 1-3, one bicycle box on image 4 (4 images)."""
     import numpy as np
 
-    from fidelity.cocoeval import coco_from_dict
-    from fidelity.detectors import COCO80_CATEGORY_IDS, COCO80_NAMES
+    from fidelity.coco.scoring import coco_from_dict
+    from fidelity.coco.detectors import COCO80_CATEGORY_IDS, COCO80_NAMES
 
     cats = [{"id": c, "name": n} for c, n in zip(COCO80_CATEGORY_IDS, COCO80_NAMES, strict=True)]
     imgs = [{"id": i, "width": 200, "height": 200, "file_name": f"{i}.jpg"} for i in (1, 2, 3, 4)]
@@ -200,7 +200,7 @@ def _explain_store(tmp_path):  # type: ignore[no-untyped-def]
     # the cell: the bicycle found, but below a false bicycle on image 1 -> AP 1/2
     cell = person | {1: d((10, 10, 60, 90, 0.9, 0), (120, 120, 160, 160, 0.95, 1)),
                      4: d((20, 20, 80, 80, 0.8, 1))}
-    from fidelity.cocoeval import evaluate_detections
+    from fidelity.coco.scoring import evaluate_detections
 
     s = SweepStore(tmp_path)
     s.register_model("m", "m.onnx", "m" * 4, None, {})
@@ -213,9 +213,9 @@ def _explain_store(tmp_path):  # type: ignore[no-untyped-def]
 
 def test_class_breakdown_by_hand(tmp_path) -> None:
     """One bicycle box ranked below a false positive: bicycle AP 1 -> 1/2, ΔmAP = 50/2 points."""
-    from fidelity.cocoeval import evaluate_detections
+    from fidelity.coco.scoring import evaluate_detections
     from fidelity.errors import InvalidValueError
-    from fidelity.tables import class_breakdown, explain_cell
+    from fidelity.coco.tables import class_breakdown, explain_cell
 
     s, coco, base, cell = _explain_store(tmp_path)
     rows = class_breakdown(coco, base, cell, [1, 2, 3, 4])
@@ -265,7 +265,7 @@ def test_tables_explain_command(tmp_path) -> None:
 
 def test_worst_case_rows_carry_the_rare_class_share(tmp_path) -> None:
     """With annotations, each worst-case row says how much of its ΔmAP rare classes make."""
-    from fidelity.tables import build_tables, report_markdown
+    from fidelity.coco.tables import build_tables, report_markdown
 
     s, coco, _, _ = _explain_store(tmp_path)
     t = build_tables(s, coco)
@@ -278,14 +278,14 @@ def test_worst_case_rows_carry_the_rare_class_share(tmp_path) -> None:
     assert "| ΔE | worst transform | ΔmAP points | of which rare |" in md
     assert "the 2 of 2 classes with at most 5 ground-truth boxes" in md
     assert "of which rare" not in report_markdown(build_tables(s), [])  # no annotations
-    from fidelity.tables import compare_with_paper
+    from fidelity.coco.tables import compare_with_paper
 
     (de3,) = [c for c in compare_with_paper(t) if c["claim"].startswith("ΔE ≤ 3")]
     assert "of which 25.00 from the 2 classes with at most 5 boxes" in de3["evidence"]
 
 
 def test_model_conventions_are_said_in_words():
-    from fidelity.tables import _conventions_words
+    from fidelity.coco.tables import _conventions_words
 
     assert _conventions_words({"conf": 0.001, "iou": 0.7, "max_det": 300}) == (
         "conf 0.001, NMS IoU 0.7, max_det 300")
@@ -297,7 +297,7 @@ def test_model_conventions_are_said_in_words():
 
 def test_image_caps_are_parsed_and_bad_ones_named() -> None:
     from fidelity.errors import InvalidValueError
-    from fidelity.tables import parse_image_caps
+    from fidelity.coco.tables import parse_image_caps
 
     models = ["a", "b-int8"]
     assert parse_image_caps(None, models) == {}
@@ -328,7 +328,7 @@ def test_tables_images_without_annotations_is_one_line_exit_2(store, tmp_path) -
 
 def test_threshold_verdicts_by_hand() -> None:
     """Both readings of the paper's "%", each exceedance set against 2 standard errors."""
-    from fidelity.tables import _threshold_verdict
+    from fidelity.coco.tables import _threshold_verdict
 
     def row(pts: float, rel: float, se_pts: float | None = None,
             se_rel: float | None = None) -> dict:

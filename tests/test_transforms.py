@@ -8,7 +8,7 @@ import pytest
 
 from benchmarks.colour_reference import reference_transform
 from fidelity.errors import InvalidValueError, UnknownNameError
-from fidelity.transforms import (
+from fidelity.prediction.transforms import (
     TRANSFORMS,
     apply_transform,
     hsv_to_rgb,

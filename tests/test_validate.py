@@ -1,4 +1,4 @@
-"""Tests for fidelity.validate: suite loading, error profiles, scoring logic, a tiny real run."""
+"""Tests for fidelity.coco.validate: suite loading, error profiles, scoring logic, a tiny real run."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from fidelity.errors import InputFileError
-from fidelity.validate import (
+from fidelity.coco.validate import (
     BASELINE,
     FOLDS,
     ValidationStore,
@@ -103,9 +103,9 @@ def test_bad_folders(tmp_path: Path) -> None:
 
 def test_error_profile_of_a_pure_lightness_shift() -> None:
     """A pure L* shift: CIEDE2000's ΔL' is exactly the shift, ΔC' = ΔH' = 0 (Sharma 2005)."""
-    from fidelity.charts import load_chart
-    from fidelity.colorimetry import lab_to_srgb
-    from fidelity.measure import measure_chart
+    from fidelity.colour.charts import load_chart
+    from fidelity.colour.colorimetry import lab_to_srgb
+    from fidelity.chart.measure import measure_chart
 
     chart = load_chart()
     lab = chart.lab + np.array([3.0, 0.0, 0.0])
@@ -118,9 +118,9 @@ def test_error_profile_of_a_pure_lightness_shift() -> None:
 
 
 def test_error_profile_of_a_chroma_scaling() -> None:
-    from fidelity.charts import load_chart
-    from fidelity.colorimetry import lab_to_srgb
-    from fidelity.measure import measure_chart
+    from fidelity.colour.charts import load_chart
+    from fidelity.colour.colorimetry import lab_to_srgb
+    from fidelity.chart.measure import measure_chart
 
     chart = load_chart()
     lab = chart.lab * np.array([1.0, 0.6, 0.6])  # less chroma, same hue and lightness
@@ -174,7 +174,7 @@ def test_collect_results_losses_standard_errors_and_bound(tmp_path: Path) -> Non
                                        "predicted-vs-measured-safecolor-2025.png"}
     json.loads((tmp_path / "report" / "validation.json").read_text())
     # a stored camera that is not in the suite given (renamed or removed) is left out, and said
-    from fidelity.validate import CameraCase
+    from fidelity.coco.validate import CameraCase
 
     other = CameraCase("other", tmp_path / "other.toml", "D65", "0" * 64)
     res = collect_results(st, tables=["safecolor-2025"], bound_table="safecolor-2025",

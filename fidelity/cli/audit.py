@@ -14,7 +14,7 @@ from fidelity.cli.gate import (
     report_paths,
     write_outputs,
 )
-from fidelity.prediction import SIZES
+from fidelity.prediction.table import SIZES
 
 
 @click.command()
@@ -70,7 +70,7 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
     written = write_outputs(report, prediction, json_path=json_path, html_path=html_path,
                             protect=(str(image),), location_png=figure)
     if not quiet:
-        from fidelity.report import summary_lines
+        from fidelity.report.chart import summary_lines
 
         click.echo(f"{image}: {report['source'].get('format')} {report['source'].get('pixel_type')}"
                    f" {report['source'].get('width')}x{report['source'].get('height')}, "

@@ -8,8 +8,8 @@ from pathlib import Path
 import click
 
 from fidelity.cli.gate import camera_report, write_outputs
-from fidelity.prediction import SIZES
-from fidelity.verdict import DEFAULT_MAX_DELTA_E, Criterion
+from fidelity.prediction.table import SIZES
+from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion
 
 #: Where ``fidelity check`` writes its report unless told otherwise.
 DEFAULT_OUTPUT_DIR = "fidelity-report"
@@ -18,7 +18,7 @@ DEFAULT_OUTPUT_DIR = "fidelity-report"
 @click.command()
 @click.option("--camera", default=None,
               help="Camera model: built-in name or TOML path (default: the built-in realistic "
-                   "camera, fidelity.camera.DEFAULT_CAMERA).")
+                   "camera, fidelity.camera.model.DEFAULT_CAMERA).")
 @click.option("--illuminant", default="D65", show_default=True, help="Scene illuminant.")
 @click.option("--renderer", default="closed-form", show_default=True,
               help="closed-form (exact, fast) or mitsuba (spectral path tracer).")
@@ -39,7 +39,7 @@ def check(camera: str | None, illuminant: str, renderer: str, reference: str,
     Renders the spectral colour chart through the camera, measures ΔE00, predicts the detection
     loss and prints a verdict (exit 0 pass, 1 fail, 2 error); writes an HTML and a JSON report.
     """
-    from fidelity.camera import DEFAULT_CAMERA
+    from fidelity.camera.model import DEFAULT_CAMERA
     from fidelity.fileio import check_outputs
 
     cam = camera or DEFAULT_CAMERA
@@ -51,7 +51,7 @@ def check(camera: str | None, illuminant: str, renderer: str, reference: str,
         size=size, table=table, criterion=Criterion("max-delta-e", max_delta_e))
     assert verdict is not None
     write_outputs(report, prediction, json_path=json_path, html_path=html_path)
-    from fidelity.report import summary_lines
+    from fidelity.report.chart import summary_lines
 
     src = report["source"]
     variant = f" ({src['variant']})" if src.get("variant") else ""

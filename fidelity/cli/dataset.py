@@ -27,7 +27,7 @@ def dataset(images: str, out: str, transform: str | None, delta_e: str | None,
     if workers is None:
         workers = available_cpus()
     from fidelity.cli.sweep import _targets, _transforms
-    from fidelity.dataset import list_images, write_grid, write_transformed_dataset
+    from fidelity.coco.dataset import list_images, write_grid, write_transformed_dataset
     from fidelity.errors import InvalidValueError
 
     if transform is None or delta_e is None:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from fidelity.cocoeval import COCO_SCORERS
+from fidelity.coco.scoring import COCO_SCORERS
 
 #: ``--scorer``, shared by the commands that score COCO AP (evaluate, sweep).
 scorer_option = click.option(
@@ -41,11 +41,11 @@ def evaluate(model: str, images: str, annotations: str, limit: int | None, threa
     """Run a detector on a COCO image folder and print COCO box AP."""
     from tqdm import tqdm
 
-    from fidelity.cocoeval import evaluate_detections, load_annotations, resolve_scorer
-    from fidelity.detectors import Detector
+    from fidelity.coco.scoring import evaluate_detections, load_annotations, resolve_scorer
+    from fidelity.coco.detectors import Detector
     from fidelity.errors import InputFileError
     from fidelity.fileio import check_outputs, write_json_atomic
-    from fidelity.jpeg import read_jpeg
+    from fidelity.coco.jpeg import read_jpeg
 
     check_outputs({"--json": json_path}, {"--model": model, "--annotations": annotations})
     det = Detector(model, threads=threads, provider=provider)

@@ -15,8 +15,8 @@ from typing import Any
 import click
 
 from fidelity.errors import FidelityError
-from fidelity.prediction import CLASS_COLUMNS, SIZES, Prediction, predict
-from fidelity.verdict import EXIT_ERROR, Criterion, Verdict, evaluate
+from fidelity.prediction.table import CLASS_COLUMNS, SIZES, Prediction, predict
+from fidelity.prediction.verdict import EXIT_ERROR, Criterion, Verdict, evaluate
 
 PATH = click.Path(dir_okay=False, path_type=Path)
 
@@ -42,9 +42,9 @@ def image_report(
     with ``location_figure`` the base64 PNG of where the patches were sampled (for HTML).
 
     ``corners`` ``None`` (or empty): the chart is found in the image
-    (:func:`fidelity.detect.detect_chart`); the corners it found go into the report."""
-    from fidelity.audit import audit_image
-    from fidelity.report import build_report
+    (:func:`fidelity.chart.find.detect_chart`); the corners it found go into the report."""
+    from fidelity.chart.audit import audit_image
+    from fidelity.report.chart import build_report
 
     result = audit_image(image, corners or None, layer=layer, encoding=encoding, exposure=exposure,
                          reference=reference, illuminant=illuminant, negatives=negatives,
@@ -75,8 +75,8 @@ def image_report(
     )
     figure = None
     if location_figure:
-        from fidelity.imageio import read_image
-        from fidelity.report import plot_chart_location
+        from fidelity.chart.image import read_image
+        from fidelity.report.chart import plot_chart_location
 
         figure = plot_chart_location(read_image(image, layer=layer).pixels, result.location,
                                      encoding=result.encoding, exposure_ev=result.exposure_ev,
@@ -88,9 +88,9 @@ def camera_report(
     camera: str, *, command: str, illuminant: str, renderer: str, reference: str, size: str,
     table: str | None, criterion: Criterion | None = None, seed: int | None = None,
 ) -> tuple[dict[str, Any], Prediction, Verdict | None]:
-    """Render ``camera``'s chart (:func:`fidelity.render.render_chart`) and build its report."""
-    from fidelity.render import render_chart
-    from fidelity.report import build_report
+    """Render ``camera``'s chart (:func:`fidelity.camera.render.render_chart`) and build its report."""
+    from fidelity.camera.render import render_chart
+    from fidelity.report.chart import build_report
 
     render = render_chart(camera, illuminant, renderer, reference=reference, seed=seed)
     m = render.measurement
@@ -112,7 +112,7 @@ def write_outputs(report: dict[str, Any], prediction: Prediction, *, json_path: 
                   html_path: Path | None, protect: tuple[str, ...] = (),
                   location_png: str | None = None) -> list[Path]:
     """Write the JSON and HTML reports that were asked for; return their paths."""
-    from fidelity.report import write_html_report, write_json_report
+    from fidelity.report.chart import write_html_report, write_json_report
 
     written = []
     if json_path is not None:
@@ -141,7 +141,7 @@ def _error_line(message: str) -> None:
 
 def _write_junit(junit: Path, cases: list[Any]) -> None:
     """Write the JUnit file; a failure to write it is an error (exit 2)."""
-    from fidelity.report import write_junit
+    from fidelity.report.chart import write_junit
 
     try:
         write_junit(junit, cases)
@@ -242,7 +242,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         _error_line(str(exc))
         sys.exit(EXIT_ERROR)
 
-    from fidelity.report import GateCase
+    from fidelity.report.chart import GateCase
 
     try:
         criterion = make_criterion(max_delta_e, max_dmap, cls, unit)
@@ -308,6 +308,6 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
 
 
 def _short(report: dict[str, Any]) -> list[str]:
-    from fidelity.report import summary_lines
+    from fidelity.report.chart import summary_lines
 
     return summary_lines(report)

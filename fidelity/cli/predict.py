@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from fidelity.cli.gate import PATH
-from fidelity.prediction import CLASS_COLUMNS, INTERPOLATIONS, SIZES, available_tables, predict
+from fidelity.prediction.table import CLASS_COLUMNS, INTERPOLATIONS, SIZES, available_tables, predict
 
 
 @click.command()
@@ -17,7 +17,7 @@ from fidelity.prediction import CLASS_COLUMNS, INTERPOLATIONS, SIZES, available_
 @click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
               help="Detector size class: n, s, m, l, x or any.")
 @click.option("--table", default=None, help="Prediction table name or JSON path "
-              "(default: the fidelity.prediction.DEFAULT_TABLE).")
+              "(default: the fidelity.prediction.table.DEFAULT_TABLE).")
 @click.option("--method", type=click.Choice(list(INTERPOLATIONS)), default=None,
               help="Interpolation (default: the table's own).")
 @click.option("--baseline-map", type=float, default=None,
@@ -43,7 +43,7 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
     fidelity predict --max-dmap 1 --unit relative      # ΔE limit for <= 1 % of baseline mAP
     """
     if list_tables:
-        from fidelity.prediction import DEFAULT_TABLE, load_prediction_table
+        from fidelity.prediction.table import DEFAULT_TABLE, load_prediction_table
 
         for name in available_tables():
             t = load_prediction_table(name)
@@ -83,7 +83,7 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
             f"{t['transform']} {t['param']:.4g}" for t in reach))
     if json_path is not None:
         from fidelity.fileio import write_json_atomic
-        from fidelity.report import _clean
+        from fidelity.report.chart import _clean
 
         write_json_atomic(json_path, _clean(p.to_dict()))
         click.echo(f"wrote {json_path}")
@@ -91,8 +91,8 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
 
 def _print_limit(max_dmap: float, cls: str, unit: str, size: str, table: str | None,
                  method: str | None, json_path: Path | None) -> None:
-    from fidelity.prediction import delta_e_limit
-    from fidelity.verdict import Criterion
+    from fidelity.prediction.table import delta_e_limit
+    from fidelity.prediction.verdict import Criterion
 
     criterion = Criterion("max-dmap", max_dmap, cls, unit)  # checks the class and unit
     lim = delta_e_limit(max_dmap, criterion.column, size=size, table=table, method=method)

@@ -7,10 +7,10 @@ from pathlib import Path
 import click
 import numpy as np
 
-from fidelity.camera import DEFAULT_CAMERA
+from fidelity.camera.model import DEFAULT_CAMERA
 from fidelity.fileio import atomic_output, write_json_atomic
-from fidelity.render import REFERENCES, RENDERERS, ChartRender, render_chart
-from fidelity.spectral import CHROMATIC_ADAPTATION_METHODS, GRID_STEP_NM, SPECTRA_SETS
+from fidelity.camera.render import REFERENCES, RENDERERS, ChartRender, render_chart
+from fidelity.colour.spectral import CHROMATIC_ADAPTATION_METHODS, GRID_STEP_NM, SPECTRA_SETS
 
 
 def write_exr(path: Path, image: np.ndarray) -> Path:
@@ -115,7 +115,7 @@ def render(camera: str, illuminant: str, renderer: str, spp: int | None,
     is found, else scalar_spectral). Both go through the camera's ISP and are measured against
     the scene-consistent reference (or --reference safecolor).
     """
-    from fidelity.camera import available_cameras, load_camera
+    from fidelity.camera.model import available_cameras, load_camera
 
     if list_cameras:
         for name in available_cameras():

@@ -25,7 +25,7 @@ def _targets(text: str) -> list[float]:
 
 def _transforms(text: str) -> list[str]:
     from fidelity.errors import unknown_name
-    from fidelity.transforms import TRANSFORMS
+    from fidelity.prediction.transforms import TRANSFORMS
 
     if text == "all":
         return list(TRANSFORMS)
@@ -76,8 +76,8 @@ def sweep(models: str | None, images: str | None, annotations: str | None, trans
           --annotations instances.json --out DIR        (rerun the same line to resume)
       fidelity sweep --rescore --annotations instances.json --out DIR
     """
-    from fidelity.sweep import ModelSpec, SweepStore, run_sweep
-    from fidelity.sweep import rescore as do_rescore
+    from fidelity.coco.sweep import ModelSpec, SweepStore, run_sweep
+    from fidelity.coco.sweep import rescore as do_rescore
 
     if status:
         _print_status(SweepStore(out, create=False))
@@ -103,7 +103,7 @@ def sweep(models: str | None, images: str | None, annotations: str | None, trans
 
 
 def _print_status(store: Any) -> None:
-    from fidelity.sweep import sweep_status
+    from fidelity.coco.sweep import sweep_status
 
     rows = sweep_status(store)
     click.echo(f"store {store.path}")

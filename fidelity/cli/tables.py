@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from fidelity.tables import RARE_BOXES
+from fidelity.coco.tables import RARE_BOXES
 
 
 @click.command()
@@ -50,8 +50,8 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
     from pathlib import Path
 
     from fidelity.fileio import check_outputs
-    from fidelity.sweep import SweepStore
-    from fidelity.tables import parse_image_caps, write_report
+    from fidelity.coco.sweep import SweepStore
+    from fidelity.coco.tables import parse_image_caps, write_report
 
     check_outputs({"--prediction": prediction, "--json": json_path},
                   {"--annotations": annotations})
@@ -67,7 +67,7 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
         raise InvalidValueError("--images re-scores cells from the annotations: it cannot be "
                                 "combined with --no-standard-errors")
     if standard_errors:
-        from fidelity.cocoeval import load_annotations
+        from fidelity.coco.scoring import load_annotations
 
         recorded = (store.meta().get("data") or {}).get("annotations")
         if annotations:  # given: it must load (a missing file is an error naming it)
@@ -87,9 +87,9 @@ def _explain(store: object, spec: str, annotations: str | None, rare_boxes: int,
              caps: dict[str, int], top: int, json_path: str | None) -> None:
     from pathlib import Path
 
-    from fidelity.cocoeval import load_annotations
+    from fidelity.coco.scoring import load_annotations
     from fidelity.errors import InvalidValueError
-    from fidelity.tables import explain_cell
+    from fidelity.coco.tables import explain_cell
 
     parts = spec.rsplit(":", 2)
     try:

@@ -52,11 +52,11 @@ def validate(cameras: str, models: str | None, images: str | None, annotations: 
     from dataclasses import replace
     from pathlib import Path
 
-    from fidelity.emulation import EMULATION_METHODS, TRAINING_SETS
+    from fidelity.coco.emulation import EMULATION_METHODS, TRAINING_SETS
     from fidelity.errors import InvalidValueError, unknown_name
     from fidelity.fileio import check_outputs
-    from fidelity.sweep import ModelSpec
-    from fidelity.validate import (
+    from fidelity.coco.sweep import ModelSpec
+    from fidelity.coco.validate import (
         ValidationStore,
         collect_results,
         default_store,
@@ -85,7 +85,7 @@ def validate(cameras: str, models: str | None, images: str | None, annotations: 
         st = run_validation(cases, specs, images, annotations, store_dir, method=method,
                             training=training, threads=threads, provider=provider,
                             progress=not no_progress)
-    from fidelity.validate import write_report
+    from fidelity.coco.validate import write_report
 
     results = collect_results(st, bound_table=bound_table, suite=cases)
     paths = write_report(results, out,

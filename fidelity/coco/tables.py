@@ -1,6 +1,6 @@
 """Worst-case tables, plots and reports from a sweep store.
 
-Definitions (all derived from the finished cells of :mod:`fidelity.sweep`):
+Definitions (all derived from the finished cells of :mod:`fidelity.coco.sweep`):
 
 * ΔmAP in points: ``dmap_points = 100 * (mAP_baseline - mAP_cell)`` (percentage points of
   COCO mAP@[.50:.95]); relative: ``dmap_relative = 100 * (mAP_baseline - mAP_cell) /
@@ -140,7 +140,7 @@ def align_image_counts(store: Any, coco: Any, cells: Sequence[dict[str, Any]],
     """
     from tqdm import tqdm
 
-    from fidelity.cocoeval import evaluate_detections, resolve_scorer
+    from fidelity.coco.scoring import evaluate_detections, resolve_scorer
 
     method = resolve_scorer(method)
     ids_all = sorted(coco.getImgIds())
@@ -245,13 +245,13 @@ def class_breakdown(coco: Any, baseline: Mapping[int, np.ndarray], cell: Mapping
     ground truth in the evaluated images (COCO evaluation, Lin et al. 2014; classes without
     ground truth are skipped), so ΔmAP = Σ_c ΔAP_c / K: a class with one box weighs as much as
     person with thousands, and one detection ranked below a false positive halves that class's
-    AP. ``baseline``, ``cell``: per-image (K, 6) detections (:mod:`fidelity.sweep` store);
+    AP. ``baseline``, ``cell``: per-image (K, 6) detections (:mod:`fidelity.coco.sweep` store);
     ``image_ids``: the images both are scored on. Returns one row per class with ground truth:
     ``name``, ``boxes`` (non-crowd ground-truth boxes in the images), ``ap_baseline``, ``ap``
     (fractions), ``dap_points`` = 100 (AP₀ − AP), ``share_points`` = ``dap_points`` / K, sorted
     by share, largest loss first. The shares sum to the ΔmAP in points.
     """
-    from fidelity.cocoeval import evaluate_detections
+    from fidelity.coco.scoring import evaluate_detections
 
     ids = sorted(int(i) for i in image_ids)
     b = evaluate_detections(coco, baseline, ids, method=method)
@@ -364,14 +364,14 @@ def add_standard_errors(store: Any, coco: Any, deltas: dict[str, list[dict[str, 
     """Add ``dmap_points_se``, ``dmap_relative_se``, ``dap_person_points_se``,
     ``dap_bicycle_points_se`` to rows.
 
-    Paired standard errors over :data:`fidelity.cocoeval.FOLDS` interleaved image folds: per
+    Paired standard errors over :data:`fidelity.coco.scoring.FOLDS` interleaved image folds: per
     fold the loss of the cell against the baseline on the same images,
-    ``SE = std(loss_k, ddof=1) / sqrt(K)`` (:func:`fidelity.cocoeval.paired_standard_error`).
+    ``SE = std(loss_k, ddof=1) / sqrt(K)`` (:func:`fidelity.coco.scoring.paired_standard_error`).
     Fold scores are computed from the stored detections (no inference) and cached in the store.
     """
     from tqdm import tqdm
 
-    from fidelity.cocoeval import paired_standard_error
+    from fidelity.coco.scoring import paired_standard_error
 
     ids_all = sorted(coco.getImgIds())
     todo = [(m, r) for m, rows in deltas.items() for r in rows if r["status"] == "done"]
@@ -392,7 +392,7 @@ def add_standard_errors(store: Any, coco: Any, deltas: dict[str, list[dict[str, 
 def build_tables(store: Any, coco: Any = None, *, method: str = "auto",
                  progress: bool = False, images: Mapping[str, int] | None = None
                  ) -> dict[str, Any]:
-    """Everything the report needs, from a :class:`fidelity.sweep.SweepStore`.
+    """Everything the report needs, from a :class:`fidelity.coco.sweep.SweepStore`.
 
     ``coco``: the sweep's annotations (pycocotools ``COCO``); when given, every model's cells
     are scored on one image count (:func:`align_image_counts`; ``images`` caps it per model)
@@ -420,7 +420,7 @@ def build_tables(store: Any, coco: Any = None, *, method: str = "auto",
     grid = store.meta().get("grid") or {}
     planned = grid.get("transforms")
     if not planned:
-        from fidelity.transforms import TRANSFORMS
+        from fidelity.prediction.transforms import TRANSFORMS
 
         planned = list(TRANSFORMS)
     seen = {c["transform"] for c in cells if c["transform"] != "baseline"}
@@ -780,7 +780,7 @@ def _conventions_words(conv: dict[str, Any]) -> str:
 
 def _run_history_words(info: dict[str, Any], capped: bool = False) -> str:
     """The sweep runs behind a model's cells, in words (its latest registration and the
-    registrations it replaced, see :meth:`fidelity.resultstore.ResultsStore.register_model`);
+    registrations it replaced, see :meth:`fidelity.coco.store.ResultsStore.register_model`);
     ``capped``: the image count was asked for (``--images``), not set by the cells."""
     st = info.get("settings") or {}
     limit, images = info.get("limit_images"), info.get("images")
@@ -837,7 +837,7 @@ def report_markdown(tables: dict[str, Any], comparison: list[dict[str, Any]],
                          f"{a['rescored']}).")
     lines += ["", "Method: each image is decoded as sRGB code values (ICC profiles not applied), "
               "transformed with the parameter calibrated on the chart for (transform, ΔE) "
-              "(fidelity.calibration, full precision; listed per cell below), rounded to 8 bit "
+              "(fidelity.prediction.calibration, full precision; listed per cell below), rounded to 8 bit "
               "(exact 8-bit tables, equal to the float64 reference), JPEG-encoded with the "
               "original quantization tables and subsampling, decoded, and passed to the "
               "detector; ΔE 0 is the baseline (decode and re-encode only). Scoring: COCO box AP "
@@ -1054,12 +1054,12 @@ def delta_e_limits(tables: dict[str, Any]) -> list[dict[str, Any]]:
 
     For every curve of the measured prediction table (each size class's worst case over its
     models, and each model's), the largest chart ΔE whose predicted loss stays within each of
-    :data:`LIMIT_BUDGETS` (:func:`fidelity.prediction.delta_e_limit`: the curves as ``fidelity
+    :data:`LIMIT_BUDGETS` (:func:`fidelity.prediction.table.delta_e_limit`: the curves as ``fidelity
     predict`` uses them, running maximum, linear between the measured ΔE).
     """
     from dataclasses import replace
 
-    from fidelity.prediction import delta_e_limit, parse_prediction_table
+    from fidelity.prediction.table import delta_e_limit, parse_prediction_table
 
     table = parse_prediction_table(_jsonable(prediction_table(tables)))
     out = []
@@ -1077,7 +1077,7 @@ def delta_e_limits(tables: dict[str, Any]) -> list[dict[str, Any]]:
 
 
 def _limits_markdown(limits: list[dict[str, Any]]) -> list[str]:
-    from fidelity.prediction import limit_rounded_down
+    from fidelity.prediction.table import limit_rounded_down
 
     def cell(x: dict[str, Any]) -> str:
         if x["status"] == "none":

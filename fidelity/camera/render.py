@@ -3,19 +3,19 @@
 Two renderers give one result (:data:`RENDERERS`):
 
 - ``"closed-form"`` (default, the ground truth): per patch the Riemann sum
-  ``sum R E S dl / sum E ybar dl`` (:func:`fidelity.camera.camera_response`), painted into a
+  ``sum R E S dl / sum E ybar dl`` (:func:`fidelity.camera.model.camera_response`), painted into a
   chart image. A flat Lambertian chart under uniform light needs nothing more.
 - ``"mitsuba"``: Mitsuba 3 renders the same chart spectrally
-  (:mod:`fidelity.mitsuba_render`), in the same units.
+  (:mod:`fidelity.camera.mitsuba`), in the same units.
 
 Both images then go through the same camera pipeline in numpy (exposure, vignetting, noise,
-white balance, CCM, tone curve, quantisation; :mod:`fidelity.camera`) and the same patch
+white balance, CCM, tone curve, quantisation; :mod:`fidelity.camera.model`) and the same patch
 sampling (:func:`sample_patches`): the central window (half the patch side) of each patch,
 averaged with a 10 % trimmed mean per channel (robust to hot pixels and Monte Carlo
 fireflies), with the per-patch standard deviation of the window reported as noise.
 
 Reference (``reference=``): ``"scene"`` (default) is the scene-consistent reference of
-:func:`fidelity.spectral.scene_reference`; ``"safecolor"`` is the SAFE-COLOR Lab table (old
+:func:`fidelity.colour.spectral.scene_reference`; ``"safecolor"`` is the SAFE-COLOR Lab table (old
 D50-era chart data, about 2 ΔE00 from a correct D65 render; offered for comparison only).
 """
 
@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.stats import trim_mean
 
-from fidelity.camera import (
+from fidelity.camera.model import (
     CameraModel,
     add_sensor_noise,
     camera_response,
@@ -39,8 +39,8 @@ from fidelity.camera import (
     vignetting_gain,
 )
 from fidelity.errors import InvalidValueError, unknown_name
-from fidelity.measure import ChartMeasurement, measure_chart
-from fidelity.spectral import GRID_STEP_NM, load_illuminant, load_patch_spectra, scene_reference
+from fidelity.chart.measure import ChartMeasurement, measure_chart
+from fidelity.colour.spectral import GRID_STEP_NM, load_illuminant, load_patch_spectra, scene_reference
 
 FloatArray = NDArray[np.float64]
 
@@ -181,7 +181,7 @@ def render_chart(
     """Render the spectral chart through ``camera`` under ``illuminant`` and measure ΔE00.
 
     ``renderer`` in :data:`RENDERERS`; ``spp`` (Mitsuba samples per pixel, default
-    :data:`fidelity.mitsuba_render.DEFAULT_SPP`); ``reference`` in :data:`REFERENCES`;
+    :data:`fidelity.camera.mitsuba.DEFAULT_SPP`); ``reference`` in :data:`REFERENCES`;
     ``spectra`` a reflectance set; ``seed`` overrides the camera's noise seed (Mitsuba's sampler
     uses it too, default 0); ``pixels_per_patch`` the patch side in pixels; ``cat`` the
     chromatic adaptation of the scene reference; ``step`` the spectral grid step (nm);
@@ -208,7 +208,7 @@ def render_chart(
         raw = layout.paint(closed)
         used_variant = None
     else:
-        from fidelity import mitsuba_render as mr
+        from fidelity.camera import mitsuba as mr
 
         ppp = pixels_per_patch or mr.DEFAULT_PIXELS_PER_PATCH
         layout = ChartLayout.for_patch_size(ppp)
@@ -235,7 +235,7 @@ def render_chart(
         ref = scene_reference(ill, spectra, cat=cat, step=step)
         ref_lab, ref_srgb, ref_conv = ref.lab, ref.srgb, ref.conventions
     else:
-        from fidelity.charts import load_chart
+        from fidelity.colour.charts import load_chart
 
         chart = load_chart("safecolor")
         ref_lab, ref_srgb = chart.lab, chart.srgb_unclipped

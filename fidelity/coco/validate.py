@@ -2,15 +2,15 @@
 
 For every camera file of a suite (:func:`load_suite`):
 
-1. **Predict.** Render the chart (:func:`fidelity.render.render_chart`, closed form) under the
+1. **Predict.** Render the chart (:func:`fidelity.camera.render.render_chart`, closed form) under the
    test case's illuminant, take the chart ΔE (mean CIEDE2000 over the 24 patches) and predict
-   the detection loss with every prediction table (:func:`fidelity.prediction.predict`,
+   the detection loss with every prediction table (:func:`fidelity.prediction.table.predict`,
    detector size ``n``; the baseline mAP of the detector resolves the paper's points-vs-relative
    ambiguity conservatively).
-2. **Measure.** Fit the camera's colour rendering (:func:`fidelity.emulation.fit_emulation`),
+2. **Measure.** Fit the camera's colour rendering (:func:`fidelity.coco.emulation.fit_emulation`),
    apply it to every COCO image, and run the detectors on the result after the same JPEG round
    trip as the COCO sweep (original quantisation tables and subsampling,
-   :func:`fidelity.jpeg.roundtrip_jpeg`); ΔmAP is measured against the ΔE = 0 baseline (the
+   :func:`fidelity.coco.jpeg.roundtrip_jpeg`); ΔmAP is measured against the ΔE = 0 baseline (the
    same round trip with no colour change), in percentage points and relative to the baseline,
    and per class (person, bicycle).
 3. **Compare.** The worst-case table bounds a camera when the measured loss is at most the
@@ -44,10 +44,10 @@ from typing import Any
 
 import numpy as np
 
-from fidelity.cocoeval import FOLDS  # interleaved image folds for standard errors
+from fidelity.coco.scoring import FOLDS  # interleaved image folds for standard errors
 from fidelity.errors import InputFileError, InvalidValueError
 from fidelity.fileio import file_sha256, portable_paths
-from fidelity.resultstore import ResultsStore, pack_detections, unpack_detections
+from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
 
 STORE_NAME = "validation.sqlite"
 SUITE_FILE = "suite.toml"
@@ -92,8 +92,8 @@ def load_suite(folder: str | os.PathLike[str]) -> list[CameraCase]:
     Raises :class:`InputFileError` for a missing folder, no camera files, an invalid camera
     file, a malformed ``suite.toml`` or one naming a camera that is not there.
     """
-    from fidelity.camera import read_camera_file
-    from fidelity.spectral import load_illuminant
+    from fidelity.camera.model import read_camera_file
+    from fidelity.colour.spectral import load_illuminant
 
     d = Path(folder)
     if not d.is_dir():
@@ -174,7 +174,7 @@ def chart_error_profile(measurement: Any) -> dict[str, Any]:
 def predictions_for(delta_e: float, baseline_map_percent: float | None,
                     tables: Sequence[str], size: str = "n") -> dict[str, dict[str, Any]]:
     """Predicted losses of every column for each table name: table -> column -> value."""
-    from fidelity.prediction import predict
+    from fidelity.prediction.table import predict
 
     out = {}
     for t in tables:
@@ -189,7 +189,7 @@ def predictions_for(delta_e: float, baseline_map_percent: float | None,
 def image_delta_e(emu: Any, images: Sequence[np.ndarray]) -> dict[str, float]:
     """Mean and 95th-percentile CIEDE2000 between images and their emulations (every
     ``IMAGE_DE_SAMPLE[1]``-th pixel in both directions): how far the camera moves real photos."""
-    from fidelity.colorimetry import delta_e_2000, srgb_to_lab
+    from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
 
     step = IMAGE_DE_SAMPLE[1]
     vals = []
@@ -290,7 +290,7 @@ class ValidationStore(ResultsStore):
 
 
 def _fold_scores(coco: Any, dets: dict[int, np.ndarray], ids: Sequence[int]) -> list[dict[str, Any]]:
-    from fidelity.cocoeval import score_folds
+    from fidelity.coco.scoring import score_folds
 
     return score_folds(coco, dets, ids, FOLDS)
 
@@ -303,13 +303,13 @@ def _fold_scores(coco: Any, dets: dict[int, np.ndarray], ids: Sequence[int]) -> 
 def prepare_case(case: CameraCase, store: ValidationStore, method: str, training: str,
                  cache: Any, image_ids: Sequence[int]) -> tuple[Any, dict[str, Any]]:
     """Render, measure, fit the emulation and check it; the record is stored (resumable)."""
-    from fidelity.emulation import (
+    from fidelity.coco.emulation import (
         EMULATION_METHODS,
         EMULATION_VERSION,
         emulation_accuracy,
         fit_emulation,
     )
-    from fidelity.render import render_chart
+    from fidelity.camera.render import render_chart
 
     key = json.dumps({"sha256": case.sha256, "illuminant": case.illuminant, "method": method,
                       "training": training, "emulation_version": EMULATION_VERSION})
@@ -352,7 +352,7 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[Any],
                    training: str = "colour-science", threads: int | None = 1,
                    provider: str = "auto", batch_commit: int = 25, progress: bool = True,
                    log: Callable[[str], None] | None = None) -> ValidationStore:
-    """Run (or resume) the validation; ``models`` are :class:`fidelity.sweep.ModelSpec`.
+    """Run (or resume) the validation; ``models`` are :class:`fidelity.coco.sweep.ModelSpec`.
 
     Per model the baseline cell runs first, then cameras in the given order; each camera's
     emulation table is built once and used for every model.
@@ -360,10 +360,10 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[Any],
     import onnxruntime
     from tqdm import tqdm
 
-    from fidelity.cocoeval import evaluate_detections, load_annotated_images
-    from fidelity.detectors import Detector
-    from fidelity.jpeg import roundtrip_jpeg
-    from fidelity.sweep import ImageCache
+    from fidelity.coco.scoring import evaluate_detections, load_annotated_images
+    from fidelity.coco.detectors import Detector
+    from fidelity.coco.jpeg import roundtrip_jpeg
+    from fidelity.coco.sweep import ImageCache
 
     say = log or (lambda s: print(s, file=sys.stderr, flush=True))
     img_dir, coco, all_ids = load_annotated_images(images, annotations)
@@ -381,7 +381,7 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[Any],
     store.set_meta("settings", {"emulation_method": method, "training": training,
                                 "folds": FOLDS, "size_class": "n",
                                 "jpeg": "original quantisation tables and subsampling "
-                                        "(fidelity.jpeg.roundtrip_jpeg), as the COCO sweep"})
+                                        "(fidelity.coco.jpeg.roundtrip_jpeg), as the COCO sweep"})
     store.set_meta("cameras", [{"camera": c.name, "file": c.path.name,
                                 "illuminant": c.illuminant} for c in cases])
     cache = ImageCache(img_dir, coco)
@@ -454,7 +454,7 @@ def _loss(base: float | None, value: float | None) -> float | None:
 
 
 def _se(base_folds: list[dict[str, Any]], folds: list[dict[str, Any]], key: str) -> float | None:
-    from fidelity.cocoeval import paired_standard_error
+    from fidelity.coco.scoring import paired_standard_error
 
     return paired_standard_error([b.get(key) for b in base_folds], [f.get(key) for f in folds])
 
@@ -463,8 +463,8 @@ def holdout_accuracy(cases: Sequence[CameraCase], method: str = "root-polynomial
                      ) -> dict[str, dict[str, Any]]:
     """Out-of-sample emulation accuracy per camera: the mapping fitted on the colour-science
     reflectances *without* the 24 chart patches, checked on the chart
-    (:func:`fidelity.emulation.emulation_accuracy`)."""
-    from fidelity.emulation import emulation_accuracy, fit_emulation
+    (:func:`fidelity.coco.emulation.emulation_accuracy`)."""
+    from fidelity.coco.emulation import emulation_accuracy, fit_emulation
 
     return {c.name: emulation_accuracy(fit_emulation(c.path, c.illuminant, method,
                                                      "colour-science-no-chart")).to_dict()
@@ -477,7 +477,7 @@ def collect_results(store: ValidationStore, tables: Sequence[str] | None = None,
     """Predicted against measured losses of every finished (camera, model) cell.
 
     ``tables``: prediction tables to evaluate (default: all available); ``bound_table``: the
-    worst-case table whose bound is tested (default :data:`fidelity.prediction.DEFAULT_TABLE`).
+    worst-case table whose bound is tested (default :data:`fidelity.prediction.table.DEFAULT_TABLE`).
     Returns a JSON-ready dict with ``rows`` (one per camera and model), ``summary``,
     ``cameras`` (chart and emulation records), ``models`` and provenance. With ``suite`` (the
     camera cases), each stored camera also gets its out-of-sample emulation accuracy
@@ -485,7 +485,7 @@ def collect_results(store: ValidationStore, tables: Sequence[str] | None = None,
     the suite (renamed or removed camera files) are left out of the results and listed under
     ``summary.not_in_suite``.
     """
-    from fidelity.prediction import DEFAULT_TABLE, available_tables
+    from fidelity.prediction.table import DEFAULT_TABLE, available_tables
 
     tabs = list(tables) if tables else available_tables()
     bound = bound_table or DEFAULT_TABLE
@@ -672,7 +672,7 @@ def _plot_vs_delta_e(rows: list[dict[str, Any]], tables: Sequence[str], path: Pa
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fidelity.prediction import predict_curve
+    from fidelity.prediction.table import predict_curve
 
     classes = ("all", "person", "bicycle")
     fig, axes = plt.subplots(1, 3, figsize=(15, 5))
@@ -766,7 +766,7 @@ def report_markdown(results: dict[str, Any], figures: dict[str, str],
     add(f"- Emulation: `{st.get('emulation_method')}` fitted on `{st.get('training')}` "
         "reflectances (chart + colour-science spectral data); JPEG: "
         f"{st.get('jpeg')}. ΔE = 0 baseline: the same round trip without colour change.")
-    add(f"- Prediction: `fidelity.prediction.predict(chart ΔE, size='n', baseline_map=...)` with "
+    add(f"- Prediction: `fidelity.prediction.table.predict(chart ΔE, size='n', baseline_map=...)` with "
         f"tables {', '.join(f'`{t}`' for t in summ['tables'])}; the bound tested is `{bound}`.")
     add(f"- Standard errors: {FOLDS} interleaved image folds, SE = std(fold loss)/√{FOLDS}.")
     add(f"- Versions: {meta.get('versions')}; machine: {meta.get('machine')}.")

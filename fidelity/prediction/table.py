@@ -683,20 +683,20 @@ def transform_parameters(delta_e: float, calibration: Any = None, *,
                          solve: bool = True) -> list[dict[str, Any]]:
     """The SAFE-COLOR transform parameters that give chart ΔE ``delta_e``, one per transform.
 
-    From the shipped calibration table (``fidelity.calibration.load_calibration_table()``): at
+    From the shipped calibration table (``fidelity.prediction.calibration.load_calibration_table()``): at
     a calibrated target, the table's parameter (``method: "calibrated"``). Between targets the
     table's two bracketing entries are given (``bracket``) and the parameter is solved on the
-    chart for this exact ΔE (``fidelity.calibration.calibrate_transform``, ``method: "solved"``),
+    chart for this exact ΔE (``fidelity.prediction.calibration.calibrate_transform``, ``method: "solved"``),
     or, with ``solve=False``, interpolated linearly in ΔE between the bracket
     (``method: "interpolated"``; below the first target the identity at the chart's baseline ΔE
     is the lower end). A ΔE below the chart's baseline or beyond a transform's reach is
     reported as unreachable (``param: null``), not as a number.
     """
     if calibration is None:
-        from fidelity.calibration import load_calibration_table
+        from fidelity.prediction.calibration import load_calibration_table
 
         calibration = load_calibration_table()
-    from fidelity.transforms import TRANSFORMS
+    from fidelity.prediction.transforms import TRANSFORMS
 
     baseline = float(calibration.baseline_delta_e)
     by_transform: dict[str, list[Any]] = {}
@@ -729,7 +729,7 @@ def transform_parameters(delta_e: float, calibration: Any = None, *,
         elif delta_e <= baseline:
             row.update(method=f"unreachable: at or below the chart's baseline ΔE {baseline:.4g}")
         elif solve:
-            from fidelity.calibration import calibrate_transform
+            from fidelity.prediction.calibration import calibrate_transform
 
             entry = calibrate_transform(name, delta_e)
             if entry.reachable and entry.param is not None:

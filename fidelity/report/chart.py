@@ -10,8 +10,8 @@ The JSON report (``schema_version`` :data:`SCHEMA_VERSION`) is described by the 
 - ``exposure_ev``, ``bad_pixels``: the audit of an image (``null`` for a render);
 - ``source``: the image (path, sha256, format, layer, corners, how they were found, encoding) or the render
   (camera, illuminant, renderer, variant, seconds);
-- ``prediction``: ΔE -> ΔmAP (:meth:`fidelity.prediction.Prediction.to_dict`);
-- ``verdict``: pass/fail of the criterion (:meth:`fidelity.verdict.Verdict.to_dict`);
+- ``prediction``: ΔE -> ΔmAP (:meth:`fidelity.prediction.table.Prediction.to_dict`);
+- ``verdict``: pass/fail of the criterion (:meth:`fidelity.prediction.verdict.Verdict.to_dict`);
 - ``provenance``: tool version, time, Python and libraries, input sha256, tables (name, path,
   sha256), conventions.
 
@@ -40,9 +40,9 @@ import numpy as np
 
 from fidelity import __version__
 from fidelity.fileio import write_json_atomic, write_text_atomic
-from fidelity.measure import ChartMeasurement
-from fidelity.prediction import Prediction, predict_curve
-from fidelity.verdict import Verdict
+from fidelity.chart.measure import ChartMeasurement
+from fidelity.prediction.table import Prediction, predict_curve
+from fidelity.prediction.verdict import Verdict
 
 #: Version of the JSON report layout (bump on incompatible change).
 SCHEMA_VERSION = "1.0"
@@ -227,7 +227,7 @@ def plot_chart_location(pixels: np.ndarray, location: Any, *, encoding: str = "l
                         exposure_ev: float = 0.0, found: bool = False) -> str:
     """Base64 PNG: the image with every patch's sampling window outlined and numbered.
 
-    ``location`` is a :class:`fidelity.locate.ChartLocation`. Linear pixels are shown at the
+    ``location`` is a :class:`fidelity.chart.locate.ChartLocation`. Linear pixels are shown at the
     audit's exposure (``2**exposure_ev``), sRGB-encoded; NaN/Inf show as black. The corner
     patches are labelled, so a wrong orientation or a grid off the patches is seen at once.
     """
@@ -236,8 +236,8 @@ def plot_chart_location(pixels: np.ndarray, location: Any, *, encoding: str = "l
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fidelity import colorimetry as cm
-    from fidelity.locate import CORNER_PATCHES, apply_homography
+    from fidelity.colour import colorimetry as cm
+    from fidelity.chart.locate import CORNER_PATCHES, apply_homography
 
     arr = np.asarray(pixels, dtype=np.float64)
     arr = np.where(np.isfinite(arr), arr, 0.0)

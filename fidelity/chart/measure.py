@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fidelity.colorimetry import delta_e_2000, delta_e_2000_components, srgb_to_lab
+from fidelity.colour.colorimetry import delta_e_2000, delta_e_2000_components, srgb_to_lab
 from fidelity.errors import InvalidValueError
 
 __all__ = ["ChartMeasurement", "chart_delta_e", "measure_chart"]

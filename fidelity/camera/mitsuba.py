@@ -6,7 +6,7 @@ light from any other surface (nothing can occlude or inter-reflect on a plane), 
 ``direct`` integrator computes exactly L(l) = R(l) E(l) / pi per pixel; the camera channel is
 the spectral integral ``int L(l) S_c(l) dl`` that ``specfilm`` estimates by Monte Carlo over
 wavelengths. Multiplying by pi / sum(E ybar dl) gives the units of
-:func:`fidelity.camera.camera_response`. Path tracing would add nothing but cost; what remains
+:func:`fidelity.camera.model.camera_response`. Path tracing would add nothing but cost; what remains
 is the wavelength-sampling noise of the Monte Carlo estimate, which the benchmark
 (``benchmarks/bench_render.py``) measures against the closed form.
 
@@ -39,7 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fidelity.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
 from fidelity.resources import resource_dir
-from fidelity.spectral import GRID_END_NM, GRID_START_NM, GRID_STEP_NM, cie_1931_cmfs
+from fidelity.colour.spectral import GRID_END_NM, GRID_START_NM, GRID_STEP_NM, cie_1931_cmfs
 
 FloatArray = NDArray[np.float64]
 
@@ -275,7 +275,7 @@ def build_scene_dict(
     """Fill the template: patch rectangles, emitter SPD, film channels, sensor framing.
 
     ``reflectance`` (24, N), ``illuminant`` (N,), ``film_channels`` (N, K) on the grid;
-    ``layout`` a :class:`fidelity.render.ChartLayout` (1 world unit = 1 pixel).
+    ``layout`` a :class:`fidelity.camera.render.ChartLayout` (1 world unit = 1 pixel).
     """
     import mitsuba as mi
 
@@ -336,7 +336,7 @@ def render_raw(
     seed: int = 0,
     sampler: str | None = None,
 ) -> MitsubaImage:
-    """Render the chart and return camera raw RGB in :func:`fidelity.camera.camera_response` units.
+    """Render the chart and return camera raw RGB in :func:`fidelity.camera.model.camera_response` units.
 
     raw_c = pi * film_c / sum(E ybar dl), film_c = sum_k recombine[c, k] * specfilm channel k.
     ``variant`` None probes (:func:`probe_variant`); ``seed`` seeds the sampler; ``sampler``

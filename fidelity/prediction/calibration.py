@@ -29,11 +29,11 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import brentq
 
-from fidelity.charts import DEFAULT_CHART, Chart, load_chart
-from fidelity.colorimetry import delta_e_2000, srgb_to_lab
+from fidelity.colour.charts import DEFAULT_CHART, Chart, load_chart
+from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
 from fidelity.errors import InputFileError, InvalidValueError, UnreachableTargetError
 from fidelity.resources import resource_dir
-from fidelity.transforms import TRANSFORMS, TransformSpec, get_transform
+from fidelity.prediction.transforms import TRANSFORMS, TransformSpec, get_transform
 
 __all__ = [
     "DEFAULT_TARGETS",

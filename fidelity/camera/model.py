@@ -30,7 +30,7 @@ cameras live in ``fidelity/data/cameras/<name>.toml``. Every stage is optional:
    ``colour.characterisation.matrix_colour_correction`` with ``fit_method`` (``"Cheung 2004"``,
    3 terms; or ``"Finlayson 2015"``, degree 1), from the noise-free white-balanced patches under
    ``fit_illuminant`` (default ``"D65"``, or ``"scene"``) to the scene-consistent linear sRGB
-   reference of that illuminant (:func:`fidelity.spectral.scene_reference`).
+   reference of that illuminant (:func:`fidelity.colour.spectral.scene_reference`).
 7. **Tone curve** (``[tone] curve``): ``linear`` (output stays scene-linear float),
    ``srgb`` (IEC 61966-2-1 encoding), ``gamma`` (V^(1/gamma), ``gamma`` default 2.2) or ``lut``
    (``lut = "file.csv"`` or inline ``[[x, y], ...]``, linear input -> encoded output, linearly
@@ -41,7 +41,7 @@ cameras live in ``fidelity/data/cameras/<name>.toml``. Every stage is optional:
 Clipping rule: a display-referred output (tone curve other than ``linear``) or a quantised
 output is clipped to [0, 1], as a real encoded image is. A camera with a ``linear`` tone curve
 and no quantisation outputs unclipped float linear sRGB (an EXR-like output); it is measured as
-:func:`fidelity.colorimetry.delinearize_srgb` of those values, unclipped, so out-of-gamut patches
+:func:`fidelity.colour.colorimetry.delinearize_srgb` of those values, unclipped, so out-of-gamut patches
 (e.g. cyan) are measured exactly and an ideal camera measures ΔE00 ~ 0.
 
 Measurement rule: a display-referred output is read as encoded sRGB, which is what a viewer or
@@ -64,7 +64,7 @@ from numpy.typing import ArrayLike, NDArray
 from fidelity.errors import InputFileError, InvalidValueError, unknown_name
 from fidelity.fileio import require_file
 from fidelity.resources import resource_dir
-from fidelity.spectral import (
+from fidelity.colour.spectral import (
     GRID_STEP_NM,
     Illuminant,
     cie_1931_cmfs,
@@ -116,7 +116,7 @@ class Sensitivities:
     values: FloatArray
 
     def on_grid(self, step: float = GRID_STEP_NM) -> FloatArray:
-        """Sensitivities (M, 3) on :func:`fidelity.spectral.wavelength_grid` (zero outside)."""
+        """Sensitivities (M, 3) on :func:`fidelity.colour.spectral.wavelength_grid` (zero outside)."""
         return resample(self.wavelengths, self.values, wavelength_grid(step), extrapolation="zero")
 
 
@@ -228,7 +228,7 @@ def ideal_sensitivities() -> Sensitivities:
 
     With these, camera RGB = M @ XYZ exactly, so the camera reproduces sRGB colorimetrically.
     """
-    from fidelity.colorimetry import MATRIX_XYZ_TO_LINEAR_SRGB
+    from fidelity.colour.colorimetry import MATRIX_XYZ_TO_LINEAR_SRGB
 
     values = cie_1931_cmfs() @ np.asarray(MATRIX_XYZ_TO_LINEAR_SRGB).T
     return Sensitivities("ideal (M_XYZ->sRGB @ CIE 1931 2 degree CMFs)", wavelength_grid(), values)
@@ -391,7 +391,7 @@ def colour_correction_matrix(
 
 def apply_tone_curve(linear: ArrayLike, tone: ToneCurve) -> FloatArray:
     """Linear -> output values. Display curves clip to [0, 1] first; ``linear`` is identity."""
-    from fidelity.colorimetry import delinearize_srgb
+    from fidelity.colour.colorimetry import delinearize_srgb
 
     x = np.asarray(linear, dtype=np.float64)
     if tone.curve == "linear":
@@ -437,7 +437,7 @@ def develop(
     ``raw_patches`` (24, 3) are the patch values measured on the raw image (white-patch and
     grey-world balance use them). Returns the output image and its encoded sRGB view.
     """
-    from fidelity.colorimetry import delinearize_srgb
+    from fidelity.colour.colorimetry import delinearize_srgb
 
     img = np.asarray(raw_image, dtype=np.float64)
     gains = white_balance_gains(camera.white_balance, raw_patches, camera.sensitivities,

@@ -1,7 +1,7 @@
 """Find a 4 x 6 colour chart in an image, so that an audit needs no hand-given corners.
 
 The result is the same four numbers a user would give with ``--corners``: the image centres of
-the dark skin, bluish green, black and white patches (:mod:`fidelity.locate` conventions:
+the dark skin, bluish green, black and white patches (:mod:`fidelity.chart.locate` conventions:
 ``x`` along a row, ``y`` down, pixel ``(i, j)`` at ``x = j, y = i``). Everything after that,
 sampling windows, bad pixels, exposure and ΔE00, is the audit's own and does not depend on how
 the corners were found.
@@ -18,7 +18,7 @@ Methods (:data:`CHART_DETECTION_METHODS`):
     the detector found is assigned to the grid cell its centre falls in (within 0.3 patch
     pitches of the cell centre, through the coarse outline), and a homography grid -> image is
     fitted to all assigned swatch centres by the normalised DLT
-    (:func:`fidelity.locate.homography_from_points`), leaving out swatches whose centre lies
+    (:func:`fidelity.chart.locate.homography_from_points`), leaving out swatches whose centre lies
     more than three times the median distance off the fit (a contour merged with a dark
     frame). With fewer than six assigned swatches the coarse outline answers. The detector
     keeps only clusters of swatches with about the chart's aspect ratio
@@ -50,9 +50,9 @@ from typing import Any
 
 import numpy as np
 
-from fidelity import colorimetry as cm
+from fidelity.colour import colorimetry as cm
 from fidelity.errors import FidelityError, InvalidValueError, unknown_name
-from fidelity.locate import CORNER_PATCHES, apply_homography, homography_from_points
+from fidelity.chart.locate import CORNER_PATCHES, apply_homography, homography_from_points
 
 #: Largest distance (in patch pitches) between a swatch centre and the grid cell centre it is
 #: assigned to when the coarse outline is refined.
@@ -299,8 +299,8 @@ def _oriented_corners(image: np.ndarray, grid_to_image: np.ndarray, rows: int, c
     default chart's linear sRGB. A best score above :data:`ORIENTATION_MARGIN` times the next
     one means the swatches found are not a ColorChecker: an error.
     """
-    from fidelity.charts import load_chart
-    from fidelity.locate import grid_centres, locate_chart, sample_patches
+    from fidelity.colour.charts import load_chart
+    from fidelity.chart.locate import grid_centres, locate_chart, sample_patches
 
     reference = cm.linearize_srgb(load_chart().srgb)
     cells = _corner_cells(rows, cols)

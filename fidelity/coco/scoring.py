@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from fidelity.detectors import COCO80_CATEGORY_IDS
+from fidelity.coco.detectors import COCO80_CATEGORY_IDS
 from fidelity.errors import InputFileError, InvalidValueError
 
 

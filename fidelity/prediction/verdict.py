@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from fidelity.errors import InvalidValueError, unknown_name
-from fidelity.prediction import CLASS_COLUMNS, Prediction
+from fidelity.prediction.table import CLASS_COLUMNS, Prediction
 
 #: SAFE-COLOR: "ΔE ≤ 3 keeps ΔmAP below 1 %" (with a safety margin).
 DEFAULT_MAX_DELTA_E = 3.0

@@ -392,7 +392,7 @@ def scene_reference(
     Under D65 the adaptation only corrects the 1e-4 difference between the tabulated D65
     white and the sRGB white point, so the white patch lands on a* = b* = 0.
     """
-    from fidelity import colorimetry as cm
+    from fidelity.colour import colorimetry as cm
 
     ill = illuminant if isinstance(illuminant, Illuminant) else load_illuminant(illuminant)
     ps = load_patch_spectra(spectra)

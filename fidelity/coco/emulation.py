@@ -1,9 +1,9 @@
 """Emulate a camera's colour rendering on ordinary sRGB images.
 
-A camera model (:mod:`fidelity.camera`) is spectral: it needs reflectances, not pixels. To see
+A camera model (:mod:`fidelity.camera.model`) is spectral: it needs reflectances, not pixels. To see
 what its colour errors cost a detector on COCO photographs we fit a *colour mapping* from the
 reference colour of a surface (what an ideal camera would record: the scene-consistent sRGB of
-:func:`fidelity.spectral.scene_reference`) to the colour the camera outputs for the same
+:func:`fidelity.colour.spectral.scene_reference`) to the colour the camera outputs for the same
 surface, and apply that mapping to every pixel of an image. Spectral detail the image no longer
 has (metamerism) cannot be recovered; the fit is the best colour-to-colour estimate.
 
@@ -20,7 +20,7 @@ For each reflectance R under the test-case illuminant E the reference is
 ``sRGB(M_cat XYZ(R, E))`` (CIE 1931 2°, Bradford to D65, IEC 61966-2-1), *clipped to [0, 1]*
 because an 8-bit image can only hold that; the target is the camera's output for R with the
 camera's own exposure, white balance and CCM (metered and fitted on the chart, exactly as
-:func:`fidelity.render.render_chart` does, noise-free).
+:func:`fidelity.camera.render.render_chart` does, noise-free).
 
 Methods (:data:`EMULATION_METHODS`, ``method=``):
 
@@ -31,7 +31,7 @@ Methods (:data:`EMULATION_METHODS`, ``method=``):
   ``colour.characterisation.matrix_colour_correction(..., method="Finlayson 2015", degree=2,
   root_polynomial_expansion=True)``, from reference linear sRGB to the camera's linear signal
   before its tone curve; ``T`` and ``Q`` are the camera's own tone curve and quantisation
-  (:func:`fidelity.camera.apply_tone_curve`, :func:`fidelity.camera.quantise`). Root-polynomial
+  (:func:`fidelity.camera.model.apply_tone_curve`, :func:`fidelity.camera.model.quantise`). Root-polynomial
   terms are homogeneous of degree 1, so the mapping scales with exposure like the camera does
   (a shaded red maps to a shaded camera-red).
 * ``"lut3d"``: a 33^3 3D LUT on encoded sRGB: the root-polynomial mapping sampled on the grid
@@ -41,12 +41,12 @@ Methods (:data:`EMULATION_METHODS`, ``method=``):
 
 Applying to 8-bit images (:meth:`Emulation.apply_uint8`) uses a full 256^3 table (48 MiB)
 evaluated once per emulation on all 16,777,216 code triples, then rounded
-``rint(clip(x, 0, 1) * 255)`` like :func:`fidelity.dataset.to_uint8`; an image then costs one
+``rint(clip(x, 0, 1) * 255)`` like :func:`fidelity.coco.dataset.to_uint8`; an image then costs one
 table look-up per pixel.
 
 Accuracy (:func:`emulation_accuracy`): the chart reference, as an 8-bit image, goes through the
 same table; the result is compared patch by patch with the camera's rendered chart
-(:func:`fidelity.render.render_chart`) in CIEDE2000.
+(:func:`fidelity.camera.render.render_chart`) in CIEDE2000.
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fidelity.camera import (
+from fidelity.camera.model import (
     CameraModel,
     apply_tone_curve,
     camera_response,
@@ -70,7 +70,7 @@ from fidelity.camera import (
     quantise,
 )
 from fidelity.errors import InvalidValueError, unknown_name
-from fidelity.spectral import (
+from fidelity.colour.spectral import (
     GRID_STEP_NM,
     load_illuminant,
     load_patch_spectra,
@@ -101,7 +101,7 @@ ROOT_POLYNOMIAL_DEGREE: int = 2
 
 @dataclass(frozen=True)
 class ReflectanceSet:
-    """Reflectances (K, N) on :func:`fidelity.spectral.wavelength_grid` with names and sources."""
+    """Reflectances (K, N) on :func:`fidelity.colour.spectral.wavelength_grid` with names and sources."""
 
     name: str
     names: tuple[str, ...]
@@ -189,10 +189,10 @@ def reference_linear_srgb(reflectance: ArrayLike, illuminant: str = "D65",
                           cat: str = "Bradford") -> FloatArray:
     """Scene-consistent reference linear sRGB (..., 3) of reflectances (..., N) on the grid.
 
-    Same convention as :func:`fidelity.spectral.scene_reference`: XYZ under the illuminant
+    Same convention as :func:`fidelity.colour.spectral.scene_reference`: XYZ under the illuminant
     (Y_white = 1), adapted by ``cat`` to the sRGB D65 white, IEC 61966-2-1 matrix; unclipped.
     """
-    from fidelity import colorimetry as cm
+    from fidelity.colour import colorimetry as cm
 
     ill = load_illuminant(illuminant)
     xyz, white = tristimulus(reflectance, ill.on_grid())
@@ -223,10 +223,10 @@ def camera_samples(camera: CameraModel, illuminant: str, reflectances: Reflectan
     """Noise-free camera output for every reflectance, metered and balanced on the chart.
 
     Exposure (auto metering), white balance (white-patch, grey-world) and the fitted CCM use the
-    chart exactly as :func:`fidelity.render.render_chart` does; vignetting and noise (spatial
+    chart exactly as :func:`fidelity.camera.render.render_chart` does; vignetting and noise (spatial
     and random effects, not colour rendering) are left out.
     """
-    from fidelity.colorimetry import delinearize_srgb
+    from fidelity.colour.colorimetry import delinearize_srgb
 
     ill = load_illuminant(illuminant)
     e, sens = ill.on_grid(), camera.sensitivities.on_grid()
@@ -243,7 +243,7 @@ def camera_samples(camera: CameraModel, illuminant: str, reflectances: Reflectan
 def camera_output_srgb(camera: CameraModel, linear: ArrayLike) -> FloatArray:
     """The camera's output stage on its linear signal: tone curve, quantisation, then encoded
     sRGB clipped to [0, 1] (a linear-output camera is encoded with the sRGB curve)."""
-    from fidelity.colorimetry import delinearize_srgb
+    from fidelity.colour.colorimetry import delinearize_srgb
 
     out = apply_tone_curve(linear, camera.tone)
     if camera.quantisation_bits is not None:
@@ -315,7 +315,7 @@ class Emulation:
     # float path -------------------------------------------------------------------------------
     def _root_poly(self, srgb: FloatArray) -> FloatArray:
         """Root-polynomial part + camera output stage, without quantisation for the LUT."""
-        from fidelity.colorimetry import linearize_srgb
+        from fidelity.colour.colorimetry import linearize_srgb
 
         lin = linearize_srgb(np.clip(srgb, 0.0, 1.0))
         return root_polynomial_terms(lin) @ self.matrix.T
@@ -337,7 +337,7 @@ class Emulation:
     def cube(self, chunk: int = 1 << 20) -> NDArray[np.uint8]:
         """The (2^24, 3) uint8 table of :meth:`apply` on every 8-bit triple (built once)."""
         if self._cube is None:
-            from fidelity.dataset import _all_triples, to_uint8
+            from fidelity.coco.dataset import _all_triples, to_uint8
 
             table = np.empty((1 << 24, 3), dtype=np.uint8)
             for s in range(0, 1 << 24, chunk):
@@ -461,10 +461,10 @@ class EmulationAccuracy:
 def emulation_accuracy(emu: Emulation, chart_spectra: str = "BabelColor Average"
                        ) -> EmulationAccuracy:
     """Check the emulation against the camera's own rendered chart (module docstring)."""
-    from fidelity.colorimetry import delta_e_2000, srgb_to_lab
-    from fidelity.dataset import to_uint8
-    from fidelity.render import render_chart
-    from fidelity.spectral import scene_reference
+    from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
+    from fidelity.coco.dataset import to_uint8
+    from fidelity.camera.render import render_chart
+    from fidelity.colour.spectral import scene_reference
 
     render = render_chart(emu.camera, emu.illuminant, spectra=chart_spectra)
     cam_srgb = np.clip(render.measurement.srgb, 0.0, 1.0)

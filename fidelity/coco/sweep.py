@@ -2,7 +2,7 @@
 
 Pipeline per cell, all in memory (equivalent to writing the transformed JPEG files and reading
 them back, as SAFE-COLOR did): decoded original (cached in RAM) -> 8-bit transform
-(:class:`fidelity.dataset.PixelMap`, exact) -> JPEG encode with the original's tables and
+(:class:`fidelity.coco.dataset.PixelMap`, exact) -> JPEG encode with the original's tables and
 subsampling -> decode -> detector -> raw detections.
 
 Store (``<out>/sweep.sqlite``, WAL journal, ``synchronous=FULL``):
@@ -13,7 +13,7 @@ Store (``<out>/sweep.sqlite``, WAL journal, ``synchronous=FULL``):
 * ``cells(model, transform, target, param, status, reason, images, map, map50, map75, ap,
   seconds, finished)``: one row per finished cell (``status`` ``done`` or ``unreachable``).
 * ``folds(model, transform, target, images, folds)``: per-fold scores of a finished cell
-  (:func:`fidelity.cocoeval.score_folds`), computed from the stored detections when a report
+  (:func:`fidelity.coco.scoring.score_folds`), computed from the stored detections when a report
   asks for standard errors, and kept.
 * ``models(model, file, sha256, limit_images, settings)`` and ``meta(key, value)``: provenance
   (versions, data, grid, machine, and ``scorers``: the COCO AP implementations that scored it).
@@ -22,7 +22,7 @@ A rerun skips finished cells and the images already stored in unfinished ones. A
 model's image limit raised (``model.onnx@N``) extends its finished cells: only the new images
 are run, the stored ones are kept, and each cell is re-scored on the first N images (baseline
 first). A store caught mid-extension holds cells on two image counts; its report scores every
-cell of a model on the smaller one (:func:`fidelity.tables.align_image_counts`).
+cell of a model on the smaller one (:func:`fidelity.coco.tables.align_image_counts`).
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ import numpy as np
 
 from fidelity.errors import InvalidValueError
 from fidelity.fileio import file_sha256
-from fidelity.resultstore import ResultsStore, pack_detections, unpack_detections
+from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
 
 #: Default targets of the sweep (issue 5): ΔE 0 is the baseline.
 SWEEP_TARGETS: tuple[float, ...] = (0, 1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 18, 21, 24)
@@ -131,7 +131,7 @@ class SweepStore(ResultsStore):
     def fold_scores(self, coco: Any, model: str, transform: str, target: float,
                     image_ids: Sequence[int], method: str = "auto") -> list[dict[str, Any]]:
         """Per-fold scores of a cell on ``image_ids`` (cached in the ``folds`` table)."""
-        from fidelity.cocoeval import score_folds
+        from fidelity.coco.scoring import score_folds
 
         row = self.db.execute("SELECT images, folds FROM folds WHERE model=? AND transform=? "
                               "AND target=?", (model, transform, float(target))).fetchone()
@@ -253,7 +253,7 @@ class ImageCache:
 
     def get(self, image_id: int) -> tuple[np.ndarray, Any]:
         """(rgb, settings) of an image id."""
-        from fidelity.jpeg import read_jpeg
+        from fidelity.coco.jpeg import read_jpeg
 
         hit = self._cache.get(image_id)
         if hit is None:
@@ -270,7 +270,7 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
               progress: bool = False) -> SweepStore:
     """Run (or resume) every cell of the grid for each model in order; returns the store.
 
-    ``scorer``: COCO AP implementation (:data:`fidelity.cocoeval.COCO_SCORERS` or ``"auto"``);
+    ``scorer``: COCO AP implementation (:data:`fidelity.coco.scoring.COCO_SCORERS` or ``"auto"``);
     it is recorded in the store's ``meta`` and in each cell's log line. ``log`` receives one
     line per finished cell, numbered ``[k/N]`` in the run order (N: every planned cell, k
     counts finished ones too); ``progress`` adds a progress bar over a cell's images.
@@ -280,10 +280,10 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     import onnxruntime
     from tqdm import tqdm
 
-    from fidelity.cocoeval import evaluate_detections, load_annotated_images, resolve_scorer
-    from fidelity.dataset import BASELINE, PixelMap, calibrated_param
-    from fidelity.detectors import Detector
-    from fidelity.jpeg import roundtrip_jpeg
+    from fidelity.coco.scoring import evaluate_detections, load_annotated_images, resolve_scorer
+    from fidelity.coco.dataset import BASELINE, PixelMap, calibrated_param
+    from fidelity.coco.detectors import Detector
+    from fidelity.coco.jpeg import roundtrip_jpeg
 
     say = log or (lambda s: print(s, file=sys.stderr, flush=True))
     img_dir, coco, all_ids = load_annotated_images(images, annotations)
@@ -417,7 +417,7 @@ def sweep_status(store: SweepStore, pace_cells: int = 10) -> list[dict[str, Any]
 
 def rescore(store: SweepStore, annotations: str | os.PathLike[str], method: str = "auto") -> int:
     """Recompute every done cell's scores from the stored detections (no inference)."""
-    from fidelity.cocoeval import evaluate_detections, load_annotations, resolve_scorer
+    from fidelity.coco.scoring import evaluate_detections, load_annotations, resolve_scorer
 
     method = resolve_scorer(method)
     coco = load_annotations(annotations)

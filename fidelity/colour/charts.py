@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fidelity.colorimetry import lab_to_srgb
+from fidelity.colour.colorimetry import lab_to_srgb
 from fidelity.errors import InputFileError, InvalidValueError, unknown_name
 from fidelity.resources import resource_dir
 

@@ -2,9 +2,9 @@
 
 Steps (each a pure function of arrays; :func:`audit_image` adds the file reading):
 
-1. Locate the 24 patches from the four corner-patch centres (:mod:`fidelity.locate`) and take
+1. Locate the 24 patches from the four corner-patch centres (:mod:`fidelity.chart.locate`) and take
    the pixels of each patch's central sampling window. Without given corners the chart is
-   found first (:func:`fidelity.detect.detect_chart`); everything after that is the same.
+   found first (:func:`fidelity.chart.find.detect_chart`); everything after that is the same.
 2. Exclude bad pixels: a pixel with NaN or +-Inf in any channel. They are counted (per kind,
    per patch, and over the whole image). Pixels with a negative channel are counted too and by
    default kept (:data:`NEGATIVE_RULES`: scene-linear renders of out-of-gamut colours have
@@ -23,12 +23,12 @@ Steps (each a pure function of arrays; :func:`audit_image` adds the file reading
    auto exposure removes any overall brightness error of the camera along with the exposure.
 5. Encode as sRGB (IEC 61966-2-1), clip to [0, 1] like any stored image (the patches that
    clipped are listed), convert to CIELAB D65 and compare with the reference by CIEDE2000
-   (:func:`fidelity.measure.measure_chart`); the chart ΔE is the mean over the 24 patches.
+   (:func:`fidelity.chart.measure.measure_chart`); the chart ΔE is the mean over the 24 patches.
 
 Input pixels are taken as linear or encoded sRGB (Rec. 709 primaries, D65 white), or in another
 RGB colourspace (``colourspace``: ACEScg, ITU-R BT.2020, ... or an EXR's chromaticities), whose
 linear patch means are converted to linear sRGB first
-(:func:`fidelity.colorimetry.matrix_rgb_to_linear_srgb`; encoded input is decoded with the sRGB
+(:func:`fidelity.colour.colorimetry.matrix_rgb_to_linear_srgb`; encoded input is decoded with the sRGB
 transfer function whatever its primaries). A camera's native RGB must be converted before
 auditing.
 """
@@ -43,11 +43,11 @@ from typing import Any
 
 import numpy as np
 
-from fidelity import colorimetry as cm
-from fidelity.detect import ChartDetection, detect_chart
+from fidelity.colour import colorimetry as cm
+from fidelity.chart.find import ChartDetection, detect_chart
 from fidelity.errors import InvalidValueError, unknown_name
-from fidelity.locate import DEFAULT_WINDOW, ChartLocation, locate_chart, sample_patches
-from fidelity.measure import ChartMeasurement, measure_chart
+from fidelity.chart.locate import DEFAULT_WINDOW, ChartLocation, locate_chart, sample_patches
+from fidelity.chart.measure import ChartMeasurement, measure_chart
 
 #: Encodings of input pixel values.
 ENCODINGS = ("linear", "srgb")
@@ -81,12 +81,12 @@ class Reference:
 
 def load_reference(reference: str = DEFAULT_REFERENCE, illuminant: str = "D65") -> Reference:
     """The reference chart: ``"scene"`` (BabelColor Average spectra under ``illuminant``,
-    adapted to D65, :func:`fidelity.spectral.scene_reference`), or a chart name/path
-    (``"safecolor"``: the paper's Lab values, :func:`fidelity.charts.load_chart`)."""
-    from fidelity.charts import load_chart
+    adapted to D65, :func:`fidelity.colour.spectral.scene_reference`), or a chart name/path
+    (``"safecolor"``: the paper's Lab values, :func:`fidelity.colour.charts.load_chart`)."""
+    from fidelity.colour.charts import load_chart
 
     if reference == SCENE_REFERENCE:
-        from fidelity.spectral import scene_reference
+        from fidelity.colour.spectral import scene_reference
 
         chart = load_chart("safecolor")
         sr = scene_reference(illuminant)
@@ -102,7 +102,7 @@ def load_reference(reference: str = DEFAULT_REFERENCE, illuminant: str = "D65") 
     try:
         chart = load_chart(reference)
     except Exception as exc:  # an unknown name reads better with the choices listed
-        from fidelity.charts import available_charts
+        from fidelity.colour.charts import available_charts
         from fidelity.errors import FidelityError
 
         if isinstance(exc, FidelityError) and not os.path.exists(reference):
@@ -236,7 +236,7 @@ def audit_pixels(
     corners
         Centres of the dark skin, bluish green, black and white patches, ``(4, 2)`` image
         ``(x, y)`` or ``"X1,Y1,...,X4,Y4"``; ``None``: find the chart
-        (:func:`fidelity.detect.detect_chart` with ``detection``).
+        (:func:`fidelity.chart.find.detect_chart` with ``detection``).
     exposure
         ``"auto"`` (fit on the neutral patches), a fixed EV (scale ``2**EV``), or ``None``:
         auto for linear input, 0 for sRGB-encoded input.
@@ -244,7 +244,7 @@ def audit_pixels(
         ``"safecolor"`` (the paper's chart), ``"scene"`` or a chart name/path.
     colourspace
         RGB primaries of the pixels: a colour-science name or 8 chromaticities (see
-        :func:`fidelity.colorimetry.matrix_rgb_to_linear_srgb`).
+        :func:`fidelity.colour.colorimetry.matrix_rgb_to_linear_srgb`).
     """
     to_srgb = cm.matrix_rgb_to_linear_srgb(colourspace)
     if encoding not in ENCODINGS:
@@ -355,7 +355,7 @@ def audit_image(
     negatives: str = "keep",
     colourspace: str | Sequence[float] | None = None,
 ) -> AuditResult:
-    """Read an image (:func:`fidelity.imageio.read_image`) and audit its chart.
+    """Read an image (:func:`fidelity.chart.image.read_image`) and audit its chart.
 
     ``encoding=None`` takes the file's likely encoding: linear for floating-point pixels (EXR,
     HDR, float TIFF), sRGB for integer pixels (PNG, JPEG, 8/16-bit TIFF). ``colourspace=None``
@@ -364,7 +364,7 @@ def audit_image(
     """
     from fidelity.errors import FidelityError
     from fidelity.fileio import file_sha256
-    from fidelity.imageio import read_image
+    from fidelity.chart.image import read_image
 
     img = read_image(path, layer=layer)
     info = img.to_dict()

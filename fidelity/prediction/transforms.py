@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fidelity.colorimetry import delinearize_srgb, lab_to_srgb, linearize_srgb, srgb_to_lab
+from fidelity.colour.colorimetry import delinearize_srgb, lab_to_srgb, linearize_srgb, srgb_to_lab
 from fidelity.errors import InvalidValueError, unknown_name
 
 __all__ = [

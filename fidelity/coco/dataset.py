@@ -1,6 +1,6 @@
 """Transformed copies of an image set: one subset per (transform, ΔE target), as SAFE-COLOR made.
 
-Every image is read as sRGB code values (:mod:`fidelity.jpeg`), transformed with the parameter
+Every image is read as sRGB code values (:mod:`fidelity.coco.jpeg`), transformed with the parameter
 calibrated on the chart for that (transform, ΔE), rounded to 8 bit and written back as JPEG with
 the original's quantization tables, chroma subsampling and ICC profile. ΔE = 0 is the baseline:
 decode and re-encode only.
@@ -9,7 +9,7 @@ Fast path (:class:`PixelMap`). Images are 8-bit, so for a fixed (transform, para
 transform except ``pull_mean`` is a pure per-pixel function of the RGB triple:
 
 * brightness, contrast, gamma act on each channel alone: a 256-entry lookup table per channel,
-  built by evaluating :func:`fidelity.transforms.apply_transform` on the 256 code values.
+  built by evaluating :func:`fidelity.prediction.transforms.apply_transform` on the 256 code values.
 * saturation and hue mix channels: a 256^3-entry table (48 MiB of uint8) built once per
   (transform, parameter) by evaluating the same reference function on all 16,777,216 triples.
 * ``pull_mean`` depends on the image's mean Lab, so it runs per image, on the image's distinct
@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from fidelity.colorimetry import (
+from fidelity.colour.colorimetry import (
     CIE_EPSILON,
     CIE_KAPPA,
     MATRIX_LINEAR_SRGB_TO_XYZ,
@@ -61,7 +61,7 @@ def to_uint8(x: np.ndarray) -> np.ndarray:
 
 def reference_transform(rgb8: np.ndarray, name: str, param: float) -> np.ndarray:
     """The slow reference: float64 ``apply_transform(rgb8 / 255, name, param)`` rounded to 8 bit."""
-    from fidelity.transforms import apply_transform
+    from fidelity.prediction.transforms import apply_transform
 
     x = np.asarray(rgb8, dtype=np.float64) / 255.0
     return to_uint8(apply_transform(x, name, param))
@@ -94,7 +94,7 @@ class PixelMap:
         t0 = time.perf_counter()
         if name == BASELINE:
             return cls(name, None, "identity")
-        from fidelity.transforms import TRANSFORMS, apply_transform
+        from fidelity.prediction.transforms import TRANSFORMS, apply_transform
 
         if name not in TRANSFORMS:
             from fidelity.errors import unknown_name
@@ -155,7 +155,7 @@ def pull_mean_uint8(rgb8: np.ndarray, alpha: float,
                     workspace: PullMeanWorkspace | None = None) -> np.ndarray:
     """Exact 8-bit ``pull_mean``, with the Lab <-> sRGB work done once per distinct colour.
 
-    Same arithmetic per colour as :func:`fidelity.transforms.pull_mean` on ``rgb8 / 255`` in
+    Same arithmetic per colour as :func:`fidelity.prediction.transforms.pull_mean` on ``rgb8 / 255`` in
     float64 (sRGB decoding through a 256-entry table of the same function's values), on the
     distinct colours only (a natural 640x480 image has 40k-180k of ~300k pixels). The mean Lab
     is the count-weighted sum over distinct colours divided by the pixel count: the same number
@@ -201,8 +201,8 @@ class PullMeanWorkspace:
     """Reusable buffers of :func:`pull_mean_uint8`, and its per-colour colour science.
 
     :meth:`lab_of_codes` and :meth:`codes_of_lab` repeat, operation for operation (the same
-    float64 operations in the same order), :func:`fidelity.colorimetry.srgb_to_lab` on
-    ``code / 255`` and :func:`to_uint8` of :func:`fidelity.colorimetry.lab_to_srgb`, but on
+    float64 operations in the same order), :func:`fidelity.colour.colorimetry.srgb_to_lab` on
+    ``code / 255`` and :func:`to_uint8` of :func:`fidelity.colour.colorimetry.lab_to_srgb`, but on
     channel planes (3, n), ``chunk`` colours at a time, in buffers kept between calls: fresh
     multi-MiB temporaries cost more in page faults and cache misses than the arithmetic does
     (benchmarks/bench_pipeline.py times ``pull_mean``; chunks of 8192 colours were fastest). The
@@ -298,7 +298,7 @@ class PullMeanWorkspace:
         t *= np.asarray(WHITEPOINT_D65_XYZ)[:, None]
         x = self.plane("lin", n)
         np.matmul(MATRIX_XYZ_TO_LINEAR_SRGB, t, out=x)  # linear sRGB (3, N)
-        p = f  # reused: sRGB encoding, as fidelity.colorimetry (the power branch above
+        p = f  # reused: sRGB encoding, as fidelity.colour.colorimetry (the power branch above
         with np.errstate(invalid="ignore"):  # 0.0031308, where max(x, 0.0031308) = x;
             np.power(x, 1.0 / 2.4, out=p)  # NaN below 0 is overwritten just after)
         p *= 1.055
@@ -316,8 +316,8 @@ class PullMeanWorkspace:
 
 @functools.cache
 def _srgb_linear_table() -> np.ndarray:
-    """Linear values of the 256 sRGB code values (:func:`fidelity.colorimetry.linearize_srgb`)."""
-    from fidelity.colorimetry import linearize_srgb
+    """Linear values of the 256 sRGB code values (:func:`fidelity.colour.colorimetry.linearize_srgb`)."""
+    from fidelity.colour.colorimetry import linearize_srgb
 
     table = linearize_srgb(np.arange(256, dtype=np.float64) / 255.0)
     table.flags.writeable = False
@@ -336,7 +336,7 @@ def calibrated_param(transform: str, target: float) -> tuple[float | None, str |
     """
     if target == 0:
         return None, None
-    from fidelity.calibration import calibrate_transform, load_calibration_table
+    from fidelity.prediction.calibration import calibrate_transform, load_calibration_table
 
     try:
         table = load_calibration_table()
@@ -379,7 +379,7 @@ _WORKER_MAP: dict[tuple[str, float | None], PixelMap] = {}
 
 def _write_one(args: tuple[str, str, str, float | None]) -> str:
     from fidelity.fileio import write_bytes_atomic
-    from fidelity.jpeg import encode_jpeg, read_jpeg
+    from fidelity.coco.jpeg import encode_jpeg, read_jpeg
 
     src, dst, name, param = args
     key = (name, param)

@@ -1,0 +1,1 @@
+"""Reports: JSON for machines, HTML for people, JUnit XML for CI, terminal summaries."""
