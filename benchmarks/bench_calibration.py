@@ -11,8 +11,8 @@ import time
 from pathlib import Path
 
 from benchmarks.machine import machine_info
-from fidelity.prediction.calibration import calibration_table
 from fidelity.fileio import write_json_atomic
+from fidelity.prediction.calibration import calibration_table
 
 
 def main() -> None:

@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.machine import best_time, machine_info
+from fidelity.chart.find import find_chart
+from fidelity.chart.measure import measure_pixels
 from fidelity.colour import colorimetry as cm
-from fidelity.chart.audit import audit_pixels
-from fidelity.chart.find import detect_chart
 from fidelity.fileio import write_json_atomic
 from fidelity.prediction.transforms import apply_transform
 
@@ -54,13 +54,13 @@ def main() -> None:
         for camera, transform in CAMERAS.items():
             srgb = apply_transform(CHART.srgb, *transform) if transform else CHART.srgb
             img = scene(h, size, cm.linearize_srgb(np.clip(srgb, 0, 1)))
-            anchor = detect_chart(img, refine=False)
-            ours = detect_chart(img)
+            anchor = find_chart(img, refine=False)
+            ours = find_chart(img)
             err_a = float(np.linalg.norm(anchor.corners - truth, axis=-1).max()) / pitch * 100
             err_o = float(np.linalg.norm(ours.corners - truth, axis=-1).max()) / pitch * 100
-            t_a = best_time(lambda img=img: detect_chart(img, refine=False), args.repeats)
-            t_o = best_time(lambda img=img: detect_chart(img), args.repeats)
-            t_audit = best_time(lambda img=img, c=truth: audit_pixels(img, c), args.repeats)
+            t_a = best_time(lambda img=img: find_chart(img, refine=False), args.repeats)
+            t_o = best_time(lambda img=img: find_chart(img), args.repeats)
+            t_audit = best_time(lambda img=img, c=truth: measure_pixels(img, c), args.repeats)
             rows.append({"case": case, "camera": camera, "image": f"{size[1]}x{size[0]}",
                          "pitch_px": round(pitch, 2),
                          "corner_error_percent_pitch": {"anchor": round(err_a, 3),

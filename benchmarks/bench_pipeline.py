@@ -95,13 +95,13 @@ def main() -> int:
     import onnxruntime
     from PIL import Image
 
-    from fidelity.prediction.calibration import calibrate_transform
-    from fidelity.coco.scoring import evaluate_detections, load_annotations, resolve_scorer
     from fidelity.coco.dataset import PixelMap, reference_transform
     from fidelity.coco.detectors import Detector
     from fidelity.coco.jpeg import decode_jpeg, encode_jpeg
-    from fidelity.resources import shared_dir
+    from fidelity.coco.scoring import evaluate_detections, load_annotations, resolve_scorer
+    from fidelity.prediction.calibration import calibrate_transform
     from fidelity.prediction.transforms import TRANSFORMS
+    from fidelity.resources import shared_dir
 
     shared = shared_dir()
     if shared is None:

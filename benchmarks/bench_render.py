@@ -35,9 +35,9 @@ from typing import Any
 import numpy as np
 
 from fidelity.camera.model import Noise, load_camera
+from fidelity.camera.render import render_chart
 from fidelity.colour.colorimetry import delta_e_2000
 from fidelity.fileio import atomic_output, write_json_atomic, write_text_atomic
-from fidelity.camera.render import render_chart
 
 TARGET = 0.02
 TIME_LIMIT_S = 30.0

@@ -57,8 +57,8 @@ def main() -> int:
     args = ap.parse_args()
 
     from fidelity.coco.scoring import evaluate_detections, load_annotations
-    from fidelity.fileio import write_json_atomic
     from fidelity.coco.sweep import SweepStore
+    from fidelity.fileio import write_json_atomic
 
     store = SweepStore(args.store, create=False)
     scorer_of = store.scorer_of

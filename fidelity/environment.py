@@ -52,8 +52,8 @@ def dependency_versions(distribution: str = "fidelity") -> dict[str, str | None]
 def _mitsuba(probe: bool) -> dict[str, Any]:
     if not probe:
         return {"probed": False}
-    from fidelity.errors import FidelityError
     from fidelity.camera.mitsuba import probe_variant
+    from fidelity.errors import FidelityError
 
     try:
         p = probe_variant()

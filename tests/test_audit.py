@@ -17,7 +17,7 @@ import OpenEXR
 import pytest
 from PIL import Image as PILImage
 
-from fidelity.chart.audit import audit_image, audit_pixels, exposure_from_neutrals
+from fidelity.chart.measure import exposure_from_neutrals, measure_image, measure_pixels
 from fidelity.colour.charts import load_chart
 from fidelity.errors import FidelityError, InvalidValueError, UnknownNameError
 from fidelity.prediction.transforms import apply_transform
@@ -85,7 +85,7 @@ def chart():
 
 def test_identity_chart_png_measures_the_known_baseline(tmp_path, chart):
     write_png8(tmp_path / "c.png", draw_chart(chart.srgb))
-    result = audit_image(tmp_path / "c.png", corners_of())
+    result = measure_image(tmp_path / "c.png", corners_of())
     want = expected_delta_e(np.rint(chart.srgb * 255) / 255, chart.lab)
     assert result.exposure_ev == 0.0 and result.exposure_mode == "fixed"
     assert result.encoding == "srgb"
@@ -97,7 +97,7 @@ def test_identity_chart_png_measures_the_known_baseline(tmp_path, chart):
 def test_transformed_chart_png(tmp_path, chart, name, param):
     srgb = apply_transform(chart.srgb, name, param)
     write_png8(tmp_path / "c.png", draw_chart(srgb))
-    result = audit_image(tmp_path / "c.png", corners_of())
+    result = measure_image(tmp_path / "c.png", corners_of())
     stored = np.rint(srgb * 255) / 255
     # the known ΔE is that of the chart as stored in 8 bit (rounding alone moves the float
     # chart's ΔE by up to about 0.2: the SAFE-COLOR data sets are 8-bit images too)
@@ -114,7 +114,7 @@ def test_linear_exr_auto_exposure(tmp_path, chart, name, param, scale):
     srgb = apply_transform(chart.srgb, name, param)
     linear = colour.cctf_decoding(draw_chart(srgb), function="sRGB") * scale
     write_exr(tmp_path / "c.exr", linear, dtype=np.float32)
-    result = audit_image(tmp_path / "c.exr", corners_of())
+    result = measure_image(tmp_path / "c.exr", corners_of())
     assert result.encoding == "linear" and result.exposure_mode == "auto"
     assert result.exposure_ev == pytest.approx(-math.log2(scale), abs=1e-5 if param == 0 else 0.02)
     assert abs(result.mean_delta_e - expected_delta_e(srgb, chart.lab)) < 0.02
@@ -126,16 +126,16 @@ def test_linear_exr_fixed_exposure(tmp_path, chart):
     srgb = apply_transform(chart.srgb, "saturation-inc", 1.8)
     scale = 0.013
     write_exr(tmp_path / "c.exr", colour.cctf_decoding(draw_chart(srgb), function="sRGB") * scale)
-    result = audit_image(tmp_path / "c.exr", corners_of(), exposure=-math.log2(scale))
+    result = measure_image(tmp_path / "c.exr", corners_of(), exposure=-math.log2(scale))
     assert abs(result.mean_delta_e - expected_delta_e(srgb, chart.lab)) < 0.02
-    auto = audit_image(tmp_path / "c.exr", corners_of(), exposure="auto")
+    auto = measure_image(tmp_path / "c.exr", corners_of(), exposure="auto")
     assert abs(auto.exposure_ev + math.log2(scale)) < 0.03
 
 
 def test_auto_exposure_absorbs_a_global_brightness_error(tmp_path, chart):
     linear = colour.cctf_decoding(draw_chart(chart.srgb), function="sRGB") * 1.5
-    fixed = audit_pixels(linear, corners_of(), encoding="linear", exposure=0.0)
-    auto = audit_pixels(linear, corners_of(), encoding="linear")
+    fixed = measure_pixels(linear, corners_of(), encoding="linear", exposure=0.0)
+    auto = measure_pixels(linear, corners_of(), encoding="linear")
     assert auto.exposure_ev == pytest.approx(-math.log2(1.5), abs=1e-6)
     assert auto.mean_delta_e == pytest.approx(expected_delta_e(chart.srgb, chart.lab), abs=0.02)
     assert fixed.mean_delta_e > auto.mean_delta_e + 2.0
@@ -148,11 +148,11 @@ def test_linear_half_exr_fixed_exposure_with_layer(tmp_path, chart):
     write_exr(tmp_path / "c.exr", np.concatenate([linear, linear * 0.5], axis=-1),
               channels=("beauty.R", "beauty.G", "beauty.B", "diffuse.R", "diffuse.G", "diffuse.B"),
               dtype=np.float16)
-    result = audit_image(tmp_path / "c.exr", corners_of(), layer="beauty",
+    result = measure_image(tmp_path / "c.exr", corners_of(), layer="beauty",
                          exposure=-math.log2(scale))
     assert result.exposure_mode == "fixed"
     assert abs(result.mean_delta_e - expected_delta_e(srgb, chart.lab)) < 0.02
-    other = audit_image(tmp_path / "c.exr", corners_of(), layer="diffuse",
+    other = measure_image(tmp_path / "c.exr", corners_of(), layer="diffuse",
                         exposure=-math.log2(scale) + 1.0)
     assert abs(other.mean_delta_e - result.mean_delta_e) < 0.02
 
@@ -166,7 +166,7 @@ def test_16bit_tiff_meets_the_float_chart(tmp_path, chart):
     out.open(str(tmp_path / "c.tif"), oiio.ImageSpec(img.shape[1], img.shape[0], 3, "uint16"))
     out.write_image(img)
     out.close()
-    result = audit_image(tmp_path / "c.tif", corners_of())
+    result = measure_image(tmp_path / "c.tif", corners_of())
     assert result.encoding == "srgb"
     assert abs(result.mean_delta_e - expected_delta_e(srgb, chart.lab)) < 0.02
 
@@ -174,7 +174,7 @@ def test_16bit_tiff_meets_the_float_chart(tmp_path, chart):
 def test_bad_pixels_counted_and_excluded(chart):
     srgb = apply_transform(chart.srgb, "hue", 8.0)
     img = colour.cctf_decoding(draw_chart(srgb), function="sRGB")
-    clean = audit_pixels(img, corners_of(), encoding="linear", exposure=0.0)
+    clean = measure_pixels(img, corners_of(), encoding="linear", exposure=0.0)
     dirty = img.copy()
     centres = map_points(KNOWN_H, np.array([[1.0, 1.0], [4.0, 2.0]]))  # purplish blue, magenta
     x, y = np.rint(centres[0]).astype(int)
@@ -183,7 +183,7 @@ def test_bad_pixels_counted_and_excluded(chart):
     x, y = np.rint(centres[1]).astype(int)
     dirty[y, x] = [0.2, -0.1, 0.2]
     dirty[0, 0] = np.nan  # outside every sampling window
-    result = audit_pixels(dirty, corners_of(), encoding="linear", exposure=0.0,
+    result = measure_pixels(dirty, corners_of(), encoding="linear", exposure=0.0,
                           negatives="exclude")
     bp = result.bad_pixels
     assert (bp["nan"], bp["inf"], bp["negative"], bp["total"]) == (1, 1, 1, 3)
@@ -191,7 +191,7 @@ def test_bad_pixels_counted_and_excluded(chart):
     assert bp["image"]["total"] == 4
     assert result.mean_delta_e == pytest.approx(clean.mean_delta_e, abs=1e-9)
     # by default a negative value is counted but kept: NaN/Inf alone are excluded
-    kept = audit_pixels(dirty, corners_of(), encoding="linear", exposure=0.0).bad_pixels
+    kept = measure_pixels(dirty, corners_of(), encoding="linear", exposure=0.0).bad_pixels
     assert (kept["negative"], kept["total"], kept["per_patch"]) == (1, 2, {"purplish blue": 2})
 
 
@@ -201,8 +201,8 @@ def test_negative_values_of_out_of_gamut_colours_are_kept_in_the_linear_mean(cha
     lin[17] = [-0.02, 0.18, 0.33]  # "cyan"
     img = draw_chart(lin)
     with pytest.raises(InvalidValueError, match="'cyan': only 0 of"):
-        audit_pixels(img, corners_of(), encoding="linear", exposure=0.0, negatives="exclude")
-    result = audit_pixels(img, corners_of(), encoding="linear", exposure=0.0)
+        measure_pixels(img, corners_of(), encoding="linear", exposure=0.0, negatives="exclude")
+    result = measure_pixels(img, corners_of(), encoding="linear", exposure=0.0)
     assert result.bad_pixels["negative"] == result.valid_pixels[17]
     assert "cyan" in result.clipped_patches
     # expected: the patch mean (flat) encoded as sRGB and clipped, by colour-science
@@ -210,7 +210,7 @@ def test_negative_values_of_out_of_gamut_colours_are_kept_in_the_linear_mean(cha
     np.testing.assert_allclose(result.measurement.srgb, expected, atol=1e-9)
     assert result.mean_delta_e == pytest.approx(expected_delta_e(expected, chart.lab), abs=0.02)
     with pytest.raises(UnknownNameError, match="rule for negative values"):
-        audit_pixels(img, corners_of(), negatives="clip")
+        measure_pixels(img, corners_of(), negatives="clip")
 
 
 def test_patch_with_too_few_valid_pixels_is_named(chart):
@@ -219,7 +219,7 @@ def test_patch_with_too_few_valid_pixels_is_named(chart):
     x, y = np.rint(c).astype(int)
     img[y - 12:y + 13, x - 12:x + 13] = np.nan
     with pytest.raises(InvalidValueError, match="neutral 6.5"):
-        audit_pixels(img, corners_of(), encoding="linear")
+        measure_pixels(img, corners_of(), encoding="linear")
 
 
 def test_exposure_from_neutrals_recovers_scale(chart):
@@ -231,17 +231,17 @@ def test_exposure_from_neutrals_recovers_scale(chart):
 
 def test_scene_reference_differs_from_paper_reference(tmp_path, chart):
     write_png8(tmp_path / "c.png", draw_chart(chart.srgb))
-    paper = audit_image(tmp_path / "c.png", corners_of(), reference="safecolor")
-    scene = audit_image(tmp_path / "c.png", corners_of(), reference="scene")
+    paper = measure_image(tmp_path / "c.png", corners_of(), reference="safecolor")
+    scene = measure_image(tmp_path / "c.png", corners_of(), reference="scene")
     assert scene.reference.name.startswith("scene")
     assert scene.mean_delta_e > paper.mean_delta_e  # BabelColor spectra differ from the paper's Lab
     with pytest.raises(FidelityError, match="unknown reference"):
-        audit_image(tmp_path / "c.png", corners_of(), reference="no-such-chart")
+        measure_image(tmp_path / "c.png", corners_of(), reference="no-such-chart")
 
 
 def test_audit_dict_has_the_documented_keys(tmp_path, chart):
     write_png8(tmp_path / "c.png", draw_chart(chart.srgb))
-    d = audit_image(tmp_path / "c.png", corners_of()).to_dict()
+    d = measure_image(tmp_path / "c.png", corners_of()).to_dict()
     for key in ("mean_delta_e", "max_delta_e", "patches", "exposure_ev", "bad_pixels"):
         assert key in d
     assert len(d["patches"]) == 24
@@ -255,8 +255,8 @@ def test_srgb_input_with_auto_exposure(tmp_path, chart):
     srgb = apply_transform(chart.srgb, "hue", 10.0)
     dark = colour.cctf_encoding(colour.cctf_decoding(srgb, function="sRGB") * 0.5, function="sRGB")
     write_png8(tmp_path / "dark.png", draw_chart(dark))
-    fixed = audit_image(tmp_path / "dark.png", corners_of())
-    auto = audit_image(tmp_path / "dark.png", corners_of(), exposure="auto")
+    fixed = measure_image(tmp_path / "dark.png", corners_of())
+    auto = measure_image(tmp_path / "dark.png", corners_of(), exposure="auto")
     assert auto.exposure_mode == "auto" and auto.exposure_ev == pytest.approx(1.0, abs=0.02)
     assert fixed.exposure_ev == 0.0 and fixed.mean_delta_e > auto.mean_delta_e + 3
     assert abs(auto.mean_delta_e - expected_delta_e(srgb, chart.lab)) < 0.2  # 8-bit rounding x2

@@ -6,6 +6,8 @@ import colour
 import numpy as np
 import pytest
 
+from fidelity.colour.charts import load_chart
+from fidelity.errors import InvalidValueError, UnreachableTargetError
 from fidelity.prediction.calibration import (
     DEFAULT_TARGETS,
     TOLERANCE,
@@ -15,8 +17,6 @@ from fidelity.prediction.calibration import (
     load_calibration_table,
     transform_delta_e,
 )
-from fidelity.colour.charts import load_chart
-from fidelity.errors import InvalidValueError, UnreachableTargetError
 from fidelity.prediction.transforms import TRANSFORMS
 
 D65_XY = np.array([0.3127, 0.3290])

@@ -28,8 +28,13 @@ from fidelity.camera.model import (
     vignetting_gain,
     white_balance_gains,
 )
+from fidelity.colour.spectral import (
+    load_illuminant,
+    load_patch_spectra,
+    scene_reference,
+    tristimulus,
+)
 from fidelity.errors import InputFileError, UnknownNameError
-from fidelity.colour.spectral import load_illuminant, load_patch_spectra, scene_reference, tristimulus
 
 
 def _patches_under(ill: str = "D65"):

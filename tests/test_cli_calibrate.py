@@ -8,8 +8,8 @@ from pathlib import Path
 
 from click.testing import CliRunner
 
-from fidelity.colour.charts import load_chart
 from fidelity.cli import main
+from fidelity.colour.charts import load_chart
 
 
 def test_calibrate_writes_json_and_csv(tmp_path: Path) -> None:

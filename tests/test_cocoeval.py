@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from fidelity.coco.detectors import COCO80_CATEGORY_IDS, COCO80_NAMES
 from fidelity.coco.scoring import (
     COCO_SCORERS,
     coco_from_dict,
@@ -17,7 +18,6 @@ from fidelity.coco.scoring import (
     load_annotations,
     paired_standard_error,
 )
-from fidelity.coco.detectors import COCO80_CATEGORY_IDS, COCO80_NAMES
 from fidelity.errors import InputFileError, InvalidValueError
 
 

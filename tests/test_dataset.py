@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 from PIL import Image, ImageCms, JpegImagePlugin
 
-from fidelity.prediction.calibration import calibrate_transform
 from fidelity.coco.dataset import (
     CHANNELWISE,
     PixelMap,
@@ -21,8 +20,9 @@ from fidelity.coco.dataset import (
     write_grid,
     write_transformed_dataset,
 )
-from fidelity.errors import InputFileError, UnreachableTargetError
 from fidelity.coco.jpeg import decode_jpeg, encode_jpeg, read_jpeg
+from fidelity.errors import InputFileError, UnreachableTargetError
+from fidelity.prediction.calibration import calibrate_transform
 from fidelity.prediction.transforms import TRANSFORMS
 
 
@@ -243,8 +243,8 @@ def test_pull_mean_workspace_repeats_the_colorimetry() -> None:
     near-black linear segments, with chunks small enough that several chunks and a short last
     chunk are used.
     """
-    from fidelity.colour.colorimetry import lab_to_srgb, srgb_to_lab
     from fidelity.coco.dataset import PullMeanWorkspace, pull_mean_uint8, to_uint8
+    from fidelity.colour.colorimetry import lab_to_srgb, srgb_to_lab
 
     rng = np.random.default_rng(7)
     codes = rng.integers(0, 256, (5000, 3)).astype(np.uint8)

@@ -18,13 +18,13 @@ import pytest
 from click.testing import CliRunner
 from test_audit import GRID_CORNERS, draw_chart, expected_delta_e, map_points, write_exr, write_png8
 
-from fidelity.colour import colorimetry as cm
-from fidelity.chart.audit import audit_pixels
-from fidelity.colour.charts import load_chart
-from fidelity.cli import main
-from fidelity.chart.find import detect_chart, orientation_score
-from fidelity.errors import InvalidValueError, UnknownNameError
+from fidelity.chart.find import find_chart, orientation_score
 from fidelity.chart.locate import homography_from_points
+from fidelity.chart.measure import measure_pixels
+from fidelity.cli import main
+from fidelity.colour import colorimetry as cm
+from fidelity.colour.charts import load_chart
+from fidelity.errors import InvalidValueError, UnknownNameError
 from fidelity.prediction.transforms import apply_transform
 
 CHART = load_chart("safecolor")
@@ -74,7 +74,7 @@ def test_corners_found_in_every_orientation(case):
     h, size = CASES[case]
     truth = map_points(h, GRID_CORNERS)
     pitch = float(np.linalg.norm(truth[1] - truth[0]) / 5)
-    found = detect_chart(scene(h, size))
+    found = find_chart(scene(h, size))
     err = np.linalg.norm(found.corners - truth, axis=-1).max()
     assert err < 0.03 * pitch, (case, found.corners.tolist(), truth.tolist())
     assert found.swatches >= 6 and found.candidates >= 1
@@ -83,7 +83,7 @@ def test_corners_found_in_every_orientation(case):
 def test_small_chart_in_a_large_image_is_searched_in_tiles_and_refined_on_a_crop():
     # 180 px wide in a 2400 px frame: too small at the detector's 1440 px working width
     h = grid_homography(30, -0.15, (1900, 500))
-    found = detect_chart(scene(h, (1800, 2400)))
+    found = find_chart(scene(h, (1800, 2400)))
     truth = map_points(h, GRID_CORNERS)
     assert np.linalg.norm(found.corners - truth, axis=-1).max() < 0.03 * 30
     x0, y0, x1, y1 = found.region
@@ -97,8 +97,8 @@ def test_hdr_input_with_bad_pixels_and_the_audit_it_feeds():
     img = scene(h, size, cm.linearize_srgb(camera)) * 900.0  # HDR scale
     img[5:40, 5:40] = np.nan
     img[300:310, 10:20, 1] = np.inf
-    found = audit_pixels(img, None, encoding="linear")
-    given = audit_pixels(img, map_points(h, GRID_CORNERS), encoding="linear")
+    found = measure_pixels(img, None, encoding="linear")
+    given = measure_pixels(img, map_points(h, GRID_CORNERS), encoding="linear")
     assert found.detection is not None and given.detection is None
     assert found.mean_delta_e == pytest.approx(given.mean_delta_e, abs=1e-9)
     assert found.mean_delta_e == pytest.approx(expected_delta_e(np.clip(camera, 0, 1), CHART.lab),
@@ -129,11 +129,11 @@ def test_no_chart_is_a_clear_error(tmp_path):
     rng = np.random.default_rng(3)
     noise = rng.uniform(0, 1, (300, 400, 3))
     with pytest.raises(InvalidValueError, match="no colour chart found"):
-        detect_chart(noise)
+        find_chart(noise)
     with pytest.raises(InvalidValueError, match="the image is black"):
-        detect_chart(np.zeros((50, 60, 3)))
+        find_chart(np.zeros((50, 60, 3)))
     with pytest.raises(UnknownNameError, match="chart detection method"):
-        detect_chart(noise, method="neural")
+        find_chart(noise, method="neural")
     path = tmp_path / "table.exr"
     write_exr(path, noise.astype(np.float32))
     r = CliRunner().invoke(main, ["gate", str(path), "--max-delta-e", "3"])
@@ -173,4 +173,4 @@ def test_missing_opencv_is_a_clear_error_that_suggests_corners(monkeypatch):
     monkeypatch.setitem(sys.modules, "colour_checker_detection", None)  # import fails
     h, size = CASES["frontal"]
     with pytest.raises(FidelityError, match="needs colour-checker-detection and OpenCV.*--corners"):
-        detect_chart(scene(h, size))
+        find_chart(scene(h, size))

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from fidelity.camera.model import camera_from_dict
-from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
 from fidelity.coco.emulation import (
     EMULATION_METHODS,
     _trilinear,
@@ -17,6 +16,7 @@ from fidelity.coco.emulation import (
     root_polynomial_terms,
     training_reflectances,
 )
+from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
 from fidelity.errors import UnknownNameError
 
 #: Rotation of linear RGB by -30 degrees about the grey axis (cameras/bad-hue-rotation.toml).

@@ -17,8 +17,8 @@ from click.testing import CliRunner
 from PIL import Image as PILImage
 from test_audit import corners_of, draw_chart, expected_delta_e, write_exr, write_png8
 
-from fidelity.colour.charts import load_chart
 from fidelity.cli import main
+from fidelity.colour.charts import load_chart
 from fidelity.errors import InvalidValueError
 from fidelity.prediction.table import DEFAULT_TABLE, predict
 from fidelity.prediction.transforms import apply_transform

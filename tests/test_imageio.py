@@ -14,9 +14,9 @@ import OpenImageIO as oiio
 import pytest
 from PIL import Image as PILImage
 
+from fidelity.chart.image import read_image
 from fidelity.errors import InputFileError
 from fidelity.fileio import file_sha256
-from fidelity.chart.image import read_image
 
 RNG = np.random.default_rng(4)
 RGB = RNG.uniform(0.0, 4.0, size=(12, 17, 3)).astype(np.float32)

@@ -42,9 +42,9 @@ def test_info_reports_every_declared_dependency_and_the_setup(tmp_path: Path) ->
 
 
 def test_info_says_which_mitsuba_variant_renders() -> None:
+    from fidelity.camera.mitsuba import probe_variant
     from fidelity.environment import describe_environment
     from fidelity.errors import FidelityError
-    from fidelity.camera.mitsuba import probe_variant
 
     m = describe_environment(probe=True)["mitsuba"]
     try:

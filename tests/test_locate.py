@@ -7,15 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from fidelity.errors import InvalidValueError
 from fidelity.chart.locate import (
     apply_homography,
     grid_centres,
     homography_from_points,
     locate_chart,
     parse_corners,
-    sample_patches,
+    window_pixels,
 )
+from fidelity.errors import InvalidValueError
 
 GRID_CORNERS = np.array([[0, 0], [5, 0], [5, 3], [0, 3]], dtype=float)
 
@@ -67,7 +67,7 @@ def test_sample_patches_returns_window_pixels():
     loc = locate_chart(project(h, GRID_CORNERS), img.shape)
     cx, cy = np.rint(loc.centres[7]).astype(int)
     img[cy, cx] = 1.0
-    samples = sample_patches(img, loc)
+    samples = window_pixels(img, loc)
     assert len(samples) == 24
     assert samples[7].sum() == 3.0 and all(s.sum() == 0 for i, s in enumerate(samples) if i != 7)
 

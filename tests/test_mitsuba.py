@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from fidelity.camera.model import camera_response, load_camera
+from fidelity.camera.render import ChartLayout, patch_means, render_chart
 from fidelity.colour.colorimetry import delta_e_2000
-from fidelity.camera.render import ChartLayout, render_chart, sample_patches
 from fidelity.colour.spectral import load_illuminant, load_patch_spectra
 
 mi = pytest.importorskip("mitsuba")
@@ -77,7 +77,7 @@ def test_mitsuba_raw_matches_closed_form_per_patch(variant: str) -> None:
     lay = ChartLayout.for_patch_size(8)
     img = mr.render_raw(refl, e, s, lay, spp=64, variant=variant)
     assert img.variant == variant and img.image.shape == (lay.height, lay.width, 3)
-    got, _ = sample_patches(img.image, lay)
+    got, _ = patch_means(img.image, lay)
     expected = camera_response(refl, e, s)
     np.testing.assert_allclose(got, expected, rtol=0.03, atol=2e-4)
     # the background between patches is black: nothing but the chart is lit
@@ -154,8 +154,8 @@ def test_oblique_path_traced_render_is_found_and_audited_like_the_frontal_closed
     grey table through a perspective camera (tilted, turned); the audit finds the chart without
     corners and measures what it measures on the frontal closed form (same spectra, ideal
     camera, so scene-linear sRGB with the cyan's red below zero)."""
-    from fidelity.chart.audit import audit_pixels
     from fidelity.camera.model import ideal_sensitivities
+    from fidelity.chart.measure import measure_pixels
     from fidelity.colour.spectral import cie_1931_cmfs
 
     probe = mr.probe_variant()
@@ -185,13 +185,13 @@ def test_oblique_path_traced_render_is_found_and_audited_like_the_frontal_closed
     film = np.asarray(mi_.render(mi_.load_dict(scene), seed=0, spp=32), dtype=np.float64)
     raw = (film.reshape(300, 400, -1) @ recombine.T) * (np.pi / (float(e @ cie_1931_cmfs(step)[:, 1]) * step))
     assert raw.min() < 0  # the cyan is outside sRGB: its red is negative
-    oblique = audit_pixels(raw, None, encoding="linear", reference="scene")
+    oblique = measure_pixels(raw, None, encoding="linear", reference="scene")
     assert oblique.detection is not None and oblique.detection.swatches >= 12
 
     frontal_img = layout.paint(camera_response(refl, e, sens, step))
     centres = [((x0 + x1 - 1) / 2, (y0 + y1 - 1) / 2)
                for y0, y1, x0, x1 in (layout.patch_box(i) for i in (0, 5, 23, 18))]
-    frontal = audit_pixels(frontal_img, np.array(centres), encoding="linear", reference="scene")
+    frontal = measure_pixels(frontal_img, np.array(centres), encoding="linear", reference="scene")
     print(f"oblique {oblique.mean_delta_e:.4f} frontal {frontal.mean_delta_e:.4f} worst patch "
           f"{np.abs(oblique.measurement.delta_e - frontal.measurement.delta_e).max():.4f}")
     assert abs(oblique.mean_delta_e - frontal.mean_delta_e) < 0.05

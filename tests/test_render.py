@@ -11,11 +11,11 @@ import pytest
 from click.testing import CliRunner
 
 from fidelity.camera.model import DEFAULT_CAMERA
-from fidelity.colour.charts import load_chart
+from fidelity.camera.render import ChartLayout, patch_means, render_chart
 from fidelity.cli import main
+from fidelity.colour.charts import load_chart
 from fidelity.colour.colorimetry import WHITEPOINT_D65_XYZ, delta_e_2000
 from fidelity.errors import UnknownNameError
-from fidelity.camera.render import ChartLayout, render_chart, sample_patches
 
 SRGB_D65_XY = np.array([0.3127, 0.3290])
 
@@ -115,7 +115,7 @@ def test_layout_and_robust_patch_sampling() -> None:
     img = lay.paint(values)
     y0, y1, x0, x1 = lay.window(5)
     img[y0, x0] = 1e6  # a firefly inside the window
-    means, stds = sample_patches(img, lay)
+    means, stds = patch_means(img, lay)
     np.testing.assert_allclose(means, values)  # trimmed mean ignores it
     assert stds[5, 0] > 0 and stds[4, 0] == 0
     px = img[y0:y1, x0:x1].reshape(-1, 3)

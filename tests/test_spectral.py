@@ -9,7 +9,6 @@ import pytest
 
 from fidelity.colour.charts import load_chart
 from fidelity.colour.colorimetry import WHITEPOINT_D65_XYZ, delta_e_2000
-from fidelity.errors import FidelityError, InputFileError, InvalidValueError, UnknownNameError
 from fidelity.colour.spectral import (
     SPECTRA_SETS,
     WAVELENGTHS_NM,
@@ -21,6 +20,7 @@ from fidelity.colour.spectral import (
     tristimulus,
     wavelength_grid,
 )
+from fidelity.errors import FidelityError, InputFileError, InvalidValueError, UnknownNameError
 
 SRGB_D65_XY = np.array([0.3127, 0.3290])
 

@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fidelity.errors import InputFileError, InvalidValueError
 from fidelity.coco.sweep import (
     ModelSpec,
     SweepStore,
@@ -22,6 +21,7 @@ from fidelity.coco.sweep import (
     plan_phases,
     unpack_detections,
 )
+from fidelity.errors import InputFileError, InvalidValueError
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -130,12 +130,12 @@ def coco(shared):
 @pytest.mark.shared
 def test_ci_slice_sweep_resume_rescore(coco, tmp_path) -> None:
     """A few images, one model, two targets; checked against a direct second computation."""
-    from fidelity.prediction.calibration import calibrate_transform
-    from fidelity.coco.scoring import evaluate_detections, load_annotations
     from fidelity.coco.dataset import reference_transform
     from fidelity.coco.detectors import Detector
     from fidelity.coco.jpeg import read_jpeg, roundtrip_jpeg
+    from fidelity.coco.scoring import evaluate_detections, load_annotations
     from fidelity.coco.sweep import rescore, run_sweep
+    from fidelity.prediction.calibration import calibrate_transform
 
     images, ann, model = coco
     store = run_sweep([ModelSpec(model, 4)], images, ann, tmp_path,

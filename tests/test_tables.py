@@ -8,7 +8,6 @@ from types import SimpleNamespace
 
 import pytest
 
-from fidelity.prediction.table import parse_prediction_table
 from fidelity.coco.sweep import SweepStore
 from fidelity.coco.tables import (
     build_tables,
@@ -17,6 +16,7 @@ from fidelity.coco.tables import (
     prediction_table,
     write_report,
 )
+from fidelity.prediction.table import parse_prediction_table
 
 TRANSFORMS = ["contrast-inc", "hue", "saturation-inc"]
 
@@ -181,8 +181,8 @@ def _explain_store(tmp_path):  # type: ignore[no-untyped-def]
     """Ground truth: a person box on images 1-3, one bicycle box on image 4 (4 images)."""
     import numpy as np
 
-    from fidelity.coco.scoring import coco_from_dict
     from fidelity.coco.detectors import COCO80_CATEGORY_IDS, COCO80_NAMES
+    from fidelity.coco.scoring import coco_from_dict
 
     cats = [{"id": c, "name": n} for c, n in zip(COCO80_CATEGORY_IDS, COCO80_NAMES, strict=True)]
     imgs = [{"id": i, "width": 200, "height": 200, "file_name": f"{i}.jpg"} for i in (1, 2, 3, 4)]
@@ -214,8 +214,8 @@ def _explain_store(tmp_path):  # type: ignore[no-untyped-def]
 def test_class_breakdown_by_hand(tmp_path) -> None:
     """One bicycle box ranked below a false positive: bicycle AP 1 -> 1/2, ΔmAP = 50/2 points."""
     from fidelity.coco.scoring import evaluate_detections
-    from fidelity.errors import InvalidValueError
     from fidelity.coco.tables import class_breakdown, explain_cell
+    from fidelity.errors import InvalidValueError
 
     s, coco, base, cell = _explain_store(tmp_path)
     rows = class_breakdown(coco, base, cell, [1, 2, 3, 4])
@@ -296,8 +296,8 @@ def test_model_conventions_are_said_in_words():
 
 
 def test_image_caps_are_parsed_and_bad_ones_named() -> None:
-    from fidelity.errors import InvalidValueError
     from fidelity.coco.tables import parse_image_caps
+    from fidelity.errors import InvalidValueError
 
     models = ["a", "b-int8"]
     assert parse_image_caps(None, models) == {}

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from fidelity.errors import InputFileError
 from fidelity.coco.validate import (
     BASELINE,
     FOLDS,
@@ -21,6 +20,7 @@ from fidelity.coco.validate import (
     load_suite,
     write_report,
 )
+from fidelity.errors import InputFileError
 
 REPO = Path(__file__).resolve().parent.parent
 CAMERAS = REPO / "cameras"
@@ -103,9 +103,9 @@ def test_bad_folders(tmp_path: Path) -> None:
 
 def test_error_profile_of_a_pure_lightness_shift() -> None:
     """A pure L* shift: CIEDE2000's ΔL' is exactly the shift, ΔC' = ΔH' = 0 (Sharma 2005)."""
+    from fidelity.chart.measure import measure_chart
     from fidelity.colour.charts import load_chart
     from fidelity.colour.colorimetry import lab_to_srgb
-    from fidelity.chart.measure import measure_chart
 
     chart = load_chart()
     lab = chart.lab + np.array([3.0, 0.0, 0.0])
@@ -118,9 +118,9 @@ def test_error_profile_of_a_pure_lightness_shift() -> None:
 
 
 def test_error_profile_of_a_chroma_scaling() -> None:
+    from fidelity.chart.measure import measure_chart
     from fidelity.colour.charts import load_chart
     from fidelity.colour.colorimetry import lab_to_srgb
-    from fidelity.chart.measure import measure_chart
 
     chart = load_chart()
     lab = chart.lab * np.array([1.0, 0.6, 0.6])  # less chroma, same hue and lightness

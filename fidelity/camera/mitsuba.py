@@ -37,9 +37,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fidelity.colour.spectral import GRID_END_NM, GRID_START_NM, GRID_STEP_NM, cie_1931_cmfs
 from fidelity.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
 from fidelity.resources import resource_dir
-from fidelity.colour.spectral import GRID_END_NM, GRID_START_NM, GRID_STEP_NM, cie_1931_cmfs
 
 FloatArray = NDArray[np.float64]
 

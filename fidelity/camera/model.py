@@ -61,9 +61,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fidelity.errors import InputFileError, InvalidValueError, unknown_name
-from fidelity.fileio import require_file
-from fidelity.resources import resource_dir
 from fidelity.colour.spectral import (
     GRID_STEP_NM,
     Illuminant,
@@ -75,6 +72,9 @@ from fidelity.colour.spectral import (
     scene_reference,
     wavelength_grid,
 )
+from fidelity.errors import InputFileError, InvalidValueError, unknown_name
+from fidelity.fileio import require_file
+from fidelity.resources import resource_dir
 
 FloatArray = NDArray[np.float64]
 

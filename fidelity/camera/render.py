@@ -10,7 +10,7 @@ Two renderers give one result (:data:`RENDERERS`):
 
 Both images then go through the same camera pipeline in numpy (exposure, vignetting, noise,
 white balance, CCM, tone curve, quantisation; :mod:`fidelity.camera.model`) and the same patch
-sampling (:func:`sample_patches`): the central window (half the patch side) of each patch,
+sampling (:func:`patch_means`): the central window (half the patch side) of each patch,
 averaged with a 10 % trimmed mean per channel (robust to hot pixels and Monte Carlo
 fireflies), with the per-patch standard deviation of the window reported as noise.
 
@@ -38,9 +38,14 @@ from fidelity.camera.model import (
     load_camera,
     vignetting_gain,
 )
-from fidelity.errors import InvalidValueError, unknown_name
 from fidelity.chart.measure import ChartMeasurement, measure_chart
-from fidelity.colour.spectral import GRID_STEP_NM, load_illuminant, load_patch_spectra, scene_reference
+from fidelity.colour.spectral import (
+    GRID_STEP_NM,
+    load_illuminant,
+    load_patch_spectra,
+    scene_reference,
+)
+from fidelity.errors import InvalidValueError, unknown_name
 
 FloatArray = NDArray[np.float64]
 
@@ -106,7 +111,7 @@ class ChartLayout:
         return img
 
 
-def sample_patches(
+def patch_means(
     image: ArrayLike, layout: ChartLayout, fraction: float = WINDOW_FRACTION,
     trim: float = TRIM_PROPORTION,
 ) -> tuple[FloatArray, FloatArray]:
@@ -227,9 +232,9 @@ def render_chart(
     if cam.vignetting_fov_deg is not None:
         raw = raw * vignetting_gain(layout.height, layout.width, cam.vignetting_fov_deg)[..., None]
     raw = add_sensor_noise(raw, cam.noise, seed)
-    cam_rgb, cam_std = sample_patches(raw, layout)
+    cam_rgb, cam_std = patch_means(raw, layout)
     dev = develop(cam, raw, cam_rgb, ill, spectra=spectra, step=step)
-    srgb, srgb_std = sample_patches(dev.srgb, layout)
+    srgb, srgb_std = patch_means(dev.srgb, layout)
 
     if reference == "scene":
         ref = scene_reference(ill, spectra, cat=cat, step=step)
@@ -284,5 +289,5 @@ __all__ = [
     "ChartLayout",
     "ChartRender",
     "render_chart",
-    "sample_patches",
+    "patch_means",
 ]

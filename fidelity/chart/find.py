@@ -6,7 +6,7 @@ the dark skin, bluish green, black and white patches (:mod:`fidelity.chart.locat
 sampling windows, bad pixels, exposure and ΔE00, is the audit's own and does not depend on how
 the corners were found.
 
-Methods (:data:`CHART_DETECTION_METHODS`):
+Methods (:data:`CHART_FINDERS`):
 
 ``segmentation``
     colour-checker-detection's segmentation detector (Colour Developers, *Colour - Checker
@@ -26,7 +26,7 @@ Methods (:data:`CHART_DETECTION_METHODS`):
     chart under strong perspective is not found; give ``--corners`` for it. A mirrored chart (seen from behind a mirror) is not recognised
     as such; give ``--corners`` for it.
 
-Passes (:func:`detect_chart`, any method): the whole image first; when that finds nothing and
+Passes (:func:`find_chart`, any method): the whole image first; when that finds nothing and
 the image is large (:data:`TILED_SEARCH_SIDE`), nine half-size tiles overlapping by half; then,
 with refinement, once more on the chart's surroundings (corner centres plus 1.5 patch pitches)
 when they are under half an image larger than the detector's working width
@@ -50,9 +50,9 @@ from typing import Any
 
 import numpy as np
 
+from fidelity.chart.locate import CORNER_PATCHES, apply_homography, homography_from_points
 from fidelity.colour import colorimetry as cm
 from fidelity.errors import FidelityError, InvalidValueError, unknown_name
-from fidelity.chart.locate import CORNER_PATCHES, apply_homography, homography_from_points
 
 #: Largest distance (in patch pitches) between a swatch centre and the grid cell centre it is
 #: assigned to when the coarse outline is refined.
@@ -80,7 +80,7 @@ OUTLIER_FACTOR = 3.0
 
 
 @dataclass(frozen=True)
-class ChartDetection:
+class FoundChart:
     """A chart found in an image.
 
     ``corners`` is ``(4, 2)`` image ``(x, y)`` of the dark skin, bluish green, black and white
@@ -153,7 +153,7 @@ def _working_to_image(points: np.ndarray, shape: tuple[int, int], working_width:
 
 
 def _detect_segmentation(image: np.ndarray, rows: int, cols: int, refine: bool = True
-                         ) -> ChartDetection:
+                         ) -> FoundChart:
     try:
         import colour_checker_detection as ccd
         from colour_checker_detection.detection.segmentation import (
@@ -217,7 +217,7 @@ def _detect_segmentation(image: np.ndarray, rows: int, cols: int, refine: bool =
             residual = float(np.sqrt(np.mean(np.sum(
                 (apply_homography(grid_to_image, src[keep]) - dst[keep]) ** 2, axis=-1))))
     corners, symmetry = _oriented_corners(image, grid_to_image, rows, cols)
-    return ChartDetection(corners=corners, method="segmentation", candidates=len(charts),
+    return FoundChart(corners=corners, method="segmentation", candidates=len(charts),
                           swatches=used, residual_px=residual, orientation=symmetry)
 
 
@@ -299,8 +299,8 @@ def _oriented_corners(image: np.ndarray, grid_to_image: np.ndarray, rows: int, c
     default chart's linear sRGB. A best score above :data:`ORIENTATION_MARGIN` times the next
     one means the swatches found are not a ColorChecker: an error.
     """
+    from fidelity.chart.locate import grid_centres, locate_chart, window_pixels
     from fidelity.colour.charts import load_chart
-    from fidelity.chart.locate import grid_centres, locate_chart, sample_patches
 
     reference = cm.linearize_srgb(load_chart().srgb)
     cells = _corner_cells(rows, cols)
@@ -312,7 +312,7 @@ def _oriented_corners(image: np.ndarray, grid_to_image: np.ndarray, rows: int, c
     except InvalidValueError:
         raise InvalidValueError("no colour chart found: the chart found lies partly outside "
                                 "the image; give --corners X1,Y1,...,X4,Y4") from None
-    means = np.array([s.mean(axis=0) for s in sample_patches(image, location)])
+    means = np.array([s.mean(axis=0) for s in window_pixels(image, location)])
     grid = grid_centres(rows, cols)
     best: tuple[float, str, np.ndarray] | None = None
     scores: list[float] = []
@@ -339,12 +339,12 @@ def _corner_cells(rows: int, cols: int) -> np.ndarray:
 
 
 #: Chart detection methods by name.
-CHART_DETECTION_METHODS: dict[str, Callable[..., ChartDetection]] = {
+CHART_FINDERS: dict[str, Callable[..., FoundChart]] = {
     "segmentation": _detect_segmentation,
 }
 
 
-def detect_chart(
+def find_chart(
     pixels: np.ndarray,
     *,
     encoding: str = "linear",
@@ -352,7 +352,7 @@ def detect_chart(
     rows: int = 4,
     cols: int = 6,
     refine: bool = True,
-) -> ChartDetection:
+) -> FoundChart:
     """Find the chart in an ``(H, W, 3)`` image and return its corner-patch centres.
 
     Parameters
@@ -360,7 +360,7 @@ def detect_chart(
     pixels
         Linear or sRGB-encoded RGB (``encoding``), any scale; NaN/Inf/negative count as black.
     method
-        A key of :data:`CHART_DETECTION_METHODS`.
+        A key of :data:`CHART_FINDERS`.
     refine
         Fit the grid to the patch outlines found (default); ``False`` keeps the detector's
         chart outline (the benchmark's anchor).
@@ -370,15 +370,15 @@ def detect_chart(
     InvalidValueError
         No chart found (the message suggests ``--corners``), or a black image.
     """
-    if method not in CHART_DETECTION_METHODS:
-        raise unknown_name("chart detection method", method, CHART_DETECTION_METHODS)
+    if method not in CHART_FINDERS:
+        raise unknown_name("chart detection method", method, CHART_FINDERS)
     if encoding not in ("linear", "srgb"):
         raise unknown_name("encoding", encoding, ("linear", "srgb"))
     image = detection_image(pixels, encoding)
-    find = CHART_DETECTION_METHODS[method]
+    find = CHART_FINDERS[method]
     height, width = image.shape[:2]
 
-    def within(region: tuple[int, int, int, int]) -> ChartDetection:
+    def within(region: tuple[int, int, int, int]) -> FoundChart:
         x0, y0, x1, y1 = region
         found = find(image[y0:y1, x0:x1], rows, cols, refine=refine)
         return replace(found, corners=found.corners + (x0, y0), region=region)
@@ -446,12 +446,12 @@ __all__ = [
     "ASPECT_RATIO_RANGE",
     "ASSIGN_TOLERANCE",
     "CROP_PASS_MIN_SIDE",
-    "CHART_DETECTION_METHODS",
+    "CHART_FINDERS",
     "MIN_REFINE_SWATCHES",
     "ORIENTATION_MARGIN",
     "OUTLIER_FACTOR",
     "TILED_SEARCH_SIDE",
-    "ChartDetection",
-    "detect_chart",
+    "FoundChart",
+    "find_chart",
     "detection_image",
 ]

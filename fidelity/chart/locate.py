@@ -246,7 +246,7 @@ def locate_chart(
     )
 
 
-def sample_patches(pixels: np.ndarray, location: ChartLocation) -> list[np.ndarray]:
+def window_pixels(pixels: np.ndarray, location: ChartLocation) -> list[np.ndarray]:
     """The ``(n_k, C)`` pixel values inside each patch's sampling window, row-major."""
     return [pixels[rr, cc] for rr, cc in location.windows]
 
@@ -261,5 +261,5 @@ __all__ = [
     "homography_from_points",
     "locate_chart",
     "parse_corners",
-    "sample_patches",
+    "window_pixels",
 ]

@@ -1,12 +1,48 @@
-"""Chart measurement: per-patch CIEDE2000 of measured sRGB against reference CIELAB.
+"""Measure a chart: per-patch CIEDE2000 of measured sRGB against reference CIELAB, and the
+measurement of a chart in any image.
 
 The SAFE-COLOR chart ΔE of an image is the mean ΔE00 over the chart's patches, each patch's
 encoded sRGB converted to CIELAB (D65) and compared with the reference Lab
-(``shared/reference/safecolor.md``, "Colour difference").
+(``shared/reference/safecolor.md``, "Colour difference"): :func:`measure_chart`.
+
+Measuring a chart in an image (:func:`measure_pixels`; :func:`measure_image` adds the file
+reading), step by step (each a pure function of arrays):
+
+1. Locate the 24 patches from the four corner-patch centres (:mod:`fidelity.chart.locate`) and take
+   the pixels of each patch's central sampling window. Without given corners the chart is
+   found first (:func:`fidelity.chart.find.find_chart`); everything after that is the same.
+2. Exclude bad pixels: a pixel with NaN or +-Inf in any channel. They are counted (per kind,
+   per patch, and over the whole image). Pixels with a negative channel are counted too and by
+   default kept (:data:`NEGATIVE_RULES`: scene-linear renders of out-of-gamut colours have
+   them), or excluded with ``negatives="exclude"``. A patch keeps its measurement only
+   if at least ``min_valid_fraction`` of its window (and at least ``MIN_VALID_PIXELS``) is
+   valid; otherwise the audit fails with an error naming the patch.
+3. Average each patch in linear light: linear input as it is, sRGB-encoded input decoded with
+   the IEC 61966-2-1 transfer function first. (For a flat patch this equals averaging the
+   encoded values; for a noisy patch it is the physically meaningful mean.)
+4. Exposure: linear input is scaled by ``2**EV`` with ``EV`` chosen so that the achromatic
+   (neutral) patches match the reference luminance on average in log space,
+   ``EV = mean_k log2(Y_ref,k / Y_meas,k)`` over the neutral patches with ``Y_meas > 0``, where
+   ``Y`` is CIE Y of linear sRGB (IEC 61966-2-1 matrix) and ``Y_ref`` the Y of the reference
+   Lab. A fixed EV can be given instead; sRGB-encoded input keeps its exposure (EV 0) unless
+   asked. A pure exposure scale ``s`` is thus recovered as ``EV = -log2(s)`` exactly. Note that
+   auto exposure removes any overall brightness error of the camera along with the exposure.
+5. Encode as sRGB (IEC 61966-2-1), clip to [0, 1] like any stored image (the patches that
+   clipped are listed), convert to CIELAB D65 and compare with the reference by CIEDE2000
+   (:func:`measure_chart`); the chart ΔE is the mean over the 24 patches.
+
+Input pixels are taken as linear or encoded sRGB (Rec. 709 primaries, D65 white), or in another
+RGB colourspace (``colourspace``: ACEScg, ITU-R BT.2020, ... or an EXR's chromaticities), whose
+linear patch means are converted to linear sRGB first
+(:func:`fidelity.colour.colorimetry.matrix_rgb_to_linear_srgb`; encoded input is decoded with the sRGB
+transfer function whatever its primaries). A camera's native RGB must be converted before
+auditing.
 """
 
 from __future__ import annotations
 
+import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -14,10 +50,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fidelity.chart.find import FoundChart, find_chart
+from fidelity.chart.locate import DEFAULT_WINDOW, ChartLocation, locate_chart, window_pixels
+from fidelity.colour import colorimetry as cm
+from fidelity.colour.charts import DEFAULT_REFERENCE, Reference, load_reference
 from fidelity.colour.colorimetry import delta_e_2000, delta_e_2000_components, srgb_to_lab
-from fidelity.errors import InvalidValueError
-
-__all__ = ["ChartMeasurement", "chart_delta_e", "measure_chart"]
+from fidelity.errors import InvalidValueError, unknown_name
 
 F64 = NDArray[np.float64]
 
@@ -135,3 +173,293 @@ def measure_chart(
         reference_srgb=None if reference_srgb is None else _patch_array(reference_srgb, "reference sRGB", n),
         noise=None if noise is None else np.asarray(noise, dtype=np.float64),
     )
+
+
+#: Encodings of input pixel values.
+ENCODINGS = ("linear", "srgb")
+#: What a finite negative channel value does: ``keep`` it in the linear-light mean (an
+#: out-of-gamut colour rendered into sRGB primaries, such as the chart's cyan in a spectral
+#: render, has one; the encoded mean is clipped like any stored image), or ``exclude`` the pixel.
+NEGATIVE_RULES = ("keep", "exclude")
+#: Fewest valid pixels a patch needs, whatever its window size.
+MIN_VALID_PIXELS = 4
+#: Default fraction of a window's pixels that must be valid.
+MIN_VALID_FRACTION = 0.5
+
+
+def luminance_linear_srgb(rgb: np.ndarray) -> np.ndarray:
+    """CIE Y (white = 1) of linear sRGB ``(..., 3)``: the middle row of the IEC 61966-2-1 matrix."""
+    return np.asarray(rgb, np.float64) @ cm.MATRIX_LINEAR_SRGB_TO_XYZ[1]
+
+
+def exposure_from_neutrals(
+    linear_rgb: np.ndarray, reference_lab: np.ndarray, neutral_indices: Sequence[int],
+    patch_names: Sequence[str] | None = None,
+) -> float:
+    """Exposure correction in EV that makes the neutral patches match the reference.
+
+    ``EV = mean_k log2(Y_ref,k / Y_meas,k)`` over neutral patches ``k`` with ``Y_meas > 0``
+    (the geometric-mean luminance ratio). ``linear_rgb`` (n, 3) patch means in linear sRGB;
+    ``reference_lab`` (n, 3) CIELAB D65. Raises when no neutral patch has light.
+    """
+    idx = np.asarray(list(neutral_indices), dtype=int)
+    if idx.size == 0:
+        raise InvalidValueError("the reference chart has no neutral patches to set the exposure on")
+    y_meas = luminance_linear_srgb(np.asarray(linear_rgb)[idx])
+    y_ref = cm.lab_to_xyz(np.asarray(reference_lab, np.float64)[idx])[:, 1]
+    ok = (y_meas > 0) & np.isfinite(y_meas)
+    if not np.any(ok):
+        names = ", ".join(patch_names[i] for i in idx) if patch_names else str(idx.tolist())
+        raise InvalidValueError(
+            f"cannot set the exposure automatically: the neutral patches ({names}) are black; "
+            f"give --exposure EV"
+        )
+    return float(np.mean(np.log2(y_ref[ok] / y_meas[ok])))
+
+
+@dataclass(frozen=True)
+class ImageMeasurement:
+    """An audited chart: the :class:`ChartMeasurement` plus how it was obtained."""
+
+    measurement: ChartMeasurement
+    exposure_ev: float
+    exposure_mode: str
+    encoding: str
+    bad_pixels: dict[str, Any]
+    valid_pixels: tuple[int, ...]
+    clipped_patches: tuple[str, ...]
+    location: ChartLocation
+    reference: Reference
+    image: dict[str, Any] | None = None
+    detection: FoundChart | None = None
+    colourspace: str = "sRGB"
+
+    @property
+    def mean_delta_e(self) -> float:
+        """The chart ΔE: mean ΔE00 over the patches."""
+        return self.measurement.mean_delta_e
+
+    @property
+    def max_delta_e(self) -> float:
+        """Largest per-patch ΔE00."""
+        return self.measurement.max_delta_e
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: ``mean_delta_e``, ``max_delta_e``, ``patches`` (``delta_e``, ``delta_l``,
+        ``delta_c``, ``delta_h``, ...), ``exposure_ev``, ``bad_pixels`` and the details."""
+        d = self.measurement.to_dict()
+        for patch, n in zip(d["patches"], self.valid_pixels, strict=True):
+            patch["valid_pixels"] = int(n)
+            patch["bad_pixels"] = int(self.bad_pixels["per_patch"].get(patch["name"], 0))
+        d.update(
+            exposure_ev=self.exposure_ev,
+            exposure_mode=self.exposure_mode,
+            encoding=self.encoding,
+            bad_pixels=self.bad_pixels,
+            clipped_patches=list(self.clipped_patches),
+            reference=self.reference.name,
+            location=self.location.to_dict(),
+            detection=self.detection.to_dict() if self.detection else None,
+            colourspace=self.colourspace,
+            image=self.image,
+        )
+        return d
+
+
+def _bad_counts(values: np.ndarray, negatives: str = "exclude"
+                ) -> tuple[np.ndarray, dict[str, int]]:
+    """Mask of excluded pixels of ``(n, 3)`` values and counts.
+
+    A pixel with a NaN or +-Inf channel is always excluded; one with a negative channel is
+    counted, and excluded only for ``negatives="exclude"``. ``total`` counts the excluded."""
+    nan = np.isnan(values).any(axis=-1)
+    inf = np.isinf(values).any(axis=-1)
+    with np.errstate(invalid="ignore"):
+        neg = (values < 0).any(axis=-1)
+    bad = nan | inf | neg if negatives == "exclude" else nan | inf
+    return bad, {"nan": int(nan.sum()), "inf": int(inf.sum()), "negative": int(neg.sum()),
+                 "total": int(bad.sum())}
+
+
+def measure_pixels(
+    pixels: np.ndarray,
+    corners: np.ndarray | str | Sequence[float] | None = None,
+    *,
+    encoding: str = "linear",
+    exposure: float | str | None = None,
+    reference: str | Reference = DEFAULT_REFERENCE,
+    illuminant: str = "D65",
+    window: float = DEFAULT_WINDOW,
+    min_valid_fraction: float = MIN_VALID_FRACTION,
+    image: dict[str, Any] | None = None,
+    detection: str = "segmentation",
+    negatives: str = "keep",
+    colourspace: str | Sequence[float] = "sRGB",
+) -> ImageMeasurement:
+    """Audit a chart in an ``(H, W, 3)`` image array (see the module docstring).
+
+    Parameters
+    ----------
+    pixels
+        ``(H, W, 3)`` values, linear or encoded sRGB (``encoding``).
+    corners
+        Centres of the dark skin, bluish green, black and white patches, ``(4, 2)`` image
+        ``(x, y)`` or ``"X1,Y1,...,X4,Y4"``; ``None``: find the chart
+        (:func:`fidelity.chart.find.find_chart` with ``detection``).
+    exposure
+        ``"auto"`` (fit on the neutral patches), a fixed EV (scale ``2**EV``), or ``None``:
+        auto for linear input, 0 for sRGB-encoded input.
+    reference
+        ``"safecolor"`` (the paper's chart), ``"scene"`` or a chart name/path.
+    colourspace
+        RGB primaries of the pixels: a colour-science name or 8 chromaticities (see
+        :func:`fidelity.colour.colorimetry.matrix_rgb_to_linear_srgb`).
+    """
+    to_srgb = cm.matrix_rgb_to_linear_srgb(colourspace)
+    if encoding not in ENCODINGS:
+        raise unknown_name("encoding", encoding, ENCODINGS)
+    if negatives not in NEGATIVE_RULES:
+        raise unknown_name("rule for negative values", negatives, NEGATIVE_RULES)
+    arr = np.asarray(pixels)
+    if arr.ndim != 3 or arr.shape[2] != 3:
+        raise InvalidValueError(f"image must be (H, W, 3), got shape {arr.shape}")
+    ref = reference if isinstance(reference, Reference) else load_reference(reference, illuminant)
+    if exposure is None:
+        exposure = "auto" if encoding == "linear" else 0.0
+    if isinstance(exposure, str):
+        if exposure.strip().lower() == "auto":
+            mode = "auto"
+        else:
+            try:
+                exposure = float(exposure)
+            except ValueError:
+                raise InvalidValueError(
+                    f"--exposure {exposure!r}: expected 'auto' or a number of EV") from None
+    if not isinstance(exposure, str):
+        if not math.isfinite(float(exposure)):
+            raise InvalidValueError(f"--exposure {exposure!r} must be finite")
+        mode = "fixed"
+    found = None
+    if corners is None:
+        found = find_chart(arr, encoding=encoding, method=detection, rows=ref.rows,
+                             cols=ref.cols)
+        corners = found.corners
+    loc = locate_chart(corners, arr.shape, rows=ref.rows, cols=ref.cols, window=window,
+                       patch_names=ref.patch_names)
+    samples = window_pixels(arr, loc)
+    n = len(samples)
+    means = np.empty((n, 3))
+    valid_counts: list[int] = []
+    per_patch: dict[str, int] = {}
+    totals = {"nan": 0, "inf": 0, "negative": 0, "total": 0}
+    linear_samples: list[np.ndarray] = []
+    for k, vals in enumerate(samples):
+        vals64 = np.asarray(vals, dtype=np.float64)
+        bad, counts = _bad_counts(vals64, negatives)
+        for key in totals:
+            totals[key] += counts[key]
+        if counts["total"]:
+            per_patch[ref.patch_names[k]] = counts["total"]
+        good = vals64[~bad]
+        need = max(MIN_VALID_PIXELS, int(math.ceil(min_valid_fraction * len(vals64))))
+        if len(good) < need:
+            negative = (f", {counts['negative']} negative" if negatives == "exclude" else "")
+            raise InvalidValueError(
+                f"patch {ref.patch_names[k]!r}: only {len(good)} of {len(vals64)} pixels are "
+                f"valid ({counts['nan']} NaN, {counts['inf']} Inf{negative}); need at least "
+                f"{need}"
+            )
+        lin = good if encoding == "linear" else cm.linearize_srgb(good)
+        if not np.array_equal(to_srgb, np.eye(3)):
+            lin = lin @ to_srgb.T
+        linear_samples.append(lin)
+        means[k] = lin.mean(axis=0)
+        valid_counts.append(len(good))
+    if mode == "auto":
+        ev = exposure_from_neutrals(means, ref.lab, ref.neutral_indices, ref.patch_names)
+    else:
+        ev = float(exposure)
+    scale = 2.0 ** ev
+    srgb_unclipped = cm.delinearize_srgb(means * scale)
+    srgb = np.clip(srgb_unclipped, 0.0, 1.0)
+    clipped = tuple(ref.patch_names[k] for k in range(n)
+                    if np.any(np.abs(srgb_unclipped[k] - srgb[k]) > 1e-12))
+    noise = np.array([np.clip(cm.delinearize_srgb(s * scale), 0, 1).std(axis=0)
+                      for s in linear_samples])
+    _, whole = _bad_counts(arr.reshape(-1, 3), negatives)
+    rule = ("a pixel with NaN, +-Inf or a negative value in any channel is excluded"
+            if negatives == "exclude" else
+            "a pixel with NaN or +-Inf in any channel is excluded; negative values are counted "
+            "and kept in the linear mean")
+    bad_pixels = {**totals, "per_patch": per_patch, "image": whole, "negatives": negatives,
+                  "rule": f"{rule}; counts in sampling windows (image: whole image); total: "
+                          f"pixels excluded"}
+    measurement = measure_chart(srgb, ref.lab, ref.patch_names, reference_srgb=ref.srgb,
+                                noise=noise)
+    return ImageMeasurement(
+        measurement=measurement, exposure_ev=ev, exposure_mode=mode, encoding=encoding,
+        bad_pixels=bad_pixels, valid_pixels=tuple(valid_counts), clipped_patches=clipped,
+        location=loc, reference=ref, image=image, detection=found,
+        colourspace=_colourspace_name(colourspace),
+    )
+
+
+def _colourspace_name(colourspace: str | Sequence[float]) -> str:
+    if isinstance(colourspace, str):
+        return colourspace
+    return "chromaticities " + ",".join(f"{float(v):.5g}" for v in colourspace)
+
+
+def measure_image(
+    path: str | os.PathLike[str],
+    corners: np.ndarray | str | Sequence[float] | None = None,
+    *,
+    layer: str | None = None,
+    encoding: str | None = None,
+    exposure: float | str | None = None,
+    reference: str | Reference = DEFAULT_REFERENCE,
+    illuminant: str = "D65",
+    window: float = DEFAULT_WINDOW,
+    detection: str = "segmentation",
+    negatives: str = "keep",
+    colourspace: str | Sequence[float] | None = None,
+) -> ImageMeasurement:
+    """Read an image (:func:`fidelity.chart.image.read_image`) and audit its chart.
+
+    ``encoding=None`` takes the file's likely encoding: linear for floating-point pixels (EXR,
+    HDR, float TIFF), sRGB for integer pixels (PNG, JPEG, 8/16-bit TIFF). ``colourspace=None``
+    takes the file's OpenEXR ``chromaticities`` attribute when it has one, else sRGB. Errors name
+    the file.
+    """
+    from fidelity.chart.image import read_image
+    from fidelity.errors import FidelityError
+    from fidelity.fileio import file_sha256
+
+    img = read_image(path, layer=layer)
+    info = img.to_dict()
+    info["sha256"] = file_sha256(img.path)
+    enc = encoding or img.encoding
+    try:
+        return measure_pixels(img.pixels, corners, encoding=enc, exposure=exposure,
+                            reference=reference, illuminant=illuminant, window=window,
+                            image={**info, "encoding": enc}, detection=detection,
+                            negatives=negatives,
+                            colourspace=(colourspace if colourspace is not None
+                                         else img.chromaticities or "sRGB"))
+    except FidelityError as exc:
+        raise type(exc)(f"{img.path}: {exc}") from None
+
+__all__ = [
+    "ENCODINGS",
+    "MIN_VALID_FRACTION",
+    "MIN_VALID_PIXELS",
+    "NEGATIVE_RULES",
+    "ChartMeasurement",
+    "ImageMeasurement",
+    "chart_delta_e",
+    "exposure_from_neutrals",
+    "luminance_linear_srgb",
+    "measure_chart",
+    "measure_image",
+    "measure_pixels",
+]

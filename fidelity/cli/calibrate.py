@@ -9,15 +9,15 @@ from pathlib import Path
 import click
 import numpy as np
 
+from fidelity.colour.charts import DEFAULT_CHART, load_chart
+from fidelity.errors import InvalidValueError
+from fidelity.fileio import write_json_atomic, write_text_atomic
 from fidelity.prediction.calibration import (
     DEFAULT_TARGETS,
     calibration_table,
     calibration_table_csv,
     calibration_table_text,
 )
-from fidelity.colour.charts import DEFAULT_CHART, load_chart
-from fidelity.errors import InvalidValueError
-from fidelity.fileio import write_json_atomic, write_text_atomic
 from fidelity.prediction.transforms import TRANSFORMS, get_transform
 
 

@@ -41,11 +41,11 @@ def evaluate(model: str, images: str, annotations: str, limit: int | None, threa
     """Run a detector on a COCO image folder and print COCO box AP."""
     from tqdm import tqdm
 
-    from fidelity.coco.scoring import evaluate_detections, load_annotations, resolve_scorer
     from fidelity.coco.detectors import Detector
+    from fidelity.coco.jpeg import read_jpeg
+    from fidelity.coco.scoring import evaluate_detections, load_annotations, resolve_scorer
     from fidelity.errors import InputFileError
     from fidelity.fileio import check_outputs, write_json_atomic
-    from fidelity.coco.jpeg import read_jpeg
 
     check_outputs({"--json": json_path}, {"--model": model, "--annotations": annotations})
     det = Detector(model, threads=threads, provider=provider)

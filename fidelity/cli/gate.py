@@ -42,11 +42,11 @@ def image_report(
     with ``location_figure`` the base64 PNG of where the patches were sampled (for HTML).
 
     ``corners`` ``None`` (or empty): the chart is found in the image
-    (:func:`fidelity.chart.find.detect_chart`); the corners it found go into the report."""
-    from fidelity.chart.audit import audit_image
+    (:func:`fidelity.chart.find.find_chart`); the corners it found go into the report."""
+    from fidelity.chart.measure import measure_image
     from fidelity.report.chart import build_report
 
-    result = audit_image(image, corners or None, layer=layer, encoding=encoding, exposure=exposure,
+    result = measure_image(image, corners or None, layer=layer, encoding=encoding, exposure=exposure,
                          reference=reference, illuminant=illuminant, negatives=negatives,
                          colourspace=colourspace)
     prediction = predict(result.mean_delta_e, size=size, table=table)

@@ -7,7 +7,13 @@ from pathlib import Path
 import click
 
 from fidelity.cli.gate import PATH
-from fidelity.prediction.table import CLASS_COLUMNS, INTERPOLATIONS, SIZES, available_tables, predict
+from fidelity.prediction.table import (
+    CLASS_COLUMNS,
+    INTERPOLATIONS,
+    SIZES,
+    available_tables,
+    predict,
+)
 
 
 @click.command()

@@ -8,9 +8,9 @@ import click
 import numpy as np
 
 from fidelity.camera.model import DEFAULT_CAMERA
-from fidelity.fileio import atomic_output, write_json_atomic
 from fidelity.camera.render import REFERENCES, RENDERERS, ChartRender, render_chart
 from fidelity.colour.spectral import CHROMATIC_ADAPTATION_METHODS, GRID_STEP_NM, SPECTRA_SETS
+from fidelity.fileio import atomic_output, write_json_atomic
 
 
 def write_exr(path: Path, image: np.ndarray) -> Path:

@@ -49,9 +49,9 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
     """
     from pathlib import Path
 
-    from fidelity.fileio import check_outputs
     from fidelity.coco.sweep import SweepStore
     from fidelity.coco.tables import parse_image_caps, write_report
+    from fidelity.fileio import check_outputs
 
     check_outputs({"--prediction": prediction, "--json": json_path},
                   {"--annotations": annotations})
@@ -88,8 +88,8 @@ def _explain(store: object, spec: str, annotations: str | None, rare_boxes: int,
     from pathlib import Path
 
     from fidelity.coco.scoring import load_annotations
-    from fidelity.errors import InvalidValueError
     from fidelity.coco.tables import explain_cell
+    from fidelity.errors import InvalidValueError
 
     parts = spec.rsplit(":", 2)
     try:

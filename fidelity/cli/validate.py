@@ -53,8 +53,6 @@ def validate(cameras: str, models: str | None, images: str | None, annotations: 
     from pathlib import Path
 
     from fidelity.coco.emulation import EMULATION_METHODS, TRAINING_SETS
-    from fidelity.errors import InvalidValueError, unknown_name
-    from fidelity.fileio import check_outputs
     from fidelity.coco.sweep import ModelSpec
     from fidelity.coco.validate import (
         ValidationStore,
@@ -63,6 +61,8 @@ def validate(cameras: str, models: str | None, images: str | None, annotations: 
         load_suite,
         run_validation,
     )
+    from fidelity.errors import InvalidValueError, unknown_name
+    from fidelity.fileio import check_outputs
 
     check_outputs({f"--out ({n})": Path(out) / n
                    for n in ("validation.md", "validation.html", "validation.json")},

@@ -378,8 +378,8 @@ _WORKER_MAP: dict[tuple[str, float | None], PixelMap] = {}
 
 
 def _write_one(args: tuple[str, str, str, float | None]) -> str:
-    from fidelity.fileio import write_bytes_atomic
     from fidelity.coco.jpeg import encode_jpeg, read_jpeg
+    from fidelity.fileio import write_bytes_atomic
 
     src, dst, name, param = args
     key = (name, param)

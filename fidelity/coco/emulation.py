@@ -69,7 +69,6 @@ from fidelity.camera.model import (
     load_camera,
     quantise,
 )
-from fidelity.errors import InvalidValueError, unknown_name
 from fidelity.colour.spectral import (
     GRID_STEP_NM,
     load_illuminant,
@@ -79,6 +78,7 @@ from fidelity.colour.spectral import (
     tristimulus,
     wavelength_grid,
 )
+from fidelity.errors import InvalidValueError, unknown_name
 
 FloatArray = NDArray[np.float64]
 
@@ -461,9 +461,9 @@ class EmulationAccuracy:
 def emulation_accuracy(emu: Emulation, chart_spectra: str = "BabelColor Average"
                        ) -> EmulationAccuracy:
     """Check the emulation against the camera's own rendered chart (module docstring)."""
-    from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
-    from fidelity.coco.dataset import to_uint8
     from fidelity.camera.render import render_chart
+    from fidelity.coco.dataset import to_uint8
+    from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
     from fidelity.colour.spectral import scene_reference
 
     render = render_chart(emu.camera, emu.illuminant, spectra=chart_spectra)

@@ -39,9 +39,9 @@ from typing import Any
 
 import numpy as np
 
+from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
 from fidelity.errors import InvalidValueError
 from fidelity.fileio import file_sha256
-from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
 
 #: Default targets of the sweep (issue 5): ΔE 0 is the baseline.
 SWEEP_TARGETS: tuple[float, ...] = (0, 1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 18, 21, 24)
@@ -280,10 +280,10 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     import onnxruntime
     from tqdm import tqdm
 
-    from fidelity.coco.scoring import evaluate_detections, load_annotated_images, resolve_scorer
     from fidelity.coco.dataset import BASELINE, PixelMap, calibrated_param
     from fidelity.coco.detectors import Detector
     from fidelity.coco.jpeg import roundtrip_jpeg
+    from fidelity.coco.scoring import evaluate_detections, load_annotated_images, resolve_scorer
 
     say = log or (lambda s: print(s, file=sys.stderr, flush=True))
     img_dir, coco, all_ids = load_annotated_images(images, annotations)

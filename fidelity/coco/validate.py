@@ -45,9 +45,9 @@ from typing import Any
 import numpy as np
 
 from fidelity.coco.scoring import FOLDS  # interleaved image folds for standard errors
+from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
 from fidelity.errors import InputFileError, InvalidValueError
 from fidelity.fileio import file_sha256, portable_paths
-from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
 
 STORE_NAME = "validation.sqlite"
 SUITE_FILE = "suite.toml"
@@ -303,13 +303,13 @@ def _fold_scores(coco: Any, dets: dict[int, np.ndarray], ids: Sequence[int]) -> 
 def prepare_case(case: CameraCase, store: ValidationStore, method: str, training: str,
                  cache: Any, image_ids: Sequence[int]) -> tuple[Any, dict[str, Any]]:
     """Render, measure, fit the emulation and check it; the record is stored (resumable)."""
+    from fidelity.camera.render import render_chart
     from fidelity.coco.emulation import (
         EMULATION_METHODS,
         EMULATION_VERSION,
         emulation_accuracy,
         fit_emulation,
     )
-    from fidelity.camera.render import render_chart
 
     key = json.dumps({"sha256": case.sha256, "illuminant": case.illuminant, "method": method,
                       "training": training, "emulation_version": EMULATION_VERSION})
@@ -360,9 +360,9 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[Any],
     import onnxruntime
     from tqdm import tqdm
 
-    from fidelity.coco.scoring import evaluate_detections, load_annotated_images
     from fidelity.coco.detectors import Detector
     from fidelity.coco.jpeg import roundtrip_jpeg
+    from fidelity.coco.scoring import evaluate_detections, load_annotated_images
     from fidelity.coco.sweep import ImageCache
 
     say = log or (lambda s: print(s, file=sys.stderr, flush=True))

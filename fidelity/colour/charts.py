@@ -9,6 +9,7 @@ file (or passing its path), not code.
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -17,10 +18,19 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fidelity.colour.colorimetry import lab_to_srgb
-from fidelity.errors import InputFileError, InvalidValueError, unknown_name
+from fidelity.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
 from fidelity.resources import resource_dir
 
-__all__ = ["DEFAULT_CHART", "Chart", "available_charts", "load_chart"]
+__all__ = [
+    "DEFAULT_CHART",
+    "DEFAULT_REFERENCE",
+    "SCENE_REFERENCE",
+    "Chart",
+    "Reference",
+    "available_charts",
+    "load_chart",
+    "load_reference",
+]
 
 #: The chart of the SAFE-COLOR calibration table.
 DEFAULT_CHART = "safecolor"
@@ -151,3 +161,58 @@ def load_chart(name_or_path: str | Path = DEFAULT_CHART) -> Chart:
     except json.JSONDecodeError as exc:
         raise InputFileError(f"{path}: not valid JSON ({exc})") from None
     return _chart_from_document(doc, str(path))
+
+
+#: Reference choices besides a chart name or path: ``scene`` (spectral chart under the illuminant).
+SCENE_REFERENCE = "scene"
+#: Default reference: the SAFE-COLOR chart (the paper's Lab values).
+DEFAULT_REFERENCE = "safecolor"
+
+
+@dataclass(frozen=True)
+class Reference:
+    """Reference colours of the chart patches: names, CIELAB D65, clipped sRGB, neutral indices."""
+
+    name: str
+    patch_names: tuple[str, ...]
+    lab: np.ndarray
+    srgb: np.ndarray
+    neutral_indices: tuple[int, ...]
+    rows: int = 4
+    cols: int = 6
+    conventions: dict[str, Any] = field(default_factory=dict)
+
+
+def load_reference(reference: str = DEFAULT_REFERENCE, illuminant: str = "D65") -> Reference:
+    """The reference chart: ``"scene"`` (BabelColor Average spectra under ``illuminant``,
+    adapted to D65, :func:`fidelity.colour.spectral.scene_reference`), or a chart name/path
+    (``"safecolor"``: the paper's Lab values, :func:`fidelity.colour.charts.load_chart`)."""
+    if reference == SCENE_REFERENCE:
+        from fidelity.colour.spectral import scene_reference
+
+        chart = load_chart("safecolor")
+        sr = scene_reference(illuminant)
+        lab = np.asarray(sr.lab, dtype=np.float64)
+        return Reference(
+            name=f"scene ({sr.conventions.get('reflectances', '')} under "
+                 f"{sr.conventions.get('illuminant', illuminant)})",
+            patch_names=tuple(sr.patch_names) if sr.patch_names else chart.patch_names,
+            lab=lab, srgb=np.clip(np.asarray(sr.srgb, np.float64), 0, 1),
+            neutral_indices=chart.neutral_indices,  # same layout as the SAFE-COLOR chart
+            conventions=dict(sr.conventions),
+        )
+    try:
+        chart = load_chart(reference)
+    except Exception as exc:  # an unknown name reads better with the choices listed
+
+        if isinstance(exc, FidelityError) and not os.path.exists(reference):
+            raise unknown_name("reference", reference,
+                               [SCENE_REFERENCE, *available_charts()]) from None
+        raise
+    return Reference(
+        name=chart.name, patch_names=chart.patch_names, lab=np.asarray(chart.lab, np.float64),
+        srgb=np.asarray(chart.srgb, np.float64), neutral_indices=chart.neutral_indices,
+        rows=chart.rows, cols=chart.cols,
+        conventions={"reference": f"chart {chart.name!r}: {chart.title}",
+                     "provenance": chart.provenance},
+    )

@@ -32,8 +32,8 @@ from scipy.optimize import brentq
 from fidelity.colour.charts import DEFAULT_CHART, Chart, load_chart
 from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
 from fidelity.errors import InputFileError, InvalidValueError, UnreachableTargetError
-from fidelity.resources import resource_dir
 from fidelity.prediction.transforms import TRANSFORMS, TransformSpec, get_transform
+from fidelity.resources import resource_dir
 
 __all__ = [
     "DEFAULT_TARGETS",

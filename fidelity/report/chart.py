@@ -39,8 +39,8 @@ from xml.etree import ElementTree as ET
 import numpy as np
 
 from fidelity import __version__
-from fidelity.fileio import write_json_atomic, write_text_atomic
 from fidelity.chart.measure import ChartMeasurement
+from fidelity.fileio import write_json_atomic, write_text_atomic
 from fidelity.prediction.table import Prediction, predict_curve
 from fidelity.prediction.verdict import Verdict
 
@@ -236,8 +236,8 @@ def plot_chart_location(pixels: np.ndarray, location: Any, *, encoding: str = "l
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fidelity.colour import colorimetry as cm
     from fidelity.chart.locate import CORNER_PATCHES, apply_homography
+    from fidelity.colour import colorimetry as cm
 
     arr = np.asarray(pixels, dtype=np.float64)
     arr = np.where(np.isfinite(arr), arr, 0.0)
