@@ -1,0 +1,152 @@
+"""The report document: what every report says, before it is HTML or Markdown.
+
+Every report of the project (a chart check, the COCO benchmark tables, the validation of the
+camera suite, the render benchmark) is built as one :class:`Document` from its data and then
+written both ways by :mod:`fidelity.report.html`: HTML for people (one Jinja2 template, plots
+embedded, the headline and the verdict first, details folded away) and Markdown from the same
+document. A document is a title, a :class:`Headline` (the verdict or the main finding, with an
+optional headline figure) and :class:`Section` objects holding blocks:
+
+- :class:`Text`: Markdown prose (inline emphasis, code, links, lists);
+- :class:`Table`: a header and rows of cells (strings, already formatted);
+- :class:`Figure`: a PNG (bytes) with a caption; embedded in HTML, a file link in Markdown;
+- :class:`Facts`: label/value pairs (a summary table);
+- :class:`Code`: preformatted text (JSON provenance).
+
+A section with ``folded=True`` is collapsed in HTML (``<details>``); Markdown shows it all.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+#: Look of a headline: a pass, a fail, or information without a verdict.
+Tone = Literal["pass", "fail", "info"]
+
+
+@dataclass(frozen=True)
+class Text:
+    """Markdown prose (one or more paragraphs, lists allowed)."""
+
+    markdown: str
+
+
+@dataclass(frozen=True)
+class Table:
+    """A table of formatted cells: ``header`` (n,) and ``rows`` (m, n); ``numeric`` marks the
+    columns to right-align (default: every column but the first)."""
+
+    header: tuple[str, ...]
+    rows: tuple[tuple[str, ...], ...]
+    caption: str = ""
+    numeric: tuple[bool, ...] | None = None
+
+    def alignment(self) -> tuple[bool, ...]:
+        """Per column: True to right-align (numbers)."""
+        if self.numeric is not None:
+            return self.numeric
+        return tuple(i > 0 for i in range(len(self.header)))
+
+
+@dataclass(frozen=True)
+class Figure:
+    """A PNG figure: ``png`` bytes, ``name`` (its file name when written next to Markdown),
+    ``alt`` text and a ``caption``."""
+
+    png: bytes
+    name: str
+    alt: str
+    caption: str = ""
+
+
+@dataclass(frozen=True)
+class Facts:
+    """Label/value pairs shown as a two-column summary (values are Markdown)."""
+
+    items: tuple[tuple[str, str], ...]
+
+
+@dataclass(frozen=True)
+class Code:
+    """Preformatted text (JSON, a command line), shown as it is."""
+
+    text: str
+    language: str = ""
+
+
+Block = Text | Table | Figure | Facts | Code
+
+
+@dataclass(frozen=True)
+class Section:
+    """A titled part of a report; ``folded`` sections are collapsed in HTML."""
+
+    title: str
+    blocks: tuple[Block, ...]
+    folded: bool = False
+    level: int = 2
+
+
+@dataclass(frozen=True)
+class Headline:
+    """What a reader must see first: ``message`` (Markdown), its ``tone`` and an optional
+    headline ``figure``."""
+
+    message: str
+    tone: Tone = "info"
+    figure: Figure | None = None
+
+
+@dataclass(frozen=True)
+class Document:
+    """A whole report: ``title``, an optional ``subtitle`` (Markdown), the :class:`Headline`,
+    its :class:`Section` objects in reading order and a ``footer`` (Markdown)."""
+
+    title: str
+    headline: Headline
+    sections: tuple[Section, ...] = ()
+    subtitle: str = ""
+    footer: str = ""
+
+    def figures(self) -> list[Figure]:
+        """Every figure of the document, headline first, in reading order."""
+        out = [self.headline.figure] if self.headline.figure else []
+        for s in self.sections:
+            out += [b for b in s.blocks if isinstance(b, Figure)]
+        return out
+
+
+def section(title: str, *blocks: Block | None, folded: bool = False, level: int = 2
+            ) -> Section:
+    """A :class:`Section` of the blocks that are not ``None`` (optional parts drop out)."""
+    return Section(title, tuple(b for b in blocks if b is not None), folded=folded, level=level)
+
+
+def table(header: Sequence[str], rows: Sequence[Sequence[str]], caption: str = "",
+          numeric: Sequence[bool] | None = None) -> Table:
+    """A :class:`Table` from any sequences (checks that every row has the header's width)."""
+    head = tuple(header)
+    body = tuple(tuple(r) for r in rows)
+    for i, r in enumerate(body):
+        if len(r) != len(head):
+            raise ValueError(f"table row {i} has {len(r)} cells, the header {len(head)}")
+    return Table(head, body, caption, tuple(numeric) if numeric is not None else None)
+
+
+__all__ = [
+    "Block",
+    "Code",
+    "Document",
+    "Facts",
+    "Figure",
+    "Headline",
+    "Section",
+    "Table",
+    "Text",
+    "Tone",
+    "section",
+    "table",
+]
+
