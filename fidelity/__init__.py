@@ -3,13 +3,135 @@
 Implements the SAFE-COLOR method (Damschen, Avula, Mohamad, IEEE IV 2025): colour error of a
 simulated camera, measured as CIEDE2000 on a Macbeth ColorChecker, mapped to predicted object
 detection loss.
+
+Two pipelines, one folder each:
+
+- the camera check (:mod:`fidelity.check`): :mod:`fidelity.colour` (colorimetry, spectra, chart
+  data) → :mod:`fidelity.camera` (camera model, closed-form and Mitsuba renderers) →
+  :mod:`fidelity.chart` (image reading, chart finding, measurement) → :mod:`fidelity.prediction`
+  (transforms, calibration, ΔE → ΔmAP tables, verdicts) → :mod:`fidelity.report` (JSON, HTML,
+  JUnit);
+- the COCO benchmark (:mod:`fidelity.coco`): transformed datasets → ONNX detectors → COCO
+  scoring → the sweep and its store → worst-case tables → validation of realistic cameras.
+
+The names below are the public API; each is imported on first use, so ``import fidelity`` is
+fast::
+
+    import fidelity
+    report = fidelity.check_camera("nikon-5100")     # render, measure, predict, verdict
+    print(report.mean_delta_e, report.verdict.passed)
 """
 
+from __future__ import annotations
+
+import importlib
 from importlib.metadata import PackageNotFoundError, version
+from typing import TYPE_CHECKING, Any
 
 try:
     __version__ = version("fidelity")
 except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+source"
 
-__all__ = ["__version__"]
+#: Public name -> the module that defines it.
+_API: dict[str, str] = {
+    # the camera-check pipeline
+    "check_camera": "fidelity.check",
+    "audit_image": "fidelity.check",
+    "gate": "fidelity.check",
+    # stages
+    "delta_e_2000": "fidelity.colour.colorimetry",
+    "load_chart": "fidelity.colour.charts",
+    "Chart": "fidelity.colour.charts",
+    "load_camera": "fidelity.camera.model",
+    "CameraModel": "fidelity.camera.model",
+    "render_chart": "fidelity.camera.render",
+    "ChartRender": "fidelity.camera.render",
+    "read_image": "fidelity.chart.image",
+    "find_chart": "fidelity.chart.find",
+    "FoundChart": "fidelity.chart.find",
+    "measure_chart": "fidelity.chart.measure",
+    "measure_image": "fidelity.chart.measure",
+    "ChartMeasurement": "fidelity.chart.measure",
+    "ImageMeasurement": "fidelity.chart.measure",
+    "apply_transform": "fidelity.prediction.transforms",
+    "calibrate_transform": "fidelity.prediction.calibration",
+    "predict": "fidelity.prediction.table",
+    "delta_e_limit": "fidelity.prediction.table",
+    "Prediction": "fidelity.prediction.table",
+    "Criterion": "fidelity.prediction.verdict",
+    "Verdict": "fidelity.prediction.verdict",
+    "evaluate": "fidelity.prediction.verdict",
+    "ChartReport": "fidelity.report.chart",
+    "write_chart_report": "fidelity.report.chart",
+    # errors
+    "FidelityError": "fidelity.errors",
+}
+
+if TYPE_CHECKING:
+    from fidelity.camera.model import CameraModel, load_camera
+    from fidelity.camera.render import ChartRender, render_chart
+    from fidelity.chart.find import FoundChart, find_chart
+    from fidelity.chart.image import read_image
+    from fidelity.chart.measure import (
+        ChartMeasurement,
+        ImageMeasurement,
+        measure_chart,
+        measure_image,
+    )
+    from fidelity.check import audit_image, check_camera, gate
+    from fidelity.colour.charts import Chart, load_chart
+    from fidelity.colour.colorimetry import delta_e_2000
+    from fidelity.errors import FidelityError
+    from fidelity.prediction.calibration import calibrate_transform
+    from fidelity.prediction.table import Prediction, delta_e_limit, predict
+    from fidelity.prediction.transforms import apply_transform
+    from fidelity.prediction.verdict import Criterion, Verdict, evaluate
+    from fidelity.report.chart import ChartReport, write_chart_report
+
+
+def __getattr__(name: str) -> Any:
+    """Import a public name's module on first use (PEP 562)."""
+    module = _API.get(name)
+    if module is None:
+        raise AttributeError(f"module 'fidelity' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)
+
+
+__all__ = [
+    "__version__",
+    "CameraModel",
+    "Chart",
+    "ChartMeasurement",
+    "ChartRender",
+    "ChartReport",
+    "Criterion",
+    "FidelityError",
+    "FoundChart",
+    "ImageMeasurement",
+    "Prediction",
+    "Verdict",
+    "apply_transform",
+    "audit_image",
+    "calibrate_transform",
+    "check_camera",
+    "delta_e_2000",
+    "delta_e_limit",
+    "evaluate",
+    "find_chart",
+    "gate",
+    "load_camera",
+    "load_chart",
+    "measure_chart",
+    "measure_image",
+    "predict",
+    "read_image",
+    "render_chart",
+    "write_chart_report",
+]

@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import math
 import os
 import tempfile
 from collections.abc import Iterable, Iterator, Mapping
@@ -61,6 +62,26 @@ def write_bytes_atomic(path: str | os.PathLike[str], data: bytes) -> Path:
     with atomic_output(path) as tmp:
         tmp.write_bytes(data)
     return Path(path)
+
+
+#: A JSON object as the records' ``to_json`` give it (strict JSON after :func:`json_ready`).
+JSONObject = dict[str, Any]
+
+
+def json_ready(obj: Any) -> Any:
+    """``obj`` as strict JSON values: numpy scalars and arrays become Python numbers and lists,
+    tuples lists, paths strings, dict keys strings, and NaN or +-Inf ``None``."""
+    if isinstance(obj, dict):
+        return {str(k): json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_ready(v) for v in obj]
+    if hasattr(obj, "tolist") and hasattr(obj, "dtype"):  # numpy array or scalar
+        return json_ready(obj.tolist())
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, os.PathLike):
+        return os.fspath(obj)
+    return obj
 
 
 def write_json_atomic(path: str | os.PathLike[str], obj: Any) -> Path:

@@ -186,13 +186,14 @@ def test_bad_pixels_counted_and_excluded(chart):
     result = measure_pixels(dirty, corners_of(), encoding="linear", exposure=0.0,
                           negatives="exclude")
     bp = result.bad_pixels
-    assert (bp["nan"], bp["inf"], bp["negative"], bp["total"]) == (1, 1, 1, 3)
-    assert bp["per_patch"] == {"purplish blue": 2, "magenta": 1}
-    assert bp["image"]["total"] == 4
+    w = bp.window
+    assert (w.nan, w.inf, w.negative, w.total) == (1, 1, 1, 3)
+    assert bp.per_patch == {"purplish blue": 2, "magenta": 1}
+    assert bp.image.total == 4
     assert result.mean_delta_e == pytest.approx(clean.mean_delta_e, abs=1e-9)
     # by default a negative value is counted but kept: NaN/Inf alone are excluded
     kept = measure_pixels(dirty, corners_of(), encoding="linear", exposure=0.0).bad_pixels
-    assert (kept["negative"], kept["total"], kept["per_patch"]) == (1, 2, {"purplish blue": 2})
+    assert (kept.window.negative, kept.window.total, kept.per_patch) == (1, 2, {"purplish blue": 2})
 
 
 def test_negative_values_of_out_of_gamut_colours_are_kept_in_the_linear_mean(chart):
@@ -203,7 +204,7 @@ def test_negative_values_of_out_of_gamut_colours_are_kept_in_the_linear_mean(cha
     with pytest.raises(InvalidValueError, match="'cyan': only 0 of"):
         measure_pixels(img, corners_of(), encoding="linear", exposure=0.0, negatives="exclude")
     result = measure_pixels(img, corners_of(), encoding="linear", exposure=0.0)
-    assert result.bad_pixels["negative"] == result.valid_pixels[17]
+    assert result.bad_pixels.window.negative == result.valid_pixels[17]
     assert "cyan" in result.clipped_patches
     # expected: the patch mean (flat) encoded as sRGB and clipped, by colour-science
     expected = np.clip(colour.cctf_encoding(np.clip(lin, 0, None), function="sRGB"), 0, 1)
@@ -241,7 +242,7 @@ def test_scene_reference_differs_from_paper_reference(tmp_path, chart):
 
 def test_audit_dict_has_the_documented_keys(tmp_path, chart):
     write_png8(tmp_path / "c.png", draw_chart(chart.srgb))
-    d = measure_image(tmp_path / "c.png", corners_of()).to_dict()
+    d = measure_image(tmp_path / "c.png", corners_of()).to_json()
     for key in ("mean_delta_e", "max_delta_e", "patches", "exposure_ev", "bad_pixels"):
         assert key in d
     assert len(d["patches"]) == 24

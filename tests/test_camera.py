@@ -168,7 +168,7 @@ def test_yaml_and_toml_camera_files_agree(tmp_path) -> None:
         "noise: {full_well: 9000, read_noise: 4, seed: 3}\n"
     )
     a, b = read_camera_file(toml), read_camera_file(yaml)
-    assert a.to_dict() | {"source": ""} == b.to_dict() | {"source": ""}
+    assert a.to_json() | {"source": ""} == b.to_json() | {"source": ""}
     assert a.quantisation_bits == 10 and a.noise.seed == 3 and a.tone.gamma == 2.4
 
 

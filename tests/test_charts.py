@@ -28,14 +28,14 @@ def test_safecolor_chart_matches_the_paper_table() -> None:
 
 
 def _write_chart(path: Path, **changes: object) -> Path:
-    doc = load_chart().to_dict()
+    doc = load_chart().to_json()
     doc.update(changes)
     path.write_text(json.dumps(doc))
     return path
 
 
 def test_a_user_chart_is_a_file(tmp_path: Path) -> None:
-    doc = load_chart().to_dict()
+    doc = load_chart().to_json()
     doc["name"] = "two-patch"
     doc["layout"] = {"rows": 1, "cols": 2}
     doc["patches"] = doc["patches"][18:20]
@@ -78,7 +78,7 @@ def test_measure_chart_reports_per_patch_differences() -> None:
     m = measure_chart(srgb, c.lab, c.patch_names)
     assert m.worst_patch == "dark skin" and m.delta_e[0] > 5
     assert m.delta_l[0] > 0
-    d = m.to_dict()
+    d = m.to_json()
     assert len(d["patches"]) == 24 and d["patches"][0]["name"] == "dark skin"
     assert d["mean_delta_e"] == pytest.approx(float(np.mean(m.delta_e)))
     with pytest.raises(InvalidValueError, match="patches \\[3\\]"):

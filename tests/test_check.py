@@ -100,8 +100,14 @@ def test_report_numbers_agree_with_colour_science(default_check):
     assert doc["prediction"]["dmap_points"] == pytest.approx(
         _default_table_chord(doc["mean_delta_e"]))
     html = (folder / "fidelity-report" / "report.html").read_text()
-    assert html.count("data:image/png;base64,") == 3
-    for text in ("Provenance", DEFAULT_TABLE, doc["provenance"]["version"], "Conventions"):
+    # the verdict first, then the chart, the colour-error figures and the prediction curve
+    assert html.index("PASS") < html.index('alt="the chart: reference against measured"')
+    for alt in ("ΔE00 on the chart layout", "a*b* errors", "tone curve of the neutral patches",
+                "ΔE00 per patch", "predicted loss against chart ΔE"):
+        assert f'alt="{alt}" src="data:image/png;base64,' in html
+    assert html.count("data:image/png;base64,") == 6
+    assert "<details><summary>Patches</summary>" in html
+    for text in ("Provenance", DEFAULT_TABLE, doc["provenance"]["version"]):
         assert text in html
 
 

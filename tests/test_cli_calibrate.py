@@ -28,7 +28,7 @@ def test_calibrate_writes_json_and_csv(tmp_path: Path) -> None:
 
 
 def test_calibrate_another_chart(tmp_path: Path) -> None:
-    doc = load_chart().to_dict()
+    doc = load_chart().to_json()
     doc["name"] = "greys"
     doc["layout"] = {"rows": 1, "cols": 6}
     doc["patches"] = doc["patches"][18:]

@@ -103,7 +103,7 @@ def test_hdr_input_with_bad_pixels_and_the_audit_it_feeds():
     assert found.mean_delta_e == pytest.approx(given.mean_delta_e, abs=1e-9)
     assert found.mean_delta_e == pytest.approx(expected_delta_e(np.clip(camera, 0, 1), CHART.lab),
                                                abs=0.02)
-    assert found.to_dict()["detection"]["corners_text"].count(",") == 7
+    assert found.to_json()["detection"]["corners_text"].count(",") == 7
 
 
 def test_srgb_png_through_the_cli_prints_the_corners_it_found(tmp_path):
@@ -114,7 +114,7 @@ def test_srgb_png_through_the_cli_prints_the_corners_it_found(tmp_path):
                                   "--html", str(tmp_path / "a.html")])
     assert r.exit_code == 0, r.output
     page = (tmp_path / "a.html").read_text()
-    assert "Where the patches were sampled" in page and "alt='sampling windows'" in page
+    assert "Where the patches were sampled" in page and 'alt="sampling windows" src="data:image/png' in page
     line = next(ln for ln in r.stdout.splitlines() if ln.startswith("chart found"))
     corners = np.array([float(v) for v in line.split("--corners ")[1].split(",")]).reshape(4, 2)
     assert np.abs(corners - map_points(h, GRID_CORNERS)).max() < 1.0

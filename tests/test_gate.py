@@ -67,7 +67,9 @@ def test_gate_pass_and_fail_on_delta_e(png, tmp_path):
     assert report["verdict"]["passed"] is False
     assert report["mean_delta_e"] == pytest.approx(de, abs=0.02)
     html = (tmp_path / "r.html").read_text()
-    assert html.count("data:image/png;base64,") == 4  # sampling windows, swatches, bars, curve
+    # swatches, sampling windows, ΔE map, a*b*, tone curve, ΔE bars, prediction curve
+    assert html.count("data:image/png;base64,") == 7
+    assert html.index("FAIL") < html.index('alt="sampling windows"')
     assert report["provenance"]["input_sha256"] in html
 
 
@@ -277,16 +279,21 @@ def test_usage_errors_exit_2(png):
     assert run("gate", "--camera", "ideal", "--max-delta-e", "abc").exit_code == 2
 
 
-def test_unexpected_exception_in_gate_exits_2(png, monkeypatch):
-    import fidelity.cli.gate as gate_mod
+def test_an_internal_error_exits_3_with_the_traceback_in_a_log(png, monkeypatch, tmp_path):
+    import fidelity.check as check_mod
 
     def boom(*a, **k):
         raise RuntimeError("disk on fire\nsecond line")
 
-    monkeypatch.setattr(gate_mod, "image_report", boom)
+    monkeypatch.setattr(check_mod, "audit_image", boom)
+    monkeypatch.setenv("FIDELITY_CACHE", str(tmp_path / "cache"))
     r = run("gate", png[0], "--corners", corners_of(), "--max-delta-e", "3")
-    assert r.exit_code == 2
-    assert "unexpected RuntimeError: disk on fire second line" in one_error_line(r)
+    assert r.exit_code == 3
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in r.output
+    assert lines[0].startswith("fidelity: internal error: RuntimeError: disk on fire second line")
+    (log,) = (tmp_path / "cache" / "logs").glob("fidelity-*.log")
+    assert "Traceback" in log.read_text() and str(log) in lines[0]
 
 
 def test_report_never_overwrites_the_input(png, tmp_path):

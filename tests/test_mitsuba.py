@@ -92,7 +92,7 @@ def test_mitsuba_and_closed_form_give_one_result() -> None:
     d = delta_e_2000(mits.measurement.lab, closed.measurement.lab)
     assert float(np.mean(d)) < 0.05
     assert mits.measurement.mean_delta_e < 0.06
-    assert mits.to_dict()["variant"] == mits.variant
+    assert mits.to_json()["variant"] == mits.variant
 
 
 def test_mitsuba_default_settings_meet_the_benchmark_target() -> None:

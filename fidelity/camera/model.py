@@ -197,7 +197,7 @@ class CameraModel:
         """True when the output is clipped to [0, 1] (display curve or quantisation)."""
         return self.output_encoding == "display" or self.quantisation_bits is not None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, Any]:
         """JSON-ready description of every stage (sensitivity data summarised)."""
         d: dict[str, Any] = {
             "name": self.name,

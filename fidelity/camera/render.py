@@ -27,7 +27,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import trim_mean
 
 from fidelity.camera.model import (
     CameraModel,
@@ -120,6 +119,8 @@ def patch_means(
     Mean: per-channel trimmed mean cutting ``trim`` of the values at each end
     (scipy.stats.trim_mean). Std: sample standard deviation (ddof = 1; 0 for a 1-pixel window).
     """
+    from scipy.stats import trim_mean
+
     img = np.asarray(image, dtype=np.float64)
     n = layout.rows * layout.cols
     means = np.empty((n, img.shape[-1]))
@@ -148,9 +149,9 @@ class ChartRender:
     camera_noise: FloatArray
     settings: dict[str, Any] = field(default_factory=dict)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, Any]:
         """JSON-ready result: ΔE summary, renderer, variant, seconds, conventions, patches."""
-        m = self.measurement.to_dict()
+        m = self.measurement.to_json()
         for i, p in enumerate(m["patches"]):
             p["camera_rgb"] = [float(v) for v in self.camera_rgb[i]]
             p["camera_rgb_noise"] = [float(v) for v in self.camera_noise[i]]
@@ -161,7 +162,7 @@ class ChartRender:
             "renderer": self.renderer,
             "variant": self.variant,
             "seconds": self.seconds,
-            "camera": self.camera.to_dict(),
+            "camera": self.camera.to_json(),
             "settings": self.settings,
             "conventions": self.conventions,
             "patches": m["patches"],

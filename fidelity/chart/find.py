@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -104,8 +104,10 @@ class FoundChart:
         """The corners as ``--corners`` takes them: ``X1,Y1,...,X4,Y4`` (0.1 px)."""
         return ",".join(f"{v:.1f}" for v in self.corners.ravel())
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready record of the detection."""
+    def to_json(self) -> dict[str, Any]:
+        """JSON form: ``method``, ``corners``, ``corner_patches``, ``corners_text``,
+        ``candidates``, ``swatches``, ``residual_px`` (null without refinement),
+        ``orientation``, ``region``."""
         return {
             "method": self.method,
             "corners": np.round(self.corners, 3).tolist(),
@@ -117,6 +119,20 @@ class FoundChart:
             "orientation": self.orientation,
             "region": list(self.region) if self.region else None,
         }
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> FoundChart:
+        """Inverse of :meth:`to_json` (corners as stored, to 0.001 px)."""
+        residual = data.get("residual_px")
+        region = data.get("region")
+        return cls(
+            corners=np.asarray(data["corners"], dtype=np.float64), method=str(data["method"]),
+            candidates=int(data["candidates"]), swatches=int(data["swatches"]),
+            residual_px=math.nan if residual is None else float(residual),
+            orientation=str(data.get("orientation", "as found")),
+            region=(int(region[0]), int(region[1]), int(region[2]), int(region[3]))
+            if region else None,
+        )
 
 
 def detection_image(pixels: np.ndarray, encoding: str = "linear") -> np.ndarray:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -76,20 +76,65 @@ class Image:
         """Image width in pixels."""
         return int(self.pixels.shape[1])
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready description (without the pixels)."""
-        return {
-            "path": str(self.path),
-            "format": self.file_format,
-            "pixel_type": self.pixel_type,
-            "width": self.width,
-            "height": self.height,
-            "channels": list(self.channels),
-            "layer": self.layer,
-            "encoding_guess": self.encoding,
+    def info(self, sha256: str | None = None, encoding: str | None = None) -> ImageInfo:
+        """What the image is (without the pixels); ``sha256`` of the file and the ``encoding``
+        it is measured in, when known."""
+        return ImageInfo(
+            path=str(self.path), format=self.file_format, pixel_type=self.pixel_type,
+            width=self.width, height=self.height, channels=self.channels, layer=self.layer,
+            encoding_guess=self.encoding, colorspace=self.colorspace,
+            chromaticities=self.chromaticities, sha256=sha256, encoding=encoding,
+        )
+
+
+@dataclass(frozen=True)
+class ImageInfo:
+    """An image file as a report states it: ``path``, file ``format``, ``pixel_type``, size,
+    the three ``channels`` used, ``layer``, the likely encoding (``encoding_guess``), OpenImageIO's
+    ``colorspace`` and OpenEXR's ``chromaticities`` attributes, the file's ``sha256`` and the
+    ``encoding`` it was measured in."""
+
+    path: str
+    format: str
+    pixel_type: str
+    width: int
+    height: int
+    channels: tuple[str, ...]
+    layer: str | None
+    encoding_guess: str
+    colorspace: str | None = None
+    chromaticities: tuple[float, ...] | None = None
+    sha256: str | None = None
+    encoding: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON form (keys in this order; ``sha256`` and ``encoding`` only when known)."""
+        out: dict[str, Any] = {
+            "path": self.path, "format": self.format, "pixel_type": self.pixel_type,
+            "width": self.width, "height": self.height, "channels": list(self.channels),
+            "layer": self.layer, "encoding_guess": self.encoding_guess,
             "colorspace": self.colorspace,
             "chromaticities": list(self.chromaticities) if self.chromaticities else None,
         }
+        if self.sha256 is not None:
+            out["sha256"] = self.sha256
+        if self.encoding is not None:
+            out["encoding"] = self.encoding
+        return out
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> ImageInfo:
+        """Inverse of :meth:`to_json`."""
+        chroma = data.get("chromaticities")
+        return cls(
+            path=str(data["path"]), format=str(data["format"]),
+            pixel_type=str(data["pixel_type"]), width=int(data["width"]),
+            height=int(data["height"]), channels=tuple(data["channels"]),
+            layer=data.get("layer"), encoding_guess=str(data["encoding_guess"]),
+            colorspace=data.get("colorspace"),
+            chromaticities=tuple(float(v) for v in chroma) if chroma else None,
+            sha256=data.get("sha256"), encoding=data.get("encoding"),
+        )
 
 
 @contextlib.contextmanager
@@ -294,4 +339,4 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None) -> Image:
     )
 
 
-__all__ = ["FLOAT_PIXEL_TYPES", "Image", "read_image"]
+__all__ = ["FLOAT_PIXEL_TYPES", "Image", "ImageInfo", "read_image"]

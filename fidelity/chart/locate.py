@@ -135,8 +135,8 @@ class ChartLocation:
     rows: int
     cols: int
 
-    def to_dict(self) -> dict[str, object]:
-        """JSON-ready summary (corners, centres, window size and pixel counts)."""
+    def to_json(self) -> dict[str, object]:
+        """JSON form: corners, homography, centres, window size and pixel counts."""
         return {
             "corners": self.corners.tolist(),
             "corner_patches": list(CORNER_PATCHES),

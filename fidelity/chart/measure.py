@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -51,6 +51,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fidelity.chart.find import FoundChart, find_chart
+from fidelity.chart.image import ImageInfo
 from fidelity.chart.locate import DEFAULT_WINDOW, ChartLocation, locate_chart, window_pixels
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import DEFAULT_REFERENCE, Reference, load_reference
@@ -114,8 +115,10 @@ class ChartMeasurement:
         """Name of the patch with the largest ΔE00."""
         return self.patch_names[int(np.argmax(self.delta_e))]
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary: mean/max ΔE00 and one entry per patch in chart order."""
+    def to_json(self) -> dict[str, Any]:
+        """JSON form: ``mean_delta_e``, ``max_delta_e``, ``worst_patch`` and one entry per
+        patch in chart order (``name``, ``delta_e``, ``delta_l``, ``delta_c``, ``delta_h``,
+        ``lab``, ``reference_lab``, ``srgb``, ``reference_srgb``, ``noise``)."""
 
         def vec(a: F64 | None, i: int) -> list[float] | None:
             return None if a is None else [float(v) for v in a[i]]
@@ -140,6 +143,31 @@ class ChartMeasurement:
                 for i, name in enumerate(self.patch_names)
             ],
         }
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> ChartMeasurement:
+        """The measurement of a :meth:`to_json` document (its ``patches``; the summary values
+        are derived from them again)."""
+        patches = data["patches"]
+
+        def rows(key: str) -> F64 | None:
+            if any(p.get(key) is None for p in patches):
+                return None
+            return np.array([p[key] for p in patches], dtype=np.float64)
+
+        def col(key: str) -> F64:
+            return np.array([p[key] for p in patches], dtype=np.float64)
+
+        srgb, lab, ref = rows("srgb"), rows("lab"), rows("reference_lab")
+        if srgb is None or lab is None or ref is None:
+            raise InvalidValueError("a chart measurement needs srgb, lab and reference_lab "
+                                    "of every patch")
+        return cls(
+            patch_names=tuple(str(p["name"]) for p in patches), srgb=srgb, lab=lab,
+            reference_lab=ref, delta_e=col("delta_e"), delta_l=col("delta_l"),
+            delta_c=col("delta_c"), delta_h=col("delta_h"),
+            reference_srgb=rows("reference_srgb"), noise=rows("noise"),
+        )
 
 
 def measure_chart(
@@ -172,6 +200,70 @@ def measure_chart(
         delta_h=dh,
         reference_srgb=None if reference_srgb is None else _patch_array(reference_srgb, "reference sRGB", n),
         noise=None if noise is None else np.asarray(noise, dtype=np.float64),
+    )
+
+
+#: Reference chroma C*ab below which a patch counts as neutral (the Macbeth chart's six greys
+#: have C*ab < 2; its least chromatic colour patch about 20).
+NEUTRAL_CHROMA = 5.0
+
+
+def neutral_patches(m: ChartMeasurement) -> tuple[int, ...]:
+    """Indices of the neutral patches: reference chroma C*ab below :data:`NEUTRAL_CHROMA`."""
+    chroma = np.hypot(m.reference_lab[:, 1], m.reference_lab[:, 2])
+    return tuple(int(i) for i in np.flatnonzero(chroma < NEUTRAL_CHROMA))
+
+
+@dataclass(frozen=True)
+class ChartStatistics:
+    """What a chart says beyond ΔE, as Imatest's Colorcheck reports it.
+
+    ``saturation_percent``: mean measured chroma C*ab of the colour (non-neutral) patches in
+    percent of their mean reference chroma (100: right saturation, > 100 oversaturated).
+    ``neutral_ab``: mean (a*, b*) error, measured minus reference, of the neutral patches (the
+    white-balance error, a colour cast); ``neutral_chroma`` its length. ``neutral_delta_l``:
+    mean L* error of the neutral patches (exposure and tone). ``snr_db``: mean over the neutral
+    patches of 20 log10(mean / standard deviation) of their encoded sRGB values, and
+    ``worst_snr_db`` the lowest; None when the noise is unknown or zero.
+    """
+
+    saturation_percent: float
+    neutral_ab: tuple[float, float]
+    neutral_chroma: float
+    neutral_delta_l: float
+    snr_db: float | None
+    worst_snr_db: float | None
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON form."""
+        return {"saturation_percent": self.saturation_percent,
+                "neutral_ab": list(self.neutral_ab), "neutral_chroma": self.neutral_chroma,
+                "neutral_delta_l": self.neutral_delta_l, "snr_db": self.snr_db,
+                "worst_snr_db": self.worst_snr_db}
+
+
+def chart_statistics(m: ChartMeasurement) -> ChartStatistics:
+    """Saturation, white balance, neutral lightness and noise of a measured chart
+    (:class:`ChartStatistics`). Raises when the chart has no neutral or no colour patch."""
+    neutral = list(neutral_patches(m))
+    colour = [k for k in range(len(m.patch_names)) if k not in neutral]
+    if not neutral or not colour:
+        raise InvalidValueError("chart statistics need neutral and colour patches")
+    c_meas = np.hypot(m.lab[colour, 1], m.lab[colour, 2])
+    c_ref = np.hypot(m.reference_lab[colour, 1], m.reference_lab[colour, 2])
+    d_ab = (m.lab[neutral, 1:] - m.reference_lab[neutral, 1:]).mean(axis=0)
+    snr: list[float] = []
+    if m.noise is not None:
+        for k in neutral:
+            sd = float(np.mean(m.noise[k]))
+            if sd > 0:
+                snr.append(20.0 * math.log10(float(np.mean(m.srgb[k])) / sd))
+    return ChartStatistics(
+        saturation_percent=float(100.0 * c_meas.mean() / c_ref.mean()),
+        neutral_ab=(float(d_ab[0]), float(d_ab[1])), neutral_chroma=float(np.hypot(*d_ab)),
+        neutral_delta_l=float((m.lab[neutral, 0] - m.reference_lab[neutral, 0]).mean()),
+        snr_db=float(np.mean(snr)) if snr else None,
+        worst_snr_db=float(np.min(snr)) if snr else None,
     )
 
 
@@ -218,6 +310,52 @@ def exposure_from_neutrals(
 
 
 @dataclass(frozen=True)
+class PixelCounts:
+    """Pixels with a NaN, a +-Inf or a negative channel, and how many were ``excluded``
+    (``total``)."""
+
+    nan: int
+    inf: int
+    negative: int
+    total: int
+
+    def to_json(self) -> dict[str, int]:
+        """JSON form."""
+        return {"nan": self.nan, "inf": self.inf, "negative": self.negative, "total": self.total}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> PixelCounts:
+        """Inverse of :meth:`to_json`."""
+        return cls(int(data["nan"]), int(data["inf"]), int(data["negative"]), int(data["total"]))
+
+
+@dataclass(frozen=True)
+class BadPixels:
+    """Bad pixels of an audited image: ``window`` counts over the sampling windows,
+    ``per_patch`` the excluded pixels of each patch that has any, ``image`` the counts over the
+    whole image, the ``negatives`` rule (:data:`NEGATIVE_RULES`) and the ``rule`` in words."""
+
+    window: PixelCounts
+    per_patch: Mapping[str, int]
+    image: PixelCounts
+    negatives: str
+    rule: str
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON form (the window counts at the top level, as the report schema has them)."""
+        return {**self.window.to_json(), "per_patch": dict(self.per_patch),
+                "image": self.image.to_json(), "negatives": self.negatives, "rule": self.rule}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> BadPixels:
+        """Inverse of :meth:`to_json`."""
+        return cls(PixelCounts.from_json(data), {str(k): int(v) for k, v in
+                                                 data["per_patch"].items()},
+                   PixelCounts.from_json(data["image"]), str(data.get("negatives", "keep")),
+                   str(data.get("rule", "")))
+
+
+@dataclass(frozen=True)
 class ImageMeasurement:
     """An audited chart: the :class:`ChartMeasurement` plus how it was obtained."""
 
@@ -225,12 +363,12 @@ class ImageMeasurement:
     exposure_ev: float
     exposure_mode: str
     encoding: str
-    bad_pixels: dict[str, Any]
+    bad_pixels: BadPixels
     valid_pixels: tuple[int, ...]
     clipped_patches: tuple[str, ...]
     location: ChartLocation
     reference: Reference
-    image: dict[str, Any] | None = None
+    image: ImageInfo | None = None
     detection: FoundChart | None = None
     colourspace: str = "sRGB"
 
@@ -244,24 +382,26 @@ class ImageMeasurement:
         """Largest per-patch ΔE00."""
         return self.measurement.max_delta_e
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: ``mean_delta_e``, ``max_delta_e``, ``patches`` (``delta_e``, ``delta_l``,
-        ``delta_c``, ``delta_h``, ...), ``exposure_ev``, ``bad_pixels`` and the details."""
-        d = self.measurement.to_dict()
+    def to_json(self) -> dict[str, Any]:
+        """JSON form: the measurement (:meth:`ChartMeasurement.to_json`, each patch with its
+        ``valid_pixels`` and ``bad_pixels``), ``exposure_ev``, ``exposure_mode``, ``encoding``,
+        ``bad_pixels``, ``clipped_patches``, ``reference``, ``location``, ``detection``,
+        ``colourspace`` and ``image``."""
+        d = self.measurement.to_json()
         for patch, n in zip(d["patches"], self.valid_pixels, strict=True):
             patch["valid_pixels"] = int(n)
-            patch["bad_pixels"] = int(self.bad_pixels["per_patch"].get(patch["name"], 0))
+            patch["bad_pixels"] = int(self.bad_pixels.per_patch.get(patch["name"], 0))
         d.update(
             exposure_ev=self.exposure_ev,
             exposure_mode=self.exposure_mode,
             encoding=self.encoding,
-            bad_pixels=self.bad_pixels,
+            bad_pixels=self.bad_pixels.to_json(),
             clipped_patches=list(self.clipped_patches),
             reference=self.reference.name,
-            location=self.location.to_dict(),
-            detection=self.detection.to_dict() if self.detection else None,
+            location=self.location.to_json(),
+            detection=self.detection.to_json() if self.detection else None,
             colourspace=self.colourspace,
-            image=self.image,
+            image=self.image.to_json() if self.image else None,
         )
         return d
 
@@ -291,7 +431,7 @@ def measure_pixels(
     illuminant: str = "D65",
     window: float = DEFAULT_WINDOW,
     min_valid_fraction: float = MIN_VALID_FRACTION,
-    image: dict[str, Any] | None = None,
+    image: ImageInfo | None = None,
     detection: str = "segmentation",
     negatives: str = "keep",
     colourspace: str | Sequence[float] = "sRGB",
@@ -391,9 +531,9 @@ def measure_pixels(
             if negatives == "exclude" else
             "a pixel with NaN or +-Inf in any channel is excluded; negative values are counted "
             "and kept in the linear mean")
-    bad_pixels = {**totals, "per_patch": per_patch, "image": whole, "negatives": negatives,
-                  "rule": f"{rule}; counts in sampling windows (image: whole image); total: "
-                          f"pixels excluded"}
+    bad_pixels = BadPixels(PixelCounts(**totals), per_patch, PixelCounts(**whole), negatives,
+                           f"{rule}; counts in sampling windows (image: whole image); total: "
+                           f"pixels excluded")
     measurement = measure_chart(srgb, ref.lab, ref.patch_names, reference_srgb=ref.srgb,
                                 noise=noise)
     return ImageMeasurement(
@@ -436,13 +576,12 @@ def measure_image(
     from fidelity.fileio import file_sha256
 
     img = read_image(path, layer=layer)
-    info = img.to_dict()
-    info["sha256"] = file_sha256(img.path)
     enc = encoding or img.encoding
+    info = img.info(sha256=file_sha256(img.path), encoding=enc)
     try:
         return measure_pixels(img.pixels, corners, encoding=enc, exposure=exposure,
                             reference=reference, illuminant=illuminant, window=window,
-                            image={**info, "encoding": enc}, detection=detection,
+                            image=info, detection=detection,
                             negatives=negatives,
                             colourspace=(colourspace if colourspace is not None
                                          else img.chromaticities or "sRGB"))
@@ -451,12 +590,18 @@ def measure_image(
 
 __all__ = [
     "ENCODINGS",
+    "BadPixels",
+    "PixelCounts",
     "MIN_VALID_FRACTION",
     "MIN_VALID_PIXELS",
     "NEGATIVE_RULES",
     "ChartMeasurement",
+    "ChartStatistics",
+    "NEUTRAL_CHROMA",
     "ImageMeasurement",
     "chart_delta_e",
+    "chart_statistics",
+    "neutral_patches",
     "exposure_from_neutrals",
     "luminance_linear_srgb",
     "measure_chart",

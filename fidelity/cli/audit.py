@@ -6,14 +6,7 @@ from pathlib import Path
 
 import click
 
-from fidelity.cli.gate import (
-    PATH,
-    colourspace_option,
-    image_report,
-    negatives_option,
-    report_paths,
-    write_outputs,
-)
+from fidelity.cli.gate import PATH, colourspace_option, negatives_option, report_paths
 from fidelity.prediction.table import SIZES
 
 
@@ -54,7 +47,10 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
     fidelity audit render.exr --json audit.json
     fidelity audit photo.jpg --corners 102,88,610,95,604,420,98,414
     """
+    from fidelity.check import audit_image
     from fidelity.fileio import check_outputs
+    from fidelity.report.chart import ImageSource, write_chart_report
+    from fidelity.report.terminal import summary_lines
 
     # an existing folder gets IMAGE-NAME.json / .html, as in `fidelity gate`
     (json_path,) = report_paths((image,), json_path, ".json")
@@ -62,19 +58,16 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
     check_outputs({"--json": json_path, "--html": html_path},
                   {"IMAGE": image, "--table": table, "--reference": reference,
                    "--illuminant": illuminant})
-    report, prediction, _, figure = image_report(
-        image, corners, command="audit", encoding=encoding, exposure=exposure, layer=layer,
-        reference=reference, illuminant=illuminant, size=size, table=table,
-        location_figure=html_path is not None, negatives=negatives,
-        colourspace=colourspace)
-    written = write_outputs(report, prediction, json_path=json_path, html_path=html_path,
-                            protect=(str(image),), location_png=figure)
+    report = audit_image(image, corners, encoding=encoding, exposure=exposure, layer=layer,
+                         reference=reference, illuminant=illuminant, size=size, table=table,
+                         negatives=negatives, colourspace=colourspace)
+    written = write_chart_report(report, json_path=json_path, html_path=html_path,
+                                 protect=(image,))
     if not quiet:
-        from fidelity.report.chart import summary_lines
-
-        click.echo(f"{image}: {report['source'].get('format')} {report['source'].get('pixel_type')}"
-                   f" {report['source'].get('width')}x{report['source'].get('height')}, "
-                   f"{report['source'].get('encoding')} pixels")
+        src = report.source
+        assert isinstance(src, ImageSource)
+        click.echo(f"{image}: {src.image.format} {src.image.pixel_type} "
+                   f"{src.image.width}x{src.image.height}, {src.encoding} pixels")
         for line in summary_lines(report):
             click.echo(line)
         for p in written:

@@ -79,7 +79,7 @@ def calibrate(chart: str, targets: str | None, transform_names: str | None,
     table = calibration_table(c, tlist, names)
     seconds = time.perf_counter() - t0
     if json_path:
-        write_json_atomic(json_path, table.to_dict())
+        write_json_atomic(json_path, table.to_json())
     if csv_path:
         write_text_atomic(csv_path, calibration_table_csv(table))
     if md_path:

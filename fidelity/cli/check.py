@@ -7,9 +7,8 @@ from pathlib import Path
 
 import click
 
-from fidelity.cli.gate import camera_report, write_outputs
 from fidelity.prediction.table import SIZES
-from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion
+from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E
 
 #: Where ``fidelity check`` writes its report unless told otherwise.
 DEFAULT_OUTPUT_DIR = "fidelity-report"
@@ -40,24 +39,26 @@ def check(camera: str | None, illuminant: str, renderer: str, reference: str,
     loss and prints a verdict (exit 0 pass, 1 fail, 2 error); writes an HTML and a JSON report.
     """
     from fidelity.camera.model import DEFAULT_CAMERA
+    from fidelity.check import check_camera
     from fidelity.fileio import check_outputs
+    from fidelity.prediction.verdict import Criterion
+    from fidelity.report.chart import RenderSource, write_chart_report
+    from fidelity.report.terminal import summary_lines
 
     cam = camera or DEFAULT_CAMERA
     html_path, json_path = out_dir / "report.html", out_dir / "report.json"
     check_outputs({"--out (report.html)": html_path, "--out (report.json)": json_path},
                   {"--camera": cam, "--table": table, "--illuminant": illuminant})
-    report, prediction, verdict = camera_report(
-        cam, command="check", illuminant=illuminant, renderer=renderer, reference=reference,
-        size=size, table=table, criterion=Criterion("max-delta-e", max_delta_e))
-    assert verdict is not None
-    write_outputs(report, prediction, json_path=json_path, html_path=html_path)
-    from fidelity.report.chart import summary_lines
-
-    src = report["source"]
-    variant = f" ({src['variant']})" if src.get("variant") else ""
-    click.echo(f"fidelity check: camera {src['camera']}, illuminant {illuminant}, "
-               f"{src['renderer']} renderer{variant}, {reference} reference")
+    report = check_camera(cam, illuminant=illuminant, renderer=renderer, reference=reference,
+                          size=size, table=table,
+                          criterion=Criterion("max-delta-e", max_delta_e))
+    write_chart_report(report, json_path=json_path, html_path=html_path)
+    src = report.source
+    assert isinstance(src, RenderSource)
+    variant = f" ({src.variant})" if src.variant else ""
+    click.echo(f"fidelity check: camera {src.camera}, illuminant {illuminant}, "
+               f"{src.renderer} renderer{variant}, {reference} reference")
     for line in summary_lines(report):
         click.echo("  " + line)
     click.echo(f"  report: {html_path} (JSON: {json_path})")
-    sys.exit(verdict.exit_code)
+    sys.exit(report.exit_code)

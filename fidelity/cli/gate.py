@@ -1,22 +1,25 @@
 """``fidelity gate``: pass/fail for CI on an image's chart or a camera model's render.
 
 Exit codes: 0 pass, 1 fail, 2 error (one line on stderr, no traceback; with ``--junit`` the
-error is also written as a JUnit ``<error>``). The helpers here (measuring an image or a camera
-into a report) are shared by ``fidelity audit`` and ``fidelity check``.
+error is also written as a JUnit ``<error>``). The work is :func:`fidelity.check.gate`; the
+image options and report paths here are shared with ``fidelity audit``.
 """
 
 from __future__ import annotations
 
 import sys
-import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import click
 
 from fidelity.errors import FidelityError
-from fidelity.prediction.table import CLASS_COLUMNS, SIZES, Prediction, predict
-from fidelity.prediction.verdict import EXIT_ERROR, Criterion, Verdict, evaluate
+from fidelity.prediction.table import CLASS_COLUMNS, SIZES
+from fidelity.prediction.verdict import EXIT_ERROR, Criterion
+
+if TYPE_CHECKING:
+    from fidelity.report.junit import GateCase
 
 PATH = click.Path(dir_okay=False, path_type=Path)
 
@@ -30,97 +33,6 @@ negatives_option = click.option(
     "--negatives", type=click.Choice(["keep", "exclude"]), default="keep", show_default=True,
     help="Pixels with a negative channel: keep them in the linear mean (out-of-gamut colours in "
          "a scene-linear render) or exclude them like NaN/Inf.")
-
-
-def image_report(
-    image: Path, corners: str | None, *, command: str, encoding: str | None, exposure: str | None,
-    layer: str | None, reference: str, illuminant: str, size: str, table: str | None,
-    criterion: Criterion | None = None, location_figure: bool = False,
-    negatives: str = "keep", colourspace: str | None = None,
-) -> tuple[dict[str, Any], Prediction, Verdict | None, str | None]:
-    """Audit ``image`` and build its report (measurement, prediction, optional verdict), and
-    with ``location_figure`` the base64 PNG of where the patches were sampled (for HTML).
-
-    ``corners`` ``None`` (or empty): the chart is found in the image
-    (:func:`fidelity.chart.find.find_chart`); the corners it found go into the report."""
-    from fidelity.chart.measure import measure_image
-    from fidelity.report.chart import build_report
-
-    result = measure_image(image, corners or None, layer=layer, encoding=encoding, exposure=exposure,
-                         reference=reference, illuminant=illuminant, negatives=negatives,
-                         colourspace=colourspace)
-    prediction = predict(result.mean_delta_e, size=size, table=table)
-    verdict = evaluate(result.mean_delta_e, prediction, criterion) if criterion else None
-    info = dict(result.image or {})
-    source = {"type": "image", **info, "corners": result.location.corners.tolist(),
-              "corners_found": result.detection.to_dict() if result.detection else None,
-              "colourspace": result.colourspace,
-              "exposure_mode": result.exposure_mode, "reference": result.reference.name}
-    report = build_report(
-        command, result.measurement, source=source, prediction=prediction, verdict=verdict,
-        exposure_ev=result.exposure_ev, bad_pixels=result.bad_pixels,
-        patch_extras=[{"valid_pixels": int(n),
-                       "bad_pixels": int(result.bad_pixels["per_patch"].get(name, 0))}
-                      for name, n in zip(result.reference.patch_names, result.valid_pixels,
-                                         strict=True)],
-        conventions={"reference": result.reference.conventions,
-                     "audit": "patches located by the homography of the 4x6 grid from the corner "
-                              "patch centres; central window of "
-                              f"{result.location.window:g} pitch; mean in linear light; "
-                              "exposure on the neutral patches (EV) unless fixed; sRGB encoded "
-                              "and clipped to [0, 1]"},
-        details={"location": result.location.to_dict(),
-                 "clipped_patches": list(result.clipped_patches),
-                 "encoding": result.encoding},
-    )
-    figure = None
-    if location_figure:
-        from fidelity.chart.image import read_image
-        from fidelity.report.chart import plot_chart_location
-
-        figure = plot_chart_location(read_image(image, layer=layer).pixels, result.location,
-                                     encoding=result.encoding, exposure_ev=result.exposure_ev,
-                                     found=result.detection is not None)
-    return report, prediction, verdict, figure
-
-
-def camera_report(
-    camera: str, *, command: str, illuminant: str, renderer: str, reference: str, size: str,
-    table: str | None, criterion: Criterion | None = None, seed: int | None = None,
-) -> tuple[dict[str, Any], Prediction, Verdict | None]:
-    """Render ``camera``'s chart (:func:`fidelity.camera.render.render_chart`) and build its report."""
-    from fidelity.camera.render import render_chart
-    from fidelity.report.chart import build_report
-
-    render = render_chart(camera, illuminant, renderer, reference=reference, seed=seed)
-    m = render.measurement
-    prediction = predict(m.mean_delta_e, size=size, table=table)
-    verdict = evaluate(m.mean_delta_e, prediction, criterion) if criterion else None
-    rd = render.to_dict()
-    source = {"type": "render", "camera": getattr(render.camera, "name", str(camera)),
-              "illuminant": illuminant, "renderer": render.renderer, "variant": render.variant,
-              "seconds": render.seconds, "reference": reference}
-    report = build_report(
-        command, m, source=source, prediction=prediction, verdict=verdict,
-        conventions={"render": rd.get("conventions", {})},
-        details={"camera": rd.get("camera"), "settings": rd.get("settings")},
-    )
-    return report, prediction, verdict
-
-
-def write_outputs(report: dict[str, Any], prediction: Prediction, *, json_path: Path | None,
-                  html_path: Path | None, protect: tuple[str, ...] = (),
-                  location_png: str | None = None) -> list[Path]:
-    """Write the JSON and HTML reports that were asked for; return their paths."""
-    from fidelity.report.chart import write_html_report, write_json_report
-
-    written = []
-    if json_path is not None:
-        written.append(write_json_report(json_path, report, protect=protect))
-    if html_path is not None:
-        written.append(write_html_report(html_path, report, prediction, protect=protect,
-                                         location_png=location_png))
-    return written
 
 
 def make_criterion(max_delta_e: float | None, max_dmap: float | None, cls: str | None,
@@ -139,9 +51,9 @@ def _error_line(message: str) -> None:
     click.echo(f"fidelity: error: {message}", err=True)
 
 
-def _write_junit(junit: Path, cases: list[Any]) -> None:
+def _write_junit(junit: Path, cases: Sequence[GateCase]) -> None:
     """Write the JUnit file; a failure to write it is an error (exit 2)."""
-    from fidelity.report.chart import write_junit
+    from fidelity.report.junit import write_junit
 
     try:
         write_junit(junit, cases)
@@ -223,6 +135,11 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
                                                           colourspace)):
         raise click.UsageError("--corners, --encoding, --exposure, --layer and --colourspace "
                                "apply to an IMAGE, not to --camera")
+    from fidelity.check import GateOutputs
+    from fidelity.check import gate as gate_subjects
+    from fidelity.report.junit import GateCase, gate_exit_code
+    from fidelity.report.terminal import summary_lines
+
     many = len(images) > 1
     try:
         from fidelity.fileio import check_outputs
@@ -242,72 +159,32 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         _error_line(str(exc))
         sys.exit(EXIT_ERROR)
 
-    from fidelity.report.chart import GateCase
-
     try:
         criterion = make_criterion(max_delta_e, max_dmap, cls, unit)
     except FidelityError as exc:
         if junit is not None:
-            subject = ", ".join(map(str, images)) if images else camera
-            _write_junit(junit, [GateCase(f"colour fidelity of {subject}", error=str(exc))])
+            subject = ", ".join(map(str, images)) if images else str(camera)
+            _write_junit(junit, [GateCase(subject, error=str(exc))])
         _error_line(str(exc))
         sys.exit(EXIT_ERROR)
-    image_options = dict(corners=corners, command="gate", encoding=encoding, exposure=exposure,
-                         layer=layer, reference=reference or "safecolor",
-                         illuminant=illuminant, size=size, table=table, criterion=criterion,
-                         negatives=negatives, colourspace=colourspace)
-
-    def measure(subject: Path, jp: Path | None, hp: Path | None) -> tuple[GateCase, int]:
-        """Gate one image (or the camera); its outputs written; errors become the case's."""
-        name = f"colour fidelity of {subject if images else camera}: {criterion.describe()}"
-        t0 = time.perf_counter()
-        try:
-            if images:
-                report, prediction, verdict, figure = image_report(
-                    subject, location_figure=hp is not None, **image_options)
-            else:
-                report, prediction, verdict = camera_report(
-                    camera or "", command="gate", illuminant=illuminant, renderer=renderer,
-                    reference=reference or "scene", size=size, table=table,
-                    criterion=criterion)
-                figure = None
-            assert verdict is not None
-            write_outputs(report, prediction, json_path=jp, html_path=hp,
-                          protect=tuple(map(str, images)), location_png=figure)
-        except FidelityError as exc:
-            message = str(exc)
-        except Exception as exc:  # noqa: BLE001 - a gate must answer 2, never a traceback
-            message = f"unexpected {type(exc).__name__}: {exc}".replace("\n", " ")
-        else:
-            return GateCase(name, report=report, seconds=time.perf_counter() - t0), \
-                verdict.exit_code
-        return GateCase(name, error=message, seconds=time.perf_counter() - t0), EXIT_ERROR
-
-    cases: list[GateCase] = []
-    codes: list[int] = []
-    for subject, jp, hp in zip(subjects, json_paths, html_paths, strict=True):
-        case, code = measure(subject, jp, hp)
-        cases.append(case)
-        codes.append(code)
+    cases = gate_subjects(
+        criterion, images, camera=camera,
+        outputs=[GateOutputs(jp, hp) for jp, hp in zip(json_paths, html_paths, strict=True)],
+        corners=corners, layer=layer, encoding=encoding, exposure=exposure,
+        negatives=negatives, colourspace=colourspace, reference=reference,
+        illuminant=illuminant, renderer=renderer, size=size, table=table)
+    for case in cases:
         if many:
-            click.echo(f"{subject}:" if case.error is None else f"{subject}: error")
-        if case.error is not None:
-            _error_line(case.error)
+            click.echo(f"{case.subject}:" if case.error is None else f"{case.subject}: error")
+        if case.error is not None or case.report is None:
+            _error_line(case.error or "no report")
             continue
-        assert case.report is not None
-        for line in _short(case.report):
+        for line in summary_lines(case.report):
             click.echo(("  " if many else "") + line)
     if junit is not None:
         _write_junit(junit, cases)
     if many:
-        failed = sum(c == 1 for c in codes)
-        errors = sum(c == EXIT_ERROR for c in codes)
-        click.echo(f"gate: {codes.count(0)} of {len(codes)} passed, {failed} failed, "
-                   f"{errors} could not be measured")
-    sys.exit(EXIT_ERROR if EXIT_ERROR in codes else max(codes))
-
-
-def _short(report: dict[str, Any]) -> list[str]:
-    from fidelity.report.chart import summary_lines
-
-    return summary_lines(report)
+        codes = [c.exit_code for c in cases]
+        click.echo(f"gate: {codes.count(0)} of {len(codes)} passed, {codes.count(1)} failed, "
+                   f"{codes.count(EXIT_ERROR)} could not be measured")
+    sys.exit(gate_exit_code(cases))

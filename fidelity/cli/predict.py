@@ -83,15 +83,14 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
             click.echo("  " + line)
     for note in p.notes:
         click.echo(f"  note: {note}")
-    reach = [t for t in p.transforms if t["reachable"]]
+    reach = [t for t in p.transforms if t.reachable and t.param is not None]
     if reach:
         click.echo("  SAFE-COLOR transforms at this ΔE: " + ", ".join(
-            f"{t['transform']} {t['param']:.4g}" for t in reach))
+            f"{t.transform} {t.param:.4g}" for t in reach))
     if json_path is not None:
-        from fidelity.fileio import write_json_atomic
-        from fidelity.report.chart import _clean
+        from fidelity.fileio import json_ready, write_json_atomic
 
-        write_json_atomic(json_path, _clean(p.to_dict()))
+        write_json_atomic(json_path, json_ready(p.to_json()))
         click.echo(f"wrote {json_path}")
 
 
@@ -118,5 +117,5 @@ def _print_limit(max_dmap: float, cls: str, unit: str, size: str, table: str | N
     if json_path is not None:
         from fidelity.fileio import write_json_atomic
 
-        write_json_atomic(json_path, lim.to_dict())
+        write_json_atomic(json_path, lim.to_json())
         click.echo(f"wrote {json_path}")

@@ -130,7 +130,7 @@ def render(camera: str, illuminant: str, renderer: str, spp: int | None,
     result = render_chart(camera, illuminant, renderer, spp=spp, reference=reference,
                           spectra=spectra, seed=seed, pixels_per_patch=pixels_per_patch,
                           cat=cat, step=step, variant=variant)
-    report = result.to_dict()
+    report = result.to_json()
     if out_dir is not None:
         exr = write_exr(out_dir / "chart_linear.exr", result.linear_image)
         bits = result.camera.quantisation_bits or 16

@@ -442,7 +442,7 @@ class EmulationAccuracy:
     camera_chart_delta_e: float
     emulated_chart_delta_e: float
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, Any]:
         """JSON-ready summary with per-patch values."""
         return {
             "chart_mean_delta_e": float(self.chart_delta_e.mean()),

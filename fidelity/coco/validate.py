@@ -333,11 +333,11 @@ def prepare_case(case: CameraCase, store: ValidationStore, method: str, training
         "render": {"renderer": render.renderer, "conventions": {
             k: render.conventions[k] for k in ("exposure_gain", "white_balance_gains", "ccm")}},
         "patches": [{k: p[k] for k in ("name", "delta_e", "delta_l", "delta_c", "delta_h", "lab",
-                                       "reference_lab", "srgb")} for p in m.to_dict()["patches"]],
-        "emulation": {**emu.describe(), "accuracy": acc.to_dict(),
+                                       "reference_lab", "srgb")} for p in m.to_json()["patches"]],
+        "emulation": {**emu.describe(), "accuracy": acc.to_json(),
                       "other_methods": {
                           k: emulation_accuracy(fit_emulation(emu.camera, case.illuminant, k,
-                                                              training)).to_dict()
+                                                              training)).to_json()
                           for k in EMULATION_METHODS if k != method}},
         "image_delta_e": image_delta_e(emu, sample),
         "seconds": time.perf_counter() - t0,
@@ -467,7 +467,7 @@ def holdout_accuracy(cases: Sequence[CameraCase], method: str = "root-polynomial
     from fidelity.coco.emulation import emulation_accuracy, fit_emulation
 
     return {c.name: emulation_accuracy(fit_emulation(c.path, c.illuminant, method,
-                                                     "colour-science-no-chart")).to_dict()
+                                                     "colour-science-no-chart")).to_json()
             for c in cases}
 
 

@@ -72,7 +72,7 @@ class Chart:
         chroma = np.hypot(self.lab[:, 1], self.lab[:, 2])
         return tuple(int(i) for i in np.flatnonzero(chroma < 2.0))
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, Any]:
         """The chart as the JSON document it was loaded from (normalised)."""
         return {
             "name": self.name,

@@ -27,7 +27,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import brentq
 
 from fidelity.colour.charts import DEFAULT_CHART, Chart, load_chart
 from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
@@ -73,7 +72,7 @@ class CalibrationEntry:
     delta_e: float
     reachable: bool
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, Any]:
         return asdict(self)
 
 
@@ -103,16 +102,16 @@ class CalibrationTable:
     def targets(self) -> list[float]:
         return sorted({e.target for e in self.entries})
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, Any]:
         """The documented JSON form: chart, baseline_delta_e, entries."""
         return {
             "chart": self.chart,
             "baseline_delta_e": self.baseline_delta_e,
-            "entries": [e.to_dict() for e in self.entries],
+            "entries": [e.to_json() for e in self.entries],
         }
 
     @classmethod
-    def from_dict(cls, doc: dict[str, Any], source: str = "calibration table") -> CalibrationTable:
+    def from_json(cls, doc: dict[str, Any], source: str = "calibration table") -> CalibrationTable:
         try:
             entries = tuple(
                 CalibrationEntry(
@@ -181,6 +180,8 @@ def _solve(
     target: float,
     curves: list[tuple[NDArray[np.float64], NDArray[np.float64]]],
 ) -> CalibrationEntry:
+    from scipy.optimize import brentq
+
     def f(x: float) -> float:
         return float(transform_delta_e(spec, np.float64(x), chart)) - target
 
@@ -262,7 +263,7 @@ def load_calibration_table(path: str | Path | None = None) -> CalibrationTable:
         raise InputFileError(f"{p}: calibration table does not exist") from None
     except (OSError, ValueError) as exc:
         raise InputFileError(f"{p}: cannot read calibration table ({exc})") from None
-    return CalibrationTable.from_dict(doc, str(p))
+    return CalibrationTable.from_json(doc, str(p))
 
 
 def calibration_table_csv(table: CalibrationTable) -> str:

@@ -40,7 +40,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -150,6 +150,17 @@ class PredictionTable:
         if anyc:
             return preferred(anyc), "any"
         return preferred(list(self.curves)), ",".join(self.sizes())
+
+    @classmethod
+    def from_summary(cls, data: Mapping[str, Any]) -> PredictionTable:
+        """The table as :meth:`summary` identifies it, without its curves (a prediction read
+        back from JSON names its table; :func:`load_prediction_table` gives the curves)."""
+        path = data.get("path")
+        return cls(name=str(data["name"]), title=str(data.get("title", "")),
+                   kind=str(data["kind"]), provenance=dict(data.get("provenance") or {}),
+                   units=dict(data.get("units") or {}), curves=(),
+                   interpolation=str(data.get("interpolation", "pchip")),
+                   path=Path(path) if path else None)
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready identification of the table (name, title, kind, provenance, units)."""
@@ -308,11 +319,19 @@ class ColumnPrediction:
     delta_e_range: tuple[float, float] | None
     note: str
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form."""
+    def to_json(self) -> dict[str, Any]:
+        """JSON form: ``value``, ``status``, ``delta_e_range``, ``note``."""
         return {"value": self.value, "status": self.status,
                 "delta_e_range": list(self.delta_e_range) if self.delta_e_range else None,
                 "note": self.note}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> ColumnPrediction:
+        """Inverse of :meth:`to_json`."""
+        rng = data.get("delta_e_range")
+        value = data.get("value")
+        return cls(None if value is None else float(value), str(data["status"]),
+                   (float(rng[0]), float(rng[1])) if rng else None, str(data.get("note", "")))
 
 
 def points_ceiling(curve: Curve, column: str, curves: Sequence[Curve],
@@ -419,8 +438,8 @@ class DeltaELimit:
         """``delta_e`` as :func:`limit_rounded_down` prints it (None stays None)."""
         return None if self.delta_e is None else limit_rounded_down(self.delta_e, decimals)
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form."""
+    def to_json(self) -> dict[str, Any]:
+        """JSON form."""
         return {"max_loss": self.max_loss, "column": self.column, "delta_e": self.delta_e,
                 "status": self.status, "loss_at_limit": self.loss_at_limit,
                 "table": self.table, "size_used": self.size_used,
@@ -488,8 +507,8 @@ class Prediction:
     table: PredictionTable
     method: str
     baseline_map: float | None
-    transforms: list[dict[str, Any]]
-    notes: list[str]
+    transforms: tuple[TransformParameter, ...]
+    notes: tuple[str, ...]
 
     @property
     def dmap_points(self) -> float | None:
@@ -528,9 +547,10 @@ class Prediction:
             raise unknown_name("unit", unit, ("points", "relative"))
         return self.columns[CLASS_COLUMNS[cls]].value
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form with at least ``dmap_points``, ``dmap_relative``,
-        ``dap_person_points``, ``dap_bicycle_points``, ``table`` and ``transforms``."""
+    def to_json(self) -> dict[str, Any]:
+        """JSON form with ``dmap_points``, ``dmap_relative``, ``dap_person_points``,
+        ``dap_bicycle_points``, the per-column answers, ``table`` (its summary) and
+        ``transforms``."""
         return {
             "delta_e": self.delta_e,
             "size": self.size,
@@ -538,13 +558,29 @@ class Prediction:
             **{col: self.columns[col].value for col in COLUMNS},
             "bound": self.table.kind == "published-bounds",
             "out_of_range": self.out_of_range,
-            "columns": {col: c.to_dict() for col, c in self.columns.items()},
+            "columns": {col: c.to_json() for col, c in self.columns.items()},
             "interpolation": self.method,
             "baseline_map": self.baseline_map,
             "table": self.table.summary(),
-            "transforms": self.transforms,
-            "notes": self.notes,
+            "transforms": [tp.to_json() for tp in self.transforms],
+            "notes": list(self.notes),
         }
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Prediction:
+        """Inverse of :meth:`to_json`; the table comes back as its summary, without curves
+        (:meth:`PredictionTable.from_summary`)."""
+        baseline = data.get("baseline_map")
+        return cls(
+            delta_e=float(data["delta_e"]), size=str(data["size"]),
+            size_used=str(data["size_used"]),
+            columns={str(k): ColumnPrediction.from_json(v) for k, v in data["columns"].items()},
+            table=PredictionTable.from_summary(data["table"]),
+            method=str(data["interpolation"]),
+            baseline_map=None if baseline is None else float(baseline),
+            transforms=tuple(TransformParameter.from_json(tp) for tp in data["transforms"]),
+            notes=tuple(str(n) for n in data["notes"]),
+        )
 
 
 def predict(
@@ -662,7 +698,7 @@ def predict(
     return Prediction(
         delta_e=de, size=size, size_used=size_used, columns=columns, table=tab, method=m,
         baseline_map=float(baseline_map) if baseline_map is not None else None,
-        transforms=transform_parameters(de) if transforms else [], notes=notes,
+        transforms=tuple(transform_parameters(de)) if transforms else (), notes=tuple(notes),
     )
 
 
@@ -679,8 +715,43 @@ def _bracketing_se(curve: Curve | None, delta_e: float) -> tuple[float, float] |
     return (float(se.min()), float(se.max())) if se.size else None
 
 
+@dataclass(frozen=True)
+class TransformParameter:
+    """The parameter of one SAFE-COLOR transform that gives chart ΔE ``delta_e``.
+
+    ``param`` is None when ``reachable`` is False; ``method`` says how it was found
+    (``calibrated``, ``solved``, ``interpolated``) or why it is unreachable; ``bracket`` holds
+    the two calibrated (ΔE, parameter) points around ``delta_e``, when there are two.
+    """
+
+    transform: str
+    delta_e: float
+    param: float | None
+    reachable: bool
+    method: str | None
+    bracket: tuple[tuple[float, float], tuple[float, float]] | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON form (``bracket`` as two ``{"delta_e", "param"}`` objects)."""
+        return {"transform": self.transform, "delta_e": self.delta_e, "param": self.param,
+                "reachable": self.reachable, "method": self.method,
+                "bracket": None if self.bracket is None else
+                [{"delta_e": e, "param": q} for e, q in self.bracket]}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> TransformParameter:
+        """Inverse of :meth:`to_json`."""
+        b = data.get("bracket")
+        param = data.get("param")
+        return cls(str(data["transform"]), float(data["delta_e"]),
+                   None if param is None else float(param), bool(data["reachable"]),
+                   data.get("method"),
+                   None if not b else ((float(b[0]["delta_e"]), float(b[0]["param"])),
+                                       (float(b[1]["delta_e"]), float(b[1]["param"]))))
+
+
 def transform_parameters(delta_e: float, calibration: Any = None, *,
-                         solve: bool = True) -> list[dict[str, Any]]:
+                         solve: bool = True) -> list[TransformParameter]:
     """The SAFE-COLOR transform parameters that give chart ΔE ``delta_e``, one per transform.
 
     From the shipped calibration table (``fidelity.prediction.calibration.load_calibration_table()``): at
@@ -702,7 +773,7 @@ def transform_parameters(delta_e: float, calibration: Any = None, *,
     by_transform: dict[str, list[Any]] = {}
     for e in calibration.entries:
         by_transform.setdefault(e.transform, []).append(e)
-    out: list[dict[str, Any]] = []
+    out: list[TransformParameter] = []
     for name, entries in by_transform.items():
         entries = sorted(entries, key=lambda e: float(e.target))
         spec = TRANSFORMS.get(name)
@@ -743,7 +814,10 @@ def transform_parameters(delta_e: float, calibration: Any = None, *,
             row.update(param=float(p), reachable=True, method="interpolated")
         else:
             row.update(method="unreachable within the transform's range")
-        out.append(row)
+        out.append(TransformParameter(
+            name, float(row["delta_e"]), row["param"], row["reachable"], row["method"],
+            None if row["bracket"] is None else tuple(
+                (float(b["delta_e"]), float(b["param"])) for b in row["bracket"])))
     return out
 
 
@@ -759,6 +833,7 @@ __all__ = [
     "DeltaELimit",
     "Prediction",
     "PredictionTable",
+    "TransformParameter",
     "available_tables",
     "delta_e_limit",
     "load_prediction_table",

@@ -15,6 +15,7 @@ Exit codes of the commands: 0 pass, 1 fail, 2 error.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -64,6 +65,16 @@ class Criterion:
         class's points column)."""
         return "dmap_relative" if self.unit == "relative" else CLASS_COLUMNS[self.cls]
 
+    def to_json(self) -> dict[str, Any]:
+        """JSON form: ``kind``, ``limit``, ``cls``, ``unit`` and the ``description``."""
+        return {**asdict(self), "description": self.describe()}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Criterion:
+        """Inverse of :meth:`to_json` (checked like any criterion)."""
+        return cls(str(data["kind"]), float(data["limit"]), str(data.get("cls", "all")),
+                   str(data.get("unit", "points")))
+
     def describe(self) -> str:
         """``"mean ΔE00 <= 3"`` or ``"predicted person ΔAP <= 1 points"``."""
         if self.kind == "max-delta-e":
@@ -94,17 +105,26 @@ class Verdict:
         """``"PASS"`` or ``"FAIL"``."""
         return "PASS" if self.passed else "FAIL"
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form."""
+    def to_json(self) -> dict[str, Any]:
+        """JSON form: ``passed``, ``label``, ``criterion``, ``value``, ``limit``,
+        ``conservative_answer``, ``message``."""
         return {
             "passed": self.passed,
             "label": self.label,
-            "criterion": {**asdict(self.criterion), "description": self.criterion.describe()},
+            "criterion": self.criterion.to_json(),
             "value": self.value,
             "limit": self.criterion.limit,
             "conservative_answer": self.conservative,
             "message": self.message,
         }
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Verdict:
+        """Inverse of :meth:`to_json`."""
+        value = data.get("value")
+        return cls(bool(data["passed"]), Criterion.from_json(data["criterion"]),
+                   None if value is None else float(value), str(data["message"]),
+                   bool(data.get("conservative_answer", False)))
 
 
 def evaluate(mean_delta_e: float, prediction: Prediction | None, criterion: Criterion) -> Verdict:

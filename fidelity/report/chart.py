@@ -1,51 +1,65 @@
-"""Reports: JSON for machines (documented schema), self-contained HTML for people, JUnit XML for CI.
+"""The chart report: one measured chart, its predicted detection loss and its verdict.
 
-The JSON report (``schema_version`` :data:`SCHEMA_VERSION`) is described by the JSON Schema in
-``fidelity/data/schemas/report.schema.json`` (:func:`report_schema`). It is the same for
-``fidelity audit``, ``check`` and ``gate``; keys that do not apply are ``null``:
+:class:`ChartReport` is what ``fidelity check``, ``audit`` and ``gate`` produce
+(:mod:`fidelity.check`). Its JSON form (``schema_version`` :data:`SCHEMA_VERSION`) is described by
+the JSON Schema ``fidelity/data/schemas/report.schema.json`` (:func:`report_schema`); keys that do
+not apply are ``null``:
 
 - ``mean_delta_e``, ``max_delta_e``, ``worst_patch``, ``patches`` (per patch ``delta_e``,
   ``delta_l``, ``delta_c``, ``delta_h``, ``lab``, ``reference_lab``, ``srgb``, ...): the chart
   measurement (CIEDE2000, Lab D65);
 - ``exposure_ev``, ``bad_pixels``: the audit of an image (``null`` for a render);
-- ``source``: the image (path, sha256, format, layer, corners, how they were found, encoding) or the render
-  (camera, illuminant, renderer, variant, seconds);
-- ``prediction``: ΔE -> ΔmAP (:meth:`fidelity.prediction.table.Prediction.to_dict`);
-- ``verdict``: pass/fail of the criterion (:meth:`fidelity.prediction.verdict.Verdict.to_dict`);
-- ``provenance``: tool version, time, Python and libraries, input sha256, tables (name, path,
+- ``source``: the image (:class:`ImageSource`) or the render (:class:`RenderSource`);
+- ``prediction``: ΔE -> ΔmAP (:meth:`fidelity.prediction.table.Prediction.to_json`);
+- ``verdict``: pass/fail of the criterion (:meth:`fidelity.prediction.verdict.Verdict.to_json`);
+- ``details``: where the patches were sampled (image) or the camera and render settings;
+- ``provenance``: tool version, Python and libraries, input sha256, tables (name, path,
   sha256), conventions.
 
-The HTML report embeds its plots as base64 PNG (matplotlib, Agg): the chart as swatches
-(reference left, measured right, in each patch), ΔE00 per patch as bars, and the ΔE -> ΔmAP
-curves with this chart's point; then the verdict and the provenance.
+The HTML report (:func:`chart_document`, written by :mod:`fidelity.report.html`) puts the
+verdict and the chart first, then the figures a colour scientist expects (ΔE heat map on the
+chart, a*b* arrows, the neutral tone curve, ΔE per patch, the prediction curve with the limit)
+and folds the patch table, the transforms and the provenance away.
 """
 
 from __future__ import annotations
 
-import base64
 import datetime as _dt
-import html
-import io
 import json
 import os
 import platform
 import sys
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-from xml.etree import ElementTree as ET
 
 import numpy as np
+from numpy.typing import NDArray
 
-from fidelity import __version__
-from fidelity.chart.measure import ChartMeasurement
-from fidelity.fileio import write_json_atomic, write_text_atomic
-from fidelity.prediction.table import Prediction, predict_curve
+from fidelity.chart.find import FoundChart
+from fidelity.chart.image import ImageInfo
+from fidelity.chart.locate import ChartLocation
+from fidelity.chart.measure import BadPixels, ChartMeasurement
+from fidelity.fileio import JSONObject, json_ready
+from fidelity.prediction.table import Prediction
 from fidelity.prediction.verdict import Verdict
+from fidelity.report.document import (
+    Code,
+    Document,
+    Facts,
+    Figure,
+    Headline,
+    Section,
+    Text,
+    section,
+    table,
+)
 
 #: Version of the JSON report layout (bump on incompatible change).
 SCHEMA_VERSION = "1.0"
+#: Commands that write a chart report.
+COMMANDS = ("audit", "check", "gate")
 
 
 def report_schema_path() -> Path:
@@ -55,555 +69,523 @@ def report_schema_path() -> Path:
     return resource_dir("data") / "schemas" / "report.schema.json"
 
 
-def report_schema() -> dict[str, Any]:
+def report_schema() -> JSONObject:
     """The JSON Schema (draft 2020-12) of the JSON report."""
-    return json.loads(report_schema_path().read_text(encoding="utf-8"))
+    schema: JSONObject = json.loads(report_schema_path().read_text(encoding="utf-8"))
+    return schema
 
 
-def _sha256_or_none(path: str | os.PathLike[str] | None) -> str | None:
-    if not path:
-        return None
-    from fidelity.fileio import file_sha256
+# ------------------------------------------------------------------------------- records
+
+@dataclass(frozen=True)
+class ImageSource:
+    """An image whose chart was measured: the file (:class:`~fidelity.chart.image.ImageInfo`),
+    the corner patch centres used (``corners``, (4, 2) image x, y), how the chart was found
+    (``found``; None when the corners were given), where each patch was sampled
+    (``location``), the RGB ``colourspace`` the pixels were taken in, the ``exposure_mode``
+    (auto or fixed), the reference's name, the patches clipped in sRGB and the pixel
+    ``encoding`` measured."""
+
+    image: ImageInfo
+    corners: NDArray[np.float64]
+    location: ChartLocation
+    colourspace: str
+    exposure_mode: str
+    reference: str
+    encoding: str
+    clipped_patches: tuple[str, ...] = ()
+    found: FoundChart | None = None
+
+    def to_json(self) -> JSONObject:
+        """The report's ``source`` object."""
+        return {"type": "image", **self.image.to_json(), "corners": self.corners.tolist(),
+                "corners_found": self.found.to_json() if self.found else None,
+                "colourspace": self.colourspace, "exposure_mode": self.exposure_mode,
+                "reference": self.reference}
+
+    def details(self) -> JSONObject:
+        """The report's ``details`` object for an image."""
+        return {"location": self.location.to_json(),
+                "clipped_patches": list(self.clipped_patches), "encoding": self.encoding}
+
+    @classmethod
+    def from_json(cls, source: Mapping[str, Any], details: Mapping[str, Any]) -> ImageSource:
+        """The source of a report's ``source`` and ``details``; the sampling windows are
+        located again from the corners (:func:`fidelity.chart.locate.locate_chart`)."""
+        from fidelity.chart.locate import locate_chart
+
+        info = ImageInfo.from_json(source)
+        corners = np.asarray(source["corners"], dtype=np.float64)
+        loc = details["location"]
+        rows_cols = (4, 6) if len(loc["centres"]) == 24 else (1, len(loc["centres"]))
+        location = locate_chart(corners, (info.height, info.width), rows=rows_cols[0],
+                                cols=rows_cols[1], window=float(loc["window_pitch_fraction"]),
+                                min_pixels=1)
+        found = source.get("corners_found")
+        return cls(info, corners, location, str(source.get("colourspace", "sRGB")),
+                   str(source.get("exposure_mode", "")), str(source.get("reference", "")),
+                   str(details.get("encoding", info.encoding or "")),
+                   tuple(details.get("clipped_patches", ())),
+                   FoundChart.from_json(found) if found else None)
+
+    @property
+    def title(self) -> str:
+        """How a report names this source."""
+        return self.image.path
+
+
+@dataclass(frozen=True)
+class RenderSource:
+    """A camera model's render of the spectral chart: the ``camera`` name, ``illuminant``,
+    ``renderer`` and Mitsuba ``variant`` (None for the closed form), the render's wall time
+    in ``seconds``, the ``reference`` it was compared with, and the camera's and the render's
+    settings (JSON, as :meth:`fidelity.camera.render.ChartRender.to_json` gives them)."""
+
+    camera: str
+    illuminant: str
+    renderer: str
+    variant: str | None
+    seconds: float
+    reference: str
+    camera_settings: Mapping[str, Any] = field(default_factory=dict)
+    render_settings: Mapping[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> JSONObject:
+        """The report's ``source`` object."""
+        return {"type": "render", "camera": self.camera, "illuminant": self.illuminant,
+                "renderer": self.renderer, "variant": self.variant, "seconds": self.seconds,
+                "reference": self.reference}
+
+    def details(self) -> JSONObject:
+        """The report's ``details`` object for a render."""
+        return {"camera": dict(self.camera_settings), "settings": dict(self.render_settings)}
+
+    @classmethod
+    def from_json(cls, source: Mapping[str, Any], details: Mapping[str, Any]) -> RenderSource:
+        """Inverse of :meth:`to_json` and :meth:`details`."""
+        return cls(str(source["camera"]), str(source["illuminant"]), str(source["renderer"]),
+                   source.get("variant"), float(source["seconds"]), str(source["reference"]),
+                   dict(details.get("camera") or {}), dict(details.get("settings") or {}))
+
+    @property
+    def title(self) -> str:
+        """How a report names this source."""
+        return self.camera
+
+
+Source = ImageSource | RenderSource
+
+
+@dataclass(frozen=True)
+class TableRef:
+    """A data table a result depends on: ``name``, ``kind`` (prediction tables), ``path`` and
+    the file's ``sha256``."""
+
+    name: str
+    path: str | None
+    sha256: str | None
+    kind: str | None = None
+
+    def to_json(self) -> JSONObject:
+        """JSON form (``kind`` only for tables that have one)."""
+        out: JSONObject = {"name": self.name}
+        if self.kind is not None:
+            out["kind"] = self.kind
+        return out | {"path": self.path, "sha256": self.sha256}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> TableRef:
+        """Inverse of :meth:`to_json`."""
+        return cls(str(data["name"]), data.get("path"), data.get("sha256"), data.get("kind"))
+
+    @classmethod
+    def of_file(cls, name: str, path: str | os.PathLike[str] | None,
+                kind: str | None = None) -> TableRef:
+        """The reference of a table file (its sha256 read now; None when unreadable)."""
+        from fidelity.fileio import file_sha256
+
+        digest = None
+        if path:
+            try:
+                digest = file_sha256(path)
+            except OSError:
+                digest = None
+        return cls(name, str(path) if path else None, digest, kind)
+
+
+#: Conventions every chart report states.
+BASE_CONVENTIONS: Mapping[str, str] = {
+    "delta_e": "CIEDE2000 (kL = kC = kH = 1), CIE 1976 L*a*b* relative to D65, CIE 1931 2° "
+               "observer; chart ΔE = mean over the 24 patches",
+    "srgb": "IEC 61966-2-1 (piecewise transfer, 0.04045 / 0.0031308, exponent 2.4)",
+    "dmap_points": "percentage points of mAP@[.50:.95] (100*(baseline-transformed))",
+    "dmap_relative": "percent of the baseline mAP",
+}
+
+#: Libraries whose versions a report records.
+_LIBRARIES = ("numpy", "scipy", "colour-science", "OpenImageIO", "OpenEXR", "matplotlib",
+              "mitsuba")
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """Where a report's numbers come from: the tool ``version``, ``python``, ``platform``,
+    library versions, the input's sha256, the tables used and the conventions."""
+
+    version: str
+    python: str
+    platform: str
+    libraries: Mapping[str, str]
+    input_sha256: str | None
+    tables: Mapping[str, TableRef]
+    conventions: Mapping[str, Any]
+    tool: str = "fidelity"
+
+    def to_json(self) -> JSONObject:
+        """The report's ``provenance`` object."""
+        return {"tool": self.tool, "version": self.version, "python": self.python,
+                "platform": self.platform, "libraries": dict(self.libraries),
+                "input_sha256": self.input_sha256,
+                "tables": {k: t.to_json() for k, t in self.tables.items()},
+                "conventions": dict(self.conventions)}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Provenance:
+        """Inverse of :meth:`to_json`."""
+        return cls(str(data["version"]), str(data["python"]), str(data["platform"]),
+                   dict(data["libraries"]), data.get("input_sha256"),
+                   {k: TableRef.from_json(v) for k, v in data["tables"].items()},
+                   dict(data["conventions"]), str(data.get("tool", "fidelity")))
+
+    @classmethod
+    def collect(cls, input_sha256: str | None, prediction: Prediction | None,
+                conventions: Mapping[str, Any]) -> Provenance:
+        """The provenance of a report made now, on this machine."""
+        from importlib.metadata import PackageNotFoundError, version
+
+        from fidelity import __version__
+        from fidelity.resources import resource_dir
+
+        libraries: dict[str, str] = {}
+        for name in _LIBRARIES:
+            try:
+                libraries[name] = version(name)
+            except PackageNotFoundError:
+                continue
+        tables: dict[str, TableRef] = {}
+        if prediction is not None:
+            t = prediction.table
+            tables["prediction"] = TableRef.of_file(t.name, t.path, t.kind)
+            tables["calibration"] = TableRef.of_file(
+                "calibration-safecolor", resource_dir("data") / "calibration-safecolor.json")
+        return cls(__version__, sys.version.split()[0], platform.platform(), libraries,
+                   input_sha256, tables, {**BASE_CONVENTIONS, **conventions})
+
+
+@dataclass(frozen=True)
+class ChartReport:
+    """One chart measured (an image audit or a camera render), the detection loss predicted
+    from its chart ΔE and the verdict of a gate (see the module docstring)."""
+
+    command: str
+    created: str
+    measurement: ChartMeasurement
+    source: Source
+    provenance: Provenance
+    prediction: Prediction | None = None
+    verdict: Verdict | None = None
+    exposure_ev: float | None = None
+    bad_pixels: BadPixels | None = None
+    valid_pixels: tuple[int, ...] | None = None
+    schema_version: str = SCHEMA_VERSION
+
+    @property
+    def mean_delta_e(self) -> float:
+        """The chart ΔE: mean ΔE00 over the patches."""
+        return self.measurement.mean_delta_e
+
+    @property
+    def max_delta_e(self) -> float:
+        """Largest per-patch ΔE00."""
+        return self.measurement.max_delta_e
+
+    @property
+    def worst_patch(self) -> str:
+        """The patch with the largest ΔE00."""
+        return self.measurement.worst_patch
+
+    @property
+    def exit_code(self) -> int:
+        """0 pass (or no verdict), 1 fail."""
+        return self.verdict.exit_code if self.verdict is not None else 0
+
+    def to_json(self) -> JSONObject:
+        """The JSON report (strict JSON values; see the module docstring)."""
+        m = self.measurement.to_json()
+        patches = m["patches"]
+        if self.valid_pixels is not None:
+            per_patch = self.bad_pixels.per_patch if self.bad_pixels else {}
+            for p, n in zip(patches, self.valid_pixels, strict=True):
+                p.update(valid_pixels=int(n), bad_pixels=int(per_patch.get(p["name"], 0)))
+        out: JSONObject = json_ready({
+            "schema_version": self.schema_version,
+            "command": self.command,
+            "created": self.created,
+            "mean_delta_e": m["mean_delta_e"],
+            "max_delta_e": m["max_delta_e"],
+            "worst_patch": m["worst_patch"],
+            "patches": patches,
+            "exposure_ev": self.exposure_ev,
+            "bad_pixels": self.bad_pixels.to_json() if self.bad_pixels else None,
+            "source": self.source.to_json(),
+            "prediction": self.prediction.to_json() if self.prediction else None,
+            "verdict": self.verdict.to_json() if self.verdict else None,
+            "details": self.source.details(),
+            "provenance": self.provenance.to_json(),
+        })
+        return out
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any], *, validate: bool = True) -> ChartReport:
+        """The report of a JSON document, checked against :func:`report_schema` first
+        (``validate``; needs the ``jsonschema`` package)."""
+        if validate:
+            validate_report(data)
+        src, details = data["source"], data.get("details") or {}
+        source: Source = (ImageSource.from_json(src, details) if src["type"] == "image"
+                          else RenderSource.from_json(src, details))
+        patches = data["patches"]
+        valid = (tuple(int(p["valid_pixels"]) for p in patches)
+                 if all("valid_pixels" in p for p in patches) else None)
+        return cls(
+            command=str(data["command"]), created=str(data["created"]),
+            measurement=ChartMeasurement.from_json(data), source=source,
+            provenance=Provenance.from_json(data["provenance"]),
+            prediction=Prediction.from_json(data["prediction"]) if data["prediction"] else None,
+            verdict=Verdict.from_json(data["verdict"]) if data["verdict"] else None,
+            exposure_ev=data.get("exposure_ev"),
+            bad_pixels=BadPixels.from_json(data["bad_pixels"]) if data["bad_pixels"] else None,
+            valid_pixels=valid, schema_version=str(data["schema_version"]),
+        )
+
+
+def validate_report(data: Mapping[str, Any]) -> None:
+    """Check a JSON report against :func:`report_schema`; raises
+    :class:`~fidelity.errors.InvalidValueError` naming the first violation."""
+    import jsonschema
+
+    from fidelity.errors import InvalidValueError
 
     try:
-        return file_sha256(path)
-    except OSError:
-        return None
+        jsonschema.validate(dict(data), report_schema())
+    except jsonschema.ValidationError as exc:
+        where = "/".join(str(p) for p in exc.absolute_path) or "(top level)"
+        raise InvalidValueError(f"not a fidelity report: {where}: {exc.message}") from None
 
 
-def _library_versions() -> dict[str, str]:
-    from importlib.metadata import PackageNotFoundError, version
+def utc_now() -> str:
+    """The current UTC time as the report writes it (``YYYY-MM-DDThh:mm:ssZ``)."""
+    return _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
-    out = {}
-    for name in ("numpy", "scipy", "colour-science", "OpenImageIO", "OpenEXR", "matplotlib",
-                 "mitsuba"):
-        try:
-            out[name] = version(name)
-        except PackageNotFoundError:
-            continue
+
+# ---------------------------------------------------------------------- the HTML document
+
+def _num(v: float | None, nd: int = 2) -> str:
+    return "–" if v is None else f"{v:.{nd}f}"
+
+
+def _headline(report: ChartReport) -> Headline:
+    from fidelity.report import plots
+
+    figure = Figure(plots.swatches(report.measurement), "swatches.png",
+                    "the chart: reference against measured",
+                    "Each patch: reference colour (left half) and measured colour (right half).")
+    v = report.verdict
+    if v is not None:
+        return Headline(f"**{v.label}**: {v.message.split(': ', 1)[-1]}",
+                        "pass" if v.passed else "fail", figure)
+    return Headline(f"mean ΔE00 {report.mean_delta_e:.2f}, max {report.max_delta_e:.2f} "
+                    f"({report.worst_patch}); no gate applied", "info", figure)
+
+
+def _summary_facts(report: ChartReport) -> Facts:
+    from fidelity.chart.measure import chart_statistics
+
+    items = [("mean ΔE00 (chart ΔE)", _num(report.mean_delta_e)),
+             ("max ΔE00", f"{_num(report.max_delta_e)} ({report.worst_patch})")]
+    stats = chart_statistics(report.measurement)
+    items += [("saturation (mean chroma of the colour patches)",
+               f"{stats.saturation_percent:.1f} % of the reference"),
+              ("white balance error (mean a*, b* of the neutral patches)",
+               f"a* {stats.neutral_ab[0]:+.2f}, b* {stats.neutral_ab[1]:+.2f} "
+               f"(ΔC*ab {stats.neutral_chroma:.2f})"),
+              ("mean ΔL* of the neutral patches", f"{stats.neutral_delta_l:+.2f}")]
+    if stats.snr_db is not None:
+        items.append(("noise: signal-to-noise of the neutral patches (encoded sRGB)",
+                      f"{stats.snr_db:.1f} dB (worst {stats.worst_snr_db:.1f} dB)"))
+    if report.exposure_ev is not None:
+        items.append(("exposure correction", f"{report.exposure_ev:+.3f} EV"))
+    if report.bad_pixels is not None:
+        w = report.bad_pixels.window
+        items.append(("bad pixels in windows (NaN/Inf/negative)",
+                      f"{w.total} ({w.nan}/{w.inf}/{w.negative})"))
+    p = report.prediction
+    if p is not None:
+        b = "≤ " if p.table.kind == "published-bounds" else ""
+        items += [("predicted ΔmAP, percentage points", b + _num(p.dmap_points)),
+                  ("predicted ΔmAP, % of baseline", b + _num(p.dmap_relative)),
+                  ("predicted person ΔAP, points", b + _num(p.dap_person_points)),
+                  ("predicted bicycle ΔAP, points", b + _num(p.dap_bicycle_points)),
+                  ("prediction table", f"{p.table.name} ({p.table.kind}), detector size "
+                                       f"{p.size_used}")]
+    src = report.source
+    if isinstance(src, RenderSource):
+        variant = f" ({src.variant})" if src.variant else ""
+        items += [("camera", src.camera), ("illuminant", src.illuminant),
+                  ("renderer", f"{src.renderer}{variant}, {src.seconds:.2f} s")]
+    else:
+        items += [("image", f"`{src.image.path}` ({src.image.format}, {src.image.pixel_type}, "
+                            f"{src.image.width}x{src.image.height}, {src.encoding} pixels)")]
+    items.append(("reference", src.reference))
+    return Facts(tuple(items))
+
+
+def _limits(report: ChartReport) -> tuple[float | None, float | None]:
+    """(ΔE limit, ΔmAP-points limit) of the report's verdict, where it has one."""
+    if report.verdict is None:
+        return None, None
+    c = report.verdict.criterion
+    if c.kind == "max-delta-e":
+        return c.limit, None
+    return None, (c.limit if c.cls == "all" and c.unit == "points" else None)
+
+
+def _patch_table(report: ChartReport) -> Section:
+    m = report.measurement
+    rows = []
+    for k, name in enumerate(m.patch_names):
+        rows.append((name, _num(float(m.delta_e[k])), _num(float(m.delta_l[k])),
+                     _num(float(m.delta_c[k])), _num(float(m.delta_h[k])),
+                     *(_num(float(v)) for v in m.lab[k]),
+                     *(_num(float(v)) for v in m.reference_lab[k])))
+    return section("Patches", table(
+        ("patch", "ΔE00", "ΔL'", "ΔC'", "ΔH'", "L*", "a*", "b*", "ref L*", "ref a*", "ref b*"),
+        rows), folded=True)
+
+
+def _prediction_sections(report: ChartReport, limit_de: float | None,
+                         limit_dmap: float | None) -> list[Section]:
+    from fidelity.report import plots
+
+    p = report.prediction
+    if p is None:
+        return []
+    blocks: list[Any] = []
+    if p.table.curves:
+        blocks.append(Figure(plots.prediction_curve(p, limit_dmap, limit_de),
+                             "prediction.png", "predicted loss against chart ΔE"))
+    notes = [f"- {n}" for n in p.notes]
+    notes += [f"- {col}: {c.status}: {c.note}" for col, c in p.columns.items()]
+    blocks.append(Text("\n".join(notes)))
+    out = [section("ΔE → predicted detection loss", *blocks)]
+    if p.transforms:
+        out.append(section(
+            f"SAFE-COLOR transforms that give ΔE {p.delta_e:.2f} on the chart",
+            table(("transform", "parameter", "how"),
+                  [(t.transform, _num(t.param, 4), str(t.method)) for t in p.transforms],
+                  numeric=(False, True, False)), folded=True))
     return out
 
 
-def _clean(obj: Any) -> Any:
-    """Make ``obj`` strict-JSON: numpy scalars/arrays to Python, NaN/Inf to ``None``."""
-    if isinstance(obj, dict):
-        return {str(k): _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _clean(obj.tolist())
-    if isinstance(obj, (np.floating, float)):
-        v = float(obj)
-        return v if np.isfinite(v) else None
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    if isinstance(obj, Path):
-        return str(obj)
-    return obj
+def chart_document(report: ChartReport, pixels: NDArray[Any] | None = None) -> Document:
+    """The chart report as a :class:`~fidelity.report.document.Document`: the verdict and the
+    chart first, then where the patches were sampled (an image, given its ``pixels``), the ΔE
+    heat map, a*b* arrows, the neutral tone curve and ΔE per patch, the prediction; the patch
+    table, transforms and provenance folded away."""
+    from fidelity.chart.measure import neutral_patches
+    from fidelity.report import plots
+
+    m = report.measurement
+    limit_de, limit_dmap = _limits(report)
+    sections = [section("Summary", _summary_facts(report))]
+    src = report.source
+    if isinstance(src, ImageSource) and pixels is not None:
+        sections.append(section("Where the patches were sampled", Figure(
+            plots.chart_location(pixels, src.location, encoding=src.encoding,
+                                 exposure_ev=report.exposure_ev or 0.0,
+                                 found=src.found is not None),
+            "location.png", "sampling windows")))
+    neutral = neutral_patches(m)
+    figures: list[Any] = [
+        Figure(plots.delta_e_map(m, limit_de), "delta_e_map.png", "ΔE00 on the chart layout"),
+        Figure(plots.ab_arrows(m), "ab_arrows.png", "a*b* errors",
+               "Arrows from the reference colour to the measured one in the a*b* plane."),
+    ]
+    if neutral:
+        figures.append(Figure(plots.tone_curve(m, neutral), "tone_curve.png",
+                              "tone curve of the neutral patches"))
+    figures.append(Figure(plots.delta_e_bars(m, limit_de), "delta_e_bars.png",
+                          "ΔE00 per patch"))
+    sections.append(section("Colour errors", *figures))
+    sections += _prediction_sections(report, limit_de, limit_dmap)
+    sections.append(_patch_table(report))
+    prov = report.provenance
+    sections.append(section("Provenance", Facts((
+        ("tool", f"fidelity {prov.version}"), ("created", report.created),
+        ("input sha256", prov.input_sha256 or "–"), ("python", prov.python),
+        ("platform", prov.platform),
+        ("libraries", ", ".join(f"{k} {v}" for k, v in prov.libraries.items())))),
+        Code(json.dumps(json_ready(report.source.to_json()), indent=1, ensure_ascii=False)),
+        Code(json.dumps(json_ready({k: t.to_json() for k, t in prov.tables.items()}), indent=1,
+                        ensure_ascii=False)),
+        Code(json.dumps(json_ready(dict(prov.conventions)), indent=1, ensure_ascii=False)),
+        folded=True))
+    return Document(f"Colour fidelity report: {src.title}", _headline(report),
+                    tuple(sections),
+                    footer=f"JSON schema: fidelity/data/schemas/report.schema.json "
+                           f"(version {report.schema_version}).")
 
 
-def build_report(
-    command: str,
-    measurement: ChartMeasurement,
-    *,
-    source: dict[str, Any],
-    prediction: Prediction | None = None,
-    verdict: Verdict | None = None,
-    exposure_ev: float | None = None,
-    bad_pixels: dict[str, Any] | None = None,
-    patch_extras: list[dict[str, Any]] | None = None,
-    conventions: dict[str, Any] | None = None,
-    details: dict[str, Any] | None = None,
-) -> dict[str, Any]:
-    """Assemble the JSON report (see the module docstring for the layout)."""
-    m = measurement.to_dict()
-    patches = m["patches"]
-    if patch_extras:
-        for p, extra in zip(patches, patch_extras, strict=True):
-            p.update(extra)
-    tables: dict[str, Any] = {}
-    if prediction is not None:
-        t = prediction.table
-        tables["prediction"] = {"name": t.name, "kind": t.kind, "path": str(t.path) if t.path else None,
-                                "sha256": _sha256_or_none(t.path)}
-        from fidelity.resources import resource_dir
+def write_chart_report(report: ChartReport, *, json_path: str | os.PathLike[str] | None = None,
+                       html_path: str | os.PathLike[str] | None = None,
+                       protect: Sequence[str | os.PathLike[str]] = ()) -> list[Path]:
+    """Write the JSON and/or HTML report, atomically, refusing to write over any path in
+    ``protect`` (the inputs). The HTML of an image report reads the image again to show where
+    the patches were sampled. Returns the paths written."""
+    from fidelity.fileio import check_outputs, write_json_atomic
 
-        cal = resource_dir("data") / "calibration-safecolor.json"
-        tables["calibration"] = {"name": "calibration-safecolor", "path": str(cal),
-                                 "sha256": _sha256_or_none(cal)}
-    conv = {
-        "delta_e": "CIEDE2000 (kL = kC = kH = 1), CIE 1976 L*a*b* relative to D65, CIE 1931 2° "
-                   "observer; chart ΔE = mean over the 24 patches",
-        "srgb": "IEC 61966-2-1 (piecewise transfer, 0.04045 / 0.0031308, exponent 2.4)",
-        "dmap_points": "percentage points of mAP@[.50:.95] (100*(baseline-transformed))",
-        "dmap_relative": "percent of the baseline mAP",
-        **(conventions or {}),
-    }
-    report = {
-        "schema_version": SCHEMA_VERSION,
-        "command": command,
-        "created": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
-        "mean_delta_e": m["mean_delta_e"],
-        "max_delta_e": m["max_delta_e"],
-        "worst_patch": m.get("worst_patch"),
-        "patches": patches,
-        "exposure_ev": exposure_ev,
-        "bad_pixels": bad_pixels,
-        "source": source,
-        "prediction": prediction.to_dict() if prediction is not None else None,
-        "verdict": verdict.to_dict() if verdict is not None else None,
-        "details": details or {},
-        "provenance": {
-            "tool": "fidelity",
-            "version": __version__,
-            "python": sys.version.split()[0],
-            "platform": platform.platform(),
-            "libraries": _library_versions(),
-            "input_sha256": source.get("sha256"),
-            "tables": tables,
-            "conventions": conv,
-        },
-    }
-    return _clean(report)
+    inputs = {f"input {i + 1}": p for i, p in enumerate(protect) if p}
+    written: list[Path] = []
+    if json_path is not None:
+        check_outputs({"report": json_path}, inputs)
+        written.append(write_json_atomic(json_path, report.to_json()))
+    if html_path is not None:
+        from fidelity.report.html import write_document
 
+        check_outputs({"report": html_path}, inputs)
+        pixels = None
+        if isinstance(report.source, ImageSource):
+            from fidelity.chart.image import read_image
 
-def write_json_report(path: str | os.PathLike[str], report: dict[str, Any],
-                      protect: tuple[str, ...] = ()) -> Path:
-    """Write the JSON report atomically (strict JSON: no NaN)."""
-    _refuse_inputs(path, protect)
-    return write_json_atomic(path, report)
-
-
-def _refuse_inputs(path: str | os.PathLike[str], protect: tuple[str, ...]) -> None:
-    from fidelity.fileio import check_outputs
-
-    check_outputs({"report": path}, {f"input {i + 1}": p for i, p in enumerate(protect) if p})
-
-
-# --------------------------------------------------------------------------------- plots
-
-def _png(fig: Any) -> str:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)
-    return base64.b64encode(buf.getvalue()).decode("ascii")
-
-
-def plot_swatches(report: dict[str, Any]) -> str:
-    """Base64 PNG: the chart, each patch split into reference (left) and measured (right)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    patches = report["patches"]
-    rows, cols = 4, 6
-    cell, gap = 60, 16
-    img = np.full((rows * (cell + gap) + gap, cols * (cell + gap) + gap, 3), 0.12)
-    for k, p in enumerate(patches[: rows * cols]):
-        r, c = divmod(k, cols)
-        y0, x0 = gap + r * (cell + gap), gap + c * (cell + gap)
-        ref = np.clip(p.get("reference_srgb") or [0.5, 0.5, 0.5], 0, 1)
-        meas = np.clip(p.get("srgb") or [0.5, 0.5, 0.5], 0, 1)
-        img[y0:y0 + cell, x0:x0 + cell // 2] = ref
-        img[y0:y0 + cell, x0 + cell // 2:x0 + cell] = meas
-    fig, ax = plt.subplots(figsize=(7.2, 5.2))
-    ax.imshow(img, interpolation="nearest")
-    for k, p in enumerate(patches[: rows * cols]):
-        r, c = divmod(k, cols)
-        y0, x0 = gap + r * (cell + gap), gap + c * (cell + gap)
-        ax.text(x0 + cell / 2, y0 + cell + gap * 0.5, f"{p['name']}\nΔE {p['delta_e']:.2f}",
-                ha="center", va="center", fontsize=5.5, color="white", linespacing=1.0)
-    ax.set_title("reference (left half) | measured (right half) per patch", fontsize=9)
-    ax.axis("off")
-    return _png(fig)
-
-
-def plot_chart_location(pixels: np.ndarray, location: Any, *, encoding: str = "linear",
-                        exposure_ev: float = 0.0, found: bool = False) -> str:
-    """Base64 PNG: the image with every patch's sampling window outlined and numbered.
-
-    ``location`` is a :class:`fidelity.chart.locate.ChartLocation`. Linear pixels are shown at the
-    audit's exposure (``2**exposure_ev``), sRGB-encoded; NaN/Inf show as black. The corner
-    patches are labelled, so a wrong orientation or a grid off the patches is seen at once.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from fidelity.chart.locate import CORNER_PATCHES, apply_homography
-    from fidelity.colour import colorimetry as cm
-
-    arr = np.asarray(pixels, dtype=np.float64)
-    arr = np.where(np.isfinite(arr), arr, 0.0)
-    if encoding == "linear":
-        arr = cm.delinearize_srgb(np.clip(arr * 2.0 ** exposure_ev, 0.0, 1.0))
-    arr = np.clip(arr, 0.0, 1.0)
-    height, width = arr.shape[:2]
-    fig, ax = plt.subplots(figsize=(7.2, 7.2 * height / max(width, 1)))
-    ax.imshow(arr, interpolation="antialiased")
-    half = location.window / 2.0
-    square = np.array([[-half, -half], [half, -half], [half, half], [-half, half],
-                       [-half, -half]])
-    cols = location.cols
-    for k in range(location.rows * cols):
-        r, c = divmod(k, cols)
-        quad = apply_homography(location.homography, square + (c, r))
-        ax.plot(quad[:, 0], quad[:, 1], color="white", lw=0.8)
-        ax.plot(quad[:, 0], quad[:, 1], color="black", lw=0.8, ls=(0, (2, 2)))
-        ax.text(*location.centres[k], str(k + 1), ha="center", va="center", fontsize=6,
-                color="white", bbox={"facecolor": "black", "alpha": 0.5, "pad": 0.5, "lw": 0})
-    for name, (x, y) in zip(CORNER_PATCHES, location.corners, strict=True):
-        ax.text(x, y + location.pitch_px * 0.3, name, fontsize=6, color="yellow", ha="center",
-                va="top", bbox={"facecolor": "black", "alpha": 0.6, "pad": 0.5, "lw": 0})
-    ax.set_xlim(-0.5, width - 0.5)
-    ax.set_ylim(height - 0.5, -0.5)
-    how = "found in the image" if found else "from --corners"
-    ax.set_title(f"sampling windows ({location.window:g} patch pitch), corners {how}", fontsize=9)
-    ax.axis("off")
-    return _png(fig)
-
-
-def plot_delta_e_bars(report: dict[str, Any], limit: float | None = None) -> str:
-    """Base64 PNG: ΔE00 per patch as bars, with the mean (and the ΔE limit, if any)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    patches = report["patches"]
-    names = [p["name"] for p in patches]
-    de = [p["delta_e"] for p in patches]
-    colours = [np.clip(p.get("srgb") or [0.4, 0.4, 0.4], 0, 1) for p in patches]
-    fig, ax = plt.subplots(figsize=(8.5, 3.4))
-    ax.bar(range(len(de)), de, color=colours, edgecolor="black", linewidth=0.5)
-    ax.axhline(report["mean_delta_e"], color="tab:blue", ls="--", lw=1,
-               label=f"mean {report['mean_delta_e']:.2f}")
-    if limit is not None:
-        ax.axhline(limit, color="tab:red", ls=":", lw=1.2, label=f"limit {limit:g}")
-    ax.set_xticks(range(len(de)), names, rotation=60, ha="right", fontsize=7)
-    ax.set_ylabel("ΔE00")
-    ax.legend(fontsize=8)
-    ax.grid(axis="y", alpha=0.3)
-    return _png(fig)
-
-
-def plot_prediction_curve(prediction: Prediction, limit_dmap: float | None = None) -> str:
-    """Base64 PNG: the table's ΔE -> loss curves with this chart's point on each."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    de = prediction.delta_e
-    xmax = max(30.0, de * 1.2)
-    grid = np.linspace(0.0, xmax, 601)
-    fig, ax = plt.subplots(figsize=(7.5, 4.2))
-    labels = {"dmap_points": "ΔmAP (points)", "dmap_relative": "ΔmAP (% of baseline)",
-              "dap_person_points": "person ΔAP (points)", "dap_bicycle_points": "bicycle ΔAP (points)"}
-    colors = {"dmap_points": "tab:red", "dmap_relative": "tab:orange",
-              "dap_person_points": "tab:blue", "dap_bicycle_points": "tab:green"}
-    for col, label in labels.items():
-        y = predict_curve(grid, col, size=prediction.size, table=prediction.table,
-                          method=prediction.method)
-        if np.all(np.isnan(y)):
-            continue
-        ax.plot(grid, y, color=colors[col], lw=1.3, label=label,
-                ls="-" if col != "dmap_relative" else "--")
-        v = prediction.columns[col].value
-        if v is not None:
-            ax.plot([de], [v], "o", color=colors[col], ms=7, mec="black")
-    ax.axvline(de, color="grey", lw=0.8, ls=":")
-    ax.annotate(f"this chart: ΔE {de:.2f}", (de, 0), xytext=(5, 5), textcoords="offset points",
-                fontsize=8)
-    rng = prediction.columns["dmap_points"].delta_e_range
-    if rng is not None and rng[1] < xmax:
-        ax.axvspan(rng[1], xmax, color="grey", alpha=0.12, label="beyond the table (ceiling)")
-    if limit_dmap is not None:
-        ax.axhline(limit_dmap, color="black", ls=":", lw=1, label=f"limit {limit_dmap:g}")
-    ax.set_xlabel("chart ΔE00 (mean over 24 patches)")
-    ax.set_ylabel("predicted loss" + (" (upper bound)" if prediction.table.kind ==
-                                      "published-bounds" else ""))
-    ax.set_yscale("symlog", linthresh=1.0)
-    ax.set_ylim(0, 105)
-    ax.set_xlim(0, xmax)
-    ax.set_title(f"table {prediction.table.name} ({prediction.table.kind}), detector size "
-                 f"{prediction.size_used}, {prediction.method} interpolation", fontsize=9)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="lower right")
-    return _png(fig)
-
-
-# ---------------------------------------------------------------------------------- HTML
-
-_CSS = """
-body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;max-width:1100px;
-margin:2em auto;padding:0 1em;color:#222}h1{font-size:1.5em}h2{font-size:1.15em;margin-top:1.6em;
-border-bottom:1px solid #ddd}table{border-collapse:collapse;font-size:.85em}td,th{border:1px solid
-#ddd;padding:3px 7px;text-align:right}th{background:#f4f4f4}td.l,th.l{text-align:left}
-.verdict{padding:.8em 1em;border-radius:6px;font-size:1.1em;font-weight:600}
-.pass{background:#e3f5e1;color:#1d5e1a}.fail{background:#fbe3e1;color:#8a1c12}
-.info{background:#eef2fb;color:#1f3a73}pre{background:#f7f7f7;padding:.8em;overflow-x:auto;
-font-size:.78em}img{max-width:100%}.note{color:#555;font-size:.85em}
-"""
-
-
-def _fmt(v: Any, nd: int = 2) -> str:
-    if v is None:
-        return "–"
-    if isinstance(v, float):
-        return f"{v:.{nd}f}"
-    return html.escape(str(v))
-
-
-def render_html(report: dict[str, Any], prediction: Prediction | None = None,
-                location_png: str | None = None) -> str:
-    """The self-contained HTML report of a JSON report (plots embedded as base64 PNG).
-
-    ``location_png``: the base64 PNG of :func:`plot_chart_location`, shown for an image."""
-    e = html.escape
-    verdict = report.get("verdict")
-    src = report.get("source") or {}
-    title = src.get("camera") or src.get("path") or "chart"
-    parts = [f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>fidelity "
-             f"report: {e(str(title))}</title><style>{_CSS}</style></head><body>",
-             f"<h1>Colour fidelity report: {e(str(title))}</h1>"]
-    if verdict:
-        cls = "pass" if verdict["passed"] else "fail"
-        parts.append(f"<div class='verdict {cls}'>{e(verdict['message'])}</div>")
-    else:
-        parts.append(f"<div class='verdict info'>mean ΔE00 {report['mean_delta_e']:.2f} "
-                     f"(no gate applied)</div>")
-    pred = report.get("prediction")
-    rows = [("mean ΔE00 (chart ΔE)", _fmt(report["mean_delta_e"])),
-            ("max ΔE00", f"{_fmt(report['max_delta_e'])} ({e(str(report.get('worst_patch')))})")]
-    if report.get("exposure_ev") is not None:
-        rows.append(("exposure correction", f"{report['exposure_ev']:+.3f} EV"))
-    if report.get("bad_pixels"):
-        bp = report["bad_pixels"]
-        rows.append(("bad pixels in windows (NaN/Inf/negative)",
-                     f"{bp.get('total', 0)} ({bp.get('nan', 0)}/{bp.get('inf', 0)}/"
-                     f"{bp.get('negative', 0)})"))
-    if pred:
-        b = "≤ " if pred.get("bound") else ""
-        rows += [
-            ("predicted ΔmAP, percentage points", b + _fmt(pred["dmap_points"])),
-            ("predicted ΔmAP, % of baseline", b + _fmt(pred["dmap_relative"])),
-            ("predicted person ΔAP, points", b + _fmt(pred["dap_person_points"])),
-            ("predicted bicycle ΔAP, points", b + _fmt(pred["dap_bicycle_points"])),
-            ("prediction table", e(f"{pred['table']['name']} ({pred['table']['kind']}), detector size "
-                                   f"{pred['size_used']}")),
-        ]
-    parts.append("<h2>Summary</h2><table>" + "".join(
-        f"<tr><th class='l'>{e(k)}</th><td class='l'>{v}</td></tr>" for k, v in rows) + "</table>")
-    if pred and pred.get("notes"):
-        parts.append("<ul class='note'>" + "".join(f"<li>{e(n)}</li>" for n in pred["notes"])
-                     + "</ul>")
-    limit_de = None
-    limit_dmap = None
-    if verdict:
-        crit = verdict["criterion"]
-        if crit["kind"] == "max-delta-e":
-            limit_de = crit["limit"]
-        elif crit["cls"] == "all" and crit["unit"] == "points":
-            limit_dmap = crit["limit"]
-    if location_png:
-        parts.append("<h2>Where the patches were sampled</h2>"
-                     f"<img alt='sampling windows' src='data:image/png;base64,{location_png}'>")
-    parts.append("<h2>Chart: reference against measured</h2>"
-                 f"<img alt='swatches' src='data:image/png;base64,{plot_swatches(report)}'>")
-    parts.append("<h2>ΔE00 per patch</h2>"
-                 f"<img alt='delta E bars' src='data:image/png;base64,"
-                 f"{plot_delta_e_bars(report, limit_de)}'>")
-    if prediction is not None:
-        parts.append("<h2>ΔE → predicted detection loss</h2>"
-                     f"<img alt='prediction curve' src='data:image/png;base64,"
-                     f"{plot_prediction_curve(prediction, limit_dmap)}'>")
-        for col, c in pred["columns"].items():
-            parts.append(f"<div class='note'>{e(col)}: {e(c['status'])}: {e(c['note'])}</div>")
-    head = ("<tr><th class='l'>patch</th><th>ΔE00</th><th>ΔL'</th><th>ΔC'</th><th>ΔH'</th>"
-            "<th>L*</th><th>a*</th><th>b*</th><th>ref L*</th><th>ref a*</th><th>ref b*</th></tr>")
-    body = "".join(
-        f"<tr><td class='l'>{e(p['name'])}</td><td>{_fmt(p['delta_e'])}</td>"
-        f"<td>{_fmt(p['delta_l'])}</td><td>{_fmt(p['delta_c'])}</td><td>{_fmt(p['delta_h'])}</td>"
-        + "".join(f"<td>{_fmt(v)}</td>" for v in (p.get("lab") or [None] * 3))
-        + "".join(f"<td>{_fmt(v)}</td>" for v in (p.get("reference_lab") or [None] * 3))
-        + "</tr>" for p in report["patches"])
-    parts.append(f"<h2>Patches</h2><table>{head}{body}</table>")
-    if pred and pred.get("transforms"):
-        trs = "".join(
-            f"<tr><td class='l'>{e(t['transform'])}</td><td>{_fmt(t['param'], 4)}</td>"
-            f"<td class='l'>{e(str(t['method']))}</td></tr>" for t in pred["transforms"])
-        parts.append(f"<h2>SAFE-COLOR transforms that give ΔE {pred['delta_e']:.2f} on the "
-                     f"chart</h2><table><tr><th class='l'>transform</th><th>parameter</th>"
-                     f"<th class='l'>how</th></tr>{trs}</table>")
-    prov = report["provenance"]
-    parts.append("<h2>Provenance</h2><table>" + "".join(
-        f"<tr><th class='l'>{e(k)}</th><td class='l'>{e(str(v))}</td></tr>" for k, v in (
-            ("tool", f"fidelity {prov['version']}"), ("created", report["created"]),
-            ("input sha256", prov.get("input_sha256") or "–"),
-            ("python", prov["python"]), ("platform", prov["platform"]),
-            ("libraries", ", ".join(f"{k} {v}" for k, v in prov["libraries"].items())),
-        )) + "</table>")
-    parts.append("<h3>Source</h3><pre>" + e(json.dumps(src, indent=1, ensure_ascii=False))
-                 + "</pre>")
-    parts.append("<h3>Tables</h3><pre>" + e(json.dumps(prov["tables"], indent=1,
-                                                        ensure_ascii=False)) + "</pre>")
-    if pred:
-        parts.append("<h3>Prediction table provenance</h3><pre>" + e(json.dumps(
-            pred["table"]["provenance"], indent=1, ensure_ascii=False)) + "</pre>")
-    parts.append("<h3>Conventions</h3><pre>" + e(json.dumps(prov["conventions"], indent=1,
-                                                             ensure_ascii=False)) + "</pre>")
-    parts.append("<p class='note'>JSON schema: fidelity/data/schemas/report.schema.json "
-                 f"(version {e(report['schema_version'])}).</p></body></html>")
-    return "\n".join(parts)
-
-
-def write_html_report(path: str | os.PathLike[str], report: dict[str, Any],
-                      prediction: Prediction | None = None, protect: tuple[str, ...] = (),
-                      location_png: str | None = None) -> Path:
-    """Write the HTML report atomically."""
-    _refuse_inputs(path, protect)
-    return write_text_atomic(path, render_html(report, prediction, location_png))
-
-
-# --------------------------------------------------------------------------------- JUnit
-
-@dataclass(frozen=True)
-class GateCase:
-    """One gated input for JUnit: its test-case ``name``, its ``report`` (None on error), the
-    ``error`` message (exit code 2) and the ``seconds`` it took."""
-
-    name: str
-    report: dict[str, Any] | None = None
-    error: str | None = None
-    seconds: float = 0.0
-
-
-def _junit_properties(report: dict[str, Any]) -> list[tuple[str, str]]:
-    pred = report.get("prediction") or {}
-    values = (("mean_delta_e", report.get("mean_delta_e")),
-              ("max_delta_e", report.get("max_delta_e")),
-              ("worst_patch", report.get("worst_patch")),
-              ("dmap_points", pred.get("dmap_points")),
-              ("dmap_relative", pred.get("dmap_relative")),
-              ("dap_person_points", pred.get("dap_person_points")),
-              ("dap_bicycle_points", pred.get("dap_bicycle_points")),
-              ("prediction_table", (pred.get("table") or {}).get("name")),
-              ("input_sha256", report["provenance"].get("input_sha256")),
-              ("fidelity_version", report["provenance"]["version"]))
-    return [(k, "" if v is None else str(v)) for k, v in values]
-
-
-def junit_xml(cases: Sequence[GateCase]) -> str:
-    """JUnit XML, one test case per gated input. A failed gate is a ``<failure>``, an error
-    (exit code 2) an ``<error>``; the measured values are ``<properties>``: of the test suite
-    when there is one case (JUnit's classic place), of each test case when there are several
-    (the form pytest's ``record_property`` writes, read by Jenkins and GitLab)."""
-    total = sum(c.seconds for c in cases)
-    suite = ET.Element("testsuite", name="fidelity", tests=str(len(cases)), failures="0",
-                       errors="0", skipped="0", time=f"{total:.3f}")
-    suite_props = ET.SubElement(suite, "properties")  # JUnit: properties precede test cases
-    failures = errors = 0
-    for c in cases:
-        case = ET.SubElement(suite, "testcase", classname="fidelity.gate", name=c.name,
-                             time=f"{c.seconds:.3f}")
-        if c.error is not None:
-            errors += 1
-            ET.SubElement(case, "error", message=c.error, type="FidelityError").text = c.error
-            continue
-        if c.report is None:
-            continue
-        props = suite_props if len(cases) == 1 else ET.SubElement(case, "properties")
-        for key, value in _junit_properties(c.report):
-            ET.SubElement(props, "property", name=key, value=value)
-        verdict = c.report.get("verdict")
-        if verdict and not verdict["passed"]:
-            failures += 1
-            ET.SubElement(case, "failure", message=verdict["message"],
-                          type="GateFailure").text = verdict["message"]
-        ET.SubElement(case, "system-out").text = "\n".join(summary_lines(c.report))
-    suite.set("failures", str(failures))
-    suite.set("errors", str(errors))
-    if not len(suite_props):
-        suite.remove(suite_props)
-    root = ET.Element("testsuites", name="fidelity", tests=str(len(cases)),
-                      failures=str(failures), errors=str(errors))
-    root.append(suite)
-    ET.indent(root)
-    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
-
-
-def write_junit(path: str | os.PathLike[str], cases: Sequence[GateCase]) -> Path:
-    """Write JUnit XML atomically (see :func:`junit_xml`)."""
-    return write_text_atomic(path, junit_xml(cases))
-
-
-# ------------------------------------------------------------------------------ terminal
-
-def summary_lines(report: dict[str, Any]) -> list[str]:
-    """A short, readable verdict for the terminal."""
-    lines = []
-    found = (report.get("source") or {}).get("corners_found")
-    if found:
-        lines.append(f"chart found ({found['method']}, {found['swatches']} of 24 patch outlines "
-                     f"fitted, orientation {found['orientation']}): --corners "
-                     f"{found['corners_text']}")
-    space = (report.get("source") or {}).get("colourspace")
-    if space and space != "sRGB":
-        lines.append(f"RGB primaries: {space}, converted to linear sRGB")
-    lines.append(f"chart ΔE00: mean {report['mean_delta_e']:.2f}, max "
-                 f"{report['max_delta_e']:.2f} ({report.get('worst_patch')})")
-    if report.get("exposure_ev") is not None:
-        bp = report.get("bad_pixels") or {}
-        kept = (f"; pixels with a negative channel kept in the mean: {bp['negative']}"
-                if bp.get("negative") and bp.get("negatives") == "keep" else "")
-        lines.append(f"exposure correction {report['exposure_ev']:+.2f} EV; bad pixels "
-                     f"excluded: {bp.get('total', 0)}{kept}")
-        clipped = (report.get("details") or {}).get("clipped_patches")
-        if clipped:
-            lines.append("outside [0, 1] in sRGB, clipped like a stored image: "
-                         + ", ".join(clipped))
-    pred = report.get("prediction")
-    if pred:
-        b = "<= " if pred.get("bound") else ""
-
-        def f(v: Any) -> str:
-            return "n/a" if v is None else f"{b}{v:.2f}"
-
-        kind = ("upper bound, " if pred.get("bound") else
-                "measured worst case, " if pred["table"].get("kind") == "measured" else "")
-        lines.append(f"predicted ΔmAP: {f(pred['dmap_points'])} percentage points, "
-                     f"{f(pred['dmap_relative'])} % of baseline ({kind}table "
-                     f"{pred['table']['name']}, detector size {pred['size_used']})")
-        lines.append(f"predicted ΔAP: person {f(pred['dap_person_points'])} points, bicycle "
-                     f"{f(pred['dap_bicycle_points'])} points")
-        if pred.get("out_of_range"):
-            lines.append("note: ΔE beyond the table's range; conservative ceiling used")
-    if report.get("verdict"):
-        lines.append(report["verdict"]["message"])
-    return lines
+            pixels = read_image(report.source.image.path, layer=report.source.image.layer).pixels
+        written += write_document(chart_document(report, pixels), html=html_path)
+    return written
 
 
 __all__ = [
+    "BASE_CONVENTIONS",
+    "COMMANDS",
     "SCHEMA_VERSION",
-    "build_report",
-    "GateCase",
-    "junit_xml",
-    "plot_delta_e_bars",
-    "plot_prediction_curve",
-    "plot_swatches",
-    "plot_chart_location",
-    "render_html",
+    "ChartReport",
+    "ImageSource",
+    "Provenance",
+    "RenderSource",
+    "Source",
+    "TableRef",
+    "chart_document",
     "report_schema",
     "report_schema_path",
-    "summary_lines",
-    "write_html_report",
-    "write_json_report",
-    "write_junit",
+    "utc_now",
+    "validate_report",
+    "write_chart_report",
 ]

@@ -1,0 +1,136 @@
+"""JUnit XML for CI: one test case per gated image or camera.
+
+The test-case name is stable (``colour fidelity of SUBJECT``): the criterion and its limit are
+properties, so changing a threshold keeps a CI's test history. The test suite carries a
+``timestamp`` (UTC) and the ``hostname``. A failed gate is a ``<failure>``, an input error (exit
+code 2) an ``<error>``; the measured values are ``<properties>``: of the test suite when there is
+one case (JUnit's classic place), of each test case when there are several (the form pytest's
+``record_property`` writes, read by Jenkins and GitLab).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import socket
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from xml.etree import ElementTree as ET
+
+from fidelity.prediction.verdict import EXIT_ERROR, Criterion
+from fidelity.report.chart import ChartReport
+
+
+@dataclass(frozen=True)
+class GateCase:
+    """One gated input: its ``subject`` (image path or camera), the ``criterion``, the
+    ``report`` (None on error), the ``error`` message (exit code 2) and the ``seconds`` it
+    took."""
+
+    subject: str
+    criterion: Criterion | None = None
+    report: ChartReport | None = None
+    error: str | None = None
+    seconds: float = 0.0
+
+    @property
+    def name(self) -> str:
+        """The JUnit test-case name (stable: no threshold in it)."""
+        return f"colour fidelity of {self.subject}"
+
+    @property
+    def exit_code(self) -> int:
+        """0 pass, 1 fail, 2 error."""
+        if self.error is not None or self.report is None:
+            return EXIT_ERROR
+        return self.report.exit_code
+
+
+def gate_exit_code(cases: Sequence[GateCase]) -> int:
+    """The exit code of a gate over ``cases``: 2 if any could not be measured, else 1 if any
+    failed, else 0."""
+    codes = [c.exit_code for c in cases]
+    return EXIT_ERROR if EXIT_ERROR in codes else max(codes, default=0)
+
+
+def _properties(case: GateCase) -> list[tuple[str, str]]:
+    values: list[tuple[str, object]] = []
+    if case.criterion is not None:
+        c = case.criterion
+        values += [("criterion", c.kind), ("limit", c.limit), ("criterion_description",
+                                                               c.describe())]
+        if c.kind == "max-dmap":
+            values += [("class", c.cls), ("unit", c.unit)]
+    r = case.report
+    if r is not None:
+        p = r.prediction
+        values += [("mean_delta_e", r.mean_delta_e), ("max_delta_e", r.max_delta_e),
+                   ("worst_patch", r.worst_patch),
+                   ("dmap_points", p.dmap_points if p else None),
+                   ("dmap_relative", p.dmap_relative if p else None),
+                   ("dap_person_points", p.dap_person_points if p else None),
+                   ("dap_bicycle_points", p.dap_bicycle_points if p else None),
+                   ("prediction_table", p.table.name if p else None),
+                   ("reference", r.source.reference),
+                   ("input_sha256", r.provenance.input_sha256),
+                   ("fidelity_version", r.provenance.version)]
+        if r.verdict is not None and r.verdict.value is not None:
+            values.append(("value", r.verdict.value))
+    return [(k, "" if v is None else str(v)) for k, v in values]
+
+
+def junit_xml(cases: Sequence[GateCase], *, timestamp: str | None = None,
+              hostname: str | None = None) -> str:
+    """JUnit XML of ``cases`` (see the module docstring); ``timestamp`` (ISO 8601, UTC) and
+    ``hostname`` default to now and this machine."""
+    from fidelity.report.terminal import summary_lines
+
+    stamp = timestamp or _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%S")
+    host = hostname or socket.gethostname()
+    total = sum(c.seconds for c in cases)
+    suite = ET.Element("testsuite", name="fidelity", tests=str(len(cases)), failures="0",
+                       errors="0", skipped="0", time=f"{total:.3f}", timestamp=stamp,
+                       hostname=host)
+    suite_props = ET.SubElement(suite, "properties")  # JUnit: properties precede test cases
+    failures = errors = 0
+    for c in cases:
+        case = ET.SubElement(suite, "testcase", classname="fidelity.gate", name=c.name,
+                             time=f"{c.seconds:.3f}")
+        props = suite_props if len(cases) == 1 else ET.SubElement(case, "properties")
+        for key, value in _properties(c):
+            ET.SubElement(props, "property", name=key, value=value)
+        if c.error is not None or c.report is None:
+            errors += 1
+            message = c.error or "no report"
+            ET.SubElement(case, "error", message=message, type="FidelityError").text = message
+            continue
+        verdict = c.report.verdict
+        if verdict is not None and not verdict.passed:
+            failures += 1
+            ET.SubElement(case, "failure", message=verdict.message,
+                          type="GateFailure").text = verdict.message
+        ET.SubElement(case, "system-out").text = "\n".join(summary_lines(c.report))
+    suite.set("failures", str(failures))
+    suite.set("errors", str(errors))
+    for case in suite.findall("testcase"):  # an empty <properties> is not valid JUnit
+        props = case.find("properties")
+        if props is not None and not len(props):
+            case.remove(props)
+    if not len(suite_props):
+        suite.remove(suite_props)
+    root = ET.Element("testsuites", name="fidelity", tests=str(len(cases)),
+                      failures=str(failures), errors=str(errors), time=f"{total:.3f}")
+    root.append(suite)
+    ET.indent(root)
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def write_junit(path: str | os.PathLike[str], cases: Sequence[GateCase]) -> Path:
+    """Write JUnit XML atomically (see :func:`junit_xml`)."""
+    from fidelity.fileio import write_text_atomic
+
+    return write_text_atomic(path, junit_xml(cases))
+
+
+__all__ = ["GateCase", "gate_exit_code", "junit_xml", "write_junit"]

@@ -1,0 +1,55 @@
+"""The chart report on a terminal: a few lines a person reads at a glance."""
+
+from __future__ import annotations
+
+from fidelity.report.chart import ChartReport, ImageSource
+
+
+def summary_lines(report: ChartReport) -> list[str]:
+    """How the chart was found (image), the chart ΔE, exposure and bad pixels (image), the
+    predicted loss and the verdict, one line each."""
+    lines = []
+    src = report.source
+    if isinstance(src, ImageSource):
+        found = src.found
+        if found is not None:
+            lines.append(f"chart found ({found.method}, {found.swatches} of 24 patch outlines "
+                         f"fitted, orientation {found.orientation}): --corners "
+                         f"{found.corners_text()}")
+        if src.colourspace and src.colourspace != "sRGB":
+            lines.append(f"RGB primaries: {src.colourspace}, converted to linear sRGB")
+    lines.append(f"chart ΔE00: mean {report.mean_delta_e:.2f}, max "
+                 f"{report.max_delta_e:.2f} ({report.worst_patch})")
+    if report.exposure_ev is not None:
+        bp = report.bad_pixels
+        kept = ""
+        if bp is not None and bp.window.negative and bp.negatives == "keep":
+            kept = f"; pixels with a negative channel kept in the mean: {bp.window.negative}"
+        lines.append(f"exposure correction {report.exposure_ev:+.2f} EV; bad pixels "
+                     f"excluded: {bp.window.total if bp else 0}{kept}")
+        if isinstance(src, ImageSource) and src.clipped_patches:
+            lines.append("outside [0, 1] in sRGB, clipped like a stored image: "
+                         + ", ".join(src.clipped_patches))
+    p = report.prediction
+    if p is not None:
+        bound = p.table.kind == "published-bounds"
+        b = "<= " if bound else ""
+
+        def f(v: float | None) -> str:
+            return "n/a" if v is None else f"{b}{v:.2f}"
+
+        kind = ("upper bound, " if bound else
+                "measured worst case, " if p.table.kind == "measured" else "")
+        lines.append(f"predicted ΔmAP: {f(p.dmap_points)} percentage points, "
+                     f"{f(p.dmap_relative)} % of baseline ({kind}table "
+                     f"{p.table.name}, detector size {p.size_used})")
+        lines.append(f"predicted ΔAP: person {f(p.dap_person_points)} points, bicycle "
+                     f"{f(p.dap_bicycle_points)} points")
+        if p.out_of_range:
+            lines.append("note: ΔE beyond the table's range; conservative ceiling used")
+    if report.verdict is not None:
+        lines.append(report.verdict.message)
+    return lines
+
+
+__all__ = ["summary_lines"]

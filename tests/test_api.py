@@ -1,0 +1,73 @@
+"""The public Python API: names, lazy import, the pipelines' records and their JSON."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import fidelity
+from fidelity.report.chart import ChartReport
+
+
+def test_every_public_name_resolves_and_is_documented():
+    for name in fidelity.__all__[1:]:
+        obj = getattr(fidelity, name)
+        assert obj.__doc__ and len(obj.__doc__.strip()) > 20, name
+
+
+def test_import_fidelity_is_light():
+    code = ("import sys, fidelity; heavy = [m for m in ('numpy', 'scipy', 'matplotlib', "
+            "'colour', 'onnxruntime', 'mitsuba', 'cv2') if m in sys.modules]; print(heavy)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_check_camera_in_three_lines_matches_the_closed_form():
+    report = fidelity.check_camera("ideal")
+    # the ideal camera is exact under D65 (README: < 0.01 ΔE00)
+    assert report.mean_delta_e < 0.01 and report.verdict is not None and report.verdict.passed
+    assert report.exit_code == 0
+    direct = fidelity.render_chart("ideal").measurement
+    np.testing.assert_array_equal(report.measurement.delta_e, direct.delta_e)
+    assert report.prediction is not None
+    assert report.prediction.dmap_points == fidelity.predict(report.mean_delta_e).dmap_points
+
+
+def test_chart_report_json_round_trip_is_exact_and_schema_valid(tmp_path):
+    pytest.importorskip("jsonschema")
+    from fidelity.camera.render import render_chart
+
+    report = fidelity.check_camera("nikon-5100")
+    doc = json.loads(json.dumps(report.to_json()))
+    assert ChartReport.from_json(doc).to_json() == doc
+    # an image report: the render's display PNG, found and measured
+    import OpenImageIO as oiio
+
+    img = (render_chart("nikon-5100").display_image * 65535 + 0.5).astype(np.uint16)
+    path = tmp_path / "chart.png"
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), oiio.ImageSpec(img.shape[1], img.shape[0], 3, "uint16"))
+    out.write_image(img)
+    out.close()
+    audit = fidelity.audit_image(path, reference="scene",
+                                 criterion=fidelity.Criterion("max-delta-e", 3.0))
+    doc = json.loads(json.dumps(audit.to_json()))
+    back = ChartReport.from_json(doc)
+    assert back.to_json() == doc
+    assert back.source.found is not None  # type: ignore[union-attr]
+    # PNG quantisation only: the audit measures what the render measured (README)
+    assert audit.mean_delta_e == pytest.approx(report.mean_delta_e, abs=0.02)
+
+
+def test_from_json_refuses_a_document_that_is_not_a_report():
+    pytest.importorskip("jsonschema")
+    from fidelity.errors import InvalidValueError
+
+    doc = fidelity.check_camera("ideal").to_json()
+    doc["mean_delta_e"] = -1.0
+    with pytest.raises(InvalidValueError, match="mean_delta_e"):
+        ChartReport.from_json(doc)
