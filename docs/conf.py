@@ -10,17 +10,20 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 # Matplotlib must not look for a display while autodoc imports the package.
 os.environ.setdefault("MPLBACKEND", "Agg")
 
+import sphinx.util.inspect  # noqa: E402
+
 import fidelity  # noqa: E402
 
 project = "fidelity"
 author = "the fidelity developers"
-copyright = "the fidelity developers"  # noqa: A001
+copyright = "the fidelity developers"
 release = fidelity.__version__
 version = release
 
@@ -68,3 +71,30 @@ nitpicky = False
 html_theme = "furo"
 html_title = f"fidelity {release}"
 html_show_sourcelink = False
+
+
+# A type alias nested in a generic (``tuple[FloatArray, FloatArray]``) is printed with the repr of
+# Sphinx's placeholder, ``TypeAliasForwardRef('numpy.typing.NDArray')``: print the alias name.
+def _alias_name(self: Any) -> str:
+    return str(self.name)
+
+
+sphinx.util.inspect.TypeAliasForwardRef.__repr__ = _alias_name  # type: ignore[method-assign]
+
+# A long value (a registry such as ``TRANSFORMS``) is dropped from its signature after reading;
+# its docstring says what it holds. Short values (``DEFAULT_TABLE = 'coco1000-measured'``) stay.
+MAX_VALUE_CHARS = 120
+
+
+def _drop_long_values(app: Any, doctree: Any) -> None:
+    from sphinx import addnodes
+
+    for annotation in list(doctree.findall(addnodes.desc_annotation)):
+        value = annotation.astext()
+        if value.lstrip().startswith("=") and len(value) > MAX_VALUE_CHARS:
+            annotation.parent.remove(annotation)
+
+
+def setup(app: Any) -> dict[str, Any]:
+    app.connect("doctree-read", _drop_long_values)
+    return {"parallel_read_safe": True}
