@@ -70,13 +70,15 @@ def test_no_arguments_prints_a_verdict_and_writes_the_report(default_check):
     assert len(out.strip().splitlines()) <= 8  # short and readable
 
 
-def test_readme_example_is_what_check_prints(default_check):
-    """The README's ``$ fidelity check`` block is the tool's real output, line for line."""
+@pytest.mark.parametrize("page", ["README.md", "docs/index.md", "docs/check.md"])
+def test_readme_example_is_what_check_prints(default_check, page):
+    """The ``$ fidelity check`` block of the README and the docs is the tool's real output,
+    line for line."""
     from pathlib import Path
 
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
-    block = re.search(r"```text\n\$ fidelity check\n(.*?)```", readme, re.S)
-    assert block, "README.md lost its `$ fidelity check` example"
+    text = (Path(__file__).resolve().parents[1] / page).read_text(encoding="utf-8")
+    block = re.search(r"```text\n\$ fidelity check\n(.*?)```", text, re.S)
+    assert block, f"{page} lost its `$ fidelity check` example"
     _, r = default_check
     assert r.stdout.strip().splitlines() == block.group(1).strip().splitlines()
 

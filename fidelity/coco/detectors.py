@@ -7,8 +7,9 @@ from its file name:
     letterboxed pixels followed by C class scores (sigmoid already applied). Needs NMS.
     Validation conventions (Ultralytics ``DetectionValidator``): confidence 0.001, IoU 0.7,
     multi-label NMS per class, at most 30000 boxes into NMS and 300 detections out.
-``ultralytics-e2e``  one output ``1 x K x 6`` (YOLOv10 end-to-end, e.g. 1x300x6): ``x1, y1, x2,
-    y2, score, class`` in letterboxed pixels; NMS-free. Conventions: confidence 0.001, 300 out.
+``ultralytics-e2e``  one output ``1 x K x 6`` (YOLOv10 end-to-end, e.g. 1x300x6):
+    ``x1, y1, x2, y2, score, class`` in letterboxed pixels; NMS-free. Conventions: confidence
+    0.001, 300 out.
 ``yolox``  one output ``1 x N x (5+C)`` where N equals the number of grid cells of strides
     8/16/32 for the input size (3549 for 416x416): raw ``x, y, log w, log h, objectness, C class
     scores`` (objectness and classes already sigmoid). Decode ``xy = (p + grid) * stride``,

@@ -421,7 +421,7 @@ def delta_e_2000(lab1: ArrayLike, lab2: ArrayLike) -> FloatArray:
     ``lab1``, ``lab2``: (..., 3) broadcastable CIELAB arrays (L* in [0, 100], a*, b* real).
     Returns (...,) ΔE00 >= 0, symmetric in its arguments. Computed in float64; float32 inputs
     give a float32 result.
-    Hues exactly 180° apart take the |Δh'| <= 180° branch deterministically (see source).
+    Hues exactly 180° apart take the ``|Δh'| <= 180°`` branch deterministically (see source).
     """
     return _ciede2000(lab1, lab2, components=False)[0]
 

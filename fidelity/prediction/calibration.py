@@ -8,7 +8,7 @@ side of its direction. The chart image is the reference Lab converted to sRGB an
 
 Method: the ΔE curve of each transform is evaluated once on a scan grid from the identity
 outwards (one vectorised call); the first grid interval whose ends straddle the target brackets
-the root, and Brent's method (``scipy.optimize.brentq``) solves it to |ΔE - target| <= 1e-4
+the root, and Brent's method (``scipy.optimize.brentq``) solves it to ``|ΔE - target| <= 1e-4``
 (typically 1e-10). The paper used ``minimize_scalar`` and stopped within 0.3 %.
 
 Root choice (several roots exist for hue, whose ΔE is not monotonic in h, and wherever a curve
@@ -50,7 +50,7 @@ __all__ = [
 
 #: SAFE-COLOR targets: ΔE 1, 2, ..., 12, then 15, 18, ..., 45.
 DEFAULT_TARGETS: tuple[float, ...] = tuple(float(t) for t in [*range(1, 13), *range(15, 46, 3)])
-#: Largest accepted |ΔE - target| of a calibrated parameter.
+#: Largest accepted ``|ΔE - target|`` of a calibrated parameter.
 TOLERANCE = 1e-4
 #: File name of the shipped default table (package data).
 DEFAULT_TABLE_FILE = "calibration-safecolor.json"

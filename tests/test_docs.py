@@ -1,0 +1,61 @@
+"""The documentation site builds without a warning, and documents every library module."""
+
+from __future__ import annotations
+
+import importlib.util
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+
+
+def _missing_docs_packages() -> list[str]:
+    return [name for name in ("sphinx", "myst_parser", "furo")
+            if importlib.util.find_spec(name) is None]
+
+
+def test_every_library_module_has_an_api_page():
+    """Each module under fidelity/ (the CLI aside) is named by one ``automodule`` directive."""
+    documented: list[str] = []
+    for page in sorted((DOCS / "api").glob("*.rst")) + [DOCS / "api.md"]:
+        documented += re.findall(r"^\.\. automodule:: (\S+)", page.read_text(encoding="utf-8"),
+                                 re.M)
+    modules = set()
+    for path in (ROOT / "fidelity").rglob("*.py"):
+        parts = path.relative_to(ROOT).with_suffix("").parts
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        name = ".".join(parts)
+        if name.startswith("fidelity.cli") or name == "fidelity.__main__":
+            continue
+        modules.add(name)
+    assert sorted(modules - set(documented)) == [], "add these modules to a page in docs/api/"
+    assert len(documented) == len(set(documented)), "a module is documented twice"
+
+
+def test_readme_is_short_and_links_existing_pages():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert len(readme.encode("utf-8")) < 8 * 1024
+    links = re.findall(r"\]\((docs/[^)#]+)", readme)
+    assert links
+    for link in links:
+        assert (ROOT / link).is_file(), link
+
+
+@pytest.mark.skipif(bool(_missing_docs_packages()),
+                    reason="the docs extra is not installed (pip install -e '.[docs]'): "
+                           f"missing {', '.join(_missing_docs_packages())}")
+def test_docs_build_without_warnings(tmp_path):
+    """Sphinx with warnings as errors: bad reStructuredText in a docstring, a module that does
+    not import, a page outside the table of contents or a link to a missing heading fail."""
+    r = subprocess.run(
+        [sys.executable, "-m", "sphinx", "-W", "--keep-going", "-E", "-q", "-b", "dummy",
+         str(DOCS), str(tmp_path / "build")],
+        cwd=ROOT, capture_output=True, text=True, timeout=300,
+    )
+    assert r.returncode == 0, r.stderr[-4000:]
