@@ -231,7 +231,8 @@ def load_template(path: str | Path | None = None) -> dict[str, Any]:
     """The scene template (``scenes/spectral_chart.json`` unless ``path`` is given)."""
     p = Path(path) if path else resource_dir("scenes") / "spectral_chart.json"
     try:
-        return json.loads(p.read_text(encoding="utf-8"))
+        template: dict[str, Any] = json.loads(p.read_text(encoding="utf-8"))
+        return template
     except (OSError, ValueError) as exc:
         raise InputFileError(f"{p}: cannot read the Mitsuba scene template ({exc})") from exc
 

@@ -56,7 +56,7 @@ import tomllib
 from dataclasses import asdict, dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -325,7 +325,8 @@ def white_balance_gains(
         return np.ones(3)
     if wb.method == "gains":
         g = np.asarray(wb.gains, dtype=np.float64)
-        return g / g[1]
+        gains: FloatArray = g / g[1]
+        return gains
     if wb.method == "white-patch":
         white = p[WHITE_PATCH_INDEX]
     elif wb.method == "grey-world":
@@ -339,8 +340,8 @@ def white_balance_gains(
     if wb.method == "illuminant":
         # camera units put the perfect white at luminance 1 (camera_response), so mapping it to
         # (1, 1, 1) keeps exposure: an ideal camera then renders the white patch at its own Y.
-        return 1.0 / white
-    return white[1] / white
+        return np.asarray(1.0 / white, dtype=np.float64)
+    return np.asarray(white[1] / white, dtype=np.float64)
 
 
 def fit_colour_correction(
@@ -398,7 +399,7 @@ def apply_tone_curve(linear: ArrayLike, tone: ToneCurve) -> FloatArray:
         return x.copy()
     x = np.clip(x, 0.0, 1.0)
     if tone.curve == "srgb":
-        return delinearize_srgb(x)
+        return np.asarray(delinearize_srgb(x), dtype=np.float64)
     if tone.curve == "gamma":
         return np.power(x, 1.0 / tone.gamma)
     lut = np.asarray(tone.lut, dtype=np.float64)
@@ -448,7 +449,8 @@ def develop(
     out = apply_tone_curve(linear, camera.tone)
     if camera.quantisation_bits is not None:
         out = quantise(out, camera.quantisation_bits)
-    srgb = delinearize_srgb(out) if camera.output_encoding == "linear" else out
+    srgb = (np.asarray(delinearize_srgb(out), dtype=np.float64)
+            if camera.output_encoding == "linear" else out)
     return Developed(out, srgb, gains, m)
 
 
@@ -498,6 +500,14 @@ class _Reader:
             raise self.error(key, f"must be a string, got {v!r}")
         return v
 
+    @overload
+    def number(self, key: str, default: float, lo: float | None = None,
+               hi: float | None = None, lo_open: bool = False) -> float: ...
+
+    @overload
+    def number(self, key: str, default: None, lo: float | None = None,
+               hi: float | None = None, lo_open: bool = False) -> float | None: ...
+
     def number(self, key: str, default: float | None, lo: float | None = None,
                hi: float | None = None, lo_open: bool = False) -> float | None:
         v = self.table.get(key, default)
@@ -510,6 +520,12 @@ class _Reader:
         if hi is not None and v > hi:
             raise self.error(key, f"must be <= {hi:g}, got {v!r}")
         return float(v)
+
+    @overload
+    def integer(self, key: str, default: int, lo: int, hi: int) -> int: ...
+
+    @overload
+    def integer(self, key: str, default: None, lo: int, hi: int) -> int | None: ...
 
     def integer(self, key: str, default: int | None, lo: int, hi: int) -> int | None:
         v = self.table.get(key, default)

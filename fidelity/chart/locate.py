@@ -106,14 +106,16 @@ def homography_from_points(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     h = np.linalg.inv(t_dst) @ vt[-1].reshape(3, 3) @ t_src
     if abs(h[2, 2]) < 1e-15:
         raise InvalidValueError("corner points give a degenerate homography")
-    return h / h[2, 2]
+    out: np.ndarray = h / h[2, 2]
+    return out
 
 
 def apply_homography(h: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Map ``(..., 2)`` points through ``h``: ``(x, y) = (h @ (u, v, 1))[:2] / w``."""
     pts = np.asarray(points, dtype=np.float64)
     hom = pts @ h[:, :2].T + h[:, 2]
-    return hom[..., :2] / hom[..., 2:3]
+    out: np.ndarray = hom[..., :2] / hom[..., 2:3]
+    return out
 
 
 @dataclass(frozen=True)

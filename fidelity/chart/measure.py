@@ -192,12 +192,12 @@ def measure_chart(
     return ChartMeasurement(
         patch_names=names,
         srgb=rgb,
-        lab=lab,
+        lab=np.asarray(lab, np.float64),
         reference_lab=ref,
-        delta_e=delta_e_2000(lab, ref),
-        delta_l=dl,
-        delta_c=dc,
-        delta_h=dh,
+        delta_e=np.asarray(delta_e_2000(lab, ref), np.float64),
+        delta_l=np.asarray(dl, np.float64),
+        delta_c=np.asarray(dc, np.float64),
+        delta_h=np.asarray(dh, np.float64),
         reference_srgb=None if reference_srgb is None else _patch_array(reference_srgb, "reference sRGB", n),
         noise=None if noise is None else np.asarray(noise, dtype=np.float64),
     )
@@ -281,7 +281,8 @@ MIN_VALID_FRACTION = 0.5
 
 def luminance_linear_srgb(rgb: np.ndarray) -> np.ndarray:
     """CIE Y (white = 1) of linear sRGB ``(..., 3)``: the middle row of the IEC 61966-2-1 matrix."""
-    return np.asarray(rgb, np.float64) @ cm.MATRIX_LINEAR_SRGB_TO_XYZ[1]
+    y: np.ndarray = np.asarray(rgb, np.float64) @ cm.MATRIX_LINEAR_SRGB_TO_XYZ[1]
+    return y
 
 
 def exposure_from_neutrals(

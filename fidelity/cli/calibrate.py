@@ -92,7 +92,7 @@ def calibrate(chart: str, targets: str | None, transform_names: str | None,
     if not quiet:
         click.echo(calibration_table_text(table))
         reached = [abs(e.delta_e - e.target) for e in table.entries if e.reachable]
-        n = len(table.entries)
-        click.echo(f"{n} {'entry' if n == 1 else 'entries'} ({len(reached)} reachable) in "
+        count = len(table.entries)
+        click.echo(f"{count} {'entry' if count == 1 else 'entries'} ({len(reached)} reachable) in "
                    f"{seconds:.2f} s" + (f"; largest |ΔE - target| = {max(reached):.1e}"
                                          if reached else ""))

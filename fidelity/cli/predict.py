@@ -64,6 +64,7 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
     if max_dmap is not None:
         _print_limit(max_dmap, cls, unit, size, table, method, json_path)
         return
+    assert delta_e is not None  # one of the two was given
     p = predict(delta_e, size=size, table=table, method=method, baseline_map=baseline_map)
     b = "<= " if p.table.kind == "published-bounds" else ""
 

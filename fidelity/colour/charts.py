@@ -59,7 +59,7 @@ class Chart:
     @property
     def srgb_unclipped(self) -> NDArray[np.float64]:
         """Encoded sRGB of the reference Lab, (n, 3), not clipped (out-of-gamut patches leave [0, 1])."""
-        return lab_to_srgb(self.lab)
+        return np.asarray(lab_to_srgb(self.lab), dtype=np.float64)
 
     @property
     def srgb(self) -> NDArray[np.float64]:

@@ -91,7 +91,8 @@ MATRIX_LINEAR_SRGB_TO_XYZ: NDArray[np.float64] = normalised_primary_matrix(
     _SRGB_PRIMARIES_XY, WHITEPOINT_D65_XY
 )
 #: XYZ -> linear sRGB, the exact inverse of :data:`MATRIX_LINEAR_SRGB_TO_XYZ`.
-MATRIX_XYZ_TO_LINEAR_SRGB: NDArray[np.float64] = np.linalg.inv(MATRIX_LINEAR_SRGB_TO_XYZ)
+MATRIX_XYZ_TO_LINEAR_SRGB: NDArray[np.float64] = np.asarray(
+    np.linalg.inv(MATRIX_LINEAR_SRGB_TO_XYZ), dtype=np.float64)
 #: XYZ of the D65 white with Y = 1: (0.95046, 1, 1.08906).
 WHITEPOINT_D65_XYZ: NDArray[np.float64] = _xy_to_xyz(WHITEPOINT_D65_XY)
 
@@ -443,7 +444,8 @@ def delta_e_1976(lab1: ArrayLike, lab2: ArrayLike) -> FloatArray:
     out_dtype = _result_dtype(lab1, lab2)
     p, q = _lab_pair(lab1, lab2)
     d = q - p
-    return np.sqrt(np.sum(d * d, axis=-1)).astype(out_dtype, copy=False)
+    out: FloatArray = np.sqrt(np.sum(d * d, axis=-1)).astype(out_dtype, copy=False)
+    return out
 
 
 #: Colour-difference methods by name, for ``delta_e(..., method=...)``.

@@ -30,6 +30,7 @@ from __future__ import annotations
 import json
 import re
 from dataclasses import dataclass, field
+from typing import Any
 from functools import lru_cache
 from pathlib import Path
 
@@ -114,7 +115,7 @@ class PatchSpectra:
     patch_names: tuple[str, ...]
     wavelengths: FloatArray
     reflectance: FloatArray
-    provenance: dict = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
 
     def on_grid(self, step: float = GRID_STEP_NM) -> FloatArray:
         """Reflectances (24, M) on :func:`wavelength_grid` (linear, end values held)."""
@@ -374,7 +375,7 @@ class SceneReference:
     lab: FloatArray
     linear_srgb: FloatArray
     srgb: FloatArray
-    conventions: dict
+    conventions: dict[str, Any]
 
 
 def scene_reference(
@@ -415,8 +416,9 @@ def scene_reference(
         "srgb": "IEC 61966-2-1, unclipped (out-of-gamut patches may fall outside [0, 1])",
     }
     return SceneReference(
-        ps.patch_names, xyz_scene, white, xyz, cm.xyz_to_lab(xyz), lin,
-        cm.delinearize_srgb(lin), conventions,
+        ps.patch_names, xyz_scene, white, xyz, np.asarray(cm.xyz_to_lab(xyz), np.float64),
+        np.asarray(lin, np.float64), np.asarray(cm.delinearize_srgb(lin), np.float64),
+        conventions,
     )
 
 

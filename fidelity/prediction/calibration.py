@@ -146,7 +146,7 @@ def transform_delta_e(
     p = np.asarray(param, dtype=np.float64)
     image = c.srgb.reshape((1,) * p.ndim + c.srgb.shape)  # (1.., n, 3)
     out = spec.function(image, p[..., None])  # param broadcast over patches
-    return delta_e_2000(srgb_to_lab(out), c.lab).mean(axis=-1)
+    return np.asarray(delta_e_2000(srgb_to_lab(out), c.lab).mean(axis=-1), dtype=np.float64)
 
 
 def _scan_grid(spec: TransformSpec) -> list[NDArray[np.float64]]:

@@ -289,7 +289,7 @@ def _interp_pchip(x: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def _interp_linear(x: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
-    return np.interp(t, x, y)
+    return np.asarray(np.interp(t, x, y))
 
 
 def _interp_step(x: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -816,8 +816,9 @@ def transform_parameters(delta_e: float, calibration: Any = None, *,
             row.update(method="unreachable within the transform's range")
         out.append(TransformParameter(
             name, float(row["delta_e"]), row["param"], row["reachable"], row["method"],
-            None if row["bracket"] is None else tuple(
-                (float(b["delta_e"]), float(b["param"])) for b in row["bracket"])))
+            None if row["bracket"] is None else (
+                (float(row["bracket"][0]["delta_e"]), float(row["bracket"][0]["param"])),
+                (float(row["bracket"][1]["delta_e"]), float(row["bracket"][1]["param"])))))
     return out
 
 

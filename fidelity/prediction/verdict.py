@@ -137,21 +137,21 @@ def evaluate(mean_delta_e: float, prediction: Prediction | None, criterion: Crit
                        f"{'<=' if passed else '>'} {criterion.limit:g}")
     if prediction is None:
         raise InvalidValueError("a --max-dmap gate needs a prediction")
-    value = prediction.value(criterion.cls, criterion.unit)
+    loss = prediction.value(criterion.cls, criterion.unit)
     col = prediction.columns[criterion.column]
     what = criterion.describe().removeprefix("predicted ").split(" <=")[0]
     unit = "points" if criterion.unit == "points" else "%"
-    if value is None:
+    if loss is None:
         return Verdict(False, criterion, None,
                        f"FAIL: table {prediction.table.name!r} has no {what} prediction "
                        f"(nothing supports a pass)", conservative=True)
-    passed = value <= criterion.limit
+    passed = loss <= criterion.limit
     conservative = col.status != "interpolated"
     extra = f" ({col.status}: conservative answer)" if conservative else ""
     bound = " (upper bound)" if prediction.table.kind == "published-bounds" else ""
     return Verdict(
-        passed, criterion, float(value),
-        f"{'PASS' if passed else 'FAIL'}: predicted {what} {value:.2f} {unit}{bound}"
+        passed, criterion, float(loss),
+        f"{'PASS' if passed else 'FAIL'}: predicted {what} {loss:.2f} {unit}{bound}"
         f"{extra} {'<=' if passed else '>'} {criterion.limit:g} at mean ΔE00 "
         f"{prediction.delta_e:.2f}",
         conservative=conservative,

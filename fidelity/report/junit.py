@@ -114,9 +114,9 @@ def junit_xml(cases: Sequence[GateCase], *, timestamp: str | None = None,
     suite.set("failures", str(failures))
     suite.set("errors", str(errors))
     for case in suite.findall("testcase"):  # an empty <properties> is not valid JUnit
-        props = case.find("properties")
-        if props is not None and not len(props):
-            case.remove(props)
+        empty = case.find("properties")
+        if empty is not None and not len(empty):
+            case.remove(empty)
     if not len(suite_props):
         suite.remove(suite_props)
     root = ET.Element("testsuites", name="fidelity", tests=str(len(cases)),

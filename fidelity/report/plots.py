@@ -203,7 +203,8 @@ def chart_location(pixels: NDArray[Any], location: ChartLocation, *, encoding: s
     arr = np.asarray(pixels, dtype=np.float64)
     arr = np.where(np.isfinite(arr), arr, 0.0)
     if encoding == "linear":
-        arr = cm.delinearize_srgb(np.clip(arr * 2.0 ** exposure_ev, 0.0, 1.0))
+        arr = np.asarray(cm.delinearize_srgb(np.clip(arr * 2.0 ** exposure_ev, 0.0, 1.0)),
+                         dtype=np.float64)
     arr = np.clip(arr, 0.0, 1.0)
     height, width = arr.shape[:2]
     fig, ax = new_figure(7.2, 7.2 * height / max(width, 1))
