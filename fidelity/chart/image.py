@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from fidelity.errors import InputFileError
-from fidelity.fileio import require_file
+from fidelity.fileio import atomic_output, require_file
 
 #: Pixel types that hold scene-linear data by convention.
 FLOAT_PIXEL_TYPES = frozenset({"half", "float", "double"})
@@ -339,4 +339,45 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None) -> Image:
     )
 
 
-__all__ = ["FLOAT_PIXEL_TYPES", "Image", "ImageInfo", "read_image"]
+def write_exr(path: str | os.PathLike[str], image: np.ndarray,
+              content: str = "linear camera RGB (raw, after exposure/noise)") -> Path:
+    """Write (H, W, 3) float32 RGB as a zip-compressed scanline EXR (channels R, G, B),
+    atomically; ``content`` is stored in the ``fidelity:content`` attribute."""
+    import OpenImageIO as oiio
+
+    img = np.ascontiguousarray(image, dtype=np.float32)
+    with atomic_output(path) as tmp:
+        out = oiio.ImageOutput.create(str(path))
+        if out is None:
+            raise InputFileError(f"{path}: cannot create EXR writer ({oiio.geterror()})")
+        spec = oiio.ImageSpec(img.shape[1], img.shape[0], 3, oiio.FLOAT)
+        spec.channelnames = ("R", "G", "B")
+        spec.attribute("compression", "zip")
+        spec.attribute("fidelity:content", content)
+        if not out.open(str(tmp), spec):
+            raise InputFileError(f"{path}: cannot write EXR ({out.geterror()})")
+        out.write_image(img)
+        out.close()
+    return Path(path)
+
+
+def write_png(path: str | os.PathLike[str], image: np.ndarray, bits: int) -> Path:
+    """Write (H, W, 3) encoded sRGB in [0, 1] as an 8- or 16-bit PNG, atomically."""
+    import OpenImageIO as oiio
+
+    if bits > 8:
+        data, fmt = np.round(np.clip(image, 0, 1) * 65535).astype(np.uint16), oiio.UINT16
+    else:
+        data, fmt = np.round(np.clip(image, 0, 1) * 255).astype(np.uint8), oiio.UINT8
+    with atomic_output(path) as tmp:
+        out = oiio.ImageOutput.create(str(path))
+        spec = oiio.ImageSpec(data.shape[1], data.shape[0], 3, fmt)
+        spec.attribute("oiio:ColorSpace", "sRGB")
+        if out is None or not out.open(str(tmp), spec):
+            raise InputFileError(f"{path}: cannot write PNG ({oiio.geterror()})")
+        out.write_image(np.ascontiguousarray(data))
+        out.close()
+    return Path(path)
+
+
+__all__ = ["FLOAT_PIXEL_TYPES", "Image", "ImageInfo", "read_image", "write_exr", "write_png"]

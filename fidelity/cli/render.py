@@ -5,51 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import click
-import numpy as np
 
 from fidelity.camera.model import DEFAULT_CAMERA
 from fidelity.camera.render import REFERENCES, RENDERERS, ChartRender, render_chart
 from fidelity.colour.spectral import CHROMATIC_ADAPTATION_METHODS, GRID_STEP_NM, SPECTRA_SETS
-from fidelity.fileio import atomic_output, write_json_atomic
-
-
-def write_exr(path: Path, image: np.ndarray) -> Path:
-    """Write (H, W, 3) float32 camera RGB as a scanline EXR (channels R, G, B), atomically."""
-    import OpenImageIO as oiio
-
-    img = np.ascontiguousarray(image, dtype=np.float32)
-    with atomic_output(path) as tmp:
-        out = oiio.ImageOutput.create(str(path))
-        if out is None:
-            raise click.ClickException(f"{path}: cannot create EXR writer ({oiio.geterror()})")
-        spec = oiio.ImageSpec(img.shape[1], img.shape[0], 3, oiio.FLOAT)
-        spec.channelnames = ("R", "G", "B")
-        spec.attribute("compression", "zip")
-        spec.attribute("fidelity:content", "linear camera RGB (raw, after exposure/noise)")
-        if not out.open(str(tmp), spec):
-            raise click.ClickException(f"{path}: cannot write EXR ({out.geterror()})")
-        out.write_image(img)
-        out.close()
-    return path
-
-
-def write_png(path: Path, image: np.ndarray, bits: int) -> Path:
-    """Write (H, W, 3) encoded sRGB in [0, 1] as an 8- or 16-bit PNG, atomically."""
-    import OpenImageIO as oiio
-
-    if bits > 8:
-        data, fmt = np.round(np.clip(image, 0, 1) * 65535).astype(np.uint16), oiio.UINT16
-    else:
-        data, fmt = np.round(np.clip(image, 0, 1) * 255).astype(np.uint8), oiio.UINT8
-    with atomic_output(path) as tmp:
-        out = oiio.ImageOutput.create(str(path))
-        spec = oiio.ImageSpec(data.shape[1], data.shape[0], 3, fmt)
-        spec.attribute("oiio:ColorSpace", "sRGB")
-        if out is None or not out.open(str(tmp), spec):
-            raise click.ClickException(f"{path}: cannot write PNG ({oiio.geterror()})")
-        out.write_image(np.ascontiguousarray(data))
-        out.close()
-    return path
+from fidelity.fileio import write_json_atomic
 
 
 def format_report(r: ChartRender) -> str:
@@ -132,6 +92,8 @@ def render(camera: str, illuminant: str, renderer: str, spp: int | None,
                           cat=cat, step=step, variant=variant)
     report = result.to_json()
     if out_dir is not None:
+        from fidelity.chart.image import write_exr, write_png
+
         exr = write_exr(out_dir / "chart_linear.exr", result.linear_image)
         bits = result.camera.quantisation_bits or 16
         png = write_png(out_dir / "chart_display.png", result.display_image, bits)
