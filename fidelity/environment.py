@@ -30,18 +30,28 @@ def available_cpus() -> int:
     return os.cpu_count() or 1
 
 
-def dependency_versions(distribution: str = "fidelity") -> dict[str, str | None]:
-    """Installed version of each requirement ``distribution`` declares (extras excluded);
-    None for a requirement that is not installed."""
+#: The distribution's name on the package index (the import name is ``fidelity``).
+DISTRIBUTION = "camera-fidelity"
+#: Extras whose packages the tool runs with (not the test and docs tools).
+RUNTIME_EXTRAS = ("render", "coco", "ray")
+
+
+def dependency_versions(distribution: str = DISTRIBUTION,
+                        extras: tuple[str, ...] = ()) -> dict[str, str | None]:
+    """Installed version of each requirement ``distribution`` declares: the core, and those of
+    ``extras``; None for a requirement that is not installed."""
     try:
         requires = metadata.requires(distribution) or []
     except metadata.PackageNotFoundError:
         return {}
     out: dict[str, str | None] = {}
     for req in requires:
-        if "extra ==" in req:
+        extra = re.search(r"""extra\s*==\s*["']([^"']+)["']""", req)
+        if extra and extra.group(1) not in extras:
             continue
         name = re.split(r"[\s<>=!~;\[]", req, maxsplit=1)[0]
+        if name == distribution:  # an extra that names others ("all")
+            continue
         try:
             out[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
@@ -57,7 +67,7 @@ def _mitsuba(probe: bool) -> dict[str, Any]:
 
     try:
         p = probe_variant()
-    except FidelityError as exc:
+    except (FidelityError, ImportError) as exc:
         return {"probed": True, "variant": None, "error": str(exc)}
     return {"probed": True, "variant": p.variant, "libllvm": p.libllvm, "notes": list(p.notes)}
 
@@ -65,12 +75,23 @@ def _mitsuba(probe: bool) -> dict[str, Any]:
 def _onnxruntime() -> dict[str, Any]:
     try:
         import onnxruntime as ort
-    except ImportError as exc:  # pragma: no cover - a declared dependency
-        return {"error": str(exc)}
+    except ImportError as exc:  # the [coco] extra is not installed
+        return {"error": str(exc), "available": [], "used": []}
     from fidelity.coco.detectors import default_providers
 
     return {"available": list(ort.get_available_providers()), "used": default_providers(),
             "device": ort.get_device()}
+
+
+def _coco_scorer() -> str | None:
+    """The COCO scorer ``auto`` picks; None without the [coco] extra."""
+    from fidelity.coco.scoring import resolve_scorer
+    from fidelity.errors import FidelityError
+
+    try:
+        return resolve_scorer("auto")
+    except (FidelityError, ImportError):
+        return None
 
 
 def _chart_detection() -> dict[str, Any]:
@@ -101,18 +122,21 @@ def describe_environment(probe: bool = True) -> dict[str, Any]:
     """The installation's capabilities (module docstring); ``probe``: run the Mitsuba probe
     (a few seconds, subprocesses)."""
     from fidelity import __version__
-    from fidelity.coco.scoring import resolve_scorer
     from fidelity.prediction.table import DEFAULT_TABLE, available_tables
+
+    core = dependency_versions()
 
     return {
         "fidelity": __version__,
         "python": platform.python_version(),
         "platform": platform.platform(),
         "cpus": available_cpus(),
-        "dependencies": dependency_versions(),
+        "dependencies": core,
+        "extras": {extra: {k: v for k, v in dependency_versions(extras=(extra,)).items()
+                           if k not in core} for extra in RUNTIME_EXTRAS},
         "mitsuba": _mitsuba(probe),
         "onnxruntime": _onnxruntime(),
-        "coco_scorer": resolve_scorer("auto"),
+        "coco_scorer": _coco_scorer(),
         "chart_detection": _chart_detection(),
         "shared": _shared(),
         "prediction_tables": {"default": DEFAULT_TABLE, "available": available_tables()},

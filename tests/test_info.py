@@ -20,10 +20,17 @@ def test_info_reports_every_declared_dependency_and_the_setup(tmp_path: Path) ->
     r = CliRunner().invoke(main, ["info", "--no-probe", "--json", str(tmp_path / "env.json")])
     assert r.exit_code == 0, r.output
     env = json.loads((tmp_path / "env.json").read_text())
-    declared = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["dependencies"]
-    names = {re.split(r"[<>=!~;\[ ]", d, maxsplit=1)[0].lower() for d in declared}
-    assert {k.lower() for k in env["dependencies"]} == names
-    for name, version in env["dependencies"].items():
+    project = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
+
+    def names(requirements: list[str]) -> set[str]:
+        return {re.split(r"[<>=!~;\[ ]", d, maxsplit=1)[0].lower() for d in requirements}
+
+    assert {k.lower() for k in env["dependencies"]} == names(project["dependencies"])
+    for extra in ("render", "coco", "ray"):
+        declared = names(project["optional-dependencies"][extra])
+        assert {k.lower() for k in env["extras"][extra]} == declared, extra
+    for name, version in [*env["dependencies"].items(),
+                          *(kv for e in env["extras"].values() for kv in e.items())]:
         assert version == metadata.version(name), name
         assert f"{name} {version}" in r.output
     import onnxruntime

@@ -114,6 +114,10 @@ class LazyGroup(click.Group):
         except (click.exceptions.Abort, KeyboardInterrupt):
             click.echo("fidelity: interrupted", err=True)
             sys.exit(130)
+        except BrokenPipeError:  # `fidelity ... | head`: the reader left; stop quietly
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+            sys.exit(141)
         except Exception as exc:  # noqa: BLE001 - the boundary: a bug is exit 3, not a traceback
             text = traceback.format_exc()
             try:

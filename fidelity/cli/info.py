@@ -21,6 +21,10 @@ def info(probe: bool, json_path: Path | None) -> None:
                f"{env['cpus']} CPU(s)")
     deps = env["dependencies"]
     click.echo("dependencies: " + ", ".join(f"{k} {v or 'MISSING'}" for k, v in deps.items()))
+    for extra, pkgs in env["extras"].items():
+        state = "installed" if all(pkgs.values()) else "not installed"
+        click.echo(f"extra [{extra}] {state}: " + ", ".join(f"{k} {v or 'missing'}"
+                                                         for k, v in pkgs.items()))
     m = env["mitsuba"]
     if not m["probed"]:
         click.echo("mitsuba: not probed (--probe)")

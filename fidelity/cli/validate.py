@@ -6,8 +6,9 @@ import click
 
 
 @click.command()
-@click.option("--cameras", required=True, type=click.Path(file_okay=False),
-              help="Folder of camera files (+ optional suite.toml with scene illuminants).")
+@click.option("--cameras", default=None, type=click.Path(file_okay=False),
+              help="Folder of camera files (+ optional suite.toml with scene illuminants); "
+                   "default: the 30-camera suite that ships with fidelity.")
 @click.option("--models", default=None,
               help="Comma-separated ONNX files, each optionally PATH@N (first N images by id).")
 @click.option("--images", default=None, type=click.Path(file_okay=False),
@@ -37,7 +38,7 @@ import click
 @click.option("--notes", default=None, type=click.Path(dir_okay=False, exists=True),
               help="Markdown file with a written analysis, included in the report.")
 @click.option("--no-progress", is_flag=True, help="No progress bars.")
-def validate(cameras: str, models: str | None, images: str | None, annotations: str | None,
+def validate(cameras: str | None, models: str | None, images: str | None, annotations: str | None,
              out: str, limit: int | None, store: str | None, method: str, training: str,
              threads: int, provider: str, bound_table: str | None, report_only: bool,
              notes: str | None, no_progress: bool) -> None:
@@ -71,6 +72,10 @@ def validate(cameras: str, models: str | None, images: str | None, annotations: 
         raise unknown_name("emulation method", method, EMULATION_METHODS)
     if training not in TRAINING_SETS:
         raise unknown_name("training set", training, TRAINING_SETS)
+    if cameras is None:
+        from fidelity.resources import resource_dir
+
+        cameras = str(resource_dir("cameras"))
     cases = load_suite(cameras)
     store_dir = store or str(default_store())
     if report_only:
