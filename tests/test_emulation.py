@@ -136,10 +136,10 @@ def test_apply_uint8_equals_float_path_and_accuracy_is_small() -> None:
     from fidelity.coco.dataset import to_uint8
 
     np.testing.assert_array_equal(emu.apply_uint8(img), to_uint8(emu.apply(img / 255.0)))
-    acc = emulation_accuracy(emu).to_json()
+    acc = emulation_accuracy(emu).summary()
     # the only differences left: 8-bit rounding of the chart and out-of-gamut (cyan) clipping
-    assert acc["chart_mean_delta_e"] < 0.5
-    assert abs(acc["emulated_chart_delta_e"] - acc["camera_chart_delta_e"]) < 0.5
+    assert acc.chart_mean_delta_e < 0.5
+    assert abs(acc.emulated_chart_delta_e - acc.camera_chart_delta_e) < 0.5
 
 
 def test_unknown_method_and_training_are_named() -> None:

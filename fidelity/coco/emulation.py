@@ -52,9 +52,10 @@ same table; the result is compared patch by patch with the camera's rendered cha
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -404,10 +405,11 @@ def camera_output_srgb_noquant(camera: CameraModel, linear: ArrayLike) -> FloatA
 EMULATION_METHODS: tuple[str, ...] = ("root-polynomial", "lut3d")
 
 
-def fit_emulation(camera: CameraModel | str, illuminant: str = "D65",
+def fit_emulation(camera: CameraModel | str | Path, illuminant: str = "D65",
                   method: str = "root-polynomial", training: str = "colour-science",
                   chart_spectra: str = "BabelColor Average") -> Emulation:
-    """Fit the colour mapping of ``camera`` under ``illuminant`` (module docstring).
+    """Fit the colour mapping of ``camera`` (a model, a built-in name or a camera file) under
+    ``illuminant`` (module docstring).
 
     ``method`` in :data:`EMULATION_METHODS`; ``training`` in :data:`TRAINING_SETS`.
     """
@@ -442,20 +444,62 @@ class EmulationAccuracy:
     camera_chart_delta_e: float
     emulated_chart_delta_e: float
 
+    def summary(self) -> AccuracySummary:
+        """The summary the validation keeps: means, maxima and per-patch values."""
+        return AccuracySummary(
+            chart_mean_delta_e=float(self.chart_delta_e.mean()),
+            chart_max_delta_e=float(self.chart_delta_e.max()),
+            chart_worst_patch=self.patch_names[int(np.argmax(self.chart_delta_e))],
+            training_mean_delta_e=float(self.training_delta_e.mean()),
+            training_p95_delta_e=float(np.percentile(self.training_delta_e, 95)),
+            training_colours=int(self.training_delta_e.size),
+            camera_chart_delta_e=self.camera_chart_delta_e,
+            emulated_chart_delta_e=self.emulated_chart_delta_e,
+            patches={n: float(d) for n, d in zip(self.patch_names, self.chart_delta_e,
+                                                 strict=True)},
+        )
+
     def to_json(self) -> dict[str, Any]:
-        """JSON-ready summary with per-patch values."""
-        return {
-            "chart_mean_delta_e": float(self.chart_delta_e.mean()),
-            "chart_max_delta_e": float(self.chart_delta_e.max()),
-            "chart_worst_patch": self.patch_names[int(np.argmax(self.chart_delta_e))],
-            "training_mean_delta_e": float(self.training_delta_e.mean()),
-            "training_p95_delta_e": float(np.percentile(self.training_delta_e, 95)),
-            "training_colours": int(self.training_delta_e.size),
-            "camera_chart_delta_e": self.camera_chart_delta_e,
-            "emulated_chart_delta_e": self.emulated_chart_delta_e,
-            "patches": {n: float(d) for n, d in zip(self.patch_names, self.chart_delta_e,
-                                                    strict=True)},
-        }
+        """JSON-ready summary with per-patch values (:meth:`summary` as JSON)."""
+        return self.summary().to_json()
+
+
+@dataclass(frozen=True)
+class AccuracySummary:
+    """The accuracy of an emulation as the validation stores it (ΔE00, see
+    :class:`EmulationAccuracy`): chart mean, maximum and worst patch (emulated against the
+    camera's chart), training-set mean and 95th percentile over ``training_colours`` colours,
+    the chart ΔE of the camera and of the emulated chart, and ΔE00 per patch."""
+
+    chart_mean_delta_e: float
+    chart_max_delta_e: float
+    chart_worst_patch: str
+    training_mean_delta_e: float
+    training_p95_delta_e: float
+    training_colours: int
+    camera_chart_delta_e: float
+    emulated_chart_delta_e: float
+    patches: dict[str, float]
+
+    def to_json(self) -> dict[str, Any]:
+        """The summary as JSON (field names as keys, in field order)."""
+        return {"chart_mean_delta_e": self.chart_mean_delta_e,
+                "chart_max_delta_e": self.chart_max_delta_e,
+                "chart_worst_patch": self.chart_worst_patch,
+                "training_mean_delta_e": self.training_mean_delta_e,
+                "training_p95_delta_e": self.training_p95_delta_e,
+                "training_colours": self.training_colours,
+                "camera_chart_delta_e": self.camera_chart_delta_e,
+                "emulated_chart_delta_e": self.emulated_chart_delta_e,
+                "patches": self.patches}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> AccuracySummary:
+        """Inverse of :meth:`to_json`."""
+        return cls(d["chart_mean_delta_e"], d["chart_max_delta_e"], d["chart_worst_patch"],
+                   d["training_mean_delta_e"], d["training_p95_delta_e"],
+                   int(d["training_colours"]), d["camera_chart_delta_e"],
+                   d["emulated_chart_delta_e"], dict(d.get("patches") or {}))
 
 
 def emulation_accuracy(emu: Emulation, chart_spectra: str = "BabelColor Average"
@@ -486,6 +530,7 @@ __all__ = [
     "EMULATION_VERSION",
     "LUT_SIZE",
     "TRAINING_SETS",
+    "AccuracySummary",
     "CameraSamples",
     "Emulation",
     "EmulationAccuracy",
