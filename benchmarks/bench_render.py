@@ -77,7 +77,7 @@ def machine_info() -> dict[str, Any]:
         "platform": platform.platform(),
         "python": sys.version.split()[0],
         "mitsuba": mitsuba.__version__,
-        "drjit": drjit.__version__,
+        "drjit": getattr(drjit, "__version__", None),
         "numpy": np.__version__,
         "libllvm": str(lib) if lib else None,
         "note": "shared 2-core machine; other jobs may have run at the same time",
@@ -119,7 +119,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
     # resumable: finished rows are appended to a JSON-lines file and skipped on a re-run
     partial = args.out / "bench_render.partial.jsonl"
-    done: dict[tuple, dict[str, Any]] = {}
+    done: dict[tuple[Any, ...], dict[str, Any]] = {}
     if partial.is_file():
         for line in partial.read_text(encoding="utf-8").splitlines():
             if line.strip():

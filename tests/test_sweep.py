@@ -224,9 +224,98 @@ def test_kill_9_mid_cell_then_resume(coco, tmp_path) -> None:
         assert np.array_equal(after[i], d)
 
 
+class FakeDetector:
+    """Stands in for the ONNX detector (no onnxruntime session): a person box that moves with
+    the image's mean colour (so every transform changes the IoU, hence the AP), and a false
+    positive."""
+
+    def __init__(self, path: Path, *, threads: int | None = None, provider: str = "auto"):
+        self.path = Path(path)
+
+    @property
+    def name(self) -> str:
+        return self.path.stem
+
+    def describe(self) -> dict[str, str]:
+        return {"model": self.name}
+
+    def __call__(self, rgb: np.ndarray) -> np.ndarray:
+        dx = 12.0 * float(rgb.mean()) / 255.0
+        return np.array([[8 + dx, 8, 40 + dx, 56, 0.8, 0], [30, 4, 60, 20, 0.5, 0]],
+                        np.float32)
+
+
+def synthetic_coco(folder: Path, n: int = 4) -> tuple[Path, Path, Path]:
+    """``n`` small JPEG photos with one person box each, their annotations and a model file."""
+    import json
+
+    from PIL import Image
+
+    images = folder / "images"
+    images.mkdir(parents=True)
+    rng = np.random.default_rng(1)
+    for i in range(1, n + 1):
+        pixels = (rng.uniform(0, 255, (64, 64, 3)) * 0.3 + i * 40 % 180).astype(np.uint8)
+        Image.fromarray(pixels).save(images / f"{i}.jpg", quality=90)
+    ann = folder / "ann.json"
+    ann.write_text(json.dumps({
+        "images": [{"id": i, "width": 64, "height": 64, "file_name": f"{i}.jpg"}
+                   for i in range(1, n + 1)],
+        "annotations": [{"id": i, "image_id": i, "category_id": 1, "bbox": [8, 8, 32, 48],
+                         "area": 1536, "iscrowd": 0} for i in range(1, n + 1)],
+        "categories": [{"id": 1, "name": "person"}]}))
+    model = folder / "fake.onnx"
+    model.write_bytes(b"not a network")
+    return images, ann, model
+
+
+def test_two_sweeps_share_one_models_cells_fast(tmp_path, monkeypatch) -> None:
+    """The fast twin of the test below: priority and reverse order at once (two threads, a
+    stand-in detector, synthetic images) fill one store with every cell once, as one run does."""
+    import threading
+
+    from fidelity.coco import detectors
+    from fidelity.coco.sweep import run_sweep
+
+    monkeypatch.setattr(detectors, "Detector", FakeDetector)
+    images, ann, model = synthetic_coco(tmp_path / "data")
+    grid = (["contrast-inc", "contrast-dec"], [0, 3, 6])  # 8-bit tables: quick to build
+    logs: dict[str, list[str]] = {"priority": [], "reverse": []}
+    errors: list[BaseException] = []
+
+    def run(order: str) -> None:
+        try:
+            run_sweep([ModelSpec(model, 3)], images, ann, tmp_path / "two", *grid,
+                      order=order, log=logs[order].append)
+        except BaseException as exc:  # noqa: BLE001 - reported by the test
+            errors.append(exc)
+
+    threads = [threading.Thread(target=run, args=(o,)) for o in logs]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=120)
+    assert not errors, errors
+    single = run_sweep([ModelSpec(model, 3)], images, ann, tmp_path / "one", *grid,
+                       log=lambda s: None)
+    shared = SweepStore(tmp_path / "two")
+    expect = {(c.transform, c.target): c for c in single.cells()}
+    got = {(c.transform, c.target): c for c in shared.cells()}
+    assert set(got) == set(expect) and len(got) == 5
+    for key, cell in expect.items():
+        assert got[key].images == 3 and got[key].map == pytest.approx(cell.map, abs=1e-12)
+        a, b = shared.detections("fake", *key), single.detections("fake", *key)
+        assert a.keys() == b.keys() and all(np.array_equal(a[i], b[i]) for i in a)
+    assert len({c.map for c in got.values()}) > 1  # the transforms did change the scores
+    runs = sum(" images=3 " in line for log in logs.values() for line in log)
+    assert len(expect) <= runs <= len(expect) + 1, logs
+
+
 @pytest.mark.shared
+@pytest.mark.slow
 def test_two_processes_share_one_models_cells(coco, tmp_path) -> None:
-    """Priority and reverse order on one store at once: every cell once, as one process has it."""
+    """Priority and reverse order on one store at once: every cell once, as one process has it
+    (two real processes, the real detector; fast twin above)."""
     from fidelity.coco.sweep import run_sweep
 
     images, ann, model = coco

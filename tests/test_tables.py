@@ -108,7 +108,8 @@ def test_tables_json_round_trips(store, tmp_path) -> None:
     rows = data["tables"]["worst_case"]["yolo11n"]
     assert "dmap_points_se" not in rows[0] and rows[1]["dmap_points_se"] is None
     # a report rebuilt from the JSON alone is the same document
-    assert render_both(tables_document(back)) == render_both(tables_document(result))
+    assert render_both(tables_document(back, figures={})) == render_both(
+        tables_document(result, figures={}))
 
 
 def render_both(doc: Document) -> tuple[str, str]:

@@ -198,7 +198,7 @@ def reference_linear_srgb(reflectance: ArrayLike, illuminant: str = "D65",
     ill = load_illuminant(illuminant)
     xyz, white = tristimulus(reflectance, ill.on_grid())
     m = matrix_chromatic_adaptation(white, cm.WHITEPOINT_D65_XYZ, cat)
-    return cm.xyz_to_linear_srgb(xyz @ m.T)
+    return np.asarray(cm.xyz_to_linear_srgb(xyz @ m.T), dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -237,7 +237,7 @@ def camera_samples(camera: CameraModel, illuminant: str, reflectances: Reflectan
     dev = develop(camera, raw[None], chart_raw * gain, ill, spectra=chart_spectra)
     linear = (raw * dev.white_balance_gains) @ dev.ccm.T
     ref_lin = reference_linear_srgb(reflectances.reflectance, illuminant)
-    ref = np.clip(delinearize_srgb(ref_lin), 0.0, 1.0)
+    ref = np.clip(np.asarray(delinearize_srgb(ref_lin), dtype=np.float64), 0.0, 1.0)
     return CameraSamples(reflectances.names, ref, ref_lin, linear, np.clip(dev.srgb[0], 0.0, 1.0))
 
 
@@ -250,7 +250,7 @@ def camera_output_srgb(camera: CameraModel, linear: ArrayLike) -> FloatArray:
     if camera.quantisation_bits is not None:
         out = quantise(out, camera.quantisation_bits)
     if camera.output_encoding == "linear":
-        out = delinearize_srgb(out)
+        out = np.asarray(delinearize_srgb(out), dtype=np.float64)
     return np.clip(out, 0.0, 1.0)
 
 
@@ -353,7 +353,8 @@ class Emulation:
         if a.dtype != np.uint8 or a.shape[-1] != 3:
             raise InvalidValueError(f"image must be (..., 3) uint8, got {a.shape} {a.dtype}")
         idx = (a[..., 0].astype(np.uint32) << 16) | (a[..., 1].astype(np.uint32) << 8) | a[..., 2]
-        return self.cube()[idx]
+        out: NDArray[np.uint8] = self.cube()[idx]
+        return out
 
     def describe(self) -> dict[str, Any]:
         """JSON-ready description: method, training set, matrix, sizes, fit time."""
@@ -392,7 +393,7 @@ def _fit_lut3d(emu: Emulation) -> FloatArray:
                           epsilon=1.0 / LUT_RBF_WIDTH, smoothing=LUT_RBF_SMOOTHING, degree=-1)
     g = np.linspace(0.0, 1.0, LUT_SIZE)
     grid = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
-    lut = camera_output_srgb_noquant(emu.camera, emu._root_poly(grid)) + rbf(grid)
+    lut: FloatArray = camera_output_srgb_noquant(emu.camera, emu._root_poly(grid)) + rbf(grid)
     return np.clip(lut, 0.0, 1.0).reshape(LUT_SIZE, LUT_SIZE, LUT_SIZE, 3)
 
 
@@ -521,7 +522,8 @@ def emulation_accuracy(emu: Emulation, chart_spectra: str = "BabelColor Average"
     d_train = delta_e_2000(srgb_to_lab(emu.apply(emu.samples.reference_srgb)),
                            srgb_to_lab(emu.samples.camera_srgb))
     emulated_de = float(delta_e_2000(srgb_to_lab(emulated), ref.lab).mean())
-    return EmulationAccuracy(tuple(ref.patch_names), d_chart, d_train,
+    return EmulationAccuracy(tuple(ref.patch_names), np.asarray(d_chart, dtype=np.float64),
+                             np.asarray(d_train, dtype=np.float64),
                              float(render.measurement.mean_delta_e), emulated_de)
 
 

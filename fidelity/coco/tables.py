@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
@@ -450,9 +450,10 @@ class TablesResult:
 
     def to_json(self) -> dict[str, Any]:
         """``{"tables", "comparison", "delta_e_limits"}`` (strict JSON values)."""
-        return json_ready({"tables": self.tables.to_json(),
-                           "comparison": [c.to_json() for c in self.comparison],
-                           "delta_e_limits": [x.to_json() for x in self.limits]})
+        out: dict[str, Any] = json_ready({
+            "tables": self.tables.to_json(), "comparison": [c.to_json() for c in self.comparison],
+            "delta_e_limits": [x.to_json() for x in self.limits]})
+        return out
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> TablesResult:
@@ -1160,20 +1161,21 @@ def prediction_table(tables: Tables, name: str = "coco1000-measured") -> dict[st
     omitted: list[str] = []
 
     def complete_points(label: str, rows: Sequence[WorstCaseRow | SizeClassRow],
-                        source: Callable[[Any], str]) -> list[dict[str, Any]]:
+                        sources: Sequence[str]) -> list[dict[str, Any]]:
         omitted.extend(f"{label} ΔE {r.delta_e:g}" for r in rows if r.partial)
-        return [_point(r, source(r)) for r in rows if not r.partial]
+        return [_point(r, src) for r, src in zip(rows, sources, strict=True) if not r.partial]
 
     for size, srows in tables.size_classes.items():
         curves.append({"size": size, "model": None, "points": complete_points(
-            size, srows, lambda r, size=size: f"worst over {r.models} model(s) of size {size}: "
-                                              f"{', '.join(r.model_names)}")})
+            size, srows, [f"worst over {r.models} model(s) of size {size}: "
+                          f"{', '.join(r.model_names)}" for r in srows])})
     for m, wrows in tables.worst_case.items():
         info = tables.models[m]
         curves.append({"size": info.size, "model": m, "baseline_map": info.baseline_map,
                        "baseline_ap": info.baseline_ap or {},
-                       "points": complete_points(m, wrows, lambda r, m=m: f"{m} worst case over "
-                                                 f"{r.transforms_done} transforms")})
+                       "points": complete_points(m, wrows, [
+                           f"{m} worst case over {r.transforms_done} transforms"
+                           for r in wrows])})
     return {
         "name": name,
         "title": "Measured worst-case detection loss on the shared COCO val2017 subset",

@@ -531,12 +531,13 @@ class ValidationResults:
 
     def to_json(self) -> dict[str, Any]:
         """``validation.json`` (strict JSON values)."""
-        return json_ready({
+        out: dict[str, Any] = json_ready({
             "rows": [r.to_json() for r in self.rows], "summary": self.summary.to_json(),
             "cameras": {k: c.to_json() for k, c in self.cameras.items()},
             "models": {m: r.to_json() for m, r in self.models.items()},
             "baselines": {m: b.to_json() for m, b in self.baselines.items()},
             "meta": self.meta})
+        return out
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> ValidationResults:

@@ -77,9 +77,9 @@ def scatter_plot(rows: Sequence[ValidationRow], table_name: str) -> bytes:
         col = LOSS_COLUMNS[cls]
         lo, hi = 0.0, 1.0
         for m in models:
-            pts = [(p, y, r.se.get(col) or 0.0) for r in rows if r.model == m
-                   if (p := r.predicted[table_name].losses.get(col)) is not None
-                   and (y := r.measured.get(col)) is not None]
+            pts = [(pv, mv, r.se.get(col) or 0.0) for r in rows if r.model == m
+                   if (pv := r.predicted[table_name].losses.get(col)) is not None
+                   and (mv := r.measured.get(col)) is not None]
             if not pts:
                 continue
             pa, ya, sa = (np.array(v) for v in zip(*pts, strict=True))
@@ -115,11 +115,11 @@ def vs_delta_e_plot(rows: Sequence[ValidationRow], tables: Sequence[str]) -> byt
     for ax, cls in zip(axes, _PLOTTED, strict=True):
         col = LOSS_COLUMNS[cls]
         for m, mk in zip(models, "osD^v", strict=False):
-            pts = [(r.chart_delta_e, y, r.se.get(col) or 0.0) for r in rows
-                   if r.model == m and (y := r.measured.get(col)) is not None]
+            pts = [(r.chart_delta_e, mv, r.se.get(col) or 0.0) for r in rows
+                   if r.model == m and (mv := r.measured.get(col)) is not None]
             if pts:
-                x, y, s = (np.array(v) for v in zip(*pts, strict=True))
-                ax.errorbar(x, y, yerr=2 * s, fmt=mk, ms=5, alpha=0.8, capsize=2,
+                xa, ya, sa = (np.array(v) for v in zip(*pts, strict=True))
+                ax.errorbar(xa, ya, yerr=2 * sa, fmt=mk, ms=5, alpha=0.8, capsize=2,
                             label=f"measured, {m}")
         for t, ls in zip(tables, ("-", "--", ":", "-."), strict=False):
             try:
@@ -294,14 +294,15 @@ def _bound_section(results: ValidationResults) -> Section:
                      f"{s.cameras_within}/{s.cameras}", share])
     notes = []
     for t in summ.tables:
-        xs = [(p, m) for r in rows if (p := r.predicted[t].losses.dmap_points) is not None
-              and (m := r.measured.dmap_points) is not None]
+        xs = [(pv, mv) for r in rows if (pv := r.predicted[t].losses.dmap_points) is not None
+              and (mv := r.measured.dmap_points) is not None]
         if xs:
-            p, m = zip(*xs, strict=True)
-            err = np.array(m) - np.array(p)
+            pred = [x[0] for x in xs]
+            meas = [x[1] for x in xs]
+            err = np.array(meas) - np.array(pred)
             notes.append(f"- `{t}` ({rows[0].predicted[t].kind}): mAP measured − predicted: "
                          f"median {np.median(err):+.2f} points, max {err.max():+.2f}; Spearman "
-                         f"ρ(predicted, measured) = {number(spearman(p, m))}; within for "
+                         f"ρ(predicted, measured) = {number(spearman(pred, meas))}; within for "
                          f"{int(np.sum(err <= 0))}/{len(err)} cells.")
     if rows:
         de = [r.chart_delta_e for r in rows]
