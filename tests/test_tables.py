@@ -372,6 +372,9 @@ def test_model_conventions_are_said_in_words():
         "conf 0.001, no NMS (end-to-end), max_det 300")
     assert conventions_words({"conf": 0.01, "iou": 0.65, "max_det": None}) == (
         "conf 0.01, NMS IoU 0.65, no detection cap")
+    assert conventions_words({"conf": 0.001, "iou": 0.7, "max_det": 300, "max_nms": 30000,
+                              "multi_label": True}) == (
+        "conf 0.001, NMS IoU 0.7, max_det 300, max_nms 30000, multi-label")
 
 
 def test_image_caps_are_parsed_and_bad_ones_named() -> None:

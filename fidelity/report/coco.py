@@ -149,12 +149,15 @@ def tables_figures(tables: Tables) -> dict[str, Figure]:
 
 
 def conventions_words(conv: Mapping[str, Any]) -> str:
-    """The post-processing thresholds in words: no NMS for an end-to-end head, no cap if None."""
+    """The post-processing thresholds in words: no NMS for an end-to-end head, no cap if None;
+    the NMS input cap (``max_nms``) and multi-label NMS when the detector sets them."""
     iou = conv.get("iou")
     max_det = conv.get("max_det")
     return (f"conf {conv.get('conf')}, "
             + ("no NMS (end-to-end)" if iou is None else f"NMS IoU {iou}") + ", "
-            + ("no detection cap" if max_det is None else f"max_det {max_det}"))
+            + ("no detection cap" if max_det is None else f"max_det {max_det}")
+            + (f", max_nms {conv['max_nms']}" if conv.get("max_nms") is not None else "")
+            + (", multi-label" if conv.get("multi_label") else ""))
 
 
 def run_history_words(info: ModelSummary, capped: bool = False) -> str:

@@ -318,7 +318,7 @@ def _bound_section(results: ValidationResults) -> Section:
                          f"cameras; largest measured ΔmAP {max(_points(r) for r in mr):.2f} "
                          "points.")
     return section(
-        f"Within the bound of `{summ.bound_table}`, per class",
+        f"Within the bound of {summ.bound_table}, per class",
         table(["class", "cells within bound", "within bound up to 2 SE",
                "cameras within bound (all models)", "share"], body),
         Text("\n".join(notes)) if notes else None)
