@@ -68,10 +68,23 @@ def write_bytes_atomic(path: str | os.PathLike[str], data: bytes) -> Path:
 JSONObject = dict[str, Any]
 
 
+@runtime_checkable
+class SupportsJson(Protocol):
+    """A record that writes itself as JSON (the ``to_json`` of the project's dataclasses)."""
+
+    def to_json(self) -> Any:
+        """The record as JSON-ready Python values."""
+        ...
+
+
 def json_ready(obj: Any) -> Any:
-    """``obj`` as strict JSON values: numpy scalars and arrays become Python numbers and lists,
-    tuples lists, paths strings, dict keys strings, and NaN or +-Inf ``None``."""
-    if isinstance(obj, dict):
+    """``obj`` as strict JSON values: records with a ``to_json`` method are written by it,
+    numpy scalars and arrays become Python numbers and lists, tuples lists, paths strings,
+    mapping keys strings, and NaN or +-Inf ``None``. The one JSON cleaner of the project (chart
+    reports, COCO tables, validation)."""
+    if isinstance(obj, SupportsJson) and not isinstance(obj, type):
+        return json_ready(obj.to_json())
+    if isinstance(obj, Mapping):
         return {str(k): json_ready(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [json_ready(v) for v in obj]
@@ -87,45 +100,6 @@ def json_ready(obj: Any) -> Any:
 def write_json_atomic(path: str | os.PathLike[str], obj: Any) -> Path:
     """Write ``obj`` as indented JSON (NaN is rejected: not valid JSON) atomically."""
     return write_text_atomic(path, json.dumps(obj, indent=2, allow_nan=False) + "\n")
-
-
-@runtime_checkable
-class SupportsJson(Protocol):
-    """A record that writes itself as JSON (the ``to_json`` of the project's dataclasses)."""
-
-    def to_json(self) -> Any:
-        """The record as JSON-ready Python values."""
-        ...
-
-
-def json_ready(obj: Any) -> Any:
-    """``obj`` as strict JSON values, ready for :func:`json.dumps` with ``allow_nan=False``.
-
-    Records with a ``to_json`` method are written by it; mappings become dicts with string
-    keys, lists/tuples/arrays lists; numpy scalars become Python ``bool``/``int``/``float``;
-    NaN and infinities become ``None`` (JSON has no NaN); paths become strings. Everything else
-    is returned as it is. The one JSON cleaner of the project (reports, tables, validation).
-    """
-    if isinstance(obj, SupportsJson) and not isinstance(obj, type):
-        return json_ready(obj.to_json())
-    if isinstance(obj, Mapping):
-        return {str(k): json_ready(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [json_ready(v) for v in obj]
-    import numpy as np
-
-    if isinstance(obj, np.ndarray):
-        return json_ready(obj.tolist())
-    if isinstance(obj, bool | np.bool_):
-        return bool(obj)
-    if isinstance(obj, float | np.floating):
-        v = float(obj)
-        return v if math.isfinite(v) else None
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, Path):
-        return str(obj)
-    return obj
 
 
 PathLike = str | os.PathLike[str]

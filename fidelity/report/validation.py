@@ -208,7 +208,8 @@ def failure_reason(row: ValidationRow, cls: str, camera: CameraRecord) -> str:
 
     Combines: the excess over the bound in units of the measurement's standard error; where on
     the table the prediction came from (status); the direction of the chart error (shares of
-    |ΔL'|, |ΔC'|, |ΔH'|, signed mean ΔL' and ΔC', lightness contrast ratio, neutral cast); and
+    ``|ΔL'|``, ``|ΔC'|``, ``|ΔH'|``, signed mean ΔL' and ΔC', lightness contrast ratio, neutral
+    cast); and
     the image-level ΔE00 of the emulation compared with the chart ΔE.
     """
     b = row.bound[cls]
