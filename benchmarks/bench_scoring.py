@@ -20,7 +20,7 @@ import argparse
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -29,13 +29,15 @@ from machine import best_time, machine_info  # noqa: E402
 
 if TYPE_CHECKING:
     from fidelity.coco.scoring import CocoScore
+    from fidelity.coco.sweep import SweepCell
 
 
-def _max_difference(ref: dict[str, Any], score: CocoScore) -> float:
-    """Largest |Δ| between a stored cell (map, map50, map75, ap) and a CocoScore."""
-    diffs = [abs(ref["map"] - score.map), abs(ref["map50"] - score.map50),
-             abs(ref["map75"] - score.map75)]
-    for name, ap in (ref["ap"] or {}).items():
+def _max_difference(ref: SweepCell | CocoScore, score: CocoScore) -> float:
+    """Largest |Δ| between a stored cell's (or a reference score's) map, map50, map75, ap
+    and a CocoScore."""
+    diffs = [abs((ref.map or 0.0) - score.map), abs((ref.map50 or 0.0) - score.map50),
+             abs((ref.map75 or 0.0) - score.map75)]
+    for name, ap in (ref.ap or {}).items():
         other = score.ap.get(name)
         if (ap is None) != (other is None):
             return float("inf")
@@ -65,7 +67,7 @@ def main() -> int:
     coco = load_annotations(args.annotations)
     ids_all = sorted(coco.getImgIds())
     models = store.models()
-    cells = [c for c in store.cells() if c["status"] == "done"]
+    cells = [c for c in store.cells() if c.done]
     checked = cells
     if args.check is not None and args.check < len(cells):
         pick = np.random.default_rng(1).choice(len(cells), args.check, replace=False)
@@ -74,18 +76,18 @@ def main() -> int:
     worst, n, t0 = 0.0, 0, time.perf_counter()
     worst_cell = None
     for c in checked:
-        lim = models[c["model"]]["limit_images"]
+        lim = models[c.model].limit_images
         ids = ids_all[:lim] if lim else ids_all
-        dets = store.detections(c["model"], c["transform"], c["target"])
+        dets = store.detections(c.model, c.transform, c.target)
         fast = evaluate_detections(coco, dets, ids, method="faster-coco-eval")
         # cells the sweep scored with pycocotools are compared with their stored numbers; the
         # others are scored with pycocotools here
-        ref = c if scorer_of(c) == "pycocotools" else evaluate_detections(
-            coco, dets, ids, method="pycocotools").to_dict()
+        ref: SweepCell | CocoScore = c if scorer_of(c) == "pycocotools" else \
+            evaluate_detections(coco, dets, ids, method="pycocotools")
         d = _max_difference(ref, fast)
         n += 1
         if d > worst:
-            worst, worst_cell = d, f"{c['model']} {c['transform']} ΔE {c['target']:g}"
+            worst, worst_cell = d, f"{c.model} {c.transform} ΔE {c.target:g}"
         if n % 25 == 0:
             print(f"{n}/{len(checked)} cells, largest difference so far {worst:.2e}",
                   file=sys.stderr, flush=True)
@@ -96,14 +98,14 @@ def main() -> int:
                                            replace=False)]
     timing = []
     for c in sample:
-        lim = models[c["model"]]["limit_images"]
+        lim = models[c.model].limit_images
         ids = ids_all[:lim] if lim else ids_all
-        dets = store.detections(c["model"], c["transform"], c["target"])
+        dets = store.detections(c.model, c.transform, c.target)
         t_ref, t_fast = (best_time(lambda m=m, d=dets, i=ids: evaluate_detections(coco, d, i,
                                                                                   method=m),
                                    args.repeats)
                          for m in ("pycocotools", "faster-coco-eval"))
-        timing.append({"cell": f"{c['model']} {c['transform']} ΔE {c['target']:g}",
+        timing.append({"cell": f"{c.model} {c.transform} ΔE {c.target:g}",
                        "images": len(ids), "pycocotools_s": t_ref, "faster_coco_eval_s": t_fast,
                        "ratio": t_ref / t_fast})
         print(f"{timing[-1]['cell']:<40} {len(ids):>5} img  pycocotools {t_ref:6.2f} s  "

@@ -11,6 +11,7 @@ from fidelity.errors import InputFileError
 from fidelity.fileio import (
     atomic_output,
     check_outputs,
+    json_ready,
     require_file,
     write_json_atomic,
     write_text_atomic,
@@ -68,3 +69,41 @@ def test_check_outputs_sees_through_links_and_relative_paths(tmp_path: Path, mon
     with pytest.raises(InputFileError, match="--html names a folder; give a file name"):
         check_outputs({"--html": tmp_path})
     assert src.read_bytes() == b"x"
+
+
+def test_json_ready_makes_strict_json() -> None:
+    """numpy scalars and arrays to Python, NaN/inf to null, keys to strings, records by their
+    to_json; the result passes json.dumps(allow_nan=False) and keeps every finite value."""
+    import json
+    import math
+    from dataclasses import dataclass
+
+    import numpy as np
+
+    @dataclass(frozen=True)
+    class Rec:
+        x: float
+
+        def to_json(self) -> dict[str, float]:
+            return {"x": self.x}
+
+    obj = {1: np.float64(0.1), "a": [np.int64(3), np.bool_(True), (np.nan, -np.inf)],
+           "arr": np.array([[1.5, np.nan]]), "p": Path("/a/b"), "rec": Rec(np.float32(2.5)),
+           "neg_zero": -0.0, "none": None, "s": "text"}
+    got = json_ready(obj)
+    assert got == {"1": 0.1, "a": [3, True, [None, None]], "arr": [[1.5, None]],
+                   "p": "/a/b", "rec": {"x": 2.5}, "neg_zero": -0.0, "none": None,
+                   "s": "text"}
+    assert type(got["1"]) is float and type(got["a"][0]) is int and type(got["a"][1]) is bool
+    assert math.copysign(1.0, got["neg_zero"]) == -1.0  # -0.0 stays as written
+    json.dumps(got, allow_nan=False)
+
+
+def test_number_formatter() -> None:
+    from fidelity.report.format import MISSING, number, words
+
+    assert (number(0.125), number(0.125, 1), number(3), number(None), number("x")) == (
+        "0.12", "0.1", "3", MISSING, "x")
+    assert words({"python": "3.11", "cpus": 2, "load": [1.5, 2.0], "x": None}) == (
+        "python 3.11, cpus 2, load 1.5, 2.0, x –")
+    assert words({}) == MISSING

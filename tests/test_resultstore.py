@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fidelity.coco.store import pack_detections, unpack_detections
+from fidelity.coco.store import RegisteredModel, pack_detections, unpack_detections
 from fidelity.coco.sweep import SweepStore
 from fidelity.coco.validate import ValidationStore
 from fidelity.errors import InputFileError, InvalidValueError
@@ -26,8 +26,7 @@ def test_meta_and_models_survive_reopening(tmp_path: Path, store_cls: type) -> N
     s.close()
     again = store_cls(tmp_path, create=False)
     assert again.meta() == {"grid": {"targets": [0, 3]}}
-    assert again.models()["m"] == {"file": "m.onnx", "sha256": "aa" * 32, "limit_images": 100,
-                                   "settings": {"conf": 0.001}}
+    assert again.models()["m"] == RegisteredModel("m.onnx", "aa" * 32, 100, {"conf": 0.001})
     with pytest.raises(InputFileError, match=store_cls.store_name):
         store_cls(tmp_path / "elsewhere", create=False)
 
@@ -44,12 +43,12 @@ def test_an_extended_sweep_keeps_the_registrations_it_replaced(tmp_path: Path) -
     s = SweepStore(tmp_path)
     s.register_model("m", "m.onnx", "aa" * 32, 250, {"threads": 2, "conf": 0.001})
     s.register_model("m", "m.onnx", "aa" * 32, 250, {"threads": 2, "conf": 0.001})  # a resume
-    assert "earlier" not in s.models()["m"]["settings"]
+    assert "earlier" not in s.models()["m"].settings
     s.register_model("m", "m.onnx", "aa" * 32, 500, {"threads": 1, "conf": 0.001})
     s.register_model("m", "m.onnx", "aa" * 32, 1000, {"threads": 1, "conf": 0.001})
     got = s.models()["m"]
-    assert got["limit_images"] == 1000
-    assert got["settings"] == {"threads": 1, "conf": 0.001,
+    assert got.limit_images == 1000
+    assert got.settings == {"threads": 1, "conf": 0.001,
                                "earlier": [{"limit_images": 250, "threads": 2},
                                            {"limit_images": 500}]}
 

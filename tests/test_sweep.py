@@ -8,6 +8,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -78,12 +79,12 @@ def test_status_of_a_store_being_extended(tmp_path) -> None:
                                   "2026-01-01T00:04:00Z"), strict=True):
             s.db.execute("UPDATE cells SET finished=? WHERE model='m' AND transform=? AND "
                          "target=?", (stamp, t, float(e)))
-    m, full = sorted(sweep_status(s), key=lambda r: r["model"] != "m")
-    assert (m["images"], m["planned"], m["done"], m["unreachable"], m["to_do"]) == (4, 7, 3, 1, 3)
-    assert m["under_way"] == [("a", 6.0, 3)]
-    assert m["images_to_do"] == 1 + 4 + 4  # a@6 needs one more; b@6 and c@6 all four
-    assert m["pace_s"] == 120.0 and m["left_s"] == 360.0
-    assert (full["images"], full["done"], full["to_do"], full["pace_s"]) == (10, 0, 7, None)
+    m, full = sorted(sweep_status(s), key=lambda r: r.model != "m")
+    assert (m.images, m.planned, m.done, m.unreachable, m.to_do) == (4, 7, 3, 1, 3)
+    assert m.under_way == (("a", 6.0, 3),)
+    assert m.images_to_do == 1 + 4 + 4  # a@6 needs one more; b@6 and c@6 all four
+    assert m.pace_s == 120.0 and m.left_s == 360.0
+    assert (full.images, full.done, full.to_do, full.pace_s) == (10, 0, 7, None)
     r = CliRunner().invoke(main, ["sweep", "--status", "--out", str(tmp_path)])
     assert r.exit_code == 0, r.output
     assert "2.0 min per cell, about 0.1 h left" in r.output
@@ -140,12 +141,12 @@ def test_ci_slice_sweep_resume_rescore(coco, tmp_path) -> None:
     images, ann, model = coco
     store = run_sweep([ModelSpec(model, 4)], images, ann, tmp_path,
                       ["contrast-inc", "saturation-inc"], [0, 15], threads=2, log=lambda s: None)
-    cells = {(c["transform"], c["target"]): c for c in store.cells()}
+    cells = {(c.transform, c.target): c for c in store.cells()}
     assert set(cells) == {("baseline", 0), ("contrast-inc", 15), ("saturation-inc", 15)}
-    assert cells[("saturation-inc", 15)]["status"] == "unreachable"
-    assert "cannot reach" in cells[("saturation-inc", 15)]["reason"]
+    assert cells[("saturation-inc", 15)].status == "unreachable"
+    assert "cannot reach" in cells[("saturation-inc", 15)].reason
     param = calibrate_transform("contrast-inc", 15).param
-    assert cells[("contrast-inc", 15)]["param"] == pytest.approx(param)
+    assert cells[("contrast-inc", 15)].param == pytest.approx(param)
 
     # second method: transformed JPEG written and read back, detector, pycocotools
     gt = load_annotations(ann)
@@ -159,16 +160,16 @@ def test_ci_slice_sweep_resume_rescore(coco, tmp_path) -> None:
             dets[i] = det(roundtrip_jpeg(t, settings))
         direct = evaluate_detections(gt, dets, ids, method="pycocotools")  # the reference
         cell = cells[(transform, 0 if p is None else 15)]
-        assert cell["map"] == pytest.approx(direct.map, abs=1e-9)
-        assert cell["ap"]["person"] == pytest.approx(direct.ap["person"], abs=1e-9)
-    assert cells[("contrast-inc", 15)]["map"] < cells[("baseline", 0)]["map"]
+        assert cell.map == pytest.approx(direct.map, abs=1e-9)
+        assert cell.ap["person"] == pytest.approx(direct.ap["person"], abs=1e-9)
+    assert cells[("contrast-inc", 15)].map < cells[("baseline", 0)].map
 
     # resume: nothing is redone
-    before = {(c["transform"], c["target"]): c["finished"] for c in store.cells()}
+    before = {(c.transform, c.target): c.finished for c in store.cells()}
     time.sleep(1.1)
     again = run_sweep([ModelSpec(model, 4)], images, ann, tmp_path,
                       ["contrast-inc", "saturation-inc"], [0, 15], threads=2, log=lambda s: None)
-    assert {(c["transform"], c["target"]): c["finished"] for c in again.cells()} == before
+    assert {(c.transform, c.target): c.finished for c in again.cells()} == before
 
     from fidelity.coco.scoring import resolve_scorer
 
@@ -180,9 +181,10 @@ def test_ci_slice_sweep_resume_rescore(coco, tmp_path) -> None:
     # a store scored by pycocotools, then resumed with another scorer, says which cell had which
     again.record_scorer("faster-coco-eval")
     assert again.scorer_of(again.cells()[0]) == "pycocotools"
-    assert again.scorer_of({"finished": "2999-01-01T00:00:00Z"}) == "faster-coco-eval"
-    assert again.cell("yolox_nano", "contrast-inc", 15)["map"] == pytest.approx(
-        cells[("contrast-inc", 15)]["map"], abs=1e-12)
+    later = replace(again.cells()[0], finished="2999-01-01T00:00:00Z")
+    assert again.scorer_of(later) == "faster-coco-eval"
+    assert again.cell("yolox_nano", "contrast-inc", 15).map == pytest.approx(
+        cells[("contrast-inc", 15)].map, abs=1e-12)
 
 
 @pytest.mark.shared
@@ -215,16 +217,105 @@ def test_kill_9_mid_cell_then_resume(coco, tmp_path) -> None:
     run_sweep([ModelSpec(model, 30)], images, ann, tmp_path, [], [0], threads=2,
               log=lambda s: None)
     done = store.cell("yolox_nano", "baseline", 0)
-    assert done is not None and done["images"] == 30
+    assert done is not None and done.images == 30
     after = store.detections("yolox_nano", "baseline", 0)
     assert len(after) == 30
     for i, d in kept.items():
         assert np.array_equal(after[i], d)
 
 
+class FakeDetector:
+    """Stands in for the ONNX detector (no onnxruntime session): a person box that moves with
+    the image's mean colour (so every transform changes the IoU, hence the AP), and a false
+    positive."""
+
+    def __init__(self, path: Path, *, threads: int | None = None, provider: str = "auto"):
+        self.path = Path(path)
+
+    @property
+    def name(self) -> str:
+        return self.path.stem
+
+    def describe(self) -> dict[str, str]:
+        return {"model": self.name}
+
+    def __call__(self, rgb: np.ndarray) -> np.ndarray:
+        dx = 12.0 * float(rgb.mean()) / 255.0
+        return np.array([[8 + dx, 8, 40 + dx, 56, 0.8, 0], [30, 4, 60, 20, 0.5, 0]],
+                        np.float32)
+
+
+def synthetic_coco(folder: Path, n: int = 4) -> tuple[Path, Path, Path]:
+    """``n`` small JPEG photos with one person box each, their annotations and a model file."""
+    import json
+
+    from PIL import Image
+
+    images = folder / "images"
+    images.mkdir(parents=True)
+    rng = np.random.default_rng(1)
+    for i in range(1, n + 1):
+        pixels = (rng.uniform(0, 255, (64, 64, 3)) * 0.3 + i * 40 % 180).astype(np.uint8)
+        Image.fromarray(pixels).save(images / f"{i}.jpg", quality=90)
+    ann = folder / "ann.json"
+    ann.write_text(json.dumps({
+        "images": [{"id": i, "width": 64, "height": 64, "file_name": f"{i}.jpg"}
+                   for i in range(1, n + 1)],
+        "annotations": [{"id": i, "image_id": i, "category_id": 1, "bbox": [8, 8, 32, 48],
+                         "area": 1536, "iscrowd": 0} for i in range(1, n + 1)],
+        "categories": [{"id": 1, "name": "person"}]}))
+    model = folder / "fake.onnx"
+    model.write_bytes(b"not a network")
+    return images, ann, model
+
+
+def test_two_sweeps_share_one_models_cells_fast(tmp_path, monkeypatch) -> None:
+    """The fast twin of the test below: priority and reverse order at once (two threads, a
+    stand-in detector, synthetic images) fill one store with every cell once, as one run does."""
+    import threading
+
+    from fidelity.coco import detectors
+    from fidelity.coco.sweep import run_sweep
+
+    monkeypatch.setattr(detectors, "Detector", FakeDetector)
+    images, ann, model = synthetic_coco(tmp_path / "data")
+    grid = (["contrast-inc", "contrast-dec"], [0, 3, 6])  # 8-bit tables: quick to build
+    logs: dict[str, list[str]] = {"priority": [], "reverse": []}
+    errors: list[BaseException] = []
+
+    def run(order: str) -> None:
+        try:
+            run_sweep([ModelSpec(model, 3)], images, ann, tmp_path / "two", *grid,
+                      order=order, log=logs[order].append)
+        except BaseException as exc:  # noqa: BLE001 - reported by the test
+            errors.append(exc)
+
+    threads = [threading.Thread(target=run, args=(o,)) for o in logs]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=120)
+    assert not errors, errors
+    single = run_sweep([ModelSpec(model, 3)], images, ann, tmp_path / "one", *grid,
+                       log=lambda s: None)
+    shared = SweepStore(tmp_path / "two")
+    expect = {(c.transform, c.target): c for c in single.cells()}
+    got = {(c.transform, c.target): c for c in shared.cells()}
+    assert set(got) == set(expect) and len(got) == 5
+    for key, cell in expect.items():
+        assert got[key].images == 3 and got[key].map == pytest.approx(cell.map, abs=1e-12)
+        a, b = shared.detections("fake", *key), single.detections("fake", *key)
+        assert a.keys() == b.keys() and all(np.array_equal(a[i], b[i]) for i in a)
+    assert len({c.map for c in got.values()}) > 1  # the transforms did change the scores
+    runs = sum(" images=3 " in line for log in logs.values() for line in log)
+    assert len(expect) <= runs <= len(expect) + 1, logs
+
+
 @pytest.mark.shared
+@pytest.mark.slow
 def test_two_processes_share_one_models_cells(coco, tmp_path) -> None:
-    """Priority and reverse order on one store at once: every cell once, as one process has it."""
+    """Priority and reverse order on one store at once: every cell once, as one process has it
+    (two real processes, the real detector; fast twin above)."""
     from fidelity.coco.sweep import run_sweep
 
     images, ann, model = coco
@@ -241,12 +332,12 @@ def test_two_processes_share_one_models_cells(coco, tmp_path) -> None:
     single = run_sweep([ModelSpec(model, 5)], images, ann, tmp_path / "one", *grid, threads=1,
                        log=lambda s: None)
     shared = SweepStore(tmp_path / "two")
-    expect = {(c["transform"], c["target"]): c for c in single.cells()}
-    got = {(c["transform"], c["target"]): c for c in shared.cells()}
+    expect = {(c.transform, c.target): c for c in single.cells()}
+    got = {(c.transform, c.target): c for c in shared.cells()}
     assert set(got) == set(expect) and len(got) == 5
     for key, cell in expect.items():
-        assert got[key]["images"] == 5
-        assert got[key]["map"] == pytest.approx(cell["map"], abs=1e-12)
+        assert got[key].images == 5
+        assert got[key].map == pytest.approx(cell.map, abs=1e-12)
         a, b = shared.detections("yolox_nano", *key), single.detections("yolox_nano", *key)
         assert a.keys() == b.keys() and all(np.array_equal(a[i], b[i]) for i in a)
     # no cell was run twice except, at most, the one the two orders met on
@@ -340,34 +431,34 @@ def test_raising_and_lowering_a_model_limit(coco, tmp_path) -> None:
     store = run_sweep([ModelSpec(model, 3)], images, ann, tmp_path, ["contrast-inc"], [0, 6],
                       **quiet)
     first = store.detections("yolox_nano", "contrast-inc", 6)
-    assert sorted(c["images"] for c in store.cells()) == [3, 3]
+    assert sorted(c.images for c in store.cells()) == [3, 3]
 
     # a store caught mid-extension: the baseline is on 6 images, the cell still on 3
     gt = load_annotations(ann)
     ids6 = sorted(gt.getImgIds())[:6]
     cells = store.cells()
-    base = next(c for c in cells if c["transform"] == "baseline") | {"images": 6}
-    assert cell_deltas([base] + [c for c in cells if c["transform"] != "baseline"]) == {}
+    base = replace(next(c for c in cells if c.transform == "baseline"), images=6)
+    assert cell_deltas([base] + [c for c in cells if c.transform != "baseline"]) == {}
 
     lines: list[str] = []
     store = run_sweep([ModelSpec(model, 6)], images, ann, tmp_path, ["contrast-inc"], [0, 6],
                       threads=1, log=lines.append)
-    assert sorted(c["images"] for c in store.cells()) == [6, 6]
+    assert sorted(c.images for c in store.cells()) == [6, 6]
     assert all("new=3 " in line for line in lines), lines
     after = store.detections("yolox_nano", "contrast-inc", 6)
     assert sorted(after) == ids6
     for i, d in first.items():  # the stored images were not run again
         assert np.array_equal(after[i], d)
     cell = store.cell("yolox_nano", "contrast-inc", 6)
-    assert cell["map"] == pytest.approx(evaluate_detections(gt, after, ids6).map, abs=1e-12)
+    assert cell.map == pytest.approx(evaluate_detections(gt, after, ids6).map, abs=1e-12)
 
     lines.clear()
     store = run_sweep([ModelSpec(model, 2)], images, ann, tmp_path, ["contrast-inc"], [0, 6],
                       threads=1, log=lines.append)
     assert all("new=0 " in line for line in lines) and len(lines) == 2
     cell = store.cell("yolox_nano", "contrast-inc", 6)
-    assert cell["images"] == 2
-    assert cell["map"] == pytest.approx(evaluate_detections(gt, after, ids6[:2]).map, abs=1e-12)
+    assert cell.images == 2
+    assert cell.map == pytest.approx(evaluate_detections(gt, after, ids6[:2]).map, abs=1e-12)
     assert len(cell_deltas(store.cells())["yolox_nano"]) == 1
 
 
@@ -376,23 +467,27 @@ def test_tables_of_a_store_caught_mid_extension(coco, tmp_path) -> None:
     """Baseline extended to 6 images, the cell still on 3: both are reported on the first 3."""
     from fidelity.coco.scoring import evaluate_detections, load_annotations
     from fidelity.coco.sweep import run_sweep
-    from fidelity.coco.tables import build_tables, report_markdown
+    from fidelity.coco.tables import AlignedCount, TablesResult, build_tables
+    from fidelity.report.coco import tables_document
+    from fidelity.report.html import render_markdown
+
+    def report_markdown(tables: object) -> str:
+        return render_markdown(tables_document(TablesResult(tables, (), ()), figures={}))
 
     images, ann, model = coco
     quiet = {"threads": 1, "log": lambda s: None}
     run_sweep([ModelSpec(model, 3)], images, ann, tmp_path, ["contrast-inc"], [0, 6], **quiet)
     store = run_sweep([ModelSpec(model, 6)], images, ann, tmp_path, ["contrast-inc"], [0],
                       **quiet)
-    assert {c["transform"]: c["images"] for c in store.cells()} == {"baseline": 6,
-                                                                     "contrast-inc": 3}
-    assert build_tables(store)["cells"] == {}  # without annotations: left out, as before
+    assert {c.transform: c.images for c in store.cells()} == {"baseline": 6,
+                                                               "contrast-inc": 3}
+    assert build_tables(store).cells == {}  # without annotations: left out, as before
 
     gt = load_annotations(ann)
     ids3 = sorted(gt.getImgIds())[:3]
     tables = build_tables(store, gt)
-    assert tables["aligned"] == {"yolox_nano": {"images": 3, "stored": [3, 6], "rescored": 1,
-                                                "capped": False}}
-    assert tables["models"]["yolox_nano"]["images"] == 3
+    assert tables.aligned == {"yolox_nano": AlignedCount(3, (3, 6), 1, False)}
+    assert tables.models["yolox_nano"].images == 3
 
     def direct_dmap(ids: list[int]) -> float:  # pycocotools on the stored detections
         base, cell = (evaluate_detections(gt, store.detections("yolox_nano", t, e), ids,
@@ -400,24 +495,22 @@ def test_tables_of_a_store_caught_mid_extension(coco, tmp_path) -> None:
                       for t, e in (("baseline", 0), ("contrast-inc", 6)))
         return 100 * (base - cell)
 
-    (row,) = tables["cells"]["yolox_nano"]
-    assert row["dmap_points"] == pytest.approx(direct_dmap(ids3), abs=1e-6)
-    assert not tables["worst_case"]["yolox_nano"][1]["partial"]
-    assert store.cell("yolox_nano", "baseline", 0)["images"] == 6  # the store is not changed
-    assert "reported on the first 3, so that every" in report_markdown(tables, [])
+    (row,) = tables.cells["yolox_nano"]
+    assert row.dmap_points == pytest.approx(direct_dmap(ids3), abs=1e-6)
+    assert not tables.worst_case["yolox_nano"][1].partial
+    assert store.cell("yolox_nano", "baseline", 0).images == 6  # the store is not changed
+    assert "reported on the first 3, so that every" in report_markdown(tables)
 
     # an earlier state asked for: both cells re-scored on the first 2 images
     capped = build_tables(store, gt, images={"yolox_nano": 2})
-    assert capped["aligned"]["yolox_nano"] == {"images": 2, "stored": [3, 6], "rescored": 2,
-                                               "capped": True}
-    (row,) = capped["cells"]["yolox_nano"]
-    assert row["dmap_points"] == pytest.approx(direct_dmap(ids3[:2]), abs=1e-6)
-    md = report_markdown(capped, [])
+    assert capped.aligned["yolox_nano"] == AlignedCount(2, (3, 6), 2, True)
+    (row,) = capped.cells["yolox_nano"]
+    assert row.dmap_points == pytest.approx(direct_dmap(ids3[:2]), abs=1e-6)
+    md = report_markdown(capped)
     assert "reported on the first 2 images, as asked (`--images`" in md
     assert "registered for the first 6 images; reported on the first 2 asked for" in md
     # a cap above what every cell has changes nothing
-    assert build_tables(store, gt, images={"yolox_nano": 5})["aligned"]["yolox_nano"][
-        "images"] == 3
+    assert build_tables(store, gt, images={"yolox_nano": 5}).aligned["yolox_nano"].images == 3
 
 
 @pytest.mark.shared
@@ -432,20 +525,20 @@ def test_fold_standard_errors_in_tables(coco, tmp_path) -> None:
                       threads=2, log=lambda s: None)
     gt = load_annotations(ann)
     tables = build_tables(store, gt)
-    row = tables["cells"]["yolox_nano"][0]
+    row = tables.cells["yolox_nano"][0]
     ids = sorted(gt.getImgIds())[:12]
     base = store.detections("yolox_nano", "baseline", 0)
     cell = store.detections("yolox_nano", "contrast-inc", 12)
     b = [evaluate_detections(gt, base, ids[k::5], method="pycocotools").map for k in range(5)]
     c = [evaluate_detections(gt, cell, ids[k::5], method="pycocotools").map for k in range(5)]
     losses = [100 * (bk - ck) for bk, ck in zip(b, c, strict=True)]
-    assert row["dmap_points_se"] == pytest.approx(np.std(losses, ddof=1) / np.sqrt(5), abs=1e-9)
+    assert row.errors.dmap_points == pytest.approx(np.std(losses, ddof=1) / np.sqrt(5), abs=1e-9)
     rel = [100 * (bk - ck) / bk for bk, ck in zip(b, c, strict=True) if bk > 0]
-    assert row["dmap_relative_se"] == pytest.approx(np.std(rel, ddof=1) / np.sqrt(len(rel)),
-                                                    abs=1e-9)
-    worst = tables["worst_case"]["yolox_nano"][1]
-    assert (worst["dmap_points_se"], worst["dmap_relative_se"]) == (
-        row["dmap_points_se"], row["dmap_relative_se"])
+    assert row.errors.dmap_relative == pytest.approx(np.std(rel, ddof=1) / np.sqrt(len(rel)),
+                                                     abs=1e-9)
+    worst = tables.worst_case["yolox_nano"][1]
+    assert (worst.dmap_points_se, worst.dmap_relative_se) == (
+        row.errors.dmap_points, row.errors.dmap_relative)
     n = store.db.execute("SELECT COUNT(*) FROM folds").fetchone()[0]
     assert n == 2  # baseline and the cell, kept for the next report
-    assert build_tables(store)["cells"]["yolox_nano"][0].get("dmap_points_se") is None
+    assert build_tables(store).cells["yolox_nano"][0].errors is None

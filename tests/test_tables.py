@@ -10,13 +10,17 @@ import pytest
 
 from fidelity.coco.sweep import SweepStore
 from fidelity.coco.tables import (
+    TablesResult,
+    WorstCaseRow,
     build_tables,
     compare_with_paper,
     model_size,
     prediction_table,
-    write_report,
+    tables_result,
 )
 from fidelity.prediction.table import parse_prediction_table
+from fidelity.report.coco import tables_document, write_tables_report
+from fidelity.report.document import Document, Table
 
 TRANSFORMS = ["contrast-inc", "hue", "saturation-inc"]
 
@@ -56,36 +60,68 @@ def test_model_size() -> None:
 
 def test_worst_case_rows_by_hand(store) -> None:
     t = build_tables(store)
-    rows = {r["delta_e"]: r for r in t["worst_case"]["yolo11n"]}
+    rows = {r.delta_e: r for r in t.worst_case["yolo11n"]}
     r3 = rows[3.0]
-    assert r3["worst_transform"] == "contrast-inc"
-    assert r3["dmap_points"] == pytest.approx(5.0) and r3["dmap_relative"] == pytest.approx(10.0)
+    assert r3.worst_transform == "contrast-inc"
+    assert r3.dmap_points == pytest.approx(5.0) and r3.dmap_relative == pytest.approx(10.0)
     # person and bicycle are their own worst cases: hue for person (10 pts), sat for bicycle
-    assert r3["dap_person_points"] == pytest.approx(10.0)
-    assert r3["dap_bicycle_points"] == pytest.approx(10.0)
-    assert r3["transforms_done"] == 3 and not r3["partial"]
+    assert r3.dap_person_points == pytest.approx(10.0)
+    assert r3.dap_bicycle_points == pytest.approx(10.0)
+    assert r3.transforms_done == 3 and not r3.partial
     r6 = rows[6.0]
-    assert r6["unreachable"] == ["saturation-inc"] and r6["transforms_reachable"] == 2
-    assert r6["partial"]  # hue at ΔE 6 is missing
-    v8 = {r["delta_e"]: r for r in t["worst_case"]["yolov8n"]}[3.0]
-    assert v8["partial"] and v8["dmap_relative"] == pytest.approx(5.0)
+    assert r6.unreachable == ("saturation-inc",) and r6.transforms_reachable == 2
+    assert r6.partial  # hue at ΔE 6 is missing
+    v8 = {r.delta_e: r for r in t.worst_case["yolov8n"]}[3.0]
+    assert v8.partial and v8.dmap_relative == pytest.approx(5.0)
     # size class n: worst over yolo11n and yolov8n
-    n3 = {r["delta_e"]: r for r in t["size_classes"]["n"]}[3.0]
-    assert n3["worst_model"] == "yolo11n" and n3["dmap_points"] == pytest.approx(5.0)
-    assert "s" in t["size_classes"] and t["models"]["yolov8s"]["size"] == "s"
+    n3 = {r.delta_e: r for r in t.size_classes["n"]}[3.0]
+    assert n3.worst_model == "yolo11n" and n3.dmap_points == pytest.approx(5.0)
+    assert "s" in t.size_classes and t.models["yolov8s"].size == "s"
+    # the unreachable cell is kept, without scores
+    (unr,) = [c for c in t.cells["yolo11n"] if not c.done]
+    assert (unr.transform, unr.delta_e, unr.map) == ("saturation-inc", 6.0, None)
 
 
 def test_paper_comparison_verdicts(store) -> None:
-    claims = {c["claim"]: c for c in compare_with_paper(build_tables(store))}
+    claims = {c.claim: c for c in compare_with_paper(build_tables(store))}
     c3 = claims["ΔE ≤ 3 keeps worst-case ΔmAP below 1 %"]
-    assert c3["verdict"].startswith("disagrees: exceeded in points and as a share")
-    assert "10.00 %" in c3["evidence"]
+    assert c3.verdict.startswith("disagrees: exceeded in points and as a share")
+    assert "10.00 %" in c3.evidence
     person = claims["person is more sensitive than the mean (relative ΔAP > ΔmAP)"]
     # cells with ΔmAP > 0.5 %: 11n c-inc@3 (10 vs 10: not more), sat@3 (1.7 vs 4: no),
     # hue@3 (16.7 vs 1: yes), c-inc@6 (16.7 vs 20: no), v8n hue@3 (0 vs 5: no) -> 1 of 5
-    assert person["verdict"] == "disagrees" and "1 of 5" in person["evidence"]
+    assert person.verdict == "disagrees" and "1 of 5" in person.evidence
     # not every transform has ΔE <= 12 for every model: ranking not claimed
-    assert claims["hue changes hurt least"]["verdict"] == "not enough data"
+    assert claims["hue changes hurt least"].verdict == "not enough data"
+
+
+def test_tables_json_round_trips(store, tmp_path) -> None:
+    """tables.json is the result's to_json, and reading it back gives the same records."""
+    result = tables_result(store)
+    written = write_tables_report(result, tmp_path / "rep")
+    data = json.loads(written["tables.json"].read_text())
+    assert data == result.to_json()
+    assert set(data) == {"tables", "comparison", "delta_e_limits"}
+    back = TablesResult.from_json(data)
+    assert back == result
+    # the baseline row has no standard-error keys; the others carry them (None here)
+    rows = data["tables"]["worst_case"]["yolo11n"]
+    assert "dmap_points_se" not in rows[0] and rows[1]["dmap_points_se"] is None
+    # a report rebuilt from the JSON alone is the same document
+    assert render_both(tables_document(back, figures={})) == render_both(
+        tables_document(result, figures={}))
+
+
+def render_both(doc: Document) -> tuple[str, str]:
+    from fidelity.report.html import render_html, render_markdown
+
+    return render_html(doc), render_markdown(doc)
+
+
+def tables_of(doc: Document, title: str) -> list[Table]:
+    """The tables of the section named ``title``."""
+    (sec,) = [s for s in doc.sections if s.title == title]
+    return [b for b in sec.blocks if isinstance(b, Table)]
 
 
 def test_prediction_table_follows_schema(store) -> None:
@@ -109,28 +145,72 @@ def test_prediction_table_follows_schema(store) -> None:
 def test_delta_e_limits_by_hand(store) -> None:
     """yolo11n's curve: ΔE 0 -> 0, ΔE 3 -> 5 points = 10 % (linear between): 1 point at ΔE
     0.6, 3 points at 1.8; 1 % at 0.3, 3 % at 0.9; 10 % and 10 points hold to the end (ΔE 3)."""
-    from fidelity.coco.tables import delta_e_limits, report_markdown
+    from fidelity.coco.tables import delta_e_limits
 
     tables = build_tables(store)
-    limits = {(r["size"], r["model"]): r["limits"] for r in delta_e_limits(tables)}
+    limits = {(r.size, r.model): r.limits for r in delta_e_limits(tables)}
     assert ("n", "yolov8n") not in limits  # its ΔE 3 row is partial: only the baseline left
-    got = [(x["delta_e"], x["status"]) for x in limits[("n", "yolo11n")]]
+    got = [(x.delta_e, x.status) for x in limits[("n", "yolo11n")]]
     want = [(0.3, "inside"), (0.9, "inside"), (3.0, "whole-range"),
             (0.6, "inside"), (1.8, "inside"), (3.0, "whole-range")]
     for (de, status), (w, ws) in zip(got, want, strict=True):
         assert de == pytest.approx(w, abs=1e-5) and status == ws
-    md = report_markdown(tables, compare_with_paper(tables), (), delta_e_limits(tables))
-    assert "| yolo11n | 0.30 | 0.90 | 3.00+ | 0.60 | 1.80 | 3.00+ |" in md
+    doc = tables_document(TablesResult(tables, (), tuple(delta_e_limits(tables))),
+                          figures={})
+    (tab,) = tables_of(doc, "ΔE limits our worst cases imply")
+    assert ("yolo11n", "0.30", "0.90", "3.00+", "0.60", "1.80", "3.00+") in tab.rows
 
 
 def test_report_files(store, tmp_path) -> None:
     out = tmp_path / "rep"
-    written = write_report(store, out, tmp_path / "pred.json")
+    written = write_tables_report(tables_result(store), out, tmp_path / "pred.json")
+    assert set(written) >= {"report.md", "report.html", "tables.json", "prediction",
+                            "worst_case.png", "map_vs_de_yolo11n.png"}
     md = (out / "report.md").read_text()
     assert "| 3 | contrast-inc | 5.00 | 10.00 |" in md
-    assert (out / "report.html").read_text().count("<img") == len(
-        [k for k in written if k.endswith(".png")]) >= 2
-    assert (out / "worst_case.png").read_bytes()[:4] == b"\x89PNG"
+    for name in ("worst_case.png", "map_vs_de_yolov8n.png"):
+        assert (out / name).read_bytes()[:4] == b"\x89PNG"
+        assert f"]({name})" in md  # the Markdown links its figure files
+
+
+def test_report_structure(store) -> None:
+    """Headline (and its figure) before any table, every figure embedded, plots before the
+    long tables, the per-cell tables and the coverage folded, Markdown and HTML from the same
+    document, no Python dict text."""
+    import re
+
+    from fidelity.report.html import markdown_inline
+
+    doc = tables_document(tables_result(store))
+    html, md = render_both(doc)
+    figures = doc.figures()
+    assert doc.headline.figure is not None and doc.headline.figure.name == "worst_case.png"
+    # one mAP plot per model with transformed cells (yolov8s has only its baseline)
+    assert [f.name for f in figures] == ["worst_case.png", "map_vs_de_yolo11n.png",
+                                         "map_vs_de_yolov8n.png"]
+    assert html.count('src="data:image/png;base64,') == html.count("<img") == len(figures)
+    assert html.index('class="headline') < html.index("data:image/png") < html.index("<table")
+    # the headline names every model's worst case at the paper's thresholds, with numbers
+    assert "yolo11n: ΔE ≤ 3: **10.00 %** (contrast-inc at ΔE 3)" in doc.headline.message
+    # plots before the long tables; the tables of every cell are folded away
+    titles = [s.title for s in doc.sections]
+    assert titles.index("mAP against ΔE, per model") < titles.index("Worst case: yolo11n")
+    folded = {s.title for s in doc.sections if s.folded}
+    assert folded == {"Coverage (which cells this report is built from)",
+                      "All cells: yolo11n", "All cells: yolov8n"}
+    assert html.count("<details>") == len(folded)
+    assert titles.index("All cells: yolo11n") > titles.index("Method")
+    details = html[html.index("<details><summary>All cells: yolo11n"):]
+    assert "contrast-inc" in details[:details.index("</details>")]
+    # every cell of every table is in both renderings
+    for s in doc.sections:
+        for b in s.blocks:
+            if isinstance(b, Table):
+                for row in b.rows:
+                    assert "| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" in md
+                    for c in row:
+                        assert str(markdown_inline(c)) in html
+    assert not re.search(r"\{'|': ", md) and "{&#39;" not in html
 
 
 def test_report_names_every_run_behind_a_models_cells(store, tmp_path) -> None:
@@ -138,7 +218,7 @@ def test_report_names_every_run_behind_a_models_cells(store, tmp_path) -> None:
     # for the first 20 with one thread (an extension caught before any new cell finished): the
     # report names both runs and says the cells are reported on 10 images.
     store.register_model("yolov8n", "yolov8n.onnx", "yolov8n" * 4, 20, {"threads": 1})
-    written = write_report(store, tmp_path / "rep", tmp_path / "pred.json")
+    written = write_tables_report(tables_result(store), tmp_path / "rep", tmp_path / "pred.json")
     md = (tmp_path / "rep" / "report.md").read_text()
     line = next(x for x in md.splitlines() if x.startswith("- yolov8n: file"))
     assert "1 intra-op thread(s)" in line
@@ -163,18 +243,18 @@ def test_ranking_claims_by_hand(tmp_path) -> None:
     s = SweepStore(tmp_path)
     s.set_meta("grid", {"transforms": ["contrast-dec", "contrast-inc", "hue"], "targets": [0, 6]})
     _model_at_de6(s, "m", {"contrast-dec": 0.46, "contrast-inc": 0.45, "hue": 0.495})
-    claims = {c["claim"]: c for c in compare_with_paper(build_tables(s))}
+    claims = {c.claim: c for c in compare_with_paper(build_tables(s))}
     most = claims["contrast increase and decrease hurt detection most"]
-    assert most["verdict"] == "agrees" and "contrast-inc 10.00 %" in most["evidence"]
+    assert most.verdict == "agrees" and "contrast-inc 10.00 %" in most.evidence
     least = claims["hue changes hurt least"]
-    assert least["verdict"] == "agrees" and "hue (1.00 %)" in least["evidence"]
-    assert "(m at ΔE 6)" in most["evidence"]
+    assert least.verdict == "agrees" and "hue (1.00 %)" in least.evidence
+    assert "(m at ΔE 6)" in most.evidence
     # two models measured at the same ΔE: said once, for every model
     _model_at_de6(s, "k", {"contrast-dec": 0.40, "contrast-inc": 0.45, "hue": 0.49})
-    claims = {c["claim"]: c for c in compare_with_paper(build_tables(s))}
+    claims = {c.claim: c for c in compare_with_paper(build_tables(s))}
     most = claims["contrast increase and decrease hurt detection most"]
-    assert "(every model at ΔE 6)" in most["evidence"]
-    assert "contrast-dec 14.00 %, contrast-inc 10.00 %, hue 1.50 %" in most["evidence"]
+    assert "(every model at ΔE 6)" in most.evidence
+    assert "contrast-dec 14.00 %, contrast-inc 10.00 %, hue 1.50 %" in most.evidence
 
 
 def _explain_store(tmp_path):  # type: ignore[no-untyped-def]
@@ -219,23 +299,23 @@ def test_class_breakdown_by_hand(tmp_path) -> None:
 
     s, coco, base, cell = _explain_store(tmp_path)
     rows = class_breakdown(coco, base, cell, [1, 2, 3, 4])
-    assert [(r["name"], r["boxes"]) for r in rows] == [("bicycle", 1), ("person", 3)]
-    assert rows[0]["ap_baseline"] == pytest.approx(1.0) and rows[0]["ap"] == pytest.approx(0.5)
-    assert rows[0]["dap_points"] == pytest.approx(50.0)
-    assert rows[0]["share_points"] == pytest.approx(25.0) and rows[1]["share_points"] == 0
+    assert [(r.name, r.boxes) for r in rows] == [("bicycle", 1), ("person", 3)]
+    assert rows[0].ap_baseline == pytest.approx(1.0) and rows[0].ap == pytest.approx(0.5)
+    assert rows[0].dap_points == pytest.approx(50.0)
+    assert rows[0].share_points == pytest.approx(25.0) and rows[1].share_points == 0
     direct = evaluate_detections(coco, base, method="pycocotools").map - evaluate_detections(
         coco, cell, method="pycocotools").map
-    assert sum(r["share_points"] for r in rows) == pytest.approx(100 * direct)
+    assert sum(r.share_points for r in rows) == pytest.approx(100 * direct)
 
     r = explain_cell(s, coco, "m", "hue", 3, rare_boxes=1)
-    assert r["images"] == 4 and r["dmap_points"] == pytest.approx(25.0)
-    assert r["rare"] == {"classes": 1, "mean_dap_points": pytest.approx(50.0),
-                         "share_points": pytest.approx(25.0)}
-    assert r["common"]["classes"] == 1 and r["common"]["share_points"] == pytest.approx(0.0)
+    assert r.images == 4 and r.dmap_points == pytest.approx(25.0)
+    assert r.rare.classes == 1 and r.rare.mean_dap_points == pytest.approx(50.0)
+    assert r.rare.share_points == pytest.approx(25.0)
+    assert r.common.classes == 1 and r.common.share_points == pytest.approx(0.0)
     with pytest.raises(InvalidValueError, match="cell m hue ΔE 6: not in the store"):
         explain_cell(s, coco, "m", "hue", 6)
     # on the first 3 images only persons, found alike: nothing lost
-    assert explain_cell(s, coco, "m", "hue", 3, images=3)["dmap_points"] == pytest.approx(0.0)
+    assert explain_cell(s, coco, "m", "hue", 3, images=3).dmap_points == pytest.approx(0.0)
     with pytest.raises(InvalidValueError, match="--images 5 is not in 1..4"):
         explain_cell(s, coco, "m", "hue", 3, images=5)
 
@@ -257,7 +337,10 @@ def test_tables_explain_command(tmp_path) -> None:
     assert res.exit_code == 0, res.output
     assert "ΔmAP 25.00 points, the mean of ΔAP over 2 classes" in res.output
     assert "classes with <= 1 boxes (1): mean ΔAP 50.00 points" in res.output
-    assert json.loads(out.read_text())["classes"][0]["name"] == "bicycle"
+    data = json.loads(out.read_text())
+    assert data["classes"][0]["name"] == "bicycle" and data["dmap_points"] == pytest.approx(25.0)
+    assert data["rare"] == {"classes": 1, "mean_dap_points": pytest.approx(50.0),
+                            "share_points": pytest.approx(25.0)}
     bad = CliRunner().invoke(main, ["tables", str(tmp_path / "store"), "--annotations",
                                     str(ann), "--explain", "m-hue-3"])
     assert bad.exit_code != 0 and "expected MODEL:TRANSFORM:ΔE" in bad.output
@@ -265,34 +348,33 @@ def test_tables_explain_command(tmp_path) -> None:
 
 def test_worst_case_rows_carry_the_rare_class_share(tmp_path) -> None:
     """With annotations, each worst-case row says how much of its ΔmAP rare classes make."""
-    from fidelity.coco.tables import build_tables, report_markdown
-
     s, coco, _, _ = _explain_store(tmp_path)
-    t = build_tables(s, coco)
-    row = t["worst_case"]["m"][1]
-    assert row["delta_e"] == 3 and row["dmap_points"] == pytest.approx(25.0)
+    result = tables_result(s, coco)
+    row = result.tables.worst_case["m"][1]
+    assert row.delta_e == 3 and row.dmap_points == pytest.approx(25.0)
     # person (3 boxes) and bicycle (1 box) are both rare at the default of 5 boxes
-    assert row["dmap_points_rare"] == pytest.approx(25.0)
-    assert (row["rare_classes"], row["classes"]) == (2, 2)
-    md = report_markdown(t, [])
-    assert "| ΔE | worst transform | ΔmAP points | of which rare |" in md
-    assert "the 2 of 2 classes with at most 5 ground-truth boxes" in md
-    assert "of which rare" not in report_markdown(build_tables(s), [])  # no annotations
-    from fidelity.coco.tables import compare_with_paper
-
-    (de3,) = [c for c in compare_with_paper(t) if c["claim"].startswith("ΔE ≤ 3")]
-    assert "of which 25.00 from the 2 classes with at most 5 boxes" in de3["evidence"]
+    assert row.rare is not None and row.rare.dmap_points_rare == pytest.approx(25.0)
+    assert (row.rare.rare_classes, row.rare.classes) == (2, 2)
+    (tab,) = tables_of(tables_document(result, figures={}), "Worst case: m")
+    assert tab.header[3] == "of which rare" and tab.rows[0][3] == "25.00"
+    (plain,) = tables_of(tables_document(tables_result(s), figures={}), "Worst case: m")
+    assert "of which rare" not in plain.header  # no annotations: no rare-class column
+    (de3,) = [c for c in result.comparison if c.claim.startswith("ΔE ≤ 3")]
+    assert "of which 25.00 from the 2 classes with at most 5 boxes" in de3.evidence
 
 
 def test_model_conventions_are_said_in_words():
-    from fidelity.coco.tables import _conventions_words
+    from fidelity.report.coco import conventions_words
 
-    assert _conventions_words({"conf": 0.001, "iou": 0.7, "max_det": 300}) == (
+    assert conventions_words({"conf": 0.001, "iou": 0.7, "max_det": 300}) == (
         "conf 0.001, NMS IoU 0.7, max_det 300")
-    assert _conventions_words({"conf": 0.001, "iou": None, "max_det": 300}) == (
+    assert conventions_words({"conf": 0.001, "iou": None, "max_det": 300}) == (
         "conf 0.001, no NMS (end-to-end), max_det 300")
-    assert _conventions_words({"conf": 0.01, "iou": 0.65, "max_det": None}) == (
+    assert conventions_words({"conf": 0.01, "iou": 0.65, "max_det": None}) == (
         "conf 0.01, NMS IoU 0.65, no detection cap")
+    assert conventions_words({"conf": 0.001, "iou": 0.7, "max_det": 300, "max_nms": 30000,
+                              "multi_label": True}) == (
+        "conf 0.001, NMS IoU 0.7, max_det 300, max_nms 30000, multi-label")
 
 
 def test_image_caps_are_parsed_and_bad_ones_named() -> None:
@@ -331,9 +413,9 @@ def test_threshold_verdicts_by_hand() -> None:
     from fidelity.coco.tables import _threshold_verdict
 
     def row(pts: float, rel: float, se_pts: float | None = None,
-            se_rel: float | None = None) -> dict:
-        return {"dmap_points": pts, "dmap_relative": rel, "dmap_points_se": se_pts,
-                "dmap_relative_se": se_rel}
+            se_rel: float | None = None) -> WorstCaseRow:
+        return WorstCaseRow(3.0, "hue", pts, rel, 0.5, None, None, None, None, 1, 1, (), False,
+                            se_pts, se_rel)
 
     assert _threshold_verdict([row(0.5, 0.9, 0.1, 0.2)], 1.0) == "agrees"
     # 0.76 points but 1.97 % of baseline, SE 1.02: inside 2 SE

@@ -11,16 +11,24 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from fidelity.coco.emulation import AccuracySummary
+from fidelity.coco.scoring import FoldScore
 from fidelity.coco.validate import (
     BASELINE,
     FOLDS,
+    CameraRecord,
+    EmulationRecord,
+    ErrorProfile,
+    ImageDeltaE,
+    ValidationResults,
     ValidationStore,
     chart_error_profile,
     collect_results,
     load_suite,
-    write_report,
 )
 from fidelity.errors import InputFileError
+from fidelity.report.document import Table
+from fidelity.report.validation import validation_document, write_validation_report
 
 REPO = Path(__file__).resolve().parent.parent
 CAMERAS = REPO / "cameras"
@@ -111,10 +119,10 @@ def test_error_profile_of_a_pure_lightness_shift() -> None:
     lab = chart.lab + np.array([3.0, 0.0, 0.0])
     m = measure_chart(lab_to_srgb(lab), chart.lab, chart.patch_names)
     p = chart_error_profile(m)
-    assert p["dominant"] == "lightness"
-    assert p["mean_dl"] == pytest.approx(3.0, abs=1e-6)
-    assert p["share_l"] == pytest.approx(1.0, abs=1e-6)
-    assert p["contrast_ratio"] == pytest.approx(1.0, abs=1e-9)
+    assert p.dominant == "lightness"
+    assert p.mean_dl == pytest.approx(3.0, abs=1e-6)
+    assert p.share_l == pytest.approx(1.0, abs=1e-6)
+    assert p.contrast_ratio == pytest.approx(1.0, abs=1e-9)
 
 
 def test_error_profile_of_a_chroma_scaling() -> None:
@@ -125,8 +133,8 @@ def test_error_profile_of_a_chroma_scaling() -> None:
     chart = load_chart()
     lab = chart.lab * np.array([1.0, 0.6, 0.6])  # less chroma, same hue and lightness
     p = chart_error_profile(measure_chart(lab_to_srgb(lab), chart.lab, chart.patch_names))
-    assert p["dominant"] == "chroma" and p["mean_dc"] < 0
-    assert p["share_h"] < 1e-6
+    assert p.dominant == "chroma" and p.mean_dc < 0
+    assert p.share_h < 1e-6
 
 
 # --------------------------------------------------------------------------------- scoring
@@ -136,54 +144,118 @@ def _score(m: float, person: float, bicycle: float | None, images: int = 10) -> 
     return SimpleNamespace(images=images, map=m, map50=m, ap={"person": person, "bicycle": bicycle})
 
 
-def test_collect_results_losses_standard_errors_and_bound(tmp_path: Path) -> None:
+def _accuracy(mean: float, worst: float, camera_de: float, emulated_de: float
+              ) -> AccuracySummary:
+    return AccuracySummary(mean, worst, "cyan", 0.4, 1.0, 10, camera_de, emulated_de,
+                           {"cyan": worst})
+
+
+def _camera(name: str, chart_de: float, dominant: str = "hue") -> CameraRecord:
+    profile = ErrorProfile(0.1, 0.1, 0.3, 0.2, 0.2, 0.6, 0.0, 0.0, 1.0, (0.0, 0.0), dominant,
+                           "cyan", 0.9)
+    emulation = EmulationRecord({"method": "root-polynomial"},
+                                _accuracy(0.3, 0.9, chart_de, chart_de + 0.1),
+                                {"lut3d": _accuracy(0.2, 0.5, chart_de, chart_de)})
+    return CameraRecord(name, f"{name}.toml", "0" * 64, "test", "D65", chart_de, 2 * chart_de,
+                        profile, {"renderer": "closed-form"}, (), emulation,
+                        ImageDeltaE(1.5, 4.0, 2, 4), 0.1)
+
+
+@pytest.fixture
+def one_camera_store(tmp_path: Path) -> ValidationStore:
+    """One detector, its baseline and one camera 2 points of mAP worse (folds by hand)."""
     st = ValidationStore(tmp_path / "store")
-    st.register_model("det", "det.onnx", "0" * 64, None, {})
-    base_folds = [{"map": 0.40, "person": 0.5, "bicycle": 0.3, "images": 2}] * FOLDS
+    st.register_model("det", "det.onnx", "0" * 64, None, {"conventions": {"conf": 0.001}})
+    base_folds = [FoldScore(0.40, 0.5, 0.3, 2)] * FOLDS
     st.finish_cell("det", BASELINE, _score(0.40, 0.50, 0.30), base_folds, 1.0)
-    fold_maps = [0.39, 0.38, 0.40, 0.37, 0.36]
-    folds = [{"map": v, "person": 0.5, "bicycle": 0.3, "images": 2} for v in fold_maps]
+    folds = [FoldScore(v, 0.5, 0.3, 2) for v in FOLD_MAPS]
     st.finish_cell("det", "cam", _score(0.38, 0.45, 0.30), folds, 1.0)
-    profile = {"dominant": "hue", "share_l": 0.2, "share_c": 0.2, "share_h": 0.6, "mean_dl": 0.0,
-               "mean_dc": 0.0, "contrast_ratio": 1.0, "neutral_cast_ab": [0.0, 0.0]}
-    st.set_case("cam", "k", {"illuminant": "D65", "chart_delta_e": 2.0, "profile": profile,
-                             "description": "test", "emulation": {"accuracy": {
-                                 "chart_mean_delta_e": 0.3, "chart_max_delta_e": 0.9,
-                                 "chart_worst_patch": "cyan", "training_mean_delta_e": 0.4,
-                                 "training_p95_delta_e": 1.0, "camera_chart_delta_e": 2.0,
-                                 "emulated_chart_delta_e": 2.1}}})
+    st.set_case("cam", "k", _camera("cam", 2.0))
+    return st
+
+
+FOLD_MAPS = [0.39, 0.38, 0.40, 0.37, 0.36]
+
+
+def test_collect_results_losses_standard_errors_and_bound(one_camera_store, tmp_path) -> None:
+    st = one_camera_store
     res = collect_results(st, tables=["safecolor-2025"], bound_table="safecolor-2025")
-    (row,) = res["rows"]
-    assert row["measured"]["dmap_points"] == pytest.approx(2.0)
-    assert row["measured"]["dmap_relative"] == pytest.approx(5.0)
-    assert row["measured"]["dap_person_points"] == pytest.approx(5.0)
-    assert row["measured"]["dap_bicycle_points"] == pytest.approx(0.0)
-    d = 100 * (0.40 - np.array(fold_maps))
-    assert row["se"]["dmap_points"] == pytest.approx(d.std(ddof=1) / np.sqrt(FOLDS))
+    (row,) = res.rows
+    assert row.measured.dmap_points == pytest.approx(2.0)
+    assert row.measured.dmap_relative == pytest.approx(5.0)
+    assert row.measured.dap_person_points == pytest.approx(5.0)
+    assert row.measured.dap_bicycle_points == pytest.approx(0.0)
+    d = 100 * (0.40 - np.array(FOLD_MAPS))
+    assert row.se.dmap_points == pytest.approx(d.std(ddof=1) / np.sqrt(FOLDS))
     # safecolor-2025 (linear): ΔE 2 lies between (0, 0) and (3, 1 point): 2/3 point for mAP
-    assert row["bound"]["all"]["predicted"] == pytest.approx(2 / 3)
-    assert row["bound"]["all"]["within"] is False
-    assert row["bound"]["bicycle"]["within"] is True
-    s = res["summary"]
-    assert s["all"]["cameras"] == 1 and s["all"]["cameras_within"] == 0
-    assert s["all"]["failures"] == [("cam", "det")]
-    paths = write_report(res, tmp_path / "report")
-    md = (tmp_path / "report" / "validation.md").read_text()
-    assert "**cam** / det" in md and "1.9 SE" in md and "inside sampling noise" in md
+    assert row.bound["all"].predicted == pytest.approx(2 / 3)
+    assert row.bound["all"].within is False
+    assert row.bound["all"].excess == pytest.approx(2.0 - 2 / 3)
+    assert row.bound["bicycle"].within is True
+    s = res.summary.classes
+    assert s["all"].cameras == 1 and s["all"].cameras_within == 0
+    assert s["all"].failures == (("cam", "det"),)
+    paths = write_validation_report(res, tmp_path / "report")
     assert {p.name for p in paths} >= {"validation.md", "validation.html", "validation.json",
                                        "predicted-vs-measured-safecolor-2025.png"}
-    json.loads((tmp_path / "report" / "validation.json").read_text())
+    # validation.json is the results' to_json and reads back to the same records
+    data = json.loads((tmp_path / "report" / "validation.json").read_text())
+    assert data == res.to_json() and ValidationResults.from_json(data) == res
+    assert data["summary"]["all"]["failures"] == [["cam", "det"]]
+    assert set(data["rows"][0]["bound"]["all"]) == {"predicted", "measured", "se", "within",
+                                                    "excess", "within_2se", "status"}
+    # the failure is explained from the data: excess in SE units, inside the noise
+    md = (tmp_path / "report" / "validation.md").read_text()
+    excess_se = (2.0 - 2 / 3) / row.se.dmap_points
+    assert "**cam** / det" in md and f"{excess_se:.1f} SE" in md
     # a stored camera that is not in the suite given (renamed or removed) is left out, and said
     from fidelity.coco.validate import CameraCase
 
     other = CameraCase("other", tmp_path / "other.toml", "D65", "0" * 64)
     res = collect_results(st, tables=["safecolor-2025"], bound_table="safecolor-2025",
                           suite=[other])
-    assert res["rows"] == [] and res["summary"]["not_in_suite"] == ["cam"]
-    assert "cam" not in res["cameras"]
-    write_report(res, tmp_path / "report2")
-    assert ("- Left out: 1 camera(s) in the store but not in the suite given (renamed or removed "
-            "camera files): cam.") in (tmp_path / "report2" / "validation.md").read_text()
+    assert res.rows == () and res.summary.not_in_suite == ("cam",)
+    assert "cam" not in res.cameras
+    doc = validation_document(res, figures={})
+    assert doc.headline.tone == "info" and doc.headline.figure is None
+
+
+def test_validation_report_structure(one_camera_store) -> None:
+    """Headline (the bound, with the bound table's plot) before any table, every figure
+    embedded, the per-camera tables folded, Markdown and HTML from one document, the tone
+    from the data, no Python dict text."""
+    import re
+
+    from fidelity.report.html import markdown_inline, render_html, render_markdown
+
+    res = collect_results(one_camera_store, tables=["safecolor-2025"],
+                          bound_table="safecolor-2025")
+    doc = validation_document(res, notes="Some *analysis*.")
+    html, md = render_html(doc), render_markdown(doc)
+    assert doc.headline.figure is not None
+    assert doc.headline.figure.name == "predicted-vs-measured-safecolor-2025.png"
+    # mAP is 1.33 points over the bound, within 2 SE (0.74); person 5 points over with no
+    # spread over the folds (SE 0): beyond 2 SE, so the headline says fail
+    (row,) = res.rows
+    assert row.bound["all"].within_2se is True and row.bound["person"].within_2se is False
+    assert doc.headline.tone == "fail"
+    assert html.index('class="headline') < html.index("data:image/png") < html.index("<table")
+    names = [f.name for f in doc.figures()]
+    assert names == ["predicted-vs-measured-safecolor-2025.png", "loss-vs-chart-delta-e.png",
+                     "emulation-accuracy.png"]
+    assert html.count('src="data:image/png;base64,') == html.count("<img") == len(names)
+    folded = {s.title for s in doc.sections if s.folded}
+    assert {"Per camera", "Emulation accuracy per camera", "Cameras"} <= folded
+    assert html.count("<details>") == len(folded)
+    assert [s.title for s in doc.sections][1] == "Analysis"
+    for s in doc.sections:
+        for b in s.blocks:
+            if isinstance(b, Table):
+                for row in b.rows:
+                    assert "| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" in md
+                    assert all(str(markdown_inline(c)) in html for c in row)
+    assert not re.search(r"\{'|': ", md) and "{&#39;" not in html
+    assert "conventions conf 0.001" in md  # the detector's settings in words
 
 
 def test_cli_needs_models_unless_report_only(tmp_path: Path) -> None:
@@ -222,15 +294,15 @@ def test_tiny_real_run_is_resumable(shared: Path, tmp_path: Path) -> None:
     r = CliRunner().invoke(main, args)
     assert r.exit_code == 0, r.output
     st = ValidationStore(tmp_path / "st", create=False)
-    cells = {c["camera"]: c for c in st.cells()}
+    cells = {c.camera: c for c in st.cells()}
     assert set(cells) == {BASELINE, "ideal-srgb8", "bad-hue-rotation"}
-    assert all(c["images"] == 4 for c in cells.values())
+    assert all(c.images == 4 for c in cells.values())
     info = st.cases()["ideal-srgb8"]
-    assert info["chart_delta_e"] < 0.5
-    assert info["emulation"]["accuracy"]["chart_max_delta_e"] < 1.5
-    before = {k: c["finished"] for k, c in cells.items()}
+    assert info.chart_delta_e < 0.5
+    assert info.emulation.accuracy.chart_max_delta_e < 1.5
+    before = {k: c.finished for k, c in cells.items()}
     r2 = CliRunner().invoke(main, args)
     assert r2.exit_code == 0, r2.output
-    assert {c["camera"]: c["finished"] for c in st.cells()} == before
+    assert {c.camera: c.finished for c in st.cells()} == before
     md = (tmp_path / "rep" / "validation.md").read_text()
     assert "bad-hue-rotation" in md and "yolox_nano" in md

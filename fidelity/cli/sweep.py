@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import sys
-from typing import Any
+from typing import TYPE_CHECKING
 
 import click
 
 from fidelity.cli.evaluate import scorer_option
+
+if TYPE_CHECKING:
+    from fidelity.coco.sweep import SweepStore
 
 
 def _targets(text: str) -> list[float]:
@@ -98,11 +101,11 @@ def sweep(models: str | None, images: str | None, annotations: str | None, trans
                       scorer=scorer,
                       progress=sys.stderr.isatty() if progress is None else progress)
     cells = store.cells()
-    done = sum(c["status"] == "done" for c in cells)
+    done = sum(c.done for c in cells)
     click.echo(f"{done} cells done, {len(cells) - done} unreachable; store {store.path}")
 
 
-def _print_status(store: Any) -> None:
+def _print_status(store: SweepStore) -> None:
     from fidelity.coco.sweep import sweep_status
 
     rows = sweep_status(store)
@@ -110,12 +113,12 @@ def _print_status(store: Any) -> None:
     click.echo(f"{'model':<18} {'images':>6} {' done':<9} {'unreachable':>11} {'to do':>5}  "
                "pace and time left")
     for r in rows:
-        pace = ("finished" if not r["to_do"] else "" if r["pace_s"] is None else
-                f"{r['pace_s'] / 60:.1f} min per cell, about {r['left_s'] / 3600:.1f} h left")
-        click.echo(f"{r['model']:<18} {r['images'] or '-':>6} {r['done']:>4}/{r['planned']:<4}"
-                   f"{r['unreachable']:>11} {r['to_do']:>5}  {pace}")
-        for t, e, n in r["under_way"]:
-            click.echo(f"{'':<18} under way: {t} ΔE {e:g}, {n} of {r['images']} images stored")
-    if any(r["to_do"] for r in rows):
+        pace = ("finished" if not r.to_do else "" if r.pace_s is None or r.left_s is None else
+                f"{r.pace_s / 60:.1f} min per cell, about {r.left_s / 3600:.1f} h left")
+        click.echo(f"{r.model:<18} {r.images or '-':>6} {r.done:>4}/{r.planned:<4}"
+                   f"{r.unreachable:>11} {r.to_do:>5}  {pace}")
+        for t, e, n in r.under_way:
+            click.echo(f"{'':<18} under way: {t} ΔE {e:g}, {n} of {r.images} images stored")
+    if any(r.to_do for r in rows):
         click.echo("pace: median time between a model's last finished cells (whatever ran "
                    "beside it); rerun the sweep's command line to resume")

@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import click
 
 from fidelity.coco.tables import RARE_BOXES
+
+if TYPE_CHECKING:
+    from fidelity.coco.sweep import SweepStore
 
 
 @click.command()
@@ -50,8 +55,9 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
     from pathlib import Path
 
     from fidelity.coco.sweep import SweepStore
-    from fidelity.coco.tables import parse_image_caps, write_report
+    from fidelity.coco.tables import parse_image_caps, tables_result
     from fidelity.fileio import check_outputs
+    from fidelity.report.coco import write_tables_report
 
     check_outputs({"--prediction": prediction, "--json": json_path},
                   {"--annotations": annotations})
@@ -77,13 +83,13 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
         else:
             click.echo(f"no annotations ({recorded or 'none recorded'}): report without "
                        "standard errors (pass --annotations)", err=True)
-    written = write_report(store, out or Path(store_dir) / "report", prediction, name, coco,
-                           progress, caps)
+    result = tables_result(store, coco, progress=progress, images=caps)
+    written = write_tables_report(result, out or Path(store_dir) / "report", prediction, name)
     for k, p in written.items():
         click.echo(f"{k:<14} {p}")
 
 
-def _explain(store: object, spec: str, annotations: str | None, rare_boxes: int,
+def _explain(store: SweepStore, spec: str, annotations: str | None, rare_boxes: int,
              caps: dict[str, int], top: int, json_path: str | None) -> None:
     from pathlib import Path
 
@@ -97,29 +103,27 @@ def _explain(store: object, spec: str, annotations: str | None, rare_boxes: int,
     except (IndexError, ValueError):
         raise InvalidValueError(f"--explain {spec!r}: expected MODEL:TRANSFORM:ΔE, e.g. "
                                 "yolov10n-int8dyn:pull_mean:1") from None
-    recorded = (store.meta().get("data") or {}).get("annotations")  # type: ignore[attr-defined]
+    recorded = (store.meta().get("data") or {}).get("annotations")
     path = annotations or recorded
     if not path or not (annotations or Path(path).is_file()):
         raise InvalidValueError(f"--explain needs the COCO annotations ({path or 'none recorded'}"
                                 " is not there): pass --annotations")
     r = explain_cell(store, load_annotations(path), model, transform, target,
-                     images=caps.get(model),
-                     rare_boxes=rare_boxes)
-    click.echo(f"{model} {transform} ΔE {target:g} on {r['images']} images: ΔmAP "
-               f"{r['dmap_points']:.2f} points, the mean of ΔAP over {len(r['classes'])} classes")
-    for key, word in (("rare", f"<= {rare_boxes}"), ("common", f"> {rare_boxes}")):
-        p = r[key]
-        if p["classes"]:
-            click.echo(f"  classes with {word} boxes ({p['classes']}): mean ΔAP "
-                       f"{p['mean_dap_points']:.2f} points, {p['share_points']:.2f} points of "
+                     images=caps.get(model), rare_boxes=rare_boxes)
+    click.echo(f"{model} {transform} ΔE {target:g} on {r.images} images: ΔmAP "
+               f"{r.dmap_points:.2f} points, the mean of ΔAP over {len(r.classes)} classes")
+    for group, word in ((r.rare, f"<= {rare_boxes}"), (r.common, f"> {rare_boxes}")):
+        if group.classes and group.mean_dap_points is not None:
+            click.echo(f"  classes with {word} boxes ({group.classes}): mean ΔAP "
+                       f"{group.mean_dap_points:.2f} points, {group.share_points:.2f} points of "
                        "the ΔmAP")
     click.echo(f"  {'class':<16} {'boxes':>5} {'AP base':>8} {'AP':>8} {'ΔAP pts':>8} "
                f"{'share pts':>9}")
-    for c in r["classes"][:top]:
-        click.echo(f"  {c['name']:<16} {c['boxes']:>5} {c['ap_baseline']:>8.4f} {c['ap']:>8.4f} "
-                   f"{c['dap_points']:>8.2f} {c['share_points']:>9.2f}")
+    for c in r.classes[:top]:
+        click.echo(f"  {c.name:<16} {c.boxes:>5} {c.ap_baseline:>8.4f} {c.ap:>8.4f} "
+                   f"{c.dap_points:>8.2f} {c.share_points:>9.2f}")
     if json_path:
         from fidelity.fileio import write_json_atomic
 
-        write_json_atomic(json_path, r)
+        write_json_atomic(json_path, r.to_json())
         click.echo(f"  JSON: {json_path}")

@@ -90,13 +90,14 @@ def validate(cameras: str | None, models: str | None, images: str | None, annota
         st = run_validation(cases, specs, images, annotations, store_dir, method=method,
                             training=training, threads=threads, provider=provider,
                             progress=not no_progress)
-    from fidelity.coco.validate import write_report
+    from fidelity.report.validation import write_validation_report
 
     results = collect_results(st, bound_table=bound_table, suite=cases)
-    paths = write_report(results, out,
-                         notes=Path(notes).read_text(encoding="utf-8") if notes else None)
-    s = results["summary"]
-    click.echo(f"{len(results['rows'])} (camera, model) cells; bound table {s['bound_table']}: "
-               f"mAP within bound for {s['all']['cameras_within']}/{s['all']['cameras']} cameras")
+    paths = write_validation_report(
+        results, out, notes=Path(notes).read_text(encoding="utf-8") if notes else None)
+    s = results.summary
+    mean = s.classes["all"]
+    click.echo(f"{len(results.rows)} (camera, model) cells; bound table {s.bound_table}: "
+               f"mAP within bound for {mean.cameras_within}/{mean.cameras} cameras")
     for p in paths:
         click.echo(f"wrote {p}")

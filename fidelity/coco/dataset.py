@@ -56,7 +56,8 @@ BASELINE = "baseline"
 
 def to_uint8(x: np.ndarray) -> np.ndarray:
     """Round [0, 1] floats to 8-bit code values: ``rint(clip(x, 0, 1) * 255)``."""
-    return np.rint(np.clip(x, 0.0, 1.0) * 255.0).astype(np.uint8)
+    out: np.ndarray = np.rint(np.clip(x, 0.0, 1.0) * 255.0).astype(np.uint8)
+    return out
 
 
 def reference_transform(rgb8: np.ndarray, name: str, param: float) -> np.ndarray:

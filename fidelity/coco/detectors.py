@@ -202,7 +202,8 @@ def resize_bilinear(image: np.ndarray, height: int, width: int) -> np.ndarray:
     top = image[y0].astype(np.float32)
     rows = top + (image[y1].astype(np.float32) - top) * fy[:, None, None]
     left = rows[:, x0]
-    return left + (rows[:, x1] - left) * fx[None, :, None]
+    out: np.ndarray = left + (rows[:, x1] - left) * fx[None, :, None]
+    return out
 
 
 @dataclass(frozen=True)

@@ -52,9 +52,10 @@ same table; the result is compared patch by patch with the camera's rendered cha
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -197,7 +198,7 @@ def reference_linear_srgb(reflectance: ArrayLike, illuminant: str = "D65",
     ill = load_illuminant(illuminant)
     xyz, white = tristimulus(reflectance, ill.on_grid())
     m = matrix_chromatic_adaptation(white, cm.WHITEPOINT_D65_XYZ, cat)
-    return cm.xyz_to_linear_srgb(xyz @ m.T)
+    return np.asarray(cm.xyz_to_linear_srgb(xyz @ m.T), dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -236,7 +237,7 @@ def camera_samples(camera: CameraModel, illuminant: str, reflectances: Reflectan
     dev = develop(camera, raw[None], chart_raw * gain, ill, spectra=chart_spectra)
     linear = (raw * dev.white_balance_gains) @ dev.ccm.T
     ref_lin = reference_linear_srgb(reflectances.reflectance, illuminant)
-    ref = np.clip(delinearize_srgb(ref_lin), 0.0, 1.0)
+    ref = np.clip(np.asarray(delinearize_srgb(ref_lin), dtype=np.float64), 0.0, 1.0)
     return CameraSamples(reflectances.names, ref, ref_lin, linear, np.clip(dev.srgb[0], 0.0, 1.0))
 
 
@@ -249,7 +250,7 @@ def camera_output_srgb(camera: CameraModel, linear: ArrayLike) -> FloatArray:
     if camera.quantisation_bits is not None:
         out = quantise(out, camera.quantisation_bits)
     if camera.output_encoding == "linear":
-        out = delinearize_srgb(out)
+        out = np.asarray(delinearize_srgb(out), dtype=np.float64)
     return np.clip(out, 0.0, 1.0)
 
 
@@ -352,7 +353,8 @@ class Emulation:
         if a.dtype != np.uint8 or a.shape[-1] != 3:
             raise InvalidValueError(f"image must be (..., 3) uint8, got {a.shape} {a.dtype}")
         idx = (a[..., 0].astype(np.uint32) << 16) | (a[..., 1].astype(np.uint32) << 8) | a[..., 2]
-        return self.cube()[idx]
+        out: NDArray[np.uint8] = self.cube()[idx]
+        return out
 
     def describe(self) -> dict[str, Any]:
         """JSON-ready description: method, training set, matrix, sizes, fit time."""
@@ -391,7 +393,7 @@ def _fit_lut3d(emu: Emulation) -> FloatArray:
                           epsilon=1.0 / LUT_RBF_WIDTH, smoothing=LUT_RBF_SMOOTHING, degree=-1)
     g = np.linspace(0.0, 1.0, LUT_SIZE)
     grid = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
-    lut = camera_output_srgb_noquant(emu.camera, emu._root_poly(grid)) + rbf(grid)
+    lut: FloatArray = camera_output_srgb_noquant(emu.camera, emu._root_poly(grid)) + rbf(grid)
     return np.clip(lut, 0.0, 1.0).reshape(LUT_SIZE, LUT_SIZE, LUT_SIZE, 3)
 
 
@@ -404,10 +406,11 @@ def camera_output_srgb_noquant(camera: CameraModel, linear: ArrayLike) -> FloatA
 EMULATION_METHODS: tuple[str, ...] = ("root-polynomial", "lut3d")
 
 
-def fit_emulation(camera: CameraModel | str, illuminant: str = "D65",
+def fit_emulation(camera: CameraModel | str | Path, illuminant: str = "D65",
                   method: str = "root-polynomial", training: str = "colour-science",
                   chart_spectra: str = "BabelColor Average") -> Emulation:
-    """Fit the colour mapping of ``camera`` under ``illuminant`` (module docstring).
+    """Fit the colour mapping of ``camera`` (a model, a built-in name or a camera file) under
+    ``illuminant`` (module docstring).
 
     ``method`` in :data:`EMULATION_METHODS`; ``training`` in :data:`TRAINING_SETS`.
     """
@@ -442,20 +445,62 @@ class EmulationAccuracy:
     camera_chart_delta_e: float
     emulated_chart_delta_e: float
 
+    def summary(self) -> AccuracySummary:
+        """The summary the validation keeps: means, maxima and per-patch values."""
+        return AccuracySummary(
+            chart_mean_delta_e=float(self.chart_delta_e.mean()),
+            chart_max_delta_e=float(self.chart_delta_e.max()),
+            chart_worst_patch=self.patch_names[int(np.argmax(self.chart_delta_e))],
+            training_mean_delta_e=float(self.training_delta_e.mean()),
+            training_p95_delta_e=float(np.percentile(self.training_delta_e, 95)),
+            training_colours=int(self.training_delta_e.size),
+            camera_chart_delta_e=self.camera_chart_delta_e,
+            emulated_chart_delta_e=self.emulated_chart_delta_e,
+            patches={n: float(d) for n, d in zip(self.patch_names, self.chart_delta_e,
+                                                 strict=True)},
+        )
+
     def to_json(self) -> dict[str, Any]:
-        """JSON-ready summary with per-patch values."""
-        return {
-            "chart_mean_delta_e": float(self.chart_delta_e.mean()),
-            "chart_max_delta_e": float(self.chart_delta_e.max()),
-            "chart_worst_patch": self.patch_names[int(np.argmax(self.chart_delta_e))],
-            "training_mean_delta_e": float(self.training_delta_e.mean()),
-            "training_p95_delta_e": float(np.percentile(self.training_delta_e, 95)),
-            "training_colours": int(self.training_delta_e.size),
-            "camera_chart_delta_e": self.camera_chart_delta_e,
-            "emulated_chart_delta_e": self.emulated_chart_delta_e,
-            "patches": {n: float(d) for n, d in zip(self.patch_names, self.chart_delta_e,
-                                                    strict=True)},
-        }
+        """JSON-ready summary with per-patch values (:meth:`summary` as JSON)."""
+        return self.summary().to_json()
+
+
+@dataclass(frozen=True)
+class AccuracySummary:
+    """The accuracy of an emulation as the validation stores it (ΔE00, see
+    :class:`EmulationAccuracy`): chart mean, maximum and worst patch (emulated against the
+    camera's chart), training-set mean and 95th percentile over ``training_colours`` colours,
+    the chart ΔE of the camera and of the emulated chart, and ΔE00 per patch."""
+
+    chart_mean_delta_e: float
+    chart_max_delta_e: float
+    chart_worst_patch: str
+    training_mean_delta_e: float
+    training_p95_delta_e: float
+    training_colours: int
+    camera_chart_delta_e: float
+    emulated_chart_delta_e: float
+    patches: dict[str, float]
+
+    def to_json(self) -> dict[str, Any]:
+        """The summary as JSON (field names as keys, in field order)."""
+        return {"chart_mean_delta_e": self.chart_mean_delta_e,
+                "chart_max_delta_e": self.chart_max_delta_e,
+                "chart_worst_patch": self.chart_worst_patch,
+                "training_mean_delta_e": self.training_mean_delta_e,
+                "training_p95_delta_e": self.training_p95_delta_e,
+                "training_colours": self.training_colours,
+                "camera_chart_delta_e": self.camera_chart_delta_e,
+                "emulated_chart_delta_e": self.emulated_chart_delta_e,
+                "patches": self.patches}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> AccuracySummary:
+        """Inverse of :meth:`to_json`."""
+        return cls(d["chart_mean_delta_e"], d["chart_max_delta_e"], d["chart_worst_patch"],
+                   d["training_mean_delta_e"], d["training_p95_delta_e"],
+                   int(d["training_colours"]), d["camera_chart_delta_e"],
+                   d["emulated_chart_delta_e"], dict(d.get("patches") or {}))
 
 
 def emulation_accuracy(emu: Emulation, chart_spectra: str = "BabelColor Average"
@@ -477,7 +522,8 @@ def emulation_accuracy(emu: Emulation, chart_spectra: str = "BabelColor Average"
     d_train = delta_e_2000(srgb_to_lab(emu.apply(emu.samples.reference_srgb)),
                            srgb_to_lab(emu.samples.camera_srgb))
     emulated_de = float(delta_e_2000(srgb_to_lab(emulated), ref.lab).mean())
-    return EmulationAccuracy(tuple(ref.patch_names), d_chart, d_train,
+    return EmulationAccuracy(tuple(ref.patch_names), np.asarray(d_chart, dtype=np.float64),
+                             np.asarray(d_train, dtype=np.float64),
                              float(render.measurement.mean_delta_e), emulated_de)
 
 
@@ -486,6 +532,7 @@ __all__ = [
     "EMULATION_VERSION",
     "LUT_SIZE",
     "TRAINING_SETS",
+    "AccuracySummary",
     "CameraSamples",
     "Emulation",
     "EmulationAccuracy",

@@ -232,15 +232,40 @@ def evaluate_detections(coco_gt: Any, detections: Mapping[int, np.ndarray],
 FOLDS: int = 5
 
 
+@dataclass(frozen=True)
+class FoldScore:
+    """COCO scores of one image fold (fractions in [0, 1]; None: no ground truth of the class
+    in the fold), as the stores keep them for standard errors (:func:`score_folds`)."""
+
+    map: float
+    person: float | None
+    bicycle: float | None
+    images: int
+
+    def value(self, key: str) -> float | None:
+        """The score named ``key``: ``"map"``, ``"person"`` or ``"bicycle"``."""
+        return {"map": self.map, "person": self.person, "bicycle": self.bicycle}[key]
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"map", "person", "bicycle", "images"}`` (the stores' format)."""
+        return {"map": self.map, "person": self.person, "bicycle": self.bicycle,
+                "images": self.images}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> FoldScore:
+        """Inverse of :meth:`to_json`."""
+        return cls(data["map"], data.get("person"), data.get("bicycle"), int(data["images"]))
+
+
 def score_folds(coco_gt: Any, detections: Mapping[int, np.ndarray], image_ids: Sequence[int],
-                folds: int = FOLDS, method: str = "pycocotools") -> list[dict[str, Any]]:
+                folds: int = FOLDS, method: str = "pycocotools") -> list[FoldScore]:
     """Scores of ``folds`` interleaved image folds (``ids[k::folds]``), for standard errors.
 
-    Returns one dict per fold with ``map``, ``person``, ``bicycle`` (AP fractions, None without
-    ground truth) and ``images``. With fewer images than folds each image is a fold; with fewer
-    than 2 images, no folds. The standard error of a paired difference d between two runs on
-    the same images is ``std(d_k, ddof=1) / sqrt(K)`` over the folds (the folds are disjoint
-    and together cover every image).
+    Returns one :class:`FoldScore` per fold (mAP, person and bicycle AP, images). With fewer
+    images than folds each image is a fold; with fewer than 2 images, no folds. The standard
+    error of a paired difference d between two runs on the same images is
+    ``std(d_k, ddof=1) / sqrt(K)`` over the folds (the folds are disjoint and together cover
+    every image).
     """
     ids = sorted(int(i) for i in image_ids)
     n = min(int(folds), len(ids))
@@ -248,8 +273,7 @@ def score_folds(coco_gt: Any, detections: Mapping[int, np.ndarray], image_ids: S
     for k in range(n if n >= 2 else 0):
         fold = ids[k::n]
         s = evaluate_detections(coco_gt, detections, fold, method=method)
-        out.append({"map": s.map, "person": s.ap.get("person"), "bicycle": s.ap.get("bicycle"),
-                    "images": len(fold)})
+        out.append(FoldScore(s.map, s.ap.get("person"), s.ap.get("bicycle"), len(fold)))
     return out
 
 

@@ -15,6 +15,8 @@ import os
 import sqlite3
 import time
 import zlib
+from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -22,7 +24,7 @@ import numpy as np
 
 from fidelity.errors import InputFileError, InvalidValueError
 
-__all__ = ["ResultsStore", "pack_detections", "unpack_detections"]
+__all__ = ["RegisteredModel", "ResultsStore", "pack_detections", "unpack_detections"]
 
 _COMMON_SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -39,6 +41,30 @@ def pack_detections(d: np.ndarray) -> bytes:
 def unpack_detections(blob: bytes) -> np.ndarray:
     """Inverse of :func:`pack_detections`."""
     return np.frombuffer(zlib.decompress(blob), dtype=np.float32).reshape(-1, 6)
+
+
+@dataclass(frozen=True)
+class RegisteredModel:
+    """A model as a store registered it: its ONNX ``file`` name and ``sha256``, the image
+    limit of its run (``limit_images``; None = every image) and the detector's ``settings``
+    (provenance as the detector describes itself, JSON; ``settings["earlier"]`` lists the
+    registrations a run replaced, see :meth:`ResultsStore.register_model`)."""
+
+    file: str
+    sha256: str
+    limit_images: int | None
+    settings: dict[str, Any]
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"file", "sha256", "limit_images", "settings"}``."""
+        return {"file": self.file, "sha256": self.sha256, "limit_images": self.limit_images,
+                "settings": self.settings}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> RegisteredModel:
+        """Inverse of :meth:`to_json`."""
+        return cls(data["file"], data["sha256"], data.get("limit_images"),
+                   dict(data.get("settings") or {}))
 
 
 #: Seconds a store waits for another process's lock before giving up.
@@ -143,7 +169,7 @@ class ResultsStore:
             self.db.execute("INSERT OR REPLACE INTO models VALUES (?, ?, ?, ?, ?)",
                             (model, file, sha256, limit, json.dumps(settings)))
 
-    def models(self) -> dict[str, dict[str, Any]]:
-        """Registered models: name -> file, sha256, limit_images, settings."""
-        return {m: {"file": f, "sha256": s, "limit_images": lim, "settings": json.loads(st)}
+    def models(self) -> dict[str, RegisteredModel]:
+        """Registered models by name."""
+        return {m: RegisteredModel(f, s, lim, json.loads(st))
                 for m, f, s, lim, st in self.db.execute("SELECT * FROM models")}

@@ -35,13 +35,16 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
 from fidelity.errors import InvalidValueError
 from fidelity.fileio import file_sha256
+
+if TYPE_CHECKING:
+    from fidelity.coco.scoring import FoldScore
 
 #: Default targets of the sweep (issue 5): ΔE 0 is the baseline.
 SWEEP_TARGETS: tuple[float, ...] = (0, 1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 18, 21, 24)
@@ -95,7 +98,7 @@ class SweepStore(ResultsStore):
         return {i: unpack_detections(b) for i, b in rows}
 
     # provenance -----------------------------------------------------------------------------
-    def scorers(self) -> list[dict[str, Any]]:
+    def scorers(self) -> list[dict[str, str | None]]:
         """The COCO AP implementations that scored this store, oldest first.
 
         Each entry is ``{"scorer": name, "since": ISO time or None}``: cells finished from
@@ -107,7 +110,8 @@ class SweepStore(ResultsStore):
             return [{"scorer": "pycocotools", "since": None}] if self.cells() else []
         return [r if isinstance(r, dict) else {"scorer": r, "since": None} for r in raw]
 
-    def record_scorer(self, method: str, *, all_cells: bool = False) -> list[dict[str, Any]]:
+    def record_scorer(self, method: str, *, all_cells: bool = False
+                      ) -> list[dict[str, str | None]]:
         """Record that ``method`` scores the cells finished from now on (``all_cells``: all)."""
         now = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
         used = [] if all_cells else self.scorers()
@@ -116,7 +120,7 @@ class SweepStore(ResultsStore):
         self.set_meta("scorers", used)
         return used
 
-    def scorer_of(self, cell: dict[str, Any]) -> str | None:
+    def scorer_of(self, cell: SweepCell) -> str | None:
         """Which scorer scored a finished cell (from :meth:`scorers` and its ``finished``).
 
         Times have 1 s resolution; a cell finished in the second a scorer was recorded counts
@@ -124,38 +128,39 @@ class SweepStore(ResultsStore):
         """
         name = None
         for entry in self.scorers():
-            if entry["since"] is None or (cell.get("finished") or "") > entry["since"]:
+            if entry["since"] is None or (cell.finished or "") > entry["since"]:
                 name = entry["scorer"]
         return name
 
     def fold_scores(self, coco: Any, model: str, transform: str, target: float,
-                    image_ids: Sequence[int], method: str = "auto") -> list[dict[str, Any]]:
+                    image_ids: Sequence[int], method: str = "auto") -> list[FoldScore]:
         """Per-fold scores of a cell on ``image_ids`` (cached in the ``folds`` table)."""
-        from fidelity.coco.scoring import score_folds
+        from fidelity.coco.scoring import FoldScore, score_folds
 
         row = self.db.execute("SELECT images, folds FROM folds WHERE model=? AND transform=? "
                               "AND target=?", (model, transform, float(target))).fetchone()
         if row and row[0] == len(image_ids):
-            return list(json.loads(row[1]))
+            return [FoldScore.from_json(f) for f in json.loads(row[1])]
         folds = score_folds(coco, self.detections(model, transform, target), image_ids,
                             method=method)
         with self.db:
             self.db.execute("INSERT OR REPLACE INTO folds VALUES (?, ?, ?, ?, ?)",
-                            (model, transform, float(target), len(image_ids), json.dumps(folds)))
+                            (model, transform, float(target), len(image_ids),
+                             json.dumps([f.to_json() for f in folds])))
         return folds
 
     # cells ----------------------------------------------------------------------------------
-    def cell(self, model: str, transform: str, target: float) -> dict[str, Any] | None:
-        """A finished cell's row, or None."""
+    def cell(self, model: str, transform: str, target: float) -> SweepCell | None:
+        """A finished cell, or None."""
         cur = self.db.execute("SELECT * FROM cells WHERE model=? AND transform=? AND target=?",
                               (model, transform, float(target)))
         row = cur.fetchone()
-        return _cell_dict(cur, row) if row else None
+        return SweepCell.from_row(cur, row) if row else None
 
-    def cells(self) -> list[dict[str, Any]]:
-        """All finished cells (done and unreachable)."""
+    def cells(self) -> list[SweepCell]:
+        """All finished cells (done and unreachable), by model, transform and target."""
         cur = self.db.execute("SELECT * FROM cells ORDER BY model, transform, target")
-        return [_cell_dict(cur, r) for r in cur.fetchall()]
+        return [SweepCell.from_row(cur, r) for r in cur.fetchall()]
 
     def finish_cell(self, model: str, transform: str, target: float, *, param: float | None,
                     status: str, reason: str | None = None, images: int | None = None,
@@ -171,10 +176,48 @@ class SweepStore(ResultsStore):
                  time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())))
 
 
-def _cell_dict(cur: sqlite3.Cursor, row: Sequence[Any]) -> dict[str, Any]:
-    d = {c[0]: v for c, v in zip(cur.description, row, strict=True)}
-    d["ap"] = json.loads(d["ap"]) if d.get("ap") else None
-    return d
+@dataclass(frozen=True)
+class SweepCell:
+    """A finished cell of the sweep store (one row of its ``cells`` table).
+
+    ``status``: ``"done"`` (scored) or ``"unreachable"`` (the transform cannot reach the ΔE
+    ``target`` on the chart; ``reason`` says why). A done cell has ``param`` (the calibrated
+    transform parameter), ``images`` (how many it was scored on, first N by id), ``map``,
+    ``map50``, ``map75`` and ``ap`` (per class name; fractions in [0, 1], None without ground
+    truth), ``seconds`` and ``finished`` (UTC, ISO 8601). ``rescored_from`` is not stored: a
+    report that re-scores a cell on fewer images sets it to the stored count
+    (:func:`fidelity.coco.tables.align_image_counts`).
+    """
+
+    model: str
+    transform: str
+    target: float
+    param: float | None
+    status: str
+    reason: str | None = None
+    images: int | None = None
+    map: float | None = None
+    map50: float | None = None
+    map75: float | None = None
+    ap: dict[str, float | None] | None = None
+    seconds: float | None = None
+    finished: str | None = None
+    rescored_from: int | None = None
+
+    @property
+    def done(self) -> bool:
+        """Whether the cell was scored (not unreachable)."""
+        return self.status == "done"
+
+    @classmethod
+    def from_row(cls, cur: sqlite3.Cursor, row: Sequence[Any]) -> SweepCell:
+        """The cell of a ``SELECT * FROM cells`` row (``cur`` names its columns)."""
+        d = {c[0]: v for c, v in zip(cur.description, row, strict=True)}
+        return cls(model=d["model"], transform=d["transform"], target=float(d["target"]),
+                   param=d["param"], status=d["status"], reason=d["reason"],
+                   images=d["images"], map=d["map"], map50=d["map50"], map75=d["map75"],
+                   ap=json.loads(d["ap"]) if d.get("ap") else None, seconds=d["seconds"],
+                   finished=d["finished"])
 
 
 @dataclass(frozen=True)
@@ -324,7 +367,7 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
         for transform, target in grid:
             k += 1
             finished = store.cell(det.name, transform, target)
-            if finished and (finished["status"] != "done" or finished["images"] == len(ids)):
+            if finished and (not finished.done or finished.images == len(ids)):
                 continue
             # not finished, or finished on another image count (the model's limit was raised:
             # only the new images are run; or lowered: re-scored on the first N, no inference)
@@ -368,17 +411,37 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     return store
 
 
-def sweep_status(store: SweepStore, pace_cells: int = 10) -> list[dict[str, Any]]:
+@dataclass(frozen=True)
+class SweepProgress:
+    """Where a sweep stands for one registered model (:func:`sweep_status`).
+
+    ``images``: the image count its cells are run on (its registered limit, else the image
+    folder's count); ``planned``: cells of the grid the store last ran (baseline and every
+    transform at every non-zero target); ``done`` (on ``images`` images), ``unreachable``,
+    ``to_do`` (the rest); ``under_way``: unfinished cells with stored detections, as
+    ``(transform, target, stored images)``; ``images_to_do``: detections still missing over the
+    cells to do; ``pace_s``: median seconds between the model's last finished cells (wall time
+    per cell, whatever else runs beside it; None with fewer than 3); ``left_s``:
+    ``to_do * pace_s``, a rough guide.
+    """
+
+    model: str
+    images: int | None
+    planned: int
+    done: int
+    unreachable: int
+    to_do: int
+    under_way: tuple[tuple[str, float, int], ...]
+    images_to_do: int
+    pace_s: float | None
+    left_s: float | None
+
+
+def sweep_status(store: SweepStore, pace_cells: int = 10) -> list[SweepProgress]:
     """Where a sweep stands, per registered model, from the store alone (no annotations).
 
-    For each model: ``images`` (the image count its cells are run on: its registered limit,
-    else the image folder's count), ``planned`` (cells of the grid the store last ran:
-    baseline and every transform at every non-zero target), ``done`` (on ``images`` images),
-    ``unreachable``, ``to_do`` (the rest), ``under_way`` (unfinished cells with stored
-    detections: ``(transform, target, stored images)``), ``images_to_do`` (detections still
-    missing over the cells to do), ``pace_s`` (median seconds between the last ``pace_cells``
-    finished cells of the model: wall time per cell, whatever else runs beside it; None with
-    fewer than 3) and ``left_s`` (``to_do * pace_s``, a rough guide). Safe while a sweep writes.
+    One :class:`SweepProgress` per model; the pace is the median time between its last
+    ``pace_cells`` finished cells. Safe while a sweep writes.
     """
     import datetime
 
@@ -390,29 +453,31 @@ def sweep_status(store: SweepStore, pace_cells: int = 10) -> list[dict[str, Any]
         (m, t, float(e)): n for m, t, e, n in store.db.execute(
             "SELECT model, transform, target, COUNT(*) FROM detections "
             "GROUP BY model, transform, target")}
-    cells: dict[str, dict[tuple[str, float], dict[str, Any]]] = {}
+    cells: dict[str, dict[tuple[str, float], SweepCell]] = {}
     for c in store.cells():
-        cells.setdefault(c["model"], {})[(c["transform"], float(c["target"]))] = c
+        cells.setdefault(c.model, {})[(c.transform, c.target)] = c
     out = []
     for model, info in store.models().items():
-        n = info.get("limit_images") or image_count
+        n = info.limit_images or image_count
         mine = cells.get(model, {})
-        done = {k: c for k, c in mine.items() if c["status"] == "done" and c["images"] == n}
-        unreachable = {k for k, c in mine.items() if c["status"] == "unreachable"}
+        done = {k: c for k, c in mine.items() if c.done and c.images == n}
+        unreachable = {k for k, c in mine.items() if c.status == "unreachable"}
         to_do = [k for k in planned if k not in done and k not in unreachable]
-        under_way = [(t, e, stored[(model, t, e)]) for t, e in to_do  # more than last scored
-                     if stored.get((model, t, e), 0) > ((mine.get((t, e)) or {}).get("images")
-                                                        or 0)]
+        under_way = tuple((t, e, stored[(model, t, e)]) for t, e in to_do  # more than scored
+                          if stored.get((model, t, e), 0) > _images_of(mine.get((t, e))))
         images_to_do = sum(max(0, (n or 0) - stored.get((model, t, e), 0)) for t, e in to_do)
-        stamps = sorted(datetime.datetime.strptime(c["finished"], "%Y-%m-%dT%H:%M:%SZ")
-                        for c in done.values() if c.get("finished"))[-pace_cells:]
+        stamps = sorted(datetime.datetime.strptime(c.finished, "%Y-%m-%dT%H:%M:%SZ")
+                        for c in done.values() if c.finished)[-pace_cells:]
         gaps = [(b - a).total_seconds() for a, b in zip(stamps, stamps[1:], strict=False)]
         pace = float(np.median(gaps)) if len(gaps) >= 2 else None
-        out.append({"model": model, "images": n, "planned": len(planned), "done": len(done),
-                    "unreachable": len(unreachable), "to_do": len(to_do),
-                    "under_way": under_way, "images_to_do": images_to_do, "pace_s": pace,
-                    "left_s": None if pace is None else pace * len(to_do)})
+        out.append(SweepProgress(model, n, len(planned), len(done), len(unreachable),
+                                 len(to_do), under_way, images_to_do, pace,
+                                 None if pace is None else pace * len(to_do)))
     return out
+
+
+def _images_of(cell: SweepCell | None) -> int:
+    return (cell.images or 0) if cell is not None else 0
 
 
 def rescore(store: SweepStore, annotations: str | os.PathLike[str], method: str = "auto") -> int:
@@ -425,14 +490,15 @@ def rescore(store: SweepStore, annotations: str | os.PathLike[str], method: str 
     models = store.models()
     n = 0
     for c in store.cells():
-        if c["status"] != "done":
+        if not c.done:
             continue
-        lim = models.get(c["model"], {}).get("limit_images")
+        reg = models.get(c.model)
+        lim = reg.limit_images if reg is not None else None
         ids = ids_all[:lim] if lim else ids_all
-        score = evaluate_detections(coco, store.detections(c["model"], c["transform"],
-                                                           c["target"]), ids, method=method)
-        store.finish_cell(c["model"], c["transform"], c["target"], param=c["param"],
-                          status="done", images=len(ids), score=score, seconds=c["seconds"])
+        score = evaluate_detections(coco, store.detections(c.model, c.transform, c.target), ids,
+                                    method=method)
+        store.finish_cell(c.model, c.transform, c.target, param=c.param, status="done",
+                          images=len(ids), score=score, seconds=c.seconds)
         n += 1
     store.record_scorer(method, all_cells=True)
     return n

@@ -284,12 +284,18 @@ def prediction_curve(prediction: Prediction, limit_dmap: float | None = None,
 
 
 def axes_plain_ticks(ax: Axes) -> None:
-    """Tick labels as plain numbers on a log axis (1, 2, 5, 10 rather than 10^0)."""
-    from matplotlib.ticker import FuncFormatter
+    """Tick labels as plain numbers on the log and symlog axes of ``ax`` (0.5, 1, 10 rather
+    than 10^0); a symlog axis (linear below 1) gets ticks at 1, 2 and 5 per decade. Linear
+    axes are left as they are."""
+    from matplotlib.ticker import FuncFormatter, SymmetricalLogLocator
 
-    fmt = FuncFormatter(lambda v, _: f"{v:g}")
-    ax.xaxis.set_major_formatter(fmt)
-    ax.yaxis.set_major_formatter(fmt)
+    for axis in (ax.xaxis, ax.yaxis):
+        scale = axis.get_scale()
+        if scale == "symlog":
+            axis.set_major_locator(SymmetricalLogLocator(base=10, linthresh=1.0,
+                                                         subs=[1.0, 2.0, 5.0]))
+        if scale in ("log", "symlog"):
+            axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
 
 
 __all__ = [

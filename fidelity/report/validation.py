@@ -1,0 +1,588 @@
+"""The validation report: predicted against measured detection loss for a suite of cameras.
+
+Built as one :class:`~fidelity.report.document.Document` from
+:class:`~fidelity.coco.validate.ValidationResults` (:func:`validation_document`) and written as
+``validation.html`` and ``validation.md`` with ``validation.json`` and the PNG figures
+(:func:`write_validation_report`). Reading order: the headline (does the worst-case table
+bound the measured loss, with the predicted-against-measured plot), the bound per class, the
+written analysis, the plots, every failure with its data-derived reason, then the per-camera
+tables (folded), emulation accuracy, cameras, baselines and what was run.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fidelity.report.document import (
+    Block,
+    Document,
+    Figure,
+    Headline,
+    Section,
+    Text,
+    Tone,
+    section,
+    table,
+)
+from fidelity.report.format import number, words
+
+if TYPE_CHECKING:
+    from fidelity.coco.validate import (
+        CameraRecord,
+        ValidationResults,
+        ValidationRow,
+        ValidationSummary,
+    )
+
+#: Title of the validation report.
+TITLE = "Validation: predicted against measured detection loss for realistic camera models"
+
+#: The classes by :data:`fidelity.coco.validate.LOSS_COLUMNS` key, as the report names them.
+CLASS_TITLES: dict[str, str] = {"all": "mAP@[.50:.95] (all classes)", "person": "AP person",
+                                "bicycle": "AP bicycle",
+                                "all-relative": "mAP relative to baseline"}
+
+#: File names of the figures.
+VS_DELTA_E_PNG = "loss-vs-chart-delta-e.png"
+EMULATION_PNG = "emulation-accuracy.png"
+
+
+def scatter_png(table_name: str) -> str:
+    """File name of the predicted-against-measured plot of one prediction table."""
+    return f"predicted-vs-measured-{table_name}.png"
+
+
+# --------------------------------------------------------------------------------------------
+# Plots
+# --------------------------------------------------------------------------------------------
+
+_PLOTTED = ("all", "person", "bicycle")
+
+
+def scatter_plot(rows: Sequence[ValidationRow], table_name: str) -> bytes:
+    """Measured against predicted loss (points) per class, ±2 SE, with the identity line
+    (the bound holds below it), for one prediction table (PNG bytes)."""
+    from fidelity.coco.validate import LOSS_COLUMNS
+    from fidelity.report.plots import axes_plain_ticks, new_figure, png_bytes
+
+    fig, axes = new_figure(15, 5, 1, 3)
+    models = sorted({r.model for r in rows})
+    markers = dict(zip(models, "osD^v", strict=False))
+    for ax, cls in zip(axes, _PLOTTED, strict=True):
+        col = LOSS_COLUMNS[cls]
+        lo, hi = 0.0, 1.0
+        for m in models:
+            pts = [(pv, mv, r.se.get(col) or 0.0) for r in rows if r.model == m
+                   if (pv := r.predicted[table_name].losses.get(col)) is not None
+                   and (mv := r.measured.get(col)) is not None]
+            if not pts:
+                continue
+            pa, ya, sa = (np.array(v) for v in zip(*pts, strict=True))
+            ax.errorbar(pa, ya, yerr=2 * sa, fmt=markers[m], ms=5, alpha=0.8, capsize=2,
+                        label=f"{m} (±2 SE)")
+            lo = min(lo, float(ya.min() - 2 * sa.max()), float(pa.min()))
+            hi = max(hi, float(ya.max() + 2 * sa.max()), float(pa.max()))
+        ax.plot([lo, hi], [lo, hi], "k--", lw=1, label="identity (measured = predicted)")
+        ax.fill_between([lo, hi], [lo, hi], [lo, lo], color="tab:green", alpha=0.06,
+                        label="bound holds")
+        ax.set_xscale("symlog", linthresh=1.0)
+        ax.set_yscale("symlog", linthresh=1.0)
+        axes_plain_ticks(ax)
+        ax.set_xlabel(f"predicted Δ{CLASS_TITLES[cls]} (points, {table_name})")
+        ax.set_ylabel("measured loss (points)")
+        ax.set_title(CLASS_TITLES[cls])
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper left")
+    return png_bytes(fig)
+
+
+def vs_delta_e_plot(rows: Sequence[ValidationRow], tables: Sequence[str]) -> bytes:
+    """Measured loss (points, ±2 SE) against the camera's chart ΔE00 per class, with every
+    table's worst-case curve for detector size n (PNG bytes)."""
+    from fidelity.coco.validate import LOSS_COLUMNS
+    from fidelity.prediction.table import predict_curve
+    from fidelity.report.plots import axes_plain_ticks, new_figure, png_bytes
+
+    fig, axes = new_figure(15, 5, 1, 3)
+    models = sorted({r.model for r in rows})
+    xmax = max([r.chart_delta_e for r in rows] + [6.0]) * 1.05
+    grid = np.linspace(0, xmax, 300)
+    for ax, cls in zip(axes, _PLOTTED, strict=True):
+        col = LOSS_COLUMNS[cls]
+        for m, mk in zip(models, "osD^v", strict=False):
+            pts = [(r.chart_delta_e, mv, r.se.get(col) or 0.0) for r in rows
+                   if r.model == m and (mv := r.measured.get(col)) is not None]
+            if pts:
+                xa, ya, sa = (np.array(v) for v in zip(*pts, strict=True))
+                ax.errorbar(xa, ya, yerr=2 * sa, fmt=mk, ms=5, alpha=0.8, capsize=2,
+                            label=f"measured, {m}")
+        for t, ls in zip(tables, ("-", "--", ":", "-."), strict=False):
+            try:
+                curve = predict_curve(grid, col, size="n", table=t)
+            except Exception:  # noqa: BLE001 - a table without this column is skipped
+                continue
+            if np.all(np.isnan(curve)):
+                continue
+            ax.plot(grid, curve, ls, color="k", lw=1.2, label=f"worst case, {t}")
+        ax.axhline(0, color="grey", lw=0.5)
+        ax.set_yscale("symlog", linthresh=1.0)
+        axes_plain_ticks(ax)
+        ax.set_xlabel("chart ΔE00 of the camera (mean over 24 patches)")
+        ax.set_ylabel(f"loss of {CLASS_TITLES[cls]} (points)")
+        ax.set_title(CLASS_TITLES[cls])
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper left")
+    return png_bytes(fig)
+
+
+def emulation_plot(cameras: Mapping[str, CameraRecord]) -> bytes:
+    """Mean and largest ΔE00 per camera between its emulation and its own rendered chart
+    (cameras by chart ΔE; PNG bytes)."""
+    from fidelity.report.plots import new_figure, png_bytes
+
+    names = sorted(cameras, key=lambda k: cameras[k].chart_delta_e)
+    fig, ax = new_figure(12, 4.5)
+    x = np.arange(len(names))
+    acc = [cameras[n].emulation.accuracy for n in names]
+    ax.bar(x - 0.2, [a.chart_mean_delta_e for a in acc], 0.4, label="mean ΔE00 (chart)")
+    ax.bar(x + 0.2, [a.chart_max_delta_e for a in acc], 0.4, label="max ΔE00 (chart)")
+    ax.set_xticks(x, names, rotation=75, ha="right", fontsize=7)
+    ax.set_ylabel("ΔE00 emulated vs camera")
+    ax.set_title("Emulation accuracy: fitted mapping applied to the 8-bit reference chart vs the "
+                 "camera's rendered chart")
+    ax.legend()
+    ax.grid(axis="y", alpha=0.3)
+    return png_bytes(fig)
+
+
+def validation_figures(results: ValidationResults) -> dict[str, Figure]:
+    """Every figure by file name: predicted against measured per table (the bound table
+    first), measured loss against chart ΔE, emulation accuracy."""
+    rows, summ = results.rows, results.summary
+    out: dict[str, Figure] = {}
+    if rows:
+        for t in _table_order(summ):
+            out[scatter_png(t)] = Figure(
+                scatter_plot(rows, t), scatter_png(t), f"predicted against measured loss, {t}",
+                f"Measured loss (points, ±2 SE) against the loss `{t}` predicts, per class; "
+                "dashed: identity (measured = predicted); the bound holds below it.")
+        out[VS_DELTA_E_PNG] = Figure(
+            vs_delta_e_plot(rows, _table_order(summ)), VS_DELTA_E_PNG,
+            "measured loss against chart ΔE with the worst-case curves",
+            "Measured loss (points, ±2 SE) against the camera's chart ΔE00, with each table's "
+            "worst-case curve (detector size n).")
+    if results.cameras:
+        out[EMULATION_PNG] = Figure(
+            emulation_plot(results.cameras), EMULATION_PNG, "emulation accuracy per camera",
+            "Mean and largest ΔE00 between the emulated and the camera's own rendered chart, "
+            "cameras by chart ΔE.")
+    return out
+
+
+def _table_order(summ: ValidationSummary) -> list[str]:
+    return [summ.bound_table] + [t for t in summ.tables if t != summ.bound_table]
+
+
+# --------------------------------------------------------------------------------------------
+# Words
+# --------------------------------------------------------------------------------------------
+
+
+def spearman(x: Sequence[float], y: Sequence[float]) -> float | None:
+    """Spearman rank correlation (scipy.stats.spearmanr); None for fewer than 3 pairs."""
+    if len(x) < 3:
+        return None
+    from scipy.stats import spearmanr
+
+    r = spearmanr(x, y).statistic
+    return None if not np.isfinite(r) else float(r)
+
+
+def failure_reason(row: ValidationRow, cls: str, camera: CameraRecord) -> str:
+    """One-paragraph, data-derived explanation of a bound failure (for the report).
+
+    Combines: the excess over the bound in units of the measurement's standard error; where on
+    the table the prediction came from (status); the direction of the chart error (shares of
+    ``|ΔL'|``, ``|ΔC'|``, ``|ΔH'|``, signed mean ΔL' and ΔC', lightness contrast ratio, neutral
+    cast); and
+    the image-level ΔE00 of the emulation compared with the chart ΔE.
+    """
+    b = row.bound[cls]
+    prof = camera.profile
+    excess = b.excess or 0.0
+    parts = [f"measured {number(b.measured)} > predicted {number(b.predicted)} "
+             f"(excess {excess:.2f}"]
+    se = b.se
+    if se:
+        parts[0] += f", {excess / se:.1f} SE; SE {se:.2f})"
+        parts.append("inside sampling noise (excess < 2 SE)" if excess < 2 * se else
+                     "larger than the sampling noise (excess >= 2 SE)")
+    else:
+        parts[0] += ")"
+    if b.status == "below-range":
+        parts.append("the chart ΔE lies below the table's first point, so the bound there is the "
+                     "first point's value")
+    parts.append(f"chart error mostly {prof.dominant} (|ΔL'| {prof.share_l:.0%}, "
+                 f"|ΔC'| {prof.share_c:.0%}, |ΔH'| {prof.share_h:.0%}; mean ΔL' "
+                 f"{prof.mean_dl:+.1f}, mean ΔC' {prof.mean_dc:+.1f}, contrast ratio "
+                 f"{prof.contrast_ratio:.2f}, neutral cast a*,b* "
+                 f"{prof.neutral_cast_ab[0]:+.1f},{prof.neutral_cast_ab[1]:+.1f})")
+    ide = camera.image_delta_e
+    if ide is not None:
+        parts.append(f"on photos the emulation moves colours by ΔE00 {ide.mean:.1f} on average "
+                     f"(p95 {ide.p95:.1f}) against chart ΔE {camera.chart_delta_e:.1f}")
+    return "; ".join(parts) + "."
+
+
+def _conventions_words(conv: Mapping[str, Any]) -> str:
+    from fidelity.report.coco import conventions_words
+
+    extra = [str(conv[k]) for k in ("source", "preprocess") if conv.get(k)]
+    return "; ".join([conventions_words(conv), *extra])
+
+
+def _photo_delta_e(camera: CameraRecord) -> float:
+    return camera.image_delta_e.mean if camera.image_delta_e is not None else float("nan")
+
+
+# --------------------------------------------------------------------------------------------
+# Document
+# --------------------------------------------------------------------------------------------
+
+
+def headline(results: ValidationResults, figure: Figure | None = None) -> Headline:
+    """Does the bound table bound the measured loss: cells and cameras within it, per class.
+
+    Tone: pass when every judged cell is within the bound, fail when some cell exceeds it by
+    more than 2 standard errors, info otherwise (exceedances within the sampling noise).
+    """
+    summ = results.summary
+    if not results.rows:
+        return Headline("No finished (camera, model) cell yet: nothing to compare.", "info",
+                        figure)
+    lines = [f"**Does the worst-case table `{summ.bound_table}` bound the measured loss?**", ""]
+    for cls, s in summ.classes.items():
+        if not s.cells:
+            lines.append(f"- {CLASS_TITLES[cls]}: no cell with a value to compare.")
+            continue
+        lines.append(f"- {CLASS_TITLES[cls]}: within the bound in **{s.within} of {s.cells}** "
+                     f"cells ({s.within_2se} of {s.cells} up to 2 SE); cameras within (all "
+                     f"models) {s.cameras_within} of {s.cameras}"
+                     + (f" ({100 * s.share_cameras_within:.0f} %)"
+                        if s.share_cameras_within is not None else "") + ".")
+    judged = [s for s in summ.classes.values() if s.cells]
+    tone: Tone = "pass"
+    if any(s.within < s.cells for s in judged):
+        tone = "fail" if any(s.within_2se < s.cells for s in judged) else "info"
+    return Headline("\n".join(lines), tone, figure)
+
+
+def _bound_section(results: ValidationResults) -> Section:
+    from fidelity.coco.validate import LOSS_COLUMNS
+
+    rows, summ, cams = results.rows, results.summary, results.cameras
+    body = []
+    for cls in LOSS_COLUMNS:
+        s = summ.classes[cls]
+        share = number(None) if s.share_cameras_within is None else \
+            f"{100 * s.share_cameras_within:.0f} %"
+        body.append([cls, f"{s.within}/{s.cells}", f"{s.within_2se}/{s.cells}",
+                     f"{s.cameras_within}/{s.cameras}", share])
+    notes = []
+    for t in summ.tables:
+        xs = [(pv, mv) for r in rows if (pv := r.predicted[t].losses.dmap_points) is not None
+              and (mv := r.measured.dmap_points) is not None]
+        if xs:
+            pred = [x[0] for x in xs]
+            meas = [x[1] for x in xs]
+            err = np.array(meas) - np.array(pred)
+            notes.append(f"- `{t}` ({rows[0].predicted[t].kind}): mAP measured − predicted: "
+                         f"median {np.median(err):+.2f} points, max {err.max():+.2f}; Spearman "
+                         f"ρ(predicted, measured) = {number(spearman(pred, meas))}; within for "
+                         f"{int(np.sum(err <= 0))}/{len(err)} cells.")
+    if rows:
+        de = [r.chart_delta_e for r in rows]
+        loss = [_points(r) for r in rows]
+        photo = [_photo_delta_e(cams[r.camera]) for r in rows]
+        notes.append(f"- Spearman ρ(chart ΔE, measured ΔmAP) = {number(spearman(de, loss))}; "
+                     "ρ(photo ΔE00 of the emulation on COCO images, measured ΔmAP) = "
+                     f"{number(spearman(photo, loss))} (all cells, both models).")
+        for m in sorted({r.model for r in rows}):
+            mr = [r for r in rows if r.model == m]
+            rho = spearman([r.chart_delta_e for r in mr], [_points(r) for r in mr])
+            notes.append(f"  - `{m}`: ρ(chart ΔE, ΔmAP) = {number(rho)} over {len(mr)} "
+                         f"cameras; largest measured ΔmAP {max(_points(r) for r in mr):.2f} "
+                         "points.")
+    return section(
+        f"Within the bound of {summ.bound_table}, per class",
+        table(["class", "cells within bound", "within bound up to 2 SE",
+               "cameras within bound (all models)", "share"], body),
+        Text("\n".join(notes)) if notes else None)
+
+
+def _points(r: ValidationRow) -> float:
+    v = r.measured.dmap_points
+    return float("nan") if v is None else v
+
+
+def _plots_section(results: ValidationResults, figures: Mapping[str, Figure]) -> Section | None:
+    summ = results.summary
+    others = [figures[n] for t in _table_order(summ)[1:] if (n := scatter_png(t)) in figures]
+    blocks: list[Block | None] = [*others, figures.get(VS_DELTA_E_PNG)]
+    if not any(blocks):
+        return None
+    return section("Predicted and measured loss", *blocks)
+
+
+def _failures_sections(results: ValidationResults) -> list[Section]:
+    rows, cams = results.rows, results.cameras
+    out = []
+    for cls in ("all", "all-relative", "person", "bicycle"):
+        fails = [r for r in rows if r.bound[cls].within is False]
+        if not fails:
+            continue
+        items = [f"- **{r.camera}** / {r.model} ({r.illuminant}, chart ΔE "
+                 f"{r.chart_delta_e:.2f}): {failure_reason(r, cls, cams[r.camera])}"
+                 for r in sorted(fails, key=lambda r: -(r.bound[cls].excess or 0.0))]
+        out.append(section(CLASS_TITLES[cls], Text("\n".join(items)), level=3))
+    if not out:
+        return [section("Every case where the bound fails",
+                        Text("None: every finished cell is within the bound."))]
+    return [section("Every case where the bound fails",
+                    Text("Every (camera, model) cell whose measured loss is above the "
+                         "worst-case prediction, per class, largest excess first, with what "
+                         "the data say about it."))] + out
+
+
+def _per_camera_section(results: ValidationResults) -> Section:
+    rows, cams, bound = results.rows, results.cameras, results.summary.bound_table
+
+    def cell(r: ValidationRow, k: str) -> str:
+        v = r.bound[k]
+        if v.measured is None:
+            return number(None)
+        s = f"{v.measured:.2f}" + (f" ± {v.se:.2f}" if v.se else "")
+        return f"**{s}**" if v.within is False else s
+
+    body = []
+    for r in sorted(rows, key=lambda r: (r.chart_delta_e, r.model)):
+        c = cams[r.camera]
+        pr = c.profile
+        b = r.bound
+        body.append([r.camera, r.illuminant, f"{r.chart_delta_e:.2f}",
+                     f"{pr.dominant} ({pr.share_l:.2f}/{pr.share_c:.2f}/{pr.share_h:.2f})",
+                     f"{pr.contrast_ratio:.2f}",
+                     number(c.image_delta_e.mean if c.image_delta_e else None, 1), r.model,
+                     cell(r, "all"), number(b["all"].predicted), cell(r, "person"),
+                     number(b["person"].predicted), cell(r, "bicycle"),
+                     number(b["bicycle"].predicted)])
+    return section(
+        "Per camera",
+        Text("Losses in percentage points (positive = worse than the baseline), measured ± SE; "
+             f"predicted = `{bound}`. Bold: measured loss above the worst-case prediction."),
+        table(["camera", "illuminant", "chart ΔE", "dominant error (L/C/H share)", "contrast",
+               "photo ΔE00", "model", "ΔmAP meas.", "ΔmAP pred.", "Δperson meas.",
+               "Δperson pred.", "Δbicycle meas.", "Δbicycle pred."], body,
+              numeric=[False, False, True, False, True, True, False] + [True] * 6),
+        folded=True)
+
+
+def _other_tables_section(results: ValidationResults) -> Section | None:
+    summ = results.summary
+    other = [t for t in summ.tables if t != summ.bound_table]
+    if not other or not results.rows:
+        return None
+    body = [[r.camera, r.model, f"{r.chart_delta_e:.2f}", number(r.measured.dmap_points)]
+            + [number(r.predicted[t].losses.dmap_points) for t in other]
+            for r in sorted(results.rows, key=lambda r: (r.chart_delta_e, r.model))]
+    return section("Other tables' predictions of ΔmAP (points)",
+                   table(["camera", "model", "chart ΔE", "measured", *other], body,
+                         numeric=[False, False] + [True] * (2 + len(other))),
+                   folded=True)
+
+
+def _emulation_sections(results: ValidationResults, figures: Mapping[str, Figure]
+                        ) -> list[Section]:
+    cams = results.cameras
+    names = sorted(cams, key=lambda k: cams[k].chart_delta_e)
+    accs = [cams[n].emulation.accuracy for n in names]
+    summary = None
+    if accs:
+        means = np.array([a.chart_mean_delta_e for a in accs])
+        maxes = np.array([a.chart_max_delta_e for a in accs])
+        gap = np.array([abs(a.emulated_chart_delta_e - a.camera_chart_delta_e) for a in accs])
+        text = (f"Over {len(accs)} cameras: chart mean ΔE00 (emulated vs camera) at most "
+                f"{means.max():.2f} (median {np.median(means):.2f}); worst single patch "
+                f"{maxes.max():.2f}; the emulated chart's ΔE differs from the camera's by at "
+                f"most {gap.max():.2f}.")
+        hs = [h for n in cams if (h := cams[n].emulation.holdout) is not None]
+        if hs:
+            hm = np.array([h.chart_mean_delta_e for h in hs])
+            text += (f" Held out (chart spectra not in the fit): chart mean ΔE00 at most "
+                     f"{hm.max():.2f} (median {np.median(hm):.2f}); worst single patch "
+                     f"{max(h.chart_max_delta_e for h in hs):.2f}.")
+        summary = Text(text)
+    intro = Text(
+        "The fitted mapping is applied to the reference chart as an 8-bit image (the same 256³ "
+        "table used on COCO) and compared with the camera's own rendered chart (CIEDE2000 per "
+        "patch). Training: mean and 95th percentile over all training colours (in-sample). "
+        "Chart ΔE columns: the camera's chart ΔE and the emulated chart's, both against the "
+        "reference. Held out: the same method fitted without the 24 chart spectra, checked on "
+        "the chart (out of sample).")
+    body = []
+    for name in names:
+        c = cams[name]
+        a = c.emulation.accuracy
+        h = c.emulation.holdout
+        hold = number(None) if not h else \
+            f"{h.chart_mean_delta_e:.2f} / {h.chart_max_delta_e:.2f}"
+        oth = "; ".join(f"{k}: {v.chart_mean_delta_e:.2f} / {v.chart_max_delta_e:.2f}"
+                        for k, v in c.emulation.other_methods.items())
+        body.append([name, c.illuminant, f"{a.camera_chart_delta_e:.2f}",
+                     f"{a.emulated_chart_delta_e:.2f}", f"{a.chart_mean_delta_e:.2f}",
+                     f"{a.chart_max_delta_e:.2f} ({a.chart_worst_patch})", hold,
+                     f"{a.training_mean_delta_e:.2f}", f"{a.training_p95_delta_e:.2f}", oth])
+    return [
+        section("Emulation accuracy", summary, figures.get(EMULATION_PNG), intro),
+        section("Emulation accuracy per camera", table(
+            ["camera", "illuminant", "chart ΔE camera", "chart ΔE emulated", "chart mean",
+             "chart max (patch)", "held-out chart mean / max", "training mean", "training p95",
+             "other method chart mean / max"], body,
+            numeric=[False, False] + [True] * 7 + [False]), folded=True),
+    ]
+
+
+def _cameras_section(results: ValidationResults) -> Section:
+    cams = results.cameras
+    return section("Cameras", table(
+        ["camera", "illuminant", "description"],
+        [[n, cams[n].illuminant, cams[n].description] for n in sorted(cams)],
+        numeric=[False, False, False]), folded=True)
+
+
+def _baselines_section(results: ValidationResults) -> Section:
+    rows = [[f"`{m}`", f"{b.map:.4f}", f"{b.map50:.4f}", number(b.ap.get("person"), 4),
+             number(b.ap.get("bicycle"), 4), str(b.images)]
+            for m, b in sorted(results.baselines.items())]
+    return section("Baselines (ΔE = 0: JPEG round trip only)", table(
+        ["model", "mAP", "AP50", "AP person", "AP bicycle", "images"], rows))
+
+
+def _run_section(results: ValidationResults) -> Section:
+    from fidelity.coco.scoring import FOLDS
+    from fidelity.fileio import portable_paths
+
+    meta, summ, cams = results.meta, results.summary, results.cameras
+    data = portable_paths(meta.get("data", {}))
+    lines = [f"- Images: COCO val2017 subset at `{data.get('images')}` "
+             f"({data.get('image_count')} annotated images), annotations "
+             f"`{data.get('annotations')}`."]
+    for m, info in sorted(results.models.items()):
+        n = info.limit_images or data.get("image_count")
+        st = info.settings
+        size = st.get("input_size")
+        lines.append(
+            f"- Model `{m}` (`{info.file}`, sha256 {info.sha256[:16]}…): first {n} images by "
+            f"id; layout {st.get('layout')}, input "
+            + ("×".join(map(str, size)) if isinstance(size, list) else str(size))
+            + f", conventions {_conventions_words(st.get('conventions') or {})}, threads "
+            f"{st.get('threads')}.")
+    lines.append(f"- Cameras: {len(cams)} camera files from `cameras/` (listed below with "
+                 "their scene illuminants); chart rendered in closed form; ΔE = mean CIEDE2000 "
+                 "over the 24 patches against the scene-consistent reference.")
+    if summ.not_in_suite:
+        lines.append(f"- Left out: {len(summ.not_in_suite)} camera(s) in the store but not in "
+                     "the suite given (renamed or removed camera files): "
+                     f"{', '.join(summ.not_in_suite)}.")
+    st = meta.get("settings", {})
+    lines.append(f"- Emulation: `{st.get('emulation_method')}` fitted on `{st.get('training')}` "
+                 "reflectances (chart + colour-science spectral data); JPEG: "
+                 f"{st.get('jpeg')}. ΔE = 0 baseline: the same round trip without colour "
+                 "change.")
+    lines.append("- Prediction: `fidelity.prediction.table.predict(chart ΔE, size='n', "
+                 "baseline_map=...)` with tables "
+                 f"{', '.join(f'`{t}`' for t in summ.tables)}; the bound tested is "
+                 f"`{summ.bound_table}`.")
+    lines.append(f"- Standard errors: {FOLDS} interleaved image folds, SE = std(fold "
+                 f"loss)/√{FOLDS}.")
+    lines.append(f"- Versions: {words(meta.get('versions'))}; machine: "
+                 f"{words(meta.get('machine'))}.")
+    finished = sorted({r.camera for r in results.rows})
+    lines.append(f"- Finished: {len(results.rows)} (camera, model) cells, {len(finished)} of "
+                 f"{len(cams)} cameras with at least one model.")
+    return section("What was run", Text("\n".join(lines)))
+
+
+def validation_document(results: ValidationResults, notes: str | None = None,
+                        figures: Mapping[str, Figure] | None = None) -> Document:
+    """The validation report of ``results``; ``notes`` (Markdown) is the "Analysis" section;
+    figures: :func:`validation_figures`, made when not given."""
+    figs = dict(figures) if figures is not None else validation_figures(results)
+    bound_fig = figs.get(scatter_png(results.summary.bound_table))
+    sections: list[Section | None] = [
+        _bound_section(results),
+        section("Analysis", Text(notes.strip())) if notes else None,
+        _plots_section(results, figs),
+        *_failures_sections(results),
+        _per_camera_section(results),
+        _other_tables_section(results),
+        *_emulation_sections(results, figs),
+        _cameras_section(results),
+        _baselines_section(results),
+        _run_section(results),
+    ]
+    return Document(
+        TITLE, headline(results, bound_fig), tuple(s for s in sections if s is not None),
+        subtitle="Generated by `fidelity validate` (fidelity/coco/validate.py) from the results "
+                 "store; every number below is computed from stored detections and chart "
+                 "renders.")
+
+
+def write_validation_document(results: ValidationResults, out_dir: str | os.PathLike[str],
+                              notes: str | None = None) -> list[Path]:
+    """Write ``validation.html`` and ``validation.md`` with its PNG figures (atomically); the
+    report alone, e.g. rebuilt from a ``validation.json`` (:meth:`ValidationResults.from_json`).
+
+    Figures: predicted against measured with the identity line per class (all, person,
+    bicycle), one per prediction table; measured loss against chart ΔE with the tables'
+    worst-case curves; emulation accuracy per camera.
+    """
+    from fidelity.report.html import write_document
+
+    out = Path(out_dir)
+    return write_document(validation_document(results, notes), html=out / "validation.html",
+                          markdown=out / "validation.md")
+
+
+def write_validation_report(results: ValidationResults, out_dir: str | os.PathLike[str],
+                            notes: str | None = None) -> list[Path]:
+    """Write the report (:func:`write_validation_document`) and ``validation.json``,
+    atomically; returns the paths written."""
+    from fidelity.fileio import write_json_atomic
+
+    written = write_validation_document(results, out_dir, notes)
+    written.append(write_json_atomic(Path(out_dir) / "validation.json", results.to_json()))
+    return written
+
+
+__all__ = [
+    "CLASS_TITLES",
+    "EMULATION_PNG",
+    "TITLE",
+    "VS_DELTA_E_PNG",
+    "emulation_plot",
+    "failure_reason",
+    "headline",
+    "scatter_plot",
+    "spearman",
+    "validation_document",
+    "validation_figures",
+    "vs_delta_e_plot",
+    "write_validation_document",
+    "write_validation_report",
+]
