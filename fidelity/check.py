@@ -133,7 +133,7 @@ def audit_image(
     layer: str | None = None,
     encoding: str | None = None,
     exposure: float | str | None = None,
-    reference: str = "safecolor",
+    reference: str = "scene",
     illuminant: str = "D65",
     size: str = "any",
     table: PredictionTable | str | None = None,
@@ -157,8 +157,8 @@ def audit_image(
         ``linear``/``srgb`` (default from the file), ``auto`` or a fixed EV, what to do with
         negative values, the RGB primaries.
     reference, illuminant
-        ``safecolor`` (the paper's Lab values), ``scene`` (the chart's spectra under
-        ``illuminant``) or a chart JSON.
+        ``scene`` (the chart's spectra under ``illuminant``, adapted to D65, as
+        :func:`check_camera` uses), ``safecolor`` (the paper's Lab values) or a chart JSON.
     size, table, criterion
         As for :func:`check_camera`; ``criterion`` None: no verdict.
 
@@ -224,7 +224,7 @@ def gate(
     reports to its :class:`GateOutputs`. An input error of one subject (exit code 2) becomes
     its case's ``error``; the others are still measured.
 
-    ``reference`` defaults to ``safecolor`` for images and ``scene`` for a camera. Returns one
+    ``reference`` defaults to ``scene``. Returns one
     :class:`~fidelity.report.junit.GateCase` per subject (its report, or its error, and the
     time it took); :func:`fidelity.report.junit.gate_exit_code` turns them into the exit code.
     """
@@ -240,7 +240,7 @@ def gate(
         try:
             if images:
                 report = audit_image(subject, corners, layer=layer, encoding=encoding,
-                                     exposure=exposure, reference=reference or "safecolor",
+                                     exposure=exposure, reference=reference or "scene",
                                      illuminant=illuminant, size=size, table=table,
                                      criterion=criterion, negatives=negatives,
                                      colourspace=colourspace, command="gate")

@@ -198,22 +198,22 @@ def test_dataset_command(tmp_path) -> None:
                                          str(tmp_path / "out"), "--no-progress",
                                          *map(str, args)])
 
-    r = run("--transform", "contrast-inc", "--delta-e", "3")  # default: one worker per core
+    r = run("--transforms", "contrast-inc", "--targets", "3")  # default: one worker per core
     param = calibrate_transform("contrast-inc", 3.0).param
     assert r.exit_code == 0, r.output
     assert f"contrast-inc_de3: param {param:.6g}, wrote 3, kept 0 existing" in r.output
     assert sorted(p.name for p in (tmp_path / "out/contrast-inc_de3").iterdir()) == sorted(before)
-    r = run("--transform", "contrast-inc", "--delta-e", "3", "--workers", "1")
+    r = run("--transforms", "contrast-inc", "--targets", "3", "--workers", "1")
     assert "wrote 0, kept 3 existing" in r.output
-    r = run("--transform", "saturation-inc,hue", "--delta-e", "0,15")
+    r = run("--transforms", "saturation-inc,hue", "--targets", "0,15")
     assert r.exit_code == 0, r.output
     assert "baseline: param -, wrote 3" in r.output
     assert "saturation-inc_de15: skipped: " in r.output and "cannot reach" in r.output
     assert "hue_de15: param" in r.output
     assert {p.name: _sha(p) for p in src.iterdir()} == before  # originals untouched
-    for args, message in (((), "give --transform and --delta-e"),
-                          (("--transform", "contrast-up", "--delta-e", "3"), "contrast-up"),
-                          (("--transform", "hue", "--delta-e", "3", "--param", "5",
+    for args, message in (((), "give --transforms and --targets"),
+                          (("--transforms", "contrast-up", "--targets", "3"), "contrast-up"),
+                          (("--transforms", "hue", "--targets", "3", "--param", "5",
                             "--workers", "0"), "--workers")):
         r = run(*args)
         assert r.exit_code == 2 and message in r.output and "Traceback" not in r.output, r.output

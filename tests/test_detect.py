@@ -97,8 +97,8 @@ def test_hdr_input_with_bad_pixels_and_the_audit_it_feeds():
     img = scene(h, size, cm.linearize_srgb(camera)) * 900.0  # HDR scale
     img[5:40, 5:40] = np.nan
     img[300:310, 10:20, 1] = np.inf
-    found = measure_pixels(img, None, encoding="linear")
-    given = measure_pixels(img, map_points(h, GRID_CORNERS), encoding="linear")
+    found = measure_pixels(img, None, encoding="linear", reference="safecolor")
+    given = measure_pixels(img, map_points(h, GRID_CORNERS), encoding="linear", reference="safecolor")
     assert found.detection is not None and given.detection is None
     assert found.mean_delta_e == pytest.approx(given.mean_delta_e, abs=1e-9)
     assert found.mean_delta_e == pytest.approx(expected_delta_e(np.clip(camera, 0, 1), CHART.lab),

@@ -114,8 +114,7 @@ def test_render_cli_with_mitsuba_reports_the_variant(tmp_path) -> None:
 
     js = tmp_path / "r.json"
     res = CliRunner().invoke(main, ["render", "--camera", "ideal", "--renderer", "mitsuba",
-                                    "--spp", "16", "--pixels-per-patch", "8", "--json", str(js),
-                                    "-q"])
+                                    "--spp", "16", "--pixels-per-patch", "8", "--json", str(js)])
     assert res.exit_code == 0, res.output
     d = json.loads(js.read_text())
     assert d["renderer"] == "mitsuba" and d["variant"] in mr.PREFERRED_VARIANTS

@@ -399,10 +399,10 @@ def test_tables_images_without_annotations_is_one_line_exit_2(store, tmp_path) -
     from fidelity.cli import main
 
     res = CliRunner().invoke(main, ["tables", str(store.path.parent), "--no-standard-errors",
-                                    "--images", "2", "--out", str(tmp_path / "r")])
+                                    "--limit", "2", "--out", str(tmp_path / "r")])
     assert res.exit_code == 2
-    assert "--images re-scores cells from the annotations" in res.output
-    res = CliRunner().invoke(main, ["tables", str(store.path.parent), "--images", "nope=2",
+    assert "--limit re-scores cells from the annotations" in res.output
+    res = CliRunner().invoke(main, ["tables", str(store.path.parent), "--limit", "nope=2",
                                     "--out", str(tmp_path / "r")])
     assert res.exit_code == 2 and "no model 'nope' in the store" in res.output
     assert not (tmp_path / "r").exists()

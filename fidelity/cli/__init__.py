@@ -32,20 +32,37 @@ from fidelity.errors import FidelityError
 #: Exit code of an internal error (a bug), after 0 pass, 1 fail, 2 input error.
 EXIT_INTERNAL = 3
 
-#: command name -> "module:attribute" of its click command.
-COMMANDS: dict[str, str] = {
-    "audit": "fidelity.cli.audit:audit",
-    "check": "fidelity.cli.check:check",
-    "gate": "fidelity.cli.gate:gate",
-    "info": "fidelity.cli.info:info",
-    "predict": "fidelity.cli.predict:predict_cmd",
-    "calibrate": "fidelity.cli.calibrate:calibrate",
-    "dataset": "fidelity.cli.dataset:dataset",
-    "evaluate": "fidelity.cli.evaluate:evaluate",
-    "render": "fidelity.cli.render:render",
-    "sweep": "fidelity.cli.sweep:sweep",
-    "tables": "fidelity.cli.tables:tables",
-    "validate": "fidelity.cli.validate:validate",
+#: command name -> ("module:attribute" of its click command, one-line help). The help listing
+#: reads the line from here, so ``fidelity --help`` imports no command (a test keeps both equal).
+COMMANDS: dict[str, tuple[str, str]] = {
+    "audit": ("fidelity.cli.audit:audit",
+              "Measure the chart in IMAGE: ΔE00 per patch, mean and max, exposure, bad pixels."),
+    "calibrate": ("fidelity.cli.calibrate:calibrate", "Print the SAFE-COLOR calibration table."),
+    "check": ("fidelity.cli.check:check",
+              "Is this camera model's colour good enough for perception testing?"),
+    "dataset": ("fidelity.cli.dataset:dataset",
+                "Write transformed JPEGs (original quantization tables and subsampling); reruns "
+                "resume."),
+    "evaluate": ("fidelity.cli.evaluate:evaluate",
+                 "Run detectors on a COCO image folder and print COCO box AP."),
+    "gate": ("fidelity.cli.gate:gate",
+             "Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 error."),
+    "info": ("fidelity.cli.info:info",
+             "Versions, Mitsuba variant, ONNX providers, chart detection, shared data found."),
+    "predict": ("fidelity.cli.predict:predict_cmd",
+                "Predict what a chart ΔE costs detectors, or the ΔE limit of a loss budget."),
+    "render": ("fidelity.cli.render:render",
+               "Render the spectral Macbeth chart through a camera model and measure ΔE00 per "
+               "patch."),
+    "sweep": ("fidelity.cli.sweep:sweep",
+              "Run (or resume) the COCO sweep; one line per finished cell on stderr ([k/N] "
+              "cells)."),
+    "tables": ("fidelity.cli.tables:tables",
+               "Worst case per model and size class, paper comparison, plots, Markdown/HTML "
+               "report."),
+    "validate": ("fidelity.cli.validate:validate",
+                 "Render every camera's chart, predict its ΔmAP, emulate it on COCO and measure "
+                 "ΔmAP."),
 }
 
 
@@ -77,12 +94,18 @@ class LazyGroup(click.Group):
         return sorted(COMMANDS)
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
-        target = COMMANDS.get(cmd_name)
-        if target is None:
+        entry = COMMANDS.get(cmd_name)
+        if entry is None:
             return None
-        module_name, attr = target.split(":")
+        module_name, attr = entry[0].split(":")
         command: click.Command = getattr(importlib.import_module(module_name), attr)
         return command
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        """The command list of ``--help``, from :data:`COMMANDS` (no command is imported)."""
+        rows = [(name, help_line) for name, (_, help_line) in sorted(COMMANDS.items())]
+        with formatter.section("Commands"):
+            formatter.write_dl(rows)
 
     def main(self, *args: Any, **kwargs: Any) -> Any:
         """Run the command line; errors of the group's own options are one line too."""
@@ -139,8 +162,12 @@ class LazyGroup(click.Group):
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="fidelity")
 @click.option("-v", "--verbose", is_flag=True, help="Show the traceback of an internal error.")
+@click.option("--config", "config_path", type=click.Path(dir_okay=False), default=None,
+              help="Settings file (default: the nearest fidelity.toml, or pyproject.toml with "
+                   "[tool.fidelity], from the working folder up).")
+@click.option("--no-config", is_flag=True, help="Ignore any settings file.")
 @click.pass_context
-def main(ctx: click.Context, verbose: bool) -> None:
+def main(ctx: click.Context, verbose: bool, config_path: str | None, no_config: bool) -> None:
     """Colour fidelity of simulated cameras, and what its error costs object detectors.
 
     \b
@@ -148,8 +175,19 @@ def main(ctx: click.Context, verbose: bool) -> None:
                  fidelity audit IMAGE    (measure the chart in a render or photo)
                  fidelity gate IMAGE --max-delta-e 3   (pass/fail for CI)
     Exit codes:  0 pass, 1 fail, 2 input error, 3 internal error (a bug; see the log named)
+    Settings:    [tool.fidelity] in pyproject.toml or fidelity.toml (camera, max_delta_e,
+                 reference, table, ...); options on the command line win.
     """
     ctx.obj = {"verbose": verbose}
+    if no_config:
+        return
+    from fidelity.config import find_config, read_config
+
+    found = config_path or find_config()
+    if found is not None:
+        config = read_config(found)
+        ctx.obj["config"] = config
+        ctx.default_map = config.default_map(list(COMMANDS))
 
 
 __all__ = ["COMMANDS", "EXIT_INTERNAL", "LazyGroup", "error_line", "internal_error_log", "main"]

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from fidelity.cli.gate import PATH, colourspace_option, negatives_option, report_paths
+from fidelity.cli.options import STDOUT, common_options
 from fidelity.prediction.table import SIZES
 
 
@@ -25,22 +26,23 @@ from fidelity.prediction.table import SIZES
 @click.option("--layer", default=None, help="EXR layer (e.g. 'diffuse' for diffuse.R) or part.")
 @colourspace_option
 @negatives_option
-@click.option("--reference", default="safecolor", show_default=True,
-              help="safecolor (the paper's Lab), scene (BabelColor spectra under --illuminant) "
-                   "or a chart JSON.")
+@click.option("--reference", default="scene", show_default=True,
+              help="scene (the chart's BabelColor spectra under --illuminant, as render and "
+                   "check use), safecolor (the paper's Lab table) or a chart JSON.")
 @click.option("--illuminant", default="D65", show_default=True,
               help="Illuminant of the scene reference.")
 @click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
               help="Detector size class for the predicted loss.")
 @click.option("--table", default=None, help="Prediction table (name or JSON path).")
 @click.option("--json", "json_path", type=click.Path(path_type=Path),
-              help="Write the JSON report here (a folder: IMAGE-NAME.json in it).")
+              help="Write the JSON report here (a folder: IMAGE-NAME.json in it; '-': "
+                   "standard output).")
 @click.option("--html", "html_path", type=click.Path(path_type=Path),
               help="Write the HTML report here (a folder: IMAGE-NAME.html in it).")
-@click.option("--quiet", "-q", is_flag=True, help="Print nothing.")
+@common_options
 def audit(image: Path, corners: str | None, encoding: str | None, exposure: str | None,
           layer: str | None, colourspace: str | None, negatives: str, reference: str,
-          illuminant: str, size: str, table: str | None, json_path: Path | None, html_path: Path | None, quiet: bool) -> None:
+          illuminant: str, size: str, table: str | None, json_path: Path | None, html_path: Path | None) -> None:
     """Measure the chart in IMAGE: ΔE00 per patch, mean and max, exposure, bad pixels.
 
     \b
@@ -53,7 +55,8 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
     from fidelity.report.terminal import summary_lines
 
     # an existing folder gets IMAGE-NAME.json / .html, as in `fidelity gate`
-    (json_path,) = report_paths((image,), json_path, ".json")
+    to_stdout = json_path is not None and str(json_path) == STDOUT
+    (json_path,) = report_paths((image,), None if to_stdout else json_path, ".json")
     (html_path,) = report_paths((image,), html_path, ".html")
     check_outputs({"--json": json_path, "--html": html_path},
                   {"IMAGE": image, "--table": table, "--reference": reference,
@@ -63,12 +66,15 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
                          negatives=negatives, colourspace=colourspace)
     written = write_chart_report(report, json_path=json_path, html_path=html_path,
                                  protect=(image,))
-    if not quiet:
-        src = report.source
-        assert isinstance(src, ImageSource)
-        click.echo(f"{image}: {src.image.format} {src.image.pixel_type} "
-                   f"{src.image.width}x{src.image.height}, {src.encoding} pixels")
-        for line in summary_lines(report):
-            click.echo(line)
-        for p in written:
-            click.echo(f"wrote {p}")
+    if to_stdout:
+        from fidelity.cli.options import write_json_output
+
+        write_json_output(STDOUT, report.to_json())
+    src = report.source
+    assert isinstance(src, ImageSource)
+    click.echo(f"{image}: {src.image.format} {src.image.pixel_type} "
+               f"{src.image.width}x{src.image.height}, {src.encoding} pixels")
+    for line in summary_lines(report):
+        click.echo(line)
+    for p in written:
+        click.echo(f"wrote {p}")

@@ -9,9 +9,10 @@ from pathlib import Path
 import click
 import numpy as np
 
+from fidelity.cli.options import common_options, json_option, write_json_output
 from fidelity.colour.charts import DEFAULT_CHART, load_chart
 from fidelity.errors import InvalidValueError
-from fidelity.fileio import write_json_atomic, write_text_atomic
+from fidelity.fileio import write_text_atomic
 from fidelity.prediction.calibration import (
     DEFAULT_TARGETS,
     calibration_table,
@@ -49,16 +50,14 @@ def parse_number_list(text: str, what: str) -> list[float]:
                    "Default: 1..12, 15, 18, ..., 45.")
 @click.option("--transforms", "transform_names", default=None,
               help=f"Comma-separated transforms (default: all ten): {', '.join(TRANSFORMS)}.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the table as JSON.")
+@json_option("Write the table as JSON")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Write the table as CSV.")
 @click.option("--markdown", "md_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Write the table as Markdown.")
-@click.option("--quiet", "-q", is_flag=True, help="Do not print the table.")
+@common_options
 def calibrate(chart: str, targets: str | None, transform_names: str | None,
-              json_path: Path | None, csv_path: Path | None, md_path: Path | None,
-              quiet: bool) -> None:
+              json_path: str | None, csv_path: Path | None, md_path: Path | None) -> None:
     """Print the SAFE-COLOR calibration table.
 
     For each transform and target ΔE, the parameter that puts the chart at that mean CIEDE2000
@@ -79,7 +78,7 @@ def calibrate(chart: str, targets: str | None, transform_names: str | None,
     table = calibration_table(c, tlist, names)
     seconds = time.perf_counter() - t0
     if json_path:
-        write_json_atomic(json_path, table.to_json())
+        write_json_output(json_path, table.to_json())
     if csv_path:
         write_text_atomic(csv_path, calibration_table_csv(table))
     if md_path:
@@ -89,10 +88,9 @@ def calibrate(chart: str, targets: str | None, transform_names: str | None,
                  "--csv reports/calibration/calibration-safecolor.csv --markdown "
                  "reports/calibration/calibration-safecolor.md`.\n")
         write_text_atomic(md_path, title + body + regen)
-    if not quiet:
-        click.echo(calibration_table_text(table))
-        reached = [abs(e.delta_e - e.target) for e in table.entries if e.reachable]
-        count = len(table.entries)
-        click.echo(f"{count} {'entry' if count == 1 else 'entries'} ({len(reached)} reachable) in "
-                   f"{seconds:.2f} s" + (f"; largest |ΔE - target| = {max(reached):.1e}"
-                                         if reached else ""))
+    click.echo(calibration_table_text(table))
+    reached = [abs(e.delta_e - e.target) for e in table.entries if e.reachable]
+    count = len(table.entries)
+    click.echo(f"{count} {'entry' if count == 1 else 'entries'} ({len(reached)} reachable) in "
+               f"{seconds:.2f} s" + (f"; largest |ΔE - target| = {max(reached):.1e}"
+                                     if reached else ""))

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from fidelity.cli.options import STDOUT, common_options, json_option, write_json_output
 from fidelity.prediction.table import SIZES
 from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E
 
@@ -31,8 +32,13 @@ DEFAULT_OUTPUT_DIR = "fidelity-report"
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               default=DEFAULT_OUTPUT_DIR, show_default=True,
               help="Folder for report.html and report.json.")
+@json_option("Write the JSON report here instead of OUT/report.json")
+@click.option("--html", "html_path", type=click.Path(dir_okay=False, path_type=Path),
+              default=None, help="Write the HTML report here instead of OUT/report.html.")
+@common_options
 def check(camera: str | None, illuminant: str, renderer: str, reference: str,
-          max_delta_e: float, size: str, table: str | None, out_dir: Path) -> None:
+          max_delta_e: float, size: str, table: str | None, out_dir: Path,
+          json_path: str | None, html_path: Path | None) -> None:
     """Is this camera model's colour good enough for perception testing?
 
     Renders the spectral colour chart through the camera, measures ΔE00, predicts the detection
@@ -46,13 +52,17 @@ def check(camera: str | None, illuminant: str, renderer: str, reference: str,
     from fidelity.report.terminal import summary_lines
 
     cam = camera or DEFAULT_CAMERA
-    html_path, json_path = out_dir / "report.html", out_dir / "report.json"
-    check_outputs({"--out (report.html)": html_path, "--out (report.json)": json_path},
+    html = html_path or out_dir / "report.html"
+    to_stdout = json_path == STDOUT
+    json_file = None if to_stdout else Path(json_path) if json_path else out_dir / "report.json"
+    check_outputs({"--html": html, "--json": json_file},
                   {"--camera": cam, "--table": table, "--illuminant": illuminant})
     report = check_camera(cam, illuminant=illuminant, renderer=renderer, reference=reference,
                           size=size, table=table,
                           criterion=Criterion("max-delta-e", max_delta_e))
-    write_chart_report(report, json_path=json_path, html_path=html_path)
+    write_chart_report(report, json_path=json_file, html_path=html)
+    if to_stdout:
+        write_json_output(STDOUT, report.to_json())
     src = report.source
     assert isinstance(src, RenderSource)
     variant = f" ({src.variant})" if src.variant else ""
@@ -60,5 +70,5 @@ def check(camera: str | None, illuminant: str, renderer: str, reference: str,
                f"{src.renderer} renderer{variant}, {reference} reference")
     for line in summary_lines(report):
         click.echo("  " + line)
-    click.echo(f"  report: {html_path} (JSON: {json_path})")
+    click.echo(f"  report: {html}" + (f" (JSON: {json_file})" if json_file else ""))
     sys.exit(report.exit_code)

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 import click
 
+from fidelity.cli.options import STDOUT, common_options
 from fidelity.errors import FidelityError
 from fidelity.prediction.table import CLASS_COLUMNS, SIZES
 from fidelity.prediction.verdict import EXIT_ERROR, Criterion
@@ -33,6 +34,13 @@ negatives_option = click.option(
     "--negatives", type=click.Choice(["keep", "exclude"]), default="keep", show_default=True,
     help="Pixels with a negative channel: keep them in the linear mean (out-of-gamut colours in "
          "a scene-linear render) or exclude them like NaN/Inf.")
+
+
+def from_settings(name: str) -> bool:
+    """Whether option ``name`` of the running command has its value from the settings file."""
+    from click.core import ParameterSource
+
+    return click.get_current_context().get_parameter_source(name) == ParameterSource.DEFAULT_MAP
 
 
 def make_criterion(max_delta_e: float | None, max_dmap: float | None, cls: str | None,
@@ -99,20 +107,23 @@ def report_paths(images: tuple[Path, ...], path: Path | None, suffix: str, *,
 @click.option("--layer", default=None, help="EXR layer or part name.")
 @colourspace_option
 @negatives_option
-@click.option("--reference", default=None,
-              help="Reference: safecolor (image default) or scene (camera default).")
+@click.option("--reference", default="scene", show_default=True,
+              help="scene (the chart's spectra under --illuminant), safecolor (the paper's Lab "
+                   "table) or a chart JSON.")
 @click.option("--illuminant", default="D65", show_default=True, help="Scene illuminant.")
 @click.option("--renderer", default="closed-form", show_default=True,
               help="Camera renderer: closed-form or mitsuba.")
 @click.option("--junit", type=PATH, help="Write JUnit XML (one test case per image or camera).")
 @click.option("--json", "json_path", type=click.Path(path_type=Path),
-              help="Write the JSON report (several images: a folder, one report per image).")
+              help="Write the JSON report (several images: a folder, one report per image; "
+                   "'-': standard output, one subject only).")
 @click.option("--html", "html_path", type=click.Path(path_type=Path),
               help="Write the HTML report (several images: a folder, one report per image).")
+@common_options
 def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
          max_delta_e: float | None, max_dmap: float | None, cls: str | None, unit: str,
          size: str, table: str | None, encoding: str | None, exposure: str | None,
-         layer: str | None, colourspace: str | None, negatives: str, reference: str | None,
+         layer: str | None, colourspace: str | None, negatives: str, reference: str,
          illuminant: str, renderer: str, junit: Path | None, json_path: Path | None,
          html_path: Path | None) -> None:
     """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 error.
@@ -127,6 +138,13 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
     folders that get IMAGE-NAME.json / .html, as an existing folder does for one image); the
     exit code is 2 if any image could not be measured, else 1 if any failed, else 0.
     """
+    # settings-file values yield to what the command line names
+    if images and camera is not None and from_settings("camera"):
+        camera = None
+    if max_dmap is not None and max_delta_e is not None and from_settings("max_delta_e"):
+        max_delta_e = None
+    if max_delta_e is not None and max_dmap is not None and from_settings("max_dmap"):
+        max_dmap = None
     if images and camera is not None:
         raise click.UsageError("give IMAGE(s) or --camera, not both")
     if not images and camera is None:
@@ -141,6 +159,11 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
     from fidelity.report.terminal import summary_lines
 
     many = len(images) > 1
+    to_stdout = json_path is not None and str(json_path) == STDOUT
+    if to_stdout and many:
+        raise click.UsageError("--json - (standard output) takes one IMAGE; give a folder")
+    if to_stdout:
+        json_path = None
     try:
         from fidelity.fileio import check_outputs
 
@@ -183,6 +206,10 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
             click.echo(("  " if many else "") + line)
     if junit is not None:
         _write_junit(junit, cases)
+    if to_stdout and cases[0].report is not None:
+        from fidelity.cli.options import write_json_output
+
+        write_json_output(STDOUT, cases[0].report.to_json())
     if many:
         codes = [c.exit_code for c in cases]
         click.echo(f"gate: {codes.count(0)} of {len(codes)} passed, {codes.count(1)} failed, "

@@ -2,17 +2,17 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import click
+
+from fidelity.cli.options import common_options, json_option, write_json_output
 
 
 @click.command()
 @click.option("--probe/--no-probe", default=True, show_default=True,
               help="Probe which Mitsuba variant renders here (a few seconds).")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              default=None, help="Also write it as JSON.")
-def info(probe: bool, json_path: Path | None) -> None:
+@json_option("Also write it as JSON")
+@common_options
+def info(probe: bool, json_path: str | None) -> None:
     """Versions, Mitsuba variant, ONNX providers, chart detection, shared data found."""
     from fidelity.environment import describe_environment
 
@@ -51,7 +51,4 @@ def info(probe: bool, json_path: Path | None) -> None:
     t = env["prediction_tables"]
     click.echo(f"prediction tables: {', '.join(t['available'])} (default {t['default']})")
     if json_path is not None:
-        from fidelity.fileio import write_json_atomic
-
-        write_json_atomic(json_path, env)
-        click.echo(f"wrote {json_path}")
+        click.echo(f"wrote {write_json_output(json_path, env)}")

@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import click
 
-from fidelity.cli.gate import PATH
+from fidelity.cli.options import common_options, json_option, write_json_output
 from fidelity.prediction.table import (
     CLASS_COLUMNS,
     INTERPOLATIONS,
@@ -35,14 +33,17 @@ from fidelity.prediction.table import (
 @click.option("--unit", type=click.Choice(["points", "relative"]), default="points",
               show_default=True, help="Unit of --max-dmap: percentage points or % of baseline "
                                       "(relative: --class all only).")
-@click.option("--json", "json_path", type=PATH, help="Write the prediction as JSON.")
+@json_option("Write the prediction (or the ΔE limit) as JSON")
 @click.option("--list-tables", is_flag=True, help="List the prediction tables and exit.")
+@common_options
 def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
                 method: str | None, baseline_map: float | None, max_dmap: float | None,
-                unit: str, json_path: Path | None, list_tables: bool) -> None:
-    """Predict what a chart ΔE costs detectors: ΔmAP (points and % of baseline), ΔAP person and
-    bicycle, and the SAFE-COLOR transform parameters that produce this ΔE on the chart; or,
-    with --max-dmap, the largest chart ΔE that keeps the predicted loss within a budget.
+                unit: str, json_path: str | None, list_tables: bool) -> None:
+    """Predict what a chart ΔE costs detectors, or the ΔE limit of a loss budget.
+
+    With --delta-e: ΔmAP (points and % of baseline), ΔAP person and bicycle, and the
+    SAFE-COLOR transform parameters that produce this ΔE on the chart. With --max-dmap: the
+    largest chart ΔE that keeps the predicted loss within a budget.
 
     \b
     fidelity predict --delta-e 4.2 --class person --json predict.json
@@ -89,14 +90,11 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
         click.echo("  SAFE-COLOR transforms at this ΔE: " + ", ".join(
             f"{t.transform} {t.param:.4g}" for t in reach))
     if json_path is not None:
-        from fidelity.fileio import json_ready, write_json_atomic
-
-        write_json_atomic(json_path, json_ready(p.to_json()))
-        click.echo(f"wrote {json_path}")
+        click.echo(f"wrote {write_json_output(json_path, p.to_json())}")
 
 
 def _print_limit(max_dmap: float, cls: str, unit: str, size: str, table: str | None,
-                 method: str | None, json_path: Path | None) -> None:
+                 method: str | None, json_path: str | None) -> None:
     from fidelity.prediction.table import delta_e_limit
     from fidelity.prediction.verdict import Criterion
 
@@ -116,7 +114,4 @@ def _print_limit(max_dmap: float, cls: str, unit: str, size: str, table: str | N
                    f"{lim.loss_at_limit:.2f} at ΔE {lim.delta_e:.4f})")
         click.echo(f"  gate with: fidelity gate IMAGE --max-delta-e {de:.2f}")
     if json_path is not None:
-        from fidelity.fileio import write_json_atomic
-
-        write_json_atomic(json_path, lim.to_json())
-        click.echo(f"wrote {json_path}")
+        click.echo(f"wrote {write_json_output(json_path, lim.to_json())}")

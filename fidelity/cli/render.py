@@ -8,8 +8,8 @@ import click
 
 from fidelity.camera.model import DEFAULT_CAMERA
 from fidelity.camera.render import REFERENCES, RENDERERS, ChartRender, render_chart
+from fidelity.cli.options import common_options, json_option, write_json_output
 from fidelity.colour.spectral import CHROMATIC_ADAPTATION_METHODS, GRID_STEP_NM, SPECTRA_SETS
-from fidelity.fileio import write_json_atomic
 
 
 def format_report(r: ChartRender) -> str:
@@ -60,14 +60,13 @@ def format_report(r: ChartRender) -> str:
               help="Folder for chart_linear.exr (raw camera RGB before white balance and colour "
                    "correction, float32) and chart_display.png (the developed sRGB image: "
                    "audit this one to check the render).")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              default=None, help="Write the full result as JSON.")
+@json_option("Write the full result as JSON")
 @click.option("--list-cameras", is_flag=True, help="List the built-in cameras and exit.")
-@click.option("--quiet", "-q", is_flag=True, help="Print only the summary line.")
+@common_options
 def render(camera: str, illuminant: str, renderer: str, spp: int | None,
            pixels_per_patch: int | None, reference: str, spectra: str, cat: str, step: float,
-           seed: int | None, variant: str | None, out_dir: Path | None, json_path: Path | None,
-           list_cameras: bool, quiet: bool) -> None:
+           seed: int | None, variant: str | None, out_dir: Path | None, json_path: str | None,
+           list_cameras: bool) -> None:
     """Render the spectral Macbeth chart through a camera model and measure ΔE00 per patch.
 
     The closed form (default) integrates reflectance x illuminant x sensitivity per patch;
@@ -99,6 +98,5 @@ def render(camera: str, illuminant: str, renderer: str, spp: int | None,
         png = write_png(out_dir / "chart_display.png", result.display_image, bits)
         report["files"] = {"linear_exr": str(exr), "display_png": str(png)}
     if json_path is not None:
-        write_json_atomic(json_path, report)
-    text = format_report(result)
-    click.echo(text.splitlines()[-1] if quiet else text)
+        write_json_output(json_path, report)
+    click.echo(format_report(result))

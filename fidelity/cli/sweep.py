@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-import sys
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import click
 
 from fidelity.cli.evaluate import scorer_option
+from fidelity.cli.options import common_options, progress_option, show_progress
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import SweepStore
@@ -66,11 +67,13 @@ def _transforms(text: str) -> list[str]:
 @click.option("--status", is_flag=True,
               help="Only say where the store in --out stands (per model: cells done, to do, "
                    "under way, pace); safe while a sweep runs.")
-@click.option("--progress/--no-progress", default=None,
-              help="Progress bar over each cell's images (default: when stderr is a terminal).")
+@click.option("--limit", type=click.IntRange(min=1), default=None,
+              help="At most N images (first N by id) for every model without its own @N.")
+@progress_option
+@common_options
 def sweep(models: str | None, images: str | None, annotations: str | None, transforms: str,
           targets: str, out: str, threads: int, provider: str, order: str, scorer: str,
-          rescore: bool, status: bool, progress: bool | None) -> None:
+          rescore: bool, status: bool, limit: int | None, progress: bool | None) -> None:
     """Run (or resume) the COCO sweep; one line per finished cell on stderr ([k/N] cells).
 
     \b
@@ -96,10 +99,12 @@ def sweep(models: str | None, images: str | None, annotations: str | None, trans
 
         raise InvalidValueError("--models and --images are needed (except with --rescore)")
     specs = [ModelSpec.parse(m.strip()) for m in models.split(",") if m.strip()]
+    if limit is not None:
+        specs = [s if s.limit else replace(s, limit=limit) for s in specs]
     store = run_sweep(specs, images, annotations, out, _transforms(transforms),
                       _targets(targets), threads=threads, provider=provider, order=order,
                       scorer=scorer,
-                      progress=sys.stderr.isatty() if progress is None else progress)
+                      progress=show_progress(progress))
     cells = store.cells()
     done = sum(c.done for c in cells)
     click.echo(f"{done} cells done, {len(cells) - done} unreachable; store {store.path}")

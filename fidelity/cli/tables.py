@@ -6,6 +6,13 @@ from typing import TYPE_CHECKING
 
 import click
 
+from fidelity.cli.options import (
+    common_options,
+    json_option,
+    progress_option,
+    show_progress,
+    write_json_output,
+)
 from fidelity.coco.tables import RARE_BOXES
 
 if TYPE_CHECKING:
@@ -34,20 +41,20 @@ if TYPE_CHECKING:
               type=click.IntRange(min=0),
               help="With --explain: classes with at most this many ground-truth boxes in the "
                    "images count as rare.")
-@click.option("--images", "images", default=None, metavar="N|MODEL=N[,...]",
+@click.option("--limit", "images", default=None, metavar="N|MODEL=N[,...]",
               help="Report on at most the first N images by id, for every model (N) or the "
                    "models named (MODEL=N), re-scoring stored detections: an earlier state of "
                    "a sweep that has moved on (default: all that every cell of a model has). "
                    "With --explain: the cell is scored on the first N.")
 @click.option("--top", default=10, show_default=True, type=click.IntRange(min=1),
               help="With --explain: classes listed (largest loss first).")
-@click.option("--json", "json_path", default=None, type=click.Path(dir_okay=False),
-              help="With --explain: also write the breakdown as JSON.")
-@click.option("--progress/--no-progress", default=True, show_default=True)
+@json_option("With --explain: also write the breakdown as JSON")
+@progress_option
+@common_options
 def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
            annotations: str | None, standard_errors: bool, explain: str | None,
            rare_boxes: int, images: str | None, top: int, json_path: str | None,
-           progress: bool) -> None:
+           progress: bool | None) -> None:
     """Worst case per model and size class, paper comparison, plots, Markdown/HTML report.
 
     With --explain MODEL:TRANSFORM:ΔE: the classes one cell's ΔmAP comes from, instead.
@@ -70,7 +77,7 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
     if caps and not standard_errors:
         from fidelity.errors import InvalidValueError
 
-        raise InvalidValueError("--images re-scores cells from the annotations: it cannot be "
+        raise InvalidValueError("--limit re-scores cells from the annotations: it cannot be "
                                 "combined with --no-standard-errors")
     if standard_errors:
         from fidelity.coco.scoring import load_annotations
@@ -83,7 +90,7 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
         else:
             click.echo(f"no annotations ({recorded or 'none recorded'}): report without "
                        "standard errors (pass --annotations)", err=True)
-    result = tables_result(store, coco, progress=progress, images=caps)
+    result = tables_result(store, coco, progress=show_progress(progress), images=caps)
     written = write_tables_report(result, out or Path(store_dir) / "report", prediction, name)
     for k, p in written.items():
         click.echo(f"{k:<14} {p}")
@@ -123,7 +130,4 @@ def _explain(store: SweepStore, spec: str, annotations: str | None, rare_boxes: 
         click.echo(f"  {c.name:<16} {c.boxes:>5} {c.ap_baseline:>8.4f} {c.ap:>8.4f} "
                    f"{c.dap_points:>8.2f} {c.share_points:>9.2f}")
     if json_path:
-        from fidelity.fileio import write_json_atomic
-
-        write_json_atomic(json_path, r.to_json())
-        click.echo(f"  JSON: {json_path}")
+        click.echo(f"  JSON: {write_json_output(json_path, r.to_json())}")

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import click
 
+from fidelity.cli.options import common_options, progress_option, show_progress
+
 
 @click.command()
 @click.option("--cameras", default=None, type=click.Path(file_okay=False),
@@ -37,11 +39,12 @@ import click
               help="Only write the report from what the store holds (no inference).")
 @click.option("--notes", default=None, type=click.Path(dir_okay=False, exists=True),
               help="Markdown file with a written analysis, included in the report.")
-@click.option("--no-progress", is_flag=True, help="No progress bars.")
+@progress_option
+@common_options
 def validate(cameras: str | None, models: str | None, images: str | None, annotations: str | None,
              out: str, limit: int | None, store: str | None, method: str, training: str,
              threads: int, provider: str, bound_table: str | None, report_only: bool,
-             notes: str | None, no_progress: bool) -> None:
+             notes: str | None, progress: bool | None) -> None:
     """Render every camera's chart, predict its ΔmAP, emulate it on COCO and measure ΔmAP.
 
     \b
@@ -89,7 +92,7 @@ def validate(cameras: str | None, models: str | None, images: str | None, annota
             specs = [replace(s, limit=min(s.limit or limit, limit)) for s in specs]
         st = run_validation(cases, specs, images, annotations, store_dir, method=method,
                             training=training, threads=threads, provider=provider,
-                            progress=not no_progress)
+                            progress=show_progress(progress))
     from fidelity.report.validation import write_validation_report
 
     results = collect_results(st, bound_table=bound_table, suite=cases)

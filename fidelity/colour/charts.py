@@ -165,8 +165,9 @@ def load_chart(name_or_path: str | Path = DEFAULT_CHART) -> Chart:
 
 #: Reference choices besides a chart name or path: ``scene`` (spectral chart under the illuminant).
 SCENE_REFERENCE = "scene"
-#: Default reference: the SAFE-COLOR chart (the paper's Lab values).
-DEFAULT_REFERENCE = "safecolor"
+#: Default reference of every command (render, check, audit, gate): the chart's spectra under the
+#: scene illuminant (``scene``); ``safecolor`` is the paper's Lab table (older D50-era data).
+DEFAULT_REFERENCE = "scene"
 
 
 @dataclass(frozen=True)

@@ -133,6 +133,11 @@ class ImageSource:
         """How a report names this source."""
         return self.image.path
 
+    @property
+    def reference_description(self) -> str:
+        """The reference the chart was compared with, in words (its illuminant included)."""
+        return self.reference
+
 
 @dataclass(frozen=True)
 class RenderSource:
@@ -171,6 +176,14 @@ class RenderSource:
     def title(self) -> str:
         """How a report names this source."""
         return self.camera
+
+    @property
+    def reference_description(self) -> str:
+        """The reference the chart was compared with, in words (its illuminant included)."""
+        if self.reference != "scene":
+            return self.reference
+        spectra = self.render_settings.get("spectra", "BabelColor Average")
+        return f"scene ({spectra} under {self.illuminant})"
 
 
 Source = ImageSource | RenderSource

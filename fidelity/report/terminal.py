@@ -19,7 +19,8 @@ def summary_lines(report: ChartReport) -> list[str]:
         if src.colourspace and src.colourspace != "sRGB":
             lines.append(f"RGB primaries: {src.colourspace}, converted to linear sRGB")
     lines.append(f"chart ΔE00: mean {report.mean_delta_e:.2f}, max "
-                 f"{report.max_delta_e:.2f} ({report.worst_patch})")
+                 f"{report.max_delta_e:.2f} ({report.worst_patch}); reference "
+                 f"{src.reference_description}")
     if report.exposure_ev is not None:
         bp = report.bad_pixels
         kept = ""

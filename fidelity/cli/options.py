@@ -1,0 +1,114 @@
+"""Options every command shares, so one idea has one flag everywhere.
+
+The vocabulary (also in the docs' command table):
+
+- ``--images DIR``: a folder of images; ``--annotations FILE``: COCO annotations;
+- ``--models A.onnx,B.onnx@250``: ONNX detectors (``@N``: that model on the first N images by
+  id); ``--limit N``: at most N images (first N by id) for every model;
+- ``--transforms all|NAME,...``: SAFE-COLOR transforms; ``--targets 0,1,3``: chart ΔE targets of
+  the transforms; ``--delta-e X``: a chart's measured ΔE (``predict``);
+- ``--camera``, ``--illuminant``, ``--reference``, ``--table``, ``--size``: as in ``check``;
+- ``--out DIR``: the folder a command writes several files to; ``--json FILE`` (``-`` for
+  stdout: then nothing else is printed there), ``--html FILE``, ``--junit FILE``: one report;
+- ``-q/--quiet``: print nothing but errors (and JSON asked for on stdout); ``-v/--verbose``:
+  show the traceback of an internal error; ``--progress/--no-progress``: progress bars (default:
+  when stderr is a terminal; never in a CI log).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import io
+import json
+import os
+import sys
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+import click
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+#: The ``--json`` value that means standard output.
+STDOUT = "-"
+
+
+def _state() -> dict[str, Any]:
+    ctx = click.get_current_context()
+    root = ctx.find_root()
+    obj: dict[str, Any] = root.ensure_object(dict)
+    return obj
+
+
+def common_options(f: F) -> F:
+    """Add ``-q/--quiet`` and ``-v/--verbose`` to a command. Quiet (or ``--json -``) sends the
+    command's ordinary printing to nowhere; JSON asked for on stdout still goes there
+    (:func:`write_json_output`)."""
+
+    @functools.wraps(f)
+    def wrapper(*args: Any, quiet: bool, verbose: bool, **kwargs: Any) -> Any:
+        state = _state()
+        state["verbose"] = bool(state.get("verbose")) or verbose
+        state["stdout"] = sys.stdout
+        silent = quiet or str(kwargs.get("json_path") or "") == STDOUT
+        with contextlib.redirect_stdout(io.StringIO()) if silent else contextlib.nullcontext():
+            return f(*args, **kwargs)
+
+    wrapper = click.option("-v", "--verbose", is_flag=True,
+                           help="Show the traceback of an internal error.")(wrapper)
+    wrapper = click.option("-q", "--quiet", is_flag=True,
+                           help="Print nothing but errors (and JSON asked for on stdout).")(
+        wrapper)
+    return wrapper  # type: ignore[return-value]
+
+
+def progress_option(f: F) -> F:
+    """``--progress/--no-progress`` (default: show progress when stderr is a terminal)."""
+    return click.option("--progress/--no-progress", default=None,
+                        help="Progress bars (default: when stderr is a terminal).")(f)
+
+
+def show_progress(progress: bool | None) -> bool:
+    """Whether to draw progress bars: as asked, else only when stderr is a terminal."""
+    if progress is not None:
+        return progress
+    return sys.stderr.isatty()
+
+
+def json_option(help_text: str) -> Callable[[F], F]:
+    """``--json FILE`` (``-``: standard output), stored as ``json_path``."""
+    return click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
+                        help=f"{help_text} ('-': standard output).")
+
+
+def real_stdout() -> Any:
+    """The standard output of the command line (also under ``--quiet``)."""
+    with contextlib.suppress(RuntimeError):
+        out = _state().get("stdout")
+        if out is not None:
+            return out
+    return sys.stdout
+
+
+def write_json_output(path: str | os.PathLike[str], obj: Any) -> str:
+    """Write JSON to ``path`` atomically, or to standard output for ``-``; returns where."""
+    from fidelity.fileio import json_ready, write_json_atomic
+
+    if str(path) == STDOUT:
+        out = real_stdout()
+        out.write(json.dumps(json_ready(obj), indent=2, allow_nan=False) + "\n")
+        out.flush()
+        return "standard output"
+    return str(write_json_atomic(path, obj))
+
+
+__all__ = [
+    "STDOUT",
+    "common_options",
+    "json_option",
+    "progress_option",
+    "real_stdout",
+    "show_progress",
+    "write_json_output",
+]
