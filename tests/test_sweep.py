@@ -360,7 +360,7 @@ def test_cli_errors_are_one_line(tmp_path) -> None:
 
     r = CliRunner().invoke(main, ["tables", str(tmp_path)])
     assert r.exit_code == 2 and "no sweep store" in r.output and "Traceback" not in r.output
-    r = CliRunner().invoke(main, ["evaluate", "--model", str(tmp_path / "m.onnx"), "--images",
+    r = CliRunner().invoke(main, ["evaluate", "--models", str(tmp_path / "m.onnx"), "--images",
                                   str(tmp_path), "--annotations", str(tmp_path / "a.json")])
     assert r.exit_code == 2 and "model file does not exist" in r.output
 
@@ -379,7 +379,7 @@ def test_evaluate_names_missing_images_before_inference(coco, tmp_path) -> None:
     folder = tmp_path / "subset"
     folder.mkdir()
     (folder / first["file_name"]).symlink_to(images / first["file_name"])
-    r = CliRunner().invoke(main, ["evaluate", "--model", str(model), "--images", str(folder),
+    r = CliRunner().invoke(main, ["evaluate", "--models", str(model), "--images", str(folder),
                                   "--annotations", str(ann), "--limit", "3", "--no-progress"])
     assert r.exit_code == 2 and "Traceback" not in r.output
     assert f"{folder}: 2 of the 3 annotated images to evaluate are missing, e.g. " in r.output
@@ -395,7 +395,7 @@ def test_cli_evaluate_sweep_tables(coco, tmp_path) -> None:
 
     images, ann, model = coco
     run = CliRunner().invoke
-    r = run(main, ["evaluate", "--model", str(model), "--images", str(images), "--annotations",
+    r = run(main, ["evaluate", "--models", str(model), "--images", str(images), "--annotations",
                    str(ann), "--limit", "3", "--threads", "2", "--no-progress", "--json",
                    str(tmp_path / "ev.json")])
     assert r.exit_code == 0, r.output

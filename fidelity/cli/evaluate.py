@@ -7,6 +7,13 @@ from pathlib import Path
 
 import click
 
+from fidelity.cli.options import (
+    common_options,
+    json_option,
+    progress_option,
+    show_progress,
+    write_json_output,
+)
 from fidelity.coco.scoring import COCO_SCORERS
 
 #: ``--scorer``, shared by the commands that score COCO AP (evaluate, sweep).
@@ -17,7 +24,7 @@ scorer_option = click.option(
 
 
 @click.command()
-@click.option("--model", "model", required=True, type=click.Path(dir_okay=False),
+@click.option("--models", "model", required=True, type=click.Path(dir_okay=False),
               help="ONNX detector (Ultralytics 1x84xN, YOLOv10 1x300x6 or YOLOX 1xNx85).")
 @click.option("--images", required=True, type=click.Path(file_okay=False),
               help="Folder with the images named in the annotations.")
@@ -29,23 +36,23 @@ scorer_option = click.option(
               help="onnxruntime intra-op threads (default: all cores).")
 @click.option("--provider", type=click.Choice(["auto", "cpu", "cuda"]), default="auto",
               show_default=True, help="Execution provider (auto: CUDA if present).")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
-              help="Write map, map50, ap (class -> AP), images, seconds as JSON (fractions).")
+@json_option("Write map, map50, ap (class -> AP), images, seconds as JSON (fractions)")
 @click.option("--classes", default="person,bicycle,car,motorcycle,bus,truck,traffic light,stop sign",
               show_default=True, help="Classes whose AP is printed (all are in --json).")
 @scorer_option
-@click.option("--progress/--no-progress", default=True, show_default=True)
+@progress_option
+@common_options
 def evaluate(model: str, images: str, annotations: str, limit: int | None, threads: int | None,
              provider: str, json_path: str | None, classes: str, scorer: str,
-             progress: bool) -> None:
-    """Run a detector on a COCO image folder and print COCO box AP."""
+             progress: bool | None) -> None:
+    """Run detectors on a COCO image folder and print COCO box AP."""
     from tqdm import tqdm
 
     from fidelity.coco.detectors import Detector
     from fidelity.coco.jpeg import read_jpeg
     from fidelity.coco.scoring import evaluate_detections, load_annotations, resolve_scorer
     from fidelity.errors import InputFileError
-    from fidelity.fileio import check_outputs, write_json_atomic
+    from fidelity.fileio import check_outputs
 
     check_outputs({"--json": json_path}, {"--model": model, "--annotations": annotations})
     det = Detector(model, threads=threads, provider=provider)
@@ -60,7 +67,7 @@ def evaluate(model: str, images: str, annotations: str, limit: int | None, threa
                              f"to evaluate are missing, e.g. {coco.imgs[missing[0]]['file_name']}")
     t0 = time.perf_counter()
     dets = {}
-    for i in tqdm(ids, desc=det.name, unit="img", disable=not progress):
+    for i in tqdm(ids, desc=det.name, unit="img", disable=not show_progress(progress)):
         rgb, _ = read_jpeg(folder / coco.imgs[i]["file_name"])
         dets[i] = det(rgb)
     infer_s = time.perf_counter() - t0
@@ -84,6 +91,5 @@ def evaluate(model: str, images: str, annotations: str, limit: int | None, threa
         payload = score.to_dict() | {"seconds": seconds, "detector": info,
                                      "annotations": str(annotations), "images_dir": str(images),
                                      "scorer": method}
-        write_json_atomic(json_path, payload)
-        click.echo(f"wrote {json_path}")
+        click.echo(f"wrote {write_json_output(json_path, payload)}")
 
