@@ -8,6 +8,8 @@ import pytest
 
 from fidelity.resources import shared_dir
 
+pytest_plugins = ["pytester"]
+
 DATA = Path(__file__).parent / "data"
 
 

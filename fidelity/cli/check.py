@@ -7,18 +7,25 @@ from pathlib import Path
 
 import click
 
-from fidelity.cli.options import STDOUT, common_options, json_option, write_json_output
+from fidelity.cli.options import (
+    STDOUT,
+    common_options,
+    from_settings,
+    json_option,
+    write_json_output,
+)
 from fidelity.prediction.table import SIZES
-from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E
+from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion
 
 #: Where ``fidelity check`` writes its report unless told otherwise.
 DEFAULT_OUTPUT_DIR = "fidelity-report"
 
 
 @click.command()
+@click.argument("cameras", nargs=-1)
 @click.option("--camera", default=None,
               help="Camera model: built-in name or TOML path (default: the built-in realistic "
-                   "camera, fidelity.camera.model.DEFAULT_CAMERA).")
+                   "camera, fidelity.camera.model.DEFAULT_CAMERA); or give CAMERAS.")
 @click.option("--illuminant", default="D65", show_default=True, help="Scene illuminant.")
 @click.option("--renderer", default="closed-form", show_default=True,
               help="closed-form (exact, fast) or mitsuba (spectral path tracer).")
@@ -31,44 +38,81 @@ DEFAULT_OUTPUT_DIR = "fidelity-report"
 @click.option("--table", default=None, help="Prediction table (name or JSON path).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               default=DEFAULT_OUTPUT_DIR, show_default=True,
-              help="Folder for report.html and report.json.")
-@json_option("Write the JSON report here instead of OUT/report.json")
+              help="Folder for report.html and report.json (several cameras: a subfolder "
+                   "each).")
+@json_option("Write the JSON report here instead of OUT/report.json (one camera)")
 @click.option("--html", "html_path", type=click.Path(dir_okay=False, path_type=Path),
-              default=None, help="Write the HTML report here instead of OUT/report.html.")
+              default=None, help="Write the HTML report here instead of OUT/report.html "
+                                 "(one camera).")
+@click.option("--report/--no-report", default=True, show_default=True,
+              help="Write the HTML and JSON reports (--no-report: the verdict only, e.g. in a "
+                   "pre-commit hook).")
 @common_options
-def check(camera: str | None, illuminant: str, renderer: str, reference: str,
-          max_delta_e: float, size: str, table: str | None, out_dir: Path,
-          json_path: str | None, html_path: Path | None) -> None:
+def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, renderer: str,
+          reference: str, max_delta_e: float, size: str, table: str | None, out_dir: Path,
+          json_path: str | None, html_path: Path | None, report: bool) -> None:
     """Is this camera model's colour good enough for perception testing?
 
     Renders the spectral colour chart through the camera, measures ΔE00, predicts the detection
     loss and prints a verdict (exit 0 pass, 1 fail, 2 error); writes an HTML and a JSON report.
+    Several CAMERAS are checked one by one (reports in OUT/CAMERA-NAME/); the exit code is the
+    worst.
+
+    \b
+    fidelity check                                  # the built-in camera
+    fidelity check --camera my-camera.toml
+    fidelity check cameras/*.toml --no-report       # each, verdicts only
     """
     from fidelity.camera.model import DEFAULT_CAMERA
-    from fidelity.check import check_camera
     from fidelity.fileio import check_outputs
     from fidelity.prediction.verdict import Criterion
+
+    if cameras and camera is not None and not from_settings("camera"):
+        raise click.UsageError("give CAMERAS or --camera, not both")
+    subjects = list(cameras) or [camera or DEFAULT_CAMERA]
+    many = len(subjects) > 1
+    if many and (json_path or html_path):
+        raise click.UsageError("--json and --html take one camera; several write into --out")
+    to_stdout = json_path == STDOUT
+    plans = []
+    for cam in subjects:
+        folder = out_dir / Path(cam).stem if many else out_dir
+        html = (html_path or folder / "report.html") if report else None
+        json_file = (None if to_stdout or not report else
+                     Path(json_path) if json_path else folder / "report.json")
+        plans.append((cam, html, json_file))
+    check_outputs({f"{k} ({cam})" if many else k: v for cam, html, js in plans
+                   for k, v in (("--html", html), ("--json", js))},
+                  {"--table": table, "--illuminant": illuminant}
+                  | {f"CAMERA {cam}": cam for cam in subjects})
+    criterion = Criterion("max-delta-e", max_delta_e)
+    codes = [_check_one(cam, html, js, to_stdout=to_stdout, many=many, criterion=criterion,
+                        illuminant=illuminant, renderer=renderer, reference=reference,
+                        size=size, table=table) for cam, html, js in plans]
+    sys.exit(max(codes))
+
+
+def _check_one(cam: str, html: Path | None, json_file: Path | None, *, to_stdout: bool,
+               many: bool, criterion: Criterion, illuminant: str, renderer: str,
+               reference: str, size: str, table: str | None) -> int:
+    """Check one camera, write its reports, print its verdict; its exit code."""
+    from fidelity.check import check_camera
     from fidelity.report.chart import RenderSource, write_chart_report
     from fidelity.report.terminal import summary_lines
 
-    cam = camera or DEFAULT_CAMERA
-    html = html_path or out_dir / "report.html"
-    to_stdout = json_path == STDOUT
-    json_file = None if to_stdout else Path(json_path) if json_path else out_dir / "report.json"
-    check_outputs({"--html": html, "--json": json_file},
-                  {"--camera": cam, "--table": table, "--illuminant": illuminant})
     report = check_camera(cam, illuminant=illuminant, renderer=renderer, reference=reference,
-                          size=size, table=table,
-                          criterion=Criterion("max-delta-e", max_delta_e))
+                          size=size, table=table, criterion=criterion)
     write_chart_report(report, json_path=json_file, html_path=html)
     if to_stdout:
         write_json_output(STDOUT, report.to_json())
     src = report.source
     assert isinstance(src, RenderSource)
     variant = f" ({src.variant})" if src.variant else ""
-    click.echo(f"fidelity check: camera {src.camera}, illuminant {illuminant}, "
+    name = cam if many else src.camera
+    click.echo(f"fidelity check: camera {name}, illuminant {illuminant}, "
                f"{src.renderer} renderer{variant}, {reference} reference")
     for line in summary_lines(report):
         click.echo("  " + line)
-    click.echo(f"  report: {html}" + (f" (JSON: {json_file})" if json_file else ""))
-    sys.exit(report.exit_code)
+    if html is not None:
+        click.echo(f"  report: {html}" + (f" (JSON: {json_file})" if json_file else ""))
+    return report.exit_code

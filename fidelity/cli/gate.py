@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from fidelity.cli.options import STDOUT, common_options
+from fidelity.cli.options import STDOUT, common_options, from_settings
 from fidelity.errors import FidelityError
 from fidelity.prediction.table import CLASS_COLUMNS, SIZES
 from fidelity.prediction.verdict import EXIT_ERROR, Criterion
@@ -34,13 +34,6 @@ negatives_option = click.option(
     "--negatives", type=click.Choice(["keep", "exclude"]), default="keep", show_default=True,
     help="Pixels with a negative channel: keep them in the linear mean (out-of-gamut colours in "
          "a scene-linear render) or exclude them like NaN/Inf.")
-
-
-def from_settings(name: str) -> bool:
-    """Whether option ``name`` of the running command has its value from the settings file."""
-    from click.core import ParameterSource
-
-    return click.get_current_context().get_parameter_source(name) == ParameterSource.DEFAULT_MAP
 
 
 def make_criterion(max_delta_e: float | None, max_dmap: float | None, cls: str | None,

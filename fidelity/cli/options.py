@@ -63,6 +63,13 @@ def common_options(f: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
+def from_settings(name: str) -> bool:
+    """Whether option ``name`` of the running command has its value from the settings file."""
+    from click.core import ParameterSource
+
+    return click.get_current_context().get_parameter_source(name) == ParameterSource.DEFAULT_MAP
+
+
 def progress_option(f: F) -> F:
     """``--progress/--no-progress`` (default: show progress when stderr is a terminal)."""
     return click.option("--progress/--no-progress", default=None,
@@ -106,6 +113,7 @@ def write_json_output(path: str | os.PathLike[str], obj: Any) -> str:
 __all__ = [
     "STDOUT",
     "common_options",
+    "from_settings",
     "json_option",
     "progress_option",
     "real_stdout",

@@ -1,0 +1,76 @@
+"""A pytest plugin: assert a simulator's rendered images keep their colour.
+
+Installed with camera-fidelity (entry point ``pytest11``), it gives every test suite the
+``colour_fidelity`` fixture::
+
+    def test_day_render_keeps_colour(colour_fidelity):
+        assert colour_fidelity("renders/day.exr") <= 3      # mean ΔE00 of the chart
+
+The fixture measures the chart in an image (found, or given by ``corners=``) with
+:func:`fidelity.audit_image` and returns a :class:`ColourFidelity`: a float (the mean ΔE00) that
+also carries the whole :class:`~fidelity.report.chart.ChartReport` (``.report``). The measured
+values are recorded as JUnit properties of the test (``record_property``), so a CI shows them.
+
+A marker sets the fixture's defaults for one test::
+
+    @pytest.mark.colour_fidelity(reference="safecolor", illuminant="D50")
+    def test_studio_photo(colour_fidelity): ...
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import pytest
+
+if TYPE_CHECKING:
+    from fidelity.report.chart import ChartReport
+
+
+class ColourFidelity(float):
+    """The chart's mean ΔE00 of an image (compare it with a limit), with its ``report``."""
+
+    report: ChartReport
+
+    def __new__(cls, report: ChartReport) -> ColourFidelity:
+        value = super().__new__(cls, report.mean_delta_e)
+        value.report = report
+        return value
+
+    def __repr__(self) -> str:
+        return (f"ColourFidelity(mean ΔE00 {float(self):.3f}, max "
+                f"{self.report.max_delta_e:.3f} ({self.report.worst_patch}))")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Declare the ``colour_fidelity`` marker."""
+    config.addinivalue_line(
+        "markers", "colour_fidelity(**options): defaults of the colour_fidelity fixture "
+                   "(reference, illuminant, corners, ...; see fidelity.audit_image)")
+
+
+@pytest.fixture
+def colour_fidelity(request: pytest.FixtureRequest,
+                    record_property: Callable[[str, object], None],
+                    ) -> Callable[..., ColourFidelity]:
+    """Measure the chart in an image: ``colour_fidelity(path, **options)`` -> mean ΔE00."""
+    marker = request.node.get_closest_marker("colour_fidelity")
+    defaults: dict[str, Any] = dict(marker.kwargs) if marker else {}
+
+    def measure(image: str | os.PathLike[str], **options: Any) -> ColourFidelity:
+        from fidelity.check import audit_image
+
+        report = audit_image(image, **{**defaults, **options})
+        name = os.fspath(image)
+        record_property(f"{name}:mean_delta_e", f"{report.mean_delta_e:.4f}")
+        record_property(f"{name}:max_delta_e", f"{report.max_delta_e:.4f}")
+        if report.prediction is not None and report.prediction.dmap_points is not None:
+            record_property(f"{name}:dmap_points", f"{report.prediction.dmap_points:.4f}")
+        return ColourFidelity(report)
+
+    return measure
+
+
+__all__ = ["ColourFidelity", "colour_fidelity"]

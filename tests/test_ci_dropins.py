@@ -1,0 +1,182 @@
+"""The pieces a simulator team drops into its CI: JUnit XML, the GitHub Action, the pre-commit
+hook, the pytest plugin and the container."""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import shutil
+import subprocess
+from pathlib import Path
+from xml.etree import ElementTree as ET
+
+import numpy as np
+import pytest
+import yaml
+from click.testing import CliRunner
+
+from fidelity.cli import main
+from fidelity.resources import resource_dir
+
+REPO = Path(__file__).resolve().parents[1]
+JUNIT_XSD = resource_dir("data") / "schemas" / "junit.xsd"
+
+
+@pytest.fixture(scope="module")
+def renders(tmp_path_factory) -> dict[str, Path]:
+    """Display PNGs of two cameras' renders (the chart, found by the audit)."""
+    from fidelity.camera.render import render_chart
+    from fidelity.chart.image import write_png
+
+    folder = tmp_path_factory.mktemp("renders")
+    out = {}
+    for name, camera in (("good", "nikon-5100"), ("bad", str(REPO / "cameras" /
+                                                              "bad-oversaturated.toml"))):
+        r = render_chart(camera)
+        out[name] = write_png(folder / f"{name}.png", r.display_image, 16)
+    return out
+
+
+def _valid_junit(path: Path) -> ET.Element:
+    lxml = pytest.importorskip("lxml.etree")
+    schema = lxml.XMLSchema(lxml.parse(str(JUNIT_XSD)))
+    doc = lxml.parse(str(path))
+    assert schema.validate(doc), schema.error_log
+    return ET.parse(path).getroot()
+
+
+def test_junit_is_valid_with_stable_names_timestamp_hostname_and_threshold(renders, tmp_path):
+    junit = tmp_path / "j.xml"
+    for limit in ("3", "1.5"):  # changing the threshold keeps the test name
+        r = CliRunner().invoke(main, ["gate", str(renders["good"]), "--max-delta-e", limit,
+                                      "--junit", str(junit)])
+        assert r.exit_code in (0, 1), r.output
+        root = _valid_junit(junit)
+        suite = root.find("testsuite")
+        assert suite is not None
+        case = suite.find("testcase")
+        assert case is not None and case.get("name") == f"colour fidelity of {renders['good']}"
+        assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d", suite.get("timestamp", ""))
+        assert suite.get("hostname")
+        props = {p.get("name"): p.get("value") for p in suite.iter("property")}
+        assert props["limit"] == str(float(limit)) and props["criterion"] == "max-delta-e"
+    # several images, one of them unreadable: a failure, an error, properties per case
+    (tmp_path / "broken.png").write_bytes(b"not a png")
+    r = CliRunner().invoke(main, ["gate", str(renders["good"]), str(renders["bad"]),
+                                  str(tmp_path / "broken.png"), "--max-delta-e", "3",
+                                  "--junit", str(junit)])
+    assert r.exit_code == 2
+    root = _valid_junit(junit)
+    assert (root.get("tests"), root.get("failures"), root.get("errors")) == ("3", "1", "1")
+    for case in root.iter("testcase"):
+        assert case.find("properties/property[@name='limit']") is not None
+
+
+def test_pytest_plugin_fixture_asserts_an_images_colour(renders, pytester):
+    pytester.makepyfile(f"""
+        import pytest
+
+        def test_good(colour_fidelity):
+            assert colour_fidelity({str(renders['good'])!r}) <= 3
+
+        def test_bad(colour_fidelity):
+            assert colour_fidelity({str(renders['bad'])!r}) <= 3
+
+        @pytest.mark.colour_fidelity(reference="safecolor")
+        def test_marker_sets_the_reference(colour_fidelity):
+            result = colour_fidelity({str(renders['good'])!r})
+            assert result.report.source.reference == "safecolor" and result > 1
+    """)
+    result = pytester.runpytest("--junitxml=out.xml")  # loaded by its pytest11 entry point
+    result.assert_outcomes(passed=2, failed=1)
+    result.stdout.fnmatch_lines(["*ColourFidelity(mean ΔE00*"])
+    props = {p.get("name"): p.get("value")
+             for p in ET.parse(pytester.path / "out.xml").getroot().iter("property")}
+    assert any(k.endswith("good.png:mean_delta_e") for k in props)
+
+
+def test_pre_commit_hook_manifest_and_entry(tmp_path):
+    clientlib = pytest.importorskip("pre_commit.clientlib")
+    (hook,) = clientlib.load_manifest(str(REPO / ".pre-commit-hooks.yaml"))
+    files = re.compile(hook["files"])
+    exclude = re.compile(hook["exclude"])
+
+    def selected(path: str) -> bool:
+        return bool(files.search(path)) and not exclude.search(path)
+
+    assert selected("sim/cameras/front.toml") and selected("cameras/wide.yaml")
+    assert not selected("pyproject.toml") and not selected("cameras/suite.toml")
+    assert not selected("sim/cameras/notes.md")
+    cameras = tmp_path / "cameras"
+    cameras.mkdir()
+    for name in ("ideal-srgb8.toml", "bad-oversaturated.toml"):
+        shutil.copy(REPO / "cameras" / name, cameras / name)
+    entry = shlex.split(hook["entry"])
+    ok = subprocess.run([*entry, str(cameras / "ideal-srgb8.toml")], cwd=tmp_path,
+                        capture_output=True, text=True)
+    assert ok.returncode == 0, ok.stderr
+    both = subprocess.run([*entry, "--max-delta-e", "3", str(cameras / "ideal-srgb8.toml"),
+                           str(cameras / "bad-oversaturated.toml")], cwd=tmp_path,
+                          capture_output=True, text=True)
+    assert both.returncode == 1 and "FAIL" in both.stdout
+    assert not (tmp_path / "fidelity-report").exists()  # a hook writes no reports
+
+
+def _action() -> dict:
+    return yaml.safe_load((REPO / "action.yml").read_text())
+
+
+def _gate_script() -> str:
+    (step,) = [s for s in _action()["runs"]["steps"] if s.get("id") == "gate"]
+    return step["run"]
+
+
+@pytest.mark.parametrize("images, limit, code", [("good", "3", 0), ("good bad", "3", 1),
+                                                 ("good", "0.1", 1)])
+def test_github_action_gate_step(renders, tmp_path, images, limit, code):
+    action = _action()
+    assert action["runs"]["using"] == "composite"
+    assert {"images", "camera", "max-delta-e", "max-dmap", "args", "report-dir"} <= set(
+        action["inputs"])
+    uses = [s["uses"] for s in action["runs"]["steps"] if "uses" in s]
+    assert any(u.startswith("actions/upload-artifact@") for u in uses)
+    report_dir = tmp_path / "fidelity-report"
+    output = tmp_path / "github_output"
+    env = {**os.environ, "FIDELITY_IMAGES": " ".join(str(renders[i]) for i in images.split()),
+           "FIDELITY_CAMERA": "", "FIDELITY_MAX_DELTA_E": limit, "FIDELITY_MAX_DMAP": "",
+           "FIDELITY_ARGS": "", "FIDELITY_REPORT_DIR": str(report_dir),
+           "GITHUB_OUTPUT": str(output)}
+    r = subprocess.run(["bash", "-c", _gate_script()], env=env, capture_output=True, text=True,
+                       cwd=tmp_path)
+    assert r.returncode == 0, r.stderr  # the step itself succeeds; the verdict step exits
+    assert output.read_text().strip() == f"exit-code={code}"
+    _valid_junit(report_dir / "junit.xml")
+    htmls = list(report_dir.glob("*.html"))
+    assert len(htmls) == len(images.split())
+
+
+def test_dockerfile_installs_what_ci_installs():
+    docker = (REPO / "Dockerfile").read_text()
+    ci = (REPO / ".ci" / "run").read_text()
+    for package in ("libllvm19", "libgl1", "libglib2.0-0"):
+        assert package in docker and package in ci, package
+    assert re.search(r'pip install "\.\[render,coco\]"', docker)
+
+
+def _docker_engine() -> bool:
+    if shutil.which("docker") is None:
+        return False
+    return subprocess.run(["docker", "info"], capture_output=True).returncode == 0
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not _docker_engine(), reason="no Docker engine runs here (docker info "
+                                                  "fails); the container is built where one does")
+def test_container_builds_and_checks_the_default_camera(tmp_path):
+    tag = "camera-fidelity:test"
+    subprocess.run(["docker", "build", "-t", tag, str(REPO)], check=True)
+    r = subprocess.run(["docker", "run", "--rm", tag, "check", "--no-report"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0 and "PASS" in r.stdout
+    assert np.isfinite(float(re.search(r"mean ([\d.]+)", r.stdout).group(1)))
