@@ -54,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     load = os.getloadavg()[0]
     times: dict[str, list[float]] = {name: [] for name in COMMANDS}
     with tempfile.TemporaryDirectory() as cwd:  # no settings file is found from here
-        for name, cmd in COMMANDS.items():  # warm the file cache once
+        for cmd in COMMANDS.values():  # warm the file cache once
             run_once(cmd, cwd)
         for _ in range(args.repeats):
             for name, cmd in COMMANDS.items():

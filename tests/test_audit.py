@@ -19,6 +19,9 @@ from PIL import Image as PILImage
 
 from fidelity.chart import measure as _measure
 from fidelity.chart.measure import exposure_from_neutrals
+from fidelity.colour.charts import load_chart
+from fidelity.errors import FidelityError, InvalidValueError, UnknownNameError
+from fidelity.prediction.transforms import apply_transform
 
 
 def measure_image(*args, **kwargs):
@@ -30,9 +33,6 @@ def measure_image(*args, **kwargs):
 def measure_pixels(*args, **kwargs):
     kwargs.setdefault("reference", "safecolor")
     return _measure.measure_pixels(*args, **kwargs)
-from fidelity.colour.charts import load_chart
-from fidelity.errors import FidelityError, InvalidValueError, UnknownNameError
-from fidelity.prediction.transforms import apply_transform
 
 #: A known homography grid (u, v) -> image (x, y): rotation, anisotropic scale, perspective.
 KNOWN_H = np.array([
