@@ -120,3 +120,20 @@ def test_a_ci_line_shrinks_to_gate_image(tmp_path, monkeypatch):
     assert "PASS" in r.stdout and (tmp_path / "colour.xml").is_file()
     r = CliRunner().invoke(main, ["gate", "render.png", "--max-dmap", "0.01"])
     assert r.exit_code == 1 and "predicted ΔmAP" in r.stdout  # --max-dmap replaces the ΔE gate
+
+
+def test_the_light_core_gates_an_exr_without_the_extras(tmp_path):
+    """The core install (no [render], no [coco]) renders in closed form, audits and gates an
+    EXR: run with Mitsuba, onnxruntime and the COCO scorers made unimportable."""
+    r = CliRunner().invoke(main, ["render", "--camera", "ideal", "--out", str(tmp_path)])
+    assert r.exit_code == 0, r.output
+    exr = tmp_path / "chart_linear.exr"
+    blocked = ("mitsuba", "drjit", "onnxruntime", "pycocotools", "faster_coco_eval", "ray")
+    code = ("import sys\n"
+            f"for m in {blocked!r}:\n    sys.modules[m] = None  # import fails\n"
+            "from fidelity.cli import main\n"
+            f"main(['gate', {str(exr)!r}, '--max-delta-e', '1', '--json', '-'])\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    doc = json.loads(out.stdout)
+    assert doc["verdict"]["passed"] and doc["mean_delta_e"] < 1
