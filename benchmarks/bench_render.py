@@ -295,7 +295,7 @@ def document(result: dict[str, Any]) -> Document:
         ("platform", str(m["platform"])),
         ("software", f"Python {m['python']}, Mitsuba {m['mitsuba']}, Dr.Jit {m['drjit']}, "
                      f"libLLVM {m['libllvm']}"),
-        ("load average at start", listing(m["load_average_at_start"] or [])),
+        ("load average at start (1, 5, 15 min)", listing(f"{v:.2f}" for v in m["load_average_at_start"] or [])),
         ("note", str(m["note"])),
     ))
     method = Text(
