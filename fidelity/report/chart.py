@@ -430,8 +430,8 @@ def _summary_facts(report: ChartReport) -> Facts:
     items += [("saturation (mean chroma of the colour patches)",
                f"{stats.saturation_percent:.1f} % of the reference"),
               ("white balance error (mean a*, b* of the neutral patches)",
-               f"a* {stats.neutral_ab[0]:+.2f}, b* {stats.neutral_ab[1]:+.2f} "
-               f"(ΔC*ab {stats.neutral_chroma:.2f})"),
+               f"a\\* {stats.neutral_ab[0]:+.2f}, b\\* {stats.neutral_ab[1]:+.2f} "
+               f"(ΔC\\*ab {stats.neutral_chroma:.2f})"),
               ("mean ΔL* of the neutral patches", f"{stats.neutral_delta_l:+.2f}")]
     if stats.snr_db is not None:
         items.append(("noise: signal-to-noise of the neutral patches (encoded sRGB)",
@@ -532,14 +532,14 @@ def chart_document(report: ChartReport, pixels: NDArray[Any] | None = None) -> D
     figures: list[Any] = [
         Figure(plots.delta_e_map(m, limit_de), "delta_e_map.png", "ΔE00 on the chart layout"),
         Figure(plots.ab_arrows(m), "ab_arrows.png", "a*b* errors",
-               "Arrows from the reference colour to the measured one in the a*b* plane."),
+               "Arrows from the reference colour to the measured one in the a\\*b\\* plane."),
     ]
     if neutral:
         figures.append(Figure(plots.tone_curve(m, neutral), "tone_curve.png",
                               "tone curve of the neutral patches"))
     figures.append(Figure(plots.delta_e_bars(m, limit_de), "delta_e_bars.png",
                           "ΔE00 per patch"))
-    sections.append(section("Colour errors", *figures))
+    sections.append(section("Colour errors", *figures, gallery=True))
     sections += _prediction_sections(report, limit_de, limit_dmap)
     sections.append(_patch_table(report))
     prov = report.provenance

@@ -35,8 +35,8 @@ class Text:
 
 @dataclass(frozen=True)
 class Table:
-    """A table of formatted cells: ``header`` (n,) and ``rows`` (m, n); ``numeric`` marks the
-    columns to right-align (default: every column but the first)."""
+    """A table of formatted cells: ``header`` (n,, plain text) and ``rows`` (m, n; Markdown);
+    ``numeric`` marks the columns to right-align (default: every column but the first)."""
 
     header: tuple[str, ...]
     rows: tuple[tuple[str, ...], ...]
@@ -63,7 +63,7 @@ class Figure:
 
 @dataclass(frozen=True)
 class Facts:
-    """Label/value pairs shown as a two-column summary (values are Markdown)."""
+    """Label/value pairs shown as a two-column summary (labels plain text, values Markdown)."""
 
     items: tuple[tuple[str, str], ...]
 
@@ -81,12 +81,14 @@ Block = Text | Table | Figure | Facts | Code
 
 @dataclass(frozen=True)
 class Section:
-    """A titled part of a report; ``folded`` sections are collapsed in HTML."""
+    """A titled part of a report; ``folded`` sections are collapsed in HTML; a ``gallery``
+    shows its figures side by side where the page is wide enough."""
 
     title: str
     blocks: tuple[Block, ...]
     folded: bool = False
     level: int = 2
+    gallery: bool = False
 
 
 @dataclass(frozen=True)
@@ -118,10 +120,11 @@ class Document:
         return out
 
 
-def section(title: str, *blocks: Block | None, folded: bool = False, level: int = 2
-            ) -> Section:
+def section(title: str, *blocks: Block | None, folded: bool = False, level: int = 2,
+            gallery: bool = False) -> Section:
     """A :class:`Section` of the blocks that are not ``None`` (optional parts drop out)."""
-    return Section(title, tuple(b for b in blocks if b is not None), folded=folded, level=level)
+    return Section(title, tuple(b for b in blocks if b is not None), folded=folded, level=level,
+                   gallery=gallery)
 
 
 def table(header: Sequence[str], rows: Sequence[Sequence[str]], caption: str = "",
