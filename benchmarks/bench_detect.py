@@ -1,4 +1,5 @@
-"""Benchmark: finding the chart (fidelity.chart.find) against colour-checker-detection's own outline.
+"""Benchmark: the accuracy of the chart's corners (fidelity.chart.find): the search's fit alone
+against the fit refined at full size, on synthetic scenes with known geometry.
 
 Synthetic scenes with known geometry (the test suite's cases: frontal, tilted with perspective,
 upside down, a quarter turn in a portrait image, mirrored, small), each with three cameras: the
@@ -6,9 +7,12 @@ reference colours, a contrast-inc camera and a desaturating one (ΔE of several 
 the corner error (largest distance of a corner-patch centre from the truth, in % of the patch
 pitch) and the time, best of N, of
 
-- anchor: colour-checker-detection's segmentation outline alone (``refine=False``: its chart
-  quadrilateral, with our orientation check so that a mirrored chart is comparable), and
-- fidelity: the same detection, refined by fitting the grid to the patch outlines.
+- anchor: the cascade's search fit alone (``refine=False``: the verified placement of the
+  candidate, at the search's reduced size), and
+- fidelity: the same, refined at full size by fitting the grid to the patch outlines.
+
+(Finding charts in photos, against OpenCV's mcc and colour-checker-detection:
+``benchmarks/bench_find_chart.py``.)
 
 Also the time of the audit itself with given corners, so the cost of not typing them shows.
 Writes reports/benchmarks/detect.json.  Run:  python -m benchmarks.bench_detect [--repeats N]

@@ -141,6 +141,7 @@ def audit_image(
     negatives: str = "keep",
     colourspace: str | None = None,
     command: str = "audit",
+    bayer: str | None = None,
 ) -> ChartReport:
     """Measure the chart in ``image``, predict the detection loss, apply ``criterion``.
 
@@ -156,6 +157,9 @@ def audit_image(
         How to read the pixels (see :func:`fidelity.chart.measure.measure_image`): EXR layer,
         ``linear``/``srgb`` (default from the file), ``auto`` or a fixed EV, what to do with
         negative values, the RGB primaries.
+    bayer
+        CFA pattern of a one-channel camera raw mosaic (``RGGB``, ``BGGR``, ``GRBG``,
+        ``GBRG``): demosaiced before measuring (:func:`fidelity.chart.image.read_image`).
     reference, illuminant
         ``scene`` (the chart's spectra under ``illuminant``, adapted to D65, as
         :func:`check_camera` uses), ``safecolor`` (the paper's Lab values) or a chart JSON.
@@ -173,7 +177,7 @@ def audit_image(
     result = measure_image(image, corners if corners is None or len(corners) else None,
                            layer=layer, encoding=encoding, exposure=exposure,
                            reference=reference, illuminant=illuminant, negatives=negatives,
-                           colourspace=colourspace)
+                           colourspace=colourspace, bayer=bayer)
     prediction, verdict = _predict_and_judge(result.mean_delta_e, size, table, criterion)
     info = result.image
     assert info is not None  # measure_image always describes the file
@@ -181,7 +185,8 @@ def audit_image(
         image=info, corners=result.location.corners, location=result.location,
         colourspace=result.colourspace, exposure_mode=result.exposure_mode,
         reference=result.reference.name, encoding=result.encoding,
-        clipped_patches=result.clipped_patches, found=result.detection)
+        clipped_patches=result.clipped_patches, found=result.detection,
+        corner_checks=result.corner_checks)
     conventions = {"reference": result.reference.conventions,
                    "audit": AUDIT_CONVENTION.format(window=result.location.window)}
     return ChartReport(
@@ -214,6 +219,7 @@ def gate(
     exposure: str | None = None,
     negatives: str = "keep",
     colourspace: str | None = None,
+    bayer: str | None = None,
     reference: str | None = None,
     illuminant: str = "D65",
     renderer: str = "closed-form",
@@ -243,7 +249,7 @@ def gate(
                                      exposure=exposure, reference=reference or "scene",
                                      illuminant=illuminant, size=size, table=table,
                                      criterion=criterion, negatives=negatives,
-                                     colourspace=colourspace, command="gate")
+                                     colourspace=colourspace, command="gate", bayer=bayer)
             else:
                 report = check_camera(subject, illuminant=illuminant, renderer=renderer,
                                       reference=reference or "scene", size=size, table=table,

@@ -6,7 +6,7 @@ declares (read from its metadata, so the list cannot drift from ``pyproject.toml
 Mitsuba variant renders here and with which libLLVM (the probe of
 :func:`fidelity.camera.mitsuba.probe_variant`, run in a subprocess), onnxruntime's execution
 providers and the ones a detector would use, the COCO scorer ``auto`` picks, whether chart
-detection (colour-checker-detection with OpenCV) is usable, the shared data folder and what it
+detection (OpenCV with its contrib modules, cv2.mcc) is usable, the shared data folder and what it
 holds, and the prediction tables shipped.
 
 Nothing here changes state; a check that fails is reported as such, never raised.
@@ -96,10 +96,13 @@ def _coco_scorer() -> str | None:
 
 def _chart_detection() -> dict[str, Any]:
     try:
-        import colour_checker_detection  # noqa: F401
         import cv2
     except ImportError as exc:
         return {"usable": False, "error": f"{type(exc).__name__}: {exc}"}
+    if not hasattr(cv2, "mcc"):
+        return {"usable": False, "opencv": cv2.__version__,
+                "error": f"OpenCV {cv2.__version__} at {cv2.__file__} has no contrib modules "
+                         f"(cv2.mcc): install opencv-contrib-python-headless alone"}
     return {"usable": True, "opencv": cv2.__version__}
 
 

@@ -1,82 +1,167 @@
-"""Find a 4 x 6 colour chart in an image, so that an audit needs no hand-given corners.
+"""Find a 24-patch colour chart in an image, so that an audit needs no hand-given corners.
 
 The result is the same four numbers a user would give with ``--corners``: the image centres of
 the dark skin, bluish green, black and white patches (:mod:`fidelity.chart.locate` conventions:
-``x`` along a row, ``y`` down, pixel ``(i, j)`` at ``x = j, y = i``). Everything after that,
-sampling windows, bad pixels, exposure and ΔE00, is the audit's own and does not depend on how
-the corners were found.
+``x`` along a row, ``y`` down, pixel ``(i, j)`` at ``x = j, y = i``), with a detection
+confidence. Everything after that, sampling windows, bad pixels, exposure and ΔE00, is the
+audit's own and does not depend on how the corners were found.
 
-Methods (:data:`CHART_FINDERS`):
+The finder is a cascade (:func:`find_chart`, method ``cascade``):
 
-``segmentation``
-    colour-checker-detection's segmentation detector (Colour Developers, *Colour - Checker
-    Detection*, ``detect_colour_checkers_segmentation``): adaptive thresholding at a working
-    width of 1440 px, square swatch contours, clusters of swatches with the chart's 3:2 aspect
-    ratio; the chart's orientation (which corner is dark skin) is the rotation whose sampled
-    colours are closest to the ColorChecker reference. Its chart outline is coarse (it encloses
-    the swatches and part of the gaps), so the corners are refined here: every swatch contour
-    the detector found is assigned to the grid cell its centre falls in (within 0.3 patch
-    pitches of the cell centre, through the coarse outline), and a homography grid -> image is
-    fitted to all assigned swatch centres by the normalised DLT
-    (:func:`fidelity.chart.locate.homography_from_points`), leaving out swatches whose centre lies
-    more than three times the median distance off the fit (a contour merged with a dark
-    frame). With fewer than six assigned swatches the coarse outline answers. The detector
-    keeps only clusters of swatches with about the chart's aspect ratio
-    (:data:`ASPECT_RATIO_RANGE`, wider than its own default) and square-ish swatches, so a
-    chart under strong perspective is not found; give ``--corners`` for it. A mirrored chart (seen from behind a mirror) is not recognised
-    as such; give ``--corners`` for it.
+1. **Search at a reduced size.** The image is shrunk (area average) to at most
+   :data:`SEARCH_SIDE` pixels on its long side, its 99th percentile of the brightest channel
+   scaled to 1, and sRGB-encoded to 8 bits (the detectors' domain).
+2. **Candidates** from two detectors:
 
-Passes (:func:`find_chart`, any method): the whole image first; when that finds nothing and
-the image is large (:data:`TILED_SEARCH_SIDE`), nine half-size tiles overlapping by half; then,
-with refinement, once more on the chart's surroundings (corner centres plus 1.5 patch pitches)
-when they are under half an image larger than the detector's working width
-(:data:`CROP_PASS_MIN_SIDE`), since the detector works at a fixed width and a small chart
-gains resolution there (a 4000 x 3000 synthetic photo: corner error 4.2 % of a pitch from the
-whole frame, 0.3 % from the crop). The crop's answer is kept only if it agrees with the first
-within a quarter pitch. Found this way: charts down to about 7.5 % of the image width.
+   ``mcc``
+       OpenCV's Macbeth chart detector (``cv2.mcc``, opencv-contrib; Ch. Pardo et al.'s MCC
+       method): each chart it finds gives its 24 patch centres, to which a grid -> image
+       homography is fitted.
+   ``segmentation``
+       our own patch segmentation: adaptive thresholds of the grey image at
+       :data:`BLOCK_FRACTIONS` of the image size, contours simplified to convex quadrilaterals
+       (:func:`patch_quads`), and quadrilaterals of similar size that sit one patch pitch apart
+       along each other's edges chained into a lattice (:func:`patch_lattices`); a homography
+       lattice -> image is fitted to their centres. Any 4 x 6 window of the lattice, in any of
+       the 8 orientations of a grid (turns, mirror images), is a candidate placement.
+
+   Segmentation runs first; OpenCV's detector runs only when no candidate was accepted with a
+   confidence of at least :data:`SURE_CONFIDENCE`.
+
+3. **Verification** (:func:`placement_scores`): each placement of the 4 x 6 chart, including
+   the detector's own answer moved one row or column either way and every orientation, samples
+   its 24 patches (central 0.35 x 0.35 pitch) and is scored against the reference layout: the
+   rank correlation (Spearman) between the measured and the reference patches of R, G, B,
+   log(R/G) and log(B/G), averaged (:func:`colour_order`). Ranks do not change under a
+   per-channel gain (coloured light, white balance, exposure) or a monotone tone curve, and a
+   chart placed a row off, turned or mirrored mixes dark with light and grey with colour.
+   The best placement is kept when its **confidence** (that mean rank correlation) is at
+   least :data:`MIN_CONFIDENCE`, its neutral row is in order of lightness (at least
+   :data:`MIN_NEUTRAL_ORDER` of the 15 pairs), the next-best placement of the same candidate
+   scores at least :data:`MIN_MARGIN` lower and its patches are flat (median relative spread
+   at most :data:`MAX_UNIFORMITY`); so a chart found one row or column off is corrected, never
+   measured. The thresholds were chosen on a tuning set of the benchmark
+   (``benchmarks/bench_find_chart.py --seed 7``) and checked on another (seed 19).
+4. **Refinement at full size**: the chart's surroundings (corners plus 2 pitches) are cut from
+   the full-size image (shrunk only if still larger than :data:`REFINE_SIDE`), segmented
+   again, each patch outline assigned to its grid cell, and the homography fitted to all
+   assigned centres by the normalised DLT (:func:`fidelity.chart.locate.homography_from_points`),
+   leaving out centres more than three times the median distance off the fit. The placement
+   is verified again there and kept only if it passes the same checks.
+5. **Small charts in large images**: when the whole image shows no chart and it is larger than
+   1.5 x :data:`SEARCH_SIDE`, four overlapping quarters are searched, each at up to
+   :data:`SEARCH_SIDE` pixels.
+
+Chart types: the 24-patch ColorChecker layout (Classic, Mini, the 24-patch page of a Passport:
+one layout, whose physical sizes one photo cannot tell apart). Other patch grids found beside
+the chart (a Passport's other page) are counted in ``other_charts`` and not measured. A chart
+whose 24 patches continue into a larger grid of patches (a ColorChecker SG or a digital
+target), or a large patch grid with no 24-patch chart, is refused with
+:class:`~fidelity.errors.InvalidValueError` rather than measured wrongly.
 
 Input: ``(H, W, 3)`` linear or sRGB-encoded RGB of any scale (HDR welcome). NaN, Inf and
-negative values count as black for finding the chart only; the image is scaled so that its 99th
-percentile of the brightest channel is 1 and clipped to [0, 1] (the detector's domain).
+negative values count as black for finding the chart only.
 """
 
 from __future__ import annotations
 
 import math
-import warnings
+import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from fidelity.chart.locate import CORNER_PATCHES, apply_homography, homography_from_points
 from fidelity.colour import colorimetry as cm
 from fidelity.errors import FidelityError, InvalidValueError, unknown_name
 
-#: Largest distance (in patch pitches) between a swatch centre and the grid cell centre it is
-#: assigned to when the coarse outline is refined.
+F64 = NDArray[np.float64]
+
+#: Long side, in pixels, of the reduced image the chart is searched in.
+SEARCH_SIDE = 1600
+#: Long side, in pixels, of the chart's surroundings in which the fit is refined (full size
+#: when smaller).
+REFINE_SIDE = 1000
+#: Adaptive-threshold block sizes, as fractions of the image's short side (odd, at least 7 px).
+BLOCK_FRACTIONS = (0.025, 0.06)
+#: Whether the search also looks for patches darker than their surroundings.
+SEARCH_INVERSE = False
+#: Offsets of the adaptive threshold (grey levels below the local mean).
+THRESHOLD_OFFSETS = (2.0,)
+#: Smallest patch outline, in pixels of area, that counts (a patch side of about 5 px).
+MIN_QUAD_AREA = 25.0
+#: Largest distance (in patch pitches) between a patch centre and the grid cell it is assigned
+#: to.
 ASSIGN_TOLERANCE = 0.3
-#: Aspect ratios (long / short side of the swatch cluster's smallest enclosing rectangle) that
-#: can be a 3:2 chart. The detector's default, 1.35-1.65, loses a chart seen under a little
-#: perspective (a 5 % keystone gives 1.30); false clusters are caught by the orientation check.
-ASPECT_RATIO_RANGE = (1.1, 2.0)
-#: The best orientation's score must be below this fraction of the next best, else what was
-#: found is not taken for a ColorChecker (a real chart, even with ΔE 20 of colour error, scores
-#: at most 0.56 of its next orientation in the tests).
-ORIENTATION_MARGIN = 0.8
-#: Images at least this many pixels on their long side are searched in tiles when the whole
-#: frame shows no chart (the detector works at 1440 px width, where a small chart in a large
-#: image has patches too small to segment).
-TILED_SEARCH_SIDE = 2400
-#: The crop pass runs only on images wider (long side) than the detector's working width of
-#: 1440 px: a smaller image is already seen at full resolution, and a crop would add time only.
-CROP_PASS_MIN_SIDE = 1440
-#: Fewest assigned swatches for the refined fit (else the detector's outline answers).
+#: Fewest patch outlines for a refined fit.
 MIN_REFINE_SWATCHES = 6
-#: A swatch centre farther from the fitted grid than this many times the median distance is
-#: left out of the refined fit.
+#: A patch centre farther from the fitted grid than this many times the median distance is
+#: left out of the fit.
 OUTLIER_FACTOR = 3.0
+#: Fewest mean rank correlation (of 1) a placement needs to be taken for the chart.
+MIN_CONFIDENCE = 0.7
+#: A candidate accepted with at least this confidence ends the search (the next detector in
+#: the cascade is not run).
+SURE_CONFIDENCE = 0.9
+#: Below this mean rank correlation nothing chart-like was found at all.
+NO_CHART_CONFIDENCE = 0.5
+#: Fewest fraction of the 15 pairs of neutral patches in order of lightness.
+MIN_NEUTRAL_ORDER = 0.8
+#: Smallest lead of the best placement of a candidate over its next-best placement.
+MIN_MARGIN = 0.15
+#: Largest median spread of the sampled values within a patch (relative to their mean): a
+#: placement whose windows straddle patch edges is not the chart.
+MAX_UNIFORMITY = 0.15
+#: Patch-like outlines in the ring of cells just outside the 4 x 6 chart that make it part of a
+#: larger patch grid (a ColorChecker SG, a digital target).
+LARGER_GRID_RING = 4
+#: Fewest patches of a lattice beside the chart that make it another patch chart (a
+#: Passport's other page).
+OTHER_CHART_PATCHES = 12
+#: How far beside the chart other charts are looked for, in patch pitches, and the long side
+#: of the view they are looked for in.
+BESIDE_PITCHES = 8.0
+BESIDE_SIDE = 700
+#: Patches left out of the rank correlation (those that disagree most: covered, glared).
+TRIM = 2
+#: Side of the sampling window used for verification, in patch pitches.
+VERIFY_WINDOW = 0.35
+#: Number of sample points along each side of the verification window.
+VERIFY_SAMPLES = 5
+#: Reference chart rows and columns: the finder knows the 24-patch layout only.
+ROWS, COLS = 4, 6
+
+
+@dataclass(frozen=True)
+class ChartChecks:
+    """How well the chart found matches the 24-patch reference layout.
+
+    ``colour_order`` the mean Spearman rank correlation of R, G, B, log(R/G), log(B/G) between
+    measured and reference patches (1: same order); ``neutral_order`` the fraction of the 15
+    pairs of neutral patches in order of lightness; ``margin`` the lead of ``colour_order``
+    over the next-best placement (another row, column or orientation) of the same candidate;
+    ``uniformity`` the median over the patches of the standard deviation of the sampled
+    linear values relative to their mean (0: flat patches).
+    """
+
+    colour_order: float
+    neutral_order: float
+    margin: float
+    uniformity: float
+
+    def to_json(self) -> dict[str, float]:
+        """JSON form: the four numbers, rounded to 1e-4."""
+        return {k: round(float(v), 4) for k, v in vars(self).items()}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> ChartChecks:
+        """Inverse of :meth:`to_json`."""
+        return cls(colour_order=float(data["colour_order"]),
+                   neutral_order=float(data["neutral_order"]), margin=float(data["margin"]),
+                   uniformity=float(data["uniformity"]))
 
 
 @dataclass(frozen=True)
@@ -84,12 +169,16 @@ class FoundChart:
     """A chart found in an image.
 
     ``corners`` is ``(4, 2)`` image ``(x, y)`` of the dark skin, bluish green, black and white
-    patch centres; ``candidates`` the number of charts the detector found (the first answers);
-    ``swatches`` the number of patches whose own contour refined the fit (0: the detector's
-    outline answered); ``residual_px`` the RMS distance, in image pixels, between those swatch
-    centres and the fitted grid (NaN without refinement); ``orientation`` the grid symmetry
-    (:data:`GRID_SYMMETRIES`) that put the patches in order, relative to the detector's own
-    answer; ``region`` the ``(x0, y0, x1, y1)`` part of the image the answer was found in.
+    patch centres; ``method`` the detector whose candidate won (``mcc`` or ``segmentation``);
+    ``candidates`` the number of candidates verified; ``swatches`` the number of patch outlines
+    that refined the fit at full size (0: the search's fit answered); ``residual_px`` the RMS
+    distance, in image pixels, between those outlines' centres and the fitted grid (NaN
+    without refinement); ``orientation`` how the chart lies in the image (its top edge's turn
+    from the image's x axis, and whether it is seen mirrored); ``region`` the ``(x0, y0, x1,
+    y1)`` part of the image the final fit was made in; ``confidence`` the verification's mean
+    rank correlation (0-1, :class:`ChartChecks`); ``chart`` the chart type found;
+    ``other_charts`` patch charts found beside it that are not the 24-patch layout (a
+    Passport's other page) and were not measured; ``seconds`` the time taken.
     """
 
     corners: np.ndarray
@@ -99,6 +188,12 @@ class FoundChart:
     residual_px: float
     orientation: str = "as found"
     region: tuple[int, int, int, int] | None = None
+    confidence: float = math.nan
+    checks: ChartChecks | None = None
+    chart: str = "24-patch ColorChecker"
+    other_charts: int = 0
+    seconds: float = math.nan
+    notes: tuple[str, ...] = field(default_factory=tuple)
 
     def corners_text(self) -> str:
         """The corners as ``--corners`` takes them: ``X1,Y1,...,X4,Y4`` (0.1 px)."""
@@ -107,7 +202,8 @@ class FoundChart:
     def to_json(self) -> dict[str, Any]:
         """JSON form: ``method``, ``corners``, ``corner_patches``, ``corners_text``,
         ``candidates``, ``swatches``, ``residual_px`` (null without refinement),
-        ``orientation``, ``region``."""
+        ``orientation``, ``region``, ``confidence``, ``checks``, ``chart``, ``other_charts``,
+        ``seconds``, ``notes``."""
         return {
             "method": self.method,
             "corners": np.round(self.corners, 3).tolist(),
@@ -118,13 +214,23 @@ class FoundChart:
             "residual_px": None if math.isnan(self.residual_px) else round(self.residual_px, 3),
             "orientation": self.orientation,
             "region": list(self.region) if self.region else None,
+            "confidence": None if math.isnan(self.confidence) else round(self.confidence, 4),
+            "checks": self.checks.to_json() if self.checks else None,
+            "chart": self.chart,
+            "other_charts": self.other_charts,
+            "seconds": None if math.isnan(self.seconds) else round(self.seconds, 4),
+            "notes": list(self.notes),
         }
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> FoundChart:
-        """Inverse of :meth:`to_json` (corners as stored, to 0.001 px)."""
+        """Inverse of :meth:`to_json` (corners as stored, to 0.001 px; keys added since are
+        optional)."""
         residual = data.get("residual_px")
         region = data.get("region")
+        confidence = data.get("confidence")
+        seconds = data.get("seconds")
+        checks = data.get("checks")
         return cls(
             corners=np.asarray(data["corners"], dtype=np.float64), method=str(data["method"]),
             candidates=int(data["candidates"]), swatches=int(data["swatches"]),
@@ -132,141 +238,386 @@ class FoundChart:
             orientation=str(data.get("orientation", "as found")),
             region=(int(region[0]), int(region[1]), int(region[2]), int(region[3]))
             if region else None,
+            confidence=math.nan if confidence is None else float(confidence),
+            checks=ChartChecks.from_json(checks) if checks else None,
+            chart=str(data.get("chart", "24-patch ColorChecker")),
+            other_charts=int(data.get("other_charts", 0)),
+            seconds=math.nan if seconds is None else float(seconds),
+            notes=tuple(str(n) for n in data.get("notes", ())),
         )
+
+
+# --------------------------------------------------------------------------------------------
+# Views: part of the image, shrunk, in the detectors' domain
+
+
+@dataclass(frozen=True)
+class View:
+    """Part of the image as the detectors see it.
+
+    ``linear`` ``(h, w, 3)`` float32 linear RGB scaled to [0, 1]; ``bgr8`` the same,
+    sRGB-encoded, 8-bit, in OpenCV's B, G, R order; ``to_image`` the 3 x 3 map of view
+    ``(x, y)`` to image ``(x, y)`` (pixel centres at integers in both).
+    """
+
+    linear: np.ndarray
+    bgr8: np.ndarray
+    to_image: F64
+
+    @property
+    def scale(self) -> float:
+        """View pixels per image pixel (along x)."""
+        return float(1.0 / self.to_image[0, 0])
+
+
+def _cv2() -> Any:
+    """The OpenCV module, or an error that says what to install (or to give --corners)."""
+    try:
+        import cv2
+    except ImportError as exc:  # OpenCV missing: say so rather than a bare ImportError
+        raise FidelityError(f"chart detection needs OpenCV with its contrib modules "
+                            f"(opencv-contrib-python-headless; {exc}); install it or give "
+                            f"--corners") from None
+    return cv2
+
+
+_ENCODE_LUT = np.clip(np.rint(cm.delinearize_srgb(np.linspace(0.0, 1.0, 4096)) * 255), 0,
+                      255).astype(np.uint8)
+_DECODE_LUT = cm.linearize_srgb(np.linspace(0.0, 1.0, 65536)).astype(np.float32)
+
+
+class Pyramid:
+    """An image and its halvings (2 x 2 area averages, computed when first asked for), so that
+    views of any part at any reduced size cost one pass over the full image at most."""
+
+    def __init__(self, pixels: np.ndarray) -> None:
+        self.levels: dict[int, np.ndarray] = {1: np.asarray(pixels)}
+        self.height, self.width = self.levels[1].shape[:2]
+
+    def level(self, factor: int) -> np.ndarray:
+        """The image averaged over ``factor`` x ``factor`` blocks (``factor`` a power of 2)."""
+        if factor not in self.levels:
+            finer = self.level(factor // 2)
+            if finer.dtype != np.float32:
+                finer = finer.astype(np.float32)
+            h, w = finer.shape[0] // 2, finer.shape[1] // 2
+            cv2 = _cv2()
+            coarser = cv2.resize(finer[:2 * h, :2 * w], (w, h), interpolation=cv2.INTER_AREA)
+            if factor == 2:  # NaN and Inf spread over their 2 x 2 block only: count as black
+                coarser = np.nan_to_num(coarser, nan=0.0, posinf=0.0, neginf=0.0)
+            self.levels[factor] = coarser
+        return self.levels[factor]
+
+
+def _prepare(pyramid: Pyramid, region: tuple[int, int, int, int], max_side: int, encoding: str
+             ) -> tuple[np.ndarray, F64]:
+    """The region shrunk (area average) to ``max_side``, finite, non-negative, linear; with the
+    3 x 3 map of its pixel coordinates to the image's."""
+    cv2 = _cv2()
+    x0, y0, x1, y1 = region
+    s = min(1.0, max_side / max(x1 - x0, y1 - y0))
+    factor = 1
+    while factor * 2 * s <= 1.0 and min(pyramid.height, pyramid.width) // (factor * 2) >= 8:
+        factor *= 2
+    level = pyramid.level(factor)
+    lx0, ly0 = x0 // factor, y0 // factor
+    lx1 = min(-(-x1 // factor), level.shape[1])
+    ly1 = min(-(-y1 // factor), level.shape[0])
+    arr = np.ascontiguousarray(level[ly0:ly1, lx0:lx1], dtype=np.float32)
+    height, width = arr.shape[:2]
+    target = (max(1, round((x1 - x0) * s)), max(1, round((y1 - y0) * s)))
+    if target[0] < width or target[1] < height:
+        arr = cv2.resize(arr, (min(target[0], width), min(target[1], height)),
+                         interpolation=cv2.INTER_AREA)
+    sx, sy = arr.shape[1] / width, arr.shape[0] / height
+    if factor == 1:
+        arr = np.nan_to_num(arr, nan=0.0, posinf=0.0, neginf=0.0)
+    np.maximum(arr, 0.0, out=arr)
+    if encoding == "srgb":
+        arr = _DECODE_LUT[np.rint(np.clip(arr, 0.0, 1.0) * 65535).astype(np.int32)]
+    # view -> level crop (OpenCV's pixel-centre convention) -> level -> image
+    to_level = np.array([[1.0 / sx, 0.0, lx0 + 0.5 / sx - 0.5],
+                         [0.0, 1.0 / sy, ly0 + 0.5 / sy - 0.5], [0.0, 0.0, 1.0]])
+    level_to_image = np.array([[factor, 0.0, (factor - 1) / 2.0],
+                               [0.0, factor, (factor - 1) / 2.0], [0.0, 0.0, 1.0]])
+    return arr, level_to_image @ to_level
+
+
+def make_view(pixels: np.ndarray | Pyramid, region: tuple[int, int, int, int], max_side: int,
+              encoding: str, peak: float | None = None) -> tuple[View, float]:
+    """A :class:`View` of ``pixels[y0:y1, x0:x1]`` at most ``max_side`` pixels on its long side.
+
+    The values are divided by ``peak`` (default: the 99th percentile of the view's brightest
+    channel) and clipped to [0, 1]. Returns the view and the peak used.
+    """
+    pyramid = pixels if isinstance(pixels, Pyramid) else Pyramid(pixels)
+    arr, to_image = _prepare(pyramid, region, max_side, encoding)
+    if peak is None:
+        step = max(1, int(math.sqrt(arr.shape[0] * arr.shape[1] / 250_000)))
+        peak = float(np.percentile(arr[::step, ::step].max(axis=-1), 99.0))
+    if not peak > 0.0:
+        raise InvalidValueError("no colour chart found: the image is black")
+    linear = np.clip(arr * np.float32(1.0 / peak), 0.0, 1.0)
+    bgr8 = _ENCODE_LUT[(linear[..., ::-1] * 4095 + 0.5).astype(np.int32)]
+    return View(linear=linear, bgr8=np.ascontiguousarray(bgr8), to_image=to_image), peak
 
 
 def detection_image(pixels: np.ndarray, encoding: str = "linear") -> np.ndarray:
-    """The float32 linear image in [0, 1] that the detector sees (see the module docstring)."""
-    arr = np.asarray(pixels, dtype=np.float64)
+    """The float32 linear image in [0, 1] that the detectors see, at full size."""
+    arr = np.asarray(pixels)
     if arr.ndim != 3 or arr.shape[2] != 3:
         raise InvalidValueError(f"image must be (H, W, 3), got shape {arr.shape}")
-    arr = np.where(np.isfinite(arr), arr, 0.0)
-    arr = np.maximum(arr, 0.0)
-    if encoding == "srgb":
-        arr = cm.linearize_srgb(np.clip(arr, 0.0, 1.0))
-    peak = float(np.percentile(arr.max(axis=-1), 99.0))
-    if peak <= 0.0:
-        raise InvalidValueError("no colour chart found: the image is black")
-    return np.clip(arr / peak, 0.0, 1.0).astype(np.float32)
+    view, _ = make_view(arr, (0, 0, arr.shape[1], arr.shape[0]), max(arr.shape[:2]), encoding)
+    return view.linear
 
 
-def _working_to_image(points: np.ndarray, shape: tuple[int, int], working_width: int
-                      ) -> np.ndarray:
-    """Map working-image ``(x, y)`` back to the original image.
+# --------------------------------------------------------------------------------------------
+# Patch outlines and lattices (our own segmentation)
 
-    colour-checker-detection turns a portrait image 90 degrees clockwise, then resizes it to
-    ``working_width`` (OpenCV pixel-centre convention ``x_src = (x_dst + 0.5) / s - 0.5``).
+
+@dataclass(frozen=True)
+class Quads:
+    """Convex four-sided patch outlines: ``corners`` ``(n, 4, 2)``, ``centres`` ``(n, 2)``
+    (contour centroids), ``areas`` ``(n,)`` pixels."""
+
+    corners: F64
+    centres: F64
+    areas: F64
+
+
+def patch_quads(bgr8: np.ndarray, blocks: tuple[int, ...] | None = None,
+                inverse: bool = True) -> Quads:
+    """Patch-like outlines in an 8-bit image: convex quadrilaterals of similar sides.
+
+    The grey image is thresholded against its local mean (``cv2.adaptiveThreshold``, block
+    sizes ``blocks`` in pixels, default :data:`BLOCK_FRACTIONS` of the short side,
+    :data:`THRESHOLD_OFFSETS`), for patches lighter than their surroundings and, with
+    ``inverse``, darker; each outer and inner contour is simplified (Douglas-Peucker, 6 % of its perimeter) and kept
+    when it has four corners, is convex, fills at least 80 % of its quadrilateral, has
+    opposite sides within a factor 3 and an area between :data:`MIN_QUAD_AREA` and 1/20 of
+    the image. Outlines found twice (centres within a fifth of a side) are kept once.
     """
-    height, width = shape
-    rotated = width < height
-    w2, h2 = (height, width) if rotated else (width, height)
-    working_height = int(h2 / (w2 / working_width))
-    x = (points[:, 0] + 0.5) * w2 / working_width - 0.5
-    y = (points[:, 1] + 0.5) * h2 / working_height - 0.5
-    if rotated:  # clockwise turn: x' = (H - 1) - y, y' = x
-        x, y = y, (height - 1) - x
-    return np.stack([x, y], axis=-1)
+    cv2 = _cv2()
+    grey = cv2.cvtColor(bgr8, cv2.COLOR_BGR2GRAY)
+    height, width = grey.shape
+    max_area = height * width / 20.0
+    min_box = MIN_QUAD_AREA
+    found: list[tuple[np.ndarray, np.ndarray, float]] = []
+    if blocks is None:
+        blocks = tuple(int(min(height, width) * fraction) for fraction in BLOCK_FRACTIONS)
+    for size in blocks:
+        block = max(7, int(size) | 1)
+        for offset in THRESHOLD_OFFSETS:
+            binary = cv2.adaptiveThreshold(grey, 255, cv2.ADAPTIVE_THRESH_MEAN_C,
+                                           cv2.THRESH_BINARY, block, -offset)
+            for mask in (binary, 255 - binary) if inverse else (binary,):
+                contours, _ = cv2.findContours(mask, cv2.RETR_LIST, cv2.CHAIN_APPROX_SIMPLE)
+                for contour in contours:
+                    if len(contour) < 4:
+                        continue
+                    _, _, bw, bh = cv2.boundingRect(contour)
+                    if bw * bh < min_box or bw > 5 * bh or bh > 5 * bw:
+                        continue
+                    area = cv2.contourArea(contour)
+                    if not MIN_QUAD_AREA <= area <= max_area:
+                        continue
+                    poly = cv2.approxPolyDP(contour, 0.06 * cv2.arcLength(contour, True), True)
+                    if len(poly) != 4 or not cv2.isContourConvex(poly):
+                        continue
+                    quad_area = cv2.contourArea(poly)
+                    if quad_area <= 0 or area < 0.8 * quad_area:
+                        continue
+                    (x0, y0), (x1, y1), (x2, y2), (x3, y3) = poly.reshape(4, 2).tolist()
+                    sides = (math.hypot(x1 - x0, y1 - y0), math.hypot(x2 - x1, y2 - y1),
+                             math.hypot(x3 - x2, y3 - y2), math.hypot(x0 - x3, y0 - y3))
+                    if min(sides) <= 0 or max(sides) > 3.0 * min(sides):
+                        continue
+                    m = cv2.moments(contour)
+                    found.append((poly.reshape(4, 2), np.array([m["m10"] / m["m00"],
+                                                                m["m01"] / m["m00"]]), area))
+    if not found:
+        return Quads(np.empty((0, 4, 2)), np.empty((0, 2)), np.empty(0))
+    corners = np.stack([f[0] for f in found]).astype(np.float64)
+    centres = np.stack([f[1] for f in found])
+    areas = np.array([f[2] for f in found])
+    # keep one of each outline found twice (largest first)
+    order = np.argsort(-areas)
+    keep: list[int] = []
+    near_to = _PointIndex(centres)
+    taken = np.zeros(len(centres), dtype=bool)
+    for k in order:
+        if taken[k]:
+            continue
+        keep.append(int(k))
+        for j in near_to(centres[k], 0.2 * math.sqrt(areas[k])):
+            if 0.5 < areas[j] / areas[k] <= 1.0:
+                taken[j] = True
+    idx = np.array(sorted(keep))
+    return Quads(corners[idx], centres[idx], areas[idx])
 
 
-def _detect_segmentation(image: np.ndarray, rows: int, cols: int, refine: bool = True
-                         ) -> FoundChart:
-    try:
-        import colour_checker_detection as ccd
-        from colour_checker_detection.detection.segmentation import (
-            SETTINGS_SEGMENTATION_COLORCHECKER_CLASSIC as settings,
-        )
-    except ImportError as exc:  # OpenCV needs libGL; say so rather than a bare ImportError
-        raise FidelityError(
-            f"chart detection needs colour-checker-detection and OpenCV ({exc}); install them "
-            f"(and libgl1) or give --corners") from None
-    if (rows, cols) != (settings["swatches_vertical"], settings["swatches_horizontal"]):
-        raise InvalidValueError(f"chart detection knows the 4 x 6 ColorChecker only, not "
-                                f"{rows} x {cols}")
-    found: dict[str, Any] = {}
+class _PointIndex:
+    """Points sorted along x, for finding those within a radius of a point."""
 
-    def segmenter(img: np.ndarray, **kwargs: Any) -> Any:
-        data = ccd.segmenter_default(img, **kwargs)
-        found["swatches"] = np.asarray(data.swatches, dtype=np.float64)
-        return data
+    def __init__(self, points: np.ndarray) -> None:
+        self.points = np.asarray(points, np.float64)
+        self.order = np.argsort(self.points[:, 0], kind="stable")
+        self.xs = self.points[self.order, 0]
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        charts = ccd.detect_colour_checkers_segmentation(
-            image, segmenter=segmenter, additional_data=True,
-            aspect_ratio_minimum=ASPECT_RATIO_RANGE[0], aspect_ratio_maximum=ASPECT_RATIO_RANGE[1])
-    if not charts:
-        raise InvalidValueError("no colour chart found (segmentation); give --corners "
-                                "X1,Y1,...,X4,Y4")
-    ww, wh = int(settings["working_width"]), int(settings["working_height"])
-    quad = np.asarray(charts[0].quadrilateral, dtype=np.float64)
-    # Outline corner k goes to rectangle corner k (below), so edge 1 -> 2 must be a long side;
-    # the detector's orientation check knows rotations only, and for a mirrored chart it can
-    # answer with a quarter turn. The patch order is decided in _oriented_corners.
-    if np.linalg.norm(quad[2] - quad[1]) < np.linalg.norm(quad[1] - quad[0]):
-        quad = np.roll(quad, 1, axis=0)
-    # The detector samples swatch (c, r) at ((c + 0.5) ww / cols, (r + 0.5) wh / rows) of the
-    # rectangle its outline is warped onto, outline corner k going to rectangle corner k.
-    rect = np.array([[ww, 0], [ww, wh], [0, wh], [0, 0]], dtype=np.float64)
-    rect_to_working = homography_from_points(rect, quad)
-    pitch = np.array([ww / cols, wh / rows])
-    grid_to_rect = np.array([[pitch[0], 0, 0.5 * pitch[0]], [0, pitch[1], 0.5 * pitch[1]],
-                             [0, 0, 1.0]])
-    coarse = rect_to_working @ grid_to_rect  # grid (u, v) -> working image
-    swatches = found.get("swatches", np.empty((0, 4, 2)))
-    matched_grid, matched_img = _assign_swatches(swatches.reshape(-1, 4, 2).mean(axis=1),
-                                                 coarse, rows, cols)
-    n = len(matched_grid)
-    shape = image.shape[:2]
-    cells = _corner_cells(rows, cols)
-    # the coarse outline as a grid -> image map (through the four corner cells)
-    grid_to_image = homography_from_points(
-        cells, _working_to_image(apply_homography(coarse, cells), shape, ww))
-    residual, used = math.nan, 0
-    if refine and n >= MIN_REFINE_SWATCHES and len({u for u, _ in matched_grid}) >= 2 \
-            and len({v for _, v in matched_grid}) >= 2:
-        src = np.asarray(matched_grid)
-        dst = _working_to_image(np.asarray(matched_img), shape, ww)
-        refined = _robust_homography(src, dst)
-        if refined is not None:
-            grid_to_image, keep = refined
-            used = int(keep.sum())
-            residual = float(np.sqrt(np.mean(np.sum(
-                (apply_homography(grid_to_image, src[keep]) - dst[keep]) ** 2, axis=-1))))
-    corners, symmetry = _oriented_corners(image, grid_to_image, rows, cols)
-    return FoundChart(corners=corners, method="segmentation", candidates=len(charts),
-                          swatches=used, residual_px=residual, orientation=symmetry)
+    def __call__(self, centre: np.ndarray, radius: float) -> list[int]:
+        lo = int(np.searchsorted(self.xs, centre[0] - radius, "left"))
+        hi = int(np.searchsorted(self.xs, centre[0] + radius, "right"))
+        cand = self.order[lo:hi]
+        d = self.points[cand] - centre
+        return [int(j) for j in cand[(d * d).sum(axis=1) <= radius * radius]]
 
 
-def _assign_swatches(centres: np.ndarray, grid_to_working: np.ndarray, rows: int, cols: int
-                     ) -> tuple[list[tuple[float, float]], list[np.ndarray]]:
-    """Swatch centres assigned to grid cells: ``(u, v)`` cells and the centres that sit there.
+@dataclass(frozen=True)
+class Lattice:
+    """Patch outlines on one grid: ``homography`` lattice ``(i, j)`` -> view ``(x, y)`` (one
+    unit = one patch pitch), ``cells`` ``(n, 2)`` integer lattice cells occupied, ``quads``
+    their indices into the :class:`Quads`."""
 
-    A centre belongs to the cell nearest to where the coarse outline puts it, if within
-    :data:`ASSIGN_TOLERANCE` patch pitches; of several in one cell the nearest is kept.
+    homography: F64
+    cells: NDArray[np.int64]
+    quads: NDArray[np.int64]
+
+
+def _axes(quad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The two mean edge vectors of a quadrilateral (one side of the patch each)."""
+    a = ((quad[1] - quad[0]) + (quad[2] - quad[3])) / 2.0
+    b = ((quad[3] - quad[0]) + (quad[2] - quad[1])) / 2.0
+    return a, b
+
+
+def patch_lattices(quads: Quads, min_patches: int = 4) -> list[Lattice]:
+    """Group patch outlines into lattices of patches one pitch apart.
+
+    Two outlines are neighbours when their areas are within a factor 2.5, their edges nearly
+    parallel, and the second's centre lies 1 to 1.8 sides from the first's along one of its
+    edges (within 0.35 sides across). Connected outlines get integer lattice cells by walking
+    the neighbours (their edges relabelled to a common frame); a homography lattice -> view is
+    fitted to the cells (least squares, outliers left out), every outline of a similar size
+    whose centre maps within :data:`ASSIGN_TOLERANCE` of a free cell is added, and the fit
+    repeated. Lattices with fewer than ``min_patches`` outlines, or all on one line, are
+    dropped.
     """
-    if not len(centres):
-        return [], []
-    uv = apply_homography(np.linalg.inv(grid_to_working), centres)
-    cell = np.rint(uv)
-    dist = np.linalg.norm(uv - cell, axis=-1)
-    ok = ((dist <= ASSIGN_TOLERANCE) & (cell[:, 0] >= 0) & (cell[:, 0] < cols)
-          & (cell[:, 1] >= 0) & (cell[:, 1] < rows))
-    best: dict[tuple[int, int], int] = {}
-    for k in np.flatnonzero(ok):
-        key = (int(cell[k, 0]), int(cell[k, 1]))
-        if key not in best or dist[k] < dist[best[key]]:
-            best[key] = int(k)
-    return [(float(u), float(v)) for u, v in best], [centres[k] for k in best.values()]
+    n = len(quads.centres)
+    if n < min_patches:
+        return []
+    axes = [_axes(q) for q in quads.corners]
+    sides = np.sqrt(quads.areas)
+    near_to = _PointIndex(quads.centres)
+    # neighbour steps in each outline's own frame: (j, step along a, step along b)
+    steps: list[list[tuple[int, int, int]]] = [[] for _ in range(n)]
+    for i in range(n):
+        a, b = axes[i]
+        basis = np.column_stack([a, b])
+        if abs(np.linalg.det(basis)) < 1e-9:
+            continue
+        inv = np.linalg.inv(basis)
+        for j in near_to(quads.centres[i], 2.0 * sides[i]):
+            if j == i or not 0.4 <= quads.areas[j] / quads.areas[i] <= 2.5:
+                continue
+            s, t = inv @ (quads.centres[j] - quads.centres[i])
+            if 1.0 <= abs(s) <= 1.8 and abs(t) <= 0.35:
+                step = (int(np.sign(s)), 0)
+            elif 1.0 <= abs(t) <= 1.8 and abs(s) <= 0.35:
+                step = (0, int(np.sign(t)))
+            else:
+                continue
+            aj, bj = axes[j]
+            # edges nearly parallel: one of j's edges along each of i's
+            cos_a = abs(a @ aj) / (np.linalg.norm(a) * np.linalg.norm(aj) + 1e-12)
+            cos_b = abs(a @ bj) / (np.linalg.norm(a) * np.linalg.norm(bj) + 1e-12)
+            if max(cos_a, cos_b) < 0.85:
+                continue
+            steps[i].append((j, *step))
+    lattices: list[Lattice] = []
+    seen = np.zeros(n, dtype=bool)
+    for seed in np.argsort(-quads.areas):
+        if seen[seed] or not steps[seed]:
+            continue
+        # frame[k]: 2 x 2 signed permutation from k's own (a, b) steps to the lattice's
+        frame: dict[int, np.ndarray] = {int(seed): np.eye(2)}
+        cell: dict[int, np.ndarray] = {int(seed): np.zeros(2)}
+        queue = [int(seed)]
+        while queue:
+            i = queue.pop()
+            a_i, b_i = axes[i]
+            for j, s, t in steps[i]:
+                if j in cell or seen[j]:
+                    continue
+                cell[j] = cell[i] + frame[i] @ np.array([s, t], dtype=float)
+                a_j, b_j = axes[j]
+                # express j's edges in i's frame
+                q = np.zeros((2, 2))
+                for col, e in enumerate((a_j, b_j)):
+                    ca, cb = e @ a_i, e @ b_i
+                    na = ca / (np.linalg.norm(a_i) ** 2)
+                    nb = cb / (np.linalg.norm(b_i) ** 2)
+                    if abs(na) >= abs(nb):
+                        q[0, col] = np.sign(na)
+                    else:
+                        q[1, col] = np.sign(nb)
+                if abs(np.linalg.det(q)) < 0.5:
+                    continue
+                frame[j] = frame[i] @ q
+                queue.append(j)
+        members = np.array(sorted(cell))
+        seen[members] = True
+        if len(members) < min_patches:
+            continue
+        lattice = _fit_lattice(quads, members, np.array([cell[int(k)] for k in members]))
+        if lattice is not None and len(lattice.quads) >= min_patches:
+            lattices.append(lattice)
+            seen[lattice.quads] = True
+    return lattices
 
 
-def _robust_homography(src: np.ndarray, dst: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray] | None:
-    """Least-squares grid -> image homography that leaves out swatches which do not fit.
+def _fit_lattice(quads: Quads, members: np.ndarray, cells: np.ndarray) -> Lattice | None:
+    """Fit lattice -> view to the walked cells, then collect all outlines on the lattice."""
+    if len(set(cells[:, 0].tolist())) < 2 or len(set(cells[:, 1].tolist())) < 2:
+        return None
+    fit = robust_homography(cells, quads.centres[members])
+    if fit is None:
+        return None
+    h, keep = fit
+    area = float(np.median(quads.areas[members[keep]]))
+    for _ in range(2):
+        uv = apply_homography(np.linalg.inv(h), quads.centres)
+        near = np.rint(uv)
+        dist = np.linalg.norm(uv - near, axis=-1)
+        lo, hi = near[members].min(axis=0) - 1, near[members].max(axis=0) + 1
+        ok = ((dist <= ASSIGN_TOLERANCE) & (quads.areas >= 0.4 * area)
+              & (quads.areas <= 2.5 * area) & np.all(near >= lo, axis=1)
+              & np.all(near <= hi, axis=1))
+        best: dict[tuple[int, int], int] = {}
+        for k in np.flatnonzero(ok):
+            key = (int(near[k, 0]), int(near[k, 1]))
+            if key not in best or dist[k] < dist[best[key]]:
+                best[key] = int(k)
+        if len(best) < 4:
+            return None
+        members = np.array(list(best.values()))
+        cells = np.array(list(best.keys()), dtype=float)
+        if len(set(cells[:, 0].tolist())) < 2 or len(set(cells[:, 1].tolist())) < 2:
+            return None
+        fit = robust_homography(cells, quads.centres[members])
+        if fit is None:
+            return None
+        h, keep = fit
+        members, cells = members[keep], cells[keep]
+    return Lattice(homography=h, cells=cells.astype(np.int64), quads=members.astype(np.int64))
 
-    A swatch whose contour merged with its surroundings (the black patch with a dark frame,
-    say) has a displaced centre. Fit, drop the points whose distance to the fit exceeds
-    ``OUTLIER_FACTOR`` times the median distance (and 0.5 px), refit; up to three rounds, never
-    below :data:`MIN_REFINE_SWATCHES` points. Returns the map and the mask of points kept.
+
+def robust_homography(src: np.ndarray, dst: np.ndarray) -> tuple[F64, np.ndarray] | None:
+    """Least-squares homography ``src -> dst`` that leaves out points which do not fit.
+
+    Fit (normalised DLT), drop the points whose distance to the fit exceeds
+    :data:`OUTLIER_FACTOR` times the median distance (and 0.5 px), refit; up to three rounds,
+    never below 4 points. Returns the map and the mask of points kept (``None`` when
+    degenerate).
     """
     keep = np.ones(len(src), dtype=bool)
     h = None
@@ -278,170 +629,364 @@ def _robust_homography(src: np.ndarray, dst: np.ndarray
         dist = np.linalg.norm(apply_homography(h, src) - dst, axis=-1)
         limit = max(OUTLIER_FACTOR * float(np.median(dist[keep])), 0.5)
         new = keep & (dist <= limit)
-        if new.sum() == keep.sum() or new.sum() < MIN_REFINE_SWATCHES:
+        if new.sum() == keep.sum() or new.sum() < max(4, MIN_REFINE_SWATCHES // 2):
             break
         keep = new
-    return (h, keep) if h is not None else None
+    if h is None or not np.all(np.isfinite(h)) or np.linalg.cond(h) > 1e12:
+        return None
+    return h, keep
 
 
-#: The symmetries of a rows x cols grid that keep its shape, as maps of grid ``(u, v)``.
-GRID_SYMMETRIES: dict[str, Callable[[np.ndarray, int, int], np.ndarray]] = {
-    "as found": lambda g, rows, cols: g,
-    "turned 180 degrees": lambda g, rows, cols: np.stack(
-        [cols - 1 - g[:, 0], rows - 1 - g[:, 1]], axis=-1),
-    "mirrored left-right": lambda g, rows, cols: np.stack([cols - 1 - g[:, 0], g[:, 1]], axis=-1),
-    "mirrored top-bottom": lambda g, rows, cols: np.stack([g[:, 0], rows - 1 - g[:, 1]], axis=-1),
-}
+# --------------------------------------------------------------------------------------------
+# Verification against the reference layout
 
 
-def orientation_score(measured: np.ndarray, reference: np.ndarray) -> float:
-    """How far ``(n, 3)`` measured linear RGB is from the reference, whatever the exposure.
-
-    The mean squared difference of ``log(rgb + 1e-3)`` after removing the best common offset
-    (a global exposure scale); a wrong patch order mixes dark with light and grey with colour,
-    and scores far worse than any plausible camera error.
-    """
-    d = np.log(np.maximum(measured, 0.0) + 1e-3) - np.log(np.maximum(reference, 0.0) + 1e-3)
-    return float(np.mean((d - d.mean()) ** 2))
-
-
-def _oriented_corners(image: np.ndarray, grid_to_image: np.ndarray, rows: int, cols: int
-                      ) -> tuple[np.ndarray, str]:
-    """Corner-patch centres under the grid symmetry whose patch colours fit the reference best.
-
-    The detector tells rotations apart by its own reference, not mirror images; the four
-    symmetries of the grid (:data:`GRID_SYMMETRIES`) are scored here by
-    :func:`orientation_score` of the patch means (central 0.3 x 0.3 patch pitch) against the
-    default chart's linear sRGB. A best score above :data:`ORIENTATION_MARGIN` times the next
-    one means the swatches found are not a ColorChecker: an error.
-    """
-    from fidelity.chart.locate import grid_centres, locate_chart, window_pixels
+def _reference_linear() -> F64:
     from fidelity.colour.charts import load_chart
 
-    reference = cm.linearize_srgb(load_chart().srgb)
-    cells = _corner_cells(rows, cols)
-    # Every symmetry maps the grid onto itself, so its patches are the ones found, reordered:
-    # sample once, then score each order.
-    try:
-        location = locate_chart(apply_homography(grid_to_image, cells), image.shape, rows=rows,
-                                cols=cols, window=0.3, min_pixels=1)
-    except InvalidValueError:
-        raise InvalidValueError("no colour chart found: the chart found lies partly outside "
-                                "the image; give --corners X1,Y1,...,X4,Y4") from None
-    means = np.array([s.mean(axis=0) for s in window_pixels(image, location)])
-    grid = grid_centres(rows, cols)
-    best: tuple[float, str, np.ndarray] | None = None
-    scores: list[float] = []
-    for name, symmetry in GRID_SYMMETRIES.items():
-        moved = np.rint(symmetry(grid, rows, cols)).astype(int)
-        order = moved[:, 1] * cols + moved[:, 0]  # patch k is seen where grid cell order[k] is
-        score = orientation_score(means[order], reference)
-        scores.append(score)
-        if best is None or score < best[0]:
-            best = (score, name, apply_homography(grid_to_image, symmetry(cells, rows, cols)))
-    assert best is not None
-    ranked = sorted(scores)
-    if len(ranked) > 1 and ranked[0] > ORIENTATION_MARGIN * ranked[1]:
-        raise InvalidValueError(
-            f"no colour chart found: the patches of what looked like a chart match no "
-            f"orientation of the ColorChecker clearly (scores {ranked[0]:.2f} and "
-            f"{ranked[1]:.2f}); give --corners X1,Y1,...,X4,Y4")
-    return best[2], best[1]
+    return np.asarray(cm.linearize_srgb(load_chart().srgb), dtype=np.float64)
 
 
-def _corner_cells(rows: int, cols: int) -> np.ndarray:
-    """Grid ``(u, v)`` of the corner patches in :data:`CORNER_PATCHES` order."""
-    return np.array([[0, 0], [cols - 1, 0], [cols - 1, rows - 1], [0, rows - 1]], dtype=float)
+def _features(rgb: np.ndarray) -> np.ndarray:
+    """``(..., 24, 3)`` linear RGB -> ``(..., 24, 5)``: R, G, B, log(R/G), log(B/G)."""
+    lg = np.log(np.maximum(rgb, 0.0) + 2e-3)
+    return np.concatenate([rgb, lg[..., :1] - lg[..., 1:2], lg[..., 2:3] - lg[..., 1:2]], axis=-1)
 
 
-#: Chart detection methods by name.
-CHART_FINDERS: dict[str, Callable[..., FoundChart]] = {
-    "segmentation": _detect_segmentation,
+def average_ranks(x: np.ndarray) -> F64:
+    """Ranks (0-based) along axis -2, ties given their average rank, of a ``(..., n, f)`` array
+    of finite values."""
+    a = np.moveaxis(np.asarray(x, np.float64), -2, -1)  # (..., f, n)
+    shape = a.shape
+    rows = a.reshape(-1, shape[-1])
+    span = float(np.ptp(rows)) + 1.0 if rows.size else 1.0
+    # put every row in its own range of values, so that one sorted array serves them all
+    offset = (np.arange(len(rows)) * 2.0 * span)[:, None] - float(rows.min(initial=0.0))
+    flat = (rows + offset).ravel()
+    ordered = np.sort(flat)
+    less = np.searchsorted(ordered, flat, "left")
+    leq = np.searchsorted(ordered, flat, "right")
+    start = (np.arange(len(rows)) * shape[-1])[:, None]
+    ranks = ((less + leq - 1) / 2.0).reshape(rows.shape) - start
+    return np.moveaxis(ranks.reshape(shape), -1, -2)
+
+
+def colour_order(measured: np.ndarray, reference: np.ndarray | None = None, trim: int = 0
+                 ) -> F64:
+    """Mean Spearman rank correlation of ``(..., 24, 3)`` measured linear RGB with the reference.
+
+    Over the five features R, G, B, log(R/G), log(B/G) of the 24 patches (ties, such as
+    clipped patches, get their average rank); 1 when every feature orders the patches as the
+    reference does. Ranks are unchanged by a per-channel gain or any increasing tone curve, so
+    coloured light, white balance and exposure leave it near 1. ``trim`` leaves out that many
+    patches that disagree most (summed absolute rank difference), and ranks the rest again: a
+    patch covered by a finger or a glare costs the chart little.
+    """
+    ref = _reference_linear() if reference is None else np.asarray(reference, np.float64)
+    fm = _features(np.asarray(measured, np.float64))
+    fr = np.broadcast_to(_features(ref), fm.shape)
+    n = fm.shape[-2]
+    if trim:
+        d = np.abs(average_ranks(fm) - average_ranks(fr)).sum(axis=-1)  # (..., n)
+        worst = np.argsort(-d, axis=-1, kind="stable")[..., :trim]
+        drop = np.zeros(d.shape, dtype=bool)
+        np.put_along_axis(drop, worst, True, axis=-1)
+        # dropped patches move above every kept one, so the kept are ranked among themselves
+        top_m = fm.max(axis=-2, keepdims=True) + 1.0
+        top_r = fr.max(axis=-2, keepdims=True) + 1.0
+        fm = np.where(drop[..., None], top_m, fm)
+        fr = np.where(drop[..., None], top_r, fr)
+        diff = np.where(drop[..., None], 0.0, average_ranks(fm) - average_ranks(fr))
+        n -= trim
+    else:
+        diff = average_ranks(fm) - average_ranks(fr)
+    rho = 1.0 - 6.0 * np.sum(diff ** 2, axis=-2) / (n * (n * n - 1))
+    return np.asarray(rho.mean(axis=-1))
+
+
+#: Indices of the neutral patches, white to black, in the 24-patch layout.
+NEUTRALS = np.arange(18, 24)
+
+
+def neutral_order(measured: np.ndarray) -> np.ndarray:
+    """Fraction of the 15 pairs of neutral patches (white ... black) whose measured lightness
+    (R + G + B) is in the reference order (ties count as in order)."""
+    y = np.asarray(measured)[..., NEUTRALS, :].sum(axis=-1)
+    i, j = np.triu_indices(len(NEUTRALS), 1)
+    return np.asarray(np.mean(y[..., i] >= y[..., j] - 1e-6, axis=-1))
+
+
+#: The 8 orientations of a grid: chart ``(u, v)`` -> lattice direction, as 2 x 2 matrices
+#: (identity, turns, mirror images, transposes).
+ORIENTATIONS = tuple(np.array(m, dtype=float) for m in (
+    [[1, 0], [0, 1]], [[-1, 0], [0, -1]], [[-1, 0], [0, 1]], [[1, 0], [0, -1]],
+    [[0, 1], [1, 0]], [[0, -1], [-1, 0]], [[0, -1], [1, 0]], [[0, 1], [-1, 0]]))
+
+
+def _grid_cells() -> F64:
+    r, c = np.mgrid[0:ROWS, 0:COLS]
+    return np.stack([c.ravel(), r.ravel()], axis=-1).astype(np.float64)
+
+
+def sample_cells(view: View, homography: np.ndarray, cells: np.ndarray,
+                 window: float = VERIFY_WINDOW) -> tuple[F64, F64]:
+    """Mean and relative spread of the linear view in a ``window``-pitch square about each
+    lattice cell (``VERIFY_SAMPLES``\\ :sup:`2` points, bilinear). Cells whose window leaves the
+    view get NaN."""
+    k = VERIFY_SAMPLES
+    offs = (np.arange(k) + 0.5) / k - 0.5
+    oy, ox = np.meshgrid(offs * window, offs * window, indexing="ij")
+    pts = cells[:, None, :] + np.stack([ox.ravel(), oy.ravel()], axis=-1)[None]
+    xy = apply_homography(homography, pts.reshape(-1, 2)).reshape(len(cells), k * k, 2)
+    height, width = view.linear.shape[:2]
+    inside = ((xy[..., 0] >= 0) & (xy[..., 0] <= width - 1) & (xy[..., 1] >= 0)
+              & (xy[..., 1] <= height - 1)).all(axis=1)
+    x = np.clip(xy[..., 0], 0, width - 1.001)
+    y = np.clip(xy[..., 1], 0, height - 1.001)
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = (x - x0)[..., None], (y - y0)[..., None]
+    img = view.linear
+    vals = (img[y0, x0] * (1 - fx) * (1 - fy) + img[y0, x0 + 1] * fx * (1 - fy)
+            + img[y0 + 1, x0] * (1 - fx) * fy + img[y0 + 1, x0 + 1] * fx * fy)
+    mean = vals.mean(axis=1)
+    spread = vals.std(axis=1).mean(axis=-1) / (mean.mean(axis=-1) + 0.02)
+    mean[~inside] = np.nan
+    spread[~inside] = np.nan
+    return mean.astype(np.float64), spread.astype(np.float64)
+
+
+@dataclass(frozen=True)
+class Placement:
+    """The best placement of the 4 x 6 chart on a candidate lattice.
+
+    ``homography`` maps chart grid ``(u, v)`` to view ``(x, y)``; ``checks`` its scores;
+    ``cells`` the lattice cells of its 24 patches (chart order); ``view_index`` which view.
+    """
+
+    homography: F64
+    checks: ChartChecks
+    cells: NDArray[np.int64]
+    source: str
+    ring_patches: int = 0
+
+
+def placement_scores(view: View, lattice_h: np.ndarray, occupied: np.ndarray, source: str,
+                     trim: int = TRIM, given: bool = False) -> Placement | None:
+    """Verify every placement of the 4 x 6 chart on a lattice and return the best.
+
+    Placements: the 8 orientations (:data:`ORIENTATIONS`) and every offset whose 4 x 6 window
+    holds at least half of the ``occupied`` cells (or 12 of them), so that a detector's answer
+    one row or column off is corrected. Each is scored
+    by :func:`colour_order` of its sampled patches; the best, with its margin over the next
+    best and its neutral order and uniformity, is returned (``None``: no placement lies in the
+    view).
+    """
+    occ = np.asarray(occupied, dtype=np.int64)
+    lo, hi = occ.min(axis=0), occ.max(axis=0)
+    grid = _grid_cells()
+    occ_set = {(int(a), int(b)) for a, b in occ}
+    # occupancy as an image of the lattice (one cell border), to count cells held by a window
+    occupancy = np.zeros((int(hi[1] - lo[1]) + 3, int(hi[0] - lo[0]) + 3), dtype=np.int64)
+    occupancy[occ[:, 1] - lo[1] + 1, occ[:, 0] - lo[0] + 1] = 1
+    need = max(min(len(occ_set) * 0.5, 12), min(4, len(occ_set)))
+    chunks: list[np.ndarray] = []
+    for m in ORIENTATIONS:
+        rel = np.rint(grid @ m.T).astype(np.int64)  # offsets of the 24 cells from the origin
+        rmin, rmax = rel.min(axis=0), rel.max(axis=0)
+        ox, oy = np.meshgrid(np.arange(lo[0] - rmax[0], hi[0] - rmin[0] + 1),
+                             np.arange(lo[1] - rmax[1], hi[1] - rmin[1] + 1), indexing="ij")
+        origins = np.stack([ox.ravel(), oy.ravel()], axis=-1)
+        cells = origins[:, None, :] + rel[None]  # (o, 24, 2)
+        cx = cells[..., 0] - lo[0] + 1
+        cy = cells[..., 1] - lo[1] + 1
+        inside = (cx >= 0) & (cx < occupancy.shape[1]) & (cy >= 0) & (cy < occupancy.shape[0])
+        held = np.where(inside, occupancy[np.clip(cy, 0, occupancy.shape[0] - 1),
+                                          np.clip(cx, 0, occupancy.shape[1] - 1)], 0).sum(-1)
+        chunks.append(cells[held >= need])
+    cells_all = np.concatenate(chunks)  # (p, 24, 2)
+    if not len(cells_all):
+        return None
+    placements = list(cells_all)
+    uniq, inverse = np.unique(cells_all.reshape(-1, 2), axis=0, return_inverse=True)
+    means, spread = sample_cells(view, lattice_h, uniq.astype(float))
+    pm = means[inverse.ravel()].reshape(len(placements), ROWS * COLS, 3)
+    ps = spread[inverse.ravel()].reshape(len(placements), ROWS * COLS)
+    valid = np.all(np.isfinite(pm), axis=(1, 2))
+    if not valid.any():
+        return None
+    scores = np.full(len(placements), -np.inf)
+    scores[valid] = colour_order(pm[valid], trim=trim)
+    order = np.argsort(-scores)
+    best = int(order[0])
+    second = float(scores[order[1]]) if len(order) > 1 and np.isfinite(scores[order[1]]) else 0.0
+    if given:  # the placement of the occupied cells themselves, against the best other one
+        same = np.flatnonzero(np.all(cells_all == occ[None], axis=(1, 2)))
+        if not len(same) or not np.isfinite(scores[same[0]]):
+            return None
+        best = int(same[0])
+        others = np.delete(scores, best)
+        second = float(others.max()) if len(others) and np.isfinite(others.max()) else 0.0
+    cells = cells_all[best]
+    h = lattice_h @ _cell_map(cells)
+    box = {(int(a), int(b)) for a, b in cells}
+    ring = _ring(cells)
+    ring_patches = sum(c in occ_set and c not in box for c in ring)
+    checks = ChartChecks(colour_order=float(scores[best]),
+                         neutral_order=float(neutral_order(pm[best])),
+                         margin=float(scores[best]) - second,
+                         uniformity=float(np.median(ps[best])))
+    return Placement(homography=h, checks=checks, cells=cells, source=source,
+                     ring_patches=ring_patches)
+
+
+def _cell_map(cells: np.ndarray) -> F64:
+    """The affine map chart grid ``(u, v)`` -> lattice cell of a placement (3 x 3)."""
+    grid = _grid_cells()
+    a = np.c_[grid, np.ones(len(grid))]
+    sol, *_ = np.linalg.lstsq(a, cells.astype(float), rcond=None)
+    m = np.eye(3)
+    m[:2, :] = sol.T
+    return m
+
+
+def _ring(cells: np.ndarray) -> set[tuple[int, int]]:
+    """Lattice cells just outside the placement's 4 x 6 box (the 24 cells around it)."""
+    lo, hi = cells.min(axis=0), cells.max(axis=0)
+    ring: set[tuple[int, int]] = set()
+    for x in range(int(lo[0]) - 1, int(hi[0]) + 2):
+        for y in range(int(lo[1]) - 1, int(hi[1]) + 2):
+            if not (lo[0] <= x <= hi[0] and lo[1] <= y <= hi[1]):
+                ring.add((x, y))
+    return ring
+
+
+def _accepted(p: Placement) -> bool:
+    c = p.checks
+    return (c.colour_order >= MIN_CONFIDENCE and c.neutral_order >= MIN_NEUTRAL_ORDER
+            and c.margin >= MIN_MARGIN and c.uniformity <= MAX_UNIFORMITY)
+
+
+# --------------------------------------------------------------------------------------------
+# Detectors: candidates in one view
+
+
+def _mcc_module() -> Any:
+    cv2 = _cv2()
+    if not hasattr(cv2, "mcc"):
+        raise FidelityError(
+            f"chart detection needs OpenCV's contrib modules (cv2.mcc), but this OpenCV "
+            f"({getattr(cv2, '__version__', '?')}, {getattr(cv2, '__file__', '?')}) is a build "
+            f"without them: install opencv-contrib-python-headless (and no other OpenCV build) "
+            f"or give --corners")
+    return cv2
+
+
+def mcc_charts(bgr8: np.ndarray, charts: int = 2) -> list[F64]:
+    """OpenCV's MCC detector (``cv2.mcc``, chart type ``MCC24``): the ``(24, 2)`` patch
+    centres of each chart it finds (in its patch order: dark skin first, row by row)."""
+    cv2 = _mcc_module()
+    detector = cv2.mcc.CCheckerDetector_create()
+    if hasattr(detector, "setColorChartType"):  # OpenCV 5 API
+        detector.setColorChartType(cv2.mcc.MCC24)
+        ok = detector.process(bgr8, charts)
+    else:
+        ok = detector.process(bgr8, cv2.mcc.MCC24, charts)
+    if not ok:
+        return []
+    out = []
+    for checker in detector.getListColorChecker():
+        pts = np.asarray(checker.getColorCharts(), dtype=np.float64).reshape(-1, 4, 2)
+        if len(pts) == ROWS * COLS:
+            out.append(pts.mean(axis=1))
+    return out
+
+
+def _mcc_candidates(view: View) -> list[Placement]:
+    found = []
+    grid = _grid_cells()
+    for centres in mcc_charts(view.bgr8):
+        fit = robust_homography(grid, centres)
+        if fit is None:
+            continue
+        p = placement_scores(view, fit[0], grid.astype(np.int64), "mcc")
+        if p is not None:
+            found.append(p)
+    return found
+
+
+def _segmentation_candidates(view: View, quads: Quads | None = None
+                             ) -> tuple[list[Placement], list[Lattice]]:
+    quads = patch_quads(view.bgr8, inverse=SEARCH_INVERSE) if quads is None else quads
+    lattices = patch_lattices(quads)
+    found = []
+    for lattice in lattices:
+        p = placement_scores(view, lattice.homography, lattice.cells, "segmentation")
+        if p is not None:
+            found.append(p)
+    return found, lattices
+
+
+#: Detectors by name: a view -> verified candidates.
+DETECTORS: dict[str, Callable[[View], list[Placement]]] = {
+    "mcc": _mcc_candidates,
+    "segmentation": lambda view: _segmentation_candidates(view)[0],
 }
 
 
-def find_chart(
-    pixels: np.ndarray,
-    *,
-    encoding: str = "linear",
-    method: str = "segmentation",
-    rows: int = 4,
-    cols: int = 6,
-    refine: bool = True,
-) -> FoundChart:
-    """Find the chart in an ``(H, W, 3)`` image and return its corner-patch centres.
-
-    Parameters
-    ----------
-    pixels
-        Linear or sRGB-encoded RGB (``encoding``), any scale; NaN/Inf/negative count as black.
-    method
-        A key of :data:`CHART_FINDERS`.
-    refine
-        Fit the grid to the patch outlines found (default); ``False`` keeps the detector's
-        chart outline (the benchmark's anchor).
-
-    Raises
-    ------
-    InvalidValueError
-        No chart found (the message suggests ``--corners``), or a black image.
-    """
-    if method not in CHART_FINDERS:
-        raise unknown_name("chart detection method", method, CHART_FINDERS)
-    if encoding not in ("linear", "srgb"):
-        raise unknown_name("encoding", encoding, ("linear", "srgb"))
-    image = detection_image(pixels, encoding)
-    find = CHART_FINDERS[method]
-    height, width = image.shape[:2]
-
-    def within(region: tuple[int, int, int, int]) -> FoundChart:
-        x0, y0, x1, y1 = region
-        found = find(image[y0:y1, x0:x1], rows, cols, refine=refine)
-        return replace(found, corners=found.corners + (x0, y0), region=region)
-
-    whole = (0, 0, width, height)
-    try:
-        found = within(whole)
-    except InvalidValueError as exc:
-        found = None
-        for region in _tiles(width, height) if max(width, height) >= TILED_SEARCH_SIDE else []:
-            try:
-                found = within(region)
-                break
-            except InvalidValueError:
-                continue
-        if found is None:
-            raise exc from None
-    if not refine:
-        return found
-    # Second pass on the chart's surroundings: the detector works at a fixed width, so a chart
-    # that fills a small part of the image gains resolution (and the fit accuracy) here.
-    crop = _chart_region(found.corners, width, height)
-    if (max(width, height) <= CROP_PASS_MIN_SIDE
-            or (crop[2] - crop[0]) * (crop[3] - crop[1]) > 0.5 * width * height):
-        return found  # the detector already saw the chart at full resolution or better
-    try:
-        closer = within(crop)
-    except InvalidValueError:
-        return found
-    pitch = _pitch(found.corners, rows, cols)
-    if np.linalg.norm(closer.corners - found.corners, axis=-1).max() > 0.25 * pitch:
-        return found  # the passes disagree on the chart: keep the first
-    return closer
+# --------------------------------------------------------------------------------------------
+# The finder
 
 
-def _pitch(corners: np.ndarray, rows: int, cols: int) -> float:
+@dataclass(frozen=True)
+class _Search:
+    best: Placement | None
+    view: View
+    candidates: int
+    lattices: list[Lattice]
+
+
+def _search(view: View, detectors: tuple[str, ...]) -> _Search:
+    candidates: list[Placement] = []
+    lattices: list[Lattice] = []
+    for name in detectors:
+        if any(_accepted(p) and p.checks.colour_order >= SURE_CONFIDENCE for p in candidates):
+            break  # the next detector could not do better
+        if name == "segmentation":
+            found, lattices = _segmentation_candidates(view)
+        else:
+            found = DETECTORS[name](view)
+        candidates.extend(found)
+    best = max(candidates, key=lambda p: p.checks.colour_order, default=None)
+    accepted = [p for p in candidates if _accepted(p)]
+    if accepted:
+        best = max(accepted, key=lambda p: p.checks.colour_order)
+    return _Search(best=best, view=view, candidates=len(candidates), lattices=lattices)
+
+
+def _quarters(width: int, height: int) -> list[tuple[int, int, int, int]]:
+    """Four overlapping quarters (each 5/8 of the side): a chart smaller than 1/4 of the
+    image lies whole in one of them."""
+    tw, th = (width * 5 + 7) // 8, (height * 5 + 7) // 8
+    return [(x, y, x + tw, y + th) for y in (0, height - th) for x in (0, width - tw)]
+
+
+def _corners(h: np.ndarray) -> F64:
+    return apply_homography(h, np.array([[0, 0], [COLS - 1, 0], [COLS - 1, ROWS - 1],
+                                         [0, ROWS - 1]], dtype=float))
+
+
+def chart_pitch(corners: np.ndarray) -> float:
     """Smallest patch pitch along the chart's edges, in pixels, from the corner centres."""
     c = np.asarray(corners)
-    return float(min(np.linalg.norm(c[1] - c[0]) / (cols - 1), np.linalg.norm(c[2] - c[1]) /
-                     (rows - 1), np.linalg.norm(c[2] - c[3]) / (cols - 1),
-                     np.linalg.norm(c[3] - c[0]) / (rows - 1)))
+    return float(min(np.linalg.norm(c[1] - c[0]) / (COLS - 1), np.linalg.norm(c[2] - c[1]) /
+                     (ROWS - 1), np.linalg.norm(c[2] - c[3]) / (COLS - 1),
+                     np.linalg.norm(c[3] - c[0]) / (ROWS - 1)))
 
 
-def _chart_region(corners: np.ndarray, width: int, height: int, rows: int = 4, cols: int = 6
+def _chart_region(corners: np.ndarray, width: int, height: int, margin_pitches: float = 2.0
                   ) -> tuple[int, int, int, int]:
-    """``(x0, y0, x1, y1)`` around the chart: corner centres plus 1.5 patch pitches."""
-    margin = 1.5 * max(_pitch(corners, rows, cols), 1.0)
+    """``(x0, y0, x1, y1)`` around the chart: corner centres plus ``margin_pitches``."""
+    margin = margin_pitches * max(chart_pitch(corners), 1.0)
     x0 = max(int(np.floor(corners[:, 0].min() - margin)), 0)
     y0 = max(int(np.floor(corners[:, 1].min() - margin)), 0)
     x1 = min(int(np.ceil(corners[:, 0].max() + margin)) + 1, width)
@@ -449,25 +994,311 @@ def _chart_region(corners: np.ndarray, width: int, height: int, rows: int = 4, c
     return x0, y0, x1, y1
 
 
-def _tiles(width: int, height: int) -> list[tuple[int, int, int, int]]:
-    """Half-size tiles overlapping by half (3 x 3): any chart smaller than a quarter of the
-    image lies whole in one of them."""
-    tw, th = (width + 1) // 2, (height + 1) // 2
-    xs = [0, (width - tw) // 2, width - tw]
-    ys = [0, (height - th) // 2, height - th]
-    return [(x, y, x + tw, y + th) for y in ys for x in xs]
+def _refine(view: View, h_view: np.ndarray) -> tuple[F64, int, float, Quads]:
+    """Fit the grid to the patch outlines found in ``view`` near their cells.
+
+    Returns the grid -> view homography (the given one when too few outlines fit), the number
+    of outlines used, their RMS residual (view pixels; NaN without refinement) and the
+    outlines. The threshold blocks are a quarter and half the patch pitch."""
+    corners = _corners(h_view)
+    pitch = chart_pitch(corners)
+    quads = patch_quads(view.bgr8, blocks=(round(0.25 * pitch), round(0.5 * pitch)), inverse=False)
+    if not len(quads.centres):
+        return np.asarray(h_view, np.float64), 0, math.nan, quads
+    uv = apply_homography(np.linalg.inv(h_view), quads.centres)
+    near = np.rint(uv)
+    dist = np.linalg.norm(uv - near, axis=-1)
+    expected = (0.84 * pitch) ** 2
+    ok = ((dist <= ASSIGN_TOLERANCE) & (near[:, 0] >= 0) & (near[:, 0] < COLS)
+          & (near[:, 1] >= 0) & (near[:, 1] < ROWS) & (quads.areas >= 0.25 * expected)
+          & (quads.areas <= 2.5 * expected))
+    best: dict[tuple[int, int], int] = {}
+    for k in np.flatnonzero(ok):
+        key = (int(near[k, 0]), int(near[k, 1]))
+        if key not in best or dist[k] < dist[best[key]]:
+            best[key] = int(k)
+    if len(best) < MIN_REFINE_SWATCHES or len({u for u, _ in best}) < 2 \
+            or len({v for _, v in best}) < 2:
+        return np.asarray(h_view, np.float64), 0, math.nan, quads
+    src = np.array(list(best.keys()), dtype=float)
+    dst = quads.centres[list(best.values())]
+    fit = robust_homography(src, dst)
+    if fit is None:
+        return np.asarray(h_view, np.float64), 0, math.nan, quads
+    h, keep = fit
+    if np.linalg.norm(_corners(h) - corners, axis=-1).max() > 0.35 * pitch:
+        return np.asarray(h_view, np.float64), 0, math.nan, quads
+    residual = float(np.sqrt(np.mean(np.sum((apply_homography(h, src[keep]) - dst[keep]) ** 2,
+                                            axis=-1))))
+    return h, int(keep.sum()), residual, quads
+
+
+def _ring_patches(quads: Quads, h_view: np.ndarray) -> int:
+    """Patch outlines of the chart's size centred on the cells just outside its 4 x 6 grid."""
+    if not len(quads.centres):
+        return 0
+    pitch = chart_pitch(_corners(h_view))
+    expected = (0.84 * pitch) ** 2
+    uv = apply_homography(np.linalg.inv(h_view), quads.centres)
+    near = np.rint(uv)
+    dist = np.linalg.norm(uv - near, axis=-1)
+    ok = (dist <= ASSIGN_TOLERANCE) & (quads.areas >= 0.3 * expected) & \
+        (quads.areas <= 2.0 * expected)
+    ring = _ring(_grid_cells().astype(np.int64))
+    return len({(int(a), int(b)) for a, b in near[ok]} & ring)
+
+
+def _orientation(h_image: np.ndarray) -> str:
+    c = _corners(h_image)
+    top = c[1] - c[0]
+    side = c[3] - c[0]
+    angle = math.degrees(math.atan2(top[1], top[0]))
+    mirrored = top[0] * side[1] - top[1] * side[0] < 0
+    return f"turned {angle:.0f} degrees" + (", mirrored" if mirrored else "")
+
+
+def other_charts(image: np.ndarray | Pyramid, grid_to_image: np.ndarray, encoding: str) -> int:
+    """Patch charts beside the chart found: a Passport's other page, say.
+
+    The chart's surroundings (its corner centres plus :data:`BESIDE_PITCHES` pitches each way)
+    are segmented for patches lighter and darker than their surroundings
+    (:func:`patch_quads`, :func:`patch_lattices`); a lattice of at least
+    :data:`OTHER_CHART_PATCHES` patches with a pitch within a factor 2 of the chart's and
+    under a fifth of its patches on the chart counts as another chart.
+    """
+    pyramid = image if isinstance(image, Pyramid) else Pyramid(image)
+    corners = _corners(grid_to_image)
+    region = _chart_region(corners, pyramid.width, pyramid.height, BESIDE_PITCHES)
+    view, _ = make_view(pyramid, region, BESIDE_SIDE, encoding)
+    h_view = np.linalg.inv(view.to_image) @ grid_to_image
+    pitch = chart_pitch(_corners(h_view))
+    quads = patch_quads(view.bgr8, blocks=(round(0.25 * pitch), round(0.5 * pitch)))
+    inv = np.linalg.inv(h_view)
+    count = 0
+    for lattice in patch_lattices(quads, min_patches=OTHER_CHART_PATCHES):
+        centres = apply_homography(lattice.homography, lattice.cells.astype(float))
+        ends = apply_homography(lattice.homography, np.array([[0.0, 0.0], [1.0, 0.0]]))
+        step = float(np.linalg.norm(ends[1] - ends[0]))
+        uv = apply_homography(inv, centres)
+        inside = ((uv[:, 0] > -0.5) & (uv[:, 0] < COLS - 0.5) & (uv[:, 1] > -0.5)
+                  & (uv[:, 1] < ROWS - 0.5))
+        if inside.mean() < 0.2 and 0.5 * pitch <= step <= 2.0 * pitch:
+            count += 1
+    return count
+
+
+def _larger_grid_error(lattices: list[Lattice]) -> InvalidValueError | None:
+    big = [lt for lt in lattices if len(lt.cells) > ROWS * COLS + 4]
+    if not big:
+        return None
+    lt = max(big, key=lambda x: len(x.cells))
+    span = lt.cells.max(axis=0) - lt.cells.min(axis=0) + 1
+    return InvalidValueError(
+        f"the chart in the image is a grid of {len(lt.cells)}+ patches ({span[1]} x {span[0]}), "
+        f"not the 24-patch ColorChecker (an SG or digital target?): fidelity measures the "
+        f"24-patch layout only (Classic, Mini, Passport); give --corners of a 24-patch chart")
+
+
+def _cascade(image: np.ndarray, encoding: str, refine: bool, detectors: tuple[str, ...]
+             ) -> FoundChart:
+    t0 = time.perf_counter()
+    height, width = image.shape[:2]
+    whole = (0, 0, width, height)
+    pyramid = Pyramid(image)
+    view, peak = make_view(pyramid, whole, SEARCH_SIDE, encoding)
+    search = _search(view, detectors)
+    searches = [search]
+    if (search.best is None or not _accepted(search.best)) \
+            and max(width, height) > 1.5 * SEARCH_SIDE:
+        for quarter in _quarters(width, height):
+            tile, _ = make_view(pyramid, quarter, SEARCH_SIDE, encoding, peak)
+            s = _search(tile, detectors)
+            searches.append(s)
+            if s.best is not None and _accepted(s.best):
+                search = s
+                break
+    candidates = sum(s.candidates for s in searches)
+    lattices_all = [(s, lt) for s in searches for lt in s.lattices]
+    best = search.best
+    if best is None or not _accepted(best):
+        tried = [s.best for s in searches if s.best is not None]
+        closest = max(tried, key=lambda p: p.checks.colour_order, default=None)
+        larger = _larger_grid_error([lt for _, lt in lattices_all])
+        if larger is not None:
+            raise larger
+        if closest is None or closest.checks.colour_order < NO_CHART_CONFIDENCE:
+            raise InvalidValueError("no colour chart found; give --corners X1,Y1,...,X4,Y4 "
+                                    "(centres of the dark skin, bluish green, black and white "
+                                    "patches)")
+        owner = next(s for s in searches if s.best is closest)
+        corners = _corners(owner.view.to_image @ closest.homography)
+        c = closest.checks
+        raise InvalidValueError(
+            f"a chart-like patch grid was found but does not match the 24-patch ColorChecker "
+            f"clearly (confidence {c.colour_order:.2f}, neutral order {c.neutral_order:.2f}, "
+            f"margin {c.margin:.2f}, uniformity {c.uniformity:.2f}; need {MIN_CONFIDENCE:g}, "
+            f"{MIN_NEUTRAL_ORDER:g}, {MIN_MARGIN:g}, <= {MAX_UNIFORMITY:g}); if it is the chart, check and give --corners "
+            + ",".join(f"{v:.1f}" for v in corners.ravel()))
+    if best.ring_patches >= LARGER_GRID_RING:
+        raise _larger_grid_error(search.lattices) or InvalidValueError(
+            "the 24 patches found continue into a larger grid of patches (an SG or digital "
+            "target?): fidelity measures the 24-patch layout only; give --corners")
+    h_image = search.view.to_image @ best.homography
+    checks = best.checks
+    swatches, residual = 0, math.nan
+    region = None
+    notes: list[str] = []
+    if refine:
+        corners0 = _corners(h_image)
+        region = _chart_region(corners0, width, height)
+        crop, _ = make_view(pyramid, region, REFINE_SIDE, encoding)
+        to_crop = np.linalg.inv(crop.to_image)
+        h_crop0 = to_crop @ h_image
+        h_crop, swatches, residual_view, quads = _refine(crop, h_crop0)
+        ring = _ring_patches(quads, h_crop)
+        if ring >= LARGER_GRID_RING:
+            raise InvalidValueError(
+                f"the 24 patches found continue into a larger grid of patches ({ring} patch "
+                f"outlines on the cells around them; an SG or digital target?): fidelity "
+                f"measures the 24-patch ColorChecker only (Classic, Mini, Passport); give "
+                f"--corners of a 24-patch chart")
+        # verified again at full size: the refined placement, or a row / column / orientation
+        # that fits better there; kept only if it passes the same checks
+        again = placement_scores(crop, h_crop, _grid_cells().astype(np.int64), best.source)
+        if again is not None and _accepted(again) \
+                and again.checks.colour_order >= checks.colour_order - 0.1:
+            h_image = crop.to_image @ again.homography
+            checks = again.checks
+            residual = residual_view / crop.scale if swatches else math.nan
+        else:
+            swatches = 0
+    corners = _corners(h_image)
+    others = other_charts(pyramid, h_image, encoding) if refine else 0
+    chart = "24-patch ColorChecker"
+    if others:
+        notes.append(f"{others} other patch chart(s) beside it, not the 24-patch layout "
+                     f"(a ColorChecker Passport's other page?), not measured")
+        chart += " (the 24-patch one of several charts: Passport?)"
+    return FoundChart(corners=corners, method=best.source, candidates=candidates,
+                      swatches=swatches, residual_px=residual, orientation=_orientation(h_image),
+                      region=region, confidence=float(max(checks.colour_order, 0.0)),
+                      checks=checks, chart=chart, other_charts=others,
+                      seconds=time.perf_counter() - t0, notes=tuple(notes))
+
+
+def check_corners(pixels: np.ndarray, corners: np.ndarray, *, encoding: str = "linear"
+                  ) -> ChartChecks | None:
+    """How well the 24 patches at given corner centres match the reference layout.
+
+    The :class:`ChartChecks` of the placement the corners give (sampled at up to
+    :data:`REFINE_SIDE` pixels), its ``margin`` taken over the best other placement (another
+    row, column or orientation: negative when one fits better, i.e. the corners are probably
+    off). ``None`` when the chart cannot be sampled.
+    """
+    arr = np.asarray(pixels)
+    pts = np.asarray(corners, dtype=np.float64)
+    try:
+        grid_to_image = homography_from_points(_corners(np.eye(3)), pts)
+        region = _chart_region(pts, arr.shape[1], arr.shape[0])
+        view, _ = make_view(arr, region, REFINE_SIDE, encoding)
+    except InvalidValueError:
+        return None
+    h_view = np.linalg.inv(view.to_image) @ grid_to_image
+    placement = placement_scores(view, h_view, _grid_cells().astype(np.int64), "given",
+                                 given=True)
+    return placement.checks if placement is not None else None
+
+
+def _finder(detectors: tuple[str, ...]) -> Callable[..., FoundChart]:
+    def find(image: np.ndarray, encoding: str = "linear", refine: bool = True) -> FoundChart:
+        return _cascade(image, encoding, refine, detectors)
+    return find
+
+
+#: Chart finders by name: the cascade (both detectors, the default) or one detector alone
+#: (with the same verification and refinement).
+CHART_FINDERS: dict[str, Callable[..., FoundChart]] = {
+    "cascade": _finder(("segmentation", "mcc")),
+    "mcc": _finder(("mcc",)),
+    "segmentation": _finder(("segmentation",)),
+}
+
+
+def find_chart(
+    pixels: np.ndarray,
+    *,
+    encoding: str = "linear",
+    method: str = "cascade",
+    rows: int = 4,
+    cols: int = 6,
+    refine: bool = True,
+) -> FoundChart:
+    """Find the 24-patch chart in an ``(H, W, 3)`` image and return its corner-patch centres.
+
+    Parameters
+    ----------
+    pixels
+        Linear or sRGB-encoded RGB (``encoding``), any scale; NaN/Inf/negative count as black.
+    method
+        A key of :data:`CHART_FINDERS`.
+    rows, cols
+        The chart's layout; only the 4 x 6 ColorChecker is known.
+    refine
+        Refine the fit at full size (default); ``False`` keeps the search's fit.
+
+    Raises
+    ------
+    InvalidValueError
+        No chart found, a chart that does not match the 24-patch layout clearly (the message
+        gives the corners of the best guess, to check and pass as ``--corners``), a chart of
+        another kind (SG, digital target), or a black image.
+    FidelityError
+        OpenCV without its contrib modules.
+    """
+    if method not in CHART_FINDERS:
+        raise unknown_name("chart detection method", method, CHART_FINDERS)
+    if encoding not in ("linear", "srgb"):
+        raise unknown_name("encoding", encoding, ("linear", "srgb"))
+    if (rows, cols) != (ROWS, COLS):
+        raise InvalidValueError(f"chart detection knows the 4 x 6 ColorChecker only, not "
+                                f"{rows} x {cols}")
+    arr = np.asarray(pixels)
+    if arr.ndim != 3 or arr.shape[2] != 3:
+        raise InvalidValueError(f"image must be (H, W, 3), got shape {arr.shape}")
+    return CHART_FINDERS[method](arr, encoding=encoding, refine=refine)
 
 
 __all__ = [
-    "ASPECT_RATIO_RANGE",
     "ASSIGN_TOLERANCE",
-    "CROP_PASS_MIN_SIDE",
     "CHART_FINDERS",
-    "MIN_REFINE_SWATCHES",
-    "ORIENTATION_MARGIN",
-    "OUTLIER_FACTOR",
-    "TILED_SEARCH_SIDE",
+    "DETECTORS",
+    "MIN_CONFIDENCE",
+    "MAX_UNIFORMITY",
+    "MIN_MARGIN",
+    "MIN_NEUTRAL_ORDER",
+    "ORIENTATIONS",
+    "Pyramid",
+    "REFINE_SIDE",
+    "SEARCH_SIDE",
+    "SURE_CONFIDENCE",
+    "ChartChecks",
     "FoundChart",
-    "find_chart",
+    "Lattice",
+    "Placement",
+    "Quads",
+    "View",
+    "chart_pitch",
+    "check_corners",
+    "colour_order",
     "detection_image",
+    "find_chart",
+    "make_view",
+    "mcc_charts",
+    "neutral_order",
+    "other_charts",
+    "patch_lattices",
+    "patch_quads",
+    "placement_scores",
+    "robust_homography",
+    "sample_cells",
 ]

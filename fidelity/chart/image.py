@@ -12,6 +12,14 @@ case-insensitively: ``R``/``red``, ``G``/``green``, ``B``/``blue`` (so ``R``, ``
 multi-part EXR files, the part names. Without ``layer`` the unprefixed ``R, G, B`` are used;
 if there are none and exactly one layer has all three, that layer is used.
 
+Camera raw frames: a one-channel image holding a Bayer colour filter array mosaic (16-bit or
+float PNG/TIFF, e.g. what ``dcraw -D -4 -T`` writes from a DNG or other raw file) is read with
+``bayer`` (the CFA pattern of its top-left 2 x 2 pixels, :data:`BAYER_PATTERNS`) and demosaiced
+by Malvar, He & Cutler's gradient-corrected linear interpolation (ICASSP 2004) as
+colour-demosaicing implements it (``demosaicing_CFA_Bayer_Malvar2004``). Its values are taken as
+linear (sensor data; black level already subtracted; camera RGB: give ``--colourspace`` for a
+colour-accurate audit). Without ``bayer`` a one-channel image is an error that names the option.
+
 Errors (all :class:`fidelity.errors.InputFileError`, naming the file): missing, not an image,
 truncated or corrupt, one colour channel only (greyscale), channels that are not R, G, B,
 an unknown layer or an ambiguous choice of layers.
@@ -31,6 +39,11 @@ import numpy as np
 
 from fidelity.errors import InputFileError
 from fidelity.fileio import atomic_output, require_file
+
+#: Bayer colour filter array patterns (colours of the top-left 2 x 2 pixels, row by row).
+BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
+#: The demosaicing method used for Bayer mosaics.
+DEMOSAICING = "Malvar 2004 (colour-demosaicing)"
 
 #: Pixel types that hold scene-linear data by convention.
 FLOAT_PIXEL_TYPES = frozenset({"half", "float", "double"})
@@ -65,6 +78,7 @@ class Image:
     colorspace: str | None = None
     all_channels: tuple[str, ...] = field(default_factory=tuple)
     chromaticities: tuple[float, ...] | None = None
+    bayer: str | None = None
 
     @property
     def height(self) -> int:
@@ -84,6 +98,7 @@ class Image:
             width=self.width, height=self.height, channels=self.channels, layer=self.layer,
             encoding_guess=self.encoding, colorspace=self.colorspace,
             chromaticities=self.chromaticities, sha256=sha256, encoding=encoding,
+            bayer=self.bayer,
         )
 
 
@@ -106,6 +121,7 @@ class ImageInfo:
     chromaticities: tuple[float, ...] | None = None
     sha256: str | None = None
     encoding: str | None = None
+    bayer: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         """JSON form (keys in this order; ``sha256`` and ``encoding`` only when known)."""
@@ -120,6 +136,9 @@ class ImageInfo:
             out["sha256"] = self.sha256
         if self.encoding is not None:
             out["encoding"] = self.encoding
+        if self.bayer is not None:
+            out["bayer"] = self.bayer
+            out["demosaicing"] = DEMOSAICING
         return out
 
     @classmethod
@@ -133,7 +152,7 @@ class ImageInfo:
             layer=data.get("layer"), encoding_guess=str(data["encoding_guess"]),
             colorspace=data.get("colorspace"),
             chromaticities=tuple(float(v) for v in chroma) if chroma else None,
-            sha256=data.get("sha256"), encoding=data.get("encoding"),
+            sha256=data.get("sha256"), encoding=data.get("encoding"), bayer=data.get("bayer"),
         )
 
 
@@ -259,7 +278,8 @@ def _choose(parts: list[_Part], layer: str | None, path: Path) -> tuple[_Part, s
                                     not in _ALPHA_NAMES]) == 1 for p in parts):
         raise InputFileError(
             f"{path}: one-channel image ({_describe_channels(parts)}); a colour chart needs "
-            f"R, G, B"
+            f"R, G, B: for a camera raw Bayer mosaic give --bayer "
+            f"{'|'.join(BAYER_PATTERNS)} (its CFA pattern)"
         )
     raise InputFileError(
         f"{path}: unknown channels ({_describe_channels(parts)}); expected R, G, B "
@@ -267,7 +287,30 @@ def _choose(parts: list[_Part], layer: str | None, path: Path) -> tuple[_Part, s
     )
 
 
-def read_image(path: str | os.PathLike[str], layer: str | None = None) -> Image:
+def _mosaic_channel(parts: list[_Part], path: Path, bayer: str) -> tuple[_Part, int]:
+    """The part and index of the one channel of a Bayer mosaic (alpha ignored)."""
+    colour = [(part, k) for part in parts for k, ch in enumerate(part.channels)
+              if _split_channel(ch)[1].lower() not in _ALPHA_NAMES]
+    if len(colour) != 1:
+        raise InputFileError(
+            f"{path}: --bayer {bayer} needs a one-channel mosaic, but the image has "
+            f"{len(colour)} colour channels ({_describe_channels(parts)}); leave out --bayer")
+    return colour[0]
+
+
+def demosaic(mosaic: np.ndarray, pattern: str) -> np.ndarray:
+    """``(H, W)`` Bayer mosaic -> ``(H, W, 3)`` float32 R, G, B (:data:`DEMOSAICING`).
+
+    ``pattern`` names the colours of the top-left 2 x 2 pixels (:data:`BAYER_PATTERNS`).
+    """
+    from colour_demosaicing import demosaicing_CFA_Bayer_Malvar2004
+
+    rgb = demosaicing_CFA_Bayer_Malvar2004(np.asarray(mosaic, dtype=np.float64), pattern)
+    return np.asarray(rgb, dtype=np.float32)
+
+
+def read_image(path: str | os.PathLike[str], layer: str | None = None,
+               bayer: str | None = None) -> Image:
     """Read an image as ``(H, W, 3)`` float32 R, G, B.
 
     Parameters
@@ -276,6 +319,9 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None) -> Image:
         EXR, HDR, TIFF, PNG, JPEG or any other format OpenImageIO reads.
     layer
         EXR layer (channel prefix such as ``diffuse`` for ``diffuse.R``) or part name.
+    bayer
+        CFA pattern of a one-channel Bayer mosaic (:data:`BAYER_PATTERNS`): the mosaic is
+        demosaiced (:func:`demosaic`) and taken as linear.
 
     Raises
     ------
@@ -285,6 +331,11 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None) -> Image:
     """
     import OpenImageIO as oiio
 
+    from fidelity.errors import unknown_name
+
+    if bayer is not None and bayer.upper() not in BAYER_PATTERNS:
+        raise unknown_name("--bayer pattern", bayer, BAYER_PATTERNS)
+    bayer = bayer.upper() if bayer is not None else None
     p = require_file(path, "image")
     with _quiet_stderr():
         inp = oiio.ImageInput.open(str(p))
@@ -300,7 +351,11 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None) -> Image:
                 parts.append(_Part(k, str(name) if name else None, tuple(spec.channelnames)))
                 k += 1
             inp.geterror()  # seeking past the last part sets an error: clear it
-            part, prefix, rgb = _choose(parts, layer, p)
+            if bayer is not None:
+                part, mosaic_index = _mosaic_channel(parts, p, bayer)
+                prefix, rgb = None, {"R": mosaic_index, "G": mosaic_index, "B": mosaic_index}
+            else:
+                part, prefix, rgb = _choose(parts, layer, p)
             if not inp.seek_subimage(part.index, 0):
                 raise InputFileError(f"{p}: cannot read part {part.index} ({_one_line(inp.geterror())})")
             spec = inp.spec()
@@ -321,9 +376,14 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None) -> Image:
         arr = arr[:, :, None]
     if arr.ndim == 4:  # deep / volume: take the first slice
         arr = arr[0]
-    pixels = np.ascontiguousarray(arr[:, :, [rgb["R"], rgb["G"], rgb["B"]]])
-    channels = tuple(part.channels[rgb[c]] for c in ("R", "G", "B"))
-    encoding = "linear" if pixel_type in FLOAT_PIXEL_TYPES else "srgb"
+    if bayer is not None:
+        pixels = demosaic(arr[:, :, rgb["R"]], bayer)
+        channels = tuple(f"{part.channels[rgb['R']]} ({c} of {bayer})" for c in "RGB")
+        encoding = "linear"
+    else:
+        pixels = np.ascontiguousarray(arr[:, :, [rgb["R"], rgb["G"], rgb["B"]]])
+        channels = tuple(part.channels[rgb[c]] for c in ("R", "G", "B"))
+        encoding = "linear" if pixel_type in FLOAT_PIXEL_TYPES else "srgb"
     return Image(
         pixels=pixels,
         path=p,
@@ -336,6 +396,7 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None) -> Image:
         all_channels=tuple(ch for prt in parts for ch in prt.channels),
         chromaticities=(tuple(float(v) for v in chroma)
                         if isinstance(chroma, (tuple, list)) and len(chroma) == 8 else None),
+        bayer=bayer,
     )
 
 
@@ -380,4 +441,5 @@ def write_png(path: str | os.PathLike[str], image: np.ndarray, bits: int) -> Pat
     return Path(path)
 
 
-__all__ = ["FLOAT_PIXEL_TYPES", "Image", "ImageInfo", "read_image", "write_exr", "write_png"]
+__all__ = ["BAYER_PATTERNS", "DEMOSAICING", "FLOAT_PIXEL_TYPES", "Image", "ImageInfo", "demosaic",
+           "read_image", "write_exr", "write_png"]

@@ -50,7 +50,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fidelity.chart.find import FoundChart, find_chart
+from fidelity.chart.find import ChartChecks, FoundChart, check_corners, find_chart
 from fidelity.chart.image import ImageInfo
 from fidelity.chart.locate import DEFAULT_WINDOW, ChartLocation, locate_chart, window_pixels
 from fidelity.colour import colorimetry as cm
@@ -372,6 +372,7 @@ class ImageMeasurement:
     image: ImageInfo | None = None
     detection: FoundChart | None = None
     colourspace: str = "sRGB"
+    corner_checks: ChartChecks | None = None
 
     @property
     def mean_delta_e(self) -> float:
@@ -387,7 +388,7 @@ class ImageMeasurement:
         """JSON form: the measurement (:meth:`ChartMeasurement.to_json`, each patch with its
         ``valid_pixels`` and ``bad_pixels``), ``exposure_ev``, ``exposure_mode``, ``encoding``,
         ``bad_pixels``, ``clipped_patches``, ``reference``, ``location``, ``detection``,
-        ``colourspace`` and ``image``."""
+        ``corner_checks``, ``colourspace`` and ``image``."""
         d = self.measurement.to_json()
         for patch, n in zip(d["patches"], self.valid_pixels, strict=True):
             patch["valid_pixels"] = int(n)
@@ -401,6 +402,7 @@ class ImageMeasurement:
             reference=self.reference.name,
             location=self.location.to_json(),
             detection=self.detection.to_json() if self.detection else None,
+            corner_checks=self.corner_checks.to_json() if self.corner_checks else None,
             colourspace=self.colourspace,
             image=self.image.to_json() if self.image else None,
         )
@@ -433,7 +435,7 @@ def measure_pixels(
     window: float = DEFAULT_WINDOW,
     min_valid_fraction: float = MIN_VALID_FRACTION,
     image: ImageInfo | None = None,
-    detection: str = "segmentation",
+    detection: str = "cascade",
     negatives: str = "keep",
     colourspace: str | Sequence[float] = "sRGB",
 ) -> ImageMeasurement:
@@ -446,7 +448,10 @@ def measure_pixels(
     corners
         Centres of the dark skin, bluish green, black and white patches, ``(4, 2)`` image
         ``(x, y)`` or ``"X1,Y1,...,X4,Y4"``; ``None``: find the chart
-        (:func:`fidelity.chart.find.find_chart` with ``detection``).
+        (:func:`fidelity.chart.find.find_chart` with ``detection``; a chart found with low
+        confidence, or of another kind, is an error). Given corners are measured as given;
+        how well their patches match the reference layout is reported
+        (``corner_checks``, :func:`fidelity.chart.find.check_corners`).
     exposure
         ``"auto"`` (fit on the neutral patches), a fixed EV (scale ``2**EV``), or ``None``:
         auto for linear input, 0 for sRGB-encoded input.
@@ -481,12 +486,16 @@ def measure_pixels(
             raise InvalidValueError(f"--exposure {exposure!r} must be finite")
         mode = "fixed"
     found = None
+    checks = None
     if corners is None:
         found = find_chart(arr, encoding=encoding, method=detection, rows=ref.rows,
                              cols=ref.cols)
         corners = found.corners
+        checks = found.checks
     loc = locate_chart(corners, arr.shape, rows=ref.rows, cols=ref.cols, window=window,
                        patch_names=ref.patch_names)
+    if found is None and (ref.rows, ref.cols) == (4, 6):
+        checks = check_corners(arr, loc.corners, encoding=encoding)
     samples = window_pixels(arr, loc)
     n = len(samples)
     means = np.empty((n, 3))
@@ -541,7 +550,7 @@ def measure_pixels(
         measurement=measurement, exposure_ev=ev, exposure_mode=mode, encoding=encoding,
         bad_pixels=bad_pixels, valid_pixels=tuple(valid_counts), clipped_patches=clipped,
         location=loc, reference=ref, image=image, detection=found,
-        colourspace=_colourspace_name(colourspace),
+        colourspace=_colourspace_name(colourspace), corner_checks=checks,
     )
 
 
@@ -561,22 +570,23 @@ def measure_image(
     reference: str | Reference = DEFAULT_REFERENCE,
     illuminant: str = "D65",
     window: float = DEFAULT_WINDOW,
-    detection: str = "segmentation",
+    detection: str = "cascade",
     negatives: str = "keep",
     colourspace: str | Sequence[float] | None = None,
+    bayer: str | None = None,
 ) -> ImageMeasurement:
     """Read an image (:func:`fidelity.chart.image.read_image`) and audit its chart.
 
     ``encoding=None`` takes the file's likely encoding: linear for floating-point pixels (EXR,
     HDR, float TIFF), sRGB for integer pixels (PNG, JPEG, 8/16-bit TIFF). ``colourspace=None``
-    takes the file's OpenEXR ``chromaticities`` attribute when it has one, else sRGB. Errors name
-    the file.
+    takes the file's OpenEXR ``chromaticities`` attribute when it has one, else sRGB. ``bayer``:
+    the CFA pattern of a one-channel raw mosaic (demosaiced, linear). Errors name the file.
     """
     from fidelity.chart.image import read_image
     from fidelity.errors import FidelityError
     from fidelity.fileio import file_sha256
 
-    img = read_image(path, layer=layer)
+    img = read_image(path, layer=layer, bayer=bayer)
     enc = encoding or img.encoding
     info = img.info(sha256=file_sha256(img.path), encoding=enc)
     try:

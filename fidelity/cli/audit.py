@@ -6,7 +6,13 @@ from pathlib import Path
 
 import click
 
-from fidelity.cli.gate import PATH, colourspace_option, negatives_option, report_paths
+from fidelity.cli.gate import (
+    PATH,
+    bayer_option,
+    colourspace_option,
+    negatives_option,
+    report_paths,
+)
 from fidelity.cli.options import STDOUT, common_options
 from fidelity.prediction.table import SIZES
 
@@ -24,6 +30,7 @@ from fidelity.prediction.table import SIZES
               help="auto (neutral patches; default for linear input) or a fixed EV "
                    "(pixels x 2**EV; default 0 for sRGB input).")
 @click.option("--layer", default=None, help="EXR layer (e.g. 'diffuse' for diffuse.R) or part.")
+@bayer_option
 @colourspace_option
 @negatives_option
 @click.option("--reference", default="scene", show_default=True,
@@ -41,7 +48,8 @@ from fidelity.prediction.table import SIZES
               help="Write the HTML report here (a folder: IMAGE-NAME.html in it).")
 @common_options
 def audit(image: Path, corners: str | None, encoding: str | None, exposure: str | None,
-          layer: str | None, colourspace: str | None, negatives: str, reference: str,
+          layer: str | None, bayer: str | None, colourspace: str | None, negatives: str,
+          reference: str,
           illuminant: str, size: str, table: str | None, json_path: Path | None, html_path: Path | None) -> None:
     """Measure the chart in IMAGE: ΔE00 per patch, mean and max, exposure, bad pixels.
 
@@ -63,7 +71,7 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
                    "--illuminant": illuminant})
     report = audit_image(image, corners, encoding=encoding, exposure=exposure, layer=layer,
                          reference=reference, illuminant=illuminant, size=size, table=table,
-                         negatives=negatives, colourspace=colourspace)
+                         negatives=negatives, colourspace=colourspace, bayer=bayer)
     written = write_chart_report(report, json_path=json_path, html_path=html_path,
                                  protect=(image,))
     if to_stdout:

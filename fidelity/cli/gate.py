@@ -30,6 +30,11 @@ colourspace_option = click.option(
     "--colourspace", default=None,
     help="RGB primaries of the pixels: a colour-science name (ACEScg, 'ITU-R BT.2020', "
          "'Display P3', ...). Default: the EXR's chromaticities attribute, else sRGB.")
+bayer_option = click.option(
+    "--bayer", type=click.Choice(["RGGB", "BGGR", "GRBG", "GBRG"], case_sensitive=False),
+    default=None,
+    help="The image is a one-channel camera raw Bayer mosaic (PNG/TIFF) with this CFA pattern "
+         "(top-left 2x2): demosaic it (Malvar 2004, colour-demosaicing), values taken as linear.")
 negatives_option = click.option(
     "--negatives", type=click.Choice(["keep", "exclude"]), default="keep", show_default=True,
     help="Pixels with a negative channel: keep them in the linear mean (out-of-gamut colours in "
@@ -98,6 +103,7 @@ def report_paths(images: tuple[Path, ...], path: Path | None, suffix: str, *,
               help="Image pixel encoding (default: linear for float formats, else sRGB).")
 @click.option("--exposure", default=None, help="Image exposure: auto or a fixed EV.")
 @click.option("--layer", default=None, help="EXR layer or part name.")
+@bayer_option
 @colourspace_option
 @negatives_option
 @click.option("--reference", default="scene", show_default=True,
@@ -116,9 +122,9 @@ def report_paths(images: tuple[Path, ...], path: Path | None, suffix: str, *,
 def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
          max_delta_e: float | None, max_dmap: float | None, cls: str | None, unit: str,
          size: str, table: str | None, encoding: str | None, exposure: str | None,
-         layer: str | None, colourspace: str | None, negatives: str, reference: str,
-         illuminant: str, renderer: str, junit: Path | None, json_path: Path | None,
-         html_path: Path | None) -> None:
+         layer: str | None, bayer: str | None, colourspace: str | None, negatives: str,
+         reference: str, illuminant: str, renderer: str, junit: Path | None,
+         json_path: Path | None, html_path: Path | None) -> None:
     """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 error.
 
     \b
@@ -143,9 +149,9 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
     if not images and camera is None:
         raise click.UsageError("give one or more IMAGEs, or --camera")
     if camera is not None and any(v is not None for v in (corners, encoding, exposure, layer,
-                                                          colourspace)):
-        raise click.UsageError("--corners, --encoding, --exposure, --layer and --colourspace "
-                               "apply to an IMAGE, not to --camera")
+                                                          bayer, colourspace)):
+        raise click.UsageError("--corners, --encoding, --exposure, --layer, --bayer and "
+                               "--colourspace apply to an IMAGE, not to --camera")
     from fidelity.check import GateOutputs
     from fidelity.check import gate as gate_subjects
     from fidelity.report.junit import GateCase, gate_exit_code
@@ -187,7 +193,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         criterion, images, camera=camera,
         outputs=[GateOutputs(jp, hp) for jp, hp in zip(json_paths, html_paths, strict=True)],
         corners=corners, layer=layer, encoding=encoding, exposure=exposure,
-        negatives=negatives, colourspace=colourspace, reference=reference,
+        negatives=negatives, colourspace=colourspace, bayer=bayer, reference=reference,
         illuminant=illuminant, renderer=renderer, size=size, table=table)
     for case in cases:
         if many:

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fidelity.chart.find import FoundChart
+from fidelity.chart.find import ChartChecks, FoundChart
 from fidelity.chart.image import ImageInfo
 from fidelity.chart.locate import ChartLocation
 from fidelity.chart.measure import BadPixels, ChartMeasurement
@@ -95,11 +95,14 @@ class ImageSource:
     encoding: str
     clipped_patches: tuple[str, ...] = ()
     found: FoundChart | None = None
+    corner_checks: ChartChecks | None = None
 
     def to_json(self) -> JSONObject:
         """The report's ``source`` object."""
         return {"type": "image", **self.image.to_json(), "corners": self.corners.tolist(),
                 "corners_found": self.found.to_json() if self.found else None,
+                "corner_checks": (self.corner_checks.to_json() if self.corner_checks
+                                  else None),
                 "colourspace": self.colourspace, "exposure_mode": self.exposure_mode,
                 "reference": self.reference}
 
@@ -122,11 +125,13 @@ class ImageSource:
                                 cols=rows_cols[1], window=float(loc["window_pitch_fraction"]),
                                 min_pixels=1)
         found = source.get("corners_found")
+        checks = source.get("corner_checks")
         return cls(info, corners, location, str(source.get("colourspace", "sRGB")),
                    str(source.get("exposure_mode", "")), str(source.get("reference", "")),
                    str(details.get("encoding", info.encoding or "")),
                    tuple(details.get("clipped_patches", ())),
-                   FoundChart.from_json(found) if found else None)
+                   FoundChart.from_json(found) if found else None,
+                   ChartChecks.from_json(checks) if checks else None)
 
     @property
     def title(self) -> str:
@@ -580,7 +585,8 @@ def write_chart_report(report: ChartReport, *, json_path: str | os.PathLike[str]
         if isinstance(report.source, ImageSource):
             from fidelity.chart.image import read_image
 
-            pixels = read_image(report.source.image.path, layer=report.source.image.layer).pixels
+            pixels = read_image(report.source.image.path, layer=report.source.image.layer,
+                                bayer=report.source.image.bayer).pixels
         written += write_document(chart_document(report, pixels), html=html_path)
     return written
 

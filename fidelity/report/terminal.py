@@ -13,9 +13,16 @@ def summary_lines(report: ChartReport) -> list[str]:
     if isinstance(src, ImageSource):
         found = src.found
         if found is not None:
-            lines.append(f"chart found ({found.method}, {found.swatches} of 24 patch outlines "
-                         f"fitted, orientation {found.orientation}): --corners "
+            conf = "" if found.confidence != found.confidence else \
+                f", confidence {found.confidence:.2f}"
+            lines.append(f"chart found ({found.method}{conf}, {found.swatches} of 24 patch "
+                         f"outlines fitted, orientation {found.orientation}): --corners "
                          f"{found.corners_text()}")
+            lines.extend(f"chart: {found.chart}; {note}" for note in found.notes)
+        elif src.corner_checks is not None and src.corner_checks.margin < 0:
+            lines.append(f"warning: the patches at --corners match the chart layout less well "
+                         f"than another row, column or orientation would (colour order "
+                         f"{src.corner_checks.colour_order:.2f}); check --corners")
         if src.colourspace and src.colourspace != "sRGB":
             lines.append(f"RGB primaries: {src.colourspace}, converted to linear sRGB")
     lines.append(f"chart ΔE00: mean {report.mean_delta_e:.2f}, max "
