@@ -1,5 +1,6 @@
 # camera-fidelity with every extra and the system libraries it needs:
-#   libllvm19 for Mitsuba 3's llvm_* variants (Dr.Jit's JIT), libgl1 + libglib2.0 for OpenCV.
+#   libllvm19 for Mitsuba 3's llvm_* variants (Dr.Jit's JIT). OpenCV is the headless contrib
+#   build (cv2.mcc): it needs no libGL.
 #
 #   docker build -t camera-fidelity .
 #   docker run --rm -v "$PWD:/work" -w /work camera-fidelity gate render.exr --max-delta-e 3
@@ -7,7 +8,7 @@ FROM python:3.11-slim-bookworm
 
 RUN apt-get update \
  && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends \
-      libllvm19 libgl1 libglib2.0-0 \
+      libllvm19 \
  && rm -rf /var/lib/apt/lists/*
 
 ENV PIP_NO_CACHE_DIR=1 \

@@ -303,7 +303,11 @@ def demosaic(mosaic: np.ndarray, pattern: str) -> np.ndarray:
 
     ``pattern`` names the colours of the top-left 2 x 2 pixels (:data:`BAYER_PATTERNS`).
     """
-    from colour_demosaicing import demosaicing_CFA_Bayer_Malvar2004
+    import warnings
+
+    with warnings.catch_warnings():  # it imports scipy.ndimage.filters, deprecated in SciPy
+        warnings.simplefilter("ignore", DeprecationWarning)
+        from colour_demosaicing import demosaicing_CFA_Bayer_Malvar2004
 
     rgb = demosaicing_CFA_Bayer_Malvar2004(np.asarray(mosaic, dtype=np.float64), pattern)
     return np.asarray(rgb, dtype=np.float32)
