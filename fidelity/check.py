@@ -142,6 +142,7 @@ def audit_image(
     colourspace: str | None = None,
     command: str = "audit",
     bayer: str | None = None,
+    max_pixels: int | None = None,
 ) -> ChartReport:
     """Measure the chart in ``image``, predict the detection loss, apply ``criterion``.
 
@@ -165,6 +166,9 @@ def audit_image(
         :func:`check_camera` uses), ``safecolor`` (the paper's Lab values) or a chart JSON.
     size, table, criterion
         As for :func:`check_camera`; ``criterion`` None: no verdict.
+    max_pixels
+        Refuse a larger image (width x height) before decoding it (default:
+        :func:`fidelity.chart.image.pixel_limit`).
 
     Returns
     -------
@@ -177,7 +181,7 @@ def audit_image(
     result = measure_image(image, corners if corners is None or len(corners) else None,
                            layer=layer, encoding=encoding, exposure=exposure,
                            reference=reference, illuminant=illuminant, negatives=negatives,
-                           colourspace=colourspace, bayer=bayer)
+                           colourspace=colourspace, bayer=bayer, max_pixels=max_pixels)
     prediction, verdict = _predict_and_judge(result.mean_delta_e, size, table, criterion)
     info = result.image
     assert info is not None  # measure_image always describes the file
@@ -225,6 +229,7 @@ def gate(
     renderer: str = "closed-form",
     size: str = "any",
     table: str | None = None,
+    max_pixels: int | None = None,
 ) -> list[GateCase]:
     """Gate ``images`` one by one (or ``camera``) against ``criterion``; write each one's
     reports to its :class:`GateOutputs`. An input error of one subject (exit code 2) becomes
@@ -249,7 +254,8 @@ def gate(
                                      exposure=exposure, reference=reference or "scene",
                                      illuminant=illuminant, size=size, table=table,
                                      criterion=criterion, negatives=negatives,
-                                     colourspace=colourspace, command="gate", bayer=bayer)
+                                     colourspace=colourspace, command="gate", bayer=bayer,
+                                     max_pixels=max_pixels)
             else:
                 report = check_camera(subject, illuminant=illuminant, renderer=renderer,
                                       reference=reference or "scene", size=size, table=table,

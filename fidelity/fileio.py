@@ -8,6 +8,7 @@ never written to: :func:`atomic_output` refuses a destination that is one of the
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import json
 import math
@@ -19,6 +20,40 @@ from typing import Any, Protocol, runtime_checkable
 
 from fidelity.errors import InputFileError
 
+#: errno values that mean "the output cannot be written here" (a full disk, a quota, a
+#: read-only file system or folder, a file too large for the system's limit), not a bug.
+WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM,
+                          errno.EFBIG, errno.ENOTDIR, errno.EISDIR, errno.ENAMETOOLONG})
+
+
+def printable(text: str) -> str:
+    """``text`` that can always be written as UTF-8 (a terminal, a log, an XML file): the
+    undecodable bytes of a file name, which Python keeps as surrogate escapes, are shown as
+    ``\\xNN``, other lone surrogates as ``\\uNNNN``."""
+    try:
+        text.encode("utf-8")
+        return text
+    except UnicodeEncodeError:
+        return "".join(f"\\x{ord(c) - 0xDC00:02x}" if 0xDC80 <= ord(c) <= 0xDCFF else
+                       f"\\u{ord(c):04x}" if 0xD800 <= ord(c) <= 0xDFFF else c for c in text)
+
+
+def display_path(path: str | os.PathLike[str]) -> str:
+    """``path`` as printable text (:func:`printable`)."""
+    return printable(os.fsdecode(path))
+
+
+def write_error(path: str | os.PathLike[str], exc: OSError) -> InputFileError:
+    """The one-line error for an output that could not be written (``exc`` one of
+    :data:`WRITE_ERRNOS`): ``<path>: cannot write: <reason>``."""
+    reason = exc.strerror or str(exc)
+    hint = {errno.ENOSPC: "; free some space or write elsewhere",
+            errno.EDQUOT: "; free some space or write elsewhere",
+            errno.EROFS: "; write elsewhere",
+            errno.EACCES: "; write elsewhere", errno.EPERM: "; write elsewhere"}
+    return InputFileError(f"{display_path(path)}: cannot write the output: {reason}"
+                          f"{hint.get(exc.errno or 0, '')}")
+
 
 @contextlib.contextmanager
 def atomic_output(
@@ -27,33 +62,43 @@ def atomic_output(
     """Yield a temporary path beside ``path``; rename it to ``path`` when the block succeeds.
 
     ``protect`` lists input paths that must never be overwritten; naming one of them as output
-    raises :class:`InputFileError`.
+    raises :class:`InputFileError`. When the output cannot be written (a full disk, a
+    read-only folder: an :class:`OSError` with an errno of :data:`WRITE_ERRNOS`, raised while
+    the block writes the temporary file or while it is renamed), the temporary file is removed,
+    an earlier file at ``path`` is left as it was, and :class:`InputFileError` names ``path``.
     """
     target = Path(path)
     for p in protect:
         if Path(p).exists() and target.exists() and target.resolve() == Path(p).resolve():
-            raise InputFileError(f"{target}: refusing to write over an input file")
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp" + target.suffix,
-                               dir=target.parent)
-    os.close(fd)
-    tmp_path = Path(tmp)
-    # mkstemp creates the file private (0600); an output gets the usual 0666 & ~umask.
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp_path, 0o666 & ~umask)
+            raise InputFileError(f"{display_path(target)}: refusing to write over an input file")
+    tmp_path: Path | None = None
     try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp" + target.suffix,
+                                   dir=target.parent)
+        os.close(fd)
+        tmp_path = Path(tmp)
+        # mkstemp creates the file private (0600); an output gets the usual 0666 & ~umask.
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp_path, 0o666 & ~umask)
         yield tmp_path
         os.replace(tmp_path, target)
+    except OSError as exc:
+        if exc.errno in WRITE_ERRNOS:
+            raise write_error(target, exc) from None
+        raise
     finally:
-        if tmp_path.exists():
-            tmp_path.unlink()
+        if tmp_path is not None:
+            with contextlib.suppress(OSError):
+                tmp_path.unlink()
 
 
 def write_text_atomic(path: str | os.PathLike[str], text: str) -> Path:
-    """Write ``text`` (UTF-8) to ``path`` atomically and return the path."""
+    """Write ``text`` (UTF-8) to ``path`` atomically and return the path; undecodable bytes of
+    file names quoted in it are written as ``\\xNN`` (:func:`printable`)."""
     with atomic_output(path) as tmp:
-        tmp.write_text(text, encoding="utf-8")
+        tmp.write_text(printable(text), encoding="utf-8")
     return Path(path)
 
 
@@ -105,36 +150,100 @@ def write_json_atomic(path: str | os.PathLike[str], obj: Any) -> Path:
 PathLike = str | os.PathLike[str]
 
 
-def check_outputs(outputs: Mapping[str, PathLike | None],
-                  inputs: Mapping[str, PathLike | None] | None = None) -> None:
-    """Refuse, before any work is done, an output that is an input or is named twice.
+def _existing(path: Path) -> str | None:
+    """``"file"``, ``"folder"`` or None (absent, or a name that is no path at all)."""
+    try:
+        return "folder" if path.is_dir() else "file" if path.exists() else None
+    except (OSError, ValueError):  # a name too long, with a NUL byte, ...
+        return None
 
-    ``outputs`` and ``inputs`` map a label (the option, e.g. ``"--junit"``) to a path or
-    ``None`` (not given). An input that does not exist as a file is skipped (built-in names such
-    as a camera or table name); an output is the same file as an input when both name one
-    existing file (:func:`os.path.samefile`, so links and relative paths are seen through).
-    Raises :class:`InputFileError` naming the output, its option and the input; also for an
-    output that is an existing folder.
+
+def _inside(path: Path, folder: Path) -> bool:
+    return path == folder or folder in path.parents
+
+
+def check_outputs(outputs: Mapping[str, PathLike | None],
+                  inputs: Mapping[str, PathLike | None] | None = None, *,
+                  stores: Mapping[str, PathLike | None] | None = None) -> None:
+    """Refuse, before any work is done, an output that would write over something the command
+    reads, or that is named twice.
+
+    ``outputs`` maps a label (the option, e.g. ``"--junit"``) to the path of a file the command
+    will write, or ``None`` (not given). ``inputs`` maps labels to what the command reads: a
+    file, a folder, or a name that is not a path (a built-in camera or table name: skipped).
+    ``stores`` maps labels to results-store folders the command reads (a sweep's or a
+    validation's SQLite store). Every path is compared resolved (links and relative paths are
+    seen through). Refused, with :class:`InputFileError` naming the output, its option and the
+    input:
+
+    - an output that is an input file (:func:`os.path.samefile`);
+    - an output that names an existing file inside an input folder (an image of ``--images``);
+    - an output directly inside a store folder, existing or not (the store's database, its
+      SQLite companion files, or anything else there; a subfolder such as ``STORE/report`` is
+      allowed);
+    - an output that is an existing folder, or the same file as another output.
     """
     given = {k: Path(v) for k, v in outputs.items() if v is not None}
-    files = {k: Path(v) for k, v in (inputs or {}).items()
-             if v is not None and Path(v).is_file()}
+    files: dict[str, Path] = {}
+    folders: dict[str, Path] = {}
+    for label, v in (inputs or {}).items():
+        if v is None:
+            continue
+        kind = _existing(Path(v))
+        if kind == "file":
+            files[label] = Path(v)
+        elif kind == "folder":
+            folders[label] = Path(v).resolve()
+    store_dirs = {k: Path(v).resolve() for k, v in (stores or {}).items() if v is not None}
     for out_label, out in given.items():
-        if out.is_dir():
-            raise InputFileError(f"{out}: {out_label} names a folder; give a file name")
-        if not out.exists():
+        where = display_path(out)
+        kind = _existing(out)
+        if kind == "folder":
+            raise InputFileError(f"{where}: {out_label} names a folder; give a file name")
+        resolved = out.resolve()
+        for st_label, st in store_dirs.items():
+            if resolved.parent == st:
+                raise InputFileError(
+                    f"{where}: {out_label} writes into the results store {st_label} "
+                    f"({display_path(st)}); refusing to write beside the store's data: give "
+                    "another folder (a subfolder such as report/ is fine)")
+        if kind is None:
             continue
         for in_label, src in files.items():
             if os.path.samefile(out, src):
-                raise InputFileError(f"{out}: {out_label} names the input {in_label} "
-                                     f"({src}); refusing to write over an input file")
+                raise InputFileError(f"{where}: {out_label} names the input {in_label} "
+                                     f"({display_path(src)}); refusing to write over an input "
+                                     "file")
+        for in_label, folder in folders.items():
+            if _inside(resolved, folder):
+                raise InputFileError(f"{where}: {out_label} names a file inside the input "
+                                     f"folder {in_label} ({display_path(folder)}); refusing "
+                                     "to write over an input file")
     seen: dict[Path, str] = {}
     for out_label, out in given.items():
         key = out.resolve()
         if key in seen:
-            raise InputFileError(f"{out}: named by both {seen[key]} and {out_label}; give each "
-                                 "output its own file")
+            raise InputFileError(f"{display_path(out)}: named by both {seen[key]} and "
+                                 f"{out_label}; give each output its own file")
         seen[key] = out_label
+
+
+def check_output_folders(folders: Mapping[str, PathLike | None],
+                         inputs: Mapping[str, PathLike | None]) -> None:
+    """Refuse an output folder whose files the command writes one by one (a dataset's subset
+    folders) when it is an input folder or holds one: ``folders`` and ``inputs`` map labels to
+    paths (``None``: not given). Raises :class:`InputFileError` naming both."""
+    for out_label, out in folders.items():
+        if out is None:
+            continue
+        resolved = Path(out).resolve()
+        for in_label, src in inputs.items():
+            if src is None or _existing(Path(src)) != "folder":
+                continue
+            if _inside(Path(src).resolve(), resolved):
+                raise InputFileError(
+                    f"{display_path(out)}: {out_label} would write into the input folder "
+                    f"{in_label} ({display_path(src)}); give an output folder outside it")
 
 
 def require_file(path: str | os.PathLike[str], what: str = "input file") -> Path:

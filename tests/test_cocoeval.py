@@ -127,7 +127,9 @@ def test_load_annotated_images_names_what_is_missing(tmp_path) -> None:
 
     doc = {"images": [{"id": 2, "file_name": "b.jpg", "width": 4, "height": 4},
                       {"id": 1, "file_name": "a.jpg", "width": 4, "height": 4}],
-           "annotations": [], "categories": [{"id": 1, "name": "person"}]}
+           "annotations": [{"id": 1, "image_id": 1, "category_id": 1, "bbox": [0, 0, 2, 2],
+                            "area": 4, "iscrowd": 0}],
+           "categories": [{"id": 1, "name": "person"}]}
     ann = tmp_path / "ann.json"
     ann.write_text(_json.dumps(doc))
     folder = tmp_path / "img"

@@ -107,3 +107,69 @@ def test_number_formatter() -> None:
     assert words({"python": "3.11", "cpus": 2, "load": [1.5, 2.0], "x": None}) == (
         "python 3.11, cpus 2, load 1.5, 2.0, x –")
     assert words({}) == MISSING
+
+
+def test_check_outputs_protects_input_folders_and_stores(tmp_path: Path) -> None:
+    """An output that names an existing file inside an input folder, or lies directly in a
+    results store's folder, is refused; new files beside inputs and store subfolders are not."""
+    from fidelity.fileio import check_output_folders
+
+    images = tmp_path / "images"
+    images.mkdir()
+    (images / "one.jpg").write_bytes(b"jpeg")
+    with pytest.raises(InputFileError, match=r"--json names a file inside the input folder "
+                                             r"--images"):
+        check_outputs({"--json": images / "one.jpg"}, {"--images": images})
+    with pytest.raises(InputFileError, match="inside the input folder"):
+        check_outputs({"--json": tmp_path / "." / "images" / "one.jpg"}, {"--images": images})
+    check_outputs({"--json": images / "new.json"}, {"--images": images})
+    store = tmp_path / "store"
+    store.mkdir()
+    (store / "sweep.sqlite").write_bytes(b"db")
+    for name in ("sweep.sqlite", "sweep.sqlite-wal", "tables.json"):
+        with pytest.raises(InputFileError, match="writes into the results store STORE"):
+            check_outputs({"--prediction": store / name}, stores={"STORE": store})
+    check_outputs({"--out (report.html)": store / "report" / "report.html"},
+                  stores={"STORE": store})
+    (tmp_path / "hue_de3").mkdir()
+    with pytest.raises(InputFileError, match=r"--out \(hue_de3\) would write into the input "
+                                             r"folder --images"):
+        check_output_folders({"--out (hue_de3)": tmp_path / "hue_de3"},
+                             {"--images": tmp_path / "store" / ".." / "hue_de3"})
+    check_output_folders({"--out (hue_de3)": tmp_path / "x" / "hue_de3"}, {"--images": images})
+
+
+def test_write_errors_leave_no_partial_file(tmp_path: Path, monkeypatch) -> None:
+    """A full disk while writing: InputFileError naming the output, the temporary file gone,
+    an earlier file of the same name as it was; other OSErrors go on as they are."""
+    import errno
+
+    target = tmp_path / "out.json"
+    target.write_text("earlier")
+
+    def full(self, *a, **k):  # noqa: ANN001, ANN002, ANN003
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Path, "write_text", full)
+    with pytest.raises(InputFileError, match=r"out.json: cannot write the output: No space "
+                                             r"left on device"):
+        write_text_atomic(target, "new")
+    monkeypatch.undo()
+    assert target.read_text() == "earlier"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.json"]
+    with pytest.raises(InputFileError, match="Read-only file system"):
+        with atomic_output(tmp_path / "x.txt"):
+            raise OSError(errno.EROFS, "Read-only file system")
+    with pytest.raises(OSError, match="something else"):
+        with atomic_output(tmp_path / "y.txt"):
+            raise OSError(errno.EBADF, "something else")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.json"]
+
+
+def test_undecodable_file_names_print() -> None:
+    from fidelity.fileio import display_path, printable
+
+    assert display_path(b"chart\xff.png") == "chart\\xff.png"
+    assert printable("chart\udcff.png") == "chart\\xff.png"
+    assert printable("\ud800 ok é") == "\\ud800 ok é"
+    assert printable("plain ΔE") == "plain ΔE"

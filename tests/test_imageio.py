@@ -168,3 +168,25 @@ def test_unknown_channels(tmp_path):
     exr(tmp_path / "xyz.exr", {"X": RGB[..., 0], "Y": RGB[..., 1], "Z": RGB[..., 2]})
     with pytest.raises(InputFileError, match=r"xyz\.exr: unknown channels \(X, Y, Z\)"):
         read_image(tmp_path / "xyz.exr")
+
+
+def test_pixel_limit_is_checked_before_decoding(tmp_path, monkeypatch):
+    """More pixels than the limit: refused from the header (--max-pixels, then
+    FIDELITY_MAX_PIXELS, then the default); RGBA and odd channel orders read only R, G, B."""
+    from fidelity.chart.image import DEFAULT_MAX_PIXELS, pixel_limit
+    from fidelity.errors import InvalidValueError
+
+    rgba = np.concatenate([RGB, np.ones(RGB.shape[:2] + (1,), np.float32)], axis=2)
+    p = oiio_write(tmp_path / "a.tif", rgba, "float")
+    np.testing.assert_array_equal(read_image(p).pixels, RGB)
+    assert read_image(p, max_pixels=12 * 17).width == 17
+    with pytest.raises(InputFileError, match=r"a.tif: the image is 17x12 \(0.0 megapixels\), "
+                                             r"more than the limit"):
+        read_image(p, max_pixels=12 * 17 - 1)
+    assert pixel_limit() == DEFAULT_MAX_PIXELS
+    monkeypatch.setenv("FIDELITY_MAX_PIXELS", "2e8")
+    assert pixel_limit() == 200_000_000 and pixel_limit(5) == 5
+    for bad in ("0", "-3", "1.5", "lots", "inf"):
+        monkeypatch.setenv("FIDELITY_MAX_PIXELS", bad)
+        with pytest.raises(InvalidValueError, match=f"FIDELITY_MAX_PIXELS={bad}"):
+            pixel_limit()

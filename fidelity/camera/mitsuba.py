@@ -24,7 +24,6 @@ one), and falls back to ``scalar_spectral`` (no LLVM needed). The variant that r
 from __future__ import annotations
 
 import copy
-import json
 import os
 import re
 import subprocess
@@ -37,8 +36,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fidelity import schema as sc
 from fidelity.colour.spectral import GRID_END_NM, GRID_START_NM, GRID_STEP_NM, cie_1931_cmfs
-from fidelity.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
+from fidelity.errors import FidelityError, InvalidValueError, unknown_name
+from fidelity.fileio import display_path
 from fidelity.resources import resource_dir
 
 FloatArray = NDArray[np.float64]
@@ -227,14 +228,36 @@ def _activate(variant: str) -> Any:
 # --------------------------------------------------------------------------------------------
 
 
+def _plugin(*fields: sc.Field, required: bool = True) -> sc.Table:
+    """A Mitsuba plugin table: its ``type`` and the fields the code reads; others pass."""
+    return sc.Table(fields=(sc.Field("type", sc.String(nonempty=True), required=required),
+                            *fields), extra=True)
+
+
+#: The parts of the Mitsuba scene template that :func:`build_scene_dict` reads (the rest of a
+#: template goes to Mitsuba as it is): the sensor with its film and sampler, the emitter, and
+#: the ``patch`` shape with its BSDF.
+TEMPLATE_SCHEMA = sc.Table(fields=(
+    sc.Field("_comment", sc.AnyValue()),
+    sc.Field("type", sc.String(choices=("scene",), ignore_case=False), required=True),
+    sc.Field("sensor", _plugin(
+        sc.Field("camera_height", sc.Number(lo=0.0, lo_open=True)),
+        sc.Field("film", _plugin(), required=True),
+        sc.Field("sampler", _plugin(), required=True)), required=True),
+    sc.Field("emitter", _plugin(), required=True),
+    sc.Field("patch", _plugin(sc.Field("bsdf", _plugin(), required=True)), required=True),
+), extra=True)
+
+
 def load_template(path: str | Path | None = None) -> dict[str, Any]:
-    """The scene template (``scenes/spectral_chart.json`` unless ``path`` is given)."""
+    """The scene template (``scenes/spectral_chart.json`` unless ``path`` is given), checked
+    against :data:`TEMPLATE_SCHEMA`."""
     p = Path(path) if path else resource_dir("scenes") / "spectral_chart.json"
-    try:
-        template: dict[str, Any] = json.loads(p.read_text(encoding="utf-8"))
-        return template
-    except (OSError, ValueError) as exc:
-        raise InputFileError(f"{p}: cannot read the Mitsuba scene template ({exc})") from exc
+    where = f"{display_path(p)} (Mitsuba scene template)"
+    template: dict[str, Any] = sc.load_document(p, where, fmt="json", max_bytes=1 << 20,
+                                                what="scene template")
+    sc.validate(template, TEMPLATE_SCHEMA, where)
+    return template
 
 
 def _regular(values: ArrayLike, step: float) -> dict[str, Any]:
@@ -382,6 +405,7 @@ __all__ = [
     "DEFAULT_SAMPLER",
     "SAMPLERS",
     "DEFAULT_SPP",
+    "TEMPLATE_SCHEMA",
     "GRID_END_NM",
     "PREFERRED_VARIANTS",
     "MitsubaImage",

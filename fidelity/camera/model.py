@@ -52,15 +52,17 @@ shows up as colour error, as it should.
 from __future__ import annotations
 
 import math
-import tomllib
+import os
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, overload
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fidelity import schema as sc
 from fidelity.colour.spectral import (
     GRID_STEP_NM,
     Illuminant,
@@ -72,7 +74,7 @@ from fidelity.colour.spectral import (
     scene_reference,
     wavelength_grid,
 )
-from fidelity.errors import InputFileError, InvalidValueError, unknown_name
+from fidelity.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
 from fidelity.fileio import require_file
 from fidelity.resources import resource_dir
 
@@ -301,8 +303,13 @@ def add_sensor_noise(image: ArrayLike, noise: Noise, seed: int | None = None) ->
         return img.copy()
     rng = np.random.default_rng(noise.seed if seed is None else seed)
     fw = float(noise.full_well)  # type: ignore[arg-type]
-    sigma = np.sqrt(np.maximum(img, 0.0) / fw + (noise.read_noise / fw) ** 2)
-    return img + sigma * rng.standard_normal(img.shape)
+    with np.errstate(over="ignore", invalid="ignore"):
+        sigma = np.sqrt(np.maximum(img, 0.0) / fw + np.square(noise.read_noise / fw))
+        noisy: FloatArray = img + sigma * rng.standard_normal(img.shape)
+    if not np.all(np.isfinite(noisy)):
+        raise InvalidValueError(f"[noise]: read_noise {noise.read_noise:g} e- on a full well of "
+                                f"{fw:g} e- makes the noise beyond the floating-point range")
+    return noisy
 
 
 def white_balance_gains(
@@ -458,252 +465,249 @@ def develop(
 # Camera files
 # --------------------------------------------------------------------------------------------
 
-_SECTIONS: dict[str, tuple[str, ...]] = {
-    "sensitivities": ("source", "path"),
-    "exposure": ("mode", "gain", "ev", "target"),
-    "white_balance": ("method", "gains", "illuminant"),
-    "ccm": ("method", "matrix", "fit_method", "fit_illuminant"),
-    "tone": ("curve", "gamma", "lut"),
-    "noise": ("full_well", "read_noise", "seed"),
-    "quantisation": ("bits",),
-    "vignetting": ("diagonal_fov_deg",),
-}
-_TOP = ("name", "description", *_SECTIONS)
+#: Largest camera file read, in bytes (the built-in ones are under 2 kB).
+MAX_CAMERA_FILE_BYTES = 1 << 20
+#: Most points of a tone-curve LUT.
+MAX_LUT_POINTS = 65536
 
 
-class _Reader:
-    """Typed access to one camera-file table with errors naming file, field and problem."""
+def _illuminant_problem(name: str) -> str | None:
+    """Why ``name`` is not an illuminant (None: it is one)."""
+    from fidelity.errors import FidelityError
 
-    def __init__(self, origin: str, section: str, table: Any) -> None:
-        self.origin, self.section = origin, section
-        if not isinstance(table, dict):
-            raise self.error("", f"must be a table, got {type(table).__name__}")
-        unknown = set(table) - set(_SECTIONS[section])
-        if unknown:
-            raise self.error(sorted(unknown)[0],
-                             f"unknown field; known: {', '.join(_SECTIONS[section])}")
-        self.table = table
+    try:
+        load_illuminant(name)
+    except FidelityError as exc:
+        return str(exc)
+    return None
 
-    def error(self, key: str, msg: str) -> InputFileError:
-        where = f"[{self.section}]" + (f".{key}" if key else "")
-        return InputFileError(f"camera file {self.origin}: {where}: {msg}")
 
-    def choice(self, key: str, choices: tuple[str, ...], default: str) -> str:
-        v = self.table.get(key, default)
-        if not isinstance(v, str) or v.lower() not in choices:
-            raise self.error(key, f"must be one of {', '.join(choices)}, got {v!r}")
-        return v.lower()
+def _named_illuminant(key: str, method: str, method_value: str
+                      ) -> Callable[[Mapping[str, Any]], tuple[str, str] | None]:
+    """Rule: ``key`` names a known illuminant (or ``scene``) when ``method`` is
+    ``method_value``."""
 
-    def string(self, key: str, default: str | None = None) -> str | None:
-        v = self.table.get(key, default)
-        if v is not None and not isinstance(v, str):
-            raise self.error(key, f"must be a string, got {v!r}")
-        return v
-
-    @overload
-    def number(self, key: str, default: float, lo: float | None = None,
-               hi: float | None = None, lo_open: bool = False) -> float: ...
-
-    @overload
-    def number(self, key: str, default: None, lo: float | None = None,
-               hi: float | None = None, lo_open: bool = False) -> float | None: ...
-
-    def number(self, key: str, default: float | None, lo: float | None = None,
-               hi: float | None = None, lo_open: bool = False) -> float | None:
-        v = self.table.get(key, default)
-        if v is None:
+    def test(t: Mapping[str, Any]) -> tuple[str, str] | None:
+        name = t.get(key) or ""
+        if t.get(method) != method_value or not name or name.lower() == "scene":
             return None
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise self.error(key, f"must be a finite number, got {v!r}")
-        if lo is not None and (v < lo or (lo_open and v == lo)):
-            raise self.error(key, f"must be {'>' if lo_open else '>='} {lo:g}, got {v!r}")
-        if hi is not None and v > hi:
-            raise self.error(key, f"must be <= {hi:g}, got {v!r}")
-        return float(v)
+        problem = _illuminant_problem(name)
+        return None if problem is None else (key, problem)
 
-    @overload
-    def integer(self, key: str, default: int, lo: int, hi: int) -> int: ...
+    return test
 
-    @overload
-    def integer(self, key: str, default: None, lo: int, hi: int) -> int | None: ...
 
-    def integer(self, key: str, default: int | None, lo: int, hi: int) -> int | None:
-        v = self.table.get(key, default)
-        if v is None:
-            return None
-        if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-            raise self.error(key, f"must be an integer in [{lo}, {hi}], got {v!r}")
-        return int(v)
+def lut_problem(lut: NDArray[np.float64]) -> str | None:
+    """Why ``(K, 2)`` tone-curve points (linear input, encoded output) are not a tone curve:
+    at least 2 points, strictly increasing inputs spanning [0, 1], outputs in [0, 1]."""
+    if lut.shape[0] < 2 or not np.all(np.diff(lut[:, 0]) > 0):
+        return "needs >= 2 points with strictly increasing inputs"
+    if lut[0, 0] > 0 or lut[-1, 0] < 1:
+        return "inputs must span [0, 1]"
+    if np.any(lut[:, 1] < 0) or np.any(lut[:, 1] > 1):
+        return "outputs must lie in [0, 1]"
+    return None
 
-    def matrix(self, key: str, rows: int | None, cols: int) -> FloatArray:
-        v = self.table.get(key)
-        try:
-            a = np.asarray(v, dtype=np.float64)
-        except (TypeError, ValueError):
-            a = np.empty(0)
-        if a.ndim != 2 or a.shape[1] != cols or (rows is not None and a.shape[0] != rows) or (
-            not np.all(np.isfinite(a))
-        ):
-            shape = f"{rows}x{cols}" if rows else f"Kx{cols}"
-            raise self.error(key, f"must be a {shape} array of finite numbers, got {v!r}")
-        return a
 
+def _sensitivity_source(t: Mapping[str, Any]) -> tuple[str, str] | None:
+    src = t.get("source")
+    if src is None or src.lower() in ("ideal", "file") or src in COLOUR_CAMERAS:
+        return None
+    return ("source", f"must be 'ideal', 'file' or one of {', '.join(COLOUR_CAMERAS)}, "
+                      f"got {src!r}")
+
+
+def _fit_method(t: Mapping[str, Any]) -> tuple[str, str] | None:
+    m = t.get("fit_method")
+    if not m or any(m.lower() == k.lower() for k in CCM_FIT_METHODS):
+        return None
+    return "fit_method", f"must be one of {', '.join(CCM_FIT_METHODS)}, got {m!r}"
+
+
+def _inline_lut(t: Mapping[str, Any]) -> tuple[str, str] | None:
+    lut = t.get("lut")
+    if not isinstance(lut, list):
+        return None
+    problem = lut_problem(np.asarray(lut, dtype=np.float64).reshape(-1, 2))
+    return None if problem is None else ("lut", problem)
+
+
+def _noise_needs_full_well(t: Mapping[str, Any]) -> tuple[str, str] | None:
+    if t.get("full_well") is None and "read_noise" in t:
+        return "full_well", "required when read_noise is given"
+    return None
+
+
+def _finite_row(n: int) -> sc.ListOf:
+    return sc.ListOf(sc.Number(), min_items=n, max_items=n)
+
+
+#: The schema of a camera file (TOML or YAML; the module docstring says what each stage does).
+#: A field that only one method reads (``gains``, ``matrix``, ``lut``, ``path``) is checked
+#: only when that method is chosen.
+CAMERA_SCHEMA = sc.Table(fields=(
+    sc.Field("name", sc.String(nonempty=True)),
+    sc.Field("description", sc.String(), default=""),
+    sc.Field("sensitivities", sc.Table(fields=(
+        sc.Field("source", sc.String(nullable=True), default="ideal"),
+        sc.Field("path", sc.String(nonempty=True), when=("source", ("file",))),
+    ), rules=(sc.Check(_sensitivity_source), sc.RequiredWhen("path", "source", ("file",)))),
+        default={}),
+    sc.Field("exposure", sc.Table(fields=(
+        sc.Field("mode", sc.String(choices=EXPOSURE_MODES, lower=True), default="none"),
+        sc.Field("gain", sc.Number(lo=0.0, lo_open=True), default=1.0),
+        sc.Field("ev", sc.Number(lo=-30, hi=30, nullable=True)),
+        sc.Field("target", sc.Number(lo=0.0, hi=1.0, lo_open=True), default=0.9),
+    ), rules=(sc.Exclusive("gain", "ev"),)), default={}),
+    sc.Field("white_balance", sc.Table(fields=(
+        sc.Field("method", sc.String(choices=WHITE_BALANCE_METHODS, lower=True),
+                 default="none"),
+        sc.Field("gains", sc.ListOf(sc.Number(lo=0.0, lo_open=True), min_items=3, max_items=3,
+                                    describe="3 positive numbers"),
+                 when=("method", ("gains",))),
+        sc.Field("illuminant", sc.String(nullable=True), default="scene"),
+    ), rules=(sc.RequiredWhen("gains", "method", ("gains",)),
+              sc.Check(_named_illuminant("illuminant", "method", "illuminant")))),
+        default={}),
+    sc.Field("ccm", sc.Table(fields=(
+        sc.Field("method", sc.String(choices=CCM_METHODS, lower=True), default="none"),
+        sc.Field("matrix", sc.ListOf(_finite_row(3), min_items=3, max_items=3,
+                                     describe="a 3x3 array of finite numbers"),
+                 when=("method", ("matrix",))),
+        sc.Field("fit_method", sc.String(nullable=True), default="Cheung 2004"),
+        sc.Field("fit_illuminant", sc.String(nullable=True), default="D65"),
+    ), rules=(sc.RequiredWhen("matrix", "method", ("matrix",)), sc.Check(_fit_method),
+              sc.Check(_named_illuminant("fit_illuminant", "method", "fit")))), default={}),
+    sc.Field("tone", sc.Table(fields=(
+        sc.Field("curve", sc.String(choices=TONE_CURVES, lower=True), default="linear"),
+        sc.Field("gamma", sc.Number(lo=0.0, hi=10.0, lo_open=True), default=2.2),
+        sc.Field("lut", sc.OneOf(options=(
+            sc.String(), sc.ListOf(_finite_row(2), max_items=MAX_LUT_POINTS)),
+            describe=f"a CSV path or [[x, y], ...] of finite numbers (at most "
+                     f"{MAX_LUT_POINTS} points)"),
+            when=("curve", ("lut",))),
+    ), rules=(sc.RequiredWhen("lut", "curve", ("lut",)), sc.Check(_inline_lut))), default={}),
+    sc.Field("noise", sc.Table(fields=(
+        sc.Field("full_well", sc.Number(lo=1.0, nullable=True)),
+        sc.Field("read_noise", sc.Number(lo=0.0), default=0.0),
+        sc.Field("seed", sc.Integer(lo=0, hi=2**63 - 1), default=0),
+    ), rules=(sc.Check(_noise_needs_full_well),)), default={}),
+    sc.Field("quantisation", sc.Table(fields=(
+        sc.Field("bits", sc.Integer(lo=1, hi=16, nullable=True)),)), default={}),
+    sc.Field("vignetting", sc.Table(fields=(
+        sc.Field("diagonal_fov_deg", sc.Number(lo=0.0, hi=179.0, lo_open=True,
+                                               nullable=True)),)), default={}),
+))
 
 def camera_from_dict(data: Any, origin: str = "<dict>", base_dir: Path | None = None) -> CameraModel:
     """Build and validate a :class:`CameraModel` from a parsed camera file (module docstring).
 
-    ``base_dir`` resolves relative paths (sensitivity CSV, LUT file). Raises
-    :class:`InputFileError` naming the file, the field and the problem.
+    The file is checked against :data:`CAMERA_SCHEMA`; ``base_dir`` resolves relative paths
+    (sensitivity CSV, LUT file). Raises :class:`InputFileError` naming the file, the field and
+    the problem (``camera file <origin>: [section].field: problem``).
     """
-    if not isinstance(data, dict):
-        raise InputFileError(f"camera file {origin}: top level must be a table")
-    unknown = set(data) - set(_TOP)
-    if unknown:
-        raise InputFileError(f"camera file {origin}: unknown field {sorted(unknown)[0]!r}; "
-                             f"known: {', '.join(_TOP)}")
-    name = data.get("name", Path(origin).stem)
-    if not isinstance(name, str) or not name:
-        raise InputFileError(f"camera file {origin}: name must be a non-empty string")
-    desc = data.get("description", "")
-    if not isinstance(desc, str):
-        raise InputFileError(f"camera file {origin}: description must be a string")
+    from fidelity.errors import FidelityError
+
+    where = f"camera file {origin}"
+    v = sc.validate(data, CAMERA_SCHEMA, where, sections=True)
     base = base_dir or Path.cwd()
 
-    def sec(s: str) -> _Reader:
-        return _Reader(origin, s, data.get(s, {}))
+    def error(section: str, key: str, problem: str) -> InputFileError:
+        return sc.SchemaError(f"{where}: [{section}].{key}: {problem}")
 
-    # sensitivities
-    r = sec("sensitivities")
-    src = r.string("source", "ideal")
+    def file_in(section: str, key: str, spec: str) -> Path:
+        return Path(spec) if Path(spec).is_absolute() else base / spec
+
+    name = v.get("name", Path(origin).stem)
+    sv = v["sensitivities"]
+    src = sv["source"]
     if src is None or src.lower() == "ideal":
         sens = ideal_sensitivities()
     elif src.lower() == "file":
-        path = r.string("path")
-        if not path:
-            raise r.error("path", "required when source = 'file'")
-        p = Path(path) if Path(path).is_absolute() else base / path
-        wl, vals = read_spectral_csv(p, columns=3, what="sensitivity CSV")
+        p = file_in("sensitivities", "path", sv["path"])
+        try:
+            wl, vals = read_spectral_csv(p, columns=3, what="sensitivity CSV")
+        except FidelityError as exc:
+            raise error("sensitivities", "path", str(exc)) from None
         if np.any(vals < 0) or not np.all(vals.max(axis=0) > 0):
-            raise r.error("path", f"{p}: sensitivities must be >= 0 with a positive peak per channel")
+            raise error("sensitivities", "path",
+                        f"{p}: sensitivities must be >= 0 with a positive peak per channel")
         sens = Sensitivities(f"file {p}", wl, vals)
-    elif src in COLOUR_CAMERAS:
-        sens = colour_camera_sensitivities(src)
     else:
-        raise r.error("source", f"must be 'ideal', 'file' or one of {', '.join(COLOUR_CAMERAS)},"
-                                f" got {src!r}")
+        sens = colour_camera_sensitivities(src)
 
-    r = sec("exposure")
-    mode = r.choice("mode", EXPOSURE_MODES, "none")
-    gain = r.number("gain", 1.0, lo=0.0, lo_open=True)
-    ev = r.number("ev", None, lo=-30, hi=30)
-    if ev is not None:
-        if "gain" in r.table:
-            raise r.error("ev", "give either gain or ev, not both")
-        gain = 2.0**ev
-    exposure = Exposure(mode, float(gain), float(r.number("target", 0.9, lo=0.0, hi=1.0,
-                                                            lo_open=True)))
+    ev = v["exposure"]
+    gain = 2.0 ** ev["ev"] if ev.get("ev") is not None else ev["gain"]
+    exposure = Exposure(ev["mode"], float(gain), float(ev["target"]))
 
-    r = sec("white_balance")
-    method = r.choice("method", WHITE_BALANCE_METHODS, "none")
-    gains = None
-    if method == "gains":
-        if "gains" not in r.table:
-            raise r.error("gains", "required when method = 'gains'")
-        raw_gains = r.table["gains"]
-        ok = isinstance(raw_gains, list) and len(raw_gains) == 3 and all(
-            isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) and x > 0
-            for x in raw_gains
-        )
-        if not ok:
-            raise r.error("gains", f"must be 3 positive numbers, got {raw_gains!r}")
-        gains = (float(raw_gains[0]), float(raw_gains[1]), float(raw_gains[2]))
-    wb_ill = r.string("illuminant", "scene") or "scene"
-    if method == "illuminant" and wb_ill.lower() != "scene":
-        _check_illuminant(r, "illuminant", wb_ill)
-    wb = WhiteBalance(method, gains, wb_ill)
+    wv = v["white_balance"]
+    gains = tuple(wv["gains"]) if wv["method"] == "gains" else None
+    wb = WhiteBalance(wv["method"], gains, wv["illuminant"] or "scene")
 
-    r = sec("ccm")
-    method = r.choice("method", CCM_METHODS, "none")
-    matrix = None
-    if method == "matrix":
-        if "matrix" not in r.table:
-            raise r.error("matrix", "required when method = 'matrix'")
-        m = r.matrix("matrix", 3, 3)
-        matrix = tuple(tuple(float(x) for x in row) for row in m)
-    fit_method = r.string("fit_method", "Cheung 2004") or "Cheung 2004"
-    if not any(fit_method.lower() == k.lower() for k in CCM_FIT_METHODS):
-        raise r.error("fit_method", f"must be one of {', '.join(CCM_FIT_METHODS)}, got {fit_method!r}")
-    fit_ill = r.string("fit_illuminant", "D65") or "D65"
-    if method == "fit" and fit_ill.lower() != "scene":
-        _check_illuminant(r, "fit_illuminant", fit_ill)
-    ccm = ColourCorrection(method, matrix, fit_method, fit_ill)  # type: ignore[arg-type]
+    cv = v["ccm"]
+    matrix = (tuple(tuple(row) for row in cv["matrix"]) if cv["method"] == "matrix" else None)
+    ccm = ColourCorrection(cv["method"], matrix,
+                           cv["fit_method"] or "Cheung 2004", cv["fit_illuminant"] or "D65")
 
-    r = sec("tone")
-    curve = r.choice("curve", TONE_CURVES, "linear")
-    gamma = float(r.number("gamma", 2.2, lo=0.0, hi=10.0, lo_open=True))
+    tv = v["tone"]
     lut = None
-    if curve == "lut":
-        spec = r.table.get("lut")
+    if tv["curve"] == "lut":
+        spec = tv["lut"]
         if isinstance(spec, str):
-            p = Path(spec) if Path(spec).is_absolute() else base / spec
-            wl, vals = read_spectral_csv(p, columns=1, what="tone LUT file")
+            p = file_in("tone", "lut", spec)
+            try:
+                wl, vals = read_spectral_csv(p, columns=1, what="tone LUT file")
+            except FidelityError as exc:
+                raise error("tone", "lut", str(exc)) from None
             arr = np.column_stack([wl, vals[:, 0]])
-        elif spec is None:
-            raise r.error("lut", "required when curve = 'lut' (a CSV path or [[x, y], ...])")
+            problem = lut_problem(arr)
+            if problem:
+                raise error("tone", "lut", problem)
         else:
-            arr = r.matrix("lut", None, 2)
-        if arr.shape[0] < 2 or not np.all(np.diff(arr[:, 0]) > 0):
-            raise r.error("lut", "needs >= 2 points with strictly increasing inputs")
-        if arr[0, 0] > 0 or arr[-1, 0] < 1:
-            raise r.error("lut", "inputs must span [0, 1]")
-        if np.any(arr[:, 1] < 0) or np.any(arr[:, 1] > 1):
-            raise r.error("lut", "outputs must lie in [0, 1]")
+            arr = np.asarray(spec, dtype=np.float64).reshape(-1, 2)
         lut = tuple((float(a), float(b)) for a, b in arr)
-    tone = ToneCurve(curve, gamma, lut)
+    tone = ToneCurve(tv["curve"], float(tv["gamma"]), lut)
 
-    r = sec("noise")
-    fw = r.number("full_well", None, lo=1.0)
-    noise = Noise(fw, float(r.number("read_noise", 0.0, lo=0.0)),
-                  int(r.integer("seed", 0, 0, 2**63 - 1)))
-    if fw is None and "read_noise" in r.table:
-        raise r.error("full_well", "required when read_noise is given")
-
-    bits = sec("quantisation").integer("bits", None, 1, 16)
-    fov = sec("vignetting").number("diagonal_fov_deg", None, lo=0.0, hi=179.0, lo_open=True)
-    return CameraModel(name, sens, desc, exposure, wb, ccm, tone, noise, bits, fov, origin)
+    nv = v["noise"]
+    noise = Noise(nv.get("full_well"), float(nv["read_noise"]), int(nv["seed"]))
+    bits = v["quantisation"].get("bits")
+    fov = v["vignetting"].get("diagonal_fov_deg")
+    return CameraModel(name, sens, v["description"], exposure, wb, ccm, tone, noise, bits, fov,
+                       origin)
 
 
-def _check_illuminant(r: _Reader, key: str, name: str) -> None:
+def camera_files(name_or_path: str | os.PathLike[str]) -> list[Path]:
+    """The files reading a camera touches: the camera file and the sensitivity CSV and tone
+    LUT file it names (none for a built-in camera name; only the camera file itself when it
+    cannot be parsed). For the overwrite check of commands (:func:`fidelity.fileio.check_outputs`)."""
+    p = Path(name_or_path)
+    if str(name_or_path) in available_cameras() or not p.is_file():
+        return []
+    files = [p]
     try:
-        load_illuminant(name)
-    except Exception as exc:  # noqa: BLE001 - re-raised with the field named
-        raise r.error(key, str(exc)) from None
+        data = sc.load_document(p, max_bytes=MAX_CAMERA_FILE_BYTES)
+    except FidelityError:
+        return files
+    for section, key in (("sensitivities", "path"), ("tone", "lut")):
+        table = data.get(section) if isinstance(data, dict) else None
+        spec = table.get(key) if isinstance(table, dict) else None
+        if isinstance(spec, str) and spec:
+            files.append(Path(spec) if Path(spec).is_absolute() else p.parent / spec)
+    return files
 
 
 def read_camera_file(path: str | Path) -> CameraModel:
     """Parse and validate a TOML (``.toml``) or YAML (``.yaml``/``.yml``) camera file."""
+    from fidelity.fileio import display_path
+
     p = require_file(path, "camera file")
     suffix = p.suffix.lower()
-    try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"camera file {p}: cannot read ({exc})") from exc
-    if suffix == ".toml":
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise InputFileError(f"camera file {p}: invalid TOML ({exc})") from exc
-    elif suffix in (".yaml", ".yml"):
-        import yaml
-
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            msg = str(exc).replace("\n", " ")
-            raise InputFileError(f"camera file {p}: invalid YAML ({msg})") from exc
-    else:
-        raise InputFileError(f"camera file {p}: expected a .toml, .yaml or .yml file")
-    return camera_from_dict(data, str(p), p.parent)
+    if suffix not in (".toml", ".yaml", ".yml"):
+        raise InputFileError(f"camera file {display_path(p)}: expected a .toml, .yaml or "
+                             ".yml file")
+    data = sc.load_document(p, f"camera file {display_path(p)}",
+                            max_bytes=MAX_CAMERA_FILE_BYTES, what="camera file")
+    return camera_from_dict(data, display_path(p), p.parent)
 
 
 def _builtin_dir() -> Path:
@@ -751,7 +755,10 @@ __all__ = [
     "apply_tone_curve",
     "available_cameras",
     "camera_from_dict",
+    "CAMERA_SCHEMA",
+    "camera_files",
     "camera_response",
+    "lut_problem",
     "colour_camera_sensitivities",
     "colour_correction_matrix",
     "develop",

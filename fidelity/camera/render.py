@@ -21,7 +21,10 @@ D50-era chart data, about 2 ΔE00 from a correct D65 render; offered for compari
 
 from __future__ import annotations
 
+import contextlib
+import math
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -44,7 +47,7 @@ from fidelity.colour.spectral import (
     load_patch_spectra,
     scene_reference,
 )
-from fidelity.errors import InvalidValueError, unknown_name
+from fidelity.errors import FidelityError, InvalidValueError, unknown_name
 
 FloatArray = NDArray[np.float64]
 
@@ -169,6 +172,59 @@ class ChartRender:
         }
 
 
+#: Accepted spectral grid steps, nm (the grid spans 380-780 nm: 4001 to 21 samples).
+STEP_RANGE_NM: tuple[float, float] = (0.1, 20.0)
+#: Largest patch side in pixels (a 6 x 4 chart of 512 px patches is 3.7k x 2.5k pixels).
+MAX_PIXELS_PER_PATCH: int = 512
+#: Most Mitsuba samples per pixel (the benchmarked default is 144).
+MAX_SPP: int = 1 << 20
+#: Largest seed (numpy's generators take any non-negative integer; 64 bits is plenty).
+MAX_SEED: int = 2**63 - 1
+
+
+def check_render_settings(*, step: float = GRID_STEP_NM, pixels_per_patch: int | None = None,
+                          spp: int | None = None, seed: int | None = None) -> None:
+    """Refuse render settings outside their domain (:data:`STEP_RANGE_NM`,
+    :data:`MAX_PIXELS_PER_PATCH`, :data:`MAX_SPP`, :data:`MAX_SEED`) with an
+    :class:`~fidelity.errors.InvalidValueError` naming the option."""
+    lo, hi = STEP_RANGE_NM
+    if not (isinstance(step, int | float) and math.isfinite(step) and lo <= step <= hi):
+        raise InvalidValueError(f"--step {step!r}: the spectral step must be between {lo:g} "
+                                f"and {hi:g} nm and divide 400 nm (e.g. 1, 2, 5, 10)")
+    if pixels_per_patch is not None and not 2 <= pixels_per_patch <= MAX_PIXELS_PER_PATCH:
+        raise InvalidValueError(f"--pixels-per-patch {pixels_per_patch}: must be between 2 and "
+                                f"{MAX_PIXELS_PER_PATCH}")
+    if spp is not None and not 1 <= spp <= MAX_SPP:
+        raise InvalidValueError(f"--spp {spp}: must be between 1 and {MAX_SPP}")
+    if seed is not None and not 0 <= seed <= MAX_SEED:
+        raise InvalidValueError(f"--seed {seed}: must be between 0 and {MAX_SEED}")
+
+
+def camera_context(camera: CameraModel, message: str) -> str:
+    """``message`` prefixed with the camera it concerns (``camera file <path>`` for a camera
+    file, ``camera <name>`` for a built-in one), unless it names it already."""
+    if camera.source in message:
+        return message
+    where = (f"camera {camera.name}" if camera.source.startswith("built-in")
+             else f"camera file {camera.source}")
+    return f"{where}: {message}"
+
+
+@contextlib.contextmanager
+def _about(camera: CameraModel) -> Iterator[None]:
+    """Errors raised inside name the camera (:func:`camera_context`)."""
+    try:
+        yield
+    except FidelityError as exc:
+        raise type(exc)(camera_context(camera, str(exc))) from None
+
+
+def _require_finite(values: np.ndarray, what: str) -> None:
+    if not np.all(np.isfinite(values)):
+        raise InvalidValueError(f"{what} is not finite (a value beyond the floating-point "
+                                "range): check the camera's gains, matrix and noise")
+
+
 def render_chart(
     camera: CameraModel | str,
     illuminant: str = "D65",
@@ -200,10 +256,13 @@ def render_chart(
     if reference not in REFERENCES:
         raise unknown_name("reference", reference, REFERENCES)
     cam = load_camera(camera) if not isinstance(camera, CameraModel) else camera
+    check_render_settings(step=step, pixels_per_patch=pixels_per_patch, spp=spp, seed=seed)
     ill = load_illuminant(illuminant)
     ps = load_patch_spectra(spectra)
-    refl, e, sens = ps.on_grid(step), ill.on_grid(step), cam.sensitivities.on_grid(step)
-    closed = camera_response(refl, e, sens, step)
+    refl, e = ps.on_grid(step), ill.on_grid(step)
+    with _about(cam):
+        sens = cam.sensitivities.on_grid(step)
+        closed = camera_response(refl, e, sens, step)
 
     settings: dict[str, Any] = {"illuminant": ill.name, "spectra": ps.name,
                                 "reference": reference, "seed": seed}
@@ -228,14 +287,18 @@ def render_chart(
     settings.update(renderer=renderer, pixels_per_patch=layout.patch_px,
                     image_size=[layout.height, layout.width], spp=mitsuba_info.get("spp"))
 
-    gain = exposure_gain(cam.exposure, closed)
-    raw = raw * gain
-    if cam.vignetting_fov_deg is not None:
-        raw = raw * vignetting_gain(layout.height, layout.width, cam.vignetting_fov_deg)[..., None]
-    raw = add_sensor_noise(raw, cam.noise, seed)
-    cam_rgb, cam_std = patch_means(raw, layout)
-    dev = develop(cam, raw, cam_rgb, ill, spectra=spectra, step=step)
-    srgb, srgb_std = patch_means(dev.srgb, layout)
+    with _about(cam), np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        gain = exposure_gain(cam.exposure, closed)
+        raw = raw * gain
+        if cam.vignetting_fov_deg is not None:
+            raw = raw * vignetting_gain(layout.height, layout.width, cam.vignetting_fov_deg)[..., None]
+        raw = add_sensor_noise(raw, cam.noise, seed)
+        _require_finite(raw, "the raw image (exposure, vignetting, noise)")
+        cam_rgb, cam_std = patch_means(raw, layout)
+        dev = develop(cam, raw, cam_rgb, ill, spectra=spectra, step=step)
+        _require_finite(dev.srgb, "the developed image (white balance, colour correction, tone "
+                                  "curve)")
+        srgb, srgb_std = patch_means(dev.srgb, layout)
 
     if reference == "scene":
         ref = scene_reference(ill, spectra, cat=cat, step=step)
@@ -285,6 +348,12 @@ def render_chart(
 
 __all__ = [
     "CLOSED_FORM_PIXELS_PER_PATCH",
+    "MAX_PIXELS_PER_PATCH",
+    "MAX_SEED",
+    "MAX_SPP",
+    "STEP_RANGE_NM",
+    "camera_context",
+    "check_render_settings",
     "REFERENCES",
     "RENDERERS",
     "ChartLayout",

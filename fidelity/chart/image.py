@@ -28,6 +28,7 @@ an unknown layer or an ambiguous choice of layers.
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import tempfile
 from collections.abc import Iterator, Mapping
@@ -37,8 +38,8 @@ from typing import Any
 
 import numpy as np
 
-from fidelity.errors import InputFileError
-from fidelity.fileio import atomic_output, require_file
+from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.fileio import atomic_output, display_path, require_file
 
 #: Bayer colour filter array patterns (colours of the top-left 2 x 2 pixels, row by row).
 BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
@@ -47,6 +48,21 @@ DEMOSAICING = "Malvar 2004 (colour-demosaicing)"
 
 #: Pixel types that hold scene-linear data by convention.
 FLOAT_PIXEL_TYPES = frozenset({"half", "float", "double"})
+
+#: Largest image :func:`read_image` decodes unless told otherwise, in pixels (width x height),
+#: checked from the file's header before any pixel is decoded. Sized for a 24 GiB machine from
+#: the audit's measured peak above the program itself (``benchmarks/bench_memory.py``): about
+#: 20 bytes per pixel for an RGB photo of 24 megapixels or more, about 60 for a Bayer mosaic
+#: (demosaiced in float64). 150 megapixels (a 14142 x 10607 photo, more than any camera sold)
+#: then peak near 3 GB, or 9 GB for a mosaic: at most a third of the machine, leaving room for
+#: the system and the other jobs on it.
+DEFAULT_MAX_PIXELS = 150_000_000
+
+#: Environment variable that sets the pixel limit (like ``--max-pixels``).
+MAX_PIXELS_ENV = "FIDELITY_MAX_PIXELS"
+
+#: Most parts (subimages) of a file that are looked at for R, G, B channels.
+MAX_PARTS = 1024
 
 _COLOUR_NAMES = {
     "r": "R", "red": "R",
@@ -313,8 +329,29 @@ def demosaic(mosaic: np.ndarray, pattern: str) -> np.ndarray:
     return np.asarray(rgb, dtype=np.float32)
 
 
+def pixel_limit(max_pixels: int | None = None) -> int:
+    """The pixel limit in force: ``max_pixels`` when given, else the environment variable
+    :data:`MAX_PIXELS_ENV`, else :data:`DEFAULT_MAX_PIXELS`. Raises
+    :class:`~fidelity.errors.InvalidValueError` for a limit that is not a positive whole number
+    (``2e8`` is read as 200000000)."""
+    if max_pixels is not None:
+        what, value = "--max-pixels", str(max_pixels)
+    else:
+        what, value = MAX_PIXELS_ENV, os.environ.get(MAX_PIXELS_ENV, "")
+        if not value.strip():
+            return DEFAULT_MAX_PIXELS
+    try:
+        number = float(value)
+    except ValueError:
+        number = math.nan
+    if not (math.isfinite(number) and number >= 1 and number == int(number)):
+        raise InvalidValueError(f"{what}={value}: expected a positive whole number of pixels, "
+                                f"e.g. {DEFAULT_MAX_PIXELS}")
+    return int(number)
+
+
 def read_image(path: str | os.PathLike[str], layer: str | None = None,
-               bayer: str | None = None) -> Image:
+               bayer: str | None = None, *, max_pixels: int | None = None) -> Image:
     """Read an image as ``(H, W, 3)`` float32 R, G, B.
 
     Parameters
@@ -326,21 +363,44 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None,
     bayer
         CFA pattern of a one-channel Bayer mosaic (:data:`BAYER_PATTERNS`): the mosaic is
         demosaiced (:func:`demosaic`) and taken as linear.
+    max_pixels
+        Refuse an image of more pixels (width x height) than this, from its header, before
+        decoding it (:func:`pixel_limit`: default :data:`MAX_PIXELS_ENV` or
+        :data:`DEFAULT_MAX_PIXELS`).
+
+    Only the channels that hold R, G and B (or the mosaic) are decoded, as float32, so the
+    pixels of an RGB image are held once: 12 bytes per pixel.
 
     Raises
     ------
     InputFileError
         Missing, unreadable, truncated or corrupt file; one-channel image; channels that are not
-        R, G, B; unknown or ambiguous layer. The message names the file.
+        R, G, B; unknown or ambiguous layer; more pixels than the limit; a file name that is
+        not valid UTF-8 (OpenImageIO cannot open it). The message names the file.
     """
-    import OpenImageIO as oiio
 
     from fidelity.errors import unknown_name
 
     if bayer is not None and bayer.upper() not in BAYER_PATTERNS:
         raise unknown_name("--bayer pattern", bayer, BAYER_PATTERNS)
     bayer = bayer.upper() if bayer is not None else None
+    limit = pixel_limit(max_pixels)
     p = require_file(path, "image")
+    shown = display_path(p)
+    if shown != str(p):
+        raise InputFileError(f"{shown}: the file name is not valid UTF-8, which the image "
+                             "reader (OpenImageIO) cannot open; rename the file")
+    try:
+        return _read(p, layer, bayer, limit)
+    except UnicodeDecodeError:  # OpenImageIO passes on names and messages from the file
+        raise InputFileError(f"{p}: corrupt image (its header holds text that is not "
+                             "UTF-8)") from None
+
+
+def _read(p: Path, layer: str | None, bayer: str | None, limit: int) -> Image:
+    """:func:`read_image` of a checked path."""
+    import OpenImageIO as oiio
+
     with _quiet_stderr():
         inp = oiio.ImageInput.open(str(p))
         if inp is None:
@@ -349,7 +409,7 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None,
         try:
             parts: list[_Part] = []
             k = 0
-            while inp.seek_subimage(k, 0):
+            while k < MAX_PARTS and inp.seek_subimage(k, 0):
                 spec = inp.spec()
                 name = spec.getattribute("name")
                 parts.append(_Part(k, str(name) if name else None, tuple(spec.channelnames)))
@@ -365,7 +425,16 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None,
             spec = inp.spec()
             if spec.width < 1 or spec.height < 1:
                 raise InputFileError(f"{p}: empty image ({spec.width}x{spec.height})")
-            data = inp.read_image(part.index, 0, 0, spec.nchannels, "float")
+            pixels_declared = int(spec.width) * int(spec.height) * max(int(spec.depth), 1)
+            if pixels_declared > limit:
+                raise InputFileError(
+                    f"{p}: the image is {spec.width}x{spec.height} "
+                    f"({pixels_declared / 1e6:.1f} megapixels), more than the limit of "
+                    f"{limit / 1e6:g} megapixels; raise it with --max-pixels N or "
+                    f"{MAX_PIXELS_ENV}=N if this machine has the memory (an audit needs "
+                    "about 20 bytes per pixel, 60 for a Bayer mosaic)")
+            first, last = min(rgb.values()), max(rgb.values())
+            data = inp.read_image(part.index, 0, first, last + 1, "float")
             err = _one_line(inp.geterror())
             if data is None or err:
                 raise InputFileError(f"{p}: truncated or corrupt image ({err or 'read failed'})")
@@ -380,12 +449,16 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None,
         arr = arr[:, :, None]
     if arr.ndim == 4:  # deep / volume: take the first slice
         arr = arr[0]
+    order = [rgb["R"] - first, rgb["G"] - first, rgb["B"] - first]
     if bayer is not None:
-        pixels = demosaic(arr[:, :, rgb["R"]], bayer)
+        pixels = demosaic(arr[:, :, order[0]], bayer)
         channels = tuple(f"{part.channels[rgb['R']]} ({c} of {bayer})" for c in "RGB")
         encoding = "linear"
     else:
-        pixels = np.ascontiguousarray(arr[:, :, [rgb["R"], rgb["G"], rgb["B"]]])
+        if order == [0, 1, 2] and arr.shape[2] == 3:
+            pixels = np.ascontiguousarray(arr)  # already R, G, B: no second copy
+        else:
+            pixels = np.ascontiguousarray(arr[:, :, order])
         channels = tuple(part.channels[rgb[c]] for c in ("R", "G", "B"))
         encoding = "linear" if pixel_type in FLOAT_PIXEL_TYPES else "srgb"
     return Image(
@@ -421,8 +494,7 @@ def write_exr(path: str | os.PathLike[str], image: np.ndarray,
         spec.attribute("fidelity:content", content)
         if not out.open(str(tmp), spec):
             raise InputFileError(f"{path}: cannot write EXR ({out.geterror()})")
-        out.write_image(img)
-        out.close()
+        _finish(out, out.write_image(img), path, "EXR")
     return Path(path)
 
 
@@ -440,10 +512,25 @@ def write_png(path: str | os.PathLike[str], image: np.ndarray, bits: int) -> Pat
         spec.attribute("oiio:ColorSpace", "sRGB")
         if out is None or not out.open(str(tmp), spec):
             raise InputFileError(f"{path}: cannot write PNG ({oiio.geterror()})")
-        out.write_image(np.ascontiguousarray(data))
-        out.close()
+        _finish(out, out.write_image(np.ascontiguousarray(data)), path, "PNG")
     return Path(path)
 
 
-__all__ = ["BAYER_PATTERNS", "DEMOSAICING", "FLOAT_PIXEL_TYPES", "Image", "ImageInfo", "demosaic",
+def _finish(out: Any, written: bool, path: str | os.PathLike[str], kind: str) -> None:
+    """Close an OpenImageIO writer; a failed write or close (a full disk) is an error naming
+    the output, so that :func:`fidelity.fileio.atomic_output` removes the partial file."""
+    import OpenImageIO as oiio
+
+    closed = out.close()
+    if not (written and closed is not False):
+        import errno
+
+        from fidelity.fileio import write_error
+
+        reason = _one_line(out.geterror() or oiio.geterror()) or "write failed"
+        raise write_error(path, OSError(errno.EIO, f"{kind} writer: {reason}"))
+
+
+__all__ = ["BAYER_PATTERNS", "DEFAULT_MAX_PIXELS", "DEMOSAICING", "FLOAT_PIXEL_TYPES",
+           "MAX_PIXELS_ENV", "Image", "ImageInfo", "demosaic", "pixel_limit",
            "read_image", "write_exr", "write_png"]

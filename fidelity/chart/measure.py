@@ -203,6 +203,10 @@ def measure_chart(
     )
 
 
+#: Largest exposure correction, in EV, either way: 2**128 spans float32's whole range, so a
+#: larger one takes every patch to 0 or beyond any floating-point value.
+MAX_EXPOSURE_EV = 128.0
+
 #: Reference chroma C*ab below which a patch counts as neutral (the Macbeth chart's six greys
 #: have C*ab < 2; its least chromatic colour patch about 20).
 NEUTRAL_CHROMA = 5.0
@@ -300,14 +304,21 @@ def exposure_from_neutrals(
         raise InvalidValueError("the reference chart has no neutral patches to set the exposure on")
     y_meas = luminance_linear_srgb(np.asarray(linear_rgb)[idx])
     y_ref = cm.lab_to_xyz(np.asarray(reference_lab, np.float64)[idx])[:, 1]
-    ok = (y_meas > 0) & np.isfinite(y_meas)
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        ratio = y_ref / y_meas
+    ok = (y_meas > 0) & np.isfinite(y_meas) & np.isfinite(ratio) & (ratio > 0)
     if not np.any(ok):
         names = ", ".join(patch_names[i] for i in idx) if patch_names else str(idx.tolist())
         raise InvalidValueError(
             f"cannot set the exposure automatically: the neutral patches ({names}) are black; "
             f"give --exposure EV"
         )
-    return float(np.mean(np.log2(y_ref[ok] / y_meas[ok])))
+    ev = float(np.mean(np.log2(ratio[ok])))
+    if not abs(ev) <= MAX_EXPOSURE_EV:
+        raise InvalidValueError(
+            f"cannot set the exposure automatically: the neutral patches would need "
+            f"{ev:+.4g} EV, beyond +-{MAX_EXPOSURE_EV:g}; give --exposure EV")
+    return ev
 
 
 @dataclass(frozen=True)
@@ -424,6 +435,26 @@ def _bad_counts(values: np.ndarray, negatives: str = "exclude"
                  "total": int(bad.sum())}
 
 
+#: Rows of an image counted at a time by :func:`_whole_image_counts` (bounded memory).
+COUNT_BLOCK_PIXELS = 1 << 20
+
+
+def _whole_image_counts(arr: np.ndarray, negatives: str) -> dict[str, int]:
+    """:func:`_bad_counts` over a whole ``(H, W, 3)`` image, a block of rows at a time, so that
+    its masks take a few MB whatever the image's size."""
+    rows = max(1, COUNT_BLOCK_PIXELS // max(arr.shape[1], 1))
+    totals = {"nan": 0, "inf": 0, "negative": 0, "total": 0}
+    for y in range(0, arr.shape[0], rows):
+        block = arr[y:y + rows]
+        lo, hi = float(block.min(initial=0.0)), float(block.max(initial=0.0))
+        if math.isfinite(lo) and math.isfinite(hi) and lo >= 0:
+            continue  # min and max propagate NaN: no NaN, no Inf, nothing negative here
+        _, counts = _bad_counts(block.reshape(-1, 3), negatives)
+        for key in totals:
+            totals[key] += counts[key]
+    return totals
+
+
 def measure_pixels(
     pixels: np.ndarray,
     corners: np.ndarray | str | Sequence[float] | None = None,
@@ -482,8 +513,9 @@ def measure_pixels(
                 raise InvalidValueError(
                     f"--exposure {exposure!r}: expected 'auto' or a number of EV") from None
     if not isinstance(exposure, str):
-        if not math.isfinite(float(exposure)):
-            raise InvalidValueError(f"--exposure {exposure!r} must be finite")
+        if not math.isfinite(float(exposure)) or abs(float(exposure)) > MAX_EXPOSURE_EV:
+            raise InvalidValueError(f"--exposure {exposure!r}: must be a finite number of EV "
+                                    f"within +-{MAX_EXPOSURE_EV:g}")
         mode = "fixed"
     found = None
     checks = None
@@ -530,13 +562,20 @@ def measure_pixels(
     else:
         ev = float(exposure)
     scale = 2.0 ** ev
-    srgb_unclipped = cm.delinearize_srgb(means * scale)
+    with np.errstate(over="ignore", invalid="ignore"):
+        exposed = means * scale
+    if not np.all(np.isfinite(exposed)):
+        beyond = [ref.patch_names[k] for k in range(n) if not np.all(np.isfinite(exposed[k]))]
+        raise InvalidValueError(
+            f"exposure {ev:+.4g} EV takes the patch values beyond the floating-point range "
+            f"(patches {', '.join(beyond)}); give a smaller --exposure")
+    srgb_unclipped = cm.delinearize_srgb(exposed)
     srgb = np.clip(srgb_unclipped, 0.0, 1.0)
     clipped = tuple(ref.patch_names[k] for k in range(n)
                     if np.any(np.abs(srgb_unclipped[k] - srgb[k]) > 1e-12))
     noise = np.array([np.clip(cm.delinearize_srgb(s * scale), 0, 1).std(axis=0)
                       for s in linear_samples])
-    _, whole = _bad_counts(arr.reshape(-1, 3), negatives)
+    whole = _whole_image_counts(arr, negatives)
     rule = ("a pixel with NaN, +-Inf or a negative value in any channel is excluded"
             if negatives == "exclude" else
             "a pixel with NaN or +-Inf in any channel is excluded; negative values are counted "
@@ -574,8 +613,10 @@ def measure_image(
     negatives: str = "keep",
     colourspace: str | Sequence[float] | None = None,
     bayer: str | None = None,
+    max_pixels: int | None = None,
 ) -> ImageMeasurement:
-    """Read an image (:func:`fidelity.chart.image.read_image`) and audit its chart.
+    """Read an image (:func:`fidelity.chart.image.read_image`, refusing more than
+    ``max_pixels`` pixels) and audit its chart.
 
     ``encoding=None`` takes the file's likely encoding: linear for floating-point pixels (EXR,
     HDR, float TIFF), sRGB for integer pixels (PNG, JPEG, 8/16-bit TIFF). ``colourspace=None``
@@ -586,7 +627,7 @@ def measure_image(
     from fidelity.errors import FidelityError
     from fidelity.fileio import file_sha256
 
-    img = read_image(path, layer=layer, bayer=bayer)
+    img = read_image(path, layer=layer, bayer=bayer, max_pixels=max_pixels)
     enc = encoding or img.encoding
     info = img.info(sha256=file_sha256(img.path), encoding=enc)
     try:
@@ -603,6 +644,7 @@ __all__ = [
     "ENCODINGS",
     "BadPixels",
     "PixelCounts",
+    "MAX_EXPOSURE_EV",
     "MIN_VALID_FRACTION",
     "MIN_VALID_PIXELS",
     "NEGATIVE_RULES",

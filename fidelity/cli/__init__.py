@@ -15,12 +15,16 @@ One error boundary (:meth:`LazyGroup.invoke`) turns every failure into an exit c
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
+import errno
 import importlib
 import os
 import sys
 import tempfile
 import traceback
+import warnings
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -67,8 +71,39 @@ COMMANDS: dict[str, tuple[str, str]] = {
 
 
 def error_line(message: str) -> None:
-    """Print ``fidelity: error: <message>`` as one line on stderr."""
-    click.echo("fidelity: error: " + " ".join(str(message).split()), err=True)
+    """Print ``fidelity: error: <message>`` as one line on stderr (undecodable bytes of file
+    names shown as ``\\xNN``)."""
+    from fidelity.fileio import printable
+
+    click.echo("fidelity: error: " + printable(" ".join(str(message).split())), err=True)
+
+
+#: errno values of an :class:`OSError` that is about the machine, not the program: a full
+#: disk, a quota, a read-only or unreadable place, a missing file (exit 2, one line).
+ENVIRONMENT_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES,
+                                errno.EPERM, errno.EFBIG, errno.ENOENT, errno.ENOTDIR,
+                                errno.EISDIR, errno.ENAMETOOLONG, errno.EIO, errno.ELOOP,
+                                errno.EMFILE, errno.ENFILE, errno.ENOMEM})
+
+#: Words of SQLite errors that are about the disk, not the program (exit 2, one line).
+SQLITE_DISK_ERRORS = ("disk is full", "disk i/o error", "readonly database",
+                      "unable to open database file", "not a database",
+                      "database disk image is malformed")
+
+
+def environment_error(exc: BaseException) -> str | None:
+    """The one-line message for an exception caused by the machine rather than by fidelity
+    (:data:`ENVIRONMENT_ERRNOS`, :data:`SQLITE_DISK_ERRORS`), else None."""
+    from fidelity.fileio import display_path
+
+    if isinstance(exc, OSError) and exc.errno in ENVIRONMENT_ERRNOS:
+        reason = exc.strerror or str(exc)
+        return f"{display_path(exc.filename)}: {reason}" if exc.filename else reason
+    if type(exc).__module__ == "sqlite3" and any(w in str(exc).lower()
+                                                 for w in SQLITE_DISK_ERRORS):
+        return (f"results store: {exc} (the SQLite store in the folder the command writes its "
+                "results to; free some space there or give another folder)")
+    return None
 
 
 def internal_error_log() -> Path:
@@ -125,7 +160,8 @@ class LazyGroup(click.Group):
 
     def invoke(self, ctx: click.Context) -> Any:
         try:
-            return super().invoke(ctx)
+            with quiet_warnings(ctx):
+                return super().invoke(ctx)
         except FidelityError as exc:
             error_line(str(exc))
             sys.exit(exc.exit_code)
@@ -142,21 +178,43 @@ class LazyGroup(click.Group):
             os.dup2(devnull, sys.stdout.fileno())
             sys.exit(141)
         except Exception as exc:  # noqa: BLE001 - the boundary: a bug is exit 3, not a traceback
-            text = traceback.format_exc()
+            message = environment_error(exc)
+            if message is not None:  # a full disk, a read-only folder: not a bug
+                error_line(message)
+                sys.exit(2)
+            from fidelity.fileio import printable
+
+            text = printable(traceback.format_exc())
             try:
                 log = internal_error_log()
-                log.write_text(f"fidelity {__version__}: {' '.join(sys.argv)}\n{text}",
-                               encoding="utf-8")
+                log.write_text(f"fidelity {__version__}: {printable(' '.join(sys.argv))}\n"
+                               f"{text}", encoding="utf-8")
                 where = f"the traceback is in {log}"
             except OSError:
                 where = "no log could be written"
             verbose = bool(ctx.obj and ctx.obj.get("verbose"))
             if verbose:
                 click.echo(text, err=True)
-            first = " ".join(str(exc).split())
+            first = printable(" ".join(str(exc).split()))
             click.echo(f"fidelity: internal error: {type(exc).__name__}: {first} (a bug; "
                        f"{where})", err=True)
             sys.exit(EXIT_INTERNAL)
+
+
+@contextlib.contextmanager
+def quiet_warnings(ctx: click.Context) -> Iterator[None]:
+    """Keep Python warnings (numpy's floating-point warnings, libraries' notices) off the
+    screen while a command runs: the results they concern are checked and reported as errors
+    instead. With ``-v`` they are printed at the end, one line each."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("default")
+        try:
+            yield
+        finally:
+            if ctx.obj and ctx.obj.get("verbose"):
+                for w in caught:
+                    click.echo(f"fidelity: warning: {w.category.__name__}: {w.message} "
+                               f"({w.filename}:{w.lineno})", err=True)
 
 
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
@@ -190,4 +248,5 @@ def main(ctx: click.Context, verbose: bool, config_path: str | None, no_config: 
         ctx.default_map = config.default_map(list(COMMANDS))
 
 
-__all__ = ["COMMANDS", "EXIT_INTERNAL", "LazyGroup", "error_line", "internal_error_log", "main"]
+__all__ = ["COMMANDS", "ENVIRONMENT_ERRNOS", "EXIT_INTERNAL", "SQLITE_DISK_ERRORS", "LazyGroup",
+           "environment_error", "error_line", "internal_error_log", "main", "quiet_warnings"]

@@ -10,6 +10,7 @@ from fidelity.cli.gate import (
     PATH,
     bayer_option,
     colourspace_option,
+    max_pixels_option,
     negatives_option,
     report_paths,
 )
@@ -46,11 +47,13 @@ from fidelity.prediction.table import SIZES
                    "standard output).")
 @click.option("--html", "html_path", type=click.Path(path_type=Path),
               help="Write the HTML report here (a folder: IMAGE-NAME.html in it).")
+@max_pixels_option
 @common_options
 def audit(image: Path, corners: str | None, encoding: str | None, exposure: str | None,
           layer: str | None, bayer: str | None, colourspace: str | None, negatives: str,
           reference: str,
-          illuminant: str, size: str, table: str | None, json_path: Path | None, html_path: Path | None) -> None:
+          illuminant: str, size: str, table: str | None, json_path: Path | None, html_path: Path | None,
+          max_pixels: int | None) -> None:
     """Measure the chart in IMAGE: ΔE00 per patch, mean and max, exposure, bad pixels.
 
     \b
@@ -71,7 +74,8 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
                    "--illuminant": illuminant})
     report = audit_image(image, corners, encoding=encoding, exposure=exposure, layer=layer,
                          reference=reference, illuminant=illuminant, size=size, table=table,
-                         negatives=negatives, colourspace=colourspace, bayer=bayer)
+                         negatives=negatives, colourspace=colourspace, bayer=bayer,
+                         max_pixels=max_pixels)
     written = write_chart_report(report, json_path=json_path, html_path=html_path,
                                  protect=(image,))
     if to_stdout:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 import time
 from pathlib import Path
@@ -15,6 +16,7 @@ from fidelity.errors import InvalidValueError
 from fidelity.fileio import write_text_atomic
 from fidelity.prediction.calibration import (
     DEFAULT_TARGETS,
+    MAX_TARGETS,
     calibration_table,
     calibration_table_csv,
     calibration_table_text,
@@ -32,13 +34,20 @@ def parse_number_list(text: str, what: str) -> list[float]:
         try:
             if m:
                 lo, hi = float(m.group(1)), float(m.group(2))
+                if not hi - lo < MAX_TARGETS:  # before np.arange allocates the range
+                    raise InvalidValueError(f"{what}: the range {part} has more than "
+                                            f"{MAX_TARGETS} values")
                 values.extend(float(v) for v in np.arange(lo, hi + 0.5, 1.0) if v <= hi + 1e-9)
             else:
                 values.append(float(part))
         except ValueError:
             raise InvalidValueError(f"{what}: cannot read {part!r} as a number or a range a-b") from None
+        if not all(math.isfinite(v) and v > 0 for v in values):
+            raise InvalidValueError(f"{what}: {part!r} is not a positive finite ΔE")
     if not values:
         raise InvalidValueError(f"{what}: no values given")
+    if len(values) > MAX_TARGETS:
+        raise InvalidValueError(f"{what}: {len(values)} values, at most {MAX_TARGETS}")
     return values
 
 

@@ -63,7 +63,7 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
     fidelity check --camera my-camera.toml
     fidelity check cameras/*.toml --no-report       # each, verdicts only
     """
-    from fidelity.camera.model import DEFAULT_CAMERA
+    from fidelity.camera.model import DEFAULT_CAMERA, camera_files
     from fidelity.fileio import check_outputs
     from fidelity.prediction.verdict import Criterion
 
@@ -84,7 +84,9 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
     check_outputs({f"{k} ({cam})" if many else k: v for cam, html, js in plans
                    for k, v in (("--html", html), ("--json", js))},
                   {"--table": table, "--illuminant": illuminant}
-                  | {f"CAMERA {cam}": cam for cam in subjects})
+                  | {f"CAMERA {cam}": cam for cam in subjects}
+                  | {f"CAMERA {cam} ({f.name})": f for cam in subjects
+                     for f in camera_files(cam)})
     criterion = Criterion("max-delta-e", max_delta_e)
     codes = [_check_one(cam, html, js, to_stdout=to_stdout, many=many, criterion=criterion,
                         illuminant=illuminant, renderer=renderer, reference=reference,

@@ -40,6 +40,13 @@ def dataset(images: str, out: str, transforms: str | None, targets: str | None,
     files = list_images(images)
     names = _transforms(transforms)
     values = _targets(targets)
+    from pathlib import Path
+
+    from fidelity.coco.dataset import subset_name
+    from fidelity.fileio import check_output_folders
+
+    check_output_folders({f"--out ({subset_name(t, e)})": Path(out) / subset_name(t, e)
+                          for t in names for e in values}, {"--images": images})
     bars = show_progress(progress)
     if len(names) == 1 and len(values) == 1:
         res = [write_transformed_dataset(files, out, names[0], values[0], param=param,

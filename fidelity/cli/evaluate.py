@@ -54,7 +54,8 @@ def evaluate(model: str, images: str, annotations: str, limit: int | None, threa
     from fidelity.errors import InputFileError
     from fidelity.fileio import check_outputs
 
-    check_outputs({"--json": json_path}, {"--model": model, "--annotations": annotations})
+    check_outputs({"--json": json_path},
+                  {"--model": model, "--annotations": annotations, "--images": images})
     det = Detector(model, threads=threads, provider=provider)
     coco = load_annotations(annotations)
     ids = sorted(coco.getImgIds())[:limit] if limit else sorted(coco.getImgIds())

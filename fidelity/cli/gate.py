@@ -40,6 +40,12 @@ negatives_option = click.option(
     help="Pixels with a negative channel: keep them in the linear mean (out-of-gamut colours in "
          "a scene-linear render) or exclude them like NaN/Inf.")
 
+#: ``--max-pixels``, shared by ``audit`` and ``gate``.
+max_pixels_option = click.option(
+    "--max-pixels", type=click.IntRange(min=1), default=None,
+    help="Refuse images of more pixels (width x height), checked before decoding; default "
+         "150000000 or $FIDELITY_MAX_PIXELS. An audit needs about 20 bytes per pixel (60 for --bayer).")
+
 
 def make_criterion(max_delta_e: float | None, max_dmap: float | None, cls: str | None,
                    unit: str) -> Criterion:
@@ -118,13 +124,15 @@ def report_paths(images: tuple[Path, ...], path: Path | None, suffix: str, *,
                    "'-': standard output, one subject only).")
 @click.option("--html", "html_path", type=click.Path(path_type=Path),
               help="Write the HTML report (several images: a folder, one report per image).")
+@max_pixels_option
 @common_options
 def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
          max_delta_e: float | None, max_dmap: float | None, cls: str | None, unit: str,
          size: str, table: str | None, encoding: str | None, exposure: str | None,
          layer: str | None, bayer: str | None, colourspace: str | None, negatives: str,
          reference: str, illuminant: str, renderer: str, junit: Path | None,
-         json_path: Path | None, html_path: Path | None) -> None:
+         json_path: Path | None, html_path: Path | None,
+         max_pixels: int | None) -> None:
     """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 error.
 
     \b
@@ -174,8 +182,11 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         for img, jp, hp in zip(subjects, json_paths, html_paths, strict=True):
             outputs[f"--json ({img})" if many else "--json"] = jp
             outputs[f"--html ({img})" if many else "--html"] = hp
+        from fidelity.camera.model import camera_files
+
         check_outputs(outputs, {"--camera": camera, "--table": table, "--reference": reference,
                                 "--illuminant": illuminant}
+                      | {f"--camera ({f.name})": f for f in camera_files(camera or "")}
                       | {(f"IMAGE {img}" if many else "IMAGE"): img for img in images})
     except FidelityError as exc:  # no JUnit file either: it may be the input named
         _error_line(str(exc))
@@ -194,7 +205,8 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         outputs=[GateOutputs(jp, hp) for jp, hp in zip(json_paths, html_paths, strict=True)],
         corners=corners, layer=layer, encoding=encoding, exposure=exposure,
         negatives=negatives, colourspace=colourspace, bayer=bayer, reference=reference,
-        illuminant=illuminant, renderer=renderer, size=size, table=table)
+        illuminant=illuminant, renderer=renderer, size=size, table=table,
+        max_pixels=max_pixels)
     for case in cases:
         if many:
             click.echo(f"{case.subject}:" if case.error is None else f"{case.subject}: error")

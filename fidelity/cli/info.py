@@ -15,7 +15,9 @@ from fidelity.cli.options import common_options, json_option, write_json_output
 def info(probe: bool, json_path: str | None) -> None:
     """Versions, Mitsuba variant, ONNX providers, chart detection, shared data found."""
     from fidelity.environment import describe_environment
+    from fidelity.fileio import check_outputs
 
+    check_outputs({"--json": json_path})
     env = describe_environment(probe=probe)
     click.echo(f"fidelity {env['fidelity']}, Python {env['python']}, {env['platform']}, "
                f"{env['cpus']} CPU(s)")

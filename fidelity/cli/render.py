@@ -84,8 +84,11 @@ def render(camera: str, illuminant: str, renderer: str, spp: int | None,
 
     files = {} if out_dir is None else {f"--out ({name})": out_dir / name for name in
                                         ("chart_linear.exr", "chart_display.png")}
+    from fidelity.camera.model import camera_files
+
     check_outputs({**files, "--json": json_path},
-                  {"--camera": camera, "--illuminant": illuminant})
+                  {"--camera": camera, "--illuminant": illuminant}
+                  | {f"--camera ({f.name})": f for f in camera_files(camera)})
     result = render_chart(camera, illuminant, renderer, spp=spp, reference=reference,
                           spectra=spectra, seed=seed, pixels_per_patch=pixels_per_patch,
                           cat=cat, step=step, variant=variant)

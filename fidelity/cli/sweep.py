@@ -86,7 +86,11 @@ def sweep(models: str | None, images: str | None, annotations: str | None, trans
     from fidelity.coco.sweep import rescore as do_rescore
 
     if status:
-        _print_status(SweepStore(out, create=False))
+        from fidelity.coco.tables import check_store_meta
+
+        store = SweepStore(out, create=False)
+        check_store_meta(store.db, str(store.path))
+        _print_status(store)
         return
     if not annotations:
         raise click.UsageError("--annotations is needed (except with --status)")
@@ -99,6 +103,17 @@ def sweep(models: str | None, images: str | None, annotations: str | None, trans
 
         raise InvalidValueError("--models and --images are needed (except with --rescore)")
     specs = [ModelSpec.parse(m.strip()) for m in models.split(",") if m.strip()]
+    if not specs:
+        from fidelity.errors import InvalidValueError
+
+        raise InvalidValueError(f"--models {models!r}: names no ONNX file")
+    from pathlib import Path
+
+    from fidelity.fileio import check_outputs
+
+    check_outputs({"--out (sweep.sqlite)": Path(out) / SweepStore.store_name},
+                  {"--annotations": annotations, **{f"--models ({s.path})": s.path
+                                                    for s in specs}})
     if limit is not None:
         specs = [s if s.limit else replace(s, limit=limit) for s in specs]
     store = run_sweep(specs, images, annotations, out, _transforms(transforms),

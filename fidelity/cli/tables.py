@@ -66,9 +66,15 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
     from fidelity.fileio import check_outputs
     from fidelity.report.coco import write_tables_report
 
-    check_outputs({"--prediction": prediction, "--json": json_path},
-                  {"--annotations": annotations})
+    report = Path(out or Path(store_dir) / "report")
+    check_outputs({"--prediction": prediction, "--json": json_path}
+                  | ({} if explain else {f"--out ({n})": report / n
+                                         for n in ("report.html", "report.md", "tables.json")}),
+                  {"--annotations": annotations}, stores={"STORE_DIR": store_dir})
     store = SweepStore(store_dir, create=False)
+    from fidelity.coco.tables import check_store_meta
+
+    check_store_meta(store.db, str(store.path))
     coco = None
     caps = parse_image_caps(images, list(store.models()))
     if explain:

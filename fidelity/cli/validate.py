@@ -56,6 +56,7 @@ def validate(cameras: str | None, models: str | None, images: str | None, annota
     from dataclasses import replace
     from pathlib import Path
 
+    from fidelity.camera.model import camera_files
     from fidelity.coco.emulation import EMULATION_METHODS, TRAINING_SETS
     from fidelity.coco.sweep import ModelSpec
     from fidelity.coco.validate import (
@@ -68,9 +69,18 @@ def validate(cameras: str | None, models: str | None, images: str | None, annota
     from fidelity.errors import InvalidValueError, unknown_name
     from fidelity.fileio import check_outputs
 
+    camera_inputs: dict[str, Path | str | None] = {"--cameras": cameras}
+    if cameras is not None and Path(cameras).is_dir():
+        camera_inputs = {f"--cameras ({p.name})": f for p in sorted(Path(cameras).iterdir())
+                         for f in camera_files(p)
+                         if p.suffix.lower() in (".toml", ".yaml", ".yml")}
     check_outputs({f"--out ({n})": Path(out) / n
                    for n in ("validation.md", "validation.html", "validation.json")},
-                  {"--notes": notes, "--annotations": annotations, "--cameras": cameras})
+                  {"--notes": notes, "--annotations": annotations, "--images": images,
+                   "--table": bound_table, **camera_inputs,
+                   **{f"--models ({m})": m.strip().rsplit("@", 1)[0]
+                      for m in (models or "").split(",") if m.strip()}},
+                  stores={"--store": store or default_store()})
     if method not in EMULATION_METHODS:
         raise unknown_name("emulation method", method, EMULATION_METHODS)
     if training not in TRAINING_SETS:
@@ -88,6 +98,8 @@ def validate(cameras: str | None, models: str | None, images: str | None, annota
             raise InvalidValueError("--models, --images and --annotations are needed "
                                     "(except with --report-only)")
         specs = [ModelSpec.parse(m.strip()) for m in models.split(",") if m.strip()]
+        if not specs:
+            raise InvalidValueError(f"--models {models!r}: names no ONNX file")
         if limit:
             specs = [replace(s, limit=min(s.limit or limit, limit)) for s in specs]
         st = run_validation(cases, specs, images, annotations, store_dir, method=method,

@@ -176,6 +176,35 @@ def recognise_layout(input_shapes: list[tuple[str, list[Any]]],
         f"Ultralytics 1x(4+C)x{anchors}, YOLOv10 end-to-end 1xKx6, YOLOX 1x{anchors}x(5+C)")
 
 
+def check_detector(layout: ModelLayout, path: str) -> None:
+    """Refuse a model whose layout fidelity cannot score: COCO scoring maps class index k to
+    the k-th of the 80 COCO categories (:data:`COCO80_CATEGORY_IDS`), so the model must have
+    exactly 80 classes. Raises :class:`InputFileError` naming the model."""
+    if layout.num_classes != len(COCO80_CATEGORY_IDS):
+        raise InputFileError(f"{path}: the model has {layout.num_classes} classes "
+                             f"({layout.kind} layout); COCO scoring needs the "
+                             f"{len(COCO80_CATEGORY_IDS)} COCO classes")
+
+
+def check_raw_output(output: np.ndarray, layout: ModelLayout, path: str) -> None:
+    """Refuse a raw model output that cannot be scored: NaN or +-Inf anywhere (boxes, scores,
+    classes), or, in the end-to-end layout, a class index that is not a whole number in
+    ``[0, classes)``. Raises :class:`InvalidValueError` naming the model, so a broken model
+    stops a run with one clear error instead of failing each cell's scoring."""
+    out = np.asarray(output)
+    if not np.all(np.isfinite(out)):
+        bad = int(np.count_nonzero(~np.isfinite(out)))
+        raise InvalidValueError(f"{path}: the model output has {bad} NaN or infinite values "
+                                f"(shape {list(out.shape)}); it cannot be scored")
+    if layout.kind == "ultralytics-e2e" and out.ndim == 3 and out.shape[-1] == 6:
+        cls = out[0, :, 5]
+        wrong = (cls < 0) | (cls >= layout.num_classes) | (cls != np.round(cls))
+        if np.any(wrong):
+            raise InvalidValueError(
+                f"{path}: the model output has class index {float(cls[wrong][0]):g}, not a "
+                f"whole number in [0, {layout.num_classes}); it cannot be scored")
+
+
 # --------------------------------------------------------------------------------------------
 # Preprocessing
 
@@ -418,6 +447,7 @@ class Detector:
         self.layout = recognise_layout(
             [(i.name, list(i.shape)) for i in self.session.get_inputs()],
             [(o.name, list(o.shape)) for o in self.session.get_outputs()], meta, str(p))
+        check_detector(self.layout, str(p))
         self.conventions = dict(CONVENTIONS[self.layout.kind])
         for k, v in (("conf", conf), ("iou", iou), ("max_det", max_det)):
             if v is not None:
@@ -443,6 +473,7 @@ class Detector:
         """Run the network on an (H, W, 3) uint8 RGB image; raw output and letterbox geometry."""
         x, box = preprocess(rgb, self.layout)
         out = self.session.run([self.layout.output_name], {self.layout.input_name: x})[0]
+        check_raw_output(out, self.layout, str(self.path))
         return out, box
 
     def __call__(self, rgb: np.ndarray) -> np.ndarray:

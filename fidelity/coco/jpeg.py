@@ -85,6 +85,8 @@ def decode_jpeg(data: bytes, source: str = "<bytes>") -> tuple[np.ndarray, JpegS
             arr = np.asarray(im)
     except UnidentifiedImageError as exc:
         raise InputFileError(f"{source}: not an image file (no known image header)") from exc
+    except Image.DecompressionBombError as exc:  # more pixels than Pillow's limit
+        raise InputFileError(f"{source}: refused: {exc}") from exc
     except OSError as exc:  # truncated or corrupt data
         raise InputFileError(f"{source}: cannot decode JPEG: {exc}") from exc
     if arr.ndim == 2:

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import contextlib
 import io
-import json
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -23,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from fidelity import schema as sc
 from fidelity.coco.detectors import COCO80_CATEGORY_IDS
 from fidelity.errors import InputFileError, InvalidValueError
 
@@ -46,19 +46,74 @@ class CocoScore:
                 "stats": list(self.stats)}
 
 
+def _annotation_links(doc: Mapping[str, Any]) -> tuple[str, str] | None:
+    """Ids unique, every annotation's image and category known."""
+    for key in ("images", "categories"):
+        ids = [item["id"] for item in doc[key]]
+        if len(set(ids)) != len(ids):
+            dup = next(i for i in ids if ids.count(i) > 1)
+            return key, f"id {dup} is used twice"
+    images = {im["id"] for im in doc["images"]}
+    categories = {c["id"] for c in doc["categories"]}
+    for k, ann in enumerate(doc["annotations"]):
+        if ann["image_id"] not in images:
+            return f"annotations[{k}].image_id", f"{ann['image_id']} is not an image id"
+        if ann["category_id"] not in categories:
+            return (f"annotations[{k}].category_id",
+                    f"{ann['category_id']} is not a category id of the file")
+    return None
+
+
+def _box(doc: Mapping[str, Any]) -> tuple[str, str] | None:
+    if doc["bbox"][2] < 0 or doc["bbox"][3] < 0:
+        return "bbox", f"width and height must be >= 0, got {doc['bbox']}"
+    return None
+
+
+#: The parts of a COCO instances file that scoring reads (Lin et al. 2014, cocodataset.org
+#: "Data format"): images (id, file_name), box annotations (id, image_id, category_id, bbox
+#: [x, y, w, h] in pixels, area, iscrowd) and categories (id, name); at least one of each,
+#: ids unique, every annotation's image and category present. Other fields pass unread.
+COCO_SCHEMA = sc.Table(fields=(
+    sc.Field("images", sc.ListOf(sc.Table(fields=(
+        sc.Field("id", sc.Integer(), required=True),
+        sc.Field("file_name", sc.String(nonempty=True), required=True),
+        sc.Field("width", sc.Integer(lo=1)),
+        sc.Field("height", sc.Integer(lo=1)),
+    ), extra=True), min_items=1), required=True),
+    sc.Field("annotations", sc.ListOf(sc.Table(fields=(
+        sc.Field("id", sc.Integer(), required=True),
+        sc.Field("image_id", sc.Integer(), required=True),
+        sc.Field("category_id", sc.Integer(), required=True),
+        sc.Field("bbox", sc.ListOf(sc.Number(), min_items=4, max_items=4,
+                                   describe="[x, y, width, height], 4 finite numbers"),
+                 required=True),
+        sc.Field("area", sc.Number(lo=0.0), required=True),
+        sc.Field("iscrowd", sc.Integer(lo=0, hi=1), default=0),
+    ), extra=True, rules=(sc.Check(_box),)), min_items=1), required=True),
+    sc.Field("categories", sc.ListOf(sc.Table(fields=(
+        sc.Field("id", sc.Integer(), required=True),
+        sc.Field("name", sc.String(nonempty=True), required=True),
+    ), extra=True), min_items=1), required=True),
+), extra=True, rules=(sc.Check(_annotation_links),))
+
+
+def check_annotations(data: Any, origin: str) -> None:
+    """Raise :class:`~fidelity.schema.SchemaError` ``<origin>: <field>: <problem>`` unless
+    ``data`` is a COCO instances document scoring can use (:data:`COCO_SCHEMA`)."""
+    sc.validate(data, COCO_SCHEMA, origin)
+
+
 def load_annotations(path: str | os.PathLike[str]) -> Any:
-    """Load a COCO annotation file into a quiet ``pycocotools.coco.COCO`` object."""
+    """Load a COCO annotation file, checked against :data:`COCO_SCHEMA`, into a quiet
+    ``pycocotools.coco.COCO`` object."""
+    from fidelity.fileio import display_path
 
     p = Path(path)
     if not p.is_file():
-        raise InputFileError(f"{p}: annotation file does not exist")
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise InputFileError(f"{p}: not a readable COCO JSON file: {exc}") from exc
-    for key in ("images", "annotations", "categories"):
-        if key not in data:
-            raise InputFileError(f"{p}: COCO annotation file lacks the {key!r} list")
+        raise InputFileError(f"{display_path(p)}: annotation file does not exist")
+    data = sc.load_document(p, fmt="json", what="annotation file")
+    check_annotations(data, display_path(p))
     return coco_from_dict(data)
 
 

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fidelity import schema as sc
 from fidelity.coco.store import RegisteredModel
 from fidelity.errors import InputFileError
 from fidelity.fileio import json_ready, portable_paths
@@ -1265,7 +1266,57 @@ def delta_e_limits(tables: Tables) -> list[CurveLimits]:
     return out
 
 
+# --------------------------------------------------------------------------------------------
+# Store provenance
+
+
+def _names(kind: str) -> sc.Node:
+    return sc.ListOf(sc.String(), describe=f"a list of {kind} names")
+
+
+#: The provenance (``meta`` table) of a sweep store as ``fidelity sweep`` writes it and the
+#: reports read it: each value is JSON; only the keys read are checked, others pass.
+SWEEP_META_SCHEMA = sc.Table(fields=(
+    sc.Field("grid", sc.Table(fields=(
+        sc.Field("transforms", _names("transform")),
+        sc.Field("targets", sc.ListOf(sc.Number(lo=0.0), describe="a list of ΔE values >= 0")),
+        sc.Field("models", _names("model")),
+    ), extra=True)),
+    sc.Field("data", sc.Table(fields=(
+        sc.Field("images", sc.String(nullable=True)),
+        sc.Field("annotations", sc.String(nullable=True)),
+        sc.Field("image_count", sc.Integer(lo=0, nullable=True)),
+    ), extra=True)),
+    sc.Field("scorers", sc.ListOf(sc.OneOf(options=(
+        sc.String(), sc.Table(fields=(sc.Field("scorer", sc.String(), required=True),
+                                      sc.Field("since", sc.String(nullable=True))),
+                              extra=True)), describe="a scorer name or {scorer, since}"))),
+    sc.Field("versions", sc.MapOf(nullable=True)),
+    sc.Field("machine", sc.MapOf(nullable=True)),
+), extra=True)
+
+
+def check_store_meta(db: Any, path: str, schema: sc.Node = SWEEP_META_SCHEMA) -> None:
+    """Check a results store's provenance (its ``meta`` table, read through the open SQLite
+    connection ``db``; nothing is written) against ``schema``: every value JSON, the keys the
+    reports read of the right shape. Raises :class:`~fidelity.schema.SchemaError`
+    ``<store> (provenance): <key>: <problem>``."""
+    import sqlite3
+
+    origin = f"{path} (provenance)"
+    try:
+        rows = list(db.execute("SELECT key, value FROM meta"))
+    except sqlite3.DatabaseError as exc:
+        raise sc.SchemaError(f"{origin}: cannot read: {exc}") from None
+    meta: dict[str, Any] = {}
+    for key, value in rows:
+        meta[str(key)] = sc.parse_text(str(value), "json", f"{origin}: {key}")
+    sc.validate(meta, schema, origin)
+
+
 __all__ = [
+    "SWEEP_META_SCHEMA",
+    "check_store_meta",
     "LIMIT_BUDGETS",
     "PAPER_THRESHOLDS",
     "RARE_BOXES",

@@ -8,8 +8,8 @@ file (or passing its path), not code.
 
 from __future__ import annotations
 
-import json
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -17,11 +17,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fidelity import schema as sc
 from fidelity.colour.colorimetry import lab_to_srgb
-from fidelity.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
+from fidelity.errors import FidelityError, InputFileError, unknown_name
+from fidelity.fileio import display_path
 from fidelity.resources import resource_dir
 
 __all__ = [
+    "CHART_SCHEMA",
     "DEFAULT_CHART",
     "DEFAULT_REFERENCE",
     "SCENE_REFERENCE",
@@ -94,52 +97,75 @@ def available_charts() -> list[str]:
     return sorted(p.stem for p in resource_dir("charts").glob("*.json"))
 
 
-def _chart_from_document(doc: Any, source: str) -> Chart:
-    def bad(msg: str) -> InvalidValueError:
-        return InvalidValueError(f"{source}: {msg}")
-
-    if not isinstance(doc, dict):
-        raise bad("a chart file must hold a JSON object")
-    try:
-        rows = int(doc["layout"]["rows"])
-        cols = int(doc["layout"]["cols"])
-        patches = doc["patches"]
-    except (KeyError, TypeError, ValueError) as exc:
-        raise bad(f"missing or invalid field {exc}; need layout.rows, layout.cols, patches") from None
+def _layout_fits(doc: Mapping[str, Any]) -> tuple[str, str] | None:
+    rows, cols = doc["layout"]["rows"], doc["layout"]["cols"]
     if rows < 1 or cols < 1:
-        raise bad(f"layout {rows} x {cols} is empty")
-    if not isinstance(patches, list) or len(patches) != rows * cols:
-        n = len(patches) if isinstance(patches, list) else "no"
-        raise bad(f"layout {rows} x {cols} needs {rows * cols} patches, found {n}")
-    names: list[str] = []
-    labs: list[list[float]] = []
-    for i, p in enumerate(patches):
-        try:
-            names.append(str(p["name"]))
-            lab = [float(v) for v in p["lab"]]
-        except (KeyError, TypeError, ValueError):
-            raise bad(f"patch {i + 1} needs 'name' and a numeric 'lab' [L, a, b]") from None
-        if len(lab) != 3 or not np.all(np.isfinite(lab)):
-            raise bad(f"patch {i + 1} ({names[-1]!r}): 'lab' must be 3 finite numbers, got {p['lab']}")
-        labs.append(lab)
-    lab_arr = np.array(labs, dtype=np.float64)
+        return "layout", f"layout {rows} x {cols} is empty"
+    if len(doc["patches"]) != rows * cols:
+        return "patches", (f"layout {rows} x {cols} needs {rows * cols} patches, found "
+                           f"{len(doc['patches'])}")
+    return None
+
+
+#: Largest magnitude of a reference CIELAB coordinate (L* of a reflective chart is in
+#: [0, 100]; a* and b* of real colours stay within +-200).
+LAB_LIMIT = 1000.0
+
+
+def _lab_range(doc: Mapping[str, Any]) -> tuple[str, str] | None:
+    for k, p in enumerate(doc["patches"]):
+        if not 0.0 <= p["lab"][0] <= 100.0:
+            return f"patches[{k}].lab", f"L* must be in [0, 100], got {p['lab'][0]}"
+    return None
+
+
+#: Most patches of a chart (a 14 x 10 ColorChecker SG has 140).
+MAX_CHART_PATCHES = 1024
+
+#: A chart file (``charts/README.md``): layout, white point and the patches' reference Lab.
+CHART_SCHEMA = sc.Table(fields=(
+    sc.Field("name", sc.String(nonempty=True)),
+    sc.Field("title", sc.String(), default=""),
+    sc.Field("layout", sc.Table(fields=(
+        sc.Field("rows", sc.Integer(lo=0, hi=MAX_CHART_PATCHES), required=True),
+        sc.Field("cols", sc.Integer(lo=0, hi=MAX_CHART_PATCHES), required=True),
+    ), extra=True), required=True),
+    sc.Field("colour_space", sc.String()),
+    sc.Field("whitepoint", sc.String(choices=("D65",), ignore_case=False,
+                                     describe="D65 (reference Lab must be relative to D65)"),
+             default="D65"),
+    sc.Field("observer", sc.String(), default="CIE 1931 2 degree"),
+    sc.Field("provenance", sc.String(), default=""),
+    sc.Field("patches", sc.ListOf(sc.Table(fields=(
+        sc.Field("name", sc.String(), required=True),
+        sc.Field("lab", sc.ListOf(sc.Number(lo=-LAB_LIMIT, hi=LAB_LIMIT), min_items=3,
+                                  max_items=3, describe="3 finite numbers [L, a, b]"),
+                 required=True),
+    ), extra=True), max_items=MAX_CHART_PATCHES), required=True),
+), extra=True, rules=(sc.Check(_layout_fits), sc.Check(_lab_range)))
+
+#: Largest chart file read, in bytes.
+MAX_CHART_BYTES = 4 << 20
+
+
+def _chart_from_document(doc: Any, source: str) -> Chart:
+    """A :class:`Chart` from a parsed chart file, validated against :data:`CHART_SCHEMA`."""
+    v = sc.validate(doc, CHART_SCHEMA, source)
+    lab_arr = np.array([p["lab"] for p in v["patches"]], dtype=np.float64).reshape(-1, 3)
     lab_arr.setflags(write=False)
-    whitepoint = str(doc.get("whitepoint", "D65"))
-    if whitepoint != "D65":
-        raise bad(f"whitepoint {whitepoint!r} is not supported; reference Lab must be relative to D65")
-    known = {"name", "title", "layout", "colour_space", "whitepoint", "observer", "provenance", "patches"}
+    known = {f.name for f in CHART_SCHEMA.fields}
     return Chart(
-        name=str(doc.get("name", Path(source).stem)),
-        title=str(doc.get("title", "")),
-        patch_names=tuple(names),
+        name=str(v.get("name", Path(source).stem)),
+        title=v["title"],
+        patch_names=tuple(p["name"] for p in v["patches"]),
         lab=lab_arr,
-        rows=rows,
-        cols=cols,
-        whitepoint=whitepoint,
-        observer=str(doc.get("observer", "CIE 1931 2 degree")),
-        provenance=str(doc.get("provenance", "")),
+        rows=v["layout"]["rows"],
+        cols=v["layout"]["cols"],
+        whitepoint=v["whitepoint"],
+        observer=v["observer"],
+        provenance=v["provenance"],
         source=source,
-        extra={k: v for k, v in doc.items() if k not in known},
+        extra={k: val for k, val in v.items() if k not in known},
     )
 
 
@@ -154,13 +180,8 @@ def load_chart(name_or_path: str | Path = DEFAULT_CHART) -> Chart:
         if path.suffix or "/" in text_name:
             raise InputFileError(f"{path}: chart file does not exist")
         raise unknown_name("chart", text_name, available_charts())
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"{path}: cannot read chart file ({exc})") from None
-    except json.JSONDecodeError as exc:
-        raise InputFileError(f"{path}: not valid JSON ({exc})") from None
-    return _chart_from_document(doc, str(path))
+    doc = sc.load_document(path, fmt="json", max_bytes=MAX_CHART_BYTES, what="chart file")
+    return _chart_from_document(doc, display_path(path))
 
 
 #: Reference choices besides a chart name or path: ``scene`` (spectral chart under the illuminant).

@@ -54,8 +54,9 @@ def wavelength_grid(step: float = GRID_STEP_NM) -> FloatArray:
 
     ``step`` must divide 400 nm into whole steps (1, 2, 4, 5, 10, 20 ... nm).
     """
-    n = (GRID_END_NM - GRID_START_NM) / float(step)
-    if not np.isfinite(n) or step <= 0 or abs(n - round(n)) > 1e-9:
+    ok = isinstance(step, int | float) and np.isfinite(step) and step > 0
+    n = (GRID_END_NM - GRID_START_NM) / float(step) if ok else np.nan
+    if not np.isfinite(n) or abs(n - round(n)) > 1e-9:
         raise InvalidValueError(
             f"wavelength step {step!r} nm must be positive and divide {GRID_END_NM - GRID_START_NM:g} nm"
         )

@@ -36,6 +36,7 @@ from fidelity.resources import resource_dir
 
 __all__ = [
     "DEFAULT_TARGETS",
+    "MAX_TARGETS",
     "TOLERANCE",
     "CalibrationEntry",
     "CalibrationTable",
@@ -49,6 +50,8 @@ __all__ = [
 ]
 
 #: SAFE-COLOR targets: ΔE 1, 2, ..., 12, then 15, 18, ..., 45.
+#: Most target ΔE values of one calibration table (each costs a root search per transform).
+MAX_TARGETS = 1000
 DEFAULT_TARGETS: tuple[float, ...] = tuple(float(t) for t in [*range(1, 13), *range(15, 46, 3)])
 #: Largest accepted ``|ΔE - target|`` of a calibrated parameter.
 TOLERANCE = 1e-4
@@ -240,6 +243,8 @@ def calibration_table(
     c = _chart(chart)
     names = list(TRANSFORMS) if transforms is None else list(transforms)
     tlist = [float(t) for t in targets]
+    if len(tlist) > MAX_TARGETS:
+        raise InvalidValueError(f"{len(tlist)} target ΔE values: at most {MAX_TARGETS}")
     for t in tlist:
         if not np.isfinite(t) or t <= 0:
             raise InvalidValueError(f"target ΔE must be a positive finite number, got {t}")

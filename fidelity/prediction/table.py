@@ -37,7 +37,6 @@ when several per-model curves match, the worst (largest) value answers.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -47,7 +46,9 @@ from typing import Any
 
 import numpy as np
 
+from fidelity import schema as sc
 from fidelity.errors import InputFileError, InvalidValueError, unknown_name
+from fidelity.fileio import display_path
 from fidelity.resources import resource_dir
 
 #: The table used when none is named: the project's measured table (the COCO sweep, issue 5).
@@ -175,83 +176,100 @@ class PredictionTable:
         }
 
 
-def _number(value: Any, where: str) -> float:
-    if value is None:
-        return math.nan
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise InvalidValueError(f"{where}: expected a number or null, got {value!r}")
-    v = float(value)
-    if not math.isfinite(v):
-        raise InvalidValueError(f"{where}: {v} is not finite")
-    return v
+def _distinct_delta_e(curve: Mapping[str, Any]) -> tuple[str, str] | None:
+    de = sorted(float(p["delta_e"]) for p in curve["points"])
+    if any(b <= a for a, b in zip(de, de[1:], strict=False)):
+        return "points", "delta_e values must be distinct numbers >= 0"
+    return None
 
 
-def _baseline_percent(value: Any, where: str) -> float | None:
-    """A curve's ``baseline_map`` in percent: a fraction in (0, 1] (pycocotools' scale) is
-    multiplied by 100; larger values are taken as percent already."""
-    if value is None:
+def _some_loss(curve: Mapping[str, Any]) -> tuple[str, str] | None:
+    if any(p.get(col) is not None for p in curve["points"] for col in COLUMNS):
         return None
-    v = _number(value, f"{where}.baseline_map")
-    if not 0 < v <= 100:
-        raise InvalidValueError(f"{where}.baseline_map {v} must be in (0, 1] or (1, 100]")
+    return "points", f"no loss values: every point lacks {', '.join(COLUMNS)}"
+
+
+_LOSS = sc.Number(nullable=True)
+
+#: One point of a curve: the chart ΔE and the loss in each column (``null``: not measured).
+POINT_SCHEMA = sc.Table(fields=(
+    sc.Field("delta_e", sc.Number(lo=0.0), required=True),
+    *(sc.Field(col, _LOSS) for col in COLUMNS),
+    sc.Field("dmap_points_se", sc.Number(lo=0.0, nullable=True)),
+    sc.Field("worst_transform", sc.String(nullable=True)),
+    sc.Field("source", sc.AnyValue()),
+    sc.Field("partial", sc.Boolean(nullable=True)),
+), extra=True)
+
+#: One curve: a detector size (and model), its points and baselines.
+CURVE_SCHEMA = sc.Table(fields=(
+    sc.Field("size", sc.String(choices=SIZES, ignore_case=False), default="any"),
+    sc.Field("model", sc.String(nullable=True)),
+    sc.Field("points", sc.ListOf(POINT_SCHEMA, min_items=1), required=True),
+    sc.Field("baseline_map", sc.Number(lo=0.0, hi=100.0, nullable=True)),
+    sc.Field("baseline_ap", sc.MapOf(sc.Number(lo=0.0, hi=100.0, nullable=True),
+                                     nullable=True, describe="an object (class -> AP)")),
+), extra=True, rules=(sc.Check(_distinct_delta_e), sc.Check(_some_loss)))
+
+#: A prediction table file (CORE_API.md, "Prediction table schema").
+PREDICTION_TABLE_SCHEMA = sc.Table(fields=(
+    sc.Field("name", sc.String(nonempty=True), required=True),
+    sc.Field("kind", sc.String(choices=_KINDS, ignore_case=False), required=True),
+    sc.Field("curves", sc.ListOf(CURVE_SCHEMA, min_items=1), required=True),
+    sc.Field("interpolation", sc.String(choices=("pchip", "linear", "step"), ignore_case=False),
+             default="pchip"),
+    sc.Field("title", sc.String()),
+    sc.Field("provenance", sc.MapOf(), default={}),
+    sc.Field("units", sc.MapOf(), default={}),
+), extra=True)
+
+#: Largest prediction table file read, in bytes.
+MAX_TABLE_BYTES = 16 << 20
+
+
+def _percent(v: float | None) -> float | None:
+    """A baseline in percent: a fraction in (0, 1] (pycocotools' scale) is multiplied by 100;
+    larger values are taken as percent already."""
+    if v is None:
+        return None
     return v * 100.0 if v <= 1.0 else v
 
 
+def _column(points: Sequence[Mapping[str, Any]], key: str) -> np.ndarray:
+    return np.array([math.nan if p.get(key) is None else float(p[key]) for p in points])
+
+
 def parse_prediction_table(obj: dict[str, Any], origin: str = "<table>") -> PredictionTable:
-    """Validate a prediction-table JSON object and build a :class:`PredictionTable`."""
-    if not isinstance(obj, dict):
-        raise InputFileError(f"{origin}: a prediction table must be a JSON object")
-    for key in ("name", "kind", "curves"):
-        if key not in obj:
-            raise InputFileError(f"{origin}: prediction table lacks {key!r}")
-    if obj["kind"] not in _KINDS:
-        raise InputFileError(f"{origin}: kind {obj['kind']!r} is not one of {', '.join(_KINDS)}")
-    interpolation = obj.get("interpolation", "pchip")
-    if interpolation not in INTERPOLATIONS:
-        raise InputFileError(f"{origin}: unknown interpolation {interpolation!r}")
+    """Validate a prediction-table JSON object (:data:`PREDICTION_TABLE_SCHEMA`) and build a
+    :class:`PredictionTable`. Raises :class:`~fidelity.schema.SchemaError` (an
+    :class:`InputFileError`) as ``<origin>: <field>: <problem>``."""
+    v = sc.validate(obj, PREDICTION_TABLE_SCHEMA, origin)
     curves = []
-    for i, c in enumerate(obj["curves"]):
-        where = f"{origin}: curves[{i}]"
-        size = c.get("size", "any")
-        if size not in SIZES:
-            raise InputFileError(f"{where}: size {size!r} is not one of {', '.join(SIZES)}")
-        pts = c.get("points") or []
-        if not pts:
-            raise InputFileError(f"{where}: no points")
-        pts = sorted(pts, key=lambda p: float(p["delta_e"]))
-        de = np.array([_number(p.get("delta_e"), f"{where}.delta_e") for p in pts])
-        if np.any(np.isnan(de)) or np.any(de < 0) or np.any(np.diff(de) <= 0):
-            raise InputFileError(f"{where}: delta_e values must be distinct numbers >= 0")
-        values = {col: np.array([_number(p.get(col), f"{where}.{col}") for p in pts])
-                  for col in COLUMNS}
-        baseline = c.get("baseline_map")
+    for c in v["curves"]:
+        pts = sorted(c["points"], key=lambda p: float(p["delta_e"]))
         ap = c.get("baseline_ap") or {}
-        if not isinstance(ap, dict):
-            raise InputFileError(f"{where}.baseline_ap: expected an object (class -> AP)")
-        baseline_ap = {col: _baseline_percent(ap[cls], f"{where}.baseline_ap.{cls}")
-                       for cls, col in CLASS_COLUMNS.items() if cls != "all"
-                       and ap.get(cls) is not None}
+        baseline_ap = {col: _percent(ap.get(cls)) for cls, col in CLASS_COLUMNS.items()
+                       if cls != "all" and ap.get(cls) is not None}
         curves.append(Curve(
-            size=size,
+            size=c["size"],
             model=c.get("model"),
-            delta_e=de,
-            values=values,
+            delta_e=_column(pts, "delta_e"),
+            values={col: _column(pts, col) for col in COLUMNS},
             sources=tuple(str(p.get("source", "")) for p in pts),
             worst_transforms=tuple(p.get("worst_transform") for p in pts),
-            baseline_map=_baseline_percent(baseline, where),
-            baseline_ap={k: v for k, v in baseline_ap.items() if v is not None},
-            dmap_points_se=(np.array([_number(p.get("dmap_points_se"), f"{where}.dmap_points_se")
-                                      for p in pts])
+            baseline_map=_percent(c.get("baseline_map")),
+            baseline_ap={k: val for k, val in baseline_ap.items() if val is not None},
+            dmap_points_se=(_column(pts, "dmap_points_se")
                             if any("dmap_points_se" in p for p in pts) else None),
         ))
     return PredictionTable(
-        name=str(obj["name"]),
-        title=str(obj.get("title", obj["name"])),
-        kind=str(obj["kind"]),
-        provenance=dict(obj.get("provenance", {})),
-        units=dict(obj.get("units", {})),
+        name=str(v["name"]),
+        title=str(v.get("title", v["name"])),
+        kind=str(v["kind"]),
+        provenance=dict(v["provenance"]),
+        units=dict(v["units"]),
         curves=tuple(curves),
-        interpolation=str(interpolation),
+        interpolation=str(v["interpolation"]),
         raw=obj,
     )
 
@@ -269,12 +287,10 @@ def load_prediction_table(name_or_path: str | os.PathLike[str] | None = None) ->
         if not path.is_file():
             raise unknown_name("prediction table", name, available_tables())
     if not path.is_file():
-        raise InputFileError(f"{path}: prediction table does not exist")
-    try:
-        obj = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputFileError(f"{path}: not a readable JSON prediction table ({exc})") from None
-    table = parse_prediction_table(obj, str(path))
+        raise InputFileError(f"{display_path(path)}: prediction table does not exist")
+    obj = sc.load_document(path, fmt="json", max_bytes=MAX_TABLE_BYTES,
+                           what="prediction table")
+    table = parse_prediction_table(obj, display_path(path))
     return PredictionTable(**{**table.__dict__, "path": path})
 
 
@@ -617,7 +633,8 @@ def predict(
     if not math.isfinite(de) or de < 0:
         raise InvalidValueError(f"ΔE {delta_e!r} must be a finite number >= 0")
     if baseline_map is not None and not (0 < float(baseline_map) <= 100):
-        raise InvalidValueError(f"baseline mAP {baseline_map!r} must be in (0, 100] percent")
+        raise InvalidValueError(f"--baseline-map {baseline_map!r}: the baseline mAP must be in "
+                                "(0, 100] percent")
     tab = table if isinstance(table, PredictionTable) else load_prediction_table(table)
     m = method or tab.interpolation
     if m not in INTERPOLATIONS:
@@ -828,6 +845,7 @@ __all__ = [
     "COLUMNS",
     "DEFAULT_TABLE",
     "INTERPOLATIONS",
+    "PREDICTION_TABLE_SCHEMA",
     "SIZES",
     "ColumnPrediction",
     "Curve",

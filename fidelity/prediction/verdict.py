@@ -49,7 +49,8 @@ class Criterion:
             raise unknown_name("gate criterion", self.kind, CRITERIA)
         if not (isinstance(self.limit, (int, float)) and math.isfinite(self.limit)
                 and self.limit >= 0):
-            raise InvalidValueError(f"limit {self.limit!r} must be a finite number >= 0")
+            raise InvalidValueError(f"--{self.kind} {self.limit!r}: the limit must be a finite "
+                                    "number >= 0")
         if self.cls not in CLASS_COLUMNS:
             raise unknown_name("class", self.cls, CLASS_COLUMNS)
         if self.unit not in UNITS:
