@@ -177,7 +177,8 @@ def check_outputs(outputs: Mapping[str, PathLike | None],
     input:
 
     - an output that is an input file (:func:`os.path.samefile`);
-    - an output that names an existing file inside an input folder (an image of ``--images``);
+    - an output inside an input folder, existing or not (``--images``: so a rerun answers as
+      the first run did);
     - an output directly inside a store folder, existing or not (the store's database, its
       SQLite companion files, or anything else there; a subfolder such as ``STORE/report`` is
       allowed);
@@ -207,6 +208,11 @@ def check_outputs(outputs: Mapping[str, PathLike | None],
                     f"{where}: {out_label} writes into the results store {st_label} "
                     f"({display_path(st)}); refusing to write beside the store's data: give "
                     "another folder (a subfolder such as report/ is fine)")
+        for in_label, folder in folders.items():
+            if _inside(resolved, folder):  # existing or not: the same answer on every rerun
+                raise InputFileError(f"{where}: {out_label} writes inside the input folder "
+                                     f"{in_label} ({display_path(folder)}); refusing to write "
+                                     "among the inputs: give another folder")
         if kind is None:
             continue
         for in_label, src in files.items():
@@ -214,11 +220,6 @@ def check_outputs(outputs: Mapping[str, PathLike | None],
                 raise InputFileError(f"{where}: {out_label} names the input {in_label} "
                                      f"({display_path(src)}); refusing to write over an input "
                                      "file")
-        for in_label, folder in folders.items():
-            if _inside(resolved, folder):
-                raise InputFileError(f"{where}: {out_label} names a file inside the input "
-                                     f"folder {in_label} ({display_path(folder)}); refusing "
-                                     "to write over an input file")
     seen: dict[Path, str] = {}
     for out_label, out in given.items():
         key = out.resolve()

@@ -110,19 +110,20 @@ def test_number_formatter() -> None:
 
 
 def test_check_outputs_protects_input_folders_and_stores(tmp_path: Path) -> None:
-    """An output that names an existing file inside an input folder, or lies directly in a
-    results store's folder, is refused; new files beside inputs and store subfolders are not."""
+    """An output inside an input folder (existing or not: a rerun answers as the first run), or
+    directly in a results store's folder, is refused; store subfolders are not."""
     from fidelity.fileio import check_output_folders
 
     images = tmp_path / "images"
     images.mkdir()
     (images / "one.jpg").write_bytes(b"jpeg")
-    with pytest.raises(InputFileError, match=r"--json names a file inside the input folder "
-                                             r"--images"):
+    with pytest.raises(InputFileError, match=r"--json writes inside the input folder --images"):
         check_outputs({"--json": images / "one.jpg"}, {"--images": images})
     with pytest.raises(InputFileError, match="inside the input folder"):
         check_outputs({"--json": tmp_path / "." / "images" / "one.jpg"}, {"--images": images})
-    check_outputs({"--json": images / "new.json"}, {"--images": images})
+    with pytest.raises(InputFileError, match="inside the input folder"):
+        check_outputs({"--json": images / "new.json"}, {"--images": images})
+    check_outputs({"--json": tmp_path / "new.json"}, {"--images": images})
     store = tmp_path / "store"
     store.mkdir()
     (store / "sweep.sqlite").write_bytes(b"db")
