@@ -74,8 +74,8 @@ def atomic_output(
     tmp_path: Path | None = None
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp" + target.suffix,
-                                   dir=target.parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.{os.getpid()}.",
+                                   suffix=".tmp" + target.suffix, dir=target.parent)
         os.close(fd)
         tmp_path = Path(tmp)
         # mkstemp creates the file private (0600); an output gets the usual 0666 & ~umask.
@@ -92,6 +92,36 @@ def atomic_output(
         if tmp_path is not None:
             with contextlib.suppress(OSError):
                 tmp_path.unlink()
+
+
+def remove_stale_temporaries(folder: str | os.PathLike[str]) -> list[Path]:
+    """Delete the temporary files that :func:`atomic_output` left in ``folder`` when its
+    process was killed (``.<name>.<pid>.<random>.tmp<suffix>`` whose process has ended);
+    those of live processes (another run writing there now) are kept. Returns the removed
+    paths. A resume calls it, so temporary files never survive a resume."""
+    import re
+
+    d = Path(folder)
+    removed: list[Path] = []
+    if not d.is_dir():
+        return removed
+    pattern = re.compile(r"^\..+\.(\d+)\.[^.]+\.tmp[^/]*$")
+    for p in d.iterdir():
+        m = pattern.match(p.name)
+        if not m or not p.is_file():
+            continue
+        pid = int(m.group(1))
+        try:
+            os.kill(pid, 0)
+            continue  # a live process is writing it
+        except ProcessLookupError:
+            pass
+        except PermissionError:
+            continue
+        with contextlib.suppress(OSError):
+            p.unlink()
+            removed.append(p)
+    return removed
 
 
 def write_text_atomic(path: str | os.PathLike[str], text: str) -> Path:

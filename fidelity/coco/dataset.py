@@ -367,7 +367,8 @@ def list_images(folder: str | os.PathLike[str]) -> list[Path]:
     d = Path(folder)
     if not d.is_dir():
         raise InputFileError(f"{d}: image folder does not exist")
-    files = sorted(p for p in d.iterdir() if p.suffix.lower() in (".jpg", ".jpeg"))
+    files = sorted(p for p in d.iterdir()
+                   if p.suffix.lower() in (".jpg", ".jpeg") and not p.name.startswith("."))
     if not files:
         raise InputFileError(f"{d}: no .jpg/.jpeg images in the folder")
     return files
@@ -412,6 +413,9 @@ def write_transformed_dataset(images: Sequence[Path], out_dir: str | os.PathLike
 
             raise UnreachableTargetError(reason or f"{transform} at ΔE {target:g} unreachable")
     sub = out / subset_name(transform, target)
+    from fidelity.fileio import remove_stale_temporaries
+
+    remove_stale_temporaries(sub)  # a killed run's temporary files do not survive the resume
     srcs = {p.resolve() for p in images}
     jobs = []
     for p in images:

@@ -6,17 +6,38 @@ transaction survives ``kill -9`` and a rerun resumes from what is stored. Each s
 settings) so that detections of different model files are never mixed; subclasses add their own
 tables in :attr:`ResultsStore.schema`. Raw detections are kept as zlib-compressed float32
 ``(n, 6)`` arrays (x1, y1, x2, y2, score, class), so re-scoring needs no inference.
+
+Long runs (issue 23):
+
+* **Damaged or foreign stores.** Opening checks the file (an SQLite header, not shorter than
+  the header says), the format version (``PRAGMA user_version``, :attr:`ResultsStore.format`;
+  a store written by a newer fidelity is refused) and every table's columns against the
+  schema; a damaged page met later is reported the same way. Each is an
+  :class:`~fidelity.errors.InputFileError` naming the store, never a traceback.
+* **Inputs.** ``images`` records each image a run used (file name, size, SHA-256 of the bytes)
+  and ``meta["inputs"]`` the annotation file's SHA-256: a resume over other images or other
+  annotations is refused, naming what differs (:meth:`ResultsStore.check_images`,
+  :meth:`ResultsStore.check_annotations`); models are checked by their SHA-256
+  (:meth:`ResultsStore.register_model`).
+* **Leases.** Processes that share a store claim cells in ``leases`` (one owner per cell) and
+  keep their ``owners`` row's heartbeat fresh (:class:`LeaseKeeper`); a cell claimed by a live
+  owner is left to it, a claim whose owner stopped beating for :data:`LEASE_STALE_S` seconds
+  (or whose process is gone, on the same host) is taken over (:meth:`ResultsStore.claim`).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import socket
 import sqlite3
+import threading
 import time
+import uuid
 import zlib
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -24,13 +45,27 @@ import numpy as np
 
 from fidelity.errors import InputFileError, InvalidValueError
 
-__all__ = ["RegisteredModel", "ResultsStore", "pack_detections", "unpack_detections"]
+__all__ = ["LEASE_STALE_S", "Claim", "ImageEntry", "ImageSet", "LeaseKeeper", "Owner",
+           "RegisteredModel", "ResultsStore", "pack_detections", "unpack_detections"]
 
 _COMMON_SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS models (
     model TEXT PRIMARY KEY, file TEXT, sha256 TEXT, limit_images INTEGER, settings TEXT);
+CREATE TABLE IF NOT EXISTS images (
+    image_id INTEGER PRIMARY KEY, file_name TEXT NOT NULL, size INTEGER NOT NULL,
+    sha256 TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS owners (
+    owner TEXT PRIMARY KEY, host TEXT NOT NULL, pid INTEGER NOT NULL, started REAL NOT NULL,
+    heartbeat REAL NOT NULL, info TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS leases (
+    cell TEXT PRIMARY KEY, owner TEXT NOT NULL, claimed REAL NOT NULL);
 """
+
+#: Seconds without a heartbeat after which a claim is taken over by another run.
+LEASE_STALE_S = 60.0
+#: Seconds between two heartbeats of a running owner (:class:`LeaseKeeper`).
+HEARTBEAT_S = 10.0
 
 
 def pack_detections(d: np.ndarray) -> bytes:
@@ -96,28 +131,296 @@ def _enter_wal_mode(db: sqlite3.Connection, path: Path) -> None:
         delay = min(2 * delay, 0.25)
 
 
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+
+
+def check_sqlite_file(path: Path, kind: str) -> None:
+    """Refuse a file that cannot be an intact SQLite database, before SQLite opens it.
+
+    Checks the 16-byte magic string and that the file is not shorter than the page count of
+    its header says (when the header's count is valid: its change counter equals its
+    version-valid-for number; SQLite file format, section 1.3). An empty file is a new store.
+    Raises :class:`InputFileError` naming the file.
+    """
+    try:
+        size = path.stat().st_size
+        with open(path, "rb") as fh:
+            head = fh.read(100)
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise InputFileError(f"{path}: cannot read the {kind} store: {exc}") from exc
+    if size == 0:
+        return
+    if not head.startswith(_SQLITE_MAGIC) or len(head) < 100:
+        raise InputFileError(f"{path}: not a {kind} store (not an SQLite database file)")
+    page_size = int.from_bytes(head[16:18], "big")
+    page_size = 65536 if page_size == 1 else page_size
+    pages = int.from_bytes(head[28:32], "big")
+    valid = head[24:28] == head[92:96]
+    if valid and pages and page_size and size < pages * page_size:
+        raise InputFileError(f"{path}: the {kind} store is truncated ({size} bytes, its header "
+                             f"says {pages * page_size}); restore it or start a new store")
+
+
+class _GuardedCursor(sqlite3.Cursor):
+    """A cursor that reports a damaged database as an input error naming the store."""
+
+    store_path: Path = Path("?")
+    store_kind: str = "results"
+
+    def _damaged(self, exc: sqlite3.DatabaseError) -> InputFileError:
+        return InputFileError(f"{self.store_path}: the {self.store_kind} store is damaged "
+                              f"({exc}); restore it or start a new store")
+
+    def execute(self, sql: str, parameters: Any = (), /) -> _GuardedCursor:
+        try:
+            super().execute(sql, parameters)
+        except sqlite3.DatabaseError as exc:
+            if type(exc) is not sqlite3.DatabaseError:
+                raise
+            raise self._damaged(exc) from exc
+        return self
+
+    def executemany(self, sql: str, seq_of_parameters: Any, /) -> _GuardedCursor:
+        try:
+            super().executemany(sql, seq_of_parameters)
+        except sqlite3.DatabaseError as exc:
+            if type(exc) is not sqlite3.DatabaseError:
+                raise
+            raise self._damaged(exc) from exc
+        return self
+
+    def fetchone(self) -> Any:
+        try:
+            return super().fetchone()
+        except sqlite3.DatabaseError as exc:
+            if type(exc) is not sqlite3.DatabaseError:
+                raise
+            raise self._damaged(exc) from exc
+
+    def fetchall(self) -> list[Any]:
+        try:
+            return super().fetchall()
+        except sqlite3.DatabaseError as exc:
+            if type(exc) is not sqlite3.DatabaseError:
+                raise
+            raise self._damaged(exc) from exc
+
+    def __next__(self) -> Any:
+        try:
+            return super().__next__()
+        except sqlite3.DatabaseError as exc:
+            if type(exc) is not sqlite3.DatabaseError:
+                raise
+            raise self._damaged(exc) from exc
+
+
+class _GuardedConnection(sqlite3.Connection):
+    """A connection whose statements run on :class:`_GuardedCursor` (damage -> input error)."""
+
+    store_path: Path = Path("?")
+    store_kind: str = "results"
+
+    def _cursor(self) -> _GuardedCursor:
+        cur = self.cursor(_GuardedCursor)
+        cur.store_path, cur.store_kind = self.store_path, self.store_kind
+        return cur
+
+    def execute(self, sql: str, parameters: Any = (), /) -> _GuardedCursor:
+        return self._cursor().execute(sql, parameters)
+
+    def executemany(self, sql: str, parameters: Any, /) -> _GuardedCursor:
+        return self._cursor().executemany(sql, parameters)
+
+
+def _connect(path: Path, kind: str) -> _GuardedConnection:
+    db = sqlite3.connect(str(path), timeout=BUSY_TIMEOUT_S, factory=_GuardedConnection)
+    assert isinstance(db, _GuardedConnection)
+    db.store_path, db.store_kind = path, kind
+    return db
+
+
+def _schema_columns(schema: str) -> dict[str, list[str]]:
+    """Table -> column names of a schema script (built in an in-memory database)."""
+    mem = sqlite3.connect(":memory:")
+    try:
+        mem.executescript(schema)
+        tables = [r[0] for r in mem.execute("SELECT name FROM sqlite_master WHERE type='table'")]
+        return {t: [c[1] for c in mem.execute(f"PRAGMA table_info({t})")] for t in tables}
+    finally:
+        mem.close()
+
+
+@dataclass(frozen=True)
+class Owner:
+    """A run that works on a store: a unique ``id``, its ``host``, process id, start time
+    (seconds since the epoch) and what it is (``info``: executor, workers; JSON)."""
+
+    id: str
+    host: str
+    pid: int
+    started: float
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def this_process(cls, info: Mapping[str, Any] | None = None) -> Owner:
+        """A new owner for a run in this process."""
+        return cls(uuid.uuid4().hex, socket.gethostname(), os.getpid(), time.time(),
+                   dict(info or {}))
+
+
+@dataclass(frozen=True)
+class Claim:
+    """A cell claimed by a run: the cell's key (as the store's ``cells`` key, a tuple), its
+    :class:`Owner`, when it was claimed and the owner's last heartbeat (seconds since the
+    epoch)."""
+
+    cell: tuple[Any, ...]
+    owner: Owner
+    claimed: float
+    heartbeat: float
+
+
+def _process_gone(host: str, pid: int) -> bool:
+    """Whether process ``pid`` on ``host`` is known to have ended (only this host can tell)."""
+    if host != socket.gethostname():
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except PermissionError:
+        return False
+    return False
+
+
+def cell_key(cell: Sequence[Any]) -> str:
+    """The text key of a cell in the ``leases`` table (its key columns as a JSON list)."""
+    return json.dumps([float(v) if isinstance(v, (int, float)) and not isinstance(v, bool)
+                       else v for v in cell])
+
+
+@dataclass(frozen=True)
+class ImageEntry:
+    """An input image as a run used it: COCO ``image_id``, ``file_name``, ``size`` in bytes
+    and the SHA-256 of its bytes (no time stamps: a copy of the same file matches)."""
+
+    image_id: int
+    file_name: str
+    size: int
+    sha256: str
+
+
+class ImageSet:
+    """The annotated images of a run: the folder, the COCO annotations and the ids (ascending).
+
+    :meth:`entries` hashes the files (once); :meth:`read` returns an image's bytes and checks
+    them against that hash, so the bytes a detector sees are the bytes the store recorded.
+    """
+
+    def __init__(self, folder: Path, coco: Any, ids: Sequence[int]) -> None:
+        self.folder = Path(folder)
+        self.coco = coco
+        self.ids = list(ids)
+        self._entries: dict[int, ImageEntry] = {}
+
+    def file_name(self, image_id: int) -> str:
+        """The file name of an image id."""
+        return str(self.coco.imgs[image_id]["file_name"])
+
+    def path(self, image_id: int) -> Path:
+        """The file of an image id."""
+        return self.folder / self.file_name(image_id)
+
+    def _read(self, image_id: int) -> bytes:
+        p = self.path(image_id)
+        try:
+            return p.read_bytes()
+        except OSError as exc:
+            raise InputFileError(f"{p}: cannot read image: {exc}") from exc
+
+    def entries(self, ids: Iterable[int] | None = None) -> dict[int, ImageEntry]:
+        """:class:`ImageEntry` of each image id (default: all), hashing files not hashed yet."""
+        out = {}
+        for i in self.ids if ids is None else ids:
+            e = self._entries.get(i)
+            if e is None:
+                data = self._read(i)
+                e = ImageEntry(i, self.file_name(i), len(data), hashlib.sha256(data).hexdigest())
+                self._entries[i] = e
+            out[i] = e
+        return out
+
+    def read(self, image_id: int) -> bytes:
+        """The bytes of an image; an error if they differ from the hashed ones."""
+        data = self._read(image_id)
+        e = self._entries.get(image_id)
+        if e is not None and hashlib.sha256(data).hexdigest() != e.sha256:
+            raise InputFileError(f"{self.path(image_id)}: the image changed during the run")
+        return data
+
+    def fingerprint(self, ids: Iterable[int] | None = None) -> str:
+        """SHA-256 over the sorted ``(file name, size, SHA-256)`` of the images: one value
+        that names the image set (mtime-independent)."""
+        digest = hashlib.sha256()
+        for e in sorted(self.entries(ids).values(), key=lambda e: e.file_name):
+            digest.update(f"{e.file_name}\t{e.size}\t{e.sha256}\n".encode())
+        return digest.hexdigest()
+
+
 class ResultsStore:
-    """Base of the results stores: connection, provenance (``meta``) and registered models.
+    """Base of the results stores: connection, provenance (``meta``), registered models,
+    recorded inputs (``images``) and leases (``owners``, ``leases``).
 
     Subclasses set :attr:`store_name` (file name in the folder), :attr:`kind` (for messages)
     and :attr:`schema` (their own tables), and may override :meth:`_model_conflict`.
+    :attr:`format` is the store format this code writes (``PRAGMA user_version``; 0 is a
+    store from before the number was written, read as format 1).
     """
 
     store_name: ClassVar[str] = "results.sqlite"
     kind: ClassVar[str] = "results"
     schema: ClassVar[str] = ""
+    format: ClassVar[int] = 1
 
     def __init__(self, folder: str | os.PathLike[str], *, create: bool = True) -> None:
         self.folder = Path(folder)
         self.path = self.folder / self.store_name
         if not create and not self.path.is_file():
             raise InputFileError(f"{self.folder}: no {self.kind} store ({self.store_name}) in this folder")
+        if self.folder.exists() and not self.folder.is_dir():
+            raise InputFileError(f"{self.folder}: not a folder (a {self.kind} store is a folder)")
+        check_sqlite_file(self.path, self.kind)
         self.folder.mkdir(parents=True, exist_ok=True)
-        self.db = sqlite3.connect(str(self.path), timeout=BUSY_TIMEOUT_S)
+        self.db = _connect(self.path, self.kind)
         _enter_wal_mode(self.db, self.path)
         self.db.execute("PRAGMA synchronous=FULL")
+        self._check_schema()
         self.db.executescript(_COMMON_SCHEMA + self.schema)
         self.db.commit()
+        version = self.db.execute("PRAGMA user_version").fetchone()[0]
+        if version != self.format:
+            self.db.execute(f"PRAGMA user_version={int(self.format)}")
+            self.db.commit()
+
+    def _check_schema(self) -> None:
+        """Refuse a store of a newer format or whose tables are not this kind's."""
+        version = self.db.execute("PRAGMA user_version").fetchone()[0]
+        if version > self.format:
+            raise InputFileError(f"{self.path}: {self.kind} store of format {version}, written "
+                                 f"by a newer fidelity (this one reads format {self.format} "
+                                 "and older); upgrade fidelity or start a new store")
+        have = {r[0] for r in self.db.execute(
+            "SELECT name FROM sqlite_master WHERE type='table'").fetchall()}
+        for table, columns in _schema_columns(_COMMON_SCHEMA + self.schema).items():
+            if table not in have:
+                continue
+            got = [c[1] for c in self.db.execute(f"PRAGMA table_info({table})").fetchall()]
+            if got != columns:
+                raise InputFileError(
+                    f"{self.path}: not a {self.kind} store of this fidelity (table {table!r} "
+                    f"has columns {', '.join(got)}; expected {', '.join(columns)})")
 
     def close(self) -> None:
         """Close the connection."""
@@ -173,3 +476,170 @@ class ResultsStore:
         """Registered models by name."""
         return {m: RegisteredModel(f, s, lim, json.loads(st))
                 for m, f, s, lim, st in self.db.execute("SELECT * FROM models")}
+
+
+    # recorded inputs --------------------------------------------------------------------------
+    def check_images(self, entries: Mapping[int, ImageEntry], folder: str | os.PathLike[str]
+                     ) -> int:
+        """Refuse images that differ from those recorded for the same ids; record new ones.
+
+        ``entries``: the run's images (:meth:`ImageSet.entries`). An image whose file name,
+        size or SHA-256 differs from the store's record of the same id raises
+        :class:`InputFileError` naming the store, how many differ and the first one (a resume
+        with ``--images`` pointing at another folder with the same file names). Returns how
+        many images were recorded for the first time.
+        """
+        stored = {r[0]: ImageEntry(r[0], r[1], r[2], r[3]) for r in self.db.execute(
+            "SELECT image_id, file_name, size, sha256 FROM images").fetchall()}
+        differ = [(stored[i], e) for i, e in sorted(entries.items())
+                  if i in stored and stored[i] != e]
+        if differ:
+            old, new = differ[0]
+            what = (f"{new.file_name}: {new.size} bytes, sha256 {new.sha256[:12]}, where the "
+                    f"store's was {old.size} bytes, sha256 {old.sha256[:12]}")
+            raise InputFileError(
+                f"{self.path}: the images in {folder} differ from the ones this store was run "
+                f"on ({len(differ)} of {len(entries)}, e.g. {what}); give the original images "
+                "or start a new store")
+        rows = [(e.image_id, e.file_name, e.size, e.sha256) for i, e in entries.items()
+                if i not in stored]
+        if rows:
+            with self.db:
+                self.db.executemany("INSERT OR REPLACE INTO images VALUES (?, ?, ?, ?)", rows)
+        return len(rows)
+
+    def check_annotations(self, path: str | os.PathLike[str], sha256: str, *,
+                          replace: bool = False) -> None:
+        """Refuse annotations other than the store's (``meta["inputs"]["annotations"]``).
+
+        The first run records the file's SHA-256; a later run with another file raises
+        :class:`InputFileError` naming both, unless ``replace`` (a re-scoring of every cell with
+        the new annotations) records the new one.
+        """
+        inputs = dict(self.meta().get("inputs") or {})
+        old = (inputs.get("annotations") or {}).get("sha256")
+        if old is not None and old != sha256 and not replace:
+            raise InputFileError(
+                f"{self.path}: the annotations {path} (sha256 {sha256[:12]}) differ from the "
+                f"ones this store was run on (sha256 {old[:12]}, "
+                f"{(inputs.get('annotations') or {}).get('file')}); give those, re-score with "
+                "the new ones (--rescore) or start a new store")
+        inputs["annotations"] = {"file": Path(path).name, "sha256": sha256}
+        self.set_meta("inputs", inputs)
+
+    # leases -----------------------------------------------------------------------------------
+    def register_owner(self, owner: Owner, now: float | None = None) -> None:
+        """Record a run that will claim cells (its first heartbeat)."""
+        with self.db:
+            self.db.execute("INSERT OR REPLACE INTO owners VALUES (?, ?, ?, ?, ?, ?)",
+                            (owner.id, owner.host, owner.pid, owner.started,
+                             time.time() if now is None else now, json.dumps(owner.info)))
+
+    def beat(self, owner: str, now: float | None = None) -> None:
+        """A heartbeat of ``owner``: its claims stay its own."""
+        with self.db:
+            self.db.execute("UPDATE owners SET heartbeat=? WHERE owner=?",
+                            (time.time() if now is None else now, owner))
+
+    def claim(self, cell: Sequence[Any], owner: str, *, now: float | None = None,
+              stale_s: float = LEASE_STALE_S) -> bool:
+        """Claim a cell for ``owner``; False when another live owner holds it.
+
+        A claim is taken over when its owner's last heartbeat is more than ``stale_s``
+        seconds old, when its owner is not registered, or when its owner's process is known to
+        have ended (same host). One ``BEGIN IMMEDIATE`` transaction: two runs never both get
+        a cell while its owner is live.
+        """
+        t = time.time() if now is None else now
+        key = cell_key(cell)
+        self.db.commit()
+        self.db.execute("BEGIN IMMEDIATE")
+        try:
+            row = self.db.execute(
+                "SELECT l.owner, o.heartbeat, o.host, o.pid FROM leases l LEFT JOIN owners o "
+                "ON o.owner = l.owner WHERE l.cell=?", (key,)).fetchone()
+            free = (row is None or row[0] == owner or row[1] is None
+                    or t - float(row[1]) > stale_s or _process_gone(row[2], int(row[3])))
+            if free:
+                self.db.execute("INSERT OR REPLACE INTO leases VALUES (?, ?, ?)", (key, owner, t))
+            self.db.commit()
+        except BaseException:
+            self.db.rollback()
+            raise
+        return free
+
+    def release(self, cell: Sequence[Any], owner: str) -> None:
+        """Give up ``owner``'s claim on a cell (after finishing it)."""
+        with self.db:
+            self.db.execute("DELETE FROM leases WHERE cell=? AND owner=?",
+                            (cell_key(cell), owner))
+
+    def retire(self, owner: str) -> None:
+        """Remove an owner and its claims (a run that ends)."""
+        with self.db:
+            self.db.execute("DELETE FROM leases WHERE owner=?", (owner,))
+            self.db.execute("DELETE FROM owners WHERE owner=?", (owner,))
+
+    def claims(self) -> list[Claim]:
+        """Every claim with its owner (owners that left no row are shown as unknown)."""
+        rows = self.db.execute(
+            "SELECT l.cell, l.owner, l.claimed, o.host, o.pid, o.started, o.heartbeat, o.info "
+            "FROM leases l LEFT JOIN owners o ON o.owner = l.owner ORDER BY l.claimed"
+        ).fetchall()
+        out = []
+        for cell, owner, claimed, host, pid, started, beat, info in rows:
+            out.append(Claim(tuple(json.loads(cell)),
+                             Owner(owner, host or "?", int(pid or 0), float(started or 0.0),
+                                   json.loads(info) if info else {}),
+                             float(claimed), float(beat if beat is not None else claimed)))
+        return out
+
+
+class LeaseKeeper:
+    """A run's membership in a store's leases: registers the :class:`Owner`, keeps its
+    heartbeat fresh every ``every_s`` seconds on a thread of its own (its own connection),
+    and retires it (claims dropped) on :meth:`close`.
+
+    ``claim``/``release`` go through the run's own store connection (the thread that writes
+    results). A process killed with ``kill -9`` stops beating; its claims are taken over after
+    :data:`LEASE_STALE_S` seconds, or at once on the same host (its process id is gone).
+    """
+
+    def __init__(self, store: ResultsStore, info: Mapping[str, Any] | None = None, *,
+                 every_s: float = HEARTBEAT_S, stale_s: float = LEASE_STALE_S,
+                 clock: Callable[[], float] = time.time) -> None:
+        self.store = store
+        self.owner = Owner.this_process(info)
+        self.stale_s = stale_s
+        self.clock = clock
+        store.register_owner(self.owner, clock())
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._beat, args=(every_s,), daemon=True,
+                                        name="fidelity-heartbeat")
+        self._thread.start()
+
+    def _beat(self, every_s: float) -> None:
+        db = _connect(self.store.path, self.store.kind)
+        try:
+            while not self._stop.wait(every_s):
+                with db:
+                    db.execute("UPDATE owners SET heartbeat=? WHERE owner=?",
+                               (self.clock(), self.owner.id))
+        except sqlite3.Error:  # the store went away; the run itself will report it
+            pass
+        finally:
+            db.close()
+
+    def claim(self, cell: Sequence[Any]) -> bool:
+        """Claim a cell for this run (:meth:`ResultsStore.claim`)."""
+        return self.store.claim(cell, self.owner.id, now=self.clock(), stale_s=self.stale_s)
+
+    def release(self, cell: Sequence[Any]) -> None:
+        """Release a finished cell."""
+        self.store.release(cell, self.owner.id)
+
+    def close(self) -> None:
+        """Stop the heartbeat and retire the owner."""
+        self._stop.set()
+        self._thread.join(timeout=5)
+        self.store.retire(self.owner.id)

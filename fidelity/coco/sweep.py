@@ -44,6 +44,7 @@ from fidelity.errors import InvalidValueError
 from fidelity.fileio import file_sha256
 
 if TYPE_CHECKING:
+    from fidelity.coco.executor import ExecutorOptions
     from fidelity.coco.scoring import FoldScore
 
 #: Default targets of the sweep (issue 5): ΔE 0 is the baseline.
@@ -310,28 +311,52 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
               transforms: Sequence[str], targets: Sequence[float], *, threads: int | None = 1,
               provider: str = "auto", batch_commit: int = 25, order: str = "priority",
               scorer: str = "auto", log: Callable[[str], None] | None = None,
-              progress: bool = False) -> SweepStore:
+              progress: bool = False, executor: ExecutorOptions | None = None,
+              lease_s: float | None = None) -> SweepStore:
     """Run (or resume) every cell of the grid for each model in order; returns the store.
 
     ``scorer``: COCO AP implementation (:data:`fidelity.coco.scoring.COCO_SCORERS` or ``"auto"``);
     it is recorded in the store's ``meta`` and in each cell's log line. ``log`` receives one
     line per finished cell, numbered ``[k/N]`` in the run order (N: every planned cell, k
-    counts finished ones too); ``progress`` adds a progress bar over a cell's images.
+    counts finished ones too); ``progress`` shows one progress bar for the whole plan.
+
+    ``executor``: where the detector runs (:class:`fidelity.coco.executor.ExecutorOptions`;
+    default: this process with ``threads`` and ``provider``); ``batch_commit``: images per
+    work item of the local executor (detections are committed per item). Cells are claimed in
+    the store (:class:`fidelity.coco.store.LeaseKeeper`), so several runs on one store share
+    the cells; ``lease_s`` overrides the seconds after which a silent run's claims are taken
+    over. Inputs are checked against the store's record (images, annotations, models).
     """
     import platform
 
     import onnxruntime
-    from tqdm import tqdm
 
-    from fidelity.coco.dataset import BASELINE, PixelMap, calibrated_param
-    from fidelity.coco.detectors import Detector
-    from fidelity.coco.jpeg import roundtrip_jpeg
+    from fidelity.coco.dataset import BASELINE, calibrated_param
+    from fidelity.coco.executor import (
+        CellWork,
+        ExecutorOptions,
+        ModelFile,
+        PixelTransform,
+        make_executor,
+        run_cells,
+    )
     from fidelity.coco.scoring import evaluate_detections, load_annotated_images, resolve_scorer
+    from fidelity.coco.store import LEASE_STALE_S, ImageSet, LeaseKeeper
+    from fidelity.fileio import remove_stale_temporaries
 
+    opts = executor or ExecutorOptions(threads=threads, provider=provider)
     say = log or (lambda s: print(s, file=sys.stderr, flush=True))
     img_dir, coco, all_ids = load_annotated_images(images, annotations)
     method = resolve_scorer(scorer)
+    files = [ModelFile.from_path(m.path) for m in models]
+    if not files:
+        raise InvalidValueError("no models to sweep (--models is empty)")
     store = SweepStore(out)
+    remove_stale_temporaries(store.folder)
+    image_set = ImageSet(img_dir, coco, all_ids)
+    used = sorted({i for m in models for i in (all_ids[: m.limit] if m.limit else all_ids)})
+    store.check_images(image_set.entries(used), img_dir)
+    store.check_annotations(annotations, file_sha256(annotations))
     import PIL
 
     store.set_meta("versions", {"python": platform.python_version(),
@@ -344,70 +369,81 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
                             "annotations": str(Path(annotations).resolve()),
                             "image_count": len(all_ids)})
     store.record_scorer(method)
-    store.set_meta("machine", {"platform": platform.platform(), "cpus": os.cpu_count(),
-                               "threads": threads})
     store.set_meta("grid", {"transforms": list(transforms), "targets": list(targets),
                             "models": [f"{m.path.name}@{m.limit or len(all_ids)}"
                                        for m in models]})
-    cache = ImageCache(img_dir, coco)
-    params: dict[tuple[str, float], tuple[float | None, str | None]] = {}
-    detectors: dict[int, Any] = {}
     plan = plan_phases(len(models), transforms, targets, order)
-    total, k = sum(len(grid) for _, grid in plan), 0
-    for index, grid in plan:
-        spec = models[index]
-        if index not in detectors:
-            detectors.clear()  # one session at a time
-            detectors[index] = Detector(spec.path, threads=threads, provider=provider)
-            store.register_model(detectors[index].name, spec.path.name,
-                                 file_sha256(spec.path), spec.limit,
-                                 detectors[index].describe())
-        det = detectors[index]
-        ids = all_ids[: spec.limit] if spec.limit else all_ids
-        for transform, target in grid:
-            k += 1
-            finished = store.cell(det.name, transform, target)
+    total = sum(len(grid) for _, grid in plan)
+    params: dict[tuple[str, float], tuple[float | None, str | None]] = {}
+    ex = make_executor(image_set, opts)
+    lease: LeaseKeeper | None = None
+    try:
+        where = ex.describe()
+        store.set_meta("machine", {"platform": platform.platform(), "cpus": os.cpu_count(),
+                                   "threads": opts.threads} | where)
+        for spec, f in zip(models, files, strict=True):
+            store.register_model(f.name, spec.path.name, f.sha256, spec.limit,
+                                 ex.describe_model(f))
+        lease = LeaseKeeper(store, where, stale_s=LEASE_STALE_S if lease_s is None else lease_s)
+        work: list[CellWork] = []
+        number: dict[tuple[Any, ...], int] = {}
+        for k, (index, (transform, target)) in enumerate(
+                ((i, c) for i, grid in plan for c in grid), start=1):
+            f, spec = files[index], models[index]
+            ids = all_ids[: spec.limit] if spec.limit else all_ids
+            key = (f.name, transform, float(target))
+            number[key] = k
+            finished = store.cell(*key)
             if finished and (not finished.done or finished.images == len(ids)):
                 continue
-            # not finished, or finished on another image count (the model's limit was raised:
-            # only the new images are run; or lowered: re-scored on the first N, no inference)
             if transform == BASELINE:
-                param, reason = None, None
+                param: float | None = None
             else:
-                key = (transform, target)
-                if key not in params:
-                    params[key] = calibrated_param(transform, target)
-                param, reason = params[key]
+                if (transform, target) not in params:
+                    params[(transform, target)] = calibrated_param(transform, target)
+                param, reason = params[(transform, target)]
                 if param is None:
-                    store.finish_cell(det.name, transform, target, param=None,
-                                      status="unreachable", reason=reason)
-                    say(f"[{k}/{total}] {det.name} {transform} ΔE {target:g}: unreachable "
+                    store.finish_cell(*key, param=None, status="unreachable", reason=reason)
+                    say(f"[{k}/{total}] {f.name} {transform} ΔE {target:g}: unreachable "
                         f"({reason})")
                     continue
-            t0 = time.perf_counter()
-            pm = PixelMap.build(transform, param)
-            have = store.stored_images(det.name, transform, target)
-            todo = [i for i in ids if i not in have]
-            batch: list[tuple[int, np.ndarray]] = []
-            for i in tqdm(todo, desc=f"[{k}/{total}] {det.name} {transform} ΔE {target:g}",
-                          unit="img", disable=not progress, leave=False):
-                rgb, settings = cache.get(i)
-                seen = roundtrip_jpeg(pm(rgb), settings)
-                batch.append((i, det(seen)))
-                if len(batch) >= batch_commit:
-                    store.add_detections(det.name, transform, target, batch)
-                    batch = []
-            if batch:
-                store.add_detections(det.name, transform, target, batch)
-            dets = store.detections(det.name, transform, target)
-            score = evaluate_detections(coco, dets, ids, method=method)
-            dt = time.perf_counter() - t0
-            store.finish_cell(det.name, transform, target, param=param, status="done",
-                              images=len(ids), score=score, seconds=dt)
-            say(f"{time.strftime('%H:%M:%S')} [{k}/{total}] {det.name} {transform} ΔE {target:g} "
-                f"param={param} mAP={score.map:.4f} AP50={score.map50:.4f} "
-                f"person={score.ap.get('person')} images={len(ids)} new={len(todo)} "
-                f"{dt:.1f}s ({len(todo) / dt if dt else 0:.1f} img/s)")
+            work.append(CellWork(key, f"{f.name} {transform} ΔE {target:g}", f,
+                                 PixelTransform.of(transform, param), tuple(ids)))
+
+        class Cells:
+            """The sweep store as :func:`run_cells` sees it."""
+
+            def done(self, cell: CellWork) -> bool:
+                c = store.cell(*cell.key)
+                return c is not None and (not c.done or c.images == len(cell.image_ids))
+
+            def stored(self, cell: CellWork) -> set[int]:
+                return store.stored_images(*cell.key)
+
+            def add(self, cell: CellWork, rows: Sequence[tuple[int, np.ndarray]]) -> None:
+                store.add_detections(*cell.key, rows)
+
+            def finish(self, cell: CellWork, seconds: float, new: int) -> None:
+                model, transform, target = cell.key
+                ids = list(cell.image_ids)
+                score = evaluate_detections(coco, store.detections(*cell.key), ids,
+                                            method=method)
+                param = cell.transform.param
+                store.finish_cell(model, transform, target, param=param, status="done",
+                                  images=len(ids), score=score, seconds=seconds)
+                say(f"{time.strftime('%H:%M:%S')} [{number[cell.key]}/{total}] {model} "
+                    f"{transform} ΔE {target:g} param={param} mAP={score.map:.4f} "
+                    f"AP50={score.map50:.4f} person={score.ap.get('person')} "
+                    f"images={len(ids)} new={new} {seconds:.1f}s "
+                    f"({new / seconds if seconds else 0:.1f} img/s)")
+
+        chunk = batch_commit if opts.kind == "local" else None
+        run_cells(work, ex, Cells(), lease=lease, chunk_images=chunk, progress=progress,
+                  say=say)
+    finally:
+        if lease is not None:
+            lease.close()
+        ex.close()
     return store
 
 
