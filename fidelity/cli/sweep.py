@@ -9,6 +9,7 @@ import click
 
 from fidelity.cli.evaluate import scorer_option
 from fidelity.cli.options import common_options, progress_option, show_progress
+from fidelity.cli.executor import executor_from, executor_options
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import SweepStore
@@ -60,8 +61,8 @@ def _transforms(text: str) -> list[str]:
               default="priority", show_default=True,
               help="priority: every model's ΔE 1, 3, 6, 12, 24 cells first (the paper's "
                    "thresholds), then the rest; ascending: model by model, ΔE ascending; "
-                   "reverse: priority backwards, to let a second process share the cells "
-                   "of one already running on the same --out.")
+                   "reverse: priority backwards. Runs on one --out share the cells through "
+                   "claims in the store, whatever their order.")
 @scorer_option
 @click.option("--rescore", is_flag=True, help="Only recompute scores from stored detections.")
 @click.option("--status", is_flag=True,
@@ -70,10 +71,12 @@ def _transforms(text: str) -> list[str]:
 @click.option("--limit", type=click.IntRange(min=1), default=None,
               help="At most N images (first N by id) for every model without its own @N.")
 @progress_option
+@executor_options
 @common_options
 def sweep(models: str | None, images: str | None, annotations: str | None, transforms: str,
           targets: str, out: str, threads: int, provider: str, order: str, scorer: str,
-          rescore: bool, status: bool, limit: int | None, progress: bool | None) -> None:
+          rescore: bool, status: bool, limit: int | None, progress: bool | None, executor: str,
+          address: str | None, workers: int | None) -> None:
     """Run (or resume) the COCO sweep; one line per finished cell on stderr ([k/N] cells).
 
     \b
@@ -81,6 +84,7 @@ def sweep(models: str | None, images: str | None, annotations: str | None, trans
       fidelity sweep --models yolox_nano.onnx,yolo11n.onnx@250 --images val2017 \\
           --annotations instances.json --out DIR        (rerun the same line to resume)
       fidelity sweep --rescore --annotations instances.json --out DIR
+      fidelity sweep ... --executor ray --address auto --workers 8   (a Ray cluster)
     """
     from fidelity.coco.sweep import ModelSpec, SweepStore, run_sweep
     from fidelity.coco.sweep import rescore as do_rescore
@@ -116,10 +120,10 @@ def sweep(models: str | None, images: str | None, annotations: str | None, trans
                                                     for s in specs}})
     if limit is not None:
         specs = [s if s.limit else replace(s, limit=limit) for s in specs]
+    options = executor_from(executor, address, workers, threads, provider)
     store = run_sweep(specs, images, annotations, out, _transforms(transforms),
                       _targets(targets), threads=threads, provider=provider, order=order,
-                      scorer=scorer,
-                      progress=show_progress(progress))
+                      scorer=scorer, executor=options, progress=show_progress(progress))
     cells = store.cells()
     done = sum(c.done for c in cells)
     click.echo(f"{done} cells done, {len(cells) - done} unreachable; store {store.path}")
@@ -128,7 +132,10 @@ def sweep(models: str | None, images: str | None, annotations: str | None, trans
 def _print_status(store: SweepStore) -> None:
     from fidelity.coco.sweep import sweep_status
 
+    import time
+
     rows = sweep_status(store)
+    now = time.time()
     click.echo(f"store {store.path}")
     click.echo(f"{'model':<18} {'images':>6} {' done':<9} {'unreachable':>11} {'to do':>5}  "
                "pace and time left")
@@ -137,8 +144,19 @@ def _print_status(store: SweepStore) -> None:
                 f"{r.pace_s / 60:.1f} min per cell, about {r.left_s / 3600:.1f} h left")
         click.echo(f"{r.model:<18} {r.images or '-':>6} {r.done:>4}/{r.planned:<4}"
                    f"{r.unreachable:>11} {r.to_do:>5}  {pace}")
+        claimed = {(str(c.cell[1]), float(c.cell[2])): (c, n)
+                   for c, n in zip(r.claims, r.stored, strict=True)}
         for t, e, n in r.under_way:
-            click.echo(f"{'':<18} under way: {t} ΔE {e:g}, {n} of {r.images} images stored")
+            if (t, e) not in claimed:
+                click.echo(f"{'':<18} under way: {t} ΔE {e:g}, {n} of {r.images} images stored"
+                           " (no run holds it now)")
+        for (t, e), (c, n) in claimed.items():
+            who = c.owner.info
+            what = (f"{who.get('executor', '?')}, {who.get('workers', '?')} workers"
+                    if who else "unknown run")
+            click.echo(f"{'':<18} under way: {t} ΔE {e:g}, {n} of {r.images} images stored; "
+                       f"run on {c.owner.host} pid {c.owner.pid} ({what}), heartbeat "
+                       f"{max(0.0, now - c.heartbeat):.0f} s ago")
     if any(r.to_do for r in rows):
         click.echo("pace: median time between a model's last finished cells (whatever ran "
                    "beside it); rerun the sweep's command line to resume")

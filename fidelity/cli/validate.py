@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from fidelity.cli.options import common_options, progress_option, show_progress
+from fidelity.cli.executor import executor_from, executor_options
 
 
 @click.command()
@@ -40,11 +41,13 @@ from fidelity.cli.options import common_options, progress_option, show_progress
 @click.option("--notes", default=None, type=click.Path(dir_okay=False, exists=True),
               help="Markdown file with a written analysis, included in the report.")
 @progress_option
+@executor_options
 @common_options
 def validate(cameras: str | None, models: str | None, images: str | None, annotations: str | None,
              out: str, limit: int | None, store: str | None, method: str, training: str,
              threads: int, provider: str, bound_table: str | None, report_only: bool,
-             notes: str | None, progress: bool | None) -> None:
+             notes: str | None, progress: bool | None, executor: str, address: str | None,
+             workers: int | None) -> None:
     """Render every camera's chart, predict its ΔmAP, emulate it on COCO and measure ΔmAP.
 
     \b
@@ -100,11 +103,12 @@ def validate(cameras: str | None, models: str | None, images: str | None, annota
         specs = [ModelSpec.parse(m.strip()) for m in models.split(",") if m.strip()]
         if not specs:
             raise InvalidValueError(f"--models {models!r}: names no ONNX file")
+        options = executor_from(executor, address, workers, threads, provider)
         if limit:
             specs = [replace(s, limit=min(s.limit or limit, limit)) for s in specs]
         st = run_validation(cases, specs, images, annotations, store_dir, method=method,
                             training=training, threads=threads, provider=provider,
-                            progress=show_progress(progress))
+                            progress=show_progress(progress), executor=options)
     from fidelity.report.validation import write_validation_report
 
     results = collect_results(st, bound_table=bound_table, suite=cases)

@@ -463,16 +463,23 @@ class RayExecutor:
             kwargs |= {"include_dashboard": False,
                        "num_cpus": (options.workers or os.cpu_count() or 1)
                        * (options.threads or 1)}
+        import logging
+
+        quiet = logging.getLogger("ray._private.authentication_token_setup")
+        level = quiet.level
+        quiet.setLevel(logging.ERROR)  # a notice on every start, not about this run
         try:
             ray.init(address=options.address, **kwargs)
         except (ConnectionError, ValueError, RuntimeError) as exc:
             raise InvalidValueError(f"--address {options.address}: cannot connect to a Ray "
                                     f"cluster: {' '.join(str(exc).split())[:300]}") from exc
+        finally:
+            quiet.setLevel(level)
 
     def describe(self) -> dict[str, Any]:
         """Executor ``ray``, workers, the nodes they run on, threads, provider."""
-        return {"executor": "ray", "workers": self.workers, "nodes": len(self.nodes),
-                "worker_ids": self.nodes, "threads": self.options.threads,
+        return {"executor": "ray", "workers": self.workers,
+                "nodes": len({w.split(":")[0] for w in self.nodes}), "worker_ids": self.nodes, "threads": self.options.threads,
                 "provider": self.provider, "ray": self._ray.__version__}
 
     def _model_ref(self, model: ModelFile) -> Any:
@@ -655,7 +662,8 @@ def run_cells(cells: Sequence[CellWork], executor: Executor, store: CellStore, *
 
     def finish(o: _Open) -> None:
         nonlocal done_cells
-        store.finish(o.cell, time.perf_counter() - o.t0, o.new)
+        if not store.done(o.cell):  # not finished by a run that took the cell over meanwhile
+            store.finish(o.cell, time.perf_counter() - o.t0, o.new)
         if lease is not None:
             lease.release(o.cell.key)
         del open_cells[o.cell.key]

@@ -560,8 +560,9 @@ class ResultsStore:
                 "ON o.owner = l.owner WHERE l.cell=?", (key,)).fetchone()
             free = (row is None or row[0] == owner or row[1] is None
                     or t - float(row[1]) > stale_s or _process_gone(row[2], int(row[3])))
-            if free:
+            if free:  # a claim is a sign of life too
                 self.db.execute("INSERT OR REPLACE INTO leases VALUES (?, ?, ?)", (key, owner, t))
+                self.db.execute("UPDATE owners SET heartbeat=? WHERE owner=?", (t, owner))
             self.db.commit()
         except BaseException:
             self.db.rollback()

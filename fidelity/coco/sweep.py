@@ -32,7 +32,7 @@ import os
 import sqlite3
 import sys
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -44,7 +44,8 @@ from fidelity.errors import InvalidValueError
 from fidelity.fileio import file_sha256
 
 if TYPE_CHECKING:
-    from fidelity.coco.executor import ExecutorOptions
+    from fidelity.coco.executor import ExecutorOptions, RunCounts
+    from fidelity.coco.store import Claim
     from fidelity.coco.scoring import FoldScore
 
 #: Default targets of the sweep (issue 5): ΔE 0 is the baseline.
@@ -438,13 +439,26 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
                     f"({new / seconds if seconds else 0:.1f} img/s)")
 
         chunk = batch_commit if opts.kind == "local" else None
-        run_cells(work, ex, Cells(), lease=lease, chunk_images=chunk, progress=progress,
-                  say=say)
+        counts = run_cells(work, ex, Cells(), lease=lease, chunk_images=chunk,
+                           progress=progress, say=say)
+        if counts.items:
+            say(run_summary(counts, where))
     finally:
         if lease is not None:
             lease.close()
         ex.close()
     return store
+
+
+def run_summary(counts: RunCounts, where: Mapping[str, Any]) -> str:
+    """One line on what a run's executor did (work items, worker processes, nodes, busy time)."""
+    nodes = len({w.split(":")[0] for w in counts.workers})
+    procs = len(counts.workers)
+    return (f"executor {where.get('executor')}: {counts.images} images in {counts.items} work "
+            f"items on {procs} worker process{'' if procs == 1 else 'es'} ({nodes} "
+            f"node{'' if nodes == 1 else 's'}), "
+            f"{counts.worker_seconds:.1f} s of worker time; {counts.cells} cells finished here"
+            + (f", {counts.waited} by another run" if counts.waited else ""))
 
 
 @dataclass(frozen=True)
@@ -471,6 +485,8 @@ class SweepProgress:
     images_to_do: int
     pace_s: float | None
     left_s: float | None
+    claims: tuple[Claim, ...] = ()
+    stored: tuple[int, ...] = ()
 
 
 def sweep_status(store: SweepStore, pace_cells: int = 10) -> list[SweepProgress]:
@@ -489,6 +505,7 @@ def sweep_status(store: SweepStore, pace_cells: int = 10) -> list[SweepProgress]
         (m, t, float(e)): n for m, t, e, n in store.db.execute(
             "SELECT model, transform, target, COUNT(*) FROM detections "
             "GROUP BY model, transform, target")}
+    claims = store.claims()
     cells: dict[str, dict[tuple[str, float], SweepCell]] = {}
     for c in store.cells():
         cells.setdefault(c.model, {})[(c.transform, c.target)] = c
@@ -506,9 +523,12 @@ def sweep_status(store: SweepStore, pace_cells: int = 10) -> list[SweepProgress]
                         for c in done.values() if c.finished)[-pace_cells:]
         gaps = [(b - a).total_seconds() for a, b in zip(stamps, stamps[1:], strict=False)]
         pace = float(np.median(gaps)) if len(gaps) >= 2 else None
+        mine_claims = tuple(c for c in claims if c.cell and c.cell[0] == model)
         out.append(SweepProgress(model, n, len(planned), len(done), len(unreachable),
                                  len(to_do), under_way, images_to_do, pace,
-                                 None if pace is None else pace * len(to_do)))
+                                 None if pace is None else pace * len(to_do), mine_claims,
+                                 tuple(stored.get((model, str(c.cell[1]), float(c.cell[2])), 0)
+                                       for c in mine_claims)))
     return out
 
 
@@ -517,11 +537,13 @@ def _images_of(cell: SweepCell | None) -> int:
 
 
 def rescore(store: SweepStore, annotations: str | os.PathLike[str], method: str = "auto") -> int:
-    """Recompute every done cell's scores from the stored detections (no inference)."""
+    """Recompute every done cell's scores from the stored detections (no inference); the
+    annotations become the store's recorded ones."""
     from fidelity.coco.scoring import evaluate_detections, load_annotations, resolve_scorer
 
     method = resolve_scorer(method)
     coco = load_annotations(annotations)
+    store.check_annotations(annotations, file_sha256(annotations), replace=True)
     ids_all = sorted(coco.getImgIds())
     models = store.models()
     n = 0

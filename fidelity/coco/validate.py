@@ -55,6 +55,7 @@ from fidelity.fileio import file_sha256, json_ready
 
 if TYPE_CHECKING:
     from fidelity.chart.measure import ChartMeasurement
+    from fidelity.coco.executor import ExecutorOptions
     from fidelity.coco.emulation import AccuracySummary, Emulation
     from fidelity.coco.scoring import CocoScore, FoldScore
     from fidelity.coco.sweep import ImageCache, ModelSpec
@@ -759,23 +760,46 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
                    store_dir: str | os.PathLike[str], *, method: str = "root-polynomial",
                    training: str = "colour-science", threads: int | None = 1,
                    provider: str = "auto", batch_commit: int = 25, progress: bool = True,
-                   log: Callable[[str], None] | None = None) -> ValidationStore:
+                   log: Callable[[str], None] | None = None,
+                   executor: ExecutorOptions | None = None,
+                   lease_s: float | None = None) -> ValidationStore:
     """Run (or resume) the validation; ``models`` are :class:`fidelity.coco.sweep.ModelSpec`.
 
     Per model the baseline cell runs first, then cameras in the given order; each camera's
-    emulation table is built once and used for every model.
+    emulation table is built once (by this process) and used for every model. ``executor``:
+    where the detectors run (:class:`fidelity.coco.executor.ExecutorOptions`; default: this
+    process with ``threads`` and ``provider``); the store is written by this process only,
+    its cells claimed so that several runs share them (``lease_s``: see
+    :func:`fidelity.coco.sweep.run_sweep`). Inputs are checked against the store's record.
     """
     import onnxruntime
-    from tqdm import tqdm
 
-    from fidelity.coco.detectors import Detector
-    from fidelity.coco.jpeg import roundtrip_jpeg
+    from fidelity.coco.executor import (
+        IDENTITY,
+        CellWork,
+        ExecutorOptions,
+        ModelFile,
+        PixelTransform,
+        make_executor,
+        run_cells,
+    )
     from fidelity.coco.scoring import evaluate_detections, load_annotated_images, score_folds
-    from fidelity.coco.sweep import ImageCache
+    from fidelity.coco.store import LEASE_STALE_S, ImageSet, LeaseKeeper
+    from fidelity.coco.sweep import ImageCache, run_summary
+    from fidelity.fileio import remove_stale_temporaries
 
+    opts = executor or ExecutorOptions(threads=threads, provider=provider)
     say = log or (lambda s: print(s, file=sys.stderr, flush=True))
     img_dir, coco, all_ids = load_annotated_images(images, annotations)
+    files = [ModelFile.from_path(m.path) for m in models]
+    if not files:
+        raise InvalidValueError("no models to run (--models is empty)")
     store = ValidationStore(store_dir)
+    remove_stale_temporaries(store.folder)
+    image_set = ImageSet(img_dir, coco, all_ids)
+    used = sorted({i for m in models for i in (all_ids[: m.limit] if m.limit else all_ids)})
+    store.check_images(image_set.entries(used), img_dir)
+    store.check_annotations(annotations, file_sha256(annotations))
     from fidelity import __version__
 
     store.set_meta("versions", {"python": platform.python_version(),
@@ -784,8 +808,6 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     store.set_meta("data", {"images": str(Path(img_dir).resolve()),
                             "annotations": str(Path(annotations).resolve()),
                             "image_count": len(all_ids)})
-    store.set_meta("machine", {"platform": platform.platform(), "cpus": os.cpu_count(),
-                               "threads": threads, "provider": provider})
     store.set_meta("settings", {"emulation_method": method, "training": training,
                                 "folds": FOLDS, "size_class": "n",
                                 "jpeg": "original quantisation tables and subsampling "
@@ -793,54 +815,80 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     store.set_meta("cameras", [{"camera": c.name, "file": c.path.name,
                                 "illuminant": c.illuminant} for c in cases])
     cache = ImageCache(img_dir, coco)
-    dets_by_model = []
-    for spec in models:
-        det = Detector(spec.path, threads=threads, provider=provider)
-        ids = all_ids[: spec.limit] if spec.limit else all_ids
-        store.register_model(det.name, spec.path.name, file_sha256(spec.path), spec.limit,
-                             det.describe())
-        dets_by_model.append((det, ids))
-    store.set_meta("models_run", [{"model": d.name, "images": len(i)} for d, i in dets_by_model])
+    ex = make_executor(image_set, opts)
+    lease: LeaseKeeper | None = None
+    try:
+        where = ex.describe()
+        store.set_meta("machine", {"platform": platform.platform(), "cpus": os.cpu_count(),
+                                   "threads": opts.threads, "provider": opts.provider} | where)
+        runs = []
+        for spec, f in zip(models, files, strict=True):
+            ids = all_ids[: spec.limit] if spec.limit else all_ids
+            store.register_model(f.name, spec.path.name, f.sha256, spec.limit,
+                                 ex.describe_model(f))
+            runs.append((f, tuple(ids)))
+        store.set_meta("models_run", [{"model": f.name, "images": len(i)} for f, i in runs])
+        lease = LeaseKeeper(store, where, stale_s=LEASE_STALE_S if lease_s is None else lease_s)
+        built: dict[str, np.ndarray] = {}
 
-    def run_cell(det: Detector, ids: Sequence[int], camera: str,
-                 fn: Callable[[np.ndarray], np.ndarray]) -> None:
-        if store.cell(det.name, camera):
-            return
-        t0 = time.perf_counter()
-        have = store.stored_images(det.name, camera)
-        todo = [i for i in ids if i not in have]
-        batch: list[tuple[int, np.ndarray]] = []
-        for i in tqdm(todo, desc=f"{camera} / {det.name}", unit="img", disable=not progress,
-                      leave=False, mininterval=5):
-            rgb, settings = cache.get(i)
-            batch.append((i, det(roundtrip_jpeg(fn(rgb), settings))))
-            if len(batch) >= batch_commit:
-                store.add_detections(det.name, camera, batch)
-                batch = []
-        if batch:
-            store.add_detections(det.name, camera, batch)
-        dets = store.detections(det.name, camera)
-        score = evaluate_detections(coco, dets, ids)
-        folds = score_folds(coco, dets, ids, FOLDS)
-        dt = time.perf_counter() - t0
-        store.finish_cell(det.name, camera, score, folds, dt)
-        say(f"{time.strftime('%H:%M:%S')} {camera} / {det.name}: mAP={score.map:.4f} "
-            f"person={score.ap.get('person')} images={len(ids)} new={len(todo)} {dt:.1f}s")
+        def table_of(case: CameraCase) -> Callable[[], np.ndarray]:
+            def table() -> np.ndarray:
+                if case.name not in built:
+                    built.clear()  # one camera's table at a time
+                    emu, info = prepare_case(case, store, method, training, cache, all_ids)
+                    acc = info.emulation.accuracy
+                    say(f"{time.strftime('%H:%M:%S')} {case.name} ({case.illuminant}): chart "
+                        f"ΔE {info.chart_delta_e:.2f}, emulation chart ΔE00 mean "
+                        f"{acc.chart_mean_delta_e:.2f} max {acc.chart_max_delta_e:.2f}")
+                    built[case.name] = emu.cube()
+                return built[case.name]
+            return table
 
-    for det, ids in dets_by_model:
-        run_cell(det, ids, BASELINE, lambda a: a)
-    for case in cases:
-        if all(store.cell(d.name, case.name) for d, _ in dets_by_model) and store.case(case.name):
-            continue
-        emu, info = prepare_case(case, store, method, training, cache, all_ids)
-        acc = info.emulation.accuracy
-        say(f"{time.strftime('%H:%M:%S')} {case.name} ({case.illuminant}): chart ΔE "
-            f"{info.chart_delta_e:.2f}, emulation chart ΔE00 mean "
-            f"{acc.chart_mean_delta_e:.2f} max {acc.chart_max_delta_e:.2f}")
-        emu.cube()
-        for det, ids in dets_by_model:
-            run_cell(det, ids, case.name, emu.apply_uint8)
-        del emu
+        work = [CellWork((f.name, BASELINE), f"{BASELINE} / {f.name}", f,
+                         PixelTransform.of(IDENTITY, None), ids) for f, ids in runs]
+        for case in cases:
+            done = all(store.cell(f.name, case.name) for f, _ in runs)
+            if done:
+                if not store.case(case.name):
+                    prepare_case(case, store, method, training, cache, all_ids)
+                continue
+            key = json.dumps([case.name, case.sha256, case.illuminant, method, training])
+            spec = PixelTransform(key, case.name)
+            work += [CellWork((f.name, case.name), f"{case.name} / {f.name}", f, spec, ids,
+                              table_of(case)) for f, ids in runs]
+
+        class Cells:
+            """The validation store as :func:`fidelity.coco.executor.run_cells` sees it."""
+
+            def done(self, cell: CellWork) -> bool:
+                return store.cell(*cell.key) is not None
+
+            def stored(self, cell: CellWork) -> set[int]:
+                return store.stored_images(*cell.key)
+
+            def add(self, cell: CellWork, rows: Sequence[tuple[int, np.ndarray]]) -> None:
+                store.add_detections(*cell.key, list(rows))
+
+            def finish(self, cell: CellWork, seconds: float, new: int) -> None:
+                model, camera = cell.key
+                ids = list(cell.image_ids)
+                dets = store.detections(model, camera)
+                score = evaluate_detections(coco, dets, ids)
+                folds = score_folds(coco, dets, ids, FOLDS)
+                store.finish_cell(model, camera, score, folds, seconds)
+                say(f"{time.strftime('%H:%M:%S')} {camera} / {model}: mAP={score.map:.4f} "
+                    f"person={score.ap.get('person')} images={len(ids)} new={new} "
+                    f"{seconds:.1f}s")
+
+        chunk = batch_commit if opts.kind == "local" else None
+        counts = run_cells(work, ex, Cells(), lease=lease, chunk_images=chunk,
+                           progress=progress, say=say)
+        if counts.items:
+            say(run_summary(counts, where))
+    finally:
+        if lease is not None:
+            lease.close()
+        ex.close()
     return store
 
 

@@ -1,0 +1,241 @@
+"""The sweep on a real Ray cluster (a head and a second node started here) equals the local run.
+
+The cluster is started with ``ray start --head`` and ``ray start --address`` in a private
+temporary folder on free ports, and stopped by ending exactly the processes it started (found
+by that folder in their command lines, and their children): ``ray stop`` would end every Ray
+process on the machine, other users' clusters too.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import secrets
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fidelity.coco.sweep import ModelSpec, SweepStore
+
+REPO = Path(__file__).resolve().parents[1]
+GRID = (["contrast-inc", "contrast-dec"], [0, 3, 6])  # 8-bit tables: quick to build
+IMAGES = 12
+
+
+def _free_ports(n: int) -> list[int]:
+    socks, ports = [], []
+    for _ in range(n):
+        s = socket.socket()
+        s.bind(("127.0.0.1", 0))
+        socks.append(s)
+        ports.append(s.getsockname()[1])
+    for s in socks:
+        s.close()
+    return ports
+
+
+def _processes() -> dict[int, tuple[int, str]]:
+    out = {}
+    for d in os.listdir("/proc"):
+        if not d.isdigit():
+            continue
+        try:
+            cmd = Path(f"/proc/{d}/cmdline").read_bytes().replace(b"\0", b" ").decode(
+                errors="replace")
+            stat = Path(f"/proc/{d}/stat").read_text()
+        except OSError:
+            continue
+        out[int(d)] = (int(stat.rsplit(")", 1)[1].split()[1]), cmd)
+    return out
+
+
+def _cluster_processes(mark: str) -> dict[int, str]:
+    """Processes whose command line names ``mark`` (the cluster's folder), and descendants."""
+    procs = _processes()
+    mine = {pid for pid, (_, cmd) in procs.items() if mark in cmd and pid != os.getpid()}
+    grew = True
+    while grew:
+        grew = False
+        for pid, (ppid, _) in procs.items():
+            if ppid in mine and pid not in mine:
+                mine.add(pid)
+                grew = True
+    return {pid: procs[pid][1] for pid in mine}
+
+
+def _stop_cluster(mark: str) -> None:
+    procs = _cluster_processes(mark)
+    for pid in procs:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGTERM)
+    deadline = time.time() + 5
+    while time.time() < deadline and any(Path(f"/proc/{p}").exists() for p in procs):
+        time.sleep(0.2)
+    for pid in _cluster_processes(mark) | procs:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+
+
+@pytest.fixture(scope="module")
+def cluster() -> Iterator[tuple[str, str]]:
+    """A local Ray cluster of two nodes (1 CPU each); yields (head address, its folder)."""
+    try:
+        import ray  # noqa: F401
+    except ImportError:
+        pytest.skip("Ray cannot be imported here (pip install 'camera-fidelity[ray]')")
+    if not Path("/proc").is_dir():
+        pytest.skip("the cluster test finds its processes in /proc (Linux)")
+    folder = tempfile.mkdtemp(prefix="fr-", dir="/tmp")  # short: Ray's socket paths are long
+    p = _free_ports(18)
+    token = Path(folder) / "auth_token"  # the cluster's own token, not ~/.ray's
+    token.write_text(secrets.token_hex(32))
+    env = {"RAY_USAGE_STATS_ENABLED": "0", "RAY_AUTH_MODE": "token",
+           "RAY_AUTH_TOKEN_PATH": str(token)}
+    saved = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)  # for the drivers this test starts too
+    ray_cli = [sys.executable, "-m", "ray.scripts.scripts", "start", "--num-cpus", "1",
+               "--object-store-memory", str(100 * 2**20), "--disable-usage-stats"]
+
+    def node_ports(q: list[int]) -> list[str]:
+        return ["--node-manager-port", str(q[0]), "--object-manager-port", str(q[1]),
+                "--min-worker-port", str(q[2]), "--max-worker-port", str(q[2] + 40),
+                "--dashboard-agent-listen-port", str(q[3]), "--dashboard-agent-grpc-port",
+                str(q[4]), "--metrics-export-port", str(q[5]), "--runtime-env-agent-port",
+                str(q[6])]
+
+    head = f"127.0.0.1:{p[0]}"
+    try:
+        for cmd in (ray_cli + ["--head", "--port", str(p[0]), "--temp-dir", folder,
+                               "--include-dashboard", "false", "--dashboard-port", str(p[1])]
+                    + node_ports(p[2:9]),
+                    ray_cli + ["--address", head] + node_ports(p[9:16])):
+            r = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
+            if r.returncode != 0:
+                pytest.fail(f"ray start failed: {r.stdout[-2000:]} {r.stderr[-2000:]}")
+        yield head, folder
+    finally:
+        _stop_cluster(folder)
+        shutil.rmtree(folder, ignore_errors=True)
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+@pytest.fixture(scope="module")
+def coco(shared: Path) -> tuple[Path, Path, Path]:
+    return (shared / "coco/val2017", shared / "coco/annotations/instances_val2017_subset.json",
+            shared / "models/yolox_nano.onnx")
+
+
+def _sweep_cli(coco: tuple[Path, Path, Path], out: Path, head: str) -> subprocess.Popen[str]:
+    images, ann, model = coco
+    return subprocess.Popen(
+        [sys.executable, "-m", "fidelity", "sweep", "--models", f"{model}@{IMAGES}", "--images",
+         str(images), "--annotations", str(ann), "--transforms", ",".join(GRID[0]),
+         "--targets", ",".join(str(t) for t in GRID[1]), "--out", str(out), "--executor", "ray",
+         "--address", head, "--workers", "2", "--no-progress"],
+        cwd=REPO, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+
+
+def _stored(out: Path) -> int:
+    if not (out / "sweep.sqlite").is_file():
+        return 0
+    s = SweepStore(out)
+    try:
+        return int(s.db.execute("SELECT COUNT(*) FROM detections").fetchone()[0])
+    finally:
+        s.close()
+
+
+def _wait_for(out: Path, n: int, proc: subprocess.Popen[str], timeout: float = 120) -> int:
+    deadline = time.time() + timeout
+    while time.time() < deadline and proc.poll() is None:
+        got = _stored(out)
+        if got >= n:
+            return got
+        time.sleep(0.05)
+    return _stored(out)
+
+
+def _new_images(log: str) -> int:
+    return sum(int(m) for m in re.findall(r" new=(\d+) ", log))
+
+
+def _assert_same(a: SweepStore, b: SweepStore) -> None:
+    cells_a = {(c.model, c.transform, c.target): c for c in a.cells()}
+    cells_b = {(c.model, c.transform, c.target): c for c in b.cells()}
+    assert cells_a.keys() == cells_b.keys() and len(cells_a) == 5
+    for key, c in cells_a.items():
+        d = cells_b[key]
+        assert (c.status, c.param, c.images, c.map, c.map50, c.map75, c.ap) == \
+               (d.status, d.param, d.images, d.map, d.map50, d.map75, d.ap), key
+        x, y = a.detections(*key), b.detections(*key)
+        assert x.keys() == y.keys() and len(x) == IMAGES
+        assert all(np.array_equal(x[i], y[i]) for i in x), key
+
+
+@pytest.mark.shared
+def test_ray_cluster_sweep_equals_local(cluster, coco, tmp_path) -> None:
+    """The CLI on a two-node Ray cluster, 2 workers: one worker killed mid-run (Ray restarts it
+    and retries its chunk), then the driver killed with SIGKILL and rerun; the final store
+    equals a local run's cell by cell (scores and every detection), the rerun computes only
+    what was not stored, and both nodes did work."""
+    from fidelity.coco.sweep import run_sweep
+
+    head, folder = cluster
+    images, ann, model = coco
+    local = run_sweep([ModelSpec(model, IMAGES)], images, ann, tmp_path / "local", *GRID,
+                      log=lambda s: None)
+
+    out = tmp_path / "ray"
+    proc = _sweep_cli(coco, out, head)
+    assert _wait_for(out, 8, proc) >= 8, proc.communicate()[1][-3000:]
+    workers = [pid for pid, cmd in _cluster_processes(folder).items()
+               if cmd.startswith("ray::DetectorWorker")]
+    assert len(workers) == 2, _cluster_processes(folder)
+    os.kill(workers[0], signal.SIGKILL)  # a worker dies mid-run: Ray restarts it, retries
+    stdout, log = proc.communicate(timeout=240)
+    assert proc.returncode == 0, log[-3000:]
+    assert "5 cells done" in stdout
+    assert _new_images(log) == 5 * IMAGES  # every image computed and stored once
+    ran = re.search(r"on (\d+) worker process(?:es)? \((\d+) nodes?\)", log)
+    assert ran and int(ran.group(1)) >= 3 and int(ran.group(2)) == 2, log  # one restarted
+    store = SweepStore(out)
+    _assert_same(local, store)
+    machine = store.meta()["machine"]
+    assert machine["executor"] == "ray" and machine["workers"] == 2 and machine["nodes"] == 2
+
+    # kill -9 of the driver, then a rerun: nothing lost, nothing stored computed again
+    out2 = tmp_path / "ray-killed"
+    proc = _sweep_cli(coco, out2, head)
+    _wait_for(out2, 16, proc)
+    proc.send_signal(signal.SIGKILL)
+    proc.communicate()
+    kept = _stored(out2)
+    assert 0 < kept < 5 * IMAGES, "the kill came too late to test a resume"
+    before = SweepStore(out2)
+    stored_before = {k: before.detections(*k) for k in
+                     [(c.model, c.transform, c.target) for c in local.cells()]}
+    before.close()
+    proc = _sweep_cli(coco, out2, head)
+    stdout, log = proc.communicate(timeout=240)
+    assert proc.returncode == 0, log[-3000:]
+    assert _new_images(log) == 5 * IMAGES - kept
+    again = SweepStore(out2)
+    _assert_same(local, again)
+    for key, dets in stored_before.items():  # what was stored stays as it was
+        after = again.detections(*key)
+        assert all(np.array_equal(after[i], d) for i, d in dets.items())
+    assert again.claims() == []  # the run retired its claims
