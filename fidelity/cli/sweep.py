@@ -130,9 +130,9 @@ def sweep(models: str | None, images: str | None, annotations: str | None, trans
 
 
 def _print_status(store: SweepStore) -> None:
-    from fidelity.coco.sweep import sweep_status
-
     import time
+
+    from fidelity.coco.sweep import sweep_status
 
     rows = sweep_status(store)
     now = time.time()

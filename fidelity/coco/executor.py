@@ -427,11 +427,11 @@ class RayExecutor:
                                     "'camera-fidelity[ray]'") from exc
         self.images = images
         self.options = options
-        self._ray = ray
+        self._ray: Any = ray
         self._started = not ray.is_initialized()
         if self._started:
             self._init(options)
-        resources = ray.cluster_resources()
+        resources: dict[str, float] = self._ray.cluster_resources()
         gpus = int(resources.get("GPU", 0))
         use_gpu = gpus > 0 and options.provider in ("auto", "cuda")
         if options.provider == "cuda" and not gpus:

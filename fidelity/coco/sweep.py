@@ -45,8 +45,8 @@ from fidelity.fileio import file_sha256
 
 if TYPE_CHECKING:
     from fidelity.coco.executor import ExecutorOptions, RunCounts
-    from fidelity.coco.store import Claim
     from fidelity.coco.scoring import FoldScore
+    from fidelity.coco.store import Claim
 
 #: Default targets of the sweep (issue 5): ΔE 0 is the baseline.
 SWEEP_TARGETS: tuple[float, ...] = (0, 1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 18, 21, 24)
@@ -422,7 +422,8 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
                 return store.stored_images(*cell.key)
 
             def add(self, cell: CellWork, rows: Sequence[tuple[int, np.ndarray]]) -> None:
-                store.add_detections(*cell.key, rows)
+                model, transform, target = cell.key
+                store.add_detections(model, transform, target, rows)
 
             def finish(self, cell: CellWork, seconds: float, new: int) -> None:
                 model, transform, target = cell.key

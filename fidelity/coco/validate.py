@@ -55,8 +55,8 @@ from fidelity.fileio import file_sha256, json_ready
 
 if TYPE_CHECKING:
     from fidelity.chart.measure import ChartMeasurement
-    from fidelity.coco.executor import ExecutorOptions
     from fidelity.coco.emulation import AccuracySummary, Emulation
+    from fidelity.coco.executor import ExecutorOptions
     from fidelity.coco.scoring import CocoScore, FoldScore
     from fidelity.coco.sweep import ImageCache, ModelSpec
 
@@ -853,8 +853,8 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
                     prepare_case(case, store, method, training, cache, all_ids)
                 continue
             key = json.dumps([case.name, case.sha256, case.illuminant, method, training])
-            spec = PixelTransform(key, case.name)
-            work += [CellWork((f.name, case.name), f"{case.name} / {f.name}", f, spec, ids,
+            emulated = PixelTransform(key, case.name)
+            work += [CellWork((f.name, case.name), f"{case.name} / {f.name}", f, emulated, ids,
                               table_of(case)) for f, ids in runs]
 
         class Cells:
@@ -867,7 +867,8 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
                 return store.stored_images(*cell.key)
 
             def add(self, cell: CellWork, rows: Sequence[tuple[int, np.ndarray]]) -> None:
-                store.add_detections(*cell.key, list(rows))
+                model, camera = cell.key
+                store.add_detections(model, camera, list(rows))
 
             def finish(self, cell: CellWork, seconds: float, new: int) -> None:
                 model, camera = cell.key
