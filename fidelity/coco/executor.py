@@ -610,8 +610,9 @@ class CellStore(Protocol):
 
 @dataclass
 class RunCounts:
-    """What a driver run did: cells finished by it, cells left to other runs, images computed
-    (detections stored by this run), work items and the workers' seconds on them."""
+    """What a driver run did: cells finished by it, cells finished by other runs while it
+    waited, images computed (detections stored by this run), work items, the workers' seconds
+    on them, the worker processes (``node:pid``) and the run's wall ``seconds``."""
 
     cells: int = 0
     waited: int = 0
@@ -619,6 +620,13 @@ class RunCounts:
     items: int = 0
     worker_seconds: float = 0.0
     workers: set[str] = field(default_factory=set)
+    seconds: float = 0.0
+
+    def to_json(self) -> dict[str, Any]:
+        """The counts as a store's ``meta["last_run"]`` keeps them."""
+        return {"cells": self.cells, "waited": self.waited, "images": self.images,
+                "items": self.items, "worker_seconds": self.worker_seconds,
+                "workers": sorted(self.workers), "seconds": self.seconds}
 
 
 @dataclass
@@ -645,6 +653,7 @@ def run_cells(cells: Sequence[CellWork], executor: Executor, store: CellStore, *
 
     chunk = chunk_images or CHUNK_IMAGES.get(executor.kind, 25)
     counts = RunCounts()
+    t_start = time.perf_counter()
     todo = [c for c in cells if not store.done(c)]
     stored = {c.key: store.stored(c) for c in todo}
     total_images = sum(len(set(c.image_ids) - stored[c.key]) for c in todo)
@@ -748,4 +757,5 @@ def run_cells(cells: Sequence[CellWork], executor: Executor, store: CellStore, *
                 time.sleep(poll_s)
     finally:
         bar.close()
+        counts.seconds = time.perf_counter() - t_start
     return counts

@@ -442,6 +442,7 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
         chunk = batch_commit if opts.kind == "local" else None
         counts = run_cells(work, ex, Cells(), lease=lease, chunk_images=chunk,
                            progress=progress, say=say)
+        store.set_meta("last_run", where | counts.to_json())
         if counts.items:
             say(run_summary(counts, where))
     finally:

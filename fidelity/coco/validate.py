@@ -884,6 +884,7 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
         chunk = batch_commit if opts.kind == "local" else None
         counts = run_cells(work, ex, Cells(), lease=lease, chunk_images=chunk,
                            progress=progress, say=say)
+        store.set_meta("last_run", where | counts.to_json())
         if counts.items:
             say(run_summary(counts, where))
     finally:
