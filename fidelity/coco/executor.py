@@ -12,8 +12,9 @@ and the store format do not depend on the executor.
     at a time, in plan order, when the driver asks for the next result.
 ``ray`` (:class:`RayExecutor`)
     ``workers`` Ray actors (:func:`ray_worker_class`), each a :class:`ChunkRunner` with its own
-    ONNX session and image cache, reserving ``num_cpus = threads`` (or ``num_gpus = 1`` and
-    the CUDA execution provider where the cluster has GPUs). Items go through Ray's
+    ONNX session and image cache, reserving ``num_cpus = threads``; where the cluster has GPUs
+    (and ``provider`` is auto or cuda) each also reserves ``num_gpus = min(1, GPUs / workers)``
+    and runs the CUDA execution provider (default workers: one per GPU). Items go through Ray's
     :class:`ray.util.ActorPool`; an actor that dies is restarted by Ray and its item retried
     (``max_restarts``, ``max_task_retries``), so a killed worker costs only its chunk.
 
@@ -437,9 +438,13 @@ class RayExecutor:
         if options.provider == "cuda" and not gpus:
             raise InvalidValueError("--provider cuda: the Ray cluster has no GPU")
         threads = options.threads or 1
-        per_worker = {"num_gpus": 1, "num_cpus": 1} if use_gpu else {"num_cpus": threads}
         room = gpus if use_gpu else int(resources.get("CPU", 1)) // threads
         self.workers = options.workers or max(1, room)
+        # GPU: one worker per GPU, or several sharing each GPU (fractional num_gpus) so that
+        # one worker's JPEG and transform work overlaps another's inference
+        per_worker: dict[str, float] = (
+            {"num_gpus": min(1.0, gpus / self.workers), "num_cpus": threads} if use_gpu
+            else {"num_cpus": threads})
         self.capacity = IN_FLIGHT_PER_WORKER * self.workers
         cls = ray_worker_class()
         provider = "cuda" if use_gpu else ("cpu" if options.provider == "auto"
