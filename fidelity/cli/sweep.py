@@ -8,8 +8,8 @@ from typing import TYPE_CHECKING
 import click
 
 from fidelity.cli.evaluate import scorer_option
-from fidelity.cli.options import common_options, progress_option, show_progress
 from fidelity.cli.executor import executor_from, executor_options
+from fidelity.cli.options import common_options, progress_option, show_progress
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import SweepStore

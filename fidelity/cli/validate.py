@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import click
 
-from fidelity.cli.options import common_options, progress_option, show_progress
 from fidelity.cli.executor import executor_from, executor_options
+from fidelity.cli.options import common_options, progress_option, show_progress
 
 
 @click.command()
