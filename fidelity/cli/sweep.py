@@ -124,6 +124,11 @@ def sweep(models: str | None, images: str | None, annotations: str | None, trans
     store = run_sweep(specs, images, annotations, out, _transforms(transforms),
                       _targets(targets), threads=threads, provider=provider, order=order,
                       scorer=scorer, executor=options, progress=show_progress(progress))
+    from fidelity.coco.sweep import run_summary
+
+    last = store.meta().get("last_run") or {}
+    if last.get("items"):
+        click.echo(run_summary(last), err=True)
     cells = store.cells()
     done = sum(c.done for c in cells)
     click.echo(f"{done} cells done, {len(cells) - done} unreachable; store {store.path}")

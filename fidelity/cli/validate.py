@@ -109,6 +109,11 @@ def validate(cameras: str | None, models: str | None, images: str | None, annota
         st = run_validation(cases, specs, images, annotations, store_dir, method=method,
                             training=training, threads=threads, provider=provider,
                             progress=show_progress(progress), executor=options)
+        from fidelity.coco.sweep import run_summary
+
+        last = st.meta().get("last_run") or {}
+        if last.get("items"):
+            click.echo(run_summary(last), err=True)
     from fidelity.report.validation import write_validation_report
 
     results = collect_results(st, bound_table=bound_table, suite=cases)

@@ -44,7 +44,7 @@ from fidelity.errors import InvalidValueError
 from fidelity.fileio import file_sha256
 
 if TYPE_CHECKING:
-    from fidelity.coco.executor import ExecutorOptions, RunCounts
+    from fidelity.coco.executor import ExecutorOptions
     from fidelity.coco.scoring import FoldScore
     from fidelity.coco.store import Claim
 
@@ -443,8 +443,6 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
         counts = run_cells(work, ex, Cells(), lease=lease, chunk_images=chunk,
                            progress=progress, say=say)
         store.set_meta("last_run", where | counts.to_json())
-        if counts.items:
-            say(run_summary(counts, where))
     finally:
         if lease is not None:
             lease.close()
@@ -452,15 +450,19 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     return store
 
 
-def run_summary(counts: RunCounts, where: Mapping[str, Any]) -> str:
-    """One line on what a run's executor did (work items, worker processes, nodes, busy time)."""
-    nodes = len({w.split(":")[0] for w in counts.workers})
-    procs = len(counts.workers)
-    return (f"executor {where.get('executor')}: {counts.images} images in {counts.items} work "
-            f"items on {procs} worker process{'' if procs == 1 else 'es'} ({nodes} "
-            f"node{'' if nodes == 1 else 's'}), "
-            f"{counts.worker_seconds:.1f} s of worker time; {counts.cells} cells finished here"
-            + (f", {counts.waited} by another run" if counts.waited else ""))
+def run_summary(last_run: Mapping[str, Any]) -> str:
+    """One line on what a run's executor did (a store's ``meta["last_run"]``): images, work
+    items, worker processes, nodes, the workers' busy time and the wall time."""
+    workers = list(last_run.get("workers") or [])
+    nodes = len({w.split(":")[0] for w in workers})
+    procs = len(workers)
+    waited = last_run.get("waited") or 0
+    return (f"executor {last_run.get('executor')}: {last_run.get('images', 0)} images in "
+            f"{last_run.get('items', 0)} work items on {procs} worker "
+            f"process{'' if procs == 1 else 'es'} ({nodes} node{'' if nodes == 1 else 's'}), "
+            f"{last_run.get('worker_seconds', 0.0):.1f} s of worker time in "
+            f"{last_run.get('seconds', 0.0):.1f} s; {last_run.get('cells', 0)} cells finished "
+            "here" + (f", {waited} by another run" if waited else ""))
 
 
 @dataclass(frozen=True)

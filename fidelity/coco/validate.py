@@ -785,7 +785,7 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     )
     from fidelity.coco.scoring import evaluate_detections, load_annotated_images, score_folds
     from fidelity.coco.store import LEASE_STALE_S, ImageSet, LeaseKeeper
-    from fidelity.coco.sweep import ImageCache, run_summary
+    from fidelity.coco.sweep import ImageCache
     from fidelity.fileio import remove_stale_temporaries
 
     opts = executor or ExecutorOptions(threads=threads, provider=provider)
@@ -885,8 +885,6 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
         counts = run_cells(work, ex, Cells(), lease=lease, chunk_images=chunk,
                            progress=progress, say=say)
         store.set_meta("last_run", where | counts.to_json())
-        if counts.items:
-            say(run_summary(counts, where))
     finally:
         if lease is not None:
             lease.close()
