@@ -416,3 +416,74 @@ def test_kill_9_at_random_moments_then_resume_equals_an_uninterrupted_run(coco, 
         assert np.array_equal(resumed.detections(*c)[i], d)
     assert resumed.claims() == []
     assert not [p for p in (tmp_path / "killed").iterdir() if ".tmp" in p.name]
+
+
+@pytest.mark.shared
+def test_evaluate_resumes_after_kill_9_and_equals_a_direct_run(coco, tmp_path) -> None:
+    """evaluate killed with SIGKILL after some images, then run again: it computes only the
+    rest (the store in the cache kept the others) and its scores equal a direct computation
+    (the detector on each JPEG, pycocotools)."""
+    from fidelity.coco.detectors import Detector
+    from fidelity.coco.jpeg import read_jpeg
+    from fidelity.coco.scoring import evaluate_detections, load_annotations
+
+    images, ann, model = coco
+    n = 60  # the local executor commits every 25 images
+    env = {**os.environ, "FIDELITY_CACHE": str(tmp_path / "cache"), "OMP_NUM_THREADS": "1"}
+    args = [sys.executable, "-m", "fidelity", "evaluate", "--models", str(model), "--images",
+            str(images), "--annotations", str(ann), "--limit", str(n), "--threads", "1",
+            "--no-progress", "--scorer", "pycocotools", "--json", str(tmp_path / "e.json")]
+
+    def stored() -> int:
+        found = list((tmp_path / "cache" / "evaluate").glob("*/evaluation.sqlite"))
+        if not found:
+            return 0
+        with sqlite3.connect(found[0]) as db:
+            try:
+                return int(db.execute("SELECT COUNT(*) FROM detections").fetchone()[0])
+            except sqlite3.OperationalError:
+                return 0
+
+    proc = subprocess.Popen(args, cwd=REPO, env=env, stdout=subprocess.PIPE, text=True)
+    deadline = time.time() + 60
+    while time.time() < deadline and proc.poll() is None and stored() < 1:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGKILL)
+    proc.communicate()
+    kept = stored()
+    assert 0 < kept < n, "the kill came too late to test a resume"
+    r = subprocess.run(args, cwd=REPO, env=env, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert f"{kept} from an earlier run's store" in r.stdout
+    got = json.loads((tmp_path / "e.json").read_text())
+    assert got["computed"] == n - kept
+    gt = load_annotations(ann)
+    ids = sorted(gt.getImgIds())[:n]
+    det = Detector(model, threads=1)
+    direct = evaluate_detections(
+        gt, {i: det(read_jpeg(images / gt.imgs[i]["file_name"])[0]) for i in ids}, ids,
+        method="pycocotools")
+    assert got["map"] == pytest.approx(direct.map, abs=1e-12)
+    assert got["ap"] == pytest.approx(direct.ap, abs=1e-12)
+    assert not [p for p in tmp_path.iterdir() if ".tmp" in p.name]
+
+
+def test_status_names_the_run_that_holds_a_cell(tmp_path) -> None:
+    """sweep --status while a run works: per claimed cell its stored images, the run's host,
+    process, executor and workers, and its last heartbeat."""
+    import socket
+
+    s = SweepStore(tmp_path)
+    s.set_meta("grid", {"transforms": ["hue"], "targets": [0, 3]})
+    s.set_meta("data", {"image_count": 10})
+    s.register_model("m", "m.onnx", "aa" * 32, None, {})
+    owner = Owner("run1", socket.gethostname(), os.getpid(), time.time(),
+                  {"executor": "ray", "workers": 2})
+    s.register_owner(owner)
+    assert s.claim(("m", "hue", 3.0), "run1")
+    s.add_detections("m", "hue", 3, [(i, np.zeros((0, 6), np.float32)) for i in range(4)])
+    r = CliRunner().invoke(main, ["sweep", "--status", "--out", str(tmp_path)])
+    assert r.exit_code == 0, r.output
+    line = next(ln for ln in r.output.splitlines() if "hue ΔE 3" in ln)
+    assert "4 of 10 images stored" in line and f"pid {os.getpid()} (ray, 2 workers)" in line
+    assert "heartbeat 0 s ago" in line or "heartbeat 1 s ago" in line

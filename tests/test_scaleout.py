@@ -9,6 +9,7 @@ process on the machine, other users' clusters too.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import re
 import secrets
@@ -239,3 +240,52 @@ def test_ray_cluster_sweep_equals_local(cluster, coco, tmp_path) -> None:
         after = again.detections(*key)
         assert all(np.array_equal(after[i], d) for i, d in dets.items())
     assert again.claims() == []  # the run retired its claims
+
+
+@pytest.mark.shared
+def test_ray_cluster_evaluate_and_validate_equal_local(cluster, coco, tmp_path) -> None:
+    """evaluate and validate with --executor ray on the two-node cluster give the local
+    scores (and, for validate, the same detections)."""
+    from fidelity.coco.validate import ValidationStore, load_suite
+    from fidelity.resources import resource_dir
+
+    head, _ = cluster
+    images, ann, model = coco
+    base = [sys.executable, "-m", "fidelity", "evaluate", "--models", str(model), "--images",
+            str(images), "--annotations", str(ann), "--limit", "10", "--no-progress"]
+    out = {}
+    for name, extra in (("local", ["--threads", "1"]),
+                        ("ray", ["--executor", "ray", "--address", head, "--workers", "2"])):
+        env = {**os.environ, "FIDELITY_CACHE": str(tmp_path / f"cache-{name}")}
+        r = subprocess.run(base + extra + ["--json", str(tmp_path / f"{name}.json")], cwd=REPO,
+                           env=env, capture_output=True, text=True, timeout=240)
+        assert r.returncode == 0, r.stderr[-3000:]
+        out[name] = json.loads((tmp_path / f"{name}.json").read_text())
+    assert out["ray"]["executor"]["executor"] == "ray"
+    for key in ("map", "map50", "map75", "ap", "detections"):
+        assert out["ray"][key] == out["local"][key], key
+
+    cams = tmp_path / "cameras"
+    cams.mkdir()
+    first = load_suite(resource_dir("cameras"))[0]
+    shutil.copy(first.path, cams / first.path.name)
+    stores = {}
+    for name, extra in (("local", []),
+                        ("ray", ["--executor", "ray", "--address", head, "--workers", "2"])):
+        r = subprocess.run(
+            [sys.executable, "-m", "fidelity", "validate", "--cameras", str(cams), "--models",
+             f"{model}@4", "--images", str(images), "--annotations", str(ann), "--store",
+             str(tmp_path / f"v-{name}"), "--out", str(tmp_path / f"r-{name}"),
+             "--no-progress"] + extra, cwd=REPO, capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr[-3000:]
+        stores[name] = ValidationStore(tmp_path / f"v-{name}", create=False)
+    local, remote = stores["local"], stores["ray"]
+    assert remote.meta()["machine"]["executor"] == "ray"
+    a = {(c.model, c.camera): c for c in local.cells()}
+    b = {(c.model, c.camera): c for c in remote.cells()}
+    assert a.keys() == b.keys() and len(a) == 2
+    for key, c in a.items():
+        assert (c.map, c.map50, c.ap, c.folds) == (b[key].map, b[key].map50, b[key].ap,
+                                                   b[key].folds)
+        x, y = local.detections(*key), remote.detections(*key)
+        assert x.keys() == y.keys() and all(np.array_equal(x[i], y[i]) for i in x)

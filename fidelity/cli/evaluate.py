@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from fidelity.cli.executor import executor_from, executor_options
 from fidelity.cli.options import (
     common_options,
     json_option,
@@ -41,24 +42,29 @@ scorer_option = click.option(
               show_default=True, help="Classes whose AP is printed (all are in --json).")
 @scorer_option
 @progress_option
+@executor_options
 @common_options
 def evaluate(model: str, images: str, annotations: str, limit: int | None, threads: int | None,
              provider: str, json_path: str | None, classes: str, scorer: str,
-             progress: bool | None) -> None:
-    """Run detectors on a COCO image folder and print COCO box AP."""
-    from tqdm import tqdm
+             progress: bool | None, executor: str, address: str | None,
+             workers: int | None) -> None:
+    """Run detectors on a COCO image folder and print COCO box AP.
 
-    from fidelity.coco.detectors import Detector
-    from fidelity.coco.jpeg import read_jpeg
+    Detections are kept per image in a store in the cache ($FIDELITY_CACHE/evaluate), so an
+    interrupted evaluation started again runs only the images it had not finished.
+    """
+    from fidelity.coco.executor import detect_images
     from fidelity.coco.scoring import evaluate_detections, load_annotations, resolve_scorer
+    from fidelity.coco.store import ImageSet
     from fidelity.errors import InputFileError
-    from fidelity.fileio import check_outputs
+    from fidelity.fileio import check_outputs, remove_stale_temporaries
 
     check_outputs({"--json": json_path},
                   {"--model": model, "--annotations": annotations, "--images": images})
-    det = Detector(model, threads=threads, provider=provider)
+    options = executor_from(executor, address, workers, threads, provider)
     coco = load_annotations(annotations)
-    ids = sorted(coco.getImgIds())[:limit] if limit else sorted(coco.getImgIds())
+    all_ids = sorted(coco.getImgIds())
+    ids = all_ids[:limit] if limit else all_ids
     folder = Path(images)
     if not folder.is_dir():
         raise InputFileError(f"{folder}: image folder does not exist")
@@ -66,23 +72,27 @@ def evaluate(model: str, images: str, annotations: str, limit: int | None, threa
     if missing:  # before any inference
         raise InputFileError(f"{folder}: {len(missing)} of the {len(ids)} annotated images "
                              f"to evaluate are missing, e.g. {coco.imgs[missing[0]]['file_name']}")
+    if json_path and json_path != "-":
+        remove_stale_temporaries(Path(json_path).parent)
     t0 = time.perf_counter()
-    dets = {}
-    for i in tqdm(ids, desc=det.name, unit="img", disable=not show_progress(progress)):
-        rgb, _ = read_jpeg(folder / coco.imgs[i]["file_name"])
-        dets[i] = det(rgb)
-    infer_s = time.perf_counter() - t0
+    found = detect_images(model, ImageSet(folder, coco, ids), ids, options,
+                          progress=show_progress(progress))
+    dets = found.detections
     method = resolve_scorer(scorer)
     score = evaluate_detections(coco, dets, ids, method=method)
     seconds = time.perf_counter() - t0
-    info = det.describe()
+    info = found.detector
     conv = info["conventions"]
-    click.echo(f"model      {det.name}  layout {info['layout']}  input {info['input_size']}  "
-               f"providers {','.join(info['providers'])}")
+    click.echo(f"model      {info['model']}  layout {info['layout']}  input "
+               f"{info['input_size']}  providers {','.join(info['providers'])}")
     click.echo(f"settings   conf {conv['conf']}  iou {conv['iou']}  max_det {conv['max_det']}  "
                f"({conv['source']})")
-    click.echo(f"images     {len(ids)}  detections {score.detections}  "
-               f"{len(ids) / infer_s:.1f} img/s inference  {seconds:.1f} s total  (scored by {method})")
+    rate = (f"{found.new / found.seconds:.1f} img/s inference" if found.new and found.seconds
+            else "no inference")
+    earlier = len(ids) - found.new
+    click.echo(f"images     {len(ids)}  detections {score.detections}  {rate}  "
+               f"{seconds:.1f} s total  (scored by {method})"
+               + (f"  {earlier} from an earlier run's store" if earlier else ""))
     click.echo(f"mAP        {score.map:.4f}   (AP@[.50:.95], fraction)")
     click.echo(f"AP50       {score.map50:.4f}")
     for name in [c.strip() for c in classes.split(",") if c.strip()]:
@@ -91,6 +101,7 @@ def evaluate(model: str, images: str, annotations: str, limit: int | None, threa
     if json_path:
         payload = score.to_dict() | {"seconds": seconds, "detector": info,
                                      "annotations": str(annotations), "images_dir": str(images),
-                                     "scorer": method}
+                                     "scorer": method, "executor": found.executor,
+                                     "computed": found.new}
         click.echo(f"wrote {write_json_output(json_path, payload)}")
 

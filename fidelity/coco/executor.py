@@ -449,8 +449,7 @@ class RayExecutor:
         cls = ray_worker_class()
         provider = "cuda" if use_gpu else ("cpu" if options.provider == "auto"
                                            else options.provider)
-        self.actors = [cls.options(**per_worker).remote(options.threads, provider,
-                                                        options.cache_mb)
+        self.actors = [cls.options(**per_worker).remote(threads, provider, options.cache_mb)
                        for _ in range(self.workers)]
         self.pool = ActorPool(self.actors)
         self.nodes = sorted(set(ray.get([a.node.remote() for a in self.actors])))
@@ -764,3 +763,66 @@ def run_cells(cells: Sequence[CellWork], executor: Executor, store: CellStore, *
         bar.close()
         counts.seconds = time.perf_counter() - t_start
     return counts
+
+
+@dataclass(frozen=True)
+class Detections:
+    """What :func:`detect_images` found: detections by image id, the detector's description,
+    the images computed now (``new``; the others came from the store of an earlier run), the
+    seconds the detection took and the executor's provenance."""
+
+    detections: dict[int, np.ndarray]
+    detector: dict[str, Any]
+    new: int
+    seconds: float
+    executor: dict[str, Any]
+    store: Path
+
+
+def detect_images(model: str | os.PathLike[str], images: ImageSet, ids: Sequence[int],
+                  options: ExecutorOptions, *, store_base: str | os.PathLike[str] | None = None,
+                  progress: bool = False) -> Detections:
+    """Run one detector over images as they are (no transform, no re-encoding), resumably.
+
+    Detections are stored per image as they come back, in an
+    :class:`fidelity.coco.store.EvaluationStore` named by the model, provider and image set
+    (:func:`fidelity.coco.store.evaluation_store_dir` under ``store_base``), so a killed run
+    started again computes only the images it had not stored, and a repeated one none.
+    """
+    from fidelity.coco.store import EvaluationStore, evaluation_store_dir
+    from fidelity.fileio import remove_stale_temporaries
+
+    m = ModelFile.from_path(model)
+    folder = evaluation_store_dir(m.sha256, options.provider, images.fingerprint(), store_base)
+    store = EvaluationStore(folder)
+    remove_stale_temporaries(folder)
+    ex = make_executor(images, options)
+    try:
+        where = ex.describe()
+        info = ex.describe_model(m)
+        store.register_model(m.name, m.path.name, m.sha256, None, info)
+
+        class Cells:
+            """The evaluation store as :func:`run_cells` sees it."""
+
+            def done(self, cell: CellWork) -> bool:
+                return False
+
+            def stored(self, cell: CellWork) -> set[int]:
+                return store.stored_images()
+
+            def add(self, cell: CellWork, rows: Sequence[tuple[int, np.ndarray]]) -> None:
+                store.add_detections(rows)
+
+            def finish(self, cell: CellWork, seconds: float, new: int) -> None:
+                pass
+
+        cell = CellWork(("evaluate",), m.name, m, PixelTransform.of(IDENTITY, None, False),
+                        tuple(ids))
+        counts = run_cells([cell], ex, Cells(), progress=progress)
+        store.set_meta("last_run", where | counts.to_json())
+        dets = store.detections(ids)
+    finally:
+        ex.close()
+        store.close()
+    return Detections(dets, info, counts.images, counts.seconds, where, folder)

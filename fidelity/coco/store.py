@@ -45,8 +45,9 @@ import numpy as np
 
 from fidelity.errors import InputFileError, InvalidValueError
 
-__all__ = ["LEASE_STALE_S", "Claim", "ImageEntry", "ImageSet", "LeaseKeeper", "Owner",
-           "RegisteredModel", "ResultsStore", "pack_detections", "unpack_detections"]
+__all__ = ["LEASE_STALE_S", "Claim", "EvaluationStore", "ImageEntry", "ImageSet",
+           "LeaseKeeper", "Owner", "RegisteredModel", "ResultsStore", "evaluation_store_dir",
+           "pack_detections", "unpack_detections"]
 
 _COMMON_SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -644,3 +645,48 @@ class LeaseKeeper:
         self._stop.set()
         self._thread.join(timeout=5)
         self.store.retire(self.owner.id)
+
+
+class EvaluationStore(ResultsStore):
+    """The per-image detections of one ``fidelity evaluate`` (one model, one image set), so
+    that a killed evaluation resumes where it stopped and a repeated one scores at once.
+
+    ``detections(image_id, n, dets)``; the folder is :func:`evaluation_store_dir`, named by
+    what decides the detections (the model's SHA-256, the execution provider and the image
+    set's fingerprint), so a store never mixes two evaluations.
+    """
+
+    store_name = "evaluation.sqlite"
+    kind = "evaluation"
+    schema = """
+CREATE TABLE IF NOT EXISTS detections (
+    image_id INTEGER PRIMARY KEY, n INTEGER NOT NULL, dets BLOB NOT NULL);
+"""
+
+    def stored_images(self) -> set[int]:
+        """Image ids whose detections are stored."""
+        return {r[0] for r in self.db.execute("SELECT image_id FROM detections").fetchall()}
+
+    def add_detections(self, rows: Iterable[tuple[int, np.ndarray]]) -> None:
+        """Store (image_id, detections) pairs in one transaction."""
+        with self.db:
+            self.db.executemany("INSERT OR REPLACE INTO detections VALUES (?, ?, ?)",
+                                [(int(i), len(d), pack_detections(d)) for i, d in rows])
+
+    def detections(self, ids: Iterable[int] | None = None) -> dict[int, np.ndarray]:
+        """Stored detections (of ``ids``, default all): image_id -> (n, 6)."""
+        want = None if ids is None else set(ids)
+        return {i: unpack_detections(b) for i, b in self.db.execute(
+            "SELECT image_id, dets FROM detections").fetchall() if want is None or i in want}
+
+
+def evaluation_store_dir(model_sha256: str, provider: str, images_fingerprint: str,
+                         base: str | os.PathLike[str] | None = None) -> Path:
+    """Folder of an :class:`EvaluationStore`: ``<base>/<key>``, ``base`` by default
+    ``$FIDELITY_CACHE/evaluate`` or ``~/.cache/fidelity/evaluate``; ``key`` is a SHA-256 of
+    the model's SHA-256, the provider and the image set's fingerprint (first 24 hex digits)."""
+    if base is None:
+        root = os.environ.get("FIDELITY_CACHE")
+        base = (Path(root) if root else Path.home() / ".cache" / "fidelity") / "evaluate"
+    key = hashlib.sha256(f"{model_sha256}\n{provider}\n{images_fingerprint}".encode())
+    return Path(base) / key.hexdigest()[:24]
