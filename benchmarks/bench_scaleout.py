@@ -19,7 +19,10 @@ Other people's work on the machine distorts timings: before each run the benchma
 most ``--max-wait`` s) for the 1-minute load average to fall below ``--max-load`` and records
 the load it started at. Best of the repeats is reported.
 
-Usage: python benchmarks/bench_scaleout.py [--images 40] [--repeats 3]
+``--stages`` only times the stages of a work item on one core (decode, transforms, JPEG round
+trip, detector), for the cluster estimate in docs/scaleout.md.
+
+Usage: python benchmarks/bench_scaleout.py [--images 40] [--repeats 3] [--stages]
        [--out reports/scaleout]   (needs ../shared and the [ray] extra)
 """
 
@@ -76,6 +79,47 @@ def one_run(kind: str, workers: int, shared: Path, images: int, folder: Path) ->
             "worker_processes": len(last["workers"]), "cells": cells}
 
 
+def stage_costs(shared: Path, n: int = 20, repeats: int = 3) -> dict[str, float]:
+    """Milliseconds per image of each stage of a work item on one core (best of ``repeats``
+    passes over ``n`` images): decode, transform (channel table, 2^24 table, pull_mean), JPEG
+    round trip, YOLOX-nano on the CPU (1 thread)."""
+    from fidelity.coco.dataset import PixelMap, calibrated_param
+    from fidelity.coco.detectors import Detector
+    from fidelity.coco.jpeg import decode_jpeg, roundtrip_jpeg
+    from fidelity.coco.scoring import load_annotated_images
+
+    folder, coco, ids = load_annotated_images(
+        shared / "coco/val2017", shared / "coco/annotations/instances_val2017_subset.json")
+    blobs = [(folder / coco.imgs[i]["file_name"]).read_bytes() for i in ids[:n]]
+    decoded = [decode_jpeg(b) for b in blobs]
+    maps = {t: PixelMap.build(t, calibrated_param(t, 3)[0])
+            for t in ("contrast-inc", "hue", "pull_mean")}
+    det = Detector(shared / "models/yolox_nano.onnx", threads=1)
+
+    def best(fn: Any) -> float:
+        times = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            for item in decoded:
+                fn(item)
+            times.append(time.perf_counter() - t0)
+        return 1e3 * min(times) / len(decoded)
+
+    out = {"decode_ms": 1e3 * min(_timed(lambda: [decode_jpeg(b) for b in blobs])
+                                  for _ in range(repeats)) / len(blobs)}
+    for t, pm in maps.items():
+        out[f"transform_{t}_ms"] = best(lambda d, pm=pm: pm(d[0]))
+    out["jpeg_roundtrip_ms"] = best(lambda d: roundtrip_jpeg(d[0], d[1]))
+    out["detector_yolox_nano_cpu_1_thread_ms"] = best(lambda d: det(d[0]))
+    return out
+
+
+def _timed(fn: Any) -> float:
+    t0 = time.perf_counter()
+    fn()
+    return time.perf_counter() - t0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--images", type=int, default=40)
@@ -83,6 +127,8 @@ def main() -> int:
     ap.add_argument("--max-load", type=float, default=0.7)
     ap.add_argument("--max-wait", type=float, default=600.0)
     ap.add_argument("--out", type=Path, default=Path("reports/scaleout"))
+    ap.add_argument("--stages", action="store_true",
+                    help="only time the stages of a work item on one core (stages.json)")
     args = ap.parse_args()
 
     from fidelity.resources import shared_dir
@@ -91,6 +137,14 @@ def main() -> int:
     if shared is None:
         print("../shared (COCO images, models) not found", file=sys.stderr)
         return 2
+    if args.stages:
+        load = wait_for_quiet(args.max_load, args.max_wait)
+        stages = stage_costs(shared) | {"load1_before": load}
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "stages.json").write_text(json.dumps(
+            {"machine": machine_info(), "stages": stages}, indent=2) + "\n")
+        print(json.dumps(stages, indent=2))
+        return 0
     work = Path(tempfile.mkdtemp(prefix="bench-scaleout-"))
     token = work / "auth_token"  # a private token: nothing written to ~/.ray
     token.write_text(secrets.token_hex(32))
