@@ -209,14 +209,15 @@ def test_ray_cluster_sweep_equals_local(cluster, coco, tmp_path) -> None:
     os.kill(workers[0], signal.SIGKILL)  # a worker dies mid-run: Ray restarts it, retries
     stdout, log = proc.communicate(timeout=240)
     assert proc.returncode == 0, log[-3000:]
-    assert "5 cells done" in stdout
-    assert _new_images(log) == 5 * IMAGES  # every image computed and stored once
+    assert "5 cells done" in stdout, (stdout, log[-3000:])
+    assert _new_images(log) == 5 * IMAGES, log[-3000:]  # every image computed and stored once
     ran = re.search(r"on (\d+) worker process(?:es)? \((\d+) nodes?\)", log)
     assert ran and int(ran.group(1)) >= 3 and int(ran.group(2)) == 2, log  # one restarted
     store = SweepStore(out)
     _assert_same(local, store)
     machine = store.meta()["machine"]
-    assert machine["executor"] == "ray" and machine["workers"] == 2 and machine["nodes"] == 2
+    assert machine["executor"] == "ray" and machine["workers"] == 2 and machine["nodes"] == 2, \
+        machine
 
     # kill -9 of the driver, then a rerun: nothing lost, nothing stored computed again
     out2 = tmp_path / "ray-killed"
@@ -225,7 +226,7 @@ def test_ray_cluster_sweep_equals_local(cluster, coco, tmp_path) -> None:
     proc.send_signal(signal.SIGKILL)
     proc.communicate()
     kept = _stored(out2)
-    assert 0 < kept < 5 * IMAGES, "the kill came too late to test a resume"
+    assert 0 < kept < 5 * IMAGES, f"the kill came too late to test a resume ({kept} stored)"
     before = SweepStore(out2)
     stored_before = {k: before.detections(*k) for k in
                      [(c.model, c.transform, c.target) for c in local.cells()]}
@@ -233,7 +234,7 @@ def test_ray_cluster_sweep_equals_local(cluster, coco, tmp_path) -> None:
     proc = _sweep_cli(coco, out2, head)
     stdout, log = proc.communicate(timeout=240)
     assert proc.returncode == 0, log[-3000:]
-    assert _new_images(log) == 5 * IMAGES - kept
+    assert _new_images(log) == 5 * IMAGES - kept, (kept, log[-3000:])
     again = SweepStore(out2)
     _assert_same(local, again)
     for key, dets in stored_before.items():  # what was stored stays as it was
@@ -289,3 +290,20 @@ def test_ray_cluster_evaluate_and_validate_equal_local(cluster, coco, tmp_path) 
                                                    b[key].folds)
         x, y = local.detections(*key), remote.detections(*key)
         assert x.keys() == y.keys() and all(np.array_equal(x[i], y[i]) for i in x)
+
+
+@pytest.mark.parametrize("extra, needle", [
+    (["--address", "auto"], "--address is for --executor ray"),
+    (["--workers", "2"], "the local executor runs one worker"),
+])
+def test_executor_options_need_ray(tmp_path, extra, needle) -> None:
+    from click.testing import CliRunner
+
+    from fidelity.cli import main
+    from tests.test_sweep import synthetic_coco
+
+    images, ann, model = synthetic_coco(tmp_path / "data")
+    r = CliRunner().invoke(main, ["sweep", "--models", str(model), "--images", str(images),
+                                  "--annotations", str(ann), "--out", str(tmp_path / "o")]
+                           + extra)
+    assert r.exit_code == 2 and needle in r.output and "Traceback" not in r.output, r.output

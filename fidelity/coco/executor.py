@@ -60,6 +60,8 @@ CHUNK_IMAGES: dict[str, int] = {"local": 25, "ray": 8}
 IN_FLIGHT_PER_WORKER = 2
 #: Decoded images a runner keeps, in MiB of pixels (least recently used ones are dropped).
 CACHE_MB = 4096
+#: Seconds the Ray workers have to start (an autoscaling cluster may first add nodes).
+WORKER_START_S = 300.0
 
 
 @dataclass(frozen=True)
@@ -452,7 +454,18 @@ class RayExecutor:
         self.actors = [cls.options(**per_worker).remote(threads, provider, options.cache_mb)
                        for _ in range(self.workers)]
         self.pool = ActorPool(self.actors)
-        self.nodes = sorted(set(ray.get([a.node.remote() for a in self.actors])))
+        try:
+            self.nodes = sorted(set(ray.get([a.node.remote() for a in self.actors],
+                                            timeout=WORKER_START_S)))
+        except ray.exceptions.GetTimeoutError:
+            self.close()
+            need = ", ".join(f"{v:g} {k.removeprefix('num_').upper()}"
+                             for k, v in per_worker.items())
+            have = ", ".join(f"{resources.get(k, 0):g} {k}" for k in ("CPU", "GPU"))
+            raise InvalidValueError(
+                f"--workers {self.workers}: the workers did not start within "
+                f"{WORKER_START_S:g} s; each needs {need} and the Ray cluster has {have}"
+            ) from None
         self.provider = provider
         self._images: dict[int, Any] = {}
         self._models: dict[str, Any] = {}
