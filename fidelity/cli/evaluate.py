@@ -53,7 +53,7 @@ def evaluate(model: str, images: str, annotations: str, limit: int | None, threa
     Detections are kept per image in a store in the cache ($FIDELITY_CACHE/evaluate), so an
     interrupted evaluation started again runs only the images it had not finished.
     """
-    from fidelity.coco.executor import detect_images
+    from fidelity.coco.executor import ModelFile, detect_images
     from fidelity.coco.scoring import evaluate_detections, load_annotations, resolve_scorer
     from fidelity.coco.store import ImageSet
     from fidelity.errors import InputFileError
@@ -62,6 +62,7 @@ def evaluate(model: str, images: str, annotations: str, limit: int | None, threa
     check_outputs({"--json": json_path},
                   {"--model": model, "--annotations": annotations, "--images": images})
     options = executor_from(executor, address, workers, threads, provider)
+    detector = ModelFile.from_path(model)  # a missing model is named first
     coco = load_annotations(annotations)
     all_ids = sorted(coco.getImgIds())
     ids = all_ids[:limit] if limit else all_ids
@@ -75,7 +76,7 @@ def evaluate(model: str, images: str, annotations: str, limit: int | None, threa
     if json_path and json_path != "-":
         remove_stale_temporaries(Path(json_path).parent)
     t0 = time.perf_counter()
-    found = detect_images(model, ImageSet(folder, coco, ids), ids, options,
+    found = detect_images(detector, ImageSet(folder, coco, ids), ids, options,
                           progress=show_progress(progress))
     dets = found.detections
     method = resolve_scorer(scorer)

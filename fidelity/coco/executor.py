@@ -657,7 +657,8 @@ class _Open:
 def run_cells(cells: Sequence[CellWork], executor: Executor, store: CellStore, *,
               lease: LeaseKeeper | None = None, chunk_images: int | None = None,
               progress: bool = False, poll_s: float = 2.0,
-              say: Callable[[str], None] | None = None) -> RunCounts:
+              say: Callable[[str], None] | None = None,
+              background: bool | None = None) -> RunCounts:
     """Run every cell: claim, submit its missing images in chunks, store, finish.
 
     Cells are taken in the given order; at most ``executor.capacity`` items are in flight, so
@@ -665,7 +666,14 @@ def run_cells(cells: Sequence[CellWork], executor: Executor, store: CellStore, *
     waited for at the end (taken over if that run stops beating, see
     :meth:`fidelity.coco.store.ResultsStore.claim`). ``progress``: one bar for the whole plan
     (images done, rate, ETA; cells in its text), on stderr.
+
+    ``background`` (default: for executors with more than one worker): a finished cell is
+    scored (``store.finish``) on a thread of its own, so that the workers get new items while
+    the driver scores; ``store.finish`` must then use a store connection of that thread (the
+    sweep's and the validation's do). The claim is released once the cell is recorded.
     """
+    import concurrent.futures
+
     from tqdm import tqdm
 
     chunk = chunk_images or CHUNK_IMAGES.get(executor.kind, 25)
@@ -686,17 +694,38 @@ def run_cells(cells: Sequence[CellWork], executor: Executor, store: CellStore, *
     waiting: list[CellWork] = []
     queue: collections.deque[tuple[CellWork, WorkItem, np.ndarray | None]] = collections.deque()
 
-    def finish(o: _Open) -> None:
+    threaded = executor.workers > 1 if background is None else background
+    scorer = concurrent.futures.ThreadPoolExecutor(1, "fidelity-score") if threaded else None
+    scoring: dict[tuple[Any, ...], concurrent.futures.Future[None]] = {}
+
+    def recorded(key: tuple[Any, ...]) -> None:
         nonlocal done_cells
-        if not store.done(o.cell):  # not finished by a run that took the cell over meanwhile
-            store.finish(o.cell, time.perf_counter() - o.t0, o.new)
         if lease is not None:
-            lease.release(o.cell.key)
-        del open_cells[o.cell.key]
+            lease.release(key)
         counts.cells += 1
         done_cells += 1
         show()
         bar.refresh()
+
+    def reap(wait: bool = False) -> None:
+        """Release the claims of cells the scoring thread has recorded."""
+        for key, fut in list(scoring.items()):
+            if wait or fut.done():
+                fut.result()  # the thread's error, if any, is the run's
+                del scoring[key]
+                recorded(key)
+
+    def finish(o: _Open) -> None:
+        del open_cells[o.cell.key]
+        if store.done(o.cell):  # finished by a run that took the cell over meanwhile
+            recorded(o.cell.key)
+            return
+        seconds = time.perf_counter() - o.t0
+        if scorer is None:
+            store.finish(o.cell, seconds, o.new)
+            recorded(o.cell.key)
+        else:
+            scoring[o.cell.key] = scorer.submit(store.finish, o.cell, seconds, o.new)
 
     def start(cell: CellWork) -> bool:
         """Claim and queue a cell's items; False when another run holds it."""
@@ -720,6 +749,7 @@ def run_cells(cells: Sequence[CellWork], executor: Executor, store: CellStore, *
         return True
 
     def collect() -> None:
+        reap()
         r = executor.next_result()
         o = open_cells[r.item.cell]
         store.add(o.cell, r.detections)
@@ -751,6 +781,7 @@ def run_cells(cells: Sequence[CellWork], executor: Executor, store: CellStore, *
                 collect()
         while executor.pending() or queue:
             pump()
+        reap(wait=True)
         announced = False
         while waiting:
             still = []
@@ -763,6 +794,7 @@ def run_cells(cells: Sequence[CellWork], executor: Executor, store: CellStore, *
                 elif start(cell):
                     while executor.pending() or queue:
                         pump()
+                    reap(wait=True)
                 else:
                     still.append(cell)
             waiting = still
@@ -773,6 +805,8 @@ def run_cells(cells: Sequence[CellWork], executor: Executor, store: CellStore, *
                     announced = True
                 time.sleep(poll_s)
     finally:
+        if scorer is not None:
+            scorer.shutdown(wait=True)
         bar.close()
         counts.seconds = time.perf_counter() - t_start
     return counts
@@ -792,7 +826,8 @@ class Detections:
     store: Path
 
 
-def detect_images(model: str | os.PathLike[str], images: ImageSet, ids: Sequence[int],
+def detect_images(model: ModelFile | str | os.PathLike[str], images: ImageSet,
+                  ids: Sequence[int],
                   options: ExecutorOptions, *, store_base: str | os.PathLike[str] | None = None,
                   progress: bool = False) -> Detections:
     """Run one detector over images as they are (no transform, no re-encoding), resumably.
@@ -805,7 +840,7 @@ def detect_images(model: str | os.PathLike[str], images: ImageSet, ids: Sequence
     from fidelity.coco.store import EvaluationStore, evaluation_store_dir
     from fidelity.fileio import remove_stale_temporaries
 
-    m = ModelFile.from_path(model)
+    m = model if isinstance(model, ModelFile) else ModelFile.from_path(model)
     folder = evaluation_store_dir(m.sha256, options.provider, images.fingerprint(), store_base)
     store = EvaluationStore(folder)
     remove_stale_temporaries(folder)

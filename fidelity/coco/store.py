@@ -236,7 +236,10 @@ class _GuardedConnection(sqlite3.Connection):
 
 
 def _connect(path: Path, kind: str) -> _GuardedConnection:
-    db = sqlite3.connect(str(path), timeout=BUSY_TIMEOUT_S, factory=_GuardedConnection)
+    # each connection is used by one thread at a time; a scoring thread's store is closed by
+    # the thread that started it, after the thread has ended
+    db = sqlite3.connect(str(path), timeout=BUSY_TIMEOUT_S, factory=_GuardedConnection,
+                         check_same_thread=False)
     assert isinstance(db, _GuardedConnection)
     db.store_path, db.store_kind = path, kind
     return db

@@ -31,6 +31,7 @@ import json
 import os
 import sqlite3
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -378,6 +379,7 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     params: dict[tuple[str, float], tuple[float | None, str | None]] = {}
     ex = make_executor(image_set, opts)
     lease: LeaseKeeper | None = None
+    opened: list[SweepStore] = []
     try:
         where = ex.describe()
         store.set_meta("machine", {"platform": platform.platform(), "cpus": os.cpu_count(),
@@ -411,6 +413,16 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
             work.append(CellWork(key, f"{f.name} {transform} ΔE {target:g}", f,
                                  PixelTransform.of(transform, param), tuple(ids)))
 
+        local = threading.local()
+
+        def own_store() -> SweepStore:
+            """This thread's connection to the store."""
+            st: SweepStore | None = getattr(local, "store", None)
+            if st is None:
+                st = local.store = SweepStore(store.folder, create=False)
+                opened.append(st)
+            return st
+
         class Cells:
             """The sweep store as :func:`run_cells` sees it."""
 
@@ -428,11 +440,12 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
             def finish(self, cell: CellWork, seconds: float, new: int) -> None:
                 model, transform, target = cell.key
                 ids = list(cell.image_ids)
-                score = evaluate_detections(coco, store.detections(*cell.key), ids,
-                                            method=method)
+                own = own_store()  # run_cells may score on a thread of its own
+                score = evaluate_detections(coco, own.detections(model, transform, target),
+                                            ids, method=method)
                 param = cell.transform.param
-                store.finish_cell(model, transform, target, param=param, status="done",
-                                  images=len(ids), score=score, seconds=seconds)
+                own.finish_cell(model, transform, target, param=param, status="done",
+                                images=len(ids), score=score, seconds=seconds)
                 say(f"{time.strftime('%H:%M:%S')} [{number[cell.key]}/{total}] {model} "
                     f"{transform} ΔE {target:g} param={param} mAP={score.map:.4f} "
                     f"AP50={score.map50:.4f} person={score.ap.get('person')} "
@@ -447,6 +460,8 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
         if lease is not None:
             lease.close()
         ex.close()
+        for st in opened:
+            st.close()
     return store
 
 

@@ -34,6 +34,7 @@ import json
 import os
 import platform
 import sys
+import threading
 import time
 import tomllib
 from collections.abc import Callable, Mapping, Sequence
@@ -817,6 +818,7 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     cache = ImageCache(img_dir, coco)
     ex = make_executor(image_set, opts)
     lease: LeaseKeeper | None = None
+    opened: list[ValidationStore] = []
     try:
         where = ex.describe()
         store.set_meta("machine", {"platform": platform.platform(), "cpus": os.cpu_count(),
@@ -857,6 +859,16 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
             work += [CellWork((f.name, case.name), f"{case.name} / {f.name}", f, emulated, ids,
                               table_of(case)) for f, ids in runs]
 
+        local = threading.local()
+
+        def own_store() -> ValidationStore:
+            """This thread's connection to the store."""
+            st: ValidationStore | None = getattr(local, "store", None)
+            if st is None:
+                st = local.store = ValidationStore(store.folder, create=False)
+                opened.append(st)
+            return st
+
         class Cells:
             """The validation store as :func:`fidelity.coco.executor.run_cells` sees it."""
 
@@ -873,10 +885,11 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
             def finish(self, cell: CellWork, seconds: float, new: int) -> None:
                 model, camera = cell.key
                 ids = list(cell.image_ids)
-                dets = store.detections(model, camera)
+                own = own_store()  # run_cells may score on a thread of its own
+                dets = own.detections(model, camera)
                 score = evaluate_detections(coco, dets, ids)
                 folds = score_folds(coco, dets, ids, FOLDS)
-                store.finish_cell(model, camera, score, folds, seconds)
+                own.finish_cell(model, camera, score, folds, seconds)
                 say(f"{time.strftime('%H:%M:%S')} {camera} / {model}: mAP={score.map:.4f} "
                     f"person={score.ap.get('person')} images={len(ids)} new={new} "
                     f"{seconds:.1f}s")
@@ -889,6 +902,8 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
         if lease is not None:
             lease.close()
         ex.close()
+        for st in opened:
+            st.close()
     return store
 
 
