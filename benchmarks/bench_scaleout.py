@@ -60,13 +60,14 @@ def one_run(kind: str, workers: int, shared: Path, images: int, folder: Path) ->
     from fidelity.coco.sweep import ModelSpec, run_sweep
 
     out = Path(tempfile.mkdtemp(dir=folder))
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     store = run_sweep([ModelSpec(shared / "models/yolox_nano.onnx", images)],
                       shared / "coco/val2017",
                       shared / "coco/annotations/instances_val2017_subset.json", out, *GRID,
                       executor=ExecutorOptions(kind, workers=workers if kind == "ray" else None),
                       log=lambda s: None)
     wall = time.perf_counter() - t0
+    driver_cpu = time.process_time() - c0
     last = store.meta()["last_run"]
     cells = {(c.transform, c.target): (c.map, c.ap) for c in store.cells()}
     store.close()
@@ -76,7 +77,12 @@ def one_run(kind: str, workers: int, shared: Path, images: int, folder: Path) ->
             "items": last["items"], "worker_seconds": busy,
             "throughput": last["images"] / loop,
             "idle_per_item_s": (loop * workers - busy) / last["items"],
-            "worker_processes": len(last["workers"]), "cells": cells}
+            "worker_processes": len(last["workers"]), "cells": cells,
+            "worker_cpu_ms_per_image": 1e3 * last["worker_cpu_seconds"] / last["images"],
+            # this process: the driver, and for the local executor the worker too
+            "driver_cpu_ms_per_image": 1e3 * (driver_cpu - (last["worker_cpu_seconds"]
+                                                           if kind == "local" else 0.0))
+            / last["images"]}
 
 
 def stage_costs(shared: Path, n: int = 20, repeats: int = 3) -> dict[str, float]:
@@ -191,7 +197,20 @@ def main() -> int:
         "ray_init_s": ray_start,
         "all_runs_identical": all(r["identical_to_first_run"] for r in runs),
         "load1_of_best_runs": {k: v["load1_before"] for k, v in best.items()},
+        # CPU per image (robust to other people's load): the work each worker does per image,
+        # and what the driver adds; min over the repeats
+        "worker_cpu_ms_per_image": {k: min(r["worker_cpu_ms_per_image"] for r in runs
+                                           if r["config"] == k) for k in best},
+        "driver_cpu_ms_per_image": {k: min(r["driver_cpu_ms_per_image"] for r in runs
+                                           if r["config"] == k) for k in best},
     }
+    cpu = summary["worker_cpu_ms_per_image"]
+    # the efficiency 2 workers reach on 2 otherwise idle cores if the CPU time per image stays
+    # as measured: throughput(1) = 1/c1 (the driver has the other core), throughput(2) <=
+    # 2 / (c2 + d2) (two workers and the driver share two cores), so the ratio is
+    # c1 / (c2 + d2); an upper bound (Ray's own daemons are not counted)
+    d2 = summary["driver_cpu_ms_per_image"]["ray-2"]
+    summary["efficiency_2_workers_from_cpu_time"] = cpu["ray-1"] / (cpu["ray-2"] + d2)
     result = {"plan": {"model": "yolox_nano.onnx", "images": args.images,
                        "transforms": GRID[0], "targets": GRID[1], "cells": 5},
               "machine": machine_info(), "summary": summary, "runs": runs,
@@ -244,6 +263,15 @@ def readme(result: dict[str, Any]) -> str:
         "(Ray 1 worker against local)",
         f"- one image through transform + JPEG + detector on one worker: "
         f"{s['per_image_ms_one_worker']:.1f} ms",
+        f"- CPU per image (min over repeats; robust to other people's load): worker "
+        f"{s['worker_cpu_ms_per_image']['ray-1']:.1f} ms with 1 Ray worker, "
+        f"{s['worker_cpu_ms_per_image']['ray-2']:.1f} ms with 2, "
+        f"{s['worker_cpu_ms_per_image']['local']:.1f} ms local; the driver adds "
+        f"{s['driver_cpu_ms_per_image']['ray-2']:.1f} ms (Ray, 2 workers), "
+        f"{s['driver_cpu_ms_per_image']['local']:.1f} ms (local)",
+        f"- efficiency at 2 workers on 2 idle cores from these CPU times, c1 / (c2 + driver): "
+        f"{s['efficiency_2_workers_from_cpu_time']:.2f} (an upper bound: Ray's daemons are "
+        "not counted)",
         f"- every run's cells identical to the first run's: {s['all_runs_identical']}",
         "",
     ])

@@ -164,12 +164,14 @@ class WorkItem:
 @dataclass(frozen=True)
 class ChunkResult:
     """What a worker hands back: the item, (image id, (n, 6) float32 detections) pairs in the
-    item's order, the worker's seconds on it and which worker ran it (``node:pid``)."""
+    item's order, the worker's seconds on it, which worker ran it (``node:pid``) and the CPU
+    seconds its process spent on it (``cpu_seconds``: all its threads)."""
 
     item: WorkItem
     detections: tuple[tuple[int, np.ndarray], ...]
     seconds: float
     worker: str
+    cpu_seconds: float = 0.0
 
 
 # --------------------------------------------------------------------------------------------
@@ -247,7 +249,7 @@ class ChunkRunner:
         """Detect every image of ``item``; ``data(image_id)`` gives an image's JPEG bytes."""
         from fidelity.coco.jpeg import roundtrip_jpeg
 
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         det = self.detector(item.model, model_path)
         fn = self.transform(item.transform, build)
         out = []
@@ -256,7 +258,8 @@ class ChunkRunner:
             x = fn(rgb) if fn is not None else rgb
             seen = roundtrip_jpeg(x, settings) if item.transform.roundtrip else x
             out.append((i, det(seen)))
-        return ChunkResult(item, tuple(out), time.perf_counter() - t0, worker)
+        return ChunkResult(item, tuple(out), time.perf_counter() - t0, worker,
+                           time.process_time() - c0)
 
 
 # --------------------------------------------------------------------------------------------
@@ -629,7 +632,8 @@ class CellStore(Protocol):
 class RunCounts:
     """What a driver run did: cells finished by it, cells finished by other runs while it
     waited, images computed (detections stored by this run), work items, the workers' seconds
-    on them, the worker processes (``node:pid``) and the run's wall ``seconds``."""
+    on them, the worker processes (``node:pid``), the run's wall ``seconds`` and the CPU
+    seconds the workers' processes spent on the items."""
 
     cells: int = 0
     waited: int = 0
@@ -638,11 +642,13 @@ class RunCounts:
     worker_seconds: float = 0.0
     workers: set[str] = field(default_factory=set)
     seconds: float = 0.0
+    worker_cpu_seconds: float = 0.0
 
     def to_json(self) -> dict[str, Any]:
         """The counts as a store's ``meta["last_run"]`` keeps them."""
         return {"cells": self.cells, "waited": self.waited, "images": self.images,
                 "items": self.items, "worker_seconds": self.worker_seconds,
+                "worker_cpu_seconds": self.worker_cpu_seconds,
                 "workers": sorted(self.workers), "seconds": self.seconds}
 
 
@@ -758,6 +764,7 @@ def run_cells(cells: Sequence[CellWork], executor: Executor, store: CellStore, *
         counts.images += len(r.detections)
         counts.items += 1
         counts.worker_seconds += r.seconds
+        counts.worker_cpu_seconds += r.cpu_seconds
         counts.workers.add(r.worker)
         bar.update(len(r.detections))
         if o.left == 0:
