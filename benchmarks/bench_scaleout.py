@@ -149,6 +149,8 @@ def main() -> int:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "stages.json").write_text(json.dumps(
             {"machine": machine_info(), "stages": stages}, indent=2) + "\n")
+        if (args.out / "bench_scaleout.json").is_file():
+            write_readme(args.out)
         print(json.dumps(stages, indent=2))
         return 0
     work = Path(tempfile.mkdtemp(prefix="bench-scaleout-"))
@@ -197,7 +199,8 @@ def main() -> int:
         "ray_init_s": ray_start,
         "all_runs_identical": all(r["identical_to_first_run"] for r in runs),
         "load1_of_best_runs": {k: v["load1_before"] for k, v in best.items()},
-        # CPU per image (robust to other people's load): the work each worker does per image,
+        # CPU per image (less sensitive to other people's load than wall time): the work each
+        # worker does per image,
         # and what the driver adds; min over the repeats
         "worker_cpu_ms_per_image": {k: min(r["worker_cpu_ms_per_image"] for r in runs
                                            if r["config"] == k) for k in best},
@@ -218,9 +221,23 @@ def main() -> int:
                            "max_wait": args.max_wait}}
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "bench_scaleout.json").write_text(json.dumps(result, indent=2) + "\n")
-    (args.out / "README.md").write_text(readme(result))
+    write_readme(args.out)
     print(json.dumps(summary, indent=2))
     return 0
+
+
+def write_readme(out: Path) -> None:
+    """reports/scaleout/README.md from bench_scaleout.json (and stages.json, if there)."""
+    result = json.loads((out / "bench_scaleout.json").read_text())
+    text = readme(result)
+    if (out / "stages.json").is_file():
+        st = json.loads((out / "stages.json").read_text())["stages"]
+        text += "\n".join([
+            "Stages of a work item on one core (`--stages`, ms per image, best of 3 over 20 "
+            f"images, load {st['load1_before']:.2f}): "
+            + ", ".join(f"{k.removesuffix('_ms').replace('_', ' ')} {v:.1f}"
+                        for k, v in st.items() if k.endswith("_ms")) + ".", ""])
+    (out / "README.md").write_text(text)
 
 
 def readme(result: dict[str, Any]) -> str:
@@ -263,7 +280,8 @@ def readme(result: dict[str, Any]) -> str:
         "(Ray 1 worker against local)",
         f"- one image through transform + JPEG + detector on one worker: "
         f"{s['per_image_ms_one_worker']:.1f} ms",
-        f"- CPU per image (min over repeats; robust to other people's load): worker "
+        f"- CPU per image (min over repeats; less sensitive to other people's load than wall "
+        "time, not immune: contention slows a process's own CPU work too): worker "
         f"{s['worker_cpu_ms_per_image']['ray-1']:.1f} ms with 1 Ray worker, "
         f"{s['worker_cpu_ms_per_image']['ray-2']:.1f} ms with 2, "
         f"{s['worker_cpu_ms_per_image']['local']:.1f} ms local; the driver adds "
