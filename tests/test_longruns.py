@@ -61,6 +61,12 @@ def test_garbage_store_is_one_line_exit_2(tmp_path) -> None:
     for args in _commands(tmp_path):
         r = CliRunner().invoke(main, args)
         _one_line_error(r, f"{tmp_path / 'sweep.sqlite'}: not a sweep store")
+    from tests.test_sweep import synthetic_coco
+
+    images, ann, model = synthetic_coco(tmp_path / "data")
+    r = CliRunner().invoke(main, ["sweep", "--models", str(model), "--images", str(images),
+                                  "--annotations", str(ann), "--out", str(tmp_path)])
+    _one_line_error(r, f"{tmp_path / 'sweep.sqlite'}: not a sweep store")
     (tmp_path / "validation.sqlite").write_bytes(b"hello" * 100)
     r = CliRunner().invoke(main, ["validate", "--report-only", "--store", str(tmp_path),
                                   "--out", str(tmp_path / "v")])
