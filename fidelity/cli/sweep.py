@@ -137,6 +137,7 @@ def sweep(models: str | None, images: str | None, annotations: str | None, trans
 def _print_status(store: SweepStore) -> None:
     import time
 
+    from fidelity.coco.store import process_gone
     from fidelity.coco.sweep import sweep_status
 
     rows = sweep_status(store)
@@ -159,9 +160,11 @@ def _print_status(store: SweepStore) -> None:
             who = c.owner.info
             what = (f"{who.get('executor', '?')}, {who.get('workers', '?')} workers"
                     if who else "unknown run")
+            state = ("its process has ended: the next run takes the cell over"
+                     if process_gone(c.owner.host, c.owner.pid)
+                     else f"heartbeat {max(0.0, now - c.heartbeat):.0f} s ago")
             click.echo(f"{'':<18} under way: {t} ΔE {e:g}, {n} of {r.images} images stored; "
-                       f"run on {c.owner.host} pid {c.owner.pid} ({what}), heartbeat "
-                       f"{max(0.0, now - c.heartbeat):.0f} s ago")
+                       f"run on {c.owner.host} pid {c.owner.pid} ({what}), {state}")
     if any(r.to_do for r in rows):
         click.echo("pace: median time between a model's last finished cells (whatever ran "
                    "beside it); rerun the sweep's command line to resume")

@@ -47,7 +47,7 @@ from fidelity.errors import InputFileError, InvalidValueError
 
 __all__ = ["LEASE_STALE_S", "Claim", "EvaluationStore", "ImageEntry", "ImageSet",
            "LeaseKeeper", "Owner", "RegisteredModel", "ResultsStore", "evaluation_store_dir",
-           "pack_detections", "unpack_detections"]
+           "pack_detections", "process_gone", "unpack_detections"]
 
 _COMMON_SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -286,7 +286,7 @@ class Claim:
     heartbeat: float
 
 
-def _process_gone(host: str, pid: int) -> bool:
+def process_gone(host: str, pid: int) -> bool:
     """Whether process ``pid`` on ``host`` is known to have ended (only this host can tell)."""
     if host != socket.gethostname():
         return False
@@ -563,7 +563,7 @@ class ResultsStore:
                 "SELECT l.owner, o.heartbeat, o.host, o.pid FROM leases l LEFT JOIN owners o "
                 "ON o.owner = l.owner WHERE l.cell=?", (key,)).fetchone()
             free = (row is None or row[0] == owner or row[1] is None
-                    or t - float(row[1]) > stale_s or _process_gone(row[2], int(row[3])))
+                    or t - float(row[1]) > stale_s or process_gone(row[2], int(row[3])))
             if free:  # a claim is a sign of life too
                 self.db.execute("INSERT OR REPLACE INTO leases VALUES (?, ?, ?)", (key, owner, t))
                 self.db.execute("UPDATE owners SET heartbeat=? WHERE owner=?", (t, owner))
