@@ -122,7 +122,7 @@ def _enter_wal_mode(db: sqlite3.Connection, path: Path) -> None:
             mode = db.execute("PRAGMA journal_mode=WAL").fetchone()[0]
         except sqlite3.OperationalError as exc:
             if "locked" not in str(exc) or time.monotonic() > deadline:
-                raise InputFileError(f"{path}: cannot open the store: {exc}") from exc
+                raise InputFileError(f"{path}: cannot open the results store: {exc}") from exc
         else:
             if str(mode).lower() == "wal":
                 return
@@ -396,17 +396,20 @@ class ResultsStore:
         if self.folder.exists() and not self.folder.is_dir():
             raise InputFileError(f"{self.folder}: not a folder (a {self.kind} store is a folder)")
         check_sqlite_file(self.path, self.kind)
-        self.folder.mkdir(parents=True, exist_ok=True)
-        self.db = _connect(self.path, self.kind)
-        _enter_wal_mode(self.db, self.path)
-        self.db.execute("PRAGMA synchronous=FULL")
-        self._check_schema()
-        self.db.executescript(_COMMON_SCHEMA + self.schema)
-        self.db.commit()
-        version = self.db.execute("PRAGMA user_version").fetchone()[0]
-        if version != self.format:
-            self.db.execute(f"PRAGMA user_version={int(self.format)}")
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            self.db = _connect(self.path, self.kind)
+            _enter_wal_mode(self.db, self.path)
+            self.db.execute("PRAGMA synchronous=FULL")
+            self._check_schema()
+            self.db.executescript(_COMMON_SCHEMA + self.schema)
             self.db.commit()
+            version = self.db.execute("PRAGMA user_version").fetchone()[0]
+            if version != self.format:
+                self.db.execute(f"PRAGMA user_version={int(self.format)}")
+                self.db.commit()
+        except (OSError, sqlite3.OperationalError) as exc:  # a full disk, no permission
+            raise InputFileError(f"{self.path}: cannot open the results store: {exc}") from exc
 
     def _check_schema(self) -> None:
         """Refuse a store of a newer format or whose tables are not this kind's."""
