@@ -126,9 +126,13 @@ def test_a_store_from_before_the_format_number_opens(tmp_path) -> None:
     db.execute("INSERT INTO meta VALUES ('grid', '{}')")
     db.commit()
     db.close()
-    s = SweepStore(tmp_path, create=False)
-    assert s.db.execute("PRAGMA user_version").fetchone()[0] == 1
+    s = SweepStore(tmp_path, create=False)  # a reader adds the new tables, not the number
     assert s.meta() == {"grid": {}} and s.claims() == []
+    assert s.db.execute("PRAGMA user_version").fetchone()[0] == 0
+    s.close()
+    s = SweepStore(tmp_path)  # a run writes the format number
+    assert s.db.execute("PRAGMA user_version").fetchone()[0] == 1
+    assert s.claims() == []
 
 
 # ----------------------------------------------------------------------- inputs on resume

@@ -387,6 +387,9 @@ class ResultsStore:
     kind: ClassVar[str] = "results"
     schema: ClassVar[str] = ""
     format: ClassVar[int] = 1
+    #: Tables every store of this kind has had from its first version (the others, added
+    #: later, are created in an older store when it is opened).
+    core_tables: ClassVar[tuple[str, ...]] = ("meta", "models")
 
     def __init__(self, folder: str | os.PathLike[str], *, create: bool = True) -> None:
         self.folder = Path(folder)
@@ -396,23 +399,37 @@ class ResultsStore:
         if self.folder.exists() and not self.folder.is_dir():
             raise InputFileError(f"{self.folder}: not a folder (a {self.kind} store is a folder)")
         check_sqlite_file(self.path, self.kind)
+        if not create and self.path.stat().st_size == 0:
+            raise InputFileError(f"{self.path}: not a {self.kind} store (an empty file)")
         try:
             self.folder.mkdir(parents=True, exist_ok=True)
             self.db = _connect(self.path, self.kind)
-            _enter_wal_mode(self.db, self.path)
+            if create:  # a reader (status, tables) changes nothing in the file
+                _enter_wal_mode(self.db, self.path)
             self.db.execute("PRAGMA synchronous=FULL")
-            self._check_schema()
-            self.db.executescript(_COMMON_SCHEMA + self.schema)
-            self.db.commit()
+            have = self._check_schema()
+            if have or create:
+                missing = [t for t in self.core_tables if t not in have]
+                if have and missing:
+                    raise InputFileError(f"{self.path}: not a {self.kind} store (no table "
+                                         f"{missing[0]!r})")
+                if set(_schema_columns(_COMMON_SCHEMA + self.schema)) - have:
+                    # one transaction: a second process never sees half the tables
+                    self.db.commit()
+                    self.db.executescript("BEGIN IMMEDIATE;\n" + _COMMON_SCHEMA + self.schema
+                                          + "\nCOMMIT;")
+            else:
+                raise InputFileError(f"{self.path}: not a {self.kind} store (no tables)")
             version = self.db.execute("PRAGMA user_version").fetchone()[0]
-            if version != self.format:
+            if create and version != self.format:
                 self.db.execute(f"PRAGMA user_version={int(self.format)}")
                 self.db.commit()
         except (OSError, sqlite3.OperationalError) as exc:  # a full disk, no permission
             raise InputFileError(f"{self.path}: cannot open the results store: {exc}") from exc
 
-    def _check_schema(self) -> None:
-        """Refuse a store of a newer format or whose tables are not this kind's."""
+    def _check_schema(self) -> set[str]:
+        """Refuse a store of a newer format or whose tables are not this kind's; returns the
+        tables it has."""
         version = self.db.execute("PRAGMA user_version").fetchone()[0]
         if version > self.format:
             raise InputFileError(f"{self.path}: {self.kind} store of format {version}, written "
@@ -428,6 +445,7 @@ class ResultsStore:
                 raise InputFileError(
                     f"{self.path}: not a {self.kind} store of this fidelity (table {table!r} "
                     f"has columns {', '.join(got)}; expected {', '.join(columns)})")
+        return have
 
     def close(self) -> None:
         """Close the connection."""
@@ -438,9 +456,18 @@ class ResultsStore:
         with self.db:
             self.db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (key, json.dumps(value)))
 
+    def _json(self, text: Any, where: str) -> Any:
+        """A JSON value the store holds; an input error naming the store when it is not one."""
+        try:
+            return json.loads(text)
+        except (TypeError, ValueError) as exc:
+            raise InputFileError(f"{self.path}: the {self.kind} store is damaged ({where} is "
+                                 f"not JSON: {exc})") from None
+
     def meta(self) -> dict[str, Any]:
         """All provenance values."""
-        return {k: json.loads(v) for k, v in self.db.execute("SELECT key, value FROM meta")}
+        return {k: self._json(v, f"meta {k!r}")
+                for k, v in self.db.execute("SELECT key, value FROM meta")}
 
     def _model_conflict(self, stored_sha256: str, stored_limit: int | None, sha256: str,
                         limit: int | None) -> str | None:
@@ -481,7 +508,7 @@ class ResultsStore:
 
     def models(self) -> dict[str, RegisteredModel]:
         """Registered models by name."""
-        return {m: RegisteredModel(f, s, lim, json.loads(st))
+        return {m: RegisteredModel(f, s, lim, self._json(st, f"model {m!r}"))
                 for m, f, s, lim, st in self.db.execute("SELECT * FROM models")}
 
 
@@ -590,6 +617,10 @@ class ResultsStore:
 
     def claims(self) -> list[Claim]:
         """Every claim with its owner (owners that left no row are shown as unknown)."""
+        tables = {r[0] for r in self.db.execute(
+            "SELECT name FROM sqlite_master WHERE type='table'").fetchall()}
+        if not {"leases", "owners"} <= tables:  # a store from before claims, opened to read
+            return []
         rows = self.db.execute(
             "SELECT l.cell, l.owner, l.claimed, o.host, o.pid, o.started, o.heartbeat, o.info "
             "FROM leases l LEFT JOIN owners o ON o.owner = l.owner ORDER BY l.claimed"
@@ -664,6 +695,7 @@ class EvaluationStore(ResultsStore):
 
     store_name = "evaluation.sqlite"
     kind = "evaluation"
+    core_tables = ("meta", "models", "detections")
     schema = """
 CREATE TABLE IF NOT EXISTS detections (
     image_id INTEGER PRIMARY KEY, n INTEGER NOT NULL, dets BLOB NOT NULL);

@@ -76,6 +76,7 @@ class SweepStore(ResultsStore):
 
     store_name = STORE_NAME
     kind = "sweep"
+    core_tables = ("meta", "models", "cells", "detections")
     schema = _SCHEMA
 
     # detections -----------------------------------------------------------------------------

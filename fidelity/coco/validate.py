@@ -636,6 +636,7 @@ class ValidationStore(ResultsStore):
 
     store_name = STORE_NAME
     kind = "validation"
+    core_tables = ("meta", "models", "cases", "cells", "detections")
     schema = _SCHEMA
 
     def _model_conflict(self, stored_sha256: str, stored_limit: int | None, sha256: str,
