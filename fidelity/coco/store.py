@@ -27,6 +27,7 @@ Long runs (issue 23):
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -36,6 +37,7 @@ import threading
 import time
 import uuid
 import zlib
+from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -134,6 +136,14 @@ def _enter_wal_mode(db: sqlite3.Connection, path: Path) -> None:
 
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 
+#: Store files this process has SQLite connections to (resolved path -> open connections).
+#: While one is open, nothing else in the process may open and close that file: closing any
+#: file descriptor of it drops every POSIX lock the process holds on it, SQLite's included,
+#: and another process's writes then corrupt the database ("How To Corrupt An SQLite
+#: Database File", section 2.2).
+_OPEN_STORES: Counter[Path] = Counter()
+_OPEN_LOCK = threading.Lock()
+
 
 def check_sqlite_file(path: Path, kind: str) -> None:
     """Refuse a file that cannot be an intact SQLite database, before SQLite opens it.
@@ -141,8 +151,12 @@ def check_sqlite_file(path: Path, kind: str) -> None:
     Checks the 16-byte magic string and that the file is not shorter than the page count of
     its header says (when the header's count is valid: its change counter equals its
     version-valid-for number; SQLite file format, section 1.3). An empty file is a new store.
-    Raises :class:`InputFileError` naming the file.
+    Raises :class:`InputFileError` naming the file. Skipped while this process has the file
+    open through SQLite (it was checked then, and reading it now would drop SQLite's locks).
     """
+    with _OPEN_LOCK:
+        if _OPEN_STORES[path.resolve()] > 0:
+            return
     try:
         size = path.stat().st_size
         with open(path, "rb") as fh:
@@ -218,10 +232,25 @@ class _GuardedCursor(sqlite3.Cursor):
 
 
 class _GuardedConnection(sqlite3.Connection):
-    """A connection whose statements run on :class:`_GuardedCursor` (damage -> input error)."""
+    """A connection whose statements run on :class:`_GuardedCursor` (damage -> input error),
+    counted in :data:`_OPEN_STORES` while it is open."""
 
     store_path: Path = Path("?")
     store_kind: str = "results"
+    _counted: Path | None = None
+
+    def close(self) -> None:
+        with _OPEN_LOCK:
+            if self._counted is not None:
+                _OPEN_STORES[self._counted] -= 1
+                if _OPEN_STORES[self._counted] <= 0:
+                    del _OPEN_STORES[self._counted]
+                self._counted = None
+        super().close()
+
+    def __del__(self) -> None:  # a connection dropped without close() is closed by SQLite
+        with contextlib.suppress(Exception):
+            self.close()
 
     def _cursor(self) -> _GuardedCursor:
         cur = self.cursor(_GuardedCursor)
@@ -242,6 +271,9 @@ def _connect(path: Path, kind: str) -> _GuardedConnection:
                          check_same_thread=False)
     assert isinstance(db, _GuardedConnection)
     db.store_path, db.store_kind = path, kind
+    with _OPEN_LOCK:
+        db._counted = path.resolve()
+        _OPEN_STORES[db._counted] += 1
     return db
 
 
