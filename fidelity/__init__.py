@@ -39,6 +39,8 @@ _API: dict[str, str] = {
     "check_camera": "fidelity.check",
     "audit_image": "fidelity.check",
     "gate": "fidelity.check",
+    "compare_charts": "fidelity.compare",
+    "ComparisonReport": "fidelity.compare",
     # stages
     "delta_e_2000": "fidelity.colour.colorimetry",
     "load_chart": "fidelity.colour.charts",
@@ -57,6 +59,14 @@ _API: dict[str, str] = {
     "apply_transform": "fidelity.prediction.transforms",
     "calibrate_transform": "fidelity.prediction.calibration",
     "predict": "fidelity.prediction.table",
+    "predict_directional": "fidelity.prediction.directional",
+    "DirectionalPrediction": "fidelity.prediction.directional",
+    "error_parts": "fidelity.prediction.directional",
+    "chart_blind_spots": "fidelity.chart.blindspots",
+    "BlindSpot": "fidelity.chart.blindspots",
+    "measure_mapping": "fidelity.coco.measure",
+    "MeasuredLoss": "fidelity.coco.measure",
+    "corrupt": "fidelity.coco.corruptions",
     "delta_e_limit": "fidelity.prediction.table",
     "Prediction": "fidelity.prediction.table",
     "Criterion": "fidelity.prediction.verdict",
@@ -71,6 +81,7 @@ _API: dict[str, str] = {
 if TYPE_CHECKING:
     from fidelity.camera.model import CameraModel, load_camera
     from fidelity.camera.render import ChartRender, render_chart
+    from fidelity.chart.blindspots import BlindSpot, chart_blind_spots
     from fidelity.chart.find import FoundChart, find_chart
     from fidelity.chart.image import read_image
     from fidelity.chart.measure import (
@@ -80,10 +91,18 @@ if TYPE_CHECKING:
         measure_image,
     )
     from fidelity.check import audit_image, check_camera, gate
+    from fidelity.coco.corruptions import corrupt
+    from fidelity.coco.measure import MeasuredLoss, measure_mapping
     from fidelity.colour.charts import Chart, load_chart
     from fidelity.colour.colorimetry import delta_e_2000
+    from fidelity.compare import ComparisonReport, compare_charts
     from fidelity.errors import FidelityError
     from fidelity.prediction.calibration import calibrate_transform
+    from fidelity.prediction.directional import (
+        DirectionalPrediction,
+        error_parts,
+        predict_directional,
+    )
     from fidelity.prediction.table import Prediction, delta_e_limit, predict
     from fidelity.prediction.transforms import apply_transform
     from fidelity.prediction.verdict import Criterion, Verdict, evaluate
@@ -106,23 +125,31 @@ def __dir__() -> list[str]:
 
 __all__ = [
     "__version__",
+    "BlindSpot",
     "CameraModel",
     "Chart",
     "ChartMeasurement",
     "ChartRender",
     "ChartReport",
+    "ComparisonReport",
     "Criterion",
+    "DirectionalPrediction",
     "FidelityError",
     "FoundChart",
     "ImageMeasurement",
+    "MeasuredLoss",
     "Prediction",
     "Verdict",
     "apply_transform",
     "audit_image",
     "calibrate_transform",
+    "chart_blind_spots",
     "check_camera",
+    "compare_charts",
+    "corrupt",
     "delta_e_2000",
     "delta_e_limit",
+    "error_parts",
     "evaluate",
     "find_chart",
     "gate",
@@ -130,7 +157,9 @@ __all__ = [
     "load_chart",
     "measure_chart",
     "measure_image",
+    "measure_mapping",
     "predict",
+    "predict_directional",
     "read_image",
     "render_chart",
     "write_chart_report",

@@ -20,7 +20,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -35,6 +35,9 @@ from fidelity.report.chart import (
 
 if TYPE_CHECKING:
     from fidelity.camera.model import CameraModel
+    from fidelity.chart.measure import ChartMeasurement
+    from fidelity.coco.measure import MeasuredLoss, MeasureRequest
+    from fidelity.prediction.directional import DirectionalPrediction
     from fidelity.prediction.table import Prediction, PredictionTable
     from fidelity.prediction.verdict import Verdict
     from fidelity.report.junit import GateCase
@@ -50,13 +53,56 @@ AUDIT_CONVENTION = ("patches located by the homography of the 4x6 grid from the 
 
 
 def _predict_and_judge(mean_delta_e: float, size: str, table: PredictionTable | str | None,
-                       criterion: Criterion | None) -> tuple[Prediction, Verdict | None]:
+                       criterion: Criterion | None, measurement: ChartMeasurement | None = None,
+                       bound: str = "classic"
+                       ) -> tuple[Prediction, Verdict | None, DirectionalPrediction | None]:
+    """The classic prediction, the direction-aware one (of ``measurement``, when given) and
+    the verdict of ``criterion`` on the ``bound`` asked for (``classic`` or ``directional``)."""
+    from fidelity.prediction.directional import BOUNDS, evaluate_directional
     from fidelity.prediction.table import predict
     from fidelity.prediction.verdict import evaluate
 
+    if bound not in BOUNDS:
+        from fidelity.errors import unknown_name
+
+        raise unknown_name("bound", bound, BOUNDS)
     prediction = predict(mean_delta_e, size=size, table=table)
-    verdict = evaluate(mean_delta_e, prediction, criterion) if criterion else None
-    return prediction, verdict
+    directional = _directional(measurement, size, table) if measurement is not None else None
+    verdict = None
+    if criterion:
+        if bound == "directional" and directional is not None:
+            verdict = evaluate_directional(mean_delta_e, directional, criterion)
+        else:
+            verdict = evaluate(mean_delta_e, prediction, criterion)
+    return prediction, verdict, directional
+
+
+def _directional(measurement: ChartMeasurement, size: str,
+                 table: PredictionTable | str | None) -> DirectionalPrediction:
+    """The direction-aware prediction of a chart: from ``table`` when it is a direction-aware
+    table, else from the default one."""
+    from fidelity.prediction.directional import predict_chart
+
+    kind = getattr(table, "kind", None)
+    name: str | None = None
+    if isinstance(table, str):
+        name = table
+    elif table is not None and kind == "directional" and table.path is not None:
+        name = str(table.path)
+    if name is not None and kind != "directional":
+        from fidelity.prediction.table import load_prediction_table
+
+        if load_prediction_table(name).kind != "directional":
+            name = None
+    return predict_chart(measurement, size=size, table=name)
+
+
+def _measure(request: MeasureRequest | None, mapping: Any, key: str,
+             description: dict[str, Any]) -> tuple[MeasuredLoss, ...]:
+    """Run a measurement request on a fitted mapping (nothing without a request)."""
+    if request is None:
+        return ()
+    return tuple(request.run(mapping, key, description))
 
 
 def check_camera(
@@ -70,6 +116,8 @@ def check_camera(
     criterion: Criterion | None = DEFAULT_CRITERION,
     seed: int | None = None,
     command: str = "check",
+    bound: str = "classic",
+    measure: MeasureRequest | None = None,
 ) -> ChartReport:
     """Render ``camera``'s chart, measure it, predict its detection loss, apply ``criterion``.
 
@@ -93,6 +141,13 @@ def check_camera(
         The gate (default: mean ΔE00 <= 3, SAFE-COLOR's threshold); None: no verdict.
     seed
         Seed of the camera noise (default: the camera file's).
+    bound
+        Which prediction decides a ``max-dmap`` verdict: ``classic`` (the table's worst case
+        over every transform) or ``directional``
+        (:mod:`fidelity.prediction.directional`); the report holds both.
+    measure
+        Also measure the camera's loss on COCO (:class:`fidelity.coco.measure.MeasureRequest`:
+        the camera's colour rendering emulated on the images, as ``fidelity validate`` does).
 
     Returns
     -------
@@ -112,7 +167,19 @@ def check_camera(
     render = render_chart(camera if camera is not None else DEFAULT_CAMERA, illuminant,
                           renderer, reference=reference, seed=seed)
     m = render.measurement
-    prediction, verdict = _predict_and_judge(m.mean_delta_e, size, table, criterion)
+    prediction, verdict, directional = _predict_and_judge(m.mean_delta_e, size, table,
+                                                          criterion, m, bound)
+    from fidelity.chart.blindspots import chart_blind_spots
+
+    spots = chart_blind_spots(m, bits=render.camera.quantisation_bits)
+    measured: tuple[MeasuredLoss, ...] = ()
+    if measure is not None:
+        from fidelity.coco.emulation import emulation_key, fit_emulation
+
+        emu = fit_emulation(render.camera, illuminant)
+        measured = _measure(measure, emu.apply_uint8, emulation_key(emu),
+                            {"camera": render.camera.name, "illuminant": illuminant,
+                             "emulation": emu.describe()})
     rd = render.to_json()
     source = RenderSource(camera=render.camera.name, illuminant=illuminant,
                           renderer=render.renderer, variant=render.variant,
@@ -122,7 +189,8 @@ def check_camera(
         command=command, created=utc_now(), measurement=m, source=source,
         provenance=Provenance.collect(None, prediction,
                                       {"render": rd.get("conventions", {})}),
-        prediction=prediction, verdict=verdict,
+        prediction=prediction, verdict=verdict, directional=directional, bound=bound,
+        blind_spots=spots, measured=measured,
     )
 
 
@@ -143,6 +211,8 @@ def audit_image(
     command: str = "audit",
     bayer: str | None = None,
     max_pixels: int | None = None,
+    bound: str = "classic",
+    measure: MeasureRequest | None = None,
 ) -> ChartReport:
     """Measure the chart in ``image``, predict the detection loss, apply ``criterion``.
 
@@ -164,11 +234,15 @@ def audit_image(
     reference, illuminant
         ``scene`` (the chart's spectra under ``illuminant``, adapted to D65, as
         :func:`check_camera` uses), ``safecolor`` (the paper's Lab values) or a chart JSON.
-    size, table, criterion
+    size, table, criterion, bound
         As for :func:`check_camera`; ``criterion`` None: no verdict.
     max_pixels
         Refuse a larger image (width x height) before decoding it (default:
         :func:`fidelity.chart.image.pixel_limit`).
+    measure
+        Also measure on COCO what this chart's colour rendering costs a detector: a mapping
+        from the reference to the measured colours, fitted on the 24 patches
+        (:class:`fidelity.coco.emulation.PatchEmulation`), applied to the images.
 
     Returns
     -------
@@ -182,7 +256,8 @@ def audit_image(
                            layer=layer, encoding=encoding, exposure=exposure,
                            reference=reference, illuminant=illuminant, negatives=negatives,
                            colourspace=colourspace, bayer=bayer, max_pixels=max_pixels)
-    prediction, verdict = _predict_and_judge(result.mean_delta_e, size, table, criterion)
+    prediction, verdict, directional = _predict_and_judge(
+        result.mean_delta_e, size, table, criterion, result.measurement, bound)
     info = result.image
     assert info is not None  # measure_image always describes the file
     source = ImageSource(
@@ -193,14 +268,53 @@ def audit_image(
         corner_checks=result.corner_checks)
     conventions = {"reference": result.reference.conventions,
                    "audit": AUDIT_CONVENTION.format(window=result.location.window)}
+    spots = _image_blind_spots(result.measurement, info, bayer, max_pixels)
+    measured: tuple[MeasuredLoss, ...] = ()
+    if measure is not None:
+        emu = chart_emulation(result.measurement)
+        measured = _measure(measure, emu.apply_uint8, emu.key(),
+                            {"image": info.path, "sha256": info.sha256,
+                             "emulation": emu.describe()})
     return ChartReport(
         command=command, created=utc_now(), measurement=result.measurement, source=source,
         provenance=Provenance.collect(info.sha256, prediction,
                                       conventions),
         prediction=prediction, verdict=verdict,
         exposure_ev=result.exposure_ev, bad_pixels=result.bad_pixels,
-        valid_pixels=result.valid_pixels,
+        valid_pixels=result.valid_pixels, directional=directional, bound=bound,
+        blind_spots=spots, measured=measured,
     )
+
+
+def _image_blind_spots(measurement: ChartMeasurement, info: Any, bayer: str | None = None,
+                       max_pixels: int | None = None) -> tuple[Any, ...]:
+    """The blind-spot checks of an audited image: the chart's shadow tones, and the image's
+    banding when its pixels are integer codes (read again for it, demosaiced like the audit
+    with ``bayer``)."""
+    from fidelity.chart.blindspots import banding, chart_blind_spots
+
+    spots = chart_blind_spots(measurement)
+    if str(info.pixel_type).lower() in ("uint8", "uint16", "int8", "int16"):
+        from fidelity.chart.image import read_image
+
+        pixels = read_image(info.path, layer=info.layer, bayer=bayer,
+                            max_pixels=max_pixels).pixels
+        spots = (*spots, banding(pixels, info.pixel_type))
+    else:
+        spots = (*spots, banding(np.zeros((1, 1, 3)), info.pixel_type))
+    return spots
+
+
+def chart_emulation(measurement: ChartMeasurement) -> Any:
+    """The colour mapping from a chart's reference to its measured colours, fitted on its
+    patches (:class:`fidelity.coco.emulation.PatchEmulation`)."""
+    from fidelity.chart.measure import neutral_patches
+    from fidelity.coco.emulation import PatchEmulation
+    from fidelity.colour.colorimetry import lab_to_srgb
+
+    ref = (measurement.reference_srgb if measurement.reference_srgb is not None
+           else np.asarray(lab_to_srgb(measurement.reference_lab), np.float64))
+    return PatchEmulation.fit(ref, measurement.srgb, neutral_patches(measurement))
 
 
 @dataclass(frozen=True)
@@ -230,6 +344,7 @@ def gate(
     size: str = "any",
     table: str | None = None,
     max_pixels: int | None = None,
+    bound: str = "classic",
 ) -> list[GateCase]:
     """Gate ``images`` one by one (or ``camera``) against ``criterion``; write each one's
     reports to its :class:`GateOutputs`. An input error of one subject (exit code 2) becomes
@@ -255,11 +370,11 @@ def gate(
                                      illuminant=illuminant, size=size, table=table,
                                      criterion=criterion, negatives=negatives,
                                      colourspace=colourspace, command="gate", bayer=bayer,
-                                     max_pixels=max_pixels)
+                                     max_pixels=max_pixels, bound=bound)
             else:
                 report = check_camera(subject, illuminant=illuminant, renderer=renderer,
                                       reference=reference or "scene", size=size, table=table,
-                                      criterion=criterion, command="gate")
+                                      criterion=criterion, command="gate", bound=bound)
             write_chart_report(report, json_path=out.json_path, html_path=out.html_path,
                                protect=[os.fspath(i) for i in images])
         except (FidelityError, OSError) as exc:
@@ -271,4 +386,5 @@ def gate(
     return cases
 
 
-__all__ = ["AUDIT_CONVENTION", "DEFAULT_CRITERION", "GateOutputs", "audit_image", "check_camera", "gate"]
+__all__ = ["AUDIT_CONVENTION", "DEFAULT_CRITERION", "GateOutputs", "audit_image", "chart_emulation",
+           "check_camera", "gate"]

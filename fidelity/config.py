@@ -72,6 +72,7 @@ SETTINGS: Mapping[str, Setting] = {
     "models": Setting(str, "models"),
     "threads": Setting(int, "threads"),
     "provider": Setting(str, "provider"),
+    "bound": Setting(str, "bound"),
 }
 
 

@@ -107,7 +107,8 @@ def test_report_numbers_agree_with_colour_science(default_check):
     for alt in ("ΔE00 on the chart layout", "a*b* errors", "tone curve of the neutral patches",
                 "ΔE00 per patch", "predicted loss against chart ΔE"):
         assert f'alt="{alt}" src="data:image/png;base64,' in html
-    assert html.count("data:image/png;base64,") == 6
+    assert 'alt="worst case per transform family and the classic curve"' in html
+    assert html.count("data:image/png;base64,") == 7
     assert "<details><summary>Patches</summary>" in html
     for text in ("Provenance", DEFAULT_TABLE, doc["provenance"]["version"]):
         assert text in html

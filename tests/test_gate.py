@@ -72,8 +72,9 @@ def test_gate_pass_and_fail_on_delta_e(png, tmp_path):
     assert report["verdict"]["passed"] is False
     assert report["mean_delta_e"] == pytest.approx(de, abs=0.02)
     html = (tmp_path / "r.html").read_text()
-    # swatches, sampling windows, ΔE map, a*b*, tone curve, ΔE bars, prediction curve
-    assert html.count("data:image/png;base64,") == 7
+    # swatches, sampling windows, ΔE map, a*b*, tone curve, ΔE bars, prediction curve, the
+    # direction-aware family curves
+    assert html.count("data:image/png;base64,") == 8
     assert html.index("FAIL") < html.index('alt="sampling windows"')
     assert report["provenance"]["input_sha256"] in html
 

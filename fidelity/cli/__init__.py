@@ -44,6 +44,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "calibrate": ("fidelity.cli.calibrate:calibrate", "Print the SAFE-COLOR calibration table."),
     "check": ("fidelity.cli.check:check",
               "Is this camera model's colour good enough for perception testing?"),
+    "coco-c": ("fidelity.cli.cococ:cococ",
+               "Measure COCO-C's colour corruptions: chart ΔE and ΔmAP per severity."),
+    "compare": ("fidelity.cli.compare:compare",
+                "Compare a simulated chart with the real camera's: sim-to-real ΔE00 and its "
+                "cost."),
     "dataset": ("fidelity.cli.dataset:dataset",
                 "Write transformed JPEGs (original quantization tables and subsampling); reruns "
                 "resume."),

@@ -14,7 +14,14 @@ from fidelity.cli.gate import (
     negatives_option,
     report_paths,
 )
-from fidelity.cli.options import STDOUT, common_options
+from fidelity.cli.options import (
+    STDOUT,
+    bound_option,
+    common_options,
+    measure_inputs,
+    measure_options,
+    measure_request,
+)
 from fidelity.prediction.table import SIZES
 
 
@@ -48,17 +55,21 @@ from fidelity.prediction.table import SIZES
 @click.option("--html", "html_path", type=click.Path(path_type=Path),
               help="Write the HTML report here (a folder: IMAGE-NAME.html in it).")
 @max_pixels_option
+@bound_option
+@measure_options
 @common_options
 def audit(image: Path, corners: str | None, encoding: str | None, exposure: str | None,
           layer: str | None, bayer: str | None, colourspace: str | None, negatives: str,
-          reference: str,
-          illuminant: str, size: str, table: str | None, json_path: Path | None, html_path: Path | None,
-          max_pixels: int | None) -> None:
+          reference: str, illuminant: str, size: str, table: str | None,
+          json_path: Path | None, html_path: Path | None, max_pixels: int | None,
+          bound: str, measure: bool, images: str | None, annotations: str | None,
+          models: str | None, limit: int | None) -> None:
     """Measure the chart in IMAGE: ΔE00 per patch, mean and max, exposure, bad pixels.
 
     \b
     fidelity audit render.exr --json audit.json
     fidelity audit photo.jpg --corners 102,88,610,95,604,420,98,414
+    fidelity audit render.png --measure      # + the loss measured on COCO
     """
     from fidelity.check import audit_image
     from fidelity.fileio import check_outputs
@@ -71,11 +82,12 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
     (html_path,) = report_paths((image,), html_path, ".html")
     check_outputs({"--json": json_path, "--html": html_path},
                   {"IMAGE": image, "--table": table, "--reference": reference,
-                   "--illuminant": illuminant})
+                   "--illuminant": illuminant} | measure_inputs(images, annotations, models))
+    request = measure_request(measure, images, annotations, models, limit)
     report = audit_image(image, corners, encoding=encoding, exposure=exposure, layer=layer,
                          reference=reference, illuminant=illuminant, size=size, table=table,
                          negatives=negatives, colourspace=colourspace, bayer=bayer,
-                         max_pixels=max_pixels)
+                         max_pixels=max_pixels, bound=bound, measure=request)
     written = write_chart_report(report, json_path=json_path, html_path=html_path,
                                  protect=(image,))
     if to_stdout:

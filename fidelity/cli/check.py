@@ -4,14 +4,19 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import click
 
 from fidelity.cli.options import (
     STDOUT,
+    bound_option,
     common_options,
     from_settings,
     json_option,
+    measure_inputs,
+    measure_options,
+    measure_request,
     write_json_output,
 )
 from fidelity.prediction.table import SIZES
@@ -47,10 +52,14 @@ DEFAULT_OUTPUT_DIR = "fidelity-report"
 @click.option("--report/--no-report", default=True, show_default=True,
               help="Write the HTML and JSON reports (--no-report: the verdict only, e.g. in a "
                    "pre-commit hook).")
+@bound_option
+@measure_options
 @common_options
 def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, renderer: str,
           reference: str, max_delta_e: float, size: str, table: str | None, out_dir: Path,
-          json_path: str | None, html_path: Path | None, report: bool) -> None:
+          json_path: str | None, html_path: Path | None, report: bool, bound: str,
+          measure: bool, images: str | None, annotations: str | None, models: str | None,
+          limit: int | None) -> None:
     """Is this camera model's colour good enough for perception testing?
 
     Renders the spectral colour chart through the camera, measures ΔE00, predicts the detection
@@ -62,6 +71,7 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
     fidelity check                                  # the built-in camera
     fidelity check --camera my-camera.toml
     fidelity check cameras/*.toml --no-report       # each, verdicts only
+    fidelity check --camera my.toml --measure       # + the loss measured on COCO
     """
     from fidelity.camera.model import DEFAULT_CAMERA, camera_files
     from fidelity.fileio import check_outputs
@@ -86,24 +96,29 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
                   {"--table": table, "--illuminant": illuminant}
                   | {f"CAMERA {cam}": cam for cam in subjects}
                   | {f"CAMERA {cam} ({f.name})": f for cam in subjects
-                     for f in camera_files(cam)})
+                     for f in camera_files(cam)}
+                  | measure_inputs(images, annotations, models))
     criterion = Criterion("max-delta-e", max_delta_e)
+    request = measure_request(measure, images, annotations, models, limit)
     codes = [_check_one(cam, html, js, to_stdout=to_stdout, many=many, criterion=criterion,
                         illuminant=illuminant, renderer=renderer, reference=reference,
-                        size=size, table=table) for cam, html, js in plans]
+                        size=size, table=table, bound=bound, measure=request)
+             for cam, html, js in plans]
     sys.exit(max(codes))
 
 
 def _check_one(cam: str, html: Path | None, json_file: Path | None, *, to_stdout: bool,
                many: bool, criterion: Criterion, illuminant: str, renderer: str,
-               reference: str, size: str, table: str | None) -> int:
+               reference: str, size: str, table: str | None, bound: str = "classic",
+               measure: Any = None) -> int:
     """Check one camera, write its reports, print its verdict; its exit code."""
     from fidelity.check import check_camera
     from fidelity.report.chart import RenderSource, write_chart_report
     from fidelity.report.terminal import summary_lines
 
     report = check_camera(cam, illuminant=illuminant, renderer=renderer, reference=reference,
-                          size=size, table=table, criterion=criterion)
+                          size=size, table=table, criterion=criterion, bound=bound,
+                          measure=measure)
     write_chart_report(report, json_path=json_file, html_path=html)
     if to_stdout:
         write_json_output(STDOUT, report.to_json())

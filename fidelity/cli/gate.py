@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from fidelity.cli.options import STDOUT, common_options, from_settings
+from fidelity.cli.options import STDOUT, bound_option, common_options, from_settings
 from fidelity.errors import FidelityError
 from fidelity.prediction.table import CLASS_COLUMNS, SIZES
 from fidelity.prediction.verdict import EXIT_ERROR, Criterion
@@ -125,6 +125,7 @@ def report_paths(images: tuple[Path, ...], path: Path | None, suffix: str, *,
 @click.option("--html", "html_path", type=click.Path(path_type=Path),
               help="Write the HTML report (several images: a folder, one report per image).")
 @max_pixels_option
+@bound_option
 @common_options
 def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
          max_delta_e: float | None, max_dmap: float | None, cls: str | None, unit: str,
@@ -132,7 +133,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
          layer: str | None, bayer: str | None, colourspace: str | None, negatives: str,
          reference: str, illuminant: str, renderer: str, junit: Path | None,
          json_path: Path | None, html_path: Path | None,
-         max_pixels: int | None) -> None:
+         max_pixels: int | None, bound: str) -> None:
     """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 error.
 
     \b
@@ -206,7 +207,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         corners=corners, layer=layer, encoding=encoding, exposure=exposure,
         negatives=negatives, colourspace=colourspace, bayer=bayer, reference=reference,
         illuminant=illuminant, renderer=renderer, size=size, table=table,
-        max_pixels=max_pixels)
+        max_pixels=max_pixels, bound=bound)
     for case in cases:
         if many:
             click.echo(f"{case.subject}:" if case.error is None else f"{case.subject}: error")

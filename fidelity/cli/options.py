@@ -89,6 +89,70 @@ def json_option(help_text: str) -> Callable[[F], F]:
                         help=f"{help_text} ('-': standard output).")
 
 
+def bound_option(f: F) -> F:
+    """``--bound classic|directional``: which prediction decides a ``--max-dmap`` verdict (both
+    are reported)."""
+    return click.option(
+        "--bound", type=click.Choice(["classic", "directional"]), default="classic",
+        show_default=True,
+        help="Prediction that decides a --max-dmap verdict: the classic worst case over every "
+             "transform, or the direction-aware one (both are reported).")(f)
+
+
+def measure_options(f: F) -> F:
+    """``--measure`` and what it runs on: ``--images DIR``, ``--annotations FILE``,
+    ``--models A.onnx[@N]``, ``--limit N`` (default: the shared data folder's COCO subset and
+    YOLOX-nano)."""
+    opts = [
+        click.option("--measure", is_flag=True,
+                     help="Also measure the loss on COCO: emulate this colour rendering on the "
+                          "images and run a detector (ΔmAP ± SE; the baseline is cached)."),
+        click.option("--images", default=None, type=click.Path(file_okay=False),
+                     help="With --measure: COCO image folder (default: "
+                          "$FIDELITY_SHARED/coco/val2017)."),
+        click.option("--annotations", default=None, type=click.Path(dir_okay=False),
+                     help="With --measure: COCO annotations (default: the shared subset's)."),
+        click.option("--models", default=None,
+                     help="With --measure: ONNX detector(s), PATH[@N] comma-separated "
+                          "(default: the shared yolox_nano.onnx)."),
+        click.option("--limit", type=click.IntRange(min=1), default=None,
+                     help="With --measure: at most N images (first N by id)."),
+    ]
+    for opt in reversed(opts):
+        f = opt(f)
+    return f
+
+
+def measure_inputs(images: str | None, annotations: str | None, models: str | None
+                   ) -> dict[str, Any]:
+    """What ``--measure`` reads, for :func:`fidelity.fileio.check_outputs`: the image folder,
+    the annotations and each model file."""
+    found: dict[str, Any] = {"--images": images, "--annotations": annotations}
+    for m in (models or "").split(","):
+        path = m.strip().rsplit("@", 1)[0] if "@" in m else m.strip()
+        if path:
+            found[f"--models ({path})"] = path
+    return found
+
+
+def measure_request(measure: bool, images: str | None, annotations: str | None,
+                    models: str | None, limit: int | None) -> Any:
+    """The :class:`fidelity.coco.measure.MeasureRequest` of the ``--measure`` options (None
+    without ``--measure``; the other options then must not be given)."""
+    if not measure:
+        if any(v is not None for v in (images, annotations, models, limit)) and not all(
+                from_settings(n) for n, v in (("images", images), ("annotations", annotations),
+                                              ("models", models), ("limit", limit))
+                if v is not None):
+            raise click.UsageError("--images, --annotations, --models and --limit go with "
+                                   "--measure")
+        return None
+    from fidelity.coco.measure import MeasureRequest, resolve_coco_inputs
+
+    return MeasureRequest(resolve_coco_inputs(images, annotations, models), limit=limit,
+                          progress=show_progress(None))
+
+
 def real_stdout() -> Any:
     """The standard output of the command line (also under ``--quiet``)."""
     with contextlib.suppress(RuntimeError):
@@ -112,9 +176,13 @@ def write_json_output(path: str | os.PathLike[str], obj: Any) -> str:
 
 __all__ = [
     "STDOUT",
+    "bound_option",
     "common_options",
     "from_settings",
     "json_option",
+    "measure_inputs",
+    "measure_options",
+    "measure_request",
     "progress_option",
     "real_stdout",
     "show_progress",

@@ -33,12 +33,20 @@ from fidelity.prediction.table import (
 @click.option("--unit", type=click.Choice(["points", "relative"]), default="points",
               show_default=True, help="Unit of --max-dmap: percentage points or % of baseline "
                                       "(relative: --class all only).")
+@click.option("--direction", default=None,
+              type=click.Choice(["tone", "chroma", "hue", "contrast", "pull_mean"]),
+              help="With --delta-e: the direction-aware loss of an error entirely of this "
+                   "transform family (default: every family's is listed).")
+@click.option("--coco-c", "coco_c", default=None, metavar="CORRUPTION:SEVERITY",
+              help="Instead of --delta-e: a COCO-C colour corruption (brightness, contrast, "
+                   "saturate; severity 1-5): its chart ΔE, predicted and measured loss.")
 @json_option("Write the prediction (or the ΔE limit) as JSON")
 @click.option("--list-tables", is_flag=True, help="List the prediction tables and exit.")
 @common_options
 def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
                 method: str | None, baseline_map: float | None, max_dmap: float | None,
-                unit: str, json_path: str | None, list_tables: bool) -> None:
+                unit: str, direction: str | None, coco_c: str | None, json_path: str | None,
+                list_tables: bool) -> None:
     """Predict what a chart ΔE costs detectors, or the ΔE limit of a loss budget.
 
     With --delta-e: ΔmAP (points and % of baseline), ΔAP person and bicycle, and the
@@ -48,6 +56,7 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
     \b
     fidelity predict --delta-e 4.2 --class person --json predict.json
     fidelity predict --max-dmap 1 --unit relative      # ΔE limit for <= 1 % of baseline mAP
+    fidelity predict --coco-c contrast:3               # a COCO-C corruption on the ΔE scale
     """
     if list_tables:
         from fidelity.prediction.table import DEFAULT_TABLE, load_prediction_table
@@ -57,11 +66,14 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
             mark = " (default)" if name == DEFAULT_TABLE else ""
             click.echo(f"{name}{mark}: {t.kind}, sizes {', '.join(t.sizes())} - {t.title}")
         return
-    if (delta_e is None) == (max_dmap is None):
-        raise click.UsageError("give --delta-e X or --max-dmap P")
+    if sum(v is not None for v in (delta_e, max_dmap, coco_c)) != 1:
+        raise click.UsageError("give --delta-e X or --max-dmap P (or --coco-c CORRUPTION:SEVERITY)")
     from fidelity.fileio import check_outputs
 
     check_outputs({"--json": json_path}, {"--table": table})
+    if coco_c is not None:
+        _print_coco_c(coco_c, size, table, json_path)
+        return
     if max_dmap is not None:
         _print_limit(max_dmap, cls, unit, size, table, method, json_path)
         return
@@ -89,8 +101,58 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
     if reach:
         click.echo("  SAFE-COLOR transforms at this ΔE: " + ", ".join(
             f"{t.transform} {t.param:.4g}" for t in reach))
+    doc = p.to_json()
+    if p.table.kind != "published-bounds":
+        doc["directional_by_family"] = _print_families(delta_e, size, table, direction)
     if json_path is not None:
-        click.echo(f"wrote {write_json_output(json_path, p.to_json())}")
+        click.echo(f"wrote {write_json_output(json_path, doc)}")
+
+
+def _print_families(delta_e: float, size: str, table: str | None,
+                    direction: str | None) -> dict[str, float | None]:
+    """The direction-aware loss of an error entirely of each family (or one)."""
+    from fidelity.prediction.directional import DEFAULT_DIRECTIONAL_TABLE, family_losses
+    from fidelity.prediction.table import load_prediction_table
+
+    dtab = table if table and load_prediction_table(table).kind == "directional" else None
+    got = family_losses(delta_e, size=size, table=dtab)
+    if direction is not None:
+        got = {direction: got[direction]}
+    name = dtab or DEFAULT_DIRECTIONAL_TABLE
+    click.echo(f"  direction-aware ΔmAP ({name}) of an error entirely of one family: " + ", ".join(
+        f"{f} {'n/a' if v is None else f'{v:.2f}'}" + (" (classic curve)" if src == "classic"
+                                                       else "")
+        for f, (v, src) in got.items()))
+    click.echo("  (a measured chart splits its error over the families: fidelity check, "
+               "audit, gate and compare report it)")
+    return {f: v for f, (v, _) in got.items()}
+
+
+def _print_coco_c(spec: str, size: str, table: str | None, json_path: str | None) -> None:
+    from fidelity.coco.corruptions import coco_c_answer
+
+    a = coco_c_answer(spec, size=size, table=table)
+    p, d = a.prediction, a.directional
+
+    def f(v: float | None) -> str:
+        return "n/a" if v is None else f"{v:.2f}"
+
+    click.echo(f"COCO-C {a.corruption} severity {a.severity} (parameter {a.parameter}): chart "
+               f"ΔE00 {a.chart_delta_e:.2f} (max {a.measurement.max_delta_e:.2f}, "
+               f"{a.measurement.worst_patch}); lightness {d.parts.lightness:.2f}, chroma "
+               f"{d.parts.chroma:.2f}, hue {d.parts.hue:.2f}")
+    click.echo(f"  predicted ΔmAP: classic {f(p.dmap_points)} points, {f(p.dmap_relative)} % "
+               f"(table {p.table.name}, detector size {p.size_used}); direction-aware "
+               f"{f(d.dmap_points)} points, {f(d.dmap_relative)} % ({d.explanation()})")
+    if not a.measured:
+        click.echo(f"  measured: not in the COCO-C table {a.table_path}")
+    for m in a.measured:
+        se = "" if m.dmap_points_se is None else f" ± {m.dmap_points_se:.2f}"
+        click.echo(f"  measured ΔmAP: {m.dmap_points:.2f}{se} points, {m.dmap_relative:.2f} % "
+                   f"of baseline mAP {100 * m.baseline_map:.2f} ({m.model}, {m.images} COCO "
+                   "images; COCO-C table)")
+    if json_path is not None:
+        click.echo(f"wrote {write_json_output(json_path, a.to_json())}")
 
 
 def _print_limit(max_dmap: float, cls: str, unit: str, size: str, table: str | None,

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -20,13 +20,17 @@ if TYPE_CHECKING:
 
 
 @click.command()
-@click.argument("store_dir", type=click.Path(file_okay=False))
+@click.argument("store_dir", type=click.Path())
 @click.option("--out", default=None, type=click.Path(file_okay=False),
               help="Report folder (default: STORE_DIR/report).")
 @click.option("--prediction", "prediction", default=None, type=click.Path(dir_okay=False),
               help="Also write the measured prediction table (CORE_API schema) to this file.")
 @click.option("--name", default="coco1000-measured", show_default=True,
               help="Name of the prediction table.")
+@click.option("--directional", default=None, type=click.Path(dir_okay=False),
+              help="Also write the direction-aware prediction table (per transform family; "
+                   "fidelity.prediction.directional) to this file. STORE_DIR may be a "
+                   "tables.json: then only the tables are written, from it.")
 @click.option("--annotations", default=None, type=click.Path(dir_okay=False),
               help="COCO annotations of the sweep, for standard errors (default: the file the "
                    "sweep recorded, if it is there).")
@@ -52,12 +56,14 @@ if TYPE_CHECKING:
 @progress_option
 @common_options
 def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
-           annotations: str | None, standard_errors: bool, explain: str | None,
+           directional: str | None, annotations: str | None, standard_errors: bool, explain: str | None,
            rare_boxes: int, images: str | None, top: int, json_path: str | None,
            progress: bool | None) -> None:
     """Worst case per model and size class, paper comparison, plots, Markdown/HTML report.
 
     With --explain MODEL:TRANSFORM:ΔE: the classes one cell's ΔmAP comes from, instead.
+    STORE_DIR may be a tables.json (e.g. reports/coco/tables.json): then only --prediction
+    and --directional are written, from it.
     """
     from pathlib import Path
 
@@ -67,7 +73,13 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
     from fidelity.report.coco import write_tables_report
 
     report = Path(out or Path(store_dir) / "report")
-    check_outputs({"--prediction": prediction, "--json": json_path}
+    if Path(store_dir).is_file():
+        check_outputs({"--prediction": prediction, "--directional": directional},
+                      {"--annotations": annotations, "STORE_DIR": store_dir})
+        _tables_from_json(Path(store_dir), prediction, name, directional)
+        return
+    check_outputs({"--prediction": prediction, "--json": json_path,
+                   "--directional": directional}
                   | ({} if explain else {f"--out ({n})": report / n
                                          for n in ("report.html", "report.md", "tables.json")}),
                   {"--annotations": annotations}, stores={"STORE_DIR": store_dir})
@@ -98,8 +110,40 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
                        "standard errors (pass --annotations)", err=True)
     result = tables_result(store, coco, progress=show_progress(progress), images=caps)
     written = write_tables_report(result, out or Path(store_dir) / "report", prediction, name)
+    if directional is not None:
+        written["directional"] = _write_directional(result.tables, directional)
     for k, p in written.items():
         click.echo(f"{k:<14} {p}")
+
+
+def _write_directional(tables_: Any, path: str) -> Any:
+    from fidelity.fileio import json_ready, write_json_atomic
+    from fidelity.prediction.directional import directional_table
+
+    return write_json_atomic(path, json_ready(directional_table(tables_)))
+
+
+def _tables_from_json(path: Any, prediction: str | None, name: str,
+                      directional: str | None) -> None:
+    """The prediction tables of a ``tables.json`` (no store, no report)."""
+    import json
+
+    from fidelity.coco.tables import TablesResult, prediction_table
+    from fidelity.errors import InputFileError, InvalidValueError
+    from fidelity.fileio import json_ready, write_json_atomic
+
+    if prediction is None and directional is None:
+        raise InvalidValueError(f"{path}: from a tables.json, give --prediction FILE and/or "
+                                "--directional FILE")
+    try:
+        result = TablesResult.from_json(json.loads(path.read_text(encoding="utf-8")))
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise InputFileError(f"{path}: not a tables.json of fidelity tables ({exc})") from None
+    if prediction is not None:
+        p = write_json_atomic(prediction, json_ready(prediction_table(result.tables, name)))
+        click.echo(f"{'prediction':<14} {p}")
+    if directional is not None:
+        click.echo(f"{'directional':<14} {_write_directional(result.tables, directional)}")
 
 
 def _explain(store: SweepStore, spec: str, annotations: str | None, rare_boxes: int,

@@ -51,6 +51,7 @@ same table; the result is compared patch by patch with the camera's rendered cha
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
@@ -536,13 +537,193 @@ __all__ = [
     "CameraSamples",
     "Emulation",
     "EmulationAccuracy",
+    "PatchEmulation",
     "ReflectanceSet",
+    "apply_log_tone",
     "camera_output_srgb",
     "camera_samples",
     "emulation_accuracy",
+    "emulation_key",
     "fit_emulation",
     "fit_root_polynomial",
     "reference_linear_srgb",
     "root_polynomial_terms",
     "training_reflectances",
 ]
+
+
+# --------------------------------------------------------------------------------------------
+# Emulation fitted from measured chart patches (an audited image, a sim-to-real comparison)
+# --------------------------------------------------------------------------------------------
+
+
+def _log_tone_curve(source_y: ArrayLike, target_y: ArrayLike
+                    ) -> tuple[FloatArray, FloatArray]:
+    """Knots (log Y_source, log Y_target) of a monotone tone curve through neutral patches,
+    sorted, with repeated or non-increasing points dropped."""
+    s = np.log(np.clip(np.asarray(source_y, float), 1e-6, None))
+    t = np.log(np.clip(np.asarray(target_y, float), 1e-6, None))
+    order = np.argsort(s)
+    s, t = s[order], t[order]
+    keep = [0]
+    for k in range(1, len(s)):
+        if s[k] > s[keep[-1]] + 1e-9 and t[k] > t[keep[-1]]:
+            keep.append(k)
+    return s[keep], t[keep]
+
+
+def apply_log_tone(y: ArrayLike, knots: tuple[FloatArray, FloatArray]) -> FloatArray:
+    """The tone curve of :func:`_log_tone_curve` on luminances ``y`` (>= 0): piecewise linear
+    in log-log between the knots, continued with the end segments' slopes (a power law, the
+    local gamma) beyond them; 0 stays 0."""
+    xs, ts = knots
+    yy = np.asarray(y, float)
+    out = np.zeros_like(yy)
+    pos = yy > 0
+    if len(xs) < 2:
+        shift = float(ts[0] - xs[0]) if len(xs) else 0.0
+        out[pos] = yy[pos] * math.exp(shift)
+        return out
+    ly = np.log(yy[pos])
+    lo_slope = (ts[1] - ts[0]) / (xs[1] - xs[0])
+    hi_slope = (ts[-1] - ts[-2]) / (xs[-1] - xs[-2])
+    v = np.interp(ly, xs, ts)
+    v = np.where(ly < xs[0], ts[0] + lo_slope * (ly - xs[0]), v)
+    v = np.where(ly > xs[-1], ts[-1] + hi_slope * (ly - xs[-1]), v)
+    out[pos] = np.exp(v)
+    return out
+
+
+@dataclass
+class PatchEmulation:
+    """A colour mapping fitted on measured chart patches alone: from ``source`` colours (the
+    chart's reference, or one camera's chart) to ``target`` colours (the measured chart, or
+    another camera's), both encoded sRGB (n, 3).
+
+    ``out = encode(clip(P(tone(linearize(x)))))``: ``tone`` scales each colour's linear RGB
+    so that its luminance follows the neutral patches' tone curve (target against source
+    luminance, piecewise linear on log-log axes, continued with the end slopes);
+    ``P`` is a degree-2 root-polynomial (:func:`fit_root_polynomial`, Finlayson et al. 2015)
+    fitted by least squares from the toned source to the target in linear light on all
+    patches. A target equal to the source gives the identity (up to rounding). 8-bit images go
+    through a 256^3 table (:meth:`apply_uint8`), as :class:`Emulation` does.
+    """
+
+    source_srgb: FloatArray
+    target_srgb: FloatArray
+    neutral: tuple[int, ...]
+    knots: tuple[FloatArray, FloatArray]
+    matrix: FloatArray
+    fit_seconds: float = 0.0
+    _cube: NDArray[np.uint8] | None = field(default=None, repr=False)
+
+    @classmethod
+    def fit(cls, source_srgb: ArrayLike, target_srgb: ArrayLike,
+            neutral: tuple[int, ...]) -> PatchEmulation:
+        """Fit the mapping from ``source_srgb`` to ``target_srgb`` (n >= 6 patches; the
+        ``neutral`` indices carry the tone curve)."""
+        from fidelity.chart.measure import luminance_linear_srgb
+        from fidelity.colour.colorimetry import linearize_srgb
+
+        t0 = time.perf_counter()
+        src = np.clip(np.asarray(source_srgb, float), 0.0, 1.0)
+        dst = np.clip(np.asarray(target_srgb, float), 0.0, 1.0)
+        if src.shape != dst.shape or src.ndim != 2 or src.shape[1] != 3 or len(src) < 6:
+            raise InvalidValueError(f"patch emulation needs matching (n >= 6, 3) colours, got "
+                                    f"{src.shape} and {dst.shape}")
+        ls = np.asarray(linearize_srgb(src), np.float64)
+        lt = np.asarray(linearize_srgb(dst), np.float64)
+        idx = list(neutral)
+        knots = _log_tone_curve(luminance_linear_srgb(ls[idx]), luminance_linear_srgb(lt[idx]))
+        toned = _tone_rgb(ls, knots)
+        matrix = fit_root_polynomial(toned, lt)
+        return cls(src, dst, tuple(int(i) for i in neutral), knots, matrix,
+                   time.perf_counter() - t0)
+
+    def apply(self, srgb: ArrayLike) -> FloatArray:
+        """Map encoded sRGB (..., 3) in [0, 1] to the target's encoded sRGB, clipped."""
+        from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
+
+        x = np.clip(np.asarray(srgb, dtype=np.float64), 0.0, 1.0)
+        lin = _tone_rgb(np.asarray(linearize_srgb(x), np.float64), self.knots)
+        out = root_polynomial_terms(lin) @ self.matrix.T
+        return np.clip(np.asarray(delinearize_srgb(np.clip(out, 0.0, 1.0)), np.float64), 0, 1)
+
+    def cube(self, chunk: int = 1 << 20) -> NDArray[np.uint8]:
+        """The (2^24, 3) uint8 table of :meth:`apply` on every 8-bit triple (built once)."""
+        if self._cube is None:
+            from fidelity.coco.dataset import _all_triples, to_uint8
+
+            table = np.empty((1 << 24, 3), dtype=np.uint8)
+            for s in range(0, 1 << 24, chunk):
+                e = min(s + chunk, 1 << 24)
+                table[s:e] = to_uint8(self.apply(_all_triples(s, e)))
+            self._cube = table
+        return self._cube
+
+    def apply_uint8(self, rgb8: ArrayLike) -> NDArray[np.uint8]:
+        """Apply to an (H, W, 3) uint8 image through :meth:`cube`."""
+        a = np.asarray(rgb8)
+        if a.dtype != np.uint8 or a.shape[-1] != 3:
+            raise InvalidValueError(f"image must be (..., 3) uint8, got {a.shape} {a.dtype}")
+        idx = (a[..., 0].astype(np.uint32) << 16) | (a[..., 1].astype(np.uint32) << 8) | a[..., 2]
+        out: NDArray[np.uint8] = self.cube()[idx]
+        return out
+
+    def patch_delta_e(self) -> FloatArray:
+        """ΔE00 per patch between the mapped source and the target (the in-sample fit error)."""
+        from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
+
+        return np.asarray(delta_e_2000(srgb_to_lab(self.apply(self.source_srgb)),
+                                       srgb_to_lab(self.target_srgb)), np.float64)
+
+    def key(self) -> str:
+        """A key that changes with the mapping (for the measurement store)."""
+        import hashlib
+
+        h = hashlib.sha256()
+        for a in (self.matrix, self.knots[0], self.knots[1]):
+            h.update(np.ascontiguousarray(np.round(a, 12)).tobytes())
+        h.update(f"patch-emulation-v{EMULATION_VERSION}".encode())
+        return f"patch-emulation:{h.hexdigest()[:20]}"
+
+    def describe(self) -> dict[str, Any]:
+        """JSON-ready: the method, the patches, the tone knots, the matrix and the fit."""
+        d = self.patch_delta_e()
+        return {"method": "patch root-polynomial + neutral tone curve",
+                "patches": len(self.source_srgb), "neutral": list(self.neutral),
+                "tone_knots_log_y": [self.knots[0].round(6).tolist(),
+                                     self.knots[1].round(6).tolist()],
+                "root_polynomial_matrix": self.matrix.round(6).tolist(),
+                "fit_mean_delta_e": float(d.mean()), "fit_max_delta_e": float(d.max()),
+                "fit_seconds": self.fit_seconds}
+
+
+def _tone_rgb(linear: FloatArray, knots: tuple[FloatArray, FloatArray]) -> FloatArray:
+    """Scale linear RGB (..., 3) so that its luminance follows the tone curve."""
+    from fidelity.chart.measure import luminance_linear_srgb
+
+    lin = np.asarray(linear, float)
+    y = np.asarray(luminance_linear_srgb(lin), float)
+    ty = apply_log_tone(np.clip(y, 0.0, None), knots)
+    scale = np.divide(ty, y, out=np.ones_like(y), where=y > 1e-9)
+    out: FloatArray = lin * scale[..., None]
+    return out
+
+
+def emulation_key(emu: Emulation) -> str:
+    """A key that changes with a camera emulation's mapping (for the measurement store): the
+    fitted matrix, LUT, output stage (tone, quantisation, encoding) and
+    :data:`EMULATION_VERSION`."""
+    import hashlib
+    import json
+
+    cam = emu.camera
+    h = hashlib.sha256()
+    h.update(np.ascontiguousarray(np.round(emu.matrix, 12)).tobytes())
+    if emu.lut is not None:
+        h.update(np.ascontiguousarray(np.round(emu.lut, 9)).tobytes())
+    h.update(json.dumps({"tone": repr(cam.tone), "bits": cam.quantisation_bits,
+                         "encoding": cam.output_encoding, "method": emu.method,
+                         "version": EMULATION_VERSION}, sort_keys=True).encode())
+    return f"camera-emulation:{cam.name}:{h.hexdigest()[:20]}"

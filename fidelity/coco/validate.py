@@ -56,6 +56,7 @@ from fidelity.fileio import file_sha256, json_ready
 
 if TYPE_CHECKING:
     from fidelity.chart.measure import ChartMeasurement
+    from fidelity.coco.bounds import DirectionalValidation
     from fidelity.coco.emulation import AccuracySummary, Emulation
     from fidelity.coco.executor import ExecutorOptions
     from fidelity.coco.scoring import CocoScore, FoldScore
@@ -530,15 +531,20 @@ class ValidationResults:
     models: dict[str, RegisteredModel]
     baselines: dict[str, ValidationCell]
     meta: dict[str, Any]
+    #: both bounds and the blind-spot checks per camera (:mod:`fidelity.coco.bounds`)
+    directional: DirectionalValidation | None = None
 
     def to_json(self) -> dict[str, Any]:
         """``validation.json`` (strict JSON values)."""
-        out: dict[str, Any] = json_ready({
+        d: dict[str, Any] = {
             "rows": [r.to_json() for r in self.rows], "summary": self.summary.to_json(),
             "cameras": {k: c.to_json() for k, c in self.cameras.items()},
             "models": {m: r.to_json() for m, r in self.models.items()},
             "baselines": {m: b.to_json() for m, b in self.baselines.items()},
-            "meta": self.meta})
+            "meta": self.meta}
+        if self.directional is not None:
+            d["directional"] = self.directional.to_json()
+        out: dict[str, Any] = json_ready(d)
         return out
 
     @classmethod
@@ -549,7 +555,15 @@ class ValidationResults:
                    {k: CameraRecord.from_json(c) for k, c in d["cameras"].items()},
                    {m: RegisteredModel.from_json(r) for m, r in d["models"].items()},
                    {m: ValidationCell.from_json(b) for m, b in d["baselines"].items()},
-                   dict(d.get("meta") or {}))
+                   dict(d.get("meta") or {}), _directional_from_json(d.get("directional")))
+
+
+def _directional_from_json(d: Mapping[str, Any] | None) -> DirectionalValidation | None:
+    if not d:
+        return None
+    from fidelity.coco.bounds import DirectionalValidation
+
+    return DirectionalValidation.from_json(d)
 
 
 # --------------------------------------------------------------------------------------------
@@ -1028,9 +1042,14 @@ def collect_results(store: ValidationStore, tables: Sequence[str] | None = None,
         rows.append(_row(camera, cases[camera], b, c, tabs, bound))
     summary = ValidationSummary(bound, tuple(tabs), tuple(not_in_suite),
                                 {cls: _class_summary(rows, cls) for cls in LOSS_COLUMNS})
-    return ValidationResults(
+    results = ValidationResults(
         tuple(rows), summary, cases, models,
         {m: cells[(m, BASELINE)] for m in models if (m, BASELINE) in cells}, store.meta())
+    if suite and rows:
+        from fidelity.coco.bounds import directional_validation
+
+        results = replace(results, directional=directional_validation(results, suite))
+    return results
 
 
 __all__ = [

@@ -68,7 +68,9 @@ CLASS_COLUMNS: dict[str, str] = {
 #: Largest possible loss in each column (total loss) when nothing better is known.
 CEILING = 100.0
 
-_KINDS = ("published-bounds", "measured")
+#: Table kinds; a ``directional`` table is a measured one that also holds per-family curves
+#: (:mod:`fidelity.prediction.directional`).
+_KINDS = ("published-bounds", "measured", "directional")
 
 
 def prediction_dir() -> Path:
@@ -694,7 +696,7 @@ def predict(
             notes.append("ΔmAP points vs relative: the paper's '%' is ambiguous; dmap_points is "
                          "safe under both readings, dmap_relative only under the relative "
                          "reading (give the detector's baseline mAP to bound it under both)")
-    if tab.kind == "measured":
+    if tab.kind in ("measured", "directional"):
         notes.append("measured table: values are the worst loss measured over the transforms "
                      "(and models) at each ΔE, with sampling error, not a guaranteed bound")
         se = _bracketing_se(answering, de)

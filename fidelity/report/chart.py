@@ -32,16 +32,18 @@ import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from fidelity.chart.blindspots import BlindSpot
 from fidelity.chart.find import ChartChecks, FoundChart
 from fidelity.chart.image import ImageInfo
 from fidelity.chart.locate import ChartLocation
 from fidelity.chart.measure import BadPixels, ChartMeasurement
 from fidelity.fileio import JSONObject, json_ready
+from fidelity.prediction.directional import DirectionalPrediction
 from fidelity.prediction.table import Prediction
 from fidelity.prediction.verdict import Verdict
 from fidelity.report.document import (
@@ -56,10 +58,13 @@ from fidelity.report.document import (
     table,
 )
 
+if TYPE_CHECKING:
+    from fidelity.coco.measure import MeasuredLoss
+
 #: Version of the JSON report layout (bump on incompatible change).
 SCHEMA_VERSION = "1.0"
 #: Commands that write a chart report.
-COMMANDS = ("audit", "check", "gate")
+COMMANDS = ("audit", "check", "compare", "gate")
 
 
 def report_schema_path() -> Path:
@@ -316,6 +321,19 @@ class ChartReport:
     bad_pixels: BadPixels | None = None
     valid_pixels: tuple[int, ...] | None = None
     schema_version: str = SCHEMA_VERSION
+    #: the direction-aware prediction (:mod:`fidelity.prediction.directional`)
+    directional: DirectionalPrediction | None = None
+    #: which prediction decided a max-dmap verdict: ``classic`` or ``directional``
+    bound: str = "classic"
+    #: the blind-spot checks (:mod:`fidelity.chart.blindspots`)
+    blind_spots: tuple[BlindSpot, ...] = ()
+    #: losses measured on COCO (``--measure``; :class:`fidelity.coco.measure.MeasuredLoss`)
+    measured: tuple[MeasuredLoss, ...] = ()
+
+    @property
+    def warnings(self) -> list[BlindSpot]:
+        """The blind-spot checks that found a risk."""
+        return [s for s in self.blind_spots if s.at_risk]
 
     @property
     def mean_delta_e(self) -> float:
@@ -360,6 +378,11 @@ class ChartReport:
             "verdict": self.verdict.to_json() if self.verdict else None,
             "details": self.source.details(),
             "provenance": self.provenance.to_json(),
+            "bound": self.bound,
+            "directional_prediction": (self.directional.to_json()
+                                       if self.directional else None),
+            "blind_spots": [b.to_json() for b in self.blind_spots],
+            "measured_loss": [m.to_json() for m in self.measured],
         })
         return out
 
@@ -384,7 +407,20 @@ class ChartReport:
             exposure_ev=data.get("exposure_ev"),
             bad_pixels=BadPixels.from_json(data["bad_pixels"]) if data["bad_pixels"] else None,
             valid_pixels=valid, schema_version=str(data["schema_version"]),
+            directional=(DirectionalPrediction.from_json(data["directional_prediction"])
+                         if data.get("directional_prediction") else None),
+            bound=str(data.get("bound") or "classic"),
+            blind_spots=tuple(BlindSpot.from_json(b) for b in data.get("blind_spots") or ()),
+            measured=_measured_from_json(data.get("measured_loss") or ()),
         )
+
+
+def _measured_from_json(items: Sequence[Mapping[str, Any]]) -> tuple[MeasuredLoss, ...]:
+    if not items:
+        return ()
+    from fidelity.coco.measure import MeasuredLoss
+
+    return tuple(MeasuredLoss.from_json(m) for m in items)
 
 
 def validate_report(data: Mapping[str, Any]) -> None:
@@ -419,11 +455,12 @@ def _headline(report: ChartReport) -> Headline:
                     "the chart: reference against measured",
                     "Each patch: reference colour (left half) and measured colour (right half).")
     v = report.verdict
+    warn = "".join(f"\n\n**warning**: {w.reason}" for w in report.warnings)
     if v is not None:
-        return Headline(f"**{v.label}**: {v.message.split(': ', 1)[-1]}",
+        return Headline(f"**{v.label}**: {v.message.split(': ', 1)[-1]}{warn}",
                         "pass" if v.passed else "fail", figure)
     return Headline(f"mean ΔE00 {report.mean_delta_e:.2f}, max {report.max_delta_e:.2f} "
-                    f"({report.worst_patch}); no gate applied", "info", figure)
+                    f"({report.worst_patch}); no gate applied{warn}", "info", figure)
 
 
 def _summary_facts(report: ChartReport) -> Facts:
@@ -456,6 +493,17 @@ def _summary_facts(report: ChartReport) -> Facts:
                   ("predicted bicycle ΔAP, points", b + _num(p.dap_bicycle_points)),
                   ("prediction table", f"{p.table.name} ({p.table.kind}), detector size "
                                        f"{p.size_used}")]
+    d = report.directional
+    if d is not None:
+        items += [("direction-aware predicted ΔmAP, points", _num(d.dmap_points)),
+                  ("direction-aware predicted person / bicycle ΔAP, points",
+                   f"{_num(d.dap_person_points)} / {_num(d.dap_bicycle_points)}"),
+                  ("bound of the verdict", _bound_words(report))]
+    for m in report.measured:
+        items.append((f"measured ΔmAP on COCO, {m.model}", m.summary().removeprefix(
+            "measured ΔmAP ")))
+    for spot in report.warnings:
+        items.append(("blind-spot warning", spot.reason))
     src = report.source
     if isinstance(src, RenderSource):
         variant = f" ({src.variant})" if src.variant else ""
@@ -466,6 +514,89 @@ def _summary_facts(report: ChartReport) -> Facts:
                             f"{src.image.width}x{src.image.height}, {src.encoding} pixels)")]
     items.append(("reference", src.reference))
     return Facts(tuple(items))
+
+
+def _bound_words(report: ChartReport) -> str:
+    v = report.verdict
+    if v is None:
+        return "no verdict"
+    if v.criterion.kind != "max-dmap":
+        return "neither: the verdict is on the chart ΔE"
+    return ("direction-aware" if report.bound == "directional" else
+            "classic (worst case over every transform)")
+
+
+def _directional_section(report: ChartReport) -> Section | None:
+    from fidelity.report import plots
+
+    d = report.directional
+    if d is None:
+        return None
+    pr = d.parts
+    sh = pr.shares()
+    facts = [("chart ΔE split by direction (ΔE00 units)",
+              f"lightness {pr.lightness:.2f} ({100 * sh['lightness']:.0f} %), chroma "
+              f"{pr.chroma:.2f} ({100 * sh['chroma']:.0f} %), hue {pr.hue:.2f} "
+              f"({100 * sh['hue']:.0f} %)")]
+    if d.fit is not None:
+        facts.append(("best-fitting transform", f"{d.fit.fit} {d.fit.param:.4g}: explains "
+                                                f"{100 * d.fit.explained:.0f} % of the error "
+                                                f"(mean ΔE00 {d.fit.error:.2f} -> "
+                                                f"{d.fit.residual:.2f})"))
+    else:
+        facts.append(("best-fitting transform", "none explains the error"))
+    p = report.prediction
+    facts.append(("predicted ΔmAP, classic / direction-aware",
+                  f"{_num(p.dmap_points if p else None)} / {_num(d.dmap_points)} points"))
+    rows = [(t.family, f"{100 * t.weight:.1f} %", _num(t.values.get("dmap_points")),
+             t.sources.get("dmap_points", ""), t.reason) for t in d.terms]
+    return section(
+        "Direction-aware prediction",
+        Text("Each part of the chart error is charged the worst loss of the SAFE-COLOR "
+             "transforms that move the chart that way (`fidelity.prediction.directional`): "
+             "loss = x·f(fitted family) + (1 − x)·Σ share·f(direction's family), every curve "
+             "read at the chart ΔE. An empirical worst case validated on 30 camera models, "
+             "not a guarantee."),
+        Facts(tuple(facts)),
+        table(("family", "weight", "its ΔmAP at this ΔE", "curve", "why"), rows,
+              numeric=(False, True, True, False, False)),
+        Figure(plots.family_curves(d, p), "family_curves.png",
+               "worst case per transform family and the classic curve"),
+        Text("\n".join(f"- {n}" for n in d.notes)))
+
+
+def _blind_spot_section(report: ChartReport) -> Section | None:
+    if not report.blind_spots:
+        return None
+    rows = [(b.kind, {True: "**at risk**", False: "no", None: "not judged"}[b.at_risk],
+             _num(b.value, 3), b.reason) for b in report.blind_spots]
+    return section("Blind spots of the chart ΔE", Text(
+        "What a mean over 24 flat patches cannot see (`fidelity.chart.blindspots`): the tone "
+        "of the deep shadows below the black patch, and posterisation (banding) of smooth "
+        "gradients."), table(("check", "at risk", "value", "reason"), rows,
+                             numeric=(False, False, True, False)))
+
+
+def _measured_section(report: ChartReport) -> Section | None:
+    if not report.measured:
+        return None
+    rows = []
+    for m in report.measured:
+        rows.append((m.model, str(m.images), f"{100 * m.baseline_map:.2f}",
+                     f"{m.dmap_points:.2f} ± {_num(m.dmap_points_se)}",
+                     f"{m.dmap_relative:.2f} ± {_num(m.dmap_relative_se)}",
+                     f"{_num(m.dap_person_points)} ± {_num(m.dap_person_points_se)}",
+                     f"{m.seconds:.0f} s" + ("" if m.inferred else " (cached)")))
+    p, d = report.prediction, report.directional
+    return section("Measured on COCO", Text(
+        "The camera's colour rendering applied to COCO images (emulated: a colour mapping "
+        "fitted to the camera or to the chart's patches), the same JPEG round trip as the "
+        "ΔE = 0 baseline, ΔmAP against that baseline with the paired standard error of 5 "
+        f"image folds (`fidelity.coco.measure`). Predicted: classic "
+        f"{_num(p.dmap_points if p else None)}, direction-aware "
+        f"{_num(d.dmap_points if d else None)} points."),
+        table(("detector", "images", "baseline mAP (%)", "ΔmAP points ± SE",
+               "ΔmAP % of baseline ± SE", "person ΔAP ± SE", "time"), rows))
 
 
 def _limits(report: ChartReport) -> tuple[float | None, float | None]:
@@ -546,6 +677,8 @@ def chart_document(report: ChartReport, pixels: NDArray[Any] | None = None) -> D
                           "ΔE00 per patch"))
     sections.append(section("Colour errors", *figures, gallery=True))
     sections += _prediction_sections(report, limit_de, limit_dmap)
+    sections += [x for x in (_directional_section(report), _measured_section(report),
+                             _blind_spot_section(report)) if x is not None]
     sections.append(_patch_table(report))
     prov = report.provenance
     sections.append(section("Provenance", Facts((

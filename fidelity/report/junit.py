@@ -75,6 +75,11 @@ def _properties(case: GateCase) -> list[tuple[str, str]]:
                    ("reference", r.source.reference),
                    ("input_sha256", r.provenance.input_sha256),
                    ("fidelity_version", r.provenance.version)]
+        d = r.directional
+        values += [("bound", r.bound),
+                   ("directional_dmap_points", d.dmap_points if d else None)]
+        values += [(f"measured_dmap_points_{m.model}", m.dmap_points) for m in r.measured]
+        values += [(f"warning_{w.kind}", w.reason) for w in r.warnings]
         if r.verdict is not None and r.verdict.value is not None:
             values.append(("value", r.verdict.value))
     return [(k, "" if v is None else str(v)) for k, v in values]

@@ -28,6 +28,7 @@ if TYPE_CHECKING:
 
     from fidelity.chart.locate import ChartLocation
     from fidelity.chart.measure import ChartMeasurement
+    from fidelity.prediction.directional import DirectionalPrediction
     from fidelity.prediction.table import Prediction
 
 #: Resolution of every PNG.
@@ -66,8 +67,10 @@ def _clip01(values: NDArray[np.float64] | None, k: int) -> NDArray[np.float64]:
     return np.clip(np.asarray(values[k], np.float64), 0.0, 1.0)
 
 
-def swatches(m: ChartMeasurement) -> bytes:
-    """The chart, each patch split into reference (left half) and measured (right half)."""
+def swatches(m: ChartMeasurement, labels: tuple[str, str] = ("reference", "measured")
+             ) -> bytes:
+    """The chart, each patch split into reference (left half) and measured (right half);
+    ``labels`` name the two halves in the title."""
     n = len(m.patch_names)
     rows, cols = _grid(n)
     cell, gap = 60, 16
@@ -84,7 +87,7 @@ def swatches(m: ChartMeasurement) -> bytes:
         y0, x0 = gap + r * (cell + gap), gap + c * (cell + gap)
         ax.text(x0 + cell / 2, y0 + cell + gap * 0.5, f"{name}\nΔE {m.delta_e[k]:.2f}",
                 ha="center", va="center", fontsize=5.5, color="white", linespacing=1.0)
-    ax.set_title("reference (left half) | measured (right half) per patch", fontsize=9)
+    ax.set_title(f"{labels[0]} (left half) | {labels[1]} (right half) per patch", fontsize=9)
     ax.axis("off")
     return png_bytes(fig)
 
@@ -142,9 +145,11 @@ def delta_e_bars(m: ChartMeasurement, limit: float | None = None) -> bytes:
     return png_bytes(fig)
 
 
-def ab_arrows(m: ChartMeasurement) -> bytes:
+def ab_arrows(m: ChartMeasurement, labels: tuple[str, str] = ("reference", "measured")
+              ) -> bytes:
     """The CIELAB a*b* plane: each patch's reference (circle, its own colour) with an arrow to
-    the measured colour; the direction of every hue and chroma error at a glance."""
+    the measured colour; the direction of every hue and chroma error at a glance (``labels``
+    name the two ends in the title)."""
     fig, ax = new_figure(6.4, 6.0)
     ref, meas = m.reference_lab, m.lab
     for k in range(len(m.patch_names)):
@@ -161,7 +166,7 @@ def ab_arrows(m: ChartMeasurement) -> bytes:
     ax.set_aspect("equal")
     ax.set_xlabel("a*")
     ax.set_ylabel("b*")
-    ax.set_title("a*b*: reference (circles) → measured (dots)", fontsize=9)
+    ax.set_title(f"a*b*: {labels[0]} (circles) → {labels[1]} (dots)", fontsize=9)
     ax.grid(alpha=0.3)
     return png_bytes(fig)
 
@@ -283,6 +288,91 @@ def prediction_curve(prediction: Prediction, limit_dmap: float | None = None,
     return png_bytes(fig)
 
 
+def family_curves(directional: DirectionalPrediction, classic: Prediction | None = None,
+                  column: str = "dmap_points") -> bytes:
+    """The direction-aware table's family curves (worst case of each transform family) and
+    the classic curve (worst over every transform), with this chart's classic and
+    direction-aware predictions at its ΔE."""
+    from fidelity.prediction.directional import load_directional_table
+    from fidelity.prediction.table import predict_curve
+
+    tab = load_directional_table(directional.table.get("path") or directional.table["name"])
+    de = directional.delta_e
+    xmax = max(24.0, de * 1.2)
+    grid = np.linspace(0.0, xmax, 481)
+    fig, ax = new_figure(7.5, 4.2)
+    y = predict_curve(grid, column, size=directional.size, table=tab.classic)
+    ax.plot(grid, y, color="black", lw=1.6, label="classic: worst over every transform")
+    styles = {"tone": "tab:blue", "chroma": "tab:green", "hue": "tab:purple",
+              "contrast": "tab:red", "pull_mean": "tab:orange"}
+    weights = {t.family: t.weight for t in directional.terms}
+    for fam, ftab in tab.families.items():
+        fy = predict_curve(grid, column, size=directional.size, table=ftab)
+        curves, _ = ftab.select(directional.size)
+        end = min(float(c.delta_e[-1]) for c in curves)
+        fy = np.where(grid <= end, fy, np.nan)  # beyond its range a family is not drawn
+        w = weights.get(fam, 0.0)
+        ax.plot(grid, fy, color=styles.get(fam, "grey"), lw=1.0 + 2.0 * w,
+                label=f"{fam} (weight {100 * w:.0f} %)", alpha=0.9)
+    if classic is not None and classic.columns[column].value is not None:
+        ax.plot([de], [classic.columns[column].value], "s", color="black", ms=7,
+                label="this chart, classic")
+    dv = directional.columns.get(column)
+    if dv is not None:
+        ax.plot([de], [dv], "o", color="gold", mec="black", ms=8,
+                label="this chart, direction-aware")
+    ax.axvline(de, color="grey", lw=0.8, ls=":")
+    ax.set_xlabel("chart ΔE00 (mean over 24 patches)")
+    ax.set_ylabel(_CURVE_STYLE[column][0] + " predicted")
+    ax.set_yscale("symlog", linthresh=1.0)
+    axes_plain_ticks(ax)
+    ax.set_xlim(0, xmax)
+    ax.set_ylim(bottom=0)
+    ax.set_title(f"direction-aware table {tab.name}: worst case per transform family, size "
+                 f"{directional.size_used}", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="lower right")
+    return png_bytes(fig)
+
+
+def chart_pair(left: tuple[NDArray[Any], ChartLocation, str, float],
+               right: tuple[NDArray[Any], ChartLocation, str, float],
+               titles: tuple[str, str] = ("simulation", "real camera")) -> bytes:
+    """Two charts side by side, each cropped to its chart with the sampling windows drawn:
+    ``(pixels, location, encoding, exposure_ev)`` for each."""
+    from fidelity.chart.locate import apply_homography
+    from fidelity.colour import colorimetry as cm
+
+    fig, axes = new_figure(11.0, 4.4, 1, 2)
+    for ax, (pixels, loc, encoding, ev), title in zip(axes, (left, right), titles,
+                                                       strict=True):
+        arr = np.asarray(pixels, dtype=np.float64)
+        arr = np.where(np.isfinite(arr), arr, 0.0)
+        if encoding == "linear":
+            arr = np.asarray(cm.delinearize_srgb(np.clip(arr * 2.0 ** ev, 0.0, 1.0)),
+                             dtype=np.float64)
+        arr = np.clip(arr, 0.0, 1.0)
+        corners = apply_homography(loc.homography, np.array(
+            [[-0.6, -0.6], [loc.cols - 0.4, -0.6], [loc.cols - 0.4, loc.rows - 0.4],
+             [-0.6, loc.rows - 0.4]]))
+        x0, y0 = np.floor(corners.min(axis=0)).astype(int)
+        x1, y1 = np.ceil(corners.max(axis=0)).astype(int)
+        h, w = arr.shape[:2]
+        x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, w - 1), min(y1, h - 1)
+        ax.imshow(arr[y0:y1 + 1, x0:x1 + 1], interpolation="antialiased",
+                  extent=(x0 - 0.5, x1 + 0.5, y1 + 0.5, y0 - 0.5))
+        half = loc.window / 2.0
+        square = np.array([[-half, -half], [half, -half], [half, half], [-half, half],
+                           [-half, -half]])
+        for k in range(loc.rows * loc.cols):
+            r, c = divmod(k, loc.cols)
+            quad = apply_homography(loc.homography, square + (c, r))
+            ax.plot(quad[:, 0], quad[:, 1], color="white", lw=0.7)
+        ax.set_title(title, fontsize=9)
+        ax.axis("off")
+    return png_bytes(fig)
+
+
 def axes_plain_ticks(ax: Axes) -> None:
     """Tick labels as plain numbers on the log and symlog axes of ``ax`` (0.5, 1, 10 rather
     than 10^0); a symlog axis (linear below 1) gets ticks at 1, 2 and 5 per decade. Linear
@@ -303,8 +393,10 @@ __all__ = [
     "ab_arrows",
     "axes_plain_ticks",
     "chart_location",
+    "chart_pair",
     "delta_e_bars",
     "delta_e_map",
+    "family_curves",
     "new_figure",
     "png_bytes",
     "prediction_curve",

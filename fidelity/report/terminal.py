@@ -55,9 +55,30 @@ def summary_lines(report: ChartReport) -> list[str]:
                      f"{f(p.dap_bicycle_points)} points")
         if p.out_of_range:
             lines.append("note: ΔE beyond the table's range; conservative ceiling used")
+    lines += directional_lines(report)
+    lines += [f"measured on COCO: {m.summary()}" for m in report.measured]
+    lines += [w.warning for w in report.warnings]
     if report.verdict is not None:
         lines.append(report.verdict.message)
     return lines
 
 
-__all__ = ["summary_lines"]
+def directional_lines(report: ChartReport) -> list[str]:
+    """The direction-aware prediction in one line, and which bound a ``max-dmap`` verdict
+    used."""
+    d = report.directional
+    if d is None:
+        return []
+
+    def f(v: float | None) -> str:
+        return "n/a" if v is None else f"{v:.2f}"
+
+    used = ""
+    if report.verdict is not None and report.verdict.criterion.kind == "max-dmap":
+        used = ("; the verdict uses this bound" if report.bound == "directional" else
+                "; the verdict uses the classic bound (--bound directional: this one)")
+    return [f"direction-aware ΔmAP: {f(d.dmap_points)} points, {f(d.dmap_relative)} % of "
+            f"baseline ({d.explanation()}){used}"]
+
+
+__all__ = ["directional_lines", "summary_lines"]

@@ -50,6 +50,7 @@ CLASS_TITLES: dict[str, str] = {"all": "mAP@[.50:.95] (all classes)", "person": 
 #: File names of the figures.
 VS_DELTA_E_PNG = "loss-vs-chart-delta-e.png"
 EMULATION_PNG = "emulation-accuracy.png"
+BOUNDS_PNG = "classic-vs-directional.png"
 
 
 def scatter_png(table_name: str) -> str:
@@ -140,6 +141,42 @@ def vs_delta_e_plot(rows: Sequence[ValidationRow], tables: Sequence[str]) -> byt
     return png_bytes(fig)
 
 
+def bounds_plot(results: ValidationResults) -> bytes:
+    """Measured mAP loss (points, ±2 SE) against both predictions per cell: the classic
+    worst case and the direction-aware one, with the identity line (PNG bytes)."""
+    from fidelity.report.plots import axes_plain_ticks, new_figure, png_bytes
+
+    dv = results.directional
+    assert dv is not None
+    fig, axes = new_figure(13, 5.2, 1, 2)
+    for ax, key, title in ((axes[0], "classic", f"classic ({results.summary.bound_table})"),
+                           (axes[1], "directional", f"direction-aware ({dv.table})")):
+        lo, hi = 0.0, 1.0
+        for m, mk in zip(sorted({r.model for r in dv.rows}), "osD^v", strict=False):
+            pts = [(getattr(c, key), c.measured, c.se or 0.0) for r in dv.rows
+                   if r.model == m for c in (r.cells["all"],)
+                   if getattr(c, key) is not None and c.measured is not None]
+            if not pts:
+                continue
+            pa, ya, sa = (np.array(v) for v in zip(*pts, strict=True))
+            ax.errorbar(pa, ya, yerr=2 * sa, fmt=mk, ms=5, alpha=0.8, capsize=2,
+                        label=f"{m} (±2 SE)")
+            lo = min(lo, float((ya - 2 * sa).min()))
+            hi = max(hi, float(pa.max()), float((ya + 2 * sa).max()))
+        ax.plot([lo, hi], [lo, hi], "k--", lw=1, label="measured = predicted")
+        ax.fill_between([lo, hi], [lo, hi], [lo, lo], color="tab:green", alpha=0.06,
+                        label="bound holds")
+        ax.set_xscale("symlog", linthresh=1.0)
+        ax.set_yscale("symlog", linthresh=1.0)
+        axes_plain_ticks(ax)
+        ax.set_xlabel("predicted ΔmAP (points)")
+        ax.set_ylabel("measured ΔmAP (points)")
+        ax.set_title(title)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper left")
+    return png_bytes(fig)
+
+
 def emulation_plot(cameras: Mapping[str, CameraRecord]) -> bytes:
     """Mean and largest ΔE00 per camera between its emulation and its own rendered chart
     (cameras by chart ΔE; PNG bytes)."""
@@ -176,6 +213,11 @@ def validation_figures(results: ValidationResults) -> dict[str, Figure]:
             "measured loss against chart ΔE with the worst-case curves",
             "Measured loss (points, ±2 SE) against the camera's chart ΔE00, with each table's "
             "worst-case curve (detector size n).")
+    if results.directional is not None and results.directional.rows:
+        out[BOUNDS_PNG] = Figure(
+            bounds_plot(results), BOUNDS_PNG, "both bounds against the measured loss",
+            "Measured ΔmAP (points, ±2 SE) against the classic worst case (left) and the "
+            "direction-aware prediction (right); each bound holds below the dashed line.")
     if results.cameras:
         out[EMULATION_PNG] = Figure(
             emulation_plot(results.cameras), EMULATION_PNG, "emulation accuracy per camera",
@@ -275,6 +317,17 @@ def headline(results: ValidationResults, figure: Figure | None = None) -> Headli
                      f"models) {s.cameras_within} of {s.cameras}"
                      + (f" ({100 * s.share_cameras_within:.0f} %)"
                         if s.share_cameras_within is not None else "") + ".")
+    dv = results.directional
+    if dv is not None and "all" in dv.summary and dv.summary["all"].cells:
+        d = dv.summary["all"]
+        lines.append(f"- Direction-aware bound (`{dv.table}`), mAP: within in **{d.directional_within}"
+                     f" of {d.cells}** cells ({d.directional_within_2se} of {d.cells} up to 2 "
+                     f"SE); median over-prediction {number(d.directional_median_ratio, 1)}× "
+                     f"against {number(d.classic_median_ratio, 1)}× for the classic bound.")
+        warned = sorted(c.camera for c in dv.cameras.values() if c.warnings)
+        if warned:
+            lines.append(f"- Blind-spot warnings for {len(warned)} of {len(dv.cameras)} "
+                         f"cameras: {', '.join(warned)}.")
     judged = [s for s in summ.classes.values() if s.cells]
     tone: Tone = "pass"
     if any(s.within < s.cells for s in judged):
@@ -357,6 +410,84 @@ def _failures_sections(results: ValidationResults) -> list[Section]:
                     Text("Every (camera, model) cell whose measured loss is above the "
                          "worst-case prediction, per class, largest excess first, with what "
                          "the data say about it."))] + out
+
+
+def _directional_sections(results: ValidationResults, figures: Mapping[str, Figure]
+                          ) -> list[Section]:
+    """Both bounds on every cell (summary, figure, per cell with over-prediction ratios)."""
+    dv = results.directional
+    if dv is None:
+        return []
+    summ = dv.summary
+    body = []
+    for cls, s in summ.items():
+        body.append([CLASS_TITLES.get(cls, cls), f"{s.classic_within}/{s.cells}",
+                     f"{s.classic_within_2se}/{s.cells}", f"{s.directional_within}/{s.cells}",
+                     f"{s.directional_within_2se}/{s.cells}",
+                     number(s.classic_median_ratio), number(s.directional_median_ratio),
+                     f"{number(s.classic_median_ratio_significant)} / "
+                     f"{number(s.directional_median_ratio_significant)} "
+                     f"({s.significant_cells})"])
+    intro = Text(
+        f"The direction-aware prediction (`fidelity.prediction.directional`, table "
+        f"`{dv.table}`) charges each part of a camera's chart error the worst loss of the "
+        "SAFE-COLOR transforms that move the chart that way: the share a fitted transform "
+        "explains at that transform family's curve, the rest split into lightness, chroma and "
+        "hue at the curves of tone (brightness, gamma), saturation and hue transforms, every "
+        "curve read at the camera's chart ΔE. Each camera's chart is rendered again (closed "
+        "form). Over-prediction ratio = predicted / measured, over the cells with a positive "
+        "measured loss (in brackets: over the cells measured more than 2 SE above 0, and "
+        "their number).")
+    rows = []
+    for r in sorted(dv.rows, key=lambda r: (r.chart_delta_e, r.model)):
+        c = r.cells["all"]
+        cam = dv.cameras[r.camera]
+        rows.append([r.camera, r.model, f"{r.chart_delta_e:.2f}",
+                     number(c.measured) + (f" ± {c.se:.2f}" if c.se else ""),
+                     number(c.classic), number(c.ratio(c.classic), 1),
+                     number(c.directional), number(c.ratio(c.directional), 1),
+                     "yes" if c.directional_within_2se else "**no**",
+                     cam.prediction.explanation()])
+    return [
+        section("Direction-aware bound against the classic one", intro,
+                table(["class", "classic within", "classic within 2 SE",
+                       "direction-aware within", "direction-aware within 2 SE",
+                       "classic median ratio", "direction-aware median ratio",
+                       "median ratios, cells > 2 SE (n)"], body),
+                figures.get(BOUNDS_PNG)),
+        section("Over-prediction per camera (ΔmAP, points)", table(
+            ["camera", "model", "chart ΔE", "measured", "classic", "ratio",
+             "direction-aware", "ratio", "within 2 SE", "charged as"], rows,
+            numeric=[False, False] + [True] * 6 + [False, False]), folded=True),
+    ]
+
+
+def _blind_spot_sections(results: ValidationResults) -> list[Section]:
+    """The blind-spot checks of every camera: the warnings, then every check (folded)."""
+    dv = results.directional
+    if dv is None:
+        return []
+    meas = {(r.camera, r.model): r.cells["all"] for r in dv.rows}
+    warned = [c for c in dv.cameras.values() if c.warnings]
+    lines = []
+    for c in sorted(warned, key=lambda c: c.chart_delta_e):
+        got = "; ".join(f"{m}: measured {number(x.measured)} ± {number(x.se)}, classic "
+                        f"{number(x.classic)}, direction-aware {number(x.directional)}"
+                        for (k, m), x in sorted(meas.items()) if k == c.camera)
+        for w in c.warnings:
+            lines.append(f"- **{c.camera}** (chart ΔE {c.chart_delta_e:.2f}): {w.reason}. "
+                         f"ΔmAP {got}.")
+    text = (f"{len(warned)} of {len(dv.cameras)} cameras get a warning "
+            "(`fidelity.chart.blindspots`: shadow tone of the neutral patches, the camera's "
+            "bit depth):\n\n" + "\n".join(lines)) if warned else \
+        f"None of the {len(dv.cameras)} cameras gets a warning."
+    rows = [[c.camera, b.kind, {True: "**at risk**", False: "no", None: "not judged"}[b.at_risk],
+             number(b.value, 3), b.reason]
+            for c in sorted(dv.cameras.values(), key=lambda c: c.camera) for b in c.blind_spots]
+    return [section("Blind-spot warnings", Text(text)),
+            section("Blind-spot checks per camera", table(
+                ["camera", "check", "at risk", "value", "reason"], rows,
+                numeric=[False, False, False, True, False]), folded=True)]
 
 
 def _per_camera_section(results: ValidationResults) -> Section:
@@ -528,6 +659,8 @@ def validation_document(results: ValidationResults, notes: str | None = None,
         _bound_section(results),
         section("Analysis", Text(notes.strip())) if notes else None,
         _plots_section(results, figs),
+        *_directional_sections(results, figs),
+        *_blind_spot_sections(results),
         *_failures_sections(results),
         _per_camera_section(results),
         _other_tables_section(results),
@@ -561,20 +694,28 @@ def write_validation_document(results: ValidationResults, out_dir: str | os.Path
 
 def write_validation_report(results: ValidationResults, out_dir: str | os.PathLike[str],
                             notes: str | None = None) -> list[Path]:
-    """Write the report (:func:`write_validation_document`) and ``validation.json``,
-    atomically; returns the paths written."""
+    """Write the report (:func:`write_validation_document`), ``validation.json`` and, when
+    the results carry both bounds (:mod:`fidelity.coco.bounds`), ``directional.json``
+    (derived from ``validation.json``, the camera files and the shipped tables, so kept
+    apart); atomically; returns the paths written."""
     from fidelity.fileio import write_json_atomic
 
     written = write_validation_document(results, out_dir, notes)
-    written.append(write_json_atomic(Path(out_dir) / "validation.json", results.to_json()))
+    doc = results.to_json()
+    directional = doc.pop("directional", None)
+    written.append(write_json_atomic(Path(out_dir) / "validation.json", doc))
+    if directional is not None:
+        written.append(write_json_atomic(Path(out_dir) / "directional.json", directional))
     return written
 
 
 __all__ = [
+    "BOUNDS_PNG",
     "CLASS_TITLES",
     "EMULATION_PNG",
     "TITLE",
     "VS_DELTA_E_PNG",
+    "bounds_plot",
     "emulation_plot",
     "failure_reason",
     "headline",

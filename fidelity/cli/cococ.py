@@ -1,0 +1,115 @@
+"""``fidelity coco-c``: COCO-C's colour corruptions on the chart ΔE scale, measured on COCO."""
+
+from __future__ import annotations
+
+import click
+
+from fidelity.cli.options import common_options, progress_option, show_progress
+
+
+def _names(text: str, known: tuple[str, ...], what: str) -> list[str]:
+    from fidelity.errors import unknown_name
+
+    items = [t.strip() for t in text.split(",") if t.strip()]
+    if items == ["all"]:
+        return list(known)
+    for t in items:
+        if t not in known:
+            raise unknown_name(what, t, known)
+    return items
+
+
+def _severities(text: str) -> list[int]:
+    from fidelity.errors import InvalidValueError
+
+    out: list[int] = []
+    for part in text.split(","):
+        a, _, b = part.strip().partition("-")
+        try:
+            lo, hi = int(a), int(b or a)
+        except ValueError:
+            raise InvalidValueError(f"--severities {text!r}: expected e.g. 1-5 or 1,3,5") from None
+        out += list(range(lo, hi + 1))
+    if not out or any(s < 1 or s > 5 for s in out):
+        raise InvalidValueError(f"--severities {text!r}: severities are 1 to 5")
+    return sorted(set(out))
+
+
+@click.command()
+@click.option("--models", default=None,
+              help="ONNX detectors, PATH[@N] comma-separated (default: the shared "
+                   "yolox_nano.onnx).")
+@click.option("--images", default=None, type=click.Path(file_okay=False),
+              help="COCO image folder (default: $FIDELITY_SHARED/coco/val2017).")
+@click.option("--annotations", default=None, type=click.Path(dir_okay=False),
+              help="COCO annotations (default: the shared subset's).")
+@click.option("--limit", type=click.IntRange(min=1), default=None,
+              help="At most N images (first N by id) for every model.")
+@click.option("--corruptions", default="all", show_default=True,
+              help="brightness, contrast, saturate (comma-separated) or all.")
+@click.option("--severities", default="1-5", show_default=True, help="e.g. 1-5 or 1,3,5.")
+@click.option("--out", required=True, type=click.Path(file_okay=False),
+              help="Report folder (cococ.html, cococ.md, cococ.json, figures).")
+@click.option("--data", "data", default=None, type=click.Path(dir_okay=False),
+              help="Also write the table predict --coco-c reads (the shipped one is "
+                   "fidelity/data/coco-c.json).")
+@click.option("--store", default=None, type=click.Path(file_okay=False),
+              help="Detections store (default $FIDELITY_CACHE/measure); rerun to resume.")
+@click.option("--threads", type=click.IntRange(min=1), default=1, show_default=True,
+              help="onnxruntime intra-op threads.")
+@click.option("--provider", type=click.Choice(["auto", "cpu", "cuda"]), default="auto",
+              show_default=True)
+@click.option("--report-only", is_flag=True,
+              help="Rebuild the report from OUT/cococ.json (no inference).")
+@click.option("--notes", default=None, type=click.Path(dir_okay=False, exists=True),
+              help="Markdown file with a written analysis, included in the report.")
+@progress_option
+@common_options
+def cococ(models: str | None, images: str | None, annotations: str | None, limit: int | None,
+          corruptions: str, severities: str, out: str, data: str | None, store: str | None,
+          threads: int, provider: str, report_only: bool, notes: str | None,
+          progress: bool | None) -> None:
+    """Measure COCO-C's colour corruptions: chart ΔE and ΔmAP per severity.
+
+    Applies brightness, contrast and saturate of imagecorruptions (severities 1-5) to the
+    calibration chart (its chart ΔE) and to every COCO image (the measured ΔmAP ± SE per
+    detector, against the cached ΔE = 0 baseline). One log line per cell on stderr; rerun the
+    same line to resume.
+
+    \b
+    fidelity coco-c --models yolox_nano.onnx,yolo11n-int8dyn.onnx@250 --out reports/cococ \\
+        --data fidelity/data/coco-c.json
+    """
+    import json
+    from pathlib import Path
+
+    from fidelity.coco.corruptions import CORRUPTIONS, CocoCResults, run_coco_c
+    from fidelity.coco.measure import resolve_coco_inputs, stderr_log
+    from fidelity.fileio import check_outputs
+    from fidelity.report.cococ import write_cococ_report
+
+    out_dir = Path(out)
+    from fidelity.cli.options import measure_inputs
+
+    check_outputs({f"--out ({n})": out_dir / n
+                   for n in ("cococ.json", "cococ.html", "cococ.md", "cococ-chart-delta-e.png",
+                             "cococ-loss-vs-delta-e.png")} | {"--data": data},
+                  {"--notes": notes} | measure_inputs(images, annotations, models),
+                  stores={"--store": store})
+    text = Path(notes).read_text(encoding="utf-8") if notes else None
+    if report_only:
+        from fidelity.errors import InputFileError
+
+        src = out_dir / "cococ.json"
+        try:
+            results = CocoCResults.from_json(json.loads(src.read_text(encoding="utf-8")))
+        except FileNotFoundError:
+            raise InputFileError(f"{src}: no results to rebuild the report from") from None
+    else:
+        inputs = resolve_coco_inputs(images, annotations, models, what="fidelity coco-c")
+        results = run_coco_c(inputs, _names(corruptions, CORRUPTIONS, "corruption"),
+                             _severities(severities), limit=limit, store=store,
+                             threads=threads, provider=provider,
+                             progress=show_progress(progress), log=stderr_log)
+    for p in write_cococ_report(results, out_dir, text, data):
+        click.echo(f"wrote {p}")

@@ -1,0 +1,132 @@
+"""``fidelity compare``: the simulator's chart against the real camera's, patch by patch."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from fidelity.cli.gate import PATH, bayer_option, colourspace_option, negatives_option
+from fidelity.cli.options import (
+    STDOUT,
+    bound_option,
+    common_options,
+    json_option,
+    measure_inputs,
+    measure_options,
+    measure_request,
+    write_json_output,
+)
+from fidelity.prediction.table import CLASS_COLUMNS, SIZES
+from fidelity.prediction.verdict import EXIT_ERROR
+
+
+@click.command()
+@click.argument("sim", type=PATH)
+@click.argument("real", type=PATH)
+@click.option("--sim-corners", default=None,
+              help="X1,Y1,...,X4,Y4: centres of the dark skin, bluish green, black and white "
+                   "patches in SIM (default: the chart is found).")
+@click.option("--real-corners", default=None, help="The same for REAL.")
+@click.option("--normalise", "normalise_mode",
+              type=click.Choice(["exposure", "exposure+wb", "none"]), default="exposure",
+              show_default=True,
+              help="Match the simulated chart to the real one on the neutral patches before "
+                   "comparing: exposure, exposure and white balance, or nothing.")
+@click.option("--max-delta-e", type=float, default=None,
+              help="Pass when the sim-to-real chart ΔE00 (mean over the patches) <= X.")
+@click.option("--max-dmap", type=float, default=None,
+              help="Pass when the predicted ΔmAP (or class ΔAP) of the difference <= P.")
+@click.option("--class", "cls", type=click.Choice(list(CLASS_COLUMNS)), default=None,
+              help="Class of --max-dmap: all (mAP, default), person, bicycle.")
+@click.option("--unit", type=click.Choice(["points", "relative"]), default="points",
+              show_default=True, help="Unit of --max-dmap.")
+@bound_option
+@click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
+              help="Detector size class of the prediction.")
+@click.option("--table", default=None, help="Prediction table (name or JSON path).")
+@click.option("--reference", default="scene", show_default=True,
+              help="What each chart's own ΔE is measured against: scene, safecolor or a chart "
+                   "JSON.")
+@click.option("--illuminant", default="D65", show_default=True,
+              help="Illuminant of the scene reference.")
+@click.option("--encoding", type=click.Choice(["linear", "srgb"]), default=None,
+              help="Pixel encoding of both images (default: from each file).")
+@click.option("--exposure", default=None, help="Exposure of both audits: auto or a fixed EV.")
+@click.option("--layer", default=None, help="EXR layer or part name.")
+@bayer_option
+@colourspace_option
+@negatives_option
+@click.option("--junit", type=PATH, help="Write JUnit XML (one test case).")
+@json_option("Write the comparison as JSON")
+@click.option("--html", "html_path", type=PATH, default=None, help="Write the HTML report.")
+@measure_options
+@common_options
+def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | None,
+            normalise_mode: str, max_delta_e: float | None, max_dmap: float | None,
+            cls: str | None, unit: str, bound: str, size: str, table: str | None,
+            reference: str, illuminant: str, encoding: str | None, exposure: str | None,
+            layer: str | None, bayer: str | None, colourspace: str | None, negatives: str,
+            junit: Path | None,
+            json_path: str | None, html_path: Path | None, measure: bool, images: str | None,
+            annotations: str | None, models: str | None, limit: int | None) -> None:
+    """Compare a simulated chart with the real camera's: sim-to-real ΔE00 and its cost.
+
+    SIM is the simulator's render of the chart scene, REAL a photo of the same chart taken
+    by the real camera (any format audit reads). Both charts are audited, the simulated one
+    is matched to the real one on the neutral patches (--normalise), and each patch is
+    compared in CIEDE2000; the loss the difference would cost a detector is predicted
+    (classic and direction-aware) and, with --measure, measured on COCO. With --max-delta-e
+    or --max-dmap: exit 0 pass, 1 fail, 2 error, as fidelity gate.
+
+    \b
+    fidelity compare sim.exr photo.jpg --real-corners 102,88,610,95,604,420,98,414
+    fidelity compare sim.exr photo.png --max-delta-e 5 --junit sim-vs-real.xml --html r.html
+    """
+    from fidelity.cli.gate import make_criterion
+    from fidelity.compare import compare_charts, comparison_lines, write_comparison_report
+    from fidelity.errors import FidelityError
+    from fidelity.fileio import check_outputs
+    from fidelity.report.junit import GateCase, write_junit
+
+    to_stdout = json_path == STDOUT
+    check_outputs({"--json": None if to_stdout else json_path, "--html": html_path,
+                   "--junit": junit},
+                  {"SIM": sim, "REAL": real, "--table": table, "--reference": reference,
+                   "--illuminant": illuminant} | measure_inputs(images, annotations, models))
+    criterion = None
+    if max_delta_e is not None or max_dmap is not None:
+        criterion = make_criterion(max_delta_e, max_dmap, cls, unit)
+    elif cls is not None:
+        raise click.UsageError("--class goes with --max-dmap")
+    request = measure_request(measure, images, annotations, models, limit)
+    subject = f"{sim} against {real}"
+    try:
+        report = compare_charts(
+            sim, real, sim_corners=sim_corners, real_corners=real_corners,
+            normalise_mode=normalise_mode, reference=reference, illuminant=illuminant,
+            size=size, table=table, criterion=criterion, bound=bound, layer=layer,
+            encoding=encoding, exposure=exposure, negatives=negatives,
+            colourspace=colourspace, bayer=bayer, measure=request)
+    except FidelityError as exc:
+        if junit is not None:
+            write_junit(junit, [GateCase(subject, criterion, error=str(exc))])
+        raise
+    write_comparison_report(report, json_path=None if to_stdout else json_path,
+                            html_path=html_path, protect=(sim, real))
+    for line in comparison_lines(report):
+        click.echo(line)
+    if junit is not None:
+        try:
+            write_junit(junit, [GateCase(subject, criterion, report=report.as_chart_report())])
+        except (FidelityError, OSError) as exc:
+            click.echo(f"fidelity: error: {junit}: cannot write JUnit XML: {exc}", err=True)
+            sys.exit(EXIT_ERROR)
+    if json_path is not None:
+        where = write_json_output(json_path, report.to_json())
+        if not to_stdout:
+            click.echo(f"wrote {where}")
+    if html_path is not None:
+        click.echo(f"wrote {html_path}")
+    sys.exit(report.exit_code)

@@ -1,0 +1,539 @@
+"""COCO-C's colour corruptions on the chart ΔE scale.
+
+COCO-C (Michaelis et al., "Benchmarking Robustness in Object Detection", 2019) corrupts COCO
+images with the ``imagecorruptions`` package (Rusak & Mitzkus, after Hendrycks & Dietterich
+2019) at severities 1-5. Three of its corruptions change only colour and tone, pixel by pixel
+(or by a per-image statistic), so a colour chart measures them as it measures a camera
+(x = image / 255 in float64):
+
+- ``brightness``: HSV value V <- clip(V + c, 0, 1), c = 0.1, 0.2, 0.3, 0.4, 0.5;
+- ``contrast``: per channel clip((x - mean) c + mean, 0, 1) with the image's mean,
+  c = 0.4, 0.3, 0.2, 0.1, 0.05;
+- ``saturate``: HSV saturation S <- clip(S a + b, 0, 1), (a, b) = (0.3, 0), (0.1, 0), (2, 0),
+  (5, 0.1), (20, 0.2);
+
+then ``clip(x, 0, 1) * 255`` truncated to uint8 (``imagecorruptions.corrupt`` returns
+``np.uint8(...)``); HSV is scikit-image's ``rgb2hsv`` / ``hsv2rgb`` (hexcone; where two
+channels share the maximum the later of R, G, B sets the hue). :func:`corrupt` implements these
+definitions in numpy and equals the package bit for bit (tests compare them on random and COCO
+images when ``imagecorruptions`` is installed: ``pip install scikit-image`` and ``pip install
+--no-deps imagecorruptions==1.1.2``, whose ``opencv-python`` requirement would be a second
+OpenCV build).
+
+The other sixteen corruptions are left out on purpose: noise (gaussian, shot, impulse,
+speckle) has zero mean and averages out of a patch mean, blur (defocus, glass, motion, zoom,
+gaussian), pixelate, JPEG and elastic transform change spatial detail, and the weather
+corruptions (snow, frost, fog, spatter) overlay random, spatially varying textures: a flat
+chart's mean ΔE either misses them or depends on where the texture falls, so a chart ΔE would
+not mean what it means for a camera.
+
+The chart ΔE of a corruption (:func:`corruption_chart`) is measured like the SAFE-COLOR
+calibration: the calibration chart (:data:`fidelity.colour.charts.DEFAULT_CHART`, reference
+Lab -> sRGB clipped to [0, 1]) as an 8-bit image of 24 flat 32-pixel patches and nothing else
+(so ``contrast`` pulls towards the chart's mean, as ``pull_mean`` does in the calibration), the
+corruption applied to the image, each patch's colour read back and compared with the reference
+in CIEDE2000.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fidelity.errors import InvalidValueError, unknown_name
+
+U8 = NDArray[np.uint8]
+F64 = NDArray[np.float64]
+
+#: Parameters per severity 1-5 (imagecorruptions 1.1.2, ``corruptions.py``).
+BRIGHTNESS: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4, 0.5)
+CONTRAST: tuple[float, ...] = (0.4, 0.3, 0.2, 0.1, 0.05)
+SATURATE: tuple[tuple[float, float], ...] = ((0.3, 0.0), (0.1, 0.0), (2.0, 0.0), (5.0, 0.1),
+                                             (20.0, 0.2))
+#: The colour corruptions of COCO-C, in the package's order.
+CORRUPTIONS: tuple[str, ...] = ("brightness", "contrast", "saturate")
+#: Severities of COCO-C.
+SEVERITIES: tuple[int, ...] = (1, 2, 3, 4, 5)
+#: Version of the package whose definitions :func:`corrupt` implements.
+IMAGECORRUPTIONS_VERSION = "1.1.2"
+#: Side of a patch of the chart image, pixels.
+PATCH_PX = 32
+
+
+def _check(name: str, severity: int) -> None:
+    if name not in CORRUPTIONS:
+        raise unknown_name("colour corruption", name, CORRUPTIONS)
+    if severity not in SEVERITIES:
+        raise InvalidValueError(f"{name}: severity {severity!r} must be an integer 1-5")
+
+
+def parse_corruption(spec: str) -> tuple[str, int]:
+    """``"contrast:3"`` -> ``("contrast", 3)``; errors name the text."""
+    name, _, sev = str(spec).partition(":")
+    try:
+        severity = int(sev)
+    except ValueError:
+        raise InvalidValueError(f"--coco-c {spec!r}: expected CORRUPTION:SEVERITY, e.g. "
+                                f"contrast:3 (corruptions: {', '.join(CORRUPTIONS)}; "
+                                "severities 1-5)") from None
+    _check(name.strip(), severity)
+    return name.strip(), severity
+
+
+# --------------------------------------------------------------------------------------------
+# HSV as scikit-image computes it
+# --------------------------------------------------------------------------------------------
+
+
+def rgb_to_hsv_skimage(rgb: F64) -> F64:
+    """RGB (..., 3) in [0, 1] -> HSV (..., 3), the operations of ``skimage.color.rgb2hsv``.
+
+    V = max, S = (max - min) / max (0 where max = min), H from the channel holding the max
+    (B over G over R when they tie), H = (h / 6) mod 1, 0 where max = min.
+    """
+    arr = np.asarray(rgb, dtype=np.float64)
+    out = np.empty_like(arr)
+    v = arr.max(-1)
+    delta = np.ptp(arr, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = delta / v
+        s[delta == 0.0] = 0.0
+        idx = arr[..., 0] == v
+        out[idx, 0] = (arr[idx, 1] - arr[idx, 2]) / delta[idx]
+        idx = arr[..., 1] == v
+        out[idx, 0] = 2.0 + (arr[idx, 2] - arr[idx, 0]) / delta[idx]
+        idx = arr[..., 2] == v
+        out[idx, 0] = 4.0 + (arr[idx, 0] - arr[idx, 1]) / delta[idx]
+        h = (out[..., 0] / 6.0) % 1.0
+    h[delta == 0.0] = 0.0
+    out[..., 0] = h
+    out[..., 1] = s
+    out[..., 2] = v
+    out[np.isnan(out)] = 0
+    return out
+
+
+def hsv_to_rgb_skimage(hsv: F64) -> F64:
+    """HSV (..., 3) -> RGB (..., 3), the operations of ``skimage.color.hsv2rgb``."""
+    arr = np.asarray(hsv, dtype=np.float64)
+    hi = np.floor(arr[..., 0] * 6)
+    f = arr[..., 0] * 6 - hi
+    p = arr[..., 2] * (1 - arr[..., 1])
+    q = arr[..., 2] * (1 - f * arr[..., 1])
+    t = arr[..., 2] * (1 - (1 - f) * arr[..., 1])
+    v = arr[..., 2]
+    sector = hi.astype(np.uint8) % 6
+    out = np.empty(arr.shape, dtype=np.float64)
+    for k, (a, b, c) in enumerate(((v, t, p), (q, v, p), (p, v, t), (p, q, v), (t, p, v),
+                                   (v, p, q))):
+        sel = sector == k
+        out[sel, 0] = a[sel]
+        out[sel, 1] = b[sel]
+        out[sel, 2] = c[sel]
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# The corruptions
+# --------------------------------------------------------------------------------------------
+
+
+def _truncate(x: F64) -> U8:
+    """``np.uint8(clip(x, 0, 1) * 255)``: the package's float -> uint8 (truncation)."""
+    out: U8 = (np.clip(x, 0, 1) * 255).astype(np.uint8)
+    return out
+
+
+def _hsv_corruption(x: F64, name: str, severity: int) -> F64:
+    hsv = rgb_to_hsv_skimage(x)
+    if name == "brightness":
+        hsv[..., 2] = np.clip(hsv[..., 2] + BRIGHTNESS[severity - 1], 0, 1)
+    else:
+        a, b = SATURATE[severity - 1]
+        hsv[..., 1] = np.clip(hsv[..., 1] * a + b, 0, 1)
+    return hsv_to_rgb_skimage(hsv)
+
+
+def contrast_means(rgb8: U8) -> F64:
+    """The per-channel image mean of ``contrast`` (float64 of ``image / 255``, as the package
+    computes it)."""
+    x = np.asarray(rgb8) / 255.0
+    means: F64 = np.mean(x, axis=(0, 1), keepdims=True)
+    return means
+
+
+def corrupt(rgb8: U8, name: str, severity: int) -> U8:
+    """Apply a COCO-C colour corruption to an (H, W, 3) uint8 sRGB image (module docstring):
+    the same numbers as ``imagecorruptions.corrupt(rgb8, severity, name)``."""
+    _check(name, severity)
+    a = np.asarray(rgb8)
+    if a.dtype != np.uint8 or a.ndim != 3 or a.shape[2] != 3:
+        raise InvalidValueError(f"image must be (H, W, 3) uint8, got {a.shape} {a.dtype}")
+    x = a / 255.0
+    if name == "contrast":
+        c = CONTRAST[severity - 1]
+        means = np.mean(x, axis=(0, 1), keepdims=True)
+        return _truncate((x - means) * c + means)
+    return _truncate(_hsv_corruption(x, name, severity))
+
+
+@dataclass
+class CorruptionMap:
+    """A fast, exact 8-bit :func:`corrupt` for one (corruption, severity): ``brightness`` and
+    ``saturate`` act on each pixel alone, so they are one look-up in a table of all 2^24
+    colours (built once, 48 MiB); ``contrast`` depends on the image's mean, so it is three
+    256-entry tables per image."""
+
+    name: str
+    severity: int
+    build_seconds: float = 0.0
+    _cube: U8 | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        _check(self.name, self.severity)
+
+    def cube(self, chunk: int = 1 << 20) -> U8:
+        """The (2^24, 3) table of a per-pixel corruption (``brightness``, ``saturate``)."""
+        if self.name == "contrast":
+            raise InvalidValueError("contrast depends on the image mean: it has no colour table")
+        if self._cube is None:
+            t0 = time.perf_counter()
+            table = np.empty((1 << 24, 3), dtype=np.uint8)
+            for s in range(0, 1 << 24, chunk):
+                idx = np.arange(s, min(s + chunk, 1 << 24), dtype=np.uint32)
+                x = np.stack([(idx >> 16) & 255, (idx >> 8) & 255, idx & 255],
+                             axis=-1).astype(np.float64) / 255.0
+                table[s:s + len(idx)] = _truncate(_hsv_corruption(x, self.name, self.severity))
+            self._cube = table
+            self.build_seconds = time.perf_counter() - t0
+        return self._cube
+
+    def __call__(self, rgb8: U8) -> U8:
+        a = np.asarray(rgb8)
+        if a.dtype != np.uint8 or a.ndim != 3 or a.shape[2] != 3:
+            raise InvalidValueError(f"image must be (H, W, 3) uint8, got {a.shape} {a.dtype}")
+        if self.name == "contrast":
+            c = CONTRAST[self.severity - 1]
+            means = contrast_means(a)[0, 0]
+            levels = np.arange(256, dtype=np.float64) / 255.0
+            out = np.empty_like(a)
+            for ch in range(3):
+                lut = _truncate((levels - means[ch]) * c + means[ch])
+                out[..., ch] = lut[a[..., ch]]
+            return out
+        idx = (a[..., 0].astype(np.uint32) << 16) | (a[..., 1].astype(np.uint32) << 8) | a[..., 2]
+        result: U8 = self.cube()[idx]
+        return result
+
+    @property
+    def key(self) -> str:
+        """The mapping key of the measurement store."""
+        return f"coco-c:{self.name}:{self.severity}:imagecorruptions-{IMAGECORRUPTIONS_VERSION}"
+
+
+# --------------------------------------------------------------------------------------------
+# On the chart
+# --------------------------------------------------------------------------------------------
+
+
+def chart_image(srgb: F64, rows: int = 4, cols: int = 6, patch_px: int = PATCH_PX) -> U8:
+    """An 8-bit image of flat patches (rows x cols, ``patch_px`` square, row-major order) of
+    encoded sRGB colours (n, 3) in [0, 1], rounded to code values."""
+    from fidelity.coco.dataset import to_uint8
+
+    codes = to_uint8(np.asarray(srgb, dtype=np.float64)).reshape(rows, cols, 3)
+    return np.ascontiguousarray(np.repeat(np.repeat(codes, patch_px, axis=0), patch_px, axis=1))
+
+
+def patch_colours(image: U8, rows: int = 4, cols: int = 6, patch_px: int = PATCH_PX) -> F64:
+    """The mean encoded sRGB (n, 3) of each flat patch of a :func:`chart_image`."""
+    a = np.asarray(image, dtype=np.float64) / 255.0
+    out: F64 = a.reshape(rows, patch_px, cols, patch_px, 3).mean(axis=(1, 3)).reshape(-1, 3)
+    return out
+
+
+def corruption_chart(name: str, severity: int, chart: str | None = None) -> Any:
+    """The :class:`~fidelity.chart.measure.ChartMeasurement` of the calibration chart's 8-bit
+    image after the corruption (module docstring): its ``mean_delta_e`` is the corruption's
+    chart ΔE."""
+    from fidelity.chart.measure import measure_chart
+    from fidelity.colour.charts import DEFAULT_CHART, load_chart
+
+    _check(name, severity)
+    ch = load_chart(chart or DEFAULT_CHART)
+    image = corrupt(chart_image(ch.srgb, ch.rows, ch.cols), name, severity)
+    return measure_chart(patch_colours(image, ch.rows, ch.cols), ch.lab, ch.patch_names,
+                         reference_srgb=ch.srgb)
+
+
+def uncorrupted_chart_delta_e(chart: str | None = None) -> float:
+    """The chart ΔE of the 8-bit chart image itself (gamut clipping and 8-bit rounding): the
+    floor every corruption's chart ΔE starts from."""
+    from fidelity.colour.charts import DEFAULT_CHART, load_chart
+    from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
+
+    ch = load_chart(chart or DEFAULT_CHART)
+    img = chart_image(ch.srgb, ch.rows, ch.cols)
+    return float(delta_e_2000(srgb_to_lab(patch_colours(img, ch.rows, ch.cols)), ch.lab).mean())
+
+
+# --------------------------------------------------------------------------------------------
+# The COCO-C table: chart ΔE, prediction and measured loss per (corruption, severity)
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class CorruptionCell:
+    """One (corruption, severity): its chart ΔE (mean, max, worst patch), the direction parts
+    of the chart error (:class:`fidelity.prediction.directional.ErrorParts`, as JSON), and the
+    measured loss per detector (:class:`fidelity.coco.measure.MeasuredLoss`)."""
+
+    corruption: str
+    severity: int
+    parameter: Any
+    chart_delta_e: float
+    chart_max_delta_e: float
+    worst_patch: str
+    parts: Mapping[str, Any]
+    measured: tuple[Any, ...] = ()
+
+    def to_json(self) -> dict[str, Any]:
+        """Field names as keys (``measured``: their JSON)."""
+        return {"corruption": self.corruption, "severity": self.severity,
+                "parameter": self.parameter, "chart_delta_e": self.chart_delta_e,
+                "chart_max_delta_e": self.chart_max_delta_e, "worst_patch": self.worst_patch,
+                "parts": dict(self.parts), "measured": [m.to_json() for m in self.measured]}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> CorruptionCell:
+        """Inverse of :meth:`to_json`."""
+        from fidelity.coco.measure import MeasuredLoss
+
+        param = d["parameter"]
+        return cls(str(d["corruption"]), int(d["severity"]),
+                   tuple(param) if isinstance(param, list) else param,
+                   float(d["chart_delta_e"]), float(d["chart_max_delta_e"]),
+                   str(d["worst_patch"]), dict(d.get("parts") or {}),
+                   tuple(MeasuredLoss.from_json(m) for m in d.get("measured") or ()))
+
+    def measured_for(self, model: str) -> Any:
+        """The :class:`~fidelity.coco.measure.MeasuredLoss` of ``model`` (None if absent)."""
+        return next((m for m in self.measured if m.model == model), None)
+
+
+@dataclass(frozen=True)
+class CocoCResults:
+    """The COCO-C table (:func:`run_coco_c`): one :class:`CorruptionCell` per (corruption,
+    severity), the chart used, its own 8-bit ΔE (``floor_delta_e``), provenance."""
+
+    cells: tuple[CorruptionCell, ...]
+    chart: str
+    floor_delta_e: float
+    meta: Mapping[str, Any]
+
+    def cell(self, corruption: str, severity: int) -> CorruptionCell:
+        """The cell of (corruption, severity); an error when it is not in the table."""
+        for c in self.cells:
+            if c.corruption == corruption and c.severity == severity:
+                return c
+        raise InvalidValueError(f"{corruption}:{severity} is not in the COCO-C table")
+
+    def models(self) -> list[str]:
+        """Detectors measured in some cell, in first-seen order."""
+        seen: dict[str, None] = {}
+        for c in self.cells:
+            for m in c.measured:
+                seen.setdefault(m.model, None)
+        return list(seen)
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"chart", "floor_delta_e", "cells", "meta"}``."""
+        from fidelity.fileio import json_ready
+
+        out: dict[str, Any] = json_ready({"chart": self.chart,
+                                          "floor_delta_e": self.floor_delta_e,
+                                          "cells": [c.to_json() for c in self.cells],
+                                          "meta": dict(self.meta)})
+        return out
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> CocoCResults:
+        """Inverse of :meth:`to_json`."""
+        return cls(tuple(CorruptionCell.from_json(c) for c in d["cells"]), str(d["chart"]),
+                   float(d["floor_delta_e"]), dict(d.get("meta") or {}))
+
+
+def _parameter(name: str, severity: int) -> Any:
+    return {"brightness": BRIGHTNESS, "contrast": CONTRAST,
+            "saturate": SATURATE}[name][severity - 1]
+
+
+def chart_cells(corruptions: Sequence[str] = CORRUPTIONS,
+                severities: Sequence[int] = SEVERITIES) -> list[CorruptionCell]:
+    """The chart side of every (corruption, severity): chart ΔE and direction parts, no COCO."""
+    from fidelity.prediction.directional import error_parts
+
+    out = []
+    for name in corruptions:
+        for sev in severities:
+            m = corruption_chart(name, sev)
+            out.append(CorruptionCell(name, sev, _parameter(name, sev), m.mean_delta_e,
+                                      m.max_delta_e, m.worst_patch,
+                                      error_parts(m.reference_lab, m.lab).to_json()))
+    return out
+
+
+def run_coco_c(inputs: Any, corruptions: Sequence[str] = CORRUPTIONS,
+               severities: Sequence[int] = SEVERITIES, *, limit: int | None = None,
+               store: Any = None, threads: int | None = 1, provider: str = "auto",
+               progress: bool = False, log: Any = None) -> CocoCResults:
+    """Measure every (corruption, severity) on COCO with every detector of ``inputs``
+    (:func:`fidelity.coco.measure.measure_mapping`; resumable through its store) and put each
+    next to its chart ΔE."""
+    import platform
+
+    from fidelity import __version__
+    from fidelity.coco.measure import measure_mapping
+    from fidelity.colour.charts import DEFAULT_CHART
+
+    cells = []
+    for cell in chart_cells(corruptions, severities):
+        fn = CorruptionMap(cell.corruption, cell.severity)
+        measured = measure_mapping(
+            fn, fn.key, inputs, limit=limit, store=store, threads=threads, provider=provider,
+            progress=progress, log=log,
+            description={"corruption": cell.corruption, "severity": cell.severity,
+                         "parameter": cell.parameter,
+                         "definition": f"imagecorruptions {IMAGECORRUPTIONS_VERSION}"})
+        cells.append(CorruptionCell(cell.corruption, cell.severity, cell.parameter,
+                                    cell.chart_delta_e, cell.chart_max_delta_e,
+                                    cell.worst_patch, cell.parts, tuple(measured)))
+    meta = {"fidelity": __version__, "python": platform.python_version(),
+            "machine": {"platform": platform.platform(), "threads": threads},
+            "images": str(inputs.images), "annotations": str(inputs.annotations),
+            "models": [f"{m.path.name}" + (f"@{m.limit}" if m.limit else "")
+                       for m in inputs.models], "limit": limit,
+            "definitions": f"imagecorruptions {IMAGECORRUPTIONS_VERSION} (brightness, contrast, "
+                           "saturate), reimplemented in fidelity.coco.corruptions and checked "
+                           "equal bit for bit"}
+    return CocoCResults(tuple(cells), DEFAULT_CHART, uncorrupted_chart_delta_e(), meta)
+
+
+#: The shipped COCO-C table (package data), written by ``fidelity coco-c --data``.
+DATA_FILE = "coco-c.json"
+
+
+def load_coco_c(path: str | os.PathLike[str] | None = None) -> CocoCResults:
+    """The COCO-C table: ``path`` or the shipped ``fidelity/data/coco-c.json``."""
+    import json
+
+    from fidelity.errors import InputFileError
+    from fidelity.resources import resource_dir
+
+    p = Path(path) if path is not None else resource_dir("data") / DATA_FILE
+    try:
+        return CocoCResults.from_json(json.loads(p.read_text(encoding="utf-8")))
+    except FileNotFoundError:
+        raise InputFileError(f"{p}: no COCO-C table (run fidelity coco-c --data {p})") from None
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise InputFileError(f"{p}: not a COCO-C table ({exc})") from None
+
+
+@dataclass(frozen=True)
+class CocoCAnswer:
+    """What ``fidelity predict --coco-c NAME:SEVERITY`` answers: the corruption's chart
+    measurement (its chart ΔE), the classic and the direction-aware predictions at that ΔE,
+    and the losses measured on COCO (from the shipped table)."""
+
+    corruption: str
+    severity: int
+    parameter: Any
+    measurement: Any
+    prediction: Any
+    directional: Any
+    measured: tuple[Any, ...]
+    table_path: str
+
+    @property
+    def chart_delta_e(self) -> float:
+        """The corruption's chart ΔE (mean ΔE00)."""
+        return float(self.measurement.mean_delta_e)
+
+    def to_json(self) -> dict[str, Any]:
+        """The answer as JSON."""
+        return {"corruption": self.corruption, "severity": self.severity,
+                "parameter": self.parameter, "chart_delta_e": self.chart_delta_e,
+                "chart_max_delta_e": float(self.measurement.max_delta_e),
+                "worst_patch": self.measurement.worst_patch,
+                "prediction": self.prediction.to_json(),
+                "directional_prediction": self.directional.to_json(),
+                "measured": [m.to_json() for m in self.measured],
+                "table": self.table_path}
+
+
+def coco_c_answer(spec: str, *, size: str = "any", table: str | None = None,
+                  data: str | os.PathLike[str] | None = None) -> CocoCAnswer:
+    """The chart ΔE, the predicted and the measured loss of a COCO-C corruption
+    (``"contrast:3"``): the chart side computed now (:func:`corruption_chart`), the measured
+    loss from the COCO-C table (:func:`load_coco_c`)."""
+    from fidelity.prediction.directional import predict_chart
+    from fidelity.prediction.table import predict
+    from fidelity.resources import resource_dir
+
+    name, severity = parse_corruption(spec)
+    m = corruption_chart(name, severity)
+    prediction = predict(m.mean_delta_e, size=size, table=table)
+    directional = predict_chart(m, size=size, table=_directional_name(table))
+    results = load_coco_c(data)
+    try:
+        measured = results.cell(name, severity).measured
+    except InvalidValueError:
+        measured = ()
+    path = str(data) if data is not None else str(resource_dir("data") / DATA_FILE)
+    return CocoCAnswer(name, severity, _parameter(name, severity), m, prediction, directional,
+                       tuple(measured), path)
+
+
+def _directional_name(table: str | None) -> str | None:
+    """``table`` when it is a direction-aware table, else None (the default one)."""
+    if table is None:
+        return None
+    from fidelity.prediction.table import load_prediction_table
+
+    return table if load_prediction_table(table).kind == "directional" else None
+
+
+__all__ = [
+    "BRIGHTNESS",
+    "CONTRAST",
+    "CORRUPTIONS",
+    "IMAGECORRUPTIONS_VERSION",
+    "PATCH_PX",
+    "SATURATE",
+    "SEVERITIES",
+    "DATA_FILE",
+    "CocoCAnswer",
+    "CocoCResults",
+    "CorruptionCell",
+    "CorruptionMap",
+    "chart_cells",
+    "chart_image",
+    "coco_c_answer",
+    "contrast_means",
+    "corrupt",
+    "corruption_chart",
+    "hsv_to_rgb_skimage",
+    "load_coco_c",
+    "parse_corruption",
+    "patch_colours",
+    "rgb_to_hsv_skimage",
+    "run_coco_c",
+    "uncorrupted_chart_delta_e",
+]

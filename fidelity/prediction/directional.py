@@ -1,0 +1,803 @@
+"""Direction-aware prediction: which way a chart is wrong decides what its error costs.
+
+The classic prediction (:func:`fidelity.prediction.table.predict`) charges every chart error
+the worst loss of *any* SAFE-COLOR transform at that chart ΔE, and above ΔE 4 the worst is a
+contrast change, which real cameras seldom make; so it over-predicts realistic cameras by an
+order of magnitude (``reports/validation``). This module charges each part of a chart's error
+the worst loss of the transforms that move the chart *that way*.
+
+**The parts of a chart error** (:func:`error_parts`). CIEDE2000 (Sharma, Wu & Dalal 2005)
+adds three weighted terms per patch, lightness ``l = ΔL'/S_L``, chroma ``c = ΔC'/S_C`` and
+hue ``h = ΔH'/S_H``: ``ΔE00² = l² + c² + h² + R_T c h``. Each patch's ΔE00 is split into
+three non-negative parts in proportion to ``l²``, ``c²`` and ``h²`` (the rotation term goes
+with them pro rata), so that the chart's mean ΔE00 is exactly ``lightness + chroma + hue``.
+
+**Transform families** (:data:`FAMILIES`), from the sweep's ten transforms, and what they move
+on the calibration chart (mean share of the chart ΔE over ΔE 1-24, :func:`family_shares`):
+
+==============  ======================================  ======================================
+family          transforms                              moves (lightness / chroma / hue)
+==============  ======================================  ======================================
+``tone``        brightness-dec/-inc, gamma-dec/-inc      lightness: 82-91 % / 4-8 % / 5-13 %
+``chroma``      saturation-dec/-inc                      36-39 % / 46-56 % / 5-18 %
+``hue``         hue                                      12 % / 5 % / 83 %
+``contrast``    contrast-dec/-inc                        44-47 % / 32-52 % / 4-21 %
+``pull_mean``   pull_mean                                37 % / 46 % / 17 %
+==============  ======================================  ======================================
+
+Each family has a worst-case curve per detector size (and model): at each ΔE the largest loss
+of its transforms (and models), from the sweep's cells (:func:`directional_table`, written to
+``fidelity/data/prediction/coco1000-directional.json``).
+
+**What explains a chart** (:func:`fit_families`). Each one-parameter family of the transforms
+(``brightness``, ``gamma``, ``contrast``, ``saturation``, ``hue``, ``pull_mean``; both
+directions) is fitted to the chart: the parameter that brings the transformed reference chart
+closest to the measured one (least mean ΔE00; a scan of the parameter range, then Brent's
+bounded method). The family that removes the largest share ``x`` of the chart's error
+(``x = 1 - residual / error``, in [0, 1]) *explains* that share.
+
+**The prediction** (:func:`predict_directional`) at the chart's ΔE ``E`` is a weighted sum of
+family curves, each read at ``E``::
+
+    loss = x · f_F(E) + (1 - x) · [s_L · f_tone(E) + s_C · f_chroma(E) + s_H · f_hue(E)]
+
+with ``F`` the family of the best fit, and ``s_L, s_C, s_H`` the lightness, chroma and hue
+shares of what the fit leaves (the residual chart error). A chart that *is* a SAFE-COLOR
+transform is explained fully (``x = 1``) and gets that transform family's worst case, so the
+sweep's own cells stay bounded; an error no family explains (a white-balance cast) is charged
+by its direction. Every weight is at most 1 and the weights add up to 1, so the prediction
+never exceeds the classic one (the worst over all transforms). Beyond the ΔE range a family was
+measured on (``chroma`` ends at ΔE 21, as the saturation transforms reach no further on the
+chart) its part is charged the classic curve: no extrapolation.
+
+Like the classic measured table, it is an empirical worst case, not a guarantee; the
+validation on 30 realistic camera models (``reports/validation``) checks it against the loss
+measured by emulating each camera on COCO.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fidelity.errors import InvalidValueError, unknown_name
+
+if TYPE_CHECKING:
+    from fidelity.chart.measure import ChartMeasurement
+    from fidelity.coco.tables import Tables
+    from fidelity.prediction.table import PredictionTable
+    from fidelity.prediction.verdict import Criterion, Verdict
+
+F64 = NDArray[np.float64]
+
+#: The direction-aware table used when none is named.
+DEFAULT_DIRECTIONAL_TABLE = "coco1000-directional"
+#: The three directions of a CIEDE2000 difference.
+DIRECTIONS: tuple[str, ...] = ("lightness", "chroma", "hue")
+#: Which bound decides a verdict: the classic worst case (default) or the direction-aware one.
+BOUNDS: tuple[str, ...] = ("classic", "directional")
+#: Loss columns (as in :data:`fidelity.prediction.table.COLUMNS`).
+COLUMNS: tuple[str, ...] = ("dmap_points", "dmap_relative", "dap_person_points",
+                            "dap_bicycle_points")
+#: Share of the chart error a fit must remove to count as an explanation (below: noise).
+MIN_EXPLAINED = 0.02
+
+
+@dataclass(frozen=True)
+class Family:
+    """A family of SAFE-COLOR transforms: its ``transforms`` (sweep names), the one-parameter
+    ``fits`` that stand for it and the ``direction`` it charges (None: a mixed family, used
+    only when a fit explains the chart)."""
+
+    name: str
+    transforms: tuple[str, ...]
+    fits: tuple[str, ...]
+    direction: str | None
+    description: str
+
+
+#: The transform families (module docstring), by name.
+FAMILIES: dict[str, Family] = {f.name: f for f in (
+    Family("tone", ("brightness-dec", "brightness-inc", "gamma-dec", "gamma-inc"),
+           ("brightness", "gamma"), "lightness",
+           "tone changes that keep the contrast: brightness shifts and gamma"),
+    Family("chroma", ("saturation-dec", "saturation-inc"), ("saturation",), "chroma",
+           "HSV saturation down or up"),
+    Family("hue", ("hue",), ("hue",), "hue", "HSV hue rotation"),
+    Family("contrast", ("contrast-dec", "contrast-inc"), ("contrast",), None,
+           "contrast about mid-grey: lightness and chroma together"),
+    Family("pull_mean", ("pull_mean",), ("pull_mean",), None,
+           "every colour pulled towards the mean Lab colour"),
+)}
+#: The family that charges each direction of an unexplained error.
+DIRECTION_FAMILY: dict[str, str] = {"lightness": "tone", "chroma": "chroma", "hue": "hue"}
+
+
+@dataclass(frozen=True)
+class FitSpec:
+    """A one-parameter transform fitted to charts: the function (encoded sRGB in [0, 1]),
+    its parameter range (both directions), the identity and the scan scale."""
+
+    name: str
+    family: str
+    function: Callable[[ArrayLike, ArrayLike], NDArray[np.floating[Any]]]
+    lo: float
+    hi: float
+    identity: float
+    scale: str = "linear"
+
+
+def _fit_specs() -> dict[str, FitSpec]:
+    from fidelity.prediction import transforms as tr
+
+    return {s.name: s for s in (
+        FitSpec("brightness", "tone", tr.brightness, -1.0, 1.0, 0.0),
+        FitSpec("gamma", "tone", tr.gamma, 0.01, 10.0, 1.0, "log"),
+        FitSpec("contrast", "contrast", tr.contrast, 0.001, 50.0, 1.0, "log"),
+        FitSpec("saturation", "chroma", tr.saturation, 0.001, 50.0, 1.0, "log"),
+        FitSpec("hue", "hue", tr.hue, -180.0, 180.0, 0.0),
+        FitSpec("pull_mean", "pull_mean", tr.pull_mean, 0.0, 1.0, 1.0),
+    )}
+
+
+# --------------------------------------------------------------------------------------------
+# The parts of a chart error
+# --------------------------------------------------------------------------------------------
+
+
+def delta_e_2000_terms(lab1: ArrayLike, lab2: ArrayLike) -> tuple[F64, F64, F64, F64]:
+    """The weighted CIEDE2000 terms of ``lab2`` relative to ``lab1``: ``(ΔL'/S_L, ΔC'/S_C,
+    ΔH'/S_H, R_T)`` (..., each), kL = kC = kH = 1, so that ``ΔE00² = l² + c² + h² + R_T c h``.
+
+    Sharma, Wu & Dalal, Color Res. Appl. 30(1), 2005, eq. 1-22, written out in degrees
+    (independent of :func:`fidelity.colour.colorimetry.delta_e_2000`, which the tests compare
+    it with).
+    """
+    p, q = np.broadcast_arrays(np.asarray(lab1, np.float64), np.asarray(lab2, np.float64))
+    L1, a1, b1 = p[..., 0], p[..., 1], p[..., 2]
+    L2, a2, b2 = q[..., 0], q[..., 1], q[..., 2]
+    cbar = (np.hypot(a1, b1) + np.hypot(a2, b2)) / 2.0
+    g = 0.5 * (1.0 - np.sqrt(cbar ** 7 / (cbar ** 7 + 25.0 ** 7)))
+    a1p, a2p = (1.0 + g) * a1, (1.0 + g) * a2
+    c1p, c2p = np.hypot(a1p, b1), np.hypot(a2p, b2)
+    h1p = np.where(c1p == 0, 0.0, np.degrees(np.arctan2(b1, a1p)) % 360.0)
+    h2p = np.where(c2p == 0, 0.0, np.degrees(np.arctan2(b2, a2p)) % 360.0)
+    dh = h2p - h1p
+    dh = np.where(dh > 180.0, dh - 360.0, np.where(dh < -180.0, dh + 360.0, dh))
+    dh = np.where(c1p * c2p == 0, 0.0, dh)
+    dL, dC = L2 - L1, c2p - c1p
+    dH = 2.0 * np.sqrt(c1p * c2p) * np.sin(np.radians(dh) / 2.0)
+    lbar, cbarp = (L1 + L2) / 2.0, (c1p + c2p) / 2.0
+    hsum = h1p + h2p
+    hbar = np.where(np.abs(h1p - h2p) <= 180.0, hsum / 2.0,
+                    np.where(hsum < 360.0, (hsum + 360.0) / 2.0, (hsum - 360.0) / 2.0))
+    hbar = np.where(c1p * c2p == 0, hsum, hbar)
+    t = (1.0 - 0.17 * np.cos(np.radians(hbar - 30.0)) + 0.24 * np.cos(np.radians(2 * hbar))
+         + 0.32 * np.cos(np.radians(3 * hbar + 6.0)) - 0.20 * np.cos(np.radians(4 * hbar - 63.0)))
+    sl = 1.0 + 0.015 * (lbar - 50.0) ** 2 / np.sqrt(20.0 + (lbar - 50.0) ** 2)
+    sc = 1.0 + 0.045 * cbarp
+    sh = 1.0 + 0.015 * cbarp * t
+    dtheta = 30.0 * np.exp(-(((hbar - 275.0) / 25.0) ** 2))
+    rc = 2.0 * np.sqrt(cbarp ** 7 / (cbarp ** 7 + 25.0 ** 7))
+    rt = -np.sin(np.radians(2.0 * dtheta)) * rc
+    return dL / sl, dC / sc, dH / sh, rt
+
+
+@dataclass(frozen=True)
+class ErrorParts:
+    """A chart error split by direction (module docstring): ``lightness + chroma + hue`` =
+    ``delta_e``, the mean ΔE00 over the patches; all >= 0, in ΔE00 units."""
+
+    lightness: float
+    chroma: float
+    hue: float
+
+    @property
+    def delta_e(self) -> float:
+        """The chart ΔE (mean ΔE00): the sum of the parts."""
+        return self.lightness + self.chroma + self.hue
+
+    def shares(self) -> dict[str, float]:
+        """Each direction's share of the chart ΔE (equal thirds for a zero error)."""
+        total = self.delta_e
+        if total <= 0:
+            return dict.fromkeys(DIRECTIONS, 1.0 / 3.0)
+        return {"lightness": self.lightness / total, "chroma": self.chroma / total,
+                "hue": self.hue / total}
+
+    @property
+    def dominant(self) -> str:
+        """The direction with the largest part."""
+        s = self.shares()
+        return max(DIRECTIONS, key=lambda d: s[d])
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"lightness", "chroma", "hue", "delta_e"}``."""
+        return {"lightness": self.lightness, "chroma": self.chroma, "hue": self.hue,
+                "delta_e": self.delta_e}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> ErrorParts:
+        """Inverse of :meth:`to_json`."""
+        return cls(float(d["lightness"]), float(d["chroma"]), float(d["hue"]))
+
+
+def error_parts(reference_lab: ArrayLike, lab: ArrayLike) -> ErrorParts:
+    """Split the chart error of ``lab`` (n, 3) against ``reference_lab`` (n, 3) into its
+    lightness, chroma and hue parts (module docstring; their sum is the mean ΔE00)."""
+    from fidelity.colour.colorimetry import delta_e_2000
+
+    ref, meas = np.asarray(reference_lab, np.float64), np.asarray(lab, np.float64)
+    lt, c, h, _ = delta_e_2000_terms(ref, meas)
+    de = np.asarray(delta_e_2000(meas, ref), np.float64)
+    sq = np.stack([lt * lt, c * c, h * h], axis=-1)
+    tot = sq.sum(axis=-1, keepdims=True)
+    w = np.divide(sq, tot, out=np.zeros_like(sq), where=tot > 0)
+    parts = (de[..., None] * w).reshape(-1, 3).mean(axis=0)
+    return ErrorParts(float(parts[0]), float(parts[1]), float(parts[2]))
+
+
+# --------------------------------------------------------------------------------------------
+# Fitting the transform families to a chart
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class FamilyFit:
+    """The best parameter of one fitted transform (:func:`fit_families`): ``param``, the mean
+    ΔE00 left between the transformed reference and the chart (``residual``), the chart's
+    error before the fit (``error``: the untransformed reference against the chart) and the
+    share ``explained`` = max(0, 1 - residual / error)."""
+
+    fit: str
+    family: str
+    param: float
+    residual: float
+    error: float
+
+    @property
+    def explained(self) -> float:
+        """Share of the chart error the fit removes, in [0, 1]."""
+        if self.error <= 0:
+            return 0.0
+        return float(min(1.0, max(0.0, 1.0 - self.residual / self.error)))
+
+    def to_json(self) -> dict[str, Any]:
+        """Field names as keys, and ``explained``."""
+        return {"fit": self.fit, "family": self.family, "param": self.param,
+                "residual": self.residual, "error": self.error, "explained": self.explained}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> FamilyFit:
+        """Inverse of :meth:`to_json`."""
+        return cls(str(d["fit"]), str(d["family"]), float(d["param"]), float(d["residual"]),
+                   float(d["error"]))
+
+
+def _reference_srgb(reference_lab: F64) -> F64:
+    from fidelity.colour.colorimetry import lab_to_srgb
+
+    return np.clip(np.asarray(lab_to_srgb(reference_lab), np.float64), 0.0, 1.0)
+
+
+def fit_family(reference_lab: ArrayLike, lab: ArrayLike, fit: str,
+               scan: int = 161) -> FamilyFit:
+    """Fit transform ``fit`` (``brightness``, ``gamma``, ``contrast``, ``saturation``,
+    ``hue``, ``pull_mean``) to a chart: the parameter minimising the mean ΔE00 between the
+    transformed reference chart (reference Lab -> sRGB clipped to [0, 1], as the calibration
+    chart) and ``lab``; a scan of ``scan`` points over the range, then
+    ``scipy.optimize.minimize_scalar`` (bounded) around the best one."""
+    from scipy.optimize import minimize_scalar
+
+    from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
+
+    specs = _fit_specs()
+    if fit not in specs:
+        raise unknown_name("fitted transform", fit, specs)
+    spec = specs[fit]
+    ref = np.asarray(reference_lab, np.float64)
+    target = np.asarray(lab, np.float64)
+    src = _reference_srgb(ref)
+    log = spec.scale == "log"
+
+    def param(u: float) -> float:
+        return float(np.exp(u)) if log else float(u)
+
+    def cost(u: float) -> float:
+        out = spec.function(src, param(u))
+        return float(np.mean(delta_e_2000(srgb_to_lab(out), target)))
+
+    lo, hi = (math.log(spec.lo), math.log(spec.hi)) if log else (spec.lo, spec.hi)
+    ident = math.log(spec.identity) if log else spec.identity
+    grid = np.sort(np.append(np.linspace(lo, hi, scan), ident))
+    # the whole scan in one call: the chart repeated once per parameter (a transform's
+    # parameter broadcasts over the leading axes; pull_mean's mean is the chart's own)
+    params = np.exp(grid) if log else grid
+    stack = np.broadcast_to(src, (len(grid), *src.shape))
+    out = spec.function(stack, params[:, None])
+    values = np.mean(delta_e_2000(srgb_to_lab(out), target), axis=-1)
+    error = cost(ident)
+    k = int(np.argmin(values))
+    best_u, best = float(grid[k]), float(values[k])
+    a, b = float(grid[max(k - 1, 0)]), float(grid[min(k + 1, len(grid) - 1)])
+    if b > a:
+        res = minimize_scalar(cost, bounds=(a, b), method="bounded",
+                              options={"xatol": 1e-10 * max(1.0, abs(b - a))})
+        if float(res.fun) < best:
+            best_u, best = float(res.x), float(res.fun)
+    return FamilyFit(fit, spec.family, param(best_u), best, error)
+
+
+def fit_families(reference_lab: ArrayLike, lab: ArrayLike) -> list[FamilyFit]:
+    """Every fitted transform of :func:`fit_family`, best explanation first."""
+    fits = [fit_family(reference_lab, lab, name) for name in _fit_specs()]
+    return sorted(fits, key=lambda f: -f.explained)
+
+
+def fitted_lab(reference_lab: ArrayLike, fit: FamilyFit) -> F64:
+    """The reference chart through a fitted transform, as Lab (n, 3)."""
+    from fidelity.colour.colorimetry import srgb_to_lab
+
+    spec = _fit_specs()[fit.fit]
+    src = _reference_srgb(np.asarray(reference_lab, np.float64))
+    return np.asarray(srgb_to_lab(spec.function(src, fit.param)), np.float64)
+
+
+def family_shares(calibration: Any = None, chart: str | None = None
+                  ) -> dict[str, dict[str, float]]:
+    """What each SAFE-COLOR transform moves on the calibration chart: the mean lightness,
+    chroma and hue shares of its chart error over its calibrated targets (by transform)."""
+    from fidelity.colour.charts import DEFAULT_CHART, load_chart
+    from fidelity.colour.colorimetry import srgb_to_lab
+    from fidelity.prediction.calibration import load_calibration_table
+    from fidelity.prediction.transforms import TRANSFORMS
+
+    cal = calibration if calibration is not None else load_calibration_table()
+    ch = load_chart(chart or DEFAULT_CHART)
+    acc: dict[str, list[dict[str, float]]] = {}
+    for e in cal.entries:
+        if not e.reachable or e.param is None:
+            continue
+        out = srgb_to_lab(TRANSFORMS[e.transform](ch.srgb, e.param))
+        acc.setdefault(e.transform, []).append(error_parts(ch.lab, out).shares())
+    return {t: {d: float(np.mean([s[d] for s in v])) for d in DIRECTIONS}
+            for t, v in acc.items()}
+
+
+# --------------------------------------------------------------------------------------------
+# The direction-aware table
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class DirectionalTable:
+    """A direction-aware prediction table: the ``classic`` table it extends (the same file's
+    curves: the worst case over every transform) and one table of worst-case curves per
+    family (``families``, each a :class:`~fidelity.prediction.table.PredictionTable` of kind
+    ``measured``)."""
+
+    name: str
+    classic: PredictionTable
+    families: dict[str, PredictionTable]
+    family_transforms: dict[str, tuple[str, ...]]
+    provenance: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def path(self) -> Any:
+        """The table file."""
+        return self.classic.path
+
+    def summary(self) -> dict[str, Any]:
+        """Name, kind, path and the families with their transforms."""
+        return {"name": self.name, "kind": "directional",
+                "path": str(self.classic.path) if self.classic.path else None,
+                "families": {f: list(t) for f, t in self.family_transforms.items()}}
+
+
+def load_directional_table(name_or_path: str | None = None) -> DirectionalTable:
+    """Load a direction-aware table (registry name or JSON path; None:
+    :data:`DEFAULT_DIRECTIONAL_TABLE`). A prediction table without ``families`` is an error
+    naming it."""
+    from fidelity.errors import InputFileError
+    from fidelity.prediction.table import load_prediction_table, parse_prediction_table
+
+    classic = load_prediction_table(name_or_path or DEFAULT_DIRECTIONAL_TABLE)
+    fams = classic.raw.get("families")
+    if classic.kind != "directional" or not isinstance(fams, dict):
+        raise InputFileError(f"{classic.path or classic.name}: not a direction-aware table "
+                             f"(kind {classic.kind!r}, no 'families'); e.g. "
+                             f"{DEFAULT_DIRECTIONAL_TABLE}")
+    tables: dict[str, PredictionTable] = {}
+    members: dict[str, tuple[str, ...]] = {}
+    for fam, body in fams.items():
+        if fam not in FAMILIES:
+            raise InputFileError(f"{classic.path}: unknown family {fam!r}")
+        tables[fam] = parse_prediction_table(
+            {"name": f"{classic.name}:{fam}", "kind": "measured",
+             "interpolation": classic.interpolation, "curves": body["curves"],
+             "units": classic.units}, f"{classic.path}: families.{fam}")
+        members[fam] = tuple(body.get("transforms") or FAMILIES[fam].transforms)
+    return DirectionalTable(classic.name, classic, tables, members,
+                            dict(classic.raw.get("provenance") or {}))
+
+
+def _family_point(cells: Sequence[Any], columns: Sequence[str]) -> dict[str, Any] | None:
+    """The worst case of a family at one ΔE over ``cells`` (done CellDelta rows)."""
+    if not cells:
+        return None
+    worst = max(cells, key=lambda c: c.dmap_points)
+    point: dict[str, Any] = {"worst_transform": worst.transform, "worst_model": worst.model}
+    for col in columns:
+        vals = [getattr(c, col) for c in cells if getattr(c, col) is not None]
+        point[col] = round(float(max(vals)), 4) if vals else None
+    se = worst.errors.dmap_points if worst.errors is not None else None
+    point["dmap_points_se"] = None if se is None else round(float(se), 4)
+    return point
+
+
+def directional_table(tables: Tables, name: str = DEFAULT_DIRECTIONAL_TABLE,
+                      classic_name: str = "coco1000-measured") -> dict[str, Any]:
+    """The direction-aware prediction table (JSON) from a sweep's tables
+    (:class:`fidelity.coco.tables.Tables`, e.g. read from ``reports/coco/tables.json``).
+
+    Its ``curves`` are the classic measured table's (:func:`fidelity.coco.tables.prediction_table`),
+    so the file also answers as a classic table; ``families`` holds, per family, one curve per
+    size class (worst over its transforms and the class's models) and per model (worst over
+    its transforms). A family's point at a ΔE is kept only when every transform of the family
+    that reaches that ΔE on the chart was measured for every model of the curve (a partial
+    point could understate the worst case); transforms that cannot reach it are left out, and
+    where none reaches it the family's curve ends.
+    """
+    from fidelity.coco.tables import prediction_table
+
+    base = prediction_table(tables, classic_name)
+    columns = COLUMNS
+    families: dict[str, Any] = {}
+    for fam in FAMILIES.values():
+        members = set(fam.transforms)
+        # per model and ΔE: the family's done cells, and whether every transform of the
+        # family has a cell there that is done or unreachable (else the point is partial)
+        by_model: dict[str, dict[float, list[Any]]] = {}
+        complete: dict[str, dict[float, bool]] = {}
+        for model, cells in tables.cells.items():
+            seen: dict[float, set[str]] = {}
+            ok: dict[float, bool] = {}
+            done: dict[float, list[Any]] = {}
+            for c in cells:
+                if c.transform not in members:
+                    continue
+                key = float(c.delta_e)
+                seen.setdefault(key, set()).add(c.transform)
+                ok[key] = ok.get(key, True) and c.status in ("done", "unreachable")
+                if c.done:
+                    done.setdefault(key, []).append(c)
+            by_model[model] = {e: done.get(e, []) for e in seen}
+            complete[model] = {e: ok[e] and seen[e] == members for e in seen}
+        curves: list[dict[str, Any]] = []
+        sizes: dict[str, list[str]] = {}
+        for model in sorted(by_model):
+            sizes.setdefault(tables.models[model].size, []).append(model)
+        for size, models in sorted(sizes.items()):
+            targets = sorted({e for m in models for e in by_model[m]})
+            points = [{"delta_e": 0.0, **dict.fromkeys(columns, 0.0), "dmap_points_se": None,
+                       "worst_transform": None, "source": "ΔE 0: no transform"}]
+            for e in targets:
+                if not all(complete[m].get(e, False) for m in models):
+                    continue
+                p = _family_point([c for m in models for c in by_model[m].get(e, [])], columns)
+                if p is None:
+                    break
+                points.append({"delta_e": e, **{k: p[k] for k in columns},
+                               "dmap_points_se": p["dmap_points_se"],
+                               "worst_transform": p["worst_transform"],
+                               "source": f"worst over {', '.join(fam.transforms)} and "
+                                         f"{len(models)} model(s): {p['worst_model']}"})
+            curves.append({"size": size, "model": None, "points": points})
+            for m in models:
+                info = tables.models[m]
+                mpoints = [{"delta_e": 0.0, **dict.fromkeys(columns, 0.0),
+                            "dmap_points_se": None, "worst_transform": None,
+                            "source": "ΔE 0: no transform"}]
+                for e in sorted(by_model[m]):
+                    if not complete[m].get(e, False):
+                        continue
+                    p = _family_point(by_model[m][e], columns)
+                    if p is None:
+                        break
+                    mpoints.append({"delta_e": e, **{k: p[k] for k in columns},
+                                    "dmap_points_se": p["dmap_points_se"],
+                                    "worst_transform": p["worst_transform"],
+                                    "source": f"{m}: worst over {', '.join(fam.transforms)}"})
+                curves.append({"size": size, "model": m, "baseline_map": info.baseline_map,
+                               "baseline_ap": info.baseline_ap or {}, "points": mpoints})
+        families[fam.name] = {"transforms": list(fam.transforms), "fits": list(fam.fits),
+                              "direction": fam.direction, "description": fam.description,
+                              "curves": curves}
+    provenance = dict(base["provenance"])
+    provenance["directional"] = (
+        "fidelity.prediction.directional.directional_table from the sweep's cells: per family "
+        "the worst case over its transforms (and the size class's models); prediction = x f_F(E)"
+        " + (1 - x) sum_d s_d f_d(E), see the module docstring")
+    provenance["classic_table"] = classic_name
+    return {**base, "name": name, "kind": "directional",
+            "title": "Direction-aware worst-case detection loss on the shared COCO val2017 "
+                     "subset (per transform family)",
+            "provenance": provenance, "families": families}
+
+
+# --------------------------------------------------------------------------------------------
+# The prediction
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class FamilyTerm:
+    """One term of a direction-aware prediction: the ``family``, its ``weight`` (in [0, 1];
+    the weights add up to 1), why it is there (``reason``), and per column its curve value at
+    the chart ΔE (``values``) and where it came from (``sources``: ``family`` or ``classic``,
+    when the family was not measured that far)."""
+
+    family: str
+    weight: float
+    reason: str
+    values: Mapping[str, float | None]
+    sources: Mapping[str, str]
+
+    def to_json(self) -> dict[str, Any]:
+        """Field names as keys."""
+        return {"family": self.family, "weight": self.weight, "reason": self.reason,
+                "values": dict(self.values), "sources": dict(self.sources)}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> FamilyTerm:
+        """Inverse of :meth:`to_json`."""
+        return cls(str(d["family"]), float(d["weight"]), str(d["reason"]),
+                   dict(d["values"]), dict(d["sources"]))
+
+
+@dataclass(frozen=True)
+class DirectionalPrediction:
+    """The direction-aware prediction of one chart (:func:`predict_directional`): the chart
+    ΔE, its :class:`ErrorParts`, the best :class:`FamilyFit` (None when none explains
+    :data:`MIN_EXPLAINED` of the error), the parts the fit leaves (``residual_parts``), the
+    :class:`FamilyTerm` terms and the resulting loss per column (``columns``), the detector
+    size asked and answered, and the table (its summary)."""
+
+    delta_e: float
+    parts: ErrorParts
+    fit: FamilyFit | None
+    residual_parts: ErrorParts
+    terms: tuple[FamilyTerm, ...]
+    columns: Mapping[str, float | None]
+    size: str
+    size_used: str
+    table: Mapping[str, Any]
+    notes: tuple[str, ...] = ()
+
+    @property
+    def dmap_points(self) -> float | None:
+        """Predicted ΔmAP, percentage points."""
+        return self.columns.get("dmap_points")
+
+    @property
+    def dmap_relative(self) -> float | None:
+        """Predicted ΔmAP, % of the baseline mAP."""
+        return self.columns.get("dmap_relative")
+
+    @property
+    def dap_person_points(self) -> float | None:
+        """Predicted person ΔAP, points."""
+        return self.columns.get("dap_person_points")
+
+    @property
+    def dap_bicycle_points(self) -> float | None:
+        """Predicted bicycle ΔAP, points."""
+        return self.columns.get("dap_bicycle_points")
+
+    def value(self, cls: str = "all", unit: str = "points") -> float | None:
+        """The loss of ``cls`` (``all``, ``person``, ``bicycle``) in ``unit``."""
+        from fidelity.prediction.table import CLASS_COLUMNS
+
+        if unit == "relative":
+            if cls != "all":
+                raise InvalidValueError(f"--class {cls}: only 'all' has a relative ΔmAP")
+            return self.dmap_relative
+        if cls not in CLASS_COLUMNS:
+            raise unknown_name("class", cls, CLASS_COLUMNS)
+        return self.columns.get(CLASS_COLUMNS[cls])
+
+    def explanation(self) -> str:
+        """One line: which families charge the error, with their weights."""
+        parts = ", ".join(f"{t.family} {100 * t.weight:.0f} %" for t in self.terms
+                          if t.weight >= 0.005)
+        if self.fit is not None:
+            return (f"{parts}; {self.fit.fit} {self.fit.param:.4g} explains "
+                    f"{100 * self.fit.explained:.0f} % of the error")
+        return f"{parts}; by direction, no transform explains the error"
+
+    def to_json(self) -> dict[str, Any]:
+        """Columns first, then the parts, fit, terms, size and table."""
+        return {"delta_e": self.delta_e, **{c: self.columns.get(c) for c in COLUMNS},
+                "parts": self.parts.to_json(),
+                "fit": self.fit.to_json() if self.fit else None,
+                "residual_parts": self.residual_parts.to_json(),
+                "terms": [t.to_json() for t in self.terms], "size": self.size,
+                "size_used": self.size_used, "table": dict(self.table),
+                "notes": list(self.notes)}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> DirectionalPrediction:
+        """Inverse of :meth:`to_json`."""
+        return cls(float(d["delta_e"]), ErrorParts.from_json(d["parts"]),
+                   FamilyFit.from_json(d["fit"]) if d.get("fit") else None,
+                   ErrorParts.from_json(d["residual_parts"]),
+                   tuple(FamilyTerm.from_json(t) for t in d["terms"]),
+                   {c: d.get(c) for c in COLUMNS}, str(d["size"]), str(d["size_used"]),
+                   dict(d["table"]), tuple(str(n) for n in d.get("notes") or ()))
+
+
+def _family_value(table: DirectionalTable, family: str, column: str, delta_e: float,
+                  size: str) -> tuple[float | None, str]:
+    """A family curve's loss at ``delta_e``; beyond the family's measured range the classic
+    curve's (the classic table's rules, e.g. its total-loss ceiling)."""
+    from fidelity.prediction.table import predict, predict_curve
+
+    ftab = table.families[family]
+    curves, _ = ftab.select(size)
+    ends = [float(c.delta_e[~np.isnan(c.values[column])][-1]) for c in curves
+            if np.any(~np.isnan(c.values[column]))]
+    if ends and delta_e <= min(ends):
+        v = float(predict_curve([delta_e], column, size=size, table=ftab)[0])
+        return (None if math.isnan(v) else v), "family"
+    classic = predict(delta_e, size=size, table=table.classic, transforms=False)
+    return classic.columns[column].value, "classic"
+
+
+def predict_directional(reference_lab: ArrayLike, lab: ArrayLike, *,
+                        delta_e: float | None = None, size: str = "any",
+                        table: DirectionalTable | str | None = None) -> DirectionalPrediction:
+    """The direction-aware prediction of a chart (module docstring).
+
+    Parameters
+    ----------
+    reference_lab, lab
+        The chart's reference and measured CIELAB D65 (n, 3).
+    delta_e
+        The chart ΔE to read the curves at (default: the mean ΔE00 of ``lab`` against
+        ``reference_lab``).
+    size
+        Detector size class (``n`` ... ``x``, ``any``).
+    table
+        A :class:`DirectionalTable`, its name or path (None:
+        :data:`DEFAULT_DIRECTIONAL_TABLE`).
+    """
+    tab = table if isinstance(table, DirectionalTable) else load_directional_table(table)
+    ref = np.asarray(reference_lab, np.float64)
+    meas = np.asarray(lab, np.float64)
+    parts = error_parts(ref, meas)
+    de = parts.delta_e if delta_e is None else float(delta_e)
+    if not math.isfinite(de) or de < 0:
+        raise InvalidValueError(f"ΔE {delta_e!r} must be a finite number >= 0")
+    fits = fit_families(ref, meas)
+    best = fits[0] if fits and fits[0].explained >= MIN_EXPLAINED else None
+    weights: dict[str, float] = {}
+    reasons: dict[str, str] = {}
+    residual = parts
+    rest = 1.0
+    if best is not None:
+        x = best.explained
+        weights[best.family] = x
+        reasons[best.family] = (f"{best.fit} {best.param:.4g} explains {100 * x:.1f} % of the "
+                                "chart error")
+        residual = error_parts(fitted_lab(ref, best), meas)
+        rest = 1.0 - x
+    shares = residual.shares()
+    for d in DIRECTIONS:
+        fam = DIRECTION_FAMILY[d]
+        w = rest * shares[d]
+        if w <= 0:
+            continue
+        weights[fam] = weights.get(fam, 0.0) + w
+        why = f"{100 * shares[d]:.1f} % of the {'remaining ' if best else ''}error is {d}"
+        reasons[fam] = f"{reasons[fam]}; {why}" if fam in reasons else why
+    terms = []
+    columns: dict[str, float | None] = dict.fromkeys(COLUMNS, 0.0)
+    classic_used = set()
+    for fam, w in weights.items():
+        values: dict[str, float | None] = {}
+        sources: dict[str, str] = {}
+        for col in COLUMNS:
+            v, src = _family_value(tab, fam, col, de, size)
+            values[col], sources[col] = v, src
+            if src == "classic" and w > 0:
+                classic_used.add(fam)
+            cur = columns[col]
+            columns[col] = None if v is None or cur is None else cur + w * v
+        terms.append(FamilyTerm(fam, w, reasons[fam], values, sources))
+    terms.sort(key=lambda t: -t.weight)
+    _, size_used = tab.families[terms[0].family if terms else "tone"].select(size)
+    notes = ["direction-aware: each part of the chart error is charged the worst loss of the "
+             "transforms that move the chart that way (an empirical worst case, validated on "
+             "30 camera models; not a guarantee)"]
+    if classic_used:
+        notes.append(f"ΔE {de:.2f} is beyond the range measured for "
+                     f"{', '.join(sorted(classic_used))}: that part is charged the classic "
+                     "curve")
+    return DirectionalPrediction(de, parts, best, residual, tuple(terms), columns, size,
+                                 size_used, tab.summary(), tuple(notes))
+
+
+def predict_chart(measurement: ChartMeasurement, *, size: str = "any",
+                  table: DirectionalTable | str | None = None) -> DirectionalPrediction:
+    """:func:`predict_directional` of a measured chart (its reference and measured Lab, at
+    its mean ΔE00)."""
+    return predict_directional(measurement.reference_lab, measurement.lab,
+                               delta_e=measurement.mean_delta_e, size=size, table=table)
+
+
+def family_losses(delta_e: float, *, size: str = "any",
+                  table: DirectionalTable | str | None = None,
+                  column: str = "dmap_points") -> dict[str, tuple[float | None, str]]:
+    """Each family's worst-case loss at chart ΔE ``delta_e`` (what a chart error entirely of
+    that family is predicted to cost), with its source (``family`` or ``classic``)."""
+    tab = table if isinstance(table, DirectionalTable) else load_directional_table(table)
+    if column not in COLUMNS:
+        raise unknown_name("prediction column", column, COLUMNS)
+    return {f: _family_value(tab, f, column, float(delta_e), size) for f in tab.families}
+
+
+def evaluate_directional(mean_delta_e: float, prediction: DirectionalPrediction,
+                         criterion: Criterion) -> Verdict:
+    """Apply a ``max-dmap`` ``criterion`` to the direction-aware prediction (a ``max-delta-e``
+    criterion does not depend on the bound: :func:`fidelity.prediction.verdict.evaluate`)."""
+    from fidelity.prediction.verdict import Verdict, evaluate
+
+    if criterion.kind != "max-dmap":
+        return evaluate(mean_delta_e, None, criterion)
+    loss = prediction.value(criterion.cls, criterion.unit)
+    what = criterion.describe().removeprefix("predicted ").split(" <=")[0]
+    unit = "points" if criterion.unit == "points" else "%"
+    if loss is None:
+        return Verdict(False, criterion, None,
+                       f"FAIL: no direction-aware {what} prediction (nothing supports a pass)",
+                       conservative=True)
+    passed = loss <= criterion.limit
+    return Verdict(passed, criterion, float(loss),
+                   f"{'PASS' if passed else 'FAIL'}: predicted {what} {loss:.2f} {unit} "
+                   f"(direction-aware bound) {'<=' if passed else '>'} {criterion.limit:g} at "
+                   f"mean ΔE00 {prediction.delta_e:.2f}")
+
+
+__all__ = [
+    "BOUNDS",
+    "COLUMNS",
+    "DEFAULT_DIRECTIONAL_TABLE",
+    "DIRECTIONS",
+    "DIRECTION_FAMILY",
+    "FAMILIES",
+    "MIN_EXPLAINED",
+    "DirectionalPrediction",
+    "DirectionalTable",
+    "ErrorParts",
+    "Family",
+    "FamilyFit",
+    "FamilyTerm",
+    "FitSpec",
+    "delta_e_2000_terms",
+    "directional_table",
+    "error_parts",
+    "evaluate_directional",
+    "family_losses",
+    "family_shares",
+    "fit_families",
+    "fit_family",
+    "fitted_lab",
+    "load_directional_table",
+    "predict_chart",
+    "predict_directional",
+]

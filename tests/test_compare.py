@@ -1,0 +1,143 @@
+"""fidelity compare: sim against real on synthetic chart images with known colours."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from xml.etree import ElementTree as ET
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from fidelity.chart.image import write_png
+from fidelity.cli import main
+from fidelity.colour.charts import load_reference
+from fidelity.colour.colorimetry import delinearize_srgb, delta_e_2000, linearize_srgb, srgb_to_lab
+from fidelity.compare import ComparisonReport, compare_charts
+
+PATCH, GAP = 40, 10
+#: A known 3x3 colour matrix (linear light), what the "real camera" does differently.
+M = np.array([[0.90, 0.08, 0.02], [0.05, 0.92, 0.03], [0.00, 0.10, 0.90]])
+
+
+def _centre(i: int) -> tuple[float, float]:
+    r, c = divmod(i, 6)
+    return (GAP + c * (PATCH + GAP) + PATCH / 2 - 0.5, GAP + r * (PATCH + GAP) + PATCH / 2 - 0.5)
+
+
+CORNERS = ",".join(f"{v:g}" for i in (0, 5, 23, 18) for v in _centre(i))
+
+
+def _image(colours: np.ndarray) -> np.ndarray:
+    img = np.zeros((4 * PATCH + 5 * GAP, 6 * PATCH + 7 * GAP, 3))
+    for i, rgb in enumerate(colours):
+        r, c = divmod(i, 6)
+        y, x = GAP + r * (PATCH + GAP), GAP + c * (PATCH + GAP)
+        img[y:y + PATCH, x:x + PATCH] = rgb
+    return img
+
+
+def _q16(x: np.ndarray) -> np.ndarray:
+    return np.round(np.clip(x, 0, 1) * 65535) / 65535
+
+
+@pytest.fixture(scope="module")
+def charts(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("cmp")
+    sim = np.clip(load_reference("scene").srgb, 0, 1)
+    real = np.clip(delinearize_srgb(np.clip(linearize_srgb(sim) @ M.T, 0, 1)), 0, 1)
+    darker = np.clip(delinearize_srgb(linearize_srgb(sim) * 2 ** -0.5), 0, 1)
+    paths = {}
+    for name, colours in (("sim", sim), ("real", real), ("darker", darker)):
+        paths[name] = write_png(folder / f"{name}.png", _image(colours), 16)
+    return paths, sim, real
+
+
+def test_a_chart_compared_with_itself_is_zero(charts):
+    paths, _, _ = charts
+    r = compare_charts(paths["sim"], paths["sim"], sim_corners=CORNERS, real_corners=CORNERS)
+    assert r.mean_delta_e == 0.0 and r.max_delta_e == 0.0
+    assert r.normalisation.exposure_ev == 0.0
+    assert r.prediction.dmap_points == 0.0
+
+
+def test_a_known_matrix_gives_the_closed_form_delta_e(charts):
+    """Sim against the same chart through a 3x3 matrix: ΔE00 per patch is the closed form's
+    (the colours as the 16-bit PNG stores them), direction signs included."""
+    paths, sim, real = charts
+    r = compare_charts(paths["sim"], paths["real"], sim_corners=CORNERS, real_corners=CORNERS,
+                       normalise_mode="none")
+    expected = delta_e_2000(srgb_to_lab(_q16(sim)), srgb_to_lab(_q16(real)))
+    # float32 pixels as read: 5e-5 ΔE00
+    np.testing.assert_allclose(r.measurement.delta_e, expected, atol=5e-5)
+    assert r.mean_delta_e == pytest.approx(float(expected.mean()), abs=1e-5)
+    # each chart's own ΔE against the reference is its audit's
+    ref = load_reference("scene").lab
+    for report, colours in ((r.sim, sim), (r.real, real)):
+        assert report.mean_delta_e == pytest.approx(
+            float(delta_e_2000(srgb_to_lab(_q16(colours)), ref).mean()), abs=5e-5)
+
+
+def test_exposure_normalisation_removes_an_exposure_difference(charts):
+    paths, _, _ = charts
+    raw = compare_charts(paths["darker"], paths["sim"], sim_corners=CORNERS,
+                         real_corners=CORNERS, normalise_mode="none")
+    norm = compare_charts(paths["darker"], paths["sim"], sim_corners=CORNERS,
+                          real_corners=CORNERS)
+    assert raw.mean_delta_e > 3
+    assert norm.normalisation.exposure_ev == pytest.approx(0.5, abs=0.01)
+    assert norm.mean_delta_e < 0.3  # what is left: clipping of the brightest patches
+    wb = compare_charts(paths["real"], paths["sim"], sim_corners=CORNERS, real_corners=CORNERS,
+                        normalise_mode="exposure+wb")
+    plain = compare_charts(paths["real"], paths["sim"], sim_corners=CORNERS,
+                           real_corners=CORNERS)
+    assert wb.normalisation.gains is not None and wb.mean_delta_e < plain.mean_delta_e
+
+
+def test_compare_cli_gates_writes_junit_json_html(charts, tmp_path):
+    paths, _, _ = charts
+    args = ["compare", str(paths["sim"]), str(paths["real"]), "--sim-corners", CORNERS,
+            "--real-corners", CORNERS, "--normalise", "none"]
+    r = CliRunner().invoke(main, [*args, "--max-delta-e", "0.5", "--junit",
+                                  str(tmp_path / "j.xml"), "--json", str(tmp_path / "c.json"),
+                                  "--html", str(tmp_path / "c.html")])
+    assert r.exit_code == 1, r.output
+    assert "sim-to-real ΔE00: mean" in r.stdout and "FAIL" in r.stdout
+    suite = ET.parse(tmp_path / "j.xml").getroot().find("testsuite")
+    assert suite.get("failures") == "1"
+    doc = json.loads((tmp_path / "c.json").read_text())
+    back = ComparisonReport.from_json(doc)
+    assert back.to_json() == doc
+    html = (tmp_path / "c.html").read_text()
+    for alt in ("the simulated and the real chart, sampling windows outlined",
+                "sim-to-real ΔE00 per patch",
+                "a*b*: arrows from the simulated colour to the real one"):
+        assert f'alt="{alt}"' in html
+    r = CliRunner().invoke(main, [*args, "--max-delta-e", "10"])
+    assert r.exit_code == 0 and "PASS" in r.stdout
+    r = CliRunner().invoke(main, [*args, "--max-dmap", "100", "--bound", "directional",
+                                  "--json", "-"])
+    assert r.exit_code == 0
+    assert json.loads(r.stdout)["verdict"]["message"].endswith(
+        f"at mean ΔE00 {doc['sim_to_real']['mean_delta_e']:.2f}")
+    r = CliRunner().invoke(main, ["compare", str(paths["sim"]), str(tmp_path / "none.png"),
+                                  "--max-delta-e", "1"])
+    assert r.exit_code == 2 and r.stderr.startswith("fidelity: error:")
+
+
+def test_compare_measure_needs_coco_inputs(charts, monkeypatch, tmp_path):
+    paths, _, _ = charts
+    monkeypatch.setenv("FIDELITY_SHARED", str(tmp_path / "nowhere"))
+    r = CliRunner().invoke(main, ["compare", str(paths["sim"]), str(paths["real"]),
+                                  "--sim-corners", CORNERS, "--real-corners", CORNERS,
+                                  "--measure"])
+    assert r.exit_code == 2
+    assert "pass --images DIR" in r.stderr and "FIDELITY_SHARED" in r.stderr
+
+
+def test_compare_is_in_the_public_api():
+    import fidelity
+
+    assert fidelity.compare_charts is compare_charts
+    assert Path(fidelity.compare_charts.__module__.replace(".", "/") + ".py").name == "compare.py"

@@ -1,0 +1,125 @@
+"""COCO-C colour corruptions: equal to imagecorruptions, their chart ΔE, predict --coco-c."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from fidelity.cli import main
+from fidelity.coco import corruptions as cc
+
+
+def _images(shared=None):
+    rng = np.random.default_rng(7)
+    out = [(rng.random((37, 45, 3)) * 256).astype(np.uint8)]
+    grey = (rng.random((40, 40)) * 256).astype(np.uint8)
+    out.append(np.repeat(grey[:, :, None], 3, axis=2))  # a grey image: saturate gives it a hue
+    ties = np.zeros((32, 32, 3), np.uint8)
+    ties[..., 0] = ties[..., 1] = 200  # R = G = max: skimage's tie rule sets the hue
+    ties[..., 2] = np.arange(32, dtype=np.uint8)[None, :] * 3
+    out.append(ties)
+    if shared is not None:
+        from fidelity.coco.jpeg import read_jpeg
+
+        files = sorted((shared / "coco" / "val2017").glob("*.jpg"))[:3]
+        out += [read_jpeg(f)[0] for f in files]
+    return out
+
+
+@pytest.mark.parametrize("name", cc.CORRUPTIONS)
+def test_equal_to_imagecorruptions(name):
+    ic = pytest.importorskip("imagecorruptions")
+    for img in _images():
+        for sev in cc.SEVERITIES:
+            assert np.array_equal(cc.corrupt(img, name, sev), ic.corrupt(img, sev, name)), sev
+
+
+def test_equal_to_imagecorruptions_on_coco(shared):
+    ic = pytest.importorskip("imagecorruptions")
+    for img in _images(shared)[3:]:
+        for name in cc.CORRUPTIONS:
+            for sev in (1, 3, 5):
+                fast = cc.CorruptionMap(name, sev) if name == "contrast" else None
+                want = ic.corrupt(img, sev, name)
+                assert np.array_equal(cc.corrupt(img, name, sev), want)
+                if fast is not None:
+                    assert np.array_equal(fast(img), want)
+
+
+def test_the_fast_table_equals_the_definition():
+    m = cc.CorruptionMap("saturate", 4)
+    m._cube = None
+    img = _images()[0]
+    # build only what this image needs: the table's rows are the definition on each colour
+    idx = (img[..., 0].astype(np.uint32) << 16) | (img[..., 1].astype(np.uint32) << 8) | img[..., 2]
+    rows = np.stack([(idx >> 16) & 255, (idx >> 8) & 255, idx & 255], axis=-1)
+    direct = cc.corrupt(rows.astype(np.uint8), "saturate", 4)
+    assert np.array_equal(direct, cc.corrupt(img, "saturate", 4))
+    c = cc.CorruptionMap("contrast", 2)
+    assert np.array_equal(c(img), cc.corrupt(img, "contrast", 2))
+
+
+def test_chart_delta_e_grows_with_severity():
+    cells = cc.chart_cells()
+    by = {(c.corruption, c.severity): c.chart_delta_e for c in cells}
+    for name in ("brightness", "contrast"):
+        assert all(by[(name, s)] < by[(name, s + 1)] for s in range(1, 5)), name
+    # saturate's severities 1-2 desaturate, 3-5 saturate more
+    assert by[("saturate", 2)] > by[("saturate", 1)] and by[("saturate", 3)] < by[("saturate", 4)]
+    floor = cc.uncorrupted_chart_delta_e()
+    assert 0 < floor < min(by.values())
+    for c in cells:  # the parts add up to the chart ΔE
+        assert c.parts["lightness"] + c.parts["chroma"] + c.parts["hue"] == pytest.approx(
+            c.chart_delta_e)
+    bright = next(c for c in cells if c.corruption == "brightness" and c.severity == 3)
+    assert bright.parts["lightness"] / bright.chart_delta_e > 0.9
+
+
+def test_predict_coco_c_prints_equivalent_delta_e_and_losses(tmp_path):
+    r = CliRunner().invoke(main, ["predict", "--coco-c", "contrast:3", "--json",
+                                  str(tmp_path / "c.json")])
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "c.json").read_text())
+    m = cc.corruption_chart("contrast", 3)
+    assert doc["chart_delta_e"] == pytest.approx(m.mean_delta_e)
+    assert f"chart ΔE00 {m.mean_delta_e:.2f}" in r.stdout
+    assert "predicted ΔmAP: classic" in r.stdout and "direction-aware" in r.stdout
+    table = cc.load_coco_c()
+    measured = table.cell("contrast", 3).measured
+    assert measured and [x["dmap_points"] for x in doc["measured"]] == [
+        x.dmap_points for x in measured]
+    assert "measured ΔmAP" in r.stdout
+    r = CliRunner().invoke(main, ["predict", "--coco-c", "fog:3"])
+    assert r.exit_code == 2 and "unknown colour corruption" in r.stderr
+    r = CliRunner().invoke(main, ["predict", "--coco-c", "contrast:9"])
+    assert r.exit_code == 2
+
+
+def test_shipped_table_equals_the_report(tmp_path):
+    """fidelity/data/coco-c.json and reports/cococ/cococ.json hold the same run, and its
+    chart side is what the code computes now."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    shipped = json.loads((root / "fidelity/data/coco-c.json").read_text())
+    report = json.loads((root / "reports/cococ/cococ.json").read_text())
+    assert shipped == report
+    res = cc.CocoCResults.from_json(shipped)
+    for c in res.cells:
+        assert c.chart_delta_e == pytest.approx(cc.corruption_chart(c.corruption,
+                                                                    c.severity).mean_delta_e)
+    assert res.to_json() == shipped
+
+
+def test_coco_c_report_only_rebuilds(tmp_path):
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    (tmp_path / "cococ.json").write_text((root / "reports/cococ/cococ.json").read_text())
+    r = CliRunner().invoke(main, ["coco-c", "--out", str(tmp_path), "--report-only"])
+    assert r.exit_code == 0, r.output
+    html = (tmp_path / "cococ.html").read_text()
+    assert "chart ΔE against COCO-C severity" in html
