@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import click
@@ -14,6 +13,7 @@ from fidelity.cli.options import (
     show_progress,
     write_json_output,
 )
+from fidelity.coco.evaluate import METRICS
 from fidelity.coco.scoring import COCO_SCORERS
 
 #: ``--scorer``, shared by the commands that score COCO AP (evaluate, sweep).
@@ -39,58 +39,49 @@ scorer_option = click.option(
 @json_option("Write map, map50, ap (class -> AP), images, seconds as JSON (fractions)")
 @click.option("--classes", default="person,bicycle,car,motorcycle,bus,truck,traffic light,stop sign",
               show_default=True, help="Classes whose AP is printed (all are in --json).")
+@click.option("--metric", "metrics", multiple=True, type=click.Choice(list(METRICS)),
+              default=("coco",), show_default=True,
+              help="Also report Ultralytics' own mAP50-95 (yolo val's number: 101-point "
+                   "envelope integrated by the trapezoid rule, crowd boxes as false "
+                   "positives); 'ultralytics' follows Ultralytics 8.4, 'ultralytics-8.3' the "
+                   "older rules. COCO AP is always reported. Repeatable.")
 @scorer_option
 @progress_option
 @common_options
 def evaluate(model: str, images: str, annotations: str, limit: int | None, threads: int | None,
-             provider: str, json_path: str | None, classes: str, scorer: str,
-             progress: bool | None) -> None:
+             provider: str, json_path: str | None, classes: str, metrics: tuple[str, ...],
+             scorer: str, progress: bool | None) -> None:
     """Run detectors on a COCO image folder and print COCO box AP."""
     from tqdm import tqdm
 
-    from fidelity.coco.detectors import Detector
-    from fidelity.coco.jpeg import read_jpeg
-    from fidelity.coco.scoring import evaluate_detections, load_annotations, resolve_scorer
-    from fidelity.errors import InputFileError
+    from fidelity.coco.evaluate import evaluate_model
     from fidelity.fileio import check_outputs
 
     check_outputs({"--json": json_path},
                   {"--model": model, "--annotations": annotations, "--images": images})
-    det = Detector(model, threads=threads, provider=provider)
-    coco = load_annotations(annotations)
-    ids = sorted(coco.getImgIds())[:limit] if limit else sorted(coco.getImgIds())
-    folder = Path(images)
-    if not folder.is_dir():
-        raise InputFileError(f"{folder}: image folder does not exist")
-    missing = [i for i in ids if not (folder / coco.imgs[i]["file_name"]).is_file()]
-    if missing:  # before any inference
-        raise InputFileError(f"{folder}: {len(missing)} of the {len(ids)} annotated images "
-                             f"to evaluate are missing, e.g. {coco.imgs[missing[0]]['file_name']}")
-    t0 = time.perf_counter()
-    dets = {}
-    for i in tqdm(ids, desc=det.name, unit="img", disable=not show_progress(progress)):
-        rgb, _ = read_jpeg(folder / coco.imgs[i]["file_name"])
-        dets[i] = det(rgb)
-    infer_s = time.perf_counter() - t0
-    method = resolve_scorer(scorer)
-    score = evaluate_detections(coco, dets, ids, method=method)
-    seconds = time.perf_counter() - t0
-    info = det.describe()
+    with tqdm(desc=Path(model).stem, unit="img", disable=not show_progress(progress)) as bar:
+        ev = evaluate_model(model, images, annotations, limit=limit, threads=threads,
+                            provider=provider, scorer=scorer, metrics=metrics,
+                            progress=bar.update)
+    info = ev.detector
     conv = info["conventions"]
-    click.echo(f"model      {det.name}  layout {info['layout']}  input {info['input_size']}  "
-               f"providers {','.join(info['providers'])}")
+    score = ev.coco
+    click.echo(f"model      {info['model']}  layout {info['layout']}  input {info['input_size']}  "
+               f"batch {info['batch']}  providers {','.join(info['providers'])}")
     click.echo(f"settings   conf {conv['conf']}  iou {conv['iou']}  max_det {conv['max_det']}  "
                f"({conv['source']})")
-    click.echo(f"images     {len(ids)}  detections {score.detections}  "
-               f"{len(ids) / infer_s:.1f} img/s inference  {seconds:.1f} s total  (scored by {method})")
-    click.echo(f"mAP        {score.map:.4f}   (AP@[.50:.95], fraction)")
+    click.echo(f"preprocess {info['preprocessing']}")
+    click.echo(f"images     {ev.images}  detections {score.detections}  "
+               f"{ev.images / ev.detect_seconds:.1f} img/s detection  {ev.seconds:.1f} s total  "
+               f"(scored by {ev.scorer})")
+    click.echo(f"mAP        {score.map:.4f}   (COCO AP@[.50:.95], fraction)")
     click.echo(f"AP50       {score.map50:.4f}")
+    for name, u in ev.ultralytics.items():
+        click.echo(f"{name} mAP50-95 {u.map:.4f}  mAP50 {u.map50:.4f}   (Ultralytics {u.version} "
+                   f"rules, {u.targets} targets)")
     for name in [c.strip() for c in classes.split(",") if c.strip()]:
         v = score.ap.get(name)
         click.echo(f"AP {name:<14} {'n/a (no ground truth)' if v is None else f'{v:.4f}'}")
     if json_path:
-        payload = score.to_dict() | {"seconds": seconds, "detector": info,
-                                     "annotations": str(annotations), "images_dir": str(images),
-                                     "scorer": method}
+        payload = ev.to_dict() | {"annotations": str(annotations), "images_dir": str(images)}
         click.echo(f"wrote {write_json_output(json_path, payload)}")
-

@@ -389,11 +389,15 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
             have = store.stored_images(det.name, transform, target)
             todo = [i for i in ids if i not in have]
             batch: list[tuple[int, np.ndarray]] = []
-            for i in tqdm(todo, desc=f"[{k}/{total}] {det.name} {transform} ΔE {target:g}",
-                          unit="img", disable=not progress, leave=False):
+
+            def load(i: int, pm: PixelMap = pm) -> np.ndarray:  # on the detector's worker thread
                 rgb, settings = cache.get(i)
-                seen = roundtrip_jpeg(pm(rgb), settings)
-                batch.append((i, det(seen)))
+                return roundtrip_jpeg(pm(rgb), settings)
+
+            for i, d in tqdm(det.detect_stream(todo, load), total=len(todo),
+                             desc=f"[{k}/{total}] {det.name} {transform} ΔE {target:g}",
+                             unit="img", disable=not progress, leave=False):
+                batch.append((i, d))
                 if len(batch) >= batch_commit:
                     store.add_detections(det.name, transform, target, batch)
                     batch = []

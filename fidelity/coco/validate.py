@@ -810,10 +810,14 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
         have = store.stored_images(det.name, camera)
         todo = [i for i in ids if i not in have]
         batch: list[tuple[int, np.ndarray]] = []
-        for i in tqdm(todo, desc=f"{camera} / {det.name}", unit="img", disable=not progress,
-                      leave=False, mininterval=5):
+        def load(i: int) -> np.ndarray:  # on the detector's worker thread
             rgb, settings = cache.get(i)
-            batch.append((i, det(roundtrip_jpeg(fn(rgb), settings))))
+            return roundtrip_jpeg(fn(rgb), settings)
+
+        for i, d in tqdm(det.detect_stream(todo, load), total=len(todo),
+                         desc=f"{camera} / {det.name}", unit="img", disable=not progress,
+                         leave=False, mininterval=5):
+            batch.append((i, d))
             if len(batch) >= batch_commit:
                 store.add_detections(det.name, camera, batch)
                 batch = []
