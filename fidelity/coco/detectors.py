@@ -710,7 +710,7 @@ def postprocess(output: np.ndarray, layout: ModelLayout, box: Letterbox,
 
 def default_providers() -> list[str]:
     """Execution providers, best first: CUDA when onnxruntime offers it, then CPU."""
-    import onnxruntime as ort  # type: ignore[import-untyped,unused-ignore]
+    import onnxruntime as ort
 
     avail = ort.get_available_providers()
     chosen = [p for p in ("CUDAExecutionProvider",) if p in avail]
@@ -744,7 +744,7 @@ class Detector:
     def __init__(self, path: str | os.PathLike[str], *, threads: int | None = None,
                  provider: str = "auto", conf: float | None = None, iou: float | None = None,
                  max_det: int | None = None, batch: int | None = None) -> None:
-        import onnxruntime as ort  # type: ignore[import-untyped,unused-ignore]
+        import onnxruntime as ort
 
         p = Path(path)
         if not p.is_file():
