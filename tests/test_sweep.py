@@ -244,6 +244,11 @@ class FakeDetector:
         return np.array([[8 + dx, 8, 40 + dx, 56, 0.8, 0], [30, 4, 60, 20, 0.5, 0]],
                         np.float32)
 
+    def detect_stream(self, items, load, **_):
+        """The Detector's loop over many images, one at a time."""
+        for item in items:
+            yield item, self(load(item))
+
 
 def synthetic_coco(folder: Path, n: int = 4) -> tuple[Path, Path, Path]:
     """``n`` small JPEG photos with one person box each, their annotations and a model file."""
