@@ -232,3 +232,127 @@ def test_paired_standard_errors_in_points_and_relative_by_hand() -> None:
     assert paired_standard_error([0.4, 0.4, 0.0], [0.2, 0.3, 0.0], relative=True) == \
         pytest.approx(12.5)
     assert paired_standard_error([0.4], [0.2]) is None
+
+
+# --------------------------------------------------------------------------------------------
+# Ultralytics' own AP against hand-computed values
+
+
+def _gt_crowd(items: list[tuple[int, list[float], int]]) -> object:
+    cats = [{"id": c, "name": n} for c, n in zip(COCO80_CATEGORY_IDS, COCO80_NAMES, strict=True)]
+    anns = [{"id": k + 1, "image_id": 1, "category_id": c, "bbox": b, "area": b[2] * b[3],
+             "iscrowd": crowd} for k, (c, b, crowd) in enumerate(items)]
+    return coco_from_dict({"images": [{"id": 1, "width": 200, "height": 200,
+                                       "file_name": "1.jpg"}],
+                           "annotations": anns, "categories": cats})
+
+
+@pytest.mark.parametrize("version", ["8.4", "8.3"])
+def test_ultralytics_perfect_detection_is_0995(version: str) -> None:
+    """One TP: precision 1 up to recall 1 and 0 at recall 1 itself -> trapezoid 0.995."""
+    from fidelity.coco.scoring import ultralytics_ap
+
+    gt = _gt({1: [(1, [10, 10, 50, 80])]})
+    s = ultralytics_ap(gt, {1: np.array([det(10, 10, 50, 80, 0.9, 0)])}, version=version)
+    assert s.map == pytest.approx(0.995) and s.map50 == pytest.approx(0.995)
+    assert s.ap["person"] == pytest.approx(0.995) and s.ap["bicycle"] is None
+    assert s.targets == 1 and s.detections == 1
+
+
+def test_ultralytics_ap_by_hand_both_versions() -> None:
+    """2 GT; TP (0.9), FP (0.8), TP at IoU 0.62 only (0.7); values worked out by hand.
+
+    IoU < 0.62 thresholds (.50 .55 .60): recall .5 .5 1, precision 1 .5 2/3; envelope 1 up to
+    recall .5, 2/3 up to 1, 0 at 1: AP = 0.01 (50 + 50 * 2/3 - 1/2) = 0.828333 (both versions).
+    Thresholds .65 ... .95: recall .5 .5 .5, precision 1 .5 1/3: 8.4 drops to 0 after recall
+    .5: AP = 0.01 (50 - 1/2) = 0.495; 8.3 falls linearly from 1/3 at recall .5 to 0 at 1:
+    AP = 0.49 + 0.01 (1 + 1/3) / 2 + 0.5 * 0.5 / 3 = 0.58.
+    """
+    from fidelity.coco.scoring import ultralytics_ap
+
+    gt = _gt({1: [(1, [10, 10, 50, 80]), (1, [100, 100, 40, 50])]})
+    d = np.array([det(10, 10, 50, 80, 0.9, 0), det(150, 10, 40, 30, 0.8, 0),
+                  det(100, 100, 40, 31, 0.7, 0)])
+    low, high = 0.01 * (50 + 50 * 2 / 3 - 0.5), 0.495
+    s = ultralytics_ap(gt, {1: d}, version="8.4")
+    assert s.map50 == pytest.approx(low) and s.map75 == pytest.approx(high)
+    assert s.map == pytest.approx((3 * low + 7 * high) / 10)
+    old = ultralytics_ap(gt, {1: d}, version="8.3")
+    assert old.map50 == pytest.approx(low) and old.map75 == pytest.approx(0.58)
+    assert old.map == pytest.approx((3 * low + 7 * 0.58) / 10)
+
+
+def test_ultralytics_crowd_boxes_are_false_positives() -> None:
+    """A detection on a crowd box: COCO ignores it (AP 1), Ultralytics counts it as FP.
+
+    Recall 0, 1 with precision 0, 1/2: envelope 1/2 from recall 0 up to 1, 0 at 1:
+    AP = 0.01 (100 * 1/2 - 1/4) = 0.4975 at every threshold.
+    """
+    from fidelity.coco.scoring import ultralytics_ap
+
+    gt = _gt_crowd([(1, [10, 10, 50, 80], 0), (1, [100, 100, 60, 60], 1)])
+    d = {1: np.array([det(100, 100, 60, 60, 0.95, 0), det(10, 10, 50, 80, 0.9, 0)])}
+    assert ultralytics_ap(gt, d).map == pytest.approx(0.4975)
+    assert ultralytics_ap(gt, d).targets == 1
+    assert evaluate_detections(gt, d, method="pycocotools").map == pytest.approx(1.0)
+
+
+def test_ultralytics_versions_clip_differently() -> None:
+    """A box partly outside the image: IoU 5/9 as predicted (8.4: TP at .50 and .55 only),
+    1 once clipped (8.3)."""
+    from fidelity.coco.scoring import ultralytics_ap
+
+    gt = _gt({1: [(1, [0, 0, 50, 50])]})
+    d = {1: np.array([[-40, 0, 50, 50, 0.9, 0]], np.float64)}
+    assert ultralytics_ap(gt, d, version="8.4").map == pytest.approx(0.2 * 0.995)
+    assert ultralytics_ap(gt, d, version="8.3").map == pytest.approx(0.995)
+
+
+def test_ultralytics_matching_rules() -> None:
+    """d1 (first) overlaps g1 at .6; d2 overlaps g1 at .9 and g2 at .7 (IoU matrix by hand).
+
+    8.4 walks the detections by confidence: d1 takes g1, d2 falls back to g2 (2 TP at .5).
+    8.3 keeps each detection's best target only (both g1), then g1's first detection: 1 TP.
+    """
+    from fidelity.coco.scoring import match_by_confidence, match_by_iou
+
+    iou = np.array([[0.6, 0.9], [0.0, 0.7]])
+    new, old = match_by_confidence(iou), match_by_iou(iou)
+    assert new[:, 0].tolist() == [True, True] and old[:, 0].tolist() == [True, False]
+    # at .65 d1 misses; both rules give d2 the better target g1
+    assert new[:, 3].tolist() == [False, True] and old[:, 3].tolist() == [False, True]
+    assert not new[:, 9].any() and not old[:, 9].any()  # nothing reaches .95
+
+
+def test_ultralytics_mean_over_classes_with_targets() -> None:
+    """A class with targets and no detection counts 0; a class without targets is left out."""
+    from fidelity.coco.scoring import ultralytics_ap
+
+    gt = _gt({1: [(1, [10, 10, 50, 80])], 2: [(2, [0, 0, 60, 60])]})
+    d = {1: np.array([det(10, 10, 50, 80, 0.9, 0), det(100, 100, 20, 20, 0.5, 5)])}
+    s = ultralytics_ap(gt, d, [1, 2])
+    assert s.ap["person"] == pytest.approx(0.995) and s.ap["bicycle"] == 0.0
+    assert s.ap["bus"] is None and s.map == pytest.approx(0.995 / 2)
+    with pytest.raises(InvalidValueError, match="no images"):
+        ultralytics_ap(gt, {})
+
+
+@pytest.mark.shared
+def test_ultralytics_ap_of_ground_truth_is_0995(shared) -> None:
+    """The shared ground truth as detections: every non-crowd box found, AP 0.995 per class
+    (Ultralytics' trapezoid drops to 0 at recall 1), whatever the crowd boxes."""
+    from fidelity.coco.scoring import ultralytics_ap
+
+    coco = load_annotations(shared / "coco/annotations/instances_val2017_subset.json")
+    ids = sorted(coco.getImgIds())[:200]
+    cats = sorted(coco.getCatIds())
+    dets = {}
+    for i in ids:
+        rows = [[x, y, x + w, y + h, 1.0, cats.index(a["category_id"])]
+                for a in coco.imgToAnns[i] if not a["iscrowd"] and a["bbox"][2] > 0
+                and a["bbox"][3] > 0 for x, y, w, h in [a["bbox"]]]
+        dets[i] = np.array(rows, dtype=np.float64).reshape(-1, 6)
+    for version in ("8.4", "8.3"):
+        s = ultralytics_ap(coco, dets, ids, version=version)
+        assert s.map == pytest.approx(0.995, abs=1e-9), version
+        assert s.targets == sum(len(d) for d in dets.values())

@@ -219,49 +219,81 @@ def test_dataset_command(tmp_path) -> None:
         assert r.exit_code == 2 and message in r.output and "Traceback" not in r.output, r.output
 
 
+def _kernels() -> list[str]:
+    from fidelity.coco.dataset import _numba_kernels
+
+    return ["numpy", "numba"] if _numba_kernels() is not None else ["numpy"]
+
+
 @pytest.mark.shared
 def test_pull_mean_fast_path_equals_reference_on_real_images(shared) -> None:
-    """The per-colour pull_mean (count-weighted mean Lab) gives the reference's codes exactly."""
+    """The per-colour pull_mean (count-weighted mean Lab) gives the reference's codes exactly,
+    with the numpy kernel and the compiled one (when numba is installed)."""
     from fidelity.coco.dataset import PullMeanWorkspace, pull_mean_uint8
     from fidelity.coco.jpeg import read_jpeg
 
     files = sorted((shared / "coco/val2017").glob("*.jpg"))[:20]
     assert len(files) == 20
-    workspace = PullMeanWorkspace()  # reused across images of different sizes, as in a sweep
+    workspaces = {k: PullMeanWorkspace() for k in _kernels()}  # reused across image sizes
     for f in files:
         img = read_jpeg(f)[0]
         for alpha in (0.95, 0.5):
-            assert np.array_equal(pull_mean_uint8(img, alpha, workspace),
-                                  reference_transform(img, "pull_mean", alpha)), (f.name, alpha)
+            ref = reference_transform(img, "pull_mean", alpha)
+            for kernel, ws in workspaces.items():
+                assert np.array_equal(pull_mean_uint8(img, alpha, ws, kernel), ref), \
+                    (f.name, alpha, kernel)
 
 
-def test_pull_mean_workspace_repeats_the_colorimetry() -> None:
+@pytest.mark.parametrize("kernel", ["numpy", "numba"])
+def test_pull_mean_workspace_repeats_the_colorimetry(kernel: str) -> None:
     """Per-colour Lab round trip of the pull_mean fast path against fidelity.colour.colorimetry.
 
     Codes exact and Lab to 1e-12 on every code value of each channel, random triples, random
     Lab values in and far out of gamut (negative L, huge chroma: the clipped branch) and the
     near-black linear segments, with chunks small enough that several chunks and a short last
-    chunk are used.
+    chunk are used; the numba kernel gives the numpy kernel's bits.
     """
     from fidelity.coco.dataset import PullMeanWorkspace, pull_mean_uint8, to_uint8
     from fidelity.colour.colorimetry import lab_to_srgb, srgb_to_lab
 
+    if kernel not in _kernels():
+        pytest.skip("numba is not installed")
     rng = np.random.default_rng(7)
     codes = rng.integers(0, 256, (5000, 3)).astype(np.uint8)
     codes[:256] = np.arange(256, dtype=np.uint8)[:, None]
     codes[256:512, 0] = np.arange(256)
     codes[256:512, 1:] = 0
     ws = PullMeanWorkspace(chunk=777)
-    lab = ws.lab_of_codes(codes)
+    lab = ws.lab_of_codes(codes, kernel).copy()
     np.testing.assert_allclose(lab.T, srgb_to_lab(codes / 255.0), rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(lab, PullMeanWorkspace(chunk=1000).lab_of_codes(codes))
     labs = np.concatenate([srgb_to_lab(codes / 255.0),
                            rng.uniform([-10.0, -200.0, -200.0], [120.0, 200.0, 200.0], (5000, 3)),
                            rng.uniform([0.0, -3.0, -3.0], [9.0, 3.0, 3.0], (2000, 3))])
-    got = ws.codes_of_lab(np.ascontiguousarray(labs.T))
+    got = ws.codes_of_lab(np.ascontiguousarray(labs.T), kernel)
     assert np.array_equal(got, to_uint8(lab_to_srgb(labs)))
     # tiny images (fewer colours than channels) and a workspace shrinking back to them
     for n in (1, 2, 3, 4, 2000):
         img = rng.integers(0, 256, (1, n, 3)).astype(np.uint8)
         for alpha in (0.0, 0.3, 1.0):
-            assert np.array_equal(pull_mean_uint8(img, alpha, ws),
+            assert np.array_equal(pull_mean_uint8(img, alpha, ws, kernel),
                                   reference_transform(img, "pull_mean", alpha)), (n, alpha)
+
+
+def test_pull_mean_kernels_agree_and_are_named() -> None:
+    from fidelity.coco.dataset import PullMeanWorkspace, pull_mean_kernel, pull_mean_uint8
+    from fidelity.errors import UnknownNameError
+
+    imgs = [natural_image(120, 160, seed=s) for s in range(3)]
+    imgs.append(np.zeros((0, 3), np.uint8))
+    for kernel in _kernels():
+        ws = PullMeanWorkspace()
+        for img in imgs:
+            out = pull_mean_uint8(img, 0.6, ws, kernel)
+            assert out.shape == img.shape and out.dtype == np.uint8
+            if img.size:
+                assert np.array_equal(out, reference_transform(img, "pull_mean", 0.6)), kernel
+    assert pull_mean_kernel("numpy") == "numpy"
+    assert pull_mean_kernel("auto") in ("numpy", "numba")
+    with pytest.raises(UnknownNameError):
+        pull_mean_kernel("cuda")

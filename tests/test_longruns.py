@@ -367,7 +367,7 @@ def test_kill_9_at_random_moments_then_resume_equals_an_uninterrupted_run(coco, 
 
     images, ann, model = coco
     grid = (["contrast-inc"], [0, 3, 6])
-    n = 10
+    n = 24  # enough work that each run is still going when it is killed
     script = textwrap.dedent(f"""
         from pathlib import Path
         from fidelity.coco.sweep import ModelSpec, run_sweep

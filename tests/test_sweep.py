@@ -244,6 +244,11 @@ class FakeDetector:
         return np.array([[8 + dx, 8, 40 + dx, 56, 0.8, 0], [30, 4, 60, 20, 0.5, 0]],
                         np.float32)
 
+    def detect_stream(self, items, load, **_):
+        """The Detector's loop over many images, one at a time."""
+        for item in items:
+            yield item, self(load(item))
+
 
 def synthetic_coco(folder: Path, n: int = 4) -> tuple[Path, Path, Path]:
     """``n`` small JPEG photos with one person box each, their annotations and a model file."""
@@ -397,10 +402,12 @@ def test_cli_evaluate_sweep_tables(coco, tmp_path) -> None:
     run = CliRunner().invoke
     r = run(main, ["evaluate", "--models", str(model), "--images", str(images), "--annotations",
                    str(ann), "--limit", "3", "--threads", "2", "--no-progress", "--json",
-                   str(tmp_path / "ev.json")])
+                   str(tmp_path / "ev.json"), "--metric", "ultralytics"])
     assert r.exit_code == 0, r.output
     ev = json.loads((tmp_path / "ev.json").read_text())
     assert ev["images"] == 3 and 0 < ev["map"] <= 1 and 0 <= ev["map50"] <= 1
+    assert 0 < ev["ultralytics"]["map"] <= 1 and ev["ultralytics"]["version"] == "8.4"
+    assert "ultralytics mAP50-95" in r.output and "top-left" in r.output
     assert all(v is None or 0 <= v <= 1 for v in ev["ap"].values()) and ev["seconds"] > 0
     assert "conf 0.01" in r.output and "iou 0.65" in r.output
     out = tmp_path / "sw"

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import functools
 import os
+import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -152,50 +153,63 @@ class PixelMap:
         return reference_transform(a, self.name, self.param)
 
 
+#: pull_mean kernels: ``"numpy"`` (always available) and ``"numba"`` (the per-colour
+#: element-wise steps compiled, when numba is installed: ``pip install fidelity[fast]``).
+PULL_MEAN_KERNELS: tuple[str, ...] = ("numpy", "numba")
+
+
+def pull_mean_kernel(kernel: str = "auto") -> str:
+    """The pull_mean kernel that runs: ``"auto"`` picks numba when it imports, else numpy.
+
+    ``$FIDELITY_PULL_MEAN_KERNEL`` (``numpy`` or ``numba``) overrides ``"auto"``.
+    """
+    if kernel == "auto":
+        kernel = os.environ.get("FIDELITY_PULL_MEAN_KERNEL", "auto")
+    if kernel == "auto":
+        return "numba" if _numba_kernels() is not None else "numpy"
+    if kernel not in PULL_MEAN_KERNELS:
+        from fidelity.errors import unknown_name
+
+        raise unknown_name("pull_mean kernel", kernel, [*PULL_MEAN_KERNELS, "auto"])
+    if kernel == "numba" and _numba_kernels() is None:
+        raise InvalidValueError("pull_mean kernel 'numba' needs numba (pip install numba)")
+    return kernel
+
+
 def pull_mean_uint8(rgb8: np.ndarray, alpha: float,
-                    workspace: PullMeanWorkspace | None = None) -> np.ndarray:
+                    workspace: PullMeanWorkspace | None = None, kernel: str = "auto"
+                    ) -> np.ndarray:
     """Exact 8-bit ``pull_mean``, with the Lab <-> sRGB work done once per distinct colour.
 
-    Same arithmetic per colour as :func:`fidelity.prediction.transforms.pull_mean` on ``rgb8 / 255`` in
-    float64 (sRGB decoding through a 256-entry table of the same function's values), on the
-    distinct colours only (a natural 640x480 image has 40k-180k of ~300k pixels). The mean Lab
-    is the count-weighted sum over distinct colours divided by the pixel count: the same number
-    as the reference's sum over pixels up to the order of additions (a few ulp), which changed
-    no 8-bit code on 1000 COCO images (tests/test_dataset.py checks 20 of them on every run).
+    Same arithmetic per colour as :func:`fidelity.prediction.transforms.pull_mean` on
+    ``rgb8 / 255`` in float64 (sRGB decoding through a 256-entry table of the same function's
+    values), on the distinct colours only (a natural 640x480 image has 40k-180k of ~300k
+    pixels); the output codes are equal to the reference's (tests/test_dataset.py).
+
+    The pixels, packed into 24-bit keys, are sorted to find the distinct colours and their
+    counts; the mean Lab is the count-weighted sum over distinct colours divided by the pixel
+    count (the reference's sum over pixels up to the order of additions, a few ulp, which
+    changed no 8-bit code on 1000 COCO images x 3 α); the output codes go back to the pixels
+    through a 2^24-entry table. ``kernel`` (:func:`pull_mean_kernel`): ``numpy`` runs the
+    per-colour colour science as numpy calls; ``numba`` fuses its element-wise steps into
+    compiled loops (same operations, same bits, about 4x faster there).
+
     ``workspace``: optional :class:`PullMeanWorkspace` reused between images, so that the
-    colour table and the float planes are not allocated (and page-faulted) for every image.
+    tables and the float planes are not allocated (and page-faulted) for every image.
     Domain: (..., 3) uint8 sRGB codes, α in [0, 1]; range: uint8 codes of the same shape.
     """
     ws = workspace if workspace is not None else PullMeanWorkspace()
-    a = np.asarray(rgb8)
-    packed = a[..., 0].astype(np.uint32)
-    packed <<= 8
-    packed |= a[..., 1]
-    packed <<= 8
-    packed |= a[..., 2]
-    packed = packed.ravel()
-    srt = np.sort(packed)
-    first = np.empty(srt.size, dtype=bool)
-    first[:1] = True
-    np.not_equal(srt[1:], srt[:-1], out=first[1:])
-    starts = np.flatnonzero(first)
-    uniq = srt[starts]
-    counts = np.diff(starts, append=srt.size).astype(np.float64)
-    table = ws.table()
-    table[uniq] = np.arange(uniq.size, dtype=np.int32)
-    inverse = np.take(table, packed)
-    n = uniq.size
-    codes = ws.plane("codes", n, False, np.uint8)
-    np.right_shift(uniq, 16, out=codes[:, 0], casting="unsafe")
-    np.right_shift(uniq, 8, out=codes[:, 1], casting="unsafe")
-    np.copyto(codes[:, 2], uniq, casting="unsafe")
-    lab = ws.lab_of_codes(codes)
-    mean = (lab @ counts) / srt.size
-    lab -= mean[:, None]
-    lab *= np.float64(alpha)
-    lab += mean[:, None]  # = mean + α (lab - mean)
-    out_u = ws.codes_of_lab(lab)
-    return np.take(out_u, inverse, axis=0).reshape(a.shape)
+    a = np.ascontiguousarray(rgb8)
+    if a.dtype != np.uint8 or a.ndim < 1 or a.shape[-1] != 3:
+        raise InvalidValueError(f"image must be (..., 3) uint8, got {a.shape} {a.dtype}")
+    pixels = a.reshape(-1, 3)
+    if pixels.shape[0] == 0:
+        return a.copy()
+    return ws.pull(pixels, float(alpha), _kernels_for(kernel)).reshape(a.shape)
+
+
+def _kernels_for(kernel: str) -> _NumbaKernels | None:
+    return _numba_kernels() if pull_mean_kernel(kernel) == "numba" else None
 
 
 class PullMeanWorkspace:
@@ -206,57 +220,184 @@ class PullMeanWorkspace:
     ``code / 255`` and :func:`to_uint8` of :func:`fidelity.colour.colorimetry.lab_to_srgb`, but on
     channel planes (3, n), ``chunk`` colours at a time, in buffers kept between calls: fresh
     multi-MiB temporaries cost more in page faults and cache misses than the arithmetic does
-    (benchmarks/bench_pipeline.py times ``pull_mean``; chunks of 8192 colours were fastest). The
-    piecewise branches (the linear segments near black) are evaluated only where they apply.
-    The 3x3 products run as (3, 3) @ (3, n) instead of the reference's (n, 3) @ (3, 3); with
-    OpenBLAS both give the same bits (tests/test_dataset.py checks the codes, exact, and the
-    Lab values, to 1e-12). Not thread-safe: one workspace per thread or process.
+    (benchmarks/bench_pipeline.py times ``pull_mean``). The piecewise branches (the linear
+    segments near black) are evaluated only where they apply. The 3x3 products run as
+    (3, 3) @ (3, n) instead of the reference's (n, 3) @ (3, 3); with OpenBLAS both give the
+    same bits (tests/test_dataset.py checks the codes, exact, and the Lab values, to 1e-12).
+    Not thread-safe: one workspace per thread or process.
     """
 
     def __init__(self, chunk: int = 8192) -> None:
         self.chunk = int(chunk)
-        self._table: np.ndarray | None = None
+        self._tables: dict[str, np.ndarray] = {}
         self._planes: dict[str, np.ndarray] = {}
 
-    def table(self) -> np.ndarray:
-        """The colour (24-bit packed) -> index table, 2^24 int32 (64 MiB), made on first use."""
-        if self._table is None:
-            self._table = np.empty(1 << 24, dtype=np.int32)
-        return self._table
+    def table(self, dtype: Any = np.int32, fill: int | None = None) -> np.ndarray:
+        """A 2^24-entry table (64 MiB) indexed by packed colour, made on first use.
 
-    def plane(self, key: str, n: int, planar: bool = True, dtype: Any = np.float64
-              ) -> np.ndarray:
-        """Buffer ``key`` as a (3, n) view (``planar``) or an (n, 3) one, grown as needed."""
+        ``fill``: value of every entry when it is made (the numba kernel keeps its table at
+        -1 between images); without it the contents are undefined.
+        """
+        key = f"{np.dtype(dtype).str}:{fill}"
+        t = self._tables.get(key)
+        if t is None:
+            t = np.empty(1 << 24, dtype=dtype)
+            if fill is not None:
+                t.fill(fill)
+            self._tables[key] = t
+        return t
+
+    def plane(self, key: str, n: int, planar: bool = True, dtype: Any = np.float64,
+              width: int = 3) -> np.ndarray:
+        """Buffer ``key`` as a (width, n) view (``planar``) or an (n, width) one, grown as needed."""
         buf = self._planes.get(key)
         axis = 1 if planar else 0
         if buf is None or buf.shape[axis] < n or buf.dtype != np.dtype(dtype):
             size = max(n, 1024)
-            buf = np.empty((3, size) if planar else (size, 3), dtype=dtype)
+            buf = np.zeros((width, size) if planar else (size, width), dtype=dtype)
             self._planes[key] = buf
         return buf[:, :n] if planar else buf[:n]
 
-    def lab_of_codes(self, codes: np.ndarray) -> np.ndarray:
-        """CIELAB (3, N) of sRGB code triples (N, 3) uint8; a view into the workspace."""
-        n = codes.shape[0]
-        lab = self.plane("lab", n)
-        for s in range(0, n, self.chunk):
-            e = min(s + self.chunk, n)
-            self._lab_chunk(codes[s:e], lab[:, s:e])
+    # -- the two kernels ------------------------------------------------------------------
+
+    def pull(self, pixels: np.ndarray, alpha: float, kernels: _NumbaKernels | None = None
+             ) -> np.ndarray:
+        """pull_mean of (N, 3) uint8 pixels; (N, 3) uint8. ``kernels``: the numba passes."""
+        if kernels is not None:
+            return self._pull_numba(pixels, alpha, kernels)
+        n_px = pixels.shape[0]
+        little = sys.byteorder == "little"
+        quad = self.plane("quad", n_px, False, np.uint8, 4)  # bytes B, G, R, 0
+        if little:  # column copies: a reversed-stride copy is many times slower
+            quad[:, 0], quad[:, 1], quad[:, 2] = pixels[:, 2], pixels[:, 1], pixels[:, 0]
+            packed = quad.view(np.uint32).reshape(-1)  # R << 16 | G << 8 | B
+        else:  # pragma: no cover - big-endian machines
+            packed = ((pixels[:, 0].astype(np.uint32) << 16) | (pixels[:, 1].astype(np.uint32)
+                                                                << 8) | pixels[:, 2])
+        srt = np.sort(packed)
+        first = np.empty(srt.size, dtype=bool)
+        first[:1] = True
+        np.not_equal(srt[1:], srt[:-1], out=first[1:])
+        starts = np.flatnonzero(first)
+        uniq = srt[starts]
+        counts = np.diff(starts, append=srt.size).astype(np.float64)
+        n = uniq.size
+        codes = self.plane("codes", n, True, np.uint8)
+        np.right_shift(uniq, 16, out=codes[0], casting="unsafe")
+        np.right_shift(uniq, 8, out=codes[1], casting="unsafe")
+        np.copyto(codes[2], uniq, casting="unsafe")
+        lab = self._lab_planar(codes)
+        mean = (lab @ counts) / n_px
+        out = self._codes_planar(self._pulled(lab, mean, alpha))  # (3, n) uint8
+        result = np.empty((n_px, 3), dtype=np.uint8)
+        if little:
+            oq = self.plane("quad_out", n, False, np.uint8, 4)
+            oq[:, 0], oq[:, 1], oq[:, 2] = out[2], out[1], out[0]
+            table = self.table(np.uint32)
+            table[uniq] = oq.view(np.uint32).reshape(-1)
+            rq = self.plane("quad_res", n_px, False, np.uint8, 4)
+            np.take(table, packed, out=rq.view(np.uint32).reshape(-1))
+            result[:, 0], result[:, 1], result[:, 2] = rq[:, 2], rq[:, 1], rq[:, 0]
+        else:  # pragma: no cover
+            idx = self.table(np.int32)
+            idx[uniq] = np.arange(n, dtype=np.int32)
+            result[:] = out.T[np.take(idx, packed)]
+        return result
+
+    def _pull_numba(self, pixels: np.ndarray, alpha: float, k: _NumbaKernels) -> np.ndarray:
+        """:meth:`pull` with the integer passes and the colour-science glue compiled.
+
+        The same sort, distinct colours in the same order, counts and float64 operations as
+        the numpy path: the same bits.
+        """
+        n_px = pixels.shape[0]
+        packed = self.plane("packed", n_px, False, np.uint32, 1).reshape(-1)
+        k.pack(pixels, packed)
+        srt = np.sort(packed)
+        uniq = self.plane("uniq", n_px, False, np.uint32, 1).reshape(-1)
+        counts = self.plane("counts", n_px, False, np.float64, 1).reshape(-1)
+        codes = self.plane("codes", n_px, True, np.uint8)
+        n = int(k.distinct(srt, uniq, counts, codes[0], codes[1], codes[2]))
+        lab = self._lab_planar(codes[:, :n], k)
+        mean = (lab @ counts[:n]) / n_px
+        out = self._codes_planar(self._pulled(lab, mean, alpha), k)
+        table = self.table(np.uint32)
+        k.fill_table(table, uniq[:n], out[0], out[1], out[2])
+        result = np.empty((n_px, 3), dtype=np.uint8)
+        k.gather(table, packed, result)
+        return result
+
+    @staticmethod
+    def _pulled(lab: np.ndarray, mean: np.ndarray, alpha: float) -> np.ndarray:
+        lab -= mean[:, None]
+        lab *= np.float64(alpha)
+        lab += mean[:, None]  # = mean + α (lab - mean)
         return lab
 
-    def codes_of_lab(self, lab: np.ndarray) -> np.ndarray:
+    # -- per-colour colour science -----------------------------------------------------------
+
+    def lab_of_codes(self, codes: np.ndarray, kernel: str = "numpy") -> np.ndarray:
+        """CIELAB (3, N) of sRGB code triples (N, 3) uint8; a view into the workspace."""
+        planar = self.plane("codes_in", codes.shape[0], True, np.uint8)
+        planar[...] = codes.T
+        return self._lab_planar(planar, _kernels_for(kernel))
+
+    def codes_of_lab(self, lab: np.ndarray, kernel: str = "numpy") -> np.ndarray:
         """sRGB code triples (N, 3) uint8 of CIELAB (3, N): ``rint(clip(Lab2RGB, 0, 1) 255)``."""
-        n = lab.shape[1]
-        out = self.plane("codes_out", n, False, np.uint8)
+        src = self.plane("lab_in", lab.shape[1])
+        src[...] = lab
+        return np.ascontiguousarray(self._codes_planar(src, _kernels_for(kernel)).T)
+
+    def _lab_planar(self, codes: np.ndarray, kernels: _NumbaKernels | None = None
+                    ) -> np.ndarray:
+        n = codes.shape[1]
+        lab = self.plane("lab", n)
+        step = self._lab_chunk if kernels is None else self._lab_chunk_numba
         for s in range(0, n, self.chunk):
             e = min(s + self.chunk, n)
-            self._codes_chunk(lab[:, s:e], out[s:e])
+            step(codes[:, s:e], lab[:, s:e], kernels)
+        return lab
+
+    def _codes_planar(self, lab: np.ndarray, kernels: _NumbaKernels | None = None
+                      ) -> np.ndarray:
+        n = lab.shape[1]
+        out = self.plane("codes_out", n, True, np.uint8)
+        step = self._codes_chunk if kernels is None else self._codes_chunk_numba
+        for s in range(0, n, self.chunk):
+            e = min(s + self.chunk, n)
+            step(lab[:, s:e], out[:, s:e], kernels)
         return out
 
-    def _lab_chunk(self, codes: np.ndarray, lab: np.ndarray) -> None:
-        n = codes.shape[0]
+    def _lab_chunk_numba(self, codes: np.ndarray, lab: np.ndarray,
+                         k: _NumbaKernels | None) -> None:
+        assert k is not None
+        n = codes.shape[1]
+        lin, t, f = self.plane("lin", n), self.plane("t", n), self.plane("f", n)
+        k.lin_of_codes(codes[0], codes[1], codes[2], _srgb_linear_table(), lin[0], lin[1],
+                       lin[2])
+        np.matmul(MATRIX_LINEAR_SRGB_TO_XYZ, lin, out=t)  # XYZ (3, N)
+        k.divide_rows(t[0], t[1], t[2], *WHITEPOINT_D65_XYZ)
+        np.cbrt(t, out=f)
+        k.lab_of_f(t[0], t[1], t[2], f[0], f[1], f[2], lab[0], lab[1], lab[2], CIE_EPSILON,
+                   CIE_KAPPA)
+
+    def _codes_chunk_numba(self, lab: np.ndarray, out: np.ndarray,
+                           k: _NumbaKernels | None) -> None:
+        assert k is not None
+        n = lab.shape[1]
+        t, x, p = self.plane("t", n), self.plane("lin", n), self.plane("f", n)
+        k.xyz_of_lab(lab[0], lab[1], lab[2], t[0], t[1], t[2], *WHITEPOINT_D65_XYZ,
+                     CIE_EPSILON, CIE_KAPPA, CIE_KAPPA * CIE_EPSILON)
+        np.matmul(MATRIX_XYZ_TO_LINEAR_SRGB, t, out=x)  # linear sRGB (3, N)
+        with np.errstate(invalid="ignore"):
+            np.power(x, 1.0 / 2.4, out=p)
+        for c in range(3):
+            k.encode(p[c], x[c], out[c])
+
+    def _lab_chunk(self, codes: np.ndarray, lab: np.ndarray, _: Any = None) -> None:
+        n = codes.shape[1]
         lin = self.plane("lin", n)
-        np.take(_srgb_linear_table(), codes.T, out=lin)
+        np.take(_srgb_linear_table(), codes, out=lin)
         t = self.plane("t", n)
         np.matmul(MATRIX_LINEAR_SRGB_TO_XYZ, lin, out=t)  # XYZ (3, N)
         t /= np.asarray(WHITEPOINT_D65_XYZ)[:, None]
@@ -264,10 +405,11 @@ class PullMeanWorkspace:
         np.cbrt(t, out=f)
         low = self.plane("mask", n, dtype=bool)
         np.less_equal(t, CIE_EPSILON, out=low)
-        for i in range(3):  # (κ t + 16) / 116 at and below ε (few colours: computed there only)
-            sel = low[i]
-            if sel.any():
-                f[i][sel] = (CIE_KAPPA * t[i][sel] + 16.0) / 116.0
+        if low.any():  # (κ t + 16) / 116 at and below ε (few colours: computed there only)
+            for i in range(3):
+                sel = low[i]
+                if sel.any():
+                    f[i][sel] = (CIE_KAPPA * t[i][sel] + 16.0) / 116.0
         np.multiply(f[1], 116.0, out=lab[0])
         lab[0] -= 16.0
         np.subtract(f[0], f[1], out=lab[1])
@@ -275,7 +417,7 @@ class PullMeanWorkspace:
         np.subtract(f[1], f[2], out=lab[2])
         lab[2] *= 200.0
 
-    def _codes_chunk(self, lab: np.ndarray, out: np.ndarray) -> None:
+    def _codes_chunk(self, lab: np.ndarray, out: np.ndarray, _: Any = None) -> None:
         n = lab.shape[1]
         L = lab[0]
         f = self.plane("f", n)
@@ -292,10 +434,12 @@ class PullMeanWorkspace:
         low = self.plane("mask", n, dtype=bool)
         np.less_equal(t, CIE_EPSILON, out=low)
         np.less_equal(L, CIE_KAPPA * CIE_EPSILON, out=low[1])
-        for i in range(3):  # (116 f - 16) / κ at and below ε; Y: L / κ at and below κ ε
-            sel = low[i]
-            if sel.any():
-                t[i][sel] = L[sel] / CIE_KAPPA if i == 1 else (116.0 * f[i][sel] - 16.0) / CIE_KAPPA
+        if low.any():  # (116 f - 16) / κ at and below ε; Y: L / κ at and below κ ε
+            for i in range(3):
+                sel = low[i]
+                if sel.any():
+                    t[i][sel] = (L[sel] / CIE_KAPPA if i == 1
+                                 else (116.0 * f[i][sel] - 16.0) / CIE_KAPPA)
         t *= np.asarray(WHITEPOINT_D65_XYZ)[:, None]
         x = self.plane("lin", n)
         np.matmul(MATRIX_XYZ_TO_LINEAR_SRGB, t, out=x)  # linear sRGB (3, N)
@@ -305,14 +449,163 @@ class PullMeanWorkspace:
         p *= 1.055
         p -= 0.055
         np.less_equal(x, 0.0031308, out=low)
-        for i in range(3):
-            sel = low[i]
-            if sel.any():
-                p[i][sel] = x[i][sel] * 12.92
+        if low.any():
+            for i in range(3):
+                sel = low[i]
+                if sel.any():
+                    p[i][sel] = x[i][sel] * 12.92
         np.clip(p, 0.0, 1.0, out=p)  # to_uint8
         p *= 255.0
         np.rint(p, out=p)
-        np.copyto(out, p.T, casting="unsafe")
+        np.copyto(out, p, casting="unsafe")
+
+
+@dataclass(frozen=True)
+class _NumbaKernels:
+    """The compiled element-wise passes of the numba pull_mean kernel (:func:`_numba_kernels`)."""
+
+    pack: Callable[..., None]
+    distinct: Callable[..., int]
+    fill_table: Callable[..., None]
+    gather: Callable[..., None]
+    lin_of_codes: Callable[..., None]
+    divide_rows: Callable[..., None]
+    lab_of_f: Callable[..., None]
+    xyz_of_lab: Callable[..., None]
+    encode: Callable[..., None]
+
+
+@functools.cache
+def _numba_kernels() -> _NumbaKernels | None:
+    """The numba pull_mean passes, compiled on first use (cached on disk), or None without numba.
+
+    ``pack``, ``distinct``, ``fill_table`` and ``gather`` are the integer passes of
+    :meth:`PullMeanWorkspace.pull` around numpy's sort (pack the pixels into 24-bit keys; the
+    distinct keys of the sorted array with their counts and codes; the output codes into the
+    2^24-entry table; the table read back onto the pixels), one loop each instead of several
+    numpy passes. The others are the element-wise glue of :meth:`PullMeanWorkspace._lab_chunk`
+    and ``_codes_chunk`` fused into one loop per step, over contiguous channel rows: the same IEEE
+    operations in the same order (numba compiles without fast-math: no reassociation, no FMA
+    contraction, ``x / 116.0`` stays a division), while the 3x3 products, ``cbrt`` and
+    ``power`` stay the numpy calls of the reference. tests/test_dataset.py checks that both
+    kernels give the same bits.
+    """
+    import importlib
+
+    try:
+        numba = importlib.import_module("numba")
+    except ImportError:
+        return None
+
+    jit = numba.njit(cache=True, nogil=True, boundscheck=False)
+
+    @jit  # type: ignore[untyped-decorator,misc,unused-ignore]
+    def pack(pixels: np.ndarray, packed: np.ndarray) -> None:
+        for p in range(pixels.shape[0]):
+            packed[p] = (np.uint32(pixels[p, 0]) << 16) | (np.uint32(pixels[p, 1]) << 8) \
+                | np.uint32(pixels[p, 2])
+
+    @jit  # type: ignore[untyped-decorator,misc,unused-ignore]
+    def distinct(srt: np.ndarray, uniq: np.ndarray, counts: np.ndarray, c0: np.ndarray,
+                 c1: np.ndarray, c2: np.ndarray) -> int:
+        n = 0
+        start = 0
+        for q in range(srt.shape[0] + 1):
+            if q == srt.shape[0] or (q > 0 and srt[q] != srt[q - 1]):
+                key = srt[start]
+                uniq[n] = key
+                counts[n] = np.float64(q - start)
+                c0[n] = np.uint8((key >> 16) & 255)
+                c1[n] = np.uint8((key >> 8) & 255)
+                c2[n] = np.uint8(key & 255)
+                n += 1
+                start = q
+        return n
+
+    @jit  # type: ignore[untyped-decorator,misc,unused-ignore]
+    def fill_table(table: np.ndarray, uniq: np.ndarray, o0: np.ndarray, o1: np.ndarray,
+                   o2: np.ndarray) -> None:
+        for j in range(uniq.shape[0]):
+            table[uniq[j]] = (np.uint32(o0[j]) << 16) | (np.uint32(o1[j]) << 8) \
+                | np.uint32(o2[j])
+
+    @jit  # type: ignore[untyped-decorator,misc,unused-ignore]
+    def gather(table: np.ndarray, packed: np.ndarray, out: np.ndarray) -> None:
+        for p in range(packed.shape[0]):
+            v = table[packed[p]]
+            out[p, 0] = np.uint8(v >> 16)
+            out[p, 1] = np.uint8((v >> 8) & 255)
+            out[p, 2] = np.uint8(v & 255)
+
+    @jit  # type: ignore[untyped-decorator,misc,unused-ignore]
+    def lin_of_codes(c0: np.ndarray, c1: np.ndarray, c2: np.ndarray, table: np.ndarray,
+                     l0: np.ndarray, l1: np.ndarray, l2: np.ndarray) -> None:
+        for k in range(c0.shape[0]):
+            l0[k] = table[c0[k]]
+            l1[k] = table[c1[k]]
+            l2[k] = table[c2[k]]
+
+    @jit  # type: ignore[untyped-decorator,misc,unused-ignore]
+    def divide_rows(t0: np.ndarray, t1: np.ndarray, t2: np.ndarray, w0: float, w1: float,
+                    w2: float) -> None:
+        for k in range(t0.shape[0]):
+            t0[k] = t0[k] / w0
+            t1[k] = t1[k] / w1
+            t2[k] = t2[k] / w2
+
+    @jit  # type: ignore[untyped-decorator,misc,unused-ignore]
+    def lab_of_f(t0: np.ndarray, t1: np.ndarray, t2: np.ndarray, f0: np.ndarray,
+                 f1: np.ndarray, f2: np.ndarray, L: np.ndarray, A: np.ndarray, B: np.ndarray,
+                 eps: float, kappa: float) -> None:
+        for k in range(t0.shape[0]):
+            fx, fy, fz = f0[k], f1[k], f2[k]
+            if t0[k] <= eps:
+                fx = (kappa * t0[k] + 16.0) / 116.0
+            if t1[k] <= eps:
+                fy = (kappa * t1[k] + 16.0) / 116.0
+            if t2[k] <= eps:
+                fz = (kappa * t2[k] + 16.0) / 116.0
+            L[k] = fy * 116.0 - 16.0
+            A[k] = (fx - fy) * 500.0
+            B[k] = (fy - fz) * 200.0
+
+    @jit  # type: ignore[untyped-decorator,misc,unused-ignore]
+    def xyz_of_lab(L: np.ndarray, A: np.ndarray, B: np.ndarray, t0: np.ndarray,
+                   t1: np.ndarray, t2: np.ndarray, w0: float, w1: float, w2: float,
+                   eps: float, kappa: float, kappa_eps: float) -> None:
+        for k in range(L.shape[0]):
+            lk = L[k]
+            fy = (lk + 16.0) / 116.0
+            fx = A[k] / 500.0 + fy
+            fz = fy - B[k] / 200.0
+            tx = fx * fx * fx
+            ty = fy * fy * fy
+            tz = fz * fz * fz
+            if tx <= eps:
+                tx = (116.0 * fx - 16.0) / kappa
+            if lk <= kappa_eps:
+                ty = lk / kappa
+            if tz <= eps:
+                tz = (116.0 * fz - 16.0) / kappa
+            t0[k] = tx * w0
+            t1[k] = ty * w1
+            t2[k] = tz * w2
+
+    @jit  # type: ignore[untyped-decorator,misc,unused-ignore]
+    def encode(p: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
+        for k in range(p.shape[0]):
+            v = p[k] * 1.055
+            v = v - 0.055
+            if x[k] <= 0.0031308:
+                v = x[k] * 12.92
+            v = min(max(v, 0.0), 1.0) * 255.0
+            out[k] = np.uint8(np.rint(v))
+
+    return _NumbaKernels(pack, distinct, fill_table, gather, lin_of_codes, divide_rows,
+                         lab_of_f, xyz_of_lab, encode)
+
+
+_WHITE = np.asarray(WHITEPOINT_D65_XYZ, dtype=np.float64)
 
 
 @functools.cache

@@ -153,12 +153,14 @@ class PixelTransform:
 @dataclass(frozen=True)
 class WorkItem:
     """A chunk of one cell: detect ``image_ids`` with ``model`` after ``transform``. ``cell``
-    is the store's key of the cell (e.g. ``(model, transform, target)``)."""
+    is the store's key of the cell (e.g. ``(model, transform, target)``); ``clip``: boxes
+    clipped to the image (False: as the network gives them, for Ultralytics' own metric)."""
 
     cell: tuple[Any, ...]
     model: ModelFile
     transform: PixelTransform
     image_ids: tuple[int, ...]
+    clip: bool = True
 
 
 @dataclass(frozen=True)
@@ -183,7 +185,8 @@ class ChunkRunner:
     and a cache of decoded images (least recently used dropped beyond ``cache_mb``).
 
     :meth:`run` is the one place where a work item is computed, for every executor:
-    decode (cached) -> transform -> JPEG round trip -> detector.
+    decode (cached) -> transform -> JPEG round trip -> detector, the loading on the detector's
+    prefetch thread ahead of the network (:meth:`fidelity.coco.detectors.Detector.detect_stream`).
     """
 
     def __init__(self, threads: int | None = 1, provider: str = "auto",
@@ -252,13 +255,14 @@ class ChunkRunner:
         t0, c0 = time.perf_counter(), time.process_time()
         det = self.detector(item.model, model_path)
         fn = self.transform(item.transform, build)
-        out = []
-        for i in item.image_ids:
+
+        def load(i: int) -> np.ndarray:  # on the detector's one prefetch thread, in order
             rgb, settings = self.image(i, data, (names or {}).get(i, f"image {i}"))
             x = fn(rgb) if fn is not None else rgb
-            seen = roundtrip_jpeg(x, settings) if item.transform.roundtrip else x
-            out.append((i, det(seen)))
-        return ChunkResult(item, tuple(out), time.perf_counter() - t0, worker,
+            return roundtrip_jpeg(x, settings) if item.transform.roundtrip else x
+
+        out = tuple(det.detect_stream(item.image_ids, load, clip=item.clip))
+        return ChunkResult(item, out, time.perf_counter() - t0, worker,
                            time.process_time() - c0)
 
 
@@ -606,6 +610,7 @@ class CellWork:
     transform: PixelTransform
     image_ids: tuple[int, ...]
     table: Callable[[], np.ndarray] | None = None
+    clip: bool = True
 
 
 class CellStore(Protocol):
@@ -750,7 +755,7 @@ def run_cells(cells: Sequence[CellWork], executor: Executor, store: CellStore, *
         table = cell.table() if cell.table is not None else None
         for s in range(0, len(missing), chunk):
             queue.append((cell, WorkItem(cell.key, cell.model, cell.transform.bare(),
-                                         tuple(missing[s:s + chunk])), table))
+                                         tuple(missing[s:s + chunk]), cell.clip), table))
             o.left += 1
         return True
 
@@ -837,7 +842,9 @@ def detect_images(model: ModelFile | str | os.PathLike[str], images: ImageSet,
                   ids: Sequence[int],
                   options: ExecutorOptions, *, store_base: str | os.PathLike[str] | None = None,
                   progress: bool = False) -> Detections:
-    """Run one detector over images as they are (no transform, no re-encoding), resumably.
+    """Run one detector over images as they are (no transform, no re-encoding), resumably;
+    boxes as the network gives them, not clipped to the image (``evaluate`` clips them for COCO
+    AP and keeps them for Ultralytics' metric).
 
     Detections are stored per image as they come back, in an
     :class:`fidelity.coco.store.EvaluationStore` named by the model, provider and image set
@@ -873,7 +880,7 @@ def detect_images(model: ModelFile | str | os.PathLike[str], images: ImageSet,
                 pass
 
         cell = CellWork(("evaluate",), m.name, m, PixelTransform.of(IDENTITY, None, False),
-                        tuple(ids))
+                        tuple(ids), clip=False)
         counts = run_cells([cell], ex, Cells(), progress=progress)
         store.set_meta("last_run", where | counts.to_json())
         dets = store.detections(ids)

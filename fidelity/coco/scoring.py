@@ -39,7 +39,7 @@ class CocoScore:
     detections: int
     stats: tuple[float, ...] = field(default=())
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, Any]:
         """JSON-ready dict with ``map``, ``map50``, ``map75``, ``ap`` (name -> AP), ``images``."""
         return {"map": self.map, "map50": self.map50, "map75": self.map75, "ap": self.ap,
                 "images": self.images, "detections": self.detections,
@@ -348,3 +348,244 @@ def paired_standard_error(base: Sequence[float | None], other: Sequence[float | 
     if len(d) < 2:
         return None
     return float(np.std(d, ddof=1) / np.sqrt(len(d)))
+
+
+# --------------------------------------------------------------------------------------------
+# Ultralytics' own AP (what ``yolo val`` prints as mAP50-95)
+
+#: IoU thresholds of AP@[.50:.95] (Ultralytics ``DetectionValidator.iouv``).
+ULTRALYTICS_IOU_THRESHOLDS: np.ndarray = np.linspace(0.5, 0.95, 10)
+_AP_RECALL = np.linspace(0.0, 1.0, 101)
+_trapezoid: Callable[..., Any] = getattr(np, "trapezoid", None) or getattr(np, "trapz")  # noqa: B009
+
+
+@dataclass(frozen=True)
+class UltralyticsScore:
+    """Ultralytics box metrics of one detector run (fractions in [0, 1]).
+
+    ``map`` (mAP50-95), ``map50``, ``map75``: means over the classes with ground truth in the
+    evaluated images; ``ap``: AP50-95 per class name (``None`` without ground truth);
+    ``targets``: ground-truth boxes counted (crowd and empty boxes are not); ``version``: the
+    Ultralytics rules followed (:data:`ULTRALYTICS_RULES`).
+    """
+
+    map: float
+    map50: float
+    map75: float
+    ap: dict[str, float | None]
+    images: int
+    detections: int
+    targets: int
+    version: str
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-ready dict of every field."""
+        return {"map": self.map, "map50": self.map50, "map75": self.map75, "ap": self.ap,
+                "images": self.images, "detections": self.detections,
+                "targets": self.targets, "version": self.version}
+
+
+def box_iou(a: np.ndarray, b: np.ndarray, eps: float = 1e-7) -> np.ndarray:
+    """IoU matrix (M, N) of ``x1, y1, x2, y2`` boxes: ``inter / (area_a + area_b - inter + eps)``.
+
+    The formula of Ultralytics ``metrics.box_iou`` (eps 1e-7 in the denominator), in float64.
+    """
+    a = np.asarray(a, dtype=np.float64).reshape(-1, 4)
+    b = np.asarray(b, dtype=np.float64).reshape(-1, 4)
+    lt = np.maximum(a[:, None, :2], b[None, :, :2])
+    rb = np.minimum(a[:, None, 2:], b[None, :, 2:])
+    inter = np.clip(rb - lt, 0, None).prod(2)
+    area_a = (a[:, 2:] - a[:, :2]).prod(1)
+    area_b = (b[:, 2:] - b[:, :2]).prod(1)
+    return np.asarray(inter / (area_a[:, None] + area_b[None, :] - inter + eps))
+
+
+def match_by_confidence(iou: np.ndarray, thresholds: np.ndarray = ULTRALYTICS_IOU_THRESHOLDS
+                        ) -> np.ndarray:
+    """Correct-detection matrix (N, T) of one image, Ultralytics >= 8.4 (``match_predictions``).
+
+    ``iou``: (M targets, N detections), zero where the classes differ; detections in
+    descending confidence. Per threshold, each detection in turn takes the unclaimed target
+    with the highest IoU (the first on ties) and is correct when that IoU reaches the
+    threshold (``>=``); a target is claimed once. COCO's greedy matching, one image at a time.
+    """
+    m, n = iou.shape
+    correct = np.zeros((n, len(thresholds)), dtype=bool)
+    if m == 0 or n == 0:
+        return correct
+    claimed = np.zeros((m, len(thresholds)), dtype=bool)
+    cols = np.arange(len(thresholds))
+    for j in np.flatnonzero((iou >= thresholds.min()).any(0)):
+        available = np.where(claimed, 0.0, iou[:, j, None])
+        k = available.argmax(0)
+        correct[j] = available[k, cols] >= thresholds
+        claimed[k, cols] |= correct[j]
+    return correct
+
+
+def match_by_iou(iou: np.ndarray, thresholds: np.ndarray = ULTRALYTICS_IOU_THRESHOLDS
+                 ) -> np.ndarray:
+    """Correct-detection matrix (N, T) of one image, Ultralytics 8.3 (``match_predictions``).
+
+    Per threshold, of the (target, detection) pairs with IoU at or above it each detection
+    keeps its highest-IoU pair, and of those each target keeps the one of the first detection
+    (the most confident); the rest are false positives. (Ultralytics breaks exact IoU ties
+    by its unstable sort order, here by target order.)
+    """
+    m, n = iou.shape
+    correct = np.zeros((n, len(thresholds)), dtype=bool)
+    for t, thr in enumerate(thresholds):
+        gi, dj = np.nonzero(iou >= thr)
+        if not gi.size:
+            continue
+        order = np.argsort(-iou[gi, dj], kind="stable")
+        gi, dj = gi[order], dj[order]
+        _, first_d = np.unique(dj, return_index=True)  # best pair of each detection,
+        gi, dj = gi[first_d], dj[first_d]  # now in detection order
+        _, first_g = np.unique(gi, return_index=True)  # then each target's first detection
+        correct[dj[first_g], t] = True
+    return correct
+
+
+def average_precision_101(recall: np.ndarray, precision: np.ndarray, drop_to_zero: bool = True
+                          ) -> float:
+    """101-point interpolated AP of one precision/recall curve (Ultralytics ``compute_ap``).
+
+    Sentinels (0, 1) before the curve; after it, ``drop_to_zero`` (8.4): precision 0 from
+    the last recall on (``(r_last, 0), (1, 0)``); else (8.3) one point ``(1, 0)``, so that
+    the precision falls linearly from the last point to recall 1. The precision envelope
+    (running maximum from the right) is sampled at recall 0, 0.01, ..., 1 with ``np.interp``
+    and integrated with the trapezoid rule.
+    """
+    r = np.asarray(recall, dtype=np.float64)
+    p = np.asarray(precision, dtype=np.float64)
+    if drop_to_zero:
+        mrec = np.concatenate(([0.0], r, [r[-1] if len(r) else 1.0], [1.0]))
+        mpre = np.concatenate(([1.0], p, [0.0], [0.0]))
+    else:
+        mrec = np.concatenate(([0.0], r, [1.0]))
+        mpre = np.concatenate(([1.0], p, [0.0]))
+    mpre = np.flip(np.maximum.accumulate(np.flip(mpre)))
+    return float(_trapezoid(np.interp(_AP_RECALL, mrec, mpre), _AP_RECALL))
+
+
+@dataclass(frozen=True)
+class UltralyticsRules:
+    """What changed between Ultralytics versions in the detection metric."""
+
+    match: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    drop_to_zero: bool  # AP sentinel after the last recall
+    clip_detections: bool  # IoU on boxes clipped to the image (8.3) or as predicted (8.4)
+    description: str
+
+
+#: Ultralytics' detection-metric rules by version: ``"8.4"`` (8.4.x, current) and ``"8.3"``.
+ULTRALYTICS_RULES: dict[str, UltralyticsRules] = {
+    "8.4": UltralyticsRules(match_by_confidence, True, False,
+                            "Ultralytics 8.4: confidence-ordered matching, precision 0 after "
+                            "the last recall, IoU on unclipped boxes"),
+    "8.3": UltralyticsRules(match_by_iou, False, True,
+                            "Ultralytics 8.3: IoU-ordered matching, precision falls linearly "
+                            "to recall 1, IoU on boxes clipped to the image"),
+}
+
+
+def _ultralytics_targets(coco_gt: Any, image_id: int, index: Mapping[int, int]
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Ground truth of one image as Ultralytics loads it: (M, 4) xyxy boxes and class indices.
+
+    Crowd annotations are dropped (Ultralytics' COCO conversion skips ``iscrowd``), as are
+    boxes with zero width or height and exact duplicates (first kept).
+    """
+    boxes, classes, seen = [], [], set()
+    for a in coco_gt.imgToAnns.get(image_id, []):
+        if a.get("iscrowd", 0) or a["category_id"] not in index:
+            continue
+        x, y, w, h = (float(v) for v in a["bbox"])
+        if w <= 0 or h <= 0:
+            continue
+        key = (index[a["category_id"]], x, y, w, h)
+        if key in seen:
+            continue
+        seen.add(key)
+        boxes.append([x, y, x + w, y + h])
+        classes.append(index[a["category_id"]])
+    return (np.asarray(boxes, dtype=np.float64).reshape(-1, 4),
+            np.asarray(classes, dtype=np.intp))
+
+
+def ultralytics_ap(coco_gt: Any, detections: Mapping[int, np.ndarray],
+                   image_ids: Sequence[int] | None = None, version: str = "8.4"
+                   ) -> UltralyticsScore:
+    """Ultralytics' own box mAP of per-image (K, 6) detections (``yolo val``'s mAP50-95).
+
+    Per image (ascending id), detections in descending confidence are matched to the
+    non-crowd ground truth of the same class at the 10 IoU thresholds 0.50:0.05:0.95
+    (:data:`ULTRALYTICS_RULES` ``[version].match``). Over all images, per class with ground
+    truth: detections sorted by confidence (``np.argsort(-conf)``, as Ultralytics), recall =
+    TP / targets, precision = TP / (TP + FP), AP = :func:`average_precision_101` of the
+    precision envelope. mAP is the mean over classes with ground truth (a class with no
+    detection counts 0). Differences from COCO AP (:func:`evaluate_detections`): crowd boxes
+    are not ignore regions (a detection on one is a false positive), no 100-detection cap
+    and no area ranges, one trapezoid-integrated curve instead of the mean of 101 samples.
+    ``detections`` should be unclipped for ``"8.4"`` (``Detector(..., clip=False)``), which
+    computes IoU on the boxes as predicted; ``"8.3"`` clips them to the image first.
+    Source: Ultralytics 8.4.190 / 8.3.143, ``utils/metrics.py`` (``ap_per_class``,
+    ``compute_ap``), ``engine/validator.py`` (``match_predictions``).
+    """
+    if version not in ULTRALYTICS_RULES:
+        from fidelity.errors import unknown_name
+
+        raise unknown_name("Ultralytics metric version", version, list(ULTRALYTICS_RULES))
+    rules = ULTRALYTICS_RULES[version]
+    ids = sorted(int(i) for i in (image_ids if image_ids is not None else detections))
+    if not ids:
+        raise InvalidValueError("no images to evaluate")
+    cat_ids = sorted(coco_gt.getCatIds())
+    mapping: Sequence[int] = cat_ids if len(cat_ids) == len(COCO80_CATEGORY_IDS) \
+        else COCO80_CATEGORY_IDS
+    index = {int(c): k for k, c in enumerate(mapping)}
+    cat_names = {c["id"]: c["name"] for c in coco_gt.dataset["categories"]}
+    tps, confs, pred_cls, target_cls = [], [], [], []
+    for i in ids:
+        if i not in coco_gt.imgs:
+            raise InvalidValueError(f"image id not in the annotations: {i}")
+        gt_boxes, gt_cls = _ultralytics_targets(coco_gt, i, index)
+        d = np.asarray(detections.get(i, np.zeros((0, 6))), dtype=np.float32).reshape(-1, 6)
+        d = d[np.argsort(-d[:, 4], kind="stable")]
+        if rules.clip_detections:
+            img = coco_gt.imgs[i]
+            d[:, [0, 2]] = np.clip(d[:, [0, 2]], 0, img["width"])
+            d[:, [1, 3]] = np.clip(d[:, [1, 3]], 0, img["height"])
+        dc = d[:, 5].astype(np.intp)
+        iou = box_iou(gt_boxes, d[:, :4]) * (gt_cls[:, None] == dc[None, :])
+        tps.append(rules.match(iou, ULTRALYTICS_IOU_THRESHOLDS))
+        confs.append(d[:, 4])
+        pred_cls.append(dc)
+        target_cls.append(gt_cls)
+    tp = np.concatenate(tps)
+    conf = np.concatenate(confs).astype(np.float32)
+    pcls = np.concatenate(pred_cls)
+    tcls = np.concatenate(target_cls)
+    order = np.argsort(-conf)
+    tp, pcls = tp[order], pcls[order]
+    classes, n_targets = np.unique(tcls, return_counts=True)
+    ap = np.zeros((len(classes), len(ULTRALYTICS_IOU_THRESHOLDS)))
+    for ci, (c, n_l) in enumerate(zip(classes, n_targets, strict=True)):
+        sel = pcls == c
+        if not sel.any():
+            continue
+        tpc = tp[sel].cumsum(0)
+        fpc = (1 - tp[sel]).cumsum(0)
+        recall = tpc / (n_l + 1e-16)
+        precision = tpc / (tpc + fpc)
+        for t in range(ap.shape[1]):
+            ap[ci, t] = average_precision_101(recall[:, t], precision[:, t], rules.drop_to_zero)
+    per_class: dict[str, float | None] = {cat_names.get(int(c), str(c)): None for c in mapping}
+    for ci, c in enumerate(classes):
+        per_class[cat_names.get(int(mapping[c]), str(mapping[c]))] = float(ap[ci].mean())
+    has = len(classes) > 0
+    return UltralyticsScore(
+        map=float(ap.mean()) if has else 0.0, map50=float(ap[:, 0].mean()) if has else 0.0,
+        map75=float(ap[:, 5].mean()) if has else 0.0, ap=per_class, images=len(ids),
+        detections=int(len(conf)), targets=int(len(tcls)), version=version)

@@ -758,5 +758,6 @@ def evaluation_store_dir(model_sha256: str, provider: str, images_fingerprint: s
     if base is None:
         root = os.environ.get("FIDELITY_CACHE")
         base = (Path(root) if root else Path.home() / ".cache" / "fidelity") / "evaluate"
-    key = hashlib.sha256(f"{model_sha256}\n{provider}\n{images_fingerprint}".encode())
+    # "unclipped": the store holds boxes as the network gives them (evaluate clips for COCO AP)
+    key = hashlib.sha256(f"{model_sha256}\n{provider}\n{images_fingerprint}\nunclipped".encode())
     return Path(base) / key.hexdigest()[:24]
