@@ -41,11 +41,13 @@ from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Generic, TypeVar
 
 import numpy as np
 
 from fidelity.errors import InputFileError, InvalidValueError
+
+S = TypeVar("S", bound="ResultsStore")
 
 __all__ = ["LEASE_STALE_S", "Claim", "EvaluationStore", "ImageEntry", "ImageSet",
            "LeaseKeeper", "Owner", "RegisteredModel", "ResultsStore", "evaluation_store_dir",
@@ -574,6 +576,16 @@ class ResultsStore:
                 self.db.executemany("INSERT OR REPLACE INTO images VALUES (?, ?, ?, ?)", rows)
         return len(rows)
 
+    def check_run_inputs(self, images: ImageSet, used: Iterable[int],
+                         annotations: str | os.PathLike[str]) -> None:
+        """Before a run resumes: the images it will use (``used`` ids of ``images``) and its
+        annotations must be those recorded (:meth:`check_images`, :meth:`check_annotations`);
+        a new store records them."""
+        from fidelity.fileio import file_sha256
+
+        self.check_images(images.entries(sorted(used)), images.folder)
+        self.check_annotations(annotations, file_sha256(annotations))
+
     def check_annotations(self, path: str | os.PathLike[str], sha256: str, *,
                           replace: bool = False) -> None:
         """Refuse annotations other than the store's (``meta["inputs"]["annotations"]``).
@@ -714,6 +726,34 @@ class LeaseKeeper:
         self._stop.set()
         self._thread.join(timeout=5)
         self.store.retire(self.owner.id)
+
+
+class ThreadStores(Generic[S]):
+    """One connection to a store per thread (``open_`` makes one): a run's scoring thread
+    reads and writes through its own, never through another thread's. :meth:`close` closes
+    every one made."""
+
+    def __init__(self, open_: Callable[[], S]) -> None:
+        self._open = open_
+        self._local = threading.local()
+        self._opened: list[S] = []
+        self._lock = threading.Lock()
+
+    def get(self) -> S:
+        """This thread's store."""
+        st: S | None = getattr(self._local, "store", None)
+        if st is None:
+            st = self._local.store = self._open()
+            with self._lock:
+                self._opened.append(st)
+        return st
+
+    def close(self) -> None:
+        """Close every store this made."""
+        with self._lock:
+            for st in self._opened:
+                st.close()
+            self._opened.clear()
 
 
 class EvaluationStore(ResultsStore):

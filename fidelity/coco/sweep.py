@@ -31,7 +31,6 @@ import json
 import os
 import sqlite3
 import sys
-import threading
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -344,7 +343,7 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
         run_cells,
     )
     from fidelity.coco.scoring import evaluate_detections, load_annotated_images, resolve_scorer
-    from fidelity.coco.store import LEASE_STALE_S, ImageSet, LeaseKeeper
+    from fidelity.coco.store import LEASE_STALE_S, ImageSet, LeaseKeeper, ThreadStores
     from fidelity.fileio import remove_stale_temporaries
 
     opts = executor or ExecutorOptions(threads=threads, provider=provider)
@@ -357,9 +356,9 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     store = SweepStore(out)
     remove_stale_temporaries(store.folder)
     image_set = ImageSet(img_dir, coco, all_ids)
-    used = sorted({i for m in models for i in (all_ids[: m.limit] if m.limit else all_ids)})
-    store.check_images(image_set.entries(used), img_dir)
-    store.check_annotations(annotations, file_sha256(annotations))
+    store.check_run_inputs(image_set, {i for m in models
+                                       for i in (all_ids[: m.limit] if m.limit else all_ids)},
+                           annotations)
     import PIL
 
     store.set_meta("versions", {"python": platform.python_version(),
@@ -380,7 +379,7 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     params: dict[tuple[str, float], tuple[float | None, str | None]] = {}
     ex = make_executor(image_set, opts)
     lease: LeaseKeeper | None = None
-    opened: list[SweepStore] = []
+    stores = ThreadStores(lambda: SweepStore(store.folder, create=False))
     try:
         where = ex.describe()
         store.set_meta("machine", {"platform": platform.platform(), "cpus": os.cpu_count(),
@@ -414,16 +413,6 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
             work.append(CellWork(key, f"{f.name} {transform} ΔE {target:g}", f,
                                  PixelTransform.of(transform, param), tuple(ids)))
 
-        local = threading.local()
-
-        def own_store() -> SweepStore:
-            """This thread's connection to the store."""
-            st: SweepStore | None = getattr(local, "store", None)
-            if st is None:
-                st = local.store = SweepStore(store.folder, create=False)
-                opened.append(st)
-            return st
-
         class Cells:
             """The sweep store as :func:`run_cells` sees it."""
 
@@ -441,7 +430,7 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
             def finish(self, cell: CellWork, seconds: float, new: int) -> None:
                 model, transform, target = cell.key
                 ids = list(cell.image_ids)
-                own = own_store()  # run_cells may score on a thread of its own
+                own = stores.get()  # run_cells may score on a thread of its own
                 score = evaluate_detections(coco, own.detections(model, transform, target),
                                             ids, method=method)
                 param = cell.transform.param
@@ -461,8 +450,7 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
         if lease is not None:
             lease.close()
         ex.close()
-        for st in opened:
-            st.close()
+        stores.close()
     return store
 
 

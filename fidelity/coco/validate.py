@@ -34,7 +34,6 @@ import json
 import os
 import platform
 import sys
-import threading
 import time
 import tomllib
 from collections.abc import Callable, Mapping, Sequence
@@ -800,7 +799,7 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
         run_cells,
     )
     from fidelity.coco.scoring import evaluate_detections, load_annotated_images, score_folds
-    from fidelity.coco.store import LEASE_STALE_S, ImageSet, LeaseKeeper
+    from fidelity.coco.store import LEASE_STALE_S, ImageSet, LeaseKeeper, ThreadStores
     from fidelity.coco.sweep import ImageCache
     from fidelity.fileio import remove_stale_temporaries
 
@@ -813,9 +812,9 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     store = ValidationStore(store_dir)
     remove_stale_temporaries(store.folder)
     image_set = ImageSet(img_dir, coco, all_ids)
-    used = sorted({i for m in models for i in (all_ids[: m.limit] if m.limit else all_ids)})
-    store.check_images(image_set.entries(used), img_dir)
-    store.check_annotations(annotations, file_sha256(annotations))
+    store.check_run_inputs(image_set, {i for m in models
+                                       for i in (all_ids[: m.limit] if m.limit else all_ids)},
+                           annotations)
     from fidelity import __version__
 
     store.set_meta("versions", {"python": platform.python_version(),
@@ -833,7 +832,7 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     cache = ImageCache(img_dir, coco)
     ex = make_executor(image_set, opts)
     lease: LeaseKeeper | None = None
-    opened: list[ValidationStore] = []
+    stores = ThreadStores(lambda: ValidationStore(store.folder, create=False))
     try:
         where = ex.describe()
         store.set_meta("machine", {"platform": platform.platform(), "cpus": os.cpu_count(),
@@ -874,16 +873,6 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
             work += [CellWork((f.name, case.name), f"{case.name} / {f.name}", f, emulated, ids,
                               table_of(case)) for f, ids in runs]
 
-        local = threading.local()
-
-        def own_store() -> ValidationStore:
-            """This thread's connection to the store."""
-            st: ValidationStore | None = getattr(local, "store", None)
-            if st is None:
-                st = local.store = ValidationStore(store.folder, create=False)
-                opened.append(st)
-            return st
-
         class Cells:
             """The validation store as :func:`fidelity.coco.executor.run_cells` sees it."""
 
@@ -900,7 +889,7 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
             def finish(self, cell: CellWork, seconds: float, new: int) -> None:
                 model, camera = cell.key
                 ids = list(cell.image_ids)
-                own = own_store()  # run_cells may score on a thread of its own
+                own = stores.get()  # run_cells may score on a thread of its own
                 dets = own.detections(model, camera)
                 score = evaluate_detections(coco, dets, ids)
                 folds = score_folds(coco, dets, ids, FOLDS)
@@ -917,8 +906,7 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
         if lease is not None:
             lease.close()
         ex.close()
-        for st in opened:
-            st.close()
+        stores.close()
     return store
 
 
