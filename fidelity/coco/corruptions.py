@@ -363,6 +363,24 @@ class CocoCResults:
                                           "meta": dict(self.meta)})
         return out
 
+    def without_locations(self) -> CocoCResults:
+        """These results with each measurement's input paths cut to their names: the form
+        shipped as ``fidelity/data/coco-c.json``, which names its inputs (and the dataset by
+        its fingerprint, ``settings["dataset"]``) but not where they lay on the machine that
+        measured them."""
+        from dataclasses import replace
+
+        def named(m: Any) -> Any:
+            settings = {k: Path(v).name if k in ("images_folder", "annotations") else v
+                        for k, v in m.settings.items()}
+            return replace(m, settings=settings)
+
+        meta = {k: Path(v).name if k in ("images", "annotations") and v else v
+                for k, v in self.meta.items()}
+        return replace(self, meta=meta,
+                       cells=tuple(replace(c, measured=tuple(named(m) for m in c.measured))
+                                   for c in self.cells))
+
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> CocoCResults:
         """Inverse of :meth:`to_json`."""

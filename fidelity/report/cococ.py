@@ -201,7 +201,8 @@ def write_cococ_report(results: CocoCResults, out_dir: str | os.PathLike[str],
                        notes: str | None = None, data: str | os.PathLike[str] | None = None
                        ) -> list[Path]:
     """Write ``cococ.html``, ``cococ.md`` (with its figures) and ``cococ.json`` into
-    ``out_dir``, and the shipped data file ``data`` when given; atomically."""
+    ``out_dir``, and the shipped data file ``data`` when given (its input paths cut to their
+    names: :meth:`~fidelity.coco.corruptions.CocoCResults.without_locations`); atomically."""
     from fidelity.fileio import write_json_atomic
     from fidelity.report.html import write_document
 
@@ -210,7 +211,7 @@ def write_cococ_report(results: CocoCResults, out_dir: str | os.PathLike[str],
                              markdown=out / "cococ.md")
     written.append(write_json_atomic(out / "cococ.json", results.to_json()))
     if data is not None:
-        written.append(write_json_atomic(data, results.to_json()))
+        written.append(write_json_atomic(data, results.without_locations().to_json()))
     return written
 
 
