@@ -88,8 +88,9 @@ def _stop_cluster(mark: str) -> None:
 
 
 @pytest.fixture(scope="module")
-def cluster() -> Iterator[tuple[str, str]]:
-    """A local Ray cluster of two nodes (1 CPU each); yields (head address, its folder)."""
+def cluster() -> Iterator[tuple[str, str, str]]:
+    """A local Ray cluster of two nodes (1 CPU each) with a Ray Client server on the head;
+    yields (head address, its folder, the ``ray://`` address)."""
     try:
         import ray  # noqa: F401
     except ImportError:
@@ -117,13 +118,14 @@ def cluster() -> Iterator[tuple[str, str]]:
     head = f"127.0.0.1:{p[0]}"
     try:
         for cmd in (ray_cli + ["--head", "--port", str(p[0]), "--temp-dir", folder,
-                               "--include-dashboard", "false", "--dashboard-port", str(p[1])]
+                               "--include-dashboard", "false", "--dashboard-port", str(p[1]),
+                               "--ray-client-server-port", str(p[16])]
                     + node_ports(p[2:9]),
                     ray_cli + ["--address", head] + node_ports(p[9:16])):
             r = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
             if r.returncode != 0:
                 pytest.fail(f"ray start failed: {r.stdout[-2000:]} {r.stderr[-2000:]}")
-        yield head, folder
+        yield head, folder, f"ray://127.0.0.1:{p[16]}"
     finally:
         _stop_cluster(folder)
         shutil.rmtree(folder, ignore_errors=True)
@@ -199,7 +201,7 @@ def test_ray_cluster_sweep_equals_local(cluster, coco, tmp_path) -> None:
     what was not stored, and both nodes did work."""
     from fidelity.coco.sweep import run_sweep
 
-    head, folder = cluster
+    head, folder, _ = cluster
     images, ann, model = coco
     local = run_sweep([ModelSpec(model, IMAGES)], images, ann, tmp_path / "local", *GRID,
                       log=lambda s: None)
@@ -248,13 +250,31 @@ def test_ray_cluster_sweep_equals_local(cluster, coco, tmp_path) -> None:
 
 
 @pytest.mark.shared
+def test_ray_client_sweep_equals_local(cluster, coco, tmp_path) -> None:
+    """``--address ray://HOST:PORT`` (Ray Client: the driver outside the cluster, images and
+    detections through the client connection) gives the local run's store."""
+    from fidelity.coco.sweep import run_sweep
+
+    _, _, client = cluster
+    images, ann, model = coco
+    local = run_sweep([ModelSpec(model, IMAGES)], images, ann, tmp_path / "local", *GRID,
+                      log=lambda s: None)
+    out = tmp_path / "client"
+    stdout, log = _sweep_cli(coco, out, client).communicate(timeout=240)
+    assert "5 cells done" in stdout, (stdout, log[-3000:])
+    store = SweepStore(out)
+    _assert_same(local, store)
+    assert store.meta()["machine"]["executor"] == "ray"
+
+
+@pytest.mark.shared
 def test_ray_cluster_evaluate_and_validate_equal_local(cluster, coco, tmp_path) -> None:
     """evaluate and validate with --executor ray on the two-node cluster give the local
     scores (and, for validate, the same detections)."""
     from fidelity.coco.validate import ValidationStore, load_suite
     from fidelity.resources import resource_dir
 
-    head, _ = cluster
+    head, _, _ = cluster
     images, ann, model = coco
     base = [sys.executable, "-m", "fidelity", "evaluate", "--models", str(model), "--images",
             str(images), "--annotations", str(ann), "--limit", "10", "--no-progress"]
