@@ -495,8 +495,13 @@ class RayExecutor:
         try:
             ray.init(address=options.address, **kwargs)
         except (ConnectionError, ValueError, RuntimeError) as exc:
+            hint = ("; a cluster with token authentication needs RAY_AUTH_MODE=token and its "
+                    "token (RAY_AUTH_TOKEN_PATH) here too"
+                    if str(options.address).startswith("ray://")
+                    and os.environ.get("RAY_AUTH_MODE") != "token" else "")
             raise InvalidValueError(f"--address {options.address}: cannot connect to a Ray "
-                                    f"cluster: {' '.join(str(exc).split())[:300]}") from exc
+                                    f"cluster: {' '.join(str(exc).split())[:300]}{hint}"
+                                    ) from exc
         finally:
             quiet.setLevel(level)
 
