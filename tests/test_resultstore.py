@@ -53,6 +53,20 @@ def test_an_extended_sweep_keeps_the_registrations_it_replaced(tmp_path: Path) -
                                            {"limit_images": 500}]}
 
 
+@pytest.mark.parametrize("store_cls", [SweepStore, ValidationStore])
+def test_detections_of_other_preprocessing_are_not_mixed(tmp_path: Path,
+                                                         store_cls: type) -> None:
+    """A store made by a version that prepared images differently is not extended (its cells
+    would mix two preprocessings); a resume with the same preprocessing is."""
+    old = {"conventions": {"preprocess": "letterbox centred, pad 114, bilinear, RGB/255"}}
+    new = {"conventions": {"preprocess": "long side with ceil sizes, INTER_LINEAR on uint8"}}
+    s = store_cls(tmp_path)
+    s.register_model("m", "m.onnx", "aa" * 32, 100, old)
+    s.register_model("m", "m.onnx", "aa" * 32, 100, old | {"threads": 2})
+    with pytest.raises(InvalidValueError, match="other preprocessing"):
+        s.register_model("m", "m.onnx", "aa" * 32, 100, new)
+
+
 def test_a_validation_keeps_one_image_set_per_model(tmp_path: Path) -> None:
     s = ValidationStore(tmp_path)
     s.register_model("m", "m.onnx", "aa" * 32, 100, {})

@@ -380,7 +380,10 @@ def measure_mapping(mapping: Mapping8, key: str, inputs: CocoInputs, *,
         t0 = time.perf_counter()
         det = Detector(spec.path, threads=threads, provider=provider)
         sha = file_sha256(spec.path)
-        model = f"{det.name}@{sha[:12]}"
+        # the preprocessing is part of the key: a cache made by a version that prepared images
+        # differently is not reused (its detections would differ)
+        pre = hashlib.sha256(det.preprocessing.describe().encode()).hexdigest()[:8]
+        model = f"{det.name}@{sha[:12]}:{pre}"
         st.register_model(model, spec.path.name, sha, None, det.describe())
         n = min(x for x in (spec.limit, limit, len(all_ids)) if x is not None)
         ids = all_ids[:n]

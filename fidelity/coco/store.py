@@ -147,6 +147,15 @@ _OPEN_STORES: Counter[Path] = Counter()
 _OPEN_LOCK = threading.Lock()
 
 
+def preprocessing_of(settings: Mapping[str, Any]) -> str | None:
+    """The preprocessing a detector's registered ``settings`` name
+    (``settings["conventions"]["preprocess"]``, :meth:`fidelity.coco.detectors.Detector.describe`);
+    None where they name none."""
+    conventions = settings.get("conventions")
+    found = conventions.get("preprocess") if isinstance(conventions, Mapping) else None
+    return str(found) if found is not None else None
+
+
 def check_sqlite_file(path: Path, kind: str) -> None:
     """Refuse a file that cannot be an intact SQLite database, before SQLite opens it.
 
@@ -530,6 +539,12 @@ class ResultsStore:
             if why:
                 raise InvalidValueError(f"store {self.path}: model {model!r} {why}")
             old = json.loads(row[2])
+            made, now = preprocessing_of(old), preprocessing_of(settings)
+            if made is not None and now is not None and made != now:
+                raise InvalidValueError(
+                    f"store {self.path}: model {model!r}'s detections were made with other "
+                    f"preprocessing ({made}; this version: {now}); they would mix: give a new "
+                    "store (this one's scores stay readable, e.g. by tables)")
             earlier = old.pop("earlier", [])
             changed = {k: v for k, v in old.items() if settings.get(k) != v}
             if changed or row[1] != limit:
