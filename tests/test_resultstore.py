@@ -130,3 +130,30 @@ def test_a_second_open_in_the_same_process_never_touches_the_file(tmp_path, monk
     first.close()
     third = SweepStore(tmp_path, create=False)  # no connection left: the file is checked again
     third.close()
+
+
+def test_a_store_dropped_while_the_open_counter_is_busy_does_not_deadlock(tmp_path):
+    """A connection dropped without close() is closed by its ``__del__``, which the garbage
+    collector may run inside any allocation, also while this thread holds the lock of the
+    open-store counter (found as a hang of the suite in CI: ``check_sqlite_file`` collected a
+    dropped connection inside ``Path.resolve``). Run in a child process with a time limit, so
+    that a regression fails instead of hanging the suite."""
+    import subprocess
+    import sys
+
+    code = (
+        "import gc, sys\n"
+        "from pathlib import Path\n"
+        "from fidelity.coco import store\n"
+        "from fidelity.coco.sweep import SweepStore\n"
+        "s = SweepStore(Path(sys.argv[1]))\n"
+        "db = s.db\n"
+        "s.db = None\n"
+        "with store._OPEN_LOCK:\n"
+        "    del db\n"
+        "    gc.collect()\n"
+        "    assert not store._OPEN_STORES, store._OPEN_STORES\n"
+        "print('ok')\n")
+    r = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 0 and r.stdout.strip() == "ok", r.stderr[-2000:]

@@ -862,8 +862,12 @@ def detect_images(model: ModelFile | str | os.PathLike[str], images: ImageSet,
     m = model if isinstance(model, ModelFile) else ModelFile.from_path(model)
     folder = evaluation_store_dir(m.sha256, options.provider, images.fingerprint(), store_base)
     store = EvaluationStore(folder)
-    remove_stale_temporaries(folder)
-    ex = make_executor(images, options)
+    try:
+        remove_stale_temporaries(folder)
+        ex = make_executor(images, options)
+    except BaseException:
+        store.close()
+        raise
     try:
         where = ex.describe()
         info = ex.describe_model(m)

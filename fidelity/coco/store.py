@@ -144,7 +144,9 @@ _SQLITE_MAGIC = b"SQLite format 3\x00"
 #: and another process's writes then corrupt the database ("How To Corrupt An SQLite
 #: Database File", section 2.2).
 _OPEN_STORES: Counter[Path] = Counter()
-_OPEN_LOCK = threading.Lock()
+#: Re-entrant: a connection dropped without ``close()`` is closed by ``__del__``, which the
+#: garbage collector may run inside any allocation, also while this thread holds the lock.
+_OPEN_LOCK = threading.RLock()
 
 
 def preprocessing_of(settings: Mapping[str, Any]) -> str | None:
@@ -165,8 +167,9 @@ def check_sqlite_file(path: Path, kind: str) -> None:
     Raises :class:`InputFileError` naming the file. Skipped while this process has the file
     open through SQLite (it was checked then, and reading it now would drop SQLite's locks).
     """
+    resolved = path.resolve()
     with _OPEN_LOCK:
-        if _OPEN_STORES[path.resolve()] > 0:
+        if _OPEN_STORES[resolved] > 0:
             return
     try:
         size = path.stat().st_size
@@ -282,9 +285,10 @@ def _connect(path: Path, kind: str) -> _GuardedConnection:
                          check_same_thread=False)
     assert isinstance(db, _GuardedConnection)
     db.store_path, db.store_kind = path, kind
+    resolved = path.resolve()
     with _OPEN_LOCK:
-        db._counted = path.resolve()
-        _OPEN_STORES[db._counted] += 1
+        db._counted = resolved
+        _OPEN_STORES[resolved] += 1
     return db
 
 
