@@ -113,6 +113,24 @@ class ChartLayout:
         return img
 
 
+def trimmed_mean(values: ArrayLike, proportion: float) -> FloatArray:
+    """Mean along axis 0 of (N, C) ``values`` after cutting ``int(proportion * N)`` values at
+    each end of every column.
+
+    The same steps as ``scipy.stats.trim_mean(values, proportion, axis=0)`` (the same
+    ``np.partition`` and mean, so the same bits) without importing scipy.stats (about 0.3 s at
+    start-up). ``proportion`` in [0, 0.5).
+    """
+    a = np.asarray(values, dtype=np.float64)
+    if not 0.0 <= proportion < 0.5:
+        raise ValueError(f"trim proportion {proportion} outside [0, 0.5)")
+    low = int(proportion * a.shape[0])
+    high = a.shape[0] - low
+    part = np.partition(a, (low, high - 1), axis=0)
+    out: FloatArray = np.mean(part[low:high], axis=0)
+    return out
+
+
 def patch_means(
     image: ArrayLike, layout: ChartLayout, fraction: float = WINDOW_FRACTION,
     trim: float = TRIM_PROPORTION,
@@ -120,10 +138,8 @@ def patch_means(
     """Robust patch means and standard deviations, each (24, C), from central windows.
 
     Mean: per-channel trimmed mean cutting ``trim`` of the values at each end
-    (scipy.stats.trim_mean). Std: sample standard deviation (ddof = 1; 0 for a 1-pixel window).
+    (:func:`trimmed_mean`). Std: sample standard deviation (ddof = 1; 0 for a 1-pixel window).
     """
-    from scipy.stats import trim_mean
-
     img = np.asarray(image, dtype=np.float64)
     n = layout.rows * layout.cols
     means = np.empty((n, img.shape[-1]))
@@ -131,7 +147,7 @@ def patch_means(
     for i in range(n):
         y0, y1, x0, x1 = layout.window(i, fraction)
         px = img[y0:y1, x0:x1].reshape(-1, img.shape[-1])
-        means[i] = trim_mean(px, trim, axis=0)
+        means[i] = trimmed_mean(px, trim)
         stds[i] = px.std(axis=0, ddof=1) if px.shape[0] > 1 else 0.0
     return means, stds
 
@@ -360,4 +376,5 @@ __all__ = [
     "ChartRender",
     "render_chart",
     "patch_means",
+    "trimmed_mean",
 ]
