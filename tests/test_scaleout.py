@@ -209,6 +209,12 @@ def test_ray_cluster_sweep_equals_local(cluster, coco, tmp_path) -> None:
     out = tmp_path / "ray"
     proc = _sweep_cli(coco, out, head)
     assert _wait_for(out, 8, proc) >= 8, proc.communicate()[1][-3000:]
+    status = subprocess.run([sys.executable, "-m", "fidelity", "sweep", "--status", "--out",
+                             str(out)], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert status.returncode == 0, status.stderr[-2000:]
+    # per-cell progress of the live Ray run, from the claims the driver keeps in the store
+    assert re.search(rf"under way: .* \d+ of {IMAGES} images stored; run on .* "
+                     r"\(ray, 2 workers\)", status.stdout), status.stdout
     workers = [pid for pid, cmd in _cluster_processes(folder).items()
                if cmd.startswith("ray::DetectorWorker")]
     assert len(workers) == 2, _cluster_processes(folder)
