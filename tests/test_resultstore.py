@@ -157,3 +157,16 @@ def test_a_store_dropped_while_the_open_counter_is_busy_does_not_deadlock(tmp_pa
     r = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True,
                        text=True, timeout=60)
     assert r.returncode == 0 and r.stdout.strip() == "ok", r.stderr[-2000:]
+
+
+def test_an_evaluation_cache_is_kept_per_preprocessing(tmp_path) -> None:
+    """evaluate's per-image cache is named by what decides the detections, the detector's
+    preprocessing included: a version that prepares images differently starts its own."""
+    from fidelity.coco.store import evaluation_store_dir
+
+    def folder(pre: str | None) -> Path:
+        return evaluation_store_dir("aa" * 32, "cpu", "f" * 16, tmp_path, preprocessing=pre)
+
+    assert folder("letterbox centred, bilinear") == folder("letterbox centred, bilinear")
+    assert folder("letterbox centred, bilinear") != folder("ceil sizes, INTER_LINEAR on uint8")
+    assert folder(None).parent == tmp_path

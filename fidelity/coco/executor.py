@@ -856,21 +856,22 @@ def detect_images(model: ModelFile | str | os.PathLike[str], images: ImageSet,
     (:func:`fidelity.coco.store.evaluation_store_dir` under ``store_base``), so a killed run
     started again computes only the images it had not stored, and a repeated one none.
     """
-    from fidelity.coco.store import EvaluationStore, evaluation_store_dir
+    from fidelity.coco.store import EvaluationStore, evaluation_store_dir, preprocessing_of
     from fidelity.fileio import remove_stale_temporaries
 
     m = model if isinstance(model, ModelFile) else ModelFile.from_path(model)
-    folder = evaluation_store_dir(m.sha256, options.provider, images.fingerprint(), store_base)
-    store = EvaluationStore(folder)
-    try:
-        remove_stale_temporaries(folder)
-        ex = make_executor(images, options)
-    except BaseException:
-        store.close()
-        raise
+    ex = make_executor(images, options)
     try:
         where = ex.describe()
         info = ex.describe_model(m)
+        folder = evaluation_store_dir(m.sha256, options.provider, images.fingerprint(),
+                                      store_base, preprocessing=preprocessing_of(info))
+        store = EvaluationStore(folder)
+    except BaseException:
+        ex.close()
+        raise
+    try:
+        remove_stale_temporaries(folder)
         store.register_model(m.name, m.path.name, m.sha256, None, info)
 
         class Cells:

@@ -810,13 +810,17 @@ CREATE TABLE IF NOT EXISTS detections (
 
 
 def evaluation_store_dir(model_sha256: str, provider: str, images_fingerprint: str,
-                         base: str | os.PathLike[str] | None = None) -> Path:
+                         base: str | os.PathLike[str] | None = None, *,
+                         preprocessing: str | None = None) -> Path:
     """Folder of an :class:`EvaluationStore`: ``<base>/<key>``, ``base`` by default
     ``$FIDELITY_CACHE/evaluate`` or ``~/.cache/fidelity/evaluate``; ``key`` is a SHA-256 of
-    the model's SHA-256, the provider and the image set's fingerprint (first 24 hex digits)."""
+    the model's SHA-256, the provider, the image set's fingerprint and the detector's
+    ``preprocessing`` (:func:`preprocessing_of`; first 24 hex digits), so that a version that
+    prepares images differently starts a cache of its own."""
     if base is None:
         root = os.environ.get("FIDELITY_CACHE")
         base = (Path(root) if root else Path.home() / ".cache" / "fidelity") / "evaluate"
     # "unclipped": the store holds boxes as the network gives them (evaluate clips for COCO AP)
-    key = hashlib.sha256(f"{model_sha256}\n{provider}\n{images_fingerprint}\nunclipped".encode())
+    key = hashlib.sha256(f"{model_sha256}\n{provider}\n{images_fingerprint}\nunclipped\n"
+                         f"{preprocessing or ''}".encode())
     return Path(base) / key.hexdigest()[:24]
