@@ -300,8 +300,41 @@ def fit_root_polynomial(source: ArrayLike, target: ArrayLike) -> FloatArray:
 # --------------------------------------------------------------------------------------------
 
 
+class EightBitTable:
+    """The 8-bit path of a colour mapping: its :meth:`apply` on all 2^24 triples, tabulated
+    once (:meth:`cube`), then any uint8 image mapped by lookup (:meth:`apply_uint8`). Mixed into
+    :class:`Emulation` and :class:`PatchEmulation`, which hold the table in ``_cube``."""
+
+    _cube: NDArray[np.uint8] | None
+
+    def apply(self, srgb: ArrayLike) -> FloatArray:
+        """Map encoded sRGB (..., 3) in [0, 1]; defined by the mapping."""
+        raise NotImplementedError
+
+    def cube(self, chunk: int = 1 << 20) -> NDArray[np.uint8]:
+        """The (2^24, 3) uint8 table of :meth:`apply` on every 8-bit triple (built once)."""
+        if self._cube is None:
+            from fidelity.coco.dataset import _all_triples, to_uint8
+
+            table = np.empty((1 << 24, 3), dtype=np.uint8)
+            for s in range(0, 1 << 24, chunk):
+                e = min(s + chunk, 1 << 24)
+                table[s:e] = to_uint8(self.apply(_all_triples(s, e)))
+            self._cube = table
+        return self._cube
+
+    def apply_uint8(self, rgb8: ArrayLike) -> NDArray[np.uint8]:
+        """Apply to an (H, W, 3) uint8 image through :meth:`cube`; returns a new uint8 image."""
+        a = np.asarray(rgb8)
+        if a.dtype != np.uint8 or a.shape[-1] != 3:
+            raise InvalidValueError(f"image must be (..., 3) uint8, got {a.shape} {a.dtype}")
+        idx = (a[..., 0].astype(np.uint32) << 16) | (a[..., 1].astype(np.uint32) << 8) | a[..., 2]
+        out: NDArray[np.uint8] = self.cube()[idx]
+        return out
+
+
 @dataclass
-class Emulation:
+class Emulation(EightBitTable):
     """A fitted colour mapping reference sRGB -> camera output sRGB (see module docstring)."""
 
     camera: CameraModel
@@ -334,28 +367,6 @@ class Emulation:
         if self.camera.quantisation_bits is not None:
             out = quantise(out, self.camera.quantisation_bits)
         return np.clip(out, 0.0, 1.0)
-
-    # 8-bit path -------------------------------------------------------------------------------
-    def cube(self, chunk: int = 1 << 20) -> NDArray[np.uint8]:
-        """The (2^24, 3) uint8 table of :meth:`apply` on every 8-bit triple (built once)."""
-        if self._cube is None:
-            from fidelity.coco.dataset import _all_triples, to_uint8
-
-            table = np.empty((1 << 24, 3), dtype=np.uint8)
-            for s in range(0, 1 << 24, chunk):
-                e = min(s + chunk, 1 << 24)
-                table[s:e] = to_uint8(self.apply(_all_triples(s, e)))
-            self._cube = table
-        return self._cube
-
-    def apply_uint8(self, rgb8: ArrayLike) -> NDArray[np.uint8]:
-        """Apply to an (H, W, 3) uint8 image through :meth:`cube`; returns a new uint8 image."""
-        a = np.asarray(rgb8)
-        if a.dtype != np.uint8 or a.shape[-1] != 3:
-            raise InvalidValueError(f"image must be (..., 3) uint8, got {a.shape} {a.dtype}")
-        idx = (a[..., 0].astype(np.uint32) << 16) | (a[..., 1].astype(np.uint32) << 8) | a[..., 2]
-        out: NDArray[np.uint8] = self.cube()[idx]
-        return out
 
     def describe(self) -> dict[str, Any]:
         """JSON-ready description: method, training set, matrix, sizes, fit time."""
@@ -535,6 +546,7 @@ __all__ = [
     "TRAINING_SETS",
     "AccuracySummary",
     "CameraSamples",
+    "EightBitTable",
     "Emulation",
     "EmulationAccuracy",
     "PatchEmulation",
@@ -595,7 +607,7 @@ def apply_log_tone(y: ArrayLike, knots: tuple[FloatArray, FloatArray]) -> FloatA
 
 
 @dataclass
-class PatchEmulation:
+class PatchEmulation(EightBitTable):
     """A colour mapping fitted on measured chart patches alone: from ``source`` colours (the
     chart's reference, or one camera's chart) to ``target`` colours (the measured chart, or
     another camera's), both encoded sRGB (n, 3).
@@ -648,27 +660,6 @@ class PatchEmulation:
         lin = _tone_rgb(np.asarray(linearize_srgb(x), np.float64), self.knots)
         out = root_polynomial_terms(lin) @ self.matrix.T
         return np.clip(np.asarray(delinearize_srgb(np.clip(out, 0.0, 1.0)), np.float64), 0, 1)
-
-    def cube(self, chunk: int = 1 << 20) -> NDArray[np.uint8]:
-        """The (2^24, 3) uint8 table of :meth:`apply` on every 8-bit triple (built once)."""
-        if self._cube is None:
-            from fidelity.coco.dataset import _all_triples, to_uint8
-
-            table = np.empty((1 << 24, 3), dtype=np.uint8)
-            for s in range(0, 1 << 24, chunk):
-                e = min(s + chunk, 1 << 24)
-                table[s:e] = to_uint8(self.apply(_all_triples(s, e)))
-            self._cube = table
-        return self._cube
-
-    def apply_uint8(self, rgb8: ArrayLike) -> NDArray[np.uint8]:
-        """Apply to an (H, W, 3) uint8 image through :meth:`cube`."""
-        a = np.asarray(rgb8)
-        if a.dtype != np.uint8 or a.shape[-1] != 3:
-            raise InvalidValueError(f"image must be (..., 3) uint8, got {a.shape} {a.dtype}")
-        idx = (a[..., 0].astype(np.uint32) << 16) | (a[..., 1].astype(np.uint32) << 8) | a[..., 2]
-        out: NDArray[np.uint8] = self.cube()[idx]
-        return out
 
     def patch_delta_e(self) -> FloatArray:
         """ΔE00 per patch between the mapped source and the target (the in-sample fit error)."""
