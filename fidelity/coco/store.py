@@ -595,15 +595,22 @@ class ResultsStore:
                 self.db.executemany("INSERT OR REPLACE INTO images VALUES (?, ?, ?, ?)", rows)
         return len(rows)
 
-    def check_run_inputs(self, images: ImageSet, used: Iterable[int],
-                         annotations: str | os.PathLike[str]) -> None:
-        """Before a run resumes: the images it will use (``used`` ids of ``images``) and its
-        annotations must be those recorded (:meth:`check_images`, :meth:`check_annotations`);
-        a new store records them."""
-        from fidelity.fileio import file_sha256
+    def start_run(self, images: ImageSet, limits: Iterable[int | None],
+                  annotations: str | os.PathLike[str]) -> None:
+        """Before a run works in this store: a killed run's temporary files removed; the
+        images it will use (per model the first ``limit`` of ``images.ids``, all for None) and
+        its annotations checked against the store's record (:meth:`check_images`,
+        :meth:`check_annotations`; a new store records them); ``meta["data"]`` written."""
+        from fidelity.fileio import file_sha256, remove_stale_temporaries
 
-        self.check_images(images.entries(sorted(used)), images.folder)
+        remove_stale_temporaries(self.folder)
+        ids = images.ids
+        used = sorted({i for n in limits for i in (ids[:n] if n else ids)})
+        self.check_images(images.entries(used), images.folder)
         self.check_annotations(annotations, file_sha256(annotations))
+        self.set_meta("data", {"images": str(images.folder.resolve()),
+                               "annotations": str(Path(annotations).resolve()),
+                               "image_count": len(ids)})
 
     def check_annotations(self, path: str | os.PathLike[str], sha256: str, *,
                           replace: bool = False) -> None:

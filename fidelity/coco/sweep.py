@@ -344,7 +344,6 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     )
     from fidelity.coco.scoring import evaluate_detections, load_annotated_images, resolve_scorer
     from fidelity.coco.store import LEASE_STALE_S, ImageSet, LeaseKeeper, ThreadStores
-    from fidelity.fileio import remove_stale_temporaries
 
     opts = executor or ExecutorOptions(threads=threads, provider=provider)
     say = log or (lambda s: print(s, file=sys.stderr, flush=True))
@@ -354,11 +353,8 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     if not files:
         raise InvalidValueError("no models to sweep (--models is empty)")
     store = SweepStore(out)
-    remove_stale_temporaries(store.folder)
     image_set = ImageSet(img_dir, coco, all_ids)
-    store.check_run_inputs(image_set, {i for m in models
-                                       for i in (all_ids[: m.limit] if m.limit else all_ids)},
-                           annotations)
+    store.start_run(image_set, [m.limit for m in models], annotations)
     import PIL
 
     store.set_meta("versions", {"python": platform.python_version(),
@@ -367,9 +363,6 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
                                 "pycocotools": _dist_version("pycocotools"),
                                 "faster-coco-eval": _dist_version("faster-coco-eval"),
                                 "fidelity": _fidelity_version()})
-    store.set_meta("data", {"images": str(Path(img_dir).resolve()),
-                            "annotations": str(Path(annotations).resolve()),
-                            "image_count": len(all_ids)})
     store.record_scorer(method)
     store.set_meta("grid", {"transforms": list(transforms), "targets": list(targets),
                             "models": [f"{m.path.name}@{m.limit or len(all_ids)}"

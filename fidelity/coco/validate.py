@@ -801,7 +801,6 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     from fidelity.coco.scoring import evaluate_detections, load_annotated_images, score_folds
     from fidelity.coco.store import LEASE_STALE_S, ImageSet, LeaseKeeper, ThreadStores
     from fidelity.coco.sweep import ImageCache
-    from fidelity.fileio import remove_stale_temporaries
 
     opts = executor or ExecutorOptions(threads=threads, provider=provider)
     say = log or (lambda s: print(s, file=sys.stderr, flush=True))
@@ -810,19 +809,13 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     if not files:
         raise InvalidValueError("no models to run (--models is empty)")
     store = ValidationStore(store_dir)
-    remove_stale_temporaries(store.folder)
     image_set = ImageSet(img_dir, coco, all_ids)
-    store.check_run_inputs(image_set, {i for m in models
-                                       for i in (all_ids[: m.limit] if m.limit else all_ids)},
-                           annotations)
+    store.start_run(image_set, [m.limit for m in models], annotations)
     from fidelity import __version__
 
     store.set_meta("versions", {"python": platform.python_version(),
                                 "onnxruntime": onnxruntime.__version__, "numpy": np.__version__,
                                 "fidelity": __version__, "colour": _colour_version()})
-    store.set_meta("data", {"images": str(Path(img_dir).resolve()),
-                            "annotations": str(Path(annotations).resolve()),
-                            "image_count": len(all_ids)})
     store.set_meta("settings", {"emulation_method": method, "training": training,
                                 "folds": FOLDS, "size_class": "n",
                                 "jpeg": "original quantisation tables and subsampling "
