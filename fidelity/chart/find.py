@@ -575,11 +575,18 @@ def patch_lattices(quads: Quads, min_patches: int = 4) -> list[Lattice]:
     return lattices
 
 
-def _fit_lattice(quads: Quads, members: np.ndarray, cells: np.ndarray) -> Lattice | None:
-    """Fit lattice -> view to the walked cells, then collect all outlines on the lattice."""
+def _spanning_homography(cells: np.ndarray, points: np.ndarray
+                         ) -> tuple[F64, np.ndarray] | None:
+    """:func:`robust_homography` from lattice ``cells`` (n, 2) to image ``points`` (n, 2);
+    None unless the cells span at least two rows and two columns (a line fixes no plane)."""
     if len(set(cells[:, 0].tolist())) < 2 or len(set(cells[:, 1].tolist())) < 2:
         return None
-    fit = robust_homography(cells, quads.centres[members])
+    return robust_homography(cells, points)
+
+
+def _fit_lattice(quads: Quads, members: np.ndarray, cells: np.ndarray) -> Lattice | None:
+    """Fit lattice -> view to the walked cells, then collect all outlines on the lattice."""
+    fit = _spanning_homography(cells, quads.centres[members])
     if fit is None:
         return None
     h, keep = fit
@@ -601,9 +608,7 @@ def _fit_lattice(quads: Quads, members: np.ndarray, cells: np.ndarray) -> Lattic
             return None
         members = np.array(list(best.values()))
         cells = np.array(list(best.keys()), dtype=float)
-        if len(set(cells[:, 0].tolist())) < 2 or len(set(cells[:, 1].tolist())) < 2:
-            return None
-        fit = robust_homography(cells, quads.centres[members])
+        fit = _spanning_homography(cells, quads.centres[members])
         if fit is None:
             return None
         h, keep = fit
