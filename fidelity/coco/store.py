@@ -192,57 +192,53 @@ def check_sqlite_file(path: Path, kind: str) -> None:
                              f"says {pages * page_size}); restore it or start a new store")
 
 
+class _DamageGuard:
+    """Context manager: SQLite's plain DatabaseError (a damaged file; not its subclasses,
+    which are about the statement) becomes an input error naming the store."""
+
+    def __init__(self, path: Path, kind: str) -> None:
+        self.path, self.kind = path, kind
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None,
+                 tb: Any) -> None:
+        if kind is sqlite3.DatabaseError:
+            raise InputFileError(f"{self.path}: the {self.kind} store is damaged ({exc}); "
+                                 "restore it or start a new store") from exc
+
+
 class _GuardedCursor(sqlite3.Cursor):
     """A cursor that reports a damaged database as an input error naming the store."""
 
     store_path: Path = Path("?")
     store_kind: str = "results"
 
-    def _damaged(self, exc: sqlite3.DatabaseError) -> InputFileError:
-        return InputFileError(f"{self.store_path}: the {self.store_kind} store is damaged "
-                              f"({exc}); restore it or start a new store")
+    def _guarded(self) -> _DamageGuard:
+        return _DamageGuard(self.store_path, self.store_kind)
 
     def execute(self, sql: str, parameters: Any = (), /) -> _GuardedCursor:
-        try:
+        with self._guarded():
             super().execute(sql, parameters)
-        except sqlite3.DatabaseError as exc:
-            if type(exc) is not sqlite3.DatabaseError:
-                raise
-            raise self._damaged(exc) from exc
         return self
 
     def executemany(self, sql: str, seq_of_parameters: Any, /) -> _GuardedCursor:
-        try:
+        with self._guarded():
             super().executemany(sql, seq_of_parameters)
-        except sqlite3.DatabaseError as exc:
-            if type(exc) is not sqlite3.DatabaseError:
-                raise
-            raise self._damaged(exc) from exc
         return self
 
     def fetchone(self) -> Any:
-        try:
+        with self._guarded():
             return super().fetchone()
-        except sqlite3.DatabaseError as exc:
-            if type(exc) is not sqlite3.DatabaseError:
-                raise
-            raise self._damaged(exc) from exc
 
     def fetchall(self) -> list[Any]:
-        try:
+        with self._guarded():
             return super().fetchall()
-        except sqlite3.DatabaseError as exc:
-            if type(exc) is not sqlite3.DatabaseError:
-                raise
-            raise self._damaged(exc) from exc
 
     def __next__(self) -> Any:
-        try:
+        with self._guarded():
             return super().__next__()
-        except sqlite3.DatabaseError as exc:
-            if type(exc) is not sqlite3.DatabaseError:
-                raise
-            raise self._damaged(exc) from exc
 
 
 class _GuardedConnection(sqlite3.Connection):
