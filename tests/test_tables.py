@@ -32,7 +32,12 @@ def score(m: float, person: float, bicycle: float) -> SimpleNamespace:
 
 @pytest.fixture
 def store(tmp_path) -> SweepStore:
-    s = SweepStore(tmp_path)
+    return make_store(tmp_path)
+
+
+def make_store(folder: Path) -> SweepStore:
+    """A hand-made sweep store: three models, three transforms, ΔE 0, 3 and 6."""
+    s = SweepStore(folder)
     s.set_meta("grid", {"transforms": TRANSFORMS, "targets": [0, 3, 6]})
     for model, base in (("yolo11n", 0.50), ("yolov8n", 0.40), ("yolov8s", 0.45)):
         s.register_model(model, model + ".onnx", model * 4, None, {"conventions": {"conf": 0.001}})
