@@ -40,7 +40,7 @@ _API: dict[str, str] = {
     "audit_image": "fidelity.check",
     "gate": "fidelity.check",
     "compare_charts": "fidelity.compare",
-    "ComparisonReport": "fidelity.compare",
+    "ComparisonReport": "fidelity.records",
     # stages
     "delta_e_2000": "fidelity.colour.colorimetry",
     "load_chart": "fidelity.colour.charts",
@@ -72,8 +72,12 @@ _API: dict[str, str] = {
     "Criterion": "fidelity.prediction.verdict",
     "Verdict": "fidelity.prediction.verdict",
     "evaluate": "fidelity.prediction.verdict",
-    "ChartReport": "fidelity.report.chart",
+    # records
+    "ChartReport": "fidelity.records",
+    "GateResult": "fidelity.records",
+    # reports
     "write_chart_report": "fidelity.report.chart",
+    "write_comparison_report": "fidelity.report.compare",
     # errors
     "FidelityError": "fidelity.errors",
 }
@@ -95,7 +99,7 @@ if TYPE_CHECKING:
     from fidelity.coco.measure import MeasuredLoss, measure_mapping
     from fidelity.colour.charts import Chart, load_chart
     from fidelity.colour.colorimetry import delta_e_2000
-    from fidelity.compare import ComparisonReport, compare_charts
+    from fidelity.compare import compare_charts
     from fidelity.errors import FidelityError
     from fidelity.prediction.calibration import calibrate_transform
     from fidelity.prediction.directional import (
@@ -106,7 +110,9 @@ if TYPE_CHECKING:
     from fidelity.prediction.table import Prediction, delta_e_limit, predict
     from fidelity.prediction.transforms import apply_transform
     from fidelity.prediction.verdict import Criterion, Verdict, evaluate
-    from fidelity.report.chart import ChartReport, write_chart_report
+    from fidelity.records import ChartReport, ComparisonReport, GateResult
+    from fidelity.report.chart import write_chart_report
+    from fidelity.report.compare import write_comparison_report
 
 
 def __getattr__(name: str) -> Any:
@@ -136,6 +142,7 @@ __all__ = [
     "DirectionalPrediction",
     "FidelityError",
     "FoundChart",
+    "GateResult",
     "ImageMeasurement",
     "MeasuredLoss",
     "Prediction",
@@ -163,4 +170,5 @@ __all__ = [
     "read_image",
     "render_chart",
     "write_chart_report",
+    "write_comparison_report",
 ]

@@ -1,7 +1,8 @@
 """The camera check: chart → camera model → render → measure → predict → verdict → report.
 
-Three jobs, each one function that returns typed records (:mod:`fidelity.report.chart`); the
-command line only parses options, calls one of them and prints:
+Three jobs, each one function that returns typed records (:mod:`fidelity.records`); the
+command line only parses options, calls one of them and prints (:mod:`fidelity.report` renders
+the records):
 
 - :func:`check_camera`: render a camera model's spectral chart (closed form or Mitsuba 3,
   :mod:`fidelity.camera.render`), measure ΔE00, predict the detection loss
@@ -9,8 +10,8 @@ command line only parses options, calls one of them and prints:
 - :func:`audit_image`: the same for a chart in any render or photo (EXR, HDR, TIFF, PNG, JPEG;
   found or given by its corners, :mod:`fidelity.chart.measure`);
 - :func:`gate`: :func:`audit_image` over several images (or :func:`check_camera` for one
-  camera) for CI, each gated, reported and turned into a JUnit case; an input error of one
-  image becomes that case's error, not the end of the run.
+  camera) for CI, each gated into a :class:`~fidelity.records.GateResult`; an input error of
+  one image becomes that result's error, not the end of the run.
 """
 
 from __future__ import annotations
@@ -18,15 +19,15 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fidelity.prediction.judge import judge
 from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion
-from fidelity.report.chart import (
+from fidelity.records import (
     ChartReport,
+    GateResult,
     ImageSource,
     Provenance,
     RenderSource,
@@ -37,10 +38,7 @@ if TYPE_CHECKING:
     from fidelity.camera.model import CameraModel
     from fidelity.chart.measure import ChartMeasurement
     from fidelity.coco.measure import MeasuredLoss, MeasureRequest
-    from fidelity.prediction.directional import DirectionalPrediction
-    from fidelity.prediction.table import Prediction, PredictionTable
-    from fidelity.prediction.verdict import Verdict
-    from fidelity.report.junit import GateCase
+    from fidelity.prediction.table import PredictionTable
 
 #: The gate of ``fidelity check`` unless told otherwise: mean ΔE00 <= 3 (SAFE-COLOR).
 DEFAULT_CRITERION = Criterion("max-delta-e", DEFAULT_MAX_DELTA_E)
@@ -50,51 +48,6 @@ AUDIT_CONVENTION = ("patches located by the homography of the 4x6 grid from the 
                     "centres; central window of {window:g} pitch; mean in linear light; "
                     "exposure on the neutral patches (EV) unless fixed; sRGB encoded and "
                     "clipped to [0, 1]")
-
-
-def _predict_and_judge(mean_delta_e: float, size: str, table: PredictionTable | str | None,
-                       criterion: Criterion | None, measurement: ChartMeasurement | None = None,
-                       bound: str = "classic"
-                       ) -> tuple[Prediction, Verdict | None, DirectionalPrediction | None]:
-    """The classic prediction, the direction-aware one (of ``measurement``, when given) and
-    the verdict of ``criterion`` on the ``bound`` asked for (``classic`` or ``directional``)."""
-    from fidelity.prediction.directional import BOUNDS, evaluate_directional
-    from fidelity.prediction.table import predict
-    from fidelity.prediction.verdict import evaluate
-
-    if bound not in BOUNDS:
-        from fidelity.errors import unknown_name
-
-        raise unknown_name("bound", bound, BOUNDS)
-    prediction = predict(mean_delta_e, size=size, table=table)
-    directional = _directional(measurement, size, table) if measurement is not None else None
-    verdict = None
-    if criterion:
-        if bound == "directional" and directional is not None:
-            verdict = evaluate_directional(mean_delta_e, directional, criterion)
-        else:
-            verdict = evaluate(mean_delta_e, prediction, criterion)
-    return prediction, verdict, directional
-
-
-def _directional(measurement: ChartMeasurement, size: str,
-                 table: PredictionTable | str | None) -> DirectionalPrediction:
-    """The direction-aware prediction of a chart: from ``table`` when it is a direction-aware
-    table, else from the default one."""
-    from fidelity.prediction.directional import predict_chart
-
-    kind = getattr(table, "kind", None)
-    name: str | None = None
-    if isinstance(table, str):
-        name = table
-    elif table is not None and kind == "directional" and table.path is not None:
-        name = str(table.path)
-    if name is not None and kind != "directional":
-        from fidelity.prediction.table import load_prediction_table
-
-        if load_prediction_table(name).kind != "directional":
-            name = None
-    return predict_chart(measurement, size=size, table=name)
 
 
 def _measure(request: MeasureRequest | None, mapping: Any, key: str,
@@ -167,8 +120,7 @@ def check_camera(
     render = render_chart(camera if camera is not None else DEFAULT_CAMERA, illuminant,
                           renderer, reference=reference, seed=seed)
     m = render.measurement
-    prediction, verdict, directional = _predict_and_judge(m.mean_delta_e, size, table,
-                                                          criterion, m, bound)
+    prediction, verdict, directional = judge(m.mean_delta_e, size, table, criterion, m, bound)
     from fidelity.chart.blindspots import chart_blind_spots
 
     spots = chart_blind_spots(m, bits=render.camera.quantisation_bits)
@@ -256,8 +208,8 @@ def audit_image(
                            layer=layer, encoding=encoding, exposure=exposure,
                            reference=reference, illuminant=illuminant, negatives=negatives,
                            colourspace=colourspace, bayer=bayer, max_pixels=max_pixels)
-    prediction, verdict, directional = _predict_and_judge(
-        result.mean_delta_e, size, table, criterion, result.measurement, bound)
+    prediction, verdict, directional = judge(result.mean_delta_e, size, table, criterion,
+                                             result.measurement, bound)
     info = result.image
     assert info is not None  # measure_image always describes the file
     source = ImageSource(
@@ -317,20 +269,11 @@ def chart_emulation(measurement: ChartMeasurement) -> Any:
     return PatchEmulation.fit(ref, measurement.srgb, neutral_patches(measurement))
 
 
-@dataclass(frozen=True)
-class GateOutputs:
-    """Where one gated subject's reports go (None: not written)."""
-
-    json_path: Path | None = None
-    html_path: Path | None = None
-
-
 def gate(
     criterion: Criterion,
     images: Sequence[str | os.PathLike[str]] = (),
     *,
     camera: str | None = None,
-    outputs: Sequence[GateOutputs] | None = None,
     corners: str | None = None,
     layer: str | None = None,
     encoding: str | None = None,
@@ -345,23 +288,20 @@ def gate(
     table: str | None = None,
     max_pixels: int | None = None,
     bound: str = "classic",
-) -> list[GateCase]:
-    """Gate ``images`` one by one (or ``camera``) against ``criterion``; write each one's
-    reports to its :class:`GateOutputs`. An input error of one subject (exit code 2) becomes
-    its case's ``error``; the others are still measured.
+) -> list[GateResult]:
+    """Gate ``images`` one by one (or ``camera``) against ``criterion``. An input error of
+    one subject (exit code 2) becomes its result's ``error``; the others are still measured.
 
-    ``reference`` defaults to ``scene``. Returns one
-    :class:`~fidelity.report.junit.GateCase` per subject (its report, or its error, and the
-    time it took); :func:`fidelity.report.junit.gate_exit_code` turns them into the exit code.
+    ``reference`` defaults to ``scene``. Returns one :class:`~fidelity.records.GateResult`
+    per subject (its report, or its error, and the time it took);
+    :func:`fidelity.records.gate_exit_code` turns them into the exit code and
+    :func:`fidelity.report.write_chart_report` writes each report.
     """
     from fidelity.errors import FidelityError
-    from fidelity.report.chart import write_chart_report
-    from fidelity.report.junit import GateCase
 
     subjects: list[str] = [os.fspath(i) for i in images] or ([camera] if camera else [])
-    outs = list(outputs) if outputs is not None else [GateOutputs()] * len(subjects)
-    cases: list[GateCase] = []
-    for subject, out in zip(subjects, outs, strict=True):
+    results: list[GateResult] = []
+    for subject in subjects:
         t0 = time.perf_counter()
         try:
             if images:
@@ -375,16 +315,14 @@ def gate(
                 report = check_camera(subject, illuminant=illuminant, renderer=renderer,
                                       reference=reference or "scene", size=size, table=table,
                                       criterion=criterion, command="gate", bound=bound)
-            write_chart_report(report, json_path=out.json_path, html_path=out.html_path,
-                               protect=[os.fspath(i) for i in images])
         except (FidelityError, OSError) as exc:
-            cases.append(GateCase(subject, criterion, error=str(exc),
-                                  seconds=time.perf_counter() - t0))
+            results.append(GateResult(subject, criterion, error=str(exc),
+                                      seconds=time.perf_counter() - t0))
         else:
-            cases.append(GateCase(subject, criterion, report=report,
-                                  seconds=time.perf_counter() - t0))
-    return cases
+            results.append(GateResult(subject, criterion, report=report,
+                                      seconds=time.perf_counter() - t0))
+    return results
 
 
-__all__ = ["AUDIT_CONVENTION", "DEFAULT_CRITERION", "GateOutputs", "audit_image", "chart_emulation",
+__all__ = ["AUDIT_CONVENTION", "DEFAULT_CRITERION", "audit_image", "chart_emulation",
            "check_camera", "gate"]

@@ -8,7 +8,7 @@ Installed with camera-fidelity (entry point ``pytest11``), it gives every test s
 
 The fixture measures the chart in an image (found, or given by ``corners=``) with
 :func:`fidelity.audit_image` and returns a :class:`ColourFidelity`: a float (the mean ΔE00) that
-also carries the whole :class:`~fidelity.report.chart.ChartReport` (``.report``). The measured
+also carries the whole :class:`~fidelity.records.ChartReport` (``.report``). The measured
 values are recorded as JUnit properties of the test (``record_property``), so a CI shows them.
 
 A marker sets the fixture's defaults for one test::
@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 import pytest
 
 if TYPE_CHECKING:
-    from fidelity.report.chart import ChartReport
+    from fidelity.records import ChartReport
 
 
 class ColourFidelity(float):

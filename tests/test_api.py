@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import fidelity
-from fidelity.report.chart import ChartReport
+from fidelity.records import ChartReport
 
 
 def test_every_public_name_resolves_and_is_documented():

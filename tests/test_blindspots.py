@@ -84,7 +84,7 @@ def test_check_and_audit_report_the_warnings(tmp_path):
     assert [b["kind"] for b in doc["blind_spots"] if b["at_risk"]] == ["bit-depth"]
     html = (tmp_path / "report.html").read_text()
     assert "Blind spots of the chart ΔE" in html and "<strong>warning</strong>" in html
-    from fidelity.report.chart import ChartReport, report_schema
+    from fidelity.records import ChartReport, report_schema
 
     jsonschema = pytest.importorskip("jsonschema")
     jsonschema.validate(doc, report_schema())

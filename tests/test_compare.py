@@ -14,7 +14,8 @@ from fidelity.chart.image import write_png
 from fidelity.cli import main
 from fidelity.colour.charts import load_reference
 from fidelity.colour.colorimetry import delinearize_srgb, delta_e_2000, linearize_srgb, srgb_to_lab
-from fidelity.compare import ComparisonReport, compare_charts
+from fidelity.compare import compare_charts
+from fidelity.records import ComparisonReport
 
 PATCH, GAP = 40, 10
 #: A known 3x3 colour matrix (linear light), what the "real camera" does differently.

@@ -163,7 +163,7 @@ def test_validation_both_bounds_hold_on_the_30_cameras():
 def test_directional_verdict_and_json_round_trip():
     from fidelity.check import check_camera
     from fidelity.prediction.verdict import Criterion
-    from fidelity.report.chart import ChartReport
+    from fidelity.records import ChartReport
 
     crit = Criterion("max-dmap", 5.0)
     cam = ROOT / "cameras" / "bad-hue-rotation.toml"

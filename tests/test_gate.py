@@ -155,7 +155,7 @@ def test_gate_camera(tmp_path):
 
 def test_report_json_matches_the_schema(png, tmp_path):
     jsonschema = pytest.importorskip("jsonschema")
-    from fidelity.report.chart import report_schema
+    from fidelity.records import report_schema
 
     path, _ = png
     r = run("audit", path, "--corners", corners_of(), "--json", tmp_path / "a.json")

@@ -73,7 +73,8 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
     """
     from fidelity.check import audit_image
     from fidelity.fileio import check_outputs
-    from fidelity.report.chart import ImageSource, write_chart_report
+    from fidelity.records import ImageSource
+    from fidelity.report.chart import write_chart_report
     from fidelity.report.terminal import summary_lines
 
     # an existing folder gets IMAGE-NAME.json / .html, as in `fidelity gate`

@@ -113,7 +113,8 @@ def _check_one(cam: str, html: Path | None, json_file: Path | None, *, to_stdout
                measure: Any = None) -> int:
     """Check one camera, write its reports, print its verdict; its exit code."""
     from fidelity.check import check_camera
-    from fidelity.report.chart import RenderSource, write_chart_report
+    from fidelity.records import RenderSource
+    from fidelity.report.chart import write_chart_report
     from fidelity.report.terminal import summary_lines
 
     report = check_camera(cam, illuminant=illuminant, renderer=renderer, reference=reference,

@@ -85,10 +85,12 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
     fidelity compare sim.exr photo.png --max-delta-e 5 --junit sim-vs-real.xml --html r.html
     """
     from fidelity.cli.gate import make_criterion
-    from fidelity.compare import compare_charts, comparison_lines, write_comparison_report
+    from fidelity.compare import compare_charts
     from fidelity.errors import FidelityError
     from fidelity.fileio import check_outputs
-    from fidelity.report.junit import GateCase, write_junit
+    from fidelity.records import GateResult
+    from fidelity.report.compare import comparison_lines, write_comparison_report
+    from fidelity.report.junit import write_junit
 
     to_stdout = json_path == STDOUT
     check_outputs({"--json": None if to_stdout else json_path, "--html": html_path,
@@ -111,7 +113,7 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
             colourspace=colourspace, bayer=bayer, measure=request)
     except FidelityError as exc:
         if junit is not None:
-            write_junit(junit, [GateCase(subject, criterion, error=str(exc))])
+            write_junit(junit, [GateResult(subject, criterion, error=str(exc))])
         raise
     write_comparison_report(report, json_path=None if to_stdout else json_path,
                             html_path=html_path, protect=(sim, real))
@@ -119,7 +121,7 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
         click.echo(line)
     if junit is not None:
         try:
-            write_junit(junit, [GateCase(subject, criterion, report=report.as_chart_report())])
+            write_junit(junit, [GateResult(subject, criterion, report=report.as_chart_report())])
         except (FidelityError, OSError) as exc:
             click.echo(f"fidelity: error: {junit}: cannot write JUnit XML: {exc}", err=True)
             sys.exit(EXIT_ERROR)

@@ -20,7 +20,7 @@ from fidelity.prediction.table import CLASS_COLUMNS, SIZES
 from fidelity.prediction.verdict import EXIT_ERROR, Criterion
 
 if TYPE_CHECKING:
-    from fidelity.report.junit import GateCase
+    from fidelity.records import GateResult
 
 PATH = click.Path(dir_okay=False, path_type=Path)
 
@@ -63,7 +63,7 @@ def _error_line(message: str) -> None:
     click.echo(f"fidelity: error: {message}", err=True)
 
 
-def _write_junit(junit: Path, cases: Sequence[GateCase]) -> None:
+def _write_junit(junit: Path, cases: Sequence[GateResult]) -> None:
     """Write the JUnit file; a failure to write it is an error (exit 2)."""
     from fidelity.report.junit import write_junit
 
@@ -88,6 +88,24 @@ def report_paths(images: tuple[Path, ...], path: Path | None, suffix: str, *,
         raise FidelityError(f"several images are named {', '.join(twice)}: their reports in "
                             f"{path} would collide; gate them in separate runs")
     return [path / f"{n}{suffix}" for n in names]
+
+
+def write_reports(result: GateResult, json_path: Path | None, html_path: Path | None,
+                  inputs: Sequence[Path]) -> GateResult:
+    """Write a gated subject's JSON and HTML reports (never over an ``inputs`` file); a
+    failure to write them becomes the subject's error, as an input error does."""
+    from dataclasses import replace
+
+    from fidelity.report.chart import write_chart_report
+
+    if result.report is None:
+        return result
+    try:
+        write_chart_report(result.report, json_path=json_path, html_path=html_path,
+                           protect=list(inputs))
+    except (FidelityError, OSError) as exc:
+        return replace(result, report=None, error=str(exc))
+    return result
 
 
 @click.command()
@@ -161,9 +179,8 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
                                                           bayer, colourspace)):
         raise click.UsageError("--corners, --encoding, --exposure, --layer, --bayer and "
                                "--colourspace apply to an IMAGE, not to --camera")
-    from fidelity.check import GateOutputs
     from fidelity.check import gate as gate_subjects
-    from fidelity.report.junit import GateCase, gate_exit_code
+    from fidelity.records import GateResult, gate_exit_code
     from fidelity.report.terminal import summary_lines
 
     many = len(images) > 1
@@ -198,16 +215,16 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
     except FidelityError as exc:
         if junit is not None:
             subject = ", ".join(map(str, images)) if images else str(camera)
-            _write_junit(junit, [GateCase(subject, error=str(exc))])
+            _write_junit(junit, [GateResult(subject, error=str(exc))])
         _error_line(str(exc))
         sys.exit(EXIT_ERROR)
     cases = gate_subjects(
-        criterion, images, camera=camera,
-        outputs=[GateOutputs(jp, hp) for jp, hp in zip(json_paths, html_paths, strict=True)],
-        corners=corners, layer=layer, encoding=encoding, exposure=exposure,
+        criterion, images, camera=camera, corners=corners, layer=layer, encoding=encoding, exposure=exposure,
         negatives=negatives, colourspace=colourspace, bayer=bayer, reference=reference,
         illuminant=illuminant, renderer=renderer, size=size, table=table,
         max_pixels=max_pixels, bound=bound)
+    cases = [write_reports(case, jp, hp, images)
+             for case, jp, hp in zip(cases, json_paths, html_paths, strict=True)]
     for case in cases:
         if many:
             click.echo(f"{case.subject}:" if case.error is None else f"{case.subject}: error")

@@ -404,13 +404,17 @@ def load_directional_table(name_or_path: str | None = None) -> DirectionalTable:
     :data:`DEFAULT_DIRECTIONAL_TABLE`). A prediction table without ``families`` is an error
     naming it."""
     from fidelity.errors import InputFileError
-    from fidelity.prediction.table import load_prediction_table, parse_prediction_table
+    from fidelity.prediction.table import (
+        TableKind,
+        load_prediction_table,
+        parse_prediction_table,
+    )
 
     classic = load_prediction_table(name_or_path or DEFAULT_DIRECTIONAL_TABLE)
     fams = classic.raw.get("families")
-    if classic.kind != "directional" or not isinstance(fams, dict):
+    if classic.kind is not TableKind.DIRECTIONAL or not isinstance(fams, dict):
         raise InputFileError(f"{classic.path or classic.name}: not a direction-aware table "
-                             f"(kind {classic.kind!r}, no 'families'); e.g. "
+                             f"(kind {classic.kind.value!r}, no 'families'); e.g. "
                              f"{DEFAULT_DIRECTIONAL_TABLE}")
     tables: dict[str, PredictionTable] = {}
     members: dict[str, tuple[str, ...]] = {}

@@ -41,6 +41,7 @@ import math
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
@@ -68,9 +69,33 @@ CLASS_COLUMNS: dict[str, str] = {
 #: Largest possible loss in each column (total loss) when nothing better is known.
 CEILING = 100.0
 
-#: Table kinds; a ``directional`` table is a measured one that also holds per-family curves
-#: (:mod:`fidelity.prediction.directional`).
-_KINDS = ("published-bounds", "measured", "directional")
+
+
+class TableKind(StrEnum):
+    """What a prediction table's values are.
+
+    ``published-bounds``: upper bounds read from a publication (the worst case over its
+    transforms and detectors); ``measured``: the worst loss measured over the transforms (and
+    models) at each ΔE, with sampling error; ``directional``: a measured table that also holds
+    per-family curves (:mod:`fidelity.prediction.directional`). The value is the JSON ``kind``.
+    """
+
+    PUBLISHED_BOUNDS = "published-bounds"
+    MEASURED = "measured"
+    DIRECTIONAL = "directional"
+
+    @property
+    def upper_bound(self) -> bool:
+        """True when the values are upper bounds rather than measured worst cases."""
+        return self is TableKind.PUBLISHED_BOUNDS
+
+    @property
+    def measured(self) -> bool:
+        """True when the values were measured (and carry sampling error)."""
+        return self is not TableKind.PUBLISHED_BOUNDS
+
+
+_KINDS = tuple(k.value for k in TableKind)
 
 
 def prediction_dir() -> Path:
@@ -114,7 +139,7 @@ class PredictionTable:
 
     name: str
     title: str
-    kind: str
+    kind: TableKind
     provenance: dict[str, Any]
     units: dict[str, str]
     curves: tuple[Curve, ...]
@@ -160,7 +185,8 @@ class PredictionTable:
         back from JSON names its table; :func:`load_prediction_table` gives the curves)."""
         path = data.get("path")
         return cls(name=str(data["name"]), title=str(data.get("title", "")),
-                   kind=str(data["kind"]), provenance=dict(data.get("provenance") or {}),
+                   kind=TableKind(str(data["kind"])),
+                   provenance=dict(data.get("provenance") or {}),
                    units=dict(data.get("units") or {}), curves=(),
                    interpolation=str(data.get("interpolation", "pchip")),
                    path=Path(path) if path else None)
@@ -170,7 +196,7 @@ class PredictionTable:
         return {
             "name": self.name,
             "title": self.title,
-            "kind": self.kind,
+            "kind": self.kind.value,
             "interpolation": self.interpolation,
             "path": str(self.path) if self.path else None,
             "provenance": self.provenance,
@@ -267,7 +293,7 @@ def parse_prediction_table(obj: dict[str, Any], origin: str = "<table>") -> Pred
     return PredictionTable(
         name=str(v["name"]),
         title=str(v.get("title", v["name"])),
-        kind=str(v["kind"]),
+        kind=TableKind(str(v["kind"])),
         provenance=dict(v["provenance"]),
         units=dict(v["units"]),
         curves=tuple(curves),
@@ -574,7 +600,7 @@ class Prediction:
             "size": self.size,
             "size_used": self.size_used,
             **{col: self.columns[col].value for col in COLUMNS},
-            "bound": self.table.kind == "published-bounds",
+            "bound": self.table.kind.upper_bound,
             "out_of_range": self.out_of_range,
             "columns": {col: c.to_json() for col, c in self.columns.items()},
             "interpolation": self.method,
@@ -678,7 +704,7 @@ def predict(
         else:
             note = (f"ΔE {de:g} is beyond the table's range ({rng[0]:g}..{rng[1]:g}); no "
                     f"extrapolation: total loss, {_ceiling_words(col, best_v)}")
-        if (col == "dmap_relative" and tab.kind == "published-bounds" and baseline_map
+        if (col == "dmap_relative" and tab.kind.upper_bound and baseline_map
                 and columns.get("dmap_points") and columns["dmap_points"].value is not None):
             pts = columns["dmap_points"].value
             alt = min(CEILING, 100.0 * pts / float(baseline_map))
@@ -686,17 +712,17 @@ def predict(
                 note += (f"; raised to 100*{pts:.4g}/{float(baseline_map):g} = {alt:.4g} % "
                          f"(the paper's percent read as points)")
                 best_v = alt
-        if tab.kind == "published-bounds":
+        if tab.kind.upper_bound:
             note = "upper bound; " + note
         columns[col] = ColumnPrediction(best_v, status, rng, note)
-    if tab.kind == "published-bounds":
+    if tab.kind.upper_bound:
         notes.append("published-bounds table: values are upper bounds (worst case over the "
                       "paper's transforms and detectors), not expectations")
         if baseline_map is None:
             notes.append("ΔmAP points vs relative: the paper's '%' is ambiguous; dmap_points is "
                          "safe under both readings, dmap_relative only under the relative "
                          "reading (give the detector's baseline mAP to bound it under both)")
-    if tab.kind in ("measured", "directional"):
+    if tab.kind.measured:
         notes.append("measured table: values are the worst loss measured over the transforms "
                      "(and models) at each ΔE, with sampling error, not a guaranteed bound")
         se = _bracketing_se(answering, de)
@@ -854,6 +880,7 @@ __all__ = [
     "DeltaELimit",
     "Prediction",
     "PredictionTable",
+    "TableKind",
     "TransformParameter",
     "available_tables",
     "delta_e_limit",

@@ -149,7 +149,7 @@ def evaluate(mean_delta_e: float, prediction: Prediction | None, criterion: Crit
     passed = loss <= criterion.limit
     conservative = col.status != "interpolated"
     extra = f" ({col.status}: conservative answer)" if conservative else ""
-    bound = " (upper bound)" if prediction.table.kind == "published-bounds" else ""
+    bound = " (upper bound)" if prediction.table.kind.upper_bound else ""
     return Verdict(
         passed, criterion, float(loss),
         f"{'PASS' if passed else 'FAIL'}: predicted {what} {loss:.2f} {unit}{bound}"

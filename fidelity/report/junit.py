@@ -14,47 +14,18 @@ import datetime as _dt
 import os
 import socket
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from fidelity.prediction.verdict import EXIT_ERROR, Criterion
-from fidelity.report.chart import ChartReport
+from fidelity.records import GateResult
 
 
-@dataclass(frozen=True)
-class GateCase:
-    """One gated input: its ``subject`` (image path or camera), the ``criterion``, the
-    ``report`` (None on error), the ``error`` message (exit code 2) and the ``seconds`` it
-    took."""
-
-    subject: str
-    criterion: Criterion | None = None
-    report: ChartReport | None = None
-    error: str | None = None
-    seconds: float = 0.0
-
-    @property
-    def name(self) -> str:
-        """The JUnit test-case name (stable: no threshold in it)."""
-        return f"colour fidelity of {self.subject}"
-
-    @property
-    def exit_code(self) -> int:
-        """0 pass, 1 fail, 2 error."""
-        if self.error is not None or self.report is None:
-            return EXIT_ERROR
-        return self.report.exit_code
+def case_name(result: GateResult) -> str:
+    """The JUnit test-case name of a gated subject (stable: no threshold in it)."""
+    return f"colour fidelity of {result.subject}"
 
 
-def gate_exit_code(cases: Sequence[GateCase]) -> int:
-    """The exit code of a gate over ``cases``: 2 if any could not be measured, else 1 if any
-    failed, else 0."""
-    codes = [c.exit_code for c in cases]
-    return EXIT_ERROR if EXIT_ERROR in codes else max(codes, default=0)
-
-
-def _properties(case: GateCase) -> list[tuple[str, str]]:
+def _properties(case: GateResult) -> list[tuple[str, str]]:
     values: list[tuple[str, object]] = []
     if case.criterion is not None:
         c = case.criterion
@@ -85,7 +56,7 @@ def _properties(case: GateCase) -> list[tuple[str, str]]:
     return [(k, "" if v is None else str(v)) for k, v in values]
 
 
-def junit_xml(cases: Sequence[GateCase], *, timestamp: str | None = None,
+def junit_xml(cases: Sequence[GateResult], *, timestamp: str | None = None,
               hostname: str | None = None) -> str:
     """JUnit XML of ``cases`` (see the module docstring); ``timestamp`` (ISO 8601, UTC) and
     ``hostname`` default to now and this machine."""
@@ -100,7 +71,7 @@ def junit_xml(cases: Sequence[GateCase], *, timestamp: str | None = None,
     suite_props = ET.SubElement(suite, "properties")  # JUnit: properties precede test cases
     failures = errors = 0
     for c in cases:
-        case = ET.SubElement(suite, "testcase", classname="fidelity.gate", name=c.name,
+        case = ET.SubElement(suite, "testcase", classname="fidelity.gate", name=case_name(c),
                              time=f"{c.seconds:.3f}")
         props = suite_props if len(cases) == 1 else ET.SubElement(case, "properties")
         for key, value in _properties(c):
@@ -131,11 +102,11 @@ def junit_xml(cases: Sequence[GateCase], *, timestamp: str | None = None,
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
-def write_junit(path: str | os.PathLike[str], cases: Sequence[GateCase]) -> Path:
+def write_junit(path: str | os.PathLike[str], cases: Sequence[GateResult]) -> Path:
     """Write JUnit XML atomically (see :func:`junit_xml`)."""
     from fidelity.fileio import write_text_atomic
 
     return write_text_atomic(path, junit_xml(cases))
 
 
-__all__ = ["GateCase", "gate_exit_code", "junit_xml", "write_junit"]
+__all__ = ["case_name", "junit_xml", "write_junit"]

@@ -276,8 +276,8 @@ def prediction_curve(prediction: Prediction, limit_dmap: float | None = None,
         ax.axvline(limit_delta_e, color="tab:red", ls="-.", lw=1.1,
                    label=f"ΔE limit {limit_delta_e:g}")
     ax.set_xlabel("chart ΔE00 (mean over 24 patches)")
-    ax.set_ylabel("predicted loss" + (" (upper bound)" if prediction.table.kind ==
-                                      "published-bounds" else ""))
+    ax.set_ylabel("predicted loss" + (" (upper bound)" if prediction.table.kind.upper_bound
+                                      else ""))
     ax.set_yscale("symlog", linthresh=1.0)
     ax.set_ylim(0, 105)
     ax.set_xlim(0, xmax)

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from fidelity.report.chart import ChartReport, ImageSource
+from fidelity.prediction.table import TableKind
+from fidelity.records import ChartReport, ImageSource
 
 
 def summary_lines(report: ChartReport) -> list[str]:
@@ -40,14 +41,14 @@ def summary_lines(report: ChartReport) -> list[str]:
                          + ", ".join(src.clipped_patches))
     p = report.prediction
     if p is not None:
-        bound = p.table.kind == "published-bounds"
+        bound = p.table.kind.upper_bound
         b = "<= " if bound else ""
 
         def f(v: float | None) -> str:
             return "n/a" if v is None else f"{b}{v:.2f}"
 
         kind = ("upper bound, " if bound else
-                "measured worst case, " if p.table.kind == "measured" else "")
+                "measured worst case, " if p.table.kind is TableKind.MEASURED else "")
         lines.append(f"predicted ΔmAP: {f(p.dmap_points)} percentage points, "
                      f"{f(p.dmap_relative)} % of baseline ({kind}table "
                      f"{p.table.name}, detector size {p.size_used})")

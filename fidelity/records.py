@@ -1,0 +1,623 @@
+"""The result records of the chart pipeline: what ``check``, ``audit``, ``gate`` and ``compare``
+return (:mod:`fidelity.check`, :mod:`fidelity.compare`), with their JSON forms.
+
+:class:`ChartReport` is one chart measured (an image audit or a camera render), the detection loss
+predicted from its chart ΔE and the verdict of a gate. Its JSON form (``schema_version``
+:data:`SCHEMA_VERSION`) is described by the JSON Schema
+``fidelity/data/schemas/report.schema.json`` (:func:`report_schema`); keys that do not apply are
+``null``:
+
+- ``mean_delta_e``, ``max_delta_e``, ``worst_patch``, ``patches`` (per patch ``delta_e``,
+  ``delta_l``, ``delta_c``, ``delta_h``, ``lab``, ``reference_lab``, ``srgb``, ...): the chart
+  measurement (CIEDE2000, Lab D65);
+- ``exposure_ev``, ``bad_pixels``: the audit of an image (``null`` for a render);
+- ``source``: the image (:class:`ImageSource`) or the render (:class:`RenderSource`);
+- ``prediction``: ΔE -> ΔmAP (:meth:`fidelity.prediction.table.Prediction.to_json`);
+- ``verdict``: pass/fail of the criterion (:meth:`fidelity.prediction.verdict.Verdict.to_json`);
+- ``details``: where the patches were sampled (image) or the camera and render settings;
+- ``provenance``: tool version, Python and libraries, input sha256, tables (name, path,
+  sha256), conventions.
+
+:class:`ComparisonReport` is a sim-to-real comparison (two audits, the :class:`Normalisation`,
+the sim-to-real measurement, prediction and verdict); :class:`GateResult` one gated subject
+(its report or its input error). :mod:`fidelity.report` turns these records into JSON files,
+HTML, JUnit and terminal text; nothing here writes a file or a sentence of a report.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+import platform
+import sys
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fidelity.chart.blindspots import BlindSpot
+from fidelity.chart.find import ChartChecks, FoundChart
+from fidelity.chart.image import ImageInfo
+from fidelity.chart.locate import ChartLocation
+from fidelity.chart.measure import BadPixels, ChartMeasurement
+from fidelity.fileio import JSONObject, json_ready
+from fidelity.prediction.directional import DirectionalPrediction
+from fidelity.prediction.table import Prediction
+from fidelity.prediction.verdict import EXIT_ERROR, Criterion, Verdict
+
+if TYPE_CHECKING:
+    from fidelity.coco.measure import MeasuredLoss
+
+#: Version of the JSON report layout (bump on incompatible change).
+SCHEMA_VERSION = "1.0"
+#: Commands that write a chart report.
+COMMANDS = ("audit", "check", "compare", "gate")
+
+
+def report_schema_path() -> Path:
+    """Path of the JSON Schema of the report."""
+    from fidelity.resources import resource_dir
+
+    return resource_dir("data") / "schemas" / "report.schema.json"
+
+
+def report_schema() -> JSONObject:
+    """The JSON Schema (draft 2020-12) of the JSON report."""
+    schema: JSONObject = json.loads(report_schema_path().read_text(encoding="utf-8"))
+    return schema
+
+
+@dataclass(frozen=True)
+class ImageSource:
+    """An image whose chart was measured: the file (:class:`~fidelity.chart.image.ImageInfo`),
+    the corner patch centres used (``corners``, (4, 2) image x, y), how the chart was found
+    (``found``; None when the corners were given), where each patch was sampled
+    (``location``), the RGB ``colourspace`` the pixels were taken in, the ``exposure_mode``
+    (auto or fixed), the reference's name, the patches clipped in sRGB and the pixel
+    ``encoding`` measured."""
+
+    image: ImageInfo
+    corners: NDArray[np.float64]
+    location: ChartLocation
+    colourspace: str
+    exposure_mode: str
+    reference: str
+    encoding: str
+    clipped_patches: tuple[str, ...] = ()
+    found: FoundChart | None = None
+    corner_checks: ChartChecks | None = None
+
+    def to_json(self) -> JSONObject:
+        """The report's ``source`` object."""
+        return {"type": "image", **self.image.to_json(), "corners": self.corners.tolist(),
+                "corners_found": self.found.to_json() if self.found else None,
+                "corner_checks": (self.corner_checks.to_json() if self.corner_checks
+                                  else None),
+                "colourspace": self.colourspace, "exposure_mode": self.exposure_mode,
+                "reference": self.reference}
+
+    def details(self) -> JSONObject:
+        """The report's ``details`` object for an image."""
+        return {"location": self.location.to_json(),
+                "clipped_patches": list(self.clipped_patches), "encoding": self.encoding}
+
+    @classmethod
+    def from_json(cls, source: Mapping[str, Any], details: Mapping[str, Any]) -> ImageSource:
+        """The source of a report's ``source`` and ``details``; the sampling windows are
+        located again from the corners (:func:`fidelity.chart.locate.locate_chart`)."""
+        from fidelity.chart.locate import locate_chart
+
+        info = ImageInfo.from_json(source)
+        corners = np.asarray(source["corners"], dtype=np.float64)
+        loc = details["location"]
+        rows_cols = (4, 6) if len(loc["centres"]) == 24 else (1, len(loc["centres"]))
+        location = locate_chart(corners, (info.height, info.width), rows=rows_cols[0],
+                                cols=rows_cols[1], window=float(loc["window_pitch_fraction"]),
+                                min_pixels=1)
+        found = source.get("corners_found")
+        checks = source.get("corner_checks")
+        return cls(info, corners, location, str(source.get("colourspace", "sRGB")),
+                   str(source.get("exposure_mode", "")), str(source.get("reference", "")),
+                   str(details.get("encoding", info.encoding or "")),
+                   tuple(details.get("clipped_patches", ())),
+                   FoundChart.from_json(found) if found else None,
+                   ChartChecks.from_json(checks) if checks else None)
+
+    @property
+    def title(self) -> str:
+        """How a report names this source."""
+        return self.image.path
+
+    @property
+    def reference_description(self) -> str:
+        """The reference the chart was compared with, in words (its illuminant included)."""
+        return self.reference
+
+
+@dataclass(frozen=True)
+class RenderSource:
+    """A camera model's render of the spectral chart: the ``camera`` name, ``illuminant``,
+    ``renderer`` and Mitsuba ``variant`` (None for the closed form), the render's wall time
+    in ``seconds``, the ``reference`` it was compared with, and the camera's and the render's
+    settings (JSON, as :meth:`fidelity.camera.render.ChartRender.to_json` gives them)."""
+
+    camera: str
+    illuminant: str
+    renderer: str
+    variant: str | None
+    seconds: float
+    reference: str
+    camera_settings: Mapping[str, Any] = field(default_factory=dict)
+    render_settings: Mapping[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> JSONObject:
+        """The report's ``source`` object."""
+        return {"type": "render", "camera": self.camera, "illuminant": self.illuminant,
+                "renderer": self.renderer, "variant": self.variant, "seconds": self.seconds,
+                "reference": self.reference}
+
+    def details(self) -> JSONObject:
+        """The report's ``details`` object for a render."""
+        return {"camera": dict(self.camera_settings), "settings": dict(self.render_settings)}
+
+    @classmethod
+    def from_json(cls, source: Mapping[str, Any], details: Mapping[str, Any]) -> RenderSource:
+        """Inverse of :meth:`to_json` and :meth:`details`."""
+        return cls(str(source["camera"]), str(source["illuminant"]), str(source["renderer"]),
+                   source.get("variant"), float(source["seconds"]), str(source["reference"]),
+                   dict(details.get("camera") or {}), dict(details.get("settings") or {}))
+
+    @property
+    def title(self) -> str:
+        """How a report names this source."""
+        return self.camera
+
+    @property
+    def reference_description(self) -> str:
+        """The reference the chart was compared with, in words (its illuminant included)."""
+        if self.reference != "scene":
+            return self.reference
+        spectra = self.render_settings.get("spectra", "BabelColor Average")
+        return f"scene ({spectra} under {self.illuminant})"
+
+
+Source = ImageSource | RenderSource
+
+
+@dataclass(frozen=True)
+class TableRef:
+    """A data table a result depends on: ``name``, ``kind`` (prediction tables), ``path`` and
+    the file's ``sha256``."""
+
+    name: str
+    path: str | None
+    sha256: str | None
+    kind: str | None = None
+
+    def to_json(self) -> JSONObject:
+        """JSON form (``kind`` only for tables that have one)."""
+        out: JSONObject = {"name": self.name}
+        if self.kind is not None:
+            out["kind"] = self.kind
+        return out | {"path": self.path, "sha256": self.sha256}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> TableRef:
+        """Inverse of :meth:`to_json`."""
+        return cls(str(data["name"]), data.get("path"), data.get("sha256"), data.get("kind"))
+
+    @classmethod
+    def of_file(cls, name: str, path: str | os.PathLike[str] | None,
+                kind: str | None = None) -> TableRef:
+        """The reference of a table file (its sha256 read now; None when unreadable)."""
+        from fidelity.fileio import file_sha256
+
+        digest = None
+        if path:
+            try:
+                digest = file_sha256(path)
+            except OSError:
+                digest = None
+        return cls(name, str(path) if path else None, digest, kind)
+
+
+#: Conventions every chart report states.
+BASE_CONVENTIONS: Mapping[str, str] = {
+    "delta_e": "CIEDE2000 (kL = kC = kH = 1), CIE 1976 L*a*b* relative to D65, CIE 1931 2° "
+               "observer; chart ΔE = mean over the 24 patches",
+    "srgb": "IEC 61966-2-1 (piecewise transfer, 0.04045 / 0.0031308, exponent 2.4)",
+    "dmap_points": "percentage points of mAP@[.50:.95] (100*(baseline-transformed))",
+    "dmap_relative": "percent of the baseline mAP",
+}
+
+#: Libraries whose versions a report records.
+_LIBRARIES = ("numpy", "scipy", "colour-science", "OpenImageIO", "OpenEXR", "matplotlib",
+              "mitsuba")
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """Where a report's numbers come from: the tool ``version``, ``python``, ``platform``,
+    library versions, the input's sha256, the tables used and the conventions."""
+
+    version: str
+    python: str
+    platform: str
+    libraries: Mapping[str, str]
+    input_sha256: str | None
+    tables: Mapping[str, TableRef]
+    conventions: Mapping[str, Any]
+    tool: str = "fidelity"
+
+    def to_json(self) -> JSONObject:
+        """The report's ``provenance`` object."""
+        return {"tool": self.tool, "version": self.version, "python": self.python,
+                "platform": self.platform, "libraries": dict(self.libraries),
+                "input_sha256": self.input_sha256,
+                "tables": {k: t.to_json() for k, t in self.tables.items()},
+                "conventions": dict(self.conventions)}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Provenance:
+        """Inverse of :meth:`to_json`."""
+        return cls(str(data["version"]), str(data["python"]), str(data["platform"]),
+                   dict(data["libraries"]), data.get("input_sha256"),
+                   {k: TableRef.from_json(v) for k, v in data["tables"].items()},
+                   dict(data["conventions"]), str(data.get("tool", "fidelity")))
+
+    @classmethod
+    def collect(cls, input_sha256: str | None, prediction: Prediction | None,
+                conventions: Mapping[str, Any]) -> Provenance:
+        """The provenance of a report made now, on this machine."""
+        from importlib.metadata import PackageNotFoundError, version
+
+        from fidelity import __version__
+        from fidelity.resources import resource_dir
+
+        libraries: dict[str, str] = {}
+        for name in _LIBRARIES:
+            try:
+                libraries[name] = version(name)
+            except PackageNotFoundError:
+                continue
+        tables: dict[str, TableRef] = {}
+        if prediction is not None:
+            t = prediction.table
+            tables["prediction"] = TableRef.of_file(t.name, t.path, t.kind)
+            tables["calibration"] = TableRef.of_file(
+                "calibration-safecolor", resource_dir("data") / "calibration-safecolor.json")
+        return cls(__version__, sys.version.split()[0], platform.platform(), libraries,
+                   input_sha256, tables, {**BASE_CONVENTIONS, **conventions})
+
+
+@dataclass(frozen=True)
+class ChartReport:
+    """One chart measured (an image audit or a camera render), the detection loss predicted
+    from its chart ΔE and the verdict of a gate (see the module docstring)."""
+
+    command: str
+    created: str
+    measurement: ChartMeasurement
+    source: Source
+    provenance: Provenance
+    prediction: Prediction | None = None
+    verdict: Verdict | None = None
+    exposure_ev: float | None = None
+    bad_pixels: BadPixels | None = None
+    valid_pixels: tuple[int, ...] | None = None
+    schema_version: str = SCHEMA_VERSION
+    #: the direction-aware prediction (:mod:`fidelity.prediction.directional`)
+    directional: DirectionalPrediction | None = None
+    #: which prediction decided a max-dmap verdict: ``classic`` or ``directional``
+    bound: str = "classic"
+    #: the blind-spot checks (:mod:`fidelity.chart.blindspots`)
+    blind_spots: tuple[BlindSpot, ...] = ()
+    #: losses measured on COCO (``--measure``; :class:`fidelity.coco.measure.MeasuredLoss`)
+    measured: tuple[MeasuredLoss, ...] = ()
+
+    @property
+    def warnings(self) -> list[BlindSpot]:
+        """The blind-spot checks that found a risk."""
+        return [s for s in self.blind_spots if s.at_risk]
+
+    @property
+    def mean_delta_e(self) -> float:
+        """The chart ΔE: mean ΔE00 over the patches."""
+        return self.measurement.mean_delta_e
+
+    @property
+    def max_delta_e(self) -> float:
+        """Largest per-patch ΔE00."""
+        return self.measurement.max_delta_e
+
+    @property
+    def worst_patch(self) -> str:
+        """The patch with the largest ΔE00."""
+        return self.measurement.worst_patch
+
+    @property
+    def exit_code(self) -> int:
+        """0 pass (or no verdict), 1 fail."""
+        return self.verdict.exit_code if self.verdict is not None else 0
+
+    def to_json(self) -> JSONObject:
+        """The JSON report (strict JSON values; see the module docstring)."""
+        m = self.measurement.to_json()
+        patches = m["patches"]
+        if self.valid_pixels is not None:
+            per_patch = self.bad_pixels.per_patch if self.bad_pixels else {}
+            for p, n in zip(patches, self.valid_pixels, strict=True):
+                p.update(valid_pixels=int(n), bad_pixels=int(per_patch.get(p["name"], 0)))
+        out: JSONObject = json_ready({
+            "schema_version": self.schema_version,
+            "command": self.command,
+            "created": self.created,
+            "mean_delta_e": m["mean_delta_e"],
+            "max_delta_e": m["max_delta_e"],
+            "worst_patch": m["worst_patch"],
+            "patches": patches,
+            "exposure_ev": self.exposure_ev,
+            "bad_pixels": self.bad_pixels.to_json() if self.bad_pixels else None,
+            "source": self.source.to_json(),
+            "prediction": self.prediction.to_json() if self.prediction else None,
+            "verdict": self.verdict.to_json() if self.verdict else None,
+            "details": self.source.details(),
+            "provenance": self.provenance.to_json(),
+            "bound": self.bound,
+            "directional_prediction": (self.directional.to_json()
+                                       if self.directional else None),
+            "blind_spots": [b.to_json() for b in self.blind_spots],
+            "measured_loss": [m.to_json() for m in self.measured],
+        })
+        return out
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any], *, validate: bool = True) -> ChartReport:
+        """The report of a JSON document, checked against :func:`report_schema` first
+        (``validate``; needs the ``jsonschema`` package)."""
+        if validate:
+            validate_report(data)
+        src, details = data["source"], data.get("details") or {}
+        source: Source = (ImageSource.from_json(src, details) if src["type"] == "image"
+                          else RenderSource.from_json(src, details))
+        patches = data["patches"]
+        valid = (tuple(int(p["valid_pixels"]) for p in patches)
+                 if all("valid_pixels" in p for p in patches) else None)
+        return cls(
+            command=str(data["command"]), created=str(data["created"]),
+            measurement=ChartMeasurement.from_json(data), source=source,
+            provenance=Provenance.from_json(data["provenance"]),
+            prediction=Prediction.from_json(data["prediction"]) if data["prediction"] else None,
+            verdict=Verdict.from_json(data["verdict"]) if data["verdict"] else None,
+            exposure_ev=data.get("exposure_ev"),
+            bad_pixels=BadPixels.from_json(data["bad_pixels"]) if data["bad_pixels"] else None,
+            valid_pixels=valid, schema_version=str(data["schema_version"]),
+            directional=(DirectionalPrediction.from_json(data["directional_prediction"])
+                         if data.get("directional_prediction") else None),
+            bound=str(data.get("bound") or "classic"),
+            blind_spots=tuple(BlindSpot.from_json(b) for b in data.get("blind_spots") or ()),
+            measured=_measured_from_json(data.get("measured_loss") or ()),
+        )
+
+
+def _measured_from_json(items: Sequence[Mapping[str, Any]]) -> tuple[MeasuredLoss, ...]:
+    if not items:
+        return ()
+    from fidelity.coco.measure import MeasuredLoss
+
+    return tuple(MeasuredLoss.from_json(m) for m in items)
+
+
+def validate_report(data: Mapping[str, Any]) -> None:
+    """Check a JSON report against :func:`report_schema`; raises
+    :class:`~fidelity.errors.InvalidValueError` naming the first violation."""
+    import jsonschema
+
+    from fidelity.errors import InvalidValueError
+
+    try:
+        jsonschema.validate(dict(data), report_schema())
+    except jsonschema.ValidationError as exc:
+        where = "/".join(str(p) for p in exc.absolute_path) or "(top level)"
+        raise InvalidValueError(f"not a fidelity report: {where}: {exc.message}") from None
+
+
+def utc_now() -> str:
+    """The current UTC time as the report writes it (``YYYY-MM-DDThh:mm:ssZ``)."""
+    return _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+#: JSON layout version of a comparison report.
+COMPARE_SCHEMA_VERSION = "1.0"
+
+
+@dataclass(frozen=True)
+class Normalisation:
+    """What was matched: the ``mode``, the exposure change applied to the simulated chart
+    (``exposure_ev``, EV; 0 for ``none``) and the per-channel ``gains`` (``exposure+wb``:
+    R, G, B, including the exposure; None otherwise)."""
+
+    mode: str
+    exposure_ev: float
+    gains: tuple[float, float, float] | None = None
+
+    def describe(self) -> str:
+        """In words, for reports."""
+        if self.mode == "none":
+            return "none: the charts compared as audited"
+        text = f"exposure of the simulation {self.exposure_ev:+.3f} EV (neutral patches)"
+        if self.gains is not None:
+            g = ", ".join(f"{v:.4f}" for v in self.gains)
+            text += f"; white balance gains R, G, B {g} (neutral patches, incl. exposure)"
+        return text
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"mode", "exposure_ev", "gains", "description"}``."""
+        return {"mode": self.mode, "exposure_ev": self.exposure_ev,
+                "gains": list(self.gains) if self.gains is not None else None,
+                "description": self.describe()}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> Normalisation:
+        """Inverse of :meth:`to_json`."""
+        g = d.get("gains")
+        return cls(str(d["mode"]), float(d["exposure_ev"]),
+                   (float(g[0]), float(g[1]), float(g[2])) if g else None)
+
+
+@dataclass(frozen=True)
+class ComparisonReport:
+    """A sim-to-real comparison (module docstring): the two audits (``sim``, ``real``:
+    :class:`ChartReport`), the :class:`Normalisation`, the sim-to-real
+    ``measurement`` (the normalised simulated chart against the real chart as reference), the
+    classic ``prediction`` and the ``directional`` one at the sim-to-real ΔE, the
+    ``verdict``, which ``bound`` decided it, the losses ``measured`` on COCO, the mapping's
+    description (``emulation``), when and with what it was made."""
+
+    created: str
+    sim: ChartReport
+    real: ChartReport
+    normalisation: Normalisation
+    measurement: ChartMeasurement
+    prediction: Prediction
+    directional: DirectionalPrediction | None
+    verdict: Verdict | None
+    provenance: Provenance
+    bound: str = "classic"
+    measured: tuple[MeasuredLoss, ...] = ()
+    emulation: Mapping[str, Any] | None = None
+    command: str = "compare"
+    schema_version: str = COMPARE_SCHEMA_VERSION
+
+    @property
+    def mean_delta_e(self) -> float:
+        """The sim-to-real chart ΔE: mean ΔE00 over the patches."""
+        return self.measurement.mean_delta_e
+
+    @property
+    def max_delta_e(self) -> float:
+        """Largest sim-to-real ΔE00 of a patch."""
+        return self.measurement.max_delta_e
+
+    @property
+    def worst_patch(self) -> str:
+        """The patch whose simulated colour is farthest from the real one."""
+        return self.measurement.worst_patch
+
+    @property
+    def exit_code(self) -> int:
+        """0 pass (or no verdict), 1 fail."""
+        return self.verdict.exit_code if self.verdict is not None else 0
+
+    def as_chart_report(self) -> ChartReport:
+        """The sim-to-real result as a :class:`ChartReport` of the
+        simulated image whose reference is the real chart (for JUnit and the verdict line)."""
+        from dataclasses import replace
+
+
+        src = self.sim.source
+        assert isinstance(src, ImageSource)
+        real_src = self.real.source
+        real_name = real_src.title
+        return ChartReport(
+            command=self.command, created=self.created, measurement=self.measurement,
+            source=replace(src, reference=f"the real camera's chart ({real_name})"),
+            provenance=self.provenance, prediction=self.prediction, verdict=self.verdict,
+            directional=self.directional, bound=self.bound, measured=self.measured)
+
+    def to_json(self) -> dict[str, Any]:
+        """The comparison as JSON: the sim-to-real summary and patches first, then the two
+        audits (their own :meth:`ChartReport.to_json`)."""
+        m = self.measurement.to_json()
+        out: dict[str, Any] = json_ready({
+            "schema_version": self.schema_version, "command": self.command,
+            "created": self.created,
+            "sim_to_real": {"mean_delta_e": m["mean_delta_e"],
+                            "max_delta_e": m["max_delta_e"], "worst_patch": m["worst_patch"],
+                            "normalisation": self.normalisation.to_json(),
+                            "patches": m["patches"]},
+            "sim_delta_e": self.sim.mean_delta_e, "real_delta_e": self.real.mean_delta_e,
+            "prediction": self.prediction.to_json(),
+            "directional_prediction": (self.directional.to_json() if self.directional
+                                       else None),
+            "bound": self.bound,
+            "verdict": self.verdict.to_json() if self.verdict else None,
+            "measured_loss": [x.to_json() for x in self.measured],
+            "emulation": dict(self.emulation) if self.emulation else None,
+            "sim": self.sim.to_json(), "real": self.real.to_json(),
+            "provenance": self.provenance.to_json()})
+        return out
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> ComparisonReport:
+        """Inverse of :meth:`to_json`."""
+        from fidelity.chart.measure import ChartMeasurement
+        from fidelity.coco.measure import MeasuredLoss
+
+        s2r = d["sim_to_real"]
+        return cls(
+            created=str(d["created"]), sim=ChartReport.from_json(d["sim"]),
+            real=ChartReport.from_json(d["real"]),
+            normalisation=Normalisation.from_json(s2r["normalisation"]),
+            measurement=ChartMeasurement.from_json(s2r),
+            prediction=Prediction.from_json(d["prediction"]),
+            directional=(DirectionalPrediction.from_json(d["directional_prediction"])
+                         if d.get("directional_prediction") else None),
+            verdict=Verdict.from_json(d["verdict"]) if d.get("verdict") else None,
+            provenance=Provenance.from_json(d["provenance"]), bound=str(d.get("bound", "classic")),
+            measured=tuple(MeasuredLoss.from_json(x) for x in d.get("measured_loss") or ()),
+            emulation=d.get("emulation"), command=str(d.get("command", "compare")),
+            schema_version=str(d.get("schema_version", COMPARE_SCHEMA_VERSION)))
+
+
+@dataclass(frozen=True)
+class GateResult:
+    """One gated subject (:func:`fidelity.check.gate`): its ``subject`` (image path or camera), the ``criterion``, the
+    ``report`` (None on error), the ``error`` message (exit code 2) and the ``seconds`` it
+    took."""
+
+    subject: str
+    criterion: Criterion | None = None
+    report: ChartReport | None = None
+    error: str | None = None
+    seconds: float = 0.0
+
+    @property
+    def exit_code(self) -> int:
+        """0 pass, 1 fail, 2 error."""
+        if self.error is not None or self.report is None:
+            return EXIT_ERROR
+        return self.report.exit_code
+
+
+def gate_exit_code(results: Sequence[GateResult]) -> int:
+    """The exit code of a gate over ``results``: 2 if any could not be measured, else 1 if any
+    failed, else 0."""
+    codes = [r.exit_code for r in results]
+    return EXIT_ERROR if EXIT_ERROR in codes else max(codes, default=0)
+
+
+__all__ = [
+    "BASE_CONVENTIONS",
+    "COMMANDS",
+    "COMPARE_SCHEMA_VERSION",
+    "SCHEMA_VERSION",
+    "ChartReport",
+    "ComparisonReport",
+    "GateResult",
+    "ImageSource",
+    "Normalisation",
+    "Provenance",
+    "RenderSource",
+    "Source",
+    "TableRef",
+    "gate_exit_code",
+    "report_schema",
+    "report_schema_path",
+    "utc_now",
+    "validate_report",
+]

@@ -1,0 +1,184 @@
+"""The sim-to-real comparison as terminal lines, an HTML document and report files.
+
+Renders a :class:`~fidelity.records.ComparisonReport` (:func:`fidelity.compare.compare_charts`):
+:func:`comparison_lines` for the terminal, :func:`comparison_document` for the HTML report (the
+chart report's section builders, :mod:`fidelity.report.chart`, for the parts the two share) and
+:func:`write_comparison_report` for the files.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fidelity.fileio import json_ready
+from fidelity.records import ComparisonReport, ImageSource
+from fidelity.report.chart import blind_spot_section, directional_section, measured_section
+from fidelity.report.document import (
+    Code,
+    Document,
+    Facts,
+    Figure,
+    Headline,
+    Text,
+    section,
+    table,
+)
+from fidelity.report.terminal import directional_lines
+
+
+def comparison_lines(report: ComparisonReport) -> list[str]:
+    """The comparison on a terminal: each chart's ΔE, the normalisation, the sim-to-real ΔE
+    with its direction, the predicted (and measured) loss, warnings and the verdict."""
+    sim, real = report.sim, report.real
+    m = report.measurement
+    lines = [f"simulation {sim.source.title}: chart ΔE00 {sim.mean_delta_e:.2f} against the "
+             f"reference ({sim.source.reference_description})",
+             f"real camera {real.source.title}: chart ΔE00 {real.mean_delta_e:.2f} against "
+             "the reference",
+             f"normalisation: {report.normalisation.describe()}",
+             f"sim-to-real ΔE00: mean {m.mean_delta_e:.2f}, max {m.max_delta_e:.2f} "
+             f"({m.worst_patch}); mean ΔL' {float(np.mean(m.delta_l)):+.2f}, ΔC' "
+             f"{float(np.mean(m.delta_c)):+.2f}, |ΔH'| {float(np.mean(np.abs(m.delta_h))):.2f} "
+             "(simulation relative to the real camera)"]
+    p = report.prediction
+
+    def f(v: float | None) -> str:
+        return "n/a" if v is None else f"{v:.2f}"
+
+    lines.append(f"predicted ΔmAP of the difference: {f(p.dmap_points)} points, "
+                 f"{f(p.dmap_relative)} % of baseline (classic, table {p.table.name}, "
+                 f"detector size {p.size_used})")
+    lines += directional_lines(report.as_chart_report())
+    lines += [f"measured on COCO (real -> simulated colours): {x.summary()}"
+              for x in report.measured]
+    for who, r in (("simulation", sim), ("real camera", real)):
+        lines += [f"warning ({who}): {w.reason}" for w in r.warnings]
+    if report.verdict is not None:
+        lines.append(report.verdict.message.replace("mean ΔE00", "sim-to-real ΔE00"))
+    return lines
+
+
+def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | None = None,
+                        real_pixels: NDArray[Any] | None = None) -> Document:
+    """The comparison as a :class:`~fidelity.report.document.Document`: the verdict first,
+    then the two charts side by side, the sim-to-real ΔE map, the a*b* arrows from the
+    simulated to the real colours, the direction of each difference, the predictions, each
+    chart's own audit and the provenance."""
+    from fidelity.report import plots
+    m = report.measurement
+    v = report.verdict
+    swatch = Figure(plots.swatches(m, ("real camera", "simulation")), "swatches.png",
+                    "real camera (left half) against simulation (right half)")
+    warn = "".join(f"\n\n**warning** ({who}): {w.reason}"
+                   for who, r in (("simulation", report.sim), ("real camera", report.real))
+                   for w in r.warnings)
+    if v is not None:
+        head = Headline(f"**{v.label}**: {v.message.split(': ', 1)[-1].replace('mean ΔE00', 'sim-to-real ΔE00')}{warn}",
+                        "pass" if v.passed else "fail", swatch)
+    else:
+        head = Headline(f"sim-to-real ΔE00 mean {m.mean_delta_e:.2f}, max "
+                        f"{m.max_delta_e:.2f} ({m.worst_patch}); no gate applied{warn}",
+                        "info", swatch)
+    p, d = report.prediction, report.directional
+
+    def n2(x: float | None) -> str:
+        return "–" if x is None else f"{x:.2f}"
+
+    facts = Facts((
+        ("simulation", f"`{report.sim.source.title}`: chart ΔE00 {report.sim.mean_delta_e:.2f}"),
+        ("real camera", f"`{report.real.source.title}`: chart ΔE00 "
+                        f"{report.real.mean_delta_e:.2f}"),
+        ("reference of each chart", report.sim.source.reference_description),
+        ("normalisation", report.normalisation.describe()),
+        ("sim-to-real ΔE00", f"mean {m.mean_delta_e:.2f}, max {m.max_delta_e:.2f} "
+                             f"({m.worst_patch})"),
+        ("mean direction (simulation − real)",
+         f"ΔL' {float(np.mean(m.delta_l)):+.2f}, ΔC' {float(np.mean(m.delta_c)):+.2f}, "
+         f"|ΔH'| {float(np.mean(np.abs(m.delta_h))):.2f}"),
+        ("predicted ΔmAP of the difference, classic", f"{n2(p.dmap_points)} points "
+                                                      f"({p.table.name})"),
+        ("predicted ΔmAP of the difference, direction-aware",
+         f"{n2(d.dmap_points if d else None)} points"),
+        *((f"measured ΔmAP on COCO, {x.model}", x.summary().removeprefix("measured ΔmAP "))
+          for x in report.measured)))
+    sections = [section("Summary", facts)]
+    ss, rs = report.sim.source, report.real.source
+    if (sim_pixels is not None and real_pixels is not None and isinstance(ss, ImageSource)
+            and isinstance(rs, ImageSource)):
+        sections.append(section("The two charts", Figure(plots.chart_pair(
+            (sim_pixels, ss.location, ss.encoding, report.sim.exposure_ev or 0.0),
+            (real_pixels, rs.location, rs.encoding, report.real.exposure_ev or 0.0),
+            (f"simulation: {Path(ss.title).name}", f"real camera: {Path(rs.title).name}")),
+            "charts.png", "the simulated and the real chart, sampling windows outlined")))
+    reversed_m = replace(m, lab=m.reference_lab, reference_lab=m.lab, srgb=m.reference_srgb
+                         if m.reference_srgb is not None else m.srgb, reference_srgb=m.srgb)
+    limit = (v.criterion.limit if v is not None and v.criterion.kind == "max-delta-e"
+             else None)
+    rows = [(name, f"{m.delta_e[k]:.2f}", f"{m.delta_l[k]:+.2f}", f"{m.delta_c[k]:+.2f}",
+             f"{m.delta_h[k]:+.2f}", f"{report.sim.measurement.delta_e[k]:.2f}",
+             f"{report.real.measurement.delta_e[k]:.2f}")
+            for k, name in enumerate(m.patch_names)]
+    sections.append(section(
+        "Sim-to-real differences",
+        Figure(plots.delta_e_map(m, limit), "delta_e_map.png", "sim-to-real ΔE00 per patch"),
+        Figure(plots.ab_arrows(reversed_m, ("simulation", "real camera")), "ab_arrows.png",
+               "a*b*: arrows from the simulated colour to the real one"),
+        table(("patch", "sim-to-real ΔE00", "ΔL'", "ΔC'", "ΔH'", "sim ΔE00 to reference",
+               "real ΔE00 to reference"), rows)))
+    chart_view = report.as_chart_report()
+    sections += [s for s in (directional_section(chart_view), measured_section(chart_view))
+                 if s is not None]
+    for who, r in (("simulation", report.sim), ("real camera", report.real)):
+        bs = blind_spot_section(r)
+        if bs is not None:
+            sections.append(replace(bs, title=f"Blind spots: {who}", folded=True))
+    if report.emulation:
+        sections.append(section("The fitted mapping (real -> simulated colours)",
+                                Code(_json(report.emulation)), folded=True))
+    sections.append(section("Provenance", Text(f"Created {report.created}; fidelity "
+                                               f"{report.provenance.version}."),
+                            Code(_json(dict(report.provenance.conventions))), folded=True))
+    return Document(f"Sim against real: {Path(ss.title).name} vs {Path(rs.title).name}", head,
+                    tuple(sections))
+
+
+def _json(obj: Any) -> str:
+    return json.dumps(json_ready(obj), indent=1, ensure_ascii=False)
+
+
+def write_comparison_report(report: ComparisonReport, *,
+                            json_path: str | os.PathLike[str] | None = None,
+                            html_path: str | os.PathLike[str] | None = None,
+                            protect: Sequence[str | os.PathLike[str]] = ()) -> list[Path]:
+    """Write the JSON and/or HTML comparison report atomically, never over an input."""
+    from fidelity.fileio import check_outputs, write_json_atomic
+
+    inputs = {f"input {i + 1}": p for i, p in enumerate(protect) if p}
+    written: list[Path] = []
+    if json_path is not None:
+        check_outputs({"report": json_path}, inputs)
+        written.append(write_json_atomic(json_path, report.to_json()))
+    if html_path is not None:
+        from fidelity.chart.image import read_image
+        from fidelity.report.html import write_document
+
+        check_outputs({"report": html_path}, inputs)
+        pix = []
+        for r in (report.sim, report.real):
+            src = r.source
+            pix.append(read_image(src.image.path, layer=src.image.layer,
+                                  bayer=src.image.bayer).pixels
+                       if isinstance(src, ImageSource) else None)
+        written += write_document(comparison_document(report, pix[0], pix[1]), html=html_path)
+    return written
+
+
+__all__ = ["comparison_document", "comparison_lines", "write_comparison_report"]
