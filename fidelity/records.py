@@ -12,8 +12,10 @@ predicted from its chart ΔE and the verdict of a gate. Its JSON form (``schema_
   measurement (CIEDE2000, Lab D65);
 - ``exposure_ev``, ``bad_pixels``: the audit of an image (``null`` for a render);
 - ``source``: the image (:class:`ImageSource`) or the render (:class:`RenderSource`);
-- ``prediction``: ΔE -> ΔmAP (:meth:`fidelity.prediction.table.Prediction.to_json`);
-- ``verdict``: pass/fail of the criterion (:meth:`fidelity.prediction.verdict.Verdict.to_json`);
+- ``prediction``: ΔE -> ΔmAP (:meth:`fidelity.prediction.table.Prediction.to_json`, with the
+  notes in words);
+- ``verdict``: pass/fail of the criterion (:meth:`fidelity.prediction.verdict.Verdict.to_json`,
+  with the message);
 - ``details``: where the patches were sampled (image) or the camera and render settings;
 - ``provenance``: tool version, Python and libraries, input sha256, tables (name, path,
   sha256), conventions.
@@ -21,7 +23,9 @@ predicted from its chart ΔE and the verdict of a gate. Its JSON form (``schema_
 :class:`ComparisonReport` is a sim-to-real comparison (two audits, the :class:`Normalisation`,
 the sim-to-real measurement, prediction and verdict); :class:`GateResult` one gated subject
 (its report or its input error). :mod:`fidelity.report` turns these records into JSON files,
-HTML, JUnit and terminal text; nothing here writes a file or a sentence of a report.
+HTML, JUnit and terminal text (the JSON report: :func:`fidelity.report.jsonform.chart_report_json`
+and :func:`~fidelity.report.jsonform.comparison_json`); nothing here writes a file or a
+sentence of a report. Each record reads its report back with ``from_json``.
 """
 
 from __future__ import annotations
@@ -44,7 +48,7 @@ from fidelity.chart.find import ChartChecks, FoundChart
 from fidelity.chart.image import ImageInfo
 from fidelity.chart.locate import ChartLocation
 from fidelity.chart.measure import BadPixels, ChartMeasurement
-from fidelity.fileio import JSONObject, json_ready
+from fidelity.fileio import JSONObject
 from fidelity.prediction.directional import DirectionalPrediction
 from fidelity.prediction.table import Prediction
 from fidelity.prediction.verdict import EXIT_ERROR, Criterion, Verdict
@@ -344,37 +348,6 @@ class ChartReport:
         """0 pass (or no verdict), 1 fail."""
         return self.verdict.exit_code if self.verdict is not None else 0
 
-    def to_json(self) -> JSONObject:
-        """The JSON report (strict JSON values; see the module docstring)."""
-        m = self.measurement.to_json()
-        patches = m["patches"]
-        if self.valid_pixels is not None:
-            per_patch = self.bad_pixels.per_patch if self.bad_pixels else {}
-            for p, n in zip(patches, self.valid_pixels, strict=True):
-                p.update(valid_pixels=int(n), bad_pixels=int(per_patch.get(p["name"], 0)))
-        out: JSONObject = json_ready({
-            "schema_version": self.schema_version,
-            "command": self.command,
-            "created": self.created,
-            "mean_delta_e": m["mean_delta_e"],
-            "max_delta_e": m["max_delta_e"],
-            "worst_patch": m["worst_patch"],
-            "patches": patches,
-            "exposure_ev": self.exposure_ev,
-            "bad_pixels": self.bad_pixels.to_json() if self.bad_pixels else None,
-            "source": self.source.to_json(),
-            "prediction": self.prediction.to_json() if self.prediction else None,
-            "verdict": self.verdict.to_json() if self.verdict else None,
-            "details": self.source.details(),
-            "provenance": self.provenance.to_json(),
-            "bound": self.bound,
-            "directional_prediction": (self.directional.to_json()
-                                       if self.directional else None),
-            "blind_spots": [b.to_json() for b in self.blind_spots],
-            "measured_loss": [m.to_json() for m in self.measured],
-        })
-        return out
-
     @classmethod
     def from_json(cls, data: Mapping[str, Any], *, validate: bool = True) -> ChartReport:
         """The report of a JSON document, checked against :func:`report_schema` first
@@ -392,7 +365,8 @@ class ChartReport:
             measurement=ChartMeasurement.from_json(data), source=source,
             provenance=Provenance.from_json(data["provenance"]),
             prediction=Prediction.from_json(data["prediction"]) if data["prediction"] else None,
-            verdict=Verdict.from_json(data["verdict"]) if data["verdict"] else None,
+            verdict=(Verdict.from_json(data["verdict"], float(data["mean_delta_e"]))
+                     if data["verdict"] else None),
             exposure_ev=data.get("exposure_ev"),
             bad_pixels=BadPixels.from_json(data["bad_pixels"]) if data["bad_pixels"] else None,
             valid_pixels=valid, schema_version=str(data["schema_version"]),
@@ -529,29 +503,6 @@ class ComparisonReport:
             provenance=self.provenance, prediction=self.prediction, verdict=self.verdict,
             directional=self.directional, bound=self.bound, measured=self.measured)
 
-    def to_json(self) -> dict[str, Any]:
-        """The comparison as JSON: the sim-to-real summary and patches first, then the two
-        audits (their own :meth:`ChartReport.to_json`)."""
-        m = self.measurement.to_json()
-        out: dict[str, Any] = json_ready({
-            "schema_version": self.schema_version, "command": self.command,
-            "created": self.created,
-            "sim_to_real": {"mean_delta_e": m["mean_delta_e"],
-                            "max_delta_e": m["max_delta_e"], "worst_patch": m["worst_patch"],
-                            "normalisation": self.normalisation.to_json(),
-                            "patches": m["patches"]},
-            "sim_delta_e": self.sim.mean_delta_e, "real_delta_e": self.real.mean_delta_e,
-            "prediction": self.prediction.to_json(),
-            "directional_prediction": (self.directional.to_json() if self.directional
-                                       else None),
-            "bound": self.bound,
-            "verdict": self.verdict.to_json() if self.verdict else None,
-            "measured_loss": [x.to_json() for x in self.measured],
-            "emulation": dict(self.emulation) if self.emulation else None,
-            "sim": self.sim.to_json(), "real": self.real.to_json(),
-            "provenance": self.provenance.to_json()})
-        return out
-
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> ComparisonReport:
         """Inverse of :meth:`to_json`."""
@@ -567,7 +518,8 @@ class ComparisonReport:
             prediction=Prediction.from_json(d["prediction"]),
             directional=(DirectionalPrediction.from_json(d["directional_prediction"])
                          if d.get("directional_prediction") else None),
-            verdict=Verdict.from_json(d["verdict"]) if d.get("verdict") else None,
+            verdict=(Verdict.from_json(d["verdict"], float(s2r["mean_delta_e"]))
+                     if d.get("verdict") else None),
             provenance=Provenance.from_json(d["provenance"]), bound=str(d.get("bound", "classic")),
             measured=tuple(MeasuredLoss.from_json(x) for x in d.get("measured_loss") or ()),
             emulation=d.get("emulation"), command=str(d.get("command", "compare")),

@@ -164,6 +164,7 @@ def test_directional_verdict_and_json_round_trip():
     from fidelity.check import check_camera
     from fidelity.prediction.verdict import Criterion
     from fidelity.records import ChartReport
+    from fidelity.report.jsonform import chart_report_json
 
     crit = Criterion("max-dmap", 5.0)
     cam = ROOT / "cameras" / "bad-hue-rotation.toml"
@@ -171,7 +172,7 @@ def test_directional_verdict_and_json_round_trip():
     directional = check_camera(cam, criterion=crit, bound="directional")
     assert not classic.verdict.passed and directional.verdict.passed
     assert directional.verdict.value == pytest.approx(directional.directional.dmap_points)
-    doc = directional.to_json()
+    doc = chart_report_json(directional)
     assert doc["bound"] == "directional"
     back = ChartReport.from_json(doc)
-    assert back.to_json() == doc
+    assert chart_report_json(back) == doc

@@ -86,7 +86,8 @@ def test_predictions_are_monotone_and_conservative_beyond_range():
     assert far.out_of_range
     assert far.columns["dmap_points"].status == "above-range"
     assert far.dmap_points == 100.0 and far.dmap_relative == 100.0
-    assert any("beyond the table" in n for n in far.notes)
+    assert {c.status for c in far.columns.values()} == {pr.ColumnStatus.ABOVE_RANGE}
+    assert far.columns["dmap_points"].delta_e_range == (0.0, 24.0)
 
 
 @pytest.mark.parametrize("name", pr.available_tables())
@@ -102,10 +103,12 @@ def test_points_vs_relative_with_a_baseline():
     assert p.dmap_points == pytest.approx(3.0)
     # the paper's "3 %" read as points is 3/37.5 = 8 % of the baseline: the larger bound wins
     assert p.dmap_relative == pytest.approx(100 * 3.0 / 37.5)
-    assert "read as points" in p.columns["dmap_relative"].note
+    assert p.columns["dmap_relative"].raised_from == pytest.approx(3.0)  # the table's value
     plain = pr.predict(6.0, table=SC, transforms=False)
     assert plain.dmap_relative == pytest.approx(3.0)
-    assert any("ambiguous" in n for n in plain.notes)
+    assert plain.upper_bound and plain.kind is pr.TableKind.PUBLISHED_BOUNDS
+    assert plain.columns["dmap_relative"].raised_from is None and plain.baseline_map is None
+    assert plain.dmap_points_se is None and plain.dmap_points_interval is None
     with pytest.raises(FidelityError, match="baseline mAP"):
         pr.predict(6.0, table=SC, baseline_map=0.0)
 
@@ -129,8 +132,8 @@ def _measured_table() -> dict:
 def test_measured_table_reports_the_sampling_error_of_its_points():
     doc = _measured_table()
     plain = pr.predict(3.0, size="n", table=pr.parse_prediction_table(doc), transforms=False)
-    assert any("not a guaranteed bound" in n for n in plain.notes)
-    assert not any("SE" in n for n in plain.notes)  # no SEs in the file: none reported
+    assert plain.kind is pr.TableKind.MEASURED and not plain.upper_bound
+    assert plain.dmap_points_se is None  # no SEs in the file: none reported
     for curve, ses in zip(doc["curves"][:2], ([0.1, 0.3, 0.2, 0.5], [0.15, 0.25, 0.4, 0.6]),
                           strict=True):
         for point, se in zip(curve["points"], ses, strict=True):
@@ -138,10 +141,17 @@ def test_measured_table_reports_the_sampling_error_of_its_points():
     table = pr.parse_prediction_table(doc)
     # model b answers (worst) at ΔE 3 exactly: its point's SE
     at3 = pr.predict(3.0, size="n", table=table, transforms=False)
-    assert "around ΔE 3: SE 0.25 points" in " ".join(at3.notes)
+    assert at3.dmap_points_se == pr.SamplingError(0.25, 0.25)
+    assert at3.dmap_points_interval == pytest.approx((0.9 - 0.25, 0.9 + 0.25))
     # between ΔE 3 and 6: the SEs of model b's two bracketing points
     at4 = pr.predict(4.0, size="n", table=table, transforms=False)
-    assert "around ΔE 4: SE 0.25-0.40 points" in " ".join(at4.notes)
+    assert at4.dmap_points_se == pr.SamplingError(0.25, 0.40)
+    lo, hi = at4.dmap_points_interval
+    assert hi - lo == pytest.approx(0.8) and (lo + hi) / 2 == pytest.approx(at4.dmap_points)
+    # the JSON form carries them, and reads them back
+    back = pr.Prediction.from_json(json.loads(json.dumps(at4.to_json())))
+    assert back.dmap_points_se == at4.dmap_points_se
+    assert back.dmap_points_interval == pytest.approx(at4.dmap_points_interval)
 
 
 def test_measured_table_worst_model_pchip_running_max():
@@ -205,9 +215,8 @@ def test_total_loss_beyond_the_range_is_the_baseline_in_points():
     assert far.dap_person_points == pytest.approx(50.0)  # largest person baseline AP
     assert far.dap_bicycle_points == 100.0  # no bicycle baseline known: 100 points
     assert far.dmap_relative == 100.0
-    note = next(n for n in far.notes if "beyond the table's range (0..12)" in n)
-    assert "ΔmAP 38 points (the baseline); ΔmAP 100 %; person ΔAP 50 points" in note
-    assert "bicycle ΔAP 100 points (no baseline known)" in note
+    assert {c.delta_e_range for c in far.columns.values()} == {(0.0, 12.0)}
+    assert {c.status for c in far.columns.values()} == {pr.ColumnStatus.ABOVE_RANGE}
     # the caller's detector baseline bounds an aggregate curve's mAP loss
     assert pr.predict(20.0, size="n", table=table, transforms=False,
                       baseline_map=25.0).dmap_points == pytest.approx(25.0)
@@ -229,8 +238,7 @@ def test_measured_table_ranges_and_sizes():
     assert beyond.columns["dmap_points"].status == "above-range"
     m = pr.predict(5.0, size="m", table=table, transforms=False)
     assert m.size_used == ",".join(table.sizes()) and "m" not in table.sizes()
-    assert any("no curve for size 'm'" in n and "their worst case answers" in n
-               for n in m.notes)
+    assert m.size == "m"
     with pytest.raises(UnknownNameError, match="detector size"):
         pr.predict(5.0, size="xl", table=table)
 

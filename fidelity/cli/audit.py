@@ -93,8 +93,9 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
                                  protect=(image,))
     if to_stdout:
         from fidelity.cli.options import write_json_output
+        from fidelity.report.jsonform import chart_report_json
 
-        write_json_output(STDOUT, report.to_json())
+        write_json_output(STDOUT, chart_report_json(report))
     src = report.source
     assert isinstance(src, ImageSource)
     click.echo(f"{image}: {src.image.format} {src.image.pixel_type} "

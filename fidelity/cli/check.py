@@ -122,7 +122,9 @@ def _check_one(cam: str, html: Path | None, json_file: Path | None, *, to_stdout
                           measure=measure)
     write_chart_report(report, json_path=json_file, html_path=html)
     if to_stdout:
-        write_json_output(STDOUT, report.to_json())
+        from fidelity.report.jsonform import chart_report_json
+
+        write_json_output(STDOUT, chart_report_json(report))
     src = report.source
     assert isinstance(src, RenderSource)
     variant = f" ({src.variant})" if src.variant else ""

@@ -126,7 +126,9 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
             click.echo(f"fidelity: error: {junit}: cannot write JUnit XML: {exc}", err=True)
             sys.exit(EXIT_ERROR)
     if json_path is not None:
-        where = write_json_output(json_path, report.to_json())
+        from fidelity.report.jsonform import comparison_json
+
+        where = write_json_output(json_path, comparison_json(report))
         if not to_stdout:
             click.echo(f"wrote {where}")
     if html_path is not None:

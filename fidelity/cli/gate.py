@@ -237,8 +237,9 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         _write_junit(junit, cases)
     if to_stdout and cases[0].report is not None:
         from fidelity.cli.options import write_json_output
+        from fidelity.report.jsonform import chart_report_json
 
-        write_json_output(STDOUT, cases[0].report.to_json())
+        write_json_output(STDOUT, chart_report_json(cases[0].report))
     if many:
         codes = [c.exit_code for c in cases]
         click.echo(f"gate: {codes.count(0)} of {len(codes)} passed, {codes.count(1)} failed, "

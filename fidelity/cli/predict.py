@@ -12,6 +12,7 @@ from fidelity.prediction.table import (
     available_tables,
     predict,
 )
+from fidelity.report.words import prediction_notes
 
 
 @click.command()
@@ -79,7 +80,7 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
         return
     assert delta_e is not None  # one of the two was given
     p = predict(delta_e, size=size, table=table, method=method, baseline_map=baseline_map)
-    b = "<= " if p.table.kind == "published-bounds" else ""
+    b = "<= " if p.upper_bound else ""
 
     def f(v: float | None) -> str:
         return "n/a" if v is None else f"{b}{v:.2f}"
@@ -95,16 +96,18 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
     for k, line in lines.items():
         if k != cls:
             click.echo("  " + line)
-    for note in p.notes:
+    for note in prediction_notes(p):
         click.echo(f"  note: {note}")
     reach = [t for t in p.transforms if t.reachable and t.param is not None]
     if reach:
         click.echo("  SAFE-COLOR transforms at this ΔE: " + ", ".join(
             f"{t.transform} {t.param:.4g}" for t in reach))
-    doc = p.to_json()
-    if p.table.kind != "published-bounds":
-        doc["directional_by_family"] = _print_families(delta_e, size, table, direction)
+    families = (_print_families(delta_e, size, table, direction) if p.kind.measured
+                else None)
     if json_path is not None:
+        from fidelity.report.jsonform import prediction_json
+
+        doc = prediction_json(p, families)
         click.echo(f"wrote {write_json_output(json_path, doc)}")
 
 
@@ -112,9 +115,9 @@ def _print_families(delta_e: float, size: str, table: str | None,
                     direction: str | None) -> dict[str, float | None]:
     """The direction-aware loss of an error entirely of each family (or one)."""
     from fidelity.prediction.directional import DEFAULT_DIRECTIONAL_TABLE, family_losses
-    from fidelity.prediction.table import load_prediction_table
+    from fidelity.prediction.judge import directional_table_name
 
-    dtab = table if table and load_prediction_table(table).kind == "directional" else None
+    dtab = directional_table_name(table)
     got = family_losses(delta_e, size=size, table=dtab)
     if direction is not None:
         got = {direction: got[direction]}
@@ -152,7 +155,9 @@ def _print_coco_c(spec: str, size: str, table: str | None, json_path: str | None
                    f"of baseline mAP {100 * m.baseline_map:.2f} ({m.model}, {m.images} COCO "
                    "images; COCO-C table)")
     if json_path is not None:
-        click.echo(f"wrote {write_json_output(json_path, a.to_json())}")
+        from fidelity.report.jsonform import coco_c_answer_json
+
+        click.echo(f"wrote {write_json_output(json_path, coco_c_answer_json(a))}")
 
 
 def _print_limit(max_dmap: float, cls: str, unit: str, size: str, table: str | None,

@@ -759,22 +759,12 @@ def evaluate_directional(mean_delta_e: float, prediction: DirectionalPrediction,
                          criterion: Criterion) -> Verdict:
     """Apply a ``max-dmap`` ``criterion`` to the direction-aware prediction (a ``max-delta-e``
     criterion does not depend on the bound: :func:`fidelity.prediction.verdict.evaluate`)."""
-    from fidelity.prediction.verdict import Verdict, evaluate
+    from fidelity.prediction.verdict import evaluate, judge_value
 
     if criterion.kind != "max-dmap":
         return evaluate(mean_delta_e, None, criterion)
-    loss = prediction.value(criterion.cls, criterion.unit)
-    what = criterion.describe().removeprefix("predicted ").split(" <=")[0]
-    unit = "points" if criterion.unit == "points" else "%"
-    if loss is None:
-        return Verdict(False, criterion, None,
-                       f"FAIL: no direction-aware {what} prediction (nothing supports a pass)",
-                       conservative=True)
-    passed = loss <= criterion.limit
-    return Verdict(passed, criterion, float(loss),
-                   f"{'PASS' if passed else 'FAIL'}: predicted {what} {loss:.2f} {unit} "
-                   f"(direction-aware bound) {'<=' if passed else '>'} {criterion.limit:g} at "
-                   f"mean ΔE00 {prediction.delta_e:.2f}")
+    return judge_value(criterion, prediction.value(criterion.cls, criterion.unit),
+                       prediction.delta_e, bound="directional")
 
 
 __all__ = [

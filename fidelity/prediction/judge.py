@@ -28,6 +28,18 @@ class Judgement(NamedTuple):
     directional: DirectionalPrediction | None
 
 
+def directional_table_name(table: PredictionTable | str | None) -> str | None:
+    """The name (or path) of ``table`` when it is a direction-aware table
+    (:attr:`TableKind.DIRECTIONAL`), else None (the default direction-aware table answers)."""
+    if isinstance(table, str):
+        from fidelity.prediction.table import load_prediction_table
+
+        return table if load_prediction_table(table).kind is TableKind.DIRECTIONAL else None
+    if table is not None and table.kind is TableKind.DIRECTIONAL and table.path is not None:
+        return str(table.path)
+    return None
+
+
 def directional_prediction(measurement: ChartMeasurement, size: str = "any",
                            table: PredictionTable | str | None = None) -> DirectionalPrediction:
     """The direction-aware prediction of a chart: from ``table`` when it is a direction-aware
@@ -45,15 +57,7 @@ def directional_prediction(measurement: ChartMeasurement, size: str = "any",
     """
     from fidelity.prediction.directional import predict_chart
 
-    name: str | None = None
-    if isinstance(table, str):
-        from fidelity.prediction.table import load_prediction_table
-
-        name = table if load_prediction_table(table).kind is TableKind.DIRECTIONAL else None
-    elif (table is not None and table.kind is TableKind.DIRECTIONAL
-          and table.path is not None):
-        name = str(table.path)
-    return predict_chart(measurement, size=size, table=name)
+    return predict_chart(measurement, size=size, table=directional_table_name(table))
 
 
 def judge(mean_delta_e: float, size: str = "any", table: PredictionTable | str | None = None,
@@ -97,4 +101,4 @@ def judge(mean_delta_e: float, size: str = "any", table: PredictionTable | str |
     return Judgement(prediction, verdict, directional)
 
 
-__all__ = ["Judgement", "directional_prediction", "judge"]
+__all__ = ["Judgement", "directional_prediction", "directional_table_name", "judge"]

@@ -349,33 +349,68 @@ INTERPOLATIONS: dict[str, Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndar
 }
 
 
+class ColumnStatus(StrEnum):
+    """How a column's answer was obtained (see :class:`ColumnPrediction`)."""
+
+    INTERPOLATED = "interpolated"
+    BELOW_RANGE = "below-range"
+    ABOVE_RANGE = "above-range"
+    NO_DATA = "no-data"
+
+
 @dataclass(frozen=True)
 class ColumnPrediction:
     """One column's answer: ``value`` and how it was obtained.
 
-    ``status`` is ``"interpolated"`` (inside the column's ΔE range), ``"below-range"`` (ΔE below
-    the first point: the first point's value, an upper bound because loss grows with ΔE),
-    ``"above-range"`` (beyond the last point: the ceiling, total loss) or ``"no-data"``.
+    ``status`` is :attr:`ColumnStatus.INTERPOLATED` (inside the column's ΔE range,
+    ``delta_e_range``), ``BELOW_RANGE`` (ΔE below the first point: the first point's value, an
+    upper bound because loss grows with ΔE), ``ABOVE_RANGE`` (beyond the last point: the
+    ceiling, total loss) or ``NO_DATA``. ``raised_from``: for the relative column of a
+    published-bounds table given the detector's baseline, the table's value before it was
+    raised to ``100 * points / baseline`` (the paper's percent read as points); None when not
+    raised.
     """
 
     value: float | None
-    status: str
+    status: ColumnStatus
     delta_e_range: tuple[float, float] | None
-    note: str
+    raised_from: float | None = None
 
     def to_json(self) -> dict[str, Any]:
-        """JSON form: ``value``, ``status``, ``delta_e_range``, ``note``."""
-        return {"value": self.value, "status": self.status,
+        """JSON form: ``value``, ``status``, ``delta_e_range``, ``raised_from``."""
+        return {"value": self.value, "status": self.status.value,
                 "delta_e_range": list(self.delta_e_range) if self.delta_e_range else None,
-                "note": self.note}
+                "raised_from": self.raised_from}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> ColumnPrediction:
         """Inverse of :meth:`to_json`."""
         rng = data.get("delta_e_range")
         value = data.get("value")
-        return cls(None if value is None else float(value), str(data["status"]),
-                   (float(rng[0]), float(rng[1])) if rng else None, str(data.get("note", "")))
+        raised = data.get("raised_from")
+        return cls(None if value is None else float(value), ColumnStatus(str(data["status"])),
+                   (float(rng[0]), float(rng[1])) if rng else None,
+                   None if raised is None else float(raised))
+
+
+@dataclass(frozen=True)
+class SamplingError:
+    """The standard error of a measured table's ΔmAP (percentage points) at the table points
+    next to a chart ΔE: the smaller (``low``) and the larger (``high``) of the two (equal at a
+    table point). From the paired standard error the sweep recorded per cell
+    (:func:`fidelity.coco.scoring.paired_standard_error`)."""
+
+    low: float
+    high: float
+
+    def to_json(self) -> dict[str, float]:
+        """``{"low", "high"}`` in percentage points."""
+        return {"low": self.low, "high": self.high}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> SamplingError:
+        """Inverse of :meth:`to_json`."""
+        return cls(float(data["low"]), float(data["high"]))
 
 
 def points_ceiling(curve: Curve, column: str, curves: Sequence[Curve],
@@ -396,15 +431,6 @@ def points_ceiling(curve: Curve, column: str, curves: Sequence[Curve],
         return float(baseline_map)
     known = [b for c in curves if (b := c.baseline_points(column))]
     return max(known) if known else CEILING
-
-
-def _ceiling_words(column: str, value: float | None) -> str:
-    """How a total-loss ceiling was set, in words (for notes)."""
-    if column == "dmap_relative":
-        return "100 %"
-    if value is None or value >= CEILING:
-        return "100 points (no baseline known)"
-    return f"{value:.4g} points (the baseline)"
 
 
 def _column_values(curve: Curve, column: str, delta_e: np.ndarray, method: str,
@@ -542,7 +568,14 @@ def delta_e_limit(max_loss: float, column: str = "dmap_points", *, size: str = "
 
 @dataclass(frozen=True)
 class Prediction:
-    """The predicted detection loss for one chart ΔE (see :func:`predict`)."""
+    """The predicted detection loss for one chart ΔE (see :func:`predict`).
+
+    ``columns`` holds each loss column's answer (:class:`ColumnPrediction`), ``size_used`` the
+    detector size class whose curves answered (``any``, or the sizes a table has, comma
+    separated, when it has no curve for ``size``), ``dmap_points_se`` the sampling error of a
+    measured table around ``delta_e`` (None for published bounds or a table without SEs).
+    What the numbers mean in words is written by :mod:`fidelity.report.words`.
+    """
 
     delta_e: float
     size: str
@@ -552,7 +585,17 @@ class Prediction:
     method: str
     baseline_map: float | None
     transforms: tuple[TransformParameter, ...]
-    notes: tuple[str, ...]
+    dmap_points_se: SamplingError | None = None
+
+    @property
+    def kind(self) -> TableKind:
+        """The kind of the table that answered."""
+        return self.table.kind
+
+    @property
+    def upper_bound(self) -> bool:
+        """True when the values are published upper bounds, not measured worst cases."""
+        return self.table.kind.upper_bound
 
     @property
     def dmap_points(self) -> float | None:
@@ -575,9 +618,19 @@ class Prediction:
         return self.columns["dap_bicycle_points"].value
 
     @property
+    def dmap_points_interval(self) -> tuple[float, float] | None:
+        """``dmap_points`` ± its larger sampling error (one standard error, k = 1), in
+        percentage points; None without a measured SE or a value."""
+        v, se = self.dmap_points, self.dmap_points_se
+        if v is None or se is None:
+            return None
+        return (v - se.high, v + se.high)
+
+    @property
     def out_of_range(self) -> bool:
         """True when any column was answered outside its table range."""
-        return any(c.status in ("below-range", "above-range") for c in self.columns.values())
+        return any(c.status in (ColumnStatus.BELOW_RANGE, ColumnStatus.ABOVE_RANGE)
+                   for c in self.columns.values())
 
     def value(self, cls: str = "all", unit: str = "points") -> float | None:
         """The loss for ``cls`` (``all``, ``person``, ``bicycle``) in ``unit``."""
@@ -592,22 +645,26 @@ class Prediction:
         return self.columns[CLASS_COLUMNS[cls]].value
 
     def to_json(self) -> dict[str, Any]:
-        """JSON form with ``dmap_points``, ``dmap_relative``, ``dap_person_points``,
-        ``dap_bicycle_points``, the per-column answers, ``table`` (its summary) and
-        ``transforms``."""
+        """JSON form of the fields: ``dmap_points``, ``dmap_relative``, ``dap_person_points``,
+        ``dap_bicycle_points``, ``bound`` (published upper bounds), the per-column answers,
+        ``dmap_points_se`` and ``dmap_points_interval``, ``table`` (its summary) and
+        ``transforms``. The report's JSON adds the notes in words
+        (:func:`fidelity.report.words.prediction_json`)."""
+        interval = self.dmap_points_interval
         return {
             "delta_e": self.delta_e,
             "size": self.size,
             "size_used": self.size_used,
             **{col: self.columns[col].value for col in COLUMNS},
-            "bound": self.table.kind.upper_bound,
+            "bound": self.upper_bound,
             "out_of_range": self.out_of_range,
             "columns": {col: c.to_json() for col, c in self.columns.items()},
             "interpolation": self.method,
             "baseline_map": self.baseline_map,
+            "dmap_points_se": self.dmap_points_se.to_json() if self.dmap_points_se else None,
+            "dmap_points_interval": list(interval) if interval else None,
             "table": self.table.summary(),
             "transforms": [tp.to_json() for tp in self.transforms],
-            "notes": list(self.notes),
         }
 
     @classmethod
@@ -615,6 +672,7 @@ class Prediction:
         """Inverse of :meth:`to_json`; the table comes back as its summary, without curves
         (:meth:`PredictionTable.from_summary`)."""
         baseline = data.get("baseline_map")
+        se = data.get("dmap_points_se")
         return cls(
             delta_e=float(data["delta_e"]), size=str(data["size"]),
             size_used=str(data["size_used"]),
@@ -623,7 +681,7 @@ class Prediction:
             method=str(data["interpolation"]),
             baseline_map=None if baseline is None else float(baseline),
             transforms=tuple(TransformParameter.from_json(tp) for tp in data["transforms"]),
-            notes=tuple(str(n) for n in data["notes"]),
+            dmap_points_se=SamplingError.from_json(se) if se else None,
         )
 
 
@@ -668,16 +726,6 @@ def predict(
     if m not in INTERPOLATIONS:
         raise unknown_name("interpolation method", m, INTERPOLATIONS)
     curves, size_used = tab.select(size)
-    notes: list[str] = []
-    if size_used == "any" and size != "any":
-        notes.append(f"table {tab.name!r} has no curve for size {size!r}; its 'any' curve "
-                     f"(worst case over every size) answers")
-    elif size_used != size:
-        sizes = tab.sizes()
-        have = (f"only size {sizes[0]} detectors" if len(sizes) == 1
-                else "sizes " + ", ".join(sizes))
-        notes.append(f"table {tab.name!r} has no curve for size {size!r} (it has {have}); "
-                     f"their worst case answers")
     t = np.array([de])
     columns: dict[str, ColumnPrediction] = {}
     answering: Curve | None = None
@@ -691,59 +739,24 @@ def predict(
                 if col == "dmap_points":
                     answering = c
         if math.isnan(best_v):
-            columns[col] = ColumnPrediction(None, "no-data", None,
-                                            f"table {tab.name!r} has no {col} data")
+            columns[col] = ColumnPrediction(None, ColumnStatus.NO_DATA, None)
             continue
-        status = {0: "interpolated", -1: "below-range", 1: "above-range"}[best_s]
-        assert rng is not None
-        if status == "interpolated":
-            note = f"{m} interpolation inside ΔE {rng[0]:g}..{rng[1]:g}"
-        elif status == "below-range":
-            note = (f"ΔE {de:g} is below the table's range ({rng[0]:g}..{rng[1]:g}); answered "
-                    f"with the value at ΔE {rng[0]:g} (an upper bound: loss grows with ΔE)")
-        else:
-            note = (f"ΔE {de:g} is beyond the table's range ({rng[0]:g}..{rng[1]:g}); no "
-                    f"extrapolation: total loss, {_ceiling_words(col, best_v)}")
+        status = {0: ColumnStatus.INTERPOLATED, -1: ColumnStatus.BELOW_RANGE,
+                  1: ColumnStatus.ABOVE_RANGE}[best_s]
+        raised_from = None
         if (col == "dmap_relative" and tab.kind.upper_bound and baseline_map
                 and columns.get("dmap_points") and columns["dmap_points"].value is not None):
             pts = columns["dmap_points"].value
             alt = min(CEILING, 100.0 * pts / float(baseline_map))
             if alt > best_v:
-                note += (f"; raised to 100*{pts:.4g}/{float(baseline_map):g} = {alt:.4g} % "
-                         f"(the paper's percent read as points)")
-                best_v = alt
-        if tab.kind.upper_bound:
-            note = "upper bound; " + note
-        columns[col] = ColumnPrediction(best_v, status, rng, note)
-    if tab.kind.upper_bound:
-        notes.append("published-bounds table: values are upper bounds (worst case over the "
-                      "paper's transforms and detectors), not expectations")
-        if baseline_map is None:
-            notes.append("ΔmAP points vs relative: the paper's '%' is ambiguous; dmap_points is "
-                         "safe under both readings, dmap_relative only under the relative "
-                         "reading (give the detector's baseline mAP to bound it under both)")
-    if tab.kind.measured:
-        notes.append("measured table: values are the worst loss measured over the transforms "
-                     "(and models) at each ΔE, with sampling error, not a guaranteed bound")
-        se = _bracketing_se(answering, de)
-        if se:
-            notes.append(f"sampling error of the measured ΔmAP points around ΔE {de:g}: SE "
-                         + (f"{se[0]:.2f}" if se[0] == se[1] else f"{se[0]:.2f}-{se[1]:.2f}")
-                         + " points")
-    above = {col: cp for col, cp in columns.items() if cp.status == "above-range"}
-    if above:
-        rng = next(iter(above.values())).delta_e_range
-        assert rng is not None
-        labels = {"dmap_points": "ΔmAP", "dmap_relative": "ΔmAP",
-                  "dap_person_points": "person ΔAP", "dap_bicycle_points": "bicycle ΔAP"}
-        notes.append(f"ΔE {de:g} is beyond the table's range ({rng[0]:g}..{rng[1]:g}); no "
-                     "extrapolation: total loss, " + "; ".join(
-                         f"{labels[col]} {_ceiling_words(col, cp.value)}"
-                         for col, cp in above.items() if cp.value is not None))
+                raised_from, best_v = best_v, alt
+        columns[col] = ColumnPrediction(best_v, status, rng, raised_from)
+    se = _bracketing_se(answering, de) if tab.kind.measured else None
     return Prediction(
         delta_e=de, size=size, size_used=size_used, columns=columns, table=tab, method=m,
         baseline_map=float(baseline_map) if baseline_map is not None else None,
-        transforms=tuple(transform_parameters(de)) if transforms else (), notes=tuple(notes),
+        transforms=tuple(transform_parameters(de)) if transforms else (),
+        dmap_points_se=SamplingError(*se) if se else None,
     )
 
 
@@ -876,10 +889,12 @@ __all__ = [
     "PREDICTION_TABLE_SCHEMA",
     "SIZES",
     "ColumnPrediction",
+    "ColumnStatus",
     "Curve",
     "DeltaELimit",
     "Prediction",
     "PredictionTable",
+    "SamplingError",
     "TableKind",
     "TransformParameter",
     "available_tables",

@@ -17,10 +17,11 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
+from enum import StrEnum
 from typing import Any
 
 from fidelity.errors import InvalidValueError, unknown_name
-from fidelity.prediction.table import CLASS_COLUMNS, Prediction
+from fidelity.prediction.table import CLASS_COLUMNS, ColumnStatus, Prediction
 
 #: SAFE-COLOR: "ΔE ≤ 3 keeps ΔmAP below 1 %" (with a safety margin).
 DEFAULT_MAX_DELTA_E = 3.0
@@ -85,16 +86,38 @@ class Criterion:
         return f"predicted {what} <= {self.limit:g} {unit}"
 
 
+class VerdictReason(StrEnum):
+    """Why a gate passed or failed: the value is within the limit, over it, or there is no
+    prediction to compare (a ``max-dmap`` gate on a column without data fails)."""
+
+    WITHIN_LIMIT = "within-limit"
+    OVER_LIMIT = "over-limit"
+    NO_PREDICTION = "no-prediction"
+
+
 @dataclass(frozen=True)
 class Verdict:
-    """The outcome of a gate: ``passed``, the ``value`` compared with the criterion's limit,
-    and a one-line ``message``."""
+    """The outcome of a gate.
+
+    ``passed`` and its ``reason``; the ``value`` compared with the criterion's limit (the chart
+    ΔE, or the predicted loss in the criterion's unit; None without a prediction); the chart
+    ΔE the verdict was made at (``delta_e``); for a ``max-dmap`` gate, which prediction decided
+    it (``bound``: ``classic`` or ``directional``), the answering column's ``status``, whether
+    the value is a published ``upper_bound``, the prediction ``table``'s name, and whether it
+    is a ``conservative`` answer (outside the table's range, or no prediction). The sentence a
+    report prints is :func:`fidelity.report.words.verdict_message`.
+    """
 
     passed: bool
     criterion: Criterion
     value: float | None
-    message: str
+    reason: VerdictReason
+    delta_e: float
     conservative: bool = False
+    bound: str = "classic"
+    status: ColumnStatus | None = None
+    upper_bound: bool = False
+    table: str | None = None
 
     @property
     def exit_code(self) -> int:
@@ -107,56 +130,68 @@ class Verdict:
         return "PASS" if self.passed else "FAIL"
 
     def to_json(self) -> dict[str, Any]:
-        """JSON form: ``passed``, ``label``, ``criterion``, ``value``, ``limit``,
-        ``conservative_answer``, ``message``."""
+        """JSON form of the fields: ``passed``, ``label``, ``reason``, ``criterion``, ``value``,
+        ``limit``, ``delta_e``, ``bound``, ``status``, ``upper_bound``, ``table``,
+        ``conservative_answer``. The report's JSON adds the ``message``
+        (:func:`fidelity.report.words.verdict_json`)."""
         return {
             "passed": self.passed,
             "label": self.label,
+            "reason": self.reason.value,
             "criterion": self.criterion.to_json(),
             "value": self.value,
             "limit": self.criterion.limit,
+            "delta_e": self.delta_e,
+            "bound": self.bound,
+            "status": self.status.value if self.status is not None else None,
+            "upper_bound": self.upper_bound,
+            "table": self.table,
             "conservative_answer": self.conservative,
-            "message": self.message,
         }
 
     @classmethod
-    def from_json(cls, data: Mapping[str, Any]) -> Verdict:
-        """Inverse of :meth:`to_json`."""
+    def from_json(cls, data: Mapping[str, Any], delta_e: float | None = None) -> Verdict:
+        """Inverse of :meth:`to_json`; a report written before the verdict's fields were
+        recorded gives its reason from ``passed`` and ``value``, its ΔE as ``delta_e``."""
         value = data.get("value")
-        return cls(bool(data["passed"]), Criterion.from_json(data["criterion"]),
-                   None if value is None else float(value), str(data["message"]),
-                   bool(data.get("conservative_answer", False)))
+        passed = bool(data["passed"])
+        reason = data.get("reason") or (
+            "within-limit" if passed else "no-prediction" if value is None else "over-limit")
+        status = data.get("status")
+        de = data.get("delta_e", delta_e)
+        return cls(passed, Criterion.from_json(data["criterion"]),
+                   None if value is None else float(value), VerdictReason(str(reason)),
+                   float("nan") if de is None else float(de),
+                   bool(data.get("conservative_answer", False)),
+                   str(data.get("bound") or "classic"),
+                   ColumnStatus(str(status)) if status else None,
+                   bool(data.get("upper_bound", False)), data.get("table"))
+
+
+def judge_value(criterion: Criterion, value: float | None, delta_e: float, **fields: Any
+                ) -> Verdict:
+    """The verdict of ``criterion`` on ``value`` (None: no prediction, a fail) at chart ΔE
+    ``delta_e``; ``fields`` are the verdict's other fields (``bound``, ``status`` ...)."""
+    if value is None:
+        return Verdict(False, criterion, None, VerdictReason.NO_PREDICTION, float(delta_e),
+                       **{"conservative": True, **fields})
+    passed = value <= criterion.limit
+    return Verdict(passed, criterion, float(value),
+                   VerdictReason.WITHIN_LIMIT if passed else VerdictReason.OVER_LIMIT,
+                   float(delta_e), **fields)
 
 
 def evaluate(mean_delta_e: float, prediction: Prediction | None, criterion: Criterion) -> Verdict:
     """Apply ``criterion`` to a chart's mean ΔE00 and (for ``max-dmap``) its prediction."""
     if criterion.kind == "max-delta-e":
-        value = float(mean_delta_e)
-        passed = value <= criterion.limit
-        return Verdict(passed, criterion, value,
-                       f"{'PASS' if passed else 'FAIL'}: mean ΔE00 {value:.2f} "
-                       f"{'<=' if passed else '>'} {criterion.limit:g}")
+        return judge_value(criterion, float(mean_delta_e), float(mean_delta_e))
     if prediction is None:
         raise InvalidValueError("a --max-dmap gate needs a prediction")
-    loss = prediction.value(criterion.cls, criterion.unit)
     col = prediction.columns[criterion.column]
-    what = criterion.describe().removeprefix("predicted ").split(" <=")[0]
-    unit = "points" if criterion.unit == "points" else "%"
-    if loss is None:
-        return Verdict(False, criterion, None,
-                       f"FAIL: table {prediction.table.name!r} has no {what} prediction "
-                       f"(nothing supports a pass)", conservative=True)
-    passed = loss <= criterion.limit
-    conservative = col.status != "interpolated"
-    extra = f" ({col.status}: conservative answer)" if conservative else ""
-    bound = " (upper bound)" if prediction.table.kind.upper_bound else ""
-    return Verdict(
-        passed, criterion, float(loss),
-        f"{'PASS' if passed else 'FAIL'}: predicted {what} {loss:.2f} {unit}{bound}"
-        f"{extra} {'<=' if passed else '>'} {criterion.limit:g} at mean ΔE00 "
-        f"{prediction.delta_e:.2f}",
-        conservative=conservative,
-    )
+    return judge_value(criterion, prediction.value(criterion.cls, criterion.unit),
+                       prediction.delta_e, status=col.status,
+                       conservative=col.status is not ColumnStatus.INTERPOLATED,
+                       upper_bound=prediction.upper_bound, table=prediction.table.name)
 
 
 __all__ = [
@@ -168,5 +203,7 @@ __all__ = [
     "UNITS",
     "Criterion",
     "Verdict",
+    "VerdictReason",
     "evaluate",
+    "judge_value",
 ]

@@ -30,6 +30,8 @@ from fidelity.report.document import (
     section,
     table,
 )
+from fidelity.report.jsonform import chart_report_json
+from fidelity.report.words import column_note, prediction_notes, verdict_message
 
 # ---------------------------------------------------------------------- the HTML document
 
@@ -46,7 +48,7 @@ def headline(report: ChartReport) -> Headline:
     v = report.verdict
     warn = "".join(f"\n\n**warning**: {w.reason}" for w in report.warnings)
     if v is not None:
-        return Headline(f"**{v.label}**: {v.message.split(': ', 1)[-1]}{warn}",
+        return Headline(f"**{v.label}**: {verdict_message(v).split(': ', 1)[-1]}{warn}",
                         "pass" if v.passed else "fail", figure)
     return Headline(f"mean ΔE00 {report.mean_delta_e:.2f}, max {report.max_delta_e:.2f} "
                     f"({report.worst_patch}); no gate applied{warn}", "info", figure)
@@ -222,8 +224,8 @@ def prediction_sections(report: ChartReport, limit_de: float | None,
     if p.table.curves:
         blocks.append(Figure(plots.prediction_curve(p, limit_dmap, limit_de),
                              "prediction.png", "predicted loss against chart ΔE"))
-    notes = [f"- {n}" for n in p.notes]
-    notes += [f"- {col}: {c.status}: {c.note}" for col, c in p.columns.items()]
+    notes = [f"- {n}" for n in prediction_notes(p)]
+    notes += [f"- {col}: {c.status}: {column_note(p, col)}" for col, c in p.columns.items()]
     blocks.append(Text("\n".join(notes)))
     out = [section("ΔE → predicted detection loss", *blocks)]
     if p.transforms:
@@ -298,7 +300,7 @@ def write_chart_report(report: ChartReport, *, json_path: str | os.PathLike[str]
     written: list[Path] = []
     if json_path is not None:
         check_outputs({"report": json_path}, inputs)
-        written.append(write_json_atomic(json_path, report.to_json()))
+        written.append(write_json_atomic(json_path, chart_report_json(report)))
     if html_path is not None:
         from fidelity.report.html import write_document
 

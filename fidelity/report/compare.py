@@ -31,7 +31,9 @@ from fidelity.report.document import (
     section,
     table,
 )
+from fidelity.report.jsonform import comparison_json
 from fidelity.report.terminal import directional_lines
+from fidelity.report.words import verdict_message
 
 
 def comparison_lines(report: ComparisonReport) -> list[str]:
@@ -62,7 +64,7 @@ def comparison_lines(report: ComparisonReport) -> list[str]:
     for who, r in (("simulation", sim), ("real camera", real)):
         lines += [f"warning ({who}): {w.reason}" for w in r.warnings]
     if report.verdict is not None:
-        lines.append(report.verdict.message.replace("mean ΔE00", "sim-to-real ΔE00"))
+        lines.append(verdict_message(report.verdict, "sim-to-real ΔE00"))
     return lines
 
 
@@ -81,7 +83,8 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
                    for who, r in (("simulation", report.sim), ("real camera", report.real))
                    for w in r.warnings)
     if v is not None:
-        head = Headline(f"**{v.label}**: {v.message.split(': ', 1)[-1].replace('mean ΔE00', 'sim-to-real ΔE00')}{warn}",
+        message = verdict_message(v, "sim-to-real ΔE00").split(": ", 1)[-1]
+        head = Headline(f"**{v.label}**: {message}{warn}",
                         "pass" if v.passed else "fail", swatch)
     else:
         head = Headline(f"sim-to-real ΔE00 mean {m.mean_delta_e:.2f}, max "
@@ -165,7 +168,7 @@ def write_comparison_report(report: ComparisonReport, *,
     written: list[Path] = []
     if json_path is not None:
         check_outputs({"report": json_path}, inputs)
-        written.append(write_json_atomic(json_path, report.to_json()))
+        written.append(write_json_atomic(json_path, comparison_json(report)))
     if html_path is not None:
         from fidelity.chart.image import read_image
         from fidelity.report.html import write_document

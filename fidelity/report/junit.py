@@ -18,6 +18,7 @@ from pathlib import Path
 from xml.etree import ElementTree as ET
 
 from fidelity.records import GateResult
+from fidelity.report.words import verdict_message
 
 
 def case_name(result: GateResult) -> str:
@@ -84,8 +85,8 @@ def junit_xml(cases: Sequence[GateResult], *, timestamp: str | None = None,
         verdict = c.report.verdict
         if verdict is not None and not verdict.passed:
             failures += 1
-            ET.SubElement(case, "failure", message=verdict.message,
-                          type="GateFailure").text = verdict.message
+            message = verdict_message(verdict)
+            ET.SubElement(case, "failure", message=message, type="GateFailure").text = message
         ET.SubElement(case, "system-out").text = "\n".join(summary_lines(c.report))
     suite.set("failures", str(failures))
     suite.set("errors", str(errors))

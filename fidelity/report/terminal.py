@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from fidelity.prediction.table import TableKind
 from fidelity.records import ChartReport, ImageSource
+from fidelity.report.words import verdict_message
 
 
 def summary_lines(report: ChartReport) -> list[str]:
@@ -60,7 +61,7 @@ def summary_lines(report: ChartReport) -> list[str]:
     lines += [f"measured on COCO: {m.summary()}" for m in report.measured]
     lines += [w.warning for w in report.warnings]
     if report.verdict is not None:
-        lines.append(report.verdict.message)
+        lines.append(verdict_message(report.verdict))
     return lines
 
 

@@ -1,0 +1,106 @@
+"""The JSON reports: the records' JSON forms with the sentences a person reads beside the numbers.
+
+A record's ``to_json`` holds its fields; the JSON report a command writes (``check``, ``audit``,
+``gate``, ``compare``, ``predict``) adds, for each prediction, its ``notes`` and each column's
+``note``, and for each verdict its ``message``, written by :mod:`fidelity.report.words`. The
+report's layout is the JSON Schema ``fidelity/data/schemas/report.schema.json``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+from fidelity.fileio import JSONObject, json_ready
+from fidelity.prediction.table import Prediction
+from fidelity.prediction.verdict import Verdict
+from fidelity.records import ChartReport, ComparisonReport
+from fidelity.report.words import column_note, prediction_notes, verdict_message
+
+if TYPE_CHECKING:
+    from fidelity.coco.corruptions import CocoCAnswer
+
+
+def prediction_json(prediction: Prediction,
+                    families: Mapping[str, float | None] | None = None) -> dict[str, Any]:
+    """:meth:`Prediction.to_json <fidelity.prediction.table.Prediction.to_json>` with the
+    ``notes`` and each column's ``note``; with ``families`` (``fidelity predict``: the
+    direction-aware ΔmAP of an error entirely of each transform family), also
+    ``directional_by_family``."""
+    out = prediction.to_json()
+    for col, c in out["columns"].items():
+        c["note"] = column_note(prediction, col)
+    out["notes"] = prediction_notes(prediction)
+    if families is not None:
+        out["directional_by_family"] = dict(families)
+    return out
+
+
+def coco_c_answer_json(answer: CocoCAnswer) -> dict[str, Any]:
+    """The answer of ``fidelity predict --coco-c`` as JSON, its prediction with the notes."""
+    return answer.to_json() | {"prediction": prediction_json(answer.prediction)}
+
+
+def verdict_json(verdict: Verdict, delta_e_name: str = "mean ΔE00") -> dict[str, Any]:
+    """:meth:`Verdict.to_json <fidelity.prediction.verdict.Verdict.to_json>` with the
+    ``message``."""
+    return verdict.to_json() | {"message": verdict_message(verdict, delta_e_name)}
+
+
+def chart_report_json(report: ChartReport) -> JSONObject:
+    """The JSON report of a chart (``check``, ``audit``, ``gate``; the module docstring of
+    :mod:`fidelity.records` lists its keys), strict JSON values."""
+    r = report
+    m = r.measurement.to_json()
+    patches = m["patches"]
+    if r.valid_pixels is not None:
+        per_patch = r.bad_pixels.per_patch if r.bad_pixels else {}
+        for p, n in zip(patches, r.valid_pixels, strict=True):
+            p.update(valid_pixels=int(n), bad_pixels=int(per_patch.get(p["name"], 0)))
+    out: JSONObject = json_ready({
+        "schema_version": r.schema_version,
+        "command": r.command,
+        "created": r.created,
+        "mean_delta_e": m["mean_delta_e"],
+        "max_delta_e": m["max_delta_e"],
+        "worst_patch": m["worst_patch"],
+        "patches": patches,
+        "exposure_ev": r.exposure_ev,
+        "bad_pixels": r.bad_pixels.to_json() if r.bad_pixels else None,
+        "source": r.source.to_json(),
+        "prediction": prediction_json(r.prediction) if r.prediction else None,
+        "verdict": verdict_json(r.verdict) if r.verdict else None,
+        "details": r.source.details(),
+        "provenance": r.provenance.to_json(),
+        "bound": r.bound,
+        "directional_prediction": r.directional.to_json() if r.directional else None,
+        "blind_spots": [b.to_json() for b in r.blind_spots],
+        "measured_loss": [x.to_json() for x in r.measured],
+    })
+    return out
+
+
+def comparison_json(report: ComparisonReport) -> JSONObject:
+    """The JSON report of a sim-to-real comparison (``compare``): the sim-to-real summary and
+    patches first, then the two audits as :func:`chart_report_json` writes them."""
+    r = report
+    m = r.measurement.to_json()
+    out: JSONObject = json_ready({
+        "schema_version": r.schema_version, "command": r.command, "created": r.created,
+        "sim_to_real": {"mean_delta_e": m["mean_delta_e"], "max_delta_e": m["max_delta_e"],
+                        "worst_patch": m["worst_patch"],
+                        "normalisation": r.normalisation.to_json(), "patches": m["patches"]},
+        "sim_delta_e": r.sim.mean_delta_e, "real_delta_e": r.real.mean_delta_e,
+        "prediction": prediction_json(r.prediction),
+        "directional_prediction": r.directional.to_json() if r.directional else None,
+        "bound": r.bound,
+        "verdict": verdict_json(r.verdict) if r.verdict else None,
+        "measured_loss": [x.to_json() for x in r.measured],
+        "emulation": dict(r.emulation) if r.emulation else None,
+        "sim": chart_report_json(r.sim), "real": chart_report_json(r.real),
+        "provenance": r.provenance.to_json()})
+    return out
+
+
+__all__ = ["chart_report_json", "coco_c_answer_json", "comparison_json", "prediction_json",
+           "verdict_json"]

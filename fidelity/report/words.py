@@ -1,0 +1,125 @@
+"""Predictions and verdicts in words: the sentences every report prints, written from the fields.
+
+A :class:`~fidelity.prediction.table.Prediction` and a
+:class:`~fidelity.prediction.verdict.Verdict` carry numbers and enums only (the table's kind,
+each column's status and range, the sampling error, a verdict's reason); this module is the one
+place that says what they mean, for the terminal, the HTML and JUnit reports and the notes of the
+JSON report (:mod:`fidelity.report.jsonform`).
+"""
+
+from __future__ import annotations
+
+from fidelity.prediction.table import CEILING, ColumnStatus, Prediction
+from fidelity.prediction.verdict import Verdict, VerdictReason
+
+#: How the notes name each loss column.
+COLUMN_LABELS = {"dmap_points": "ΔmAP", "dmap_relative": "ΔmAP",
+                 "dap_person_points": "person ΔAP", "dap_bicycle_points": "bicycle ΔAP"}
+
+
+def ceiling_words(column: str, value: float | None) -> str:
+    """How a total-loss ceiling was set: ``100 %`` (relative), the baseline in points, or 100
+    points when no baseline is known."""
+    if column == "dmap_relative":
+        return "100 %"
+    if value is None or value >= CEILING:
+        return "100 points (no baseline known)"
+    return f"{value:.4g} points (the baseline)"
+
+
+def column_note(prediction: Prediction, column: str) -> str:
+    """How one column's answer was obtained (interpolated, below or beyond the range, raised
+    to the points reading, no data), in one clause."""
+    p, c = prediction, prediction.columns[column]
+    if c.status is ColumnStatus.NO_DATA or c.delta_e_range is None:
+        return f"table {p.table.name!r} has no {column} data"
+    lo, hi = c.delta_e_range
+    if c.status is ColumnStatus.INTERPOLATED:
+        note = f"{p.method} interpolation inside ΔE {lo:g}..{hi:g}"
+    elif c.status is ColumnStatus.BELOW_RANGE:
+        note = (f"ΔE {p.delta_e:g} is below the table's range ({lo:g}..{hi:g}); answered "
+                f"with the value at ΔE {lo:g} (an upper bound: loss grows with ΔE)")
+    else:
+        note = (f"ΔE {p.delta_e:g} is beyond the table's range ({lo:g}..{hi:g}); no "
+                f"extrapolation: total loss, {ceiling_words(column, c.value)}")
+    points = p.columns["dmap_points"].value
+    if c.raised_from is not None and points is not None and p.baseline_map:
+        note += (f"; raised to 100*{points:.4g}/{p.baseline_map:g} = {c.value:.4g} % "
+                 f"(the paper's percent read as points)")
+    if p.upper_bound:
+        note = "upper bound; " + note
+    return note
+
+
+def _size_note(p: Prediction) -> str | None:
+    if p.size_used == "any" and p.size != "any":
+        return (f"table {p.table.name!r} has no curve for size {p.size!r}; its 'any' curve "
+                f"(worst case over every size) answers")
+    if p.size_used != p.size:
+        sizes = p.size_used.split(",")
+        have = (f"only size {sizes[0]} detectors" if len(sizes) == 1
+                else "sizes " + ", ".join(sizes))
+        return (f"table {p.table.name!r} has no curve for size {p.size!r} (it has {have}); "
+                f"their worst case answers")
+    return None
+
+
+def prediction_notes(prediction: Prediction) -> list[str]:
+    """What a prediction's numbers are, in sentences: which size answered, whether the values
+    are upper bounds or measured worst cases (with their sampling error), and what a ΔE beyond
+    the table's range was answered with."""
+    p = prediction
+    notes = [n for n in (_size_note(p),) if n]
+    if p.upper_bound:
+        notes.append("published-bounds table: values are upper bounds (worst case over the "
+                     "paper's transforms and detectors), not expectations")
+        if p.baseline_map is None:
+            notes.append("ΔmAP points vs relative: the paper's '%' is ambiguous; dmap_points is "
+                         "safe under both readings, dmap_relative only under the relative "
+                         "reading (give the detector's baseline mAP to bound it under both)")
+    else:
+        notes.append("measured table: values are the worst loss measured over the transforms "
+                     "(and models) at each ΔE, with sampling error, not a guaranteed bound")
+        se = p.dmap_points_se
+        if se is not None:
+            notes.append(f"sampling error of the measured ΔmAP points around ΔE {p.delta_e:g}: "
+                         "SE " + (f"{se.low:.2f}" if se.low == se.high
+                                  else f"{se.low:.2f}-{se.high:.2f}") + " points")
+    above = {col: c for col, c in p.columns.items() if c.status is ColumnStatus.ABOVE_RANGE}
+    if above:
+        rng = next(iter(above.values())).delta_e_range
+        assert rng is not None
+        notes.append(f"ΔE {p.delta_e:g} is beyond the table's range ({rng[0]:g}..{rng[1]:g}); "
+                     "no extrapolation: total loss, " + "; ".join(
+                         f"{COLUMN_LABELS[col]} {ceiling_words(col, c.value)}"
+                         for col, c in above.items() if c.value is not None))
+    return notes
+
+
+def verdict_message(verdict: Verdict, delta_e_name: str = "mean ΔE00") -> str:
+    """The verdict in one line, e.g. ``PASS: mean ΔE00 1.02 <= 3`` or ``FAIL: predicted ΔmAP
+    1.40 points > 1 at mean ΔE00 2.41``; ``delta_e_name`` names the chart ΔE (a comparison's
+    is the sim-to-real ΔE00)."""
+    v, c = verdict, verdict.criterion
+    if c.kind == "max-delta-e":
+        assert v.value is not None
+        return (f"{v.label}: {delta_e_name} {v.value:.2f} "
+                f"{'<=' if v.passed else '>'} {c.limit:g}")
+    what = c.describe().removeprefix("predicted ").split(" <=")[0]
+    directional = v.bound == "directional"
+    if v.reason is VerdictReason.NO_PREDICTION or v.value is None:
+        source = "no direction-aware" if directional else f"table {v.table!r} has no"
+        return f"FAIL: {source} {what} prediction (nothing supports a pass)"
+    unit = "points" if c.unit == "points" else "%"
+    if directional:
+        qualifier = " (direction-aware bound)"
+    else:
+        qualifier = " (upper bound)" if v.upper_bound else ""
+        if v.conservative and v.status is not None:
+            qualifier += f" ({v.status.value}: conservative answer)"
+    return (f"{v.label}: predicted {what} {v.value:.2f} {unit}{qualifier} "
+            f"{'<=' if v.passed else '>'} {c.limit:g} at {delta_e_name} {v.delta_e:.2f}")
+
+
+__all__ = ["COLUMN_LABELS", "ceiling_words", "column_note", "prediction_notes",
+           "verdict_message"]

@@ -1,0 +1,170 @@
+"""The package's import graph: layered, acyclic, no private name used across modules (issue 33).
+
+Every ``import`` and ``from ... import`` of ``fidelity/`` is read from the source (module level,
+inside functions and under ``TYPE_CHECKING`` alike: an import hidden in a function still ties
+two modules together). The layers, lowest first, are the ones docs/development.md names:
+
+0. support: ``errors``, ``version``, ``resources``, ``fileio``, ``schema``
+1. ``colour``
+2. ``camera``, ``chart``
+3. ``prediction``
+4. ``coco``
+5. the chart pipeline: ``records``, ``check``, ``compare``
+6. ``report``
+7. the edges: ``config``, ``environment``, ``cli``, ``pytest_plugin``, ``__main__`` and the
+   package itself (its lazy public API)
+
+A module may import its own layer and the ones below; a cycle is an error at any layer.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parent.parent / "fidelity"
+
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("fidelity.errors", "fidelity.version", "fidelity.resources", "fidelity.fileio",
+     "fidelity.schema"),
+    ("fidelity.colour",),
+    ("fidelity.camera", "fidelity.chart"),
+    ("fidelity.prediction",),
+    ("fidelity.coco",),
+    ("fidelity.records", "fidelity.check", "fidelity.compare"),
+    ("fidelity.report",),
+    ("fidelity.config", "fidelity.environment", "fidelity.cli", "fidelity.pytest_plugin",
+     "fidelity.__main__", "fidelity"),
+)
+
+
+def modules(root: Path = PACKAGE) -> dict[str, Path]:
+    """Module name -> file, for every ``.py`` file of the package."""
+    out = {}
+    for path in sorted(root.rglob("*.py")):
+        parts = list(path.relative_to(root.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts.pop()
+        out[".".join(parts)] = path
+    return out
+
+
+def imports(root: Path = PACKAGE) -> tuple[dict[str, set[str]], list[tuple[str, str, str]]]:
+    """The import graph (module -> the package's modules it imports) and each private name
+    imported from another module (importer, module, name)."""
+    mods = modules(root)
+    graph: dict[str, set[str]] = defaultdict(set)
+    private: list[tuple[str, str, str]] = []
+    for name, path in mods.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                targets = [(a.name, None) for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    up = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    base = ".".join([*up, *([base] if base else [])])
+                targets = [(base, a.name) for a in node.names]
+            else:
+                continue
+            for module, member in targets:
+                if not module.startswith("fidelity"):
+                    continue
+                full = f"{module}.{member}" if member else module
+                target = full if full in mods else module
+                if target != name:
+                    graph[name].add(target)
+                if (member and member.startswith("_") and not member.startswith("__")
+                        and target != name):
+                    private.append((name, target, member))
+    return graph, private
+
+
+def layer(module: str) -> int:
+    """The layer of a module: that of the longest package prefix in :data:`LAYERS`."""
+    best, length = -1, -1
+    for i, names in enumerate(LAYERS):
+        for prefix in names:
+            if (module == prefix or module.startswith(prefix + ".")) and len(prefix) > length:
+                best, length = i, len(prefix)
+    return best
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+@pytest.fixture(scope="module")
+def graph() -> tuple[dict[str, set[str]], list[tuple[str, str, str]]]:
+    return imports()
+
+
+def test_every_module_has_a_layer() -> None:
+    assert [m for m in modules() if layer(m) < 0] == []
+
+
+def test_no_import_cycle(graph) -> None:
+    assert cycles(graph[0]) == []
+
+
+def test_no_lower_layer_imports_a_higher_one(graph) -> None:
+    upward = [f"{m} (layer {layer(m)}) imports {t} (layer {layer(t)})"
+              for m, targets in sorted(graph[0].items()) for t in sorted(targets)
+              if layer(t) > layer(m)]
+    assert upward == []
+
+
+def test_no_private_name_crosses_modules(graph) -> None:
+    assert graph[1] == []
+
+
+def test_the_checks_find_what_they_look_for(tmp_path) -> None:
+    """The walker sees imports inside functions, relative imports and private names, and the
+    cycle finder finds a two-module cycle: the checks above can fail."""
+    pkg = tmp_path / "fidelity"
+    (pkg / "colour").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "colour" / "__init__.py").write_text("")
+    (pkg / "errors.py").write_text("def f():\n    from fidelity.colour.a import _hidden\n")
+    (pkg / "colour" / "a.py").write_text("from ..errors import f\n_hidden = 1\n")
+    g, private = imports(pkg)
+    assert g["fidelity.errors"] == {"fidelity.colour.a"}
+    assert g["fidelity.colour.a"] == {"fidelity.errors"}
+    assert private == [("fidelity.errors", "fidelity.colour.a", "_hidden")]
+    assert cycles(g) == [["fidelity.colour.a", "fidelity.errors"]]
+    assert layer("fidelity.errors") < layer("fidelity.colour.a")

@@ -1,0 +1,88 @@
+"""Predictions and verdicts in words (fidelity.report.words): each sentence carries the fields'
+numbers, and one sentence per reason. The wording itself is pinned by the JSON outputs
+(tests/test_json_outputs.py); here the numbers and the choice of sentence."""
+
+from __future__ import annotations
+
+import pytest
+from test_prediction import SC, _measured_table
+
+from fidelity.prediction import table as pr
+from fidelity.prediction.verdict import Criterion, VerdictReason, evaluate, judge_value
+from fidelity.report.words import (
+    ceiling_words,
+    column_note,
+    prediction_notes,
+    verdict_message,
+)
+
+
+def test_the_sampling_error_note_gives_the_two_bracketing_ses() -> None:
+    doc = _measured_table()
+    for curve, ses in zip(doc["curves"][:2], ([0.1, 0.3, 0.2, 0.5], [0.15, 0.25, 0.4, 0.6]),
+                          strict=True):
+        for point, se in zip(curve["points"], ses, strict=True):
+            point["dmap_points_se"] = se
+    p = pr.predict(4.0, size="n", table=pr.parse_prediction_table(doc), transforms=False)
+    notes = prediction_notes(p)
+    assert sum("0.25-0.40" in n for n in notes) == 1
+    p3 = pr.predict(3.0, size="n", table=pr.parse_prediction_table(doc), transforms=False)
+    assert sum(" 0.25 points" in n for n in prediction_notes(p3)) == 1
+    plain = pr.predict(3.0, size="n", table=pr.parse_prediction_table(_measured_table()),
+                       transforms=False)
+    assert len(prediction_notes(plain)) == len(notes) - 1  # no SE: no SE sentence
+
+
+def test_a_raised_relative_loss_names_points_baseline_and_result() -> None:
+    p = pr.predict(6.0, table=SC, baseline_map=37.5, transforms=False)
+    note = column_note(p, "dmap_relative")
+    assert "100*3/37.5 = 8 %" in note
+    plain = pr.predict(6.0, table=SC, transforms=False)
+    assert "100*" not in column_note(plain, "dmap_relative")
+    # the published-bounds notes: one more sentence without the baseline (the ambiguity)
+    assert len(prediction_notes(plain)) == len(prediction_notes(p)) + 1
+
+
+def test_ceilings_in_words_carry_the_baseline() -> None:
+    assert ceiling_words("dmap_points", 38.0).startswith("38 points")
+    assert ceiling_words("dap_person_points", 100.0).startswith("100 points")
+    assert ceiling_words("dap_person_points", None).startswith("100 points")
+    assert ceiling_words("dmap_relative", 100.0) == "100 %"
+
+
+def test_every_size_fallback_says_which_sizes_answered() -> None:
+    table = pr.parse_prediction_table(_measured_table())
+    m = pr.predict(5.0, size="m", table=table, transforms=False)
+    assert sum("'m'" in n and "sizes n, x" in n for n in prediction_notes(m)) == 1
+    n = pr.predict(5.0, size="n", table=table, transforms=False)
+    assert not any("'n'" in s for s in prediction_notes(n))
+
+
+@pytest.mark.parametrize(("value", "reason", "head"), [
+    (0.5, VerdictReason.WITHIN_LIMIT, "PASS"),
+    (1.5, VerdictReason.OVER_LIMIT, "FAIL"),
+    (None, VerdictReason.NO_PREDICTION, "FAIL"),
+])
+def test_a_verdict_message_per_reason(value, reason, head) -> None:
+    v = judge_value(Criterion("max-dmap", 1.0), value, 2.41, table="t")
+    assert v.reason is reason and v.passed == (head == "PASS")
+    message = verdict_message(v)
+    assert message.startswith(head + ":")
+    if value is None:
+        assert "'t'" in message and v.conservative
+    else:
+        assert f"{value:.2f} points" in message and "2.41" in message
+
+
+def test_the_verdict_on_the_chart_delta_e_and_the_comparisons_name_for_it() -> None:
+    v = evaluate(3.2, None, Criterion("max-delta-e", 3.0))
+    assert v.reason is VerdictReason.OVER_LIMIT and v.value == v.delta_e == 3.2
+    assert verdict_message(v).startswith("FAIL: mean ΔE00 3.20 > 3")
+    assert verdict_message(v, "sim-to-real ΔE00").startswith("FAIL: sim-to-real ΔE00 3.20")
+
+
+def test_a_conservative_answer_says_its_status() -> None:
+    p = pr.predict(30.0, table=SC, transforms=False)
+    v = evaluate(30.0, p, Criterion("max-dmap", 200.0))
+    assert v.passed and v.conservative and v.status is pr.ColumnStatus.ABOVE_RANGE
+    assert v.upper_bound and "above-range" in verdict_message(v)
