@@ -112,8 +112,10 @@ def test_shipped_table_equals_the_report(tmp_path):
     assert shipped != report and "/coco/" not in text
     res = cc.CocoCResults.from_json(shipped)
     for c in res.cells:
-        assert c.chart_delta_e == pytest.approx(cc.corruption_chart(c.corruption,
-                                                                    c.severity).mean_delta_e)
+        chart = cc.corruption_chart(c.corruption, c.severity)
+        assert c.chart_delta_e == pytest.approx(chart.mean_delta_e)
+        # the report's predictions are recorded, and equal what the shipped tables give now
+        assert c.prediction == cc.predict_cell(chart)
     assert res.to_json() == shipped
 
 

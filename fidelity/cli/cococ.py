@@ -83,7 +83,12 @@ def cococ(models: str | None, images: str | None, annotations: str | None, limit
     import json
     from pathlib import Path
 
-    from fidelity.coco.corruptions import CORRUPTIONS, CocoCResults, run_coco_c
+    from fidelity.coco.corruptions import (
+        CORRUPTIONS,
+        CocoCResults,
+        run_coco_c,
+        with_predictions,
+    )
     from fidelity.coco.measure import resolve_coco_inputs, stderr_log
     from fidelity.fileio import check_outputs
     from fidelity.report.cococ import write_cococ_report
@@ -102,7 +107,8 @@ def cococ(models: str | None, images: str | None, annotations: str | None, limit
 
         src = out_dir / "cococ.json"
         try:
-            results = CocoCResults.from_json(json.loads(src.read_text(encoding="utf-8")))
+            results = with_predictions(
+                CocoCResults.from_json(json.loads(src.read_text(encoding="utf-8"))))
         except FileNotFoundError:
             raise InputFileError(f"{src}: no results to rebuild the report from") from None
     else:

@@ -40,14 +40,17 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from fidelity.errors import InvalidValueError, unknown_name
+
+if TYPE_CHECKING:
+    from fidelity.chart.measure import ChartMeasurement
 
 U8 = NDArray[np.uint8]
 F64 = NDArray[np.float64]
@@ -289,11 +292,55 @@ def uncorrupted_chart_delta_e(chart: str | None = None) -> float:
 # --------------------------------------------------------------------------------------------
 
 
+#: Detector size class of the predictions a COCO-C cell records.
+PREDICTION_SIZE = "n"
+
+
+@dataclass(frozen=True)
+class CellPrediction:
+    """The predicted ΔmAP of a COCO-C cell's chart error for detector size ``size``, from the
+    shipped tables: classic (worst case over the SAFE-COLOR transforms at the chart ΔE) and
+    direction-aware (:mod:`fidelity.prediction.directional`), in percentage points and in %
+    of the baseline mAP."""
+
+    classic: float | None
+    directional: float | None
+    classic_relative: float | None
+    directional_relative: float | None
+    size: str = PREDICTION_SIZE
+
+    def to_json(self) -> dict[str, Any]:
+        """Field names as keys."""
+        return {"classic": self.classic, "directional": self.directional,
+                "classic_relative": self.classic_relative,
+                "directional_relative": self.directional_relative, "size": self.size}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> CellPrediction:
+        """Inverse of :meth:`to_json`."""
+        return cls(d.get("classic"), d.get("directional"), d.get("classic_relative"),
+                   d.get("directional_relative"), str(d.get("size", PREDICTION_SIZE)))
+
+
+def predict_cell(measurement: ChartMeasurement, size: str = PREDICTION_SIZE) -> CellPrediction:
+    """The classic and the direction-aware predicted ΔmAP of a corrupted chart (detector size
+    ``size``), from the shipped tables."""
+    from fidelity.prediction.directional import predict_chart
+    from fidelity.prediction.table import predict
+
+    classic = predict(measurement.mean_delta_e, size=size, transforms=False)
+    d = predict_chart(measurement, size=size)
+    return CellPrediction(classic.dmap_points, d.dmap_points, classic.dmap_relative,
+                          d.dmap_relative, size)
+
+
 @dataclass(frozen=True)
 class CorruptionCell:
     """One (corruption, severity): its chart ΔE (mean, max, worst patch), the direction parts
-    of the chart error (:class:`fidelity.prediction.directional.ErrorParts`, as JSON), and the
-    measured loss per detector (:class:`fidelity.coco.measure.MeasuredLoss`)."""
+    of the chart error (:class:`fidelity.prediction.directional.ErrorParts`, as JSON), the
+    measured loss per detector (:class:`fidelity.coco.measure.MeasuredLoss`) and the loss
+    predicted from the chart (:class:`CellPrediction`; None in a table written before it was
+    recorded: :func:`with_predictions`)."""
 
     corruption: str
     severity: int
@@ -303,13 +350,15 @@ class CorruptionCell:
     worst_patch: str
     parts: Mapping[str, Any]
     measured: tuple[Any, ...] = ()
+    prediction: CellPrediction | None = None
 
     def to_json(self) -> dict[str, Any]:
-        """Field names as keys (``measured``: their JSON)."""
+        """Field names as keys (``measured``, ``prediction``: their JSON)."""
         return {"corruption": self.corruption, "severity": self.severity,
                 "parameter": self.parameter, "chart_delta_e": self.chart_delta_e,
                 "chart_max_delta_e": self.chart_max_delta_e, "worst_patch": self.worst_patch,
-                "parts": dict(self.parts), "measured": [m.to_json() for m in self.measured]}
+                "parts": dict(self.parts), "measured": [m.to_json() for m in self.measured],
+                "prediction": self.prediction.to_json() if self.prediction else None}
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> CorruptionCell:
@@ -321,7 +370,8 @@ class CorruptionCell:
                    tuple(param) if isinstance(param, list) else param,
                    float(d["chart_delta_e"]), float(d["chart_max_delta_e"]),
                    str(d["worst_patch"]), dict(d.get("parts") or {}),
-                   tuple(MeasuredLoss.from_json(m) for m in d.get("measured") or ()))
+                   tuple(MeasuredLoss.from_json(m) for m in d.get("measured") or ()),
+                   CellPrediction.from_json(d["prediction"]) if d.get("prediction") else None)
 
     def measured_for(self, model: str) -> Any:
         """The :class:`~fidelity.coco.measure.MeasuredLoss` of ``model`` (None if absent)."""
@@ -395,7 +445,8 @@ def _parameter(name: str, severity: int) -> Any:
 
 def chart_cells(corruptions: Sequence[str] = CORRUPTIONS,
                 severities: Sequence[int] = SEVERITIES) -> list[CorruptionCell]:
-    """The chart side of every (corruption, severity): chart ΔE and direction parts, no COCO."""
+    """The chart side of every (corruption, severity): chart ΔE, direction parts and the loss
+    predicted from them, no COCO."""
     from fidelity.prediction.directional import error_parts
 
     out = []
@@ -404,8 +455,18 @@ def chart_cells(corruptions: Sequence[str] = CORRUPTIONS,
             m = corruption_chart(name, sev)
             out.append(CorruptionCell(name, sev, _parameter(name, sev), m.mean_delta_e,
                                       m.max_delta_e, m.worst_patch,
-                                      error_parts(m.reference_lab, m.lab).to_json()))
+                                      error_parts(m.reference_lab, m.lab).to_json(),
+                                      prediction=predict_cell(m)))
     return out
+
+
+def with_predictions(results: CocoCResults) -> CocoCResults:
+    """``results`` with each cell's predicted loss (:func:`predict_cell`) where it has none
+    (a table written before the predictions were recorded)."""
+    return replace(results, cells=tuple(
+        c if c.prediction is not None else
+        replace(c, prediction=predict_cell(corruption_chart(c.corruption, c.severity)))
+        for c in results.cells))
 
 
 def run_coco_c(inputs: Any, corruptions: Sequence[str] = CORRUPTIONS,
@@ -430,9 +491,7 @@ def run_coco_c(inputs: Any, corruptions: Sequence[str] = CORRUPTIONS,
             description={"corruption": cell.corruption, "severity": cell.severity,
                          "parameter": cell.parameter,
                          "definition": f"imagecorruptions {IMAGECORRUPTIONS_VERSION}"})
-        cells.append(CorruptionCell(cell.corruption, cell.severity, cell.parameter,
-                                    cell.chart_delta_e, cell.chart_max_delta_e,
-                                    cell.worst_patch, cell.parts, tuple(measured)))
+        cells.append(replace(cell, measured=tuple(measured)))
     meta = {"fidelity": __version__, "python": platform.python_version(),
             "machine": {"platform": platform.platform(), "threads": threads},
             "images": str(inputs.images), "annotations": str(inputs.annotations),
@@ -534,11 +593,13 @@ __all__ = [
     "CORRUPTIONS",
     "IMAGECORRUPTIONS_VERSION",
     "PATCH_PX",
+    "PREDICTION_SIZE",
     "SATURATE",
     "SEVERITIES",
     "DATA_FILE",
     "CocoCAnswer",
     "CocoCResults",
+    "CellPrediction",
     "CorruptionCell",
     "CorruptionMap",
     "chart_cells",
@@ -550,8 +611,10 @@ __all__ = [
     "hsv_to_rgb_skimage",
     "load_coco_c",
     "parse_corruption",
+    "predict_cell",
     "patch_colours",
     "rgb_to_hsv_skimage",
     "run_coco_c",
     "uncorrupted_chart_delta_e",
+    "with_predictions",
 ]

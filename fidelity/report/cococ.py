@@ -31,18 +31,16 @@ DELTA_E_PNG = "cococ-chart-delta-e.png"
 LOSS_PNG = "cococ-loss-vs-delta-e.png"
 
 
-def predictions(cell: CorruptionCell, size: str = "n") -> dict[str, float | None]:
-    """The classic and the direction-aware predicted ΔmAP (points) of a cell's chart error
-    (detector size ``size``), computed now from the shipped tables."""
-    from fidelity.coco.corruptions import corruption_chart
-    from fidelity.prediction.directional import predict_chart
-    from fidelity.prediction.table import predict
-
-    m = corruption_chart(cell.corruption, cell.severity)
-    classic = predict(m.mean_delta_e, size=size, transforms=False)
-    d = predict_chart(m, size=size)
-    return {"classic": classic.dmap_points, "directional": d.dmap_points,
-            "classic_relative": classic.dmap_relative, "directional_relative": d.dmap_relative}
+def predictions(cell: CorruptionCell) -> dict[str, float | None]:
+    """The cell's recorded predictions (:class:`fidelity.coco.corruptions.CellPrediction`) by
+    name; every value None when the cell has none."""
+    p = cell.prediction
+    if p is None:
+        return dict.fromkeys(("classic", "directional", "classic_relative",
+                              "directional_relative"))
+    return {"classic": p.classic, "directional": p.directional,
+            "classic_relative": p.classic_relative,
+            "directional_relative": p.directional_relative}
 
 
 def delta_e_plot(results: CocoCResults) -> bytes:
