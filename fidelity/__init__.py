@@ -56,6 +56,7 @@ _API: dict[str, str] = {
     "measure_image": "fidelity.chart.measure",
     "ChartMeasurement": "fidelity.chart.measure",
     "ImageMeasurement": "fidelity.chart.measure",
+    "ReadOptions": "fidelity.chart.measure",
     "apply_transform": "fidelity.prediction.transforms",
     "calibrate_transform": "fidelity.prediction.calibration",
     "predict": "fidelity.prediction.table",
@@ -91,6 +92,7 @@ if TYPE_CHECKING:
     from fidelity.chart.measure import (
         ChartMeasurement,
         ImageMeasurement,
+        ReadOptions,
         measure_chart,
         measure_image,
     )
@@ -146,6 +148,7 @@ __all__ = [
     "ImageMeasurement",
     "MeasuredLoss",
     "Prediction",
+    "ReadOptions",
     "Verdict",
     "apply_transform",
     "audit_image",

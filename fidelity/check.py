@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fidelity.chart.measure import DEFAULT_READ, ReadOptions
 from fidelity.prediction.judge import judge
 from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion
 from fidelity.records import (
@@ -150,19 +151,13 @@ def audit_image(
     image: str | os.PathLike[str],
     corners: str | Sequence[float] | np.ndarray | None = None,
     *,
-    layer: str | None = None,
-    encoding: str | None = None,
-    exposure: float | str | None = None,
+    read: ReadOptions = DEFAULT_READ,
     reference: str = "scene",
     illuminant: str = "D65",
     size: str = "any",
     table: PredictionTable | str | None = None,
     criterion: Criterion | None = None,
-    negatives: str = "keep",
-    colourspace: str | None = None,
     command: str = "audit",
-    bayer: str | None = None,
-    max_pixels: int | None = None,
     bound: str = "classic",
     measure: MeasureRequest | None = None,
 ) -> ChartReport:
@@ -176,21 +171,16 @@ def audit_image(
         Image centres (x, y) of the dark skin, bluish green, black and white patches, as
         ``"X1,Y1,...,X4,Y4"`` or (4, 2); None: the chart is found
         (:func:`fidelity.chart.find.find_chart`).
-    layer, encoding, exposure, negatives, colourspace
-        How to read the pixels (see :func:`fidelity.chart.measure.measure_image`): EXR layer,
+    read
+        How to read the pixels (:class:`~fidelity.chart.measure.ReadOptions`): EXR layer,
         ``linear``/``srgb`` (default from the file), ``auto`` or a fixed EV, what to do with
-        negative values, the RGB primaries.
-    bayer
-        CFA pattern of a one-channel camera raw mosaic (``RGGB``, ``BGGR``, ``GRBG``,
-        ``GBRG``): demosaiced before measuring (:func:`fidelity.chart.image.read_image`).
+        negative values, the RGB primaries, the Bayer pattern of a raw mosaic, the pixel
+        limit.
     reference, illuminant
         ``scene`` (the chart's spectra under ``illuminant``, adapted to D65, as
         :func:`check_camera` uses), ``safecolor`` (the paper's Lab values) or a chart JSON.
     size, table, criterion, bound
         As for :func:`check_camera`; ``criterion`` None: no verdict.
-    max_pixels
-        Refuse a larger image (width x height) before decoding it (default:
-        :func:`fidelity.chart.image.pixel_limit`).
     measure
         Also measure on COCO what this chart's colour rendering costs a detector: a mapping
         from the reference to the measured colours, fitted on the 24 patches
@@ -205,9 +195,7 @@ def audit_image(
     from fidelity.chart.measure import measure_image
 
     result = measure_image(image, corners if corners is None or len(corners) else None,
-                           layer=layer, encoding=encoding, exposure=exposure,
-                           reference=reference, illuminant=illuminant, negatives=negatives,
-                           colourspace=colourspace, bayer=bayer, max_pixels=max_pixels)
+                           read=read, reference=reference, illuminant=illuminant)
     prediction, verdict, directional = judge(result.mean_delta_e, size, table, criterion,
                                              result.measurement, bound)
     info = result.image
@@ -220,7 +208,7 @@ def audit_image(
         corner_checks=result.corner_checks)
     conventions = {"reference": result.reference.conventions,
                    "audit": AUDIT_CONVENTION.format(window=result.location.window)}
-    spots = _image_blind_spots(result.measurement, info, bayer, max_pixels)
+    spots = _image_blind_spots(result.measurement, info, read)
     measured: tuple[MeasuredLoss, ...] = ()
     if measure is not None:
         emu = chart_emulation(result.measurement)
@@ -238,19 +226,18 @@ def audit_image(
     )
 
 
-def _image_blind_spots(measurement: ChartMeasurement, info: Any, bayer: str | None = None,
-                       max_pixels: int | None = None) -> tuple[Any, ...]:
+def _image_blind_spots(measurement: ChartMeasurement, info: Any, read: ReadOptions
+                       ) -> tuple[Any, ...]:
     """The blind-spot checks of an audited image: the chart's shadow tones, and the image's
-    banding when its pixels are integer codes (read again for it, demosaiced like the audit
-    with ``bayer``)."""
+    banding when its pixels are integer codes (read again for it, as the audit read it)."""
     from fidelity.chart.blindspots import banding, chart_blind_spots
 
     spots = chart_blind_spots(measurement)
     if str(info.pixel_type).lower() in ("uint8", "uint16", "int8", "int16"):
         from fidelity.chart.image import read_image
 
-        pixels = read_image(info.path, layer=info.layer, bayer=bayer,
-                            max_pixels=max_pixels).pixels
+        pixels = read_image(info.path, layer=info.layer, bayer=read.bayer,
+                            max_pixels=read.max_pixels).pixels
         spots = (*spots, banding(pixels, info.pixel_type))
     else:
         spots = (*spots, banding(np.zeros((1, 1, 3)), info.pixel_type))
@@ -275,18 +262,12 @@ def gate(
     *,
     camera: str | None = None,
     corners: str | None = None,
-    layer: str | None = None,
-    encoding: str | None = None,
-    exposure: str | None = None,
-    negatives: str = "keep",
-    colourspace: str | None = None,
-    bayer: str | None = None,
+    read: ReadOptions = DEFAULT_READ,
     reference: str | None = None,
     illuminant: str = "D65",
     renderer: str = "closed-form",
     size: str = "any",
     table: str | None = None,
-    max_pixels: int | None = None,
     bound: str = "classic",
 ) -> list[GateResult]:
     """Gate ``images`` one by one (or ``camera``) against ``criterion``. An input error of
@@ -305,12 +286,10 @@ def gate(
         t0 = time.perf_counter()
         try:
             if images:
-                report = audit_image(subject, corners, layer=layer, encoding=encoding,
-                                     exposure=exposure, reference=reference or "scene",
-                                     illuminant=illuminant, size=size, table=table,
-                                     criterion=criterion, negatives=negatives,
-                                     colourspace=colourspace, command="gate", bayer=bayer,
-                                     max_pixels=max_pixels, bound=bound)
+                report = audit_image(subject, corners, read=read,
+                                     reference=reference or "scene", illuminant=illuminant,
+                                     size=size, table=table, criterion=criterion,
+                                     command="gate", bound=bound)
             else:
                 report = check_camera(subject, illuminant=illuminant, renderer=renderer,
                                       reference=reference or "scene", size=size, table=table,

@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fidelity.chart.measure import DEFAULT_READ, ReadOptions
 from fidelity.errors import InvalidValueError, unknown_name
 from fidelity.records import ComparisonReport, Normalisation, Provenance, utc_now
 
@@ -95,12 +96,7 @@ def compare_charts(
     table: str | None = None,
     criterion: Criterion | None = None,
     bound: str = "classic",
-    layer: str | None = None,
-    encoding: str | None = None,
-    exposure: str | None = None,
-    negatives: str = "keep",
-    colourspace: str | None = None,
-    bayer: str | None = None,
+    read: ReadOptions = DEFAULT_READ,
     measure: MeasureRequest | None = None,
 ) -> ComparisonReport:
     """Compare the chart in the simulated image ``sim`` with the chart in the real camera's
@@ -122,8 +118,9 @@ def compare_charts(
     criterion
         ``max-delta-e`` on the sim-to-real chart ΔE, or ``max-dmap`` on its predicted loss
         (decided by ``bound``: ``classic`` or ``directional``); None: no verdict.
-    layer, encoding, exposure, negatives, colourspace, bayer
-        How both images are read (as ``audit``).
+    read
+        How both images are read (:class:`~fidelity.chart.measure.ReadOptions`, as
+        ``audit``).
     measure
         Also measure the difference's cost on COCO (:class:`fidelity.coco.measure.MeasureRequest`).
 
@@ -137,10 +134,8 @@ def compare_charts(
 
     if normalise_mode not in NORMALISATIONS:
         raise unknown_name("normalisation", normalise_mode, NORMALISATIONS)
-    kw: dict[str, Any] = {"layer": layer, "encoding": encoding, "exposure": exposure,
-                          "reference": reference, "illuminant": illuminant, "size": size,
-                          "table": table, "negatives": negatives, "colourspace": colourspace,
-                          "bayer": bayer}
+    kw: dict[str, Any] = {"read": read, "reference": reference, "illuminant": illuminant,
+                          "size": size, "table": table}
     sim_report = audit_image(sim, sim_corners, command="compare", **kw)
     real_report = audit_image(real, real_corners, command="compare", **kw)
     sm, rm = sim_report.measurement, real_report.measurement

@@ -60,9 +60,16 @@ def colour_fidelity(request: pytest.FixtureRequest,
     defaults: dict[str, Any] = dict(marker.kwargs) if marker else {}
 
     def measure(image: str | os.PathLike[str], **options: Any) -> ColourFidelity:
+        from dataclasses import fields
+
+        from fidelity.chart.measure import ReadOptions
         from fidelity.check import audit_image
 
-        report = audit_image(image, **{**defaults, **options})
+        kwargs = {**defaults, **options}
+        reading = {f.name for f in fields(ReadOptions)} & kwargs.keys()
+        if reading:  # the image-reading options may be given one by one (layer="beauty")
+            kwargs["read"] = ReadOptions(**{k: kwargs.pop(k) for k in sorted(reading)})
+        report = audit_image(image, **kwargs)
         name = os.fspath(image)
         record_property(f"{name}:mean_delta_e", f"{report.mean_delta_e:.4f}")
         record_property(f"{name}:max_delta_e", f"{report.max_delta_e:.4f}")

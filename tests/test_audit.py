@@ -18,7 +18,7 @@ import pytest
 from PIL import Image as PILImage
 
 from fidelity.chart import measure as _measure
-from fidelity.chart.measure import exposure_from_neutrals
+from fidelity.chart.measure import ReadOptions, exposure_from_neutrals
 from fidelity.colour.charts import load_chart
 from fidelity.errors import FidelityError, InvalidValueError, UnknownNameError
 from fidelity.prediction.transforms import apply_transform
@@ -138,9 +138,10 @@ def test_linear_exr_fixed_exposure(tmp_path, chart):
     srgb = apply_transform(chart.srgb, "saturation-inc", 1.8)
     scale = 0.013
     write_exr(tmp_path / "c.exr", colour.cctf_decoding(draw_chart(srgb), function="sRGB") * scale)
-    result = measure_image(tmp_path / "c.exr", corners_of(), exposure=-math.log2(scale))
+    result = measure_image(tmp_path / "c.exr", corners_of(),
+                           read=ReadOptions(exposure=-math.log2(scale)))
     assert abs(result.mean_delta_e - expected_delta_e(srgb, chart.lab)) < 0.02
-    auto = measure_image(tmp_path / "c.exr", corners_of(), exposure="auto")
+    auto = measure_image(tmp_path / "c.exr", corners_of(), read=ReadOptions(exposure="auto"))
     assert abs(auto.exposure_ev + math.log2(scale)) < 0.03
 
 
@@ -160,12 +161,12 @@ def test_linear_half_exr_fixed_exposure_with_layer(tmp_path, chart):
     write_exr(tmp_path / "c.exr", np.concatenate([linear, linear * 0.5], axis=-1),
               channels=("beauty.R", "beauty.G", "beauty.B", "diffuse.R", "diffuse.G", "diffuse.B"),
               dtype=np.float16)
-    result = measure_image(tmp_path / "c.exr", corners_of(), layer="beauty",
-                         exposure=-math.log2(scale))
+    result = measure_image(tmp_path / "c.exr", corners_of(),
+                           read=ReadOptions(layer="beauty", exposure=-math.log2(scale)))
     assert result.exposure_mode == "fixed"
     assert abs(result.mean_delta_e - expected_delta_e(srgb, chart.lab)) < 0.02
-    other = measure_image(tmp_path / "c.exr", corners_of(), layer="diffuse",
-                        exposure=-math.log2(scale) + 1.0)
+    other = measure_image(tmp_path / "c.exr", corners_of(),
+                          read=ReadOptions(layer="diffuse", exposure=-math.log2(scale) + 1.0))
     assert abs(other.mean_delta_e - result.mean_delta_e) < 0.02
 
 
@@ -269,7 +270,7 @@ def test_srgb_input_with_auto_exposure(tmp_path, chart):
     dark = colour.cctf_encoding(colour.cctf_decoding(srgb, function="sRGB") * 0.5, function="sRGB")
     write_png8(tmp_path / "dark.png", draw_chart(dark))
     fixed = measure_image(tmp_path / "dark.png", corners_of())
-    auto = measure_image(tmp_path / "dark.png", corners_of(), exposure="auto")
+    auto = measure_image(tmp_path / "dark.png", corners_of(), read=ReadOptions(exposure="auto"))
     assert auto.exposure_mode == "auto" and auto.exposure_ev == pytest.approx(1.0, abs=0.02)
     assert fixed.exposure_ev == 0.0 and fixed.mean_delta_e > auto.mean_delta_e + 3
     assert abs(auto.mean_delta_e - expected_delta_e(srgb, chart.lab)) < 0.2  # 8-bit rounding x2

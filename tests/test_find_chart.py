@@ -26,7 +26,7 @@ from fidelity.chart.find import (
     make_view,
     placement_scores,
 )
-from fidelity.chart.measure import measure_image, measure_pixels
+from fidelity.chart.measure import ReadOptions, measure_image, measure_pixels
 from fidelity.cli import main
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import load_chart
@@ -120,7 +120,7 @@ def test_bayer_mosaic_is_demosaiced_and_measures_like_the_rgb_original(tmp_path,
     write_exr(rgb_path, linear.astype(np.float32))
     _write_mosaic_png16(raw_path, _mosaic(linear, pattern))
     rgb = measure_image(rgb_path, corners)
-    raw = measure_image(raw_path, corners, bayer=pattern.lower())
+    raw = measure_image(raw_path, corners, read=ReadOptions(bayer=pattern.lower()))
     assert raw.image is not None and raw.image.bayer == pattern
     assert raw.encoding == "linear"
     assert raw.mean_delta_e == pytest.approx(rgb.mean_delta_e, abs=0.05)
@@ -149,7 +149,7 @@ def test_one_channel_image_without_bayer_is_exit_2_naming_the_option(tmp_path):
     rgb = tmp_path / "rgb.exr"
     write_exr(rgb, np.ones((10, 12, 3), np.float32))
     with pytest.raises(InputFileError, match="one-channel mosaic"):
-        measure_image(rgb, bayer="RGGB")
+        measure_image(rgb, read=ReadOptions(bayer="RGGB"))
 
 
 def test_low_confidence_fit_is_an_error_unless_corners_are_given(tmp_path):

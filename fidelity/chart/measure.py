@@ -599,51 +599,89 @@ def _colourspace_name(colourspace: str | Sequence[float]) -> str:
     return "chromaticities " + ",".join(f"{float(v):.5g}" for v in colourspace)
 
 
+@dataclass(frozen=True)
+class ReadOptions:
+    """How an image's pixels are read for measuring its chart (``audit``, ``gate``,
+    ``compare`` and their library functions take one as ``read=``).
+
+    Attributes
+    ----------
+    layer
+        EXR layer or part name (None: the first RGB layer).
+    encoding
+        ``linear`` or ``srgb``; None: the file's likely encoding (linear for floating-point
+        pixels: EXR, HDR, float TIFF; sRGB for integer pixels: PNG, JPEG, 8/16-bit TIFF).
+    exposure
+        ``"auto"`` (fitted on the neutral patches), a fixed EV, or None: auto for linear
+        pixels, 0 for sRGB-encoded ones.
+    negatives
+        Pixels with a negative channel: ``keep`` them in the linear mean or ``exclude`` them
+        like NaN/Inf (:data:`NEGATIVE_RULES`).
+    colourspace
+        RGB primaries of the pixels (a colour-science name); None: the EXR's
+        ``chromaticities`` attribute, else sRGB.
+    bayer
+        CFA pattern of a one-channel camera raw mosaic (``RGGB``, ``BGGR``, ``GRBG``,
+        ``GBRG``): demosaiced, taken as linear (:func:`fidelity.chart.image.read_image`).
+    max_pixels
+        Refuse a larger image (width x height) before decoding it; None:
+        :func:`fidelity.chart.image.pixel_limit`.
+    """
+
+    layer: str | None = None
+    encoding: str | None = None
+    exposure: float | str | None = None
+    negatives: str = "keep"
+    colourspace: str | None = None
+    bayer: str | None = None
+    max_pixels: int | None = None
+
+    def given(self) -> list[str]:
+        """The options set away from their defaults that describe the pixels of an image
+        (``layer``, ``encoding``, ``exposure``, ``bayer``, ``colourspace``), by name."""
+        return [name for name in ("layer", "encoding", "exposure", "bayer", "colourspace")
+                if getattr(self, name) is not None]
+
+
+#: Every image-reading option at its default.
+DEFAULT_READ = ReadOptions()
+
+
 def measure_image(
     path: str | os.PathLike[str],
     corners: np.ndarray | str | Sequence[float] | None = None,
     *,
-    layer: str | None = None,
-    encoding: str | None = None,
-    exposure: float | str | None = None,
+    read: ReadOptions = DEFAULT_READ,
     reference: str | Reference = DEFAULT_REFERENCE,
     illuminant: str = "D65",
     window: float = DEFAULT_WINDOW,
     detection: str = "cascade",
-    negatives: str = "keep",
-    colourspace: str | Sequence[float] | None = None,
-    bayer: str | None = None,
-    max_pixels: int | None = None,
 ) -> ImageMeasurement:
-    """Read an image (:func:`fidelity.chart.image.read_image`, refusing more than
-    ``max_pixels`` pixels) and audit its chart.
-
-    ``encoding=None`` takes the file's likely encoding: linear for floating-point pixels (EXR,
-    HDR, float TIFF), sRGB for integer pixels (PNG, JPEG, 8/16-bit TIFF). ``colourspace=None``
-    takes the file's OpenEXR ``chromaticities`` attribute when it has one, else sRGB. ``bayer``:
-    the CFA pattern of a one-channel raw mosaic (demosaiced, linear). Errors name the file.
-    """
+    """Read an image (:func:`fidelity.chart.image.read_image`, as ``read`` says:
+    :class:`ReadOptions`) and audit its chart (:func:`measure_pixels`). Errors name the
+    file."""
     from fidelity.chart.image import read_image
     from fidelity.errors import FidelityError
     from fidelity.fileio import file_sha256
 
-    img = read_image(path, layer=layer, bayer=bayer, max_pixels=max_pixels)
-    enc = encoding or img.encoding
+    img = read_image(path, layer=read.layer, bayer=read.bayer, max_pixels=read.max_pixels)
+    enc = read.encoding or img.encoding
     info = img.info(sha256=file_sha256(img.path), encoding=enc)
     try:
-        return measure_pixels(img.pixels, corners, encoding=enc, exposure=exposure,
-                            reference=reference, illuminant=illuminant, window=window,
-                            image=info, detection=detection,
-                            negatives=negatives,
-                            colourspace=(colourspace if colourspace is not None
-                                         else img.chromaticities or "sRGB"))
+        return measure_pixels(img.pixels, corners, encoding=enc, exposure=read.exposure,
+                              reference=reference, illuminant=illuminant, window=window,
+                              image=info, detection=detection, negatives=read.negatives,
+                              colourspace=(read.colourspace if read.colourspace is not None
+                                           else img.chromaticities or "sRGB"))
     except FidelityError as exc:
         raise type(exc)(f"{img.path}: {exc}") from None
 
 __all__ = [
     "ENCODINGS",
     "BadPixels",
+    "DEFAULT_READ",
     "PixelCounts",
+    "ReadOptions",
     "MAX_EXPOSURE_EV",
     "MIN_VALID_FRACTION",
     "MIN_VALID_PIXELS",

@@ -71,6 +71,7 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
     fidelity audit photo.jpg --corners 102,88,610,95,604,420,98,414
     fidelity audit render.png --measure      # + the loss measured on COCO
     """
+    from fidelity.chart.measure import ReadOptions
     from fidelity.check import audit_image
     from fidelity.fileio import check_outputs
     from fidelity.records import ImageSource
@@ -85,10 +86,10 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
                   {"IMAGE": image, "--table": table, "--reference": reference,
                    "--illuminant": illuminant} | measure_inputs(images, annotations, models))
     request = measure_request(measure, images, annotations, models, limit)
-    report = audit_image(image, corners, encoding=encoding, exposure=exposure, layer=layer,
-                         reference=reference, illuminant=illuminant, size=size, table=table,
-                         negatives=negatives, colourspace=colourspace, bayer=bayer,
-                         max_pixels=max_pixels, bound=bound, measure=request)
+    read = ReadOptions(layer=layer, encoding=encoding, exposure=exposure, negatives=negatives,
+                       colourspace=colourspace, bayer=bayer, max_pixels=max_pixels)
+    report = audit_image(image, corners, read=read, reference=reference, illuminant=illuminant,
+                         size=size, table=table, bound=bound, measure=request)
     written = write_chart_report(report, json_path=json_path, html_path=html_path,
                                  protect=(image,))
     if to_stdout:

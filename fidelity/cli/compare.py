@@ -84,6 +84,7 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
     fidelity compare sim.exr photo.jpg --real-corners 102,88,610,95,604,420,98,414
     fidelity compare sim.exr photo.png --max-delta-e 5 --junit sim-vs-real.xml --html r.html
     """
+    from fidelity.chart.measure import ReadOptions
     from fidelity.cli.gate import make_criterion
     from fidelity.compare import compare_charts
     from fidelity.errors import FidelityError
@@ -108,9 +109,10 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
         report = compare_charts(
             sim, real, sim_corners=sim_corners, real_corners=real_corners,
             normalise_mode=normalise_mode, reference=reference, illuminant=illuminant,
-            size=size, table=table, criterion=criterion, bound=bound, layer=layer,
-            encoding=encoding, exposure=exposure, negatives=negatives,
-            colourspace=colourspace, bayer=bayer, measure=request)
+            size=size, table=table, criterion=criterion, bound=bound,
+            read=ReadOptions(layer=layer, encoding=encoding, exposure=exposure,
+                             negatives=negatives, colourspace=colourspace, bayer=bayer),
+            measure=request)
     except FidelityError as exc:
         if junit is not None:
             write_junit(junit, [GateResult(subject, criterion, error=str(exc))])

@@ -179,6 +179,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
                                                           bayer, colourspace)):
         raise click.UsageError("--corners, --encoding, --exposure, --layer, --bayer and "
                                "--colourspace apply to an IMAGE, not to --camera")
+    from fidelity.chart.measure import ReadOptions
     from fidelity.check import gate as gate_subjects
     from fidelity.records import GateResult, gate_exit_code
     from fidelity.report.terminal import summary_lines
@@ -219,10 +220,11 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         _error_line(str(exc))
         sys.exit(EXIT_ERROR)
     cases = gate_subjects(
-        criterion, images, camera=camera, corners=corners, layer=layer, encoding=encoding, exposure=exposure,
-        negatives=negatives, colourspace=colourspace, bayer=bayer, reference=reference,
-        illuminant=illuminant, renderer=renderer, size=size, table=table,
-        max_pixels=max_pixels, bound=bound)
+        criterion, images, camera=camera, corners=corners,
+        read=ReadOptions(layer=layer, encoding=encoding, exposure=exposure, negatives=negatives,
+                         colourspace=colourspace, bayer=bayer, max_pixels=max_pixels),
+        reference=reference, illuminant=illuminant, renderer=renderer, size=size, table=table,
+        bound=bound)
     cases = [write_reports(case, jp, hp, images)
              for case, jp, hp in zip(cases, json_paths, html_paths, strict=True)]
     for case in cases:
