@@ -15,7 +15,9 @@ For every camera file of a suite (:func:`load_suite`):
    and per class (person, bicycle).
 3. **Compare.** The worst-case table bounds a camera when the measured loss is at most the
    prediction. A standard error of every measured loss comes from 5 interleaved folds of the
-   image set (image ``i`` of the id-sorted list in fold ``i mod 5``): SE = std(fold ΔmAP)/sqrt(5).
+   image set (image ``i`` of the id-sorted list in fold ``i mod 5``): SE = std(fold ΔmAP)/sqrt(5),
+   the relative one over each fold's ΔmAP as a share of that fold's baseline
+   (:func:`fidelity.coco.loss.loss_estimate`, as the sweep tables).
 
 Suite folder: camera files (``*.toml``, ``*.yaml``, ``*.yml``) and an optional ``suite.toml``
 giving each camera's scene illuminant (``default_illuminant = "D65"``; ``[illuminant]`` table
@@ -43,6 +45,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fidelity.coco.loss import LOSS_COLUMNS, Losses
 from fidelity.coco.scoring import FOLDS  # interleaved image folds for standard errors
 from fidelity.coco.store import (
     RegisteredModel,
@@ -66,13 +69,6 @@ SUITE_FILE = "suite.toml"
 BASELINE = "baseline"
 #: Classes compared (``all`` = mAP@[.50:.95] over the 80 COCO classes).
 CLASSES: tuple[str, ...] = ("all", "person", "bicycle")
-#: Loss columns compared (prediction-table column names).
-LOSS_COLUMNS: dict[str, str] = {
-    "all": "dmap_points",
-    "all-relative": "dmap_relative",
-    "person": "dap_person_points",
-    "bicycle": "dap_bicycle_points",
-}
 #: Images and pixel stride used for the image-level ΔE00 of an emulation (analysis only).
 IMAGE_DE_SAMPLE: tuple[int, int] = (50, 4)
 
@@ -339,36 +335,8 @@ class ValidationCell:
                    d["seconds"], d["finished"])
 
 
-#: Key order of the measured losses and of their standard errors in ``validation.json``.
-_MEASURED_KEYS = ("dmap_points", "dmap_relative", "dap_person_points", "dap_bicycle_points")
+#: Key order of the measured losses' standard errors in ``validation.json``.
 _SE_KEYS = ("dmap_points", "dap_person_points", "dap_bicycle_points", "dmap_relative")
-
-
-@dataclass(frozen=True)
-class Losses:
-    """Losses by prediction-table column (:data:`LOSS_COLUMNS`): ΔmAP in points and relative
-    (% of baseline), ΔAP of person and bicycle in points; None where not defined."""
-
-    dmap_points: float | None
-    dmap_relative: float | None
-    dap_person_points: float | None
-    dap_bicycle_points: float | None
-
-    def get(self, column: str) -> float | None:
-        """The loss of ``column`` (a value of :data:`LOSS_COLUMNS`)."""
-        return {"dmap_points": self.dmap_points, "dmap_relative": self.dmap_relative,
-                "dap_person_points": self.dap_person_points,
-                "dap_bicycle_points": self.dap_bicycle_points}[column]
-
-    def to_json(self, keys: Sequence[str] = _MEASURED_KEYS) -> dict[str, Any]:
-        """``{column: value}`` in the order ``keys``."""
-        return {k: self.get(k) for k in keys}
-
-    @classmethod
-    def from_json(cls, d: Mapping[str, Any]) -> Losses:
-        """Inverse of :meth:`to_json`."""
-        return cls(d.get("dmap_points"), d.get("dmap_relative"), d.get("dap_person_points"),
-                   d.get("dap_bicycle_points"))
 
 
 @dataclass(frozen=True)
@@ -427,9 +395,10 @@ class BoundCheck:
 class ValidationRow:
     """Predicted against measured loss of one (camera, model) cell (:func:`collect_results`).
 
-    Scores are fractions; ``measured`` and ``se`` are :class:`Losses` (points, relative in %)
-    against the model's ΔE = 0 baseline; ``predicted``: per table its :class:`TablePrediction`;
-    ``bound``: per class of :data:`LOSS_COLUMNS` the :class:`BoundCheck` of the bound table.
+    Scores are fractions; ``measured`` and ``se`` are :class:`fidelity.coco.loss.Losses`
+    (points, relative in %) against the model's ΔE = 0 baseline; ``predicted``: per table its
+    :class:`TablePrediction`; ``bound``: per class of :data:`fidelity.coco.loss.LOSS_COLUMNS`
+    the :class:`BoundCheck` of the bound table.
     """
 
     camera: str
@@ -498,7 +467,8 @@ class ClassSummary:
 @dataclass(frozen=True)
 class ValidationSummary:
     """The bound ``bound_table`` tested, the ``tables`` evaluated, stored cameras left out
-    (``not_in_suite``) and per class of :data:`LOSS_COLUMNS` its :class:`ClassSummary`."""
+    (``not_in_suite``) and per class of :data:`fidelity.coco.loss.LOSS_COLUMNS` its
+    :class:`ClassSummary`."""
 
     bound_table: str
     tables: tuple[str, ...]
@@ -608,7 +578,7 @@ def predictions_for(delta_e: float, baseline_map_percent: float | None,
         p = predict(delta_e, size=size, table=t, baseline_map=baseline_map_percent,
                     transforms=False)
         out[t] = TablePrediction(
-            Losses(*(p.columns[col].value for col in _MEASURED_KEYS)),
+            Losses(*(p.columns[col].value for col in LOSS_COLUMNS.values())),
             {col: p.columns[col].status for col in LOSS_COLUMNS.values()}, p.table.kind)
     return out
 
@@ -914,19 +884,6 @@ def _colour_version() -> str:
 # --------------------------------------------------------------------------------------------
 
 
-def _loss(base: float | None, value: float | None) -> float | None:
-    if base is None or value is None:
-        return None
-    return 100.0 * (base - value)
-
-
-def _se(base_folds: Sequence[FoldScore], folds: Sequence[FoldScore], key: str) -> float | None:
-    from fidelity.coco.scoring import paired_standard_error
-
-    return paired_standard_error([b.value(key) for b in base_folds],
-                                 [f.value(key) for f in folds])
-
-
 def holdout_accuracy(cases: Sequence[CameraCase], method: str = "root-polynomial"
                      ) -> dict[str, AccuracySummary]:
     """Out-of-sample emulation accuracy per camera: the mapping fitted on the colour-science
@@ -949,16 +906,16 @@ def _bound_check(predicted: float | None, measured: float | None, se: float | No
 
 def _row(camera: str, info: CameraRecord, b: ValidationCell, c: ValidationCell,
          tables: Sequence[str], bound: str) -> ValidationRow:
-    """Predicted against measured loss of one cell ``c`` against its baseline ``b``."""
-    measured = Losses(
-        dmap_points=_loss(b.map, c.map),
-        dmap_relative=100.0 * (b.map - c.map) / b.map if b.map else None,
-        dap_person_points=_loss(b.ap.get("person"), c.ap.get("person")),
-        dap_bicycle_points=_loss(b.ap.get("bicycle"), c.ap.get("bicycle")))
-    se_points = _se(b.folds, c.folds, "map")
-    se = Losses(se_points,
-                None if se_points is None else 100.0 * se_points / (100.0 * b.map),
-                _se(b.folds, c.folds, "person"), _se(b.folds, c.folds, "bicycle"))
+    """Predicted against measured loss of one cell ``c`` against its baseline ``b``
+    (:func:`fidelity.coco.loss.score_loss`)."""
+    from fidelity.coco.loss import score_loss
+
+    base: dict[str, float | None] = {"map": b.map, **b.ap}
+    cell: dict[str, float | None] = {"map": c.map, **c.ap}
+    loss, person, bicycle = (score_loss(k, base, cell, b.folds, c.folds)
+                             for k in ("map", "person", "bicycle"))
+    measured = Losses(loss.points, loss.relative, person.points, bicycle.points)
+    se = Losses(loss.points_se, loss.relative_se, person.points_se, bicycle.points_se)
     pred = predictions_for(info.chart_delta_e, 100.0 * b.map, tables)
     checks = {cls: _bound_check(pred[bound].losses.get(col), measured.get(col), se.get(col),
                                 pred[bound].status[col])
@@ -1037,7 +994,6 @@ __all__ = [
     "BASELINE",
     "CLASSES",
     "FOLDS",
-    "LOSS_COLUMNS",
     "BoundCheck",
     "CameraCase",
     "CameraRecord",
@@ -1045,7 +1001,6 @@ __all__ = [
     "EmulationRecord",
     "ErrorProfile",
     "ImageDeltaE",
-    "Losses",
     "TablePrediction",
     "ValidationCell",
     "ValidationResults",
