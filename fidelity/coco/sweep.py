@@ -42,6 +42,7 @@ import numpy as np
 from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
 from fidelity.errors import InvalidValueError
 from fidelity.fileio import file_sha256
+from fidelity.version import __version__
 
 if TYPE_CHECKING:
     from fidelity.coco.executor import ExecutorOptions
@@ -362,7 +363,7 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
                                 "numpy": np.__version__, "Pillow": PIL.__version__,
                                 "pycocotools": _dist_version("pycocotools"),
                                 "faster-coco-eval": _dist_version("faster-coco-eval"),
-                                "fidelity": _fidelity_version()})
+                                "fidelity": __version__})
     store.record_scorer(method)
     store.set_meta("grid", {"transforms": list(transforms), "targets": list(targets),
                             "models": [f"{m.path.name}@{m.limit or len(all_ids)}"
@@ -570,9 +571,3 @@ def _dist_version(name: str) -> str | None:
         return version(name)
     except PackageNotFoundError:
         return None
-
-
-def _fidelity_version() -> str:
-    from fidelity import __version__
-
-    return __version__

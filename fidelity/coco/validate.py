@@ -781,7 +781,7 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     store = ValidationStore(store_dir)
     image_set = ImageSet(img_dir, coco, all_ids)
     store.start_run(image_set, [m.limit for m in models], annotations)
-    from fidelity import __version__
+    from fidelity.version import __version__
 
     store.set_meta("versions", {"python": platform.python_version(),
                                 "onnxruntime": onnxruntime.__version__, "numpy": np.__version__,
