@@ -60,12 +60,13 @@ def test_a_transformed_chart_is_explained_by_its_own_family(name, param):
 def test_shipped_table_is_rebuilt_from_tables_json():
     """coco1000-directional.json is what directional_table makes of reports/coco/tables.json,
     and its classic curves are the measured table's."""
+    from fidelity.coco.directional import directional_table
     from fidelity.coco.tables import TablesResult
     from fidelity.fileio import json_ready
     from fidelity.prediction.table import prediction_dir
 
     result = TablesResult.from_json(json.loads((ROOT / "reports/coco/tables.json").read_text()))
-    built = json_ready(dr.directional_table(result.tables))
+    built = json_ready(directional_table(result.tables))
     shipped = json.loads((prediction_dir() / "coco1000-directional.json").read_text())
     assert built == shipped
     classic = json.loads((prediction_dir() / "coco1000-measured.json").read_text())

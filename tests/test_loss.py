@@ -12,8 +12,8 @@ import pytest
 
 from fidelity.coco.loss import (
     LOSS_COLUMNS,
-    LossEstimate,
     Losses,
+    LossEstimate,
     loss_estimate,
     paired_standard_error,
     score_loss,
