@@ -146,8 +146,7 @@ def test_validation_both_bounds_hold_on_the_30_cameras():
     """On the validation's 60 cells (stored measured loss ± SE, charts from the stored renders)
     the direction-aware bound holds within 2 SE for every class and over-predicts mAP far
     less than the classic one."""
-    from fidelity.coco.bounds import directional_validation
-    from fidelity.coco.validate import ValidationResults
+    from fidelity.coco.validate import ValidationResults, directional_validation
 
     doc = json.loads((ROOT / "reports/validation/validation.json").read_text())
     doc.pop("directional", None)  # recomputed here, not read back

@@ -45,6 +45,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fidelity.coco.bounds import CameraChart, DirectionalValidation, MeasuredCell, compare_bounds
 from fidelity.coco.loss import LOSS_COLUMNS, Losses
 from fidelity.coco.scoring import FOLDS  # interleaved image folds for standard errors
 from fidelity.coco.store import (
@@ -58,7 +59,6 @@ from fidelity.fileio import file_sha256, json_ready
 
 if TYPE_CHECKING:
     from fidelity.chart.measure import ChartMeasurement
-    from fidelity.coco.bounds import DirectionalValidation
     from fidelity.coco.emulation import AccuracySummary, Emulation
     from fidelity.coco.executor import ExecutorOptions
     from fidelity.coco.scoring import CocoScore, FoldScore
@@ -528,11 +528,7 @@ class ValidationResults:
 
 
 def _directional_from_json(d: Mapping[str, Any] | None) -> DirectionalValidation | None:
-    if not d:
-        return None
-    from fidelity.coco.bounds import DirectionalValidation
-
-    return DirectionalValidation.from_json(d)
+    return DirectionalValidation.from_json(d) if d else None
 
 
 # --------------------------------------------------------------------------------------------
@@ -984,10 +980,26 @@ def collect_results(store: ValidationStore, tables: Sequence[str] | None = None,
         tuple(rows), summary, cases, models,
         {m: cells[(m, BASELINE)] for m in models if (m, BASELINE) in cells}, store.meta())
     if suite and rows:
-        from fidelity.coco.bounds import directional_validation
-
         results = replace(results, directional=directional_validation(results, suite))
     return results
+
+
+def directional_validation(results: ValidationResults,
+                           suite: Sequence[CameraCase] | None = None,
+                           table: str | None = None) -> DirectionalValidation:
+    """Both bounds and the blind-spot checks on every camera and cell of ``results``
+    (:func:`fidelity.coco.bounds.compare_bounds`, against the classic prediction of
+    ``results.summary.bound_table``); ``suite``: the camera files, to render each chart (closed
+    form) and read its bit depth; ``table``: the direction-aware table (None: the default)."""
+    by_name = {c.name: c for c in suite or ()}
+    charts = {name: CameraChart(name, rec.chart_delta_e, rec.patches,
+                                by_name[name].path if name in by_name else None,
+                                by_name[name].illuminant if name in by_name else None)
+              for name, rec in results.cameras.items()}
+    bound = results.summary.bound_table
+    cells = [MeasuredCell(r.camera, r.model, r.chart_delta_e, r.measured, r.se,
+                          r.predicted[bound].losses) for r in results.rows]
+    return compare_bounds(cells, charts, table)
 
 
 __all__ = [
@@ -1010,6 +1022,7 @@ __all__ = [
     "chart_error_profile",
     "collect_results",
     "default_store",
+    "directional_validation",
     "holdout_accuracy",
     "image_delta_e",
     "load_suite",
