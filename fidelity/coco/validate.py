@@ -56,12 +56,14 @@ from fidelity.coco.store import (
 )
 from fidelity.errors import InputFileError, InvalidValueError
 from fidelity.fileio import file_sha256, json_ready
+from fidelity.version import __version__
 
 if TYPE_CHECKING:
     from fidelity.chart.measure import ChartMeasurement
     from fidelity.coco.emulation import AccuracySummary, Emulation
-    from fidelity.coco.executor import ExecutorOptions
+    from fidelity.coco.executor import CellWork, ExecutorOptions
     from fidelity.coco.scoring import CocoScore, FoldScore
+    from fidelity.coco.store import ThreadStores
     from fidelity.coco.sweep import ImageCache, ModelSpec
 
 STORE_NAME = "validation.sqlite"
@@ -753,19 +755,20 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     its cells claimed so that several runs share them (``lease_s``: see
     :func:`fidelity.coco.sweep.run_sweep`). Inputs are checked against the store's record.
     """
+    import functools
+
     import onnxruntime
 
+    from fidelity.coco.driver import StoreRun
     from fidelity.coco.executor import (
         IDENTITY,
         CellWork,
         ExecutorOptions,
         ModelFile,
         PixelTransform,
-        make_executor,
-        run_cells,
     )
-    from fidelity.coco.scoring import evaluate_detections, load_annotated_images, score_folds
-    from fidelity.coco.store import LEASE_STALE_S, ImageSet, LeaseKeeper, ThreadStores
+    from fidelity.coco.scoring import load_annotated_images
+    from fidelity.coco.store import ImageSet
     from fidelity.coco.sweep import ImageCache
 
     opts = executor or ExecutorOptions(threads=threads, provider=provider)
@@ -777,8 +780,6 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     store = ValidationStore(store_dir)
     image_set = ImageSet(img_dir, coco, all_ids)
     store.start_run(image_set, [m.limit for m in models], annotations)
-    from fidelity.version import __version__
-
     store.set_meta("versions", {"python": platform.python_version(),
                                 "onnxruntime": onnxruntime.__version__, "numpy": np.__version__,
                                 "fidelity": __version__, "colour": _colour_version()})
@@ -789,36 +790,15 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     store.set_meta("cameras", [{"camera": c.name, "file": c.path.name,
                                 "illuminant": c.illuminant} for c in cases])
     cache = ImageCache(img_dir, coco)
-    ex = make_executor(image_set, opts)
-    lease: LeaseKeeper | None = None
-    stores = ThreadStores(lambda: ValidationStore(store.folder, create=False))
-    try:
-        where = ex.describe()
-        store.set_meta("machine", {"platform": platform.platform(), "cpus": os.cpu_count(),
-                                   "threads": opts.threads, "provider": opts.provider} | where)
-        runs = []
-        for spec, f in zip(models, files, strict=True):
-            ids = all_ids[: spec.limit] if spec.limit else all_ids
-            store.register_model(f.name, spec.path.name, f.sha256, spec.limit,
-                                 ex.describe_model(f))
-            runs.append((f, tuple(ids)))
+    with StoreRun(store, lambda: ValidationStore(store.folder, create=False), image_set,
+                  opts) as run:
+        run.record_machine({"threads": opts.threads, "provider": opts.provider})
+        run.register_models(files, [m.limit for m in models])
+        runs = [(f, tuple(all_ids[: spec.limit] if spec.limit else all_ids))
+                for spec, f in zip(models, files, strict=True)]
         store.set_meta("models_run", [{"model": f.name, "images": len(i)} for f, i in runs])
-        lease = LeaseKeeper(store, where, stale_s=LEASE_STALE_S if lease_s is None else lease_s)
-        built: dict[str, np.ndarray] = {}
-
-        def table_of(case: CameraCase) -> Callable[[], np.ndarray]:
-            def table() -> np.ndarray:
-                if case.name not in built:
-                    built.clear()  # one camera's table at a time
-                    emu, info = prepare_case(case, store, method, training, cache, all_ids)
-                    acc = info.emulation.accuracy
-                    say(f"{time.strftime('%H:%M:%S')} {case.name} ({case.illuminant}): chart "
-                        f"ΔE {info.chart_delta_e:.2f}, emulation chart ΔE00 mean "
-                        f"{acc.chart_mean_delta_e:.2f} max {acc.chart_max_delta_e:.2f}")
-                    built[case.name] = emu.cube()
-                return built[case.name]
-            return table
-
+        run.start_leases(lease_s)
+        tables = EmulationTables(store, method, training, cache, all_ids, say)
         work = [CellWork((f.name, BASELINE), f"{BASELINE} / {f.name}", f,
                          PixelTransform.of(IDENTITY, None), ids) for f, ids in runs]
         for case in cases:
@@ -830,43 +810,81 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
             key = json.dumps([case.name, case.sha256, case.illuminant, method, training])
             emulated = PixelTransform(key, case.name)
             work += [CellWork((f.name, case.name), f"{case.name} / {f.name}", f, emulated, ids,
-                              table_of(case)) for f, ids in runs]
-
-        class Cells:
-            """The validation store as :func:`fidelity.coco.executor.run_cells` sees it."""
-
-            def done(self, cell: CellWork) -> bool:
-                return store.cell(*cell.key) is not None
-
-            def stored(self, cell: CellWork) -> set[int]:
-                return store.stored_images(*cell.key)
-
-            def add(self, cell: CellWork, rows: Sequence[tuple[int, np.ndarray]]) -> None:
-                model, camera = cell.key
-                store.add_detections(model, camera, list(rows))
-
-            def finish(self, cell: CellWork, seconds: float, new: int) -> None:
-                model, camera = cell.key
-                ids = list(cell.image_ids)
-                own = stores.get()  # run_cells may score on a thread of its own
-                dets = own.detections(model, camera)
-                score = evaluate_detections(coco, dets, ids)
-                folds = score_folds(coco, dets, ids, FOLDS)
-                own.finish_cell(model, camera, score, folds, seconds)
-                say(f"{time.strftime('%H:%M:%S')} {camera} / {model}: mAP={score.map:.4f} "
-                    f"person={score.ap.get('person')} images={len(ids)} new={new} "
-                    f"{seconds:.1f}s")
-
-        chunk = batch_commit if opts.kind == "local" else None
-        counts = run_cells(work, ex, Cells(), lease=lease, chunk_images=chunk,
-                           progress=progress, say=say)
-        store.set_meta("last_run", where | counts.to_json())
-    finally:
-        if lease is not None:
-            lease.close()
-        ex.close()
-        stores.close()
+                              functools.partial(tables.get, case)) for f, ids in runs]
+        run.run(work, ValidationCells(store, run.stores, coco, say), batch_commit=batch_commit,
+                progress=progress, say=say)
     return store
+
+
+class EmulationTables:
+    """The 8-bit emulation tables of a validation run's cameras, built when a cell first needs
+    one (:func:`prepare_case`, logged through ``say``) and kept one camera at a time."""
+
+    def __init__(self, store: ValidationStore, method: str, training: str, cache: ImageCache,
+                 image_ids: Sequence[int], say: Callable[[str], None]) -> None:
+        self.store = store
+        self.method = method
+        self.training = training
+        self.cache = cache
+        self.image_ids = image_ids
+        self.say = say
+        self.built: dict[str, np.ndarray] = {}
+
+    def get(self, case: CameraCase) -> np.ndarray:
+        """The camera's (2^24, 3) uint8 table (:meth:`fidelity.coco.emulation.Emulation.cube`)."""
+        if case.name not in self.built:
+            self.built.clear()  # one camera's table at a time
+            emu, info = prepare_case(case, self.store, self.method, self.training, self.cache,
+                                     self.image_ids)
+            acc = info.emulation.accuracy
+            self.say(f"{time.strftime('%H:%M:%S')} {case.name} ({case.illuminant}): chart "
+                     f"ΔE {info.chart_delta_e:.2f}, emulation chart ΔE00 mean "
+                     f"{acc.chart_mean_delta_e:.2f} max {acc.chart_max_delta_e:.2f}")
+            self.built[case.name] = emu.cube()
+        return self.built[case.name]
+
+
+class ValidationCells:
+    """The validation store as :func:`fidelity.coco.executor.run_cells` sees it (a
+    :class:`fidelity.coco.executor.CellStore`): cells keyed ``(model, camera)``, scored on
+    ``coco`` with their fold scores when their detections are all stored, each logged through
+    ``say``. ``store``: the run's connection (the driver's thread); ``stores``: a connection
+    per thread, for scoring (a cell may be scored on a thread of its own)."""
+
+    def __init__(self, store: ValidationStore, stores: ThreadStores[ValidationStore],
+                 coco: Any, say: Callable[[str], None]) -> None:
+        self.store = store
+        self.stores = stores
+        self.coco = coco
+        self.say = say
+
+    def done(self, cell: CellWork) -> bool:
+        """Whether the cell is finished."""
+        return self.store.cell(*cell.key) is not None
+
+    def stored(self, cell: CellWork) -> set[int]:
+        """Image ids whose detections are stored."""
+        return self.store.stored_images(*cell.key)
+
+    def add(self, cell: CellWork, rows: Sequence[tuple[int, np.ndarray]]) -> None:
+        """Store detections (one transaction)."""
+        model, camera = cell.key
+        self.store.add_detections(model, camera, list(rows))
+
+    def finish(self, cell: CellWork, seconds: float, new: int) -> None:
+        """Score the cell and its folds, record it and log it."""
+        from fidelity.coco.scoring import evaluate_detections, score_folds
+
+        model, camera = cell.key
+        ids = list(cell.image_ids)
+        own = self.stores.get()  # run_cells may score on a thread of its own
+        dets = own.detections(model, camera)
+        score = evaluate_detections(self.coco, dets, ids)
+        folds = score_folds(self.coco, dets, ids, FOLDS)
+        own.finish_cell(model, camera, score, folds, seconds)
+        self.say(f"{time.strftime('%H:%M:%S')} {camera} / {model}: mAP={score.map:.4f} "
+                 f"person={score.ap.get('person')} images={len(ids)} new={new} "
+                 f"{seconds:.1f}s")
 
 
 def _colour_version() -> str:
@@ -1011,10 +1029,12 @@ __all__ = [
     "CameraRecord",
     "ClassSummary",
     "EmulationRecord",
+    "EmulationTables",
     "ErrorProfile",
     "ImageDeltaE",
     "TablePrediction",
     "ValidationCell",
+    "ValidationCells",
     "ValidationResults",
     "ValidationRow",
     "ValidationStore",
