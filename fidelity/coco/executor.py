@@ -47,7 +47,7 @@ import numpy as np
 from fidelity.errors import FidelityError, InputFileError, InvalidValueError
 
 if TYPE_CHECKING:
-    from fidelity.coco.store import ImageSet, LeaseKeeper
+    from fidelity.coco.store import EvaluationStore, ImageSet, LeaseKeeper
 
 #: Executor names (``--executor``).
 EXECUTORS: tuple[str, ...] = ("local", "ray")
@@ -878,6 +878,29 @@ def run_cells(cells: Sequence[CellWork], executor: Executor, store: CellStore, *
                    progress=progress, poll_s=poll_s, say=say, background=background).run()
 
 
+class EvaluationCells:
+    """An evaluation store as :func:`run_cells` sees it (a :class:`CellStore`): one cell,
+    never finished (:func:`detect_images` reads the detections back), detections by image."""
+
+    def __init__(self, store: EvaluationStore) -> None:
+        self.store = store
+
+    def done(self, cell: CellWork) -> bool:
+        """Never: the stored images decide what is left."""
+        return False
+
+    def stored(self, cell: CellWork) -> set[int]:
+        """Image ids whose detections are stored."""
+        return self.store.stored_images()
+
+    def add(self, cell: CellWork, rows: Sequence[tuple[int, np.ndarray]]) -> None:
+        """Store detections (one transaction)."""
+        self.store.add_detections(rows)
+
+    def finish(self, cell: CellWork, seconds: float, new: int) -> None:
+        """Nothing to score."""
+
+
 @dataclass(frozen=True)
 class Detections:
     """What :func:`detect_images` found: detections by image id, the detector's description,
@@ -922,25 +945,9 @@ def detect_images(model: ModelFile | str | os.PathLike[str], images: ImageSet,
     try:
         remove_stale_temporaries(folder)
         store.register_model(m.name, m.path.name, m.sha256, None, info)
-
-        class Cells:
-            """The evaluation store as :func:`run_cells` sees it."""
-
-            def done(self, cell: CellWork) -> bool:
-                return False
-
-            def stored(self, cell: CellWork) -> set[int]:
-                return store.stored_images()
-
-            def add(self, cell: CellWork, rows: Sequence[tuple[int, np.ndarray]]) -> None:
-                store.add_detections(rows)
-
-            def finish(self, cell: CellWork, seconds: float, new: int) -> None:
-                pass
-
         cell = CellWork(("evaluate",), m.name, m, PixelTransform.of(IDENTITY, None, False),
                         tuple(ids), clip=False)
-        counts = run_cells([cell], ex, Cells(), progress=progress)
+        counts = run_cells([cell], ex, EvaluationCells(store), progress=progress)
         store.set_meta("last_run", where | counts.to_json())
         dets = store.detections(ids)
     finally:
