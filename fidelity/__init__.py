@@ -25,13 +25,9 @@ fast::
 from __future__ import annotations
 
 import importlib
-from importlib.metadata import PackageNotFoundError, version
 from typing import TYPE_CHECKING, Any
 
-try:
-    __version__ = version("camera-fidelity")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree
-    __version__ = "0.0.0+source"
+from fidelity.version import __version__
 
 #: Public name -> the module that defines it.
 _API: dict[str, str] = {

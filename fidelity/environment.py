@@ -124,8 +124,8 @@ def _shared() -> dict[str, Any]:
 def describe_environment(probe: bool = True) -> dict[str, Any]:
     """The installation's capabilities (module docstring); ``probe``: run the Mitsuba probe
     (a few seconds, subprocesses)."""
-    from fidelity import __version__
     from fidelity.prediction.table import DEFAULT_TABLE, available_tables
+    from fidelity.version import __version__
 
     core = dependency_versions()
 

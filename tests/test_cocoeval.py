@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 
 from fidelity.coco.detectors import COCO80_CATEGORY_IDS, COCO80_NAMES
+from fidelity.coco.loss import paired_standard_error
 from fidelity.coco.scoring import (
     COCO_SCORERS,
     coco_from_dict,
     detections_to_coco,
     evaluate_detections,
     load_annotations,
-    paired_standard_error,
 )
 from fidelity.errors import InputFileError, InvalidValueError
 

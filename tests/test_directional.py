@@ -60,12 +60,13 @@ def test_a_transformed_chart_is_explained_by_its_own_family(name, param):
 def test_shipped_table_is_rebuilt_from_tables_json():
     """coco1000-directional.json is what directional_table makes of reports/coco/tables.json,
     and its classic curves are the measured table's."""
+    from fidelity.coco.directional import directional_table
     from fidelity.coco.tables import TablesResult
     from fidelity.fileio import json_ready
     from fidelity.prediction.table import prediction_dir
 
     result = TablesResult.from_json(json.loads((ROOT / "reports/coco/tables.json").read_text()))
-    built = json_ready(dr.directional_table(result.tables))
+    built = json_ready(directional_table(result.tables))
     shipped = json.loads((prediction_dir() / "coco1000-directional.json").read_text())
     assert built == shipped
     classic = json.loads((prediction_dir() / "coco1000-measured.json").read_text())
@@ -145,8 +146,7 @@ def test_validation_both_bounds_hold_on_the_30_cameras():
     """On the validation's 60 cells (stored measured loss ± SE, charts from the stored renders)
     the direction-aware bound holds within 2 SE for every class and over-predicts mAP far
     less than the classic one."""
-    from fidelity.coco.bounds import directional_validation
-    from fidelity.coco.validate import ValidationResults
+    from fidelity.coco.validate import ValidationResults, directional_validation
 
     doc = json.loads((ROOT / "reports/validation/validation.json").read_text())
     doc.pop("directional", None)  # recomputed here, not read back

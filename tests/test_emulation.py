@@ -144,13 +144,13 @@ def test_apply_uint8_equals_float_path() -> None:
 def test_table_entry_of_a_pixel_is_its_own_colour() -> None:
     """Fast twin of the test above: the table row apply_uint8 reads for a pixel is the one
     cube() fills from that pixel's code values (so table and float path agree)."""
-    from fidelity.coco.dataset import _all_triples
+    from fidelity.coco.dataset import all_triples
 
     img = np.random.default_rng(7).integers(0, 256, (8, 9, 3), dtype=np.uint8)
     idx = (img[..., 0].astype(np.uint32) << 16) | (img[..., 1].astype(np.uint32) << 8) \
         | img[..., 2]
     for i, pixel in zip(idx.ravel(), img.reshape(-1, 3), strict=True):
-        np.testing.assert_array_equal(_all_triples(int(i), int(i) + 1)[0], pixel / 255.0)
+        np.testing.assert_array_equal(all_triples(int(i), int(i) + 1)[0], pixel / 255.0)
 
 
 def test_accuracy_of_an_exactly_emulable_camera_is_small() -> None:

@@ -117,8 +117,8 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
 
 
 def _write_directional(tables_: Any, path: str) -> Any:
+    from fidelity.coco.directional import directional_table
     from fidelity.fileio import json_ready, write_json_atomic
-    from fidelity.prediction.directional import directional_table
 
     return write_json_atomic(path, json_ready(directional_table(tables_)))
 

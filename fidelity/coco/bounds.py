@@ -1,9 +1,11 @@
 """The direction-aware bound and the blind-spot checks on the validation's 30 cameras.
 
-:func:`directional_validation` takes the validation's results
-(:class:`fidelity.coco.validate.ValidationResults`: each camera's measured ΔmAP ± SE per
-detector) and, for every camera, renders its chart in closed form under the test case's
-illuminant (when the camera files are given; else it reads the chart stored in the results),
+:func:`compare_bounds` takes the validation's measured cells (:class:`MeasuredCell`: each
+camera's measured ΔmAP ± SE per detector and the classic prediction; built from
+:class:`fidelity.coco.validate.ValidationResults` by
+:func:`fidelity.coco.validate.directional_validation`) and, for every camera
+(:class:`CameraChart`), renders its chart in closed form under the test case's illuminant
+(when the camera file is given; else it reads the chart stored with the results),
 predicts its loss with the direction-aware table (:mod:`fidelity.prediction.directional`,
 detector size ``n``) and runs the blind-spot checks (:mod:`fidelity.chart.blindspots`). Per
 (camera, detector) cell and class it compares both bounds with the measured loss:
@@ -21,19 +23,44 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fidelity.coco.loss import LOSS_COLUMNS, Losses
+
 if TYPE_CHECKING:
     from fidelity.chart.blindspots import BlindSpot
-    from fidelity.coco.validate import CameraCase, ValidationResults
     from fidelity.prediction.directional import DirectionalPrediction
 
-#: Classes compared (``fidelity.coco.validate.LOSS_COLUMNS`` keys -> prediction columns).
-CLASS_COLUMNS: dict[str, str] = {"all": "dmap_points", "all-relative": "dmap_relative",
-                                 "person": "dap_person_points",
-                                 "bicycle": "dap_bicycle_points"}
+
+@dataclass(frozen=True)
+class MeasuredCell:
+    """One (camera, detector) cell of the validation as the bounds read it: the camera's chart
+    ΔE, the ``measured`` losses and their ``se`` (points, relative in %), and the ``classic``
+    prediction of the bound table (:class:`fidelity.coco.loss.Losses` each)."""
+
+    camera: str
+    model: str
+    chart_delta_e: float
+    measured: Losses
+    se: Losses
+    classic: Losses
+
+
+@dataclass(frozen=True)
+class CameraChart:
+    """A camera's chart as stored with the validation: its mean ΔE00 ``chart_delta_e`` and
+    ``patches`` (per patch ``name``, ``lab``, ``reference_lab``, ``srgb``); with the camera
+    file (``path``) and the scene ``illuminant`` the chart is rendered again in closed form
+    (and its bit depth read) instead."""
+
+    camera: str
+    chart_delta_e: float
+    patches: tuple[Mapping[str, Any], ...]
+    path: Path | None = None
+    illuminant: str | None = None
 
 
 @dataclass(frozen=True)
@@ -138,7 +165,8 @@ class CameraBounds:
 
 @dataclass(frozen=True)
 class RowBounds:
-    """Both bounds of one (camera, detector) cell, per class of :data:`CLASS_COLUMNS`."""
+    """Both bounds of one (camera, detector) cell, per class of
+    :data:`fidelity.coco.loss.LOSS_COLUMNS`."""
 
     camera: str
     model: str
@@ -240,12 +268,21 @@ def summarise(rows: Sequence[RowBounds], cls: str) -> ClassBounds:
         _median([c.ratio(c.directional) for c in sig]), len(sig))
 
 
-def directional_validation(results: ValidationResults,
-                           suite: Sequence[CameraCase] | None = None,
-                           table: str | None = None) -> DirectionalValidation:
-    """Both bounds and the blind-spot checks on every camera and cell of ``results`` (module
-    docstring); ``suite``: the camera files, to render each chart (closed form) and read its
-    bit depth."""
+def compare_bounds(cells: Sequence[MeasuredCell], charts: Mapping[str, CameraChart],
+                   table: str | None = None) -> DirectionalValidation:
+    """Both bounds and the blind-spot checks on every camera and cell (module docstring).
+
+    Parameters
+    ----------
+    cells
+        The measured cells with the classic prediction; a cell whose camera has no chart is
+        left out.
+    charts
+        Per camera its chart (rendered again where the camera file is given).
+    table
+        The direction-aware table's name or path (None:
+        :data:`fidelity.prediction.directional.DEFAULT_DIRECTIONAL_TABLE`).
+    """
     from fidelity.chart.blindspots import chart_blind_spots
     from fidelity.prediction.directional import (
         DEFAULT_DIRECTIONAL_TABLE,
@@ -254,14 +291,12 @@ def directional_validation(results: ValidationResults,
     )
 
     tab = load_directional_table(table)
-    by_name = {c.name: c for c in suite or ()}
     cameras: dict[str, CameraBounds] = {}
-    for name, rec in sorted(results.cameras.items()):
-        case = by_name.get(name)
-        if case is not None:
+    for name, chart in sorted(charts.items()):
+        if chart.path is not None and chart.illuminant is not None:
             from fidelity.camera.render import render_chart
 
-            render = render_chart(str(case.path), case.illuminant)
+            render = render_chart(str(chart.path), chart.illuminant)
             m = render.measurement
             ref, lab, de = m.reference_lab, m.lab, m.mean_delta_e
             spots = chart_blind_spots(m, bits=render.camera.quantisation_bits)
@@ -269,38 +304,37 @@ def directional_validation(results: ValidationResults,
         else:
             from fidelity.chart.measure import measure_chart
 
-            lab = np.array([p["lab"] for p in rec.patches], dtype=np.float64)
-            ref = np.array([p["reference_lab"] for p in rec.patches], dtype=np.float64)
-            srgb = np.array([p["srgb"] for p in rec.patches], dtype=np.float64)
-            m = measure_chart(srgb, ref, [str(p["name"]) for p in rec.patches])
-            de = rec.chart_delta_e
+            lab = np.array([p["lab"] for p in chart.patches], dtype=np.float64)
+            ref = np.array([p["reference_lab"] for p in chart.patches], dtype=np.float64)
+            srgb = np.array([p["srgb"] for p in chart.patches], dtype=np.float64)
+            m = measure_chart(srgb, ref, [str(p["name"]) for p in chart.patches])
+            de = chart.chart_delta_e
             spots = chart_blind_spots(m)
             rendered = False
         pred = predict_directional(ref, lab, delta_e=de, size="n", table=tab)
         cameras[name] = CameraBounds(name, float(de), pred, spots, rendered)
     rows = []
-    for r in results.rows:
+    for r in cells:
         cam = cameras.get(r.camera)
         if cam is None:
             continue
-        cells = {}
-        for cls, col in CLASS_COLUMNS.items():
-            classic = r.predicted[results.summary.bound_table].losses.get(col)
-            cells[cls] = BoundCell(r.measured.get(col), r.se.get(col), classic,
-                                   cam.prediction.columns.get(col))
-        rows.append(RowBounds(r.camera, r.model, r.chart_delta_e, cells))
-    summary = {cls: summarise(rows, cls) for cls in CLASS_COLUMNS}
+        bounds = {cls: BoundCell(r.measured.get(col), r.se.get(col), r.classic.get(col),
+                                 cam.prediction.columns.get(col))
+                  for cls, col in LOSS_COLUMNS.items()}
+        rows.append(RowBounds(r.camera, r.model, r.chart_delta_e, bounds))
+    summary = {cls: summarise(rows, cls) for cls in LOSS_COLUMNS}
     return DirectionalValidation(table or DEFAULT_DIRECTIONAL_TABLE, cameras, tuple(rows),
                                  summary)
 
 
 __all__ = [
-    "CLASS_COLUMNS",
     "BoundCell",
     "CameraBounds",
+    "CameraChart",
     "ClassBounds",
     "DirectionalValidation",
+    "MeasuredCell",
     "RowBounds",
-    "directional_validation",
+    "compare_bounds",
     "summarise",
 ]

@@ -478,9 +478,9 @@ def run_coco_c(inputs: Any, corruptions: Sequence[str] = CORRUPTIONS,
     next to its chart ΔE."""
     import platform
 
-    from fidelity import __version__
     from fidelity.coco.measure import measure_mapping
     from fidelity.colour.charts import DEFAULT_CHART
+    from fidelity.version import __version__
 
     cells = []
     for cell in chart_cells(corruptions, severities):

@@ -69,7 +69,12 @@ def reference_transform(rgb8: np.ndarray, name: str, param: float) -> np.ndarray
     return to_uint8(apply_transform(x, name, param))
 
 
-def _all_triples(start: int, stop: int) -> np.ndarray:
+def all_triples(start: int, stop: int) -> np.ndarray:
+    """The 8-bit RGB triples with 24-bit codes ``start`` to ``stop - 1`` as floats in [0, 1].
+
+    Code ``i`` is ``(r << 16) | (g << 8) | b``; row ``i - start`` is ``(r, g, b) / 255``:
+    the inputs of a 16.7-million-entry 8-bit lookup table, a chunk at a time.
+    """
     idx = np.arange(start, stop, dtype=np.uint32)
     rgb = np.empty((stop - start, 3), dtype=np.float64)
     rgb[:, 0] = (idx >> 16) & 255
@@ -121,7 +126,7 @@ class PixelMap:
         lut = np.empty((1 << 24, 3), dtype=np.uint8)
         for s in range(0, 1 << 24, chunk):
             e = min(s + chunk, 1 << 24)
-            lut[s:e] = to_uint8(apply_transform(_all_triples(s, e), name, float(param)))
+            lut[s:e] = to_uint8(apply_transform(all_triples(s, e), name, float(param)))
         return cls(name, float(param), "cube", lut, time.perf_counter() - t0)
 
     def __call__(self, rgb8: np.ndarray) -> np.ndarray:

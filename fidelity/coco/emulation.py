@@ -314,12 +314,12 @@ class EightBitTable:
     def cube(self, chunk: int = 1 << 20) -> NDArray[np.uint8]:
         """The (2^24, 3) uint8 table of :meth:`apply` on every 8-bit triple (built once)."""
         if self._cube is None:
-            from fidelity.coco.dataset import _all_triples, to_uint8
+            from fidelity.coco.dataset import all_triples, to_uint8
 
             table = np.empty((1 << 24, 3), dtype=np.uint8)
             for s in range(0, 1 << 24, chunk):
                 e = min(s + chunk, 1 << 24)
-                table[s:e] = to_uint8(self.apply(_all_triples(s, e)))
+                table[s:e] = to_uint8(self.apply(all_triples(s, e)))
             self._cube = table
         return self._cube
 

@@ -47,7 +47,7 @@ import numpy as np
 from fidelity.errors import FidelityError, InputFileError, InvalidValueError
 
 if TYPE_CHECKING:
-    from fidelity.coco.store import ImageSet, LeaseKeeper
+    from fidelity.coco.store import EvaluationStore, ImageSet, LeaseKeeper
 
 #: Executor names (``--executor``).
 EXECUTORS: tuple[str, ...] = ("local", "ray")
@@ -670,12 +670,198 @@ class _Open:
     new: int = 0
 
 
+class CellRun:
+    """One run of :func:`run_cells`: the plan, the cells open and waiting, the queue of work
+    items not yet submitted, the scoring thread and the counts (the steps are its methods).
+
+    :meth:`run` takes the cells in the given order; at most ``executor.capacity`` items are in
+    flight, so that claims stay close to the work. A cell claimed by another live run is left
+    to it and waited for at the end (taken over if that run stops beating, see
+    :meth:`fidelity.coco.store.ResultsStore.claim`).
+    """
+
+    def __init__(self, cells: Sequence[CellWork], executor: Executor, store: CellStore, *,
+                 lease: LeaseKeeper | None = None, chunk_images: int | None = None,
+                 progress: bool = False, poll_s: float = 2.0,
+                 say: Callable[[str], None] | None = None,
+                 background: bool | None = None) -> None:
+        import concurrent.futures
+
+        from tqdm import tqdm
+
+        self.cells = cells
+        self.executor = executor
+        self.store = store
+        self.lease = lease
+        self.poll_s = poll_s
+        self.say = say
+        self.chunk = chunk_images or CHUNK_IMAGES.get(executor.kind, 25)
+        self.counts = RunCounts()
+        self.t_start = time.perf_counter()
+        self.todo = [c for c in cells if not store.done(c)]
+        #: image ids stored per cell key when the run started
+        self.stored = {c.key: store.stored(c) for c in self.todo}
+        total_images = sum(len(set(c.image_ids) - self.stored[c.key]) for c in self.todo)
+        self.bar = tqdm(total=total_images, unit="img", disable=not progress,
+                        dynamic_ncols=True, file=sys.stderr, smoothing=0.1)
+        self.done_cells = len(cells) - len(self.todo)
+        self.show()
+        self.open_cells: dict[tuple[Any, ...], _Open] = {}
+        self.waiting: list[CellWork] = []
+        self.queue: collections.deque[tuple[CellWork, WorkItem, np.ndarray | None]] = \
+            collections.deque()
+        threaded = executor.workers > 1 if background is None else background
+        self.scorer = (concurrent.futures.ThreadPoolExecutor(1, "fidelity-score") if threaded
+                       else None)
+        self.scoring: dict[tuple[Any, ...], concurrent.futures.Future[None]] = {}
+
+    def show(self) -> None:
+        """The bar's text: cells finished of the plan."""
+        self.bar.set_description_str(f"cells {self.done_cells}/{len(self.cells)}",
+                                     refresh=False)
+
+    def recorded(self, key: tuple[Any, ...]) -> None:
+        """A cell is recorded in the store: release its claim and count it."""
+        if self.lease is not None:
+            self.lease.release(key)
+        self.counts.cells += 1
+        self.done_cells += 1
+        self.show()
+        self.bar.refresh()
+
+    def reap(self, wait: bool = False) -> None:
+        """Release the claims of cells the scoring thread has recorded (``wait``: all)."""
+        for key, fut in list(self.scoring.items()):
+            if wait or fut.done():
+                fut.result()  # the thread's error, if any, is the run's
+                del self.scoring[key]
+                self.recorded(key)
+
+    def finish(self, o: _Open) -> None:
+        """Score and record a cell whose items are all back (on the scoring thread, if any)."""
+        del self.open_cells[o.cell.key]
+        if self.store.done(o.cell):  # finished by a run that took the cell over meanwhile
+            self.recorded(o.cell.key)
+            return
+        seconds = time.perf_counter() - o.t0
+        if self.scorer is None:
+            self.store.finish(o.cell, seconds, o.new)
+            self.recorded(o.cell.key)
+        else:
+            self.scoring[o.cell.key] = self.scorer.submit(self.store.finish, o.cell, seconds,
+                                                          o.new)
+
+    def start(self, cell: CellWork) -> bool:
+        """Claim and queue a cell's items; False when another run holds it."""
+        if self.lease is not None and not self.lease.claim(cell.key):
+            return False
+        if self.store.done(cell):  # finished by another run meanwhile
+            if self.lease is not None:
+                self.lease.release(cell.key)
+            return True
+        have = self.store.stored(cell)
+        missing = [i for i in cell.image_ids if i not in have]
+        o = self.open_cells[cell.key] = _Open(cell, time.perf_counter(), 0)
+        if not missing:
+            self.finish(o)  # e.g. a model's image limit lowered: re-scored, no inference
+            return True
+        table = cell.table() if cell.table is not None else None
+        for s in range(0, len(missing), self.chunk):
+            self.queue.append((cell, WorkItem(cell.key, cell.model, cell.transform.bare(),
+                                              tuple(missing[s:s + self.chunk]), cell.clip),
+                               table))
+            o.left += 1
+        return True
+
+    def collect(self) -> None:
+        """Store the next finished item's detections; finish its cell when it was the last."""
+        self.reap()
+        r = self.executor.next_result()
+        o = self.open_cells[r.item.cell]
+        self.store.add(o.cell, r.detections)
+        o.left -= 1
+        o.new += len(r.detections)
+        c = self.counts
+        c.images += len(r.detections)
+        c.items += 1
+        c.worker_seconds += r.seconds
+        c.worker_cpu_seconds += r.cpu_seconds
+        c.workers.add(r.worker)
+        self.bar.update(len(r.detections))
+        if o.left == 0:
+            self.finish(o)
+
+    def pump(self) -> None:
+        """Submit queued items up to the executor's capacity, then collect one result."""
+        while self.queue and self.executor.pending() < self.executor.capacity:
+            _, item, table = self.queue.popleft()
+            self.executor.submit(item, table)
+        if self.executor.pending():
+            self.collect()
+
+    def drain(self) -> None:
+        """Run until nothing is queued or in flight."""
+        while self.executor.pending() or self.queue:
+            self.pump()
+
+    def run_planned(self) -> None:
+        """Every cell not finished when the run started, in order; claimed ones wait."""
+        for cell in self.todo:
+            if not self.start(cell):
+                self.waiting.append(cell)
+                continue
+            while self.queue:
+                self.pump()
+            while self.executor.pending() >= self.executor.capacity:
+                self.collect()
+        self.drain()
+        self.reap(wait=True)
+
+    def run_waiting(self) -> None:
+        """Wait for the cells other runs hold: count those they finish, take over the rest
+        when their claims lapse."""
+        announced = False
+        while self.waiting:
+            still = []
+            for cell in self.waiting:
+                if self.store.done(cell):
+                    self.done_cells += 1
+                    self.counts.waited += 1
+                    self.show()
+                    self.bar.update(len(set(cell.image_ids) - self.stored.get(cell.key, set())))
+                elif self.start(cell):
+                    self.drain()
+                    self.reap(wait=True)
+                else:
+                    still.append(cell)
+            self.waiting = still
+            if self.waiting:
+                if not announced and self.say is not None:
+                    self.say(f"waiting for {len(self.waiting)} cells claimed by another run on "
+                             "this store (taken over if it stops)")
+                    announced = True
+                time.sleep(self.poll_s)
+
+    def run(self) -> RunCounts:
+        """Run every cell (the planned ones, then those other runs held); the counts."""
+        try:
+            self.run_planned()
+            self.run_waiting()
+        finally:
+            if self.scorer is not None:
+                self.scorer.shutdown(wait=True)
+            self.bar.close()
+            self.counts.seconds = time.perf_counter() - self.t_start
+        return self.counts
+
+
 def run_cells(cells: Sequence[CellWork], executor: Executor, store: CellStore, *,
               lease: LeaseKeeper | None = None, chunk_images: int | None = None,
               progress: bool = False, poll_s: float = 2.0,
               say: Callable[[str], None] | None = None,
               background: bool | None = None) -> RunCounts:
-    """Run every cell: claim, submit its missing images in chunks, store, finish.
+    """Run every cell: claim, submit its missing images in chunks, store, finish
+    (:class:`CellRun`).
 
     Cells are taken in the given order; at most ``executor.capacity`` items are in flight, so
     that claims stay close to the work. A cell claimed by another live run is left to it and
@@ -688,145 +874,31 @@ def run_cells(cells: Sequence[CellWork], executor: Executor, store: CellStore, *
     the driver scores; ``store.finish`` must then use a store connection of that thread (the
     sweep's and the validation's do). The claim is released once the cell is recorded.
     """
-    import concurrent.futures
+    return CellRun(cells, executor, store, lease=lease, chunk_images=chunk_images,
+                   progress=progress, poll_s=poll_s, say=say, background=background).run()
 
-    from tqdm import tqdm
 
-    chunk = chunk_images or CHUNK_IMAGES.get(executor.kind, 25)
-    counts = RunCounts()
-    t_start = time.perf_counter()
-    todo = [c for c in cells if not store.done(c)]
-    stored = {c.key: store.stored(c) for c in todo}
-    total_images = sum(len(set(c.image_ids) - stored[c.key]) for c in todo)
-    bar = tqdm(total=total_images, unit="img", disable=not progress, dynamic_ncols=True,
-               file=sys.stderr, smoothing=0.1)
-    done_cells = len(cells) - len(todo)
+class EvaluationCells:
+    """An evaluation store as :func:`run_cells` sees it (a :class:`CellStore`): one cell,
+    never finished (:func:`detect_images` reads the detections back), detections by image."""
 
-    def show() -> None:
-        bar.set_description_str(f"cells {done_cells}/{len(cells)}", refresh=False)
+    def __init__(self, store: EvaluationStore) -> None:
+        self.store = store
 
-    show()
-    open_cells: dict[tuple[Any, ...], _Open] = {}
-    waiting: list[CellWork] = []
-    queue: collections.deque[tuple[CellWork, WorkItem, np.ndarray | None]] = collections.deque()
+    def done(self, cell: CellWork) -> bool:
+        """Never: the stored images decide what is left."""
+        return False
 
-    threaded = executor.workers > 1 if background is None else background
-    scorer = concurrent.futures.ThreadPoolExecutor(1, "fidelity-score") if threaded else None
-    scoring: dict[tuple[Any, ...], concurrent.futures.Future[None]] = {}
+    def stored(self, cell: CellWork) -> set[int]:
+        """Image ids whose detections are stored."""
+        return self.store.stored_images()
 
-    def recorded(key: tuple[Any, ...]) -> None:
-        nonlocal done_cells
-        if lease is not None:
-            lease.release(key)
-        counts.cells += 1
-        done_cells += 1
-        show()
-        bar.refresh()
+    def add(self, cell: CellWork, rows: Sequence[tuple[int, np.ndarray]]) -> None:
+        """Store detections (one transaction)."""
+        self.store.add_detections(rows)
 
-    def reap(wait: bool = False) -> None:
-        """Release the claims of cells the scoring thread has recorded."""
-        for key, fut in list(scoring.items()):
-            if wait or fut.done():
-                fut.result()  # the thread's error, if any, is the run's
-                del scoring[key]
-                recorded(key)
-
-    def finish(o: _Open) -> None:
-        del open_cells[o.cell.key]
-        if store.done(o.cell):  # finished by a run that took the cell over meanwhile
-            recorded(o.cell.key)
-            return
-        seconds = time.perf_counter() - o.t0
-        if scorer is None:
-            store.finish(o.cell, seconds, o.new)
-            recorded(o.cell.key)
-        else:
-            scoring[o.cell.key] = scorer.submit(store.finish, o.cell, seconds, o.new)
-
-    def start(cell: CellWork) -> bool:
-        """Claim and queue a cell's items; False when another run holds it."""
-        if lease is not None and not lease.claim(cell.key):
-            return False
-        if store.done(cell):  # finished by another run meanwhile
-            if lease is not None:
-                lease.release(cell.key)
-            return True
-        have = store.stored(cell)
-        missing = [i for i in cell.image_ids if i not in have]
-        o = open_cells[cell.key] = _Open(cell, time.perf_counter(), 0)
-        if not missing:
-            finish(o)  # e.g. a model's image limit lowered: re-scored, no inference
-            return True
-        table = cell.table() if cell.table is not None else None
-        for s in range(0, len(missing), chunk):
-            queue.append((cell, WorkItem(cell.key, cell.model, cell.transform.bare(),
-                                         tuple(missing[s:s + chunk]), cell.clip), table))
-            o.left += 1
-        return True
-
-    def collect() -> None:
-        reap()
-        r = executor.next_result()
-        o = open_cells[r.item.cell]
-        store.add(o.cell, r.detections)
-        o.left -= 1
-        o.new += len(r.detections)
-        counts.images += len(r.detections)
-        counts.items += 1
-        counts.worker_seconds += r.seconds
-        counts.worker_cpu_seconds += r.cpu_seconds
-        counts.workers.add(r.worker)
-        bar.update(len(r.detections))
-        if o.left == 0:
-            finish(o)
-
-    def pump() -> None:
-        while queue and executor.pending() < executor.capacity:
-            _, item, table = queue.popleft()
-            executor.submit(item, table)
-        if executor.pending():
-            collect()
-
-    try:
-        for cell in todo:
-            if not start(cell):
-                waiting.append(cell)
-                continue
-            while queue:
-                pump()
-            while executor.pending() >= executor.capacity:
-                collect()
-        while executor.pending() or queue:
-            pump()
-        reap(wait=True)
-        announced = False
-        while waiting:
-            still = []
-            for cell in waiting:
-                if store.done(cell):
-                    done_cells += 1
-                    counts.waited += 1
-                    show()
-                    bar.update(len(set(cell.image_ids) - stored.get(cell.key, set())))
-                elif start(cell):
-                    while executor.pending() or queue:
-                        pump()
-                    reap(wait=True)
-                else:
-                    still.append(cell)
-            waiting = still
-            if waiting:
-                if not announced and say is not None:
-                    say(f"waiting for {len(waiting)} cells claimed by another run on this "
-                        "store (taken over if it stops)")
-                    announced = True
-                time.sleep(poll_s)
-    finally:
-        if scorer is not None:
-            scorer.shutdown(wait=True)
-        bar.close()
-        counts.seconds = time.perf_counter() - t_start
-    return counts
+    def finish(self, cell: CellWork, seconds: float, new: int) -> None:
+        """Nothing to score."""
 
 
 @dataclass(frozen=True)
@@ -873,25 +945,9 @@ def detect_images(model: ModelFile | str | os.PathLike[str], images: ImageSet,
     try:
         remove_stale_temporaries(folder)
         store.register_model(m.name, m.path.name, m.sha256, None, info)
-
-        class Cells:
-            """The evaluation store as :func:`run_cells` sees it."""
-
-            def done(self, cell: CellWork) -> bool:
-                return False
-
-            def stored(self, cell: CellWork) -> set[int]:
-                return store.stored_images()
-
-            def add(self, cell: CellWork, rows: Sequence[tuple[int, np.ndarray]]) -> None:
-                store.add_detections(rows)
-
-            def finish(self, cell: CellWork, seconds: float, new: int) -> None:
-                pass
-
         cell = CellWork(("evaluate",), m.name, m, PixelTransform.of(IDENTITY, None, False),
                         tuple(ids), clip=False)
-        counts = run_cells([cell], ex, Cells(), progress=progress)
+        counts = run_cells([cell], ex, EvaluationCells(store), progress=progress)
         store.set_meta("last_run", where | counts.to_json())
         dets = store.detections(ids)
     finally:

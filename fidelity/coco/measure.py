@@ -8,7 +8,7 @@ baseline (the JPEG round trip with the original quantisation tables and subsampl
 :func:`fidelity.coco.jpeg.roundtrip_jpeg`, no colour change) and once through the mapping and
 the same round trip; ΔmAP = 100 × (baseline mAP − mapped mAP) in percentage points (also
 relative to the baseline, and ΔAP of person and bicycle), with the paired standard error of 5
-interleaved image folds (:func:`fidelity.coco.scoring.paired_standard_error`).
+interleaved image folds (:func:`fidelity.coco.loss.loss_estimate`).
 
 Every image's raw detections go to a crash-safe store (:class:`MeasureStore`, default
 ``$FIDELITY_CACHE/measure`` or ``~/.cache/fidelity/measure``), keyed by the model file
@@ -202,7 +202,8 @@ class MeasuredLoss:
     """What a mapping cost one detector on ``images`` COCO images (:func:`measure_mapping`).
 
     Scores are fractions; losses in percentage points (``dmap_relative`` in % of the baseline
-    mAP), each with its paired 5-fold standard error (``*_se``; None with fewer than 2 folds).
+    mAP; None when the baseline mAP is 0), each with its paired 5-fold standard error
+    (``*_se``; None with fewer than 2 folds), all from :func:`fidelity.coco.loss.loss_estimate`.
     ``seconds``: wall time of the measurement; ``inferred``: images run through the detector
     in it (the rest came from the store); ``baseline_cached``: whether the baseline was
     already stored for every image.
@@ -217,7 +218,7 @@ class MeasuredLoss:
     map: float
     dmap_points: float
     dmap_points_se: float | None
-    dmap_relative: float
+    dmap_relative: float | None
     dmap_relative_se: float | None
     dap_person_points: float | None
     dap_person_points_se: float | None
@@ -242,8 +243,9 @@ class MeasuredLoss:
         """One line: ``measured ΔmAP 0.31 ± 0.14 points (yolox_nano, 1000 images, 38 s)``."""
         se = f" ± {self.dmap_points_se:.2f}" if self.dmap_points_se is not None else ""
         cached = "" if self.inferred else ", all detections from the store"
+        rel = "undefined" if self.dmap_relative is None else f"{self.dmap_relative:.2f}"
         return (f"measured ΔmAP {self.dmap_points:.2f}{se} points, "
-                f"{self.dmap_relative:.2f} % of baseline mAP {100 * self.baseline_map:.2f} "
+                f"{rel} % of baseline mAP {100 * self.baseline_map:.2f} "
                 f"({self.model}, {self.images} COCO images, {self.seconds:.0f} s{cached})")
 
     def to_json(self) -> dict[str, Any]:
@@ -267,7 +269,7 @@ class MeasuredLoss:
         return cls(str(d["model"]), str(d["model_file"]), str(d["model_sha256"]),
                    str(d["mapping"]), int(d["images"]), float(d["baseline_map"]),
                    float(d["map"]), float(d["dmap_points"]), d.get("dmap_points_se"),
-                   float(d["dmap_relative"]), d.get("dmap_relative_se"),
+                   d.get("dmap_relative"), d.get("dmap_relative_se"),
                    d.get("dap_person_points"), d.get("dap_person_points_se"),
                    d.get("dap_bicycle_points"), d.get("dap_bicycle_points_se"),
                    float(d["seconds"]), int(d["inferred"]), bool(d["baseline_cached"]),
@@ -355,11 +357,11 @@ def measure_mapping(mapping: Mapping8, key: str, inputs: CocoInputs, *,
         One per detector, in the order of ``inputs.models``.
     """
     from fidelity.coco.detectors import Detector
+    from fidelity.coco.loss import score_loss
     from fidelity.coco.scoring import (
         FOLDS,
         evaluate_detections,
         load_annotated_images,
-        paired_standard_error,
         resolve_scorer,
         score_folds,
     )
@@ -400,23 +402,19 @@ def measure_mapping(mapping: Mapping8, key: str, inputs: CocoInputs, *,
         bf = score_folds(coco, base_d, ids, FOLDS, method=method)
         mf = score_folds(coco, map_d, ids, FOLDS, method=method)
 
-        def se(k: str, folds_b: Sequence[Any] = bf, folds_m: Sequence[Any] = mf,
-               relative: bool = False) -> float | None:
-            return paired_standard_error([f.value(k) for f in folds_b],
-                                         [f.value(k) for f in folds_m], relative=relative)
-
-        def dap(cls: str, bs: Any = b, ms: Any = m) -> float | None:
-            vb, vm = bs.ap.get(cls), ms.ap.get(cls)
-            return None if vb is None or vm is None else 100.0 * (vb - vm)
-
+        scores_b: dict[str, float | None] = {"map": b.map, **b.ap}
+        scores_m: dict[str, float | None] = {"map": m.map, **m.ap}
+        loss, person, bicycle = (score_loss(k, scores_b, scores_m, bf, mf)
+                                 for k in ("map", "person", "bicycle"))
+        if loss.points is None:  # both mAPs are numbers
+            raise ValueError("a measured cell without mAP")
         result = MeasuredLoss(
             model=det.name, model_file=spec.path.name, model_sha256=sha, mapping=key,
             images=len(ids), baseline_map=b.map, map=m.map,
-            dmap_points=100.0 * (b.map - m.map), dmap_points_se=se("map"),
-            dmap_relative=100.0 * (b.map - m.map) / b.map if b.map > 0 else 0.0,
-            dmap_relative_se=se("map", relative=True),
-            dap_person_points=dap("person"), dap_person_points_se=se("person"),
-            dap_bicycle_points=dap("bicycle"), dap_bicycle_points_se=se("bicycle"),
+            dmap_points=loss.points, dmap_points_se=loss.points_se,
+            dmap_relative=loss.relative, dmap_relative_se=loss.relative_se,
+            dap_person_points=person.points, dap_person_points_se=person.points_se,
+            dap_bicycle_points=bicycle.points, dap_bicycle_points_se=bicycle.points_se,
             seconds=time.perf_counter() - t0, inferred=ran + ran_base,
             baseline_cached=ran_base == 0, scorer=method,
             settings={"threads": threads, "providers": det.providers, "folds": FOLDS,

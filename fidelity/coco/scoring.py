@@ -320,7 +320,7 @@ def score_folds(coco_gt: Any, detections: Mapping[int, np.ndarray], image_ids: S
     images than folds each image is a fold; with fewer than 2 images, no folds. The standard
     error of a paired difference d between two runs on the same images is
     ``std(d_k, ddof=1) / sqrt(K)`` over the folds (the folds are disjoint and together cover
-    every image).
+    every image; :func:`fidelity.coco.loss.paired_standard_error`).
     """
     ids = sorted(int(i) for i in image_ids)
     n = min(int(folds), len(ids))
@@ -330,24 +330,6 @@ def score_folds(coco_gt: Any, detections: Mapping[int, np.ndarray], image_ids: S
         s = evaluate_detections(coco_gt, detections, fold, method=method)
         out.append(FoldScore(s.map, s.ap.get("person"), s.ap.get("bicycle"), len(fold)))
     return out
-
-
-def paired_standard_error(base: Sequence[float | None], other: Sequence[float | None],
-                          scale: float = 100.0, relative: bool = False) -> float | None:
-    """SE of ``scale * mean(base - other)`` from per-fold values (None where a fold lacks one).
-
-    ``std(d_k, ddof=1) / sqrt(K)`` over the folds where both values exist; None with fewer
-    than 2 such folds. ``relative``: the per-fold loss as a share of that fold's own base,
-    ``d_k = scale * (b_k - o_k) / b_k`` (folds with ``b_k <= 0`` left out), the SE of a
-    relative ΔmAP: a loss proportional to the baseline (mAP -> 0 loses 100 % on every fold)
-    has no spread there, while its spread in points carries the folds' different baselines.
-    """
-    d = [scale * (b - o) / (b if relative else 1.0)
-         for b, o in zip(base, other, strict=True)
-         if b is not None and o is not None and (not relative or b > 0)]
-    if len(d) < 2:
-        return None
-    return float(np.std(d, ddof=1) / np.sqrt(len(d)))
 
 
 # --------------------------------------------------------------------------------------------

@@ -42,11 +42,12 @@ import numpy as np
 from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
 from fidelity.errors import InvalidValueError
 from fidelity.fileio import file_sha256
+from fidelity.version import __version__
 
 if TYPE_CHECKING:
-    from fidelity.coco.executor import ExecutorOptions
+    from fidelity.coco.executor import CellWork, ExecutorOptions
     from fidelity.coco.scoring import FoldScore
-    from fidelity.coco.store import Claim
+    from fidelity.coco.store import Claim, ThreadStores
 
 #: Default targets of the sweep (issue 5): ΔE 0 is the baseline.
 SWEEP_TARGETS: tuple[float, ...] = (0, 1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 18, 21, 24)
@@ -334,16 +335,10 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     import onnxruntime
 
     from fidelity.coco.dataset import BASELINE, calibrated_param
-    from fidelity.coco.executor import (
-        CellWork,
-        ExecutorOptions,
-        ModelFile,
-        PixelTransform,
-        make_executor,
-        run_cells,
-    )
-    from fidelity.coco.scoring import evaluate_detections, load_annotated_images, resolve_scorer
-    from fidelity.coco.store import LEASE_STALE_S, ImageSet, LeaseKeeper, ThreadStores
+    from fidelity.coco.driver import StoreRun
+    from fidelity.coco.executor import CellWork, ExecutorOptions, ModelFile, PixelTransform
+    from fidelity.coco.scoring import load_annotated_images, resolve_scorer
+    from fidelity.coco.store import ImageSet
 
     opts = executor or ExecutorOptions(threads=threads, provider=provider)
     say = log or (lambda s: print(s, file=sys.stderr, flush=True))
@@ -362,7 +357,7 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
                                 "numpy": np.__version__, "Pillow": PIL.__version__,
                                 "pycocotools": _dist_version("pycocotools"),
                                 "faster-coco-eval": _dist_version("faster-coco-eval"),
-                                "fidelity": _fidelity_version()})
+                                "fidelity": __version__})
     store.record_scorer(method)
     store.set_meta("grid", {"transforms": list(transforms), "targets": list(targets),
                             "models": [f"{m.path.name}@{m.limit or len(all_ids)}"
@@ -370,17 +365,11 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     plan = plan_phases(len(models), transforms, targets, order)
     total = sum(len(grid) for _, grid in plan)
     params: dict[tuple[str, float], tuple[float | None, str | None]] = {}
-    ex = make_executor(image_set, opts)
-    lease: LeaseKeeper | None = None
-    stores = ThreadStores(lambda: SweepStore(store.folder, create=False))
-    try:
-        where = ex.describe()
-        store.set_meta("machine", {"platform": platform.platform(), "cpus": os.cpu_count(),
-                                   "threads": opts.threads} | where)
-        for spec, f in zip(models, files, strict=True):
-            store.register_model(f.name, spec.path.name, f.sha256, spec.limit,
-                                 ex.describe_model(f))
-        lease = LeaseKeeper(store, where, stale_s=LEASE_STALE_S if lease_s is None else lease_s)
+    with StoreRun(store, lambda: SweepStore(store.folder, create=False), image_set,
+                  opts) as run:
+        run.record_machine({"threads": opts.threads})
+        run.register_models(files, [m.limit for m in models])
+        run.start_leases(lease_s)
         work: list[CellWork] = []
         number: dict[tuple[Any, ...], int] = {}
         for k, (index, (transform, target)) in enumerate(
@@ -405,46 +394,63 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
                     continue
             work.append(CellWork(key, f"{f.name} {transform} ΔE {target:g}", f,
                                  PixelTransform.of(transform, param), tuple(ids)))
-
-        class Cells:
-            """The sweep store as :func:`run_cells` sees it."""
-
-            def done(self, cell: CellWork) -> bool:
-                c = store.cell(*cell.key)
-                return c is not None and (not c.done or c.images == len(cell.image_ids))
-
-            def stored(self, cell: CellWork) -> set[int]:
-                return store.stored_images(*cell.key)
-
-            def add(self, cell: CellWork, rows: Sequence[tuple[int, np.ndarray]]) -> None:
-                model, transform, target = cell.key
-                store.add_detections(model, transform, target, rows)
-
-            def finish(self, cell: CellWork, seconds: float, new: int) -> None:
-                model, transform, target = cell.key
-                ids = list(cell.image_ids)
-                own = stores.get()  # run_cells may score on a thread of its own
-                score = evaluate_detections(coco, own.detections(model, transform, target),
-                                            ids, method=method)
-                param = cell.transform.param
-                own.finish_cell(model, transform, target, param=param, status="done",
-                                images=len(ids), score=score, seconds=seconds)
-                say(f"{time.strftime('%H:%M:%S')} [{number[cell.key]}/{total}] {model} "
-                    f"{transform} ΔE {target:g} param={param} mAP={score.map:.4f} "
-                    f"AP50={score.map50:.4f} person={score.ap.get('person')} "
-                    f"images={len(ids)} new={new} {seconds:.1f}s "
-                    f"({new / seconds if seconds else 0:.1f} img/s)")
-
-        chunk = batch_commit if opts.kind == "local" else None
-        counts = run_cells(work, ex, Cells(), lease=lease, chunk_images=chunk,
-                           progress=progress, say=say)
-        store.set_meta("last_run", where | counts.to_json())
-    finally:
-        if lease is not None:
-            lease.close()
-        ex.close()
-        stores.close()
+        run.run(work, SweepCells(store, run.stores, coco, method, number, total, say),
+                batch_commit=batch_commit, progress=progress, say=say)
     return store
+
+
+class SweepCells:
+    """The sweep store as :func:`fidelity.coco.executor.run_cells` sees it (a
+    :class:`fidelity.coco.executor.CellStore`): cells keyed ``(model, transform, ΔE)``, scored
+    with ``method`` on ``coco`` when their detections are all stored, each logged as
+    ``[number/total]`` through ``say``.
+
+    ``store``: the run's connection (the driver's thread); ``stores``: a connection per thread,
+    for scoring (a cell may be scored on a thread of its own).
+    """
+
+    def __init__(self, store: SweepStore, stores: ThreadStores[SweepStore], coco: Any,
+                 method: str, number: Mapping[tuple[Any, ...], int], total: int,
+                 say: Callable[[str], None]) -> None:
+        self.store = store
+        self.stores = stores
+        self.coco = coco
+        self.method = method
+        self.number = number
+        self.total = total
+        self.say = say
+
+    def done(self, cell: CellWork) -> bool:
+        """Finished on the cell's image count (or unreachable)."""
+        c = self.store.cell(*cell.key)
+        return c is not None and (not c.done or c.images == len(cell.image_ids))
+
+    def stored(self, cell: CellWork) -> set[int]:
+        """Image ids whose detections are stored."""
+        return self.store.stored_images(*cell.key)
+
+    def add(self, cell: CellWork, rows: Sequence[tuple[int, np.ndarray]]) -> None:
+        """Store detections (one transaction)."""
+        model, transform, target = cell.key
+        self.store.add_detections(model, transform, target, rows)
+
+    def finish(self, cell: CellWork, seconds: float, new: int) -> None:
+        """Score the cell on its images, record it and log it."""
+        from fidelity.coco.scoring import evaluate_detections
+
+        model, transform, target = cell.key
+        ids = list(cell.image_ids)
+        own = self.stores.get()  # run_cells may score on a thread of its own
+        score = evaluate_detections(self.coco, own.detections(model, transform, target),
+                                    ids, method=self.method)
+        param = cell.transform.param
+        own.finish_cell(model, transform, target, param=param, status="done",
+                        images=len(ids), score=score, seconds=seconds)
+        self.say(f"{time.strftime('%H:%M:%S')} [{self.number[cell.key]}/{self.total}] {model} "
+                 f"{transform} ΔE {target:g} param={param} mAP={score.map:.4f} "
+                 f"AP50={score.map50:.4f} person={score.ap.get('person')} "
+                 f"images={len(ids)} new={new} {seconds:.1f}s "
+                 f"({new / seconds if seconds else 0:.1f} img/s)")
 
 
 def run_summary(last_run: Mapping[str, Any]) -> str:
@@ -570,9 +576,3 @@ def _dist_version(name: str) -> str | None:
         return version(name)
     except PackageNotFoundError:
         return None
-
-
-def _fidelity_version() -> str:
-    from fidelity import __version__
-
-    return __version__

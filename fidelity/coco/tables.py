@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fidelity import schema as sc
+from fidelity.coco.loss import loss_estimate
 from fidelity.coco.store import RegisteredModel
 from fidelity.errors import InputFileError
 from fidelity.fileio import json_ready, portable_paths
@@ -538,11 +539,10 @@ def model_size(model: str) -> str:
 
 
 def _delta(base: float | None, value: float | None) -> tuple[float | None, float | None]:
-    if base is None or value is None:
-        return None, None
-    pts = 100.0 * (base - value)
-    rel = 100.0 * (base - value) / base if base > 0 else None
-    return pts, rel
+    """(points, relative) loss of ``value`` against ``base``
+    (:func:`fidelity.coco.loss.loss_estimate`)."""
+    loss = loss_estimate(base, value)
+    return loss.points, loss.relative
 
 
 def _value(x: float | None) -> float:
@@ -846,12 +846,14 @@ def add_standard_errors(store: SweepStore, coco: Any, deltas: Mapping[str, Seque
 
     Paired standard errors over :data:`fidelity.coco.scoring.FOLDS` interleaved image folds: per
     fold the loss of the cell against the baseline on the same images,
-    ``SE = std(loss_k, ddof=1) / sqrt(K)`` (:func:`fidelity.coco.scoring.paired_standard_error`).
+    ``SE = std(loss_k, ddof=1) / sqrt(K)`` (:func:`fidelity.coco.loss.loss_estimate`; no
+    relative SE for a baseline mAP of 0).
     Fold scores are computed from the stored detections (no inference) and cached in the store.
     """
     from tqdm import tqdm
 
-    from fidelity.coco.scoring import FoldScore, paired_standard_error
+    from fidelity.coco.loss import score_loss
+    from fidelity.coco.scoring import FoldScore
 
     ids_all = sorted(coco.getImgIds())
     todo = [(m, r) for m, rows in deltas.items() for r in rows if r.done]
@@ -863,13 +865,14 @@ def add_standard_errors(store: SweepStore, coco: Any, deltas: Mapping[str, Seque
             base_folds[m] = store.fold_scores(coco, m, "baseline", 0.0, ids, method)
         folds = store.fold_scores(coco, m, r.transform, r.delta_e, ids, method)
 
-        def se(key: str, relative: bool = False, m: str = m,
-               folds: list[FoldScore] = folds) -> float | None:
-            return paired_standard_error([f.value(key) for f in base_folds[m]],
-                                         [f.value(key) for f in folds], relative=relative)
-
-        errors[id(r)] = CellErrors(se("map"), se("map", relative=True), se("person"),
-                                   se("bicycle"))
+        b = baselines[m]
+        base: dict[str, float | None] = {"map": b.map, **(b.ap or {})}
+        cell: dict[str, float | None] = {"map": r.map, "person": r.ap_person,
+                                         "bicycle": r.ap_bicycle}
+        loss, person, bicycle = (score_loss(k, base, cell, base_folds[m], folds)
+                                 for k in ("map", "person", "bicycle"))
+        errors[id(r)] = CellErrors(loss.points_se, loss.relative_se, person.points_se,
+                                   bicycle.points_se)
     return {m: [replace(r, errors=errors[id(r)]) if id(r) in errors else r for r in rows]
             for m, rows in deltas.items()}
 

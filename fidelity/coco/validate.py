@@ -15,7 +15,9 @@ For every camera file of a suite (:func:`load_suite`):
    and per class (person, bicycle).
 3. **Compare.** The worst-case table bounds a camera when the measured loss is at most the
    prediction. A standard error of every measured loss comes from 5 interleaved folds of the
-   image set (image ``i`` of the id-sorted list in fold ``i mod 5``): SE = std(fold ΔmAP)/sqrt(5).
+   image set (image ``i`` of the id-sorted list in fold ``i mod 5``): SE = std(fold ΔmAP)/sqrt(5),
+   the relative one over each fold's ΔmAP as a share of that fold's baseline
+   (:func:`fidelity.coco.loss.loss_estimate`, as the sweep tables).
 
 Suite folder: camera files (``*.toml``, ``*.yaml``, ``*.yml``) and an optional ``suite.toml``
 giving each camera's scene illuminant (``default_illuminant = "D65"``; ``[illuminant]`` table
@@ -43,6 +45,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fidelity.coco.bounds import CameraChart, DirectionalValidation, MeasuredCell, compare_bounds
+from fidelity.coco.loss import LOSS_COLUMNS, Losses
 from fidelity.coco.scoring import FOLDS  # interleaved image folds for standard errors
 from fidelity.coco.store import (
     RegisteredModel,
@@ -52,13 +56,14 @@ from fidelity.coco.store import (
 )
 from fidelity.errors import InputFileError, InvalidValueError
 from fidelity.fileio import file_sha256, json_ready
+from fidelity.version import __version__
 
 if TYPE_CHECKING:
     from fidelity.chart.measure import ChartMeasurement
-    from fidelity.coco.bounds import DirectionalValidation
     from fidelity.coco.emulation import AccuracySummary, Emulation
-    from fidelity.coco.executor import ExecutorOptions
+    from fidelity.coco.executor import CellWork, ExecutorOptions
     from fidelity.coco.scoring import CocoScore, FoldScore
+    from fidelity.coco.store import ThreadStores
     from fidelity.coco.sweep import ImageCache, ModelSpec
 
 STORE_NAME = "validation.sqlite"
@@ -66,13 +71,6 @@ SUITE_FILE = "suite.toml"
 BASELINE = "baseline"
 #: Classes compared (``all`` = mAP@[.50:.95] over the 80 COCO classes).
 CLASSES: tuple[str, ...] = ("all", "person", "bicycle")
-#: Loss columns compared (prediction-table column names).
-LOSS_COLUMNS: dict[str, str] = {
-    "all": "dmap_points",
-    "all-relative": "dmap_relative",
-    "person": "dap_person_points",
-    "bicycle": "dap_bicycle_points",
-}
 #: Images and pixel stride used for the image-level ΔE00 of an emulation (analysis only).
 IMAGE_DE_SAMPLE: tuple[int, int] = (50, 4)
 
@@ -339,36 +337,8 @@ class ValidationCell:
                    d["seconds"], d["finished"])
 
 
-#: Key order of the measured losses and of their standard errors in ``validation.json``.
-_MEASURED_KEYS = ("dmap_points", "dmap_relative", "dap_person_points", "dap_bicycle_points")
+#: Key order of the measured losses' standard errors in ``validation.json``.
 _SE_KEYS = ("dmap_points", "dap_person_points", "dap_bicycle_points", "dmap_relative")
-
-
-@dataclass(frozen=True)
-class Losses:
-    """Losses by prediction-table column (:data:`LOSS_COLUMNS`): ΔmAP in points and relative
-    (% of baseline), ΔAP of person and bicycle in points; None where not defined."""
-
-    dmap_points: float | None
-    dmap_relative: float | None
-    dap_person_points: float | None
-    dap_bicycle_points: float | None
-
-    def get(self, column: str) -> float | None:
-        """The loss of ``column`` (a value of :data:`LOSS_COLUMNS`)."""
-        return {"dmap_points": self.dmap_points, "dmap_relative": self.dmap_relative,
-                "dap_person_points": self.dap_person_points,
-                "dap_bicycle_points": self.dap_bicycle_points}[column]
-
-    def to_json(self, keys: Sequence[str] = _MEASURED_KEYS) -> dict[str, Any]:
-        """``{column: value}`` in the order ``keys``."""
-        return {k: self.get(k) for k in keys}
-
-    @classmethod
-    def from_json(cls, d: Mapping[str, Any]) -> Losses:
-        """Inverse of :meth:`to_json`."""
-        return cls(d.get("dmap_points"), d.get("dmap_relative"), d.get("dap_person_points"),
-                   d.get("dap_bicycle_points"))
 
 
 @dataclass(frozen=True)
@@ -427,9 +397,10 @@ class BoundCheck:
 class ValidationRow:
     """Predicted against measured loss of one (camera, model) cell (:func:`collect_results`).
 
-    Scores are fractions; ``measured`` and ``se`` are :class:`Losses` (points, relative in %)
-    against the model's ΔE = 0 baseline; ``predicted``: per table its :class:`TablePrediction`;
-    ``bound``: per class of :data:`LOSS_COLUMNS` the :class:`BoundCheck` of the bound table.
+    Scores are fractions; ``measured`` and ``se`` are :class:`fidelity.coco.loss.Losses`
+    (points, relative in %) against the model's ΔE = 0 baseline; ``predicted``: per table its
+    :class:`TablePrediction`; ``bound``: per class of :data:`fidelity.coco.loss.LOSS_COLUMNS`
+    the :class:`BoundCheck` of the bound table.
     """
 
     camera: str
@@ -498,7 +469,8 @@ class ClassSummary:
 @dataclass(frozen=True)
 class ValidationSummary:
     """The bound ``bound_table`` tested, the ``tables`` evaluated, stored cameras left out
-    (``not_in_suite``) and per class of :data:`LOSS_COLUMNS` its :class:`ClassSummary`."""
+    (``not_in_suite``) and per class of :data:`fidelity.coco.loss.LOSS_COLUMNS` its
+    :class:`ClassSummary`."""
 
     bound_table: str
     tables: tuple[str, ...]
@@ -558,11 +530,7 @@ class ValidationResults:
 
 
 def _directional_from_json(d: Mapping[str, Any] | None) -> DirectionalValidation | None:
-    if not d:
-        return None
-    from fidelity.coco.bounds import DirectionalValidation
-
-    return DirectionalValidation.from_json(d)
+    return DirectionalValidation.from_json(d) if d else None
 
 
 # --------------------------------------------------------------------------------------------
@@ -608,7 +576,7 @@ def predictions_for(delta_e: float, baseline_map_percent: float | None,
         p = predict(delta_e, size=size, table=t, baseline_map=baseline_map_percent,
                     transforms=False)
         out[t] = TablePrediction(
-            Losses(*(p.columns[col].value for col in _MEASURED_KEYS)),
+            Losses(*(p.columns[col].value for col in LOSS_COLUMNS.values())),
             {col: p.columns[col].status for col in LOSS_COLUMNS.values()}, p.table.kind)
     return out
 
@@ -787,19 +755,20 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     its cells claimed so that several runs share them (``lease_s``: see
     :func:`fidelity.coco.sweep.run_sweep`). Inputs are checked against the store's record.
     """
+    import functools
+
     import onnxruntime
 
+    from fidelity.coco.driver import StoreRun
     from fidelity.coco.executor import (
         IDENTITY,
         CellWork,
         ExecutorOptions,
         ModelFile,
         PixelTransform,
-        make_executor,
-        run_cells,
     )
-    from fidelity.coco.scoring import evaluate_detections, load_annotated_images, score_folds
-    from fidelity.coco.store import LEASE_STALE_S, ImageSet, LeaseKeeper, ThreadStores
+    from fidelity.coco.scoring import load_annotated_images
+    from fidelity.coco.store import ImageSet
     from fidelity.coco.sweep import ImageCache
 
     opts = executor or ExecutorOptions(threads=threads, provider=provider)
@@ -811,8 +780,6 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     store = ValidationStore(store_dir)
     image_set = ImageSet(img_dir, coco, all_ids)
     store.start_run(image_set, [m.limit for m in models], annotations)
-    from fidelity import __version__
-
     store.set_meta("versions", {"python": platform.python_version(),
                                 "onnxruntime": onnxruntime.__version__, "numpy": np.__version__,
                                 "fidelity": __version__, "colour": _colour_version()})
@@ -823,36 +790,15 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     store.set_meta("cameras", [{"camera": c.name, "file": c.path.name,
                                 "illuminant": c.illuminant} for c in cases])
     cache = ImageCache(img_dir, coco)
-    ex = make_executor(image_set, opts)
-    lease: LeaseKeeper | None = None
-    stores = ThreadStores(lambda: ValidationStore(store.folder, create=False))
-    try:
-        where = ex.describe()
-        store.set_meta("machine", {"platform": platform.platform(), "cpus": os.cpu_count(),
-                                   "threads": opts.threads, "provider": opts.provider} | where)
-        runs = []
-        for spec, f in zip(models, files, strict=True):
-            ids = all_ids[: spec.limit] if spec.limit else all_ids
-            store.register_model(f.name, spec.path.name, f.sha256, spec.limit,
-                                 ex.describe_model(f))
-            runs.append((f, tuple(ids)))
+    with StoreRun(store, lambda: ValidationStore(store.folder, create=False), image_set,
+                  opts) as run:
+        run.record_machine({"threads": opts.threads, "provider": opts.provider})
+        run.register_models(files, [m.limit for m in models])
+        runs = [(f, tuple(all_ids[: spec.limit] if spec.limit else all_ids))
+                for spec, f in zip(models, files, strict=True)]
         store.set_meta("models_run", [{"model": f.name, "images": len(i)} for f, i in runs])
-        lease = LeaseKeeper(store, where, stale_s=LEASE_STALE_S if lease_s is None else lease_s)
-        built: dict[str, np.ndarray] = {}
-
-        def table_of(case: CameraCase) -> Callable[[], np.ndarray]:
-            def table() -> np.ndarray:
-                if case.name not in built:
-                    built.clear()  # one camera's table at a time
-                    emu, info = prepare_case(case, store, method, training, cache, all_ids)
-                    acc = info.emulation.accuracy
-                    say(f"{time.strftime('%H:%M:%S')} {case.name} ({case.illuminant}): chart "
-                        f"ΔE {info.chart_delta_e:.2f}, emulation chart ΔE00 mean "
-                        f"{acc.chart_mean_delta_e:.2f} max {acc.chart_max_delta_e:.2f}")
-                    built[case.name] = emu.cube()
-                return built[case.name]
-            return table
-
+        run.start_leases(lease_s)
+        tables = EmulationTables(store, method, training, cache, all_ids, say)
         work = [CellWork((f.name, BASELINE), f"{BASELINE} / {f.name}", f,
                          PixelTransform.of(IDENTITY, None), ids) for f, ids in runs]
         for case in cases:
@@ -864,43 +810,81 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
             key = json.dumps([case.name, case.sha256, case.illuminant, method, training])
             emulated = PixelTransform(key, case.name)
             work += [CellWork((f.name, case.name), f"{case.name} / {f.name}", f, emulated, ids,
-                              table_of(case)) for f, ids in runs]
-
-        class Cells:
-            """The validation store as :func:`fidelity.coco.executor.run_cells` sees it."""
-
-            def done(self, cell: CellWork) -> bool:
-                return store.cell(*cell.key) is not None
-
-            def stored(self, cell: CellWork) -> set[int]:
-                return store.stored_images(*cell.key)
-
-            def add(self, cell: CellWork, rows: Sequence[tuple[int, np.ndarray]]) -> None:
-                model, camera = cell.key
-                store.add_detections(model, camera, list(rows))
-
-            def finish(self, cell: CellWork, seconds: float, new: int) -> None:
-                model, camera = cell.key
-                ids = list(cell.image_ids)
-                own = stores.get()  # run_cells may score on a thread of its own
-                dets = own.detections(model, camera)
-                score = evaluate_detections(coco, dets, ids)
-                folds = score_folds(coco, dets, ids, FOLDS)
-                own.finish_cell(model, camera, score, folds, seconds)
-                say(f"{time.strftime('%H:%M:%S')} {camera} / {model}: mAP={score.map:.4f} "
-                    f"person={score.ap.get('person')} images={len(ids)} new={new} "
-                    f"{seconds:.1f}s")
-
-        chunk = batch_commit if opts.kind == "local" else None
-        counts = run_cells(work, ex, Cells(), lease=lease, chunk_images=chunk,
-                           progress=progress, say=say)
-        store.set_meta("last_run", where | counts.to_json())
-    finally:
-        if lease is not None:
-            lease.close()
-        ex.close()
-        stores.close()
+                              functools.partial(tables.get, case)) for f, ids in runs]
+        run.run(work, ValidationCells(store, run.stores, coco, say), batch_commit=batch_commit,
+                progress=progress, say=say)
     return store
+
+
+class EmulationTables:
+    """The 8-bit emulation tables of a validation run's cameras, built when a cell first needs
+    one (:func:`prepare_case`, logged through ``say``) and kept one camera at a time."""
+
+    def __init__(self, store: ValidationStore, method: str, training: str, cache: ImageCache,
+                 image_ids: Sequence[int], say: Callable[[str], None]) -> None:
+        self.store = store
+        self.method = method
+        self.training = training
+        self.cache = cache
+        self.image_ids = image_ids
+        self.say = say
+        self.built: dict[str, np.ndarray] = {}
+
+    def get(self, case: CameraCase) -> np.ndarray:
+        """The camera's (2^24, 3) uint8 table (:meth:`fidelity.coco.emulation.Emulation.cube`)."""
+        if case.name not in self.built:
+            self.built.clear()  # one camera's table at a time
+            emu, info = prepare_case(case, self.store, self.method, self.training, self.cache,
+                                     self.image_ids)
+            acc = info.emulation.accuracy
+            self.say(f"{time.strftime('%H:%M:%S')} {case.name} ({case.illuminant}): chart "
+                     f"ΔE {info.chart_delta_e:.2f}, emulation chart ΔE00 mean "
+                     f"{acc.chart_mean_delta_e:.2f} max {acc.chart_max_delta_e:.2f}")
+            self.built[case.name] = emu.cube()
+        return self.built[case.name]
+
+
+class ValidationCells:
+    """The validation store as :func:`fidelity.coco.executor.run_cells` sees it (a
+    :class:`fidelity.coco.executor.CellStore`): cells keyed ``(model, camera)``, scored on
+    ``coco`` with their fold scores when their detections are all stored, each logged through
+    ``say``. ``store``: the run's connection (the driver's thread); ``stores``: a connection
+    per thread, for scoring (a cell may be scored on a thread of its own)."""
+
+    def __init__(self, store: ValidationStore, stores: ThreadStores[ValidationStore],
+                 coco: Any, say: Callable[[str], None]) -> None:
+        self.store = store
+        self.stores = stores
+        self.coco = coco
+        self.say = say
+
+    def done(self, cell: CellWork) -> bool:
+        """Whether the cell is finished."""
+        return self.store.cell(*cell.key) is not None
+
+    def stored(self, cell: CellWork) -> set[int]:
+        """Image ids whose detections are stored."""
+        return self.store.stored_images(*cell.key)
+
+    def add(self, cell: CellWork, rows: Sequence[tuple[int, np.ndarray]]) -> None:
+        """Store detections (one transaction)."""
+        model, camera = cell.key
+        self.store.add_detections(model, camera, list(rows))
+
+    def finish(self, cell: CellWork, seconds: float, new: int) -> None:
+        """Score the cell and its folds, record it and log it."""
+        from fidelity.coco.scoring import evaluate_detections, score_folds
+
+        model, camera = cell.key
+        ids = list(cell.image_ids)
+        own = self.stores.get()  # run_cells may score on a thread of its own
+        dets = own.detections(model, camera)
+        score = evaluate_detections(self.coco, dets, ids)
+        folds = score_folds(self.coco, dets, ids, FOLDS)
+        own.finish_cell(model, camera, score, folds, seconds)
+        self.say(f"{time.strftime('%H:%M:%S')} {camera} / {model}: mAP={score.map:.4f} "
+                 f"person={score.ap.get('person')} images={len(ids)} new={new} "
+                 f"{seconds:.1f}s")
 
 
 def _colour_version() -> str:
@@ -912,19 +896,6 @@ def _colour_version() -> str:
 # --------------------------------------------------------------------------------------------
 # Results
 # --------------------------------------------------------------------------------------------
-
-
-def _loss(base: float | None, value: float | None) -> float | None:
-    if base is None or value is None:
-        return None
-    return 100.0 * (base - value)
-
-
-def _se(base_folds: Sequence[FoldScore], folds: Sequence[FoldScore], key: str) -> float | None:
-    from fidelity.coco.scoring import paired_standard_error
-
-    return paired_standard_error([b.value(key) for b in base_folds],
-                                 [f.value(key) for f in folds])
 
 
 def holdout_accuracy(cases: Sequence[CameraCase], method: str = "root-polynomial"
@@ -949,16 +920,16 @@ def _bound_check(predicted: float | None, measured: float | None, se: float | No
 
 def _row(camera: str, info: CameraRecord, b: ValidationCell, c: ValidationCell,
          tables: Sequence[str], bound: str) -> ValidationRow:
-    """Predicted against measured loss of one cell ``c`` against its baseline ``b``."""
-    measured = Losses(
-        dmap_points=_loss(b.map, c.map),
-        dmap_relative=100.0 * (b.map - c.map) / b.map if b.map else None,
-        dap_person_points=_loss(b.ap.get("person"), c.ap.get("person")),
-        dap_bicycle_points=_loss(b.ap.get("bicycle"), c.ap.get("bicycle")))
-    se_points = _se(b.folds, c.folds, "map")
-    se = Losses(se_points,
-                None if se_points is None else 100.0 * se_points / (100.0 * b.map),
-                _se(b.folds, c.folds, "person"), _se(b.folds, c.folds, "bicycle"))
+    """Predicted against measured loss of one cell ``c`` against its baseline ``b``
+    (:func:`fidelity.coco.loss.score_loss`)."""
+    from fidelity.coco.loss import score_loss
+
+    base: dict[str, float | None] = {"map": b.map, **b.ap}
+    cell: dict[str, float | None] = {"map": c.map, **c.ap}
+    loss, person, bicycle = (score_loss(k, base, cell, b.folds, c.folds)
+                             for k in ("map", "person", "bicycle"))
+    measured = Losses(loss.points, loss.relative, person.points, bicycle.points)
+    se = Losses(loss.points_se, loss.relative_se, person.points_se, bicycle.points_se)
     pred = predictions_for(info.chart_delta_e, 100.0 * b.map, tables)
     checks = {cls: _bound_check(pred[bound].losses.get(col), measured.get(col), se.get(col),
                                 pred[bound].status[col])
@@ -1027,27 +998,43 @@ def collect_results(store: ValidationStore, tables: Sequence[str] | None = None,
         tuple(rows), summary, cases, models,
         {m: cells[(m, BASELINE)] for m in models if (m, BASELINE) in cells}, store.meta())
     if suite and rows:
-        from fidelity.coco.bounds import directional_validation
-
         results = replace(results, directional=directional_validation(results, suite))
     return results
+
+
+def directional_validation(results: ValidationResults,
+                           suite: Sequence[CameraCase] | None = None,
+                           table: str | None = None) -> DirectionalValidation:
+    """Both bounds and the blind-spot checks on every camera and cell of ``results``
+    (:func:`fidelity.coco.bounds.compare_bounds`, against the classic prediction of
+    ``results.summary.bound_table``); ``suite``: the camera files, to render each chart (closed
+    form) and read its bit depth; ``table``: the direction-aware table (None: the default)."""
+    by_name = {c.name: c for c in suite or ()}
+    charts = {name: CameraChart(name, rec.chart_delta_e, rec.patches,
+                                by_name[name].path if name in by_name else None,
+                                by_name[name].illuminant if name in by_name else None)
+              for name, rec in results.cameras.items()}
+    bound = results.summary.bound_table
+    cells = [MeasuredCell(r.camera, r.model, r.chart_delta_e, r.measured, r.se,
+                          r.predicted[bound].losses) for r in results.rows]
+    return compare_bounds(cells, charts, table)
 
 
 __all__ = [
     "BASELINE",
     "CLASSES",
     "FOLDS",
-    "LOSS_COLUMNS",
     "BoundCheck",
     "CameraCase",
     "CameraRecord",
     "ClassSummary",
     "EmulationRecord",
+    "EmulationTables",
     "ErrorProfile",
     "ImageDeltaE",
-    "Losses",
     "TablePrediction",
     "ValidationCell",
+    "ValidationCells",
     "ValidationResults",
     "ValidationRow",
     "ValidationStore",
@@ -1055,6 +1042,7 @@ __all__ = [
     "chart_error_profile",
     "collect_results",
     "default_store",
+    "directional_validation",
     "holdout_accuracy",
     "image_delta_e",
     "load_suite",

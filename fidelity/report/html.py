@@ -67,7 +67,7 @@ def environment() -> jinja2.Environment:
 
 def render_html(doc: Document) -> str:
     """The self-contained HTML page of ``doc``."""
-    from fidelity import __version__
+    from fidelity.version import __version__
 
     return environment().get_template(TEMPLATE).render(doc=doc, version=__version__)
 

@@ -42,7 +42,7 @@ if TYPE_CHECKING:
 #: Title of the validation report.
 TITLE = "Validation: predicted against measured detection loss for realistic camera models"
 
-#: The classes by :data:`fidelity.coco.validate.LOSS_COLUMNS` key, as the report names them.
+#: The classes by :data:`fidelity.coco.loss.LOSS_COLUMNS` key, as the report names them.
 CLASS_TITLES: dict[str, str] = {"all": "mAP@[.50:.95] (all classes)", "person": "AP person",
                                 "bicycle": "AP bicycle",
                                 "all-relative": "mAP relative to baseline"}
@@ -68,7 +68,7 @@ _PLOTTED = ("all", "person", "bicycle")
 def scatter_plot(rows: Sequence[ValidationRow], table_name: str) -> bytes:
     """Measured against predicted loss (points) per class, ±2 SE, with the identity line
     (the bound holds below it), for one prediction table (PNG bytes)."""
-    from fidelity.coco.validate import LOSS_COLUMNS
+    from fidelity.coco.loss import LOSS_COLUMNS
     from fidelity.report.plots import axes_plain_ticks, new_figure, png_bytes
 
     fig, axes = new_figure(15, 5, 1, 3)
@@ -105,7 +105,7 @@ def scatter_plot(rows: Sequence[ValidationRow], table_name: str) -> bytes:
 def vs_delta_e_plot(rows: Sequence[ValidationRow], tables: Sequence[str]) -> bytes:
     """Measured loss (points, ±2 SE) against the camera's chart ΔE00 per class, with every
     table's worst-case curve for detector size n (PNG bytes)."""
-    from fidelity.coco.validate import LOSS_COLUMNS
+    from fidelity.coco.loss import LOSS_COLUMNS
     from fidelity.prediction.table import predict_curve
     from fidelity.report.plots import axes_plain_ticks, new_figure, png_bytes
 
@@ -336,7 +336,7 @@ def headline(results: ValidationResults, figure: Figure | None = None) -> Headli
 
 
 def _bound_section(results: ValidationResults) -> Section:
-    from fidelity.coco.validate import LOSS_COLUMNS
+    from fidelity.coco.loss import LOSS_COLUMNS
 
     rows, summ, cams = results.rows, results.summary, results.cameras
     body = []

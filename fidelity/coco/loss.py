@@ -1,0 +1,184 @@
+"""The detection loss of a transformed cell against its baseline, and its standard error.
+
+One formula for the sweep tables (:mod:`fidelity.coco.tables`), the validation
+(:mod:`fidelity.coco.validate`) and the ``--measure`` runs (:mod:`fidelity.coco.measure`).
+Scores are fractions in [0, 1] (COCO mAP@[.50:.95] or a class's AP); with ``scale = 100``:
+
+* loss in points: ``points = 100 * (base - value)`` (percentage points);
+* relative loss: ``relative = 100 * (base - value) / base`` (percent of the baseline);
+* paired standard errors over K disjoint image folds (the same images scored with and
+  without the transform): ``SE = std(d_k, ddof=1) / sqrt(K)`` with per-fold losses
+  ``d_k = 100 * (b_k - o_k)`` in points and ``d_k = 100 * (b_k - o_k) / b_k`` relative (each
+  fold's loss as a share of that fold's own baseline, so that a loss proportional to the
+  baseline has no spread), over the folds where both scores exist.
+
+**Zero baseline.** A relative loss is undefined where the baseline is not positive: the
+relative loss is None when ``base <= 0``, and so is its SE; a fold with ``b_k <= 0`` is left
+out of the relative SE. An SE needs at least 2 usable folds (None otherwise).
+
+Source: the paired-difference standard error of K-fold means (e.g. Efron & Tibshirani, *An
+Introduction to the Bootstrap*, 1993, ch. 2: SE of a mean = sample sd / sqrt(n)); the folds
+are :func:`fidelity.coco.scoring.score_folds`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+#: Loss columns compared by class (``all`` = mAP@[.50:.95] over the 80 COCO classes) ->
+#: prediction-table column names (:data:`fidelity.prediction.table.COLUMNS`).
+LOSS_COLUMNS: dict[str, str] = {
+    "all": "dmap_points",
+    "all-relative": "dmap_relative",
+    "person": "dap_person_points",
+    "bicycle": "dap_bicycle_points",
+}
+
+#: Percentage points per unit of score (scores are fractions).
+SCALE = 100.0
+
+
+def paired_standard_error(base: Sequence[float | None], other: Sequence[float | None],
+                          scale: float = SCALE, relative: bool = False) -> float | None:
+    """SE of ``scale * mean(base - other)`` from per-fold values (None where a fold lacks one).
+
+    Parameters
+    ----------
+    base, other
+        Per-fold scores (fractions) of the baseline and the transformed run, fold by fold.
+    scale
+        Units of the loss per unit of score (100: percentage points).
+    relative
+        The per-fold loss as a share of that fold's own base, ``d_k = scale * (b_k - o_k) /
+        b_k`` (folds with ``b_k <= 0`` left out): the SE of a relative loss (percent of the
+        baseline). A loss proportional to the baseline (mAP -> 0 loses 100 % on every fold)
+        has no spread there, while its spread in points carries the folds' different
+        baselines.
+
+    Returns
+    -------
+    float or None
+        ``std(d_k, ddof=1) / sqrt(K)`` over the K folds where both values exist (and, relative,
+        the base is positive); None with fewer than 2 such folds.
+    """
+    d = [scale * (b - o) / (b if relative else 1.0)
+         for b, o in zip(base, other, strict=True)
+         if b is not None and o is not None and (not relative or b > 0)]
+    if len(d) < 2:
+        return None
+    return float(np.std(d, ddof=1) / np.sqrt(len(d)))
+
+
+@dataclass(frozen=True)
+class LossEstimate:
+    """A loss and its paired fold standard errors (:func:`loss_estimate`).
+
+    ``points``: ``100 * (base - value)`` (percentage points); ``relative``: percent of the
+    baseline (None when the baseline is not positive); ``points_se``, ``relative_se``: their
+    paired fold SEs (None with fewer than 2 usable folds, and ``relative_se`` None whenever
+    ``relative`` is). Every field is None where the baseline or the value is missing.
+    """
+
+    points: float | None
+    relative: float | None
+    points_se: float | None = None
+    relative_se: float | None = None
+
+
+def loss_estimate(base: float | None, value: float | None,
+                  base_folds: Sequence[float | None] = (),
+                  folds: Sequence[float | None] = ()) -> LossEstimate:
+    """The loss of ``value`` against ``base`` and its standard errors (module docstring).
+
+    Parameters
+    ----------
+    base, value
+        Scores (fractions in [0, 1]) of the baseline and the transformed cell on the same
+        images; None where a score does not exist (a class without ground truth).
+    base_folds, folds
+        The same scores per image fold (equal lengths; empty: no standard errors).
+
+    Returns
+    -------
+    LossEstimate
+        Points and relative loss (percent of the baseline, None for a baseline <= 0) with
+        their paired SEs.
+    """
+    if base is None or value is None:
+        return LossEstimate(None, None)
+    points = SCALE * (base - value)
+    defined = base > 0
+    return LossEstimate(
+        points=points,
+        relative=SCALE * (base - value) / base if defined else None,
+        points_se=paired_standard_error(base_folds, folds),
+        relative_se=paired_standard_error(base_folds, folds, relative=True) if defined
+        else None)
+
+
+class FoldValues(Protocol):
+    """Scores of one image fold by name (:class:`fidelity.coco.scoring.FoldScore`)."""
+
+    def value(self, key: str) -> float | None:
+        """The fold's score ``key`` (``"map"``, ``"person"``, ``"bicycle"``), a fraction."""
+
+
+def score_loss(key: str, base: Mapping[str, float | None], value: Mapping[str, float | None],
+               base_folds: Sequence[FoldValues] = (),
+               folds: Sequence[FoldValues] = ()) -> LossEstimate:
+    """:func:`loss_estimate` of score ``key`` (``"map"``, ``"person"``, ``"bicycle"``).
+
+    Parameters
+    ----------
+    key
+        The score compared.
+    base, value
+        Scores by name (fractions) of the baseline and the cell; a missing key is None.
+    base_folds, folds
+        Per-fold scores of the baseline and the cell (:func:`fidelity.coco.scoring.score_folds`).
+    """
+    return loss_estimate(base.get(key), value.get(key), [f.value(key) for f in base_folds],
+                         [f.value(key) for f in folds])
+
+
+@dataclass(frozen=True)
+class Losses:
+    """Losses by prediction-table column (:data:`LOSS_COLUMNS`): ΔmAP in points and relative
+    (% of baseline), ΔAP of person and bicycle in points; None where not defined."""
+
+    dmap_points: float | None
+    dmap_relative: float | None
+    dap_person_points: float | None
+    dap_bicycle_points: float | None
+
+    def get(self, column: str) -> float | None:
+        """The loss of ``column`` (a value of :data:`LOSS_COLUMNS`)."""
+        return {"dmap_points": self.dmap_points, "dmap_relative": self.dmap_relative,
+                "dap_person_points": self.dap_person_points,
+                "dap_bicycle_points": self.dap_bicycle_points}[column]
+
+    def to_json(self, keys: Sequence[str] = tuple(LOSS_COLUMNS.values())) -> dict[str, Any]:
+        """``{column: value}`` in the order ``keys``."""
+        return {k: self.get(k) for k in keys}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> Losses:
+        """Inverse of :meth:`to_json`."""
+        return cls(d.get("dmap_points"), d.get("dmap_relative"), d.get("dap_person_points"),
+                   d.get("dap_bicycle_points"))
+
+
+__all__ = [
+    "LOSS_COLUMNS",
+    "SCALE",
+    "FoldValues",
+    "LossEstimate",
+    "Losses",
+    "loss_estimate",
+    "paired_standard_error",
+    "score_loss",
+]
