@@ -279,7 +279,7 @@ class Provenance:
         """The provenance of a report made now, on this machine."""
         from importlib.metadata import PackageNotFoundError, version
 
-        from fidelity import __version__
+        from fidelity.version import __version__
         from fidelity.resources import resource_dir
 
         libraries: dict[str, str] = {}

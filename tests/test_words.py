@@ -4,6 +4,8 @@ numbers, and one sentence per reason. The wording itself is pinned by the JSON o
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 from test_prediction import SC, _measured_table
 
@@ -86,3 +88,20 @@ def test_a_conservative_answer_says_its_status() -> None:
     v = evaluate(30.0, p, Criterion("max-dmap", 200.0))
     assert v.passed and v.conservative and v.status is pr.ColumnStatus.ABOVE_RANGE
     assert v.upper_bound and "above-range" in verdict_message(v)
+
+
+def test_a_zero_baseline_measured_loss_renders_as_undefined() -> None:
+    """A detector with baseline mAP 0 has no relative loss (fidelity.coco.loss): the report
+    says so instead of failing on None."""
+    from fidelity.check import check_camera
+    from fidelity.coco.measure import MeasuredLoss
+    from fidelity.report.chart import measured_section
+    from fidelity.report.document import Table
+
+    loss = MeasuredLoss("m", "m.onnx", "0" * 64, "k", 10, 0.0, 0.0, 0.0, None, None, None,
+                        None, None, None, None, 1.0, 10, False, "coco", {})
+    report = dataclasses.replace(check_camera("ideal"), measured=(loss,))
+    section = measured_section(report)
+    assert section is not None
+    rows = [b for b in section.blocks if isinstance(b, Table)][0].rows
+    assert rows[0][4] == "– ± –" and rows[0][3] == "0.00 ± –"

@@ -30,7 +30,7 @@ from typing import Any
 
 import click
 
-from fidelity import __version__
+from fidelity.version import __version__
 from fidelity.errors import FidelityError
 
 #: Exit code of an internal error (a bug), after 0 pass, 1 fail, 2 input error.

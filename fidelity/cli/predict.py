@@ -151,7 +151,8 @@ def _print_coco_c(spec: str, size: str, table: str | None, json_path: str | None
         click.echo(f"  measured: not in the COCO-C table {a.table_path}")
     for m in a.measured:
         se = "" if m.dmap_points_se is None else f" ± {m.dmap_points_se:.2f}"
-        click.echo(f"  measured ΔmAP: {m.dmap_points:.2f}{se} points, {m.dmap_relative:.2f} % "
+        rel = "undefined" if m.dmap_relative is None else f"{m.dmap_relative:.2f}"
+        click.echo(f"  measured ΔmAP: {m.dmap_points:.2f}{se} points, {rel} % "
                    f"of baseline mAP {100 * m.baseline_map:.2f} ({m.model}, {m.images} COCO "
                    "images; COCO-C table)")
     if json_path is not None:

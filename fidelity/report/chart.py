@@ -175,7 +175,7 @@ def measured_section(report: ChartReport) -> Section | None:
     for m in report.measured:
         rows.append((m.model, str(m.images), f"{100 * m.baseline_map:.2f}",
                      f"{m.dmap_points:.2f} ± {_num(m.dmap_points_se)}",
-                     f"{m.dmap_relative:.2f} ± {_num(m.dmap_relative_se)}",
+                     f"{_num(m.dmap_relative)} ± {_num(m.dmap_relative_se)}",
                      f"{_num(m.dap_person_points)} ± {_num(m.dap_person_points_se)}",
                      f"{m.seconds:.0f} s" + ("" if m.inferred else " (cached)")))
     p, d = report.prediction, report.directional
