@@ -279,8 +279,8 @@ class Provenance:
         """The provenance of a report made now, on this machine."""
         from importlib.metadata import PackageNotFoundError, version
 
-        from fidelity.version import __version__
         from fidelity.resources import resource_dir
+        from fidelity.version import __version__
 
         libraries: dict[str, str] = {}
         for name in _LIBRARIES:

@@ -30,8 +30,8 @@ from typing import Any
 
 import click
 
-from fidelity.version import __version__
 from fidelity.errors import FidelityError
+from fidelity.version import __version__
 
 #: Exit code of an internal error (a bug), after 0 pass, 1 fail, 2 input error.
 EXIT_INTERNAL = 3
