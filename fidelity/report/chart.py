@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from numpy.typing import NDArray
 
-from fidelity.fileio import json_ready
+from fidelity.fileio import JSONObject, json_ready
 from fidelity.records import ChartReport, ImageSource, RenderSource
 from fidelity.report.document import (
     Code,
@@ -288,31 +288,49 @@ def chart_document(report: ChartReport, pixels: NDArray[Any] | None = None) -> D
                            f"(version {report.schema_version}).")
 
 
-def write_chart_report(report: ChartReport, *, json_path: str | os.PathLike[str] | None = None,
+def source_pixels(report: ChartReport) -> NDArray[Any] | None:
+    """The pixels of an image report's image, read again as the audit read it (None for a
+    render): the HTML shows where the patches were sampled."""
+    from fidelity.chart.image import read_image
+
+    src = report.source
+    if not isinstance(src, ImageSource):
+        return None
+    return read_image(src.image.path, layer=src.image.layer, bayer=src.image.bayer).pixels
+
+
+def write_report_files(json_document: Callable[[], JSONObject],
+                       html_document: Callable[[], Document], *,
+                       json_path: str | os.PathLike[str] | None = None,
                        html_path: str | os.PathLike[str] | None = None,
                        protect: Sequence[str | os.PathLike[str]] = ()) -> list[Path]:
-    """Write the JSON and/or HTML report, atomically, refusing to write over any path in
-    ``protect`` (the inputs). The HTML of an image report reads the image again to show where
-    the patches were sampled. Returns the paths written."""
+    """Write a report's JSON and/or HTML atomically, refusing to write over any path in
+    ``protect`` (the inputs); each document is made only when its file is asked for. Returns
+    the paths written."""
     from fidelity.fileio import check_outputs, write_json_atomic
 
     inputs = {f"input {i + 1}": p for i, p in enumerate(protect) if p}
     written: list[Path] = []
     if json_path is not None:
         check_outputs({"report": json_path}, inputs)
-        written.append(write_json_atomic(json_path, chart_report_json(report)))
+        written.append(write_json_atomic(json_path, json_document()))
     if html_path is not None:
         from fidelity.report.html import write_document
 
         check_outputs({"report": html_path}, inputs)
-        pixels = None
-        if isinstance(report.source, ImageSource):
-            from fidelity.chart.image import read_image
-
-            pixels = read_image(report.source.image.path, layer=report.source.image.layer,
-                                bayer=report.source.image.bayer).pixels
-        written += write_document(chart_document(report, pixels), html=html_path)
+        written += write_document(html_document(), html=html_path)
     return written
+
+
+def write_chart_report(report: ChartReport, *, json_path: str | os.PathLike[str] | None = None,
+                       html_path: str | os.PathLike[str] | None = None,
+                       protect: Sequence[str | os.PathLike[str]] = ()) -> list[Path]:
+    """Write the JSON and/or HTML report, atomically, refusing to write over any path in
+    ``protect`` (the inputs). The HTML of an image report reads the image again to show where
+    the patches were sampled. Returns the paths written."""
+    return write_report_files(lambda: chart_report_json(report),
+                              lambda: chart_document(report, source_pixels(report)),
+                              json_path=json_path, html_path=html_path, protect=protect)
 
 
 __all__ = [
@@ -324,7 +342,9 @@ __all__ = [
     "measured_section",
     "patch_section",
     "prediction_sections",
+    "source_pixels",
     "summary_facts",
     "verdict_limits",
     "write_chart_report",
+    "write_report_files",
 ]

@@ -20,7 +20,13 @@ from numpy.typing import NDArray
 
 from fidelity.fileio import json_ready
 from fidelity.records import ComparisonReport, ImageSource
-from fidelity.report.chart import blind_spot_section, directional_section, measured_section
+from fidelity.report.chart import (
+    blind_spot_section,
+    directional_section,
+    measured_section,
+    source_pixels,
+    write_report_files,
+)
 from fidelity.report.document import (
     Code,
     Document,
@@ -162,26 +168,11 @@ def write_comparison_report(report: ComparisonReport, *,
                             html_path: str | os.PathLike[str] | None = None,
                             protect: Sequence[str | os.PathLike[str]] = ()) -> list[Path]:
     """Write the JSON and/or HTML comparison report atomically, never over an input."""
-    from fidelity.fileio import check_outputs, write_json_atomic
-
-    inputs = {f"input {i + 1}": p for i, p in enumerate(protect) if p}
-    written: list[Path] = []
-    if json_path is not None:
-        check_outputs({"report": json_path}, inputs)
-        written.append(write_json_atomic(json_path, comparison_json(report)))
-    if html_path is not None:
-        from fidelity.chart.image import read_image
-        from fidelity.report.html import write_document
-
-        check_outputs({"report": html_path}, inputs)
-        pix = []
-        for r in (report.sim, report.real):
-            src = r.source
-            pix.append(read_image(src.image.path, layer=src.image.layer,
-                                  bayer=src.image.bayer).pixels
-                       if isinstance(src, ImageSource) else None)
-        written += write_document(comparison_document(report, pix[0], pix[1]), html=html_path)
-    return written
+    return write_report_files(
+        lambda: comparison_json(report),
+        lambda: comparison_document(report, source_pixels(report.sim),
+                                    source_pixels(report.real)),
+        json_path=json_path, html_path=html_path, protect=protect)
 
 
 __all__ = ["comparison_document", "comparison_lines", "write_comparison_report"]
