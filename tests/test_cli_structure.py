@@ -1,0 +1,33 @@
+"""The command line's place in the package: the library never imports it, and its modules
+share only public names."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import fidelity
+
+PACKAGE = Path(fidelity.__file__).parent
+
+
+def _imports(path: Path) -> list[tuple[str, list[str]]]:
+    """(module, names) of every import in ``path``, at module level or inside functions."""
+    found: list[tuple[str, list[str]]] = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            found.append((node.module, [a.name for a in node.names]))
+        elif isinstance(node, ast.Import):
+            found += [(a.name, []) for a in node.names]
+    return found
+
+
+def test_the_library_never_imports_the_command_line():
+    cli = PACKAGE / "cli"
+    offenders = [f"{p.relative_to(PACKAGE)}: {module}"
+                 for p in sorted(PACKAGE.rglob("*.py"))
+                 if cli not in p.parents and p.name != "__main__.py"
+                 for module, _ in _imports(p)
+                 if module == "fidelity.cli" or module.startswith("fidelity.cli.")]
+    assert offenders == []
+
