@@ -31,3 +31,10 @@ def test_the_library_never_imports_the_command_line():
                  if module == "fidelity.cli" or module.startswith("fidelity.cli.")]
     assert offenders == []
 
+
+def test_command_modules_import_no_private_name():
+    offenders = [f"{p.name}: {module}.{name}"
+                 for p in sorted((PACKAGE / "cli").glob("*.py"))
+                 for module, names in _imports(p) if module.startswith("fidelity")
+                 for name in names if name.startswith("_") and not name.startswith("__")]
+    assert offenders == []

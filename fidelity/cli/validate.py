@@ -2,17 +2,28 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import click
 
 from fidelity.cli.executor import executor_from, executor_options
-from fidelity.cli.options import common_options, progress_option, show_progress
+from fidelity.cli.options import (
+    ModelList,
+    common_options,
+    model_inputs,
+    progress_option,
+    show_progress,
+)
+
+if TYPE_CHECKING:
+    from fidelity.coco.sweep import ModelSpec
 
 
 @click.command()
 @click.option("--cameras", default=None, type=click.Path(file_okay=False),
               help="Folder of camera files (+ optional suite.toml with scene illuminants); "
                    "default: the 30-camera suite that ships with fidelity.")
-@click.option("--models", default=None,
+@click.option("--models", type=ModelList(), default=None,
               help="Comma-separated ONNX files, each optionally PATH@N (first N images by id).")
 @click.option("--images", default=None, type=click.Path(file_okay=False),
               help="COCO image folder.")
@@ -43,7 +54,7 @@ from fidelity.cli.options import common_options, progress_option, show_progress
 @progress_option
 @executor_options
 @common_options
-def validate(cameras: str | None, models: str | None, images: str | None, annotations: str | None,
+def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: str | None, annotations: str | None,
              out: str, limit: int | None, store: str | None, method: str, training: str,
              threads: int, provider: str, bound_table: str | None, report_only: bool,
              notes: str | None, progress: bool | None, executor: str, address: str | None,
@@ -61,7 +72,6 @@ def validate(cameras: str | None, models: str | None, images: str | None, annota
 
     from fidelity.camera.model import camera_files
     from fidelity.coco.emulation import EMULATION_METHODS, TRAINING_SETS
-    from fidelity.coco.sweep import ModelSpec
     from fidelity.coco.validate import (
         ValidationStore,
         collect_results,
@@ -80,9 +90,7 @@ def validate(cameras: str | None, models: str | None, images: str | None, annota
     check_outputs({f"--out ({n})": Path(out) / n
                    for n in ("validation.md", "validation.html", "validation.json")},
                   {"--notes": notes, "--annotations": annotations, "--images": images,
-                   "--table": bound_table, **camera_inputs,
-                   **{f"--models ({m})": m.strip().rsplit("@", 1)[0]
-                      for m in (models or "").split(",") if m.strip()}},
+                   "--table": bound_table, **camera_inputs, **model_inputs(models)},
                   stores={"--store": store or default_store()})
     if method not in EMULATION_METHODS:
         raise unknown_name("emulation method", method, EMULATION_METHODS)
@@ -100,9 +108,7 @@ def validate(cameras: str | None, models: str | None, images: str | None, annota
         if not models or not images or not annotations:
             raise InvalidValueError("--models, --images and --annotations are needed "
                                     "(except with --report-only)")
-        specs = [ModelSpec.parse(m.strip()) for m in models.split(",") if m.strip()]
-        if not specs:
-            raise InvalidValueError(f"--models {models!r}: names no ONNX file")
+        specs = list(models)
         options = executor_from(executor, address, workers, threads, provider)
         if limit:
             specs = [replace(s, limit=min(s.limit or limit, limit)) for s in specs]
