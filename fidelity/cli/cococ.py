@@ -12,6 +12,7 @@ from fidelity.cli.options import (
     Severities,
     coco_inputs,
     common_options,
+    limit_option,
     model_inputs,
     progress_option,
     show_progress,
@@ -29,8 +30,7 @@ if TYPE_CHECKING:
               help="COCO image folder (default: $FIDELITY_SHARED/coco/val2017).")
 @click.option("--annotations", default=None, type=click.Path(dir_okay=False),
               help="COCO annotations (default: the shared subset's).")
-@click.option("--limit", type=click.IntRange(min=1), default=None,
-              help="At most N images (first N by id) for every model.")
+@limit_option()
 @click.option("--corruptions", type=CorruptionNames(), default="all", show_default=True,
               help="brightness, contrast, saturate (comma-separated) or all.")
 @click.option("--severities", type=Severities(), default="1-5", show_default=True,
@@ -53,9 +53,9 @@ if TYPE_CHECKING:
 @progress_option
 @common_options
 def cococ(models: tuple[ModelSpec, ...] | None, images: str | None, annotations: str | None,
-          limit: int | None, corruptions: list[str], severities: list[int], out: str, data: str | None, store: str | None,
-          threads: int, provider: str, report_only: bool, notes: str | None,
-          progress: bool | None) -> None:
+          limit: int | None, corruptions: list[str], severities: list[int], out: str,
+          data: str | None, store: str | None, threads: int, provider: str, report_only: bool,
+          notes: str | None, progress: bool | None) -> None:
     """Measure COCO-C's colour corruptions: chart ΔE and ΔmAP per severity.
 
     Applies brightness, contrast and saturate of imagecorruptions (severities 1-5) to the

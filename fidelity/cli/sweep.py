@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import click
@@ -13,7 +12,9 @@ from fidelity.cli.options import (
     ModelList,
     Targets,
     TransformNames,
+    cap_models,
     common_options,
+    limit_option,
     model_inputs,
     progress_option,
     show_progress,
@@ -25,7 +26,8 @@ if TYPE_CHECKING:
 
 @click.command()
 @click.option("--models", type=ModelList(), default=None,
-              help="Comma-separated ONNX files, each optionally PATH@N (first N images by id).")
+              help="Comma-separated ONNX files, each optionally PATH@N (at most the first N "
+                   "images by id).")
 @click.option("--images", default=None, type=click.Path(file_okay=False))
 @click.option("--annotations", type=click.Path(dir_okay=False),
               help="COCO annotations of the images (needed except with --status).")
@@ -52,15 +54,14 @@ if TYPE_CHECKING:
 @click.option("--status", is_flag=True,
               help="Only say where the store in --out stands (per model: cells done, to do, "
                    "under way, pace); safe while a sweep runs.")
-@click.option("--limit", type=click.IntRange(min=1), default=None,
-              help="At most N images (first N by id) for every model without its own @N.")
+@limit_option()
 @progress_option
 @executor_options
 @common_options
 def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations: str | None,
           transforms: list[str], targets: list[float], out: str, threads: int, provider: str,
-          order: str, scorer: str, rescore: bool, status: bool, limit: int | None, progress: bool | None, executor: str,
-          address: str | None, workers: int | None) -> None:
+          order: str, scorer: str, rescore: bool, status: bool, limit: int | None,
+          progress: bool | None, executor: str, address: str | None, workers: int | None) -> None:
     """Run (or resume) the COCO sweep; one line per finished cell on stderr ([k/N] cells).
 
     \b
@@ -97,8 +98,7 @@ def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
 
     check_outputs({"--out (sweep.sqlite)": Path(out) / SweepStore.store_name},
                   {"--annotations": annotations, **model_inputs(specs)})
-    if limit is not None:
-        specs = [s if s.limit else replace(s, limit=limit) for s in specs]
+    specs = list(cap_models(specs, limit))
     options = executor_from(executor, address, workers, threads, provider)
     store = run_sweep(specs, images, annotations, out, transforms, targets, threads=threads,
                       provider=provider, order=order, scorer=scorer, executor=options, progress=show_progress(progress))

@@ -9,7 +9,9 @@ import click
 from fidelity.cli.executor import executor_from, executor_options
 from fidelity.cli.options import (
     ModelList,
+    cap_models,
     common_options,
+    limit_option,
     model_inputs,
     progress_option,
     show_progress,
@@ -24,15 +26,15 @@ if TYPE_CHECKING:
               help="Folder of camera files (+ optional suite.toml with scene illuminants); "
                    "default: the 30-camera suite that ships with fidelity.")
 @click.option("--models", type=ModelList(), default=None,
-              help="Comma-separated ONNX files, each optionally PATH@N (first N images by id).")
+              help="Comma-separated ONNX files, each optionally PATH@N (at most the first N "
+                   "images by id).")
 @click.option("--images", default=None, type=click.Path(file_okay=False),
               help="COCO image folder.")
 @click.option("--annotations", default=None, type=click.Path(dir_okay=False),
               help="COCO annotation JSON.")
 @click.option("--out", required=True, type=click.Path(file_okay=False),
               help="Report folder (Markdown, HTML, JSON, plots).")
-@click.option("--limit", type=click.IntRange(min=1), default=None,
-              help="At most N images (first N by id) for every model.")
+@limit_option()
 @click.option("--store", default=None, type=click.Path(file_okay=False),
               help="Results store folder (default $FIDELITY_CACHE/validation or "
                    "~/.cache/fidelity/validation); rerun to resume.")
@@ -67,7 +69,6 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
           --images coco/val2017 --annotations instances.json --out reports/validation
       (rerun the same line to resume; add --report-only to rebuild the report)
     """
-    from dataclasses import replace
     from pathlib import Path
 
     from fidelity.camera.model import camera_files
@@ -110,8 +111,7 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
                                     "(except with --report-only)")
         specs = list(models)
         options = executor_from(executor, address, workers, threads, provider)
-        if limit:
-            specs = [replace(s, limit=min(s.limit or limit, limit)) for s in specs]
+        specs = list(cap_models(specs, limit))
         st = run_validation(cases, specs, images, annotations, store_dir, method=method,
                             training=training, threads=threads, provider=provider,
                             progress=show_progress(progress), executor=options)
