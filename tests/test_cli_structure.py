@@ -6,7 +6,11 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+import pytest
+from click.testing import CliRunner
+
 import fidelity
+from fidelity.cli import COMMANDS, main
 
 PACKAGE = Path(fidelity.__file__).parent
 
@@ -38,3 +42,9 @@ def test_command_modules_import_no_private_name():
                  for module, names in _imports(p) if module.startswith("fidelity")
                  for name in names if name.startswith("_") and not name.startswith("__")]
     assert offenders == []
+
+
+@pytest.mark.parametrize("name", sorted(COMMANDS))
+def test_every_command_prints_its_help(name):
+    r = CliRunner().invoke(main, [name, "--help"])
+    assert r.exit_code == 0 and "--quiet" in r.output, r.output

@@ -7,28 +7,23 @@ from typing import TYPE_CHECKING
 
 import click
 
-from fidelity.cli.executor import executor_from, executor_options
 from fidelity.cli.options import (
     ModelList,
     cap_models,
     common_options,
+    executor_from,
+    executor_options,
     json_option,
     limit_option,
     progress_option,
+    scorer_option,
     show_progress,
     write_json_output,
 )
 from fidelity.coco.evaluate import METRICS
-from fidelity.coco.scoring import COCO_SCORERS
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import ModelSpec
-
-#: ``--scorer``, shared by the commands that score COCO AP (evaluate, sweep).
-scorer_option = click.option(
-    "--scorer", type=click.Choice(["auto", *COCO_SCORERS]), default="auto", show_default=True,
-    help="COCO AP implementation: pycocotools (reference) or faster-coco-eval (same numbers "
-         "to 1e-4, tested; ~6x faster); auto: faster-coco-eval if installed.")
 
 
 @click.command()

@@ -6,17 +6,18 @@ from typing import TYPE_CHECKING
 
 import click
 
-from fidelity.cli.evaluate import scorer_option
-from fidelity.cli.executor import executor_from, executor_options
 from fidelity.cli.options import (
     ModelList,
     Targets,
     TransformNames,
     cap_models,
     common_options,
+    executor_from,
+    executor_options,
     limit_option,
     model_inputs,
     progress_option,
+    scorer_option,
     show_progress,
 )
 

@@ -6,11 +6,12 @@ from typing import TYPE_CHECKING
 
 import click
 
-from fidelity.cli.executor import executor_from, executor_options
 from fidelity.cli.options import (
     ModelList,
     cap_models,
     common_options,
+    executor_from,
+    executor_options,
     limit_option,
     model_inputs,
     progress_option,
