@@ -52,8 +52,8 @@ if TYPE_CHECKING:
 @progress_option
 @executor_options
 @common_options
-def evaluate(model: tuple[ModelSpec, ...], images: str, annotations: str, limit: int | None, threads: int | None,
-             provider: str, json_path: str | None, classes: str, metrics: tuple[str, ...],
+def evaluate(model: tuple[ModelSpec, ...], images: str, annotations: str, limit: int | None,
+             threads: int | None, provider: str, json_path: str | None, classes: str, metrics: tuple[str, ...],
              scorer: str, progress: bool | None, executor: str, address: str | None,
              workers: int | None) -> None:
     """Run detectors on a COCO image folder and print COCO box AP.
@@ -68,7 +68,7 @@ def evaluate(model: tuple[ModelSpec, ...], images: str, annotations: str, limit:
         raise click.UsageError("evaluate takes one model in --models (sweep takes several)")
     (spec,) = cap_models(model, limit)
     check_outputs({"--json": json_path},
-                  {"--model": spec.path, "--annotations": annotations, "--images": images})
+                  {"--models": spec.path, "--annotations": annotations, "--images": images})
     options = executor_from(executor, address, workers, threads, provider)
     if json_path and json_path != "-":
         remove_stale_temporaries(Path(json_path).parent)
