@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import os
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -132,10 +132,12 @@ def _value(path: Path, where: str, key: str, value: Any) -> Any:
     return value
 
 
-def read_config(path: str | os.PathLike[str]) -> Config:
-    """Read and check a settings file (:data:`SETTINGS`); errors name the file and the key."""
-    from fidelity.cli import COMMANDS
+def read_config(path: str | os.PathLike[str], *, command_names: Collection[str]) -> Config:
+    """Read and check a settings file (:data:`SETTINGS`); errors name the file and the key.
 
+    ``command_names``: the commands a table of the file may be named after (the caller's: the
+    command line passes its own, so this module knows nothing of it).
+    """
     p = Path(path)
     try:
         doc = tomllib.loads(p.read_text(encoding="utf-8"))
@@ -154,9 +156,9 @@ def read_config(path: str | os.PathLike[str]) -> Config:
     commands: dict[str, dict[str, Any]] = {}
     for key, value in table.items():
         if isinstance(value, dict):
-            if key not in COMMANDS:
+            if key not in command_names:
                 raise InputFileError(f"{p}: {prefix}{key}: not a command; known: "
-                                     f"{', '.join(sorted(COMMANDS))}")
+                                     f"{', '.join(sorted(command_names))}")
             commands[key] = {SETTINGS[k].param if k in SETTINGS else k:
                              _value(p, f"{prefix}{key}.", k, v) for k, v in value.items()}
         else:

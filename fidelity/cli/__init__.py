@@ -248,7 +248,7 @@ def main(ctx: click.Context, verbose: bool, config_path: str | None, no_config: 
 
     found = config_path or find_config()
     if found is not None:
-        config = read_config(found)
+        config = read_config(found, command_names=list(COMMANDS))
         ctx.obj["config"] = config
         ctx.default_map = config.default_map(list(COMMANDS))
 

@@ -6,21 +6,17 @@ from pathlib import Path
 
 import click
 
-from fidelity.cli.gate import (
-    PATH,
-    bayer_option,
-    colourspace_option,
-    max_pixels_option,
-    negatives_option,
-    report_paths,
-)
 from fidelity.cli.options import (
+    PATH,
     STDOUT,
     bound_option,
     common_options,
+    image_read_options,
+    max_pixels_option,
     measure_inputs,
     measure_options,
     measure_request,
+    report_paths,
 )
 from fidelity.prediction.table import SIZES
 
@@ -32,15 +28,7 @@ from fidelity.prediction.table import SIZES
                    "and white patches (the chart's top-left, top-right, bottom-right, "
                    "bottom-left patch as seen); pixel (row i, column j) is at x=j, y=i. "
                    "Default: the chart is found in the image and the corners printed.")
-@click.option("--encoding", type=click.Choice(["linear", "srgb"]), default=None,
-              help="Pixel encoding (default: linear for EXR/HDR/float TIFF, sRGB otherwise).")
-@click.option("--exposure", default=None,
-              help="auto (neutral patches; default for linear input) or a fixed EV "
-                   "(pixels x 2**EV; default 0 for sRGB input).")
-@click.option("--layer", default=None, help="EXR layer (e.g. 'diffuse' for diffuse.R) or part.")
-@bayer_option
-@colourspace_option
-@negatives_option
+@image_read_options
 @click.option("--reference", default="scene", show_default=True,
               help="scene (the chart's BabelColor spectra under --illuminant, as render and "
                    "check use), safecolor (the paper's Lab table) or a chart JSON.")

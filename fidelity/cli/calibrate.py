@@ -2,70 +2,45 @@
 
 from __future__ import annotations
 
-import math
-import re
 import time
 from pathlib import Path
 
 import click
-import numpy as np
 
-from fidelity.cli.options import common_options, json_option, write_json_output
+from fidelity.cli.options import (
+    Targets,
+    TransformNames,
+    common_options,
+    json_option,
+    write_json_output,
+)
 from fidelity.colour.charts import DEFAULT_CHART, load_chart
-from fidelity.errors import InvalidValueError
 from fidelity.fileio import write_text_atomic
 from fidelity.prediction.calibration import (
     DEFAULT_TARGETS,
-    MAX_TARGETS,
     calibration_table,
     calibration_table_csv,
     calibration_table_text,
 )
-from fidelity.prediction.transforms import TRANSFORMS, get_transform
-
-
-def parse_number_list(text: str, what: str) -> list[float]:
-    """Parse "1,2,3" and ranges "1-12" (inclusive, step 1) into a list of numbers."""
-    values: list[float] = []
-    for part in (p.strip() for p in text.split(",")):
-        if not part:
-            continue
-        m = re.fullmatch(r"(\d+(?:\.\d*)?)-(\d+(?:\.\d*)?)", part)
-        try:
-            if m:
-                lo, hi = float(m.group(1)), float(m.group(2))
-                if not hi - lo < MAX_TARGETS:  # before np.arange allocates the range
-                    raise InvalidValueError(f"{what}: the range {part} has more than "
-                                            f"{MAX_TARGETS} values")
-                values.extend(float(v) for v in np.arange(lo, hi + 0.5, 1.0) if v <= hi + 1e-9)
-            else:
-                values.append(float(part))
-        except ValueError:
-            raise InvalidValueError(f"{what}: cannot read {part!r} as a number or a range a-b") from None
-        if not all(math.isfinite(v) and v > 0 for v in values):
-            raise InvalidValueError(f"{what}: {part!r} is not a positive finite ΔE")
-    if not values:
-        raise InvalidValueError(f"{what}: no values given")
-    if len(values) > MAX_TARGETS:
-        raise InvalidValueError(f"{what}: {len(values)} values, at most {MAX_TARGETS}")
-    return values
+from fidelity.prediction.transforms import TRANSFORMS
 
 
 @click.command()
 @click.option("--chart", default=DEFAULT_CHART, show_default=True,
               help="Built-in chart name or path to a chart JSON file.")
-@click.option("--targets", default=None,
+@click.option("--targets", type=Targets(baseline=False), default=None,
               help="Comma-separated target ΔE values or ranges (e.g. '1-12,15,18'). "
                    "Default: 1..12, 15, 18, ..., 45.")
-@click.option("--transforms", "transform_names", default=None,
-              help=f"Comma-separated transforms (default: all ten): {', '.join(TRANSFORMS)}.")
+@click.option("--transforms", "transform_names", type=TransformNames(), default=None,
+              help=f"'all' or comma-separated transforms (default: all ten): "
+                   f"{', '.join(TRANSFORMS)}.")
 @json_option("Write the table as JSON")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Write the table as CSV.")
 @click.option("--markdown", "md_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Write the table as Markdown.")
 @common_options
-def calibrate(chart: str, targets: str | None, transform_names: str | None,
+def calibrate(chart: str, targets: list[float] | None, transform_names: list[str] | None,
               json_path: str | None, csv_path: Path | None, md_path: Path | None) -> None:
     """Print the SAFE-COLOR calibration table.
 
@@ -77,14 +52,9 @@ def calibrate(chart: str, targets: str | None, transform_names: str | None,
     check_outputs({"--json": json_path, "--csv": csv_path, "--markdown": md_path},
                   {"--chart": chart})
     c = load_chart(chart)
-    tlist = DEFAULT_TARGETS if targets is None else parse_number_list(targets, "--targets")
-    names = None
-    if transform_names:
-        names = [n.strip() for n in transform_names.split(",") if n.strip()]
-        for n in names:
-            get_transform(n)
+    tlist = DEFAULT_TARGETS if targets is None else targets
     t0 = time.perf_counter()
-    table = calibration_table(c, tlist, names)
+    table = calibration_table(c, tlist, transform_names)
     seconds = time.perf_counter() - t0
     if json_path:
         write_json_output(json_path, table.to_json())

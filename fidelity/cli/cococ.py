@@ -2,52 +2,39 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import click
 
-from fidelity.cli.options import common_options, progress_option, show_progress
+from fidelity.cli.options import (
+    CorruptionNames,
+    ModelList,
+    Severities,
+    coco_inputs,
+    common_options,
+    limit_option,
+    model_inputs,
+    progress_option,
+    show_progress,
+)
 
-
-def _names(text: str, known: tuple[str, ...], what: str) -> list[str]:
-    from fidelity.errors import unknown_name
-
-    items = [t.strip() for t in text.split(",") if t.strip()]
-    if items == ["all"]:
-        return list(known)
-    for t in items:
-        if t not in known:
-            raise unknown_name(what, t, known)
-    return items
-
-
-def _severities(text: str) -> list[int]:
-    from fidelity.errors import InvalidValueError
-
-    out: list[int] = []
-    for part in text.split(","):
-        a, _, b = part.strip().partition("-")
-        try:
-            lo, hi = int(a), int(b or a)
-        except ValueError:
-            raise InvalidValueError(f"--severities {text!r}: expected e.g. 1-5 or 1,3,5") from None
-        out += list(range(lo, hi + 1))
-    if not out or any(s < 1 or s > 5 for s in out):
-        raise InvalidValueError(f"--severities {text!r}: severities are 1 to 5")
-    return sorted(set(out))
+if TYPE_CHECKING:
+    from fidelity.coco.sweep import ModelSpec
 
 
 @click.command()
-@click.option("--models", default=None,
+@click.option("--models", type=ModelList(), default=None,
               help="ONNX detectors, PATH[@N] comma-separated (default: the shared "
                    "yolox_nano.onnx).")
 @click.option("--images", default=None, type=click.Path(file_okay=False),
               help="COCO image folder (default: $FIDELITY_SHARED/coco/val2017).")
 @click.option("--annotations", default=None, type=click.Path(dir_okay=False),
               help="COCO annotations (default: the shared subset's).")
-@click.option("--limit", type=click.IntRange(min=1), default=None,
-              help="At most N images (first N by id) for every model.")
-@click.option("--corruptions", default="all", show_default=True,
+@limit_option()
+@click.option("--corruptions", type=CorruptionNames(), default="all", show_default=True,
               help="brightness, contrast, saturate (comma-separated) or all.")
-@click.option("--severities", default="1-5", show_default=True, help="e.g. 1-5 or 1,3,5.")
+@click.option("--severities", type=Severities(), default="1-5", show_default=True,
+              help="e.g. 1-5 or 1,3,5.")
 @click.option("--out", required=True, type=click.Path(file_okay=False),
               help="Report folder (cococ.html, cococ.md, cococ.json, figures).")
 @click.option("--data", "data", default=None, type=click.Path(dir_okay=False),
@@ -65,10 +52,10 @@ def _severities(text: str) -> list[int]:
               help="Markdown file with a written analysis, included in the report.")
 @progress_option
 @common_options
-def cococ(models: str | None, images: str | None, annotations: str | None, limit: int | None,
-          corruptions: str, severities: str, out: str, data: str | None, store: str | None,
-          threads: int, provider: str, report_only: bool, notes: str | None,
-          progress: bool | None) -> None:
+def cococ(models: tuple[ModelSpec, ...] | None, images: str | None, annotations: str | None,
+          limit: int | None, corruptions: list[str], severities: list[int], out: str,
+          data: str | None, store: str | None, threads: int, provider: str, report_only: bool,
+          notes: str | None, progress: bool | None) -> None:
     """Measure COCO-C's colour corruptions: chart ΔE and ΔmAP per severity.
 
     Applies brightness, contrast and saturate of imagecorruptions (severities 1-5) to the
@@ -83,23 +70,17 @@ def cococ(models: str | None, images: str | None, annotations: str | None, limit
     import json
     from pathlib import Path
 
-    from fidelity.coco.corruptions import (
-        CORRUPTIONS,
-        CocoCResults,
-        run_coco_c,
-        with_predictions,
-    )
-    from fidelity.coco.measure import resolve_coco_inputs, stderr_log
+    from fidelity.coco.corruptions import CocoCResults, run_coco_c, with_predictions
+    from fidelity.coco.measure import stderr_log
     from fidelity.fileio import check_outputs
     from fidelity.report.cococ import write_cococ_report
 
     out_dir = Path(out)
-    from fidelity.cli.options import measure_inputs
-
     check_outputs({f"--out ({n})": out_dir / n
                    for n in ("cococ.json", "cococ.html", "cococ.md", "cococ-chart-delta-e.png",
                              "cococ-loss-vs-delta-e.png")} | {"--data": data},
-                  {"--notes": notes} | measure_inputs(images, annotations, models),
+                  {"--notes": notes, "--images": images, "--annotations": annotations,
+                   **model_inputs(models)},
                   stores={"--store": store})
     text = Path(notes).read_text(encoding="utf-8") if notes else None
     if report_only:
@@ -112,9 +93,8 @@ def cococ(models: str | None, images: str | None, annotations: str | None, limit
         except FileNotFoundError:
             raise InputFileError(f"{src}: no results to rebuild the report from") from None
     else:
-        inputs = resolve_coco_inputs(images, annotations, models, what="fidelity coco-c")
-        results = run_coco_c(inputs, _names(corruptions, CORRUPTIONS, "corruption"),
-                             _severities(severities), limit=limit, store=store,
+        inputs = coco_inputs(images, annotations, models, what="fidelity coco-c")
+        results = run_coco_c(inputs, corruptions, severities, limit=limit, store=store,
                              threads=threads, provider=provider,
                              progress=show_progress(progress), log=stderr_log)
     for p in write_cococ_report(results, out_dir, text, data):

@@ -7,12 +7,14 @@ from pathlib import Path
 
 import click
 
-from fidelity.cli.gate import PATH, bayer_option, colourspace_option, negatives_option
 from fidelity.cli.options import (
+    PATH,
     STDOUT,
     bound_option,
     common_options,
+    image_read_options,
     json_option,
+    make_criterion,
     measure_inputs,
     measure_options,
     measure_request,
@@ -51,13 +53,7 @@ from fidelity.prediction.verdict import EXIT_ERROR
                    "JSON.")
 @click.option("--illuminant", default="D65", show_default=True,
               help="Illuminant of the scene reference.")
-@click.option("--encoding", type=click.Choice(["linear", "srgb"]), default=None,
-              help="Pixel encoding of both images (default: from each file).")
-@click.option("--exposure", default=None, help="Exposure of both audits: auto or a fixed EV.")
-@click.option("--layer", default=None, help="EXR layer or part name.")
-@bayer_option
-@colourspace_option
-@negatives_option
+@image_read_options
 @click.option("--junit", type=PATH, help="Write JUnit XML (one test case).")
 @json_option("Write the comparison as JSON")
 @click.option("--html", "html_path", type=PATH, default=None, help="Write the HTML report.")
@@ -85,7 +81,6 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
     fidelity compare sim.exr photo.png --max-delta-e 5 --junit sim-vs-real.xml --html r.html
     """
     from fidelity.chart.measure import ReadOptions
-    from fidelity.cli.gate import make_criterion
     from fidelity.compare import compare_charts
     from fidelity.errors import FidelityError
     from fidelity.fileio import check_outputs

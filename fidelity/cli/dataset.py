@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import click
 
-from fidelity.cli.options import common_options, progress_option, show_progress
+from fidelity.cli.options import (
+    Targets,
+    TransformNames,
+    common_options,
+    progress_option,
+    show_progress,
+)
 
 
 @click.command()
@@ -12,24 +18,24 @@ from fidelity.cli.options import common_options, progress_option, show_progress
               help="Folder of original JPEGs (never modified).")
 @click.option("--out", required=True, type=click.Path(file_okay=False),
               help="Output folder; one subfolder per (transform, ΔE).")
-@click.option("--transforms", default=None,
+@click.option("--transforms", type=TransformNames(), default=None,
               help="Transform name, or 'all' / comma-separated names (grid form).")
-@click.option("--targets", default=None,
-              help="Chart ΔE target, or comma-separated targets (grid form); 0 = baseline.")
+@click.option("--targets", type=Targets(baseline=True), default=None,
+              help="Chart ΔE target, or comma-separated targets or ranges a-b (grid form); "
+                   "0 = baseline.")
 @click.option("--param", type=float, default=None,
               help="Use this transform parameter instead of the calibrated one (single cell).")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Parallel worker processes (default: one per CPU core this process may use).")
 @progress_option
 @common_options
-def dataset(images: str, out: str, transforms: str | None, targets: str | None,
+def dataset(images: str, out: str, transforms: list[str] | None, targets: list[float] | None,
             param: float | None, workers: int | None, progress: bool | None) -> None:
     """Write transformed JPEGs (original quantization tables and subsampling); reruns resume."""
     from fidelity.environment import available_cpus
 
     if workers is None:
         workers = available_cpus()
-    from fidelity.cli.sweep import _targets, _transforms
     from fidelity.coco.dataset import list_images, write_grid, write_transformed_dataset
     from fidelity.errors import InvalidValueError
 
@@ -38,8 +44,7 @@ def dataset(images: str, out: str, transforms: str | None, targets: str | None,
                                 "contrast-inc --targets 3, or --transforms all --targets "
                                 "0,1,2,3)")
     files = list_images(images)
-    names = _transforms(transforms)
-    values = _targets(targets)
+    names, values = transforms, targets
     from pathlib import Path
 
     from fidelity.coco.dataset import subset_name

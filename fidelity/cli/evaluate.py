@@ -3,36 +3,38 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
-from fidelity.cli.executor import executor_from, executor_options
 from fidelity.cli.options import (
+    ModelList,
+    cap_models,
     common_options,
+    executor_from,
+    executor_options,
     json_option,
+    limit_option,
     progress_option,
+    scorer_option,
     show_progress,
     write_json_output,
 )
 from fidelity.coco.evaluate import METRICS
-from fidelity.coco.scoring import COCO_SCORERS
 
-#: ``--scorer``, shared by the commands that score COCO AP (evaluate, sweep).
-scorer_option = click.option(
-    "--scorer", type=click.Choice(["auto", *COCO_SCORERS]), default="auto", show_default=True,
-    help="COCO AP implementation: pycocotools (reference) or faster-coco-eval (same numbers "
-         "to 1e-4, tested; ~6x faster); auto: faster-coco-eval if installed.")
+if TYPE_CHECKING:
+    from fidelity.coco.sweep import ModelSpec
 
 
 @click.command()
-@click.option("--models", "model", required=True, type=click.Path(dir_okay=False),
-              help="ONNX detector (Ultralytics 1x84xN, YOLOv10 1x300x6 or YOLOX 1xNx85).")
+@click.option("--models", "model", required=True, type=ModelList(),
+              help="ONNX detector, PATH[@N] (Ultralytics 1x84xN, YOLOv10 1x300x6 or YOLOX "
+                   "1xNx85); one.")
 @click.option("--images", required=True, type=click.Path(file_okay=False),
               help="Folder with the images named in the annotations.")
 @click.option("--annotations", required=True, type=click.Path(dir_okay=False),
               help="COCO instances JSON (box annotations).")
-@click.option("--limit", type=click.IntRange(min=1), default=None,
-              help="Evaluate only the first N images by image id.")
+@limit_option()
 @click.option("--threads", type=click.IntRange(min=1), default=None,
               help="onnxruntime intra-op threads (default: all cores).")
 @click.option("--provider", type=click.Choice(["auto", "cpu", "cuda"]), default="auto",
@@ -50,8 +52,8 @@ scorer_option = click.option(
 @progress_option
 @executor_options
 @common_options
-def evaluate(model: str, images: str, annotations: str, limit: int | None, threads: int | None,
-             provider: str, json_path: str | None, classes: str, metrics: tuple[str, ...],
+def evaluate(model: tuple[ModelSpec, ...], images: str, annotations: str, limit: int | None,
+             threads: int | None, provider: str, json_path: str | None, classes: str, metrics: tuple[str, ...],
              scorer: str, progress: bool | None, executor: str, address: str | None,
              workers: int | None) -> None:
     """Run detectors on a COCO image folder and print COCO box AP.
@@ -62,12 +64,15 @@ def evaluate(model: str, images: str, annotations: str, limit: int | None, threa
     from fidelity.coco.evaluate import evaluate_model
     from fidelity.fileio import check_outputs, remove_stale_temporaries
 
+    if len(model) != 1:
+        raise click.UsageError("evaluate takes one model in --models (sweep takes several)")
+    (spec,) = cap_models(model, limit)
     check_outputs({"--json": json_path},
-                  {"--model": model, "--annotations": annotations, "--images": images})
+                  {"--models": spec.path, "--annotations": annotations, "--images": images})
     options = executor_from(executor, address, workers, threads, provider)
     if json_path and json_path != "-":
         remove_stale_temporaries(Path(json_path).parent)
-    ev = evaluate_model(model, images, annotations, limit=limit, options=options,
+    ev = evaluate_model(spec.path, images, annotations, limit=spec.limit, options=options,
                         scorer=scorer, metrics=metrics, progress=show_progress(progress))
     info = ev.detector
     conv = info["conventions"]

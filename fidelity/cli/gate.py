@@ -2,7 +2,8 @@
 
 Exit codes: 0 pass, 1 fail, 2 error (one line on stderr, no traceback; with ``--junit`` the
 error is also written as a JUnit ``<error>``). The work is :func:`fidelity.check.gate`; the
-image options and report paths here are shared with ``fidelity audit``.
+image options, the criterion and the report paths are :mod:`fidelity.cli.options`', shared with
+``fidelity audit`` and ``fidelity compare``.
 """
 
 from __future__ import annotations
@@ -14,50 +15,23 @@ from typing import TYPE_CHECKING
 
 import click
 
-from fidelity.cli.options import STDOUT, bound_option, common_options, from_settings
+from fidelity.cli.options import (
+    PATH,
+    STDOUT,
+    bound_option,
+    common_options,
+    from_settings,
+    image_read_options,
+    make_criterion,
+    max_pixels_option,
+    report_paths,
+)
 from fidelity.errors import FidelityError
 from fidelity.prediction.table import CLASS_COLUMNS, SIZES
-from fidelity.prediction.verdict import EXIT_ERROR, Criterion
+from fidelity.prediction.verdict import EXIT_ERROR
 
 if TYPE_CHECKING:
     from fidelity.records import GateResult
-
-PATH = click.Path(dir_okay=False, path_type=Path)
-
-
-#: Image options shared by ``audit`` and ``gate``.
-colourspace_option = click.option(
-    "--colourspace", default=None,
-    help="RGB primaries of the pixels: a colour-science name (ACEScg, 'ITU-R BT.2020', "
-         "'Display P3', ...). Default: the EXR's chromaticities attribute, else sRGB.")
-bayer_option = click.option(
-    "--bayer", type=click.Choice(["RGGB", "BGGR", "GRBG", "GBRG"], case_sensitive=False),
-    default=None,
-    help="The image is a one-channel camera raw Bayer mosaic (PNG/TIFF) with this CFA pattern "
-         "(top-left 2x2): demosaic it (Malvar 2004, colour-demosaicing), values taken as linear.")
-negatives_option = click.option(
-    "--negatives", type=click.Choice(["keep", "exclude"]), default="keep", show_default=True,
-    help="Pixels with a negative channel: keep them in the linear mean (out-of-gamut colours in "
-         "a scene-linear render) or exclude them like NaN/Inf.")
-
-#: ``--max-pixels``, shared by ``audit`` and ``gate``.
-max_pixels_option = click.option(
-    "--max-pixels", type=click.IntRange(min=1), default=None,
-    help="Refuse images of more pixels (width x height), checked before decoding; default "
-         "150000000 or $FIDELITY_MAX_PIXELS. An audit needs about 20 bytes per pixel (60 for --bayer).")
-
-
-def make_criterion(max_delta_e: float | None, max_dmap: float | None, cls: str | None,
-                   unit: str) -> Criterion:
-    """The gate's criterion from its options (exactly one of the two limits)."""
-    if (max_delta_e is None) == (max_dmap is None):
-        raise click.UsageError("give exactly one of --max-delta-e X or --max-dmap P")
-    if max_delta_e is not None:
-        if cls is not None:
-            raise click.UsageError("--class goes with --max-dmap, not --max-delta-e")
-        return Criterion("max-delta-e", float(max_delta_e))
-    return Criterion("max-dmap", float(max_dmap), cls or "all", unit)  # type: ignore[arg-type]
-
 
 def _error_line(message: str) -> None:
     click.echo(f"fidelity: error: {message}", err=True)
@@ -72,22 +46,6 @@ def _write_junit(junit: Path, cases: Sequence[GateResult]) -> None:
     except (FidelityError, OSError) as exc:
         _error_line(f"{junit}: cannot write JUnit XML: {exc}")
         sys.exit(EXIT_ERROR)
-
-
-def report_paths(images: tuple[Path, ...], path: Path | None, suffix: str, *,
-                 folder: bool = False) -> list[Path | None]:
-    """Where each image's report goes: ``path`` itself, or, when ``path`` is a folder
-    (``folder``, or an existing directory), the image's file name + ``suffix`` in it."""
-    if path is None:
-        return [None] * len(images)
-    if not (folder or path.is_dir()):
-        return [path] * len(images)
-    names = [img.name for img in images]
-    twice = sorted({n for n in names if names.count(n) > 1})
-    if twice:
-        raise FidelityError(f"several images are named {', '.join(twice)}: their reports in "
-                            f"{path} would collide; gate them in separate runs")
-    return [path / f"{n}{suffix}" for n in names]
 
 
 def write_reports(result: GateResult, json_path: Path | None, html_path: Path | None,
@@ -123,13 +81,7 @@ def write_reports(result: GateResult, json_path: Path | None, html_path: Path | 
 @click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
               help="Detector size class of the prediction.")
 @click.option("--table", default=None, help="Prediction table (name or JSON path).")
-@click.option("--encoding", type=click.Choice(["linear", "srgb"]), default=None,
-              help="Image pixel encoding (default: linear for float formats, else sRGB).")
-@click.option("--exposure", default=None, help="Image exposure: auto or a fixed EV.")
-@click.option("--layer", default=None, help="EXR layer or part name.")
-@bayer_option
-@colourspace_option
-@negatives_option
+@image_read_options
 @click.option("--reference", default="scene", show_default=True,
               help="scene (the chart's spectra under --illuminant), safecolor (the paper's Lab "
                    "table) or a chart JSON.")

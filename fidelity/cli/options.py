@@ -3,10 +3,16 @@
 The vocabulary (also in the docs' command table):
 
 - ``--images DIR``: a folder of images; ``--annotations FILE``: COCO annotations;
-- ``--models A.onnx,B.onnx@250``: ONNX detectors (``@N``: that model on the first N images by
-  id); ``--limit N``: at most N images (first N by id) for every model;
-- ``--transforms all|NAME,...``: SAFE-COLOR transforms; ``--targets 0,1,3``: chart ΔE targets of
-  the transforms; ``--delta-e X``: a chart's measured ΔE (``predict``);
+- ``--models A.onnx,B.onnx@250``: ONNX detectors (:class:`ModelList`; ``@N``: that model on at
+  most N images); ``--limit N``: at most N images for every model (:data:`LIMIT_HELP`). Both
+  select the first N annotated images by image id; with both, the smaller N wins
+  (:func:`cap_models`);
+- ``--transforms all|NAME,...``: SAFE-COLOR transforms (:class:`TransformNames`);
+  ``--targets 0,1,3``: chart ΔE targets of the transforms (:class:`Targets`); ``--delta-e X``:
+  a chart's measured ΔE (``predict``); ``--severities 1-5``: COCO-C severities
+  (:class:`Severities`);
+- ``--encoding``, ``--exposure``, ``--layer``, ``--bayer``, ``--colourspace``, ``--negatives``:
+  how an image is read (:func:`image_read_options`);
 - ``--camera``, ``--illuminant``, ``--reference``, ``--table``, ``--size``: as in ``check``;
 - ``--out DIR``: the folder a command writes several files to; ``--json FILE`` (``-`` for
   stdout: then nothing else is printed there), ``--html FILE``, ``--junit FILE``: one report;
@@ -22,16 +28,358 @@ import functools
 import io
 import json
 import os
+import re
 import sys
-from collections.abc import Callable
-from typing import Any, TypeVar
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
+
+from fidelity.errors import FidelityError, InvalidValueError
+
+if TYPE_CHECKING:
+    from typing import TypeAlias
+
+    from fidelity.coco.executor import ExecutorOptions
+    from fidelity.coco.measure import CocoInputs
+    from fidelity.coco.sweep import ModelSpec
+    from fidelity.prediction.verdict import Criterion
+
+    # click >= 8.2 types ParamType by its value; the project supports click 8.1 too
+    ParamTypeBase: TypeAlias = click.ParamType[Any]
+else:
+    ParamTypeBase = click.ParamType
 
 F = TypeVar("F", bound=Callable[..., Any])
 
 #: The ``--json`` value that means standard output.
 STDOUT = "-"
+
+#: A file argument or option (a path, not a folder).
+PATH = click.Path(dir_okay=False, path_type=Path)
+
+
+# --------------------------------------------------------------------------------------------
+# Value types: each parses one idea's text, the same way in every command. A bad value is an
+# InvalidValueError naming the option and the value (one line, exit 2).
+
+
+def _flag(param: click.Parameter | None, default: str) -> str:
+    return param.opts[0] if param is not None and param.opts else default
+
+
+class Targets(ParamTypeBase):
+    """Chart ΔE targets of the transforms: ``1,2,3`` and ranges ``1-12`` (inclusive, step 1)
+    -> a list of floats. ``baseline``: 0 is allowed (the decode + re-encode baseline)."""
+
+    name = "targets"
+
+    def __init__(self, *, baseline: bool) -> None:
+        self.baseline = baseline
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> list[float]:
+        if not isinstance(value, str):
+            return list(value)
+        return self.parse(value, _flag(param, "--targets"))
+
+    def parse(self, text: str, what: str) -> list[float]:
+        """The targets of ``text``; errors name ``what`` (the option)."""
+        import math
+
+        from fidelity.prediction.calibration import MAX_TARGETS
+
+        values: list[float] = []
+        for part in (p.strip() for p in text.split(",")):
+            if not part:
+                continue
+            m = re.fullmatch(r"(\d+(?:\.\d*)?)-(\d+(?:\.\d*)?)", part)
+            try:
+                if m:
+                    lo, hi = float(m.group(1)), float(m.group(2))
+                    if not hi - lo < MAX_TARGETS:  # before the range is built
+                        raise InvalidValueError(f"{what}: the range {part} has more than "
+                                                f"{MAX_TARGETS} values")
+                    values.extend(lo + k for k in range(int(hi - lo) + 1) if lo + k <= hi + 1e-9)
+                else:
+                    values.append(float(part))
+            except ValueError:
+                raise InvalidValueError(f"{what}: cannot read {part!r} as a number or a range "
+                                        "a-b") from None
+            if not all(math.isfinite(v) and (v > 0 or (self.baseline and v == 0))
+                       for v in values):
+                kind = "non-negative" if self.baseline else "positive"
+                raise InvalidValueError(f"{what}: {part!r} is not a {kind} finite ΔE")
+        if not values:
+            raise InvalidValueError(f"{what}: no values given")
+        if len(values) > MAX_TARGETS:
+            raise InvalidValueError(f"{what}: {len(values)} values, at most {MAX_TARGETS}")
+        return values
+
+
+class NameList(ParamTypeBase):
+    """``all`` or comma-separated names from a known set -> a list of names."""
+
+    name = "names"
+    #: What one name is, in errors ("transform").
+    what = "name"
+
+    def known(self) -> Sequence[str]:
+        """The names accepted, in their canonical order (``all``: every one)."""
+        raise NotImplementedError
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> list[str]:
+        if not isinstance(value, str):
+            return list(value)
+        from fidelity.errors import unknown_name
+
+        known = self.known()
+        items = [t.strip() for t in value.split(",") if t.strip()]
+        if items == ["all"]:
+            return list(known)
+        if not items:
+            raise InvalidValueError(f"{_flag(param, '--' + self.name)} {value!r}: names no "
+                                    f"{self.what}")
+        for t in items:
+            if t not in known:
+                err = unknown_name(self.what, t, known)
+                raise type(err)(f"{_flag(param, '--' + self.name)}: {err}")
+        return items
+
+
+class TransformNames(NameList):
+    """``--transforms``: SAFE-COLOR transforms (:data:`fidelity.prediction.transforms.TRANSFORMS`)."""
+
+    name = "transforms"
+    what = "transform"
+
+    def known(self) -> Sequence[str]:
+        from fidelity.prediction.transforms import TRANSFORMS
+
+        return list(TRANSFORMS)
+
+
+class CorruptionNames(NameList):
+    """``--corruptions``: COCO-C colour corruptions
+    (:data:`fidelity.coco.corruptions.CORRUPTIONS`)."""
+
+    name = "corruptions"
+    what = "corruption"
+
+    def known(self) -> Sequence[str]:
+        from fidelity.coco.corruptions import CORRUPTIONS
+
+        return CORRUPTIONS
+
+
+class Severities(ParamTypeBase):
+    """``--severities``: COCO-C severities, ``1-5`` or ``1,3,5`` -> sorted distinct ints 1..5."""
+
+    name = "severities"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> list[int]:
+        if not isinstance(value, str):
+            return sorted(set(value))
+        what = f"{_flag(param, '--severities')} {value!r}"
+        out: list[int] = []
+        for part in value.split(","):
+            a, _, b = part.strip().partition("-")
+            try:
+                lo, hi = int(a), int(b or a)
+            except ValueError:
+                raise InvalidValueError(f"{what}: expected e.g. 1-5 or 1,3,5") from None
+            if not 1 <= lo <= hi <= 5:
+                raise InvalidValueError(f"{what}: severities are 1 to 5")
+            out += list(range(lo, hi + 1))
+        return sorted(set(out))
+
+
+def parse_models(text: str, what: str = "--models") -> tuple[ModelSpec, ...]:
+    """``A.onnx,B.onnx@250`` -> :class:`fidelity.coco.sweep.ModelSpec` each (at least one)."""
+    from fidelity.coco.sweep import ModelSpec
+
+    specs = tuple(ModelSpec.parse(m.strip()) for m in text.split(",") if m.strip())
+    if not specs:
+        raise InvalidValueError(f"{what} {text!r}: names no ONNX file")
+    return specs
+
+
+class ModelList(ParamTypeBase):
+    """``--models A.onnx,B.onnx@250``: ONNX detectors, each optionally ``@N`` (at most the first
+    N annotated images by id) -> a tuple of :class:`fidelity.coco.sweep.ModelSpec`
+    (:func:`parse_models`)."""
+
+    name = "models"
+
+    def get_metavar(self, param: click.Parameter, *args: Any, **kwargs: Any) -> str:
+        return "PATH[@N],..."
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> tuple[ModelSpec, ...]:
+        if not isinstance(value, str):
+            return tuple(value)
+        return parse_models(value, _flag(param, "--models"))
+
+
+#: One text of ``--limit`` for every command that runs detectors on COCO images.
+LIMIT_HELP = ("At most N images for every model: the first N annotated images by image id "
+              "(a model's own @N caps it further; the smaller N wins).")
+
+
+def limit_option(prefix: str = "") -> Callable[[F], F]:
+    """``--limit N`` (:data:`LIMIT_HELP`; ``prefix``: e.g. "With --measure: ")."""
+    return click.option("--limit", type=click.IntRange(min=1), default=None,
+                        help=prefix + LIMIT_HELP)
+
+
+def cap_models(models: Sequence[ModelSpec], limit: int | None) -> tuple[ModelSpec, ...]:
+    """Each model with ``--limit`` applied: its own ``@N`` or ``limit``, the smaller."""
+    if limit is None:
+        return tuple(models)
+    return tuple(replace(s, limit=min(s.limit or limit, limit)) for s in models)
+
+
+def model_inputs(models: Sequence[ModelSpec] | None) -> dict[str, Path]:
+    """What ``--models`` reads, for :func:`fidelity.fileio.check_outputs`: each model file."""
+    return {f"--models ({s.path})": s.path for s in models or ()}
+
+
+def coco_inputs(images: str | None, annotations: str | None,
+                models: Sequence[ModelSpec] | None, *, what: str = "--measure") -> CocoInputs:
+    """:func:`fidelity.coco.measure.resolve_coco_inputs` of the options' values (those not
+    given from the shared data folder)."""
+    from fidelity.coco.measure import resolve_coco_inputs
+
+    items = None if models is None else [f"{s.path}@{s.limit}" if s.limit else str(s.path)
+                                         for s in models]
+    return resolve_coco_inputs(images, annotations, items, what=what)
+
+
+# --------------------------------------------------------------------------------------------
+# Where and how the COCO commands run their detectors and score them
+
+
+def scorer_option(f: F) -> F:
+    """``--scorer``: the COCO AP implementation (evaluate, sweep)."""
+    from fidelity.coco.scoring import COCO_SCORERS
+
+    return click.option(
+        "--scorer", type=click.Choice(["auto", *COCO_SCORERS]), default="auto",
+        show_default=True,
+        help="COCO AP implementation: pycocotools (reference) or faster-coco-eval (same numbers "
+             "to 1e-4, tested; ~6x faster); auto: faster-coco-eval if installed.")(f)
+
+
+def executor_options(func: F) -> F:
+    """``--executor``, ``--address``, ``--workers``: where the COCO commands run their
+    detectors (sweep, validate, evaluate)."""
+    func = click.option(
+        "--workers", type=click.IntRange(min=1), default=None,
+        help="Ray workers (actors), each with its own ONNX session and image cache "
+             "(default: one per CPU of the cluster, or per GPU where it has GPUs).")(func)
+    func = click.option(
+        "--address", default=None, metavar="auto|ray://HOST:10001|HOST:PORT",
+        help="Ray cluster to use: auto (the one started with `ray start` here), a Ray Client "
+             "address, or a head node's address (default: start Ray on this machine).")(func)
+    func = click.option(
+        "--executor", type=click.Choice(["local", "ray"]), default="local", show_default=True,
+        help="local: this process runs the detector; ray: Ray actors on this machine or a "
+             "cluster run it (pip install 'camera-fidelity[ray]'); the store and the results "
+             "are the same.")(func)
+    return func
+
+
+def executor_from(executor: str, address: str | None, workers: int | None,
+                  threads: int | None, provider: str) -> ExecutorOptions:
+    """The :class:`fidelity.coco.executor.ExecutorOptions` of the command-line values."""
+    from fidelity.coco.executor import ExecutorOptions
+
+    return ExecutorOptions(executor, address, workers, threads, provider)
+
+
+# --------------------------------------------------------------------------------------------
+# How an image is read, and what is judged (audit, gate, compare)
+
+
+def image_read_options(f: F) -> F:
+    """``--encoding``, ``--exposure``, ``--layer``, ``--bayer``, ``--colourspace`` and
+    ``--negatives``: how an image's pixels are read (audit, gate, compare)."""
+    opts = [
+        click.option("--encoding", type=click.Choice(["linear", "srgb"]), default=None,
+                     help="Pixel encoding (default: linear for EXR/HDR/float TIFF, sRGB "
+                          "otherwise)."),
+        click.option("--exposure", default=None,
+                     help="auto (neutral patches; default for linear input) or a fixed EV "
+                          "(pixels x 2**EV; default 0 for sRGB input)."),
+        click.option("--layer", default=None,
+                     help="EXR layer (e.g. 'diffuse' for diffuse.R) or part name."),
+        click.option(
+            "--bayer", type=click.Choice(["RGGB", "BGGR", "GRBG", "GBRG"], case_sensitive=False),
+            default=None,
+            help="The image is a one-channel camera raw Bayer mosaic (PNG/TIFF) with this CFA "
+                 "pattern (top-left 2x2): demosaic it (Malvar 2004, colour-demosaicing), values "
+                 "taken as linear."),
+        click.option(
+            "--colourspace", default=None,
+            help="RGB primaries of the pixels: a colour-science name (ACEScg, 'ITU-R BT.2020', "
+                 "'Display P3', ...). Default: the EXR's chromaticities attribute, else sRGB."),
+        click.option(
+            "--negatives", type=click.Choice(["keep", "exclude"]), default="keep",
+            show_default=True,
+            help="Pixels with a negative channel: keep them in the linear mean (out-of-gamut "
+                 "colours in a scene-linear render) or exclude them like NaN/Inf."),
+    ]
+    for opt in reversed(opts):
+        f = opt(f)
+    return f
+
+
+def max_pixels_option(f: F) -> F:
+    """``--max-pixels N``: refuse larger images (audit, gate)."""
+    return click.option(
+        "--max-pixels", type=click.IntRange(min=1), default=None,
+        help="Refuse images of more pixels (width x height), checked before decoding; default "
+             "150000000 or $FIDELITY_MAX_PIXELS. An audit needs about 20 bytes per pixel (60 "
+             "for --bayer).")(f)
+
+
+def make_criterion(max_delta_e: float | None, max_dmap: float | None, cls: str | None,
+                   unit: str) -> Criterion:
+    """The criterion of ``--max-delta-e`` / ``--max-dmap`` (exactly one), ``--class`` and
+    ``--unit`` (gate, compare)."""
+    from fidelity.prediction.verdict import Criterion
+
+    if (max_delta_e is None) == (max_dmap is None):
+        raise click.UsageError("give exactly one of --max-delta-e X or --max-dmap P")
+    if max_delta_e is not None:
+        if cls is not None:
+            raise click.UsageError("--class goes with --max-dmap, not --max-delta-e")
+        return Criterion("max-delta-e", float(max_delta_e))
+    return Criterion("max-dmap", float(max_dmap), cls or "all", unit)  # type: ignore[arg-type]
+
+
+def report_paths(images: tuple[Path, ...], path: Path | None, suffix: str, *,
+                 folder: bool = False) -> list[Path | None]:
+    """Where each image's report goes: ``path`` itself, or, when ``path`` is a folder
+    (``folder``, or an existing directory), the image's file name + ``suffix`` in it."""
+    if path is None:
+        return [None] * len(images)
+    if not (folder or path.is_dir()):
+        return [path] * len(images)
+    names = [img.name for img in images]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise FidelityError(f"several images are named {', '.join(twice)}: their reports in "
+                            f"{path} would collide; gate them in separate runs")
+    return [path / f"{n}{suffix}" for n in names]
+
+
+# --------------------------------------------------------------------------------------------
+# Output and the options every command shares
 
 
 def _state() -> dict[str, Any]:
@@ -112,11 +460,10 @@ def measure_options(f: F) -> F:
                           "$FIDELITY_SHARED/coco/val2017)."),
         click.option("--annotations", default=None, type=click.Path(dir_okay=False),
                      help="With --measure: COCO annotations (default: the shared subset's)."),
-        click.option("--models", default=None,
+        click.option("--models", default=None, metavar="PATH[@N],...",
                      help="With --measure: ONNX detector(s), PATH[@N] comma-separated "
                           "(default: the shared yolox_nano.onnx)."),
-        click.option("--limit", type=click.IntRange(min=1), default=None,
-                     help="With --measure: at most N images (first N by id)."),
+        limit_option("With --measure: "),
     ]
     for opt in reversed(opts):
         f = opt(f)
@@ -126,13 +473,9 @@ def measure_options(f: F) -> F:
 def measure_inputs(images: str | None, annotations: str | None, models: str | None
                    ) -> dict[str, Any]:
     """What ``--measure`` reads, for :func:`fidelity.fileio.check_outputs`: the image folder,
-    the annotations and each model file."""
-    found: dict[str, Any] = {"--images": images, "--annotations": annotations}
-    for m in (models or "").split(","):
-        path = m.strip().rsplit("@", 1)[0] if "@" in m else m.strip()
-        if path:
-            found[f"--models ({path})"] = path
-    return found
+    the annotations and each model file (``models`` read as :class:`ModelList` reads it)."""
+    specs = None if models is None else parse_models(models)
+    return {"--images": images, "--annotations": annotations} | model_inputs(specs)
 
 
 def measure_request(measure: bool, images: str | None, annotations: str | None,
@@ -175,16 +518,36 @@ def write_json_output(path: str | os.PathLike[str], obj: Any) -> str:
 
 
 __all__ = [
+    "LIMIT_HELP",
+    "PATH",
     "STDOUT",
+    "CorruptionNames",
+    "ModelList",
+    "NameList",
+    "Severities",
+    "Targets",
+    "TransformNames",
     "bound_option",
+    "cap_models",
+    "coco_inputs",
     "common_options",
+    "executor_from",
+    "executor_options",
     "from_settings",
+    "image_read_options",
     "json_option",
+    "limit_option",
+    "make_criterion",
+    "max_pixels_option",
     "measure_inputs",
     "measure_options",
     "measure_request",
+    "model_inputs",
+    "parse_models",
     "progress_option",
     "real_stdout",
+    "report_paths",
+    "scorer_option",
     "show_progress",
     "write_json_output",
 ]

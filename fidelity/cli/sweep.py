@@ -2,55 +2,42 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import click
 
-from fidelity.cli.evaluate import scorer_option
-from fidelity.cli.executor import executor_from, executor_options
-from fidelity.cli.options import common_options, progress_option, show_progress
+from fidelity.cli.options import (
+    ModelList,
+    Targets,
+    TransformNames,
+    cap_models,
+    common_options,
+    executor_from,
+    executor_options,
+    limit_option,
+    model_inputs,
+    progress_option,
+    scorer_option,
+    show_progress,
+)
 
 if TYPE_CHECKING:
-    from fidelity.coco.sweep import SweepStore
-
-
-def _targets(text: str) -> list[float]:
-    from fidelity.errors import InvalidValueError
-
-    try:
-        vals = [float(t) for t in text.split(",") if t.strip()]
-    except ValueError as exc:
-        raise InvalidValueError(f"--targets {text!r}: not a comma-separated list of numbers") \
-            from exc
-    if not vals or any(v < 0 for v in vals):
-        raise InvalidValueError(f"--targets {text!r}: need non-negative ΔE values")
-    return vals
-
-
-def _transforms(text: str) -> list[str]:
-    from fidelity.errors import unknown_name
-    from fidelity.prediction.transforms import TRANSFORMS
-
-    if text == "all":
-        return list(TRANSFORMS)
-    names = [t.strip() for t in text.split(",") if t.strip()]
-    for n in names:
-        if n not in TRANSFORMS:
-            raise unknown_name("transform", n, TRANSFORMS)
-    return names
+    from fidelity.coco.sweep import ModelSpec, SweepStore
 
 
 @click.command()
-@click.option("--models", default=None,
-              help="Comma-separated ONNX files, each optionally PATH@N (first N images by id).")
+@click.option("--models", type=ModelList(), default=None,
+              help="Comma-separated ONNX files, each optionally PATH@N (at most the first N "
+                   "images by id).")
 @click.option("--images", default=None, type=click.Path(file_okay=False))
 @click.option("--annotations", type=click.Path(dir_okay=False),
               help="COCO annotations of the images (needed except with --status).")
-@click.option("--transforms", default="all", show_default=True,
+@click.option("--transforms", type=TransformNames(), default="all", show_default=True,
               help="'all' or comma-separated transform names.")
-@click.option("--targets", default="0,1,2,3,4,5,6,8,10,12,15,18,21,24", show_default=True,
-              help="Chart ΔE targets; 0 is the baseline (decode + re-encode only).")
+@click.option("--targets", type=Targets(baseline=True),
+              default="0,1,2,3,4,5,6,8,10,12,15,18,21,24", show_default=True,
+              help="Chart ΔE targets or ranges a-b; 0 is the baseline (decode + re-encode "
+                   "only).")
 @click.option("--out", required=True, type=click.Path(file_okay=False),
               help="Folder of the results store (sweep.sqlite); rerun to resume.")
 @click.option("--threads", type=click.IntRange(min=1), default=1, show_default=True,
@@ -68,15 +55,14 @@ def _transforms(text: str) -> list[str]:
 @click.option("--status", is_flag=True,
               help="Only say where the store in --out stands (per model: cells done, to do, "
                    "under way, pace); safe while a sweep runs.")
-@click.option("--limit", type=click.IntRange(min=1), default=None,
-              help="At most N images (first N by id) for every model without its own @N.")
+@limit_option()
 @progress_option
 @executor_options
 @common_options
-def sweep(models: str | None, images: str | None, annotations: str | None, transforms: str,
-          targets: str, out: str, threads: int, provider: str, order: str, scorer: str,
-          rescore: bool, status: bool, limit: int | None, progress: bool | None, executor: str,
-          address: str | None, workers: int | None) -> None:
+def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations: str | None,
+          transforms: list[str], targets: list[float], out: str, threads: int, provider: str,
+          order: str, scorer: str, rescore: bool, status: bool, limit: int | None,
+          progress: bool | None, executor: str, address: str | None, workers: int | None) -> None:
     """Run (or resume) the COCO sweep; one line per finished cell on stderr ([k/N] cells).
 
     \b
@@ -86,7 +72,7 @@ def sweep(models: str | None, images: str | None, annotations: str | None, trans
       fidelity sweep --rescore --annotations instances.json --out DIR
       fidelity sweep ... --executor ray --address auto --workers 8   (a Ray cluster)
     """
-    from fidelity.coco.sweep import ModelSpec, SweepStore, run_sweep
+    from fidelity.coco.sweep import SweepStore, run_sweep
     from fidelity.coco.sweep import rescore as do_rescore
 
     if status:
@@ -106,24 +92,17 @@ def sweep(models: str | None, images: str | None, annotations: str | None, trans
         from fidelity.errors import InvalidValueError
 
         raise InvalidValueError("--models and --images are needed (except with --rescore)")
-    specs = [ModelSpec.parse(m.strip()) for m in models.split(",") if m.strip()]
-    if not specs:
-        from fidelity.errors import InvalidValueError
-
-        raise InvalidValueError(f"--models {models!r}: names no ONNX file")
+    specs = list(models)
     from pathlib import Path
 
     from fidelity.fileio import check_outputs
 
     check_outputs({"--out (sweep.sqlite)": Path(out) / SweepStore.store_name},
-                  {"--annotations": annotations, **{f"--models ({s.path})": s.path
-                                                    for s in specs}})
-    if limit is not None:
-        specs = [s if s.limit else replace(s, limit=limit) for s in specs]
+                  {"--annotations": annotations, **model_inputs(specs)})
+    specs = list(cap_models(specs, limit))
     options = executor_from(executor, address, workers, threads, provider)
-    store = run_sweep(specs, images, annotations, out, _transforms(transforms),
-                      _targets(targets), threads=threads, provider=provider, order=order,
-                      scorer=scorer, executor=options, progress=show_progress(progress))
+    store = run_sweep(specs, images, annotations, out, transforms, targets, threads=threads,
+                      provider=provider, order=order, scorer=scorer, executor=options, progress=show_progress(progress))
     from fidelity.coco.sweep import run_summary
 
     last = store.meta().get("last_run") or {}

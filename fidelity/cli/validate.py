@@ -2,26 +2,40 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import click
 
-from fidelity.cli.executor import executor_from, executor_options
-from fidelity.cli.options import common_options, progress_option, show_progress
+from fidelity.cli.options import (
+    ModelList,
+    cap_models,
+    common_options,
+    executor_from,
+    executor_options,
+    limit_option,
+    model_inputs,
+    progress_option,
+    show_progress,
+)
+
+if TYPE_CHECKING:
+    from fidelity.coco.sweep import ModelSpec
 
 
 @click.command()
 @click.option("--cameras", default=None, type=click.Path(file_okay=False),
               help="Folder of camera files (+ optional suite.toml with scene illuminants); "
                    "default: the 30-camera suite that ships with fidelity.")
-@click.option("--models", default=None,
-              help="Comma-separated ONNX files, each optionally PATH@N (first N images by id).")
+@click.option("--models", type=ModelList(), default=None,
+              help="Comma-separated ONNX files, each optionally PATH@N (at most the first N "
+                   "images by id).")
 @click.option("--images", default=None, type=click.Path(file_okay=False),
               help="COCO image folder.")
 @click.option("--annotations", default=None, type=click.Path(dir_okay=False),
               help="COCO annotation JSON.")
 @click.option("--out", required=True, type=click.Path(file_okay=False),
               help="Report folder (Markdown, HTML, JSON, plots).")
-@click.option("--limit", type=click.IntRange(min=1), default=None,
-              help="At most N images (first N by id) for every model.")
+@limit_option()
 @click.option("--store", default=None, type=click.Path(file_okay=False),
               help="Results store folder (default $FIDELITY_CACHE/validation or "
                    "~/.cache/fidelity/validation); rerun to resume.")
@@ -43,7 +57,7 @@ from fidelity.cli.options import common_options, progress_option, show_progress
 @progress_option
 @executor_options
 @common_options
-def validate(cameras: str | None, models: str | None, images: str | None, annotations: str | None,
+def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: str | None, annotations: str | None,
              out: str, limit: int | None, store: str | None, method: str, training: str,
              threads: int, provider: str, bound_table: str | None, report_only: bool,
              notes: str | None, progress: bool | None, executor: str, address: str | None,
@@ -56,12 +70,10 @@ def validate(cameras: str | None, models: str | None, images: str | None, annota
           --images coco/val2017 --annotations instances.json --out reports/validation
       (rerun the same line to resume; add --report-only to rebuild the report)
     """
-    from dataclasses import replace
     from pathlib import Path
 
     from fidelity.camera.model import camera_files
     from fidelity.coco.emulation import EMULATION_METHODS, TRAINING_SETS
-    from fidelity.coco.sweep import ModelSpec
     from fidelity.coco.validate import (
         ValidationStore,
         collect_results,
@@ -80,9 +92,7 @@ def validate(cameras: str | None, models: str | None, images: str | None, annota
     check_outputs({f"--out ({n})": Path(out) / n
                    for n in ("validation.md", "validation.html", "validation.json")},
                   {"--notes": notes, "--annotations": annotations, "--images": images,
-                   "--table": bound_table, **camera_inputs,
-                   **{f"--models ({m})": m.strip().rsplit("@", 1)[0]
-                      for m in (models or "").split(",") if m.strip()}},
+                   "--table": bound_table, **camera_inputs, **model_inputs(models)},
                   stores={"--store": store or default_store()})
     if method not in EMULATION_METHODS:
         raise unknown_name("emulation method", method, EMULATION_METHODS)
@@ -100,12 +110,9 @@ def validate(cameras: str | None, models: str | None, images: str | None, annota
         if not models or not images or not annotations:
             raise InvalidValueError("--models, --images and --annotations are needed "
                                     "(except with --report-only)")
-        specs = [ModelSpec.parse(m.strip()) for m in models.split(",") if m.strip()]
-        if not specs:
-            raise InvalidValueError(f"--models {models!r}: names no ONNX file")
+        specs = list(models)
         options = executor_from(executor, address, workers, threads, provider)
-        if limit:
-            specs = [replace(s, limit=min(s.limit or limit, limit)) for s in specs]
+        specs = list(cap_models(specs, limit))
         st = run_validation(cases, specs, images, annotations, store_dir, method=method,
                             training=training, threads=threads, provider=provider,
                             progress=show_progress(progress), executor=options)
