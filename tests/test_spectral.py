@@ -8,13 +8,16 @@ import numpy as np
 import pytest
 
 from fidelity.colour.charts import load_chart
-from fidelity.colour.colorimetry import WHITEPOINT_D65_XYZ, delta_e_2000
+from fidelity.colour.colorimetry import (
+    WHITEPOINT_D65_XYZ,
+    delta_e_2000,
+    matrix_chromatic_adaptation,
+)
 from fidelity.colour.spectral import (
     SPECTRA_SETS,
     WAVELENGTHS_NM,
     load_illuminant,
     load_patch_spectra,
-    matrix_chromatic_adaptation,
     resample,
     scene_reference,
     tristimulus,

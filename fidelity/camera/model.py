@@ -238,14 +238,18 @@ def ideal_sensitivities() -> Sensitivities:
 
 def colour_camera_sensitivities(name: str) -> Sensitivities:
     """Sensitivities of a camera in ``colour.MSDS_CAMERA_SENSITIVITIES`` (peak-normalised)."""
-    import colour
+    from fidelity.colour.datasets import camera_sensitivities
 
     key = COLOUR_CAMERAS.get(name)
     if key is None:
         raise unknown_name("camera sensitivities", name, ["ideal", "file", *COLOUR_CAMERAS])
-    msds = colour.MSDS_CAMERA_SENSITIVITIES[key]
-    return Sensitivities(f"{name} (colour.MSDS_CAMERA_SENSITIVITIES)",
-                         np.asarray(msds.wavelengths, float), np.asarray(msds.values, float))
+    shipped = camera_sensitivities(key)
+    if shipped is None:
+        import colour
+
+        msds = colour.MSDS_CAMERA_SENSITIVITIES[key]
+        shipped = np.asarray(msds.wavelengths, float), np.asarray(msds.values, float)
+    return Sensitivities(f"{name} (colour.MSDS_CAMERA_SENSITIVITIES)", *shipped)
 
 
 def camera_response(
@@ -354,20 +358,20 @@ def white_balance_gains(
 def fit_colour_correction(
     camera_rgb: ArrayLike, target_linear_srgb: ArrayLike, method: str = "Cheung 2004"
 ) -> FloatArray:
-    """3x3 matrix M minimising ||camera_rgb @ M.T - target||^2 (colour.characterisation).
+    """3x3 matrix M minimising ||camera_rgb @ M.T - target||^2.
 
     ``method`` in :data:`CCM_FIT_METHODS` (Cheung, Westland, Connah, Ripamonti 2004, 3 terms;
-    Finlayson, Mackiewicz, Hurlbert 2015, degree 1). Inputs (K, 3), K >= 3.
+    Finlayson, Mackiewicz, Hurlbert 2015, degree 1). Inputs (K, 3), K >= 3. With 3 terms and
+    degree 1 both expand RGB to itself, so both are the Moore-Penrose least-squares mapping
+    ``M = target.T @ pinv(camera_rgb.T)``, computed as colour-science's
+    ``colour.characterisation.matrix_colour_correction`` computes it (tested equal).
     """
-    import colour
-
     key = next((k for k in CCM_FIT_METHODS if k.lower() == method.lower()), None)
     if key is None:
         raise unknown_name("colour-correction fit method", method, CCM_FIT_METHODS)
-    m = colour.characterisation.matrix_colour_correction(
-        np.asarray(camera_rgb, float), np.asarray(target_linear_srgb, float), method=key,
-        **CCM_FIT_METHODS[key],
-    )
+    rgb = np.atleast_2d(np.asarray(camera_rgb, dtype=np.float64))
+    target = np.atleast_2d(np.asarray(target_linear_srgb, dtype=np.float64))
+    m = np.dot(np.transpose(target), np.linalg.pinv(np.transpose(rgb)))
     return np.asarray(m, dtype=np.float64).reshape(3, 3)
 
 

@@ -71,11 +71,11 @@ from fidelity.camera.model import (
     load_camera,
     quantise,
 )
+from fidelity.colour.colorimetry import matrix_chromatic_adaptation
 from fidelity.colour.spectral import (
     GRID_STEP_NM,
     load_illuminant,
     load_patch_spectra,
-    matrix_chromatic_adaptation,
     resample,
     tristimulus,
     wavelength_grid,

@@ -35,6 +35,8 @@ __all__ = [
     "WHITEPOINT_D65_XYZ",
     "COMMON_RGB_COLOURSPACES",
     "delinearize_srgb",
+    "CHROMATIC_ADAPTATION_METHODS",
+    "matrix_chromatic_adaptation",
     "matrix_rgb_to_linear_srgb",
     "delta_e",
     "delta_e_1976",
@@ -464,6 +466,37 @@ def delta_e(lab1: ArrayLike, lab2: ArrayLike, method: str = "CIE 2000") -> Float
     return fn(lab1, lab2)
 
 
+#: Chromatic adaptation transforms (von Kries-type, cone-space matrices from colour-science
+#: ``CHROMATIC_ADAPTATION_TRANSFORMS``): Bradford (Lam 1985, ICC v4), CAT02 (CIECAM02),
+#: CAT16 (CAM16), Von Kries (Hunt-Pointer-Estevez), XYZ Scaling.
+CHROMATIC_ADAPTATION_METHODS: tuple[str, ...] = (
+    "Bradford",
+    "CAT02",
+    "CAT16",
+    "Von Kries",
+    "XYZ Scaling",
+)
+
+
+def matrix_chromatic_adaptation(
+    white_source: ArrayLike, white_target: ArrayLike, method: str = "Bradford"
+) -> FloatArray:
+    """3x3 von Kries-type adaptation matrix M with XYZ_target = M @ XYZ_source.
+
+    M = A^-1 diag(A w_t / A w_s) A, A the cone-response matrix of ``method``
+    (Fairchild, Color Appearance Models, 3rd ed., ch. 9). Whites are XYZ (Y > 0).
+    """
+    from fidelity.colour.datasets import adaptation_matrix
+
+    key = next((k for k in CHROMATIC_ADAPTATION_METHODS if k.lower() == method.lower()), None)
+    a = adaptation_matrix(key) if key is not None else None
+    if a is None:
+        raise unknown_name("chromatic adaptation transform", method, CHROMATIC_ADAPTATION_METHODS)
+    ws = a @ np.asarray(white_source, dtype=np.float64)
+    wt = a @ np.asarray(white_target, dtype=np.float64)
+    return np.linalg.inv(a) @ np.diag(wt / ws) @ a
+
+
 #: Names of colour-science RGB colourspaces that renderers commonly write (any key of
 #: ``colour.RGB_COLOURSPACES`` is accepted).
 COMMON_RGB_COLOURSPACES: tuple[str, ...] = (
@@ -484,38 +517,55 @@ def matrix_rgb_to_linear_srgb(
         ``chromaticities`` attribute: ``Rx, Ry, Gx, Gy, Bx, By, Wx, Wy`` (CIE 1931 xy).
     chromatic_adaptation
         Transform that adapts the colourspace's white to D65 when they differ (ACES: about
-        D60), a name of ``colour.CHROMATIC_ADAPTATION_TRANSFORMS``.
+        D60), one of :data:`CHROMATIC_ADAPTATION_METHODS`.
 
-    Each side's RGB -> XYZ matrix is the normalised primary matrix of its primaries and white
-    (SMPTE RP 177-1993), via ``colour.matrix_RGB_to_RGB``; the result is exact identity for
-    sRGB. Linear values only: a transfer function is not part of the matrix.
+    Notes
+    -----
+    The colourspace's RGB -> XYZ matrix (its specification's own, or, for chromaticities, the
+    normalised primary matrix: SMPTE RP 177-1993, :func:`normalised_primary_matrix`) and the
+    normalised primary matrix of sRGB, the whites adapted by
+    ``chromatic_adaptation`` (:func:`matrix_chromatic_adaptation`), as
+    ``colour.matrix_RGB_to_RGB`` computes it (tested equal); the result is exact identity for
+    sRGB. The primaries of :data:`fidelity.colour.datasets.COLOURSPACES` ship with fidelity,
+    other colour-science names are looked up there. Linear values only: a transfer function
+    is not part of the matrix.
     """
-    import colour
+    from fidelity.colour import datasets
 
     if isinstance(colourspace, str):
-        spaces = {k.lower(): k for k in colour.RGB_COLOURSPACES}
-        key = spaces.get(colourspace.strip().lower())
-        if key is None:
-            raise unknown_name("RGB colourspace", colourspace, COMMON_RGB_COLOURSPACES)
-        source = colour.RGB_COLOURSPACES[key]
-        if key == "sRGB":
+        if colourspace.strip().lower() == "srgb":
             return np.eye(3)
+        shipped = {k.lower(): k for k in datasets.COLOURSPACES}.get(colourspace.strip().lower())
+        if shipped is not None:
+            found = datasets.colourspace(shipped)
+            assert found is not None
+            _, white, to_xyz = found
+        else:
+            import colour
+
+            spaces = {k.lower(): k for k in colour.RGB_COLOURSPACES}
+            key = spaces.get(colourspace.strip().lower())
+            if key is None:
+                raise unknown_name("RGB colourspace", colourspace, COMMON_RGB_COLOURSPACES)
+            white = np.asarray(colour.RGB_COLOURSPACES[key].whitepoint, np.float64)
+            to_xyz = np.asarray(colour.RGB_COLOURSPACES[key].matrix_RGB_to_XYZ, np.float64)
     else:
         xy = np.asarray(colourspace, dtype=np.float64).ravel()
         if xy.shape != (8,) or not np.all(np.isfinite(xy)) or np.any(xy[1::2] <= 0):
             raise InvalidValueError(f"chromaticities {np.asarray(colourspace).tolist()!r}: "
                                     f"expected 8 finite numbers Rx, Ry, Gx, Gy, Bx, By, Wx, Wy "
                                     f"with y > 0")
-        source = colour.RGB_Colourspace("chromaticities", xy[:6].reshape(3, 2), xy[6:],
-                                        use_derived_matrix_RGB_to_XYZ=True,
-                                        use_derived_matrix_XYZ_to_RGB=True)
         if np.allclose(xy, [0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290], atol=5e-5):
             return np.eye(3)
-    if chromatic_adaptation not in colour.CHROMATIC_ADAPTATION_TRANSFORMS:
+        white = xy[6:]
+        to_xyz = normalised_primary_matrix(xy[:6].reshape(3, 2), white)
+    if chromatic_adaptation not in CHROMATIC_ADAPTATION_METHODS:
         raise unknown_name("chromatic adaptation transform", chromatic_adaptation,
-                           tuple(colour.CHROMATIC_ADAPTATION_TRANSFORMS))
-    srgb = colour.RGB_COLOURSPACES["sRGB"].copy()  # derived matrix, as MATRIX_XYZ_TO_LINEAR_SRGB
-    srgb.use_derived_matrix_RGB_to_XYZ = True
-    srgb.use_derived_matrix_XYZ_to_RGB = True
-    return np.asarray(colour.matrix_RGB_to_RGB(source, srgb, chromatic_adaptation),
-                      dtype=np.float64)
+                           CHROMATIC_ADAPTATION_METHODS)
+    srgb = datasets.colourspace("sRGB")
+    assert srgb is not None
+    cat = matrix_chromatic_adaptation(_xy_to_xyz(white), _xy_to_xyz(srgb[1]),
+                                      chromatic_adaptation)
+    return np.asarray(np.linalg.inv(normalised_primary_matrix(srgb[0], srgb[1]))
+                      @ (cat @ to_xyz), dtype=np.float64)
+

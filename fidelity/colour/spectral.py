@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fidelity.colour.colorimetry import matrix_chromatic_adaptation
 from fidelity.errors import InputFileError, InvalidValueError, unknown_name
 from fidelity.fileio import require_file
 from fidelity.resources import resource_dir
@@ -207,9 +208,15 @@ def load_illuminant(name_or_path: str) -> Illuminant:
     least 2 rows, strictly increasing wavelengths, finite non-negative power that is not all
     zero, and cover 400-700 nm; light outside its range is taken as zero.
     """
-    import colour
+    from fidelity.colour import datasets
 
     key = _match_name(name_or_path, ILLUMINANTS)
+    shipped = datasets.illuminant(ILLUMINANTS[key]) if key is not None else None
+    if key is not None and shipped is not None:
+        return Illuminant(key, shipped[0], shipped[1],
+                          f"CIE 15:2018 illuminant {ILLUMINANTS[key]} (colour.SDS_ILLUMINANTS)")
+    import colour
+
     if key is not None:
         sd = colour.SDS_ILLUMINANTS[ILLUMINANTS[key]]
         return Illuminant(key, np.asarray(sd.wavelengths, float), np.asarray(sd.values, float),
@@ -294,10 +301,10 @@ def cie_1931_cmfs(step: float = GRID_STEP_NM) -> FloatArray:
 
 @lru_cache(maxsize=8)
 def _cmfs(step: float) -> FloatArray:
-    import colour
+    from fidelity.colour.datasets import cmfs_1931
 
-    cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
-    return resample(cmfs.wavelengths, cmfs.values, wavelength_grid(step), extrapolation="zero")
+    wavelengths, values = cmfs_1931()
+    return resample(wavelengths, values, wavelength_grid(step), extrapolation="zero")
 
 
 def integrate(spectra: ArrayLike, weights: ArrayLike, step: float = GRID_STEP_NM) -> FloatArray:
@@ -327,37 +334,6 @@ def tristimulus(
 # --------------------------------------------------------------------------------------------
 # Chromatic adaptation and the scene-consistent reference
 # --------------------------------------------------------------------------------------------
-
-#: Chromatic adaptation transforms (von Kries-type, cone-space matrices from colour-science
-#: ``CHROMATIC_ADAPTATION_TRANSFORMS``): Bradford (Lam 1985, ICC v4), CAT02 (CIECAM02),
-#: CAT16 (CAM16), Von Kries (Hunt-Pointer-Estevez), XYZ Scaling.
-CHROMATIC_ADAPTATION_METHODS: tuple[str, ...] = (
-    "Bradford",
-    "CAT02",
-    "CAT16",
-    "Von Kries",
-    "XYZ Scaling",
-)
-
-
-def matrix_chromatic_adaptation(
-    white_source: ArrayLike, white_target: ArrayLike, method: str = "Bradford"
-) -> FloatArray:
-    """3x3 von Kries-type adaptation matrix M with XYZ_target = M @ XYZ_source.
-
-    M = A^-1 diag(A w_t / A w_s) A, A the cone-response matrix of ``method``
-    (Fairchild, Color Appearance Models, 3rd ed., ch. 9). Whites are XYZ (Y > 0).
-    """
-    import colour
-
-    key = next((k for k in CHROMATIC_ADAPTATION_METHODS if k.lower() == method.lower()), None)
-    if key is None:
-        raise unknown_name("chromatic adaptation transform", method, CHROMATIC_ADAPTATION_METHODS)
-    a = np.asarray(colour.CHROMATIC_ADAPTATION_TRANSFORMS[key], dtype=np.float64)
-    ws = a @ np.asarray(white_source, dtype=np.float64)
-    wt = a @ np.asarray(white_target, dtype=np.float64)
-    return np.linalg.inv(a) @ np.diag(wt / ws) @ a
-
 
 @dataclass(frozen=True)
 class SceneReference:
@@ -424,7 +400,6 @@ def scene_reference(
 
 
 __all__ = [
-    "CHROMATIC_ADAPTATION_METHODS",
     "GRID_END_NM",
     "GRID_START_NM",
     "GRID_STEP_NM",
@@ -440,7 +415,6 @@ __all__ = [
     "integrate",
     "load_illuminant",
     "load_patch_spectra",
-    "matrix_chromatic_adaptation",
     "read_spectral_csv",
     "resample",
     "scene_reference",
