@@ -79,9 +79,12 @@ def test_bit_depth_and_banding_measure_the_levels():
 def test_check_and_audit_report_the_warnings(tmp_path):
     r = CliRunner().invoke(main, ["check", "--camera", str(CAMERAS / "bad-5bit.toml"),
                                   "--out", str(tmp_path)])
-    assert r.exit_code == 0 and "warning: posterisation" in r.stdout
+    assert r.exit_code == 0, r.output
     doc = json.loads((tmp_path / "report.json").read_text())
     assert [b["kind"] for b in doc["blind_spots"] if b["at_risk"]] == ["bit-depth"]
+    # the camera's 5 bits, against the risk threshold of 6
+    depth = next(b for b in doc["blind_spots"] if b["kind"] == "bit-depth")
+    assert (depth["value"], depth["threshold"]) == (5.0, 6.0)
     html = (tmp_path / "report.html").read_text()
     assert "Blind spots of the chart ΔE" in html and "<strong>warning</strong>" in html
     from fidelity.records import ChartReport, report_schema
@@ -104,4 +107,6 @@ def test_check_and_audit_report_the_warnings(tmp_path):
         doc = json.loads((tmp_path / f"g{bits}.json").read_text())
         band = next(b for b in doc["blind_spots"] if b["kind"] == "banding")
         assert band["at_risk"] is expect, band
-        assert ("warning: posterisation" in r.stdout) is expect
+        # the levels the gradient holds, in bits: those it was posterised to
+        assert band["value"] == pytest.approx(bits, abs=0.1), band
+        assert (band["value"] <= band["threshold"]) is expect, band

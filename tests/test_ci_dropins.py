@@ -3,6 +3,7 @@ hook, the pytest plugin and the container."""
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shlex
@@ -90,10 +91,13 @@ def test_pytest_plugin_fixture_asserts_an_images_colour(renders, pytester):
     """)
     result = pytester.runpytest("--junitxml=out.xml")  # loaded by its pytest11 entry point
     result.assert_outcomes(passed=2, failed=1)
-    result.stdout.fnmatch_lines(["*ColourFidelity(mean ΔE00*"])
     props = {p.get("name"): p.get("value")
              for p in ET.parse(pytester.path / "out.xml").getroot().iter("property")}
-    assert any(k.endswith("good.png:mean_delta_e") for k in props)
+    # the chart ΔE each test compared with 3, recorded per image: the good one within, the
+    # bad one beyond (the failed test)
+    mean = {name: float(v) for k, v in props.items()
+            for name in ("good.png", "bad.png") if k.endswith(f"{name}:mean_delta_e")}
+    assert mean["good.png"] <= 3 < mean["bad.png"]
 
 
 def test_pre_commit_hook_manifest_and_entry(tmp_path):
@@ -181,7 +185,9 @@ def _docker_engine() -> bool:
 def test_container_builds_and_checks_the_default_camera(tmp_path):
     tag = "camera-fidelity:test"
     subprocess.run(["docker", "build", "-t", tag, str(REPO)], check=True)
-    r = subprocess.run(["docker", "run", "--rm", tag, "check", "--no-report"],
+    r = subprocess.run(["docker", "run", "--rm", tag, "check", "--no-report", "--json", "-"],
                        capture_output=True, text=True)
-    assert r.returncode == 0 and "PASS" in r.stdout
-    assert np.isfinite(float(re.search(r"mean ([\d.]+)", r.stdout).group(1)))
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert doc["command"] == "check" and np.isfinite(doc["mean_delta_e"])
+    assert doc["verdict"]["passed"] is True and doc["verdict"]["value"] == doc["mean_delta_e"]

@@ -6,8 +6,10 @@ import csv
 import json
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
+from fidelity.chart.measure import chart_delta_e
 from fidelity.cli import main
 from fidelity.colour.charts import load_chart
 
@@ -17,10 +19,19 @@ def test_calibrate_writes_json_and_csv(tmp_path: Path) -> None:
     res = runner.invoke(main, ["calibrate", "--targets", "1-3,30", "--transforms", "hue,saturation-inc",
                                "--json", str(tmp_path / "t.json"), "--csv", str(tmp_path / "t.csv")])
     assert res.exit_code == 0, res.output
-    assert "baseline" in res.output and "saturation-inc" in res.output
     doc = json.loads((tmp_path / "t.json").read_text())
     assert set(doc) == {"chart", "baseline_delta_e", "entries"}
+    chart = load_chart()
+    assert doc["chart"] == chart.name == "safecolor"
+    # the untransformed chart's own ΔE00 (its sRGB against its Lab)
+    assert doc["baseline_delta_e"] == pytest.approx(chart_delta_e(chart.srgb, chart.lab),
+                                                    rel=1e-9)
     assert len(doc["entries"]) == 8
+    assert [(e["transform"], e["target"]) for e in doc["entries"]] == [
+        (t, float(x)) for t in ("hue", "saturation-inc") for x in (1, 2, 3, 30)]
+    for e in doc["entries"]:
+        if e["reachable"]:
+            assert e["delta_e"] == pytest.approx(e["target"], abs=1e-6), e
     unreachable = [e for e in doc["entries"] if not e["reachable"]]
     assert [(e["transform"], e["target"], e["param"]) for e in unreachable] == [("saturation-inc", 30.0, None)]
     rows = list(csv.DictReader((tmp_path / "t.csv").open()))
@@ -43,13 +54,15 @@ def test_calibrate_another_chart(tmp_path: Path) -> None:
 
 def test_calibrate_errors_exit_2_with_one_line(tmp_path: Path) -> None:
     runner = CliRunner()
-    for args, match in [
-        (["calibrate", "--chart", "nope"], "unknown chart 'nope'"),
-        (["calibrate", "--targets", "x"], "--targets"),
-        (["calibrate", "--transforms", "contrast"], "unknown transform 'contrast'"),
-        (["calibrate", "--chart", str(tmp_path / "missing.json")], "does not exist"),
+    for args, names in [
+        (["calibrate", "--chart", "nope"], ["'nope'"]),
+        (["calibrate", "--targets", "x"], ["--targets", "'x'"]),
+        (["calibrate", "--transforms", "contrast"], ["'contrast'"]),
+        (["calibrate", "--chart", str(tmp_path / "missing.json")], [str(tmp_path / "missing.json")]),
     ]:
         res = runner.invoke(main, args)
         assert res.exit_code == 2, (args, res.output)
-        assert match in res.output
+        lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+        assert len(lines) == 1 and lines[0].startswith("fidelity: error: "), res.output
+        assert all(n in lines[0] for n in names), (names, lines[0])
         assert "Traceback" not in res.output

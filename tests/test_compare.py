@@ -105,10 +105,18 @@ def test_compare_cli_gates_writes_junit_json_html(charts, tmp_path):
                                   str(tmp_path / "j.xml"), "--json", str(tmp_path / "c.json"),
                                   "--html", str(tmp_path / "c.html")])
     assert r.exit_code == 1, r.output
-    assert "sim-to-real ΔE00: mean" in r.stdout and "FAIL" in r.stdout
     suite = ET.parse(tmp_path / "j.xml").getroot().find("testsuite")
     assert suite.get("failures") == "1"
     doc = json.loads((tmp_path / "c.json").read_text())
+    # the gate judged the sim-to-real ΔE (not either chart's own) against the limit
+    s2r = doc["sim_to_real"]
+    direct = compare_charts(paths["sim"], paths["real"], sim_corners=CORNERS,
+                            real_corners=CORNERS, normalise_mode="none")
+    assert s2r["mean_delta_e"] == pytest.approx(direct.mean_delta_e, abs=1e-12)
+    assert s2r["normalisation"]["mode"] == "none"
+    v = doc["verdict"]
+    assert v["passed"] is False and v["reason"] == "over-limit" and v["limit"] == 0.5
+    assert v["value"] == v["delta_e"] == s2r["mean_delta_e"] > 0.5
     back = ComparisonReport.from_json(doc)
     assert comparison_json(back) == doc
     html = (tmp_path / "c.html").read_text()
@@ -116,13 +124,20 @@ def test_compare_cli_gates_writes_junit_json_html(charts, tmp_path):
                 "sim-to-real ΔE00 per patch",
                 "a*b*: arrows from the simulated colour to the real one"):
         assert f'alt="{alt}"' in html
-    r = CliRunner().invoke(main, [*args, "--max-delta-e", "10"])
-    assert r.exit_code == 0 and "PASS" in r.stdout
+    r = CliRunner().invoke(main, [*args, "--max-delta-e", "10", "--json", "-"])
+    assert r.exit_code == 0
+    v = json.loads(r.stdout)["verdict"]
+    assert v["passed"] is True and v["reason"] == "within-limit"
+    assert v["value"] == s2r["mean_delta_e"] and v["limit"] == 10.0
     r = CliRunner().invoke(main, [*args, "--max-dmap", "100", "--bound", "directional",
                                   "--json", "-"])
     assert r.exit_code == 0
-    assert json.loads(r.stdout)["verdict"]["message"].endswith(
-        f"at mean ΔE00 {doc['sim_to_real']['mean_delta_e']:.2f}")
+    out = json.loads(r.stdout)
+    v = out["verdict"]
+    # the direction-aware prediction at the sim-to-real ΔE decided it
+    assert v["bound"] == out["bound"] == "directional" and v["reason"] == "within-limit"
+    assert v["delta_e"] == pytest.approx(s2r["mean_delta_e"], abs=1e-12)
+    assert v["value"] == pytest.approx(out["directional_prediction"]["dmap_points"])
     r = CliRunner().invoke(main, ["compare", str(paths["sim"]), str(tmp_path / "none.png"),
                                   "--max-delta-e", "1"])
     assert r.exit_code == 2 and r.stderr.startswith("fidelity: error:")
@@ -134,8 +149,9 @@ def test_compare_measure_needs_coco_inputs(charts, monkeypatch, tmp_path):
     r = CliRunner().invoke(main, ["compare", str(paths["sim"]), str(paths["real"]),
                                   "--sim-corners", CORNERS, "--real-corners", CORNERS,
                                   "--measure"])
-    assert r.exit_code == 2
-    assert "pass --images DIR" in r.stderr and "FIDELITY_SHARED" in r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.exit_code == 2 and len(lines) == 1 and lines[0].startswith("fidelity: error: ")
+    assert "--images" in lines[0] and "FIDELITY_SHARED" in lines[0]
 
 
 def test_compare_is_in_the_public_api():

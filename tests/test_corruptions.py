@@ -10,6 +10,8 @@ from click.testing import CliRunner
 
 from fidelity.cli import main
 from fidelity.coco import corruptions as cc
+from fidelity.prediction.directional import predict_chart
+from fidelity.prediction.table import predict
 
 
 def _images(shared=None):
@@ -85,15 +87,25 @@ def test_predict_coco_c_prints_equivalent_delta_e_and_losses(tmp_path):
     doc = json.loads((tmp_path / "c.json").read_text())
     m = cc.corruption_chart("contrast", 3)
     assert doc["chart_delta_e"] == pytest.approx(m.mean_delta_e)
-    assert f"chart ΔE00 {m.mean_delta_e:.2f}" in r.stdout
-    assert "predicted ΔmAP: classic" in r.stdout and "direction-aware" in r.stdout
+    assert doc["chart_max_delta_e"] == pytest.approx(m.max_delta_e)
+    assert doc["worst_patch"] == m.worst_patch
+    # both predictions are made at the corruption's chart ΔE, from the shipped tables
+    classic = predict(m.mean_delta_e, transforms=False)
+    directional = predict_chart(m)
+    assert doc["prediction"]["delta_e"] == doc["directional_prediction"]["delta_e"] == (
+        pytest.approx(m.mean_delta_e))
+    assert doc["prediction"]["dmap_points"] == pytest.approx(classic.dmap_points)
+    assert doc["prediction"]["dmap_relative"] == pytest.approx(classic.dmap_relative)
+    assert doc["directional_prediction"]["dmap_points"] == pytest.approx(directional.dmap_points)
+    assert doc["directional_prediction"]["dmap_points"] < doc["prediction"]["dmap_points"]
     table = cc.load_coco_c()
     measured = table.cell("contrast", 3).measured
     assert measured and [x["dmap_points"] for x in doc["measured"]] == [
         x.dmap_points for x in measured]
-    assert "measured ΔmAP" in r.stdout
     r = CliRunner().invoke(main, ["predict", "--coco-c", "fog:3"])
-    assert r.exit_code == 2 and "unknown colour corruption" in r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.exit_code == 2 and len(lines) == 1 and lines[0].startswith("fidelity: error: ")
+    assert "'fog'" in lines[0]
     r = CliRunner().invoke(main, ["predict", "--coco-c", "contrast:9"])
     assert r.exit_code == 2
 
@@ -127,4 +139,4 @@ def test_coco_c_report_only_rebuilds(tmp_path):
     r = CliRunner().invoke(main, ["coco-c", "--out", str(tmp_path), "--report-only"])
     assert r.exit_code == 0, r.output
     html = (tmp_path / "cococ.html").read_text()
-    assert "chart ΔE against COCO-C severity" in html
+    assert 'alt="chart ΔE against COCO-C severity" src="data:image/png;base64,' in html

@@ -11,6 +11,7 @@ corners; an image without a chart is a one-line error.
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -115,13 +116,24 @@ def test_srgb_png_through_the_cli_prints_the_corners_it_found(tmp_path):
     assert r.exit_code == 0, r.output
     page = (tmp_path / "a.html").read_text()
     assert "Where the patches were sampled" in page and 'alt="sampling windows" src="data:image/png' in page
-    line = next(ln for ln in r.stdout.splitlines() if ln.startswith("chart found"))
-    corners = np.array([float(v) for v in line.split("--corners ")[1].split(",")]).reshape(4, 2)
-    assert np.abs(corners - map_points(h, GRID_CORNERS)).max() < 1.0
-    again = CliRunner().invoke(main, ["audit", str(path), "--corners", line.split("--corners ")[1]])
+    doc = json.loads((tmp_path / "a.json").read_text())
+    found = doc["source"]["corners_found"]
+    assert found["method"] == "segmentation"
+    truth = map_points(h, GRID_CORNERS)
+    assert np.abs(np.array(found["corners"]) - truth).max() < 1.0
+    # the --corners it prints are the corners found, rounded; given back, they audit the same
+    text = found["corners_text"]
+    assert f"--corners {text}" in r.stdout
+    printed = np.array([float(v) for v in text.split(",")]).reshape(4, 2)
+    np.testing.assert_allclose(printed, found["corners"], atol=0.05 + 1e-9)
+    again = CliRunner().invoke(main, ["audit", str(path), "--corners", text, "--json",
+                                      str(tmp_path / "b.json")])
     assert again.exit_code == 0
-    mean = [ln for ln in r.stdout.splitlines() if ln.startswith("chart ΔE00")]
-    assert mean == [ln for ln in again.stdout.splitlines() if ln.startswith("chart ΔE00")]
+    given = json.loads((tmp_path / "b.json").read_text())
+    assert given["source"]["corners_found"] is None
+    assert given["mean_delta_e"] == pytest.approx(doc["mean_delta_e"], abs=1e-6)
+    assert given["max_delta_e"] == pytest.approx(doc["max_delta_e"], abs=1e-6)
+    assert given["worst_patch"] == doc["worst_patch"]
     del stored
 
 
@@ -139,7 +151,7 @@ def test_no_chart_is_a_clear_error(tmp_path):
     r = CliRunner().invoke(main, ["gate", str(path), "--max-delta-e", "3"])
     assert r.exit_code == 2
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1 and str(path) in lines[0] and "no colour chart found" in lines[0]
+    assert len(lines) == 1 and lines[0].startswith(f"fidelity: error: {path}: ")
     assert "--corners" in lines[0]
 
 

@@ -32,16 +32,15 @@ def test_info_reports_every_declared_dependency_and_the_setup(tmp_path: Path) ->
     for name, version in [*env["dependencies"].items(),
                           *(kv for e in env["extras"].values() for kv in e.items())]:
         assert version == metadata.version(name), name
-        assert f"{name} {version}" in r.output
     import onnxruntime
 
     assert env["onnxruntime"]["available"] == onnxruntime.get_available_providers()
     assert env["onnxruntime"]["used"][-1] == "CPUExecutionProvider"
-    assert env["mitsuba"] == {"probed": False} and "mitsuba: not probed" in r.output
+    assert env["mitsuba"] == {"probed": False}
     assert env["prediction_tables"]["default"] in env["prediction_tables"]["available"]
     folder = shared_dir()
     if folder is None:
-        assert env["shared"]["folder"] is None and "shared data: not found" in r.output
+        assert env["shared"]["folder"] is None
     else:
         assert env["shared"]["folder"] == str(folder)
         assert env["shared"]["models"] == sorted(p.name for p in folder.glob("models/*.onnx"))
@@ -60,4 +59,7 @@ def test_info_says_which_mitsuba_variant_renders() -> None:
         expect = None
     assert m["variant"] == expect
     if expect is not None:
+        # an llvm_* variant runs on the libLLVM it names; the others need none
+        assert (m["libllvm"] is None) is not expect.startswith("llvm")
+        # the probe's outcome per variant is only in its notes' words (no field)
         assert any(note.startswith(f"{expect}: ok") for note in m["notes"])

@@ -13,7 +13,7 @@ def test_inputs_come_from_options_or_the_shared_folder(monkeypatch, tmp_path):
     from fidelity.coco.measure import resolve_coco_inputs
 
     monkeypatch.setenv("FIDELITY_SHARED", str(tmp_path / "none"))
-    with pytest.raises(InvalidValueError, match=r"pass --images DIR .*--annotations FILE"):
+    with pytest.raises(InvalidValueError, match=r"--images .*--annotations .*FIDELITY_SHARED"):
         resolve_coco_inputs()
     shared = tmp_path / "shared"
     (shared / "coco" / "val2017").mkdir(parents=True)

@@ -289,7 +289,9 @@ def test_transform_parameters_between_targets_reach_that_delta_e():
     assert interp["hue"].method == "interpolated"
     assert all(not r.reachable for r in pr.transform_parameters(0.1))
     far = {r.transform: r for r in pr.transform_parameters(30.0)}
-    assert far["contrast-dec"].param is None and "at most" in str(far["contrast-dec"].method)
+    assert far["contrast-dec"].param is None and not far["contrast-dec"].reachable
+    # the reach of the transform is only in the method's words (TransformParameter has no field)
+    assert "at most" in str(far["contrast-dec"].method)
 
 
 def test_prediction_dict_keys():
@@ -369,11 +371,18 @@ def test_predict_command_gives_the_delta_e_limit(tmp_path):
                                   "--json", str(tmp_path / "l.json")])
     assert r.exit_code == 0, r.output
     # the paper's table: ΔE 3 -> 1, so the limit is ΔE 3 exactly
-    assert "chart ΔE00 <= 3.00 keeps the predicted ΔmAP <= 1 percentage points" in r.output
-    assert "fidelity gate IMAGE --max-delta-e 3.00" in r.output
-    assert json.loads((tmp_path / "l.json").read_text())["delta_e"] == pytest.approx(3.0)
+    doc = json.loads((tmp_path / "l.json").read_text())
+    assert doc["delta_e"] == pytest.approx(3.0)
+    assert (doc["max_loss"], doc["column"], doc["table"], doc["size_used"]) == (
+        1.0, "dmap_points", "safecolor-2025", "any")
+    assert doc["status"] == "inside" and doc["loss_at_limit"] == pytest.approx(1.0)
+    assert doc["delta_e_range"] == [0.0, 24.0]
+    # the threshold to gate on: the limit rounded down, 3.00
+    assert pr.limit_rounded_down(doc["delta_e"]) == 3.0
     r = CliRunner().invoke(main, ["predict", "--max-dmap", "1", "--delta-e", "2"])
-    assert r.exit_code == 2 and "give --delta-e X or --max-dmap P" in r.output
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.exit_code == 2 and len(lines) == 1 and lines[0].startswith("fidelity: error: ")
+    assert "--delta-e" in lines[0] and "--max-dmap" in lines[0]
 
 
 def test_delta_e_limit_rounds_down_for_printing():

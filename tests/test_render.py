@@ -132,12 +132,14 @@ def test_render_cli_writes_json_exr_and_png(tmp_path) -> None:
                                     "--renderer", "closed-form", "--out", str(out),
                                     "--json", str(js)])
     assert res.exit_code == 0, res.output
-    assert "mean ΔE00" in res.output
     d = json.loads(js.read_text())
     for key in ("mean_delta_e", "max_delta_e", "renderer", "variant", "seconds", "patches",
                 "conventions", "camera"):
         assert key in d
     assert d["renderer"] == "closed-form" and d["variant"] is None and d["mean_delta_e"] < 0.01
+    same = render_chart("ideal", "D65").measurement  # what the command measured
+    assert d["mean_delta_e"] == pytest.approx(same.mean_delta_e, abs=1e-9)
+    assert d["max_delta_e"] == pytest.approx(same.max_delta_e, abs=1e-9)
     assert [p["name"] for p in d["patches"]] == list(load_chart("safecolor").patch_names)
     for p in d["patches"]:
         assert {"name", "delta_e", "lab", "srgb", "camera_rgb"} <= set(p)
