@@ -357,7 +357,12 @@ def make_view(pixels: np.ndarray | Pyramid, region: tuple[int, int, int, int], m
         peak = float(np.percentile(arr[::step, ::step].max(axis=-1), 99.0))
     if not peak > 0.0:
         raise InvalidValueError("no colour chart found: the image is black")
-    linear = np.clip(arr * np.float32(1.0 / peak), 0.0, 1.0)
+    with np.errstate(over="ignore"):
+        scale = np.float32(1.0 / peak)
+    if np.isfinite(scale):
+        linear = np.clip(arr * scale, 0.0, 1.0)
+    else:  # a denormal peak (values ~1e-40): 1/peak overflows single precision
+        linear = np.clip(arr.astype(np.float64) / peak, 0.0, 1.0).astype(np.float32)
     bgr8 = _ENCODE_LUT[(linear[..., ::-1] * 4095 + 0.5).astype(np.int32)]
     return View(linear=linear, bgr8=np.ascontiguousarray(bgr8), to_image=to_image), peak
 

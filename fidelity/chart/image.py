@@ -375,8 +375,8 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None,
     ------
     InputFileError
         Missing, unreadable, truncated or corrupt file; one-channel image; channels that are not
-        R, G, B; unknown or ambiguous layer; more pixels than the limit; a file name that is
-        not valid UTF-8 (OpenImageIO cannot open it). The message names the file.
+        R, G, B; unknown or ambiguous layer; more pixels than the limit. The message names the
+        file (a name that is not valid UTF-8 is read through a link of a plain name).
     """
 
     from fidelity.errors import unknown_name
@@ -387,14 +387,31 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None,
     limit = pixel_limit(max_pixels)
     p = require_file(path, "image")
     shown = display_path(p)
-    if shown != str(p):
-        raise InputFileError(f"{shown}: the file name is not valid UTF-8, which the image "
-                             "reader (OpenImageIO) cannot open; rename the file")
     try:
-        return _read(p, layer, bayer, limit)
+        if shown == str(p):
+            return _read(p, layer, bayer, limit)
+        return _read_through_link(p, shown, layer, bayer, limit)
     except UnicodeDecodeError:  # OpenImageIO passes on names and messages from the file
-        raise InputFileError(f"{p}: corrupt image (its header holds text that is not "
+        raise InputFileError(f"{shown}: corrupt image (its header holds text that is not "
                              "UTF-8)") from None
+
+
+def _read_through_link(p: Path, shown: str, layer: str | None, bayer: str | None,
+                       limit: int) -> Image:
+    """:func:`_read` of a file whose name is not valid UTF-8 (OpenImageIO takes names as UTF-8
+    text): through a symbolic link of a plain name in a temporary folder, the image's path and
+    the messages naming the file itself."""
+    from dataclasses import replace
+
+    suffix = "".join(c for c in p.suffix if c.isascii() and (c.isalnum() or c == "."))
+    with tempfile.TemporaryDirectory(prefix="fidelity-") as folder:
+        link = Path(folder) / f"image{suffix}"
+        os.symlink(os.path.abspath(p), link)
+        try:
+            image = _read(link, layer, bayer, limit)
+        except InputFileError as exc:
+            raise InputFileError(str(exc).replace(str(link), shown)) from None
+    return replace(image, path=p)
 
 
 def _read(p: Path, layer: str | None, bayer: str | None, limit: int) -> Image:
@@ -484,15 +501,15 @@ def write_exr(path: str | os.PathLike[str], image: np.ndarray,
     import OpenImageIO as oiio
 
     img = np.ascontiguousarray(image, dtype=np.float32)
-    with atomic_output(path) as tmp:
-        out = oiio.ImageOutput.create(str(path))
+    with atomic_output(path) as tmp, _plain_name(tmp) as name:
+        out = oiio.ImageOutput.create("openexr")
         if out is None:
             raise InputFileError(f"{path}: cannot create EXR writer ({oiio.geterror()})")
         spec = oiio.ImageSpec(img.shape[1], img.shape[0], 3, oiio.FLOAT)
         spec.channelnames = ("R", "G", "B")
         spec.attribute("compression", "zip")
         spec.attribute("fidelity:content", content)
-        if not out.open(str(tmp), spec):
+        if not out.open(name, spec):
             raise InputFileError(f"{path}: cannot write EXR ({out.geterror()})")
         _finish(out, out.write_image(img), path, "EXR")
     return Path(path)
@@ -506,14 +523,29 @@ def write_png(path: str | os.PathLike[str], image: np.ndarray, bits: int) -> Pat
         data, fmt = np.round(np.clip(image, 0, 1) * 65535).astype(np.uint16), oiio.UINT16
     else:
         data, fmt = np.round(np.clip(image, 0, 1) * 255).astype(np.uint8), oiio.UINT8
-    with atomic_output(path) as tmp:
-        out = oiio.ImageOutput.create(str(path))
+    with atomic_output(path) as tmp, _plain_name(tmp) as name:
+        out = oiio.ImageOutput.create("png")
         spec = oiio.ImageSpec(data.shape[1], data.shape[0], 3, fmt)
         spec.attribute("oiio:ColorSpace", "sRGB")
-        if out is None or not out.open(str(tmp), spec):
+        if out is None or not out.open(name, spec):
             raise InputFileError(f"{path}: cannot write PNG ({oiio.geterror()})")
         _finish(out, out.write_image(np.ascontiguousarray(data)), path, "PNG")
     return Path(path)
+
+
+@contextlib.contextmanager
+def _plain_name(path: Path) -> Iterator[str]:
+    """A name OpenImageIO can open for ``path`` (it takes names as UTF-8 text): the path
+    itself, or, when it is not valid UTF-8, a symbolic link of a plain name to it in a
+    temporary folder."""
+    if display_path(path) == str(path):
+        yield str(path)
+        return
+    suffix = "".join(c for c in path.suffix if c.isascii() and (c.isalnum() or c == "."))
+    with tempfile.TemporaryDirectory(prefix="fidelity-") as folder:
+        link = Path(folder) / f"file{suffix}"
+        os.symlink(os.path.abspath(path), link)
+        yield str(link)
 
 
 def _finish(out: Any, written: bool, path: str | os.PathLike[str], kind: str) -> None:

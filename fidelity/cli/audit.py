@@ -18,6 +18,7 @@ from fidelity.cli.options import (
     measure_request,
     report_paths,
 )
+from fidelity.fileio import display_path
 from fidelity.prediction.table import SIZES
 
 
@@ -87,9 +88,9 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
         write_json_output(STDOUT, chart_report_json(report))
     src = report.source
     assert isinstance(src, ImageSource)
-    click.echo(f"{image}: {src.image.format} {src.image.pixel_type} "
+    click.echo(f"{display_path(image)}: {src.image.format} {src.image.pixel_type} "
                f"{src.image.width}x{src.image.height}, {src.encoding} pixels")
     for line in summary_lines(report):
         click.echo(line)
     for p in written:
-        click.echo(f"wrote {p}")
+        click.echo(f"wrote {display_path(p)}")

@@ -83,7 +83,7 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
     from fidelity.chart.measure import ReadOptions
     from fidelity.compare import compare_charts
     from fidelity.errors import FidelityError
-    from fidelity.fileio import check_outputs
+    from fidelity.fileio import check_outputs, display_path
     from fidelity.records import GateResult
     from fidelity.report.compare import comparison_lines, write_comparison_report
     from fidelity.report.junit import write_junit
@@ -127,7 +127,7 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
 
         where = write_json_output(json_path, comparison_json(report))
         if not to_stdout:
-            click.echo(f"wrote {where}")
+            click.echo(f"wrote {display_path(where)}")
     if html_path is not None:
-        click.echo(f"wrote {html_path}")
+        click.echo(f"wrote {display_path(html_path)}")
     sys.exit(report.exit_code)

@@ -27,6 +27,7 @@ from fidelity.cli.options import (
     report_paths,
 )
 from fidelity.errors import FidelityError
+from fidelity.fileio import display_path
 from fidelity.prediction.table import CLASS_COLUMNS, SIZES
 from fidelity.prediction.verdict import EXIT_ERROR
 
@@ -181,7 +182,8 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
              for case, jp, hp in zip(cases, json_paths, html_paths, strict=True)]
     for case in cases:
         if many:
-            click.echo(f"{case.subject}:" if case.error is None else f"{case.subject}: error")
+            subject = display_path(case.subject)
+            click.echo(f"{subject}:" if case.error is None else f"{subject}: error")
         if case.error is not None or case.report is None:
             _error_line(case.error or "no report")
             continue

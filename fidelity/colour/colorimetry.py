@@ -558,7 +558,14 @@ def matrix_rgb_to_linear_srgb(
         if np.allclose(xy, [0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290], atol=5e-5):
             return np.eye(3)
         white = xy[6:]
-        to_xyz = normalised_primary_matrix(xy[:6].reshape(3, 2), white)
+        primaries = xy[:6].reshape(3, 2)
+        corners = np.hstack([primaries, np.ones((3, 1))])
+        if abs(np.linalg.det(corners)) < 1e-9:  # twice the area of the primaries' triangle
+            shown = [float(f"{v:.6g}") for v in xy]
+            raise InvalidValueError(f"chromaticities {shown}: the three primaries lie "
+                                    f"on one line (or point) of the xy diagram: no RGB "
+                                    f"colourspace has them; give --colourspace")
+        to_xyz = normalised_primary_matrix(primaries, white)
     if chromatic_adaptation not in CHROMATIC_ADAPTATION_METHODS:
         raise unknown_name("chromatic adaptation transform", chromatic_adaptation,
                            CHROMATIC_ADAPTATION_METHODS)
