@@ -55,7 +55,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "evaluate": ("fidelity.cli.evaluate:evaluate",
                  "Run detectors on a COCO image folder and print COCO box AP."),
     "gate": ("fidelity.cli.gate:gate",
-             "Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 error."),
+             "Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 input error, 3 bug."),
     "info": ("fidelity.cli.info:info",
              "Versions, Mitsuba variant, ONNX providers, chart detection, shared data found."),
     "predict": ("fidelity.cli.predict:predict_cmd",

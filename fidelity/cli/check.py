@@ -37,7 +37,8 @@ DEFAULT_OUTPUT_DIR = "fidelity-report"
 @click.option("--reference", type=click.Choice(["scene", "safecolor"]), default="scene",
               show_default=True, help="Reference colours: the scene's spectra or the paper's Lab.")
 @click.option("--max-delta-e", type=float, default=DEFAULT_MAX_DELTA_E, show_default=True,
-              help="Pass when the mean ΔE00 <= X (SAFE-COLOR: ΔE <= 3 keeps ΔmAP below 1 %).")
+              help="Pass when the mean ΔE00 <= X (default: SAFE-COLOR's published threshold; "
+                   "fidelity predict --delta-e X gives the loss measured at X).")
 @click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
               help="Detector size class for the predicted loss.")
 @click.option("--table", default=None, help="Prediction table (name or JSON path).")
@@ -63,7 +64,7 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
     """Is this camera model's colour good enough for perception testing?
 
     Renders the spectral colour chart through the camera, measures ΔE00, predicts the detection
-    loss and prints a verdict (exit 0 pass, 1 fail, 2 error); writes an HTML and a JSON report.
+    loss and prints a verdict (exit 0 pass, 1 fail, 2 input error, 3 internal error); writes an HTML and a JSON report.
     Several CAMERAS are checked one by one (reports in OUT/CAMERA-NAME/); the exit code is the
     worst.
 

@@ -74,7 +74,7 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
     is matched to the real one on the neutral patches (--normalise), and each patch is
     compared in CIEDE2000; the loss the difference would cost a detector is predicted
     (classic and direction-aware) and, with --measure, measured on COCO. With --max-delta-e
-    or --max-dmap: exit 0 pass, 1 fail, 2 error, as fidelity gate.
+    or --max-dmap: exit 0 pass, 1 fail, 2 input error, 3 bug, as fidelity gate.
 
     \b
     fidelity compare sim.exr photo.jpg --real-corners 102,88,610,95,604,420,98,414

@@ -105,7 +105,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
          reference: str, illuminant: str, renderer: str, junit: Path | None,
          json_path: Path | None, html_path: Path | None,
          max_pixels: int | None, bound: str) -> None:
-    """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 error.
+    """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 input error, 3 bug.
 
     \b
     fidelity gate render.exr --max-delta-e 3
@@ -132,6 +132,9 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
                                                           bayer, colourspace)):
         raise click.UsageError("--corners, --encoding, --exposure, --layer, --bayer and "
                                "--colourspace apply to an IMAGE, not to --camera")
+    if images and renderer != "closed-form" and not from_settings("renderer"):
+        raise click.UsageError("--renderer applies to --camera (a camera model rendered), not "
+                               "to an IMAGE")
     from fidelity.chart.measure import ReadOptions
     from fidelity.check import gate as gate_subjects
     from fidelity.records import GateResult, gate_exit_code

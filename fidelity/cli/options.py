@@ -16,7 +16,8 @@ The vocabulary (also in the docs' command table):
 - ``--camera``, ``--illuminant``, ``--reference``, ``--table``, ``--size``: as in ``check``;
 - ``--out DIR``: the folder a command writes several files to; ``--json FILE`` (``-`` for
   stdout: then nothing else is printed there), ``--html FILE``, ``--junit FILE``: one report;
-- ``-q/--quiet``: print nothing but errors (and JSON asked for on stdout); ``-v/--verbose``:
+- ``-q/--quiet``: print nothing but errors (and JSON asked for on stdout; with ``--json -``
+  and no ``-q`` the ordinary printing goes to stderr); ``-v/--verbose``:
   show the traceback of an internal error; ``--progress/--no-progress``: progress bars (default:
   when stderr is a terminal; never in a CI log).
 """
@@ -390,17 +391,22 @@ def _state() -> dict[str, Any]:
 
 
 def common_options(f: F) -> F:
-    """Add ``-q/--quiet`` and ``-v/--verbose`` to a command. Quiet (or ``--json -``) sends the
-    command's ordinary printing to nowhere; JSON asked for on stdout still goes there
-    (:func:`write_json_output`)."""
+    """Add ``-q/--quiet`` and ``-v/--verbose`` to a command. Quiet sends the command's ordinary
+    printing to nowhere; ``--json -`` sends it to standard error, so that standard output holds
+    the JSON alone (:func:`write_json_output`) and the verdict still reaches the log."""
 
     @functools.wraps(f)
     def wrapper(*args: Any, quiet: bool, verbose: bool, **kwargs: Any) -> Any:
         state = _state()
         state["verbose"] = bool(state.get("verbose")) or verbose
         state["stdout"] = sys.stdout
-        silent = quiet or str(kwargs.get("json_path") or "") == STDOUT
-        with contextlib.redirect_stdout(io.StringIO()) if silent else contextlib.nullcontext():
+        to_stdout = str(kwargs.get("json_path") or "") == STDOUT
+        redirect: contextlib.AbstractContextManager[Any] = contextlib.nullcontext()
+        if quiet:
+            redirect = contextlib.redirect_stdout(io.StringIO())
+        elif to_stdout:
+            redirect = contextlib.redirect_stdout(sys.stderr)
+        with redirect:
             return f(*args, **kwargs)
 
     wrapper = click.option("-v", "--verbose", is_flag=True,
@@ -443,8 +449,9 @@ def bound_option(f: F) -> F:
     return click.option(
         "--bound", type=click.Choice(["classic", "directional"]), default="classic",
         show_default=True,
-        help="Prediction that decides a --max-dmap verdict: the classic worst case over every "
-             "transform, or the direction-aware one (both are reported).")(f)
+        help="Prediction that decides a verdict on the predicted loss (--max-dmap of gate and "
+             "compare): the classic worst case over every transform, or the direction-aware one "
+             "(both are reported).")(f)
 
 
 def measure_options(f: F) -> F:
