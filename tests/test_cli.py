@@ -127,7 +127,7 @@ def test_the_light_core_gates_an_exr_without_the_extras(tmp_path):
     EXR: run with Mitsuba, onnxruntime and the COCO scorers made unimportable."""
     r = CliRunner().invoke(main, ["render", "--camera", "ideal", "--out", str(tmp_path)])
     assert r.exit_code == 0, r.output
-    exr = tmp_path / "chart_linear.exr"
+    exr = tmp_path / "raw_camera.exr"
     blocked = ("mitsuba", "drjit", "onnxruntime", "pycocotools", "faster_coco_eval", "ray")
     code = ("import sys\n"
             f"for m in {blocked!r}:\n    sys.modules[m] = None  # import fails\n"

@@ -16,7 +16,7 @@ def chart_png(tmp_path_factory):
     out = tmp_path_factory.mktemp("render")
     r = CliRunner().invoke(main, ["render", "--out", str(out), "-q"])
     assert r.exit_code == 0, r.output
-    return out / "chart_display.png"
+    return out / "developed.png"
 
 
 def test_json_to_stdout_keeps_the_verdict_on_stderr(chart_png) -> None:

@@ -107,11 +107,11 @@ def renders(tmp_path_factory) -> Path:
 
 
 def _png(renders: Path, camera: str) -> str:
-    return str(renders / camera / "chart_display.png")
+    return str(renders / camera / "developed.png")
 
 
 def _exr(renders: Path, camera: str) -> str:
-    return str(renders / camera / "chart_linear.exr")
+    return str(renders / camera / "raw_camera.exr")
 
 
 def _tables_store(out: Path) -> str:

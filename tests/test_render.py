@@ -143,9 +143,9 @@ def test_render_cli_writes_json_exr_and_png(tmp_path) -> None:
     assert [p["name"] for p in d["patches"]] == list(load_chart("safecolor").patch_names)
     for p in d["patches"]:
         assert {"name", "delta_e", "lab", "srgb", "camera_rgb"} <= set(p)
-    exr = oiio.ImageBuf(str(out / "chart_linear.exr"))
+    exr = oiio.ImageBuf(str(out / "raw_camera.exr"))
     assert exr.spec().format == oiio.FLOAT and exr.spec().nchannels == 3
-    png = oiio.ImageBuf(str(out / "chart_display.png"))
+    png = oiio.ImageBuf(str(out / "developed.png"))
     assert png.spec().width == exr.spec().width and png.spec().format == oiio.UINT16
 
 

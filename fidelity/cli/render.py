@@ -34,6 +34,11 @@ def format_report(r: ChartRender) -> str:
     return "\n".join(lines)
 
 
+#: What ``render --out`` writes: the raw camera RGB and the developed image.
+RAW_FILE = "raw_camera.exr"
+DEVELOPED_FILE = "developed.png"
+
+
 @click.command()
 @click.option("--camera", default=DEFAULT_CAMERA, show_default=True,
               help="Built-in camera name (see --list-cameras) or a TOML/YAML camera file.")
@@ -58,9 +63,9 @@ def format_report(r: ChartRender) -> str:
 @click.option("--seed", type=int, default=None, help="Noise/sampler seed (default: camera's).")
 @click.option("--variant", default=None, help="Force a Mitsuba variant (default: probed).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Folder for chart_linear.exr (raw camera RGB before white balance and colour "
-                   "correction, float32) and chart_display.png (the developed sRGB image: "
-                   "audit this one to check the render).")
+              help="Folder for raw_camera.exr (raw camera RGB before white balance and colour "
+                   "correction, float32: not an image to audit) and developed.png (the developed "
+                   "sRGB image: audit this one to check the render).")
 @json_option("Write the full result as JSON")
 @click.option("--list-cameras", is_flag=True, help="List the built-in cameras and exit.")
 @common_options
@@ -84,7 +89,7 @@ def render(camera: str, illuminant: str, renderer: str, spp: int | None,
     from fidelity.fileio import check_outputs
 
     files = {} if out_dir is None else {f"--out ({name})": out_dir / name for name in
-                                        ("chart_linear.exr", "chart_display.png")}
+                                        (RAW_FILE, DEVELOPED_FILE)}
     from fidelity.camera.model import camera_files
 
     check_outputs({**files, "--json": json_path},
@@ -97,10 +102,16 @@ def render(camera: str, illuminant: str, renderer: str, spp: int | None,
     if out_dir is not None:
         from fidelity.chart.image import write_exr, write_png
 
-        exr = write_exr(out_dir / "chart_linear.exr", result.linear_image)
+        exr = write_exr(out_dir / RAW_FILE, result.linear_image)
         bits = result.camera.quantisation_bits or 16
-        png = write_png(out_dir / "chart_display.png", result.display_image, bits)
-        report["files"] = {"linear_exr": str(exr), "display_png": str(png)}
+        png = write_png(out_dir / DEVELOPED_FILE, result.display_image, bits)
+        report["files"] = {"raw_exr": str(exr), "developed_png": str(png)}
     if json_path is not None:
         write_json_output(json_path, report)
     click.echo(format_report(result))
+    if out_dir is not None:
+        from fidelity.fileio import display_path
+
+        click.echo(f"wrote {display_path(png)} (the developed sRGB image: audit this one)")
+        click.echo(f"wrote {display_path(exr)} (raw camera RGB before white balance and colour "
+                   "correction)")

@@ -58,7 +58,7 @@ def _commands(w: dict[str, Any], out: Path) -> dict[str, tuple[list[Any], Path]]
     an earlier run (which must survive)."""
     c = w.get("coco")
     cmds: dict[str, tuple[list[Any], Path]] = {
-        "render --out": (["render", "--out", out / "r", "-q"], out / "r" / "chart_linear.exr"),
+        "render --out": (["render", "--out", out / "r", "-q"], out / "r" / "raw_camera.exr"),
         "audit --html": (["audit", w["image"], "--corners", "12,12,112,12,112,72,12,72",
                           "--html", out / "a.html"], out / "a.html"),
         "calibrate --json": (["calibrate", "--targets", "1-6", "--json", out / "c.json", "-q"],

@@ -63,9 +63,9 @@ CASES: list[tuple[str, Callable[[dict[str, Path]], list[Any]], str]] = [
                                         w["camera"]], "--json"),
     ("render --json camera's CSV", lambda w: ["render", "--camera", w["camera"], "--json",
                                               w["csv"]], "--json"),
-    ("render --out over chart_display.png", lambda w: [
+    ("render --out over developed.png", lambda w: [
         "render", "--camera", w["camera"], "--out", w["dir"] / "o", "--json",
-        w["dir"] / "o" / "chart_display.png"], "--json"),
+        w["dir"] / "o" / "developed.png"], "--json"),
     ("predict --json table", lambda w: ["predict", "--delta-e", "3", "--table", w["table"],
                                         "--json", w["table"]], "--json"),
     ("calibrate --csv chart", lambda w: ["calibrate", "--chart", w["chart"], "--csv",
@@ -89,7 +89,7 @@ def test_outputs_never_write_over_inputs(case: str, argv: Callable[[dict[str, Pa
                                          option: str, world: dict[str, Path]) -> None:
     (world["dir"] / "validation.md").write_text("my notes\n")
     (world["dir"] / "o").mkdir(exist_ok=True)
-    (world["dir"] / "o" / "chart_display.png").write_bytes(world["image"].read_bytes())
+    (world["dir"] / "o" / "developed.png").write_bytes(world["image"].read_bytes())
     (world["dir"] / "store").mkdir(exist_ok=True)
     before = fingerprint([world["dir"]])
     outcome = run(*argv(world))
