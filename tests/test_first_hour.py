@@ -48,3 +48,16 @@ def test_help_numbers_come_from_the_tool() -> None:
     for command in ("check", "gate", "compare"):
         out = " ".join(CliRunner().invoke(main, [command, "--help"]).output.split())
         assert "3 internal error" in out or "3 bug" in out, command
+
+
+def test_gate_names_the_camera_and_every_file_it_wrote(tmp_path) -> None:
+    files = [tmp_path / "g.json", tmp_path / "g.html", tmp_path / "j.xml"]
+    r = CliRunner().invoke(main, ["gate", "--camera", "nikon-5100", "--max-delta-e", "3",
+                                  "--json", str(files[0]), "--html", str(files[1]),
+                                  "--junit", str(files[2])])
+    assert r.exit_code == 0
+    lines = r.stdout.splitlines()
+    assert lines[0].startswith("camera nikon-5100,")
+    assert [ln.removeprefix("wrote ") for ln in lines if ln.startswith("wrote ")] == [
+        str(f) for f in files]
+    assert all(f.stat().st_size > 0 for f in files)

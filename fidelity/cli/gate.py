@@ -50,21 +50,22 @@ def _write_junit(junit: Path, cases: Sequence[GateResult]) -> None:
 
 
 def write_reports(result: GateResult, json_path: Path | None, html_path: Path | None,
-                  inputs: Sequence[Path]) -> GateResult:
+                  inputs: Sequence[Path]) -> tuple[GateResult, list[Path]]:
     """Write a gated subject's JSON and HTML reports (never over an ``inputs`` file); a
-    failure to write them becomes the subject's error, as an input error does."""
+    failure to write them becomes the subject's error, as an input error does. Returns the
+    result and the files written."""
     from dataclasses import replace
 
     from fidelity.report.chart import write_chart_report
 
     if result.report is None:
-        return result
+        return result, []
     try:
-        write_chart_report(result.report, json_path=json_path, html_path=html_path,
-                           protect=list(inputs))
+        written = write_chart_report(result.report, json_path=json_path, html_path=html_path,
+                                     protect=list(inputs))
     except (FidelityError, OSError) as exc:
-        return replace(result, report=None, error=str(exc))
-    return result
+        return replace(result, report=None, error=str(exc)), []
+    return result, written
 
 
 @click.command()
@@ -181,19 +182,26 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
                          colourspace=colourspace, bayer=bayer, max_pixels=max_pixels),
         reference=reference, illuminant=illuminant, renderer=renderer, size=size, table=table,
         bound=bound)
-    cases = [write_reports(case, jp, hp, images)
-             for case, jp, hp in zip(cases, json_paths, html_paths, strict=True)]
-    for case in cases:
+    done = [write_reports(case, jp, hp, images)
+            for case, jp, hp in zip(cases, json_paths, html_paths, strict=True)]
+    cases = [case for case, _ in done]
+    for case, written in done:
         if many:
             subject = display_path(case.subject)
             click.echo(f"{subject}:" if case.error is None else f"{subject}: error")
         if case.error is not None or case.report is None:
             _error_line(case.error or "no report")
             continue
+        if camera is not None:
+            src = case.report.source
+            click.echo(f"camera {src.title}, illuminant {illuminant}, {renderer} renderer")
         for line in summary_lines(case.report):
             click.echo(("  " if many else "") + line)
+        for path in written:
+            click.echo(("  " if many else "") + f"wrote {display_path(path)}")
     if junit is not None:
         _write_junit(junit, cases)
+        click.echo(f"wrote {display_path(junit)}")
     if to_stdout and cases[0].report is not None:
         from fidelity.cli.options import write_json_output
         from fidelity.report.jsonform import chart_report_json
