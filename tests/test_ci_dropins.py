@@ -164,7 +164,11 @@ def test_dockerfile_installs_what_ci_installs():
     docker = (REPO / "Dockerfile").read_text()
     ci = (REPO / ".ci" / "run").read_text()
     assert "libllvm19" in docker and "libllvm19" in ci  # Mitsuba's llvm_* variants
-    assert re.search(r'pip install "\.\[render,coco\]"', docker)
+    # the core by default, the extras CI tests as a build argument; a pinned base; not root
+    assert re.search(r'pip install "\.\$\{EXTRAS:\+\[\$\{EXTRAS\}\]\}"', docker)
+    assert "--build-arg EXTRAS=render,coco" in docker
+    assert re.search(r"^FROM python:\d+\.\d+\.\d+-slim-\w+$", docker, re.M)
+    assert re.search(r"^USER (?!root)\w+$", docker, re.M)
     # one OpenCV build, the headless contrib one (cv2.mcc, no libGL)
     import tomllib
 
