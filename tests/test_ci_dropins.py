@@ -154,7 +154,7 @@ def test_github_action_gate_step(renders, tmp_path, images, limit, code):
     r = subprocess.run(["bash", "-c", _gate_script()], env=env, capture_output=True, text=True,
                        cwd=tmp_path)
     assert r.returncode == 0, r.stderr  # the step itself succeeds; the verdict step exits
-    assert output.read_text().strip() == f"exit-code={code}"
+    assert output.read_text().splitlines()[0] == f"exit-code={code}"
     _valid_junit(report_dir / "junit.xml")
     htmls = list(report_dir.glob("*.html"))
     assert len(htmls) == len(images.split())
@@ -195,3 +195,62 @@ def test_container_builds_and_checks_the_default_camera(tmp_path):
     doc = json.loads(r.stdout)
     assert doc["command"] == "check" and np.isfinite(doc["mean_delta_e"])
     assert doc["verdict"]["passed"] is True and doc["verdict"]["value"] == doc["mean_delta_e"]
+
+
+def _step(step_id: str | None = None, name: str | None = None) -> dict:
+    (step,) = [s for s in _action()["runs"]["steps"]
+               if (step_id and s.get("id") == step_id) or (name and s.get("name") == name)]
+    return step
+
+
+def test_github_action_installs_its_own_checkout(tmp_path):
+    """The install step as the runner runs it: in the caller's repository, GITHUB_ACTION_PATH
+    the Action's checkout; with no package input it installs that checkout, not the caller."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    log = tmp_path / "pip-args"
+    (bin_dir / "python").write_text(f'#!/bin/sh\necho "$@" > {log}\n')
+    (bin_dir / "python").chmod(0o755)
+    caller = tmp_path / "caller"
+    caller.mkdir()
+    step = _step(name="Install camera-fidelity")
+    assert "${{ github.action_path }}" not in step["run"]  # the runner exports it to the step
+    env = {**os.environ, "PATH": f"{bin_dir}:{os.environ['PATH']}",
+           "GITHUB_ACTION_PATH": str(REPO), "FIDELITY_PACKAGE": ""}
+    r = subprocess.run(["bash", "-c", step["run"]], env=env, cwd=caller, capture_output=True,
+                       text=True)
+    assert r.returncode == 0, r.stderr
+    assert log.read_text().split()[-1] == str(REPO)
+    env["FIDELITY_PACKAGE"] = "camera-fidelity==0.1.0"
+    subprocess.run(["bash", "-c", step["run"]], env=env, cwd=caller, check=True)
+    assert log.read_text().split()[-1] == "camera-fidelity==0.1.0"
+
+
+def test_github_action_leaves_thresholds_to_the_project_and_names_its_artifact(renders,
+                                                                              tmp_path):
+    """Empty thresholds: the caller's [tool.fidelity] settings decide (here a strict 0.1 that
+    fails the good render); the artifact is named after the job and matrix entry."""
+    action = _action()
+    assert action["inputs"]["max-delta-e"]["default"] == ""
+    assert action["inputs"]["package"]["default"] == ""
+    (upload,) = [s for s in action["runs"]["steps"]
+                 if s.get("uses", "").startswith("actions/upload-artifact@")]
+    assert upload["with"]["name"] == "${{ steps.gate.outputs.artifact }}"
+    caller = tmp_path / "caller"
+    caller.mkdir()
+    (caller / "pyproject.toml").write_text("[tool.fidelity]\nmax_delta_e = 0.1\n")
+    output = tmp_path / "github_output"
+    env = {**os.environ, "FIDELITY_IMAGES": str(renders["good"]), "FIDELITY_CAMERA": "",
+           "FIDELITY_MAX_DELTA_E": "", "FIDELITY_MAX_DMAP": "", "FIDELITY_ARGS": "",
+           "FIDELITY_REPORT_DIR": str(tmp_path / "reports"), "FIDELITY_ARTIFACT": "",
+           "FIDELITY_JOB": "colour", "FIDELITY_MATRIX_INDEX": "2",
+           "GITHUB_OUTPUT": str(output)}
+    r = subprocess.run(["bash", "-c", _step("gate")["run"]], env=env, capture_output=True,
+                       text=True, cwd=caller)
+    assert r.returncode == 0, r.stderr
+    assert output.read_text().split() == ["exit-code=1", "artifact=fidelity-report-colour-2"]
+    env.update(FIDELITY_ARTIFACT="mine", FIDELITY_MAX_DELTA_E="3")
+    output.unlink()
+    subprocess.run(["bash", "-c", _step("gate")["run"]], env=env, cwd=caller, check=True,
+                   capture_output=True)
+    assert output.read_text().split() == ["exit-code=0", "artifact=mine"]
