@@ -6,6 +6,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from xml.etree import ElementTree
 
 import click
 import pytest
@@ -81,22 +82,31 @@ def test_settings_file_sets_defaults_and_the_command_line_wins(tmp_path, monkeyp
                         'max_delta_e = 0.5\n\n[tool.fidelity.check]\nout = "reports"\n')
     (tmp_path / "sub").mkdir()
     monkeypatch.chdir(tmp_path / "sub")  # found from a folder below
+    def report(folder: Path) -> dict:
+        return json.loads((folder / "report.json").read_text())
+
     r = CliRunner().invoke(main, ["check"])
     assert r.exit_code == 0, r.output
-    assert "camera ideal" in r.stdout and "<= 0.5" in r.stdout
-    assert (tmp_path / "reports" / "report.json").is_file()  # relative to the settings file
+    doc = report(tmp_path / "reports")  # relative to the settings file
+    assert doc["source"]["camera"] == "ideal"
+    assert doc["verdict"]["criterion"]["kind"] == "max-delta-e"
+    assert doc["verdict"]["limit"] == 0.5 and doc["verdict"]["passed"] is True
     r = CliRunner().invoke(main, ["check", "--max-delta-e", "0.0001", "--out", "x"])
-    assert r.exit_code == 1 and "<= 0.0001" not in r.stdout and "> 0.0001" in r.stdout
+    assert r.exit_code == 1, r.output
+    verdict = report(tmp_path / "sub" / "x")["verdict"]
+    assert (verdict["limit"], verdict["passed"], verdict["reason"]) == (0.0001, False,
+                                                                        "over-limit")
+    assert verdict["value"] > 0.0001
     r = CliRunner().invoke(main, ["--no-config", "check", "--out", "y"])
-    assert "camera nikon-5100" in r.stdout
+    assert report(tmp_path / "sub" / "y")["source"]["camera"] == "nikon-5100"
 
 
 @pytest.mark.parametrize("text, where", [
-    ("max_delta_e = 'x'\n", ": max_delta_e: expected a float"),
-    ("max_delta = 3\n", ": max_delta: unknown setting"),
-    ("[nosuch]\ncamera = 'ideal'\n", ": nosuch: not a command"),
-    ("[gate]\nmax_dmap = true\n", ": gate.max_dmap: expected a float"),
-    ("camera = \n", "not a TOML file"),
+    ("max_delta_e = 'x'\n", ": max_delta_e: "),
+    ("max_delta = 3\n", ": max_delta: "),
+    ("[nosuch]\ncamera = 'ideal'\n", ": nosuch: "),
+    ("[gate]\nmax_dmap = true\n", ": gate.max_dmap: "),
+    ("camera = \n", "fidelity.toml: "),  # not TOML: no key to name, the file is named
 ])
 def test_a_bad_settings_file_is_one_line_naming_file_and_key(tmp_path, monkeypatch, text, where):
     monkeypatch.chdir(tmp_path)
@@ -115,11 +125,24 @@ def test_a_ci_line_shrinks_to_gate_image(tmp_path, monkeypatch):
     write_png(tmp_path / "render.png", render_chart("nikon-5100").display_image, 16)
     _settings(tmp_path, "camera = 'nikon-5100'\nmax_delta_e = 3\n"
                         "[gate]\njunit = 'colour.xml'\n", "fidelity.toml")
+    def junit() -> tuple[str, dict[str, str]]:
+        """The JUnit file's failure count and its recorded properties."""
+        root = ElementTree.parse(tmp_path / "colour.xml").getroot()
+        props = {p.get("name"): p.get("value") for p in root.iter("property")}
+        return root.get("failures"), props
+
     r = CliRunner().invoke(main, ["gate", "render.png"])  # the image wins over the camera
     assert r.exit_code == 0, r.output
-    assert "PASS" in r.stdout and (tmp_path / "colour.xml").is_file()
+    failures, props = junit()
+    assert failures == "0" and props["criterion"] == "max-delta-e"
+    assert float(props["limit"]) == 3.0 and float(props["mean_delta_e"]) <= 3.0
     r = CliRunner().invoke(main, ["gate", "render.png", "--max-dmap", "0.01"])
-    assert r.exit_code == 1 and "predicted ΔmAP" in r.stdout  # --max-dmap replaces the ΔE gate
+    assert r.exit_code == 1, r.output
+    failures, props = junit()  # --max-dmap replaces the ΔE gate
+    assert failures == "1" and props["criterion"] == "max-dmap"
+    assert float(props["limit"]) == 0.01
+    assert float(props["value"]) == pytest.approx(float(props["dmap_points"]))
+    assert float(props["value"]) > 0.01
 
 
 def test_the_light_core_gates_an_exr_without_the_extras(tmp_path):

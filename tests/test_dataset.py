@@ -5,6 +5,7 @@ from __future__ import annotations
 import colorsys
 import hashlib
 import io
+import re
 
 import numpy as np
 import pytest
@@ -198,25 +199,53 @@ def test_dataset_command(tmp_path) -> None:
                                          str(tmp_path / "out"), "--no-progress",
                                          *map(str, args)])
 
+    def cells(r) -> dict[str, dict[str, object]]:  # type: ignore[no-untyped-def]
+        """The fields of each printed cell line: SUBSET: param P, wrote N, kept K existing."""
+        assert r.exit_code == 0, r.output
+        out: dict[str, dict[str, object]] = {}
+        for ln in r.output.splitlines():
+            subset, _, rest = ln.partition(": ")
+            m = re.fullmatch(r"param (\S+), wrote (\d+), kept (\d+) existing, \S+ s", rest)
+            if m:
+                out[subset] = {"param": None if m[1] == "-" else float(m[1]),
+                               "wrote": int(m[2]), "kept": int(m[3])}
+            elif rest.startswith("skipped: "):
+                out[subset] = {"skipped": True}
+        return out
+
     r = run("--transforms", "contrast-inc", "--targets", "3")  # default: one worker per core
     param = calibrate_transform("contrast-inc", 3.0).param
-    assert r.exit_code == 0, r.output
-    assert f"contrast-inc_de3: param {param:.6g}, wrote 3, kept 0 existing" in r.output
-    assert sorted(p.name for p in (tmp_path / "out/contrast-inc_de3").iterdir()) == sorted(before)
+    c = cells(r)
+    assert set(c) == {"contrast-inc_de3"}
+    assert c["contrast-inc_de3"] == {"param": pytest.approx(param, rel=1e-5), "wrote": 3,
+                                     "kept": 0}
+    sub = tmp_path / "out/contrast-inc_de3"
+    assert sorted(p.name for p in sub.iterdir()) == sorted(before)
+    mtimes = {p.name: p.stat().st_mtime_ns for p in sub.iterdir()}
     r = run("--transforms", "contrast-inc", "--targets", "3", "--workers", "1")
-    assert "wrote 0, kept 3 existing" in r.output
+    assert cells(r)["contrast-inc_de3"] == {"param": pytest.approx(param, rel=1e-5),
+                                            "wrote": 0, "kept": 3}
+    assert {p.name: p.stat().st_mtime_ns for p in sub.iterdir()} == mtimes  # kept as they were
     r = run("--transforms", "saturation-inc,hue", "--targets", "0,15")
-    assert r.exit_code == 0, r.output
-    assert "baseline: param -, wrote 3" in r.output
-    assert "saturation-inc_de15: skipped: " in r.output and "cannot reach" in r.output
-    assert "hue_de15: param" in r.output
+    c = cells(r)
+    assert set(c) == {"baseline", "saturation-inc_de15", "hue_de15"}, r.output
+    assert c["baseline"] == {"param": None, "wrote": 3, "kept": 0}
+    assert c["saturation-inc_de15"] == {"skipped": True}  # the chart cannot reach ΔE 15
+    assert c["hue_de15"]["wrote"] == 3
+    assert c["hue_de15"]["param"] == pytest.approx(calibrate_transform("hue", 15.0).param,
+                                                   rel=1e-5)
+    assert not (tmp_path / "out/saturation-inc_de15").exists()
+    assert sorted(p.name for p in (tmp_path / "out/hue_de15").iterdir()) == sorted(before)
     assert {p.name: _sha(p) for p in src.iterdir()} == before  # originals untouched
-    for args, message in (((), "give --transforms and --targets"),
-                          (("--transforms", "contrast-up", "--targets", "3"), "contrast-up"),
-                          (("--transforms", "hue", "--targets", "3", "--param", "5",
-                            "--workers", "0"), "--workers")):
+    for args, names in (((), ("--transforms", "--targets")),
+                        (("--transforms", "contrast-up", "--targets", "3"), ("contrast-up",)),
+                        (("--transforms", "hue", "--targets", "3", "--param", "5",
+                          "--workers", "0"), ("--workers",))):
         r = run(*args)
-        assert r.exit_code == 2 and message in r.output and "Traceback" not in r.output, r.output
+        assert r.exit_code == 2, r.output
+        lines = [ln for ln in r.output.splitlines() if ln.strip()]
+        assert len(lines) == 1 and lines[0].startswith("fidelity: error: "), r.output
+        assert all(n in lines[0] for n in names) and "Traceback" not in r.output, r.output
 
 
 def _kernels() -> list[str]:

@@ -205,9 +205,11 @@ def test_collect_results_losses_standard_errors_and_bound(one_camera_store, tmp_
     assert set(data["rows"][0]["bound"]["all"]) == {"predicted", "measured", "se", "within",
                                                     "excess", "within_2se", "status"}
     # the failure is explained from the data: excess in SE units, inside the noise
-    md = (tmp_path / "report" / "validation.md").read_text()
-    excess_se = (2.0 - 2 / 3) / row.se.dmap_points
-    assert "**cam** / det" in md and f"{excess_se:.1f} SE" in md
+    bound = data["rows"][0]["bound"]["all"]
+    assert (data["rows"][0]["camera"], data["rows"][0]["model"]) == ("cam", "det")
+    assert bound["excess"] == pytest.approx(2.0 - 2 / 3)
+    assert bound["se"] == pytest.approx(row.se.dmap_points)
+    assert bound["excess"] / bound["se"] < 2 and bound["within_2se"] is True
     # a stored camera that is not in the suite given (renamed or removed) is left out, and said
     from fidelity.coco.validate import CameraCase
 
@@ -255,7 +257,8 @@ def test_validation_report_structure(one_camera_store) -> None:
                     assert "| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" in md
                     assert all(str(markdown_inline(c)) in html for c in row)
     assert not re.search(r"\{'|': ", md) and "{&#39;" not in html
-    assert "conventions conf 0.001" in md  # the detector's settings in words
+    # the detector's settings, as validation.json carries them for the report
+    assert res.to_json()["models"]["det"]["settings"]["conventions"] == {"conf": 0.001}
 
 
 def test_cli_needs_models_unless_report_only(tmp_path: Path) -> None:
@@ -264,10 +267,18 @@ def test_cli_needs_models_unless_report_only(tmp_path: Path) -> None:
     d = make_suite(tmp_path / "s", ["a"])
     r = CliRunner().invoke(main, ["validate", "--cameras", str(d), "--out", str(tmp_path / "o"),
                                   "--store", str(tmp_path / "st")])
-    assert r.exit_code == 2 and "--models" in r.output
+    one_line_error(r, "--models")
     r = CliRunner().invoke(main, ["validate", "--cameras", str(d), "--out", str(tmp_path / "o"),
                                   "--store", str(tmp_path / "none"), "--report-only"])
-    assert r.exit_code == 2 and "no validation store" in r.output
+    one_line_error(r, str(tmp_path / "none"))
+
+
+def one_line_error(r, *names: str) -> None:  # type: ignore[no-untyped-def]
+    """Exit code 2 and one line ``fidelity: error: ...`` that names each of ``names``."""
+    assert r.exit_code == 2, r.output
+    lines = [ln for ln in r.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("fidelity: error: "), r.output
+    assert all(n in lines[0] for n in names) and "Traceback" not in r.output, (names, r.output)
 
 
 # --------------------------------------------------------------------------------- real slice
