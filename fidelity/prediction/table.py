@@ -649,7 +649,7 @@ class Prediction:
         ``dap_bicycle_points``, ``bound`` (published upper bounds), the per-column answers,
         ``dmap_points_se`` and ``dmap_points_interval``, ``table`` (its summary) and
         ``transforms``. The report's JSON adds the notes in words
-        (:func:`fidelity.report.words.prediction_json`)."""
+        (:func:`fidelity.report.jsonform.prediction_json`)."""
         interval = self.dmap_points_interval
         return {
             "delta_e": self.delta_e,

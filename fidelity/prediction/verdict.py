@@ -133,7 +133,7 @@ class Verdict:
         """JSON form of the fields: ``passed``, ``label``, ``reason``, ``criterion``, ``value``,
         ``limit``, ``delta_e``, ``bound``, ``status``, ``upper_bound``, ``table``,
         ``conservative_answer``. The report's JSON adds the ``message``
-        (:func:`fidelity.report.words.verdict_json`)."""
+        (:func:`fidelity.report.jsonform.verdict_json`)."""
         return {
             "passed": self.passed,
             "label": self.label,
