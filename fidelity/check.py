@@ -234,10 +234,9 @@ def _image_blind_spots(measurement: ChartMeasurement, info: Any, read: ReadOptio
 
     spots = chart_blind_spots(measurement)
     if str(info.pixel_type).lower() in ("uint8", "uint16", "int8", "int16"):
-        from fidelity.chart.image import read_image
+        from fidelity.chart.measure import read_again
 
-        pixels = read_image(info.path, layer=info.layer, bayer=read.bayer,
-                            max_pixels=read.max_pixels).pixels
+        pixels = read_again(info, read.max_pixels).pixels
         spots = (*spots, banding(pixels, info.pixel_type))
     else:
         spots = (*spots, banding(np.zeros((1, 1, 3)), info.pixel_type))

@@ -83,6 +83,24 @@ def normalise(sim_srgb: NDArray[np.float64], real_srgb: NDArray[np.float64],
     return out, Normalisation(mode, ev, gains)
 
 
+def _reads(sim: str | os.PathLike[str], real: str | os.PathLike[str], read: ReadOptions
+           ) -> tuple[ReadOptions, ReadOptions]:
+    """How each of the two inputs is read: the recording options (``topic``, ``frame``,
+    ``time``) go to the input that is a recording (both, or both when neither looks like one:
+    then the reader says which is not)."""
+    from dataclasses import replace
+
+    from fidelity.chart.recording import is_recording_path
+
+    if not read.names_message():
+        return read, read
+    plain = replace(read, topic=None, frame=None, time=None)
+    is_rec = [is_recording_path(p) for p in (sim, real)]
+    if not any(is_rec):
+        return read, read
+    return (read if is_rec[0] else plain), (read if is_rec[1] else plain)
+
+
 def compare_charts(
     sim: str | os.PathLike[str],
     real: str | os.PathLike[str],
@@ -106,7 +124,8 @@ def compare_charts(
     ----------
     sim, real
         Images (EXR, HDR, TIFF, PNG, JPEG) of the same chart, rendered by the simulator and
-        photographed by the real camera.
+        photographed by the real camera; either may be a robot recording (ROS 1 bag, ROS 2
+        bag, MCAP file) of which ``read`` names the message.
     sim_corners, real_corners
         Each image's corner patch centres (see :func:`fidelity.check.audit_image`); None: found.
     normalise_mode
@@ -120,7 +139,8 @@ def compare_charts(
         (decided by ``bound``: ``classic`` or ``directional``); None: no verdict.
     read
         How both images are read (:class:`~fidelity.chart.measure.ReadOptions`, as
-        ``audit``).
+        ``audit``); its ``topic``, ``frame`` and ``time`` apply to the input that is a robot
+        recording (:mod:`fidelity.chart.recording`).
     measure
         Also measure the difference's cost on COCO (:class:`fidelity.coco.measure.MeasureRequest`).
 
@@ -134,10 +154,11 @@ def compare_charts(
 
     if normalise_mode not in NORMALISATIONS:
         raise unknown_name("normalisation", normalise_mode, NORMALISATIONS)
-    kw: dict[str, Any] = {"read": read, "reference": reference, "illuminant": illuminant,
+    kw: dict[str, Any] = {"reference": reference, "illuminant": illuminant,
                           "size": size, "table": table}
-    sim_report = audit_image(sim, sim_corners, command="compare", **kw)
-    real_report = audit_image(real, real_corners, command="compare", **kw)
+    sim_read, real_read = _reads(sim, real, read)
+    sim_report = audit_image(sim, sim_corners, command="compare", read=sim_read, **kw)
+    real_report = audit_image(real, real_corners, command="compare", read=real_read, **kw)
     sm, rm = sim_report.measurement, real_report.measurement
     if sm.patch_names != rm.patch_names:
         raise InvalidValueError(f"{sim} and {real}: the charts have different patches")

@@ -51,7 +51,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fidelity.chart.find import ChartChecks, FoundChart, check_corners, find_chart
-from fidelity.chart.image import ImageInfo
+from fidelity.chart.image import Image, ImageInfo
 from fidelity.chart.locate import DEFAULT_WINDOW, ChartLocation, locate_chart, window_pixels
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import DEFAULT_REFERENCE, Reference, load_reference
@@ -626,6 +626,11 @@ class ReadOptions:
     max_pixels
         Refuse a larger image (width x height) before decoding it; None:
         :func:`fidelity.chart.image.pixel_limit`.
+    topic, frame, time
+        The input is a robot recording (ROS 1 bag, ROS 2 bag, MCAP file:
+        :mod:`fidelity.chart.recording`): the image ``topic`` (None: its only image topic),
+        the message's index on it (``frame``, negative from the end) or the time nearest to
+        ``time`` seconds after the recording's first message; neither: the first message.
     """
 
     layer: str | None = None
@@ -635,12 +640,22 @@ class ReadOptions:
     colourspace: str | None = None
     bayer: str | None = None
     max_pixels: int | None = None
+    topic: str | None = None
+    frame: int | None = None
+    time: float | None = None
 
     def given(self) -> list[str]:
         """The options set away from their defaults that describe the pixels of an image
-        (``layer``, ``encoding``, ``exposure``, ``bayer``, ``colourspace``), by name."""
-        return [name for name in ("layer", "encoding", "exposure", "bayer", "colourspace")
+        (``layer``, ``encoding``, ``exposure``, ``bayer``, ``colourspace``, ``topic``,
+        ``frame``, ``time``), by name."""
+        return [name for name in ("layer", "encoding", "exposure", "bayer", "colourspace",
+                                  "topic", "frame", "time")
                 if getattr(self, name) is not None]
+
+    def names_message(self) -> bool:
+        """Whether these options name a message of a recording (``topic``, ``frame`` or
+        ``time`` given)."""
+        return any(v is not None for v in (self.topic, self.frame, self.time))
 
 
 #: Every image-reading option at its default.
@@ -660,13 +675,11 @@ def measure_image(
     """Read an image (:func:`fidelity.chart.image.read_image`, as ``read`` says:
     :class:`ReadOptions`) and audit its chart (:func:`measure_pixels`). Errors name the
     file."""
-    from fidelity.chart.image import read_image
     from fidelity.errors import FidelityError
-    from fidelity.fileio import file_sha256
 
-    img = read_image(path, layer=read.layer, bayer=read.bayer, max_pixels=read.max_pixels)
+    img, sha256 = read_input(path, read)
     enc = read.encoding or img.encoding
-    info = img.info(sha256=file_sha256(img.path), encoding=enc)
+    info = img.info(sha256=sha256, encoding=enc)
     try:
         return measure_pixels(img.pixels, corners, encoding=enc, exposure=read.exposure,
                               reference=reference, illuminant=illuminant, window=window,
@@ -675,6 +688,47 @@ def measure_image(
                                            else img.chromaticities or "sRGB"))
     except FidelityError as exc:
         raise type(exc)(f"{img.path}: {exc}") from None
+
+def read_input(path: str | os.PathLike[str], read: ReadOptions = DEFAULT_READ
+               ) -> tuple[Image, str]:
+    """Read an image file (:func:`fidelity.chart.image.read_image`) or, for a recording (a
+    ``.bag``, ``.mcap`` or ``.db3`` file, a folder, or ``topic``/``frame``/``time`` given),
+    the message ``read`` names (:func:`fidelity.chart.recording.read_frame`). Returns the
+    image and a sha256: the file's, or the message's serialised bytes'."""
+    image, sha256 = _read_input(path, read, digest=True)
+    assert sha256 is not None
+    return image, sha256
+
+
+def _read_input(path: str | os.PathLike[str], read: ReadOptions, *, digest: bool
+                ) -> tuple[Image, str | None]:
+    from fidelity.chart import recording
+
+    if read.names_message() or recording.is_recording_path(path):
+        if read.layer is not None:
+            raise InvalidValueError(f"{path}: --layer names an EXR layer; a recording has none")
+        return recording.read_frame(
+            path, recording.Choice(read.topic, read.frame, read.time), bayer=read.bayer,
+            max_pixels=read.max_pixels)
+    from fidelity.chart.image import read_image
+    from fidelity.fileio import file_sha256
+
+    img = read_image(path, layer=read.layer, bayer=read.bayer, max_pixels=read.max_pixels)
+    return img, (file_sha256(img.path) if digest else None)
+
+
+def read_again(info: ImageInfo, max_pixels: int | None = None) -> Image:
+    """The image an audit described by ``info`` read again as it was read (the same file, layer
+    and Bayer pattern, or the same message of the same recording), for a report that shows or
+    checks its pixels."""
+    rec = info.recording
+    if rec is not None:
+        again = ReadOptions(bayer=info.bayer, max_pixels=max_pixels, topic=rec.topic,
+                            frame=rec.frame)
+    else:
+        again = ReadOptions(layer=info.layer, bayer=info.bayer, max_pixels=max_pixels)
+    return _read_input(info.path, again, digest=False)[0]
+
 
 __all__ = [
     "ENCODINGS",
@@ -698,4 +752,6 @@ __all__ = [
     "measure_chart",
     "measure_image",
     "measure_pixels",
+    "read_again",
+    "read_input",
 ]
