@@ -6,7 +6,8 @@ rosbags' writers for each kind: a ROS 1 bag, a ROS 2 bag with sqlite3 storage an
 with MCAP storage; its one topic holds 640 x 480 rgb8 sensor_msgs/Image frames of a chart
 photo (the frames differ by a little noise), 30 per second. Each measurement is a whole
 process, ``python -m fidelity audit RECORDING --topic /camera/image_raw --frame N`` (the chart
-found, measured, predicted), timed from start to exit (wall seconds), with its peak resident
+found, measured, predicted), run right after the anchor's process (``--repeat`` pairs; medians),
+timed from start to exit (wall seconds), with its peak resident
 memory (``ru_maxrss`` of that child, from ``os.wait4``) and the bytes it read through read()
 calls (``rchar`` of /proc/self/io at exit: page-cache hits included, so it counts what the
 process asked for whatever the cache holds). The anchor, measured in the same run, is the same
@@ -118,11 +119,22 @@ def run(args: list[str]) -> dict[str, float]:
             "read_mb": rchar / 1e6}
 
 
-def best(args: list[str], repeat: int) -> dict[str, float]:
-    """Median wall time of ``repeat`` runs; the peak RSS and bytes read of the median run."""
-    runs = sorted((run(args) for _ in range(repeat)), key=lambda r: r["wall_s"])
-    mid = runs[len(runs) // 2]
-    return {**mid, "wall_s_runs": [round(r["wall_s"], 3) for r in runs]}  # type: ignore[dict-item]
+def pairs(bag_args: list[str], png_args: list[str], repeat: int) -> dict[str, Any]:
+    """``repeat`` runs of the recording's audit, each right after the anchor's (so that a
+    change of the machine's load touches both): medians of each, the median of the pairs'
+    wall-time ratios, and the peak RSS and bytes read of the median runs."""
+    bag, png = [], []
+    for _ in range(repeat):
+        png.append(run(png_args))
+        bag.append(run(bag_args))
+    ratios = sorted(b["wall_s"] / a["wall_s"] for a, b in zip(png, bag, strict=True))
+
+    def median(rows: list[dict[str, float]]) -> dict[str, float]:
+        return sorted(rows, key=lambda r: r["wall_s"])[len(rows) // 2]
+
+    return {"bag": median(bag), "png": median(png), "wall_ratio": statistics.median(ratios),
+            "bag_wall_s_runs": [round(r["wall_s"], 3) for r in bag],
+            "png_wall_s_runs": [round(r["wall_s"], 3) for r in png]}
 
 
 def main() -> int:
@@ -143,13 +155,12 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="bench-recording-", dir="/tmp") as tmp:
         folder = Path(tmp)
         picks = {"first": 0, "middle": count // 2, "last": count - 1}
-        anchors = {}
+        pngs = {}
         for name, k in picks.items():
-            png = folder / f"frame-{name}.png"
-            write_png(png, images[k % len(images)] / 255.0, 8)
-            anchors[name] = best(["audit", str(png), "-q"], args.repeat)
-        print(f"{'recording':>10s} {'GB':>5s} {'frame':>6s} {'wall s':>7s} {'x png':>6s} "
-              f"{'RSS MB':>7s} {'x png':>6s} {'read MB':>8s} {'png MB':>7s}")
+            pngs[name] = folder / f"frame-{name}.png"
+            write_png(pngs[name], images[k % len(images)] / 255.0, 8)
+        print(f"{'recording':>10s} {'GB':>5s} {'frame':>6s} {'wall s':>7s} {'png s':>6s} "
+              f"{'ratio':>6s} {'RSS MB':>7s} {'png MB':>7s} {'read MB':>8s} {'png MB':>7s}")
         for kind in [k.strip() for k in args.kinds.split(",") if k.strip()]:
             t = time.perf_counter()
             path = write(folder / (f"drive-{kind}.bag" if kind == "ros1" else f"drive-{kind}"),
@@ -157,20 +168,20 @@ def main() -> int:
             written_s = time.perf_counter() - t
             size = size_of(path)
             for name, k in picks.items():
-                got = best(["audit", str(path), "--topic", TOPIC, "--frame", str(k), "-q"],
-                           args.repeat)
-                anchor = anchors[name]
+                m = pairs(["audit", str(path), "--topic", TOPIC, "--frame", str(k), "-q"],
+                          ["audit", str(pngs[name]), "-q"], args.repeat)
+                got, anchor = m["bag"], m["png"]
                 row = {
                     "recording": kind, "gigabytes": round(size / 1e9, 3), "frames": count,
                     "frame": k, "position": name, "write_s": round(written_s, 1),
-                    "wall_s": round(got["wall_s"], 3),
-                    "wall_s_runs": got["wall_s_runs"],
+                    "wall_s": round(got["wall_s"], 3), "wall_s_runs": m["bag_wall_s_runs"],
                     "max_rss_mb": round(got["max_rss_mb"], 1),
                     "read_mb": round(got["read_mb"], 1),
                     "png_wall_s": round(anchor["wall_s"], 3),
+                    "png_wall_s_runs": m["png_wall_s_runs"],
                     "png_max_rss_mb": round(anchor["max_rss_mb"], 1),
                     "png_read_mb": round(anchor["read_mb"], 1),
-                    "wall_ratio": round(got["wall_s"] / anchor["wall_s"], 3),
+                    "wall_ratio": round(m["wall_ratio"], 3),
                     "rss_ratio": round(got["max_rss_mb"] / anchor["max_rss_mb"], 3),
                     "read_beyond_png_mb": round(got["read_mb"] - anchor["read_mb"], 1),
                     "read_fraction_of_recording": round(
@@ -178,12 +189,14 @@ def main() -> int:
                 }
                 rows.append(row)
                 print(f"{kind:>10s} {size / 1e9:5.2f} {k:6d} {row['wall_s']:7.2f} "
-                      f"{row['wall_ratio']:6.2f} {row['max_rss_mb']:7.0f} "
-                      f"{row['rss_ratio']:6.2f} {row['read_mb']:8.1f} {row['png_read_mb']:7.1f}")
+                      f"{row['png_wall_s']:6.2f} {row['wall_ratio']:6.2f} "
+                      f"{row['max_rss_mb']:7.0f} {row['png_max_rss_mb']:7.0f} "
+                      f"{row['read_mb']:8.1f} {row['png_read_mb']:7.1f}")
             shutil.rmtree(path) if path.is_dir() else path.unlink()
     doc = {"method": (__doc__ or "").split("\n\n")[1].replace("\n", " "),
            "date": time.strftime("%Y-%m-%d"), "rows": rows,
            "summary": {
+               "median_wall_ratio": statistics.median(r["wall_ratio"] for r in rows),
                "max_wall_ratio": max(r["wall_ratio"] for r in rows),
                "max_rss_ratio": max(r["rss_ratio"] for r in rows),
                "max_read_beyond_png_mb": max(r["read_beyond_png_mb"] for r in rows),

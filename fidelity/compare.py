@@ -83,24 +83,6 @@ def normalise(sim_srgb: NDArray[np.float64], real_srgb: NDArray[np.float64],
     return out, Normalisation(mode, ev, gains)
 
 
-def _reads(sim: str | os.PathLike[str], real: str | os.PathLike[str], read: ReadOptions
-           ) -> tuple[ReadOptions, ReadOptions]:
-    """How each of the two inputs is read: the recording options (``topic``, ``frame``,
-    ``time``) go to the input that is a recording (both, or both when neither looks like one:
-    then the reader says which is not)."""
-    from dataclasses import replace
-
-    from fidelity.chart.recording import is_recording_path
-
-    if not read.names_message():
-        return read, read
-    plain = replace(read, topic=None, frame=None, time=None)
-    is_rec = [is_recording_path(p) for p in (sim, real)]
-    if not any(is_rec):
-        return read, read
-    return (read if is_rec[0] else plain), (read if is_rec[1] else plain)
-
-
 def compare_charts(
     sim: str | os.PathLike[str],
     real: str | os.PathLike[str],
@@ -148,7 +130,7 @@ def compare_charts(
     -------
     ComparisonReport
     """
-    from fidelity.chart.measure import measure_chart, neutral_patches
+    from fidelity.chart.measure import measure_chart, neutral_patches, reads_for
     from fidelity.check import audit_image
     from fidelity.prediction.judge import judge
 
@@ -156,7 +138,7 @@ def compare_charts(
         raise unknown_name("normalisation", normalise_mode, NORMALISATIONS)
     kw: dict[str, Any] = {"reference": reference, "illuminant": illuminant,
                           "size": size, "table": table}
-    sim_read, real_read = _reads(sim, real, read)
+    sim_read, real_read = reads_for((sim, real), read)
     sim_report = audit_image(sim, sim_corners, command="compare", read=sim_read, **kw)
     real_report = audit_image(real, real_corners, command="compare", read=real_read, **kw)
     sm, rm = sim_report.measurement, real_report.measurement

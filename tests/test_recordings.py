@@ -315,6 +315,18 @@ def test_audit_gate_and_compare_read_a_recording(recordings, corners, tmp_path):
         g = _run(["gate", str(paths["ros1"]), "--topic", "/cam/jpeg", "--frame", "1",
                   "--corners", c, "--max-delta-e", str(bound), "-q"])
         assert g.exit_code == code, g.output
+    # several subjects: --topic and --frame go to the recordings, not to the PNG
+    junit = tmp_path / "g.xml"
+    g = _run(["gate", str(folder / "c8.png"), str(paths["ros1"]), str(paths["mcap-file"]),
+              "--topic", "/cam/bgr8", "--frame", "-2", "--corners", c,
+              "--max-delta-e", str(png["mean_delta_e"] + 0.001), "--json", str(tmp_path / "g"),
+              "--junit", str(junit), "-q"])
+    assert g.exit_code == 0, g.output
+    for name in ("drive.bag.json", "drive_mcap-file.mcap.json"):
+        each = json.loads((tmp_path / "g" / name).read_text())
+        assert each["source"]["recording"]["frame"] == 1
+        assert each["mean_delta_e"] == pytest.approx(png["mean_delta_e"], abs=1e-9)
+    assert "recording" not in json.loads((tmp_path / "g" / "c8.png.json").read_text())["source"]
     cmp_json = tmp_path / "cmp.json"
     r = _run(["compare", str(folder / "c.exr"), str(paths["sqlite3"]), "--topic", "/cam/rgb8",
               "--time", "0.1", "--sim-corners", c, "--real-corners", c,
@@ -452,3 +464,21 @@ def test_without_rosbags_a_recording_is_one_line_naming_the_extra(recordings):
     assert out.returncode == 2
     assert out.stderr.strip() == ("fidelity: error: reading a ROS bag or MCAP file needs "
                                   "rosbags: pip install 'camera-fidelity[ros]'")
+
+
+def test_a_sqlite3_bag_without_message_definitions_is_read_with_rosbags_types(chart, tmp_path):
+    """Older rosbag2 sqlite3 bags hold no message definitions: the reader falls back on
+    rosbags' own store of ROS 2 types, and the pixels are the same."""
+    import sqlite3
+
+    from fidelity.chart.recording import Choice, read_frame
+
+    _, display = chart
+    codes = np.clip(np.rint(display * 255), 0, 255).astype(np.uint8)
+    path = write_recording(tmp_path, "sqlite3", {"/cam": [
+        lambda ts, t: image_msg(ts, codes, "rgb8", t)]})
+    with sqlite3.connect(path / f"{path.name}.db3") as db:
+        assert db.execute("SELECT COUNT(*) FROM message_definitions").fetchone()[0] > 0
+        db.execute("DELETE FROM message_definitions")
+    image, _ = read_frame(path, Choice("/cam"))
+    np.testing.assert_array_equal(np.rint(image.pixels * 255).astype(np.uint8), codes)

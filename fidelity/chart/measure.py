@@ -700,6 +700,26 @@ def read_input(path: str | os.PathLike[str], read: ReadOptions = DEFAULT_READ
     return image, sha256
 
 
+def reads_for(paths: Sequence[str | os.PathLike[str]], read: ReadOptions
+              ) -> list[ReadOptions]:
+    """How each of several inputs is read: ``read``'s recording options (``topic``, ``frame``,
+    ``time``) go to the inputs that are recordings by their form (a folder, a ``.bag``,
+    ``.mcap`` or ``.db3`` file: :func:`fidelity.chart.recording.is_recording_path`), the other
+    options to all; when none looks like a recording, all get them (and the reader says which
+    input is not one)."""
+    from dataclasses import replace
+
+    from fidelity.chart.recording import is_recording_path
+
+    if not read.names_message():
+        return [read for _ in paths]
+    plain = replace(read, topic=None, frame=None, time=None)
+    is_rec = [is_recording_path(p) for p in paths]
+    if not any(is_rec):
+        return [read for _ in paths]
+    return [read if r else plain for r in is_rec]
+
+
 def _read_input(path: str | os.PathLike[str], read: ReadOptions, *, digest: bool
                 ) -> tuple[Image, str | None]:
     from fidelity.chart import recording
@@ -754,4 +774,5 @@ __all__ = [
     "measure_pixels",
     "read_again",
     "read_input",
+    "reads_for",
 ]

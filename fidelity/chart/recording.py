@@ -247,10 +247,17 @@ def topic_times(reader: Any, topic: str) -> list[int]:
         for st in storages:
             got = _mcap_times(st, topic) if hasattr(st, "chunks") else _sqlite_times(st, topic)
             if got is None:  # no index: read the topic through
-                times = [t for _, t, _ in reader.messages(connections=conns)]
-                return sorted(times)
+                return _read_through(reader, conns)
             times.extend(got)
+    counted = sum(int(c.msgcount) for c in conns)
+    if counted and counted != len(times):  # an index that disagrees with the statistics
+        return _read_through(reader, conns)
     return sorted(times)
+
+
+def _read_through(reader: Any, conns: Sequence[Any]) -> list[int]:
+    """Log times of the messages of ``conns`` read message by message (no usable index)."""
+    return sorted(t for _, t, _ in reader.messages(connections=conns))
 
 
 def _choose_frame(times: Sequence[int], start_ns: int, end_ns: int, choice: Choice,
@@ -302,9 +309,7 @@ def read_frame(path: str | os.PathLike[str], choice: Choice = Choice(), *,
     highlevel, typesys = _rosbags()
     with _named(p, suffix) as name:
         try:
-            reader = highlevel.AnyReader(
-                [name], default_typestore=typesys.get_typestore(typesys.Stores.LATEST))
-            reader.open()
+            reader = _open(highlevel, typesys, name)
         except Exception as exc:  # a damaged recording, whatever rosbags' parser met
             raise InputFileError(f"{shown}: cannot read the recording ({_reason(exc)})") from None
         try:
@@ -362,6 +367,22 @@ def read_frame(path: str | os.PathLike[str], choice: Choice = Choice(), *,
                       channels=channels, layer=None, encoding=encoding, bayer=pattern)
     return replace(image, path=p, file_format=kind, recording=record,
                    all_channels=image.channels), hashlib.sha256(raw).hexdigest()
+
+
+def _open(highlevel: Any, typesys: Any, name: Path) -> Any:
+    """An open rosbags reader of ``name``, its message types from the recording's own
+    definitions, or, for a recording without them (older sqlite3 bags), from rosbags' store of
+    the latest ROS 2 types (built only then: it takes most of a second)."""
+    reader = highlevel.AnyReader([name])
+    try:
+        reader.open()
+    except highlevel.AnyReaderError as exc:
+        if "default_typestore" not in str(exc):
+            raise
+        reader = highlevel.AnyReader(
+            [name], default_typestore=typesys.get_typestore(typesys.Stores.LATEST))
+        reader.open()
+    return reader
 
 
 def _reason(exc: BaseException) -> str:
