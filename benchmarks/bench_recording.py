@@ -14,7 +14,9 @@ process asked for whatever the cache holds). The anchor, measured in the same ru
 audit of the same frame stored as a PNG file. Frames at the start, middle and end of the
 recording are read: reading through the bag would make the late frames cost more and read
 about the whole bag; using its index, every frame costs about the same and reads a few MB
-beyond what the PNG audit reads (Python, numpy and the libraries themselves).
+beyond what the PNG audit reads (Python, numpy and the libraries themselves). The frame read
+alone (``fidelity.chart.recording.read_frame`` in a warm process: index and message, median of
+5) is timed too, with the bytes it reads.
 
 Writes reports/benchmarks/recording.json (or ``--out``).
 Run:  python -m benchmarks.bench_recording [--gigabytes 1] [--repeat 3]
@@ -54,6 +56,41 @@ atexit.register(_report)
 from fidelity.cli import main
 main(sys.argv[1:], prog_name="fidelity")
 """
+
+
+_READ_CHILD = r"""
+import json, statistics, sys, time
+from fidelity.chart.recording import Choice, read_frame
+
+def rchar():
+    with open("/proc/self/io") as f:
+        return int(next(ln for ln in f if ln.startswith("rchar:")).split()[1])
+
+path, picks, repeat = sys.argv[1], json.loads(sys.argv[2]), int(sys.argv[3])
+read_frame(path, Choice(sys.argv[4], frame=0))  # imports done, the file's pages cached
+out = {}
+for name, k in picks.items():
+    walls, reads = [], []
+    for _ in range(repeat):
+        before, t = rchar(), time.perf_counter()
+        image, _ = read_frame(path, Choice(sys.argv[4], frame=k))
+        walls.append(time.perf_counter() - t)
+        reads.append(rchar() - before)
+        assert image.recording.frame == k
+    out[name] = {"seconds": statistics.median(walls), "read_bytes": max(reads)}
+print(json.dumps(out))
+"""
+
+
+def read_only(path: Path, picks: dict[str, int], repeat: int) -> dict[str, Any]:
+    """:func:`fidelity.chart.recording.read_frame` alone in a warm process: median seconds and
+    bytes read (``rchar``) per frame read."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    res = subprocess.run([sys.executable, "-c", _READ_CHILD, str(path), json.dumps(picks),
+                          str(repeat), TOPIC], env=env, capture_output=True, text=True,
+                         check=True)
+    out: dict[str, Any] = json.loads(res.stdout.strip().splitlines()[-1])
+    return out
 
 
 def frames(n: int) -> list[np.ndarray]:
@@ -160,13 +197,15 @@ def main() -> int:
             pngs[name] = folder / f"frame-{name}.png"
             write_png(pngs[name], images[k % len(images)] / 255.0, 8)
         print(f"{'recording':>10s} {'GB':>5s} {'frame':>6s} {'wall s':>7s} {'png s':>6s} "
-              f"{'ratio':>6s} {'RSS MB':>7s} {'png MB':>7s} {'read MB':>8s} {'png MB':>7s}")
+              f"{'ratio':>6s} {'RSS MB':>7s} {'png MB':>7s} {'read MB':>8s} {'png MB':>7s} "
+              f"{'frame s':>8s} {'frame MB':>8s}")
         for kind in [k.strip() for k in args.kinds.split(",") if k.strip()]:
             t = time.perf_counter()
             path = write(folder / (f"drive-{kind}.bag" if kind == "ros1" else f"drive-{kind}"),
                          kind, count, images)
             written_s = time.perf_counter() - t
             size = size_of(path)
+            alone = read_only(path, picks, 5)
             for name, k in picks.items():
                 m = pairs(["audit", str(path), "--topic", TOPIC, "--frame", str(k), "-q"],
                           ["audit", str(pngs[name]), "-q"], args.repeat)
@@ -186,12 +225,15 @@ def main() -> int:
                     "read_beyond_png_mb": round(got["read_mb"] - anchor["read_mb"], 1),
                     "read_fraction_of_recording": round(
                         (got["read_mb"] - anchor["read_mb"]) * 1e6 / size, 5),
+                    "read_frame_s": round(alone[name]["seconds"], 4),
+                    "read_frame_mb": round(alone[name]["read_bytes"] / 1e6, 3),
                 }
                 rows.append(row)
                 print(f"{kind:>10s} {size / 1e9:5.2f} {k:6d} {row['wall_s']:7.2f} "
                       f"{row['png_wall_s']:6.2f} {row['wall_ratio']:6.2f} "
                       f"{row['max_rss_mb']:7.0f} {row['png_max_rss_mb']:7.0f} "
-                      f"{row['read_mb']:8.1f} {row['png_read_mb']:7.1f}")
+                      f"{row['read_mb']:8.1f} {row['png_read_mb']:7.1f} "
+                      f"{row['read_frame_s']:8.3f} {row['read_frame_mb']:8.2f}")
             shutil.rmtree(path) if path.is_dir() else path.unlink()
     doc = {"method": (__doc__ or "").split("\n\n")[1].replace("\n", " "),
            "date": time.strftime("%Y-%m-%d"), "rows": rows,
@@ -200,6 +242,8 @@ def main() -> int:
                "max_wall_ratio": max(r["wall_ratio"] for r in rows),
                "max_rss_ratio": max(r["rss_ratio"] for r in rows),
                "max_read_beyond_png_mb": max(r["read_beyond_png_mb"] for r in rows),
+               "max_read_frame_s": max(r["read_frame_s"] for r in rows),
+               "max_read_frame_mb": max(r["read_frame_mb"] for r in rows),
                "median_wall_s": statistics.median(r["wall_s"] for r in rows)},
            "machine": machine_info()}
     write_json_atomic(args.out, doc)

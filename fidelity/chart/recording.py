@@ -336,9 +336,7 @@ def read_frame(path: str | os.PathLike[str], choice: Choice = Choice(), *,
                 raise InputFileError(f"{shown}: topic {topic!r} frame {k}: cannot decode the "
                                      f"message ({_reason(exc)})") from None
             kind = _kind(reader, suffix)
-        except InputFileError:
-            raise
-        except InvalidValueError:
+        except (InputFileError, InvalidValueError):
             raise
         except Exception as exc:  # damaged data met while reading the index or the message
             raise InputFileError(f"{shown}: cannot read the recording ({_reason(exc)})") from None
