@@ -263,6 +263,17 @@ def test_raw_conversion_agrees_with_rosbags_image(chart):
         scale = 65535 if "16" in enc else 255
         np.testing.assert_array_equal(np.rint(ours * scale).astype(np.int64),
                                       np.asarray(theirs, np.int64), err_msg=enc)
+    # YUV 4:2:2 (usb_cam, many GigE cameras): BT.601 studio range as OpenCV converts it, to
+    # within one code (OpenCV computes in 20-bit fixed point); every byte value occurs
+    yuv = np.random.default_rng(3).integers(0, 256, (64, 96, 2), dtype=np.uint8)
+    for enc in ("uyvy", "yuv422", "yuyv", "yuv422_yuy2"):
+        msg = image_msg(ts, yuv, enc, T0)
+        theirs = np.asarray(image.message_to_cvimage(msg, "rgb8"), np.int64)
+        ours = message_pixels(msg.height, msg.width, msg.encoding, False, msg.step, msg.data)
+        assert ours[1:4] == ("uint8", ("R", "G", "B"), "srgb")
+        diff = np.abs(np.rint(ours[0] * 255).astype(np.int64) - theirs)
+        assert diff.max() <= 1 and diff.mean() < 0.05, enc
+        assert theirs.min() == 0 and theirs.max() == 255  # the clipping is exercised
 
 
 def test_time_picks_the_nearest_message_and_the_default_is_the_first(recordings, corners):
@@ -400,10 +411,10 @@ def test_bad_recordings_are_one_line_errors(recordings, chart, tmp_path):
     assert line.startswith(f"fidelity: error: {oddbag}: topic /raw frame 0: a Bayer mosaic")
     assert "odd size 248x167" in line
     # an encoding not read
-    (tmp_path / "yuv").mkdir()
-    yuv = write_recording(tmp_path / "yuv", "ros1", {"/yuv": [lambda ts, t: image_msg(
-        ts, np.zeros((4, 4, 2), np.uint8), "yuv422", t)]})
-    assert "unsupported encoding 'yuv422'" in _error(["audit", str(yuv)])
+    (tmp_path / "nv21").mkdir()
+    nv21 = write_recording(tmp_path / "nv21", "ros1", {"/nv21": [lambda ts, t: image_msg(
+        ts, np.zeros((6, 4), np.uint8), "nv21", t)]})
+    assert "unsupported encoding 'nv21'" in _error(["audit", str(nv21)])
 
 
 def test_a_short_message_is_an_error_naming_its_size():

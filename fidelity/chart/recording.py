@@ -16,7 +16,9 @@ Messages (:func:`message_pixels`):
   ``rgba16``, ``bgra16`` (integer codes normalised to [0, 1] by ``v / (2**bits - 1)`` as
   :func:`fidelity.chart.image.read_image` does for a PNG; likely sRGB-encoded), ``32FC3``,
   ``32FC4``, ``64FC3`` (floats as they are, channels taken as R, G, B; likely linear), the
-  generic ``8UC3``/``16UC3`` (and 4-channel) codes taken as R, G, B; ``bayer_rggb8`` and the
+  generic ``8UC3``/``16UC3`` (and 4-channel) codes taken as R, G, B; YUV 4:2:2 ``uyvy``
+  (``yuv422``) and ``yuyv`` (``yuv422_yuy2``) converted by ITU-R BT.601 in studio range to 8-bit
+  R'G'B' as OpenCV (and so cv_bridge) converts them; ``bayer_rggb8`` and the
   other ``bayer_*`` 8/16-bit mosaics demosaiced (:func:`fidelity.chart.image.demosaic`, the
   pattern from the encoding; linear); one-channel ``mono8``, ``mono16``, ``8UC1``, ``16UC1``,
   ``32FC1`` images only as a Bayer mosaic of a pattern given (``bayer``), as for a one-channel
@@ -70,6 +72,16 @@ _PACKED: dict[str, tuple[str, int, tuple[int, int, int]]] = {
     "rgba16": ("u2", 4, (0, 1, 2)), "bgra16": ("u2", 4, (2, 1, 0)),
     "mono8": ("u1", 1, (0, 0, 0)), "mono16": ("u2", 1, (0, 0, 0)),
 }
+#: YUV 4:2:2 encodings: the byte offsets of Y0, U, Y1, V in each 4-byte pair of pixels.
+_YUV422 = {"uyvy": (1, 0, 3, 2), "yuv422": (1, 0, 3, 2), "yuyv": (0, 1, 2, 3),
+           "yuv422_yuy2": (0, 1, 2, 3)}
+#: ITU-R BT.601 studio range (Y 16-235, Cb/Cr 16-240) Y'CbCr -> R'G'B' in 8-bit codes, the
+#: conversion OpenCV's ``COLOR_YUV2RGB_UYVY``/``_YUYV`` (and so cv_bridge) applies.
+_BT601 = np.array([[255 / 219, 0.0, 255 / 224 * 1.402],
+                   [255 / 219, -255 / 224 * 1.772 * 0.114 / 0.587,
+                    -255 / 224 * 1.402 * 0.299 / 0.587],
+                   [255 / 219, 255 / 224 * 1.772, 0.0]])
+
 #: OpenCV-style generic codes: depth -> numpy type (channels 1, 3 or 4; 3 and 4 as R, G, B).
 _GENERIC = {"8U": "u1", "16U": "u2", "32F": "f4", "64F": "f8"}
 #: Pixel types as :class:`fidelity.chart.image.Image` names them.
@@ -80,7 +92,7 @@ def supported_encodings() -> list[str]:
     """The ``sensor_msgs/Image`` encodings :func:`message_pixels` reads."""
     bayer = [f"bayer_{p.lower()}{bits}" for p in BAYER_PATTERNS for bits in (8, 16)]
     generic = [f"{d}C{c}" for d in _GENERIC for c in (1, 3, 4)]
-    return [*_PACKED, *bayer, *generic]
+    return [*_PACKED, *_YUV422, *bayer, *generic]
 
 
 def is_recording_path(path: str | os.PathLike[str]) -> bool:
@@ -409,6 +421,8 @@ def message_pixels(height: int, width: int, encoding: str, bigendian: bool, step
     """
     enc = encoding.strip()
     pattern = _bayer_of(enc)
+    if enc in _YUV422:
+        return _yuv422(height, width, enc, step, data, bayer=bayer, limit=limit, where=where)
     if pattern is not None:
         bits = enc[10:]
         if bits not in ("8", "16"):
@@ -467,6 +481,38 @@ def message_pixels(height: int, width: int, encoding: str, bigendian: bool, step
     rgb = np.ascontiguousarray(as_float[:, :, list(order)])
     return (rgb, pixel_type, names, "srgb" if dt.kind == "u" else "linear",  # type: ignore[return-value]
             None)
+
+
+def _yuv422(height: int, width: int, encoding: str, step: int, data: np.ndarray, *,
+            bayer: str | None, limit: int | None, where: str
+            ) -> tuple[np.ndarray, str, tuple[str, str, str], str, str | None]:
+    """A YUV 4:2:2 image (``uyvy``/``yuv422``, ``yuyv``/``yuv422_yuy2``) as R'G'B': BT.601
+    studio range (:data:`_BT601`), each chroma pair shared by its two pixels, rounded and
+    clipped to 8-bit codes as OpenCV converts it, normalised like ``rgb8``."""
+    if bayer is not None:
+        raise InputFileError(f"{where}: --bayer {bayer.upper()} needs a one-channel mosaic, "
+                             f"but the image is {encoding}; leave out --bayer")
+    if height < 1 or width < 2 or width % 2:
+        raise InputFileError(f"{where}: a {encoding} image needs an even width, not "
+                             f"{width}x{height}")
+    if limit is not None and height * width > limit:
+        raise InputFileError(
+            f"{where}: the image is {width}x{height} ({height * width / 1e6:.1f} megapixels), "
+            f"more than the limit of {limit / 1e6:g} megapixels; raise it with --max-pixels N")
+    row = width * 2
+    if step < row or data.size < step * (height - 1) + row:
+        raise InputFileError(f"{where}: the message holds {data.size} bytes, fewer than its "
+                             f"{width}x{height} {encoding} pixels need (step {step})")
+    rows = np.lib.stride_tricks.as_strided(data, shape=(height, row), strides=(step, 1))
+    quads = np.ascontiguousarray(rows).reshape(height, width // 2, 4).astype(np.float64)
+    y0, u, y1, v = (quads[:, :, i] for i in _YUV422[encoding])
+    y = np.maximum(np.stack([y0, y1], axis=2).reshape(height, width) - 16.0, 0.0)  # as OpenCV
+    cb = np.repeat(u, 2, axis=1) - 128.0
+    cr = np.repeat(v, 2, axis=1) - 128.0
+    rgb = np.stack([y, cb, cr], axis=-1) @ _BT601.T
+    codes = np.clip(np.rint(rgb), 0, 255)
+    pixels = codes.astype(np.float32) * np.float32(1.0 / 255)
+    return pixels, "uint8", ("R", "G", "B"), "srgb", None
 
 
 def _decompress(data: bytes, fmt: str, bayer: str | None, limit: int, where: str) -> Image:
