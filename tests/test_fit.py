@@ -251,7 +251,9 @@ def images(tmp_path_factory, exact, cases):
     hue_exr = write_exr(folder / "hue.exr", _image(cases["hue"][0] * 0.5))
     grey = write_png(folder / "grey.png", _image(np.repeat(
         np.clip(exact[1], 0, 1).mean(axis=1, keepdims=True), 3, axis=1)), 16)
-    return {"real": real, "hue": hue, "hue_exr": hue_exr, "grey": grey, "dir": folder}
+    bits5 = write_png(folder / "bits5.png", _image(np.clip(cases["5bit"][1], 0, 1)), 16)
+    return {"real": real, "hue": hue, "hue_exr": hue_exr, "grey": grey, "bits5": bits5,
+            "dir": folder}
 
 
 def test_fit_correction_api_applies_and_writes_a_cube(images, tmp_path):
@@ -361,3 +363,15 @@ def test_a_missing_opencolorio_names_the_extra(monkeypatch):
     monkeypatch.setattr(builtins, "__import__", no_ocio)
     with pytest.raises(InvalidValueError, match=r"camera-fidelity\[fit\]"):
         lut.ocio()
+
+
+def test_cli_fit_says_when_the_model_cannot_express_the_difference(images, tmp_path):
+    """5-bit banding: the report marks the fit as not expressing the difference."""
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["fit", str(images["bits5"]), str(images["real"]), "--out",
+                                  str(out), "--sim-corners", CORNERS, "--real-corners", CORNERS,
+                                  "--objective", "linear"])
+    assert r.exit_code == 0, r.output
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["correction"]["expressed"] is False
+    assert rep["cross_validated_mean_delta_e"] > 0.5

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from fidelity.fileio import json_ready
-from fidelity.fit import FitReport
+from fidelity.fit import EXPRESSED_DELTA_E, FitReport
 from fidelity.report.chart import write_report_files
 from fidelity.report.document import Code, Document, Facts, Figure, Headline, section, table
 from fidelity.report.jsonform import fit_json
@@ -52,6 +52,11 @@ def fit_lines(report: FitReport) -> list[str]:
         f"{100 * lut.grid_within:.2f} % within {lut.tolerance:g}; limit "
         f"{'met' if lut.passed else 'NOT met'})",
     ]
+    if not c.expressed:
+        lines.append(f"warning: the {c.model.name} model does not express this difference: "
+                     f"{_n(c.cv_mean)} ΔE00 remains on patches held out of the fit (above "
+                     f"{EXPRESSED_DELTA_E:g}); what is left is not a colour mapping of this "
+                     "family (quantisation, noise, a spatial effect, or a model too simple)")
     if c.cv_mean > 0 and a.mean_delta_e >= b.mean_delta_e:
         lines.append("warning: the correction does not lower the sim-to-real ΔE00: the "
                      f"{c.model.name} model cannot express this difference")
@@ -69,9 +74,12 @@ def fit_document(report: FitReport) -> Document:
     after_fig = Figure(plots.swatches(a, ("real camera", "corrected simulation")),
                        "after.png", "real camera (left half) against the corrected simulation "
                        "(right half)")
+    note = ("" if c.expressed else
+            f"; the {c.model.name} model does not express the difference (cross-validated "
+            f"ΔE00 above {EXPRESSED_DELTA_E:g})")
     head = Headline(f"sim-to-real ΔE00 {b.mean_delta_e:.2f} before, **{a.mean_delta_e:.2f}** "
-                    f"after the {c.model.name} correction (cross-validated {_n(c.cv_mean)})",
-                    "info", after_fig)
+                    f"after the {c.model.name} correction (cross-validated {_n(c.cv_mean)})"
+                    f"{note}", "info" if c.expressed else "fail", after_fig)
     facts = Facts((
         ("simulation", f"`{report.sim}`"), ("real camera", f"`{report.real}`"),
         ("model", f"{c.model.name}, {c.objective} objective"),
