@@ -375,3 +375,23 @@ def test_cli_fit_says_when_the_model_cannot_express_the_difference(images, tmp_p
     rep = json.loads((out / "report.json").read_text())
     assert rep["correction"]["expressed"] is False
     assert rep["cross_validated_mean_delta_e"] > 0.5
+
+
+def test_the_normalisation_is_left_out_of_the_correction(images, exact, tmp_path):
+    """``exposure`` (default) keeps the simulator's exposure: a SIM one stop darker than REAL
+    and otherwise equal gets a correction that changes nothing; ``none`` corrects the
+    exposure too (linear values doubled)."""
+    from fidelity.fit import fit_correction
+
+    dark = np.asarray(delinearize_srgb(np.asarray(linearize_srgb(np.clip(exact[1], 0, 1)))
+                                       * 0.5))
+    sim = write_png(tmp_path / "dark.png", _image(dark), 16)
+    keep = fit_correction(sim, images["real"], sim_corners=CORNERS, real_corners=CORNERS,
+                          objective="linear")
+    assert keep.normalisation.exposure_ev == pytest.approx(1.0, abs=0.01)
+    x = keep.sim_pixels
+    assert np.abs(keep.apply(x) - x).max() < 2e-3
+    fix = fit_correction(sim, images["real"], sim_corners=CORNERS, real_corners=CORNERS,
+                         objective="linear", normalise_mode="none")
+    lin = np.asarray(linearize_srgb(x))
+    assert np.allclose(np.asarray(linearize_srgb(fix.apply(x))), 2 * lin, atol=2e-3)
