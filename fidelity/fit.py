@@ -379,7 +379,7 @@ def check_cube(correction: Correction, path: str | os.PathLike[str], size: int) 
 class FitReport:
     """A fit and its verification: the inputs, the :class:`Correction`, the sim-to-real
     measurement before (``before``) and after, the latter of the SIM image through the
-    ``.cube`` by OpenColorIO, audited again (``after``), their predicted losses, the
+    ``.cube`` by OpenColorIO, measured again in the audit's windows (``after``), their predicted losses, the
     ``.cube``'s :class:`LutCheck` (one per size tried, the last one kept) and the seconds
     spent (``seconds``: ``read``, ``fit``, ``verify``)."""
 

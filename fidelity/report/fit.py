@@ -39,7 +39,7 @@ def fit_lines(report: FitReport) -> list[str]:
     lines += [
         f"sim-to-real ΔE00 before: mean {b.mean_delta_e:.2f}, max {b.max_delta_e:.2f} "
         f"({b.worst_patch}); predicted ΔmAP {_n(report.prediction_before.dmap_points)} points",
-        f"sim-to-real ΔE00 after (SIM through the .cube by OpenColorIO, audited again): mean "
+        f"sim-to-real ΔE00 after (SIM through the .cube by OpenColorIO, measured again): mean "
         f"{a.mean_delta_e:.2f}, max {a.max_delta_e:.2f} ({a.worst_patch}); predicted ΔmAP "
         f"{_n(report.prediction_after.dmap_points)} points",
         f"fitted ΔE00 (used patches): mean "
