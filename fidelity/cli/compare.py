@@ -13,6 +13,7 @@ from fidelity.cli.options import (
     PATH,
     STDOUT,
     bound_option,
+    chart_pair_options,
     common_options,
     image_read_options,
     json_option,
@@ -32,15 +33,7 @@ if TYPE_CHECKING:
 @click.command()
 @click.argument("sim", type=IMAGE_PATH)
 @click.argument("real", type=IMAGE_PATH)
-@click.option("--sim-corners", default=None,
-              help="X1,Y1,...,X4,Y4: centres of the dark skin, bluish green, black and white "
-                   "patches in SIM (default: the chart is found).")
-@click.option("--real-corners", default=None, help="The same for REAL.")
-@click.option("--normalise", "normalise_mode",
-              type=click.Choice(["exposure", "exposure+wb", "none"]), default="exposure",
-              show_default=True,
-              help="Match the simulated chart to the real one on the neutral patches before "
-                   "comparing: exposure, exposure and white balance, or nothing.")
+@chart_pair_options
 @click.option("--max-delta-e", type=float, default=None,
               help="Pass when the sim-to-real chart ΔE00 (mean over the patches) <= X.")
 @click.option("--max-dmap", type=float, default=None,

@@ -315,6 +315,27 @@ READ_OPTION_NAMES = ("layer", "encoding", "exposure", "negatives", "colourspace"
                      "topic", "frame", "time")
 
 
+def chart_pair_options(f: F) -> F:
+    """``--sim-corners``, ``--real-corners`` and ``--normalise``: where the two charts of a
+    simulated and a real image are and how the simulated one is matched to the real one
+    (compare, fit)."""
+    opts = [
+        click.option("--sim-corners", default=None,
+                     help="X1,Y1,...,X4,Y4: centres of the dark skin, bluish green, black and "
+                          "white patches in SIM (default: the chart is found)."),
+        click.option("--real-corners", default=None, help="The same for REAL."),
+        click.option("--normalise", "normalise_mode",
+                     type=click.Choice(["exposure", "exposure+wb", "none"]),
+                     default="exposure", show_default=True,
+                     help="Match the simulated chart to the real one on the neutral patches "
+                          "before comparing: exposure, exposure and white balance, or "
+                          "nothing."),
+    ]
+    for opt in reversed(opts):
+        f = opt(f)
+    return f
+
+
 def image_read_options(f: F) -> F:
     """``--encoding``, ``--exposure``, ``--layer``, ``--bayer``, ``--colourspace``,
     ``--negatives`` and, for a recording, ``--topic``, ``--frame``, ``--time``: how an image's
