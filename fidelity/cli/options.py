@@ -120,6 +120,21 @@ class Targets(ParamTypeBase):
         return values
 
 
+class Resolution(ParamTypeBase):
+    """``WIDTHxHEIGHT`` in pixels (``640x480``) -> ``(width, height)``."""
+
+    name = "WIDTHxHEIGHT"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> tuple[int, int]:
+        if isinstance(value, tuple):
+            return value
+        m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", str(value))
+        if not m:
+            self.fail(f"{value!r}: expected WIDTHxHEIGHT in pixels, e.g. 640x480", param, ctx)
+        return int(m.group(1)), int(m.group(2))
+
+
 class NameList(ParamTypeBase):
     """``all`` or comma-separated names from a known set -> a list of names."""
 
@@ -527,6 +542,7 @@ def write_json_output(path: str | os.PathLike[str], obj: Any) -> str:
 __all__ = [
     "LIMIT_HELP",
     "PATH",
+    "Resolution",
     "STDOUT",
     "CorruptionNames",
     "ModelList",
