@@ -53,8 +53,9 @@ def _rectangle(root: ET.Element, ident: str, cx: float, cy: float, hw: float, hh
 
 def irradiance_scale(scene: ChartScene) -> float:
     """The factor on the illuminant's relative SPD (see the module docstring)."""
-    ybar = np.interp(scene.wavelengths(), np.arange(380.0, 781.0), cie_1931_cmfs(1.0)[:, 1])
-    norm = float(scene.illuminant_spd @ ybar) * scene.step
+    fine = np.arange(380.0, 781.0)  # the SPD as Mitsuba interpolates it, on the 1 nm CMFs
+    spd = np.interp(fine, scene.wavelengths(), scene.illuminant_spd)
+    norm = float(spd @ cie_1931_cmfs(1.0)[:, 1])
     return math.pi * scene.white_level * MITSUBA_CIE_Y_INTEGRAL / norm
 
 

@@ -282,10 +282,12 @@ def build_scene(
                 "note": "RGB materials from the Lab table; the Mitsuba scene keeps the spectra"}
     albedo = np.clip(linear, 0.0, 1.0)
     clipped = np.any(albedo != linear, axis=1)
-    ideal = ideal_sensitivities()
-    grid = wavelength_grid(step)
-    s = np.stack([np.interp(grid, ideal.wavelengths, ideal.values[:, c]) for c in range(3)], 1)
-    spectral_linear = camera_response(refl, spd, s, step) * white_level
+    # the closed form of what the Mitsuba scene holds: its 5 nm spectra, linearly interpolated
+    # (as Mitsuba's 'regular' spectra are), integrated on the 1 nm grid of the CIE observer
+    fine, coarse = wavelength_grid(1.0), wavelength_grid(step)
+    refl_fine = np.stack([np.interp(fine, coarse, r) for r in refl])
+    spectral_linear = camera_response(refl_fine, np.interp(fine, coarse, spd),
+                                      ideal_sensitivities().values, 1.0) * white_level
     clip_de = None
     if clipped.any():
         from fidelity.colour.colorimetry import delta_e_2000

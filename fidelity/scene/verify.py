@@ -28,6 +28,10 @@ from fidelity.resources import resource_dir
 FloatArray = NDArray[np.float64]
 
 
+#: The folder (in a checkout, beside ``fidelity/``) of the Python environment with ``bpy``.
+BLENDER_VENV = ".venv-blender"
+
+
 class BlenderUnavailableError(FidelityError):
     """No Python with ``bpy`` and no ``blender`` program was found."""
 
@@ -61,12 +65,17 @@ def delta_e_linear(measured: ArrayLike, expected: ArrayLike) -> FloatArray:
 
 def blender_command() -> list[str]:
     """The command that runs ``scenes/blender_render.py``: ``$FIDELITY_BPY_PYTHON`` (a Python
-    with bpy), ``$FIDELITY_BLENDER`` or ``blender`` on the PATH (``blender -b --python``), or
-    this Python when it imports bpy. Raises :class:`BlenderUnavailableError`."""
+    with bpy), else :data:`BLENDER_VENV` beside the ``fidelity`` package (a checkout's
+    ``.venv-blender``, as ``.ci/run`` makes it), ``$FIDELITY_BLENDER`` or ``blender`` on the
+    PATH (``blender -b --python``), or this Python when it imports bpy. Raises
+    :class:`BlenderUnavailableError`."""
     script = str(resource_dir("scenes") / "blender_render.py")
     py = os.environ.get("FIDELITY_BPY_PYTHON")
     if py:
         return [py, script]
+    venv = Path(__file__).resolve().parent.parent.parent / BLENDER_VENV / "bin" / "python"
+    if venv.exists():
+        return [str(venv), script]
     blender = os.environ.get("FIDELITY_BLENDER") or shutil.which("blender")
     if blender:
         return [blender, "-b", "--factory-startup", "--python", script, "--"]
@@ -111,5 +120,5 @@ def render_with_blender(scene_file: str | os.PathLike[str], output: str | os.Pat
     return BlenderRender(Path(output), json.loads(lines[-1]), seconds)
 
 
-__all__ = ["BlenderRender", "BlenderUnavailableError", "blender_command", "delta_e_linear",
+__all__ = ["BLENDER_VENV", "BlenderRender", "BlenderUnavailableError", "blender_command", "delta_e_linear",
            "patch_linear_means", "render_with_blender"]
