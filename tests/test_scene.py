@@ -236,6 +236,28 @@ def test_existing_folder_kept_but_earlier_export_replaced(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["photos", "scene"]  # no temporaries
 
 
+def test_a_failing_writer_leaves_nothing_and_keeps_the_earlier_export(d65, tmp_path,
+                                                                      monkeypatch):
+    import errno
+
+    import fidelity.scene.gltf as gltf
+    from fidelity.errors import InputFileError
+
+    pytest.importorskip("pygltflib")
+    out = tmp_path / "scene"
+    export_scene(d65, "gltf", out)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+
+    def full_disk(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(gltf, "write_gltf", full_disk)
+    with pytest.raises(InputFileError, match="No space left"):
+        export_scene(build_scene("A", resolution=SIZE), "gltf", out)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene"]
+
+
 @pytest.mark.parametrize("args", [["--resolution", "8x8"], ["--resolution", "wide"],
                                   ["--fill", "0"], ["--fill", "0.5", "--distance", "1"],
                                   ["--distance", "0.05"], ["--fov", "0"],

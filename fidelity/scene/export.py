@@ -29,7 +29,7 @@ import numpy as np
 
 from fidelity.errors import FidelityError, InputFileError, unknown_name
 from fidelity.fileio import WRITE_ERRNOS, display_path, json_ready, write_error
-from fidelity.scene.model import ChartScene
+from fidelity.scene.model import LUMENS_PER_WATT, ChartScene
 
 #: format -> (scene file name, Python module it needs, extra that provides it)
 FORMATS: dict[str, tuple[str, str, str]] = {
@@ -147,7 +147,13 @@ def manifest(scene: ChartScene, fmt: str, scene_file: str) -> dict[str, Any]:
                          "patches in the camera's image; pixel (row i, column j) is at x=j, y=i"),
         "patch_size_px": scene.patch_size_px(),
         "expected_exposure": {"gate_exposure_ev": ev, "white_level": scene.white_level,
-                              "rule": expected},
+                              "rule": expected,
+                              "white_luminance_cd_m2": LUMENS_PER_WATT * scene.white_level,
+                              "ev100_for_unit_scale": math.log2(LUMENS_PER_WATT / 1.2),
+                              "photometric": "a white Lambertian surface has 683 x white_level "
+                                             "cd/m^2 under the light (683 lm/W); exposure "
+                                             "1 / (1.2 x 2^EV100) (Unreal manual exposure) "
+                                             "maps it to white_level at EV100 = log2(683/1.2)"},
         "renderer_settings": RENDERER_SETTINGS,
         "gate_command": gate,
         "patches": _patches(scene),
@@ -179,20 +185,21 @@ Then gate it (the corners are those of this camera's image; nothing has to find 
 
 ## CARLA / Unreal Engine
 
-Post Process Volume (unbound) or the camera's post-process settings: Exposure *Metering Mode
-Manual*, *Apply Physical Camera Exposure* off, *Exposure Compensation* chosen so that a white
-Lambertian surface under this light reads {white} (Unreal multiplies by 1/1.2 at EV100 0 with
-physical exposure off); Bloom intensity 0, Vignette intensity 0, Lens Flares 0, Chromatic
-Aberration 0, Film Grain 0, Motion Blur 0, Auto Exposure speed irrelevant (manual);
-Tonemapper: r.TonemapperFilm 0 / r.Tonemapper.Quality 0 and capture *SceneColor (HDR)* in a
-SceneCapture2D (CARLA: a sensor.camera.rgb gives tone-mapped 8-bit output: set
+Post Process Volume (unbound) or the camera's post-process settings: Metering Mode *Manual*,
+a fixed exposure of EV100 = log2(683 / 1.2) = 9.15 (Unreal's manual exposure scales luminance by
+1 / (1.2 x 2^EV100); a white Lambertian surface under this light has 683 x white level cd/m^2,
+the glTF light being {lux:.6g} lux), Exposure Compensation 0; Bloom 0, Vignette 0, Lens Flares
+0, Chromatic Aberration 0, Film Grain 0, Motion Blur 0; no tone curve (capture *SceneColor
+(HDR)* with a SceneCapture2D; a CARLA `sensor.camera.rgb` is tone-mapped 8-bit output: set
 `enable_postprocess_effects` False and gamma 1, or capture the HDR scene colour). Disable the
-sky light and sky atmosphere.
+sky light and sky atmosphere. Import the .glb with lights and cameras; if the importer drops
+`KHR_materials_specular`, set each material's Specular to 0.
 
 ## NVIDIA Omniverse RTX (Isaac Sim)
 
-RTX - Real-Time or Path Traced; Post Processing: Tonemapping operator *Linear* (or off),
-cm2 factor 1, white scale 1, Auto Exposure off, Bloom off, Lens Flare off, Chromatic
+RTX - Real-Time or Path Traced; UsdLux units (1 nit renders at 1.0 at exposure 0, so the
+white patch lands at its albedo x white level with no exposure change); Post Processing:
+Tonemapping operator *Linear* (or off), cm2 factor 1, white scale 1, Auto Exposure off, Bloom off, Lens Flare off, Chromatic
 Aberration off, Motion Blur off, Film Grain off; remove the default dome/sky light and
 lighting rig (Stage *Lights*: only this scene's light). Write the *HdrColor* AOV (linear EXR).
 
