@@ -319,6 +319,25 @@ def test_blender_cycles_render_passes_the_gate(fmt, d65, tmp_path):
     assert delta_e_linear(measured, d65.albedo).mean() < 0.05
 
 
+def test_blender_render_under_illuminant_a(tmp_path):
+    """The RGB materials under A are the chart's colours under A adapted to D65 (what a
+    white-balanced camera sees); gated against the scene reference under A."""
+    pytest.importorskip("pygltflib")
+    _probe_bpy()
+    from fidelity.chart.measure import ReadOptions
+    from fidelity.check import audit_image
+
+    scene = build_scene("A", resolution=SIZE)
+    done = export_scene(scene, "gltf", tmp_path / "a")
+    render = render_with_blender(done.scene_file, tmp_path / "a.exr", *SIZE, samples=1)
+    report = audit_image(render.image, done.manifest["corners"],
+                         read=ReadOptions(exposure=0.0), illuminant="A")
+    floor = scene.conventions["albedo_clipping_delta_e"]
+    mean = report.measurement.mean_delta_e
+    assert mean <= BOUND_RGB
+    assert mean == pytest.approx(0.0 if floor is None else floor["mean"], abs=0.05)
+
+
 def test_srgb_values_as_linear_factors_fail_by_far(d65, tmp_path):
     pytest.importorskip("pygltflib")
     _probe_bpy()

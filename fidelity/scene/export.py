@@ -207,7 +207,9 @@ lighting rig (Stage *Lights*: only this scene's light). Write the *HdrColor* AOV
 
 Render engine Cycles; Color Management: Display sRGB, View Transform *Standard*, Look *None*,
 Exposure 0, Gamma 1; World colour black, strength 0; Output OpenEXR 32-bit float. glTF:
-import with *Lighting Mode: Standard* (physical, 683 lm/W; the default). BlenderProc:
+import with *Lighting Mode: Standard* (physical, 683 lm/W; the default). USD: import with
+*Light Intensity Scale* 0.25 (Blender's USD importer multiplies a DistantLight's intensity by
+4; UsdLux makes a normalized DistantLight's intensity its illuminance). BlenderProc:
 `bproc.renderer.set_output_format("OPEN_EXR")`, `bproc.world.set_world_background([0, 0, 0])`,
 and `bpy.context.scene.view_settings.view_transform = "Standard"`.
 The project's own proof renders this file headless in Cycles: `scenes/blender_render.py`.
