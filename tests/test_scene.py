@@ -170,6 +170,24 @@ def test_mitsuba_xml_loads(d65, tmp_path):
 
 
 @pytest.mark.parametrize("fmt", list(FORMATS))
+def test_manifest_follows_its_schema(fmt, tmp_path):
+    jsonschema = pytest.importorskip("jsonschema")
+    pytest.importorskip({"gltf": "pygltflib", "usd": "pxr", "mitsuba": "json"}[fmt])
+    from fidelity.resources import resource_dir
+
+    schema = json.loads((resource_dir("data") / "schemas" / "scene-manifest.schema.json")
+                        .read_text(encoding="utf-8"))
+    jsonschema.Draft202012Validator.check_schema(schema)
+    scene = build_scene("F11", resolution=(320, 200), white_level=0.25)
+    doc = json.loads((export_scene(scene, fmt, tmp_path / fmt).folder / "manifest.json")
+                     .read_text(encoding="utf-8"))
+    jsonschema.validate(doc, schema)
+    assert doc["expected_exposure"]["gate_exposure_ev"] == pytest.approx(2.0)
+    np.testing.assert_allclose([p["expected_linear_rgb"] for p in doc["patches"]],
+                               scene.albedo * 0.25)
+
+
+@pytest.mark.parametrize("fmt", list(FORMATS))
 def test_export_takes_under_a_second(fmt, d65, tmp_path):
     module = {"gltf": "pygltflib", "usd": "pxr", "mitsuba": "mitsuba"}[fmt]
     pytest.importorskip(module)

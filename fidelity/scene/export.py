@@ -40,6 +40,8 @@ FORMATS: dict[str, tuple[str, str, str]] = {
 #: ``kind`` of the manifest, which marks a folder as an export that may be replaced.
 MANIFEST_KIND = "fidelity chart scene"
 MANIFEST = "manifest.json"
+#: Version of the manifest's layout (``fidelity/data/schemas/scene-manifest.schema.json``).
+MANIFEST_SCHEMA_VERSION = "1.0"
 README = "README.md"
 
 
@@ -132,6 +134,7 @@ def manifest(scene: ChartScene, fmt: str, scene_file: str) -> dict[str, Any]:
                     "white-balance the render before gating, or compare with "
                     "spectral_linear_srgb")
     doc: dict[str, Any] = {
+        "schema_version": MANIFEST_SCHEMA_VERSION,
         "kind": MANIFEST_KIND,
         "format": fmt,
         "scene_file": scene_file,
@@ -375,5 +378,5 @@ def wrongly_encoded(scene: ChartScene) -> np.ndarray:
     return np.clip(scene.reference_srgb, 0.0, 1.0)
 
 
-__all__ = ["FORMATS", "MANIFEST", "MANIFEST_KIND", "README", "RENDERER_SETTINGS", "Export",
+__all__ = ["FORMATS", "MANIFEST", "MANIFEST_KIND", "MANIFEST_SCHEMA_VERSION", "README", "RENDERER_SETTINGS", "Export",
            "MissingExtraError", "export_scene", "manifest", "readme", "wrongly_encoded"]
