@@ -289,6 +289,13 @@ def test_bad_settings(args, tmp_path):
     assert not (tmp_path / "s").exists()
 
 
+def test_texture_only_for_gltf(tmp_path):
+    r = CliRunner().invoke(main, ["scene", "--format", "usd", "--base-colour", "texture",
+                                  "--out", str(tmp_path / "u")])
+    assert r.exit_code == 2 and "--base-colour" in _one_line(r)
+    assert not (tmp_path / "u").exists()
+
+
 def test_usd_without_usd_core_names_the_extra(tmp_path):
     code = ("import sys; sys.modules['pxr'] = None\n"
             "from fidelity.cli import main\n"
@@ -354,6 +361,38 @@ def test_blender_render_under_illuminant_a(tmp_path):
     mean = report.measurement.mean_delta_e
     assert mean <= BOUND_RGB
     assert mean == pytest.approx(0.0 if floor is None else floor["mean"], abs=0.05)
+
+
+def _audit(image: Path, manifest: dict) -> float:
+    from fidelity.chart.measure import ReadOptions
+    from fidelity.check import audit_image
+
+    return float(audit_image(image, manifest["corners"], read=ReadOptions(exposure=0.0),
+                             illuminant=manifest["illuminant"]).measurement.mean_delta_e)
+
+
+def test_blender_decodes_the_srgb_texture(d65, tmp_path):
+    """glTF textures are sRGB-encoded: Blender decodes the 8-bit texels to exactly the albedo
+    the manifest gives, and the render passes the gate (the 8-bit quantisation and the cyan
+    clipping are the only error). Texels holding linear values (not encoded) fail by far."""
+    pytest.importorskip("pygltflib")
+    _probe_bpy()
+    from fidelity.chart.image import read_image
+    from fidelity.scene.gltf import write_gltf
+
+    done = export_scene(d65, "gltf", tmp_path / "t", base_colour="texture")
+    albedo = np.array([p["albedo_linear_srgb"] for p in done.manifest["patches"]])
+    assert done.manifest["base_colour"] == "texture"
+    render = render_with_blender(done.scene_file, tmp_path / "t.exr", *SIZE, samples=1)
+    measured = patch_linear_means(read_image(render.image).pixels, d65.patch_centres_px(),
+                                  d65.patch_size_px())
+    assert delta_e_linear(measured, albedo).max() < 0.01
+    assert _audit(render.image, done.manifest) <= BOUND_RGB
+    wrong = tmp_path / "wrong.glb"
+    linear_texels = np.round(np.clip(d65.albedo, 0, 1) * 255).astype(np.uint8)
+    write_gltf(d65, wrong, base_colour="texture", texels=linear_texels)
+    render = render_with_blender(wrong, tmp_path / "wrong.exr", *SIZE, samples=1)
+    assert _audit(render.image, done.manifest) > 10 * BOUND_RGB
 
 
 def test_srgb_values_as_linear_factors_fail_by_far(d65, tmp_path):

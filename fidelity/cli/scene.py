@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from fidelity.cli.options import Resolution, common_options
-from fidelity.scene.export import FORMATS, export_scene
+from fidelity.scene.export import BASE_COLOURS, FORMATS, export_scene
 from fidelity.scene.model import CHARTS, REFERENCES, build_scene
 
 
@@ -36,10 +36,14 @@ from fidelity.scene.model import CHARTS, REFERENCES, build_scene
               help="Camera distance from the chart in metres (instead of --fill).")
 @click.option("--white-level", type=float, default=1.0, show_default=True,
               help="Linear value a perfect white reflector renders at (sets the light).")
+@click.option("--base-colour", type=click.Choice(BASE_COLOURS), default="factor",
+              show_default=True,
+              help="gltf: the patches' linear baseColorFactor, or an 8-bit sRGB-encoded "
+                   "baseColorTexture (one texel per patch).")
 @common_options
 def scene(fmt: str, out_dir: Path, reference: str, illuminant: str, chart: str,
           resolution: tuple[int, int], yfov: float, fill: float | None,
-          distance: float | None, white_level: float) -> None:
+          distance: float | None, white_level: float, base_colour: str) -> None:
     """Write the chart scene in the format a simulator loads, with manifest.json and README.md.
 
     \b
@@ -56,6 +60,6 @@ def scene(fmt: str, out_dir: Path, reference: str, illuminant: str, chart: str,
                                "needs --reference scene")
     model = build_scene(illuminant, reference, chart, resolution=resolution, yfov_deg=yfov,
                         fill=fill, distance=distance, white_level=white_level)
-    done = export_scene(model, fmt, out_dir)
+    done = export_scene(model, fmt, out_dir, base_colour=base_colour)
     click.echo(f"wrote {done.scene_file}, manifest.json, README.md ({done.seconds:.2f} s)")
     click.echo(f"gate the render: {done.manifest['gate_command']}")

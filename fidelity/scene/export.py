@@ -21,15 +21,18 @@ import shutil
 import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from fidelity.errors import FidelityError, InputFileError, unknown_name
+from fidelity.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
 from fidelity.fileio import WRITE_ERRNOS, display_path, json_ready, write_error
 from fidelity.scene.model import LUMENS_PER_WATT, ChartScene
+
+#: glTF base colour encodings (:data:`fidelity.scene.gltf.BASE_COLOURS`, without importing it).
+BASE_COLOURS: tuple[str, ...] = ("factor", "texture")
 
 #: format -> (scene file name, Python module it needs, extra that provides it)
 FORMATS: dict[str, tuple[str, str, str]] = {
@@ -231,6 +234,9 @@ Encoding (glTF 2.0 specification): each patch's `baseColorFactor` is its **linea
 `roughnessFactor` 1, `KHR_materials_specular` `specularFactor` 0 (no specular reflection: the
 reference is a 45/0 measurement). An importer that ignores `KHR_materials_specular` adds a
 dielectric specular of about 4 % (F0 = 0.04): set the material's specular to 0 by hand.
+Base colour here: **{base_colour}** (`fidelity scene --base-colour texture` writes one 8-bit
+sRGB-encoded texel per patch instead, factor 1, nearest filtering: an importer must decode it
+as sRGB, and the manifest's albedos are the decoded 8-bit values).
 """,
     "usd": """# Chart scene: OpenUSD (`chart.usda`)
 
@@ -265,15 +271,15 @@ def readme(scene: ChartScene, fmt: str, doc: dict[str, Any]) -> str:
               "height": cam.height, "yfov": math.degrees(cam.yfov), "distance": cam.distance,
               "illuminant": scene.illuminant, "white": f"{scene.white_level:g}",
               "white_rgb": ", ".join(f"{v * scene.white_level:.4f}" for v in scene.albedo[18]),
-              "gate": doc["gate_command"]}
+              "gate": doc["gate_command"], "base_colour": doc.get("base_colour", "factor")}
     return (_README_BY_FORMAT[fmt] + _README_COMMON).format(**values)
 
 
-def _writer(fmt: str) -> Callable[[ChartScene, Path], None]:
+def _writer(fmt: str, base_colour: str = "factor") -> Callable[[ChartScene, Path], None]:
     if fmt == "gltf":
         from fidelity.scene.gltf import write_gltf
 
-        return write_gltf
+        return lambda scene, path: write_gltf(scene, path, base_colour=base_colour)
     if fmt == "usd":
         from fidelity.scene.usd import write_usd
 
@@ -300,16 +306,32 @@ def _replaceable(out: Path) -> bool:
 
 
 def export_scene(scene: ChartScene, fmt: str, out: str | os.PathLike[str], *,
-                 check: bool = True) -> Export:
+                 check: bool = True, base_colour: str = "factor") -> Export:
     """Write ``scene`` in ``fmt`` to the folder ``out`` (see the module docstring).
 
     ``check`` loads the Mitsuba XML back with ``mitsuba.load_file`` when Mitsuba is installed.
+    ``base_colour`` (glTF only): ``factor`` (linear factors) or ``texture`` (an 8-bit
+    sRGB-encoded texture; the manifest's albedos are then the quantised ones it decodes to).
     Raises :class:`~fidelity.errors.UnknownNameError` (format), :class:`MissingExtraError`,
     :class:`~fidelity.errors.InputFileError` (a destination that cannot be written or holds
     something else).
     """
     t0 = time.perf_counter()
     name, _, _ = _check_format(fmt)
+    if base_colour not in BASE_COLOURS:
+        raise unknown_name("base colour", base_colour, BASE_COLOURS)
+    if base_colour != "factor":
+        if fmt != "gltf":
+            raise InvalidValueError(f"--base-colour {base_colour}: only the gltf format has "
+                                    "textures here; give --base-colour factor")
+        from fidelity.scene.gltf import texture_albedo
+
+        quantised = texture_albedo(scene.albedo)
+        scene = replace(scene, albedo=quantised, conventions={
+            **scene.conventions,
+            "rgb_materials": "8-bit sRGB-encoded baseColorTexture (one texel per patch, nearest "
+                             "filtering), factor 1; albedo = the decoded 8-bit texel",
+            "albedo_quantisation_delta_e_max": float(_max_de(quantised, scene.albedo))})
     target = Path(out)
     where = display_path(target)
     if not _replaceable(target):
@@ -321,12 +343,13 @@ def export_scene(scene: ChartScene, fmt: str, out: str | os.PathLike[str], *,
         tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.{os.getpid()}.", suffix=".tmp",
                                     dir=target.parent))
         scene_path = tmp / name
-        _writer(fmt)(scene, scene_path)
+        _writer(fmt, base_colour)(scene, scene_path)
         if fmt == "mitsuba" and check and importlib.util.find_spec("mitsuba") is not None:
             from fidelity.scene.mitsuba import check_loads
 
             check_loads(scene_path)
         doc = manifest(scene, fmt, name)
+        doc["base_colour"] = base_colour if fmt == "gltf" else "factor"
         doc["checked_with"] = _checked_with(fmt, check)
         (tmp / MANIFEST).write_text(json.dumps(json_ready(doc), indent=1) + "\n",
                                     encoding="utf-8")
@@ -366,6 +389,12 @@ def _checked_with(fmt: str, check: bool) -> str | None:
     return f"pygltflib {getattr(pygltflib, '__version__', '')}".strip()
 
 
+def _max_de(a: np.ndarray, b: np.ndarray) -> float:
+    from fidelity.scene.verify import delta_e_linear
+
+    return float(np.max(delta_e_linear(a, b)))
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
@@ -378,5 +407,5 @@ def wrongly_encoded(scene: ChartScene) -> np.ndarray:
     return np.clip(scene.reference_srgb, 0.0, 1.0)
 
 
-__all__ = ["FORMATS", "MANIFEST", "MANIFEST_KIND", "MANIFEST_SCHEMA_VERSION", "README", "RENDERER_SETTINGS", "Export",
+__all__ = ["BASE_COLOURS", "FORMATS", "MANIFEST", "MANIFEST_KIND", "MANIFEST_SCHEMA_VERSION", "README", "RENDERER_SETTINGS", "Export",
            "MissingExtraError", "export_scene", "manifest", "readme", "wrongly_encoded"]
