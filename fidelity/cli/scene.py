@@ -44,7 +44,9 @@ from fidelity.scene.model import CHARTS, REFERENCES, build_scene
 def scene(fmt: str, out_dir: Path, reference: str, illuminant: str, chart: str,
           resolution: tuple[int, int], yfov: float, fill: float | None,
           distance: float | None, white_level: float, base_colour: str) -> None:
-    """Write the chart scene in the format a simulator loads, with manifest.json and README.md.
+    """Export the chart scene for a simulator: glTF, OpenUSD or Mitsuba 3, with a manifest.
+
+    The scene is written in the format the simulator loads, with manifest.json and README.md.
 
     \b
     fidelity scene --format gltf --out chart-gltf
