@@ -7,7 +7,7 @@ two modules together). The layers, lowest first, are the ones docs/development.m
 0. support: ``errors``, ``version``, ``resources``, ``fileio``, ``schema``
 1. ``colour``
 2. ``camera``, ``chart``, ``correction``
-3. ``prediction``
+3. ``prediction``, ``scene`` (the chart scene for simulators: colour + camera data)
 4. ``coco``
 5. the chart pipeline: ``records``, ``check``, ``compare``, ``fit``
 6. ``report``
@@ -32,7 +32,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
      "fidelity.schema"),
     ("fidelity.colour",),
     ("fidelity.camera", "fidelity.chart", "fidelity.correction"),
-    ("fidelity.prediction",),
+    ("fidelity.prediction", "fidelity.scene"),
     ("fidelity.coco",),
     ("fidelity.records", "fidelity.check", "fidelity.compare", "fidelity.fit"),
     ("fidelity.report",),

@@ -66,6 +66,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "render": ("fidelity.cli.render:render",
                "Render the spectral Macbeth chart through a camera model and measure ΔE00 per "
                "patch."),
+    "scene": ("fidelity.cli.scene:scene",
+              "Export the chart scene for a simulator: glTF, OpenUSD or Mitsuba 3, with a "
+              "manifest."),
     "sweep": ("fidelity.cli.sweep:sweep",
               "Run (or resume) the COCO sweep; one line per finished cell on stderr ([k/N] "
               "cells)."),

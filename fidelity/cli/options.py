@@ -121,6 +121,21 @@ class Targets(ParamTypeBase):
         return values
 
 
+class Resolution(ParamTypeBase):
+    """``WIDTHxHEIGHT`` in pixels (``640x480``) -> ``(width, height)``."""
+
+    name = "WIDTHxHEIGHT"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> tuple[int, int]:
+        if isinstance(value, tuple):
+            return value
+        m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", str(value))
+        if not m:
+            self.fail(f"{value!r}: expected WIDTHxHEIGHT in pixels, e.g. 640x480", param, ctx)
+        return int(m.group(1)), int(m.group(2))
+
+
 class NameList(ParamTypeBase):
     """``all`` or comma-separated names from a known set -> a list of names."""
 
@@ -585,6 +600,7 @@ __all__ = [
     "LIMIT_HELP",
     "PATH",
     "READ_OPTION_NAMES",
+    "Resolution",
     "STDOUT",
     "CorruptionNames",
     "ModelList",
