@@ -324,7 +324,7 @@ def test_cli_fit_writes_the_files_and_the_report(images, tmp_path):
     out = tmp_path / "out"
     r = CliRunner().invoke(main, ["fit", str(images["hue"]), str(images["real"]), "--out",
                                   str(out), "--sim-corners", CORNERS, "--real-corners", CORNERS,
-                                  "--model", "root-polynomial"])
+                                  "--correction", "root-polynomial"])
     assert r.exit_code == 0, r.output
     for name in ("correction.cube", "correction.ocio", "correction.json", "report.json",
                  "report.html"):

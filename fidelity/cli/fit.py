@@ -25,10 +25,10 @@ if TYPE_CHECKING:
 @click.option("--out", "out", type=click.Path(file_okay=False, path_type=Path), required=True,
               help="Folder for correction.cube, correction.ocio, correction.json, report.json "
                    "and report.html.")
-@click.option("--model", type=click.Choice(["gains", "matrix", "matrix+curve",
+@click.option("--correction", "model", type=click.Choice(["gains", "matrix", "matrix+curve",
                                             "root-polynomial"]),
               default="matrix", show_default=True,
-              help="Correction model: per-channel gains, a 3x3 matrix, a shared tone curve "
+              help="The correction's form: per-channel gains, a 3x3 matrix, a shared tone curve "
                    "then a matrix, or Finlayson's root-polynomial (degree 2).")
 @click.option("--objective", type=click.Choice(["linear", "ciede2000"]), default=None,
               help="What the fit minimises: squared differences in linear RGB, or squared "
@@ -57,7 +57,7 @@ def fit(sim: Path, real: Path, out: Path, model: str, objective: str | None,
 
     \b
     fidelity fit sim.png photo.jpg --out correction/
-    fidelity fit sim.exr photo.jpg --out c/ --model root-polynomial --normalise none
+    fidelity fit sim.exr photo.jpg --out c/ --correction root-polynomial --normalise none
     """
     from fidelity.fileio import check_outputs, display_path
     from fidelity.fit import fit_and_verify
