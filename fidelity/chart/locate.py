@@ -118,10 +118,6 @@ def apply_homography(h: np.ndarray, points: np.ndarray) -> np.ndarray:
     return out
 
 
-#: Pixels of a window's bounding box mapped to the grid at a time (bounded memory).
-MASK_BLOCK_PIXELS = 1 << 18
-
-
 @dataclass(frozen=True, eq=False)
 class PatchWindow:
     """The pixels of one patch's sampling window: those set in ``mask`` (``(h, w)`` bool) over
@@ -166,22 +162,63 @@ class PatchWindow:
         return out
 
 
+#: Pixels either side of a window's edge, along a row, whose centres are mapped to the grid
+#: to decide whether they are in it (those farther in are, those farther out are not).
+EDGE_PIXELS = 2
+
+
+def _inside(h_inv: np.ndarray, xs: np.ndarray, ys: np.ndarray, centre: tuple[float, float],
+            half: float) -> np.ndarray:
+    """Whether pixel centres ``(xs, ys)`` map within ``half`` (+1e-9) of ``centre`` in grid
+    coordinates."""
+    uv = apply_homography(h_inv, np.stack([xs, ys], axis=-1).astype(np.float64))
+    out: np.ndarray = ((np.abs(uv[..., 0] - centre[0]) <= half + 1e-9)
+                       & (np.abs(uv[..., 1] - centre[1]) <= half + 1e-9))
+    return out
+
+
 def _window_mask(h_inv: np.ndarray, box: tuple[int, int, int, int], centre: tuple[float, float],
-                 half: float) -> np.ndarray:
+                 half: float, quad: np.ndarray) -> np.ndarray:
     """Which pixels of ``box`` (x0, y0, x1, y1, inclusive) map within ``half`` of ``centre`` in
-    grid coordinates, a block of rows at a time."""
+    grid coordinates: the pixels of the convex quadrilateral ``quad`` (the window's corners in
+    the image). Each row crosses it in one run of pixels; the pixels within
+    :data:`EDGE_PIXELS` of the run's ends are mapped to the grid to decide, the rest filled,
+    so that the work grows with the window's perimeter, not its area."""
     x0, y0, x1, y1 = box
-    xs = np.arange(x0, x1 + 1, dtype=np.float64)
-    mask = np.zeros((y1 - y0 + 1, len(xs)), dtype=bool)
-    step = max(1, MASK_BLOCK_PIXELS // len(xs))
-    for ya in range(y0, y1 + 1, step):
-        ys = np.arange(ya, min(ya + step, y1 + 1), dtype=np.float64)
-        pts = np.empty((len(ys), len(xs), 2))
-        pts[..., 0] = xs[None, :]
-        pts[..., 1] = ys[:, None]
-        uv = apply_homography(h_inv, pts)
-        mask[ya - y0:ya - y0 + len(ys)] = ((np.abs(uv[..., 0] - centre[0]) <= half + 1e-9)
-                                           & (np.abs(uv[..., 1] - centre[1]) <= half + 1e-9))
+    width = x1 - x0 + 1
+    ys = np.arange(y0, y1 + 1, dtype=np.float64)
+    # where each row's line crosses the quadrilateral's edges
+    ends = np.full((len(ys), 2), np.nan)
+    for (px, py), (qx, qy) in zip(quad, np.roll(quad, -1, axis=0), strict=True):
+        if py == qy:
+            continue
+        t = (ys - py) / (qy - py)
+        x = np.where((t >= 0) & (t <= 1), px + t * (qx - px), np.nan)
+        with np.errstate(invalid="ignore"):
+            ends[:, 0] = np.fmin(ends[:, 0], x)
+            ends[:, 1] = np.fmax(ends[:, 1], x)
+    mask = np.zeros((len(ys), width), dtype=bool)
+    test_rows: list[np.ndarray] = []
+    test_cols: list[np.ndarray] = []
+    crossed = np.isfinite(ends[:, 0])
+    for r in np.flatnonzero(~crossed):  # rows that miss it (by rounding): every pixel tested
+        test_rows.append(np.full(width, r))
+        test_cols.append(np.arange(width))
+    rows = np.flatnonzero(crossed)
+    lo = np.clip(np.floor(ends[rows, 0]).astype(np.int64) - x0 - EDGE_PIXELS, 0, width)
+    hi = np.clip(np.ceil(ends[rows, 1]).astype(np.int64) - x0 + EDGE_PIXELS + 1, 0, width)
+    for r, a, b in zip(rows, lo, hi, strict=True):
+        if b - a <= 4 * EDGE_PIXELS + 2:
+            test_rows.append(np.full(b - a, r))
+            test_cols.append(np.arange(a, b))
+        else:
+            mask[r, a + 2 * EDGE_PIXELS + 1:b - 2 * EDGE_PIXELS - 1] = True
+            edge = np.r_[a:a + 2 * EDGE_PIXELS + 1, b - 2 * EDGE_PIXELS - 1:b]
+            test_rows.append(np.full(len(edge), r))
+            test_cols.append(edge)
+    if test_rows:
+        rr, cc = np.concatenate(test_rows), np.concatenate(test_cols)
+        mask[rr, cc] = _inside(h_inv, cc + x0, rr + y0, centre, half)
     return mask
 
 
@@ -292,7 +329,7 @@ def locate_chart(
         x1 = min(int(np.ceil(quad[:, 0].max())), width - 1)
         y0 = max(int(np.floor(quad[:, 1].min())), 0)
         y1 = min(int(np.ceil(quad[:, 1].max())), height - 1)
-        mask = _window_mask(h_inv, (x0, y0, x1, y1), (float(u0), float(v0)), half)
+        mask = _window_mask(h_inv, (x0, y0, x1, y1), (float(u0), float(v0)), half, quad)
         windows.append(PatchWindow(y0, x0, mask, int(np.count_nonzero(mask))))
     c2 = centres.reshape(rows, cols, 2)
     steps = np.concatenate([

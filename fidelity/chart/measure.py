@@ -603,10 +603,9 @@ def measure_pixels(
         if coded:  # integer codes: a histogram per channel holds all the patch has to say
             histograms.append(_code_histogram(vals))
             counts, valid = dict(_NO_BAD), len(vals)
-            mean = histograms[-1] @ _code_linear(arr.dtype.str, encoding) / max(valid, 1)
         else:
             lin, counts = _patch_linear(vals, encoding, negatives, to_srgb, identity)
-            valid, mean = len(lin), lin.mean(axis=0)
+            valid = len(lin)
         for key in totals:
             totals[key] += counts[key]
         if counts["total"]:
@@ -619,7 +618,8 @@ def measure_pixels(
                 f"valid ({counts['nan']} NaN, {counts['inf']} Inf{negative}); need at least "
                 f"{need}"
             )
-        means[k] = mean
+        means[k] = (histograms[-1] @ _code_linear(arr.dtype.str, encoding) / valid if coded
+                    else lin.mean(axis=0))
         valid_counts.append(valid)
     if mode == "auto":
         ev = exposure_from_neutrals(means, ref.lab, ref.neutral_indices, ref.patch_names)
