@@ -50,12 +50,13 @@ DEMOSAICING = "Malvar 2004 (colour-demosaicing)"
 FLOAT_PIXEL_TYPES = frozenset({"half", "float", "double"})
 
 #: Largest image :func:`read_image` decodes unless told otherwise, in pixels (width x height),
-#: checked from the file's header before any pixel is decoded. Sized for a 24 GiB machine from
-#: the audit's measured peak above the program itself (``benchmarks/bench_memory.py``): about
-#: 20 bytes per pixel for an RGB photo of 24 megapixels or more, about 60 for a Bayer mosaic
-#: (demosaiced in float64). 150 megapixels (a 14142 x 10607 photo, more than any camera sold)
-#: then peak near 3 GB, or 9 GB for a mosaic: at most a third of the machine, leaving room for
-#: the system and the other jobs on it.
+#: checked from the file's header before any pixel is decoded. An audit holds the image at its
+#: decoded depth (3 bytes per pixel for an 8-bit photo, 6 for 16-bit or half, 12 for float)
+#: plus about one byte per pixel for the chart finder's reduced copies: measured for 8-bit
+#: JPEGs (``benchmarks/bench_memory.py``), 3.1 MB per megapixel above the program's 170 MB
+#: between 24 and 108 megapixels (630 MB at 108). A Bayer mosaic is demosaiced in float64
+#: (about 60 bytes per pixel). 150 megapixels (a 14142 x 10607 photo, more than any camera
+#: sold) then take under 1 GB as an 8-bit photo, about 2 GB as float.
 DEFAULT_MAX_PIXELS = 150_000_000
 
 #: Environment variable that sets the pixel limit (like ``--max-pixels``).
@@ -498,7 +499,8 @@ def _read(p: Path, layer: str | None, bayer: str | None, limit: int,
                     f"({pixels_declared / 1e6:.1f} megapixels), more than the limit of "
                     f"{limit / 1e6:g} megapixels; raise it with --max-pixels N or "
                     f"{MAX_PIXELS_ENV}=N if this machine has the memory (an audit needs "
-                    "about 20 bytes per pixel, 60 for a Bayer mosaic)")
+                    "the decoded image plus about 1 byte per pixel: 4 for an 8-bit photo; 60 "
+                    "for a Bayer mosaic)")
             first, last = min(rgb.values()), max(rgb.values())
             keep = native and bayer is None and str(spec.format) in NATIVE_PIXEL_TYPES
             fmt = str(spec.format) if keep else "float"
