@@ -13,7 +13,8 @@ other in the same run:
 
 each with the default workers (one per core) and with ``--workers 1``. The marginal time per
 image is ``(T_large - T_small) / (large - small)`` (the start-up, the imports, the pool and the
-numba kernels cancel), quoted as its ratio to the floor's; the fixed cost is ``T_small`` minus
+numba kernels cancel), quoted as its ratio to the floor's, in wall time and in CPU time (of the
+process and its workers: less sensitive to other jobs on the machine); the fixed cost is ``T_small`` minus
 ``small`` marginal times. Each process is run ``--repeats`` times, the fastest kept (other jobs
 share the machine). ``--source DIR`` runs the same with the ``fidelity`` package of another
 checkout (before/after in one run). Writes reports/benchmarks/dataset.json. Run:
@@ -100,11 +101,13 @@ def main() -> int:
         for label, source in sources:
             for workers in (None, 1):
                 times: dict[tuple[str, int], float] = {}
+                cpu: dict[tuple[str, int], float] = {}
                 for target, subset in (("0", "floor"), ("3", "pull_mean")):
                     for n, folder in folders.items():
                         row = dataset_run(source, folder, Path(tmp) / "out", target, workers,
                                           args.repeats)
                         times[(subset, n)] = row["seconds"]
+                        cpu[(subset, n)] = row["cpu_seconds"]
                         rows.append({"source": label, "workers": workers or available_cpus(),
                                      "default_workers": workers is None, "subset": subset,
                                      "images": n, **row})
@@ -115,12 +118,17 @@ def main() -> int:
                             for k in ("floor", "pull_mean")}
                 fixed = {k: times[(k, args.small)] - args.small * marginal[k]
                          for k in ("floor", "pull_mean")}
+                marginal_cpu = {k: (cpu[(k, args.large)] - cpu[(k, args.small)]) / span
+                                for k in ("floor", "pull_mean")}
                 key = f"{label}, {'default workers' if workers is None else '--workers 1'}"
                 summary[key] = {
                     "workers": workers or available_cpus(),
                     "marginal_ms_per_image": {k: 1000 * v for k, v in marginal.items()},
                     "fixed_seconds": fixed,
                     "pull_mean_marginal_ratio_to_floor": marginal["pull_mean"] / marginal["floor"],
+                    "marginal_cpu_ms_per_image": {k: 1000 * v for k, v in marginal_cpu.items()},
+                    "pull_mean_marginal_cpu_ratio_to_floor": (marginal_cpu["pull_mean"]
+                                                              / marginal_cpu["floor"]),
                     f"seconds_for_{args.small}_images": {k: times[(k, args.small)]
                                                          for k in ("floor", "pull_mean")},
                 }
@@ -128,7 +136,8 @@ def main() -> int:
     for key, s in summary.items():
         m = s["marginal_ms_per_image"]
         print(f"{key:>40s}: pull_mean {m['pull_mean']:6.1f} ms/image, floor "
-              f"{m['floor']:6.1f} ms/image: {s['pull_mean_marginal_ratio_to_floor']:.2f}x; "
+              f"{m['floor']:6.1f} ms/image: {s['pull_mean_marginal_ratio_to_floor']:.2f}x "
+              f"(CPU {s['pull_mean_marginal_cpu_ratio_to_floor']:.2f}x); "
               f"fixed {s['fixed_seconds']['pull_mean']:.2f} s (floor "
               f"{s['fixed_seconds']['floor']:.2f} s)")
     write_json_atomic(args.out, {

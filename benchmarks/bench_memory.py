@@ -122,14 +122,16 @@ _LAUNCH = (
     "_, status, usage = os.wait4(pid, 0)\n"
     "print(json.dumps({'exit': os.waitstatus_to_exitcode(status),\n"
     "                  'seconds': time.perf_counter() - t,\n"
+    "                  'cpu_seconds': usage.ru_utime + usage.ru_stime,\n"
     "                  'max_rss_kib': usage.ru_maxrss}))\n"
 )
 
 
 def run_process(args: list[str], env: dict[str, str] | None = None,
                 cwd: Path | None = None) -> dict[str, Any]:
-    """Run one process (through :data:`_LAUNCH`); its exit code, wall seconds, max RSS (MB,
-    its own) and the last line it wrote to stderr."""
+    """Run one process (through :data:`_LAUNCH`); its exit code, wall seconds, CPU seconds
+    (user and system, with the children it waited for), max RSS (MB, its own) and the last line
+    it wrote to stderr."""
     res = subprocess.run([sys.executable, "-S", "-c", _LAUNCH, *args], capture_output=True,
                          text=True, env=env, cwd=cwd, check=False)
     if res.returncode or not res.stdout.strip():
@@ -137,6 +139,7 @@ def run_process(args: list[str], env: dict[str, str] | None = None,
     usage = json.loads(res.stdout.strip().splitlines()[-1])
     err = res.stderr.strip()
     return {"exit": usage["exit"], "seconds": round(usage["seconds"], 2),
+            "cpu_seconds": round(usage["cpu_seconds"], 2),
             "max_rss_mb": round(usage["max_rss_kib"] * 1024 / 1e6, 1),
             "stderr": err.splitlines()[-1] if err else ""}
 

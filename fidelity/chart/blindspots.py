@@ -231,7 +231,7 @@ def banding(pixels: np.ndarray, pixel_type: str, *, min_bits: int = MIN_BITS) ->
         return BlindSpot("banding", None, None, float(min_bits),
                          f"banding not judged: {pixel_type} pixels are not integer codes")
     arr = np.asarray(pixels)
-    if arr.dtype.kind in "ui" and np.iinfo(arr.dtype).max == rng:  # the codes themselves
+    if arr.dtype in (np.uint8, np.uint16) and np.iinfo(arr.dtype).max == rng:  # codes
         codes = arr
     else:
         codes = _codes(arr, rng)

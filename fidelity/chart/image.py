@@ -70,13 +70,19 @@ MAX_PARTS = 1024
 NATIVE_PIXEL_TYPES = {"uint8": np.uint8, "uint16": np.uint16, "half": np.float16}
 
 
+def is_coded(values: np.ndarray) -> bool:
+    """Whether ``values`` are 8- or 16-bit unsigned integer codes (an image read at its native
+    depth), which stand for ``code / (2**bits - 1)``."""
+    return values.dtype in (np.uint8, np.uint16)
+
+
 def as_float32(values: np.ndarray) -> np.ndarray:
-    """``values`` as float32 of the scale :func:`read_image` gives: unsigned integer codes
-    times ``1 / (2**bits - 1)`` in single precision, as OpenImageIO converts them (so the
-    result equals the float read bit for bit), floating-point values as they are (no copy for
-    float32)."""
+    """``values`` as float32 of the scale :func:`read_image` gives: 8- and 16-bit unsigned
+    codes (:func:`is_coded`) times ``1 / (2**bits - 1)`` in single precision, as OpenImageIO
+    converts them (so the result equals the float read bit for bit), other values as they are
+    (no copy for float32)."""
     a = np.asarray(values)
-    if a.dtype.kind in "ui":
+    if is_coded(a):
         return a.astype(np.float32) * np.float32(1.0 / np.iinfo(a.dtype).max)
     return a.astype(np.float32, copy=False)
 
@@ -621,5 +627,5 @@ def _finish(out: Any, written: bool, path: str | os.PathLike[str], kind: str) ->
 
 __all__ = ["BAYER_PATTERNS", "DEFAULT_MAX_PIXELS", "DEMOSAICING", "FLOAT_PIXEL_TYPES",
            "MAX_PIXELS_ENV", "NATIVE_PIXEL_TYPES", "Image", "ImageInfo", "as_float32",
-           "demosaic", "pixel_limit",
+           "demosaic", "is_coded", "pixel_limit",
            "read_image", "write_exr", "write_png"]

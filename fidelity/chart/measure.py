@@ -52,7 +52,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fidelity.chart.find import ChartChecks, FoundChart, check_corners, find_chart
-from fidelity.chart.image import Image, ImageInfo, as_float32
+from fidelity.chart.image import Image, ImageInfo, as_float32, is_coded
 from fidelity.chart.locate import DEFAULT_WINDOW, ChartLocation, locate_chart
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import DEFAULT_REFERENCE, Reference, load_reference
@@ -445,7 +445,7 @@ def _whole_image_counts(arr: np.ndarray, negatives: str) -> dict[str, int]:
     its masks take a few MB whatever the image's size."""
     rows = max(1, COUNT_BLOCK_PIXELS // max(arr.shape[1], 1))
     totals = {"nan": 0, "inf": 0, "negative": 0, "total": 0}
-    if arr.dtype.kind == "u":  # integer codes: never NaN, Inf or negative
+    if is_coded(arr):  # integer codes: never NaN, Inf or negative
         return totals
     for y in range(0, arr.shape[0], rows):
         block = arr[y:y + rows]
@@ -472,7 +472,7 @@ def _patch_linear(vals: np.ndarray, encoding: str, negatives: str, to_srgb: np.n
                   identity: bool) -> tuple[np.ndarray, dict[str, int]]:
     """The valid pixels of one window's values ``(n, 3)`` (any dtype: integer codes are
     looked up in :func:`_code_linear`) in linear sRGB, float64, and the bad-pixel counts."""
-    if vals.dtype.kind == "u":  # integer codes: never NaN, Inf or negative
+    if is_coded(vals):  # integer codes: never NaN, Inf or negative
         lin = _code_linear(vals.dtype.str, encoding)[vals]
         counts = {"nan": 0, "inf": 0, "negative": 0, "total": 0}
     else:
@@ -535,9 +535,9 @@ def measure_pixels(
     Parameters
     ----------
     pixels
-        ``(H, W, 3)`` values, linear or encoded sRGB (``encoding``): floating-point, or
-        unsigned integer codes normalised by ``2**bits - 1``
-        (:func:`fidelity.chart.image.as_float32`; an image read at its native depth).
+        ``(H, W, 3)`` values, linear or encoded sRGB (``encoding``): 8- or 16-bit unsigned
+        codes stand for ``code / (2**bits - 1)`` (:func:`fidelity.chart.image.as_float32`; an
+        image read at its native depth), other values for themselves.
     corners
         Centres of the dark skin, bluish green, black and white patches, ``(4, 2)`` image
         ``(x, y)`` or ``"X1,Y1,...,X4,Y4"``; ``None``: find the chart
@@ -596,7 +596,7 @@ def measure_pixels(
     per_patch: dict[str, int] = {}
     totals = {"nan": 0, "inf": 0, "negative": 0, "total": 0}
     identity = bool(np.array_equal(to_srgb, np.eye(3)))
-    coded = arr.dtype.kind == "u" and identity
+    coded = is_coded(arr) and identity
     histograms: list[np.ndarray] = []
     for k, win in enumerate(loc.windows):
         vals = win.values(arr)

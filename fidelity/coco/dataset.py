@@ -184,9 +184,10 @@ def pull_mean_kernel(kernel: str = "auto") -> str:
 
 
 #: Fewest images a run writes with pull_mean for the numba kernel to pay for itself. Measured
-#: on the project's 2-core machine (other jobs running): importing numba and loading its
-#: kernels from the disk cache take 3.3 s per process; the kernel saves 11 ms per 640x480 COCO
-#: photo over the numpy kernel (41 against 52 ms). Both give the same bits.
+#: on the project's 2-core machine at load average 12: importing numba and loading its kernels
+#: from the disk cache take 3.3 s per process (then inherited by forked workers); the kernel
+#: saves 11 ms per 640x480 COCO photo over the numpy kernel (41 against 52 ms), so 300 images
+#: break even. Both give the same bits.
 NUMBA_MIN_IMAGES = 300
 
 
