@@ -197,7 +197,6 @@ def _window_mask(h_inv: np.ndarray, box: tuple[int, int, int, int], centre: tupl
         with np.errstate(invalid="ignore"):
             ends[:, 0] = np.fmin(ends[:, 0], x)
             ends[:, 1] = np.fmax(ends[:, 1], x)
-    mask = np.zeros((len(ys), width), dtype=bool)
     test_rows: list[np.ndarray] = []
     test_cols: list[np.ndarray] = []
     crossed = np.isfinite(ends[:, 0])
@@ -207,15 +206,22 @@ def _window_mask(h_inv: np.ndarray, box: tuple[int, int, int, int], centre: tupl
     rows = np.flatnonzero(crossed)
     lo = np.clip(np.floor(ends[rows, 0]).astype(np.int64) - x0 - EDGE_PIXELS, 0, width)
     hi = np.clip(np.ceil(ends[rows, 1]).astype(np.int64) - x0 + EDGE_PIXELS + 1, 0, width)
-    for r, a, b in zip(rows, lo, hi, strict=True):
-        if b - a <= 4 * EDGE_PIXELS + 2:
-            test_rows.append(np.full(b - a, r))
-            test_cols.append(np.arange(a, b))
-        else:
-            mask[r, a + 2 * EDGE_PIXELS + 1:b - 2 * EDGE_PIXELS - 1] = True
-            edge = np.r_[a:a + 2 * EDGE_PIXELS + 1, b - 2 * EDGE_PIXELS - 1:b]
-            test_rows.append(np.full(len(edge), r))
-            test_cols.append(edge)
+    keep = hi > lo
+    rows, lo, hi = rows[keep], lo[keep], hi[keep]
+    # the run's inside, filled: +1 where it starts, -1 where it stops, summed along the row
+    k = 2 * EDGE_PIXELS + 1
+    start, stop = lo + k, hi - k
+    wide = stop > start
+    steps = np.zeros((len(ys), width + 1), dtype=np.int8)
+    steps[rows[wide], start[wide]] = 1
+    steps[rows[wide], stop[wide]] = -1
+    mask = np.cumsum(steps, axis=1, dtype=np.int8)[:, :width] > 0
+    # the k pixels at each end of the run (all of a short run) are tested
+    span = np.arange(k)
+    cols = np.concatenate([lo[:, None] + span, hi[:, None] - k + span], axis=1)
+    cols = np.clip(cols, lo[:, None], hi[:, None] - 1)
+    test_rows.append(np.repeat(rows, 2 * k))
+    test_cols.append(cols.ravel())
     if test_rows:
         rr, cc = np.concatenate(test_rows), np.concatenate(test_cols)
         mask[rr, cc] = _inside(h_inv, cc + x0, rr + y0, centre, half)
