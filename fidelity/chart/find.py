@@ -74,6 +74,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fidelity.chart.image import as_float32, is_coded
 from fidelity.chart.locate import CORNER_PATCHES, apply_homography, homography_from_points
 from fidelity.colour import colorimetry as cm
 from fidelity.errors import FidelityError, InvalidValueError, unknown_name
@@ -317,7 +318,8 @@ class Pyramid:
             out = np.empty((out_h, out_w) + source.shape[2:], np.float32)
             for y in range(0, out_h * step, band):
                 block = source[y:min(y + band, out_h * step), :out_w * step]
-                out[y // step:(y + block.shape[0]) // step] = _halvings(block, step, finer == 1)
+                out[y // step:(y + block.shape[0]) // step] = _halvings(
+                    block, step, finer == 1 and not is_coded(block))
             self.levels[factor] = out
         return self.levels[factor]
 
@@ -329,8 +331,8 @@ PYRAMID_BAND_PIXELS = 1 << 20
 def _halvings(block: np.ndarray, step: int, first: bool) -> np.ndarray:
     """``block`` (rows and columns multiples of ``step``) as float32, halved by 2 x 2 area
     averages until ``step`` x ``step`` blocks are averaged; ``first``: the block is of the
-    image itself, whose NaN and Inf spread over their 2 x 2 block only and count as black."""
-    from fidelity.chart.image import as_float32
+    image itself, whose NaN and Inf spread over their 2 x 2 block only and count as black (8-
+    and 16-bit codes have none)."""
 
     cv2 = _cv2()
     arr = np.ascontiguousarray(as_float32(block))
@@ -362,8 +364,6 @@ def _prepare(pyramid: Pyramid, region: tuple[int, int, int, int], max_side: int,
     ly1 = min(-(-y1 // factor), level.shape[0])
     arr = np.ascontiguousarray(level[ly0:ly1, lx0:lx1])
     if factor == 1:
-        from fidelity.chart.image import as_float32
-
         arr = np.ascontiguousarray(as_float32(arr))
     height, width = arr.shape[:2]
     target = (max(1, round((x1 - x0) * s)), max(1, round((y1 - y0) * s)))

@@ -82,8 +82,10 @@ def as_float32(values: np.ndarray) -> np.ndarray:
     converts them (so the result equals the float read bit for bit), other values as they are
     (no copy for float32)."""
     a = np.asarray(values)
-    if is_coded(a):
-        return a.astype(np.float32) * np.float32(1.0 / np.iinfo(a.dtype).max)
+    if is_coded(a):  # one pass: each code converted to float32, then scaled in float32
+        out: np.ndarray = np.multiply(a, np.float32(1.0 / np.iinfo(a.dtype).max),
+                                      dtype=np.float32)
+        return out
     return a.astype(np.float32, copy=False)
 
 _COLOUR_NAMES = {
