@@ -16,8 +16,11 @@ image is ``(T_large - T_small) / (large - small)`` (the start-up, the imports, t
 numba kernels cancel), quoted as its ratio to the floor's, in wall time and in CPU time (of the
 process and its workers: less sensitive to other jobs on the machine); the fixed cost is ``T_small`` minus
 ``small`` marginal times. Each process is run ``--repeats`` times, the fastest kept (other jobs
-share the machine). ``--source DIR`` runs the same with the ``fidelity`` package of another
-checkout (before/after in one run). Writes reports/benchmarks/dataset.json. Run:
+share the machine). The checkout's own runs are repeated with the numba kernel forced
+(``FIDELITY_PULL_MEAN_KERNEL=numba``; a run of fewer than
+:data:`fidelity.coco.dataset.NUMBA_MIN_IMAGES` photos takes the numpy kernel by itself).
+``--source DIR`` runs the same with the ``fidelity`` package of another checkout (before/after
+in one run). Writes reports/benchmarks/dataset.json. Run:
 python -m benchmarks.bench_dataset [--source /work/main]
 """
 
@@ -46,9 +49,13 @@ def coco_folder(given: Path | None) -> Path:
 
 
 def dataset_run(source: Path, images: Path, out: Path, target: str, workers: int | None,
-                repeats: int) -> dict[str, Any]:
-    """The fastest of ``repeats`` whole ``fidelity dataset`` processes (fresh output each)."""
-    env = dict(os.environ, PYTHONPATH=str(source))
+                repeats: int, kernel: str | None = None) -> dict[str, Any]:
+    """The fastest of ``repeats`` whole ``fidelity dataset`` processes (fresh output each);
+    ``kernel``: the pull_mean kernel forced (``FIDELITY_PULL_MEAN_KERNEL``)."""
+    env = {k: v for k, v in os.environ.items() if k != "FIDELITY_PULL_MEAN_KERNEL"}
+    env["PYTHONPATH"] = str(source)
+    if kernel is not None:
+        env["FIDELITY_PULL_MEAN_KERNEL"] = kernel
     args = [sys.executable, "-m", "fidelity", "dataset", "--images", str(images), "--out",
             str(out), "--transforms", "pull_mean", "--targets", target, "--no-progress"]
     if workers is not None:
@@ -84,9 +91,10 @@ def main() -> int:
     photos = sorted(coco.glob("*.jpg"))[:args.large]
     if len(photos) < args.large:
         sys.exit(f"bench_dataset: need {args.large} JPEGs in {coco} (found {len(photos)})")
-    sources = [("this checkout", ROOT)]
+    sources: list[tuple[str, Path, str | None]] = [("this checkout", ROOT, None),
+                                                    ("this checkout, numba", ROOT, "numba")]
     if args.source is not None:
-        sources.append((args.label, args.source))
+        sources.append((args.label, args.source, None))
     rows: list[dict[str, Any]] = []
     summary: dict[str, dict[str, Any]] = {}
     with tempfile.TemporaryDirectory(prefix="bench-dataset-") as tmp:
@@ -97,21 +105,21 @@ def main() -> int:
             for p in photos[:n]:
                 (folder / p.name).symlink_to(p)
             folders[n] = folder
-        print(f"{'source':>14s} {'workers':>8s} {'subset':>10s} {'images':>6s} {'s':>7s}")
-        for label, source in sources:
+        print(f"{'source':>21s} {'workers':>8s} {'subset':>10s} {'images':>6s} {'s':>7s}")
+        for label, source, kernel in sources:
             for workers in (None, 1):
                 times: dict[tuple[str, int], float] = {}
                 cpu: dict[tuple[str, int], float] = {}
                 for target, subset in (("0", "floor"), ("3", "pull_mean")):
                     for n, folder in folders.items():
                         row = dataset_run(source, folder, Path(tmp) / "out", target, workers,
-                                          args.repeats)
+                                          args.repeats, kernel)
                         times[(subset, n)] = row["seconds"]
                         cpu[(subset, n)] = row["cpu_seconds"]
                         rows.append({"source": label, "workers": workers or available_cpus(),
                                      "default_workers": workers is None, "subset": subset,
                                      "images": n, **row})
-                        print(f"{label:>14s} {workers or 'default':>8} {subset:>10s} {n:>6d} "
+                        print(f"{label:>21s} {workers or 'default':>8} {subset:>10s} {n:>6d} "
                               f"{row['seconds']:>7.2f}", flush=True)
                 span = args.large - args.small
                 marginal = {k: (times[(k, args.large)] - times[(k, args.small)]) / span

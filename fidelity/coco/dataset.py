@@ -183,12 +183,14 @@ def pull_mean_kernel(kernel: str = "auto") -> str:
     return kernel
 
 
-#: Fewest images a run writes with pull_mean for the numba kernel to pay for itself. Measured
-#: on the project's 2-core machine at load average 12: importing numba and loading its kernels
-#: from the disk cache take 3.3 s per process (then inherited by forked workers); the kernel
-#: saves 11 ms per 640x480 COCO photo over the numpy kernel (41 against 52 ms), so 300 images
-#: break even. Both give the same bits.
-NUMBA_MIN_IMAGES = 300
+#: Fewest images a run writes with pull_mean for the numba kernel to pay for itself. Importing
+#: numba and loading its kernels from the disk cache add 1.5-2 s to a run (then inherited by
+#: forked workers; ``benchmarks/bench_dataset.py``: 8 COCO photos in 2.67 s with numba forced,
+#: 1.17 s without, default workers); the kernel saves about 1.5 ms of CPU per 640x480 photo
+#: (``benchmarks/bench_pipeline.py`` on a quiet machine: 2.75 against 4.28 ms; bench_dataset's
+#: marginal CPU per photo 18.0-18.5 against 19.5-21.2 ms), so about 1000 photos break even.
+#: Both kernels give the same bits.
+NUMBA_MIN_IMAGES = 1000
 
 
 def run_kernel(images: int) -> str:
