@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fidelity.chart.measure import DEFAULT_READ, ReadOptions
+from fidelity.chart.measure import DEFAULT_READ, ReadOptions, reads_for
 from fidelity.prediction.judge import judge
 from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion
 from fidelity.records import (
@@ -284,12 +284,13 @@ def gate(
     from fidelity.errors import FidelityError
 
     subjects: list[str] = [os.fspath(i) for i in images] or ([camera] if camera else [])
+    reads = reads_for(subjects, read) if images else [read for _ in subjects]
     results: list[GateResult] = []
-    for subject in subjects:
+    for subject, subject_read in zip(subjects, reads, strict=True):
         t0 = time.perf_counter()
         try:
             if images:
-                report = audit_image(subject, corners, read=read,
+                report = audit_image(subject, corners, read=subject_read,
                                      reference=reference or "scene", illuminant=illuminant,
                                      size=size, table=table, criterion=criterion,
                                      command="gate", bound=bound)

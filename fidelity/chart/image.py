@@ -97,6 +97,55 @@ _ALPHA_NAMES = {"a", "alpha"}
 
 
 @dataclass(frozen=True)
+class Recording:
+    """Where in a robot recording an image message was read (:mod:`fidelity.chart.recording`):
+    the recording's ``kind`` (``ROS 1 bag``, ``ROS 2 bag (sqlite3)``, ``ROS 2 bag (MCAP)``,
+    ``MCAP file``), the ``topic``, the ``message_type``
+    (``sensor_msgs/msg/Image`` or ``sensor_msgs/msg/CompressedImage``), its ``ros_encoding``
+    (the Image's ``encoding`` or the CompressedImage's ``format``), the message's index among
+    the topic's messages in time order (``frame``, 0-based) of ``frames``, its log time
+    (``time_ns``, nanoseconds since the Unix epoch) and ``offset_s`` (seconds after the
+    recording's first message), and its header's ``stamp_ns`` and ``frame_id``."""
+
+    kind: str
+    topic: str
+    message_type: str
+    ros_encoding: str
+    frame: int
+    frames: int
+    time_ns: int
+    offset_s: float
+    stamp_ns: int | None = None
+    frame_id: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON form (``time_utc``: ``time_ns`` as ISO 8601 UTC text)."""
+        import datetime
+
+        utc = datetime.datetime.fromtimestamp(self.time_ns // 10**9, datetime.UTC)
+        text = utc.strftime("%Y-%m-%dT%H:%M:%S") + f".{self.time_ns % 10**9:09d}Z"
+        return {"kind": self.kind, "topic": self.topic, "message_type": self.message_type,
+                "ros_encoding": self.ros_encoding, "frame": self.frame, "frames": self.frames,
+                "time_ns": self.time_ns, "time_utc": text, "offset_s": self.offset_s,
+                "stamp_ns": self.stamp_ns, "frame_id": self.frame_id}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Recording:
+        """Inverse of :meth:`to_json`."""
+        stamp = data.get("stamp_ns")
+        return cls(str(data["kind"]), str(data["topic"]), str(data["message_type"]),
+                   str(data["ros_encoding"]), int(data["frame"]), int(data["frames"]),
+                   int(data["time_ns"]), float(data["offset_s"]),
+                   None if stamp is None else int(stamp), data.get("frame_id"))
+
+    def describe(self) -> str:
+        """One line: topic, frame, time and message (``/cam frame 3 of 40 at 1.234 s ...``)."""
+        return (f"topic {self.topic} frame {self.frame} of {self.frames} at "
+                f"{self.offset_s:.3f} s ({self.message_type.rsplit('/', 1)[-1]} "
+                f"{self.ros_encoding})")
+
+
+@dataclass(frozen=True)
 class Image:
     """An image read from disk.
 
@@ -121,6 +170,7 @@ class Image:
     all_channels: tuple[str, ...] = field(default_factory=tuple)
     chromaticities: tuple[float, ...] | None = None
     bayer: str | None = None
+    recording: Recording | None = None
 
     @property
     def height(self) -> int:
@@ -140,7 +190,7 @@ class Image:
             width=self.width, height=self.height, channels=self.channels, layer=self.layer,
             encoding_guess=self.encoding, colorspace=self.colorspace,
             chromaticities=self.chromaticities, sha256=sha256, encoding=encoding,
-            bayer=self.bayer,
+            bayer=self.bayer, recording=self.recording,
         )
 
 
@@ -149,7 +199,9 @@ class ImageInfo:
     """An image file as a report states it: ``path``, file ``format``, ``pixel_type``, size,
     the three ``channels`` used, ``layer``, the likely encoding (``encoding_guess``), OpenImageIO's
     ``colorspace`` and OpenEXR's ``chromaticities`` attributes, the file's ``sha256`` and the
-    ``encoding`` it was measured in."""
+    ``encoding`` it was measured in. An image read from a robot recording (``path`` the bag)
+    has its :class:`Recording` (topic, frame, time), and ``sha256`` is that of the message's
+    serialised bytes (the recording is not read whole)."""
 
     path: str
     format: str
@@ -164,9 +216,11 @@ class ImageInfo:
     sha256: str | None = None
     encoding: str | None = None
     bayer: str | None = None
+    recording: Recording | None = None
 
     def to_json(self) -> dict[str, Any]:
-        """JSON form (keys in this order; ``sha256`` and ``encoding`` only when known)."""
+        """JSON form (keys in this order; ``sha256``, ``encoding``, ``bayer`` and
+        ``recording`` only when known)."""
         out: dict[str, Any] = {
             "path": self.path, "format": self.format, "pixel_type": self.pixel_type,
             "width": self.width, "height": self.height, "channels": list(self.channels),
@@ -181,6 +235,8 @@ class ImageInfo:
         if self.bayer is not None:
             out["bayer"] = self.bayer
             out["demosaicing"] = DEMOSAICING
+        if self.recording is not None:
+            out["recording"] = self.recording.to_json()
         return out
 
     @classmethod
@@ -195,6 +251,8 @@ class ImageInfo:
             colorspace=data.get("colorspace"),
             chromaticities=tuple(float(v) for v in chroma) if chroma else None,
             sha256=data.get("sha256"), encoding=data.get("encoding"), bayer=data.get("bayer"),
+            recording=(Recording.from_json(data["recording"]) if data.get("recording")
+                       else None),
         )
 
 
@@ -628,6 +686,6 @@ def _finish(out: Any, written: bool, path: str | os.PathLike[str], kind: str) ->
 
 
 __all__ = ["BAYER_PATTERNS", "DEFAULT_MAX_PIXELS", "DEMOSAICING", "FLOAT_PIXEL_TYPES",
-           "MAX_PIXELS_ENV", "NATIVE_PIXEL_TYPES", "Image", "ImageInfo", "as_float32",
-           "demosaic", "is_coded", "pixel_limit",
+           "MAX_PIXELS_ENV", "NATIVE_PIXEL_TYPES", "Image", "ImageInfo", "Recording",
+           "as_float32", "demosaic", "is_coded", "pixel_limit",
            "read_image", "write_exr", "write_png"]

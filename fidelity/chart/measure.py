@@ -694,6 +694,11 @@ class ReadOptions:
     max_pixels
         Refuse a larger image (width x height) before decoding it; None:
         :func:`fidelity.chart.image.pixel_limit`.
+    topic, frame, time
+        The input is a robot recording (ROS 1 bag, ROS 2 bag, MCAP file:
+        :mod:`fidelity.chart.recording`): the image ``topic`` (None: its only image topic),
+        the message's index on it (``frame``, negative from the end) or the time nearest to
+        ``time`` seconds after the recording's first message; neither: the first message.
     """
 
     layer: str | None = None
@@ -703,12 +708,22 @@ class ReadOptions:
     colourspace: str | None = None
     bayer: str | None = None
     max_pixels: int | None = None
+    topic: str | None = None
+    frame: int | None = None
+    time: float | None = None
 
     def given(self) -> list[str]:
         """The options set away from their defaults that describe the pixels of an image
-        (``layer``, ``encoding``, ``exposure``, ``bayer``, ``colourspace``), by name."""
-        return [name for name in ("layer", "encoding", "exposure", "bayer", "colourspace")
+        (``layer``, ``encoding``, ``exposure``, ``bayer``, ``colourspace``, ``topic``,
+        ``frame``, ``time``), by name."""
+        return [name for name in ("layer", "encoding", "exposure", "bayer", "colourspace",
+                                  "topic", "frame", "time")
                 if getattr(self, name) is not None]
+
+    def names_message(self) -> bool:
+        """Whether these options name a message of a recording (``topic``, ``frame`` or
+        ``time`` given)."""
+        return any(v is not None for v in (self.topic, self.frame, self.time))
 
 
 #: Every image-reading option at its default.
@@ -727,18 +742,15 @@ def measure_image(
     inspect_image: Callable[[Image], object] | None = None,
 ) -> ImageMeasurement:
     """Read an image (:func:`fidelity.chart.image.read_image`, as ``read`` says:
-    :class:`ReadOptions`; at its native depth) and audit its chart (:func:`measure_pixels`).
-    Errors name the file. ``inspect_image`` is called with the image read once its chart is
-    measured, so that a caller can look at more of it without reading it again (the audit's
-    banding check)."""
-    from fidelity.chart.image import read_image
+    :class:`ReadOptions`; an image file at its native depth) and audit its chart
+    (:func:`measure_pixels`). Errors name the file. ``inspect_image`` is called with the image
+    read once its chart is measured, so that a caller can look at more of it without reading it
+    again (the audit's banding check)."""
     from fidelity.errors import FidelityError
-    from fidelity.fileio import file_sha256
 
-    img = read_image(path, layer=read.layer, bayer=read.bayer, max_pixels=read.max_pixels,
-                     native=True)
+    img, sha256 = read_input(path, read, native=True)
     enc = read.encoding or img.encoding
-    info = img.info(sha256=file_sha256(img.path), encoding=enc)
+    info = img.info(sha256=sha256, encoding=enc)
     try:
         result = measure_pixels(img.pixels, corners, encoding=enc, exposure=read.exposure,
                                 reference=reference, illuminant=illuminant, window=window,
@@ -750,6 +762,69 @@ def measure_image(
     if inspect_image is not None:
         inspect_image(img)
     return result
+
+def read_input(path: str | os.PathLike[str], read: ReadOptions = DEFAULT_READ, *,
+               native: bool = False) -> tuple[Image, str]:
+    """Read an image file (:func:`fidelity.chart.image.read_image`; ``native``: 8/16-bit codes
+    and half floats kept as they are) or, for a recording (a ``.bag``, ``.mcap`` or ``.db3``
+    file, a folder, or ``topic``/``frame``/``time`` given), the message ``read`` names
+    (:func:`fidelity.chart.recording.read_frame`). Returns the image and a sha256: the file's,
+    or the message's serialised bytes'."""
+    image, sha256 = _read_input(path, read, digest=True, native=native)
+    assert sha256 is not None
+    return image, sha256
+
+
+def reads_for(paths: Sequence[str | os.PathLike[str]], read: ReadOptions
+              ) -> list[ReadOptions]:
+    """How each of several inputs is read: ``read``'s recording options (``topic``, ``frame``,
+    ``time``) go to the inputs that are recordings by their form (a folder, a ``.bag``,
+    ``.mcap`` or ``.db3`` file: :func:`fidelity.chart.recording.is_recording_path`), the other
+    options to all; when none looks like a recording, all get them (and the reader says which
+    input is not one)."""
+    from dataclasses import replace
+
+    from fidelity.chart.recording import is_recording_path
+
+    if not read.names_message():
+        return [read for _ in paths]
+    plain = replace(read, topic=None, frame=None, time=None)
+    is_rec = [is_recording_path(p) for p in paths]
+    if not any(is_rec):
+        return [read for _ in paths]
+    return [read if r else plain for r in is_rec]
+
+
+def _read_input(path: str | os.PathLike[str], read: ReadOptions, *, digest: bool,
+                native: bool = False) -> tuple[Image, str | None]:
+    from fidelity.chart import recording
+
+    if read.names_message() or recording.is_recording_path(path):
+        if read.layer is not None:
+            raise InvalidValueError(f"{path}: --layer names an EXR layer; a recording has none")
+        return recording.read_frame(
+            path, recording.Choice(read.topic, read.frame, read.time), bayer=read.bayer,
+            max_pixels=read.max_pixels)
+    from fidelity.chart.image import read_image
+    from fidelity.fileio import file_sha256
+
+    img = read_image(path, layer=read.layer, bayer=read.bayer, max_pixels=read.max_pixels,
+                     native=native)
+    return img, (file_sha256(img.path) if digest else None)
+
+
+def read_again(info: ImageInfo, max_pixels: int | None = None) -> Image:
+    """The image an audit described by ``info`` read again as it was read (the same file, layer
+    and Bayer pattern, or the same message of the same recording), for a report that shows or
+    checks its pixels."""
+    rec = info.recording
+    if rec is not None:
+        again = ReadOptions(bayer=info.bayer, max_pixels=max_pixels, topic=rec.topic,
+                            frame=rec.frame)
+    else:
+        again = ReadOptions(layer=info.layer, bayer=info.bayer, max_pixels=max_pixels)
+    return _read_input(info.path, again, digest=False)[0]
+
 
 __all__ = [
     "ENCODINGS",
@@ -773,4 +848,7 @@ __all__ = [
     "measure_chart",
     "measure_image",
     "measure_pixels",
+    "read_again",
+    "read_input",
+    "reads_for",
 ]

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from fidelity.cli.options import (
-    PATH,
+    IMAGE_PATH,
     STDOUT,
     bound_option,
     common_options,
@@ -21,9 +22,12 @@ from fidelity.cli.options import (
 from fidelity.fileio import display_path
 from fidelity.prediction.table import SIZES
 
+if TYPE_CHECKING:
+    from fidelity.chart.measure import ReadOptions
+
 
 @click.command()
-@click.argument("image", type=PATH)
+@click.argument("image", type=IMAGE_PATH)
 @click.option("--corners", default=None,
               help="X1,Y1,X2,Y2,X3,Y3,X4,Y4: image centres of the dark skin, bluish green, black "
                    "and white patches (the chart's top-left, top-right, bottom-right, "
@@ -47,8 +51,7 @@ from fidelity.prediction.table import SIZES
 @bound_option
 @measure_options
 @common_options
-def audit(image: Path, corners: str | None, encoding: str | None, exposure: str | None,
-          layer: str | None, bayer: str | None, colourspace: str | None, negatives: str,
+def audit(image: Path, corners: str | None, read: ReadOptions,
           reference: str, illuminant: str, size: str, table: str | None,
           json_path: Path | None, html_path: Path | None, max_pixels: int | None,
           bound: str, measure: bool, images: str | None, annotations: str | None,
@@ -59,8 +62,13 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
     fidelity audit render.exr --json audit.json
     fidelity audit photo.jpg --corners 102,88,610,95,604,420,98,414
     fidelity audit render.png --measure      # + the loss measured on COCO
+    fidelity audit drive.bag --topic /camera/image_raw --time 12.5
+
+    IMAGE is an image file or a robot recording (ROS 1 bag, ROS 2 bag folder or its .db3 /
+    .mcap file, MCAP file) with --topic and --frame or --time.
     """
-    from fidelity.chart.measure import ReadOptions
+    from dataclasses import replace
+
     from fidelity.check import audit_image
     from fidelity.fileio import check_outputs
     from fidelity.records import ImageSource
@@ -75,8 +83,7 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
                   {"IMAGE": image, "--table": table, "--reference": reference,
                    "--illuminant": illuminant} | measure_inputs(images, annotations, models))
     request = measure_request(measure, images, annotations, models, limit)
-    read = ReadOptions(layer=layer, encoding=encoding, exposure=exposure, negatives=negatives,
-                       colourspace=colourspace, bayer=bayer, max_pixels=max_pixels)
+    read = replace(read, max_pixels=max_pixels)
     report = audit_image(image, corners, read=read, reference=reference, illuminant=illuminant,
                          size=size, table=table, bound=bound, measure=request)
     written = write_chart_report(report, json_path=json_path, html_path=html_path,

@@ -291,12 +291,12 @@ def chart_document(report: ChartReport, pixels: NDArray[Any] | None = None) -> D
 def source_pixels(report: ChartReport) -> NDArray[Any] | None:
     """The pixels of an image report's image, read again as the audit read it (None for a
     render): the HTML shows where the patches were sampled."""
-    from fidelity.chart.image import read_image
+    from fidelity.chart.measure import read_again
 
     src = report.source
     if not isinstance(src, ImageSource):
         return None
-    return read_image(src.image.path, layer=src.image.layer, bayer=src.image.bayer).pixels
+    return read_again(src.image).pixels
 
 
 def write_report_files(json_document: Callable[[], JSONObject],

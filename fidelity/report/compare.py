@@ -125,7 +125,7 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
         sections.append(section("The two charts", Figure(plots.chart_pair(
             (sim_pixels, ss.location, ss.encoding, report.sim.exposure_ev or 0.0),
             (real_pixels, rs.location, rs.encoding, report.real.exposure_ev or 0.0),
-            (f"simulation: {Path(ss.title).name}", f"real camera: {Path(rs.title).name}")),
+            (f"simulation: {ss.name}", f"real camera: {rs.name}")),
             "charts.png", "the simulated and the real chart, sampling windows outlined")))
     reversed_m = replace(m, lab=m.reference_lab, reference_lab=m.lab, srgb=m.reference_srgb
                          if m.reference_srgb is not None else m.srgb, reference_srgb=m.srgb)
@@ -155,7 +155,7 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
     sections.append(section("Provenance", Text(f"Created {report.created}; fidelity "
                                                f"{report.provenance.version}."),
                             Code(_json(dict(report.provenance.conventions))), folded=True))
-    return Document(f"Sim against real: {Path(ss.title).name} vs {Path(rs.title).name}", head,
+    return Document(f"Sim against real: {ss.name} vs {rs.name}", head,
                     tuple(sections))
 
 
