@@ -41,9 +41,10 @@ auditing.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -51,8 +52,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fidelity.chart.find import ChartChecks, FoundChart, check_corners, find_chart
-from fidelity.chart.image import Image, ImageInfo
-from fidelity.chart.locate import DEFAULT_WINDOW, ChartLocation, locate_chart, window_pixels
+from fidelity.chart.image import Image, ImageInfo, as_float32, is_coded
+from fidelity.chart.locate import DEFAULT_WINDOW, ChartLocation, locate_chart
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import DEFAULT_REFERENCE, Reference, load_reference
 from fidelity.colour.colorimetry import delta_e_2000, delta_e_2000_components, srgb_to_lab
@@ -444,6 +445,8 @@ def _whole_image_counts(arr: np.ndarray, negatives: str) -> dict[str, int]:
     its masks take a few MB whatever the image's size."""
     rows = max(1, COUNT_BLOCK_PIXELS // max(arr.shape[1], 1))
     totals = {"nan": 0, "inf": 0, "negative": 0, "total": 0}
+    if is_coded(arr):  # integer codes: never NaN, Inf or negative
+        return totals
     for y in range(0, arr.shape[0], rows):
         block = arr[y:y + rows]
         lo, hi = float(block.min(initial=0.0)), float(block.max(initial=0.0))
@@ -453,6 +456,63 @@ def _whole_image_counts(arr: np.ndarray, negatives: str) -> dict[str, int]:
         for key in totals:
             totals[key] += counts[key]
     return totals
+
+
+@functools.lru_cache(maxsize=4)
+def _code_linear(dtype: str, encoding: str) -> np.ndarray:
+    """Linear value (float64) of every code of an unsigned integer ``dtype``, as the float
+    path computes it from the float32 value of the code (:func:`as_float32`)."""
+    codes = as_float32(np.arange(np.iinfo(dtype).max + 1, dtype=dtype)).astype(np.float64)
+    table: np.ndarray = codes if encoding == "linear" else cm.linearize_srgb(codes)
+    table.flags.writeable = False
+    return table
+
+
+def _patch_linear(vals: np.ndarray, encoding: str, negatives: str, to_srgb: np.ndarray,
+                  identity: bool) -> tuple[np.ndarray, dict[str, int]]:
+    """The valid pixels of one window's values ``(n, 3)`` (any dtype: integer codes are
+    looked up in :func:`_code_linear`) in linear sRGB, float64, and the bad-pixel counts."""
+    if is_coded(vals):  # integer codes: never NaN, Inf or negative
+        lin = _code_linear(vals.dtype.str, encoding)[vals]
+        counts = {"nan": 0, "inf": 0, "negative": 0, "total": 0}
+    else:
+        vals64 = vals.astype(np.float64)
+        bad, counts = _bad_counts(vals64, negatives)
+        good = vals64[~bad] if counts["total"] else vals64
+        lin = good if encoding == "linear" else cm.linearize_srgb(good)
+    if not identity:
+        lin = lin @ to_srgb.T
+    return lin, counts
+
+
+_NO_BAD = {"nan": 0, "inf": 0, "negative": 0, "total": 0}
+
+
+def _code_histogram(vals: np.ndarray) -> np.ndarray:
+    """``(3, codes)`` counts of each integer code per channel of ``(n, 3)`` values."""
+    levels = np.iinfo(vals.dtype).max + 1
+    return np.stack([np.bincount(vals[:, c], minlength=levels) for c in range(3)])
+
+
+def _histogram_noise(hist: np.ndarray, linear: np.ndarray, scale: float) -> np.ndarray:
+    """Standard deviation per channel of the encoded, exposed, clipped values of a patch of
+    integer codes from its histogram ``(3, codes)`` (``linear``: the linear value of each
+    code): ``sqrt(sum_i n_i (v_i - mean)^2 / n)``, as ``numpy.std`` of the pixels."""
+    encoded = np.clip(cm.delinearize_srgb(linear * scale), 0, 1)
+    n = hist.sum(axis=1)
+    mean = hist @ encoded / n
+    out: np.ndarray = np.sqrt(np.einsum("ci,ci->c", hist, (encoded[None, :] - mean[:, None])
+                                        ** 2) / n)
+    return out
+
+
+def _patch_noise(vals: np.ndarray, scale: float, encoding: str, negatives: str,
+                 to_srgb: np.ndarray, identity: bool) -> np.ndarray:
+    """Standard deviation per channel of one window's valid pixels, exposed by ``scale`` and
+    sRGB-encoded, clipped to [0, 1] (as a stored image holds them)."""
+    lin, _ = _patch_linear(vals, encoding, negatives, to_srgb, identity)
+    out: np.ndarray = np.clip(cm.delinearize_srgb(lin * scale), 0, 1).std(axis=0)
+    return out
 
 
 def measure_pixels(
@@ -475,7 +535,9 @@ def measure_pixels(
     Parameters
     ----------
     pixels
-        ``(H, W, 3)`` values, linear or encoded sRGB (``encoding``).
+        ``(H, W, 3)`` values, linear or encoded sRGB (``encoding``): 8- or 16-bit unsigned
+        codes stand for ``code / (2**bits - 1)`` (:func:`fidelity.chart.image.as_float32`; an
+        image read at its native depth), other values for themselves.
     corners
         Centres of the dark skin, bluish green, black and white patches, ``(4, 2)`` image
         ``(x, y)`` or ``"X1,Y1,...,X4,Y4"``; ``None``: find the chart
@@ -528,35 +590,37 @@ def measure_pixels(
                        patch_names=ref.patch_names)
     if found is None and (ref.rows, ref.cols) == (4, 6):
         checks = check_corners(arr, loc.corners, encoding=encoding)
-    samples = window_pixels(arr, loc)
-    n = len(samples)
+    n = len(loc.windows)
     means = np.empty((n, 3))
     valid_counts: list[int] = []
     per_patch: dict[str, int] = {}
     totals = {"nan": 0, "inf": 0, "negative": 0, "total": 0}
-    linear_samples: list[np.ndarray] = []
-    for k, vals in enumerate(samples):
-        vals64 = np.asarray(vals, dtype=np.float64)
-        bad, counts = _bad_counts(vals64, negatives)
+    identity = bool(np.array_equal(to_srgb, np.eye(3)))
+    coded = is_coded(arr) and identity
+    histograms: list[np.ndarray] = []
+    for k, win in enumerate(loc.windows):
+        vals = win.values(arr)
+        if coded:  # integer codes: a histogram per channel holds all the patch has to say
+            histograms.append(_code_histogram(vals))
+            counts, valid = dict(_NO_BAD), len(vals)
+        else:
+            lin, counts = _patch_linear(vals, encoding, negatives, to_srgb, identity)
+            valid = len(lin)
         for key in totals:
             totals[key] += counts[key]
         if counts["total"]:
             per_patch[ref.patch_names[k]] = counts["total"]
-        good = vals64[~bad]
-        need = max(MIN_VALID_PIXELS, int(math.ceil(min_valid_fraction * len(vals64))))
-        if len(good) < need:
+        need = max(MIN_VALID_PIXELS, int(math.ceil(min_valid_fraction * len(vals))))
+        if valid < need:
             negative = (f", {counts['negative']} negative" if negatives == "exclude" else "")
             raise InvalidValueError(
-                f"patch {ref.patch_names[k]!r}: only {len(good)} of {len(vals64)} pixels are "
+                f"patch {ref.patch_names[k]!r}: only {valid} of {len(vals)} pixels are "
                 f"valid ({counts['nan']} NaN, {counts['inf']} Inf{negative}); need at least "
                 f"{need}"
             )
-        lin = good if encoding == "linear" else cm.linearize_srgb(good)
-        if not np.array_equal(to_srgb, np.eye(3)):
-            lin = lin @ to_srgb.T
-        linear_samples.append(lin)
-        means[k] = lin.mean(axis=0)
-        valid_counts.append(len(good))
+        means[k] = (histograms[-1] @ _code_linear(arr.dtype.str, encoding) / valid if coded
+                    else lin.mean(axis=0))
+        valid_counts.append(valid)
     if mode == "auto":
         ev = exposure_from_neutrals(means, ref.lab, ref.neutral_indices, ref.patch_names)
     else:
@@ -573,8 +637,12 @@ def measure_pixels(
     srgb = np.clip(srgb_unclipped, 0.0, 1.0)
     clipped = tuple(ref.patch_names[k] for k in range(n)
                     if np.any(np.abs(srgb_unclipped[k] - srgb[k]) > 1e-12))
-    noise = np.array([np.clip(cm.delinearize_srgb(s * scale), 0, 1).std(axis=0)
-                      for s in linear_samples])
+    if coded:
+        noise = np.array([_histogram_noise(hist, _code_linear(arr.dtype.str, encoding), scale)
+                          for hist in histograms])
+    else:
+        noise = np.array([_patch_noise(win.values(arr), scale, encoding, negatives, to_srgb,
+                                       identity) for win in loc.windows])
     whole = _whole_image_counts(arr, negatives)
     rule = ("a pixel with NaN, +-Inf or a negative value in any channel is excluded"
             if negatives == "exclude" else
@@ -671,31 +739,38 @@ def measure_image(
     illuminant: str = "D65",
     window: float = DEFAULT_WINDOW,
     detection: str = "cascade",
+    inspect_image: Callable[[Image], object] | None = None,
 ) -> ImageMeasurement:
     """Read an image (:func:`fidelity.chart.image.read_image`, as ``read`` says:
-    :class:`ReadOptions`) and audit its chart (:func:`measure_pixels`). Errors name the
-    file."""
+    :class:`ReadOptions`; an image file at its native depth) and audit its chart
+    (:func:`measure_pixels`). Errors name the file. ``inspect_image`` is called with the image
+    read once its chart is measured, so that a caller can look at more of it without reading it
+    again (the audit's banding check)."""
     from fidelity.errors import FidelityError
 
-    img, sha256 = read_input(path, read)
+    img, sha256 = read_input(path, read, native=True)
     enc = read.encoding or img.encoding
     info = img.info(sha256=sha256, encoding=enc)
     try:
-        return measure_pixels(img.pixels, corners, encoding=enc, exposure=read.exposure,
-                              reference=reference, illuminant=illuminant, window=window,
-                              image=info, detection=detection, negatives=read.negatives,
-                              colourspace=(read.colourspace if read.colourspace is not None
-                                           else img.chromaticities or "sRGB"))
+        result = measure_pixels(img.pixels, corners, encoding=enc, exposure=read.exposure,
+                                reference=reference, illuminant=illuminant, window=window,
+                                image=info, detection=detection, negatives=read.negatives,
+                                colourspace=(read.colourspace if read.colourspace is not None
+                                             else img.chromaticities or "sRGB"))
     except FidelityError as exc:
         raise type(exc)(f"{img.path}: {exc}") from None
+    if inspect_image is not None:
+        inspect_image(img)
+    return result
 
-def read_input(path: str | os.PathLike[str], read: ReadOptions = DEFAULT_READ
-               ) -> tuple[Image, str]:
-    """Read an image file (:func:`fidelity.chart.image.read_image`) or, for a recording (a
-    ``.bag``, ``.mcap`` or ``.db3`` file, a folder, or ``topic``/``frame``/``time`` given),
-    the message ``read`` names (:func:`fidelity.chart.recording.read_frame`). Returns the
-    image and a sha256: the file's, or the message's serialised bytes'."""
-    image, sha256 = _read_input(path, read, digest=True)
+def read_input(path: str | os.PathLike[str], read: ReadOptions = DEFAULT_READ, *,
+               native: bool = False) -> tuple[Image, str]:
+    """Read an image file (:func:`fidelity.chart.image.read_image`; ``native``: 8/16-bit codes
+    and half floats kept as they are) or, for a recording (a ``.bag``, ``.mcap`` or ``.db3``
+    file, a folder, or ``topic``/``frame``/``time`` given), the message ``read`` names
+    (:func:`fidelity.chart.recording.read_frame`). Returns the image and a sha256: the file's,
+    or the message's serialised bytes'."""
+    image, sha256 = _read_input(path, read, digest=True, native=native)
     assert sha256 is not None
     return image, sha256
 
@@ -720,8 +795,8 @@ def reads_for(paths: Sequence[str | os.PathLike[str]], read: ReadOptions
     return [read if r else plain for r in is_rec]
 
 
-def _read_input(path: str | os.PathLike[str], read: ReadOptions, *, digest: bool
-                ) -> tuple[Image, str | None]:
+def _read_input(path: str | os.PathLike[str], read: ReadOptions, *, digest: bool,
+                native: bool = False) -> tuple[Image, str | None]:
     from fidelity.chart import recording
 
     if read.names_message() or recording.is_recording_path(path):
@@ -733,7 +808,8 @@ def _read_input(path: str | os.PathLike[str], read: ReadOptions, *, digest: bool
     from fidelity.chart.image import read_image
     from fidelity.fileio import file_sha256
 
-    img = read_image(path, layer=read.layer, bayer=read.bayer, max_pixels=read.max_pixels)
+    img = read_image(path, layer=read.layer, bayer=read.bayer, max_pixels=read.max_pixels,
+                     native=native)
     return img, (file_sha256(img.path) if digest else None)
 
 

@@ -415,8 +415,8 @@ def max_pixels_option(f: F) -> F:
     return click.option(
         "--max-pixels", type=click.IntRange(min=1), default=None,
         help="Refuse images of more pixels (width x height), checked before decoding; default "
-             "150000000 or $FIDELITY_MAX_PIXELS. An audit needs about 20 bytes per pixel (60 "
-             "for --bayer).")(f)
+             "150000000 or $FIDELITY_MAX_PIXELS. An audit needs the decoded image plus about 1 "
+             "byte per pixel (4 for an 8-bit photo; 60 for --bayer).")(f)
 
 
 def make_criterion(max_delta_e: float | None, max_dmap: float | None, cls: str | None,
