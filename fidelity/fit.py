@@ -22,20 +22,21 @@ The result is a :class:`Correction` on the simulator's *pixel values* (its encod
 colourspace): ``apply(pixels)``, ``to_cube(path)`` (OpenColorIO's Baker,
 :mod:`fidelity.correction.lut`), ``to_json()``.
 
-:func:`verify_correction` checks the correction instead of assuming it: the ``.cube`` through
+:func:`fit_and_verify` checks the correction instead of assuming it: the ``.cube`` through
 OpenColorIO's processor against the model itself, over the chart and a dense lattice
 (:class:`LutCheck`; the smallest cube size of :data:`~fidelity.correction.lut.CUBE_SIZES`
-within :data:`LUT_TOLERANCE` ΔE00), then the whole SIM image through the cube by OpenColorIO
-(loaded from ``correction.ocio``), measured again in the audit's sampling windows
-(:func:`remeasure`) and compared with REAL: the sim-to-real ΔE00 and its predicted ΔmAP before
-and after (:class:`FitReport`).
+within :data:`LUT_TOLERANCE` ΔE00), then the SIM pixels in the audit's sampling windows through
+the cube by OpenColorIO (loaded from ``correction.ocio``), measured again (:func:`remeasure`:
+the patch means of the whole corrected image in the same windows, at the windows' cost) and
+compared with REAL: the sim-to-real ΔE00 and its predicted ΔmAP before and after
+(:class:`FitReport`).
 """
 
 from __future__ import annotations
 
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -61,6 +62,8 @@ LUT_TOLERANCE = 0.1
 #: Cross-validated ΔE00 above which the model is said not to express the difference (issue
 #: 29's "corrected ΔE00 below 0.5 where the model family can express the error").
 EXPRESSED_DELTA_E = 0.5
+#: The models affine in light: their ``.cube`` is sampled on a lattice even in light.
+AFFINE_MODELS: tuple[str, ...] = ("gains", "matrix")
 #: Points per axis of the dense lattice the ``.cube`` is checked on (not a divisor of the cube
 #: sizes' spacing, so that most points fall between the cube's nodes).
 CHECK_GRID = 41
@@ -105,14 +108,26 @@ class Correction:
         """Corrected pixel values of the simulator's pixel values ``(..., 3)`` (same encoding)."""
         from fidelity.colour.colorimetry import delinearize_srgb
 
+        out = self.apply_linear(pixels)
+        if self.encoding == "srgb":
+            return np.asarray(delinearize_srgb(out), np.float64)
+        return out
+
+    def apply_linear(self, pixels: ArrayLike) -> F64:
+        """Corrected scene-linear values (the simulator's colourspace and scale, unclipped) of
+        the simulator's pixel values ``(..., 3)``: what the ``.cube`` holds."""
         a = np.asarray(pixels, np.float64)
         if a.shape[-1:] != (3,):
             raise InvalidValueError(f"pixels must be (..., 3), got shape {a.shape}")
         fit = _to_linear(a, self.encoding) @ self.to_fit.T
-        out = self.model.apply(fit) @ np.linalg.inv(self.to_fit).T
-        if self.encoding == "srgb":
-            return np.asarray(delinearize_srgb(out), np.float64)
-        return np.asarray(out, np.float64)
+        return np.asarray(self.model.apply(fit) @ np.linalg.inv(self.to_fit).T, np.float64)
+
+    @property
+    def lattice(self) -> str:
+        """How the ``.cube``'s lattice is spaced (:data:`fidelity.correction.lut.LATTICES`):
+        ``linear`` for the models affine in light (gains, matrix: interpolated exactly),
+        ``encoded`` for those that bend (a tone curve, a root-polynomial)."""
+        return "linear" if self.model.name in AFFINE_MODELS else "encoded"
 
     def display_lab(self, pixels: ArrayLike) -> F64:
         """CIELAB of pixel values as the fit space shows them (sRGB clipped to [0, 1]): what
@@ -140,23 +155,33 @@ class Correction:
 
     def cube_comments(self, size: int) -> list[str]:
         """The header comments of the ``.cube``: what goes in and what comes out."""
-        enc = ("sRGB-encoded values (IEC 61966-2-1) in [0, 1]" if self.encoding == "srgb" else
-               f"scene-linear values 0 .. {self.domain_max:.6g} through a 1D shaper (sRGB "
-               "encoding of v / max); values beyond are clamped")
+        space = ("sRGB-encoded values (IEC 61966-2-1) in [0, 1]" if self.encoding == "srgb"
+                 else f"scene-linear values 0 .. {self.domain_max:.6g} (values beyond are "
+                 "clamped)")
+        shaper = {("srgb", "encoded"): "the 3D LUT directly",
+                  ("srgb", "linear"): "a 1D shaper (the sRGB decoding) then the 3D LUT",
+                  ("linear", "encoded"): "a 1D shaper (the sRGB encoding of v / max) then the "
+                                         "3D LUT",
+                  ("linear", "linear"): "a 1D shaper (v / max) then the 3D LUT"}
+        post = ("; apply the sRGB encoding (IEC 61966-2-1) after it to get corrected "
+                "sRGB-encoded pixels (correction.ocio does)" if self.encoding == "srgb" else "")
         return [f"fidelity fit: {self.model.name} correction ({self.objective} objective), "
-                f"{size}^3 lattice",
-                f"input: the simulator's pixels, {enc}",
-                "output: corrected pixels, same encoding and colourspace as the input",
+                f"{size}^3 lattice even in {'light' if self.lattice == 'linear' else 'sRGB'}",
+                f"input: the simulator's pixels, {space}, through "
+                f"{shaper[(self.encoding, self.lattice)]}",
+                f"output: corrected scene-linear values, the simulator's colourspace and "
+                f"scale, unclipped{post}",
                 "apply with tetrahedral interpolation"]
 
     def to_cube(self, path: str | os.PathLike[str], size: int = 33) -> Path:
         """Write the ``.cube`` (OpenColorIO's Baker, :func:`fidelity.correction.lut.bake_cube`)
-        atomically; returns the path."""
+        of :meth:`apply_linear` atomically; returns the path."""
         from fidelity.correction.lut import bake_cube
         from fidelity.fileio import write_text_atomic
 
-        return write_text_atomic(path, bake_cube(self.apply, size, self.encoding,
-                                                 self.domain_max, self.cube_comments(size)))
+        return write_text_atomic(path, bake_cube(self.apply_linear, size, self.encoding,
+                                                 self.domain_max, self.cube_comments(size),
+                                                 self.lattice))
 
     def to_json(self) -> dict[str, Any]:
         """``model`` (gains, matrix, curve: :meth:`ColourModel.to_json`), ``objective``,
@@ -170,6 +195,7 @@ class Correction:
             **self.model.to_json(), "objective": self.objective,
             "conditioning": self.conditioning.to_json(), "encoding": self.encoding,
             "to_fit": self.to_fit.tolist(), "domain_max": self.domain_max,
+            "cube_lattice": self.lattice, "cube_output": "scene-linear",
             "normalisation": self.normalisation.to_json(), "excluded": dict(self.excluded),
             "fitted_mean_delta_e": float(np.mean(self.fitted_delta_e[self._used_mask])),
             "cross_validated_mean_delta_e": f(self.cv_mean),
@@ -362,7 +388,7 @@ def check_cube(correction: Correction, path: str | os.PathLike[str], size: int) 
     from fidelity.colour.colorimetry import delta_e_2000
     from fidelity.correction.lut import apply_processor, cube_processor, lattice_inputs
 
-    proc = cube_processor(path)
+    proc = cube_processor(path, correction.encoding)
     grid = lattice_inputs(CHECK_GRID, correction.encoding, correction.domain_max).reshape(-1, 3)
     out = []
     for pts in (correction.sim_pixels, grid):
@@ -417,10 +443,17 @@ def fit_and_verify(
     illuminant: str = "D65",
     size: str = "any",
     table: str | None = None,
+    corrected: bool = False,
 ) -> FitReport:
     """:func:`fit_correction`, then write ``correction.cube`` (the smallest cube size within
     :data:`LUT_TOLERANCE`), ``correction.ocio`` and ``correction.json`` into the folder
-    ``out`` and verify them (module docstring)."""
+    ``out`` and verify them (module docstring).
+
+    The verification puts through OpenColorIO only the SIM pixels that the audit measures (its
+    patch windows); ``corrected=True`` puts the whole SIM image through and writes it
+    (:func:`corrected_name`: a 16-bit PNG for sRGB-encoded SIM, clipped as a camera stores it;
+    a float EXR for scene-linear SIM), measuring the whole corrected image instead (the same
+    patch means; it costs the whole image's transform and writing)."""
     from fidelity.chart.measure import measure_chart, neutral_patches
     from fidelity.compare import normalise
     from fidelity.correction.lut import (
@@ -454,10 +487,17 @@ def fit_and_verify(
             break
     config = folder / "correction.ocio"
     write_text_atomic(config, ocio_config(cube, f"fidelity fit: {corr.model.name} correction "
-                                                f"of {Path(sim).name} towards {Path(real).name}"))
-    corrected = apply_processor(config_processor(config), s.pixels)
+                                                f"of {Path(sim).name} towards {Path(real).name}",
+                                          corr.encoding))
+    processor = config_processor(config)
     sa, ra = s.audit, r.audit
-    after_srgb_audit = remeasure(corrected, sa)
+    files = {"cube": str(cube), "ocio": str(config), "json": str(folder / "correction.json")}
+    if corrected:
+        whole = apply_processor(processor, np.asarray(s.pixels)[..., :3])
+        files["corrected"] = str(_write_corrected(folder, whole, corr.encoding))
+        after_srgb_audit = remeasure(whole, sa)
+    else:
+        after_srgb_audit = remeasure(s.pixels, sa, lambda v: apply_processor(processor, v))
     rm = ra.measurement
     ref_srgb = np.clip(rm.srgb, 0, 1)
     neutral = neutral_patches(rm)
@@ -469,27 +509,51 @@ def fit_and_verify(
     pb = judge(before.mean_delta_e, size, table)[0]
     pa = judge(after.mean_delta_e, size, table)[0]
     write_json_atomic(folder / "correction.json", corr.to_json())
-    files = {"cube": str(cube), "ocio": str(config), "json": str(folder / "correction.json")}
     return FitReport(utc_now(), str(sim), str(real), corr, before, after, pb, pa,
                      tuple(checks), files,
                      {"read": t1 - t0, "fit": t2 - t1, "verify": t3 - t2})
 
 
-def remeasure(pixels: NDArray[Any], audit: ImageMeasurement) -> F64:
-    """The encoded sRGB patch colours ``(n, 3)`` of ``pixels`` (an image of the same size as
-    the audited one: its correction) measured as ``audit`` measured its image: the same
-    sampling windows, encoding, colourspace and exposure rule (auto exposure fitted again on
-    the neutral patches, a fixed one kept), pixels with NaN or Inf excluded, clipped to
-    [0, 1]. Only the windows are read, so that verifying a 12 MP image costs what its windows
-    cost."""
+def corrected_name(encoding: str) -> str:
+    """The file name of the corrected SIM image: ``corrected.png`` (sRGB-encoded) or
+    ``corrected.exr`` (scene-linear)."""
+    return "corrected.png" if encoding == "srgb" else "corrected.exr"
+
+
+def _write_corrected(folder: Path, pixels: NDArray[Any], encoding: str) -> Path:
+    from fidelity.chart.image import write_exr, write_png
+
+    path = folder / corrected_name(encoding)
+    if encoding == "srgb":
+        return write_png(path, pixels, 16)
+    return write_exr(path, pixels, "the simulator's linear RGB corrected by fidelity fit")
+
+
+def remeasure(pixels: NDArray[Any], audit: ImageMeasurement,
+              transform: Callable[[NDArray[Any]], NDArray[Any]] | None = None) -> F64:
+    """The encoded sRGB patch colours ``(n, 3)`` of ``pixels`` (an image of the size of the
+    audited one), each pixel first through ``transform`` (``(m, 3)`` -> ``(m, 3)``, e.g. the
+    correction through OpenColorIO's processor), measured as ``audit`` measured its image: the
+    same sampling windows, encoding, colourspace and exposure rule (auto exposure fitted again
+    on the neutral patches, a fixed one kept), pixels with NaN or Inf excluded, clipped to
+    [0, 1].
+
+    Only the windows' pixels are read and transformed: the patch means are those of the whole
+    image through ``transform`` measured in the same windows (``tests/test_fit.py`` checks
+    both ways), at the cost of the windows, not of the image."""
     from fidelity.chart.locate import window_pixels
     from fidelity.chart.measure import exposure_from_neutrals
     from fidelity.colour.colorimetry import delinearize_srgb
 
     p = _colourspace_matrix(audit)
+    windows = [np.asarray(v, np.float32).reshape(-1, 3)  # float32 like the pixels: 2x faster
+               for v in window_pixels(pixels, audit.location)]
+    if transform is not None:
+        counts = np.cumsum([len(v) for v in windows])[:-1]
+        joined = np.asarray(transform(np.concatenate(windows)), np.float32)
+        windows = np.split(joined, counts)
     means = []
-    for vals in window_pixels(pixels, audit.location):
-        v = np.asarray(vals, np.float32).reshape(-1, 3)  # float32 like the pixels: 2x faster
+    for v in windows:
         v = v[np.all(np.isfinite(v), axis=1)]
         if len(v) == 0:
             raise InvalidValueError("the corrected image has no finite pixel in a patch window")
@@ -502,6 +566,6 @@ def remeasure(pixels: NDArray[Any], audit: ImageMeasurement) -> F64:
     return np.clip(np.asarray(delinearize_srgb(lin * 2.0 ** ev), np.float64), 0.0, 1.0)
 
 
-__all__ = ["CHECK_GRID", "Correction", "DEFAULT_MODEL", "EXPRESSED_DELTA_E", "FitReport", "GREY_CHROMA",
-           "LUT_TOLERANCE", "LutCheck", "check_cube", "fit_and_verify", "fit_correction",
-           "remeasure"]
+__all__ = ["AFFINE_MODELS", "CHECK_GRID", "Correction", "DEFAULT_MODEL", "EXPRESSED_DELTA_E",
+           "FitReport", "GREY_CHROMA", "LUT_TOLERANCE", "LutCheck", "check_cube",
+           "corrected_name", "fit_and_verify", "fit_correction", "remeasure"]

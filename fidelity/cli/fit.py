@@ -33,6 +33,11 @@ if TYPE_CHECKING:
 @click.option("--objective", type=click.Choice(["linear", "ciede2000"]), default=None,
               help="What the fit minimises: squared differences in linear RGB, or squared "
                    "CIEDE2000 (default: ciede2000, the lower cross-validated ΔE00).")
+@click.option("--write-corrected", "corrected", is_flag=True,
+              help="Also put the whole SIM image through the .cube by OpenColorIO and write it "
+                   "(OUT/corrected.png for sRGB-encoded SIM, OUT/corrected.exr for scene-linear "
+                   "SIM); without it only the patch windows the verification measures are "
+                   "transformed.")
 @chart_pair_options
 @click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
               help="Detector size class of the predicted ΔmAP.")
@@ -43,7 +48,7 @@ if TYPE_CHECKING:
               help="Illuminant of the scene reference.")
 @image_read_options
 @common_options
-def fit(sim: Path, real: Path, out: Path, model: str, objective: str | None,
+def fit(sim: Path, real: Path, out: Path, model: str, objective: str | None, corrected: bool,
         sim_corners: str | None, real_corners: str | None, normalise_mode: str, size: str,
         table: str | None, reference: str, illuminant: str, read: ReadOptions) -> None:
     """Fit the correction from the simulator's chart onto the real camera's, as a 3D LUT.
@@ -58,23 +63,28 @@ def fit(sim: Path, real: Path, out: Path, model: str, objective: str | None,
     \b
     fidelity fit sim.png photo.jpg --out correction/
     fidelity fit sim.exr photo.jpg --out c/ --correction root-polynomial --normalise none
+    fidelity fit sim.png photo.jpg --out c/ --write-corrected
     """
     from fidelity.fileio import check_outputs, display_path
     from fidelity.fit import fit_and_verify
     from fidelity.report.fit import fit_lines, write_fit_report
 
-    names = ("correction.cube", "correction.ocio", "correction.json", "report.json",
-             "report.html")
+    names: tuple[str, ...] = ("correction.cube", "correction.ocio", "correction.json",
+                              "report.json", "report.html")
+    if corrected:
+        names += ("corrected.png", "corrected.exr")
     check_outputs({n: out / n for n in names},
                   {"SIM": sim, "REAL": real, "--table": table, "--reference": reference,
                    "--illuminant": illuminant})
     report = fit_and_verify(
         sim, real, out, model=model, objective=objective, sim_corners=sim_corners,
         real_corners=real_corners, normalise_mode=normalise_mode, reference=reference,
-        illuminant=illuminant, size=size, table=table,
-        read=read)
+        illuminant=illuminant, size=size, table=table, read=read, corrected=corrected)
     write_fit_report(report, json_path=out / "report.json", html_path=out / "report.html",
                      protect=(sim, real))
     for line in fit_lines(report):
         click.echo(line)
-    click.echo(f"wrote {', '.join(display_path(out / n) for n in names)}")
+    written = [out / n for n in names[:5]]
+    if "corrected" in report.files:
+        written.append(Path(report.files["corrected"]))
+    click.echo(f"wrote {', '.join(display_path(p) for p in written)}")
