@@ -382,20 +382,33 @@ class LutCheck:
                 "tolerance": self.tolerance, "passed": self.passed}
 
 
-def check_cube(correction: Correction, path: str | os.PathLike[str], size: int) -> LutCheck:
-    """Apply the ``.cube`` at ``path`` with OpenColorIO's processor and compare it with
-    :meth:`Correction.apply` on the chart's patches and on a dense lattice (:class:`LutCheck`)."""
+def check_points(correction: Correction) -> tuple[tuple[F64, F64], tuple[F64, F64]]:
+    """The points a ``.cube`` is checked on (the chart's SIM pixel values, a
+    :data:`CHECK_GRID`^3 lattice of the input range, most points between the cube's nodes)
+    and the model's own output there as CIELAB (:meth:`Correction.display_lab`): what
+    :func:`check_cube` compares with, computed once for every cube size tried."""
+    from fidelity.correction.lut import lattice_inputs
+
+    grid = lattice_inputs(CHECK_GRID, correction.encoding, correction.domain_max).reshape(-1, 3)
+    points = (correction.sim_pixels, grid)
+    return points, (correction.display_lab(correction.apply(points[0])),
+                    correction.display_lab(correction.apply(points[1])))
+
+
+def check_cube(correction: Correction, path: str | os.PathLike[str], size: int,
+               points: tuple[tuple[F64, F64], tuple[F64, F64]] | None = None) -> LutCheck:
+    """Apply the ``.cube`` at ``path`` (and the output encoding) with OpenColorIO's processor
+    and compare it with :meth:`Correction.apply` on the chart's patches and on a dense lattice
+    (:class:`LutCheck`); ``points``: :func:`check_points` of ``correction``, if computed."""
     from fidelity.colour.colorimetry import delta_e_2000
-    from fidelity.correction.lut import apply_processor, cube_processor, lattice_inputs
+    from fidelity.correction.lut import apply_processor, cube_processor
 
     proc = cube_processor(path, correction.encoding)
-    grid = lattice_inputs(CHECK_GRID, correction.encoding, correction.domain_max).reshape(-1, 3)
+    (chart, grid), (chart_lab, grid_lab) = points or check_points(correction)
     out = []
-    for pts in (correction.sim_pixels, grid):
+    for pts, direct in ((chart, chart_lab), (grid, grid_lab)):
         lut = apply_processor(proc, pts).astype(np.float64)
-        direct = correction.apply(pts)
-        out.append(np.asarray(delta_e_2000(correction.display_lab(lut),
-                                           correction.display_lab(direct)), np.float64))
+        out.append(np.asarray(delta_e_2000(correction.display_lab(lut), direct), np.float64))
     return LutCheck(size, float(out[0].max()), float(out[0].mean()), float(out[1].max()),
                     float(out[1].mean()), len(grid), LUT_TOLERANCE,
                     float(np.percentile(out[1], 99)),
@@ -408,7 +421,8 @@ class FitReport:
     measurement before (``before``) and after, the latter of the SIM image through the
     ``.cube`` by OpenColorIO, measured again in the audit's windows (``after``), their predicted losses, the
     ``.cube``'s :class:`LutCheck` (one per size tried, the last one kept) and the seconds
-    spent (``seconds``: ``read``, ``fit``, ``verify``)."""
+    spent (``seconds``: ``read``, ``fit``, ``verify``; ``cpu_seconds`` the same in this
+    process's CPU time)."""
 
     created: str
     sim: str
@@ -421,6 +435,7 @@ class FitReport:
     lut_checks: tuple[LutCheck, ...]
     files: dict[str, str]
     seconds: dict[str, float]
+    cpu_seconds: dict[str, float] = field(default_factory=dict)
 
     @property
     def lut(self) -> LutCheck:
@@ -460,6 +475,7 @@ def fit_and_verify(
         CUBE_SIZES,
         apply_processor,
         config_processor,
+        cube_processor,
         ocio,
         ocio_config,
     )
@@ -467,37 +483,41 @@ def fit_and_verify(
     from fidelity.prediction.judge import judge
 
     ocio()
-    t0 = time.perf_counter()
+    c0, t0 = time.process_time(), time.perf_counter()
     from fidelity.chart.measure import reads_for
 
     sim_read, real_read = reads_for((sim, real), read)
     s = _read(sim, sim_corners, sim_read, reference, illuminant)
     r = _read(real, real_corners, real_read, reference, illuminant)
-    t1 = time.perf_counter()
+    c1, t1 = time.process_time(), time.perf_counter()
     corr = _fit_charts(s, r, model, objective, normalise_mode, None)
-    t2 = time.perf_counter()
+    c2, t2 = time.process_time(), time.perf_counter()
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     cube = folder / "correction.cube"
     checks: list[LutCheck] = []
+    points = check_points(corr)
     for n in CUBE_SIZES:
         corr.to_cube(cube, n)
-        checks.append(check_cube(corr, cube, n))
+        checks.append(check_cube(corr, cube, n, points))
         if checks[-1].passed:
             break
     config = folder / "correction.ocio"
     write_text_atomic(config, ocio_config(cube, f"fidelity fit: {corr.model.name} correction "
                                                 f"of {Path(sim).name} towards {Path(real).name}",
                                           corr.encoding))
-    processor = config_processor(config)
     sa, ra = s.audit, r.audit
     files = {"cube": str(cube), "ocio": str(config), "json": str(folder / "correction.json")}
     if corrected:
-        whole = apply_processor(processor, np.asarray(s.pixels)[..., :3])
+        whole = apply_processor(config_processor(config), np.asarray(s.pixels)[..., :3])
         files["corrected"] = str(_write_corrected(folder, whole, corr.encoding))
         after_srgb_audit = remeasure(whole, sa)
     else:
-        after_srgb_audit = remeasure(s.pixels, sa, lambda v: apply_processor(processor, v))
+        # the cube alone through OpenColorIO (scene-linear out): the sRGB encoding that
+        # correction.ocio applies after it would be undone by the measurement at once
+        cube_only = cube_processor(cube, reload=False)  # the file check_cube just read
+        after_srgb_audit = remeasure(s.pixels, sa, lambda v: apply_processor(cube_only, v),
+                                     linear_output=True)
     rm = ra.measurement
     ref_srgb = np.clip(rm.srgb, 0, 1)
     neutral = neutral_patches(rm)
@@ -505,13 +525,14 @@ def fit_and_verify(
     after_srgb, _ = normalise(after_srgb_audit, rm.srgb, neutral, normalise_mode)
     before = measure_chart(before_srgb, rm.lab, rm.patch_names, reference_srgb=ref_srgb)
     after = measure_chart(after_srgb, rm.lab, rm.patch_names, reference_srgb=ref_srgb)
-    t3 = time.perf_counter()
+    c3, t3 = time.process_time(), time.perf_counter()
     pb = judge(before.mean_delta_e, size, table)[0]
     pa = judge(after.mean_delta_e, size, table)[0]
     write_json_atomic(folder / "correction.json", corr.to_json())
     return FitReport(utc_now(), str(sim), str(real), corr, before, after, pb, pa,
                      tuple(checks), files,
-                     {"read": t1 - t0, "fit": t2 - t1, "verify": t3 - t2})
+                     {"read": t1 - t0, "fit": t2 - t1, "verify": t3 - t2},
+                     {"read": c1 - c0, "fit": c2 - c1, "verify": c3 - c2})
 
 
 def corrected_name(encoding: str) -> str:
@@ -530,13 +551,15 @@ def _write_corrected(folder: Path, pixels: NDArray[Any], encoding: str) -> Path:
 
 
 def remeasure(pixels: NDArray[Any], audit: ImageMeasurement,
-              transform: Callable[[NDArray[Any]], NDArray[Any]] | None = None) -> F64:
+              transform: Callable[[NDArray[Any]], NDArray[Any]] | None = None, *,
+              linear_output: bool = False) -> F64:
     """The encoded sRGB patch colours ``(n, 3)`` of ``pixels`` (an image of the size of the
     audited one), each pixel first through ``transform`` (``(m, 3)`` -> ``(m, 3)``, e.g. the
     correction through OpenColorIO's processor), measured as ``audit`` measured its image: the
     same sampling windows, encoding, colourspace and exposure rule (auto exposure fitted again
     on the neutral patches, a fixed one kept), pixels with NaN or Inf excluded, clipped to
-    [0, 1].
+    [0, 1]. ``linear_output``: the transform gives scene-linear values (the ``.cube`` without
+    its output encoding), averaged as they are instead of decoded from the audit's encoding.
 
     Only the windows' pixels are read and transformed: the patch means are those of the whole
     image through ``transform`` measured in the same windows (``tests/test_fit.py`` checks
@@ -552,13 +575,15 @@ def remeasure(pixels: NDArray[Any], audit: ImageMeasurement,
         counts = np.cumsum([len(v) for v in windows])[:-1]
         joined = np.asarray(transform(np.concatenate(windows)), np.float32)
         windows = np.split(joined, counts)
+    encoding = "linear" if linear_output else audit.encoding
     means = []
     for v in windows:
-        v = v[np.all(np.isfinite(v), axis=1)]
+        finite = np.isfinite(v).all(axis=1)
+        if not finite.all():
+            v = v[finite]
         if len(v) == 0:
             raise InvalidValueError("the corrected image has no finite pixel in a patch window")
-        mean = np.asarray(_to_linear(v, audit.encoding), np.float64).mean(axis=0)
-        means.append(p @ mean)
+        means.append(p @ np.asarray(_to_linear(v, encoding)).mean(axis=0, dtype=np.float64))
     lin = np.array(means)
     ref = audit.reference
     ev = (exposure_from_neutrals(lin, ref.lab, ref.neutral_indices, ref.patch_names)
@@ -567,5 +592,5 @@ def remeasure(pixels: NDArray[Any], audit: ImageMeasurement,
 
 
 __all__ = ["AFFINE_MODELS", "CHECK_GRID", "Correction", "DEFAULT_MODEL", "EXPRESSED_DELTA_E",
-           "FitReport", "GREY_CHROMA", "LUT_TOLERANCE", "LutCheck", "check_cube",
+           "FitReport", "GREY_CHROMA", "LUT_TOLERANCE", "LutCheck", "check_cube", "check_points",
            "corrected_name", "fit_and_verify", "fit_correction", "remeasure"]

@@ -434,7 +434,10 @@ def test_the_windows_alone_measure_what_the_whole_corrected_image_measures(image
         assert "corrected" not in fast.files
         assert Path(whole.files["corrected"]).name == ("corrected.png" if key == "hue"
                                                        else "corrected.exr")
-        assert np.allclose(fast.after.delta_e, whole.after.delta_e, atol=1e-6)
+        # the windows take the cube's scene-linear output as it is; the whole image goes
+        # through OpenColorIO's sRGB encoding (the continuous "moncurve" form of IEC
+        # 61966-2-1) and is decoded again by the audit (the IEC form): within 0.002 ΔE00
+        assert np.allclose(fast.after.delta_e, whole.after.delta_e, atol=2e-3)
         assert fast.after.mean_delta_e < 0.5
         # remeasure itself, both ways, on the audit of the SIM image
         from fidelity.chart.measure import measure_pixels

@@ -178,11 +178,15 @@ def correction_transform(cube: str, encoding: str) -> Any:
     return ft if post is None else oc.GroupTransform([ft, post])
 
 
-def cube_processor(path: str | os.PathLike[str], encoding: str = "linear") -> Any:
+def cube_processor(path: str | os.PathLike[str], encoding: str = "linear", *,
+                   reload: bool = True) -> Any:
     """OpenColorIO's CPU processor of the ``.cube`` at ``path`` and the output encoding of
-    ``encoding`` input (:func:`correction_transform`)."""
+    ``encoding`` input (:func:`correction_transform`). ``reload``: read the file again
+    (OpenColorIO caches files by path; ``False`` only where the file is known unchanged since
+    it was last read)."""
     oc = ocio()
-    oc.ClearAllCaches()  # OpenColorIO caches files by path: a rewritten cube must be read again
+    if reload:
+        oc.ClearAllCaches()  # a rewritten cube must be read again
     transform = correction_transform(str(Path(path).resolve()), encoding)
     return oc.Config.CreateRaw().getProcessor(transform).getDefaultCPUProcessor()
 
