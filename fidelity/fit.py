@@ -249,19 +249,29 @@ def _colourspace_matrix(audit: ImageMeasurement) -> F64:
     return matrix_rgb_to_linear_srgb(name)
 
 
-def _fit_charts(sim: _Chart, real: _Chart, model: str, objective: str | None,
-                normalise_mode: str, weights: ArrayLike | None) -> Correction:
+@dataclass(frozen=True)
+class _Prepared:
+    """One pair of charts ready to fit: the fit-space colours, the weights, what was
+    excluded and what turns the simulator's pixels into the fit space."""
+
+    names: tuple[str, ...]
+    norm: Normalisation
+    sim_fit: F64
+    real_fit: F64
+    weights: F64
+    excluded: dict[str, str]
+    encoding: str
+    to_fit: F64
+    domain_max: float
+    sim_pixels: F64
+
+
+def _prepare(sim: _Chart, real: _Chart, normalise_mode: str,
+             weights: ArrayLike | None) -> _Prepared:
     from fidelity.chart.measure import neutral_patches
     from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
     from fidelity.compare import normalise
-    from fidelity.correction.models import (
-        DEFAULT_OBJECTIVE,
-        cross_validate,
-        fit_model,
-        linear_to_lab,
-        patch_delta_e,
-        usable_patches,
-    )
+    from fidelity.correction.models import linear_to_lab, usable_patches
 
     sm, rm = sim.audit.measurement, real.audit.measurement
     if sm.patch_names != rm.patch_names:
@@ -289,9 +299,6 @@ def _fit_charts(sim: _Chart, real: _Chart, model: str, objective: str | None,
     w = np.array([0.0 if n in excluded else 1.0 for n in names])
     if weights is not None:
         w = w * np.asarray(weights, np.float64)
-    objective = DEFAULT_OBJECTIVE if objective is None else objective
-    fitted, cond = fit_model(sim_fit, real_fit, model, weights=w, objective=objective)
-    cv = cross_validate(sim_fit, real_fit, model, weights=w, objective=objective, start=fitted)
     p = _colourspace_matrix(sim.audit)
     to_fit = np.diag(d) @ (2.0 ** sim.audit.exposure_ev * p)
     sim_lin_pixels = np.asarray(linearize_srgb(sm.srgb), np.float64) @ np.linalg.inv(
@@ -301,9 +308,31 @@ def _fit_charts(sim: _Chart, real: _Chart, model: str, objective: str | None,
                   else sim_lin_pixels)
     domain_max = (1.0 if enc == "srgb" else
                   float(np.max(np.linalg.solve(to_fit, np.ones(3)))))
-    return Correction(fitted, objective, cond, enc, to_fit, domain_max, norm, names, excluded,
-                      sim_fit, real_fit, patch_delta_e(sim_fit, real_fit),
-                      patch_delta_e(fitted.apply(sim_fit), real_fit), cv, sim_pixels)
+    return _Prepared(names, norm, sim_fit, real_fit, w, excluded, enc, to_fit, domain_max,
+                     sim_pixels)
+
+
+def _correction(pp: _Prepared, fitted: ColourModel, objective: str, cond: Conditioning,
+                cv: F64) -> Correction:
+    from fidelity.correction.models import patch_delta_e
+
+    return Correction(fitted, objective, cond, pp.encoding, pp.to_fit, pp.domain_max, pp.norm,
+                      pp.names, pp.excluded, pp.sim_fit, pp.real_fit,
+                      patch_delta_e(pp.sim_fit, pp.real_fit),
+                      patch_delta_e(fitted.apply(pp.sim_fit), pp.real_fit), cv, pp.sim_pixels)
+
+
+def _fit_charts(sim: _Chart, real: _Chart, model: str, objective: str | None,
+                normalise_mode: str, weights: ArrayLike | None) -> Correction:
+    from fidelity.correction.models import DEFAULT_OBJECTIVE, cross_validate, fit_model
+
+    pp = _prepare(sim, real, normalise_mode, weights)
+    objective = DEFAULT_OBJECTIVE if objective is None else objective
+    fitted, cond = fit_model(pp.sim_fit, pp.real_fit, model, weights=pp.weights,
+                             objective=objective)
+    cv = cross_validate(pp.sim_fit, pp.real_fit, model, weights=pp.weights,
+                        objective=objective, start=fitted)
+    return _correction(pp, fitted, objective, cond, cv)
 
 
 def fit_correction(
@@ -469,18 +498,7 @@ def fit_and_verify(
     (:func:`corrected_name`: a 16-bit PNG for sRGB-encoded SIM, clipped as a camera stores it;
     a float EXR for scene-linear SIM), measuring the whole corrected image instead (the same
     patch means; it costs the whole image's transform and writing)."""
-    from fidelity.chart.measure import measure_chart, neutral_patches
-    from fidelity.compare import normalise
-    from fidelity.correction.lut import (
-        CUBE_SIZES,
-        apply_processor,
-        config_processor,
-        cube_processor,
-        ocio,
-        ocio_config,
-    )
-    from fidelity.fileio import write_json_atomic, write_text_atomic
-    from fidelity.prediction.judge import judge
+    from fidelity.correction.lut import ocio
 
     ocio()
     c0, t0 = time.process_time(), time.perf_counter()
@@ -492,7 +510,29 @@ def fit_and_verify(
     c1, t1 = time.process_time(), time.perf_counter()
     corr = _fit_charts(s, r, model, objective, normalise_mode, None)
     c2, t2 = time.process_time(), time.perf_counter()
-    folder = Path(out)
+    return _verify(s, r, corr, Path(out), normalise_mode=normalise_mode, size=size,
+                   table=table, corrected=corrected, seconds=(t1 - t0, t2 - t1),
+                   cpu=(c1 - c0, c2 - c1))
+
+
+def _verify(s: _Chart, r: _Chart, corr: Correction, folder: Path, *, normalise_mode: str,
+            size: str, table: str | None, corrected: bool, seconds: tuple[float, float],
+            cpu: tuple[float, float]) -> FitReport:
+    """Write the cube, the config and ``correction.json`` of ``corr`` into ``folder`` and
+    verify them on the SIM chart ``s`` against the REAL chart ``r`` (module docstring)."""
+    from fidelity.chart.measure import measure_chart, neutral_patches
+    from fidelity.compare import normalise
+    from fidelity.correction.lut import (
+        CUBE_SIZES,
+        apply_processor,
+        config_processor,
+        cube_processor,
+        ocio_config,
+    )
+    from fidelity.fileio import write_json_atomic, write_text_atomic
+    from fidelity.prediction.judge import judge
+
+    c2, t2 = time.process_time(), time.perf_counter()
     folder.mkdir(parents=True, exist_ok=True)
     cube = folder / "correction.cube"
     checks: list[LutCheck] = []
@@ -504,8 +544,8 @@ def fit_and_verify(
             break
     config = folder / "correction.ocio"
     write_text_atomic(config, ocio_config(cube, f"fidelity fit: {corr.model.name} correction "
-                                                f"of {Path(sim).name} towards {Path(real).name}",
-                                          corr.encoding))
+                                                f"of {Path(s.path).name} towards "
+                                                f"{Path(r.path).name}", corr.encoding))
     sa, ra = s.audit, r.audit
     files = {"cube": str(cube), "ocio": str(config), "json": str(folder / "correction.json")}
     if corrected:
@@ -529,10 +569,95 @@ def fit_and_verify(
     pb = judge(before.mean_delta_e, size, table)[0]
     pa = judge(after.mean_delta_e, size, table)[0]
     write_json_atomic(folder / "correction.json", corr.to_json())
-    return FitReport(utc_now(), str(sim), str(real), corr, before, after, pb, pa,
+    return FitReport(utc_now(), s.path, r.path, corr, before, after, pb, pa,
                      tuple(checks), files,
-                     {"read": t1 - t0, "fit": t2 - t1, "verify": t3 - t2},
-                     {"read": c1 - c0, "fit": c2 - c1, "verify": c3 - c2})
+                     {"read": seconds[0], "fit": seconds[1], "verify": t3 - t2},
+                     {"read": cpu[0], "fit": cpu[1], "verify": c3 - c2})
+
+
+@dataclass(frozen=True)
+class SharedFit:
+    """One colour matrix fitted over several pairs of charts (the same cameras under several
+    illuminants) with per-pair gains (:func:`fidelity.correction.models.fit_shared_matrix`):
+    the shared ``matrix`` (a ``matrix`` :class:`~fidelity.correction.models.ColourModel`),
+    each pair's ``gains`` (the first pair's fixed at 1), the ``conditioning`` and, per pair,
+    the :class:`FitReport` of its correction ``matrix @ diag(gains)`` (its cube, config and
+    verification; its cross-validated ΔE00 from folds that hold the same patches out of every
+    pair); ``seconds`` for the whole."""
+
+    created: str
+    matrix: ColourModel
+    gains: tuple[F64, ...]
+    conditioning: Conditioning
+    reports: tuple[FitReport, ...]
+    seconds: dict[str, float]
+
+    def to_json(self) -> dict[str, Any]:
+        """The shared matrix (rows = output R, G, B), the conditioning and per pair the files,
+        the gains and the ΔE00 before, after, fitted and cross-validated."""
+        return {"model": "matrix", "objective": "linear", "matrix": self.matrix.matrix.tolist(),
+                "conditioning": self.conditioning.to_json(),
+                "pairs": [{"sim": r.sim, "real": r.real, "gains": g.tolist(),
+                           "before_mean_delta_e": r.before.mean_delta_e,
+                           "after_mean_delta_e": r.after.mean_delta_e,
+                           "after_max_delta_e": r.after.max_delta_e,
+                           "fitted_mean_delta_e": r.correction.to_json()["fitted_mean_delta_e"],
+                           "cross_validated_mean_delta_e": r.correction.cv_mean,
+                           "files": dict(r.files)}
+                          for r, g in zip(self.reports, self.gains, strict=True)]}
+
+
+def fit_pairs_and_verify(
+    pairs: Sequence[tuple[str | os.PathLike[str], str | os.PathLike[str]]],
+    out: str | os.PathLike[str],
+    *,
+    sim_corners: str | Sequence[float] | None = None,
+    real_corners: str | Sequence[float] | None = None,
+    normalise_mode: str = "exposure",
+    read: ReadOptions = DEFAULT_READ,
+    reference: str = "scene",
+    illuminant: str = "D65",
+    size: str = "any",
+    table: str | None = None,
+    corrected: bool = False,
+) -> SharedFit:
+    """Fit one matrix and per-pair gains over ``pairs`` of (SIM, REAL) charts, the same
+    cameras under different illuminants (:class:`SharedFit`), and write and verify each pair's
+    correction ``matrix @ diag(gains)`` as :func:`fit_and_verify` does, into
+    ``out/pair-<k>`` (k from 1). The fit is weighted least squares in linear RGB over the
+    patches usable in each pair; corners and the other options apply to every pair."""
+    from fidelity.chart.measure import reads_for
+    from fidelity.correction.lut import ocio
+    from fidelity.correction.models import ColourModel, cross_validate_shared, fit_shared_matrix
+
+    ocio()
+    if len(pairs) < 2:
+        raise InvalidValueError("a fit over illuminants needs at least two pairs (--pair SIM "
+                                "REAL, given twice or more)")
+    t0 = time.perf_counter()
+    charts = []
+    for sim, real in pairs:
+        sim_read, real_read = reads_for((sim, real), read)
+        charts.append((_read(sim, sim_corners, sim_read, reference, illuminant),
+                       _read(real, real_corners, real_read, reference, illuminant)))
+    t1 = time.perf_counter()
+    prepared = [_prepare(s, r, normalise_mode, None) for s, r in charts]
+    xs = [pp.sim_fit for pp in prepared]
+    ys = [pp.real_fit for pp in prepared]
+    ws = [pp.weights for pp in prepared]
+    matrix, gains, cond = fit_shared_matrix(xs, ys, weights=ws)
+    cvs = cross_validate_shared(xs, ys, weights=ws)
+    t2 = time.perf_counter()
+    reports = []
+    for k, ((s, r), pp, g, cv) in enumerate(zip(charts, prepared, gains, cvs, strict=True)):
+        model = ColourModel("matrix", np.asarray((matrix.matrix @ np.diag(g)).T, np.float64))
+        reports.append(_verify(s, r, _correction(pp, model, "linear", cond, cv),
+                               Path(out) / f"pair-{k + 1}", normalise_mode=normalise_mode,
+                               size=size, table=table, corrected=corrected,
+                               seconds=(0.0, 0.0), cpu=(0.0, 0.0)))
+    t3 = time.perf_counter()
+    return SharedFit(utc_now(), matrix, gains, cond, tuple(reports),
+                     {"read": t1 - t0, "fit": t2 - t1, "verify": t3 - t2})
 
 
 def corrected_name(encoding: str) -> str:
@@ -593,4 +718,5 @@ def remeasure(pixels: NDArray[Any], audit: ImageMeasurement,
 
 __all__ = ["AFFINE_MODELS", "CHECK_GRID", "Correction", "DEFAULT_MODEL", "EXPRESSED_DELTA_E",
            "FitReport", "GREY_CHROMA", "LUT_TOLERANCE", "LutCheck", "check_cube", "check_points",
-           "corrected_name", "fit_and_verify", "fit_correction", "remeasure"]
+           "corrected_name", "fit_and_verify", "fit_correction", "fit_pairs_and_verify",
+           "remeasure", "SharedFit"]

@@ -463,3 +463,94 @@ def test_cli_fit_write_corrected(images, tmp_path):
                                   "--write-corrected"])
     assert r.exit_code == 0, r.output
     assert (out / "corrected.png").is_file() and "corrected.png" in r.output
+
+
+# ----------------------------------------------------------------------------------------------
+# One matrix over several illuminants (--pair)
+# ----------------------------------------------------------------------------------------------
+
+GAINS_A = np.array([0.8, 1.0, 1.3])  # a white-balance error of the simulator under A
+
+
+@pytest.fixture(scope="module")
+def illuminant_pairs(tmp_path_factory):
+    """The suite's exact camera (real) and the same camera with the hue-rotated colour matrix
+    (sim), rendered in closed form under D65 and under A; under A the simulator's pixels also
+    carry a white-balance error (linear values divided by GAINS_A)."""
+    folder = tmp_path_factory.mktemp("pairs")
+    out = []
+    for ill in ("D65", "A"):
+        real = render_chart(_camera(), ill, pixels_per_patch=8).measurement.srgb
+        sim = render_chart(_camera(ccm={"method": "matrix", "matrix": HUE.tolist()}), ill,
+                           pixels_per_patch=8).measurement.srgb
+        if ill == "A":
+            sim = delinearize_srgb(np.asarray(linearize_srgb(sim)) / GAINS_A)
+        out.append((write_png(folder / f"sim_{ill}.png", _image(np.clip(sim, 0, 1)), 16),
+                    write_png(folder / f"real_{ill}.png", _image(np.clip(real, 0, 1)), 16)))
+    return out
+
+
+def test_one_matrix_over_two_illuminants_is_recovered(illuminant_pairs, tmp_path):
+    """The shared matrix is the inverse hue rotation, the gains under A undo the white-balance
+    error (relative to D65's, which are fixed at 1) and each illuminant's corrected ΔE00 is
+    measured through its own cube."""
+    from fidelity.fit import fit_pairs_and_verify
+
+    shared = fit_pairs_and_verify(illuminant_pairs, tmp_path, sim_corners=CORNERS,
+                                  real_corners=CORNERS)
+    # the exposure normalisation scales each pair by one number: compare up to scale
+    m = shared.matrix.matrix
+    assert np.allclose(m / m.sum(axis=1).mean(), np.linalg.inv(HUE), atol=5e-3)
+    g = shared.gains[1]
+    assert np.allclose(g / g[1], GAINS_A / GAINS_A[1], rtol=5e-3)
+    assert np.array_equal(shared.gains[0], np.ones(3))
+    for rep in shared.reports:
+        # the rotated colours leave the sRGB gamut on a few patches, clipped in the PNG (more
+        # of them under A): those are excluded and named; the used ones are corrected
+        c = rep.correction
+        used = np.array([n not in c.excluded for n in c.patch_names])
+        assert 3 <= used.sum() < 24
+        assert rep.before.mean_delta_e > 3
+        assert rep.after.delta_e[used].max() < 0.5
+        assert rep.after.mean_delta_e < rep.before.mean_delta_e / 3
+        assert c.cv_mean < 0.5
+        assert rep.lut.passed
+        assert Path(rep.files["cube"]).is_file()
+    assert Path(shared.reports[1].files["cube"]).parent.name == "pair-2"
+    doc = shared.to_json()
+    assert len(doc["pairs"]) == 2 and doc["pairs"][1]["gains"] == g.tolist()
+
+
+def test_a_single_matrix_fit_over_both_is_worse_without_the_gains(illuminant_pairs, tmp_path):
+    """Without per-illuminant gains the A pair's white-balance error is left over: one plain
+    matrix fitted to the A pair alone (reference) does what the shared fit does for it."""
+    from fidelity.fit import fit_and_verify, fit_pairs_and_verify
+
+    shared = fit_pairs_and_verify(illuminant_pairs, tmp_path / "s", sim_corners=CORNERS,
+                                  real_corners=CORNERS)
+    alone = fit_and_verify(*illuminant_pairs[1], tmp_path / "a", sim_corners=CORNERS,
+                           real_corners=CORNERS, objective="linear")
+    assert abs(shared.reports[1].after.mean_delta_e - alone.after.mean_delta_e) < 0.2
+
+
+def test_cli_fit_pairs(illuminant_pairs, tmp_path):
+    out = tmp_path / "out"
+    args = ["fit", "--out", str(out), "--sim-corners", CORNERS, "--real-corners", CORNERS]
+    for sim, real in illuminant_pairs:
+        args += ["--pair", str(sim), str(real)]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 0, r.output
+    rep = json.loads((out / "report.json").read_text())
+    assert len(rep["pairs"]) == 2
+    for pair in rep["pairs"]:
+        assert pair["before_mean_delta_e"] > 3 * pair["after_mean_delta_e"]
+        assert pair["fitted_mean_delta_e"] < 0.5
+    assert (out / "report.html").is_file() and (out / "pair-2" / "correction.cube").is_file()
+    assert "pair 2" in r.output
+    bad = CliRunner().invoke(main, ["fit", str(illuminant_pairs[0][0]), str(illuminant_pairs[0][1]),
+                                    "--out", str(tmp_path / "o2"), "--pair",
+                                    str(illuminant_pairs[1][0]), str(illuminant_pairs[1][1])])
+    assert bad.exit_code == 2
+    one = CliRunner().invoke(main, ["fit", "--out", str(tmp_path / "o3"), "--pair",
+                                    str(illuminant_pairs[1][0]), str(illuminant_pairs[1][1])])
+    assert one.exit_code == 2

@@ -20,8 +20,13 @@ if TYPE_CHECKING:
 
 
 @click.command()
-@click.argument("sim", type=IMAGE_PATH)
-@click.argument("real", type=IMAGE_PATH)
+@click.argument("sim", type=IMAGE_PATH, required=False)
+@click.argument("real", type=IMAGE_PATH, required=False)
+@click.option("--pair", "pairs", type=(IMAGE_PATH, IMAGE_PATH), multiple=True,
+              metavar="SIM REAL",
+              help="A SIM and REAL pair of one illuminant, given twice or more instead of SIM "
+                   "REAL: one matrix that holds across them, with per-illuminant gains; each "
+                   "pair's correction goes to OUT/pair-<k>.")
 @click.option("--out", "out", type=click.Path(file_okay=False, path_type=Path), required=True,
               help="Folder for correction.cube, correction.ocio, correction.json, report.json "
                    "and report.html.")
@@ -48,7 +53,8 @@ if TYPE_CHECKING:
               help="Illuminant of the scene reference.")
 @image_read_options
 @common_options
-def fit(sim: Path, real: Path, out: Path, model: str, objective: str | None, corrected: bool,
+def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...], out: Path,
+        model: str, objective: str | None, corrected: bool,
         sim_corners: str | None, real_corners: str | None, normalise_mode: str, size: str,
         table: str | None, reference: str, illuminant: str, read: ReadOptions) -> None:
     """Fit the correction from the simulator's chart onto the real camera's, as a 3D LUT.
@@ -64,10 +70,26 @@ def fit(sim: Path, real: Path, out: Path, model: str, objective: str | None, cor
     fidelity fit sim.png photo.jpg --out correction/
     fidelity fit sim.exr photo.jpg --out c/ --correction root-polynomial --normalise none
     fidelity fit sim.png photo.jpg --out c/ --write-corrected
+    fidelity fit --pair sim_d65.exr real_d65.jpg --pair sim_a.exr real_a.jpg --out c/
     """
     from fidelity.fileio import check_outputs, display_path
     from fidelity.fit import fit_and_verify
     from fidelity.report.fit import fit_lines, write_fit_report
+
+    if pairs:
+        if sim is not None or real is not None:
+            raise click.UsageError("give SIM REAL or --pair SIM REAL (twice or more), not both")
+        if len(pairs) < 2:
+            raise click.UsageError("--pair is a fit over illuminants: give it twice or more "
+                                   "(one pair: fidelity fit SIM REAL)")
+        if model != "matrix":
+            raise click.UsageError("--pair fits one matrix with per-illuminant gains: "
+                                   "--correction matrix only")
+        _fit_pairs(pairs, out, sim_corners, real_corners, normalise_mode, size, table,
+                   reference, illuminant, read, corrected)
+        return
+    if sim is None or real is None:
+        raise click.UsageError("give SIM and REAL, or --pair SIM REAL twice or more")
 
     names: tuple[str, ...] = ("correction.cube", "correction.ocio", "correction.json",
                               "report.json", "report.html")
@@ -88,3 +110,31 @@ def fit(sim: Path, real: Path, out: Path, model: str, objective: str | None, cor
     if "corrected" in report.files:
         written.append(Path(report.files["corrected"]))
     click.echo(f"wrote {', '.join(display_path(p) for p in written)}")
+
+
+def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str | None,
+               real_corners: str | None, normalise_mode: str, size: str, table: str | None,
+               reference: str, illuminant: str, read: ReadOptions, corrected: bool) -> None:
+    from fidelity.fileio import check_outputs, display_path
+    from fidelity.fit import fit_pairs_and_verify
+    from fidelity.report.fit import shared_fit_lines, write_shared_fit_report
+
+    inputs: dict[str, Path | str | None] = {"--table": table, "--reference": reference,
+                                            "--illuminant": illuminant}
+    for k, (s, r) in enumerate(pairs):
+        inputs[f"--pair {k + 1} SIM"] = s
+        inputs[f"--pair {k + 1} REAL"] = r
+    check_outputs({"report.json": out / "report.json", "report.html": out / "report.html",
+                   **{f"pair-{k + 1}": out / f"pair-{k + 1}" for k in range(len(pairs))}},
+                  inputs)
+    shared = fit_pairs_and_verify(pairs, out, sim_corners=sim_corners, real_corners=real_corners,
+                                  normalise_mode=normalise_mode, reference=reference,
+                                  illuminant=illuminant, size=size, table=table, read=read,
+                                  corrected=corrected)
+    write_shared_fit_report(shared, json_path=out / "report.json",
+                            html_path=out / "report.html",
+                            protect=[p for pair in pairs for p in pair])
+    for line in shared_fit_lines(shared):
+        click.echo(line)
+    click.echo(f"wrote {display_path(out / 'report.json')}, {display_path(out / 'report.html')} "
+               f"and the corrections in {', '.join(display_path(out / f'pair-{k + 1}') for k in range(len(pairs)))}")

@@ -454,8 +454,100 @@ def usable_patches(sim_srgb: ArrayLike, real_srgb: ArrayLike, names: Sequence[st
     return out
 
 
+#: Alternating least-squares rounds of :func:`fit_shared_matrix` at most, and the relative
+#: change of the coefficients below which it stops.
+SHARED_ROUNDS, SHARED_TOLERANCE = 200, 1e-12
+
+
+def _gains_for(matrix: F64, x: F64, y: F64, w: F64) -> F64:
+    """The per-channel gains ``g`` minimising ``sum w |y - M (g * x)|^2`` (closed form)."""
+    a = (x[:, None, :] * matrix[None, :, :]).reshape(-1, 3)  # rows: M[c] * x[k]
+    sw = np.repeat(np.sqrt(w), 3)
+    g, *_ = np.linalg.lstsq(a * sw[:, None], y.reshape(-1) * sw, rcond=None)
+    return np.asarray(g, np.float64)
+
+
+def fit_shared_matrix(sims: Sequence[ArrayLike], reals: Sequence[ArrayLike], *,
+                      weights: Sequence[ArrayLike | None] | None = None
+                      ) -> tuple[ColourModel, tuple[F64, ...], Conditioning]:
+    """One matrix ``M`` and per-chart gains ``g_i`` with ``real_i = M (g_i * sim_i)`` over
+    several pairs of charts (the same camera under several illuminants: the white balance
+    changes with the illuminant, the colour matrix does not), by weighted least squares in
+    linear RGB (alternating: the matrix in closed form with :func:`fit_model`'s conditioning
+    rule over all pairs, then each pair's gains in closed form, until the coefficients change
+    by less than :data:`SHARED_TOLERANCE`). ``M`` and the gains are determined up to a
+    per-channel scale; the first pair's gains are fixed at 1 (the matrix carries its white
+    balance; the others' gains are relative to it).
+
+    Returns the matrix as a ``matrix`` :class:`ColourModel`, the gains ``(3,)`` per pair and
+    the matrix step's :class:`Conditioning`. Gains beyond :data:`MAX_COEFFICIENT` or not
+    positive are refused (:class:`~fidelity.errors.InvalidValueError`)."""
+    if len(sims) != len(reals) or not sims:
+        raise InvalidValueError("fit_shared_matrix needs as many sim charts as real ones, "
+                                "at least one")
+    ws = list(weights) if weights is not None else [None] * len(sims)
+    data = [_check(s, r, w) for s, r, w in zip(sims, reals, ws, strict=True)]
+    gains = [np.ones(3) for _ in data]
+    model, cond = fit_model(np.concatenate([x for x, _, _ in data]),
+                            np.concatenate([y for _, y, _ in data]), "matrix",
+                            weights=np.concatenate([w for _, _, w in data]), objective="linear")
+    for _ in range(SHARED_ROUNDS):
+        m = model.matrix
+        new = [np.ones(3)] + [_gains_for(m, x, y, w) for x, y, w in data[1:]]
+        for i, g in enumerate(new):
+            if not (np.all(np.isfinite(g)) and np.all(g > 0) and np.all(g <= MAX_COEFFICIENT)):
+                raise InvalidValueError(
+                    f"the gains of pair {i + 1} ({', '.join(f'{v:.3g}' for v in g)}) are not "
+                    f"positive numbers up to {MAX_COEFFICIENT:g}: the charts do not share a "
+                    "colour matrix")
+        model, cond = fit_model(np.concatenate([x * g for (x, _, _), g in zip(data, new,
+                                                                              strict=True)]),
+                                np.concatenate([y for _, y, _ in data]), "matrix",
+                                weights=np.concatenate([w for _, _, w in data]),
+                                objective="linear")
+        change = max(float(np.max(np.abs(model.matrix - m))),
+                     max(float(np.max(np.abs(a - b))) for a, b in zip(new, gains, strict=True)))
+        gains = new
+        if change < SHARED_TOLERANCE:
+            break
+    return model, tuple(gains), cond
+
+
+def cross_validate_shared(sims: Sequence[ArrayLike], reals: Sequence[ArrayLike], *,
+                          weights: Sequence[ArrayLike | None] | None = None,
+                          hold_out: int = HOLD_OUT) -> tuple[F64, ...]:
+    """:func:`cross_validate` of :func:`fit_shared_matrix`: fold ``j`` holds the same patches
+    out of every pair (the used patches of the first pair ``j, j + F, ...``), so that a patch
+    is predicted under every illuminant by a fit that saw it under none. Returns ``(n,)`` per
+    pair, NaN for patches of weight 0."""
+    ws = list(weights) if weights is not None else [None] * len(sims)
+    data = [_check(s, r, w) for s, r, w in zip(sims, reals, ws, strict=True)]
+    used = np.flatnonzero(np.any([w > 0 for _, _, w in data], axis=0))
+    folds = max(2, math.ceil(len(used) / max(1, hold_out)))
+    out = [np.full(len(x), np.nan) for x, _, _ in data]
+    for j in range(folds):
+        held = used[j::folds]
+        if held.size == 0:
+            continue
+        wj = []
+        for _, _, w in data:
+            w = w.copy()
+            w[held] = 0.0
+            wj.append(w)
+        model, gains, _ = fit_shared_matrix([x for x, _, _ in data], [y for _, y, _ in data],
+                                            weights=wj)
+        for i, ((x, y, w), g) in enumerate(zip(data, gains, strict=True)):
+            keep = held[w[held] > 0]
+            out[i][keep] = patch_delta_e(model.apply(x[keep] * g), y[keep])
+    return tuple(out)
+
+
 __all__ = [
     "CONDITION_LIMIT",
+    "SHARED_ROUNDS",
+    "SHARED_TOLERANCE",
+    "cross_validate_shared",
+    "fit_shared_matrix",
     "CURVE_KNOTS",
     "ColourModel",
     "Conditioning",

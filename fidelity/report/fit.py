@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from fidelity.fileio import json_ready
-from fidelity.fit import EXPRESSED_DELTA_E, FitReport
+from fidelity.fit import EXPRESSED_DELTA_E, FitReport, SharedFit
 from fidelity.report.chart import write_report_files
 from fidelity.report.document import Code, Document, Facts, Figure, Headline, section, table
-from fidelity.report.jsonform import fit_json
+from fidelity.report.jsonform import fit_json, shared_fit_json
 
 
 def _n(v: float | None) -> str:
@@ -127,4 +127,68 @@ def write_fit_report(report: FitReport, *, json_path: str | os.PathLike[str] | N
                               json_path=json_path, html_path=html_path, protect=protect)
 
 
-__all__ = ["fit_document", "fit_lines", "write_fit_report"]
+def shared_fit_lines(shared: SharedFit) -> list[str]:
+    """A fit over illuminants on a terminal: the shared matrix, then per pair its gains and
+    the sim-to-real ΔE00 before and after (through its own .cube) with the cross-validated
+    ΔE00 and the cube's check."""
+    m = shared.matrix.matrix
+    lines = [f"one matrix over {len(shared.reports)} pairs (linear least squares, per-pair "
+             "gains, the first pair's fixed at 1): rows "
+             + "; ".join(" ".join(f"{v:+.4f}" for v in row) for row in m)]
+    if shared.conditioning.reason:
+        lines.append(f"regularised: {shared.conditioning.reason}")
+    for k, (rep, g) in enumerate(zip(shared.reports, shared.gains, strict=True)):
+        c, b, a = rep.correction, rep.before, rep.after
+        lines.append(
+            f"pair {k + 1}: {Path(rep.sim).name} -> {Path(rep.real).name}: gains "
+            f"{' '.join(f'{v:.4f}' for v in g)}; ΔE00 before mean {b.mean_delta_e:.2f}, after "
+            f"mean {a.mean_delta_e:.2f} (max {a.max_delta_e:.2f}, {a.worst_patch}); "
+            f"cross-validated mean {_n(c.cv_mean)}; {len(c.used)} of {len(c.patch_names)} "
+            f"patches used; .cube {rep.lut.size}^3 max ΔE00 {rep.lut.grid_max:.3f} "
+            f"({'met' if rep.lut.passed else 'NOT met'})")
+    return lines
+
+
+def shared_fit_document(shared: SharedFit) -> Document:
+    """A fit over illuminants as a :class:`~fidelity.report.document.Document`: the matrix,
+    a table of the pairs, and each pair's before/after swatches."""
+    from fidelity.report import plots
+
+    worst = max(shared.reports, key=lambda r: r.after.mean_delta_e)
+    head = Headline(f"one matrix over {len(shared.reports)} illuminants: sim-to-real ΔE00 after "
+                    f"at most **{worst.after.mean_delta_e:.2f}** (mean over the chart, "
+                    f"{Path(worst.sim).name})", "info")
+    rows = [(str(k + 1), f"`{Path(r.sim).name}`", f"`{Path(r.real).name}`",
+             " ".join(f"{v:.4f}" for v in g), f"{r.before.mean_delta_e:.2f}",
+             f"{r.after.mean_delta_e:.2f}", f"{r.after.max_delta_e:.2f}",
+             _n(r.correction.cv_mean), f"{len(r.correction.used)}", f"{r.lut.size}³")
+            for k, (r, g) in enumerate(zip(shared.reports, shared.gains, strict=True))]
+    sections = [
+        section("Pairs", table(("pair", "SIM", "REAL", "gains", "ΔE00 before", "ΔE00 after",
+                                "max after", "cross-validated", "patches used", "cube"), rows)),
+        section("Before and after", *[
+            Figure(plots.swatches(r.after, ("real camera", "corrected simulation")),
+                   f"after_{k + 1}.png", f"pair {k + 1} after: real camera (left half) against "
+                   "the corrected simulation (right half)")
+            for k, r in enumerate(shared.reports)], gallery=True),
+        section("The shared matrix", Code(json.dumps(json_ready(
+            {"matrix": shared.matrix.matrix.tolist(),
+             "conditioning": shared.conditioning.to_json()}), indent=1))),
+        section("Files and timing", Code(json.dumps(json_ready(
+            {"files": [r.files for r in shared.reports], "seconds": shared.seconds}),
+            indent=1)), folded=True),
+    ]
+    return Document("Fit over illuminants", head, tuple(sections))
+
+
+def write_shared_fit_report(shared: SharedFit, *, json_path: str | os.PathLike[str] | None = None,
+                            html_path: str | os.PathLike[str] | None = None,
+                            protect: Sequence[str | os.PathLike[str]] = ()) -> list[Path]:
+    """Write the JSON and/or HTML report of a fit over illuminants atomically."""
+    return write_report_files(lambda: shared_fit_json(shared),
+                              lambda: shared_fit_document(shared), json_path=json_path,
+                              html_path=html_path, protect=protect)
+
+
+__all__ = ["fit_document", "fit_lines", "shared_fit_document", "shared_fit_lines",
+           "write_fit_report", "write_shared_fit_report"]

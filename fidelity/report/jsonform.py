@@ -19,7 +19,7 @@ from fidelity.report.words import column_note, prediction_notes, verdict_message
 
 if TYPE_CHECKING:
     from fidelity.coco.corruptions import CocoCAnswer
-    from fidelity.fit import FitReport
+    from fidelity.fit import FitReport, SharedFit
 
 
 def prediction_json(prediction: Prediction,
@@ -128,5 +128,18 @@ def fit_json(report: FitReport) -> JSONObject:
     return out
 
 
+def shared_fit_json(shared: SharedFit) -> JSONObject:
+    """The JSON report of ``fidelity fit --pair``: the shared matrix, its conditioning and per
+    pair the gains, the ΔE00 before and after, fitted and cross-validated, and the full report
+    of that pair's correction (:func:`fit_json`)."""
+    doc = shared.to_json()
+    for pair, rep in zip(doc["pairs"], shared.reports, strict=True):
+        pair["report"] = fit_json(rep)
+    out: JSONObject = json_ready({"command": "fit", "created": shared.created, **doc,
+                                  "seconds": dict(shared.seconds)})
+    return out
+
+
 __all__ = ["chart_report_json", "coco_c_answer_json", "comparison_json", "fit_json",
+           "shared_fit_json",
            "prediction_json", "verdict_json"]
