@@ -660,6 +660,102 @@ def fit_pairs_and_verify(
                      {"read": t1 - t0, "fit": t2 - t1, "verify": t3 - t2})
 
 
+#: Pixels per patch of the chart rendered from a camera file (``--camera``).
+CAMERA_PIXELS_PER_PATCH = 32
+
+
+def _absolute_paths(value: Any, base: Path) -> Any:
+    """``value`` (a parsed camera file) with every string naming a file relative to ``base``
+    made absolute, so that the corrected camera file finds them from anywhere."""
+    if isinstance(value, dict):
+        return {k: _absolute_paths(v, base) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_absolute_paths(v, base) for v in value]
+    if isinstance(value, str) and value and not Path(value).is_absolute() and (
+            base / value).is_file():
+        return str((base / value).resolve())
+    return value
+
+
+def fit_camera_and_verify(
+    camera: str | os.PathLike[str],
+    real: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    model: str = DEFAULT_MODEL,
+    objective: str | None = None,
+    real_corners: str | Sequence[float] | None = None,
+    normalise_mode: str = "exposure",
+    read: ReadOptions = DEFAULT_READ,
+    reference: str = "scene",
+    illuminant: str = "D65",
+    size: str = "any",
+    table: str | None = None,
+    corrected: bool = False,
+) -> tuple[FitReport, Path]:
+    """Render the chart through the camera model file ``camera`` in closed form (under
+    ``illuminant``; ``out/sim_render.png`` or ``.exr``), fit and verify the correction onto
+    ``real`` as :func:`fit_and_verify` does, and write ``out/corrected.toml``: the camera
+    file with its colour-correction matrix replaced by the corrected one,
+    ``inv(T) M T @ CCM`` (``M`` the fitted matrix in the fit space, ``T`` the simulator's
+    pixels -> fit space, ``CCM`` the camera's own matrix, resolved).
+
+    The correction of a camera file is a 3x3 matrix in the camera's linear output (before its
+    tone curve): ``model`` ``gains`` or ``matrix``, and the camera's tone curve ``srgb`` or
+    ``linear`` (the encodings the audit reads exactly). Returns the report and the path of
+    ``corrected.toml``."""
+    import tomli_w
+
+    from fidelity.camera.model import colour_correction_matrix, read_camera_file
+    from fidelity.camera.render import ChartLayout, render_chart
+    from fidelity.chart.image import write_exr, write_png
+    from fidelity.colour.spectral import load_illuminant
+    from fidelity.fileio import write_text_atomic
+    from fidelity.schema import load_document
+
+    path = Path(camera)
+    cam = read_camera_file(path)
+    if model not in AFFINE_MODELS:
+        raise InvalidValueError(f"{path}: a camera file is corrected through its 3x3 colour "
+                                f"matrix: --correction gains or matrix, not {model}")
+    if cam.tone.curve not in ("srgb", "linear"):
+        raise InvalidValueError(f"{path}: tone curve {cam.tone.curve!r}: a corrected camera "
+                                "file is written for the srgb and linear tone curves (the "
+                                "encodings the audit reads exactly)")
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    render = render_chart(cam, illuminant, pixels_per_patch=CAMERA_PIXELS_PER_PATCH)
+    layout = ChartLayout.for_patch_size(CAMERA_PIXELS_PER_PATCH)
+    centres = []
+    for k in (0, 5, 23, 18):
+        y0, y1, x0, x1 = layout.patch_box(k)
+        centres += [(x0 + x1) / 2 - 0.5, (y0 + y1) / 2 - 0.5]
+    if cam.output_encoding == "linear":
+        sim = write_exr(folder / "sim_render.exr", render.linear_image,
+                        f"fidelity fit --camera: {cam.name} under {illuminant}")
+    else:
+        sim = write_png(folder / "sim_render.png", render.display_image, 16)
+    rep = fit_and_verify(sim, real, folder, model=model, objective=objective,
+                         sim_corners=",".join(f"{v:g}" for v in centres),
+                         real_corners=real_corners,
+                         normalise_mode=normalise_mode, read=read, reference=reference,
+                         illuminant=illuminant, size=size, table=table, corrected=corrected)
+    c = rep.correction
+    t = c.to_fit
+    ccm = colour_correction_matrix(cam, load_illuminant(illuminant))
+    new = np.linalg.inv(t) @ c.model.matrix @ t @ np.asarray(ccm, np.float64)
+    data = _absolute_paths(load_document(path, str(path)), path.parent.resolve())
+    data["name"] = f"{data.get('name', cam.name)}-corrected"
+    data["description"] = (f"{data.get('description', cam.name)}, corrected by fidelity fit "
+                           f"({c.model.name}) towards {Path(real).name}")
+    data["ccm"] = {"method": "matrix", "matrix": new.tolist()}
+    toml = folder / "corrected.toml"
+    write_text_atomic(toml, f"# fidelity fit --camera {path.name}: the colour matrix "
+                            f"corrected towards {Path(real).name} (ΔE00 after "
+                            f"{rep.after.mean_delta_e:.3f})\n" + tomli_w.dumps(data))
+    return rep, toml
+
+
 def corrected_name(encoding: str) -> str:
     """The file name of the corrected SIM image: ``corrected.png`` (sRGB-encoded) or
     ``corrected.exr`` (scene-linear)."""
@@ -718,5 +814,5 @@ def remeasure(pixels: NDArray[Any], audit: ImageMeasurement,
 
 __all__ = ["AFFINE_MODELS", "CHECK_GRID", "Correction", "DEFAULT_MODEL", "EXPRESSED_DELTA_E",
            "FitReport", "GREY_CHROMA", "LUT_TOLERANCE", "LutCheck", "check_cube", "check_points",
-           "corrected_name", "fit_and_verify", "fit_correction", "fit_pairs_and_verify",
+           "CAMERA_PIXELS_PER_PATCH", "corrected_name", "fit_and_verify", "fit_camera_and_verify", "fit_correction", "fit_pairs_and_verify",
            "remeasure", "SharedFit"]

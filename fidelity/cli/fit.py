@@ -27,6 +27,11 @@ if TYPE_CHECKING:
               help="A SIM and REAL pair of one illuminant, given twice or more instead of SIM "
                    "REAL: one matrix that holds across them, with per-illuminant gains; each "
                    "pair's correction goes to OUT/pair-<k>.")
+@click.option("--camera", "camera", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              default=None,
+              help="A camera model file instead of a rendered SIM (then give REAL alone): its "
+                   "chart is rendered in closed form, the correction fitted and verified, and "
+                   "OUT/corrected.toml written, the camera with its colour matrix corrected.")
 @click.option("--out", "out", type=click.Path(file_okay=False, path_type=Path), required=True,
               help="Folder for correction.cube, correction.ocio, correction.json, report.json "
                    "and report.html.")
@@ -53,7 +58,8 @@ if TYPE_CHECKING:
               help="Illuminant of the scene reference.")
 @image_read_options
 @common_options
-def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...], out: Path,
+def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...],
+        camera: Path | None, out: Path,
         model: str, objective: str | None, corrected: bool,
         sim_corners: str | None, real_corners: str | None, normalise_mode: str, size: str,
         table: str | None, reference: str, illuminant: str, read: ReadOptions) -> None:
@@ -87,6 +93,13 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
                                    "--correction matrix only")
         _fit_pairs(pairs, out, sim_corners, real_corners, normalise_mode, size, table,
                    reference, illuminant, read, corrected)
+        return
+    if camera is not None:
+        if sim is None or real is not None:
+            raise click.UsageError("with --camera give REAL alone: fidelity fit --camera "
+                                   "sim.toml REAL --out DIR")
+        _fit_camera(camera, sim, out, model, objective, real_corners, normalise_mode, size,
+                    table, reference, illuminant, read, corrected)
         return
     if sim is None or real is None:
         raise click.UsageError("give SIM and REAL, or --pair SIM REAL twice or more")
@@ -138,3 +151,26 @@ def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str
         click.echo(line)
     click.echo(f"wrote {display_path(out / 'report.json')}, {display_path(out / 'report.html')} "
                f"and the corrections in {', '.join(display_path(out / f'pair-{k + 1}') for k in range(len(pairs)))}")
+
+
+def _fit_camera(camera: Path, real: Path, out: Path, model: str, objective: str | None,
+                real_corners: str | None, normalise_mode: str, size: str, table: str | None,
+                reference: str, illuminant: str, read: ReadOptions, corrected: bool) -> None:
+    from fidelity.fileio import check_outputs, display_path
+    from fidelity.fit import fit_camera_and_verify
+    from fidelity.report.fit import fit_lines, write_fit_report
+
+    names = ("correction.cube", "correction.ocio", "correction.json", "report.json",
+             "report.html", "corrected.toml", "sim_render.png", "sim_render.exr")
+    check_outputs({n: out / n for n in names},
+                  {"--camera": camera, "REAL": real, "--table": table,
+                   "--reference": reference, "--illuminant": illuminant})
+    report, toml = fit_camera_and_verify(
+        camera, real, out, model=model, objective=objective, real_corners=real_corners,
+        normalise_mode=normalise_mode, reference=reference, illuminant=illuminant, size=size,
+        table=table, read=read, corrected=corrected)
+    write_fit_report(report, json_path=out / "report.json", html_path=out / "report.html",
+                     protect=(camera, real))
+    for line in fit_lines(report):
+        click.echo(line)
+    click.echo(f"corrected camera: {display_path(toml)} (fidelity check {display_path(toml)})")
