@@ -39,7 +39,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -49,6 +49,9 @@ from fidelity.correction.models import ColourModel, Conditioning
 from fidelity.errors import InvalidValueError
 from fidelity.prediction.table import Prediction
 from fidelity.records import Normalisation, utc_now
+
+if TYPE_CHECKING:
+    from fidelity.coco.measure import MeasuredLoss, MeasureRequest
 
 F64 = NDArray[np.float64]
 
@@ -451,7 +454,9 @@ class FitReport:
     ``.cube`` by OpenColorIO, measured again in the audit's windows (``after``), their predicted losses, the
     ``.cube``'s :class:`LutCheck` (one per size tried, the last one kept) and the seconds
     spent (``seconds``: ``read``, ``fit``, ``verify``; ``cpu_seconds`` the same in this
-    process's CPU time)."""
+    process's CPU time); with ``measure``, the loss measured on COCO of the simulator's
+    colours before and after the correction (``measured_before``, ``measured_after``: the
+    emulation of each on the images, as ``fidelity compare --measure`` makes it)."""
 
     created: str
     sim: str
@@ -465,6 +470,8 @@ class FitReport:
     files: dict[str, str]
     seconds: dict[str, float]
     cpu_seconds: dict[str, float] = field(default_factory=dict)
+    measured_before: tuple[MeasuredLoss, ...] = ()
+    measured_after: tuple[MeasuredLoss, ...] = ()
 
     @property
     def lut(self) -> LutCheck:
@@ -488,6 +495,7 @@ def fit_and_verify(
     size: str = "any",
     table: str | None = None,
     corrected: bool = False,
+    measure: MeasureRequest | None = None,
 ) -> FitReport:
     """:func:`fit_correction`, then write ``correction.cube`` (the smallest cube size within
     :data:`LUT_TOLERANCE`), ``correction.ocio`` and ``correction.json`` into the folder
@@ -512,12 +520,12 @@ def fit_and_verify(
     c2, t2 = time.process_time(), time.perf_counter()
     return _verify(s, r, corr, Path(out), normalise_mode=normalise_mode, size=size,
                    table=table, corrected=corrected, seconds=(t1 - t0, t2 - t1),
-                   cpu=(c1 - c0, c2 - c1))
+                   cpu=(c1 - c0, c2 - c1), measure=measure)
 
 
 def _verify(s: _Chart, r: _Chart, corr: Correction, folder: Path, *, normalise_mode: str,
             size: str, table: str | None, corrected: bool, seconds: tuple[float, float],
-            cpu: tuple[float, float]) -> FitReport:
+            cpu: tuple[float, float], measure: MeasureRequest | None = None) -> FitReport:
     """Write the cube, the config and ``correction.json`` of ``corr`` into ``folder`` and
     verify them on the SIM chart ``s`` against the REAL chart ``r`` (module docstring)."""
     from fidelity.chart.measure import measure_chart, neutral_patches
@@ -569,10 +577,21 @@ def _verify(s: _Chart, r: _Chart, corr: Correction, folder: Path, *, normalise_m
     pb = judge(before.mean_delta_e, size, table)[0]
     pa = judge(after.mean_delta_e, size, table)[0]
     write_json_atomic(folder / "correction.json", corr.to_json())
+    measured: list[tuple[MeasuredLoss, ...]] = [(), ()]
+    if measure is not None:
+        from fidelity.coco.emulation import PatchEmulation
+
+        # as compare --measure: the real camera's colours -> the simulator's, on COCO photos
+        for k, (side, colours) in enumerate((("before", before_srgb), ("after", after_srgb))):
+            emu = PatchEmulation.fit(ref_srgb, colours, neutral)
+            measured[k] = tuple(measure.run(emu.apply_uint8, emu.key(), {
+                "sim": s.path, "real": r.path, "fit": side, "model": corr.model.name,
+                "emulation": emu.describe()}))
     return FitReport(utc_now(), s.path, r.path, corr, before, after, pb, pa,
                      tuple(checks), files,
                      {"read": seconds[0], "fit": seconds[1], "verify": t3 - t2},
-                     {"read": cpu[0], "fit": cpu[1], "verify": c3 - c2})
+                     {"read": cpu[0], "fit": cpu[1], "verify": c3 - c2},
+                     measured[0], measured[1])
 
 
 @dataclass(frozen=True)
@@ -692,6 +711,7 @@ def fit_camera_and_verify(
     size: str = "any",
     table: str | None = None,
     corrected: bool = False,
+    measure: MeasureRequest | None = None,
 ) -> tuple[FitReport, Path]:
     """Render the chart through the camera model file ``camera`` in closed form (under
     ``illuminant``; ``out/sim_render.png`` or ``.exr``), fit and verify the correction onto
@@ -739,7 +759,8 @@ def fit_camera_and_verify(
                          sim_corners=",".join(f"{v:g}" for v in centres),
                          real_corners=real_corners,
                          normalise_mode=normalise_mode, read=read, reference=reference,
-                         illuminant=illuminant, size=size, table=table, corrected=corrected)
+                         illuminant=illuminant, size=size, table=table, corrected=corrected,
+                         measure=measure)
     c = rep.correction
     t = c.to_fit
     ccm = colour_correction_matrix(cam, load_illuminant(illuminant))

@@ -613,3 +613,33 @@ def test_fit_camera_refuses_what_a_camera_file_cannot_hold(images, tmp_path):
     r = CliRunner().invoke(main, ["fit", "--camera", str(cam), str(images["real"]),
                                   str(images["real"]), "--out", str(tmp_path / "o2")])
     assert r.exit_code == 2
+
+
+# ----------------------------------------------------------------------------------------------
+# Measured on COCO (--measure)
+# ----------------------------------------------------------------------------------------------
+
+
+def test_measure_gives_the_coco_loss_before_and_after(images, shared, tmp_path):
+    """With a MeasureRequest (``--measure``) the simulator's colours before and after the
+    correction are emulated on COCO images and run through YOLOX-nano: for SIM = REAL (an
+    identity correction) both losses are exactly 0; for the hue-rotated SIM both are
+    measured on the same images, and the report carries them."""
+    from fidelity.coco.measure import MeasureRequest, resolve_coco_inputs
+    from fidelity.fit import fit_and_verify
+    from fidelity.report.jsonform import fit_json
+
+    req = MeasureRequest(resolve_coco_inputs(), limit=3, store=str(tmp_path / "store"))
+    same = fit_and_verify(images["real"], images["real"], tmp_path / "same",
+                          sim_corners=CORNERS, real_corners=CORNERS, measure=req)
+    assert [m.model for m in same.measured_after] == ["yolox_nano"]
+    for m in (*same.measured_before, *same.measured_after):
+        assert m.images == 3 and m.dmap_points == 0.0
+    hue = fit_and_verify(images["hue"], images["real"], tmp_path / "hue",
+                         sim_corners=CORNERS, real_corners=CORNERS, measure=req)
+    b, a = hue.measured_before[0], hue.measured_after[0]
+    assert b.images == a.images == 3
+    assert np.isfinite(b.dmap_points) and np.isfinite(a.dmap_points)
+    assert b.mapping != a.mapping  # two different emulations were measured
+    doc = fit_json(hue)
+    assert doc["measured_after"][0]["dmap_points"] == a.dmap_points

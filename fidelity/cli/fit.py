@@ -12,11 +12,15 @@ from fidelity.cli.options import (
     chart_pair_options,
     common_options,
     image_read_options,
+    measure_inputs,
+    measure_options,
+    measure_request,
 )
 from fidelity.prediction.table import SIZES
 
 if TYPE_CHECKING:
     from fidelity.chart.measure import ReadOptions
+    from fidelity.coco.measure import MeasureRequest
 
 
 @click.command()
@@ -56,13 +60,16 @@ if TYPE_CHECKING:
               help="What each chart is audited against: scene, safecolor or a chart JSON.")
 @click.option("--illuminant", default="D65", show_default=True,
               help="Illuminant of the scene reference.")
+@measure_options
 @image_read_options
 @common_options
 def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...],
         camera: Path | None, out: Path,
         model: str, objective: str | None, corrected: bool,
         sim_corners: str | None, real_corners: str | None, normalise_mode: str, size: str,
-        table: str | None, reference: str, illuminant: str, read: ReadOptions) -> None:
+        table: str | None, reference: str, illuminant: str, measure: bool, images: str | None,
+        annotations: str | None, models: str | None, limit: int | None,
+        read: ReadOptions) -> None:
     """Fit the correction from the simulator's chart onto the real camera's, as a 3D LUT.
 
     SIM and REAL are read as fidelity compare reads them. The correction (gains, matrix,
@@ -82,7 +89,10 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
     from fidelity.fit import fit_and_verify
     from fidelity.report.fit import fit_lines, write_fit_report
 
+    request = measure_request(measure, images, annotations, models, limit)
     if pairs:
+        if request is not None:
+            raise click.UsageError("--measure goes with SIM REAL or --camera, not --pair")
         if sim is not None or real is not None:
             raise click.UsageError("give SIM REAL or --pair SIM REAL (twice or more), not both")
         if len(pairs) < 2:
@@ -99,7 +109,7 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
             raise click.UsageError("with --camera give REAL alone: fidelity fit --camera "
                                    "sim.toml REAL --out DIR")
         _fit_camera(camera, sim, out, model, objective, real_corners, normalise_mode, size,
-                    table, reference, illuminant, read, corrected)
+                    table, reference, illuminant, read, corrected, request)
         return
     if sim is None or real is None:
         raise click.UsageError("give SIM and REAL, or --pair SIM REAL twice or more")
@@ -110,11 +120,12 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
         names += ("corrected.png", "corrected.exr")
     check_outputs({n: out / n for n in names},
                   {"SIM": sim, "REAL": real, "--table": table, "--reference": reference,
-                   "--illuminant": illuminant})
+                   "--illuminant": illuminant} | measure_inputs(images, annotations, models))
     report = fit_and_verify(
         sim, real, out, model=model, objective=objective, sim_corners=sim_corners,
         real_corners=real_corners, normalise_mode=normalise_mode, reference=reference,
-        illuminant=illuminant, size=size, table=table, read=read, corrected=corrected)
+        illuminant=illuminant, size=size, table=table, read=read, corrected=corrected,
+        measure=request)
     write_fit_report(report, json_path=out / "report.json", html_path=out / "report.html",
                      protect=(sim, real))
     for line in fit_lines(report):
@@ -155,7 +166,8 @@ def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str
 
 def _fit_camera(camera: Path, real: Path, out: Path, model: str, objective: str | None,
                 real_corners: str | None, normalise_mode: str, size: str, table: str | None,
-                reference: str, illuminant: str, read: ReadOptions, corrected: bool) -> None:
+                reference: str, illuminant: str, read: ReadOptions, corrected: bool,
+                request: MeasureRequest | None) -> None:
     from fidelity.fileio import check_outputs, display_path
     from fidelity.fit import fit_camera_and_verify
     from fidelity.report.fit import fit_lines, write_fit_report
@@ -168,7 +180,7 @@ def _fit_camera(camera: Path, real: Path, out: Path, model: str, objective: str 
     report, toml = fit_camera_and_verify(
         camera, real, out, model=model, objective=objective, real_corners=real_corners,
         normalise_mode=normalise_mode, reference=reference, illuminant=illuminant, size=size,
-        table=table, read=read, corrected=corrected)
+        table=table, read=read, corrected=corrected, measure=request)
     write_fit_report(report, json_path=out / "report.json", html_path=out / "report.html",
                      protect=(camera, real))
     for line in fit_lines(report):

@@ -52,6 +52,9 @@ def fit_lines(report: FitReport) -> list[str]:
         f"{100 * lut.grid_within:.2f} % within {lut.tolerance:g}; limit "
         f"{'met' if lut.passed else 'NOT met'})",
     ]
+    for side, losses in (("before", report.measured_before), ("after", report.measured_after)):
+        lines += [f"COCO, the simulator's colours {side} the correction: {m.summary()}"
+                  for m in losses]
     if not c.expressed:
         lines.append(f"warning: the {c.model.name} model does not express this difference: "
                      f"{_n(c.cv_mean)} ΔE00 remains on patches held out of the fit (above "

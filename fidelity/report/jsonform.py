@@ -124,7 +124,9 @@ def fit_json(report: FitReport) -> JSONObject:
         "fitted_mean_delta_e": c.to_json()["fitted_mean_delta_e"],
         "cross_validated_mean_delta_e": c.to_json()["cross_validated_mean_delta_e"],
         "lut_check": r.lut.to_json(), "lut_checks": [x.to_json() for x in r.lut_checks],
-        "correction": c.to_json(), "files": dict(r.files), "seconds": dict(r.seconds)})
+        "correction": c.to_json(), "files": dict(r.files), "seconds": dict(r.seconds),
+        "measured_before": [m.to_json() for m in r.measured_before],
+        "measured_after": [m.to_json() for m in r.measured_after]})
     return out
 
 
