@@ -643,3 +643,9 @@ def test_measure_gives_the_coco_loss_before_and_after(images, shared, tmp_path):
     assert b.mapping != a.mapping  # two different emulations were measured
     doc = fit_json(hue)
     assert doc["measured_after"][0]["dmap_points"] == a.dmap_points
+    from fidelity.report.fit import fit_lines, write_fit_report
+
+    assert sum("COCO" in line for line in fit_lines(hue)) == 2
+    html = tmp_path / "report.html"
+    write_fit_report(hue, html_path=html)
+    assert "measured on COCO after" in html.read_text()

@@ -95,6 +95,9 @@ def fit_document(report: FitReport) -> Document:
         ("predicted ΔmAP before → after", f"{_n(report.prediction_before.dmap_points)} → "
                                           f"{_n(report.prediction_after.dmap_points)} points"),
         ("cross-validated ΔE00", f"mean {_n(c.cv_mean)}"),
+        *[(f"measured on COCO {side}", m.summary())
+          for side, losses in (("before", report.measured_before),
+                               ("after", report.measured_after)) for m in losses],
         (".cube check", f"{lut.size}³: max ΔE00 {lut.chart_max:.3f} (chart), "
                         f"{lut.grid_max:.3f} ({lut.grid_points} lattice points, 99th "
                         f"percentile {lut.grid_p99:.3f}); limit {lut.tolerance:g} "
