@@ -41,6 +41,7 @@ from fidelity.camera.model import (
     vignetting_gain,
 )
 from fidelity.chart.measure import ChartMeasurement, measure_chart
+from fidelity.chart.uncertainty import UncertaintyBudget
 from fidelity.colour.spectral import (
     GRID_STEP_NM,
     load_illuminant,
@@ -167,6 +168,8 @@ class ChartRender:
     camera_rgb: FloatArray
     camera_noise: FloatArray
     settings: dict[str, Any] = field(default_factory=dict)
+    #: the standard uncertainty of the chart ΔE (:func:`render_uncertainty`)
+    uncertainty: UncertaintyBudget | None = None
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready result: ΔE summary, renderer, variant, seconds, conventions, patches."""
@@ -328,6 +331,11 @@ def render_chart(
                     "provenance": str(getattr(chart, "provenance", ""))}
     measurement = measure_chart(srgb, ref_lab, ps.patch_names, reference_srgb=ref_srgb,
                                 noise=srgb_std)
+    with _about(cam), np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        budget = render_uncertainty(
+            raw, dev.srgb, layout, cam_rgb, srgb, ref_lab, measurement.mean_delta_e,
+            cam.quantisation_bits, ps.patch_names,
+            _means_developer(cam, ill, dev.ccm, spectra, step))
     conventions = {
         "reference": ref_conv,
         "spectral_grid_nm": f"380-780 step {step:g}",
@@ -359,7 +367,71 @@ def render_chart(
         camera_rgb=cam_rgb,
         camera_noise=cam_std,
         settings=settings,
+        uncertainty=budget,
     )
+
+
+def _means_developer(cam: CameraModel, illuminant: Any, ccm: FloatArray, spectra: str,
+                     step: float) -> Any:
+    """Raw patch means ``(B, n, 3)`` -> their developed encoded sRGB, draw by draw (the
+    camera's white balance estimated on each draw's patches, its CCM as rendered, no
+    quantisation: that is the rounding component)."""
+    from dataclasses import replace
+
+    smooth = replace(cam, quantisation_bits=None)
+
+    def developed(raw_means: FloatArray) -> FloatArray:
+        out = np.empty_like(raw_means)
+        for b in range(raw_means.shape[0]):
+            d = develop(smooth, raw_means[b][:, None, :], raw_means[b], illuminant, ccm=ccm,
+                        spectra=spectra, step=step)
+            out[b] = d.srgb[:, 0, :]
+        return out
+
+    return developed
+
+
+def render_uncertainty(raw_image: ArrayLike, srgb_image: ArrayLike, layout: ChartLayout,
+                       raw_means: FloatArray, srgb_means: FloatArray,
+                       reference_lab: FloatArray, value: float, bits: int | None,
+                       patch_names: tuple[str, ...] | list[str], developed: Any,
+                       ) -> UncertaintyBudget:
+    """The uncertainty budget of a render's chart ΔE (:mod:`fidelity.chart.uncertainty`):
+    the pixel noise of each raw window's trimmed mean, propagated through the camera's
+    development (``developed``: raw patch means ``(B, n, 3)`` -> encoded sRGB; its white
+    balance is estimated on each draw, as the camera does on the noisy chart), and the
+    rounding of the output codes (a ``bits``-bit camera); the windows are the layout's own
+    (no placement uncertainty) and the render has no exposure normalisation."""
+    from fidelity.chart import uncertainty as unc
+
+    def windows(image: ArrayLike) -> list[FloatArray]:
+        img = np.asarray(image, np.float64)
+        out = []
+        for i in range(layout.rows * layout.cols):
+            y0, y1, x0, x1 = layout.window(i, WINDOW_FRACTION)
+            out.append(img[y0:y1, x0:x1].reshape(-1, img.shape[-1]))
+        return out
+
+    f = unc.srgb_chart_function(reference_lab)
+
+    def f_raw(raw: FloatArray) -> FloatArray:
+        return f(developed(raw))
+
+    noise, notes = unc.noise_component(windows(raw_image), raw_means, f_raw,
+                                       trim=TRIM_PROPORTION, patch_names=patch_names)
+    noise = unc.UncertaintyComponent(
+        noise.name, noise.value, noise.type,
+        noise.method.replace("each patch window's pixels", "each patch window's raw pixels")
+        + "; each draw developed by the camera (its white balance estimated on the draw)")
+    step = 1.0 / (2 ** bits - 1) if bits else None
+    rounding = unc.rounding_component(windows(srgb_image), srgb_means, f, step)
+    placement = unc.UncertaintyComponent(
+        "placement", 0.0, "B", "a render's windows are its layout's own: no placement error")
+    exposure = unc.UncertaintyComponent(
+        "exposure normalisation", 0.0, "B",
+        "a render is measured as the camera exposed it: no normalisation")
+    return unc.UncertaintyBudget(float(value), (noise, rounding, placement, exposure),
+                                 notes=notes)
 
 
 __all__ = [
@@ -376,5 +448,6 @@ __all__ = [
     "ChartRender",
     "render_chart",
     "patch_means",
+    "render_uncertainty",
     "trimmed_mean",
 ]

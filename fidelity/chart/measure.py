@@ -53,6 +53,7 @@ from numpy.typing import ArrayLike, NDArray
 from fidelity.chart.find import ChartChecks, FoundChart, check_corners, find_chart
 from fidelity.chart.image import ImageInfo
 from fidelity.chart.locate import DEFAULT_WINDOW, ChartLocation, locate_chart, window_pixels
+from fidelity.chart.uncertainty import UncertaintyBudget
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import DEFAULT_REFERENCE, Reference, load_reference
 from fidelity.colour.colorimetry import delta_e_2000, delta_e_2000_components, srgb_to_lab
@@ -384,6 +385,8 @@ class ImageMeasurement:
     detection: FoundChart | None = None
     colourspace: str = "sRGB"
     corner_checks: ChartChecks | None = None
+    #: the standard uncertainty of the chart ΔE (:mod:`fidelity.chart.uncertainty`)
+    uncertainty: UncertaintyBudget | None = None
 
     @property
     def mean_delta_e(self) -> float:
@@ -416,6 +419,7 @@ class ImageMeasurement:
             corner_checks=self.corner_checks.to_json() if self.corner_checks else None,
             colourspace=self.colourspace,
             image=self.image.to_json() if self.image else None,
+            uncertainty=self.uncertainty.to_json() if self.uncertainty else None,
         )
         return d
 
@@ -469,6 +473,7 @@ def measure_pixels(
     detection: str = "cascade",
     negatives: str = "keep",
     colourspace: str | Sequence[float] = "sRGB",
+    uncertainty: bool = True,
 ) -> ImageMeasurement:
     """Audit a chart in an ``(H, W, 3)`` image array (see the module docstring).
 
@@ -491,6 +496,8 @@ def measure_pixels(
     colourspace
         RGB primaries of the pixels: a colour-science name or 8 chromaticities (see
         :func:`fidelity.colour.colorimetry.matrix_rgb_to_linear_srgb`).
+    uncertainty
+        Also evaluate the standard uncertainty of the chart ΔE (:func:`image_uncertainty`).
     """
     to_srgb = cm.matrix_rgb_to_linear_srgb(colourspace)
     if encoding not in ENCODINGS:
@@ -585,12 +592,99 @@ def measure_pixels(
                            f"pixels excluded")
     measurement = measure_chart(srgb, ref.lab, ref.patch_names, reference_srgb=ref.srgb,
                                 noise=noise)
+    budget = None
+    if uncertainty:
+        budget = image_uncertainty(
+            arr, loc, linear_samples, means, ref, measurement.mean_delta_e,
+            exposure_ev=None if mode == "auto" else ev, fitted_ev=ev, encoding=encoding,
+            negatives=negatives, to_srgb=to_srgb, found=found,
+            pixel_type=image.pixel_type if image is not None else str(arr.dtype))
     return ImageMeasurement(
         measurement=measurement, exposure_ev=ev, exposure_mode=mode, encoding=encoding,
         bad_pixels=bad_pixels, valid_pixels=tuple(valid_counts), clipped_patches=clipped,
         location=loc, reference=ref, image=image, detection=found,
         colourspace=_colourspace_name(colourspace), corner_checks=checks,
+        uncertainty=budget,
     )
+
+
+#: Code steps of integer pixel types (pixels read as [0, 1]).
+_CODE_STEPS = {"uint8": 1.0 / 255.0, "int8": 1.0 / 127.0, "uint16": 1.0 / 65535.0,
+               "int16": 1.0 / 32767.0}
+
+
+def image_uncertainty(
+    pixels: np.ndarray, location: ChartLocation, linear_samples: Sequence[np.ndarray],
+    linear_means: np.ndarray, reference: Reference, value: float, *,
+    exposure_ev: float | None, fitted_ev: float, encoding: str, negatives: str,
+    to_srgb: np.ndarray, found: FoundChart | None, pixel_type: str,
+) -> UncertaintyBudget:
+    """The uncertainty budget of an audited chart's ΔE (:mod:`fidelity.chart.uncertainty`):
+    pixel noise, rounding of integer codes, placement of the corners and the exposure
+    normalisation (``exposure_ev`` None: auto, fitted at ``fitted_ev``)."""
+    from fidelity.chart import uncertainty as unc
+
+    ref_lab = np.asarray(reference.lab, np.float64)
+    neutral = reference.neutral_indices
+    f = unc.linear_chart_function(ref_lab, neutral, exposure_ev)
+    covs, notes = unc.patch_covariances(linear_samples, patch_names=reference.patch_names)
+    noise, _ = unc.noise_component(linear_samples, linear_means, f, covariances=covs)
+    identity = np.array_equal(to_srgb, np.eye(3))
+
+    def patch_linear(vals: np.ndarray) -> np.ndarray:
+        v = np.asarray(vals, dtype=np.float64)
+        v = v[~_bad_counts(v, negatives)[0]]
+        lin = v if encoding == "linear" else cm.linearize_srgb(v)
+        return lin if identity else lin @ to_srgb.T
+
+    step = _CODE_STEPS.get(str(pixel_type).lower())
+    codes = [np.asarray(s, np.float64)[~_bad_counts(np.asarray(s, np.float64), negatives)[0]]
+             for s in window_pixels(pixels, location)] if step else None
+    to_measured = None
+    if step and codes is not None:
+        if encoding == "srgb":
+            m = np.array([c.mean(axis=0) if len(c) else np.zeros(3) for c in codes])
+            h = step / 2
+            slope = (cm.linearize_srgb(m + h) - cm.linearize_srgb(m - h)) / (2 * h)
+        else:
+            slope = np.ones_like(linear_means)
+
+        def to_measured(e: np.ndarray) -> np.ndarray:
+            lin = e * slope[None]
+            return lin if identity else lin @ to_srgb.T
+
+    rounding = unc.rounding_component(linear_samples, linear_means, f, step, encoded=codes,
+                                      to_measured=to_measured)
+
+    def remeasure(corners: np.ndarray) -> float | None:
+        try:
+            loc = locate_chart(corners, pixels.shape, rows=location.rows, cols=location.cols,
+                               window=location.window, min_pixels=1)
+        except InvalidValueError:
+            return None
+        samples = [patch_linear(v) for v in window_pixels(pixels, loc)]
+        if any(len(s) == 0 for s in samples):
+            return None
+        return float(f(np.array([s.mean(axis=0) for s in samples])[None])[0])
+
+    if found is not None and math.isfinite(found.residual_px):
+        sigma = max(found.residual_px / math.sqrt(2.0), unc.UNREFINED_PLACEMENT_PX)
+        how = ("the RMS residual of the finder's refined fit / sqrt(2), at least a "
+               "rectangular half pixel")
+    elif found is not None:
+        sigma, how = 1.0, "found without refinement: one pixel assumed"
+    else:
+        sigma, how = unc.UNREFINED_PLACEMENT_PX, "corners given: a rectangular half pixel"
+    placement = unc.placement_component(remeasure, location.corners, sigma, how)
+    if exposure_ev is None:
+        exposure = unc.exposure_component(
+            linear_means, ref_lab, neutral, fitted_ev,
+            unc.linear_chart_function(ref_lab, neutral, 0.0), covs)
+    else:
+        exposure = unc.UncertaintyComponent("exposure normalisation", 0.0, "B",
+                                            "exposure fixed: no normalisation")
+    return unc.UncertaintyBudget(float(value), (noise, rounding, placement, exposure),
+                                 notes=notes)
 
 
 def _colourspace_name(colourspace: str | Sequence[float]) -> str:
@@ -698,4 +792,5 @@ __all__ = [
     "measure_chart",
     "measure_image",
     "measure_pixels",
+    "image_uncertainty",
 ]

@@ -11,6 +11,7 @@ from fidelity.cli.options import (
     STDOUT,
     bound_option,
     common_options,
+    evidence_option,
     image_read_options,
     max_pixels_option,
     measure_inputs,
@@ -45,6 +46,7 @@ from fidelity.prediction.table import SIZES
               help="Write the HTML report here (a folder: IMAGE-NAME.html in it).")
 @max_pixels_option
 @bound_option
+@evidence_option
 @measure_options
 @common_options
 def audit(image: Path, corners: str | None, encoding: str | None, exposure: str | None,
@@ -52,7 +54,7 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
           reference: str, illuminant: str, size: str, table: str | None,
           json_path: Path | None, html_path: Path | None, max_pixels: int | None,
           bound: str, measure: bool, images: str | None, annotations: str | None,
-          models: str | None, limit: int | None) -> None:
+          models: str | None, limit: int | None, evidence_path: Path | None) -> None:
     """Measure the chart in IMAGE: ΔE00 per patch, mean and max, exposure, bad pixels.
 
     \b
@@ -71,7 +73,7 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
     to_stdout = json_path is not None and str(json_path) == STDOUT
     (json_path,) = report_paths((image,), None if to_stdout else json_path, ".json")
     (html_path,) = report_paths((image,), html_path, ".html")
-    check_outputs({"--json": json_path, "--html": html_path},
+    check_outputs({"--json": json_path, "--html": html_path, "--evidence": evidence_path},
                   {"IMAGE": image, "--table": table, "--reference": reference,
                    "--illuminant": illuminant} | measure_inputs(images, annotations, models))
     request = measure_request(measure, images, annotations, models, limit)
@@ -94,3 +96,8 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
         click.echo(line)
     for p in written:
         click.echo(f"wrote {display_path(p)}")
+    if evidence_path is not None:
+        from fidelity.report.evidence import write_evidence
+
+        write_evidence(evidence_path, "audit", [(str(image), report, None)], 0)
+        click.echo(f"wrote {display_path(evidence_path)}")

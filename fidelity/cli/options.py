@@ -454,6 +454,48 @@ def bound_option(f: F) -> F:
              "(both are reported).")(f)
 
 
+def decision_options(f: F) -> F:
+    """``--decision simple|guarded``, ``--coverage-factor K`` and ``--strict``: how a verdict
+    compares a value that has an uncertainty with its limit
+    (:class:`fidelity.prediction.verdict.DecisionRule`; :func:`decision_rule`)."""
+    f = click.option(
+        "--strict", is_flag=True, default=False,
+        help="With --decision guarded: a value within U of the limit fails (exit 1) instead "
+             "of being undecided (exit 4).")(f)
+    f = click.option(
+        "--coverage-factor", type=click.FloatRange(min=0, min_open=True), default=2.0,
+        show_default=True,
+        help="k of the expanded uncertainty U = k u a guarded decision uses (2: about 95 %% "
+             "for a normal distribution).")(f)
+    return click.option(
+        "--decision", type=click.Choice(["simple", "guarded"]), default="simple",
+        show_default=True,
+        help="Decision rule: simple (pass when value <= limit) or guarded (ILAC-G8: pass when "
+             "value + U <= limit, fail when value - U > limit, undecided in between: exit 4, "
+             "or a fail with --strict).")(f)
+
+
+def decision_rule(decision: str, coverage_factor: float, strict: bool) -> Any:
+    """The :class:`~fidelity.prediction.verdict.DecisionRule` of the options of
+    :func:`decision_options`."""
+    from fidelity.prediction.verdict import DecisionRule
+
+    if strict and decision != "guarded":
+        raise click.UsageError("--strict goes with --decision guarded")
+    return DecisionRule(decision, float(coverage_factor), bool(strict))
+
+
+def evidence_option(f: F) -> F:
+    """``--evidence FILE``: the credibility record of the run
+    (:mod:`fidelity.report.evidence`)."""
+    return click.option(
+        "--evidence", "evidence_path", type=PATH, default=None,
+        help="Write the run's credibility record here (JSON: code, environment, inputs with "
+             "SHA-256, reference and table provenance, measurement with its uncertainty "
+             "budget, prediction with its interval, validity domain, decision rule, "
+             "verdict).")(f)
+
+
 def measure_options(f: F) -> F:
     """``--measure`` and what it runs on: ``--images DIR``, ``--annotations FILE``,
     ``--models A.onnx[@N]``, ``--limit N`` (default: the shared data folder's COCO subset and

@@ -71,7 +71,7 @@ from fidelity.errors import InvalidValueError, unknown_name
 if TYPE_CHECKING:
     from fidelity.chart.measure import ChartMeasurement
     from fidelity.prediction.table import PredictionTable
-    from fidelity.prediction.verdict import Criterion, Verdict
+    from fidelity.prediction.verdict import Criterion, DecisionRule, Verdict
 
 F64 = NDArray[np.float64]
 
@@ -652,15 +652,20 @@ def family_losses(delta_e: float, *, size: str = "any",
 
 
 def evaluate_directional(mean_delta_e: float, prediction: DirectionalPrediction,
-                         criterion: Criterion) -> Verdict:
+                         criterion: Criterion, *, decision: DecisionRule | None = None,
+                         delta_e_uncertainty: float | None = None) -> Verdict:
     """Apply a ``max-dmap`` ``criterion`` to the direction-aware prediction (a ``max-delta-e``
-    criterion does not depend on the bound: :func:`fidelity.prediction.verdict.evaluate`)."""
-    from fidelity.prediction.verdict import evaluate, judge_value
+    criterion does not depend on the bound: :func:`fidelity.prediction.verdict.evaluate`) by
+    the ``decision`` rule (default simple; the direction-aware prediction states no
+    uncertainty, so a guarded rule takes U = 0)."""
+    from fidelity.prediction.verdict import SIMPLE, evaluate, judge_value
 
+    rule = decision or SIMPLE
     if criterion.kind != "max-dmap":
-        return evaluate(mean_delta_e, None, criterion)
+        return evaluate(mean_delta_e, None, criterion, decision=rule,
+                        delta_e_uncertainty=delta_e_uncertainty)
     return judge_value(criterion, prediction.value(criterion.cls, criterion.unit),
-                       prediction.delta_e, bound="directional")
+                       prediction.delta_e, bound="directional", decision=rule)
 
 
 __all__ = [

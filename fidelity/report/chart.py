@@ -200,6 +200,24 @@ def verdict_limits(report: ChartReport) -> tuple[float | None, float | None]:
     return None, (c.limit if c.cls == "all" and c.unit == "points" else None)
 
 
+def uncertainty_section(report: ChartReport) -> Section | None:
+    """The uncertainty budget of the chart ΔE (GUM style): each component, its standard
+    uncertainty, type and how it was obtained, and the combined standard uncertainty."""
+    u = report.uncertainty
+    if u is None:
+        return None
+    rows = [(c.name, f"{c.value:.4f}", c.type, c.method) for c in u.components]
+    rows.append(("combined (root sum of squares)", f"{u.combined:.4f}", "",
+                 f"coverage factor k = {u.k:g}; expanded U (k = 2) = {u.expanded(2.0):.4f}"))
+    notes = "".join(f"\n- {n}" for n in u.notes)
+    return section("Measurement uncertainty of the chart ΔE",
+                   Text(f"**{u.text()}**: standard uncertainty of the {u.quantity}; Monte "
+                        f"Carlo propagation (JCGM 101) with {u.draws} draws, seed {u.seed}."
+                        + notes),
+                   table(("component", "standard uncertainty, ΔE00", "type", "how obtained"),
+                         rows, numeric=(False, True, False, False)))
+
+
 def patch_section(report: ChartReport) -> Section:
     m = report.measurement
     rows = []
@@ -268,6 +286,9 @@ def chart_document(report: ChartReport, pixels: NDArray[Any] | None = None) -> D
                           "ΔE00 per patch"))
     sections.append(section("Colour errors", *figures, gallery=True))
     sections += prediction_sections(report, limit_de, limit_dmap)
+    budget = uncertainty_section(report)
+    if budget is not None:
+        sections.append(budget)
     sections += [x for x in (directional_section(report), measured_section(report),
                              blind_spot_section(report)) if x is not None]
     sections.append(patch_section(report))
