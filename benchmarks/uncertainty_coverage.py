@@ -9,7 +9,11 @@ around their mean; a right ``u`` has about 68 % of them within ``±u`` and 95 % 
 - ``render noisy``: the same camera with ten times less full well (3000 e-) and 5 e- read noise;
 - ``audit noisy``: the noisy camera's developed image audited as a user would (the chart found,
   corners jittered by the finder's residual, exposure fitted on the neutral patches): the
-  budget of an image audit, placement included.
+  budget of an image audit, placement included. This camera's white balance is fixed
+  (``illuminant``), so that the seeds change only what an image shows, its pixel noise: a
+  camera that estimates its white balance on the noisy chart changes its colours from capture
+  to capture, which a render's budget states (``camera white balance``) and an audit of one
+  image cannot know.
 
 The spread is the sample standard deviation over the trials; the mean ΔE over the trials stands
 in for the expectation. With N trials a coverage fraction has a binomial standard error of
@@ -59,11 +63,14 @@ def coverage(delta_e: list[float], u: list[float]) -> dict[str, Any]:
             "binomial_se_at_95": float(np.sqrt(0.95 * 0.05 / n))}
 
 
-def noisy_camera() -> Any:
+def noisy_camera(fixed_white_balance: bool = False) -> Any:
     from fidelity.camera.model import Noise, load_camera
 
     cam = load_camera("nikon-5100")
-    return replace(cam, name="nikon-5100 noisy", noise=Noise(full_well=3000.0, read_noise=5.0))
+    cam = replace(cam, name="nikon-5100 noisy", noise=Noise(full_well=3000.0, read_noise=5.0))
+    if fixed_white_balance:
+        cam = replace(cam, white_balance=replace(cam.white_balance, method="illuminant"))
+    return cam
 
 
 def render_study(camera: Any, trials: int) -> dict[str, Any]:
@@ -99,8 +106,8 @@ def audit_study(camera: Any, trials: int) -> dict[str, Any]:
     return out
 
 
-def _run(cmd: list[str], pythonpath: str, cwd: str) -> tuple[float, float]:
-    """Wall seconds and max RSS (MiB) of one whole process."""
+def _run(cmd: list[str], pythonpath: str, cwd: str) -> tuple[float, float, float]:
+    """Wall seconds, max RSS (MiB) and CPU seconds (user + system) of one whole process."""
     env = dict(os.environ, PYTHONPATH=pythonpath)
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, env=env, cwd=cwd, stdout=subprocess.DEVNULL,
@@ -109,7 +116,7 @@ def _run(cmd: list[str], pythonpath: str, cwd: str) -> tuple[float, float]:
     wall = time.perf_counter() - t0
     if os.waitstatus_to_exitcode(status) not in (0, 1):
         raise RuntimeError(f"{cmd} failed")
-    return wall, usage.ru_maxrss / 1024.0
+    return wall, usage.ru_maxrss / 1024.0, usage.ru_utime + usage.ru_stime
 
 
 def cost_study(anchor: str, repeats: int) -> dict[str, Any]:
@@ -130,7 +137,7 @@ def cost_study(anchor: str, repeats: int) -> dict[str, Any]:
             "check": [sys.executable, "-m", "fidelity", "check", "--json",
                       str(Path(tmp) / "c.json")],
         }
-        times: dict[str, dict[str, list[tuple[float, float]]]] = {
+        times: dict[str, dict[str, list[tuple[float, float, float]]]] = {
             k: {"anchor": [], "uncertainty": []} for k in commands}
         for _ in range(repeats):
             for name, cmd in commands.items():
@@ -139,12 +146,16 @@ def cost_study(anchor: str, repeats: int) -> dict[str, Any]:
     out: dict[str, Any] = {"anchor": anchor, "repeats": repeats, "image": "developed.png of "
                            "fidelity render --camera nikon-5100 (248x168, 16-bit PNG)"}
     for name, t in times.items():
-        a = statistics.median(w for w, _ in t["anchor"])
-        b = statistics.median(w for w, _ in t["uncertainty"])
+        a = statistics.median(w for w, _, _ in t["anchor"])
+        b = statistics.median(w for w, _, _ in t["uncertainty"])
+        ca = statistics.median(c for _, _, c in t["anchor"])
+        cb = statistics.median(c for _, _, c in t["uncertainty"])
         out[name] = {"anchor_wall_s": a, "uncertainty_wall_s": b,
                      "overhead_percent": 100.0 * (b / a - 1.0),
-                     "anchor_max_rss_mib": max(m for _, m in t["anchor"]),
-                     "uncertainty_max_rss_mib": max(m for _, m in t["uncertainty"])}
+                     "anchor_cpu_s": ca, "uncertainty_cpu_s": cb,
+                     "cpu_overhead_percent": 100.0 * (cb / ca - 1.0),
+                     "anchor_max_rss_mib": max(m for _, m, _ in t["anchor"]),
+                     "uncertainty_max_rss_mib": max(m for _, m, _ in t["uncertainty"])}
     return out
 
 
@@ -168,13 +179,14 @@ def markdown(result: dict[str, Any]) -> str:
     if cost:
         lines += ["", f"Cost, whole processes, median of {cost['repeats']} interleaved runs, "
                       f"anchor = commit {cost['anchor']} (no uncertainty):", "",
-                  "| command | anchor s | with uncertainty s | overhead | max RSS anchor / "
-                  "now MiB |", "|---|---|---|---|---|"]
+                  "| command | wall s anchor / now | wall overhead | CPU s anchor / now | CPU "
+                  "overhead | max RSS anchor / now MiB |", "|---|---|---|---|---|---|"]
         for name in ("audit", "check"):
             c = cost[name]
-            lines.append(f"| {name} | {c['anchor_wall_s']:.2f} | {c['uncertainty_wall_s']:.2f} | "
-                         f"{c['overhead_percent']:+.1f} % | {c['anchor_max_rss_mib']:.0f} / "
-                         f"{c['uncertainty_max_rss_mib']:.0f} |")
+            lines.append(f"| {name} | {c['anchor_wall_s']:.2f} / {c['uncertainty_wall_s']:.2f} | "
+                         f"{c['overhead_percent']:+.1f} % | {c['anchor_cpu_s']:.2f} / "
+                         f"{c['uncertainty_cpu_s']:.2f} | {c['cpu_overhead_percent']:+.1f} % | "
+                         f"{c['anchor_max_rss_mib']:.0f} / {c['uncertainty_max_rss_mib']:.0f} |")
     lines += ["", f"Machine: {result['machine'].get('cpu')}, {result['machine'].get('cores')} "
                   "cores (shared with other jobs)."]
     return "\n".join(lines) + "\n"
@@ -188,13 +200,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--anchor", default="38ac479",
                     help="commit of the code before the uncertainty (the cost's anchor)")
     ap.add_argument("--no-cost", action="store_true")
+    ap.add_argument("--only-cost", action="store_true",
+                    help="measure the cost again, keep the coverage of coverage.json")
     args = ap.parse_args(argv)
     from fidelity.fileio import write_text_atomic
 
     result: dict[str, Any] = {"machine": machine_info(), "coverage": {}}
-    result["coverage"]["render nikon-5100"] = render_study("nikon-5100", args.trials)
-    result["coverage"]["render noisy"] = render_study(noisy_camera(), args.trials)
-    result["coverage"]["audit noisy"] = audit_study(noisy_camera(), args.audit_trials)
+    if args.only_cost:
+        result["coverage"] = json.loads((OUT / "coverage.json").read_text())["coverage"]
+    else:
+        result["coverage"]["render nikon-5100"] = render_study("nikon-5100", args.trials)
+        result["coverage"]["render noisy"] = render_study(noisy_camera(), args.trials)
+        result["coverage"]["audit noisy (fixed white balance)"] = audit_study(
+            noisy_camera(fixed_white_balance=True), args.audit_trials)
     if not args.no_cost:
         result["cost"] = cost_study(args.anchor, args.repeats)
     OUT.mkdir(parents=True, exist_ok=True)

@@ -166,3 +166,26 @@ def test_render_budget_covers_the_spread_over_noise_seeds():
     dev = np.abs(des_a - des_a.mean())
     assert 0.5 <= np.mean(dev <= us_a) <= 0.9
     assert np.mean(dev <= 2 * us_a) >= 0.85
+
+
+def test_placement_remeasure_equals_locating_the_jittered_corners_again():
+    """The placement component's fast re-measurement (candidate pixels mapped through the
+    jittered homography) gives the patch means of a full audit at the jittered corners."""
+    from fidelity.chart.measure import _window_remeasurer
+    from fidelity.colour.colorimetry import linearize_srgb as lin
+
+    ref = load_reference("scene")
+    img = _draw_chart(np.clip(np.asarray(ref.srgb), 0, 1), 0.02, 7)
+    p = 24
+    corners = np.array([p, p, p + 5 * p, p, p + 5 * p, p + 3 * p, p, p + 3 * p],
+                       float).reshape(4, 2)
+    base = measure_pixels(img, corners, encoding="srgb", exposure=0.0, reference=ref,
+                          uncertainty=False)
+    remeasure = _window_remeasurer(img, base.location, 0.5, "keep", lambda v: lin(v))
+    jitter = corners + np.array([[0.4, -0.3], [-0.2, 0.5], [0.3, 0.3], [-0.5, -0.1]])
+    again = measure_pixels(img, jitter, encoding="srgb", exposure=0.0, reference=ref,
+                           uncertainty=False)
+    means = remeasure(jitter)
+    assert means is not None
+    srgb = np.clip(delinearize_srgb(means), 0, 1)
+    assert np.allclose(srgb, again.measurement.srgb, atol=1e-12)

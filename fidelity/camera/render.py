@@ -334,8 +334,8 @@ def render_chart(
     with _about(cam), np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         budget = render_uncertainty(
             raw, dev.srgb, layout, cam_rgb, srgb, ref_lab, measurement.mean_delta_e,
-            cam.quantisation_bits, ps.patch_names,
-            _means_developer(cam, ill, dev.ccm, spectra, step))
+            cam.quantisation_bits, ps.patch_names, cam,
+            _white_balance_developer(cam, ill, dev.ccm, spectra, step, cam_rgb))
     conventions = {
         "reference": ref_conv,
         "spectral_grid_nm": f"380-780 step {step:g}",
@@ -371,37 +371,45 @@ def render_chart(
     )
 
 
-def _means_developer(cam: CameraModel, illuminant: Any, ccm: FloatArray, spectra: str,
-                     step: float) -> Any:
-    """Raw patch means ``(B, n, 3)`` -> their developed encoded sRGB, draw by draw (the
-    camera's white balance estimated on each draw's patches, its CCM as rendered, no
-    quantisation: that is the rounding component)."""
-    from dataclasses import replace
+def _white_balance_developer(cam: CameraModel, illuminant: Any, ccm: FloatArray, spectra: str,
+                             step: float, raw_means: FloatArray) -> Any:
+    """(raw window pixels ``(N, 3)``, drawn raw patch means ``(B, n, 3)``) -> the pixels
+    ``(B, N, 3)`` developed by the camera with its white balance estimated on each draw's
+    patch means (its CCM as rendered): one :func:`develop` of the pixels scaled by each draw's
+    gains over the rendered ones."""
+    from fidelity.camera.model import white_balance_gains
 
-    smooth = replace(cam, quantisation_bits=None)
+    def gains(means: FloatArray) -> FloatArray:
+        return white_balance_gains(cam.white_balance, means, cam.sensitivities, illuminant, step)
 
-    def developed(raw_means: FloatArray) -> FloatArray:
-        out = np.empty_like(raw_means)
-        for b in range(raw_means.shape[0]):
-            d = develop(smooth, raw_means[b][:, None, :], raw_means[b], illuminant, ccm=ccm,
-                        spectra=spectra, step=step)
-            out[b] = d.srgb[:, 0, :]
+    base = gains(raw_means)
+
+    def developed(pixels: FloatArray, drawn: FloatArray) -> FloatArray:
+        ratio = np.array([gains(m) for m in drawn]) / base
+        d = develop(cam, pixels[None] * ratio[:, None, :], raw_means, illuminant, ccm=ccm,
+                    spectra=spectra, step=step)
+        out: FloatArray = d.srgb
         return out
 
     return developed
 
 
+#: Monte Carlo draws of the white-balance component (each develops the windows' pixels).
+WHITE_BALANCE_DRAWS = 100
+
+
 def render_uncertainty(raw_image: ArrayLike, srgb_image: ArrayLike, layout: ChartLayout,
                        raw_means: FloatArray, srgb_means: FloatArray,
                        reference_lab: FloatArray, value: float, bits: int | None,
-                       patch_names: tuple[str, ...] | list[str], developed: Any,
-                       ) -> UncertaintyBudget:
+                       patch_names: tuple[str, ...] | list[str], camera: CameraModel,
+                       developed: Any) -> UncertaintyBudget:
     """The uncertainty budget of a render's chart ΔE (:mod:`fidelity.chart.uncertainty`):
-    the pixel noise of each raw window's trimmed mean, propagated through the camera's
-    development (``developed``: raw patch means ``(B, n, 3)`` -> encoded sRGB; its white
-    balance is estimated on each draw, as the camera does on the noisy chart), and the
-    rounding of the output codes (a ``bits``-bit camera); the windows are the layout's own
-    (no placement uncertainty) and the render has no exposure normalisation."""
+    the pixel noise of each developed window's trimmed mean; the camera's white balance when
+    the camera estimates it on the noisy chart (``white-patch``, ``grey-world``): its gains
+    drawn from the raw patch means' standard errors and the windows' pixels developed with
+    them (``developed``: pixels, raw means -> developed pixels), :data:`WHITE_BALANCE_DRAWS`
+    draws; the rounding of the output codes (a ``bits``-bit camera). The windows are the
+    layout's own (no placement uncertainty) and a render has no exposure normalisation."""
     from fidelity.chart import uncertainty as unc
 
     def windows(image: ArrayLike) -> list[FloatArray]:
@@ -413,24 +421,40 @@ def render_uncertainty(raw_image: ArrayLike, srgb_image: ArrayLike, layout: Char
         return out
 
     f = unc.srgb_chart_function(reference_lab)
-
-    def f_raw(raw: FloatArray) -> FloatArray:
-        return f(developed(raw))
-
-    noise, notes = unc.noise_component(windows(raw_image), raw_means, f_raw,
-                                       trim=TRIM_PROPORTION, patch_names=patch_names)
-    noise = unc.UncertaintyComponent(
-        noise.name, noise.value, noise.type,
-        noise.method.replace("each patch window's pixels", "each patch window's raw pixels")
-        + "; each draw developed by the camera (its white balance estimated on the draw)")
+    srgb_windows = windows(srgb_image)
+    noise, notes = unc.noise_component(srgb_windows, srgb_means, f, trim=TRIM_PROPORTION,
+                                       patch_names=patch_names)
+    if camera.white_balance.method in ("white-patch", "grey-world") and camera.noise.enabled:
+        raw_windows = windows(raw_image)
+        covs, _ = unc.patch_covariances(raw_windows, trim=TRIM_PROPORTION)
+        vals, vecs = np.linalg.eigh(covs)
+        root = vecs * np.sqrt(np.maximum(vals, 0.0))[:, None, :]
+        rng = np.random.default_rng(unc.SEED + 4)
+        drawn = raw_means[None] + np.einsum(
+            "kij,bkj->bki", root, rng.standard_normal((WHITE_BALANCE_DRAWS, *raw_means.shape)))
+        edges = np.cumsum([0] + [len(w) for w in raw_windows])
+        dev = developed(np.concatenate(raw_windows), drawn)  # (B, N, 3)
+        means = np.stack([trimmed_mean(np.swapaxes(dev[:, edges[k]:edges[k + 1]], 0, 1),
+                                       TRIM_PROPORTION) for k in range(len(raw_windows))],
+                         axis=1)
+        wb = unc.UncertaintyComponent(
+            "camera white balance", float(np.std(f(means), ddof=1)), "A",
+            f"the camera's {camera.white_balance.method} white balance is estimated on the "
+            f"noisy chart: its gains drawn from the raw patch means' standard errors "
+            f"(winsorised covariance of each raw window), the windows' pixels developed with "
+            f"them, {WHITE_BALANCE_DRAWS} Monte Carlo draws")
+    else:
+        wb = unc.UncertaintyComponent(
+            "camera white balance", 0.0, "B",
+            "the camera's white balance does not depend on the noisy chart")
     step = 1.0 / (2 ** bits - 1) if bits else None
-    rounding = unc.rounding_component(windows(srgb_image), srgb_means, f, step)
+    rounding = unc.rounding_component(srgb_windows, srgb_means, f, step)
     placement = unc.UncertaintyComponent(
         "placement", 0.0, "B", "a render's windows are its layout's own: no placement error")
     exposure = unc.UncertaintyComponent(
         "exposure normalisation", 0.0, "B",
         "a render is measured as the camera exposed it: no normalisation")
-    return unc.UncertaintyBudget(float(value), (noise, rounding, placement, exposure),
+    return unc.UncertaintyBudget(float(value), (noise, wb, rounding, placement, exposure),
                                  notes=notes)
 
 

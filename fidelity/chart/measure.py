@@ -613,6 +613,57 @@ _CODE_STEPS = {"uint8": 1.0 / 255.0, "int8": 1.0 / 127.0, "uint16": 1.0 / 65535.
                "int16": 1.0 / 32767.0}
 
 
+def _window_remeasurer(pixels: np.ndarray, location: ChartLocation, sigma: float,
+                       negatives: str, linear: Any) -> Any:
+    """A function of jittered corners ``(4, 2)`` -> the linear patch means ``(n, 3)`` measured
+    with the windows they give (the membership rule of :func:`fidelity.chart.locate.locate_chart`: a pixel
+    belongs to a patch's window when its centre maps inside it), or None when a window is
+    empty. The candidate pixels (each window's box grown by ``4 sigma + 2`` px), without the
+    bad ones (``negatives`` rule), are read and converted to linear sRGB (``linear``) once; a
+    draw maps them through its homography."""
+    from fidelity.chart.locate import apply_homography, grid_centres, homography_from_points
+
+    rows, cols = location.rows, location.cols
+    height, width = pixels.shape[:2]
+    grow = int(math.ceil(4.0 * sigma)) + 2
+    xy, values, owner = [], [], []
+    for k, (yy, xx) in enumerate(location.windows):
+        if len(yy) == 0:
+            continue
+        y0, y1 = max(int(yy.min()) - grow, 0), min(int(yy.max()) + grow, height - 1)
+        x0, x1 = max(int(xx.min()) - grow, 0), min(int(xx.max()) + grow, width - 1)
+        gy, gx = np.mgrid[y0:y1 + 1, x0:x1 + 1]
+        v = np.asarray(pixels[y0:y1 + 1, x0:x1 + 1], np.float64).reshape(-1, 3)
+        keep = ~_bad_counts(v, negatives)[0]
+        xy.append(np.stack([gx.ravel(), gy.ravel()], axis=-1)[keep].astype(np.float64))
+        values.append(linear(v[keep]))
+        owner.append(np.full(int(keep.sum()), k))
+    points = np.concatenate(xy)
+    vals = np.concatenate(values)
+    who = np.concatenate(owner)
+    centre = grid_centres(rows, cols)[who]
+    half = location.window / 2.0 + 1e-9
+    n = rows * cols
+    grid_corners = np.array([[0, 0], [cols - 1, 0], [cols - 1, rows - 1], [0, rows - 1]], float)
+
+    def remeasure(corners: np.ndarray) -> np.ndarray | None:
+        try:
+            h = homography_from_points(grid_corners, corners)
+            uv = apply_homography(np.linalg.inv(h), points)
+        except (InvalidValueError, np.linalg.LinAlgError):
+            return None
+        inside = np.all(np.abs(uv - centre) <= half, axis=1)
+        counts = np.bincount(who[inside], minlength=n)
+        if np.any(counts == 0):
+            return None
+        sums = np.stack([np.bincount(who[inside], weights=vals[inside, c], minlength=n)
+                         for c in range(3)], axis=-1)
+        means: np.ndarray = sums / counts[:, None]
+        return means
+
+    return remeasure
+
+
 def image_uncertainty(
     pixels: np.ndarray, location: ChartLocation, linear_samples: Sequence[np.ndarray],
     linear_means: np.ndarray, reference: Reference, value: float, *,
@@ -631,9 +682,7 @@ def image_uncertainty(
     noise, _ = unc.noise_component(linear_samples, linear_means, f, covariances=covs)
     identity = np.array_equal(to_srgb, np.eye(3))
 
-    def patch_linear(vals: np.ndarray) -> np.ndarray:
-        v = np.asarray(vals, dtype=np.float64)
-        v = v[~_bad_counts(v, negatives)[0]]
+    def to_linear(v: np.ndarray) -> np.ndarray:
         lin = v if encoding == "linear" else cm.linearize_srgb(v)
         return lin if identity else lin @ to_srgb.T
 
@@ -656,17 +705,6 @@ def image_uncertainty(
     rounding = unc.rounding_component(linear_samples, linear_means, f, step, encoded=codes,
                                       to_measured=to_measured)
 
-    def remeasure(corners: np.ndarray) -> float | None:
-        try:
-            loc = locate_chart(corners, pixels.shape, rows=location.rows, cols=location.cols,
-                               window=location.window, min_pixels=1)
-        except InvalidValueError:
-            return None
-        samples = [patch_linear(v) for v in window_pixels(pixels, loc)]
-        if any(len(s) == 0 for s in samples):
-            return None
-        return float(f(np.array([s.mean(axis=0) for s in samples])[None])[0])
-
     if found is not None and math.isfinite(found.residual_px):
         sigma = max(found.residual_px / math.sqrt(2.0), unc.UNREFINED_PLACEMENT_PX)
         how = ("the RMS residual of the finder's refined fit / sqrt(2), at least a "
@@ -675,7 +713,8 @@ def image_uncertainty(
         sigma, how = 1.0, "found without refinement: one pixel assumed"
     else:
         sigma, how = unc.UNREFINED_PLACEMENT_PX, "corners given: a rectangular half pixel"
-    placement = unc.placement_component(remeasure, location.corners, sigma, how)
+    remeasure = _window_remeasurer(pixels, location, sigma, negatives, to_linear)
+    placement = unc.placement_component(remeasure, location.corners, sigma, how, f)
     if exposure_ev is None:
         exposure = unc.exposure_component(
             linear_means, ref_lab, neutral, fitted_ev,

@@ -366,23 +366,23 @@ def exposure_component(linear_means: F64, reference_lab: F64, neutral: Sequence[
         f"{u_ev:.4f} EV, {draws} Monte Carlo draws")
 
 
-def placement_component(remeasure: Callable[[F64], float | None], corners: F64,
-                        sigma_px: float, how: str, *,
+def placement_component(remeasure: Callable[[F64], F64 | None], corners: F64,
+                        sigma_px: float, how: str, f: ChartFunction, *,
                         rng: np.random.Generator | None = None,
                         draws: int = PLACEMENT_DRAWS) -> UncertaintyComponent:
-    """The ``placement`` component: the chart measured again (``remeasure``: corners ``(4, 2)``
-    -> chart ΔE, None when the jittered corners cannot be measured) with the corners jittered
-    by ``sigma_px`` per axis (normal), ``draws`` times; ``how`` says where ``sigma_px`` comes
-    from."""
+    """The ``placement`` component: the patch means measured again (``remeasure``: corners
+    ``(4, 2)`` -> patch means ``(n, 3)``, None when the jittered corners cannot be measured)
+    with the corners jittered by ``sigma_px`` per axis (normal), ``draws`` times, and the
+    chart ΔE ``f`` of each; ``how`` says where ``sigma_px`` comes from."""
     rng = rng if rng is not None else np.random.default_rng(SEED + 3)
-    values = []
+    means = []
     for _ in range(draws):
-        v = remeasure(np.asarray(corners, np.float64)
+        m = remeasure(np.asarray(corners, np.float64)
                       + sigma_px * rng.standard_normal((4, 2)))
-        if v is not None and math.isfinite(v):
-            values.append(v)
-    value = _spread(np.asarray(values)) if len(values) > 1 else 0.0
-    lost = draws - len(values)
+        if m is not None:
+            means.append(m)
+    value = _spread(f(np.stack(means))) if len(means) > 1 else 0.0
+    lost = draws - len(means)
     extra = f"; {lost} draws could not be measured" if lost else ""
     return UncertaintyComponent(
         "placement", value, "B",

@@ -202,7 +202,8 @@ def verdict_limits(report: ChartReport) -> tuple[float | None, float | None]:
 
 def uncertainty_section(report: ChartReport) -> Section | None:
     """The uncertainty budget of the chart ΔE (GUM style): each component, its standard
-    uncertainty, type and how it was obtained, and the combined standard uncertainty."""
+    uncertainty, type and how it was obtained, and the combined standard uncertainty; the
+    predicted ΔmAP's interval and the validity domain of the answer."""
     u = report.uncertainty
     if u is None:
         return None
@@ -210,12 +211,25 @@ def uncertainty_section(report: ChartReport) -> Section | None:
     rows.append(("combined (root sum of squares)", f"{u.combined:.4f}", "",
                  f"coverage factor k = {u.k:g}; expanded U (k = 2) = {u.expanded(2.0):.4f}"))
     notes = "".join(f"\n- {n}" for n in u.notes)
-    return section("Measurement uncertainty of the chart ΔE",
-                   Text(f"**{u.text()}**: standard uncertainty of the {u.quantity}; Monte "
-                        f"Carlo propagation (JCGM 101) with {u.draws} draws, seed {u.seed}."
-                        + notes),
-                   table(("component", "standard uncertainty, ΔE00", "type", "how obtained"),
-                         rows, numeric=(False, True, False, False)))
+    blocks: list[Any] = [
+        Text(f"**{u.text()}**: standard uncertainty of the {u.quantity}; Monte Carlo "
+             f"propagation (JCGM 101) with {u.draws} draws, seed {u.seed}." + notes),
+        table(("component", "standard uncertainty, ΔE00", "type", "how obtained"), rows,
+              numeric=(False, True, False, False))]
+    iv = report.interval
+    if iv is not None:
+        se = "unknown" if iv.table_se is None else f"{iv.table_se:.3f}"
+        lo, hi = iv.interval()
+        blocks.append(Text(
+            f"Predicted ΔmAP {iv.value:.2f} ± {iv.standard_uncertainty:.2f} points (k = 1; "
+            f"k = {iv.k:g}: {lo:.2f} to {hi:.2f}): the table's sampling error {se}, the "
+            f"chart ΔE's uncertainty through the table's slope {iv.slope:.3f} points per "
+            f"ΔE00: {iv.propagated:.3f}."))
+    if report.validity is not None:
+        blocks.append(table(("validity domain", "inside", "detail"),
+                            [(c.name, "yes" if c.inside else "**no**", c.detail)
+                             for c in report.validity.checks]))
+    return section("Measurement uncertainty of the chart ΔE", *blocks)
 
 
 def patch_section(report: ChartReport) -> Section:

@@ -56,12 +56,16 @@ def comparison_lines(report: ComparisonReport) -> list[str]:
              f"({m.worst_patch}); mean ΔL' {float(np.mean(m.delta_l)):+.2f}, ΔC' "
              f"{float(np.mean(m.delta_c)):+.2f}, |ΔH'| {float(np.mean(np.abs(m.delta_h))):.2f} "
              "(simulation relative to the real camera)"]
+    if report.uncertainty is not None:
+        lines.append(report.uncertainty.text())
     p = report.prediction
 
     def f(v: float | None) -> str:
         return "n/a" if v is None else f"{v:.2f}"
 
-    lines.append(f"predicted ΔmAP of the difference: {f(p.dmap_points)} points, "
+    pm = (f" ± {report.interval.standard_uncertainty:.2f} (k=1)"
+          if report.interval is not None else "")
+    lines.append(f"predicted ΔmAP of the difference: {f(p.dmap_points)}{pm} points, "
                  f"{f(p.dmap_relative)} % of baseline (classic, table {p.table.name}, "
                  f"detector size {p.size_used})")
     lines += directional_lines(report.as_chart_report())
