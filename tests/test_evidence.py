@@ -210,3 +210,21 @@ def test_evidence_of_an_audit_names_the_image_hash(tmp_path):
     assert names == ["pixel noise", "rounding", "placement", "exposure normalisation"]
     same = run("audit", image, "--evidence", image)
     assert same.exit_code == 2  # never over an input
+
+
+def test_settings_file_sets_the_decision_rule_and_html_shows_the_budget(tmp_path):
+    """decision, coverage_factor and strict from a settings file; the HTML report's budget
+    table lists every component of the JSON budget."""
+    r = run("check", "--camera", "nikon-5100", "--out", tmp_path / "c")
+    doc = json.loads((tmp_path / "c" / "report.json").read_text())
+    html = (tmp_path / "c" / "report.html").read_text(encoding="utf-8")
+    assert r.exit_code == 0 and "Measurement uncertainty of the chart ΔE" in html
+    for comp in doc["uncertainty"]["components"]:
+        assert comp["name"] in html
+    de, u = doc["mean_delta_e"], doc["uncertainty"]["standard_uncertainty"]
+    settings = tmp_path / "fidelity.toml"
+    settings.write_text(f'decision = "guarded"\ncoverage_factor = 2.0\nmax_delta_e = {de + u:.6f}\n')
+    undecided = run("--config", settings, "gate", "--camera", "nikon-5100")
+    assert undecided.exit_code == EXIT_UNDECIDED, undecided.output
+    settings.write_text(settings.read_text() + "strict = true\n")
+    assert run("--config", settings, "gate", "--camera", "nikon-5100").exit_code == EXIT_FAIL
