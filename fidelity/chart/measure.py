@@ -229,7 +229,11 @@ class ChartStatistics:
     white-balance error, a colour cast); ``neutral_chroma`` its length. ``neutral_delta_l``:
     mean L* error of the neutral patches (exposure and tone). ``snr_db``: mean over the neutral
     patches of 20 log10(mean / standard deviation) of their encoded sRGB values, and
-    ``worst_snr_db`` the lowest; None when the noise is unknown or zero.
+    ``worst_snr_db`` the lowest, over the patches with noise above :data:`NOISE_FLOOR`; None
+    when the noise is unknown or below the floor. ``noise_free``: the noise is known and every
+    neutral patch's is below :data:`NOISE_FLOOR` (a noise-free render: report "no noise", not
+    the SNR of floating-point rounding). ``worst_patch`` / ``worst_patch_snr_db``: the patch of
+    the whole chart with the lowest SNR (:func:`patch_snr_db`), None when none has a finite one.
     """
 
     saturation_percent: float
@@ -238,13 +242,96 @@ class ChartStatistics:
     neutral_delta_l: float
     snr_db: float | None
     worst_snr_db: float | None
+    noise_free: bool = False
+    worst_patch: str | None = None
+    worst_patch_snr_db: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         """JSON form."""
         return {"saturation_percent": self.saturation_percent,
                 "neutral_ab": list(self.neutral_ab), "neutral_chroma": self.neutral_chroma,
                 "neutral_delta_l": self.neutral_delta_l, "snr_db": self.snr_db,
-                "worst_snr_db": self.worst_snr_db}
+                "worst_snr_db": self.worst_snr_db, "noise_free": self.noise_free,
+                "worst_patch": self.worst_patch,
+                "worst_patch_snr_db": self.worst_patch_snr_db}
+
+
+#: Standard deviation (encoded sRGB, 0..1) below which a patch counts as noise-free: the
+#: quantisation noise of a 16-bit encoding, 1 / (65535 sqrt(12)) (a uniform rounding error's
+#: standard deviation). A render without noise has a standard deviation of ~1e-16 (rounding),
+#: whose "SNR" of ~290 dB means nothing.
+NOISE_FLOOR: float = 1.0 / (65535.0 * math.sqrt(12.0))
+
+
+def patch_snr_db(m: ChartMeasurement) -> F64 | None:
+    """Signal-to-noise ratio of every patch, dB: ``20 log10(mean / standard deviation)`` of its
+    encoded sRGB values (means over the three channels), as Imatest's Colorcheck reports it.
+
+    ``+inf`` where the standard deviation is below :data:`NOISE_FLOOR` (no noise), NaN where the
+    patch has no signal (mean <= 0 with noise) or a value is not finite; None when the
+    measurement has no noise (an image without per-patch spread). Shape (n,).
+    """
+    if m.noise is None:
+        return None
+    mean = np.asarray(m.srgb, np.float64).reshape(len(m.patch_names), -1).mean(axis=1)
+    sd = np.asarray(m.noise, np.float64).reshape(len(m.patch_names), -1).mean(axis=1)
+    out = np.full(mean.shape, np.nan)
+    quiet = np.isfinite(sd) & (sd < NOISE_FLOOR)
+    ok = np.isfinite(sd) & np.isfinite(mean) & ~quiet & (mean > 0)
+    out[ok] = 20.0 * np.log10(mean[ok] / sd[ok])
+    out[quiet] = np.inf
+    return out
+
+
+@dataclass(frozen=True)
+class ToneFit:
+    """The neutral patches' tone curve fitted with a power law about mid grey.
+
+    ``Y_meas = 0.18 * 2**offset_ev * (Y_ref / 0.18)**gamma`` (CIE Y, white = 1): ``gamma`` is
+    the slope of log Y_meas against log Y_ref (1: the reference's tone, > 1: more contrast),
+    ``offset_ev`` the exposure error at 18 % grey in EV (positive: measured brighter),
+    ``rms_ev`` the root-mean-square residual in EV over the ``patches`` fitted (the neutral
+    patches with light in both).
+    """
+
+    gamma: float
+    offset_ev: float
+    rms_ev: float
+    patches: int
+
+    def predict(self, y_ref: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Measured Y the fit gives for reference Y ``y_ref`` (any shape, >= 0)."""
+        y = np.clip(np.asarray(y_ref, np.float64), 0.0, None)
+        return np.asarray(0.18 * 2.0 ** self.offset_ev * (y / 0.18) ** self.gamma, np.float64)
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON form."""
+        return {"gamma": self.gamma, "offset_ev": self.offset_ev, "rms_ev": self.rms_ev,
+                "patches": self.patches}
+
+
+def fit_tone(m: ChartMeasurement, neutral_indices: Sequence[int] | None = None
+             ) -> ToneFit | None:
+    """Least-squares fit of :class:`ToneFit` to the neutral patches (default
+    :func:`neutral_patches`) in log2 Y; None when fewer than two of them have light in both
+    the measurement and the reference, or all at one reference level."""
+    idx = list(neutral_patches(m) if neutral_indices is None else neutral_indices)
+    if len(idx) < 2:
+        return None
+    y_ref = cm.lab_to_xyz(np.asarray(m.reference_lab, np.float64)[idx])[:, 1]
+    y_meas = cm.lab_to_xyz(np.asarray(m.lab, np.float64)[idx])[:, 1]
+    white = float(cm.WHITEPOINT_D65_XYZ[1])
+    ok = (np.isfinite(y_ref) & np.isfinite(y_meas) & (y_ref > 0) & (y_meas > 0))
+    if int(ok.sum()) < 2:
+        return None
+    x = np.log2(y_ref[ok] / white / 0.18)
+    y = np.log2(y_meas[ok] / white / 0.18)
+    if float(np.ptp(x)) < 1e-9:
+        return None
+    gamma, offset = np.polyfit(x, y, 1)
+    resid = y - (gamma * x + offset)
+    return ToneFit(gamma=float(gamma), offset_ev=float(offset),
+                   rms_ev=float(np.sqrt(np.mean(resid ** 2))), patches=int(ok.sum()))
 
 
 def chart_statistics(m: ChartMeasurement) -> ChartStatistics:
@@ -257,18 +344,25 @@ def chart_statistics(m: ChartMeasurement) -> ChartStatistics:
     c_meas = np.hypot(m.lab[colour, 1], m.lab[colour, 2])
     c_ref = np.hypot(m.reference_lab[colour, 1], m.reference_lab[colour, 2])
     d_ab = (m.lab[neutral, 1:] - m.reference_lab[neutral, 1:]).mean(axis=0)
+    per_patch = patch_snr_db(m)
     snr: list[float] = []
-    if m.noise is not None:
-        for k in neutral:
-            sd = float(np.mean(m.noise[k]))
-            if sd > 0:
-                snr.append(20.0 * math.log10(float(np.mean(m.srgb[k])) / sd))
+    noise_free = False
+    worst: tuple[str, float] | None = None
+    if per_patch is not None:
+        snr = [float(per_patch[k]) for k in neutral if np.isfinite(per_patch[k])]
+        noise_free = bool(np.all(np.isposinf(per_patch[neutral])))
+        finite = np.flatnonzero(np.isfinite(per_patch))
+        if finite.size:
+            k_worst = int(finite[np.argmin(per_patch[finite])])
+            worst = (m.patch_names[k_worst], float(per_patch[k_worst]))
     return ChartStatistics(
         saturation_percent=float(100.0 * c_meas.mean() / c_ref.mean()),
         neutral_ab=(float(d_ab[0]), float(d_ab[1])), neutral_chroma=float(np.hypot(*d_ab)),
         neutral_delta_l=float((m.lab[neutral, 0] - m.reference_lab[neutral, 0]).mean()),
         snr_db=float(np.mean(snr)) if snr else None,
         worst_snr_db=float(np.min(snr)) if snr else None,
+        noise_free=noise_free, worst_patch=worst[0] if worst else None,
+        worst_patch_snr_db=worst[1] if worst else None,
     )
 
 
@@ -837,11 +931,15 @@ __all__ = [
     "MIN_VALID_PIXELS",
     "NEGATIVE_RULES",
     "ChartMeasurement",
+    "NOISE_FLOOR",
     "ChartStatistics",
+    "ToneFit",
     "NEUTRAL_CHROMA",
     "ImageMeasurement",
     "chart_delta_e",
     "chart_statistics",
+    "fit_tone",
+    "patch_snr_db",
     "neutral_patches",
     "exposure_from_neutrals",
     "luminance_linear_srgb",

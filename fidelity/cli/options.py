@@ -464,7 +464,9 @@ def _state() -> dict[str, Any]:
 def common_options(f: F) -> F:
     """Add ``-q/--quiet`` and ``-v/--verbose`` to a command. Quiet sends the command's ordinary
     printing to nowhere; ``--json -`` sends it to standard error, so that standard output holds
-    the JSON alone (:func:`write_json_output`) and the verdict still reaches the log."""
+    the JSON alone (:func:`write_json_output`) and the verdict still reaches the log. Unless
+    quiet, the command first says which settings file it read and what it took from it
+    (:func:`settings_line`)."""
 
     @functools.wraps(f)
     def wrapper(*args: Any, quiet: bool, verbose: bool, **kwargs: Any) -> Any:
@@ -478,6 +480,9 @@ def common_options(f: F) -> F:
         elif to_stdout:
             redirect = contextlib.redirect_stdout(sys.stderr)
         with redirect:
+            settings = settings_line()
+            if settings:
+                click.echo(settings)
             return f(*args, **kwargs)
 
     wrapper = click.option("-v", "--verbose", is_flag=True,
@@ -486,6 +491,22 @@ def common_options(f: F) -> F:
                            help="Print nothing but errors (and JSON asked for on stdout).")(
         wrapper)
     return wrapper  # type: ignore[return-value]
+
+
+def settings_line() -> str | None:
+    """What the running command took from a settings file: ``fidelity: settings FILE: key,
+    ...`` (the options whose value came from it, by their flags), or that none of its keys
+    applies; None when no settings file was read (none found, or ``--no-config``)."""
+    from click.core import ParameterSource
+
+    config = _state().get("config")
+    if config is None:
+        return None
+    ctx = click.get_current_context()
+    used = [max(p.opts, key=len) for p in ctx.command.params
+            if p.name and ctx.get_parameter_source(p.name) == ParameterSource.DEFAULT_MAP]
+    what = ", ".join(used) if used else "no setting applies to this command"
+    return f"fidelity: settings {config.path}: {what}"
 
 
 def from_settings(name: str) -> bool:
@@ -615,6 +636,7 @@ __all__ = [
     "executor_from",
     "executor_options",
     "from_settings",
+    "settings_line",
     "image_read_options",
     "json_option",
     "limit_option",
