@@ -37,6 +37,9 @@ _API: dict[str, str] = {
     "gate": "fidelity.check",
     "compare_charts": "fidelity.compare",
     "ComparisonReport": "fidelity.records",
+    "fit_correction": "fidelity.fit",
+    "Correction": "fidelity.fit",
+    "FitReport": "fidelity.fit",
     # stages
     "delta_e_2000": "fidelity.colour.colorimetry",
     "load_chart": "fidelity.colour.charts",
@@ -99,6 +102,7 @@ if TYPE_CHECKING:
     from fidelity.colour.colorimetry import delta_e_2000
     from fidelity.compare import compare_charts
     from fidelity.errors import FidelityError
+    from fidelity.fit import Correction, FitReport, fit_correction
     from fidelity.prediction.calibration import calibrate_transform
     from fidelity.prediction.directional import (
         DirectionalPrediction,
@@ -136,9 +140,11 @@ __all__ = [
     "ChartRender",
     "ChartReport",
     "ComparisonReport",
+    "Correction",
     "Criterion",
     "DirectionalPrediction",
     "FidelityError",
+    "FitReport",
     "FoundChart",
     "GateResult",
     "ImageMeasurement",
@@ -158,6 +164,7 @@ __all__ = [
     "error_parts",
     "evaluate",
     "find_chart",
+    "fit_correction",
     "gate",
     "load_camera",
     "load_chart",

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fidelity.chart.measure import DEFAULT_READ, ReadOptions
+from fidelity.chart.measure import DEFAULT_READ, ReadOptions, reads_for
 from fidelity.prediction.judge import judge
 from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, SIMPLE, Criterion, DecisionRule
 from fidelity.records import (
@@ -231,8 +231,10 @@ def audit_image(
     """
     from fidelity.chart.measure import measure_image
 
+    banding: list[Any] = []
     result = measure_image(image, corners if corners is None or len(corners) else None,
-                           read=read, reference=reference, illuminant=illuminant)
+                           read=read, reference=reference, illuminant=illuminant,
+                           inspect_image=lambda img: banding.append(_image_banding(img)))
     u = result.uncertainty
     prediction, verdict, directional = judge(
         result.mean_delta_e, size, table, criterion, result.measurement, bound,
@@ -248,7 +250,7 @@ def audit_image(
         corner_checks=result.corner_checks)
     conventions = {"reference": result.reference.conventions,
                    "audit": AUDIT_CONVENTION.format(window=result.location.window)}
-    spots = _image_blind_spots(result.measurement, info, read)
+    spots = (*_image_blind_spots(result.measurement, info, read), *banding)
     measured: tuple[MeasuredLoss, ...] = ()
     if measure is not None:
         emu = chart_emulation(result.measurement)
@@ -269,20 +271,21 @@ def audit_image(
 
 def _image_blind_spots(measurement: ChartMeasurement, info: Any, read: ReadOptions
                        ) -> tuple[Any, ...]:
-    """The blind-spot checks of an audited image: the chart's shadow tones, and the image's
-    banding when its pixels are integer codes (read again for it, as the audit read it)."""
-    from fidelity.chart.blindspots import banding, chart_blind_spots
+    """The blind-spot checks of an audited image's chart: its shadow tones (the image's
+    banding: :func:`_image_banding`)."""
+    from fidelity.chart.blindspots import chart_blind_spots
 
-    spots = chart_blind_spots(measurement)
-    if str(info.pixel_type).lower() in ("uint8", "uint16", "int8", "int16"):
-        from fidelity.chart.image import read_image
+    return chart_blind_spots(measurement)
 
-        pixels = read_image(info.path, layer=info.layer, bayer=read.bayer,
-                            max_pixels=read.max_pixels).pixels
-        spots = (*spots, banding(pixels, info.pixel_type))
-    else:
-        spots = (*spots, banding(np.zeros((1, 1, 3)), info.pixel_type))
-    return spots
+
+def _image_banding(image: Any) -> Any:
+    """The banding check of an image read for its audit
+    (:class:`fidelity.chart.image.Image`): judged when its pixels are integer codes."""
+    from fidelity.chart.blindspots import banding
+
+    if str(image.pixel_type).lower() in ("uint8", "uint16", "int8", "int16"):
+        return banding(image.pixels, image.pixel_type)
+    return banding(np.zeros((1, 1, 3)), image.pixel_type)
 
 
 def chart_emulation(measurement: ChartMeasurement) -> Any:
@@ -323,12 +326,13 @@ def gate(
     from fidelity.errors import FidelityError
 
     subjects: list[str] = [os.fspath(i) for i in images] or ([camera] if camera else [])
+    reads = reads_for(subjects, read) if images else [read for _ in subjects]
     results: list[GateResult] = []
-    for subject in subjects:
+    for subject, subject_read in zip(subjects, reads, strict=True):
         t0 = time.perf_counter()
         try:
             if images:
-                report = audit_image(subject, corners, read=read,
+                report = audit_image(subject, corners, read=subject_read,
                                      reference=reference or "scene", illuminant=illuminant,
                                      size=size, table=table, criterion=criterion,
                                      command="gate", bound=bound, decision=decision)

@@ -109,7 +109,8 @@ def compare_charts(
     ----------
     sim, real
         Images (EXR, HDR, TIFF, PNG, JPEG) of the same chart, rendered by the simulator and
-        photographed by the real camera.
+        photographed by the real camera; either may be a robot recording (ROS 1 bag, ROS 2
+        bag, MCAP file) of which ``read`` names the message.
     sim_corners, real_corners
         Each image's corner patch centres (see :func:`fidelity.check.audit_image`); None: found.
     normalise_mode
@@ -123,7 +124,8 @@ def compare_charts(
         (decided by ``bound``: ``classic`` or ``directional``); None: no verdict.
     read
         How both images are read (:class:`~fidelity.chart.measure.ReadOptions`, as
-        ``audit``).
+        ``audit``); its ``topic``, ``frame`` and ``time`` apply to the input that is a robot
+        recording (:mod:`fidelity.chart.recording`).
     measure
         Also measure the difference's cost on COCO (:class:`fidelity.coco.measure.MeasureRequest`).
     decision
@@ -134,16 +136,17 @@ def compare_charts(
     -------
     ComparisonReport
     """
-    from fidelity.chart.measure import measure_chart, neutral_patches
+    from fidelity.chart.measure import measure_chart, neutral_patches, reads_for
     from fidelity.check import audit_image
     from fidelity.prediction.judge import judge
 
     if normalise_mode not in NORMALISATIONS:
         raise unknown_name("normalisation", normalise_mode, NORMALISATIONS)
-    kw: dict[str, Any] = {"read": read, "reference": reference, "illuminant": illuminant,
+    kw: dict[str, Any] = {"reference": reference, "illuminant": illuminant,
                           "size": size, "table": table}
-    sim_report = audit_image(sim, sim_corners, command="compare", **kw)
-    real_report = audit_image(real, real_corners, command="compare", **kw)
+    sim_read, real_read = reads_for((sim, real), read)
+    sim_report = audit_image(sim, sim_corners, command="compare", read=sim_read, **kw)
+    real_report = audit_image(real, real_corners, command="compare", read=real_read, **kw)
     sm, rm = sim_report.measurement, real_report.measurement
     if sm.patch_names != rm.patch_names:
         raise InvalidValueError(f"{sim} and {real}: the charts have different patches")

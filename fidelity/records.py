@@ -143,8 +143,20 @@ class ImageSource:
 
     @property
     def title(self) -> str:
-        """How a report names this source."""
-        return self.image.path
+        """How a report names this source: the file, and for a recording the topic, frame and
+        time of the message read."""
+        return self.image.path + self._recording_suffix()
+
+    @property
+    def name(self) -> str:
+        """:attr:`title` with the file's name only (no folders)."""
+        return Path(self.image.path).name + self._recording_suffix()
+
+    def _recording_suffix(self) -> str:
+        rec = self.image.recording
+        if rec is None:
+            return ""
+        return f" ({rec.topic}, frame {rec.frame}, {rec.offset_s:.3f} s)"
 
     @property
     def reference_description(self) -> str:
@@ -188,6 +200,11 @@ class RenderSource:
     @property
     def title(self) -> str:
         """How a report names this source."""
+        return self.camera
+
+    @property
+    def name(self) -> str:
+        """How a report names this source in short: the camera."""
         return self.camera
 
     @property

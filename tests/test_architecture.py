@@ -6,10 +6,10 @@ two modules together). The layers, lowest first, are the ones docs/development.m
 
 0. support: ``errors``, ``version``, ``resources``, ``fileio``, ``schema``
 1. ``colour``
-2. ``camera``, ``chart``
-3. ``prediction``
+2. ``camera``, ``chart``, ``correction``
+3. ``prediction``, ``scene`` (the chart scene for simulators: colour + camera data)
 4. ``coco``
-5. the chart pipeline: ``records``, ``check``, ``compare``
+5. the chart pipeline: ``records``, ``check``, ``compare``, ``fit``
 6. ``report``
 7. the edges: ``config``, ``environment``, ``cli``, ``pytest_plugin``, ``__main__`` and the
    package itself (its lazy public API)
@@ -31,10 +31,10 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("fidelity.errors", "fidelity.version", "fidelity.resources", "fidelity.fileio",
      "fidelity.schema"),
     ("fidelity.colour",),
-    ("fidelity.camera", "fidelity.chart"),
-    ("fidelity.prediction",),
+    ("fidelity.camera", "fidelity.chart", "fidelity.correction"),
+    ("fidelity.prediction", "fidelity.scene"),
     ("fidelity.coco",),
-    ("fidelity.records", "fidelity.check", "fidelity.compare"),
+    ("fidelity.records", "fidelity.check", "fidelity.compare", "fidelity.fit"),
     ("fidelity.report",),
     ("fidelity.config", "fidelity.environment", "fidelity.cli", "fidelity.pytest_plugin",
      "fidelity.__main__", "fidelity"),

@@ -162,34 +162,79 @@ def bit_depth(bits: int | None, min_bits: int = MIN_BITS) -> BlindSpot:
 _CODE_RANGE: dict[str, int] = {"uint8": 255, "int8": 127, "uint16": 65535, "int16": 32767}
 
 
+#: Pixels of an image whose neighbour steps are counted at a time (bounded memory).
+STEP_BLOCK_PIXELS = 1 << 20
+
+
+def _numpy_steps(a: np.ndarray, b: np.ndarray, limit: int) -> np.ndarray:
+    """Counts of ``|b - a|`` = 0 .. ``limit`` over integer arrays of one shape (0 left at 0)."""
+    steps = np.abs(b.astype(np.int64) - a.astype(np.int64)).ravel()
+    out: np.ndarray = np.bincount(steps[(steps > 0) & (steps <= limit)], minlength=limit + 1)
+    return out[:limit + 1]
+
+
+def _opencv_steps(a: np.ndarray, b: np.ndarray, limit: int) -> np.ndarray:
+    """:func:`_numpy_steps` of 8- or 16-bit codes by OpenCV (``absdiff``, ``calcHist``: exact
+    integer counts while a block holds under 2**24 values), several times faster."""
+    try:
+        import cv2
+    except ImportError:  # pragma: no cover - OpenCV is a dependency
+        return _numpy_steps(a, b, limit)
+    if a.size == 0:
+        return np.zeros(limit + 1, dtype=np.int64)
+    d = cv2.absdiff(a, b)
+    hist = cv2.calcHist([d.reshape(d.shape[0], -1)], [0], None, [limit + 1], [0, limit + 1])
+    out = np.rint(hist.ravel()).astype(np.int64)
+    out[0] = 0
+    return out
+
+
 def effective_bits(codes: np.ndarray, code_range: int,
                    smooth_fraction: float = SMOOTH_STEP_FRACTION,
                    min_pairs: int = MIN_SMOOTH_PAIRS) -> tuple[float | None, int, int]:
     """(effective bits or None, the step ``q``, smooth pairs found) of integer codes (H, W, C)
-    (module docstring)."""
-    a = np.asarray(codes, dtype=np.int64)
+    (module docstring). The steps are counted a block of rows at a time, so that memory stays
+    a few MB whatever the image's size."""
+    a = np.asarray(codes)
     limit = max(1, int(round(smooth_fraction * code_range)))
-    steps: list[np.ndarray] = []
-    for d in (np.diff(a, axis=0), np.diff(a, axis=1)):
-        d = np.abs(d).ravel()
-        steps.append(d[(d > 0) & (d <= limit)])
-    small = np.concatenate(steps)
-    if small.size < min_pairs:
-        return None, 0, int(small.size)
-    values, counts = np.unique(small, return_counts=True)
-    q = int(values[int(np.argmax(counts))])
-    return float(math.log2(code_range / q + 1.0)), q, int(small.size)
+    counts = np.zeros(limit + 1, dtype=np.int64)
+    rows = max(1, STEP_BLOCK_PIXELS // max(int(np.prod(a.shape[1:])), 1))
+    count = _opencv_steps if a.dtype in (np.uint8, np.uint16) else _numpy_steps
+    for y in range(0, max(a.shape[0], 1), rows):
+        block = a[y:y + rows + 1]  # one row of overlap: the steps down
+        counts += count(block[:-1], block[1:], limit) if len(block) > 1 else 0
+        counts += count(block[:rows, :-1], block[:rows, 1:], limit)
+    pairs = int(counts.sum())
+    if pairs < min_pairs:
+        return None, 0, pairs
+    q = int(np.argmax(counts))
+    return float(math.log2(code_range / q + 1.0)), q, pairs
+
+
+def _codes(pixels: np.ndarray, code_range: int) -> np.ndarray:
+    """Integer codes (int32) of values scaled to [0, 1], a block of rows at a time."""
+    out = np.empty(pixels.shape, dtype=np.int32)
+    rows = max(1, STEP_BLOCK_PIXELS // max(int(np.prod(pixels.shape[1:])), 1))
+    for y in range(0, pixels.shape[0], rows):
+        block = np.asarray(pixels[y:y + rows], np.float64)
+        out[y:y + rows] = np.rint(np.clip(block, 0.0, 1.0) * code_range)
+    return out
 
 
 def banding(pixels: np.ndarray, pixel_type: str, *, min_bits: int = MIN_BITS) -> BlindSpot:
     """Posterisation of an image from its smooth regions (module docstring); ``pixels``
     (H, W, 3) as read (:func:`fidelity.chart.image.read_image`: integer codes scaled to
-    [0, 1]) and the file's ``pixel_type``."""
+    [0, 1], or the codes themselves when read at their native depth) and the file's
+    ``pixel_type``."""
     rng = _CODE_RANGE.get(str(pixel_type).lower())
     if rng is None:
         return BlindSpot("banding", None, None, float(min_bits),
                          f"banding not judged: {pixel_type} pixels are not integer codes")
-    codes = np.rint(np.clip(np.asarray(pixels, np.float64), 0.0, 1.0) * rng)
+    arr = np.asarray(pixels)
+    if arr.dtype in (np.uint8, np.uint16) and np.iinfo(arr.dtype).max == rng:  # codes
+        codes = arr
+    else:
+        codes = _codes(arr, rng)
     bits, q, pairs = effective_bits(codes, rng)
     if bits is None:
         return BlindSpot("banding", None, None, float(min_bits),
@@ -233,6 +278,7 @@ __all__ = [
     "SHADOW_PROBE_L",
     "SHADOW_SLOPE_TOLERANCE",
     "SMOOTH_STEP_FRACTION",
+    "STEP_BLOCK_PIXELS",
     "BlindSpot",
     "banding",
     "bit_depth",

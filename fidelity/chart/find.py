@@ -74,6 +74,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fidelity.chart.image import as_float32, is_coded
 from fidelity.chart.locate import CORNER_PATCHES, apply_homography, homography_from_points
 from fidelity.colour import colorimetry as cm
 from fidelity.errors import FidelityError, InvalidValueError, unknown_name
@@ -133,6 +134,11 @@ VERIFY_WINDOW = 0.35
 VERIFY_SAMPLES = 5
 #: Reference chart rows and columns: the finder knows the 24-patch layout only.
 ROWS, COLS = 4, 6
+#: Shortest image side, in pixels, that can hold a measurable chart: an audit samples at least
+#: 9 pixels in a window of half a pitch (:data:`fidelity.chart.locate.MIN_WINDOW_PIXELS`), so a
+#: pitch of 6 pixels or more, and the chart's short side spans its 4 rows of patches. Smaller
+#: images are not searched (OpenCV's detector takes gigabytes and seconds on a 1-pixel-wide one).
+MIN_IMAGE_SIDE = 4 * 6
 
 
 @dataclass(frozen=True)
@@ -287,26 +293,59 @@ _DECODE_LUT = cm.linearize_srgb(np.linspace(0.0, 1.0, 65536)).astype(np.float32)
 
 
 class Pyramid:
-    """An image and its halvings (2 x 2 area averages, computed when first asked for), so that
-    views of any part at any reduced size cost one pass over the full image at most."""
+    """An image and its reductions by 2 x 2 area averages (computed when first asked for), so
+    that views of any part at any reduced size cost one pass over the full image at most.
+
+    The image is kept as given (8/16-bit codes, half or single floats: whatever
+    :func:`fidelity.chart.image.read_image` decoded); a reduction is computed from it a band of
+    rows at a time (:data:`PYRAMID_BAND_PIXELS`), each band converted to float32
+    (:func:`fidelity.chart.image.as_float32`) and halved repeatedly, so that no full-size float
+    copy is made. The result equals halving the whole float32 image level by level."""
 
     def __init__(self, pixels: np.ndarray) -> None:
         self.levels: dict[int, np.ndarray] = {1: np.asarray(pixels)}
         self.height, self.width = self.levels[1].shape[:2]
 
     def level(self, factor: int) -> np.ndarray:
-        """The image averaged over ``factor`` x ``factor`` blocks (``factor`` a power of 2)."""
+        """The image averaged over ``factor`` x ``factor`` blocks (``factor`` a power of 2):
+        float32 for ``factor`` > 1, the image as given for 1."""
         if factor not in self.levels:
-            finer = self.level(factor // 2)
-            if finer.dtype != np.float32:
-                finer = finer.astype(np.float32)
-            h, w = finer.shape[0] // 2, finer.shape[1] // 2
-            cv2 = _cv2()
-            coarser = cv2.resize(finer[:2 * h, :2 * w], (w, h), interpolation=cv2.INTER_AREA)
-            if factor == 2:  # NaN and Inf spread over their 2 x 2 block only: count as black
-                coarser = np.nan_to_num(coarser, nan=0.0, posinf=0.0, neginf=0.0)
-            self.levels[factor] = coarser
+            finer = max((f for f in self.levels if 1 < f < factor), default=1)
+            source = self.levels[finer]
+            step = factor // finer
+            out_h, out_w = source.shape[0] // step, source.shape[1] // step
+            band = max(1, PYRAMID_BAND_PIXELS // max(source.shape[1] * step, 1)) * step
+            out = np.empty((out_h, out_w) + source.shape[2:], np.float32)
+            for y in range(0, out_h * step, band):
+                block = source[y:min(y + band, out_h * step), :out_w * step]
+                out[y // step:(y + block.shape[0]) // step] = _halvings(
+                    block, step, finer == 1 and not is_coded(block))
+            self.levels[factor] = out
         return self.levels[factor]
+
+
+#: Pixels of the image converted to float at a time when a :class:`Pyramid` level is computed.
+PYRAMID_BAND_PIXELS = 1 << 20
+
+
+def _halvings(block: np.ndarray, step: int, first: bool) -> np.ndarray:
+    """``block`` (rows and columns multiples of ``step``) as float32, halved by 2 x 2 area
+    averages until ``step`` x ``step`` blocks are averaged; ``first``: the block is of the
+    image itself, whose NaN and Inf spread over their 2 x 2 block only and count as black (8-
+    and 16-bit codes have none)."""
+
+    cv2 = _cv2()
+    arr = np.ascontiguousarray(as_float32(block))
+    while step > 1:
+        h, w = arr.shape[0] // 2, arr.shape[1] // 2
+        arr = cv2.resize(arr, (w, h), interpolation=cv2.INTER_AREA)
+        if first:
+            arr = np.nan_to_num(arr, nan=0.0, posinf=0.0, neginf=0.0)
+            first = False
+        step //= 2
+    if arr.ndim < block.ndim:  # OpenCV drops a last axis of length 1
+        arr = arr[..., None]
+    return arr
 
 
 def _prepare(pyramid: Pyramid, region: tuple[int, int, int, int], max_side: int, encoding: str
@@ -323,7 +362,9 @@ def _prepare(pyramid: Pyramid, region: tuple[int, int, int, int], max_side: int,
     lx0, ly0 = x0 // factor, y0 // factor
     lx1 = min(-(-x1 // factor), level.shape[1])
     ly1 = min(-(-y1 // factor), level.shape[0])
-    arr = np.ascontiguousarray(level[ly0:ly1, lx0:lx1], dtype=np.float32)
+    arr = np.ascontiguousarray(level[ly0:ly1, lx0:lx1])
+    if factor == 1:
+        arr = np.ascontiguousarray(as_float32(arr))
     height, width = arr.shape[:2]
     target = (max(1, round((x1 - x0) * s)), max(1, round((y1 - y0) * s)))
     if target[0] < width or target[1] < height:
@@ -1275,6 +1316,11 @@ def find_chart(
     arr = np.asarray(pixels)
     if arr.ndim != 3 or arr.shape[2] != 3:
         raise InvalidValueError(f"image must be (H, W, 3), got shape {arr.shape}")
+    if min(arr.shape[:2]) < MIN_IMAGE_SIDE:
+        raise InvalidValueError(
+            f"no colour chart found: the image is {arr.shape[1]}x{arr.shape[0]} pixels, too "
+            f"small to hold a measurable 24-patch chart (at least {MIN_IMAGE_SIDE} pixels on "
+            f"its short side)")
     return CHART_FINDERS[method](arr, encoding=encoding, refine=refine)
 
 
@@ -1283,6 +1329,7 @@ __all__ = [
     "CHART_FINDERS",
     "DETECTORS",
     "MIN_CONFIDENCE",
+    "MIN_IMAGE_SIDE",
     "MAX_UNIFORMITY",
     "MIN_MARGIN",
     "MIN_NEUTRAL_ORDER",

@@ -50,12 +50,13 @@ DEMOSAICING = "Malvar 2004 (colour-demosaicing)"
 FLOAT_PIXEL_TYPES = frozenset({"half", "float", "double"})
 
 #: Largest image :func:`read_image` decodes unless told otherwise, in pixels (width x height),
-#: checked from the file's header before any pixel is decoded. Sized for a 24 GiB machine from
-#: the audit's measured peak above the program itself (``benchmarks/bench_memory.py``): about
-#: 20 bytes per pixel for an RGB photo of 24 megapixels or more, about 60 for a Bayer mosaic
-#: (demosaiced in float64). 150 megapixels (a 14142 x 10607 photo, more than any camera sold)
-#: then peak near 3 GB, or 9 GB for a mosaic: at most a third of the machine, leaving room for
-#: the system and the other jobs on it.
+#: checked from the file's header before any pixel is decoded. An audit holds the image at its
+#: decoded depth (3 bytes per pixel for an 8-bit photo, 6 for 16-bit or half, 12 for float)
+#: plus about one byte per pixel for the chart finder's reduced copies: measured for 8-bit
+#: JPEGs (``benchmarks/bench_memory.py``), 3.1 MB per megapixel above the program's 170 MB
+#: between 24 and 108 megapixels (630 MB at 108). A Bayer mosaic is demosaiced in float64
+#: (about 60 bytes per pixel). 150 megapixels (a 14142 x 10607 photo, more than any camera
+#: sold) then take under 1 GB as an 8-bit photo, about 2 GB as float.
 DEFAULT_MAX_PIXELS = 150_000_000
 
 #: Environment variable that sets the pixel limit (like ``--max-pixels``).
@@ -63,6 +64,29 @@ MAX_PIXELS_ENV = "FIDELITY_MAX_PIXELS"
 
 #: Most parts (subimages) of a file that are looked at for R, G, B channels.
 MAX_PARTS = 1024
+
+#: Pixel types kept as they are when an image is read at its native depth (``native=True``):
+#: unsigned integer codes (normalised by :func:`as_float32` when used) and half floats.
+NATIVE_PIXEL_TYPES = {"uint8": np.uint8, "uint16": np.uint16, "half": np.float16}
+
+
+def is_coded(values: np.ndarray) -> bool:
+    """Whether ``values`` are 8- or 16-bit unsigned integer codes (an image read at its native
+    depth), which stand for ``code / (2**bits - 1)``."""
+    return values.dtype in (np.uint8, np.uint16)
+
+
+def as_float32(values: np.ndarray) -> np.ndarray:
+    """``values`` as float32 of the scale :func:`read_image` gives: 8- and 16-bit unsigned
+    codes (:func:`is_coded`) times ``1 / (2**bits - 1)`` in single precision, as OpenImageIO
+    converts them (so the result equals the float read bit for bit), other values as they are
+    (no copy for float32)."""
+    a = np.asarray(values)
+    if is_coded(a):  # one pass: each code converted to float32, then scaled in float32
+        out: np.ndarray = np.multiply(a, np.float32(1.0 / np.iinfo(a.dtype).max),
+                                      dtype=np.float32)
+        return out
+    return a.astype(np.float32, copy=False)
 
 _COLOUR_NAMES = {
     "r": "R", "red": "R",
@@ -73,11 +97,62 @@ _ALPHA_NAMES = {"a", "alpha"}
 
 
 @dataclass(frozen=True)
+class Recording:
+    """Where in a robot recording an image message was read (:mod:`fidelity.chart.recording`):
+    the recording's ``kind`` (``ROS 1 bag``, ``ROS 2 bag (sqlite3)``, ``ROS 2 bag (MCAP)``,
+    ``MCAP file``), the ``topic``, the ``message_type``
+    (``sensor_msgs/msg/Image`` or ``sensor_msgs/msg/CompressedImage``), its ``ros_encoding``
+    (the Image's ``encoding`` or the CompressedImage's ``format``), the message's index among
+    the topic's messages in time order (``frame``, 0-based) of ``frames``, its log time
+    (``time_ns``, nanoseconds since the Unix epoch) and ``offset_s`` (seconds after the
+    recording's first message), and its header's ``stamp_ns`` and ``frame_id``."""
+
+    kind: str
+    topic: str
+    message_type: str
+    ros_encoding: str
+    frame: int
+    frames: int
+    time_ns: int
+    offset_s: float
+    stamp_ns: int | None = None
+    frame_id: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON form (``time_utc``: ``time_ns`` as ISO 8601 UTC text)."""
+        import datetime
+
+        utc = datetime.datetime.fromtimestamp(self.time_ns // 10**9, datetime.UTC)
+        text = utc.strftime("%Y-%m-%dT%H:%M:%S") + f".{self.time_ns % 10**9:09d}Z"
+        return {"kind": self.kind, "topic": self.topic, "message_type": self.message_type,
+                "ros_encoding": self.ros_encoding, "frame": self.frame, "frames": self.frames,
+                "time_ns": self.time_ns, "time_utc": text, "offset_s": self.offset_s,
+                "stamp_ns": self.stamp_ns, "frame_id": self.frame_id}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Recording:
+        """Inverse of :meth:`to_json`."""
+        stamp = data.get("stamp_ns")
+        return cls(str(data["kind"]), str(data["topic"]), str(data["message_type"]),
+                   str(data["ros_encoding"]), int(data["frame"]), int(data["frames"]),
+                   int(data["time_ns"]), float(data["offset_s"]),
+                   None if stamp is None else int(stamp), data.get("frame_id"))
+
+    def describe(self) -> str:
+        """One line: topic, frame, time and message (``/cam frame 3 of 40 at 1.234 s ...``)."""
+        return (f"topic {self.topic} frame {self.frame} of {self.frames} at "
+                f"{self.offset_s:.3f} s ({self.message_type.rsplit('/', 1)[-1]} "
+                f"{self.ros_encoding})")
+
+
+@dataclass(frozen=True)
 class Image:
     """An image read from disk.
 
-    ``pixels`` is ``(H, W, 3)`` float32 R, G, B. Integer formats are normalised to [0, 1] by
-    ``v / (2**bits - 1)``; floating-point formats keep their values (NaN, Inf and negative values
+    ``pixels`` is ``(H, W, 3)`` float32 R, G, B (or, read with ``native=True``, the file's own
+    8/16-bit codes or half floats: :func:`as_float32` gives the float32 values). Integer
+    formats are normalised to [0, 1] by ``v / (2**bits - 1)``; floating-point formats keep
+    their values (NaN, Inf and negative values
     included: the audit counts and excludes them). ``encoding`` is the likely encoding of the
     values: ``"linear"`` for floating-point pixel types, ``"srgb"`` otherwise.
     ``chromaticities`` is OpenEXR's standard attribute of the same name when the file has it:
@@ -95,6 +170,7 @@ class Image:
     all_channels: tuple[str, ...] = field(default_factory=tuple)
     chromaticities: tuple[float, ...] | None = None
     bayer: str | None = None
+    recording: Recording | None = None
 
     @property
     def height(self) -> int:
@@ -114,7 +190,7 @@ class Image:
             width=self.width, height=self.height, channels=self.channels, layer=self.layer,
             encoding_guess=self.encoding, colorspace=self.colorspace,
             chromaticities=self.chromaticities, sha256=sha256, encoding=encoding,
-            bayer=self.bayer,
+            bayer=self.bayer, recording=self.recording,
         )
 
 
@@ -123,7 +199,9 @@ class ImageInfo:
     """An image file as a report states it: ``path``, file ``format``, ``pixel_type``, size,
     the three ``channels`` used, ``layer``, the likely encoding (``encoding_guess``), OpenImageIO's
     ``colorspace`` and OpenEXR's ``chromaticities`` attributes, the file's ``sha256`` and the
-    ``encoding`` it was measured in."""
+    ``encoding`` it was measured in. An image read from a robot recording (``path`` the bag)
+    has its :class:`Recording` (topic, frame, time), and ``sha256`` is that of the message's
+    serialised bytes (the recording is not read whole)."""
 
     path: str
     format: str
@@ -138,9 +216,11 @@ class ImageInfo:
     sha256: str | None = None
     encoding: str | None = None
     bayer: str | None = None
+    recording: Recording | None = None
 
     def to_json(self) -> dict[str, Any]:
-        """JSON form (keys in this order; ``sha256`` and ``encoding`` only when known)."""
+        """JSON form (keys in this order; ``sha256``, ``encoding``, ``bayer`` and
+        ``recording`` only when known)."""
         out: dict[str, Any] = {
             "path": self.path, "format": self.format, "pixel_type": self.pixel_type,
             "width": self.width, "height": self.height, "channels": list(self.channels),
@@ -155,6 +235,8 @@ class ImageInfo:
         if self.bayer is not None:
             out["bayer"] = self.bayer
             out["demosaicing"] = DEMOSAICING
+        if self.recording is not None:
+            out["recording"] = self.recording.to_json()
         return out
 
     @classmethod
@@ -169,6 +251,8 @@ class ImageInfo:
             colorspace=data.get("colorspace"),
             chromaticities=tuple(float(v) for v in chroma) if chroma else None,
             sha256=data.get("sha256"), encoding=data.get("encoding"), bayer=data.get("bayer"),
+            recording=(Recording.from_json(data["recording"]) if data.get("recording")
+                       else None),
         )
 
 
@@ -351,7 +435,8 @@ def pixel_limit(max_pixels: int | None = None) -> int:
 
 
 def read_image(path: str | os.PathLike[str], layer: str | None = None,
-               bayer: str | None = None, *, max_pixels: int | None = None) -> Image:
+               bayer: str | None = None, *, max_pixels: int | None = None,
+               native: bool = False) -> Image:
     """Read an image as ``(H, W, 3)`` float32 R, G, B.
 
     Parameters
@@ -367,9 +452,14 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None,
         Refuse an image of more pixels (width x height) than this, from its header, before
         decoding it (:func:`pixel_limit`: default :data:`MAX_PIXELS_ENV` or
         :data:`DEFAULT_MAX_PIXELS`).
+    native
+        Keep 8- and 16-bit integer codes and half floats as they are in the file
+        (:data:`NATIVE_PIXEL_TYPES`; 3 or 6 bytes per RGB pixel instead of 12) rather than
+        float32; :func:`as_float32` of any part of them is what ``native=False`` gives.
+        Bayer mosaics are demosaiced to float32 either way.
 
-    Only the channels that hold R, G and B (or the mosaic) are decoded, as float32, so the
-    pixels of an RGB image are held once: 12 bytes per pixel.
+    Only the channels that hold R, G and B (or the mosaic) are decoded, as float32 (or at
+    their native depth), so the pixels of an RGB image are held once.
 
     Raises
     ------
@@ -389,15 +479,15 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None,
     shown = display_path(p)
     try:
         if shown == str(p):
-            return _read(p, layer, bayer, limit)
-        return _read_through_link(p, shown, layer, bayer, limit)
+            return _read(p, layer, bayer, limit, native)
+        return _read_through_link(p, shown, layer, bayer, limit, native)
     except UnicodeDecodeError:  # OpenImageIO passes on names and messages from the file
         raise InputFileError(f"{shown}: corrupt image (its header holds text that is not "
                              "UTF-8)") from None
 
 
 def _read_through_link(p: Path, shown: str, layer: str | None, bayer: str | None,
-                       limit: int) -> Image:
+                       limit: int, native: bool = False) -> Image:
     """:func:`_read` of a file whose name is not valid UTF-8 (OpenImageIO takes names as UTF-8
     text): through a symbolic link of a plain name in a temporary folder, the image's path and
     the messages naming the file itself."""
@@ -408,13 +498,39 @@ def _read_through_link(p: Path, shown: str, layer: str | None, bayer: str | None
         link = Path(folder) / f"image{suffix}"
         os.symlink(os.path.abspath(p), link)
         try:
-            image = _read(link, layer, bayer, limit)
+            image = _read(link, layer, bayer, limit, native)
         except InputFileError as exc:
             raise InputFileError(str(exc).replace(str(link), shown)) from None
     return replace(image, path=p)
 
 
-def _read(p: Path, layer: str | None, bayer: str | None, limit: int) -> Image:
+#: Pixels decoded at a time into the image's array (so that the decoder's own buffer stays
+#: small: a whole-image read holds the image twice).
+READ_BAND_PIXELS = 1 << 22
+
+
+def _read_scanlines(inp: Any, spec: Any, part: int, chbegin: int, chend: int, fmt: str
+                    ) -> np.ndarray | None:
+    """The channels ``chbegin .. chend - 1`` of a scanline image, a band of rows at a time,
+    into one ``(H, W, C)`` array of ``fmt``; None when a band cannot be read."""
+    width, height = int(spec.width), int(spec.height)
+    out: np.ndarray | None = None
+    step = max(1, READ_BAND_PIXELS // max(width, 1))
+    for y in range(0, height, step):
+        rows = min(step, height - y)
+        band = inp.read_scanlines(part, 0, spec.y + y, spec.y + y + rows, spec.z, chbegin,
+                                  chend, fmt)
+        if band is None:
+            return None
+        band = np.asarray(band)
+        if out is None:
+            out = np.empty((height, width, chend - chbegin), dtype=band.dtype)
+        out[y:y + rows] = band.reshape(rows, width, chend - chbegin)
+    return out
+
+
+def _read(p: Path, layer: str | None, bayer: str | None, limit: int,
+          native: bool = False) -> Image:
     """:func:`read_image` of a checked path."""
     import OpenImageIO as oiio
 
@@ -449,9 +565,15 @@ def _read(p: Path, layer: str | None, bayer: str | None, limit: int) -> Image:
                     f"({pixels_declared / 1e6:.1f} megapixels), more than the limit of "
                     f"{limit / 1e6:g} megapixels; raise it with --max-pixels N or "
                     f"{MAX_PIXELS_ENV}=N if this machine has the memory (an audit needs "
-                    "about 20 bytes per pixel, 60 for a Bayer mosaic)")
+                    "the decoded image plus about 1 byte per pixel: 4 for an 8-bit photo; 60 "
+                    "for a Bayer mosaic)")
             first, last = min(rgb.values()), max(rgb.values())
-            data = inp.read_image(part.index, 0, first, last + 1, "float")
+            keep = native and bayer is None and str(spec.format) in NATIVE_PIXEL_TYPES
+            fmt = str(spec.format) if keep else "float"
+            if spec.tile_width == 0 and int(spec.depth) <= 1:
+                data = _read_scanlines(inp, spec, part.index, first, last + 1, fmt)
+            else:  # tiled or volume images: whole
+                data = inp.read_image(part.index, 0, first, last + 1, fmt)
             err = _one_line(inp.geterror())
             if data is None or err:
                 raise InputFileError(f"{p}: truncated or corrupt image ({err or 'read failed'})")
@@ -461,7 +583,7 @@ def _read(p: Path, layer: str | None, bayer: str | None, limit: int) -> Image:
             chroma = spec.getattribute("chromaticities")
         finally:
             inp.close()
-    arr = np.asarray(data, dtype=np.float32)
+    arr = np.asarray(data) if keep else np.asarray(data, dtype=np.float32)
     if arr.ndim == 2:
         arr = arr[:, :, None]
     if arr.ndim == 4:  # deep / volume: take the first slice
@@ -564,5 +686,6 @@ def _finish(out: Any, written: bool, path: str | os.PathLike[str], kind: str) ->
 
 
 __all__ = ["BAYER_PATTERNS", "DEFAULT_MAX_PIXELS", "DEMOSAICING", "FLOAT_PIXEL_TYPES",
-           "MAX_PIXELS_ENV", "Image", "ImageInfo", "demosaic", "pixel_limit",
+           "MAX_PIXELS_ENV", "NATIVE_PIXEL_TYPES", "Image", "ImageInfo", "Recording",
+           "as_float32", "demosaic", "is_coded", "pixel_limit",
            "read_image", "write_exr", "write_png"]

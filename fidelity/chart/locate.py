@@ -19,7 +19,7 @@ follows perspective: a pixel belongs to the window of patch ``(c, r)`` when its 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -118,20 +118,131 @@ def apply_homography(h: np.ndarray, points: np.ndarray) -> np.ndarray:
     return out
 
 
+@dataclass(frozen=True, eq=False)
+class PatchWindow:
+    """The pixels of one patch's sampling window: those set in ``mask`` (``(h, w)`` bool) over
+    the box of rows ``y0 .. y0 + h - 1`` and columns ``x0 .. x0 + w - 1``, in row-major order.
+
+    Unpacks like the pair of row and column index arrays it stands for (``rows, cols =
+    window``), at one byte per pixel of the box instead of sixteen per pixel."""
+
+    y0: int
+    x0: int
+    mask: np.ndarray
+    count: int
+
+    def indices(self) -> tuple[np.ndarray, np.ndarray]:
+        """Row and column indices (int64) of the window's pixels, row-major."""
+        rows, cols = np.nonzero(self.mask)
+        return rows.astype(np.int64) + self.y0, cols.astype(np.int64) + self.x0
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        return iter(self.indices())
+
+    def __getitem__(self, index: int) -> np.ndarray:
+        return self.indices()[index]
+
+    def __len__(self) -> int:
+        return 2
+
+    def values(self, pixels: np.ndarray) -> np.ndarray:
+        """``(count, C)`` values of ``pixels`` (``(H, W, C)``, any dtype, not copied whole) in
+        the window, row-major: ``pixels[rows, cols]``."""
+        h, w = self.mask.shape
+        box = np.asarray(pixels)[self.y0:self.y0 + h, self.x0:self.x0 + w]
+        if self.count == h * w:  # the whole box (a chart square to the image)
+            return box.reshape(h * w, *box.shape[2:]).copy()
+        lengths = self.mask.sum(axis=1)
+        first = self.mask.argmax(axis=1)
+        last = w - 1 - self.mask[:, ::-1].argmax(axis=1)
+        rows = np.flatnonzero(lengths)
+        if np.array_equal(last[rows] - first[rows] + 1, lengths[rows]):  # one run per row
+            return np.concatenate([box[r, first[r]:first[r] + lengths[r]] for r in rows])
+        out: np.ndarray = box[self.mask]
+        return out
+
+
+#: Pixels either side of a window's edge, along a row, whose centres are mapped to the grid
+#: to decide whether they are in it (those farther in are, those farther out are not).
+EDGE_PIXELS = 2
+
+
+def _inside(h_inv: np.ndarray, xs: np.ndarray, ys: np.ndarray, centre: tuple[float, float],
+            half: float) -> np.ndarray:
+    """Whether pixel centres ``(xs, ys)`` map within ``half`` (+1e-9) of ``centre`` in grid
+    coordinates."""
+    uv = apply_homography(h_inv, np.stack([xs, ys], axis=-1).astype(np.float64))
+    out: np.ndarray = ((np.abs(uv[..., 0] - centre[0]) <= half + 1e-9)
+                       & (np.abs(uv[..., 1] - centre[1]) <= half + 1e-9))
+    return out
+
+
+def _window_mask(h_inv: np.ndarray, box: tuple[int, int, int, int], centre: tuple[float, float],
+                 half: float, quad: np.ndarray) -> np.ndarray:
+    """Which pixels of ``box`` (x0, y0, x1, y1, inclusive) map within ``half`` of ``centre`` in
+    grid coordinates: the pixels of the convex quadrilateral ``quad`` (the window's corners in
+    the image). Each row crosses it in one run of pixels; the pixels within
+    :data:`EDGE_PIXELS` of the run's ends are mapped to the grid to decide, the rest filled,
+    so that the work grows with the window's perimeter, not its area."""
+    x0, y0, x1, y1 = box
+    width = x1 - x0 + 1
+    ys = np.arange(y0, y1 + 1, dtype=np.float64)
+    # where each row's line crosses the quadrilateral's edges
+    ends = np.full((len(ys), 2), np.nan)
+    for (px, py), (qx, qy) in zip(quad, np.roll(quad, -1, axis=0), strict=True):
+        if py == qy:
+            continue
+        t = (ys - py) / (qy - py)
+        x = np.where((t >= 0) & (t <= 1), px + t * (qx - px), np.nan)
+        with np.errstate(invalid="ignore"):
+            ends[:, 0] = np.fmin(ends[:, 0], x)
+            ends[:, 1] = np.fmax(ends[:, 1], x)
+    test_rows: list[np.ndarray] = []
+    test_cols: list[np.ndarray] = []
+    crossed = np.isfinite(ends[:, 0])
+    for r in np.flatnonzero(~crossed):  # rows that miss it (by rounding): every pixel tested
+        test_rows.append(np.full(width, r))
+        test_cols.append(np.arange(width))
+    rows = np.flatnonzero(crossed)
+    lo = np.clip(np.floor(ends[rows, 0]).astype(np.int64) - x0 - EDGE_PIXELS, 0, width)
+    hi = np.clip(np.ceil(ends[rows, 1]).astype(np.int64) - x0 + EDGE_PIXELS + 1, 0, width)
+    keep = hi > lo
+    rows, lo, hi = rows[keep], lo[keep], hi[keep]
+    # the run's inside, filled: +1 where it starts, -1 where it stops, summed along the row
+    k = 2 * EDGE_PIXELS + 1
+    start, stop = lo + k, hi - k
+    wide = stop > start
+    steps = np.zeros((len(ys), width + 1), dtype=np.int8)
+    steps[rows[wide], start[wide]] = 1
+    steps[rows[wide], stop[wide]] = -1
+    mask = np.cumsum(steps, axis=1, dtype=np.int8)[:, :width] > 0
+    # the k pixels at each end of the run (all of a short run) are tested
+    span = np.arange(k)
+    cols = np.concatenate([lo[:, None] + span, hi[:, None] - k + span], axis=1)
+    cols = np.clip(cols, lo[:, None], hi[:, None] - 1)
+    test_rows.append(np.repeat(rows, 2 * k))
+    test_cols.append(cols.ravel())
+    if test_rows:
+        rr, cc = np.concatenate(test_rows), np.concatenate(test_cols)
+        mask[rr, cc] = _inside(h_inv, cc + x0, rr + y0, centre, half)
+    return mask
+
+
 @dataclass(frozen=True)
 class ChartLocation:
     """Where the chart's patches lie in an image.
 
     ``homography`` maps grid ``(u, v)`` to image ``(x, y)``; ``centres`` is ``(24, 2)`` image
-    ``(x, y)`` of the patch centres in row-major order; ``windows[k]`` is a tuple of row and
-    column index arrays of the pixels in patch ``k``'s sampling window; ``pitch_px`` is the
+    ``(x, y)`` of the patch centres in row-major order; ``windows[k]`` holds the pixels in patch
+    ``k``'s sampling window (a :class:`PatchWindow`, which unpacks as the row and column index
+    arrays); ``pitch_px`` is the
     smallest distance between neighbouring patch centres in pixels.
     """
 
     corners: np.ndarray
     homography: np.ndarray
     centres: np.ndarray
-    windows: tuple[tuple[np.ndarray, np.ndarray], ...]
+    windows: tuple[PatchWindow, ...]
     window: float
     pitch_px: float
     rows: int
@@ -145,7 +256,7 @@ class ChartLocation:
             "homography": self.homography.tolist(),
             "centres": np.round(self.centres, 3).tolist(),
             "window_pitch_fraction": self.window,
-            "window_pixels": [int(len(w[0])) for w in self.windows],
+            "window_pixels": [int(w.count) for w in self.windows],
             "pitch_px": round(self.pitch_px, 3),
         }
 
@@ -211,7 +322,7 @@ def locate_chart(
     if np.any(w <= 0):
         raise InvalidValueError("corners give a perspective in which the chart crosses the horizon")
     centres = apply_homography(h, grid)
-    windows: list[tuple[np.ndarray, np.ndarray]] = []
+    windows: list[PatchWindow] = []
     for k, (u0, v0) in enumerate(grid):
         quad = apply_homography(h, offsets + (u0, v0))
         if (quad[:, 0].min() < -0.5 or quad[:, 0].max() > width - 0.5
@@ -224,17 +335,15 @@ def locate_chart(
         x1 = min(int(np.ceil(quad[:, 0].max())), width - 1)
         y0 = max(int(np.floor(quad[:, 1].min())), 0)
         y1 = min(int(np.ceil(quad[:, 1].max())), height - 1)
-        yy, xx = np.mgrid[y0:y1 + 1, x0:x1 + 1]
-        uv = apply_homography(h_inv, np.stack([xx.ravel(), yy.ravel()], axis=-1).astype(float))
-        inside = (np.abs(uv[:, 0] - u0) <= half + 1e-9) & (np.abs(uv[:, 1] - v0) <= half + 1e-9)
-        windows.append((yy.ravel()[inside], xx.ravel()[inside]))
+        mask = _window_mask(h_inv, (x0, y0, x1, y1), (float(u0), float(v0)), half, quad)
+        windows.append(PatchWindow(y0, x0, mask, int(np.count_nonzero(mask))))
     c2 = centres.reshape(rows, cols, 2)
     steps = np.concatenate([
         np.linalg.norm(np.diff(c2, axis=1), axis=-1).ravel(),
         np.linalg.norm(np.diff(c2, axis=0), axis=-1).ravel(),
     ])
     pitch = float(steps.min())
-    counts = [len(wi[0]) for wi in windows]
+    counts = [wi.count for wi in windows]
     k_min = int(np.argmin(counts))
     if counts[k_min] < min_pixels:
         raise InvalidValueError(
@@ -250,7 +359,7 @@ def locate_chart(
 
 def window_pixels(pixels: np.ndarray, location: ChartLocation) -> list[np.ndarray]:
     """The ``(n_k, C)`` pixel values inside each patch's sampling window, row-major."""
-    return [pixels[rr, cc] for rr, cc in location.windows]
+    return [w.values(pixels) for w in location.windows]
 
 
 __all__ = [
@@ -258,6 +367,7 @@ __all__ = [
     "DEFAULT_WINDOW",
     "MIN_WINDOW_PIXELS",
     "ChartLocation",
+    "PatchWindow",
     "apply_homography",
     "grid_centres",
     "homography_from_points",

@@ -41,9 +41,10 @@ auditing.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -51,9 +52,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fidelity.chart.find import ChartChecks, FoundChart, check_corners, find_chart
-from fidelity.chart.image import ImageInfo
-from fidelity.chart.locate import DEFAULT_WINDOW, ChartLocation, locate_chart, window_pixels
-from fidelity.chart.uncertainty import UncertaintyBudget
+from fidelity.chart.image import Image, ImageInfo, as_float32, is_coded
+from fidelity.chart.locate import DEFAULT_WINDOW, ChartLocation, locate_chart
+from fidelity.chart.uncertainty import PatchSpread, UncertaintyBudget, patch_spread
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import DEFAULT_REFERENCE, Reference, load_reference
 from fidelity.colour.colorimetry import delta_e_2000, delta_e_2000_components, srgb_to_lab
@@ -229,7 +230,11 @@ class ChartStatistics:
     white-balance error, a colour cast); ``neutral_chroma`` its length. ``neutral_delta_l``:
     mean L* error of the neutral patches (exposure and tone). ``snr_db``: mean over the neutral
     patches of 20 log10(mean / standard deviation) of their encoded sRGB values, and
-    ``worst_snr_db`` the lowest; None when the noise is unknown or zero.
+    ``worst_snr_db`` the lowest, over the patches with noise above :data:`NOISE_FLOOR`; None
+    when the noise is unknown or below the floor. ``noise_free``: the noise is known and every
+    neutral patch's is below :data:`NOISE_FLOOR` (a noise-free render: report "no noise", not
+    the SNR of floating-point rounding). ``worst_patch`` / ``worst_patch_snr_db``: the patch of
+    the whole chart with the lowest SNR (:func:`patch_snr_db`), None when none has a finite one.
     """
 
     saturation_percent: float
@@ -238,13 +243,96 @@ class ChartStatistics:
     neutral_delta_l: float
     snr_db: float | None
     worst_snr_db: float | None
+    noise_free: bool = False
+    worst_patch: str | None = None
+    worst_patch_snr_db: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         """JSON form."""
         return {"saturation_percent": self.saturation_percent,
                 "neutral_ab": list(self.neutral_ab), "neutral_chroma": self.neutral_chroma,
                 "neutral_delta_l": self.neutral_delta_l, "snr_db": self.snr_db,
-                "worst_snr_db": self.worst_snr_db}
+                "worst_snr_db": self.worst_snr_db, "noise_free": self.noise_free,
+                "worst_patch": self.worst_patch,
+                "worst_patch_snr_db": self.worst_patch_snr_db}
+
+
+#: Standard deviation (encoded sRGB, 0..1) below which a patch counts as noise-free: the
+#: quantisation noise of a 16-bit encoding, 1 / (65535 sqrt(12)) (a uniform rounding error's
+#: standard deviation). A render without noise has a standard deviation of ~1e-16 (rounding),
+#: whose "SNR" of ~290 dB means nothing.
+NOISE_FLOOR: float = 1.0 / (65535.0 * math.sqrt(12.0))
+
+
+def patch_snr_db(m: ChartMeasurement) -> F64 | None:
+    """Signal-to-noise ratio of every patch, dB: ``20 log10(mean / standard deviation)`` of its
+    encoded sRGB values (means over the three channels), as Imatest's Colorcheck reports it.
+
+    ``+inf`` where the standard deviation is below :data:`NOISE_FLOOR` (no noise), NaN where the
+    patch has no signal (mean <= 0 with noise) or a value is not finite; None when the
+    measurement has no noise (an image without per-patch spread). Shape (n,).
+    """
+    if m.noise is None:
+        return None
+    mean = np.asarray(m.srgb, np.float64).reshape(len(m.patch_names), -1).mean(axis=1)
+    sd = np.asarray(m.noise, np.float64).reshape(len(m.patch_names), -1).mean(axis=1)
+    out = np.full(mean.shape, np.nan)
+    quiet = np.isfinite(sd) & (sd < NOISE_FLOOR)
+    ok = np.isfinite(sd) & np.isfinite(mean) & ~quiet & (mean > 0)
+    out[ok] = 20.0 * np.log10(mean[ok] / sd[ok])
+    out[quiet] = np.inf
+    return out
+
+
+@dataclass(frozen=True)
+class ToneFit:
+    """The neutral patches' tone curve fitted with a power law about mid grey.
+
+    ``Y_meas = 0.18 * 2**offset_ev * (Y_ref / 0.18)**gamma`` (CIE Y, white = 1): ``gamma`` is
+    the slope of log Y_meas against log Y_ref (1: the reference's tone, > 1: more contrast),
+    ``offset_ev`` the exposure error at 18 % grey in EV (positive: measured brighter),
+    ``rms_ev`` the root-mean-square residual in EV over the ``patches`` fitted (the neutral
+    patches with light in both).
+    """
+
+    gamma: float
+    offset_ev: float
+    rms_ev: float
+    patches: int
+
+    def predict(self, y_ref: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Measured Y the fit gives for reference Y ``y_ref`` (any shape, >= 0)."""
+        y = np.clip(np.asarray(y_ref, np.float64), 0.0, None)
+        return np.asarray(0.18 * 2.0 ** self.offset_ev * (y / 0.18) ** self.gamma, np.float64)
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON form."""
+        return {"gamma": self.gamma, "offset_ev": self.offset_ev, "rms_ev": self.rms_ev,
+                "patches": self.patches}
+
+
+def fit_tone(m: ChartMeasurement, neutral_indices: Sequence[int] | None = None
+             ) -> ToneFit | None:
+    """Least-squares fit of :class:`ToneFit` to the neutral patches (default
+    :func:`neutral_patches`) in log2 Y; None when fewer than two of them have light in both
+    the measurement and the reference, or all at one reference level."""
+    idx = list(neutral_patches(m) if neutral_indices is None else neutral_indices)
+    if len(idx) < 2:
+        return None
+    y_ref = cm.lab_to_xyz(np.asarray(m.reference_lab, np.float64)[idx])[:, 1]
+    y_meas = cm.lab_to_xyz(np.asarray(m.lab, np.float64)[idx])[:, 1]
+    white = float(cm.WHITEPOINT_D65_XYZ[1])
+    ok = (np.isfinite(y_ref) & np.isfinite(y_meas) & (y_ref > 0) & (y_meas > 0))
+    if int(ok.sum()) < 2:
+        return None
+    x = np.log2(y_ref[ok] / white / 0.18)
+    y = np.log2(y_meas[ok] / white / 0.18)
+    if float(np.ptp(x)) < 1e-9:
+        return None
+    gamma, offset = np.polyfit(x, y, 1)
+    resid = y - (gamma * x + offset)
+    return ToneFit(gamma=float(gamma), offset_ev=float(offset),
+                   rms_ev=float(np.sqrt(np.mean(resid ** 2))), patches=int(ok.sum()))
 
 
 def chart_statistics(m: ChartMeasurement) -> ChartStatistics:
@@ -257,18 +345,25 @@ def chart_statistics(m: ChartMeasurement) -> ChartStatistics:
     c_meas = np.hypot(m.lab[colour, 1], m.lab[colour, 2])
     c_ref = np.hypot(m.reference_lab[colour, 1], m.reference_lab[colour, 2])
     d_ab = (m.lab[neutral, 1:] - m.reference_lab[neutral, 1:]).mean(axis=0)
+    per_patch = patch_snr_db(m)
     snr: list[float] = []
-    if m.noise is not None:
-        for k in neutral:
-            sd = float(np.mean(m.noise[k]))
-            if sd > 0:
-                snr.append(20.0 * math.log10(float(np.mean(m.srgb[k])) / sd))
+    noise_free = False
+    worst: tuple[str, float] | None = None
+    if per_patch is not None:
+        snr = [float(per_patch[k]) for k in neutral if np.isfinite(per_patch[k])]
+        noise_free = bool(np.all(np.isposinf(per_patch[neutral])))
+        finite = np.flatnonzero(np.isfinite(per_patch))
+        if finite.size:
+            k_worst = int(finite[np.argmin(per_patch[finite])])
+            worst = (m.patch_names[k_worst], float(per_patch[k_worst]))
     return ChartStatistics(
         saturation_percent=float(100.0 * c_meas.mean() / c_ref.mean()),
         neutral_ab=(float(d_ab[0]), float(d_ab[1])), neutral_chroma=float(np.hypot(*d_ab)),
         neutral_delta_l=float((m.lab[neutral, 0] - m.reference_lab[neutral, 0]).mean()),
         snr_db=float(np.mean(snr)) if snr else None,
         worst_snr_db=float(np.min(snr)) if snr else None,
+        noise_free=noise_free, worst_patch=worst[0] if worst else None,
+        worst_patch_snr_db=worst[1] if worst else None,
     )
 
 
@@ -448,6 +543,8 @@ def _whole_image_counts(arr: np.ndarray, negatives: str) -> dict[str, int]:
     its masks take a few MB whatever the image's size."""
     rows = max(1, COUNT_BLOCK_PIXELS // max(arr.shape[1], 1))
     totals = {"nan": 0, "inf": 0, "negative": 0, "total": 0}
+    if is_coded(arr):  # integer codes: never NaN, Inf or negative
+        return totals
     for y in range(0, arr.shape[0], rows):
         block = arr[y:y + rows]
         lo, hi = float(block.min(initial=0.0)), float(block.max(initial=0.0))
@@ -457,6 +554,77 @@ def _whole_image_counts(arr: np.ndarray, negatives: str) -> dict[str, int]:
         for key in totals:
             totals[key] += counts[key]
     return totals
+
+
+@functools.lru_cache(maxsize=4)
+def _code_linear(dtype: str, encoding: str) -> np.ndarray:
+    """Linear value (float64) of every code of an unsigned integer ``dtype``, as the float
+    path computes it from the float32 value of the code (:func:`as_float32`)."""
+    codes = as_float32(np.arange(np.iinfo(dtype).max + 1, dtype=dtype)).astype(np.float64)
+    table: np.ndarray = codes if encoding == "linear" else cm.linearize_srgb(codes)
+    table.flags.writeable = False
+    return table
+
+
+def _patch_linear(vals: np.ndarray, encoding: str, negatives: str, to_srgb: np.ndarray,
+                  identity: bool) -> tuple[np.ndarray, dict[str, int]]:
+    """The valid pixels of one window's values ``(n, 3)`` (any dtype: integer codes are
+    looked up in :func:`_code_linear`) in linear sRGB, float64, and the bad-pixel counts."""
+    if is_coded(vals):  # integer codes: never NaN, Inf or negative
+        lin = _code_linear(vals.dtype.str, encoding)[vals]
+        counts = {"nan": 0, "inf": 0, "negative": 0, "total": 0}
+    else:
+        vals64 = vals.astype(np.float64)
+        bad, counts = _bad_counts(vals64, negatives)
+        good = vals64[~bad] if counts["total"] else vals64
+        lin = good if encoding == "linear" else cm.linearize_srgb(good)
+    if not identity:
+        lin = lin @ to_srgb.T
+    return lin, counts
+
+
+_NO_BAD = {"nan": 0, "inf": 0, "negative": 0, "total": 0}
+
+
+def _code_histogram(vals: np.ndarray) -> np.ndarray:
+    """``(3, codes)`` counts of each integer code per channel of ``(n, 3)`` values."""
+    levels = np.iinfo(vals.dtype).max + 1
+    return np.stack([np.bincount(vals[:, c], minlength=levels) for c in range(3)])
+
+
+def _histogram_noise(hist: np.ndarray, linear: np.ndarray, scale: float) -> np.ndarray:
+    """Standard deviation per channel of the encoded, exposed, clipped values of a patch of
+    integer codes from its histogram ``(3, codes)`` (``linear``: the linear value of each
+    code): ``sqrt(sum_i n_i (v_i - mean)^2 / n)``, as ``numpy.std`` of the pixels."""
+    encoded = np.clip(cm.delinearize_srgb(linear * scale), 0, 1)
+    n = hist.sum(axis=1)
+    mean = hist @ encoded / n
+    out: np.ndarray = np.sqrt(np.einsum("ci,ci->c", hist, (encoded[None, :] - mean[:, None])
+                                        ** 2) / n)
+    return out
+
+
+def _patch_noise(vals: np.ndarray, scale: float, encoding: str, negatives: str,
+                 to_srgb: np.ndarray, identity: bool) -> np.ndarray:
+    """Standard deviation per channel of one window's valid pixels, exposed by ``scale`` and
+    sRGB-encoded, clipped to [0, 1] (as a stored image holds them)."""
+    lin, _ = _patch_linear(vals, encoding, negatives, to_srgb, identity)
+    out: np.ndarray = np.clip(cm.delinearize_srgb(lin * scale), 0, 1).std(axis=0)
+    return out
+
+
+def _window_spread(vals: np.ndarray, linear: np.ndarray | None, encoding: str, negatives: str,
+                   to_srgb: np.ndarray, identity: bool, step: float | None) -> PatchSpread:
+    """The :class:`~fidelity.chart.uncertainty.PatchSpread` of one window's values ``vals``
+    ``(n, 3)``: ``linear`` its valid pixels in linear sRGB when already computed, the code
+    values (:func:`as_float32`) when the pixels are integer codes (``step``)."""
+    if linear is None:
+        linear, _ = _patch_linear(vals, encoding, negatives, to_srgb, identity)
+    codes = None
+    if step:
+        v = as_float32(vals).astype(np.float64)
+        codes = v if is_coded(vals) else v[~_bad_counts(v, negatives)[0]]
+    return patch_spread(linear, codes)
 
 
 def measure_pixels(
@@ -480,7 +648,9 @@ def measure_pixels(
     Parameters
     ----------
     pixels
-        ``(H, W, 3)`` values, linear or encoded sRGB (``encoding``).
+        ``(H, W, 3)`` values, linear or encoded sRGB (``encoding``): 8- or 16-bit unsigned
+        codes stand for ``code / (2**bits - 1)`` (:func:`fidelity.chart.image.as_float32`; an
+        image read at its native depth), other values for themselves.
     corners
         Centres of the dark skin, bluish green, black and white patches, ``(4, 2)`` image
         ``(x, y)`` or ``"X1,Y1,...,X4,Y4"``; ``None``: find the chart
@@ -535,35 +705,42 @@ def measure_pixels(
                        patch_names=ref.patch_names)
     if found is None and (ref.rows, ref.cols) == (4, 6):
         checks = check_corners(arr, loc.corners, encoding=encoding)
-    samples = window_pixels(arr, loc)
-    n = len(samples)
+    n = len(loc.windows)
     means = np.empty((n, 3))
     valid_counts: list[int] = []
     per_patch: dict[str, int] = {}
     totals = {"nan": 0, "inf": 0, "negative": 0, "total": 0}
-    linear_samples: list[np.ndarray] = []
-    for k, vals in enumerate(samples):
-        vals64 = np.asarray(vals, dtype=np.float64)
-        bad, counts = _bad_counts(vals64, negatives)
+    identity = bool(np.array_equal(to_srgb, np.eye(3)))
+    coded = is_coded(arr) and identity
+    histograms: list[np.ndarray] = []
+    spreads: list[PatchSpread] = []
+    step = _CODE_STEPS.get(str(image.pixel_type if image is not None else arr.dtype).lower())
+    for k, win in enumerate(loc.windows):
+        vals = win.values(arr)
+        if coded:  # integer codes: a histogram per channel holds all the patch has to say
+            histograms.append(_code_histogram(vals))
+            counts, valid = dict(_NO_BAD), len(vals)
+        else:
+            lin, counts = _patch_linear(vals, encoding, negatives, to_srgb, identity)
+            valid = len(lin)
+        if uncertainty:  # one window's spread at a time: never every window's pixels at once
+            spreads.append(_window_spread(vals, lin if not coded else None, encoding,
+                                          negatives, to_srgb, identity, step))
         for key in totals:
             totals[key] += counts[key]
         if counts["total"]:
             per_patch[ref.patch_names[k]] = counts["total"]
-        good = vals64[~bad]
-        need = max(MIN_VALID_PIXELS, int(math.ceil(min_valid_fraction * len(vals64))))
-        if len(good) < need:
+        need = max(MIN_VALID_PIXELS, int(math.ceil(min_valid_fraction * len(vals))))
+        if valid < need:
             negative = (f", {counts['negative']} negative" if negatives == "exclude" else "")
             raise InvalidValueError(
-                f"patch {ref.patch_names[k]!r}: only {len(good)} of {len(vals64)} pixels are "
+                f"patch {ref.patch_names[k]!r}: only {valid} of {len(vals)} pixels are "
                 f"valid ({counts['nan']} NaN, {counts['inf']} Inf{negative}); need at least "
                 f"{need}"
             )
-        lin = good if encoding == "linear" else cm.linearize_srgb(good)
-        if not np.array_equal(to_srgb, np.eye(3)):
-            lin = lin @ to_srgb.T
-        linear_samples.append(lin)
-        means[k] = lin.mean(axis=0)
-        valid_counts.append(len(good))
+        means[k] = (histograms[-1] @ _code_linear(arr.dtype.str, encoding) / valid if coded
+                    else lin.mean(axis=0))
+        valid_counts.append(valid)
     if mode == "auto":
         ev = exposure_from_neutrals(means, ref.lab, ref.neutral_indices, ref.patch_names)
     else:
@@ -580,8 +757,12 @@ def measure_pixels(
     srgb = np.clip(srgb_unclipped, 0.0, 1.0)
     clipped = tuple(ref.patch_names[k] for k in range(n)
                     if np.any(np.abs(srgb_unclipped[k] - srgb[k]) > 1e-12))
-    noise = np.array([np.clip(cm.delinearize_srgb(s * scale), 0, 1).std(axis=0)
-                      for s in linear_samples])
+    if coded:
+        noise = np.array([_histogram_noise(hist, _code_linear(arr.dtype.str, encoding), scale)
+                          for hist in histograms])
+    else:
+        noise = np.array([_patch_noise(win.values(arr), scale, encoding, negatives, to_srgb,
+                                       identity) for win in loc.windows])
     whole = _whole_image_counts(arr, negatives)
     rule = ("a pixel with NaN, +-Inf or a negative value in any channel is excluded"
             if negatives == "exclude" else
@@ -595,10 +776,9 @@ def measure_pixels(
     budget = None
     if uncertainty:
         budget = image_uncertainty(
-            arr, loc, linear_samples, means, ref, measurement.mean_delta_e,
+            arr, loc, spreads, means, ref, measurement.mean_delta_e,
             exposure_ev=None if mode == "auto" else ev, fitted_ev=ev, encoding=encoding,
-            negatives=negatives, to_srgb=to_srgb, found=found,
-            pixel_type=image.pixel_type if image is not None else str(arr.dtype))
+            negatives=negatives, to_srgb=to_srgb, found=found, step=step)
     return ImageMeasurement(
         measurement=measurement, exposure_ev=ev, exposure_mode=mode, encoding=encoding,
         bad_pixels=bad_pixels, valid_pixels=tuple(valid_counts), clipped_patches=clipped,
@@ -611,6 +791,11 @@ def measure_pixels(
 #: Code steps of integer pixel types (pixels read as [0, 1]).
 _CODE_STEPS = {"uint8": 1.0 / 255.0, "int8": 1.0 / 127.0, "uint16": 1.0 / 65535.0,
                "int16": 1.0 / 32767.0}
+
+
+#: Candidate pixels beyond which the placement component re-measures the windows on a regular
+#: lattice of them (about 110 MB while its draws run).
+PLACEMENT_CANDIDATES = 2_000_000
 
 
 def _window_remeasurer(pixels: np.ndarray, location: ChartLocation, sigma: float,
@@ -626,14 +811,22 @@ def _window_remeasurer(pixels: np.ndarray, location: ChartLocation, sigma: float
     rows, cols = location.rows, location.cols
     height, width = pixels.shape[:2]
     grow = int(math.ceil(4.0 * sigma)) + 2
-    xy, values, owner = [], [], []
-    for k, (yy, xx) in enumerate(location.windows):
-        if len(yy) == 0:
+    boxes = []
+    for k, win in enumerate(location.windows):
+        if win.count == 0:
             continue
-        y0, y1 = max(int(yy.min()) - grow, 0), min(int(yy.max()) + grow, height - 1)
-        x0, x1 = max(int(xx.min()) - grow, 0), min(int(xx.max()) + grow, width - 1)
-        gy, gx = np.mgrid[y0:y1 + 1, x0:x1 + 1]
-        v = np.asarray(pixels[y0:y1 + 1, x0:x1 + 1], np.float64).reshape(-1, 3)
+        h, w = win.mask.shape
+        boxes.append((k, max(win.y0 - grow, 0), min(win.y0 + h - 1 + grow, height - 1),
+                      max(win.x0 - grow, 0), min(win.x0 + w - 1 + grow, width - 1)))
+    total = sum((y1 - y0 + 1) * (x1 - x0 + 1) for _, y0, y1, x0, x1 in boxes)
+    # every candidate pixel costs about 56 bytes while the draws run: above
+    # PLACEMENT_CANDIDATES, a regular lattice of them (the same for every draw) stands for all
+    stride = max(1, math.ceil(math.sqrt(total / PLACEMENT_CANDIDATES)))
+    xy, values, owner = [], [], []
+    for k, y0, y1, x0, x1 in boxes:
+        gy, gx = np.mgrid[y0:y1 + 1:stride, x0:x1 + 1:stride]
+        v = as_float32(pixels[y0:y1 + 1:stride, x0:x1 + 1:stride]).astype(np.float64)
+        v = v.reshape(-1, 3)
         keep = ~_bad_counts(v, negatives)[0]
         xy.append(np.stack([gx.ravel(), gy.ravel()], axis=-1)[keep].astype(np.float64))
         values.append(linear(v[keep]))
@@ -665,36 +858,38 @@ def _window_remeasurer(pixels: np.ndarray, location: ChartLocation, sigma: float
 
 
 def image_uncertainty(
-    pixels: np.ndarray, location: ChartLocation, linear_samples: Sequence[np.ndarray],
+    pixels: np.ndarray, location: ChartLocation, spreads: Sequence[PatchSpread],
     linear_means: np.ndarray, reference: Reference, value: float, *,
     exposure_ev: float | None, fitted_ev: float, encoding: str, negatives: str,
-    to_srgb: np.ndarray, found: FoundChart | None, pixel_type: str,
+    to_srgb: np.ndarray, found: FoundChart | None, step: float | None,
 ) -> UncertaintyBudget:
     """The uncertainty budget of an audited chart's ΔE (:mod:`fidelity.chart.uncertainty`):
-    pixel noise, rounding of integer codes, placement of the corners and the exposure
-    normalisation (``exposure_ev`` None: auto, fitted at ``fitted_ev``)."""
+    pixel noise and rounding of integer codes (of ``step``, None for float pixels) from each
+    window's :class:`~fidelity.chart.uncertainty.PatchSpread`, placement of the corners and
+    the exposure normalisation (``exposure_ev`` None: auto, fitted at ``fitted_ev``)."""
     from fidelity.chart import uncertainty as unc
 
     ref_lab = np.asarray(reference.lab, np.float64)
     neutral = reference.neutral_indices
     f = unc.linear_chart_function(ref_lab, neutral, exposure_ev)
-    covs, notes = unc.patch_covariances(linear_samples, patch_names=reference.patch_names)
-    noise, _ = unc.noise_component(linear_samples, linear_means, f, covariances=covs)
+    covs, notes = unc.spread_covariances(spreads, patch_names=reference.patch_names)
+    noise, _ = unc.noise_component((), linear_means, f, covariances=covs)
     identity = np.array_equal(to_srgb, np.eye(3))
 
     def to_linear(v: np.ndarray) -> np.ndarray:
         lin = v if encoding == "linear" else cm.linearize_srgb(v)
         return lin if identity else lin @ to_srgb.T
 
-    step = _CODE_STEPS.get(str(pixel_type).lower())
-    codes = [np.asarray(s, np.float64)[~_bad_counts(np.asarray(s, np.float64), negatives)[0]]
-             for s in window_pixels(pixels, location)] if step else None
     to_measured = None
-    if step and codes is not None:
+    stuck = None
+    if step:
+        code_mean = np.array([s.code_mean if s.code_mean is not None else np.zeros(3)
+                              for s in spreads])
+        stuck = np.array([s.code_std < step if s.code_std is not None and s.count else
+                          np.ones(3, bool) for s in spreads])
         if encoding == "srgb":
-            m = np.array([c.mean(axis=0) if len(c) else np.zeros(3) for c in codes])
             h = step / 2
-            slope = (cm.linearize_srgb(m + h) - cm.linearize_srgb(m - h)) / (2 * h)
+            slope = (cm.linearize_srgb(code_mean + h) - cm.linearize_srgb(code_mean - h)) / (2 * h)
         else:
             slope = np.ones_like(linear_means)
 
@@ -702,7 +897,7 @@ def image_uncertainty(
             lin = e * slope[None]
             return lin if identity else lin @ to_srgb.T
 
-    rounding = unc.rounding_component(linear_samples, linear_means, f, step, encoded=codes,
+    rounding = unc.rounding_component((), linear_means, f, step, stuck=stuck,
                                       to_measured=to_measured)
 
     if found is not None and math.isfinite(found.residual_px):
@@ -759,6 +954,11 @@ class ReadOptions:
     max_pixels
         Refuse a larger image (width x height) before decoding it; None:
         :func:`fidelity.chart.image.pixel_limit`.
+    topic, frame, time
+        The input is a robot recording (ROS 1 bag, ROS 2 bag, MCAP file:
+        :mod:`fidelity.chart.recording`): the image ``topic`` (None: its only image topic),
+        the message's index on it (``frame``, negative from the end) or the time nearest to
+        ``time`` seconds after the recording's first message; neither: the first message.
     """
 
     layer: str | None = None
@@ -768,12 +968,22 @@ class ReadOptions:
     colourspace: str | None = None
     bayer: str | None = None
     max_pixels: int | None = None
+    topic: str | None = None
+    frame: int | None = None
+    time: float | None = None
 
     def given(self) -> list[str]:
         """The options set away from their defaults that describe the pixels of an image
-        (``layer``, ``encoding``, ``exposure``, ``bayer``, ``colourspace``), by name."""
-        return [name for name in ("layer", "encoding", "exposure", "bayer", "colourspace")
+        (``layer``, ``encoding``, ``exposure``, ``bayer``, ``colourspace``, ``topic``,
+        ``frame``, ``time``), by name."""
+        return [name for name in ("layer", "encoding", "exposure", "bayer", "colourspace",
+                                  "topic", "frame", "time")
                 if getattr(self, name) is not None]
+
+    def names_message(self) -> bool:
+        """Whether these options name a message of a recording (``topic``, ``frame`` or
+        ``time`` given)."""
+        return any(v is not None for v in (self.topic, self.frame, self.time))
 
 
 #: Every image-reading option at its default.
@@ -789,25 +999,92 @@ def measure_image(
     illuminant: str = "D65",
     window: float = DEFAULT_WINDOW,
     detection: str = "cascade",
+    inspect_image: Callable[[Image], object] | None = None,
 ) -> ImageMeasurement:
     """Read an image (:func:`fidelity.chart.image.read_image`, as ``read`` says:
-    :class:`ReadOptions`) and audit its chart (:func:`measure_pixels`). Errors name the
-    file."""
-    from fidelity.chart.image import read_image
+    :class:`ReadOptions`; an image file at its native depth) and audit its chart
+    (:func:`measure_pixels`). Errors name the file. ``inspect_image`` is called with the image
+    read once its chart is measured, so that a caller can look at more of it without reading it
+    again (the audit's banding check)."""
     from fidelity.errors import FidelityError
-    from fidelity.fileio import file_sha256
 
-    img = read_image(path, layer=read.layer, bayer=read.bayer, max_pixels=read.max_pixels)
+    img, sha256 = read_input(path, read, native=True)
     enc = read.encoding or img.encoding
-    info = img.info(sha256=file_sha256(img.path), encoding=enc)
+    info = img.info(sha256=sha256, encoding=enc)
     try:
-        return measure_pixels(img.pixels, corners, encoding=enc, exposure=read.exposure,
-                              reference=reference, illuminant=illuminant, window=window,
-                              image=info, detection=detection, negatives=read.negatives,
-                              colourspace=(read.colourspace if read.colourspace is not None
-                                           else img.chromaticities or "sRGB"))
+        result = measure_pixels(img.pixels, corners, encoding=enc, exposure=read.exposure,
+                                reference=reference, illuminant=illuminant, window=window,
+                                image=info, detection=detection, negatives=read.negatives,
+                                colourspace=(read.colourspace if read.colourspace is not None
+                                             else img.chromaticities or "sRGB"))
     except FidelityError as exc:
         raise type(exc)(f"{img.path}: {exc}") from None
+    if inspect_image is not None:
+        inspect_image(img)
+    return result
+
+def read_input(path: str | os.PathLike[str], read: ReadOptions = DEFAULT_READ, *,
+               native: bool = False) -> tuple[Image, str]:
+    """Read an image file (:func:`fidelity.chart.image.read_image`; ``native``: 8/16-bit codes
+    and half floats kept as they are) or, for a recording (a ``.bag``, ``.mcap`` or ``.db3``
+    file, a folder, or ``topic``/``frame``/``time`` given), the message ``read`` names
+    (:func:`fidelity.chart.recording.read_frame`). Returns the image and a sha256: the file's,
+    or the message's serialised bytes'."""
+    image, sha256 = _read_input(path, read, digest=True, native=native)
+    assert sha256 is not None
+    return image, sha256
+
+
+def reads_for(paths: Sequence[str | os.PathLike[str]], read: ReadOptions
+              ) -> list[ReadOptions]:
+    """How each of several inputs is read: ``read``'s recording options (``topic``, ``frame``,
+    ``time``) go to the inputs that are recordings by their form (a folder, a ``.bag``,
+    ``.mcap`` or ``.db3`` file: :func:`fidelity.chart.recording.is_recording_path`), the other
+    options to all; when none looks like a recording, all get them (and the reader says which
+    input is not one)."""
+    from dataclasses import replace
+
+    from fidelity.chart.recording import is_recording_path
+
+    if not read.names_message():
+        return [read for _ in paths]
+    plain = replace(read, topic=None, frame=None, time=None)
+    is_rec = [is_recording_path(p) for p in paths]
+    if not any(is_rec):
+        return [read for _ in paths]
+    return [read if r else plain for r in is_rec]
+
+
+def _read_input(path: str | os.PathLike[str], read: ReadOptions, *, digest: bool,
+                native: bool = False) -> tuple[Image, str | None]:
+    from fidelity.chart import recording
+
+    if read.names_message() or recording.is_recording_path(path):
+        if read.layer is not None:
+            raise InvalidValueError(f"{path}: --layer names an EXR layer; a recording has none")
+        return recording.read_frame(
+            path, recording.Choice(read.topic, read.frame, read.time), bayer=read.bayer,
+            max_pixels=read.max_pixels)
+    from fidelity.chart.image import read_image
+    from fidelity.fileio import file_sha256
+
+    img = read_image(path, layer=read.layer, bayer=read.bayer, max_pixels=read.max_pixels,
+                     native=native)
+    return img, (file_sha256(img.path) if digest else None)
+
+
+def read_again(info: ImageInfo, max_pixels: int | None = None) -> Image:
+    """The image an audit described by ``info`` read again as it was read (the same file, layer
+    and Bayer pattern, or the same message of the same recording), for a report that shows or
+    checks its pixels."""
+    rec = info.recording
+    if rec is not None:
+        again = ReadOptions(bayer=info.bayer, max_pixels=max_pixels, topic=rec.topic,
+                            frame=rec.frame)
+    else:
+        again = ReadOptions(layer=info.layer, bayer=info.bayer, max_pixels=max_pixels)
+    return _read_input(info.path, again, digest=False)[0]
+
 
 __all__ = [
     "ENCODINGS",
@@ -820,11 +1097,15 @@ __all__ = [
     "MIN_VALID_PIXELS",
     "NEGATIVE_RULES",
     "ChartMeasurement",
+    "NOISE_FLOOR",
     "ChartStatistics",
+    "ToneFit",
     "NEUTRAL_CHROMA",
     "ImageMeasurement",
     "chart_delta_e",
     "chart_statistics",
+    "fit_tone",
+    "patch_snr_db",
     "neutral_patches",
     "exposure_from_neutrals",
     "luminance_linear_srgb",
@@ -832,4 +1113,7 @@ __all__ = [
     "measure_image",
     "measure_pixels",
     "image_uncertainty",
+    "read_again",
+    "read_input",
+    "reads_for",
 ]

@@ -227,39 +227,90 @@ def mean_covariance(pixels: F64, trim: float = 0.0) -> F64:
     return cov / (1.0 - 2.0 * trim) ** 2 if trim > 0 else cov
 
 
+@dataclass(frozen=True)
+class PatchSpread:
+    """What the noise and rounding components need of one patch window's valid pixels,
+    without the pixels (so that an audit never holds every window at once).
+
+    ``count`` pixels; ``covariance`` ``(3, 3)``: their sample covariance (ddof 1) in the fit's
+    linear domain, zero for fewer than two pixels; ``flat`` ``(3,)``: channels whose pixels are
+    all equal (exactly no noise); ``code_mean`` / ``code_std`` ``(3,)``: mean and standard
+    deviation of the integer codes' values (``code / (2**bits - 1)``), None for float pixels.
+    """
+
+    count: int
+    covariance: F64
+    flat: NDArray[np.bool_]
+    code_mean: F64 | None = None
+    code_std: F64 | None = None
+
+
+def patch_spread(linear: F64, codes: F64 | None = None) -> PatchSpread:
+    """The :class:`PatchSpread` of one window: ``linear`` ``(n, 3)`` valid pixels in the fit's
+    domain, ``codes`` ``(n, 3)`` the same pixels' code values (integer images only)."""
+    x = np.asarray(linear, np.float64).reshape(-1, 3)
+    n = x.shape[0]
+    cov = (np.atleast_2d(np.cov(x, rowvar=False, ddof=1)) if n >= 2 else np.zeros((3, 3)))
+    flat = (np.ptp(x, axis=0) == 0) if n else np.ones(3, bool)
+    if codes is None:
+        return PatchSpread(n, cov, flat)
+    c = np.asarray(codes, np.float64).reshape(-1, 3)
+    if not len(c):
+        return PatchSpread(n, cov, flat, np.zeros(3), np.zeros(3))
+    return PatchSpread(n, cov, flat, c.mean(axis=0), c.std(axis=0))
+
+
 def patch_covariances(samples: Sequence[F64], *, trim: float = 0.0,
                       patch_names: Sequence[str] | None = None) -> tuple[F64, tuple[str, ...]]:
     """The covariance ``(n, 3, 3)`` of each patch mean from its window's ``samples``
     ``(n_k, 3)`` (:func:`mean_covariance`; a channel of identical pixels has none), and the
-    notes on patches with fewer than :data:`MIN_NOISE_PIXELS` pixels, whose covariance is taken
-    as the largest per-pixel covariance of the other patches over their own count (none such:
-    a rectangular distribution over [0, 1] per channel)."""
-    n = len(samples)
+    notes on patches with fewer than :data:`MIN_NOISE_PIXELS` pixels (see
+    :func:`spread_covariances`)."""
+    if trim == 0:
+        return spread_covariances([patch_spread(s) for s in samples], patch_names=patch_names)
+    per_pixel = []
+    for s in samples:
+        s = np.asarray(s, np.float64)
+        if s.shape[0] < MIN_NOISE_PIXELS:
+            per_pixel.append(PatchSpread(s.shape[0], np.zeros((3, 3)), np.ones(3, bool)))
+            continue
+        flat = np.ptp(s, axis=0) == 0
+        per_pixel.append(PatchSpread(s.shape[0], mean_covariance(s, trim) * s.shape[0], flat))
+    return spread_covariances(per_pixel, patch_names=patch_names)
+
+
+def spread_covariances(spreads: Sequence[PatchSpread], *,
+                       patch_names: Sequence[str] | None = None
+                       ) -> tuple[F64, tuple[str, ...]]:
+    """The covariance ``(n, 3, 3)`` of each patch mean, ``covariance / count`` of its
+    :class:`PatchSpread` (a flat channel has none), and the notes on patches with fewer than
+    :data:`MIN_NOISE_PIXELS` pixels, whose covariance is taken as the largest per-pixel
+    covariance of the other patches over their own count (none such: a rectangular
+    distribution over [0, 1] per channel)."""
+    n = len(spreads)
     names = list(patch_names) if patch_names is not None else [f"patch {k + 1}" for k in range(n)]
     covs = np.zeros((n, 3, 3))
     per_pixel = np.zeros((n, 3, 3))
     small: list[int] = []
-    for k, s in enumerate(samples):
-        s = np.asarray(s, np.float64)
-        if s.shape[0] < MIN_NOISE_PIXELS:
+    for k, sp in enumerate(spreads):
+        if sp.count < MIN_NOISE_PIXELS:
             small.append(k)
             continue
-        flat = np.ptp(s, axis=0) == 0  # identical pixels: exactly no noise
-        covs[k] = mean_covariance(s, trim)
-        covs[k][flat, :] = 0.0
-        covs[k][:, flat] = 0.0
-        per_pixel[k] = covs[k] * s.shape[0]
+        per_pixel[k] = sp.covariance
+        per_pixel[k][sp.flat, :] = 0.0
+        per_pixel[k][:, sp.flat] = 0.0
+        covs[k] = per_pixel[k] / sp.count
     notes: list[str] = []
     if small:
         others = [k for k in range(n) if k not in small]
         if others:
             worst = max(others, key=lambda j: float(np.trace(per_pixel[j])))
             for k in small:
-                covs[k] = per_pixel[worst] / max(len(samples[k]), 1)
+                covs[k] = per_pixel[worst] / max(spreads[k].count, 1)
             how = f"the largest per-pixel noise of the other patches ({names[worst]})"
         else:
             for k in small:
-                covs[k] = np.eye(3) / 12.0 / max(len(samples[k]), 1)
+                covs[k] = np.eye(3) / 12.0 / max(spreads[k].count, 1)
             how = "a rectangular distribution over [0, 1] per channel"
         notes.append("pixel noise not estimable from fewer than "
                      f"{MIN_NOISE_PIXELS} valid pixels in " + ", ".join(names[k] for k in small)
@@ -302,20 +353,24 @@ def noise_component(samples: Sequence[F64], means: F64, f: ChartFunction, *,
 def rounding_component(samples: Sequence[F64], means: F64, f: ChartFunction, step: float | None,
                        *, encoded: Sequence[F64] | None = None,
                        to_measured: Callable[[F64], F64] | None = None,
+                       stuck: NDArray[np.bool_] | None = None,
                        rng: np.random.Generator | None = None, draws: int = DRAWS,
                        ) -> UncertaintyComponent:
     """The ``rounding`` component: each patch channel whose pixel codes vary by less than one
     ``step`` gets a rectangular error over ``±step/2`` on its code. ``encoded``: the pixels in
     the coded domain (default ``samples``); ``to_measured`` maps a code-domain error of the
-    patch means to the domain of ``means`` (a derivative; default identity). ``step`` None: no
-    integer codes (float pixels), zero."""
+    patch means to the domain of ``means`` (a derivative; default identity); ``stuck``
+    ``(n, 3)``: which patch channels are not dithered, when known without the pixels
+    (:attr:`PatchSpread.code_std` ``< step``). ``step`` None: no integer codes (float
+    pixels), zero."""
     if not step:
         return UncertaintyComponent("rounding", 0.0, "B",
                                     "floating-point pixels: no rounding to integer codes")
     rng = rng if rng is not None else np.random.default_rng(SEED + 1)
-    codes = encoded if encoded is not None else samples
-    stuck = np.array([np.asarray(c, np.float64).std(axis=0) < step if len(c) else
-                      np.ones(3, bool) for c in codes])
+    if stuck is None:
+        codes = encoded if encoded is not None else samples
+        stuck = np.array([np.asarray(c, np.float64).std(axis=0) < step if len(c) else
+                          np.ones(3, bool) for c in codes])
     e = rng.uniform(-step / 2, step / 2, (draws, *stuck.shape)) * stuck[None]
     if to_measured is not None:
         e = to_measured(e)
@@ -397,6 +452,7 @@ __all__ = [
     "SEED",
     "UNREFINED_PLACEMENT_PX",
     "ChartFunction",
+    "PatchSpread",
     "UncertaintyBudget",
     "UncertaintyComponent",
     "exposure_component",
@@ -405,8 +461,10 @@ __all__ = [
     "mean_covariance",
     "noise_component",
     "patch_covariances",
+    "patch_spread",
     "placement_component",
     "rounding_component",
+    "spread_covariances",
     "srgb_chart_function",
     "uncertain_text",
 ]

@@ -55,6 +55,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
                 "resume."),
     "evaluate": ("fidelity.cli.evaluate:evaluate",
                  "Run detectors on a COCO image folder and print COCO box AP."),
+    "fit": ("fidelity.cli.fit:fit",
+            "Fit the correction from the simulator's chart onto the real camera's, as a 3D "
+            "LUT."),
     "gate": ("fidelity.cli.gate:gate",
              "Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 input error, 3 bug, 4 "
              "undecided (--decision guarded)."),
@@ -65,6 +68,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "render": ("fidelity.cli.render:render",
                "Render the spectral Macbeth chart through a camera model and measure ΔE00 per "
                "patch."),
+    "scene": ("fidelity.cli.scene:scene",
+              "Export the chart scene for a simulator: glTF, OpenUSD or Mitsuba 3, with a "
+              "manifest."),
     "sweep": ("fidelity.cli.sweep:sweep",
               "Run (or resume) the COCO sweep; one line per finished cell on stderr ([k/N] "
               "cells)."),

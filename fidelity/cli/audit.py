@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from fidelity.cli.options import (
-    PATH,
+    IMAGE_PATH,
     STDOUT,
     bound_option,
     common_options,
@@ -22,9 +24,12 @@ from fidelity.cli.options import (
 from fidelity.fileio import display_path
 from fidelity.prediction.table import SIZES
 
+if TYPE_CHECKING:
+    from fidelity.chart.measure import ReadOptions
+
 
 @click.command()
-@click.argument("image", type=PATH)
+@click.argument("image", type=IMAGE_PATH)
 @click.option("--corners", default=None,
               help="X1,Y1,X2,Y2,X3,Y3,X4,Y4: image centres of the dark skin, bluish green, black "
                    "and white patches (the chart's top-left, top-right, bottom-right, "
@@ -39,20 +44,20 @@ from fidelity.prediction.table import SIZES
 @click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
               help="Detector size class for the predicted loss.")
 @click.option("--table", default=None, help="Prediction table (name or JSON path).")
-@click.option("--json", "json_path", type=click.Path(path_type=Path),
-              help="Write the JSON report here (a folder: IMAGE-NAME.json in it; '-': "
-                   "standard output).")
-@click.option("--html", "html_path", type=click.Path(path_type=Path),
-              help="Write the HTML report here (a folder: IMAGE-NAME.html in it).")
+@click.option("--json", "json_path", type=click.Path(),
+              help="Write the JSON report here (a folder, existing or written with a "
+                   "trailing /: IMAGE-NAME.json in it; '-': standard output).")
+@click.option("--html", "html_path", type=click.Path(),
+              help="Write the HTML report here (a folder, existing or written with a "
+                   "trailing /: IMAGE-NAME.html in it).")
 @max_pixels_option
 @bound_option
 @evidence_option
 @measure_options
 @common_options
-def audit(image: Path, corners: str | None, encoding: str | None, exposure: str | None,
-          layer: str | None, bayer: str | None, colourspace: str | None, negatives: str,
+def audit(image: Path, corners: str | None, read: ReadOptions,
           reference: str, illuminant: str, size: str, table: str | None,
-          json_path: Path | None, html_path: Path | None, max_pixels: int | None,
+          json_path: str | None, html_path: str | None, max_pixels: int | None,
           bound: str, measure: bool, images: str | None, annotations: str | None,
           models: str | None, limit: int | None, evidence_path: Path | None) -> None:
     """Measure the chart in IMAGE: ΔE00 per patch, mean and max, exposure, bad pixels.
@@ -61,27 +66,34 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
     fidelity audit render.exr --json audit.json
     fidelity audit photo.jpg --corners 102,88,610,95,604,420,98,414
     fidelity audit render.png --measure      # + the loss measured on COCO
+    fidelity audit drive.bag --topic /camera/image_raw --time 12.5
+
+    IMAGE is an image file or a robot recording (ROS 1 bag, ROS 2 bag folder or its .db3 /
+    .mcap file, MCAP file) with --topic and --frame or --time.
     """
-    from fidelity.chart.measure import ReadOptions
+    from dataclasses import replace
+
     from fidelity.check import audit_image
     from fidelity.fileio import check_outputs
     from fidelity.records import ImageSource
     from fidelity.report.chart import write_chart_report
     from fidelity.report.terminal import summary_lines
 
-    # an existing folder gets IMAGE-NAME.json / .html, as in `fidelity gate`
+    # an existing folder, or one written with a trailing separator, gets IMAGE-NAME.json /
+    # .html, as in `fidelity gate`
     to_stdout = json_path is not None and str(json_path) == STDOUT
-    (json_path,) = report_paths((image,), None if to_stdout else json_path, ".json")
-    (html_path,) = report_paths((image,), html_path, ".html")
-    check_outputs({"--json": json_path, "--html": html_path, "--evidence": evidence_path},
+    (json_file,) = report_paths((image,), None if to_stdout or json_path is None
+                                else Path(json_path), ".json", folder=_folder(json_path))
+    (html_file,) = report_paths((image,), None if html_path is None else Path(html_path),
+                                ".html", folder=_folder(html_path))
+    check_outputs({"--json": json_file, "--html": html_file, "--evidence": evidence_path},
                   {"IMAGE": image, "--table": table, "--reference": reference,
                    "--illuminant": illuminant} | measure_inputs(images, annotations, models))
     request = measure_request(measure, images, annotations, models, limit)
-    read = ReadOptions(layer=layer, encoding=encoding, exposure=exposure, negatives=negatives,
-                       colourspace=colourspace, bayer=bayer, max_pixels=max_pixels)
+    read = replace(read, max_pixels=max_pixels)
     report = audit_image(image, corners, read=read, reference=reference, illuminant=illuminant,
                          size=size, table=table, bound=bound, measure=request)
-    written = write_chart_report(report, json_path=json_path, html_path=html_path,
+    written = write_chart_report(report, json_path=json_file, html_path=html_file,
                                  protect=(image,))
     if to_stdout:
         from fidelity.cli.options import write_json_output
@@ -101,3 +113,8 @@ def audit(image: Path, corners: str | None, encoding: str | None, exposure: str 
 
         write_evidence(evidence_path, "audit", [(str(image), report, None)], 0)
         click.echo(f"wrote {display_path(evidence_path)}")
+
+
+def _folder(value: str | None) -> bool:
+    """Whether an output option names a folder by its trailing separator (``out/``)."""
+    return value is not None and value.endswith(("/", os.sep))

@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from fidelity.cli.options import (
+    IMAGE_PATH,
     PATH,
     STDOUT,
     bound_option,
+    chart_pair_options,
     common_options,
     decision_options,
     decision_rule,
@@ -26,19 +29,14 @@ from fidelity.cli.options import (
 from fidelity.prediction.table import CLASS_COLUMNS, SIZES
 from fidelity.prediction.verdict import EXIT_ERROR
 
+if TYPE_CHECKING:
+    from fidelity.chart.measure import ReadOptions
+
 
 @click.command()
-@click.argument("sim", type=PATH)
-@click.argument("real", type=PATH)
-@click.option("--sim-corners", default=None,
-              help="X1,Y1,...,X4,Y4: centres of the dark skin, bluish green, black and white "
-                   "patches in SIM (default: the chart is found).")
-@click.option("--real-corners", default=None, help="The same for REAL.")
-@click.option("--normalise", "normalise_mode",
-              type=click.Choice(["exposure", "exposure+wb", "none"]), default="exposure",
-              show_default=True,
-              help="Match the simulated chart to the real one on the neutral patches before "
-                   "comparing: exposure, exposure and white balance, or nothing.")
+@click.argument("sim", type=IMAGE_PATH)
+@click.argument("real", type=IMAGE_PATH)
+@chart_pair_options
 @click.option("--max-delta-e", type=float, default=None,
               help="Pass when the sim-to-real chart ΔE00 (mean over the patches) <= X.")
 @click.option("--max-dmap", type=float, default=None,
@@ -67,8 +65,7 @@ from fidelity.prediction.verdict import EXIT_ERROR
 def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | None,
             normalise_mode: str, max_delta_e: float | None, max_dmap: float | None,
             cls: str | None, unit: str, bound: str, size: str, table: str | None,
-            reference: str, illuminant: str, encoding: str | None, exposure: str | None,
-            layer: str | None, bayer: str | None, colourspace: str | None, negatives: str,
+            reference: str, illuminant: str, read: ReadOptions,
             junit: Path | None,
             json_path: str | None, html_path: Path | None, measure: bool, images: str | None,
             annotations: str | None, models: str | None, limit: int | None, decision: str,
@@ -86,8 +83,11 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
     \b
     fidelity compare sim.exr photo.jpg --real-corners 102,88,610,95,604,420,98,414
     fidelity compare sim.exr photo.png --max-delta-e 5 --junit sim-vs-real.xml --html r.html
+    fidelity compare sim.exr drive.bag --topic /camera/image_raw --time 12.5
+
+    REAL (or SIM) may be a robot recording (ROS 1 bag, ROS 2 bag, MCAP file): --topic,
+    --frame and --time then choose its message.
     """
-    from fidelity.chart.measure import ReadOptions
     from fidelity.compare import compare_charts
     from fidelity.errors import FidelityError
     from fidelity.fileio import check_outputs, display_path
@@ -113,8 +113,7 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
             sim, real, sim_corners=sim_corners, real_corners=real_corners,
             normalise_mode=normalise_mode, reference=reference, illuminant=illuminant,
             size=size, table=table, criterion=criterion, bound=bound,
-            read=ReadOptions(layer=layer, encoding=encoding, exposure=exposure,
-                             negatives=negatives, colourspace=colourspace, bayer=bayer),
+            read=read,
             measure=request, decision=rule)
     except FidelityError as exc:
         if junit is not None:

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import click
 
 from fidelity.cli.options import (
+    IMAGE_PATH,
     PATH,
     STDOUT,
     bound_option,
@@ -36,6 +37,7 @@ from fidelity.prediction.table import CLASS_COLUMNS, SIZES
 from fidelity.prediction.verdict import EXIT_ERROR, EXIT_UNDECIDED
 
 if TYPE_CHECKING:
+    from fidelity.chart.measure import ReadOptions
     from fidelity.records import GateResult
 
 def _error_line(message: str) -> None:
@@ -73,7 +75,7 @@ def write_reports(result: GateResult, json_path: Path | None, html_path: Path | 
 
 
 @click.command()
-@click.argument("images", nargs=-1, type=PATH)
+@click.argument("images", nargs=-1, type=IMAGE_PATH)
 @click.option("--corners", help="X1,Y1,...,X4,Y4: centres of the dark skin, bluish green, black "
               "and white patches in IMAGE (default: the chart is found); with several images, "
               "for all of them.")
@@ -107,8 +109,7 @@ def write_reports(result: GateResult, json_path: Path | None, html_path: Path | 
 @common_options
 def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
          max_delta_e: float | None, max_dmap: float | None, cls: str | None, unit: str,
-         size: str, table: str | None, encoding: str | None, exposure: str | None,
-         layer: str | None, bayer: str | None, colourspace: str | None, negatives: str,
+         size: str, table: str | None, read: ReadOptions,
          reference: str, illuminant: str, renderer: str, junit: Path | None,
          json_path: Path | None, html_path: Path | None,
          max_pixels: int | None, bound: str, decision: str, coverage_factor: float,
@@ -121,6 +122,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
     fidelity gate photo.jpg --corners 102,88,610,95,604,420,98,414 --max-delta-e 3
     fidelity gate --camera nikon-5100 --max-dmap 1 --class person --junit colour.xml
     fidelity gate day.exr dusk.exr tunnel.exr --max-delta-e 3 --junit colour.xml
+    fidelity gate drive.bag --topic /camera/image_raw --frame 40 --max-delta-e 3
 
     Several IMAGEs are gated one by one (one JUnit test case each; --json and --html name
     folders that get IMAGE-NAME.json / .html, as an existing folder does for one image); the
@@ -138,14 +140,15 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         raise click.UsageError("give IMAGE(s) or --camera, not both")
     if not images and camera is None:
         raise click.UsageError("give one or more IMAGEs, or --camera")
-    if camera is not None and any(v is not None for v in (corners, encoding, exposure, layer,
-                                                          bayer, colourspace)):
-        raise click.UsageError("--corners, --encoding, --exposure, --layer, --bayer and "
-                               "--colourspace apply to an IMAGE, not to --camera")
+    if camera is not None and (corners is not None or read.given()):
+        raise click.UsageError("--corners, --encoding, --exposure, --layer, --bayer, "
+                               "--colourspace, --topic, --frame and --time apply to an IMAGE, "
+                               "not to --camera")
     if images and renderer != "closed-form" and not from_settings("renderer"):
         raise click.UsageError("--renderer applies to --camera (a camera model rendered), not "
                                "to an IMAGE")
-    from fidelity.chart.measure import ReadOptions
+    from dataclasses import replace
+
     from fidelity.check import gate as gate_subjects
     from fidelity.records import GateResult, gate_exit_code
     from fidelity.report.terminal import summary_lines
@@ -188,8 +191,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         sys.exit(EXIT_ERROR)
     cases = gate_subjects(
         criterion, images, camera=camera, corners=corners,
-        read=ReadOptions(layer=layer, encoding=encoding, exposure=exposure, negatives=negatives,
-                         colourspace=colourspace, bayer=bayer, max_pixels=max_pixels),
+        read=replace(read, max_pixels=max_pixels),
         reference=reference, illuminant=illuminant, renderer=renderer, size=size, table=table,
         bound=bound, decision=rule)
     done = [write_reports(case, jp, hp, images)

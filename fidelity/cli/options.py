@@ -11,8 +11,9 @@ The vocabulary (also in the docs' command table):
   ``--targets 0,1,3``: chart ΔE targets of the transforms (:class:`Targets`); ``--delta-e X``:
   a chart's measured ΔE (``predict``); ``--severities 1-5``: COCO-C severities
   (:class:`Severities`);
-- ``--encoding``, ``--exposure``, ``--layer``, ``--bayer``, ``--colourspace``, ``--negatives``:
-  how an image is read (:func:`image_read_options`);
+- ``--encoding``, ``--exposure``, ``--layer``, ``--bayer``, ``--colourspace``, ``--negatives``,
+  and for a robot recording ``--topic``, ``--frame``, ``--time``: how an image is read
+  (:func:`image_read_options`, one ``read`` argument);
 - ``--camera``, ``--illuminant``, ``--reference``, ``--table``, ``--size``: as in ``check``;
 - ``--out DIR``: the folder a command writes several files to; ``--json FILE`` (``-`` for
   stdout: then nothing else is printed there), ``--html FILE``, ``--junit FILE``: one report;
@@ -118,6 +119,21 @@ class Targets(ParamTypeBase):
         if len(values) > MAX_TARGETS:
             raise InvalidValueError(f"{what}: {len(values)} values, at most {MAX_TARGETS}")
         return values
+
+
+class Resolution(ParamTypeBase):
+    """``WIDTHxHEIGHT`` in pixels (``640x480``) -> ``(width, height)``."""
+
+    name = "WIDTHxHEIGHT"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> tuple[int, int]:
+        if isinstance(value, tuple):
+            return value
+        m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", str(value))
+        if not m:
+            self.fail(f"{value!r}: expected WIDTHxHEIGHT in pixels, e.g. 640x480", param, ctx)
+        return int(m.group(1)), int(m.group(2))
 
 
 class NameList(ParamTypeBase):
@@ -306,9 +322,51 @@ def executor_from(executor: str, address: str | None, workers: int | None,
 # How an image is read, and what is judged (audit, gate, compare)
 
 
+#: An image argument: a file, or a recording (a ROS 2 bag is a folder).
+IMAGE_PATH = click.Path(path_type=Path)
+
+#: The command-line names of the image-reading options, as :class:`ReadOptions` names them.
+READ_OPTION_NAMES = ("layer", "encoding", "exposure", "negatives", "colourspace", "bayer",
+                     "topic", "frame", "time")
+
+
+def chart_pair_options(f: F) -> F:
+    """``--sim-corners``, ``--real-corners`` and ``--normalise``: where the two charts of a
+    simulated and a real image are and how the simulated one is matched to the real one
+    (compare, fit)."""
+    opts = [
+        click.option("--sim-corners", default=None,
+                     help="X1,Y1,...,X4,Y4: centres of the dark skin, bluish green, black and "
+                          "white patches in SIM (default: the chart is found)."),
+        click.option("--real-corners", default=None, help="The same for REAL."),
+        click.option("--normalise", "normalise_mode",
+                     type=click.Choice(["exposure", "exposure+wb", "none"]),
+                     default="exposure", show_default=True,
+                     help="Match the simulated chart to the real one on the neutral patches "
+                          "before comparing: exposure, exposure and white balance, or "
+                          "nothing."),
+    ]
+    for opt in reversed(opts):
+        f = opt(f)
+    return f
+
+
 def image_read_options(f: F) -> F:
-    """``--encoding``, ``--exposure``, ``--layer``, ``--bayer``, ``--colourspace`` and
-    ``--negatives``: how an image's pixels are read (audit, gate, compare)."""
+    """``--encoding``, ``--exposure``, ``--layer``, ``--bayer``, ``--colourspace``,
+    ``--negatives`` and, for a recording, ``--topic``, ``--frame``, ``--time``: how an image's
+    pixels are read (audit, gate, compare, ...). The command receives them as one argument
+    ``read``, a :class:`fidelity.chart.measure.ReadOptions` (``max_pixels`` left at None:
+    :func:`max_pixels_option` gives it separately)."""
+
+    @functools.wraps(f)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        from fidelity.chart.measure import ReadOptions
+
+        values = {name: kwargs.pop(name) for name in READ_OPTION_NAMES}
+        if values["frame"] is not None and values["time"] is not None:
+            raise click.UsageError("give --frame N or --time T, not both")
+        return f(*args, read=ReadOptions(**values), **kwargs)
+
     opts = [
         click.option("--encoding", type=click.Choice(["linear", "srgb"]), default=None,
                      help="Pixel encoding (default: linear for EXR/HDR/float TIFF, sRGB "
@@ -333,10 +391,23 @@ def image_read_options(f: F) -> F:
             show_default=True,
             help="Pixels with a negative channel: keep them in the linear mean (out-of-gamut "
                  "colours in a scene-linear render) or exclude them like NaN/Inf."),
+        click.option(
+            "--topic", default=None, metavar="NAME",
+            help="The input is a ROS 1 bag, a ROS 2 bag (folder, .db3 or .mcap) or an MCAP "
+                 "file: read this sensor_msgs/Image or CompressedImage topic (default: its "
+                 "only image topic)."),
+        click.option(
+            "--frame", type=int, default=None, metavar="N",
+            help="With a recording: the N-th message of --topic (0 the first, the default; "
+                 "-1 the last)."),
+        click.option(
+            "--time", type=float, default=None, metavar="T",
+            help="With a recording: the message of --topic nearest to T seconds after the "
+                 "recording's first message."),
     ]
     for opt in reversed(opts):
-        f = opt(f)
-    return f
+        wrapper = opt(wrapper)
+    return wrapper  # type: ignore[return-value]
 
 
 def max_pixels_option(f: F) -> F:
@@ -344,8 +415,8 @@ def max_pixels_option(f: F) -> F:
     return click.option(
         "--max-pixels", type=click.IntRange(min=1), default=None,
         help="Refuse images of more pixels (width x height), checked before decoding; default "
-             "150000000 or $FIDELITY_MAX_PIXELS. An audit needs about 20 bytes per pixel (60 "
-             "for --bayer).")(f)
+             "150000000 or $FIDELITY_MAX_PIXELS. An audit needs the decoded image plus about 1 "
+             "byte per pixel (4 for an 8-bit photo; 60 for --bayer).")(f)
 
 
 def make_criterion(max_delta_e: float | None, max_dmap: float | None, cls: str | None,
@@ -393,7 +464,9 @@ def _state() -> dict[str, Any]:
 def common_options(f: F) -> F:
     """Add ``-q/--quiet`` and ``-v/--verbose`` to a command. Quiet sends the command's ordinary
     printing to nowhere; ``--json -`` sends it to standard error, so that standard output holds
-    the JSON alone (:func:`write_json_output`) and the verdict still reaches the log."""
+    the JSON alone (:func:`write_json_output`) and the verdict still reaches the log. Unless
+    quiet, the command first says which settings file it read and what it took from it
+    (:func:`settings_line`)."""
 
     @functools.wraps(f)
     def wrapper(*args: Any, quiet: bool, verbose: bool, **kwargs: Any) -> Any:
@@ -407,6 +480,9 @@ def common_options(f: F) -> F:
         elif to_stdout:
             redirect = contextlib.redirect_stdout(sys.stderr)
         with redirect:
+            settings = settings_line()
+            if settings:
+                click.echo(settings)
             return f(*args, **kwargs)
 
     wrapper = click.option("-v", "--verbose", is_flag=True,
@@ -415,6 +491,22 @@ def common_options(f: F) -> F:
                            help="Print nothing but errors (and JSON asked for on stdout).")(
         wrapper)
     return wrapper  # type: ignore[return-value]
+
+
+def settings_line() -> str | None:
+    """What the running command took from a settings file: ``fidelity: settings FILE: key,
+    ...`` (the options whose value came from it, by their flags), or that none of its keys
+    applies; None when no settings file was read (none found, or ``--no-config``)."""
+    from click.core import ParameterSource
+
+    config = _state().get("config")
+    if config is None:
+        return None
+    ctx = click.get_current_context()
+    used = [max(p.opts, key=len) for p in ctx.command.params
+            if p.name and ctx.get_parameter_source(p.name) == ParameterSource.DEFAULT_MAP]
+    what = ", ".join(used) if used else "no setting applies to this command"
+    return f"fidelity: settings {config.path}: {what}"
 
 
 def from_settings(name: str) -> bool:
@@ -567,8 +659,11 @@ def write_json_output(path: str | os.PathLike[str], obj: Any) -> str:
 
 
 __all__ = [
+    "IMAGE_PATH",
     "LIMIT_HELP",
     "PATH",
+    "READ_OPTION_NAMES",
+    "Resolution",
     "STDOUT",
     "CorruptionNames",
     "ModelList",
@@ -583,6 +678,7 @@ __all__ = [
     "executor_from",
     "executor_options",
     "from_settings",
+    "settings_line",
     "image_read_options",
     "json_option",
     "limit_option",

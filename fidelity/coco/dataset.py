@@ -25,11 +25,12 @@ Rounding rule: ``uint8 = rint(clip(x, 0, 1) * 255)`` (round half to even).
 from __future__ import annotations
 
 import functools
+import multiprocessing
 import os
 import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -94,6 +95,7 @@ class PixelMap:
     build_seconds: float = 0.0
     lut16: np.ndarray | None = None
     workspace: PullMeanWorkspace | None = None
+    kernel: str = "auto"
 
     @classmethod
     def build(cls, name: str, param: float | None, chunk: int = 1 << 20) -> PixelMap:
@@ -154,7 +156,7 @@ class PixelMap:
         if self.name == "pull_mean":
             if self.workspace is None:
                 self.workspace = PullMeanWorkspace()
-            return pull_mean_uint8(a, self.param, self.workspace)
+            return pull_mean_uint8(a, self.param, self.workspace, self.kernel)
         return reference_transform(a, self.name, self.param)
 
 
@@ -179,6 +181,25 @@ def pull_mean_kernel(kernel: str = "auto") -> str:
     if kernel == "numba" and _numba_kernels() is None:
         raise InvalidValueError("pull_mean kernel 'numba' needs numba (pip install numba)")
     return kernel
+
+
+#: Fewest images a run writes with pull_mean for the numba kernel to pay for itself. Importing
+#: numba and loading its kernels from the disk cache add 1.5-2 s to a run (then inherited by
+#: forked workers; ``benchmarks/bench_dataset.py``: 8 COCO photos in 2.67 s with numba forced,
+#: 1.17 s without, default workers); the kernel saves about 1.5 ms of CPU per 640x480 photo
+#: (``benchmarks/bench_pipeline.py`` on a quiet machine: 2.75 against 4.28 ms; bench_dataset's
+#: marginal CPU per photo 18.0-18.5 against 19.5-21.2 ms), so about 1000 photos break even.
+#: Both kernels give the same bits.
+NUMBA_MIN_IMAGES = 1000
+
+
+def run_kernel(images: int) -> str:
+    """The pull_mean kernel for a run writing ``images`` images: numpy for fewer than
+    :data:`NUMBA_MIN_IMAGES` (numba is not even imported), else :func:`pull_mean_kernel`'s
+    choice; ``$FIDELITY_PULL_MEAN_KERNEL`` decides when set."""
+    if images < NUMBA_MIN_IMAGES and not os.environ.get("FIDELITY_PULL_MEAN_KERNEL"):
+        return "numpy"
+    return pull_mean_kernel("auto")
 
 
 def pull_mean_uint8(rgb8: np.ndarray, alpha: float,
@@ -674,19 +695,20 @@ def list_images(folder: str | os.PathLike[str]) -> list[Path]:
 
 #: Per-process cache of the last built table, so that a pool worker builds a 256^3 table once
 #: per subset and not once per image (each worker process has its own copy).
-_WORKER_MAP: dict[tuple[str, float | None], PixelMap] = {}
+_WORKER_MAP: dict[tuple[str, float | None, str], PixelMap] = {}
 
 
-def _write_one(args: tuple[str, str, str, float | None]) -> str:
+def _write_one(args: tuple[str, str, str, float | None, str]) -> str:
     from fidelity.coco.jpeg import encode_jpeg, read_jpeg
     from fidelity.fileio import write_bytes_atomic
 
-    src, dst, name, param = args
-    key = (name, param)
+    src, dst, name, param, kernel = args
+    key = (name, param, kernel)
     pm = _WORKER_MAP.get(key)
     if pm is None:
         _WORKER_MAP.clear()
         pm = _WORKER_MAP[key] = PixelMap.build(name, param)
+        pm.kernel = kernel
     rgb, settings = read_jpeg(src)
     write_bytes_atomic(dst, encode_jpeg(pm(rgb), settings))
     return dst
@@ -694,11 +716,15 @@ def _write_one(args: tuple[str, str, str, float | None]) -> str:
 
 def write_transformed_dataset(images: Sequence[Path], out_dir: str | os.PathLike[str],
                               transform: str, target: float, *, param: float | None = None,
-                              workers: int = 1, progress: bool = True) -> dict[str, Any]:
+                              workers: int = 1, progress: bool = True,
+                              executor: Executor | None = None) -> dict[str, Any]:
     """Write one subset: every image transformed for (``transform``, ΔE ``target``).
 
     ``param`` overrides the calibrated parameter. Existing outputs are skipped (resumable);
-    each file is written atomically; inputs are never overwritten. Returns a summary dict.
+    each file is written atomically; inputs are never overwritten. ``executor``: a pool of
+    workers to run on (:func:`start_workers`; :func:`write_grid` starts one for all its
+    subsets), else one is started for this subset when ``workers`` > 1. Returns a summary
+    dict.
     """
     out = Path(out_dir)
     name = transform
@@ -715,35 +741,84 @@ def write_transformed_dataset(images: Sequence[Path], out_dir: str | os.PathLike
 
     remove_stale_temporaries(sub)  # a killed run's temporary files do not survive the resume
     srcs = {p.resolve() for p in images}
-    jobs = []
+    todo = []
     for p in images:
         dst = sub / p.name
         if dst.resolve() in srcs:
             raise InputFileError(f"{dst}: output would overwrite an input image")
         if not dst.exists():
-            jobs.append((str(p), str(dst), name, param))
+            todo.append((str(p), str(dst)))
+    kernel = run_kernel(len(todo)) if name in PER_IMAGE else "auto"
+    jobs = [(src, dst, name, param, kernel) for src, dst in todo]
     sub.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    _run_jobs(jobs, workers, progress, f"{subset_name(transform, target)}")
+    _run_jobs(jobs, workers, progress, f"{subset_name(transform, target)}", executor)
     return {"subset": sub.name, "transform": name, "target": target, "param": param,
             "written": len(jobs), "skipped": len(images) - len(jobs),
             "seconds": time.perf_counter() - t0}
 
 
-def _run_jobs(jobs: list[tuple[str, str, str, float | None]], workers: int, progress: bool,
-              desc: str) -> None:
+#: Most images a worker is handed at a time (fewer when the folder is small, so that every
+#: worker gets some).
+MAX_CHUNK = 8
+
+
+def pool_size(workers: int, images: int) -> int:
+    """Worker processes worth starting for ``images`` images: no more than there are
+    images."""
+    return max(1, min(int(workers), int(images)))
+
+
+def _prepare_worker(kernel: str | None) -> None:
+    """Make a worker ready before its first image: the pull_mean ``kernel`` loaded (numba's
+    from its disk cache), so that the first images do not wait on it. A no-op in a worker
+    forked from a process that has it."""
+    if kernel is not None:
+        pull_mean_uint8(np.zeros((1, 3), np.uint8), 0.5, kernel=kernel)
+
+
+def start_workers(workers: int, images: int, transforms: Iterable[str]) -> Executor | None:
+    """A pool of :func:`pool_size` worker processes for writing ``images`` images with
+    ``transforms`` (None when one process is enough: the images are written in this one).
+
+    Each worker is prepared once (:func:`_prepare_worker`, the pull_mean kernel of
+    :func:`run_kernel`): where workers are forked, in this process before they start, so that
+    they inherit it rather than each doing it again.
+    """
+    size = pool_size(workers, images)
+    if size <= 1:
+        return None
+    kernel = run_kernel(images) if PER_IMAGE & set(transforms) else None
+    if multiprocessing.get_start_method(allow_none=False) == "fork":
+        _prepare_worker(kernel)
+    return ProcessPoolExecutor(max_workers=size, initializer=_prepare_worker,
+                               initargs=(kernel,))
+
+
+def _run_jobs(jobs: list[tuple[str, str, str, float | None, str]], workers: int, progress: bool,
+              desc: str, executor: Executor | None = None) -> None:
     from tqdm import tqdm
 
     bar = tqdm(total=len(jobs), desc=desc, unit="img", disable=not progress or not jobs)
     try:
-        if workers <= 1 or len(jobs) < 2:
+        if not jobs:
+            return
+        pool = executor
+        if pool is None:
+            pool = start_workers(workers, len(jobs), {j[2] for j in jobs})
+        if pool is None:
             for j in jobs:
                 _write_one(j)
                 bar.update()
-        else:
-            with ProcessPoolExecutor(max_workers=workers) as ex:
-                for _ in ex.map(_write_one, jobs, chunksize=8):
-                    bar.update()
+            return
+        size = pool_size(workers, len(jobs))
+        chunk = max(1, min(MAX_CHUNK, len(jobs) // (4 * size)))
+        try:
+            for _ in pool.map(_write_one, jobs, chunksize=chunk):
+                bar.update()
+        finally:
+            if executor is None:
+                pool.shutdown()
     finally:
         bar.close()
 
@@ -757,18 +832,25 @@ def write_grid(images: Sequence[Path], out_dir: str | os.PathLike[str],
 
     results = []
     done_baseline = False
-    for t in transforms:
-        for e in targets:
-            if e == 0:
-                if done_baseline:
-                    continue
-                done_baseline = True
-            try:
-                results.append(write_transformed_dataset(images, out_dir, t, e, workers=workers,
-                                                         progress=progress))
-            except UnreachableTargetError as exc:
-                results.append({"subset": subset_name(t, e), "transform": t, "target": e,
-                                "skipped_reason": str(exc)})
-                if on_skip:
-                    on_skip(t, e, str(exc))
+    names, values = list(transforms), list(targets)
+    pool = start_workers(workers, len(images), names)  # started once for every subset
+    try:
+        for t in names:
+            for e in values:
+                if e == 0:
+                    if done_baseline:
+                        continue
+                    done_baseline = True
+                try:
+                    results.append(write_transformed_dataset(
+                        images, out_dir, t, e, workers=workers, progress=progress,
+                        executor=pool))
+                except UnreachableTargetError as exc:
+                    results.append({"subset": subset_name(t, e), "transform": t, "target": e,
+                                    "skipped_reason": str(exc)})
+                    if on_skip:
+                        on_skip(t, e, str(exc))
+    finally:
+        if pool is not None:
+            pool.shutdown()
     return results

@@ -19,6 +19,7 @@ from fidelity.report.words import column_note, prediction_notes, verdict_message
 
 if TYPE_CHECKING:
     from fidelity.coco.corruptions import CocoCAnswer
+    from fidelity.fit import FitReport
 
 
 def prediction_json(prediction: Prediction,
@@ -108,5 +109,30 @@ def comparison_json(report: ComparisonReport) -> JSONObject:
     return out
 
 
-__all__ = ["chart_report_json", "coco_c_answer_json", "comparison_json", "prediction_json",
-           "verdict_json"]
+def fit_json(report: FitReport) -> JSONObject:
+    """The JSON report of ``fidelity fit``: the sim-to-real ΔE00 before and after (the SIM
+    image through the ``.cube`` by OpenColorIO, audited again) with their predictions, the
+    fitted and cross-validated ΔE00, the ``.cube``'s check against the model, the correction
+    (:meth:`fidelity.fit.Correction.to_json`), the files written and the seconds spent."""
+    r, c = report, report.correction
+
+    def side(m: Any, p: Prediction) -> dict[str, Any]:
+        j = m.to_json()
+        return {"mean_delta_e": j["mean_delta_e"], "max_delta_e": j["max_delta_e"],
+                "worst_patch": j["worst_patch"], "prediction": prediction_json(p),
+                "patches": [{"name": q["name"], "delta_e": q["delta_e"]} for q in j["patches"]]}
+
+    out: JSONObject = json_ready({
+        "command": "fit", "created": r.created, "sim": r.sim, "real": r.real,
+        "model": c.model.name, "objective": c.objective,
+        "before": side(r.before, r.prediction_before),
+        "after": side(r.after, r.prediction_after),
+        "fitted_mean_delta_e": c.to_json()["fitted_mean_delta_e"],
+        "cross_validated_mean_delta_e": c.to_json()["cross_validated_mean_delta_e"],
+        "lut_check": r.lut.to_json(), "lut_checks": [x.to_json() for x in r.lut_checks],
+        "correction": c.to_json(), "files": dict(r.files), "seconds": dict(r.seconds)})
+    return out
+
+
+__all__ = ["chart_report_json", "coco_c_answer_json", "comparison_json", "fit_json",
+           "prediction_json", "verdict_json"]

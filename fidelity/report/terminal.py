@@ -13,6 +13,10 @@ def summary_lines(report: ChartReport) -> list[str]:
     lines = []
     src = report.source
     if isinstance(src, ImageSource):
+        rec = src.image.recording
+        if rec is not None:
+            lines.append(f"{rec.kind}: {rec.describe()}, log time "
+                         f"{rec.to_json()['time_utc']}")
         found = src.found
         if found is not None:
             conf = "" if found.confidence != found.confidence else \

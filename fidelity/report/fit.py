@@ -1,0 +1,138 @@
+"""The fit of a correction (``fidelity fit``) as terminal lines, an HTML document and files.
+
+Renders a :class:`~fidelity.fit.FitReport`: :func:`fit_lines` for the terminal,
+:func:`fit_document` for the HTML report (before/after swatches and ΔE maps, the per-patch
+table, the ``.cube``'s check, the correction) and :func:`write_fit_report` for the files.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from fidelity.fileio import json_ready
+from fidelity.fit import EXPRESSED_DELTA_E, FitReport
+from fidelity.report.chart import write_report_files
+from fidelity.report.document import (
+    Code,
+    Document,
+    Facts,
+    Headline,
+    section,
+    svg_figure,
+    table,
+)
+from fidelity.report.jsonform import fit_json
+
+
+def _n(v: float | None) -> str:
+    return "n/a" if v is None or not np.isfinite(v) else f"{v:.2f}"
+
+
+def fit_lines(report: FitReport) -> list[str]:
+    """The fit on a terminal: the model, the excluded patches, the conditioning, the
+    sim-to-real ΔE00 before and after with their predicted ΔmAP, the fitted and
+    cross-validated ΔE00, the ``.cube``'s check and the files."""
+    c, lut = report.correction, report.lut
+    b, a = report.before, report.after
+    lines = [f"model: {c.model.name} ({c.objective} objective), fitted on {len(c.used)} of "
+             f"{len(c.patch_names)} patches; normalisation: {c.normalisation.describe()}"]
+    lines += [f"excluded: {name}: {why}" for name, why in c.excluded.items()]
+    if c.conditioning.reason:
+        lines.append(f"regularised: {c.conditioning.reason}")
+    lines += [
+        f"sim-to-real ΔE00 before: mean {b.mean_delta_e:.2f}, max {b.max_delta_e:.2f} "
+        f"({b.worst_patch}); predicted ΔmAP {_n(report.prediction_before.dmap_points)} points",
+        f"sim-to-real ΔE00 after (SIM through the .cube by OpenColorIO, measured again): mean "
+        f"{a.mean_delta_e:.2f}, max {a.max_delta_e:.2f} ({a.worst_patch}); predicted ΔmAP "
+        f"{_n(report.prediction_after.dmap_points)} points",
+        f"fitted ΔE00 (used patches): mean "
+        f"{float(np.mean(c.fitted_delta_e[[n in c.used for n in c.patch_names]])):.2f}; "
+        f"cross-validated (leave-3-out): mean {_n(c.cv_mean)}, max "
+        f"{_n(float(np.nanmax(c.cv_delta_e)))}",
+        f".cube {lut.size}^3 through OpenColorIO against the model: max ΔE00 "
+        f"{lut.chart_max:.3f} over the chart, {lut.grid_max:.3f} over {lut.grid_points} "
+        f"lattice points (99th percentile {lut.grid_p99:.3f}, "
+        f"{100 * lut.grid_within:.2f} % within {lut.tolerance:g}; limit "
+        f"{'met' if lut.passed else 'NOT met'})",
+    ]
+    if not c.expressed:
+        lines.append(f"warning: the {c.model.name} model does not express this difference: "
+                     f"{_n(c.cv_mean)} ΔE00 remains on patches held out of the fit (above "
+                     f"{EXPRESSED_DELTA_E:g}); what is left is not a colour mapping of this "
+                     "family (quantisation, noise, a spatial effect, or a model too simple)")
+    if c.cv_mean > 0 and a.mean_delta_e >= b.mean_delta_e:
+        lines.append("warning: the correction does not lower the sim-to-real ΔE00: the "
+                     f"{c.model.name} model cannot express this difference")
+    elif np.isfinite(c.cv_mean) and c.cv_mean >= b.mean_delta_e:
+        lines.append("warning: the cross-validated ΔE00 is no lower than before: the fit "
+                     "memorises the patches rather than expressing the difference")
+    return lines
+
+
+def fit_document(report: FitReport) -> Document:
+    """The fit as a :class:`~fidelity.report.document.Document`."""
+    from fidelity.report import chartfigures
+
+    c, b, a, lut = report.correction, report.before, report.after, report.lut
+    after_fig = svg_figure(chartfigures.swatches(a, ("real camera", "corrected simulation")),
+                           "after.svg", "real camera (left half) against the corrected simulation "
+                       "(right half)")
+    note = ("" if c.expressed else
+            f"; the {c.model.name} model does not express the difference (cross-validated "
+            f"ΔE00 above {EXPRESSED_DELTA_E:g})")
+    head = Headline(f"sim-to-real ΔE00 {b.mean_delta_e:.2f} before, **{a.mean_delta_e:.2f}** "
+                    f"after the {c.model.name} correction (cross-validated {_n(c.cv_mean)})"
+                    f"{note}", "info" if c.expressed else "fail", after_fig)
+    facts = Facts((
+        ("simulation", f"`{report.sim}`"), ("real camera", f"`{report.real}`"),
+        ("model", f"{c.model.name}, {c.objective} objective"),
+        ("normalisation", c.normalisation.describe()),
+        ("patches used", f"{len(c.used)} of {len(c.patch_names)}"),
+        ("conditioning", f"condition number {c.conditioning.condition_number:.3g}"
+                         + (f"; {c.conditioning.reason}" if c.conditioning.reason else "")),
+        ("sim-to-real ΔE00 before", f"mean {b.mean_delta_e:.2f}, max {b.max_delta_e:.2f}"),
+        ("sim-to-real ΔE00 after", f"mean {a.mean_delta_e:.2f}, max {a.max_delta_e:.2f}"),
+        ("predicted ΔmAP before → after", f"{_n(report.prediction_before.dmap_points)} → "
+                                          f"{_n(report.prediction_after.dmap_points)} points"),
+        ("cross-validated ΔE00", f"mean {_n(c.cv_mean)}"),
+        (".cube check", f"{lut.size}³: max ΔE00 {lut.chart_max:.3f} (chart), "
+                        f"{lut.grid_max:.3f} ({lut.grid_points} lattice points, 99th "
+                        f"percentile {lut.grid_p99:.3f}); limit {lut.tolerance:g} "
+                        f"{'met' if lut.passed else 'not met'}"),
+    ))
+    rows = [(n, f"{b.delta_e[k]:.2f}", f"{a.delta_e[k]:.2f}", f"{c.fitted_delta_e[k]:.2f}",
+             _n(float(c.cv_delta_e[k])), c.excluded.get(n, "used"))
+            for k, n in enumerate(c.patch_names)]
+    sections = [
+        section("Summary", facts),
+        section("Before and after", svg_figure(chartfigures.swatches(b, ("real camera", "simulation")),
+                                               "before.svg", "before: real camera (left half) "
+                                           "against the simulation (right half)"),
+                after_fig,
+                svg_figure(chartfigures.delta_e_map(b), "before_map.svg", "sim-to-real ΔE00 before"),
+                svg_figure(chartfigures.delta_e_map(a), "after_map.svg", "sim-to-real ΔE00 after"),
+                gallery=True),
+        section("Per patch", table(("patch", "ΔE00 before", "ΔE00 after (through the .cube)",
+                                    "ΔE00 fitted", "ΔE00 cross-validated", "fit"), rows)),
+        section("The correction", Code(json.dumps(json_ready(c.model.to_json()), indent=1))),
+        section("Files and timing", Code(json.dumps(json_ready(
+            {"files": report.files, "seconds": report.seconds}), indent=1)), folded=True),
+    ]
+    return Document(f"Fit: {Path(report.sim).name} towards {Path(report.real).name}", head,
+                    tuple(sections))
+
+
+def write_fit_report(report: FitReport, *, json_path: str | os.PathLike[str] | None = None,
+                     html_path: str | os.PathLike[str] | None = None,
+                     protect: Sequence[str | os.PathLike[str]] = ()) -> list[Path]:
+    """Write the JSON and/or HTML fit report atomically, never over an input."""
+    return write_report_files(lambda: fit_json(report), lambda: fit_document(report),
+                              json_path=json_path, html_path=html_path, protect=protect)
+
+
+__all__ = ["fit_document", "fit_lines", "write_fit_report"]

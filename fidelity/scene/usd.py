@@ -1,0 +1,96 @@
+"""Write the chart scene as OpenUSD (``.usda``) with ``usd-core``'s ``pxr``.
+
+Stage: metres (``metersPerUnit`` 1), +y up, as the scene model. One ``Mesh`` per patch and the
+frame, each bound to a ``UsdPreviewSurface`` material: ``diffuseColor`` the linear albedo
+(UsdPreviewSurface colours are linear), ``metallic`` 0, ``roughness`` 1 and ``ior`` 1 (a
+dielectric's F0 = ((ior - 1) / (ior + 1))^2 = 0: no specular reflection, as the chart's 45/0
+reference). Light: a ``UsdLux.DistantLight`` along -z with ``normalize`` on, so that (UsdLux)
+its ``intensity`` is the illuminance it gives a surface facing it: the irradiance in renderer
+units, pi * white level. (Blender's USD importer multiplies a DistantLight's intensity by 4,
+"approximately matches Karma" in its source, usd_reader_light.cc: import with Light Intensity
+Scale 0.25.) Camera: ``UsdGeom.Camera`` (looks along -z) with apertures
+giving the model's fields of view.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from fidelity.scene.model import FRAME_REFLECTANCE, ChartScene
+
+EXTRA = "scene"
+
+
+def write_usd(scene: ChartScene, path: Path, *, linear_factors: np.ndarray | None = None) -> None:
+    """Write ``scene`` to ``path`` (.usda); ``linear_factors`` (24, 3) replaces the albedos."""
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
+
+    factors = scene.albedo if linear_factors is None else np.asarray(linear_factors)
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    root = UsdGeom.Xform.Define(stage, "/World")
+    stage.SetDefaultPrim(root.GetPrim())
+    UsdGeom.Xform.Define(stage, "/World/Chart")
+    UsdGeom.Scope.Define(stage, "/World/Looks")
+    chart = scene.chart
+
+    def quad(name: str, cx: float, cy: float, hw: float, hh: float, z: float,
+             colour: list[float]) -> None:
+        mesh = UsdGeom.Mesh.Define(stage, f"/World/Chart/{name}")
+        pts = [Gf.Vec3f(cx - hw, cy - hh, z), Gf.Vec3f(cx + hw, cy - hh, z),
+               Gf.Vec3f(cx + hw, cy + hh, z), Gf.Vec3f(cx - hw, cy + hh, z)]
+        mesh.CreatePointsAttr(pts)
+        mesh.CreateFaceVertexCountsAttr([4])
+        mesh.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
+        mesh.CreateNormalsAttr([Gf.Vec3f(0, 0, 1)] * 4)
+        mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        mesh.CreateExtentAttr([Gf.Vec3f(cx - hw, cy - hh, z), Gf.Vec3f(cx + hw, cy + hh, z)])
+        material = UsdShade.Material.Define(stage, f"/World/Looks/{name}")
+        shader = UsdShade.Shader.Define(stage, f"/World/Looks/{name}/PreviewSurface")
+        shader.CreateIdAttr("UsdPreviewSurface")
+        shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*colour))
+        shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
+        shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(1.0)
+        shader.CreateInput("ior", Sdf.ValueTypeNames.Float).Set(1.0)
+        shader.CreateInput("useSpecularWorkflow", Sdf.ValueTypeNames.Int).Set(0)
+        material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+        UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(material)
+
+    for i, name in enumerate(scene.patch_names):
+        cx, cy = chart.patch_centre(i)
+        quad(f"patch_{i + 1:02d}_{_identifier(name)}", cx, cy, chart.patch / 2, chart.patch / 2,
+             0.0, [float(v) for v in factors[i]])
+    quad("frame", 0.0, 0.0, chart.width / 2, chart.height / 2, -0.0005, [FRAME_REFLECTANCE] * 3)
+
+    light = UsdLux.DistantLight.Define(stage, "/World/Sun")
+    light.CreateIntensityAttr(float(scene.irradiance))
+    light.CreateExposureAttr(0.0)
+    light.CreateColorAttr(Gf.Vec3f(1.0, 1.0, 1.0))
+    light.CreateAngleAttr(0.0)
+    light.CreateNormalizeAttr(True)
+
+    cam = scene.camera
+    camera = UsdGeom.Camera.Define(stage, "/World/Camera")
+    focal = 50.0
+    vertical = 2 * focal * math.tan(cam.yfov / 2)
+    camera.CreateFocalLengthAttr(focal)
+    camera.CreateVerticalApertureAttr(vertical)
+    camera.CreateHorizontalApertureAttr(vertical * cam.width / cam.height)
+    camera.CreateProjectionAttr(UsdGeom.Tokens.perspective)
+    camera.CreateClippingRangeAttr(Gf.Vec2f(0.01, 100.0))
+    UsdGeom.Xformable(camera).AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, cam.distance))
+    stage.SetMetadata("comment", "fidelity chart scene: linear sRGB albedos, see manifest.json")
+    stage.GetRootLayer().Save()
+
+
+def _identifier(name: str) -> str:
+    out = "".join(c if c.isalnum() else "_" for c in name)
+    return out if out and not out[0].isdigit() else f"_{out}"
+
+
+__all__ = ["EXTRA", "write_usd"]

@@ -1,0 +1,397 @@
+"""fidelity fit (issue 29): correction models recovered from charts with a known error, the
+.cube checked through OpenColorIO, the hard cases refused or regularised, the command line."""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from fidelity.camera.model import camera_from_dict
+from fidelity.camera.render import render_chart
+from fidelity.chart.image import write_exr, write_png
+from fidelity.cli import main
+from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
+from fidelity.correction.models import (
+    CONDITION_LIMIT,
+    CURVE_KNOTS,
+    MAX_COEFFICIENT,
+    cross_validate,
+    expand_root_polynomial,
+    fit_model,
+    patch_delta_e,
+    usable_patches,
+)
+from fidelity.errors import InvalidValueError
+
+ocio = pytest.importorskip("PyOpenColorIO", reason="fidelity fit needs opencolorio ([fit])")
+
+#: The suite's exact camera (CIE 1931 CMFs x the sRGB matrix: camera RGB is linear sRGB),
+#: float output: the "real camera" of the ground-truth tests.
+EXACT = {"name": "exact", "sensitivities": {"source": "ideal"},
+         "exposure": {"mode": "gain", "gain": 1.0},
+         "white_balance": {"method": "illuminant", "illuminant": "scene"},
+         "ccm": {"method": "none"}, "tone": {"curve": "srgb"}}
+
+
+def _rotation(degrees: float) -> np.ndarray:
+    """Rodrigues rotation of linear RGB about the grey axis (cameras/bad-hue-rotation.toml)."""
+    k = np.ones(3) / math.sqrt(3)
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    t = math.radians(degrees)
+    return np.eye(3) + math.sin(t) * kx + (1 - math.cos(t)) * kx @ kx
+
+
+HUE = _rotation(-20.0)
+WB = (1.25, 1.0, 0.8)
+
+
+def _camera(**changes: object):
+    d = copy.deepcopy(EXACT)
+    d.update(changes)
+    return camera_from_dict(d)
+
+
+def _patches(camera) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """Linear sRGB and encoded sRGB of a camera's rendered chart patches."""
+    m = render_chart(camera, pixels_per_patch=8).measurement
+    return np.asarray(linearize_srgb(m.srgb)), m.srgb, m.patch_names
+
+
+@pytest.fixture(scope="module")
+def exact():
+    return _patches(_camera())
+
+
+@pytest.fixture(scope="module")
+def cases():
+    """The suite's exact camera with one known error each."""
+    return {
+        "hue": _patches(_camera(ccm={"method": "matrix", "matrix": HUE.tolist()})),
+        "wb": _patches(_camera(white_balance={"method": "gains", "gains": list(WB)})),
+        "gamma": _patches(_camera(tone={"curve": "gamma", "gamma": 2.2})),
+        "5bit": _patches(_camera(quantisation={"bits": 5})),
+    }
+
+
+def _weights(sim_srgb, real_srgb, names) -> np.ndarray:
+    ex = usable_patches(sim_srgb, real_srgb, names)
+    return np.array([0.0 if n in ex else 1.0 for n in names])
+
+
+# ----------------------------------------------------------------------------------------------
+# Models against independent references and known errors
+# ----------------------------------------------------------------------------------------------
+
+
+def test_root_polynomial_terms_and_fit_equal_colour_science(exact, cases):
+    """The terms and the unweighted least-squares fit of Finlayson et al. 2015 (degree 2) equal
+    colour-science's implementation."""
+    from colour.characterisation import (
+        matrix_colour_correction,
+        polynomial_expansion_Finlayson2015,
+    )
+
+    sim = np.clip(cases["hue"][0], 1e-4, None)
+    real = np.clip(exact[0], 1e-4, None)
+    ours = expand_root_polynomial(sim)
+    theirs = polynomial_expansion_Finlayson2015(sim, degree=2, root_polynomial_expansion=True)
+    assert np.allclose(np.sort(ours, axis=1), np.sort(theirs, axis=1), atol=1e-12)
+    fitted, _ = fit_model(sim, real, "root-polynomial", objective="linear")
+    m = matrix_colour_correction(sim, real, method="Finlayson 2015", degree=2,
+                                 root_polynomial_expansion=True)
+    assert np.allclose(fitted.apply(sim), polynomial_expansion_Finlayson2015(
+        sim, degree=2, root_polynomial_expansion=True) @ np.asarray(m).T, atol=1e-9)
+
+
+@pytest.mark.parametrize("objective", ["linear", "ciede2000"])
+def test_a_hue_rotated_matrix_is_recovered(exact, cases, objective):
+    sim, srgb, names = cases["hue"]
+    w = _weights(srgb, exact[1], names)
+    fitted, cond = fit_model(sim, exact[0], "matrix", weights=w, objective=objective)
+    # the fit inverts the camera's rotation: out = R^-1 in
+    assert np.allclose(fitted.matrix, np.linalg.inv(HUE), atol=1e-4)
+    assert cond.ridge == 0.0
+    assert patch_delta_e(fitted.apply(sim), exact[0])[w > 0].max() < 0.01
+    assert patch_delta_e(sim, exact[0])[w > 0].mean() > 5  # the error was large
+
+
+def test_wrong_white_balance_gains_are_recovered(exact, cases):
+    sim, srgb, names = cases["wb"]
+    w = _weights(srgb, exact[1], names)
+    fitted, _ = fit_model(sim, exact[0], "gains", weights=w, objective="linear")
+    # to 1e-3: the rendered chart is float32 sRGB-encoded pixels, decoded again
+    assert np.allclose(fitted.gains, 1.0 / np.array(WB), rtol=1e-3)
+    assert np.allclose(fitted.matrix, np.diag(fitted.gains))
+    assert patch_delta_e(fitted.apply(sim), exact[0])[w > 0].max() < 0.01
+
+
+def test_a_gamma_22_curve_is_recovered_by_matrix_and_curve(exact, cases):
+    """A gamma 2.2 encoding read as sRGB: matrix+curve brings the chart below 0.5 ΔE00 and its
+    curve follows the exact inverse phi(v) = sRGB-encode(v**2.2) within 0.01 at its knots
+    (0.2 - 0.8; the knots are where the PCHIP curve is pinned; between, it interpolates)."""
+    sim, srgb, names = cases["gamma"]
+    w = _weights(srgb, exact[1], names)
+    fitted, _ = fit_model(sim, exact[0], "matrix+curve", weights=w, objective="linear")
+    de = patch_delta_e(fitted.apply(sim), exact[0])[w > 0]
+    assert de.mean() < 0.1 and de.max() < 0.5
+    truth = np.asarray(delinearize_srgb(np.asarray(CURVE_KNOTS) ** 2.2))
+    assert fitted.curve is not None
+    assert np.allclose(fitted.curve, truth, atol=0.01)
+    plain, _ = fit_model(sim, exact[0], "matrix", weights=w, objective="linear")
+    assert patch_delta_e(plain.apply(sim), exact[0])[w > 0].mean() > 3 * de.mean()
+
+
+def test_5_bit_banding_is_not_expressible(exact, cases):
+    """No model takes a 5-bit chart below 0.5 ΔE00 held out: quantisation is not a colour
+    mapping, and cross-validation shows it."""
+    sim, srgb, names = cases["5bit"]
+    w = _weights(srgb, exact[1], names)
+    for model in ("gains", "matrix", "matrix+curve", "root-polynomial"):
+        cv = cross_validate(sim, exact[0], model, weights=w, objective="linear")
+        assert np.nanmean(cv) > 0.5, model
+
+
+def test_cross_validation_holds_every_used_patch_out_once(exact, cases):
+    sim, srgb, names = cases["hue"]
+    w = _weights(srgb, exact[1], names)
+    cv = cross_validate(sim, exact[0], "matrix", weights=w, objective="linear")
+    assert np.all(np.isnan(cv[w == 0])) and np.all(np.isfinite(cv[w > 0]))
+    assert np.nanmax(cv) < 0.01
+
+
+# ----------------------------------------------------------------------------------------------
+# Hard cases
+# ----------------------------------------------------------------------------------------------
+
+
+def test_a_nearly_grey_simulated_chart_is_regularised_with_a_reason(exact):
+    real = exact[0]
+    grey = real.mean(axis=1, keepdims=True)
+    sim = grey + 1e-5 * (real - grey)  # all colour but a trace removed
+    fitted, cond = fit_model(sim, real, "matrix", objective="linear")
+    assert cond.condition_number > CONDITION_LIMIT and cond.ridge > 0
+    assert cond.reason and "condition number" in cond.reason
+    assert np.abs(fitted.coefficients).max() <= MAX_COEFFICIENT
+
+
+def test_a_singular_chart_never_gives_huge_coefficients(exact):
+    sim = np.tile([[0.2, 0.2, 0.2]], (24, 1))  # every patch the same grey
+    for model in ("matrix", "root-polynomial", "gains"):
+        try:
+            fitted, _ = fit_model(sim, exact[0], model, objective="linear")
+        except InvalidValueError as exc:
+            assert "unstable" in str(exc) or "determine" in str(exc)
+        else:
+            assert np.abs(fitted.coefficients).max() <= MAX_COEFFICIENT
+
+
+def test_too_few_patches_are_refused(exact):
+    w = np.zeros(24)
+    w[:4] = 1
+    with pytest.raises(InvalidValueError, match="needs at least"):
+        fit_model(exact[0], exact[0], "root-polynomial", weights=w)
+
+
+def test_zero_and_nan_inputs(exact):
+    with pytest.raises(InvalidValueError, match="NaN"):
+        fit_model(np.full((24, 3), np.nan), exact[0])
+    with pytest.raises(InvalidValueError, match="all black"):
+        fit_model(np.zeros((24, 3)), exact[0], "matrix", objective="linear")
+    tiny = exact[0] * 1e-300  # near-denormal colours would need gains of 1e300: refused
+    with pytest.raises(InvalidValueError, match="unstable"):
+        fit_model(tiny, exact[0], "gains", objective="linear")
+
+
+def test_clipped_and_saturated_patches_are_named():
+    names = ("a", "b", "c", "d")
+    sim = np.array([[0.5, 0.5, 0.5], [1.0, 0.5, 0.2], [0.4, 0.0, 0.3], [0.3, 0.3, 0.3]])
+    real = np.array([[0.5, 0.5, 0.5], [0.9, 0.5, 0.2], [0.4, 0.1, 0.3], [0.3, 0.3, 0.3]])
+    ex = usable_patches(sim, real, names, real_clipped=("d",))
+    assert set(ex) == {"b", "c", "d"}
+    assert "saturated in the simulated" in ex["b"] and "black" in ex["c"]
+    assert "clipped in the real" in ex["d"]
+
+
+# ----------------------------------------------------------------------------------------------
+# The pipeline, the .cube and OpenColorIO
+# ----------------------------------------------------------------------------------------------
+
+PATCH, GAP = 32, 8
+
+
+def _centre(i: int) -> tuple[float, float]:
+    r, c = divmod(i, 6)
+    return (GAP + c * (PATCH + GAP) + PATCH / 2 - 0.5, GAP + r * (PATCH + GAP) + PATCH / 2 - 0.5)
+
+
+CORNERS = ",".join(f"{v:g}" for i in (0, 5, 23, 18) for v in _centre(i))
+
+
+def _image(colours: np.ndarray) -> np.ndarray:
+    img = np.full((4 * PATCH + 5 * GAP, 6 * PATCH + 7 * GAP, 3), 0.05)
+    for i, rgb in enumerate(colours):
+        r, c = divmod(i, 6)
+        y, x = GAP + r * (PATCH + GAP), GAP + c * (PATCH + GAP)
+        img[y:y + PATCH, x:x + PATCH] = rgb
+    return img
+
+
+@pytest.fixture(scope="module")
+def images(tmp_path_factory, exact, cases):
+    folder = tmp_path_factory.mktemp("fit")
+    real = write_png(folder / "real.png", _image(np.clip(exact[1], 0, 1)), 16)
+    hue = write_png(folder / "hue.png", _image(np.clip(cases["hue"][1], 0, 1)), 16)
+    # scene-linear EXR of the hue-rotated camera, at half the light: a shaper cube
+    hue_exr = write_exr(folder / "hue.exr", _image(cases["hue"][0] * 0.5))
+    grey = write_png(folder / "grey.png", _image(np.repeat(
+        np.clip(exact[1], 0, 1).mean(axis=1, keepdims=True), 3, axis=1)), 16)
+    bits5 = write_png(folder / "bits5.png", _image(np.clip(cases["5bit"][1], 0, 1)), 16)
+    return {"real": real, "hue": hue, "hue_exr": hue_exr, "grey": grey, "bits5": bits5,
+            "dir": folder}
+
+
+def test_fit_correction_api_applies_and_writes_a_cube(images, tmp_path):
+    import fidelity
+
+    c = fidelity.fit_correction(images["hue"], images["real"], sim_corners=CORNERS,
+                                real_corners=CORNERS)
+    assert isinstance(c, fidelity.Correction)
+    assert c.encoding == "srgb"
+    assert float(np.mean(c.fitted_delta_e[[n in c.used for n in c.patch_names]])) < 0.1
+    assert c.before_delta_e.mean() > 5
+    cube = c.to_cube(tmp_path / "c.cube")
+    text = cube.read_text()
+    assert "LUT_3D_SIZE 33" in text and text.startswith("# fidelity fit")
+    doc = c.to_json()
+    assert doc["model"] == "matrix" and len(doc["patches"]) == 24
+    assert np.allclose(doc["matrix"], np.linalg.inv(HUE), atol=2e-3)
+    # apply() on the chart's own pixels gives the real chart's colours
+    out = c.apply(c.sim_pixels)
+    from fidelity.correction.lut import apply_processor, cube_processor
+
+    lut = apply_processor(cube_processor(cube), c.sim_pixels)
+    assert np.abs(lut - out).max() < 0.02  # encoded values: the chart check is in ΔE00 below
+
+
+@pytest.mark.parametrize("sim_key", ["hue", "hue_exr"])
+def test_fit_and_verify_through_opencolorio(images, tmp_path, sim_key):
+    """The whole loop: the SIM image through the .cube by OpenColorIO's processor, audited
+    again, is within 0.5 ΔE00 of REAL; the .cube is within 0.1 ΔE00 of the model over the
+    chart and a dense lattice; the OCIO config loads and gives the cube's result."""
+    from fidelity.correction.lut import apply_processor, config_processor, cube_processor
+    from fidelity.fit import fit_and_verify
+
+    rep = fit_and_verify(images[sim_key], images["real"], tmp_path, sim_corners=CORNERS,
+                         real_corners=CORNERS)
+    assert rep.before.mean_delta_e > 5
+    assert rep.after.mean_delta_e < 0.5
+    assert rep.lut.chart_max <= 0.1
+    if sim_key == "hue_exr":
+        assert rep.lut.passed and rep.lut.grid_max <= 0.1 and rep.lut.size in (33, 65)
+    else:
+        # sRGB in, sRGB out: a 20-degree hue correction drives output channels through 0,
+        # where the sRGB encoding's toe bends faster than a 65^3 lattice follows; it is
+        # measured and reported (not met), the 33^3 cube was tried first
+        assert [c.size for c in rep.lut_checks] == [33, 65] and not rep.lut.passed
+        assert rep.lut.grid_p99 <= 0.1 and rep.lut.grid_max < 0.5
+    assert rep.prediction_after.dmap_points is not None
+    assert rep.prediction_before.dmap_points is not None
+    assert rep.prediction_after.dmap_points < rep.prediction_before.dmap_points
+    text = Path(rep.files["cube"]).read_text()
+    if sim_key == "hue_exr":
+        assert rep.correction.encoding == "linear"
+        assert "LUT_1D_INPUT_RANGE" in text and "scene-linear" in text
+    x = rep.correction.sim_pixels
+    a = apply_processor(cube_processor(rep.files["cube"]), x)
+    b = apply_processor(config_processor(rep.files["ocio"]), x)
+    assert np.array_equal(a, b)
+
+
+def test_a_nearly_grey_real_chart_is_refused(images, tmp_path):
+    from fidelity.fit import fit_correction
+
+    with pytest.raises(InvalidValueError, match="nearly grey"):
+        fit_correction(images["hue"], images["grey"], sim_corners=CORNERS, real_corners=CORNERS)
+
+
+def test_cli_fit_writes_the_files_and_the_report(images, tmp_path):
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["fit", str(images["hue"]), str(images["real"]), "--out",
+                                  str(out), "--sim-corners", CORNERS, "--real-corners", CORNERS,
+                                  "--correction", "root-polynomial"])
+    assert r.exit_code == 0, r.output
+    for name in ("correction.cube", "correction.ocio", "correction.json", "report.json",
+                 "report.html"):
+        assert (out / name).is_file()
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["model"] == "root-polynomial"
+    assert rep["before"]["mean_delta_e"] > 5 > 0.5 > rep["after"]["mean_delta_e"]
+    assert rep["lut_check"]["chart_max_delta_e"] <= 0.1
+    assert rep["lut_check"]["grid_p99_delta_e"] <= 0.1
+    assert rep["cross_validated_mean_delta_e"] < 0.5
+    assert len(rep["correction"]["coefficients"]) == 3
+    assert len(rep["correction"]["coefficients"][0]) == 6
+    excluded = rep["correction"]["excluded"]
+    assert all(p["used"] == (p["name"] not in excluded) for p in rep["correction"]["patches"])
+
+
+def test_cli_fit_bad_input_is_one_line_exit_2(images, tmp_path):
+    r = CliRunner().invoke(main, ["fit", str(tmp_path / "missing.png"), str(images["real"]),
+                                  "--out", str(tmp_path / "o")])
+    assert r.exit_code == 2
+    assert "missing.png" in r.output
+
+
+def test_a_missing_opencolorio_names_the_extra(monkeypatch):
+    import builtins
+
+    from fidelity.correction import lut
+
+    real_import = builtins.__import__
+
+    def no_ocio(name, *args, **kwargs):
+        if name == "PyOpenColorIO":
+            raise ImportError(name)
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_ocio)
+    with pytest.raises(InvalidValueError, match=r"camera-fidelity\[fit\]"):
+        lut.ocio()
+
+
+def test_cli_fit_says_when_the_model_cannot_express_the_difference(images, tmp_path):
+    """5-bit banding: the report marks the fit as not expressing the difference."""
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["fit", str(images["bits5"]), str(images["real"]), "--out",
+                                  str(out), "--sim-corners", CORNERS, "--real-corners", CORNERS,
+                                  "--objective", "linear"])
+    assert r.exit_code == 0, r.output
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["correction"]["expressed"] is False
+    assert rep["cross_validated_mean_delta_e"] > 0.5
+
+
+def test_the_normalisation_is_left_out_of_the_correction(images, exact, tmp_path):
+    """``exposure`` (default) keeps the simulator's exposure: a SIM one stop darker than REAL
+    and otherwise equal gets a correction that changes nothing; ``none`` corrects the
+    exposure too (linear values doubled)."""
+    from fidelity.fit import fit_correction
+
+    dark = np.asarray(delinearize_srgb(np.asarray(linearize_srgb(np.clip(exact[1], 0, 1)))
+                                       * 0.5))
+    sim = write_png(tmp_path / "dark.png", _image(dark), 16)
+    keep = fit_correction(sim, images["real"], sim_corners=CORNERS, real_corners=CORNERS,
+                          objective="linear")
+    assert keep.normalisation.exposure_ev == pytest.approx(1.0, abs=0.01)
+    x = keep.sim_pixels
+    assert np.abs(keep.apply(x) - x).max() < 2e-3
+    fix = fit_correction(sim, images["real"], sim_corners=CORNERS, real_corners=CORNERS,
+                         objective="linear", normalise_mode="none")
+    lin = np.asarray(linearize_srgb(x))
+    assert np.allclose(np.asarray(linearize_srgb(fix.apply(x))), 2 * lin, atol=2e-3)
