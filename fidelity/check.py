@@ -75,6 +75,18 @@ def evidence_of(prediction: Prediction | None, budget: UncertaintyBudget | None,
         f"reference {reference}: the 24-patch ColorChecker the tables were calibrated on"
         if inside else f"reference {reference}: not the 24-patch ColorChecker the tables "
                        f"were calibrated on; the prediction does not apply to its ΔE"))
+    table = prediction.table
+    if table.kind.measured:
+        from fidelity.coco.detectors import stale_preprocessing
+
+        stale = stale_preprocessing(table.provenance)
+        domain = domain.with_check(DomainCheck(
+            "detector preprocessing", not stale,
+            f"table {table.name}: every detector measured with this version's preprocessing"
+            if not stale else
+            f"table {table.name}: {', '.join(sorted(stale))} measured with a detector "
+            f"preprocessing other than this version's (the table predates it; rerun the "
+            f"sweep and fidelity tables)"))
     return interval, domain
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
+import fidelity
 from fidelity.cli import main
 from fidelity.prediction.interval import prediction_interval, validity_domain
 from fidelity.prediction.table import load_prediction_table, predict
@@ -228,3 +229,53 @@ def test_settings_file_sets_the_decision_rule_and_html_shows_the_budget(tmp_path
     assert undecided.exit_code == EXIT_UNDECIDED, undecided.output
     settings.write_text(settings.read_text() + "strict = true\n")
     assert run("--config", settings, "gate", "--camera", "nikon-5100").exit_code == EXIT_FAIL
+
+
+def test_stale_preprocessing_names_the_detectors_measured_otherwise():
+    from fidelity.coco.detectors import PREPROCESSING, stale_preprocessing
+
+    now = PREPROCESSING["ultralytics"].describe()
+    prov = {"models": {"a": {"conventions": {"preprocess": now}},
+                       "b": {"conventions": {"preprocess": "letterbox centred, RGB/255"}},
+                       "c": {"conventions": {}}}}
+    assert stale_preprocessing(prov) == {"b": "letterbox centred, RGB/255", "c": None}
+    assert stale_preprocessing({"models": {"a": {"conventions": {"preprocess": now}}}}) == {}
+    assert stale_preprocessing({}) == {}
+
+
+def test_validity_domain_states_whether_the_table_has_this_versions_preprocessing(tmp_path):
+    """A measured table whose detectors all carry this version's preprocessing is inside; the
+    same table with one detector's recorded preprocessing changed is outside, naming it."""
+    from fidelity.coco.detectors import PREPROCESSING
+
+    src = json.loads((Path(fidelity.__file__).parent / "data" / "prediction"
+                      / "coco1000-measured.json").read_text())
+    for name, m in src["provenance"]["models"].items():
+        family = "yolox" if name.startswith("yolox") else "ultralytics"
+        m["conventions"]["preprocess"] = PREPROCESSING[family].describe()
+    good = tmp_path / "good.json"
+    good.write_text(json.dumps(src))
+    src["provenance"]["models"]["yolox_nano"]["conventions"]["preprocess"] = "older"
+    old = tmp_path / "old.json"
+    old.write_text(json.dumps(src))
+
+    def check(table):
+        doc = fidelity.check_camera("nikon-5100", table=str(table))
+        return {c.name: c for c in doc.validity.checks}["detector preprocessing"]
+
+    assert check(good).inside
+    stale = check(old)
+    assert not stale.inside and "yolox_nano" in stale.detail
+
+
+@pytest.mark.xfail(strict=True, reason="the shipped tables predate the current detector "
+                   "preprocessing; the re-sweep (benchmarks/run_coco_sweep.sh) is running. When "
+                   "its tables land this passes, and strict xfail then fails until this mark "
+                   "is removed")
+def test_shipped_measured_tables_carry_this_versions_preprocessing():
+    from fidelity.coco.detectors import stale_preprocessing
+
+    folder = Path(fidelity.__file__).parent / "data" / "prediction"
+    for path in sorted(folder.glob("coco*.json")):
+        prov = json.loads(path.read_text())["provenance"]
+        assert stale_preprocessing(prov) == {}, path.name
