@@ -189,3 +189,31 @@ def test_placement_remeasure_equals_locating_the_jittered_corners_again():
     assert means is not None
     srgb = np.clip(delinearize_srgb(means), 0, 1)
     assert np.allclose(srgb, again.measurement.srgb, atol=1e-12)
+
+
+@pytest.mark.parametrize("sigma", [0.5, 1.5])
+def test_placement_remeasure_equals_locating_again_under_perspective(sigma):
+    """The same with a chart in strong perspective (one side 40 % shorter) and jitters up to
+    the 4-sigma reach: only the pixels near the windows' edges are re-mapped, the rest counted
+    once, and the means are still those of locating again."""
+    from fidelity.chart.measure import _window_remeasurer
+    from fidelity.colour.colorimetry import linearize_srgb as lin
+
+    ref = load_reference("scene")
+    img = _draw_chart(np.clip(np.asarray(ref.srgb), 0, 1), 0.05, 9)
+    h, w = img.shape[:2]
+    corners = np.array([[0.12 * w, 0.15 * h], [0.85 * w, 0.25 * h],
+                        [0.83 * w, 0.70 * h], [0.14 * w, 0.82 * h]])
+    base = measure_pixels(img, corners, encoding="srgb", exposure=0.0, reference=ref,
+                          uncertainty=False)
+    remeasure = _window_remeasurer(img, base.location, sigma, "keep", lambda v: lin(v))
+    rng = np.random.default_rng(3)
+    for _ in range(4):
+        jitter = corners + np.clip(sigma * rng.standard_normal((4, 2)), -4 * sigma, 4 * sigma)
+        again = measure_pixels(img, jitter, encoding="srgb", exposure=0.0, reference=ref,
+                               uncertainty=False)
+        means = remeasure(jitter)
+        assert means is not None
+        srgb = np.clip(delinearize_srgb(means), 0, 1)
+        assert np.allclose(srgb, again.measurement.srgb, atol=1e-12)
+    assert remeasure(corners + np.array([[4 * sigma + 3, 0], [0, 0], [0, 0], [0, 0]])) is None

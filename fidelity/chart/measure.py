@@ -838,19 +838,41 @@ def _window_remeasurer(pixels: np.ndarray, location: ChartLocation, sigma: float
     half = location.window / 2.0 + 1e-9
     n = rows * cols
     grid_corners = np.array([[0, 0], [cols - 1, 0], [cols - 1, rows - 1], [0, rows - 1]], float)
+    # Only the pixels near a window's edge can change sides when the corners move by up to
+    # ``grow`` px: those farther in are counted once (``fixed``), those farther out dropped.
+    # A corner shift of d px moves a grid position by at most about d / pitch (the smallest
+    # pitch along the chart's sides), taken 1.5 times over for safety; a draw moving a corner
+    # farther than ``grow`` px (beyond 4 sigma) is not measured (it would need pixels
+    # outside the boxes read).
+    c0 = np.asarray(location.corners, np.float64)
+    sides = [float(np.linalg.norm(c0[1] - c0[0])) / max(cols - 1, 1),
+             float(np.linalg.norm(c0[2] - c0[3])) / max(cols - 1, 1),
+             float(np.linalg.norm(c0[3] - c0[0])) / max(rows - 1, 1),
+             float(np.linalg.norm(c0[2] - c0[1])) / max(rows - 1, 1)]
+    margin = 1.5 * grow / max(min(sides), 1e-9)
+    uv0 = apply_homography(np.linalg.inv(homography_from_points(grid_corners, c0)), points)
+    reach = np.max(np.abs(uv0 - centre), axis=1)
+    inner = reach <= half - margin
+    band = (reach > half - margin) & (reach <= half + margin)
+    fixed_counts = np.bincount(who[inner], minlength=n).astype(np.float64)
+    fixed_sums = np.stack([np.bincount(who[inner], weights=vals[inner, c], minlength=n)
+                           for c in range(3)], axis=-1)
+    points, vals, who, centre = points[band], vals[band], who[band], centre[band]
 
     def remeasure(corners: np.ndarray) -> np.ndarray | None:
+        if float(np.max(np.abs(np.asarray(corners, np.float64) - c0))) > grow:
+            return None
         try:
             h = homography_from_points(grid_corners, corners)
             uv = apply_homography(np.linalg.inv(h), points)
         except (InvalidValueError, np.linalg.LinAlgError):
             return None
         inside = np.all(np.abs(uv - centre) <= half, axis=1)
-        counts = np.bincount(who[inside], minlength=n)
+        counts = fixed_counts + np.bincount(who[inside], minlength=n)
         if np.any(counts == 0):
             return None
-        sums = np.stack([np.bincount(who[inside], weights=vals[inside, c], minlength=n)
-                         for c in range(3)], axis=-1)
+        sums = fixed_sums + np.stack([np.bincount(who[inside], weights=vals[inside, c],
+                                                  minlength=n) for c in range(3)], axis=-1)
         means: np.ndarray = sums / counts[:, None]
         return means
 
