@@ -11,6 +11,7 @@ from fidelity.cli.options import (
     IMAGE_PATH,
     chart_pair_options,
     common_options,
+    evidence_option,
     image_read_options,
 )
 from fidelity.prediction.table import SIZES
@@ -42,10 +43,12 @@ if TYPE_CHECKING:
 @click.option("--illuminant", default="D65", show_default=True,
               help="Illuminant of the scene reference.")
 @image_read_options
+@evidence_option
 @common_options
 def fit(sim: Path, real: Path, out: Path, model: str, objective: str | None,
         sim_corners: str | None, real_corners: str | None, normalise_mode: str, size: str,
-        table: str | None, reference: str, illuminant: str, read: ReadOptions) -> None:
+        table: str | None, reference: str, illuminant: str, read: ReadOptions,
+        evidence_path: Path | None) -> None:
     """Fit the correction from the simulator's chart onto the real camera's, as a 3D LUT.
 
     SIM and REAL are read as fidelity compare reads them. The correction (gains, matrix,
@@ -65,7 +68,7 @@ def fit(sim: Path, real: Path, out: Path, model: str, objective: str | None,
 
     names = ("correction.cube", "correction.ocio", "correction.json", "report.json",
              "report.html")
-    check_outputs({n: out / n for n in names},
+    check_outputs({**{n: out / n for n in names}, "--evidence": evidence_path},
                   {"SIM": sim, "REAL": real, "--table": table, "--reference": reference,
                    "--illuminant": illuminant})
     report = fit_and_verify(
@@ -78,3 +81,8 @@ def fit(sim: Path, real: Path, out: Path, model: str, objective: str | None,
     for line in fit_lines(report):
         click.echo(line)
     click.echo(f"wrote {', '.join(display_path(out / n) for n in names)}")
+    if evidence_path is not None:
+        from fidelity.report.evidence import write_fit_evidence
+
+        write_fit_evidence(evidence_path, report)
+        click.echo(f"wrote {display_path(evidence_path)}")

@@ -32,10 +32,13 @@ import platform
 import subprocess
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fidelity.fileio import JSONObject, json_ready
 from fidelity.records import ChartReport, ComparisonReport, ImageSource, RenderSource, utc_now
+
+if TYPE_CHECKING:
+    from fidelity.fit import FitReport
 
 #: Layout version of the credibility record.
 EVIDENCE_SCHEMA_VERSION = "1.0"
@@ -241,6 +244,67 @@ def evidence_record(command: str, subjects: Sequence[tuple[str, ChartReport | Co
     return out
 
 
+def fit_evidence_record(report: FitReport, exit_code: int = 0) -> JSONObject:
+    """The credibility record of ``fidelity fit``: one subject, the pair SIM -> REAL, whose
+    inputs are the two images (SHA-256), whose measurement is the sim-to-real mean ΔE00 after
+    the correction (SIM through the ``.cube`` by OpenColorIO, measured again), whose prediction
+    is that difference's, and which adds ``correction``: the fit's JSON report
+    (:func:`fidelity.report.jsonform.fit_json`: before/after, fitted and cross-validated ΔE00,
+    the ``.cube``'s check, the model) and the SHA-256 of every file written. A fit has no
+    verdict; its validity domain is the prediction table's."""
+    from fidelity.fileio import file_sha256
+    from fidelity.prediction.interval import validity_domain
+    from fidelity.report.jsonform import fit_json
+
+    p = report.prediction_after
+    validity = validity_domain(p)
+    files: dict[str, dict[str, str | None]] = {}
+    for name, path in report.files.items():
+        try:
+            files[name] = {"path": path, "sha256": file_sha256(path)}
+        except OSError:
+            files[name] = {"path": path, "sha256": None}
+    subject = {
+        "subject": f"{report.sim} -> {report.real}", "error": None, "command": "fit",
+        "inputs": [_file_input("simulated image", report.sim),
+                   _file_input("real image", report.real)],
+        "reference": {"name": "the real camera's chart",
+                      "description": "sim-to-real ΔE00: the simulated chart measured against "
+                                     "the real camera's, patch by patch",
+                      "conventions": {}},
+        "prediction_table": {"name": p.table.name, "kind": p.table.kind.value,
+                             "path": str(p.table.path) if p.table.path else None,
+                             "sha256": (file_sha256(p.table.path) if p.table.path else None),
+                             "provenance": dict(p.table.provenance), "calibration": None},
+        "measurement": {"quantity": "sim-to-real mean ΔE00 after the correction",
+                        "value": report.after.mean_delta_e,
+                        "max_delta_e": report.after.max_delta_e,
+                        "worst_patch": report.after.worst_patch, "uncertainty": None,
+                        "before": report.before.mean_delta_e},
+        "prediction": {"delta_e": p.delta_e, "size": p.size, "size_used": p.size_used,
+                       "dmap_points": p.dmap_points, "dmap_relative": p.dmap_relative,
+                       "dap_person_points": p.dap_person_points,
+                       "dap_bicycle_points": p.dap_bicycle_points,
+                       "upper_bound": p.upper_bound, "interval": None,
+                       "directional_dmap_points": None, "bound": "classic"},
+        "validity": validity.to_json(),
+        "verdict": None,
+        "correction": {"report": fit_json(report), "files": files},
+    }
+    out: JSONObject = json_ready({
+        "record": {"schema": "fidelity credibility record",
+                   "schema_version": EVIDENCE_SCHEMA_VERSION, "created": utc_now(),
+                   "command": "fit", "exit_code": int(exit_code),
+                   "outcome": OUTCOMES.get(int(exit_code), "unknown")},
+        "tool": tool_record(),
+        "environment": environment_record(),
+        "decision_rule": None,
+        "subjects": [subject],
+        "credibility_sections": {k: list(v) for k, v in CREDIBILITY_SECTIONS.items()},
+    })
+    return out
+
+
 def write_evidence(path: str | os.PathLike[str], command: str,
                    subjects: Sequence[tuple[str, ChartReport | ComparisonReport | None,
                                             str | None]],
@@ -252,6 +316,16 @@ def write_evidence(path: str | os.PathLike[str], command: str,
     return Path(path)
 
 
+def write_fit_evidence(path: str | os.PathLike[str], report: FitReport,
+                       exit_code: int = 0) -> Path:
+    """Write the fit's credibility record atomically (:func:`fit_evidence_record`)."""
+    from fidelity.fileio import write_json_atomic
+
+    write_json_atomic(path, fit_evidence_record(report, exit_code))
+    return Path(path)
+
+
 __all__ = ["CREDIBILITY_SECTIONS", "EVIDENCE_SCHEMA_VERSION", "OUTCOMES", "code_sha256",
            "environment_record", "evidence_record", "evidence_schema", "evidence_schema_path",
-           "git_commit", "tool_record", "write_evidence"]
+           "fit_evidence_record", "git_commit", "tool_record", "write_evidence",
+           "write_fit_evidence"]
