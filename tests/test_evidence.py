@@ -111,6 +111,9 @@ def test_validity_domain_says_outside_instead_of_extrapolating():
     assert not check.inside and "not extrapolated" in check.detail
     sizes = validity_domain(predict(1.0, table=table, size="x"))
     assert not next(c for c in sizes.checks if c.name == "detector size").inside
+    # "any" (the default) asks for the worst case over the sizes the table measured: inside
+    anysize = validity_domain(predict(1.0, table=table, size="any"))
+    assert next(c for c in anysize.checks if c.name == "detector size").inside
 
 
 # ------------------------------------------------------------------ the CLI and the record

@@ -180,11 +180,15 @@ def validity_domain(prediction: Prediction, column: str = "dmap_points") -> Vali
     sizes = prediction.table.sizes()
     measured = ", ".join(sizes) or "none"
     same = prediction.size in sizes
-    size = DomainCheck(
-        "detector size", same,
-        f"detector size {prediction.size} measured by the table (sizes {measured})" if same
-        else f"detector size {prediction.size} not measured by the table (sizes {measured}); "
-             f"answered by the curves of {prediction.size_used}")
+    if prediction.size == "any" and sizes:  # the worst case over the sizes the table measured
+        size = DomainCheck("detector size", True,
+                           f"any detector size: the table's measured sizes ({measured})")
+    else:
+        size = DomainCheck(
+            "detector size", same,
+            f"detector size {prediction.size} measured by the table (sizes {measured})" if same
+            else f"detector size {prediction.size} not measured by the table (sizes "
+                 f"{measured}); answered by the curves of {prediction.size_used}")
     kind = DomainCheck(
         "table kind", prediction.table.kind.measured,
         f"table {prediction.table.name}: {prediction.table.kind.value}"

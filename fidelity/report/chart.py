@@ -260,7 +260,8 @@ def uncertainty_section(report: ChartReport) -> Section | None:
     if report.validity is not None:
         blocks.append(table(("validity domain", "inside", "detail"),
                             [(c.name, "yes" if c.inside else "**no**", c.detail)
-                             for c in report.validity.checks]))
+                             for c in report.validity.checks],
+                            numeric=(False, False, False)))
     return section("Measurement uncertainty of the chart ΔE", *blocks)
 
 
