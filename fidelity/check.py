@@ -25,7 +25,7 @@ import numpy as np
 
 from fidelity.chart.measure import DEFAULT_READ, ReadOptions, reads_for
 from fidelity.prediction.judge import judge
-from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion
+from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, SIMPLE, Criterion, DecisionRule
 from fidelity.records import (
     ChartReport,
     GateResult,
@@ -38,8 +38,10 @@ from fidelity.records import (
 if TYPE_CHECKING:
     from fidelity.camera.model import CameraModel
     from fidelity.chart.measure import ChartMeasurement
+    from fidelity.chart.uncertainty import UncertaintyBudget
     from fidelity.coco.measure import MeasuredLoss, MeasureRequest
-    from fidelity.prediction.table import PredictionTable
+    from fidelity.prediction.interval import PredictionInterval, ValidityDomain
+    from fidelity.prediction.table import Prediction, PredictionTable
 
 #: The gate of ``fidelity check`` unless told otherwise: mean ΔE00 <= 3 (SAFE-COLOR).
 DEFAULT_CRITERION = Criterion("max-delta-e", DEFAULT_MAX_DELTA_E)
@@ -49,6 +51,43 @@ AUDIT_CONVENTION = ("patches located by the homography of the 4x6 grid from the 
                     "centres; central window of {window:g} pitch; mean in linear light; "
                     "exposure on the neutral patches (EV) unless fixed; sRGB encoded and "
                     "clipped to [0, 1]")
+
+
+#: The reference charts the prediction tables were calibrated for: the 24-patch ColorChecker
+#: as the scene renders it, or the paper's Lab values of the same chart.
+TABLE_REFERENCES = ("scene", "safecolor")
+
+
+def evidence_of(prediction: Prediction | None, budget: UncertaintyBudget | None,
+                reference: str, k: float = 2.0
+                ) -> tuple[PredictionInterval | None, ValidityDomain | None]:
+    """The predicted ΔmAP's interval (with the chart ΔE's uncertainty ``budget``) and the
+    validity domain of the answer (the prediction's checks and the ``reference`` chart)."""
+    if prediction is None:
+        return None, None
+    from fidelity.prediction.interval import DomainCheck, prediction_interval, validity_domain
+
+    interval = prediction_interval(prediction, budget.combined if budget else 0.0,
+                                   "dmap_points", k)
+    inside = reference in TABLE_REFERENCES
+    domain = validity_domain(prediction).with_check(DomainCheck(
+        "reference chart", inside,
+        f"reference {reference}: the 24-patch ColorChecker the tables were calibrated on"
+        if inside else f"reference {reference}: not the 24-patch ColorChecker the tables "
+                       f"were calibrated on; the prediction does not apply to its ΔE"))
+    table = prediction.table
+    if table.kind.measured:
+        from fidelity.coco.detectors import stale_preprocessing
+
+        stale = stale_preprocessing(table.provenance)
+        domain = domain.with_check(DomainCheck(
+            "detector preprocessing", not stale,
+            f"table {table.name}: every detector measured with this version's preprocessing"
+            if not stale else
+            f"table {table.name}: {', '.join(sorted(stale))} measured with a detector "
+            f"preprocessing other than this version's (the table predates it; rerun the "
+            f"sweep and fidelity tables)"))
+    return interval, domain
 
 
 def _measure(request: MeasureRequest | None, mapping: Any, key: str,
@@ -72,6 +111,7 @@ def check_camera(
     command: str = "check",
     bound: str = "classic",
     measure: MeasureRequest | None = None,
+    decision: DecisionRule = SIMPLE,
 ) -> ChartReport:
     """Render ``camera``'s chart, measure it, predict its detection loss, apply ``criterion``.
 
@@ -102,6 +142,9 @@ def check_camera(
     measure
         Also measure the camera's loss on COCO (:class:`fidelity.coco.measure.MeasureRequest`:
         the camera's colour rendering emulated on the images, as ``fidelity validate`` does).
+    decision
+        The decision rule of the verdict (:class:`~fidelity.prediction.verdict.DecisionRule`;
+        guarded: with the chart ΔE's uncertainty, :mod:`fidelity.chart.uncertainty`).
 
     Returns
     -------
@@ -121,7 +164,11 @@ def check_camera(
     render = render_chart(camera if camera is not None else DEFAULT_CAMERA, illuminant,
                           renderer, reference=reference, seed=seed)
     m = render.measurement
-    prediction, verdict, directional = judge(m.mean_delta_e, size, table, criterion, m, bound)
+    u = render.uncertainty
+    prediction, verdict, directional = judge(
+        m.mean_delta_e, size, table, criterion, m, bound, decision=decision,
+        delta_e_uncertainty=u.combined if u else None)
+    interval, validity = evidence_of(prediction, u, reference, decision.k)
     from fidelity.chart.blindspots import chart_blind_spots
 
     spots = chart_blind_spots(m, bits=render.camera.quantisation_bits)
@@ -143,7 +190,8 @@ def check_camera(
         provenance=Provenance.collect(None, prediction,
                                       {"render": rd.get("conventions", {})}),
         prediction=prediction, verdict=verdict, directional=directional, bound=bound,
-        blind_spots=spots, measured=measured,
+        blind_spots=spots, measured=measured, uncertainty=u, interval=interval,
+        validity=validity,
     )
 
 
@@ -160,6 +208,7 @@ def audit_image(
     command: str = "audit",
     bound: str = "classic",
     measure: MeasureRequest | None = None,
+    decision: DecisionRule = SIMPLE,
 ) -> ChartReport:
     """Measure the chart in ``image``, predict the detection loss, apply ``criterion``.
 
@@ -179,7 +228,7 @@ def audit_image(
     reference, illuminant
         ``scene`` (the chart's spectra under ``illuminant``, adapted to D65, as
         :func:`check_camera` uses), ``safecolor`` (the paper's Lab values) or a chart JSON.
-    size, table, criterion, bound
+    size, table, criterion, bound, decision
         As for :func:`check_camera`; ``criterion`` None: no verdict.
     measure
         Also measure on COCO what this chart's colour rendering costs a detector: a mapping
@@ -198,8 +247,11 @@ def audit_image(
     result = measure_image(image, corners if corners is None or len(corners) else None,
                            read=read, reference=reference, illuminant=illuminant,
                            inspect_image=lambda img: banding.append(_image_banding(img)))
-    prediction, verdict, directional = judge(result.mean_delta_e, size, table, criterion,
-                                             result.measurement, bound)
+    u = result.uncertainty
+    prediction, verdict, directional = judge(
+        result.mean_delta_e, size, table, criterion, result.measurement, bound,
+        decision=decision, delta_e_uncertainty=u.combined if u else None)
+    interval, validity = evidence_of(prediction, u, reference, decision.k)
     info = result.image
     assert info is not None  # measure_image always describes the file
     source = ImageSource(
@@ -224,7 +276,8 @@ def audit_image(
         prediction=prediction, verdict=verdict,
         exposure_ev=result.exposure_ev, bad_pixels=result.bad_pixels,
         valid_pixels=result.valid_pixels, directional=directional, bound=bound,
-        blind_spots=spots, measured=measured,
+        blind_spots=spots, measured=measured, uncertainty=u, interval=interval,
+        validity=validity,
     )
 
 
@@ -272,6 +325,7 @@ def gate(
     size: str = "any",
     table: str | None = None,
     bound: str = "classic",
+    decision: DecisionRule = SIMPLE,
 ) -> list[GateResult]:
     """Gate ``images`` one by one (or ``camera``) against ``criterion``. An input error of
     one subject (exit code 2) becomes its result's ``error``; the others are still measured.
@@ -293,11 +347,12 @@ def gate(
                 report = audit_image(subject, corners, read=subject_read,
                                      reference=reference or "scene", illuminant=illuminant,
                                      size=size, table=table, criterion=criterion,
-                                     command="gate", bound=bound)
+                                     command="gate", bound=bound, decision=decision)
             else:
                 report = check_camera(subject, illuminant=illuminant, renderer=renderer,
                                       reference=reference or "scene", size=size, table=table,
-                                      criterion=criterion, command="gate", bound=bound)
+                                      criterion=criterion, command="gate", bound=bound,
+                                      decision=decision)
         except (FidelityError, OSError) as exc:
             results.append(GateResult(subject, criterion, error=str(exc),
                                       seconds=time.perf_counter() - t0))
@@ -307,5 +362,5 @@ def gate(
     return results
 
 
-__all__ = ["AUDIT_CONVENTION", "DEFAULT_CRITERION", "audit_image", "chart_emulation",
-           "check_camera", "gate"]
+__all__ = ["AUDIT_CONVENTION", "DEFAULT_CRITERION", "TABLE_REFERENCES", "audit_image",
+           "chart_emulation", "check_camera", "evidence_of", "gate"]

@@ -35,7 +35,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fidelity.chart.measure import DEFAULT_READ, ReadOptions
+from fidelity.chart.uncertainty import UncertaintyBudget
 from fidelity.errors import InvalidValueError, unknown_name
+from fidelity.prediction.verdict import SIMPLE, DecisionRule
 from fidelity.records import ComparisonReport, Normalisation, Provenance, utc_now
 
 if TYPE_CHECKING:
@@ -98,6 +100,7 @@ def compare_charts(
     bound: str = "classic",
     read: ReadOptions = DEFAULT_READ,
     measure: MeasureRequest | None = None,
+    decision: DecisionRule = SIMPLE,
 ) -> ComparisonReport:
     """Compare the chart in the simulated image ``sim`` with the chart in the real camera's
     image ``real`` (module docstring).
@@ -125,6 +128,9 @@ def compare_charts(
         recording (:mod:`fidelity.chart.recording`).
     measure
         Also measure the difference's cost on COCO (:class:`fidelity.coco.measure.MeasureRequest`).
+    decision
+        The verdict's decision rule (:class:`~fidelity.prediction.verdict.DecisionRule`); the
+        sim-to-real ΔE's uncertainty is :func:`sim_to_real_uncertainty`.
 
     Returns
     -------
@@ -146,7 +152,11 @@ def compare_charts(
         raise InvalidValueError(f"{sim} and {real}: the charts have different patches")
     srgb, norm = normalise(sm.srgb, rm.srgb, neutral_patches(rm), normalise_mode)
     m = measure_chart(srgb, rm.lab, rm.patch_names, reference_srgb=np.clip(rm.srgb, 0, 1))
-    prediction, verdict, directional = judge(m.mean_delta_e, size, table, criterion, m, bound)
+    budget = sim_to_real_uncertainty(m.mean_delta_e, sim_report.uncertainty,
+                                     real_report.uncertainty)
+    prediction, verdict, directional = judge(
+        m.mean_delta_e, size, table, criterion, m, bound, decision=decision,
+        delta_e_uncertainty=budget.combined if budget else None)
     measured: tuple[MeasuredLoss, ...] = ()
     emulation = None
     if measure is not None:
@@ -164,8 +174,32 @@ def compare_charts(
                               "ΔE with the same tables as a chart's own ΔE"}
     prov = Provenance.collect(sim_report.provenance.input_sha256, prediction,
                               {**dict(sim_report.provenance.conventions), **conventions})
+    from fidelity.check import evidence_of
+
+    interval, validity = evidence_of(prediction, budget, reference, decision.k)
     return ComparisonReport(utc_now(), sim_report, real_report, norm, m, prediction,
-                            directional, verdict, prov, bound, measured, emulation)
+                            directional, verdict, prov, bound, measured, emulation,
+                            uncertainty=budget, interval=interval, validity=validity)
 
 
-__all__ = ["NORMALISATIONS", "compare_charts", "normalise"]
+def sim_to_real_uncertainty(value: float, sim: UncertaintyBudget | None,
+                            real: UncertaintyBudget | None) -> UncertaintyBudget | None:
+    """The standard uncertainty of a sim-to-real chart ΔE: each image's audited uncertainty
+    (its chart ΔE's combined standard uncertainty) as a component, combined by root sum of
+    squares. An approximation: the sim-to-real ΔE compares the two charts' colours, each known
+    to the uncertainty its audit found, with a sensitivity taken as that of a chart's ΔE to its
+    own colours (1). None when either audit has no budget."""
+    from fidelity.chart.uncertainty import UncertaintyComponent
+
+    if sim is None or real is None:
+        return None
+    how = ("the combined standard uncertainty of the {} image's audited chart ΔE (its own "
+           "budget), sensitivity taken as 1")
+    return UncertaintyBudget(
+        float(value),
+        (UncertaintyComponent("simulated image", sim.combined, "B", how.format("simulated")),
+         UncertaintyComponent("real image", real.combined, "B", how.format("real"))),
+        quantity="sim-to-real mean ΔE00")
+
+
+__all__ = ["NORMALISATIONS", "compare_charts", "normalise", "sim_to_real_uncertainty"]

@@ -73,6 +73,10 @@ SETTINGS: Mapping[str, Setting] = {
     "threads": Setting(int, "threads"),
     "provider": Setting(str, "provider"),
     "bound": Setting(str, "bound"),
+    "decision": Setting(str, "decision"),
+    "coverage_factor": Setting(float, "coverage_factor"),
+    "strict": Setting(bool, "strict"),
+    "evidence": Setting(str, "evidence_path", path=True),
 }
 
 

@@ -3,13 +3,18 @@
 Installed with camera-fidelity (entry point ``pytest11``), it gives every test suite the
 ``colour_fidelity`` fixture::
 
+    import pytest
+
     def test_day_render_keeps_colour(colour_fidelity):
         assert colour_fidelity("renders/day.exr") <= 3      # mean ΔE00 of the chart
 
 The fixture measures the chart in an image (found, or given by ``corners=``) with
 :func:`fidelity.audit_image` and returns a :class:`ColourFidelity`: a float (the mean ΔE00) that
 also carries the whole :class:`~fidelity.records.ChartReport` (``.report``). The measured
-values are recorded as JUnit properties of the test (``record_property``), so a CI shows them.
+values are recorded as JUnit properties, so a CI shows them: properties of the test case under
+``junit_family`` ``legacy`` or ``xunit1``, and under ``xunit2`` (pytest's default, whose schema
+allows properties only on the suite) properties of the test suite named after the test
+(``TEST_ID:IMAGE:mean_delta_e``), without pytest's warning about ``record_property``.
 
 A marker sets the fixture's defaults for one test::
 
@@ -51,11 +56,25 @@ def pytest_configure(config: pytest.Config) -> None:
                    "(reference, illuminant, corners, ...; see fidelity.audit_image)")
 
 
+def _recorder(request: pytest.FixtureRequest) -> Callable[[str, object], None]:
+    """Where a measured value goes: the test's own properties (``user_properties``: JUnit
+    ``legacy``/``xunit1``, or no JUnit file), else, under ``xunit2`` with ``--junitxml``, the
+    suite's properties prefixed with the test's id."""
+    xml_path = getattr(request.config.option, "xmlpath", None)
+    family = str(request.config.getini("junit_family") or "xunit2")
+    if not xml_path or family in ("legacy", "xunit1"):
+        props = request.node.user_properties
+        return lambda name, value: props.append((name, value))
+    record_suite: Callable[[str, object], None] = request.getfixturevalue(
+        "record_testsuite_property")
+    test_id = request.node.nodeid
+    return lambda name, value: record_suite(f"{test_id}:{name}", value)
+
+
 @pytest.fixture
-def colour_fidelity(request: pytest.FixtureRequest,
-                    record_property: Callable[[str, object], None],
-                    ) -> Callable[..., ColourFidelity]:
+def colour_fidelity(request: pytest.FixtureRequest) -> Callable[..., ColourFidelity]:
     """Measure the chart in an image: ``colour_fidelity(path, **options)`` -> mean ΔE00."""
+    record_property = _recorder(request)
     marker = request.node.get_closest_marker("colour_fidelity")
     defaults: dict[str, Any] = dict(marker.kwargs) if marker else {}
 

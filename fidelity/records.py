@@ -17,6 +17,14 @@ predicted from its chart ΔE and the verdict of a gate. Its JSON form (``schema_
 - ``verdict``: pass/fail of the criterion (:meth:`fidelity.prediction.verdict.Verdict.to_json`,
   with the message);
 - ``details``: where the patches were sampled (image) or the camera and render settings;
+- ``prediction_interval``: the predicted ΔmAP with its standard uncertainty (the table's
+  sampling error and the ΔE's uncertainty through the table's slope,
+  :class:`fidelity.prediction.interval.PredictionInterval`);
+- ``validity``: whether the answer lies inside its evidence's domain (table ΔE range, detector
+  sizes, table kind, reference chart: :class:`fidelity.prediction.interval.ValidityDomain`);
+- ``uncertainty``: the standard uncertainty budget of the mean ΔE00
+  (:class:`fidelity.chart.uncertainty.UncertaintyBudget`: each component, its value, type and
+  method; the combined ``standard_uncertainty`` with ``k`` = 1);
 - ``provenance``: tool version, Python and libraries, input sha256, tables (name, path,
   sha256), conventions.
 
@@ -48,10 +56,12 @@ from fidelity.chart.find import ChartChecks, FoundChart
 from fidelity.chart.image import ImageInfo
 from fidelity.chart.locate import ChartLocation
 from fidelity.chart.measure import BadPixels, ChartMeasurement
+from fidelity.chart.uncertainty import UncertaintyBudget
 from fidelity.fileio import JSONObject
 from fidelity.prediction.directional import DirectionalPrediction
+from fidelity.prediction.interval import PredictionInterval, ValidityDomain
 from fidelity.prediction.table import Prediction
-from fidelity.prediction.verdict import EXIT_ERROR, Criterion, Verdict
+from fidelity.prediction.verdict import EXIT_ERROR, Criterion, Verdict, worst_exit_code
 
 if TYPE_CHECKING:
     from fidelity.coco.measure import MeasuredLoss
@@ -339,6 +349,12 @@ class ChartReport:
     blind_spots: tuple[BlindSpot, ...] = ()
     #: losses measured on COCO (``--measure``; :class:`fidelity.coco.measure.MeasuredLoss`)
     measured: tuple[MeasuredLoss, ...] = ()
+    #: the standard uncertainty of the chart ΔE (:mod:`fidelity.chart.uncertainty`)
+    uncertainty: UncertaintyBudget | None = None
+    #: the predicted ΔmAP with its uncertainty (:mod:`fidelity.prediction.interval`)
+    interval: PredictionInterval | None = None
+    #: whether the answer lies inside its evidence's domain
+    validity: ValidityDomain | None = None
 
     @property
     def warnings(self) -> list[BlindSpot]:
@@ -392,6 +408,12 @@ class ChartReport:
             bound=str(data.get("bound") or "classic"),
             blind_spots=tuple(BlindSpot.from_json(b) for b in data.get("blind_spots") or ()),
             measured=_measured_from_json(data.get("measured_loss") or ()),
+            uncertainty=(UncertaintyBudget.from_json(data["uncertainty"])
+                         if data.get("uncertainty") else None),
+            interval=(PredictionInterval.from_json(data["prediction_interval"])
+                      if data.get("prediction_interval") else None),
+            validity=(ValidityDomain.from_json(data["validity"])
+                      if data.get("validity") else None),
         )
 
 
@@ -483,6 +505,10 @@ class ComparisonReport:
     emulation: Mapping[str, Any] | None = None
     command: str = "compare"
     schema_version: str = COMPARE_SCHEMA_VERSION
+    #: the sim-to-real ΔE's uncertainty (:func:`fidelity.compare.sim_to_real_uncertainty`)
+    uncertainty: UncertaintyBudget | None = None
+    interval: PredictionInterval | None = None
+    validity: ValidityDomain | None = None
 
     @property
     def mean_delta_e(self) -> float:
@@ -518,7 +544,8 @@ class ComparisonReport:
             command=self.command, created=self.created, measurement=self.measurement,
             source=replace(src, reference=f"the real camera's chart ({real_name})"),
             provenance=self.provenance, prediction=self.prediction, verdict=self.verdict,
-            directional=self.directional, bound=self.bound, measured=self.measured)
+            directional=self.directional, bound=self.bound, measured=self.measured,
+            uncertainty=self.uncertainty, interval=self.interval, validity=self.validity)
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> ComparisonReport:
@@ -540,7 +567,12 @@ class ComparisonReport:
             provenance=Provenance.from_json(d["provenance"]), bound=str(d.get("bound", "classic")),
             measured=tuple(MeasuredLoss.from_json(x) for x in d.get("measured_loss") or ()),
             emulation=d.get("emulation"), command=str(d.get("command", "compare")),
-            schema_version=str(d.get("schema_version", COMPARE_SCHEMA_VERSION)))
+            schema_version=str(d.get("schema_version", COMPARE_SCHEMA_VERSION)),
+            uncertainty=(UncertaintyBudget.from_json(s2r["uncertainty"])
+                         if s2r.get("uncertainty") else None),
+            interval=(PredictionInterval.from_json(d["prediction_interval"])
+                      if d.get("prediction_interval") else None),
+            validity=ValidityDomain.from_json(d["validity"]) if d.get("validity") else None)
 
 
 @dataclass(frozen=True)
@@ -557,7 +589,7 @@ class GateResult:
 
     @property
     def exit_code(self) -> int:
-        """0 pass, 1 fail, 2 error."""
+        """0 pass, 1 fail, 2 error, 4 undecided (guarded decision rule)."""
         if self.error is not None or self.report is None:
             return EXIT_ERROR
         return self.report.exit_code
@@ -565,9 +597,9 @@ class GateResult:
 
 def gate_exit_code(results: Sequence[GateResult]) -> int:
     """The exit code of a gate over ``results``: 2 if any could not be measured, else 1 if any
-    failed, else 0."""
-    codes = [r.exit_code for r in results]
-    return EXIT_ERROR if EXIT_ERROR in codes else max(codes, default=0)
+    failed, else 4 if any was undecided, else 0
+    (:func:`fidelity.prediction.verdict.worst_exit_code`)."""
+    return worst_exit_code(r.exit_code for r in results)
 
 
 __all__ = [

@@ -110,12 +110,13 @@ def test_report_numbers_agree_with_colour_science(default_check):
         _default_table_chord(doc["mean_delta_e"]))
     html = (folder / "fidelity-report" / "report.html").read_text()
     # the verdict first, then the chart, the colour-error figures and the prediction curve
-    assert html.index("PASS") < html.index('alt="the chart: reference against measured"')
+    assert html.index("PASS") < html.index('aria-label="the chart: reference against measured"')
     for alt in ("ΔE00 on the chart layout", "a*b* errors", "tone curve of the neutral patches",
-                "ΔE00 per patch", "predicted loss against chart ΔE"):
-        assert f'alt="{alt}" src="data:image/png;base64,' in html
-    assert 'alt="worst case per transform family and the classic curve"' in html
-    assert html.count("data:image/png;base64,") == 7
+                "ΔE00 per patch", "predicted loss against chart ΔE",
+                "worst case per transform family and the classic curve"):
+        assert f'role="img" aria-label="{alt}"' in html
+    # every figure is inline SVG drawn from the numbers, none a PNG
+    assert html.count("<svg ") == 7 and "data:image/png" not in html
     assert "<details><summary>Patches</summary>" in html
     for text in ("Provenance", DEFAULT_TABLE, doc["provenance"]["version"]):
         assert text in html

@@ -89,7 +89,9 @@ def test_pytest_plugin_fixture_asserts_an_images_colour(renders, pytester):
             result = colour_fidelity({str(renders['good'])!r})
             assert result.report.source.reference == "safecolor" and result > 1
     """)
-    result = pytester.runpytest("--junitxml=out.xml")  # loaded by its pytest11 entry point
+    # loaded by its pytest11 entry point, in a fresh process (an in-process run drops the
+    # modules it imported, and numpy's extension modules load once per process)
+    result = pytester.runpytest_subprocess("--junitxml=out.xml")
     result.assert_outcomes(passed=2, failed=1)
     props = {p.get("name"): p.get("value")
              for p in ET.parse(pytester.path / "out.xml").getroot().iter("property")}

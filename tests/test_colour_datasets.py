@@ -53,8 +53,13 @@ def test_the_loaders_give_the_shipped_numbers() -> None:
 
 
 @pytest.mark.parametrize("argv", [["check", "--no-report", "-q"],
-                                  ["audit", "{png}", "-q", "--json", "{json}"]])
+                                  ["audit", "{png}", "-q", "--json", "{json}"],
+                                  # the HTML reports' figures are SVG written from the numbers
+                                  ["check", "-q", "--out", "{out}"],
+                                  ["audit", "{png}", "-q", "--html", "{html}"]])
 def test_check_and_audit_import_neither_colour_science_nor_matplotlib(argv, tmp_path) -> None:
+    """Nor scipy.optimize / scipy.interpolate (0.5-0.8 s of imports: the prediction's solvers
+    are fidelity.prediction.scalar)."""
     from fidelity.camera.render import render_chart
 
     png = tmp_path / "chart.png"
@@ -65,15 +70,20 @@ def test_check_and_audit_import_neither_colour_science_nor_matplotlib(argv, tmp_
     out.open(str(png), oiio.ImageSpec(img.shape[1], img.shape[0], 3, "uint8"))
     out.write_image(img)
     out.close()
-    args = [a.format(png=png, json=tmp_path / "a.json") for a in argv]
+    args = [a.format(png=png, json=tmp_path / "a.json", out=tmp_path / "out",
+                     html=tmp_path / "a.html") for a in argv]
     code = ("import sys\nfrom fidelity.cli import main\n"
             f"try:\n    main({args!r})\nexcept SystemExit as e:\n    code = e.code\n"
-            "bad = sorted(m for m in sys.modules if m.split('.')[0] in ('colour', 'matplotlib'))\n"
+            "bad = sorted(m for m in sys.modules if m.split('.')[0] in ('colour', 'matplotlib')\n"
+            "             or m.startswith(('scipy.optimize', 'scipy.interpolate')))\n"
             "print('IMPORTED', bad)\nsys.exit(code)\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                        cwd=Path(__file__).resolve().parent.parent, timeout=300)
     assert r.returncode in (0, 1), r.stderr
     assert "IMPORTED []" in r.stdout, r.stdout[-2000:]
+    html = tmp_path / ("a.html" if "--html" in argv else "out/report.html")
+    if "{out}" in argv or "{html}" in argv:
+        assert html.read_text(encoding="utf-8").count("<svg ") >= 6
 
 
 @pytest.mark.parametrize("name", ds.COLOURSPACES)

@@ -123,7 +123,7 @@ def test_compare_cli_gates_writes_junit_json_html(charts, tmp_path):
     for alt in ("the simulated and the real chart, sampling windows outlined",
                 "sim-to-real ΔE00 per patch",
                 "a*b*: arrows from the simulated colour to the real one"):
-        assert f'alt="{alt}"' in html
+        assert f'aria-label="{alt}"' in html
     r = CliRunner().invoke(main, [*args, "--max-delta-e", "10", "--json", "-"])
     assert r.exit_code == 0
     v = json.loads(r.stdout)["verdict"]

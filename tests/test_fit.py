@@ -649,3 +649,34 @@ def test_measure_gives_the_coco_loss_before_and_after(images, shared, tmp_path):
     html = tmp_path / "report.html"
     write_fit_report(hue, html_path=html)
     assert "measured on COCO after" in html.read_text()
+def test_cli_fit_writes_a_credibility_record_that_follows_the_schema(images, tmp_path):
+    """fit --evidence: one subject, the pair; the inputs' SHA-256, the measurement after the
+    correction, the written files' SHA-256, valid against the shipped evidence schema."""
+    import hashlib
+
+    import jsonschema
+
+    from fidelity.report.evidence import evidence_schema
+
+    out, record = tmp_path / "out", tmp_path / "evidence.json"
+    r = CliRunner().invoke(main, ["fit", str(images["hue"]), str(images["real"]), "--out",
+                                  str(out), "--sim-corners", CORNERS, "--real-corners", CORNERS,
+                                  "--evidence", str(record)])
+    assert r.exit_code == 0, r.output
+    doc = json.loads(record.read_text())
+    jsonschema.validate(doc, evidence_schema())
+    (subject,) = doc["subjects"]
+    sha = {i["role"]: i["sha256"] for i in subject["inputs"]}
+    assert sha["simulated image"] == hashlib.sha256(images["hue"].read_bytes()).hexdigest()
+    assert sha["real image"] == hashlib.sha256(images["real"].read_bytes()).hexdigest()
+    rep = json.loads((out / "report.json").read_text())
+    assert subject["measurement"]["value"] == pytest.approx(rep["after"]["mean_delta_e"])
+    cube = subject["correction"]["files"]["cube"]
+    assert cube["sha256"] == hashlib.sha256((out / "correction.cube").read_bytes()).hexdigest()
+    assert doc["record"]["command"] == "fit" and doc["record"]["exit_code"] == 0
+    # never over an input
+    again = CliRunner().invoke(main, ["fit", str(images["hue"]), str(images["real"]), "--out",
+                                      str(tmp_path / "o2"), "--sim-corners", CORNERS,
+                                      "--real-corners", CORNERS, "--evidence",
+                                      str(images["real"])])
+    assert again.exit_code == 2

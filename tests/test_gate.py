@@ -76,8 +76,8 @@ def test_gate_pass_and_fail_on_delta_e(png, tmp_path):
     html = (tmp_path / "r.html").read_text()
     # swatches, sampling windows, ΔE map, a*b*, tone curve, ΔE bars, prediction curve, the
     # direction-aware family curves
-    assert html.count("data:image/png;base64,") == 8
-    assert html.index("FAIL") < html.index('alt="sampling windows"')
+    assert html.count("<svg ") == 8
+    assert html.index("FAIL") < html.index('aria-label="sampling windows"')
     assert report["provenance"]["input_sha256"] in html
 
 

@@ -60,6 +60,11 @@ ADDED = (
     (re.compile(r"(\$|.*\.prediction)\.columns\.\w+$"), {"raised_from"}),
     (re.compile(r".*\.verdict$"), {"reason", "delta_e", "bound", "status", "upper_bound",
                                     "table"}),
+    # issue 32: the uncertainty budget of the chart ΔE, the prediction's interval, the validity
+    # domain, the verdict's decision rule and uncertainty
+    (re.compile(r"(\$|.*\.sim|.*\.real|\$\.sim_to_real)$"), {"uncertainty"}),
+    (re.compile(r"(\$|.*\.sim|.*\.real)$"), {"prediction_interval", "validity"}),
+    (re.compile(r".*\.verdict$"), {"decision", "standard_uncertainty", "expanded_uncertainty"}),
 )
 
 

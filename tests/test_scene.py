@@ -423,3 +423,32 @@ def test_mitsuba_render_matches_the_closed_form(illuminant, tmp_path):
     y, x = (int(v) for v in scene.camera.project(0.0, CLASSIC.height / 2 - 0.004)[::-1])
     luminance = img[y, x] @ np.array([0.2126, 0.7152, 0.0722])
     assert luminance == pytest.approx(0.03 * scene.white_level, rel=0.05)
+
+
+def test_mini_chart_is_the_classic_field_at_the_minis_size():
+    """--chart mini: 82.55 x 57.15 mm outside (3.25 x 2.25 in), the Classic's patch field
+    scaled to that width; the camera moves in so the chart fills the same share of the image,
+    so the manifest's corners are the Classic's."""
+    from fidelity.scene.model import MINI
+
+    assert (MINI.width, MINI.height) == (pytest.approx(0.08255), pytest.approx(0.05715))
+    assert MINI.patch / CLASSIC.patch == pytest.approx(82.55 / 279.4)
+    assert 6 * MINI.pitch < MINI.width and 4 * MINI.pitch < MINI.height
+    mini = build_scene("D65", chart="mini", resolution=SIZE)
+    classic = build_scene("D65", resolution=SIZE)
+    assert mini.camera.distance == pytest.approx(classic.camera.distance * 82.55 / 279.4,
+                                                 rel=0.05)
+    # the same 24 materials; the corners within the aspect-ratio difference of the two charts
+    np.testing.assert_array_equal(mini.albedo, classic.albedo)
+    assert np.abs(mini.corners_px() - classic.corners_px()).max() < 0.05 * SIZE[0]
+
+
+def test_blender_renders_the_mini_chart_and_it_passes_the_gate(d65, tmp_path):
+    pytest.importorskip("pygltflib")
+    _probe_bpy()
+    scene = build_scene("D65", chart="mini", resolution=SIZE)
+    done = export_scene(scene, "gltf", tmp_path / "mini")
+    render = render_with_blender(done.scene_file, tmp_path / "mini.exr", *SIZE, samples=4)
+    code, report = gate_json(render.image, done.manifest, tmp_path)
+    mean = report["mean_delta_e"] if "mean_delta_e" in report else report["chart"]["mean_delta_e"]
+    assert code == 0 and mean <= BOUND_RGB

@@ -41,6 +41,7 @@ from fidelity.camera.model import (
     vignetting_gain,
 )
 from fidelity.chart.measure import ChartMeasurement, measure_chart
+from fidelity.chart.uncertainty import UncertaintyBudget
 from fidelity.colour.spectral import (
     GRID_STEP_NM,
     load_illuminant,
@@ -167,6 +168,8 @@ class ChartRender:
     camera_rgb: FloatArray
     camera_noise: FloatArray
     settings: dict[str, Any] = field(default_factory=dict)
+    #: the standard uncertainty of the chart ΔE (:func:`render_uncertainty`)
+    uncertainty: UncertaintyBudget | None = None
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready result: ΔE summary, renderer, variant, seconds, conventions, patches."""
@@ -328,6 +331,11 @@ def render_chart(
                     "provenance": str(getattr(chart, "provenance", ""))}
     measurement = measure_chart(srgb, ref_lab, ps.patch_names, reference_srgb=ref_srgb,
                                 noise=srgb_std)
+    with _about(cam), np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        budget = render_uncertainty(
+            raw, dev.srgb, layout, cam_rgb, srgb, ref_lab, measurement.mean_delta_e,
+            cam.quantisation_bits, ps.patch_names, cam,
+            _white_balance_developer(cam, ill, dev.ccm, spectra, step, cam_rgb))
     conventions = {
         "reference": ref_conv,
         "spectral_grid_nm": f"380-780 step {step:g}",
@@ -359,7 +367,95 @@ def render_chart(
         camera_rgb=cam_rgb,
         camera_noise=cam_std,
         settings=settings,
+        uncertainty=budget,
     )
+
+
+def _white_balance_developer(cam: CameraModel, illuminant: Any, ccm: FloatArray, spectra: str,
+                             step: float, raw_means: FloatArray) -> Any:
+    """(raw window pixels ``(N, 3)``, drawn raw patch means ``(B, n, 3)``) -> the pixels
+    ``(B, N, 3)`` developed by the camera with its white balance estimated on each draw's
+    patch means (its CCM as rendered): one :func:`develop` of the pixels scaled by each draw's
+    gains over the rendered ones."""
+    from fidelity.camera.model import white_balance_gains
+
+    def gains(means: FloatArray) -> FloatArray:
+        return white_balance_gains(cam.white_balance, means, cam.sensitivities, illuminant, step)
+
+    base = gains(raw_means)
+
+    def developed(pixels: FloatArray, drawn: FloatArray) -> FloatArray:
+        ratio = np.array([gains(m) for m in drawn]) / base
+        d = develop(cam, pixels[None] * ratio[:, None, :], raw_means, illuminant, ccm=ccm,
+                    spectra=spectra, step=step)
+        out: FloatArray = d.srgb
+        return out
+
+    return developed
+
+
+#: Monte Carlo draws of the white-balance component (each develops the windows' pixels).
+WHITE_BALANCE_DRAWS = 100
+
+
+def render_uncertainty(raw_image: ArrayLike, srgb_image: ArrayLike, layout: ChartLayout,
+                       raw_means: FloatArray, srgb_means: FloatArray,
+                       reference_lab: FloatArray, value: float, bits: int | None,
+                       patch_names: tuple[str, ...] | list[str], camera: CameraModel,
+                       developed: Any) -> UncertaintyBudget:
+    """The uncertainty budget of a render's chart ΔE (:mod:`fidelity.chart.uncertainty`):
+    the pixel noise of each developed window's trimmed mean; the camera's white balance when
+    the camera estimates it on the noisy chart (``white-patch``, ``grey-world``): its gains
+    drawn from the raw patch means' standard errors and the windows' pixels developed with
+    them (``developed``: pixels, raw means -> developed pixels), :data:`WHITE_BALANCE_DRAWS`
+    draws; the rounding of the output codes (a ``bits``-bit camera). The windows are the
+    layout's own (no placement uncertainty) and a render has no exposure normalisation."""
+    from fidelity.chart import uncertainty as unc
+
+    def windows(image: ArrayLike) -> list[FloatArray]:
+        img = np.asarray(image, np.float64)
+        out = []
+        for i in range(layout.rows * layout.cols):
+            y0, y1, x0, x1 = layout.window(i, WINDOW_FRACTION)
+            out.append(img[y0:y1, x0:x1].reshape(-1, img.shape[-1]))
+        return out
+
+    f = unc.srgb_chart_function(reference_lab)
+    srgb_windows = windows(srgb_image)
+    noise, notes = unc.noise_component(srgb_windows, srgb_means, f, trim=TRIM_PROPORTION,
+                                       patch_names=patch_names)
+    if camera.white_balance.method in ("white-patch", "grey-world") and camera.noise.enabled:
+        raw_windows = windows(raw_image)
+        covs, _ = unc.patch_covariances(raw_windows, trim=TRIM_PROPORTION)
+        vals, vecs = np.linalg.eigh(covs)
+        root = vecs * np.sqrt(np.maximum(vals, 0.0))[:, None, :]
+        rng = np.random.default_rng(unc.SEED + 4)
+        drawn = raw_means[None] + np.einsum(
+            "kij,bkj->bki", root, rng.standard_normal((WHITE_BALANCE_DRAWS, *raw_means.shape)))
+        edges = np.cumsum([0] + [len(w) for w in raw_windows])
+        dev = developed(np.concatenate(raw_windows), drawn)  # (B, N, 3)
+        means = np.stack([trimmed_mean(np.swapaxes(dev[:, edges[k]:edges[k + 1]], 0, 1),
+                                       TRIM_PROPORTION) for k in range(len(raw_windows))],
+                         axis=1)
+        wb = unc.UncertaintyComponent(
+            "camera white balance", float(np.std(f(means), ddof=1)), "A",
+            f"the camera's {camera.white_balance.method} white balance is estimated on the "
+            f"noisy chart: its gains drawn from the raw patch means' standard errors "
+            f"(winsorised covariance of each raw window), the windows' pixels developed with "
+            f"them, {WHITE_BALANCE_DRAWS} Monte Carlo draws")
+    else:
+        wb = unc.UncertaintyComponent(
+            "camera white balance", 0.0, "B",
+            "the camera's white balance does not depend on the noisy chart")
+    step = 1.0 / (2 ** bits - 1) if bits else None
+    rounding = unc.rounding_component(srgb_windows, srgb_means, f, step)
+    placement = unc.UncertaintyComponent(
+        "placement", 0.0, "B", "a render's windows are its layout's own: no placement error")
+    exposure = unc.UncertaintyComponent(
+        "exposure normalisation", 0.0, "B",
+        "a render is measured as the camera exposed it: no normalisation")
+    return unc.UncertaintyBudget(float(value), (noise, wb, rounding, placement, exposure),
+                                 notes=notes)
 
 
 __all__ = [
@@ -376,5 +472,6 @@ __all__ = [
     "ChartRender",
     "render_chart",
     "patch_means",
+    "render_uncertainty",
     "trimmed_mean",
 ]

@@ -54,6 +54,7 @@ from numpy.typing import ArrayLike, NDArray
 from fidelity.chart.find import ChartChecks, FoundChart, check_corners, find_chart
 from fidelity.chart.image import Image, ImageInfo, as_float32, is_coded
 from fidelity.chart.locate import DEFAULT_WINDOW, ChartLocation, locate_chart
+from fidelity.chart.uncertainty import PatchSpread, UncertaintyBudget, patch_spread
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import DEFAULT_REFERENCE, Reference, load_reference
 from fidelity.colour.colorimetry import delta_e_2000, delta_e_2000_components, srgb_to_lab
@@ -229,7 +230,11 @@ class ChartStatistics:
     white-balance error, a colour cast); ``neutral_chroma`` its length. ``neutral_delta_l``:
     mean L* error of the neutral patches (exposure and tone). ``snr_db``: mean over the neutral
     patches of 20 log10(mean / standard deviation) of their encoded sRGB values, and
-    ``worst_snr_db`` the lowest; None when the noise is unknown or zero.
+    ``worst_snr_db`` the lowest, over the patches with noise above :data:`NOISE_FLOOR`; None
+    when the noise is unknown or below the floor. ``noise_free``: the noise is known and every
+    neutral patch's is below :data:`NOISE_FLOOR` (a noise-free render: report "no noise", not
+    the SNR of floating-point rounding). ``worst_patch`` / ``worst_patch_snr_db``: the patch of
+    the whole chart with the lowest SNR (:func:`patch_snr_db`), None when none has a finite one.
     """
 
     saturation_percent: float
@@ -238,13 +243,96 @@ class ChartStatistics:
     neutral_delta_l: float
     snr_db: float | None
     worst_snr_db: float | None
+    noise_free: bool = False
+    worst_patch: str | None = None
+    worst_patch_snr_db: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         """JSON form."""
         return {"saturation_percent": self.saturation_percent,
                 "neutral_ab": list(self.neutral_ab), "neutral_chroma": self.neutral_chroma,
                 "neutral_delta_l": self.neutral_delta_l, "snr_db": self.snr_db,
-                "worst_snr_db": self.worst_snr_db}
+                "worst_snr_db": self.worst_snr_db, "noise_free": self.noise_free,
+                "worst_patch": self.worst_patch,
+                "worst_patch_snr_db": self.worst_patch_snr_db}
+
+
+#: Standard deviation (encoded sRGB, 0..1) below which a patch counts as noise-free: the
+#: quantisation noise of a 16-bit encoding, 1 / (65535 sqrt(12)) (a uniform rounding error's
+#: standard deviation). A render without noise has a standard deviation of ~1e-16 (rounding),
+#: whose "SNR" of ~290 dB means nothing.
+NOISE_FLOOR: float = 1.0 / (65535.0 * math.sqrt(12.0))
+
+
+def patch_snr_db(m: ChartMeasurement) -> F64 | None:
+    """Signal-to-noise ratio of every patch, dB: ``20 log10(mean / standard deviation)`` of its
+    encoded sRGB values (means over the three channels), as Imatest's Colorcheck reports it.
+
+    ``+inf`` where the standard deviation is below :data:`NOISE_FLOOR` (no noise), NaN where the
+    patch has no signal (mean <= 0 with noise) or a value is not finite; None when the
+    measurement has no noise (an image without per-patch spread). Shape (n,).
+    """
+    if m.noise is None:
+        return None
+    mean = np.asarray(m.srgb, np.float64).reshape(len(m.patch_names), -1).mean(axis=1)
+    sd = np.asarray(m.noise, np.float64).reshape(len(m.patch_names), -1).mean(axis=1)
+    out = np.full(mean.shape, np.nan)
+    quiet = np.isfinite(sd) & (sd < NOISE_FLOOR)
+    ok = np.isfinite(sd) & np.isfinite(mean) & ~quiet & (mean > 0)
+    out[ok] = 20.0 * np.log10(mean[ok] / sd[ok])
+    out[quiet] = np.inf
+    return out
+
+
+@dataclass(frozen=True)
+class ToneFit:
+    """The neutral patches' tone curve fitted with a power law about mid grey.
+
+    ``Y_meas = 0.18 * 2**offset_ev * (Y_ref / 0.18)**gamma`` (CIE Y, white = 1): ``gamma`` is
+    the slope of log Y_meas against log Y_ref (1: the reference's tone, > 1: more contrast),
+    ``offset_ev`` the exposure error at 18 % grey in EV (positive: measured brighter),
+    ``rms_ev`` the root-mean-square residual in EV over the ``patches`` fitted (the neutral
+    patches with light in both).
+    """
+
+    gamma: float
+    offset_ev: float
+    rms_ev: float
+    patches: int
+
+    def predict(self, y_ref: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Measured Y the fit gives for reference Y ``y_ref`` (any shape, >= 0)."""
+        y = np.clip(np.asarray(y_ref, np.float64), 0.0, None)
+        return np.asarray(0.18 * 2.0 ** self.offset_ev * (y / 0.18) ** self.gamma, np.float64)
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON form."""
+        return {"gamma": self.gamma, "offset_ev": self.offset_ev, "rms_ev": self.rms_ev,
+                "patches": self.patches}
+
+
+def fit_tone(m: ChartMeasurement, neutral_indices: Sequence[int] | None = None
+             ) -> ToneFit | None:
+    """Least-squares fit of :class:`ToneFit` to the neutral patches (default
+    :func:`neutral_patches`) in log2 Y; None when fewer than two of them have light in both
+    the measurement and the reference, or all at one reference level."""
+    idx = list(neutral_patches(m) if neutral_indices is None else neutral_indices)
+    if len(idx) < 2:
+        return None
+    y_ref = cm.lab_to_xyz(np.asarray(m.reference_lab, np.float64)[idx])[:, 1]
+    y_meas = cm.lab_to_xyz(np.asarray(m.lab, np.float64)[idx])[:, 1]
+    white = float(cm.WHITEPOINT_D65_XYZ[1])
+    ok = (np.isfinite(y_ref) & np.isfinite(y_meas) & (y_ref > 0) & (y_meas > 0))
+    if int(ok.sum()) < 2:
+        return None
+    x = np.log2(y_ref[ok] / white / 0.18)
+    y = np.log2(y_meas[ok] / white / 0.18)
+    if float(np.ptp(x)) < 1e-9:
+        return None
+    gamma, offset = np.polyfit(x, y, 1)
+    resid = y - (gamma * x + offset)
+    return ToneFit(gamma=float(gamma), offset_ev=float(offset),
+                   rms_ev=float(np.sqrt(np.mean(resid ** 2))), patches=int(ok.sum()))
 
 
 def chart_statistics(m: ChartMeasurement) -> ChartStatistics:
@@ -257,18 +345,25 @@ def chart_statistics(m: ChartMeasurement) -> ChartStatistics:
     c_meas = np.hypot(m.lab[colour, 1], m.lab[colour, 2])
     c_ref = np.hypot(m.reference_lab[colour, 1], m.reference_lab[colour, 2])
     d_ab = (m.lab[neutral, 1:] - m.reference_lab[neutral, 1:]).mean(axis=0)
+    per_patch = patch_snr_db(m)
     snr: list[float] = []
-    if m.noise is not None:
-        for k in neutral:
-            sd = float(np.mean(m.noise[k]))
-            if sd > 0:
-                snr.append(20.0 * math.log10(float(np.mean(m.srgb[k])) / sd))
+    noise_free = False
+    worst: tuple[str, float] | None = None
+    if per_patch is not None:
+        snr = [float(per_patch[k]) for k in neutral if np.isfinite(per_patch[k])]
+        noise_free = bool(np.all(np.isposinf(per_patch[neutral])))
+        finite = np.flatnonzero(np.isfinite(per_patch))
+        if finite.size:
+            k_worst = int(finite[np.argmin(per_patch[finite])])
+            worst = (m.patch_names[k_worst], float(per_patch[k_worst]))
     return ChartStatistics(
         saturation_percent=float(100.0 * c_meas.mean() / c_ref.mean()),
         neutral_ab=(float(d_ab[0]), float(d_ab[1])), neutral_chroma=float(np.hypot(*d_ab)),
         neutral_delta_l=float((m.lab[neutral, 0] - m.reference_lab[neutral, 0]).mean()),
         snr_db=float(np.mean(snr)) if snr else None,
         worst_snr_db=float(np.min(snr)) if snr else None,
+        noise_free=noise_free, worst_patch=worst[0] if worst else None,
+        worst_patch_snr_db=worst[1] if worst else None,
     )
 
 
@@ -385,6 +480,8 @@ class ImageMeasurement:
     detection: FoundChart | None = None
     colourspace: str = "sRGB"
     corner_checks: ChartChecks | None = None
+    #: the standard uncertainty of the chart ΔE (:mod:`fidelity.chart.uncertainty`)
+    uncertainty: UncertaintyBudget | None = None
 
     @property
     def mean_delta_e(self) -> float:
@@ -417,6 +514,7 @@ class ImageMeasurement:
             corner_checks=self.corner_checks.to_json() if self.corner_checks else None,
             colourspace=self.colourspace,
             image=self.image.to_json() if self.image else None,
+            uncertainty=self.uncertainty.to_json() if self.uncertainty else None,
         )
         return d
 
@@ -515,6 +613,20 @@ def _patch_noise(vals: np.ndarray, scale: float, encoding: str, negatives: str,
     return out
 
 
+def _window_spread(vals: np.ndarray, linear: np.ndarray | None, encoding: str, negatives: str,
+                   to_srgb: np.ndarray, identity: bool, step: float | None) -> PatchSpread:
+    """The :class:`~fidelity.chart.uncertainty.PatchSpread` of one window's values ``vals``
+    ``(n, 3)``: ``linear`` its valid pixels in linear sRGB when already computed, the code
+    values (:func:`as_float32`) when the pixels are integer codes (``step``)."""
+    if linear is None:
+        linear, _ = _patch_linear(vals, encoding, negatives, to_srgb, identity)
+    codes = None
+    if step:
+        v = as_float32(vals).astype(np.float64)
+        codes = v if is_coded(vals) else v[~_bad_counts(v, negatives)[0]]
+    return patch_spread(linear, codes)
+
+
 def measure_pixels(
     pixels: np.ndarray,
     corners: np.ndarray | str | Sequence[float] | None = None,
@@ -529,6 +641,7 @@ def measure_pixels(
     detection: str = "cascade",
     negatives: str = "keep",
     colourspace: str | Sequence[float] = "sRGB",
+    uncertainty: bool = True,
 ) -> ImageMeasurement:
     """Audit a chart in an ``(H, W, 3)`` image array (see the module docstring).
 
@@ -553,6 +666,8 @@ def measure_pixels(
     colourspace
         RGB primaries of the pixels: a colour-science name or 8 chromaticities (see
         :func:`fidelity.colour.colorimetry.matrix_rgb_to_linear_srgb`).
+    uncertainty
+        Also evaluate the standard uncertainty of the chart ΔE (:func:`image_uncertainty`).
     """
     to_srgb = cm.matrix_rgb_to_linear_srgb(colourspace)
     if encoding not in ENCODINGS:
@@ -598,6 +713,8 @@ def measure_pixels(
     identity = bool(np.array_equal(to_srgb, np.eye(3)))
     coded = is_coded(arr) and identity
     histograms: list[np.ndarray] = []
+    spreads: list[PatchSpread] = []
+    step = _CODE_STEPS.get(str(image.pixel_type if image is not None else arr.dtype).lower())
     for k, win in enumerate(loc.windows):
         vals = win.values(arr)
         if coded:  # integer codes: a histogram per channel holds all the patch has to say
@@ -606,6 +723,9 @@ def measure_pixels(
         else:
             lin, counts = _patch_linear(vals, encoding, negatives, to_srgb, identity)
             valid = len(lin)
+        if uncertainty:  # one window's spread at a time: never every window's pixels at once
+            spreads.append(_window_spread(vals, lin if not coded else None, encoding,
+                                          negatives, to_srgb, identity, step))
         for key in totals:
             totals[key] += counts[key]
         if counts["total"]:
@@ -653,12 +773,174 @@ def measure_pixels(
                            f"pixels excluded")
     measurement = measure_chart(srgb, ref.lab, ref.patch_names, reference_srgb=ref.srgb,
                                 noise=noise)
+    budget = None
+    if uncertainty:
+        budget = image_uncertainty(
+            arr, loc, spreads, means, ref, measurement.mean_delta_e,
+            exposure_ev=None if mode == "auto" else ev, fitted_ev=ev, encoding=encoding,
+            negatives=negatives, to_srgb=to_srgb, found=found, step=step)
     return ImageMeasurement(
         measurement=measurement, exposure_ev=ev, exposure_mode=mode, encoding=encoding,
         bad_pixels=bad_pixels, valid_pixels=tuple(valid_counts), clipped_patches=clipped,
         location=loc, reference=ref, image=image, detection=found,
         colourspace=_colourspace_name(colourspace), corner_checks=checks,
+        uncertainty=budget,
     )
+
+
+#: Code steps of integer pixel types (pixels read as [0, 1]).
+_CODE_STEPS = {"uint8": 1.0 / 255.0, "int8": 1.0 / 127.0, "uint16": 1.0 / 65535.0,
+               "int16": 1.0 / 32767.0}
+
+
+#: Candidate pixels beyond which the placement component re-measures the windows on a regular
+#: lattice of them (about 110 MB while its draws run).
+PLACEMENT_CANDIDATES = 2_000_000
+
+
+def _window_remeasurer(pixels: np.ndarray, location: ChartLocation, sigma: float,
+                       negatives: str, linear: Any) -> Any:
+    """A function of jittered corners ``(4, 2)`` -> the linear patch means ``(n, 3)`` measured
+    with the windows they give (the membership rule of :func:`fidelity.chart.locate.locate_chart`: a pixel
+    belongs to a patch's window when its centre maps inside it), or None when a window is
+    empty. The candidate pixels (each window's box grown by ``4 sigma + 2`` px), without the
+    bad ones (``negatives`` rule), are read and converted to linear sRGB (``linear``) once; a
+    draw maps them through its homography."""
+    from fidelity.chart.locate import apply_homography, grid_centres, homography_from_points
+
+    rows, cols = location.rows, location.cols
+    height, width = pixels.shape[:2]
+    grow = int(math.ceil(4.0 * sigma)) + 2
+    boxes = []
+    for k, win in enumerate(location.windows):
+        if win.count == 0:
+            continue
+        h, w = win.mask.shape
+        boxes.append((k, max(win.y0 - grow, 0), min(win.y0 + h - 1 + grow, height - 1),
+                      max(win.x0 - grow, 0), min(win.x0 + w - 1 + grow, width - 1)))
+    total = sum((y1 - y0 + 1) * (x1 - x0 + 1) for _, y0, y1, x0, x1 in boxes)
+    # every candidate pixel costs about 56 bytes while the draws run: above
+    # PLACEMENT_CANDIDATES, a regular lattice of them (the same for every draw) stands for all
+    stride = max(1, math.ceil(math.sqrt(total / PLACEMENT_CANDIDATES)))
+    xy, values, owner = [], [], []
+    for k, y0, y1, x0, x1 in boxes:
+        gy, gx = np.mgrid[y0:y1 + 1:stride, x0:x1 + 1:stride]
+        v = as_float32(pixels[y0:y1 + 1:stride, x0:x1 + 1:stride]).astype(np.float64)
+        v = v.reshape(-1, 3)
+        keep = ~_bad_counts(v, negatives)[0]
+        xy.append(np.stack([gx.ravel(), gy.ravel()], axis=-1)[keep].astype(np.float64))
+        values.append(linear(v[keep]))
+        owner.append(np.full(int(keep.sum()), k))
+    points = np.concatenate(xy)
+    vals = np.concatenate(values)
+    who = np.concatenate(owner)
+    centre = grid_centres(rows, cols)[who]
+    half = location.window / 2.0 + 1e-9
+    n = rows * cols
+    grid_corners = np.array([[0, 0], [cols - 1, 0], [cols - 1, rows - 1], [0, rows - 1]], float)
+    # Only the pixels near a window's edge can change sides when the corners move by up to
+    # ``grow`` px: those farther in are counted once (``fixed``), those farther out dropped.
+    # A corner shift of d px moves a grid position by at most about d / pitch (the smallest
+    # pitch along the chart's sides), taken 1.5 times over for safety; a draw moving a corner
+    # farther than ``grow`` px (beyond 4 sigma) is not measured (it would need pixels
+    # outside the boxes read).
+    c0 = np.asarray(location.corners, np.float64)
+    sides = [float(np.linalg.norm(c0[1] - c0[0])) / max(cols - 1, 1),
+             float(np.linalg.norm(c0[2] - c0[3])) / max(cols - 1, 1),
+             float(np.linalg.norm(c0[3] - c0[0])) / max(rows - 1, 1),
+             float(np.linalg.norm(c0[2] - c0[1])) / max(rows - 1, 1)]
+    margin = 1.5 * grow / max(min(sides), 1e-9)
+    uv0 = apply_homography(np.linalg.inv(homography_from_points(grid_corners, c0)), points)
+    reach = np.max(np.abs(uv0 - centre), axis=1)
+    inner = reach <= half - margin
+    band = (reach > half - margin) & (reach <= half + margin)
+    fixed_counts = np.bincount(who[inner], minlength=n).astype(np.float64)
+    fixed_sums = np.stack([np.bincount(who[inner], weights=vals[inner, c], minlength=n)
+                           for c in range(3)], axis=-1)
+    points, vals, who, centre = points[band], vals[band], who[band], centre[band]
+
+    def remeasure(corners: np.ndarray) -> np.ndarray | None:
+        if float(np.max(np.abs(np.asarray(corners, np.float64) - c0))) > grow:
+            return None
+        try:
+            h = homography_from_points(grid_corners, corners)
+            uv = apply_homography(np.linalg.inv(h), points)
+        except (InvalidValueError, np.linalg.LinAlgError):
+            return None
+        inside = np.all(np.abs(uv - centre) <= half, axis=1)
+        counts = fixed_counts + np.bincount(who[inside], minlength=n)
+        if np.any(counts == 0):
+            return None
+        sums = fixed_sums + np.stack([np.bincount(who[inside], weights=vals[inside, c],
+                                                  minlength=n) for c in range(3)], axis=-1)
+        means: np.ndarray = sums / counts[:, None]
+        return means
+
+    return remeasure
+
+
+def image_uncertainty(
+    pixels: np.ndarray, location: ChartLocation, spreads: Sequence[PatchSpread],
+    linear_means: np.ndarray, reference: Reference, value: float, *,
+    exposure_ev: float | None, fitted_ev: float, encoding: str, negatives: str,
+    to_srgb: np.ndarray, found: FoundChart | None, step: float | None,
+) -> UncertaintyBudget:
+    """The uncertainty budget of an audited chart's ΔE (:mod:`fidelity.chart.uncertainty`):
+    pixel noise and rounding of integer codes (of ``step``, None for float pixels) from each
+    window's :class:`~fidelity.chart.uncertainty.PatchSpread`, placement of the corners and
+    the exposure normalisation (``exposure_ev`` None: auto, fitted at ``fitted_ev``)."""
+    from fidelity.chart import uncertainty as unc
+
+    ref_lab = np.asarray(reference.lab, np.float64)
+    neutral = reference.neutral_indices
+    f = unc.linear_chart_function(ref_lab, neutral, exposure_ev)
+    covs, notes = unc.spread_covariances(spreads, patch_names=reference.patch_names)
+    noise, _ = unc.noise_component((), linear_means, f, covariances=covs)
+    identity = np.array_equal(to_srgb, np.eye(3))
+
+    def to_linear(v: np.ndarray) -> np.ndarray:
+        lin = v if encoding == "linear" else cm.linearize_srgb(v)
+        return lin if identity else lin @ to_srgb.T
+
+    to_measured = None
+    stuck = None
+    if step:
+        code_mean = np.array([s.code_mean if s.code_mean is not None else np.zeros(3)
+                              for s in spreads])
+        stuck = np.array([s.code_std < step if s.code_std is not None and s.count else
+                          np.ones(3, bool) for s in spreads])
+        if encoding == "srgb":
+            h = step / 2
+            slope = (cm.linearize_srgb(code_mean + h) - cm.linearize_srgb(code_mean - h)) / (2 * h)
+        else:
+            slope = np.ones_like(linear_means)
+
+        def to_measured(e: np.ndarray) -> np.ndarray:
+            lin = e * slope[None]
+            return lin if identity else lin @ to_srgb.T
+
+    rounding = unc.rounding_component((), linear_means, f, step, stuck=stuck,
+                                      to_measured=to_measured)
+
+    if found is not None and math.isfinite(found.residual_px):
+        sigma = max(found.residual_px / math.sqrt(2.0), unc.UNREFINED_PLACEMENT_PX)
+        how = ("the RMS residual of the finder's refined fit / sqrt(2), at least a "
+               "rectangular half pixel")
+    elif found is not None:
+        sigma, how = 1.0, "found without refinement: one pixel assumed"
+    else:
+        sigma, how = unc.UNREFINED_PLACEMENT_PX, "corners given: a rectangular half pixel"
+    remeasure = _window_remeasurer(pixels, location, sigma, negatives, to_linear)
+    placement = unc.placement_component(remeasure, location.corners, sigma, how, f)
+    if exposure_ev is None:
+        exposure = unc.exposure_component(
+            linear_means, ref_lab, neutral, fitted_ev,
+            unc.linear_chart_function(ref_lab, neutral, 0.0), covs)
+    else:
+        exposure = unc.UncertaintyComponent("exposure normalisation", 0.0, "B",
+                                            "exposure fixed: no normalisation")
+    return unc.UncertaintyBudget(float(value), (noise, rounding, placement, exposure),
+                                 notes=notes)
 
 
 def _colourspace_name(colourspace: str | Sequence[float]) -> str:
@@ -837,17 +1119,22 @@ __all__ = [
     "MIN_VALID_PIXELS",
     "NEGATIVE_RULES",
     "ChartMeasurement",
+    "NOISE_FLOOR",
     "ChartStatistics",
+    "ToneFit",
     "NEUTRAL_CHROMA",
     "ImageMeasurement",
     "chart_delta_e",
     "chart_statistics",
+    "fit_tone",
+    "patch_snr_db",
     "neutral_patches",
     "exposure_from_neutrals",
     "luminance_linear_srgb",
     "measure_chart",
     "measure_image",
     "measure_pixels",
+    "image_uncertainty",
     "read_again",
     "read_input",
     "reads_for",

@@ -6,7 +6,8 @@ slow import (Mitsuba, onnxruntime) never delays another command.
 
 One error boundary (:meth:`LazyGroup.invoke`) turns every failure into an exit code:
 
-- 0: done (a gate passed); 1: a gate failed;
+- 0: done (a gate passed); 1: a gate failed; 4: a gate undecided (``--decision guarded``:
+  the value within its expanded uncertainty of the limit; ``--strict`` makes it 1);
 - 2: the input is wrong (:class:`fidelity.errors.FidelityError`, or a usage error of click's
   such as an unknown option or a bad value): one line ``fidelity: error: <input>: <problem>``;
 - 3: anything else is a bug: one line on screen, the traceback in a log file
@@ -58,7 +59,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
             "Fit the correction from the simulator's chart onto the real camera's, as a 3D "
             "LUT."),
     "gate": ("fidelity.cli.gate:gate",
-             "Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 input error, 3 bug."),
+             "Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 input error, 3 bug, 4 "
+             "undecided (--decision guarded)."),
     "info": ("fidelity.cli.info:info",
              "Versions, Mitsuba variant, ONNX providers, chart detection, shared data found."),
     "predict": ("fidelity.cli.predict:predict_cmd",
@@ -243,7 +245,8 @@ def main(ctx: click.Context, verbose: bool, config_path: str | None, no_config: 
     Start with:  fidelity check          (render the built-in camera, measure, predict, verdict)
                  fidelity audit IMAGE    (measure the chart in a render or photo)
                  fidelity gate IMAGE --max-delta-e 3   (pass/fail for CI)
-    Exit codes:  0 pass, 1 fail, 2 input error, 3 internal error (a bug; see the log named)
+    Exit codes:  0 pass, 1 fail, 2 input error, 3 internal error (a bug; see the log named),
+                 4 undecided (--decision guarded: within U of the limit; --strict: 1)
     Settings:    [tool.fidelity] in pyproject.toml or fidelity.toml (camera, max_delta_e,
                  reference, table, ...); options on the command line win.
     """

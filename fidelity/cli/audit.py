@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -12,6 +13,7 @@ from fidelity.cli.options import (
     STDOUT,
     bound_option,
     common_options,
+    evidence_option,
     image_read_options,
     max_pixels_option,
     measure_inputs,
@@ -42,20 +44,22 @@ if TYPE_CHECKING:
 @click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
               help="Detector size class for the predicted loss.")
 @click.option("--table", default=None, help="Prediction table (name or JSON path).")
-@click.option("--json", "json_path", type=click.Path(path_type=Path),
-              help="Write the JSON report here (a folder: IMAGE-NAME.json in it; '-': "
-                   "standard output).")
-@click.option("--html", "html_path", type=click.Path(path_type=Path),
-              help="Write the HTML report here (a folder: IMAGE-NAME.html in it).")
+@click.option("--json", "json_path", type=click.Path(),
+              help="Write the JSON report here (a folder, existing or written with a "
+                   "trailing /: IMAGE-NAME.json in it; '-': standard output).")
+@click.option("--html", "html_path", type=click.Path(),
+              help="Write the HTML report here (a folder, existing or written with a "
+                   "trailing /: IMAGE-NAME.html in it).")
 @max_pixels_option
 @bound_option
+@evidence_option
 @measure_options
 @common_options
 def audit(image: Path, corners: str | None, read: ReadOptions,
           reference: str, illuminant: str, size: str, table: str | None,
-          json_path: Path | None, html_path: Path | None, max_pixels: int | None,
+          json_path: str | None, html_path: str | None, max_pixels: int | None,
           bound: str, measure: bool, images: str | None, annotations: str | None,
-          models: str | None, limit: int | None) -> None:
+          models: str | None, limit: int | None, evidence_path: Path | None) -> None:
     """Measure the chart in IMAGE: ΔE00 per patch, mean and max, exposure, bad pixels.
 
     \b
@@ -75,18 +79,21 @@ def audit(image: Path, corners: str | None, read: ReadOptions,
     from fidelity.report.chart import write_chart_report
     from fidelity.report.terminal import summary_lines
 
-    # an existing folder gets IMAGE-NAME.json / .html, as in `fidelity gate`
+    # an existing folder, or one written with a trailing separator, gets IMAGE-NAME.json /
+    # .html, as in `fidelity gate`
     to_stdout = json_path is not None and str(json_path) == STDOUT
-    (json_path,) = report_paths((image,), None if to_stdout else json_path, ".json")
-    (html_path,) = report_paths((image,), html_path, ".html")
-    check_outputs({"--json": json_path, "--html": html_path},
+    (json_file,) = report_paths((image,), None if to_stdout or json_path is None
+                                else Path(json_path), ".json", folder=_folder(json_path))
+    (html_file,) = report_paths((image,), None if html_path is None else Path(html_path),
+                                ".html", folder=_folder(html_path))
+    check_outputs({"--json": json_file, "--html": html_file, "--evidence": evidence_path},
                   {"IMAGE": image, "--table": table, "--reference": reference,
                    "--illuminant": illuminant} | measure_inputs(images, annotations, models))
     request = measure_request(measure, images, annotations, models, limit)
     read = replace(read, max_pixels=max_pixels)
     report = audit_image(image, corners, read=read, reference=reference, illuminant=illuminant,
                          size=size, table=table, bound=bound, measure=request)
-    written = write_chart_report(report, json_path=json_path, html_path=html_path,
+    written = write_chart_report(report, json_path=json_file, html_path=html_file,
                                  protect=(image,))
     if to_stdout:
         from fidelity.cli.options import write_json_output
@@ -101,3 +108,13 @@ def audit(image: Path, corners: str | None, read: ReadOptions,
         click.echo(line)
     for p in written:
         click.echo(f"wrote {display_path(p)}")
+    if evidence_path is not None:
+        from fidelity.report.evidence import write_evidence
+
+        write_evidence(evidence_path, "audit", [(str(image), report, None)], 0)
+        click.echo(f"wrote {display_path(evidence_path)}")
+
+
+def _folder(value: str | None) -> bool:
+    """Whether an output option names a folder by its trailing separator (``out/``)."""
+    return value is not None and value.endswith(("/", os.sep))

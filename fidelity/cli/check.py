@@ -12,6 +12,9 @@ from fidelity.cli.options import (
     STDOUT,
     bound_option,
     common_options,
+    decision_options,
+    decision_rule,
+    evidence_option,
     from_settings,
     json_option,
     measure_inputs,
@@ -54,17 +57,21 @@ DEFAULT_OUTPUT_DIR = "fidelity-report"
               help="Write the HTML and JSON reports (--no-report: the verdict only, e.g. in a "
                    "pre-commit hook).")
 @bound_option
+@decision_options
+@evidence_option
 @measure_options
 @common_options
 def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, renderer: str,
           reference: str, max_delta_e: float, size: str, table: str | None, out_dir: Path,
           json_path: str | None, html_path: Path | None, report: bool, bound: str,
           measure: bool, images: str | None, annotations: str | None, models: str | None,
-          limit: int | None) -> None:
+          limit: int | None, decision: str, coverage_factor: float, strict: bool,
+          evidence_path: Path | None) -> None:
     """Is this camera model's colour good enough for perception testing?
 
     Renders the spectral colour chart through the camera, measures ΔE00, predicts the detection
-    loss and prints a verdict (exit 0 pass, 1 fail, 2 input error, 3 internal error); writes an HTML and a JSON report.
+    loss and prints a verdict (exit 0 pass, 1 fail, 2 input error, 3 internal error, 4
+    undecided with --decision guarded); writes an HTML and a JSON report.
     Several CAMERAS are checked one by one (reports in OUT/CAMERA-NAME/); the exit code is the
     worst.
 
@@ -93,34 +100,52 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
                      Path(json_path) if json_path else folder / "report.json")
         plans.append((cam, html, json_file))
     check_outputs({f"{k} ({cam})" if many else k: v for cam, html, js in plans
-                   for k, v in (("--html", html), ("--json", js))},
+                   for k, v in (("--html", html), ("--json", js))}
+                  | {"--evidence": evidence_path},
                   {"--table": table, "--illuminant": illuminant}
                   | {f"CAMERA {cam}": cam for cam in subjects}
                   | {f"CAMERA {cam} ({f.name})": f for cam in subjects
                      for f in camera_files(cam)}
                   | measure_inputs(images, annotations, models))
     criterion = Criterion("max-delta-e", max_delta_e)
+    rule = decision_rule(decision, coverage_factor, strict)
     request = measure_request(measure, images, annotations, models, limit)
+    reports: list[Any] = []
     codes = [_check_one(cam, html, js, to_stdout=to_stdout, many=many, criterion=criterion,
                         illuminant=illuminant, renderer=renderer, reference=reference,
-                        size=size, table=table, bound=bound, measure=request)
+                        size=size, table=table, bound=bound, measure=request, decision=rule,
+                        reports=reports)
              for cam, html, js in plans]
-    sys.exit(max(codes))
+    from fidelity.prediction.verdict import worst_exit_code
+
+    code = worst_exit_code(codes)
+    if evidence_path is not None:
+        from fidelity.report.evidence import write_evidence
+
+        write_evidence(evidence_path, "check",
+                       [(cam, r, None) for (cam, _, _), r in zip(plans, reports, strict=True)],
+                       code)
+        click.echo(f"  evidence: {evidence_path}")
+    sys.exit(code)
 
 
 def _check_one(cam: str, html: Path | None, json_file: Path | None, *, to_stdout: bool,
                many: bool, criterion: Criterion, illuminant: str, renderer: str,
                reference: str, size: str, table: str | None, bound: str = "classic",
-               measure: Any = None) -> int:
+               measure: Any = None, decision: Any = None, reports: list[Any] | None = None
+               ) -> int:
     """Check one camera, write its reports, print its verdict; its exit code."""
     from fidelity.check import check_camera
+    from fidelity.prediction.verdict import SIMPLE
     from fidelity.records import RenderSource
     from fidelity.report.chart import write_chart_report
     from fidelity.report.terminal import summary_lines
 
     report = check_camera(cam, illuminant=illuminant, renderer=renderer, reference=reference,
                           size=size, table=table, criterion=criterion, bound=bound,
-                          measure=measure)
+                          measure=measure, decision=decision or SIMPLE)
+    if reports is not None:
+        reports.append(report)
     write_chart_report(report, json_path=json_file, html_path=html)
     if to_stdout:
         from fidelity.report.jsonform import chart_report_json

@@ -15,6 +15,9 @@ from fidelity.cli.options import (
     bound_option,
     chart_pair_options,
     common_options,
+    decision_options,
+    decision_rule,
+    evidence_option,
     image_read_options,
     json_option,
     make_criterion,
@@ -55,6 +58,8 @@ if TYPE_CHECKING:
 @click.option("--junit", type=PATH, help="Write JUnit XML (one test case).")
 @json_option("Write the comparison as JSON")
 @click.option("--html", "html_path", type=PATH, default=None, help="Write the HTML report.")
+@decision_options
+@evidence_option
 @measure_options
 @common_options
 def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | None,
@@ -63,7 +68,8 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
             reference: str, illuminant: str, read: ReadOptions,
             junit: Path | None,
             json_path: str | None, html_path: Path | None, measure: bool, images: str | None,
-            annotations: str | None, models: str | None, limit: int | None) -> None:
+            annotations: str | None, models: str | None, limit: int | None, decision: str,
+            coverage_factor: float, strict: bool, evidence_path: Path | None) -> None:
     """Compare a simulated chart with the real camera's: sim-to-real ΔE00 and its cost.
 
     SIM is the simulator's render of the chart scene, REAL a photo of the same chart taken
@@ -71,7 +77,8 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
     is matched to the real one on the neutral patches (--normalise), and each patch is
     compared in CIEDE2000; the loss the difference would cost a detector is predicted
     (classic and direction-aware) and, with --measure, measured on COCO. With --max-delta-e
-    or --max-dmap: exit 0 pass, 1 fail, 2 input error, 3 bug, as fidelity gate.
+    or --max-dmap: exit 0 pass, 1 fail, 2 input error, 3 bug, 4 undecided (--decision
+    guarded), as fidelity gate.
 
     \b
     fidelity compare sim.exr photo.jpg --real-corners 102,88,610,95,604,420,98,414
@@ -90,7 +97,7 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
 
     to_stdout = json_path == STDOUT
     check_outputs({"--json": None if to_stdout else json_path, "--html": html_path,
-                   "--junit": junit},
+                   "--junit": junit, "--evidence": evidence_path},
                   {"SIM": sim, "REAL": real, "--table": table, "--reference": reference,
                    "--illuminant": illuminant} | measure_inputs(images, annotations, models))
     criterion = None
@@ -98,6 +105,7 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
         criterion = make_criterion(max_delta_e, max_dmap, cls, unit)
     elif cls is not None:
         raise click.UsageError("--class goes with --max-dmap")
+    rule = decision_rule(decision, coverage_factor, strict)
     request = measure_request(measure, images, annotations, models, limit)
     subject = f"{sim} against {real}"
     try:
@@ -106,7 +114,7 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
             normalise_mode=normalise_mode, reference=reference, illuminant=illuminant,
             size=size, table=table, criterion=criterion, bound=bound,
             read=read,
-            measure=request)
+            measure=request, decision=rule)
     except FidelityError as exc:
         if junit is not None:
             write_junit(junit, [GateResult(subject, criterion, error=str(exc))])
@@ -129,4 +137,9 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
             click.echo(f"wrote {display_path(where)}")
     if html_path is not None:
         click.echo(f"wrote {display_path(html_path)}")
+    if evidence_path is not None:
+        from fidelity.report.evidence import write_evidence
+
+        write_evidence(evidence_path, "compare", [(subject, report, None)], report.exit_code)
+        click.echo(f"wrote {display_path(evidence_path)}")
     sys.exit(report.exit_code)

@@ -11,6 +11,7 @@ from fidelity.cli.options import (
     IMAGE_PATH,
     chart_pair_options,
     common_options,
+    evidence_option,
     image_read_options,
     measure_inputs,
     measure_options,
@@ -21,6 +22,7 @@ from fidelity.prediction.table import SIZES
 if TYPE_CHECKING:
     from fidelity.chart.measure import ReadOptions
     from fidelity.coco.measure import MeasureRequest
+    from fidelity.fit import FitReport
 
 
 @click.command()
@@ -62,6 +64,7 @@ if TYPE_CHECKING:
               help="Illuminant of the scene reference.")
 @measure_options
 @image_read_options
+@evidence_option
 @common_options
 def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...],
         camera: Path | None, out: Path,
@@ -69,7 +72,7 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
         sim_corners: str | None, real_corners: str | None, normalise_mode: str, size: str,
         table: str | None, reference: str, illuminant: str, measure: bool, images: str | None,
         annotations: str | None, models: str | None, limit: int | None,
-        read: ReadOptions) -> None:
+        read: ReadOptions, evidence_path: Path | None) -> None:
     """Fit the correction from the simulator's chart onto the real camera's, as a 3D LUT.
 
     SIM and REAL are read as fidelity compare reads them. The correction (gains, matrix,
@@ -91,8 +94,9 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
 
     request = measure_request(measure, images, annotations, models, limit)
     if pairs:
-        if request is not None:
-            raise click.UsageError("--measure goes with SIM REAL or --camera, not --pair")
+        if request is not None or evidence_path is not None:
+            raise click.UsageError("--measure and --evidence go with SIM REAL or --camera, "
+                                   "not --pair")
         if sim is not None or real is not None:
             raise click.UsageError("give SIM REAL or --pair SIM REAL (twice or more), not both")
         if len(pairs) < 2:
@@ -109,7 +113,7 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
             raise click.UsageError("with --camera give REAL alone: fidelity fit --camera "
                                    "sim.toml REAL --out DIR")
         _fit_camera(camera, sim, out, model, objective, real_corners, normalise_mode, size,
-                    table, reference, illuminant, read, corrected, request)
+                    table, reference, illuminant, read, corrected, request, evidence_path)
         return
     if sim is None or real is None:
         raise click.UsageError("give SIM and REAL, or --pair SIM REAL twice or more")
@@ -118,7 +122,7 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
                               "report.json", "report.html")
     if corrected:
         names += ("corrected.png", "corrected.exr")
-    check_outputs({n: out / n for n in names},
+    check_outputs({**{n: out / n for n in names}, "--evidence": evidence_path},
                   {"SIM": sim, "REAL": real, "--table": table, "--reference": reference,
                    "--illuminant": illuminant} | measure_inputs(images, annotations, models))
     report = fit_and_verify(
@@ -134,6 +138,16 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
     if "corrected" in report.files:
         written.append(Path(report.files["corrected"]))
     click.echo(f"wrote {', '.join(display_path(p) for p in written)}")
+    _evidence(evidence_path, report)
+
+
+def _evidence(path: Path | None, report: FitReport) -> None:
+    if path is not None:
+        from fidelity.fileio import display_path
+        from fidelity.report.evidence import write_fit_evidence
+
+        write_fit_evidence(path, report)
+        click.echo(f"wrote {display_path(path)}")
 
 
 def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str | None,
@@ -167,14 +181,14 @@ def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str
 def _fit_camera(camera: Path, real: Path, out: Path, model: str, objective: str | None,
                 real_corners: str | None, normalise_mode: str, size: str, table: str | None,
                 reference: str, illuminant: str, read: ReadOptions, corrected: bool,
-                request: MeasureRequest | None) -> None:
+                request: MeasureRequest | None, evidence_path: Path | None) -> None:
     from fidelity.fileio import check_outputs, display_path
     from fidelity.fit import fit_camera_and_verify
     from fidelity.report.fit import fit_lines, write_fit_report
 
     names = ("correction.cube", "correction.ocio", "correction.json", "report.json",
              "report.html", "corrected.toml", "sim_render.png", "sim_render.exr")
-    check_outputs({n: out / n for n in names},
+    check_outputs({**{n: out / n for n in names}, "--evidence": evidence_path},
                   {"--camera": camera, "REAL": real, "--table": table,
                    "--reference": reference, "--illuminant": illuminant})
     report, toml = fit_camera_and_verify(
@@ -186,3 +200,4 @@ def _fit_camera(camera: Path, real: Path, out: Path, model: str, objective: str 
     for line in fit_lines(report):
         click.echo(line)
     click.echo(f"corrected camera: {display_path(toml)} (fidelity check {display_path(toml)})")
+    _evidence(evidence_path, report)

@@ -1,7 +1,8 @@
 """``fidelity gate``: pass/fail for CI on an image's chart or a camera model's render.
 
 Exit codes: 0 pass, 1 fail, 2 error (one line on stderr, no traceback; with ``--junit`` the
-error is also written as a JUnit ``<error>``). The work is :func:`fidelity.check.gate`; the
+error is also written as a JUnit ``<error>``), 4 undecided (``--decision guarded``: the value
+within its expanded uncertainty of the limit; ``--strict`` makes it a fail). The work is :func:`fidelity.check.gate`; the
 image options, the criterion and the report paths are :mod:`fidelity.cli.options`', shared with
 ``fidelity audit`` and ``fidelity compare``.
 """
@@ -21,6 +22,9 @@ from fidelity.cli.options import (
     STDOUT,
     bound_option,
     common_options,
+    decision_options,
+    decision_rule,
+    evidence_option,
     from_settings,
     image_read_options,
     make_criterion,
@@ -30,7 +34,7 @@ from fidelity.cli.options import (
 from fidelity.errors import FidelityError
 from fidelity.fileio import display_path
 from fidelity.prediction.table import CLASS_COLUMNS, SIZES
-from fidelity.prediction.verdict import EXIT_ERROR
+from fidelity.prediction.verdict import EXIT_ERROR, EXIT_UNDECIDED
 
 if TYPE_CHECKING:
     from fidelity.chart.measure import ReadOptions
@@ -100,14 +104,18 @@ def write_reports(result: GateResult, json_path: Path | None, html_path: Path | 
               help="Write the HTML report (several images: a folder, one report per image).")
 @max_pixels_option
 @bound_option
+@decision_options
+@evidence_option
 @common_options
 def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
          max_delta_e: float | None, max_dmap: float | None, cls: str | None, unit: str,
          size: str, table: str | None, read: ReadOptions,
          reference: str, illuminant: str, renderer: str, junit: Path | None,
          json_path: Path | None, html_path: Path | None,
-         max_pixels: int | None, bound: str) -> None:
-    """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 input error, 3 bug.
+         max_pixels: int | None, bound: str, decision: str, coverage_factor: float,
+         strict: bool, evidence_path: Path | None) -> None:
+    """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 input error, 3 bug, 4
+    undecided (--decision guarded).
 
     \b
     fidelity gate render.exr --max-delta-e 3
@@ -118,7 +126,8 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
 
     Several IMAGEs are gated one by one (one JUnit test case each; --json and --html name
     folders that get IMAGE-NAME.json / .html, as an existing folder does for one image); the
-    exit code is 2 if any image could not be measured, else 1 if any failed, else 0.
+    exit code is 2 if any image could not be measured, else 1 if any failed, else 4 if any
+    was undecided, else 0.
     """
     # settings-file values yield to what the command line names
     if images and camera is not None and from_settings("camera"):
@@ -157,7 +166,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         subjects = images or (Path(camera or ""),)
         json_paths = report_paths(subjects, json_path, ".json", folder=many)
         html_paths = report_paths(subjects, html_path, ".html", folder=many)
-        outputs: dict[str, Path | None] = {"--junit": junit}
+        outputs: dict[str, Path | None] = {"--junit": junit, "--evidence": evidence_path}
         for img, jp, hp in zip(subjects, json_paths, html_paths, strict=True):
             outputs[f"--json ({img})" if many else "--json"] = jp
             outputs[f"--html ({img})" if many else "--html"] = hp
@@ -173,6 +182,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
 
     try:
         criterion = make_criterion(max_delta_e, max_dmap, cls, unit)
+        rule = decision_rule(decision, coverage_factor, strict)
     except FidelityError as exc:
         if junit is not None:
             subject = ", ".join(map(str, images)) if images else str(camera)
@@ -183,7 +193,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         criterion, images, camera=camera, corners=corners,
         read=replace(read, max_pixels=max_pixels),
         reference=reference, illuminant=illuminant, renderer=renderer, size=size, table=table,
-        bound=bound)
+        bound=bound, decision=rule)
     done = [write_reports(case, jp, hp, images)
             for case, jp, hp in zip(cases, json_paths, html_paths, strict=True)]
     cases = [case for case, _ in done]
@@ -209,8 +219,16 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         from fidelity.report.jsonform import chart_report_json
 
         write_json_output(STDOUT, chart_report_json(cases[0].report))
+    if evidence_path is not None:
+        from fidelity.report.evidence import write_evidence
+
+        write_evidence(evidence_path, "gate", [(c.subject, c.report, c.error) for c in cases],
+                       gate_exit_code(cases))
+        click.echo(f"wrote {display_path(evidence_path)}")
     if many:
         codes = [c.exit_code for c in cases]
-        click.echo(f"gate: {codes.count(0)} of {len(codes)} passed, {codes.count(1)} failed, "
-                   f"{codes.count(EXIT_ERROR)} could not be measured")
+        undecided = (f", {codes.count(EXIT_UNDECIDED)} undecided"
+                     if EXIT_UNDECIDED in codes else "")
+        click.echo(f"gate: {codes.count(0)} of {len(codes)} passed, {codes.count(1)} failed"
+                   f"{undecided}, {codes.count(EXIT_ERROR)} could not be measured")
     sys.exit(gate_exit_code(cases))

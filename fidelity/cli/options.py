@@ -464,7 +464,9 @@ def _state() -> dict[str, Any]:
 def common_options(f: F) -> F:
     """Add ``-q/--quiet`` and ``-v/--verbose`` to a command. Quiet sends the command's ordinary
     printing to nowhere; ``--json -`` sends it to standard error, so that standard output holds
-    the JSON alone (:func:`write_json_output`) and the verdict still reaches the log."""
+    the JSON alone (:func:`write_json_output`) and the verdict still reaches the log. Unless
+    quiet, the command first says which settings file it read and what it took from it
+    (:func:`settings_line`)."""
 
     @functools.wraps(f)
     def wrapper(*args: Any, quiet: bool, verbose: bool, **kwargs: Any) -> Any:
@@ -478,6 +480,9 @@ def common_options(f: F) -> F:
         elif to_stdout:
             redirect = contextlib.redirect_stdout(sys.stderr)
         with redirect:
+            settings = settings_line()
+            if settings:
+                click.echo(settings)
             return f(*args, **kwargs)
 
     wrapper = click.option("-v", "--verbose", is_flag=True,
@@ -486,6 +491,22 @@ def common_options(f: F) -> F:
                            help="Print nothing but errors (and JSON asked for on stdout).")(
         wrapper)
     return wrapper  # type: ignore[return-value]
+
+
+def settings_line() -> str | None:
+    """What the running command took from a settings file: ``fidelity: settings FILE: key,
+    ...`` (the options whose value came from it, by their flags), or that none of its keys
+    applies; None when no settings file was read (none found, or ``--no-config``)."""
+    from click.core import ParameterSource
+
+    config = _state().get("config")
+    if config is None:
+        return None
+    ctx = click.get_current_context()
+    used = [max(p.opts, key=len) for p in ctx.command.params
+            if p.name and ctx.get_parameter_source(p.name) == ParameterSource.DEFAULT_MAP]
+    what = ", ".join(used) if used else "no setting applies to this command"
+    return f"fidelity: settings {config.path}: {what}"
 
 
 def from_settings(name: str) -> bool:
@@ -523,6 +544,48 @@ def bound_option(f: F) -> F:
         help="Prediction that decides a verdict on the predicted loss (--max-dmap of gate and "
              "compare): the classic worst case over every transform, or the direction-aware one "
              "(both are reported).")(f)
+
+
+def decision_options(f: F) -> F:
+    """``--decision simple|guarded``, ``--coverage-factor K`` and ``--strict``: how a verdict
+    compares a value that has an uncertainty with its limit
+    (:class:`fidelity.prediction.verdict.DecisionRule`; :func:`decision_rule`)."""
+    f = click.option(
+        "--strict", is_flag=True, default=False,
+        help="With --decision guarded: a value within U of the limit fails (exit 1) instead "
+             "of being undecided (exit 4).")(f)
+    f = click.option(
+        "--coverage-factor", type=click.FloatRange(min=0, min_open=True), default=2.0,
+        show_default=True,
+        help="k of the expanded uncertainty U = k u a guarded decision uses (2: about 95 %% "
+             "for a normal distribution).")(f)
+    return click.option(
+        "--decision", type=click.Choice(["simple", "guarded"]), default="simple",
+        show_default=True,
+        help="Decision rule: simple (pass when value <= limit) or guarded (ILAC-G8: pass when "
+             "value + U <= limit, fail when value - U > limit, undecided in between: exit 4, "
+             "or a fail with --strict).")(f)
+
+
+def decision_rule(decision: str, coverage_factor: float, strict: bool) -> Any:
+    """The :class:`~fidelity.prediction.verdict.DecisionRule` of the options of
+    :func:`decision_options`."""
+    from fidelity.prediction.verdict import DecisionRule
+
+    if strict and decision != "guarded":
+        raise click.UsageError("--strict goes with --decision guarded")
+    return DecisionRule(decision, float(coverage_factor), bool(strict))
+
+
+def evidence_option(f: F) -> F:
+    """``--evidence FILE``: the credibility record of the run
+    (:mod:`fidelity.report.evidence`)."""
+    return click.option(
+        "--evidence", "evidence_path", type=PATH, default=None,
+        help="Write the run's credibility record here (JSON: code, environment, inputs with "
+             "SHA-256, reference and table provenance, measurement with its uncertainty "
+             "budget, prediction with its interval, validity domain, decision rule, "
+             "verdict).")(f)
 
 
 def measure_options(f: F) -> F:
@@ -615,6 +678,7 @@ __all__ = [
     "executor_from",
     "executor_options",
     "from_settings",
+    "settings_line",
     "image_read_options",
     "json_option",
     "limit_option",

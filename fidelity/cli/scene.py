@@ -24,7 +24,8 @@ from fidelity.scene.model import CHARTS, REFERENCES, build_scene
               help="D65, D50, A, F2, F11, LED, any colour-science illuminant name, or a CSV "
                    "SPD file.")
 @click.option("--chart", type=click.Choice(CHARTS), default="classic", show_default=True,
-              help="ColorChecker Classic (279.4 x 215.9 mm); no other chart layout is shipped.")
+              help="ColorChecker Classic (279.4 x 215.9 mm) or Classic Mini (82.55 x 57.15 mm): "
+                   "the same 24 patches.")
 @click.option("--resolution", type=Resolution(), default="640x480", show_default=True,
               help="Camera image size, WIDTHxHEIGHT pixels.")
 @click.option("--fov", "yfov", type=float, default=40.0, show_default=True,

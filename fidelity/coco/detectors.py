@@ -51,7 +51,7 @@ import ast
 import math
 import os
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -398,6 +398,21 @@ PREPROCESSING: dict[str, Preprocessing] = {
 
 for _conv in CONVENTIONS.values():
     _conv["preprocess"] = PREPROCESSING[_conv["family"]].describe()
+
+
+def stale_preprocessing(provenance: Mapping[str, Any]) -> dict[str, str | None]:
+    """The detectors of a measured table's ``provenance`` (``models``) whose recorded
+    preprocessing (``conventions.preprocess``) is none of this version's
+    (:data:`PREPROCESSING`): name -> what they recorded (None: nothing)."""
+    current = {p.describe() for p in PREPROCESSING.values()}
+    models = provenance.get("models")
+    out: dict[str, str | None] = {}
+    for name, m in (models.items() if isinstance(models, Mapping) else ()):
+        conv = m.get("conventions") if isinstance(m, Mapping) else None
+        found = conv.get("preprocess") if isinstance(conv, Mapping) else None
+        if found not in current:
+            out[str(name)] = None if found is None else str(found)
+    return out
 
 
 def preprocessing_for(layout: ModelLayout) -> Preprocessing:

@@ -40,6 +40,7 @@ __all__ = [
     "matrix_rgb_to_linear_srgb",
     "delta_e",
     "delta_e_1976",
+    "delta_e_1994",
     "delta_e_2000",
     "delta_e_2000_components",
     "lab_to_srgb",
@@ -450,9 +451,37 @@ def delta_e_1976(lab1: ArrayLike, lab2: ArrayLike) -> FloatArray:
     return out
 
 
+def delta_e_1994(lab1: ArrayLike, lab2: ArrayLike, textiles: bool = False) -> FloatArray:
+    """CIE 1994 colour difference ΔE94 of ``lab2`` from the reference ``lab1`` (CIE 116-1995).
+
+    ΔE94 = sqrt((ΔL*/(kL SL))² + (ΔC*ab/(kC SC))² + (ΔH*ab/(kH SH))²) with SL = 1,
+    SC = 1 + K1 C*1, SH = 1 + K2 C*1, kC = kH = 1, where C*1 is the chroma of ``lab1`` (the
+    reference: the formula is not symmetric) and ΔH*ab² = Δa*² + Δb*² - ΔC*ab² (clipped at 0).
+    Graphic arts: kL = 1, K1 = 0.045, K2 = 0.015; ``textiles``: kL = 2, K1 = 0.048,
+    K2 = 0.014. The same convention as colour-science's ``delta_E_CIE1994``.
+
+    ``lab1``, ``lab2``: (..., 3) broadcastable CIELAB. Returns (...,) ΔE94 >= 0; float32
+    inputs give a float32 result.
+    """
+    out_dtype = _result_dtype(lab1, lab2)
+    p, q = _lab_pair(lab1, lab2)
+    k_l, k1, k2 = (2.0, 0.048, 0.014) if textiles else (1.0, 0.045, 0.015)
+    c1 = np.hypot(p[..., 1], p[..., 2])
+    c2 = np.hypot(q[..., 1], q[..., 2])
+    d_l = p[..., 0] - q[..., 0]
+    d_c = c1 - c2
+    d_h2 = np.maximum((p[..., 1] - q[..., 1]) ** 2 + (p[..., 2] - q[..., 2]) ** 2 - d_c ** 2,
+                      0.0)
+    s_c, s_h = 1.0 + k1 * c1, 1.0 + k2 * c1
+    out: FloatArray = np.sqrt((d_l / k_l) ** 2 + (d_c / s_c) ** 2 + d_h2 / s_h ** 2).astype(
+        out_dtype, copy=False)
+    return out
+
+
 #: Colour-difference methods by name, for ``delta_e(..., method=...)``.
 DELTA_E_METHODS: dict[str, Callable[[ArrayLike, ArrayLike], FloatArray]] = {
     "CIE 2000": delta_e_2000,
+    "CIE 1994": delta_e_1994,
     "CIE 1976": delta_e_1976,
 }
 

@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 from fidelity.colour.charts import DEFAULT_CHART, Chart, load_chart
 from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
 from fidelity.errors import InputFileError, InvalidValueError, UnreachableTargetError
+from fidelity.prediction.scalar import brent_root
 from fidelity.prediction.transforms import TRANSFORMS, TransformSpec, get_transform
 from fidelity.resources import resource_dir
 
@@ -183,8 +184,6 @@ def _solve(
     target: float,
     curves: list[tuple[NDArray[np.float64], NDArray[np.float64]]],
 ) -> CalibrationEntry:
-    from scipy.optimize import brentq
-
     def f(x: float) -> float:
         return float(transform_delta_e(spec, np.float64(x), chart)) - target
 
@@ -201,8 +200,7 @@ def _solve(
             x = float(params[i])
         else:
             a, b = float(params[i]), float(params[i + 1])
-            x = float(brentq(f, min(a, b), max(a, b), xtol=1e-14, rtol=4 * np.finfo(float).eps,
-                             maxiter=200))
+            x = brent_root(f, min(a, b), max(a, b), xtol=1e-14, maxiter=200)
         reached = f(x) + target
         if abs(reached - target) > TOLERANCE:  # a jump, not a root: keep looking on this path
             continue

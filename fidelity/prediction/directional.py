@@ -67,11 +67,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fidelity.errors import InvalidValueError, unknown_name
+from fidelity.prediction.scalar import bounded_minimum
 
 if TYPE_CHECKING:
     from fidelity.chart.measure import ChartMeasurement
     from fidelity.prediction.table import PredictionTable
-    from fidelity.prediction.verdict import Criterion, Verdict
+    from fidelity.prediction.verdict import Criterion, DecisionRule, Verdict
 
 F64 = NDArray[np.float64]
 
@@ -291,9 +292,9 @@ def fit_family(reference_lab: ArrayLike, lab: ArrayLike, fit: str,
     ``hue``, ``pull_mean``) to a chart: the parameter minimising the mean ΔE00 between the
     transformed reference chart (reference Lab -> sRGB clipped to [0, 1], as the calibration
     chart) and ``lab``; a scan of ``scan`` points over the range, then
-    ``scipy.optimize.minimize_scalar`` (bounded) around the best one."""
-    from scipy.optimize import minimize_scalar
-
+    a bounded Brent minimisation around the best one
+    (:func:`fidelity.prediction.scalar.bounded_minimum`, the algorithm of SciPy's
+    ``minimize_scalar(method="bounded")``)."""
     from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
 
     specs = _fit_specs()
@@ -326,10 +327,9 @@ def fit_family(reference_lab: ArrayLike, lab: ArrayLike, fit: str,
     best_u, best = float(grid[k]), float(values[k])
     a, b = float(grid[max(k - 1, 0)]), float(grid[min(k + 1, len(grid) - 1)])
     if b > a:
-        res = minimize_scalar(cost, bounds=(a, b), method="bounded",
-                              options={"xatol": 1e-10 * max(1.0, abs(b - a))})
-        if float(res.fun) < best:
-            best_u, best = float(res.x), float(res.fun)
+        x, fx = bounded_minimum(cost, a, b, xatol=1e-10 * max(1.0, abs(b - a)))
+        if fx < best:
+            best_u, best = x, fx
     return FamilyFit(fit, spec.family, param(best_u), best, error)
 
 
@@ -652,15 +652,20 @@ def family_losses(delta_e: float, *, size: str = "any",
 
 
 def evaluate_directional(mean_delta_e: float, prediction: DirectionalPrediction,
-                         criterion: Criterion) -> Verdict:
+                         criterion: Criterion, *, decision: DecisionRule | None = None,
+                         delta_e_uncertainty: float | None = None) -> Verdict:
     """Apply a ``max-dmap`` ``criterion`` to the direction-aware prediction (a ``max-delta-e``
-    criterion does not depend on the bound: :func:`fidelity.prediction.verdict.evaluate`)."""
-    from fidelity.prediction.verdict import evaluate, judge_value
+    criterion does not depend on the bound: :func:`fidelity.prediction.verdict.evaluate`) by
+    the ``decision`` rule (default simple; the direction-aware prediction states no
+    uncertainty, so a guarded rule takes U = 0)."""
+    from fidelity.prediction.verdict import SIMPLE, evaluate, judge_value
 
+    rule = decision or SIMPLE
     if criterion.kind != "max-dmap":
-        return evaluate(mean_delta_e, None, criterion)
+        return evaluate(mean_delta_e, None, criterion, decision=rule,
+                        delta_e_uncertainty=delta_e_uncertainty)
     return judge_value(criterion, prediction.value(criterion.cls, criterion.unit),
-                       prediction.delta_e, bound="directional")
+                       prediction.delta_e, bound="directional", decision=rule)
 
 
 __all__ = [

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, NamedTuple
 
 from fidelity.errors import unknown_name
 from fidelity.prediction.table import Prediction, PredictionTable, TableKind
-from fidelity.prediction.verdict import Criterion, Verdict
+from fidelity.prediction.verdict import SIMPLE, Criterion, DecisionRule, Verdict
 
 if TYPE_CHECKING:
     from fidelity.chart.measure import ChartMeasurement
@@ -62,7 +62,8 @@ def directional_prediction(measurement: ChartMeasurement, size: str = "any",
 
 def judge(mean_delta_e: float, size: str = "any", table: PredictionTable | str | None = None,
           criterion: Criterion | None = None, measurement: ChartMeasurement | None = None,
-          bound: str = "classic") -> Judgement:
+          bound: str = "classic", *, decision: DecisionRule = SIMPLE,
+          delta_e_uncertainty: float | None = None) -> Judgement:
     """Predict the loss of a chart ΔE and apply ``criterion``.
 
     Parameters
@@ -78,6 +79,11 @@ def judge(mean_delta_e: float, size: str = "any", table: PredictionTable | str |
     bound
         Which prediction decides a ``max-dmap`` verdict: ``classic`` (the table's worst case
         over every transform) or ``directional`` (needs ``measurement``).
+    decision, delta_e_uncertainty
+        The decision rule (:class:`~fidelity.prediction.verdict.DecisionRule`) and the chart
+        ΔE's standard uncertainty (None: unknown). A classic ``max-dmap`` verdict uses the
+        predicted loss's uncertainty (:func:`fidelity.prediction.interval.prediction_interval`);
+        a direction-aware one has none.
 
     Returns
     -------
@@ -95,9 +101,21 @@ def judge(mean_delta_e: float, size: str = "any", table: PredictionTable | str |
     verdict = None
     if criterion:
         if bound == "directional" and directional is not None:
-            verdict = evaluate_directional(mean_delta_e, directional, criterion)
+            verdict = evaluate_directional(mean_delta_e, directional, criterion,
+                                           decision=decision,
+                                           delta_e_uncertainty=delta_e_uncertainty)
         else:
-            verdict = evaluate(mean_delta_e, prediction, criterion)
+            loss_u = None
+            if criterion.kind == "max-dmap":
+                from fidelity.prediction.interval import prediction_interval
+
+                interval = prediction_interval(prediction, delta_e_uncertainty or 0.0,
+                                               criterion.column, decision.k)
+                if interval is not None and (interval.table_se is not None
+                                             or delta_e_uncertainty is not None):
+                    loss_u = interval.standard_uncertainty
+            verdict = evaluate(mean_delta_e, prediction, criterion, decision=decision,
+                               delta_e_uncertainty=delta_e_uncertainty, loss_uncertainty=loss_u)
     return Judgement(prediction, verdict, directional)
 
 

@@ -9,13 +9,22 @@ Criteria (one per gate):
   <= limit. A prediction answered outside its table's range uses the table's conservative
   answer; a column without data fails (nothing supports a pass).
 
-Exit codes of the commands: 0 pass, 1 fail, 2 error.
+Decision rules (:class:`DecisionRule`, ``--decision``; ILAC-G8:09/2019, JCGM 106:2012):
+
+- ``simple``: pass when value <= limit (the uncertainty is reported, not used);
+- ``guarded``: with the expanded uncertainty ``U = k u`` of the value (``k`` = 2 by default,
+  about 95 % coverage for a normal distribution), pass only when value + U <= limit, fail when
+  value - U > limit, and in between the verdict is ``undecided`` (exit code
+  :data:`EXIT_UNDECIDED`), or a fail when the rule is ``strict``.
+
+Exit codes of the commands: 0 pass, 1 fail, 2 error, 3 internal error, 4 undecided (guarded
+rule, not strict).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass
 from enum import StrEnum
 from typing import Any
@@ -33,6 +42,53 @@ UNITS = ("points", "relative")
 EXIT_PASS = 0
 EXIT_FAIL = 1
 EXIT_ERROR = 2
+#: A guarded verdict inside the guard band (value within U of the limit), not strict.
+EXIT_UNDECIDED = 4
+#: Decision rules.
+DECISION_RULES = ("simple", "guarded")
+#: Coverage factor of the guarded rule unless told otherwise.
+DEFAULT_COVERAGE_FACTOR = 2.0
+
+
+@dataclass(frozen=True)
+class DecisionRule:
+    """How a value with an uncertainty is compared with a limit (module docstring): ``rule``
+    (``simple`` or ``guarded``), the coverage factor ``k`` of the expanded uncertainty a
+    guarded rule uses, and ``strict`` (a guarded verdict in the guard band fails instead of
+    being undecided)."""
+
+    rule: str = "simple"
+    k: float = DEFAULT_COVERAGE_FACTOR
+    strict: bool = False
+
+    def __post_init__(self) -> None:
+        if self.rule not in DECISION_RULES:
+            raise unknown_name("decision rule", self.rule, DECISION_RULES)
+        if not (isinstance(self.k, (int, float)) and math.isfinite(self.k) and self.k > 0):
+            raise InvalidValueError(f"--coverage-factor {self.k!r}: must be a finite number > 0")
+
+    def describe(self) -> str:
+        """The rule in words."""
+        if self.rule == "simple":
+            return "simple acceptance: pass when value <= limit (uncertainty not used)"
+        band = "fail" if self.strict else "undecided"
+        return (f"guarded acceptance (ILAC-G8): pass when value + U <= limit, fail when "
+                f"value - U > limit, {band} in between; U = k u with k = {self.k:g}")
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"rule", "k", "strict", "description"}``."""
+        return {"rule": self.rule, "k": self.k, "strict": self.strict,
+                "description": self.describe()}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> DecisionRule:
+        """Inverse of :meth:`to_json`."""
+        return cls(str(data.get("rule", "simple")),
+                   float(data.get("k", DEFAULT_COVERAGE_FACTOR)), bool(data.get("strict")))
+
+
+#: The rule of a verdict unless told otherwise.
+SIMPLE = DecisionRule()
 
 
 @dataclass(frozen=True)
@@ -93,6 +149,8 @@ class VerdictReason(StrEnum):
     WITHIN_LIMIT = "within-limit"
     OVER_LIMIT = "over-limit"
     NO_PREDICTION = "no-prediction"
+    #: a guarded rule's guard band: within U of the limit
+    UNDECIDED = "undecided"
 
 
 @dataclass(frozen=True)
@@ -118,21 +176,40 @@ class Verdict:
     status: ColumnStatus | None = None
     upper_bound: bool = False
     table: str | None = None
+    #: the decision rule applied (:class:`DecisionRule`)
+    decision: DecisionRule = SIMPLE
+    #: the standard uncertainty (k = 1) of ``value``, in its unit; None: not known
+    uncertainty: float | None = None
+
+    @property
+    def expanded_uncertainty(self) -> float | None:
+        """U = k u of the decision rule (None when ``uncertainty`` is unknown)."""
+        return None if self.uncertainty is None else self.decision.k * self.uncertainty
+
+    @property
+    def undecided(self) -> bool:
+        """True when a guarded rule left the verdict undecided (not strict)."""
+        return self.reason is VerdictReason.UNDECIDED and not self.decision.strict
 
     @property
     def exit_code(self) -> int:
-        """0 pass, 1 fail."""
+        """0 pass, 1 fail, 4 undecided."""
+        if self.undecided:
+            return EXIT_UNDECIDED
         return EXIT_PASS if self.passed else EXIT_FAIL
 
     @property
     def label(self) -> str:
-        """``"PASS"`` or ``"FAIL"``."""
+        """``"PASS"``, ``"FAIL"`` or ``"UNDECIDED"``."""
+        if self.undecided:
+            return "UNDECIDED"
         return "PASS" if self.passed else "FAIL"
 
     def to_json(self) -> dict[str, Any]:
         """JSON form of the fields: ``passed``, ``label``, ``reason``, ``criterion``, ``value``,
         ``limit``, ``delta_e``, ``bound``, ``status``, ``upper_bound``, ``table``,
-        ``conservative_answer``. The report's JSON adds the ``message``
+        ``conservative_answer``, the ``decision`` rule, the value's ``standard_uncertainty``
+        and ``expanded_uncertainty`` (U = k u). The report's JSON adds the ``message``
         (:func:`fidelity.report.jsonform.verdict_json`)."""
         return {
             "passed": self.passed,
@@ -147,6 +224,9 @@ class Verdict:
             "upper_bound": self.upper_bound,
             "table": self.table,
             "conservative_answer": self.conservative,
+            "decision": self.decision.to_json(),
+            "standard_uncertainty": self.uncertainty,
+            "expanded_uncertainty": self.expanded_uncertainty,
         }
 
     @classmethod
@@ -165,45 +245,82 @@ class Verdict:
                    bool(data.get("conservative_answer", False)),
                    str(data.get("bound") or "classic"),
                    ColumnStatus(str(status)) if status else None,
-                   bool(data.get("upper_bound", False)), data.get("table"))
+                   bool(data.get("upper_bound", False)), data.get("table"),
+                   DecisionRule.from_json(data["decision"]) if data.get("decision") else SIMPLE,
+                   (None if data.get("standard_uncertainty") is None
+                    else float(data["standard_uncertainty"])))
 
 
-def judge_value(criterion: Criterion, value: float | None, delta_e: float, **fields: Any
-                ) -> Verdict:
+def worst_exit_code(codes: Iterable[int]) -> int:
+    """The exit code of several verdicts: 2 (error) before 1 (fail) before 4 (undecided)
+    before 0 (pass); others (3, internal error) first of all."""
+    order = {EXIT_PASS: 0, EXIT_UNDECIDED: 1, EXIT_FAIL: 2, EXIT_ERROR: 3}
+    return max(codes, key=lambda c: order.get(c, 4), default=EXIT_PASS)
+
+
+def judge_value(criterion: Criterion, value: float | None, delta_e: float, *,
+                decision: DecisionRule = SIMPLE, uncertainty: float | None = None,
+                **fields: Any) -> Verdict:
     """The verdict of ``criterion`` on ``value`` (None: no prediction, a fail) at chart ΔE
-    ``delta_e``; ``fields`` are the verdict's other fields (``bound``, ``status`` ...)."""
+    ``delta_e`` by the ``decision`` rule, ``uncertainty`` the value's standard uncertainty
+    (k = 1; a guarded rule without one takes U = 0 and says so through
+    ``expanded_uncertainty`` None); ``fields`` are the verdict's other fields (``bound``,
+    ``status`` ...)."""
+    fields = {"decision": decision, "uncertainty": uncertainty, **fields}
     if value is None:
         return Verdict(False, criterion, None, VerdictReason.NO_PREDICTION, float(delta_e),
                        **{"conservative": True, **fields})
-    passed = value <= criterion.limit
-    return Verdict(passed, criterion, float(value),
+    v, limit = float(value), criterion.limit
+    if decision.rule == "guarded":
+        u_exp = decision.k * (uncertainty or 0.0)
+        if v + u_exp <= limit:
+            reason, passed = VerdictReason.WITHIN_LIMIT, True
+        elif v - u_exp > limit:
+            reason, passed = VerdictReason.OVER_LIMIT, False
+        else:
+            reason, passed = VerdictReason.UNDECIDED, False
+        return Verdict(passed, criterion, v, reason, float(delta_e), **fields)
+    passed = v <= limit
+    return Verdict(passed, criterion, v,
                    VerdictReason.WITHIN_LIMIT if passed else VerdictReason.OVER_LIMIT,
                    float(delta_e), **fields)
 
 
-def evaluate(mean_delta_e: float, prediction: Prediction | None, criterion: Criterion) -> Verdict:
-    """Apply ``criterion`` to a chart's mean ΔE00 and (for ``max-dmap``) its prediction."""
+def evaluate(mean_delta_e: float, prediction: Prediction | None, criterion: Criterion, *,
+             decision: DecisionRule = SIMPLE, delta_e_uncertainty: float | None = None,
+             loss_uncertainty: float | None = None) -> Verdict:
+    """Apply ``criterion`` to a chart's mean ΔE00 and (for ``max-dmap``) its prediction by the
+    ``decision`` rule; ``delta_e_uncertainty`` and ``loss_uncertainty`` are the standard
+    uncertainties of the ΔE and of the criterion's predicted loss."""
     if criterion.kind == "max-delta-e":
-        return judge_value(criterion, float(mean_delta_e), float(mean_delta_e))
+        return judge_value(criterion, float(mean_delta_e), float(mean_delta_e),
+                           decision=decision, uncertainty=delta_e_uncertainty)
     if prediction is None:
         raise InvalidValueError("a --max-dmap gate needs a prediction")
     col = prediction.columns[criterion.column]
     return judge_value(criterion, prediction.value(criterion.cls, criterion.unit),
                        prediction.delta_e, status=col.status,
                        conservative=col.status is not ColumnStatus.INTERPOLATED,
-                       upper_bound=prediction.upper_bound, table=prediction.table.name)
+                       upper_bound=prediction.upper_bound, table=prediction.table.name,
+                       decision=decision, uncertainty=loss_uncertainty)
 
 
 __all__ = [
     "CRITERIA",
+    "DECISION_RULES",
+    "DEFAULT_COVERAGE_FACTOR",
     "DEFAULT_MAX_DELTA_E",
     "EXIT_ERROR",
     "EXIT_FAIL",
     "EXIT_PASS",
+    "EXIT_UNDECIDED",
+    "SIMPLE",
+    "DecisionRule",
     "UNITS",
     "Criterion",
     "Verdict",
     "VerdictReason",
     "evaluate",
     "judge_value",
+    "worst_exit_code",
 ]

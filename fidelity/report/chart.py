@@ -23,11 +23,11 @@ from fidelity.report.document import (
     Code,
     Document,
     Facts,
-    Figure,
     Headline,
     Section,
     Text,
     section,
+    svg_figure,
     table,
 )
 from fidelity.report.jsonform import chart_report_json
@@ -40,11 +40,12 @@ def _num(v: float | None, nd: int = 2) -> str:
 
 
 def headline(report: ChartReport) -> Headline:
-    from fidelity.report import plots
+    from fidelity.report import chartfigures
 
-    figure = Figure(plots.swatches(report.measurement), "swatches.png",
-                    "the chart: reference against measured",
-                    "Each patch: reference colour (left half) and measured colour (right half).")
+    figure = svg_figure(chartfigures.swatches(report.measurement), "swatches.svg",
+                        "the chart: reference against measured",
+                        "Each patch: reference colour (left half) and measured colour (right "
+                        "half), numbered in chart order.")
     v = report.verdict
     warn = "".join(f"\n\n**warning**: {w.reason}" for w in report.warnings)
     if v is not None:
@@ -66,9 +67,8 @@ def summary_facts(report: ChartReport) -> Facts:
                f"a\\* {stats.neutral_ab[0]:+.2f}, b\\* {stats.neutral_ab[1]:+.2f} "
                f"(ΔC\\*ab {stats.neutral_chroma:.2f})"),
               ("mean ΔL* of the neutral patches", f"{stats.neutral_delta_l:+.2f}")]
-    if stats.snr_db is not None:
-        items.append(("noise: signal-to-noise of the neutral patches (encoded sRGB)",
-                      f"{stats.snr_db:.1f} dB (worst {stats.worst_snr_db:.1f} dB)"))
+    items += noise_facts(report)
+    items += tone_facts(report)
     if report.exposure_ev is not None:
         items.append(("exposure correction", f"{report.exposure_ev:+.3f} EV"))
     if report.bad_pixels is not None:
@@ -107,6 +107,38 @@ def summary_facts(report: ChartReport) -> Facts:
     return Facts(tuple(items))
 
 
+def noise_facts(report: ChartReport) -> list[tuple[str, str]]:
+    """The noise rows of the summary: the neutral patches' SNR and the worst patch of the
+    chart, or "no noise" for a noise-free measurement (none when the noise is unknown)."""
+    from fidelity.chart.measure import NOISE_FLOOR, chart_statistics
+
+    stats = chart_statistics(report.measurement)
+    label = "noise: signal-to-noise of the neutral patches (encoded sRGB)"
+    if stats.noise_free:
+        return [(label, f"no noise (standard deviation below {NOISE_FLOOR:.1e}, the "
+                        f"quantisation noise of 16 bits)")]
+    if stats.snr_db is None:
+        return []
+    out = [(label, f"{stats.snr_db:.1f} dB (worst neutral {stats.worst_snr_db:.1f} dB)")]
+    if stats.worst_patch is not None and stats.worst_patch_snr_db is not None:
+        out.append(("lowest signal-to-noise of any patch",
+                    f"{stats.worst_patch_snr_db:.1f} dB ({stats.worst_patch})"))
+    return out
+
+
+def tone_facts(report: ChartReport) -> list[tuple[str, str]]:
+    """The tone row of the summary: gamma and exposure fitted to the neutral patches
+    (:func:`fidelity.chart.measure.fit_tone`)."""
+    from fidelity.chart.measure import fit_tone
+
+    fit = fit_tone(report.measurement)
+    if fit is None:
+        return []
+    return [("tone of the neutral patches (fitted power law)",
+             f"gamma {fit.gamma:.3f} relative to the reference, exposure {fit.offset_ev:+.2f} EV "
+             f"at 18 % grey (residual {fit.rms_ev:.3f} EV rms over {fit.patches} patches)")]
+
+
 def bound_words(report: ChartReport) -> str:
     v = report.verdict
     if v is None:
@@ -118,7 +150,7 @@ def bound_words(report: ChartReport) -> str:
 
 
 def directional_section(report: ChartReport) -> Section | None:
-    from fidelity.report import plots
+    from fidelity.report import chartfigures
 
     d = report.directional
     if d is None:
@@ -151,8 +183,8 @@ def directional_section(report: ChartReport) -> Section | None:
         Facts(tuple(facts)),
         table(("family", "weight", "its ΔmAP at this ΔE", "curve", "why"), rows,
               numeric=(False, True, True, False, False)),
-        Figure(plots.family_curves(d, p), "family_curves.png",
-               "worst case per transform family and the classic curve"),
+        svg_figure(chartfigures.family_curves(d, p), "family_curves.svg",
+                   "worst case per transform family and the classic curve"),
         Text("\n".join(f"- {n}" for n in d.notes)))
 
 
@@ -200,30 +232,82 @@ def verdict_limits(report: ChartReport) -> tuple[float | None, float | None]:
     return None, (c.limit if c.cls == "all" and c.unit == "points" else None)
 
 
+def uncertainty_section(report: ChartReport) -> Section | None:
+    """The uncertainty budget of the chart ΔE (GUM style): each component, its standard
+    uncertainty, type and how it was obtained, and the combined standard uncertainty; the
+    predicted ΔmAP's interval and the validity domain of the answer."""
+    u = report.uncertainty
+    if u is None:
+        return None
+    rows = [(c.name, f"{c.value:.4f}", c.type, c.method) for c in u.components]
+    rows.append(("combined (root sum of squares)", f"{u.combined:.4f}", "",
+                 f"coverage factor k = {u.k:g}; expanded U (k = 2) = {u.expanded(2.0):.4f}"))
+    notes = "".join(f"\n- {n}" for n in u.notes)
+    blocks: list[Any] = [
+        Text(f"**{u.text()}**: standard uncertainty of the {u.quantity}; Monte Carlo "
+             f"propagation (JCGM 101) with {u.draws} draws, seed {u.seed}." + notes),
+        table(("component", "standard uncertainty, ΔE00", "type", "how obtained"), rows,
+              numeric=(False, True, False, False))]
+    iv = report.interval
+    if iv is not None:
+        se = "unknown" if iv.table_se is None else f"{iv.table_se:.3f}"
+        lo, hi = iv.interval()
+        blocks.append(Text(
+            f"Predicted ΔmAP {iv.value:.2f} ± {iv.standard_uncertainty:.2f} points (k = 1; "
+            f"k = {iv.k:g}: {lo:.2f} to {hi:.2f}): the table's sampling error {se}, the "
+            f"chart ΔE's uncertainty through the table's slope {iv.slope:.3f} points per "
+            f"ΔE00: {iv.propagated:.3f}."))
+    if report.validity is not None:
+        blocks.append(table(("validity domain", "inside", "detail"),
+                            [(c.name, "yes" if c.inside else "**no**", c.detail)
+                             for c in report.validity.checks],
+                            numeric=(False, False, False)))
+    return section("Measurement uncertainty of the chart ΔE", *blocks)
+
+
+def _snr_cell(v: float) -> str:
+    return "no noise" if v == float("inf") else "–" if v != v else f"{v:.1f}"
+
+
 def patch_section(report: ChartReport) -> Section:
+    """Every patch: number and name, ΔE00 and its components, ΔE*ab and ΔE94 (extra
+    columns; the verdict is on ΔE00), measured and reference Lab, and the SNR where the noise
+    is known."""
+    from fidelity.chart.measure import patch_snr_db
+    from fidelity.colour.colorimetry import delta_e_1976, delta_e_1994
+
     m = report.measurement
+    de76 = delta_e_1976(m.reference_lab, m.lab)
+    de94 = delta_e_1994(m.reference_lab, m.lab)
+    snr = patch_snr_db(m)
     rows = []
     for k, name in enumerate(m.patch_names):
-        rows.append((name, _num(float(m.delta_e[k])), _num(float(m.delta_l[k])),
+        rows.append((f"{k + 1} {name}", _num(float(m.delta_e[k])), _num(float(de76[k])),
+                     _num(float(de94[k])), _num(float(m.delta_l[k])),
                      _num(float(m.delta_c[k])), _num(float(m.delta_h[k])),
                      *(_num(float(v)) for v in m.lab[k]),
-                     *(_num(float(v)) for v in m.reference_lab[k])))
-    return section("Patches", table(
-        ("patch", "ΔE00", "ΔL'", "ΔC'", "ΔH'", "L*", "a*", "b*", "ref L*", "ref a*", "ref b*"),
-        rows), folded=True)
+                     *(_num(float(v)) for v in m.reference_lab[k]),
+                     *((_snr_cell(float(snr[k])),) if snr is not None else ())))
+    header = ("patch", "ΔE00", "ΔE*ab", "ΔE94", "ΔL'", "ΔC'", "ΔH'", "L*", "a*", "b*",
+              "ref L*", "ref a*", "ref b*", *(("SNR (dB)",) if snr is not None else ()))
+    note = Text(f"Mean ΔE*ab {float(de76.mean()):.2f}, mean ΔE94 {float(de94.mean()):.2f} "
+                f"(graphic arts), mean ΔE00 {m.mean_delta_e:.2f}: the verdict is on ΔE00. "
+                "SNR: 20 log10(mean / standard deviation) of the patch's encoded sRGB "
+                "values.")
+    return section("Patches", note, table(header, rows), folded=True)
 
 
 def prediction_sections(report: ChartReport, limit_de: float | None,
                          limit_dmap: float | None) -> list[Section]:
-    from fidelity.report import plots
+    from fidelity.report import chartfigures
 
     p = report.prediction
     if p is None:
         return []
     blocks: list[Any] = []
     if p.table.curves:
-        blocks.append(Figure(plots.prediction_curve(p, limit_dmap, limit_de),
-                             "prediction.png", "predicted loss against chart ΔE"))
+        blocks.append(svg_figure(chartfigures.prediction_curve(p, limit_dmap, limit_de),
+                                 "prediction.svg", "predicted loss against chart ΔE"))
     notes = [f"- {n}" for n in prediction_notes(p)]
     notes += [f"- {col}: {c.status}: {column_note(p, col)}" for col, c in p.columns.items()]
     blocks.append(Text("\n".join(notes)))
@@ -242,32 +326,37 @@ def chart_document(report: ChartReport, pixels: NDArray[Any] | None = None) -> D
     chart first, then where the patches were sampled (an image, given its ``pixels``), the ΔE
     heat map, a*b* arrows, the neutral tone curve and ΔE per patch, the prediction; the patch
     table, transforms and provenance folded away."""
-    from fidelity.chart.measure import neutral_patches
-    from fidelity.report import plots
+    from fidelity.chart.measure import fit_tone, neutral_patches
+    from fidelity.report import chartfigures
 
     m = report.measurement
     limit_de, limit_dmap = verdict_limits(report)
     sections = [section("Summary", summary_facts(report))]
     src = report.source
     if isinstance(src, ImageSource) and pixels is not None:
-        sections.append(section("Where the patches were sampled", Figure(
-            plots.chart_location(pixels, src.location, encoding=src.encoding,
-                                 exposure_ev=report.exposure_ev or 0.0,
-                                 found=src.found is not None),
-            "location.png", "sampling windows")))
+        sections.append(section("Where the patches were sampled", svg_figure(
+            chartfigures.chart_location(pixels, src.location, encoding=src.encoding,
+                                        exposure_ev=report.exposure_ev or 0.0,
+                                        found=src.found is not None),
+            "location.svg", "sampling windows")))
     neutral = neutral_patches(m)
     figures: list[Any] = [
-        Figure(plots.delta_e_map(m, limit_de), "delta_e_map.png", "ΔE00 on the chart layout"),
-        Figure(plots.ab_arrows(m), "ab_arrows.png", "a*b* errors",
-               "Arrows from the reference colour to the measured one in the a\\*b\\* plane."),
+        svg_figure(chartfigures.delta_e_map(m, limit_de), "delta_e_map.svg",
+                   "ΔE00 on the chart layout"),
+        svg_figure(chartfigures.ab_arrows(m), "ab_arrows.svg", "a*b* errors",
+                   "Arrows from the reference colour to the measured one in the a\\*b\\* "
+                   "plane; numbers are the patches in chart order."),
     ]
     if neutral:
-        figures.append(Figure(plots.tone_curve(m, neutral), "tone_curve.png",
-                              "tone curve of the neutral patches"))
-    figures.append(Figure(plots.delta_e_bars(m, limit_de), "delta_e_bars.png",
-                          "ΔE00 per patch"))
+        figures.append(svg_figure(chartfigures.tone_curve(m, neutral, fit_tone(m, neutral)),
+                                  "tone_curve.svg", "tone curve of the neutral patches"))
+    figures.append(svg_figure(chartfigures.delta_e_bars(m, limit_de), "delta_e_bars.svg",
+                              "ΔE00 per patch"))
     sections.append(section("Colour errors", *figures, gallery=True))
     sections += prediction_sections(report, limit_de, limit_dmap)
+    budget = uncertainty_section(report)
+    if budget is not None:
+        sections.append(budget)
     sections += [x for x in (directional_section(report), measured_section(report),
                              blind_spot_section(report)) if x is not None]
     sections.append(patch_section(report))
@@ -340,10 +429,12 @@ __all__ = [
     "directional_section",
     "headline",
     "measured_section",
+    "noise_facts",
     "patch_section",
     "prediction_sections",
     "source_pixels",
     "summary_facts",
+    "tone_facts",
     "verdict_limits",
     "write_chart_report",
     "write_report_files",

@@ -31,10 +31,10 @@ from fidelity.report.document import (
     Code,
     Document,
     Facts,
-    Figure,
     Headline,
     Text,
     section,
+    svg_figure,
     table,
 )
 from fidelity.report.jsonform import comparison_json
@@ -56,12 +56,16 @@ def comparison_lines(report: ComparisonReport) -> list[str]:
              f"({m.worst_patch}); mean ΔL' {float(np.mean(m.delta_l)):+.2f}, ΔC' "
              f"{float(np.mean(m.delta_c)):+.2f}, |ΔH'| {float(np.mean(np.abs(m.delta_h))):.2f} "
              "(simulation relative to the real camera)"]
+    if report.uncertainty is not None:
+        lines.append(report.uncertainty.text())
     p = report.prediction
 
     def f(v: float | None) -> str:
         return "n/a" if v is None else f"{v:.2f}"
 
-    lines.append(f"predicted ΔmAP of the difference: {f(p.dmap_points)} points, "
+    pm = (f" ± {report.interval.standard_uncertainty:.2f} (k=1)"
+          if report.interval is not None else "")
+    lines.append(f"predicted ΔmAP of the difference: {f(p.dmap_points)}{pm} points, "
                  f"{f(p.dmap_relative)} % of baseline (classic, table {p.table.name}, "
                  f"detector size {p.size_used})")
     lines += directional_lines(report.as_chart_report())
@@ -80,11 +84,11 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
     then the two charts side by side, the sim-to-real ΔE map, the a*b* arrows from the
     simulated to the real colours, the direction of each difference, the predictions, each
     chart's own audit and the provenance."""
-    from fidelity.report import plots
+    from fidelity.report import chartfigures
     m = report.measurement
     v = report.verdict
-    swatch = Figure(plots.swatches(m, ("real camera", "simulation")), "swatches.png",
-                    "real camera (left half) against simulation (right half)")
+    swatch = svg_figure(chartfigures.swatches(m, ("real camera", "simulation")),
+                        "swatches.svg", "real camera (left half) against simulation (right half)")
     warn = "".join(f"\n\n**warning** ({who}): {w.reason}"
                    for who, r in (("simulation", report.sim), ("real camera", report.real))
                    for w in r.warnings)
@@ -122,11 +126,11 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
     ss, rs = report.sim.source, report.real.source
     if (sim_pixels is not None and real_pixels is not None and isinstance(ss, ImageSource)
             and isinstance(rs, ImageSource)):
-        sections.append(section("The two charts", Figure(plots.chart_pair(
+        sections.append(section("The two charts", svg_figure(chartfigures.chart_pair(
             (sim_pixels, ss.location, ss.encoding, report.sim.exposure_ev or 0.0),
             (real_pixels, rs.location, rs.encoding, report.real.exposure_ev or 0.0),
             (f"simulation: {ss.name}", f"real camera: {rs.name}")),
-            "charts.png", "the simulated and the real chart, sampling windows outlined")))
+            "charts.svg", "the simulated and the real chart, sampling windows outlined")))
     reversed_m = replace(m, lab=m.reference_lab, reference_lab=m.lab, srgb=m.reference_srgb
                          if m.reference_srgb is not None else m.srgb, reference_srgb=m.srgb)
     limit = (v.criterion.limit if v is not None and v.criterion.kind == "max-delta-e"
@@ -137,9 +141,10 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
             for k, name in enumerate(m.patch_names)]
     sections.append(section(
         "Sim-to-real differences",
-        Figure(plots.delta_e_map(m, limit), "delta_e_map.png", "sim-to-real ΔE00 per patch"),
-        Figure(plots.ab_arrows(reversed_m, ("simulation", "real camera")), "ab_arrows.png",
-               "a*b*: arrows from the simulated colour to the real one"),
+        svg_figure(chartfigures.delta_e_map(m, limit), "delta_e_map.svg",
+                   "sim-to-real ΔE00 per patch"),
+        svg_figure(chartfigures.ab_arrows(reversed_m, ("simulation", "real camera")),
+                   "ab_arrows.svg", "a*b*: arrows from the simulated colour to the real one"),
         table(("patch", "sim-to-real ΔE00", "ΔL'", "ΔC'", "ΔH'", "sim ΔE00 to reference",
                "real ΔE00 to reference"), rows)))
     chart_view = report.as_chart_report()

@@ -9,7 +9,8 @@ optional headline figure) and :class:`Section` objects holding blocks:
 
 - :class:`Text`: Markdown prose (inline emphasis, code, links, lists);
 - :class:`Table`: a header and rows of cells (strings, already formatted);
-- :class:`Figure`: a PNG (bytes) with a caption; embedded in HTML, a file link in Markdown;
+- :class:`Figure`: a PNG (bytes) or an SVG (text) with a caption; embedded in HTML, a file
+  link in Markdown;
 - :class:`Facts`: label/value pairs (a summary table);
 - :class:`Code`: preformatted text (JSON provenance).
 
@@ -18,6 +19,7 @@ A section with ``folded=True`` is collapsed in HTML (``<details>``); Markdown sh
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -52,13 +54,32 @@ class Table:
 
 @dataclass(frozen=True)
 class Figure:
-    """A PNG figure: ``png`` bytes, ``name`` (its file name when written next to Markdown),
-    ``alt`` text and a ``caption``."""
+    """A figure: ``png`` bytes or ``svg`` text (an ``<svg>`` element, inlined in HTML), its
+    ``name`` (its file name when written next to Markdown), ``alt`` text and a ``caption``."""
 
     png: bytes
     name: str
     alt: str
     caption: str = ""
+    svg: str = ""
+
+    @property
+    def data(self) -> bytes:
+        """The figure's file content: the SVG text (UTF-8) if it has one, else the PNG."""
+        return self.svg.encode("utf-8") if self.svg else self.png
+
+
+def svg_figure(svg: str, name: str, alt: str, caption: str = "") -> Figure:
+    """A :class:`Figure` of SVG text (``name`` ends in ``.svg``); the ``<svg>`` element's
+    accessible name (``role="img" aria-label``) becomes ``alt``."""
+    from xml.sax.saxutils import quoteattr
+
+    head, sep, rest = svg.partition(">")
+    if not sep or not head.startswith("<svg"):
+        raise ValueError("svg_figure needs the text of an <svg> element")
+    head = re.sub(r'\s(role|aria-label)="[^"]*"', "", head)
+    svg = f"{head} role=\"img\" aria-label={quoteattr(alt)}>{rest}"
+    return Figure(b"", name, alt, caption, svg=svg)
 
 
 @dataclass(frozen=True)
@@ -150,6 +171,7 @@ __all__ = [
     "Text",
     "Tone",
     "section",
+    "svg_figure",
     "table",
 ]
 

@@ -17,7 +17,15 @@ import numpy as np
 from fidelity.fileio import json_ready
 from fidelity.fit import EXPRESSED_DELTA_E, FitReport, SharedFit
 from fidelity.report.chart import write_report_files
-from fidelity.report.document import Code, Document, Facts, Figure, Headline, section, table
+from fidelity.report.document import (
+    Code,
+    Document,
+    Facts,
+    Headline,
+    section,
+    svg_figure,
+    table,
+)
 from fidelity.report.jsonform import fit_json, shared_fit_json
 
 
@@ -71,11 +79,11 @@ def fit_lines(report: FitReport) -> list[str]:
 
 def fit_document(report: FitReport) -> Document:
     """The fit as a :class:`~fidelity.report.document.Document`."""
-    from fidelity.report import plots
+    from fidelity.report import chartfigures
 
     c, b, a, lut = report.correction, report.before, report.after, report.lut
-    after_fig = Figure(plots.swatches(a, ("real camera", "corrected simulation")),
-                       "after.png", "real camera (left half) against the corrected simulation "
+    after_fig = svg_figure(chartfigures.swatches(a, ("real camera", "corrected simulation")),
+                           "after.svg", "real camera (left half) against the corrected simulation "
                        "(right half)")
     note = ("" if c.expressed else
             f"; the {c.model.name} model does not express the difference (cross-validated "
@@ -108,12 +116,12 @@ def fit_document(report: FitReport) -> Document:
             for k, n in enumerate(c.patch_names)]
     sections = [
         section("Summary", facts),
-        section("Before and after", Figure(plots.swatches(b, ("real camera", "simulation")),
-                                           "before.png", "before: real camera (left half) "
+        section("Before and after", svg_figure(chartfigures.swatches(b, ("real camera", "simulation")),
+                                               "before.svg", "before: real camera (left half) "
                                            "against the simulation (right half)"),
                 after_fig,
-                Figure(plots.delta_e_map(b), "before_map.png", "sim-to-real ΔE00 before"),
-                Figure(plots.delta_e_map(a), "after_map.png", "sim-to-real ΔE00 after"),
+                svg_figure(chartfigures.delta_e_map(b), "before_map.svg", "sim-to-real ΔE00 before"),
+                svg_figure(chartfigures.delta_e_map(a), "after_map.svg", "sim-to-real ΔE00 after"),
                 gallery=True),
         section("Per patch", table(("patch", "ΔE00 before", "ΔE00 after (through the .cube)",
                                     "ΔE00 fitted", "ΔE00 cross-validated", "fit"), rows)),
@@ -158,7 +166,7 @@ def shared_fit_lines(shared: SharedFit) -> list[str]:
 def shared_fit_document(shared: SharedFit) -> Document:
     """A fit over illuminants as a :class:`~fidelity.report.document.Document`: the matrix,
     a table of the pairs, and each pair's before/after swatches."""
-    from fidelity.report import plots
+    from fidelity.report import chartfigures
 
     worst = max(shared.reports, key=lambda r: r.after.mean_delta_e)
     head = Headline(f"one matrix over {len(shared.reports)} illuminants: sim-to-real ΔE00 after "
@@ -173,9 +181,9 @@ def shared_fit_document(shared: SharedFit) -> Document:
         section("Pairs", table(("pair", "SIM", "REAL", "gains", "ΔE00 before", "ΔE00 after",
                                 "max after", "cross-validated", "patches used", "cube"), rows)),
         section("Before and after", *[
-            Figure(plots.swatches(r.after, ("real camera", "corrected simulation")),
-                   f"after_{k + 1}.png", f"pair {k + 1} after: real camera (left half) against "
-                   "the corrected simulation (right half)")
+            svg_figure(chartfigures.swatches(r.after, ("real camera", "corrected simulation")),
+                       f"after_{k + 1}.svg", f"pair {k + 1} after: real camera (left half) "
+                       "against the corrected simulation (right half)")
             for k, r in enumerate(shared.reports)], gallery=True),
         section("The shared matrix", Code(json.dumps(json_ready(
             {"matrix": shared.matrix.matrix.tolist(),

@@ -77,6 +77,9 @@ def chart_report_json(report: ChartReport) -> JSONObject:
         "directional_prediction": r.directional.to_json() if r.directional else None,
         "blind_spots": [b.to_json() for b in r.blind_spots],
         "measured_loss": [x.to_json() for x in r.measured],
+        "uncertainty": r.uncertainty.to_json() if r.uncertainty else None,
+        "prediction_interval": r.interval.to_json() if r.interval else None,
+        "validity": r.validity.to_json() if r.validity else None,
     })
     return out
 
@@ -90,7 +93,8 @@ def comparison_json(report: ComparisonReport) -> JSONObject:
         "schema_version": r.schema_version, "command": r.command, "created": r.created,
         "sim_to_real": {"mean_delta_e": m["mean_delta_e"], "max_delta_e": m["max_delta_e"],
                         "worst_patch": m["worst_patch"],
-                        "normalisation": r.normalisation.to_json(), "patches": m["patches"]},
+                        "normalisation": r.normalisation.to_json(), "patches": m["patches"],
+                        "uncertainty": r.uncertainty.to_json() if r.uncertainty else None},
         "sim_delta_e": r.sim.mean_delta_e, "real_delta_e": r.real.mean_delta_e,
         "prediction": prediction_json(r.prediction),
         "directional_prediction": r.directional.to_json() if r.directional else None,
@@ -98,6 +102,8 @@ def comparison_json(report: ComparisonReport) -> JSONObject:
         "verdict": verdict_json(r.verdict) if r.verdict else None,
         "measured_loss": [x.to_json() for x in r.measured],
         "emulation": dict(r.emulation) if r.emulation else None,
+        "prediction_interval": r.interval.to_json() if r.interval else None,
+        "validity": r.validity.to_json() if r.validity else None,
         "sim": chart_report_json(r.sim), "real": chart_report_json(r.real),
         "provenance": r.provenance.to_json()})
     return out

@@ -2,8 +2,10 @@
 
 The test-case name is stable (``colour fidelity of SUBJECT``): the criterion and its limit are
 properties, so changing a threshold keeps a CI's test history. The test suite carries a
-``timestamp`` (UTC) and the ``hostname``. A failed gate is a ``<failure>``, an input error (exit
-code 2) an ``<error>``; the measured values are ``<properties>``: of the test suite when there is
+``timestamp`` (UTC) and the ``hostname``. A failed gate is a ``<failure>`` (type ``GateFailure``; an
+undecided one of a guarded decision rule, exit code 4, type ``GateUndecided``), an input error
+(exit code 2) an ``<error>``; the decision rule, its coverage factor and the expanded
+uncertainty it used are properties; the measured values are ``<properties>``: of the test suite when there is
 one case (JUnit's classic place), of each test case when there are several (the form pytest's
 ``record_property`` writes, read by Jenkins and GitLab).
 """
@@ -52,8 +54,23 @@ def _properties(case: GateResult) -> list[tuple[str, str]]:
                    ("directional_dmap_points", d.dmap_points if d else None)]
         values += [(f"measured_dmap_points_{m.model}", m.dmap_points) for m in r.measured]
         values += [(f"warning_{w.kind}", w.reason) for w in r.warnings]
+        if r.uncertainty is not None:
+            values.append(("mean_delta_e_standard_uncertainty", r.uncertainty.combined))
+        if r.interval is not None:
+            values.append(("dmap_points_standard_uncertainty",
+                           r.interval.standard_uncertainty))
+        if r.validity is not None:
+            values.append(("inside_validity_domain", str(r.validity.inside).lower()))
         if r.verdict is not None and r.verdict.value is not None:
             values.append(("value", r.verdict.value))
+        if r.verdict is not None:
+            v = r.verdict
+            values += [("decision_rule", v.decision.rule),
+                       ("coverage_factor", v.decision.k),
+                       ("strict", str(v.decision.strict).lower()),
+                       ("standard_uncertainty", v.uncertainty),
+                       ("expanded_uncertainty", v.expanded_uncertainty),
+                       ("outcome", v.label.lower())]
     return [(k, "" if v is None else str(v)) for k, v in values]
 
 
@@ -86,7 +103,8 @@ def junit_xml(cases: Sequence[GateResult], *, timestamp: str | None = None,
         if verdict is not None and not verdict.passed:
             failures += 1
             message = verdict_message(verdict)
-            ET.SubElement(case, "failure", message=message, type="GateFailure").text = message
+            kind = "GateUndecided" if verdict.undecided else "GateFailure"
+            ET.SubElement(case, "failure", message=message, type=kind).text = message
         ET.SubElement(case, "system-out").text = "\n".join(summary_lines(c.report))
     suite.set("failures", str(failures))
     suite.set("errors", str(errors))

@@ -34,6 +34,8 @@ def summary_lines(report: ChartReport) -> list[str]:
     lines.append(f"chart ΔE00: mean {report.mean_delta_e:.2f}, max "
                  f"{report.max_delta_e:.2f} ({report.worst_patch}); reference "
                  f"{src.reference_description}")
+    if report.uncertainty is not None:
+        lines.append(uncertainty_line(report))
     if report.exposure_ev is not None:
         bp = report.bad_pixels
         kept = ""
@@ -54,19 +56,35 @@ def summary_lines(report: ChartReport) -> list[str]:
 
         kind = ("upper bound, " if bound else
                 "measured worst case, " if p.table.kind is TableKind.MEASURED else "")
-        lines.append(f"predicted ΔmAP: {f(p.dmap_points)} percentage points, "
+        pm = ""
+        if report.interval is not None:
+            pm = f" ± {report.interval.standard_uncertainty:.2f} (k=1)"
+        lines.append(f"predicted ΔmAP: {f(p.dmap_points)}{pm} percentage points, "
                      f"{f(p.dmap_relative)} % of baseline ({kind}table "
                      f"{p.table.name}, detector size {p.size_used})")
         lines.append(f"predicted ΔAP: person {f(p.dap_person_points)} points, bicycle "
                      f"{f(p.dap_bicycle_points)} points")
         if p.out_of_range:
             lines.append("note: ΔE beyond the table's range; conservative ceiling used")
+        if report.validity is not None:
+            lines += [f"outside the evidence: {c.detail}" for c in report.validity.outside
+                      if c.name == "reference chart"]
     lines += directional_lines(report)
     lines += [f"measured on COCO: {m.summary()}" for m in report.measured]
     lines += [w.warning for w in report.warnings]
     if report.verdict is not None:
         lines.append(verdict_message(report.verdict))
     return lines
+
+
+def uncertainty_line(report: ChartReport) -> str:
+    """``mean ΔE00 2.41 ± 0.06 (k=1)`` and its largest component."""
+    u = report.uncertainty
+    assert u is not None
+    top = max(u.components, key=lambda c: c.value)
+    largest = f"; largest component: {top.name} {top.value:.3f}" if top.value > 0 else ""
+    notes = "".join(f"; {n}" for n in u.notes)
+    return f"{u.text()}{largest}{notes}"
 
 
 def directional_lines(report: ChartReport) -> list[str]:
@@ -87,4 +105,4 @@ def directional_lines(report: ChartReport) -> list[str]:
             f"baseline ({d.explanation()}){used}"]
 
 
-__all__ = ["directional_lines", "summary_lines"]
+__all__ = ["directional_lines", "summary_lines", "uncertainty_line"]

@@ -99,12 +99,13 @@ def prediction_notes(prediction: Prediction) -> list[str]:
 def verdict_message(verdict: Verdict, delta_e_name: str = "mean ΔE00") -> str:
     """The verdict in one line, e.g. ``PASS: mean ΔE00 1.02 <= 3`` or ``FAIL: predicted ΔmAP
     1.40 points > 1 at mean ΔE00 2.41``; ``delta_e_name`` names the chart ΔE (a comparison's
-    is the sim-to-real ΔE00)."""
+    is the sim-to-real ΔE00). A guarded decision rule adds the expanded uncertainty it used,
+    ``UNDECIDED: mean ΔE00 2.98 <= 3 + U (guarded: U = 0.06, k = 2)``."""
     v, c = verdict, verdict.criterion
     if c.kind == "max-delta-e":
         assert v.value is not None
         return (f"{v.label}: {delta_e_name} {v.value:.2f} "
-                f"{'<=' if v.passed else '>'} {c.limit:g}")
+                f"{_relation(v)} {c.limit:g}{_guard(v)}")
     what = c.describe().removeprefix("predicted ").split(" <=")[0]
     directional = v.bound == "directional"
     if v.reason is VerdictReason.NO_PREDICTION or v.value is None:
@@ -118,7 +119,24 @@ def verdict_message(verdict: Verdict, delta_e_name: str = "mean ΔE00") -> str:
         if v.conservative and v.status is not None:
             qualifier += f" ({v.status.value}: conservative answer)"
     return (f"{v.label}: predicted {what} {v.value:.2f} {unit}{qualifier} "
-            f"{'<=' if v.passed else '>'} {c.limit:g} at {delta_e_name} {v.delta_e:.2f}")
+            f"{_relation(v)} {c.limit:g} at {delta_e_name} {v.delta_e:.2f}{_guard(v)}")
+
+
+def _relation(v: Verdict) -> str:
+    if v.reason is VerdictReason.UNDECIDED:
+        return "within U of"
+    return "<=" if v.passed else ">"
+
+
+def _guard(v: Verdict) -> str:
+    """`` (guarded: U = 0.06, k = 2)`` for a guarded rule, nothing for the simple one."""
+    if v.decision.rule != "guarded":
+        return ""
+    u = v.expanded_uncertainty
+    told = "U unknown, taken as 0" if u is None else f"U = {u:.3g}"
+    strict = (", strict: the guard band fails"
+              if v.decision.strict and v.reason is VerdictReason.UNDECIDED else "")
+    return f" (guarded: {told}, k = {v.decision.k:g}{strict})"
 
 
 __all__ = ["COLUMN_LABELS", "ceiling_words", "column_note", "prediction_notes",

@@ -10,7 +10,8 @@ Conventions
   chart's centre is the origin; patch 0 (dark skin) is at the top left as seen from the camera.
 - Geometry: the X-Rite ColorChecker Classic's outer size, 279.4 x 215.9 mm (11 x 8.5 in), with a
   4 x 6 field of 40 mm patches 4 mm apart centred on it (nominal, not a measured drawing; the
-  colours do not depend on it). The black frame is a rectangle of the chart's size 0.5 mm behind
+  colours do not depend on it); the ColorChecker Classic Mini's, 82.55 x 57.15 mm (3.25 x 2.25
+  in, X-Rite's product sheet), with the Classic's patch field scaled to its width. The black frame is a rectangle of the chart's size 0.5 mm behind
   the patches (spectrally flat reflectance :data:`FRAME_REFLECTANCE`).
 - Light: one directional light along -z, so every patch receives the same irradiance (a flat
   chart facing the light has no shadow or inter-reflection). RGB renderers get a white light of
@@ -44,8 +45,8 @@ from fidelity.errors import InvalidValueError, unknown_name
 
 FloatArray = NDArray[np.float64]
 
-#: Charts the scene can show (the repository ships no ColorChecker Mini layout).
-CHARTS: tuple[str, ...] = ("classic",)
+#: Charts the scene can show (the same 24 patches at two physical sizes: :data:`GEOMETRIES`).
+CHARTS: tuple[str, ...] = ("classic", "mini")
 #: References the RGB materials can follow (``scene``: spectral; ``safecolor``: the Lab table).
 REFERENCES: tuple[str, ...] = ("scene", "safecolor")
 #: Reflectance of the black frame (spectrally flat, nominal).
@@ -84,10 +85,18 @@ class ChartGeometry:
         return {"name": self.name, "width_mm": self.width * 1e3, "height_mm": self.height * 1e3,
                 "patch_mm": self.patch * 1e3, "gap_mm": (self.pitch - self.patch) * 1e3,
                 "rows": self.rows, "cols": self.cols,
-                "note": "outer size of the ColorChecker Classic; nominal patch field, centred"}
+                "note": f"outer size of the ColorChecker {TITLES[self.name]}; nominal patch "
+                        "field, centred"}
 
 
+#: Product names of the charts.
+TITLES = {"classic": "Classic", "mini": "Classic Mini"}
 CLASSIC = ChartGeometry("classic", 0.2794, 0.2159, 0.040, 0.044)
+#: The Mini: 3.25 x 2.25 in outside, the Classic's patch field scaled by 82.55 / 279.4.
+MINI = ChartGeometry("mini", 0.08255, 0.05715, 0.040 * 0.08255 / 0.2794,
+                     0.044 * 0.08255 / 0.2794)
+#: Geometry of each chart in :data:`CHARTS`.
+GEOMETRIES = {"classic": CLASSIC, "mini": MINI}
 
 
 @dataclass(frozen=True)
@@ -199,7 +208,7 @@ def make_camera(chart: ChartGeometry, width: int, height: int, yfov_deg: float,
                 fill: float | None = None, distance: float | None = None) -> SceneCamera:
     """The camera at ``distance`` (metres) or where the chart fills ``fill`` (default 0.8)
     of the image along its tighter side (the width, unless the image is wider than the chart's
-    279.4 : 215.9), with bounds checked."""
+    aspect ratio), with bounds checked."""
     if not (16 <= width <= MAX_SIDE_PX and 16 <= height <= MAX_SIDE_PX):
         raise InvalidValueError(f"--resolution {width}x{height}: each side must be 16 to "
                                 f"{MAX_SIDE_PX} pixels")
@@ -260,7 +269,7 @@ def build_scene(
         raise unknown_name("reference", reference, REFERENCES)
     if not (math.isfinite(white_level) and 1e-6 <= white_level <= 1e6):
         raise InvalidValueError(f"--white-level {white_level}: must be 1e-6 to 1e6")
-    geometry = CLASSIC
+    geometry = GEOMETRIES[chart]
     camera = make_camera(geometry, resolution[0], resolution[1], yfov_deg, fill, distance)
     ill = load_illuminant(illuminant)
     step = SPECTRAL_STEP_NM
@@ -318,6 +327,8 @@ def _encode(linear: FloatArray) -> FloatArray:
 __all__ = [
     "CHARTS",
     "CLASSIC",
+    "GEOMETRIES",
+    "MINI",
     "FRAME_REFLECTANCE",
     "LUMENS_PER_WATT",
     "REFERENCES",

@@ -1,0 +1,226 @@
+"""Is the stated uncertainty of the chart ΔE right? And what does it cost? (issue 32)
+
+Coverage: one camera rendered with ``--trials`` noise seeds; each render states its chart ΔE and
+its standard uncertainty ``u`` (k = 1, :mod:`fidelity.chart.uncertainty`). The ΔE values spread
+around their mean; a right ``u`` has about 68 % of them within ``±u`` and 95 % within ``±2u``
+(normal distribution). Three studies:
+
+- ``render nikon-5100``: the built-in camera (light noise, 12 bit), closed-form render;
+- ``render noisy``: the same camera with ten times less full well (3000 e-) and 5 e- read noise;
+- ``audit noisy``: the noisy camera's developed image audited as a user would (the chart found,
+  corners jittered by the finder's residual, exposure fitted on the neutral patches): the
+  budget of an image audit, placement included. This camera's white balance is fixed
+  (``illuminant``), so that the seeds change only what an image shows, its pixel noise: a
+  camera that estimates its white balance on the noisy chart changes its colours from capture
+  to capture, which a render's budget states (``camera white balance``) and an audit of one
+  image cannot know.
+
+The spread is the sample standard deviation over the trials; the mean ΔE over the trials stands
+in for the expectation. With N trials a coverage fraction has a binomial standard error of
+about sqrt(p (1 - p) / N) (6.6 % at 68 % and N = 50).
+
+Cost: ``fidelity audit IMAGE --json`` and ``fidelity check --json`` as whole processes, this
+checkout against the anchor (the same code before the uncertainty: ``--anchor`` commit, exported
+with ``git archive``), interleaved, ``--repeats`` times each; median wall time and max RSS.
+
+    python -m benchmarks.uncertainty_coverage --trials 100 --repeats 7
+    # -> reports/uncertainty/coverage.json and reports/uncertainty/coverage.md
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.machine import machine_info
+
+REPO = Path(__file__).resolve().parent.parent
+OUT = REPO / "reports" / "uncertainty"
+
+
+def coverage(delta_e: list[float], u: list[float]) -> dict[str, Any]:
+    """Coverage of ``±u`` and ``±2u`` around the mean of ``delta_e``."""
+    de, uu = np.asarray(delta_e), np.asarray(u)
+    dev = np.abs(de - de.mean())
+    n = de.size
+    return {"trials": int(n), "mean_delta_e": float(de.mean()),
+            "observed_sd": float(de.std(ddof=1)), "mean_u": float(uu.mean()),
+            "rms_u": float(np.sqrt(np.mean(uu ** 2))),
+            "sd_over_rms_u": float(de.std(ddof=1) / np.sqrt(np.mean(uu ** 2))),
+            "within_1u": float(np.mean(dev <= uu)), "within_2u": float(np.mean(dev <= 2 * uu)),
+            "binomial_se_at_68": float(np.sqrt(0.68 * 0.32 / n)),
+            "binomial_se_at_95": float(np.sqrt(0.95 * 0.05 / n))}
+
+
+def noisy_camera(fixed_white_balance: bool = False) -> Any:
+    from fidelity.camera.model import Noise, load_camera
+
+    cam = load_camera("nikon-5100")
+    cam = replace(cam, name="nikon-5100 noisy", noise=Noise(full_well=3000.0, read_noise=5.0))
+    if fixed_white_balance:
+        cam = replace(cam, white_balance=replace(cam.white_balance, method="illuminant"))
+    return cam
+
+
+def render_study(camera: Any, trials: int) -> dict[str, Any]:
+    from fidelity.camera.render import render_chart
+
+    des, us, comps = [], [], []
+    for seed in range(trials):
+        r = render_chart(camera, seed=seed)
+        assert r.uncertainty is not None
+        des.append(r.measurement.mean_delta_e)
+        us.append(r.uncertainty.combined)
+        comps.append({c.name: c.value for c in r.uncertainty.components})
+    out = coverage(des, us)
+    out["components_mean"] = {k: float(np.mean([c[k] for c in comps])) for k in comps[0]}
+    return out
+
+
+def audit_study(camera: Any, trials: int) -> dict[str, Any]:
+    from fidelity.camera.render import render_chart
+    from fidelity.chart.measure import measure_pixels
+
+    des, us, comps = [], [], []
+    for seed in range(trials):
+        r = render_chart(camera, seed=seed, pixels_per_patch=48)
+        m = measure_pixels(r.display_image, None, encoding="srgb", exposure="auto",
+                           reference="scene")
+        assert m.uncertainty is not None
+        des.append(m.mean_delta_e)
+        us.append(m.uncertainty.combined)
+        comps.append({c.name: c.value for c in m.uncertainty.components})
+    out = coverage(des, us)
+    out["components_mean"] = {k: float(np.mean([c[k] for c in comps])) for k in comps[0]}
+    return out
+
+
+def _run(cmd: list[str], pythonpath: str, cwd: str) -> tuple[float, float, float]:
+    """Wall seconds, max RSS (MiB) and CPU seconds (user + system) of one whole process."""
+    env = dict(os.environ, PYTHONPATH=pythonpath)
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, env=env, cwd=cwd, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    if os.waitstatus_to_exitcode(status) not in (0, 1):
+        raise RuntimeError(f"{cmd} failed")
+    return wall, usage.ru_maxrss / 1024.0, usage.ru_utime + usage.ru_stime
+
+
+def cost_study(anchor: str, repeats: int) -> dict[str, Any]:
+    with tempfile.TemporaryDirectory() as tmp:
+        base = Path(tmp) / "anchor"
+        base.mkdir()
+        archive = subprocess.run(["git", "-C", str(REPO), "archive", anchor, "fidelity",
+                                  "charts", "scenes"], check=True, capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(base)], input=archive, check=True)
+        image_dir = Path(tmp) / "render"
+        subprocess.run([sys.executable, "-m", "fidelity", "render", "--camera", "nikon-5100",
+                        "--out", str(image_dir)], check=True, capture_output=True,
+                       env=dict(os.environ, PYTHONPATH=str(REPO)))
+        image = str(image_dir / "developed.png")
+        commands = {
+            "audit": [sys.executable, "-m", "fidelity", "audit", image, "--json",
+                      str(Path(tmp) / "a.json")],
+            "check": [sys.executable, "-m", "fidelity", "check", "--json",
+                      str(Path(tmp) / "c.json")],
+        }
+        times: dict[str, dict[str, list[tuple[float, float, float]]]] = {
+            k: {"anchor": [], "uncertainty": []} for k in commands}
+        for _ in range(repeats):
+            for name, cmd in commands.items():
+                times[name]["anchor"].append(_run(cmd, str(base), tmp))
+                times[name]["uncertainty"].append(_run(cmd, str(REPO), tmp))
+    out: dict[str, Any] = {"anchor": anchor, "repeats": repeats, "image": "developed.png of "
+                           "fidelity render --camera nikon-5100 (248x168, 16-bit PNG)"}
+    for name, t in times.items():
+        a = statistics.median(w for w, _, _ in t["anchor"])
+        b = statistics.median(w for w, _, _ in t["uncertainty"])
+        ca = statistics.median(c for _, _, c in t["anchor"])
+        cb = statistics.median(c for _, _, c in t["uncertainty"])
+        out[name] = {"anchor_wall_s": a, "uncertainty_wall_s": b,
+                     "overhead_percent": 100.0 * (b / a - 1.0),
+                     "anchor_cpu_s": ca, "uncertainty_cpu_s": cb,
+                     "cpu_overhead_percent": 100.0 * (cb / ca - 1.0),
+                     "anchor_max_rss_mib": max(m for _, m, _ in t["anchor"]),
+                     "uncertainty_max_rss_mib": max(m for _, m, _ in t["uncertainty"])}
+    return out
+
+
+def markdown(result: dict[str, Any]) -> str:
+    lines = ["# Uncertainty of the chart ΔE: coverage and cost (issue 32)", "",
+             "Written by `python -m benchmarks.uncertainty_coverage`; numbers from "
+             "`coverage.json`.", "",
+             "| study | trials | mean ΔE00 | observed sd | RMS stated u | sd / u | within ±u | "
+             "within ±2u |", "|---|---|---|---|---|---|---|---|"]
+    for name, s in result["coverage"].items():
+        lines.append(f"| {name} | {s['trials']} | {s['mean_delta_e']:.3f} | "
+                     f"{s['observed_sd']:.4f} | {s['rms_u']:.4f} | {s['sd_over_rms_u']:.2f} | "
+                     f"{100 * s['within_1u']:.0f} % | {100 * s['within_2u']:.0f} % |")
+    lines += ["", "Expected for a right u: about 68 % within ±u and 95 % within ±2u (binomial "
+              "standard error of a fraction over N trials: sqrt(p(1-p)/N)). Mean components "
+              "(ΔE00):", ""]
+    for name, s in result["coverage"].items():
+        comps = ", ".join(f"{k} {v:.4f}" for k, v in s["components_mean"].items())
+        lines.append(f"- {name}: {comps}")
+    cost = result.get("cost")
+    if cost:
+        lines += ["", f"Cost, whole processes, median of {cost['repeats']} interleaved runs, "
+                      f"anchor = commit {cost['anchor']} (no uncertainty):", "",
+                  "| command | wall s anchor / now | wall overhead | CPU s anchor / now | CPU "
+                  "overhead | max RSS anchor / now MiB |", "|---|---|---|---|---|---|"]
+        for name in ("audit", "check"):
+            c = cost[name]
+            lines.append(f"| {name} | {c['anchor_wall_s']:.2f} / {c['uncertainty_wall_s']:.2f} | "
+                         f"{c['overhead_percent']:+.1f} % | {c['anchor_cpu_s']:.2f} / "
+                         f"{c['uncertainty_cpu_s']:.2f} | {c['cpu_overhead_percent']:+.1f} % | "
+                         f"{c['anchor_max_rss_mib']:.0f} / {c['uncertainty_max_rss_mib']:.0f} |")
+    lines += ["", f"Machine: {result['machine'].get('cpu')}, {result['machine'].get('cores')} "
+                  "cores (shared with other jobs)."]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--trials", type=int, default=100)
+    ap.add_argument("--audit-trials", type=int, default=50)
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--anchor", default="38ac479",
+                    help="commit of the code before the uncertainty (the cost's anchor)")
+    ap.add_argument("--no-cost", action="store_true")
+    ap.add_argument("--only-cost", action="store_true",
+                    help="measure the cost again, keep the coverage of coverage.json")
+    args = ap.parse_args(argv)
+    from fidelity.fileio import write_text_atomic
+
+    result: dict[str, Any] = {"machine": machine_info(), "coverage": {}}
+    if args.only_cost:
+        result["coverage"] = json.loads((OUT / "coverage.json").read_text())["coverage"]
+    else:
+        result["coverage"]["render nikon-5100"] = render_study("nikon-5100", args.trials)
+        result["coverage"]["render noisy"] = render_study(noisy_camera(), args.trials)
+        result["coverage"]["audit noisy (fixed white balance)"] = audit_study(
+            noisy_camera(fixed_white_balance=True), args.audit_trials)
+    if not args.no_cost:
+        result["cost"] = cost_study(args.anchor, args.repeats)
+    OUT.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(OUT / "coverage.json", json.dumps(result, indent=1) + "\n")
+    write_text_atomic(OUT / "coverage.md", markdown(result))
+    print(markdown(result))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

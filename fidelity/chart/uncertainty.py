@@ -1,0 +1,470 @@
+"""The standard uncertainty of a chart ΔE00 (GUM style): an :class:`UncertaintyBudget`.
+
+The chart ΔE (mean ΔE00 over the patches) is a function ``f`` of the patch means. Each source of
+uncertainty is a component whose standard uncertainty (in ΔE00) is obtained by propagating the
+uncertainty of the inputs through ``f`` with a Monte Carlo method (JCGM 101:2008, "GUM
+Supplement 1"): :data:`DRAWS` draws with the seeded generator ``numpy.random.default_rng(SEED)``,
+the component's standard uncertainty the sample standard deviation of ``f`` over the draws.
+Components, each evaluated with the others held at their measured values:
+
+``pixel noise`` (Type A)
+    Each patch mean's covariance from its own window: the sample covariance of the pixels over
+    ``n`` (a plain mean: the audit of an image, in linear light), or the Tukey-McLaughlin
+    winsorised covariance over ``(1 - 2 g)^2 n`` (a ``g``-trimmed mean: a camera render's
+    patch sampling). Means drawn from the normal distribution with that covariance (the
+    analytic standard error, propagated by Monte Carlo). An auto exposure is refitted on every
+    draw, so the noise of the neutral patches reaches every patch as it does in the
+    measurement. A patch with fewer than :data:`MIN_NOISE_PIXELS` valid pixels cannot estimate
+    its own noise: it is given the largest per-pixel covariance of the other patches (a
+    conservative Type B value) and named in ``notes``; without any such patch, a rectangular
+    distribution over the whole [0, 1] range of each channel.
+``rounding`` (Type B)
+    Integer pixel codes: a patch channel whose pixels all hold nearly one code (standard
+    deviation below one step ``q``; noise does not dither it) carries the rounding error of
+    that code, rectangular over ``±q/2`` (JCGM 100 F.2.2.1), not averaged over its pixels.
+``placement`` (Type B, images only)
+    The four corner centres jittered by the finder's placement uncertainty (normal, per axis:
+    the refinement's RMS residual over √2; corners given by the user or found without
+    refinement: a rectangular half-pixel, 1/√12 px), the windows located again and the chart
+    measured again, :data:`PLACEMENT_DRAWS` draws. A render's windows are those of its layout:
+    no placement uncertainty.
+``exposure normalisation`` (Type A, auto exposure only)
+    The exposure is the mean of the neutral patches' log2 luminance ratios; their spread gives
+    its standard error ``s / √k`` (``k`` neutral patches), propagated through ``f``. Fixed
+    exposures (and renders) have none.
+
+The combined standard uncertainty is the root sum of squares (the components taken as
+uncorrelated, JCGM 100 5.1.2); the budget states the coverage factor ``k`` = 1. Every value is
+finite: a noiseless float render has zero for noise and rounding, never NaN.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fidelity.colour import colorimetry as cm
+
+F64 = NDArray[np.float64]
+
+#: Monte Carlo draws of each propagated component.
+DRAWS = 400
+#: Draws of the jittered corners (each re-locates and re-measures the chart).
+PLACEMENT_DRAWS = 24
+#: Seed of the generator of every draw (the budget is reproducible).
+SEED = 20251125
+#: Fewest valid pixels a patch needs to estimate its own noise.
+MIN_NOISE_PIXELS = 3
+#: Placement standard uncertainty per axis of a corner not refined by the finder (px): a
+#: rectangular distribution over one pixel (1/√12).
+UNREFINED_PLACEMENT_PX = 1.0 / math.sqrt(12.0)
+
+#: A function from patch means ``(..., n, 3)`` to the chart ΔE ``(...,)``.
+ChartFunction = Callable[[F64], F64]
+
+
+@dataclass(frozen=True)
+class UncertaintyComponent:
+    """One line of a budget: the ``name`` of the source, its standard uncertainty ``value``
+    (ΔE00, k = 1), the GUM ``type`` (``A``: statistics of the data; ``B``: other knowledge)
+    and ``method``, how it was obtained (in words)."""
+
+    name: str
+    value: float
+    type: str
+    method: str
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"name", "value", "type", "method"}``."""
+        return {"name": self.name, "value": self.value, "type": self.type,
+                "method": self.method}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> UncertaintyComponent:
+        """Inverse of :meth:`to_json`."""
+        return cls(str(d["name"]), float(d["value"]), str(d["type"]), str(d["method"]))
+
+
+@dataclass(frozen=True)
+class UncertaintyBudget:
+    """The uncertainty budget of a chart ΔE (module docstring): the measured ``value`` (mean
+    ΔE00), its ``components``, the Monte Carlo ``draws`` and ``seed``, and ``notes`` (patches
+    whose noise could not be estimated, ...). ``combined`` is the root sum of squares, ``k``
+    the coverage factor it is stated with (1)."""
+
+    value: float
+    components: tuple[UncertaintyComponent, ...]
+    draws: int = DRAWS
+    seed: int = SEED
+    notes: tuple[str, ...] = ()
+    k: float = 1.0
+    quantity: str = "mean ΔE00"
+
+    @property
+    def combined(self) -> float:
+        """Combined standard uncertainty u (k = 1), ΔE00."""
+        return float(math.sqrt(sum(c.value ** 2 for c in self.components)))
+
+    def expanded(self, k: float = 2.0) -> float:
+        """Expanded uncertainty U = k u."""
+        return float(k) * self.combined
+
+    def component(self, name: str) -> UncertaintyComponent | None:
+        """The component called ``name`` (None when absent)."""
+        return next((c for c in self.components if c.name == name), None)
+
+    def text(self) -> str:
+        """``"mean ΔE00 2.41 ± 0.06 (k=1)"``: the uncertainty to two significant digits when
+        it is below 0.1 (at least two decimals), the value to the same decimals."""
+        return f"{self.quantity} {uncertain_text(self.value, self.combined)} (k={self.k:g})"
+
+    def to_json(self) -> dict[str, Any]:
+        """``value``, ``standard_uncertainty``, ``k``, ``components``, ``method`` (the Monte
+        Carlo settings), ``notes`` and the ``text``."""
+        return {"quantity": self.quantity, "value": self.value,
+                "standard_uncertainty": self.combined, "k": self.k,
+                "components": [c.to_json() for c in self.components],
+                "method": {"propagation": "Monte Carlo (JCGM 101:2008)", "draws": self.draws,
+                           "placement_draws": PLACEMENT_DRAWS, "seed": self.seed,
+                           "combination": "root sum of squares, components uncorrelated"},
+                "notes": list(self.notes), "text": self.text()}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> UncertaintyBudget:
+        """Inverse of :meth:`to_json`."""
+        method = d.get("method") or {}
+        return cls(float(d["value"]),
+                   tuple(UncertaintyComponent.from_json(c) for c in d["components"]),
+                   int(method.get("draws", DRAWS)), int(method.get("seed", SEED)),
+                   tuple(str(n) for n in d.get("notes") or ()), float(d.get("k", 1.0)),
+                   str(d.get("quantity", "mean ΔE00")))
+
+
+def uncertain_text(value: float, u: float) -> str:
+    """``"2.41 ± 0.06"``: ``u`` to two significant digits (JCGM 100 7.2.6) with at least two and
+    at most four decimals, ``value`` to the same decimals."""
+    decimals = 2
+    if u > 0 and math.isfinite(u):
+        decimals = min(4, max(2, 1 - math.floor(math.log10(u))))
+    return f"{value:.{decimals}f} ± {u:.{decimals}f}"
+
+
+# ------------------------------------------------------------------------ the chart function
+
+def srgb_chart_function(reference_lab: F64) -> ChartFunction:
+    """``f``: encoded sRGB patch means ``(..., n, 3)`` -> mean ΔE00 against ``reference_lab``
+    (a render's measurement: no exposure step, no clipping)."""
+    ref = np.asarray(reference_lab, np.float64)
+
+    def f(srgb: F64) -> F64:
+        out: F64 = cm.delta_e_2000(cm.srgb_to_lab(srgb), ref).mean(axis=-1)
+        return out
+
+    return f
+
+
+def exposure_of_means(linear: F64, reference_lab: F64, neutral: Sequence[int]) -> F64:
+    """The auto exposure (EV) of linear sRGB patch means ``(..., n, 3)``, vectorised
+    (:func:`fidelity.chart.measure.exposure_from_neutrals` over the leading axes; a draw without
+    light on any neutral patch gets EV 0)."""
+    idx = np.asarray(list(neutral), dtype=int)
+    y = np.asarray(linear, np.float64)[..., idx, :] @ cm.MATRIX_LINEAR_SRGB_TO_XYZ[1]
+    y_ref = cm.lab_to_xyz(np.asarray(reference_lab, np.float64)[idx])[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        logs = np.log2(y_ref / y)
+    ok = np.isfinite(logs) & (y > 0)
+    n = ok.sum(axis=-1)
+    ev: F64 = np.where(n > 0, np.where(ok, logs, 0.0).sum(axis=-1) / np.maximum(n, 1), 0.0)
+    return ev
+
+
+def linear_chart_function(reference_lab: F64, neutral: Sequence[int],
+                          exposure_ev: float | None) -> ChartFunction:
+    """``f``: linear sRGB patch means ``(..., n, 3)`` -> mean ΔE00, as an image audit measures
+    them: the exposure (``None``: auto, refitted on the neutral patches; else fixed EV), sRGB
+    encoding, clipping to [0, 1], CIEDE2000 against ``reference_lab``."""
+    ref = np.asarray(reference_lab, np.float64)
+
+    def f(linear: F64) -> F64:
+        ev = (exposure_of_means(linear, ref, neutral) if exposure_ev is None
+              else np.full(linear.shape[:-2], float(exposure_ev)))
+        with np.errstate(over="ignore", invalid="ignore"):
+            exposed = linear * np.exp2(ev)[..., None, None]
+        srgb = np.clip(np.nan_to_num(cm.delinearize_srgb(exposed), nan=0.0, posinf=1.0,
+                                     neginf=0.0), 0.0, 1.0)
+        out: F64 = cm.delta_e_2000(cm.srgb_to_lab(srgb), ref).mean(axis=-1)
+        return out
+
+    return f
+
+
+def _spread(values: F64) -> float:
+    v = np.asarray(values, np.float64)
+    v = v[np.isfinite(v)]
+    return float(np.std(v, ddof=1)) if v.size > 1 else 0.0
+
+
+# ------------------------------------------------------------------------ the components
+
+def mean_covariance(pixels: F64, trim: float = 0.0) -> F64:
+    """Covariance ``(3, 3)`` of the mean of ``(n, 3)`` pixels: ``cov / n`` (``trim`` 0), or the
+    winsorised covariance over ``(1 - 2 trim)^2 n`` for a ``trim``-trimmed mean
+    (Tukey & McLaughlin 1963; Wilcox, *Introduction to Robust Estimation*, 3.6). Needs
+    ``n >= 2``."""
+    x = np.asarray(pixels, np.float64)
+    n = x.shape[0]
+    if trim > 0:
+        g = int(trim * n)
+        if g:
+            s = np.sort(x, axis=0)
+            x = np.clip(x, s[g], s[n - g - 1])
+    cov: F64 = np.atleast_2d(np.cov(x, rowvar=False, ddof=1)) / n
+    return cov / (1.0 - 2.0 * trim) ** 2 if trim > 0 else cov
+
+
+@dataclass(frozen=True)
+class PatchSpread:
+    """What the noise and rounding components need of one patch window's valid pixels,
+    without the pixels (so that an audit never holds every window at once).
+
+    ``count`` pixels; ``covariance`` ``(3, 3)``: their sample covariance (ddof 1) in the fit's
+    linear domain, zero for fewer than two pixels; ``flat`` ``(3,)``: channels whose pixels are
+    all equal (exactly no noise); ``code_mean`` / ``code_std`` ``(3,)``: mean and standard
+    deviation of the integer codes' values (``code / (2**bits - 1)``), None for float pixels.
+    """
+
+    count: int
+    covariance: F64
+    flat: NDArray[np.bool_]
+    code_mean: F64 | None = None
+    code_std: F64 | None = None
+
+
+def patch_spread(linear: F64, codes: F64 | None = None) -> PatchSpread:
+    """The :class:`PatchSpread` of one window: ``linear`` ``(n, 3)`` valid pixels in the fit's
+    domain, ``codes`` ``(n, 3)`` the same pixels' code values (integer images only)."""
+    x = np.asarray(linear, np.float64).reshape(-1, 3)
+    n = x.shape[0]
+    cov = (np.atleast_2d(np.cov(x, rowvar=False, ddof=1)) if n >= 2 else np.zeros((3, 3)))
+    flat = (np.ptp(x, axis=0) == 0) if n else np.ones(3, bool)
+    if codes is None:
+        return PatchSpread(n, cov, flat)
+    c = np.asarray(codes, np.float64).reshape(-1, 3)
+    if not len(c):
+        return PatchSpread(n, cov, flat, np.zeros(3), np.zeros(3))
+    return PatchSpread(n, cov, flat, c.mean(axis=0), c.std(axis=0))
+
+
+def patch_covariances(samples: Sequence[F64], *, trim: float = 0.0,
+                      patch_names: Sequence[str] | None = None) -> tuple[F64, tuple[str, ...]]:
+    """The covariance ``(n, 3, 3)`` of each patch mean from its window's ``samples``
+    ``(n_k, 3)`` (:func:`mean_covariance`; a channel of identical pixels has none), and the
+    notes on patches with fewer than :data:`MIN_NOISE_PIXELS` pixels (see
+    :func:`spread_covariances`)."""
+    if trim == 0:
+        return spread_covariances([patch_spread(s) for s in samples], patch_names=patch_names)
+    per_pixel = []
+    for s in samples:
+        s = np.asarray(s, np.float64)
+        if s.shape[0] < MIN_NOISE_PIXELS:
+            per_pixel.append(PatchSpread(s.shape[0], np.zeros((3, 3)), np.ones(3, bool)))
+            continue
+        flat = np.ptp(s, axis=0) == 0
+        per_pixel.append(PatchSpread(s.shape[0], mean_covariance(s, trim) * s.shape[0], flat))
+    return spread_covariances(per_pixel, patch_names=patch_names)
+
+
+def spread_covariances(spreads: Sequence[PatchSpread], *,
+                       patch_names: Sequence[str] | None = None
+                       ) -> tuple[F64, tuple[str, ...]]:
+    """The covariance ``(n, 3, 3)`` of each patch mean, ``covariance / count`` of its
+    :class:`PatchSpread` (a flat channel has none), and the notes on patches with fewer than
+    :data:`MIN_NOISE_PIXELS` pixels, whose covariance is taken as the largest per-pixel
+    covariance of the other patches over their own count (none such: a rectangular
+    distribution over [0, 1] per channel)."""
+    n = len(spreads)
+    names = list(patch_names) if patch_names is not None else [f"patch {k + 1}" for k in range(n)]
+    covs = np.zeros((n, 3, 3))
+    per_pixel = np.zeros((n, 3, 3))
+    small: list[int] = []
+    for k, sp in enumerate(spreads):
+        if sp.count < MIN_NOISE_PIXELS:
+            small.append(k)
+            continue
+        per_pixel[k] = sp.covariance
+        per_pixel[k][sp.flat, :] = 0.0
+        per_pixel[k][:, sp.flat] = 0.0
+        covs[k] = per_pixel[k] / sp.count
+    notes: list[str] = []
+    if small:
+        others = [k for k in range(n) if k not in small]
+        if others:
+            worst = max(others, key=lambda j: float(np.trace(per_pixel[j])))
+            for k in small:
+                covs[k] = per_pixel[worst] / max(spreads[k].count, 1)
+            how = f"the largest per-pixel noise of the other patches ({names[worst]})"
+        else:
+            for k in small:
+                covs[k] = np.eye(3) / 12.0 / max(spreads[k].count, 1)
+            how = "a rectangular distribution over [0, 1] per channel"
+        notes.append("pixel noise not estimable from fewer than "
+                     f"{MIN_NOISE_PIXELS} valid pixels in " + ", ".join(names[k] for k in small)
+                     + f"; taken as {how}")
+    return covs, tuple(notes)
+
+
+def noise_component(samples: Sequence[F64], means: F64, f: ChartFunction, *,
+                    trim: float = 0.0, patch_names: Sequence[str] | None = None,
+                    rng: np.random.Generator | None = None, draws: int = DRAWS,
+                    covariances: F64 | None = None,
+                    ) -> tuple[UncertaintyComponent, tuple[str, ...]]:
+    """The ``pixel noise`` component of ``f`` at ``means`` ``(n, 3)`` from each patch's
+    ``samples`` ``(n_k, 3)`` (module docstring; ``covariances``: those of
+    :func:`patch_covariances`, computed here when None), and the notes on patches too small
+    to estimate their own noise."""
+    rng = rng if rng is not None else np.random.default_rng(SEED)
+    notes: tuple[str, ...] = ()
+    if covariances is None:
+        covariances, notes = patch_covariances(samples, trim=trim, patch_names=patch_names)
+    covs = np.asarray(covariances, np.float64)
+    n = covs.shape[0]
+    # a square root of each covariance by its eigen-decomposition (singular ones, e.g. grey
+    # pixels or perfectly correlated channels, included; round-off negatives set to 0)
+    vals, vecs = np.linalg.eigh(covs)
+    chol = vecs * np.sqrt(np.maximum(vals, 0.0))[:, None, :]
+    z = rng.standard_normal((draws, n, 3))
+    drawn = np.asarray(means, np.float64)[None] + np.einsum("kij,bkj->bki", chol, z)
+    value = 0.0 if not np.any(covs) else _spread(f(drawn))
+    how = ("sample covariance of each patch window's pixels / n" if trim == 0 else
+           f"winsorised covariance of each patch window's pixels / ((1 - 2*{trim:g})^2 n) "
+           f"({trim:g}-trimmed mean)")
+    return (UncertaintyComponent(
+        "pixel noise", value, "A",
+        f"{how}; patch means drawn from the normal distribution with it, {draws} Monte Carlo "
+        f"draws propagated through the chart ΔE (the exposure refitted on each draw when "
+        f"auto)"), notes)
+
+
+def rounding_component(samples: Sequence[F64], means: F64, f: ChartFunction, step: float | None,
+                       *, encoded: Sequence[F64] | None = None,
+                       to_measured: Callable[[F64], F64] | None = None,
+                       stuck: NDArray[np.bool_] | None = None,
+                       rng: np.random.Generator | None = None, draws: int = DRAWS,
+                       ) -> UncertaintyComponent:
+    """The ``rounding`` component: each patch channel whose pixel codes vary by less than one
+    ``step`` gets a rectangular error over ``±step/2`` on its code. ``encoded``: the pixels in
+    the coded domain (default ``samples``); ``to_measured`` maps a code-domain error of the
+    patch means to the domain of ``means`` (a derivative; default identity); ``stuck``
+    ``(n, 3)``: which patch channels are not dithered, when known without the pixels
+    (:attr:`PatchSpread.code_std` ``< step``). ``step`` None: no integer codes (float
+    pixels), zero."""
+    if not step:
+        return UncertaintyComponent("rounding", 0.0, "B",
+                                    "floating-point pixels: no rounding to integer codes")
+    rng = rng if rng is not None else np.random.default_rng(SEED + 1)
+    if stuck is None:
+        codes = encoded if encoded is not None else samples
+        stuck = np.array([np.asarray(c, np.float64).std(axis=0) < step if len(c) else
+                          np.ones(3, bool) for c in codes])
+    e = rng.uniform(-step / 2, step / 2, (draws, *stuck.shape)) * stuck[None]
+    if to_measured is not None:
+        e = to_measured(e)
+    value = _spread(f(np.asarray(means, np.float64)[None] + e)) if stuck.any() else 0.0
+    return UncertaintyComponent(
+        "rounding", value, "B",
+        f"pixel codes of step {step:.3g}: each patch channel not dithered by noise (pixel "
+        f"standard deviation < one step; {int(stuck.sum())} of {stuck.size}) rectangular over "
+        f"±step/2, {draws} Monte Carlo draws")
+
+
+def exposure_component(linear_means: F64, reference_lab: F64, neutral: Sequence[int],
+                       exposure_ev: float, f_ev0: ChartFunction, covariances: F64, *,
+                       rng: np.random.Generator | None = None, draws: int = DRAWS,
+                       ) -> UncertaintyComponent:
+    """The ``exposure normalisation`` component of an auto exposure: how much the neutral
+    patches disagree about the exposure beyond what their pixel noise explains (that part is
+    in the pixel noise component, which refits the exposure on every draw).
+
+    ``EV`` is the mean of ``k`` log2 luminance ratios ``r_i``; its standard uncertainty
+    ``sqrt(max(0, s^2 - mean_i u_i^2) / k)`` with ``s`` the standard deviation of the ``r_i``
+    and ``u_i`` the pixel-noise standard uncertainty of ``r_i`` (from the patch mean's
+    ``covariances``), propagated through the chart function with a fixed exposure
+    (``f_ev0``: EV 0, the means scaled)."""
+    rng = rng if rng is not None else np.random.default_rng(SEED + 2)
+    idx = np.asarray(list(neutral), dtype=int)
+    w = cm.MATRIX_LINEAR_SRGB_TO_XYZ[1]
+    y = np.asarray(linear_means, np.float64)[idx] @ w
+    y_ref = cm.lab_to_xyz(np.asarray(reference_lab, np.float64)[idx])[:, 1]
+    u_y = np.sqrt(np.maximum(np.einsum("i,kij,j->k", w, np.asarray(covariances)[idx], w), 0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        logs = np.log2(y_ref / y)
+        u_logs = u_y / (y * math.log(2.0))
+    ok = np.isfinite(logs) & np.isfinite(u_logs) & (y > 0)
+    if ok.sum() < 2:
+        return UncertaintyComponent("exposure normalisation", 0.0, "A",
+                                    "fewer than 2 neutral patches with light: not estimable")
+    logs, u_logs = logs[ok], u_logs[ok]
+    excess = max(0.0, float(np.var(logs, ddof=1) - np.mean(u_logs ** 2)))
+    u_ev = math.sqrt(excess / logs.size)
+    evs = exposure_ev + u_ev * rng.standard_normal(draws)
+    scaled = np.asarray(linear_means, np.float64)[None] * np.exp2(evs)[:, None, None]
+    value = _spread(f_ev0(scaled)) if u_ev > 0 else 0.0
+    return UncertaintyComponent(
+        "exposure normalisation", value, "A",
+        f"disagreement of the {logs.size} neutral patches about the auto exposure beyond their "
+        f"pixel noise, sqrt(max(0, s^2 - mean u_i^2) / k) of their log2 luminance ratios = "
+        f"{u_ev:.4f} EV, {draws} Monte Carlo draws")
+
+
+def placement_component(remeasure: Callable[[F64], F64 | None], corners: F64,
+                        sigma_px: float, how: str, f: ChartFunction, *,
+                        rng: np.random.Generator | None = None,
+                        draws: int = PLACEMENT_DRAWS) -> UncertaintyComponent:
+    """The ``placement`` component: the patch means measured again (``remeasure``: corners
+    ``(4, 2)`` -> patch means ``(n, 3)``, None when the jittered corners cannot be measured)
+    with the corners jittered by ``sigma_px`` per axis (normal), ``draws`` times, and the
+    chart ΔE ``f`` of each; ``how`` says where ``sigma_px`` comes from."""
+    rng = rng if rng is not None else np.random.default_rng(SEED + 3)
+    means = []
+    for _ in range(draws):
+        m = remeasure(np.asarray(corners, np.float64)
+                      + sigma_px * rng.standard_normal((4, 2)))
+        if m is not None:
+            means.append(m)
+    value = _spread(f(np.stack(means))) if len(means) > 1 else 0.0
+    lost = draws - len(means)
+    extra = f"; {lost} draws could not be measured" if lost else ""
+    return UncertaintyComponent(
+        "placement", value, "B",
+        f"corners jittered by {sigma_px:.3f} px per axis ({how}), windows located again and "
+        f"the chart measured again, {draws} draws{extra}")
+
+
+__all__ = [
+    "DRAWS",
+    "MIN_NOISE_PIXELS",
+    "PLACEMENT_DRAWS",
+    "SEED",
+    "UNREFINED_PLACEMENT_PX",
+    "ChartFunction",
+    "PatchSpread",
+    "UncertaintyBudget",
+    "UncertaintyComponent",
+    "exposure_component",
+    "exposure_of_means",
+    "linear_chart_function",
+    "mean_covariance",
+    "noise_component",
+    "patch_covariances",
+    "patch_spread",
+    "placement_component",
+    "rounding_component",
+    "spread_covariances",
+    "srgb_chart_function",
+    "uncertain_text",
+]

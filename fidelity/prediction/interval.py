@@ -1,0 +1,207 @@
+"""The uncertainty of a predicted loss and the domain its evidence covers.
+
+:func:`prediction_interval`: a predicted loss (``dmap_points`` or another column of a
+:class:`~fidelity.prediction.table.Prediction`) with its standard uncertainty from two sources,
+combined as uncorrelated (JCGM 100 5.1.2):
+
+- the table's sampling error at that ΔE: the larger of the paired standard errors the sweep
+  recorded at the two table points around the ΔE (:class:`~fidelity.prediction.table.SamplingError`;
+  measured tables, ``dmap_points`` only; None otherwise);
+- the chart ΔE's own standard uncertainty ``u(ΔE)`` (:mod:`fidelity.chart.uncertainty`)
+  propagated through the table: ``|c| u(ΔE)`` with the sensitivity ``c`` the slope of the
+  table's answer, by central differences over ``±h`` (``h`` = max(u(ΔE), 0.01), one-sided at
+  ΔE < h).
+
+:func:`validity_domain`: whether an answer lies inside the domain of its evidence: the ΔE range
+the table measured (a ΔE outside is answered by a conservative ceiling, not extrapolated), the
+detector sizes it measured (a size it has no curve of is answered by another size's curve), and
+whether the table holds measured losses or published bounds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from fidelity.prediction.table import ColumnStatus, Prediction, predict
+
+#: Smallest ΔE step of the slope's central difference.
+MIN_STEP = 0.01
+
+
+@dataclass(frozen=True)
+class PredictionInterval:
+    """A predicted loss ``value`` of ``column`` (percentage points, or % for
+    ``dmap_relative``) with its uncertainty: the table's sampling error ``table_se`` (None:
+    unknown), the ``slope`` of the table (loss per ΔE00) and the chart ΔE's standard uncertainty
+    ``delta_e_uncertainty``. ``k`` is the coverage factor of the stated ``interval``."""
+
+    column: str
+    value: float
+    table_se: float | None
+    slope: float
+    delta_e_uncertainty: float
+    k: float = 2.0
+
+    @property
+    def propagated(self) -> float:
+        """``|slope| u(ΔE)``: the part of the ΔE's uncertainty."""
+        return abs(self.slope) * self.delta_e_uncertainty
+
+    @property
+    def standard_uncertainty(self) -> float:
+        """Combined standard uncertainty (k = 1)."""
+        return math.sqrt((self.table_se or 0.0) ** 2 + self.propagated ** 2)
+
+    def interval(self, k: float | None = None) -> tuple[float, float]:
+        """``value ± k u`` (``k`` default :attr:`k`)."""
+        kk = self.k if k is None else k
+        u = kk * self.standard_uncertainty
+        return (self.value - u, self.value + u)
+
+    def to_json(self) -> dict[str, Any]:
+        """The fields, the ``propagated`` part, the ``standard_uncertainty`` (k = 1), the
+        ``interval`` at ``k`` and the ``method``."""
+        lo, hi = self.interval()
+        return {"column": self.column, "value": self.value, "table_se": self.table_se,
+                "slope": self.slope, "delta_e_uncertainty": self.delta_e_uncertainty,
+                "propagated": self.propagated,
+                "standard_uncertainty": self.standard_uncertainty, "k": self.k,
+                "interval": [lo, hi],
+                "method": ("sqrt(table_se^2 + (slope u(ΔE))^2); table_se the larger paired SE "
+                           "of the table points around ΔE; slope by central differences")}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> PredictionInterval:
+        """Inverse of :meth:`to_json`."""
+        se = d.get("table_se")
+        return cls(str(d["column"]), float(d["value"]), None if se is None else float(se),
+                   float(d["slope"]), float(d["delta_e_uncertainty"]), float(d.get("k", 2.0)))
+
+
+def _column_value(p: Prediction, column: str) -> float | None:
+    c = p.columns.get(column)
+    return None if c is None else c.value
+
+
+def prediction_interval(prediction: Prediction, delta_e_uncertainty: float,
+                        column: str = "dmap_points", k: float = 2.0
+                        ) -> PredictionInterval | None:
+    """The predicted loss of ``column`` with its uncertainty (module docstring); None when the
+    column has no value or the prediction's table has no curves (read back from JSON)."""
+    value = _column_value(prediction, column)
+    if value is None or not prediction.table.curves:
+        return None
+    de, u = prediction.delta_e, max(float(delta_e_uncertainty), 0.0)
+    h = max(u, MIN_STEP)
+    lo, hi = max(de - h, 0.0), de + h
+
+    def at(x: float) -> float | None:
+        return _column_value(predict(x, prediction.size, prediction.table,
+                                     method=prediction.method,
+                                     baseline_map=prediction.baseline_map, transforms=False),
+                             column)
+
+    a, b = at(lo), at(hi)
+    slope = 0.0 if a is None or b is None or hi <= lo else (b - a) / (hi - lo)
+    se = (prediction.dmap_points_se.high if column == "dmap_points"
+          and prediction.dmap_points_se is not None else None)
+    return PredictionInterval(column, float(value), se, float(slope), u, k)
+
+
+@dataclass(frozen=True)
+class DomainCheck:
+    """One check of the validity domain: ``name``, whether the answer is ``inside`` and the
+    ``detail`` in words."""
+
+    name: str
+    inside: bool
+    detail: str
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"name", "inside", "detail"}``."""
+        return {"name": self.name, "inside": self.inside, "detail": self.detail}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> DomainCheck:
+        """Inverse of :meth:`to_json`."""
+        return cls(str(d["name"]), bool(d["inside"]), str(d["detail"]))
+
+
+@dataclass(frozen=True)
+class ValidityDomain:
+    """The checks of an answer against the domain its evidence covers; ``inside`` when all
+    are."""
+
+    checks: tuple[DomainCheck, ...]
+
+    @property
+    def inside(self) -> bool:
+        """True when every check is inside."""
+        return all(c.inside for c in self.checks)
+
+    @property
+    def outside(self) -> tuple[DomainCheck, ...]:
+        """The checks outside the domain."""
+        return tuple(c for c in self.checks if not c.inside)
+
+    def with_check(self, check: DomainCheck) -> ValidityDomain:
+        """This domain with one more check."""
+        return ValidityDomain((*self.checks, check))
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"inside", "checks"}``."""
+        return {"inside": self.inside, "checks": [c.to_json() for c in self.checks]}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> ValidityDomain:
+        """Inverse of :meth:`to_json`."""
+        return cls(tuple(DomainCheck.from_json(c) for c in d["checks"]))
+
+
+def validity_domain(prediction: Prediction, column: str = "dmap_points") -> ValidityDomain:
+    """Whether ``prediction``'s answer of ``column`` lies inside its table's evidence: the ΔE
+    range measured, the detector sizes measured, measured losses (not published bounds)."""
+    col = prediction.columns[column]
+    rng = col.delta_e_range
+    span = f"[{rng[0]:g}, {rng[1]:g}]" if rng else "none"
+    if col.status is ColumnStatus.INTERPOLATED:
+        de = DomainCheck("table ΔE range", True,
+                         f"ΔE {prediction.delta_e:.2f} inside the table's range {span}")
+    elif col.status is ColumnStatus.NO_DATA:
+        de = DomainCheck("table ΔE range", False, f"the table has no {column} data")
+    else:
+        where = "below" if col.status is ColumnStatus.BELOW_RANGE else "above"
+        de = DomainCheck("table ΔE range", False,
+                         f"ΔE {prediction.delta_e:.2f} {where} the table's range {span}: "
+                         f"answered by a conservative ceiling, not extrapolated")
+    sizes = prediction.table.sizes()
+    measured = ", ".join(sizes) or "none"
+    same = prediction.size in sizes
+    if prediction.size == "any" and sizes:  # the worst case over the sizes the table measured
+        size = DomainCheck("detector size", True,
+                           f"any detector size: the table's measured sizes ({measured})")
+    else:
+        size = DomainCheck(
+            "detector size", same,
+            f"detector size {prediction.size} measured by the table (sizes {measured})" if same
+            else f"detector size {prediction.size} not measured by the table (sizes "
+                 f"{measured}); answered by the curves of {prediction.size_used}")
+    kind = DomainCheck(
+        "table kind", prediction.table.kind.measured,
+        f"table {prediction.table.name}: {prediction.table.kind.value}"
+        + ("" if prediction.table.kind.measured else
+           " (published bounds, not measured by this tool)"))
+    return ValidityDomain((de, size, kind))
+
+
+__all__ = [
+    "MIN_STEP",
+    "DomainCheck",
+    "PredictionInterval",
+    "ValidityDomain",
+    "prediction_interval",
+    "validity_domain",
+]

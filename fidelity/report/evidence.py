@@ -1,0 +1,331 @@
+"""The credibility record of a run (``--evidence FILE`` of check, audit, gate, compare).
+
+One JSON document an assessment file can hold, answering what an assessor asks of every
+number: which code and data produced it, how uncertain it is, inside which domain it holds and
+by which rule pass/fail was decided. Its layout is the JSON Schema
+``fidelity/data/schemas/evidence.schema.json`` (:func:`evidence_schema`); the manual's page
+"Credibility record" maps each field to the sections of a simulation credibility assessment.
+
+- ``record``: the layout version, when, which command, its exit code and outcome;
+- ``tool``: name, version, the git commit of the source tree (None outside a checkout, with
+  ``dirty`` when it has uncommitted changes) and ``code_sha256``, one SHA-256 over every Python
+  file of the package that ran (sorted by path: path and bytes);
+- ``environment``: Python, platform, the versions of the distribution's dependencies;
+- ``decision_rule``: the rule, its coverage factor ``k`` and strictness;
+- ``subjects``: per image or camera, its ``inputs`` (role, path, SHA-256, provenance), the
+  ``reference`` (name and conventions), the ``prediction_table`` (name, kind, path, SHA-256, the
+  table's own provenance: data set, detectors with their file hashes, preprocessing, code), the
+  ``measurement`` with its ``uncertainty`` budget, the ``prediction`` with its ``interval``,
+  the ``validity`` domain check, the ``verdict`` and the ``error`` of a subject that could not
+  be measured;
+- ``credibility_sections``: which keys answer which section of an assessment.
+
+The report layer renders the result records here (:mod:`fidelity.records`); nothing is
+measured again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import platform
+import subprocess
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from fidelity.fileio import JSONObject, json_ready
+from fidelity.records import ChartReport, ComparisonReport, ImageSource, RenderSource, utc_now
+
+if TYPE_CHECKING:
+    from fidelity.fit import FitReport
+
+#: Layout version of the credibility record.
+EVIDENCE_SCHEMA_VERSION = "1.0"
+
+#: Sections of a simulation credibility assessment and the record's keys that answer them.
+CREDIBILITY_SECTIONS: Mapping[str, tuple[str, ...]] = {
+    "model description": ("subjects[].inputs", "subjects[].reference",
+                          "subjects[].prediction_table.provenance"),
+    "verification": ("tool.version", "tool.commit", "tool.code_sha256", "environment"),
+    "validation": ("subjects[].prediction_table", "subjects[].validity"),
+    "uncertainty": ("subjects[].measurement.uncertainty", "subjects[].prediction.interval",
+                    "decision_rule"),
+    "traceability": ("subjects[].inputs[].sha256", "subjects[].prediction_table.sha256",
+                     "tool.commit", "tool.code_sha256", "record.created"),
+    "decision": ("decision_rule", "subjects[].verdict", "record.exit_code"),
+}
+
+#: What an exit code means.
+OUTCOMES = {0: "pass", 1: "fail", 2: "error", 3: "internal error", 4: "undecided"}
+
+
+def evidence_schema_path() -> Path:
+    """Path of the JSON Schema of the credibility record."""
+    from fidelity.resources import resource_dir
+
+    return resource_dir("data") / "schemas" / "evidence.schema.json"
+
+
+def evidence_schema() -> JSONObject:
+    """The JSON Schema (draft 2020-12) of the credibility record."""
+    import json
+
+    schema: JSONObject = json.loads(evidence_schema_path().read_text(encoding="utf-8"))
+    return schema
+
+
+def _package_dir() -> Path:
+    return Path(__file__).resolve().parent.parent
+
+
+def code_sha256(package: Path | None = None) -> str:
+    """One SHA-256 over the package's Python files, sorted by relative path (path, NUL, bytes,
+    NUL for each)."""
+    root = package or _package_dir()
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0")
+        digest.update(path.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
+def git_commit(folder: Path | None = None) -> tuple[str | None, bool | None]:
+    """The commit of the git checkout holding the package (None outside one) and whether the
+    package has uncommitted changes."""
+    where = folder or _package_dir()
+    try:
+        head = subprocess.run(["git", "-C", str(where), "rev-parse", "HEAD"],
+                              capture_output=True, text=True, timeout=10)
+        if head.returncode != 0:
+            return None, None
+        status = subprocess.run(["git", "-C", str(where), "status", "--porcelain", "--",
+                                 str(where)], capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return None, None
+    return head.stdout.strip() or None, bool(status.stdout.strip())
+
+
+def tool_record() -> dict[str, Any]:
+    """``tool``: name, version, commit, dirty, code_sha256."""
+    from fidelity.version import __version__
+
+    commit, dirty = git_commit()
+    return {"name": "fidelity", "distribution": "camera-fidelity", "version": __version__,
+            "commit": commit, "dirty": dirty, "code_sha256": code_sha256()}
+
+
+def environment_record() -> dict[str, Any]:
+    """``environment``: Python, platform, machine and the versions of the libraries a report
+    records (:meth:`fidelity.records.Provenance.collect`)."""
+    from fidelity.records import Provenance
+
+    libraries = Provenance.collect(None, None, {}).libraries
+    return {"python": platform.python_version(), "implementation":
+            platform.python_implementation(), "platform": platform.platform(),
+            "machine": platform.machine(), "dependencies": dict(libraries)}
+
+
+def _file_input(role: str, path: str | os.PathLike[str], sha256: str | None = None,
+                provenance: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    from fidelity.fileio import file_sha256
+
+    digest = sha256
+    if digest is None:
+        try:
+            digest = file_sha256(path)
+        except OSError:
+            digest = None
+    return {"role": role, "path": str(path), "sha256": digest,
+            "provenance": dict(provenance or {})}
+
+
+def _inputs(report: ChartReport) -> list[dict[str, Any]]:
+    src = report.source
+    if isinstance(src, ImageSource):
+        info = src.image
+        return [_file_input("image", info.path, info.sha256, {
+            "format": info.format, "pixel_type": info.pixel_type,
+            "size": [info.width, info.height], "encoding": src.encoding,
+            "colourspace": src.colourspace, "exposure_mode": src.exposure_mode,
+            "corners": src.corners.tolist(),
+            "corners_found": src.found.to_json() if src.found else None})]
+    assert isinstance(src, RenderSource)
+    from fidelity.camera.model import available_cameras, camera_files
+    from fidelity.resources import resource_dir
+
+    out = []
+    if src.camera in available_cameras():
+        out.append(_file_input("camera (built-in)",
+                               resource_dir("data") / "cameras" / f"{src.camera}.toml",
+                               provenance={"name": src.camera}))
+    files = camera_files(str(src.camera_settings.get("source", src.camera)))
+    out += [_file_input("camera file" if i == 0 else "camera data", f,
+                        provenance={"camera": src.camera}) for i, f in enumerate(files)]
+    out.append({"role": "render settings", "path": None, "sha256": None,
+                "provenance": {"renderer": src.renderer, "variant": src.variant,
+                               "illuminant": src.illuminant,
+                               "settings": json_ready(dict(src.render_settings)),
+                               "camera": json_ready(dict(src.camera_settings))}})
+    return out
+
+
+def _table(report: ChartReport) -> dict[str, Any] | None:
+    p = report.prediction
+    if p is None:
+        return None
+    ref = report.provenance.tables.get("prediction")
+    calibration = report.provenance.tables.get("calibration")
+    return {"name": p.table.name, "kind": p.table.kind.value,
+            "path": ref.path if ref else (str(p.table.path) if p.table.path else None),
+            "sha256": ref.sha256 if ref else None, "provenance": dict(p.table.provenance),
+            "calibration": calibration.to_json() if calibration else None}
+
+
+def _subject(subject: str, report: ChartReport | None, error: str | None) -> dict[str, Any]:
+    from fidelity.report.jsonform import verdict_json
+
+    if report is None:
+        return {"subject": subject, "error": error or "no report", "inputs": [],
+                "reference": None, "prediction_table": None, "measurement": None,
+                "prediction": None, "validity": None, "verdict": None}
+    p, d = report.prediction, report.directional
+    return {
+        "subject": subject, "error": None, "command": report.command,
+        "inputs": _inputs(report),
+        "reference": {"name": report.source.reference,
+                      "description": report.source.reference_description,
+                      "conventions": json_ready(dict(report.provenance.conventions))},
+        "prediction_table": _table(report),
+        "measurement": {
+            "quantity": "mean ΔE00", "value": report.mean_delta_e,
+            "max_delta_e": report.max_delta_e, "worst_patch": report.worst_patch,
+            "uncertainty": report.uncertainty.to_json() if report.uncertainty else None},
+        "prediction": None if p is None else {
+            "delta_e": p.delta_e, "size": p.size, "size_used": p.size_used,
+            "dmap_points": p.dmap_points, "dmap_relative": p.dmap_relative,
+            "dap_person_points": p.dap_person_points,
+            "dap_bicycle_points": p.dap_bicycle_points, "upper_bound": p.upper_bound,
+            "interval": report.interval.to_json() if report.interval else None,
+            "directional_dmap_points": d.dmap_points if d else None, "bound": report.bound},
+        "validity": report.validity.to_json() if report.validity else None,
+        "verdict": verdict_json(report.verdict) if report.verdict else None,
+    }
+
+
+def evidence_record(command: str, subjects: Sequence[tuple[str, ChartReport | ComparisonReport
+                                                          | None, str | None]],
+                    exit_code: int) -> JSONObject:
+    """The credibility record (module docstring) of ``command`` over ``subjects`` (name,
+    report or None, error or None) that ended with ``exit_code``."""
+    items = []
+    rule = None
+    for name, report, error in subjects:
+        chart = report.as_chart_report() if isinstance(report, ComparisonReport) else report
+        item = _subject(name, chart, error)
+        if isinstance(report, ComparisonReport):
+            item["inputs"] = (_subject(name, report.sim, None)["inputs"]
+                              + [dict(x, role="real image")
+                                 for x in _subject(name, report.real, None)["inputs"]])
+        items.append(item)
+        if chart is not None and chart.verdict is not None and rule is None:
+            rule = chart.verdict.decision.to_json()
+    out: JSONObject = json_ready({
+        "record": {"schema": "fidelity credibility record",
+                   "schema_version": EVIDENCE_SCHEMA_VERSION, "created": utc_now(),
+                   "command": command, "exit_code": int(exit_code),
+                   "outcome": OUTCOMES.get(int(exit_code), "unknown")},
+        "tool": tool_record(),
+        "environment": environment_record(),
+        "decision_rule": rule,
+        "subjects": items,
+        "credibility_sections": {k: list(v) for k, v in CREDIBILITY_SECTIONS.items()},
+    })
+    return out
+
+
+def fit_evidence_record(report: FitReport, exit_code: int = 0) -> JSONObject:
+    """The credibility record of ``fidelity fit``: one subject, the pair SIM -> REAL, whose
+    inputs are the two images (SHA-256), whose measurement is the sim-to-real mean ΔE00 after
+    the correction (SIM through the ``.cube`` by OpenColorIO, measured again), whose prediction
+    is that difference's, and which adds ``correction``: the fit's JSON report
+    (:func:`fidelity.report.jsonform.fit_json`: before/after, fitted and cross-validated ΔE00,
+    the ``.cube``'s check, the model) and the SHA-256 of every file written. A fit has no
+    verdict; its validity domain is the prediction table's."""
+    from fidelity.fileio import file_sha256
+    from fidelity.prediction.interval import validity_domain
+    from fidelity.report.jsonform import fit_json
+
+    p = report.prediction_after
+    validity = validity_domain(p)
+    files: dict[str, dict[str, str | None]] = {}
+    for name, path in report.files.items():
+        try:
+            files[name] = {"path": path, "sha256": file_sha256(path)}
+        except OSError:
+            files[name] = {"path": path, "sha256": None}
+    subject = {
+        "subject": f"{report.sim} -> {report.real}", "error": None, "command": "fit",
+        "inputs": [_file_input("simulated image", report.sim),
+                   _file_input("real image", report.real)],
+        "reference": {"name": "the real camera's chart",
+                      "description": "sim-to-real ΔE00: the simulated chart measured against "
+                                     "the real camera's, patch by patch",
+                      "conventions": {}},
+        "prediction_table": {"name": p.table.name, "kind": p.table.kind.value,
+                             "path": str(p.table.path) if p.table.path else None,
+                             "sha256": (file_sha256(p.table.path) if p.table.path else None),
+                             "provenance": dict(p.table.provenance), "calibration": None},
+        "measurement": {"quantity": "sim-to-real mean ΔE00 after the correction",
+                        "value": report.after.mean_delta_e,
+                        "max_delta_e": report.after.max_delta_e,
+                        "worst_patch": report.after.worst_patch, "uncertainty": None,
+                        "before": report.before.mean_delta_e},
+        "prediction": {"delta_e": p.delta_e, "size": p.size, "size_used": p.size_used,
+                       "dmap_points": p.dmap_points, "dmap_relative": p.dmap_relative,
+                       "dap_person_points": p.dap_person_points,
+                       "dap_bicycle_points": p.dap_bicycle_points,
+                       "upper_bound": p.upper_bound, "interval": None,
+                       "directional_dmap_points": None, "bound": "classic"},
+        "validity": validity.to_json(),
+        "verdict": None,
+        "correction": {"report": fit_json(report), "files": files},
+    }
+    out: JSONObject = json_ready({
+        "record": {"schema": "fidelity credibility record",
+                   "schema_version": EVIDENCE_SCHEMA_VERSION, "created": utc_now(),
+                   "command": "fit", "exit_code": int(exit_code),
+                   "outcome": OUTCOMES.get(int(exit_code), "unknown")},
+        "tool": tool_record(),
+        "environment": environment_record(),
+        "decision_rule": None,
+        "subjects": [subject],
+        "credibility_sections": {k: list(v) for k, v in CREDIBILITY_SECTIONS.items()},
+    })
+    return out
+
+
+def write_evidence(path: str | os.PathLike[str], command: str,
+                   subjects: Sequence[tuple[str, ChartReport | ComparisonReport | None,
+                                            str | None]],
+                   exit_code: int) -> Path:
+    """Write the credibility record atomically (:func:`evidence_record`)."""
+    from fidelity.fileio import write_json_atomic
+
+    write_json_atomic(path, evidence_record(command, subjects, exit_code))
+    return Path(path)
+
+
+def write_fit_evidence(path: str | os.PathLike[str], report: FitReport,
+                       exit_code: int = 0) -> Path:
+    """Write the fit's credibility record atomically (:func:`fit_evidence_record`)."""
+    from fidelity.fileio import write_json_atomic
+
+    write_json_atomic(path, fit_evidence_record(report, exit_code))
+    return Path(path)
+
+
+__all__ = ["CREDIBILITY_SECTIONS", "EVIDENCE_SCHEMA_VERSION", "OUTCOMES", "code_sha256",
+           "environment_record", "evidence_record", "evidence_schema", "evidence_schema_path",
+           "fit_evidence_record", "git_commit", "tool_record", "write_evidence",
+           "write_fit_evidence"]

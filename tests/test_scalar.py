@@ -1,0 +1,105 @@
+"""fidelity.prediction.scalar against SciPy's brentq and bounded minimize_scalar (the
+algorithms they implement), and the prediction's answers with them."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq, minimize_scalar
+
+from fidelity.errors import InvalidValueError
+from fidelity.prediction.scalar import RTOL, bounded_minimum, brent_root
+
+ROOTS = [
+    (lambda x: x**3 - 2 * x - 5, 2.0, 3.0),                 # Wallis' cubic
+    (lambda x: math.cos(x) - x, 0.0, 1.0),
+    (lambda x: math.exp(x) - 1e-3, -20.0, 5.0),
+    (lambda x: (x - 1.0) ** 9, 0.0, 1.7),                    # flat: a multiple root
+    (lambda x: math.atan(x - 1e-9) * 1e-300, -1.0, 1.0),     # denormal-sized values
+    (lambda x: x - 1e8, 0.0, 1e9),
+    (lambda x: 1.0 if x > 0.3 else -1.0, 0.0, 1.0),          # a jump: bisection to the step
+]
+
+
+@pytest.mark.parametrize("k", range(len(ROOTS)))
+def test_brent_root_equals_scipy_brentq(k):
+    f, a, b = ROOTS[k]
+    ours = brent_root(f, a, b, xtol=1e-14, rtol=RTOL, maxiter=200)
+    theirs = brentq(f, a, b, xtol=1e-14, rtol=RTOL, maxiter=200)
+    assert ours == pytest.approx(theirs, abs=2e-14 + 8 * RTOL * abs(theirs))
+
+
+def test_brent_root_endpoints_signs_and_non_finite_values():
+    assert brent_root(lambda x: x, 0.0, 1.0) == 0.0
+    assert brent_root(lambda x: x - 1.0, 0.0, 1.0) == 1.0
+    with pytest.raises(InvalidValueError, match="same sign"):
+        brent_root(lambda x: x * x + 1.0, -1.0, 1.0)
+    with pytest.raises(InvalidValueError, match="not finite"):
+        brent_root(lambda x: math.nan, -1.0, 1.0)
+    with pytest.raises(InvalidValueError, match="not finite"):
+        brent_root(lambda x: x, -math.inf, 1.0)
+
+
+MINIMA = [
+    (lambda x: (x - 0.3) ** 2, -1.0, 2.0),
+    (lambda x: math.cos(x), 2.0, 4.5),
+    (lambda x: abs(x - 0.123456789), 0.0, 1.0),              # a kink: golden sections
+    (lambda x: x, 0.0, 1.0),                                 # at a bound
+    (lambda x: (x - 5.0) ** 4 + 1e-12 * x, 4.0, 7.0),        # flat bottom
+]
+
+
+@pytest.mark.parametrize("k", range(len(MINIMA)))
+def test_bounded_minimum_equals_scipy_minimize_scalar(k):
+    f, a, b = MINIMA[k]
+    xatol = 1e-10 * max(1.0, abs(b - a))
+    x, fx = bounded_minimum(f, a, b, xatol=xatol)
+    res = minimize_scalar(f, bounds=(a, b), method="bounded", options={"xatol": xatol})
+    assert x == pytest.approx(float(res.x), abs=4 * xatol)
+    assert fx == pytest.approx(float(res.fun), abs=1e-15)
+
+
+def test_bounded_minimum_refuses_empty_bounds():
+    with pytest.raises(InvalidValueError):
+        bounded_minimum(lambda x: x, 1.0, 1.0)
+
+
+def test_calibration_and_family_fits_equal_the_scipy_answers():
+    """The calibration table and the direction-aware fits computed with these solvers equal
+    those computed with SciPy's (to the solvers' tolerances)."""
+    from fidelity.colour.charts import load_reference
+    from fidelity.prediction import calibration, directional
+
+    def scipy_root(f, a, b, **kw):
+        return float(brentq(f, a, b, xtol=kw.get("xtol", 2e-12), rtol=RTOL,
+                            maxiter=kw.get("maxiter", 100)))
+
+    def scipy_min(f, a, b, xatol=1e-5):
+        r = minimize_scalar(f, bounds=(a, b), method="bounded", options={"xatol": xatol})
+        return float(r.x), float(r.fun)
+
+    for name in ("hue", "gamma-inc", "saturation-dec", "contrast-inc"):
+        for target in (1.0, 3.0, 12.0):
+            ours = calibration.calibrate_transform(name, target)
+            orig = calibration.brent_root
+            calibration.brent_root = scipy_root
+            try:
+                theirs = calibration.calibrate_transform(name, target)
+            finally:
+                calibration.brent_root = orig
+            assert ours.reachable == theirs.reachable
+            if ours.reachable:
+                assert ours.param == pytest.approx(theirs.param, rel=1e-12, abs=1e-13)
+    ref = np.asarray(load_reference("scene", "D65").lab)
+    lab = ref + np.array([1.5, -2.0, 3.0])
+    for fit in ("gamma", "hue", "saturation"):
+        ours = directional.fit_family(ref, lab, fit)
+        orig = directional.bounded_minimum
+        directional.bounded_minimum = scipy_min
+        try:
+            theirs = directional.fit_family(ref, lab, fit)
+        finally:
+            directional.bounded_minimum = orig
+        assert ours.param == pytest.approx(theirs.param, rel=1e-9, abs=1e-12)

@@ -1,0 +1,219 @@
+"""The uncertainty budget of the chart ΔE (fidelity.chart.uncertainty): each component against an
+independent computation, the hard cases, and the stated k = 1 uncertainty against the spread of
+repeated renders with other noise seeds."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy.stats import mstats
+
+from fidelity.camera.model import Noise, load_camera
+from fidelity.camera.render import render_chart
+from fidelity.chart import uncertainty as unc
+from fidelity.chart.measure import measure_pixels
+from fidelity.colour.charts import load_reference
+from fidelity.colour.colorimetry import (
+    delinearize_srgb,
+    delta_e_2000,
+    linearize_srgb,
+    srgb_to_lab,
+)
+
+
+def test_mean_covariance_plain_is_the_sample_covariance_over_n():
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=(50, 3)) @ np.array([[1, 0.3, 0], [0, 1, 0.2], [0, 0, 0.5]])
+    assert np.allclose(unc.mean_covariance(x), np.cov(x.T) / 50)
+
+
+def test_mean_covariance_trimmed_matches_scipy_trimmed_standard_error():
+    """The diagonal of the winsorised covariance over (1-2g)^2 n is the Tukey-McLaughlin
+    standard error of the trimmed mean, as scipy.stats.mstats.trimmed_stde computes it."""
+    rng = np.random.default_rng(2)
+    x = rng.standard_t(4, size=(200, 3))
+    se = np.sqrt(np.diag(unc.mean_covariance(x, trim=0.1)))
+    want = [mstats.trimmed_stde(x[:, c], limits=(0.1, 0.1)) for c in range(3)]
+    assert np.allclose(se, want, rtol=1e-10)
+
+
+def test_noise_component_agrees_with_first_order_gum_propagation():
+    """For small noise the Monte Carlo value equals sqrt(J Σ J^T) with J the Jacobian of the
+    chart ΔE by central differences (JCGM 100 5.1.2), a second method."""
+    ref = load_reference("scene")
+    srgb = np.clip(np.asarray(ref.srgb) + 0.03, 0.05, 0.95)  # a chart with ΔE well above 0
+    rng = np.random.default_rng(3)
+    samples = [m + 0.01 * rng.standard_normal((400, 3)) for m in srgb]
+    f = unc.srgb_chart_function(np.asarray(ref.lab))
+    comp, notes = unc.noise_component(samples, srgb, f, draws=4000)
+    assert not notes
+    covs = [unc.mean_covariance(s) for s in samples]
+    h = 1e-6
+    var = 0.0
+    for k in range(len(srgb)):
+        jac = np.zeros(3)
+        for c in range(3):
+            up, down = srgb.copy(), srgb.copy()
+            up[k, c] += h
+            down[k, c] -= h
+            jac[c] = (f(up[None])[0] - f(down[None])[0]) / (2 * h)
+        var += jac @ covs[k] @ jac
+    assert comp.value == pytest.approx(math.sqrt(var), rel=0.05)
+
+
+def test_chart_function_reproduces_the_measured_delta_e():
+    ref = load_reference("scene")
+    srgb = np.clip(np.asarray(ref.srgb) * 0.97, 0, 1)
+    want = float(np.mean(delta_e_2000(srgb_to_lab(srgb), ref.lab)))
+    assert unc.srgb_chart_function(np.asarray(ref.lab))(srgb[None])[0] == pytest.approx(want)
+
+
+def test_noiseless_float_render_has_zero_uncertainty_not_nan():
+    budget = render_chart("ideal").uncertainty
+    assert budget is not None
+    assert all(math.isfinite(c.value) for c in budget.components)
+    assert budget.combined == 0.0  # identical pixels: no noise, float: no rounding
+    assert budget.text().endswith(" ± 0.00 (k=1)")
+
+
+def test_noiseless_8_bit_render_has_rounding_only():
+    budget = render_chart("sigma-sdmerrill").uncertainty
+    assert budget is not None
+    assert budget.component("pixel noise").value == 0.0
+    rounding = budget.component("rounding").value
+    assert 0 < rounding < 0.2
+    assert budget.combined == pytest.approx(rounding)
+
+
+def test_patch_with_two_pixels_is_named_and_given_a_large_uncertainty():
+    ref = load_reference("scene")
+    srgb = np.asarray(ref.srgb, np.float64).clip(0.02, 0.98)
+    rng = np.random.default_rng(4)
+    samples = [m + 0.005 * rng.standard_normal((256, 3)) for m in srgb]
+    f = unc.srgb_chart_function(np.asarray(ref.lab))
+    full, _ = unc.noise_component(samples, srgb, f, patch_names=ref.patch_names)
+    samples[5] = samples[5][:2]
+    few, notes = unc.noise_component(samples, srgb, f, patch_names=ref.patch_names)
+    assert notes and ref.patch_names[5] in notes[0]
+    assert math.isfinite(few.value) and few.value > 1.5 * full.value
+    samples = [s[:1] for s in samples]  # no patch can estimate its noise
+    none, notes = unc.noise_component(samples, srgb, f, patch_names=ref.patch_names)
+    assert math.isfinite(none.value) and none.value > 1.0
+    assert "rectangular" in notes[0]
+
+
+def test_budget_json_round_trip_and_text():
+    budget = render_chart("nikon-5100").uncertainty
+    assert budget is not None
+    back = unc.UncertaintyBudget.from_json(json.loads(json.dumps(budget.to_json())))
+    assert back == budget
+    assert unc.uncertain_text(2.4149, 0.0612) == "2.415 ± 0.061"
+    assert unc.uncertain_text(2.4149, 0.3) == "2.41 ± 0.30"
+    assert unc.uncertain_text(2.4149, 0.0) == "2.41 ± 0.00"
+
+
+def _draw_chart(srgb: np.ndarray, noise: float, seed: int, pitch: int = 24) -> np.ndarray:
+    """A 4x6 chart of flat patches (sRGB-encoded values + Gaussian noise), axis aligned."""
+    rng = np.random.default_rng(seed)
+    img = np.full((4 * pitch + pitch, 6 * pitch + pitch, 3), 0.05)
+    for k, v in enumerate(srgb):
+        r, c = divmod(k, 6)
+        y, x = pitch // 2 + r * pitch + 2, pitch // 2 + c * pitch + 2
+        img[y:y + pitch - 4, x:x + pitch - 4] = v
+    return img + noise * rng.standard_normal(img.shape)
+
+
+def test_audit_budget_covers_the_spread_over_noise_draws():
+    """50 images of one chart with independent noise, audited at given corners: the stated k=1
+    uncertainty covers about 68 % of the ΔE values around their mean (and 2u about 95 %). The
+    chart's neutral patches agree about the exposure (an exposure scale and a colour error of
+    the colour patches), so every component but placement is random over the draws."""
+    ref = load_reference("scene")
+    lin = linearize_srgb(np.clip(np.asarray(ref.srgb), 0, 1))
+    colour = [k for k in range(24) if k not in ref.neutral_indices]
+    lin[colour] *= [1.06, 1.0, 0.94]
+    srgb = np.clip(delinearize_srgb(0.8 * lin), 0, 1)
+    p = 24
+    corners = [p, p, p + 5 * p, p, p + 5 * p, p + 3 * p, p, p + 3 * p]
+    des, us = [], []
+    for seed in range(50):
+        m = measure_pixels(_draw_chart(srgb, 0.03, seed), np.array(corners, float).reshape(4, 2),
+                           encoding="srgb", exposure="auto", reference=ref)
+        assert m.uncertainty is not None
+        des.append(m.mean_delta_e)
+        us.append(m.uncertainty.combined)
+    des_a, us_a = np.array(des), np.array(us)
+    dev = np.abs(des_a - des_a.mean())
+    assert 0.5 <= np.mean(dev <= us_a) <= 0.9
+    assert np.mean(dev <= 2 * us_a) >= 0.85
+
+
+def test_render_budget_covers_the_spread_over_noise_seeds():
+    """A noisy camera rendered with 50 seeds: k=1 covers about 68 %, k=2 about 95 %."""
+    cam = load_camera("nikon-5100")
+    cam = replace(cam, noise=Noise(full_well=3000.0, read_noise=5.0))
+    des, us = [], []
+    for seed in range(50):
+        r = render_chart(cam, seed=seed, pixels_per_patch=16)
+        assert r.uncertainty is not None
+        des.append(r.measurement.mean_delta_e)
+        us.append(r.uncertainty.combined)
+    des_a, us_a = np.array(des), np.array(us)
+    dev = np.abs(des_a - des_a.mean())
+    assert 0.5 <= np.mean(dev <= us_a) <= 0.9
+    assert np.mean(dev <= 2 * us_a) >= 0.85
+
+
+def test_placement_remeasure_equals_locating_the_jittered_corners_again():
+    """The placement component's fast re-measurement (candidate pixels mapped through the
+    jittered homography) gives the patch means of a full audit at the jittered corners."""
+    from fidelity.chart.measure import _window_remeasurer
+    from fidelity.colour.colorimetry import linearize_srgb as lin
+
+    ref = load_reference("scene")
+    img = _draw_chart(np.clip(np.asarray(ref.srgb), 0, 1), 0.02, 7)
+    p = 24
+    corners = np.array([p, p, p + 5 * p, p, p + 5 * p, p + 3 * p, p, p + 3 * p],
+                       float).reshape(4, 2)
+    base = measure_pixels(img, corners, encoding="srgb", exposure=0.0, reference=ref,
+                          uncertainty=False)
+    remeasure = _window_remeasurer(img, base.location, 0.5, "keep", lambda v: lin(v))
+    jitter = corners + np.array([[0.4, -0.3], [-0.2, 0.5], [0.3, 0.3], [-0.5, -0.1]])
+    again = measure_pixels(img, jitter, encoding="srgb", exposure=0.0, reference=ref,
+                           uncertainty=False)
+    means = remeasure(jitter)
+    assert means is not None
+    srgb = np.clip(delinearize_srgb(means), 0, 1)
+    assert np.allclose(srgb, again.measurement.srgb, atol=1e-12)
+
+
+@pytest.mark.parametrize("sigma", [0.5, 1.5])
+def test_placement_remeasure_equals_locating_again_under_perspective(sigma):
+    """The same with a chart in strong perspective (one side 40 % shorter) and jitters up to
+    the 4-sigma reach: only the pixels near the windows' edges are re-mapped, the rest counted
+    once, and the means are still those of locating again."""
+    from fidelity.chart.measure import _window_remeasurer
+    from fidelity.colour.colorimetry import linearize_srgb as lin
+
+    ref = load_reference("scene")
+    img = _draw_chart(np.clip(np.asarray(ref.srgb), 0, 1), 0.05, 9)
+    h, w = img.shape[:2]
+    corners = np.array([[0.12 * w, 0.15 * h], [0.85 * w, 0.25 * h],
+                        [0.83 * w, 0.70 * h], [0.14 * w, 0.82 * h]])
+    base = measure_pixels(img, corners, encoding="srgb", exposure=0.0, reference=ref,
+                          uncertainty=False)
+    remeasure = _window_remeasurer(img, base.location, sigma, "keep", lambda v: lin(v))
+    rng = np.random.default_rng(3)
+    for _ in range(4):
+        jitter = corners + np.clip(sigma * rng.standard_normal((4, 2)), -4 * sigma, 4 * sigma)
+        again = measure_pixels(img, jitter, encoding="srgb", exposure=0.0, reference=ref,
+                               uncertainty=False)
+        means = remeasure(jitter)
+        assert means is not None
+        srgb = np.clip(delinearize_srgb(means), 0, 1)
+        assert np.allclose(srgb, again.measurement.srgb, atol=1e-12)
+    assert remeasure(corners + np.array([[4 * sigma + 3, 0], [0, 0], [0, 0], [0, 0]])) is None
