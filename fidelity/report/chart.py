@@ -204,7 +204,9 @@ def patch_section(report: ChartReport) -> Section:
     m = report.measurement
     rows = []
     for k, name in enumerate(m.patch_names):
-        rows.append((name, _num(float(m.delta_e[k])), _num(float(m.delta_l[k])),
+        why = m.excluded.get(name)
+        shown = f"{name} (left out: {why.split(':')[0]})" if why else name
+        rows.append((shown, _num(float(m.delta_e[k])), _num(float(m.delta_l[k])),
                      _num(float(m.delta_c[k])), _num(float(m.delta_h[k])),
                      *(_num(float(v)) for v in m.lab[k]),
                      *(_num(float(v)) for v in m.reference_lab[k])))
