@@ -1319,7 +1319,7 @@ def _cascade(image: np.ndarray, encoding: str, refine: bool, detectors: tuple[st
     chart = "24-patch ColorChecker"
     if others:
         notes.append(f"{others} other patch chart(s) beside it, not the 24-patch layout "
-                     f"(a ColorChecker Passport's other page?), not measured")
+                     f"(a ColorChecker Passport's other page? tiles?), not measured")
         chart += " (the 24-patch one of several charts: Passport?)"
     if occluded:
         notes.append(f"{len(occluded)} patch(es) covered (numbers "
