@@ -192,3 +192,18 @@ def test_a_grey_mosaic_and_an_ambiguous_fit_keep_the_clear_error(tmp_path, monke
     assert fit.pattern is None and fit.margin == pytest.approx(BAYER_MARGIN / 2)
     scores = iter([0.0, 0.95, 0.95 - 1.5 * BAYER_MARGIN, 0.0])
     assert bayer_pattern(mosaic).pattern == "BGGR"
+
+
+def test_a_chart_with_more_than_four_patches_covered_is_refused_with_its_corners():
+    h = np.array([[52.0, 4.0, 70.0], [-2.0, 50.0, 60.0], [0.0, 0.0, 1.0]])
+    linear = draw_chart(LINEAR * 0.85, h=h, size=(300, 420), background=0.04)
+    # a hand over the six patches of the first three columns of the two top rows
+    outline = map_points(h, np.array([[-0.45, -0.45], [2.45, -0.45], [2.45, 1.45],
+                                      [-0.45, 1.45]]))
+    mask = np.zeros(linear.shape[:2], np.uint8)
+    cv2.fillPoly(mask, [np.rint(outline).astype(np.int32)], 1)
+    rng = np.random.default_rng(1)
+    skin = np.array([0.5, 0.3, 0.2]) * (1 + 0.2 * rng.standard_normal(linear.shape[:2] + (1,)))
+    img = np.where(mask[..., None] > 0, np.clip(skin, 0, 1), linear).astype(np.float32)
+    with pytest.raises(InvalidValueError, match="look covered.*--corners"):
+        find_chart(img)

@@ -75,7 +75,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fidelity.chart.image import BAYER_PATTERNS, as_float32, is_coded
-from fidelity.chart.locate import CORNER_PATCHES, apply_homography, homography_from_points
+from fidelity.chart.locate import (
+    CORNER_PATCHES,
+    DEFAULT_WINDOW,
+    apply_homography,
+    homography_from_points,
+)
 from fidelity.colour import colorimetry as cm
 from fidelity.errors import FidelityError, InvalidValueError, unknown_name
 
@@ -143,6 +148,9 @@ OCCLUDED_SPREAD = 0.03
 #: of the chart's own size makes the chart part of a larger grid, once the fit is refined (an
 #: SG's patches continue the grid exactly; objects beside a framed chart lie beyond its frame).
 RING_TOLERANCE = 0.15
+#: Side of the audit's sampling window, in patch pitches, in which covered patches are looked
+#: for again once the chart is found (:data:`fidelity.chart.locate.DEFAULT_WINDOW`).
+AUDIT_WINDOW = DEFAULT_WINDOW
 #: Side of the sampling window used for verification, in patch pitches.
 VERIFY_WINDOW = 0.35
 #: Number of sample points along each side of the verification window.
@@ -812,8 +820,8 @@ def occluded_patches(measured: np.ndarray, spread: np.ndarray) -> np.ndarray:
     :data:`OCCLUDED_SPREAD` and five times the median). A camera's colour error moves all
     patches smoothly, a hue rotation or a tone curve too; an object over two patches moves
     those alone. ``(24, 3)`` means and ``(24,)`` spreads (:func:`sample_cells`) -> ``(24,)``
-    bool; none when more than :data:`MAX_OCCLUDED` would be (then it is not the chart, or
-    not measurable, and the checks say so)."""
+    bool (more than :data:`MAX_OCCLUDED`: a placement that is not the chart, or a chart too
+    covered to measure)."""
     m = np.asarray(measured, np.float64)
     sp = np.asarray(spread, np.float64)
     ref = _reference_linear()
@@ -834,10 +842,7 @@ def occluded_patches(measured: np.ndarray, spread: np.ndarray) -> np.ndarray:
     texture = sp * (level + 0.02) / (level + 0.1 * float(m[NEUTRALS[0]].mean()) + 0.02)
     textured = texture >= max(OCCLUDED_SPREAD, 5.0 * float(np.median(texture)))
     disordered = ranks >= max(OCCLUDED_RANKS, 3.0 * float(np.median(ranks)))
-    covered = far | (disordered & textured)
-    if np.count_nonzero(covered) > MAX_OCCLUDED:
-        return np.zeros(len(m), dtype=bool)
-    return np.asarray(covered, dtype=bool)
+    return np.asarray(far | (disordered & textured), dtype=bool)
 
 
 #: The 8 orientations of a grid: chart ``(u, v)`` -> lattice direction, as 2 x 2 matrices
@@ -956,8 +961,11 @@ def placement_scores(view: View, lattice_h: np.ndarray, occupied: np.ndarray, so
     box = {(int(a), int(b)) for a, b in cells}
     ring = _ring(cells)
     ring_patches = sum(c in occ_set and c not in box for c in ring)
-    # patches judged covered are left out of the checks (and named), the rest must pass them
-    covered = occluded_patches(pm[best], ps[best])
+    # patches judged covered are left out of the checks (and named), the rest must pass them;
+    # with more than MAX_OCCLUDED none is left out (the checks decide) but all are named
+    flagged = occluded_patches(pm[best], ps[best])
+    many = int(np.count_nonzero(flagged)) > MAX_OCCLUDED
+    covered = np.zeros_like(flagged) if many else flagged
     score = float(scores[best])
     if covered.any():
         score = float(colour_order(pm[best], exclude=covered))
@@ -969,7 +977,7 @@ def placement_scores(view: View, lattice_h: np.ndarray, occupied: np.ndarray, so
                          uniformity=float(np.median(ps[best][clear])))
     return Placement(homography=h, checks=checks, cells=cells, source=source,
                      ring_patches=ring_patches,
-                     occluded=tuple(int(k) for k in np.flatnonzero(covered)))
+                     occluded=tuple(int(k) for k in np.flatnonzero(flagged)))
 
 
 def _cell_map(cells: np.ndarray) -> F64:
@@ -1310,11 +1318,23 @@ def _cascade(image: np.ndarray, encoding: str, refine: bool, detectors: tuple[st
                 and again.checks.colour_order >= checks.colour_order - 0.1:
             h_image = crop.to_image @ again.homography
             checks = again.checks
+            # covered patches again in the audit's own window (half a pitch): an object over
+            # its edge outside the verification window would still spoil its mean
+            wide_m, wide_s = sample_cells(crop, again.homography, _grid_cells(), AUDIT_WINDOW)
+            wide = occluded_patches(wide_m, wide_s) if np.all(np.isfinite(wide_m)) else None
             occluded = again.occluded
+            if wide is not None and wide.any():
+                occluded = tuple(sorted(set(occluded) | {int(k) for k in np.flatnonzero(wide)}))
             residual = residual_view / crop.scale if swatches else math.nan
         else:
             swatches = 0
     corners = _corners(h_image)
+    if len(occluded) > MAX_OCCLUDED:
+        raise InvalidValueError(
+            f"the chart was found but {len(occluded)} of its patches look covered (numbers "
+            f"{', '.join(str(k + 1) for k in occluded)} in chart order; at most "
+            f"{MAX_OCCLUDED} are left out): not measured; to measure all 24 anyway, check and "
+            f"give --corners " + ",".join(f"{v:.1f}" for v in corners.ravel()))
     others = other_charts(pyramid, h_image, encoding) if refine else 0
     chart = "24-patch ColorChecker"
     if others:
