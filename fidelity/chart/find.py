@@ -807,7 +807,8 @@ def neutral_order(measured: np.ndarray, use: np.ndarray | None = None) -> np.nda
     return np.asarray(np.mean(y[..., i] >= y[..., j] - 1e-6, axis=-1))
 
 
-def occluded_patches(measured: np.ndarray, spread: np.ndarray) -> np.ndarray:
+def occluded_patches(measured: np.ndarray, spread: np.ndarray, strict: bool = False
+                     ) -> np.ndarray:
     """Which of the 24 patches of a placement are covered (a leaf, a hand, a glare).
 
     Two cues, each independent of how well the camera renders colour: the patch's linear RGB
@@ -821,7 +822,8 @@ def occluded_patches(measured: np.ndarray, spread: np.ndarray) -> np.ndarray:
     patches smoothly, a hue rotation or a tone curve too; an object over two patches moves
     those alone. ``(24, 3)`` means and ``(24,)`` spreads (:func:`sample_cells`) -> ``(24,)``
     bool (more than :data:`MAX_OCCLUDED`: a placement that is not the chart, or a chart too
-    covered to measure)."""
+    covered to measure). ``strict``: only patches both far off the fit and textured (for a
+    window near the patch edges, where blur and chroma subsampling bleed in)."""
     m = np.asarray(measured, np.float64)
     sp = np.asarray(spread, np.float64)
     ref = _reference_linear()
@@ -842,6 +844,8 @@ def occluded_patches(measured: np.ndarray, spread: np.ndarray) -> np.ndarray:
     texture = sp * (level + 0.02) / (level + 0.1 * float(m[NEUTRALS[0]].mean()) + 0.02)
     textured = texture >= max(OCCLUDED_SPREAD, 5.0 * float(np.median(texture)))
     disordered = ranks >= max(OCCLUDED_RANKS, 3.0 * float(np.median(ranks)))
+    if strict:  # both: far off the camera's fit and textured
+        return np.asarray(far & textured, dtype=bool)
     return np.asarray(far | (disordered & textured), dtype=bool)
 
 
@@ -1321,7 +1325,8 @@ def _cascade(image: np.ndarray, encoding: str, refine: bool, detectors: tuple[st
             # covered patches again in the audit's own window (half a pitch): an object over
             # its edge outside the verification window would still spoil its mean
             wide_m, wide_s = sample_cells(crop, again.homography, _grid_cells(), AUDIT_WINDOW)
-            wide = occluded_patches(wide_m, wide_s) if np.all(np.isfinite(wide_m)) else None
+            wide = (occluded_patches(wide_m, wide_s, strict=True)
+                    if np.all(np.isfinite(wide_m)) else None)
             occluded = again.occluded
             if wide is not None and wide.any():
                 occluded = tuple(sorted(set(occluded) | {int(k) for k in np.flatnonzero(wide)}))
