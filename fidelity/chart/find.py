@@ -74,8 +74,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fidelity.chart.image import as_float32, is_coded
-from fidelity.chart.locate import CORNER_PATCHES, apply_homography, homography_from_points
+from fidelity.chart.image import BAYER_PATTERNS, as_float32, is_coded
+from fidelity.chart.locate import (
+    CORNER_PATCHES,
+    DEFAULT_WINDOW,
+    apply_homography,
+    homography_from_points,
+)
 from fidelity.colour import colorimetry as cm
 from fidelity.errors import FidelityError, InvalidValueError, unknown_name
 
@@ -128,6 +133,24 @@ BESIDE_PITCHES = 8.0
 BESIDE_SIDE = 700
 #: Patches left out of the rank correlation (those that disagree most: covered, glared).
 TRIM = 2
+#: Most patches judged covered (:func:`occluded_patches`) that a chart may have and still be
+#: measured without them; with more, none is left out and the checks decide.
+MAX_OCCLUDED = 4
+#: A patch whose colour is this many times the chart's median distance from the best 3 x 3
+#: camera matrix fitted to its patches is covered (a leaf, a hand, a glare).
+OCCLUDED_RESIDUAL = 8.0
+#: ... or whose rank disagreement (summed over the five features) is at least this and three
+#: times the median, while its window is textured (relative spread at least
+#: :data:`OCCLUDED_SPREAD` and five times the median).
+OCCLUDED_RANKS = 15.0
+OCCLUDED_SPREAD = 0.03
+#: Distance (in patch pitches) from a cell just outside the chart within which a patch outline
+#: of the chart's own size makes the chart part of a larger grid, once the fit is refined (an
+#: SG's patches continue the grid exactly; objects beside a framed chart lie beyond its frame).
+RING_TOLERANCE = 0.15
+#: Side of the audit's sampling window, in patch pitches, in which covered patches are looked
+#: for again once the chart is found (:data:`fidelity.chart.locate.DEFAULT_WINDOW`).
+AUDIT_WINDOW = DEFAULT_WINDOW
 #: Side of the sampling window used for verification, in patch pitches.
 VERIFY_WINDOW = 0.35
 #: Number of sample points along each side of the verification window.
@@ -184,7 +207,9 @@ class FoundChart:
     y1)`` part of the image the final fit was made in; ``confidence`` the verification's mean
     rank correlation (0-1, :class:`ChartChecks`); ``chart`` the chart type found;
     ``other_charts`` patch charts found beside it that are not the 24-patch layout (a
-    Passport's other page) and were not measured; ``seconds`` the time taken.
+    Passport's other page) and were not measured; ``seconds`` the time taken; ``occluded``
+    the patches (0-based, chart order: dark skin first, row by row) judged covered
+    (:func:`occluded_patches`), left out of the checks and of the audit's statistics.
     """
 
     corners: np.ndarray
@@ -200,6 +225,7 @@ class FoundChart:
     other_charts: int = 0
     seconds: float = math.nan
     notes: tuple[str, ...] = field(default_factory=tuple)
+    occluded: tuple[int, ...] = ()
 
     def corners_text(self) -> str:
         """The corners as ``--corners`` takes them: ``X1,Y1,...,X4,Y4`` (0.1 px)."""
@@ -209,7 +235,7 @@ class FoundChart:
         """JSON form: ``method``, ``corners``, ``corner_patches``, ``corners_text``,
         ``candidates``, ``swatches``, ``residual_px`` (null without refinement),
         ``orientation``, ``region``, ``confidence``, ``checks``, ``chart``, ``other_charts``,
-        ``seconds``, ``notes``."""
+        ``seconds``, ``notes``, ``occluded``."""
         return {
             "method": self.method,
             "corners": np.round(self.corners, 3).tolist(),
@@ -226,6 +252,7 @@ class FoundChart:
             "other_charts": self.other_charts,
             "seconds": None if math.isnan(self.seconds) else round(self.seconds, 4),
             "notes": list(self.notes),
+            "occluded": list(self.occluded),
         }
 
     @classmethod
@@ -250,6 +277,7 @@ class FoundChart:
             other_charts=int(data.get("other_charts", 0)),
             seconds=math.nan if seconds is None else float(seconds),
             notes=tuple(str(n) for n in data.get("notes", ())),
+            occluded=tuple(int(k) for k in data.get("occluded", ())),
         )
 
 
@@ -722,8 +750,8 @@ def average_ranks(x: np.ndarray) -> F64:
     return np.moveaxis(ranks.reshape(shape), -1, -2)
 
 
-def colour_order(measured: np.ndarray, reference: np.ndarray | None = None, trim: int = 0
-                 ) -> F64:
+def colour_order(measured: np.ndarray, reference: np.ndarray | None = None, trim: int = 0,
+                 exclude: np.ndarray | None = None) -> F64:
     """Mean Spearman rank correlation of ``(..., 24, 3)`` measured linear RGB with the reference.
 
     Over the five features R, G, B, log(R/G), log(B/G) of the 24 patches (ties, such as
@@ -731,17 +759,22 @@ def colour_order(measured: np.ndarray, reference: np.ndarray | None = None, trim
     reference does. Ranks are unchanged by a per-channel gain or any increasing tone curve, so
     coloured light, white balance and exposure leave it near 1. ``trim`` leaves out that many
     patches that disagree most (summed absolute rank difference), and ranks the rest again: a
-    patch covered by a finger or a glare costs the chart little.
+    patch covered by a finger or a glare costs the chart little. ``exclude`` ``(n,)`` leaves
+    out those patches instead (known to be covered: :func:`occluded_patches`).
     """
     ref = _reference_linear() if reference is None else np.asarray(reference, np.float64)
     fm = _features(np.asarray(measured, np.float64))
     fr = np.broadcast_to(_features(ref), fm.shape)
     n = fm.shape[-2]
-    if trim:
+    if exclude is not None and np.any(exclude):
+        drop = np.broadcast_to(np.asarray(exclude, dtype=bool), fm.shape[:-1])
+        trim = int(np.count_nonzero(exclude))
+    elif trim:
         d = np.abs(average_ranks(fm) - average_ranks(fr)).sum(axis=-1)  # (..., n)
         worst = np.argsort(-d, axis=-1, kind="stable")[..., :trim]
         drop = np.zeros(d.shape, dtype=bool)
         np.put_along_axis(drop, worst, True, axis=-1)
+    if trim:
         # dropped patches move above every kept one, so the kept are ranked among themselves
         top_m = fm.max(axis=-2, keepdims=True) + 1.0
         top_r = fr.max(axis=-2, keepdims=True) + 1.0
@@ -759,12 +792,61 @@ def colour_order(measured: np.ndarray, reference: np.ndarray | None = None, trim
 NEUTRALS = np.arange(18, 24)
 
 
-def neutral_order(measured: np.ndarray) -> np.ndarray:
+def neutral_order(measured: np.ndarray, use: np.ndarray | None = None) -> np.ndarray:
     """Fraction of the 15 pairs of neutral patches (white ... black) whose measured lightness
-    (R + G + B) is in the reference order (ties count as in order)."""
+    (R + G + B) is in the reference order (ties count as in order); ``use`` ``(6,)``: only
+    the pairs of those neutral patches (the others covered; 1 when fewer than 2 are left)."""
     y = np.asarray(measured)[..., NEUTRALS, :].sum(axis=-1)
     i, j = np.triu_indices(len(NEUTRALS), 1)
+    if use is not None:
+        ok = np.asarray(use, dtype=bool)
+        pair = ok[i] & ok[j]
+        if not pair.any():
+            return np.ones(y.shape[:-1])
+        i, j = i[pair], j[pair]
     return np.asarray(np.mean(y[..., i] >= y[..., j] - 1e-6, axis=-1))
+
+
+def occluded_patches(measured: np.ndarray, spread: np.ndarray, strict: bool = False
+                     ) -> np.ndarray:
+    """Which of the 24 patches of a placement are covered (a leaf, a hand, a glare).
+
+    Two cues, each independent of how well the camera renders colour: the patch's linear RGB
+    lies far from the best 3 x 3 camera matrix fitted to the chart (reference linear sRGB ->
+    measured, least squares over the 18 patches that fit best, three rounds; distance
+    relative to the predicted colour plus 5 % of the predicted white) at more than
+    :data:`OCCLUDED_RESIDUAL` times the median distance; or it disagrees in rank with the
+    reference (:func:`colour_order`'s per-patch disagreement at least :data:`OCCLUDED_RANKS`
+    and three times the median) while its window is textured (relative spread at least
+    :data:`OCCLUDED_SPREAD` and five times the median). A camera's colour error moves all
+    patches smoothly, a hue rotation or a tone curve too; an object over two patches moves
+    those alone. ``(24, 3)`` means and ``(24,)`` spreads (:func:`sample_cells`) -> ``(24,)``
+    bool (more than :data:`MAX_OCCLUDED`: a placement that is not the chart, or a chart too
+    covered to measure). ``strict``: only patches both far off the fit and textured (for a
+    window near the patch edges, where blur and chroma subsampling bleed in)."""
+    m = np.asarray(measured, np.float64)
+    sp = np.asarray(spread, np.float64)
+    ref = _reference_linear()
+    keep = np.ones(len(m), dtype=bool)
+    residual = np.zeros(len(m))
+    for _ in range(3):
+        matrix, *_ = np.linalg.lstsq(ref[keep], m[keep], rcond=None)
+        pred = ref @ matrix
+        white = float(np.linalg.norm(pred[NEUTRALS[0]]))
+        residual = (np.linalg.norm(m - pred, axis=-1)
+                    / (np.linalg.norm(pred, axis=-1) + 0.05 * white + 1e-6))
+        keep = residual <= np.sort(residual)[len(m) - 1 - 6]
+    far = residual > OCCLUDED_RESIDUAL * max(float(np.median(residual)), 1e-3)
+    ranks = np.abs(average_ranks(_features(m)) - average_ranks(_features(ref))).sum(axis=-1)
+    # the spread relative to the patch's mean plus a tenth of white: noise in a dark patch
+    # is not texture
+    level = m.mean(axis=-1)
+    texture = sp * (level + 0.02) / (level + 0.1 * float(m[NEUTRALS[0]].mean()) + 0.02)
+    textured = texture >= max(OCCLUDED_SPREAD, 5.0 * float(np.median(texture)))
+    disordered = ranks >= max(OCCLUDED_RANKS, 3.0 * float(np.median(ranks)))
+    if strict:  # both: far off the camera's fit and textured
+        return np.asarray(far & textured, dtype=bool)
+    return np.asarray(far | (disordered & textured), dtype=bool)
 
 
 #: The 8 orientations of a grid: chart ``(u, v)`` -> lattice direction, as 2 x 2 matrices
@@ -819,6 +901,7 @@ class Placement:
     cells: NDArray[np.int64]
     source: str
     ring_patches: int = 0
+    occluded: tuple[int, ...] = ()
 
 
 def placement_scores(view: View, lattice_h: np.ndarray, occupied: np.ndarray, source: str,
@@ -882,12 +965,23 @@ def placement_scores(view: View, lattice_h: np.ndarray, occupied: np.ndarray, so
     box = {(int(a), int(b)) for a, b in cells}
     ring = _ring(cells)
     ring_patches = sum(c in occ_set and c not in box for c in ring)
-    checks = ChartChecks(colour_order=float(scores[best]),
-                         neutral_order=float(neutral_order(pm[best])),
-                         margin=float(scores[best]) - second,
-                         uniformity=float(np.median(ps[best])))
+    # patches judged covered are left out of the checks (and named), the rest must pass them;
+    # with more than MAX_OCCLUDED none is left out (the checks decide) but all are named
+    flagged = occluded_patches(pm[best], ps[best])
+    many = int(np.count_nonzero(flagged)) > MAX_OCCLUDED
+    covered = np.zeros_like(flagged) if many else flagged
+    score = float(scores[best])
+    if covered.any():
+        score = float(colour_order(pm[best], exclude=covered))
+    clear = ~covered
+    kept_neutrals = clear[NEUTRALS]
+    checks = ChartChecks(colour_order=score,
+                         neutral_order=float(neutral_order(pm[best], kept_neutrals)),
+                         margin=score - second,
+                         uniformity=float(np.median(ps[best][clear])))
     return Placement(homography=h, checks=checks, cells=cells, source=source,
-                     ring_patches=ring_patches)
+                     ring_patches=ring_patches,
+                     occluded=tuple(int(k) for k in np.flatnonzero(flagged)))
 
 
 def _cell_map(cells: np.ndarray) -> F64:
@@ -1084,8 +1178,13 @@ def _refine(view: View, h_view: np.ndarray) -> tuple[F64, int, float, Quads]:
     return h, int(keep.sum()), residual, quads
 
 
-def _ring_patches(quads: Quads, h_view: np.ndarray) -> int:
-    """Patch outlines of the chart's size centred on the cells just outside its 4 x 6 grid."""
+def _ring_patches(quads: Quads, h_view: np.ndarray, refined: bool = False) -> int:
+    """Patch outlines of the chart's size centred on the cells just outside its 4 x 6 grid.
+
+    ``refined``: the grid was fitted to the chart's own patch outlines, so an outline counts
+    only within :data:`RING_TOLERANCE` of a cell and of the patches' size (0.5-1.6 times their
+    area): an SG's patches continue the grid exactly, tiles or cards beside a framed chart lie
+    beyond its frame. Otherwise :data:`ASSIGN_TOLERANCE` and 0.3-2 times the area."""
     if not len(quads.centres):
         return 0
     pitch = chart_pitch(_corners(h_view))
@@ -1093,8 +1192,8 @@ def _ring_patches(quads: Quads, h_view: np.ndarray) -> int:
     uv = apply_homography(np.linalg.inv(h_view), quads.centres)
     near = np.rint(uv)
     dist = np.linalg.norm(uv - near, axis=-1)
-    ok = (dist <= ASSIGN_TOLERANCE) & (quads.areas >= 0.3 * expected) & \
-        (quads.areas <= 2.0 * expected)
+    tolerance, lo, hi = (RING_TOLERANCE, 0.5, 1.6) if refined else (ASSIGN_TOLERANCE, 0.3, 2.0)
+    ok = (dist <= tolerance) & (quads.areas >= lo * expected) & (quads.areas <= hi * expected)
     ring = _ring(_grid_cells().astype(np.int64))
     return len({(int(a), int(b)) for a, b in near[ok]} & ring)
 
@@ -1190,12 +1289,13 @@ def _cascade(image: np.ndarray, encoding: str, refine: bool, detectors: tuple[st
             f"margin {c.margin:.2f}, uniformity {c.uniformity:.2f}; need {MIN_CONFIDENCE:g}, "
             f"{MIN_NEUTRAL_ORDER:g}, {MIN_MARGIN:g}, <= {MAX_UNIFORMITY:g}); if it is the chart, check and give --corners "
             + ",".join(f"{v:.1f}" for v in corners.ravel()))
-    if best.ring_patches >= LARGER_GRID_RING:
+    if best.ring_patches >= LARGER_GRID_RING and not refine:
         raise _larger_grid_error(search.lattices) or InvalidValueError(
             "the 24 patches found continue into a larger grid of patches (an SG or digital "
             "target?): fidelity measures the 24-patch layout only; give --corners")
     h_image = search.view.to_image @ best.homography
     checks = best.checks
+    occluded = best.occluded
     swatches, residual = 0, math.nan
     region = None
     notes: list[str] = []
@@ -1206,7 +1306,9 @@ def _cascade(image: np.ndarray, encoding: str, refine: bool, detectors: tuple[st
         to_crop = np.linalg.inv(crop.to_image)
         h_crop0 = to_crop @ h_image
         h_crop, swatches, residual_view, quads = _refine(crop, h_crop0)
-        ring = _ring_patches(quads, h_crop)
+        # patches on the cells around the chart: with the fit refined on the chart's own
+        # patches, only those that continue its grid exactly (an SG), not objects beside it
+        ring = _ring_patches(quads, h_crop, refined=swatches > 0)
         if ring >= LARGER_GRID_RING:
             raise InvalidValueError(
                 f"the 24 patches found continue into a larger grid of patches ({ring} patch "
@@ -1220,21 +1322,38 @@ def _cascade(image: np.ndarray, encoding: str, refine: bool, detectors: tuple[st
                 and again.checks.colour_order >= checks.colour_order - 0.1:
             h_image = crop.to_image @ again.homography
             checks = again.checks
+            # covered patches again in the audit's own window (half a pitch): an object over
+            # its edge outside the verification window would still spoil its mean
+            wide_m, wide_s = sample_cells(crop, again.homography, _grid_cells(), AUDIT_WINDOW)
+            wide = (occluded_patches(wide_m, wide_s, strict=True)
+                    if np.all(np.isfinite(wide_m)) else None)
+            occluded = again.occluded
+            if wide is not None and wide.any():
+                occluded = tuple(sorted(set(occluded) | {int(k) for k in np.flatnonzero(wide)}))
             residual = residual_view / crop.scale if swatches else math.nan
         else:
             swatches = 0
     corners = _corners(h_image)
+    if len(occluded) > MAX_OCCLUDED:
+        raise InvalidValueError(
+            f"the chart was found but {len(occluded)} of its patches look covered (numbers "
+            f"{', '.join(str(k + 1) for k in occluded)} in chart order; at most "
+            f"{MAX_OCCLUDED} are left out): not measured; to measure all 24 anyway, check and "
+            f"give --corners " + ",".join(f"{v:.1f}" for v in corners.ravel()))
     others = other_charts(pyramid, h_image, encoding) if refine else 0
     chart = "24-patch ColorChecker"
     if others:
         notes.append(f"{others} other patch chart(s) beside it, not the 24-patch layout "
-                     f"(a ColorChecker Passport's other page?), not measured")
+                     f"(a ColorChecker Passport's other page? tiles?), not measured")
         chart += " (the 24-patch one of several charts: Passport?)"
+    if occluded:
+        notes.append(f"{len(occluded)} patch(es) covered (numbers "
+                     f"{', '.join(str(k + 1) for k in occluded)} in chart order), left out")
     return FoundChart(corners=corners, method=best.source, candidates=candidates,
                       swatches=swatches, residual_px=residual, orientation=_orientation(h_image),
                       region=region, confidence=float(max(checks.colour_order, 0.0)),
                       checks=checks, chart=chart, other_charts=others,
-                      seconds=time.perf_counter() - t0, notes=tuple(notes))
+                      seconds=time.perf_counter() - t0, notes=tuple(notes), occluded=occluded)
 
 
 def check_corners(pixels: np.ndarray, corners: np.ndarray, *, encoding: str = "linear"
@@ -1324,8 +1443,75 @@ def find_chart(
     return CHART_FINDERS[method](arr, encoding=encoding, refine=refine)
 
 
+#: Least lead in confidence of the best-fitting CFA pattern over the next one (a pattern the
+#: finder refuses counts as 0) for a one-channel mosaic's pattern to be taken as found.
+BAYER_MARGIN = 0.15
+
+
+@dataclass(frozen=True)
+class BayerFit:
+    """How each CFA pattern fits a one-channel mosaic: ``confidence`` per pattern (the
+    chart finder's, 0 where it found no chart), the ``pattern`` taken (None: none fits
+    unambiguously) and the ``margin`` of the best over the next."""
+
+    confidence: Mapping[str, float]
+    pattern: str | None
+    margin: float
+
+    def describe(self) -> str:
+        """The confidences in words: ``RGGB 0.99, BGGR 0.00, ...``."""
+        return ", ".join(f"{k} {v:.2f}" for k, v in self.confidence.items())
+
+
+def superpixels(mosaic: np.ndarray, pattern: str) -> np.ndarray:
+    """``(H, W)`` Bayer mosaic -> ``(H // 2, W // 2, 3)`` float32 R, G, B: each 2 x 2 block's
+    red and blue sample and the mean of its two green ones, for CFA ``pattern``
+    (:data:`BAYER_PATTERNS`). No interpolation: enough to find a chart, cheap for all four."""
+    arr = np.asarray(mosaic, dtype=np.float32)
+    h, w = arr.shape[0] // 2 * 2, arr.shape[1] // 2 * 2
+    if pattern.upper() not in BAYER_PATTERNS:
+        raise unknown_name("CFA pattern", pattern, BAYER_PATTERNS)
+    sites = {(dy, dx): arr[dy:h:2, dx:w:2] for dy in (0, 1) for dx in (0, 1)}
+    where = {c: [divmod(k, 2) for k, x in enumerate(pattern.upper()) if x == c] for c in "RGB"}
+    out = np.empty((h // 2, w // 2, 3), np.float32)
+    out[..., 0] = sites[where["R"][0]]
+    out[..., 1] = (sites[where["G"][0]] + sites[where["G"][1]]) / 2.0
+    out[..., 2] = sites[where["B"][0]]
+    return out
+
+
+def bayer_pattern(mosaic: np.ndarray) -> BayerFit:
+    """Which CFA pattern a one-channel raw mosaic holding a 24-patch chart was taken with.
+
+    The chart is searched in the half-size image of each of the four patterns
+    (:func:`superpixels`, linear); a pattern is taken when the finder accepts the chart in it
+    and its confidence leads every other pattern's by at least :data:`BAYER_MARGIN`. A wrong
+    pattern swaps red with blue (the chart's colours out of order) or takes green from the red
+    and blue sites (greys for colours), so a chart tells them apart; a mosaic with no chart,
+    or one in which two patterns fit nearly as well, gives ``pattern`` None."""
+    arr = np.asarray(mosaic)
+    if arr.ndim != 2:
+        raise InvalidValueError(f"a mosaic must be (H, W), got shape {arr.shape}")
+    confidence: dict[str, float] = {}
+    for pattern in BAYER_PATTERNS:
+        try:
+            found = find_chart(superpixels(arr, pattern), encoding="linear", refine=False)
+            confidence[pattern] = float(found.confidence)
+        except InvalidValueError:
+            confidence[pattern] = 0.0
+    ranked = sorted(confidence.values(), reverse=True)
+    margin = ranked[0] - ranked[1]
+    best = max(confidence, key=lambda k: confidence[k])
+    chosen = best if ranked[0] > 0.0 and margin >= BAYER_MARGIN else None
+    return BayerFit(confidence=confidence, pattern=chosen, margin=margin)
+
+
 __all__ = [
     "ASSIGN_TOLERANCE",
+    "BAYER_MARGIN",
+    "BayerFit",
+    "bayer_pattern",
+    "superpixels",
     "CHART_FINDERS",
     "DETECTORS",
     "MIN_CONFIDENCE",
@@ -1333,6 +1519,7 @@ __all__ = [
     "MAX_UNIFORMITY",
     "MIN_MARGIN",
     "MIN_NEUTRAL_ORDER",
+    "MAX_OCCLUDED",
     "ORIENTATIONS",
     "Pyramid",
     "REFINE_SIDE",
@@ -1352,6 +1539,7 @@ __all__ = [
     "make_view",
     "mcc_charts",
     "neutral_order",
+    "occluded_patches",
     "other_charts",
     "patch_lattices",
     "patch_quads",

@@ -18,7 +18,9 @@ float PNG/TIFF, e.g. what ``dcraw -D -4 -T`` writes from a DNG or other raw file
 by Malvar, He & Cutler's gradient-corrected linear interpolation (ICASSP 2004) as
 colour-demosaicing implements it (``demosaicing_CFA_Bayer_Malvar2004``). Its values are taken as
 linear (sensor data; black level already subtracted; camera RGB: give ``--colourspace`` for a
-colour-accurate audit). Without ``bayer`` a one-channel image is an error that names the option.
+colour-accurate audit). Without ``bayer`` a one-channel image is an error that names the option
+(:class:`OneChannelError`; an audit then tries the four patterns itself:
+:func:`fidelity.chart.find.bayer_pattern`).
 
 Errors (all :class:`fidelity.errors.InputFileError`, naming the file): missing, not an image,
 truncated or corrupt, one colour channel only (greyscale), channels that are not R, G, B,
@@ -40,6 +42,12 @@ import numpy as np
 
 from fidelity.errors import InputFileError, InvalidValueError
 from fidelity.fileio import atomic_output, display_path, require_file
+
+
+class OneChannelError(InputFileError):
+    """A one-channel image read without a CFA pattern (a greyscale image, or a camera raw
+    mosaic whose pattern was not given)."""
+
 
 #: Bayer colour filter array patterns (colours of the top-left 2 x 2 pixels, row by row).
 BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
@@ -171,6 +179,7 @@ class Image:
     chromaticities: tuple[float, ...] | None = None
     bayer: str | None = None
     recording: Recording | None = None
+    bayer_found: bool = False
 
     @property
     def height(self) -> int:
@@ -190,7 +199,7 @@ class Image:
             width=self.width, height=self.height, channels=self.channels, layer=self.layer,
             encoding_guess=self.encoding, colorspace=self.colorspace,
             chromaticities=self.chromaticities, sha256=sha256, encoding=encoding,
-            bayer=self.bayer, recording=self.recording,
+            bayer=self.bayer, recording=self.recording, bayer_found=self.bayer_found,
         )
 
 
@@ -217,10 +226,12 @@ class ImageInfo:
     encoding: str | None = None
     bayer: str | None = None
     recording: Recording | None = None
+    bayer_found: bool = False
 
     def to_json(self) -> dict[str, Any]:
-        """JSON form (keys in this order; ``sha256``, ``encoding``, ``bayer`` and
-        ``recording`` only when known)."""
+        """JSON form (keys in this order; ``sha256``, ``encoding``, ``bayer`` (with
+        ``demosaicing`` and ``bayer_found``: the pattern was found by the chart, not given)
+        and ``recording`` only when known)."""
         out: dict[str, Any] = {
             "path": self.path, "format": self.format, "pixel_type": self.pixel_type,
             "width": self.width, "height": self.height, "channels": list(self.channels),
@@ -235,6 +246,7 @@ class ImageInfo:
         if self.bayer is not None:
             out["bayer"] = self.bayer
             out["demosaicing"] = DEMOSAICING
+            out["bayer_found"] = self.bayer_found
         if self.recording is not None:
             out["recording"] = self.recording.to_json()
         return out
@@ -253,6 +265,7 @@ class ImageInfo:
             sha256=data.get("sha256"), encoding=data.get("encoding"), bayer=data.get("bayer"),
             recording=(Recording.from_json(data["recording"]) if data.get("recording")
                        else None),
+            bayer_found=bool(data.get("bayer_found", False)),
         )
 
 
@@ -376,7 +389,7 @@ def _choose(parts: list[_Part], layer: str | None, path: Path) -> tuple[_Part, s
               if _split_channel(ch)[1].lower() not in _ALPHA_NAMES]
     if len(colour) == 1 or all(len([c for c in p.channels if _split_channel(c)[1].lower()
                                     not in _ALPHA_NAMES]) == 1 for p in parts):
-        raise InputFileError(
+        raise OneChannelError(
             f"{path}: one-channel image ({_describe_channels(parts)}); a colour chart needs "
             f"R, G, B: for a camera raw Bayer mosaic give --bayer "
             f"{'|'.join(BAYER_PATTERNS)} (its CFA pattern)"
@@ -685,7 +698,8 @@ def _finish(out: Any, written: bool, path: str | os.PathLike[str], kind: str) ->
         raise write_error(path, OSError(errno.EIO, f"{kind} writer: {reason}"))
 
 
-__all__ = ["BAYER_PATTERNS", "DEFAULT_MAX_PIXELS", "DEMOSAICING", "FLOAT_PIXEL_TYPES",
+__all__ = [
+    "OneChannelError","BAYER_PATTERNS", "DEFAULT_MAX_PIXELS", "DEMOSAICING", "FLOAT_PIXEL_TYPES",
            "MAX_PIXELS_ENV", "NATIVE_PIXEL_TYPES", "Image", "ImageInfo", "Recording",
            "as_float32", "demosaic", "is_coded", "pixel_limit",
            "read_image", "write_exr", "write_png"]

@@ -102,7 +102,7 @@ def homography_from_points(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     for (u, v), (x, y) in zip(a, b, strict=True):
         rows.append([u, v, 1, 0, 0, 0, -x * u, -x * v, -x])
         rows.append([0, 0, 0, u, v, 1, -y * u, -y * v, -y])
-    _, _, vt = np.linalg.svd(np.asarray(rows))
+    _, _, vt = np.linalg.svd(np.asarray(rows), full_matrices=len(rows) < 9)
     h = np.linalg.inv(t_dst) @ vt[-1].reshape(3, 3) @ t_src
     if abs(h[2, 2]) < 1e-15:
         raise InvalidValueError("corner points give a degenerate homography")

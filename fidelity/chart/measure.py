@@ -45,14 +45,14 @@ import functools
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fidelity.chart.find import ChartChecks, FoundChart, check_corners, find_chart
-from fidelity.chart.image import Image, ImageInfo, as_float32, is_coded
+from fidelity.chart.image import Image, ImageInfo, OneChannelError, as_float32, is_coded
 from fidelity.chart.locate import DEFAULT_WINDOW, ChartLocation, locate_chart
 from fidelity.chart.uncertainty import PatchSpread, UncertaintyBudget, patch_spread
 from fidelity.colour import colorimetry as cm
@@ -89,6 +89,9 @@ class ChartMeasurement:
     ``delta_l``, ``delta_c``, ``delta_h`` are the unweighted CIEDE2000 differences ΔL', ΔC', ΔH'
     of the measured colour relative to the reference (positive ΔL': lighter than reference).
     ``noise`` is the per-patch standard deviation of the sampled pixels (encoded sRGB), if known.
+    ``excluded`` names the patches left out of the chart's statistics (mean, max, worst
+    patch), with why (a patch the chart finder judged covered: a leaf, a hand); they keep
+    their own measurement.
     """
 
     patch_names: tuple[str, ...]
@@ -101,26 +104,34 @@ class ChartMeasurement:
     delta_h: F64
     reference_srgb: F64 | None = None
     noise: F64 | None = None
+    excluded: Mapping[str, str] = field(default_factory=dict)
+
+    @property
+    def used(self) -> NDArray[np.bool_]:
+        """``(n,)`` whether each patch counts in the chart's statistics (not ``excluded``)."""
+        return np.array([n not in self.excluded for n in self.patch_names], dtype=bool)
 
     @property
     def mean_delta_e(self) -> float:
-        """Mean ΔE00 over the patches: the chart ΔE."""
-        return float(np.mean(self.delta_e))
+        """Mean ΔE00 over the patches used: the chart ΔE."""
+        return float(np.mean(self.delta_e[self.used]))
 
     @property
     def max_delta_e(self) -> float:
-        """Largest per-patch ΔE00."""
-        return float(np.max(self.delta_e))
+        """Largest ΔE00 of the patches used."""
+        return float(np.max(self.delta_e[self.used]))
 
     @property
     def worst_patch(self) -> str:
-        """Name of the patch with the largest ΔE00."""
-        return self.patch_names[int(np.argmax(self.delta_e))]
+        """Name of the patch used with the largest ΔE00."""
+        de = np.where(self.used, self.delta_e, -np.inf)
+        return self.patch_names[int(np.argmax(de))]
 
     def to_json(self) -> dict[str, Any]:
         """JSON form: ``mean_delta_e``, ``max_delta_e``, ``worst_patch`` and one entry per
         patch in chart order (``name``, ``delta_e``, ``delta_l``, ``delta_c``, ``delta_h``,
-        ``lab``, ``reference_lab``, ``srgb``, ``reference_srgb``, ``noise``)."""
+        ``lab``, ``reference_lab``, ``srgb``, ``reference_srgb``, ``noise``, ``used`` and
+        ``excluded_because``: null, or why the patch is left out of the statistics)."""
 
         def vec(a: F64 | None, i: int) -> list[float] | None:
             return None if a is None else [float(v) for v in a[i]]
@@ -141,6 +152,8 @@ class ChartMeasurement:
                     "srgb": vec(self.srgb, i),
                     "reference_srgb": vec(self.reference_srgb, i),
                     "noise": vec(self.noise, i),
+                    "used": name not in self.excluded,
+                    "excluded_because": self.excluded.get(name),
                 }
                 for i, name in enumerate(self.patch_names)
             ],
@@ -169,6 +182,8 @@ class ChartMeasurement:
             reference_lab=ref, delta_e=col("delta_e"), delta_l=col("delta_l"),
             delta_c=col("delta_c"), delta_h=col("delta_h"),
             reference_srgb=rows("reference_srgb"), noise=rows("noise"),
+            excluded={str(p["name"]): str(p["excluded_because"]) for p in patches
+                      if p.get("excluded_because")},
         )
 
 
@@ -179,8 +194,12 @@ def measure_chart(
     *,
     reference_srgb: ArrayLike | None = None,
     noise: ArrayLike | None = None,
+    excluded: Mapping[str, str] | None = None,
 ) -> ChartMeasurement:
     """Measure chart patches: encoded sRGB (n, 3) against reference CIELAB D65 (n, 3).
+
+    ``excluded``: patches (by name) left out of the statistics, with why; at least one must
+    be left.
 
     Raises :class:`~fidelity.errors.InvalidValueError` for wrong shapes or NaN/Inf values,
     naming the patches concerned.
@@ -202,8 +221,23 @@ def measure_chart(
         delta_h=np.asarray(dh, np.float64),
         reference_srgb=None if reference_srgb is None else _patch_array(reference_srgb, "reference sRGB", n),
         noise=None if noise is None else np.asarray(noise, dtype=np.float64),
+        excluded=_excluded(excluded, names),
     )
 
+
+def _excluded(excluded: Mapping[str, str] | None, names: tuple[str, ...]) -> dict[str, str]:
+    out = {str(k): str(v) for k, v in (excluded or {}).items()}
+    unknown = sorted(set(out) - set(names))
+    if unknown:
+        raise InvalidValueError(f"excluded patches {unknown} are not patches of the chart")
+    if len(out) >= len(names):
+        raise InvalidValueError("every patch is excluded: nothing left to measure")
+    return out
+
+
+#: Why a patch the chart finder judged covered is left out (:attr:`ChartMeasurement.excluded`).
+OCCLUDED_REASON = ("covered (a leaf, a hand, a glare?): its colour is far from the camera's "
+                   "fit to the other patches, or its window is textured and out of order")
 
 #: Largest exposure correction, in EV, either way: 2**128 spans float32's whole range, so a
 #: larger one takes every patch to 0 or beyond any floating-point value.
@@ -705,6 +739,10 @@ def measure_pixels(
                        patch_names=ref.patch_names)
     if found is None and (ref.rows, ref.cols) == (4, 6):
         checks = check_corners(arr, loc.corners, encoding=encoding)
+    # patches the finder judged covered (a leaf, a hand) are measured but left out of the
+    # exposure fit and the chart's statistics, and named
+    excluded = {ref.patch_names[k]: OCCLUDED_REASON for k in
+                (found.occluded if found is not None and len(ref.patch_names) == 24 else ())}
     n = len(loc.windows)
     means = np.empty((n, 3))
     valid_counts: list[int] = []
@@ -742,7 +780,9 @@ def measure_pixels(
                     else lin.mean(axis=0))
         valid_counts.append(valid)
     if mode == "auto":
-        ev = exposure_from_neutrals(means, ref.lab, ref.neutral_indices, ref.patch_names)
+        neutrals = [k for k in ref.neutral_indices if ref.patch_names[k] not in excluded]
+        ev = exposure_from_neutrals(means, ref.lab, neutrals or ref.neutral_indices,
+                                    ref.patch_names)
     else:
         ev = float(exposure)
     scale = 2.0 ** ev
@@ -772,13 +812,14 @@ def measure_pixels(
                            f"{rule}; counts in sampling windows (image: whole image); total: "
                            f"pixels excluded")
     measurement = measure_chart(srgb, ref.lab, ref.patch_names, reference_srgb=ref.srgb,
-                                noise=noise)
+                                noise=noise, excluded=excluded)
     budget = None
     if uncertainty:
         budget = image_uncertainty(
             arr, loc, spreads, means, ref, measurement.mean_delta_e,
             exposure_ev=None if mode == "auto" else ev, fitted_ev=ev, encoding=encoding,
-            negatives=negatives, to_srgb=to_srgb, found=found, step=step)
+            negatives=negatives, to_srgb=to_srgb, found=found, step=step,
+            excluded=tuple(excluded))
     return ImageMeasurement(
         measurement=measurement, exposure_ev=ev, exposure_mode=mode, encoding=encoding,
         bad_pixels=bad_pixels, valid_pixels=tuple(valid_counts), clipped_patches=clipped,
@@ -884,6 +925,7 @@ def image_uncertainty(
     linear_means: np.ndarray, reference: Reference, value: float, *,
     exposure_ev: float | None, fitted_ev: float, encoding: str, negatives: str,
     to_srgb: np.ndarray, found: FoundChart | None, step: float | None,
+    excluded: Sequence[str] = (),
 ) -> UncertaintyBudget:
     """The uncertainty budget of an audited chart's ΔE (:mod:`fidelity.chart.uncertainty`):
     pixel noise and rounding of integer codes (of ``step``, None for float pixels) from each
@@ -892,8 +934,12 @@ def image_uncertainty(
     from fidelity.chart import uncertainty as unc
 
     ref_lab = np.asarray(reference.lab, np.float64)
-    neutral = reference.neutral_indices
-    f = unc.linear_chart_function(ref_lab, neutral, exposure_ev)
+    # the patches left out of the measurement (covered ones) are left out here too: of the
+    # mean ΔE and of the exposure's neutrals, as measure_pixels leaves them out
+    used = np.array([n not in excluded for n in reference.patch_names], dtype=bool)
+    neutral = ([k for k in reference.neutral_indices if used[k]]
+               or list(reference.neutral_indices))
+    f = unc.linear_chart_function(ref_lab, neutral, exposure_ev, used=used)
     covs, notes = unc.spread_covariances(spreads, patch_names=reference.patch_names)
     noise, _ = unc.noise_component((), linear_means, f, covariances=covs)
     identity = np.array_equal(to_srgb, np.eye(3))
@@ -935,7 +981,7 @@ def image_uncertainty(
     if exposure_ev is None:
         exposure = unc.exposure_component(
             linear_means, ref_lab, neutral, fitted_ev,
-            unc.linear_chart_function(ref_lab, neutral, 0.0), covs)
+            unc.linear_chart_function(ref_lab, neutral, 0.0, used=used), covs)
     else:
         exposure = unc.UncertaintyComponent("exposure normalisation", 0.0, "B",
                                             "exposure fixed: no normalisation")
@@ -1090,9 +1136,42 @@ def _read_input(path: str | os.PathLike[str], read: ReadOptions, *, digest: bool
     from fidelity.chart.image import read_image
     from fidelity.fileio import file_sha256
 
-    img = read_image(path, layer=read.layer, bayer=read.bayer, max_pixels=read.max_pixels,
-                     native=native)
+    try:
+        img = read_image(path, layer=read.layer, bayer=read.bayer, max_pixels=read.max_pixels,
+                         native=native)
+    except OneChannelError as exc:
+        if read.bayer is not None:
+            raise
+        img = _read_mosaic(path, read, exc)
     return img, (file_sha256(img.path) if digest else None)
+
+
+def _read_mosaic(path: str | os.PathLike[str], read: ReadOptions, error: OneChannelError
+                 ) -> Image:
+    """A one-channel image read without ``--bayer``: the CFA pattern the chart in it fits
+    unambiguously (:func:`fidelity.chart.find.bayer_pattern`), or ``error`` (the reader's
+    message that names ``--bayer``) with how the four patterns fit."""
+    from dataclasses import replace
+
+    from fidelity.chart.find import BAYER_MARGIN, bayer_pattern
+    from fidelity.chart.image import read_image
+
+    # the demosaiced image keeps every sample of the mosaic at its site: take them back
+    first = read_image(path, layer=read.layer, bayer="RGGB", max_pixels=read.max_pixels)
+    px = first.pixels
+    mosaic = np.empty(px.shape[:2], np.float32)
+    mosaic[0::2, 0::2] = px[0::2, 0::2, 0]
+    mosaic[0::2, 1::2] = px[0::2, 1::2, 1]
+    mosaic[1::2, 0::2] = px[1::2, 0::2, 1]
+    mosaic[1::2, 1::2] = px[1::2, 1::2, 2]
+    fit = bayer_pattern(mosaic)
+    if fit.pattern is None:
+        raise OneChannelError(
+            f"{error} (no CFA pattern fits a 24-patch chart in it unambiguously, by a lead of "
+            f"{BAYER_MARGIN:g} in confidence: {fit.describe()})") from None
+    img = first if fit.pattern == "RGGB" else read_image(
+        path, layer=read.layer, bayer=fit.pattern, max_pixels=read.max_pixels)
+    return replace(img, bayer_found=True)
 
 
 def read_again(info: ImageInfo, max_pixels: int | None = None) -> Image:
@@ -1123,6 +1202,7 @@ __all__ = [
     "ChartStatistics",
     "ToneFit",
     "NEUTRAL_CHROMA",
+    "OCCLUDED_REASON",
     "ImageMeasurement",
     "chart_delta_e",
     "chart_statistics",

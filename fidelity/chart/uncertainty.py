@@ -184,11 +184,14 @@ def exposure_of_means(linear: F64, reference_lab: F64, neutral: Sequence[int]) -
 
 
 def linear_chart_function(reference_lab: F64, neutral: Sequence[int],
-                          exposure_ev: float | None) -> ChartFunction:
+                          exposure_ev: float | None,
+                          used: NDArray[np.bool_] | None = None) -> ChartFunction:
     """``f``: linear sRGB patch means ``(..., n, 3)`` -> mean ΔE00, as an image audit measures
-    them: the exposure (``None``: auto, refitted on the neutral patches; else fixed EV), sRGB
-    encoding, clipping to [0, 1], CIEDE2000 against ``reference_lab``."""
+    them: the exposure (``None``: auto, refitted on the ``neutral`` patches; else fixed EV),
+    sRGB encoding, clipping to [0, 1], CIEDE2000 against ``reference_lab``, the mean over the
+    ``used`` patches (``(n,)``; default all)."""
     ref = np.asarray(reference_lab, np.float64)
+    keep = None if used is None or bool(np.all(used)) else np.asarray(used, dtype=bool)
 
     def f(linear: F64) -> F64:
         ev = (exposure_of_means(linear, ref, neutral) if exposure_ev is None
@@ -197,7 +200,8 @@ def linear_chart_function(reference_lab: F64, neutral: Sequence[int],
             exposed = linear * np.exp2(ev)[..., None, None]
         srgb = np.clip(np.nan_to_num(cm.delinearize_srgb(exposed), nan=0.0, posinf=1.0,
                                      neginf=0.0), 0.0, 1.0)
-        out: F64 = cm.delta_e_2000(cm.srgb_to_lab(srgb), ref).mean(axis=-1)
+        de = cm.delta_e_2000(cm.srgb_to_lab(srgb), ref)
+        out: F64 = (de if keep is None else de[..., keep]).mean(axis=-1)
         return out
 
     return f

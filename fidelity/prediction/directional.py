@@ -634,9 +634,10 @@ def predict_directional(reference_lab: ArrayLike, lab: ArrayLike, *,
 
 def predict_chart(measurement: ChartMeasurement, *, size: str = "any",
                   table: DirectionalTable | str | None = None) -> DirectionalPrediction:
-    """:func:`predict_directional` of a measured chart (its reference and measured Lab, at
-    its mean ΔE00)."""
-    return predict_directional(measurement.reference_lab, measurement.lab,
+    """:func:`predict_directional` of a measured chart (its reference and measured Lab of the
+    patches it uses: not those left out as covered, at its mean ΔE00)."""
+    used = measurement.used
+    return predict_directional(measurement.reference_lab[used], measurement.lab[used],
                                delta_e=measurement.mean_delta_e, size=size, table=table)
 
 

@@ -282,7 +282,9 @@ def patch_section(report: ChartReport) -> Section:
     snr = patch_snr_db(m)
     rows = []
     for k, name in enumerate(m.patch_names):
-        rows.append((f"{k + 1} {name}", _num(float(m.delta_e[k])), _num(float(de76[k])),
+        why = m.excluded.get(name)
+        shown = f"{k + 1} {name}" + (f" (left out: {why.split(':')[0]})" if why else "")
+        rows.append((shown, _num(float(m.delta_e[k])), _num(float(de76[k])),
                      _num(float(de94[k])), _num(float(m.delta_l[k])),
                      _num(float(m.delta_c[k])), _num(float(m.delta_h[k])),
                      *(_num(float(v)) for v in m.lab[k]),

@@ -43,6 +43,12 @@ def summary_lines(report: ChartReport) -> list[str]:
             kept = f"; pixels with a negative channel kept in the mean: {bp.window.negative}"
         lines.append(f"exposure correction {report.exposure_ev:+.2f} EV; bad pixels "
                      f"excluded: {bp.window.total if bp else 0}{kept}")
+        if report.measurement.excluded:
+            reasons: dict[str, list[str]] = {}
+            for name, why in report.measurement.excluded.items():
+                reasons.setdefault(why, []).append(name)
+            lines.extend(f"left out of the chart ΔE: {', '.join(names)}: {why}"
+                         for why, names in reasons.items())
         if isinstance(src, ImageSource) and src.clipped_patches:
             lines.append("outside [0, 1] in sRGB, clipped like a stored image: "
                          + ", ".join(src.clipped_patches))

@@ -1,0 +1,180 @@
+"""Benchmark: the chart finder on the hard kinds of photo, fidelity against OpenCV's mcc detector.
+
+Images (:mod:`benchmarks.hard_scenes`, seeded, made in memory, never committed): real COCO
+val2017 photos as backgrounds with a 24-patch chart composited in perspective and one hazard
+each (``--per-hazard`` images of each): ``distractors`` (tiles on the chart's own grid or not,
+a checkerboard, a grey card beside it), ``occluder`` (a leaf or hand with the photo's texture
+over two neighbouring patches; more when it reaches over) and ``isp`` (CLAHE local tone mapping
+and unsharp-mask halos on a 1920 x 1080 frame). JPEG quality 85.
+
+Scoring, per finder: found correctly (the four corner patch centres within half a pitch of the
+truth), answered wrongly (corners more than half a pitch off: must be 0), refused, and the
+corner error in patch pitches of the answers; for fidelity also the covered patches named
+against the truth (a patch whose central half-pitch window is more than a tenth covered):
+exactly named, missed, and clear patches named (false). Time: wall time of each finder on the
+same decoded pixels, as in :mod:`benchmarks.bench_find_chart`.
+
+Writes ``reports/find_chart/hard-results.json`` (per image and summary, with the machine) and
+``reports/find_chart/hard-table.md``.
+Run:  python -m benchmarks.bench_find_hard [--per-hazard 20] [--seed 23]
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.bench_find_chart import _opencv_version, find_mcc
+from benchmarks.chart_scenes import corners_correct
+from benchmarks.hard_scenes import HAZARDS, hard_scene
+from benchmarks.machine import machine_info
+from fidelity.colour import colorimetry as cm
+from fidelity.fileio import write_json_atomic, write_text_atomic
+
+
+def _fidelity(pixels: np.ndarray) -> tuple[np.ndarray | None, tuple[int, ...], str]:
+    from fidelity.chart.find import find_chart
+    from fidelity.errors import FidelityError
+
+    try:
+        found = find_chart(pixels, encoding="srgb")
+    except FidelityError as exc:
+        return None, (), str(exc).split(":")[0][:80]
+    return found.corners, found.occluded, ""
+
+
+def run(per_hazard: int, seed: int, coco: Path) -> list[dict[str, Any]]:
+    from fidelity.camera.render import render_chart
+
+    files = sorted(glob.glob(str(coco / "*.jpg")))
+    if len(files) < 50:
+        sys.exit(f"bench_find_hard: need COCO photos in {coco} (found {len(files)})")
+    renders = [cm.linearize_srgb(np.clip(render_chart(c, i).measurement.srgb, 0.0, 1.0))
+               for c, i in (("ideal", "D65"), ("nikon-5100", "D65"), ("nikon-5100", "A"),
+                            ("sigma-sdmerrill", "F11"))]
+    order = np.random.default_rng(seed).permutation(len(files))
+    rows = []
+    n = 0
+    for hazard in HAZARDS:
+        for k in range(per_hazard):
+            scene = hard_scene(hazard, files[order[n % len(files)]], renders[n % len(renders)],
+                               seed=(seed, n))
+            n += 1
+            truth = scene.corners
+            assert truth is not None
+            row: dict[str, Any] = {"hazard": hazard, "index": k,
+                                   "conditions": scene.conditions}
+            pixels = scene.srgb.astype(np.float32) / np.float32(255.0)
+            t0 = time.perf_counter()
+            corners, occluded, why = _fidelity(pixels)
+            seconds = time.perf_counter() - t0
+            bgr8 = np.ascontiguousarray(scene.srgb[..., ::-1])
+            t1 = time.perf_counter()
+            try:
+                mcc = find_mcc(bgr8)
+            except Exception:  # noqa: BLE001 - the anchor's crash counts as not found
+                mcc = None
+            mcc_seconds = time.perf_counter() - t1
+            for name, found, secs in (("fidelity", corners, seconds), ("mcc", mcc, mcc_seconds)):
+                res: dict[str, Any] = {"seconds": round(secs, 4), "answered": found is not None,
+                                       "correct": corners_correct(found, truth, scene.pitch_px)}
+                if found is not None:
+                    res["error_pitch"] = round(float(np.linalg.norm(
+                        np.asarray(found) - truth, axis=-1).max() / scene.pitch_px), 4)
+                row[name] = res
+            row["fidelity"]["refused_because"] = why
+            covered = {int(v) for v in str(scene.conditions.get("occluded", "")).split(",") if v}
+            row["fidelity"]["occluded"] = list(occluded)
+            row["occluded_truth"] = sorted(covered)
+            rows.append(row)
+            if sys.stderr.isatty():
+                print(f"\r{n}/{per_hazard * len(HAZARDS)} {hazard}", end="", file=sys.stderr)
+    if sys.stderr.isatty():
+        print(file=sys.stderr)
+    return rows
+
+
+def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for hazard in HAZARDS:
+        part = [r for r in rows if r["hazard"] == hazard]
+        out[hazard] = {}
+        for name in ("fidelity", "mcc"):
+            errs = [r[name]["error_pitch"] for r in part if r[name]["correct"]]
+            out[hazard][name] = {
+                "images": len(part),
+                "found_correct": sum(r[name]["correct"] for r in part),
+                "answered_wrongly": sum(r[name]["answered"] and not r[name]["correct"]
+                                        for r in part),
+                "refused": sum(not r[name]["answered"] for r in part),
+                "median_error_pitch": float(np.median(errs)) if errs else None,
+                "max_error_pitch": float(np.max(errs)) if errs else None,
+                "median_seconds": float(np.median([r[name]["seconds"] for r in part])),
+            }
+        found = [r for r in part if r["fidelity"]["correct"]]
+        truth = sum(len(r["occluded_truth"]) for r in found)
+        named = sum(len(set(r["fidelity"]["occluded"]) & set(r["occluded_truth"]))
+                    for r in found)
+        false = sum(len(set(r["fidelity"]["occluded"]) - set(r["occluded_truth"]))
+                    for r in found)
+        out[hazard]["fidelity"]["occluded"] = {
+            "covered_patches": truth, "named": named, "missed": truth - named,
+            "clear_patches_named": false,
+            "images_exactly_named": sum(set(r["fidelity"]["occluded"]) ==
+                                        set(r["occluded_truth"]) for r in found)}
+    return out
+
+
+def table(summary: dict[str, Any]) -> str:
+    lines = ["| hazard | finder | found correctly | wrong corners answered | refused | median "
+             "/ max corner error (pitch) | covered patches named (missed, clear named) | "
+             "median s |", "|---|---|---|---|---|---|---|---|"]
+    for hazard, per in summary.items():
+        for name, s in per.items():
+            err = ("-" if s["median_error_pitch"] is None
+                   else f"{s['median_error_pitch']:.3f} / {s['max_error_pitch']:.3f}")
+            occ = s.get("occluded")
+            occ_text = (f"{occ['named']}/{occ['covered_patches']} ({occ['missed']}, "
+                        f"{occ['clear_patches_named']})" if occ else "-")
+            lines.append(f"| {hazard} | {name} | {s['found_correct']}/{s['images']} | "
+                         f"{s['answered_wrongly']} | {s['refused']} | {err} | {occ_text} | "
+                         f"{s['median_seconds']:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    from fidelity.resources import shared_dir
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--per-hazard", type=int, default=20)
+    ap.add_argument("--seed", type=int, default=23)
+    shared = shared_dir()
+    ap.add_argument("--coco", type=Path,
+                    default=(shared / "coco/val2017") if shared else Path("../shared/coco/val2017"))
+    ap.add_argument("--out", type=Path,
+                    default=Path(__file__).parents[1] / "reports/find_chart")
+    args = ap.parse_args()
+    find_mcc(np.zeros((64, 64, 3), np.uint8) + 128)  # warm up OpenCV's first call
+    rows = run(args.per_hazard, args.seed, args.coco)
+    summary = summarise(rows)
+    text = table(summary)
+    print(text)
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(args.out / "hard-results.json", {
+        "benchmark": "chart finding on hard photos (distractors, occluders, ISP look)",
+        "per_hazard": args.per_hazard, "seed": args.seed, "summary": summary, "images": rows,
+        "machine": {**machine_info(), "opencv": _opencv_version()},
+        "load_average": os.getloadavg()})
+    write_text_atomic(args.out / "hard-table.md", text)
+    print(f"wrote {args.out / 'hard-results.json'}")
+
+
+if __name__ == "__main__":
+    main()
