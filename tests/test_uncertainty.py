@@ -217,3 +217,21 @@ def test_placement_remeasure_equals_locating_again_under_perspective(sigma):
         srgb = np.clip(delinearize_srgb(means), 0, 1)
         assert np.allclose(srgb, again.measurement.srgb, atol=1e-12)
     assert remeasure(corners + np.array([[4 * sigma + 3, 0], [0, 0], [0, 0], [0, 0]])) is None
+
+
+def test_chart_function_leaves_out_the_patches_the_measurement_leaves_out():
+    """With covered patches left out (``used``), the budget's chart function is the mean over
+    the used patches, so that it propagates to the ΔE the audit reports."""
+    ref = load_reference("scene")
+    lab = np.asarray(ref.lab, np.float64)
+    rng = np.random.default_rng(5)
+    base = linearize_srgb(np.clip(np.asarray(ref.srgb, np.float64), 0, 1))
+    linear = np.clip(base * (1 + 0.05 * rng.standard_normal((24, 3))), 1e-4, None)
+    used = np.ones(24, bool)
+    used[[3, 20]] = False  # a colour patch and a neutral one covered
+    neutral = [k for k in ref.neutral_indices if used[k]]
+    f_all = unc.linear_chart_function(lab, list(ref.neutral_indices), 0.0)
+    f_used = unc.linear_chart_function(lab, neutral, 0.0, used=used)
+    de = delta_e_2000(srgb_to_lab(np.clip(delinearize_srgb(linear), 0, 1)), lab)
+    assert f_all(linear[None])[0] == pytest.approx(de.mean(), rel=1e-12)
+    assert f_used(linear[None])[0] == pytest.approx(de[used].mean(), rel=1e-12)
