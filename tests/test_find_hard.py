@@ -114,7 +114,13 @@ def test_an_occluder_from_the_scene_generator_is_named_with_the_patches_it_cover
     found = find_chart(scene.srgb.astype(np.float32) / 255.0, encoding="srgb")
     assert _error_in_pitches(found, scene) < 0.05
     truth = tuple(int(k) for k in str(scene.conditions["occluded"]).split(","))
-    assert found.occluded == truth
+    # a textured cover is named and left out; a cover as flat as a patch cannot be told from
+    # the camera's own error in that patch: it is measured, and a note names it
+    assert set(found.occluded) <= set(truth)
+    flat = [k for k in truth if k not in found.occluded]
+    if flat:
+        note = next(n for n in found.notes if "far from what the other patches predict" in n)
+        assert all(str(k + 1) in note for k in flat)
 
 
 def test_a_camera_colour_error_is_not_taken_for_an_occluder():
@@ -207,3 +213,19 @@ def test_a_chart_with_more_than_four_patches_covered_is_refused_with_its_corners
     img = np.where(mask[..., None] > 0, np.clip(skin, 0, 1), linear).astype(np.float32)
     with pytest.raises(InvalidValueError, match="look covered.*--corners"):
         find_chart(img)
+
+
+@pytest.mark.parametrize("size", [(1, 1), (5, 7)])
+def test_a_tiny_one_channel_image_without_bayer_is_one_clear_error(size, tmp_path):
+    """A one-channel image of a few pixels (a fuzzed 1 x 1 half-float EXR gave exit 3 in the
+    demosaicing): the one-line error naming --bayer, exit 2."""
+    import OpenImageIO as oiio
+
+    path = tmp_path / "tiny.exr"
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), oiio.ImageSpec(size[1], size[0], 1, "half"))
+    out.write_image(np.full((*size, 1), 0.35, np.float16))
+    out.close()
+    r = CliRunner().invoke(main, ["audit", str(path), "--corners", "8,8,80,8,80,56,8,56"])
+    assert r.exit_code == 2, r.output
+    assert "--bayer" in r.output and len(r.output.strip().splitlines()) == 1

@@ -807,6 +807,23 @@ def neutral_order(measured: np.ndarray, use: np.ndarray | None = None) -> np.nda
     return np.asarray(np.mean(y[..., i] >= y[..., j] - 1e-6, axis=-1))
 
 
+def off_the_camera_fit(measured: np.ndarray) -> np.ndarray:
+    """``(24,)`` bool: patches whose linear RGB lies far from the best 3 x 3 camera matrix fitted
+    to the others (the first cue of :func:`occluded_patches`), textured or not."""
+    m = np.asarray(measured, np.float64)
+    ref = _reference_linear()
+    keep = np.ones(len(m), dtype=bool)
+    residual = np.zeros(len(m))
+    for _ in range(3):
+        matrix, *_ = np.linalg.lstsq(ref[keep], m[keep], rcond=None)
+        pred = ref @ matrix
+        white = float(np.linalg.norm(pred[NEUTRALS[0]]))
+        residual = (np.linalg.norm(m - pred, axis=-1)
+                    / (np.linalg.norm(pred, axis=-1) + 0.05 * white + 1e-6))
+        keep = residual <= np.sort(residual)[len(m) - 1 - 6]
+    return np.asarray(residual > OCCLUDED_RESIDUAL * max(float(np.median(residual)), 1e-3))
+
+
 def occluded_patches(measured: np.ndarray, spread: np.ndarray, strict: bool = False
                      ) -> np.ndarray:
     """Which of the 24 patches of a placement are covered (a leaf, a hand, a glare).
@@ -818,25 +835,17 @@ def occluded_patches(measured: np.ndarray, spread: np.ndarray, strict: bool = Fa
     :data:`OCCLUDED_RESIDUAL` times the median distance; or it disagrees in rank with the
     reference (:func:`colour_order`'s per-patch disagreement at least :data:`OCCLUDED_RANKS`
     and three times the median) while its window is textured (relative spread at least
-    :data:`OCCLUDED_SPREAD` and five times the median). A camera's colour error moves all
-    patches smoothly, a hue rotation or a tone curve too; an object over two patches moves
-    those alone. ``(24, 3)`` means and ``(24,)`` spreads (:func:`sample_cells`) -> ``(24,)``
+    :data:`OCCLUDED_SPREAD` and five times the median); either cue counts only for a textured
+    window, so that a camera's own error in one flat patch is never taken for a cover. A
+    camera's colour error moves all patches smoothly, a hue rotation or a tone curve too; an
+    object over two patches moves those alone. ``(24, 3)`` means and ``(24,)`` spreads (:func:`sample_cells`) -> ``(24,)``
     bool (more than :data:`MAX_OCCLUDED`: a placement that is not the chart, or a chart too
     covered to measure). ``strict``: only patches both far off the fit and textured (for a
     window near the patch edges, where blur and chroma subsampling bleed in)."""
     m = np.asarray(measured, np.float64)
     sp = np.asarray(spread, np.float64)
     ref = _reference_linear()
-    keep = np.ones(len(m), dtype=bool)
-    residual = np.zeros(len(m))
-    for _ in range(3):
-        matrix, *_ = np.linalg.lstsq(ref[keep], m[keep], rcond=None)
-        pred = ref @ matrix
-        white = float(np.linalg.norm(pred[NEUTRALS[0]]))
-        residual = (np.linalg.norm(m - pred, axis=-1)
-                    / (np.linalg.norm(pred, axis=-1) + 0.05 * white + 1e-6))
-        keep = residual <= np.sort(residual)[len(m) - 1 - 6]
-    far = residual > OCCLUDED_RESIDUAL * max(float(np.median(residual)), 1e-3)
+    far = off_the_camera_fit(m)
     ranks = np.abs(average_ranks(_features(m)) - average_ranks(_features(ref))).sum(axis=-1)
     # the spread relative to the patch's mean plus a tenth of white: noise in a dark patch
     # is not texture
@@ -846,7 +855,9 @@ def occluded_patches(measured: np.ndarray, spread: np.ndarray, strict: bool = Fa
     disordered = ranks >= max(OCCLUDED_RANKS, 3.0 * float(np.median(ranks)))
     if strict:  # both: far off the camera's fit and textured
         return np.asarray(far & textured, dtype=bool)
-    return np.asarray(far | (disordered & textured), dtype=bool)
+    # a flat window is never judged covered: a camera's own error can put one patch far off
+    # any 3 x 3 fit (a Foveon sensor's raw red, say), and leaving it out would hide the error
+    return np.asarray((far | disordered) & textured, dtype=bool)
 
 
 #: The 8 orientations of a grid: chart ``(u, v)`` -> lattice direction, as 2 x 2 matrices
@@ -1296,6 +1307,7 @@ def _cascade(image: np.ndarray, encoding: str, refine: bool, detectors: tuple[st
     h_image = search.view.to_image @ best.homography
     checks = best.checks
     occluded = best.occluded
+    flat_far: tuple[int, ...] = ()
     swatches, residual = 0, math.nan
     region = None
     notes: list[str] = []
@@ -1330,6 +1342,9 @@ def _cascade(image: np.ndarray, encoding: str, refine: bool, detectors: tuple[st
             occluded = again.occluded
             if wide is not None and wide.any():
                 occluded = tuple(sorted(set(occluded) | {int(k) for k in np.flatnonzero(wide)}))
+            if np.all(np.isfinite(wide_m)):
+                flat_far = tuple(int(k) for k in np.flatnonzero(off_the_camera_fit(wide_m))
+                                 if int(k) not in occluded)
             residual = residual_view / crop.scale if swatches else math.nan
         else:
             swatches = 0
@@ -1349,6 +1364,10 @@ def _cascade(image: np.ndarray, encoding: str, refine: bool, detectors: tuple[st
     if occluded:
         notes.append(f"{len(occluded)} patch(es) covered (numbers "
                      f"{', '.join(str(k + 1) for k in occluded)} in chart order), left out")
+    if flat_far:
+        notes.append(f"patch(es) {', '.join(str(k + 1) for k in flat_far)} (in chart order) "
+                     f"far from what the other patches predict but flat: the camera's own "
+                     f"error or a flat cover; measured (check the image)")
     return FoundChart(corners=corners, method=best.source, candidates=candidates,
                       swatches=swatches, residual_px=residual, orientation=_orientation(h_image),
                       region=region, confidence=float(max(checks.colour_order, 0.0)),

@@ -1146,6 +1146,10 @@ def _read_input(path: str | os.PathLike[str], read: ReadOptions, *, digest: bool
     return img, (file_sha256(img.path) if digest else None)
 
 
+#: Smallest side (pixels) of a one-channel image in which a chart is looked for without --bayer.
+MIN_MOSAIC_SIDE = 24
+
+
 def _read_mosaic(path: str | os.PathLike[str], read: ReadOptions, error: OneChannelError
                  ) -> Image:
     """A one-channel image read without ``--bayer``: the CFA pattern the chart in it fits
@@ -1157,8 +1161,13 @@ def _read_mosaic(path: str | os.PathLike[str], read: ReadOptions, error: OneChan
     from fidelity.chart.image import read_image
 
     # the demosaiced image keeps every sample of the mosaic at its site: take them back
-    first = read_image(path, layer=read.layer, bayer="RGGB", max_pixels=read.max_pixels)
+    try:
+        first = read_image(path, layer=read.layer, bayer="RGGB", max_pixels=read.max_pixels)
+    except (IndexError, ValueError):  # the demosaicing refuses a mosaic of a few pixels
+        raise OneChannelError(f"{error} (too small to look for a chart in it)") from None
     px = first.pixels
+    if min(px.shape[:2]) < MIN_MOSAIC_SIDE:
+        raise OneChannelError(f"{error} (too small to look for a chart in it)")
     mosaic = np.empty(px.shape[:2], np.float32)
     mosaic[0::2, 0::2] = px[0::2, 0::2, 0]
     mosaic[0::2, 1::2] = px[0::2, 1::2, 1]
