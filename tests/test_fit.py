@@ -649,6 +649,8 @@ def test_measure_gives_the_coco_loss_before_and_after(images, shared, tmp_path):
     html = tmp_path / "report.html"
     write_fit_report(hue, html_path=html)
     assert "measured on COCO after" in html.read_text()
+
+
 def test_cli_fit_writes_a_credibility_record_that_follows_the_schema(images, tmp_path):
     """fit --evidence: one subject, the pair; the inputs' SHA-256, the measurement after the
     correction, the written files' SHA-256, valid against the shipped evidence schema."""
