@@ -230,6 +230,13 @@ def evidence_record(command: str, subjects: Sequence[tuple[str, ChartReport | Co
         items.append(item)
         if chart is not None and chart.verdict is not None and rule is None:
             rule = chart.verdict.decision.to_json()
+    return _record(command, exit_code, rule, items)
+
+
+def _record(command: str, exit_code: int, rule: Mapping[str, Any] | None,
+            subjects: Sequence[Mapping[str, Any]]) -> JSONObject:
+    """The record around ``subjects``: its header, the tool, the environment, the decision
+    ``rule`` and the map to the credibility sections."""
     out: JSONObject = json_ready({
         "record": {"schema": "fidelity credibility record",
                    "schema_version": EVIDENCE_SCHEMA_VERSION, "created": utc_now(),
@@ -238,7 +245,7 @@ def evidence_record(command: str, subjects: Sequence[tuple[str, ChartReport | Co
         "tool": tool_record(),
         "environment": environment_record(),
         "decision_rule": rule,
-        "subjects": items,
+        "subjects": list(subjects),
         "credibility_sections": {k: list(v) for k, v in CREDIBILITY_SECTIONS.items()},
     })
     return out
@@ -291,18 +298,7 @@ def fit_evidence_record(report: FitReport, exit_code: int = 0) -> JSONObject:
         "verdict": None,
         "correction": {"report": fit_json(report), "files": files},
     }
-    out: JSONObject = json_ready({
-        "record": {"schema": "fidelity credibility record",
-                   "schema_version": EVIDENCE_SCHEMA_VERSION, "created": utc_now(),
-                   "command": "fit", "exit_code": int(exit_code),
-                   "outcome": OUTCOMES.get(int(exit_code), "unknown")},
-        "tool": tool_record(),
-        "environment": environment_record(),
-        "decision_rule": None,
-        "subjects": [subject],
-        "credibility_sections": {k: list(v) for k, v in CREDIBILITY_SECTIONS.items()},
-    })
-    return out
+    return _record("fit", exit_code, None, [subject])
 
 
 def write_evidence(path: str | os.PathLike[str], command: str,
