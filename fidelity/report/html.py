@@ -9,6 +9,7 @@ it (:func:`write_document`).
 from __future__ import annotations
 
 import base64
+import contextlib
 import os
 from functools import lru_cache
 from pathlib import Path
@@ -89,7 +90,20 @@ def _bytecode_cache() -> Any:
         return None
     if not os.access(folder, os.W_OK):
         return None
-    return jinja2.FileSystemBytecodeCache(str(folder))
+
+    class _QuietCache(jinja2.FileSystemBytecodeCache):
+        """A cache that never fails a report: a template that cannot be stored (a full disk,
+        a file-size limit) is compiled again next time."""
+
+        def dump_bytecode(self, bucket: Any) -> None:
+            with contextlib.suppress(OSError):
+                super().dump_bytecode(bucket)
+
+        def load_bytecode(self, bucket: Any) -> None:
+            with contextlib.suppress(OSError):
+                super().load_bytecode(bucket)
+
+    return _QuietCache(str(folder))
 
 
 def render_html(doc: Document) -> str:
