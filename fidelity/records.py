@@ -52,7 +52,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fidelity.chart.blindspots import BlindSpot
-from fidelity.chart.find import ChartChecks, FoundChart
 from fidelity.chart.image import ImageInfo
 from fidelity.chart.locate import ChartLocation
 from fidelity.chart.measure import BadPixels, ChartMeasurement
@@ -64,6 +63,7 @@ from fidelity.prediction.table import Prediction
 from fidelity.prediction.verdict import EXIT_ERROR, Criterion, Verdict, worst_exit_code
 
 if TYPE_CHECKING:
+    from fidelity.chart.find import ChartChecks, FoundChart
     from fidelity.coco.measure import MeasuredLoss
 
 #: Version of the JSON report layout (bump on incompatible change).
@@ -132,6 +132,8 @@ class ImageSource:
         location = locate_chart(corners, (info.height, info.width), rows=rows_cols[0],
                                 cols=rows_cols[1], window=float(loc["window_pitch_fraction"]),
                                 min_pixels=1)
+        from fidelity.chart.find import ChartChecks, FoundChart
+
         found = source.get("corners_found")
         checks = source.get("corner_checks")
         return cls(info, corners, location, str(source.get("colourspace", "sRGB")),

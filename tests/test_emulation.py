@@ -131,14 +131,44 @@ def test_lut3d_reproduces_training_colours_better_in_sample() -> None:
 
 
 @pytest.mark.slow
-def test_apply_uint8_equals_float_path() -> None:
-    """The 2^24-entry table (built in about 5 s) against the float path on random pixels;
-    fast twin: the next test."""
-    emu = fit_emulation(matrix_camera(HUE_MATRIX), "D65", "root-polynomial", "chart")
-    img = np.random.default_rng(7).integers(0, 256, (8, 9, 3), dtype=np.uint8)
+@pytest.mark.parametrize("method", ["root-polynomial", "lut3d"])
+def test_distinct_colour_path_table_and_float_path_give_the_same_codes(method, shared) -> None:
+    """The two 8-bit paths of apply_uint8 (the first images mapped on their distinct colours;
+    later ones through the 2^24-entry table, built in about 5 s) and the float path give the
+    same codes, on random pixels and on real photos (every colour a COCO image holds)."""
+    from PIL import Image
+
     from fidelity.coco.dataset import to_uint8
 
-    np.testing.assert_array_equal(emu.apply_uint8(img), to_uint8(emu.apply(img / 255.0)))
+    emu = fit_emulation(matrix_camera(HUE_MATRIX), "D65", method, "chart")
+    photos = sorted((shared / "coco" / "val2017").glob("*.jpg"))[:2]
+    images = [np.random.default_rng(7).integers(0, 256, (8, 9, 3), dtype=np.uint8)]
+    images += [np.asarray(Image.open(p).convert("RGB")) for p in photos]
+    direct = [emu.apply_uint8(img) for img in images]
+    assert emu._cube is None  # a few images: no table
+    emu.cube()
+    for img, d in zip(images, direct, strict=True):
+        np.testing.assert_array_equal(emu.apply_uint8(img), d)
+    np.testing.assert_array_equal(direct[0], to_uint8(emu.apply(images[0] / 255.0)))
+
+
+def test_the_table_is_built_once_enough_distinct_colours_were_mapped(monkeypatch) -> None:
+    """After CUBE_AFTER_COLOURS distinct colours mapped one image at a time, apply_uint8 builds
+    the table (a sweep's images then cost one look-up per pixel)."""
+    import fidelity.coco.emulation as em
+
+    monkeypatch.setattr(em, "CUBE_AFTER_COLOURS", 100)
+    emu = fit_emulation(matrix_camera(HUE_MATRIX), "D65", "root-polynomial", "chart")
+    built = []
+    monkeypatch.setattr(type(emu), "cube", lambda self, chunk=0: built.append(1) or
+                        np.zeros((1 << 24, 3), np.uint8))
+    rng = np.random.default_rng(3)
+    emu.apply_uint8(rng.integers(0, 256, (8, 9, 3), dtype=np.uint8))  # 72 colours
+    assert not built
+    emu.apply_uint8(rng.integers(0, 256, (8, 9, 3), dtype=np.uint8))  # 144 in all
+    assert not built
+    emu.apply_uint8(rng.integers(0, 256, (8, 9, 3), dtype=np.uint8))  # now over 100
+    assert built
 
 
 def test_table_entry_of_a_pixel_is_its_own_colour() -> None:

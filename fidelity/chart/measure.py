@@ -46,12 +46,11 @@ import math
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fidelity.chart.find import ChartChecks, FoundChart, check_corners, find_chart
 from fidelity.chart.image import Image, ImageInfo, OneChannelError, as_float32, is_coded
 from fidelity.chart.locate import DEFAULT_WINDOW, ChartLocation, locate_chart
 from fidelity.chart.uncertainty import PatchSpread, UncertaintyBudget, patch_spread
@@ -59,6 +58,9 @@ from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import DEFAULT_REFERENCE, Reference, load_reference
 from fidelity.colour.colorimetry import delta_e_2000, delta_e_2000_components, srgb_to_lab
 from fidelity.errors import InvalidValueError, unknown_name
+
+if TYPE_CHECKING:  # the finder is imported where a chart is found (not by check)
+    from fidelity.chart.find import ChartChecks, FoundChart
 
 F64 = NDArray[np.float64]
 
@@ -731,6 +733,8 @@ def measure_pixels(
     found = None
     checks = None
     if corners is None:
+        from fidelity.chart.find import find_chart
+
         found = find_chart(arr, encoding=encoding, method=detection, rows=ref.rows,
                              cols=ref.cols)
         corners = found.corners
@@ -738,6 +742,8 @@ def measure_pixels(
     loc = locate_chart(corners, arr.shape, rows=ref.rows, cols=ref.cols, window=window,
                        patch_names=ref.patch_names)
     if found is None and (ref.rows, ref.cols) == (4, 6):
+        from fidelity.chart.find import check_corners
+
         checks = check_corners(arr, loc.corners, encoding=encoding)
     # patches the finder judged covered (a leaf, a hand) are measured but left out of the
     # exposure fit and the chart's statistics, and named

@@ -39,10 +39,11 @@ Methods (:data:`EMULATION_METHODS`, ``method=``):
   residuals at the training colours, so the LUT bends towards every training colour; applied by
   trilinear interpolation, then the camera's quantisation.
 
-Applying to 8-bit images (:meth:`Emulation.apply_uint8`) uses a full 256^3 table (48 MiB)
-evaluated once per emulation on all 16,777,216 code triples, then rounded
-``rint(clip(x, 0, 1) * 255)`` like :func:`fidelity.coco.dataset.to_uint8`; an image then costs one
-table look-up per pixel.
+Applying to 8-bit images (:meth:`Emulation.apply_uint8`) maps the first images on their
+distinct colours and then builds a full 256^3 table (48 MiB), evaluated once per emulation on
+all 16,777,216 code triples; both round ``rint(clip(x, 0, 1) * 255)`` like
+:func:`fidelity.coco.dataset.to_uint8` and give the same codes; an image then costs one table
+look-up per pixel.
 
 Accuracy (:func:`emulation_accuracy`): the chart reference, as an 8-bit image, goes through the
 same table; the result is compared patch by patch with the camera's rendered chart
@@ -306,6 +307,7 @@ class EightBitTable:
     :class:`Emulation` and :class:`PatchEmulation`, which hold the table in ``_cube``."""
 
     _cube: NDArray[np.uint8] | None
+    _direct_colours: int
 
     def apply(self, srgb: ArrayLike) -> FloatArray:
         """Map encoded sRGB (..., 3) in [0, 1]; defined by the mapping."""
@@ -324,13 +326,37 @@ class EightBitTable:
         return self._cube
 
     def apply_uint8(self, rgb8: ArrayLike) -> NDArray[np.uint8]:
-        """Apply to an (H, W, 3) uint8 image through :meth:`cube`; returns a new uint8 image."""
+        """Apply to an (H, W, 3) uint8 image; returns a new uint8 image.
+
+        The first images are mapped on their distinct colours (:meth:`apply` on those codes,
+        the entries :meth:`cube` would hold); once :data:`CUBE_AFTER_COLOURS` distinct colours
+        have been mapped so (a sweep's worth of images), the full table is built and every later
+        image is one look-up per pixel. A fit measured on a few images never pays for the
+        16.7-million-entry table (about 4 s a mapping)."""
         a = np.asarray(rgb8)
         if a.dtype != np.uint8 or a.shape[-1] != 3:
             raise InvalidValueError(f"image must be (..., 3) uint8, got {a.shape} {a.dtype}")
         idx = (a[..., 0].astype(np.uint32) << 16) | (a[..., 1].astype(np.uint32) << 8) | a[..., 2]
+        if self._cube is None and self._direct_colours < CUBE_AFTER_COLOURS:
+            from fidelity.coco.dataset import to_uint8
+
+            codes, inverse = np.unique(idx.ravel(), return_inverse=True)
+            self._direct_colours += int(codes.size)
+            rgb = np.empty((codes.size, 3), dtype=np.float64)
+            rgb[:, 0] = (codes >> 16) & 255
+            rgb[:, 1] = (codes >> 8) & 255
+            rgb[:, 2] = codes & 255
+            mapped = to_uint8(self.apply(rgb / 255.0))
+            direct: NDArray[np.uint8] = mapped[inverse].reshape(a.shape)
+            return direct
         out: NDArray[np.uint8] = self.cube()[idx]
         return out
+
+
+#: Distinct colours mapped one image at a time before :meth:`EightBitTable.apply_uint8` builds
+#: the full 2^24-entry table: a quarter of it (a 640 x 480 photo has 40k-180k distinct colours,
+#: so a run of more than about 30 images builds the table, a fit's few images do not).
+CUBE_AFTER_COLOURS = 1 << 22
 
 
 @dataclass
@@ -346,6 +372,7 @@ class Emulation(EightBitTable):
     samples: CameraSamples
     fit_seconds: float
     _cube: NDArray[np.uint8] | None = field(default=None, repr=False)
+    _direct_colours: int = field(default=0, repr=False, compare=False)
 
     # float path -------------------------------------------------------------------------------
     def _root_poly(self, srgb: FloatArray) -> FloatArray:
@@ -628,6 +655,7 @@ class PatchEmulation(EightBitTable):
     matrix: FloatArray
     fit_seconds: float = 0.0
     _cube: NDArray[np.uint8] | None = field(default=None, repr=False)
+    _direct_colours: int = field(default=0, repr=False, compare=False)
 
     @classmethod
     def fit(cls, source_srgb: ArrayLike, target_srgb: ArrayLike,
