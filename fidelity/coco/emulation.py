@@ -321,7 +321,8 @@ class EightBitTable:
             table = np.empty((1 << 24, 3), dtype=np.uint8)
             for s in range(0, 1 << 24, chunk):
                 e = min(s + chunk, 1 << 24)
-                table[s:e] = to_uint8(self.apply(all_triples(s, e)))
+                table[s:e] = to_uint8(self.apply_codes(s, e) if hasattr(self, "apply_codes")
+                                      else self.apply(all_triples(s, e)))
             self._cube = table
         return self._cube
 
@@ -381,6 +382,29 @@ class Emulation(EightBitTable):
 
         lin = linearize_srgb(np.clip(srgb, 0.0, 1.0))
         return root_polynomial_terms(lin) @ self.matrix.T
+
+    def apply_codes(self, start: int, stop: int) -> FloatArray:
+        """:meth:`apply` on the 8-bit triples with 24-bit codes ``start`` to ``stop - 1``
+        (:func:`fidelity.coco.dataset.all_triples`), the rows of :meth:`cube`. For the
+        root-polynomial mapping the per-channel steps are looked up: each channel's
+        linearisation and each pair's root term take only 256 and 256 x 256 values, computed
+        with the same operations as :meth:`apply` (so the same bits), the 3 x 6 matrix and the
+        output stage then run on the chunk as :meth:`apply` runs them."""
+        if self.method != "root-polynomial":
+            from fidelity.coco.dataset import all_triples
+
+            return self.apply(all_triples(start, stop))
+        from fidelity.colour.colorimetry import linearize_srgb
+
+        lin = linearize_srgb(np.clip(np.arange(256, dtype=np.float64) / 255.0, 0.0, 1.0))
+        pair = lin[:, None] * lin[None, :]
+        root = np.sign(pair) * np.sqrt(np.abs(pair))  # spow of root_polynomial_terms
+        idx = np.arange(start, stop, dtype=np.uint32)
+        r, g, b = (idx >> 16) & 255, (idx >> 8) & 255, idx & 255
+        terms = np.empty((stop - start, 6), dtype=np.float64)
+        terms[:, 0], terms[:, 1], terms[:, 2] = lin[r], lin[g], lin[b]
+        terms[:, 3], terms[:, 4], terms[:, 5] = root[r, g], root[g, b], root[r, b]
+        return camera_output_srgb(self.camera, terms @ self.matrix.T)
 
     def apply(self, srgb: ArrayLike) -> FloatArray:
         """Map encoded reference sRGB (..., 3) in [0, 1] to the camera's encoded output sRGB."""
