@@ -563,3 +563,30 @@ def test_shared_models_find_annotated_people(shared) -> None:
         assert det.describe()["conventions"]["conf"] in (0.001, 0.01)
     assert kinds == {"yolo11n-int8dyn": "ultralytics", "yolov8n-int8dyn": "ultralytics",
                      "yolov10n-int8dyn": "ultralytics-e2e", "yolox_nano": "yolox"}
+
+
+@pytest.mark.shared
+def test_cuda_asked_for_is_never_a_silent_cpu_run(shared, monkeypatch) -> None:
+    """--provider cuda where onnxruntime has no CUDA provider, or where the provider is offered
+    but the session comes up on the CPU alone (onnxruntime's silent fallback: no GPU, missing
+    cuDNN), is a clear error, not a CPU run labelled cuda."""
+    import onnxruntime as ort
+
+    from fidelity.coco.detectors import Detector
+
+    model = shared / "models" / "yolox_nano.onnx"
+    if "CUDAExecutionProvider" not in ort.get_available_providers():
+        with pytest.raises(InvalidValueError, match="no CUDA execution provider"):
+            Detector(model, provider="cuda")
+    monkeypatch.setattr(ort, "get_available_providers",
+                        lambda: ["CUDAExecutionProvider", "CPUExecutionProvider"])
+    real = ort.InferenceSession
+
+    class CpuOnly(real):  # type: ignore[misc, valid-type]
+        def __init__(self, path, sess_options=None, providers=None):
+            super().__init__(path, sess_options=sess_options, providers=["CPUExecutionProvider"])
+
+    monkeypatch.setattr(ort, "InferenceSession", CpuOnly)
+    with pytest.raises(InvalidValueError, match="could not start its CUDA provider"):
+        Detector(model, provider="cuda")
+    assert Detector(model, provider="cpu").session.get_providers() == ["CPUExecutionProvider"]

@@ -777,12 +777,23 @@ class Detector:
             providers = ["CPUExecutionProvider"]
         elif provider == "cuda":
             providers = ["CUDAExecutionProvider", "CPUExecutionProvider"]
+            if "CUDAExecutionProvider" not in ort.get_available_providers():
+                raise InvalidValueError(
+                    f"--provider cuda: this onnxruntime ({ort.__version__}) has no CUDA "
+                    f"execution provider (it offers {', '.join(ort.get_available_providers())}); "
+                    f"install onnxruntime-gpu, or use --provider cpu")
         else:
             raise InvalidValueError(f"provider {provider!r}: expected auto, cpu or cuda")
         try:
             self.session = ort.InferenceSession(str(p), sess_options=opts, providers=providers)
         except Exception as exc:  # onnxruntime raises its own exception types
             raise InputFileError(f"{p}: onnxruntime cannot load the model: {exc}") from exc
+        if provider == "cuda" and "CUDAExecutionProvider" not in self.session.get_providers():
+            # onnxruntime falls back to the CPU, with a log line only, when the CUDA provider
+            # cannot start (no GPU, a missing CUDA or cuDNN library)
+            raise InvalidValueError(
+                f"--provider cuda: onnxruntime could not start its CUDA provider for {p.name} "
+                f"(no GPU, or CUDA/cuDNN libraries not found); use --provider cpu")
         meta = dict(self.session.get_modelmeta().custom_metadata_map)
         self.path = p
         self.threads = threads
