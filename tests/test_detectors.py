@@ -590,3 +590,28 @@ def test_cuda_asked_for_is_never_a_silent_cpu_run(shared, monkeypatch) -> None:
     with pytest.raises(InvalidValueError, match="could not start its CUDA provider"):
         Detector(model, provider="cuda")
     assert Detector(model, provider="cpu").session.get_providers() == ["CPUExecutionProvider"]
+
+
+@pytest.mark.shared
+def test_a_dynamically_quantised_model_runs_on_the_cpu_where_cuda_is_offered(shared,
+                                                                             monkeypatch) -> None:
+    """ConvInteger has no CUDA kernel in onnxruntime: a CUDA session runs those nodes on the
+    CPU and its detections differ from a CPU session's (benchmarks/bench_providers.py on an
+    H100). With CUDA offered, ``auto`` keeps such a model on the CPU and says why, and
+    ``cuda`` is refused; a float model is not affected."""
+    import onnxruntime as ort
+
+    from fidelity.coco.detectors import Detector, integer_operators
+
+    int8 = shared / "models" / "yolo11n-int8dyn.onnx"
+    fp32 = shared / "models" / "yolox_nano.onnx"
+    assert "ConvInteger" in integer_operators(int8)
+    assert integer_operators(fp32) == frozenset()
+    monkeypatch.setattr(ort, "get_available_providers",
+                        lambda: ["CUDAExecutionProvider", "CPUExecutionProvider"])
+    d = Detector(int8, provider="auto")
+    assert d.providers == ["CPUExecutionProvider"]
+    assert "ConvInteger" in d.describe()["provider_note"]
+    with pytest.raises(InvalidValueError, match="dynamically quantised"):
+        Detector(int8, provider="cuda")
+    assert "provider_note" not in Detector(fp32, provider="auto").describe()

@@ -723,6 +723,30 @@ def postprocess(output: np.ndarray, layout: ModelLayout, box: Letterbox,
 # Sessions
 
 
+#: Options of onnxruntime's CUDA provider: full float32 arithmetic (no TF32 tensor-core
+#: rounding, which onnxruntime turns on by default on Ampere and later GPUs and which moved
+#: COCO mAP50 by up to a point against the CPU in benchmarks/bench_providers.py).
+CUDA_OPTIONS: dict[str, str] = {"use_tf32": "0"}
+
+
+#: Why a model runs on the CPU although CUDA is offered (``Detector.provider_note``).
+CPU_ONLY_NOTE = ("dynamically quantised (ConvInteger, which onnxruntime's CUDA provider does not "
+                 "run): on the CPU, where its detections are those of the shipped tables")
+
+
+def integer_operators(path: str | os.PathLike[str]) -> frozenset[str]:
+    """The integer-arithmetic operators (``ConvInteger``, ``MatMulInteger``,
+    ``DynamicQuantizeLinear``) in the graph of the ONNX model at ``path`` (read with the
+    ``onnx`` package, weights left out); empty when ``onnx`` is not installed."""
+    try:
+        import onnx
+    except ImportError:
+        return frozenset()
+    model = onnx.load(str(path), load_external_data=False)
+    ops = {n.op_type for n in model.graph.node}
+    return frozenset(ops & {"ConvInteger", "MatMulInteger", "DynamicQuantizeLinear"})
+
+
 def default_providers() -> list[str]:
     """Execution providers, best first: CUDA when onnxruntime offers it, then CPU."""
     import onnxruntime as ort
@@ -771,17 +795,28 @@ class Detector:
             opts.intra_op_num_threads = int(threads)
             opts.inter_op_num_threads = 1
         opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+        self.provider_note: str | None = None
         if provider == "auto":
-            providers = default_providers()
+            providers = [(name, CUDA_OPTIONS) if name == "CUDAExecutionProvider" else name
+                         for name in default_providers()]
+            if len(providers) > 1 and "ConvInteger" in integer_operators(p):
+                providers = ["CPUExecutionProvider"]
+                self.provider_note = CPU_ONLY_NOTE
         elif provider == "cpu":
             providers = ["CPUExecutionProvider"]
         elif provider == "cuda":
-            providers = ["CUDAExecutionProvider", "CPUExecutionProvider"]
+            providers = [("CUDAExecutionProvider", CUDA_OPTIONS), "CPUExecutionProvider"]
             if "CUDAExecutionProvider" not in ort.get_available_providers():
                 raise InvalidValueError(
                     f"--provider cuda: this onnxruntime ({ort.__version__}) has no CUDA "
                     f"execution provider (it offers {', '.join(ort.get_available_providers())}); "
                     f"install onnxruntime-gpu, or use --provider cpu")
+            if "ConvInteger" in integer_operators(p):
+                raise InvalidValueError(
+                    f"--provider cuda: {p.name} is dynamically quantised (ConvInteger), which "
+                    f"onnxruntime's CUDA provider does not run: its nodes would run on the CPU "
+                    f"inside a CUDA session, whose detections differ from a CPU session's "
+                    f"(benchmarks/bench_providers.py); use --provider cpu")
         else:
             raise InvalidValueError(f"provider {provider!r}: expected auto, cpu or cuda")
         try:
@@ -830,6 +865,7 @@ class Detector:
             "threads": self.threads, "batch": self.batch,
             "preprocessing": self.preprocessing.describe(),
             "ultralytics_version": self.layout.metadata.get("version"),
+            **({"provider_note": self.provider_note} if self.provider_note else {}),
         }
 
     # -- the three stages ---------------------------------------------------------------------
