@@ -267,6 +267,12 @@ def test_ray_client_sweep_equals_local(cluster, coco, tmp_path) -> None:
                       log=lambda s: None)
     out = tmp_path / "client"
     stdout, log = _sweep_cli(coco, out, client).communicate(timeout=240)
+    if "Starting Ray client server failed" in log:
+        # Ray's proxy starts one server process per client; on a loaded 2-core machine that
+        # process can die before it serves (a Ray start-up failure, seen twice at load 4+, not
+        # fidelity's: fidelity's answer, exit 2 naming the address, is right). Once more.
+        time.sleep(5)
+        stdout, log = _sweep_cli(coco, out, client).communicate(timeout=240)
     assert "5 cells done" in stdout, (stdout, log[-3000:])
     store = SweepStore(out)
     _assert_same(local, store)
