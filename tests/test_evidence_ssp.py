@@ -13,7 +13,7 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
-from urllib.parse import unquote, urlparse
+from urllib.parse import unquote, unquote_to_bytes, urlparse
 
 import pytest
 from click.testing import CliRunner
@@ -75,8 +75,8 @@ def file_srmds(path):
 def resolve(uri, base):
     parsed = urlparse(uri)
     if parsed.scheme == "file":
-        return Path(unquote(parsed.path))
-    return base / unquote(uri)
+        return Path(os.fsdecode(unquote_to_bytes(parsed.path)))
+    return base / os.fsdecode(unquote_to_bytes(uri))
 
 
 # ------------------------------------------------------------------ the schemas
@@ -287,3 +287,24 @@ def test_fit_lists_its_correction_files_with_their_checksums(tmp_path, schemas):
     image = tmp_path / "nikon-5100" / "developed.png"
     assert (checksums["nikon-5100/developed.png"]
             == hashlib.sha3_256(image.read_bytes()).hexdigest())
+
+
+def test_odd_file_names_are_written_and_found_again(tmp_path, schemas):
+    """A result whose name holds a control character and an undecodable byte: the documents
+    stay valid XML (the name shown as \\xNN), its URI percent-encodes the raw bytes and leads
+    back to the file."""
+    odd = tmp_path / os.fsdecode(b"odd \x01\xff.json")
+    srmd = tmp_path / "odd.srmd"
+    r = run("check", "--camera", "nikon-5100", "--out", tmp_path / "out", "--json", odd,
+            "--evidence", srmd, "--evidence", tmp_path / "odd.stmd")
+    assert r.exit_code == 0, r.output
+    schemas["SRMD"].validate(str(srmd))
+    schemas["STMD"].validate(str(tmp_path / "odd.stmd"))
+    entry = next(e for e in etree.parse(str(srmd)).getroot().iterfind(
+        ".//stc:ClassificationEntry[@linkedType='application/json']", NS)
+        if e.get("keyword").startswith("odd"))
+    assert entry.get("keyword") == "odd \\x01\\xff.json"
+    assert entry.get(f"{{{NS['xlink']}}}href") == "odd%20%01%FF.json"
+    inner = entry.find("srmd:SimulationResourceMetaData", NS)
+    assert resolve(inner.get("data"), tmp_path) == odd
+    assert inner.get("checksum") == hashlib.sha3_256(odd.read_bytes()).hexdigest()

@@ -163,5 +163,8 @@ def _check_one(cam: str, html: Path | None, json_file: Path | None, *, to_stdout
     for line in summary_lines(report):
         click.echo("  " + line)
     if html is not None:
-        click.echo(f"  report: {html}" + (f" (JSON: {json_file})" if json_file else ""))
+        from fidelity.fileio import display_path
+
+        click.echo(f"  report: {display_path(html)}"
+                   + (f" (JSON: {display_path(json_file)})" if json_file else ""))
     return report.exit_code

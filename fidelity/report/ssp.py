@@ -37,6 +37,7 @@ decimal. Only the checksums are computed here, at the edge (:func:`traced_files`
 from __future__ import annotations
 
 import os
+import re
 import uuid
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -46,7 +47,7 @@ from urllib.parse import quote
 
 from lxml import etree
 
-from fidelity.fileio import JSONObject, file_sha3_256, write_bytes_atomic
+from fidelity.fileio import JSONObject, file_sha3_256, printable, write_bytes_atomic
 
 #: The SSP Traceability version the documents follow (``version`` of SRMD and STMD).
 SSP_TRACEABILITY_VERSION = "1.0.0-rc.2"
@@ -114,12 +115,23 @@ def mime_type(path: str | os.PathLike[str]) -> str:
     return MIME_TYPES.get(Path(path).suffix.lower(), "application/octet-stream")
 
 
+#: Characters XML 1.0 cannot hold, even escaped (C0 controls but tab, newline, return).
+_NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ufffe\uffff]")
+
+
+def xml_safe(text: str) -> str:
+    """``text`` that XML 1.0 can hold: undecodable bytes of file names as ``\\xNN``
+    (:func:`fidelity.fileio.printable`), control characters as ``\\xNN`` too."""
+    return _NOT_XML.sub(lambda m: f"\\x{ord(m.group()):02x}" if ord(m.group()) < 256
+                        else f"\\u{ord(m.group()):04x}", printable(text))
+
+
 def _traced(kind: str, role: str, path: str | os.PathLike[str]) -> TracedFile:
     try:
         digest: str | None = file_sha3_256(path)
     except OSError:
         digest = None
-    return TracedFile(kind, role, Path(path), digest, mime_type(path))
+    return TracedFile(kind, xml_safe(role), Path(path), digest, mime_type(path))
 
 
 def traced_files(record: JSONObject, results: Sequence[str | os.PathLike[str]]
@@ -175,7 +187,7 @@ def _text(value: Any) -> str:
     ``true``/``false`` (XML Schema)."""
     if isinstance(value, bool):
         return "true" if value else "false"
-    return repr(value) if isinstance(value, float) else str(value)
+    return repr(value) if isinstance(value, float) else xml_safe(str(value))
 
 
 def _classification(kind: str, entries: Sequence[tuple[str, Any]],
@@ -183,10 +195,10 @@ def _classification(kind: str, entries: Sequence[tuple[str, Any]],
     """A classification ``{CLASSIFICATION}.{kind}`` of the entries whose value is not None."""
     element = etree.Element(_q("stc", "Classification"), type=f"{CLASSIFICATION}.{kind}")
     if description:
-        element.set("description", description)
+        element.set("description", xml_safe(description))
     for keyword, value in ((k, v) for k, v in entries if v is not None):
-        etree.SubElement(element, _q("stc", "ClassificationEntry"), keyword=keyword).text = \
-            _text(value)
+        etree.SubElement(element, _q("stc", "ClassificationEntry"),
+                         keyword=xml_safe(keyword)).text = _text(value)
     return element
 
 
@@ -266,7 +278,7 @@ def _file_entries(kind: str, files: Sequence[TracedFile], base: Path) -> etree._
 
 def _title(record: JSONObject) -> str:
     names = [str(s.get("subject")) for s in record.get("subjects", [])]
-    return f"fidelity {record['record']['command']}: " + ", ".join(names)
+    return xml_safe(f"fidelity {record['record']['command']}: " + ", ".join(names))
 
 
 def _top_level(element: etree._Element, record: JSONObject) -> None:
@@ -300,7 +312,7 @@ def _resource(parent: etree._Element, kind: str, type_: str, *, source: str | No
     if source is not None:
         element.set("source", source)
     if description:
-        element.set("description", description)
+        element.set("description", xml_safe(description))
     return element
 
 
@@ -349,7 +361,7 @@ def stmd_element(record: JSONObject, files: Sequence[TracedFile],
     procedure = etree.SubElement(verdict, _q("stc", "Procedure"))
     rule = record.get("decision_rule") or {}
     method = _resource(procedure, "method", "text/plain", description="the decision rule")
-    etree.SubElement(method, _q("stc", "Content")).text = str(
+    etree.SubElement(method, _q("stc", "Content")).text = _text(
         rule.get("description") or "no decision rule: the run states no verdict")
     method.append(_classification("run", _run_entries(record)))
     out = etree.SubElement(verdict, _q("stc", "Output"))
@@ -358,7 +370,7 @@ def stmd_element(record: JSONObject, files: Sequence[TracedFile],
     for subject in record.get("subjects", []):
         result = _resource(out, "result", "text/plain",
                            description=f"verdict: {subject.get('subject')}")
-        etree.SubElement(result, _q("stc", "Content")).text = str(
+        etree.SubElement(result, _q("stc", "Content")).text = _text(
             (subject.get("verdict") or {}).get("message") or subject.get("error")
             or "no verdict")
         result.append(_classification("subject", subject_entries(subject),
@@ -368,9 +380,9 @@ def stmd_element(record: JSONObject, files: Sequence[TracedFile],
         validity = subject.get("validity") or {}
         text = _resource(rationale, "rationale", "text/plain",
                          description=f"validity domain: {subject.get('subject')}")
-        etree.SubElement(text, _q("stc", "Content")).text = "\n".join(
+        etree.SubElement(text, _q("stc", "Content")).text = xml_safe("\n".join(
             f"{c['name']}: {'inside' if c['inside'] else 'outside'}: {c['detail']}"
-            for c in validity.get("checks") or []) or "no validity domain stated"
+            for c in validity.get("checks") or []) or "no validity domain stated")
     return root
 
 
@@ -398,4 +410,4 @@ def write_stmd(path: str | os.PathLike[str], record: JSONObject,
 __all__ = ["CHECKSUM_TYPE", "CLASSIFICATION", "INPUT_KINDS", "MIME_TYPES", "NAMESPACES",
            "SSP_TRACEABILITY_VERSION", "TracedFile", "file_srmd", "file_uri", "mime_type",
            "srmd_element", "ssp_schema_path", "stmd_element", "subject_entries",
-           "traced_files", "write_srmd", "write_stmd"]
+           "traced_files", "write_srmd", "write_stmd", "xml_safe"]
