@@ -38,12 +38,14 @@ CONFIG_FILES = ("fidelity.toml", "pyproject.toml")
 class Setting:
     """One settings key: its value ``kind`` (``str``, ``float``, ``int``, ``bool``), the
     parameter name of the commands' option it sets, and whether it is a path (made absolute
-    relative to the settings file), or may be one (``maybe_path``: a name or a file)."""
+    relative to the settings file), or may be one (``maybe_path``: a name or a file); ``many``:
+    the option is repeatable, the value one of ``kind`` or a list of them."""
 
     kind: type
     param: str
     path: bool = False
     maybe_path: bool = False
+    many: bool = False
 
 
 #: Every key a settings file may hold (declarative: the validator below only walks this).
@@ -76,7 +78,7 @@ SETTINGS: Mapping[str, Setting] = {
     "decision": Setting(str, "decision"),
     "coverage_factor": Setting(float, "coverage_factor"),
     "strict": Setting(bool, "strict"),
-    "evidence": Setting(str, "evidence_path", path=True),
+    "evidence": Setting(str, "evidence_paths", path=True, many=True),
 }
 
 
@@ -121,6 +123,14 @@ def _value(path: Path, where: str, key: str, value: Any) -> Any:
     if setting is None:
         raise InputFileError(f"{path}: {where}{key}: unknown setting; known: "
                              f"{', '.join(sorted(SETTINGS))}")
+    if setting.many:
+        values = value if isinstance(value, list) else [value]
+        one = Setting(setting.kind, setting.param, setting.path, setting.maybe_path)
+        return [_one_value(path, where, key, one, v) for v in values]
+    return _one_value(path, where, key, setting, value)
+
+
+def _one_value(path: Path, where: str, key: str, setting: Setting, value: Any) -> Any:
     kind = setting.kind
     ok = (isinstance(value, kind) and not isinstance(value, bool) if kind is not bool
           else isinstance(value, bool))

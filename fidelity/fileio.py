@@ -298,10 +298,20 @@ def portable_paths(data: Any) -> Any:
             for k, v in data.items()}
 
 
-def file_sha256(path: str | os.PathLike[str]) -> str:
-    """SHA-256 hex digest of a file's bytes, read in 1 MiB blocks (provenance of inputs)."""
-    digest = hashlib.sha256()
+def _file_digest(path: str | os.PathLike[str], algorithm: str) -> str:
+    digest = hashlib.new(algorithm)
     with open(path, "rb") as fh:
         for block in iter(lambda: fh.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
+
+
+def file_sha256(path: str | os.PathLike[str]) -> str:
+    """SHA-256 hex digest of a file's bytes, read in 1 MiB blocks (provenance of inputs)."""
+    return _file_digest(path, "sha256")
+
+
+def file_sha3_256(path: str | os.PathLike[str]) -> str:
+    """SHA3-256 (FIPS 202) hex digest of a file's bytes, read in 1 MiB blocks: the checksum
+    SSP Traceability prescribes (:mod:`fidelity.report.ssp`)."""
+    return _file_digest(path, "sha3_256")

@@ -14,12 +14,14 @@ from fidelity.cli.options import (
     bound_option,
     common_options,
     evidence_option,
+    evidence_outputs,
     image_read_options,
     max_pixels_option,
     measure_inputs,
     measure_options,
     measure_request,
     report_paths,
+    write_evidence_files,
 )
 from fidelity.fileio import display_path
 from fidelity.prediction.table import SIZES
@@ -59,7 +61,7 @@ def audit(image: Path, corners: str | None, read: ReadOptions,
           reference: str, illuminant: str, size: str, table: str | None,
           json_path: str | None, html_path: str | None, max_pixels: int | None,
           bound: str, measure: bool, images: str | None, annotations: str | None,
-          models: str | None, limit: int | None, evidence_path: Path | None) -> None:
+          models: str | None, limit: int | None, evidence_paths: tuple[Path, ...]) -> None:
     """Measure the chart in IMAGE: ΔE00 per patch, mean and max, exposure, bad pixels.
 
     \b
@@ -86,7 +88,7 @@ def audit(image: Path, corners: str | None, read: ReadOptions,
                                 else Path(json_path), ".json", folder=_folder(json_path))
     (html_file,) = report_paths((image,), None if html_path is None else Path(html_path),
                                 ".html", folder=_folder(html_path))
-    check_outputs({"--json": json_file, "--html": html_file, "--evidence": evidence_path},
+    check_outputs({"--json": json_file, "--html": html_file, **evidence_outputs(evidence_paths)},
                   {"IMAGE": image, "--table": table, "--reference": reference,
                    "--illuminant": illuminant} | measure_inputs(images, annotations, models))
     request = measure_request(measure, images, annotations, models, limit)
@@ -108,11 +110,11 @@ def audit(image: Path, corners: str | None, read: ReadOptions,
         click.echo(line)
     for p in written:
         click.echo(f"wrote {display_path(p)}")
-    if evidence_path is not None:
+    if evidence_paths:
         from fidelity.report.evidence import write_evidence
 
-        write_evidence(evidence_path, "audit", [(str(image), report, None)], 0)
-        click.echo(f"wrote {display_path(evidence_path)}")
+        write_evidence_files(evidence_paths, write_evidence, "audit",
+                             [(str(image), report, None)], 0, results=list(written))
 
 
 def _folder(value: str | None) -> bool:

@@ -15,11 +15,13 @@ from fidelity.cli.options import (
     decision_options,
     decision_rule,
     evidence_option,
+    evidence_outputs,
     from_settings,
     json_option,
     measure_inputs,
     measure_options,
     measure_request,
+    write_evidence_files,
     write_json_output,
 )
 from fidelity.prediction.table import SIZES
@@ -66,7 +68,7 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
           json_path: str | None, html_path: Path | None, report: bool, bound: str,
           measure: bool, images: str | None, annotations: str | None, models: str | None,
           limit: int | None, decision: str, coverage_factor: float, strict: bool,
-          evidence_path: Path | None) -> None:
+          evidence_paths: tuple[Path, ...]) -> None:
     """Is this camera model's colour good enough for perception testing?
 
     Renders the spectral colour chart through the camera, measures ΔE00, predicts the detection
@@ -99,9 +101,10 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
         json_file = (None if to_stdout or not report else
                      Path(json_path) if json_path else folder / "report.json")
         plans.append((cam, html, json_file))
-    check_outputs({f"{k} ({cam})" if many else k: v for cam, html, js in plans
-                   for k, v in (("--html", html), ("--json", js))}
-                  | {"--evidence": evidence_path},
+    outputs: dict[str, Path | None] = {f"{k} ({cam})" if many else k: v
+                                       for cam, html, js in plans
+                                       for k, v in (("--html", html), ("--json", js))}
+    check_outputs({**outputs, **evidence_outputs(evidence_paths)},
                   {"--table": table, "--illuminant": illuminant}
                   | {f"CAMERA {cam}": cam for cam in subjects}
                   | {f"CAMERA {cam} ({f.name})": f for cam in subjects
@@ -119,13 +122,13 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
     from fidelity.prediction.verdict import worst_exit_code
 
     code = worst_exit_code(codes)
-    if evidence_path is not None:
+    if evidence_paths:
         from fidelity.report.evidence import write_evidence
 
-        write_evidence(evidence_path, "check",
-                       [(cam, r, None) for (cam, _, _), r in zip(plans, reports, strict=True)],
-                       code)
-        click.echo(f"  evidence: {evidence_path}")
+        write_evidence_files(
+            evidence_paths, write_evidence, "check",
+            [(cam, r, None) for (cam, _, _), r in zip(plans, reports, strict=True)], code,
+            results=[p for _, html, js in plans for p in (js, html)], indent="  ")
     sys.exit(code)
 
 
@@ -160,5 +163,8 @@ def _check_one(cam: str, html: Path | None, json_file: Path | None, *, to_stdout
     for line in summary_lines(report):
         click.echo("  " + line)
     if html is not None:
-        click.echo(f"  report: {html}" + (f" (JSON: {json_file})" if json_file else ""))
+        from fidelity.fileio import display_path
+
+        click.echo(f"  report: {display_path(html)}"
+                   + (f" (JSON: {display_path(json_file)})" if json_file else ""))
     return report.exit_code

@@ -18,12 +18,14 @@ from fidelity.cli.options import (
     decision_options,
     decision_rule,
     evidence_option,
+    evidence_outputs,
     image_read_options,
     json_option,
     make_criterion,
     measure_inputs,
     measure_options,
     measure_request,
+    write_evidence_files,
     write_json_output,
 )
 from fidelity.prediction.table import CLASS_COLUMNS, SIZES
@@ -69,7 +71,7 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
             junit: Path | None,
             json_path: str | None, html_path: Path | None, measure: bool, images: str | None,
             annotations: str | None, models: str | None, limit: int | None, decision: str,
-            coverage_factor: float, strict: bool, evidence_path: Path | None) -> None:
+            coverage_factor: float, strict: bool, evidence_paths: tuple[Path, ...]) -> None:
     """Compare a simulated chart with the real camera's: sim-to-real ΔE00 and its cost.
 
     SIM is the simulator's render of the chart scene, REAL a photo of the same chart taken
@@ -97,7 +99,7 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
 
     to_stdout = json_path == STDOUT
     check_outputs({"--json": None if to_stdout else json_path, "--html": html_path,
-                   "--junit": junit, "--evidence": evidence_path},
+                   "--junit": junit, **evidence_outputs(evidence_paths)},
                   {"SIM": sim, "REAL": real, "--table": table, "--reference": reference,
                    "--illuminant": illuminant} | measure_inputs(images, annotations, models))
     criterion = None
@@ -137,9 +139,11 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
             click.echo(f"wrote {display_path(where)}")
     if html_path is not None:
         click.echo(f"wrote {display_path(html_path)}")
-    if evidence_path is not None:
+    if evidence_paths:
         from fidelity.report.evidence import write_evidence
 
-        write_evidence(evidence_path, "compare", [(subject, report, None)], report.exit_code)
-        click.echo(f"wrote {display_path(evidence_path)}")
+        write_evidence_files(
+            evidence_paths, write_evidence, "compare", [(subject, report, None)],
+            report.exit_code, results=[None if to_stdout or json_path is None
+                                       else Path(json_path), html_path, junit])
     sys.exit(report.exit_code)

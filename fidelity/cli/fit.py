@@ -12,10 +12,12 @@ from fidelity.cli.options import (
     chart_pair_options,
     common_options,
     evidence_option,
+    evidence_outputs,
     image_read_options,
     measure_inputs,
     measure_options,
     measure_request,
+    write_evidence_files,
 )
 from fidelity.prediction.table import SIZES
 
@@ -72,7 +74,7 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
         sim_corners: str | None, real_corners: str | None, normalise_mode: str, size: str,
         table: str | None, reference: str, illuminant: str, measure: bool, images: str | None,
         annotations: str | None, models: str | None, limit: int | None,
-        read: ReadOptions, evidence_path: Path | None) -> None:
+        read: ReadOptions, evidence_paths: tuple[Path, ...]) -> None:
     """Fit the correction from the simulator's chart onto the real camera's, as a 3D LUT.
 
     SIM and REAL are read as fidelity compare reads them. The correction (gains, matrix,
@@ -94,7 +96,7 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
 
     request = measure_request(measure, images, annotations, models, limit)
     if pairs:
-        if request is not None or evidence_path is not None:
+        if request is not None or evidence_paths:
             raise click.UsageError("--measure and --evidence go with SIM REAL or --camera, "
                                    "not --pair")
         if sim is not None or real is not None:
@@ -113,7 +115,7 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
             raise click.UsageError("with --camera give REAL alone: fidelity fit --camera "
                                    "sim.toml REAL --out DIR")
         _fit_camera(camera, sim, out, model, objective, real_corners, normalise_mode, size,
-                    table, reference, illuminant, read, corrected, request, evidence_path)
+                    table, reference, illuminant, read, corrected, request, evidence_paths)
         return
     if sim is None or real is None:
         raise click.UsageError("give SIM and REAL, or --pair SIM REAL twice or more")
@@ -122,7 +124,7 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
                               "report.json", "report.html")
     if corrected:
         names += ("corrected.png", "corrected.exr")
-    check_outputs({**{n: out / n for n in names}, "--evidence": evidence_path},
+    check_outputs({**{n: out / n for n in names}, **evidence_outputs(evidence_paths)},
                   {"SIM": sim, "REAL": real, "--table": table, "--reference": reference,
                    "--illuminant": illuminant} | measure_inputs(images, annotations, models))
     report = fit_and_verify(
@@ -138,16 +140,13 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
     if "corrected" in report.files:
         written.append(Path(report.files["corrected"]))
     click.echo(f"wrote {', '.join(display_path(p) for p in written)}")
-    _evidence(evidence_path, report)
+    _evidence(evidence_paths, report, written)
 
 
-def _evidence(path: Path | None, report: FitReport) -> None:
-    if path is not None:
-        from fidelity.fileio import display_path
-        from fidelity.report.evidence import write_fit_evidence
+def _evidence(paths: tuple[Path, ...], report: FitReport, written: list[Path]) -> None:
+    from fidelity.report.evidence import write_fit_evidence
 
-        write_fit_evidence(path, report)
-        click.echo(f"wrote {display_path(path)}")
+    write_evidence_files(paths, write_fit_evidence, report, 0, results=written)
 
 
 def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str | None,
@@ -181,14 +180,14 @@ def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str
 def _fit_camera(camera: Path, real: Path, out: Path, model: str, objective: str | None,
                 real_corners: str | None, normalise_mode: str, size: str, table: str | None,
                 reference: str, illuminant: str, read: ReadOptions, corrected: bool,
-                request: MeasureRequest | None, evidence_path: Path | None) -> None:
+                request: MeasureRequest | None, evidence_paths: tuple[Path, ...]) -> None:
     from fidelity.fileio import check_outputs, display_path
     from fidelity.fit import fit_camera_and_verify
     from fidelity.report.fit import fit_lines, write_fit_report
 
     names = ("correction.cube", "correction.ocio", "correction.json", "report.json",
              "report.html", "corrected.toml", "sim_render.png", "sim_render.exr")
-    check_outputs({**{n: out / n for n in names}, "--evidence": evidence_path},
+    check_outputs({**{n: out / n for n in names}, **evidence_outputs(evidence_paths)},
                   {"--camera": camera, "REAL": real, "--table": table,
                    "--reference": reference, "--illuminant": illuminant})
     report, toml = fit_camera_and_verify(
@@ -200,4 +199,4 @@ def _fit_camera(camera: Path, real: Path, out: Path, model: str, objective: str 
     for line in fit_lines(report):
         click.echo(line)
     click.echo(f"corrected camera: {display_path(toml)} (fidelity check {display_path(toml)})")
-    _evidence(evidence_path, report)
+    _evidence(evidence_paths, report, [*(out / n for n in names), Path(toml)])

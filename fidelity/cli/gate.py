@@ -25,11 +25,13 @@ from fidelity.cli.options import (
     decision_options,
     decision_rule,
     evidence_option,
+    evidence_outputs,
     from_settings,
     image_read_options,
     make_criterion,
     max_pixels_option,
     report_paths,
+    write_evidence_files,
 )
 from fidelity.errors import FidelityError
 from fidelity.fileio import display_path
@@ -113,7 +115,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
          reference: str, illuminant: str, renderer: str, junit: Path | None,
          json_path: Path | None, html_path: Path | None,
          max_pixels: int | None, bound: str, decision: str, coverage_factor: float,
-         strict: bool, evidence_path: Path | None) -> None:
+         strict: bool, evidence_paths: tuple[Path, ...]) -> None:
     """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 input error, 3 bug, 4
     undecided (--decision guarded).
 
@@ -166,7 +168,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         subjects = images or (Path(camera or ""),)
         json_paths = report_paths(subjects, json_path, ".json", folder=many)
         html_paths = report_paths(subjects, html_path, ".html", folder=many)
-        outputs: dict[str, Path | None] = {"--junit": junit, "--evidence": evidence_path}
+        outputs: dict[str, Path | None] = {"--junit": junit, **evidence_outputs(evidence_paths)}
         for img, jp, hp in zip(subjects, json_paths, html_paths, strict=True):
             outputs[f"--json ({img})" if many else "--json"] = jp
             outputs[f"--html ({img})" if many else "--html"] = hp
@@ -219,12 +221,13 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         from fidelity.report.jsonform import chart_report_json
 
         write_json_output(STDOUT, chart_report_json(cases[0].report))
-    if evidence_path is not None:
+    if evidence_paths:
         from fidelity.report.evidence import write_evidence
 
-        write_evidence(evidence_path, "gate", [(c.subject, c.report, c.error) for c in cases],
-                       gate_exit_code(cases))
-        click.echo(f"wrote {display_path(evidence_path)}")
+        write_evidence_files(evidence_paths, write_evidence, "gate",
+                             [(c.subject, c.report, c.error) for c in cases],
+                             gate_exit_code(cases),
+                             results=[*(p for _, w in done for p in w), junit])
     if many:
         codes = [c.exit_code for c in cases]
         undecided = (f", {codes.count(EXIT_UNDECIDED)} undecided"

@@ -577,15 +577,53 @@ def decision_rule(decision: str, coverage_factor: float, strict: bool) -> Any:
     return DecisionRule(decision, float(coverage_factor), bool(strict))
 
 
+class EvidencePath(ParamTypeBase):
+    """An ``--evidence`` file: a path whose suffix names its format (``.json``, ``.srmd``,
+    ``.stmd``; :data:`fidelity.report.evidence.EVIDENCE_FORMATS`)."""
+
+    name = "FILE"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> Path:
+        from fidelity.report.evidence import evidence_format
+
+        path = Path(os.fsdecode(PATH.convert(value, param, ctx)))
+        evidence_format(path)
+        return path
+
+
 def evidence_option(f: F) -> F:
-    """``--evidence FILE``: the credibility record of the run
-    (:mod:`fidelity.report.evidence`)."""
+    """``--evidence FILE`` (repeatable): the credibility record of the run in the format of
+    each file's suffix (:mod:`fidelity.report.evidence`, :mod:`fidelity.report.ssp`)."""
     return click.option(
-        "--evidence", "evidence_path", type=PATH, default=None,
-        help="Write the run's credibility record here (JSON: code, environment, inputs with "
-             "SHA-256, reference and table provenance, measurement with its uncertainty "
-             "budget, prediction with its interval, validity domain, decision rule, "
-             "verdict).")(f)
+        "--evidence", "evidence_paths", type=EvidencePath(), multiple=True,
+        help="Write the run's credibility record here, in the format of the file's suffix; "
+             "give it once per format. .json: code, environment, inputs with SHA-256, "
+             "reference and table provenance, measurement with its uncertainty budget, "
+             "prediction with its interval, validity domain, decision rule, verdict. .srmd: "
+             "SSP Traceability resource meta data (every input and result with its SHA3-256, "
+             "the verdicts and values). .stmd: SSP Traceability task meta data (the "
+             "evaluation phase).")(f)
+
+
+def evidence_outputs(paths: Sequence[Path]) -> dict[str, Path]:
+    """The ``--evidence`` files as :func:`fidelity.fileio.check_outputs` labels them."""
+    return {("--evidence" if len(paths) == 1 else f"--evidence ({p.name})"): p for p in paths}
+
+
+def write_evidence_files(paths: Sequence[Path], write: Callable[..., list[Path]],
+                         *args: Any, results: Sequence[Path | None] = (),
+                         indent: str = "") -> None:
+    """Write the evidence files with ``write(paths, *args, results=...)``
+    (:func:`fidelity.report.evidence.write_evidence` or ``write_fit_evidence``), ``results``
+    being the files the run wrote that exist, and print each."""
+    from fidelity.fileio import display_path
+
+    if not paths:
+        return
+    wrote = [p for p in results if p is not None and p.is_file()]
+    for path in write(paths, *args, results=wrote):
+        click.echo(f"{indent}wrote {display_path(path)}")
 
 
 def measure_options(f: F) -> F:

@@ -1,4 +1,4 @@
-"""The credibility record of a run (``--evidence FILE`` of check, audit, gate, compare).
+"""The credibility record of a run (``--evidence FILE`` of check, audit, gate, compare, fit).
 
 One JSON document an assessment file can hold, answering what an assessor asks of every
 number: which code and data produced it, how uncertain it is, inside which domain it holds and
@@ -20,6 +20,9 @@ by which rule pass/fail was decided. Its layout is the JSON Schema
   be measured;
 - ``credibility_sections``: which keys answer which section of an assessment.
 
+The same record is written in the SSP Traceability formats, SRMD and STMD
+(:mod:`fidelity.report.ssp`), by the suffix of the file (:data:`EVIDENCE_FORMATS`).
+
 The report layer renders the result records here (:mod:`fidelity.records`); nothing is
 measured again.
 """
@@ -30,7 +33,7 @@ import hashlib
 import os
 import platform
 import subprocess
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -301,27 +304,101 @@ def fit_evidence_record(report: FitReport, exit_code: int = 0) -> JSONObject:
     return _record("fit", exit_code, None, [subject])
 
 
-def write_evidence(path: str | os.PathLike[str], command: str,
+#: The formats of ``--evidence FILE``, chosen by the file's suffix, and what each holds.
+EVIDENCE_FORMATS: Mapping[str, str] = {
+    ".json": "the credibility record (JSON, schema evidence.schema.json)",
+    ".srmd": "SSP Traceability Simulation Resource Meta Data: the run as a resource, every "
+             "input and result with its SHA3-256, the verdicts, ΔE00, predictions, validity",
+    ".stmd": "SSP Traceability Simulation Task Meta Data: the evaluation (validation) phase "
+             "of a Credible Simulation Process",
+}
+
+#: The Python module each format's writer needs, and the extra that installs it.
+_NEEDS = {".srmd": "lxml", ".stmd": "lxml"}
+
+PathArg = str | os.PathLike[str]
+
+
+def evidence_format(path: PathArg) -> str:
+    """The format of an ``--evidence`` file: its suffix in :data:`EVIDENCE_FORMATS`
+    (``.json``, ``.srmd``, ``.stmd``, any case). An unknown suffix, or a format whose library
+    is missing (``pip install 'camera-fidelity[ssp]'``), is an :class:`InvalidValueError`
+    naming the file."""
+    import importlib.util
+
+    from fidelity.errors import InvalidValueError
+    from fidelity.fileio import display_path
+
+    suffix = Path(path).suffix.lower()
+    if suffix not in EVIDENCE_FORMATS:
+        raise InvalidValueError(
+            f"{display_path(path)}: --evidence writes {', '.join(EVIDENCE_FORMATS)} (by the "
+            f"file's suffix), not {repr(suffix) if suffix else 'a file without one'}")
+    need = _NEEDS.get(suffix)
+    if need is not None and importlib.util.find_spec(need) is None:
+        raise InvalidValueError(f"{display_path(path)}: writing {suffix} needs {need}: pip "
+                                "install 'camera-fidelity[ssp]'")
+    return suffix
+
+
+def _write_json(path: PathArg, record: JSONObject, results: Sequence[PathArg]) -> Path:
+    from fidelity.fileio import write_json_atomic
+
+    return write_json_atomic(path, record)
+
+
+def _write_srmd(path: PathArg, record: JSONObject, results: Sequence[PathArg]) -> Path:
+    from fidelity.report.ssp import write_srmd
+
+    return write_srmd(path, record, results)
+
+
+def _write_stmd(path: PathArg, record: JSONObject, results: Sequence[PathArg]) -> Path:
+    from fidelity.report.ssp import write_stmd
+
+    return write_stmd(path, record, results)
+
+
+#: The writer of each format, in the order they are written: the JSON record first, the SRMD
+#: next (it lists the JSON among the results, with its checksum), the STMD last (it lists
+#: both; the SRMD as the verdict's).
+WRITERS: Mapping[str, Callable[[PathArg, JSONObject, Sequence[PathArg]], Path]] = {
+    ".json": _write_json, ".srmd": _write_srmd, ".stmd": _write_stmd}
+
+
+def write_record(paths: PathArg | Sequence[PathArg], record: JSONObject,
+                 results: Sequence[PathArg] = ()) -> list[Path]:
+    """Write ``record`` to each of ``paths`` in the format of its suffix
+    (:func:`evidence_format`), atomically, in the order of :data:`WRITERS`; ``results`` are the
+    files the run wrote (the SSP formats list them with their checksums, and each evidence file
+    written before). Returns the paths written."""
+    given = list(dict.fromkeys(Path(p) for p in ([paths] if isinstance(paths, str | os.PathLike)
+                                                  else paths)))  # each file once
+    order = list(WRITERS)
+    written: list[Path] = []
+    for path in sorted(given, key=lambda p: order.index(evidence_format(p))):
+        written.append(WRITERS[evidence_format(path)](path, record, [*results, *written]))
+    return written
+
+
+def write_evidence(paths: PathArg | Sequence[PathArg], command: str,
                    subjects: Sequence[tuple[str, ChartReport | ComparisonReport | None,
                                             str | None]],
-                   exit_code: int) -> Path:
-    """Write the credibility record atomically (:func:`evidence_record`)."""
-    from fidelity.fileio import write_json_atomic
-
-    write_json_atomic(path, evidence_record(command, subjects, exit_code))
-    return Path(path)
+                   exit_code: int, results: Sequence[PathArg] = ()) -> list[Path]:
+    """Write the credibility record (:func:`evidence_record`) to ``paths``
+    (:func:`write_record`)."""
+    return write_record(paths, evidence_record(command, subjects, exit_code), results)
 
 
-def write_fit_evidence(path: str | os.PathLike[str], report: FitReport,
-                       exit_code: int = 0) -> Path:
-    """Write the fit's credibility record atomically (:func:`fit_evidence_record`)."""
-    from fidelity.fileio import write_json_atomic
-
-    write_json_atomic(path, fit_evidence_record(report, exit_code))
-    return Path(path)
+def write_fit_evidence(paths: PathArg | Sequence[PathArg], report: FitReport,
+                       exit_code: int = 0, results: Sequence[PathArg] = ()) -> list[Path]:
+    """Write the fit's credibility record (:func:`fit_evidence_record`) to ``paths``
+    (:func:`write_record`)."""
+    return write_record(paths, fit_evidence_record(report, exit_code), results)
 
 
-__all__ = ["CREDIBILITY_SECTIONS", "EVIDENCE_SCHEMA_VERSION", "OUTCOMES", "code_sha256",
-           "environment_record", "evidence_record", "evidence_schema", "evidence_schema_path",
+__all__ = ["CREDIBILITY_SECTIONS", "EVIDENCE_FORMATS", "EVIDENCE_SCHEMA_VERSION", "OUTCOMES",
+           "WRITERS", "code_sha256", "environment_record", "evidence_format",
+           "evidence_record", "evidence_schema", "evidence_schema_path",
            "fit_evidence_record", "git_commit", "tool_record", "write_evidence",
-           "write_fit_evidence"]
+           "write_fit_evidence", "write_record"]

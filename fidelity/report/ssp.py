@@ -1,0 +1,413 @@
+"""The credibility record in the SSP Traceability formats: SRMD and STMD (``--evidence
+run.srmd``, ``--evidence run.stmd``).
+
+Source: Modelica Association Project SSP, *SSP Layered Standard Traceability*, version
+1.0-rc.2 (the public repository ``modelica/ssp-ls-traceability``, commit ``b277def``): the
+Simulation Resource Meta Data format (SRMD, section 8; MIME type
+``application/x-srmd-meta-data``) and the Simulation Task Meta Data format (STMD, section 7;
+``application/x-stmd-simulationtask``), over the common elements of section 5 (STC). Their XML
+Schemas (XSD 1.1) ship with the package, :func:`ssp_schema_path`.
+
+- **SRMD**: the run as a resource. No ``data`` attribute (the run is not one file: the SRMD is
+  tied to the run's files through its entries, section 8.1). Classifications hold what an
+  assessor asks: ``…fidelity.tool`` (name, version, commit, code hash), ``…fidelity.run``
+  (command, time, exit code, outcome, decision rule), one ``…fidelity.subject`` per camera or
+  image (verdict, mean ΔE00 and its standard uncertainty, the predicted ΔmAP and its interval,
+  the validity domain and each of its checks), and ``…fidelity.inputs`` /
+  ``…fidelity.results`` with one entry per file: ``xlink:href`` its URI (relative to the SRMD's
+  folder), ``linkedType`` its MIME type, and as content an SRMD of that file alone, whose
+  ``data`` and ``checksum`` (SHA3-256, FIPS 202, over the file's raw bytes; ``checksumType``)
+  are the attributes the SRMD schema defines for a resource's checksum.
+- **STMD**: a fragment of a Simulation Task for the validation phase of a Credible Simulation
+  Process. STMD's phases are analysis, requirements, design, implementation, execution,
+  evaluation and fulfillment; validating a camera model's colour against its reference is the
+  evaluation phase's work (section 7: "the simulation results are evaluated and quality
+  assurance measures are implemented ... a quality verdict"), so the fragment has one
+  ``EvaluationPhase`` with the steps ``EvaluateSimulationResults`` (inputs, the tool as
+  procedure, the results) and ``DeriveSimulationQualityVerdict`` (the decision rule as
+  procedure, the verdict and the SRMD of the same run as output, the validity domain as
+  rationale). Every file is a ``Resource`` whose ``MetaData`` holds its SRMD with the
+  SHA3-256 checksum (section 9.2: SRMD "contained in the MetaData elements for the resource").
+
+The documents are built from the JSON credibility record (:mod:`fidelity.report.evidence`),
+so every value equals the record's; floats are written as Python's shortest round-trip
+decimal. Only the checksums are computed here, at the edge (:func:`traced_files`).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import uuid
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from urllib.parse import quote
+
+from lxml import etree
+
+from fidelity.fileio import JSONObject, file_sha3_256, printable, write_bytes_atomic
+
+#: The SSP Traceability version the documents follow (``version`` of SRMD and STMD).
+SSP_TRACEABILITY_VERSION = "1.0.0-rc.2"
+
+#: XML namespaces of SSP Traceability 1.x and XLink.
+NAMESPACES: Mapping[str, str] = {
+    "srmd": "http://ssp-standard.org/SSPTraceability1/SimulationResourceMetaData",
+    "stmd": "http://ssp-standard.org/SSPTraceability1/SimulationTaskMetaData",
+    "stc": "http://ssp-standard.org/SSPTraceability1/SSPTraceabilityCommon",
+    "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
+    "xlink": "http://www.w3.org/1999/xlink",
+}
+
+#: The checksum algorithm SSP Traceability 1.0 prescribes (``checksumType``).
+CHECKSUM_TYPE = "SHA3-256"
+
+#: Prefix of the classification types (reverse domain name notation, STC section 5).
+CLASSIFICATION = "org.camera-fidelity.fidelity"
+
+#: MIME types by suffix (the SSP Traceability ones from its section 9); others are
+#: ``application/octet-stream``, as STC prescribes when none can be named.
+MIME_TYPES: Mapping[str, str] = {
+    ".json": "application/json", ".html": "text/html", ".xml": "application/xml",
+    ".toml": "application/toml", ".png": "image/png", ".jpg": "image/jpeg",
+    ".jpeg": "image/jpeg", ".tif": "image/tiff", ".tiff": "image/tiff", ".exr": "image/x-exr",
+    ".cube": "text/plain", ".ocio": "application/x-yaml", ".csv": "text/csv",
+    ".srmd": "application/x-srmd-meta-data", ".stmd": "application/x-stmd-simulationtask",
+}
+
+#: The STC resource ``kind`` of an input's role (others: ``document``).
+INPUT_KINDS: Mapping[str, str] = {
+    "camera (built-in)": "model", "camera file": "model", "camera data": "parameter",
+    "image": "result", "real image": "document", "simulated image": "result",
+    "prediction table": "specification", "calibration table": "parameter",
+}
+
+
+@dataclass(frozen=True)
+class TracedFile:
+    """One file of a run as the SSP Traceability documents name it.
+
+    ``kind`` is ``"input"`` or ``"result"``, ``role`` what it is to the run (``"image"``,
+    ``"prediction table"``, ``"report.json"``...), ``path`` the file (as the run named it),
+    ``sha3_256`` the SHA3-256 hex digest of its bytes (None when it could not be read) and
+    ``mime`` its MIME type.
+    """
+
+    kind: str
+    role: str
+    path: Path
+    sha3_256: str | None
+    mime: str
+
+
+def ssp_schema_path(name: str) -> Path:
+    """The shipped XML Schema ``name`` (``"SRMD.xsd"``, ``"STMD.xsd"``, ``"STC.xsd"``) of SSP
+    Traceability 1.0-rc.2, with what it imports beside it."""
+    from fidelity.resources import resource_dir
+
+    return resource_dir("data") / "schemas" / "ssp-traceability" / name
+
+
+def mime_type(path: str | os.PathLike[str]) -> str:
+    """The MIME type of ``path`` by its suffix (:data:`MIME_TYPES`)."""
+    return MIME_TYPES.get(Path(path).suffix.lower(), "application/octet-stream")
+
+
+#: Characters XML 1.0 cannot hold, even escaped (C0 controls but tab, newline, return).
+_NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ufffe\uffff]")
+
+
+def xml_safe(text: str) -> str:
+    """``text`` that XML 1.0 can hold: undecodable bytes of file names as ``\\xNN``
+    (:func:`fidelity.fileio.printable`), control characters as ``\\xNN`` too."""
+    return _NOT_XML.sub(lambda m: f"\\x{ord(m.group()):02x}" if ord(m.group()) < 256
+                        else f"\\u{ord(m.group()):04x}", printable(text))
+
+
+def _traced(kind: str, role: str, path: str | os.PathLike[str]) -> TracedFile:
+    try:
+        digest: str | None = file_sha3_256(path)
+    except OSError:
+        digest = None
+    return TracedFile(kind, xml_safe(role), Path(path), digest, mime_type(path))
+
+
+def traced_files(record: JSONObject, results: Sequence[str | os.PathLike[str]]
+                 ) -> list[TracedFile]:
+    """The run's files: every input file of the record's subjects (images, camera files, the
+    prediction and calibration tables), then its results: a fit's correction files and
+    ``results`` (the files the run wrote), each once, with its SHA3-256 read now."""
+    seen: set[Path] = set()
+    out: list[TracedFile] = []
+
+    def add(kind: str, role: str, path: Any) -> None:
+        if not path:
+            return
+        key = Path(path).resolve()
+        if key not in seen:
+            seen.add(key)
+            out.append(_traced(kind, role, path))
+
+    for subject in record.get("subjects", []):
+        for item in subject.get("inputs") or []:
+            add("input", item["role"], item.get("path"))
+        table = subject.get("prediction_table") or {}
+        add("input", "prediction table", table.get("path"))
+        add("input", "calibration table", (table.get("calibration") or {}).get("path"))
+    for subject in record.get("subjects", []):  # a fit's correction files
+        for name, item in ((subject.get("correction") or {}).get("files") or {}).items():
+            add("result", Path(item.get("path") or name).name, item.get("path"))
+    for path in results:
+        add("result", Path(path).name, path)
+    return out
+
+
+def file_uri(path: str | os.PathLike[str], base: str | os.PathLike[str]) -> str:
+    """The URI of ``path``: relative to the folder ``base`` when the file lies in or below it
+    (SSP resolves a relative URI against the document's own URI), percent-encoded; else its
+    absolute ``file:`` URI."""
+    target = Path(path).resolve()
+    try:
+        rel = Path(os.path.relpath(target, Path(base).resolve()))
+    except ValueError:  # another drive
+        rel = Path("..")
+    if rel.parts and rel.parts[0] == "..":
+        return "file://" + quote(os.fsencode(target.as_posix()), safe="/")
+    return quote(os.fsencode(rel.as_posix()), safe="/")
+
+
+def _q(prefix: str, name: str) -> str:
+    return f"{{{NAMESPACES[prefix]}}}{name}"
+
+
+def _text(value: Any) -> str:
+    """A value as classification text: floats as the shortest round-trip decimal, booleans
+    ``true``/``false`` (XML Schema)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return repr(value) if isinstance(value, float) else xml_safe(str(value))
+
+
+def _classification(kind: str, entries: Sequence[tuple[str, Any]],
+                    description: str | None = None) -> etree._Element:
+    """A classification ``{CLASSIFICATION}.{kind}`` of the entries whose value is not None."""
+    element = etree.Element(_q("stc", "Classification"), type=f"{CLASSIFICATION}.{kind}")
+    if description:
+        element.set("description", xml_safe(description))
+    for keyword, value in ((k, v) for k, v in entries if v is not None):
+        etree.SubElement(element, _q("stc", "ClassificationEntry"),
+                         keyword=xml_safe(keyword)).text = _text(value)
+    return element
+
+
+def file_srmd(file: TracedFile, base: str | os.PathLike[str]) -> etree._Element:
+    """An SRMD of one file: ``name`` its role, ``data`` its URI, ``checksum`` its SHA3-256."""
+    element = etree.Element(_q("srmd", "SimulationResourceMetaData"), nsmap=_nsmap("srmd"),
+                            version=SSP_TRACEABILITY_VERSION, name=file.role,
+                            data=file_uri(file.path, base))
+    if file.sha3_256 is not None:
+        element.set("checksum", file.sha3_256)
+        element.set("checksumType", CHECKSUM_TYPE)
+    return element
+
+
+def _nsmap(root: str) -> dict[str, str]:
+    keep = {"srmd": ("srmd", "stc", "xlink"), "stmd": ("stmd", "stc", "ssc", "xlink")}[root]
+    return {k: NAMESPACES[k] for k in keep}
+
+
+def _tool_entries(record: JSONObject) -> list[tuple[str, Any]]:
+    tool, env = record["tool"], record.get("environment") or {}
+    return [("name", tool.get("name")), ("distribution", tool.get("distribution")),
+            ("version", tool.get("version")), ("commit", tool.get("commit")),
+            ("dirty", tool.get("dirty")), ("code_sha256", tool.get("code_sha256")),
+            ("python", env.get("python")), ("platform", env.get("platform"))]
+
+
+def _run_entries(record: JSONObject) -> list[tuple[str, Any]]:
+    run, rule = record["record"], record.get("decision_rule") or {}
+    return [("command", run.get("command")), ("created", run.get("created")),
+            ("exit_code", run.get("exit_code")), ("outcome", run.get("outcome")),
+            ("decision_rule", rule.get("rule")), ("coverage_factor", rule.get("k")),
+            ("strict", rule.get("strict")), ("decision_rule_description",
+                                             rule.get("description"))]
+
+
+def subject_entries(subject: Mapping[str, Any]) -> list[tuple[str, Any]]:
+    """The classification entries of one subject of the record: its verdict, measurement,
+    prediction with interval, and validity domain (each check as ``validity: NAME``)."""
+    m = subject.get("measurement") or {}
+    u = m.get("uncertainty") or {}
+    p = subject.get("prediction") or {}
+    iv = p.get("interval") or {}
+    lo, hi = (iv.get("interval") or [None, None])[:2]
+    v = subject.get("verdict") or {}
+    validity = subject.get("validity") or {}
+    entries: list[tuple[str, Any]] = [
+        ("subject", subject.get("subject")), ("error", subject.get("error")),
+        ("verdict", v.get("label")), ("verdict_passed", v.get("passed")),
+        ("verdict_reason", v.get("reason")),
+        ("criterion", (v.get("criterion") or {}).get("description")),
+        ("verdict_value", v.get("value")), ("limit", v.get("limit")),
+        ("expanded_uncertainty", v.get("expanded_uncertainty")),
+        ("quantity", m.get("quantity")), ("mean_delta_e", m.get("value")),
+        ("mean_delta_e_standard_uncertainty", u.get("standard_uncertainty")),
+        ("max_delta_e", m.get("max_delta_e")), ("worst_patch", m.get("worst_patch")),
+        ("predicted_dmap_points", p.get("dmap_points")),
+        ("prediction_standard_uncertainty", iv.get("standard_uncertainty")),
+        ("prediction_coverage_factor", iv.get("k")),
+        ("prediction_interval_low", lo), ("prediction_interval_high", hi),
+        ("prediction_upper_bound", p.get("upper_bound")),
+        ("validity_inside", validity.get("inside"))]
+    entries += [(f"validity: {c['name']}", f"{_text(c['inside'])}: {c['detail']}")
+                for c in validity.get("checks") or []]
+    return entries
+
+
+def _file_entries(kind: str, files: Sequence[TracedFile], base: Path) -> etree._Element:
+    element = etree.Element(_q("stc", "Classification"), type=f"{CLASSIFICATION}.{kind}s")
+    for f in (f for f in files if f.kind == kind):
+        entry = etree.SubElement(element, _q("stc", "ClassificationEntry"), keyword=f.role,
+                                 linkedType=f.mime)
+        entry.set(_q("xlink", "href"), file_uri(f.path, base))
+        entry.append(file_srmd(f, base))
+    return element
+
+
+def _title(record: JSONObject) -> str:
+    names = [str(s.get("subject")) for s in record.get("subjects", [])]
+    return xml_safe(f"fidelity {record['record']['command']}: " + ", ".join(names))
+
+
+def _top_level(element: etree._Element, record: JSONObject) -> None:
+    element.set("generationTool", f"fidelity {record['tool'].get('version')}")
+    element.set("generationDateAndTime", str(record["record"]["created"]))
+
+
+def srmd_element(record: JSONObject, files: Sequence[TracedFile],
+                 base: str | os.PathLike[str]) -> etree._Element:
+    """The SRMD of a run (module docstring) from its credibility ``record`` and its ``files``;
+    URIs relative to the folder ``base`` (where the SRMD is written)."""
+    root = etree.Element(_q("srmd", "SimulationResourceMetaData"), nsmap=_nsmap("srmd"),
+                         version=SSP_TRACEABILITY_VERSION, name=_title(record))
+    root.set("description", "a fidelity run (camera-model colour fidelity): its tool, "
+             "decision rule, verdicts, measurements with their uncertainty, predictions with "
+             "their interval, validity domain, and every input and result with its SHA3-256")
+    _top_level(root, record)
+    root.append(_classification("tool", _tool_entries(record)))
+    root.append(_classification("run", _run_entries(record)))
+    for subject in record.get("subjects", []):
+        root.append(_classification("subject", subject_entries(subject),
+                                    str(subject.get("subject"))))
+    root.append(_file_entries("input", files, Path(base)))
+    root.append(_file_entries("result", files, Path(base)))
+    return root
+
+
+def _resource(parent: etree._Element, kind: str, type_: str, *, source: str | None = None,
+              description: str | None = None) -> etree._Element:
+    element = etree.SubElement(parent, _q("stc", "Resource"), kind=kind, type=type_)
+    if source is not None:
+        element.set("source", source)
+    if description:
+        element.set("description", xml_safe(description))
+    return element
+
+
+def _file_resource(parent: etree._Element, file: TracedFile, kind: str,
+                   base: Path) -> etree._Element:
+    element = _resource(parent, kind, file.mime, source=file_uri(file.path, base),
+                        description=file.role)
+    meta = etree.SubElement(element, _q("ssc", "MetaData"), kind="general",
+                            type=MIME_TYPES[".srmd"])
+    etree.SubElement(meta, _q("ssc", "Content")).append(file_srmd(file, base))
+    return element
+
+
+def _result_kind(file: TracedFile) -> str:
+    return "report" if file.mime == "text/html" else "result"
+
+
+def stmd_element(record: JSONObject, files: Sequence[TracedFile],
+                 base: str | os.PathLike[str], guid: str) -> etree._Element:
+    """The STMD fragment of a run (module docstring): one ``EvaluationPhase``; ``files`` as
+    :func:`srmd_element`, a ``.srmd`` among the results is the verdict's SRMD."""
+    where = Path(base)
+    root = etree.Element(_q("stmd", "SimulationTaskMetaData"), nsmap=_nsmap("stmd"),
+                         version=SSP_TRACEABILITY_VERSION, name=_title(record), GUID=guid)
+    _top_level(root, record)
+    phase = etree.SubElement(root, _q("stmd", "EvaluationPhase"), description=(
+        "validation of the camera model's colour rendering against its reference chart "
+        "(Credible Simulation Process: the evaluation phase)"))
+    evaluate = etree.SubElement(phase, _q("stmd", "EvaluateSimulationResults"), description=(
+        "measure the chart's CIEDE2000 colour difference with its uncertainty and predict the "
+        "detection loss from the prediction table"))
+    given = etree.SubElement(evaluate, _q("stc", "Input"))
+    for f in (f for f in files if f.kind == "input"):
+        _file_resource(given, f, INPUT_KINDS.get(f.role, "document"), where)
+    procedure = etree.SubElement(evaluate, _q("stc", "Procedure"))
+    tool = _resource(procedure, "executable", "application/octet-stream",
+                     description="the tool that ran")
+    tool.append(_classification("tool", _tool_entries(record)))
+    out = etree.SubElement(evaluate, _q("stc", "Output"))
+    srmd = [f for f in files if f.kind == "result" and f.path.suffix.lower() == ".srmd"]
+    for f in (f for f in files if f.kind == "result" and f not in srmd):
+        _file_resource(out, f, _result_kind(f), where)
+
+    verdict = etree.SubElement(phase, _q("stmd", "DeriveSimulationQualityVerdict"),
+                               description="apply the decision rule to each subject")
+    procedure = etree.SubElement(verdict, _q("stc", "Procedure"))
+    rule = record.get("decision_rule") or {}
+    method = _resource(procedure, "method", "text/plain", description="the decision rule")
+    etree.SubElement(method, _q("stc", "Content")).text = _text(
+        rule.get("description") or "no decision rule: the run states no verdict")
+    method.append(_classification("run", _run_entries(record)))
+    out = etree.SubElement(verdict, _q("stc", "Output"))
+    for f in srmd:
+        _file_resource(out, f, "result", where)
+    for subject in record.get("subjects", []):
+        result = _resource(out, "result", "text/plain",
+                           description=f"verdict: {subject.get('subject')}")
+        etree.SubElement(result, _q("stc", "Content")).text = _text(
+            (subject.get("verdict") or {}).get("message") or subject.get("error")
+            or "no verdict")
+        result.append(_classification("subject", subject_entries(subject),
+                                      str(subject.get("subject"))))
+    rationale = etree.SubElement(verdict, _q("stc", "Rationale"))
+    for subject in record.get("subjects", []):
+        validity = subject.get("validity") or {}
+        text = _resource(rationale, "rationale", "text/plain",
+                         description=f"validity domain: {subject.get('subject')}")
+        etree.SubElement(text, _q("stc", "Content")).text = xml_safe("\n".join(
+            f"{c['name']}: {'inside' if c['inside'] else 'outside'}: {c['detail']}"
+            for c in validity.get("checks") or []) or "no validity domain stated")
+    return root
+
+
+def _xml(element: etree._Element) -> bytes:
+    return bytes(etree.tostring(element, xml_declaration=True, encoding="UTF-8",
+                                pretty_print=True))
+
+
+def write_srmd(path: str | os.PathLike[str], record: JSONObject,
+               results: Sequence[str | os.PathLike[str]] = ()) -> Path:
+    """Write the run's SRMD atomically (:func:`srmd_element`); ``results`` are the files the
+    run wrote."""
+    files = traced_files(record, results)
+    return write_bytes_atomic(path, _xml(srmd_element(record, files, Path(path).parent)))
+
+
+def write_stmd(path: str | os.PathLike[str], record: JSONObject,
+               results: Sequence[str | os.PathLike[str]] = ()) -> Path:
+    """Write the run's STMD fragment atomically (:func:`stmd_element`, a new random GUID)."""
+    files = traced_files(record, results)
+    element = stmd_element(record, files, Path(path).parent, str(uuid.uuid4()))
+    return write_bytes_atomic(path, _xml(element))
+
+
+__all__ = ["CHECKSUM_TYPE", "CLASSIFICATION", "INPUT_KINDS", "MIME_TYPES", "NAMESPACES",
+           "SSP_TRACEABILITY_VERSION", "TracedFile", "file_srmd", "file_uri", "mime_type",
+           "srmd_element", "ssp_schema_path", "stmd_element", "subject_entries",
+           "traced_files", "write_srmd", "write_stmd", "xml_safe"]
