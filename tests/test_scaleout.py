@@ -142,6 +142,16 @@ def coco(shared: Path) -> tuple[Path, Path, Path]:
             shared / "models/yolox_nano.onnx")
 
 
+@pytest.fixture(scope="module")
+def local_sweep(coco, tmp_path_factory) -> SweepStore:
+    """The grid swept locally, the reference both Ray sweeps are compared with (once)."""
+    from fidelity.coco.sweep import run_sweep
+
+    images, ann, model = coco
+    return run_sweep([ModelSpec(model, IMAGES)], images, ann,
+                     tmp_path_factory.mktemp("local-sweep"), *GRID, log=lambda s: None)
+
+
 def _sweep_cli(coco: tuple[Path, Path, Path], out: Path, head: str) -> subprocess.Popen[str]:
     images, ann, model = coco
     return subprocess.Popen(
@@ -194,17 +204,13 @@ def _assert_same(a: SweepStore, b: SweepStore) -> None:
 
 
 @pytest.mark.shared
-def test_ray_cluster_sweep_equals_local(cluster, coco, tmp_path) -> None:
+def test_ray_cluster_sweep_equals_local(cluster, coco, local_sweep, tmp_path) -> None:
     """The CLI on a two-node Ray cluster, 2 workers: one worker killed mid-run (Ray restarts it
     and retries its chunk), then the driver killed with SIGKILL and rerun; the final store
     equals a local run's cell by cell (scores and every detection), the rerun computes only
     what was not stored, and both nodes did work."""
-    from fidelity.coco.sweep import run_sweep
-
     head, folder, _ = cluster
-    images, ann, model = coco
-    local = run_sweep([ModelSpec(model, IMAGES)], images, ann, tmp_path / "local", *GRID,
-                      log=lambda s: None)
+    local = local_sweep
 
     out = tmp_path / "ray"
     proc = _sweep_cli(coco, out, head)
@@ -256,15 +262,11 @@ def test_ray_cluster_sweep_equals_local(cluster, coco, tmp_path) -> None:
 
 
 @pytest.mark.shared
-def test_ray_client_sweep_equals_local(cluster, coco, tmp_path) -> None:
+def test_ray_client_sweep_equals_local(cluster, coco, local_sweep, tmp_path) -> None:
     """``--address ray://HOST:PORT`` (Ray Client: the driver outside the cluster, images and
     detections through the client connection) gives the local run's store."""
-    from fidelity.coco.sweep import run_sweep
-
     _, _, client = cluster
-    images, ann, model = coco
-    local = run_sweep([ModelSpec(model, IMAGES)], images, ann, tmp_path / "local", *GRID,
-                      log=lambda s: None)
+    local = local_sweep
     out = tmp_path / "client"
     stdout, log = _sweep_cli(coco, out, client).communicate(timeout=240)
     if "Starting Ray client server failed" in log:
