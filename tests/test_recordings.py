@@ -33,9 +33,9 @@ from rosbags.typesys import Stores, get_typestore  # noqa: E402
 from fidelity.camera.render import render_chart  # noqa: E402
 from fidelity.chart.image import write_png  # noqa: E402
 from fidelity.chart.measure import ReadOptions, measure_image  # noqa: E402
-from fidelity.chart.recording import message_pixels  # noqa: E402
+from fidelity.chart.recording import message_pixels, supported_encodings  # noqa: E402
 from fidelity.cli import main  # noqa: E402
-from fidelity.errors import FidelityError  # noqa: E402
+from fidelity.errors import FidelityError, InputFileError  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 T0 = 1_700_000_000_000_000_000  # ns
@@ -522,3 +522,76 @@ def test_zstd_compressed_ros2_bags_are_read(chart, tmp_path, kind, compression):
     image, _ = read_frame(path, Choice("/cam", frame=1))
     assert image.recording.frame == 1
     np.testing.assert_array_equal(np.rint(image.pixels * 255).astype(np.uint8), codes)
+
+
+def _nv(rgb8: np.ndarray, encoding: str) -> np.ndarray:
+    """RGB codes as a semi-planar 4:2:0 buffer ((3H/2, W): luma rows, then chroma pairs), by
+    OpenCV's BT.601 encoder (I420 planes, interleaved here as NV12 or NV21)."""
+    import cv2
+
+    h, w = rgb8.shape[:2]
+    i420 = cv2.cvtColor(np.ascontiguousarray(rgb8), cv2.COLOR_RGB2YUV_I420).reshape(-1)
+    y = i420[: h * w].reshape(h, w)
+    u = i420[h * w: h * w + h * w // 4].reshape(h // 2, w // 2)
+    v = i420[h * w + h * w // 4:].reshape(h // 2, w // 2)
+    first, second = (u, v) if encoding == "nv12" else (v, u)
+    return np.vstack([y, np.stack([first, second], axis=-1).reshape(h // 2, w)])
+
+
+@pytest.mark.parametrize("encoding", ["nv12", "nv21"])
+def test_semi_planar_yuv420_agrees_with_opencv(encoding):
+    """nv12 / nv21 (4:2:0, the chroma plane after the luma plane) against OpenCV's own
+    conversion of the same buffer: within one code (OpenCV computes in fixed point), every
+    byte value occurring; rows padded; ``height`` either the picture's (ROS 2 drivers) or the
+    buffer's rows (rosbags-image's reading) gives the same picture."""
+    import cv2
+
+    buf = np.random.default_rng(5).integers(0, 256, (96, 128), dtype=np.uint8)  # picture 64
+    code = cv2.COLOR_YUV2RGB_NV12 if encoding == "nv12" else cv2.COLOR_YUV2RGB_NV21
+    theirs = cv2.cvtColor(buf, code).astype(np.int64)
+    assert theirs.shape == (64, 128, 3) and theirs.min() == 0 and theirs.max() == 255
+    padded = np.hstack([buf, np.full((96, 8), 77, np.uint8)]).reshape(-1)
+    for height, data, step in ((64, buf.reshape(-1), 128), (64, padded, 136),
+                               (96, buf.reshape(-1), 128)):
+        ours = message_pixels(height, 128, encoding, False, step, data)
+        assert ours[1:4] == ("uint8", ("R", "G", "B"), "srgb")
+        diff = np.abs(np.rint(ours[0] * 255).astype(np.int64) - theirs)
+        assert diff.max() <= 1 and diff.mean() < 0.05, (encoding, height, step)
+    with pytest.raises(InputFileError, match="even width and height"):
+        message_pixels(63, 128, encoding, False, 128, buf.reshape(-1))
+    with pytest.raises(InputFileError, match="fewer than"):
+        message_pixels(64, 128, encoding, False, 128, buf.reshape(-1)[:9000])
+    assert encoding in supported_encodings()
+
+
+@pytest.mark.parametrize("encoding", ["nv12", "nv21"])
+def test_a_chart_recorded_as_nv12_or_nv21_measures_as_its_decoded_pixels(chart, corners,
+                                                                         encoding, tmp_path):
+    """A chart in a ROS 2 bag as nv12 / nv21 is audited as the PNG of OpenCV's decoding of the
+    same buffer (within the one-code rounding difference), and its ΔE is close to the rgb8
+    chart's (4:2:0 chroma is shared by 2 x 2 pixels: the windows inside the patches are
+    flat)."""
+    import cv2
+
+    _, display = chart
+    codes8 = np.clip(np.rint(display * 255), 0, 255).astype(np.uint8)
+    h, w = codes8.shape[:2]
+    codes8 = codes8[: h - h % 2, : w - w % 2]
+    buf = _nv(codes8, encoding)
+
+    def make(ts, t):
+        return ts.types["sensor_msgs/msg/Image"](
+            header=header(ts, t), height=codes8.shape[0], width=codes8.shape[1],
+            encoding=encoding, is_bigendian=0, step=codes8.shape[1], data=buf.reshape(-1))
+
+    bag = write_recording(tmp_path, "mcap", {"/cam/nv": [make, make]})
+    got = measure_image(bag, corners, read=ReadOptions(topic="/cam/nv"))
+    code = cv2.COLOR_YUV2RGB_NV12 if encoding == "nv12" else cv2.COLOR_YUV2RGB_NV21
+    ref = tmp_path / "decoded.png"
+    cv2.imwrite(str(ref), cv2.cvtColor(cv2.cvtColor(buf, code), cv2.COLOR_RGB2BGR))
+    want = measure_image(ref, corners)
+    assert got.mean_delta_e == pytest.approx(want.mean_delta_e, abs=0.02)
+    rgb_png = tmp_path / "rgb.png"
+    cv2.imwrite(str(rgb_png), cv2.cvtColor(codes8, cv2.COLOR_RGB2BGR))
+    assert got.mean_delta_e == pytest.approx(measure_image(rgb_png, corners).mean_delta_e,
+                                             abs=0.3)

@@ -17,8 +17,9 @@ Messages (:func:`message_pixels`):
   :func:`fidelity.chart.image.read_image` does for a PNG; likely sRGB-encoded), ``32FC3``,
   ``32FC4``, ``64FC3`` (floats as they are, channels taken as R, G, B; likely linear), the
   generic ``8UC3``/``16UC3`` (and 4-channel) codes taken as R, G, B; YUV 4:2:2 ``uyvy``
-  (``yuv422``) and ``yuyv`` (``yuv422_yuy2``) converted by ITU-R BT.601 in studio range to 8-bit
-  R'G'B' as OpenCV (and so cv_bridge) converts them; ``bayer_rggb8`` and the
+  (``yuv422``) and ``yuyv`` (``yuv422_yuy2``), and semi-planar YUV 4:2:0 ``nv12`` and ``nv21``
+  (``height`` the picture's; the chroma rows follow the luma rows), converted by ITU-R BT.601
+  in studio range to 8-bit R'G'B' as OpenCV (and so cv_bridge) converts them; ``bayer_rggb8`` and the
   other ``bayer_*`` 8/16-bit mosaics demosaiced (:func:`fidelity.chart.image.demosaic`, the
   pattern from the encoding; linear); one-channel ``mono8``, ``mono16``, ``8UC1``, ``16UC1``,
   ``32FC1`` images only as a Bayer mosaic of a pattern given (``bayer``), as for a one-channel
@@ -77,6 +78,8 @@ _YUV422 = {"uyvy": (1, 0, 3, 2), "yuv422": (1, 0, 3, 2), "yuyv": (0, 1, 2, 3),
            "yuv422_yuy2": (0, 1, 2, 3)}
 #: ITU-R BT.601 studio range (Y 16-235, Cb/Cr 16-240) Y'CbCr -> R'G'B' in 8-bit codes, the
 #: conversion OpenCV's ``COLOR_YUV2RGB_UYVY``/``_YUYV`` (and so cv_bridge) applies.
+#: Semi-planar YUV 4:2:0 encodings: the positions of Cb and Cr in each chroma pair.
+_YUV420SP = {"nv12": (0, 1), "nv21": (1, 0)}
 _BT601 = np.array([[255 / 219, 0.0, 255 / 224 * 1.402],
                    [255 / 219, -255 / 224 * 1.772 * 0.114 / 0.587,
                     -255 / 224 * 1.402 * 0.299 / 0.587],
@@ -92,7 +95,7 @@ def supported_encodings() -> list[str]:
     """The ``sensor_msgs/Image`` encodings :func:`message_pixels` reads."""
     bayer = [f"bayer_{p.lower()}{bits}" for p in BAYER_PATTERNS for bits in (8, 16)]
     generic = [f"{d}C{c}" for d in _GENERIC for c in (1, 3, 4)]
-    return [*_PACKED, *_YUV422, *bayer, *generic]
+    return [*_PACKED, *_YUV422, *_YUV420SP, *bayer, *generic]
 
 
 def is_recording_path(path: str | os.PathLike[str]) -> bool:
@@ -423,6 +426,8 @@ def message_pixels(height: int, width: int, encoding: str, bigendian: bool, step
     pattern = _bayer_of(enc)
     if enc in _YUV422:
         return _yuv422(height, width, enc, step, data, bayer=bayer, limit=limit, where=where)
+    if enc in _YUV420SP:
+        return _yuv420sp(height, width, enc, step, data, bayer=bayer, limit=limit, where=where)
     if pattern is not None:
         bits = enc[10:]
         if bits not in ("8", "16"):
@@ -506,13 +511,58 @@ def _yuv422(height: int, width: int, encoding: str, step: int, data: np.ndarray,
     rows = np.lib.stride_tricks.as_strided(data, shape=(height, row), strides=(step, 1))
     quads = np.ascontiguousarray(rows).reshape(height, width // 2, 4).astype(np.float64)
     y0, u, y1, v = (quads[:, :, i] for i in _YUV422[encoding])
-    y = np.maximum(np.stack([y0, y1], axis=2).reshape(height, width) - 16.0, 0.0)  # as OpenCV
-    cb = np.repeat(u, 2, axis=1) - 128.0
-    cr = np.repeat(v, 2, axis=1) - 128.0
-    rgb = np.stack([y, cb, cr], axis=-1) @ _BT601.T
+    y = np.stack([y0, y1], axis=2).reshape(height, width)
+    return _bt601(y, np.repeat(u, 2, axis=1), np.repeat(v, 2, axis=1))
+
+
+def _bt601(y: np.ndarray, u: np.ndarray, v: np.ndarray
+           ) -> tuple[np.ndarray, str, tuple[str, str, str], str, str | None]:
+    """Y'CbCr codes (float, full size) to R'G'B' by BT.601 in studio range (:data:`_BT601`),
+    rounded and clipped to 8-bit codes as OpenCV converts them, normalised like ``rgb8``."""
+    luma = np.maximum(y - 16.0, 0.0)  # as OpenCV
+    rgb = np.stack([luma, u - 128.0, v - 128.0], axis=-1) @ _BT601.T
     codes = np.clip(np.rint(rgb), 0, 255)
     pixels = codes.astype(np.float32) * np.float32(1.0 / 255)
     return pixels, "uint8", ("R", "G", "B"), "srgb", None
+
+
+def _yuv420sp(height: int, width: int, encoding: str, step: int, data: np.ndarray, *,
+              bayer: str | None, limit: int | None, where: str
+              ) -> tuple[np.ndarray, str, tuple[str, str, str], str, str | None]:
+    """A semi-planar YUV 4:2:0 image (``nv12``: Cb, Cr pairs; ``nv21``: Cr, Cb) as R'G'B':
+    the luma plane (``height`` rows of ``step`` bytes) then the interleaved chroma plane
+    (``height / 2`` rows), each chroma pair shared by a 2 x 2 block of pixels, converted by
+    :func:`_bt601`. ``height`` is the picture's (as ROS 2 drivers and ffmpeg_image_transport
+    write it); a message whose ``height`` counts the chroma rows too (``data`` exactly
+    ``height * step`` bytes, ``height`` a multiple of 3, as rosbags-image reads it) is read
+    with a picture two thirds as high."""
+    if bayer is not None:
+        raise InputFileError(f"{where}: --bayer {bayer.upper()} needs a one-channel mosaic, "
+                             f"but the image is {encoding}; leave out --bayer")
+    if data.size < step * (height + height // 2) and data.size == step * height \
+            and height % 3 == 0:
+        height = height * 2 // 3
+    if height < 2 or width < 2 or height % 2 or width % 2:
+        raise InputFileError(f"{where}: a {encoding} image needs an even width and height, "
+                             f"not {width}x{height}")
+    if limit is not None and height * width > limit:
+        raise InputFileError(
+            f"{where}: the image is {width}x{height} ({height * width / 1e6:.1f} megapixels), "
+            f"more than the limit of {limit / 1e6:g} megapixels; raise it with --max-pixels N")
+    rows_in_all = height + height // 2
+    if step < width or data.size < step * (rows_in_all - 1) + width:
+        raise InputFileError(f"{where}: the message holds {data.size} bytes, fewer than its "
+                             f"{width}x{height} {encoding} planes need (step {step})")
+    rows = np.lib.stride_tricks.as_strided(data, shape=(rows_in_all, width), strides=(step, 1))
+    planes = np.ascontiguousarray(rows).astype(np.float64)
+    y = planes[:height]
+    pairs = planes[height:].reshape(height // 2, width // 2, 2)
+    iu, iv = _YUV420SP[encoding]
+
+    def full(c: np.ndarray) -> np.ndarray:
+        return np.repeat(np.repeat(c, 2, axis=0), 2, axis=1)
+
+    return _bt601(y, full(pairs[:, :, iu]), full(pairs[:, :, iv]))
 
 
 def _decompress(data: bytes, fmt: str, bayer: str | None, limit: int, where: str) -> Image:
