@@ -595,3 +595,28 @@ def test_a_chart_recorded_as_nv12_or_nv21_measures_as_its_decoded_pixels(chart, 
     cv2.imwrite(str(rgb_png), cv2.cvtColor(codes8, cv2.COLOR_RGB2BGR))
     assert got.mean_delta_e == pytest.approx(measure_image(rgb_png, corners).mean_delta_e,
                                              abs=0.3)
+
+
+def test_an_absolute_time_picks_the_nearest_message(recordings, corners, tmp_path):
+    """--time as UNIX epoch seconds (@S) or ISO 8601 with its offset picks the message nearest
+    to that instant, the same as the offset after the first message; the report's own
+    time_utc, given back, names its message; outside the recording or without an offset is one
+    line and exit 2."""
+    from fidelity.chart.image import utc_text
+
+    paths, _, _ = recordings
+    path = paths["mcap"]
+    near = T0 + STEP + 30_000_000  # 0.13 s after the first message: frame 1
+    for spec in (f"@{near / 1e9:.3f}", utc_text(near), "2023-11-14T23:13:20.13+01:00"):
+        got = measure_image(path, corners, read=ReadOptions(topic="/cam/rgb8", time=spec))
+        assert got.image.recording.frame == 1, spec
+        assert got.image.recording.time_ns == T0 + STEP
+    again = measure_image(path, corners, read=ReadOptions(
+        topic="/cam/rgb8", time=got.image.recording.to_json()["time_utc"]))
+    assert again.image.recording.frame == 1
+    out = _run(["audit", str(path), "--topic", "/cam/rgb8", "--time", "@1700000099",
+                "--corners", _corner_text(corners), "-q"])
+    assert out.exit_code == 2 and "is outside the recording (2023-11-14T22:13:20" in out.output
+    err = _error(["audit", str(path), "--topic", "/cam/rgb8", "--time", "2023-11-14T22:13:20",
+                  "--corners", _corner_text(corners)])
+    assert "give the UTC offset" in err

@@ -104,6 +104,15 @@ _COLOUR_NAMES = {
 _ALPHA_NAMES = {"a", "alpha"}
 
 
+def utc_text(time_ns: int) -> str:
+    """Nanoseconds since the UNIX epoch as ISO 8601 UTC text to the nanosecond
+    (``2023-11-14T22:13:20.250000000Z``)."""
+    import datetime
+
+    utc = datetime.datetime.fromtimestamp(time_ns // 10**9, datetime.UTC)
+    return utc.strftime("%Y-%m-%dT%H:%M:%S") + f".{time_ns % 10**9:09d}Z"
+
+
 @dataclass(frozen=True)
 class Recording:
     """Where in a robot recording an image message was read (:mod:`fidelity.chart.recording`):
@@ -127,11 +136,8 @@ class Recording:
     frame_id: str | None = None
 
     def to_json(self) -> dict[str, Any]:
-        """JSON form (``time_utc``: ``time_ns`` as ISO 8601 UTC text)."""
-        import datetime
-
-        utc = datetime.datetime.fromtimestamp(self.time_ns // 10**9, datetime.UTC)
-        text = utc.strftime("%Y-%m-%dT%H:%M:%S") + f".{self.time_ns % 10**9:09d}Z"
+        """JSON form (``time_utc``: ``time_ns`` as ISO 8601 UTC text, :func:`utc_text`)."""
+        text = utc_text(self.time_ns)
         return {"kind": self.kind, "topic": self.topic, "message_type": self.message_type,
                 "ros_encoding": self.ros_encoding, "frame": self.frame, "frames": self.frames,
                 "time_ns": self.time_ns, "time_utc": text, "offset_s": self.offset_s,

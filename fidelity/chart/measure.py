@@ -1044,7 +1044,9 @@ class ReadOptions:
     max_pixels: int | None = None
     topic: str | None = None
     frame: int | None = None
-    time: float | None = None
+    #: seconds after the recording's first message, or an absolute time (text:
+    #: :func:`fidelity.chart.recording.absolute_time_ns`)
+    time: float | str | None = None
 
     def given(self) -> list[str]:
         """The options set away from their defaults that describe the pixels of an image

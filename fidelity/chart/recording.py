@@ -50,7 +50,14 @@ from typing import Any
 
 import numpy as np
 
-from fidelity.chart.image import BAYER_PATTERNS, Image, Recording, demosaic, pixel_limit
+from fidelity.chart.image import (
+    BAYER_PATTERNS,
+    Image,
+    Recording,
+    demosaic,
+    pixel_limit,
+    utc_text,
+)
 from fidelity.errors import InputFileError, InvalidValueError
 from fidelity.fileio import display_path
 
@@ -156,12 +163,52 @@ def _rosbags() -> Any:
 @dataclass(frozen=True)
 class Choice:
     """Which message of a topic to read: ``frame`` (an index; negative from the end) or
-    ``time`` (seconds after the recording's first message; the nearest message). Neither:
-    the first message."""
+    ``time`` (the nearest message to: a number of seconds after the recording's first
+    message, or an absolute time as :func:`absolute_time_ns` reads it). Neither: the first
+    message."""
 
     topic: str | None = None
     frame: int | None = None
-    time: float | None = None
+    time: float | str | None = None
+
+
+def absolute_time_ns(text: str) -> int:
+    """An absolute ``--time``: UNIX epoch seconds after ``@`` (``@1700000000.25``, as GNU
+    ``date`` writes them; what ``ros2 bag info`` and the header stamps count), or an ISO 8601
+    date and time with its UTC offset (``2023-11-14T22:13:20.25Z``, ``...+01:00``), to
+    nanoseconds since the epoch. A time without an offset is refused: a recording's clock is
+    UTC and a local reading would shift it."""
+    import datetime as dt
+    from decimal import Decimal, InvalidOperation
+
+    t = text.strip()
+    if t.startswith("@"):
+        try:
+            seconds = Decimal(t[1:])
+        except InvalidOperation:
+            raise InvalidValueError(f"--time {text!r}: expected @SECONDS since the epoch") \
+                from None
+        if not seconds.is_finite() or seconds < 0:
+            raise InvalidValueError(f"--time {text!r}: expected @SECONDS since the epoch")
+        return int(seconds * 10**9)
+    import re
+
+    # the fraction of a second read here, to the nanosecond (datetime keeps microseconds)
+    m = re.fullmatch(r"(.+?[T ]\d\d:\d\d:\d\d)(?:[.,](\d+))?(.*)", t)
+    base, fraction, offset = (m.group(1), m.group(2) or "", m.group(3)) if m else (t, "", "")
+    try:
+        when = dt.datetime.fromisoformat((base + offset).replace("Z", "+00:00")
+                                         .replace("z", "+00:00"))
+    except ValueError:
+        raise InvalidValueError(
+            f"--time {text!r}: expected seconds after the first message (0.5), @SECONDS since "
+            f"the epoch or an ISO 8601 time with its offset (2023-11-14T22:13:20.25Z)") from None
+    if when.tzinfo is None:
+        raise InvalidValueError(f"--time {text!r}: give the UTC offset (Z or +HH:MM): a "
+                                f"recording's times are UTC")
+    delta = when - dt.datetime(1970, 1, 1, tzinfo=dt.UTC)
+    nanos = int((fraction + "000000000")[:9]) if fraction else 0
+    return (delta.days * 86400 + delta.seconds) * 10**9 + nanos
 
 
 def _kind(reader: Any, suffix: str) -> str:
@@ -283,13 +330,20 @@ def _choose_frame(times: Sequence[int], start_ns: int, end_ns: int, choice: Choi
         raise InputFileError(f"{shown}: topic {topic!r} has no messages")
     if choice.frame is not None and choice.time is not None:
         raise InvalidValueError("give --frame N or --time T, not both")
-    if choice.time is not None:
+    if isinstance(choice.time, str):
+        target = absolute_time_ns(choice.time)
+        if not start_ns <= target <= end_ns:
+            raise InputFileError(
+                f"{shown}: --time {choice.time} is outside the recording ({utc_text(start_ns)} to "
+                f"{utc_text(end_ns)})")
+    elif choice.time is not None:
         t = float(choice.time)
         span = (end_ns - start_ns) / 1e9
         if not math.isfinite(t) or t < 0 or t > span:
             raise InputFileError(f"{shown}: --time {choice.time:g} s is outside the recording "
                                  f"(0 to {span:.3f} s after its first message)")
         target = start_ns + round(t * 1e9)
+    if choice.time is not None:
         k = bisect.bisect_left(times, target)
         if k == n or (k > 0 and target - times[k - 1] <= times[k] - target):
             k -= 1

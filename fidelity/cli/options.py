@@ -136,6 +136,28 @@ class Resolution(ParamTypeBase):
         return int(m.group(1)), int(m.group(2))
 
 
+class RecordingTime(ParamTypeBase):
+    """``--time``: seconds after a recording's first message (``0.5``) -> float, or an
+    absolute time (``@1700000000.25``, ``2023-11-14T22:13:20.25Z``) -> its text, checked
+    (:func:`fidelity.chart.recording.absolute_time_ns`)."""
+
+    name = "T"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> float | str:
+        if isinstance(value, float | int):
+            return float(value)
+        text = str(value).strip()
+        try:
+            return float(text)
+        except ValueError:
+            pass
+        from fidelity.chart.recording import absolute_time_ns
+
+        absolute_time_ns(text)  # a bad time is the one-line error here, before any reading
+        return text
+
+
 class NameList(ParamTypeBase):
     """``all`` or comma-separated names from a known set -> a list of names."""
 
@@ -401,9 +423,11 @@ def image_read_options(f: F) -> F:
             help="With a recording: the N-th message of --topic (0 the first, the default; "
                  "-1 the last)."),
         click.option(
-            "--time", type=float, default=None, metavar="T",
-            help="With a recording: the message of --topic nearest to T seconds after the "
-                 "recording's first message."),
+            "--time", type=RecordingTime(), default=None, metavar="T",
+            help="With a recording: the message of --topic nearest to T: seconds after the "
+                 "recording's first message (0.5), or an absolute time: @SECONDS since the "
+                 "epoch (@1700000000.25) or ISO 8601 with its offset "
+                 "(2023-11-14T22:13:20.25Z)."),
     ]
     for opt in reversed(opts):
         wrapper = opt(wrapper)
