@@ -289,11 +289,20 @@ def test_bad_settings(args, tmp_path):
     assert not (tmp_path / "s").exists()
 
 
-def test_texture_only_for_gltf(tmp_path):
-    r = CliRunner().invoke(main, ["scene", "--format", "usd", "--base-colour", "texture",
-                                  "--out", str(tmp_path / "u")])
+def test_texture_only_for_gltf_and_usd(tmp_path):
+    """Mitsuba reads spectra: --base-colour texture is refused there, written for USD (the
+    texture beside the stage, moved with the folder)."""
+    r = CliRunner().invoke(main, ["scene", "--format", "mitsuba", "--base-colour", "texture",
+                                  "--out", str(tmp_path / "m")])
     assert r.exit_code == 2 and "--base-colour" in _one_line(r)
-    assert not (tmp_path / "u").exists()
+    assert not (tmp_path / "m").exists()
+    pytest.importorskip("pxr")
+    r = CliRunner().invoke(main, ["scene", "--format", "usd", "--base-colour", "texture",
+                                  "--out", str(tmp_path / "u"), "-q"])
+    assert r.exit_code == 0, r.output
+    assert sorted(p.name for p in (tmp_path / "u").iterdir()) == [
+        "README.md", "albedo.png", "chart.usda", "manifest.json"]
+    assert "UsdUVTexture" in (tmp_path / "u" / "chart.usda").read_text()
 
 
 def test_usd_without_usd_core_names_the_extra(tmp_path):
@@ -392,6 +401,32 @@ def test_blender_decodes_the_srgb_texture(d65, tmp_path):
     linear_texels = np.round(np.clip(d65.albedo, 0, 1) * 255).astype(np.uint8)
     write_gltf(d65, wrong, base_colour="texture", texels=linear_texels)
     render = render_with_blender(wrong, tmp_path / "wrong.exr", *SIZE, samples=1)
+    assert _audit(render.image, done.manifest) > 10 * BOUND_RGB
+
+
+def test_blender_decodes_the_usd_srgb_texture(d65, tmp_path):
+    """USD with --base-colour texture: a UsdUVTexture (sourceColorSpace sRGB) of albedo.png
+    beside the stage; Blender's USD importer decodes the 8-bit texels to the manifest's
+    albedos and the render passes the gate. Linear values in the texture fail by far."""
+    pytest.importorskip("pxr")
+    _probe_bpy()
+    from fidelity.chart.image import read_image
+    from fidelity.scene.usd import TEXTURE_FILE, write_usd
+
+    done = export_scene(d65, "usd", tmp_path / "u", base_colour="texture")
+    assert done.manifest["base_colour"] == "texture"
+    assert (tmp_path / "u" / TEXTURE_FILE).is_file()
+    albedo = np.array([p["albedo_linear_srgb"] for p in done.manifest["patches"]])
+    render = render_with_blender(done.scene_file, tmp_path / "u.exr", *SIZE, samples=1)
+    measured = patch_linear_means(read_image(render.image).pixels, d65.patch_centres_px(),
+                                  d65.patch_size_px())
+    assert delta_e_linear(measured, albedo).max() < 0.01
+    assert _audit(render.image, done.manifest) <= BOUND_RGB
+    wrong = tmp_path / "w" / "chart.usda"
+    wrong.parent.mkdir()
+    linear_texels = np.round(np.clip(d65.albedo, 0, 1) * 255).astype(np.uint8)
+    write_usd(d65, wrong, base_colour="texture", texels=linear_texels)
+    render = render_with_blender(wrong, tmp_path / "w.exr", *SIZE, samples=1)
     assert _audit(render.image, done.manifest) > 10 * BOUND_RGB
 
 

@@ -39,8 +39,9 @@ from fidelity.scene.model import CHARTS, REFERENCES, build_scene
               help="Linear value a perfect white reflector renders at (sets the light).")
 @click.option("--base-colour", type=click.Choice(BASE_COLOURS), default="factor",
               show_default=True,
-              help="gltf: the patches' linear baseColorFactor, or an 8-bit sRGB-encoded "
-                   "baseColorTexture (one texel per patch).")
+              help="gltf and usd: the patches' linear colour factors, or an 8-bit "
+                   "sRGB-encoded texture, one texel per patch (gltf: baseColorTexture; usd: "
+                   "albedo.png through a UsdUVTexture).")
 @common_options
 def scene(fmt: str, out_dir: Path, reference: str, illuminant: str, chart: str,
           resolution: tuple[int, int], yfov: float, fill: float | None,

@@ -246,6 +246,10 @@ the **linear** sRGB albedo, metallic 0, roughness 1, ior 1: no specular reflecti
 `DistantLight` (`/World/Sun`) of intensity {irradiance:.6g} along -z (every patch gets the same
 irradiance), and `/World/Camera` ({width} x {height}, vertical field of view {yfov:.4g} degrees,
 {distance:.4g} m from the chart).
+Base colour here: **{base_colour}** (`fidelity scene --format usd --base-colour texture`
+writes instead `albedo.png` beside the stage, one 8-bit sRGB-encoded texel per patch, read by a
+`UsdUVTexture` with `sourceColorSpace` sRGB at each patch's texel centre: an importer must
+decode it as sRGB, and the manifest's albedos are the decoded 8-bit values).
 """,
     "mitsuba": """# Chart scene: Mitsuba 3 (`chart.xml`)
 
@@ -283,7 +287,7 @@ def _writer(fmt: str, base_colour: str = "factor") -> Callable[[ChartScene, Path
     if fmt == "usd":
         from fidelity.scene.usd import write_usd
 
-        return write_usd
+        return lambda scene, path: write_usd(scene, path, base_colour=base_colour)
     from fidelity.scene.mitsuba import write_mitsuba
 
     return write_mitsuba
@@ -310,7 +314,7 @@ def export_scene(scene: ChartScene, fmt: str, out: str | os.PathLike[str], *,
     """Write ``scene`` in ``fmt`` to the folder ``out`` (see the module docstring).
 
     ``check`` loads the Mitsuba XML back with ``mitsuba.load_file`` when Mitsuba is installed.
-    ``base_colour`` (glTF only): ``factor`` (linear factors) or ``texture`` (an 8-bit
+    ``base_colour`` (glTF and USD): ``factor`` (linear factors) or ``texture`` (an 8-bit
     sRGB-encoded texture; the manifest's albedos are then the quantised ones it decodes to).
     Raises :class:`~fidelity.errors.UnknownNameError` (format), :class:`MissingExtraError`,
     :class:`~fidelity.errors.InputFileError` (a destination that cannot be written or holds
@@ -321,16 +325,21 @@ def export_scene(scene: ChartScene, fmt: str, out: str | os.PathLike[str], *,
     if base_colour not in BASE_COLOURS:
         raise unknown_name("base colour", base_colour, BASE_COLOURS)
     if base_colour != "factor":
-        if fmt != "gltf":
-            raise InvalidValueError(f"--base-colour {base_colour}: only the gltf format has "
-                                    "textures here; give --base-colour factor")
+        if fmt not in ("gltf", "usd"):
+            raise InvalidValueError(f"--base-colour {base_colour}: the gltf and usd formats "
+                                    "have textures (Mitsuba reads spectra); give --base-colour "
+                                    "factor")
         from fidelity.scene.gltf import texture_albedo
 
         quantised = texture_albedo(scene.albedo)
         scene = replace(scene, albedo=quantised, conventions={
             **scene.conventions,
-            "rgb_materials": "8-bit sRGB-encoded baseColorTexture (one texel per patch, nearest "
-                             "filtering), factor 1; albedo = the decoded 8-bit texel",
+            "rgb_materials": (
+                "8-bit sRGB-encoded baseColorTexture (one texel per patch, nearest filtering), "
+                "factor 1; albedo = the decoded 8-bit texel" if fmt == "gltf" else
+                "8-bit sRGB-encoded UsdUVTexture albedo.png (sourceColorSpace sRGB, one texel "
+                "per patch, st at the texel centre) as diffuseColor; albedo = the decoded "
+                "8-bit texel"),
             "albedo_quantisation_delta_e_max": float(_max_de(quantised, scene.albedo))})
     target = Path(out)
     where = display_path(target)
@@ -349,7 +358,7 @@ def export_scene(scene: ChartScene, fmt: str, out: str | os.PathLike[str], *,
 
             check_loads(scene_path)
         doc = manifest(scene, fmt, name)
-        doc["base_colour"] = base_colour if fmt == "gltf" else "factor"
+        doc["base_colour"] = base_colour if fmt in ("gltf", "usd") else "factor"
         doc["checked_with"] = _checked_with(fmt, check)
         (tmp / MANIFEST).write_text(json.dumps(json_ready(doc), indent=1) + "\n",
                                     encoding="utf-8")

@@ -55,11 +55,16 @@ def texture_albedo(albedo: np.ndarray) -> np.ndarray:
     return np.asarray(linearize_srgb(texture_texels(albedo) / 255.0), dtype=np.float64)
 
 
-def _png_bytes(texels: np.ndarray, folder: Path) -> bytes:
+def write_texture_png(texels: np.ndarray, path: Path) -> None:
+    """The texels (n, 3) uint8 as a one-row 8-bit PNG of n pixels (texel k: patch k)."""
     from fidelity.chart.image import write_png
 
+    write_png(path, texels[None, :, :] / 255.0, 8)
+
+
+def _png_bytes(texels: np.ndarray, folder: Path) -> bytes:
     png = folder / ".albedo.png"
-    write_png(png, texels[None, :, :] / 255.0, 8)
+    write_texture_png(texels, png)
     data = png.read_bytes()
     png.unlink()
     return data
@@ -166,4 +171,5 @@ def write_gltf(scene: ChartScene, path: Path, *, linear_factors: np.ndarray | No
     gltf.save_binary(str(path))
 
 
-__all__ = ["BASE_COLOURS", "EXTRA", "texture_albedo", "texture_texels", "write_gltf"]
+__all__ = ["BASE_COLOURS", "EXTRA", "texture_albedo", "texture_texels", "write_gltf",
+           "write_texture_png"]

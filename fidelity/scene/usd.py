@@ -4,7 +4,8 @@ Stage: metres (``metersPerUnit`` 1), +y up, as the scene model. One ``Mesh`` per
 frame, each bound to a ``UsdPreviewSurface`` material: ``diffuseColor`` the linear albedo
 (UsdPreviewSurface colours are linear), ``metallic`` 0, ``roughness`` 1 and ``ior`` 1 (a
 dielectric's F0 = ((ior - 1) / (ior + 1))^2 = 0: no specular reflection, as the chart's 45/0
-reference). Light: a ``UsdLux.DistantLight`` along -z with ``normalize`` on, so that (UsdLux)
+reference); with ``base_colour="texture"`` the patches read their colour from an 8-bit
+sRGB-encoded texture instead (a ``UsdUVTexture``, ``sourceColorSpace`` ``sRGB``). Light: a ``UsdLux.DistantLight`` along -z with ``normalize`` on, so that (UsdLux)
 its ``intensity`` is the illuminance it gives a surface facing it: the irradiance in renderer
 units, pi * white level. (Blender's USD importer multiplies a DistantLight's intensity by 4,
 "approximately matches Karma" in its source, usd_reader_light.cc: import with Light Intensity
@@ -24,11 +25,30 @@ from fidelity.scene.model import FRAME_REFLECTANCE, ChartScene
 EXTRA = "scene"
 
 
-def write_usd(scene: ChartScene, path: Path, *, linear_factors: np.ndarray | None = None) -> None:
-    """Write ``scene`` to ``path`` (.usda); ``linear_factors`` (24, 3) replaces the albedos."""
+#: The texture file written beside the ``.usda`` with ``base_colour="texture"``.
+TEXTURE_FILE = "albedo.png"
+
+
+def write_usd(scene: ChartScene, path: Path, *, linear_factors: np.ndarray | None = None,
+              base_colour: str = "factor", texels: np.ndarray | None = None) -> None:
+    """Write ``scene`` to ``path`` (.usda); ``linear_factors`` (24, 3) replaces the albedos.
+
+    ``base_colour="texture"``: the patches' ``diffuseColor`` comes from one 8-bit
+    sRGB-encoded texture (:data:`TEXTURE_FILE` beside the stage, one texel per patch:
+    :func:`fidelity.scene.gltf.texture_texels`, or ``texels`` (24, 3) uint8) through a
+    ``UsdUVTexture`` with ``sourceColorSpace`` ``sRGB`` (the UsdPreviewSurface specification's
+    rule for 8-bit colour textures) and a ``UsdPrimvarReader_float2`` of the mesh's ``st``,
+    every vertex at its patch's texel centre; the frame keeps its linear factor."""
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
     factors = scene.albedo if linear_factors is None else np.asarray(linear_factors)
+    textured = base_colour == "texture"
+    n_tex = len(scene.patch_names)
+    if textured:
+        from fidelity.scene.gltf import texture_texels, write_texture_png
+
+        texels = texture_texels(scene.albedo) if texels is None else texels
+        write_texture_png(np.asarray(texels, np.uint8), path.parent / TEXTURE_FILE)
     stage = Usd.Stage.CreateNew(str(path))
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
@@ -39,7 +59,7 @@ def write_usd(scene: ChartScene, path: Path, *, linear_factors: np.ndarray | Non
     chart = scene.chart
 
     def quad(name: str, cx: float, cy: float, hw: float, hh: float, z: float,
-             colour: list[float]) -> None:
+             colour: list[float], texel: int | None = None) -> None:
         mesh = UsdGeom.Mesh.Define(stage, f"/World/Chart/{name}")
         pts = [Gf.Vec3f(cx - hw, cy - hh, z), Gf.Vec3f(cx + hw, cy - hh, z),
                Gf.Vec3f(cx + hw, cy + hh, z), Gf.Vec3f(cx - hw, cy + hh, z)]
@@ -53,7 +73,25 @@ def write_usd(scene: ChartScene, path: Path, *, linear_factors: np.ndarray | Non
         material = UsdShade.Material.Define(stage, f"/World/Looks/{name}")
         shader = UsdShade.Shader.Define(stage, f"/World/Looks/{name}/PreviewSurface")
         shader.CreateIdAttr("UsdPreviewSurface")
-        shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*colour))
+        diffuse = shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f)
+        if texel is None:
+            diffuse.Set(Gf.Vec3f(*colour))
+        else:
+            st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(
+                "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
+            st.Set([Gf.Vec2f((texel + 0.5) / n_tex, 0.5)] * 4)
+            reader = UsdShade.Shader.Define(stage, f"/World/Looks/{name}/st")
+            reader.CreateIdAttr("UsdPrimvarReader_float2")
+            reader.CreateInput("varname", Sdf.ValueTypeNames.Token).Set("st")
+            tex = UsdShade.Shader.Define(stage, f"/World/Looks/{name}/albedo")
+            tex.CreateIdAttr("UsdUVTexture")
+            tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(f"./{TEXTURE_FILE}")
+            tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("sRGB")
+            tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set("clamp")
+            tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set("clamp")
+            tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
+                reader.ConnectableAPI(), "result")
+            diffuse.ConnectToSource(tex.ConnectableAPI(), "rgb")
         shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
         shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(1.0)
         shader.CreateInput("ior", Sdf.ValueTypeNames.Float).Set(1.0)
@@ -64,7 +102,7 @@ def write_usd(scene: ChartScene, path: Path, *, linear_factors: np.ndarray | Non
     for i, name in enumerate(scene.patch_names):
         cx, cy = chart.patch_centre(i)
         quad(f"patch_{i + 1:02d}_{_identifier(name)}", cx, cy, chart.patch / 2, chart.patch / 2,
-             0.0, [float(v) for v in factors[i]])
+             0.0, [float(v) for v in factors[i]], i if textured else None)
     quad("frame", 0.0, 0.0, chart.width / 2, chart.height / 2, -0.0005, [FRAME_REFLECTANCE] * 3)
 
     light = UsdLux.DistantLight.Define(stage, "/World/Sun")
@@ -93,4 +131,4 @@ def _identifier(name: str) -> str:
     return out if out and not out[0].isdigit() else f"_{out}"
 
 
-__all__ = ["EXTRA", "write_usd"]
+__all__ = ["EXTRA", "TEXTURE_FILE", "write_usd"]
