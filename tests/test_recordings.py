@@ -418,10 +418,10 @@ def test_bad_recordings_are_one_line_errors(recordings, chart, tmp_path):
     assert line.startswith(f"fidelity: error: {oddbag}: topic /raw frame 0: a Bayer mosaic")
     assert "odd size 248x167" in line
     # an encoding not read
-    (tmp_path / "nv21").mkdir()
-    nv21 = write_recording(tmp_path / "nv21", "ros1", {"/nv21": [lambda ts, t: image_msg(
-        ts, np.zeros((6, 4), np.uint8), "nv21", t)]})
-    assert "unsupported encoding 'nv21'" in _error(["audit", str(nv21)])
+    (tmp_path / "nv24").mkdir()
+    nv24 = write_recording(tmp_path / "nv24", "ros1", {"/nv24": [lambda ts, t: image_msg(
+        ts, np.zeros((6, 4), np.uint8), "nv24", t)]})
+    assert "unsupported encoding 'nv24'" in _error(["audit", str(nv24)])
 
 
 def test_a_short_message_is_an_error_naming_its_size():

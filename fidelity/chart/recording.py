@@ -501,10 +501,7 @@ def message_pixels(height: int, width: int, encoding: str, bigendian: bool, step
                              f"{', '.join(supported_encodings())}")
     if height < 1 or width < 1:
         raise InputFileError(f"{where}: empty image ({width}x{height})")
-    if limit is not None and height * width > limit:
-        raise InputFileError(
-            f"{where}: the image is {width}x{height} ({height * width / 1e6:.1f} megapixels), "
-            f"more than the limit of {limit / 1e6:g} megapixels; raise it with --max-pixels N")
+    _check_size(height, width, limit, where)
     if nch == 1:
         pattern = pattern or (bayer.upper() if bayer is not None else None)
         if pattern is None:
@@ -542,22 +539,32 @@ def message_pixels(height: int, width: int, encoding: str, bigendian: bool, step
             None)
 
 
+def _check_size(height: int, width: int, limit: int | None, where: str) -> None:
+    """The pixel limit (``--max-pixels``) of a message's picture."""
+    if limit is not None and height * width > limit:
+        raise InputFileError(
+            f"{where}: the image is {width}x{height} ({height * width / 1e6:.1f} megapixels), "
+            f"more than the limit of {limit / 1e6:g} megapixels; raise it with --max-pixels N")
+
+
+def _no_bayer(bayer: str | None, encoding: str, where: str) -> None:
+    """``--bayer`` is for one-channel mosaics, not for a colour ``encoding``."""
+    if bayer is not None:
+        raise InputFileError(f"{where}: --bayer {bayer.upper()} needs a one-channel mosaic, "
+                             f"but the image is {encoding}; leave out --bayer")
+
+
 def _yuv422(height: int, width: int, encoding: str, step: int, data: np.ndarray, *,
             bayer: str | None, limit: int | None, where: str
             ) -> tuple[np.ndarray, str, tuple[str, str, str], str, str | None]:
     """A YUV 4:2:2 image (``uyvy``/``yuv422``, ``yuyv``/``yuv422_yuy2``) as R'G'B': BT.601
     studio range (:data:`_BT601`), each chroma pair shared by its two pixels, rounded and
     clipped to 8-bit codes as OpenCV converts it, normalised like ``rgb8``."""
-    if bayer is not None:
-        raise InputFileError(f"{where}: --bayer {bayer.upper()} needs a one-channel mosaic, "
-                             f"but the image is {encoding}; leave out --bayer")
+    _no_bayer(bayer, encoding, where)
     if height < 1 or width < 2 or width % 2:
         raise InputFileError(f"{where}: a {encoding} image needs an even width, not "
                              f"{width}x{height}")
-    if limit is not None and height * width > limit:
-        raise InputFileError(
-            f"{where}: the image is {width}x{height} ({height * width / 1e6:.1f} megapixels), "
-            f"more than the limit of {limit / 1e6:g} megapixels; raise it with --max-pixels N")
+    _check_size(height, width, limit, where)
     row = width * 2
     if step < row or data.size < step * (height - 1) + row:
         raise InputFileError(f"{where}: the message holds {data.size} bytes, fewer than its "
@@ -590,19 +597,14 @@ def _yuv420sp(height: int, width: int, encoding: str, step: int, data: np.ndarra
     write it); a message whose ``height`` counts the chroma rows too (``data`` exactly
     ``height * step`` bytes, ``height`` a multiple of 3, as rosbags-image reads it) is read
     with a picture two thirds as high."""
-    if bayer is not None:
-        raise InputFileError(f"{where}: --bayer {bayer.upper()} needs a one-channel mosaic, "
-                             f"but the image is {encoding}; leave out --bayer")
+    _no_bayer(bayer, encoding, where)
     if data.size < step * (height + height // 2) and data.size == step * height \
             and height % 3 == 0:
         height = height * 2 // 3
     if height < 2 or width < 2 or height % 2 or width % 2:
         raise InputFileError(f"{where}: a {encoding} image needs an even width and height, "
                              f"not {width}x{height}")
-    if limit is not None and height * width > limit:
-        raise InputFileError(
-            f"{where}: the image is {width}x{height} ({height * width / 1e6:.1f} megapixels), "
-            f"more than the limit of {limit / 1e6:g} megapixels; raise it with --max-pixels N")
+    _check_size(height, width, limit, where)
     rows_in_all = height + height // 2
     if step < width or data.size < step * (rows_in_all - 1) + width:
         raise InputFileError(f"{where}: the message holds {data.size} bytes, fewer than its "
