@@ -461,3 +461,104 @@ def test_threshold_verdicts_by_hand() -> None:
         "disagrees: exceeded in points (beyond 2 SE) and as a share of baseline (within 2 SE)")
     assert _threshold_verdict([row(2.0, 5.0)], 3.0) == (
         "agrees if read as points; exceeded as a share of baseline")
+
+
+def _earlier_store(folder: Path) -> SweepStore:
+    """An earlier sweep: yolo11n measured otherwise (20 points at ΔE 3) and yolox_nano, whose
+    recorded preprocessing is an older one."""
+    s = SweepStore(folder)
+    s.set_meta("grid", {"transforms": TRANSFORMS, "targets": [0, 3]})
+    s.set_meta("versions", {"fidelity": "0.0.9"})
+    for model, base in (("yolo11n", 0.50), ("yolox_nano", 0.30)):
+        s.register_model(model, model + ".onnx", model * 4, None,
+                         {"conventions": {"conf": 0.01, "preprocess": "an older one"}})
+        s.finish_cell(model, "baseline", 0, param=None, status="done", images=10,
+                      score=score(base, 0.6, 0.3))
+    f = s.finish_cell
+    f("yolo11n", "hue", 3, param=5.0, status="done", images=10, score=score(0.30, 0.6, 0.3))
+    # yolox_nano: every transform at ΔE 3; saturation-inc the worst, 9 points (30 %)
+    f("yolox_nano", "contrast-inc", 3, param=1.1, status="done", images=10,
+      score=score(0.25, 0.5, 0.3))
+    f("yolox_nano", "hue", 3, param=5.0, status="done", images=10, score=score(0.29, 0.6, 0.3))
+    f("yolox_nano", "saturation-inc", 3, param=1.2, status="done", images=10,
+      score=score(0.21, 0.6, 0.1))
+    return s
+
+
+def test_merge_keeps_the_earlier_models_the_store_does_not_hold(store, tmp_path) -> None:
+    """The store's models replace their namesakes; the others come with their own rows,
+    registration and preprocessing; the size class is the worst over the merged models."""
+    from fidelity.coco.detectors import stale_preprocessing
+    from fidelity.coco.tables import merge_tables
+
+    new = build_tables(store)
+    earlier = build_tables(_earlier_store(tmp_path / "earlier"))
+    merged = merge_tables(new, earlier, {"file": "old/tables.json", "sha256": "ab" * 32})
+    assert list(merged.models) == ["yolo11n", "yolov8n", "yolov8s", "yolox_nano"]
+    assert merged.worst_case["yolo11n"] == new.worst_case["yolo11n"]  # the store's, not 20 pts
+    assert merged.worst_case["yolox_nano"] == earlier.worst_case["yolox_nano"]
+    n3 = {r.delta_e: r for r in merged.size_classes["n"]}[3.0]
+    # yolo11n loses 5 points at ΔE 3, yolox_nano 9 (yolov8n's row is partial): yolox_nano
+    assert (n3.worst_model, n3.worst_transform) == ("yolox_nano", "saturation-inc")
+    assert n3.dmap_points == pytest.approx(9.0) and n3.dmap_relative == pytest.approx(30.0)
+    assert n3.model_names == ("yolo11n", "yolox_nano")
+    # cells: the store's 9 (3 baselines, 6 rows) and yolox_nano's baseline and three rows
+    assert (new.cells_done, new.cells_unreachable) == (8, 1)
+    assert (merged.cells_done, merged.cells_unreachable) == (12, 1)
+    assert merged.meta["earlier"]["models"] == ["yolox_nano"]
+    assert merged.meta["earlier"]["versions"] == {"fidelity": "0.0.9"}
+    doc = prediction_table(merged)
+    parse_prediction_table(doc)
+    prov = doc["provenance"]
+    assert prov["earlier"]["file"] == "old/tables.json" and prov["earlier"]["sha256"] == "ab" * 32
+    assert prov["models"]["yolox_nano"]["conventions"]["preprocess"] == "an older one"
+    assert set(stale_preprocessing(prov)) >= {"yolox_nano"}
+    # nothing to keep: the store's tables as they are
+    assert merge_tables(new, build_tables(store), {"file": "x"}) == new
+
+
+def test_merge_refuses_tables_of_other_images(store, tmp_path) -> None:
+    from fidelity.coco.tables import merge_tables
+    from fidelity.errors import InvalidValueError
+
+    other = _earlier_store(tmp_path / "earlier")
+    other.set_meta("data", {"images": "/a/coco/val2017", "annotations": "/a/ann.json",
+                            "image_count": 500})
+    with pytest.raises(InvalidValueError, match="old.json: measured on other images"):
+        merge_tables(build_tables(store), build_tables(other), {"file": "old.json"})
+
+
+def test_tables_earlier_command(store, tmp_path) -> None:
+    """`fidelity tables STORE --earlier TABLES_JSON`: the report and the prediction table hold
+    the kept model and say where it came from; the earlier file is never written over."""
+    from click.testing import CliRunner
+
+    from fidelity.cli import main
+
+    old = tmp_path / "old"
+    _earlier_store(tmp_path / "earlier")
+    res = CliRunner().invoke(main, ["tables", str(tmp_path / "earlier"), "--out", str(old),
+                                    "--no-standard-errors"])
+    assert res.exit_code == 0, res.output
+    before = (old / "tables.json").read_bytes()
+    out, pred = tmp_path / "new", tmp_path / "new" / "pred.json"  # (the store is tmp_path)
+    res = CliRunner().invoke(main, ["tables", str(store.path.parent), "--no-standard-errors",
+                                    "--earlier", str(old / "tables.json"), "--out", str(out),
+                                    "--prediction", str(pred)])
+    assert res.exit_code == 0, res.output
+    data = json.loads((out / "tables.json").read_text())
+    assert sorted(data["tables"]["models"]) == ["yolo11n", "yolov8n", "yolov8s", "yolox_nano"]
+    doc = json.loads(pred.read_text())
+    assert doc["provenance"]["earlier"]["models"] == ["yolox_nano"]
+    assert "kept from earlier tables" in (out / "report.md").read_text()
+    # writing the merged tables over the earlier ones is refused before any work
+    res = CliRunner().invoke(main, ["tables", str(store.path.parent), "--no-standard-errors",
+                                    "--earlier", str(old / "tables.json"), "--out", str(old)])
+    one_line_error(res, "tables.json", "--earlier")
+    assert (old / "tables.json").read_bytes() == before
+    for bad in (pred, tmp_path / "missing.json"):  # a prediction table is not a tables.json
+        res = CliRunner().invoke(main, ["tables", str(store.path.parent), "--earlier",
+                                        str(bad), "--no-standard-errors",
+                                        "--out", str(tmp_path / "r2")])
+        one_line_error(res, str(bad))
+    assert not (tmp_path / "r2").exists()

@@ -31,6 +31,11 @@ if TYPE_CHECKING:
               help="Also write the direction-aware prediction table (per transform family; "
                    "fidelity.prediction.directional) to this file. STORE_DIR may be a "
                    "tables.json: then only the tables are written, from it.")
+@click.option("--earlier", default=None, type=click.Path(dir_okay=False),
+              metavar="TABLES_JSON",
+              help="Keep the models of an earlier tables.json that STORE_DIR does not hold, as "
+                   "they were measured (their rows, settings and recorded preprocessing): "
+                   "re-measure some detectors, keep the rest. Same images required.")
 @click.option("--annotations", default=None, type=click.Path(dir_okay=False),
               help="COCO annotations of the sweep, for standard errors (default: the file the "
                    "sweep recorded, if it is there).")
@@ -56,9 +61,9 @@ if TYPE_CHECKING:
 @progress_option
 @common_options
 def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
-           directional: str | None, annotations: str | None, standard_errors: bool, explain: str | None,
-           rare_boxes: int, images: str | None, top: int, json_path: str | None,
-           progress: bool | None) -> None:
+           directional: str | None, earlier: str | None, annotations: str | None,
+           standard_errors: bool, explain: str | None, rare_boxes: int, images: str | None,
+           top: int, json_path: str | None, progress: bool | None) -> None:
     """Worst case per model and size class, paper comparison, plots, Markdown/HTML report.
 
     With --explain MODEL:TRANSFORM:ΔE: the classes one cell's ΔmAP comes from, instead.
@@ -74,6 +79,11 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
 
     report = Path(out or Path(store_dir) / "report")
     if Path(store_dir).is_file():
+        if earlier is not None:
+            from fidelity.errors import InvalidValueError
+
+            raise InvalidValueError("--earlier merges with a sweep store: STORE_DIR is a "
+                                    "tables.json here")
         check_outputs({"--prediction": prediction, "--directional": directional},
                       {"--annotations": annotations, "STORE_DIR": store_dir})
         _tables_from_json(Path(store_dir), prediction, name, directional)
@@ -82,7 +92,8 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
                    "--directional": directional}
                   | ({} if explain else {f"--out ({n})": report / n
                                          for n in ("report.html", "report.md", "tables.json")}),
-                  {"--annotations": annotations}, stores={"STORE_DIR": store_dir})
+                  {"--annotations": annotations, "--earlier": earlier},
+                  stores={"STORE_DIR": store_dir})
     store = SweepStore(store_dir, create=False)
     from fidelity.coco.tables import check_store_meta
 
@@ -108,12 +119,35 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
         else:
             click.echo(f"no annotations ({recorded or 'none recorded'}): report without "
                        "standard errors (pass --annotations)", err=True)
-    result = tables_result(store, coco, progress=show_progress(progress), images=caps)
+    kept = _read_earlier(Path(earlier)) if earlier is not None else None
+    result = tables_result(store, coco, progress=show_progress(progress), images=caps,
+                           earlier=kept)
     written = write_tables_report(result, out or Path(store_dir) / "report", prediction, name)
     if directional is not None:
         written["directional"] = _write_directional(result.tables, directional)
     for k, p in written.items():
         click.echo(f"{k:<14} {p}")
+
+
+def _read_tables_json(path: Any) -> Any:
+    """The :class:`~fidelity.coco.tables.TablesResult` of a ``tables.json`` (one-line errors)."""
+    import json
+
+    from fidelity.coco.tables import TablesResult
+    from fidelity.errors import InputFileError
+
+    try:
+        return TablesResult.from_json(json.loads(path.read_text(encoding="utf-8")))
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise InputFileError(f"{path}: not a tables.json of fidelity tables ({exc})") from None
+
+
+def _read_earlier(path: Any) -> tuple[Any, dict[str, Any]]:
+    """``--earlier``: its tables and where they came from (file name and SHA-256)."""
+    from fidelity.fileio import file_sha256
+
+    tables_ = _read_tables_json(path).tables
+    return tables_, {"file": str(path), "sha256": file_sha256(path)}
 
 
 def _write_directional(tables_: Any, path: str) -> Any:
@@ -126,19 +160,14 @@ def _write_directional(tables_: Any, path: str) -> Any:
 def _tables_from_json(path: Any, prediction: str | None, name: str,
                       directional: str | None) -> None:
     """The prediction tables of a ``tables.json`` (no store, no report)."""
-    import json
-
-    from fidelity.coco.tables import TablesResult, prediction_table
-    from fidelity.errors import InputFileError, InvalidValueError
+    from fidelity.coco.tables import prediction_table
+    from fidelity.errors import InvalidValueError
     from fidelity.fileio import json_ready, write_json_atomic
 
     if prediction is None and directional is None:
         raise InvalidValueError(f"{path}: from a tables.json, give --prediction FILE and/or "
                                 "--directional FILE")
-    try:
-        result = TablesResult.from_json(json.loads(path.read_text(encoding="utf-8")))
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise InputFileError(f"{path}: not a tables.json of fidelity tables ({exc})") from None
+    result = _read_tables_json(path)
     if prediction is not None:
         p = write_json_atomic(prediction, json_ready(prediction_table(result.tables, name)))
         click.echo(f"{'prediction':<14} {p}")

@@ -936,10 +936,74 @@ def build_tables(store: SweepStore, coco: Any = None, *, method: str = "auto",
     )
 
 
+def merge_tables(tables: Tables, earlier: Tables, source: Mapping[str, Any]) -> Tables:
+    """``tables`` (from a store) with the models of an ``earlier`` tables.json it does not hold.
+
+    For re-measuring some detectors and keeping the others as they were measured: every model
+    of ``tables`` replaces its namesake in ``earlier``; the kept models bring their own rows,
+    cells, image alignment and registration (hence their recorded preprocessing and settings,
+    which the prediction table's provenance carries per model). The size classes are the
+    worst case over the merged models again. ``meta["earlier"]`` names what was kept and where
+    it came from: ``source`` (e.g. the file's name and SHA-256) with the earlier run's
+    ``versions``, ``machine`` and ``scorers``.
+
+    Both must be measured on the same images (``meta["data"]``: image count and the file names
+    of the image folder and annotations) and with the same rare-class threshold, else
+    :class:`~fidelity.errors.InvalidValueError`. Standard errors count only where both have them.
+    """
+    from pathlib import PurePath
+
+    from fidelity.errors import InvalidValueError
+
+    def data_key(meta: Mapping[str, Any]) -> tuple[Any, ...]:
+        d = meta.get("data") or {}
+        return (d.get("image_count"), PurePath(str(d.get("images") or "")).name,
+                PurePath(str(d.get("annotations") or "")).name)
+
+    if data_key(tables.meta) != data_key(earlier.meta):
+        raise InvalidValueError(
+            f"{source.get('file', 'the earlier tables')}: measured on other images "
+            f"({data_key(earlier.meta)}) than the store ({data_key(tables.meta)}); tables of "
+            "different image sets cannot be merged")
+    if tables.rare_boxes != earlier.rare_boxes:
+        raise InvalidValueError(
+            f"{source.get('file', 'the earlier tables')}: rare-class threshold "
+            f"{earlier.rare_boxes} against the store's {tables.rare_boxes}")
+    kept = [m for m in earlier.models if m not in tables.models]
+    if not kept:
+        return tables
+    worst = dict(tables.worst_case) | {m: earlier.worst_case[m] for m in kept
+                                       if m in earlier.worst_case}
+    kept_rows = [r for m in kept for r in earlier.cells.get(m, ())]
+    return Tables(
+        models=dict(tables.models) | {m: earlier.models[m] for m in kept},
+        cells=dict(tables.cells) | {m: earlier.cells[m] for m in kept if m in earlier.cells},
+        worst_case=worst,
+        size_classes={s: tuple(rows) for s, rows in size_class_rows(worst).items()},
+        meta=tables.meta | {"earlier": dict(source) | {
+            "models": kept, "versions": earlier.meta.get("versions"),
+            "machine": earlier.meta.get("machine"), "scorers": earlier.meta.get("scorers")}},
+        transforms=tuple(sorted(set(tables.transforms) | set(earlier.transforms))),
+        # a kept model's baseline is a done cell too (the rows are its transformed cells)
+        cells_done=tables.cells_done + len(kept) + sum(r.done for r in kept_rows),
+        cells_unreachable=tables.cells_unreachable
+        + sum(r.status == "unreachable" for r in kept_rows),
+        standard_errors=tables.standard_errors and earlier.standard_errors,
+        aligned=dict(tables.aligned) | {m: earlier.aligned[m] for m in kept
+                                        if m in earlier.aligned},
+        rare_boxes=tables.rare_boxes,
+    )
+
+
 def tables_result(store: SweepStore, coco: Any = None, *, progress: bool = False,
-                  images: Mapping[str, int] | None = None) -> TablesResult:
-    """:func:`build_tables` with its paper comparison and ΔE limits (``tables.json``)."""
+                  images: Mapping[str, int] | None = None,
+                  earlier: tuple[Tables, Mapping[str, Any]] | None = None) -> TablesResult:
+    """:func:`build_tables` with its paper comparison and ΔE limits (``tables.json``);
+    ``earlier``: (tables, source) whose models the store does not hold are kept
+    (:func:`merge_tables`)."""
     tables = build_tables(store, coco, progress=progress, images=images)
+    if earlier is not None:
+        tables = merge_tables(tables, *earlier)
     return TablesResult(tables, tuple(compare_with_paper(tables)),
                         tuple(delta_e_limits(tables)))
 
@@ -1197,7 +1261,7 @@ def prediction_table(tables: Tables, name: str = "coco1000-measured") -> dict[st
                           "bicycle columns are their own worst case over the same transforms",
             "omitted_partial_points": omitted,
             "aligned_image_counts": {m: a.to_json() for m, a in tables.aligned.items()},
-        },
+        } | ({"earlier": portable_paths(meta["earlier"])} if meta.get("earlier") else {}),
         "units": {
             "dmap_points": "percentage points of mAP@[.50:.95] (100*(baseline-transformed))",
             "dmap_relative": "percent of the baseline mAP",
@@ -1348,6 +1412,7 @@ __all__ = [
     "compare_with_paper",
     "delta_e_limits",
     "explain_cell",
+    "merge_tables",
     "model_size",
     "noise_floor",
     "parse_image_caps",

@@ -255,6 +255,15 @@ def _run_section(tables: Tables) -> Section:
                                   for m, info in tables.models.items()) or number(None)),
              ("versions", words(meta.get("versions"))),
              ("machine", words(meta.get("machine")))]
+    earlier = meta.get("earlier")
+    if earlier:
+        facts.append(("kept from earlier tables",
+                      f"{', '.join(earlier.get('models') or [])} from {earlier.get('file')} "
+                      f"(SHA-256 {str(earlier.get('sha256'))[:12]}…; measured with "
+                      f"{words(earlier.get('versions'))}): not re-measured in this store"))
+    facts.append(("preprocessing", "; ".join(
+        f"{m}: {(info.settings.get('conventions') or {}).get('preprocess') or number(None)}"
+        for m, info in tables.models.items())))
     notes = []
     for m, a in tables.aligned.items():
         stored = " and ".join(map(str, a.stored))
