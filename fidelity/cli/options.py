@@ -603,7 +603,7 @@ def decision_rule(decision: str, coverage_factor: float, strict: bool) -> Any:
 
 class EvidencePath(ParamTypeBase):
     """An ``--evidence`` file: a path whose suffix names its format (``.json``, ``.srmd``,
-    ``.stmd``; :data:`fidelity.report.evidence.EVIDENCE_FORMATS`)."""
+    ``.stmd``, ``.xqar``; :data:`fidelity.report.evidence.EVIDENCE_FORMATS`)."""
 
     name = "FILE"
 
@@ -627,7 +627,8 @@ def evidence_option(f: F) -> F:
              "prediction with its interval, validity domain, decision rule, verdict. .srmd: "
              "SSP Traceability resource meta data (every input and result with its SHA3-256, "
              "the verdicts and values). .stmd: SSP Traceability task meta data (the "
-             "evaluation phase).")(f)
+             "evaluation phase). .xqar: ASAM Quality Checker result (a checker per subject, "
+             "failed verdicts as issues).")(f)
 
 
 def evidence_outputs(paths: Sequence[Path]) -> dict[str, Path]:

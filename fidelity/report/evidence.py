@@ -311,18 +311,20 @@ EVIDENCE_FORMATS: Mapping[str, str] = {
              "input and result with its SHA3-256, the verdicts, ΔE00, predictions, validity",
     ".stmd": "SSP Traceability Simulation Task Meta Data: the evaluation (validation) phase "
              "of a Credible Simulation Process",
+    ".xqar": "ASAM Quality Checker result: a checker per subject, failed or undecided "
+             "verdicts and answers outside the validity domain as issues",
 }
 
 #: The Python module each format's writer needs, and the extra that installs it.
-_NEEDS = {".srmd": "lxml", ".stmd": "lxml"}
+_NEEDS = {".srmd": ("lxml", "ssp"), ".stmd": ("lxml", "ssp"), ".xqar": ("qc_baselib", "qc")}
 
 PathArg = str | os.PathLike[str]
 
 
 def evidence_format(path: PathArg) -> str:
     """The format of an ``--evidence`` file: its suffix in :data:`EVIDENCE_FORMATS`
-    (``.json``, ``.srmd``, ``.stmd``, any case). An unknown suffix, or a format whose library
-    is missing (``pip install 'camera-fidelity[ssp]'``), is an :class:`InvalidValueError`
+    (``.json``, ``.srmd``, ``.stmd``, ``.xqar``, any case). An unknown suffix, or a format whose
+    library is missing (the ``ssp`` or ``qc`` extra), is an :class:`InvalidValueError`
     naming the file."""
     import importlib.util
 
@@ -334,10 +336,10 @@ def evidence_format(path: PathArg) -> str:
         raise InvalidValueError(
             f"{display_path(path)}: --evidence writes {', '.join(EVIDENCE_FORMATS)} (by the "
             f"file's suffix), not {repr(suffix) if suffix else 'a file without one'}")
-    need = _NEEDS.get(suffix)
+    need, extra = _NEEDS.get(suffix, (None, None))
     if need is not None and importlib.util.find_spec(need) is None:
         raise InvalidValueError(f"{display_path(path)}: writing {suffix} needs {need}: pip "
-                                "install 'camera-fidelity[ssp]'")
+                                f"install 'camera-fidelity[{extra}]'")
     return suffix
 
 
@@ -359,11 +361,17 @@ def _write_stmd(path: PathArg, record: JSONObject, results: Sequence[PathArg]) -
     return write_stmd(path, record, results)
 
 
+def _write_xqar(path: PathArg, record: JSONObject, results: Sequence[PathArg]) -> Path:
+    from fidelity.report.xqar import write_xqar
+
+    return write_xqar(path, record, results)
+
+
 #: The writer of each format, in the order they are written: the JSON record first, the SRMD
 #: next (it lists the JSON among the results, with its checksum), the STMD last (it lists
 #: both; the SRMD as the verdict's).
 WRITERS: Mapping[str, Callable[[PathArg, JSONObject, Sequence[PathArg]], Path]] = {
-    ".json": _write_json, ".srmd": _write_srmd, ".stmd": _write_stmd}
+    ".json": _write_json, ".srmd": _write_srmd, ".stmd": _write_stmd, ".xqar": _write_xqar}
 
 
 def write_record(paths: PathArg | Sequence[PathArg], record: JSONObject,
