@@ -948,8 +948,9 @@ def merge_tables(tables: Tables, earlier: Tables, source: Mapping[str, Any]) -> 
     ``versions``, ``machine`` and ``scorers``.
 
     Both must be measured on the same images (``meta["data"]``: image count and the file names
-    of the image folder and annotations) and with the same rare-class threshold, else
-    :class:`~fidelity.errors.InvalidValueError`. Standard errors count only where both have them.
+    of the image folder and annotations) and, where both have one, with the same rare-class
+    threshold, else :class:`~fidelity.errors.InvalidValueError`. Standard errors count only
+    where both have them.
     """
     from pathlib import PurePath
 
@@ -965,7 +966,8 @@ def merge_tables(tables: Tables, earlier: Tables, source: Mapping[str, Any]) -> 
             f"{source.get('file', 'the earlier tables')}: measured on other images "
             f"({data_key(earlier.meta)}) than the store ({data_key(tables.meta)}); tables of "
             "different image sets cannot be merged")
-    if tables.rare_boxes != earlier.rare_boxes:
+    if None not in (tables.rare_boxes, earlier.rare_boxes) and \
+            tables.rare_boxes != earlier.rare_boxes:
         raise InvalidValueError(
             f"{source.get('file', 'the earlier tables')}: rare-class threshold "
             f"{earlier.rare_boxes} against the store's {tables.rare_boxes}")
@@ -991,7 +993,7 @@ def merge_tables(tables: Tables, earlier: Tables, source: Mapping[str, Any]) -> 
         standard_errors=tables.standard_errors and earlier.standard_errors,
         aligned=dict(tables.aligned) | {m: earlier.aligned[m] for m in kept
                                         if m in earlier.aligned},
-        rare_boxes=tables.rare_boxes,
+        rare_boxes=tables.rare_boxes if tables.rare_boxes is not None else earlier.rare_boxes,
     )
 
 
