@@ -271,14 +271,33 @@ def test_validity_domain_states_whether_the_table_has_this_versions_preprocessin
     assert not stale.inside and "yolox_nano" in stale.detail
 
 
-@pytest.mark.xfail(strict=True, reason="the shipped tables predate the current detector "
-                   "preprocessing; the re-sweep (benchmarks/run_coco_sweep.sh) is running. When "
-                   "its tables land this passes, and strict xfail then fails until this mark "
-                   "is removed")
-def test_shipped_measured_tables_carry_this_versions_preprocessing():
+#: Detectors whose shipped table rows were measured with the detector preprocessing before
+#: issue 24 and are awaiting their re-sweep (a full sweep of one int8 model is 3.5-6.5 hours on
+#: 2 cores; `fidelity tables STORE --earlier` merges each as it lands). A detector listed here
+#: whose rows carry this version's preprocessing fails (strict xfail): take it off the list.
+AWAITING_RESWEEP = frozenset({"yolo11n-int8dyn", "yolov10n-int8dyn", "yolov8n-int8dyn"})
+
+
+def _shipped_table_models() -> list[tuple[str, str]]:
+    folder = Path(fidelity.__file__).parent / "data" / "prediction"
+    return [(path.name, model) for path in sorted(folder.glob("coco*.json"))
+            for model in json.loads(path.read_text())["provenance"].get("models", {})]
+
+
+@pytest.mark.parametrize("table,model", [
+    pytest.param(t, m, marks=pytest.mark.xfail(strict=True, reason=f"{m}: awaiting its re-sweep "
+                                               "with this version's preprocessing"))
+    if m in AWAITING_RESWEEP else (t, m) for t, m in _shipped_table_models()])
+def test_shipped_measured_tables_carry_this_versions_preprocessing(table, model):
     from fidelity.coco.detectors import stale_preprocessing
 
     folder = Path(fidelity.__file__).parent / "data" / "prediction"
-    for path in sorted(folder.glob("coco*.json")):
-        prov = json.loads(path.read_text())["provenance"]
-        assert stale_preprocessing(prov) == {}, path.name
+    prov = json.loads((folder / table).read_text())["provenance"]
+    assert model not in stale_preprocessing(prov), (table, model)
+
+
+def test_every_shipped_table_names_its_detectors():
+    """The preprocessing test above has something to check in every measured table."""
+    tables = {t for t, _ in _shipped_table_models()}
+    folder = Path(fidelity.__file__).parent / "data" / "prediction"
+    assert tables == {p.name for p in folder.glob("coco*.json")} and len(tables) >= 1
