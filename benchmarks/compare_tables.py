@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -129,16 +130,24 @@ def markdown(result: dict[str, Any], before: str, after: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def before_after_main(doc: str | None, read: Callable[[Path], Any],
+                      compare_: Callable[[Any, Any], dict[str, Any]],
+                      markdown_: Callable[[dict[str, Any], str, str], str]) -> None:
+    """The command line of a before/after comparison: BEFORE AFTER --out NAME, each side read
+    with ``read``, NAME.json and NAME.md written."""
+    ap = argparse.ArgumentParser(description=(doc or "").split("\n\n")[0])
     ap.add_argument("before", type=Path)
     ap.add_argument("after", type=Path)
     ap.add_argument("--out", type=Path, required=True, help="NAME: writes NAME.md, NAME.json")
     a = ap.parse_args()
-    result = compare(_tables(a.before), _tables(a.after))
+    result = compare_(read(a.before), read(a.after))
     a.out.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
-    a.out.with_suffix(".md").write_text(markdown(result, str(a.before), str(a.after)))
+    a.out.with_suffix(".md").write_text(markdown_(result, str(a.before), str(a.after)))
     print(a.out.with_suffix(".md"))
+
+
+def main() -> None:
+    before_after_main(__doc__, _tables, compare, markdown)
 
 
 if __name__ == "__main__":

@@ -13,10 +13,8 @@ Usage: python -m benchmarks.compare_validation BEFORE.json AFTER.json --out repo
 
 from __future__ import annotations
 
-import argparse
 import json
 import statistics
-from pathlib import Path
 from typing import Any
 
 
@@ -104,15 +102,9 @@ def markdown(result: dict[str, Any], before: str, after: str) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("before", type=Path)
-    ap.add_argument("after", type=Path)
-    ap.add_argument("--out", type=Path, required=True, help="NAME: writes NAME.md, NAME.json")
-    a = ap.parse_args()
-    result = compare(json.loads(a.before.read_text()), json.loads(a.after.read_text()))
-    a.out.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
-    a.out.with_suffix(".md").write_text(markdown(result, str(a.before), str(a.after)))
-    print(a.out.with_suffix(".md"))
+    from benchmarks.compare_tables import before_after_main
+
+    before_after_main(__doc__, lambda p: json.loads(p.read_text()), compare, markdown)
 
 
 if __name__ == "__main__":
