@@ -182,7 +182,7 @@ def _q(prefix: str, name: str) -> str:
     return f"{{{NAMESPACES[prefix]}}}{name}"
 
 
-def _text(value: Any) -> str:
+def xml_value(value: Any) -> str:
     """A value as classification text: floats as the shortest round-trip decimal, booleans
     ``true``/``false`` (XML Schema)."""
     if isinstance(value, bool):
@@ -198,7 +198,7 @@ def _classification(kind: str, entries: Sequence[tuple[str, Any]],
         element.set("description", xml_safe(description))
     for keyword, value in ((k, v) for k, v in entries if v is not None):
         etree.SubElement(element, _q("stc", "ClassificationEntry"),
-                         keyword=xml_safe(keyword)).text = _text(value)
+                         keyword=xml_safe(keyword)).text = xml_value(value)
     return element
 
 
@@ -261,7 +261,7 @@ def subject_entries(subject: Mapping[str, Any]) -> list[tuple[str, Any]]:
         ("prediction_interval_low", lo), ("prediction_interval_high", hi),
         ("prediction_upper_bound", p.get("upper_bound")),
         ("validity_inside", validity.get("inside"))]
-    entries += [(f"validity: {c['name']}", f"{_text(c['inside'])}: {c['detail']}")
+    entries += [(f"validity: {c['name']}", f"{xml_value(c['inside'])}: {c['detail']}")
                 for c in validity.get("checks") or []]
     return entries
 
@@ -361,7 +361,7 @@ def stmd_element(record: JSONObject, files: Sequence[TracedFile],
     procedure = etree.SubElement(verdict, _q("stc", "Procedure"))
     rule = record.get("decision_rule") or {}
     method = _resource(procedure, "method", "text/plain", description="the decision rule")
-    etree.SubElement(method, _q("stc", "Content")).text = _text(
+    etree.SubElement(method, _q("stc", "Content")).text = xml_value(
         rule.get("description") or "no decision rule: the run states no verdict")
     method.append(_classification("run", _run_entries(record)))
     out = etree.SubElement(verdict, _q("stc", "Output"))
@@ -370,7 +370,7 @@ def stmd_element(record: JSONObject, files: Sequence[TracedFile],
     for subject in record.get("subjects", []):
         result = _resource(out, "result", "text/plain",
                            description=f"verdict: {subject.get('subject')}")
-        etree.SubElement(result, _q("stc", "Content")).text = _text(
+        etree.SubElement(result, _q("stc", "Content")).text = xml_value(
             (subject.get("verdict") or {}).get("message") or subject.get("error")
             or "no verdict")
         result.append(_classification("subject", subject_entries(subject),
@@ -410,4 +410,4 @@ def write_stmd(path: str | os.PathLike[str], record: JSONObject,
 __all__ = ["CHECKSUM_TYPE", "CLASSIFICATION", "INPUT_KINDS", "MIME_TYPES", "NAMESPACES",
            "SSP_TRACEABILITY_VERSION", "TracedFile", "file_srmd", "file_uri", "mime_type",
            "srmd_element", "ssp_schema_path", "stmd_element", "subject_entries",
-           "traced_files", "write_srmd", "write_stmd", "xml_safe"]
+           "traced_files", "write_srmd", "write_stmd", "xml_safe", "xml_value"]

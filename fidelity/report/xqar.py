@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from fidelity.fileio import JSONObject, write_bytes_atomic
-from fidelity.report.ssp import xml_safe
+from fidelity.report.ssp import xml_safe, xml_value
 
 #: Rule UIDs (QC Framework rule UID schema): emanating entity, standard, definition setting
 #: (the evidence record's schema version), rule name.
@@ -56,13 +56,6 @@ def rule_uid(name: str, version: str) -> str:
     """The rule UID of one of :data:`RULES` (``name``) at the record's schema ``version``."""
     setting = version if re.fullmatch(r"[0-9]+(\.[0-9]+)+", version) else f"{version}.0"
     return f"{EMANATING_ENTITY}:{STANDARD}:{setting}:{RULES[name]}"
-
-
-def _text(v: Any) -> str:
-    """A parameter value as XML 1.0 can hold it (shortest round-trip decimal for floats)."""
-    if isinstance(v, float):
-        return repr(v)
-    return xml_safe(str(v))
 
 
 def _checker_id(index: int, subject: str) -> str:
@@ -112,7 +105,7 @@ def xqar_result(record: JSONObject) -> Any:
                         ("commit", tool.get("commit")), ("code_sha256", tool.get("code_sha256")),
                         ("decision_rule", rule.get("description"))):
         if value is not None:
-            result.add_param_to_checker_bundle(BUNDLE, name, _text(value))
+            result.add_param_to_checker_bundle(BUNDLE, name, xml_value(value))
     for i, subject in enumerate(record["subjects"]):
         _add_subject(result, i, subject, version, IssueSeverity, StatusType)
     return result
@@ -151,7 +144,7 @@ def _add_subject(result: Any, index: int, subject: Mapping[str, Any], version: s
             params[f"sha256 {item.get('role')}: {item.get('path')}"] = item["sha256"]
     for name, value in params.items():
         if value is not None:
-            result.add_param_to_checker(BUNDLE, cid, xml_safe(name), _text(value))
+            result.add_param_to_checker(BUNDLE, cid, xml_safe(name), xml_value(value))
     if subject.get("error"):
         result.set_checker_status(BUNDLE, cid, status.ERROR)
         return
@@ -182,7 +175,7 @@ def _measurement_element(meas: Mapping[str, Any], u: Mapping[str, Any],
              "standardUncertainty": u.get("standard_uncertainty"),
              "expandedUncertainty": verdict.get("expanded_uncertainty"),
              "limit": verdict.get("limit"), "verdict": verdict.get("label")}
-    return etree.Element("Measurement", {k: _text(v) for k, v in attrs.items()
+    return etree.Element("Measurement", {k: xml_value(v) for k, v in attrs.items()
                                          if v is not None})
 
 
