@@ -956,7 +956,9 @@ def collect_results(store: ValidationStore, tables: Sequence[str] | None = None,
                     suite: Sequence[CameraCase] | None = None) -> ValidationResults:
     """Predicted against measured losses of every finished (camera, model) cell.
 
-    ``tables``: prediction tables to evaluate (default: all available); ``bound_table``: the
+    ``tables``: prediction tables to evaluate (default: all available but the directional ones,
+    whose classic curves are their measured table's and whose bound has its own section,
+    :func:`directional_validation`); ``bound_table``: the
     worst-case table whose bound is tested (default
     :data:`fidelity.prediction.table.DEFAULT_TABLE`). Returns one :class:`ValidationRow` per
     camera and model, the :class:`ValidationSummary`, the camera records, models, baselines
@@ -965,9 +967,15 @@ def collect_results(store: ValidationStore, tables: Sequence[str] | None = None,
     stored cameras that are not in the suite (renamed or removed camera files) are left out of
     the results and listed in ``summary.not_in_suite``.
     """
-    from fidelity.prediction.table import DEFAULT_TABLE, available_tables
+    from fidelity.prediction.table import (
+        DEFAULT_TABLE,
+        TableKind,
+        available_tables,
+        load_prediction_table,
+    )
 
-    tabs = list(tables) if tables else available_tables()
+    tabs = list(tables) if tables else [
+        t for t in available_tables() if load_prediction_table(t).kind != TableKind.DIRECTIONAL]
     bound = bound_table or DEFAULT_TABLE
     if bound not in tabs:
         tabs.append(bound)
