@@ -1,6 +1,6 @@
 """The one loss formula (fidelity.coco.loss) against hand-computed numbers and a numpy
-re-derivation: points, relative, their paired fold SEs, a zero baseline, equal scores and a
-single fold."""
+re-derivation: points, relative, their paired fold SEs and jackknife SEs (against the closed
+form a jackknife of a mean has), a zero baseline, equal scores and a single fold."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from fidelity.coco.loss import (
     LOSS_COLUMNS,
     Losses,
     LossEstimate,
+    jackknife_standard_error,
     loss_estimate,
     paired_standard_error,
     score_loss,
@@ -24,9 +25,13 @@ from fidelity.coco.loss import (
 class _Fold:
     map: float | None
     person: float | None = None
+    rest_map: float | None = None
 
     def value(self, key: str) -> float | None:
         return {"map": self.map, "person": self.person, "bicycle": None}[key]
+
+    def rest_value(self, key: str) -> float | None:
+        return {"map": self.rest_map, "person": None, "bicycle": None}[key]
 
 
 def test_points_and_relative_by_hand() -> None:
@@ -64,7 +69,7 @@ def test_standard_errors_against_numpy() -> None:
 def test_zero_baseline_has_no_relative_loss() -> None:
     # one rule everywhere: relative loss and its SE undefined for a baseline of 0
     e = loss_estimate(0.0, 0.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
-    assert e == LossEstimate(0.0, None, 0.0, None)
+    assert e == LossEstimate(0.0, None, 0.0, None, "folds")
     e = loss_estimate(0.0, 0.01, [0.0, 0.1], [0.0, 0.0])
     assert e.points == pytest.approx(-1.0)
     assert e.relative is None and e.relative_se is None
@@ -81,7 +86,7 @@ def test_zero_baseline_fold_is_left_out_of_the_relative_se() -> None:
 
 def test_equal_scores_lose_nothing() -> None:
     e = loss_estimate(0.37, 0.37, [0.3, 0.4, 0.41], [0.3, 0.4, 0.41])
-    assert e == LossEstimate(0.0, 0.0, 0.0, 0.0)
+    assert e == LossEstimate(0.0, 0.0, 0.0, 0.0, "folds")
 
 
 def test_single_fold_has_no_standard_error() -> None:
@@ -118,3 +123,80 @@ def test_losses_by_column() -> None:
     assert [loss.get(c) for c in LOSS_COLUMNS.values()] == [1.0, 2.0, 3.0, None]
     assert list(loss.to_json()) == list(LOSS_COLUMNS.values())
     assert Losses.from_json(loss.to_json()) == loss
+
+
+def _additive_scores(rng: np.random.Generator, n: int, k: int
+                     ) -> tuple[float, list[float], list[float]]:
+    """A score that is the mean of per-image values: whole run, per fold, run without fold."""
+    x = rng.normal(0.4, 0.1, n)
+    folds = [x[j::k] for j in range(k)]
+    rest = [np.concatenate([f for i, f in enumerate(folds) if i != j]) for j in range(k)]
+    return float(x.mean()), [float(f.mean()) for f in folds], [float(r.mean()) for r in rest]
+
+
+@pytest.mark.parametrize(("n", "k"), [(50, 5), (1000, 5), (12, 3)])
+def test_jackknife_of_a_mean_is_the_fold_se(n: int, k: int) -> None:
+    # closed form: for a statistic that is a mean over images, folds of equal size, the
+    # delete-a-group jackknife SE equals sd(fold means)/sqrt(K) (Efron & Tibshirani 11.5)
+    rng = np.random.default_rng(n)
+    b, bf, br = _additive_scores(rng, n, k)
+    o, of, orr = _additive_scores(rng, n, k)
+    jk = jackknife_standard_error(br, orr)
+    assert jk == pytest.approx(paired_standard_error(bf, of), rel=1e-9)
+    e = loss_estimate(b, o, bf, of, br, orr)
+    assert (e.points_se, e.se_method) == (pytest.approx(jk), "jackknife")
+
+
+def test_jackknife_by_hand() -> None:
+    # leave-out losses 2, 4, 6 points: mean 4, sum of squares 8, (K-1)/K = 2/3
+    se = jackknife_standard_error([0.50, 0.50, 0.50], [0.48, 0.46, 0.44])
+    assert se == pytest.approx(math.sqrt(2 / 3 * 8))
+    # relative: losses 4 %, 8 %, 12 % of 0.5
+    rel = jackknife_standard_error([0.50, 0.50, 0.50], [0.48, 0.46, 0.44], relative=True)
+    assert rel == pytest.approx(math.sqrt(2 / 3 * 32))
+
+
+def test_jackknife_needs_every_fold() -> None:
+    # a fold without its leave-out score is no jackknife: None, and the loss falls back to
+    # the paired fold SE
+    assert jackknife_standard_error([0.5, None, 0.5], [0.4, 0.4, 0.4]) is None
+    assert jackknife_standard_error([0.5], [0.4]) is None
+    assert jackknife_standard_error([], []) is None
+    assert jackknife_standard_error([0.0, 0.5], [0.0, 0.4], relative=True) is None
+    with pytest.raises(ValueError, match="length"):
+        jackknife_standard_error([0.5, 0.5], [0.4])
+    e = loss_estimate(0.5, 0.45, [0.5, 0.4, 0.6], [0.45, 0.38, 0.51], [0.5, None, 0.5],
+                      [0.45, 0.4, 0.45])
+    assert e.se_method == "folds"
+    assert e.points_se == paired_standard_error([0.5, 0.4, 0.6], [0.45, 0.38, 0.51])
+
+
+def test_jackknife_zero_and_tiny_scores() -> None:
+    # equal leave-out losses: SE exactly 0; denormal scores give finite numbers, never NaN
+    assert jackknife_standard_error([0.3, 0.4], [0.3, 0.4]) == 0.0
+    tiny = 5e-324
+    se = jackknife_standard_error([tiny, 2 * tiny, tiny], [0.0, 0.0, tiny])
+    assert se is not None and math.isfinite(se)
+    rel = jackknife_standard_error([tiny, 2 * tiny], [0.0, tiny], relative=True)
+    assert rel is not None and math.isfinite(rel)
+
+
+def test_score_loss_uses_the_rest_scores() -> None:
+    base, cell = {"map": 0.5}, {"map": 0.45}
+    folds_b = [_Fold(0.5, rest_map=0.50), _Fold(0.4, rest_map=0.55), _Fold(0.6, rest_map=0.45)]
+    folds_c = [_Fold(0.45, rest_map=0.44), _Fold(0.38, rest_map=0.50), _Fold(0.51, rest_map=0.41)]
+    e = score_loss("map", base, cell, folds_b, folds_c)
+    assert e.se_method == "jackknife"
+    assert e.points_se == pytest.approx(jackknife_standard_error([0.50, 0.55, 0.45],
+                                                                 [0.44, 0.50, 0.41]))
+
+
+def test_fold_score_json_with_and_without_rest() -> None:
+    from fidelity.coco.scoring import FoldScore
+
+    f = FoldScore(0.4, 0.5, None, 200, 0.41, 0.52, None)
+    assert f.has_rest and FoldScore.from_json(f.to_json()) == f
+    old = {"map": 0.4, "person": 0.5, "bicycle": None, "images": 200}  # stored before
+    g = FoldScore.from_json(old)
+    assert not g.has_rest and g.rest_value("map") is None and g.to_json() == old
+    assert FoldScore(0.4, None, None, 1, 0.0).has_rest  # a rest score of 0 is a score

@@ -513,6 +513,13 @@ def test_merge_keeps_the_earlier_models_the_store_does_not_hold(store, tmp_path)
     assert prov["earlier"]["file"] == "old/tables.json" and prov["earlier"]["sha256"] == "ab" * 32
     assert prov["models"]["yolox_nano"]["conventions"]["preprocess"] == "an older one"
     assert set(stale_preprocessing(prov)) >= {"yolox_nano"}
+    # merged again into a re-measured store (the same one here): the kept rows keep the record
+    # of where they were measured, and name the file they passed through
+    twice = merge_tables(new, merged, {"file": "mid/tables.json", "sha256": "cd" * 32})
+    assert twice.meta["earlier"]["file"] == "old/tables.json"
+    assert twice.meta["earlier"]["versions"] == {"fidelity": "0.0.9"}
+    assert twice.meta["earlier"]["via"] == {"file": "mid/tables.json", "sha256": "cd" * 32}
+    assert twice.worst_case == merged.worst_case
     # nothing to keep: the store's tables as they are
     assert merge_tables(new, build_tables(store), {"file": "x"}) == new
 

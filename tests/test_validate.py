@@ -317,3 +317,29 @@ def test_tiny_real_run_is_resumable(shared: Path, tmp_path: Path) -> None:
     assert {c.camera: c.finished for c in st.cells()} == before
     md = (tmp_path / "rep" / "validation.md").read_text()
     assert "bad-hue-rotation" in md and "yolox_nano" in md
+    # every cell carries the rest-of-run scores of the jackknife SE, and the report says so
+    assert all(f.has_rest for c in st.cells() for f in c.folds)
+    doc = json.loads((tmp_path / "rep" / "validation.json").read_text())
+    assert doc["summary"]["standard_error"] == "jackknife"
+    # a store of an earlier version (folds without them) is scored again by --report-only
+    # with --annotations, from its detections: the same SEs as the run's own
+    se = {(r["camera"], r["model"]): r["bound"]["all"]["se"] for r in doc["rows"]}
+    with st.db:
+        for c in st.cells():
+            st.db.execute("UPDATE cells SET folds=? WHERE model=? AND camera=?",
+                          (json.dumps([{k: v for k, v in f.to_json().items() if k != "rest"}
+                                       for f in c.folds]), c.model, c.camera))
+    old = CliRunner().invoke(main, ["validate", "--cameras", str(suite), "--report-only",
+                                    "--store", str(tmp_path / "st"), "--out",
+                                    str(tmp_path / "old")])
+    assert old.exit_code == 0, old.output
+    assert json.loads((tmp_path / "old" / "validation.json").read_text())["summary"][
+        "standard_error"] == "folds"
+    again = CliRunner().invoke(main, ["validate", "--cameras", str(suite), "--report-only",
+                                      "--annotations", str(ann), "--store", str(tmp_path / "st"),
+                                      "--out", str(tmp_path / "again")])
+    assert again.exit_code == 0, again.output
+    doc2 = json.loads((tmp_path / "again" / "validation.json").read_text())
+    assert doc2["summary"]["standard_error"] == "jackknife"
+    assert {(r["camera"], r["model"]): r["bound"]["all"]["se"] for r in doc2["rows"]} == \
+        pytest.approx(se)

@@ -51,7 +51,9 @@ if TYPE_CHECKING:
               help="Worst-case prediction table whose bound is tested (default: the default "
                    "table of fidelity predict).")
 @click.option("--report-only", is_flag=True,
-              help="Only write the report from what the store holds (no inference).")
+              help="Only write the report from what the store holds (no inference; with "
+                   "--annotations, cells stored by an earlier version get the rest-of-run "
+                   "fold scores of the jackknife standard error).")
 @click.option("--notes", default=None, type=click.Path(dir_okay=False, exists=True),
               help="Markdown file with a written analysis, included in the report.")
 @progress_option
@@ -106,6 +108,11 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
     store_dir = store or str(default_store())
     if report_only:
         st = ValidationStore(store_dir, create=False)
+        if annotations:  # cells stored without the jackknife's rest-of-run scores
+            from fidelity.coco.scoring import load_annotations
+
+            st.rescore_folds(load_annotations(annotations),
+                             lambda m: click.echo(m, err=True))
     else:
         if not models or not images or not annotations:
             raise InvalidValueError("--models, --images and --annotations are needed "

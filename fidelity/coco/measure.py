@@ -7,8 +7,9 @@ twice, as the validation does (:mod:`fidelity.coco.validate`): once through the 
 baseline (the JPEG round trip with the original quantisation tables and subsampling,
 :func:`fidelity.coco.jpeg.roundtrip_jpeg`, no colour change) and once through the mapping and
 the same round trip; ΔmAP = 100 × (baseline mAP − mapped mAP) in percentage points (also
-relative to the baseline, and ΔAP of person and bicycle), with the paired standard error of 5
-interleaved image folds (:func:`fidelity.coco.loss.loss_estimate`).
+relative to the baseline, and ΔAP of person and bicycle), with its standard error, the
+leave-one-fold-out jackknife over 5 interleaved image folds
+(:func:`fidelity.coco.loss.loss_estimate`).
 
 Every image's raw detections go to a crash-safe store (:class:`MeasureStore`, default
 ``$FIDELITY_CACHE/measure`` or ``~/.cache/fidelity/measure``), keyed by the model file
@@ -202,7 +203,7 @@ class MeasuredLoss:
     """What a mapping cost one detector on ``images`` COCO images (:func:`measure_mapping`).
 
     Scores are fractions; losses in percentage points (``dmap_relative`` in % of the baseline
-    mAP; None when the baseline mAP is 0), each with its paired 5-fold standard error
+    mAP; None when the baseline mAP is 0), each with its standard error (5-fold jackknife)
     (``*_se``; None with fewer than 2 folds), all from :func:`fidelity.coco.loss.loss_estimate`.
     ``seconds``: wall time of the measurement; ``inferred``: images run through the detector
     in it (the rest came from the store); ``baseline_cached``: whether the baseline was

@@ -290,37 +290,65 @@ FOLDS: int = 5
 @dataclass(frozen=True)
 class FoldScore:
     """COCO scores of one image fold (fractions in [0, 1]; None: no ground truth of the class
-    in the fold), as the stores keep them for standard errors (:func:`score_folds`)."""
+    in the fold), as the stores keep them for standard errors (:func:`score_folds`).
+
+    ``rest_map``, ``rest_person``, ``rest_bicycle``: the same scores of every *other* image of
+    the run (the run without this fold), for the leave-one-fold-out jackknife standard error of
+    a loss on the whole run (:func:`fidelity.coco.loss.jackknife_standard_error`); None where
+    not computed (stores written before they were) or not defined.
+    """
 
     map: float
     person: float | None
     bicycle: float | None
     images: int
+    rest_map: float | None = None
+    rest_person: float | None = None
+    rest_bicycle: float | None = None
 
     def value(self, key: str) -> float | None:
         """The score named ``key``: ``"map"``, ``"person"`` or ``"bicycle"``."""
         return {"map": self.map, "person": self.person, "bicycle": self.bicycle}[key]
 
+    def rest_value(self, key: str) -> float | None:
+        """The score ``key`` of the run without this fold (None: not computed or defined)."""
+        return {"map": self.rest_map, "person": self.rest_person,
+                "bicycle": self.rest_bicycle}[key]
+
+    @property
+    def has_rest(self) -> bool:
+        """Whether the scores of the rest of the run were computed."""
+        return self.rest_map is not None
+
     def to_json(self) -> dict[str, Any]:
-        """``{"map", "person", "bicycle", "images"}`` (the stores' format)."""
-        return {"map": self.map, "person": self.person, "bicycle": self.bicycle,
-                "images": self.images}
+        """``{"map", "person", "bicycle", "images"}`` and, when computed, ``"rest": {"map",
+        "person", "bicycle"}`` (the stores' format)."""
+        out: dict[str, Any] = {"map": self.map, "person": self.person, "bicycle": self.bicycle,
+                               "images": self.images}
+        if self.has_rest:
+            out["rest"] = {"map": self.rest_map, "person": self.rest_person,
+                           "bicycle": self.rest_bicycle}
+        return out
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> FoldScore:
         """Inverse of :meth:`to_json`."""
-        return cls(data["map"], data.get("person"), data.get("bicycle"), int(data["images"]))
+        rest = data.get("rest") or {}
+        return cls(data["map"], data.get("person"), data.get("bicycle"), int(data["images"]),
+                   rest.get("map"), rest.get("person"), rest.get("bicycle"))
 
 
 def score_folds(coco_gt: Any, detections: Mapping[int, np.ndarray], image_ids: Sequence[int],
-                folds: int = FOLDS, method: str = "pycocotools") -> list[FoldScore]:
+                folds: int = FOLDS, method: str = "pycocotools",
+                rest: bool = True) -> list[FoldScore]:
     """Scores of ``folds`` interleaved image folds (``ids[k::folds]``), for standard errors.
 
-    Returns one :class:`FoldScore` per fold (mAP, person and bicycle AP, images). With fewer
-    images than folds each image is a fold; with fewer than 2 images, no folds. The standard
-    error of a paired difference d between two runs on the same images is
-    ``std(d_k, ddof=1) / sqrt(K)`` over the folds (the folds are disjoint and together cover
-    every image; :func:`fidelity.coco.loss.paired_standard_error`).
+    Returns one :class:`FoldScore` per fold (mAP, person and bicycle AP, images) and, with
+    ``rest``, the scores of the run without that fold (``FoldScore.rest_*``: what the
+    leave-one-fold-out jackknife of a whole-run loss needs; about ``folds - 1`` times the
+    scoring work of the run). With fewer images than folds each image is a fold; with fewer
+    than 2 images, no folds. Standard errors from them:
+    :func:`fidelity.coco.loss.loss_estimate`.
     """
     ids = sorted(int(i) for i in image_ids)
     n = min(int(folds), len(ids))
@@ -328,7 +356,13 @@ def score_folds(coco_gt: Any, detections: Mapping[int, np.ndarray], image_ids: S
     for k in range(n if n >= 2 else 0):
         fold = ids[k::n]
         s = evaluate_detections(coco_gt, detections, fold, method=method)
-        out.append(FoldScore(s.map, s.ap.get("person"), s.ap.get("bicycle"), len(fold)))
+        r: tuple[float | None, float | None, float | None] = (None, None, None)
+        if rest:
+            left = set(fold)
+            o = evaluate_detections(coco_gt, detections, [i for i in ids if i not in left],
+                                    method=method)
+            r = (o.map, o.ap.get("person"), o.ap.get("bicycle"))
+        out.append(FoldScore(s.map, s.ap.get("person"), s.ap.get("bicycle"), len(fold), *r))
     return out
 
 

@@ -138,13 +138,17 @@ class SweepStore(ResultsStore):
 
     def fold_scores(self, coco: Any, model: str, transform: str, target: float,
                     image_ids: Sequence[int], method: str = "auto") -> list[FoldScore]:
-        """Per-fold scores of a cell on ``image_ids`` (cached in the ``folds`` table)."""
+        """Per-fold scores of a cell on ``image_ids`` with the scores of the rest of the run
+        without each fold (:func:`fidelity.coco.scoring.score_folds`; cached in the ``folds``
+        table)."""
         from fidelity.coco.scoring import FoldScore, score_folds
 
         row = self.db.execute("SELECT images, folds FROM folds WHERE model=? AND transform=? "
                               "AND target=?", (model, transform, float(target))).fetchone()
         if row and row[0] == len(image_ids):
-            return [FoldScore.from_json(f) for f in json.loads(row[1])]
+            cached = [FoldScore.from_json(f) for f in json.loads(row[1])]
+            if all(f.has_rest for f in cached):  # else: scored before the jackknife's scores
+                return cached
         folds = score_folds(coco, self.detections(model, transform, target), image_ids,
                             method=method)
         with self.db:

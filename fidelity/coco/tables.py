@@ -54,14 +54,17 @@ RARE_BOXES = 5
 
 @dataclass(frozen=True)
 class CellErrors:
-    """Paired fold standard errors of a cell's losses (:func:`add_standard_errors`): ΔmAP in
-    points and relative (% of baseline), ΔAP of person and bicycle in points; None with fewer
-    than 2 usable folds."""
+    """Standard errors of a cell's losses (:func:`add_standard_errors`): ΔmAP in points and
+    relative (% of baseline), ΔAP of person and bicycle in points; None with fewer than 2
+    usable folds. ``method`` (of ΔmAP's): ``"jackknife"`` (leave-one-fold-out, of the
+    whole-run loss) or ``"folds"`` (paired fold SE; tables measured before the jackknife)
+    (:func:`fidelity.coco.loss.loss_estimate`)."""
 
     dmap_points: float | None
     dmap_relative: float | None
     dap_person_points: float | None
     dap_bicycle_points: float | None
+    method: str | None = "folds"
 
 
 @dataclass(frozen=True)
@@ -125,7 +128,7 @@ class CellDelta:
             e = self.errors
             d |= {"dmap_points_se": e.dmap_points, "dmap_relative_se": e.dmap_relative,
                   "dap_person_points_se": e.dap_person_points,
-                  "dap_bicycle_points_se": e.dap_bicycle_points}
+                  "dap_bicycle_points_se": e.dap_bicycle_points, "se_method": e.method}
         return d
 
     @classmethod
@@ -134,7 +137,8 @@ class CellDelta:
         errors = None
         if "dmap_points_se" in d:
             errors = CellErrors(d["dmap_points_se"], d.get("dmap_relative_se"),
-                                d.get("dap_person_points_se"), d.get("dap_bicycle_points_se"))
+                                d.get("dap_person_points_se"), d.get("dap_bicycle_points_se"),
+                                d.get("se_method", "folds"))
         return cls(d["model"], d["transform"], float(d["delta_e"]), d.get("param"),
                    d["status"], d.get("reason"), d.get("images"), d.get("map"), d.get("map50"),
                    d.get("dmap_points"), d.get("dmap_relative"), d.get("ap_person"),
@@ -844,10 +848,9 @@ def add_standard_errors(store: SweepStore, coco: Any, deltas: Mapping[str, Seque
                         progress: bool = False) -> dict[str, list[CellDelta]]:
     """The rows with their :class:`CellErrors` (done cells).
 
-    Paired standard errors over :data:`fidelity.coco.scoring.FOLDS` interleaved image folds: per
-    fold the loss of the cell against the baseline on the same images,
-    ``SE = std(loss_k, ddof=1) / sqrt(K)`` (:func:`fidelity.coco.loss.loss_estimate`; no
-    relative SE for a baseline mAP of 0).
+    Standard errors of each whole-run loss by the leave-one-fold-out jackknife over
+    :data:`fidelity.coco.scoring.FOLDS` interleaved image folds
+    (:func:`fidelity.coco.loss.loss_estimate`; no relative SE for a baseline mAP of 0).
     Fold scores are computed from the stored detections (no inference) and cached in the store.
     """
     from tqdm import tqdm
@@ -872,7 +875,7 @@ def add_standard_errors(store: SweepStore, coco: Any, deltas: Mapping[str, Seque
         loss, person, bicycle = (score_loss(k, base, cell, base_folds[m], folds)
                                  for k in ("map", "person", "bicycle"))
         errors[id(r)] = CellErrors(loss.points_se, loss.relative_se, person.points_se,
-                                   bicycle.points_se)
+                                   bicycle.points_se, loss.se_method)
     return {m: [replace(r, errors=errors[id(r)]) if id(r) in errors else r for r in rows]
             for m, rows in deltas.items()}
 
@@ -883,7 +886,7 @@ def build_tables(store: SweepStore, coco: Any = None, *, method: str = "auto",
 
     ``coco``: the sweep's annotations (pycocotools ``COCO``); when given, every model's cells
     are scored on one image count (:func:`align_image_counts`; ``images`` caps it per model)
-    and every done cell gets paired fold standard errors (:func:`add_standard_errors`).
+    and every done cell gets standard errors (:func:`add_standard_errors`).
     Without it, cells scored on another image count than their baseline are left out
     (:func:`cell_deltas`), there are no SEs, and ``images`` is an error.
     """
@@ -936,6 +939,19 @@ def build_tables(store: SweepStore, coco: Any = None, *, method: str = "auto",
     )
 
 
+def _kept_provenance(kept: Sequence[str], earlier: Tables, source: Mapping[str, Any]
+                     ) -> dict[str, Any]:
+    """Where the kept models were measured: ``source`` with the earlier run's versions; when
+    the earlier tables had kept every one of them from tables before (a second merge), that
+    first record, with ``via`` naming the file they passed through."""
+    prev = earlier.meta.get("earlier") or {}
+    if kept and set(kept) <= set(prev.get("models") or ()):
+        return dict(prev) | {"models": list(kept), "via": dict(source)}
+    return dict(source) | {
+        "models": list(kept), "versions": earlier.meta.get("versions"),
+        "machine": earlier.meta.get("machine"), "scorers": earlier.meta.get("scorers")}
+
+
 def merge_tables(tables: Tables, earlier: Tables, source: Mapping[str, Any]) -> Tables:
     """``tables`` (from a store) with the models of an ``earlier`` tables.json it does not hold.
 
@@ -982,9 +998,7 @@ def merge_tables(tables: Tables, earlier: Tables, source: Mapping[str, Any]) -> 
         cells=dict(tables.cells) | {m: earlier.cells[m] for m in kept if m in earlier.cells},
         worst_case=worst,
         size_classes={s: tuple(rows) for s, rows in size_class_rows(worst).items()},
-        meta=tables.meta | {"earlier": dict(source) | {
-            "models": kept, "versions": earlier.meta.get("versions"),
-            "machine": earlier.meta.get("machine"), "scorers": earlier.meta.get("scorers")}},
+        meta=tables.meta | {"earlier": _kept_provenance(kept, earlier, source)},
         transforms=tuple(sorted(set(tables.transforms) | set(earlier.transforms))),
         # a kept model's baseline is a done cell too (the rows are its transformed cells)
         cells_done=tables.cells_done + len(kept) + sum(r.done for r in kept_rows),
@@ -1263,6 +1277,8 @@ def prediction_table(tables: Tables, name: str = "coco1000-measured") -> dict[st
                           "bicycle columns are their own worst case over the same transforms",
             "omitted_partial_points": omitted,
             "aligned_image_counts": {m: a.to_json() for m, a in tables.aligned.items()},
+            "standard_errors": {m: STANDARD_ERROR_WORDS[k]
+                                for m, k in standard_error_methods(tables).items()},
         } | ({"earlier": portable_paths(meta["earlier"])} if meta.get("earlier") else {}),
         "units": {
             "dmap_points": "percentage points of mAP@[.50:.95] (100*(baseline-transformed))",
@@ -1272,6 +1288,29 @@ def prediction_table(tables: Tables, name: str = "coco1000-measured") -> dict[st
         },
         "curves": curves,
     }
+
+
+#: How each standard-error method was computed (provenance and reports).
+STANDARD_ERROR_WORDS: dict[str, str] = {
+    "jackknife": "leave-one-fold-out jackknife of the whole-run loss over 5 interleaved image "
+                 "folds (fidelity.coco.loss.jackknife_standard_error)",
+    "folds": "paired SE of the per-fold losses over 5 interleaved image folds (measured before "
+             "the jackknife; understates the SE of the whole-run loss, "
+             "reports/validation/standard_error.md)",
+    "mixed": "jackknife where the leave-one-fold-out scores exist, paired fold SE elsewhere",
+}
+
+
+def standard_error_methods(tables: Tables) -> dict[str, str]:
+    """Per model, how its ΔmAP standard errors were computed: ``"jackknife"``, ``"folds"``
+    or ``"mixed"`` (keys of :data:`STANDARD_ERROR_WORDS`); models without SEs left out."""
+    out: dict[str, str] = {}
+    for m, rows in tables.cells.items():
+        kinds = {r.errors.method for r in rows if r.errors is not None
+                 and r.errors.dmap_points is not None and r.errors.method is not None}
+        if kinds:
+            out[m] = kinds.pop() if len(kinds) == 1 else "mixed"
+    return out
 
 
 def _model_provenance(info: ModelSummary) -> dict[str, Any]:
@@ -1384,6 +1423,8 @@ def check_store_meta(db: Any, path: str, schema: sc.Node = SWEEP_META_SCHEMA) ->
 
 
 __all__ = [
+    "STANDARD_ERROR_WORDS",
+    "standard_error_methods",
     "SWEEP_META_SCHEMA",
     "check_store_meta",
     "LIMIT_BUDGETS",

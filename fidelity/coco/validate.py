@@ -470,24 +470,29 @@ class ClassSummary:
 class ValidationSummary:
     """The bound ``bound_table`` tested, the ``tables`` evaluated, stored cameras left out
     (``not_in_suite``) and per class of :data:`fidelity.coco.loss.LOSS_COLUMNS` its
-    :class:`ClassSummary`."""
+    :class:`ClassSummary`; ``standard_error``: how the measured losses' SEs were computed,
+    ``"jackknife"``, ``"folds"`` or ``"mixed"``
+    (:data:`fidelity.coco.tables.STANDARD_ERROR_WORDS`)."""
 
     bound_table: str
     tables: tuple[str, ...]
     not_in_suite: tuple[str, ...]
     classes: dict[str, ClassSummary]
+    standard_error: str = "folds"
 
     def to_json(self) -> dict[str, Any]:
-        """``{"bound_table", "tables", "not_in_suite", <class>: ...}``."""
+        """``{"bound_table", "tables", "not_in_suite", "standard_error", <class>: ...}``."""
         return {"bound_table": self.bound_table, "tables": list(self.tables),
-                "not_in_suite": list(self.not_in_suite)} | {
+                "not_in_suite": list(self.not_in_suite),
+                "standard_error": self.standard_error} | {
                     c: s.to_json() for c, s in self.classes.items()}
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> ValidationSummary:
         """Inverse of :meth:`to_json`."""
         return cls(d["bound_table"], tuple(d["tables"]), tuple(d.get("not_in_suite") or ()),
-                   {c: ClassSummary.from_json(d[c]) for c in LOSS_COLUMNS if c in d})
+                   {c: ClassSummary.from_json(d[c]) for c in LOSS_COLUMNS if c in d},
+                   d.get("standard_error", "folds"))
 
 
 @dataclass(frozen=True)
@@ -675,6 +680,26 @@ class ValidationStore(ResultsStore):
         rows = self.db.execute("SELECT model, camera FROM cells ORDER BY model, camera").fetchall()
         return [c for m, k in rows if (c := self.cell(m, k)) is not None]
 
+    def rescore_folds(self, coco: Any, say: Callable[[str], None] | None = None) -> int:
+        """Score again, from the stored detections (no inference), the folds of every cell
+        whose fold scores lack the rest-of-run scores the jackknife SE needs (cells stored
+        before they were; :func:`fidelity.coco.scoring.score_folds`). Returns how many."""
+        from fidelity.coco.scoring import score_folds
+
+        n = 0
+        for c in self.cells():
+            if c.folds and all(f.has_rest for f in c.folds):
+                continue
+            dets = self.detections(c.model, c.camera)
+            folds = score_folds(coco, dets, sorted(dets), FOLDS, method="auto")
+            with self.db:
+                self.db.execute("UPDATE cells SET folds=? WHERE model=? AND camera=?",
+                                (json.dumps([f.to_json() for f in folds]), c.model, c.camera))
+            n += 1
+            if say:
+                say(f"{c.camera} / {c.model}: folds scored again with the rest of the run")
+        return n
+
     def finish_cell(self, model: str, camera: str, score: CocoScore,
                     folds: Sequence[FoldScore], seconds: float) -> None:
         """Record a finished cell with its full-set score and per-fold scores."""
@@ -813,6 +838,7 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
                               functools.partial(tables.get, case)) for f, ids in runs]
         run.run(work, ValidationCells(store, run.stores, coco, say), batch_commit=batch_commit,
                 progress=progress, say=say)
+    store.rescore_folds(coco, say)  # cells an earlier version stored without rest scores
     return store
 
 
@@ -880,7 +906,7 @@ class ValidationCells:
         own = self.stores.get()  # run_cells may score on a thread of its own
         dets = own.detections(model, camera)
         score = evaluate_detections(self.coco, dets, ids)
-        folds = score_folds(self.coco, dets, ids, FOLDS)
+        folds = score_folds(self.coco, dets, ids, FOLDS, method="auto")
         own.finish_cell(model, camera, score, folds, seconds)
         self.say(f"{time.strftime('%H:%M:%S')} {camera} / {model}: mAP={score.map:.4f} "
                  f"person={score.ap.get('person')} images={len(ids)} new={new} "
@@ -993,6 +1019,7 @@ def collect_results(store: ValidationStore, tables: Sequence[str] | None = None,
     cells = {(c.model, c.camera): c for c in store.cells()}
     models = store.models()
     rows = []
+    methods: set[str] = set()
     for (model, camera), c in sorted(cells.items()):
         if camera == BASELINE or camera not in cases:
             continue
@@ -1000,8 +1027,11 @@ def collect_results(store: ValidationStore, tables: Sequence[str] | None = None,
         if b is None:
             continue
         rows.append(_row(camera, cases[camera], b, c, tabs, bound))
+        methods.add("jackknife" if all(f.has_rest for f in (*b.folds, *c.folds)) else "folds")
     summary = ValidationSummary(bound, tuple(tabs), tuple(not_in_suite),
-                                {cls: _class_summary(rows, cls) for cls in LOSS_COLUMNS})
+                                {cls: _class_summary(rows, cls) for cls in LOSS_COLUMNS},
+                                methods.pop() if len(methods) == 1 else
+                                "mixed" if methods else "folds")
     results = ValidationResults(
         tuple(rows), summary, cases, models,
         {m: cells[(m, BASELINE)] for m in models if (m, BASELINE) in cells}, store.meta())

@@ -4,8 +4,9 @@
 :class:`~fidelity.prediction.table.Prediction`) with its standard uncertainty from two sources,
 combined as uncorrelated (JCGM 100 5.1.2):
 
-- the table's sampling error at that ΔE: the larger of the paired standard errors the sweep
-  recorded at the two table points around the ΔE (:class:`~fidelity.prediction.table.SamplingError`;
+- the table's sampling error at that ΔE: the larger of the standard errors the sweep
+  recorded at the two table points around the ΔE (the jackknife, or the paired fold SE of
+  tables measured before it: the table's provenance says which) (:class:`~fidelity.prediction.table.SamplingError`;
   measured tables, ``dmap_points`` only; None otherwise);
 - the chart ΔE's own standard uncertainty ``u(ΔE)`` (:mod:`fidelity.chart.uncertainty`)
   propagated through the table: ``|c| u(ΔE)`` with the sensitivity ``c`` the slope of the
@@ -70,8 +71,8 @@ class PredictionInterval:
                 "propagated": self.propagated,
                 "standard_uncertainty": self.standard_uncertainty, "k": self.k,
                 "interval": [lo, hi],
-                "method": ("sqrt(table_se^2 + (slope u(ΔE))^2); table_se the larger paired SE "
-                           "of the table points around ΔE; slope by central differences")}
+                "method": ("sqrt(table_se^2 + (slope u(ΔE))^2); table_se the larger SE of "
+                           "the table points around ΔE; slope by central differences")}
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> PredictionInterval:

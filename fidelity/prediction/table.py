@@ -397,8 +397,8 @@ class ColumnPrediction:
 class SamplingError:
     """The standard error of a measured table's ΔmAP (percentage points) at the table points
     next to a chart ΔE: the smaller (``low``) and the larger (``high``) of the two (equal at a
-    table point). From the paired standard error the sweep recorded per cell
-    (:func:`fidelity.coco.scoring.paired_standard_error`)."""
+    table point). From the standard error the sweep recorded per cell
+    (:func:`fidelity.coco.loss.loss_estimate`)."""
 
     low: float
     high: float

@@ -408,11 +408,14 @@ def _standard_error_text(tables: Tables) -> Text | None:
                if r.errors is not None and r.errors.dmap_points is not None]
            for m, rows in tables.cells.items()}
     medians = ", ".join(f"{m} {float(np.median(s)):.2f}" for m, s in ses.items() if s)
-    return Text("± values are standard errors of ΔmAP, paired over 5 interleaved image folds "
-                "(SE = sd of the per-fold losses / √5; for relative ΔmAP each fold's loss as a "
-                f"share of that fold's baseline); in points median {medians} "
-                f"({sum(map(len, ses.values()))} cells). A worst case over ten transforms is "
-                "biased upwards by this noise.")
+    from fidelity.coco.tables import STANDARD_ERROR_WORDS, standard_error_methods
+
+    methods = standard_error_methods(tables)
+    how = "; ".join(f"{m}: {STANDARD_ERROR_WORDS[k]}" for m, k in methods.items())
+    return Text("± values are standard errors of ΔmAP, by detector: " + how + " (relative "
+                "ΔmAP: the same over each loss as a share of its baseline); in points median "
+                f"{medians} ({sum(map(len, ses.values()))} cells). A worst case over ten "
+                "transforms is biased upwards by this noise.")
 
 
 def _coverage_section(tables: Tables) -> Section:

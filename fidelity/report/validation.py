@@ -605,7 +605,6 @@ def _baselines_section(results: ValidationResults) -> Section:
 
 
 def _run_section(results: ValidationResults) -> Section:
-    from fidelity.coco.scoring import FOLDS
     from fidelity.fileio import portable_paths
 
     meta, summ, cams = results.meta, results.summary, results.cameras
@@ -639,8 +638,11 @@ def _run_section(results: ValidationResults) -> Section:
                  "baseline_map=...)` with tables "
                  f"{', '.join(f'`{t}`' for t in summ.tables)}; the bound tested is "
                  f"`{summ.bound_table}`.")
-    lines.append(f"- Standard errors: {FOLDS} interleaved image folds, SE = std(fold "
-                 f"loss)/√{FOLDS}.")
+    from fidelity.coco.tables import STANDARD_ERROR_WORDS
+
+    lines.append(f"- Standard errors: {STANDARD_ERROR_WORDS[summ.standard_error]}"
+                 + (" (rebuild with `--annotations` to score the rest-of-run folds)"
+                    if summ.standard_error != "jackknife" else "") + ".")
     lines.append(f"- Versions: {words(meta.get('versions'))}; machine: "
                  f"{words(meta.get('machine'))}.")
     finished = sorted({r.camera for r in results.rows})
