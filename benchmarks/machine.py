@@ -46,3 +46,23 @@ def best_time(fn: Callable[[], object], repeats: int) -> float:
         fn()
         times.append(time.perf_counter() - t)
     return min(times)
+
+
+def machine_words() -> str:
+    """``"CPU, N cores"`` of :func:`machine_info` (a report's line about the machine)."""
+    m = machine_info()
+    return f"{m['cpu']}, {m['cores']} cores"
+
+
+def write_report(out: str | os.PathLike[str], doc: dict[str, Any], markdown: str) -> None:
+    """``OUT.json`` (``doc``) and ``OUT.md`` (``markdown``), each written atomically, and the
+    Markdown printed."""
+    import json
+    from pathlib import Path
+
+    from fidelity.fileio import write_text_atomic
+
+    path = Path(out)
+    write_text_atomic(path.with_suffix(".json"), json.dumps(doc, indent=1) + "\n")
+    write_text_atomic(path.with_suffix(".md"), markdown)
+    print(markdown)

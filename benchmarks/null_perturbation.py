@@ -12,7 +12,6 @@ Usage: python -m benchmarks.null_perturbation IMAGES ANNOTATIONS MODEL.onnx[@N] 
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -23,7 +22,6 @@ import numpy as np
 from fidelity.coco.jpeg import JpegSettings, decode_jpeg, roundtrip_jpeg
 from fidelity.coco.loss import loss_estimate
 from fidelity.coco.scoring import FOLDS, evaluate_detections, load_annotated_images, score_folds
-from fidelity.fileio import write_text_atomic
 
 SEED = 20261126
 
@@ -97,7 +95,7 @@ def markdown(doc: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
-    from benchmarks.machine import machine_info
+    from benchmarks.machine import machine_words, write_report
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("images")
@@ -105,16 +103,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("models", nargs="+", help="MODEL.onnx[@N]: N = the first N images")
     ap.add_argument("--out", default="reports/validation/null_perturbation")
     a = ap.parse_args(argv)
-    mi = machine_info()
-    doc: dict[str, Any] = {"machine": f"{mi['cpu']}, {mi['cores']} cores", "models": []}
+    doc: dict[str, Any] = {"machine": machine_words(), "models": []}
     for spec in a.models:
         path, _, n = spec.partition("@")
         doc["models"].append(run_model(path, int(n) if n else None, a.images, a.annotations,
                                        lambda s: print(s, flush=True)))
-    out = Path(a.out)
-    write_text_atomic(out.with_suffix(".json"), json.dumps(doc, indent=1) + "\n")
-    write_text_atomic(out.with_suffix(".md"), markdown(doc))
-    print(markdown(doc))
+    write_report(a.out, doc, markdown(doc))
 
 
 if __name__ == "__main__":

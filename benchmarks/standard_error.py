@@ -25,7 +25,6 @@ import argparse
 import json
 import statistics
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -33,7 +32,6 @@ import numpy as np
 from fidelity.coco.loss import jackknife_standard_error, paired_standard_error
 from fidelity.coco.scoring import FOLDS, coco_from_dict, evaluate_detections, load_annotations
 from fidelity.coco.validate import BASELINE, ValidationStore
-from fidelity.fileio import write_text_atomic
 
 QUARTERS = 4
 
@@ -204,7 +202,7 @@ def markdown(doc: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
-    from benchmarks.machine import machine_info
+    from benchmarks.machine import machine_words, write_report
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("store")
@@ -224,8 +222,7 @@ def main(argv: list[str] | None = None) -> None:
     def say(s: str) -> None:
         print(s, flush=True)
 
-    m = machine_info()
-    doc: dict[str, Any] = {"machine": f"{m['cpu']}, {m['cores']} cores",
+    doc: dict[str, Any] = {"machine": machine_words(),
                            "store_images": ", ".join(f"{m}: {r.limit_images or 'all'} images"
                                                      for m, r in store.models().items()),
                            "overview": overview(store)}
@@ -238,10 +235,7 @@ def main(argv: list[str] | None = None) -> None:
         m, cam = spec.split(":", 1)
         doc["bootstrap"].append(bootstrap(store, gt, m, cam, a.resamples, a.seed))
         say(json.dumps(doc["bootstrap"][-1]))
-    out = Path(a.out)
-    write_text_atomic(out.with_suffix(".json"), json.dumps(doc, indent=1) + "\n")
-    write_text_atomic(out.with_suffix(".md"), markdown(doc))
-    print(markdown(doc))
+    write_report(a.out, doc, markdown(doc))
 
 
 if __name__ == "__main__":
