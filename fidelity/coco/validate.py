@@ -688,7 +688,7 @@ class ValidationStore(ResultsStore):
 
         n = 0
         for c in self.cells():
-            if c.folds and all(f.has_rest for f in c.folds):
+            if all(f.has_rest for f in c.folds):  # (no folds: fewer than 2 images)
                 continue
             dets = self.detections(c.model, c.camera)
             folds = score_folds(coco, dets, sorted(dets), FOLDS, method="auto")
