@@ -557,6 +557,9 @@ def test_tables_earlier_command(store, tmp_path) -> None:
     assert sorted(data["tables"]["models"]) == ["yolo11n", "yolov8n", "yolov8s", "yolox_nano"]
     doc = json.loads(pred.read_text())
     assert doc["provenance"]["earlier"]["models"] == ["yolox_nano"]
+    # the earlier file by its name and SHA-256, not where it lay on this machine
+    assert doc["provenance"]["earlier"]["file"] == "tables.json"
+    assert str(tmp_path) not in pred.read_text()
     assert "kept from earlier tables" in (out / "report.md").read_text()
     # writing the merged tables over the earlier ones is refused before any work
     res = CliRunner().invoke(main, ["tables", str(store.path.parent), "--no-standard-errors",

@@ -144,10 +144,13 @@ def _read_tables_json(path: Any) -> Any:
 
 def _read_earlier(path: Any) -> tuple[Any, dict[str, Any]]:
     """``--earlier``: its tables and where they came from (file name and SHA-256)."""
+    from pathlib import Path
+
     from fidelity.fileio import file_sha256
 
     tables_ = _read_tables_json(path).tables
-    return tables_, {"file": str(path), "sha256": file_sha256(path)}
+    # the file's name, not where it lay on this machine: provenance names the data
+    return tables_, {"file": Path(path).name, "sha256": file_sha256(path)}
 
 
 def _write_directional(tables_: Any, path: str) -> Any:
