@@ -100,10 +100,19 @@ class StoreRun(Generic[S]):
         self.stores.close()
 
     def record_machine(self, settings: Mapping[str, Any]) -> None:
-        """``meta["machine"]``: platform, CPUs, the run's ``settings`` (threads, ...) and where
-        the executor runs."""
-        self.store.set_meta("machine", {"platform": platform.platform(), "cpus": os.cpu_count()}
-                            | dict(settings) | self.where)
+        """``meta["machine"]``: platform, CPUs, processor and its kernel-choosing instructions
+        (:func:`fidelity.environment.cpu_description`), the run's ``settings`` (threads, ...)
+        and where the executor runs; ``meta["machines"]``: every distinct machine (platform,
+        CPUs, processor, instructions) that has run in this store, first to last, since a run
+        resumed elsewhere may compute differently (int8 kernels differ with the instruction
+        set)."""
+        from fidelity.environment import cpu_description
+
+        here = {"platform": platform.platform(), "cpus": os.cpu_count()} | cpu_description()
+        self.store.set_meta("machine", here | dict(settings) | self.where)
+        seen = self.store.meta().get("machines") or []
+        if here not in seen:
+            self.store.set_meta("machines", [*seen, here])
 
     def register_models(self, files: Sequence[ModelFile], limits: Sequence[int | None]) -> None:
         """Register every model file with its image limit (None: all images) and the

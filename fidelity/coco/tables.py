@@ -949,7 +949,8 @@ def _kept_provenance(kept: Sequence[str], earlier: Tables, source: Mapping[str, 
         return dict(prev) | {"models": list(kept), "via": dict(source)}
     return dict(source) | {
         "models": list(kept), "versions": earlier.meta.get("versions"),
-        "machine": earlier.meta.get("machine"), "scorers": earlier.meta.get("scorers")}
+        "machine": earlier.meta.get("machine"), "machines": earlier.meta.get("machines"),
+        "scorers": earlier.meta.get("scorers")}
 
 
 def merge_tables(tables: Tables, earlier: Tables, source: Mapping[str, Any]) -> Tables:
@@ -1271,7 +1272,7 @@ def prediction_table(tables: Tables, name: str = "coco1000-measured") -> dict[st
                       + scorer_words(meta.get("scorers")) + ")",
             "models": {m: _model_provenance(info) for m, info in tables.models.items()},
             "images": portable_paths(meta.get("data")), "versions": meta.get("versions"),
-            "machine": meta.get("machine"),
+            "machine": meta.get("machine"), "machines": meta.get("machines"),
             "cells_done": tables.cells_done, "cells_unreachable": tables.cells_unreachable,
             "worst_case": "per ΔE the transform with the largest ΔmAP in points; person and "
                           "bicycle columns are their own worst case over the same transforms",
@@ -1401,6 +1402,7 @@ SWEEP_META_SCHEMA = sc.Table(fields=(
                               extra=True)), describe="a scorer name or {scorer, since}"))),
     sc.Field("versions", sc.MapOf(nullable=True)),
     sc.Field("machine", sc.MapOf(nullable=True)),
+    sc.Field("machines", sc.ListOf(sc.MapOf(), nullable=True)),
 ), extra=True)
 
 

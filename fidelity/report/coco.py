@@ -255,6 +255,10 @@ def _run_section(tables: Tables) -> Section:
                                   for m, info in tables.models.items()) or number(None)),
              ("versions", words(meta.get("versions"))),
              ("machine", words(meta.get("machine")))]
+    machines = meta.get("machines") or []
+    if len(machines) > 1:
+        facts.append(("machines", f"{len(machines)} machines ran in this store: " + "; ".join(
+            words(m) for m in machines)))
     earlier = meta.get("earlier")
     if earlier:
         facts.append(("kept from earlier tables",

@@ -1,0 +1,170 @@
+"""Do two machines give the same detections and the same ΔmAP? The same sweep cells (same code,
+same library versions, same images and detector) run on two machines are compared image by
+image (are the stored detections bit for bit the same?) and cell by cell (mAP and the ΔmAP
+against each machine's own baseline). onnxruntime picks its kernels by the processor's
+instruction set, so an int8 detector may compute differently on another processor.
+
+Usage:
+  python -m benchmarks.cross_machine digest STORE OUT.json [--model M] [--cpu-here]
+      per-image digests (SHA-256 of the detections, 16 hex digits), the finished cells' mAP and
+      the store's provenance; small enough to carry off a lent machine. --cpu-here: add this
+      machine's processor and instructions to a store made here by a version that did not
+      record them
+  python -m benchmarks.cross_machine compare A.json B.json [--out reports/coco/cross_machine]
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import sqlite3
+import statistics
+import zlib
+from pathlib import Path
+from typing import Any
+
+from benchmarks.machine import write_report
+
+
+def digest_store(store: str | Path, model: str | None = None) -> dict[str, Any]:
+    """Per-image detection digests, finished cells and provenance of a sweep store (read
+    only)."""
+    db = sqlite3.connect(f"file:{Path(store) / 'sweep.sqlite'}?mode=ro", uri=True)
+    models = [r[0] for r in db.execute("SELECT model FROM models")]
+    model = model or models[0]
+    meta = {k: json.loads(v) for k, v in db.execute("SELECT key, value FROM meta")}
+    settings = json.loads(db.execute("SELECT settings FROM models WHERE model=?",
+                                     (model,)).fetchone()[0])
+    cells = [[t, g, n, m] for t, g, n, m in db.execute(
+        "SELECT transform, target, images, map FROM cells WHERE model=? AND status='done'",
+        (model,))]
+    digests: dict[str, dict[str, str]] = {}
+    for t, g, i, blob in db.execute(
+            "SELECT transform, target, image_id, dets FROM detections WHERE model=?", (model,)):
+        digests.setdefault(f"{t}:{g:g}", {})[str(i)] = \
+            hashlib.sha256(zlib.decompress(blob)).hexdigest()[:16]
+    db.close()
+    return {"model": model, "machine": meta.get("machine"), "versions": meta.get("versions"),
+            "settings": settings, "cells": cells, "digests": digests}
+
+
+def _cell_maps(doc: dict[str, Any]) -> dict[str, float]:
+    return {f"{t}:{g:g}": m for t, g, n, m in doc["cells"] if m is not None}
+
+
+def compare(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
+    """Image- and cell-level agreement of two digest documents of the same model."""
+    cells = []
+    same = total = 0
+    for key in sorted(set(a["digests"]) & set(b["digests"])):
+        da, db_ = a["digests"][key], b["digests"][key]
+        common = sorted(set(da) & set(db_))
+        eq = sum(da[i] == db_[i] for i in common)
+        same += eq
+        total += len(common)
+        cells.append({"cell": key, "images": len(common), "identical": eq})
+    ma, mb = _cell_maps(a), _cell_maps(b)
+    base = "baseline:0"
+    rows: list[dict[str, Any]] = []
+    if base in ma and base in mb:
+        for key in sorted(set(ma) & set(mb) - {base}):
+            la = 100 * (ma[base] - ma[key])
+            lb = 100 * (mb[base] - mb[key])
+            rows.append({"cell": key, "map_a": 100 * ma[key], "map_b": 100 * mb[key],
+                         "loss_a": la, "loss_b": lb, "difference": lb - la})
+    diffs: list[float] = [float(r["difference"]) for r in rows]
+    summary = {
+        "images_compared": total, "identical": same,
+        "identical_fraction": same / total if total else None,
+        "baseline_map_a": 100 * ma[base] if base in ma else None,
+        "baseline_map_b": 100 * mb[base] if base in mb else None,
+        "loss_cells": len(rows),
+        "loss_difference_mean": statistics.mean(diffs) if diffs else None,
+        "loss_difference_sd": statistics.stdev(diffs) if len(diffs) > 1 else None,
+        "loss_difference_max_abs": max(map(abs, diffs)) if diffs else None,
+    }
+    return {"summary": summary, "images": cells, "losses": rows}
+
+
+def _machine_words(doc: dict[str, Any]) -> str:
+    m = doc.get("machine") or {}
+    ins = m.get("instructions")
+    return (f"{m.get('cpu') or m.get('platform')}, {m.get('cpus')} CPUs"
+            + (f", instructions {' '.join(ins)}" if ins else ""))
+
+
+def markdown(a: dict[str, Any], b: dict[str, Any], result: dict[str, Any]) -> str:
+    s = result["summary"]
+    lines = [
+        f"# Same sweep cells on two machines: {a['model']}",
+        "",
+        "Written by `python -m benchmarks.cross_machine compare A.json B.json` from the "
+        "per-image digests `python -m benchmarks.cross_machine digest STORE` made of each "
+        "machine's store (same code, library versions, images and detector file).",
+        "",
+        f"- A: {_machine_words(a)}; versions {json.dumps(a.get('versions'))}",
+        f"- B: {_machine_words(b)}; versions {json.dumps(b.get('versions'))}",
+        "",
+        f"Images whose stored detections are bit for bit the same: {s['identical']} of "
+        f"{s['images_compared']} ({100 * (s['identical_fraction'] or 0):.1f} %) over "
+        f"{len(result['images'])} cells.",
+    ]
+    if s["baseline_map_a"] is not None and s["baseline_map_b"] is not None:
+        lines += [
+            "",
+            f"Baseline mAP: A {s['baseline_map_a']:.3f}, B {s['baseline_map_b']:.3f} "
+            f"(B − A {s['baseline_map_b'] - s['baseline_map_a']:+.3f} points).",
+        ]
+    if result["losses"]:
+        lines += [
+            "",
+            f"ΔmAP (each machine against its own baseline) over {s['loss_cells']} cells: "
+            f"B − A mean {s['loss_difference_mean']:+.3f} points, SD "
+            f"{s['loss_difference_sd']:.3f}, largest |B − A| "
+            f"{s['loss_difference_max_abs']:.3f}.",
+            "",
+            "| cell | mAP A | mAP B | ΔmAP A | ΔmAP B | B − A |",
+            "|---|---:|---:|---:|---:|---:|",
+        ]
+        lines += [f"| {r['cell']} | {r['map_a']:.3f} | {r['map_b']:.3f} | {r['loss_a']:+.2f} | "
+                  f"{r['loss_b']:+.2f} | {r['difference']:+.3f} |" for r in result["losses"]]
+    lines += ["", "| cell | images | identical |", "|---|---:|---:|"]
+    lines += [f"| {c['cell']} | {c['images']} | {c['identical']} "
+              f"({100 * c['identical'] / c['images']:.1f} %) |"
+              for c in result["images"] if c["images"]]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="verb", required=True)
+    d = sub.add_parser("digest")
+    d.add_argument("store")
+    d.add_argument("out")
+    d.add_argument("--model")
+    d.add_argument("--cpu-here", action="store_true")
+    c = sub.add_parser("compare")
+    c.add_argument("a")
+    c.add_argument("b")
+    c.add_argument("--out", default="reports/coco/cross_machine")
+    args = ap.parse_args(argv)
+    if args.verb == "digest":
+        from fidelity.fileio import write_text_atomic
+
+        doc = digest_store(args.store, args.model)
+        if args.cpu_here:
+            from fidelity.environment import cpu_description
+
+            doc["machine"] = (doc["machine"] or {}) | cpu_description()
+        write_text_atomic(Path(args.out), json.dumps(doc) + "\n")
+        return
+    a, b = (json.loads(Path(p).read_text(encoding="utf-8")) for p in (args.a, args.b))
+    result = compare(a, b)
+    write_report(args.out, {"a": {k: a[k] for k in ("model", "machine", "versions")},
+                            "b": {k: b[k] for k in ("model", "machine", "versions")},
+                            **result}, markdown(a, b, result))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,98 @@
+"""Which processor computed a store's detections: read from /proc/cpuinfo, kept per machine."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import fidelity.environment as environment
+from fidelity.coco.driver import StoreRun
+from fidelity.coco.store import ResultsStore
+from fidelity.environment import KERNEL_INSTRUCTIONS, cpu_description
+
+INTEL = """processor\t: 0
+vendor_id\t: GenuineIntel
+model name\t: Intel(R) Xeon(R) Processor
+flags\t\t: fpu sse4_1 avx avx2 fma avx512f avx512bw avx512_vnni avx_vnni amx_int8 amx_tile
+processor\t: 1
+model name\t: Intel(R) Xeon(R) Processor
+flags\t\t: fpu sse4_1 avx avx2 fma avx512f avx512bw avx512_vnni avx_vnni amx_int8 amx_tile
+"""
+AMD = "model name : AMD EPYC 7B13\nflags : fpu sse4_1 avx avx2 fma f16c\n"
+ARM = "processor : 0\nBogoMIPS : 50.00\nFeatures : fp asimd evtstrm asimddp i8mm sve\n"
+
+
+def test_cpu_description_reads_the_model_and_the_kernel_choosing_instructions() -> None:
+    intel = cpu_description(INTEL)
+    assert intel["cpu"] == "Intel(R) Xeon(R) Processor"
+    assert intel["instructions"] == ["sse4_1", "avx", "avx2", "fma", "avx512f", "avx512bw",
+                                     "avx512_vnni", "avx_vnni", "amx_int8"]
+    assert "amx_tile" not in intel["instructions"]  # not one that picks a kernel
+    assert cpu_description(AMD) == {"cpu": "AMD EPYC 7B13",
+                                    "instructions": ["sse4_1", "avx", "avx2", "fma", "f16c"]}
+    arm = cpu_description(ARM)
+    assert arm["instructions"] == ["asimd", "asimddp", "i8mm", "sve"]
+    assert arm["cpu"]  # no model name line: the platform's word, never empty
+
+
+@pytest.mark.parametrize("text", ["", "garbage without colons\n\x00\n", "flags :\n"])
+def test_cpu_description_of_unreadable_or_empty_cpuinfo(text: str) -> None:
+    d = cpu_description(text)
+    assert d["cpu"]
+    assert d["instructions"] in (None, [])
+    if "flags" in text:
+        assert d["instructions"] == []
+
+
+def test_cpu_description_here_lists_known_instructions_only() -> None:
+    d = cpu_description()
+    assert d["instructions"] is None or set(d["instructions"]) <= set(KERNEL_INSTRUCTIONS)
+
+
+def test_a_store_keeps_every_machine_that_ran_in_it(tmp_path: Path,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    store = ResultsStore(tmp_path)
+    run: StoreRun[Any] = StoreRun(store, lambda: ResultsStore(tmp_path, create=False),
+                                  None, None)  # type: ignore[arg-type]
+    monkeypatch.setattr(environment, "cpu_description", lambda: cpu_description(AMD))
+    run.record_machine({"threads": 2})
+    run.record_machine({"threads": 1})  # same machine, other settings: still one machine
+    meta = store.meta()
+    assert meta["machine"]["cpu"] == "AMD EPYC 7B13" and meta["machine"]["threads"] == 1
+    assert len(meta["machines"]) == 1
+    monkeypatch.setattr(environment, "cpu_description", lambda: cpu_description(INTEL))
+    run.record_machine({"threads": 2})  # resumed on another processor
+    machines = store.meta()["machines"]
+    assert [m["cpu"] for m in machines] == ["AMD EPYC 7B13", "Intel(R) Xeon(R) Processor"]
+    assert "avx512_vnni" in machines[1]["instructions"]
+    assert "threads" not in machines[0]  # the machine, not the run's settings
+    store.close()
+
+
+def _doc(maps: dict[str, float], digests: dict[str, dict[str, str]]) -> dict[str, Any]:
+    cells = [[k.split(":")[0], float(k.split(":")[1]), 3, m] for k, m in maps.items()]
+    return {"model": "m", "machine": None, "versions": None, "cells": cells,
+            "digests": digests}
+
+
+def test_cross_machine_comparison_counts_images_and_differences_of_losses() -> None:
+    from benchmarks.cross_machine import compare, markdown
+
+    a = _doc({"baseline:0": 0.40, "hue:1": 0.39, "hue:3": 0.38},
+             {"baseline:0": {"1": "a", "2": "b", "3": "c"}, "hue:1": {"1": "d", "2": "e"}})
+    b = _doc({"baseline:0": 0.41, "hue:1": 0.395, "hue:3": 0.38},
+             {"baseline:0": {"1": "a", "2": "x", "3": "c"}, "hue:1": {"1": "d", "9": "z"}})
+    r = compare(a, b)
+    s = r["summary"]
+    assert (s["images_compared"], s["identical"]) == (4, 3)  # image 9 is only in b
+    losses = {row["cell"]: row for row in r["losses"]}
+    assert losses["hue:1"]["loss_a"] == pytest.approx(1.0)
+    assert losses["hue:1"]["loss_b"] == pytest.approx(1.5)
+    assert losses["hue:3"]["difference"] == pytest.approx(1.0)  # 3.0 on b against 2.0 on a
+    assert s["loss_difference_mean"] == pytest.approx(0.75)
+    assert s["loss_difference_max_abs"] == pytest.approx(1.0)
+    assert "3 of 4" in markdown(a, b, r)
+    empty = compare(_doc({}, {}), _doc({}, {}))["summary"]
+    assert empty["identical_fraction"] is None and empty["loss_difference_mean"] is None
