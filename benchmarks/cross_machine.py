@@ -154,7 +154,7 @@ def main(argv: list[str] | None = None) -> None:
 
         doc = digest_store(args.store, args.model)
         if args.cpu_here:
-            from fidelity.environment import cpu_description
+            from fidelity.coco.machine import cpu_description
 
             doc["machine"] = (doc["machine"] or {}) | cpu_description()
         write_text_atomic(Path(args.out), json.dumps(doc) + "\n")

@@ -3,16 +3,17 @@ detections (no inference), written to reports/validation/standard_error.md|json.
 
 A loss is ``100 * (mAP(baseline) - mAP(cell))`` with each mAP pooled over every image of the
 run (COCO's precision-recall curves pool the detections of all images). Its SE was the paired
-SE of the per-fold losses; it is now the leave-one-fold-out jackknife of the pooled loss
-(fidelity.coco.loss). The checks:
+SE of the per-fold losses, then the leave-one-fold-out jackknife of the pooled loss; it is now
+the paired image bootstrap (fidelity.coco.loss, fidelity.coco.bootstrap). The checks:
 
 1. Split sample (the independent reference): a detector run on N images is cut into P
    disjoint interleaved subsets; the spread of a camera's losses over the subsets is the SE on
    N/P images with no model of mAP at all, and the SEs the tool states on a subset are set
    against it (ratio of root mean squares; coverage of the residuals on every subset for the
    first P).
-2. Paired image bootstrap of the pooled loss on a few cells (R resamples, seed stated):
-   a second estimator of the same SE.
+2. Paired image bootstrap of the pooled loss on a few cells (R resamples, seed stated), every
+   draw re-evaluated as a data set of its own, against the tool's re-weighted bootstrap on the
+   same draws.
 3. Summary of fold SE against jackknife SE over every cell of the store.
 
 Usage: python -m benchmarks.standard_error STORE ANNOTATIONS [--split MODEL] [--bootstrap
@@ -29,11 +30,18 @@ from typing import Any
 
 import numpy as np
 
-from fidelity.coco.loss import jackknife_standard_error, paired_standard_error
+from fidelity.coco.bootstrap import bootstrap_weights, draw_scores, match_records, weighted_scores
+from fidelity.coco.loss import (
+    bootstrap_standard_error,
+    jackknife_standard_error,
+    paired_standard_error,
+)
 from fidelity.coco.scoring import FOLDS, coco_from_dict, evaluate_detections, load_annotations
 from fidelity.coco.validate import BASELINE, ValidationStore
 
 QUARTERS = 4
+#: The SEs compared: the paired fold SE, the leave-one-fold-out jackknife, the image bootstrap.
+KINDS = ("fold_se", "jackknife_se", "bootstrap_se")
 
 
 def _pooled(gt: Any, dets: dict[int, np.ndarray], ids: list[int]) -> float:
@@ -41,18 +49,23 @@ def _pooled(gt: Any, dets: dict[int, np.ndarray], ids: list[int]) -> float:
 
 
 def _ses(gt: Any, base: dict[int, np.ndarray], cell: dict[int, np.ndarray], ids: list[int],
-         cache: dict[tuple[int, ...], float]) -> tuple[float | None, float | None]:
-    """Fold SE and jackknife SE of the loss on ``ids``, as the tool computes them."""
+         cache: dict[tuple[Any, ...], Any]) -> tuple[float | None, float | None, float | None]:
+    """Fold SE, jackknife SE and bootstrap SE of the loss on ``ids``, as the tool computes
+    them (the bootstrap: fidelity.coco.bootstrap.draw_scores, its default draws and seed)."""
     def b(sub: list[int]) -> float:
         key = tuple(sub)
         if key not in cache:
             cache[key] = _pooled(gt, base, sub)
-        return cache[key]
+        return float(cache[key])
 
     folds = [ids[k::FOLDS] for k in range(FOLDS)]
     rests = [[i for i in ids if i not in set(f)] for f in folds]
+    key = ("draws", *ids)
+    if key not in cache:
+        cache[key] = draw_scores(gt, base, ids)
     return (paired_standard_error([b(f) for f in folds], [_pooled(gt, cell, f) for f in folds]),
-            jackknife_standard_error([b(r) for r in rests], [_pooled(gt, cell, r) for r in rests]))
+            jackknife_standard_error([b(r) for r in rests], [_pooled(gt, cell, r) for r in rests]),
+            bootstrap_standard_error(cache[key].map, draw_scores(gt, cell, ids).map))
 
 
 def split_sample(store: ValidationStore, gt: Any, model: str, parts: int, every: bool,
@@ -64,9 +77,9 @@ def split_sample(store: ValidationStore, gt: Any, model: str, parts: int, every:
     base = store.detections(model, BASELINE)
     ids = sorted(base)
     subsets = [ids[q::parts] for q in range(parts)]
-    cache: dict[tuple[int, ...], float] = {}
+    cache: dict[tuple[Any, ...], Any] = {}
     cams: list[dict[str, Any]] = []
-    z: dict[str, list[float]] = {"fold_se": [], "jackknife_se": []}
+    z: dict[str, list[float]] = {k: [] for k in KINDS}
     for c in store.cells():
         if c.model != model or c.camera in (BASELINE, "ideal-srgb8") or c.map == \
                 (store.cell(model, BASELINE) or c).map:
@@ -74,12 +87,12 @@ def split_sample(store: ValidationStore, gt: Any, model: str, parts: int, every:
         cell = store.detections(model, c.camera)
         losses = np.array([100 * (_pooled(gt, base, s) - _pooled(gt, cell, s)) for s in subsets])
         ses = [_ses(gt, base, cell, s, cache) for s in (subsets if every else subsets[:1])]
-        cams.append({"camera": c.camera, "losses": losses.tolist(),
-                     "fold_se": [f for f, _ in ses], "jackknife_se": [j for _, j in ses]})
+        cams.append({"camera": c.camera, "losses": losses.tolist()}
+                    | {k: [x[i] for x in ses] for i, k in enumerate(KINDS)})
         if every:  # residual against the other subsets' mean: var = SE^2 * parts/(parts-1)
             for q in range(parts):
                 r = losses[q] - np.delete(losses, q).mean()
-                for k, i in (("fold_se", 0), ("jackknife_se", 1)):
+                for i, k in enumerate(KINDS):
                     se = ses[q][i]
                     if se:
                         z[k].append(float(r / (se * np.sqrt(parts / (parts - 1)))))
@@ -88,7 +101,7 @@ def split_sample(store: ValidationStore, gt: Any, model: str, parts: int, every:
     out: dict[str, Any] = {"model": model, "images": len(ids), "parts": parts,
                            "subset_images": len(subsets[0]), "cameras": len(cams),
                            "empirical_se": emp, "per_camera": cams}
-    for k in ("fold_se", "jackknife_se"):
+    for k in KINDS:
         v = [x for c in cams for x in c[k] if x is not None]
         out[k] = {"rms": float(np.sqrt(np.mean(np.square(v)))), "ratio": 0.0}
         out[k]["ratio"] = out[k]["rms"] / emp
@@ -128,16 +141,24 @@ def bootstrap(store: ValidationStore, gt: Any, model: str, camera: str, resample
                             "categories": ds["categories"]})
         sub = list(range(1, len(ids) + 1))
         losses.append(100 * (_pooled(g, db, sub) - _pooled(g, dc, sub)))
+    brute_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    w = bootstrap_weights(len(ids), resamples, seed)
+    fast = 100 * (weighted_scores(match_records(gt, base, ids), w)["map"]
+                  - weighted_scores(match_records(gt, cell, ids), w)["map"])
+    fast_s = time.perf_counter() - t0
     c = store.cell(model, camera)
     b = store.cell(model, BASELINE)
     assert c is not None and b is not None
     return {"model": model, "camera": camera, "images": len(ids), "resamples": resamples,
             "seed": seed, "loss": 100 * (b.map - c.map),
             "bootstrap_se": float(np.std(losses, ddof=1)),
+            "reweighted_se": float(np.std(fast, ddof=1)),
+            "max_draw_difference": float(np.max(np.abs(fast - np.asarray(losses)))),
             "fold_se": paired_standard_error([f.map for f in b.folds], [f.map for f in c.folds]),
             "jackknife_se": jackknife_standard_error([f.rest_map for f in b.folds],
                                                      [f.rest_map for f in c.folds]),
-            "seconds": time.perf_counter() - t0}
+            "seconds": brute_s, "reweighted_seconds": fast_s}
 
 
 def overview(store: ValidationStore) -> dict[str, Any]:
@@ -157,7 +178,7 @@ def overview(store: ValidationStore) -> dict[str, Any]:
 
 
 def markdown(doc: dict[str, Any]) -> str:
-    lines = ["# Standard error of a measured ΔmAP: fold SE against the jackknife", "",
+    lines = ["# Standard error of a measured ΔmAP: fold SE, jackknife and image bootstrap", "",
              f"Generated by `python -m benchmarks.standard_error` on {doc['machine']} from the "
              f"validation store's detections ({doc['store_images']}); no inference. Loss = "
              "100·(pooled mAP of the baseline − pooled mAP of the cell) on the same images.", ""]
@@ -171,27 +192,36 @@ def markdown(doc: dict[str, Any]) -> str:
                   "cameras; on every subset where coverage is given: the residual of a subset's "
                   "loss against the other subsets' mean, in stated SEs, should be within 1 for "
                   "~68 % and within 2 for ~95 %, mean z² ≈ 1).", "",
-                  "| detector | subsets × images | cameras | empirical SE | fold SE (before): "
-                  "rms, ratio | jackknife SE (now): rms, ratio | coverage fold: ±1, ±2, z² | "
-                  "coverage jackknife: ±1, ±2, z² |", "|---|---|---:|---:|---|---|---|---|"]
+                  "| detector | subsets × images | cameras | empirical SE | fold SE: "
+                  "rms, ratio | jackknife SE: rms, ratio | bootstrap SE (now): rms, ratio | "
+                  "coverage fold: ±1, ±2, z² | coverage jackknife | coverage bootstrap |",
+                  "|---|---|---:|---:|---|---|---|---|---|---|"]
         for s in splits:
             def cov(r: dict[str, Any]) -> str:
                 return (f"{100 * r['within_1']:.0f} %, {100 * r['within_2']:.0f} %, "
                         f"{r['mean_z2']:.2f} ({r['trials']})" if "trials" in r else "–")
-            f, j = s["fold_se"], s["jackknife_se"]
+            f, j, b = (s[k] for k in KINDS)
             lines.append(f"| {s['model']} | {s['parts']} × {s['subset_images']} | "
                          f"{s['cameras']} | {s['empirical_se']:.3f} | {f['rms']:.3f}, "
-                         f"{f['ratio']:.2f} | {j['rms']:.3f}, {j['ratio']:.2f} | {cov(f)} | "
-                         f"{cov(j)} |")
+                         f"{f['ratio']:.2f} | {j['rms']:.3f}, {j['ratio']:.2f} | "
+                         f"{b['rms']:.3f}, {b['ratio']:.2f} | {cov(f)} | {cov(j)} | "
+                         f"{cov(b)} |")
         lines.append("")
     if doc.get("bootstrap"):
-        lines += ["## Paired image bootstrap (a second estimator)", "",
+        lines += ["## Paired image bootstrap: every draw re-evaluated against re-weighted", "",
+                  "Brute force: each draw's images made a data set of their own and scored by "
+                  "COCO evaluation; re-weighted: the tool's estimator "
+                  "(`fidelity.coco.bootstrap`, one evaluation per run, the same draws).", "",
                   "| detector | camera | images | loss | fold SE | jackknife SE | bootstrap SE "
-                  "(R, seed) |", "|---|---|---:|---:|---:|---:|---:|"]
+                  "(R, seed) | re-weighted SE | largest draw difference | time brute, "
+                  "re-weighted |", "|---|---|---:|---:|---:|---:|---:|---:|---:|---|"]
         for b in doc["bootstrap"]:
+            rw = (f"{b['reweighted_se']:.4f} | {b['max_draw_difference']:.4f} | "
+                  f"{b['seconds']:.0f} s, {b['reweighted_seconds']:.1f} s"
+                  if "reweighted_se" in b else "– | – | –")
             lines.append(f"| {b['model']} | {b['camera']} | {b['images']} | {b['loss']:+.3f} | "
                          f"{b['fold_se']:.3f} | {b['jackknife_se']:.3f} | "
-                         f"{b['bootstrap_se']:.3f} ({b['resamples']}, {b['seed']}) |")
+                         f"{b['bootstrap_se']:.4f} ({b['resamples']}, {b['seed']}) | {rw} |")
         lines.append("")
     lines += ["## Jackknife SE / fold SE over every cell", "", "| detector | cells | median | "
               "range |", "|---|---:|---:|---|"]

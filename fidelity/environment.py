@@ -20,8 +20,7 @@ import re
 from importlib import metadata
 from typing import Any
 
-__all__ = ["KERNEL_INSTRUCTIONS", "available_cpus", "cpu_description", "describe_environment",
-           "dependency_versions"]
+__all__ = ["available_cpus", "describe_environment", "dependency_versions"]
 
 
 def available_cpus() -> int:
@@ -29,40 +28,6 @@ def available_cpus() -> int:
     if hasattr(os, "sched_getaffinity"):
         return len(os.sched_getaffinity(0))
     return os.cpu_count() or 1
-
-
-#: Instruction-set extensions that choose onnxruntime's (MLAS) kernels, hence can change a
-#: detector's output: the int8 ``ConvInteger`` models' detections differ between an AVX2 and an
-#: AVX-512 VNNI / AMX processor on about one image in eight (reports/coco/cross_machine.md).
-KERNEL_INSTRUCTIONS = ("sse4_1", "avx", "avx2", "fma", "f16c", "avx512f", "avx512bw",
-                       "avx512_vnni", "avx_vnni", "avx512_bf16", "amx_bf16", "amx_int8",
-                       "asimd", "asimddp", "i8mm", "sve")
-
-
-def cpu_description(cpuinfo: str | None = None) -> dict[str, Any]:
-    """The processor that computes here: ``{"cpu": model name, "instructions": [...]}``.
-
-    ``instructions``: which of :data:`KERNEL_INSTRUCTIONS` the processor reports (the flags of
-    Linux's ``/proc/cpuinfo``, or ``cpuinfo`` given as its text); None where they cannot be read
-    (another OS). ``cpu``: the first ``model name`` there, else :func:`platform.processor`.
-    """
-    if cpuinfo is None:
-        try:
-            with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
-                cpuinfo = fh.read()
-        except OSError:
-            cpuinfo = ""
-    model, flags = "", None
-    for line in cpuinfo.splitlines():
-        key, _, value = line.partition(":")
-        key = key.strip().lower()
-        if key == "model name" and not model:
-            model = value.strip()
-        elif key in ("flags", "features") and flags is None:
-            flags = set(value.split())
-    return {"cpu": model or platform.processor() or platform.machine() or None,
-            "instructions": None if flags is None else
-            [f for f in KERNEL_INSTRUCTIONS if f in flags]}
 
 
 #: The distribution's name on the package index (the import name is ``fidelity``).
@@ -156,6 +121,12 @@ def _shared() -> dict[str, Any]:
             "coco_annotations": sorted(p.name for p in ann.glob("*.json"))}
 
 
+def _cpu() -> dict[str, Any]:
+    from fidelity.coco.machine import cpu_description
+
+    return cpu_description()
+
+
 def describe_environment(probe: bool = True) -> dict[str, Any]:
     """The installation's capabilities (module docstring); ``probe``: run the Mitsuba probe
     (a few seconds, subprocesses)."""
@@ -169,7 +140,7 @@ def describe_environment(probe: bool = True) -> dict[str, Any]:
         "python": platform.python_version(),
         "platform": platform.platform(),
         "cpus": available_cpus(),
-        "cpu": cpu_description(),
+        "cpu": _cpu(),
         "dependencies": core,
         "extras": {extra: {k: v for k, v in dependency_versions(extras=(extra,)).items()
                            if k not in core} for extra in RUNTIME_EXTRAS},

@@ -200,3 +200,66 @@ def test_fold_score_json_with_and_without_rest() -> None:
     g = FoldScore.from_json(old)
     assert not g.has_rest and g.rest_value("map") is None and g.to_json() == old
     assert FoldScore(0.4, None, None, 1, 0.0).has_rest  # a rest score of 0 is a score
+
+
+def test_bootstrap_se_by_hand_and_against_numpy() -> None:
+    from fidelity.coco.loss import bootstrap_standard_error
+
+    base, other = [0.5, 0.4, 0.45], [0.4, 0.4, 0.42]
+    d = np.array([10.0, 0.0, 3.0])
+    assert bootstrap_standard_error(base, other) == pytest.approx(np.std(d, ddof=1), abs=1e-12)
+    rel = d / np.array(base)
+    assert bootstrap_standard_error(base, other, relative=True) == pytest.approx(
+        np.std(rel, ddof=1), abs=1e-12)
+    rng = np.random.default_rng(3)
+    b, o = rng.uniform(0.2, 0.5, 200), rng.uniform(0.2, 0.5, 200)
+    assert bootstrap_standard_error(list(b), list(o)) == pytest.approx(
+        np.std(100 * (b - o), ddof=1), rel=1e-12)
+
+
+def test_bootstrap_se_hard_cases() -> None:
+    from fidelity.coco.loss import bootstrap_standard_error
+
+    # a draw without the class (None) is left out; fewer than 2 usable draws: no SE
+    assert bootstrap_standard_error([0.5, None, 0.4], [0.4, 0.3, 0.4]) == pytest.approx(
+        np.std([10.0, 0.0], ddof=1))
+    assert bootstrap_standard_error([0.5, None], [0.4, 0.3]) is None
+    assert bootstrap_standard_error([], []) is None
+    assert bootstrap_standard_error([0.5, 0.4], [0.4]) is None  # unequal: not paired
+    # a zero baseline draw is left out of the relative SE only
+    assert bootstrap_standard_error([0.0, 0.5, 0.4], [0.0, 0.4, 0.4], relative=True) == \
+        pytest.approx(np.std([20.0, 0.0], ddof=1))
+    # identical runs: SE 0, never NaN; denormal scores stay finite
+    assert bootstrap_standard_error([0.3] * 5, [0.3] * 5) == 0.0
+    tiny = bootstrap_standard_error([5e-324, 1e-310, 0.0], [0.0, 0.0, 5e-324])
+    assert tiny is not None and math.isfinite(tiny)
+
+
+def test_loss_estimate_prefers_the_bootstrap_then_the_jackknife() -> None:
+    folds_b, folds_o = [0.5, 0.4, 0.45], [0.45, 0.4, 0.4]
+    rest_b, rest_o = [0.44, 0.47, 0.45], [0.41, 0.42, 0.43]
+    both = loss_estimate(0.45, 0.42, folds_b, folds_o, rest_b, rest_o, [0.45, 0.46, 0.44],
+                         [0.42, 0.41, 0.43])
+    assert both.se_method == "bootstrap"
+    assert both.points_se == pytest.approx(np.std([3.0, 5.0, 1.0], ddof=1))
+    assert loss_estimate(0.45, 0.42, folds_b, folds_o, rest_b, rest_o).se_method == "jackknife"
+    # draws that give no SE (one usable draw) fall back to the jackknife
+    assert loss_estimate(0.45, 0.42, folds_b, folds_o, rest_b, rest_o, [0.45, None],
+                         [0.42, 0.4]).se_method == "jackknife"
+
+
+def test_score_loss_pairs_draws_only_of_the_same_images() -> None:
+    from fidelity.coco.bootstrap import Draws
+
+    base = Draws(3, 1, 10, (0.5, 0.4, 0.45), (0.6, None, 0.5), (None, None, None))
+    cell = Draws(3, 1, 10, (0.4, 0.4, 0.42), (0.5, 0.5, 0.5), (None, None, None))
+    other_seed = Draws(3, 2, 10, cell.map, cell.person, cell.bicycle)
+    scores = {"map": 0.45, "person": 0.55, "bicycle": None}
+    got = score_loss("map", scores, {"map": 0.42, "person": 0.5}, (), (), base, cell)
+    assert got.se_method == "bootstrap"
+    assert got.points_se == pytest.approx(np.std([10.0, 0.0, 3.0], ddof=1))
+    person = score_loss("person", scores, {"map": 0.42, "person": 0.5}, (), (), base, cell)
+    assert person.points_se == pytest.approx(np.std([10.0, 0.0], ddof=1))
+    unpaired = score_loss("map", scores, {"map": 0.42}, (), (), base, other_seed)
+    assert unpaired.points_se is None and unpaired.se_method is None
+    assert Draws.from_json(base.to_json()) == base

@@ -266,7 +266,6 @@ class FakeDetector:
 
 def synthetic_coco(folder: Path, n: int = 4) -> tuple[Path, Path, Path]:
     """``n`` small JPEG photos with one person box each, their annotations and a model file."""
-    import json
 
     from PIL import Image
 
@@ -386,7 +385,6 @@ def test_cli_errors_are_one_line(tmp_path) -> None:
 
 @pytest.mark.shared
 def test_evaluate_names_missing_images_before_inference(coco, tmp_path) -> None:
-    import json
 
     from click.testing import CliRunner
 
@@ -406,7 +404,6 @@ def test_evaluate_names_missing_images_before_inference(coco, tmp_path) -> None:
 
 @pytest.mark.shared
 def test_cli_evaluate_sweep_tables(coco, tmp_path) -> None:
-    import json
 
     from click.testing import CliRunner
 
@@ -546,10 +543,11 @@ def test_tables_of_a_store_caught_mid_extension(coco, tmp_path) -> None:
 
 
 @pytest.mark.shared
-def test_fold_standard_errors_in_tables(coco, tmp_path) -> None:
-    """The jackknife SEs of ΔmAP equal a direct leave-one-fold-out computation, and are
-    cached."""
-    from fidelity.coco.scoring import evaluate_detections, load_annotations
+def test_bootstrap_standard_errors_in_tables(coco, tmp_path) -> None:
+    """The ΔmAP SEs of the tables are the spread of the paired bootstrap losses; a draw's score
+    is that of the drawn images re-evaluated by pycocotools; the draws are cached."""
+    from fidelity.coco.bootstrap import BOOTSTRAP_SEED, bootstrap_weights
+    from fidelity.coco.scoring import coco_from_dict, evaluate_detections, load_annotations
     from fidelity.coco.sweep import run_sweep
     from fidelity.coco.tables import build_tables
 
@@ -560,28 +558,34 @@ def test_fold_standard_errors_in_tables(coco, tmp_path) -> None:
     tables = build_tables(store, gt)
     row = tables.cells["yolox_nano"][0]
     ids = sorted(gt.getImgIds())[:12]
-    base = store.detections("yolox_nano", "baseline", 0)
-    cell = store.detections("yolox_nano", "contrast-inc", 12)
-    rest = [[i for i in ids if i not in ids[k::5]] for k in range(5)]
-    b = [evaluate_detections(gt, base, r, method="pycocotools").map for r in rest]
-    c = [evaluate_detections(gt, cell, r, method="pycocotools").map for r in rest]
-    losses = np.array([100 * (bk - ck) for bk, ck in zip(b, c, strict=True)])
-    assert row.errors.method == "jackknife"
-    assert row.errors.dmap_points == pytest.approx(
-        np.sqrt(4 / 5 * np.sum((losses - losses.mean()) ** 2)), abs=1e-9)
-    rel = np.array([100 * (bk - ck) / bk for bk, ck in zip(b, c, strict=True)])
-    assert row.errors.dmap_relative == pytest.approx(
-        np.sqrt(4 / 5 * np.sum((rel - rel.mean()) ** 2)), abs=1e-9)
+    base = store.draw_scores(gt, "yolox_nano", "baseline", 0, ids)
+    cell = store.draw_scores(gt, "yolox_nano", "contrast-inc", 12, ids)
+    assert base.images == 12 and base.seed == BOOTSTRAP_SEED and base.pairs_with(cell)
+    losses = np.array([100 * (b - c) for b, c in zip(base.map, cell.map, strict=True)])
+    assert row.errors.method == "bootstrap"
+    assert row.errors.dmap_points == pytest.approx(np.std(losses, ddof=1), abs=1e-12)
+    assert row.errors.dmap_points > 0
+    # draws 0-2 of the cell, re-evaluated as data sets of the drawn images
+    dets = store.detections("yolox_nano", "contrast-inc", 12)
+    ds = gt.dataset
+    w = bootstrap_weights(12, 3, BOOTSTRAP_SEED)
+    for b in range(3):
+        drawn = [i for i, n in zip(ids, w[b], strict=True) for _ in range(int(n))]
+        imgs, anns, d2 = [], [], {}
+        for j, src in enumerate(drawn, start=1):
+            imgs.append({"id": j, "width": 640, "height": 480})
+            anns += [a | {"id": len(anns) + k + 1, "image_id": j} for k, a in
+                     enumerate(a for a in ds["annotations"] if a["image_id"] == src)]
+            d2[j] = dets.get(src, np.zeros((0, 6), np.float32))
+        g2 = coco_from_dict({"images": imgs, "annotations": anns,
+                             "categories": ds["categories"]})
+        ref = evaluate_detections(g2, d2, list(range(1, 13)), method="pycocotools").map
+        assert cell.map[b] == pytest.approx(ref, abs=2e-3)  # ties in score order aside
     worst = tables.worst_case["yolox_nano"][1]
     assert (worst.dmap_points_se, worst.dmap_relative_se) == (
         row.errors.dmap_points, row.errors.dmap_relative)
-    n = store.db.execute("SELECT COUNT(*) FROM folds").fetchone()[0]
+    n = store.db.execute("SELECT COUNT(*) FROM draws").fetchone()[0]
     assert n == 2  # baseline and the cell, kept for the next report
-    # folds cached by an earlier version (no rest-of-run scores) are scored again
-    with store.db:
-        for key, folds in store.db.execute("SELECT rowid, folds FROM folds").fetchall():
-            store.db.execute("UPDATE folds SET folds=? WHERE rowid=?", (json.dumps(
-                [{k: v for k, v in f.items() if k != "rest"} for f in json.loads(folds)]), key))
     again = build_tables(store, gt).cells["yolox_nano"][0].errors
     assert again == row.errors
     assert build_tables(store).cells["yolox_nano"][0].errors is None

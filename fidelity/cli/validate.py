@@ -52,8 +52,8 @@ if TYPE_CHECKING:
                    "table of fidelity predict).")
 @click.option("--report-only", is_flag=True,
               help="Only write the report from what the store holds (no inference; with "
-                   "--annotations, cells stored by an earlier version get the rest-of-run "
-                   "fold scores of the jackknife standard error).")
+                   "--annotations, cells stored by an earlier version are scored on the "
+                   "image bootstrap's draws of the standard error).")
 @click.option("--notes", default=None, type=click.Path(dir_okay=False, exists=True),
               help="Markdown file with a written analysis, included in the report.")
 @progress_option
@@ -108,11 +108,12 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
     store_dir = store or str(default_store())
     if report_only:
         st = ValidationStore(store_dir, create=False)
-        if annotations:  # cells stored without the jackknife's rest-of-run scores
+        if annotations:  # cells stored without rest-of-run scores or bootstrap draws
             from fidelity.coco.scoring import load_annotations
 
-            st.rescore_folds(load_annotations(annotations),
-                             lambda m: click.echo(m, err=True))
+            coco = load_annotations(annotations)
+            st.rescore_folds(coco, lambda m: click.echo(m, err=True))
+            st.score_draws(coco, lambda m: click.echo(m, err=True))
     else:
         if not models or not images or not annotations:
             raise InvalidValueError("--models, --images and --annotations are needed "

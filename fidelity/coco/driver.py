@@ -101,12 +101,12 @@ class StoreRun(Generic[S]):
 
     def record_machine(self, settings: Mapping[str, Any]) -> None:
         """``meta["machine"]``: platform, CPUs, processor and its kernel-choosing instructions
-        (:func:`fidelity.environment.cpu_description`), the run's ``settings`` (threads, ...)
+        (:func:`fidelity.coco.machine.cpu_description`), the run's ``settings`` (threads, ...)
         and where the executor runs; ``meta["machines"]``: every distinct machine (platform,
         CPUs, processor, instructions) that has run in this store, first to last, since a run
         resumed elsewhere may compute differently (int8 kernels differ with the instruction
         set)."""
-        from fidelity.environment import cpu_description
+        from fidelity.coco.machine import cpu_description
 
         here = {"platform": platform.platform(), "cpus": os.cpu_count()} | cpu_description()
         self.store.set_meta("machine", here | dict(settings) | self.where)

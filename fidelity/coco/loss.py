@@ -6,34 +6,37 @@ Scores are fractions in [0, 1] (COCO mAP@[.50:.95] or a class's AP); with ``scal
 
 * loss in points: ``points = 100 * (base - value)`` (percentage points);
 * relative loss: ``relative = 100 * (base - value) / base`` (percent of the baseline);
-* the standard error of that whole-run loss: the leave-one-fold-out (delete-a-group)
-  jackknife over K disjoint interleaved image folds,
+* the standard error of that whole-run loss: the paired image bootstrap, the standard
+  deviation over B draws of the images with replacement of ``100 * (b*_b - o*_b)``, both runs
+  scored on the same draw ``b`` (:func:`fidelity.coco.bootstrap.draw_scores`: B = 200, a fixed
+  seed; one COCO evaluation per run, the draws by re-weighting its matches);
+* where the draws are missing (tables and stores of earlier versions), the leave-one-fold-out
+  (delete-a-group) jackknife over K disjoint interleaved image folds,
   ``SE = sqrt((K - 1) / K * sum_k (L_(k) - mean L)^2)``, with ``L_(k)`` the loss of the run
-  without fold k (``100 * (b_(k) - o_(k))`` in points, ``/ b_(k)`` relative);
-* where the leave-one-out scores are missing (stores written before they were, a class whose
-  instances all lie in one fold), the paired fold SE ``std(d_k, ddof=1) / sqrt(K)`` of the
-  per-fold losses ``d_k = 100 * (b_k - o_k)`` (relative: ``/ b_k``).
+  without fold k; where those are missing too, the paired fold SE ``std(d_k, ddof=1) /
+  sqrt(K)`` of the per-fold losses ``d_k = 100 * (b_k - o_k)`` (relative: ``/ b_k``).
 
-**Why the jackknife.** mAP pools every image's detections into one precision-recall curve per
+**Why the bootstrap.** mAP pools every image's detections into one precision-recall curve per
 class, so the whole-run loss is not the mean of the fold losses, and the fold SE describes the
 mean of the fold losses, not it. With an int8 dynamically quantised detector
 (YOLO11n-int8dyn) even a change of one code value moves the pooled mAP of 250 images by
 0.2-0.8 points, while the fold SE of its camera cells is 0.08-0.6
-(reports/validation/null_perturbation.md). Checked against a paired image bootstrap and the
-spread over disjoint image subsets (reports/validation/standard_error.md), the fold SE is too
-small (0.2-0.6x the bootstrap for YOLO11n on 250 images, 0.5-0.65x for YOLOX-nano on 1000; 0.54x
-the split-sample SE at 250 images, 55 % of its residuals within 2 SE); the jackknife is of the
-right size on average at 250-500 images (0.83-0.94x the split-sample SE, 84 % within 2 SE: the
-losses are heavy-tailed) and larger than the bootstrap on single cells where a left-out fold
-holds a rare class's few boxes (1.9-2.8x at 1000 images). An image bootstrap would be the
-better estimator.
+(reports/validation/null_perturbation.md). Checked against the spread over disjoint image
+subsets (reports/validation/standard_error.md), the fold SE is too small (0.54x the
+split-sample SE at 250 images, 55 % of its residuals within 2 SE); the jackknife is of the
+right size on average (0.83-0.94x) but on single 1000-image cells 1.9-2.8x the bootstrap, where
+a left-out fold holds a rare class's few boxes. The bootstrap resamples images, the unit the
+data were sampled by, and needs no assumption about how mAP pools; the re-weighted draws equal
+re-evaluating the drawn images (tests/test_bootstrap.py).
 
 **Zero baseline.** A relative loss is undefined where the baseline is not positive: the
 relative loss is None when ``base <= 0``, and so is its SE; a fold with ``b_k <= 0`` is left
-out of the relative SE. An SE needs at least 2 usable folds (None otherwise).
+out of the relative SE (a draw with ``b*_b <= 0`` likewise). An SE needs at least 2 usable
+folds or draws (None otherwise).
 
-Source: the delete-a-group jackknife (Efron & Tibshirani, *An Introduction to the Bootstrap*,
-1993, ch. 11.5, eq. 11.13 with groups of n/K; Kott, "The delete-a-group jackknife", J. Official
+Source: the bootstrap standard error (Efron & Tibshirani, *An Introduction to the Bootstrap*,
+1993, ch. 6, algorithm 6.1; paired samples ch. 8); the delete-a-group jackknife (ibid.
+ch. 11.5, eq. 11.13 with groups of n/K; Kott, "The delete-a-group jackknife", J. Official
 Statistics 17, 2001); the paired-difference SE of K-fold means (ibid. ch. 2). The folds and
 their leave-one-out scores are :func:`fidelity.coco.scoring.score_folds`.
 """
@@ -126,6 +129,27 @@ def jackknife_standard_error(base_rest: Sequence[float | None],
     return float(np.sqrt((k - 1) / k * np.sum((x - x.mean()) ** 2)))
 
 
+def bootstrap_standard_error(base_draws: Sequence[float | None],
+                             other_draws: Sequence[float | None], relative: bool = False,
+                             scale: float = SCALE) -> float | None:
+    """Paired image-bootstrap SE of a whole-run loss: the standard deviation (``ddof=1``) over
+    draws ``b`` of ``scale * (base_b - other_b)`` (``/ base_b`` when ``relative``), both runs
+    scored on the same drawn images (:func:`fidelity.coco.bootstrap.draw_scores`).
+
+    A draw where either score is None (no ground truth of the class in it) or, relative, the
+    baseline is not positive, is left out; None with fewer than 2 usable draws or unequal
+    lengths.
+    """
+    if len(base_draws) != len(other_draws):
+        return None
+    d = [scale * (b - o) / (b if relative else 1.0)
+         for b, o in zip(base_draws, other_draws, strict=True)
+         if b is not None and o is not None and (b > 0 or not relative)]
+    if len(d) < 2:
+        return None
+    return float(np.std(np.asarray(d), ddof=1))
+
+
 @dataclass(frozen=True)
 class LossEstimate:
     """A loss and its paired fold standard errors (:func:`loss_estimate`).
@@ -149,7 +173,9 @@ def loss_estimate(base: float | None, value: float | None,
                   base_folds: Sequence[float | None] = (),
                   folds: Sequence[float | None] = (),
                   base_rest: Sequence[float | None] = (),
-                  rest: Sequence[float | None] = ()) -> LossEstimate:
+                  rest: Sequence[float | None] = (),
+                  base_draws: Sequence[float | None] = (),
+                  draws: Sequence[float | None] = ()) -> LossEstimate:
     """The loss of ``value`` against ``base`` and its standard errors (module docstring).
 
     Parameters
@@ -162,6 +188,9 @@ def loss_estimate(base: float | None, value: float | None,
     base_rest, rest
         The same scores of the run without each fold (equal lengths; empty or with a None:
         the paired fold SE instead of the jackknife).
+    base_draws, draws
+        The same scores on paired image-bootstrap draws (equal lengths; empty: no bootstrap).
+        Where they give an SE, it is the one returned.
 
     Returns
     -------
@@ -173,6 +202,13 @@ def loss_estimate(base: float | None, value: float | None,
         return LossEstimate(None, None)
     points = SCALE * (base - value)
     defined = base > 0
+    se = bootstrap_standard_error(base_draws, draws) if base_draws or draws else None
+    if se is not None:
+        return LossEstimate(
+            points=points, relative=SCALE * (base - value) / base if defined else None,
+            points_se=se,
+            relative_se=bootstrap_standard_error(base_draws, draws, relative=True) if defined
+            else None, se_method="bootstrap")
     se = jackknife_standard_error(base_rest, rest) if base_rest or rest else None
     if se is not None:
         return LossEstimate(
@@ -199,9 +235,21 @@ class FoldValues(Protocol):
         """The score ``key`` of the run without this fold (None: not computed)."""
 
 
+class DrawValues(Protocol):
+    """Scores of one run on bootstrap draws (:class:`fidelity.coco.bootstrap.Draws`)."""
+
+    def value(self, key: str) -> Sequence[float | None]:
+        """The draws of score ``key``, fractions (None: no ground truth of it in a draw)."""
+
+    def pairs_with(self, other: Any) -> bool:
+        """Whether both runs' draw ``b`` drew the same images."""
+
+
 def score_loss(key: str, base: Mapping[str, float | None], value: Mapping[str, float | None],
                base_folds: Sequence[FoldValues] = (),
-               folds: Sequence[FoldValues] = ()) -> LossEstimate:
+               folds: Sequence[FoldValues] = (),
+               base_draws: DrawValues | None = None,
+               draws: DrawValues | None = None) -> LossEstimate:
     """:func:`loss_estimate` of score ``key`` (``"map"``, ``"person"``, ``"bicycle"``).
 
     Parameters
@@ -212,10 +260,16 @@ def score_loss(key: str, base: Mapping[str, float | None], value: Mapping[str, f
         Scores by name (fractions) of the baseline and the cell; a missing key is None.
     base_folds, folds
         Per-fold scores of the baseline and the cell (:func:`fidelity.coco.scoring.score_folds`).
+    base_draws, draws
+        Both runs' scores on paired bootstrap draws (:func:`fidelity.coco.bootstrap.draw_scores`;
+        used where both exist and pair, then the SE is the bootstrap's).
     """
+    paired = base_draws is not None and draws is not None and base_draws.pairs_with(draws)
     return loss_estimate(base.get(key), value.get(key), [f.value(key) for f in base_folds],
                          [f.value(key) for f in folds], [f.rest_value(key) for f in base_folds],
-                         [f.rest_value(key) for f in folds])
+                         [f.rest_value(key) for f in folds],
+                         base_draws.value(key) if paired and base_draws else (),
+                         draws.value(key) if paired and draws else ())
 
 
 @dataclass(frozen=True)

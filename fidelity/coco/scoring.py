@@ -162,7 +162,7 @@ def detections_to_coco(image_id: int, detections: np.ndarray,
     return out
 
 
-def _coco_results(coco_gt: Any, detections: Mapping[int, np.ndarray],
+def coco_results(coco_gt: Any, detections: Mapping[int, np.ndarray],
                   ids: Sequence[int]) -> list[dict[str, Any]]:
     cat_ids = sorted(coco_gt.getCatIds())
     mapping: Sequence[int] = cat_ids if len(cat_ids) == len(COCO80_CATEGORY_IDS) \
@@ -270,7 +270,7 @@ def evaluate_detections(coco_gt: Any, detections: Mapping[int, np.ndarray],
     if missing:
         raise InvalidValueError(f"image ids not in the annotations: {missing[:5]}")
     scorer = COCO_SCORERS[resolve_scorer(method)]
-    results = _coco_results(coco_gt, detections, ids)
+    results = coco_results(coco_gt, detections, ids)
     precision, cat_list, stats_arr = scorer(coco_gt, results, ids)
     ap: dict[str, float | None] = {}
     names = {c["id"]: c["name"] for c in coco_gt.dataset["categories"]}

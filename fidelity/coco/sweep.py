@@ -45,6 +45,7 @@ from fidelity.fileio import file_sha256
 from fidelity.version import __version__
 
 if TYPE_CHECKING:
+    from fidelity.coco.bootstrap import Draws
     from fidelity.coco.executor import CellWork, ExecutorOptions
     from fidelity.coco.scoring import FoldScore
     from fidelity.coco.store import Claim, ThreadStores
@@ -67,6 +68,10 @@ CREATE TABLE IF NOT EXISTS detections (
 CREATE TABLE IF NOT EXISTS folds (
     model TEXT NOT NULL, transform TEXT NOT NULL, target REAL NOT NULL,
     images INTEGER NOT NULL, folds TEXT NOT NULL,
+    PRIMARY KEY (model, transform, target));
+CREATE TABLE IF NOT EXISTS draws (
+    model TEXT NOT NULL, transform TEXT NOT NULL, target REAL NOT NULL,
+    images INTEGER NOT NULL, draws TEXT NOT NULL,
     PRIMARY KEY (model, transform, target));
 """
 
@@ -156,6 +161,27 @@ class SweepStore(ResultsStore):
                             (model, transform, float(target), len(image_ids),
                              json.dumps([f.to_json() for f in folds])))
         return folds
+
+    def draw_scores(self, coco: Any, model: str, transform: str, target: float,
+                    image_ids: Sequence[int]) -> Draws:
+        """A cell's scores on the image bootstrap's draws of ``image_ids``
+        (:func:`fidelity.coco.bootstrap.draw_scores` with its default draws and seed; cached in
+        the ``draws`` table, computed again when the images, draws or seed differ)."""
+        from fidelity.coco.bootstrap import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, Draws, draw_scores
+
+        row = self.db.execute("SELECT images, draws FROM draws WHERE model=? AND transform=? "
+                              "AND target=?", (model, transform, float(target))).fetchone()
+        if row and row[0] == len(image_ids):
+            cached = Draws.from_json(json.loads(row[1]))
+            if (cached.resamples, cached.seed) == (BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED):
+                return cached
+        dets = self.detections(model, transform, target)
+        draws = draw_scores(coco, dets, image_ids)
+        with self.db:
+            self.db.execute("INSERT OR REPLACE INTO draws VALUES (?, ?, ?, ?, ?)",
+                            (model, transform, float(target), len(image_ids),
+                             json.dumps(draws.to_json())))
+        return draws
 
     # cells ----------------------------------------------------------------------------------
     def cell(self, model: str, transform: str, target: float) -> SweepCell | None:

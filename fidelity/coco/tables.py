@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fidelity import schema as sc
+from fidelity.coco.bootstrap import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
 from fidelity.coco.loss import loss_estimate
 from fidelity.coco.store import RegisteredModel
 from fidelity.errors import InputFileError
@@ -56,8 +57,9 @@ RARE_BOXES = 5
 class CellErrors:
     """Standard errors of a cell's losses (:func:`add_standard_errors`): ΔmAP in points and
     relative (% of baseline), ΔAP of person and bicycle in points; None with fewer than 2
-    usable folds. ``method`` (of ΔmAP's): ``"jackknife"`` (leave-one-fold-out, of the
-    whole-run loss) or ``"folds"`` (paired fold SE; tables measured before the jackknife)
+    usable draws or folds. ``method`` (of ΔmAP's): ``"bootstrap"`` (paired image bootstrap of
+    the whole-run loss), ``"jackknife"`` (leave-one-fold-out; tables measured before the
+    bootstrap) or ``"folds"`` (paired fold SE; tables measured before the jackknife)
     (:func:`fidelity.coco.loss.loss_estimate`)."""
 
     dmap_points: float | None
@@ -848,31 +850,34 @@ def add_standard_errors(store: SweepStore, coco: Any, deltas: Mapping[str, Seque
                         progress: bool = False) -> dict[str, list[CellDelta]]:
     """The rows with their :class:`CellErrors` (done cells).
 
-    Standard errors of each whole-run loss by the leave-one-fold-out jackknife over
-    :data:`fidelity.coco.scoring.FOLDS` interleaved image folds
-    (:func:`fidelity.coco.loss.loss_estimate`; no relative SE for a baseline mAP of 0).
-    Fold scores are computed from the stored detections (no inference) and cached in the store.
+    Standard errors of each whole-run loss by the paired image bootstrap
+    (:func:`fidelity.coco.bootstrap.draw_scores`: 200 draws, fixed seed; the baseline and the
+    cell scored on the same draws; :func:`fidelity.coco.loss.loss_estimate`; no relative SE for
+    a baseline mAP of 0). The draws' scores are computed from the stored detections (no
+    inference, one COCO evaluation a cell) and cached in the store. ``method`` is unused (the
+    bootstrap's one evaluation is pycocotools'); kept for callers.
     """
     from tqdm import tqdm
 
+    from fidelity.coco.bootstrap import Draws
     from fidelity.coco.loss import score_loss
-    from fidelity.coco.scoring import FoldScore
 
+    del method
     ids_all = sorted(coco.getImgIds())
     todo = [(m, r) for m, rows in deltas.items() for r in rows if r.done]
-    base_folds: dict[str, list[FoldScore]] = {}
+    base_draws: dict[str, Draws] = {}
     errors: dict[int, CellErrors] = {}
-    for m, r in tqdm(todo, desc="fold scores", unit="cell", disable=not progress):
+    for m, r in tqdm(todo, desc="bootstrap draws", unit="cell", disable=not progress):
         ids = ids_all[: baselines[m].images]
-        if m not in base_folds:
-            base_folds[m] = store.fold_scores(coco, m, "baseline", 0.0, ids, method)
-        folds = store.fold_scores(coco, m, r.transform, r.delta_e, ids, method)
+        if m not in base_draws:
+            base_draws[m] = store.draw_scores(coco, m, "baseline", 0.0, ids)
+        draws = store.draw_scores(coco, m, r.transform, r.delta_e, ids)
 
         b = baselines[m]
         base: dict[str, float | None] = {"map": b.map, **(b.ap or {})}
         cell: dict[str, float | None] = {"map": r.map, "person": r.ap_person,
                                          "bicycle": r.ap_bicycle}
-        loss, person, bicycle = (score_loss(k, base, cell, base_folds[m], folds)
+        loss, person, bicycle = (score_loss(k, base, cell, (), (), base_draws[m], draws)
                                  for k in ("map", "person", "bicycle"))
         errors[id(r)] = CellErrors(loss.points_se, loss.relative_se, person.points_se,
                                    bicycle.points_se, loss.se_method)
@@ -1293,18 +1298,25 @@ def prediction_table(tables: Tables, name: str = "coco1000-measured") -> dict[st
 
 #: How each standard-error method was computed (provenance and reports).
 STANDARD_ERROR_WORDS: dict[str, str] = {
+    "bootstrap": f"paired image bootstrap of the whole-run loss, {BOOTSTRAP_RESAMPLES} draws of "
+                 f"the images with replacement, seed {BOOTSTRAP_SEED}, baseline and cell scored "
+                 "on the same draws "
+                 "(fidelity.coco.bootstrap.draw_scores, fidelity.coco.loss."
+                 "bootstrap_standard_error)",
     "jackknife": "leave-one-fold-out jackknife of the whole-run loss over 5 interleaved image "
-                 "folds (fidelity.coco.loss.jackknife_standard_error)",
+                 "folds (fidelity.coco.loss.jackknife_standard_error; measured before the "
+                 "bootstrap; larger than the bootstrap on 1000-image cells, "
+                 "reports/validation/standard_error.md)",
     "folds": "paired SE of the per-fold losses over 5 interleaved image folds (measured before "
              "the jackknife; understates the SE of the whole-run loss, "
              "reports/validation/standard_error.md)",
-    "mixed": "jackknife where the leave-one-fold-out scores exist, paired fold SE elsewhere",
+    "mixed": "more than one of these methods over the model's cells",
 }
 
 
 def standard_error_methods(tables: Tables) -> dict[str, str]:
-    """Per model, how its ΔmAP standard errors were computed: ``"jackknife"``, ``"folds"``
-    or ``"mixed"`` (keys of :data:`STANDARD_ERROR_WORDS`); models without SEs left out."""
+    """Per model, how its ΔmAP standard errors were computed: ``"bootstrap"``,
+    ``"jackknife"``, ``"folds"`` or ``"mixed"`` (keys of :data:`STANDARD_ERROR_WORDS`); models without SEs left out."""
     out: dict[str, str] = {}
     for m, rows in tables.cells.items():
         kinds = {r.errors.method for r in rows if r.errors is not None

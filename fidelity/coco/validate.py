@@ -60,6 +60,7 @@ from fidelity.version import __version__
 
 if TYPE_CHECKING:
     from fidelity.chart.measure import ChartMeasurement
+    from fidelity.coco.bootstrap import Draws
     from fidelity.coco.emulation import AccuracySummary, Emulation
     from fidelity.coco.executor import CellWork, ExecutorOptions
     from fidelity.coco.scoring import CocoScore, FoldScore
@@ -307,8 +308,10 @@ class CameraRecord:
 @dataclass(frozen=True)
 class ValidationCell:
     """A finished (model, camera) cell of the validation store: COCO scores on ``images``
-    images (fractions; ``ap`` per class name, None without ground truth), per-fold scores for
-    standard errors, its run time and finish time (UTC, ISO 8601)."""
+    images (fractions; ``ap`` per class name, None without ground truth), per-fold scores and
+    the scores on the image bootstrap's draws (``draws``; None until scored,
+    :meth:`ValidationStore.score_draws`) for standard errors, its run time and finish time
+    (UTC, ISO 8601)."""
 
     model: str
     camera: str
@@ -319,9 +322,11 @@ class ValidationCell:
     folds: tuple[FoldScore, ...]
     seconds: float
     finished: str
+    draws: Draws | None = None
 
     def to_json(self) -> dict[str, Any]:
-        """The cell as ``validation.json`` holds a baseline (the store's columns)."""
+        """The cell as ``validation.json`` holds a baseline (the store's columns; the draws are
+        the store's alone)."""
         return {"model": self.model, "camera": self.camera, "images": self.images,
                 "map": self.map, "map50": self.map50, "ap": self.ap,
                 "folds": [f.to_json() for f in self.folds], "seconds": self.seconds,
@@ -330,11 +335,13 @@ class ValidationCell:
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> ValidationCell:
         """Inverse of :meth:`to_json`."""
+        from fidelity.coco.bootstrap import Draws
         from fidelity.coco.scoring import FoldScore
 
         return cls(d["model"], d["camera"], int(d["images"]), d["map"], d["map50"],
                    dict(d.get("ap") or {}), tuple(FoldScore.from_json(f) for f in d["folds"]),
-                   d["seconds"], d["finished"])
+                   d["seconds"], d["finished"],
+                   Draws.from_json(d["draws"]) if d.get("draws") else None)
 
 
 #: Key order of the measured losses' standard errors in ``validation.json``.
@@ -471,7 +478,7 @@ class ValidationSummary:
     """The bound ``bound_table`` tested, the ``tables`` evaluated, stored cameras left out
     (``not_in_suite``) and per class of :data:`fidelity.coco.loss.LOSS_COLUMNS` its
     :class:`ClassSummary`; ``standard_error``: how the measured losses' SEs were computed,
-    ``"jackknife"``, ``"folds"`` or ``"mixed"``
+    ``"bootstrap"``, ``"jackknife"``, ``"folds"`` or ``"mixed"``
     (:data:`fidelity.coco.tables.STANDARD_ERROR_WORDS`)."""
 
     bound_table: str
@@ -614,6 +621,9 @@ CREATE TABLE IF NOT EXISTS cells (
 CREATE TABLE IF NOT EXISTS detections (
     model TEXT NOT NULL, camera TEXT NOT NULL, image_id INTEGER NOT NULL, n INTEGER NOT NULL,
     dets BLOB NOT NULL, PRIMARY KEY (model, camera, image_id));
+CREATE TABLE IF NOT EXISTS draws (
+    model TEXT NOT NULL, camera TEXT NOT NULL, images INTEGER NOT NULL, draws TEXT NOT NULL,
+    PRIMARY KEY (model, camera));
 """
 
 
@@ -672,8 +682,11 @@ class ValidationStore(ResultsStore):
         if row is None:
             return None
         d = {c[0]: v for c, v in zip(cur.description, row, strict=True)}
-        return ValidationCell.from_json(d | {"ap": json.loads(d["ap"]),
-                                             "folds": json.loads(d["folds"])})
+        drawn = self.db.execute("SELECT images, draws FROM draws WHERE model=? AND camera=?",
+                                (model, camera)).fetchone()
+        return ValidationCell.from_json(d | {
+            "ap": json.loads(d["ap"]), "folds": json.loads(d["folds"]),
+            "draws": json.loads(drawn[1]) if drawn and drawn[0] == d["images"] else None})
 
     def cells(self) -> list[ValidationCell]:
         """All finished cells."""
@@ -698,6 +711,27 @@ class ValidationStore(ResultsStore):
             n += 1
             if say:
                 say(f"{c.camera} / {c.model}: folds scored again with the rest of the run")
+        return n
+
+    def score_draws(self, coco: Any, say: Callable[[str], None] | None = None) -> int:
+        """Score every cell on the image bootstrap's draws (:func:`fidelity.coco.bootstrap.
+        draw_scores`, its default draws and seed) from the stored detections, where they are
+        not stored for the cell's images, draws and seed yet. Returns how many were scored."""
+        from fidelity.coco.bootstrap import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, draw_scores
+
+        n = 0
+        for c in self.cells():
+            d = c.draws
+            if d is not None and (d.resamples, d.seed) == (BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED):
+                continue
+            dets = self.detections(c.model, c.camera)
+            draws = draw_scores(coco, dets, sorted(dets))
+            with self.db:
+                self.db.execute("INSERT OR REPLACE INTO draws VALUES (?, ?, ?, ?)",
+                                (c.model, c.camera, draws.images, json.dumps(draws.to_json())))
+            n += 1
+            if say:
+                say(f"{c.camera} / {c.model}: scored on {draws.resamples} bootstrap draws")
         return n
 
     def finish_cell(self, model: str, camera: str, score: CocoScore,
@@ -839,6 +873,7 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
         run.run(work, ValidationCells(store, run.stores, coco, say), batch_commit=batch_commit,
                 progress=progress, say=say)
     store.rescore_folds(coco, say)  # cells an earlier version stored without rest scores
+    store.score_draws(coco, say)  # the bootstrap's draws of every cell not scored on them yet
     return store
 
 
@@ -952,7 +987,7 @@ def _row(camera: str, info: CameraRecord, b: ValidationCell, c: ValidationCell,
 
     base: dict[str, float | None] = {"map": b.map, **b.ap}
     cell: dict[str, float | None] = {"map": c.map, **c.ap}
-    loss, person, bicycle = (score_loss(k, base, cell, b.folds, c.folds)
+    loss, person, bicycle = (score_loss(k, base, cell, b.folds, c.folds, b.draws, c.draws)
                              for k in ("map", "person", "bicycle"))
     measured = Losses(loss.points, loss.relative, person.points, bicycle.points)
     se = Losses(loss.points_se, loss.relative_se, person.points_se, bicycle.points_se)
@@ -1027,7 +1062,9 @@ def collect_results(store: ValidationStore, tables: Sequence[str] | None = None,
         if b is None:
             continue
         rows.append(_row(camera, cases[camera], b, c, tabs, bound))
-        methods.add("jackknife" if all(f.has_rest for f in (*b.folds, *c.folds)) else "folds")
+        methods.add("bootstrap" if b.draws is not None and c.draws is not None
+                    and b.draws.pairs_with(c.draws) else
+                    "jackknife" if all(f.has_rest for f in (*b.folds, *c.folds)) else "folds")
     summary = ValidationSummary(bound, tuple(tabs), tuple(not_in_suite),
                                 {cls: _class_summary(rows, cls) for cls in LOSS_COLUMNS},
                                 methods.pop() if len(methods) == 1 else

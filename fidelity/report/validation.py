@@ -641,8 +641,8 @@ def _run_section(results: ValidationResults) -> Section:
     from fidelity.coco.tables import STANDARD_ERROR_WORDS
 
     lines.append(f"- Standard errors: {STANDARD_ERROR_WORDS[summ.standard_error]}"
-                 + (" (rebuild with `--annotations` to score the rest-of-run folds)"
-                    if summ.standard_error != "jackknife" else "") + ".")
+                 + (" (rebuild with `--annotations` to score the bootstrap's draws)"
+                    if summ.standard_error != "bootstrap" else "") + ".")
     lines.append(f"- Versions: {words(meta.get('versions'))}; machine: "
                  f"{words(meta.get('machine'))}.")
     finished = sorted({r.camera for r in results.rows})
