@@ -27,6 +27,7 @@ import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -948,10 +949,12 @@ def _kept_provenance(kept: Sequence[str], earlier: Tables, source: Mapping[str, 
                      ) -> dict[str, Any]:
     """Where the kept models were measured: ``source`` with the earlier run's versions; when
     the earlier tables had kept every one of them from tables before (a second merge), that
-    first record, with ``via`` naming the file they passed through."""
+    first record (its file by name alone, as tables of older versions recorded a path on
+    their machine), with ``via`` naming the file they passed through."""
     prev = earlier.meta.get("earlier") or {}
     if kept and set(kept) <= set(prev.get("models") or ()):
-        return dict(prev) | {"models": list(kept), "via": dict(source)}
+        first = dict(prev) | ({"file": Path(str(prev["file"])).name} if prev.get("file") else {})
+        return first | {"models": list(kept), "via": dict(source)}
     return dict(source) | {
         "models": list(kept), "versions": earlier.meta.get("versions"),
         "machine": earlier.meta.get("machine"), "machines": earlier.meta.get("machines"),
