@@ -17,7 +17,7 @@ the paired image bootstrap (fidelity.coco.loss, fidelity.coco.bootstrap). The ch
 3. Summary of fold SE against jackknife SE over every cell of the store.
 
 Usage: python -m benchmarks.standard_error STORE ANNOTATIONS [--split MODEL] [--bootstrap
-       MODEL:CAMERA ...] [--resamples R] [--out reports/validation/standard_error]
+       MODEL:CAMERA ...] [--resamples R] [--out reports/validation/standard_error] [--render]
 """
 
 from __future__ import annotations
@@ -79,7 +79,6 @@ def split_sample(store: ValidationStore, gt: Any, model: str, parts: int, every:
     subsets = [ids[q::parts] for q in range(parts)]
     cache: dict[tuple[Any, ...], Any] = {}
     cams: list[dict[str, Any]] = []
-    z: dict[str, list[float]] = {k: [] for k in KINDS}
     for c in store.cells():
         if c.model != model or c.camera in (BASELINE, "ideal-srgb8") or c.map == \
                 (store.cell(model, BASELINE) or c).map:
@@ -89,24 +88,37 @@ def split_sample(store: ValidationStore, gt: Any, model: str, parts: int, every:
         ses = [_ses(gt, base, cell, s, cache) for s in (subsets if every else subsets[:1])]
         cams.append({"camera": c.camera, "losses": losses.tolist()}
                     | {k: [x[i] for x in ses] for i, k in enumerate(KINDS)})
-        if every:  # residual against the other subsets' mean: var = SE^2 * parts/(parts-1)
-            for q in range(parts):
-                r = losses[q] - np.delete(losses, q).mean()
-                for i, k in enumerate(KINDS):
-                    se = ses[q][i]
-                    if se:
-                        z[k].append(float(r / (se * np.sqrt(parts / (parts - 1)))))
         say(f"split sample {model} {parts} parts: {c.camera}")
+    return summarise({"model": model, "images": len(ids), "parts": parts,
+                      "subset_images": len(subsets[0]), "per_camera": cams}, every)
+
+
+def summarise(split: dict[str, Any], every: bool) -> dict[str, Any]:
+    """The empirical SE of a split-sample run (its ``per_camera`` losses and stated SEs) and,
+    per estimator (:data:`KINDS` and the larger of bootstrap and jackknife, the tool's), the
+    root mean square of its SEs against it; ``every``: the coverage of the residual of each
+    subset's loss against the other subsets' mean (variance SE² · P/(P − 1))."""
+    cams = split["per_camera"]
+    parts = split["parts"]
+    for c in cams:
+        c["larger_se"] = [None if b is None and j is None else max(x for x in (b, j) if x)
+                          for b, j in zip(c["bootstrap_se"], c["jackknife_se"], strict=True)]
     emp = float(np.sqrt(np.mean([np.var(c["losses"], ddof=1) for c in cams])))
-    out: dict[str, Any] = {"model": model, "images": len(ids), "parts": parts,
-                           "subset_images": len(subsets[0]), "cameras": len(cams),
-                           "empirical_se": emp, "per_camera": cams}
-    for k in KINDS:
+    out = dict(split) | {"cameras": len(cams), "empirical_se": emp}
+    for k in (*KINDS, "larger_se"):
         v = [x for c in cams for x in c[k] if x is not None]
         out[k] = {"rms": float(np.sqrt(np.mean(np.square(v)))), "ratio": 0.0}
         out[k]["ratio"] = out[k]["rms"] / emp
-        if every and z[k]:
-            a = np.abs(np.asarray(z[k]))
+        z = []
+        if every:
+            for c in cams:
+                losses = np.asarray(c["losses"])
+                for q, se in enumerate(c[k]):
+                    if se:
+                        r = losses[q] - np.delete(losses, q).mean()
+                        z.append(float(r / (se * np.sqrt(parts / (parts - 1)))))
+        if z:
+            a = np.abs(np.asarray(z))
             out[k] |= {"trials": len(a), "within_1": float(np.mean(a <= 1)),
                        "within_2": float(np.mean(a <= 2)),
                        "mean_z2": float(np.mean(np.square(a)))}
@@ -193,19 +205,20 @@ def markdown(doc: dict[str, Any]) -> str:
                   "loss against the other subsets' mean, in stated SEs, should be within 1 for "
                   "~68 % and within 2 for ~95 %, mean z² ≈ 1).", "",
                   "| detector | subsets × images | cameras | empirical SE | fold SE: "
-                  "rms, ratio | jackknife SE: rms, ratio | bootstrap SE (now): rms, ratio | "
-                  "coverage fold: ±1, ±2, z² | coverage jackknife | coverage bootstrap |",
-                  "|---|---|---:|---:|---|---|---|---|---|---|"]
+                  "rms, ratio | jackknife SE: rms, ratio | bootstrap SE: rms, ratio | larger "
+                  "of bootstrap and jackknife (the tool's): rms, ratio | coverage fold: ±1, "
+                  "±2, z² | coverage jackknife | coverage bootstrap | coverage larger |",
+                  "|---|---|---:|---:|---|---|---|---|---|---|---|---|"]
         for s in splits:
             def cov(r: dict[str, Any]) -> str:
                 return (f"{100 * r['within_1']:.0f} %, {100 * r['within_2']:.0f} %, "
                         f"{r['mean_z2']:.2f} ({r['trials']})" if "trials" in r else "–")
-            f, j, b = (s[k] for k in KINDS)
+            f, j, b, g = (s[k] for k in (*KINDS, "larger_se"))
             lines.append(f"| {s['model']} | {s['parts']} × {s['subset_images']} | "
                          f"{s['cameras']} | {s['empirical_se']:.3f} | {f['rms']:.3f}, "
                          f"{f['ratio']:.2f} | {j['rms']:.3f}, {j['ratio']:.2f} | "
-                         f"{b['rms']:.3f}, {b['ratio']:.2f} | {cov(f)} | {cov(j)} | "
-                         f"{cov(b)} |")
+                         f"{b['rms']:.3f}, {b['ratio']:.2f} | {g['rms']:.3f}, {g['ratio']:.2f} | "
+                         f"{cov(f)} | {cov(j)} | {cov(b)} | {cov(g)} |")
         lines.append("")
     if doc.get("bootstrap"):
         lines += ["## Paired image bootstrap: every draw re-evaluated against re-weighted", "",
@@ -245,7 +258,17 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--resamples", type=int, default=100)
     ap.add_argument("--seed", type=int, default=20261126)
     ap.add_argument("--out", default="reports/validation/standard_error")
+    ap.add_argument("--render", action="store_true",
+                    help="only summarise and write OUT.md|json again from OUT.json's per-camera "
+                         "values (no evaluation; STORE and ANNOTATIONS unused)")
     a = ap.parse_args(argv)
+    if a.render:
+        from pathlib import Path
+
+        old = json.loads(Path(a.out).with_suffix(".json").read_text(encoding="utf-8"))
+        old["split"] = [summarise(sp, i == 0) for i, sp in enumerate(old.get("split") or [])]
+        write_report(a.out, old, markdown(old))
+        return
     store = ValidationStore(a.store, create=False)
     gt = load_annotations(a.annotations)
 

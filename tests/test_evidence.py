@@ -301,14 +301,14 @@ def test_shipped_measured_tables_carry_this_versions_preprocessing(table, model)
                                             "(its rows keep the SE they were measured with)"))
     if m in AWAITING_RESWEEP else m
     for m in sorted({m for t, m in _shipped_table_models() if t == "coco1000-measured.json"})])
-def test_shipped_measured_table_states_bootstrap_standard_errors(model):
-    """The SE an interval and a validation use is the paired image bootstrap's for every
-    detector measured by this version (the table's provenance names the method)."""
+def test_shipped_measured_table_states_this_versions_standard_errors(model):
+    """The SE an interval and a validation use is this version's (the larger of bootstrap and
+    jackknife) for every detector measured by it (the table's provenance names the method)."""
     from fidelity.coco.tables import STANDARD_ERROR_WORDS
 
     folder = Path(fidelity.__file__).parent / "data" / "prediction"
     prov = json.loads((folder / "coco1000-measured.json").read_text())["provenance"]
-    assert prov["standard_errors"][model] == STANDARD_ERROR_WORDS["bootstrap"]
+    assert prov["standard_errors"][model] == STANDARD_ERROR_WORDS["larger"]
 
 
 def test_every_shipped_table_names_its_detectors():

@@ -235,13 +235,20 @@ def test_bootstrap_se_hard_cases() -> None:
     assert tiny is not None and math.isfinite(tiny)
 
 
-def test_loss_estimate_prefers_the_bootstrap_then_the_jackknife() -> None:
+def test_loss_estimate_takes_the_larger_of_bootstrap_and_jackknife() -> None:
     folds_b, folds_o = [0.5, 0.4, 0.45], [0.45, 0.4, 0.4]
     rest_b, rest_o = [0.44, 0.47, 0.45], [0.41, 0.42, 0.43]
-    both = loss_estimate(0.45, 0.42, folds_b, folds_o, rest_b, rest_o, [0.45, 0.46, 0.44],
-                         [0.42, 0.41, 0.43])
-    assert both.se_method == "bootstrap"
-    assert both.points_se == pytest.approx(np.std([3.0, 5.0, 1.0], ddof=1))
+    jk = jackknife_standard_error(rest_b, rest_o)
+    wide, narrow = ([0.45, 0.50, 0.40], [0.42, 0.41, 0.43]), ([0.45, 0.46, 0.44],
+                                                               [0.42, 0.43, 0.41])
+    for draws in (wide, narrow):
+        both = loss_estimate(0.45, 0.42, folds_b, folds_o, rest_b, rest_o, *draws)
+        boot = float(np.std(100 * (np.array(draws[0]) - draws[1]), ddof=1))
+        assert both.se_method == "larger"
+        assert both.points_se == pytest.approx(max(boot, jk))
+    assert boot < jk < float(np.std(100 * (np.array(wide[0]) - wide[1]), ddof=1))
+    only = loss_estimate(0.45, 0.42, (), (), (), (), *wide)
+    assert only.se_method == "bootstrap"
     assert loss_estimate(0.45, 0.42, folds_b, folds_o, rest_b, rest_o).se_method == "jackknife"
     # draws that give no SE (one usable draw) fall back to the jackknife
     assert loss_estimate(0.45, 0.42, folds_b, folds_o, rest_b, rest_o, [0.45, None],

@@ -543,9 +543,10 @@ def test_tables_of_a_store_caught_mid_extension(coco, tmp_path) -> None:
 
 
 @pytest.mark.shared
-def test_bootstrap_standard_errors_in_tables(coco, tmp_path) -> None:
-    """The ΔmAP SEs of the tables are the spread of the paired bootstrap losses; a draw's score
-    is that of the drawn images re-evaluated by pycocotools; the draws are cached."""
+def test_standard_errors_in_tables(coco, tmp_path) -> None:
+    """The ΔmAP SE of the tables is the larger of the spread of the paired bootstrap losses and
+    a direct leave-one-fold-out jackknife; a draw's score is that of the drawn images
+    re-evaluated by pycocotools; draws and folds are cached."""
     from fidelity.coco.bootstrap import BOOTSTRAP_SEED, bootstrap_weights
     from fidelity.coco.scoring import coco_from_dict, evaluate_detections, load_annotations
     from fidelity.coco.sweep import run_sweep
@@ -562,8 +563,15 @@ def test_bootstrap_standard_errors_in_tables(coco, tmp_path) -> None:
     cell = store.draw_scores(gt, "yolox_nano", "contrast-inc", 12, ids)
     assert base.images == 12 and base.seed == BOOTSTRAP_SEED and base.pairs_with(cell)
     losses = np.array([100 * (b - c) for b, c in zip(base.map, cell.map, strict=True)])
-    assert row.errors.method == "bootstrap"
-    assert row.errors.dmap_points == pytest.approx(np.std(losses, ddof=1), abs=1e-12)
+    bd = store.detections("yolox_nano", "baseline", 0)
+    cd = store.detections("yolox_nano", "contrast-inc", 12)
+    rest = [[i for i in ids if i not in ids[k::5]] for k in range(5)]
+    jl = np.array([100 * (evaluate_detections(gt, bd, r, method="pycocotools").map
+                          - evaluate_detections(gt, cd, r, method="pycocotools").map)
+                   for r in rest])
+    jack = float(np.sqrt(4 / 5 * np.sum((jl - jl.mean()) ** 2)))
+    assert row.errors.method == "larger"
+    assert row.errors.dmap_points == pytest.approx(max(np.std(losses, ddof=1), jack), abs=1e-9)
     assert row.errors.dmap_points > 0
     # draws 0-2 of the cell, re-evaluated as data sets of the drawn images
     dets = store.detections("yolox_nano", "contrast-inc", 12)
@@ -586,6 +594,7 @@ def test_bootstrap_standard_errors_in_tables(coco, tmp_path) -> None:
         row.errors.dmap_points, row.errors.dmap_relative)
     n = store.db.execute("SELECT COUNT(*) FROM draws").fetchone()[0]
     assert n == 2  # baseline and the cell, kept for the next report
+    assert store.db.execute("SELECT COUNT(*) FROM folds").fetchone()[0] == 2
     again = build_tables(store, gt).cells["yolox_nano"][0].errors
     assert again == row.errors
     assert build_tables(store).cells["yolox_nano"][0].errors is None

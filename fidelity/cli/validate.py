@@ -52,8 +52,8 @@ if TYPE_CHECKING:
                    "table of fidelity predict).")
 @click.option("--report-only", is_flag=True,
               help="Only write the report from what the store holds (no inference; with "
-                   "--annotations, cells stored by an earlier version are scored on the "
-                   "image bootstrap's draws of the standard error).")
+                   "--annotations, cells stored by an earlier version get the bootstrap "
+                   "draws and rest-of-run fold scores of the standard error).")
 @click.option("--notes", default=None, type=click.Path(dir_okay=False, exists=True),
               help="Markdown file with a written analysis, included in the report.")
 @progress_option

@@ -7,9 +7,9 @@ twice, as the validation does (:mod:`fidelity.coco.validate`): once through the 
 baseline (the JPEG round trip with the original quantisation tables and subsampling,
 :func:`fidelity.coco.jpeg.roundtrip_jpeg`, no colour change) and once through the mapping and
 the same round trip; ΔmAP = 100 × (baseline mAP − mapped mAP) in percentage points (also
-relative to the baseline, and ΔAP of person and bicycle), with its standard error, the paired
-image bootstrap (:func:`fidelity.coco.bootstrap.draw_scores`,
-:func:`fidelity.coco.loss.loss_estimate`).
+relative to the baseline, and ΔAP of person and bicycle), with its standard error, the larger
+of the paired image bootstrap (:func:`fidelity.coco.bootstrap.draw_scores`) and the 5-fold
+jackknife (:func:`fidelity.coco.loss.loss_estimate`).
 
 Every image's raw detections go to a crash-safe store (:class:`MeasureStore`, default
 ``$FIDELITY_CACHE/measure`` or ``~/.cache/fidelity/measure``), keyed by the model file
@@ -203,8 +203,9 @@ class MeasuredLoss:
     """What a mapping cost one detector on ``images`` COCO images (:func:`measure_mapping`).
 
     Scores are fractions; losses in percentage points (``dmap_relative`` in % of the baseline
-    mAP; None when the baseline mAP is 0), each with its standard error (paired image
-    bootstrap, 200 draws; ``*_se``; None with fewer than 2 usable draws), all from :func:`fidelity.coco.loss.loss_estimate`.
+    mAP; None when the baseline mAP is 0), each with its standard error (the larger of the
+    paired image bootstrap and the 5-fold jackknife; ``*_se``; None with fewer than 2 usable
+    draws and folds), all from :func:`fidelity.coco.loss.loss_estimate`.
     ``seconds``: wall time of the measurement; ``inferred``: images run through the detector
     in it (the rest came from the store); ``baseline_cached``: whether the baseline was
     already stored for every image.
@@ -360,7 +361,13 @@ def measure_mapping(mapping: Mapping8, key: str, inputs: CocoInputs, *,
     from fidelity.coco.bootstrap import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, draw_scores
     from fidelity.coco.detectors import Detector
     from fidelity.coco.loss import score_loss
-    from fidelity.coco.scoring import evaluate_detections, load_annotated_images, resolve_scorer
+    from fidelity.coco.scoring import (
+        FOLDS,
+        evaluate_detections,
+        load_annotated_images,
+        resolve_scorer,
+        score_folds,
+    )
     from fidelity.coco.sweep import ImageCache
     from fidelity.fileio import file_sha256
 
@@ -396,10 +403,12 @@ def measure_mapping(mapping: Mapping8, key: str, inputs: CocoInputs, *,
         b = evaluate_detections(coco, base_d, ids, method=method)
         m = evaluate_detections(coco, map_d, ids, method=method)
         db, dm = draw_scores(coco, base_d, ids), draw_scores(coco, map_d, ids)
+        bf = score_folds(coco, base_d, ids, FOLDS, method=method)
+        mf = score_folds(coco, map_d, ids, FOLDS, method=method)
 
         scores_b: dict[str, float | None] = {"map": b.map, **b.ap}
         scores_m: dict[str, float | None] = {"map": m.map, **m.ap}
-        loss, person, bicycle = (score_loss(k, scores_b, scores_m, (), (), db, dm)
+        loss, person, bicycle = (score_loss(k, scores_b, scores_m, bf, mf, db, dm)
                                  for k in ("map", "person", "bicycle"))
         if loss.points is None:  # both mAPs are numbers
             raise ValueError("a measured cell without mAP")
@@ -413,8 +422,9 @@ def measure_mapping(mapping: Mapping8, key: str, inputs: CocoInputs, *,
             seconds=time.perf_counter() - t0, inferred=ran + ran_base,
             baseline_cached=ran_base == 0, scorer=method,
             settings={"threads": threads, "providers": det.providers,
-                      "standard_error": {"method": "bootstrap", "draws": BOOTSTRAP_RESAMPLES,
-                                         "seed": BOOTSTRAP_SEED},
+                      "folds": FOLDS,
+                      "standard_error": {"method": loss.se_method,
+                                         "draws": BOOTSTRAP_RESAMPLES, "seed": BOOTSTRAP_SEED},
                       "jpeg": "original quantisation tables and subsampling "
                               "(fidelity.coco.jpeg.roundtrip_jpeg)",
                       "dataset": dataset, "images_folder": str(img_dir),

@@ -478,7 +478,7 @@ class ValidationSummary:
     """The bound ``bound_table`` tested, the ``tables`` evaluated, stored cameras left out
     (``not_in_suite``) and per class of :data:`fidelity.coco.loss.LOSS_COLUMNS` its
     :class:`ClassSummary`; ``standard_error``: how the measured losses' SEs were computed,
-    ``"bootstrap"``, ``"jackknife"``, ``"folds"`` or ``"mixed"``
+    ``"larger"``, ``"bootstrap"``, ``"jackknife"``, ``"folds"`` or ``"mixed"``
     (:data:`fidelity.coco.tables.STANDARD_ERROR_WORDS`)."""
 
     bound_table: str
@@ -1062,9 +1062,10 @@ def collect_results(store: ValidationStore, tables: Sequence[str] | None = None,
         if b is None:
             continue
         rows.append(_row(camera, cases[camera], b, c, tabs, bound))
-        methods.add("bootstrap" if b.draws is not None and c.draws is not None
-                    and b.draws.pairs_with(c.draws) else
-                    "jackknife" if all(f.has_rest for f in (*b.folds, *c.folds)) else "folds")
+        drawn = b.draws is not None and c.draws is not None and b.draws.pairs_with(c.draws)
+        rest = bool(b.folds) and all(f.has_rest for f in (*b.folds, *c.folds))
+        methods.add("larger" if drawn and rest else "bootstrap" if drawn else
+                    "jackknife" if rest else "folds")
     summary = ValidationSummary(bound, tuple(tabs), tuple(not_in_suite),
                                 {cls: _class_summary(rows, cls) for cls in LOSS_COLUMNS},
                                 methods.pop() if len(methods) == 1 else

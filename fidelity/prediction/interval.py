@@ -5,8 +5,9 @@
 combined as uncorrelated (JCGM 100 5.1.2):
 
 - the table's sampling error at that ΔE: the larger of the standard errors the sweep
-  recorded at the two table points around the ΔE (the paired image bootstrap, or the
-  jackknife or paired fold SE of tables measured before it: the table's provenance says which)
+  recorded at the two table points around the ΔE (the larger of the paired image bootstrap
+  and the jackknife, or what tables measured before it recorded: the table's provenance says
+  which)
   (:class:`~fidelity.prediction.table.SamplingError`;
   measured tables, ``dmap_points`` only; None otherwise);
 - the chart ΔE's own standard uncertainty ``u(ΔE)`` (:mod:`fidelity.chart.uncertainty`)

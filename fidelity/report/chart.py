@@ -214,8 +214,8 @@ def measured_section(report: ChartReport) -> Section | None:
     return section("Measured on COCO", Text(
         "The camera's colour rendering applied to COCO images (emulated: a colour mapping "
         "fitted to the camera or to the chart's patches), the same JPEG round trip as the "
-        "ΔE = 0 baseline, ΔmAP against that baseline with its standard error from the paired "
-        f"image bootstrap (`fidelity.coco.measure`). Predicted: classic "
+        "ΔE = 0 baseline, ΔmAP against that baseline with its standard error (the larger of "
+        f"the paired image bootstrap and the 5-fold jackknife, `fidelity.coco.measure`). Predicted: classic "
         f"{_num(p.dmap_points if p else None)}, direction-aware "
         f"{_num(d.dmap_points if d else None)} points."),
         table(("detector", "images", "baseline mAP (%)", "ΔmAP points ± SE",

@@ -164,9 +164,10 @@ def cococ_document(results: CocoCResults, notes: str | None = None) -> Document:
     sections: list[Section | None] = [
         section("ΔE, prediction and measured loss per corruption and severity", Text(
             "ΔmAP in percentage points of mAP@[.50:.95] against the ΔE = 0 baseline (the same "
-            "JPEG round trip without corruption), measured ± its standard error (the paired "
-            "image bootstrap; in runs measured before it the jackknife or the paired SE over "
-            "5 image folds), image count in brackets; predictions for detector size n from "
+            "JPEG round trip without corruption), measured ± its standard error as its run "
+            "computed it (now the larger of the paired image bootstrap and the 5-fold "
+            "jackknife; earlier runs: the jackknife or the paired SE over 5 image folds), "
+            "image count in brackets; predictions for detector size n from "
             "the "
             "shipped tables (classic: `coco1000-measured`; direction-aware: "
             "`coco1000-directional`); parts: the chart ΔE split into lightness, chroma and hue "

@@ -642,7 +642,7 @@ def _run_section(results: ValidationResults) -> Section:
 
     lines.append(f"- Standard errors: {STANDARD_ERROR_WORDS[summ.standard_error]}"
                  + (" (rebuild with `--annotations` to score the bootstrap's draws)"
-                    if summ.standard_error != "bootstrap" else "") + ".")
+                    if summ.standard_error not in ("larger", "bootstrap") else "") + ".")
     lines.append(f"- Versions: {words(meta.get('versions'))}; machine: "
                  f"{words(meta.get('machine'))}.")
     finished = sorted({r.camera for r in results.rows})
