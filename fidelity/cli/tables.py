@@ -40,8 +40,9 @@ if TYPE_CHECKING:
               help="COCO annotations of the sweep, for standard errors (default: the file the "
                    "sweep recorded, if it is there).")
 @click.option("--standard-errors/--no-standard-errors", default=True, show_default=True,
-              help="Paired standard errors over 5 image folds, from the stored detections "
-                   "(computed once, then cached in the store).")
+              help="Standard errors of every loss (the larger of the paired image bootstrap "
+                   "and the 5-fold jackknife), from the stored detections (computed once, then "
+                   "cached in the store).")
 @click.option("--explain", "explain", default=None, metavar="MODEL:TRANSFORM:ΔE",
               help="Instead of the report: which classes one cell's ΔmAP comes from (per-class "
                    "ΔAP and share of the ΔmAP, from the stored detections), e.g. "
