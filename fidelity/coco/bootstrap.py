@@ -24,8 +24,6 @@ mAP@[.50:.95], the number the tables use).
 
 from __future__ import annotations
 
-import contextlib
-import io
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -85,25 +83,13 @@ def match_records(coco_gt: Any, detections: Mapping[int, np.ndarray],
 
     ``detections``: per image id (K, 6) ``x1, y1, x2, y2, score, class-index`` (as stored).
     """
-    from pycocotools.cocoeval import COCOeval
-
-    from fidelity.coco.scoring import coco_from_dict, coco_results
+    from fidelity.coco.scoring import coco_results, evaluated_pycocotools
 
     ids = sorted(int(i) for i in image_ids)
     if not ids:
         raise InvalidValueError("no images to evaluate")
-    results = coco_results(coco_gt, detections, ids)
-    with contextlib.redirect_stdout(io.StringIO()):
-        if results:
-            coco_dt = coco_gt.loadRes(results)
-        else:
-            coco_dt = coco_from_dict({"images": coco_gt.dataset["images"], "annotations": [],
-                                      "categories": coco_gt.dataset["categories"]})
-        ev = COCOeval(coco_gt, coco_dt, "bbox")
-        ev.params.imgIds = ids
-        ev.params.areaRng = [[0.0, 1e5 ** 2]]
-        ev.params.areaRngLbl = ["all"]
-        ev.evaluate()
+    ev = evaluated_pycocotools(coco_gt, coco_results(coco_gt, detections, ids), ids,
+                               area_all_only=True)
     n_img = len(ids)
     max_det = ev.params.maxDets[-1]
     names = {c["id"]: c["name"] for c in coco_gt.dataset["categories"]}

@@ -175,9 +175,10 @@ def coco_results(coco_gt: Any, detections: Mapping[int, np.ndarray],
     return results
 
 
-def _accumulate_pycocotools(coco_gt: Any, results: list[dict[str, Any]],
-                            ids: Sequence[int]) -> tuple[np.ndarray, list[int], np.ndarray]:
-    """(precision (T, R, K, A, M), catIds, stats) with the official ``pycocotools.COCOeval``."""
+def evaluated_pycocotools(coco_gt: Any, results: list[dict[str, Any]], ids: Sequence[int],
+                          area_all_only: bool = False) -> Any:
+    """``pycocotools.COCOeval`` (box) of ``results`` on ``ids`` after ``evaluate()`` (the
+    per-image matches in ``evalImgs``); ``area_all_only``: only the area range "all"."""
     from pycocotools.cocoeval import COCOeval
 
     with contextlib.redirect_stdout(io.StringIO()):
@@ -188,7 +189,18 @@ def _accumulate_pycocotools(coco_gt: Any, results: list[dict[str, Any]],
                                       "categories": coco_gt.dataset["categories"]})
         ev = COCOeval(coco_gt, coco_dt, "bbox")
         ev.params.imgIds = list(ids)
+        if area_all_only:
+            ev.params.areaRng = [[0.0, 1e5 ** 2]]
+            ev.params.areaRngLbl = ["all"]
         ev.evaluate()
+    return ev
+
+
+def _accumulate_pycocotools(coco_gt: Any, results: list[dict[str, Any]],
+                            ids: Sequence[int]) -> tuple[np.ndarray, list[int], np.ndarray]:
+    """(precision (T, R, K, A, M), catIds, stats) with the official ``pycocotools.COCOeval``."""
+    ev = evaluated_pycocotools(coco_gt, results, ids)
+    with contextlib.redirect_stdout(io.StringIO()):
         ev.accumulate()
         ev.summarize()
     return ev.eval["precision"], list(ev.params.catIds), np.asarray(ev.stats, dtype=np.float64)
