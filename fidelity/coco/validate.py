@@ -55,7 +55,7 @@ from fidelity.coco.store import (
     unpack_detections,
 )
 from fidelity.errors import InputFileError, InvalidValueError
-from fidelity.fileio import file_sha256, json_ready
+from fidelity.fileio import file_sha256, json_ready, portable_paths
 from fidelity.version import __version__
 
 if TYPE_CHECKING:
@@ -524,7 +524,8 @@ class ValidationResults:
             "cameras": {k: c.to_json() for k, c in self.cameras.items()},
             "models": {m: r.to_json() for m, r in self.models.items()},
             "baselines": {m: b.to_json() for m, b in self.baselines.items()},
-            "meta": self.meta}
+            "meta": self.meta | ({"data": portable_paths(self.meta["data"])}
+                                 if self.meta.get("data") else {})}
         if self.directional is not None:
             d["directional"] = self.directional.to_json()
         out: dict[str, Any] = json_ready(d)
