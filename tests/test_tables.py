@@ -564,7 +564,7 @@ def test_tables_earlier_command(store, tmp_path) -> None:
     # merged again from tables an older version wrote (the first record named a path on its
     # machine): the kept record names the first file by name, and the file it passed through
     first = json.loads((out / "tables.json").read_text())
-    first["tables"]["meta"]["earlier"]["file"] = "/tmp/tmp.X1/reports-coco-tables-at-abc.json"
+    first["tables"]["meta"]["earlier"]["file"] = str(tmp_path / "X1" / "reports-coco-tables-at-abc.json")
     (tmp_path / "twice.json").write_text(json.dumps(first))
     res = CliRunner().invoke(main, ["tables", str(store.path.parent), "--no-standard-errors",
                                     "--earlier", str(tmp_path / "twice.json"), "--out",
@@ -574,7 +574,7 @@ def test_tables_earlier_command(store, tmp_path) -> None:
         "earlier"]
     assert kept["file"] == "reports-coco-tables-at-abc.json"
     assert kept["via"]["file"] == "twice.json" and kept["models"] == ["yolox_nano"]
-    assert "/tmp/tmp.X1" not in (tmp_path / "again" / "tables.json").read_text()
+    assert str(tmp_path / "X1") not in (tmp_path / "again" / "tables.json").read_text()
     # writing the merged tables over the earlier ones is refused before any work
     res = CliRunner().invoke(main, ["tables", str(store.path.parent), "--no-standard-errors",
                                     "--earlier", str(old / "tables.json"), "--out", str(old)])
