@@ -60,8 +60,8 @@ class CellErrors:
     relative (% of baseline), ΔAP of person and bicycle in points; None with fewer than 2
     usable draws or folds. ``method`` (of ΔmAP's): ``"larger"`` (the larger of the paired image
     bootstrap and the jackknife of the whole-run loss), ``"bootstrap"`` (the bootstrap alone),
-    ``"jackknife"`` (leave-one-fold-out; tables measured before the
-    bootstrap) or ``"folds"`` (paired fold SE; tables measured before the jackknife)
+    ``"jackknife"`` (leave-one-fold-out; tables measured before the bootstrap) or ``"folds"``
+    (paired fold SE; tables measured before the jackknife)
     (:func:`fidelity.coco.loss.loss_estimate`)."""
 
     dmap_points: float | None
@@ -1330,7 +1330,8 @@ STANDARD_ERROR_WORDS: dict[str, str] = {
 
 def standard_error_methods(tables: Tables) -> dict[str, str]:
     """Per model, how its ΔmAP standard errors were computed: ``"larger"``, ``"bootstrap"``,
-    ``"jackknife"``, ``"folds"`` or ``"mixed"`` (keys of :data:`STANDARD_ERROR_WORDS`); models without SEs left out."""
+    ``"jackknife"``, ``"folds"`` or ``"mixed"`` (keys of :data:`STANDARD_ERROR_WORDS`); models
+    without SEs left out."""
     out: dict[str, str] = {}
     for m, rows in tables.cells.items():
         kinds = {r.errors.method for r in rows if r.errors is not None
