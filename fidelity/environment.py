@@ -121,15 +121,10 @@ def _shared() -> dict[str, Any]:
             "coco_annotations": sorted(p.name for p in ann.glob("*.json"))}
 
 
-def _cpu() -> dict[str, Any]:
-    from fidelity.coco.machine import cpu_description
-
-    return cpu_description()
-
-
 def describe_environment(probe: bool = True) -> dict[str, Any]:
     """The installation's capabilities (module docstring); ``probe``: run the Mitsuba probe
     (a few seconds, subprocesses)."""
+    from fidelity.coco.machine import cpu_description
     from fidelity.prediction.table import DEFAULT_TABLE, available_tables
     from fidelity.version import __version__
 
@@ -140,7 +135,7 @@ def describe_environment(probe: bool = True) -> dict[str, Any]:
         "python": platform.python_version(),
         "platform": platform.platform(),
         "cpus": available_cpus(),
-        "cpu": _cpu(),
+        "cpu": cpu_description(),
         "dependencies": core,
         "extras": {extra: {k: v for k, v in dependency_versions(extras=(extra,)).items()
                            if k not in core} for extra in RUNTIME_EXTRAS},

@@ -270,3 +270,7 @@ def test_score_loss_pairs_draws_only_of_the_same_images() -> None:
     unpaired = score_loss("map", scores, {"map": 0.42}, (), (), base, other_seed)
     assert unpaired.points_se is None and unpaired.se_method is None
     assert Draws.from_json(base.to_json()) == base
+    from fidelity.coco.bootstrap import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
+
+    assert not base.current  # 3 draws, seed 1: a store scores such a cell again
+    assert Draws(BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, 10, (), (), ()).current

@@ -231,6 +231,12 @@ class Draws:
         """The draws of score ``key``: ``"map"``, ``"person"`` or ``"bicycle"``."""
         return {"map": self.map, "person": self.person, "bicycle": self.bicycle}[key]
 
+    @property
+    def current(self) -> bool:
+        """Whether these are this version's draws (:data:`BOOTSTRAP_RESAMPLES` draws with
+        :data:`BOOTSTRAP_SEED`); a store scores cells again whose draws are not."""
+        return (self.resamples, self.seed) == (BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED)
+
     def pairs_with(self, other: Draws) -> bool:
         """Whether draw ``b`` of both runs drew the same images."""
         return (self.resamples, self.seed, self.images) == \

@@ -167,13 +167,13 @@ class SweepStore(ResultsStore):
         """A cell's scores on the image bootstrap's draws of ``image_ids``
         (:func:`fidelity.coco.bootstrap.draw_scores` with its default draws and seed; cached in
         the ``draws`` table, computed again when the images, draws or seed differ)."""
-        from fidelity.coco.bootstrap import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, Draws, draw_scores
+        from fidelity.coco.bootstrap import Draws, draw_scores
 
         row = self.db.execute("SELECT images, draws FROM draws WHERE model=? AND transform=? "
                               "AND target=?", (model, transform, float(target))).fetchone()
         if row and row[0] == len(image_ids):
             cached = Draws.from_json(json.loads(row[1]))
-            if (cached.resamples, cached.seed) == (BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED):
+            if cached.current:
                 return cached
         dets = self.detections(model, transform, target)
         draws = draw_scores(coco, dets, image_ids)

@@ -718,12 +718,11 @@ class ValidationStore(ResultsStore):
         """Score every cell on the image bootstrap's draws (:func:`fidelity.coco.bootstrap.
         draw_scores`, its default draws and seed) from the stored detections, where they are
         not stored for the cell's images, draws and seed yet. Returns how many were scored."""
-        from fidelity.coco.bootstrap import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, draw_scores
+        from fidelity.coco.bootstrap import draw_scores
 
         n = 0
         for c in self.cells():
-            d = c.draws
-            if d is not None and (d.resamples, d.seed) == (BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED):
+            if c.draws is not None and c.draws.current:
                 continue
             dets = self.detections(c.model, c.camera)
             draws = draw_scores(coco, dets, sorted(dets))
@@ -981,9 +980,10 @@ def _bound_check(predicted: float | None, measured: float | None, se: float | No
 
 
 def _row(camera: str, info: CameraRecord, b: ValidationCell, c: ValidationCell,
-         tables: Sequence[str], bound: str) -> ValidationRow:
+         tables: Sequence[str], bound: str) -> tuple[ValidationRow, str | None]:
     """Predicted against measured loss of one cell ``c`` against its baseline ``b``
-    (:func:`fidelity.coco.loss.score_loss`)."""
+    (:func:`fidelity.coco.loss.score_loss`), and how the mAP loss's SE was computed
+    (``se_method``; None: no SE)."""
     from fidelity.coco.loss import score_loss
 
     base: dict[str, float | None] = {"map": b.map, **b.ap}
@@ -996,10 +996,11 @@ def _row(camera: str, info: CameraRecord, b: ValidationCell, c: ValidationCell,
     checks = {cls: _bound_check(pred[bound].losses.get(col), measured.get(col), se.get(col),
                                 pred[bound].status[col])
               for cls, col in LOSS_COLUMNS.items()}
-    return ValidationRow(camera, c.model, info.illuminant, info.chart_delta_e, c.images,
-                         b.map, c.map, {k: b.ap.get(k) for k in ("person", "bicycle")},
-                         {k: c.ap.get(k) for k in ("person", "bicycle")}, measured, se, pred,
-                         checks)
+    row = ValidationRow(camera, c.model, info.illuminant, info.chart_delta_e, c.images,
+                        b.map, c.map, {k: b.ap.get(k) for k in ("person", "bicycle")},
+                        {k: c.ap.get(k) for k in ("person", "bicycle")}, measured, se, pred,
+                        checks)
+    return row, loss.se_method
 
 
 def _class_summary(rows: Sequence[ValidationRow], cls: str) -> ClassSummary:
@@ -1062,11 +1063,10 @@ def collect_results(store: ValidationStore, tables: Sequence[str] | None = None,
         b = cells.get((model, BASELINE))
         if b is None:
             continue
-        rows.append(_row(camera, cases[camera], b, c, tabs, bound))
-        drawn = b.draws is not None and c.draws is not None and b.draws.pairs_with(c.draws)
-        rest = bool(b.folds) and all(f.has_rest for f in (*b.folds, *c.folds))
-        methods.add("larger" if drawn and rest else "bootstrap" if drawn else
-                    "jackknife" if rest else "folds")
+        row, se_method = _row(camera, cases[camera], b, c, tabs, bound)
+        rows.append(row)
+        if se_method is not None:
+            methods.add(se_method)
     summary = ValidationSummary(bound, tuple(tabs), tuple(not_in_suite),
                                 {cls: _class_summary(rows, cls) for cls in LOSS_COLUMNS},
                                 methods.pop() if len(methods) == 1 else
