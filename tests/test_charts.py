@@ -43,6 +43,11 @@ def test_a_user_chart_is_a_file(tmp_path: Path) -> None:
     p.write_text(json.dumps(doc))
     c = load_chart(p)
     assert c.name == "two-patch" and c.patch_names == ("white 9.5", "neutral 8")
+    # a file is read once a process while it is unchanged, and again when it changes
+    assert load_chart(p) is c and not c.lab.flags.writeable
+    doc["patches"] = doc["patches"][::-1]
+    p.write_text(json.dumps(doc) + "\n")
+    assert load_chart(p).patch_names == ("neutral 8", "white 9.5")
 
 
 @pytest.mark.parametrize(

@@ -178,3 +178,36 @@ def test_audit_json_has_the_corner_centres_and_a_confidence():
     assert 0.0 <= d["confidence"] <= 1.0 and d["confidence"] >= MIN_CONFIDENCE
     assert np.abs(np.array(d["corners"]) - scene.corners).max() < 0.1 * scene.pitch_px
     assert d["chart"].startswith("24-patch") and d["checks"]["neutral_order"] >= 0.8
+
+
+@pytest.mark.parametrize("encoding", ["srgb", "linear"])
+def test_a_view_is_the_image_scaled_by_its_peak_and_encoded_to_8_bit_bgr(encoding):
+    """A view at full size, against the definition written out here: sRGB codes decoded to the
+    nearest of 65536 steps (the sRGB formula of IEC 61966-2-1), divided by the 99th percentile
+    of the brightest channel and clipped, then the nearest of 4096 linear steps encoded to
+    8-bit sRGB in B, G, R order; with the hard values: below 0, above 1, NaN, Inf."""
+    rng = np.random.default_rng(7)
+    pixels = rng.random((37, 53, 3)).astype(np.float32)
+    pixels[0, :6, 0] = [-0.5, 0.0, 1.0, 1.5, np.nan, np.inf]
+    view, peak = make_view(pixels, (0, 0, 53, 37), 53, encoding)
+
+    def srgb_to_linear(v):
+        return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+    def linear_to_srgb(v):
+        return np.where(v <= 0.0031308, v * 12.92, 1.055 * v ** (1 / 2.4) - 0.055)
+
+    clean = np.nan_to_num(pixels.astype(np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+    if encoding == "srgb":
+        lin = srgb_to_linear(np.rint(np.clip(clean, 0, 1) * 65535) / 65535)
+    else:
+        lin = np.maximum(clean, 0.0)
+    assert peak == pytest.approx(np.percentile(lin.max(axis=-1), 99.0), rel=1e-6)
+    linear = np.clip(lin / peak, 0.0, 1.0)
+    # within one of the 65536 decoding steps (single precision rounds some onto the next)
+    np.testing.assert_allclose(view.linear, linear, atol=5e-5)
+    codes = np.rint(255 * linear_to_srgb(np.floor(linear * 4095 + 0.5) / 4095))
+    assert view.bgr8.dtype == np.uint8 and view.bgr8.flags.c_contiguous
+    near = np.abs(view.bgr8[..., ::-1].astype(int) - codes)
+    assert near.max() <= 1 and (near == 0).mean() > 0.99  # float32 steps at a code boundary
+    np.testing.assert_array_equal(view.to_image, np.eye(3))

@@ -248,7 +248,14 @@ def test_registry_picks_up_files(tmp_path, monkeypatch):
     (tmp_path / "measured-test.json").write_text(json.dumps(_measured_table()))
     monkeypatch.setattr(pr, "prediction_dir", lambda: tmp_path)
     assert pr.available_tables() == ["measured-test", "safecolor-2025"]
-    assert pr.load_prediction_table("measured-test").kind == "measured"
+    table = pr.load_prediction_table("measured-test")
+    assert table.kind == "measured"
+    # read once a process while the file is unchanged, and again when it changes
+    assert pr.load_prediction_table(tmp_path / "measured-test.json") is table
+    changed = _measured_table()
+    changed["title"] = "changed on disk"
+    (tmp_path / "measured-test.json").write_text(json.dumps(changed, indent=1))
+    assert pr.load_prediction_table("measured-test").title == "changed on disk"
     assert pr.predict(3.0, size="n", table="measured-test", transforms=False).dmap_points == pytest.approx(0.9)
     with pytest.raises(UnknownNameError, match=r"unknown prediction table 'nope'; known: measured-test, safecolor-2025"):
         pr.load_prediction_table("nope")

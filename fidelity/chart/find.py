@@ -401,9 +401,10 @@ def _prepare(pyramid: Pyramid, region: tuple[int, int, int, int], max_side: int,
     sx, sy = arr.shape[1] / width, arr.shape[0] / height
     if factor == 1:
         arr = np.nan_to_num(arr, nan=0.0, posinf=0.0, neginf=0.0)
-    np.maximum(arr, 0.0, out=arr)
-    if encoding == "srgb":
-        arr = _DECODE_LUT[np.rint(np.clip(arr, 0.0, 1.0) * 65535).astype(np.int32)]
+    if encoding == "srgb":  # codes in [0, 1] -> the nearest of 65536 steps -> linear
+        arr = _DECODE_LUT[_codes(arr, 65535)]
+    else:
+        np.maximum(arr, 0.0, out=arr)
     # view -> level crop (OpenCV's pixel-centre convention) -> level -> image
     to_level = np.array([[1.0 / sx, 0.0, lx0 + 0.5 / sx - 0.5],
                          [0.0, 1.0 / sy, ly0 + 0.5 / sy - 0.5], [0.0, 0.0, 1.0]])
@@ -423,17 +424,32 @@ def make_view(pixels: np.ndarray | Pyramid, region: tuple[int, int, int, int], m
     arr, to_image = _prepare(pyramid, region, max_side, encoding)
     if peak is None:
         step = max(1, int(math.sqrt(arr.shape[0] * arr.shape[1] / 250_000)))
-        peak = float(np.percentile(arr[::step, ::step].max(axis=-1), 99.0))
+        sample = arr[::step, ::step]
+        brightest = np.maximum(np.maximum(sample[..., 0], sample[..., 1]), sample[..., 2])
+        peak = float(np.percentile(brightest, 99.0))
     if not peak > 0.0:
         raise InvalidValueError("no colour chart found: the image is black")
     with np.errstate(over="ignore"):
         scale = np.float32(1.0 / peak)
     if np.isfinite(scale):
-        linear = np.clip(arr * scale, 0.0, 1.0)
+        linear = np.multiply(arr, scale)
+        np.clip(linear, 0.0, 1.0, out=linear)
     else:  # a denormal peak (values ~1e-40): 1/peak overflows single precision
         linear = np.clip(arr.astype(np.float64) / peak, 0.0, 1.0).astype(np.float32)
-    bgr8 = _ENCODE_LUT[(linear[..., ::-1] * 4095 + 0.5).astype(np.int32)]
-    return View(linear=linear, bgr8=np.ascontiguousarray(bgr8), to_image=to_image), peak
+    steps = np.multiply(linear, np.float32(4095))  # linear in [0, 1] -> 4096 steps, rounded
+    steps += np.float32(0.5)
+    bgr8 = np.ascontiguousarray(_ENCODE_LUT[steps.astype(np.uint16)][..., ::-1])
+    return View(linear=linear, bgr8=bgr8, to_image=to_image), peak
+
+
+def _codes(values: np.ndarray, top: int) -> np.ndarray:
+    """``rint(clip(values, 0, 1) * top)`` (``values`` NaN-free, ``top`` < 65536) as
+    ``uint16`` indices into a lookup table, with one float temporary."""
+    scaled: np.ndarray = np.clip(values, 0.0, 1.0)
+    scaled *= np.float32(top)
+    np.rint(scaled, out=scaled)
+    codes: np.ndarray = scaled.astype(np.uint16)
+    return codes
 
 
 def detection_image(pixels: np.ndarray, encoding: str = "linear") -> np.ndarray:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -180,6 +181,14 @@ def load_chart(name_or_path: str | Path = DEFAULT_CHART) -> Chart:
         if path.suffix or "/" in text_name:
             raise InputFileError(f"{path}: chart file does not exist")
         raise unknown_name("chart", text_name, available_charts())
+    stat = path.stat()
+    return _load_chart_file(path, stat.st_mtime_ns, stat.st_size)
+
+
+@lru_cache(maxsize=16)
+def _load_chart_file(path: Path, mtime_ns: int, size: int) -> Chart:
+    """The chart in ``path`` as of its modification time and size (read and validated once a
+    process while the file is unchanged; a :class:`Chart` is frozen, its ``lab`` read-only)."""
     doc = sc.load_document(path, fmt="json", max_bytes=MAX_CHART_BYTES, what="chart file")
     return _chart_from_document(doc, display_path(path))
 

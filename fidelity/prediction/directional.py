@@ -61,6 +61,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -70,6 +71,8 @@ from fidelity.errors import InvalidValueError, unknown_name
 from fidelity.prediction.scalar import bounded_minimum
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from fidelity.chart.measure import ChartMeasurement
     from fidelity.prediction.table import PredictionTable
     from fidelity.prediction.verdict import Criterion, DecisionRule, Verdict
@@ -403,14 +406,29 @@ def load_directional_table(name_or_path: str | None = None) -> DirectionalTable:
     """Load a direction-aware table (registry name or JSON path; None:
     :data:`DEFAULT_DIRECTIONAL_TABLE`). A prediction table without ``families`` is an error
     naming it."""
-    from fidelity.errors import InputFileError
-    from fidelity.prediction.table import (
-        TableKind,
-        load_prediction_table,
-        parse_prediction_table,
-    )
+    from fidelity.prediction.table import load_prediction_table
 
     classic = load_prediction_table(name_or_path or DEFAULT_DIRECTIONAL_TABLE)
+    if classic.path is None:
+        return _directional_of(classic)
+    stat = classic.path.stat()
+    return _directional_file(classic.path, stat.st_mtime_ns, stat.st_size)
+
+
+@lru_cache(maxsize=8)
+def _directional_file(path: Path, mtime_ns: int, size: int) -> DirectionalTable:
+    """The direction-aware table in ``path`` as of its modification time and size (built once a
+    process while the file is unchanged)."""
+    from fidelity.prediction.table import load_prediction_table
+
+    return _directional_of(load_prediction_table(path))
+
+
+def _directional_of(classic: PredictionTable) -> DirectionalTable:
+    """:func:`load_directional_table` of a loaded table."""
+    from fidelity.errors import InputFileError
+    from fidelity.prediction.table import TableKind, parse_prediction_table
+
     fams = classic.raw.get("families")
     if classic.kind is not TableKind.DIRECTIONAL or not isinstance(fams, dict):
         raise InputFileError(f"{classic.path or classic.name}: not a direction-aware table "

@@ -42,6 +42,7 @@ import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -316,6 +317,14 @@ def load_prediction_table(name_or_path: str | os.PathLike[str] | None = None) ->
             raise unknown_name("prediction table", name, available_tables())
     if not path.is_file():
         raise InputFileError(f"{display_path(path)}: prediction table does not exist")
+    stat = path.stat()
+    return _load_table_file(path, stat.st_mtime_ns, stat.st_size)
+
+
+@lru_cache(maxsize=16)
+def _load_table_file(path: Path, mtime_ns: int, size: int) -> PredictionTable:
+    """The table in ``path`` as of its modification time and size (a file read and validated
+    once a process while it is unchanged; a table is never modified once built)."""
     obj = sc.load_document(path, fmt="json", max_bytes=MAX_TABLE_BYTES,
                            what="prediction table")
     table = parse_prediction_table(obj, display_path(path))
