@@ -37,14 +37,18 @@ def _se(r: CellDelta) -> float | None:
     return r.errors.dmap_points if r.errors is not None else None
 
 
-def _se_methods(rows: list[CellDelta]) -> str:
-    """The SE estimators of ``rows`` (``STANDARD_ERROR_WORDS``), most frequent first."""
+def _se_methods(rows: list[CellDelta]) -> list[str]:
+    """The SE estimators of ``rows`` (keys of ``STANDARD_ERROR_WORDS``), most frequent first."""
     from collections import Counter
 
+    return [str(m) for m, _ in Counter(r.errors.method for r in rows
+                                       if r.errors is not None).most_common()]
+
+
+def _se_words(methods: list[str]) -> str:
     from fidelity.coco.tables import STANDARD_ERROR_WORDS
 
-    counts = Counter(r.errors.method for r in rows if r.errors is not None)
-    return "; ".join(STANDARD_ERROR_WORDS.get(m, m) for m, _ in counts.most_common()) or "none"
+    return " / ".join(STANDARD_ERROR_WORDS.get(m, m) for m in methods) or "none"
 
 
 def compare(before: Tables, after: Tables) -> dict[str, Any]:
@@ -117,8 +121,8 @@ def markdown(result: dict[str, Any], before: str, after: str) -> str:
                   f"- preprocessing after: {d['preprocessing_after']}",
                   f"- baseline mAP {d['baseline_map_before']:.4f} → "
                   f"{d['baseline_map_after']:.4f}",
-                  f"- SE before: {d['se_before']}",
-                  f"- SE after: {d['se_after']}",
+                  f"- SE before: {_se_words(d['se_before'])}",
+                  f"- SE after: {_se_words(d['se_after'])}",
                   f"- {s['cells']} cells: median |change| {s['median_abs_change']:.3f} points; "
                   f"largest {big['change']:+.3f} ({big['transform']} ΔE {big['delta_e']:g}: "
                   f"{big['before']:.3f} → {big['after']:.3f}); beyond 1 after-SE "

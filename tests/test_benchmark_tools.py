@@ -1,0 +1,59 @@
+"""The tools that rebuild the committed COCO reports after a re-sweep (``benchmarks.
+compare_tables``, ``benchmarks.after_resweep``), on the committed tables and small files."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import pytest
+
+from benchmarks import after_resweep, compare_tables
+from fidelity.coco.tables import TablesResult
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def _tables(doc: dict):
+    return TablesResult.from_json(doc).tables
+
+
+def test_compare_tables_reports_the_re_measured_detector_only_with_its_changes():
+    doc = json.loads((REPO / "reports" / "coco" / "tables.json").read_text("utf-8"))
+    before = copy.deepcopy(doc)
+    model = "yolox_nano"
+    before["tables"]["models"][model]["settings"]["conventions"]["preprocess"] = "older"
+    cells = [c for c in before["tables"]["cells"][model] if c["status"] == "done"]
+    cells[0]["dmap_points"] -= 0.5  # the only cell that moved, by +0.5 points
+    cells[1]["se_method"] = "folds"
+    result = compare_tables.compare(_tables(before), _tables(doc))
+    assert list(result["models"]) == [model]  # the others kept their preprocessing
+    d = result["models"][model]
+    changes = {(c["transform"], c["delta_e"]): c["change"] for c in d["cells"]}
+    assert changes[(cells[0]["transform"], cells[0]["delta_e"])] == pytest.approx(0.5)
+    assert sum(abs(v) > 1e-12 for v in changes.values()) == 1
+    assert d["summary"]["largest_change"]["change"] == pytest.approx(0.5)
+    assert d["preprocessing_before"] == "older"
+    assert d["se_before"] == ["larger", "folds"] and d["se_after"] == ["larger"]
+    text = compare_tables.markdown(result, "a.json", "b.json")
+    assert f"## {model}" in text and "+0.500" in text
+
+
+def test_after_resweep_replaces_only_existing_files_that_changed(tmp_path):
+    src, dst = tmp_path / "new", tmp_path / "report"
+    src.mkdir()
+    dst.mkdir()
+    for name, text in {"same.md": "a", "changed.md": "new", "extra.png": "x"}.items():
+        (src / name).write_text(text)
+    (dst / "same.md").write_text("a")
+    (dst / "changed.md").write_text("old")
+    assert after_resweep._replace_existing(src, dst) == ["changed.md"]
+    assert (dst / "changed.md").read_text() == "new" and not (dst / "extra.png").exists()
+
+
+def test_after_resweep_finds_every_prediction_to_recompute():
+    doc = {"cells": [{"prediction": {"classic": 1.0}, "x": 1}, {"y": [{"prediction": None}]}],
+           "meta": {"n": 2}}
+    found = after_resweep._cells(doc)
+    assert len(found) == 2 and all("prediction" in c for c in found)
