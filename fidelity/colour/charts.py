@@ -182,13 +182,14 @@ def load_chart(name_or_path: str | Path = DEFAULT_CHART) -> Chart:
             raise InputFileError(f"{path}: chart file does not exist")
         raise unknown_name("chart", text_name, available_charts())
     stat = path.stat()
-    return _load_chart_file(path, stat.st_mtime_ns, stat.st_size)
+    return _load_chart_file(path, path.resolve(), stat.st_mtime_ns, stat.st_size)
 
 
 @lru_cache(maxsize=16)
-def _load_chart_file(path: Path, mtime_ns: int, size: int) -> Chart:
-    """The chart in ``path`` as of its modification time and size (read and validated once a
-    process while the file is unchanged; a :class:`Chart` is frozen, its ``lab`` read-only)."""
+def _load_chart_file(path: Path, resolved: Path, mtime_ns: int, size: int) -> Chart:
+    """The chart in ``path`` (``resolved``: the file it names) as of its modification time
+    and size: read and validated once a process while the file is unchanged (a
+    :class:`Chart` is frozen, its ``lab`` read-only)."""
     doc = sc.load_document(path, fmt="json", max_bytes=MAX_CHART_BYTES, what="chart file")
     return _chart_from_document(doc, display_path(path))
 

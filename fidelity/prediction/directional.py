@@ -412,13 +412,15 @@ def load_directional_table(name_or_path: str | None = None) -> DirectionalTable:
     if classic.path is None:
         return _directional_of(classic)
     stat = classic.path.stat()
-    return _directional_file(classic.path, stat.st_mtime_ns, stat.st_size)
+    return _directional_file(classic.path, classic.path.resolve(), stat.st_mtime_ns,
+                             stat.st_size)
 
 
 @lru_cache(maxsize=8)
-def _directional_file(path: Path, mtime_ns: int, size: int) -> DirectionalTable:
-    """The direction-aware table in ``path`` as of its modification time and size (built once a
-    process while the file is unchanged)."""
+def _directional_file(path: Path, resolved: Path, mtime_ns: int, size: int
+                      ) -> DirectionalTable:
+    """The direction-aware table in ``path`` (``resolved``: the file it names) as of its
+    modification time and size: built once a process while the file is unchanged."""
     from fidelity.prediction.table import load_prediction_table
 
     return _directional_of(load_prediction_table(path))

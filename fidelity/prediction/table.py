@@ -318,13 +318,14 @@ def load_prediction_table(name_or_path: str | os.PathLike[str] | None = None) ->
     if not path.is_file():
         raise InputFileError(f"{display_path(path)}: prediction table does not exist")
     stat = path.stat()
-    return _load_table_file(path, stat.st_mtime_ns, stat.st_size)
+    return _load_table_file(path, path.resolve(), stat.st_mtime_ns, stat.st_size)
 
 
 @lru_cache(maxsize=16)
-def _load_table_file(path: Path, mtime_ns: int, size: int) -> PredictionTable:
-    """The table in ``path`` as of its modification time and size (a file read and validated
-    once a process while it is unchanged; a table is never modified once built)."""
+def _load_table_file(path: Path, resolved: Path, mtime_ns: int, size: int) -> PredictionTable:
+    """The table in ``path`` (``resolved``: the file it names) as of its modification time and
+    size: a file read and validated once a process while it is unchanged (a table is never
+    modified once built)."""
     obj = sc.load_document(path, fmt="json", max_bytes=MAX_TABLE_BYTES,
                            what="prediction table")
     table = parse_prediction_table(obj, display_path(path))
