@@ -1,0 +1,118 @@
+"""This checkout against an earlier commit of it, as whole processes: the speed-up (or cost) of a
+change, measured side by side so that a busy moment of the machine hits both alike.
+
+The anchor is the package of ``--anchor`` (exported with ``git archive``: ``fidelity`` and the
+data folders it reads), run with ``python -m fidelity`` from that folder; this checkout is run
+the same way from the repository. Commands: ``fidelity audit PHOTO.jpg --json F`` of
+``bench_startup``'s 12-megapixel photo and ``fidelity check`` with its default HTML + JSON
+report. Each is run ``--repeats`` times per side, the sides alternating; the result is the
+median and best wall time, the median max RSS and the ratio of medians (this / anchor), with
+the machine and its load average.
+
+    python -m benchmarks.bench_versions --anchor 8913577 --repeats 15
+    # -> reports/benchmarks/versions.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from benchmarks.machine import machine_info
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def export(rev: str, into: Path) -> None:
+    """The package and data folders of commit ``rev`` under ``into``."""
+    archive = subprocess.run(["git", "-C", str(REPO), "archive", rev, "fidelity", "charts",
+                              "scenes", "cameras"], check=True, capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
+
+
+def commands(photo: Path, out: Path) -> dict[str, list[str]]:
+    py = [sys.executable, "-m", "fidelity"]
+    return {"fidelity audit PHOTO.jpg --json F (12 MP)":
+            [*py, "audit", str(photo), "-q", "--json", str(out / "audit.json")],
+            "fidelity check (default HTML + JSON report)":
+            [*py, "check", "-q", "--out", str(out / "check")]}
+
+
+def run(argv: list[str], source: Path, cwd: Path) -> tuple[float, float]:
+    """Wall seconds and max RSS (MB) of ``argv`` with the package of ``source``."""
+    from benchmarks.bench_memory import run_process
+    from benchmarks.bench_startup import user_environment
+
+    env = dict(user_environment(), PYTHONPATH=str(source))
+    row = run_process(argv, env=env, cwd=source)  # python -m puts the working folder first
+    if row["exit"] not in (0, 1):
+        raise RuntimeError(f"{argv} ({source}): exit {row['exit']}: {row['stderr']}")
+    return float(row["seconds"]), float(row["max_rss_mb"])
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--anchor", required=True, help="commit to compare this checkout with")
+    ap.add_argument("--repeats", type=int, default=15)
+    ap.add_argument("--out", type=Path, default=REPO / "reports" / "benchmarks" / "versions.json")
+    args = ap.parse_args(argv)
+    from benchmarks.bench_startup import make_photo
+
+    anchor = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", args.anchor],
+                            check=True, capture_output=True, text=True).stdout.strip()
+    head = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"],
+                          check=True, capture_output=True, text=True).stdout.strip()
+    dirty = bool(subprocess.run(["git", "-C", str(REPO), "status", "--porcelain", "fidelity"],
+                                check=True, capture_output=True, text=True).stdout.strip())
+    load = os.getloadavg()[0]
+    with tempfile.TemporaryDirectory() as tmp:
+        base = Path(tmp) / "anchor"
+        base.mkdir()
+        export(anchor, base)
+        photo = Path(tmp) / "photo.jpg"
+        make_photo(photo)
+        cmds = commands(photo, Path(tmp))
+        sides = {"anchor": base, "this": REPO}
+        times: dict[str, dict[str, list[tuple[float, float]]]] = {
+            n: {s: [] for s in sides} for n in cmds}
+        for cmd in cmds.values():  # warm the file cache and write the .pyc files once
+            for src in sides.values():
+                run(cmd, src, Path(tmp))
+        for _ in range(args.repeats):
+            for name, cmd in cmds.items():
+                for side, src in sides.items():
+                    times[name][side].append(run(cmd, src, Path(tmp)))
+    rows: list[dict[str, Any]] = []
+    for name, t in times.items():
+        row: dict[str, Any] = {"command": name}
+        for side in sides:
+            walls = [w for w, _ in t[side]]
+            row[side] = {"median_s": round(statistics.median(walls), 3),
+                         "min_s": round(min(walls), 3),
+                         "max_rss_mb": round(statistics.median(m for _, m in t[side]), 1)}
+        row["ratio_of_medians"] = round(row["this"]["median_s"] / row["anchor"]["median_s"], 3)
+        row["ratio_of_best"] = round(row["this"]["min_s"] / row["anchor"]["min_s"], 3)
+        rows.append(row)
+    result = {"benchmark": "versions", "anchor": anchor,
+              "this": head + (" with uncommitted changes" if dirty else ""),
+              "repeats": args.repeats, "rows": rows, "load_average_at_start": round(load, 2),
+              "machine": machine_info(),
+              "bytecode": "compiled .pyc files (PYTHONDONTWRITEBYTECODE unset)"}
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
+    for r in rows:
+        print(f"{r['command']}: this {r['this']['median_s']:.2f} s, anchor "
+              f"{r['anchor']['median_s']:.2f} s (median; ratio {r['ratio_of_medians']:.2f}; "
+              f"best {r['this']['min_s']:.2f} / {r['anchor']['min_s']:.2f})")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
