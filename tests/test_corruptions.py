@@ -148,3 +148,22 @@ def test_coco_c_report_only_rebuilds(tmp_path):
     assert r.exit_code == 0, r.output
     html = (tmp_path / "cococ.html").read_text()
     assert 'alt="chart ΔE against COCO-C severity" src="data:image/png;base64,' in html
+
+
+def test_shipped_measurements_come_from_this_versions_detectors():
+    """Every measured COCO-C loss that `predict --coco-c` reads was measured with this
+    version's detector preprocessing and states this version's SE rule (issue 32)."""
+    from pathlib import Path
+
+    from fidelity.coco.bootstrap import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
+    from fidelity.coco.detectors import PREPROCESSING
+
+    root = Path(__file__).resolve().parents[1]
+    res = cc.CocoCResults.from_json(json.loads((root / "fidelity/data/coco-c.json").read_text()))
+    current = {p.describe() for p in PREPROCESSING.values()}
+    measured = [m for c in res.cells for m in c.measured]
+    assert len(measured) >= len(res.cells) >= 15
+    for m in measured:
+        assert m.settings.get("preprocess") in current, (m.model, m.mapping)
+        assert m.settings.get("standard_error") == {
+            "method": "larger", "draws": BOOTSTRAP_RESAMPLES, "seed": BOOTSTRAP_SEED}

@@ -422,7 +422,7 @@ def measure_mapping(mapping: Mapping8, key: str, inputs: CocoInputs, *,
             seconds=time.perf_counter() - t0, inferred=ran + ran_base,
             baseline_cached=ran_base == 0, scorer=method,
             settings={"threads": threads, "providers": det.providers,
-                      "folds": FOLDS,
+                      "preprocess": det.preprocessing.describe(), "folds": FOLDS,
                       "standard_error": {"method": loss.se_method,
                                          "draws": BOOTSTRAP_RESAMPLES, "seed": BOOTSTRAP_SEED},
                       "jpeg": "original quantisation tables and subsampling "
