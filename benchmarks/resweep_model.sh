@@ -3,7 +3,7 @@
 # and merge them into reports/coco and the shipped prediction tables, keeping the detectors not
 # re-measured as they were (fidelity tables --earlier). Resumable: rerun the same line.
 #   benchmarks/resweep_model.sh STORE MODEL.onnx[@N] [MODEL.onnx[@N] ...]
-# e.g. benchmarks/resweep_model.sh ~/.cache/fidelity/resweep-yolo11n yolo11n-int8dyn.onnx
+# e.g. PROCESSES=2 benchmarks/resweep_model.sh ~/.cache/fidelity/resweep-yolo11n yolo11n-int8dyn.onnx
 # Time on 2 cores, all 1000 images (131 cells a model): YOLOX-nano ~1.5 h with one thread beside
 # other work, YOLO11n ~3.5 h, YOLOv8n/YOLOv10n ~6.5 h each with two threads (THREADS=2).
 # Shared data: $FIDELITY_SHARED (default ../shared). The store stays outside the repository;
@@ -15,10 +15,18 @@ STORE=$1; shift
 models=""
 for m in "$@"; do models="${models:+$models,}$S/models/$m"; done
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
-python -m fidelity sweep --models "$models" \
-  --images "$S/coco/val2017" --annotations "$S/coco/annotations/instances_val2017_subset.json" \
-  --transforms all --targets 0,1,2,3,4,5,6,8,10,12,15,18,21,24 --threads "${THREADS:-1}" \
-  --provider cpu --no-progress --out "$STORE"
+sweep() {
+  python -m fidelity sweep --models "$models" \
+    --images "$S/coco/val2017" --annotations "$S/coco/annotations/instances_val2017_subset.json" \
+    --transforms all --targets 0,1,2,3,4,5,6,8,10,12,15,18,21,24 --threads "${THREADS:-1}" \
+    --provider cpu --no-progress --out "$STORE"
+}
+# PROCESSES=N: N sweep processes share the store (each claims its own cells); the merge waits
+# for all of them.
+others=()
+for _ in $(seq 2 "${PROCESSES:-1}"); do sweep & others+=($!); done
+sweep
+for pid in ${others[@]+"${others[@]}"}; do wait "$pid"; done
 # The merge reads a copy of the current tables (an input is never written over), named by the
 # commit it came from (the prediction table's provenance records the name and its SHA-256).
 tmp=$(mktemp -d)
