@@ -14,9 +14,10 @@ import json
 import math
 import os
 import tempfile
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from functools import lru_cache, wraps
 from pathlib import Path
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Protocol, TypeVar, runtime_checkable
 
 from fidelity.errors import InputFileError
 
@@ -41,6 +42,30 @@ def printable(text: str) -> str:
 def display_path(path: str | os.PathLike[str]) -> str:
     """``path`` as printable text (:func:`printable`)."""
     return printable(os.fsdecode(path))
+
+
+_T = TypeVar("_T")
+
+
+def cached_while_unchanged(maxsize: int) -> Callable[[Callable[[Path], _T]], Callable[[Path], _T]]:
+    """Decorate a reader of a file: its result is kept, a process long, while the file is
+    unchanged (keyed by the path as given, the file it names, its modification time and
+    size; at most ``maxsize`` files). Its results must never be modified by a caller; an
+    exception is not kept (a broken file is read again)."""
+
+    def decorate(read: Callable[[Path], _T]) -> Callable[[Path], _T]:
+        @lru_cache(maxsize=maxsize)
+        def keyed(path: Path, resolved: Path, mtime_ns: int, size: int) -> _T:
+            return read(path)
+
+        @wraps(read)
+        def cached(path: Path) -> _T:
+            stat = path.stat()
+            return keyed(path, path.resolve(), stat.st_mtime_ns, stat.st_size)
+
+        return cached
+
+    return decorate
 
 
 def write_error(path: str | os.PathLike[str], exc: OSError) -> InputFileError:

@@ -174,3 +174,31 @@ def test_undecodable_file_names_print() -> None:
     assert printable("chart\udcff.png") == "chart\\xff.png"
     assert printable("\ud800 ok é") == "\\ud800 ok é"
     assert printable("plain ΔE") == "plain ΔE"
+
+
+def test_a_cached_reader_reads_a_file_again_only_when_it_changes(tmp_path, monkeypatch):
+    from fidelity.fileio import cached_while_unchanged
+
+    reads = []
+
+    @cached_while_unchanged(maxsize=4)
+    def read(path):
+        reads.append(path)
+        text = path.read_text()
+        if text == "broken":
+            raise ValueError(text)
+        return [text]
+
+    f = tmp_path / "a.json"
+    f.write_text("one")
+    first = read(f)
+    assert read(f) is first and len(reads) == 1  # unchanged: the same result, not read again
+    f.write_text("three")
+    assert read(f) == ["three"] and len(reads) == 2  # changed: read again
+    monkeypatch.chdir(tmp_path)
+    assert read(Path("a.json")) == ["three"] and len(reads) == 3  # another spelling: its own
+    f.write_text("broken")
+    for _ in range(2):  # an error is not kept: a broken file is read each time
+        with pytest.raises(ValueError):
+            read(f)
+    assert len(reads) == 5

@@ -11,7 +11,6 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +20,7 @@ from numpy.typing import NDArray
 from fidelity import schema as sc
 from fidelity.colour.colorimetry import lab_to_srgb
 from fidelity.errors import FidelityError, InputFileError, unknown_name
-from fidelity.fileio import display_path
+from fidelity.fileio import cached_while_unchanged, display_path
 from fidelity.resources import resource_dir
 
 __all__ = [
@@ -181,15 +180,13 @@ def load_chart(name_or_path: str | Path = DEFAULT_CHART) -> Chart:
         if path.suffix or "/" in text_name:
             raise InputFileError(f"{path}: chart file does not exist")
         raise unknown_name("chart", text_name, available_charts())
-    stat = path.stat()
-    return _load_chart_file(path, path.resolve(), stat.st_mtime_ns, stat.st_size)
+    return _load_chart_file(path)
 
 
-@lru_cache(maxsize=16)
-def _load_chart_file(path: Path, resolved: Path, mtime_ns: int, size: int) -> Chart:
-    """The chart in ``path`` (``resolved``: the file it names) as of its modification time
-    and size: read and validated once a process while the file is unchanged (a
-    :class:`Chart` is frozen, its ``lab`` read-only)."""
+@cached_while_unchanged(maxsize=16)
+def _load_chart_file(path: Path) -> Chart:
+    """The chart in ``path``, read and validated once a process while the file is unchanged
+    (a :class:`Chart` is frozen, its ``lab`` read-only)."""
     doc = sc.load_document(path, fmt="json", max_bytes=MAX_CHART_BYTES, what="chart file")
     return _chart_from_document(doc, display_path(path))
 

@@ -61,13 +61,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from functools import lru_cache
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fidelity.errors import InvalidValueError, unknown_name
+from fidelity.fileio import cached_while_unchanged
 from fidelity.prediction.scalar import bounded_minimum
 
 if TYPE_CHECKING:
@@ -411,16 +411,13 @@ def load_directional_table(name_or_path: str | None = None) -> DirectionalTable:
     classic = load_prediction_table(name_or_path or DEFAULT_DIRECTIONAL_TABLE)
     if classic.path is None:
         return _directional_of(classic)
-    stat = classic.path.stat()
-    return _directional_file(classic.path, classic.path.resolve(), stat.st_mtime_ns,
-                             stat.st_size)
+    return _directional_file(classic.path)
 
 
-@lru_cache(maxsize=8)
-def _directional_file(path: Path, resolved: Path, mtime_ns: int, size: int
-                      ) -> DirectionalTable:
-    """The direction-aware table in ``path`` (``resolved``: the file it names) as of its
-    modification time and size: built once a process while the file is unchanged."""
+@cached_while_unchanged(maxsize=8)
+def _directional_file(path: Path) -> DirectionalTable:
+    """The direction-aware table in ``path``, built once a process while the file is
+    unchanged."""
     from fidelity.prediction.table import load_prediction_table
 
     return _directional_of(load_prediction_table(path))

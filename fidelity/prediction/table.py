@@ -42,7 +42,6 @@ import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
-from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -50,7 +49,7 @@ import numpy as np
 
 from fidelity import schema as sc
 from fidelity.errors import InputFileError, InvalidValueError, unknown_name
-from fidelity.fileio import display_path
+from fidelity.fileio import cached_while_unchanged, display_path
 from fidelity.resources import resource_dir
 
 #: The table used when none is named: the project's measured table (the COCO sweep, issue 5).
@@ -317,15 +316,13 @@ def load_prediction_table(name_or_path: str | os.PathLike[str] | None = None) ->
             raise unknown_name("prediction table", name, available_tables())
     if not path.is_file():
         raise InputFileError(f"{display_path(path)}: prediction table does not exist")
-    stat = path.stat()
-    return _load_table_file(path, path.resolve(), stat.st_mtime_ns, stat.st_size)
+    return _load_table_file(path)
 
 
-@lru_cache(maxsize=16)
-def _load_table_file(path: Path, resolved: Path, mtime_ns: int, size: int) -> PredictionTable:
-    """The table in ``path`` (``resolved``: the file it names) as of its modification time and
-    size: a file read and validated once a process while it is unchanged (a table is never
-    modified once built)."""
+@cached_while_unchanged(maxsize=16)
+def _load_table_file(path: Path) -> PredictionTable:
+    """The table in ``path``, read and validated once a process while the file is unchanged
+    (a table is never modified once built)."""
     obj = sc.load_document(path, fmt="json", max_bytes=MAX_TABLE_BYTES,
                            what="prediction table")
     table = parse_prediction_table(obj, display_path(path))
