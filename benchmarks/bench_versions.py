@@ -30,10 +30,11 @@ from benchmarks.machine import machine_info
 REPO = Path(__file__).resolve().parent.parent
 
 
-def export(rev: str, into: Path) -> None:
-    """The package and data folders of commit ``rev`` under ``into``."""
-    archive = subprocess.run(["git", "-C", str(REPO), "archive", rev, "fidelity", "charts",
-                              "scenes", "cameras"], check=True, capture_output=True).stdout
+def export(rev: str, into: Path,
+           folders: tuple[str, ...] = ("fidelity", "charts", "scenes", "cameras")) -> None:
+    """The package and data ``folders`` of commit ``rev`` under ``into``."""
+    archive = subprocess.run(["git", "-C", str(REPO), "archive", rev, *folders], check=True,
+                             capture_output=True).stdout
     subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
 
 

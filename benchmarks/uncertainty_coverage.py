@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.bench_versions import export
 from benchmarks.machine import machine_info
 
 REPO = Path(__file__).resolve().parent.parent
@@ -123,9 +124,7 @@ def cost_study(anchor: str, repeats: int) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as tmp:
         base = Path(tmp) / "anchor"
         base.mkdir()
-        archive = subprocess.run(["git", "-C", str(REPO), "archive", anchor, "fidelity",
-                                  "charts", "scenes"], check=True, capture_output=True).stdout
-        subprocess.run(["tar", "-x", "-C", str(base)], input=archive, check=True)
+        export(anchor, base, ("fidelity", "charts", "scenes"))
         image_dir = Path(tmp) / "render"
         subprocess.run([sys.executable, "-m", "fidelity", "render", "--camera", "nikon-5100",
                         "--out", str(image_dir)], check=True, capture_output=True,
