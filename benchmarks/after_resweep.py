@@ -34,9 +34,9 @@ REPO = Path(__file__).resolve().parent.parent
 OLD_PREPROCESSING_REV = "1ebe250"
 
 
-def _run(argv: list[str], **kw: object) -> None:
+def _run(argv: list[str], env: dict[str, str] | None = None) -> None:
     print("+", " ".join(argv), flush=True)
-    subprocess.run(argv, check=True, cwd=REPO, **kw)  # type: ignore[call-overload]
+    subprocess.run(argv, check=True, cwd=REPO, env=env)
 
 
 def _replace_existing(src: Path, dst: Path) -> list[str]:

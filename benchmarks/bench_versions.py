@@ -46,7 +46,7 @@ def commands(photo: Path, out: Path) -> dict[str, list[str]]:
             [*py, "check", "-q", "--out", str(out / "check")]}
 
 
-def run(argv: list[str], source: Path, cwd: Path) -> tuple[float, float]:
+def run(argv: list[str], source: Path) -> tuple[float, float]:
     """Wall seconds and max RSS (MB) of ``argv`` with the package of ``source``."""
     from benchmarks.bench_memory import run_process
     from benchmarks.bench_startup import user_environment
@@ -85,11 +85,11 @@ def main(argv: list[str] | None = None) -> int:
             n: {s: [] for s in sides} for n in cmds}
         for cmd in cmds.values():  # warm the file cache and write the .pyc files once
             for src in sides.values():
-                run(cmd, src, Path(tmp))
+                run(cmd, src)
         for _ in range(args.repeats):
             for name, cmd in cmds.items():
                 for side, src in sides.items():
-                    times[name][side].append(run(cmd, src, Path(tmp)))
+                    times[name][side].append(run(cmd, src))
     rows: list[dict[str, Any]] = []
     for name, t in times.items():
         row: dict[str, Any] = {"command": name}
