@@ -20,3 +20,15 @@ def shared() -> Path:
     if path is None:
         pytest.skip("../shared (or $FIDELITY_SHARED) is not present: COCO images and ONNX models needed")
     return path
+
+
+@pytest.fixture
+def pytester(pytester: pytest.Pytester, monkeypatch: pytest.MonkeyPatch) -> pytest.Pytester:
+    """pytest's ``pytester``, its runs as a user's own pytest run: without the environment
+    pytest-xdist gives its workers (``PYTEST_XDIST_*``), which plugins read as "this run is
+    distributed" (pytest-benchmark then warns, an error under ``-W error``)."""
+    import os
+
+    for name in [n for n in os.environ if n.startswith("PYTEST_XDIST_")]:
+        monkeypatch.delenv(name)
+    return pytester
