@@ -32,3 +32,10 @@ def pytester(pytester: pytest.Pytester, monkeypatch: pytest.MonkeyPatch) -> pyte
     for name in [n for n in os.environ if n.startswith("PYTEST_XDIST_")]:
         monkeypatch.delenv(name)
     return pytester
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The files marked ``early`` (the longest) first, the rest in their order: with
+    ``--dist loadfile`` the workers take files in this order, so a parallel run does not wait
+    at its end on one long file (a stable sort: the same order on every worker)."""
+    items.sort(key=lambda item: item.get_closest_marker("early") is None)

@@ -16,6 +16,9 @@ from click.testing import CliRunner
 
 from fidelity.cli import main
 
+# among the longest files of the suite: started first, so that a parallel run does not end on it
+pytestmark = pytest.mark.early
+
 REPO = Path(__file__).resolve().parents[1]
 
 

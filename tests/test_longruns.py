@@ -27,6 +27,9 @@ from fidelity.coco.sweep import ModelSpec, SweepStore
 from fidelity.coco.validate import ValidationStore
 from fidelity.errors import InputFileError
 
+# among the longest files of the suite: started first, so that a parallel run does not end on it
+pytestmark = pytest.mark.early
+
 REPO = Path(__file__).resolve().parents[1]
 
 

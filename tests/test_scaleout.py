@@ -28,6 +28,9 @@ import pytest
 
 from fidelity.coco.sweep import ModelSpec, SweepStore
 
+# among the longest files of the suite: started first, so that a parallel run does not end on it
+pytestmark = pytest.mark.early
+
 REPO = Path(__file__).resolve().parents[1]
 GRID = (["contrast-inc", "contrast-dec"], [0, 3, 6])  # 8-bit tables: quick to build
 IMAGES = 12

@@ -30,6 +30,9 @@ from fidelity.errors import InputFileError
 from fidelity.report.document import Table
 from fidelity.report.validation import validation_document, write_validation_report
 
+# among the longest files of the suite: started first, so that a parallel run does not end on it
+pytestmark = pytest.mark.early
+
 REPO = Path(__file__).resolve().parent.parent
 CAMERAS = REPO / "cameras"
 
