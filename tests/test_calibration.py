@@ -117,6 +117,19 @@ def test_hue_is_not_monotonic_and_the_smallest_rotation_is_chosen(table) -> None
         assert np.all(transform_delta_e("hue", fine) < target)  # no smaller rotation reaches it
 
 
+def test_one_target_solved_alone_equals_the_whole_scan() -> None:
+    """calibrate_transform evaluates the scan from the identity only up to the target; the
+    table's solver scans every path whole: the same grid, so the very same entries, for
+    reachable targets, ones on a grid point, beyond reach, and hue's second path."""
+    rng = np.random.default_rng(5)
+    targets = [0.05, 0.2905, 1.0, 2.5, 7.0, 13.3, 24.0, 45.0, 80.0,
+               *rng.uniform(0.3, 40.0, 12).round(3)]
+    whole = calibration_table(targets=targets)
+    alone = [calibrate_transform(name, t) for name in TRANSFORMS for t in targets]
+    assert list(whole.entries) == alone
+    assert any(not e.reachable for e in alone) and any(e.reachable for e in alone)
+
+
 def test_unreachable_target_strict_raises() -> None:
     with pytest.raises(UnreachableTargetError, match="saturation-inc cannot reach ΔE 30"):
         calibrate_transform("saturation-inc", 30.0, strict=True)

@@ -144,8 +144,9 @@ def delta_e_bars(m: ChartMeasurement, limit: float | None = None) -> str:
 
 def _magnification(lengths: NDArray[np.float64], px_per_unit: float) -> int:
     """Factor that makes the median error arrow at least 14 px long (1, 2, 5, 10 or 20)."""
-    finite = lengths[np.isfinite(lengths)]
-    med = float(np.median(finite)) * px_per_unit if finite.size else 0.0
+    finite = np.sort(lengths[np.isfinite(lengths)])  # np.median's first call imports np.ma
+    n = finite.size
+    med = float(finite[(n - 1) // 2] + finite[n // 2]) / 2.0 * px_per_unit if n else 0.0
     for k in (1, 2, 5, 10, 20):
         if med * k >= 14.0:
             return k

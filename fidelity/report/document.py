@@ -19,6 +19,7 @@ A section with ``folded=True`` is collapsed in HTML (``<details>``); Markdown sh
 
 from __future__ import annotations
 
+import html
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -72,13 +73,11 @@ class Figure:
 def svg_figure(svg: str, name: str, alt: str, caption: str = "") -> Figure:
     """A :class:`Figure` of SVG text (``name`` ends in ``.svg``); the ``<svg>`` element's
     accessible name (``role="img" aria-label``) becomes ``alt``."""
-    from xml.sax.saxutils import quoteattr
-
     head, sep, rest = svg.partition(">")
     if not sep or not head.startswith("<svg"):
         raise ValueError("svg_figure needs the text of an <svg> element")
     head = re.sub(r'\s(role|aria-label)="[^"]*"', "", head)
-    svg = f"{head} role=\"img\" aria-label={quoteattr(alt)}>{rest}"
+    svg = f"{head} role=\"img\" aria-label=\"{html.escape(alt)}\">{rest}"
     return Figure(b"", name, alt, caption, svg=svg)
 
 

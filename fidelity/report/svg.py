@@ -21,13 +21,13 @@ scales them down only on narrow screens).
 from __future__ import annotations
 
 import base64
+import html
 import math
 import struct
 import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
-from xml.sax.saxutils import escape
 
 import numpy as np
 from numpy.typing import NDArray
@@ -192,7 +192,7 @@ class Canvas:
         if halo:
             attrs.append(f'stroke="{halo}" stroke-width="3" paint-order="stroke" '
                          f'stroke-linejoin="round"')
-        self.parts.append(f'<text {" ".join(attrs)}>{escape(s)}</text>')
+        self.parts.append(f'<text {" ".join(attrs)}>{html.escape(s, quote=False)}</text>')
 
     def image(self, x: float, y: float, w: float, h: float, uri: str) -> None:
         """A raster image (a ``data:`` URI) stretched over the rectangle, pixels kept sharp."""
@@ -207,7 +207,7 @@ class Canvas:
     def render(self) -> str:
         """The SVG element (inline in HTML, or a standalone ``.svg`` file)."""
         w, h = _f(self.width), _f(self.height)
-        label = f' role="img" aria-label="{escape(self.label, {chr(34): "&quot;"})}"' \
+        label = f' role="img" aria-label="{html.escape(self.label)}"' \
             if self.label else ""
         return (f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" '
                 f'viewBox="0 0 {w} {h}"{label} font-family=\'{FONT}\' '
