@@ -27,6 +27,29 @@ def test_import_fidelity_is_light():
     assert out.stdout.strip() == "[]"
 
 
+def test_the_version_is_the_installed_distributions():
+    """fidelity.version is the one place of the version; the build reads it from there."""
+    from importlib.metadata import version
+
+    assert fidelity.__version__ == version("camera-fidelity")
+    code = "import sys, fidelity.version; print('importlib.metadata' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+def test_installed_versions_equal_importlib_metadatas():
+    """The provenance reads a distribution's version from its metadata header; importlib's
+    parser of the whole file is the second method, over every installed distribution."""
+    from importlib.metadata import distributions, version
+
+    from fidelity.records import installed_version
+
+    names = {d.metadata["Name"] for d in distributions()}
+    assert len(names) > 20
+    assert {n: installed_version(n) for n in names} == {n: version(n) for n in names}
+    assert installed_version("no-such-distribution-here") is None
+
+
 def test_check_camera_in_three_lines_matches_the_closed_form():
     report = fidelity.check_camera("ideal")
     # the ideal camera is exact under D65 (README: < 0.01 ΔE00)

@@ -904,22 +904,31 @@ def _window_remeasurer(pixels: np.ndarray, location: ChartLocation, sigma: float
     fixed_counts = np.bincount(who[inner], minlength=n).astype(np.float64)
     fixed_sums = np.stack([np.bincount(who[inner], weights=vals[inner, c], minlength=n)
                            for c in range(3)], axis=-1)
-    points, vals, who, centre = points[band], vals[band], who[band], centre[band]
+    # the band's coordinates, centres and colours as contiguous columns: a draw's pass over
+    # them is a few vector operations on each (no (N, 3) temporaries)
+    px, py = np.ascontiguousarray(points[band, 0]), np.ascontiguousarray(points[band, 1])
+    cu, cv = np.ascontiguousarray(centre[band, 0]), np.ascontiguousarray(centre[band, 1])
+    channels = [np.ascontiguousarray(vals[band, c]) for c in range(3)]
+    who = who[band]
 
     def remeasure(corners: np.ndarray) -> np.ndarray | None:
         if float(np.max(np.abs(np.asarray(corners, np.float64) - c0))) > grow:
             return None
         try:
-            h = homography_from_points(grid_corners, corners)
-            uv = apply_homography(np.linalg.inv(h), points)
+            g = np.linalg.inv(homography_from_points(grid_corners, corners))  # image -> grid
         except (InvalidValueError, np.linalg.LinAlgError):
             return None
-        inside = np.all(np.abs(uv - centre) <= half, axis=1)
-        counts = fixed_counts + np.bincount(who[inside], minlength=n)
+        w = g[2, 0] * px + g[2, 1] * py + g[2, 2]
+        u = (g[0, 0] * px + g[0, 1] * py + g[0, 2]) / w
+        inside = np.abs(u - cu) <= half
+        v = (g[1, 0] * px + g[1, 1] * py + g[1, 2]) / w
+        inside &= np.abs(v - cv) <= half
+        who_in = who[inside]
+        counts = fixed_counts + np.bincount(who_in, minlength=n)
         if np.any(counts == 0):
             return None
-        sums = fixed_sums + np.stack([np.bincount(who[inside], weights=vals[inside, c],
-                                                  minlength=n) for c in range(3)], axis=-1)
+        sums = fixed_sums + np.stack([np.bincount(who_in, weights=ch[inside], minlength=n)
+                                      for ch in channels], axis=-1)
         means: np.ndarray = sums / counts[:, None]
         return means
 
