@@ -47,19 +47,20 @@ preprocessing on a small thread pool ahead of the network and decoding behind it
 
 from __future__ import annotations
 
-import ast
 import math
 import os
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
 from fidelity.errors import InputFileError, InvalidValueError
+
+if TYPE_CHECKING:
+    from concurrent.futures import Future
 
 K = TypeVar("K")
 
@@ -150,6 +151,8 @@ def _names_from_metadata(meta: dict[str, str], num_classes: int) -> tuple[str, .
     raw = meta.get("names")
     if raw:
         try:
+            import ast
+
             parsed = ast.literal_eval(raw)
             if isinstance(parsed, dict):
                 names = tuple(str(parsed[k]) for k in sorted(parsed))
