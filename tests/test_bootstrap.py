@@ -130,3 +130,23 @@ def test_bootstrap_weights_are_draws_with_replacement_and_reproducible() -> None
     rng = np.random.default_rng(5)
     first = np.bincount(rng.integers(0, 50, 50), minlength=50)
     assert np.array_equal(w[0], first)
+
+
+@pytest.mark.parametrize("digits", [6, 2])
+def test_counting_accumulation_equals_the_whole_one_bit_for_bit(digits: int) -> None:
+    """Whole-number weights take the accumulation at the true positives only; it gives the
+    very numbers of the accumulation over every detection (the path of fractional weights),
+    draw by draw, category by category (crowd-ignored detections, ties, zero weights)."""
+    from fidelity.coco.bootstrap import _category_ap, _category_ap_counts
+
+    data, dets = synthetic(n_images=60, seed=11, digits=digits)
+    ids = sorted(dets)
+    rec = match_records(coco_from_dict(data), dets, ids)
+    w = np.vstack([np.ones((1, len(ids))), np.zeros((1, len(ids))),
+                   bootstrap_weights(len(ids), resamples=64, seed=2)])
+    assert any(np.any(~(c.tp | c.fp)) for c in rec.categories)  # ignored detections present
+    for c in rec.categories:
+        np.testing.assert_array_equal(_category_ap_counts(c, w), _category_ap(c, w))
+    # fractional weights take the whole accumulation
+    half = weighted_scores(rec, w[2:] + 0.5)
+    assert np.all(np.isfinite(half["map"]))

@@ -14,7 +14,9 @@ and true/false-positive flag per IoU threshold, and each image's count of non-ig
 truth; :func:`weighted_scores` then runs COCO's accumulation (``COCOeval.accumulate``: sort by
 score, cumulative true/false positives, precision envelope, 101 recall points, mean over IoU
 thresholds, recall points and the categories with ground truth) with each detection and ground
-truth counted ``w`` times, for many draws at once. With every weight 1 it is COCO's mAP
+truth counted ``w`` times, for many draws at once (for whole-number weights, as a draw's
+image counts are, at the true positives only: :func:`_category_ap_counts`, the same numbers
+for a tenth of the work). With every weight 1 it is COCO's mAP
 (tested to 1e-12 against pycocotools); on a draw it equals re-scoring the drawn images
 (tested against re-evaluation of duplicated images).
 
@@ -157,6 +159,55 @@ def _category_ap(c: CategoryMatches, w: np.ndarray) -> np.ndarray:
     return np.where(npig > 0, ap, np.nan)
 
 
+def _category_ap_counts(c: CategoryMatches, w: np.ndarray) -> np.ndarray:
+    """:func:`_category_ap` for whole-number weights (image counts, as the bootstrap's), bit
+    for bit, computed at the true positives only.
+
+    Recall rises only at a true positive, so the first rank that reaches a recall point is
+    a true positive (or the first rank, for recall 0), and between two true positives the
+    precision only falls: the precision envelope there is the envelope over the true
+    positives. The false positives before each true positive are all detections weighed
+    before it less the ignored ones and the true positives: one cumulative sum of the
+    weights per draw, shared by the ten IoU thresholds, instead of two per threshold. With
+    whole-number weights every count is an exact integer in float64, so precision and recall
+    are the same numbers as the cumulative sums over every detection give.
+    """
+    b = w.shape[0]
+    npig = w @ c.gt
+    n = len(c.image)
+    if not n:
+        return np.where(npig > 0, 0.0, np.nan)
+    dw = w[:, c.image]  # (B, N)
+    every = np.cumsum(dw, axis=1)  # (B, N) weight of the detections up to each rank
+    q = np.zeros((b, len(_IOU), len(_RECALL)))
+    for t in range(len(_IOU)):
+        # the rows of _category_ap's one search over every (draw, threshold), numbered alike
+        # (draw-major): the same offsets, rounded alike, give the same first ranks
+        rows = np.arange(b, dtype=np.float64) * len(_IOU) + t
+        at_tp = np.flatnonzero(c.tp[t])
+        if not at_tp.size:
+            continue
+        tp = np.cumsum(dw[:, at_tp], axis=1)  # (B, K)
+        ignored = np.flatnonzero(~(c.tp[t] | c.fp[t]))
+        fp = every[:, at_tp] - tp
+        if ignored.size:
+            before = np.searchsorted(ignored, at_tp, side="right")  # ignored up to each rank
+            cum = np.concatenate([np.zeros((b, 1)), np.cumsum(dw[:, ignored], axis=1)], axis=1)
+            fp -= cum[:, before]
+        k = at_tp.size
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rc = tp / npig[:, None]
+            pr = tp / (tp + fp + np.spacing(1))
+        env = np.maximum.accumulate(pr[:, ::-1], axis=1)[:, ::-1]
+        rc = np.where(np.isfinite(rc), rc, 0.0) + 2.0 * rows[:, None]
+        first = np.searchsorted(rc.ravel(), (_RECALL[None, :] + 2.0 * rows[:, None]).ravel(),
+                                side="left").reshape(b, -1) - (np.arange(b) * k)[:, None]
+        ok = first < k
+        q[:, t] = np.where(ok, env[np.arange(b)[:, None], np.minimum(first, k - 1)], 0.0)
+    ap = q.mean(axis=(1, 2))
+    return np.where(npig > 0, ap, np.nan)
+
+
 def weighted_scores(records: MatchRecords, weights: np.ndarray,
                     classes: Sequence[str] = ("person", "bicycle"),
                     elements: int = 4_000_000) -> dict[str, np.ndarray]:
@@ -192,11 +243,15 @@ def weighted_scores(records: MatchRecords, weights: np.ndarray,
     # smallest positive weight is 1 (counts stay as they are; the scores are scale-free)
     pos = np.where(w > 0, w, np.inf).min(axis=1, keepdims=True)
     w = np.where(np.isfinite(pos), w / np.where(np.isfinite(pos), pos, 1.0), w)
+    # whole-number weights (image counts) whose sums stay exact in float64: the counting
+    # accumulation (same numbers, a tenth of the passes over the draws x detections)
+    counts = bool(np.all(w == np.round(w))) and float(w.sum(axis=1).max(initial=0.0)) < 2.0**52
+    category_ap = _category_ap_counts if counts else _category_ap
     aps = np.full((w.shape[0], len(records.categories)), np.nan)
     for k, c in enumerate(records.categories):
         step = max(1, min(w.shape[0], int(elements // max(1, len(_IOU) * len(c.image)))))
         for s in range(0, w.shape[0], step):
-            aps[s:s + step, k] = _category_ap(c, w[s:s + step])
+            aps[s:s + step, k] = category_ap(c, w[s:s + step])
     valid = np.isfinite(aps)
     count = valid.sum(axis=1)
     with np.errstate(invalid="ignore"):
@@ -262,7 +317,8 @@ def draw_scores(coco_gt: Any, detections: Mapping[int, np.ndarray], image_ids: S
                 resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED) -> Draws:
     """A run's mAP, person and bicycle AP on ``resamples`` bootstrap draws of its images
     (:func:`bootstrap_weights` with ``seed``; one COCO evaluation, :func:`match_records`, then
-    :func:`weighted_scores`). About 5-15 s for 200 draws of 250-1000 images on one core."""
+    :func:`weighted_scores`). For 1000 images on one core: the evaluation about 4-8 s, the
+    200 draws about 1 s."""
     rec = match_records(coco_gt, detections, image_ids)
     out = weighted_scores(rec, bootstrap_weights(len(rec.image_ids), resamples, seed))
     return Draws(int(resamples), int(seed), len(rec.image_ids), _finite(out["map"]),
