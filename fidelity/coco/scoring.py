@@ -15,7 +15,7 @@ from __future__ import annotations
 import contextlib
 import io
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -151,28 +151,34 @@ def coco_from_dict(data: Mapping[str, Any]) -> Any:
 def detections_to_coco(image_id: int, detections: np.ndarray,
                        category_ids: Sequence[int] = COCO80_CATEGORY_IDS) -> list[dict[str, Any]]:
     """Convert (K, 6) ``x1, y1, x2, y2, score, class-index`` rows into COCO result dicts."""
-    d = np.asarray(detections, dtype=np.float64).reshape(-1, 6)
-    out = []
-    cat = np.asarray(category_ids)
-    for x1, y1, x2, y2, s, c in d:
-        out.append({"image_id": int(image_id), "category_id": int(cat[int(c)]),
-                    "bbox": [round(float(x1), 3), round(float(y1), 3),
-                             round(float(x2 - x1), 3), round(float(y2 - y1), 3)],
-                    "score": round(float(s), 5)})
-    return out
+    rows = np.asarray(detections, dtype=np.float64).reshape(-1, 6).tolist()  # Python floats
+    cats = [int(c) for c in category_ids]
+    image = int(image_id)
+    return [{"image_id": image, "category_id": cats[int(c)],
+             "bbox": [round(x1, 3), round(y1, 3), round(x2 - x1, 3), round(y2 - y1, 3)],
+             "score": round(s, 5)} for x1, y1, x2, y2, s, c in rows]
 
 
 def coco_results(coco_gt: Any, detections: Mapping[int, np.ndarray],
                   ids: Sequence[int]) -> list[dict[str, Any]]:
+    """The COCO result dicts of the images ``ids``, in that order."""
+    per_image = _results_by_image(coco_gt, detections, ids)
+    return [r for i in ids for r in per_image.get(i, ())]
+
+
+def _results_by_image(coco_gt: Any, detections: Mapping[int, np.ndarray],
+                      ids: Iterable[int]) -> dict[int, list[dict[str, Any]]]:
+    """Image id -> its COCO result dicts (:func:`detections_to_coco`; images with none left
+    out), category indices mapped as the annotations' 80 categories."""
     cat_ids = sorted(coco_gt.getCatIds())
     mapping: Sequence[int] = cat_ids if len(cat_ids) == len(COCO80_CATEGORY_IDS) \
         else COCO80_CATEGORY_IDS
-    results: list[dict[str, Any]] = []
+    out: dict[int, list[dict[str, Any]]] = {}
     for i in ids:
         det = detections.get(i)
         if det is not None and len(det):
-            results.extend(detections_to_coco(i, det, mapping))
-    return results
+            out[i] = detections_to_coco(i, det, mapping)
+    return out
 
 
 def evaluated_pycocotools(coco_gt: Any, results: list[dict[str, Any]], ids: Sequence[int],
@@ -281,8 +287,13 @@ def evaluate_detections(coco_gt: Any, detections: Mapping[int, np.ndarray],
     missing = [i for i in ids if i not in known]
     if missing:
         raise InvalidValueError(f"image ids not in the annotations: {missing[:5]}")
+    return _score_results(coco_gt, coco_results(coco_gt, detections, ids), ids, method)
+
+
+def _score_results(coco_gt: Any, results: list[dict[str, Any]], ids: list[int],
+                   method: str) -> CocoScore:
+    """:func:`evaluate_detections` of COCO result dicts already made (``ids`` sorted)."""
     scorer = COCO_SCORERS[resolve_scorer(method)]
-    results = coco_results(coco_gt, detections, ids)
     precision, cat_list, stats_arr = scorer(coco_gt, results, ids)
     ap: dict[str, float | None] = {}
     names = {c["id"]: c["name"] for c in coco_gt.dataset["categories"]}
@@ -365,14 +376,24 @@ def score_folds(coco_gt: Any, detections: Mapping[int, np.ndarray], image_ids: S
     ids = sorted(int(i) for i in image_ids)
     n = min(int(folds), len(ids))
     out = []
+    if n >= 2:
+        known = set(coco_gt.getImgIds())
+        missing = [i for i in ids if i not in known]
+        if missing:
+            raise InvalidValueError(f"image ids not in the annotations: {missing[:5]}")
+    per_image = _results_by_image(coco_gt, detections, ids) if n >= 2 else {}
+
+    def score(subset: list[int]) -> CocoScore:  # the run's result dicts, made once
+        return _score_results(coco_gt, [r for i in subset for r in per_image.get(i, ())],
+                              subset, method)
+
     for k in range(n if n >= 2 else 0):
         fold = ids[k::n]
-        s = evaluate_detections(coco_gt, detections, fold, method=method)
+        s = score(fold)
         r: tuple[float | None, float | None, float | None] = (None, None, None)
         if rest:
             left = set(fold)
-            o = evaluate_detections(coco_gt, detections, [i for i in ids if i not in left],
-                                    method=method)
+            o = score([i for i in ids if i not in left])
             r = (o.map, o.ap.get("person"), o.ap.get("bicycle"))
         out.append(FoldScore(s.map, s.ap.get("person"), s.ap.get("bicycle"), len(fold), *r))
     return out
