@@ -9,7 +9,10 @@ side of its direction. The chart image is the reference Lab converted to sRGB an
 Method: the ΔE curve of each transform is evaluated once on a scan grid from the identity
 outwards (one vectorised call); the first grid interval whose ends straddle the target brackets
 the root, and Brent's method (``scipy.optimize.brentq``) solves it to ``|ΔE - target| <= 1e-4``
-(typically 1e-10). The paper used ``minimize_scalar`` and stopped within 0.3 %.
+(typically 1e-10). The paper used ``minimize_scalar`` and stopped within 0.3 %. One target
+alone (:func:`calibrate_transform`, as a prediction asks for its ΔE) evaluates the same grid
+from the identity outwards in growing chunks and stops at the first bracket: the same entry
+for the points up to the target.
 
 Root choice (several roots exist for hue, whose ΔE is not monotonic in h, and wherever a curve
 turns back): the root nearest the identity along the scan, i.e. the smallest perturbation that
