@@ -18,6 +18,7 @@ import pytest
 from fidelity.coco.sweep import (
     ModelSpec,
     SweepStore,
+    cell_pace,
     pack_detections,
     plan_cells,
     plan_phases,
@@ -598,3 +599,16 @@ def test_standard_errors_in_tables(coco, tmp_path) -> None:
     again = build_tables(store, gt).cells["yolox_nano"][0].errors
     assert again == row.errors
     assert build_tables(store).cells["yolox_nano"][0].errors is None
+
+
+def test_cell_pace_of_one_run_two_runs_and_a_pause() -> None:
+    assert cell_pace([0.0, 100.0], [100.0, 100.0]) is None  # fewer than 3 finishes
+    # one run: a cell every 100 s
+    assert cell_pace([0.0, 100.0, 200.0, 300.0], [100.0] * 4) == 100.0
+    # two runs side by side, 200 s a cell each, finishing in pairs: 100 s per cell
+    assert cell_pace([0.0, 2.0, 200.0, 202.0, 400.0, 402.0], [200.0] * 6) == \
+        pytest.approx((2 + 198 + 2 + 198 + 2) / 5)
+    # a 10-hour pause between two finishes counts as one cell's time
+    assert cell_pace([0.0, 100.0, 36_100.0, 36_200.0], [100.0] * 4) == 100.0
+    # unknown run times: the median gap caps
+    assert cell_pace([0.0, 50.0, 100.0, 5000.0], [None] * 4) == pytest.approx(50.0)

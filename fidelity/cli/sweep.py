@@ -145,5 +145,6 @@ def _print_status(store: SweepStore) -> None:
             click.echo(f"{'':<18} under way: {t} ΔE {e:g}, {n} of {r.images} images stored; "
                        f"run on {c.owner.host} pid {c.owner.pid} ({what}), {state}")
     if any(r.to_do for r in rows):
-        click.echo("pace: median time between a model's last finished cells (whatever ran "
-                   "beside it); rerun the sweep's command line to resume")
+        click.echo("pace: wall time per finished cell over a model's last cells (runs side by "
+                   "side counted together, pauses as one cell; whatever ran beside it); rerun "
+                   "the sweep's command line to resume")

@@ -507,8 +507,8 @@ class SweepProgress:
     transform at every non-zero target); ``done`` (on ``images`` images), ``unreachable``,
     ``to_do`` (the rest); ``under_way``: unfinished cells with stored detections, as
     ``(transform, target, stored images)``; ``images_to_do``: detections still missing over the
-    cells to do; ``pace_s``: median seconds between the model's last finished cells (wall time
-    per cell, whatever else runs beside it; None with fewer than 3); ``left_s``:
+    cells to do; ``pace_s``: wall seconds per finished cell over the model's last finished cells
+    (:func:`cell_pace`; whatever else runs beside it; None with fewer than 3); ``left_s``:
     ``to_do * pace_s``, a rough guide.
     """
 
@@ -529,7 +529,7 @@ class SweepProgress:
 def sweep_status(store: SweepStore, pace_cells: int = 10) -> list[SweepProgress]:
     """Where a sweep stands, per registered model, from the store alone (no annotations).
 
-    One :class:`SweepProgress` per model; the pace is the median time between its last
+    One :class:`SweepProgress` per model; the pace is :func:`cell_pace` of its last
     ``pace_cells`` finished cells. Safe while a sweep writes.
     """
     import datetime
@@ -556,10 +556,9 @@ def sweep_status(store: SweepStore, pace_cells: int = 10) -> list[SweepProgress]
         under_way = tuple((t, e, stored[(model, t, e)]) for t, e in to_do  # more than scored
                           if stored.get((model, t, e), 0) > _images_of(mine.get((t, e))))
         images_to_do = sum(max(0, (n or 0) - stored.get((model, t, e), 0)) for t, e in to_do)
-        stamps = sorted(datetime.datetime.strptime(c.finished, "%Y-%m-%dT%H:%M:%SZ")
-                        for c in done.values() if c.finished)[-pace_cells:]
-        gaps = [(b - a).total_seconds() for a, b in zip(stamps, stamps[1:], strict=False)]
-        pace = float(np.median(gaps)) if len(gaps) >= 2 else None
+        last = sorted((datetime.datetime.strptime(c.finished, "%Y-%m-%dT%H:%M:%SZ"),
+                       c.seconds) for c in done.values() if c.finished)[-pace_cells:]
+        pace = cell_pace([s.timestamp() for s, _ in last], [d for _, d in last])
         mine_claims = tuple(c for c in claims if c.cell and c.cell[0] == model)
         out.append(SweepProgress(model, n, len(planned), len(done), len(unreachable),
                                  len(to_do), under_way, images_to_do, pace,
@@ -567,6 +566,23 @@ def sweep_status(store: SweepStore, pace_cells: int = 10) -> list[SweepProgress]
                                  tuple(stored.get((model, str(c.cell[1]), float(c.cell[2])), 0)
                                        for c in mine_claims)))
     return out
+
+
+def cell_pace(finished: Sequence[float], seconds: Sequence[float | None]) -> float | None:
+    """Wall seconds per finished cell from the finishing times (seconds, ascending) of a
+    model's last cells and each cell's own run time (``SweepCell.seconds``; None: unknown).
+
+    The mean gap between finishes, each gap counted at most the cells' median run time: runs
+    side by side finish in bunches (a gap near 0, then one near a cell's time), which the mean
+    averages out, and a gap longer than a cell takes is a time nothing ran (a pause, a stopped
+    machine), counted as one cell. None with fewer than 3 finishes.
+    """
+    if len(finished) < 3:
+        return None
+    gaps = np.diff(np.asarray(finished, dtype=np.float64))
+    known = [float(s) for s in seconds if s is not None and s > 0]
+    cap = float(np.median(known)) if known else float(np.median(gaps))
+    return float(np.mean(np.minimum(gaps, cap)))
 
 
 def _images_of(cell: SweepCell | None) -> int:
