@@ -79,11 +79,11 @@ def test_status_of_a_store_being_extended(tmp_path) -> None:
     s.register_model("all", "all.onnx", "1" * 64, None, {})
     det = np.zeros((1, 6), np.float32)
     for t, e in (("baseline", 0), ("a", 3), ("b", 3)):
-        s.finish_cell("m", t, e, param=1.0, status="done", images=4, seconds=1.0)
+        s.finish_cell("m", t, e, param=1.0, status="done", images=4, seconds=180.0)
     s.finish_cell("m", "c", 3, param=None, status="unreachable", reason="r")
     s.finish_cell("m", "a", 6, param=1.0, status="done", images=2, seconds=1.0)  # before
     s.add_detections("m", "a", 6, [(i, det) for i in range(3)])  # extension: 3 of 4 stored
-    with s.db:  # finished 60 s and 180 s apart: median pace 120 s
+    with s.db:  # finished 60 s and 180 s apart, 180 s a cell: 120 s a cell
         for (t, e), stamp in zip((("baseline", 0), ("a", 3), ("b", 3)),
                                  ("2026-01-01T00:00:00Z", "2026-01-01T00:01:00Z",
                                   "2026-01-01T00:04:00Z"), strict=True):
