@@ -267,7 +267,14 @@ def workspace(tmp_path_factory, plugin_inputs) -> Path:
     for name, camera in (("nikon.png", "nikon-5100"), ("render.png", "nikon-5100"),
                          ("sim.png", "nikon-5100"),
                          ("sigma.png", "sigma-sdmerrill")):
-        write_png(ws / name, render_chart(camera).display_image, 16)
+        # as `fidelity render --out` writes its developed.png: at the camera's own bit depth
+        rendered = render_chart(camera)
+        write_png(ws / name, rendered.display_image, rendered.camera.quantisation_bits or 16)
+    if (SHARED / "coco" / "val2017").is_dir():  # docs/find_chart.md's example: the benchmark's
+        from benchmarks.bench_find_chart import generate, scene_specs  # image 0, made here
+
+        made = generate(scene_specs(False)[:1], SHARED / "coco" / "val2017", ws / "scenes", 19)
+        shutil.copy(made[0]["path"], ws / "scene_000.jpg")
     shutil.copytree(REPO / "cameras", ws / "cameras")
     for name in ("my.toml", "my-camera.toml", "cameras/my-camera.toml"):
         shutil.copy(REPO / "cameras" / "nikon5100-gamma22.toml", ws / name)
@@ -326,6 +333,48 @@ def test_documented_command_runs(page, line, workspace, monkeypatch):
                        env=_env(), capture_output=True, text=True, timeout=600)
     assert r.returncode in (0, 1), (f"{page}: `{line}` exited {r.returncode}: "
                                     f"{(r.stdout + r.stderr)[-800:]}")
+
+
+def doc_outputs() -> list[tuple[str, str, tuple[str, ...]]]:
+    """(page, command, printed lines) of every ```text block of README.md and docs/*.md that
+    shows one ``$ fidelity ...`` command and what it printed."""
+    out = []
+    for page in _doc_pages():
+        text = page.read_text(encoding="utf-8")
+        for m in re.finditer(r"```text\n\$ (fidelity [^\n]*)\n(.*?)```", text, re.S):
+            command, printed = m.group(1), m.group(2).rstrip("\n").split("\n")
+            while command.endswith("\\") and printed:  # a command continued on the next line
+                command = command[:-1] + " " + printed.pop(0).strip()
+            out.append((page.relative_to(REPO).as_posix(), command, tuple(printed)))
+    return out
+
+
+DOC_OUTPUTS = doc_outputs()
+
+
+def test_the_docs_show_outputs_to_compare():
+    runnable = [(p, c) for p, c, _ in DOC_OUTPUTS if c == "fidelity check"]
+    assert len(DOC_OUTPUTS) >= 5 and len(runnable) >= 3, DOC_OUTPUTS
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("page,line,printed", DOC_OUTPUTS, ids=lambda v: str(v)[:40])
+def test_documented_output_is_what_the_command_prints(page, line, printed, workspace):
+    """A documented run shows what the command prints today, line for line: an example
+    whose numbers the code no longer gives (after a table is re-measured, say) fails here."""
+    argv = [a for a in shlex.split(line, comments=True) if a != "\\"]
+    reason = _skip_reason(argv, workspace)
+    if reason:
+        pytest.skip(reason)
+    if any(p.strip() in ("...", "…") for p in printed):
+        pytest.skip("an excerpt of what the command prints")
+    args = [a if (workspace / a).exists() or not (REPO / a).is_file() or argv[i] in OUTPUTS
+            else str(REPO / a) for i, a in enumerate(argv[1:])]
+    r = subprocess.run([sys.executable, "-m", "fidelity", "--no-config", *args],
+                       cwd=workspace, env=_env(), capture_output=True, text=True, timeout=600)
+    assert r.returncode in (0, 1), (r.stdout + r.stderr)[-800:]
+    assert tuple(r.stdout.rstrip("\n").split("\n")) == printed, \
+        f"{page}: `{line}` now prints:\n{r.stdout}"
 
 
 def _settings_block(page: str) -> str | None:
