@@ -40,6 +40,8 @@ def dependency_versions(distribution: str = DISTRIBUTION,
                         extras: tuple[str, ...] = ()) -> dict[str, str | None]:
     """Installed version of each requirement ``distribution`` declares: the core, and those of
     ``extras``; None for a requirement that is not installed."""
+    from fidelity.records import installed_version
+
     try:
         requires = metadata.requires(distribution) or []
     except metadata.PackageNotFoundError:
@@ -52,10 +54,7 @@ def dependency_versions(distribution: str = DISTRIBUTION,
         name = re.split(r"[\s<>=!~;\[]", req, maxsplit=1)[0]
         if name == distribution:  # an extra that names others ("all")
             continue
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            out[name] = None
+        out[name] = installed_version(name)
     return out
 
 

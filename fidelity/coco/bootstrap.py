@@ -132,6 +132,23 @@ def bootstrap_weights(n_images: int, resamples: int = BOOTSTRAP_RESAMPLES,
     return w
 
 
+def _precision_at_recalls(rc: np.ndarray, pr: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """COCO's interpolated precision at its 101 recall points, per row: ``rc``, ``pr`` (R, n)
+    recall and precision along the ranks of each row (recall not decreasing; NaN or Inf
+    recall, of a draw without ground truth, taken as 0), ``rows`` (R,) each row's number in
+    one search over all rows (offset 2 a row: recall <= 1). Returns (R, 101): the precision
+    envelope at the first rank reaching each recall point, 0 where none does."""
+    n = rc.shape[1]
+    env = np.maximum.accumulate(pr[:, ::-1], axis=1)[:, ::-1]
+    rc = np.where(np.isfinite(rc), rc, 0.0) + 2.0 * rows[:, None]
+    at = np.searchsorted(rc.ravel(), (_RECALL[None, :] + 2.0 * rows[:, None]).ravel(),
+                         side="left").reshape(len(rows), -1)
+    col = at - (np.arange(len(rows)) * n)[:, None]
+    q: np.ndarray = np.where(col < n, env[np.arange(len(rows))[:, None], np.minimum(col, n - 1)],
+                             0.0)
+    return q
+
+
 def _category_ap(c: CategoryMatches, w: np.ndarray) -> np.ndarray:
     """(B,) AP of one category under image weights ``w`` (B, I); NaN where it has no
     ground truth in the draw (COCO leaves such a category out of the mean)."""
@@ -141,20 +158,12 @@ def _category_ap(c: CategoryMatches, w: np.ndarray) -> np.ndarray:
     n = dw.shape[1]
     ap = np.zeros(b)
     if n:
-        rows = np.arange(b * len(_IOU), dtype=np.float64)
         with np.errstate(invalid="ignore", divide="ignore"):
             tp = np.cumsum(dw[:, None, :] * c.tp[None], axis=2)  # (B, T, N)
             fp = np.cumsum(dw[:, None, :] * c.fp[None], axis=2)
             rc = (tp / npig[:, None, None]).reshape(-1, n)
             pr = (tp / (tp + fp + np.spacing(1))).reshape(-1, n)
-        env = np.maximum.accumulate(pr[:, ::-1], axis=1)[:, ::-1]
-        # one searchsorted over all (draw, threshold) rows: rows offset by 2 (recall <= 1)
-        rc = np.where(np.isfinite(rc), rc, 0.0) + 2.0 * rows[:, None]
-        at = np.searchsorted(rc.ravel(), (_RECALL[None, :] + 2.0 * rows[:, None]).ravel(),
-                             side="left").reshape(len(rows), -1)
-        col = at - (np.arange(len(rows)) * n)[:, None]
-        ok = col < n
-        q = np.where(ok, env[np.arange(len(rows))[:, None], np.minimum(col, n - 1)], 0.0)
+        q = _precision_at_recalls(rc, pr, np.arange(b * len(_IOU), dtype=np.float64))
         ap = q.reshape(b, len(_IOU), -1).mean(axis=(1, 2))
     return np.where(npig > 0, ap, np.nan)
 
@@ -194,16 +203,10 @@ def _category_ap_counts(c: CategoryMatches, w: np.ndarray) -> np.ndarray:
             before = np.searchsorted(ignored, at_tp, side="right")  # ignored up to each rank
             cum = np.concatenate([np.zeros((b, 1)), np.cumsum(dw[:, ignored], axis=1)], axis=1)
             fp -= cum[:, before]
-        k = at_tp.size
         with np.errstate(invalid="ignore", divide="ignore"):
             rc = tp / npig[:, None]
             pr = tp / (tp + fp + np.spacing(1))
-        env = np.maximum.accumulate(pr[:, ::-1], axis=1)[:, ::-1]
-        rc = np.where(np.isfinite(rc), rc, 0.0) + 2.0 * rows[:, None]
-        first = np.searchsorted(rc.ravel(), (_RECALL[None, :] + 2.0 * rows[:, None]).ravel(),
-                                side="left").reshape(b, -1) - (np.arange(b) * k)[:, None]
-        ok = first < k
-        q[:, t] = np.where(ok, env[np.arange(b)[:, None], np.minimum(first, k - 1)], 0.0)
+        q[:, t] = _precision_at_recalls(rc, pr, rows)
     ap = q.mean(axis=(1, 2))
     return np.where(npig > 0, ap, np.nan)
 

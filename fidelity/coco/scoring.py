@@ -283,11 +283,16 @@ def evaluate_detections(coco_gt: Any, detections: Mapping[int, np.ndarray],
     ids = sorted(int(i) for i in (image_ids if image_ids is not None else detections))
     if not ids:
         raise InvalidValueError("no images to evaluate")
+    _check_annotated(coco_gt, ids)
+    return _score_results(coco_gt, coco_results(coco_gt, detections, ids), ids, method)
+
+
+def _check_annotated(coco_gt: Any, ids: Sequence[int]) -> None:
+    """An error naming the first image ids the annotations do not have."""
     known = set(coco_gt.getImgIds())
     missing = [i for i in ids if i not in known]
     if missing:
         raise InvalidValueError(f"image ids not in the annotations: {missing[:5]}")
-    return _score_results(coco_gt, coco_results(coco_gt, detections, ids), ids, method)
 
 
 def _score_results(coco_gt: Any, results: list[dict[str, Any]], ids: list[int],
@@ -377,10 +382,7 @@ def score_folds(coco_gt: Any, detections: Mapping[int, np.ndarray], image_ids: S
     n = min(int(folds), len(ids))
     out = []
     if n >= 2:
-        known = set(coco_gt.getImgIds())
-        missing = [i for i in ids if i not in known]
-        if missing:
-            raise InvalidValueError(f"image ids not in the annotations: {missing[:5]}")
+        _check_annotated(coco_gt, ids)
     per_image = _results_by_image(coco_gt, detections, ids) if n >= 2 else {}
 
     def score(subset: list[int]) -> CocoScore:  # the run's result dicts, made once
