@@ -40,7 +40,7 @@ def dependency_versions(distribution: str = DISTRIBUTION,
                         extras: tuple[str, ...] = ()) -> dict[str, str | None]:
     """Installed version of each requirement ``distribution`` declares: the core, and those of
     ``extras``; None for a requirement that is not installed."""
-    from fidelity.records import installed_version
+    from fidelity.version import installed_version
 
     try:
         requires = metadata.requires(distribution) or []

@@ -42,7 +42,6 @@ import datetime as _dt
 import json
 import os
 import platform
-import re
 import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -269,24 +268,6 @@ BASE_CONVENTIONS: Mapping[str, str] = {
 }
 
 #: Libraries whose versions a report records.
-def installed_version(distribution: str) -> str | None:
-    """The installed version of ``distribution`` (None: not installed), as
-    ``importlib.metadata.version`` gives it, read from the ``Version:`` field of its metadata
-    header: ``version()`` parses the whole file with the e-mail parser, 5-8 ms for a
-    distribution with a long description (SciPy, matplotlib) in every report."""
-    from importlib.metadata import PackageNotFoundError
-    from importlib.metadata import distribution as find
-
-    try:
-        dist = find(distribution)
-    except PackageNotFoundError:
-        return None
-    text = dist.read_text("METADATA") or dist.read_text("PKG-INFO") or ""
-    header = text.replace("\r\n", "\n").split("\n\n", 1)[0]
-    field = re.search(r"^Version:[ \t]*(\S+)[ \t]*$", header, re.M)
-    return field.group(1) if field else dist.version
-
-
 _LIBRARIES = ("numpy", "scipy", "colour-science", "OpenImageIO", "OpenEXR", "matplotlib",
               "mitsuba")
 
@@ -326,7 +307,7 @@ class Provenance:
                 conventions: Mapping[str, Any]) -> Provenance:
         """The provenance of a report made now, on this machine."""
         from fidelity.resources import resource_dir
-        from fidelity.version import __version__
+        from fidelity.version import __version__, installed_version
 
         libraries: dict[str, str] = {}
         for name in _LIBRARIES:
@@ -635,7 +616,6 @@ __all__ = [
     "Source",
     "TableRef",
     "gate_exit_code",
-    "installed_version",
     "report_schema",
     "report_schema_path",
     "utc_now",

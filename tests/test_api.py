@@ -42,7 +42,7 @@ def test_installed_versions_equal_importlib_metadatas():
     parser of the whole file is the second method, over every installed distribution."""
     from importlib.metadata import distributions, version
 
-    from fidelity.records import installed_version
+    from fidelity.version import installed_version
 
     names = {d.metadata["Name"] for d in distributions()}
     assert len(names) > 20
