@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import random
 import re
 import secrets
 import shutil
@@ -36,16 +37,33 @@ GRID = (["contrast-inc", "contrast-dec"], [0, 3, 6])  # 8-bit tables: quick to b
 IMAGES = 12
 
 
-def _free_ports(n: int) -> list[int]:
-    socks, ports = [], []
-    for _ in range(n):
-        s = socket.socket()
-        s.bind(("127.0.0.1", 0))
-        socks.append(s)
-        ports.append(s.getsockname()[1])
-    for s in socks:
-        s.close()
-    return ports
+WORKER_PORTS = 41  # each node's worker port range: --min-worker-port .. +40
+
+
+def _bindable(port: int) -> bool:
+    with socket.socket() as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
+def _free_port_block(n: int) -> int:
+    """The first of ``n`` consecutive ports free now, below the kernel's ephemeral range.
+
+    Ports the kernel hands out (``bind(0)``) are its ephemeral ones: once closed, the same
+    port can go to any outgoing connection (Ray's own among them) before ``ray start`` binds
+    it, and a worker range counted up from one of them can cover another's port. A block
+    below that range, each port of it tried, has neither problem.
+    """
+    low = int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    rng = random.Random()
+    for _ in range(200):
+        base = rng.randrange(10000, max(10001, low - n))
+        if all(_bindable(q) for q in range(base, base + n)):
+            return base
+    pytest.fail(f"no {n} consecutive free ports between 10000 and {low}")
 
 
 def _processes() -> dict[int, tuple[int, str]]:
@@ -107,7 +125,9 @@ def cluster() -> Iterator[tuple[str, str, str]]:
     if not Path("/proc").is_dir():
         pytest.skip("the cluster test finds its processes in /proc (Linux)")
     folder = tempfile.mkdtemp(prefix="fr-", dir="/tmp")  # short: Ray's socket paths are long
-    p = _free_ports(18)
+    base = _free_port_block(17 + 2 * WORKER_PORTS)
+    p = list(range(base, base + 17))  # the nodes' own ports; then the two worker ranges
+    workers = (base + 17, base + 17 + WORKER_PORTS)
     token = Path(folder) / "auth_token"  # the cluster's own token, not ~/.ray's
     token.write_text(secrets.token_hex(32))
     env = {"RAY_USAGE_STATS_ENABLED": "0", "RAY_AUTH_MODE": "token",
@@ -117,20 +137,21 @@ def cluster() -> Iterator[tuple[str, str, str]]:
     ray_cli = [sys.executable, "-m", "ray.scripts.scripts", "start", "--num-cpus", "1",
                "--object-store-memory", str(100 * 2**20), "--disable-usage-stats"]
 
-    def node_ports(q: list[int]) -> list[str]:
+    def node_ports(q: list[int], worker: int) -> list[str]:
         return ["--node-manager-port", str(q[0]), "--object-manager-port", str(q[1]),
-                "--min-worker-port", str(q[2]), "--max-worker-port", str(q[2] + 40),
-                "--dashboard-agent-listen-port", str(q[3]), "--dashboard-agent-grpc-port",
-                str(q[4]), "--metrics-export-port", str(q[5]), "--runtime-env-agent-port",
-                str(q[6])]
+                "--min-worker-port", str(worker),
+                "--max-worker-port", str(worker + WORKER_PORTS - 1),
+                "--dashboard-agent-listen-port", str(q[2]), "--dashboard-agent-grpc-port",
+                str(q[3]), "--metrics-export-port", str(q[4]), "--runtime-env-agent-port",
+                str(q[5])]
 
     head = f"127.0.0.1:{p[0]}"
     try:
         for cmd in (ray_cli + ["--head", "--port", str(p[0]), "--temp-dir", folder,
                                "--include-dashboard", "false", "--dashboard-port", str(p[1]),
                                "--ray-client-server-port", str(p[16])]
-                    + node_ports(p[2:9]),
-                    ray_cli + ["--address", head] + node_ports(p[9:16])):
+                    + node_ports(p[2:8], workers[0]),
+                    ray_cli + ["--address", head] + node_ports(p[8:14], workers[1])):
             r = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
             if r.returncode != 0:
                 pytest.fail(f"ray start failed: {r.stdout[-2000:]} {r.stderr[-2000:]}")
