@@ -80,6 +80,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "validate": ("fidelity.cli.validate:validate",
                  "Render every camera's chart, predict its ΔmAP, emulate it on COCO and measure "
                  "ΔmAP."),
+    "verify": ("fidelity.cli.verify:verify",
+               "Check a credibility record against the files it names; --rerun repeats its run."),
 }
 
 
@@ -156,8 +158,11 @@ class LazyGroup(click.Group):
             formatter.write_dl(rows)
 
     def main(self, *args: Any, **kwargs: Any) -> Any:
-        """Run the command line; errors of the group's own options are one line too."""
+        """Run the command line; errors of the group's own options are one line too. The
+        arguments are kept (``ctx.obj["argv"]``) for a credibility record's ``invocation``."""
         kwargs["standalone_mode"] = False
+        argv = kwargs.get("args", args[0] if args else None)
+        kwargs["obj"] = {"argv": list(sys.argv[1:] if argv is None else argv)}
         try:
             code = super().main(*args, **kwargs)
         except click.exceptions.NoArgsIsHelpError as exc:  # plain `fidelity`: the help
@@ -250,7 +255,7 @@ def main(ctx: click.Context, verbose: bool, config_path: str | None, no_config: 
     Settings:    [tool.fidelity] in pyproject.toml or fidelity.toml (camera, max_delta_e,
                  reference, table, ...); options on the command line win.
     """
-    ctx.obj = {"verbose": verbose}
+    ctx.obj = {**(ctx.obj or {}), "verbose": verbose}
     if no_config:
         return
     from fidelity.config import find_config, read_config

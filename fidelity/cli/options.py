@@ -639,16 +639,31 @@ def evidence_outputs(paths: Sequence[Path]) -> dict[str, Path]:
 def write_evidence_files(paths: Sequence[Path], write: Callable[..., list[Path]],
                          *args: Any, results: Sequence[Path | None] = (),
                          indent: str = "") -> None:
-    """Write the evidence files with ``write(paths, *args, results=...)``
+    """Write the evidence files with ``write(paths, *args, results=..., invocation=...)``
     (:func:`fidelity.report.evidence.write_evidence` or ``write_fit_evidence``), ``results``
-    being the files the run wrote that exist, and print each."""
+    being the files the run wrote that exist, ``invocation`` the command line
+    (:func:`invocation`), and print each."""
     from fidelity.fileio import display_path
 
     if not paths:
         return
     wrote = [p for p in results if p is not None and p.is_file()]
-    for path in write(paths, *args, results=wrote):
+    for path in write(paths, *args, results=wrote, invocation=invocation()):
         click.echo(f"{indent}wrote {display_path(path)}")
+
+
+def invocation() -> dict[str, Any] | None:
+    """The running command line as a credibility record's ``invocation``
+    (:func:`fidelity.report.evidence.invocation_record`): the arguments the group was given,
+    the current folder and the settings file read; None outside a ``fidelity`` command."""
+    from fidelity.report.evidence import invocation_record
+
+    ctx = click.get_current_context(silent=True)
+    obj = ctx.find_root().obj if ctx is not None else None
+    if not isinstance(obj, dict) or "argv" not in obj:
+        return None
+    config = obj.get("config")
+    return invocation_record(obj["argv"], config.path if config is not None else None)
 
 
 def measure_options(f: F) -> F:

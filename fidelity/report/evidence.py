@@ -7,6 +7,10 @@ by which rule pass/fail was decided. Its layout is the JSON Schema
 "Credibility record" maps each field to the sections of a simulation credibility assessment.
 
 - ``record``: the layout version, when, which command, its exit code and outcome;
+- ``invocation`` (layout 1.1; None when the record was made through the API): the command line
+  as typed (``argv``, after ``fidelity``), the folder it ran in (``cwd``) and the settings file
+  read (path and SHA-256, None when none was), so that the run can be repeated and a relative
+  path resolved;
 - ``tool``: name, version, the git commit of the source tree (None outside a checkout, with
   ``dirty`` when it has uncommitted changes) and ``code_sha256``, one SHA-256 over every Python
   file of the package that ran (sorted by path: path and bytes);
@@ -44,7 +48,7 @@ if TYPE_CHECKING:
     from fidelity.fit import FitReport
 
 #: Layout version of the credibility record.
-EVIDENCE_SCHEMA_VERSION = "1.0"
+EVIDENCE_SCHEMA_VERSION = "1.1"
 
 #: Sections of a simulation credibility assessment and the record's keys that answer them.
 CREDIBILITY_SECTIONS: Mapping[str, tuple[str, ...]] = {
@@ -55,12 +59,15 @@ CREDIBILITY_SECTIONS: Mapping[str, tuple[str, ...]] = {
     "uncertainty": ("subjects[].measurement.uncertainty", "subjects[].prediction.interval",
                     "decision_rule"),
     "traceability": ("subjects[].inputs[].sha256", "subjects[].prediction_table.sha256",
-                     "tool.commit", "tool.code_sha256", "record.created"),
+                     "tool.commit", "tool.code_sha256", "record.created", "invocation.argv",
+                     "invocation.settings.sha256"),
     "decision": ("decision_rule", "subjects[].verdict", "record.exit_code"),
 }
 
 #: What an exit code means.
 OUTCOMES = {0: "pass", 1: "fail", 2: "error", 3: "internal error", 4: "undecided"}
+
+PathArg = str | os.PathLike[str]
 
 
 def evidence_schema_path() -> Path:
@@ -129,6 +136,24 @@ def environment_record() -> dict[str, Any]:
             "machine": platform.machine(), "dependencies": dict(libraries)}
 
 
+def invocation_record(argv: Sequence[str], settings: PathArg | None = None,
+                      cwd: PathArg | None = None) -> dict[str, Any]:
+    """``invocation``: the command line ``argv`` (after ``fidelity``), the folder it ran in
+    (default: the current one) and the settings file read (path and SHA-256; None)."""
+    from fidelity.fileio import file_sha256
+
+    folder = os.fsdecode(cwd) if cwd is not None else os.getcwd()
+    read = None
+    if settings is not None:
+        path = os.path.abspath(os.path.join(folder, os.fsdecode(settings)))
+        try:
+            digest: str | None = file_sha256(path)
+        except OSError:
+            digest = None
+        read = {"path": path, "sha256": digest}
+    return {"argv": [os.fsdecode(a) for a in argv], "cwd": folder, "settings": read}
+
+
 def _file_input(role: str, path: str | os.PathLike[str], sha256: str | None = None,
                 provenance: Mapping[str, Any] | None = None) -> dict[str, Any]:
     from fidelity.fileio import file_sha256
@@ -158,11 +183,12 @@ def _inputs(report: ChartReport) -> list[dict[str, Any]]:
     from fidelity.resources import resource_dir
 
     out = []
-    if src.camera in available_cameras():
+    source = str(src.camera_settings.get("source", src.camera))
+    if source == f"built-in {src.camera}" and src.camera in available_cameras():
         out.append(_file_input("camera (built-in)",
                                resource_dir("data") / "cameras" / f"{src.camera}.toml",
                                provenance={"name": src.camera}))
-    files = camera_files(str(src.camera_settings.get("source", src.camera)))
+    files = camera_files(source)
     out += [_file_input("camera file" if i == 0 else "camera data", f,
                         provenance={"camera": src.camera}) for i, f in enumerate(files)]
     out.append({"role": "render settings", "path": None, "sha256": None,
@@ -218,9 +244,11 @@ def _subject(subject: str, report: ChartReport | None, error: str | None) -> dic
 
 def evidence_record(command: str, subjects: Sequence[tuple[str, ChartReport | ComparisonReport
                                                           | None, str | None]],
-                    exit_code: int) -> JSONObject:
+                    exit_code: int, invocation: Mapping[str, Any] | None = None
+                    ) -> JSONObject:
     """The credibility record (module docstring) of ``command`` over ``subjects`` (name,
-    report or None, error or None) that ended with ``exit_code``."""
+    report or None, error or None) that ended with ``exit_code``; ``invocation``: the
+    command line (:func:`invocation_record`), None for a run through the API."""
     items = []
     rule = None
     for name, report, error in subjects:
@@ -233,18 +261,20 @@ def evidence_record(command: str, subjects: Sequence[tuple[str, ChartReport | Co
         items.append(item)
         if chart is not None and chart.verdict is not None and rule is None:
             rule = chart.verdict.decision.to_json()
-    return _record(command, exit_code, rule, items)
+    return _record(command, exit_code, rule, items, invocation)
 
 
 def _record(command: str, exit_code: int, rule: Mapping[str, Any] | None,
-            subjects: Sequence[Mapping[str, Any]]) -> JSONObject:
-    """The record around ``subjects``: its header, the tool, the environment, the decision
-    ``rule`` and the map to the credibility sections."""
+            subjects: Sequence[Mapping[str, Any]],
+            invocation: Mapping[str, Any] | None = None) -> JSONObject:
+    """The record around ``subjects``: its header, the command line, the tool, the
+    environment, the decision ``rule`` and the map to the credibility sections."""
     out: JSONObject = json_ready({
         "record": {"schema": "fidelity credibility record",
                    "schema_version": EVIDENCE_SCHEMA_VERSION, "created": utc_now(),
                    "command": command, "exit_code": int(exit_code),
                    "outcome": OUTCOMES.get(int(exit_code), "unknown")},
+        "invocation": dict(invocation) if invocation is not None else None,
         "tool": tool_record(),
         "environment": environment_record(),
         "decision_rule": rule,
@@ -254,7 +284,8 @@ def _record(command: str, exit_code: int, rule: Mapping[str, Any] | None,
     return out
 
 
-def fit_evidence_record(report: FitReport, exit_code: int = 0) -> JSONObject:
+def fit_evidence_record(report: FitReport, exit_code: int = 0,
+                        invocation: Mapping[str, Any] | None = None) -> JSONObject:
     """The credibility record of ``fidelity fit``: one subject, the pair SIM -> REAL, whose
     inputs are the two images (SHA-256), whose measurement is the sim-to-real mean ΔE00 after
     the correction (SIM through the ``.cube`` by OpenColorIO, measured again), whose prediction
@@ -301,7 +332,7 @@ def fit_evidence_record(report: FitReport, exit_code: int = 0) -> JSONObject:
         "verdict": None,
         "correction": {"report": fit_json(report), "files": files},
     }
-    return _record("fit", exit_code, None, [subject])
+    return _record("fit", exit_code, None, [subject], invocation)
 
 
 #: The formats of ``--evidence FILE``, chosen by the file's suffix, and what each holds.
@@ -318,7 +349,6 @@ EVIDENCE_FORMATS: Mapping[str, str] = {
 #: The Python module each format's writer needs, and the extra that installs it.
 _NEEDS = {".srmd": ("lxml", "ssp"), ".stmd": ("lxml", "ssp"), ".xqar": ("qc_baselib", "qc")}
 
-PathArg = str | os.PathLike[str]
 
 
 def evidence_format(path: PathArg) -> str:
@@ -392,21 +422,24 @@ def write_record(paths: PathArg | Sequence[PathArg], record: JSONObject,
 def write_evidence(paths: PathArg | Sequence[PathArg], command: str,
                    subjects: Sequence[tuple[str, ChartReport | ComparisonReport | None,
                                             str | None]],
-                   exit_code: int, results: Sequence[PathArg] = ()) -> list[Path]:
+                   exit_code: int, results: Sequence[PathArg] = (),
+                   invocation: Mapping[str, Any] | None = None) -> list[Path]:
     """Write the credibility record (:func:`evidence_record`) to ``paths``
     (:func:`write_record`)."""
-    return write_record(paths, evidence_record(command, subjects, exit_code), results)
+    return write_record(paths, evidence_record(command, subjects, exit_code, invocation),
+                        results)
 
 
 def write_fit_evidence(paths: PathArg | Sequence[PathArg], report: FitReport,
-                       exit_code: int = 0, results: Sequence[PathArg] = ()) -> list[Path]:
+                       exit_code: int = 0, results: Sequence[PathArg] = (),
+                       invocation: Mapping[str, Any] | None = None) -> list[Path]:
     """Write the fit's credibility record (:func:`fit_evidence_record`) to ``paths``
     (:func:`write_record`)."""
-    return write_record(paths, fit_evidence_record(report, exit_code), results)
+    return write_record(paths, fit_evidence_record(report, exit_code, invocation), results)
 
 
 __all__ = ["CREDIBILITY_SECTIONS", "EVIDENCE_FORMATS", "EVIDENCE_SCHEMA_VERSION", "OUTCOMES",
            "WRITERS", "code_sha256", "environment_record", "evidence_format",
            "evidence_record", "evidence_schema", "evidence_schema_path",
-           "fit_evidence_record", "git_commit", "tool_record", "write_evidence",
+           "fit_evidence_record", "git_commit", "invocation_record", "tool_record", "write_evidence",
            "write_fit_evidence", "write_record"]

@@ -1,0 +1,188 @@
+"""``fidelity verify``: check a credibility record against the files it names, and optionally
+run its command line again and compare the results."""
+
+from __future__ import annotations
+
+import importlib
+import os
+import subprocess
+import sys
+import tempfile
+from collections.abc import Collection, Mapping, Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import click
+
+from fidelity.cli.options import common_options, json_option, write_json_output
+
+#: The commands whose records can be run again.
+RERUNNABLE = ("check", "audit", "gate", "compare", "fit")
+
+#: The options that name what a command writes, and the file or folder (in a temporary folder)
+#: a repeated run writes instead: a repeat never writes over the first run's files.
+OUTPUTS: Mapping[str, str] = {"out_dir": "out", "out": "out", "json_path": "run.json",
+                              "html_path": "run.html", "junit": "junit.xml",
+                              "evidence_paths": "record.json"}
+
+#: The group's own options (before the command) and whether each takes a value.
+GROUP_OPTIONS: Mapping[str, bool] = {"-v": False, "--verbose": False, "--no-config": False,
+                                     "--config": True}
+
+
+def rerun_argv(argv: Sequence[str], folder: Path, settings: str | None = None,
+               configured: Collection[str] = ()) -> list[str]:
+    """The recorded command line ``argv`` (after ``fidelity``) with its output options
+    (:data:`OUTPUTS`) sent into ``folder``: each one the command line gives, the settings file
+    sets (``configured``: parameter names) or that writes without being asked (a default,
+    such as check's report folder); the command's record goes to ``folder/record.json``. The
+    settings file is the recorded one: ``settings`` (its path) named with ``--config``, or
+    ``--no-config`` when none was read, unless the command line says which. Raises
+    :class:`click.UsageError` for a command not in :data:`RERUNNABLE`."""
+    from fidelity.cli import COMMANDS
+
+    head: list[str] = []
+    i = 0
+    while i < len(argv) and argv[i].startswith("-"):
+        takes = GROUP_OPTIONS.get(argv[i].split("=", 1)[0], False) and "=" not in argv[i]
+        head += argv[i:i + 1 + takes]
+        i += 1 + takes
+    if not any(t.split("=", 1)[0] in ("--config", "--no-config") for t in head):
+        head += ["--config", settings] if settings else ["--no-config"]
+    name = argv[i] if i < len(argv) else ""
+    if name not in RERUNNABLE:
+        raise click.UsageError(f"the recorded command line runs {name or 'no command'!r}; "
+                               f"--rerun repeats {', '.join(RERUNNABLE)}")
+    module, attr = COMMANDS[name][0].split(":")
+    command: click.Command = getattr(importlib.import_module(module), attr)
+    options: dict[str, click.Option] = {}
+    for param in command.params:
+        if isinstance(param, click.Option):
+            options.update({o: param for o in (*param.opts, *param.secondary_opts)})
+    kept: list[str] = []
+    given = set(configured)
+    rest = list(argv[i + 1:])
+    j = 0
+    while j < len(rest):
+        token = rest[j]
+        if token == "--":
+            kept += rest[j:]
+            break
+        option = options.get(token.split("=", 1)[0] if token.startswith("--") else token)
+        if option is None:
+            kept.append(token)
+            j += 1
+            continue
+        inline = token.startswith("--") and "=" in token
+        n = 1 + (0 if option.is_flag or option.count or inline else option.nargs)
+        if option.name not in OUTPUTS:
+            kept += rest[j:j + n]
+        else:
+            given.add(str(option.name))
+        j += n
+    outputs = []
+    for param in command.params:
+        if isinstance(param, click.Option) and param.name in OUTPUTS and (
+                param.name in given or isinstance(param.default, str | os.PathLike)
+                or param.name == "evidence_paths"):  # a path as default: written unasked
+            outputs += [param.opts[0], str(folder / OUTPUTS[param.name])]
+    return [*head, name, *kept, *outputs]
+
+
+def _configured(argv: Sequence[str], settings: str | None) -> set[str]:
+    """The parameters of the recorded command that the settings file ``settings`` sets (None,
+    or a file that cannot be read now: none; the repeat reports the latter)."""
+    from fidelity.cli import COMMANDS
+    from fidelity.config import read_config
+    from fidelity.errors import FidelityError
+
+    if settings is None:
+        return set()
+    try:
+        config = read_config(settings, command_names=list(COMMANDS))
+    except FidelityError:
+        return set()
+    names = [a for a in argv if a in COMMANDS]
+    return set(config.default_map(names[:1]).get(names[0], {})) if names else set()
+
+
+def rerun(doc: Mapping[str, Any]) -> tuple[dict[str, Any] | None, int, str]:
+    """Run the record's command line again (:func:`rerun_argv`) in the folder it ran in, as a
+    process of this Python; returns the new record (None if none was written), the exit code
+    and the last line of its errors."""
+    from fidelity.errors import InputFileError
+    from fidelity.fileio import display_path
+    from fidelity.report.verify import read_record
+    from fidelity.schema import SchemaError
+
+    invocation = doc.get("invocation")
+    if not invocation:
+        raise InputFileError("the record holds no command line (made through the API, or by a "
+                             "fidelity before record layout 1.1): nothing to run again")
+    cwd = invocation.get("cwd")
+    if not cwd or not Path(cwd).is_dir():
+        raise InputFileError(f"{display_path(cwd or '')}: the folder the run started in is not "
+                             "here; --rerun runs the command line there")
+    with tempfile.TemporaryDirectory(prefix="fidelity-rerun-") as tmp:
+        settings = (invocation.get("settings") or {}).get("path")
+        argv = rerun_argv(invocation["argv"], Path(tmp), settings,
+                          _configured(invocation["argv"], settings))
+        proc = subprocess.run([sys.executable, "-m", "fidelity", *argv], cwd=cwd,
+                              capture_output=True, text=True, env=dict(os.environ),
+                              check=False)
+        errors = [line for line in proc.stderr.splitlines() if line.strip()]
+        try:
+            new = read_record(Path(tmp) / OUTPUTS["evidence_paths"])
+        except SchemaError:
+            new = None
+    return new, proc.returncode, errors[-1] if errors else ""
+
+
+@click.command()
+@click.argument("record", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--inputs", "inputs_dir", type=click.Path(file_okay=False, exists=True,
+                                                        path_type=Path), default=None,
+              help="Folder in which to look for a file (by its name) that is not where the "
+                   "record says: inputs handed over beside the record.")
+@click.option("--rerun", "run_again", is_flag=True,
+              help="Also run the recorded command line again, in the folder it ran in, with "
+                   "its outputs sent to a temporary folder, and compare: the same exit code "
+                   "and verdicts, each value within the record's standard uncertainty.")
+@json_option("Write the findings as JSON")
+@common_options
+def verify(record: Path, inputs_dir: Path | None, run_again: bool,
+           json_path: str | None) -> None:
+    """Check a credibility record against the files it names; --rerun repeats its run.
+
+    RECORD is the JSON record of check, audit, gate, compare or fit (--evidence FILE.json).
+
+    Every input, prediction and calibration table, settings file and written correction is
+    hashed again (SHA-256) and compared with the record; this installation's code and library
+    versions are compared with the record's. Exit 0: every file as recorded (and, with
+    --rerun, the run reproduced); 1: a file changed or missing, or the run not reproduced; 2:
+    RECORD is not a readable credibility record. A different code or environment is reported,
+    not failed: the record stays a true account of its own run.
+    """
+    from fidelity.fileio import check_outputs
+    from fidelity.report.verify import (
+        read_record,
+        rerun_finding,
+        verification_lines,
+        verify_document,
+    )
+
+    check_outputs({"--json": json_path}, {"RECORD": record})
+    doc = read_record(record)
+    result = verify_document(doc, record, inputs=inputs_dir)
+    if run_again:
+        new, code, message = rerun(doc)
+        result = replace(result, findings=(*result.findings,
+                                           rerun_finding(doc, new, code, message)))
+    for line in verification_lines(result):
+        click.echo(line)
+    if json_path:
+        where = write_json_output(json_path, result.to_json())
+        if where != "standard output":
+            click.echo(f"wrote {where}")
+    sys.exit(0 if result.verified else 1)
