@@ -256,3 +256,21 @@ def test_rerun_needs_the_recorded_command_line(tmp_path):
     assert run("verify", record).exit_code == 0
     r = run("verify", record, "--rerun")
     assert r.exit_code == 2 and "holds no command line" in r.output
+
+
+@pytest.mark.parametrize("path", ["a\u0000b.png", "x" * 5000, "/", ""])
+def test_a_path_that_cannot_name_a_file_here_is_missing_not_an_error(checked, path):
+    folder, _, record = checked
+    doc = json.loads(record.read_text())
+    doc["subjects"][0]["inputs"][0]["path"] = path
+    doc["invocation"]["cwd"] = path
+    odd = folder / "odd.json"
+    odd.write_text(json.dumps(doc), encoding="utf-8")
+    r = run("verify", odd)
+    assert r.exit_code == 1, r.output
+    assert "input camera file: missing;" in r.output
+    r = run("verify", odd, "--rerun")
+    if path == "/":  # a folder that is here: the repeat runs there and cannot find its camera
+        assert r.exit_code == 1 and "rerun: not reproduced; the run ended with exit 2" in r.output
+    else:
+        assert r.exit_code == 2 and "the folder the run started in is not here" in r.output

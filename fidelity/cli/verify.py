@@ -121,9 +121,13 @@ def rerun(doc: Mapping[str, Any]) -> tuple[dict[str, Any] | None, int, str]:
         raise InputFileError("the record holds no command line (made through the API, or by a "
                              "fidelity before record layout 1.1): nothing to run again")
     cwd = invocation.get("cwd")
-    if not cwd or not Path(cwd).is_dir():
-        raise InputFileError(f"{display_path(cwd or '')}: the folder the run started in is not "
-                             "here; --rerun runs the command line there")
+    try:
+        here = bool(cwd) and Path(cwd).is_dir()
+    except (OSError, ValueError):  # a name too long, or holding a NUL
+        here = False
+    if not here:
+        raise InputFileError(f"{display_path(cwd or '')[:300]}: the folder the run started in is "
+                             "not here; --rerun runs the command line there")
     with tempfile.TemporaryDirectory(prefix="fidelity-rerun-") as tmp:
         settings = (invocation.get("settings") or {}).get("path")
         argv = rerun_argv(invocation["argv"], Path(tmp), settings,

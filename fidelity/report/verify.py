@@ -206,6 +206,15 @@ def read_record(path: str | os.PathLike[str]) -> dict[str, Any]:
     return validated
 
 
+def _is_file(path: Path) -> bool:
+    """``path`` is a regular file here (a name too long for the system, or holding a NUL, is
+    not one)."""
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
+
+
 def _shipped_copy(recorded: str) -> Path | None:
     """This installation's copy of a file of the package's shipped data named by another
     installation's path (``.../fidelity/data/<rest>``), if it has one."""
@@ -215,7 +224,7 @@ def _shipped_copy(recorded: str) -> Path | None:
     for i in range(len(parts) - 2, -1, -1):
         if parts[i] == "fidelity" and parts[i + 1] == "data":
             candidate = resource_dir("data").joinpath(*parts[i + 2:])
-            return candidate if candidate.is_file() else None
+            return candidate if _is_file(candidate) else None
     return None
 
 
@@ -226,12 +235,12 @@ def locate(recorded: str, cwd: str | None, record_dir: Path,
     candidates = [p] if p.is_absolute() else [
         *([Path(cwd) / p] if cwd else []), record_dir / p, p]
     for c in candidates:
-        if c.is_file():
+        if _is_file(c):
             return c
     shipped = _shipped_copy(recorded)
     if shipped is not None:
         return shipped
-    if inputs is not None and (inputs / p.name).is_file():
+    if inputs is not None and p.name and _is_file(inputs / p.name):
         return inputs / p.name
     return None
 
@@ -244,7 +253,8 @@ def _file_finding(kind: str, name: str, recorded: str | None, sha256: str | None
         return Finding(kind, name, "not hashed", "the record names no file", None)
     found = locate(recorded, cwd, record_dir, inputs)
     if found is None:
-        return Finding(kind, name, "missing", f"{display_path(recorded)} is not there", None)
+        return Finding(kind, name, "missing", f"{display_path(recorded)[:300]} is not there "
+                       "(no such file)", None)
     shown = display_path(found)
     if sha256 is None:
         return Finding(kind, name, "not hashed", "the record holds no SHA-256 for it", shown)
