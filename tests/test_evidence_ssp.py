@@ -207,6 +207,10 @@ def test_a_settings_file_names_several_evidence_files(tmp_path):
     r = run("--config", settings, "check", "--no-report")
     assert r.exit_code == 0, r.output
     assert (tmp_path / "e.json").is_file() and (tmp_path / "e.srmd").is_file()
+    # the SRMD traces the settings file read (its SHA3-256, computed here) and the command line
+    text = (tmp_path / "e.srmd").read_text(encoding="utf-8")
+    assert hashlib.sha3_256(settings.read_bytes()).hexdigest().upper() in text.upper()
+    assert f'keyword="command_line">fidelity --config {settings} check --no-report<' in text
 
 
 def test_default_paths_import_no_xml_library_and_a_missing_one_is_one_line(tmp_path,

@@ -137,7 +137,7 @@ def _traced(kind: str, role: str, path: str | os.PathLike[str]) -> TracedFile:
 def traced_files(record: JSONObject, results: Sequence[str | os.PathLike[str]]
                  ) -> list[TracedFile]:
     """The run's files: every input file of the record's subjects (images, camera files, the
-    prediction and calibration tables), then its results: a fit's correction files and
+    prediction and calibration tables) and the settings file read, then its results: a fit's correction files and
     ``results`` (the files the run wrote), each once, with its SHA3-256 read now."""
     seen: set[Path] = set()
     out: list[TracedFile] = []
@@ -156,6 +156,8 @@ def traced_files(record: JSONObject, results: Sequence[str | os.PathLike[str]]
         table = subject.get("prediction_table") or {}
         add("input", "prediction table", table.get("path"))
         add("input", "calibration table", (table.get("calibration") or {}).get("path"))
+    add("input", "settings file", ((record.get("invocation") or {}).get("settings") or {})
+        .get("path"))
     for subject in record.get("subjects", []):  # a fit's correction files
         for name, item in ((subject.get("correction") or {}).get("files") or {}).items():
             add("result", Path(item.get("path") or name).name, item.get("path"))
@@ -227,8 +229,14 @@ def _tool_entries(record: JSONObject) -> list[tuple[str, Any]]:
 
 
 def _run_entries(record: JSONObject) -> list[tuple[str, Any]]:
+    import shlex
+
     run, rule = record["record"], record.get("decision_rule") or {}
-    return [("command", run.get("command")), ("created", run.get("created")),
+    invocation = record.get("invocation") or {}
+    argv = invocation.get("argv")
+    return [("command", run.get("command")),
+            ("command_line", shlex.join(["fidelity", *argv]) if argv else None),
+            ("working_folder", invocation.get("cwd")), ("created", run.get("created")),
             ("exit_code", run.get("exit_code")), ("outcome", run.get("outcome")),
             ("decision_rule", rule.get("rule")), ("coverage_factor", rule.get("k")),
             ("strict", rule.get("strict")), ("decision_rule_description",
