@@ -6,7 +6,8 @@ that one commit carries the tables and everything computed from them:
    :data:`OLD_PREPROCESSING_REV` (the last measured wholly with the earlier preprocessing):
    ``reports/coco/preprocessing_change_cells.{md,json}`` (``benchmarks.compare_tables``);
 2. the validation report from its store (``fidelity validate --report-only``: the measured
-   cells as stored, the predictions from the new tables) into ``reports/validation``;
+   cells as stored, the predictions from the new tables) into ``reports/validation``, and its
+   validated cameras (``domain.json``) into ``fidelity/data/validation-domain.json``;
 3. the COCO-C report (``fidelity coco-c --report-only``, its predictions recomputed from the
    new tables) into ``reports/cococ`` and the shipped ``fidelity/data/coco-c.json``;
 4. the recorded JSON outputs of the test suite (``FIDELITY_RECORD_JSON=1``).
@@ -71,7 +72,14 @@ def validation(store: Path, shared: Path) -> list[str]:
               str(shared / "coco" / "annotations" / "instances_val2017_subset.json"),
               "--store", str(store), "--report-only", "--notes",
               "reports/validation/analysis.md", "--out", out])
-        return _replace_existing(Path(out), REPO / "reports" / "validation")
+        changed = _replace_existing(Path(out), REPO / "reports" / "validation")
+        # the validated cameras, shipped for the validity domain of a check's prediction
+        shipped = REPO / "fidelity" / "data" / "validation-domain.json"
+        domain = Path(out) / "domain.json"
+        if domain.read_bytes() != shipped.read_bytes():
+            shutil.copyfile(domain, shipped)
+            changed.append("fidelity/data/validation-domain.json")
+        return changed
 
 
 def coco_c() -> list[str]:

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -59,10 +59,14 @@ TABLE_REFERENCES = ("scene", "safecolor")
 
 
 def evidence_of(prediction: Prediction | None, budget: UncertaintyBudget | None,
-                reference: str, k: float = 2.0
+                reference: str, k: float = 2.0,
+                camera: tuple[Mapping[str, str], str] | None = None
                 ) -> tuple[PredictionInterval | None, ValidityDomain | None]:
     """The predicted ΔmAP's interval (with the chart ΔE's uncertainty ``budget``) and the
-    validity domain of the answer (the prediction's checks and the ``reference`` chart)."""
+    validity domain of the answer (the prediction's checks, the ``reference`` chart and, for
+    a camera model, ``camera``: its stage kinds and illuminant against the cameras the
+    prediction was validated on, :meth:`~fidelity.prediction.interval.ValidatedCameras.
+    camera_checks`)."""
     if prediction is None:
         return None, None
     from fidelity.prediction.interval import DomainCheck, prediction_interval, validity_domain
@@ -87,6 +91,13 @@ def evidence_of(prediction: Prediction | None, budget: UncertaintyBudget | None,
             f"table {table.name}: {', '.join(sorted(stale))} measured with a detector "
             f"preprocessing other than this version's (the table predates it; rerun the "
             f"sweep and fidelity tables)"))
+    if camera is not None:
+        from fidelity.prediction.interval import load_validated_cameras
+
+        validated = load_validated_cameras()
+        if validated is not None:
+            for check in validated.camera_checks(*camera):
+                domain = domain.with_check(check)
     return interval, domain
 
 
@@ -168,7 +179,8 @@ def check_camera(
     prediction, verdict, directional = judge(
         m.mean_delta_e, size, table, criterion, m, bound, decision=decision,
         delta_e_uncertainty=u.combined if u else None)
-    interval, validity = evidence_of(prediction, u, reference, decision.k)
+    interval, validity = evidence_of(prediction, u, reference, decision.k,
+                                     (render.camera.stage_kinds(), illuminant))
     from fidelity.chart.blindspots import chart_blind_spots
 
     spots = chart_blind_spots(m, bits=render.camera.quantisation_bits)

@@ -326,6 +326,11 @@ def test_tiny_real_run_is_resumable(shared: Path, tmp_path: Path) -> None:
     assert all(c.draws is not None and c.draws.images == 4 for c in st.cells())
     doc = json.loads((tmp_path / "rep" / "validation.json").read_text())
     assert doc["summary"]["standard_error"] == "larger"
+    # the validated cameras beside the report: the two cameras' illuminants and stages
+    domain = json.loads((tmp_path / "rep" / "domain.json").read_text())
+    assert domain["cameras"] == 2 and domain["illuminants"] == ["D65"]
+    assert domain["cells"] == doc["summary"]["all"]["cells"] == 2
+    assert domain["stages"]["bit depth"] == ["8"] and domain["models"] == ["yolox_nano"]
     # a store of an earlier version (no draws, folds without rest scores) reports the fold SE;
     # --report-only with --annotations scores it again from its detections: the same SEs as
     # the run's own

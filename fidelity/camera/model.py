@@ -199,6 +199,16 @@ class CameraModel:
         """True when the output is clipped to [0, 1] (display curve or quantisation)."""
         return self.output_encoding == "display" or self.quantisation_bits is not None
 
+    def stage_kinds(self) -> dict[str, str]:
+        """The kind of each processing stage, the terms a validation domain is stated in
+        (:class:`fidelity.prediction.interval.ValidatedCameras`): ``exposure`` (mode), ``white
+        balance`` and ``colour correction`` (method), ``tone curve`` and ``bit depth`` (the
+        quantisation bits, ``"float"`` without quantisation)."""
+        return {"exposure": self.exposure.mode, "white balance": self.white_balance.method,
+                "colour correction": self.ccm.method, "tone curve": self.tone.curve,
+                "bit depth": ("float" if self.quantisation_bits is None
+                              else str(self.quantisation_bits))}
+
     def to_json(self) -> dict[str, Any]:
         """JSON-ready description of every stage (sensitivity data summarised)."""
         d: dict[str, Any] = {

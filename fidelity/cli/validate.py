@@ -21,6 +21,9 @@ from fidelity.cli.options import (
 if TYPE_CHECKING:
     from fidelity.coco.sweep import ModelSpec
 
+#: The validated cameras (:func:`fidelity.coco.validate.validated_cameras`), beside the report.
+DOMAIN_FILE = "domain.json"
+
 
 @click.command()
 @click.option("--cameras", default=None, type=click.Path(file_okay=False),
@@ -82,6 +85,7 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
         default_store,
         load_suite,
         run_validation,
+        validated_cameras,
     )
     from fidelity.errors import InvalidValueError, unknown_name
     from fidelity.fileio import check_outputs
@@ -92,7 +96,8 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
                          for f in camera_files(p)
                          if p.suffix.lower() in (".toml", ".yaml", ".yml")}
     check_outputs({f"--out ({n})": Path(out) / n
-                   for n in ("validation.md", "validation.html", "validation.json")},
+                   for n in ("validation.md", "validation.html", "validation.json",
+                             DOMAIN_FILE)},
                   {"--notes": notes, "--annotations": annotations, "--images": images,
                    "--table": bound_table, **camera_inputs, **model_inputs(models)},
                   stores={"--store": store or default_store()})
@@ -134,6 +139,13 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
     results = collect_results(st, bound_table=bound_table, suite=cases)
     paths = write_validation_report(
         results, out, notes=Path(notes).read_text(encoding="utf-8") if notes else None)
+    from fidelity.fileio import write_json_atomic
+
+    paths.append(write_json_atomic(Path(out) / DOMAIN_FILE, {
+        "source": "fidelity validate: the cameras validated, their illuminants and the kinds "
+                  "of their stages (the validity domain a check's prediction is judged in; "
+                  "shipped as fidelity/data/validation-domain.json)",
+        **validated_cameras(results, cases).to_json()}))
     s = results.summary
     mean = s.classes["all"]
     click.echo(f"{len(results.rows)} (camera, model) cells; bound table {s.bound_table}: "

@@ -66,6 +66,7 @@ if TYPE_CHECKING:
     from fidelity.coco.scoring import CocoScore, FoldScore
     from fidelity.coco.store import ThreadStores
     from fidelity.coco.sweep import ImageCache, ModelSpec
+    from fidelity.prediction.interval import ValidatedCameras
 
 STORE_NAME = "validation.sqlite"
 SUITE_FILE = "suite.toml"
@@ -1097,6 +1098,43 @@ def directional_validation(results: ValidationResults,
     return compare_bounds(cells, charts, table)
 
 
+def validated_cameras(results: ValidationResults, suite: Sequence[CameraCase]
+                      ) -> ValidatedCameras:
+    """The cameras ``results`` validated, as the validity domain of a prediction states them
+    (:class:`~fidelity.prediction.interval.ValidatedCameras`): each camera of the results read
+    from its file in ``suite`` (the same SHA-256 as validated, else an
+    :class:`InputFileError`), its illuminant and the kinds of its stages
+    (:meth:`~fidelity.camera.model.CameraModel.stage_kinds`); the counts of the mean-mAP
+    class (``all``) of the summary."""
+    from fidelity.camera.model import read_camera_file
+    from fidelity.prediction.interval import STAGES, ValidatedCameras
+
+    cases = {c.name: c for c in suite}
+    illuminants: set[str] = set()
+    sensitivities: set[str] = set()
+    stages: dict[str, set[str]] = {s: set() for s in STAGES}
+    for name, record in results.cameras.items():
+        case = cases.get(name)
+        if case is None or case.sha256 != record.sha256:
+            raise InputFileError(f"{name}: the camera file validated is not in the suite "
+                                 "(missing, or changed since: its SHA-256 differs)")
+        cam = read_camera_file(case.path)
+        illuminants.add(case.illuminant)
+        sensitivities.add(cam.sensitivities.name)
+        for stage, kind in cam.stage_kinds().items():
+            stages[stage].add(kind)
+    mean = results.summary.classes["all"]
+
+    def order(kinds: set[str]) -> tuple[str, ...]:  # bit depths by number, words by name
+        return tuple(sorted(kinds, key=lambda k: (not k.isdigit(), int(k) if k.isdigit()
+                                                  else 0, k)))
+
+    return ValidatedCameras(len(results.cameras), tuple(sorted(illuminants)),
+                            {s: order(k) for s, k in stages.items()},
+                            tuple(sorted(sensitivities)), tuple(results.models), mean.cells,
+                            mean.within, mean.within_2se)
+
+
 __all__ = [
     "BASELINE",
     "CLASSES",
@@ -1126,4 +1164,5 @@ __all__ = [
     "predictions_for",
     "prepare_case",
     "run_validation",
+    "validated_cameras",
 ]

@@ -19,6 +19,10 @@ combined as uncorrelated (JCGM 100 5.1.2):
 the table measured (a ΔE outside is answered by a conservative ceiling, not extrapolated), the
 detector sizes it measured (a size it has no curve of is answered by another size's curve), and
 whether the table holds measured losses or published bounds.
+
+:class:`ValidatedCameras`: the camera models the prediction was validated on (their
+illuminants and the kinds of their processing stages, shipped as ``validation-domain.json``),
+and :meth:`ValidatedCameras.camera_checks`: whether a camera model lies among them.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 from fidelity.prediction.table import ColumnStatus, Prediction, predict
@@ -200,11 +205,111 @@ def validity_domain(prediction: Prediction, column: str = "dmap_points") -> Vali
     return ValidityDomain((de, size, kind))
 
 
+#: The processing stages a camera's kind is stated in (:meth:`fidelity.camera.model.
+#: CameraModel.stage_kinds`), in the order the checks name them.
+STAGES = ("exposure", "white balance", "colour correction", "tone curve", "bit depth")
+
+#: The shipped record of the validated cameras (written by ``fidelity validate`` as
+#: ``domain.json`` beside its report; copied here by ``benchmarks.after_resweep``).
+VALIDATED_CAMERAS_FILE = "validation-domain.json"
+
+
+@dataclass(frozen=True)
+class ValidatedCameras:
+    """The camera models the prediction was validated on (``fidelity validate``, the
+    validation report) and how it held on them.
+
+    ``cameras``: how many; ``illuminants``: the scene illuminants they were rendered under;
+    ``stages``: per stage of :data:`STAGES`, the kinds the cameras had (e.g. ``"tone curve":
+    ("gamma", "lut", "srgb")``); ``sensitivities``: the sensors' spectral sensitivities;
+    ``models``: the detectors measured; ``cells``, ``within``, ``within_2se``: the (camera,
+    detector) cells, and how many had their measured mAP loss within the measured table's
+    bound, and within it plus two standard errors."""
+
+    cameras: int
+    illuminants: tuple[str, ...]
+    stages: Mapping[str, tuple[str, ...]]
+    sensitivities: tuple[str, ...]
+    models: tuple[str, ...]
+    cells: int
+    within: int
+    within_2se: int
+
+    def to_json(self) -> dict[str, Any]:
+        """The layout of :data:`VALIDATED_CAMERAS_FILE`."""
+        return {"cameras": self.cameras, "illuminants": list(self.illuminants),
+                "stages": {k: list(v) for k, v in self.stages.items()},
+                "sensitivities": list(self.sensitivities), "models": list(self.models),
+                "cells": self.cells, "within": self.within, "within_2se": self.within_2se}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> ValidatedCameras:
+        """Inverse of :meth:`to_json`."""
+        return cls(int(d["cameras"]), tuple(d["illuminants"]),
+                   {k: tuple(v) for k, v in d["stages"].items()},
+                   tuple(d["sensitivities"]), tuple(d["models"]), int(d["cells"]),
+                   int(d["within"]), int(d["within_2se"]))
+
+    def camera_checks(self, stage_kinds: Mapping[str, str], illuminant: str
+                      ) -> tuple[DomainCheck, DomainCheck]:
+        """Whether a camera (its :meth:`~fidelity.camera.model.CameraModel.stage_kinds`)
+        rendered under ``illuminant`` is like the cameras validated: the ``validated
+        illuminant`` check (the illuminant is one they were rendered under) and the
+        ``validated camera kind`` check (each stage of a kind some validated camera had; a bit
+        depth inside the range validated, a float output only if one was)."""
+        held = (f"{self.cameras} cameras, {self.within} of {self.cells} (camera, detector) "
+                f"cells within the measured bound")
+        light = illuminant in self.illuminants
+        ill = DomainCheck(
+            "validated illuminant", light,
+            f"illuminant {illuminant}: among those the validation rendered "
+            f"({', '.join(self.illuminants)}; {held})" if light else
+            f"illuminant {illuminant}: not among those the validation rendered "
+            f"({', '.join(self.illuminants)}); the prediction was not validated under it")
+        off = [f"{stage} {stage_kinds[stage]} (validated: {', '.join(self.stages[stage])})"
+               for stage in STAGES if stage in stage_kinds and stage in self.stages
+               and not _kind_validated(stage, stage_kinds[stage], self.stages[stage])]
+        like = ", ".join(f"{stage} {stage_kinds[stage]}" for stage in STAGES
+                         if stage in stage_kinds)
+        kind = DomainCheck(
+            "validated camera kind", not off,
+            f"a camera like those validated: {like} ({held})" if not off else
+            f"not validated: {'; '.join(off)}; the prediction was not validated on such a "
+            f"camera")
+        return ill, kind
+
+
+def _kind_validated(stage: str, kind: str, validated: tuple[str, ...]) -> bool:
+    """``kind`` among ``validated``; a bit depth within the range of those validated."""
+    if stage != "bit depth" or kind == "float":
+        return kind in validated
+    depths = [int(v) for v in validated if v.isdigit()]
+    return bool(depths) and min(depths) <= int(kind) <= max(depths)
+
+
+@lru_cache(maxsize=1)
+def load_validated_cameras() -> ValidatedCameras | None:
+    """The shipped :class:`ValidatedCameras` (:data:`VALIDATED_CAMERAS_FILE`); None when the
+    package ships none."""
+    import json
+
+    from fidelity.resources import resource_dir
+
+    path = resource_dir("data") / VALIDATED_CAMERAS_FILE
+    if not path.is_file():
+        return None
+    return ValidatedCameras.from_json(json.loads(path.read_text(encoding="utf-8")))
+
+
 __all__ = [
     "MIN_STEP",
+    "STAGES",
+    "VALIDATED_CAMERAS_FILE",
     "DomainCheck",
     "PredictionInterval",
+    "ValidatedCameras",
     "ValidityDomain",
+    "load_validated_cameras",
     "prediction_interval",
     "validity_domain",
 ]

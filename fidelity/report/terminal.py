@@ -74,7 +74,8 @@ def summary_lines(report: ChartReport) -> list[str]:
             lines.append("note: ΔE beyond the table's range; conservative ceiling used")
         if report.validity is not None:
             lines += [f"outside the evidence: {c.detail}" for c in report.validity.outside
-                      if c.name == "reference chart"]
+                      if c.name in ("reference chart", "validated illuminant",
+                                    "validated camera kind")]
     lines += directional_lines(report)
     lines += [f"measured on COCO: {m.summary()}" for m in report.measured]
     lines += [w.warning for w in report.warnings]
