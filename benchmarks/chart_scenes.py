@@ -209,12 +209,15 @@ LIGHTS = {"neutral": (1.0, 1.0, 1.0), "warm": (1.0, 0.78, 0.5), "cool": (0.78, 0
 
 def make_scene(kind: str, background_path: str | None, patch_linear: np.ndarray, *,
                seed: int | tuple[int, ...], long_side: int = 1600,
-               jpeg: bool = True, hard: bool = True) -> Scene:
+               jpeg: bool = True, hard: bool = True, noise_seed: int | None = None,
+               noise_level: float | None = None) -> Scene:
     """One seeded synthetic photo (see the module docstring).
 
     ``background_path`` a photo (``None``: a noisy grey table with a few coloured boxes);
     ``patch_linear`` the 24 patches' linear RGB; ``hard`` adds the harder conditions (coloured
-    light, clipping, blur, occlusion, strong tilt) at random.
+    light, clipping, blur, occlusion, strong tilt) at random; ``noise_seed``: the sensor
+    noise drawn from a generator of its own (the same scene, another capture), else from the
+    scene's; ``noise_level``: its scale (default: drawn, 0.002 to 0.02).
     """
     import cv2
 
@@ -286,7 +289,10 @@ def make_scene(kind: str, background_path: str | None, patch_linear: np.ndarray,
         img = cv2.GaussianBlur(img, (0, 0), sigma)
         cond["blur_sigma_px"] = round(sigma, 2)
     noise = rng.uniform(0.002, 0.02)
-    img = img + noise * np.sqrt(np.maximum(img, 1e-4)) * rng.standard_normal(img.shape).astype(
+    if noise_level is not None:
+        noise = noise_level
+    draw = rng if noise_seed is None else np.random.default_rng(noise_seed)
+    img = img + noise * np.sqrt(np.maximum(img, 1e-4)) * draw.standard_normal(img.shape).astype(
         np.float32)
     cond["noise"] = round(noise, 4)
     srgb = np.clip(np.rint(cm.delinearize_srgb(np.clip(img, 0, 1)) * 255), 0, 255).astype(np.uint8)

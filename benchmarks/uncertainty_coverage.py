@@ -14,6 +14,12 @@ around their mean; a right ``u`` has about 68 % of them within ``±u`` and 95 % 
   camera that estimates its white balance on the noisy chart changes its colours from capture
   to capture, which a render's budget states (``camera white balance``) and an audit of one
   image cannot know.
+- ``photo captures``: one synthetic photo (the chart under a homography in a COCO photo,
+  :func:`photo_study`) captured again and again: its own sensor noise each time, cropped by up
+  to a tenth of each side, stored as PNG or as JPEG of quality 90 and 75, audited from the
+  file as a user would. JPEG correlates neighbouring pixels (its 8 x 8 and 16 x 16 blocks):
+  the pixel-noise component's design effect (:func:`fidelity.chart.uncertainty.
+  block_design_effect`) is what this study checks.
 
 The spread is the sample standard deviation over the trials; the mean ΔE over the trials stands
 in for the expectation. With N trials a coverage fraction has a binomial standard error of
@@ -112,6 +118,59 @@ def audit_study(camera: Any, trials: int) -> dict[str, Any]:
         comps.append({c.name: c.value for c in m.uncertainty.components})
     out = coverage(des, us)
     out["components_mean"] = {k: float(np.mean([c[k] for c in comps])) for k in comps[0]}
+    return out
+
+
+#: Sensor noise of the photo studies (:func:`benchmarks.chart_scenes.make_scene`'s scale: the
+#: top of the range its photos are drawn from).
+PHOTO_NOISE = 0.02
+
+
+def photo_study(coco: Path, trials: int, noise: float, seed: int = 7, quality: int | None = 90,
+                crop: bool = True) -> dict[str, Any]:
+    """One synthetic photo (:func:`benchmarks.chart_scenes.make_scene`: the chart under a
+    homography in a COCO photo, 1600 px) captured ``trials`` times: each capture its own sensor
+    noise, cropped by up to a tenth of each side (the chart kept inside, so the finder sees it
+    elsewhere in another context and the JPEG's 8 x 8 blocks fall elsewhere on it), encoded as
+    a quality-90 JPEG and audited as a user would (``fidelity.audit_image`` of the file: the
+    chart found, exposure fitted)."""
+    import cv2
+
+    import fidelity
+    from benchmarks.chart_scenes import make_scene
+    from fidelity.colour.charts import DEFAULT_CHART, load_chart
+    from fidelity.colour.colorimetry import linearize_srgb
+
+    background = sorted(coco.glob("*.jpg"))[0]
+    patches = linearize_srgb(np.clip(load_chart(DEFAULT_CHART).srgb, 0.0, 1.0))
+    des, us, comps = [], [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for trial in range(trials):
+            scene = make_scene("classic", str(background), patches, seed=seed, long_side=1600,
+                               jpeg=False, hard=False, noise_seed=trial, noise_level=noise)
+            assert scene.corners is not None
+            rng = np.random.default_rng((seed, trial))
+            h, w = scene.srgb.shape[:2]
+            lo, hi = scene.corners.min(axis=0), scene.corners.max(axis=0)
+            x0, y0, x1, y1 = 0, 0, w, h
+            if crop:
+                x0 = int(min(rng.uniform(0, 0.1) * w, max(lo[0] - 40, 0)))
+                y0 = int(min(rng.uniform(0, 0.1) * h, max(lo[1] - 40, 0)))
+                x1 = int(max(w - rng.uniform(0, 0.1) * w, min(hi[0] + 40, w)))
+                y1 = int(max(h - rng.uniform(0, 0.1) * h, min(hi[1] + 40, h)))
+            cut = np.ascontiguousarray(scene.srgb[y0:y1, x0:x1, ::-1])
+            path = Path(tmp) / f"capture_{trial:03d}.{'jpg' if quality else 'png'}"
+            ok = cv2.imwrite(str(path), cut, [cv2.IMWRITE_JPEG_QUALITY, quality] if quality
+                             else [])
+            assert ok
+            report = fidelity.audit_image(path)
+            assert report.uncertainty is not None
+            des.append(report.mean_delta_e)
+            us.append(report.uncertainty.combined)
+            comps.append({c.name: c.value for c in report.uncertainty.components})
+    out = coverage(des, us)
+    out["components_mean"] = {k: float(np.mean([c[k] for c in comps])) for k in comps[0]}
+    out["background"] = background.name
     return out
 
 
@@ -229,6 +288,18 @@ def markdown(result: dict[str, Any]) -> str:
     for name, s in result["coverage"].items():
         comps = ", ".join(f"{k} {v:.4f}" for k, v in s["components_mean"].items())
         lines.append(f"- {name}: {comps}")
+    wide = [(name, s) for name, s in result["coverage"].items() if s["sd_over_rms_u"] < 0.7]
+    if wide:
+        lines += ["", "Where the stated u is wider than the spread (sd / u below 0.7), its largest "
+                      "component:", ""]
+        for name, s in wide:
+            top, value = max(s["components_mean"].items(), key=lambda kv: kv[1])
+            share = value ** 2 / sum(v ** 2 for v in s["components_mean"].values())
+            kind = ("the type B bound on the rounding of codes that vary by less than one "
+                    "step within a window (JPEG's smoothing leaves such channels): a bound "
+                    "that a spread over captures does not test" if top == "rounding" else
+                    "not tested by a spread over captures")
+            lines.append(f"- {name}: {top} {value:.4f}, {100 * share:.0f} % of u², {kind}")
     cost = result.get("cost")
     if cost and cost.get("share"):
         lines += ["", "What the uncertainty costs on top of an audit (requirement: at most 20 %): "
@@ -261,6 +332,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=100)
     ap.add_argument("--audit-trials", type=int, default=50)
+    ap.add_argument("--photo-trials", type=int, default=50)
+    ap.add_argument("--coco", type=Path, default=None,
+                    help="COCO photos for the photo studies (default: the shared data's)")
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--anchor", default="38ac479",
                     help="commit of the code before the uncertainty (the cost's anchor)")
@@ -278,6 +352,17 @@ def main(argv: list[str] | None = None) -> int:
         result["coverage"]["render noisy"] = render_study(noisy_camera(), args.trials)
         result["coverage"]["audit noisy (fixed white balance)"] = audit_study(
             noisy_camera(fixed_white_balance=True), args.audit_trials)
+        coco = args.coco
+        if coco is None:
+            from fidelity.resources import shared_dir
+
+            shared = shared_dir()
+            coco = shared / "coco" / "val2017" if shared is not None else None
+        if coco is not None and coco.is_dir():
+            for name, quality in (("PNG", None), ("JPEG quality 90", 90),
+                                  ("JPEG quality 75", 75)):
+                result["coverage"][f"photo captures, {name}"] = photo_study(
+                    coco, args.photo_trials, PHOTO_NOISE, quality=quality)
     if not args.no_cost:
         result["cost"] = cost_study(args.anchor, args.repeats)
     OUT.mkdir(parents=True, exist_ok=True)

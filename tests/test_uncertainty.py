@@ -235,3 +235,81 @@ def test_chart_function_leaves_out_the_patches_the_measurement_leaves_out():
     de = delta_e_2000(srgb_to_lab(np.clip(delinearize_srgb(linear), 0, 1)), lab)
     assert f_all(linear[None])[0] == pytest.approx(de.mean(), rel=1e-12)
     assert f_used(linear[None])[0] == pytest.approx(de[used].mean(), rel=1e-12)
+
+
+def test_block_design_effect_matches_its_closed_form():
+    """Pixels sharing an offset per 16 x 16 block (variance s_b^2) plus their own noise
+    (s_e^2): the mean's variance is s_b^2 / B + s_e^2 / n, the independent-pixel value
+    (s_b^2 + s_e^2) / n, so the design effect is (m s_b^2 + s_e^2) / (s_b^2 + s_e^2) with m
+    pixels a block (Kish 1965, 5.4). Independent pixels: 1 (never below). Too few blocks: 1."""
+    rng = np.random.default_rng(3)
+    side, b = 16, unc.BLOCK_PX
+    rows, cols = np.mgrid[0:side * b, 0:side * b]
+    blocks = unc.image_blocks(rows.ravel(), cols.ravel(), side * b)
+    m = b * b
+    designs = []
+    for _ in range(20):
+        offsets = rng.normal(0, 1.0, (side, side, 3))
+        pixels = (np.repeat(np.repeat(offsets, b, 0), b, 1)
+                  + rng.normal(0, 1.0, (side * b, side * b, 3))).reshape(-1, 3)
+        designs.append(unc.block_design_effect(pixels, blocks))
+    expected = (m * 1.0 + 1.0) / 2.0
+    assert np.mean(designs) == pytest.approx(expected, rel=0.1)
+    plain = [unc.block_design_effect(rng.normal(0, 1, (side * b * side * b, 3)), blocks)
+             for _ in range(20)]
+    assert np.all(np.array(plain) >= 1.0) and np.mean(plain) < 1.25
+    few = unc.image_blocks(*np.mgrid[0:20, 0:20].reshape(2, -1), 20)  # 4 blocks
+    assert np.array_equal(unc.block_design_effect(rng.normal(0, 1, (400, 3)), few), np.ones(3))
+    flat = np.ones((side * b * side * b, 3))
+    assert np.array_equal(unc.block_design_effect(flat, blocks), np.ones(3))
+
+
+def test_jpeg_patch_mean_spread_is_covered_with_the_design_effect():
+    """A flat patch with pixel noise stored as JPEG (quality 90, 4:2:0) 40 times: the spread
+    of its mean over the captures against the stated standard error. JPEG's blocks correlate
+    the pixels: the independent-pixel cov / n under-states the spread by far, the design
+    effect brings it to the spread."""
+    import cv2
+
+    rng = np.random.default_rng(11)
+    size = 128
+    rows, cols = np.mgrid[0:size, 0:size]
+    blocks = unc.image_blocks(rows.ravel(), cols.ravel(), size)
+    means, plain, designed = [], [], []
+    for _ in range(40):
+        img = np.clip(np.rint(rng.normal([120, 90, 60], 6.0, (size, size, 3))), 0, 255)
+        ok, buf = cv2.imencode(".jpg", img.astype(np.uint8), [cv2.IMWRITE_JPEG_QUALITY, 90])
+        assert ok
+        px = cv2.imdecode(buf, cv2.IMREAD_COLOR).reshape(-1, 3).astype(np.float64)
+        spread = unc.patch_spread(px, blocks=blocks)
+        assert spread.design is not None
+        se = np.sqrt(np.diag(spread.covariance) / spread.count)
+        means.append(px.mean(axis=0))
+        plain.append(se)
+        designed.append(se * np.sqrt(spread.design))
+    observed = np.std(means, axis=0, ddof=1)
+    assert np.all(observed / np.sqrt(np.mean(np.square(plain), axis=0)) > 1.5)
+    ratio = observed / np.sqrt(np.mean(np.square(designed), axis=0))
+    assert np.all((ratio > 0.6) & (ratio < 1.5)), ratio
+
+
+def test_white_balance_subsample_gives_the_whole_windows_component(monkeypatch):
+    """The white-balance component from 64 pixels of each window equals, within its Monte
+    Carlo noise, the one from every pixel of the windows (the subsample gives each draw's
+    change about the measured means)."""
+    import fidelity.camera.render as render
+
+    cam = load_camera("nikon-5100")
+    cam = replace(cam, noise=Noise(full_well=3000.0, read_noise=5.0))
+
+    def component(pixels: int) -> float:
+        monkeypatch.setattr(render, "WHITE_BALANCE_PIXELS", pixels)
+        values = []
+        for seed in range(12):
+            r = render_chart(cam, seed=seed)
+            assert r.uncertainty is not None
+            values.append(next(c.value for c in r.uncertainty.components
+                               if c.name == "camera white balance"))
+        return float(np.mean(values))
+
+    assert component(64) == pytest.approx(component(10**6), rel=0.1)

@@ -52,8 +52,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fidelity.chart.image import Image, ImageInfo, OneChannelError, as_float32, is_coded
-from fidelity.chart.locate import DEFAULT_WINDOW, ChartLocation, locate_chart
-from fidelity.chart.uncertainty import PatchSpread, UncertaintyBudget, patch_spread
+from fidelity.chart.locate import DEFAULT_WINDOW, ChartLocation, PatchWindow, locate_chart
+from fidelity.chart.uncertainty import (
+    PatchSpread,
+    UncertaintyBudget,
+    image_blocks,
+    patch_spread,
+)
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import DEFAULT_REFERENCE, Reference, load_reference
 from fidelity.colour.colorimetry import delta_e_2000, delta_e_2000_components, srgb_to_lab
@@ -650,17 +655,24 @@ def _patch_noise(vals: np.ndarray, scale: float, encoding: str, negatives: str,
 
 
 def _window_spread(vals: np.ndarray, linear: np.ndarray | None, encoding: str, negatives: str,
-                   to_srgb: np.ndarray, identity: bool, step: float | None) -> PatchSpread:
+                   to_srgb: np.ndarray, identity: bool, step: float | None,
+                   window: PatchWindow, width: int) -> PatchSpread:
     """The :class:`~fidelity.chart.uncertainty.PatchSpread` of one window's values ``vals``
     ``(n, 3)``: ``linear`` its valid pixels in linear sRGB when already computed, the code
-    values (:func:`as_float32`) when the pixels are integer codes (``step``)."""
+    values (:func:`as_float32`) when the pixels are integer codes (``step``); the design
+    effect of correlated neighbours from the image's blocks the ``window`` touches (an image
+    ``width`` pixels wide), when every pixel of it is valid."""
     if linear is None:
         linear, _ = _patch_linear(vals, encoding, negatives, to_srgb, identity)
     codes = None
     if step:
         v = as_float32(vals).astype(np.float64)
         codes = v if is_coded(vals) else v[~_bad_counts(v, negatives)[0]]
-    return patch_spread(linear, codes)
+    blocks = None
+    if len(linear) == len(vals):
+        rows, cols = window.indices()
+        blocks = image_blocks(rows, cols, width)
+    return patch_spread(linear, codes, blocks)
 
 
 def measure_pixels(
@@ -769,7 +781,8 @@ def measure_pixels(
             valid = len(lin)
         if uncertainty:  # one window's spread at a time: never every window's pixels at once
             spreads.append(_window_spread(vals, lin if not coded else None, encoding,
-                                          negatives, to_srgb, identity, step))
+                                          negatives, to_srgb, identity, step, win,
+                                          arr.shape[1]))
         for key in totals:
             totals[key] += counts[key]
         if counts["total"]:
@@ -956,7 +969,8 @@ def image_uncertainty(
                or list(reference.neutral_indices))
     f = unc.linear_chart_function(ref_lab, neutral, exposure_ev, used=used)
     covs, notes = unc.spread_covariances(spreads, patch_names=reference.patch_names)
-    noise, _ = unc.noise_component((), linear_means, f, covariances=covs)
+    noise, _ = unc.noise_component((), linear_means, f, covariances=covs,
+                                   designs=[sp.design for sp in spreads])
     identity = np.array_equal(to_srgb, np.eye(3))
 
     def to_linear(v: np.ndarray) -> np.ndarray:

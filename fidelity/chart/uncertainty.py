@@ -9,7 +9,9 @@ Components, each evaluated with the others held at their measured values:
 
 ``pixel noise`` (Type A)
     Each patch mean's covariance from its own window: the sample covariance of the pixels over
-    ``n`` (a plain mean: the audit of an image, in linear light), or the Tukey-McLaughlin
+    ``n`` (a plain mean: the audit of an image, in linear light; each channel's variance
+    raised by its design effect, :func:`block_design_effect`, where neighbouring pixels'
+    errors are alike: JPEG blocks, demosaicing, denoising), or the Tukey-McLaughlin
     winsorised covariance over ``(1 - 2 g)^2 n`` (a ``g``-trimmed mean: a camera render's
     patch sampling). Means drawn from the normal distribution with that covariance (the
     analytic standard error, propagated by Monte Carlo). An auto exposure is refitted on every
@@ -60,6 +62,12 @@ PLACEMENT_DRAWS = 24
 SEED = 20251125
 #: Fewest valid pixels a patch needs to estimate its own noise.
 MIN_NOISE_PIXELS = 3
+#: Side (px) of the image's blocks whose means show noise correlated between neighbouring
+#: pixels (:func:`block_design_effect`): a 4:2:0 JPEG's minimum coded unit, over which its
+#: chroma DCT block (and the DC quantisation of its luma blocks) spreads an error alike.
+BLOCK_PX = 16
+#: Fewest blocks a window must touch for their means to estimate its design effect.
+MIN_BLOCKS = 6
 #: Placement standard uncertainty per axis of a corner not refined by the finder (px): a
 #: rectangular distribution over one pixel (1/√12).
 UNREFINED_PLACEMENT_PX = 1.0 / math.sqrt(12.0)
@@ -239,7 +247,10 @@ class PatchSpread:
     ``count`` pixels; ``covariance`` ``(3, 3)``: their sample covariance (ddof 1) in the fit's
     linear domain, zero for fewer than two pixels; ``flat`` ``(3,)``: channels whose pixels are
     all equal (exactly no noise); ``code_mean`` / ``code_std`` ``(3,)``: mean and standard
-    deviation of the integer codes' values (``code / (2**bits - 1)``), None for float pixels.
+    deviation of the integer codes' values (``code / (2**bits - 1)``), None for float pixels;
+    ``design`` ``(3,)``: per channel, the factor by which correlation between neighbouring
+    pixels raises the variance of the mean over ``covariance / count``
+    (:func:`block_design_effect`; ones when not estimated).
     """
 
     count: int
@@ -247,21 +258,74 @@ class PatchSpread:
     flat: NDArray[np.bool_]
     code_mean: F64 | None = None
     code_std: F64 | None = None
+    design: F64 | None = None
 
 
-def patch_spread(linear: F64, codes: F64 | None = None) -> PatchSpread:
+def block_design_effect(values: F64, blocks: NDArray[np.int64],
+                        min_blocks: int = MIN_BLOCKS) -> F64:
+    """Per channel, how much correlation between neighbouring pixels raises the variance of
+    the mean of ``values`` ``(n, 3)`` over the independent-pixel ``var / n``: the design effect
+    of cluster sampling (Kish, *Survey Sampling*, 1965, 5.4), the image's
+    :data:`BLOCK_PX`-square blocks (``blocks`` ``(n,)``: each pixel's block) taken as the
+    clusters. The mean's variance from the block means ``m_b`` of ``n_b`` pixels, ``B`` blocks
+    (the ultimate-cluster estimator of a ratio mean, Kish 6.3)::
+
+        v = B / (B - 1) * sum_b (n_b / n)^2 (m_b - m)^2
+
+    and the design effect ``max(1, v / (var / n))``: never below the independent-pixel
+    value. Ones for a window touching fewer than ``min_blocks`` blocks (too few to estimate)
+    and for a channel without variance. JPEG's block-wise quantisation (its DC terms above
+    all), demosaicing, denoising and sharpening correlate neighbouring pixels; for independent
+    pixels the factor is 1 on average."""
+    x = np.asarray(values, np.float64).reshape(-1, 3)
+    n = x.shape[0]
+    ids, inverse, sizes = np.unique(np.asarray(blocks).reshape(-1), return_inverse=True,
+                                    return_counts=True)
+    count = ids.size
+    if count < min_blocks or n < 2 or count != inverse.max(initial=-1) + 1:
+        return np.ones(3)
+    sums = np.zeros((count, 3))
+    np.add.at(sums, inverse, x)
+    mean = x.mean(axis=0)
+    dev = sums / sizes[:, None] - mean
+    cluster = count / (count - 1) * (((sizes / n)[:, None] * dev) ** 2).sum(axis=0)
+    plain = x.var(axis=0, ddof=1) / n
+    out = np.ones(3)
+    positive = plain > 0
+    out[positive] = np.maximum(1.0, cluster[positive] / plain[positive])
+    return out
+
+
+def image_blocks(rows: NDArray[np.int64], cols: NDArray[np.int64], width: int
+                 ) -> NDArray[np.int64]:
+    """Each pixel's :data:`BLOCK_PX`-square block of the image (blocks counted from the
+    image's top-left corner, as a JPEG's minimum coded units are), for
+    :func:`block_design_effect`."""
+    across = -(-int(width) // BLOCK_PX)
+    out: NDArray[np.int64] = (np.asarray(rows) // BLOCK_PX) * across + \
+        np.asarray(cols) // BLOCK_PX
+    return out
+
+
+def patch_spread(linear: F64, codes: F64 | None = None,
+                 blocks: NDArray[np.int64] | None = None) -> PatchSpread:
     """The :class:`PatchSpread` of one window: ``linear`` ``(n, 3)`` valid pixels in the fit's
-    domain, ``codes`` ``(n, 3)`` the same pixels' code values (integer images only)."""
+    domain, ``codes`` ``(n, 3)`` the same pixels' code values (integer images only),
+    ``blocks`` ``(n,)`` each pixel's image block (:func:`image_blocks`), for the design effect
+    of correlated neighbours (:func:`block_design_effect`; none without)."""
     x = np.asarray(linear, np.float64).reshape(-1, 3)
     n = x.shape[0]
     cov = (np.atleast_2d(np.cov(x, rowvar=False, ddof=1)) if n >= 2 else np.zeros((3, 3)))
     flat = (np.ptp(x, axis=0) == 0) if n else np.ones(3, bool)
+    design = None  # not estimated: no blocks given, or too few touched
+    if blocks is not None and len(blocks) == n and np.unique(blocks).size >= MIN_BLOCKS:
+        design = block_design_effect(x, blocks)
     if codes is None:
-        return PatchSpread(n, cov, flat)
+        return PatchSpread(n, cov, flat, design=design)
     c = np.asarray(codes, np.float64).reshape(-1, 3)
     if not len(c):
-        return PatchSpread(n, cov, flat, np.zeros(3), np.zeros(3))
-    return PatchSpread(n, cov, flat, c.mean(axis=0), c.std(axis=0))
+        return PatchSpread(n, cov, flat, np.zeros(3), np.zeros(3), design)
+    return PatchSpread(n, cov, flat, c.mean(axis=0), c.std(axis=0), design)
 
 
 def patch_covariances(samples: Sequence[F64], *, trim: float = 0.0,
@@ -304,6 +368,9 @@ def spread_covariances(spreads: Sequence[PatchSpread], *,
         per_pixel[k][sp.flat, :] = 0.0
         per_pixel[k][:, sp.flat] = 0.0
         covs[k] = per_pixel[k] / sp.count
+        if sp.design is not None:  # each channel's variance raised by its design effect
+            root = np.sqrt(sp.design)
+            covs[k] = covs[k] * root[:, None] * root[None, :]
     notes: list[str] = []
     if small:
         others = [k for k in range(n) if k not in small]
@@ -325,12 +392,13 @@ def spread_covariances(spreads: Sequence[PatchSpread], *,
 def noise_component(samples: Sequence[F64], means: F64, f: ChartFunction, *,
                     trim: float = 0.0, patch_names: Sequence[str] | None = None,
                     rng: np.random.Generator | None = None, draws: int = DRAWS,
-                    covariances: F64 | None = None,
+                    covariances: F64 | None = None, designs: Sequence[F64 | None] = (),
                     ) -> tuple[UncertaintyComponent, tuple[str, ...]]:
     """The ``pixel noise`` component of ``f`` at ``means`` ``(n, 3)`` from each patch's
     ``samples`` ``(n_k, 3)`` (module docstring; ``covariances``: those of
-    :func:`patch_covariances`, computed here when None), and the notes on patches too small
-    to estimate their own noise."""
+    :func:`patch_covariances` or :func:`spread_covariances`, computed here when None;
+    ``designs``: the windows' design effects those covariances carry, for the method's
+    words), and the notes on patches too small to estimate their own noise."""
     rng = rng if rng is not None else np.random.default_rng(SEED)
     notes: tuple[str, ...] = ()
     if covariances is None:
@@ -347,6 +415,13 @@ def noise_component(samples: Sequence[F64], means: F64, f: ChartFunction, *,
     how = ("sample covariance of each patch window's pixels / n" if trim == 0 else
            f"winsorised covariance of each patch window's pixels / ((1 - 2*{trim:g})^2 n) "
            f"({trim:g}-trimmed mean)")
+    estimated = [d for d in designs if d is not None]
+    if estimated:
+        top = max(float(np.max(d)) for d in estimated)
+        how += (f", each channel's variance raised by its design effect for neighbouring "
+                f"pixels alike ({BLOCK_PX} x {BLOCK_PX}-pixel blocks as clusters; "
+                f"{len(estimated)} of {len(designs)} windows over {MIN_BLOCKS} blocks or more, "
+                f"largest {top:.3g})")
     return (UncertaintyComponent(
         "pixel noise", value, "A",
         f"{how}; patch means drawn from the normal distribution with it, {draws} Monte Carlo "
