@@ -978,12 +978,12 @@ def image_uncertainty(
         return lin if identity else lin @ to_srgb.T
 
     to_measured = None
-    stuck = None
+    code_std = None
     if step:
         code_mean = np.array([s.code_mean if s.code_mean is not None else np.zeros(3)
                               for s in spreads])
-        stuck = np.array([s.code_std < step if s.code_std is not None and s.count else
-                          np.ones(3, bool) for s in spreads])
+        code_std = np.array([s.code_std if s.code_std is not None and s.count else
+                             np.zeros(3) for s in spreads])
         if encoding == "srgb":
             h = step / 2
             slope = (cm.linearize_srgb(code_mean + h) - cm.linearize_srgb(code_mean - h)) / (2 * h)
@@ -994,7 +994,7 @@ def image_uncertainty(
             lin = e * slope[None]
             return lin if identity else lin @ to_srgb.T
 
-    rounding = unc.rounding_component((), linear_means, f, step, stuck=stuck,
+    rounding = unc.rounding_component((), linear_means, f, step, code_std=code_std,
                                       to_measured=to_measured)
 
     if found is not None and math.isfinite(found.residual_px):
