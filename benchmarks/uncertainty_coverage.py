@@ -88,37 +88,36 @@ def noisy_camera(fixed_white_balance: bool = False) -> Any:
     return cam
 
 
+def summary(measured: list[tuple[float, Any]]) -> dict[str, Any]:
+    """:func:`coverage` of the (chart ΔE, its uncertainty budget) pairs, with each
+    component's mean."""
+    budgets = [b for _, b in measured]
+    assert all(b is not None for b in budgets)
+    out = coverage([v for v, _ in measured], [b.combined for b in budgets])
+    out["components_mean"] = {c.name: float(np.mean([b.component(c.name).value
+                                                     for b in budgets]))
+                              for c in budgets[0].components}
+    return out
+
+
 def render_study(camera: Any, trials: int) -> dict[str, Any]:
     from fidelity.camera.render import render_chart
 
-    des, us, comps = [], [], []
-    for seed in range(trials):
-        r = render_chart(camera, seed=seed)
-        assert r.uncertainty is not None
-        des.append(r.measurement.mean_delta_e)
-        us.append(r.uncertainty.combined)
-        comps.append({c.name: c.value for c in r.uncertainty.components})
-    out = coverage(des, us)
-    out["components_mean"] = {k: float(np.mean([c[k] for c in comps])) for k in comps[0]}
-    return out
+    renders = [render_chart(camera, seed=seed) for seed in range(trials)]
+    return summary([(r.measurement.mean_delta_e, r.uncertainty) for r in renders])
 
 
 def audit_study(camera: Any, trials: int) -> dict[str, Any]:
     from fidelity.camera.render import render_chart
     from fidelity.chart.measure import measure_pixels
 
-    des, us, comps = [], [], []
+    measured = []
     for seed in range(trials):
         r = render_chart(camera, seed=seed, pixels_per_patch=48)
         m = measure_pixels(r.display_image, None, encoding="srgb", exposure="auto",
                            reference="scene")
-        assert m.uncertainty is not None
-        des.append(m.mean_delta_e)
-        us.append(m.uncertainty.combined)
-        comps.append({c.name: c.value for c in m.uncertainty.components})
-    out = coverage(des, us)
-    out["components_mean"] = {k: float(np.mean([c[k] for c in comps])) for k in comps[0]}
-    return out
+        measured.append((m.mean_delta_e, m.uncertainty))
+    return summary(measured)
 
 
 #: Sensor noise of the photo studies (:func:`benchmarks.chart_scenes.make_scene`'s scale: the
@@ -143,7 +142,7 @@ def photo_study(coco: Path, trials: int, noise: float, seed: int = 7, quality: i
 
     background = sorted(coco.glob("*.jpg"))[0]
     patches = linearize_srgb(np.clip(load_chart(DEFAULT_CHART).srgb, 0.0, 1.0))
-    des, us, comps = [], [], []
+    measured = []
     with tempfile.TemporaryDirectory() as tmp:
         for trial in range(trials):
             scene = make_scene("classic", str(background), patches, seed=seed, long_side=1600,
@@ -164,14 +163,8 @@ def photo_study(coco: Path, trials: int, noise: float, seed: int = 7, quality: i
                              else [])
             assert ok
             report = fidelity.audit_image(path)
-            assert report.uncertainty is not None
-            des.append(report.mean_delta_e)
-            us.append(report.uncertainty.combined)
-            comps.append({c.name: c.value for c in report.uncertainty.components})
-    out = coverage(des, us)
-    out["components_mean"] = {k: float(np.mean([c[k] for c in comps])) for k in comps[0]}
-    out["background"] = background.name
-    return out
+            measured.append((report.mean_delta_e, report.uncertainty))
+    return summary(measured) | {"background": background.name}
 
 
 def _run(cmd: list[str], pythonpath: str, cwd: str) -> tuple[float, float, float]:
