@@ -458,8 +458,9 @@ def render_uncertainty(raw_image: ArrayLike, srgb_image: ArrayLike, layout: Char
             f"the camera's {camera.white_balance.method} white balance is estimated on the "
             f"noisy chart: its gains drawn from the raw patch means' standard errors "
             f"(winsorised covariance of each raw window), the windows' pixels developed with "
-            f"them ({WHITE_BALANCE_PIXELS} pixels of each window), {WHITE_BALANCE_DRAWS} Monte "
-            f"Carlo draws")
+            f"them (a seeded random {WHITE_BALANCE_PIXELS} pixels of each window, each draw's "
+            f"change of a window's mean added to the measured mean), {WHITE_BALANCE_DRAWS} "
+            f"Monte Carlo draws")
     else:
         wb = unc.UncertaintyComponent(
             "camera white balance", 0.0, "B",
