@@ -263,7 +263,7 @@ class PatchSpread:
 
 
 def block_design_effect(values: F64, blocks: NDArray[np.int64],
-                        min_blocks: int = MIN_BLOCKS) -> F64:
+                        min_blocks: int = MIN_BLOCKS) -> F64 | None:
     """Per channel, how much correlation between neighbouring pixels raises the variance of
     the mean of ``values`` ``(n, 3)`` over the independent-pixel ``var / n``: the design effect
     of cluster sampling (Kish, *Survey Sampling*, 1965, 5.4), the image's
@@ -274,8 +274,8 @@ def block_design_effect(values: F64, blocks: NDArray[np.int64],
         v = B / (B - 1) * sum_b (n_b / n)^2 (m_b - m)^2
 
     and the design effect ``max(1, v / (var / n))``: never below the independent-pixel
-    value. Ones for a window touching fewer than ``min_blocks`` blocks (too few to estimate)
-    and for a channel without variance. JPEG's block-wise quantisation (its DC terms above
+    value; 1 for a channel without variance. None for a window touching fewer than
+    ``min_blocks`` blocks (too few to estimate it). JPEG's block-wise quantisation (its DC terms above
     all), demosaicing, denoising and sharpening correlate neighbouring pixels; for independent
     pixels the factor is 1 on average."""
     x = np.asarray(values, np.float64).reshape(-1, 3)
@@ -283,8 +283,8 @@ def block_design_effect(values: F64, blocks: NDArray[np.int64],
     ids, inverse, sizes = np.unique(np.asarray(blocks).reshape(-1), return_inverse=True,
                                     return_counts=True)
     count = ids.size
-    if count < min_blocks or n < 2 or count != inverse.max(initial=-1) + 1:
-        return np.ones(3)
+    if count < min_blocks or n < 2:
+        return None
     sums = np.zeros((count, 3))
     np.add.at(sums, inverse, x)
     mean = x.mean(axis=0)
@@ -318,9 +318,8 @@ def patch_spread(linear: F64, codes: F64 | None = None,
     n = x.shape[0]
     cov = (np.atleast_2d(np.cov(x, rowvar=False, ddof=1)) if n >= 2 else np.zeros((3, 3)))
     flat = (np.ptp(x, axis=0) == 0) if n else np.ones(3, bool)
-    design = None  # not estimated: no blocks given, or too few touched
-    if blocks is not None and len(blocks) == n and np.unique(blocks).size >= MIN_BLOCKS:
-        design = block_design_effect(x, blocks)
+    design = (block_design_effect(x, blocks) if blocks is not None and len(blocks) == n
+              else None)  # None: not estimated (no blocks given, or too few touched)
     if codes is None:
         return PatchSpread(n, cov, flat, design=design)
     c = np.asarray(codes, np.float64).reshape(-1, 3)
