@@ -136,9 +136,13 @@ def _traced(kind: str, role: str, path: str | os.PathLike[str]) -> TracedFile:
 
 def traced_files(record: JSONObject, results: Sequence[str | os.PathLike[str]]
                  ) -> list[TracedFile]:
-    """The run's files: every input file of the record's subjects (images, camera files, the
-    prediction and calibration tables) and the settings file read, then its results: a fit's correction files and
-    ``results`` (the files the run wrote), each once, with its SHA3-256 read now."""
+    """The run's files: every file the record names
+    (:func:`fidelity.report.evidence.record_files`: the subjects' images, camera files,
+    prediction and calibration tables and the settings file read, then a fit's correction
+    files, as results), then ``results`` (the files the run wrote), each once, with its
+    SHA3-256 read now."""
+    from fidelity.report.evidence import record_files
+
     seen: set[Path] = set()
     out: list[TracedFile] = []
 
@@ -150,17 +154,14 @@ def traced_files(record: JSONObject, results: Sequence[str | os.PathLike[str]]
             seen.add(key)
             out.append(_traced(kind, role, path))
 
-    for subject in record.get("subjects", []):
-        for item in subject.get("inputs") or []:
-            add("input", item["role"], item.get("path"))
-        table = subject.get("prediction_table") or {}
-        add("input", "prediction table", table.get("path"))
-        add("input", "calibration table", (table.get("calibration") or {}).get("path"))
-    add("input", "settings file", ((record.get("invocation") or {}).get("settings") or {})
-        .get("path"))
-    for subject in record.get("subjects", []):  # a fit's correction files
-        for name, item in ((subject.get("correction") or {}).get("files") or {}).items():
-            add("result", Path(item.get("path") or name).name, item.get("path"))
+    roles = {"prediction table": "prediction table", "calibration table": "calibration table",
+             "settings": "settings file"}
+    for kind, name, item in record_files(record):
+        path = item.get("path")
+        if kind == "output":  # a fit's correction files
+            add("result", Path(path or name).name, path)
+        else:
+            add("input", roles.get(kind, name), path)
     for path in results:
         add("result", Path(path).name, path)
     return out

@@ -332,20 +332,10 @@ def verify_document(doc: Mapping[str, Any], path: str | os.PathLike[str], *,
         findings.append(_file_finding(kind, name, file.get("path"), file.get("sha256"), cwd,
                                       record_dir, where))
 
-    for subject in doc["subjects"]:
-        for item in subject["inputs"]:
-            if item["path"] is not None:  # render settings: provenance, no file
-                add("input", item["role"], item)
-        table = subject.get("prediction_table")
-        if table:
-            add("prediction table", table["name"], table)
-            calibration = table.get("calibration")
-            if calibration:
-                add("calibration table", calibration.get("name") or "calibration", calibration)
-        for name, file in ((subject.get("correction") or {}).get("files") or {}).items():
-            add("output", name, file)
-    if invocation.get("settings"):
-        add("settings", "file", invocation["settings"])
+    from fidelity.report.evidence import record_files
+
+    for kind, name, file in record_files(doc):
+        add(kind, name, file)
     findings.append(_code_finding(doc["tool"]))
     findings.append(_environment_finding(doc["environment"]))
     rec = doc["record"]
