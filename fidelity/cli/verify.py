@@ -26,9 +26,19 @@ OUTPUTS: Mapping[str, str] = {"out_dir": "out", "out": "out", "json_path": "run.
                               "html_path": "run.html", "junit": "junit.xml",
                               "evidence_paths": "record.json"}
 
-#: The group's own options (before the command) and whether each takes a value.
-GROUP_OPTIONS: Mapping[str, bool] = {"-v": False, "--verbose": False, "--no-config": False,
-                                     "--config": True}
+
+def _options(command: click.Command) -> dict[str, click.Option]:
+    """Each option string of ``command`` (``--no-report`` too) and its option."""
+    out: dict[str, click.Option] = {}
+    for param in command.params:
+        if isinstance(param, click.Option):
+            out.update({o: param for o in (*param.opts, *param.secondary_opts)})
+    return out
+
+
+def _takes_value(command: click.Command) -> dict[str, bool]:
+    """Each option string of ``command`` and whether a value follows it."""
+    return {o: not (p.is_flag or p.count) for o, p in _options(command).items()}
 
 
 def rerun_argv(argv: Sequence[str], folder: Path, settings: str | None = None,
@@ -40,12 +50,13 @@ def rerun_argv(argv: Sequence[str], folder: Path, settings: str | None = None,
     settings file is the recorded one: ``settings`` (its path) named with ``--config``, or
     ``--no-config`` when none was read, unless the command line says which. Raises
     :class:`click.UsageError` for a command not in :data:`RERUNNABLE`."""
-    from fidelity.cli import COMMANDS
+    from fidelity.cli import COMMANDS, main
 
+    values = _takes_value(main)  # the group's own options, before the command
     head: list[str] = []
     i = 0
     while i < len(argv) and argv[i].startswith("-"):
-        takes = GROUP_OPTIONS.get(argv[i].split("=", 1)[0], False) and "=" not in argv[i]
+        takes = values.get(argv[i].split("=", 1)[0], False) and "=" not in argv[i]
         head += argv[i:i + 1 + takes]
         i += 1 + takes
     if not any(t.split("=", 1)[0] in ("--config", "--no-config") for t in head):
@@ -56,10 +67,7 @@ def rerun_argv(argv: Sequence[str], folder: Path, settings: str | None = None,
                                f"--rerun repeats {', '.join(RERUNNABLE)}")
     module, attr = COMMANDS[name][0].split(":")
     command: click.Command = getattr(importlib.import_module(module), attr)
-    options: dict[str, click.Option] = {}
-    for param in command.params:
-        if isinstance(param, click.Option):
-            options.update({o: param for o in (*param.opts, *param.secondary_opts)})
+    options = _options(command)
     kept: list[str] = []
     given = set(configured)
     rest = list(argv[i + 1:])
