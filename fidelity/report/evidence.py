@@ -37,7 +37,7 @@ import hashlib
 import os
 import platform
 import subprocess
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -152,34 +152,6 @@ def invocation_record(argv: Sequence[str], settings: PathArg | None = None,
             digest = None
         read = {"path": path, "sha256": digest}
     return {"argv": [os.fsdecode(a) for a in argv], "cwd": folder, "settings": read}
-
-
-def record_files(record: Mapping[str, Any]
-                 ) -> Iterator[tuple[str, str, Mapping[str, Any]]]:
-    """The files a credibility record names, as ``(kind, name, entry)`` with the entry's
-    recorded ``path`` and ``sha256``: each subject's input files (``input``, its role), its
-    prediction table (``prediction table``, the table's name) and that table's
-    ``calibration table``; then the ``settings`` ``file`` read; then each fit's written files
-    (``output``, the file's key). Inputs without a path (render settings) are no file. A file
-    several subjects name comes once per subject: the callers decide what counts as the
-    same."""
-    subjects = record.get("subjects") or []
-    for subject in subjects:
-        for item in subject.get("inputs") or []:
-            if item.get("path") is not None:
-                yield "input", item["role"], item
-        table = subject.get("prediction_table")
-        if table:
-            yield "prediction table", table["name"], table
-            calibration = table.get("calibration")
-            if calibration:
-                yield "calibration table", calibration.get("name") or "calibration", calibration
-    settings = (record.get("invocation") or {}).get("settings")
-    if settings:
-        yield "settings", "file", settings
-    for subject in subjects:
-        for name, item in ((subject.get("correction") or {}).get("files") or {}).items():
-            yield "output", name, item
 
 
 def _file_input(role: str, path: str | os.PathLike[str], sha256: str | None = None,
@@ -469,6 +441,5 @@ def write_fit_evidence(paths: PathArg | Sequence[PathArg], report: FitReport,
 __all__ = ["CREDIBILITY_SECTIONS", "EVIDENCE_FORMATS", "EVIDENCE_SCHEMA_VERSION", "OUTCOMES",
            "WRITERS", "code_sha256", "environment_record", "evidence_format",
            "evidence_record", "evidence_schema", "evidence_schema_path",
-           "fit_evidence_record", "git_commit", "invocation_record", "record_files",
-           "tool_record", "write_evidence",
+           "fit_evidence_record", "git_commit", "invocation_record", "tool_record", "write_evidence",
            "write_fit_evidence", "write_record"]

@@ -137,11 +137,11 @@ def _traced(kind: str, role: str, path: str | os.PathLike[str]) -> TracedFile:
 def traced_files(record: JSONObject, results: Sequence[str | os.PathLike[str]]
                  ) -> list[TracedFile]:
     """The run's files: every file the record names
-    (:func:`fidelity.report.evidence.record_files`: the subjects' images, camera files,
+    (:func:`fidelity.report.recordfiles.record_files`: the subjects' images, camera files,
     prediction and calibration tables and the settings file read, then a fit's correction
     files, as results), then ``results`` (the files the run wrote), each once, with its
     SHA3-256 read now."""
-    from fidelity.report.evidence import record_files
+    from fidelity.report.recordfiles import record_files
 
     seen: set[Path] = set()
     out: list[TracedFile] = []

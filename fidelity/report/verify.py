@@ -332,7 +332,7 @@ def verify_document(doc: Mapping[str, Any], path: str | os.PathLike[str], *,
         findings.append(_file_finding(kind, name, file.get("path"), file.get("sha256"), cwd,
                                       record_dir, where))
 
-    from fidelity.report.evidence import record_files
+    from fidelity.report.recordfiles import record_files
 
     for kind, name, file in record_files(doc):
         add(kind, name, file)
