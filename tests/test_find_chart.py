@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 
+import cv2
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -21,9 +22,12 @@ from test_audit import GRID_CORNERS, draw_chart, map_points, write_exr
 from benchmarks.chart_scenes import corners_correct, make_scene
 from fidelity.chart.find import (
     MIN_CONFIDENCE,
+    Quads,
     check_corners,
     find_chart,
     make_view,
+    patch_side,
+    perspective_bias,
     placement_scores,
 )
 from fidelity.chart.measure import ReadOptions, measure_image, measure_pixels
@@ -211,3 +215,29 @@ def test_a_view_is_the_image_scaled_by_its_peak_and_encoded_to_8_bit_bgr(encodin
     near = np.abs(view.bgr8[..., ::-1].astype(int) - codes)
     assert near.max() <= 1 and (near == 0).mean() > 0.99  # float32 steps at a code boundary
     np.testing.assert_array_equal(view.to_image, np.eye(3))
+
+
+def test_perspective_bias_moves_outline_centroids_onto_the_patch_centres() -> None:
+    # Closed form: a homography maps a square's centre to the crossing of its image's
+    # diagonals, not to the image's centroid; centroid less bias is the mapped centre.
+    h = np.array([[130.0, 20.0, 400.0], [-10.0, 90.0, 250.0], [0.12, -0.05, 1.0]])  # grid->px
+    cells = np.array([[0.0, 0.0], [5.0, 3.0], [2.0, 1.0]])
+    side = 0.8
+    half = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * side / 2
+    squares = cells[:, None, :] + half
+    img = cv2.perspectiveTransform(squares.reshape(1, -1, 2), h).reshape(-1, 4, 2)
+    centroids = []
+    for q in img:
+        m = cv2.moments(q.astype(np.float32))
+        centroids.append([m["m10"] / m["m00"], m["m01"] / m["m00"]])
+    want = cv2.perspectiveTransform(cells[None], h)[0]
+    bias = perspective_bias(h, cells, side)
+    np.testing.assert_allclose(np.array(centroids) - bias, want, atol=1e-3)  # float32 moments
+    assert np.max(np.abs(np.array(centroids) - want)) > 1.0  # the bias is real: pixels
+    # the side comes back from the outlines; an affine map has no bias
+    quads = Quads(img, np.array(centroids), np.ones(len(img)))
+    assert patch_side(h, quads, np.arange(len(img))) == pytest.approx(side, rel=1e-9)
+    affine = np.array([[130.0, 20.0, 400.0], [-10.0, 90.0, 250.0], [0.0, 0.0, 1.0]])
+    np.testing.assert_allclose(perspective_bias(affine, cells, side), 0.0, atol=1e-12)
+    # a degenerate homography gives no NaN
+    assert np.all(np.isfinite(perspective_bias(np.zeros((3, 3)), cells, side)))
