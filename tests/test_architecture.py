@@ -9,7 +9,7 @@ two modules together). The layers, lowest first, are the ones docs/development.m
 2. ``camera``, ``chart``, ``correction``
 3. ``prediction``, ``scene`` (the chart scene for simulators: colour + camera data)
 4. ``coco``
-5. the chart pipeline: ``records``, ``check``, ``compare``, ``fit``
+5. the chart pipeline: ``records``, ``check``, ``compare``, ``fit``, ``qualify``
 6. ``report``
 7. the edges: ``config``, ``environment``, ``cli``, ``pytest_plugin``, ``__main__`` and the
    package itself (its lazy public API)
@@ -34,7 +34,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("fidelity.camera", "fidelity.chart", "fidelity.correction"),
     ("fidelity.prediction", "fidelity.scene"),
     ("fidelity.coco",),
-    ("fidelity.records", "fidelity.check", "fidelity.compare", "fidelity.fit"),
+    ("fidelity.records", "fidelity.check", "fidelity.compare", "fidelity.fit",
+     "fidelity.qualify"),
     ("fidelity.report",),
     ("fidelity.config", "fidelity.environment", "fidelity.cli", "fidelity.pytest_plugin",
      "fidelity.__main__", "fidelity"),

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import colour
 import numpy as np
 import pytest
@@ -23,10 +21,9 @@ from fidelity.colour.colorimetry import (
     xyz_to_lab,
 )
 from fidelity.errors import InvalidValueError, UnknownNameError
+from fidelity.qualify import sharma_pairs
 
-DATA = Path(__file__).parent / "data"
-
-SHARMA = np.loadtxt(DATA / "ciede2000_sharma2005.txt")
+SHARMA = sharma_pairs()
 D65_XY = np.array([0.3127, 0.3290])
 
 

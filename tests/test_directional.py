@@ -13,9 +13,10 @@ from fidelity.colour.charts import load_chart
 from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
 from fidelity.prediction import directional as dr
 from fidelity.prediction.transforms import TRANSFORMS
+from fidelity.qualify import sharma_pairs
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARMA = np.loadtxt(ROOT / "tests" / "data" / "ciede2000_sharma2005.txt")
+SHARMA = sharma_pairs()
 
 
 def test_weighted_terms_rebuild_ciede2000_on_sharma_pairs():

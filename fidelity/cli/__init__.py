@@ -65,6 +65,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
              "Versions, Mitsuba variant, ONNX providers, chart detection, shared data found."),
     "predict": ("fidelity.cli.predict:predict_cmd",
                 "Predict what a chart ΔE costs detectors, or the ΔE limit of a loss budget."),
+    "qualify": ("fidelity.cli.qualify:qualify",
+                "Check this installation against independent references (tool "
+                "qualification)."),
     "render": ("fidelity.cli.render:render",
                "Render the spectral Macbeth chart through a camera model and measure ΔE00 per "
                "patch."),
