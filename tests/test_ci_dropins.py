@@ -256,3 +256,34 @@ def test_github_action_leaves_thresholds_to_the_project_and_names_its_artifact(r
     subprocess.run(["bash", "-c", _step("gate")["run"]], env=env, cwd=caller, check=True,
                    capture_output=True)
     assert output.read_text().split() == ["exit-code=0", "artifact=mine"]
+
+
+def test_github_action_qualifies_the_tool_before_gating(renders, tmp_path):
+    """qualify: "true" runs ``fidelity qualify`` first and files its record beside the
+    reports; a failed qualification is the step's exit code and no gate runs."""
+    assert _action()["inputs"]["qualify"]["default"] == "false"
+    report_dir = tmp_path / "reports"
+    output = tmp_path / "github_output"
+    env = {**os.environ, "FIDELITY_IMAGES": str(renders["good"]), "FIDELITY_CAMERA": "",
+           "FIDELITY_MAX_DELTA_E": "3", "FIDELITY_MAX_DMAP": "", "FIDELITY_ARGS": "",
+           "FIDELITY_REPORT_DIR": str(report_dir), "FIDELITY_QUALIFY": "true",
+           "GITHUB_OUTPUT": str(output)}
+    r = subprocess.run(["bash", "-c", _gate_script()], env=env, capture_output=True, text=True,
+                       cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert output.read_text().splitlines()[0] == "exit-code=0"
+    doc = json.loads((report_dir / "qualification.json").read_text())
+    assert doc["qualified"] is True and (report_dir / "junit.xml").is_file()
+    # a qualification that fails (a stand-in fidelity whose qualify exits 1): no gate runs
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    calls = tmp_path / "calls"
+    (bin_dir / "fidelity").write_text(f'#!/bin/sh\necho "$1" >> {calls}\n'
+                                      '[ "$1" = qualify ] && exit 1\nexit 0\n')
+    (bin_dir / "fidelity").chmod(0o755)
+    output.unlink()
+    env.update(PATH=f"{bin_dir}:{os.environ['PATH']}", FIDELITY_REPORT_DIR=str(tmp_path / "r2"))
+    r = subprocess.run(["bash", "-c", _gate_script()], env=env, capture_output=True, text=True,
+                       cwd=tmp_path)
+    assert r.returncode == 0 and output.read_text().splitlines()[0] == "exit-code=1"
+    assert calls.read_text().split() == ["qualify"]
