@@ -84,8 +84,8 @@ class QualificationCheck:
     """One check of the installed tool against an independent reference.
 
     ``deviation`` is the measured ``quantity`` (in ``unit``), compared with ``tolerance``:
-    the check passes when ``deviation <= tolerance``; None when it did not run (``detail``
-    says why). ``cases``: how many comparisons the deviation is the largest of."""
+    the check passes when ``deviation <= tolerance``; None when it did not run or its
+    computation raised an error (a failed check; ``detail`` says why). ``cases``: how many comparisons the deviation is the largest of."""
 
     name: str
     subject: str
@@ -408,6 +408,11 @@ def _run(name: str) -> QualificationCheck:
     except CheckNotRunError as exc:
         return QualificationCheck(name, spec.subject, spec.reference, spec.quantity, spec.unit,
                                   spec.tolerance, None, 0, NOT_RUN, str(exc),
+                                  time.perf_counter() - start)
+    except Exception as exc:  # noqa: BLE001 - a computation that breaks fails its check
+        return QualificationCheck(name, spec.subject, spec.reference, spec.quantity, spec.unit,
+                                  spec.tolerance, None, 0, FAIL,
+                                  f"raised {type(exc).__name__}: {exc}",
                                   time.perf_counter() - start)
     ok = bool(np.isfinite(deviation)) and deviation <= spec.tolerance
     return QualificationCheck(name, spec.subject, spec.reference, spec.quantity, spec.unit,

@@ -72,6 +72,19 @@ def test_the_finder_check_fails_with_centroids_as_patch_centres(monkeypatch) -> 
     assert run_check("measurement").status == PASS  # windows well inside the patches
 
 
+def test_a_check_whose_computation_raises_fails_and_names_the_error(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    from fidelity.errors import InputFileError
+
+    def lost(*args, **kwargs):  # type: ignore[no-untyped-def]
+        raise InputFileError("no chart found")
+
+    monkeypatch.setattr(find, "find_chart", lost)
+    check = run_check("chart-finder")
+    assert check.status == FAIL and check.deviation is None
+    assert check.detail.startswith("raised InputFileError: ")
+    assert check.detail.endswith("scene-0.png: no chart found")
+
+
 def test_a_check_that_raises_not_run_is_named_not_failed(monkeypatch) -> None:  # type: ignore[no-untyped-def]
     import fidelity.camera.render as render
     from fidelity.camera.mitsuba import MitsubaUnavailableError
