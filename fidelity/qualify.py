@@ -26,6 +26,8 @@ any installation, in seconds, without test data or shared data:
                           found corner patches against the known ones
 ``measurement``           the same photos audited from PNG files (find, sample, decode, Lab,
                           ΔE) against the painted colours' ΔE computed without any image
+``coco-scoring``          COCO box AP (pycocotools, faster-coco-eval) against hand-computed
+                          values of five cases (not run without the ``coco`` extra)
 ``installation``          every installed file against the SHA-256 its wheel's ``RECORD``
                           lists (not run for an editable install: its source is a checkout)
 ========================  ==================================================================
@@ -305,6 +307,56 @@ def _measurement() -> tuple[float, int, str]:
         f" against {scenes[0][2]:.4f}")
 
 
+#: Hand-computed COCO box AP (101-point interpolation, IoU .50:.05:.95): (ground truth
+#: {image: [(category id, x, y, w, h)]}, detections {image: [(x, y, w, h, score, class
+#: index)]}, mAP, AP50).
+COCO_CASES: tuple[tuple[str, dict[int, list[tuple[float, ...]]],
+                        dict[int, list[tuple[float, ...]]], float, float], ...] = (
+    ("a perfect detection", {1: [(1, 10, 10, 50, 80)]}, {1: [(10, 10, 50, 80, 0.9, 0)]},
+     1.0, 1.0),
+    # a false positive ranked first: precision 1/2 at recall 1
+    ("a false positive ranked first", {1: [(1, 10, 10, 50, 80)]},
+     {1: [(120, 120, 40, 40, 0.95, 0), (10, 10, 50, 80, 0.9, 0)]}, 0.5, 0.5),
+    # shifted by 10 px on 100 x 100: IoU 90/110 = 0.818, a hit at 7 of the 10 thresholds
+    ("a box at IoU 0.818", {1: [(3, 0, 0, 100, 100)]}, {1: [(10, 0, 100, 100, 0.8, 2)]},
+     0.7, 1.0),
+    # one of two images' objects found: AP person 1, bicycle 0, their mean
+    ("an image missed", {1: [(1, 10, 10, 50, 80)], 2: [(2, 0, 0, 60, 60)]},
+     {1: [(10, 10, 50, 80, 0.9, 0)]}, 0.5, 0.5),
+    # half the objects found, no false positive: precision 1 up to recall 0.5, 51 of 101 points
+    ("half the objects found", {1: [(1, 10, 10, 50, 80)], 2: [(1, 0, 0, 60, 60)]},
+     {1: [(10, 10, 50, 80, 0.9, 0)]}, 51 / 101, 51 / 101),
+)
+
+
+def _coco_scoring() -> tuple[float, int, str]:
+    try:
+        from fidelity.coco.detectors import COCO80_CATEGORY_IDS, COCO80_NAMES
+        from fidelity.coco.scoring import coco_from_dict, evaluate_detections, scorer_available
+    except ImportError as exc:
+        raise CheckNotRunError(f"the coco extra is not installed ({exc})") from None
+    methods = [m for m in ("pycocotools", "faster-coco-eval") if scorer_available(m)]
+    if not methods:
+        raise CheckNotRunError("no COCO scorer is installed (the coco extra)")
+    cats = [{"id": c, "name": n} for c, n in zip(COCO80_CATEGORY_IDS, COCO80_NAMES,
+                                                 strict=True)]
+    worst, where = 0.0, ""
+    for name, truth, found, map_, map50 in COCO_CASES:
+        images = [{"id": i, "width": 200, "height": 200, "file_name": f"{i}.jpg"} for i in truth]
+        anns = [{"id": k + 1, "image_id": i, "category_id": c, "bbox": [x, y, w, h],
+                 "area": w * h, "iscrowd": 0}
+                for k, (i, (c, x, y, w, h)) in enumerate((i, a) for i in truth for a in truth[i])]
+        gt = coco_from_dict({"images": images, "annotations": anns, "categories": cats})
+        dets = {i: np.array([[x, y, x + w, y + h, s, k] for x, y, w, h, s, k in rows])
+                for i, rows in found.items()}
+        for method in methods:
+            score = evaluate_detections(gt, dets, sorted(truth), method=method)
+            dev = max(abs(score.map - map_), abs(score.map50 - map50))
+            if dev >= worst:
+                worst, where = dev, f"largest for {name} ({method})"
+    return worst, 2 * len(COCO_CASES) * len(methods), f"{', '.join(methods)}; {where}"
+
+
 def _record_digest(path: Path) -> str:
     digest = hashlib.sha256(path.read_bytes()).digest()
     return base64.urlsafe_b64encode(digest).rstrip(b"=").decode()
@@ -383,6 +435,10 @@ QUALIFICATION_CHECKS: Mapping[str, _Spec] = {
         "image audit (PNG read, chart found, windows sampled, decoded, ΔE00)",
         "the painted colours' mean ΔE00 computed without an image",
         "largest |measured - painted| mean ΔE00", "ΔE00", 5e-3, _measurement),
+    "coco-scoring": _Spec(
+        "COCO box AP (the scorers behind every measured ΔmAP)",
+        "hand-computed AP of 5 cases (101-point interpolation, IoU .50:.95)",
+        "largest |mAP or AP50 - hand-computed|", "", 1e-6, _coco_scoring),
     "installation": _Spec(
         "installed files", "the wheel's RECORD (SHA-256 of every file installed)",
         "changed or missing", "files", 0.0, _installation),

@@ -38,7 +38,8 @@ def test_every_check_that_runs_here_passes_within_its_tolerance(result) -> None:
     assert [c.name for c in result.checks] == list(QUALIFICATION_CHECKS)
     for c in result.checks:
         if c.status == NOT_RUN:
-            assert c.name in ("renderer", "installation") and c.detail and c.deviation is None
+            assert c.name in ("renderer", "coco-scoring", "installation")
+            assert c.detail and c.deviation is None
             continue
         assert c.status == PASS, c
         assert c.deviation is not None and 0 <= c.deviation <= c.tolerance
@@ -62,6 +63,21 @@ def test_a_wrong_srgb_matrix_fails_its_check(monkeypatch) -> None:  # type: igno
     wrong[0, 0] += 1e-4
     monkeypatch.setattr(cm, "MATRIX_LINEAR_SRGB_TO_XYZ", wrong)
     assert run_check("srgb-matrix").status == FAIL
+
+
+def test_the_coco_scoring_check_fails_on_a_wrong_ap_and_needs_a_scorer(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    import dataclasses
+
+    import fidelity.coco.scoring as scoring
+
+    true = scoring.evaluate_detections
+    monkeypatch.setattr(scoring, "evaluate_detections", lambda *a, **k: dataclasses.replace(
+        true(*a, **k), map50=true(*a, **k).map50 * 0.999))
+    check = run_check("coco-scoring")
+    assert check.status == FAIL and check.deviation is not None and check.deviation > 1e-4
+    monkeypatch.setattr(scoring, "scorer_available", lambda method: False)
+    check = run_check("coco-scoring")
+    assert check.status == NOT_RUN and "no COCO scorer" in check.detail
 
 
 def test_the_finder_check_fails_with_centroids_as_patch_centres(monkeypatch) -> None:  # type: ignore[no-untyped-def]
