@@ -87,7 +87,8 @@ class QualificationCheck:
 
     ``deviation`` is the measured ``quantity`` (in ``unit``), compared with ``tolerance``:
     the check passes when ``deviation <= tolerance``; None when it did not run or its
-    computation raised an error (a failed check; ``detail`` says why). ``cases``: how many comparisons the deviation is the largest of."""
+    computation raised an error (a failed check; ``detail`` says why). ``cases``: how many
+    comparisons the deviation is the largest of."""
 
     name: str
     subject: str
