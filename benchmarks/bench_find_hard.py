@@ -9,9 +9,10 @@ and unsharp-mask halos on a 1920 x 1080 frame). JPEG quality 85.
 
 Scoring, per finder: found correctly (the four corner patch centres within half a pitch of the
 truth), answered wrongly (corners more than half a pitch off: must be 0), refused, and the
-corner error in patch pitches of the answers; for fidelity also the covered patches named
+corner error in patch pitches of the answers; for fidelity also the covered patches left out
 against the truth (a patch whose central half-pitch window is more than a tenth covered):
-exactly named, missed, and clear patches named (false). Time: wall time of each finder on the
+left out, missed (of them, flagged: far from what the other patches predict but flat, so
+measured and named in a note, ``FoundChart.flat_off_fit``), and clear patches left out. Time: wall time of each finder on the
 same decoded pixels, as in :mod:`benchmarks.bench_find_chart`.
 
 Writes ``reports/find_chart/hard-results.json`` (per image and summary, with the machine) and
@@ -39,15 +40,16 @@ from fidelity.colour import colorimetry as cm
 from fidelity.fileio import write_json_atomic, write_text_atomic
 
 
-def _fidelity(pixels: np.ndarray) -> tuple[np.ndarray | None, tuple[int, ...], str]:
+def _fidelity(pixels: np.ndarray) -> tuple[np.ndarray | None, tuple[int, ...],
+                                            tuple[int, ...], str]:
     from fidelity.chart.find import find_chart
     from fidelity.errors import FidelityError
 
     try:
         found = find_chart(pixels, encoding="srgb")
     except FidelityError as exc:
-        return None, (), str(exc).split(":")[0][:80]
-    return found.corners, found.occluded, ""
+        return None, (), (), str(exc).split(":")[0][:80]
+    return found.corners, found.occluded, found.flat_off_fit, ""
 
 
 def run(per_hazard: int, seed: int, coco: Path) -> list[dict[str, Any]]:
@@ -73,7 +75,7 @@ def run(per_hazard: int, seed: int, coco: Path) -> list[dict[str, Any]]:
                                    "conditions": scene.conditions}
             pixels = scene.srgb.astype(np.float32) / np.float32(255.0)
             t0 = time.perf_counter()
-            corners, occluded, why = _fidelity(pixels)
+            corners, occluded, flat, why = _fidelity(pixels)
             seconds = time.perf_counter() - t0
             bgr8 = np.ascontiguousarray(scene.srgb[..., ::-1])
             t1 = time.perf_counter()
@@ -92,6 +94,7 @@ def run(per_hazard: int, seed: int, coco: Path) -> list[dict[str, Any]]:
             row["fidelity"]["refused_because"] = why
             covered = {int(v) for v in str(scene.conditions.get("occluded", "")).split(",") if v}
             row["fidelity"]["occluded"] = list(occluded)
+            row["fidelity"]["flat_off_fit"] = list(flat)
             row["occluded_truth"] = sorted(covered)
             rows.append(row)
             if sys.stderr.isatty():
@@ -124,8 +127,11 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
                     for r in found)
         false = sum(len(set(r["fidelity"]["occluded"]) - set(r["occluded_truth"]))
                     for r in found)
+        flagged = sum(len((set(r["fidelity"].get("flat_off_fit", ())) & set(r["occluded_truth"]))
+                          - set(r["fidelity"]["occluded"])) for r in found)
         out[hazard]["fidelity"]["occluded"] = {
             "covered_patches": truth, "named": named, "missed": truth - named,
+            "flagged_flat": flagged,
             "clear_patches_named": false,
             "images_exactly_named": sum(set(r["fidelity"]["occluded"]) ==
                                         set(r["occluded_truth"]) for r in found)}
@@ -134,14 +140,16 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 def table(summary: dict[str, Any]) -> str:
     lines = ["| hazard | finder | found correctly | wrong corners answered | refused | median "
-             "/ max corner error (pitch) | covered patches named (missed, clear named) | "
+             "/ max corner error (pitch) | covered patches left out (missed, of them flagged flat; "
+             "clear left out) | "
              "median s |", "|---|---|---|---|---|---|---|---|"]
     for hazard, per in summary.items():
         for name, s in per.items():
             err = ("-" if s["median_error_pitch"] is None
                    else f"{s['median_error_pitch']:.3f} / {s['max_error_pitch']:.3f}")
             occ = s.get("occluded")
-            occ_text = (f"{occ['named']}/{occ['covered_patches']} ({occ['missed']}, "
+            occ_text = (f"{occ['named']}/{occ['covered_patches']} ({occ['missed']}, of "
+                        f"them {occ.get('flagged_flat', 0)} flagged flat; "
                         f"{occ['clear_patches_named']})" if occ else "-")
             lines.append(f"| {hazard} | {name} | {s['found_correct']}/{s['images']} | "
                          f"{s['answered_wrongly']} | {s['refused']} | {err} | {occ_text} | "

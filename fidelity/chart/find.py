@@ -209,7 +209,10 @@ class FoundChart:
     ``other_charts`` patch charts found beside it that are not the 24-patch layout (a
     Passport's other page) and were not measured; ``seconds`` the time taken; ``occluded``
     the patches (0-based, chart order: dark skin first, row by row) judged covered
-    (:func:`occluded_patches`), left out of the checks and of the audit's statistics.
+    (:func:`occluded_patches`), left out of the checks and of the audit's statistics;
+    ``flat_off_fit`` the patches far from what the others predict (:func:`off_the_camera_fit`)
+    whose window is flat: the camera's own error or a flat cover, measured and named in a
+    note, never left out (a camera's error is not hidden).
     """
 
     corners: np.ndarray
@@ -226,6 +229,7 @@ class FoundChart:
     seconds: float = math.nan
     notes: tuple[str, ...] = field(default_factory=tuple)
     occluded: tuple[int, ...] = ()
+    flat_off_fit: tuple[int, ...] = ()
 
     def corners_text(self) -> str:
         """The corners as ``--corners`` takes them: ``X1,Y1,...,X4,Y4`` (0.1 px)."""
@@ -235,7 +239,7 @@ class FoundChart:
         """JSON form: ``method``, ``corners``, ``corner_patches``, ``corners_text``,
         ``candidates``, ``swatches``, ``residual_px`` (null without refinement),
         ``orientation``, ``region``, ``confidence``, ``checks``, ``chart``, ``other_charts``,
-        ``seconds``, ``notes``, ``occluded``."""
+        ``seconds``, ``notes``, ``occluded``, ``flat_off_fit``."""
         return {
             "method": self.method,
             "corners": np.round(self.corners, 3).tolist(),
@@ -253,6 +257,7 @@ class FoundChart:
             "seconds": None if math.isnan(self.seconds) else round(self.seconds, 4),
             "notes": list(self.notes),
             "occluded": list(self.occluded),
+            "flat_off_fit": list(self.flat_off_fit),
         }
 
     @classmethod
@@ -1440,7 +1445,8 @@ def _cascade(image: np.ndarray, encoding: str, refine: bool, detectors: tuple[st
                       swatches=swatches, residual_px=residual, orientation=_orientation(h_image),
                       region=region, confidence=float(max(checks.colour_order, 0.0)),
                       checks=checks, chart=chart, other_charts=others,
-                      seconds=time.perf_counter() - t0, notes=tuple(notes), occluded=occluded)
+                      seconds=time.perf_counter() - t0, notes=tuple(notes), occluded=occluded,
+                      flat_off_fit=flat_far)
 
 
 def check_corners(pixels: np.ndarray, corners: np.ndarray, *, encoding: str = "linear"
