@@ -121,6 +121,26 @@ def test_an_occluder_from_the_scene_generator_is_named_with_the_patches_it_cover
     if flat:
         note = next(n for n in found.notes if "far from what the other patches predict" in n)
         assert all(str(k + 1) in note for k in flat)
+        assert set(flat) <= set(found.flat_off_fit)
+    assert not set(found.flat_off_fit) & set(found.occluded)
+
+
+def test_the_report_marks_patches_flagged_flat_and_far_off(tmp_path):
+    # seed 0: a flat cover over patches 17 and 23 (0-based 16, 22), measured and flagged
+    scene = hard_scene("occluder", None, LINEAR, seed=(7, 0), long_side=900)
+    path = tmp_path / "occluded photo.png"
+    cv2.imwrite(str(path), np.ascontiguousarray(scene.srgb[..., ::-1]))
+    r = CliRunner().invoke(main, ["audit", str(path), "--json", str(tmp_path / "a.json"),
+                                  "--html", str(tmp_path / "a.html")])
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "a.json").read_text())
+    flagged = doc["source"]["corners_found"]["flat_off_fit"]
+    assert flagged == [16, 22] and all(doc["patches"][k]["used"] for k in flagged)
+    html = (tmp_path / "a.html").read_text(encoding="utf-8")
+    names = load_chart().patch_names
+    for k in flagged:
+        assert f"{k + 1} {names[k]} (flagged: far from what the other patches predict" in html
+    assert html.count("(flagged: far from") == 2
 
 
 def test_a_camera_colour_error_is_not_taken_for_an_occluder():

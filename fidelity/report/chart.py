@@ -280,10 +280,14 @@ def patch_section(report: ChartReport) -> Section:
     de76 = delta_e_1976(m.reference_lab, m.lab)
     de94 = delta_e_1994(m.reference_lab, m.lab)
     snr = patch_snr_db(m)
+    found = getattr(report.source, "found", None)
+    flagged = set(found.flat_off_fit) if found is not None else set()
     rows = []
     for k, name in enumerate(m.patch_names):
         why = m.excluded.get(name)
         shown = f"{k + 1} {name}" + (f" (left out: {why.split(':')[0]})" if why else "")
+        if k in flagged:
+            shown += " (flagged: far from what the other patches predict, but flat)"
         rows.append((shown, _num(float(m.delta_e[k])), _num(float(de76[k])),
                      _num(float(de94[k])), _num(float(m.delta_l[k])),
                      _num(float(m.delta_c[k])), _num(float(m.delta_h[k])),
