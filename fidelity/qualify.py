@@ -40,7 +40,6 @@ Science only: the command line (``fidelity qualify``) and the record's JSON are
 from __future__ import annotations
 
 import base64
-import hashlib
 import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -359,7 +358,10 @@ def _coco_scoring() -> tuple[float, int, str]:
 
 
 def _record_digest(path: Path) -> str:
-    digest = hashlib.sha256(path.read_bytes()).digest()
+    """A file's SHA-256 as a wheel's RECORD writes it (URL-safe base64, no padding)."""
+    from fidelity.fileio import file_sha256
+
+    digest = bytes.fromhex(file_sha256(path))
     return base64.urlsafe_b64encode(digest).rstrip(b"=").decode()
 
 
