@@ -551,8 +551,9 @@ def patch_quads(bgr8: np.ndarray, blocks: tuple[int, ...] | None = None,
     return Quads(corners[idx], centres[idx], areas[idx])
 
 
-def _polygon_centroids(points: np.ndarray) -> F64:
-    """``(n, 4, 2)`` quadrilaterals -> ``(n, 2)`` area centroids (NaN for a zero area)."""
+def _quad_areas_centroids(points: np.ndarray) -> tuple[F64, F64]:
+    """``(n, 4, 2)`` quadrilaterals -> their signed areas ``(n,)`` and area centroids
+    ``(n, 2)`` (NaN for a zero area), over the triangles p0 p1 p2 and p0 p2 p3."""
     p0, p1, p2, p3 = points[:, 0], points[:, 1], points[:, 2], points[:, 3]
     a1 = 0.5 * ((p1[:, 0] - p0[:, 0]) * (p2[:, 1] - p0[:, 1])
                 - (p2[:, 0] - p0[:, 0]) * (p1[:, 1] - p0[:, 1]))
@@ -560,8 +561,9 @@ def _polygon_centroids(points: np.ndarray) -> F64:
                 - (p3[:, 0] - p0[:, 0]) * (p2[:, 1] - p0[:, 1]))
     area = a1 + a2
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.asarray((a1[:, None] * (p0 + p1 + p2) + a2[:, None] * (p0 + p2 + p3))
-                          / (3.0 * area[:, None]), np.float64)
+        centroid = ((a1[:, None] * (p0 + p1 + p2) + a2[:, None] * (p0 + p2 + p3))
+                    / (3.0 * area[:, None]))
+    return np.asarray(area, np.float64), np.asarray(centroid, np.float64)
 
 
 def perspective_bias(homography: np.ndarray, cells: np.ndarray, side: float) -> F64:
@@ -576,7 +578,7 @@ def perspective_bias(homography: np.ndarray, cells: np.ndarray, side: float) -> 
     cells = np.asarray(cells, np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
         corners = apply_homography(homography, (cells[:, None, :] + square).reshape(-1, 2))
-        centroid = _polygon_centroids(corners.reshape(-1, 4, 2))
+        _, centroid = _quad_areas_centroids(corners.reshape(-1, 4, 2))
         bias = centroid - apply_homography(homography, cells)
     return np.where(np.isfinite(bias), bias, 0.0)
 
@@ -586,9 +588,7 @@ def patch_side(homography: np.ndarray, quads: Quads, members: np.ndarray) -> flo
     outlines ``members`` mapped back onto the grid, within 0.3-1."""
     corners = apply_homography(np.linalg.inv(homography),
                                np.asarray(quads.corners[members], np.float64).reshape(-1, 2))
-    q = corners.reshape(-1, 4, 2)
-    x, y = q[..., 0], q[..., 1]
-    area = 0.5 * np.abs(np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1))
+    area = np.abs(_quad_areas_centroids(corners.reshape(-1, 4, 2))[0])
     return float(np.clip(np.sqrt(np.median(area)), 0.3, 1.0)) if len(area) else 0.8
 
 
