@@ -42,13 +42,12 @@ def qualify(names: str | None, json_path: str | None) -> None:
     """
     from fidelity.fileio import check_outputs
     from fidelity.qualify import qualify as run
-    from fidelity.report.evidence import tool_record
     from fidelity.report.qualify import qualification_lines, qualification_record
 
     check_outputs({"--json": json_path})
     result = run(_names(names))
     record = qualification_record(result)
-    for line in qualification_lines(result, tool_record()):
+    for line in qualification_lines(result, record["tool"]):
         click.echo(line)
     if json_path:
         where = write_json_output(json_path, record)
