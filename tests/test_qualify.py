@@ -177,7 +177,7 @@ def test_installed_files_cannot_be_checked_without_a_wheel_record(tmp_path, edit
 
 
 def test_cli_writes_the_record_and_exits_by_the_outcome(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
-    out = CliRunner().invoke(main, ["qualify", "--checks", "ciede2000,srgb-matrix",
+    out = CliRunner().invoke(main, ["qualify", "--checks", "ciede2000,srgb-matrix,ciede2000",
                                     "--json", str(tmp_path / "q é.json")])
     assert out.exit_code == 0, out.output
     doc = json.loads((tmp_path / "q é.json").read_text(encoding="utf-8"))

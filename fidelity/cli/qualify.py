@@ -15,7 +15,7 @@ def _names(text: str | None) -> list[str] | None:
 
     if text is None:
         return None
-    names = [n.strip() for n in text.split(",") if n.strip()]
+    names = list(dict.fromkeys(n.strip() for n in text.split(",") if n.strip()))  # each once
     unknown = [n for n in names if n not in QUALIFICATION_CHECKS]
     if unknown or not names:
         raise UnknownNameError(f"--checks {text}: no check named {', '.join(unknown) or 'at all'}"
