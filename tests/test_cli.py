@@ -72,6 +72,13 @@ def test_quiet_prints_nothing_but_errors(tmp_path):
     assert r.exit_code == 2 and r.stdout == "" and r.stderr.startswith("fidelity: error:")
 
 
+@pytest.mark.parametrize("value", ["-1", "nan", "1e400", "-inf"])
+def test_predict_names_the_flag_of_a_bad_delta_e(value):
+    r = CliRunner().invoke(main, ["predict", f"--delta-e={value}"])
+    assert r.exit_code == 2 and r.stdout == ""
+    assert r.stderr.startswith("fidelity: error: --delta-e ") and r.stderr.count("\n") == 1
+
+
 def _settings(folder: Path, text: str, name: str = "pyproject.toml") -> None:
     (folder / name).write_text(text, encoding="utf-8")
 

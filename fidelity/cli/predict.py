@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import click
 
 from fidelity.cli.options import common_options, json_option, write_json_output
@@ -79,6 +81,10 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
         _print_limit(max_dmap, cls, unit, size, table, method, json_path)
         return
     assert delta_e is not None  # one of the two was given
+    if not (math.isfinite(delta_e) and delta_e >= 0):
+        from fidelity.errors import InvalidValueError
+
+        raise InvalidValueError(f"--delta-e {delta_e!r}: must be a finite number >= 0")
     p = predict(delta_e, size=size, table=table, method=method, baseline_map=baseline_map)
     b = "<= " if p.upper_bound else ""
 
