@@ -1,5 +1,5 @@
-"""The pieces a simulator team drops into its CI: JUnit XML, the GitHub Action, the pre-commit
-hook, the pytest plugin and the container."""
+"""The pieces a simulator team drops into its CI: JUnit XML, the GitHub Action, the GitLab
+CI/CD component, the pre-commit hook, the pytest plugin and the container."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import re
 import shlex
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
@@ -287,3 +288,138 @@ def test_github_action_qualifies_the_tool_before_gating(renders, tmp_path):
                        cwd=tmp_path)
     assert r.returncode == 0 and output.read_text().splitlines()[0] == "exit-code=1"
     assert calls.read_text().split() == ["qualify"]
+
+
+# -- the GitLab CI/CD component (templates/gate.yml) ------------------------------------------
+
+GITLAB_COMPONENT = REPO / "templates" / "gate.yml"
+_INPUT = re.compile(r"\$\[\[\s*inputs\.([A-Za-z0-9_-]+)\s*\]\]")
+
+
+def _gitlab_component() -> tuple[dict, dict]:
+    header, jobs = yaml.safe_load_all(GITLAB_COMPONENT.read_text(encoding="utf-8"))
+    return header, jobs
+
+
+def _interpolate(node, values: dict[str, str]):  # type: ignore[no-untyped-def]
+    """The jobs with ``$[[ inputs.NAME ]]`` replaced, as GitLab does after parsing the YAML
+    (in keys and string values); an input the header does not declare is an error there."""
+    if isinstance(node, dict):
+        return {_interpolate(k, values): _interpolate(v, values) for k, v in node.items()}
+    if isinstance(node, list):
+        return [_interpolate(v, values) for v in node]
+    if isinstance(node, str):
+        return _INPUT.sub(lambda m: values[m.group(1)], node)
+    return node
+
+
+def _component_job(**given: str) -> tuple[str, dict]:
+    """The component's one job with the given inputs (the rest at their defaults)."""
+    header, jobs = _gitlab_component()
+    inputs = header["spec"]["inputs"]
+    assert set(given) <= set(inputs), set(given) - set(inputs)
+    values = {k: given.get(k, spec["default"]) for k, spec in inputs.items()}
+    for k, spec in inputs.items():
+        assert values[k] in spec.get("options", [values[k]]), (k, values[k])
+    ((name, job),) = _interpolate(jobs, values).items()
+    return name, job
+
+
+def _run_component_script(job: dict, cwd: Path, path: str | None = None
+                          ) -> subprocess.CompletedProcess[str]:
+    """The job's script after its install line, as the runner runs it (bash -eo pipefail, the
+    job's variables in the environment, in the project's checkout)."""
+    script = job["script"]
+    assert script[0] == 'python -m pip install --quiet "$FIDELITY_PACKAGE"'
+    env = {**os.environ, **{k: str(v) for k, v in job["variables"].items()}}
+    if path:
+        env["PATH"] = f"{path}:{env['PATH']}"
+    return subprocess.run(["bash", "-eo", "pipefail", "-c", "\n".join(script[1:])], env=env,
+                          cwd=cwd, capture_output=True, text=True)
+
+
+def test_gitlab_component_is_valid_gitlab_ci(tmp_path):
+    """Header and job validate against GitLab's CI schema (as check-jsonschema ships it),
+    before and after interpolation; every input is declared, used, documented and optional;
+    no keyword a component must not set at the top level."""
+    pytest.importorskip("check_jsonschema", reason="check-jsonschema (the test extra) checks "
+                        "the component against GitLab's CI schema")
+    header, jobs = _gitlab_component()
+    inputs = header["spec"]["inputs"]
+    for name, spec in inputs.items():
+        assert set(spec) <= {"description", "default", "options", "type", "regex"}, name
+        assert spec.get("description") and "default" in spec, name
+    used = set(_INPUT.findall(GITLAB_COMPONENT.read_text(encoding="utf-8").split("\n---\n")[1]))
+    assert used == set(inputs)
+    assert not {"default", "variables", "stages", "include"} & set(jobs)
+    name, job = _component_job(images="a.exr", **{"max-delta-e": "3"})
+    assert name == "fidelity-gate" and job["allow_failure"] == {"exit_codes": [4]}
+    assert job["artifacts"]["when"] == "always"
+    assert job["artifacts"]["reports"]["junit"] == "fidelity-report/junit.xml"
+    for i, doc in enumerate((header, jobs, {name: job})):
+        (tmp_path / f"{i}.json").write_text(json.dumps(doc), encoding="utf-8")
+        r = subprocess.run([sys.executable, "-m", "check_jsonschema", "--builtin-schema",
+                            "vendor.gitlab-ci", str(tmp_path / f"{i}.json")],
+                           capture_output=True, text=True)
+        assert r.returncode == 0, r.stdout + r.stderr
+    bad = {name: {**job, "allow_failure": {"exit_codes": "four"}}}  # the schema does check
+    (tmp_path / "bad.json").write_text(json.dumps(bad), encoding="utf-8")
+    r = subprocess.run([sys.executable, "-m", "check_jsonschema", "--builtin-schema",
+                        "vendor.gitlab-ci", str(tmp_path / "bad.json")], capture_output=True)
+    assert r.returncode == 1
+
+
+@pytest.mark.parametrize("images, limit, code, failures", [
+    ("good", "3", 0, 0), ("good bad", "3", 1, 1), ("good", "0.1", 1, 1)])
+def test_gitlab_component_gates_and_leaves_the_reports(renders, tmp_path, images, limit,
+                                                        code, failures):
+    _, job = _component_job(images=" ".join(str(renders[i]) for i in images.split()),
+                            **{"max-delta-e": limit, "report-dir": "out/colour"})
+    r = _run_component_script(job, tmp_path)
+    assert r.returncode == code, r.stderr
+    junit = tmp_path / job["artifacts"]["reports"]["junit"]
+    root = _valid_junit(junit)
+    assert sum(int(suite.get("failures")) for suite in root.iter("testsuite")) == failures
+    assert len(list((tmp_path / "out" / "colour").glob("*.html"))) == len(images.split())
+    assert job["artifacts"]["paths"] == ["out/colour/"]
+
+
+def test_gitlab_component_installs_the_package_input_and_qualifies_first(renders, tmp_path):
+    """The install line installs what the package input names; qualify "true" files the
+    qualification before gating, and a failed qualification is the job's exit code with no
+    gate run."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    log = tmp_path / "pip-args"
+    (bin_dir / "python").write_text(f'#!/bin/sh\necho "$@" > {log}\n')
+    (bin_dir / "python").chmod(0o755)
+    _, job = _component_job(package="camera-fidelity==0.1.0")
+    env = {**os.environ, "PATH": f"{bin_dir}:{os.environ['PATH']}",
+           **{k: str(v) for k, v in job["variables"].items()}}
+    subprocess.run(["bash", "-eo", "pipefail", "-c", job["script"][0]], env=env, check=True)
+    assert log.read_text().split()[-1] == "camera-fidelity==0.1.0"
+
+    _, job = _component_job(images=str(renders["good"]), qualify="true",
+                            **{"max-delta-e": "3"})
+    r = _run_component_script(job, tmp_path)
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((tmp_path / "fidelity-report" / "qualification.json").read_text())
+    assert doc["qualified"] is True and (tmp_path / "fidelity-report" / "junit.xml").is_file()
+    calls = tmp_path / "calls"
+    (bin_dir / "fidelity").write_text(f'#!/bin/sh\necho "$1" >> {calls}\n'
+                                      '[ "$1" = qualify ] && exit 1\nexit 0\n')
+    (bin_dir / "fidelity").chmod(0o755)
+    r = _run_component_script(job, tmp_path / "bin", path=str(bin_dir))
+    assert r.returncode == 1 and calls.read_text().split() == ["qualify"]
+
+
+@pytest.mark.parametrize("args, code", [("--decision guarded", 4),
+                                        ("--decision guarded --strict", 1)])
+def test_gitlab_component_lets_an_undecided_verdict_pass_with_a_warning(renders, tmp_path,
+                                                                        args, code):
+    """A limit inside the guard band (the good render's mean ΔE00 is about 1.005, U about
+    0.03): exit 4, which the job allows (a warning in the pipeline); --strict makes it 1."""
+    _, job = _component_job(images=str(renders["good"]), args=args, **{"max-delta-e": "1.0"})
+    r = _run_component_script(job, tmp_path)
+    assert r.returncode == code, r.stdout + r.stderr
+    assert (code in job["allow_failure"]["exit_codes"]) == (code == 4)
