@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -93,8 +94,13 @@ def test_corners_outside_the_image():
 def test_window_outside_the_image():
     # corner centres inside, but the outer half of the edge patches would leave the image
     h = known_h(angle=0.0, sx=40, sy=40, tx=3.0, ty=3.0, p=(0.0, 0.0))
-    with pytest.raises(InvalidValueError, match="lies outside"):
+    with pytest.raises(InvalidValueError) as err:
         locate_chart(project(h, GRID_CORNERS), (320, 400, 3))
+    got = re.search(r"patch 'patch 1': its sampling window \(x (\S+) to (\S+), y (\S+) to "
+                    r"(\S+)\) reaches outside the 400x320 image", str(err.value))
+    assert got, str(err.value)
+    x0, x1, y0, y1 = map(float, got.groups())  # the window about the first centre, (3, 3)
+    assert x0 < -0.5 and y0 < -0.5 and x0 + x1 == pytest.approx(6) and y0 + y1 == pytest.approx(6)
 
 
 def test_chart_too_small_to_sample():

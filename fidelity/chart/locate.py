@@ -328,8 +328,10 @@ def locate_chart(
         if (quad[:, 0].min() < -0.5 or quad[:, 0].max() > width - 0.5
                 or quad[:, 1].min() < -0.5 or quad[:, 1].max() > height - 0.5):
             raise InvalidValueError(
-                f"patch {names[k]!r} lies outside the {width}x{height} image "
-                f"(check --corners: centres of {', '.join(CORNER_PATCHES)})"
+                f"patch {names[k]!r}: its sampling window (x {quad[:, 0].min():.1f} to "
+                f"{quad[:, 0].max():.1f}, y {quad[:, 1].min():.1f} to {quad[:, 1].max():.1f}) "
+                f"reaches outside the {width}x{height} image (check --corners: centres of "
+                f"{', '.join(CORNER_PATCHES)})"
             )
         x0 = max(int(np.floor(quad[:, 0].min())), 0)
         x1 = min(int(np.ceil(quad[:, 0].max())), width - 1)
