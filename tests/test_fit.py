@@ -378,6 +378,19 @@ def test_cli_fit_says_when_the_model_cannot_express_the_difference(images, tmp_p
     assert rep["cross_validated_mean_delta_e"] > 0.5
 
 
+def test_cli_fit_of_a_chart_onto_itself_says_there_is_nothing_to_correct(images, tmp_path):
+    """Sim equal to real: a note that they already match, not a warning that the model
+    cannot express the difference."""
+    r = CliRunner().invoke(main, ["fit", str(images["real"]), str(images["real"]), "--out",
+                                  str(tmp_path / "out"), "--sim-corners", CORNERS,
+                                  "--real-corners", CORNERS])
+    assert r.exit_code == 0, r.output
+    assert "note: the simulation already matches the real camera" in r.output
+    assert "warning" not in r.output
+    rep = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert rep["before"]["mean_delta_e"] < 0.01 and rep["after"]["mean_delta_e"] < 0.01
+
+
 def test_the_normalisation_is_left_out_of_the_correction(images, exact, tmp_path):
     """``exposure`` (default) keeps the simulator's exposure: a SIM one stop darker than REAL
     and otherwise equal gets a correction that changes nothing; ``none`` corrects the

@@ -68,7 +68,14 @@ def fit_lines(report: FitReport) -> list[str]:
                      f"{_n(c.cv_mean)} ΔE00 remains on patches held out of the fit (above "
                      f"{EXPRESSED_DELTA_E:g}); what is left is not a colour mapping of this "
                      "family (quantisation, noise, a spatial effect, or a model too simple)")
-    if c.cv_mean > 0 and a.mean_delta_e >= b.mean_delta_e:
+    if b.mean_delta_e <= EXPRESSED_DELTA_E:  # nothing to lower: the fit is near the identity
+        lines.append(f"note: the simulation already matches the real camera (sim-to-real ΔE00 "
+                     f"mean {b.mean_delta_e:.2f}, at most {EXPRESSED_DELTA_E:g}); the "
+                     "correction is close to the identity")
+        if a.mean_delta_e > EXPRESSED_DELTA_E:
+            lines.append(f"warning: the correction raises the sim-to-real ΔE00 above "
+                         f"{EXPRESSED_DELTA_E:g}: do not apply it")
+    elif c.cv_mean > 0 and a.mean_delta_e >= b.mean_delta_e:
         lines.append("warning: the correction does not lower the sim-to-real ΔE00: the "
                      f"{c.model.name} model cannot express this difference")
     elif np.isfinite(c.cv_mean) and c.cv_mean >= b.mean_delta_e:
