@@ -44,6 +44,15 @@ def test_parts_add_up_to_the_chart_delta_e_and_follow_the_direction():
     assert dr.error_parts(ref, rot).shares()["hue"] > 0.97
 
 
+def test_a_zero_error_is_not_split_into_thirds_in_words():
+    ref = load_chart().lab
+    zero = dr.predict_directional(ref, ref.copy())
+    assert zero.dmap_points == 0 and zero.parts.delta_e == 0
+    assert zero.explanation() == "no colour error to split by direction"
+    tiny = dr.predict_directional(ref, ref + np.array([1e-6, 0.0, 0.0]))
+    assert tiny.explanation().startswith("tone 100 %")
+
+
 @pytest.mark.parametrize("name, param", [("contrast", 1.31), ("saturation", 0.62),
                                          ("hue", -23.0), ("gamma", 1.4),
                                          ("pull_mean", 0.7), ("brightness", -0.08)])

@@ -529,7 +529,10 @@ class DirectionalPrediction:
         return self.columns.get(CLASS_COLUMNS[cls])
 
     def explanation(self) -> str:
-        """One line: which families charge the error, with their weights."""
+        """One line: which families charge the error, with their weights (a zero error has
+        none to split: its equal thirds are a convention, not a finding)."""
+        if self.parts.delta_e <= 0:
+            return "no colour error to split by direction"
         parts = ", ".join(f"{t.family} {100 * t.weight:.0f} %" for t in self.terms
                           if t.weight >= 0.005)
         if self.fit is not None:
