@@ -48,3 +48,4 @@ def test_command_modules_import_no_private_name():
 def test_every_command_prints_its_help(name):
     r = CliRunner().invoke(main, [name, "--help"])
     assert r.exit_code == 0 and "--quiet" in r.output, r.output
+    assert "%%" not in r.output  # click prints help as written: no printf escapes

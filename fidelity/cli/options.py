@@ -581,7 +581,7 @@ def decision_options(f: F) -> F:
     f = click.option(
         "--coverage-factor", type=click.FloatRange(min=0, min_open=True), default=2.0,
         show_default=True,
-        help="k of the expanded uncertainty U = k u a guarded decision uses (2: about 95 %% "
+        help="k of the expanded uncertainty U = k u a guarded decision uses (2: about 95 % "
              "for a normal distribution).")(f)
     return click.option(
         "--decision", type=click.Choice(["simple", "guarded"]), default="simple",
