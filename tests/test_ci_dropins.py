@@ -153,11 +153,17 @@ def test_github_action_gate_step(renders, tmp_path, images, limit, code):
     env = {**os.environ, "FIDELITY_IMAGES": " ".join(str(renders[i]) for i in images.split()),
            "FIDELITY_CAMERA": "", "FIDELITY_MAX_DELTA_E": limit, "FIDELITY_MAX_DMAP": "",
            "FIDELITY_ARGS": "", "FIDELITY_REPORT_DIR": str(report_dir),
-           "GITHUB_OUTPUT": str(output)}
+           "GITHUB_OUTPUT": str(output), "GITHUB_STEP_SUMMARY": str(tmp_path / "summary.md")}
     r = subprocess.run(["bash", "-c", _gate_script()], env=env, capture_output=True, text=True,
                        cwd=tmp_path)
     assert r.returncode == 0, r.stderr  # the step itself succeeds; the verdict step exits
     assert output.read_text().splitlines()[0] == f"exit-code={code}"
+    # the job summary: the outcome, then what the gate printed (also in the log)
+    summary = (tmp_path / "summary.md").read_text().splitlines()
+    assert summary[0] == f"### camera-fidelity: {('pass', 'fail')[code]} (exit {code})"
+    assert summary[2] == "```text" and summary[-1] == "```"
+    assert summary[3:-1] == r.stdout.splitlines()
+    assert sum(line.lstrip().startswith(("PASS", "FAIL")) for line in summary) == len(images.split())
     _valid_junit(report_dir / "junit.xml")
     htmls = list(report_dir.glob("*.html"))
     assert len(htmls) == len(images.split())
@@ -284,10 +290,13 @@ def test_github_action_qualifies_the_tool_before_gating(renders, tmp_path):
     (bin_dir / "fidelity").chmod(0o755)
     output.unlink()
     env.update(PATH=f"{bin_dir}:{os.environ['PATH']}", FIDELITY_REPORT_DIR=str(tmp_path / "r2"))
+    env["GITHUB_STEP_SUMMARY"] = str(tmp_path / "summary.md")
     r = subprocess.run(["bash", "-c", _gate_script()], env=env, capture_output=True, text=True,
                        cwd=tmp_path)
     assert r.returncode == 0 and output.read_text().splitlines()[0] == "exit-code=1"
     assert calls.read_text().split() == ["qualify"]
+    summary = (tmp_path / "summary.md").read_text().splitlines()
+    assert summary[0] == "### camera-fidelity qualification: fail (exit 1)"
 
 
 # -- the GitLab CI/CD component (templates/gate.yml) ------------------------------------------
