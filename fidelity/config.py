@@ -38,7 +38,8 @@ CONFIG_FILES = ("fidelity.toml", "pyproject.toml")
 class Setting:
     """One settings key: its value ``kind`` (``str``, ``float``, ``int``, ``bool``), the
     parameter name of the commands' option it sets, and whether it is a path (made absolute
-    relative to the settings file), or may be one (``maybe_path``: a name or a file); ``many``:
+    relative to the settings file), or may be one (``maybe_path``: a name, a URI such as
+    ``ocio://default``, or a file); ``many``:
     the option is repeatable, the value one of ``kind`` or a list of them."""
 
     kind: type
@@ -64,6 +65,8 @@ SETTINGS: Mapping[str, Setting] = {
     "exposure": Setting(str, "exposure"),
     "layer": Setting(str, "layer"),
     "colourspace": Setting(str, "colourspace"),
+    "ocio_colourspace": Setting(str, "ocio_colourspace"),
+    "ocio_config": Setting(str, "ocio_config", maybe_path=True),
     "negatives": Setting(str, "negatives"),
     "junit": Setting(str, "junit", path=True),
     "json": Setting(str, "json_path", path=True),
@@ -139,9 +142,9 @@ def _one_value(path: Path, where: str, key: str, setting: Setting, value: Any) -
     if not ok:
         raise InputFileError(f"{path}: {where}{key}: expected a {kind.__name__}, got "
                              f"{value!r}")
-    if setting.path or (setting.maybe_path and isinstance(value, str)
+    if setting.path or (setting.maybe_path and isinstance(value, str) and "://" not in value
                         and (os.sep in value or value.endswith((".toml", ".yaml", ".yml",
-                                                                ".json", ".csv")))):
+                                                                ".json", ".csv", ".ocio")))):
         value = str((path.parent / value).resolve())
     return value
 

@@ -229,6 +229,11 @@ def _read(path: str | os.PathLike[str], corners: str | Sequence[float] | None,
     from fidelity.chart.measure import measure_pixels, read_input
     from fidelity.errors import FidelityError
 
+    if read.ocio_colourspace is not None:  # the .cube maps the file's own pixel values
+        raise InvalidValueError(
+            f"--ocio-colourspace {read.ocio_colourspace}: fit writes its correction for the "
+            "simulator's own pixel values; give them as --encoding and --colourspace, or "
+            "convert the images first")
     img, sha256 = read_input(path, read)
     enc = read.encoding or img.encoding
     info = img.info(sha256=sha256, encoding=enc)

@@ -184,8 +184,8 @@ def _doc_pages() -> list[Path]:
 
 def doc_commands() -> list[tuple[str, str]]:
     """(page, command line) of every ``fidelity ...`` line in the shell blocks of README.md and
-    docs/*.md (``$ fidelity`` lines of text blocks too), continuation lines joined, comments
-    dropped."""
+    docs/*.md (``$ fidelity`` lines of text and console blocks), continuation lines joined,
+    comments dropped."""
     out = []
     for page in _doc_pages():
         text = page.read_text(encoding="utf-8")
@@ -193,11 +193,11 @@ def doc_commands() -> list[tuple[str, str]]:
             lang, body = m.group(1), m.group(2).replace("\\\n", " ")
             for line in body.splitlines():
                 s = line.strip()
-                if lang == "text":
+                if lang in ("text", "console"):
                     if not s.startswith("$ fidelity "):
                         continue
                     s = s[2:]
-                elif lang not in ("sh", "bash", "console", "shell") or not s.startswith(
+                elif lang not in ("sh", "bash", "shell") or not s.startswith(
                         "fidelity "):
                     continue
                 out.append((page.relative_to(REPO).as_posix(), " ".join(s.split())))

@@ -36,12 +36,15 @@ import tempfile
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from fidelity.errors import InputFileError, InvalidValueError
 from fidelity.fileio import atomic_output, display_path, require_file
+
+if TYPE_CHECKING:
+    from fidelity.chart.ocio import OcioConversion
 
 
 class OneChannelError(InputFileError):
@@ -186,6 +189,8 @@ class Image:
     bayer: str | None = None
     recording: Recording | None = None
     bayer_found: bool = False
+    #: how OpenColorIO converted the pixels (``--ocio-colourspace``), when it did
+    ocio: OcioConversion | None = None
 
     @property
     def height(self) -> int:
@@ -206,6 +211,7 @@ class Image:
             encoding_guess=self.encoding, colorspace=self.colorspace,
             chromaticities=self.chromaticities, sha256=sha256, encoding=encoding,
             bayer=self.bayer, recording=self.recording, bayer_found=self.bayer_found,
+            ocio=self.ocio,
         )
 
 
@@ -233,11 +239,12 @@ class ImageInfo:
     bayer: str | None = None
     recording: Recording | None = None
     bayer_found: bool = False
+    ocio: OcioConversion | None = None
 
     def to_json(self) -> dict[str, Any]:
         """JSON form (keys in this order; ``sha256``, ``encoding``, ``bayer`` (with
-        ``demosaicing`` and ``bayer_found``: the pattern was found by the chart, not given)
-        and ``recording`` only when known)."""
+        ``demosaicing`` and ``bayer_found``: the pattern was found by the chart, not given),
+        ``recording`` and ``ocio`` (the OpenColorIO conversion) only when known)."""
         out: dict[str, Any] = {
             "path": self.path, "format": self.format, "pixel_type": self.pixel_type,
             "width": self.width, "height": self.height, "channels": list(self.channels),
@@ -255,6 +262,8 @@ class ImageInfo:
             out["bayer_found"] = self.bayer_found
         if self.recording is not None:
             out["recording"] = self.recording.to_json()
+        if self.ocio is not None:
+            out["ocio"] = self.ocio.to_json()
         return out
 
     @classmethod
@@ -272,7 +281,16 @@ class ImageInfo:
             recording=(Recording.from_json(data["recording"]) if data.get("recording")
                        else None),
             bayer_found=bool(data.get("bayer_found", False)),
+            ocio=_ocio_from_json(data.get("ocio")),
         )
+
+
+def _ocio_from_json(data: Mapping[str, Any] | None) -> OcioConversion | None:
+    if not data:
+        return None
+    from fidelity.chart.ocio import OcioConversion
+
+    return OcioConversion(**{k: str(v) for k, v in data.items()})
 
 
 @contextlib.contextmanager

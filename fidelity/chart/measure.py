@@ -1051,6 +1051,11 @@ class ReadOptions:
     max_pixels
         Refuse a larger image (width x height) before decoding it; None:
         :func:`fidelity.chart.image.pixel_limit`.
+    ocio_colourspace, ocio_config
+        The pixels are in this colourspace of an OpenColorIO config (a file or an ``ocio://``
+        URI; None: ``$OCIO``, else OpenColorIO's built-in default config): OpenColorIO converts
+        them to linear or display sRGB (:mod:`fidelity.chart.ocio`); instead of ``encoding``
+        and ``colourspace``.
     topic, frame, time
         The input is a robot recording (ROS 1 bag, ROS 2 bag, MCAP file:
         :mod:`fidelity.chart.recording`): the image ``topic`` (None: its only image topic),
@@ -1070,13 +1075,15 @@ class ReadOptions:
     #: seconds after the recording's first message, or an absolute time (text:
     #: :func:`fidelity.chart.recording.absolute_time_ns`)
     time: float | str | None = None
+    ocio_colourspace: str | None = None
+    ocio_config: str | None = None
 
     def given(self) -> list[str]:
         """The options set away from their defaults that describe the pixels of an image
         (``layer``, ``encoding``, ``exposure``, ``bayer``, ``colourspace``, ``topic``,
-        ``frame``, ``time``), by name."""
+        ``frame``, ``time``, ``ocio_colourspace``, ``ocio_config``), by name."""
         return [name for name in ("layer", "encoding", "exposure", "bayer", "colourspace",
-                                  "topic", "frame", "time")
+                                  "topic", "frame", "time", "ocio_colourspace", "ocio_config")
                 if getattr(self, name) is not None]
 
     def names_message(self) -> bool:
@@ -1158,12 +1165,14 @@ def _read_input(path: str | os.PathLike[str], read: ReadOptions, *, digest: bool
                 native: bool = False) -> tuple[Image, str | None]:
     from fidelity.chart import recording
 
+    _check_ocio_options(read)
     if read.names_message() or recording.is_recording_path(path):
         if read.layer is not None:
             raise InvalidValueError(f"{path}: --layer names an EXR layer; a recording has none")
-        return recording.read_frame(
+        img, sha = recording.read_frame(
             path, recording.Choice(read.topic, read.frame, read.time), bayer=read.bayer,
             max_pixels=read.max_pixels)
+        return _ocio_converted(img, read), sha
     from fidelity.chart.image import read_image
     from fidelity.fileio import file_sha256
 
@@ -1174,7 +1183,38 @@ def _read_input(path: str | os.PathLike[str], read: ReadOptions, *, digest: bool
         if read.bayer is not None:
             raise
         img = _read_mosaic(path, read, exc)
-    return img, (file_sha256(img.path) if digest else None)
+    return _ocio_converted(img, read), (file_sha256(img.path) if digest else None)
+
+
+def _check_ocio_options(read: ReadOptions) -> None:
+    """``--ocio-colourspace`` says what ``--encoding`` and ``--colourspace`` say, and more;
+    ``--ocio-config`` needs it."""
+    if read.ocio_colourspace is None:
+        if read.ocio_config is not None:
+            raise InvalidValueError(f"--ocio-config {read.ocio_config}: give the pixels' "
+                                    "colourspace in it with --ocio-colourspace NAME")
+        return
+    both = [f"--{name}" for name in ("encoding", "colourspace")
+            if getattr(read, name) is not None]
+    if both:
+        raise InvalidValueError(f"--ocio-colourspace {read.ocio_colourspace}: names the pixels' "
+                                f"encoding and primaries; leave out {' and '.join(both)}")
+
+
+def _ocio_converted(img: Image, read: ReadOptions) -> Image:
+    """The image with its pixels converted from ``read.ocio_colourspace`` by OpenColorIO
+    (:func:`fidelity.chart.ocio.convert`), or as it is when none is given."""
+    if read.ocio_colourspace is None:
+        return img
+    from dataclasses import replace
+
+    from fidelity.chart.ocio import convert
+
+    try:
+        pixels, how = convert(as_float32(img.pixels), read.ocio_colourspace, read.ocio_config)
+    except InvalidValueError as exc:
+        raise InvalidValueError(f"{img.path}: {exc}") from None
+    return replace(img, pixels=pixels, encoding=how.encoding, chromaticities=None, ocio=how)
 
 
 #: Smallest side (pixels) of a one-channel image in which a chart is looked for without --bayer.

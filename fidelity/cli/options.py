@@ -11,8 +11,8 @@ The vocabulary (also in the docs' command table):
   ``--targets 0,1,3``: chart ΔE targets of the transforms (:class:`Targets`); ``--delta-e X``:
   a chart's measured ΔE (``predict``); ``--severities 1-5``: COCO-C severities
   (:class:`Severities`);
-- ``--encoding``, ``--exposure``, ``--layer``, ``--bayer``, ``--colourspace``, ``--negatives``,
-  and for a robot recording ``--topic``, ``--frame``, ``--time``: how an image is read
+- ``--encoding``, ``--exposure``, ``--layer``, ``--bayer``, ``--colourspace``,
+  ``--ocio-colourspace``, ``--ocio-config``, ``--negatives``, and for a robot recording ``--topic``, ``--frame``, ``--time``: how an image is read
   (:func:`image_read_options`, one ``read`` argument);
 - ``--camera``, ``--illuminant``, ``--reference``, ``--table``, ``--size``: as in ``check``;
 - ``--out DIR``: the folder a command writes several files to; ``--json FILE`` (``-`` for
@@ -349,7 +349,7 @@ IMAGE_PATH = click.Path(path_type=Path)
 
 #: The command-line names of the image-reading options, as :class:`ReadOptions` names them.
 READ_OPTION_NAMES = ("layer", "encoding", "exposure", "negatives", "colourspace", "bayer",
-                     "topic", "frame", "time")
+                     "topic", "frame", "time", "ocio_colourspace", "ocio_config")
 
 
 def chart_pair_options(f: F) -> F:
@@ -375,7 +375,7 @@ def chart_pair_options(f: F) -> F:
 
 def image_read_options(f: F) -> F:
     """``--encoding``, ``--exposure``, ``--layer``, ``--bayer``, ``--colourspace``,
-    ``--negatives`` and, for a recording, ``--topic``, ``--frame``, ``--time``: how an image's
+    ``--ocio-colourspace``, ``--ocio-config``, ``--negatives`` and, for a recording, ``--topic``, ``--frame``, ``--time``: how an image's
     pixels are read (audit, gate, compare, ...). The command receives them as one argument
     ``read``, a :class:`fidelity.chart.measure.ReadOptions` (``max_pixels`` left at None:
     :func:`max_pixels_option` gives it separately)."""
@@ -408,6 +408,16 @@ def image_read_options(f: F) -> F:
             "--colourspace", default=None,
             help="RGB primaries of the pixels: a colour-science name (ACEScg, 'ITU-R BT.2020', "
                  "'Display P3', ...). Default: the EXR's chromaticities attribute, else sRGB."),
+        click.option(
+            "--ocio-colourspace", default=None, metavar="NAME",
+            help="The pixels are in this colourspace of an OpenColorIO config (ACEScct, "
+                 "'ARRI LogC4', 'Display P3 - Display', ...): OpenColorIO converts them to "
+                 "linear sRGB (scene-referred) or display sRGB. Instead of --encoding and "
+                 "--colourspace (pip install 'camera-fidelity[ocio]')."),
+        click.option(
+            "--ocio-config", default=None, metavar="CONFIG",
+            help="The OpenColorIO config of --ocio-colourspace: a file or an ocio:// URI "
+                 "(default: $OCIO, else OpenColorIO's built-in default config)."),
         click.option(
             "--negatives", type=click.Choice(["keep", "exclude"]), default="keep",
             show_default=True,

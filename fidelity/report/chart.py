@@ -103,6 +103,11 @@ def summary_facts(report: ChartReport) -> Facts:
     else:
         items += [("image", f"`{src.image.path}` ({src.image.format}, {src.image.pixel_type}, "
                             f"{src.image.width}x{src.image.height}, {src.encoding} pixels)")]
+        how = src.image.ocio
+        if how is not None:
+            items.append(("converted by OpenColorIO", f"{how.colourspace} of "
+                          f"{how.config_name or how.config} (`{how.config}`) -> {how.target} "
+                          f"of its built-in config (OpenColorIO {how.version})"))
     items.append(("reference", src.reference))
     return Facts(tuple(items))
 

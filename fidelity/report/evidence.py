@@ -172,12 +172,17 @@ def _inputs(report: ChartReport) -> list[dict[str, Any]]:
     src = report.source
     if isinstance(src, ImageSource):
         info = src.image
-        return [_file_input("image", info.path, info.sha256, {
+        inputs = [_file_input("image", info.path, info.sha256, {
             "format": info.format, "pixel_type": info.pixel_type,
             "size": [info.width, info.height], "encoding": src.encoding,
             "colourspace": src.colourspace, "exposure_mode": src.exposure_mode,
             "corners": src.corners.tolist(),
-            "corners_found": src.found.to_json() if src.found else None})]
+            "corners_found": src.found.to_json() if src.found else None,
+            **({"ocio": info.ocio.to_json()} if info.ocio else {})})]
+        if info.ocio is not None and not info.ocio.config.startswith("ocio://"):
+            inputs.append(_file_input("OpenColorIO config", info.ocio.config, provenance={
+                "name": info.ocio.config_name, "cache_id": info.ocio.config_id}))
+        return inputs
     assert isinstance(src, RenderSource)
     from fidelity.camera.model import available_cameras, camera_files
     from fidelity.resources import resource_dir

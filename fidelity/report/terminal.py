@@ -29,7 +29,11 @@ def summary_lines(report: ChartReport) -> list[str]:
             lines.append(f"warning: the patches at --corners match the chart layout less well "
                          f"than another row, column or orientation would (colour order "
                          f"{src.corner_checks.colour_order:.2f}); check --corners")
-        if src.colourspace and src.colourspace != "sRGB":
+        how = src.image.ocio
+        if how is not None:
+            lines.append(f"OpenColorIO: {how.colourspace} of {how.config_name or how.config} "
+                         f"-> {how.target} ({how.encoding} pixels)")
+        elif src.colourspace and src.colourspace != "sRGB":
             lines.append(f"RGB primaries: {src.colourspace}, converted to linear sRGB")
     lines.append(f"chart ΔE00: mean {report.mean_delta_e:.2f}, max "
                  f"{report.max_delta_e:.2f} ({report.worst_patch}); reference "
