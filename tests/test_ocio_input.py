@@ -152,3 +152,16 @@ def test_settings_name_the_colourspace_and_the_config(charts, tmp_path, monkeypa
     assert r.exit_code == 0, r.output
     how = json.loads((tmp_path / "a.json").read_text())["source"]["ocio"]
     assert how["config"] == (where if "://" in where else str(tmp_path / where))
+
+
+def test_a_report_reads_the_image_again_converted_as_the_audit_read_it(charts):
+    """The HTML report's picture of the sampling windows shows the converted pixels (the
+    image read again with the same conversion), not the file's encoded values."""
+    from fidelity.chart.measure import read_again
+
+    got = measure_image(charts["acescct"], read=ReadOptions(ocio_colourspace="ACEScct"))
+    assert got.image is not None
+    again = read_again(got.image)
+    linear = read_again(measure_image(charts["linear"]).image)  # type: ignore[arg-type]
+    assert again.ocio == got.image.ocio and again.encoding == "linear"
+    assert np.allclose(again.pixels, linear.pixels, atol=2e-3)

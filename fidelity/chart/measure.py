@@ -1256,14 +1256,17 @@ def _read_mosaic(path: str | os.PathLike[str], read: ReadOptions, error: OneChan
 
 def read_again(info: ImageInfo, max_pixels: int | None = None) -> Image:
     """The image an audit described by ``info`` read again as it was read (the same file, layer
-    and Bayer pattern, or the same message of the same recording), for a report that shows or
-    checks its pixels."""
+    and Bayer pattern, or the same message of the same recording; converted by OpenColorIO as
+    it was), for a report that shows or checks its pixels."""
     rec = info.recording
+    how = info.ocio
+    ocio = {} if how is None else {"ocio_colourspace": how.colourspace,
+                                   "ocio_config": how.config}
     if rec is not None:
         again = ReadOptions(bayer=info.bayer, max_pixels=max_pixels, topic=rec.topic,
-                            frame=rec.frame)
+                            frame=rec.frame, **ocio)
     else:
-        again = ReadOptions(layer=info.layer, bayer=info.bayer, max_pixels=max_pixels)
+        again = ReadOptions(layer=info.layer, bayer=info.bayer, max_pixels=max_pixels, **ocio)
     return _read_input(info.path, again, digest=False)[0]
 
 
