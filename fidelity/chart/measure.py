@@ -1258,15 +1258,17 @@ def read_again(info: ImageInfo, max_pixels: int | None = None) -> Image:
     """The image an audit described by ``info`` read again as it was read (the same file, layer
     and Bayer pattern, or the same message of the same recording; converted by OpenColorIO as
     it was), for a report that shows or checks its pixels."""
+    from dataclasses import replace
+
     rec = info.recording
-    how = info.ocio
-    ocio = {} if how is None else {"ocio_colourspace": how.colourspace,
-                                   "ocio_config": how.config}
     if rec is not None:
         again = ReadOptions(bayer=info.bayer, max_pixels=max_pixels, topic=rec.topic,
-                            frame=rec.frame, **ocio)
+                            frame=rec.frame)
     else:
-        again = ReadOptions(layer=info.layer, bayer=info.bayer, max_pixels=max_pixels, **ocio)
+        again = ReadOptions(layer=info.layer, bayer=info.bayer, max_pixels=max_pixels)
+    if info.ocio is not None:
+        again = replace(again, ocio_colourspace=info.ocio.colourspace,
+                        ocio_config=info.ocio.config)
     return _read_input(info.path, again, digest=False)[0]
 
 
