@@ -33,7 +33,7 @@ def available_cpus() -> int:
 #: The distribution's name on the package index (the import name is ``fidelity``).
 DISTRIBUTION = "camera-fidelity"
 #: Extras whose packages the tool runs with (not the test and docs tools).
-RUNTIME_EXTRAS = ("render", "coco", "ray")
+RUNTIME_EXTRAS = ("render", "scene", "coco", "ray", "fast", "ros", "fit", "ocio", "ssp", "qc")
 
 
 def dependency_versions(distribution: str = DISTRIBUTION,

@@ -26,8 +26,12 @@ def test_info_reports_every_declared_dependency_and_the_setup(tmp_path: Path) ->
         return {re.split(r"[<>=!~;\[ ]", d, maxsplit=1)[0].lower() for d in requirements}
 
     assert {k.lower() for k in env["dependencies"]} == names(project["dependencies"])
-    for extra in ("render", "coco", "ray"):
-        declared = names(project["optional-dependencies"][extra])
+    from fidelity.environment import RUNTIME_EXTRAS
+
+    extras = project["optional-dependencies"]
+    assert set(RUNTIME_EXTRAS) == set(extras) - {"all", "test", "docs"}  # every runtime extra
+    for extra in RUNTIME_EXTRAS:
+        declared = names(extras[extra])
         assert {k.lower() for k in env["extras"][extra]} == declared, extra
     for name, version in [*env["dependencies"].items(),
                           *(kv for e in env["extras"].values() for kv in e.items())]:
