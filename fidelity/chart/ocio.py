@@ -59,12 +59,9 @@ class OcioConversion:
 
 
 def _module() -> Any:
-    try:
-        import PyOpenColorIO
-    except ImportError:
-        raise InvalidValueError(f"--ocio-colourspace converts with OpenColorIO, which is not "
-                                f"installed: {OCIO_EXTRA}") from None
-    return PyOpenColorIO
+    from fidelity.correction.lut import ocio
+
+    return ocio("--ocio-colourspace converts with OpenColorIO", OCIO_EXTRA)
 
 
 def config_source(config: str | os.PathLike[str] | None) -> str:

@@ -55,13 +55,14 @@ SHAPER_SIZE = 4096
 OCIO_EXTRA = "pip install 'camera-fidelity[fit]'"
 
 
-def ocio() -> Any:
-    """The ``PyOpenColorIO`` module, or one clear error naming the extra that installs it."""
+def ocio(needed_for: str = "the .cube is written and checked by OpenColorIO",
+         extra: str = OCIO_EXTRA) -> Any:
+    """The ``PyOpenColorIO`` module, or one clear error: what needs it (``needed_for``), and
+    the ``extra`` that installs it."""
     try:
         import PyOpenColorIO
     except ImportError:
-        raise InvalidValueError(f"the .cube is written and checked by OpenColorIO, which is not "
-                                f"installed: {OCIO_EXTRA}") from None
+        raise InvalidValueError(f"{needed_for}, which is not installed: {extra}") from None
     return PyOpenColorIO
 
 
