@@ -12,8 +12,9 @@ The vocabulary (also in the docs' command table):
   a chart's measured ΔE (``predict``); ``--severities 1-5``: COCO-C severities
   (:class:`Severities`);
 - ``--encoding``, ``--exposure``, ``--layer``, ``--bayer``, ``--colourspace``,
-  ``--ocio-colourspace``, ``--ocio-config``, ``--negatives``, and for a robot recording ``--topic``, ``--frame``, ``--time``: how an image is read
-  (:func:`image_read_options`, one ``read`` argument);
+  ``--ocio-colourspace``, ``--ocio-config``, ``--negatives``, and for a robot recording
+  ``--topic``, ``--frame``, ``--time``: how an image is read (:func:`image_read_options`, one
+  ``read`` argument);
 - ``--camera``, ``--illuminant``, ``--reference``, ``--table``, ``--size``: as in ``check``;
 - ``--out DIR``: the folder a command writes several files to; ``--json FILE`` (``-`` for
   stdout: then nothing else is printed there), ``--html FILE``, ``--junit FILE``: one report;
@@ -375,8 +376,9 @@ def chart_pair_options(f: F) -> F:
 
 def image_read_options(f: F) -> F:
     """``--encoding``, ``--exposure``, ``--layer``, ``--bayer``, ``--colourspace``,
-    ``--ocio-colourspace``, ``--ocio-config``, ``--negatives`` and, for a recording, ``--topic``, ``--frame``, ``--time``: how an image's
-    pixels are read (audit, gate, compare, ...). The command receives them as one argument
+    ``--ocio-colourspace``, ``--ocio-config``, ``--negatives`` and, for a recording,
+    ``--topic``, ``--frame``, ``--time``: how an image's pixels are read (audit, gate, compare,
+    ...). The command receives them as one argument
     ``read``, a :class:`fidelity.chart.measure.ReadOptions` (``max_pixels`` left at None:
     :func:`max_pixels_option` gives it separately)."""
 
