@@ -165,3 +165,20 @@ def test_a_report_reads_the_image_again_converted_as_the_audit_read_it(charts):
     linear = read_again(measure_image(charts["linear"]).image)  # type: ignore[arg-type]
     assert again.ocio == got.image.ocio and again.encoding == "linear"
     assert np.allclose(again.pixels, linear.pixels, atol=2e-3)
+
+
+def test_convert_copies_unless_told_and_passes_nan_through() -> None:
+    from fidelity.chart.ocio import convert
+
+    px = np.full((2, 3, 3), 0.4, np.float32)
+    px[0, 0] = np.nan
+    out, _ = convert(px, "ACEScct")
+    assert out is not px and np.all(px[1] == np.float32(0.4))  # the input is left as it was
+    assert np.isnan(out[0, 0]).all() and np.isfinite(out[1]).all()
+    same, _ = convert(px, "ACEScct", copy=False)
+    assert same is px and np.array_equal(px[1], out[1])
+    ints = np.full((2, 2, 3), 0.5)  # float64: a new float32 array either way
+    assert convert(ints, "ACEScct", copy=False)[0].dtype == np.float32
+    frozen = np.full((2, 2, 3), 0.4, np.float32)
+    frozen.flags.writeable = False  # e.g. a recording's message buffer
+    assert convert(frozen, "ACEScct", copy=False)[0] is not frozen

@@ -1211,7 +1211,9 @@ def _ocio_converted(img: Image, read: ReadOptions) -> Image:
     from fidelity.chart.ocio import convert
 
     try:
-        pixels, how = convert(as_float32(img.pixels), read.ocio_colourspace, read.ocio_config)
+        # the image is this function's own: converted in place (as_float32 copies codes)
+        pixels, how = convert(as_float32(img.pixels), read.ocio_colourspace, read.ocio_config,
+                              copy=False)
     except InvalidValueError as exc:
         raise InvalidValueError(f"{img.path}: {exc}") from None
     return replace(img, pixels=pixels, encoding=how.encoding, chromaticities=None, ocio=how)

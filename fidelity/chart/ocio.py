@@ -86,22 +86,26 @@ def load_config(config: str | os.PathLike[str] | None) -> tuple[Any, str]:
 
 
 def convert(pixels: np.ndarray, colourspace: str,
-            config: str | os.PathLike[str] | None = None) -> tuple[np.ndarray, OcioConversion]:
+            config: str | os.PathLike[str] | None = None, *, copy: bool = True
+            ) -> tuple[np.ndarray, OcioConversion]:
     """Convert ``(H, W, 3)`` float values in ``colourspace`` of ``config`` (module docstring).
 
     Parameters
     ----------
     pixels
-        ``(H, W, 3)`` float32 values (NaN and Inf pass through as OpenColorIO leaves them).
+        ``(H, W, 3)`` float values (NaN and Inf pass through as OpenColorIO leaves them).
     colourspace
         A colourspace name (or alias) of the config.
     config
         A config file or an ``ocio://`` URI; None: ``$OCIO``, else :data:`DEFAULT_CONFIG`.
+    copy
+        False: convert ``pixels`` in place when they are a writeable C-contiguous float32
+        array (the caller's own: 12 bytes a pixel spared); a new array otherwise.
 
     Returns
     -------
-    The converted ``(H, W, 3)`` float32 values (a new array) and the
-    :class:`OcioConversion` that says what was done.
+    The converted ``(H, W, 3)`` float32 values and the :class:`OcioConversion` that says what
+    was done.
     """
     ocio = _module()
     arr = np.asarray(pixels)
@@ -124,7 +128,9 @@ def convert(pixels: np.ndarray, colourspace: str,
         raise InvalidValueError(
             f"--ocio-colourspace {colourspace}: OpenColorIO cannot convert it from {where} to "
             f"{target} of its built-in config: {' '.join(str(exc).split())}") from None
-    out = np.ascontiguousarray(arr, dtype=np.float32).copy()
+    out = np.ascontiguousarray(arr, dtype=np.float32)
+    if out is arr and (copy or not out.flags.writeable):
+        out = out.copy()
     processor.getDefaultCPUProcessor().applyRGB(out)
     return out, OcioConversion(space.getName(), where, src.getName() or "", src.getCacheID(),
                                target, "linear" if scene else "srgb", ocio.__version__)
