@@ -620,3 +620,18 @@ def test_an_absolute_time_picks_the_nearest_message(recordings, corners, tmp_pat
     err = _error(["audit", str(path), "--topic", "/cam/rgb8", "--time", "2023-11-14T22:13:20",
                   "--corners", _corner_text(corners)])
     assert "give the UTC offset" in err
+
+
+@pytest.mark.parametrize("topic, colourspace", [("/cam/float", "Linear Rec.709 (sRGB)"),
+                                                ("/cam/rgb8", "sRGB - Display")])
+def test_a_recordings_frame_is_converted_by_opencolorio(recordings, corners, topic, colourspace):
+    """--ocio-colourspace on a message's pixels: the built-in config's own linear sRGB and
+    display sRGB convert to themselves, so the chart measures as without the conversion."""
+    pytest.importorskip("PyOpenColorIO", reason="pip install 'camera-fidelity[ocio]'")
+    paths, _, _ = recordings
+    plain = measure_image(paths[KINDS[0]], corners, read=ReadOptions(topic=topic, frame=1))
+    got = measure_image(paths[KINDS[0]], corners, read=ReadOptions(
+        topic=topic, frame=1, ocio_colourspace=colourspace))
+    assert got.image is not None and got.image.ocio is not None
+    assert got.encoding == plain.encoding and got.image.recording == plain.image.recording
+    np.testing.assert_allclose(got.measurement.delta_e, plain.measurement.delta_e, atol=2e-3)
