@@ -180,5 +180,5 @@ def test_convert_copies_unless_told_and_passes_nan_through() -> None:
     ints = np.full((2, 2, 3), 0.5)  # float64: a new float32 array either way
     assert convert(ints, "ACEScct", copy=False)[0].dtype == np.float32
     frozen = np.full((2, 2, 3), 0.4, np.float32)
-    frozen.flags.writeable = False  # e.g. a recording's message buffer
+    frozen.flags.writeable = False  # e.g. np.frombuffer of bytes: OpenColorIO writes regardless
     assert convert(frozen, "ACEScct", copy=False)[0] is not frozen
