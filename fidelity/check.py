@@ -338,30 +338,41 @@ def gate(
     table: str | None = None,
     bound: str = "classic",
     decision: DecisionRule = SIMPLE,
+    frames: Sequence[int] | None = None,
 ) -> list[GateResult]:
     """Gate ``images`` one by one (or ``camera``) against ``criterion``. An input error of
     one subject (exit code 2) becomes its result's ``error``; the others are still measured.
+    ``frames``: one frame index per image (a recording named once per frame it is gated
+    on): the subject is then ``IMAGE frame N``.
 
     ``reference`` defaults to ``scene``. Returns one :class:`~fidelity.records.GateResult`
     per subject (its report, or its error, and the time it took);
     :func:`fidelity.records.gate_exit_code` turns them into the exit code and
     :func:`fidelity.report.write_chart_report` writes each report.
     """
+    from dataclasses import replace
+
     from fidelity.errors import FidelityError
 
-    subjects: list[str] = [os.fspath(i) for i in images] or ([camera] if camera else [])
-    reads = reads_for(subjects, read) if images else [read for _ in subjects]
+    paths: list[str] = [os.fspath(i) for i in images] or ([camera] if camera else [])
+    reads = reads_for(paths, read) if images else [read for _ in paths]
+    subjects = list(paths)
+    if frames is not None:
+        if len(frames) != len(paths):
+            raise ValueError(f"{len(frames)} frames for {len(paths)} images")
+        reads = [replace(r, frame=k, time=None) for r, k in zip(reads, frames, strict=True)]
+        subjects = [f"{p} frame {k}" for p, k in zip(paths, frames, strict=True)]
     results: list[GateResult] = []
-    for subject, subject_read in zip(subjects, reads, strict=True):
+    for subject, path, subject_read in zip(subjects, paths, reads, strict=True):
         t0 = time.perf_counter()
         try:
             if images:
-                report = audit_image(subject, corners, read=subject_read,
+                report = audit_image(path, corners, read=subject_read,
                                      reference=reference or "scene", illuminant=illuminant,
                                      size=size, table=table, criterion=criterion,
                                      command="gate", bound=bound, decision=decision)
             else:
-                report = check_camera(subject, illuminant=illuminant, renderer=renderer,
+                report = check_camera(path, illuminant=illuminant, renderer=renderer,
                                       reference=reference or "scene", size=size, table=table,
                                       criterion=criterion, command="gate", bound=bound,
                                       decision=decision)

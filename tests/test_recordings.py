@@ -13,9 +13,11 @@ from __future__ import annotations
 import io
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
+from xml.etree import ElementTree as ET
 
 import numpy as np
 import pytest
@@ -635,3 +637,56 @@ def test_a_recordings_frame_is_converted_by_opencolorio(recordings, corners, top
     assert got.image is not None and got.image.ocio is not None
     assert got.encoding == plain.encoding and got.image.recording == plain.image.recording
     np.testing.assert_allclose(got.measurement.delta_e, plain.measurement.delta_e, atol=2e-3)
+
+
+def test_gate_frames_gates_each_selected_frame(recordings, corners, tmp_path):
+    """--frames: each selected frame of the topic is a subject (its JUnit test case, its
+    report, its message's SHA-256); frames 0 and 2 of every topic hold noise, not the chart."""
+    paths, _, folder = recordings
+    c = _corner_text(corners)
+    png = json.loads(_run_json(["audit", str(folder / "c8.png"), "--corners", c], tmp_path))
+    limit = str(png["mean_delta_e"] + 0.001)
+    junit = tmp_path / "f.xml"
+    r = _run(["gate", str(paths["ros1"]), "--topic", "/cam/rgb8", "--frames", "0:3",
+              "--corners", c, "--max-delta-e", limit, "--junit", str(junit),
+              "--json", str(tmp_path / "f"), "--evidence", str(tmp_path / "e.json")])
+    assert r.exit_code == 1, r.output  # the noise frames fail
+    names = [case.get("name") for case in ET.parse(junit).getroot().iter("testcase")]
+    assert [n.rsplit(" ", 2)[1:] for n in names] == [["frame", "0"], ["frame", "1"],
+                                                     ["frame", "2"]]
+    docs = [json.loads((tmp_path / "f" / f"drive.bag.frame{k}.json").read_text())
+            for k in range(3)]
+    assert [d["source"]["recording"]["frame"] for d in docs] == [0, 1, 2]
+    assert docs[1]["mean_delta_e"] == pytest.approx(png["mean_delta_e"], abs=1e-9)
+    assert min(d["mean_delta_e"] for d in docs) == docs[1]["mean_delta_e"]
+    assert re.search(r"mean ΔE00 over 3 measured frames: min [\d.]+ \(frame 1\)", r.output)
+    record = json.loads((tmp_path / "e.json").read_text())
+    shas = [s["inputs"][0]["sha256"] for s in record["subjects"]]
+    assert len(set(shas)) == 3 and all(len(h) == 64 for h in shas)
+    one = _run(["gate", str(paths["mcap"]), "--topic", "/cam/rgb8", "--frames", "-2,1",
+                "--corners", c, "--max-delta-e", limit])
+    assert one.exit_code == 0 and "frame 1" in one.output  # -2 is 1: gated once
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--frames", "5"], "has 3 messages (frames 0 to 2); there is no frame 5"),
+    (["--frames", "1:1"], "--frames 1:1 selects none of topic"),
+    (["--frames", "a"], "--frames a: expected frame numbers"),
+    (["--frames", "0::0"], "the step must be a whole number above 0"),
+    (["--frames", "1", "--frame", "1"], "give --frames, or --frame N or --time T, not both"),
+])
+def test_gate_frames_bad_selections_are_one_line_exit_2(recordings, args, message):
+    paths, _, _ = recordings
+    r = CliRunner().invoke(main, ["gate", str(paths["ros1"]), "--topic", "/cam/rgb8",
+                                  "--max-delta-e", "3", *args])
+    assert r.exit_code == 2, r.output
+    assert message in r.output
+
+
+def test_gate_frames_needs_recordings(recordings):
+    _, _, folder = recordings
+    r = CliRunner().invoke(main, ["gate", str(folder / "c8.png"), "--frames", "0:2",
+                                  "--max-delta-e", "3"])
+    assert r.exit_code == 2 and r.stderr.startswith("fidelity: error: ")
+    r = CliRunner().invoke(main, ["gate", "--camera", "ideal", "--frames", "0:2"])
+    assert r.exit_code == 2 and "--frames applies to recordings" in r.output

@@ -355,6 +355,81 @@ def _choose_frame(times: Sequence[int], start_ns: int, end_ns: int, choice: Choi
     return k % n
 
 
+@dataclass(frozen=True)
+class FrameSelection:
+    """Several messages of a topic (``gate --frames``): the ``indices`` listed, or the slice
+    ``start:stop:step`` in Python's sense (negative indices from the end, ``stop`` left out),
+    as ``text`` wrote it."""
+
+    text: str
+    indices: tuple[int, ...] = ()
+    start: int | None = None
+    stop: int | None = None
+    step: int | None = None
+
+    def resolve(self, count: int, shown: str, topic: str) -> list[int]:
+        """The frame indices (0 to ``count - 1``, in order, each once) on a topic of ``count``
+        messages; an index past the end or a selection of none is an error naming ``shown``."""
+        if self.indices:
+            bad = [k for k in self.indices if not -count <= k < count]
+            if bad:
+                raise InputFileError(f"{shown}: topic {topic!r} has {count} messages (frames 0 "
+                                     f"to {count - 1}); there is no frame {bad[0]}")
+            return list(dict.fromkeys(k % count for k in self.indices))
+        picked = list(range(count))[self.start:self.stop:self.step]
+        if not picked:
+            raise InputFileError(f"{shown}: --frames {self.text} selects none of topic "
+                                 f"{topic!r}'s {count} messages")
+        return picked
+
+
+def parse_frames(text: str) -> FrameSelection:
+    """``N,M,...`` or ``START:STOP[:STEP]`` (Python slice, parts may be left out) as a
+    :class:`FrameSelection`; anything else is an error naming ``--frames``."""
+    t = text.strip()
+    try:
+        if ":" in t:
+            parts = [p.strip() for p in t.split(":")]
+            if len(parts) > 3:
+                raise ValueError
+            nums = [int(p) if p else None for p in parts] + [None] * (3 - len(parts))
+            if nums[2] is not None and nums[2] <= 0:
+                raise InvalidValueError(f"--frames {text}: the step must be a whole number "
+                                        "above 0")
+            return FrameSelection(text, start=nums[0], stop=nums[1], step=nums[2])
+        indices = tuple(int(p) for p in t.split(","))
+    except ValueError:
+        raise InvalidValueError(f"--frames {text}: expected frame numbers N,M,... or a range "
+                                "START:STOP[:STEP] (negative from the end)") from None
+    return FrameSelection(text, indices=indices)
+
+
+def topic_frames(path: str | os.PathLike[str], topic: str | None = None) -> tuple[str, int]:
+    """The image topic of the recording at ``path`` (``topic``, or its only image topic) and
+    its number of messages, from the recording's index (no message is read)."""
+    p = Path(path)
+    shown = display_path(p)
+    if not p.exists():
+        raise InputFileError(f"{shown}: no such file or folder")
+    suffix = _sniff(p, shown)
+    highlevel, typesys = _rosbags()
+    with _named(p, suffix) as name:
+        try:
+            reader = _open(highlevel, typesys, name)
+        except Exception as exc:
+            raise InputFileError(f"{shown}: cannot read the recording ({_reason(exc)})") from None
+        try:
+            chosen = _select_topic(reader, topic, shown)
+            return chosen, len(topic_times(reader, chosen))
+        except InputFileError:
+            raise
+        except Exception as exc:
+            raise InputFileError(f"{shown}: cannot read the recording ({_reason(exc)})") from None
+        finally:
+            with contextlib.suppress(Exception):
+                reader.close()
+
+
 def read_frame(path: str | os.PathLike[str], choice: Choice = Choice(), *,
                bayer: str | None = None, max_pixels: int | None = None
                ) -> tuple[Image, str]:
@@ -649,5 +724,6 @@ def _decompress(data: bytes, fmt: str, bayer: str | None, limit: int, where: str
     return image
 
 
-__all__ = ["EXTRA", "IMAGE_TYPES", "RECORDING_SUFFIXES", "Choice", "is_recording_path",
-           "message_pixels", "read_frame", "supported_encodings", "topic_times"]
+__all__ = ["EXTRA", "IMAGE_TYPES", "RECORDING_SUFFIXES", "Choice", "FrameSelection",
+           "is_recording_path", "message_pixels", "parse_frames", "read_frame",
+           "supported_encodings", "topic_frames", "topic_times"]

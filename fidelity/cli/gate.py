@@ -20,6 +20,7 @@ from fidelity.cli.options import (
     IMAGE_PATH,
     PATH,
     STDOUT,
+    FrameRange,
     bound_option,
     common_options,
     decision_options,
@@ -40,6 +41,7 @@ from fidelity.prediction.verdict import EXIT_ERROR, EXIT_UNDECIDED
 
 if TYPE_CHECKING:
     from fidelity.chart.measure import ReadOptions
+    from fidelity.chart.recording import FrameSelection
     from fidelity.records import GateResult
 
 def _error_line(message: str) -> None:
@@ -55,6 +57,41 @@ def _write_junit(junit: Path, cases: Sequence[GateResult]) -> None:
     except (FidelityError, OSError) as exc:
         _error_line(f"{junit}: cannot write JUnit XML: {exc}")
         sys.exit(EXIT_ERROR)
+
+
+def _frame_subjects(images: Sequence[Path], frames: FrameSelection, topic: str | None
+                    ) -> tuple[tuple[Path, ...], list[int]]:
+    """Each recording once per frame ``frames`` selects on its topic (from its index), and
+    those frames."""
+    from fidelity.chart.recording import topic_frames
+
+    paths: list[Path] = []
+    frame_of: list[int] = []
+    for img in images:
+        chosen, count = topic_frames(img, topic)
+        for k in frames.resolve(count, display_path(img), chosen):
+            paths.append(img)
+            frame_of.append(k)
+    return tuple(paths), frame_of
+
+
+def _frames_summary(cases: Sequence[GateResult], images: Sequence[Path],
+                    frame_of: Sequence[int]) -> list[str]:
+    """How the chart ΔE varies over the frames gated (the measured ones), per recording."""
+    from statistics import median
+
+    by: dict[Path, list[tuple[float, int]]] = {}
+    for case, path, k in zip(cases, images, frame_of, strict=True):
+        if case.report is not None:
+            by.setdefault(path, []).append((case.report.mean_delta_e, k))
+    lines = []
+    for path, values in by.items():
+        lo, hi = min(values), max(values)
+        many = "s" if len(values) > 1 else ""
+        lines.append(f"{display_path(path)}: mean ΔE00 over {len(values)} measured frame{many}: "
+                     f"min {lo[0]:.2f} (frame {lo[1]}), median "
+                     f"{median(v for v, _ in values):.2f}, max {hi[0]:.2f} (frame {hi[1]})")
+    return lines
 
 
 def write_reports(result: GateResult, json_path: Path | None, html_path: Path | None,
@@ -104,6 +141,10 @@ def write_reports(result: GateResult, json_path: Path | None, html_path: Path | 
                    "'-': standard output, one subject only).")
 @click.option("--html", "html_path", type=click.Path(path_type=Path),
               help="Write the HTML report (several images: a folder, one report per image).")
+@click.option("--frames", type=FrameRange(), default=None, metavar="FRAMES",
+              help="With recordings: gate each of these frames of --topic, N,M,... or "
+                   "START:STOP[:STEP] (0:300:30; negative from the end: -10:), each its own "
+                   "subject (JUnit test case, report); instead of --frame and --time.")
 @max_pixels_option
 @bound_option
 @decision_options
@@ -114,8 +155,8 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
          size: str, table: str | None, read: ReadOptions,
          reference: str, illuminant: str, renderer: str, junit: Path | None,
          json_path: Path | None, html_path: Path | None,
-         max_pixels: int | None, bound: str, decision: str, coverage_factor: float,
-         strict: bool, evidence_paths: tuple[Path, ...]) -> None:
+         frames: FrameSelection | None, max_pixels: int | None, bound: str, decision: str,
+         coverage_factor: float, strict: bool, evidence_paths: tuple[Path, ...]) -> None:
     """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 input error, 3 bug, 4
     undecided (--decision guarded).
 
@@ -125,6 +166,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
     fidelity gate --camera nikon-5100 --max-dmap 1 --class person --junit colour.xml
     fidelity gate day.exr dusk.exr tunnel.exr --max-delta-e 3 --junit colour.xml
     fidelity gate drive.bag --topic /camera/image_raw --frame 40 --max-delta-e 3
+    fidelity gate drive.bag --topic /camera/image_raw --frames 0:300:30 --max-delta-e 3
 
     Several IMAGEs are gated one by one (one JUnit test case each; --json and --html name
     folders that get IMAGE-NAME.json / .html, as an existing folder does for one image); the
@@ -146,6 +188,10 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         raise click.UsageError("--corners, --encoding, --exposure, --layer, --bayer, "
                                "--colourspace, --topic, --frame and --time apply to an IMAGE, "
                                "not to --camera")
+    if frames is not None and not images:
+        raise click.UsageError("--frames applies to recordings given as IMAGEs")
+    if frames is not None and (read.frame is not None or read.time is not None):
+        raise click.UsageError("give --frames, or --frame N or --time T, not both")
     if images and renderer != "closed-form" and not from_settings("renderer"):
         raise click.UsageError("--renderer applies to --camera (a camera model rendered), not "
                                "to an IMAGE")
@@ -155,17 +201,22 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
     from fidelity.records import GateResult, gate_exit_code
     from fidelity.report.terminal import summary_lines
 
-    many = len(images) > 1
     to_stdout = json_path is not None and str(json_path) == STDOUT
-    if to_stdout and many:
+    if to_stdout and (len(images) > 1 or frames is not None):
         raise click.UsageError("--json - (standard output) takes one IMAGE; give a folder")
     if to_stdout:
         json_path = None
+    frame_of: list[int] | None = None
     try:
         from fidelity.fileio import check_outputs
 
-        # a folder (always so with several images) gets one report per image (or camera)
-        subjects = images or (Path(camera or ""),)
+        if frames is not None:  # each selected frame of each recording is a subject
+            images, frame_of = _frame_subjects(images, frames, read.topic)
+        many = len(images) > 1
+        # a folder (always so with several subjects) gets one report per image (or camera)
+        subjects = ((images or (Path(camera or ""),)) if frame_of is None else
+                    tuple(Path(f"{img}.frame{k}") for img, k in zip(images, frame_of,
+                                                                       strict=True)))
         json_paths = report_paths(subjects, json_path, ".json", folder=many)
         html_paths = report_paths(subjects, html_path, ".html", folder=many)
         outputs: dict[str, Path | None] = {"--junit": junit, **evidence_outputs(evidence_paths)}
@@ -195,7 +246,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         criterion, images, camera=camera, corners=corners,
         read=replace(read, max_pixels=max_pixels),
         reference=reference, illuminant=illuminant, renderer=renderer, size=size, table=table,
-        bound=bound, decision=rule)
+        bound=bound, decision=rule, frames=frame_of)
     done = [write_reports(case, jp, hp, images)
             for case, jp, hp in zip(cases, json_paths, html_paths, strict=True)]
     cases = [case for case, _ in done]
@@ -228,6 +279,9 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
                              [(c.subject, c.report, c.error) for c in cases],
                              gate_exit_code(cases),
                              results=[*(p for _, w in done for p in w), junit])
+    if frame_of is not None:
+        for line in _frames_summary(cases, images, frame_of):
+            click.echo(line)
     if many:
         codes = [c.exit_code for c in cases]
         undecided = (f", {codes.count(EXIT_UNDECIDED)} undecided"

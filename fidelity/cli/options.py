@@ -159,6 +159,21 @@ class RecordingTime(ParamTypeBase):
         return text
 
 
+class FrameRange(ParamTypeBase):
+    """``--frames``: frame numbers ``N,M,...`` or a range ``START:STOP[:STEP]`` of a
+    recording's topic -> a :class:`fidelity.chart.recording.FrameSelection`."""
+
+    name = "FRAMES"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> Any:
+        from fidelity.chart.recording import FrameSelection, parse_frames
+
+        if isinstance(value, FrameSelection):
+            return value
+        return parse_frames(str(value))
+
+
 class NameList(ParamTypeBase):
     """``all`` or comma-separated names from a known set -> a list of names."""
 
