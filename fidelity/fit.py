@@ -244,7 +244,7 @@ def _read(path: str | os.PathLike[str], corners: str | Sequence[float] | None,
                                colourspace=(read.colourspace if read.colourspace is not None
                                             else img.chromaticities or "sRGB"))
     except FidelityError as exc:
-        raise type(exc)(f"{img.path}: {exc}") from None
+        raise type(exc)(f"{img.where}: {exc}") from None
     return _Chart(str(path), img.pixels, audit)
 
 

@@ -690,3 +690,13 @@ def test_gate_frames_needs_recordings(recordings):
     assert r.exit_code == 2 and r.stderr.startswith("fidelity: error: ")
     r = CliRunner().invoke(main, ["gate", "--camera", "ideal", "--frames", "0:2"])
     assert r.exit_code == 2 and "--frames applies to recordings" in r.output
+
+
+def test_an_error_about_a_frame_names_the_topic_and_frame(recordings):
+    paths, _, _ = recordings
+    r = CliRunner().invoke(main, ["gate", str(paths["ros1"]), "--topic", "/cam/rgb8",
+                                  "--frames", "0,1", "--max-delta-e", "3"])
+    assert r.exit_code == 2, r.output
+    assert f"fidelity: error: {paths['ros1']}: topic /cam/rgb8 frame 0: no colour chart found" \
+        in r.stderr
+    assert r.stderr.count("fidelity: error:") == 1  # frame 1 holds the chart

@@ -193,6 +193,14 @@ class Image:
     ocio: OcioConversion | None = None
 
     @property
+    def where(self) -> str:
+        """What an error about this image names: the file, and for a recording's message its
+        topic and frame (``drive.bag: topic /cam frame 3``)."""
+        rec = self.recording
+        return (display_path(self.path) if rec is None
+                else f"{display_path(self.path)}: topic {rec.topic} frame {rec.frame}")
+
+    @property
     def height(self) -> int:
         """Image height in pixels."""
         return int(self.pixels.shape[0])

@@ -1124,7 +1124,7 @@ def measure_image(
                                 colourspace=(read.colourspace if read.colourspace is not None
                                              else img.chromaticities or "sRGB"))
     except FidelityError as exc:
-        raise type(exc)(f"{img.path}: {exc}") from None
+        raise type(exc)(f"{img.where}: {exc}") from None
     if inspect_image is not None:
         inspect_image(img)
     return result
