@@ -404,9 +404,11 @@ def parse_frames(text: str) -> FrameSelection:
     return FrameSelection(text, indices=indices)
 
 
-def topic_frames(path: str | os.PathLike[str], topic: str | None = None) -> tuple[str, int]:
-    """The image topic of the recording at ``path`` (``topic``, or its only image topic) and
-    its number of messages, from the recording's index (no message is read)."""
+@contextlib.contextmanager
+def _opened(path: str | os.PathLike[str]) -> Iterator[tuple[Any, str, str]]:
+    """The recording at ``path`` open: ``(reader, its name as shown, its kind's suffix)``;
+    closed after. Whatever rosbags' parser meets in a damaged recording, opening it or reading
+    its index or messages, is one :class:`InputFileError` naming it."""
     p = Path(path)
     shown = display_path(p)
     if not p.exists():
@@ -419,15 +421,22 @@ def topic_frames(path: str | os.PathLike[str], topic: str | None = None) -> tupl
         except Exception as exc:
             raise InputFileError(f"{shown}: cannot read the recording ({_reason(exc)})") from None
         try:
-            chosen = _select_topic(reader, topic, shown)
-            return chosen, len(topic_times(reader, chosen))
-        except InputFileError:
+            yield reader, shown, suffix
+        except (InputFileError, InvalidValueError):
             raise
         except Exception as exc:
             raise InputFileError(f"{shown}: cannot read the recording ({_reason(exc)})") from None
         finally:
             with contextlib.suppress(Exception):
                 reader.close()
+
+
+def topic_frames(path: str | os.PathLike[str], topic: str | None = None) -> tuple[str, int]:
+    """The image topic of the recording at ``path`` (``topic``, or its only image topic) and
+    its number of messages, from the recording's index (no message is read)."""
+    with _opened(path) as (reader, shown, _):
+        chosen = _select_topic(reader, topic, shown)
+        return chosen, len(topic_times(reader, chosen))
 
 
 def read_frame(path: str | os.PathLike[str], choice: Choice = Choice(), *,
@@ -446,47 +455,30 @@ def read_frame(path: str | os.PathLike[str], choice: Choice = Choice(), *,
         raise unknown_name("--bayer pattern", bayer, BAYER_PATTERNS)
     limit = pixel_limit(max_pixels)
     p = Path(path)
-    shown = display_path(p)
-    if not p.exists():
-        raise InputFileError(f"{shown}: no such file or folder")
-    suffix = _sniff(p, shown)
-    highlevel, typesys = _rosbags()
-    with _named(p, suffix) as name:
+    with _opened(p) as (reader, shown, suffix):
+        topic = _select_topic(reader, choice.topic, shown)
+        times = topic_times(reader, topic)
+        start, end = int(reader.start_time), int(reader.end_time)
+        k = _choose_frame(times, start, end, choice, shown, topic)
+        t = times[k]
+        same = k - bisect.bisect_left(times, t)  # messages before it at the same time
+        conns = [c for c in reader.connections if c.topic == topic]
+        raw: bytes | None = None
+        msgtype = ""
+        for i, (found, _, data) in enumerate(reader.messages(connections=conns, start=t,
+                                                              stop=t + 1)):
+            if i == same:
+                raw, msgtype = bytes(data), str(found.msgtype)
+                break
+        if raw is None:
+            raise InputFileError(f"{shown}: topic {topic!r} frame {k}: the index names a "
+                                 "message the recording does not hold (damaged)")
         try:
-            reader = _open(highlevel, typesys, name)
-        except Exception as exc:  # a damaged recording, whatever rosbags' parser met
-            raise InputFileError(f"{shown}: cannot read the recording ({_reason(exc)})") from None
-        try:
-            topic = _select_topic(reader, choice.topic, shown)
-            times = topic_times(reader, topic)
-            start, end = int(reader.start_time), int(reader.end_time)
-            k = _choose_frame(times, start, end, choice, shown, topic)
-            t = times[k]
-            same = k - bisect.bisect_left(times, t)  # messages before it at the same time
-            conns = [c for c in reader.connections if c.topic == topic]
-            raw: bytes | None = None
-            msgtype = ""
-            for i, (found, _, data) in enumerate(reader.messages(connections=conns, start=t,
-                                                                  stop=t + 1)):
-                if i == same:
-                    raw, msgtype = bytes(data), str(found.msgtype)
-                    break
-            if raw is None:
-                raise InputFileError(f"{shown}: topic {topic!r} frame {k}: the index names a "
-                                     "message the recording does not hold (damaged)")
-            try:
-                msg = reader.deserialize(raw, msgtype)
-            except Exception as exc:
-                raise InputFileError(f"{shown}: topic {topic!r} frame {k}: cannot decode the "
-                                     f"message ({_reason(exc)})") from None
-            kind = _kind(reader, suffix)
-        except (InputFileError, InvalidValueError):
-            raise
-        except Exception as exc:  # damaged data met while reading the index or the message
-            raise InputFileError(f"{shown}: cannot read the recording ({_reason(exc)})") from None
-        finally:
-            with contextlib.suppress(Exception):
-                reader.close()
+            msg = reader.deserialize(raw, msgtype)
+        except Exception as exc:
+            raise InputFileError(f"{shown}: topic {topic!r} frame {k}: cannot decode the "
+                                 f"message ({_reason(exc)})") from None
+        kind = _kind(reader, suffix)
     where = f"{shown}: topic {topic} frame {k}"
     compressed = msgtype.endswith("CompressedImage")
     ros_encoding = str(msg.format if compressed else msg.encoding)
