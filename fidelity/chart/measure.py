@@ -62,7 +62,7 @@ from fidelity.chart.uncertainty import (
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import DEFAULT_REFERENCE, Reference, load_reference
 from fidelity.colour.colorimetry import delta_e_2000, delta_e_2000_components, srgb_to_lab
-from fidelity.errors import InvalidValueError, unknown_name
+from fidelity.errors import FidelityError, InvalidValueError, unknown_name
 
 if TYPE_CHECKING:  # the finder is imported where a chart is found (not by check)
     from fidelity.chart.find import ChartChecks, FoundChart
@@ -1112,8 +1112,6 @@ def measure_image(
     (:func:`measure_pixels`). Errors name the file. ``inspect_image`` is called with the image
     read once its chart is measured, so that a caller can look at more of it without reading it
     again (the audit's banding check)."""
-    from fidelity.errors import FidelityError
-
     img, sha256 = read_input(path, read, native=True)
     enc = read.encoding or img.encoding
     info = img.info(sha256=sha256, encoding=enc)
@@ -1214,8 +1212,8 @@ def _ocio_converted(img: Image, read: ReadOptions) -> Image:
         # the image is this function's own: converted in place (as_float32 copies codes)
         pixels, how = convert(as_float32(img.pixels), read.ocio_colourspace, read.ocio_config,
                               copy=False)
-    except InvalidValueError as exc:
-        raise InvalidValueError(f"{img.path}: {exc}") from None
+    except FidelityError as exc:
+        raise type(exc)(f"{img.where}: {exc}") from None
     return replace(img, pixels=pixels, encoding=how.encoding, chromaticities=None, ocio=how)
 
 

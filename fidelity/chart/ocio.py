@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from fidelity.errors import InvalidValueError, unknown_name
+from fidelity.errors import InvalidValueError
 
 #: The config used when neither ``--ocio-config`` nor ``$OCIO`` names one.
 DEFAULT_CONFIG = "ocio://default"
@@ -114,8 +114,9 @@ def convert(pixels: np.ndarray, colourspace: str,
     src, where = load_config(config)
     space = src.getColorSpace(colourspace)
     if space is None:
-        raise unknown_name(f"colourspace of the OpenColorIO config {where}", colourspace,
-                           [c.getName() for c in src.getColorSpaces()])
+        known = ", ".join(sorted(c.getName() for c in src.getColorSpaces()))
+        raise InvalidValueError(f"--ocio-colourspace {colourspace}: not a colourspace of the "
+                                f"OpenColorIO config {where}; its colourspaces: {known}")
     if space.isData():
         raise InvalidValueError(f"--ocio-colourspace {colourspace}: a data colourspace of "
                                 f"{where} (its values are not colours)")

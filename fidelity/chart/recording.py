@@ -133,7 +133,7 @@ def _sniff(p: Path, shown: str) -> str:
     raise InputFileError(
         f"{shown}: not a ROS bag or MCAP file (a ROS 1 bag starts with '#ROSBAG V2.0', an MCAP "
         "file with '\\x89MCAP0', a ROS 2 bag is a folder with metadata.yaml or its .db3/.mcap "
-        "file); --topic, --frame and --time read recordings only")
+        "file); --topic, --frame, --frames and --time read recordings only")
 
 
 @contextlib.contextmanager

@@ -47,6 +47,11 @@ OPTIONS: dict[str, tuple[Callable[[str, dict[str, Path]], list[Any]], str]] = {
     "gate --max-delta-e": (lambda v, w: ["gate", w["image"], "--corners",
                                          "12,12,112,12,112,72,12,72", "--max-delta-e", v],
                            "--max-delta-e"),
+    "audit --ocio-colourspace": (lambda v, w: ["audit", w["image"], "--corners",
+                                               "12,12,112,12,112,72,12,72",
+                                               "--ocio-colourspace", v], "--ocio-colourspace"),
+    "gate --frames": (lambda v, w: ["gate", w["image"], "--max-delta-e", "3", "--frames", v],
+                      "--frames"),
 }
 
 
