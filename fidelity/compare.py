@@ -101,6 +101,8 @@ def compare_charts(
     read: ReadOptions = DEFAULT_READ,
     measure: MeasureRequest | None = None,
     decision: DecisionRule = SIMPLE,
+    sim_ocio_colourspace: str | None = None,
+    real_ocio_colourspace: str | None = None,
 ) -> ComparisonReport:
     """Compare the chart in the simulated image ``sim`` with the chart in the real camera's
     image ``real`` (module docstring).
@@ -131,12 +133,17 @@ def compare_charts(
     decision
         The verdict's decision rule (:class:`~fidelity.prediction.verdict.DecisionRule`); the
         sim-to-real ΔE's uncertainty is :func:`sim_to_real_uncertainty`.
+    sim_ocio_colourspace, real_ocio_colourspace
+        One image's own OpenColorIO colourspace (a render in ACEScct against a photo in
+        sRGB): it replaces ``read``'s for that image, whose shared ``encoding`` and
+        ``colourspace`` then describe the other
+        (:func:`fidelity.chart.measure.reads_with_own_ocio`).
 
     Returns
     -------
     ComparisonReport
     """
-    from fidelity.chart.measure import measure_chart, neutral_patches, reads_for
+    from fidelity.chart.measure import measure_chart, neutral_patches, reads_with_own_ocio
     from fidelity.check import audit_image
     from fidelity.prediction.judge import judge
 
@@ -144,7 +151,8 @@ def compare_charts(
         raise unknown_name("normalisation", normalise_mode, NORMALISATIONS)
     kw: dict[str, Any] = {"reference": reference, "illuminant": illuminant,
                           "size": size, "table": table}
-    sim_read, real_read = reads_for((sim, real), read)
+    sim_read, real_read = reads_with_own_ocio((sim, real), read,
+                                              (sim_ocio_colourspace, real_ocio_colourspace))
     sim_report = audit_image(sim, sim_corners, command="compare", read=sim_read, **kw)
     real_report = audit_image(real, real_corners, command="compare", read=real_read, **kw)
     sm, rm = sim_report.measurement, real_report.measurement

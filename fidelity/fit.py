@@ -224,16 +224,22 @@ class _Chart:
     audit: ImageMeasurement
 
 
+def sim_ocio_refused(flag: str, name: str) -> InvalidValueError:
+    """The error of an OpenColorIO colourspace given for SIM: the ``.cube`` maps SIM's own
+    pixel values, which a conversion before the fit would hide."""
+    return InvalidValueError(
+        f"{flag} {name}: fit writes its correction for the simulator's own pixel values; give "
+        "them as --encoding and --colourspace, or convert the images first (REAL may have its "
+        "own: --real-ocio-colourspace)")
+
+
 def _read(path: str | os.PathLike[str], corners: str | Sequence[float] | None,
-          read: ReadOptions, reference: str, illuminant: str) -> _Chart:
+          read: ReadOptions, reference: str, illuminant: str, *, sim: bool) -> _Chart:
     from fidelity.chart.measure import measure_pixels, read_input
     from fidelity.errors import FidelityError
 
-    if read.ocio_colourspace is not None:  # the .cube maps the file's own pixel values
-        raise InvalidValueError(
-            f"--ocio-colourspace {read.ocio_colourspace}: fit writes its correction for the "
-            "simulator's own pixel values; give them as --encoding and --colourspace, or "
-            "convert the images first")
+    if sim and read.ocio_colourspace is not None:
+        raise sim_ocio_refused("--ocio-colourspace", read.ocio_colourspace)
     img, sha256 = read_input(path, read)
     enc = read.encoding or img.encoding
     info = img.info(sha256=sha256, encoding=enc)
@@ -353,6 +359,7 @@ def fit_correction(
     real_corners: str | Sequence[float] | None = None,
     normalise_mode: str = "exposure",
     read: ReadOptions = DEFAULT_READ,
+    real_ocio_colourspace: str | None = None,
     reference: str = "scene",
     illuminant: str = "D65",
     weights: ArrayLike | None = None,
@@ -370,8 +377,9 @@ def fit_correction(
     objective
         ``linear`` or ``ciede2000``; None: the measured better one
         (:data:`fidelity.correction.models.DEFAULT_OBJECTIVE`).
-    sim_corners, real_corners, normalise_mode, read, reference, illuminant
-        As :func:`fidelity.compare.compare_charts`.
+    sim_corners, real_corners, normalise_mode, read, real_ocio_colourspace, reference, illuminant
+        As :func:`fidelity.compare.compare_charts` (``sim`` has no OpenColorIO colourspace:
+        the correction maps its own pixel values).
     weights
         ``(24,)`` patch weights (default 1; excluded patches get 0 whatever their weight).
 
@@ -379,11 +387,12 @@ def fit_correction(
     -------
     Correction
     """
-    from fidelity.chart.measure import reads_for
+    from fidelity.chart.measure import reads_with_own_ocio
 
-    sim_read, real_read = reads_for((sim, real), read)
-    s = _read(sim, sim_corners, sim_read, reference, illuminant)
-    r = _read(real, real_corners, real_read, reference, illuminant)
+    sim_read, real_read = reads_with_own_ocio((sim, real), read,
+                                              (None, real_ocio_colourspace))
+    s = _read(sim, sim_corners, sim_read, reference, illuminant, sim=True)
+    r = _read(real, real_corners, real_read, reference, illuminant, sim=False)
     return _fit_charts(s, r, model, objective, normalise_mode, weights)
 
 
@@ -495,6 +504,7 @@ def fit_and_verify(
     real_corners: str | Sequence[float] | None = None,
     normalise_mode: str = "exposure",
     read: ReadOptions = DEFAULT_READ,
+    real_ocio_colourspace: str | None = None,
     reference: str = "scene",
     illuminant: str = "D65",
     size: str = "any",
@@ -515,11 +525,12 @@ def fit_and_verify(
 
     ocio()
     c0, t0 = time.process_time(), time.perf_counter()
-    from fidelity.chart.measure import reads_for
+    from fidelity.chart.measure import reads_with_own_ocio
 
-    sim_read, real_read = reads_for((sim, real), read)
-    s = _read(sim, sim_corners, sim_read, reference, illuminant)
-    r = _read(real, real_corners, real_read, reference, illuminant)
+    sim_read, real_read = reads_with_own_ocio((sim, real), read,
+                                              (None, real_ocio_colourspace))
+    s = _read(sim, sim_corners, sim_read, reference, illuminant, sim=True)
+    r = _read(real, real_corners, real_read, reference, illuminant, sim=False)
     c1, t1 = time.process_time(), time.perf_counter()
     corr = _fit_charts(s, r, model, objective, normalise_mode, None)
     c2, t2 = time.process_time(), time.perf_counter()
@@ -639,6 +650,7 @@ def fit_pairs_and_verify(
     real_corners: str | Sequence[float] | None = None,
     normalise_mode: str = "exposure",
     read: ReadOptions = DEFAULT_READ,
+    real_ocio_colourspace: str | None = None,
     reference: str = "scene",
     illuminant: str = "D65",
     size: str = "any",
@@ -650,7 +662,7 @@ def fit_pairs_and_verify(
     correction ``matrix @ diag(gains)`` as :func:`fit_and_verify` does, into
     ``out/pair-<k>`` (k from 1). The fit is weighted least squares in linear RGB over the
     patches usable in each pair; corners and the other options apply to every pair."""
-    from fidelity.chart.measure import reads_for
+    from fidelity.chart.measure import reads_with_own_ocio
     from fidelity.correction.lut import ocio
     from fidelity.correction.models import ColourModel, cross_validate_shared, fit_shared_matrix
 
@@ -661,9 +673,10 @@ def fit_pairs_and_verify(
     t0 = time.perf_counter()
     charts = []
     for sim, real in pairs:
-        sim_read, real_read = reads_for((sim, real), read)
-        charts.append((_read(sim, sim_corners, sim_read, reference, illuminant),
-                       _read(real, real_corners, real_read, reference, illuminant)))
+        sim_read, real_read = reads_with_own_ocio((sim, real), read,
+                                                  (None, real_ocio_colourspace))
+        charts.append((_read(sim, sim_corners, sim_read, reference, illuminant, sim=True),
+                       _read(real, real_corners, real_read, reference, illuminant, sim=False)))
     t1 = time.perf_counter()
     prepared = [_prepare(s, r, normalise_mode, None) for s, r in charts]
     xs = [pp.sim_fit for pp in prepared]
@@ -711,6 +724,7 @@ def fit_camera_and_verify(
     real_corners: str | Sequence[float] | None = None,
     normalise_mode: str = "exposure",
     read: ReadOptions = DEFAULT_READ,
+    real_ocio_colourspace: str | None = None,
     reference: str = "scene",
     illuminant: str = "D65",
     size: str = "any",
@@ -763,7 +777,8 @@ def fit_camera_and_verify(
     rep = fit_and_verify(sim, real, folder, model=model, objective=objective,
                          sim_corners=",".join(f"{v:g}" for v in centres),
                          real_corners=real_corners,
-                         normalise_mode=normalise_mode, read=read, reference=reference,
+                         normalise_mode=normalise_mode, read=read,
+                         real_ocio_colourspace=real_ocio_colourspace, reference=reference,
                          illuminant=illuminant, size=size, table=table, corrected=corrected,
                          measure=measure)
     c = rep.correction

@@ -182,3 +182,36 @@ def test_convert_copies_unless_told_and_passes_nan_through() -> None:
     frozen = np.full((2, 2, 3), 0.4, np.float32)
     frozen.flags.writeable = False  # e.g. np.frombuffer of bytes: OpenColorIO writes regardless
     assert convert(frozen, "ACEScct", copy=False)[0] is not frozen
+
+
+def test_compare_reads_each_image_in_its_own_colourspace(charts, tmp_path):
+    """A render in ACEScct against a photo in display sRGB: --sim-ocio-colourspace converts
+    the render alone; the same chart, so the sim-to-real ΔE00 is about 0 (without it, the
+    ACEScct values read as linear light are far off)."""
+    def compare(*extra: str) -> dict:  # type: ignore[type-arg]
+        out = tmp_path / f"c{len(extra)}.json"
+        r = CliRunner().invoke(main, ["compare", str(charts["acescct"]), str(charts["display"]),
+                                      *extra, "--json", str(out)])
+        assert r.exit_code == 0, r.output
+        return json.loads(out.read_text())
+
+    right = compare("--sim-ocio-colourspace", "ACEScct")
+    # the shared --encoding describes the other image (the photo) and is not refused
+    same = compare("--sim-ocio-colourspace", "ACEScct", "--encoding", "srgb")
+    wrong = compare()
+    de = [d["sim_to_real"]["mean_delta_e"] for d in (right, same, wrong)]
+    assert de[0] < 0.05 and de[1] == de[0] and de[2] > 5, de
+
+
+def test_fit_takes_reals_own_colourspace_and_refuses_sims(charts, tmp_path):
+    r = CliRunner().invoke(main, ["fit", str(charts["linear"]), str(charts["p3"]),
+                                  "--real-ocio-colourspace", "Display P3 - Display",
+                                  "--out", str(tmp_path / "ok")])
+    assert r.exit_code == 0, r.output
+    report = json.loads((tmp_path / "ok" / "report.json").read_text())
+    assert report["before"]["mean_delta_e"] < 0.05  # the same chart
+    r = CliRunner().invoke(main, ["fit", str(charts["acescct"]), str(charts["linear"]),
+                                  "--sim-ocio-colourspace", "ACEScct",
+                                  "--out", str(tmp_path / "no")])
+    assert r.exit_code == 2 and "--sim-ocio-colourspace ACEScct: fit writes its correction" \
+        in r.stderr

@@ -1159,6 +1159,19 @@ def reads_for(paths: Sequence[str | os.PathLike[str]], read: ReadOptions
     return [read if r else plain for r in is_rec]
 
 
+def reads_with_own_ocio(paths: Sequence[str | os.PathLike[str]], read: ReadOptions,
+                        ocio_colourspaces: Sequence[str | None]) -> list[ReadOptions]:
+    """:func:`reads_for`, then each input that names its own OpenColorIO colourspace
+    (``--sim-ocio-colourspace``, ``--real-ocio-colourspace``) read in it: it replaces the
+    shared ``ocio_colourspace``, and the shared ``encoding`` and ``colourspace`` (which then
+    describe the other inputs) are left out for it."""
+    from dataclasses import replace
+
+    return [r if own is None else replace(r, ocio_colourspace=own, encoding=None,
+                                          colourspace=None)
+            for r, own in zip(reads_for(paths, read), ocio_colourspaces, strict=True)]
+
+
 def _read_input(path: str | os.PathLike[str], read: ReadOptions, *, digest: bool,
                 native: bool = False) -> tuple[Image, str | None]:
     from fidelity.chart import recording
@@ -1303,4 +1316,5 @@ __all__ = [
     "read_again",
     "read_input",
     "reads_for",
+    "reads_with_own_ocio",
 ]

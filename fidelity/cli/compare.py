@@ -65,6 +65,7 @@ if TYPE_CHECKING:
 @measure_options
 @common_options
 def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | None,
+            sim_ocio_colourspace: str | None, real_ocio_colourspace: str | None,
             normalise_mode: str, max_delta_e: float | None, max_dmap: float | None,
             cls: str | None, unit: str, bound: str, size: str, table: str | None,
             reference: str, illuminant: str, read: ReadOptions,
@@ -115,8 +116,8 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
             sim, real, sim_corners=sim_corners, real_corners=real_corners,
             normalise_mode=normalise_mode, reference=reference, illuminant=illuminant,
             size=size, table=table, criterion=criterion, bound=bound,
-            read=read,
-            measure=request, decision=rule)
+            read=read, sim_ocio_colourspace=sim_ocio_colourspace,
+            real_ocio_colourspace=real_ocio_colourspace, measure=request, decision=rule)
     except FidelityError as exc:
         if junit is not None:
             write_junit(junit, [GateResult(subject, criterion, error=str(exc))])

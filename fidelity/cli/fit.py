@@ -71,7 +71,8 @@ if TYPE_CHECKING:
 def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...],
         camera: Path | None, out: Path,
         model: str, objective: str | None, corrected: bool,
-        sim_corners: str | None, real_corners: str | None, normalise_mode: str, size: str,
+        sim_corners: str | None, real_corners: str | None, sim_ocio_colourspace: str | None,
+        real_ocio_colourspace: str | None, normalise_mode: str, size: str,
         table: str | None, reference: str, illuminant: str, measure: bool, images: str | None,
         annotations: str | None, models: str | None, limit: int | None,
         read: ReadOptions, evidence_paths: tuple[Path, ...]) -> None:
@@ -91,9 +92,11 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
     fidelity fit --pair sim_d65.exr real_d65.jpg --pair sim_a.exr real_a.jpg --out c/
     """
     from fidelity.fileio import check_outputs, display_path
-    from fidelity.fit import fit_and_verify
+    from fidelity.fit import fit_and_verify, sim_ocio_refused
     from fidelity.report.fit import fit_lines, write_fit_report
 
+    if sim_ocio_colourspace is not None:
+        raise sim_ocio_refused("--sim-ocio-colourspace", sim_ocio_colourspace)
     request = measure_request(measure, images, annotations, models, limit)
     if pairs:
         if request is not None or evidence_paths:
@@ -108,14 +111,15 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
             raise click.UsageError("--pair fits one matrix with per-illuminant gains: "
                                    "--correction matrix only")
         _fit_pairs(pairs, out, sim_corners, real_corners, normalise_mode, size, table,
-                   reference, illuminant, read, corrected)
+                   reference, illuminant, read, real_ocio_colourspace, corrected)
         return
     if camera is not None:
         if sim is None or real is not None:
             raise click.UsageError("with --camera give REAL alone: fidelity fit --camera "
                                    "sim.toml REAL --out DIR")
         _fit_camera(camera, sim, out, model, objective, real_corners, normalise_mode, size,
-                    table, reference, illuminant, read, corrected, request, evidence_paths)
+                    table, reference, illuminant, read, real_ocio_colourspace, corrected,
+                    request, evidence_paths)
         return
     if sim is None or real is None:
         raise click.UsageError("give SIM and REAL, or --pair SIM REAL twice or more")
@@ -130,8 +134,8 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
     report = fit_and_verify(
         sim, real, out, model=model, objective=objective, sim_corners=sim_corners,
         real_corners=real_corners, normalise_mode=normalise_mode, reference=reference,
-        illuminant=illuminant, size=size, table=table, read=read, corrected=corrected,
-        measure=request)
+        illuminant=illuminant, size=size, table=table, read=read,
+        real_ocio_colourspace=real_ocio_colourspace, corrected=corrected, measure=request)
     write_fit_report(report, json_path=out / "report.json", html_path=out / "report.html",
                      protect=(sim, real))
     for line in fit_lines(report):
@@ -151,7 +155,8 @@ def _evidence(paths: tuple[Path, ...], report: FitReport, written: list[Path]) -
 
 def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str | None,
                real_corners: str | None, normalise_mode: str, size: str, table: str | None,
-               reference: str, illuminant: str, read: ReadOptions, corrected: bool) -> None:
+               reference: str, illuminant: str, read: ReadOptions,
+               real_ocio_colourspace: str | None, corrected: bool) -> None:
     from fidelity.fileio import check_outputs, display_path
     from fidelity.fit import fit_pairs_and_verify
     from fidelity.report.fit import shared_fit_lines, write_shared_fit_report
@@ -167,6 +172,7 @@ def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str
     shared = fit_pairs_and_verify(pairs, out, sim_corners=sim_corners, real_corners=real_corners,
                                   normalise_mode=normalise_mode, reference=reference,
                                   illuminant=illuminant, size=size, table=table, read=read,
+                                  real_ocio_colourspace=real_ocio_colourspace,
                                   corrected=corrected)
     write_shared_fit_report(shared, json_path=out / "report.json",
                             html_path=out / "report.html",
@@ -179,7 +185,8 @@ def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str
 
 def _fit_camera(camera: Path, real: Path, out: Path, model: str, objective: str | None,
                 real_corners: str | None, normalise_mode: str, size: str, table: str | None,
-                reference: str, illuminant: str, read: ReadOptions, corrected: bool,
+                reference: str, illuminant: str, read: ReadOptions,
+                real_ocio_colourspace: str | None, corrected: bool,
                 request: MeasureRequest | None, evidence_paths: tuple[Path, ...]) -> None:
     from fidelity.fileio import check_outputs, display_path
     from fidelity.fit import fit_camera_and_verify
@@ -193,7 +200,8 @@ def _fit_camera(camera: Path, real: Path, out: Path, model: str, objective: str 
     report, toml = fit_camera_and_verify(
         camera, real, out, model=model, objective=objective, real_corners=real_corners,
         normalise_mode=normalise_mode, reference=reference, illuminant=illuminant, size=size,
-        table=table, read=read, corrected=corrected, measure=request)
+        table=table, read=read, real_ocio_colourspace=real_ocio_colourspace,
+        corrected=corrected, measure=request)
     write_fit_report(report, json_path=out / "report.json", html_path=out / "report.html",
                      protect=(camera, real))
     for line in fit_lines(report):

@@ -369,14 +369,21 @@ READ_OPTION_NAMES = ("layer", "encoding", "exposure", "negatives", "colourspace"
 
 
 def chart_pair_options(f: F) -> F:
-    """``--sim-corners``, ``--real-corners`` and ``--normalise``: where the two charts of a
-    simulated and a real image are and how the simulated one is matched to the real one
-    (compare, fit)."""
+    """``--sim-corners``, ``--real-corners``, ``--sim-ocio-colourspace``,
+    ``--real-ocio-colourspace`` and ``--normalise``: where the two charts of a simulated and a
+    real image are, each image's own OpenColorIO colourspace, and how the simulated one is
+    matched to the real one (compare, fit)."""
     opts = [
         click.option("--sim-corners", default=None,
                      help="X1,Y1,...,X4,Y4: centres of the dark skin, bluish green, black and "
                           "white patches in SIM (default: the chart is found)."),
         click.option("--real-corners", default=None, help="The same for REAL."),
+        click.option("--sim-ocio-colourspace", default=None, metavar="NAME",
+                     help="SIM's own OpenColorIO colourspace (as --ocio-colourspace, for SIM "
+                          "alone; the shared --encoding and --colourspace then describe "
+                          "REAL)."),
+        click.option("--real-ocio-colourspace", default=None, metavar="NAME",
+                     help="The same for REAL."),
         click.option("--normalise", "normalise_mode",
                      type=click.Choice(["exposure", "exposure+wb", "none"]),
                      default="exposure", show_default=True,
