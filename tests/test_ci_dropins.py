@@ -408,18 +408,21 @@ def test_gitlab_component_installs_the_package_input_and_qualifies_first(renders
     subprocess.run(["bash", "-eo", "pipefail", "-c", job["script"][0]], env=env, check=True)
     assert log.read_text().split()[-1] == "camera-fidelity==0.1.0"
 
+    # a stand-in fidelity that logs its calls (the real qualification runs in the Action's
+    # test): qualify first, with its record in report-dir; then the gate, or not at all
     _, job = _component_job(images=str(renders["good"]), qualify="true",
                             **{"max-delta-e": "3"})
-    r = _run_component_script(job, tmp_path)
-    assert r.returncode == 0, r.stderr
-    doc = json.loads((tmp_path / "fidelity-report" / "qualification.json").read_text())
-    assert doc["qualified"] is True and (tmp_path / "fidelity-report" / "junit.xml").is_file()
     calls = tmp_path / "calls"
-    (bin_dir / "fidelity").write_text(f'#!/bin/sh\necho "$1" >> {calls}\n'
-                                      '[ "$1" = qualify ] && exit 1\nexit 0\n')
-    (bin_dir / "fidelity").chmod(0o755)
-    r = _run_component_script(job, tmp_path / "bin", path=str(bin_dir))
-    assert r.returncode == 1 and calls.read_text().split() == ["qualify"]
+    for qualified, code, ran in ((0, 0, ["qualify", "gate"]), (1, 1, ["qualify"])):
+        calls.unlink(missing_ok=True)
+        (bin_dir / "fidelity").write_text(f'#!/bin/sh\necho "$@" >> {calls}\n'
+                                          f'[ "$1" = qualify ] && exit {qualified}\nexit 0\n')
+        (bin_dir / "fidelity").chmod(0o755)
+        r = _run_component_script(job, tmp_path, path=str(bin_dir))
+        assert r.returncode == code, r.stderr
+        lines = calls.read_text().splitlines()
+        assert [line.split()[0] for line in lines] == ran
+        assert lines[0] == "qualify --json fidelity-report/qualification.json"
 
 
 @pytest.mark.parametrize("args, code", [("--decision guarded", 4),
