@@ -435,3 +435,22 @@ def test_gitlab_component_lets_an_undecided_verdict_pass_with_a_warning(renders,
     r = _run_component_script(job, tmp_path)
     assert r.returncode == code, r.stdout + r.stderr
     assert (code in job["allow_failure"]["exit_codes"]) == (code == 4)
+
+
+def test_a_value_with_a_space_reaches_the_gate_through_the_project_settings(renders, tmp_path):
+    """The Action's args are split at spaces; an OpenColorIO colourspace with one in it comes
+    from the caller's [tool.fidelity] settings, which the gate step reads."""
+    pytest.importorskip("PyOpenColorIO", reason="pip install 'camera-fidelity[ocio]'")
+    caller = tmp_path / "caller"
+    caller.mkdir()
+    (caller / "pyproject.toml").write_text(
+        '[tool.fidelity]\nocio_colourspace = "sRGB - Display"\n', encoding="utf-8")
+    env = {**os.environ, "FIDELITY_IMAGES": str(renders["good"]), "FIDELITY_CAMERA": "",
+           "FIDELITY_MAX_DELTA_E": "3", "FIDELITY_MAX_DMAP": "", "FIDELITY_ARGS": "",
+           "FIDELITY_REPORT_DIR": str(tmp_path / "reports"),
+           "GITHUB_OUTPUT": str(tmp_path / "github_output")}
+    r = subprocess.run(["bash", "-c", _gate_script()], env=env, capture_output=True, text=True,
+                       cwd=caller)
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((tmp_path / "reports" / "report.json").read_text())
+    assert doc["source"]["ocio"]["colourspace"] == "sRGB - Display"
