@@ -114,7 +114,13 @@ def test_gate_several_images_one_junit_case_each(png, tmp_path):
     assert cases[1].find("failure") is not None and cases[2].find("error") is not None
     assert cases[2].find("error").get("message").startswith(f"{cut}: ")
     assert sorted(p.name for p in out.iterdir()) == ["day.png.html", "day.png.json",
-                                                     "dusk.png.html", "dusk.png.json"]
+                                                     "dusk.png.html", "dusk.png.json",
+                                                     "index.html"]
+    # the overview: the outcome, a row per image (the one not measured unlinked, its error)
+    page = (out / "index.html").read_text()
+    assert "1 of 3 passed" in page and "1 failed" in page and "1 not measured" in page
+    assert page.count('href="day.png.html"') == 1 and page.count('href="dusk.png.html"') == 1
+    assert "Over the frames" not in page
     day = json.loads((out / "day.png.json").read_text())
     assert day["mean_delta_e"] == pytest.approx(de, abs=0.02)
     assert day["verdict"]["passed"] is True and day["verdict"]["reason"] == "within-limit"

@@ -649,8 +649,14 @@ def test_gate_frames_gates_each_selected_frame(recordings, corners, tmp_path):
     junit = tmp_path / "f.xml"
     r = _run(["gate", str(paths["ros1"]), "--topic", "/cam/rgb8", "--frames", "0:3",
               "--corners", c, "--max-delta-e", limit, "--junit", str(junit),
-              "--json", str(tmp_path / "f"), "--evidence", str(tmp_path / "e.json")])
+              "--json", str(tmp_path / "f"), "--evidence", str(tmp_path / "e.json"),
+              "--html", str(tmp_path / "h")])
     assert r.exit_code == 1, r.output  # the noise frames fail
+    # the overview page beside the three reports: a row each, linked, and the frames' plot
+    page = (tmp_path / "h" / "index.html").read_text()
+    assert "1 of 3 passed" in page and page.count('href="drive.bag.frame') == 3
+    assert all((tmp_path / "h" / f"drive.bag.frame{k}.html").is_file() for k in range(3))
+    assert 'aria-label="chart ΔE over the frames of' in page
     names = [case.get("name") for case in ET.parse(junit).getroot().iter("testcase")]
     assert [n.rsplit(" ", 2)[1:] for n in names] == [["frame", "0"], ["frame", "1"],
                                                      ["frame", "2"]]

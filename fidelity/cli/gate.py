@@ -44,6 +44,10 @@ if TYPE_CHECKING:
     from fidelity.chart.recording import FrameSelection
     from fidelity.records import GateResult
 
+#: The overview page of several subjects' HTML reports, in their folder.
+OVERVIEW_NAME = "index.html"
+
+
 def _error_line(message: str) -> None:
     click.echo(f"fidelity: error: {message}", err=True)
 
@@ -140,7 +144,8 @@ def write_reports(result: GateResult, json_path: Path | None, html_path: Path | 
               help="Write the JSON report (several images: a folder, one report per image; "
                    "'-': standard output, one subject only).")
 @click.option("--html", "html_path", type=click.Path(path_type=Path),
-              help="Write the HTML report (several images: a folder, one report per image).")
+              help="Write the HTML report (several images: a folder, one report per image "
+                   "and index.html, an overview of them all).")
 @click.option("--frames", type=FrameRange(), default=None, metavar="FRAMES",
               help="With recordings: gate each of these frames of --topic, N,M,... or "
                    "START:STOP[:STEP] (0:300:30; negative from the end: -10:), each its own "
@@ -223,6 +228,9 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         for img, jp, hp in zip(subjects, json_paths, html_paths, strict=True):
             outputs[f"--json ({img})" if many else "--json"] = jp
             outputs[f"--html ({img})" if many else "--html"] = hp
+        # several subjects' HTML reports in a folder get an overview page beside them
+        overview = html_path / OVERVIEW_NAME if many and html_path is not None else None
+        outputs["--html (overview)"] = overview
         from fidelity.camera.model import camera_files
 
         check_outputs(outputs, {"--camera": camera, "--table": table, "--reference": reference,
@@ -264,6 +272,14 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
             click.echo(("  " if many else "") + line)
         for path in written:
             click.echo(("  " if many else "") + f"wrote {display_path(path)}")
+    if overview is not None:
+        from fidelity.report.gate import write_gate_overview
+
+        write_gate_overview(overview, cases, [hp if c.report is not None else None
+                                              for c, hp in zip(cases, html_paths, strict=True)],
+                            frame_of, None if frame_of is None else
+                            [display_path(img) for img in images])
+        click.echo(f"wrote {display_path(overview)}")
     if junit is not None:
         _write_junit(junit, cases)
         click.echo(f"wrote {display_path(junit)}")

@@ -1,0 +1,133 @@
+"""The overview of a gate over several subjects (images, or the frames of a recording):
+``index.html`` beside the subjects' own reports when ``fidelity gate --html`` names a folder.
+
+The page leads with the outcome (how many passed, failed, were undecided or could not be
+measured), then a table of every subject (verdict, mean ΔE00 with its standard uncertainty,
+the worst patch, the predicted ΔmAP, a link to its report) and, for ``--frames``, a plot per
+recording of the chart ΔE over its frames with the expanded uncertainty and the ΔE limit: a
+drifting auto exposure or white balance shows as a slope.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+from fidelity.records import GateResult
+from fidelity.report.document import (
+    Document,
+    Figure,
+    Headline,
+    Section,
+    Tone,
+    section,
+    svg_figure,
+    table,
+)
+from fidelity.report.svg import COLOURS, Axes, Canvas, Scale, nice_ticks
+
+#: What each exit code of a subject is called on the page.
+OUTCOMES = {0: "pass", 1: "fail", 2: "not measured", 4: "undecided"}
+
+
+def _outcome(case: GateResult) -> str:
+    return OUTCOMES.get(case.exit_code, f"exit {case.exit_code}")
+
+
+def _row(case: GateResult, link: str | None) -> tuple[str, ...]:
+    name = f"[{case.subject}]({link})" if link else f"`{case.subject}`"
+    r = case.report
+    if r is None:
+        return (name, _outcome(case), "", "", "", (case.error or "").replace("|", "\\|"))
+    u = r.uncertainty.combined if r.uncertainty is not None else None
+    de = f"{r.mean_delta_e:.3f}" + (f" ± {u:.3f}" if u is not None else "")
+    dmap = r.prediction.dmap_points if r.prediction is not None else None
+    return (name, _outcome(case), de, f"{r.max_delta_e:.2f} ({r.worst_patch})",
+            "" if dmap is None else f"{dmap:.2f}", "")
+
+
+def frames_figure(recording: str, frames: Sequence[int], cases: Sequence[GateResult],
+                  limit: float | None) -> Figure:
+    """The chart ΔE of each measured frame of ``recording`` with its expanded uncertainty
+    (k = 2) as a bar, coloured by its verdict; frames not measured as crosses on the axis; the
+    ΔE limit as a line."""
+    measured = [(k, c) for k, c in zip(frames, cases, strict=True) if c.report is not None]
+    values = [c.report.mean_delta_e for _, c in measured if c.report is not None]
+    top = max([*values, limit or 0.0, 1.0]) * 1.15
+    x0, x1 = min(frames), max(frames)
+    if x0 == x1:
+        x0, x1 = x0 - 1, x1 + 1
+    c = Canvas(680, 320, f"chart ΔE over the frames of {recording}")
+    c.text(340, 18, f"{Path(recording).name}: mean ΔE00 per frame (bars: ± 2u)", 13,
+           anchor="middle", weight="bold")
+    ax = Axes(c, 64, 32, 596, 230, Scale(x0 - 0.5, x1 + 0.5), Scale(0.0, top))
+    whole = [t for t in nice_ticks(x0, x1) if float(t).is_integer()]  # frames are counted
+    ax.frame("frame", "mean ΔE00", xticks=whole if len(whole) > 1 else sorted(set(frames)),
+             yticks=nice_ticks(0.0, top))
+    if limit is not None:
+        ax.hline(limit, COLOURS["red"], 1.2, "7 3 2 3", f"limit {limit:.4g}")
+    colour = {0: COLOURS["green"], 1: COLOURS["red"], 4: COLOURS["orange"]}
+    for k, case in measured:
+        r = case.report
+        assert r is not None
+        u = r.uncertainty.expanded(2.0) if r.uncertainty is not None else 0.0
+        px = float(ax.px(float(k)))
+        c.line(px, float(ax.py(max(r.mean_delta_e - u, 0.0))), px,
+               float(ax.py(r.mean_delta_e + u)), "#808080", 1.2)
+        ax.marker(float(k), r.mean_delta_e, colour.get(case.exit_code, "#000"), 4.5)
+    missing = [k for k, case in zip(frames, cases, strict=True) if case.report is None]
+    for i, k in enumerate(missing):  # on the axis: no chart measured there
+        ax.marker(float(k), 0.0, "#fff", 4.0, "s", "not measured" if i == 0 else None)
+    ax.legend("upper right")
+    return svg_figure(c.render(), f"frames-{Path(recording).name}.svg",
+                      f"chart ΔE over the frames of {recording}")
+
+
+def gate_overview_document(cases: Sequence[GateResult], links: Sequence[str | None],
+                           frames: Sequence[int] | None = None,
+                           recordings: Sequence[str] | None = None) -> Document:
+    """The overview page of a gate over ``cases`` (``links``: each subject's report, relative
+    to the page, or None; ``frames`` and ``recordings``: for ``--frames``, each subject's
+    frame and recording)."""
+    counts = {name: sum(_outcome(c) == name for c in cases) for name in OUTCOMES.values()}
+    n = len(cases)
+    message = (f"**{counts['pass']} of {n} passed**, {counts['fail']} failed, "
+               f"{counts['undecided']} undecided, {counts['not measured']} not measured")
+    criterion = next((c.criterion for c in cases if c.criterion is not None), None)
+    if criterion is not None:
+        message += f" (gate: {criterion.describe()})"
+    tone: Tone = "pass" if counts["pass"] == n else "fail"
+    sections: list[Section] = []
+    if frames is not None and recordings is not None:
+        limit = criterion.limit if criterion is not None and \
+            criterion.kind == "max-delta-e" else None
+        figures: list[Figure] = []
+        for rec in dict.fromkeys(recordings):
+            mine = [(k, c) for k, c, r in zip(frames, cases, recordings, strict=True)
+                    if r == rec]
+            figures.append(frames_figure(rec, [k for k, _ in mine], [c for _, c in mine],
+                                         limit))
+        sections.append(section("Over the frames", *figures))
+    sections.append(section("Subjects", table(
+        ("subject", "verdict", "mean ΔE00 ± u (k=1)", "max ΔE00", "predicted ΔmAP, points",
+         "error"), [_row(c, link) for c, link in zip(cases, links, strict=True)],
+        numeric=(False, False, True, True, True, False))))
+    return Document("Colour fidelity gate", Headline(message, tone), tuple(sections))
+
+
+def write_gate_overview(path: str | os.PathLike[str], cases: Sequence[GateResult],
+                        reports: Sequence[Path | None], frames: Sequence[int] | None = None,
+                        recordings: Sequence[str] | None = None) -> Path:
+    """Write the overview page to ``path`` (atomically), linking each subject's report in
+    ``reports`` relative to it."""
+    from fidelity.report.html import write_document
+
+    where = Path(path)
+    links = [None if p is None else os.path.relpath(p, where.parent) for p in reports]
+    doc = gate_overview_document(cases, links, frames, recordings)
+    (written,) = write_document(doc, html=where)
+    return written
+
+
+__all__ = ["OUTCOMES", "frames_figure", "gate_overview_document", "write_gate_overview"]
