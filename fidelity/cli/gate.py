@@ -275,10 +275,15 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
     if overview is not None:
         from fidelity.report.gate import write_gate_overview
 
-        write_gate_overview(overview, cases, [hp if c.report is not None else None
-                                              for c, hp in zip(cases, html_paths, strict=True)],
-                            frame_of, None if frame_of is None else
-                            [display_path(img) for img in images])
+        try:
+            write_gate_overview(overview, cases,
+                                [hp if c.report is not None else None
+                                 for c, hp in zip(cases, html_paths, strict=True)],
+                                frame_of, None if frame_of is None else
+                                [display_path(img) for img in images])
+        except (FidelityError, OSError) as exc:  # as a JUnit file that cannot be written
+            _error_line(f"{overview}: cannot write the overview: {exc}")
+            sys.exit(EXIT_ERROR)
         click.echo(f"wrote {display_path(overview)}")
     if junit is not None:
         _write_junit(junit, cases)
