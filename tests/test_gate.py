@@ -429,3 +429,19 @@ def test_negative_values_are_kept_by_default_and_said_so(tmp_path):
     line = one_error_line(excluded)
     assert excluded.exit_code == 2 and line.startswith(f"fidelity: error: {path}: ")
     assert "'cyan'" in line
+
+
+def test_the_overview_links_a_report_named_with_spaces_and_shows_names_as_written():
+    """Report names come from image names: a space in the link, and Markdown's own characters
+    in a name or an error, show as written."""
+    from fidelity.records import GateResult
+    from fidelity.report.gate import gate_overview_document
+    from fidelity.report.html import render_html
+
+    cases = [GateResult("day *2* [a].exr", error="no chart | found"),
+             GateResult("dusk_1_.exr", error="x")]
+    page = render_html(gate_overview_document(cases, ["day *2* [a].exr.html", None]))
+    assert 'href="day%20*2*%20%5Ba%5D.exr.html"' in page
+    assert "day *2* [a].exr</a>" in page and "no chart | found" in page
+    assert "dusk_1_.exr" in page and "<em>" not in page
+    assert "0 of 2 passed" in page and "2 not measured" in page

@@ -35,11 +35,17 @@ def _outcome(case: GateResult) -> str:
     return OUTCOMES.get(case.exit_code, f"exit {case.exit_code}")
 
 
+def _text(s: str) -> str:
+    """``s`` as Markdown text that shows as it is (no emphasis, code, link or table cell)."""
+    return "".join(f"\\{ch}" if ch in "\\`*_[]()<>#|!~" else ch for ch in s)
+
+
 def _row(case: GateResult, link: str | None) -> tuple[str, ...]:
-    name = f"[{case.subject}]({link})" if link else f"`{case.subject}`"
+    # a link's destination in <...> may hold spaces (a report named after "day 2.exr")
+    name = f"[{_text(case.subject)}](<{link}>)" if link else _text(case.subject)
     r = case.report
     if r is None:
-        return (name, _outcome(case), "", "", "", (case.error or "").replace("|", "\\|"))
+        return (name, _outcome(case), "", "", "", _text(case.error or ""))
     u = r.uncertainty.combined if r.uncertainty is not None else None
     de = f"{r.mean_delta_e:.3f}" + (f" ± {u:.3f}" if u is not None else "")
     dmap = r.prediction.dmap_points if r.prediction is not None else None
@@ -50,8 +56,8 @@ def _row(case: GateResult, link: str | None) -> tuple[str, ...]:
 def frames_figure(recording: str, frames: Sequence[int], cases: Sequence[GateResult],
                   limit: float | None) -> Figure:
     """The chart ΔE of each measured frame of ``recording`` with its expanded uncertainty
-    (k = 2) as a bar, coloured by its verdict; frames not measured as crosses on the axis; the
-    ΔE limit as a line."""
+    (k = 2) as a bar, coloured by its verdict; frames not measured as open squares on the
+    axis; the ΔE limit as a line."""
     measured = [(k, c) for k, c in zip(frames, cases, strict=True) if c.report is not None]
     values = [c.report.mean_delta_e for _, c in measured if c.report is not None]
     top = max([*values, limit or 0.0, 1.0]) * 1.15
