@@ -28,6 +28,11 @@ any installation, in seconds, without test data or shared data:
                           ΔE) against the painted colours' ΔE computed without any image
 ``coco-scoring``          COCO box AP (pycocotools, faster-coco-eval) against hand-computed
                           values of five cases (not run without the ``coco`` extra)
+``ocio-input``            ``--ocio-colourspace ACEScct`` (this installation's OpenColorIO and
+                          its built-in config) against the ACEScct curve of ACES S-2016-001
+                          and the AP1-to-BT.709 matrix derived from the published
+                          chromaticities with Bradford adaptation (not run without the
+                          ``ocio`` extra)
 ``installation``          every installed file against the SHA-256 its wheel's ``RECORD``
                           lists (not run for an editable install: its source is a checkout)
 ========================  ==================================================================
@@ -329,6 +334,63 @@ COCO_CASES: tuple[tuple[str, dict[int, list[tuple[float, ...]]],
 )
 
 
+#: ACES AP1 primaries and the ACES white (S-2014-004), Rec. ITU-R BT.709 primaries and D65
+#: (IEC 61966-2-1), CIE 1931 xy.
+AP1_XY = ((0.713, 0.293), (0.165, 0.830), (0.128, 0.044))
+ACES_WHITE_XY = (0.32168, 0.33767)
+BT709_XY = ((0.640, 0.330), (0.300, 0.600), (0.150, 0.060))
+D65_XY = (0.3127, 0.3290)
+#: The Bradford cone-response matrix (Lam 1985, as CIE 160:2004 gives it).
+BRADFORD = ((0.8951, 0.2664, -0.1614), (-0.7502, 1.7135, 0.0367), (0.0389, -0.0685, 1.0296))
+
+
+def _white_xyz(xy: tuple[float, float]) -> np.ndarray:
+    """XYZ of chromaticity ``xy`` at Y = 1."""
+    return np.array([xy[0] / xy[1], 1.0, (1.0 - xy[0] - xy[1]) / xy[1]])
+
+
+def _rgb_to_xyz(primaries: tuple[tuple[float, float], ...], white: tuple[float, float]
+                ) -> np.ndarray:
+    """The RGB-to-XYZ matrix of ``primaries`` and ``white`` (SMPTE RP 177)."""
+    p = np.stack([_white_xyz(c) for c in primaries], axis=1)
+    return p * np.linalg.solve(p, _white_xyz(white))
+
+
+def _bradford(src: tuple[float, float], dst: tuple[float, float]) -> np.ndarray:
+    """The Bradford chromatic adaptation from white ``src`` to white ``dst`` (XYZ)."""
+    b = np.asarray(BRADFORD)
+    adapt: np.ndarray = np.linalg.inv(b) @ np.diag((b @ _white_xyz(dst))
+                                                   / (b @ _white_xyz(src))) @ b
+    return adapt
+
+
+def acescct_encode(linear: np.ndarray) -> np.ndarray:
+    """ACEScct code values of linear AP1 values (ACES S-2016-001, section 4.4)."""
+    lin = np.asarray(linear, np.float64)
+    log = (np.log2(np.maximum(lin, 1e-30)) + 9.72) / 17.52
+    return np.where(lin <= 0.0078125, 10.5402377416545 * lin + 0.0729055341958355, log)
+
+
+def _ocio_input() -> tuple[float, int, str]:
+    try:
+        import PyOpenColorIO  # noqa: F401
+    except ImportError:
+        raise CheckNotRunError("OpenColorIO is not installed (the ocio extra)") from None
+    from fidelity.chart.ocio import DEFAULT_CONFIG, convert
+
+    matrix = (np.linalg.inv(_rgb_to_xyz(BT709_XY, D65_XY)) @ _bradford(ACES_WHITE_XY, D65_XY)
+              @ _rgb_to_xyz(AP1_XY, ACES_WHITE_XY))
+    greys = (0.001, 0.005, 0.0078125, 0.02, 0.18, 0.5, 1.0, 4.0)  # the toe, its end, the log
+    linear = np.array([(g, g, g) for g in greys] + [(0.18, 0.05, 0.02), (0.02, 0.18, 0.05),
+                                                     (0.05, 0.02, 0.18), (0.6, 0.3, 0.1)])
+    got, how = convert(acescct_encode(linear)[None].astype(np.float32), "ACEScct",
+                       DEFAULT_CONFIG)
+    want = linear @ matrix.T
+    rel = np.abs(got[0] - want) / np.maximum(np.abs(want).max(axis=-1, keepdims=True), 1e-3)
+    return (float(rel.max()), rel.size,
+            f"OpenColorIO {how.version}, {how.config_name} -> {how.target}")
+
+
 def _coco_scoring() -> tuple[float, int, str]:
     try:
         from fidelity.coco.detectors import COCO80_CATEGORY_IDS, COCO80_NAMES
@@ -442,6 +504,11 @@ QUALIFICATION_CHECKS: Mapping[str, _Spec] = {
         "COCO box AP (the scorers behind every measured ΔmAP)",
         "hand-computed AP of 5 cases (101-point interpolation, IoU .50:.95)",
         "largest |mAP or AP50 - hand-computed|", "", 1e-6, _coco_scoring),
+    "ocio-input": _Spec(
+        "OpenColorIO input conversion (--ocio-colourspace)",
+        "ACES S-2016-001 (ACEScct) and the AP1-to-BT.709 matrix from the published "
+        "chromaticities, Bradford-adapted", "largest relative |linear - reference|", "", 1e-4,
+        _ocio_input),
     "installation": _Spec(
         "installed files", "the wheel's RECORD (SHA-256 of every file installed)",
         "changed or missing", "files", 0.0, _installation),

@@ -38,7 +38,7 @@ def test_every_check_that_runs_here_passes_within_its_tolerance(result) -> None:
     assert [c.name for c in result.checks] == list(QUALIFICATION_CHECKS)
     for c in result.checks:
         if c.status == NOT_RUN:
-            assert c.name in ("renderer", "coco-scoring", "installation")
+            assert c.name in ("renderer", "coco-scoring", "ocio-input", "installation")
             assert c.detail and c.deviation is None
             continue
         assert c.status == PASS, c
@@ -118,6 +118,35 @@ def test_a_check_that_raises_not_run_is_named_not_failed(monkeypatch) -> None:  
     # a qualification in which nothing ran is no qualification
     out = CliRunner().invoke(main, ["qualify", "--checks", "renderer"])
     assert out.exit_code == 1 and "NOT qualified: 0 of 0" in out.output
+
+
+def test_the_ocio_check_fails_on_a_wrong_conversion_and_needs_opencolorio(monkeypatch
+                                                                           ) -> None:  # type: ignore[no-untyped-def]
+    import sys
+
+    import fidelity.chart.ocio as ocio
+
+    pytest.importorskip("PyOpenColorIO", reason="pip install 'camera-fidelity[ocio]'")
+    true = ocio.convert
+    monkeypatch.setattr(ocio, "convert",
+                        lambda *a, **k: (true(*a, **k)[0] * np.float32(1.0005), true(*a, **k)[1]))
+    check = run_check("ocio-input")
+    assert check.status == FAIL and check.deviation is not None and check.deviation > 4e-4
+    monkeypatch.setattr(ocio, "convert", true)
+    monkeypatch.setitem(sys.modules, "PyOpenColorIO", None)
+    check = run_check("ocio-input")
+    assert check.status == NOT_RUN and "ocio extra" in check.detail
+
+
+def test_the_acescct_curve_of_the_check_is_the_specifications() -> None:
+    """Against colour-science's ACEScct, a second implementation of S-2016-001."""
+    colour = pytest.importorskip("colour", reason="colour-science (the test extra)")
+    from fidelity.qualify import acescct_encode
+
+    lin = np.array([0.0, 1e-4, 0.001, 0.0078125, 0.0078126, 0.02, 0.18, 1.0, 16.0, 222.0])
+    with np.errstate(divide="ignore"):  # colour-science takes log2(0) on the linear segment
+        reference = colour.models.log_encoding_ACEScct(lin)
+    np.testing.assert_allclose(acescct_encode(lin), reference, atol=1e-12)
 
 
 def test_synthetic_photo_puts_the_patch_centres_where_it_says() -> None:

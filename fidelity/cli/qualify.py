@@ -35,8 +35,8 @@ def qualify(names: str | None, json_path: str | None) -> None:
     Wu & Dalal 2005), the sRGB matrix (IEC 61966-2-1), illuminant whites (CIE 15:2018), the
     SAFE-COLOR calibration (the paper's parameters), the closed-form render (an ideal camera;
     Mitsuba 3), the chart finder and the image audit (synthetic photos under known
-    homographies), COCO box AP (hand-computed cases), and the installed files (the wheel's
-    RECORD). Each line states the
+    homographies), COCO box AP (hand-computed cases), the OpenColorIO input conversion (ACES
+    S-2016-001), and the installed files (the wheel's RECORD). Each line states the
     reference, the tolerance and what was measured. Exit 0: every check that ran passed; 1: one
     failed. A check that cannot run here (no Mitsuba, an editable install) is named, not failed.
     """
