@@ -340,30 +340,6 @@ AP1_XY = ((0.713, 0.293), (0.165, 0.830), (0.128, 0.044))
 ACES_WHITE_XY = (0.32168, 0.33767)
 BT709_XY = ((0.640, 0.330), (0.300, 0.600), (0.150, 0.060))
 D65_XY = (0.3127, 0.3290)
-#: The Bradford cone-response matrix (Lam 1985, as CIE 160:2004 gives it).
-BRADFORD = ((0.8951, 0.2664, -0.1614), (-0.7502, 1.7135, 0.0367), (0.0389, -0.0685, 1.0296))
-
-
-def _white_xyz(xy: tuple[float, float]) -> np.ndarray:
-    """XYZ of chromaticity ``xy`` at Y = 1."""
-    return np.array([xy[0] / xy[1], 1.0, (1.0 - xy[0] - xy[1]) / xy[1]])
-
-
-def _rgb_to_xyz(primaries: tuple[tuple[float, float], ...], white: tuple[float, float]
-                ) -> np.ndarray:
-    """The RGB-to-XYZ matrix of ``primaries`` and ``white`` (SMPTE RP 177)."""
-    p = np.stack([_white_xyz(c) for c in primaries], axis=1)
-    return p * np.linalg.solve(p, _white_xyz(white))
-
-
-def _bradford(src: tuple[float, float], dst: tuple[float, float]) -> np.ndarray:
-    """The Bradford chromatic adaptation from white ``src`` to white ``dst`` (XYZ)."""
-    b = np.asarray(BRADFORD)
-    adapt: np.ndarray = np.linalg.inv(b) @ np.diag((b @ _white_xyz(dst))
-                                                   / (b @ _white_xyz(src))) @ b
-    return adapt
-
-
 def acescct_encode(linear: np.ndarray) -> np.ndarray:
     """ACEScct code values of linear AP1 values (ACES S-2016-001, section 4.4)."""
     lin = np.asarray(linear, np.float64)
@@ -377,9 +353,14 @@ def _ocio_input() -> tuple[float, int, str]:
     except ImportError:
         raise CheckNotRunError("OpenColorIO is not installed (the ocio extra)") from None
     from fidelity.chart.ocio import DEFAULT_CONFIG, convert
+    from fidelity.colour.colorimetry import matrix_chromatic_adaptation, normalised_primary_matrix
 
-    matrix = (np.linalg.inv(_rgb_to_xyz(BT709_XY, D65_XY)) @ _bradford(ACES_WHITE_XY, D65_XY)
-              @ _rgb_to_xyz(AP1_XY, ACES_WHITE_XY))
+    def white(xy: tuple[float, float]) -> np.ndarray:
+        return np.array([xy[0] / xy[1], 1.0, (1.0 - xy[0] - xy[1]) / xy[1]])
+
+    matrix = (np.linalg.inv(normalised_primary_matrix(BT709_XY, D65_XY))
+              @ matrix_chromatic_adaptation(white(ACES_WHITE_XY), white(D65_XY), "Bradford")
+              @ normalised_primary_matrix(AP1_XY, ACES_WHITE_XY))
     greys = (0.001, 0.005, 0.0078125, 0.02, 0.18, 0.5, 1.0, 4.0)  # the toe, its end, the log
     linear = np.array([(g, g, g) for g in greys] + [(0.18, 0.05, 0.02), (0.02, 0.18, 0.05),
                                                      (0.05, 0.02, 0.18), (0.6, 0.3, 0.1)])
