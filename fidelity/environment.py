@@ -20,7 +20,8 @@ import re
 from importlib import metadata
 from typing import Any
 
-__all__ = ["available_cpus", "describe_environment", "dependency_versions"]
+__all__ = ["IMPORT_NAMES", "available_cpus", "describe_environment", "dependency_versions",
+           "missing_extra"]
 
 
 def available_cpus() -> int:
@@ -34,6 +35,40 @@ def available_cpus() -> int:
 DISTRIBUTION = "camera-fidelity"
 #: Extras whose packages the tool runs with (not the test and docs tools).
 RUNTIME_EXTRAS = ("render", "scene", "coco", "ray", "fast", "ros", "fit", "ocio", "ssp", "qc")
+
+
+#: The import name of each package a runtime extra declares (its requirement name where the
+#: two differ): a missing module is traced back to the extra that installs it.
+IMPORT_NAMES: dict[str, str] = {
+    "mitsuba": "mitsuba", "drjit": "drjit", "pygltflib": "pygltflib", "pxr": "usd-core",
+    "onnxruntime": "onnxruntime", "onnx": "onnx", "pycocotools": "pycocotools",
+    "faster_coco_eval": "faster-coco-eval", "PIL": "Pillow", "tqdm": "tqdm", "ray": "ray",
+    "numba": "numba", "rosbags": "rosbags", "PyOpenColorIO": "opencolorio",
+    "tomli_w": "tomli-w", "lxml": "lxml", "qc_baselib": "asam-qc-baselib",
+}
+
+
+def missing_extra(module: str | None, distribution: str = DISTRIBUTION) -> tuple[str, str] | None:
+    """``(requirement, extra)`` for a module that is not installed (the ``name`` of a
+    :class:`ModuleNotFoundError`, dotted or not) when a runtime extra of ``distribution``
+    installs it (:data:`IMPORT_NAMES`; of several such extras the one with the fewest
+    requirements), else None."""
+    requirement = IMPORT_NAMES.get((module or "").split(".")[0])
+    if requirement is None:
+        return None
+    try:
+        requires = metadata.requires(distribution) or []
+    except metadata.PackageNotFoundError:
+        return None
+    declared: dict[str, set[str]] = {}
+    for req in requires:
+        extra = re.search(r"""extra\s*==\s*["']([^"']+)["']""", req)
+        name = re.split(r"[\s<>=!~;\[]", req, maxsplit=1)[0]
+        if extra:
+            declared.setdefault(name.lower(), set()).add(extra.group(1))
+    sizes = {e: sum(e in extras for extras in declared.values()) for e in RUNTIME_EXTRAS}
+    holding = [e for e in RUNTIME_EXTRAS if e in declared.get(requirement.lower(), set())]
+    return (requirement, min(holding, key=lambda e: sizes[e])) if holding else None
 
 
 def dependency_versions(distribution: str = DISTRIBUTION,

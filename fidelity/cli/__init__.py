@@ -111,9 +111,17 @@ SQLITE_DISK_ERRORS = ("disk is full", "disk i/o error", "readonly database",
 
 def environment_error(exc: BaseException) -> str | None:
     """The one-line message for an exception caused by the machine rather than by fidelity
-    (:data:`ENVIRONMENT_ERRNOS`, :data:`SQLITE_DISK_ERRORS`), else None."""
+    (:data:`ENVIRONMENT_ERRNOS`, :data:`SQLITE_DISK_ERRORS`, a module of an extra that is not
+    installed), else None."""
     from fidelity.fileio import display_path
 
+    if isinstance(exc, ModuleNotFoundError):
+        from fidelity.environment import DISTRIBUTION, missing_extra
+
+        found = missing_extra(exc.name)
+        if found is not None:
+            return (f"{found[0]}: not installed; this command needs the [{found[1]}] extra: "
+                    f"pip install '{DISTRIBUTION}[{found[1]}]'")
     if isinstance(exc, OSError) and exc.errno in ENVIRONMENT_ERRNOS:
         reason = exc.strerror or str(exc)
         return f"{display_path(exc.filename)}: {reason}" if exc.filename else reason
