@@ -22,6 +22,7 @@ from fidelity.cli.options import (
 )
 
 if TYPE_CHECKING:
+    from fidelity.coco.scores import ScoresTransfer
     from fidelity.coco.sweep import ModelSpec, SweepStore
 
 
@@ -31,7 +32,8 @@ if TYPE_CHECKING:
                    "images by id).")
 @click.option("--images", default=None, type=click.Path(file_okay=False))
 @click.option("--annotations", type=click.Path(dir_okay=False),
-              help="COCO annotations of the images (needed except with --status).")
+              help="COCO annotations of the images (needed except with --status and "
+                   "--import-scores).")
 @click.option("--transforms", type=TransformNames(), default="all", show_default=True,
               help="'all' or comma-separated transform names.")
 @click.option("--targets", type=Targets(baseline=True),
@@ -52,6 +54,15 @@ if TYPE_CHECKING:
                    "claims in the store, whatever their order.")
 @scorer_option
 @click.option("--rescore", is_flag=True, help="Only recompute scores from stored detections.")
+@click.option("--export-scores", "export_scores", default=None, metavar="FILE",
+              type=click.Path(dir_okay=False),
+              help="Only write the finished cells of the store in --out to a scores file "
+                   "(JSON; gzip for a .gz name): their scores, fold and bootstrap scores and "
+                   "the store's provenance, without the detections; safe while a sweep runs.")
+@click.option("--import-scores", "import_scores", default=None, metavar="FILE",
+              type=click.Path(dir_okay=False),
+              help="Only make the new store in --out hold the cells of a scores file; rerun "
+                   "the sweep's command line on it to resume the sweep.")
 @click.option("--status", is_flag=True,
               help="Only say where the store in --out stands (per model: cells done, to do, "
                    "under way, pace); safe while a sweep runs.")
@@ -61,7 +72,8 @@ if TYPE_CHECKING:
 @common_options
 def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations: str | None,
           transforms: list[str], targets: list[float], out: str, threads: int, provider: str,
-          order: str, scorer: str, rescore: bool, status: bool, limit: int | None,
+          order: str, scorer: str, rescore: bool, export_scores: str | None,
+          import_scores: str | None, status: bool, limit: int | None,
           progress: bool | None, executor: str, address: str | None, workers: int | None) -> None:
     """Run (or resume) the COCO sweep; one line per finished cell on stderr ([k/N] cells).
 
@@ -70,6 +82,8 @@ def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
       fidelity sweep --models yolox_nano.onnx,yolo11n.onnx@250 --images val2017 \\
           --annotations instances.json --out DIR        (rerun the same line to resume)
       fidelity sweep --rescore --annotations instances.json --out DIR
+      fidelity sweep --export-scores run.scores.json.gz --annotations instances.json --out DIR
+      fidelity sweep --import-scores run.scores.json.gz --out NEWDIR   (then resume there)
       fidelity sweep ... --executor ray --address auto --workers 8   (a Ray cluster)
     """
     from fidelity.coco.sweep import SweepStore, run_sweep
@@ -82,8 +96,15 @@ def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
         check_store_meta(store.db, str(store.path))
         _print_status(store)
         return
+    if import_scores:
+        _import(import_scores, out)
+        return
     if not annotations:
-        raise click.UsageError("--annotations is needed (except with --status)")
+        raise click.UsageError("--annotations is needed (except with --status and "
+                               "--import-scores)")
+    if export_scores:
+        _export(export_scores, out, annotations, scorer)
+        return
     if rescore:
         n = do_rescore(SweepStore(out, create=False), annotations, method=scorer)
         click.echo(f"rescored {n} cells in {out}")
@@ -111,6 +132,43 @@ def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
     cells = store.cells()
     done = sum(c.done for c in cells)
     click.echo(f"{done} cells done, {len(cells) - done} unreachable; store {store.path}")
+
+
+def _export(path: str, out: str, annotations: str, scorer: str) -> None:
+    from pathlib import Path
+
+    from fidelity.coco.scores import export_scores
+    from fidelity.coco.scoring import load_annotations
+    from fidelity.coco.sweep import SweepStore
+    from fidelity.fileio import check_outputs
+
+    store = SweepStore(out, create=False)
+    check_outputs({"--export-scores": path},
+                  {"--annotations": annotations, "--out (sweep.sqlite)": store.path,
+                   "--out": Path(out)})
+    t = export_scores(store, load_annotations(annotations), path, method=scorer)
+    click.echo(f"{_cells(t)} exported to {t.path} (sha256 {t.sha256[:12]})")
+
+
+def _import(path: str, out: str) -> None:
+    from fidelity.coco.scores import import_scores
+    from fidelity.coco.sweep import SweepStore
+    from fidelity.fileio import file_sha256, require_file
+
+    require_file(path, "--import-scores")
+    store = SweepStore(out)
+    sha = file_sha256(path)
+    if any(s.get("sha256") == sha for s in store.meta().get("imported") or []):
+        click.echo(f"{path} is already imported into {store.path}; nothing to do")
+        return
+    t = import_scores(store, path)
+    click.echo(f"{_cells(t)} imported into {store.path}; rerun the sweep's command line with "
+               f"--out {out} to resume")
+
+
+def _cells(t: ScoresTransfer) -> str:
+    per = ", ".join(f"{m} {n}" for m, n in sorted(t.models.items()))
+    return f"{t.done} done and {t.unreachable} unreachable cells ({per})"
 
 
 def _print_status(store: SweepStore) -> None:

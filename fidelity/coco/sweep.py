@@ -15,8 +15,13 @@ Store (``<out>/sweep.sqlite``, WAL journal, ``synchronous=FULL``):
 * ``folds(model, transform, target, images, folds)``: per-fold scores of a finished cell
   (:func:`fidelity.coco.scoring.score_folds`), computed from the stored detections when a report
   asks for standard errors, and kept.
+* ``draws(model, transform, target, images, draws)``: the bootstrap draws' scores of a finished
+  cell, computed and kept like ``folds``.
+* ``imported(model, transform, target, source)``: cells that came from a scores file
+  (:mod:`fidelity.coco.scores`; their detections are not in the store).
 * ``models(model, file, sha256, limit_images, settings)`` and ``meta(key, value)``: provenance
-  (versions, data, grid, machine, and ``scorers``: the COCO AP implementations that scored it).
+  (versions, data, grid, machine, and ``scorers``: the COCO AP implementations that scored it;
+  ``imported``: the scores files imported).
 
 A rerun skips finished cells and the images already stored in unfinished ones. A rerun with a
 model's image limit raised (``model.onnx@N``) extends its finished cells: only the new images
@@ -40,7 +45,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
-from fidelity.errors import InvalidValueError
+from fidelity.errors import InputFileError, InvalidValueError
 from fidelity.fileio import file_sha256
 from fidelity.version import __version__
 
@@ -73,6 +78,9 @@ CREATE TABLE IF NOT EXISTS draws (
     model TEXT NOT NULL, transform TEXT NOT NULL, target REAL NOT NULL,
     images INTEGER NOT NULL, draws TEXT NOT NULL,
     PRIMARY KEY (model, transform, target));
+CREATE TABLE IF NOT EXISTS imported (
+    model TEXT NOT NULL, transform TEXT NOT NULL, target REAL NOT NULL, source TEXT NOT NULL,
+    PRIMARY KEY (model, transform, target));
 """
 
 
@@ -101,10 +109,30 @@ class SweepStore(ResultsStore):
                  for i, d in rows])
 
     def detections(self, model: str, transform: str, target: float) -> dict[int, np.ndarray]:
-        """All stored detections of a cell: image_id -> (n, 6)."""
+        """All stored detections of a cell: image_id -> (n, 6). A cell imported from a scores
+        file (:mod:`fidelity.coco.scores`) has none: asking for them is an input error naming
+        the cell and the file."""
         rows = self.db.execute("SELECT image_id, dets FROM detections WHERE model=? AND "
                                "transform=? AND target=?", (model, transform, float(target)))
-        return {i: unpack_detections(b) for i, b in rows}
+        out = {i: unpack_detections(b) for i, b in rows}
+        if not out:
+            source = self.imported().get((model, transform, float(target)))
+            if source is not None:
+                raise InputFileError(
+                    f"{self.path}: cell {model} {transform} ΔE {float(target):g} was imported "
+                    f"from {source.get('file')} without its detections (re-scoring needs "
+                    "the store it was run in)")
+        return out
+
+    def imported(self) -> dict[tuple[str, str, float], dict[str, Any]]:
+        """The cells imported from scores files: (model, transform, target) -> the file's
+        name, SHA-256, export time and the cell's ``detections_sha256``."""
+        tables = {r[0] for r in self.db.execute(
+            "SELECT name FROM sqlite_master WHERE type='table'").fetchall()}
+        if "imported" not in tables:  # a store of an earlier version, opened to read
+            return {}
+        return {(m, t, float(e)): self._json(src, f"imported cell {m} {t} {e:g}")
+                for m, t, e, src in self.db.execute("SELECT * FROM imported")}
 
     # provenance -----------------------------------------------------------------------------
     def scorers(self) -> list[dict[str, str | None]]:
@@ -591,9 +619,13 @@ def _images_of(cell: SweepCell | None) -> int:
 
 def rescore(store: SweepStore, annotations: str | os.PathLike[str], method: str = "auto") -> int:
     """Recompute every done cell's scores from the stored detections (no inference); the
-    annotations become the store's recorded ones."""
+    annotations become the store's recorded ones. A store holding cells imported from a scores
+    file is an input error (their detections are elsewhere); nothing is re-scored."""
     from fidelity.coco.scoring import evaluate_detections, load_annotations, resolve_scorer
 
+    imported = store.imported()
+    if imported:  # checked first: no cell is re-scored when one of them cannot be
+        store.detections(*next(iter(imported)))
     method = resolve_scorer(method)
     coco = load_annotations(annotations)
     store.check_annotations(annotations, file_sha256(annotations), replace=True)

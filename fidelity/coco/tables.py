@@ -1152,7 +1152,9 @@ def _ranking_findings(tables: Tables, cells: Sequence[CellDelta]) -> list[PaperF
         PaperFinding(least, "agrees" if order[-1] == "hue" else "disagrees",
                      f"mildest: {order[-1]} ({mean[order[-1]]:.2f} %); hue "
                      f"{mean['hue']:.2f} %, rank {order.index('hue') + 1} of "
-                     f"{len(order)} (1 = most harmful)"),
+                     f"{len(order)} (1 = most harmful)") if "hue" in mean else
+        PaperFinding(least, "not enough data", "the sweep has no hue cells (transforms "
+                     f"swept: {', '.join(order)})"),
     ]
 
 
@@ -1294,7 +1296,8 @@ def prediction_table(tables: Tables, name: str = "coco1000-measured") -> dict[st
             "aligned_image_counts": {m: a.to_json() for m, a in tables.aligned.items()},
             "standard_errors": {m: STANDARD_ERROR_WORDS[k]
                                 for m, k in standard_error_methods(tables).items()},
-        } | ({"earlier": portable_paths(meta["earlier"])} if meta.get("earlier") else {}),
+        } | ({"earlier": portable_paths(meta["earlier"])} if meta.get("earlier") else {})
+          | ({"imported": meta["imported"]} if meta.get("imported") else {}),
         "units": {
             "dmap_points": "percentage points of mAP@[.50:.95] (100*(baseline-transformed))",
             "dmap_relative": "percent of the baseline mAP",
@@ -1430,6 +1433,10 @@ SWEEP_META_SCHEMA = sc.Table(fields=(
     sc.Field("versions", sc.MapOf(nullable=True)),
     sc.Field("machine", sc.MapOf(nullable=True)),
     sc.Field("machines", sc.ListOf(sc.MapOf(), nullable=True)),
+    sc.Field("imported", sc.ListOf(sc.Table(fields=(
+        sc.Field("file", sc.String(), required=True),
+        sc.Field("sha256", sc.String(), required=True),
+    ), extra=True), describe="the scores files imported (file, sha256, ...)")),
 ), extra=True)
 
 

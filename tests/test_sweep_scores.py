@@ -1,0 +1,158 @@
+"""A sweep's scores file (fidelity.coco.scores): exported from one store, imported into a new
+one on another machine, resumed there, and reported as if the sweep had never moved."""
+
+from __future__ import annotations
+
+import gzip
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from fidelity.cli import main
+from fidelity.coco.sweep import ModelSpec, SweepStore
+from fidelity.errors import InputFileError
+from tests.test_sweep import FakeDetector, one_line_error, synthetic_coco
+
+GRID = (["contrast-inc", "contrast-dec"], [0, 3, 6])
+
+
+@pytest.fixture
+def data(tmp_path, monkeypatch):
+    from fidelity.coco import detectors
+
+    monkeypatch.setattr(detectors, "Detector", FakeDetector)
+    return synthetic_coco(tmp_path / "data", n=6)
+
+
+def sweep(data, out: Path, transforms: list[str], targets: list[float]) -> SweepStore:
+    from fidelity.coco.sweep import run_sweep
+
+    images, ann, model = data
+    return run_sweep([ModelSpec(model, None)], images, ann, out, transforms, targets,
+                     log=lambda s: None)
+
+
+def tables_json(store: SweepStore, ann: Path) -> dict:
+    from fidelity.coco.scoring import load_annotations
+    from fidelity.coco.tables import build_tables
+
+    t = build_tables(store, load_annotations(ann)).to_json()
+    return {k: v for k, v in t.items() if k != "meta"}
+
+
+def test_export_import_resume_reports_as_one_uninterrupted_run(data, tmp_path):
+    images, ann, model = data
+    first = sweep(data, tmp_path / "first", *GRID)
+    scores = tmp_path / "run.scores.json.gz"
+    r = CliRunner().invoke(main, ["sweep", "--export-scores", str(scores), "--annotations",
+                                  str(ann), "--out", str(tmp_path / "first")])
+    assert r.exit_code == 0, r.output
+    assert "5 done and 0 unreachable cells (fake 5)" in r.output
+    doc = json.loads(gzip.decompress(scores.read_bytes()))
+    assert doc["format"] == "fidelity-sweep-scores" and len(doc["images"]) == 6
+    # the digest: the stored detections, hashed here as the docstring says
+    base = first.detections("fake", "baseline", 0)
+    h = hashlib.sha256()
+    for i in sorted(base):
+        h.update(np.array([i, len(base[i])], "<i8").tobytes() + base[i].astype("<f4").tobytes())
+    cell = next(c for c in doc["cells"] if c["transform"] == "baseline")
+    assert cell["detections_sha256"] == h.hexdigest()
+    assert "detections" not in json.dumps(doc["cells"][0]).replace("detections_sha256", "")
+
+    moved = tmp_path / "moved"
+    r = CliRunner().invoke(main, ["sweep", "--import-scores", str(scores), "--out", str(moved)])
+    assert r.exit_code == 0, r.output
+    assert "5 done and 0 unreachable cells (fake 5) imported" in r.output
+    r = CliRunner().invoke(main, ["sweep", "--import-scores", str(scores), "--out", str(moved)])
+    assert r.exit_code == 0 and "already imported" in r.output, r.output
+    store = SweepStore(moved)
+    assert tables_json(store, ann) == tables_json(first, ann)
+    digest = hashlib.sha256(scores.read_bytes()).hexdigest()
+    assert store.meta()["imported"][0]["sha256"] == digest
+    # the report says where its cells came from; the prediction table it writes loads
+    r = CliRunner().invoke(main, ["tables", str(moved), "--out", str(tmp_path / "rep"),
+                                  "--prediction", str(tmp_path / "p.json"), "--no-progress"])
+    assert r.exit_code == 0, r.output
+    from fidelity.prediction.table import load_prediction_table
+
+    table = load_prediction_table(tmp_path / "p.json")
+    imported = json.loads((tmp_path / "p.json").read_text())["provenance"]["imported"]
+    assert [(i["file"], i["sha256"]) for i in imported] == [(scores.name, digest)]
+    assert table is not None
+    # a sweep without hue cells: the paper's "hue hurts least" is not enough data, not a crash
+    found = json.loads((tmp_path / "rep" / "tables.json").read_text())["comparison"]
+    hue = next(f for f in found if f["claim"] == "hue changes hurt least")
+    assert hue["verdict"] == "not enough data" and "no hue cells" in hue["evidence"]
+
+    # resumed with a wider grid: only the new cells run, and the report equals a run that never
+    # moved
+    finished = {(c.transform, c.target): c.finished for c in store.cells()}
+    wider = (["contrast-inc", "contrast-dec", "brightness-inc"], [0, 3, 6])
+    resumed = sweep(data, moved, *wider)
+    again = {(c.transform, c.target): c.finished for c in resumed.cells()}
+    assert len(again) == 7 and all(again[k] == v for k, v in finished.items())
+    whole = sweep(data, tmp_path / "whole", *wider)
+    assert tables_json(resumed, ann) == tables_json(whole, ann)
+
+
+def test_an_imported_cells_detections_are_an_error_naming_the_file(data, tmp_path):
+    images, ann, model = data
+    sweep(data, tmp_path / "a", ["contrast-inc"], [0, 3])
+    scores = tmp_path / "a.scores.json"
+    assert CliRunner().invoke(main, ["sweep", "--export-scores", str(scores), "--annotations",
+                                     str(ann), "--out", str(tmp_path / "a")]).exit_code == 0
+    assert scores.read_bytes()[:1] == b"{"  # plain JSON without .gz
+    assert CliRunner().invoke(main, ["sweep", "--import-scores", str(scores), "--out",
+                                     str(tmp_path / "b")]).exit_code == 0
+    store = SweepStore(tmp_path / "b")
+    with pytest.raises(InputFileError, match="imported from a.scores.json without its detect"):
+        store.detections("fake", "contrast-inc", 3)
+    r = CliRunner().invoke(main, ["sweep", "--rescore", "--annotations", str(ann), "--out",
+                                  str(tmp_path / "b")])
+    one_line_error(r, "a.scores.json", "imported")
+    # a store with cells of its own takes no import
+    r = CliRunner().invoke(main, ["sweep", "--import-scores", str(scores), "--out",
+                                  str(tmp_path / "a")])
+    one_line_error(r, "finished cells", "new store")
+    # exported again from the imported store: the same cells, the recorded digests kept
+    again = tmp_path / "again.scores.json"
+    assert CliRunner().invoke(main, ["sweep", "--export-scores", str(again), "--annotations",
+                                     str(ann), "--out", str(tmp_path / "b")]).exit_code == 0
+    one, two = json.loads(scores.read_text()), json.loads(again.read_text())
+    assert one["cells"] == two["cells"] and len(two["meta"]["imported"]) == 1
+
+
+@pytest.mark.parametrize(("content", "problem"), [
+    (b"", "not a sweep scores file"),
+    (b"\x1f\x8b\x08\x00trunc", "not a sweep scores file"),
+    (b'{"format": "other"}', "not a sweep scores file"),
+    (b'{"format": "fidelity-sweep-scores", "version": 99}', "version 99"),
+    (b'{"format": "fidelity-sweep-scores", "version": 1, "meta": {}, "models": {}, '
+     b'"images": [], "cells": [{"model": "m"}]}', "cell 1 has no 'transform'"),
+    (b'{"format": "fidelity-sweep-scores", "version": 1, "meta": {}, "models": {}, '
+     b'"images": []}', "'cells' is missing"),
+])
+def test_a_bad_scores_file_is_one_line(tmp_path, content, problem):
+    bad = tmp_path / "bad file.json"
+    bad.write_bytes(content)
+    r = CliRunner().invoke(main, ["sweep", "--import-scores", str(bad), "--out",
+                                  str(tmp_path / "s")])
+    one_line_error(r, "bad file.json", problem)
+
+
+def test_export_needs_a_store_and_annotations_and_never_writes_over_them(data, tmp_path):
+    images, ann, model = data
+    r = CliRunner().invoke(main, ["sweep", "--export-scores", str(tmp_path / "x.json"),
+                                  "--annotations", str(ann), "--out", str(tmp_path / "none")])
+    one_line_error(r, "none", "no sweep store")
+    sweep(data, tmp_path / "a", ["contrast-inc"], [0])
+    r = CliRunner().invoke(main, ["sweep", "--export-scores", str(ann), "--annotations",
+                                  str(ann), "--out", str(tmp_path / "a")])
+    one_line_error(r, "ann.json")
+    r = CliRunner().invoke(main, ["sweep", "--export-scores", str(tmp_path / "x.json"),
+                                  "--out", str(tmp_path / "a")])
+    one_line_error(r, "--annotations")
