@@ -156,3 +156,15 @@ def test_export_needs_a_store_and_annotations_and_never_writes_over_them(data, t
     r = CliRunner().invoke(main, ["sweep", "--export-scores", str(tmp_path / "x.json"),
                                   "--out", str(tmp_path / "a")])
     one_line_error(r, "--annotations")
+
+
+def test_a_store_resumed_with_other_versions_records_both(data, tmp_path, monkeypatch):
+    import onnxruntime
+
+    first = sweep(data, tmp_path / "s", ["contrast-inc"], [0]).meta()["versions"]
+    monkeypatch.setattr(onnxruntime, "__version__", "0.0-elsewhere")
+    meta = sweep(data, tmp_path / "s", ["contrast-inc"], [0, 3]).meta()
+    assert meta["versions"]["onnxruntime"] == "0.0-elsewhere"
+    assert meta["versions_seen"] == [first, meta["versions"]]
+    again = sweep(data, tmp_path / "s", ["contrast-inc"], [0, 3]).meta()["versions_seen"]
+    assert len(again) == 2

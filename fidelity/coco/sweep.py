@@ -20,7 +20,7 @@ Store (``<out>/sweep.sqlite``, WAL journal, ``synchronous=FULL``):
 * ``imported(model, transform, target, source)``: cells that came from a scores file
   (:mod:`fidelity.coco.scores`; their detections are not in the store).
 * ``models(model, file, sha256, limit_images, settings)`` and ``meta(key, value)``: provenance
-  (versions, data, grid, machine, and ``scorers``: the COCO AP implementations that scored it;
+  (versions and ``versions_seen``, data, grid, machine, and ``scorers``: the COCO AP implementations that scored it;
   ``imported``: the scores files imported).
 
 A rerun skips finished cells and the images already stored in unfinished ones. A rerun with a
@@ -410,12 +410,17 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     store.start_run(image_set, [m.limit for m in models], annotations)
     import PIL
 
-    store.set_meta("versions", {"python": platform.python_version(),
-                                "onnxruntime": onnxruntime.__version__,
-                                "numpy": np.__version__, "Pillow": PIL.__version__,
-                                "pycocotools": _dist_version("pycocotools"),
-                                "faster-coco-eval": _dist_version("faster-coco-eval"),
-                                "fidelity": __version__})
+    versions = {"python": platform.python_version(), "onnxruntime": onnxruntime.__version__,
+                "numpy": np.__version__, "Pillow": PIL.__version__,
+                "pycocotools": _dist_version("pycocotools"),
+                "faster-coco-eval": _dist_version("faster-coco-eval"), "fidelity": __version__}
+    # every distinct set of versions that has run in this store, first to last (a run resumed
+    # elsewhere, or after an upgrade, may detect differently), as meta["machines"] does
+    meta = store.meta()
+    seen = meta.get("versions_seen") or ([meta["versions"]] if meta.get("versions") else [])
+    store.set_meta("versions", versions)
+    if versions not in seen:
+        store.set_meta("versions_seen", [*seen, versions])
     store.record_scorer(method)
     store.set_meta("grid", {"transforms": list(transforms), "targets": list(targets),
                             "models": [f"{m.path.name}@{m.limit or len(all_ids)}"

@@ -1288,6 +1288,7 @@ def prediction_table(tables: Tables, name: str = "coco1000-measured") -> dict[st
                       + scorer_words(meta.get("scorers")) + ")",
             "models": {m: _model_provenance(info) for m, info in tables.models.items()},
             "images": portable_paths(meta.get("data")), "versions": meta.get("versions"),
+            "versions_seen": meta.get("versions_seen"),
             "machine": meta.get("machine"), "machines": meta.get("machines"),
             "cells_done": tables.cells_done, "cells_unreachable": tables.cells_unreachable,
             "worst_case": "per ΔE the transform with the largest ΔmAP in points; person and "
@@ -1431,6 +1432,7 @@ SWEEP_META_SCHEMA = sc.Table(fields=(
                                       sc.Field("since", sc.String(nullable=True))),
                               extra=True)), describe="a scorer name or {scorer, since}"))),
     sc.Field("versions", sc.MapOf(nullable=True)),
+    sc.Field("versions_seen", sc.ListOf(sc.MapOf(nullable=True), nullable=True)),
     sc.Field("machine", sc.MapOf(nullable=True)),
     sc.Field("machines", sc.ListOf(sc.MapOf(), nullable=True)),
     sc.Field("imported", sc.ListOf(sc.Table(fields=(
