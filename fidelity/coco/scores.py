@@ -2,7 +2,7 @@
 another machine, resume it there and report it.
 
 A sweep store holds every image's raw detections (about 3.6 MB a cell of 1000 images, 470 MB
-a detector): too much to move with the results. What the report (``fidelity tables``) needs of
+a detector): too much to move with the results (a scores file: 7 kB a cell gzipped). What the report (``fidelity tables``) needs of
 a finished cell scored on its model's common image count is small: its scores (mAP, mAP50,
 mAP75, per-class AP), its per-fold scores and its bootstrap draws' scores (the standard
 errors; :meth:`fidelity.coco.sweep.SweepStore.fold_scores`, ``draw_scores``). The scores file
@@ -13,9 +13,9 @@ built from it names what it was computed from.
 :func:`export_scores` writes it from a store (computing the fold and draw scores a cell does
 not have yet, and keeping them in the store); :func:`import_scores` makes a new store hold the
 same cells, which a sweep then resumes (its finished cells are skipped) and ``tables`` reports.
-An imported cell has no detections: anything that needs them (re-scoring it on other images,
-``--rescore``, a class breakdown on another image count) is an input error naming the cell and
-the file it came from (:meth:`fidelity.coco.sweep.SweepStore.detections`).
+An imported cell has no detections: anything that needs them (``--rescore``, re-scoring it on
+other images, ``tables --explain``) is an input error naming the cell and the file it came
+from (:meth:`fidelity.coco.sweep.SweepStore.detections`).
 
 Format (JSON; gzip-compressed when the file name ends in ``.gz``)::
 
