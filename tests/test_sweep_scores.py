@@ -1,5 +1,6 @@
 """A sweep's scores file (fidelity.coco.scores): exported from one store, imported into a new
-one on another machine, resumed there, and reported as if the sweep had never moved."""
+one on another machine, resumed there, and reported as if the sweep had never moved. (The
+validation store's: tests/test_validate.py, on a real run.)"""
 
 from __future__ import annotations
 
@@ -51,22 +52,23 @@ def test_export_import_resume_reports_as_one_uninterrupted_run(data, tmp_path):
     r = CliRunner().invoke(main, ["sweep", "--export-scores", str(scores), "--annotations",
                                   str(ann), "--out", str(tmp_path / "first")])
     assert r.exit_code == 0, r.output
-    assert "5 done and 0 unreachable cells (fake 5)" in r.output
+    assert "5 cells of a sweep store (fake 5) exported" in r.output
     doc = json.loads(gzip.decompress(scores.read_bytes()))
-    assert doc["format"] == "fidelity-sweep-scores" and len(doc["images"]) == 6
+    assert doc["format"] == "fidelity-scores" and doc["kind"] == "sweep"
+    assert len(doc["tables"]["images"]["rows"]) == 6
+    assert not {"detections", "owners", "leases"} & set(doc["tables"])
+    assert len(doc["tables"]["folds"]["rows"]) == len(doc["tables"]["draws"]["rows"]) == 5
     # the digest: the stored detections, hashed here as the docstring says
     base = first.detections("fake", "baseline", 0)
     h = hashlib.sha256()
     for i in sorted(base):
         h.update(np.array([i, len(base[i])], "<i8").tobytes() + base[i].astype("<f4").tobytes())
-    cell = next(c for c in doc["cells"] if c["transform"] == "baseline")
-    assert cell["detections_sha256"] == h.hexdigest()
-    assert "detections" not in json.dumps(doc["cells"][0]).replace("detections_sha256", "")
+    assert doc["detections_sha256"]['["fake", "baseline", 0.0]'] == h.hexdigest()
 
     moved = tmp_path / "moved"
     r = CliRunner().invoke(main, ["sweep", "--import-scores", str(scores), "--out", str(moved)])
     assert r.exit_code == 0, r.output
-    assert "5 done and 0 unreachable cells (fake 5) imported" in r.output
+    assert "5 cells of a sweep store (fake 5) imported" in r.output
     r = CliRunner().invoke(main, ["sweep", "--import-scores", str(scores), "--out", str(moved)])
     assert r.exit_code == 0 and "already imported" in r.output, r.output
     store = SweepStore(moved)
@@ -123,18 +125,34 @@ def test_an_imported_cells_detections_are_an_error_naming_the_file(data, tmp_pat
     assert CliRunner().invoke(main, ["sweep", "--export-scores", str(again), "--annotations",
                                      str(ann), "--out", str(tmp_path / "b")]).exit_code == 0
     one, two = json.loads(scores.read_text()), json.loads(again.read_text())
-    assert one["cells"] == two["cells"] and len(two["meta"]["imported"]) == 1
+    for name in ("cells", "folds", "draws", "images", "models"):
+        assert one["tables"][name] == two["tables"][name], name
+    assert one["detections_sha256"] == two["detections_sha256"]
+    meta = {k: json.loads(v) for k, v in two["tables"]["meta"]["rows"]}
+    assert [i["file"] for i in meta["imported"]] == ["a.scores.json"]
+    # a sweep's scores are no validation store's
+    r = CliRunner().invoke(main, ["validate", "--import-scores", str(scores), "--store",
+                                  str(tmp_path / "v")])
+    one_line_error(r, "a.scores.json", "not of a validation store")
+
+
+HEAD = b'{"format": "fidelity-scores", "version": 1, "kind": "sweep", '
 
 
 @pytest.mark.parametrize(("content", "problem"), [
-    (b"", "not a sweep scores file"),
-    (b"\x1f\x8b\x08\x00trunc", "not a sweep scores file"),
-    (b'{"format": "other"}', "not a sweep scores file"),
-    (b'{"format": "fidelity-sweep-scores", "version": 99}', "version 99"),
-    (b'{"format": "fidelity-sweep-scores", "version": 1, "meta": {}, "models": {}, '
-     b'"images": [], "cells": [{"model": "m"}]}', "cell 1 has no 'transform'"),
-    (b'{"format": "fidelity-sweep-scores", "version": 1, "meta": {}, "models": {}, '
-     b'"images": []}', "'cells' is missing"),
+    (b"", "not a scores file"),
+    (b"\x1f\x8b\x08\x00trunc", "not a scores file"),
+    (b'{"format": "other"}', "not a scores file"),
+    (b'{"format": "fidelity-scores", "version": 99}', "version 99"),
+    (HEAD + b'"tables": {}}', "no cells and meta tables"),
+    (HEAD + b'"tables": {"meta": {"columns": ["key", "value"], "rows": []}, "cells": '
+     b'{"columns": ["model"], "rows": [["m", 1]]}}}', "table 'cells' is not columns and rows"),
+    (HEAD + b'"tables": {"meta": {"columns": ["key", "value"], "rows": []}, "cells": '
+     b'{"columns": ["model"], "rows": [["m"]]}}, "detections_sha256": {}}',
+     "table 'cells' has columns model"),
+    (HEAD + b'"tables": {"nonsense": {"columns": [], "rows": []}, "meta": {"columns": '
+     b'["key", "value"], "rows": []}, "cells": {"columns": ["model"], "rows": []}}, '
+     b'"detections_sha256": {}}', "table 'nonsense' is not one of a sweep store"),
 ])
 def test_a_bad_scores_file_is_one_line(tmp_path, content, problem):
     bad = tmp_path / "bad file.json"

@@ -355,3 +355,23 @@ def test_tiny_real_run_is_resumable(shared: Path, tmp_path: Path) -> None:
     assert doc2["summary"]["standard_error"] == "larger"
     assert {(r["camera"], r["model"]): r["bound"]["all"]["se"] for r in doc2["rows"]} == \
         pytest.approx(se)
+    # carried to another machine as a scores file: the report of the imported store is the
+    # same, and a rerun there does no new work
+    scores = tmp_path / "v.scores.json.gz"
+    r = CliRunner().invoke(main, ["validate", "--export-scores", str(scores), "--annotations",
+                                  str(ann), "--store", str(tmp_path / "st")])
+    assert r.exit_code == 0 and "3 cells of a validation store (yolox_nano 3)" in r.output, \
+        r.output
+    r = CliRunner().invoke(main, ["validate", "--import-scores", str(scores), "--store",
+                                  str(tmp_path / "moved")])
+    assert r.exit_code == 0, r.output
+    moved = CliRunner().invoke(main, ["validate", "--cameras", str(suite), "--report-only",
+                                      "--store", str(tmp_path / "moved"), "--out",
+                                      str(tmp_path / "moved-rep")])
+    assert moved.exit_code == 0, moved.output
+    doc3 = json.loads((tmp_path / "moved-rep" / "validation.json").read_text())
+    assert (doc3["rows"], doc3["summary"]) == (doc2["rows"], doc2["summary"])
+    r = CliRunner().invoke(main, [*args[:-4], str(tmp_path / "moved"), *args[-3:]])
+    assert r.exit_code == 0, r.output
+    st2 = ValidationStore(tmp_path / "moved", create=False)
+    assert {c.camera: c.finished for c in st2.cells()} == before

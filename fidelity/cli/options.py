@@ -47,6 +47,8 @@ if TYPE_CHECKING:
 
     from fidelity.coco.executor import ExecutorOptions
     from fidelity.coco.measure import CocoInputs
+    from fidelity.coco.scores import ScoresTransfer
+    from fidelity.coco.store import ResultsStore
     from fidelity.coco.sweep import ModelSpec
     from fidelity.prediction.verdict import Criterion
 
@@ -327,6 +329,70 @@ def scorer_option(f: F) -> F:
         show_default=True,
         help="COCO AP implementation: pycocotools (reference) or faster-coco-eval (same numbers "
              "to 1e-4, tested; ~6x faster); auto: faster-coco-eval if installed.")(f)
+
+
+def scores_options(store: str) -> Callable[[F], F]:
+    """``--export-scores FILE`` and ``--import-scores FILE``: a results store's finished cells
+    without their detections (:mod:`fidelity.coco.scores`; sweep, validate). ``store``: the
+    option that names the store's folder."""
+    def deco(func: F) -> F:
+        func = click.option(
+            "--import-scores", "import_scores", default=None, metavar="FILE",
+            type=click.Path(dir_okay=False),
+            help=f"Only make the new store in {store} hold the cells of a scores file; rerun "
+                 "the command line on it to resume.")(func)
+        func = click.option(
+            "--export-scores", "export_scores", default=None, metavar="FILE",
+            type=click.Path(dir_okay=False),
+            help=f"Only write the finished cells of the store in {store} to a scores file "
+                 "(JSON; gzip for a .gz name): their scores, fold and bootstrap scores and the "
+                 "store's provenance, without the detections; needs --annotations; safe while "
+                 "a run goes on.")(func)
+        return func
+    return deco
+
+
+def transfer_scores(store_type: type[ResultsStore], folder: str, option: str,
+                    export_to: str | None, import_from: str | None, annotations: str | None,
+                    scorer: str = "auto") -> bool:
+    """Do ``--export-scores`` / ``--import-scores`` (:func:`scores_options`) on the store of
+    kind ``store_type`` in ``folder`` (named by ``option`` in errors); whether either was
+    given (the command then has nothing else to do)."""
+    from fidelity.coco import scores
+    from fidelity.fileio import check_outputs, file_sha256, require_file
+
+    if export_to and import_from:
+        raise click.UsageError("--export-scores and --import-scores: one at a time")
+    if import_from:
+        require_file(import_from, "--import-scores")
+        store = store_type(folder)
+        sha = file_sha256(import_from)
+        if any(s.get("sha256") == sha for s in store.meta().get("imported") or []):
+            click.echo(f"{import_from} is already imported into {store.path}; nothing to do")
+            return True
+        t = scores.import_scores(store, import_from)
+        click.echo(f"{_moved(t)} imported into {store.path}; rerun the command line with "
+                   f"{option} {folder} to resume")
+        return True
+    if export_to:
+        if not annotations:
+            raise click.UsageError("--export-scores needs --annotations (the fold and bootstrap "
+                                   "scores are computed against them)")
+        from fidelity.coco.scoring import load_annotations
+
+        store = store_type(folder, create=False)
+        check_outputs({"--export-scores": export_to},
+                      {"--annotations": annotations, f"{option} ({store.store_name})": store.path,
+                       option: Path(folder)})
+        t = scores.export_scores(store, load_annotations(annotations), export_to, method=scorer)
+        click.echo(f"{_moved(t)} exported to {t.path} (sha256 {t.sha256[:12]})")
+        return True
+    return False
+
+
+def _moved(t: ScoresTransfer) -> str:
+    per = ", ".join(f"{m} {n}" for m, n in sorted(t.models.items()))
+    return f"{t.cells} cells of a {t.kind} store ({per})"
 
 
 def executor_options(func: F) -> F:

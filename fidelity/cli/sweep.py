@@ -18,11 +18,12 @@ from fidelity.cli.options import (
     model_inputs,
     progress_option,
     scorer_option,
+    scores_options,
     show_progress,
+    transfer_scores,
 )
 
 if TYPE_CHECKING:
-    from fidelity.coco.scores import ScoresTransfer
     from fidelity.coco.sweep import ModelSpec, SweepStore
 
 
@@ -54,15 +55,7 @@ if TYPE_CHECKING:
                    "claims in the store, whatever their order.")
 @scorer_option
 @click.option("--rescore", is_flag=True, help="Only recompute scores from stored detections.")
-@click.option("--export-scores", "export_scores", default=None, metavar="FILE",
-              type=click.Path(dir_okay=False),
-              help="Only write the finished cells of the store in --out to a scores file "
-                   "(JSON; gzip for a .gz name): their scores, fold and bootstrap scores and "
-                   "the store's provenance, without the detections; safe while a sweep runs.")
-@click.option("--import-scores", "import_scores", default=None, metavar="FILE",
-              type=click.Path(dir_okay=False),
-              help="Only make the new store in --out hold the cells of a scores file; rerun "
-                   "the sweep's command line on it to resume the sweep.")
+@scores_options("--out")
 @click.option("--status", is_flag=True,
               help="Only say where the store in --out stands (per model: cells done, to do, "
                    "under way, pace); safe while a sweep runs.")
@@ -96,15 +89,12 @@ def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
         check_store_meta(store.db, str(store.path))
         _print_status(store)
         return
-    if import_scores:
-        _import(import_scores, out)
+    if transfer_scores(SweepStore, out, "--out", export_scores, import_scores, annotations,
+                       scorer):
         return
     if not annotations:
         raise click.UsageError("--annotations is needed (except with --status and "
                                "--import-scores)")
-    if export_scores:
-        _export(export_scores, out, annotations, scorer)
-        return
     if rescore:
         n = do_rescore(SweepStore(out, create=False), annotations, method=scorer)
         click.echo(f"rescored {n} cells in {out}")
@@ -132,43 +122,6 @@ def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
     cells = store.cells()
     done = sum(c.done for c in cells)
     click.echo(f"{done} cells done, {len(cells) - done} unreachable; store {store.path}")
-
-
-def _export(path: str, out: str, annotations: str, scorer: str) -> None:
-    from pathlib import Path
-
-    from fidelity.coco.scores import export_scores
-    from fidelity.coco.scoring import load_annotations
-    from fidelity.coco.sweep import SweepStore
-    from fidelity.fileio import check_outputs
-
-    store = SweepStore(out, create=False)
-    check_outputs({"--export-scores": path},
-                  {"--annotations": annotations, "--out (sweep.sqlite)": store.path,
-                   "--out": Path(out)})
-    t = export_scores(store, load_annotations(annotations), path, method=scorer)
-    click.echo(f"{_cells(t)} exported to {t.path} (sha256 {t.sha256[:12]})")
-
-
-def _import(path: str, out: str) -> None:
-    from fidelity.coco.scores import import_scores
-    from fidelity.coco.sweep import SweepStore
-    from fidelity.fileio import file_sha256, require_file
-
-    require_file(path, "--import-scores")
-    store = SweepStore(out)
-    sha = file_sha256(path)
-    if any(s.get("sha256") == sha for s in store.meta().get("imported") or []):
-        click.echo(f"{path} is already imported into {store.path}; nothing to do")
-        return
-    t = import_scores(store, path)
-    click.echo(f"{_cells(t)} imported into {store.path}; rerun the sweep's command line with "
-               f"--out {out} to resume")
-
-
-def _cells(t: ScoresTransfer) -> str:
-    per = ", ".join(f"{m} {n}" for m, n in sorted(t.models.items()))
-    return f"{t.done} done and {t.unreachable} unreachable cells ({per})"
 
 
 def _print_status(store: SweepStore) -> None:

@@ -15,7 +15,9 @@ from fidelity.cli.options import (
     limit_option,
     model_inputs,
     progress_option,
+    scores_options,
     show_progress,
+    transfer_scores,
 )
 
 if TYPE_CHECKING:
@@ -36,8 +38,9 @@ DOMAIN_FILE = "domain.json"
               help="COCO image folder.")
 @click.option("--annotations", default=None, type=click.Path(dir_okay=False),
               help="COCO annotation JSON.")
-@click.option("--out", required=True, type=click.Path(file_okay=False),
-              help="Report folder (Markdown, HTML, JSON, plots).")
+@click.option("--out", default=None, type=click.Path(file_okay=False),
+              help="Report folder (Markdown, HTML, JSON, plots); needed except with "
+                   "--export-scores and --import-scores.")
 @limit_option()
 @click.option("--store", default=None, type=click.Path(file_okay=False),
               help="Results store folder (default $FIDELITY_CACHE/validation or "
@@ -59,14 +62,16 @@ DOMAIN_FILE = "domain.json"
                    "draws and rest-of-run fold scores of the standard error).")
 @click.option("--notes", default=None, type=click.Path(dir_okay=False, exists=True),
               help="Markdown file with a written analysis, included in the report.")
+@scores_options("--store")
 @progress_option
 @executor_options
 @common_options
 def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: str | None, annotations: str | None,
-             out: str, limit: int | None, store: str | None, method: str, training: str,
-             threads: int, provider: str, bound_table: str | None, report_only: bool,
-             notes: str | None, progress: bool | None, executor: str, address: str | None,
-             workers: int | None) -> None:
+             out: str | None, limit: int | None, store: str | None, method: str,
+             training: str, threads: int, provider: str, bound_table: str | None,
+             report_only: bool, notes: str | None, export_scores: str | None,
+             import_scores: str | None, progress: bool | None, executor: str,
+             address: str | None, workers: int | None) -> None:
     """Render every camera's chart, predict its ΔmAP, emulate it on COCO and measure ΔmAP.
 
     \b
@@ -74,6 +79,8 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
       fidelity validate --cameras cameras --models yolox_nano.onnx,yolo11n.onnx@250 \\
           --images coco/val2017 --annotations instances.json --out reports/validation
       (rerun the same line to resume; add --report-only to rebuild the report)
+      fidelity validate --export-scores v.scores.json.gz --annotations instances.json
+      fidelity validate --import-scores v.scores.json.gz --store NEWDIR   (another machine)
     """
     from pathlib import Path
 
@@ -90,6 +97,12 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
     from fidelity.errors import InvalidValueError, unknown_name
     from fidelity.fileio import check_outputs
 
+    if transfer_scores(ValidationStore, store or str(default_store()), "--store",
+                       export_scores, import_scores, annotations):
+        return
+    if out is None:
+        raise click.UsageError("--out is needed (except with --export-scores and "
+                               "--import-scores)")
     camera_inputs: dict[str, Path | str | None] = {"--cameras": cameras}
     if cameras is not None and Path(cameras).is_dir():
         camera_inputs = {f"--cameras ({p.name})": f for p in sorted(Path(cameras).iterdir())

@@ -1,30 +1,34 @@
-"""A sweep's scores file: its finished cells without their detections, to carry a sweep to
-another machine, resume it there and report it.
+"""A results store's scores file: its finished cells without their detections, to carry a sweep
+or a validation to another machine, resume it there and report it.
 
-A sweep store holds every image's raw detections (about 3.6 MB a cell of 1000 images, 470 MB
-a detector): too much to move with the results (a scores file: 7 kB a cell gzipped). What the report (``fidelity tables``) needs of
-a finished cell scored on its model's common image count is small: its scores (mAP, mAP50,
-mAP75, per-class AP), its per-fold scores and its bootstrap draws' scores (the standard
-errors; :meth:`fidelity.coco.sweep.SweepStore.fold_scores`, ``draw_scores``). The scores file
-holds those for every finished cell, with the store's provenance (``meta``), its registered
-models and its recorded images, and per cell a SHA-256 of its detections, so that a report
-built from it names what it was computed from.
+A sweep or validation store holds every image's raw detections (about 3.6 MB a cell of 1000
+images; 470 MB a detector's sweep): too much to move with the results. What the reports
+(``fidelity tables``, ``fidelity validate --report-only``) need of a finished cell is small:
+its scores (mAP, per-class AP), its per-fold scores and its bootstrap draws' scores (the
+standard errors). A scores file holds every table of the store except the detections and the
+claims of running processes (``owners``, ``leases``): the provenance (``meta``), the
+registered models, the recorded images, the cells with their cached fold and draw scores (and
+a validation's camera records), row for row as the store holds them, and per cell a SHA-256 of
+its detections, so that a report built from it names what it was computed from. About 7 kB a
+sweep cell gzipped, most of it the 200 draws.
 
-:func:`export_scores` writes it from a store (computing the fold and draw scores a cell does
-not have yet, and keeping them in the store); :func:`import_scores` makes a new store hold the
-same cells, which a sweep then resumes (its finished cells are skipped) and ``tables`` reports.
-An imported cell has no detections: anything that needs them (``--rescore``, re-scoring it on
-other images, ``tables --explain``) is an input error naming the cell and the file it came
-from (:meth:`fidelity.coco.sweep.SweepStore.detections`).
+:func:`export_scores` writes it (first computing the fold and draw scores a cell lacks, which
+the store keeps: :meth:`fidelity.coco.sweep.SweepStore.complete_scores`); :func:`import_scores`
+makes a new store of the same kind hold the same rows. A sweep then resumes there (finished
+cells are skipped) and the reports read it as they would the first store. An imported cell has
+no detections: what needs them (``--rescore``, re-scoring on other images, ``tables
+--explain``) is an input error naming the cell and the file it came from
+(:meth:`fidelity.coco.store.ResultsStore.check_detections`).
 
 Format (JSON; gzip-compressed when the file name ends in ``.gz``)::
 
-    {"format": "fidelity-sweep-scores", "version": 1, "fidelity": "<version>",
-     "exported": "<UTC ISO 8601>", "meta": {...}, "models": {name: RegisteredModel},
-     "images": [[image_id, file_name, size, sha256], ...],
-     "cells": [{"model", "transform", "target", "param", "status", "reason", "images", "map",
-                "map50", "map75", "ap", "seconds", "finished", "detections_sha256",
-                "folds": [FoldScore, ...], "draws": Draws}, ...]}
+    {"format": "fidelity-scores", "version": 1, "kind": "sweep" | "validation",
+     "fidelity": "<version>", "exported": "<UTC ISO 8601>",
+     "tables": {name: {"columns": [...], "rows": [[...], ...]}, ...},
+     "detections_sha256": {"<cell key>": "<hex>", ...}}
+
+A cell key is :func:`fidelity.coco.store.cell_key` of the cell's key columns
+(:attr:`~fidelity.coco.store.ResultsStore.cell_columns`).
 """
 
 from __future__ import annotations
@@ -34,88 +38,96 @@ import hashlib
 import json
 import os
 import time
-from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fidelity.coco.store import RegisteredModel, unpack_detections
-from fidelity.coco.sweep import SweepStore
+from fidelity.coco.store import ResultsStore, cell_key, unpack_detections
 from fidelity.errors import InputFileError
 from fidelity.fileio import atomic_output, display_path, file_sha256
 
 #: The ``format`` of a scores file and the newest ``version`` this code reads and writes.
-SCORES_FORMAT = "fidelity-sweep-scores"
+SCORES_FORMAT = "fidelity-scores"
 SCORES_VERSION = 1
-
-_CELL_FIELDS = ("model", "transform", "target", "param", "status", "reason", "images", "map",
-                "map50", "map75", "ap", "seconds", "finished")
+#: Tables a scores file leaves out: the detections, and the claims of running processes.
+LEFT_OUT = ("detections", "owners", "leases")
 
 
 @dataclass(frozen=True)
 class ScoresTransfer:
-    """What an export or import moved: the file, its SHA-256, the cells (done and
-    unreachable) and per model how many."""
+    """What an export or import moved: the file, its SHA-256, the store's kind and per model
+    its cells (done and, in a sweep, unreachable)."""
 
     path: Path
     sha256: str
-    done: int
-    unreachable: int
+    kind: str
     models: dict[str, int]
 
+    @property
+    def cells(self) -> int:
+        """How many cells in all."""
+        return sum(self.models.values())
 
-def detections_digest(store: SweepStore, model: str, transform: str, target: float) -> str:
-    """SHA-256 of a cell's stored detections: per image in ascending id, its id and count as
-    two little-endian int64 and its ``(n, 6)`` float32 detections' bytes."""
+
+def detections_digest(store: ResultsStore, key: tuple[Any, ...]) -> str:
+    """SHA-256 of a cell's stored detections (``key``: its :attr:`cell_columns` values): per
+    image in ascending id, its id and count as two little-endian int64 and its ``(n, 6)``
+    float32 detections' bytes. An imported cell's is the one its file recorded."""
     import numpy as np
 
+    source = store.imported().get(cell_key(key))
+    if source is not None and "detections_sha256" in source:
+        return str(source["detections_sha256"])
     h = hashlib.sha256()
-    rows = store.db.execute("SELECT image_id, dets FROM detections WHERE model=? AND "
-                            "transform=? AND target=? ORDER BY image_id",
-                            (model, transform, float(target)))
-    for image_id, blob in rows:
+    where = " AND ".join(f"{c}=?" for c in store.cell_columns)
+    for image_id, blob in store.db.execute(
+            f"SELECT image_id, dets FROM detections WHERE {where} ORDER BY image_id", key):
         d = np.ascontiguousarray(unpack_detections(blob), dtype="<f4")
         h.update(np.array([image_id, len(d)], dtype="<i8").tobytes())
         h.update(d.tobytes())
     return h.hexdigest()
 
 
-def export_scores(store: SweepStore, coco: Any, path: str | os.PathLike[str],
-                  method: str = "auto") -> ScoresTransfer:
-    """Write ``store``'s finished cells to the scores file ``path`` (atomically).
+def _tables(store: ResultsStore) -> list[str]:
+    return [r[0] for r in store.db.execute(
+        "SELECT name FROM sqlite_master WHERE type='table' ORDER BY name")
+        if r[0] not in LEFT_OUT]
 
-    Each done cell's fold and draw scores are those the report uses: on the first ``images``
-    image ids of ``coco`` (the cell's own count), computed from the stored detections where the
-    store has not kept them yet (``method``: the fold scores' COCO scorer). An imported cell
-    keeps its recorded detections digest.
-    """
-    ids_all = sorted(coco.getImgIds())
-    imported = store.imported()
-    cells: list[dict[str, Any]] = []
-    for c in store.cells():
-        row: dict[str, Any] = {k: getattr(c, k) for k in _CELL_FIELDS}
-        if c.done:
-            ids = ids_all[: int(c.images or 0)]
-            key = (c.model, c.transform, float(c.target))
-            row["detections_sha256"] = (imported[key]["detections_sha256"] if key in imported
-                                        else detections_digest(store, *key))
-            row["folds"] = [f.to_json() for f in
-                            store.fold_scores(coco, c.model, c.transform, c.target, ids, method)]
-            row["draws"] = store.draw_scores(coco, c.model, c.transform, c.target,
-                                             ids).to_json()
-        cells.append(row)
-    images = [list(r) for r in store.db.execute(
-        "SELECT image_id, file_name, size, sha256 FROM images ORDER BY image_id")]
-    doc = {"format": SCORES_FORMAT, "version": SCORES_VERSION,
+
+def _models(doc_tables: dict[str, Any], cell_columns: tuple[str, ...]) -> dict[str, int]:
+    cells = doc_tables.get("cells") or {"columns": [], "rows": []}
+    i = list(cells["columns"]).index("model") if "model" in cells["columns"] else None
+    out: dict[str, int] = {}
+    for row in cells["rows"]:
+        m = str(row[i]) if i is not None else "?"
+        out[m] = out.get(m, 0) + 1
+    return out
+
+
+def export_scores(store: ResultsStore, coco: Any, path: str | os.PathLike[str],
+                  method: str = "auto") -> ScoresTransfer:
+    """Write ``store``'s tables but the detections to the scores file ``path`` (atomically),
+    after :meth:`~fidelity.coco.store.ResultsStore.complete_scores` (``coco``: the run's
+    annotations; ``method``: the fold scores' COCO scorer)."""
+    store.complete_scores(coco, method)
+    tables: dict[str, Any] = {}
+    for name in _tables(store):
+        cur = store.db.execute(f"SELECT * FROM {name}")
+        tables[name] = {"columns": [c[0] for c in cur.description],
+                        "rows": [list(r) for r in cur.fetchall()]}
+    cols = tables["cells"]["columns"]
+    keys = [tuple(r[cols.index(c)] for c in store.cell_columns) for r in tables["cells"]["rows"]]
+    doc = {"format": SCORES_FORMAT, "version": SCORES_VERSION, "kind": store.kind,
            "fidelity": _version(),
            "exported": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-           "meta": store.meta(), "models": {m: r.to_json() for m, r in store.models().items()},
-           "images": images, "cells": cells}
+           "tables": tables,
+           "detections_sha256": {cell_key(k): detections_digest(store, k) for k in keys}}
     text = json.dumps(doc, allow_nan=False, separators=(",", ":")).encode()
     target = Path(path)
     with atomic_output(target, protect=[store.path]) as tmp:
         tmp.write_bytes(gzip.compress(text, mtime=0) if target.suffix == ".gz" else text)
-    return _transfer(target, cells)
+    return ScoresTransfer(target, file_sha256(target), store.kind,
+                          _models(tables, store.cell_columns))
 
 
 def _version() -> str:
@@ -124,19 +136,10 @@ def _version() -> str:
     return __version__
 
 
-def _transfer(path: Path, cells: list[dict[str, Any]], sha256: str | None = None
-              ) -> ScoresTransfer:
-    models: dict[str, int] = {}
-    for c in cells:
-        models[c["model"]] = models.get(c["model"], 0) + 1
-    done = sum(c["status"] == "done" for c in cells)
-    return ScoresTransfer(path, sha256 or file_sha256(path), done, len(cells) - done, models)
-
-
-def read_scores(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """A scores file's content, checked: its format and version, and every done cell with
-    its scores, folds and draws. Raises :class:`~fidelity.errors.InputFileError` naming the
-    file and the problem."""
+def read_scores(path: str | os.PathLike[str], kind: str) -> dict[str, Any]:
+    """A scores file's content, checked: its format, version and kind, and every table a
+    list of rows as long as its columns. Raises :class:`~fidelity.errors.InputFileError`
+    naming the file and the problem."""
     p = Path(path)
     where = display_path(p)
     try:
@@ -147,86 +150,88 @@ def read_scores(path: str | os.PathLike[str]) -> dict[str, Any]:
     except FileNotFoundError:
         raise InputFileError(f"{where}: no such file") from None
     except (OSError, EOFError, ValueError) as exc:
-        raise InputFileError(f"{where}: not a sweep scores file ({exc})") from None
+        raise InputFileError(f"{where}: not a scores file ({exc})") from None
     if not isinstance(doc, dict) or doc.get("format") != SCORES_FORMAT:
-        raise InputFileError(f"{where}: not a sweep scores file (no \"format\": "
-                             f"\"{SCORES_FORMAT}\")")
+        raise InputFileError(f"{where}: not a scores file (no \"format\": \"{SCORES_FORMAT}\")")
     version = doc.get("version")
     if not isinstance(version, int) or version > SCORES_VERSION:
-        raise InputFileError(f"{where}: sweep scores file of version {version}, written by a "
-                             f"newer fidelity (this one reads version {SCORES_VERSION})")
-    for key, kind in (("meta", dict), ("models", dict), ("images", list), ("cells", list)):
-        if not isinstance(doc.get(key), kind):
-            raise InputFileError(f"{where}: {key!r} is missing or not a {kind.__name__}")
-    for i, c in enumerate(doc["cells"]):
-        missing = [k for k in _CELL_FIELDS if not isinstance(c, dict) or k not in c]
-        if not missing and c["status"] == "done":
-            missing = [k for k in ("map", "ap", "images", "folds", "draws",
-                                   "detections_sha256") if c.get(k) is None]
-        if missing:
-            raise InputFileError(f"{where}: cell {i + 1} has no {missing[0]!r}")
-        if c["model"] not in doc["models"]:
-            raise InputFileError(f"{where}: cell {i + 1}: model {c['model']!r} is not among "
-                                 "the file's models")
+        raise InputFileError(f"{where}: scores file of version {version}, written by a newer "
+                             f"fidelity (this one reads version {SCORES_VERSION})")
+    if doc.get("kind") != kind:
+        raise InputFileError(f"{where}: the scores of a {doc.get('kind')} store, not of a "
+                             f"{kind} store")
+    tables = doc.get("tables")
+    if not isinstance(tables, dict) or "cells" not in tables or "meta" not in tables:
+        raise InputFileError(f"{where}: no cells and meta tables")
+    for name, t in tables.items():
+        ok = (isinstance(t, dict) and isinstance(t.get("columns"), list)
+              and isinstance(t.get("rows"), list)
+              and all(isinstance(r, list) and len(r) == len(t["columns"]) for r in t["rows"]))
+        if not ok:
+            raise InputFileError(f"{where}: table {name!r} is not columns and rows of their "
+                                 "length")
+    if not isinstance(doc.get("detections_sha256"), dict):
+        raise InputFileError(f"{where}: no detections_sha256")
     return doc
 
 
-def import_scores(store: SweepStore, path: str | os.PathLike[str]) -> ScoresTransfer:
-    """Make ``store`` (a new store: it holds no finished cell) hold the finished cells of the
-    scores file ``path``, with its provenance, models, images and cached fold and draw scores,
-    in one transaction; ``meta["imported"]`` and the ``imported`` table name the file (by
-    name and SHA-256) and each cell's detections digest."""
-    from fidelity.coco.bootstrap import Draws
-    from fidelity.coco.scoring import FoldScore
+def import_scores(store: ResultsStore, path: str | os.PathLike[str]) -> ScoresTransfer:
+    """Make ``store`` (a new store: no finished cell) hold the rows of the scores file
+    ``path``, in one transaction. ``meta["imported"]`` lists the file (name, SHA-256, export
+    time, the fidelity that wrote it) after those the file's store had imported; the
+    ``imported`` table has each cell's source and detections digest."""
+    from fidelity.coco.store import _schema_columns
 
-    doc = read_scores(path)
+    doc = read_scores(path, store.kind)
     p = Path(path)
-    have = store.cells()
+    where = display_path(p)
+    have = store.db.execute("SELECT COUNT(*) FROM cells").fetchone()[0]
     if have:
-        raise InputFileError(f"{store.path}: holds {len(have)} finished cells; import a scores "
-                             "file into a new store (--out a new folder)")
+        raise InputFileError(f"{store.path}: holds {have} finished cells; import a scores "
+                             "file into a new store (a new folder)")
     sha256 = file_sha256(p)
     source = {"file": p.name, "sha256": sha256, "exported": doc.get("exported"),
-              "fidelity": doc.get("fidelity"), "cells": len(doc["cells"])}
-    meta: Mapping[str, Any] = doc["meta"]
-    db = store.db
+              "fidelity": doc.get("fidelity")}
+    schema = _schema_columns(store.full_schema())
+    tables: dict[str, Any] = doc["tables"]
+    for name, t in tables.items():
+        if name in LEFT_OUT or name == "imported":
+            continue
+        if name not in schema:
+            raise InputFileError(f"{where}: table {name!r} is not one of a {store.kind} store")
+        if list(t["columns"]) != schema[name]:
+            raise InputFileError(f"{where}: table {name!r} has columns "
+                                 f"{', '.join(t['columns'])}; this fidelity's have "
+                                 f"{', '.join(schema[name])}")
+    meta = {str(k): v for k, v in tables["meta"]["rows"]}
     try:
-        with db:
-            for name, value in meta.items():
-                if name not in ("last_run", "imported"):
-                    db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)",
-                               (name, json.dumps(value)))
-            db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)",
-                       ("imported", json.dumps([*(meta.get("imported") or []), source])))
-            for m, r in doc["models"].items():
-                reg = RegisteredModel.from_json(r)
-                db.execute("INSERT OR REPLACE INTO models VALUES (?, ?, ?, ?, ?)",
-                           (m, reg.file, reg.sha256, reg.limit_images, json.dumps(reg.settings)))
-            db.executemany("INSERT OR REPLACE INTO images VALUES (?, ?, ?, ?)",
-                           [(int(i), str(f), int(s), str(h)) for i, f, s, h in doc["images"]])
-            for c in doc["cells"]:
-                key = (c["model"], c["transform"], float(c["target"]))
-                db.execute("INSERT INTO cells VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
-                           (*key, c["param"], c["status"], c["reason"], c["images"], c["map"],
-                            c["map50"], c["map75"],
-                            None if c["ap"] is None else json.dumps(c["ap"]), c["seconds"],
-                            c["finished"]))
-                if c["status"] != "done":
+        earlier = json.loads(meta.get("imported", "[]"))
+    except ValueError:
+        earlier = []
+    digests: dict[str, Any] = doc["detections_sha256"]
+    cols = tables["cells"]["columns"]
+    try:
+        with store.db:
+            for name, t in tables.items():
+                if name in LEFT_OUT or name == "imported" or not t["rows"]:
                     continue
-                folds = [FoldScore.from_json(f).to_json() for f in c["folds"]]
-                draws = Draws.from_json(c["draws"]).to_json()
-                db.execute("INSERT INTO folds VALUES (?, ?, ?, ?, ?)",
-                           (*key, int(c["images"]), json.dumps(folds)))
-                db.execute("INSERT INTO draws VALUES (?, ?, ?, ?, ?)",
-                           (*key, int(c["images"]), json.dumps(draws)))
-                db.execute("INSERT INTO imported VALUES (?, ?, ?, ?)",
-                           (*key, json.dumps(source | {
-                               "detections_sha256": c["detections_sha256"]})))
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InputFileError(f"{display_path(p)}: a cell is not as a scores file holds it "
-                             f"({type(exc).__name__}: {exc})") from None
-    return _transfer(p, doc["cells"], sha256)
+                rows = [r for r in t["rows"] if name != "meta" or
+                        r[0] not in ("last_run", "imported")]
+                marks = ", ".join("?" * len(t["columns"]))
+                store.db.executemany(f"INSERT INTO {name} VALUES ({marks})", rows)
+            store.db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)",
+                             ("imported", json.dumps([*earlier, source])))
+            for r in tables["cells"]["rows"]:
+                key = cell_key(tuple(r[cols.index(c)] for c in store.cell_columns))
+                store.db.execute("INSERT INTO imported VALUES (?, ?)", (key, json.dumps(
+                    source | {"detections_sha256": digests.get(key)})))
+    except Exception as exc:  # noqa: BLE001 - sqlite3 and value errors of a damaged file
+        if type(exc).__module__ != "sqlite3" and not isinstance(exc, (TypeError, ValueError)):
+            raise
+        raise InputFileError(f"{where}: its rows do not fit a {store.kind} store ({exc})"
+                             ) from None
+    return ScoresTransfer(p, sha256, store.kind, _models(tables, store.cell_columns))
 
 
-__all__ = ["SCORES_FORMAT", "SCORES_VERSION", "ScoresTransfer",
+__all__ = ["LEFT_OUT", "SCORES_FORMAT", "SCORES_VERSION", "ScoresTransfer",
            "detections_digest", "export_scores", "import_scores", "read_scores"]

@@ -433,6 +433,8 @@ class ResultsStore:
     #: Tables every store of this kind has had from its first version (the others, added
     #: later, are created in an older store when it is opened).
     core_tables: ClassVar[tuple[str, ...]] = ("meta", "models")
+    #: The key columns of a cell in the ``cells`` table (and of its detections).
+    cell_columns: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, folder: str | os.PathLike[str], *, create: bool = True) -> None:
         self.folder = Path(folder)
@@ -493,6 +495,38 @@ class ResultsStore:
     def close(self) -> None:
         """Close the connection."""
         self.db.close()
+
+    def full_schema(self) -> str:
+        """The schema script of this kind of store (common and own tables)."""
+        return _COMMON_SCHEMA + self.schema
+
+    def imported(self) -> dict[str, dict[str, Any]]:
+        """Cells imported from a scores file (:mod:`fidelity.coco.scores`), by
+        :func:`cell_key`: the file's name, SHA-256 and export time, and the cell's
+        ``detections_sha256``. Empty for a store without the table (another kind, or one of
+        an earlier version opened to read)."""
+        tables = {r[0] for r in self.db.execute(
+            "SELECT name FROM sqlite_master WHERE type='table'").fetchall()}
+        if "imported" not in tables:
+            return {}
+        return {k: self._json(src, f"imported cell {k}")
+                for k, src in self.db.execute("SELECT cell, source FROM imported")}
+
+    def check_detections(self, key: Sequence[Any]) -> None:
+        """Raise :class:`InputFileError` when the cell ``key`` (its :attr:`cell_columns`
+        values) was imported from a scores file: its detections are not in this store."""
+        source = self.imported().get(cell_key(key))
+        if source is not None:
+            what = " ".join(f"ΔE {v:g}" if isinstance(v, float) else str(v) for v in key)
+            raise InputFileError(
+                f"{self.path}: cell {what} was imported from {source.get('file')} without its "
+                "detections (what needs them needs the store it was run in)")
+
+    def complete_scores(self, coco: Any, method: str = "auto") -> int:
+        """Compute and keep what a report needs of every finished cell and the store lacks
+        (fold and draw scores), from the stored detections; how many cells there are. Stores
+        with such caches override it."""
+        return 0
 
     def set_meta(self, key: str, value: Any) -> None:
         """Store a JSON-serialisable provenance value."""

@@ -17,8 +17,8 @@ Store (``<out>/sweep.sqlite``, WAL journal, ``synchronous=FULL``):
   asks for standard errors, and kept.
 * ``draws(model, transform, target, images, draws)``: the bootstrap draws' scores of a finished
   cell, computed and kept like ``folds``.
-* ``imported(model, transform, target, source)``: cells that came from a scores file
-  (:mod:`fidelity.coco.scores`; their detections are not in the store).
+* ``imported(cell, source)``: cells that came from a scores file (:mod:`fidelity.coco.scores`;
+  their detections are not in the store).
 * ``models(model, file, sha256, limit_images, settings)`` and ``meta(key, value)``: provenance
   (versions and ``versions_seen``, data, grid, machine, and ``scorers``: the COCO AP implementations that scored it;
   ``imported``: the scores files imported).
@@ -45,7 +45,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
-from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.errors import InvalidValueError
 from fidelity.fileio import file_sha256
 from fidelity.version import __version__
 
@@ -78,9 +78,7 @@ CREATE TABLE IF NOT EXISTS draws (
     model TEXT NOT NULL, transform TEXT NOT NULL, target REAL NOT NULL,
     images INTEGER NOT NULL, draws TEXT NOT NULL,
     PRIMARY KEY (model, transform, target));
-CREATE TABLE IF NOT EXISTS imported (
-    model TEXT NOT NULL, transform TEXT NOT NULL, target REAL NOT NULL, source TEXT NOT NULL,
-    PRIMARY KEY (model, transform, target));
+CREATE TABLE IF NOT EXISTS imported (cell TEXT PRIMARY KEY, source TEXT NOT NULL);
 """
 
 
@@ -91,6 +89,7 @@ class SweepStore(ResultsStore):
     kind = "sweep"
     core_tables = ("meta", "models", "cells", "detections")
     schema = _SCHEMA
+    cell_columns = ("model", "transform", "target")
 
     # detections -----------------------------------------------------------------------------
     def stored_images(self, model: str, transform: str, target: float) -> set[int]:
@@ -116,23 +115,20 @@ class SweepStore(ResultsStore):
                                "transform=? AND target=?", (model, transform, float(target)))
         out = {i: unpack_detections(b) for i, b in rows}
         if not out:
-            source = self.imported().get((model, transform, float(target)))
-            if source is not None:
-                raise InputFileError(
-                    f"{self.path}: cell {model} {transform} ΔE {float(target):g} was imported "
-                    f"from {source.get('file')} without its detections (re-scoring needs "
-                    "the store it was run in)")
+            self.check_detections((model, transform, float(target)))
         return out
 
-    def imported(self) -> dict[tuple[str, str, float], dict[str, Any]]:
-        """The cells imported from scores files: (model, transform, target) -> the file's
-        name, SHA-256, export time and the cell's ``detections_sha256``."""
-        tables = {r[0] for r in self.db.execute(
-            "SELECT name FROM sqlite_master WHERE type='table'").fetchall()}
-        if "imported" not in tables:  # a store of an earlier version, opened to read
-            return {}
-        return {(m, t, float(e)): self._json(src, f"imported cell {m} {t} {e:g}")
-                for m, t, e, src in self.db.execute("SELECT * FROM imported")}
+    def complete_scores(self, coco: Any, method: str = "auto") -> int:
+        """Compute and keep the fold and draw scores of every done cell that lacks them, on
+        its own image count (what ``tables`` uses; :meth:`fold_scores`, :meth:`draw_scores`).
+        Returns how many cells were done."""
+        ids_all = sorted(coco.getImgIds())
+        done = [c for c in self.cells() if c.done]
+        for c in done:
+            ids = ids_all[: int(c.images or 0)]
+            self.fold_scores(coco, c.model, c.transform, c.target, ids, method)
+            self.draw_scores(coco, c.model, c.transform, c.target, ids)
+        return len(done)
 
     # provenance -----------------------------------------------------------------------------
     def scorers(self) -> list[dict[str, str | None]]:
@@ -628,9 +624,8 @@ def rescore(store: SweepStore, annotations: str | os.PathLike[str], method: str 
     file is an input error (their detections are elsewhere); nothing is re-scored."""
     from fidelity.coco.scoring import evaluate_detections, load_annotations, resolve_scorer
 
-    imported = store.imported()
-    if imported:  # checked first: no cell is re-scored when one of them cannot be
-        store.detections(*next(iter(imported)))
+    for key in store.imported():  # checked first: no cell is re-scored if one cannot be
+        store.check_detections(tuple(json.loads(key)))
     method = resolve_scorer(method)
     coco = load_annotations(annotations)
     store.check_annotations(annotations, file_sha256(annotations), replace=True)

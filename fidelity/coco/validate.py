@@ -626,6 +626,7 @@ CREATE TABLE IF NOT EXISTS detections (
 CREATE TABLE IF NOT EXISTS draws (
     model TEXT NOT NULL, camera TEXT NOT NULL, images INTEGER NOT NULL, draws TEXT NOT NULL,
     PRIMARY KEY (model, camera));
+CREATE TABLE IF NOT EXISTS imported (cell TEXT PRIMARY KEY, source TEXT NOT NULL);
 """
 
 
@@ -636,6 +637,7 @@ class ValidationStore(ResultsStore):
     kind = "validation"
     core_tables = ("meta", "models", "cases", "cells", "detections")
     schema = _SCHEMA
+    cell_columns = ("model", "camera")
 
     def _model_conflict(self, stored_sha256: str, stored_limit: int | None, sha256: str,
                         limit: int | None) -> str | None:
@@ -673,9 +675,20 @@ class ValidationStore(ResultsStore):
                                  for i, d in rows])
 
     def detections(self, model: str, camera: str) -> dict[int, np.ndarray]:
-        """Stored detections of a cell: image_id -> (n, 6)."""
-        return {i: unpack_detections(b) for i, b in self.db.execute(
+        """Stored detections of a cell: image_id -> (n, 6). A cell imported from a scores
+        file (:mod:`fidelity.coco.scores`) has none: asking is an input error naming it."""
+        out = {i: unpack_detections(b) for i, b in self.db.execute(
             "SELECT image_id, dets FROM detections WHERE model=? AND camera=?", (model, camera))}
+        if not out:
+            self.check_detections((model, camera))
+        return out
+
+    def complete_scores(self, coco: Any, method: str = "auto") -> int:
+        """The fold scores with the rest of the run and the bootstrap draws of every cell that
+        lacks them (:meth:`rescore_folds`, :meth:`score_draws`); how many cells there are."""
+        self.rescore_folds(coco)
+        self.score_draws(coco)
+        return len(self.cells())
 
     def cell(self, model: str, camera: str) -> ValidationCell | None:
         """A finished cell, or None."""
