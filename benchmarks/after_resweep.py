@@ -17,6 +17,9 @@ Only files that already exist in the report folders are replaced. What stays by 
 preprocessing_change.md``, ``reports/validation/analysis.md``, README, docs).
 
     python -m benchmarks.after_resweep --validation-store ~/.cache/fidelity/validation-v3
+
+On a machine without that store, the validation's committed scores file
+(:data:`VALIDATION_SCORES`, ``fidelity validate --export-scores``) is imported into it first.
 """
 
 from __future__ import annotations
@@ -31,6 +34,9 @@ import tempfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
+#: The validation store's cells without their detections (``fidelity validate
+#: --export-scores``), committed so that a new machine can report the validation again.
+VALIDATION_SCORES = REPO / "reports" / "validation" / "validation.scores.json.gz"
 #: The commit whose ``reports/coco/tables.json`` is the "before" of every re-measured detector.
 OLD_PREPROCESSING_REV = "1ebe250"
 
@@ -117,8 +123,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--shared", type=Path,
                     default=Path(os.environ.get("FIDELITY_SHARED", REPO.parent / "shared")))
     a = ap.parse_args(argv)
+    store = a.validation_store.expanduser()
+    if not (store / "validation.sqlite").is_file() and VALIDATION_SCORES.is_file():
+        _run([sys.executable, "-m", "fidelity", "validate", "--import-scores",
+              str(VALIDATION_SCORES), "--store", str(store)])
     before_after()
-    print("validation:", validation(a.validation_store.expanduser(), a.shared.resolve()))
+    print("validation:", validation(store, a.shared.resolve()))
     print("COCO-C:", coco_c())
     _run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
           "tests/test_json_outputs.py"], env={**os.environ, "FIDELITY_RECORD_JSON": "1"})

@@ -392,7 +392,8 @@ def transfer_scores(store_type: type[ResultsStore], folder: str, option: str,
 
 def _moved(t: ScoresTransfer) -> str:
     per = ", ".join(f"{m} {n}" for m, n in sorted(t.models.items()))
-    return f"{t.cells} cells of a {t.kind} store ({per})"
+    unreachable = f", {t.unreachable} of them unreachable" if t.unreachable else ""
+    return f"{t.cells} cells of a {t.kind} store ({per}{unreachable})"
 
 
 def executor_options(func: F) -> F:

@@ -55,13 +55,14 @@ LEFT_OUT = ("detections", "owners", "leases")
 
 @dataclass(frozen=True)
 class ScoresTransfer:
-    """What an export or import moved: the file, its SHA-256, the store's kind and per model
-    its cells (done and, in a sweep, unreachable)."""
+    """What an export or import moved: the file, its SHA-256, the store's kind, per model
+    its cells and how many of them are unreachable (a sweep's)."""
 
     path: Path
     sha256: str
     kind: str
     models: dict[str, int]
+    unreachable: int = 0
 
     @property
     def cells(self) -> int:
@@ -94,14 +95,17 @@ def _tables(store: ResultsStore) -> list[str]:
         if r[0] not in LEFT_OUT]
 
 
-def _models(doc_tables: dict[str, Any], cell_columns: tuple[str, ...]) -> dict[str, int]:
-    cells = doc_tables.get("cells") or {"columns": [], "rows": []}
-    i = list(cells["columns"]).index("model") if "model" in cells["columns"] else None
+def _transfer(path: Path, sha256: str, kind: str, tables: dict[str, Any]) -> ScoresTransfer:
+    cells = tables.get("cells") or {"columns": [], "rows": []}
+    cols = list(cells["columns"])
+    i = cols.index("model") if "model" in cols else None
+    j = cols.index("status") if "status" in cols else None
     out: dict[str, int] = {}
     for row in cells["rows"]:
         m = str(row[i]) if i is not None else "?"
         out[m] = out.get(m, 0) + 1
-    return out
+    unreachable = sum(j is not None and row[j] == "unreachable" for row in cells["rows"])
+    return ScoresTransfer(path, sha256, kind, out, unreachable)
 
 
 def export_scores(store: ResultsStore, coco: Any, path: str | os.PathLike[str],
@@ -126,8 +130,7 @@ def export_scores(store: ResultsStore, coco: Any, path: str | os.PathLike[str],
     target = Path(path)
     with atomic_output(target, protect=[store.path]) as tmp:
         tmp.write_bytes(gzip.compress(text, mtime=0) if target.suffix == ".gz" else text)
-    return ScoresTransfer(target, file_sha256(target), store.kind,
-                          _models(tables, store.cell_columns))
+    return _transfer(target, file_sha256(target), store.kind, tables)
 
 
 def _version() -> str:
@@ -230,7 +233,7 @@ def import_scores(store: ResultsStore, path: str | os.PathLike[str]) -> ScoresTr
             raise
         raise InputFileError(f"{where}: its rows do not fit a {store.kind} store ({exc})"
                              ) from None
-    return ScoresTransfer(p, sha256, store.kind, _models(tables, store.cell_columns))
+    return _transfer(p, sha256, store.kind, tables)
 
 
 __all__ = ["LEFT_OUT", "SCORES_FORMAT", "SCORES_VERSION", "ScoresTransfer",
