@@ -98,7 +98,12 @@ def atomic_output(
             raise InputFileError(f"{display_path(target)}: refusing to write over an input file")
     tmp_path: Path | None = None
     try:
-        target.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+        except FileExistsError:  # the folder's name is taken by a file
+            raise InputFileError(f"{display_path(target)}: cannot write: "
+                                 f"{display_path(target.parent)} is a file, not a folder"
+                                 ) from None
         fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.{os.getpid()}.",
                                    suffix=".tmp" + target.suffix, dir=target.parent)
         os.close(fd)

@@ -28,6 +28,15 @@ def test_atomic_write_leaves_no_partial_file_on_error(tmp_path: Path) -> None:
     assert [p.name for p in tmp_path.iterdir()] == ["out.txt"]
 
 
+def test_an_output_whose_folder_is_a_file_is_an_input_error(tmp_path: Path) -> None:
+    (tmp_path / "taken").write_text("a file")
+    with pytest.raises(InputFileError, match="taken is a file, not a folder"):
+        write_text_atomic(tmp_path / "taken" / "out.txt", "x")
+    with pytest.raises(InputFileError, match="cannot write"):  # deeper: not a folder
+        write_text_atomic(tmp_path / "taken" / "sub" / "out.txt", "x")
+    assert (tmp_path / "taken").read_text() == "a file"
+
+
 def test_outputs_follow_the_umask(tmp_path: Path) -> None:
     old = os.umask(0o022)
     try:

@@ -160,6 +160,7 @@ def test_a_bad_scores_file_is_one_line(tmp_path, content, problem):
     r = CliRunner().invoke(main, ["sweep", "--import-scores", str(bad), "--out",
                                   str(tmp_path / "s")])
     one_line_error(r, "bad file.json", problem)
+    assert not (tmp_path / "s").exists()  # the file is read before a store is made
 
 
 def test_export_needs_a_store_and_annotations_and_never_writes_over_them(data, tmp_path):

@@ -365,12 +365,13 @@ def transfer_scores(store_type: type[ResultsStore], folder: str, option: str,
         raise click.UsageError("--export-scores and --import-scores: one at a time")
     if import_from:
         require_file(import_from, "--import-scores")
+        doc = scores.read_scores(import_from, store_type)  # before a store is made
         store = store_type(folder)
         sha = file_sha256(import_from)
         if any(s.get("sha256") == sha for s in store.meta().get("imported") or []):
             click.echo(f"{import_from} is already imported into {store.path}; nothing to do")
             return True
-        t = scores.import_scores(store, import_from)
+        t = scores.import_scores(store, import_from, doc)
         click.echo(f"{_moved(t)} imported into {store.path}; rerun the command line with "
                    f"{option} {folder} to resume")
         return True

@@ -139,10 +139,11 @@ def _version() -> str:
     return __version__
 
 
-def read_scores(path: str | os.PathLike[str], kind: str) -> dict[str, Any]:
-    """A scores file's content, checked: its format, version and kind, and every table a
-    list of rows as long as its columns. Raises :class:`~fidelity.errors.InputFileError`
-    naming the file and the problem."""
+def read_scores(path: str | os.PathLike[str], store_type: type[ResultsStore]
+                ) -> dict[str, Any]:
+    """A scores file's content, checked against the kind of store it is for: its format,
+    version and kind, and every table one of the store's with its columns and rows as long.
+    Raises :class:`~fidelity.errors.InputFileError` naming the file and the problem."""
     p = Path(path)
     where = display_path(p)
     try:
@@ -160,6 +161,7 @@ def read_scores(path: str | os.PathLike[str], kind: str) -> dict[str, Any]:
     if not isinstance(version, int) or version > SCORES_VERSION:
         raise InputFileError(f"{where}: scores file of version {version}, written by a newer "
                              f"fidelity (this one reads version {SCORES_VERSION})")
+    kind = store_type.kind
     if doc.get("kind") != kind:
         raise InputFileError(f"{where}: the scores of a {doc.get('kind')} store, not of a "
                              f"{kind} store")
@@ -173,19 +175,29 @@ def read_scores(path: str | os.PathLike[str], kind: str) -> dict[str, Any]:
         if not ok:
             raise InputFileError(f"{where}: table {name!r} is not columns and rows of their "
                                  "length")
+    schema = store_type.columns()
+    for name, t in tables.items():
+        if name in LEFT_OUT or name == "imported":
+            continue
+        if name not in schema:
+            raise InputFileError(f"{where}: table {name!r} is not one of a {kind} store")
+        if list(t["columns"]) != schema[name]:
+            raise InputFileError(f"{where}: table {name!r} has columns "
+                                 f"{', '.join(t['columns'])}; this fidelity's have "
+                                 f"{', '.join(schema[name])}")
     if not isinstance(doc.get("detections_sha256"), dict):
         raise InputFileError(f"{where}: no detections_sha256")
     return doc
 
 
-def import_scores(store: ResultsStore, path: str | os.PathLike[str]) -> ScoresTransfer:
+def import_scores(store: ResultsStore, path: str | os.PathLike[str],
+                  doc: dict[str, Any] | None = None) -> ScoresTransfer:
     """Make ``store`` (a new store: no finished cell) hold the rows of the scores file
     ``path``, in one transaction. ``meta["imported"]`` lists the file (name, SHA-256, export
     time, the fidelity that wrote it) after those the file's store had imported; the
-    ``imported`` table has each cell's source and detections digest."""
-    from fidelity.coco.store import _schema_columns
-
-    doc = read_scores(path, store.kind)
+    ``imported`` table has each cell's source and detections digest. ``doc``: the file's
+    content as :func:`read_scores` returned it (read here when not given)."""
+    doc = read_scores(path, type(store)) if doc is None else doc
     p = Path(path)
     where = display_path(p)
     have = store.db.execute("SELECT COUNT(*) FROM cells").fetchone()[0]
@@ -195,17 +207,7 @@ def import_scores(store: ResultsStore, path: str | os.PathLike[str]) -> ScoresTr
     sha256 = file_sha256(p)
     source = {"file": p.name, "sha256": sha256, "exported": doc.get("exported"),
               "fidelity": doc.get("fidelity")}
-    schema = _schema_columns(store.full_schema())
     tables: dict[str, Any] = doc["tables"]
-    for name, t in tables.items():
-        if name in LEFT_OUT or name == "imported":
-            continue
-        if name not in schema:
-            raise InputFileError(f"{where}: table {name!r} is not one of a {store.kind} store")
-        if list(t["columns"]) != schema[name]:
-            raise InputFileError(f"{where}: table {name!r} has columns "
-                                 f"{', '.join(t['columns'])}; this fidelity's have "
-                                 f"{', '.join(schema[name])}")
     meta = {str(k): v for k, v in tables["meta"]["rows"]}
     try:
         earlier = json.loads(meta.get("imported", "[]"))

@@ -496,9 +496,15 @@ class ResultsStore:
         """Close the connection."""
         self.db.close()
 
-    def full_schema(self) -> str:
+    @classmethod
+    def full_schema(cls) -> str:
         """The schema script of this kind of store (common and own tables)."""
-        return _COMMON_SCHEMA + self.schema
+        return _COMMON_SCHEMA + cls.schema
+
+    @classmethod
+    def columns(cls) -> dict[str, list[str]]:
+        """Table -> column names of this kind of store."""
+        return _schema_columns(cls.full_schema())
 
     def imported(self) -> dict[str, dict[str, Any]]:
         """Cells imported from a scores file (:mod:`fidelity.coco.scores`), by
