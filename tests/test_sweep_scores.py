@@ -116,10 +116,11 @@ def test_an_imported_cells_detections_are_an_error_naming_the_file(data, tmp_pat
     r = CliRunner().invoke(main, ["sweep", "--rescore", "--annotations", str(ann), "--out",
                                   str(tmp_path / "b")])
     one_line_error(r, "a.scores.json", "imported")
-    # a store with cells of its own takes no import
+    # the store it came from holds every cell already
     r = CliRunner().invoke(main, ["sweep", "--import-scores", str(scores), "--out",
                                   str(tmp_path / "a")])
-    one_line_error(r, "finished cells", "new store")
+    assert r.exit_code == 0 and "holds every cell" in r.output, r.output
+    assert "imported" not in SweepStore(tmp_path / "a").meta()
     # exported again from the imported store: the same cells, the recorded digests kept
     again = tmp_path / "again.scores.json"
     assert CliRunner().invoke(main, ["sweep", "--export-scores", str(again), "--annotations",
@@ -187,3 +188,55 @@ def test_a_store_resumed_with_other_versions_records_both(data, tmp_path, monkey
     assert meta["versions_seen"] == [first, meta["versions"]]
     again = sweep(data, tmp_path / "s", ["contrast-inc"], [0, 3]).meta()["versions_seen"]
     assert len(again) == 2
+
+
+def test_two_machines_shares_of_one_sweep_join_into_one_store(data, tmp_path):
+    """Machine A runs contrast-inc, machine B contrast-dec (both the baseline), no shared
+    disk: B's scores join A's store, which then reports what one run of both gives."""
+    images, ann, model = data
+    a = sweep(data, tmp_path / "a", ["contrast-inc"], [0, 3, 6])
+    sweep(data, tmp_path / "b", ["contrast-dec"], [0, 3, 6])
+    b_scores = tmp_path / "b.scores.json.gz"
+    assert CliRunner().invoke(main, ["sweep", "--export-scores", str(b_scores), "--annotations",
+                                     str(ann), "--out", str(tmp_path / "b")]).exit_code == 0
+    r = CliRunner().invoke(main, ["sweep", "--import-scores", str(b_scores), "--out",
+                                  str(tmp_path / "a")])
+    assert r.exit_code == 0 and "2 cells of a sweep store (fake 2) imported" in r.output, \
+        r.output
+    joined = SweepStore(tmp_path / "a")
+    assert len(joined.cells()) == 5
+    assert [i["cells"] for i in joined.meta()["imported"]] == [2]
+    whole = sweep(data, tmp_path / "whole", ["contrast-inc", "contrast-dec"], [0, 3, 6])
+    assert tables_json(joined, ann) == tables_json(whole, ann)
+    # A's own baseline stays A's: its detections are still there
+    assert joined.detections("fake", "baseline", 0) and a.cell("fake", "baseline", 0)
+
+
+def test_shares_of_different_runs_do_not_join(data, tmp_path):
+    images, ann, model = data
+    sweep(data, tmp_path / "a", ["contrast-inc"], [0, 3])
+    sweep(data, tmp_path / "b", ["contrast-dec"], [0, 3])
+    export = ["sweep", "--export-scores", str(tmp_path / "b.json"), "--annotations", str(ann),
+              "--out", str(tmp_path / "b")]
+    join = ["sweep", "--import-scores", str(tmp_path / "b.json"), "--out", str(tmp_path / "a")]
+    b = SweepStore(tmp_path / "b")
+    sha = b.models()["fake"].sha256
+    # the same model name from another file
+    with b.db as db:
+        db.execute("UPDATE models SET sha256='0000' WHERE model='fake'")
+    assert CliRunner().invoke(main, export).exit_code == 0
+    one_line_error(CliRunner().invoke(main, join), "b.json", "model 'fake'", "different file")
+    # other annotations
+    with b.db as db:
+        db.execute("UPDATE models SET sha256=? WHERE model='fake'", (sha,))
+    inputs = b.meta()["inputs"]
+    b.set_meta("inputs", inputs | {"annotations": {"file": "other.json", "sha256": "ab" * 32}})
+    assert CliRunner().invoke(main, export).exit_code == 0
+    one_line_error(CliRunner().invoke(main, join), "annotations", "differ")
+    # other images under the same ids
+    b.set_meta("inputs", inputs)
+    with b.db as db:
+        db.execute("UPDATE images SET sha256='ff' WHERE image_id=1")
+    assert CliRunner().invoke(main, export).exit_code == 0
+    one_line_error(CliRunner().invoke(main, join), "images", "differ")
+    assert len(SweepStore(tmp_path / "a").cells()) == 2  # nothing joined

@@ -339,8 +339,9 @@ def scores_options(store: str) -> Callable[[F], F]:
         func = click.option(
             "--import-scores", "import_scores", default=None, metavar="FILE",
             type=click.Path(dir_okay=False),
-            help=f"Only make the new store in {store} hold the cells of a scores file; rerun "
-                 "the command line on it to resume.")(func)
+            help=f"Only make the store in {store} hold the cells of a scores file it does not "
+                 "have (a new store: all; another machine's share of the same run: the rest); "
+                 "rerun the command line on it to resume.")(func)
         func = click.option(
             "--export-scores", "export_scores", default=None, metavar="FILE",
             type=click.Path(dir_okay=False),
@@ -372,6 +373,9 @@ def transfer_scores(store_type: type[ResultsStore], folder: str, option: str,
             click.echo(f"{import_from} is already imported into {store.path}; nothing to do")
             return True
         t = scores.import_scores(store, import_from, doc)
+        if not t.cells:
+            click.echo(f"{store.path} holds every cell of {import_from}; nothing to do")
+            return True
         click.echo(f"{_moved(t)} imported into {store.path}; rerun the command line with "
                    f"{option} {folder} to resume")
         return True

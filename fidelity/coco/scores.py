@@ -14,8 +14,10 @@ sweep cell gzipped, most of it the 200 draws.
 
 :func:`export_scores` writes it (first computing the fold and draw scores a cell lacks, which
 the store keeps: :meth:`fidelity.coco.sweep.SweepStore.complete_scores`); :func:`import_scores`
-makes a new store of the same kind hold the same rows. A sweep then resumes there (finished
-cells are skipped) and the reports read it as they would the first store. An imported cell has
+makes a new store of the same kind hold the same rows, or a store with cells of its own take
+the cells it lacks (machines that ran shares of one sweep without a shared disk). A sweep then
+resumes there (finished cells are skipped) and the reports read it as they would the first
+store. An imported cell has
 no detections: what needs them (``--rescore``, re-scoring on other images, ``tables
 --explain``) is an input error naming the cell and the file it came from
 (:meth:`fidelity.coco.store.ResultsStore.check_detections`).
@@ -190,53 +192,133 @@ def read_scores(path: str | os.PathLike[str], store_type: type[ResultsStore]
     return doc
 
 
+#: Provenance lists a merge joins (each distinct entry once, the store's first).
+JOINED_META = ("machines", "versions_seen")
+
+
+def _json_or(text: Any, default: Any) -> Any:
+    try:
+        return json.loads(text)
+    except (TypeError, ValueError):
+        return default
+
+
+def _check_joinable(store: ResultsStore, doc: dict[str, Any], where: str) -> None:
+    """Refuse to join a scores file into a store that holds cells when the two were not run
+    on the same things: a model of the same name from another file (or, in a validation,
+    image limit), other preprocessing, other images for the same ids, other annotations, or
+    another COCO scorer."""
+    from fidelity.coco.store import ImageEntry, RegisteredModel, preprocessing_of
+
+    tables = doc["tables"]
+    meta = {str(k): _json_or(v, None) for k, v in tables["meta"]["rows"]}
+    mine = store.models()
+    for row in tables.get("models", {}).get("rows", []):
+        name, theirs = str(row[0]), RegisteredModel(row[1], row[2], row[3],
+                                                     _json_or(row[4], {}) or {})
+        if name not in mine:
+            continue
+        why = store._model_conflict(mine[name].sha256, mine[name].limit_images,
+                                    theirs.sha256, theirs.limit_images)
+        a, b = preprocessing_of(mine[name].settings), preprocessing_of(theirs.settings)
+        if why is None and a is not None and b is not None and a != b:
+            why = f"was run with other preprocessing ({b}; this store's: {a})"
+        if why:
+            raise InputFileError(f"{where}: model {name!r} {why}; its cells cannot join the "
+                                 f"store {store.path}")
+    images = {int(r[0]): ImageEntry(int(r[0]), str(r[1]), int(r[2]), str(r[3]))
+              for r in tables.get("images", {}).get("rows", [])}
+    store.check_images(images, where)
+    ann = ((meta.get("inputs") or {}).get("annotations") or {}).get("sha256")
+    if ann:
+        store.check_annotations(where, ann)
+    here = {str(e.get("scorer") if isinstance(e, dict) else e)
+            for e in store.meta().get("scorers") or []}
+    there = {str(e.get("scorer") if isinstance(e, dict) else e)
+             for e in meta.get("scorers") or []}
+    if here and there and not there <= here:
+        raise InputFileError(f"{where}: scored by {', '.join(sorted(there))}, the store "
+                             f"{store.path} by {', '.join(sorted(here))}; re-score one of them "
+                             "(--rescore) first")
+
+
 def import_scores(store: ResultsStore, path: str | os.PathLike[str],
                   doc: dict[str, Any] | None = None) -> ScoresTransfer:
-    """Make ``store`` (a new store: no finished cell) hold the rows of the scores file
-    ``path``, in one transaction. ``meta["imported"]`` lists the file (name, SHA-256, export
-    time, the fidelity that wrote it) after those the file's store had imported; the
-    ``imported`` table has each cell's source and detections digest. ``doc``: the file's
-    content as :func:`read_scores` returned it (read here when not given)."""
+    """Make ``store`` hold the cells of the scores file ``path``, in one transaction.
+
+    A new store takes every row. A store that holds cells already (another machine's share of
+    the same run) takes the cells it does not have, with their fold and draw scores (and a
+    validation's camera records it lacks), after :func:`_check_joinable`; its own cells and
+    provenance stay, the machines and versions that computed the file's cells join its lists.
+    ``meta["imported"]`` lists the file (name, SHA-256, export time, the fidelity that wrote
+    it, how many cells it brought) after those imported before; the ``imported`` table has
+    each imported cell's source and detections digest. ``doc``: the file's content as
+    :func:`read_scores` returned it (read here when not given). The transfer counts the
+    cells the store took."""
     doc = read_scores(path, type(store)) if doc is None else doc
     p = Path(path)
     where = display_path(p)
-    have = store.db.execute("SELECT COUNT(*) FROM cells").fetchone()[0]
-    if have:
-        raise InputFileError(f"{store.path}: holds {have} finished cells; import a scores "
-                             "file into a new store (a new folder)")
-    sha256 = file_sha256(p)
-    source = {"file": p.name, "sha256": sha256, "exported": doc.get("exported"),
-              "fidelity": doc.get("fidelity")}
     tables: dict[str, Any] = doc["tables"]
-    meta = {str(k): v for k, v in tables["meta"]["rows"]}
-    try:
-        earlier = json.loads(meta.get("imported", "[]"))
-    except ValueError:
-        earlier = []
-    digests: dict[str, Any] = doc["detections_sha256"]
     cols = tables["cells"]["columns"]
+    key_of = [cols.index(c) for c in store.cell_columns]
+    joining = bool(store.db.execute("SELECT COUNT(*) FROM cells").fetchone()[0])
+    if joining:
+        _check_joinable(store, doc, where)
+    present = {cell_key(tuple(r)) for r in store.db.execute(
+        f"SELECT {', '.join(store.cell_columns)} FROM cells")}
+    new_cells = [r for r in tables["cells"]["rows"]
+                 if cell_key(tuple(r[i] for i in key_of)) not in present]
+    sha256 = file_sha256(p)
+    if joining and not new_cells:  # the store holds every cell of the file: nothing changes
+        return _transfer(p, sha256, store.kind, {"cells": {"columns": cols, "rows": []}})
+    source = {"file": p.name, "sha256": sha256, "exported": doc.get("exported"),
+              "fidelity": doc.get("fidelity"), "cells": len(new_cells)}
+    theirs = {str(k): _json_or(v, None) for k, v in tables["meta"]["rows"]}
+    mine = store.meta()
+    digests: dict[str, Any] = doc["detections_sha256"]
     try:
         with store.db:
             for name, t in tables.items():
-                if name in LEFT_OUT or name == "imported" or not t["rows"]:
+                if name in LEFT_OUT or name in ("imported", "meta") or not t["rows"]:
                     continue
-                rows = [r for r in t["rows"] if name != "meta" or
-                        r[0] not in ("last_run", "imported")]
+                rows = t["rows"]
+                cells_table = all(c in t["columns"] for c in store.cell_columns)
+                if cells_table:
+                    idx = [t["columns"].index(c) for c in store.cell_columns]
+                    rows = [r for r in rows if cell_key(tuple(r[i] for i in idx)) not in present]
+                elif joining:  # models, images, cases: by their first column, the store's kept
+                    have = {r[0]: list(r) for r in store.db.execute(f"SELECT * FROM {name}")}
+                    differ = [r for r in rows if r[0] in have and have[r[0]] != list(r)
+                              and name == "cases"]
+                    if differ:
+                        raise InputFileError(f"{where}: {name} {differ[0][0]!r} differs from "
+                                             f"the store's ({store.path})")
+                    rows = [r for r in rows if r[0] not in have]
                 marks = ", ".join("?" * len(t["columns"]))
                 store.db.executemany(f"INSERT INTO {name} VALUES ({marks})", rows)
-            store.db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)",
-                             ("imported", json.dumps([*earlier, source])))
-            for r in tables["cells"]["rows"]:
-                key = cell_key(tuple(r[cols.index(c)] for c in store.cell_columns))
+            meta: dict[str, Any] = {k: v for k, v in theirs.items()
+                                    if k not in ("last_run", "imported")}
+            if joining:
+                meta = {k: [*(mine.get(k) or []),
+                            *[e for e in theirs.get(k) or [] if e not in (mine.get(k) or [])]]
+                        for k in JOINED_META if mine.get(k) or theirs.get(k)}
+            before = (mine if joining else theirs).get("imported") or []
+            meta["imported"] = [*before, source]
+            store.db.executemany("INSERT OR REPLACE INTO meta VALUES (?, ?)",
+                                 [(k, json.dumps(v)) for k, v in meta.items()])
+            for r in new_cells:
+                key = cell_key(tuple(r[i] for i in key_of))
                 store.db.execute("INSERT INTO imported VALUES (?, ?)", (key, json.dumps(
                     source | {"detections_sha256": digests.get(key)})))
+    except InputFileError:
+        raise
     except Exception as exc:  # noqa: BLE001 - sqlite3 and value errors of a damaged file
         if type(exc).__module__ != "sqlite3" and not isinstance(exc, (TypeError, ValueError)):
             raise
         raise InputFileError(f"{where}: its rows do not fit a {store.kind} store ({exc})"
                              ) from None
-    return _transfer(p, sha256, store.kind, tables)
+    return _transfer(p, sha256, store.kind, {"cells": {"columns": cols, "rows": new_cells}})
 
 
-__all__ = ["LEFT_OUT", "SCORES_FORMAT", "SCORES_VERSION", "ScoresTransfer",
+__all__ = ["JOINED_META", "LEFT_OUT", "SCORES_FORMAT", "SCORES_VERSION", "ScoresTransfer",
            "detections_digest", "export_scores", "import_scores", "read_scores"]
