@@ -212,7 +212,9 @@ LONG_COMMANDS = {"sweep", "evaluate", "dataset", "coco-c", "validate"}
 #: Placeholders a documented line uses for "your own" values.
 PLACEHOLDERS = ("...", "DIR", "STORE", "HEAD", "[")
 #: Options whose value is written, not read.
-OUTPUTS = {"--out", "--json", "--html", "--junit", "--csv", "--markdown", "--notes-out"}
+OUTPUTS = {"--out", "--json", "--html", "--junit", "--csv", "--markdown", "--notes-out",
+           "--prediction", "--directional", "--evidence", "--export-scores", "--data",
+           "--write-corrected"}
 
 
 def test_the_docs_have_commands_to_run():

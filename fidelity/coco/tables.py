@@ -1288,7 +1288,6 @@ def prediction_table(tables: Tables, name: str = "coco1000-measured") -> dict[st
                       + scorer_words(meta.get("scorers")) + ")",
             "models": {m: _model_provenance(info) for m, info in tables.models.items()},
             "images": portable_paths(meta.get("data")), "versions": meta.get("versions"),
-            "versions_seen": meta.get("versions_seen"),
             "machine": meta.get("machine"), "machines": meta.get("machines"),
             "cells_done": tables.cells_done, "cells_unreachable": tables.cells_unreachable,
             "worst_case": "per ΔE the transform with the largest ΔmAP in points; person and "
@@ -1298,7 +1297,9 @@ def prediction_table(tables: Tables, name: str = "coco1000-measured") -> dict[st
             "standard_errors": {m: STANDARD_ERROR_WORDS[k]
                                 for m, k in standard_error_methods(tables).items()},
         } | ({"earlier": portable_paths(meta["earlier"])} if meta.get("earlier") else {})
-          | ({"imported": meta["imported"]} if meta.get("imported") else {}),
+          | ({"imported": meta["imported"]} if meta.get("imported") else {})
+          | ({"versions_seen": meta["versions_seen"]}
+             if len(meta.get("versions_seen") or ()) > 1 else {}),
         "units": {
             "dmap_points": "percentage points of mAP@[.50:.95] (100*(baseline-transformed))",
             "dmap_relative": "percent of the baseline mAP",
