@@ -90,6 +90,20 @@ def test_export_import_resume_reports_as_one_uninterrupted_run(data, tmp_path):
     hue = next(f for f in found if f["claim"] == "hue changes hurt least")
     assert hue["verdict"] == "not enough data" and "no hue cells" in hue["evidence"]
 
+    # the report straight from the scores file (a temporary store): the same tables
+    r = CliRunner().invoke(main, ["tables", str(scores), "--out", str(tmp_path / "from-file"),
+                                  "--annotations", str(ann), "--no-progress"])
+    assert r.exit_code == 0, r.output
+    from_file = json.loads((tmp_path / "from-file" / "tables.json").read_text())["tables"]
+    from_store = json.loads((tmp_path / "rep" / "tables.json").read_text())["tables"]
+    assert {k: v for k, v in from_file.items() if k != "meta"} == \
+        {k: v for k, v in from_store.items() if k != "meta"}
+    for bad, words in ((["--explain", "fake:contrast-inc:3"], ("--explain", "detections")),
+                       ([], ("give --out",)),
+                       (["--out", str(tmp_path / "x"), "--prediction", str(scores)],
+                        ("--prediction", "input"))):
+        one_line_error(CliRunner().invoke(main, ["tables", str(scores), *bad]), *words)
+
     # resumed with a wider grid: only the new cells run, and the report equals a run that never
     # moved
     finished = {(c.transform, c.target): c.finished for c in store.cells()}

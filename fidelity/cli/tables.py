@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from typing import TYPE_CHECKING, Any
 
 import click
@@ -69,8 +70,51 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
 
     With --explain MODEL:TRANSFORM:ΔE: the classes one cell's ΔmAP comes from, instead.
     STORE_DIR may be a tables.json (e.g. reports/coco/tables.json): then only --prediction
-    and --directional are written, from it.
+    and --directional are written, from it. It may be a sweep's scores file (sweep
+    --export-scores): then the report (--out) is built from its cells.
     """
+    from pathlib import Path
+
+    from fidelity.coco.scores import is_scores_file
+
+    with contextlib.ExitStack() as stack:
+        if Path(store_dir).is_file() and is_scores_file(store_dir):
+            from fidelity.fileio import check_outputs
+
+            check_outputs({"--prediction": prediction, "--directional": directional,
+                           "--out": out}, {"STORE_DIR": store_dir})
+            store_dir = _store_of_scores(stack, store_dir, out, explain)
+        _tables(store_dir, out, prediction, name, directional, earlier, annotations,
+                standard_errors, explain, rare_boxes, images, top, json_path, progress)
+
+
+def _store_of_scores(stack: contextlib.ExitStack, path: str, out: str | None,
+                     explain: str | None) -> str:
+    """A temporary sweep store holding the cells of the scores file ``path`` (removed when
+    ``stack`` closes); its report goes to ``--out``, which is then needed."""
+    import tempfile
+
+    from fidelity.coco.scores import import_scores, read_scores
+    from fidelity.coco.sweep import SweepStore
+    from fidelity.errors import InvalidValueError
+
+    if explain:
+        raise InvalidValueError(f"{path}: --explain needs the cell's detections, which a "
+                                "scores file does not hold: give the sweep store")
+    if out is None:
+        raise InvalidValueError(f"{path}: a scores file: give --out for the report")
+    doc = read_scores(path, SweepStore)
+    folder = stack.enter_context(tempfile.TemporaryDirectory(prefix="fidelity-scores-"))
+    store = SweepStore(folder)
+    import_scores(store, path, doc)
+    store.close()
+    return folder
+
+
+def _tables(store_dir: str, out: str | None, prediction: str | None, name: str,
+            directional: str | None, earlier: str | None, annotations: str | None,
+            standard_errors: bool, explain: str | None, rare_boxes: int, images: str | None,
+            top: int, json_path: str | None, progress: bool | None) -> None:
     from pathlib import Path
 
     from fidelity.coco.sweep import SweepStore

@@ -141,6 +141,21 @@ def _version() -> str:
     return __version__
 
 
+def is_scores_file(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` begins as a scores file does (``{"format": "fidelity-scores"``,
+    gzip-compressed or not); False for what cannot be read."""
+    import re
+
+    try:
+        with open(path, "rb") as f:
+            head = f.read(2)
+            f.seek(0)
+            start = (gzip.GzipFile(fileobj=f).read(64) if head == b"\x1f\x8b" else f.read(64))
+    except (OSError, EOFError):
+        return False
+    return re.match(rb'\s*\{\s*"format"\s*:\s*"fidelity-scores"', start) is not None
+
+
 def read_scores(path: str | os.PathLike[str], store_type: type[ResultsStore]
                 ) -> dict[str, Any]:
     """A scores file's content, checked against the kind of store it is for: its format,
@@ -321,4 +336,5 @@ def import_scores(store: ResultsStore, path: str | os.PathLike[str],
 
 
 __all__ = ["JOINED_META", "LEFT_OUT", "SCORES_FORMAT", "SCORES_VERSION", "ScoresTransfer",
-           "detections_digest", "export_scores", "import_scores", "read_scores"]
+           "detections_digest", "export_scores", "import_scores", "is_scores_file",
+           "read_scores"]
