@@ -219,6 +219,9 @@ def test_two_machines_shares_of_one_sweep_join_into_one_store(data, tmp_path):
         r.output
     joined = SweepStore(tmp_path / "a")
     assert len(joined.cells()) == 5
+    status = CliRunner().invoke(main, ["sweep", "--status", "--out", str(tmp_path / "a")])
+    assert status.exit_code == 0 and "imported b.scores.json.gz (sha256 " in status.output
+    assert ", 2 cells;" in status.output
     assert [i["cells"] for i in joined.meta()["imported"]] == [2]
     whole = sweep(data, tmp_path / "whole", ["contrast-inc", "contrast-dec"], [0, 3, 6])
     assert tables_json(joined, ann) == tables_json(whole, ann)

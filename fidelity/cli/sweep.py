@@ -133,6 +133,10 @@ def _print_status(store: SweepStore) -> None:
     rows = sweep_status(store)
     now = time.time()
     click.echo(f"store {store.path}")
+    for i in store.meta().get("imported") or []:
+        cells = f", {i['cells']} cells" if i.get("cells") is not None else ""
+        click.echo(f"imported {i.get('file')} (sha256 {str(i.get('sha256'))[:12]}, exported "
+                   f"{i.get('exported')}{cells}; their detections are not in this store)")
     click.echo(f"{'model':<18} {'images':>6} {' done':<9} {'unreachable':>11} {'to do':>5}  "
                "pace and time left")
     for r in rows:
