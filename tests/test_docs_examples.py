@@ -300,7 +300,7 @@ def _skip_reason(argv: list[str], ws: Path) -> str | None:
         if a.startswith("-") or argv[i - 1] in OUTPUTS:
             continue
         looks_like_file = "/" in a or re.search(r"\.(exr|png|jpg|jpeg|tiff?|json|csv|toml|md|"
-                                                 r"onnx)$", a)
+                                                 r"onnx|gz)$", a)
         if looks_like_file and not (ws / a).exists() and not (REPO / a).exists():
             return f"needs {a}, which the docs mean as the user's own file"
     return None
@@ -375,8 +375,25 @@ def test_documented_output_is_what_the_command_prints(page, line, printed, works
     r = subprocess.run([sys.executable, "-m", "fidelity", "--no-config", *args],
                        cwd=workspace, env=_env(), capture_output=True, text=True, timeout=600)
     assert r.returncode in (0, 1), (r.stdout + r.stderr)[-800:]
-    assert tuple(r.stdout.rstrip("\n").split("\n")) == printed, \
+    now = tuple(_steady(x, workspace) for x in r.stdout.rstrip("\n").split("\n"))
+    assert now == tuple(_steady(x, workspace) for x in printed), \
         f"{page}: `{line}` now prints:\n{r.stdout}"
+
+
+#: What a documented run prints that changes from run to run of the same command: when it ran
+#: (UTC), from which commit and code, where its scratch folder and the checkout were, and the
+#: digests of files written at run time. Compared as these placeholders.
+_VOLATILE = ((re.compile(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ"), "<time>"),
+             (re.compile(r"\([0-9a-f]{7,40}(?:[ ,][^)]*)?\)"), "(<commit>)"),
+             (re.compile(r"SHA-256 [0-9a-f]{12}\b"), "SHA-256 <digest>"))
+
+
+def _steady(line: str, workspace: Path) -> str:
+    """``line`` with :data:`_VOLATILE` parts and the scratch and checkout folders replaced."""
+    line = line.replace(str(workspace), "/tmp/work").replace(str(REPO), "/work/main")
+    for pattern, placeholder in _VOLATILE:
+        line = pattern.sub(placeholder, line)
+    return line
 
 
 def _settings_block(page: str) -> str | None:

@@ -77,6 +77,11 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
 
     from fidelity.coco.scores import is_scores_file
 
+    if not Path(store_dir).exists():
+        from fidelity.errors import InputFileError
+
+        raise InputFileError(f"{store_dir}: no such sweep store folder, scores file or "
+                             "tables.json")
     with contextlib.ExitStack() as stack:
         if Path(store_dir).is_file() and is_scores_file(store_dir):
             from fidelity.fileio import check_outputs
