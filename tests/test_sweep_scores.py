@@ -257,3 +257,27 @@ def test_shares_of_different_runs_do_not_join(data, tmp_path):
     assert CliRunner().invoke(main, export).exit_code == 0
     one_line_error(CliRunner().invoke(main, join), "images", "differ")
     assert len(SweepStore(tmp_path / "a").cells()) == 2  # nothing joined
+
+
+def test_a_cell_finished_during_the_export_waits_for_the_next(data, tmp_path, monkeypatch):
+    """A run going on finishes a cell after the export completed the fold and draw scores:
+    the file leaves it out (its scores would be missing where it is imported)."""
+    from fidelity.coco.scores import export_scores
+    from fidelity.coco.scoring import load_annotations
+
+    images, ann, model = data
+    store = sweep(data, tmp_path / "s", ["contrast-inc"], [0, 3, 6])
+    original = SweepStore.complete_scores
+
+    def then_a_cell_finishes(self, coco, method="auto"):
+        n = original(self, coco, method)
+        with self.db:  # as if contrast-inc 6 had finished just now
+            self.db.execute("DELETE FROM draws WHERE transform='contrast-inc' AND target=6")
+        return n
+
+    monkeypatch.setattr(SweepStore, "complete_scores", then_a_cell_finishes)
+    t = export_scores(store, load_annotations(ann), tmp_path / "s.json")
+    doc = json.loads((tmp_path / "s.json").read_text())
+    assert t.cells == 2 and sorted(r[1:3] for r in doc["tables"]["cells"]["rows"]) == [
+        ["baseline", 0.0], ["contrast-inc", 3.0]]
+    assert '["fake", "contrast-inc", 6.0]' not in doc["detections_sha256"]

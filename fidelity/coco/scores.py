@@ -114,14 +114,32 @@ def export_scores(store: ResultsStore, coco: Any, path: str | os.PathLike[str],
                   method: str = "auto") -> ScoresTransfer:
     """Write ``store``'s tables but the detections to the scores file ``path`` (atomically),
     after :meth:`~fidelity.coco.store.ResultsStore.complete_scores` (``coco``: the run's
-    annotations; ``method``: the fold scores' COCO scorer)."""
+    annotations; ``method``: the fold scores' COCO scorer). The tables are read in one
+    snapshot; a cell that a run still going on finished after its scores were completed is
+    left for the next export."""
     store.complete_scores(coco, method)
     tables: dict[str, Any] = {}
-    for name in _tables(store):
-        cur = store.db.execute(f"SELECT * FROM {name}")
-        tables[name] = {"columns": [c[0] for c in cur.description],
-                        "rows": [list(r) for r in cur.fetchall()]}
+    store.db.commit()
+    store.db.execute("BEGIN")  # one snapshot of every table, while a run may go on writing
+    try:
+        for name in _tables(store):
+            cur = store.db.execute(f"SELECT * FROM {name}")
+            tables[name] = {"columns": [c[0] for c in cur.description],
+                            "rows": [list(r) for r in cur.fetchall()]}
+    finally:
+        store.db.rollback()
     cols = tables["cells"]["columns"]
+
+    def key_of(row: list[Any], columns: list[str]) -> str:
+        return cell_key(tuple(row[columns.index(c)] for c in store.cell_columns))
+
+    # a cell finished after complete_scores has no fold or draw scores yet: the next export's
+    cached = [{key_of(r, tables[t]["columns"]) for r in tables[t]["rows"]}
+              for t in ("folds", "draws") if t in tables]
+    status = cols.index("status") if "status" in cols else None
+    tables["cells"]["rows"] = [r for r in tables["cells"]["rows"]
+                               if (status is not None and r[status] != "done")
+                               or all(key_of(r, cols) in c for c in cached)]
     keys = [tuple(r[cols.index(c)] for c in store.cell_columns) for r in tables["cells"]["rows"]]
     doc = {"format": SCORES_FORMAT, "version": SCORES_VERSION, "kind": store.kind,
            "fidelity": _version(),
