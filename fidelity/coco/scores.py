@@ -91,6 +91,11 @@ def detections_digest(store: ResultsStore, key: tuple[Any, ...]) -> str:
     return h.hexdigest()
 
 
+def _row_key(row: list[Any], columns: list[str], store: ResultsStore) -> str:
+    """The :func:`cell_key` of a row of a table that has the store's cell columns."""
+    return cell_key(tuple(row[columns.index(c)] for c in store.cell_columns))
+
+
 def _tables(store: ResultsStore) -> list[str]:
     return [r[0] for r in store.db.execute(
         "SELECT name FROM sqlite_master WHERE type='table' ORDER BY name")
@@ -129,17 +134,13 @@ def export_scores(store: ResultsStore, coco: Any, path: str | os.PathLike[str],
     finally:
         store.db.rollback()
     cols = tables["cells"]["columns"]
-
-    def key_of(row: list[Any], columns: list[str]) -> str:
-        return cell_key(tuple(row[columns.index(c)] for c in store.cell_columns))
-
     # a cell finished after complete_scores has no fold or draw scores yet: the next export's
-    cached = [{key_of(r, tables[t]["columns"]) for r in tables[t]["rows"]}
+    cached = [{_row_key(r, tables[t]["columns"], store) for r in tables[t]["rows"]}
               for t in ("folds", "draws") if t in tables]
     status = cols.index("status") if "status" in cols else None
     tables["cells"]["rows"] = [r for r in tables["cells"]["rows"]
                                if (status is not None and r[status] != "done")
-                               or all(key_of(r, cols) in c for c in cached)]
+                               or all(_row_key(r, cols, store) in c for c in cached)]
     keys = [tuple(r[cols.index(c)] for c in store.cell_columns) for r in tables["cells"]["rows"]]
     doc = {"format": SCORES_FORMAT, "version": SCORES_VERSION, "kind": store.kind,
            "fidelity": _version(),
@@ -236,15 +237,14 @@ def _json_or(text: Any, default: Any) -> Any:
         return default
 
 
-def _check_joinable(store: ResultsStore, doc: dict[str, Any], where: str) -> None:
+def _check_joinable(store: ResultsStore, tables: dict[str, Any], meta: dict[str, Any],
+                    where: str) -> None:
     """Refuse to join a scores file into a store that holds cells when the two were not run
     on the same things: a model of the same name from another file (or, in a validation,
     image limit), other preprocessing, other images for the same ids, other annotations, or
-    another COCO scorer."""
+    another COCO scorer (``tables``: the file's; ``meta``: its provenance, parsed)."""
     from fidelity.coco.store import ImageEntry, RegisteredModel, preprocessing_of
 
-    tables = doc["tables"]
-    meta = {str(k): _json_or(v, None) for k, v in tables["meta"]["rows"]}
     mine = store.models()
     for row in tables.get("models", {}).get("rows", []):
         name, theirs = str(row[0]), RegisteredModel(row[1], row[2], row[3],
@@ -292,21 +292,19 @@ def import_scores(store: ResultsStore, path: str | os.PathLike[str],
     p = Path(path)
     where = display_path(p)
     tables: dict[str, Any] = doc["tables"]
+    theirs = {str(k): _json_or(v, None) for k, v in tables["meta"]["rows"]}
     cols = tables["cells"]["columns"]
-    key_of = [cols.index(c) for c in store.cell_columns]
     joining = bool(store.db.execute("SELECT COUNT(*) FROM cells").fetchone()[0])
     if joining:
-        _check_joinable(store, doc, where)
+        _check_joinable(store, tables, theirs, where)
     present = {cell_key(tuple(r)) for r in store.db.execute(
         f"SELECT {', '.join(store.cell_columns)} FROM cells")}
-    new_cells = [r for r in tables["cells"]["rows"]
-                 if cell_key(tuple(r[i] for i in key_of)) not in present]
+    new_cells = [r for r in tables["cells"]["rows"] if _row_key(r, cols, store) not in present]
     sha256 = file_sha256(p)
     if joining and not new_cells:  # the store holds every cell of the file: nothing changes
         return _transfer(p, sha256, store.kind, {"cells": {"columns": cols, "rows": []}})
     source = {"file": p.name, "sha256": sha256, "exported": doc.get("exported"),
               "fidelity": doc.get("fidelity"), "cells": len(new_cells)}
-    theirs = {str(k): _json_or(v, None) for k, v in tables["meta"]["rows"]}
     mine = store.meta()
     digests: dict[str, Any] = doc["detections_sha256"]
     try:
@@ -315,10 +313,8 @@ def import_scores(store: ResultsStore, path: str | os.PathLike[str],
                 if name in LEFT_OUT or name in ("imported", "meta") or not t["rows"]:
                     continue
                 rows = t["rows"]
-                cells_table = all(c in t["columns"] for c in store.cell_columns)
-                if cells_table:
-                    idx = [t["columns"].index(c) for c in store.cell_columns]
-                    rows = [r for r in rows if cell_key(tuple(r[i] for i in idx)) not in present]
+                if all(c in t["columns"] for c in store.cell_columns):  # cells, folds, draws
+                    rows = [r for r in rows if _row_key(r, t["columns"], store) not in present]
                 elif joining:  # models, images, cases: by their first column, the store's kept
                     have = {r[0]: list(r) for r in store.db.execute(f"SELECT * FROM {name}")}
                     differ = [r for r in rows if r[0] in have and have[r[0]] != list(r)
@@ -340,7 +336,7 @@ def import_scores(store: ResultsStore, path: str | os.PathLike[str],
             store.db.executemany("INSERT OR REPLACE INTO meta VALUES (?, ?)",
                                  [(k, json.dumps(v)) for k, v in meta.items()])
             for r in new_cells:
-                key = cell_key(tuple(r[i] for i in key_of))
+                key = _row_key(r, cols, store)
                 store.db.execute("INSERT INTO imported VALUES (?, ?)", (key, json.dumps(
                     source | {"detections_sha256": digests.get(key)})))
     except InputFileError:
