@@ -347,6 +347,46 @@ def test_committed_scores_file_rebuilds_the_shipped_rows(path, shared, tmp_path)
         assert rebuilt[part][model] == shipped[part][model], part
 
 
+def _without_timings(doc):
+    """``doc`` without the times a run took or ended (``seconds``, ``fit_seconds``,
+    ``finished``), which differ between the run and a store imported from its scores."""
+    if isinstance(doc, dict):
+        return {k: _without_timings(v) for k, v in doc.items()
+                if k not in ("seconds", "fit_seconds", "finished")}
+    if isinstance(doc, list):
+        return [_without_timings(v) for v in doc]
+    return doc
+
+
+def test_committed_validation_scores_rebuild_the_shipped_report(tmp_path):
+    """The shipped validation report (``reports/validation/validation.json``) and validated
+    cameras (``fidelity/data/validation-domain.json``) are what this code makes of the
+    committed validation scores file and the shipped prediction tables: every row (measured
+    and predicted), the summary, the cameras and baselines (less the times they took)."""
+    from fidelity.coco.scores import import_scores, read_scores
+    from fidelity.coco.validate import (
+        ValidationStore,
+        collect_results,
+        load_suite,
+        validated_cameras,
+    )
+    from fidelity.resources import resource_dir
+
+    path = REPO / "reports" / "validation" / "validation.scores.json.gz"
+    store = ValidationStore(tmp_path / "store")
+    import_scores(store, path, read_scores(path, ValidationStore))
+    cases = load_suite(resource_dir("cameras"))
+    results = collect_results(store, suite=cases)
+    rebuilt = results.to_json()
+    shipped = json.loads((REPO / "reports" / "validation" / "validation.json").read_text())
+    for part in ("rows", "summary", "models", "cameras", "baselines"):
+        assert _without_timings(rebuilt[part]) == _without_timings(shipped[part]), part
+    domain = json.loads((Path(fidelity.__file__).parent / "data" / "validation-domain.json"
+                         ).read_text())
+    domain.pop("source")
+    assert validated_cameras(results, cases).to_json() == domain
+
+
 def test_every_shipped_table_names_its_detectors():
     """The preprocessing test above has something to check in every measured table."""
     tables = {t for t, _ in _shipped_table_models()}
