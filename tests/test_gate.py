@@ -215,6 +215,50 @@ def test_audit_linear_exr_cli(tmp_path):
     assert doc["source"]["format"] == "openexr" and doc["exposure_ev"] == pytest.approx(-math.log2(scale))
 
 
+def test_audit_several_images_one_report_each(png, tmp_path):
+    """``audit a b c`` (a shell glob): each image audited as ``audit`` of it alone gives, a
+    report per image in the folders, the one that cannot be read one error line and exit 2,
+    and one credibility record with a subject per image."""
+    import shutil
+
+    path, de = png
+    day = tmp_path / "day.png"
+    shutil.copy(path, day)
+    dusk = tmp_path / "dusk.png"
+    srgb = apply_transform(CHART.srgb, "contrast-inc", 1.8)
+    write_png8(dusk, draw_chart(srgb))
+    dusk_de = expected_delta_e(np.rint(srgb * 255) / 255, CHART.lab)
+    out = tmp_path / "reports"
+    r = run("audit", day, dusk, "--corners", corners_of(), "--json", out, "--html", out,
+            "--evidence", tmp_path / "ev.json")
+    assert r.exit_code == 0, r.output
+    assert sorted(p.name for p in out.iterdir()) == ["day.png.html", "day.png.json",
+                                                     "dusk.png.html", "dusk.png.json"]
+    means = [json.loads((out / f"{n}.png.json").read_text())["mean_delta_e"]
+             for n in ("day", "dusk")]
+    assert means == pytest.approx([de, dusk_de], abs=0.02)
+    assert r.stdout.splitlines()[-1] == "audit: 2 of 2 images measured"
+    # the same report as the image audited alone
+    alone = run("audit", dusk, "--corners", corners_of(), "--json", tmp_path / "alone.json")
+    assert alone.exit_code == 0, alone.output
+    assert json.loads((tmp_path / "alone.json").read_text())["patches"] == \
+        json.loads((out / "dusk.png.json").read_text())["patches"]
+    record = json.loads((tmp_path / "ev.json").read_text())
+    assert [s["subject"] for s in record["subjects"]] == [str(day), str(dusk)]
+    assert record["record"]["exit_code"] == 0
+
+    cut = _truncated_png(tmp_path)
+    r = run("audit", day, cut, dusk, "--corners", corners_of(), "--json", tmp_path / "again")
+    assert r.exit_code == 2, r.output
+    assert one_error_line(r).startswith(f"fidelity: error: {cut}: ")
+    assert sorted(p.name for p in (tmp_path / "again").iterdir()) == ["day.png.json",
+                                                                     "dusk.png.json"]
+    assert r.stdout.splitlines()[-1] == "audit: 2 of 3 images measured, 1 could not be"
+    # standard output takes one report
+    r = run("audit", day, dusk, "--json", "-")
+    assert r.exit_code == 2 and "takes one IMAGE" in one_error_line(r)
+
+
 def test_predict_cli(tmp_path):
     r = run("predict", "--delta-e", "4.5", "--class", "bicycle", "--table", "safecolor-2025",
             "--json", tmp_path / "p.json")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -25,13 +26,15 @@ from fidelity.cli.options import (
 )
 from fidelity.fileio import display_path
 from fidelity.prediction.table import SIZES
+from fidelity.prediction.verdict import EXIT_ERROR
 
 if TYPE_CHECKING:
     from fidelity.chart.measure import ReadOptions
+    from fidelity.records import ChartReport
 
 
 @click.command()
-@click.argument("image", type=IMAGE_PATH)
+@click.argument("image", nargs=-1, required=True, type=IMAGE_PATH)
 @click.option("--corners", default=None,
               help="X1,Y1,X2,Y2,X3,Y3,X4,Y4: image centres of the dark skin, bluish green, black "
                    "and white patches (the chart's top-left, top-right, bottom-right, "
@@ -57,7 +60,7 @@ if TYPE_CHECKING:
 @evidence_option
 @measure_options
 @common_options
-def audit(image: Path, corners: str | None, read: ReadOptions,
+def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
           reference: str, illuminant: str, size: str, table: str | None,
           json_path: str | None, html_path: str | None, max_pixels: int | None,
           bound: str, measure: bool, images: str | None, annotations: str | None,
@@ -69,52 +72,88 @@ def audit(image: Path, corners: str | None, read: ReadOptions,
     fidelity audit photo.jpg --corners 102,88,610,95,604,420,98,414
     fidelity audit render.png --measure      # + the loss measured on COCO
     fidelity audit drive.bag --topic /camera/image_raw --time 12.5
+    fidelity audit frames/*.exr --json reports/ --html reports/
 
     IMAGE is an image file or a robot recording (ROS 1 bag, ROS 2 bag folder or its .db3 /
-    .mcap file, MCAP file) with --topic and --frame or --time.
+    .mcap file, MCAP file) with --topic and --frame or --time. Several IMAGEs are audited one
+    by one in one process (--json and --html name folders that get IMAGE-NAME.json / .html);
+    one that cannot be measured is an error line and the others are still audited; the exit
+    code is then 2.
     """
     from dataclasses import replace
 
+    from fidelity.chart.measure import reads_for
     from fidelity.check import audit_image
+    from fidelity.errors import FidelityError
     from fidelity.fileio import check_outputs
     from fidelity.records import ImageSource
     from fidelity.report.chart import write_chart_report
     from fidelity.report.terminal import summary_lines
 
+    many = len(image) > 1
     # an existing folder, or one written with a trailing separator, gets IMAGE-NAME.json /
-    # .html, as in `fidelity gate`
+    # .html, as in `fidelity gate`; several images always do
     to_stdout = json_path is not None and str(json_path) == STDOUT
-    (json_file,) = report_paths((image,), None if to_stdout or json_path is None
-                                else Path(json_path), ".json", folder=_folder(json_path))
-    (html_file,) = report_paths((image,), None if html_path is None else Path(html_path),
-                                ".html", folder=_folder(html_path))
-    check_outputs({"--json": json_file, "--html": html_file, **evidence_outputs(evidence_paths)},
-                  {"IMAGE": image, "--table": table, "--reference": reference,
-                   "--illuminant": illuminant} | measure_inputs(images, annotations, models))
+    if to_stdout and many:
+        raise click.UsageError("--json - (standard output) takes one IMAGE; give a folder")
+    json_files = report_paths(image, None if to_stdout or json_path is None else Path(json_path),
+                              ".json", folder=many or _folder(json_path))
+    html_files = report_paths(image, None if html_path is None else Path(html_path), ".html",
+                              folder=many or _folder(html_path))
+    outputs: dict[str, Path | None] = dict(evidence_outputs(evidence_paths))
+    for img, jf, hf in zip(image, json_files, html_files, strict=True):
+        outputs[f"--json ({img})" if many else "--json"] = jf
+        outputs[f"--html ({img})" if many else "--html"] = hf
+    check_outputs(outputs, {"--table": table, "--reference": reference,
+                            "--illuminant": illuminant}
+                  | {(f"IMAGE {img}" if many else "IMAGE"): img for img in image}
+                  | measure_inputs(images, annotations, models))
     request = measure_request(measure, images, annotations, models, limit)
-    read = replace(read, max_pixels=max_pixels)
-    report = audit_image(image, corners, read=read, reference=reference, illuminant=illuminant,
-                         size=size, table=table, bound=bound, measure=request)
-    written = write_chart_report(report, json_path=json_file, html_path=html_file,
-                                 protect=(image,))
-    if to_stdout:
-        from fidelity.cli.options import write_json_output
-        from fidelity.report.jsonform import chart_report_json
+    indent = "  " if many else ""
+    subjects: list[tuple[str, ChartReport | None, str | None]] = []
+    written_all: list[Path] = []
+    for img, img_read, json_file, html_file in zip(
+            image, reads_for(image, replace(read, max_pixels=max_pixels)), json_files,
+            html_files, strict=True):
+        try:
+            report = audit_image(img, corners, read=img_read, reference=reference,
+                                 illuminant=illuminant, size=size, table=table, bound=bound,
+                                 measure=request)
+            written = write_chart_report(report, json_path=json_file, html_path=html_file,
+                                         protect=image)
+        except (FidelityError, OSError) as exc:
+            if not many:
+                raise
+            click.echo(f"{display_path(img)}: error")
+            click.echo(f"fidelity: error: {exc}", err=True)
+            subjects.append((str(img), None, str(exc)))
+            continue
+        subjects.append((str(img), report, None))
+        written_all.extend(written)
+        if to_stdout:
+            from fidelity.cli.options import write_json_output
+            from fidelity.report.jsonform import chart_report_json
 
-        write_json_output(STDOUT, chart_report_json(report))
-    src = report.source
-    assert isinstance(src, ImageSource)
-    click.echo(f"{display_path(image)}: {src.image.format} {src.image.pixel_type} "
-               f"{src.image.width}x{src.image.height}, {src.encoding} pixels")
-    for line in summary_lines(report):
-        click.echo(line)
-    for p in written:
-        click.echo(f"wrote {display_path(p)}")
+            write_json_output(STDOUT, chart_report_json(report))
+        src = report.source
+        assert isinstance(src, ImageSource)
+        click.echo(f"{display_path(img)}: {src.image.format} {src.image.pixel_type} "
+                   f"{src.image.width}x{src.image.height}, {src.encoding} pixels")
+        for line in summary_lines(report):
+            click.echo(indent + line)
+        for p in written:
+            click.echo(f"{indent}wrote {display_path(p)}")
+    failed = sum(error is not None for _, _, error in subjects)
     if evidence_paths:
         from fidelity.report.evidence import write_evidence
 
-        write_evidence_files(evidence_paths, write_evidence, "audit",
-                             [(str(image), report, None)], 0, results=list(written))
+        write_evidence_files(evidence_paths, write_evidence, "audit", subjects,
+                             EXIT_ERROR if failed else 0, results=written_all)
+    if many:
+        click.echo(f"audit: {len(subjects) - failed} of {len(subjects)} images measured"
+                   + (f", {failed} could not be" if failed else ""))
+    if failed:
+        sys.exit(EXIT_ERROR)
 
 
 def _folder(value: str | None) -> bool:
