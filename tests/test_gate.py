@@ -233,11 +233,18 @@ def test_audit_several_images_one_report_each(png, tmp_path):
             "--evidence", tmp_path / "ev.json")
     assert r.exit_code == 0, r.output
     assert sorted(p.name for p in out.iterdir()) == ["day.png.html", "day.png.json",
-                                                     "dusk.png.html", "dusk.png.json"]
+                                                     "dusk.png.html", "dusk.png.json",
+                                                     "index.html"]
     means = [json.loads((out / f"{n}.png.json").read_text())["mean_delta_e"]
              for n in ("day", "dusk")]
     assert means == pytest.approx([de, dusk_de], abs=0.02)
     assert r.stdout.splitlines()[-1] == "audit: 2 of 2 images measured"
+    # the overview: no verdicts; each image's chart ΔE in the plot and the table, linked
+    page = (out / "index.html").read_text()
+    assert "2 of 2 images measured" in page and "passed" not in page
+    assert page.count('href="day.png.html"') == 1 and page.count('href="dusk.png.html"') == 1
+    assert f"{means[0]:.3f} ± " in page and f"{means[1]:.3f} ± " in page
+    assert 'aria-label="chart ΔE over the images of the images audited"' in page
     # the same report as the image audited alone
     alone = run("audit", dusk, "--corners", corners_of(), "--json", tmp_path / "alone.json")
     assert alone.exit_code == 0, alone.output
@@ -248,11 +255,15 @@ def test_audit_several_images_one_report_each(png, tmp_path):
     assert record["record"]["exit_code"] == 0
 
     cut = _truncated_png(tmp_path)
-    r = run("audit", day, cut, dusk, "--corners", corners_of(), "--json", tmp_path / "again")
+    again = tmp_path / "again"
+    r = run("audit", day, cut, dusk, "--corners", corners_of(), "--json", again, "--html", again)
     assert r.exit_code == 2, r.output
     assert one_error_line(r).startswith(f"fidelity: error: {cut}: ")
-    assert sorted(p.name for p in (tmp_path / "again").iterdir()) == ["day.png.json",
-                                                                     "dusk.png.json"]
+    assert sorted(p.name for p in again.iterdir()) == [
+        "day.png.html", "day.png.json", "dusk.png.html", "dusk.png.json", "index.html"]
+    page = (again / "index.html").read_text()
+    assert "2 of 3 images measured" in page and "1 not measured" in page
+    assert "cut.png" in page and 'href="cut.png.html"' not in page
     assert r.stdout.splitlines()[-1] == "audit: 2 of 3 images measured, 1 could not be"
     # standard output takes one report
     r = run("audit", day, dusk, "--json", "-")

@@ -104,6 +104,12 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
     for img, jf, hf in zip(image, json_files, html_files, strict=True):
         outputs[f"--json ({img})" if many else "--json"] = jf
         outputs[f"--html ({img})" if many else "--html"] = hf
+    # several images' HTML reports get an overview page beside them, as a gate's do
+    overview = None
+    if many and html_path is not None:
+        from fidelity.report.gate import OVERVIEW_NAME
+
+        overview = outputs["--html (overview)"] = Path(html_path) / OVERVIEW_NAME
     check_outputs(outputs, {"--table": table, "--reference": reference,
                             "--illuminant": illuminant}
                   | {(f"IMAGE {img}" if many else "IMAGE"): img for img in image}
@@ -144,6 +150,16 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
         for p in written:
             click.echo(f"{indent}wrote {display_path(p)}")
     failed = sum(error is not None for _, _, error in subjects)
+    if overview is not None:
+        from fidelity.records import GateResult
+        from fidelity.report.gate import write_gate_overview
+
+        write_gate_overview(overview, [GateResult(s, report=r, error=e) for s, r, e in subjects],
+                            [hf if r is not None else None
+                             for (_, r, _), hf in zip(subjects, html_files, strict=True)],
+                            audit=True)
+        written_all.append(overview)
+        click.echo(f"wrote {display_path(overview)}")
     if evidence_paths:
         from fidelity.report.evidence import write_evidence
 

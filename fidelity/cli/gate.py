@@ -44,9 +44,6 @@ if TYPE_CHECKING:
     from fidelity.chart.recording import FrameSelection
     from fidelity.records import GateResult
 
-#: The overview page of several subjects' HTML reports, in their folder.
-OVERVIEW_NAME = "index.html"
-
 
 def _error_line(message: str) -> None:
     click.echo(f"fidelity: error: {message}", err=True)
@@ -229,7 +226,11 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
             outputs[f"--json ({img})" if many else "--json"] = jp
             outputs[f"--html ({img})" if many else "--html"] = hp
         # several subjects' HTML reports in a folder get an overview page beside them
-        overview = html_path / OVERVIEW_NAME if many and html_path is not None else None
+        overview = None
+        if many and html_path is not None:
+            from fidelity.report.gate import OVERVIEW_NAME
+
+            overview = html_path / OVERVIEW_NAME
         outputs["--html (overview)"] = overview
         from fidelity.camera.model import camera_files
 

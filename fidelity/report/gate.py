@@ -1,11 +1,13 @@
-"""The overview of a gate over several subjects (images, or the frames of a recording):
-``index.html`` beside the subjects' own reports when ``fidelity gate --html`` names a folder.
+"""The overview of a gate or an audit over several subjects (images, or the frames of a
+recording): ``index.html`` beside the subjects' own reports when ``fidelity gate --html`` or
+``fidelity audit --html`` names a folder.
 
 The page leads with the outcome (how many passed, failed, were undecided or could not be
 measured), then a table of every subject (verdict, mean ΔE00 with its standard uncertainty,
 the worst patch, the predicted ΔmAP, a link to its report) and, for ``--frames``, a plot per
 recording of the chart ΔE over its frames with the expanded uncertainty and the ΔE limit: a
-drifting auto exposure or white balance shows as a slope.
+drifting auto exposure or white balance shows as a slope. An audit's page has no verdicts: it
+counts the subjects measured, and plots the chart ΔE of each image in the order given.
 """
 
 from __future__ import annotations
@@ -27,6 +29,9 @@ from fidelity.report.document import (
 )
 from fidelity.report.svg import COLOURS, Axes, Canvas, Scale, nice_ticks
 
+#: The overview page's name, in the folder of the subjects' HTML reports.
+OVERVIEW_NAME = "index.html"
+
 #: What each exit code of a subject is called on the page.
 OUTCOMES = {0: "pass", 1: "fail", 2: "not measured", 4: "undecided"}
 
@@ -40,36 +45,43 @@ def _text(s: str) -> str:
     return "".join(f"\\{ch}" if ch in "\\`*_[]()<>#|!~" else ch for ch in s)
 
 
-def _row(case: GateResult, link: str | None) -> tuple[str, ...]:
+def _row(case: GateResult, link: str | None, verdict: bool = True) -> tuple[str, ...]:
+    """The table row of a subject; ``verdict``: with the verdict column (a gate's)."""
     # a link's destination in <...> may hold spaces (a report named after "day 2.exr")
     name = f"[{_text(case.subject)}](<{link}>)" if link else _text(case.subject)
+    outcome = (_outcome(case),) if verdict else ()
     r = case.report
     if r is None:
-        return (name, _outcome(case), "", "", "", _text(case.error or ""))
+        return (name, *outcome, "", "", "", _text(case.error or ""))
     u = r.uncertainty.combined if r.uncertainty is not None else None
     de = f"{r.mean_delta_e:.3f}" + (f" ± {u:.3f}" if u is not None else "")
     dmap = r.prediction.dmap_points if r.prediction is not None else None
-    return (name, _outcome(case), de, f"{r.max_delta_e:.2f} ({r.worst_patch})",
+    return (name, *outcome, de, f"{r.max_delta_e:.2f} ({r.worst_patch})",
             "" if dmap is None else f"{dmap:.2f}", "")
 
 
 def frames_figure(recording: str, frames: Sequence[int], cases: Sequence[GateResult],
-                  limit: float | None) -> Figure:
+                  limit: float | None, what: str = "frame", title: str | None = None
+                  ) -> Figure:
     """The chart ΔE of each measured frame of ``recording`` with its expanded uncertainty
-    (k = 2) as a bar, coloured by its verdict; frames not measured as open squares on the
-    axis; the ΔE limit as a line."""
+    (k = 2) as a bar, coloured by its verdict (black: none); frames not measured as open
+    squares on the axis; the ΔE limit as a line. ``what``: what the horizontal axis counts
+    (``image``: the images of an audit, numbered in the order given, ``recording`` naming
+    them); ``title``: the plot's own (default: the recording's name and what is plotted)."""
     measured = [(k, c) for k, c in zip(frames, cases, strict=True) if c.report is not None]
     values = [c.report.mean_delta_e for _, c in measured if c.report is not None]
-    top = max([*values, limit or 0.0, 1.0]) * 1.15
+    missing = [k for k, case in zip(frames, cases, strict=True) if case.report is None]
+    # room above the highest point for the legend of the frames not measured
+    top = max([*values, limit or 0.0, 1.0]) * (1.35 if missing else 1.15)
     x0, x1 = min(frames), max(frames)
     if x0 == x1:
         x0, x1 = x0 - 1, x1 + 1
-    c = Canvas(680, 320, f"chart ΔE over the frames of {recording}")
-    c.text(340, 18, f"{Path(recording).name}: mean ΔE00 per frame (bars: ± 2u)", 13,
+    c = Canvas(680, 320, f"chart ΔE over the {what}s of {recording}")
+    c.text(340, 18, title or f"{Path(recording).name}: mean ΔE00 per {what} (bars: ± 2u)", 13,
            anchor="middle", weight="bold")
     ax = Axes(c, 64, 32, 596, 230, Scale(x0 - 0.5, x1 + 0.5), Scale(0.0, top))
     whole = [t for t in nice_ticks(x0, x1) if float(t).is_integer()]  # frames are counted
-    ax.frame("frame", "mean ΔE00", xticks=whole if len(whole) > 1 else sorted(set(frames)),
+    ax.frame(what, "mean ΔE00", xticks=whole if len(whole) > 1 else sorted(set(frames)),
              yticks=nice_ticks(0.0, top))
     if limit is not None:
         ax.hline(limit, COLOURS["red"], 1.2, "7 3 2 3", f"limit {limit:.4g}")
@@ -81,13 +93,14 @@ def frames_figure(recording: str, frames: Sequence[int], cases: Sequence[GateRes
         px = float(ax.px(float(k)))
         c.line(px, float(ax.py(max(r.mean_delta_e - u, 0.0))), px,
                float(ax.py(r.mean_delta_e + u)), "#808080", 1.2)
-        ax.marker(float(k), r.mean_delta_e, colour.get(case.exit_code, "#000"), 4.5)
-    missing = [k for k, case in zip(frames, cases, strict=True) if case.report is None]
+        tone = case.exit_code if r.verdict is not None else None
+        ax.marker(float(k), r.mean_delta_e, colour.get(tone, "#000") if tone is not None
+                  else "#000", 4.5)
     for i, k in enumerate(missing):  # on the axis: no chart measured there
         ax.marker(float(k), 0.0, "#fff", 4.0, "s", "not measured" if i == 0 else None)
     ax.legend("upper right")
-    return svg_figure(c.render(), f"frames-{Path(recording).name}.svg",
-                      f"chart ΔE over the frames of {recording}")
+    return svg_figure(c.render(), f"{what}s-{Path(recording).name}.svg",
+                      f"chart ΔE over the {what}s of {recording}")
 
 
 def gate_overview_document(cases: Sequence[GateResult], links: Sequence[str | None],
@@ -122,18 +135,46 @@ def gate_overview_document(cases: Sequence[GateResult], links: Sequence[str | No
     return Document("Colour fidelity gate", Headline(message, tone), tuple(sections))
 
 
+def audit_overview_document(cases: Sequence[GateResult], links: Sequence[str | None]
+                            ) -> Document:
+    """The overview page of an audit of several images (``cases`` without a criterion, in the
+    order given; ``links`` as for :func:`gate_overview_document`): how many were measured,
+    the chart ΔE of each image over their order, and the table of :func:`gate_overview_document`
+    without its verdict column."""
+    n = len(cases)
+    missing = sum(c.report is None for c in cases)
+    message = f"**{n - missing} of {n} images measured**" + (
+        f", {missing} not measured" if missing else "")
+    numbers = list(range(1, n + 1))
+    figure = frames_figure("the images audited", numbers, cases, None, what="image",
+                           title="mean ΔE00 of each image, numbered as in the table (bars: "
+                                 "± 2u)")
+    rows = [(str(k), *_row(c, link, verdict=False))
+            for k, c, link in zip(numbers, cases, links, strict=True)]
+    return Document("Colour fidelity audit", Headline(message, "info" if not missing else "fail"),
+                    (section("Over the images", figure),
+                     section("Subjects", table(
+                         ("#", "subject", "mean ΔE00 ± u (k=1)", "max ΔE00",
+                          "predicted ΔmAP, points", "error"), rows,
+                         numeric=(True, False, True, True, True, False)))))
+
+
 def write_gate_overview(path: str | os.PathLike[str], cases: Sequence[GateResult],
                         reports: Sequence[Path | None], frames: Sequence[int] | None = None,
-                        recordings: Sequence[str] | None = None) -> Path:
+                        recordings: Sequence[str] | None = None, *, audit: bool = False
+                        ) -> Path:
     """Write the overview page to ``path`` (atomically), linking each subject's report in
-    ``reports`` relative to it."""
+    ``reports`` relative to it; ``audit``: the page of an audit
+    (:func:`audit_overview_document`), else a gate's (:func:`gate_overview_document`)."""
     from fidelity.report.html import write_document
 
     where = Path(path)
     links = [None if p is None else os.path.relpath(p, where.parent) for p in reports]
-    doc = gate_overview_document(cases, links, frames, recordings)
+    doc = (audit_overview_document(cases, links) if audit
+           else gate_overview_document(cases, links, frames, recordings))
     (written,) = write_document(doc, html=where)
     return written
 
 
-__all__ = ["OUTCOMES", "frames_figure", "gate_overview_document", "write_gate_overview"]
+__all__ = ["OUTCOMES", "OVERVIEW_NAME", "audit_overview_document", "frames_figure", "gate_overview_document",
+           "write_gate_overview"]
