@@ -674,6 +674,36 @@ def test_gate_frames_gates_each_selected_frame(recordings, corners, tmp_path):
     assert one.exit_code == 0 and "frame 1" in one.output  # -2 is 1: gated once
 
 
+def test_audit_frames_audits_each_selected_frame(recordings, corners, tmp_path):
+    """audit --frames: each selected frame its own report, as ``--frame K`` alone gives it;
+    the noise frames (0 and 2) one error line each, exit 2; an overview with the frames'
+    plot, and the summary over the frames measured."""
+    paths, _, _ = recordings
+    c = _corner_text(corners)
+    out = tmp_path / "a"
+    r = CliRunner().invoke(main, ["audit", str(paths["ros1"]), "--topic", "/cam/rgb8",
+                                  "--frames", "0:3", "--json", str(out), "--html", str(out)])
+    assert r.exit_code == 2, r.output
+    assert r.stderr.count("fidelity: error:") == 2
+    assert "topic /cam/rgb8 frame 0: no colour chart found" in r.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["drive.bag.frame1.html",
+                                                     "drive.bag.frame1.json", "index.html"]
+    alone = json.loads(_run_json(["audit", str(paths["ros1"]), "--topic", "/cam/rgb8",
+                                  "--frame", "1", "--corners", c], tmp_path))
+    got = json.loads((out / "drive.bag.frame1.json").read_text())
+    assert got["source"]["recording"]["frame"] == 1
+    assert got["mean_delta_e"] == pytest.approx(alone["mean_delta_e"], abs=1e-6)
+    assert "audit: 1 of 3 frames measured, 2 could not be" in r.stdout
+    assert re.search(r"mean ΔE00 over 1 measured frame: min [\d.]+ \(frame 1\)", r.stdout)
+    page = (out / "index.html").read_text()
+    assert "1 of 3 frames measured" in page and "2 not measured" in page
+    assert page.count('href="drive.bag.frame1.html"') == 1
+    assert 'aria-label="chart ΔE over the frames of' in page
+    both = CliRunner().invoke(main, ["audit", str(paths["ros1"]), "--topic", "/cam/rgb8",
+                                     "--frames", "1", "--frame", "1"])
+    assert both.exit_code == 2 and "not both" in both.output
+
+
 @pytest.mark.parametrize("args, message", [
     (["--frames", "5"], "has 3 messages (frames 0 to 2); there is no frame 5"),
     (["--frames", "1:1"], "--frames 1:1 selects none of topic"),

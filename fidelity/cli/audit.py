@@ -12,10 +12,13 @@ import click
 from fidelity.cli.options import (
     IMAGE_PATH,
     STDOUT,
+    FrameRange,
     bound_option,
     common_options,
     evidence_option,
     evidence_outputs,
+    frame_subjects,
+    frames_summary,
     image_read_options,
     max_pixels_option,
     measure_inputs,
@@ -30,6 +33,7 @@ from fidelity.prediction.verdict import EXIT_ERROR
 
 if TYPE_CHECKING:
     from fidelity.chart.measure import ReadOptions
+    from fidelity.chart.recording import FrameSelection
     from fidelity.records import ChartReport
 
 
@@ -55,6 +59,10 @@ if TYPE_CHECKING:
 @click.option("--html", "html_path", type=click.Path(),
               help="Write the HTML report here (a folder, existing or written with a "
                    "trailing /: IMAGE-NAME.html in it).")
+@click.option("--frames", type=FrameRange(), default=None, metavar="FRAMES",
+              help="With recordings: audit each of these frames of --topic, N,M,... or "
+                   "START:STOP[:STEP] (0:300:30; negative from the end: -10:), each its own "
+                   "report; instead of --frame and --time.")
 @max_pixels_option
 @bound_option
 @evidence_option
@@ -62,9 +70,10 @@ if TYPE_CHECKING:
 @common_options
 def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
           reference: str, illuminant: str, size: str, table: str | None,
-          json_path: str | None, html_path: str | None, max_pixels: int | None,
-          bound: str, measure: bool, images: str | None, annotations: str | None,
-          models: str | None, limit: int | None, evidence_paths: tuple[Path, ...]) -> None:
+          json_path: str | None, html_path: str | None, frames: FrameSelection | None,
+          max_pixels: int | None, bound: str, measure: bool, images: str | None,
+          annotations: str | None, models: str | None, limit: int | None,
+          evidence_paths: tuple[Path, ...]) -> None:
     """Measure the chart in IMAGE: ΔE00 per patch, mean and max, exposure, bad pixels.
 
     \b
@@ -73,12 +82,13 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
     fidelity audit render.png --measure      # + the loss measured on COCO
     fidelity audit drive.bag --topic /camera/image_raw --time 12.5
     fidelity audit frames/*.exr --json reports/ --html reports/
+    fidelity audit drive.bag --topic /camera/image_raw --frames 0:300:30 --html reports/
 
     IMAGE is an image file or a robot recording (ROS 1 bag, ROS 2 bag folder or its .db3 /
-    .mcap file, MCAP file) with --topic and --frame or --time. Several IMAGEs are audited one
-    by one in one process (--json and --html name folders that get IMAGE-NAME.json / .html);
-    one that cannot be measured is an error line and the others are still audited; the exit
-    code is then 2.
+    .mcap file, MCAP file) with --topic and --frame or --time. Several IMAGEs, or --frames of
+    recordings, are audited one by one in one process (--json and --html name folders that
+    get IMAGE-NAME.json / .html, and index.html, an overview); one that cannot be measured is
+    an error line and the others are still audited; the exit code is then 2.
     """
     from dataclasses import replace
 
@@ -86,24 +96,37 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
     from fidelity.check import audit_image
     from fidelity.errors import FidelityError
     from fidelity.fileio import check_outputs
-    from fidelity.records import ImageSource
+    from fidelity.records import GateResult, ImageSource
     from fidelity.report.chart import write_chart_report
     from fidelity.report.terminal import summary_lines
 
+    if frames is not None and (read.frame is not None or read.time is not None):
+        raise click.UsageError("give --frames, or --frame N or --time T, not both")
+    reads = reads_for(image, replace(read, max_pixels=max_pixels))
+    names = [display_path(img) for img in image]  # each subject as the terminal names it
+    reports_of = image  # what each subject's report is named after
+    frame_of: list[int] | None = None
+    if frames is not None:  # each selected frame of each recording is a subject
+        image, frame_of = frame_subjects(image, frames, read.topic)
+        reads = [replace(read, max_pixels=max_pixels, frame=k, time=None) for k in frame_of]
+        names = [f"{display_path(img)} frame {k}" for img, k in zip(image, frame_of,
+                                                                     strict=True)]
+        reports_of = tuple(Path(f"{img}.frame{k}") for img, k in zip(image, frame_of,
+                                                                        strict=True))
     many = len(image) > 1
     # an existing folder, or one written with a trailing separator, gets IMAGE-NAME.json /
     # .html, as in `fidelity gate`; several images always do
     to_stdout = json_path is not None and str(json_path) == STDOUT
     if to_stdout and many:
         raise click.UsageError("--json - (standard output) takes one IMAGE; give a folder")
-    json_files = report_paths(image, None if to_stdout or json_path is None else Path(json_path),
-                              ".json", folder=many or _folder(json_path))
-    html_files = report_paths(image, None if html_path is None else Path(html_path), ".html",
-                              folder=many or _folder(html_path))
+    json_files = report_paths(reports_of, None if to_stdout or json_path is None
+                              else Path(json_path), ".json", folder=many or _folder(json_path))
+    html_files = report_paths(reports_of, None if html_path is None else Path(html_path),
+                              ".html", folder=many or _folder(html_path))
     outputs: dict[str, Path | None] = dict(evidence_outputs(evidence_paths))
-    for img, jf, hf in zip(image, json_files, html_files, strict=True):
-        outputs[f"--json ({img})" if many else "--json"] = jf
-        outputs[f"--html ({img})" if many else "--html"] = hf
+    for name, jf, hf in zip(names, json_files, html_files, strict=True):
+        outputs[f"--json ({name})" if many else "--json"] = jf
+        outputs[f"--html ({name})" if many else "--html"] = hf
     # several images' HTML reports get an overview page beside them, as a gate's do
     overview = None
     if many and html_path is not None:
@@ -118,9 +141,8 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
     indent = "  " if many else ""
     subjects: list[tuple[str, ChartReport | None, str | None]] = []
     written_all: list[Path] = []
-    for img, img_read, json_file, html_file in zip(
-            image, reads_for(image, replace(read, max_pixels=max_pixels)), json_files,
-            html_files, strict=True):
+    for img, name, img_read, json_file, html_file in zip(image, names, reads, json_files,
+                                                         html_files, strict=True):
         try:
             report = audit_image(img, corners, read=img_read, reference=reference,
                                  illuminant=illuminant, size=size, table=table, bound=bound,
@@ -130,11 +152,11 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
         except (FidelityError, OSError) as exc:
             if not many:
                 raise
-            click.echo(f"{display_path(img)}: error")
+            click.echo(f"{name}: error")
             click.echo(f"fidelity: error: {exc}", err=True)
-            subjects.append((str(img), None, str(exc)))
+            subjects.append((_subject(img, frame_of, len(subjects)), None, str(exc)))
             continue
-        subjects.append((str(img), report, None))
+        subjects.append((_subject(img, frame_of, len(subjects)), report, None))
         written_all.extend(written)
         if to_stdout:
             from fidelity.cli.options import write_json_output
@@ -143,33 +165,43 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
             write_json_output(STDOUT, chart_report_json(report))
         src = report.source
         assert isinstance(src, ImageSource)
-        click.echo(f"{display_path(img)}: {src.image.format} {src.image.pixel_type} "
+        click.echo(f"{name}: {src.image.format} {src.image.pixel_type} "
                    f"{src.image.width}x{src.image.height}, {src.encoding} pixels")
         for line in summary_lines(report):
             click.echo(indent + line)
         for p in written:
             click.echo(f"{indent}wrote {display_path(p)}")
     failed = sum(error is not None for _, _, error in subjects)
+    cases = [GateResult(s, report=r, error=e) for s, r, e in subjects]
     if overview is not None:
-        from fidelity.records import GateResult
         from fidelity.report.gate import write_gate_overview
 
-        write_gate_overview(overview, [GateResult(s, report=r, error=e) for s, r, e in subjects],
+        write_gate_overview(overview, cases,
                             [hf if r is not None else None
                              for (_, r, _), hf in zip(subjects, html_files, strict=True)],
-                            audit=True)
+                            frame_of, None if frame_of is None else
+                            [display_path(img) for img in image], audit=True)
         written_all.append(overview)
         click.echo(f"wrote {display_path(overview)}")
+    if frame_of is not None:
+        for line in frames_summary(cases, image, frame_of):
+            click.echo(line)
     if evidence_paths:
         from fidelity.report.evidence import write_evidence
 
         write_evidence_files(evidence_paths, write_evidence, "audit", subjects,
                              EXIT_ERROR if failed else 0, results=written_all)
     if many:
-        click.echo(f"audit: {len(subjects) - failed} of {len(subjects)} images measured"
+        what = "images" if frame_of is None else "frames"
+        click.echo(f"audit: {len(subjects) - failed} of {len(subjects)} {what} measured"
                    + (f", {failed} could not be" if failed else ""))
     if failed:
         sys.exit(EXIT_ERROR)
+
+
+def _subject(image: Path, frame_of: list[int] | None, k: int) -> str:
+    """The ``k``-th subject's name in a record and on the overview: the image, or its frame."""
+    return str(image) if frame_of is None else f"{image} frame {frame_of[k]}"
 
 
 def _folder(value: str | None) -> bool:

@@ -27,6 +27,8 @@ from fidelity.cli.options import (
     decision_rule,
     evidence_option,
     evidence_outputs,
+    frame_subjects,
+    frames_summary,
     from_settings,
     image_read_options,
     make_criterion,
@@ -58,41 +60,6 @@ def _write_junit(junit: Path, cases: Sequence[GateResult]) -> None:
     except (FidelityError, OSError) as exc:
         _error_line(f"{junit}: cannot write JUnit XML: {exc}")
         sys.exit(EXIT_ERROR)
-
-
-def _frame_subjects(images: Sequence[Path], frames: FrameSelection, topic: str | None
-                    ) -> tuple[tuple[Path, ...], list[int]]:
-    """Each recording once per frame ``frames`` selects on its topic (from its index), and
-    those frames."""
-    from fidelity.chart.recording import topic_frames
-
-    paths: list[Path] = []
-    frame_of: list[int] = []
-    for img in images:
-        chosen, count = topic_frames(img, topic)
-        for k in frames.resolve(count, display_path(img), chosen):
-            paths.append(img)
-            frame_of.append(k)
-    return tuple(paths), frame_of
-
-
-def _frames_summary(cases: Sequence[GateResult], images: Sequence[Path],
-                    frame_of: Sequence[int]) -> list[str]:
-    """How the chart ΔE varies over the frames gated (the measured ones), per recording."""
-    from statistics import median
-
-    by: dict[Path, list[tuple[float, int]]] = {}
-    for case, path, k in zip(cases, images, frame_of, strict=True):
-        if case.report is not None:
-            by.setdefault(path, []).append((case.report.mean_delta_e, k))
-    lines = []
-    for path, values in by.items():
-        lo, hi = min(values), max(values)
-        many = "s" if len(values) > 1 else ""
-        lines.append(f"{display_path(path)}: mean ΔE00 over {len(values)} measured frame{many}: "
-                     f"min {lo[0]:.2f} (frame {lo[1]}), median "
-                     f"{median(v for v, _ in values):.2f}, max {hi[0]:.2f} (frame {hi[1]})")
-    return lines
 
 
 def write_reports(result: GateResult, json_path: Path | None, html_path: Path | None,
@@ -213,7 +180,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         from fidelity.fileio import check_outputs
 
         if frames is not None:  # each selected frame of each recording is a subject
-            images, frame_of = _frame_subjects(images, frames, read.topic)
+            images, frame_of = frame_subjects(images, frames, read.topic)
         many = len(images) > 1
         # a folder (always so with several subjects) gets one report per image (or camera)
         subjects = ((images or (Path(camera or ""),)) if frame_of is None else
@@ -302,7 +269,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
                              gate_exit_code(cases),
                              results=[*(p for _, w in done for p in w), junit])
     if frame_of is not None:
-        for line in _frames_summary(cases, images, frame_of):
+        for line in frames_summary(cases, images, frame_of):
             click.echo(line)
     if many:
         codes = [c.exit_code for c in cases]

@@ -45,12 +45,14 @@ from fidelity.errors import FidelityError, InvalidValueError
 if TYPE_CHECKING:
     from typing import TypeAlias
 
+    from fidelity.chart.recording import FrameSelection
     from fidelity.coco.executor import ExecutorOptions
     from fidelity.coco.measure import CocoInputs
     from fidelity.coco.scores import ScoresTransfer
     from fidelity.coco.store import ResultsStore
     from fidelity.coco.sweep import ModelSpec
     from fidelity.prediction.verdict import Criterion
+    from fidelity.records import GateResult
 
     # click >= 8.2 types ParamType by its value; the project supports click 8.1 too
     ParamTypeBase: TypeAlias = click.ParamType[Any]
@@ -174,6 +176,45 @@ class FrameRange(ParamTypeBase):
         if isinstance(value, FrameSelection):
             return value
         return parse_frames(str(value))
+
+
+def frame_subjects(images: Sequence[Path], frames: FrameSelection, topic: str | None
+                    ) -> tuple[tuple[Path, ...], list[int]]:
+    """Each recording once per frame ``frames`` selects on its topic (from its index), and
+    those frames (``gate --frames``, ``audit --frames``)."""
+    from fidelity.chart.recording import topic_frames
+    from fidelity.fileio import display_path
+
+    paths: list[Path] = []
+    frame_of: list[int] = []
+    for img in images:
+        chosen, count = topic_frames(img, topic)
+        for k in frames.resolve(count, display_path(img), chosen):
+            paths.append(img)
+            frame_of.append(k)
+    return tuple(paths), frame_of
+
+
+def frames_summary(cases: Sequence[GateResult], images: Sequence[Path],
+                    frame_of: Sequence[int]) -> list[str]:
+    """How the chart ΔE varies over the frames gated or audited (the measured ones), per
+    recording."""
+    from statistics import median
+
+    from fidelity.fileio import display_path
+
+    by: dict[Path, list[tuple[float, int]]] = {}
+    for case, path, k in zip(cases, images, frame_of, strict=True):
+        if case.report is not None:
+            by.setdefault(path, []).append((case.report.mean_delta_e, k))
+    lines = []
+    for path, values in by.items():
+        lo, hi = min(values), max(values)
+        many = "s" if len(values) > 1 else ""
+        lines.append(f"{display_path(path)}: mean ΔE00 over {len(values)} measured frame{many}: "
+                     f"min {lo[0]:.2f} (frame {lo[1]}), median "
+                     f"{median(v for v, _ in values):.2f}, max {hi[0]:.2f} (frame {hi[1]})")
+    return lines
 
 
 class NameList(ParamTypeBase):

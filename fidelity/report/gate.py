@@ -135,24 +135,33 @@ def gate_overview_document(cases: Sequence[GateResult], links: Sequence[str | No
     return Document("Colour fidelity gate", Headline(message, tone), tuple(sections))
 
 
-def audit_overview_document(cases: Sequence[GateResult], links: Sequence[str | None]
-                            ) -> Document:
-    """The overview page of an audit of several images (``cases`` without a criterion, in the
-    order given; ``links`` as for :func:`gate_overview_document`): how many were measured,
-    the chart ΔE of each image over their order, and the table of :func:`gate_overview_document`
-    without its verdict column."""
+def audit_overview_document(cases: Sequence[GateResult], links: Sequence[str | None],
+                            frames: Sequence[int] | None = None,
+                            recordings: Sequence[str] | None = None) -> Document:
+    """The overview page of an audit of several images or frames (``cases`` without a
+    criterion, in the order given; ``links``, ``frames`` and ``recordings`` as for
+    :func:`gate_overview_document`): how many were measured, the chart ΔE of each image over
+    their order (or of each frame, per recording), and the table of
+    :func:`gate_overview_document` without its verdict column."""
     n = len(cases)
+    what = "images" if frames is None else "frames"
     missing = sum(c.report is None for c in cases)
-    message = f"**{n - missing} of {n} images measured**" + (
+    message = f"**{n - missing} of {n} {what} measured**" + (
         f", {missing} not measured" if missing else "")
     numbers = list(range(1, n + 1))
-    figure = frames_figure("the images audited", numbers, cases, None, what="image",
-                           title="mean ΔE00 of each image, numbered as in the table (bars: "
-                                 "± 2u)")
+    if frames is not None and recordings is not None:
+        figures = [frames_figure(rec, [k for k, r in zip(frames, recordings, strict=True)
+                                      if r == rec],
+                                 [c for c, r in zip(cases, recordings, strict=True) if r == rec],
+                                 None) for rec in dict.fromkeys(recordings)]
+    else:
+        figures = [frames_figure("the images audited", numbers, cases, None, what="image",
+                                 title="mean ΔE00 of each image, numbered as in the table "
+                                       "(bars: ± 2u)")]
     rows = [(str(k), *_row(c, link, verdict=False))
             for k, c, link in zip(numbers, cases, links, strict=True)]
     return Document("Colour fidelity audit", Headline(message, "info" if not missing else "fail"),
-                    (section("Over the images", figure),
+                    (section(f"Over the {what}", *figures),
                      section("Subjects", table(
                          ("#", "subject", "mean ΔE00 ± u (k=1)", "max ΔE00",
                           "predicted ΔmAP, points", "error"), rows,
@@ -170,7 +179,7 @@ def write_gate_overview(path: str | os.PathLike[str], cases: Sequence[GateResult
 
     where = Path(path)
     links = [None if p is None else os.path.relpath(p, where.parent) for p in reports]
-    doc = (audit_overview_document(cases, links) if audit
+    doc = (audit_overview_document(cases, links, frames, recordings) if audit
            else gate_overview_document(cases, links, frames, recordings))
     (written,) = write_document(doc, html=where)
     return written
