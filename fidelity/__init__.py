@@ -34,6 +34,7 @@ _API: dict[str, str] = {
     # the camera-check pipeline
     "check_camera": "fidelity.check",
     "audit_image": "fidelity.check",
+    "audit_images": "fidelity.check",
     "gate": "fidelity.check",
     "compare_charts": "fidelity.compare",
     "ComparisonReport": "fidelity.records",
@@ -95,7 +96,7 @@ if TYPE_CHECKING:
         measure_chart,
         measure_image,
     )
-    from fidelity.check import audit_image, check_camera, gate
+    from fidelity.check import audit_image, audit_images, check_camera, gate
     from fidelity.coco.corruptions import corrupt
     from fidelity.coco.measure import MeasuredLoss, measure_mapping
     from fidelity.colour.charts import Chart, load_chart
@@ -154,6 +155,7 @@ __all__ = [
     "Verdict",
     "apply_transform",
     "audit_image",
+    "audit_images",
     "calibrate_transform",
     "chart_blind_spots",
     "check_camera",

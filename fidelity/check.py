@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -350,40 +351,72 @@ def gate(
     :func:`fidelity.records.gate_exit_code` turns them into the exit code and
     :func:`fidelity.report.write_chart_report` writes each report.
     """
+    if not images:
+        paths = [camera] if camera else []
+        return [_subject_result(path, partial(
+            check_camera, path, illuminant=illuminant, renderer=renderer,
+            reference=reference or "scene", size=size, table=table, criterion=criterion,
+            command="gate", bound=bound, decision=decision), criterion) for path in paths]
+    return _audit_subjects(images, corners, read, frames, criterion, command="gate",
+                           reference=reference or "scene", illuminant=illuminant, size=size,
+                           table=table, bound=bound, decision=decision)
+
+
+def audit_images(
+    images: Sequence[str | os.PathLike[str]],
+    corners: str | None = None,
+    *,
+    read: ReadOptions = DEFAULT_READ,
+    reference: str = "scene",
+    illuminant: str = "D65",
+    size: str = "any",
+    table: str | None = None,
+    bound: str = "classic",
+    measure: MeasureRequest | None = None,
+    frames: Sequence[int] | None = None,
+) -> list[GateResult]:
+    """:func:`audit_image` of ``images`` one by one (a renderer's frames, say), as
+    :func:`gate` measures them but without a criterion: one
+    :class:`~fidelity.records.GateResult` per subject, an input error of one subject its
+    ``error`` while the others are still measured; ``frames`` as for :func:`gate`."""
+    return _audit_subjects(images, corners, read, frames, None, command="audit",
+                           reference=reference, illuminant=illuminant, size=size, table=table,
+                           bound=bound, measure=measure)
+
+
+def _audit_subjects(images: Sequence[str | os.PathLike[str]], corners: str | None,
+                    read: ReadOptions, frames: Sequence[int] | None,
+                    criterion: Criterion | None, **options: Any) -> list[GateResult]:
+    """:func:`audit_image` of each image (or frame) with ``options``, as results."""
     from dataclasses import replace
 
-    from fidelity.errors import FidelityError
-
-    paths: list[str] = [os.fspath(i) for i in images] or ([camera] if camera else [])
-    reads = reads_for(paths, read) if images else [read for _ in paths]
+    paths = [os.fspath(i) for i in images]
+    reads = reads_for(paths, read)
     subjects = list(paths)
     if frames is not None:
         if len(frames) != len(paths):
             raise ValueError(f"{len(frames)} frames for {len(paths)} images")
         reads = [replace(r, frame=k, time=None) for r, k in zip(reads, frames, strict=True)]
         subjects = [f"{p} frame {k}" for p, k in zip(paths, frames, strict=True)]
-    results: list[GateResult] = []
-    for subject, path, subject_read in zip(subjects, paths, reads, strict=True):
-        t0 = time.perf_counter()
-        try:
-            if images:
-                report = audit_image(path, corners, read=subject_read,
-                                     reference=reference or "scene", illuminant=illuminant,
-                                     size=size, table=table, criterion=criterion,
-                                     command="gate", bound=bound, decision=decision)
-            else:
-                report = check_camera(path, illuminant=illuminant, renderer=renderer,
-                                      reference=reference or "scene", size=size, table=table,
-                                      criterion=criterion, command="gate", bound=bound,
-                                      decision=decision)
-        except (FidelityError, OSError) as exc:
-            results.append(GateResult(subject, criterion, error=str(exc),
-                                      seconds=time.perf_counter() - t0))
-        else:
-            results.append(GateResult(subject, criterion, report=report,
-                                      seconds=time.perf_counter() - t0))
-    return results
+    return [_subject_result(subject, partial(audit_image, path, corners, read=r,
+                                             criterion=criterion, **options), criterion)
+            for subject, path, r in zip(subjects, paths, reads, strict=True)]
+
+
+def _subject_result(subject: str, measure: Callable[[], ChartReport],
+                    criterion: Criterion | None) -> GateResult:
+    """``measure()`` as the subject's result; an input error (or an unreadable file) its
+    ``error``."""
+    from fidelity.errors import FidelityError
+
+    t0 = time.perf_counter()
+    try:
+        report = measure()
+    except (FidelityError, OSError) as exc:
+        return GateResult(subject, criterion, error=str(exc),
+                          seconds=time.perf_counter() - t0)
+    return GateResult(subject, criterion, report=report, seconds=time.perf_counter() - t0)
 
 
 __all__ = ["AUDIT_CONVENTION", "DEFAULT_CRITERION", "TABLE_REFERENCES", "audit_image",
-           "chart_emulation", "check_camera", "evidence_of", "gate"]
+           "audit_images", "chart_emulation", "check_camera", "evidence_of", "gate"]

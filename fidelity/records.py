@@ -576,9 +576,10 @@ class ComparisonReport:
 
 @dataclass(frozen=True)
 class GateResult:
-    """One gated subject (:func:`fidelity.check.gate`): its ``subject`` (image path or camera), the ``criterion``, the
-    ``report`` (None on error), the ``error`` message (exit code 2) and the ``seconds`` it
-    took."""
+    """One subject of a gate (:func:`fidelity.check.gate`) or of an audit of several images
+    (:func:`fidelity.check.audit_images`, no ``criterion``): its ``subject`` (image path,
+    ``IMAGE frame N`` or camera), the ``criterion``, the ``report`` (None on error), the
+    ``error`` message (exit code 2) and the ``seconds`` it took."""
 
     subject: str
     criterion: Criterion | None = None

@@ -500,3 +500,21 @@ def test_the_overview_links_a_report_named_with_spaces_and_shows_names_as_writte
     assert "day *2* [a].exr</a>" in page and "no chart | found" in page
     assert "dusk_1_.exr" in page and "<em>" not in page
     assert "0 of 2 passed" in page and "2 not measured" in page
+
+
+def test_audit_images_api_gives_each_image_its_report_or_error(png, tmp_path):
+    """``fidelity.audit_images``: one result per path in order, an unreadable one its error;
+    a measured one the report ``audit_image`` gives it alone, and no verdict."""
+    import fidelity
+
+    path, de = png
+    cut = _truncated_png(tmp_path)
+    results = fidelity.audit_images([path, cut], corners_of(), reference="safecolor")
+    assert [r.subject for r in results] == [str(path), str(cut)]
+    assert results[0].report is not None and results[0].error is None
+    assert results[0].report.mean_delta_e == pytest.approx(de, abs=0.02)
+    assert results[0].report.verdict is None and results[0].exit_code == 0
+    alone = fidelity.audit_image(path, corners_of(), reference="safecolor")
+    assert results[0].report.mean_delta_e == alone.mean_delta_e
+    assert results[1].report is None and results[1].error.startswith(f"{cut}: ")
+    assert results[1].exit_code == 2

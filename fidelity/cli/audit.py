@@ -34,7 +34,6 @@ from fidelity.prediction.verdict import EXIT_ERROR
 if TYPE_CHECKING:
     from fidelity.chart.measure import ReadOptions
     from fidelity.chart.recording import FrameSelection
-    from fidelity.records import ChartReport
 
 
 @click.command()
@@ -92,8 +91,8 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
     """
     from dataclasses import replace
 
-    from fidelity.chart.measure import reads_for
-    from fidelity.check import audit_image
+    from fidelity.check import audit_image, audit_images
+    from fidelity.cli import error_line
     from fidelity.errors import FidelityError
     from fidelity.fileio import check_outputs
     from fidelity.records import GateResult, ImageSource
@@ -102,17 +101,15 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
 
     if frames is not None and (read.frame is not None or read.time is not None):
         raise click.UsageError("give --frames, or --frame N or --time T, not both")
-    reads = reads_for(image, replace(read, max_pixels=max_pixels))
-    names = [display_path(img) for img in image]  # each subject as the terminal names it
+    read = replace(read, max_pixels=max_pixels)
     reports_of = image  # what each subject's report is named after
     frame_of: list[int] | None = None
     if frames is not None:  # each selected frame of each recording is a subject
         image, frame_of = frame_subjects(image, frames, read.topic)
-        reads = [replace(read, max_pixels=max_pixels, frame=k, time=None) for k in frame_of]
-        names = [f"{display_path(img)} frame {k}" for img, k in zip(image, frame_of,
-                                                                     strict=True)]
         reports_of = tuple(Path(f"{img}.frame{k}") for img, k in zip(image, frame_of,
                                                                         strict=True))
+    names = [display_path(img) if frame_of is None else f"{display_path(img)} frame {k}"
+             for img, k in zip(image, frame_of or image, strict=True)]
     many = len(image) > 1
     # an existing folder, or one written with a trailing separator, gets IMAGE-NAME.json /
     # .html, as in `fidelity gate`; several images always do
@@ -138,25 +135,33 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
                   | {(f"IMAGE {img}" if many else "IMAGE"): img for img in image}
                   | measure_inputs(images, annotations, models))
     request = measure_request(measure, images, annotations, models, limit)
+    options = {"reference": reference, "illuminant": illuminant, "size": size, "table": table,
+               "bound": bound, "measure": request}
+    if many:  # an input error of one subject is its result's; the others are still audited
+        cases = audit_images(image, corners, read=read, frames=frame_of, **options)
+    else:  # an input error is the command's (one line, exit 2)
+        only = replace(read, frame=frame_of[0], time=None) if frame_of else read
+        subject = f"{image[0]} frame {frame_of[0]}" if frame_of else str(image[0])
+        cases = [GateResult(subject, report=audit_image(image[0], corners, read=only,
+                                                        **options))]
     indent = "  " if many else ""
-    subjects: list[tuple[str, ChartReport | None, str | None]] = []
     written_all: list[Path] = []
-    for img, name, img_read, json_file, html_file in zip(image, names, reads, json_files,
-                                                         html_files, strict=True):
-        try:
-            report = audit_image(img, corners, read=img_read, reference=reference,
-                                 illuminant=illuminant, size=size, table=table, bound=bound,
-                                 measure=request)
-            written = write_chart_report(report, json_path=json_file, html_path=html_file,
-                                         protect=image)
-        except (FidelityError, OSError) as exc:
-            if not many:
-                raise
+    for k, (case, name) in enumerate(zip(cases, names, strict=True)):
+        report = case.report
+        written: list[Path] = []
+        if report is not None:
+            try:
+                written = write_chart_report(report, json_path=json_files[k],
+                                             html_path=html_files[k], protect=image)
+            except (FidelityError, OSError) as exc:
+                if not many:
+                    raise
+                cases[k] = case = replace(case, report=None, error=str(exc))
+        if case.report is None:
             click.echo(f"{name}: error")
-            click.echo(f"fidelity: error: {exc}", err=True)
-            subjects.append((_subject(img, frame_of, len(subjects)), None, str(exc)))
+            error_line(case.error or "not measured")
             continue
-        subjects.append((_subject(img, frame_of, len(subjects)), report, None))
+        report = case.report
         written_all.extend(written)
         if to_stdout:
             from fidelity.cli.options import write_json_output
@@ -171,14 +176,13 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
             click.echo(indent + line)
         for p in written:
             click.echo(f"{indent}wrote {display_path(p)}")
-    failed = sum(error is not None for _, _, error in subjects)
-    cases = [GateResult(s, report=r, error=e) for s, r, e in subjects]
+    failed = sum(case.report is None for case in cases)
     if overview is not None:
         from fidelity.report.gate import write_gate_overview
 
         write_gate_overview(overview, cases,
-                            [hf if r is not None else None
-                             for (_, r, _), hf in zip(subjects, html_files, strict=True)],
+                            [hf if case.report is not None else None
+                             for case, hf in zip(cases, html_files, strict=True)],
                             frame_of, None if frame_of is None else
                             [display_path(img) for img in image], audit=True)
         written_all.append(overview)
@@ -189,19 +193,15 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
     if evidence_paths:
         from fidelity.report.evidence import write_evidence
 
-        write_evidence_files(evidence_paths, write_evidence, "audit", subjects,
+        write_evidence_files(evidence_paths, write_evidence, "audit",
+                             [(c.subject, c.report, c.error) for c in cases],
                              EXIT_ERROR if failed else 0, results=written_all)
     if many:
         what = "images" if frame_of is None else "frames"
-        click.echo(f"audit: {len(subjects) - failed} of {len(subjects)} {what} measured"
+        click.echo(f"audit: {len(cases) - failed} of {len(cases)} {what} measured"
                    + (f", {failed} could not be" if failed else ""))
     if failed:
         sys.exit(EXIT_ERROR)
-
-
-def _subject(image: Path, frame_of: list[int] | None, k: int) -> str:
-    """The ``k``-th subject's name in a record and on the overview: the image, or its frame."""
-    return str(image) if frame_of is None else f"{image} frame {frame_of[k]}"
 
 
 def _folder(value: str | None) -> bool:
