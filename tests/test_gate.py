@@ -81,18 +81,24 @@ def test_gate_pass_and_fail_on_delta_e(png, tmp_path):
     assert report["provenance"]["input_sha256"] in html
 
 
-def test_gate_several_images_one_junit_case_each(png, tmp_path):
-    """Three renders: one passes, one fails, one cannot be measured: exit 2, a JUnit suite of
-    three cases with their own properties, one JSON and HTML report per measured image."""
+def _day_and_dusk(png: tuple[Path, float], folder: Path) -> tuple[Path, float, Path, float]:
+    """Two renders of the chart, and their chart ΔE: day.png (the ``png`` fixture's) and
+    dusk.png (a stronger contrast increase)."""
     import shutil
 
     path, de = png
-    good = tmp_path / "day.png"
-    shutil.copy(path, good)
-    worse = tmp_path / "dusk.png"
-    bad_srgb = apply_transform(CHART.srgb, "contrast-inc", 1.8)
-    write_png8(worse, draw_chart(bad_srgb))
-    worse_de = expected_delta_e(np.rint(bad_srgb * 255) / 255, CHART.lab)
+    day = folder / "day.png"
+    shutil.copy(path, day)
+    dusk = folder / "dusk.png"
+    srgb = apply_transform(CHART.srgb, "contrast-inc", 1.8)
+    write_png8(dusk, draw_chart(srgb))
+    return day, de, dusk, expected_delta_e(np.rint(srgb * 255) / 255, CHART.lab)
+
+
+def test_gate_several_images_one_junit_case_each(png, tmp_path):
+    """Three renders: one passes, one fails, one cannot be measured: exit 2, a JUnit suite of
+    three cases with their own properties, one JSON and HTML report per measured image."""
+    good, de, worse, worse_de = _day_and_dusk(png, tmp_path)
     limit = f"{de + 0.1:.3f}"
     assert worse_de > de + 0.1
     cut = _truncated_png(tmp_path)
@@ -138,6 +144,8 @@ def test_gate_several_images_one_junit_case_each(png, tmp_path):
              "--json", out)  # an existing folder: the report goes in it
     assert ok.exit_code == 0 and (out / "noon.png.json").is_file()
     # two images of one name cannot share a report folder
+    import shutil
+
     (tmp_path / "a").mkdir()
     shutil.copy(tmp_path / "noon.png", tmp_path / "a" / "noon.png")
     r = run("gate", tmp_path / "noon.png", tmp_path / "a" / "noon.png", "--corners",
@@ -219,15 +227,7 @@ def test_audit_several_images_one_report_each(png, tmp_path):
     """``audit a b c`` (a shell glob): each image audited as ``audit`` of it alone gives, a
     report per image in the folders, the one that cannot be read one error line and exit 2,
     and one credibility record with a subject per image."""
-    import shutil
-
-    path, de = png
-    day = tmp_path / "day.png"
-    shutil.copy(path, day)
-    dusk = tmp_path / "dusk.png"
-    srgb = apply_transform(CHART.srgb, "contrast-inc", 1.8)
-    write_png8(dusk, draw_chart(srgb))
-    dusk_de = expected_delta_e(np.rint(srgb * 255) / 255, CHART.lab)
+    day, de, dusk, dusk_de = _day_and_dusk(png, tmp_path)
     out = tmp_path / "reports"
     r = run("audit", day, dusk, "--corners", corners_of(), "--json", out, "--html", out,
             "--evidence", tmp_path / "ev.json")
