@@ -152,8 +152,9 @@ def _print_status(store: SweepStore) -> None:
                            " (no run holds it now)")
         for (t, e), (c, n) in claimed.items():
             who = c.owner.info
-            what = (f"{who.get('executor', '?')}, {who.get('workers', '?')} workers"
-                    if who else "unknown run")
+            workers = who.get("workers", "?")
+            what = (f"{who.get('executor', '?')}, {workers} worker"
+                    f"{'' if workers == 1 else 's'}" if who else "unknown run")
             state = ("its process has ended: the next run takes the cell over"
                      if process_gone(c.owner.host, c.owner.pid)
                      else f"heartbeat {max(0.0, now - c.heartbeat):.0f} s ago")
