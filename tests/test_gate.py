@@ -253,6 +253,8 @@ def test_audit_several_images_one_report_each(png, tmp_path):
     record = json.loads((tmp_path / "ev.json").read_text())
     assert [s["subject"] for s in record["subjects"]] == [str(day), str(dusk)]
     assert record["record"]["exit_code"] == 0
+    again = run("verify", tmp_path / "ev.json", "--rerun")  # the record repeats its run
+    assert again.exit_code == 0 and "run again: reproduced" in again.stdout, again.output
 
     cut = _truncated_png(tmp_path)
     again = tmp_path / "again"
