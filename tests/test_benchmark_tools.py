@@ -57,3 +57,31 @@ def test_after_resweep_finds_every_prediction_to_recompute():
            "meta": {"n": 2}}
     found = after_resweep._cells(doc)
     assert len(found) == 2 and all("prediction" in c for c in found)
+
+
+def test_resweep_queue_runs_each_detector_after_the_other_into_its_own_store(tmp_path):
+    """benchmarks/resweep_queue.sh: resweep_model.sh once per detector, in order, each with
+    its own store; a detector's failure stops the queue (the next would merge on top of it)."""
+    import shutil
+    import subprocess
+
+    bench = tmp_path / "benchmarks"
+    bench.mkdir()
+    shutil.copy(REPO / "benchmarks" / "resweep_queue.sh", bench)
+    log = tmp_path / "calls"
+    stub = bench / "resweep_model.sh"  # stands in for the hours-long sweep: logs its call
+    stub.write_text(f'#!/usr/bin/env bash\necho "$*" >> {log}\n[ "$2" != fail.onnx ]\n')
+    stub.chmod(0o755)
+    env = {"PATH": "/usr/bin:/bin", "RESWEEP_STORES": "/s"}
+    r = subprocess.run(["bash", str(bench / "resweep_queue.sh")], env=env, capture_output=True,
+                       text=True)
+    assert r.returncode == 0, r.stderr
+    assert log.read_text().splitlines() == [
+        "/s/resweep-yolov8n yolov8n-int8dyn.onnx", "/s/resweep-yolov10n yolov10n-int8dyn.onnx"]
+    log.unlink()
+    r = subprocess.run(["bash", str(bench / "resweep_queue.sh")],
+                       env={**env, "RESWEEP_MODELS": "yolox_nano fail yolo11n-int8dyn"},
+                       capture_output=True, text=True)
+    assert r.returncode != 0
+    assert log.read_text().splitlines() == ["/s/resweep-yolox_nano yolox_nano.onnx",
+                                            "/s/resweep-fail fail.onnx"]
