@@ -403,15 +403,15 @@ def _audit_subjects(images: Sequence[str | os.PathLike[str]], corners: str | Non
             for subject, path, r in zip(subjects, paths, reads, strict=True)]
 
 
-def _subject_result(subject: str, measure: Callable[[], ChartReport],
+def _subject_result(subject: str, run: Callable[[], ChartReport],
                     criterion: Criterion | None) -> GateResult:
-    """``measure()`` as the subject's result; an input error (or an unreadable file) its
-    ``error``."""
+    """``run()`` (the subject's check or audit) as its result; an input error (or an
+    unreadable file) its ``error``."""
     from fidelity.errors import FidelityError
 
     t0 = time.perf_counter()
     try:
-        report = measure()
+        report = run()
     except (FidelityError, OSError) as exc:
         return GateResult(subject, criterion, error=str(exc),
                           seconds=time.perf_counter() - t0)
