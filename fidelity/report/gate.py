@@ -93,14 +93,24 @@ def frames_figure(recording: str, frames: Sequence[int], cases: Sequence[GateRes
         px = float(ax.px(float(k)))
         c.line(px, float(ax.py(max(r.mean_delta_e - u, 0.0))), px,
                float(ax.py(r.mean_delta_e + u)), "#808080", 1.2)
-        tone = case.exit_code if r.verdict is not None else None
-        ax.marker(float(k), r.mean_delta_e, colour.get(tone, "#000") if tone is not None
-                  else "#000", 4.5)
+        ax.marker(float(k), r.mean_delta_e,
+                  colour.get(case.exit_code, "#000") if r.verdict is not None else "#000", 4.5)
     for i, k in enumerate(missing):  # on the axis: no chart measured there
         ax.marker(float(k), 0.0, "#fff", 4.0, "s", "not measured" if i == 0 else None)
     ax.legend("upper right")
     return svg_figure(c.render(), f"{what}s-{Path(recording).name}.svg",
                       f"chart ΔE over the {what}s of {recording}")
+
+
+def _recordings_figures(cases: Sequence[GateResult], frames: Sequence[int],
+                        recordings: Sequence[str], limit: float | None) -> list[Figure]:
+    """A :func:`frames_figure` per recording, of its subjects (``frames`` and ``recordings``:
+    each subject's frame and recording)."""
+    figures = []
+    for rec in dict.fromkeys(recordings):
+        mine = [(k, c) for k, c, r in zip(frames, cases, recordings, strict=True) if r == rec]
+        figures.append(frames_figure(rec, [k for k, _ in mine], [c for _, c in mine], limit))
+    return figures
 
 
 def gate_overview_document(cases: Sequence[GateResult], links: Sequence[str | None],
@@ -121,13 +131,8 @@ def gate_overview_document(cases: Sequence[GateResult], links: Sequence[str | No
     if frames is not None and recordings is not None:
         limit = criterion.limit if criterion is not None and \
             criterion.kind == "max-delta-e" else None
-        figures: list[Figure] = []
-        for rec in dict.fromkeys(recordings):
-            mine = [(k, c) for k, c, r in zip(frames, cases, recordings, strict=True)
-                    if r == rec]
-            figures.append(frames_figure(rec, [k for k, _ in mine], [c for _, c in mine],
-                                         limit))
-        sections.append(section("Over the frames", *figures))
+        sections.append(section("Over the frames",
+                                *_recordings_figures(cases, frames, recordings, limit)))
     sections.append(section("Subjects", table(
         ("subject", "verdict", "mean ΔE00 ± u (k=1)", "max ΔE00", "predicted ΔmAP, points",
          "error"), [_row(c, link) for c, link in zip(cases, links, strict=True)],
@@ -150,10 +155,7 @@ def audit_overview_document(cases: Sequence[GateResult], links: Sequence[str | N
         f", {missing} not measured" if missing else "")
     numbers = list(range(1, n + 1))
     if frames is not None and recordings is not None:
-        figures = [frames_figure(rec, [k for k, r in zip(frames, recordings, strict=True)
-                                      if r == rec],
-                                 [c for c, r in zip(cases, recordings, strict=True) if r == rec],
-                                 None) for rec in dict.fromkeys(recordings)]
+        figures = _recordings_figures(cases, frames, recordings, None)
     else:
         figures = [frames_figure("the images audited", numbers, cases, None, what="image",
                                  title="mean ΔE00 of each image, numbered as in the table "
@@ -185,5 +187,5 @@ def write_gate_overview(path: str | os.PathLike[str], cases: Sequence[GateResult
     return written
 
 
-__all__ = ["OUTCOMES", "OVERVIEW_NAME", "audit_overview_document", "frames_figure", "gate_overview_document",
-           "write_gate_overview"]
+__all__ = ["OUTCOMES", "OVERVIEW_NAME", "audit_overview_document", "frames_figure",
+           "gate_overview_document", "write_gate_overview"]
