@@ -26,6 +26,7 @@ from fidelity.cli.options import (
     measure_request,
     report_paths,
     write_evidence_files,
+    write_subject_reports,
 )
 from fidelity.fileio import display_path
 from fidelity.prediction.table import SIZES
@@ -93,10 +94,8 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
 
     from fidelity.check import audit_image, audit_images
     from fidelity.cli import error_line
-    from fidelity.errors import FidelityError
     from fidelity.fileio import check_outputs
     from fidelity.records import GateResult, ImageSource
-    from fidelity.report.chart import write_chart_report
     from fidelity.report.terminal import summary_lines
 
     if frames is not None and (read.frame is not None or read.time is not None):
@@ -144,25 +143,17 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
         subject = f"{image[0]} frame {frame_of[0]}" if frame_of else str(image[0])
         cases = [GateResult(subject, report=audit_image(image[0], corners, read=only,
                                                         **options))]
+    done = [write_subject_reports(case, jf, hf, image)
+            for case, jf, hf in zip(cases, json_files, html_files, strict=True)]
+    cases = [case for case, _ in done]
     indent = "  " if many else ""
-    written_all: list[Path] = []
-    for k, (case, name) in enumerate(zip(cases, names, strict=True)):
+    for (case, written), name in zip(done, names, strict=True):
         report = case.report
-        written: list[Path] = []
-        if report is not None:
-            try:
-                written = write_chart_report(report, json_path=json_files[k],
-                                             html_path=html_files[k], protect=image)
-            except (FidelityError, OSError) as exc:
-                if not many:
-                    raise
-                cases[k] = case = replace(case, report=None, error=str(exc))
-        if case.report is None:
-            click.echo(f"{name}: error")
+        if report is None:
+            if many:
+                click.echo(f"{name}: error")
             error_line(case.error or "not measured")
             continue
-        report = case.report
-        written_all.extend(written)
         if to_stdout:
             from fidelity.cli.options import write_json_output
             from fidelity.report.jsonform import chart_report_json
@@ -176,6 +167,7 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
             click.echo(indent + line)
         for p in written:
             click.echo(f"{indent}wrote {display_path(p)}")
+    written_all = [p for _, written in done for p in written]
     failed = sum(case.report is None for case in cases)
     if overview is not None:
         from fidelity.report.gate import write_gate_overview

@@ -35,6 +35,7 @@ from fidelity.cli.options import (
     max_pixels_option,
     report_paths,
     write_evidence_files,
+    write_subject_reports,
 )
 from fidelity.errors import FidelityError
 from fidelity.fileio import display_path
@@ -60,25 +61,6 @@ def _write_junit(junit: Path, cases: Sequence[GateResult]) -> None:
     except (FidelityError, OSError) as exc:
         _error_line(f"{junit}: cannot write JUnit XML: {exc}")
         sys.exit(EXIT_ERROR)
-
-
-def write_reports(result: GateResult, json_path: Path | None, html_path: Path | None,
-                  inputs: Sequence[Path]) -> tuple[GateResult, list[Path]]:
-    """Write a gated subject's JSON and HTML reports (never over an ``inputs`` file); a
-    failure to write them becomes the subject's error, as an input error does. Returns the
-    result and the files written."""
-    from dataclasses import replace
-
-    from fidelity.report.chart import write_chart_report
-
-    if result.report is None:
-        return result, []
-    try:
-        written = write_chart_report(result.report, json_path=json_path, html_path=html_path,
-                                     protect=list(inputs))
-    except (FidelityError, OSError) as exc:
-        return replace(result, report=None, error=str(exc)), []
-    return result, written
 
 
 @click.command()
@@ -223,7 +205,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         read=replace(read, max_pixels=max_pixels),
         reference=reference, illuminant=illuminant, renderer=renderer, size=size, table=table,
         bound=bound, decision=rule, frames=frame_of)
-    done = [write_reports(case, jp, hp, images)
+    done = [write_subject_reports(case, jp, hp, images)
             for case, jp, hp in zip(cases, json_paths, html_paths, strict=True)]
     cases = [case for case, _ in done]
     for case, written in done:

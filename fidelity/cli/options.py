@@ -217,6 +217,23 @@ def frames_summary(cases: Sequence[GateResult], images: Sequence[Path],
     return lines
 
 
+def write_subject_reports(result: GateResult, json_path: Path | None, html_path: Path | None,
+                          inputs: Sequence[Path]) -> tuple[GateResult, list[Path]]:
+    """Write a gated or audited subject's JSON and HTML reports (never over an ``inputs``
+    file); a failure to write them becomes the subject's error, as an input error does.
+    Returns the result and the files written."""
+    from fidelity.report.chart import write_chart_report
+
+    if result.report is None:
+        return result, []
+    try:
+        written = write_chart_report(result.report, json_path=json_path, html_path=html_path,
+                                     protect=list(inputs))
+    except (FidelityError, OSError) as exc:
+        return replace(result, report=None, error=str(exc)), []
+    return result, written
+
+
 class NameList(ParamTypeBase):
     """``all`` or comma-separated names from a known set -> a list of names."""
 
