@@ -104,6 +104,19 @@ def test_export_import_resume_reports_as_one_uninterrupted_run(data, tmp_path):
                         ("--prediction", "input"))):
         one_line_error(CliRunner().invoke(main, ["tables", str(scores), *bad]), *words)
 
+    # where the run stands, from the file alone: the store's counts; the file is no store folder
+    status = {}
+    for where in (tmp_path / "first", scores):
+        r = CliRunner().invoke(main, ["sweep", "--status", "--out", str(where)])
+        assert r.exit_code == 0, r.output
+        status[where] = next(ln.split()[1:5] for ln in r.output.splitlines()
+                             if ln.startswith("fake "))
+    assert status[scores] == status[tmp_path / "first"] == ["6", "5/5", "0", "0"]
+    assert f"scores file {scores} (a store's finished cells" in r.output
+    r = CliRunner().invoke(main, ["sweep", "--rescore", "--annotations", str(ann), "--out",
+                                  str(scores)])
+    one_line_error(r, "--out", "is a file", "--import-scores")
+
     # resumed with a wider grid: only the new cells run, and the report equals a run that never
     # moved
     finished = {(c.transform, c.target): c.finished for c in store.cells()}

@@ -41,8 +41,9 @@ if TYPE_CHECKING:
               default="0,1,2,3,4,5,6,8,10,12,15,18,21,24", show_default=True,
               help="Chart ΔE targets or ranges a-b; 0 is the baseline (decode + re-encode "
                    "only).")
-@click.option("--out", required=True, type=click.Path(file_okay=False),
-              help="Folder of the results store (sweep.sqlite); rerun to resume.")
+@click.option("--out", required=True, type=click.Path(),
+              help="Folder of the results store (sweep.sqlite); rerun to resume. With "
+                   "--status, also a scores file (--export-scores).")
 @click.option("--threads", type=click.IntRange(min=1), default=1, show_default=True,
               help="onnxruntime intra-op threads.")
 @click.option("--provider", type=click.Choice(["auto", "cpu", "cuda"]), default="auto",
@@ -58,7 +59,7 @@ if TYPE_CHECKING:
 @scores_options("--out")
 @click.option("--status", is_flag=True,
               help="Only say where the store in --out stands (per model: cells done, to do, "
-                   "under way, pace); safe while a sweep runs.")
+                   "under way, pace); safe while a sweep runs. --out may be a scores file.")
 @limit_option()
 @progress_option
 @executor_options
@@ -79,9 +80,27 @@ def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
       fidelity sweep --import-scores run.scores.json.gz --out NEWDIR   (then resume there)
       fidelity sweep ... --executor ray --address auto --workers 8   (a Ray cluster)
     """
+    from pathlib import Path
+
+    from fidelity.coco.scores import is_scores_file
     from fidelity.coco.sweep import SweepStore, run_sweep
     from fidelity.coco.sweep import rescore as do_rescore
 
+    carried = Path(out).is_file() and is_scores_file(out)  # a store carried as its scores
+    if status and carried:
+        from fidelity.coco.scores import scores_store_folder
+
+        with scores_store_folder(out, SweepStore) as folder:
+            store = SweepStore(folder, create=False)
+            try:
+                _print_status(store, shown=out)
+            finally:
+                store.close()
+        return
+    if Path(out).is_file():  # the store's folder (a scores file is read by --status alone)
+        raise click.BadParameter(f"Directory {out!r} is a file"
+                                 + (": give it to --import-scores, or to --status"
+                                    if carried else "."), param_hint="'--out'")
     if status:
         from fidelity.coco.tables import check_store_meta
 
@@ -104,8 +123,6 @@ def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
 
         raise InvalidValueError("--models and --images are needed (except with --rescore)")
     specs = list(models)
-    from pathlib import Path
-
     from fidelity.fileio import check_outputs
 
     check_outputs({"--out (sweep.sqlite)": Path(out) / SweepStore.store_name},
@@ -124,15 +141,18 @@ def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
     click.echo(f"{done} cells done, {len(cells) - done} unreachable; store {store.path}")
 
 
-def _print_status(store: SweepStore) -> None:
+def _print_status(store: SweepStore, shown: str | None = None) -> None:
+    """Where ``store`` stands; ``shown``: the scores file it was made from, if it was."""
     import time
 
     from fidelity.coco.store import process_gone
     from fidelity.coco.sweep import sweep_status
+    from fidelity.fileio import display_path
 
     rows = sweep_status(store)
     now = time.time()
-    click.echo(f"store {store.path}")
+    click.echo(f"store {store.path}" if shown is None else
+               f"scores file {display_path(shown)} (a store's finished cells, none under way)")
     for i in store.meta().get("imported") or []:
         cells = f", {i['cells']} cells" if i.get("cells") is not None else ""
         click.echo(f"imported {i.get('file')} (sha256 {str(i.get('sha256'))[:12]}, exported "

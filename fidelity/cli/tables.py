@@ -97,9 +97,7 @@ def _store_of_scores(stack: contextlib.ExitStack, path: str, out: str | None,
                      explain: str | None) -> str:
     """A temporary sweep store holding the cells of the scores file ``path`` (removed when
     ``stack`` closes); its report goes to ``--out``, which is then needed."""
-    import tempfile
-
-    from fidelity.coco.scores import import_scores, read_scores
+    from fidelity.coco.scores import scores_store_folder
     from fidelity.coco.sweep import SweepStore
     from fidelity.errors import InvalidValueError
 
@@ -108,12 +106,7 @@ def _store_of_scores(stack: contextlib.ExitStack, path: str, out: str | None,
                                 "scores file does not hold: give the sweep store")
     if out is None:
         raise InvalidValueError(f"{path}: a scores file: give --out for the report")
-    doc = read_scores(path, SweepStore)
-    folder = stack.enter_context(tempfile.TemporaryDirectory(prefix="fidelity-scores-"))
-    store = SweepStore(folder)
-    import_scores(store, path, doc)
-    store.close()
-    return folder
+    return str(stack.enter_context(scores_store_folder(path, SweepStore)))
 
 
 def _tables(store_dir: str, out: str | None, prediction: str | None, name: str,

@@ -35,11 +35,13 @@ A cell key is :func:`fidelity.coco.store.cell_key` of the cell's key columns
 
 from __future__ import annotations
 
+import contextlib
 import gzip
 import hashlib
 import json
 import os
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -349,6 +351,24 @@ def import_scores(store: ResultsStore, path: str | os.PathLike[str],
     return _transfer(p, sha256, store.kind, {"cells": {"columns": cols, "rows": new_cells}})
 
 
+@contextlib.contextmanager
+def scores_store_folder(path: str | os.PathLike[str], store_type: type[ResultsStore]
+                        ) -> Iterator[Path]:
+    """A temporary store folder holding the cells of the scores file ``path``
+    (:func:`import_scores` into a new ``store_type``), removed when the block ends: what
+    ``fidelity tables FILE`` and ``fidelity sweep --status --out FILE`` read."""
+    import tempfile
+
+    doc = read_scores(path, store_type)
+    with tempfile.TemporaryDirectory(prefix="fidelity-scores-") as folder:
+        store = store_type(folder)
+        try:
+            import_scores(store, path, doc)
+        finally:
+            store.close()
+        yield Path(folder)
+
+
 __all__ = ["JOINED_META", "LEFT_OUT", "SCORES_FORMAT", "SCORES_VERSION", "ScoresTransfer",
            "detections_digest", "export_scores", "import_scores", "is_scores_file",
-           "read_scores"]
+           "read_scores", "scores_store_folder"]
