@@ -94,14 +94,35 @@ def _machine_words(doc: dict[str, Any]) -> str:
             + (f", instructions {' '.join(ins)}" if ins else ""))
 
 
+#: A version left out of the comparison: fidelity's own string says how it was installed
+#: (``0.0.0+source`` from a checkout); the code is the commit both runs used.
+_NOT_COMPARED = ("fidelity",)
+
+
+def version_differences(a: dict[str, Any], b: dict[str, Any]) -> dict[str, list[Any]]:
+    """The versions two runs computed with that differ (name -> [A's, B's]: Python and the
+    libraries; None where one run lacks a library)."""
+    va, vb = a.get("versions") or {}, b.get("versions") or {}
+    return {k: [va.get(k), vb.get(k)] for k in sorted(set(va) | set(vb))
+            if k not in _NOT_COMPARED and va.get(k) != vb.get(k)}
+
+
+def _versions_words(a: dict[str, Any], b: dict[str, Any]) -> str:
+    diff = version_differences(a, b)
+    if not diff:
+        return "same library versions"
+    return "library versions differ: " + ", ".join(f"{k} {x} / {y}" for k, (x, y) in
+                                                   diff.items())
+
+
 def markdown(a: dict[str, Any], b: dict[str, Any], result: dict[str, Any]) -> str:
     s = result["summary"]
     lines = [
-        f"# Same sweep cells on two machines: {a['model']}",
+        f"# Same sweep cells in two runs: {a['model']}",
         "",
         "Written by `python -m benchmarks.cross_machine compare A.json B.json` from the "
         "per-image digests `python -m benchmarks.cross_machine digest STORE` made of each "
-        "machine's store (same code, library versions, images and detector file).",
+        f"run's store (same code, images and detector file; {_versions_words(a, b)}).",
         "",
         f"- A: {_machine_words(a)}; versions {json.dumps(a.get('versions'))}",
         f"- B: {_machine_words(b)}; versions {json.dumps(b.get('versions'))}",

@@ -78,7 +78,7 @@ def _doc(maps: dict[str, float], digests: dict[str, dict[str, str]]) -> dict[str
 
 
 def test_cross_machine_comparison_counts_images_and_differences_of_losses() -> None:
-    from benchmarks.cross_machine import compare, markdown
+    from benchmarks.cross_machine import compare, markdown, version_differences
 
     a = _doc({"baseline:0": 0.40, "hue:1": 0.39, "hue:3": 0.38},
              {"baseline:0": {"1": "a", "2": "b", "3": "c"}, "hue:1": {"1": "d", "2": "e"}})
@@ -94,5 +94,12 @@ def test_cross_machine_comparison_counts_images_and_differences_of_losses() -> N
     assert s["loss_difference_mean"] == pytest.approx(0.75)
     assert s["loss_difference_max_abs"] == pytest.approx(1.0)
     assert "3 of 4" in markdown(a, b, r)
+    assert "same library versions" in markdown(a, b, r)
+    a["versions"] = {"python": "3.11.7", "onnxruntime": "1.32.0", "fidelity": "0.1.0"}
+    b["versions"] = {"python": "3.11.7", "onnxruntime": "1.30.0", "numpy": "2.5.2",
+                     "fidelity": "0.0.0+source"}
+    assert version_differences(a, b) == {"numpy": [None, "2.5.2"],
+                                         "onnxruntime": ["1.32.0", "1.30.0"]}
+    assert "onnxruntime 1.32.0 / 1.30.0" in markdown(a, b, r)
     empty = compare(_doc({}, {}), _doc({}, {}))["summary"]
     assert empty["identical_fraction"] is None and empty["loss_difference_mean"] is None
