@@ -85,3 +85,49 @@ def test_resweep_queue_runs_each_detector_after_the_other_into_its_own_store(tmp
     assert r.returncode != 0
     assert log.read_text().splitlines() == ["/s/resweep-yolox_nano yolox_nano.onnx",
                                             "/s/resweep-fail fail.onnx"]
+
+
+def test_reproduction_sample_runs_the_same_cells_of_each_detector_and_copies_the_stores(
+        tmp_path):
+    """benchmarks/reproduction_sample.sh: PROCESSES sweep processes per detector on one store
+    (the grid of the sample, CPU provider), one --provider cuda try, and a copy of each
+    store in OUT (what comes back from a lent machine)."""
+    import sqlite3
+    import subprocess
+    import sys
+
+    log = tmp_path / "calls"
+    py = tmp_path / "python"  # stands in for the interpreter: runs -c, logs and fakes a sweep
+    py.write_text(f"""#!{sys.executable}
+import sqlite3, subprocess, sys
+from pathlib import Path
+if sys.argv[1] == "-c":
+    sys.exit(subprocess.call([{sys.executable!r}, *sys.argv[1:]]))
+with open({str(log)!r}, "a") as f:
+    f.write(" ".join(sys.argv[1:]) + "\\n")
+out = Path(sys.argv[sys.argv.index("--out") + 1])
+out.mkdir(parents=True, exist_ok=True)
+db = sqlite3.connect(out / "sweep.sqlite")
+db.execute("CREATE TABLE IF NOT EXISTS cells (model TEXT)")
+db.execute("INSERT INTO cells VALUES (?)", (out.name,))
+db.commit()
+""")
+    py.chmod(0o755)
+    out, stores = tmp_path / "out", tmp_path / "stores"
+    r = subprocess.run(["bash", str(REPO / "benchmarks" / "reproduction_sample.sh"), "data",
+                        str(out), str(py)], capture_output=True, text=True, cwd=tmp_path,
+                       env={"PATH": "/usr/bin:/bin", "PROCESSES": "3",
+                            "STORES": str(stores)})
+    assert r.returncode == 0, r.stderr
+    calls = log.read_text().splitlines()
+    for model in ("yolov8n-int8dyn", "yolox_nano"):
+        mine = [c for c in calls if f"data/models/{model}.onnx" in c and "cpu" in c]
+        assert len(mine) == 3
+        assert all("--transforms hue,pull_mean,contrast-dec,gamma-inc --targets 0,6,24" in c
+                   and f"--out {stores / model}" in c and "--limit 250" in c for c in mine)
+        copy = sqlite3.connect(out / f"{model}.sqlite")
+        assert copy.execute("SELECT COUNT(*) FROM cells").fetchone() == (3,)
+    cuda = [c for c in calls if "--provider cuda" in c]
+    assert len(cuda) == 1 and "yolox_nano" in cuda[0]
+    assert (out / "cuda.log").read_text().strip().endswith("exit 0")
+    assert "cpus:" in (out / "machine.txt").read_text()

@@ -17,6 +17,7 @@ from fidelity.cli.options import (
     common_options,
     evidence_option,
     evidence_outputs,
+    frame_report_names,
     frame_subjects,
     frames_summary,
     image_read_options,
@@ -105,10 +106,9 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
     frame_of: list[int] | None = None
     if frames is not None:  # each selected frame of each recording is a subject
         image, frame_of = frame_subjects(image, frames, read.topic)
-        reports_of = tuple(Path(f"{img}.frame{k}") for img, k in zip(image, frame_of,
-                                                                        strict=True))
-    names = [display_path(img) if frame_of is None else f"{display_path(img)} frame {k}"
-             for img, k in zip(image, frame_of or image, strict=True)]
+        reports_of = frame_report_names(image, frame_of)
+    names = ([display_path(img) for img in image] if frame_of is None else
+             [f"{display_path(img)} frame {k}" for img, k in zip(image, frame_of, strict=True)])
     many = len(image) > 1
     # an existing folder, or one written with a trailing separator, gets IMAGE-NAME.json /
     # .html, as in `fidelity gate`; several images always do

@@ -27,6 +27,7 @@ from fidelity.cli.options import (
     decision_rule,
     evidence_option,
     evidence_outputs,
+    frame_report_names,
     frame_subjects,
     frames_summary,
     from_settings,
@@ -166,8 +167,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         many = len(images) > 1
         # a folder (always so with several subjects) gets one report per image (or camera)
         subjects = ((images or (Path(camera or ""),)) if frame_of is None else
-                    tuple(Path(f"{img}.frame{k}") for img, k in zip(images, frame_of,
-                                                                       strict=True)))
+                    frame_report_names(images, frame_of))
         json_paths = report_paths(subjects, json_path, ".json", folder=many)
         html_paths = report_paths(subjects, html_path, ".html", folder=many)
         outputs: dict[str, Path | None] = {"--junit": junit, **evidence_outputs(evidence_paths)}

@@ -195,6 +195,12 @@ def frame_subjects(images: Sequence[Path], frames: FrameSelection, topic: str | 
     return tuple(paths), frame_of
 
 
+def frame_report_names(images: Sequence[Path], frame_of: Sequence[int]) -> tuple[Path, ...]:
+    """What each frame's report is named after: ``RECORDING.frameK`` (its reports are
+    ``RECORDING.frameK.json`` / ``.html`` in the --json / --html folder)."""
+    return tuple(Path(f"{img}.frame{k}") for img, k in zip(images, frame_of, strict=True))
+
+
 def frames_summary(cases: Sequence[GateResult], images: Sequence[Path],
                     frame_of: Sequence[int]) -> list[str]:
     """How the chart ΔE varies over the frames gated or audited (the measured ones), per
