@@ -11,6 +11,11 @@ Usage:
       machine's processor and instructions to a store made here by a version that did not
       record them
   python -m benchmarks.cross_machine compare A.json B.json [--out reports/coco/cross_machine]
+      [--stores STORE_A STORE_B]
+      --stores: where both stores are at hand, also how far apart the detections that are not
+      bit for bit the same are (boxes in pixels, scores), cell by cell
+
+benchmarks/reproduction_sample.sh runs the same sample cells on any machine.
 """
 
 from __future__ import annotations
@@ -23,6 +28,8 @@ import statistics
 import zlib
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from benchmarks.machine import write_report
 
@@ -47,6 +54,53 @@ def digest_store(store: str | Path, model: str | None = None) -> dict[str, Any]:
     db.close()
     return {"model": model, "machine": meta.get("machine"), "versions": meta.get("versions"),
             "settings": settings, "cells": cells, "digests": digests}
+
+
+def detection_differences(a: dict[int, np.ndarray], b: dict[int, np.ndarray]
+                          ) -> dict[str, Any]:
+    """How far apart two runs' detections of one cell are (image id -> (n, 6) ``x1, y1, x2,
+    y2, score, class``): over the images both hold, how many have as many detections of each
+    class (``matched``), the largest difference of a box coordinate (pixels) and of a score
+    among those, each detection paired with the other run's of its class whose box is nearest
+    (largest coordinate difference, optimal assignment: two near-equal scores may swap the
+    order), and how many images do not (``unmatched``)."""
+    from scipy.optimize import linear_sum_assignment
+
+    matched = unmatched = 0
+    box = score = 0.0
+    for i in sorted(set(a) & set(b)):
+        da, db_ = a[i].astype(np.float64), b[i].astype(np.float64)
+        if da.shape != db_.shape or not np.array_equal(np.sort(da[:, 5]), np.sort(db_[:, 5])):
+            unmatched += 1
+            continue
+        matched += 1
+        for c in np.unique(da[:, 5]):
+            pa, pb = da[da[:, 5] == c], db_[db_[:, 5] == c]
+            cost = np.abs(pa[:, None, :4] - pb[None, :, :4]).max(axis=2)
+            r, k = linear_sum_assignment(cost)
+            box = max(box, float(cost[r, k].max()))
+            score = max(score, float(np.abs(pa[r, 4] - pb[k, 4]).max()))
+    return {"matched": matched, "unmatched": unmatched, "max_box_px": box,
+            "max_score": score}
+
+
+def _store_detections(store: str | Path, model: str) -> dict[str, dict[int, np.ndarray]]:
+    from fidelity.coco.store import unpack_detections
+
+    db = sqlite3.connect(f"file:{Path(store) / 'sweep.sqlite'}?mode=ro", uri=True)
+    cells: dict[str, dict[int, np.ndarray]] = {}
+    for t, g, i, blob in db.execute(
+            "SELECT transform, target, image_id, dets FROM detections WHERE model=?", (model,)):
+        cells.setdefault(f"{t}:{g:g}", {})[int(i)] = unpack_detections(blob)
+    db.close()
+    return cells
+
+
+def store_differences(store_a: str | Path, store_b: str | Path, model: str
+                      ) -> list[dict[str, Any]]:
+    """:func:`detection_differences` of every cell both stores hold of ``model``."""
+    a, b = _store_detections(store_a, model), _store_detections(store_b, model)
+    return [{"cell": k, **detection_differences(a[k], b[k])} for k in sorted(set(a) & set(b))]
 
 
 def _cell_maps(doc: dict[str, Any]) -> dict[str, float]:
@@ -154,6 +208,16 @@ def markdown(a: dict[str, Any], b: dict[str, Any], result: dict[str, Any]) -> st
     lines += [f"| {c['cell']} | {c['images']} | {c['identical']} "
               f"({100 * c['identical'] / c['images']:.1f} %) |"
               for c in result["images"] if c["images"]]
+    if result.get("differences"):
+        lines += ["", "How far apart the detections are, image by image: an image is matched when "
+                  "both runs found as many detections of each class; each detection is paired "
+                  "with the other run's of its class whose box is nearest; the largest "
+                  "difference of a box coordinate (pixels) and of a score over the matched "
+                  "images.", "",
+                  "| cell | matched | unmatched | largest box difference (px) | "
+                  "largest score difference |", "|---|---:|---:|---:|---:|"]
+        lines += [f"| {d['cell']} | {d['matched']} | {d['unmatched']} | {d['max_box_px']:.2g} | "
+                  f"{d['max_score']:.2g} |" for d in result["differences"]]
     return "\n".join(lines) + "\n"
 
 
@@ -169,6 +233,7 @@ def main(argv: list[str] | None = None) -> None:
     c.add_argument("a")
     c.add_argument("b")
     c.add_argument("--out", default="reports/coco/cross_machine")
+    c.add_argument("--stores", nargs=2, metavar=("STORE_A", "STORE_B"))
     args = ap.parse_args(argv)
     if args.verb == "digest":
         from fidelity.fileio import write_text_atomic
@@ -182,6 +247,8 @@ def main(argv: list[str] | None = None) -> None:
         return
     a, b = (json.loads(Path(p).read_text(encoding="utf-8")) for p in (args.a, args.b))
     result = compare(a, b)
+    if args.stores:
+        result["differences"] = store_differences(args.stores[0], args.stores[1], a["model"])
     write_report(args.out, {"a": {k: a[k] for k in ("model", "machine", "versions")},
                             "b": {k: b[k] for k in ("model", "machine", "versions")},
                             **result}, markdown(a, b, result))

@@ -103,3 +103,25 @@ def test_cross_machine_comparison_counts_images_and_differences_of_losses() -> N
     assert "onnxruntime 1.32.0 / 1.30.0" in markdown(a, b, r)
     empty = compare(_doc({}, {}), _doc({}, {}))["summary"]
     assert empty["identical_fraction"] is None and empty["loss_difference_mean"] is None
+
+
+def test_detection_differences_pair_each_detection_with_the_nearest_of_its_class() -> None:
+    import numpy as np
+
+    from benchmarks.cross_machine import detection_differences
+
+    d = np.array([[10, 10, 50, 50, 0.90, 0], [12, 11, 52, 49, 0.90, 0],
+                  [0, 0, 5, 5, 0.30, 2]], np.float32)
+    swapped = d[[1, 0, 2]].copy()  # two near-equal scores in the other order
+    moved = d.copy()
+    moved[2, :4] += 0.5
+    moved[0, 4] -= 0.25
+    other = d.copy()
+    other[2, 5] = 3
+    r = detection_differences({1: d, 2: d, 3: d, 4: d, 5: d[:0]},
+                              {1: swapped, 2: moved, 3: other, 4: d[:2], 5: d[:0], 6: d})
+    assert (r["matched"], r["unmatched"]) == (3, 2)  # images 1, 2, 5; 3 and 4; 6 only in b
+    assert r["max_box_px"] == pytest.approx(0.5)
+    assert r["max_score"] == pytest.approx(0.25)
+    same = detection_differences({1: d}, {1: swapped})
+    assert same["max_box_px"] == 0 and same["max_score"] == 0
