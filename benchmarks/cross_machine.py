@@ -103,8 +103,14 @@ def store_differences(store_a: str | Path, store_b: str | Path, model: str
     return [{"cell": k, **detection_differences(a[k], b[k])} for k in sorted(set(a) & set(b))]
 
 
-def _cell_maps(doc: dict[str, Any]) -> dict[str, float]:
-    return {f"{t}:{g:g}": m for t, g, n, m in doc["cells"] if m is not None}
+def _cell_maps(a: dict[str, Any], b: dict[str, Any]) -> tuple[dict[str, float],
+                                                                dict[str, float]]:
+    """The finished cells' mAP of each run, of the cells both finished on as many images
+    (a run of fewer images scores other images)."""
+    ma = {f"{t}:{g:g}": (n, m) for t, g, n, m in a["cells"] if m is not None}
+    mb = {f"{t}:{g:g}": (n, m) for t, g, n, m in b["cells"] if m is not None}
+    both = {k for k in set(ma) & set(mb) if ma[k][0] == mb[k][0]}
+    return {k: ma[k][1] for k in both}, {k: mb[k][1] for k in both}
 
 
 def compare(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
@@ -118,7 +124,7 @@ def compare(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
         same += eq
         total += len(common)
         cells.append({"cell": key, "images": len(common), "identical": eq})
-    ma, mb = _cell_maps(a), _cell_maps(b)
+    ma, mb = _cell_maps(a, b)
     base = "baseline:0"
     rows: list[dict[str, Any]] = []
     if base in ma and base in mb:

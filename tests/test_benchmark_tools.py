@@ -128,6 +128,6 @@ db.commit()
         copy = sqlite3.connect(out / f"{model}.sqlite")
         assert copy.execute("SELECT COUNT(*) FROM cells").fetchone() == (3,)
     cuda = [c for c in calls if "--provider cuda" in c]
-    assert len(cuda) == 1 and "yolox_nano" in cuda[0]
+    assert len(cuda) == 1 and "yolov8n-int8dyn" in cuda[0]
     assert (out / "cuda.log").read_text().strip().endswith("exit 0")
     assert "cpus:" in (out / "machine.txt").read_text()

@@ -95,6 +95,11 @@ def test_cross_machine_comparison_counts_images_and_differences_of_losses() -> N
     assert s["loss_difference_max_abs"] == pytest.approx(1.0)
     assert "3 of 4" in markdown(a, b, r)
     assert "same library versions" in markdown(a, b, r)
+    fewer = _doc({"baseline:0": 0.41, "hue:1": 0.395}, b["digests"])
+    fewer["cells"] = [[t, g, 2, m] for t, g, _, m in fewer["cells"]]  # a run of 2 images
+    other = compare(a, fewer)
+    assert other["losses"] == [] and other["summary"]["baseline_map_a"] is None
+    assert other["summary"]["identical"] == 3  # the images both ran still compare
     a["versions"] = {"python": "3.11.7", "onnxruntime": "1.32.0", "fidelity": "0.1.0"}
     b["versions"] = {"python": "3.11.7", "onnxruntime": "1.30.0", "numpy": "2.5.2",
                      "fidelity": "0.0.0+source"}
