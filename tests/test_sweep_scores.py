@@ -215,6 +215,25 @@ def test_a_store_resumed_with_other_versions_records_both(data, tmp_path, monkey
     assert meta["versions_seen"] == [first, meta["versions"]]
     again = sweep(data, tmp_path / "s", ["contrast-inc"], [0, 3]).meta()["versions_seen"]
     assert len(again) == 2
+    assert first["opencv"]  # OpenCV resizes the images for the detector
+    # a store whose runs were recorded before OpenCV was named: resumed with the same
+    # libraries, it does not gain a second set
+    older = sweep(data, tmp_path / "o", ["contrast-inc"], [0])
+    before = {k: v for k, v in older.meta()["versions"].items() if k != "opencv"}
+    older.set_meta("versions", before)
+    older.set_meta("versions_seen", [before])
+    older.close()
+    assert sweep(data, tmp_path / "o", ["contrast-inc"], [0, 3]).meta()["versions_seen"] \
+        == [before]
+
+
+def test_versions_recorded_before_a_library_was_named_are_the_same_set():
+    from fidelity.coco.sweep import same_versions
+
+    old = {"python": "3.11.7", "onnxruntime": "1.32.0"}
+    assert same_versions(old, {**old, "opencv": "4.14.0"})
+    assert not same_versions(old, {**old, "onnxruntime": "1.30.0", "opencv": "4.14.0"})
+    assert same_versions({}, old)
 
 
 def test_two_machines_shares_of_one_sweep_join_into_one_store(data, tmp_path):

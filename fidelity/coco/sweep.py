@@ -404,10 +404,11 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     store = SweepStore(out)
     image_set = ImageSet(img_dir, coco, all_ids)
     store.start_run(image_set, [m.limit for m in models], annotations)
+    import cv2
     import PIL
 
     versions = {"python": platform.python_version(), "onnxruntime": onnxruntime.__version__,
-                "numpy": np.__version__, "Pillow": PIL.__version__,
+                "numpy": np.__version__, "Pillow": PIL.__version__, "opencv": cv2.__version__,
                 "pycocotools": _dist_version("pycocotools"),
                 "faster-coco-eval": _dist_version("faster-coco-eval"), "fidelity": __version__}
     # every distinct set of versions that has run in this store, first to last (a run resumed
@@ -415,7 +416,7 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     meta = store.meta()
     seen = meta.get("versions_seen") or ([meta["versions"]] if meta.get("versions") else [])
     store.set_meta("versions", versions)
-    if versions not in seen:
+    if not any(same_versions(versions, s) for s in seen):
         store.set_meta("versions_seen", [*seen, versions])
     store.record_scorer(method)
     store.set_meta("grid", {"transforms": list(transforms), "targets": list(targets),
@@ -645,6 +646,13 @@ def rescore(store: SweepStore, annotations: str | os.PathLike[str], method: str 
         n += 1
     store.record_scorer(method, all_cells=True)
     return n
+
+
+def same_versions(a: Mapping[str, Any], b: Mapping[str, Any]) -> bool:
+    """Whether two runs' recorded versions are the same set: equal wherever both name a
+    library (an entry written before a library was recorded, such as OpenCV, which resizes
+    the images for the detector, is not another set for lacking it)."""
+    return all(a[k] == b[k] for k in a.keys() & b.keys())
 
 
 def _dist_version(name: str) -> str | None:

@@ -853,9 +853,12 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     store = ValidationStore(store_dir)
     image_set = ImageSet(img_dir, coco, all_ids)
     store.start_run(image_set, [m.limit for m in models], annotations)
+    import cv2
+
     store.set_meta("versions", {"python": platform.python_version(),
                                 "onnxruntime": onnxruntime.__version__, "numpy": np.__version__,
-                                "fidelity": __version__, "colour": _colour_version()})
+                                "opencv": cv2.__version__, "fidelity": __version__,
+                                "colour": _colour_version()})
     store.set_meta("settings", {"emulation_method": method, "training": training,
                                 "folds": FOLDS, "size_class": "n",
                                 "jpeg": "original quantisation tables and subsampling "
