@@ -6,6 +6,7 @@ instruction set, so an int8 detector may compute differently on another processo
 
 Usage:
   python -m benchmarks.cross_machine digest STORE OUT.json [--model M] [--cpu-here]
+      (STORE: a sweep store's folder or its sqlite file)
       per-image digests (SHA-256 of the detections, 16 hex digits), the finished cells' mAP and
       the store's provenance; small enough to carry off a lent machine. --cpu-here: add this
       machine's processor and instructions to a store made here by a version that did not
@@ -34,10 +35,18 @@ import numpy as np
 from benchmarks.machine import write_report
 
 
+def _open(store: str | Path) -> sqlite3.Connection:
+    """A sweep store, read only: its folder, or its ``sweep.sqlite`` (or a copy of it, as
+    benchmarks/reproduction_sample.sh brings back)."""
+    path = Path(store)
+    return sqlite3.connect(f"file:{path if path.is_file() else path / 'sweep.sqlite'}?mode=ro",
+                           uri=True)
+
+
 def digest_store(store: str | Path, model: str | None = None) -> dict[str, Any]:
     """Per-image detection digests, finished cells and provenance of a sweep store (read
     only)."""
-    db = sqlite3.connect(f"file:{Path(store) / 'sweep.sqlite'}?mode=ro", uri=True)
+    db = _open(store)
     models = [r[0] for r in db.execute("SELECT model FROM models")]
     model = model or models[0]
     meta = {k: json.loads(v) for k, v in db.execute("SELECT key, value FROM meta")}
@@ -87,7 +96,7 @@ def detection_differences(a: dict[int, np.ndarray], b: dict[int, np.ndarray]
 def _store_detections(store: str | Path, model: str) -> dict[str, dict[int, np.ndarray]]:
     from fidelity.coco.store import unpack_detections
 
-    db = sqlite3.connect(f"file:{Path(store) / 'sweep.sqlite'}?mode=ro", uri=True)
+    db = _open(store)
     cells: dict[str, dict[int, np.ndarray]] = {}
     for t, g, i, blob in db.execute(
             "SELECT transform, target, image_id, dets FROM detections WHERE model=?", (model,)):

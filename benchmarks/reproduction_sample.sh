@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The reproduction sample: the same sweep cells, on the same images, run on two machines, to
-# compare their detections and scores (benchmarks/reproduction_compare.py). Run it on each
-# machine from the repository root:
+# compare their detections and scores (python -m benchmarks.cross_machine digest, then
+# compare --stores). Run it on each machine from the repository root:
 #
 #   benchmarks/reproduction_sample.sh DATA OUT [PYTHON]
 #
@@ -34,8 +34,8 @@ print('onnxruntime', o.__version__, o.get_available_providers())"
 
 run() {  # MODEL [--provider P] [extra options]
     local model=$1; shift
-    timeout "${SWEEP_SECONDS:-3600}" "$py" -m fidelity sweep --models "$data/models/$model.onnx" --images "$data/val2017" \
-        --annotations "$data/annotations.json" --limit "$limit" --threads 1 \
+    timeout "${SWEEP_SECONDS:-3600}" "$py" -m fidelity sweep --models "$data/models/$model.onnx" \
+        --images "$data/val2017" --annotations "$data/annotations.json" --limit "$limit" --threads 1 \
         --scorer pycocotools --no-progress "$@"
 }
 for model in "${models[@]}"; do

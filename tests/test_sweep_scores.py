@@ -313,3 +313,18 @@ def test_a_cell_finished_during_the_export_waits_for_the_next(data, tmp_path, mo
     assert t.cells == 2 and sorted(r[1:3] for r in doc["tables"]["cells"]["rows"]) == [
         ["baseline", 0.0], ["contrast-inc", 3.0]]
     assert '["fake", "contrast-inc", 6.0]' not in doc["detections_sha256"]
+
+
+def test_cross_machine_digest_reads_a_store_folder_or_its_sqlite_file(data, tmp_path):
+    """benchmarks.cross_machine digest: per cell, one digest per image of its detections; the
+    store's folder and its sqlite file (a copy brought back from a lent machine) read alike."""
+    from benchmarks.cross_machine import digest_store
+
+    store = sweep(data, tmp_path / "s", ["contrast-inc"], [0, 3])
+    images = store.db.execute("SELECT COUNT(*) FROM images").fetchone()[0]
+    store.close()
+    doc = digest_store(tmp_path / "s")
+    assert sorted(doc["digests"]) == ["baseline:0", "contrast-inc:3"]
+    assert all(len(d) == images for d in doc["digests"].values())
+    assert doc["versions"]["opencv"] and len(doc["cells"]) == 2
+    assert digest_store(tmp_path / "s" / "sweep.sqlite") == doc
