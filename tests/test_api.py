@@ -32,9 +32,10 @@ def test_the_version_is_the_installed_distributions():
     from importlib.metadata import version
 
     assert fidelity.__version__ == version("camera-fidelity")
-    code = "import sys, fidelity.version; print('importlib.metadata' in sys.modules)"
+    code = ("import sys, fidelity.version as v; a = 'importlib.metadata' in sys.modules; "
+            "n = v.installed_version('numpy'); print(a, 'importlib.metadata' in sys.modules, n)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "False"
+    assert out.stdout.split() == ["False", "False", version("numpy")]
 
 
 def test_installed_versions_equal_importlib_metadatas():
@@ -48,6 +49,44 @@ def test_installed_versions_equal_importlib_metadatas():
     assert len(names) > 20
     assert {n: installed_version(n) for n in names} == {n: version(n) for n in names}
     assert installed_version("no-such-distribution-here") is None
+
+
+def test_installed_version_reads_odd_metadata_folders_as_importlib_does(tmp_path, monkeypatch):
+    """Folder names with dots and capitals, an egg-info folder and an egg-info file, a
+    dist-info without a version header, and a name installed twice along ``sys.path`` (the
+    first wins): the same answers as ``importlib.metadata.version`` on the same path."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    from fidelity import version as module
+
+    first, second = tmp_path / "first", tmp_path / "second"
+    for folder, text in [
+        (first / "Zz_Dotted.Name-1.2.3.dist-info" / "METADATA",
+         "Metadata-Version: 2.1\r\nName: zz-dotted.name\r\nVersion: 1.2.3\r\n\r\nVersion: 9"),
+        (first / "zz_eggdir-0.5-py3.11.egg-info" / "PKG-INFO",
+         "Metadata-Version: 1.1\nName: zz-eggdir\nVersion: 0.5\n"),
+        (first / "zz_eggfile-2.0.egg-info", "Metadata-Version: 1.1\nName: zz_eggfile\nVersion: 2.0\n"),
+        (first / "zz_noversion-1.0.dist-info" / "METADATA", "Metadata-Version: 2.1\nName: zz-noversion\n"),
+        (first / "zz_twice-1.0.dist-info" / "METADATA", "Metadata-Version: 2.1\nName: zz-twice\nVersion: 1.0\n"),
+        (second / "zz_twice-2.0.dist-info" / "METADATA", "Metadata-Version: 2.1\nName: zz-twice\nVersion: 2.0\n"),
+    ]:
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        folder.write_bytes(text.encode())
+    monkeypatch.syspath_prepend(str(second))
+    monkeypatch.syspath_prepend(str(first))
+
+    def reference(name):
+        try:
+            return version(name)
+        except PackageNotFoundError:
+            return None
+
+    names = ["zz-dotted.name", "ZZ_Dotted-Name", "zz-eggdir", "zz.eggfile", "zz-noversion",
+             "zz-twice", "zz-absent"]
+    got = {n: module.installed_version(n) for n in names}
+    assert got == {n: reference(n) for n in names}
+    assert got["zz-dotted.name"] == "1.2.3" and got["zz-twice"] == "1.0"
+    assert got["zz-absent"] is None
 
 
 def test_check_camera_in_three_lines_matches_the_closed_form():
