@@ -3,14 +3,18 @@ change, measured side by side so that a busy moment of the machine hits both ali
 
 The anchor is the package of ``--anchor`` (exported with ``git archive``: ``fidelity`` and the
 data folders it reads), run with ``python -m fidelity`` from that folder; this checkout is run
-the same way from the repository. Commands: ``fidelity audit PHOTO.jpg --json F`` of
-``bench_startup``'s 12-megapixel photo and ``fidelity check`` with its default HTML + JSON
-report. Each is run ``--repeats`` times per side, the sides alternating; the result is the
+the same way from the repository. Commands (``--set``): ``startup``, ``fidelity audit
+PHOTO.jpg --json F`` of ``bench_startup``'s 12-megapixel photo and ``fidelity check`` with its
+default HTML + JSON report; ``validate``, a quick look with ``fidelity validate --limit 8`` (three
+cameras of ``cameras/``, YOLOX-nano; the shared data of ``$FIDELITY_SHARED``, default
+``../shared``), each run from an empty store. Each is run ``--repeats`` times per side, the sides alternating; the result is the
 median and best wall time, the median max RSS and the ratio of medians (this / anchor), with
 the machine and its load average.
 
     python -m benchmarks.bench_versions --anchor 8913577 --repeats 15
     # -> reports/benchmarks/versions.json
+    python -m benchmarks.bench_versions --anchor 82d4032 --set validate --repeats 5 \
+        --out reports/benchmarks/versions_validate.json
 """
 
 from __future__ import annotations
@@ -38,8 +42,27 @@ def export(rev: str, into: Path,
     subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
 
 
-def commands(photo: Path, out: Path) -> dict[str, list[str]]:
+#: The cameras of the ``validate`` set (files of ``cameras/``).
+VALIDATE_CAMERAS = ("ideal-srgb8", "bad-hue-rotation", "nikon5100-gamma22")
+
+
+def commands(photo: Path, out: Path, which: str = "startup",
+             shared: Path | None = None) -> dict[str, list[str]]:
+    """Name -> command line of the set ``which`` (module docstring); ``out``: a scratch folder."""
     py = [sys.executable, "-m", "fidelity"]
+    if which == "validate":
+        s = shared or Path(os.environ.get("FIDELITY_SHARED") or REPO.parent / "shared")
+        cams = out / "cameras"
+        cams.mkdir(exist_ok=True)
+        for name in VALIDATE_CAMERAS:
+            (cams / f"{name}.toml").write_bytes((REPO / "cameras" / f"{name}.toml").read_bytes())
+        return {f"fidelity validate --limit 8 ({len(VALIDATE_CAMERAS)} cameras, YOLOX-nano)":
+                [*py, "validate", "--cameras", str(cams), "--models",
+                 str(s / "models" / "yolox_nano.onnx"), "--images", str(s / "coco" / "val2017"),
+                 "--annotations", str(s / "coco" / "annotations" /
+                                      "instances_val2017_subset.json"),
+                 "--limit", "8", "--threads", "1", "--out", str(out / "validation"),
+                 "--store", str(out / "store"), "--no-progress", "-q"]}
     return {"fidelity audit PHOTO.jpg --json F (12 MP)":
             [*py, "audit", str(photo), "-q", "--json", str(out / "audit.json")],
             "fidelity check (default HTML + JSON report)":
@@ -47,10 +70,15 @@ def commands(photo: Path, out: Path) -> dict[str, list[str]]:
 
 
 def run(argv: list[str], source: Path) -> tuple[float, float]:
-    """Wall seconds and max RSS (MB) of ``argv`` with the package of ``source``."""
+    """Wall seconds and max RSS (MB) of ``argv`` with the package of ``source`` (a ``--store``
+    in ``argv`` is removed first: every run starts from an empty store)."""
+    import shutil
+
     from benchmarks.bench_memory import run_process
     from benchmarks.bench_startup import user_environment
 
+    if "--store" in argv:
+        shutil.rmtree(argv[argv.index("--store") + 1], ignore_errors=True)
     env = dict(user_environment(), PYTHONPATH=str(source))
     row = run_process(argv, env=env, cwd=source)  # python -m puts the working folder first
     if row["exit"] not in (0, 1):
@@ -62,6 +90,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--anchor", required=True, help="commit to compare this checkout with")
     ap.add_argument("--repeats", type=int, default=15)
+    ap.add_argument("--set", dest="which", choices=("startup", "validate"), default="startup",
+                    help="the commands to time (module docstring)")
     ap.add_argument("--out", type=Path, default=REPO / "reports" / "benchmarks" / "versions.json")
     args = ap.parse_args(argv)
     from benchmarks.bench_startup import make_photo
@@ -79,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
         export(anchor, base)
         photo = Path(tmp) / "photo.jpg"
         make_photo(photo)
-        cmds = commands(photo, Path(tmp))
+        cmds = commands(photo, Path(tmp), args.which)
         sides = {"anchor": base, "this": REPO}
         times: dict[str, dict[str, list[tuple[float, float]]]] = {
             n: {s: [] for s in sides} for n in cmds}
@@ -101,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
         row["ratio_of_medians"] = round(row["this"]["median_s"] / row["anchor"]["median_s"], 3)
         row["ratio_of_best"] = round(row["this"]["min_s"] / row["anchor"]["min_s"], 3)
         rows.append(row)
-    result = {"benchmark": "versions", "anchor": anchor,
+    result = {"benchmark": "versions", "set": args.which, "anchor": anchor,
               "this": head + (" with uncommitted changes" if dirty else ""),
               "repeats": args.repeats, "rows": rows, "load_average_at_start": round(load, 2),
               "machine": machine_info(),

@@ -151,6 +151,43 @@ def test_distinct_colour_path_table_and_float_path_give_the_same_codes(shared) -
     for img, d in zip(images, direct, strict=True):
         np.testing.assert_array_equal(emu.apply_uint8(img), d)
     np.testing.assert_array_equal(direct[0], to_uint8(emu.apply(images[0] / 255.0)))
+    # the table of a few images' own colours (a validation run on a few images): the rows of
+    # the full table for those colours; an image with another colour is refused
+    from fidelity.coco.dataset import PixelMap, colour_codes
+
+    codes = np.unique(np.concatenate([colour_codes(img).ravel() for img in images]))
+    own = PixelMap.of_codes("hue", codes, emu.map_codes(codes))
+    full = PixelMap("hue", None, "cube", emu.cube())
+    for img in images:
+        np.testing.assert_array_equal(own(img), full(img))
+    gap = np.flatnonzero(np.diff(codes.astype(np.int64)) > 1)[0]  # the first colour left out
+    between = int(codes[gap]) + 1
+    outside = [c for c in (0, (1 << 24) - 1) if c not in codes]  # below the first, above the last
+    for code in [between, *outside]:
+        other = images[1].copy()
+        other[5, 7] = [(code >> 16) & 255, (code >> 8) & 255, code & 255]
+        with pytest.raises(RuntimeError, match="colours its table was not made for"):
+            own(other)
+
+
+def test_a_table_of_some_colours_checks_its_codes() -> None:
+    """Codes must be sorted and distinct with one (r, g, b) row each; an empty table refuses
+    every image; the 24-bit code is (r << 16) | (g << 8) | b."""
+    from fidelity.coco.dataset import PixelMap, colour_codes
+    from fidelity.errors import InvalidValueError
+
+    assert colour_codes(np.array([[[1, 2, 3], [255, 255, 255]]], np.uint8)).tolist() == [
+        [66051, (1 << 24) - 1]]
+    for codes, values in [([3, 1], [[0, 0, 0]] * 2), ([1, 1], [[0, 0, 0]] * 2),
+                          ([1, 2], [[0, 0, 0]])]:
+        with pytest.raises(InvalidValueError):
+            PixelMap.of_codes("x", np.array(codes), np.array(values))
+    empty = PixelMap.of_codes("x", np.empty(0, np.uint32), np.empty((0, 3), np.uint8))
+    with pytest.raises(RuntimeError):
+        empty(np.zeros((1, 1, 3), np.uint8))
+    two = PixelMap.of_codes("x", np.array([0, 66051]), np.array([[9, 9, 9], [7, 8, 9]]))
+    img = np.array([[[1, 2, 3], [0, 0, 0], [1, 2, 3]]], np.uint8)
+    assert two(img).tolist() == [[[7, 8, 9], [9, 9, 9], [7, 8, 9]]]
 
 
 def test_the_table_is_built_once_enough_distinct_colours_were_mapped(monkeypatch) -> None:

@@ -375,3 +375,63 @@ def test_tiny_real_run_is_resumable(shared: Path, tmp_path: Path) -> None:
     assert r.exit_code == 0, r.output
     st2 = ValidationStore(tmp_path / "moved", create=False)
     assert {c.camera: c.finished for c in st2.cells()} == before
+
+
+def test_a_run_on_a_few_images_tables_their_colours_only(monkeypatch) -> None:
+    """Up to CODES_TABLE_IMAGES images: the camera's table holds the images' own colours (the
+    2^24-entry table is never built) and maps them as the full table does; above: the full
+    table. Tables are kept one camera at a time; the images' colours are found once."""
+    import fidelity.coco.validate as validate
+    from fidelity.coco.dataset import PixelMap
+
+    rng = np.random.default_rng(5)
+    images = {i: rng.integers(0, 256, (6, 7, 3), dtype=np.uint8) for i in range(1, 5)}
+    decoded: list[int] = []
+
+    class Cache:
+        def get(self, i: int) -> tuple[np.ndarray, None]:
+            decoded.append(i)
+            return images[i], None
+
+    def mapping(rgb: np.ndarray) -> np.ndarray:  # any fixed 8-bit colour change
+        return (rgb.astype(np.uint16) * 7 // 5 % 256).astype(np.uint8)
+
+    cubes: list[str] = []
+
+    class Emu:
+        def __init__(self, name: str) -> None:
+            self.name = name
+
+        def map_codes(self, codes: np.ndarray) -> np.ndarray:
+            rgb = np.stack([(codes >> 16) & 255, (codes >> 8) & 255, codes & 255], -1)
+            return mapping(rgb.astype(np.uint8))
+
+        def cube(self) -> np.ndarray:
+            cubes.append(self.name)
+            return self.map_codes(np.arange(1 << 24, dtype=np.uint32))
+
+    accuracy = SimpleNamespace(chart_mean_delta_e=0.1, chart_max_delta_e=0.2)
+    info = SimpleNamespace(chart_delta_e=1.0, emulation=SimpleNamespace(accuracy=accuracy))
+    monkeypatch.setattr(validate, "prepare_case", lambda case, *a: (Emu(case.name), info))
+    cases = [SimpleNamespace(name=n, illuminant="D65") for n in ("cam-a", "cam-b")]
+    lines: list[str] = []
+    small = validate.EmulationTables(None, "root-polynomial", "chart", Cache(), [1, 2, 3, 4],
+                                     lines.append)
+    for case in cases:
+        table = small.get(case)
+        assert isinstance(table, PixelMap) and table.kind == "codes"
+        for img in images.values():
+            np.testing.assert_array_equal(table(img), mapping(img))
+    assert small.get(cases[1]) is table and list(small.built) == ["cam-b"]
+    assert not cubes and sorted(decoded) == [1, 2, 3, 4] and len(lines) == 2
+    monkeypatch.setattr(validate, "CODES_TABLE_IMAGES", 3)
+    full = validate.EmulationTables(None, "root-polynomial", "chart", Cache(), [1, 2, 3, 4],
+                                    lines.append).get(cases[0])
+    assert full.kind == "cube" and cubes == ["cam-a"]
+    np.testing.assert_array_equal(full(images[1]), mapping(images[1]))
+    # the images the cells run on decide (a --limit below the images the case is prepared on)
+    decoded.clear()
+    limited = validate.EmulationTables(None, "root-polynomial", "chart", Cache(), [1, 2, 3, 4],
+                                       lines.append, [1, 2]).get(cases[1])
+    assert limited.kind == "codes" and sorted(decoded) == [1, 2] and cubes == ["cam-a"]
+    np.testing.assert_array_equal(limited(images[2]), mapping(images[2]))

@@ -84,18 +84,43 @@ def all_triples(start: int, stop: int) -> np.ndarray:
     return rgb / 255.0
 
 
+def colour_codes(rgb8: np.ndarray) -> np.ndarray:
+    """The 24-bit code ``(r << 16) | (g << 8) | b`` (uint32) of each pixel of (..., 3) uint8."""
+    a = np.asarray(rgb8)
+    idx: np.ndarray = a[..., 0].astype(np.uint32)
+    idx <<= 8
+    idx |= a[..., 1]
+    idx <<= 8
+    idx |= a[..., 2]
+    return idx
+
+
 @dataclass
 class PixelMap:
     """A fast, exact 8-bit implementation of one (transform, parameter)."""
 
     name: str
     param: float | None
-    kind: str  # "identity", "channel", "cube", "image"
+    kind: str  # "identity", "channel", "cube", "codes", "image"
     lut: np.ndarray | None = None
     build_seconds: float = 0.0
     lut16: np.ndarray | None = None
     workspace: PullMeanWorkspace | None = None
     kernel: str = "auto"
+    codes: np.ndarray | None = None
+
+    @classmethod
+    def of_codes(cls, name: str, codes: np.ndarray, values: np.ndarray) -> PixelMap:
+        """A mapping known on some colours only: the sorted, distinct 24-bit codes ``codes``
+        (``(r << 16) | (g << 8) | b``, uint32, (N,)) to ``values`` (N, 3) uint8; an image with
+        any other colour is refused. The table of a run on a few images: their colours are a
+        small part of the 2^24 a ``"cube"`` holds (:func:`colour_codes`)."""
+        c = np.ascontiguousarray(codes, dtype=np.uint32)
+        v = np.ascontiguousarray(values, dtype=np.uint8)
+        if c.ndim != 1 or v.shape != (c.size, 3) or bool(np.any(c[1:] <= c[:-1])):
+            raise InvalidValueError(f"colour table of {name}: codes must be sorted and distinct "
+                                    f"(N,) with (N, 3) values, got {c.shape} and {v.shape}")
+        return cls(name, None, "codes", v, codes=c)
 
     @classmethod
     def build(cls, name: str, param: float | None, chunk: int = 1 << 20) -> PixelMap:
@@ -146,12 +171,17 @@ class PixelMap:
             return np.take(self.lut, a)
         if self.kind == "cube":
             assert self.lut is not None
-            idx = a[..., 0].astype(np.uint32)
-            idx <<= 8
-            idx |= a[..., 1]
-            idx <<= 8
-            idx |= a[..., 2]
-            return np.take(self.lut, idx, axis=0)
+            return np.take(self.lut, colour_codes(a), axis=0)
+        if self.kind == "codes":
+            assert self.lut is not None and self.codes is not None
+            idx = colour_codes(a)
+            pos = np.searchsorted(self.codes, idx)
+            np.minimum(pos, max(self.codes.size - 1, 0), out=pos)
+            if self.codes.size == 0 or not np.array_equal(self.codes[pos], idx):
+                # an internal error (exit 3): the table was made from other pixels than these
+                raise RuntimeError(f"transform {self.name}: the image holds colours its table "
+                                   f"was not made for (a table of a run's own images only)")
+            return np.take(self.lut, pos, axis=0)
         assert self.param is not None
         if self.name == "pull_mean":
             if self.workspace is None:

@@ -337,21 +337,29 @@ class EightBitTable:
         a = np.asarray(rgb8)
         if a.dtype != np.uint8 or a.shape[-1] != 3:
             raise InvalidValueError(f"image must be (..., 3) uint8, got {a.shape} {a.dtype}")
-        idx = (a[..., 0].astype(np.uint32) << 16) | (a[..., 1].astype(np.uint32) << 8) | a[..., 2]
-        if self._cube is None and self._direct_colours < CUBE_AFTER_COLOURS:
-            from fidelity.coco.dataset import to_uint8
+        from fidelity.coco.dataset import colour_codes
 
+        idx = colour_codes(a)
+        if self._cube is None and self._direct_colours < CUBE_AFTER_COLOURS:
             codes, inverse = np.unique(idx.ravel(), return_inverse=True)
             self._direct_colours += int(codes.size)
-            rgb = np.empty((codes.size, 3), dtype=np.float64)
-            rgb[:, 0] = (codes >> 16) & 255
-            rgb[:, 1] = (codes >> 8) & 255
-            rgb[:, 2] = codes & 255
-            mapped = to_uint8(self.apply(rgb / 255.0))
-            direct: NDArray[np.uint8] = mapped[inverse].reshape(a.shape)
+            direct: NDArray[np.uint8] = self.map_codes(codes)[inverse].reshape(a.shape)
             return direct
         out: NDArray[np.uint8] = self.cube()[idx]
         return out
+
+    def map_codes(self, codes: ArrayLike) -> NDArray[np.uint8]:
+        """(N, 3) uint8: :meth:`apply` on the 24-bit codes ``codes`` ((N,) ``(r << 16) |
+        (g << 8) | b``), rounded as :meth:`cube` rounds: the rows the table holds for them."""
+        from fidelity.coco.dataset import to_uint8
+
+        c = np.asarray(codes, dtype=np.uint32).reshape(-1)
+        rgb = np.empty((c.size, 3), dtype=np.float64)
+        rgb[:, 0] = (c >> 16) & 255
+        rgb[:, 1] = (c >> 8) & 255
+        rgb[:, 2] = c & 255
+        mapped: NDArray[np.uint8] = to_uint8(self.apply(rgb / 255.0))
+        return mapped
 
 
 #: Distinct colours mapped one image at a time before :meth:`EightBitTable.apply_uint8` builds

@@ -47,6 +47,7 @@ import numpy as np
 from fidelity.errors import FidelityError, InputFileError, InvalidValueError
 
 if TYPE_CHECKING:
+    from fidelity.coco.dataset import PixelMap
     from fidelity.coco.store import EvaluationStore, ImageSet, LeaseKeeper
 
 #: Executor names (``--executor``).
@@ -119,8 +120,9 @@ class ModelFile:
 @dataclass(frozen=True)
 class PixelTransform:
     """The 8-bit colour change of a cell: transform ``name`` at ``param``
-    (:class:`fidelity.coco.dataset.PixelMap`), or a ready 2^24-entry table (``table``, a
-    validation's camera emulation; not sent with work items); ``key`` names it uniquely;
+    (:class:`fidelity.coco.dataset.PixelMap`), or a ready one (``table``: a validation's
+    camera emulation, a 2^24-entry table or one of the run's own colours; not sent with work
+    items); ``key`` names it uniquely;
     ``roundtrip``: JPEG re-encode with the original's settings after the change, as the
     transformed datasets are written (``evaluate`` reads the images as they are: False)."""
 
@@ -128,7 +130,7 @@ class PixelTransform:
     name: str
     param: float | None = None
     roundtrip: bool = True
-    table: np.ndarray | None = field(default=None, compare=False, repr=False)
+    table: PixelMap | None = field(default=None, compare=False, repr=False)
 
     @classmethod
     def of(cls, name: str, param: float | None, roundtrip: bool = True) -> PixelTransform:
@@ -137,12 +139,12 @@ class PixelTransform:
 
     def build(self) -> Callable[[np.ndarray], np.ndarray] | None:
         """The callable that changes an (H, W, 3) uint8 image (None: no change)."""
-        from fidelity.coco.dataset import PixelMap
-
         if self.table is not None:
-            return PixelMap(self.name, None, "cube", np.asarray(self.table))
+            return self.table
         if self.name == IDENTITY:
             return None
+        from fidelity.coco.dataset import PixelMap
+
         return PixelMap.build(self.name, self.param)
 
     def bare(self) -> PixelTransform:
@@ -285,7 +287,7 @@ class Executor(Protocol):
         """The detector's own description (:meth:`fidelity.coco.detectors.Detector.describe`)."""
         ...
 
-    def submit(self, item: WorkItem, table: np.ndarray | None = None) -> None:
+    def submit(self, item: WorkItem, table: PixelMap | None = None) -> None:
         """Queue a work item (``table``: the transform's ready table, if it has one)."""
         ...
 
@@ -318,7 +320,7 @@ class LocalExecutor:
         self.images = images
         self.options = options
         self.runner = ChunkRunner(options.threads, options.provider, options.cache_mb)
-        self._queue: collections.deque[tuple[WorkItem, np.ndarray | None]] = \
+        self._queue: collections.deque[tuple[WorkItem, PixelMap | None]] = \
             collections.deque()
 
     def describe(self) -> dict[str, Any]:
@@ -332,7 +334,7 @@ class LocalExecutor:
                                                     ).describe()
         return info
 
-    def submit(self, item: WorkItem, table: np.ndarray | None = None) -> None:
+    def submit(self, item: WorkItem, table: PixelMap | None = None) -> None:
         """Queue an item; it runs when :meth:`next_result` asks for it."""
         self._queue.append((item, table))
 
@@ -526,13 +528,11 @@ class RayExecutor:
         return dict(self._get(self.actors[0].describe_model.remote(model,
                                                                    [self._model_ref(model)])))
 
-    def _transform_ref(self, spec: PixelTransform, table: np.ndarray | None) -> Any:
+    def _transform_ref(self, spec: PixelTransform, table: PixelMap | None) -> Any:
         ref = self._transforms.get(spec.key)
         if ref is None:
             if table is not None:
-                from fidelity.coco.dataset import PixelMap
-
-                ref = self._ray.put(PixelMap(spec.name, None, "cube", np.asarray(table)))
+                ref = self._ray.put(table)
             else:
                 ref = self._builder.remote(spec.bare())
             self._transforms[spec.key] = ref
@@ -546,7 +546,7 @@ class RayExecutor:
             ref = self._images[image_id] = self._ray.put(self.images.read(image_id))
         return ref
 
-    def submit(self, item: WorkItem, table: np.ndarray | None = None) -> None:
+    def submit(self, item: WorkItem, table: PixelMap | None = None) -> None:
         """Hand an item to the actor pool (queued by Ray's pool while every actor is busy)."""
         transform = [self._transform_ref(item.transform, table)]
         images = {i: self._image_ref(i) for i in item.image_ids}
@@ -614,7 +614,7 @@ class CellWork:
     model: ModelFile
     transform: PixelTransform
     image_ids: tuple[int, ...]
-    table: Callable[[], np.ndarray] | None = None
+    table: Callable[[], PixelMap] | None = None
     clip: bool = True
 
 
@@ -708,7 +708,7 @@ class CellRun:
         self.show()
         self.open_cells: dict[tuple[Any, ...], _Open] = {}
         self.waiting: list[CellWork] = []
-        self.queue: collections.deque[tuple[CellWork, WorkItem, np.ndarray | None]] = \
+        self.queue: collections.deque[tuple[CellWork, WorkItem, PixelMap | None]] = \
             collections.deque()
         threaded = executor.workers > 1 if background is None else background
         self.scorer = (concurrent.futures.ThreadPoolExecutor(1, "fidelity-score") if threaded

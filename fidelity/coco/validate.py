@@ -61,6 +61,7 @@ from fidelity.version import __version__
 if TYPE_CHECKING:
     from fidelity.chart.measure import ChartMeasurement
     from fidelity.coco.bootstrap import Draws
+    from fidelity.coco.dataset import PixelMap
     from fidelity.coco.emulation import AccuracySummary, Emulation
     from fidelity.coco.executor import CellWork, ExecutorOptions
     from fidelity.coco.scoring import CocoScore, FoldScore
@@ -874,7 +875,8 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
                 for spec, f in zip(models, files, strict=True)]
         store.set_meta("models_run", [{"model": f.name, "images": len(i)} for f, i in runs])
         run.start_leases(lease_s)
-        tables = EmulationTables(store, method, training, cache, all_ids, say)
+        tables = EmulationTables(store, method, training, cache, all_ids, say,
+                                 max((ids for _, ids in runs), key=len))
         work = [CellWork((f.name, BASELINE), f"{BASELINE} / {f.name}", f,
                          PixelTransform.of(IDENTITY, None), ids) for f, ids in runs]
         for case in cases:
@@ -894,22 +896,37 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     return store
 
 
+#: Runs on at most this many images get an emulation table of their images' own colours
+#: (:meth:`fidelity.coco.dataset.PixelMap.of_codes`: a 640 x 480 photo holds 40k-180k
+#: distinct colours) instead of the 2^24-entry table, which takes about 4 s a camera to build.
+CODES_TABLE_IMAGES = 32
+
+
 class EmulationTables:
     """The 8-bit emulation tables of a validation run's cameras, built when a cell first needs
-    one (:func:`prepare_case`, logged through ``say``) and kept one camera at a time."""
+    one (:func:`prepare_case` on ``image_ids``, logged through ``say``) and kept one camera at
+    a time: the 2^24-entry table, or, where the cells run on at most
+    :data:`CODES_TABLE_IMAGES` images (``run_ids``, default ``image_ids``: every image any
+    cell runs on), the same entries for the colours those images hold only."""
 
     def __init__(self, store: ValidationStore, method: str, training: str, cache: ImageCache,
-                 image_ids: Sequence[int], say: Callable[[str], None]) -> None:
+                 image_ids: Sequence[int], say: Callable[[str], None],
+                 run_ids: Sequence[int] | None = None) -> None:
         self.store = store
         self.method = method
         self.training = training
         self.cache = cache
         self.image_ids = image_ids
         self.say = say
-        self.built: dict[str, np.ndarray] = {}
+        self.run_ids = image_ids if run_ids is None else run_ids
+        self.built: dict[str, PixelMap] = {}
+        self.codes: np.ndarray | None = None  # the distinct colours of a small run's images
 
-    def get(self, case: CameraCase) -> np.ndarray:
-        """The camera's (2^24, 3) uint8 table (:meth:`fidelity.coco.emulation.Emulation.cube`)."""
+    def get(self, case: CameraCase) -> PixelMap:
+        """The camera's 8-bit table (:meth:`fidelity.coco.emulation.Emulation.cube`, or
+        :meth:`~fidelity.coco.emulation.Emulation.map_codes` on the images' colours)."""
+        from fidelity.coco.dataset import PixelMap, colour_codes
+
         if case.name not in self.built:
             self.built.clear()  # one camera's table at a time
             emu, info = prepare_case(case, self.store, self.method, self.training, self.cache,
@@ -918,7 +935,15 @@ class EmulationTables:
             self.say(f"{time.strftime('%H:%M:%S')} {case.name} ({case.illuminant}): chart "
                      f"ΔE {info.chart_delta_e:.2f}, emulation chart ΔE00 mean "
                      f"{acc.chart_mean_delta_e:.2f} max {acc.chart_max_delta_e:.2f}")
-            self.built[case.name] = emu.cube()
+            if len(self.run_ids) <= CODES_TABLE_IMAGES:
+                if self.codes is None:
+                    self.codes = np.unique(np.concatenate(
+                        [colour_codes(self.cache.get(i)[0]).ravel() for i in self.run_ids]
+                        or [np.empty(0, np.uint32)]))
+                table = PixelMap.of_codes(case.name, self.codes, emu.map_codes(self.codes))
+            else:
+                table = PixelMap(case.name, None, "cube", emu.cube())
+            self.built[case.name] = table
         return self.built[case.name]
 
 
