@@ -593,6 +593,8 @@ def test_cuda_asked_for_is_never_a_silent_cpu_run(shared, monkeypatch) -> None:
 
 
 @pytest.mark.shared
+# the float model's session asks for the CUDA provider this test only pretends to have
+@pytest.mark.filterwarnings("ignore:Specified provider 'CUDAExecutionProvider':UserWarning")
 def test_a_dynamically_quantised_model_runs_on_the_cpu_where_cuda_is_offered(shared,
                                                                              monkeypatch) -> None:
     """ConvInteger has no CUDA kernel in onnxruntime: a CUDA session runs those nodes on the
