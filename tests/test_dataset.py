@@ -47,6 +47,14 @@ def test_fast_path_equals_reference_bit_for_bit(name: str) -> None:
     fast = pm(img)
     ref = reference_transform(img, name, param)
     assert fast.dtype == np.uint8 and np.array_equal(fast, ref)
+    # a run on a few images: each image mapped on its distinct colours, no table
+    direct = PixelMap.build(name, param, direct=True)
+    if pm.kind == "cube":
+        assert direct.kind == "direct" and direct.lut is None
+        assert np.array_equal(direct(img), fast)
+        assert np.array_equal(direct(img[:1, :1]), fast[:1, :1])  # a one-pixel image
+    else:
+        assert direct.kind == pm.kind
 
 
 def test_hue_reference_agrees_with_colorsys() -> None:
@@ -326,3 +334,23 @@ def test_pull_mean_kernels_agree_and_are_named() -> None:
     assert pull_mean_kernel("auto") in ("numpy", "numba")
     with pytest.raises(UnknownNameError):
         pull_mean_kernel("cuda")
+
+
+@pytest.mark.shared
+def test_a_few_images_mapped_on_their_colours_equal_the_table_on_real_photos(shared) -> None:
+    """A sweep cell of at most DIRECT_IMAGES images maps each image on its distinct colours
+    (no 2^24-entry table): the table's codes on real photos; larger cells keep the table."""
+    from fidelity.coco.executor import DIRECT_IMAGES, PixelTransform
+    from fidelity.coco.jpeg import read_jpeg
+
+    param = calibrate_transform("hue", 6.0).param
+    few = PixelTransform.of("hue", param, images=DIRECT_IMAGES)
+    many = PixelTransform.of("hue", param, images=DIRECT_IMAGES + 1)
+    assert few.direct and not many.direct and few.key != many.key
+    assert not PixelTransform.of("baseline", None, images=1).direct
+    table, direct = many.build(), few.build()
+    assert isinstance(table, PixelMap) and isinstance(direct, PixelMap)
+    assert (table.kind, direct.kind) == ("cube", "direct")
+    for f in sorted((shared / "coco/val2017").glob("*.jpg"))[:3]:
+        img = read_jpeg(f)[0]
+        assert np.array_equal(direct(img), table(img))

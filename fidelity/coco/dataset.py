@@ -76,12 +76,19 @@ def all_triples(start: int, stop: int) -> np.ndarray:
     Code ``i`` is ``(r << 16) | (g << 8) | b``; row ``i - start`` is ``(r, g, b) / 255``:
     the inputs of a 16.7-million-entry 8-bit lookup table, a chunk at a time.
     """
-    idx = np.arange(start, stop, dtype=np.uint32)
-    rgb = np.empty((stop - start, 3), dtype=np.float64)
+    return code_triples(np.arange(start, stop, dtype=np.uint32))
+
+
+def code_triples(codes: np.ndarray) -> np.ndarray:
+    """The 8-bit RGB triples of the 24-bit codes ``codes`` ((N,), :func:`colour_codes`) as
+    (N, 3) floats in [0, 1], computed as :func:`all_triples` computes its rows."""
+    idx = np.asarray(codes, dtype=np.uint32).reshape(-1)
+    rgb = np.empty((idx.size, 3), dtype=np.float64)
     rgb[:, 0] = (idx >> 16) & 255
     rgb[:, 1] = (idx >> 8) & 255
     rgb[:, 2] = idx & 255
-    return rgb / 255.0
+    out: np.ndarray = rgb / 255.0
+    return out
 
 
 def colour_codes(rgb8: np.ndarray) -> np.ndarray:
@@ -101,7 +108,7 @@ class PixelMap:
 
     name: str
     param: float | None
-    kind: str  # "identity", "channel", "cube", "codes", "image"
+    kind: str  # "identity", "channel", "cube", "codes", "direct", "image"
     lut: np.ndarray | None = None
     build_seconds: float = 0.0
     lut16: np.ndarray | None = None
@@ -123,8 +130,13 @@ class PixelMap:
         return cls(name, None, "codes", v, codes=c)
 
     @classmethod
-    def build(cls, name: str, param: float | None, chunk: int = 1 << 20) -> PixelMap:
-        """Build the table for ``name`` at ``param`` (``name == "baseline"``: identity)."""
+    def build(cls, name: str, param: float | None, chunk: int = 1 << 20, direct: bool = False
+              ) -> PixelMap:
+        """Build the table for ``name`` at ``param`` (``name == "baseline"``: identity).
+
+        ``direct``: a transform that needs the 2^24-entry table (48 MiB, seconds to build) maps
+        each image on its distinct colours instead (kind ``"direct"``: the same codes), for a
+        run on a few images."""
         t0 = time.perf_counter()
         if name == BASELINE:
             return cls(name, None, "identity")
@@ -150,6 +162,8 @@ class PixelMap:
             pm = cls(name, float(param), "channel", lut8, time.perf_counter() - t0)
             pm.lut16 = lut16
             return pm
+        if direct:
+            return cls(name, float(param), "direct")
         lut = np.empty((1 << 24, 3), dtype=np.uint8)
         for s in range(0, 1 << 24, chunk):
             e = min(s + chunk, 1 << 24)
@@ -183,6 +197,13 @@ class PixelMap:
                                    f"was not made for (a table of a run's own images only)")
             return np.take(self.lut, pos, axis=0)
         assert self.param is not None
+        if self.kind == "direct":
+            from fidelity.prediction.transforms import apply_transform
+
+            codes, inverse = np.unique(colour_codes(a).ravel(), return_inverse=True)
+            mapped = to_uint8(apply_transform(code_triples(codes), self.name, self.param))
+            out: np.ndarray = mapped[inverse].reshape(a.shape)
+            return out
         if self.name == "pull_mean":
             if self.workspace is None:
                 self.workspace = PullMeanWorkspace()

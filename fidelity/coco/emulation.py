@@ -351,14 +351,9 @@ class EightBitTable:
     def map_codes(self, codes: ArrayLike) -> NDArray[np.uint8]:
         """(N, 3) uint8: :meth:`apply` on the 24-bit codes ``codes`` ((N,) ``(r << 16) |
         (g << 8) | b``), rounded as :meth:`cube` rounds: the rows the table holds for them."""
-        from fidelity.coco.dataset import to_uint8
+        from fidelity.coco.dataset import code_triples, to_uint8
 
-        c = np.asarray(codes, dtype=np.uint32).reshape(-1)
-        rgb = np.empty((c.size, 3), dtype=np.float64)
-        rgb[:, 0] = (c >> 16) & 255
-        rgb[:, 1] = (c >> 8) & 255
-        rgb[:, 2] = c & 255
-        mapped: NDArray[np.uint8] = to_uint8(self.apply(rgb / 255.0))
+        mapped: NDArray[np.uint8] = to_uint8(self.apply(code_triples(np.asarray(codes))))
         return mapped
 
 

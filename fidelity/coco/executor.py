@@ -54,6 +54,10 @@ if TYPE_CHECKING:
 EXECUTORS: tuple[str, ...] = ("local", "ray")
 #: The transform name of "no colour change" (work items of the baseline and of ``evaluate``).
 IDENTITY = "baseline"
+#: Cells of at most this many images map each image on its distinct colours rather than build
+#: a transform's 2^24-entry table (:meth:`fidelity.coco.dataset.PixelMap.build`, ``direct``):
+#: a 640 x 480 photo holds 40k-180k distinct colours, the table takes seconds to build.
+DIRECT_IMAGES = 32
 #: Images per work item: the local executor commits every 25 images (as before); Ray items
 #: are smaller so that two or more workers share a cell's last images evenly.
 CHUNK_IMAGES: dict[str, int] = {"local": 25, "ray": 8}
@@ -124,18 +128,26 @@ class PixelTransform:
     camera emulation, a 2^24-entry table or one of the run's own colours; not sent with work
     items); ``key`` names it uniquely;
     ``roundtrip``: JPEG re-encode with the original's settings after the change, as the
-    transformed datasets are written (``evaluate`` reads the images as they are: False)."""
+    transformed datasets are written (``evaluate`` reads the images as they are: False);
+    ``direct``: map each image on its distinct colours rather than build a 2^24-entry table
+    (the same codes; for a cell of at most :data:`DIRECT_IMAGES` images)."""
 
     key: str
     name: str
     param: float | None = None
     roundtrip: bool = True
     table: PixelMap | None = field(default=None, compare=False, repr=False)
+    direct: bool = False
 
     @classmethod
-    def of(cls, name: str, param: float | None, roundtrip: bool = True) -> PixelTransform:
-        """The transform ``name`` at ``param`` (its key says both)."""
-        return cls(f"{name}@{param!r}" if name != IDENTITY else IDENTITY, name, param, roundtrip)
+    def of(cls, name: str, param: float | None, roundtrip: bool = True,
+           images: int | None = None) -> PixelTransform:
+        """The transform ``name`` at ``param`` (its key says both) for a cell of ``images``
+        images (at most :data:`DIRECT_IMAGES`: ``direct``)."""
+        direct = images is not None and images <= DIRECT_IMAGES and name != IDENTITY
+        key = f"{name}@{param!r}" + ("~direct" if direct else "") if name != IDENTITY \
+            else IDENTITY
+        return cls(key, name, param, roundtrip, direct=direct)
 
     def build(self) -> Callable[[np.ndarray], np.ndarray] | None:
         """The callable that changes an (H, W, 3) uint8 image (None: no change)."""
@@ -145,7 +157,7 @@ class PixelTransform:
             return None
         from fidelity.coco.dataset import PixelMap
 
-        return PixelMap.build(self.name, self.param)
+        return PixelMap.build(self.name, self.param, direct=self.direct)
 
     def bare(self) -> PixelTransform:
         """The transform without its table (what a work item carries)."""

@@ -453,7 +453,8 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
                         f"({reason})")
                     continue
             work.append(CellWork(key, f"{f.name} {transform} ΔE {target:g}", f,
-                                 PixelTransform.of(transform, param), tuple(ids)))
+                                 PixelTransform.of(transform, param, images=len(ids)),
+                                 tuple(ids)))
         run.run(work, SweepCells(store, run.stores, coco, method, number, total, say),
                 batch_commit=batch_commit, progress=progress, say=say)
     return store
