@@ -990,10 +990,12 @@ class ValidationCells:
                  f"{seconds:.1f}s")
 
 
-def _colour_version() -> str:
-    import colour
+def _colour_version() -> str | None:
+    """colour-science's version, from its metadata (importing it costs about a second, and a
+    run whose emulation is trained on the chart alone never needs it)."""
+    from fidelity.version import installed_version
 
-    return str(colour.__version__)
+    return installed_version("colour-science")
 
 
 # --------------------------------------------------------------------------------------------
