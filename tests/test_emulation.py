@@ -185,6 +185,9 @@ def test_a_table_of_some_colours_checks_its_codes() -> None:
     empty = PixelMap.of_codes("x", np.empty(0, np.uint32), np.empty((0, 3), np.uint8))
     with pytest.raises(RuntimeError):
         empty(np.zeros((1, 1, 3), np.uint8))
+    no_pixels = np.zeros((0, 4, 3), np.uint8)  # an image without pixels has no other colour
+    assert empty(no_pixels).shape == (0, 4, 3)
+    assert PixelMap.build("hue", 10.0, direct=True)(no_pixels).shape == (0, 4, 3)
     two = PixelMap.of_codes("x", np.array([0, 66051]), np.array([[9, 9, 9], [7, 8, 9]]))
     img = np.array([[[1, 2, 3], [0, 0, 0], [1, 2, 3]]], np.uint8)
     assert two(img).tolist() == [[[7, 8, 9], [9, 9, 9], [7, 8, 9]]]

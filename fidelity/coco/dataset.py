@@ -189,6 +189,8 @@ class PixelMap:
         if self.kind == "codes":
             assert self.lut is not None and self.codes is not None
             idx = colour_codes(a)
+            if idx.size == 0:
+                return np.empty(a.shape, np.uint8)
             pos = np.searchsorted(self.codes, idx)
             np.minimum(pos, max(self.codes.size - 1, 0), out=pos)
             if self.codes.size == 0 or not np.array_equal(self.codes[pos], idx):
