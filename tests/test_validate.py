@@ -378,9 +378,10 @@ def test_tiny_real_run_is_resumable(shared: Path, tmp_path: Path) -> None:
 
 
 def test_a_run_on_a_few_images_tables_their_colours_only(monkeypatch) -> None:
-    """Up to CODES_TABLE_IMAGES images: the camera's table holds the images' own colours (the
+    """Up to DIRECT_IMAGES images: the camera's table holds the images' own colours (the
     2^24-entry table is never built) and maps them as the full table does; above: the full
     table. Tables are kept one camera at a time; the images' colours are found once."""
+    import fidelity.coco.executor as executor
     import fidelity.coco.validate as validate
     from fidelity.coco.dataset import PixelMap
 
@@ -424,7 +425,7 @@ def test_a_run_on_a_few_images_tables_their_colours_only(monkeypatch) -> None:
             np.testing.assert_array_equal(table(img), mapping(img))
     assert small.get(cases[1]) is table and list(small.built) == ["cam-b"]
     assert not cubes and sorted(decoded) == [1, 2, 3, 4] and len(lines) == 2
-    monkeypatch.setattr(validate, "CODES_TABLE_IMAGES", 3)
+    monkeypatch.setattr(executor, "DIRECT_IMAGES", 3)
     full = validate.EmulationTables(None, "root-polynomial", "chart", Cache(), [1, 2, 3, 4],
                                     lines.append).get(cases[0])
     assert full.kind == "cube" and cubes == ["cam-a"]

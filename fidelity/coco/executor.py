@@ -54,9 +54,10 @@ if TYPE_CHECKING:
 EXECUTORS: tuple[str, ...] = ("local", "ray")
 #: The transform name of "no colour change" (work items of the baseline and of ``evaluate``).
 IDENTITY = "baseline"
-#: Cells of at most this many images map each image on its distinct colours rather than build
-#: a transform's 2^24-entry table (:meth:`fidelity.coco.dataset.PixelMap.build`, ``direct``):
-#: a 640 x 480 photo holds 40k-180k distinct colours, the table takes seconds to build.
+#: Cells of at most this many images map each image on its distinct colours (a sweep's
+#: transform: :meth:`fidelity.coco.dataset.PixelMap.build`, ``direct``), or through a table of
+#: their images' colours only (a validation's emulation), rather than a 2^24-entry table: a
+#: 640 x 480 photo holds 40k-180k distinct colours, the table takes seconds to build.
 DIRECT_IMAGES = 32
 #: Images per work item: the local executor commits every 25 images (as before); Ray items
 #: are smaller so that two or more workers share a cell's last images evenly.

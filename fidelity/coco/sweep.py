@@ -47,7 +47,7 @@ import numpy as np
 from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
 from fidelity.errors import InvalidValueError
 from fidelity.fileio import file_sha256
-from fidelity.version import __version__
+from fidelity.version import __version__, installed_version
 
 if TYPE_CHECKING:
     from fidelity.coco.bootstrap import Draws
@@ -409,8 +409,8 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
 
     versions = {"python": platform.python_version(), "onnxruntime": onnxruntime.__version__,
                 "numpy": np.__version__, "Pillow": PIL.__version__, "opencv": cv2.__version__,
-                "pycocotools": _dist_version("pycocotools"),
-                "faster-coco-eval": _dist_version("faster-coco-eval"), "fidelity": __version__}
+                "pycocotools": installed_version("pycocotools"),
+                "faster-coco-eval": installed_version("faster-coco-eval"), "fidelity": __version__}
     # every distinct set of versions that has run in this store, first to last (a run resumed
     # elsewhere, or after an upgrade, may detect differently), as meta["machines"] does
     meta = store.meta()
@@ -654,12 +654,3 @@ def same_versions(a: Mapping[str, Any], b: Mapping[str, Any]) -> bool:
     library (an entry written before a library was recorded, such as OpenCV, which resizes
     the images for the detector, is not another set for lacking it)."""
     return all(a[k] == b[k] for k in a.keys() & b.keys())
-
-
-def _dist_version(name: str) -> str | None:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version(name)
-    except PackageNotFoundError:
-        return None

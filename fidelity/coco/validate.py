@@ -896,17 +896,11 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     return store
 
 
-#: Runs on at most this many images get an emulation table of their images' own colours
-#: (:meth:`fidelity.coco.dataset.PixelMap.of_codes`: a 640 x 480 photo holds 40k-180k
-#: distinct colours) instead of the 2^24-entry table, which takes about 4 s a camera to build.
-CODES_TABLE_IMAGES = 32
-
-
 class EmulationTables:
     """The 8-bit emulation tables of a validation run's cameras, built when a cell first needs
     one (:func:`prepare_case` on ``image_ids``, logged through ``say``) and kept one camera at
     a time: the 2^24-entry table, or, where the cells run on at most
-    :data:`CODES_TABLE_IMAGES` images (``run_ids``, default ``image_ids``: every image any
+    :data:`fidelity.coco.executor.DIRECT_IMAGES` images (about 4 s a camera spared) (``run_ids``, default ``image_ids``: every image any
     cell runs on), the same entries for the colours those images hold only."""
 
     def __init__(self, store: ValidationStore, method: str, training: str, cache: ImageCache,
@@ -926,6 +920,7 @@ class EmulationTables:
         """The camera's 8-bit table (:meth:`fidelity.coco.emulation.Emulation.cube`, or
         :meth:`~fidelity.coco.emulation.Emulation.map_codes` on the images' colours)."""
         from fidelity.coco.dataset import PixelMap, colour_codes
+        from fidelity.coco.executor import DIRECT_IMAGES
 
         if case.name not in self.built:
             self.built.clear()  # one camera's table at a time
@@ -935,7 +930,7 @@ class EmulationTables:
             self.say(f"{time.strftime('%H:%M:%S')} {case.name} ({case.illuminant}): chart "
                      f"ΔE {info.chart_delta_e:.2f}, emulation chart ΔE00 mean "
                      f"{acc.chart_mean_delta_e:.2f} max {acc.chart_max_delta_e:.2f}")
-            if len(self.run_ids) <= CODES_TABLE_IMAGES:
+            if len(self.run_ids) <= DIRECT_IMAGES:
                 if self.codes is None:
                     self.codes = np.unique(np.concatenate(
                         [colour_codes(self.cache.get(i)[0]).ravel() for i in self.run_ids]
