@@ -900,8 +900,9 @@ class EmulationTables:
     """The 8-bit emulation tables of a validation run's cameras, built when a cell first needs
     one (:func:`prepare_case` on ``image_ids``, logged through ``say``) and kept one camera at
     a time: the 2^24-entry table, or, where the cells run on at most
-    :data:`fidelity.coco.executor.DIRECT_IMAGES` images (about 4 s a camera spared) (``run_ids``, default ``image_ids``: every image any
-    cell runs on), the same entries for the colours those images hold only."""
+    :data:`fidelity.coco.executor.DIRECT_IMAGES` images (``run_ids``, default ``image_ids``:
+    every image any cell runs on), the same entries for the colours those images hold only
+    (about 3 s a camera spared)."""
 
     def __init__(self, store: ValidationStore, method: str, training: str, cache: ImageCache,
                  image_ids: Sequence[int], say: Callable[[str], None],
@@ -986,8 +987,7 @@ class ValidationCells:
 
 
 def _colour_version() -> str | None:
-    """colour-science's version, from its metadata (importing it costs about a second, and a
-    run whose emulation is trained on the chart alone never needs it)."""
+    """colour-science's version, read from its metadata (the record needs no import of it)."""
     from fidelity.version import installed_version
 
     return installed_version("colour-science")
