@@ -207,13 +207,14 @@ class CorruptionMap:
         if self.name == "contrast":
             raise InvalidValueError("contrast depends on the image mean: it has no colour table")
         if self._cube is None:
+            from fidelity.coco.dataset import all_triples
+
             t0 = time.perf_counter()
             table = np.empty((1 << 24, 3), dtype=np.uint8)
             for s in range(0, 1 << 24, chunk):
-                idx = np.arange(s, min(s + chunk, 1 << 24), dtype=np.uint32)
-                x = np.stack([(idx >> 16) & 255, (idx >> 8) & 255, idx & 255],
-                             axis=-1).astype(np.float64) / 255.0
-                table[s:s + len(idx)] = _truncate(_hsv_corruption(x, self.name, self.severity))
+                e = min(s + chunk, 1 << 24)
+                table[s:e] = _truncate(_hsv_corruption(all_triples(s, e), self.name,
+                                                       self.severity))
             self._cube = table
             self.build_seconds = time.perf_counter() - t0
         return self._cube
@@ -231,8 +232,9 @@ class CorruptionMap:
                 lut = _truncate((levels - means[ch]) * c + means[ch])
                 out[..., ch] = lut[a[..., ch]]
             return out
-        idx = (a[..., 0].astype(np.uint32) << 16) | (a[..., 1].astype(np.uint32) << 8) | a[..., 2]
-        result: U8 = self.cube()[idx]
+        from fidelity.coco.dataset import colour_codes
+
+        result: U8 = self.cube()[colour_codes(a)]
         return result
 
     @property
