@@ -461,7 +461,7 @@ class Normalisation:
         """In words, for reports."""
         if self.mode == "none":
             return "none: the charts compared as audited"
-        text = f"exposure of the simulation {self.exposure_ev:+.3f} EV (neutral patches)"
+        text = f"exposure of the simulation {self.exposure_ev:+z.3f} EV (neutral patches)"
         if self.gains is not None:
             g = ", ".join(f"{v:.4f}" for v in self.gains)
             text += f"; white balance gains R, G, B {g} (neutral patches, incl. exposure)"

@@ -241,3 +241,15 @@ def test_perspective_bias_moves_outline_centroids_onto_the_patch_centres() -> No
     np.testing.assert_allclose(perspective_bias(affine, cells, side), 0.0, atol=1e-12)
     # a degenerate homography gives no NaN
     assert np.all(np.isfinite(perspective_bias(np.zeros((3, 3)), cells, side)))
+
+
+@pytest.mark.parametrize("degrees, shown", [(-0.2, "turned 0 degrees"), (0.2, "turned 0 degrees"),
+                                            (-90.0, "turned -90 degrees"),
+                                            (179.8, "turned 180 degrees")])
+def test_orientation_never_reads_minus_zero(degrees, shown) -> None:
+    """A chart turned by a fraction of a degree either way reads "turned 0 degrees"."""
+    from fidelity.chart.find import _orientation
+
+    a = np.radians(degrees)
+    rot = np.array([[np.cos(a), -np.sin(a), 100.0], [np.sin(a), np.cos(a), 50.0], [0, 0, 1]])
+    assert _orientation(rot @ np.diag([40.0, 40.0, 1.0])) == shown

@@ -105,3 +105,32 @@ def test_a_zero_baseline_measured_loss_renders_as_undefined() -> None:
     assert section is not None
     rows = [b for b in section.blocks if isinstance(b, Table)][0].rows
     assert rows[0][4] == "– ± –" and rows[0][3] == "0.00 ± –"
+
+
+def _signed_fixed_formats_without_z(source: str) -> list[str]:
+    """The format specs in ``source``'s f-strings that print a sign and a fixed-point number
+    (``+.2f``) but do not turn a negative zero into zero (``+z.2f``)."""
+    import ast
+    import re
+
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.FormattedValue) and isinstance(node.format_spec, ast.JoinedStr):
+            spec = "".join(v.value for v in node.format_spec.values
+                           if isinstance(v, ast.Constant) and isinstance(v.value, str))
+            if re.fullmatch(r"[<>=^]?\+\d*\.\d+f", spec):
+                found.append(spec)
+    return found
+
+
+def test_no_signed_number_prints_as_minus_zero() -> None:
+    """Every signed fixed-point number the package prints (exposure in EV, ΔL*, matrix entries)
+    uses the ``z`` option: -0.001 EV reads "+0.00 EV", never "-0.00 EV"."""
+    from pathlib import Path
+
+    assert f"{-0.001:+z.2f}" == "+0.00" and f"{-0.001:+.2f}" == "-0.00"
+    assert _signed_fixed_formats_without_z('f"{x:+.2f} {y:+z.1f}"') == ["+.2f"]
+    package = Path(__file__).resolve().parent.parent / "fidelity"
+    offenders = {str(p.relative_to(package)): found for p in sorted(package.rglob("*.py"))
+                 if (found := _signed_fixed_formats_without_z(p.read_text(encoding="utf-8")))}
+    assert offenders == {}

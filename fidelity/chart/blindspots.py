@@ -128,14 +128,14 @@ def shadow_tone(measurement: ChartMeasurement,
     off = abs(slope - 1.0)
     at_risk = off > tolerance
     if at_risk:
-        more = (f"; extrapolated to L* {SHADOW_PROBE_L:g} it is ΔL* {dl_probe:+.1f}, more than "
-                f"the ΔL* {dl_black:+.1f} at the {names[0]} patch"
+        more = (f"; extrapolated to L* {SHADOW_PROBE_L:g} it is ΔL* {dl_probe:+z.1f}, more than "
+                f"the ΔL* {dl_black:+z.1f} at the {names[0]} patch"
                 if abs(dl_probe) > abs(dl_black) + 0.25 else
-                f" (ΔL* {dl_black:+.1f} at the {names[0]} patch, {dl_probe:+.1f} extrapolated "
+                f" (ΔL* {dl_black:+z.1f} at the {names[0]} patch, {dl_probe:+z.1f} extrapolated "
                 f"to L* {SHADOW_PROBE_L:g})")
         reason = (f"shadow tones: the dark end of the tone curve has local gamma {slope:.3f} "
                   f"({names[0]} to {names[1]}; 1 is right, tolerance ±{tolerance:g}), "
-                  f"{100 * (slope - 1):+.0f} % shadow contrast{more}; the chart ΔE weights "
+                  f"{100 * (slope - 1):+z.0f} % shadow contrast{more}; the chart ΔE weights "
                   "the deep shadows that fill photographs by one patch of 24")
     else:
         reason = (f"shadow tones: local gamma of the dark end {slope:.3f} (within "

@@ -1288,7 +1288,7 @@ def _orientation(h_image: np.ndarray) -> str:
     side = c[3] - c[0]
     angle = math.degrees(math.atan2(top[1], top[0]))
     mirrored = top[0] * side[1] - top[1] * side[0] < 0
-    return f"turned {angle:.0f} degrees" + (", mirrored" if mirrored else "")
+    return f"turned {angle:z.0f} degrees" + (", mirrored" if mirrored else "")
 
 
 def other_charts(image: np.ndarray | Pyramid, grid_to_image: np.ndarray, encoding: str) -> int:

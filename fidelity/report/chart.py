@@ -64,13 +64,13 @@ def summary_facts(report: ChartReport) -> Facts:
     items += [("saturation (mean chroma of the colour patches)",
                f"{stats.saturation_percent:.1f} % of the reference"),
               ("white balance error (mean a*, b* of the neutral patches)",
-               f"a\\* {stats.neutral_ab[0]:+.2f}, b\\* {stats.neutral_ab[1]:+.2f} "
+               f"a\\* {stats.neutral_ab[0]:+z.2f}, b\\* {stats.neutral_ab[1]:+z.2f} "
                f"(ΔC\\*ab {stats.neutral_chroma:.2f})"),
-              ("mean ΔL* of the neutral patches", f"{stats.neutral_delta_l:+.2f}")]
+              ("mean ΔL* of the neutral patches", f"{stats.neutral_delta_l:+z.2f}")]
     items += noise_facts(report)
     items += tone_facts(report)
     if report.exposure_ev is not None:
-        items.append(("exposure correction", f"{report.exposure_ev:+.3f} EV"))
+        items.append(("exposure correction", f"{report.exposure_ev:+z.3f} EV"))
     if report.bad_pixels is not None:
         w = report.bad_pixels.window
         items.append(("bad pixels in windows (NaN/Inf/negative)",
@@ -140,7 +140,7 @@ def tone_facts(report: ChartReport) -> list[tuple[str, str]]:
     if fit is None:
         return []
     return [("tone of the neutral patches (fitted power law)",
-             f"gamma {fit.gamma:.3f} relative to the reference, exposure {fit.offset_ev:+.2f} EV "
+             f"gamma {fit.gamma:.3f} relative to the reference, exposure {fit.offset_ev:+z.2f} EV "
              f"at 18 % grey (residual {fit.rms_ev:.3f} EV rms over {fit.patches} patches)")]
 
 

@@ -220,7 +220,7 @@ def tone_curve(m: ChartMeasurement, neutral_indices: Sequence[int],
         y_fit = fit.predict(y_ref / float(cm.WHITEPOINT_D65_XYZ[1]))
         l_fit = cm.xyz_to_lab(np.repeat(y_fit[:, None], 3, axis=1), white=(1.0, 1.0, 1.0))
         ax.plot(lref, np.asarray(l_fit[:, 0], np.float64), COLOURS["orange"], 1.6, None,
-                f"fit: gamma {fit.gamma:.2f}, {fit.offset_ev:+.2f} EV")
+                f"fit: gamma {fit.gamma:.2f}, {fit.offset_ev:+z.2f} EV")
     ref_l = np.asarray(m.reference_lab, np.float64)[idx, 0]
     meas_l = np.asarray(m.lab, np.float64)[idx, 0]
     order = np.argsort(ref_l)

@@ -53,8 +53,8 @@ def comparison_lines(report: ComparisonReport) -> list[str]:
              "the reference",
              f"normalisation: {report.normalisation.describe()}",
              f"sim-to-real ΔE00: mean {m.mean_delta_e:.2f}, max {m.max_delta_e:.2f} "
-             f"({m.worst_patch}); mean ΔL' {float(np.mean(m.delta_l)):+.2f}, ΔC' "
-             f"{float(np.mean(m.delta_c)):+.2f}, |ΔH'| {float(np.mean(np.abs(m.delta_h))):.2f} "
+             f"({m.worst_patch}); mean ΔL' {float(np.mean(m.delta_l)):+z.2f}, ΔC' "
+             f"{float(np.mean(m.delta_c)):+z.2f}, |ΔH'| {float(np.mean(np.abs(m.delta_h))):.2f} "
              "(simulation relative to the real camera)"]
     if report.uncertainty is not None:
         lines.append(report.uncertainty.text())
@@ -114,7 +114,7 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
         ("sim-to-real ΔE00", f"mean {m.mean_delta_e:.2f}, max {m.max_delta_e:.2f} "
                              f"({m.worst_patch})"),
         ("mean direction (simulation − real)",
-         f"ΔL' {float(np.mean(m.delta_l)):+.2f}, ΔC' {float(np.mean(m.delta_c)):+.2f}, "
+         f"ΔL' {float(np.mean(m.delta_l)):+z.2f}, ΔC' {float(np.mean(m.delta_c)):+z.2f}, "
          f"|ΔH'| {float(np.mean(np.abs(m.delta_h))):.2f}"),
         ("predicted ΔmAP of the difference, classic", f"{n2(p.dmap_points)} points "
                                                       f"({p.table.name})"),
@@ -135,8 +135,8 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
                          if m.reference_srgb is not None else m.srgb, reference_srgb=m.srgb)
     limit = (v.criterion.limit if v is not None and v.criterion.kind == "max-delta-e"
              else None)
-    rows = [(name, f"{m.delta_e[k]:.2f}", f"{m.delta_l[k]:+.2f}", f"{m.delta_c[k]:+.2f}",
-             f"{m.delta_h[k]:+.2f}", f"{report.sim.measurement.delta_e[k]:.2f}",
+    rows = [(name, f"{m.delta_e[k]:.2f}", f"{m.delta_l[k]:+z.2f}", f"{m.delta_c[k]:+z.2f}",
+             f"{m.delta_h[k]:+z.2f}", f"{report.sim.measurement.delta_e[k]:.2f}",
              f"{report.real.measurement.delta_e[k]:.2f}")
             for k, name in enumerate(m.patch_names)]
     sections.append(section(

@@ -155,7 +155,7 @@ def shared_fit_lines(shared: SharedFit) -> list[str]:
     m = shared.matrix.matrix
     lines = [f"one matrix over {len(shared.reports)} pairs (linear least squares, per-pair "
              "gains, the first pair's fixed at 1): rows "
-             + "; ".join(" ".join(f"{v:+.4f}" for v in row) for row in m)]
+             + "; ".join(" ".join(f"{v:+z.4f}" for v in row) for row in m)]
     if shared.conditioning.reason:
         lines.append(f"regularised: {shared.conditioning.reason}")
     for k, (rep, g) in enumerate(zip(shared.reports, shared.gains, strict=True)):

@@ -45,7 +45,7 @@ def summary_lines(report: ChartReport) -> list[str]:
         kept = ""
         if bp is not None and bp.window.negative and bp.negatives == "keep":
             kept = f"; pixels with a negative channel kept in the mean: {bp.window.negative}"
-        lines.append(f"exposure correction {report.exposure_ev:+.2f} EV; bad pixels "
+        lines.append(f"exposure correction {report.exposure_ev:+z.2f} EV; bad pixels "
                      f"excluded: {bp.window.total if bp else 0}{kept}")
         if report.measurement.excluded:
             reasons: dict[str, list[str]] = {}

@@ -271,9 +271,9 @@ def failure_reason(row: ValidationRow, cls: str, camera: CameraRecord) -> str:
                      "first point's value")
     parts.append(f"chart error mostly {prof.dominant} (|ΔL'| {prof.share_l:.0%}, "
                  f"|ΔC'| {prof.share_c:.0%}, |ΔH'| {prof.share_h:.0%}; mean ΔL' "
-                 f"{prof.mean_dl:+.1f}, mean ΔC' {prof.mean_dc:+.1f}, contrast ratio "
+                 f"{prof.mean_dl:+z.1f}, mean ΔC' {prof.mean_dc:+z.1f}, contrast ratio "
                  f"{prof.contrast_ratio:.2f}, neutral cast a*,b* "
-                 f"{prof.neutral_cast_ab[0]:+.1f},{prof.neutral_cast_ab[1]:+.1f})")
+                 f"{prof.neutral_cast_ab[0]:+z.1f},{prof.neutral_cast_ab[1]:+z.1f})")
     ide = camera.image_delta_e
     if ide is not None:
         parts.append(f"on photos the emulation moves colours by ΔE00 {ide.mean:.1f} on average "
@@ -355,7 +355,7 @@ def _bound_section(results: ValidationResults) -> Section:
             meas = [x[1] for x in xs]
             err = np.array(meas) - np.array(pred)
             notes.append(f"- `{t}` ({rows[0].predicted[t].kind}): mAP measured − predicted: "
-                         f"median {np.median(err):+.2f} points, max {err.max():+.2f}; Spearman "
+                         f"median {np.median(err):+z.2f} points, max {err.max():+z.2f}; Spearman "
                          f"ρ(predicted, measured) = {number(spearman(pred, meas))}; within for "
                          f"{int(np.sum(err <= 0))}/{len(err)} cells.")
     if rows:
