@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +40,11 @@ __all__ = [
 DEFAULT_CHART = "safecolor"
 
 
+def _read_only(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    a.setflags(write=False)
+    return a
+
+
 @dataclass(frozen=True)
 class Chart:
     """A colour chart: named patches with reference CIELAB values on a rows x cols grid.
@@ -59,15 +65,17 @@ class Chart:
     source: str = ""
     extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
-    @property
+    @cached_property
     def srgb_unclipped(self) -> NDArray[np.float64]:
-        """Encoded sRGB of the reference Lab, (n, 3), not clipped (out-of-gamut patches leave [0, 1])."""
-        return np.asarray(lab_to_srgb(self.lab), dtype=np.float64)
+        """Encoded sRGB of the reference Lab, (n, 3), not clipped (out-of-gamut patches leave
+        [0, 1]); computed once, read-only."""
+        return _read_only(np.array(lab_to_srgb(self.lab), dtype=np.float64))
 
-    @property
+    @cached_property
     def srgb(self) -> NDArray[np.float64]:
-        """The chart image of SAFE-COLOR: reference Lab -> sRGB, clipped to [0, 1], (n, 3)."""
-        return np.clip(self.srgb_unclipped, 0.0, 1.0)
+        """The chart image of SAFE-COLOR: reference Lab -> sRGB, clipped to [0, 1], (n, 3);
+        computed once, read-only (every transform's chart ΔE starts from it)."""
+        return _read_only(np.clip(self.srgb_unclipped, 0.0, 1.0))
 
     @property
     def neutral_indices(self) -> tuple[int, ...]:
