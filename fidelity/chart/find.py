@@ -396,6 +396,7 @@ def _prepare(pyramid: Pyramid, region: tuple[int, int, int, int], max_side: int,
     lx1 = min(-(-x1 // factor), level.shape[1])
     ly1 = min(-(-y1 // factor), level.shape[0])
     arr = np.ascontiguousarray(level[ly0:ly1, lx0:lx1])
+    finite = factor > 1 or is_coded(arr)  # levels and 8/16-bit codes hold no NaN or Inf
     if factor == 1:
         arr = np.ascontiguousarray(as_float32(arr))
     height, width = arr.shape[:2]
@@ -404,7 +405,7 @@ def _prepare(pyramid: Pyramid, region: tuple[int, int, int, int], max_side: int,
         arr = cv2.resize(arr, (min(target[0], width), min(target[1], height)),
                          interpolation=cv2.INTER_AREA)
     sx, sy = arr.shape[1] / width, arr.shape[0] / height
-    if factor == 1:
+    if not finite:
         arr = np.nan_to_num(arr, nan=0.0, posinf=0.0, neginf=0.0)
     if encoding == "srgb":  # codes in [0, 1] -> the nearest of 65536 steps -> linear
         arr = _DECODE_LUT[_codes(arr, 65535)]
