@@ -159,3 +159,24 @@ def test_compare_is_in_the_public_api():
 
     assert fidelity.compare_charts is compare_charts
     assert Path(fidelity.compare_charts.__module__.replace(".", "/") + ".py").name == "compare.py"
+
+
+def test_the_html_summary_states_the_uncertainty_and_the_interval(charts):
+    """The summary table of the comparison page gives the sim-to-real ΔE with its standard
+    uncertainty and the classic prediction with its interval, as the terminal does."""
+    from fidelity.chart.uncertainty import uncertain_text
+    from fidelity.report.compare import comparison_document
+    from fidelity.report.document import Facts
+
+    paths, _, _ = charts
+    r = compare_charts(paths["sim"], paths["real"], sim_corners=CORNERS, real_corners=CORNERS,
+                       normalise_mode="none")
+    assert r.uncertainty is not None and r.interval is not None
+    assert r.uncertainty.value == pytest.approx(r.mean_delta_e, abs=1e-12)
+    facts = next(b for s in comparison_document(r).sections for b in s.blocks
+                 if isinstance(b, Facts))
+    rows = dict(facts.items)
+    u = r.uncertainty.combined
+    assert rows["sim-to-real ΔE00"].startswith(f"mean {uncertain_text(r.mean_delta_e, u)} (k=1)")
+    assert f"± {r.interval.standard_uncertainty:.2f} (k=1) points" in \
+        rows["predicted ΔmAP of the difference, classic"]

@@ -397,3 +397,19 @@ def test_every_shipped_table_names_its_detectors():
     tables = {t for t, _ in _shipped_table_models()}
     folder = Path(fidelity.__file__).parent / "data" / "prediction"
     assert tables == {p.name for p in folder.glob("coco*.json")} and len(tables) >= 1
+
+
+def test_the_html_summary_states_the_uncertainty_and_the_interval():
+    """The summary table of a check's page gives the chart ΔE with its standard uncertainty
+    and the predicted ΔmAP with its interval, the numbers of the record."""
+    from fidelity.chart.uncertainty import uncertain_text
+    from fidelity.check import check_camera
+    from fidelity.report.chart import summary_facts
+
+    r = check_camera("nikon-5100")
+    assert r.uncertainty is not None and r.interval is not None
+    rows = dict(summary_facts(r).items)
+    u = r.uncertainty
+    assert rows["mean ΔE00 (chart ΔE)"] == f"{uncertain_text(r.mean_delta_e, u.combined)} (k=1)"
+    assert rows["predicted ΔmAP, percentage points"] == \
+        f"{r.prediction.dmap_points:.2f} ± {r.interval.standard_uncertainty:.2f} (k=1)"

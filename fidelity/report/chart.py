@@ -17,6 +17,7 @@ from typing import Any
 
 from numpy.typing import NDArray
 
+from fidelity.chart.uncertainty import uncertain_text
 from fidelity.fileio import JSONObject, json_ready
 from fidelity.records import ChartReport, ImageSource, RenderSource
 from fidelity.report.document import (
@@ -58,7 +59,9 @@ def headline(report: ChartReport) -> Headline:
 def summary_facts(report: ChartReport) -> Facts:
     from fidelity.chart.measure import chart_statistics
 
-    items = [("mean ΔE00 (chart ΔE)", _num(report.mean_delta_e)),
+    u = report.uncertainty
+    items = [("mean ΔE00 (chart ΔE)", _num(report.mean_delta_e) if u is None else
+              f"{uncertain_text(u.value, u.combined)} (k={u.k:g})"),
              ("max ΔE00", f"{_num(report.max_delta_e)} ({report.worst_patch})")]
     stats = chart_statistics(report.measurement)
     items += [("saturation (mean chroma of the colour patches)",
@@ -78,7 +81,9 @@ def summary_facts(report: ChartReport) -> Facts:
     p = report.prediction
     if p is not None:
         b = "≤ " if p.table.kind.upper_bound else ""
-        items += [("predicted ΔmAP, percentage points", b + _num(p.dmap_points)),
+        pm = "" if report.interval is None else \
+            f" ± {report.interval.standard_uncertainty:.2f} (k=1)"
+        items += [("predicted ΔmAP, percentage points", b + _num(p.dmap_points) + pm),
                   ("predicted ΔmAP, % of baseline", b + _num(p.dmap_relative)),
                   ("predicted person ΔAP, points", b + _num(p.dap_person_points)),
                   ("predicted bicycle ΔAP, points", b + _num(p.dap_bicycle_points)),

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fidelity.chart.uncertainty import uncertain_text
 from fidelity.fileio import json_ready
 from fidelity.records import ComparisonReport, ImageSource
 from fidelity.report.chart import (
@@ -105,18 +106,22 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
     def n2(x: float | None) -> str:
         return "–" if x is None else f"{x:.2f}"
 
+    u = report.uncertainty
+    mean = (f"{m.mean_delta_e:.2f}" if u is None else
+            f"{uncertain_text(u.value, u.combined)} (k={u.k:g})")
+    pm = (f" ± {report.interval.standard_uncertainty:.2f} (k=1)"
+          if report.interval is not None else "")
     facts = Facts((
         ("simulation", f"`{report.sim.source.title}`: chart ΔE00 {report.sim.mean_delta_e:.2f}"),
         ("real camera", f"`{report.real.source.title}`: chart ΔE00 "
                         f"{report.real.mean_delta_e:.2f}"),
         ("reference of each chart", report.sim.source.reference_description),
         ("normalisation", report.normalisation.describe()),
-        ("sim-to-real ΔE00", f"mean {m.mean_delta_e:.2f}, max {m.max_delta_e:.2f} "
-                             f"({m.worst_patch})"),
+        ("sim-to-real ΔE00", f"mean {mean}, max {m.max_delta_e:.2f} ({m.worst_patch})"),
         ("mean direction (simulation − real)",
          f"ΔL' {float(np.mean(m.delta_l)):+z.2f}, ΔC' {float(np.mean(m.delta_c)):+z.2f}, "
          f"|ΔH'| {float(np.mean(np.abs(m.delta_h))):.2f}"),
-        ("predicted ΔmAP of the difference, classic", f"{n2(p.dmap_points)} points "
+        ("predicted ΔmAP of the difference, classic", f"{n2(p.dmap_points)}{pm} points "
                                                       f"({p.table.name})"),
         ("predicted ΔmAP of the difference, direction-aware",
          f"{n2(d.dmap_points if d else None)} points"),
