@@ -520,3 +520,22 @@ def test_audit_images_api_gives_each_image_its_report_or_error(png, tmp_path):
     assert results[0].report.mean_delta_e == alone.mean_delta_e
     assert results[1].report is None and results[1].error.startswith(f"{cut}: ")
     assert results[1].exit_code == 2
+
+
+def test_the_overview_gives_each_prediction_with_its_interval(png):
+    """The overview table's ΔE and ΔmAP columns carry each subject's standard uncertainty:
+    the numbers of its report."""
+    import fidelity
+    from fidelity.report.document import Table
+    from fidelity.report.gate import audit_overview_document
+
+    path, _ = png
+    (case,) = fidelity.audit_images([path], corners_of(), reference="safecolor")
+    r = case.report
+    assert r is not None and r.uncertainty is not None and r.interval is not None
+    (tab,) = [b for s in audit_overview_document([case], [None]).sections for b in s.blocks
+              if isinstance(b, Table)]
+    row = dict(zip(tab.header, tab.rows[0], strict=True))
+    assert row["mean ΔE00 ± u (k=1)"] == f"{r.mean_delta_e:.3f} ± {r.uncertainty.combined:.3f}"
+    assert row["predicted ΔmAP ± u (k=1), points"] == \
+        f"{r.prediction.dmap_points:.2f} ± {r.interval.standard_uncertainty:.2f}"

@@ -56,8 +56,9 @@ def _row(case: GateResult, link: str | None, verdict: bool = True) -> tuple[str,
     u = r.uncertainty.combined if r.uncertainty is not None else None
     de = f"{r.mean_delta_e:.3f}" + (f" ± {u:.3f}" if u is not None else "")
     dmap = r.prediction.dmap_points if r.prediction is not None else None
+    pm = "" if r.interval is None else f" ± {r.interval.standard_uncertainty:.2f}"
     return (name, *outcome, de, f"{r.max_delta_e:.2f} ({r.worst_patch})",
-            "" if dmap is None else f"{dmap:.2f}", "")
+            "" if dmap is None else f"{dmap:.2f}{pm}", "")
 
 
 def frames_figure(recording: str, frames: Sequence[int], cases: Sequence[GateResult],
@@ -134,7 +135,7 @@ def gate_overview_document(cases: Sequence[GateResult], links: Sequence[str | No
         sections.append(section("Over the frames",
                                 *_recordings_figures(cases, frames, recordings, limit)))
     sections.append(section("Subjects", table(
-        ("subject", "verdict", "mean ΔE00 ± u (k=1)", "max ΔE00", "predicted ΔmAP, points",
+        ("subject", "verdict", "mean ΔE00 ± u (k=1)", "max ΔE00", "predicted ΔmAP ± u (k=1), points",
          "error"), [_row(c, link) for c, link in zip(cases, links, strict=True)],
         numeric=(False, False, True, True, True, False))))
     return Document("Colour fidelity gate", Headline(message, tone), tuple(sections))
@@ -166,7 +167,7 @@ def audit_overview_document(cases: Sequence[GateResult], links: Sequence[str | N
                     (section(f"Over the {what}", *figures),
                      section("Subjects", table(
                          ("#", "subject", "mean ΔE00 ± u (k=1)", "max ΔE00",
-                          "predicted ΔmAP, points", "error"), rows,
+                          "predicted ΔmAP ± u (k=1), points", "error"), rows,
                          numeric=(True, False, True, True, True, False)))))
 
 
