@@ -539,3 +539,35 @@ def test_the_overview_gives_each_prediction_with_its_interval(png):
     assert row["mean ΔE00 ± u (k=1)"] == f"{r.mean_delta_e:.3f} ± {r.uncertainty.combined:.3f}"
     assert row["predicted ΔmAP ± u (k=1), points"] == \
         f"{r.prediction.dmap_points:.2f} ± {r.interval.standard_uncertainty:.2f}"
+
+
+def test_a_folder_of_frames_stands_for_its_images_in_natural_order(png, tmp_path):
+    """``gate FOLDER`` and ``audit FOLDER``: each image file directly in it, frame_2 before
+    frame_10; other files, hidden files and sub-folders left out; a folder without images is
+    one error line."""
+    import shutil
+
+    path, de = png
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for name in ("frame_10.png", "frame_2.PNG", ".frame_1.png"):
+        shutil.copy(path, frames / name)
+    (frames / "notes.txt").write_text("not an image")
+    (frames / "sub.png").mkdir()
+    r = run("gate", frames, "--corners", corners_of(), "--max-delta-e", f"{de + 1:.3f}",
+            "--junit", tmp_path / "j.xml")
+    assert r.exit_code == 0, r.output
+    cases = ET.parse(tmp_path / "j.xml").getroot().findall("testsuite/testcase")
+    assert [c.get("name").split(":")[0] for c in cases] == [
+        f"colour fidelity of {frames / n}" for n in ("frame_2.PNG", "frame_10.png")]
+    out = tmp_path / "out"
+    r = run("audit", frames, "--corners", corners_of(), "--json", out)
+    assert r.exit_code == 0, r.output
+    assert sorted(p.name for p in out.iterdir()) == ["frame_10.png.json", "frame_2.PNG.json"]
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    for command in ("gate", "audit"):
+        r = run(command, empty, "--max-delta-e", "3") if command == "gate" else \
+            run(command, empty)
+        assert r.exit_code == 2
+        assert one_error_line(r).startswith(f"fidelity: error: {empty}: a folder with no image")

@@ -409,7 +409,9 @@ def test_bad_recordings_are_one_line_errors(recordings, chart, tmp_path):
     assert line.startswith(f"fidelity: error: {png}: not a ROS bag or MCAP file")
     line = _error(["compare", str(png), str(png), "--topic", "/cam/rgb8"])
     assert line.startswith(f"fidelity: error: {png}: not a ROS bag or MCAP file")
-    line = _error(["audit", str(tmp_path)])
+    line = _error(["audit", str(tmp_path)])  # audit and gate: a folder of images
+    assert line.startswith(f"fidelity: error: {tmp_path}: a folder with no image in it")
+    line = _error(["compare", str(tmp_path), str(png)])
     assert line.startswith(f"fidelity: error: {tmp_path}: a folder, but not a ROS 2 bag")
     # a Bayer mosaic of odd size
     linear, _ = chart

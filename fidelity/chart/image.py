@@ -549,6 +549,41 @@ def _read_through_link(p: Path, shown: str, layer: str | None, bayer: str | None
     return replace(image, path=p)
 
 
+#: OpenImageIO's pseudo-formats, never a frame on disk: their names are not image suffixes.
+_PSEUDO_FORMATS = ("null", "term")
+
+
+def image_suffixes() -> frozenset[str]:
+    """The file suffixes (lower case, with the dot) of the formats OpenImageIO reads here
+    (its ``extension_list``), without its pseudo-formats."""
+    import OpenImageIO as oiio
+
+    out: set[str] = set()
+    for entry in str(oiio.get_string_attribute("extension_list")).split(";"):
+        fmt, _, exts = entry.partition(":")
+        if fmt not in _PSEUDO_FORMATS:
+            out.update(f".{e.lower()}" for e in exts.split(",") if e)
+    return frozenset(out)
+
+
+def _natural_key(name: str) -> tuple[tuple[int, int | str], ...]:
+    """``frame_2`` before ``frame_10``: runs of digits compare as numbers."""
+    import re
+
+    return tuple((0, int(part)) if part.isdigit() else (1, part)
+                 for part in re.split(r"(\d+)", name) if part)
+
+
+def folder_images(folder: str | os.PathLike[str]) -> list[Path]:
+    """The image files directly in ``folder`` (suffixes of :func:`image_suffixes`; hidden
+    files and sub-folders left out), in natural order of their names (``frame_2`` before
+    ``frame_10``): the frames a renderer wrote."""
+    suffixes = image_suffixes()
+    found = [p for p in Path(folder).iterdir()
+             if p.suffix.lower() in suffixes and not p.name.startswith(".") and p.is_file()]
+    return sorted(found, key=lambda p: _natural_key(p.name))
+
+
 #: Pixels decoded at a time into the image's array (so that the decoder's own buffer stays
 #: small: a whole-image read holds the image twice).
 READ_BAND_PIXELS = 1 << 22
@@ -733,5 +768,6 @@ def _finish(out: Any, written: bool, path: str | os.PathLike[str], kind: str) ->
 __all__ = [
     "OneChannelError","BAYER_PATTERNS", "DEFAULT_MAX_PIXELS", "DEMOSAICING", "FLOAT_PIXEL_TYPES",
            "MAX_PIXELS_ENV", "NATIVE_PIXEL_TYPES", "Image", "ImageInfo", "Recording",
-           "as_float32", "demosaic", "is_coded", "pixel_limit",
+           "as_float32", "demosaic", "folder_images", "image_suffixes", "is_coded",
+           "pixel_limit",
            "read_image", "write_exr", "write_png"]

@@ -17,6 +17,7 @@ from fidelity.cli.options import (
     common_options,
     evidence_option,
     evidence_outputs,
+    expand_folders,
     frame_report_names,
     frame_subjects,
     frames_summary,
@@ -82,11 +83,12 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
     fidelity audit photo.jpg --corners 102,88,610,95,604,420,98,414
     fidelity audit render.png --measure      # + the loss measured on COCO
     fidelity audit drive.bag --topic /camera/image_raw --time 12.5
-    fidelity audit frames/*.exr --json reports/ --html reports/
+    fidelity audit frames/ --json reports/ --html reports/
     fidelity audit drive.bag --topic /camera/image_raw --frames 0:300:30 --html reports/
 
-    IMAGE is an image file or a robot recording (ROS 1 bag, ROS 2 bag folder or its .db3 /
-    .mcap file, MCAP file) with --topic and --frame or --time. Several IMAGEs, or --frames of
+    IMAGE is an image file, a folder of them (its images in natural order: frame_2 before
+    frame_10) or a robot recording (ROS 1 bag, ROS 2 bag folder or its .db3 / .mcap file,
+    MCAP file) with --topic and --frame or --time. Several IMAGEs, or --frames of
     recordings, are audited one by one in one process (--json and --html name folders that
     get IMAGE-NAME.json / .html, and index.html, an overview); one that cannot be measured is
     an error line and the others are still audited; the exit code is then 2.
@@ -102,6 +104,7 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
     if frames is not None and (read.frame is not None or read.time is not None):
         raise click.UsageError("give --frames, or --frame N or --time T, not both")
     read = replace(read, max_pixels=max_pixels)
+    image = expand_folders(image)
     reports_of = image  # what each subject's report is named after
     frame_of: list[int] | None = None
     if frames is not None:  # each selected frame of each recording is a subject

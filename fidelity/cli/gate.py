@@ -27,6 +27,7 @@ from fidelity.cli.options import (
     decision_rule,
     evidence_option,
     evidence_outputs,
+    expand_folders,
     frame_report_names,
     frame_subjects,
     frames_summary,
@@ -117,9 +118,11 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
     fidelity gate photo.jpg --corners 102,88,610,95,604,420,98,414 --max-delta-e 3
     fidelity gate --camera nikon-5100 --max-dmap 1 --class person --junit colour.xml
     fidelity gate day.exr dusk.exr tunnel.exr --max-delta-e 3 --junit colour.xml
+    fidelity gate frames/ --max-delta-e 3 --junit colour.xml --html reports/
     fidelity gate drive.bag --topic /camera/image_raw --frame 40 --max-delta-e 3
     fidelity gate drive.bag --topic /camera/image_raw --frames 0:300:30 --max-delta-e 3
 
+    A folder of images stands for its images, in natural order (frame_2 before frame_10).
     Several IMAGEs are gated one by one (one JUnit test case each; --json and --html name
     folders that get IMAGE-NAME.json / .html, as an existing folder does for one image); the
     exit code is 2 if any image could not be measured, else 1 if any failed, else 4 if any
@@ -153,6 +156,11 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
     from fidelity.records import GateResult, gate_exit_code
     from fidelity.report.terminal import summary_lines
 
+    try:
+        images = expand_folders(images)  # a folder of frames: its images
+    except FidelityError as exc:
+        _error_line(str(exc))
+        sys.exit(EXIT_ERROR)
     to_stdout = json_path is not None and str(json_path) == STDOUT
     if to_stdout and (len(images) > 1 or frames is not None):
         raise click.UsageError("--json - (standard output) takes one IMAGE; give a folder")

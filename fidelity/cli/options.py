@@ -178,6 +178,30 @@ class FrameRange(ParamTypeBase):
         return parse_frames(str(value))
 
 
+def expand_folders(paths: Sequence[Path]) -> tuple[Path, ...]:
+    """Each IMAGE as given, a folder of images (one without a ROS 2 bag's ``metadata.yaml``)
+    replaced by the images in it, in natural order (:func:`fidelity.chart.image.folder_images`;
+    ``audit`` and ``gate``); a folder with none is an input error."""
+    from fidelity.chart.image import folder_images, image_suffixes
+    from fidelity.errors import InputFileError
+    from fidelity.fileio import display_path
+
+    out: list[Path] = []
+    for p in paths:
+        if not p.is_dir() or (p / "metadata.yaml").is_file():
+            out.append(p)
+            continue
+        found = folder_images(p)
+        if not found:
+            common = [x for x in (".exr", ".png", ".jpg", ".tif", ".hdr") if x in
+                      image_suffixes()]
+            raise InputFileError(f"{display_path(p)}: a folder with no image in it "
+                                 f"({', '.join(common)}, ...) and no metadata.yaml of a ROS 2 "
+                                 "bag")
+        out.extend(found)
+    return tuple(out)
+
+
 def frame_subjects(images: Sequence[Path], frames: FrameSelection, topic: str | None
                     ) -> tuple[tuple[Path, ...], list[int]]:
     """Each recording once per frame ``frames`` selects on its topic (from its index), and
