@@ -31,6 +31,9 @@ class UnreachableTargetError(FidelityError):
 
 
 def unknown_name(kind: str, name: str, known: object) -> UnknownNameError:
-    """Build an :class:`UnknownNameError` listing the names that are known."""
+    """Build an :class:`UnknownNameError` that names the input first, as every input error
+    does (``nope: unknown camera; known: ideal, nikon-5100``), and lists the names that are
+    known; a name that is empty or has spaces at its ends is quoted."""
     names = ", ".join(sorted(str(k) for k in known))  # type: ignore[attr-defined]
-    return UnknownNameError(f"unknown {kind} {name!r}; known: {names}")
+    shown = name if name and name == name.strip() else repr(name)
+    return UnknownNameError(f"{shown}: unknown {kind}; known: {names}")

@@ -218,7 +218,7 @@ def test_scorer_names() -> None:
 
     assert resolve_scorer("auto") in COCO_SCORERS
     assert resolve_scorer("pycocotools") == "pycocotools"
-    with pytest.raises(UnknownNameError, match="unknown COCO scorer 'cocoapi'"):
+    with pytest.raises(UnknownNameError, match="^cocoapi: unknown COCO scorer; known: "):
         resolve_scorer("cocoapi")
 
 

@@ -257,7 +257,7 @@ def test_registry_picks_up_files(tmp_path, monkeypatch):
     (tmp_path / "measured-test.json").write_text(json.dumps(changed, indent=1))
     assert pr.load_prediction_table("measured-test").title == "changed on disk"
     assert pr.predict(3.0, size="n", table="measured-test", transforms=False).dmap_points == pytest.approx(0.9)
-    with pytest.raises(UnknownNameError, match=r"unknown prediction table 'nope'; known: measured-test, safecolor-2025"):
+    with pytest.raises(UnknownNameError, match=r"^nope: unknown prediction table; known: measured-test, safecolor-2025$"):
         pr.load_prediction_table("nope")
     (tmp_path / "broken.json").write_text("{not json")
     with pytest.raises(InputFileError, match="broken.json"):
