@@ -571,3 +571,17 @@ def test_a_folder_of_frames_stands_for_its_images_in_natural_order(png, tmp_path
             run(command, empty)
         assert r.exit_code == 2
         assert one_error_line(r).startswith(f"fidelity: error: {empty}: a folder with no image")
+
+
+def test_a_folder_that_cannot_be_listed_is_one_error_line(tmp_path, monkeypatch):
+    frames = tmp_path / "frames"
+    frames.mkdir()
+
+    def refuse(self):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(Path, "iterdir", refuse)
+    r = run("gate", frames, "--max-delta-e", "3")
+    assert r.exit_code == 2
+    assert one_error_line(r) == (f"fidelity: error: {frames}: cannot list the folder "
+                                 "(Permission denied)")

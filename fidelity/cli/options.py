@@ -191,7 +191,11 @@ def expand_folders(paths: Sequence[Path]) -> tuple[Path, ...]:
         if not p.is_dir() or (p / "metadata.yaml").is_file():
             out.append(p)
             continue
-        found = folder_images(p)
+        try:
+            found = folder_images(p)
+        except OSError as exc:
+            raise InputFileError(f"{display_path(p)}: cannot list the folder "
+                                 f"({exc.strerror or exc})") from None
         if not found:
             common = [x for x in (".exr", ".png", ".jpg", ".tif", ".hdr") if x in
                       image_suffixes()]
