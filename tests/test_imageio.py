@@ -190,3 +190,15 @@ def test_pixel_limit_is_checked_before_decoding(tmp_path, monkeypatch):
         monkeypatch.setenv("FIDELITY_MAX_PIXELS", bad)
         with pytest.raises(InvalidValueError, match=f"FIDELITY_MAX_PIXELS={bad}"):
             pixel_limit()
+
+
+def test_folder_images_are_in_natural_order_ties_broken_by_name(tmp_path):
+    from fidelity.chart.image import folder_images
+
+    names = ["f10.exr", "f2.png", "f02.png", "f1.tif", "F3.JPG", "f2b.png", "notes.txt",
+             ".f0.png"]
+    for name in reversed(names):
+        (tmp_path / name).write_bytes(b"")
+    (tmp_path / "f4.png").mkdir()
+    assert [p.name for p in folder_images(tmp_path)] == [
+        "F3.JPG", "f1.tif", "f02.png", "f2.png", "f2b.png", "f10.exr"]

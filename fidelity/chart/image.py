@@ -581,7 +581,8 @@ def folder_images(folder: str | os.PathLike[str]) -> list[Path]:
     suffixes = image_suffixes()
     found = [p for p in Path(folder).iterdir()
              if p.suffix.lower() in suffixes and not p.name.startswith(".") and p.is_file()]
-    return sorted(found, key=lambda p: _natural_key(p.name))
+    # the name itself breaks ties (frame_1 and frame_01): the order never depends on the disk's
+    return sorted(found, key=lambda p: (_natural_key(p.name), p.name))
 
 
 #: Pixels decoded at a time into the image's array (so that the decoder's own buffer stays
