@@ -143,5 +143,5 @@ def test_unknown_camera_is_one_line_exit_2(tmp_path):
     assert r.exit_code == 2
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("fidelity: error: ")
-    assert "'no-such-camera'" in lines[0]
+    assert lines[0].startswith("fidelity: error: no-such-camera: unknown camera; known: ")
     assert not (tmp_path / "x").exists()
