@@ -130,7 +130,11 @@ class UncertaintyBudget:
     def text(self) -> str:
         """``"mean ΔE00 2.41 ± 0.06 (k=1)"``: the uncertainty to two significant digits when
         it is below 0.1 (at least two decimals), the value to the same decimals."""
-        return f"{self.quantity} {uncertain_text(self.value, self.combined)} (k={self.k:g})"
+        return f"{self.quantity} {self.value_text()}"
+
+    def value_text(self) -> str:
+        """``"2.41 ± 0.06 (k=1)"``: :meth:`text` without the quantity's name."""
+        return f"{uncertain_text(self.value, self.combined)} (k={self.k:g})"
 
     def to_json(self) -> dict[str, Any]:
         """``value``, ``standard_uncertainty``, ``k``, ``components``, ``method`` (the Monte

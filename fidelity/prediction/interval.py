@@ -63,6 +63,11 @@ class PredictionInterval:
         """Combined standard uncertainty (k = 1)."""
         return math.sqrt((self.table_se or 0.0) ** 2 + self.propagated ** 2)
 
+    def plus_minus(self) -> str:
+        """``" ± 0.27 (k=1)"``: the standard uncertainty as the reports print it after the
+        predicted value."""
+        return f" ± {self.standard_uncertainty:.2f} (k=1)"
+
     def interval(self, k: float | None = None) -> tuple[float, float]:
         """``value ± k u`` (``k`` default :attr:`k`)."""
         kk = self.k if k is None else k

@@ -17,7 +17,6 @@ from typing import Any
 
 from numpy.typing import NDArray
 
-from fidelity.chart.uncertainty import uncertain_text
 from fidelity.fileio import JSONObject, json_ready
 from fidelity.records import ChartReport, ImageSource, RenderSource
 from fidelity.report.document import (
@@ -61,7 +60,7 @@ def summary_facts(report: ChartReport) -> Facts:
 
     u = report.uncertainty
     items = [("mean ΔE00 (chart ΔE)", _num(report.mean_delta_e) if u is None else
-              f"{uncertain_text(u.value, u.combined)} (k={u.k:g})"),
+              u.value_text()),
              ("max ΔE00", f"{_num(report.max_delta_e)} ({report.worst_patch})")]
     stats = chart_statistics(report.measurement)
     items += [("saturation (mean chroma of the colour patches)",
@@ -81,8 +80,7 @@ def summary_facts(report: ChartReport) -> Facts:
     p = report.prediction
     if p is not None:
         b = "≤ " if p.table.kind.upper_bound else ""
-        pm = "" if report.interval is None else \
-            f" ± {report.interval.standard_uncertainty:.2f} (k=1)"
+        pm = "" if report.interval is None else report.interval.plus_minus()
         items += [("predicted ΔmAP, percentage points", b + _num(p.dmap_points) + pm),
                   ("predicted ΔmAP, % of baseline", b + _num(p.dmap_relative)),
                   ("predicted person ΔAP, points", b + _num(p.dap_person_points)),

@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fidelity.chart.uncertainty import uncertain_text
 from fidelity.fileio import json_ready
 from fidelity.records import ComparisonReport, ImageSource
 from fidelity.report.chart import (
@@ -64,8 +63,7 @@ def comparison_lines(report: ComparisonReport) -> list[str]:
     def f(v: float | None) -> str:
         return "n/a" if v is None else f"{v:.2f}"
 
-    pm = (f" ± {report.interval.standard_uncertainty:.2f} (k=1)"
-          if report.interval is not None else "")
+    pm = report.interval.plus_minus() if report.interval is not None else ""
     lines.append(f"predicted ΔmAP of the difference: {f(p.dmap_points)}{pm} points, "
                  f"{f(p.dmap_relative)} % of baseline (classic, table {p.table.name}, "
                  f"detector size {p.size_used})")
@@ -107,10 +105,8 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
         return "–" if x is None else f"{x:.2f}"
 
     u = report.uncertainty
-    mean = (f"{m.mean_delta_e:.2f}" if u is None else
-            f"{uncertain_text(u.value, u.combined)} (k={u.k:g})")
-    pm = (f" ± {report.interval.standard_uncertainty:.2f} (k=1)"
-          if report.interval is not None else "")
+    mean = f"{m.mean_delta_e:.2f}" if u is None else u.value_text()
+    pm = report.interval.plus_minus() if report.interval is not None else ""
     facts = Facts((
         ("simulation", f"`{report.sim.source.title}`: chart ΔE00 {report.sim.mean_delta_e:.2f}"),
         ("real camera", f"`{report.real.source.title}`: chart ΔE00 "

@@ -68,7 +68,7 @@ def summary_lines(report: ChartReport) -> list[str]:
                 "measured worst case, " if p.table.kind is TableKind.MEASURED else "")
         pm = ""
         if report.interval is not None:
-            pm = f" ± {report.interval.standard_uncertainty:.2f} (k=1)"
+            pm = report.interval.plus_minus()
         lines.append(f"predicted ΔmAP: {f(p.dmap_points)}{pm} percentage points, "
                      f"{f(p.dmap_relative)} % of baseline ({kind}table "
                      f"{p.table.name}, detector size {p.size_used})")
