@@ -1,0 +1,75 @@
+"""The manual's result tables are the reports' own: a table (or list) in README.md or docs/*.md
+that is introduced by a line ending "as in `reports/....md`:" must be, line for line, lines of
+that report, which the code generates (``fidelity tables``, ``fidelity validate``). When a
+table is re-measured and its report rebuilt, a page still quoting the earlier numbers fails
+here."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+#: The line that introduces a quoted table, naming the report it is quoted from.
+QUOTE = re.compile(r"as in `(reports/[^`]+\.md)`(?: \([^)]*\))?:$")
+
+
+def quoted_tables(text: str) -> list[tuple[str, list[str]]]:
+    """(report, the block's lines) of every table or list in ``text`` introduced by
+    :data:`QUOTE` (the introducing line, a blank line, then the ``|`` or ``- `` lines)."""
+    lines = text.split("\n")
+    out = []
+    for i, line in enumerate(lines):
+        m = QUOTE.search(line)
+        if not m:
+            continue
+        j = i + 1
+        while j < len(lines) and not lines[j].strip():
+            j += 1
+        rows = []
+        while j < len(lines) and lines[j].startswith(("|", "- ")):
+            rows.append(lines[j])
+            j += 1
+        out.append((m.group(1), rows))
+    return out
+
+
+def _pages() -> list[Path]:
+    return [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
+
+
+QUOTED = [(page.relative_to(REPO).as_posix(), report, rows)
+          for page in _pages()
+          for report, rows in quoted_tables(page.read_text(encoding="utf-8"))]
+
+
+def test_quoted_tables_are_found_where_the_results_are_stated():
+    pages = {(page, report) for page, report, _ in QUOTED}
+    assert {("docs/coco.md", "reports/coco/report.md"),
+            ("docs/predict.md", "reports/coco/report.md"),
+            ("docs/predict.md", "reports/validation/validation.md"),
+            ("docs/validation.md", "reports/validation/validation.md")} <= pages, pages
+
+
+@pytest.mark.parametrize("page,report,rows", QUOTED,
+                         ids=[f"{p}<-{r}" for p, r, _ in QUOTED])
+def test_a_quoted_table_is_the_reports_own(page, report, rows):
+    """Header and rows are lines of the report as it stands (the separator line aside, whose
+    alignment marks may differ), so every number in the quoted table is the report's."""
+    assert rows, f"{page}: the table or list quoted from {report} has no lines"
+    have = set((REPO / report).read_text(encoding="utf-8").split("\n"))
+    stale = [r for r in rows if not re.fullmatch(r"\|[-:| ]+\|", r) and r not in have]
+    assert not stale, (f"{page}: these lines of a table quoted from {report} are not in it "
+                       "(rebuilt since?); copy them again:\n" + "\n".join(stale))
+
+
+def test_quoted_tables_need_their_report_to_hold_the_row():
+    """The check itself can fail: a row changed by one digit is not found."""
+    text = "Numbers as in `reports/x.md`:\n\n| a | b |\n|---|---|\n| 1 | 2 |\n"
+    (report, rows), = quoted_tables(text)
+    assert report == "reports/x.md" and rows == ["| a | b |", "|---|---|", "| 1 | 2 |"]
+    have = {"| a | b |", "| 1 | 3 |"}
+    assert [r for r in rows if not re.fullmatch(r"\|[-:| ]+\|", r) and r not in have] \
+        == ["| 1 | 2 |"]
