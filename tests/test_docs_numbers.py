@@ -73,3 +73,28 @@ def test_quoted_tables_need_their_report_to_hold_the_row():
     have = {"| a | b |", "| 1 | 3 |"}
     assert [r for r in rows if not re.fullmatch(r"\|[-:| ]+\|", r) and r not in have] \
         == ["| 1 | 2 |"]
+
+
+def _cococ_row(cell: dict) -> str:
+    """A row of ``reports/cococ/README.md``'s table from a cell of ``cococ.json``."""
+    parts, pred = cell["parts"], cell["prediction"]
+    measured = {m["model"]: f"{m['dmap_points']:.2f} ± {m['dmap_points_se']:.2f}"
+                for m in cell["measured"]}
+    return (f"| {cell['corruption']} | {cell['severity']} | {cell['chart_delta_e']:.2f} | "
+            f"{parts['lightness']:.2f} / {parts['chroma']:.2f} / {parts['hue']:.2f} | "
+            f"{pred['classic']:.2f} | {pred['directional']:.2f} | "
+            f"{measured['yolox_nano']} | {measured['yolo11n-int8dyn']} |")
+
+
+def test_the_coco_c_readme_table_is_the_reports_json():
+    """``reports/cococ/README.md`` restates each cell of ``cococ.json`` (rebuilt with the
+    prediction tables by ``benchmarks/after_resweep.py``): the same rows, in its order."""
+    import json
+
+    cells = json.loads((REPO / "reports/cococ/cococ.json").read_text())["cells"]
+    text = (REPO / "reports/cococ/README.md").read_text(encoding="utf-8")
+    rows = [line for line in text.split("\n") if re.match(r"\| [a-z]+ \| \d \|", line)]
+    want = [_cococ_row(c) for c in cells]
+    assert len(want) == 15
+    assert rows == want, "reports/cococ/README.md: its table, as cococ.json gives it now:\n" \
+        + "\n".join(want)
