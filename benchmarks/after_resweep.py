@@ -10,7 +10,11 @@ that one commit carries the tables and everything computed from them:
    validated cameras (``domain.json``) into ``fidelity/data/validation-domain.json``;
 3. the COCO-C report (``fidelity coco-c --report-only``, its predictions recomputed from the
    new tables) into ``reports/cococ`` and the shipped ``fidelity/data/coco-c.json``;
-4. the recorded JSON outputs of the test suite (``FIDELITY_RECORD_JSON=1``).
+4. the recorded JSON outputs of the test suite (``FIDELITY_RECORD_JSON=1``);
+5. the tables README.md and docs/*.md quote from the rebuilt reports (:func:`requote`: each
+   line of a quoted table or list copied again from its report, found by its first cell) and
+   the table of ``reports/cococ/README.md`` from ``cococ.json`` (``tests/test_docs_numbers.py``
+   checks both).
 
 Only files that already exist in the report folders are replaced. What stays by hand: the
 ``AWAITING_RESWEEP`` set in ``tests/test_evidence.py`` and the prose (``reports/coco/
@@ -27,6 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -117,6 +122,83 @@ def _cells(doc: object) -> list[dict[str, object]]:
     return found
 
 
+#: The line of a manual page that introduces a table (or list) quoted from a report.
+QUOTE = re.compile(r"as in `(reports/[^`]+\.md)`(?: \([^)]*\))?:$")
+#: A table's separator line, whose alignment marks may differ from the report's.
+SEPARATOR = re.compile(r"\|[-:| ]+\|")
+
+
+def quoted_blocks(text: str) -> list[tuple[str, int, int]]:
+    """(report, first line, end line) of every table or list in ``text`` introduced by
+    :data:`QUOTE`: the introducing line, blank lines, then the ``|`` or ``- `` lines."""
+    lines = text.split("\n")
+    out = []
+    for i, line in enumerate(lines):
+        m = QUOTE.search(line)
+        if m:
+            j = i + 1
+            while j < len(lines) and not lines[j].strip():
+                j += 1
+            k = j
+            while k < len(lines) and lines[k].startswith(("|", "- ")):
+                k += 1
+            out.append((m.group(1), j, k))
+    return out
+
+
+def _key(line: str) -> str:
+    """What names a quoted line in its report: a table row's first cell, a list item's text up
+    to its first colon."""
+    return line.split("|")[1].strip() if line.startswith("|") else line.split(":")[0]
+
+
+def cococ_readme_row(cell: dict[str, object]) -> str:
+    """A row of ``reports/cococ/README.md``'s table from a cell of ``cococ.json``."""
+    parts = cell["parts"]
+    pred = cell["prediction"]
+    assert isinstance(parts, dict) and isinstance(pred, dict)
+    measured = {m["model"]: f"{m['dmap_points']:.2f} ± {m['dmap_points_se']:.2f}"
+                for m in cell["measured"]}  # type: ignore[attr-defined]
+    return (f"| {cell['corruption']} | {cell['severity']} | {cell['chart_delta_e']:.2f} | "
+            f"{parts['lightness']:.2f} / {parts['chroma']:.2f} / {parts['hue']:.2f} | "
+            f"{pred['classic']:.2f} | {pred['directional']:.2f} | "
+            f"{measured['yolox_nano']} | {measured['yolo11n-int8dyn']} |")
+
+
+COCOC_ROW = re.compile(r"\| [a-z]+ \| \d \|")
+
+
+def requote() -> list[str]:
+    """Copy the quoted tables of README.md and docs/*.md again from their reports, and
+    ``reports/cococ/README.md``'s table from ``cococ.json``; the files changed. A quoted line
+    whose key the report no longer has is left for the test to name."""
+    changed = []
+    for page in [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]:
+        lines = page.read_text("utf-8").split("\n")
+        new = list(lines)
+        for report, start, end in quoted_blocks("\n".join(lines)):
+            have = {_key(r): r for r in (REPO / report).read_text("utf-8").split("\n")
+                    if r.startswith(("|", "- ")) and not SEPARATOR.fullmatch(r)}
+            for i in range(start, end):
+                if not SEPARATOR.fullmatch(new[i]) and _key(new[i]) in have:
+                    new[i] = have[_key(new[i])]
+        if new != lines:
+            page.write_text("\n".join(new), "utf-8")
+            changed.append(page.relative_to(REPO).as_posix())
+    readme = REPO / "reports" / "cococ" / "README.md"
+    cells = json.loads((REPO / "reports" / "cococ" / "cococ.json").read_text("utf-8"))["cells"]
+    lines = readme.read_text("utf-8").split("\n")
+    at = [i for i, line in enumerate(lines) if COCOC_ROW.match(line)]
+    if len(at) == len(cells):
+        new = list(lines)
+        for i, cell in zip(at, cells, strict=True):
+            new[i] = cococ_readme_row(cell)
+        if new != lines:
+            readme.write_text("\n".join(new), "utf-8")
+            changed.append(readme.relative_to(REPO).as_posix())
+    return changed
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--validation-store", type=Path, required=True)
@@ -132,6 +214,7 @@ def main(argv: list[str] | None = None) -> int:
     print("COCO-C:", coco_c())
     _run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
           "tests/test_json_outputs.py"], env={**os.environ, "FIDELITY_RECORD_JSON": "1"})
+    print("quoted tables:", requote())
     _run(["git", "status", "--short"])
     print("by hand: AWAITING_RESWEEP in tests/test_evidence.py; the prose of "
           "reports/coco/preprocessing_change.md, reports/validation/analysis.md, README, docs")

@@ -11,29 +11,15 @@ from pathlib import Path
 
 import pytest
 
+from benchmarks.after_resweep import SEPARATOR, cococ_readme_row, quoted_blocks
+
 REPO = Path(__file__).resolve().parent.parent
-#: The line that introduces a quoted table, naming the report it is quoted from.
-QUOTE = re.compile(r"as in `(reports/[^`]+\.md)`(?: \([^)]*\))?:$")
 
 
 def quoted_tables(text: str) -> list[tuple[str, list[str]]]:
-    """(report, the block's lines) of every table or list in ``text`` introduced by
-    :data:`QUOTE` (the introducing line, a blank line, then the ``|`` or ``- `` lines)."""
+    """(report, the block's lines) of every quoted table or list in ``text``."""
     lines = text.split("\n")
-    out = []
-    for i, line in enumerate(lines):
-        m = QUOTE.search(line)
-        if not m:
-            continue
-        j = i + 1
-        while j < len(lines) and not lines[j].strip():
-            j += 1
-        rows = []
-        while j < len(lines) and lines[j].startswith(("|", "- ")):
-            rows.append(lines[j])
-            j += 1
-        out.append((m.group(1), rows))
-    return out
+    return [(report, lines[start:end]) for report, start, end in quoted_blocks(text)]
 
 
 def _pages() -> list[Path]:
@@ -60,7 +46,7 @@ def test_a_quoted_table_is_the_reports_own(page, report, rows):
     alignment marks may differ), so every number in the quoted table is the report's."""
     assert rows, f"{page}: the table or list quoted from {report} has no lines"
     have = set((REPO / report).read_text(encoding="utf-8").split("\n"))
-    stale = [r for r in rows if not re.fullmatch(r"\|[-:| ]+\|", r) and r not in have]
+    stale = [r for r in rows if not SEPARATOR.fullmatch(r) and r not in have]
     assert not stale, (f"{page}: these lines of a table quoted from {report} are not in it "
                        "(rebuilt since?); copy them again:\n" + "\n".join(stale))
 
@@ -71,19 +57,8 @@ def test_quoted_tables_need_their_report_to_hold_the_row():
     (report, rows), = quoted_tables(text)
     assert report == "reports/x.md" and rows == ["| a | b |", "|---|---|", "| 1 | 2 |"]
     have = {"| a | b |", "| 1 | 3 |"}
-    assert [r for r in rows if not re.fullmatch(r"\|[-:| ]+\|", r) and r not in have] \
+    assert [r for r in rows if not SEPARATOR.fullmatch(r) and r not in have] \
         == ["| 1 | 2 |"]
-
-
-def _cococ_row(cell: dict) -> str:
-    """A row of ``reports/cococ/README.md``'s table from a cell of ``cococ.json``."""
-    parts, pred = cell["parts"], cell["prediction"]
-    measured = {m["model"]: f"{m['dmap_points']:.2f} ± {m['dmap_points_se']:.2f}"
-                for m in cell["measured"]}
-    return (f"| {cell['corruption']} | {cell['severity']} | {cell['chart_delta_e']:.2f} | "
-            f"{parts['lightness']:.2f} / {parts['chroma']:.2f} / {parts['hue']:.2f} | "
-            f"{pred['classic']:.2f} | {pred['directional']:.2f} | "
-            f"{measured['yolox_nano']} | {measured['yolo11n-int8dyn']} |")
 
 
 def test_the_coco_c_readme_table_is_the_reports_json():
@@ -94,7 +69,7 @@ def test_the_coco_c_readme_table_is_the_reports_json():
     cells = json.loads((REPO / "reports/cococ/cococ.json").read_text())["cells"]
     text = (REPO / "reports/cococ/README.md").read_text(encoding="utf-8")
     rows = [line for line in text.split("\n") if re.match(r"\| [a-z]+ \| \d \|", line)]
-    want = [_cococ_row(c) for c in cells]
+    want = [cococ_readme_row(c) for c in cells]
     assert len(want) == 15
     assert rows == want, "reports/cococ/README.md: its table, as cococ.json gives it now:\n" \
         + "\n".join(want)
