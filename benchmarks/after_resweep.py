@@ -168,25 +168,25 @@ def cococ_readme_row(cell: dict[str, object]) -> str:
 COCOC_ROW = re.compile(r"\| [a-z]+ \| \d \|")
 
 
-def requote() -> list[str]:
-    """Copy the quoted tables of README.md and docs/*.md again from their reports, and
-    ``reports/cococ/README.md``'s table from ``cococ.json``; the files changed. A quoted line
-    whose key the report no longer has is left for the test to name."""
+def requote(root: Path = REPO) -> list[str]:
+    """Copy the quoted tables of README.md and docs/*.md under ``root`` again from their
+    reports, and ``reports/cococ/README.md``'s table from ``cococ.json``; the files changed. A
+    quoted line whose key the report no longer has is left for the test to name."""
     changed = []
-    for page in [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]:
+    for page in [root / "README.md", *sorted((root / "docs").glob("*.md"))]:
         lines = page.read_text("utf-8").split("\n")
         new = list(lines)
         for report, start, end in quoted_blocks("\n".join(lines)):
-            have = {_key(r): r for r in (REPO / report).read_text("utf-8").split("\n")
+            have = {_key(r): r for r in (root / report).read_text("utf-8").split("\n")
                     if r.startswith(("|", "- ")) and not SEPARATOR.fullmatch(r)}
             for i in range(start, end):
                 if not SEPARATOR.fullmatch(new[i]) and _key(new[i]) in have:
                     new[i] = have[_key(new[i])]
         if new != lines:
             page.write_text("\n".join(new), "utf-8")
-            changed.append(page.relative_to(REPO).as_posix())
-    readme = REPO / "reports" / "cococ" / "README.md"
-    cells = json.loads((REPO / "reports" / "cococ" / "cococ.json").read_text("utf-8"))["cells"]
+            changed.append(page.relative_to(root).as_posix())
+    readme = root / "reports" / "cococ" / "README.md"
+    cells = json.loads((root / "reports" / "cococ" / "cococ.json").read_text("utf-8"))["cells"]
     lines = readme.read_text("utf-8").split("\n")
     at = [i for i, line in enumerate(lines) if COCOC_ROW.match(line)]
     if len(at) == len(cells):
@@ -195,7 +195,7 @@ def requote() -> list[str]:
             new[i] = cococ_readme_row(cell)
         if new != lines:
             readme.write_text("\n".join(new), "utf-8")
-            changed.append(readme.relative_to(REPO).as_posix())
+            changed.append(readme.relative_to(root).as_posix())
     return changed
 
 

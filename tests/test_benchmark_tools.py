@@ -132,3 +132,31 @@ db.commit()
     assert len(cuda) == 1 and "yolov8n-int8dyn" in cuda[0]
     assert (out / "cuda.log").read_text().strip().endswith("exit 0")
     assert "cpus:" in (out / "machine.txt").read_text()
+
+
+def test_after_resweep_requotes_the_manuals_tables_from_their_reports(tmp_path):
+    """A quoted row found in its report by its first cell is copied again; a row the report no
+    longer has is left (for tests/test_docs_numbers.py to name); the COCO-C README's table is
+    rewritten from cococ.json."""
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "reports" / "cococ").mkdir(parents=True)
+    (tmp_path / "README.md").write_text("no quotes\n")
+    (tmp_path / "reports" / "r.md").write_text(
+        "| k | v |\n|---:|---:|\n| a | 2 |\n| b | 5 |\n- item: new\n")
+    page = ("Text, as in `reports/r.md`:\n\n| k | v |\n|---|---|\n| a | 1 |\n| gone | 3 |\n\n"
+            "More, as in `reports/r.md` (list):\n\n- item: old\n")
+    (tmp_path / "docs" / "p.md").write_text(page)
+    cell = {"corruption": "contrast", "severity": 2, "chart_delta_e": 14.921,
+            "parts": {"lightness": 5.94, "chroma": 7.94, "hue": 1.05},
+            "prediction": {"classic": 13.6449, "directional": 12.07},
+            "measured": [{"model": "yolox_nano", "dmap_points": 6.27, "dmap_points_se": 1.35},
+                         {"model": "yolo11n-int8dyn", "dmap_points": 8.0, "dmap_points_se": 2}]}
+    (tmp_path / "reports" / "cococ" / "cococ.json").write_text(json.dumps({"cells": [cell]}))
+    (tmp_path / "reports" / "cococ" / "README.md").write_text(
+        "| corruption | severity |\n|---|---|\n| contrast | 2 | 1 | old |\n")
+    assert after_resweep.requote(tmp_path) == ["docs/p.md", "reports/cococ/README.md"]
+    assert (tmp_path / "docs" / "p.md").read_text() == page.replace(
+        "| a | 1 |", "| a | 2 |").replace("- item: old", "- item: new")
+    assert (tmp_path / "reports" / "cococ" / "README.md").read_text().split("\n")[2] == (
+        "| contrast | 2 | 14.92 | 5.94 / 7.94 / 1.05 | 13.64 | 12.07 | 6.27 ± 1.35 | 8.00 ± 2.00 |")
+    assert after_resweep.requote(tmp_path) == []  # nothing left to copy
