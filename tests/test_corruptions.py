@@ -167,3 +167,50 @@ def test_shipped_measurements_come_from_this_versions_detectors():
         assert m.settings.get("preprocess") in current, (m.model, m.mapping)
         assert m.settings.get("standard_error") == {
             "method": "larger", "draws": BOOTSTRAP_RESAMPLES, "seed": BOOTSTRAP_SEED}
+
+
+def _shipped_json() -> dict:
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    return json.loads((root / "reports/cococ/cococ.json").read_text())
+
+
+def test_bounds_count_the_cells_each_prediction_bounds():
+    """CocoCResults.bounds against a count written here from the report's JSON: measured <=
+    predicted, measured − 2 SE <= predicted, median of predicted / measured over the cells
+    measured above 0."""
+    doc = _shipped_json()
+    s = cc.CocoCResults.from_json(doc).bounds()
+    rows = [(m["dmap_points"], m["dmap_points_se"], c["prediction"])
+            for c in doc["cells"] for m in c["measured"]]
+    assert s.cells == len(rows) == 30
+    for key in ("classic", "directional"):
+        assert getattr(s, f"{key}_within") == sum(x <= p[key] for x, _, p in rows)
+        assert getattr(s, f"{key}_within_2se") == sum(x - 2 * e <= p[key] for x, e, p in rows)
+        assert getattr(s, f"{key}_median_ratio") == pytest.approx(
+            float(np.median([p[key] / x for x, _, p in rows if x > 0])))
+
+
+def test_the_report_headline_names_the_cells_beyond_the_direction_aware_bound():
+    from dataclasses import replace
+
+    from fidelity.report.cococ import _bound_lines
+
+    res = cc.CocoCResults.from_json(_shipped_json())
+    cell = res.cells[0]
+    m = cell.measured[0]
+    pred = cc.CellPrediction(classic=2.0, directional=1.0, classic_relative=None,
+                             directional_relative=None)
+    one = replace(res, cells=(replace(cell, prediction=pred, measured=(
+        replace(m, dmap_points=1.5, dmap_points_se=0.25),
+        replace(m, model="zero-se", dmap_points=1.2, dmap_points_se=0.0))),))
+    lines = _bound_lines(one)
+    assert "**2 of 2**" in lines[0] and "(2 within 2 SE)" in lines[0]
+    assert "**0 of 2**" in lines[1] and "(1 within 2 SE)" in lines[1]
+    assert f"{m.model} {cell.corruption} {cell.severity} by 0.50 points (2.00 SE)" in lines[1]
+    assert "zero-se" in lines[1] and "by 0.20 points (no SE)" in lines[1]
+    assert "median over-prediction 1.5×" in lines[0]  # median of 2/1.5 and 2/1.2
+    # a table without predictions or measurements has no such lines
+    assert _bound_lines(replace(res, cells=tuple(replace(c, prediction=None)
+                                                 for c in res.cells))) == []

@@ -255,7 +255,14 @@ def _median(values: Sequence[float | None]) -> float | None:
 
 def summarise(rows: Sequence[RowBounds], cls: str) -> ClassBounds:
     """The :class:`ClassBounds` of one class."""
-    cells = [r.cells[cls] for r in rows if r.cells[cls].measured is not None]
+    return summarise_cells([r.cells[cls] for r in rows])
+
+
+def summarise_cells(measured: Sequence[BoundCell]) -> ClassBounds:
+    """The :class:`ClassBounds` of ``measured`` (the cells without a measured loss left out):
+    the validation's per class, the COCO-C table's (:meth:`fidelity.coco.corruptions.
+    CocoCResults.bounds`)."""
+    cells = [c for c in measured if c.measured is not None]
     sig = [c for c in cells if c.significant]
     return ClassBounds(
         len(cells), sum(bool(c.classic_within) for c in cells),

@@ -51,6 +51,7 @@ from fidelity.errors import InvalidValueError, unknown_name
 
 if TYPE_CHECKING:
     from fidelity.chart.measure import ChartMeasurement
+    from fidelity.coco.bounds import BoundCell, ClassBounds
 
 U8 = NDArray[np.uint8]
 F64 = NDArray[np.float64]
@@ -404,6 +405,29 @@ class CocoCResults:
             for m in c.measured:
                 seen.setdefault(m.model, None)
         return list(seen)
+
+    def bound_cells(self) -> list[tuple[CorruptionCell, str, BoundCell]]:
+        """(cell, detector, its :class:`~fidelity.coco.bounds.BoundCell`) for every detector
+        measured in a cell: the measured ΔmAP (points) and its SE beside the cell's recorded
+        classic and direction-aware predictions (None when it has none)."""
+        from fidelity.coco.bounds import BoundCell
+
+        out = []
+        for c in self.cells:
+            p = c.prediction
+            for m in c.measured:
+                out.append((c, str(m.model), BoundCell(
+                    m.dmap_points, m.dmap_points_se, p.classic if p else None,
+                    p.directional if p else None)))
+        return out
+
+    def bounds(self) -> ClassBounds:
+        """How often the classic and the direction-aware prediction bound the measured loss
+        (plainly and within 2 SE) and their median over-prediction, over every (cell,
+        detector) measured (:func:`fidelity.coco.bounds.summarise_cells`)."""
+        from fidelity.coco.bounds import summarise_cells
+
+        return summarise_cells([b for _, _, b in self.bound_cells()])
 
     def to_json(self) -> dict[str, Any]:
         """``{"chart", "floor_delta_e", "cells", "meta"}``."""

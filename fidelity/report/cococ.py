@@ -136,7 +136,30 @@ def _headline(results: CocoCResults, figure: Figure | None) -> Headline:
                 text += (f"; measured ΔmAP ({m0}) "
                          + ", ".join(f"{g.dmap_points:.1f}" for g in got if g is not None))
         lines.append(text + ".")
+    lines += _bound_lines(results)
     return Headline("\n".join(lines), "info", figure)
+
+
+def _bound_lines(results: CocoCResults) -> list[str]:
+    """The headline's lines on how the two predictions bound the measured losses, naming the
+    cells beyond the direction-aware one (none when no cell has both)."""
+    s = results.bounds()
+    if not s.cells or s.classic_median_ratio is None and s.directional_median_ratio is None:
+        return []
+    beyond = [f"{model} {c.corruption} {c.severity} by {b.measured - b.directional:.2f} points "
+              + (f"({(b.measured - b.directional) / b.se:.2f} SE)" if b.se else "(no SE)")
+              for c, model, b in results.bound_cells()
+              if b.directional_within is False and b.measured is not None
+              and b.directional is not None]
+    tail = f"; beyond it: {', '.join(beyond)}" if beyond else ""
+    return [
+        f"- Classic bound (`coco1000-measured`): the measured loss within it in "
+        f"**{s.classic_within} of {s.cells}** (detector, corruption, severity) cells "
+        f"({s.classic_within_2se} within 2 SE); median over-prediction "
+        f"{number(s.classic_median_ratio, 1)}×.",
+        f"- Direction-aware bound (`coco1000-directional`): within it in "
+        f"**{s.directional_within} of {s.cells}** ({s.directional_within_2se} within 2 SE); "
+        f"median over-prediction {number(s.directional_median_ratio, 1)}×{tail}."]
 
 
 def cococ_document(results: CocoCResults, notes: str | None = None) -> Document:
