@@ -268,9 +268,14 @@ def test_ray_cluster_sweep_equals_local(cluster, coco, local_sweep, tmp_path) ->
     assert "5 cells done" in stdout, (stdout, log[-3000:])
     assert _new_images(log) == 5 * IMAGES, log[-3000:]  # every image computed and stored once
     ran = re.search(r"on (\d+) worker process(?:es)? \((\d+) nodes?\)", log)
-    assert ran and int(ran.group(1)) >= 3 and int(ran.group(2)) == 2, log  # one restarted
+    assert ran and int(ran.group(1)) >= 2 and int(ran.group(2)) == 2, log
     store = SweepStore(out)
     _assert_same(local, store)
+    # the restarted worker did work: a process that was not running when one was killed ran
+    # items (the killed one's retried item, or the next one); counting processes alone does
+    # not show it, since a worker killed within its first item never reports that process
+    ran_on = {int(w.rsplit(":", 1)[1]) for w in store.meta()["last_run"]["workers"]}
+    assert ran_on - set(workers), (ran_on, workers, log)
     machine = store.meta()["machine"]
     assert machine["executor"] == "ray" and machine["workers"] == 2 and machine["nodes"] == 2, \
         machine
