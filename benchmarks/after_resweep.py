@@ -152,6 +152,24 @@ def _key(line: str) -> str:
     return line.split("|")[1].strip() if line.startswith("|") else line.split(":")[0]
 
 
+def _matching_block(report: str, quoted: list[str]) -> dict[str, str]:
+    """The lines of the table or list in ``report`` that ``quoted`` copies, by key: the one
+    with the same header line, else the one sharing the most keys (a report names a model in
+    the first cell of several tables)."""
+    blocks: list[list[str]] = []
+    run: list[str] = []
+    for line in [*report.split("\n"), ""]:
+        if line.startswith(("|", "- ")):
+            run.append(line)
+        elif run:
+            blocks.append(run)
+            run = []
+    keys = {_key(q) for q in quoted if not SEPARATOR.fullmatch(q)}
+    best = max(blocks, default=[], key=lambda b: (bool(quoted) and b[0] == quoted[0],
+                                                  len(keys & {_key(r) for r in b})))
+    return {_key(r): r for r in best if not SEPARATOR.fullmatch(r)}
+
+
 def cococ_readme_row(cell: dict[str, object]) -> str:
     """A row of ``reports/cococ/README.md``'s table from a cell of ``cococ.json``."""
     parts = cell["parts"]
@@ -168,17 +186,25 @@ def cococ_readme_row(cell: dict[str, object]) -> str:
 COCOC_ROW = re.compile(r"\| [a-z]+ \| \d \|")
 
 
+def quoting_pages(root: Path = REPO) -> list[Path]:
+    """The pages whose quoted tables (:func:`quoted_blocks`) are the reports' own lines:
+    README.md, docs/*.md and the COCO report's hand-written guide."""
+    return [root / "README.md", *sorted((root / "docs").glob("*.md")),
+            root / "reports" / "coco" / "README.md"]
+
+
 def requote(root: Path = REPO) -> list[str]:
-    """Copy the quoted tables of README.md and docs/*.md under ``root`` again from their
+    """Copy the quoted tables of :func:`quoting_pages` under ``root`` again from their
     reports, and ``reports/cococ/README.md``'s table from ``cococ.json``; the files changed. A
     quoted line whose key the report no longer has is left for the test to name."""
     changed = []
-    for page in [root / "README.md", *sorted((root / "docs").glob("*.md"))]:
+    for page in quoting_pages(root):
+        if not page.is_file():
+            continue
         lines = page.read_text("utf-8").split("\n")
         new = list(lines)
         for report, start, end in quoted_blocks("\n".join(lines)):
-            have = {_key(r): r for r in (root / report).read_text("utf-8").split("\n")
-                    if r.startswith(("|", "- ")) and not SEPARATOR.fullmatch(r)}
+            have = _matching_block((root / report).read_text("utf-8"), new[start:end])
             for i in range(start, end):
                 if not SEPARATOR.fullmatch(new[i]) and _key(new[i]) in have:
                     new[i] = have[_key(new[i])]

@@ -160,3 +160,23 @@ def test_after_resweep_requotes_the_manuals_tables_from_their_reports(tmp_path):
     assert (tmp_path / "reports" / "cococ" / "README.md").read_text().split("\n")[2] == (
         "| contrast | 2 | 14.92 | 5.94 / 7.94 / 1.05 | 13.64 | 12.07 | 6.27 ± 1.35 | 8.00 ± 2.00 |")
     assert after_resweep.requote(tmp_path) == []  # nothing left to copy
+
+
+def test_after_resweep_requotes_from_the_table_the_page_quotes(tmp_path):
+    """A report that names the same thing in the first cell of two tables (a model in its
+    limits table and in its settings table): a quoted row is copied from the table with the
+    quoted header, not from whichever comes last; the COCO report's guide is a quoting page."""
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "reports" / "coco").mkdir(parents=True)
+    (tmp_path / "reports" / "cococ").mkdir()
+    (tmp_path / "README.md").write_text("no quotes\n")
+    (tmp_path / "reports" / "cococ" / "cococ.json").write_text(json.dumps({"cells": []}))
+    (tmp_path / "reports" / "cococ" / "README.md").write_text("no table\n")
+    (tmp_path / "reports" / "r.md").write_text(
+        "| curve | ≤ 1 pts |\n|---|---:|\n| m1 | 3.38 |\n\nText.\n\n"
+        "| model | size |\n|---|---|\n| m1 | n |\n")
+    page = "Limits, as in `reports/r.md`:\n\n| curve | ≤ 1 pts |\n|---|---:|\n| m1 | 3.65 |\n"
+    (tmp_path / "reports" / "coco" / "README.md").write_text(page)
+    assert after_resweep.requote(tmp_path) == ["reports/coco/README.md"]
+    assert (tmp_path / "reports" / "coco" / "README.md").read_text() == page.replace(
+        "| m1 | 3.65 |", "| m1 | 3.38 |")
