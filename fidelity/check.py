@@ -41,7 +41,7 @@ if TYPE_CHECKING:
     from fidelity.chart.measure import ChartMeasurement
     from fidelity.chart.uncertainty import UncertaintyBudget
     from fidelity.coco.measure import MeasuredLoss, MeasureRequest
-    from fidelity.prediction.interval import PredictionInterval, ValidityDomain
+    from fidelity.prediction.interval import DomainCheck, PredictionInterval, ValidityDomain
     from fidelity.prediction.table import Prediction, PredictionTable
 
 #: The gate of ``fidelity check`` unless told otherwise: mean ΔE00 <= 3 (SAFE-COLOR).
@@ -57,6 +57,25 @@ AUDIT_CONVENTION = ("patches located by the homography of the 4x6 grid from the 
 #: The reference charts the prediction tables were calibrated for: the 24-patch ColorChecker
 #: as the scene renders it, or the paper's Lab values of the same chart.
 TABLE_REFERENCES = ("scene", "safecolor")
+
+
+def preprocessing_check(table: PredictionTable) -> DomainCheck | None:
+    """Whether a measured ``table``'s detectors were run with this version's detector
+    preprocessing (:func:`fidelity.coco.detectors.stale_preprocessing` of its provenance);
+    None for a table of published bounds."""
+    if not table.kind.measured:
+        return None
+    from fidelity.coco.detectors import stale_preprocessing
+    from fidelity.prediction.interval import DomainCheck
+
+    stale = stale_preprocessing(table.provenance)
+    return DomainCheck(
+        "detector preprocessing", not stale,
+        f"table {table.name}: every detector measured with this version's preprocessing"
+        if not stale else
+        f"table {table.name}: {', '.join(sorted(stale))} measured with a detector "
+        f"preprocessing other than this version's (the table predates it; rerun the "
+        f"sweep and fidelity tables)")
 
 
 def evidence_of(prediction: Prediction | None, budget: UncertaintyBudget | None,
@@ -80,18 +99,9 @@ def evidence_of(prediction: Prediction | None, budget: UncertaintyBudget | None,
         f"reference {reference}: the 24-patch ColorChecker the tables were calibrated on"
         if inside else f"reference {reference}: not the 24-patch ColorChecker the tables "
                        f"were calibrated on; the prediction does not apply to its ΔE"))
-    table = prediction.table
-    if table.kind.measured:
-        from fidelity.coco.detectors import stale_preprocessing
-
-        stale = stale_preprocessing(table.provenance)
-        domain = domain.with_check(DomainCheck(
-            "detector preprocessing", not stale,
-            f"table {table.name}: every detector measured with this version's preprocessing"
-            if not stale else
-            f"table {table.name}: {', '.join(sorted(stale))} measured with a detector "
-            f"preprocessing other than this version's (the table predates it; rerun the "
-            f"sweep and fidelity tables)"))
+    preprocessing = preprocessing_check(prediction.table)
+    if preprocessing is not None:
+        domain = domain.with_check(preprocessing)
     if camera is not None:
         from fidelity.prediction.interval import load_validated_cameras
 
@@ -419,4 +429,5 @@ def _subject_result(subject: str, run: Callable[[], ChartReport],
 
 
 __all__ = ["AUDIT_CONVENTION", "DEFAULT_CRITERION", "TABLE_REFERENCES", "audit_image",
-           "audit_images", "chart_emulation", "check_camera", "evidence_of", "gate"]
+           "audit_images", "chart_emulation", "check_camera", "evidence_of", "gate",
+           "preprocessing_check"]

@@ -405,3 +405,58 @@ def test_delta_e_limit_rounds_down_for_printing():
     assert lim(0.0).rounded_down() == 0.0
     assert lim(6.4399).rounded_down(1) == 6.4
     assert lim(None).rounded_down() is None
+
+
+def test_predict_command_states_the_uncertainty_of_its_answer(tmp_path):
+    """``predict --delta-e`` prints ΔmAP ± u (k=1): the table's sampling error at that ΔE (the
+    larger SE of the two points around it) combined with ``--delta-e-uncertainty`` through the
+    table's slope, here a closed form on a linear two-model table; its JSON carries the
+    interval and the validity domain. A ceiling beyond the table's range carries no SE; bad
+    uncertainties are one error line."""
+    from click.testing import CliRunner
+
+    from fidelity.cli import main
+
+    doc = _measured_table() | {"interpolation": "linear"}
+    for curve, ses in zip(doc["curves"][:2], ([0.1, 0.3, 0.2, 0.5], [0.15, 0.25, 0.4, 0.6]),
+                          strict=True):
+        for point, se in zip(curve["points"], ses, strict=True):
+            point["dmap_points_se"] = se
+    path = tmp_path / "t.json"
+    path.write_text(json.dumps(doc))
+    out = tmp_path / "p.json"
+    r = CliRunner().invoke(main, ["predict", "--delta-e", "4", "--size", "n", "--table",
+                                  str(path), "--delta-e-uncertainty", "0.5", "--json", str(out)])
+    assert r.exit_code == 0, r.output
+    # model b answers at ΔE 4: 0.9 + (1.5 - 0.9) / 3 = 1.1, slope 0.2 per ΔE on [3, 6];
+    # SE max(0.25, 0.40); u = sqrt(0.40^2 + (0.2 x 0.5)^2)
+    u = (0.40 ** 2 + (0.2 * 0.5) ** 2) ** 0.5
+    assert f"ΔmAP: 1.10 ± {u:.2f} (k=1) percentage points" in r.output
+    got = json.loads(out.read_text())
+    iv = got["prediction_interval"]
+    assert iv["value"] == pytest.approx(1.1) and iv["table_se"] == pytest.approx(0.40)
+    assert iv["slope"] == pytest.approx(0.2) and iv["delta_e_uncertainty"] == 0.5
+    assert iv["standard_uncertainty"] == pytest.approx(u)
+    assert got["validity"]["inside"] is True
+    assert [c["name"] for c in got["validity"]["checks"]] == [
+        "table ΔE range", "detector size", "table kind", "detector preprocessing"]
+    # an exact ΔE: the table's sampling error alone
+    r = CliRunner().invoke(main, ["predict", "--delta-e", "4", "--size", "n", "--table",
+                                  str(path)])
+    assert "ΔmAP: 1.10 ± 0.40 (k=1) percentage points" in r.output, r.output
+    # beyond the range the answer is the total loss, a bound by construction: no ± and no SE
+    r = CliRunner().invoke(main, ["predict", "--delta-e", "40", "--json", str(out)])
+    assert r.exit_code == 0, r.output
+    line = next(ln for ln in r.output.splitlines() if "ΔmAP:" in ln)
+    assert "±" not in line
+    got = json.loads(out.read_text())
+    assert got["dmap_points_se"] is None and got["prediction_interval"] is None
+    assert got["validity"]["checks"][0]["inside"] is False
+    for bad in ("nan", "-0.1", "inf"):
+        r = CliRunner().invoke(main, ["predict", "--delta-e", "4",
+                                      "--delta-e-uncertainty", bad])
+        lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+        assert r.exit_code == 2 and len(lines) == 1, r.output
+        assert lines[0].startswith("fidelity: error: --delta-e-uncertainty "), lines
+    r = CliRunner().invoke(main, ["predict", "--max-dmap", "1", "--delta-e-uncertainty", "0.2"])
+    assert r.exit_code == 2 and "--delta-e-uncertainty goes with --delta-e" in r.stderr

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import click
 
@@ -16,9 +17,17 @@ from fidelity.prediction.table import (
 )
 from fidelity.report.words import prediction_notes
 
+if TYPE_CHECKING:
+    from fidelity.prediction.interval import PredictionInterval
+    from fidelity.prediction.table import Prediction
+
 
 @click.command()
 @click.option("--delta-e", type=float, help="Chart ΔE (mean ΔE00 over the 24 patches).")
+@click.option("--delta-e-uncertainty", type=float, default=0.0, show_default=True,
+              metavar="U", help="With --delta-e: its standard uncertainty (k=1), e.g. from the "
+                                "instrument that measured it; propagated through the table's "
+                                "slope into the ± of the predicted ΔmAP.")
 @click.option("--class", "cls", type=click.Choice(list(CLASS_COLUMNS)), default="all",
               show_default=True, help="Class to print first: all (mAP), person or bicycle.")
 @click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
@@ -46,15 +55,18 @@ from fidelity.report.words import prediction_notes
 @json_option("Write the prediction (or the ΔE limit) as JSON")
 @click.option("--list-tables", is_flag=True, help="List the prediction tables and exit.")
 @common_options
-def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
+def predict_cmd(delta_e: float | None, delta_e_uncertainty: float, cls: str, size: str,
+                table: str | None,
                 method: str | None, baseline_map: float | None, max_dmap: float | None,
                 unit: str, direction: str | None, coco_c: str | None, json_path: str | None,
                 list_tables: bool) -> None:
     """Predict what a chart ΔE costs detectors, or the ΔE limit of a loss budget.
 
-    With --delta-e: ΔmAP (points and % of baseline), ΔAP person and bicycle, and the
-    SAFE-COLOR transform parameters that produce this ΔE on the chart. With --max-dmap: the
-    largest chart ΔE that keeps the predicted loss within a budget.
+    With --delta-e: ΔmAP (points and % of baseline) with its standard uncertainty (the
+    measured table's sampling error at that ΔE and --delta-e-uncertainty through the table's
+    slope), ΔAP person and bicycle, and the SAFE-COLOR transform parameters that produce this
+    ΔE on the chart. With --max-dmap: the largest chart ΔE that keeps the predicted loss within
+    a budget.
 
     \b
     fidelity predict --delta-e 4.2 --class person --json predict.json
@@ -74,6 +86,8 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
     from fidelity.fileio import check_outputs
 
     check_outputs({"--json": json_path}, {"--table": table})
+    if delta_e is None and delta_e_uncertainty != 0:
+        raise click.UsageError("--delta-e-uncertainty goes with --delta-e")
     if coco_c is not None:
         _print_coco_c(coco_c, size, table, json_path)
         return
@@ -81,18 +95,22 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
         _print_limit(max_dmap, cls, unit, size, table, method, json_path)
         return
     assert delta_e is not None  # one of the two was given
-    if not (math.isfinite(delta_e) and delta_e >= 0):
-        from fidelity.errors import InvalidValueError
+    from fidelity.errors import InvalidValueError
 
-        raise InvalidValueError(f"--delta-e {delta_e!r}: must be a finite number >= 0")
+    for flag, value in (("--delta-e", delta_e), ("--delta-e-uncertainty", delta_e_uncertainty)):
+        if not (math.isfinite(value) and value >= 0):
+            raise InvalidValueError(f"{flag} {value!r}: must be a finite number >= 0")
     p = predict(delta_e, size=size, table=table, method=method, baseline_map=baseline_map)
+    interval = _interval(p, delta_e_uncertainty)
     b = "<= " if p.upper_bound else ""
 
     def f(v: float | None) -> str:
         return "n/a" if v is None else f"{b}{v:.2f}"
 
+    pm = interval.plus_minus() if interval is not None else ""
     lines = {
-        "all": f"ΔmAP: {f(p.dmap_points)} percentage points, {f(p.dmap_relative)} % of baseline",
+        "all": f"ΔmAP: {f(p.dmap_points)}{pm} percentage points, {f(p.dmap_relative)} % of "
+               f"baseline",
         "person": f"person ΔAP: {f(p.dap_person_points)} percentage points",
         "bicycle": f"bicycle ΔAP: {f(p.dap_bicycle_points)} percentage points",
     }
@@ -111,10 +129,29 @@ def predict_cmd(delta_e: float | None, cls: str, size: str, table: str | None,
     families = (_print_families(delta_e, size, table, direction) if p.kind.measured
                 else None)
     if json_path is not None:
+        from fidelity.check import preprocessing_check
+        from fidelity.prediction.interval import validity_domain
         from fidelity.report.jsonform import prediction_json
 
-        doc = prediction_json(p, families)
+        domain = validity_domain(p)
+        preprocessing = preprocessing_check(p.table)
+        if preprocessing is not None:
+            domain = domain.with_check(preprocessing)
+        doc = prediction_json(p, families) | {
+            "prediction_interval": interval.to_json() if interval is not None else None,
+            "validity": domain.to_json()}
         click.echo(f"wrote {write_json_output(json_path, doc)}")
+
+
+def _interval(p: Prediction, delta_e_uncertainty: float) -> PredictionInterval | None:
+    """The predicted ΔmAP's interval; None where there is nothing to state: no value, or a
+    table of published bounds (no sampling error) answering an exact ΔE."""
+    from fidelity.prediction.interval import prediction_interval
+
+    interval = prediction_interval(p, delta_e_uncertainty)
+    if interval is None or (interval.table_se is None and delta_e_uncertainty == 0):
+        return None
+    return interval
 
 
 def _print_families(delta_e: float, size: str, table: str | None,

@@ -580,7 +580,8 @@ class Prediction:
     ``columns`` holds each loss column's answer (:class:`ColumnPrediction`), ``size_used`` the
     detector size class whose curves answered (``any``, or the sizes a table has, comma
     separated, when it has no curve for ``size``), ``dmap_points_se`` the sampling error of a
-    measured table around ``delta_e`` (None for published bounds or a table without SEs).
+    measured table around ``delta_e`` (None for published bounds, a table without SEs, or a
+    ΔE beyond the table's range, answered by the total loss).
     What the numbers mean in words is written by :mod:`fidelity.report.words`.
     """
 
@@ -758,7 +759,11 @@ def predict(
             if alt > best_v:
                 raised_from, best_v = best_v, alt
         columns[col] = ColumnPrediction(best_v, status, rng, raised_from)
-    se = _bracketing_se(answering, de) if tab.kind.measured else None
+    # the sampling error of the measured points the answer interpolates; none for a ceiling
+    # beyond the table's range (the total loss: a bound by construction, not a measured point)
+    dmap = columns.get("dmap_points")
+    se = (_bracketing_se(answering, de) if tab.kind.measured and dmap is not None
+          and dmap.status is ColumnStatus.INTERPOLATED else None)
     return Prediction(
         delta_e=de, size=size, size_used=size_used, columns=columns, table=tab, method=m,
         baseline_map=float(baseline_map) if baseline_map is not None else None,
