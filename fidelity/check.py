@@ -59,6 +59,19 @@ AUDIT_CONVENTION = ("patches located by the homography of the 4x6 grid from the 
 TABLE_REFERENCES = ("scene", "safecolor")
 
 
+def prediction_domain(prediction: Prediction, *checks: DomainCheck) -> ValidityDomain:
+    """The validity domain of ``prediction``'s answer: its table's checks
+    (:func:`fidelity.prediction.interval.validity_domain`), then ``checks``, then the
+    detector preprocessing of a measured table (:func:`preprocessing_check`)."""
+    from fidelity.prediction.interval import validity_domain
+
+    domain = validity_domain(prediction)
+    preprocessing = preprocessing_check(prediction.table)
+    for check in (*checks, *([preprocessing] if preprocessing is not None else [])):
+        domain = domain.with_check(check)
+    return domain
+
+
 def preprocessing_check(table: PredictionTable) -> DomainCheck | None:
     """Whether a measured ``table``'s detectors were run with this version's detector
     preprocessing (:func:`fidelity.coco.detectors.stale_preprocessing` of its provenance);
@@ -89,19 +102,16 @@ def evidence_of(prediction: Prediction | None, budget: UncertaintyBudget | None,
     camera_checks`)."""
     if prediction is None:
         return None, None
-    from fidelity.prediction.interval import DomainCheck, prediction_interval, validity_domain
+    from fidelity.prediction.interval import DomainCheck, prediction_interval
 
     interval = prediction_interval(prediction, budget.combined if budget else 0.0,
                                    "dmap_points", k)
     inside = reference in TABLE_REFERENCES
-    domain = validity_domain(prediction).with_check(DomainCheck(
+    domain = prediction_domain(prediction, DomainCheck(
         "reference chart", inside,
         f"reference {reference}: the 24-patch ColorChecker the tables were calibrated on"
         if inside else f"reference {reference}: not the 24-patch ColorChecker the tables "
                        f"were calibrated on; the prediction does not apply to its ΔE"))
-    preprocessing = preprocessing_check(prediction.table)
-    if preprocessing is not None:
-        domain = domain.with_check(preprocessing)
     if camera is not None:
         from fidelity.prediction.interval import load_validated_cameras
 
@@ -430,4 +440,4 @@ def _subject_result(subject: str, run: Callable[[], ChartReport],
 
 __all__ = ["AUDIT_CONVENTION", "DEFAULT_CRITERION", "TABLE_REFERENCES", "audit_image",
            "audit_images", "chart_emulation", "check_camera", "evidence_of", "gate",
-           "preprocessing_check"]
+           "prediction_domain", "preprocessing_check"]

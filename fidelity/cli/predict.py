@@ -56,10 +56,9 @@ if TYPE_CHECKING:
 @click.option("--list-tables", is_flag=True, help="List the prediction tables and exit.")
 @common_options
 def predict_cmd(delta_e: float | None, delta_e_uncertainty: float, cls: str, size: str,
-                table: str | None,
-                method: str | None, baseline_map: float | None, max_dmap: float | None,
-                unit: str, direction: str | None, coco_c: str | None, json_path: str | None,
-                list_tables: bool) -> None:
+                table: str | None, method: str | None, baseline_map: float | None,
+                max_dmap: float | None, unit: str, direction: str | None, coco_c: str | None,
+                json_path: str | None, list_tables: bool) -> None:
     """Predict what a chart ΔE costs detectors, or the ΔE limit of a loss budget.
 
     With --delta-e: ΔmAP (points and % of baseline) with its standard uncertainty (the
@@ -129,17 +128,12 @@ def predict_cmd(delta_e: float | None, delta_e_uncertainty: float, cls: str, siz
     families = (_print_families(delta_e, size, table, direction) if p.kind.measured
                 else None)
     if json_path is not None:
-        from fidelity.check import preprocessing_check
-        from fidelity.prediction.interval import validity_domain
+        from fidelity.check import prediction_domain
         from fidelity.report.jsonform import prediction_json
 
-        domain = validity_domain(p)
-        preprocessing = preprocessing_check(p.table)
-        if preprocessing is not None:
-            domain = domain.with_check(preprocessing)
         doc = prediction_json(p, families) | {
             "prediction_interval": interval.to_json() if interval is not None else None,
-            "validity": domain.to_json()}
+            "validity": prediction_domain(p).to_json()}
         click.echo(f"wrote {write_json_output(json_path, doc)}")
 
 
