@@ -129,11 +129,9 @@ def predict_cmd(delta_e: float | None, delta_e_uncertainty: float, cls: str, siz
                 else None)
     if json_path is not None:
         from fidelity.check import prediction_domain
-        from fidelity.report.jsonform import prediction_json
+        from fidelity.report.jsonform import predict_json
 
-        doc = prediction_json(p, families) | {
-            "prediction_interval": interval.to_json() if interval is not None else None,
-            "validity": prediction_domain(p).to_json()}
+        doc = predict_json(p, families, interval, prediction_domain(p))
         click.echo(f"wrote {write_json_output(json_path, doc)}")
 
 

@@ -20,6 +20,7 @@ from fidelity.report.words import column_note, prediction_notes, verdict_message
 if TYPE_CHECKING:
     from fidelity.coco.corruptions import CocoCAnswer
     from fidelity.fit import FitReport, SharedFit
+    from fidelity.prediction.interval import PredictionInterval, ValidityDomain
 
 
 def prediction_json(prediction: Prediction,
@@ -34,6 +35,17 @@ def prediction_json(prediction: Prediction,
     out["notes"] = prediction_notes(prediction)
     if families is not None:
         out["directional_by_family"] = dict(families)
+    return out
+
+
+def predict_json(prediction: Prediction, families: Mapping[str, float | None] | None,
+                 interval: PredictionInterval | None, validity: ValidityDomain) -> JSONObject:
+    """The JSON report of ``fidelity predict --delta-e``: :func:`prediction_json`, with the
+    predicted ΔmAP's ``prediction_interval`` (None where there is nothing to state) and the
+    answer's ``validity`` domain (:func:`fidelity.check.prediction_domain`)."""
+    out: JSONObject = json_ready(prediction_json(prediction, families) | {
+        "prediction_interval": interval.to_json() if interval is not None else None,
+        "validity": validity.to_json()})
     return out
 
 
