@@ -200,7 +200,7 @@ def test_collect_results_losses_standard_errors_and_bound(one_camera_store, tmp_
     assert s["all"].failures == (("cam", "det"),)
     paths = write_validation_report(res, tmp_path / "report")
     assert {p.name for p in paths} >= {"validation.md", "validation.html", "validation.json",
-                                       "predicted-vs-measured-safecolor-2025.png"}
+                                       "predicted-vs-measured-safecolor-2025.svg"}
     # validation.json is the results' to_json and reads back to the same records
     data = json.loads((tmp_path / "report" / "validation.json").read_text())
     assert data == res.to_json() and ValidationResults.from_json(data) == res
@@ -225,6 +225,98 @@ def test_collect_results_losses_standard_errors_and_bound(one_camera_store, tmp_
     assert doc.headline.tone == "info" and doc.headline.figure is None
 
 
+def _symlog(v: float) -> float:
+    """matplotlib's symlog with linthresh 1 in closed form: linear below 1, 1 + log10 above."""
+    return v if abs(v) <= 1 else float(np.sign(v)) * (1 + np.log10(abs(v)))
+
+
+def test_figures_put_each_cell_where_the_axes_say(one_camera_store) -> None:
+    """The SVG figures drawn from the numbers: in each panel of predicted against measured,
+    the cell's marker lies where the panel's labelled ticks 0 and 1 put its (predicted,
+    measured) on symlog axes, its error bar spans ±2 SE, and the identity line runs through
+    (0, 0) and (1, 1); the chart-ΔE panel puts the camera at its chart ΔE."""
+    import xml.etree.ElementTree as ET
+
+    from fidelity.report.validationfigures import (
+        GAP,
+        LEFT,
+        MODEL_COLOURS,
+        PANEL_W,
+        PLOTTED,
+        scatter_plot,
+        vs_delta_e_plot,
+    )
+
+    ns = "{http://www.w3.org/2000/svg}"
+    res = collect_results(one_camera_store, tables=["safecolor-2025"],
+                          bound_table="safecolor-2025")
+    (row,) = res.rows
+
+    def ticks(root: ET.Element, panel: int) -> tuple[dict[str, float], dict[str, float]]:
+        """Tick label -> pixel along x (labels under the panel) and along y (left of it)."""
+        x0 = LEFT + panel * (PANEL_W + GAP)
+        xs, ys = {}, {}
+        for t in root.iter(ns + "text"):
+            x, y = float(t.get("x")), float(t.get("y"))
+            if t.get("text-anchor") == "middle" and x0 - 1 <= x <= x0 + PANEL_W + 1 \
+                    and t.get("font-size") == "12":
+                xs[t.text] = x
+            elif t.get("text-anchor") == "end" and abs(x - (x0 - 7)) < 0.01:
+                ys[t.text] = y
+        return xs, ys
+
+    from fidelity.coco.loss import LOSS_COLUMNS
+
+    root = ET.fromstring(scatter_plot(res.rows, "safecolor-2025"))
+    markers = [c for c in root.iter(ns + "circle") if c.get("fill") == MODEL_COLOURS[0]]
+    assert len(markers) == len(PLOTTED) + 1  # one per panel, one in the legend
+    for panel, cls in enumerate(PLOTTED):
+        col = LOSS_COLUMNS[cls]
+        pred = row.predicted["safecolor-2025"].losses.get(col)
+        meas = row.measured.get(col)
+        assert pred is not None and meas is not None
+        xs, ys = ticks(root, panel)
+        m = markers[panel]
+        want_x = xs["0"] + (xs["1"] - xs["0"]) * _symlog(pred)
+        want_y = ys["0"] + (ys["1"] - ys["0"]) * _symlog(meas)
+        assert float(m.get("cx")) == pytest.approx(want_x, abs=0.02)
+        assert float(m.get("cy")) == pytest.approx(want_y, abs=0.02)
+        se = row.se.get(col) or 0.0
+        bars = [ln for ln in root.iter(ns + "line") if ln.get("stroke") == MODEL_COLOURS[0]
+                and ln.get("x1") == ln.get("x2") == m.get("cx")]
+        if se > 0:
+            (bar,) = bars
+            lo, hi = sorted(float(bar.get(k)) for k in ("y1", "y2"))
+            unit = ys["0"] - ys["1"]
+            assert hi == pytest.approx(ys["0"] - unit * _symlog(meas - 2 * se), abs=0.02)
+            assert lo == pytest.approx(ys["0"] - unit * _symlog(meas + 2 * se), abs=0.02)
+    # the identity line passes through (0, 0) and (1, 1) of the first panel
+    xs, ys = ticks(root, 0)
+    ident = next(p for p in root.iter(ns + "polyline") if p.get("stroke-dasharray") == "5 3")
+    pts = np.array([[float(v) for v in q.split(",")] for q in ident.get("points").split()])
+    for v in (0.0, 1.0):
+        px = xs["0"] + (xs["1"] - xs["0"]) * v
+        py = np.interp(px, pts[:, 0], pts[:, 1])
+        assert py == pytest.approx(ys["0"] + (ys["1"] - ys["0"]) * v, abs=0.2)
+    # measured loss against chart ΔE: the camera at its chart ΔE (linear axis)
+    root = ET.fromstring(vs_delta_e_plot(res.rows, ["safecolor-2025"]))
+    xs, ys = ticks(root, 0)
+    (m, *_) = [c for c in root.iter(ns + "circle") if c.get("fill") == MODEL_COLOURS[0]]
+    far = max(xs, key=float)
+    scale = (xs[far] - xs["0"]) / float(far)
+    assert float(m.get("cx")) == pytest.approx(xs["0"] + scale * row.chart_delta_e, abs=0.02)
+    assert float(m.get("cy")) == pytest.approx(
+        ys["0"] + (ys["1"] - ys["0"]) * _symlog(row.measured.dmap_points), abs=0.02)
+
+
+def test_symlog_ticks_either_side_of_zero() -> None:
+    from fidelity.report.svg import Scale, symlog_ticks
+
+    assert symlog_ticks(5, -12) == [-10, -5, -2, -1, 0, 1, 2, 5]
+    assert Scale(-0.5, 3.0, "symlog").ticks() == [0, 1, 2]
+    assert Scale(-2.5, 3.0, "symlog").ticks() == [-2, -1, 0, 1, 2]
+
+
 def test_validation_report_structure(one_camera_store) -> None:
     """Headline (the bound, with the bound table's plot) before any table, every figure
     embedded, the per-camera tables folded, Markdown and HTML from one document, the tone
@@ -238,17 +330,19 @@ def test_validation_report_structure(one_camera_store) -> None:
     doc = validation_document(res, notes="Some *analysis*.")
     html, md = render_html(doc), render_markdown(doc)
     assert doc.headline.figure is not None
-    assert doc.headline.figure.name == "predicted-vs-measured-safecolor-2025.png"
+    assert doc.headline.figure.name == "predicted-vs-measured-safecolor-2025.svg"
     # mAP is 1.33 points over the bound, within 2 SE (0.74); person 5 points over with no
     # spread over the folds (SE 0): beyond 2 SE, so the headline says fail
     (row,) = res.rows
     assert row.bound["all"].within_2se is True and row.bound["person"].within_2se is False
     assert doc.headline.tone == "fail"
-    assert html.index('class="headline') < html.index("data:image/png") < html.index("<table")
+    assert html.index('class="headline') < html.index("<svg") < html.index("<table")
     names = [f.name for f in doc.figures()]
-    assert names == ["predicted-vs-measured-safecolor-2025.png", "loss-vs-chart-delta-e.png",
-                     "emulation-accuracy.png"]
-    assert html.count('src="data:image/png;base64,') == html.count("<img") == len(names)
+    assert names == ["predicted-vs-measured-safecolor-2025.svg", "loss-vs-chart-delta-e.svg",
+                     "emulation-accuracy.svg"]
+    # every figure inlined as SVG, none as a picture; Markdown links the files
+    assert html.count("<svg") == len(names) and "<img" not in html
+    assert all(f"]({n})" in md for n in names)
     folded = {s.title for s in doc.sections if s.folded}
     assert {"Per camera", "Emulation accuracy per camera", "Cameras"} <= folded
     assert html.count("<details>") == len(folded)

@@ -227,14 +227,17 @@ def nice_ticks(lo: float, hi: float, target: int = 6) -> list[float]:
     return [round(first + i * step, 10) for i in range(n)]
 
 
-def symlog_ticks(hi: float) -> list[float]:
-    """Ticks of a symlog axis from 0 to ``hi``: 0, then 1, 2, 5 per decade."""
-    out = [0.0]
-    v = 1.0
-    while v <= hi * (1 + 1e-9):
-        out += [m * v for m in (1.0, 2.0, 5.0) if m * v <= hi * (1 + 1e-9)]
-        v *= 10.0
-    return out
+def symlog_ticks(hi: float, lo: float = 0.0) -> list[float]:
+    """Ticks of a symlog axis from ``lo`` (at most 0) to ``hi``: 0, then 1, 2, 5 per decade
+    either side of it, ascending."""
+    def side(top: float) -> list[float]:
+        out, v = [], 1.0
+        while v <= top * (1 + 1e-9):
+            out += [m * v for m in (1.0, 2.0, 5.0) if m * v <= top * (1 + 1e-9)]
+            v *= 10.0
+        return out
+
+    return [-t for t in reversed(side(-lo))] + [0.0] + side(hi)
 
 
 def tick_label(v: float) -> str:
@@ -270,8 +273,33 @@ class Scale:
     def ticks(self) -> list[float]:
         """Tick positions inside the interval."""
         if self.kind == "symlog":
-            return [t for t in symlog_ticks(self.hi) if t >= self.lo]
+            return [t for t in symlog_ticks(self.hi, min(self.lo, 0.0)) if t >= self.lo]
         return nice_ticks(self.lo, self.hi)
+
+
+#: A legend entry: kind (``line``, ``box`` or a marker of :data:`MARKERS`), label, colour,
+#: dash pattern, size (line width, marker size, or a box's opacity).
+LegendEntry = tuple[str, str, str, str | None, float]
+
+#: The point markers: circle, square, diamond, triangle up, triangle down.
+MARKERS = ("o", "s", "D", "^", "v")
+
+
+def shape_at(c: Canvas, shape: str, px: float, py: float, size: float, fill: str,
+             edge: str = "#000", width: float = 1.0) -> None:
+    """A marker of ``shape`` (:data:`MARKERS`; anything else a circle) centred at pixel
+    (``px``, ``py``), reaching ``size`` px from its centre."""
+    r = size
+    if shape == "s":
+        c.rect(px - r, py - r, 2 * r, 2 * r, fill, edge, width)
+    elif shape == "D":
+        c.polygon([(px, py - r), (px + r, py), (px, py + r), (px - r, py)], fill, edge, width)
+    elif shape in ("^", "v"):
+        d = -1.0 if shape == "^" else 1.0
+        c.polygon([(px, py + d * r), (px + r, py - d * r * 0.75), (px - r, py - d * r * 0.75)],
+                  fill, edge, width)
+    else:
+        c.circle(px, py, r, fill, edge, width)
 
 
 class Axes:
@@ -281,7 +309,7 @@ class Axes:
                  xscale: Scale, yscale: Scale) -> None:
         self.c, self.x, self.y, self.w, self.h = canvas, x, y, w, h
         self.xs, self.ys = xscale, yscale
-        self.legend_entries: list[tuple[str, str, str, str | None, float]] = []
+        self.legend_entries: list[LegendEntry] = []
 
     def px(self, v: float | NDArray[np.float64]) -> NDArray[np.float64]:
         """Pixel x of data x."""
@@ -328,14 +356,43 @@ class Axes:
 
     def marker(self, x: float, y: float, colour: str, size: float = 5.0, shape: str = "o",
                label: str | None = None, edge: str = "#000") -> None:
-        """A point marker: ``o`` circle or ``s`` square."""
-        px, py = float(self.px(x)), float(self.py(y))
-        if shape == "s":
-            self.c.rect(px - size, py - size, 2 * size, 2 * size, colour, edge, 1)
-        else:
-            self.c.circle(px, py, size, colour, edge, 1)
+        """A point marker of ``shape`` (:data:`MARKERS`), ``size`` px from its centre."""
+        shape_at(self.c, shape, float(self.px(x)), float(self.py(y)), size, colour, edge)
         if label:
             self.legend_entries.append((shape, label, colour, None, size))
+
+    def errorbar(self, xs: Sequence[float] | NDArray[np.float64],
+                 ys: Sequence[float] | NDArray[np.float64],
+                 yerr: Sequence[float] | NDArray[np.float64], colour: str, shape: str = "o",
+                 size: float = 4.0, label: str | None = None) -> None:
+        """Points with vertical error bars from ``y - yerr`` to ``y + yerr`` (capped, clipped
+        to the plot area); non-finite points are left out."""
+        top, bottom = self.y, self.y + self.h
+        for x, y, e in zip(xs, ys, yerr, strict=True):
+            if not (math.isfinite(x) and math.isfinite(y)):
+                continue
+            px = float(self.px(x))
+            if math.isfinite(e) and e > 0:
+                y0, y1 = (min(max(float(self.py(v)), top), bottom) for v in (y - e, y + e))
+                self.c.line(px, y0, px, y1, colour, 1.0)
+                for yy in (y0, y1):
+                    if top < yy < bottom:
+                        self.c.line(px - 2.5, yy, px + 2.5, yy, colour, 1.0)
+            shape_at(self.c, shape, px, float(self.py(y)), size, colour, "#000", 0.6)
+        if label:
+            self.legend_entries.append((shape, label, colour, None, size))
+
+    def region(self, xs: Sequence[float] | NDArray[np.float64],
+               ys: Sequence[float] | NDArray[np.float64], colour: str, opacity: float,
+               label: str | None = None) -> None:
+        """A filled polygon through the data points (e.g. the area below a line)."""
+        px, py = self.px(np.asarray(xs, np.float64)), self.py(np.asarray(ys, np.float64))
+        py = np.clip(py, self.y, self.y + self.h)
+        pts = " ".join(f"{_f(float(a))},{_f(float(b))}" for a, b in zip(px, py, strict=True))
+        self.c.parts.append(f'<polygon points="{pts}" fill="{colour}" '
+                            f'fill-opacity="{_f(opacity)}"/>')
+        if label:
+            self.legend_entries.append(("box", label, colour, None, opacity))
 
     def vline(self, x: float, colour: str, width: float = 1.0, dash: str | None = None,
               label: str | None = None) -> None:
@@ -372,31 +429,59 @@ class Axes:
         x0 = self.x + 8 if corner == "upper left" else self.x + self.w - width - 8
         y0 = self.y + 8 if corner.startswith("upper") else self.y + self.h - height - 8
         c.rect(x0, y0, width, height, "#fff", "#ccc", 1, opacity=0.92)
-        for i, (kind, label, colour, dash, size) in enumerate(self.legend_entries):
-            yy = y0 + 4 + row * (i + 0.5)
-            if kind == "line":
-                c.line(x0 + 6, yy, x0 + 26, yy, colour, size, dash)
-            elif kind == "box":
-                c.rect(x0 + 8, yy - 5, 16, 10, colour, "#999", 0.5, opacity=max(size, 0.3))
-            elif kind == "s":
-                c.rect(x0 + 11, yy - 5, 10, 10, colour, "#000", 1)
-            else:
-                c.circle(x0 + 16, yy, 5, colour, "#000", 1)
-            c.text(x0 + 31, yy, label, 11, baseline="middle")
+        for i, entry in enumerate(self.legend_entries):
+            legend_entry(c, entry, x0, y0 + 4 + row * (i + 0.5))
+
+
+def legend_entry(c: Canvas, entry: LegendEntry, x0: float, yy: float) -> float:
+    """Draw one legend entry with its key at ``x0`` and its text's middle at ``yy``; returns
+    the width it takes (about 6.2 px a character at 11 px)."""
+    kind, label, colour, dash, size = entry
+    if kind == "line":
+        c.line(x0 + 6, yy, x0 + 26, yy, colour, size, dash)
+    elif kind == "box":
+        c.rect(x0 + 8, yy - 5, 16, 10, colour, "#999", 0.5, opacity=max(size, 0.3))
+    else:
+        shape_at(c, kind, x0 + 16, yy, 5, colour, "#000")
+    c.text(x0 + 31, yy, label, 11, baseline="middle")
+    return 38 + 6.2 * len(label)
+
+
+def legend_row(c: Canvas, entries: Sequence[LegendEntry], y: float) -> int:
+    """A legend as a row of ``entries`` centred across the canvas at height ``y`` (e.g. one
+    legend for several panels, out of the data's way), wrapped onto further rows 17 px
+    apart where the canvas is too narrow; returns the number of rows."""
+    widths = [38 + 6.2 * len(e[1]) for e in entries]
+    rows: list[list[int]] = [[]]
+    for i, w in enumerate(widths):
+        if rows[-1] and sum(widths[j] for j in rows[-1]) + w > c.width - 16:
+            rows.append([])
+        rows[-1].append(i)
+    for r, row in enumerate(rows):
+        x = (c.width - sum(widths[i] for i in row)) / 2
+        for i in row:
+            legend_entry(c, entries[i], x, y + 17 * r)
+            x += widths[i]
+    return len(rows)
 
 
 __all__ = [
     "COLOURS",
     "FONT",
+    "MARKERS",
     "MIN_FONT_PX",
     "Axes",
     "Canvas",
     "Scale",
+    "LegendEntry",
     "hex_colour",
+    "legend_entry",
+    "legend_row",
     "luminance",
     "magma_r",
     "nice_ticks",
     "png_data_uri",
+    "shape_at",
     "symlog_ticks",
     "tick_label",
 ]

@@ -2,7 +2,7 @@
 
 Built as one :class:`~fidelity.report.document.Document` from
 :class:`~fidelity.coco.validate.ValidationResults` (:func:`validation_document`) and written as
-``validation.html`` and ``validation.md`` with ``validation.json`` and the PNG figures
+``validation.html`` and ``validation.md`` with ``validation.json`` and the SVG figures
 (:func:`write_validation_report`). Reading order: the headline (does the worst-case table
 bound the measured loss, with the predicted-against-measured plot), the bound per class, the
 written analysis, the plots, every failure with its data-derived reason, then the per-camera
@@ -27,9 +27,11 @@ from fidelity.report.document import (
     Text,
     Tone,
     section,
+    svg_figure,
     table,
 )
 from fidelity.report.format import number, words
+from fidelity.report.validationfigures import PLOTTED
 
 if TYPE_CHECKING:
     from fidelity.coco.validate import (
@@ -43,184 +45,53 @@ if TYPE_CHECKING:
 TITLE = "Validation: predicted against measured detection loss for realistic camera models"
 
 #: The classes by :data:`fidelity.coco.loss.LOSS_COLUMNS` key, as the report names them.
-CLASS_TITLES: dict[str, str] = {"all": "mAP@[.50:.95] (all classes)", "person": "AP person",
-                                "bicycle": "AP bicycle",
-                                "all-relative": "mAP relative to baseline"}
+CLASS_TITLES: dict[str, str] = {**PLOTTED, "all-relative": "mAP relative to baseline"}
 
 #: File names of the figures.
-VS_DELTA_E_PNG = "loss-vs-chart-delta-e.png"
-EMULATION_PNG = "emulation-accuracy.png"
-BOUNDS_PNG = "classic-vs-directional.png"
+VS_DELTA_E_FIGURE = "loss-vs-chart-delta-e.svg"
+EMULATION_FIGURE = "emulation-accuracy.svg"
+BOUNDS_FIGURE = "classic-vs-directional.svg"
 
 
-def scatter_png(table_name: str) -> str:
+def scatter_figure(table_name: str) -> str:
     """File name of the predicted-against-measured plot of one prediction table."""
-    return f"predicted-vs-measured-{table_name}.png"
+    return f"predicted-vs-measured-{table_name}.svg"
 
 
 # --------------------------------------------------------------------------------------------
-# Plots
+# Figures (drawn by fidelity.report.validationfigures)
 # --------------------------------------------------------------------------------------------
-
-_PLOTTED = ("all", "person", "bicycle")
-
-
-def scatter_plot(rows: Sequence[ValidationRow], table_name: str) -> bytes:
-    """Measured against predicted loss (points) per class, ±2 SE, with the identity line
-    (the bound holds below it), for one prediction table (PNG bytes)."""
-    from fidelity.coco.loss import LOSS_COLUMNS
-    from fidelity.report.plots import axes_plain_ticks, new_figure, png_bytes
-
-    fig, axes = new_figure(15, 5, 1, 3)
-    models = sorted({r.model for r in rows})
-    markers = dict(zip(models, "osD^v", strict=False))
-    for ax, cls in zip(axes, _PLOTTED, strict=True):
-        col = LOSS_COLUMNS[cls]
-        lo, hi = 0.0, 1.0
-        for m in models:
-            pts = [(pv, mv, r.se.get(col) or 0.0) for r in rows if r.model == m
-                   if (pv := r.predicted[table_name].losses.get(col)) is not None
-                   and (mv := r.measured.get(col)) is not None]
-            if not pts:
-                continue
-            pa, ya, sa = (np.array(v) for v in zip(*pts, strict=True))
-            ax.errorbar(pa, ya, yerr=2 * sa, fmt=markers[m], ms=5, alpha=0.8, capsize=2,
-                        label=f"{m} (±2 SE)")
-            lo = min(lo, float(ya.min() - 2 * sa.max()), float(pa.min()))
-            hi = max(hi, float(ya.max() + 2 * sa.max()), float(pa.max()))
-        ax.plot([lo, hi], [lo, hi], "k--", lw=1, label="identity (measured = predicted)")
-        ax.fill_between([lo, hi], [lo, hi], [lo, lo], color="tab:green", alpha=0.06,
-                        label="bound holds")
-        ax.set_xscale("symlog", linthresh=1.0)
-        ax.set_yscale("symlog", linthresh=1.0)
-        axes_plain_ticks(ax)
-        ax.set_xlabel(f"predicted Δ{CLASS_TITLES[cls]} (points, {table_name})")
-        ax.set_ylabel("measured loss (points)")
-        ax.set_title(CLASS_TITLES[cls])
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="upper left")
-    return png_bytes(fig)
-
-
-def vs_delta_e_plot(rows: Sequence[ValidationRow], tables: Sequence[str]) -> bytes:
-    """Measured loss (points, ±2 SE) against the camera's chart ΔE00 per class, with every
-    table's worst-case curve for detector size n (PNG bytes)."""
-    from fidelity.coco.loss import LOSS_COLUMNS
-    from fidelity.prediction.table import predict_curve
-    from fidelity.report.plots import axes_plain_ticks, new_figure, png_bytes
-
-    fig, axes = new_figure(15, 5, 1, 3)
-    models = sorted({r.model for r in rows})
-    xmax = max([r.chart_delta_e for r in rows] + [6.0]) * 1.05
-    grid = np.linspace(0, xmax, 300)
-    for ax, cls in zip(axes, _PLOTTED, strict=True):
-        col = LOSS_COLUMNS[cls]
-        for m, mk in zip(models, "osD^v", strict=False):
-            pts = [(r.chart_delta_e, mv, r.se.get(col) or 0.0) for r in rows
-                   if r.model == m and (mv := r.measured.get(col)) is not None]
-            if pts:
-                xa, ya, sa = (np.array(v) for v in zip(*pts, strict=True))
-                ax.errorbar(xa, ya, yerr=2 * sa, fmt=mk, ms=5, alpha=0.8, capsize=2,
-                            label=f"measured, {m}")
-        for t, ls in zip(tables, ("-", "--", ":", "-."), strict=False):
-            try:
-                curve = predict_curve(grid, col, size="n", table=t)
-            except Exception:  # noqa: BLE001 - a table without this column is skipped
-                continue
-            if np.all(np.isnan(curve)):
-                continue
-            ax.plot(grid, curve, ls, color="k", lw=1.2, label=f"worst case, {t}")
-        ax.axhline(0, color="grey", lw=0.5)
-        ax.set_yscale("symlog", linthresh=1.0)
-        axes_plain_ticks(ax)
-        ax.set_xlabel("chart ΔE00 of the camera (mean over 24 patches)")
-        ax.set_ylabel(f"loss of {CLASS_TITLES[cls]} (points)")
-        ax.set_title(CLASS_TITLES[cls])
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="upper left")
-    return png_bytes(fig)
-
-
-def bounds_plot(results: ValidationResults) -> bytes:
-    """Measured mAP loss (points, ±2 SE) against both predictions per cell: the classic
-    worst case and the direction-aware one, with the identity line (PNG bytes)."""
-    from fidelity.report.plots import axes_plain_ticks, new_figure, png_bytes
-
-    dv = results.directional
-    assert dv is not None
-    fig, axes = new_figure(13, 5.2, 1, 2)
-    for ax, key, title in ((axes[0], "classic", f"classic ({results.summary.bound_table})"),
-                           (axes[1], "directional", f"direction-aware ({dv.table})")):
-        lo, hi = 0.0, 1.0
-        for m, mk in zip(sorted({r.model for r in dv.rows}), "osD^v", strict=False):
-            pts = [(getattr(c, key), c.measured, c.se or 0.0) for r in dv.rows
-                   if r.model == m for c in (r.cells["all"],)
-                   if getattr(c, key) is not None and c.measured is not None]
-            if not pts:
-                continue
-            pa, ya, sa = (np.array(v) for v in zip(*pts, strict=True))
-            ax.errorbar(pa, ya, yerr=2 * sa, fmt=mk, ms=5, alpha=0.8, capsize=2,
-                        label=f"{m} (±2 SE)")
-            lo = min(lo, float((ya - 2 * sa).min()))
-            hi = max(hi, float(pa.max()), float((ya + 2 * sa).max()))
-        ax.plot([lo, hi], [lo, hi], "k--", lw=1, label="measured = predicted")
-        ax.fill_between([lo, hi], [lo, hi], [lo, lo], color="tab:green", alpha=0.06,
-                        label="bound holds")
-        ax.set_xscale("symlog", linthresh=1.0)
-        ax.set_yscale("symlog", linthresh=1.0)
-        axes_plain_ticks(ax)
-        ax.set_xlabel("predicted ΔmAP (points)")
-        ax.set_ylabel("measured ΔmAP (points)")
-        ax.set_title(title)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="upper left")
-    return png_bytes(fig)
-
-
-def emulation_plot(cameras: Mapping[str, CameraRecord]) -> bytes:
-    """Mean and largest ΔE00 per camera between its emulation and its own rendered chart
-    (cameras by chart ΔE; PNG bytes)."""
-    from fidelity.report.plots import new_figure, png_bytes
-
-    names = sorted(cameras, key=lambda k: cameras[k].chart_delta_e)
-    fig, ax = new_figure(12, 4.5)
-    x = np.arange(len(names))
-    acc = [cameras[n].emulation.accuracy for n in names]
-    ax.bar(x - 0.2, [a.chart_mean_delta_e for a in acc], 0.4, label="mean ΔE00 (chart)")
-    ax.bar(x + 0.2, [a.chart_max_delta_e for a in acc], 0.4, label="max ΔE00 (chart)")
-    ax.set_xticks(x, names, rotation=75, ha="right", fontsize=7)
-    ax.set_ylabel("ΔE00 emulated vs camera")
-    ax.set_title("Emulation accuracy: fitted mapping applied to the 8-bit reference chart vs the "
-                 "camera's rendered chart")
-    ax.legend()
-    ax.grid(axis="y", alpha=0.3)
-    return png_bytes(fig)
 
 
 def validation_figures(results: ValidationResults) -> dict[str, Figure]:
     """Every figure by file name: predicted against measured per table (the bound table
-    first), measured loss against chart ΔE, emulation accuracy."""
+    first), measured loss against chart ΔE, both bounds, emulation accuracy (SVG,
+    :mod:`fidelity.report.validationfigures`)."""
+    from fidelity.report import validationfigures as vf
+
     rows, summ = results.rows, results.summary
     out: dict[str, Figure] = {}
     if rows:
         for t in _table_order(summ):
-            out[scatter_png(t)] = Figure(
-                scatter_plot(rows, t), scatter_png(t), f"predicted against measured loss, {t}",
+            out[scatter_figure(t)] = svg_figure(
+                vf.scatter_plot(rows, t), scatter_figure(t),
+                f"predicted against measured loss, {t}",
                 f"Measured loss (points, ±2 SE) against the loss `{t}` predicts, per class; "
                 "dashed: identity (measured = predicted); the bound holds below it.")
-        out[VS_DELTA_E_PNG] = Figure(
-            vs_delta_e_plot(rows, _table_order(summ)), VS_DELTA_E_PNG,
+        out[VS_DELTA_E_FIGURE] = svg_figure(
+            vf.vs_delta_e_plot(rows, _table_order(summ)), VS_DELTA_E_FIGURE,
             "measured loss against chart ΔE with the worst-case curves",
             "Measured loss (points, ±2 SE) against the camera's chart ΔE00, with each table's "
             "worst-case curve (detector size n).")
     if results.directional is not None and results.directional.rows:
-        out[BOUNDS_PNG] = Figure(
-            bounds_plot(results), BOUNDS_PNG, "both bounds against the measured loss",
+        out[BOUNDS_FIGURE] = svg_figure(
+            vf.bounds_plot(results), BOUNDS_FIGURE, "both bounds against the measured loss",
             "Measured ΔmAP (points, ±2 SE) against the classic worst case (left) and the "
             "direction-aware prediction (right); each bound holds below the dashed line.")
     if results.cameras:
-        out[EMULATION_PNG] = Figure(
-            emulation_plot(results.cameras), EMULATION_PNG, "emulation accuracy per camera",
+        out[EMULATION_FIGURE] = svg_figure(
+            vf.emulation_plot(results.cameras), EMULATION_FIGURE,
+            "emulation accuracy per camera",
             "Mean and largest ΔE00 between the emulated and the camera's own rendered chart, "
             "cameras by chart ΔE.")
     return out
@@ -385,8 +256,8 @@ def _points(r: ValidationRow) -> float:
 
 def _plots_section(results: ValidationResults, figures: Mapping[str, Figure]) -> Section | None:
     summ = results.summary
-    others = [figures[n] for t in _table_order(summ)[1:] if (n := scatter_png(t)) in figures]
-    blocks: list[Block | None] = [*others, figures.get(VS_DELTA_E_PNG)]
+    others = [figures[n] for t in _table_order(summ)[1:] if (n := scatter_figure(t)) in figures]
+    blocks: list[Block | None] = [*others, figures.get(VS_DELTA_E_FIGURE)]
     if not any(blocks):
         return None
     return section("Predicted and measured loss", *blocks)
@@ -454,7 +325,7 @@ def _directional_sections(results: ValidationResults, figures: Mapping[str, Figu
                        "direction-aware within", "direction-aware within 2 SE",
                        "classic median ratio", "direction-aware median ratio",
                        "median ratios, cells > 2 SE (n)"], body),
-                figures.get(BOUNDS_PNG)),
+                figures.get(BOUNDS_FIGURE)),
         section("Over-prediction per camera (ΔmAP, points)", table(
             ["camera", "model", "chart ΔE", "measured", "classic", "ratio",
              "direction-aware", "ratio", "within 2 SE", "charged as"], rows,
@@ -579,7 +450,7 @@ def _emulation_sections(results: ValidationResults, figures: Mapping[str, Figure
                      f"{a.chart_max_delta_e:.2f} ({a.chart_worst_patch})", hold,
                      f"{a.training_mean_delta_e:.2f}", f"{a.training_p95_delta_e:.2f}", oth])
     return [
-        section("Emulation accuracy", summary, figures.get(EMULATION_PNG), intro),
+        section("Emulation accuracy", summary, figures.get(EMULATION_FIGURE), intro),
         section("Emulation accuracy per camera", table(
             ["camera", "illuminant", "chart ΔE camera", "chart ΔE emulated", "chart mean",
              "chart max (patch)", "held-out chart mean / max", "training mean", "training p95",
@@ -656,7 +527,7 @@ def validation_document(results: ValidationResults, notes: str | None = None,
     """The validation report of ``results``; ``notes`` (Markdown) is the "Analysis" section;
     figures: :func:`validation_figures`, made when not given."""
     figs = dict(figures) if figures is not None else validation_figures(results)
-    bound_fig = figs.get(scatter_png(results.summary.bound_table))
+    bound_fig = figs.get(scatter_figure(results.summary.bound_table))
     sections: list[Section | None] = [
         _bound_section(results),
         section("Analysis", Text(notes.strip())) if notes else None,
@@ -680,7 +551,7 @@ def validation_document(results: ValidationResults, notes: str | None = None,
 
 def write_validation_document(results: ValidationResults, out_dir: str | os.PathLike[str],
                               notes: str | None = None) -> list[Path]:
-    """Write ``validation.html`` and ``validation.md`` with its PNG figures (atomically); the
+    """Write ``validation.html`` and ``validation.md`` with its SVG figures (atomically); the
     report alone, e.g. rebuilt from a ``validation.json`` (:meth:`ValidationResults.from_json`).
 
     Figures: predicted against measured with the identity line per class (all, person,
@@ -712,20 +583,17 @@ def write_validation_report(results: ValidationResults, out_dir: str | os.PathLi
 
 
 __all__ = [
-    "BOUNDS_PNG",
+    "BOUNDS_FIGURE",
     "CLASS_TITLES",
-    "EMULATION_PNG",
+    "EMULATION_FIGURE",
     "TITLE",
-    "VS_DELTA_E_PNG",
-    "bounds_plot",
-    "emulation_plot",
+    "VS_DELTA_E_FIGURE",
     "failure_reason",
     "headline",
-    "scatter_plot",
+    "scatter_figure",
     "spearman",
     "validation_document",
     "validation_figures",
-    "vs_delta_e_plot",
     "write_validation_document",
     "write_validation_report",
 ]
