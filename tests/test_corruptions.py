@@ -147,7 +147,8 @@ def test_coco_c_report_only_rebuilds(tmp_path):
     r = CliRunner().invoke(main, ["coco-c", "--out", str(tmp_path), "--report-only"])
     assert r.exit_code == 0, r.output
     html = (tmp_path / "cococ.html").read_text()
-    assert 'alt="chart ΔE against COCO-C severity" src="data:image/png;base64,' in html
+    assert '<svg' in html and 'aria-label="chart ΔE against COCO-C severity"' in html
+    assert (tmp_path / "cococ-chart-delta-e.svg").is_file()
 
 
 def test_shipped_measurements_come_from_this_versions_detectors():

@@ -229,3 +229,14 @@ def test_markdown_writes_the_svg_figures(tmp_path, ref):
     assert "![the chart](swatches.svg)" in (tmp_path / "r.md").read_text(encoding="utf-8")
     html = (tmp_path / "r.html").read_text(encoding="utf-8")
     assert html.count('role="img" aria-label="the chart"') == 2
+
+
+def test_log_ticks_and_scale():
+    from fidelity.report.svg import log_ticks
+
+    assert log_ticks(0.3, 120) == [0.5, 1, 2, 5, 10, 20, 50, 100]
+    assert log_ticks(1, 1) == [] and log_ticks(0, 10) == []
+    s = Scale(0.1, 100.0, "log")
+    np.testing.assert_allclose(s.fraction(np.array([0.1, 1.0, 10.0, 100.0])),
+                               [0, 1 / 3, 2 / 3, 1])
+    assert np.isnan(s.transform(0.0)) and np.isnan(s.transform(-1.0))

@@ -178,14 +178,14 @@ def test_report_files(store, tmp_path) -> None:
     out = tmp_path / "rep"
     written = write_tables_report(tables_result(store), out, tmp_path / "pred.json")
     assert set(written) >= {"report.md", "report.html", "tables.json", "prediction",
-                            "worst_case.png", "map_vs_de_yolo11n.png"}
+                            "worst_case.svg", "map_vs_de_yolo11n.svg"}
     md = (out / "report.md").read_text()
     data = json.loads((out / "tables.json").read_text())
     row = {r["delta_e"]: r for r in data["tables"]["worst_case"]["yolo11n"]}[3.0]
     assert row["worst_transform"] == "contrast-inc"
     assert (row["dmap_points"], row["dmap_relative"]) == (pytest.approx(5.0), pytest.approx(10.0))
-    for name in ("worst_case.png", "map_vs_de_yolov8n.png"):
-        assert (out / name).read_bytes()[:4] == b"\x89PNG"
+    for name in ("worst_case.svg", "map_vs_de_yolov8n.svg"):
+        assert (out / name).read_text("utf-8").startswith("<svg")
         assert f"]({name})" in md  # the Markdown links its figure files
 
 
@@ -200,12 +200,12 @@ def test_report_structure(store) -> None:
     doc = tables_document(tables_result(store))
     html, md = render_both(doc)
     figures = doc.figures()
-    assert doc.headline.figure is not None and doc.headline.figure.name == "worst_case.png"
+    assert doc.headline.figure is not None and doc.headline.figure.name == "worst_case.svg"
     # one mAP plot per model with transformed cells (yolov8s has only its baseline)
-    assert [f.name for f in figures] == ["worst_case.png", "map_vs_de_yolo11n.png",
-                                         "map_vs_de_yolov8n.png"]
-    assert html.count('src="data:image/png;base64,') == html.count("<img") == len(figures)
-    assert html.index('class="headline') < html.index("data:image/png") < html.index("<table")
+    assert [f.name for f in figures] == ["worst_case.svg", "map_vs_de_yolo11n.svg",
+                                         "map_vs_de_yolov8n.svg"]
+    assert html.count("<svg") == len(figures) and "<img" not in html
+    assert html.index('class="headline') < html.index("<svg") < html.index("<table")
     # the headline names every model's worst case at the paper's thresholds, with its number
     tables = tables_result(store).tables
     lines = {ln.split(":")[0]: ln for ln in doc.headline.message.splitlines()}
@@ -586,3 +586,57 @@ def test_tables_earlier_command(store, tmp_path) -> None:
                                         "--out", str(tmp_path / "r2")])
         one_line_error(res, str(bad))
     assert not (tmp_path / "r2").exists()
+
+
+def test_worst_case_figure_puts_each_point_where_the_axes_say(store) -> None:
+    """The worst-case figure drawn from the numbers: on the linear panel each model's point
+    lies where the labelled ticks put its (ΔE, relative ΔmAP); on the log panel where
+    log10 between two labelled ticks puts it; SAFE-COLOR's step runs through the paper's
+    thresholds (1 % to ΔE 3, 3 % to 6, 10 % to 12)."""
+    import math
+    import xml.etree.ElementTree as ET
+
+    from fidelity.report.cocofigures import TAB10, paper_step, worst_case_plot
+
+    ns = "{http://www.w3.org/2000/svg}"
+    tables = tables_result(store).tables
+    root = ET.fromstring(worst_case_plot(tables))
+    texts = list(root.iter(ns + "text"))
+
+    def ticks(x_lo: float, x_hi: float) -> tuple[dict[str, float], dict[str, float]]:
+        xs = {t.text: float(t.get("x")) for t in texts if t.get("text-anchor") == "middle"
+              and t.get("font-size") == "12" and x_lo <= float(t.get("x")) <= x_hi}
+        ys = {t.text: float(t.get("y")) for t in texts if t.get("text-anchor") == "end"
+              and abs(float(t.get("x")) - (x_lo - 7)) < 0.01}
+        return xs, ys
+
+    step_x, step_y = paper_step()
+    assert list(zip(step_x, step_y, strict=True)) == [
+        (0, 1), (3, 1), (3, 3), (6, 3), (6, 10), (12, 10)]
+    panel_w, checked = 380.0, 0
+    for i, (model, rows) in enumerate(tables.worst_case.items()):
+        colour = TAB10[i]
+        dots = [(float(c.get("cx")), float(c.get("cy"))) for c in root.iter(ns + "circle")
+                if c.get("fill") == colour and c.get("r") == "3"]
+        pts = [(r.delta_e, r.dmap_relative) for r in rows if r.dmap_relative is not None]
+        lin = dots[:len(pts)]
+        xs, ys = ticks(64, 64 + panel_w)
+        x_far, y_far = max(xs, key=float), max(ys, key=float)
+        for (de, rel), (cx, cy) in zip(pts, lin, strict=True):
+            assert cx == pytest.approx(xs["0"] + (xs[x_far] - xs["0"]) * de / float(x_far),
+                                       abs=0.02)
+            assert cy == pytest.approx(ys["0"] + (ys[y_far] - ys["0"]) * rel / float(y_far),
+                                       abs=0.02)
+        logs = dots[len(pts):]
+        positive = [(de, rel) for de, rel in pts if rel > 0]
+        assert len(logs) == len(positive)
+        checked += len(positive)
+        lx, ly = ticks(64 + panel_w + 86, 64 + 2 * panel_w + 86)
+        labels = sorted((float(k) for k in ly), key=float)
+        a, b = labels[0], labels[-1]
+        ya, yb = ly[f"{a:g}"], ly[f"{b:g}"]
+        for (de, rel), (cx, cy) in zip(positive, logs, strict=True):
+            want = ya + (yb - ya) * (math.log10(rel) - math.log10(a)) / (
+                math.log10(b) - math.log10(a))
+            assert cy == pytest.approx(want, abs=0.02)
+    assert checked >= 2

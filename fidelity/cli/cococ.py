@@ -73,12 +73,12 @@ def cococ(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
     from fidelity.coco.corruptions import CocoCResults, run_coco_c, with_predictions
     from fidelity.coco.measure import stderr_log
     from fidelity.fileio import check_outputs
-    from fidelity.report.cococ import write_cococ_report
+    from fidelity.report.cococ import DELTA_E_FIGURE, LOSS_FIGURE, write_cococ_report
 
     out_dir = Path(out)
     check_outputs({f"--out ({n})": out_dir / n
-                   for n in ("cococ.json", "cococ.html", "cococ.md", "cococ-chart-delta-e.png",
-                             "cococ-loss-vs-delta-e.png")} | {"--data": data},
+                   for n in ("cococ.json", "cococ.html", "cococ.md", DELTA_E_FIGURE,
+                             LOSS_FIGURE)} | {"--data": data},
                   {"--notes": notes, "--images": images, "--annotations": annotations,
                    **model_inputs(models)},
                   stores={"--store": store})

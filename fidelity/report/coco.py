@@ -6,8 +6,7 @@ Built as one :class:`~fidelity.report.document.Document` from a
 measured prediction table). Reading order: the headline (the worst case of every model at
 SAFE-COLOR's thresholds, with the worst-case plot), the paper comparison and the ΔE limits, the
 plots, the worst-case tables, then method and provenance; coverage and the table of every cell
-are folded away. Plots: :func:`worst_case_plot` and :func:`map_vs_delta_e_plot` (PNG bytes,
-through :func:`fidelity.report.plots.new_figure`).
+are folded away. Figures: SVG drawn from the numbers by :mod:`fidelity.report.cocofigures`.
 """
 
 from __future__ import annotations
@@ -28,6 +27,7 @@ from fidelity.report.document import (
     Section,
     Text,
     section,
+    svg_figure,
     table,
 )
 from fidelity.report.format import listing, number, words
@@ -46,12 +46,12 @@ if TYPE_CHECKING:
 TITLE = "COCO benchmark: measured cost of colour error"
 
 #: File name of the headline figure.
-WORST_CASE_PNG = "worst_case.png"
+WORST_CASE_FIGURE = "worst_case.svg"
 
 
-def map_vs_delta_e_png(model: str) -> str:
+def map_vs_delta_e_figure(model: str) -> str:
     """File name of a model's mAP-against-ΔE plot."""
-    return f"map_vs_de_{model}.png"
+    return f"map_vs_de_{model}.svg"
 
 
 # --------------------------------------------------------------------------------------------
@@ -59,87 +59,23 @@ def map_vs_delta_e_png(model: str) -> str:
 # --------------------------------------------------------------------------------------------
 
 
-def map_vs_delta_e_plot(tables: Tables, model: str) -> bytes:
-    """mAP@[.50:.95] (%) against chart ΔE00 for every transform of ``model`` (PNG bytes)."""
-    from fidelity.report.plots import new_figure, png_bytes
-
-    base = tables.models[model].baseline_map
-    fig, ax = new_figure(7, 4.5)
-    for t in tables.transforms:
-        pts = sorted((r.delta_e, float(r.map)) for r in tables.cells.get(model, ())
-                     if r.transform == t and r.done and r.map is not None)
-        if pts:
-            x, y = zip(*([(0.0, base)] + pts), strict=True)
-            ax.plot(x, np.asarray(y) * 100, marker="o", ms=3, label=t)
-    ax.set_xlabel("chart ΔE00 (mean over 24 patches)")
-    ax.set_ylabel("mAP@[.50:.95] (%)")
-    ax.set_title(f"{model}: mAP against ΔE per transform")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
-    return png_bytes(fig)
-
-
-def worst_case_plot(tables: Tables) -> bytes:
-    """Worst-case relative ΔmAP per model against chart ΔE00, ±2 SE, with SAFE-COLOR's bound
-    as a step (1 % to ΔE 3, 3 % to 6, 10 % to 12); right: the same on a log scale (PNG)."""
-    from fidelity.report.plots import new_figure, png_bytes
-
-    fig, (a1, a2) = new_figure(11, 4.2, 1, 2)
-    lowest = np.inf  # smallest positive loss: the log axis starts just below it
-    for m, rows in tables.worst_case.items():
-        x = np.array([r.delta_e for r in rows], dtype=float)
-        y = np.array([np.nan if r.dmap_relative is None else r.dmap_relative for r in rows],
-                     dtype=float)
-        se = np.array([np.nan if r.dmap_relative_se is None else 2.0 * r.dmap_relative_se
-                       for r in rows], dtype=float)
-        (line,) = a1.plot(x, y, marker="o", ms=3, label=m)
-        colour = line.get_color()
-        bars = np.isfinite(se)
-        if bars.any():
-            a1.errorbar(x[bars], y[bars], yerr=se[bars], ls="none", color=colour, lw=0.8,
-                        capsize=2)
-        part = [(r.delta_e, r.dmap_relative) for r in rows if r.partial]
-        if part:
-            a1.plot(*zip(*part, strict=True), ls="none", marker="o", ms=8, mfc="white",
-                    color=colour)
-        pos = y > 0
-        if pos.any():
-            lowest = min(lowest, float(y[pos].min()))
-            a2.semilogy(x[pos], y[pos], marker="o", ms=3, label=m, color=colour)
-            b = pos & bars
-            if b.any():  # on the log axis a bar stops just above zero
-                lower = np.minimum(se[b], 0.95 * y[b])
-                a2.errorbar(x[b], y[b], yerr=[lower, se[b]], ls="none", color=colour,
-                            lw=0.8, capsize=2)
-    for ax in (a1, a2):
-        ax.step([0, 3, 6, 12], [1, 1, 3, 10], where="pre", color="black", lw=1, ls="--",
-                label="SAFE-COLOR bound (1 / 3 / 10 %)")
-        ax.set_xlabel("chart ΔE00")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-    a1.set_ylabel("worst-case ΔmAP (% of baseline)")
-    a1.set_title("worst case per model, ±2 SE (open circle: not all transforms done)",
-                 fontsize=10)
-    if np.isfinite(lowest):  # bars reaching towards zero are cut at the axis
-        a2.set_ylim(bottom=min(0.5, lowest / 2))
-    a2.set_ylabel("worst-case ΔmAP (% of baseline, log)")
-    a2.set_title("degradation on a log scale, ±2 SE", fontsize=10)
-    return png_bytes(fig)
-
-
 def tables_figures(tables: Tables) -> dict[str, Figure]:
-    """Every figure of the report by file name: the worst case, then mAP against ΔE per model."""
-    out = {WORST_CASE_PNG: Figure(
-        worst_case_plot(tables), WORST_CASE_PNG, "worst-case ΔmAP against chart ΔE per model",
+    """Every figure of the report by file name: the worst case, then mAP against ΔE per model
+    (SVG, :mod:`fidelity.report.cocofigures`)."""
+    from fidelity.report import cocofigures as cf
+
+    out = {WORST_CASE_FIGURE: svg_figure(
+        cf.worst_case_plot(tables), WORST_CASE_FIGURE,
+        "worst-case ΔmAP against chart ΔE per model",
         "Worst-case ΔmAP (% of the baseline mAP) per model against chart ΔE00, ±2 SE; open "
         "circles: not every transform done. Dashed: SAFE-COLOR's bound (1 % to ΔE 3, 3 % to 6, "
         "10 % to 12). Right: the same on a log scale.")}
     for m in tables.cells:
-        name = map_vs_delta_e_png(m)
-        out[name] = Figure(map_vs_delta_e_plot(tables, m), name,
-                           f"{m}: mAP against chart ΔE per transform",
-                           f"{m}: mAP@[.50:.95] against chart ΔE00, one line per transform "
-                           "(ΔE 0: the baseline).")
+        name = map_vs_delta_e_figure(m)
+        out[name] = svg_figure(cf.map_vs_delta_e_plot(tables, m), name,
+                               f"{m}: mAP against chart ΔE per transform",
+                               f"{m}: mAP@[.50:.95] against chart ΔE00, one line per transform "
+                               "(ΔE 0: the baseline).")
     return out
 
 
@@ -467,7 +403,7 @@ def tables_document(result: TablesResult, figures: Mapping[str, Figure] | None =
     not given)."""
     tables = result.tables
     figs = dict(figures) if figures is not None else tables_figures(tables)
-    per_model = [figs[n] for m in tables.cells if (n := map_vs_delta_e_png(m)) in figs]
+    per_model = [figs[n] for m in tables.cells if (n := map_vs_delta_e_figure(m)) in figs]
     sections: list[Section | None] = [
         _comparison_section(tables, result.comparison),
         _limits_section(result.limits),
@@ -480,7 +416,7 @@ def tables_document(result: TablesResult, figures: Mapping[str, Figure] | None =
         _coverage_section(tables),
         *(_all_cells_section(tables, m) for m in tables.cells),
     ]
-    return Document(TITLE, headline(tables, figs.get(WORST_CASE_PNG)),
+    return Document(TITLE, headline(tables, figs.get(WORST_CASE_FIGURE)),
                     tuple(s for s in sections if s is not None),
                     footer="Generated by `fidelity tables` from the sweep store; every number "
                            "is computed from stored detections.")
@@ -488,7 +424,7 @@ def tables_document(result: TablesResult, figures: Mapping[str, Figure] | None =
 
 def write_tables_document(result: TablesResult, out_dir: str | os.PathLike[str]
                           ) -> dict[str, Path]:
-    """Write ``report.html`` and ``report.md`` with its PNG figures (atomically); the report
+    """Write ``report.html`` and ``report.md`` with its SVG figures (atomically); the report
     alone, e.g. rebuilt from a ``tables.json`` (:meth:`TablesResult.from_json`)."""
     from fidelity.report.html import write_document
 
@@ -516,14 +452,12 @@ def write_tables_report(result: TablesResult, out_dir: str | os.PathLike[str],
 
 __all__ = [
     "TITLE",
-    "WORST_CASE_PNG",
+    "WORST_CASE_FIGURE",
     "conventions_words",
     "headline",
-    "map_vs_delta_e_plot",
     "run_history_words",
     "tables_document",
     "tables_figures",
-    "worst_case_plot",
     "write_tables_document",
     "write_tables_report",
 ]

@@ -2,7 +2,7 @@
 
 Built as one :class:`~fidelity.report.document.Document` from
 :class:`fidelity.coco.corruptions.CocoCResults` (:func:`cococ_document`) and written as
-``cococ.html`` and ``cococ.md`` with ``cococ.json`` and the PNG figures
+``cococ.html`` and ``cococ.md`` with ``cococ.json`` and the SVG figures
 (:func:`write_cococ_report`). Reading order: the headline (each corruption's chart ΔE over
 severities 1-5 and what it costs), the table (chart ΔE, its direction, the classic and the
 direction-aware predicted ΔmAP, the measured ΔmAP ± SE per detector), the figures, the method
@@ -16,9 +16,16 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from fidelity.report.document import Document, Figure, Headline, Section, Text, section, table
+from fidelity.report.document import (
+    Document,
+    Figure,
+    Headline,
+    Section,
+    Text,
+    section,
+    svg_figure,
+    table,
+)
 from fidelity.report.format import number
 
 if TYPE_CHECKING:
@@ -27,8 +34,8 @@ if TYPE_CHECKING:
 #: Title of the report.
 TITLE = "COCO-C colour corruptions on the chart ΔE scale"
 #: Figure file names.
-DELTA_E_PNG = "cococ-chart-delta-e.png"
-LOSS_PNG = "cococ-loss-vs-delta-e.png"
+DELTA_E_FIGURE = "cococ-chart-delta-e.svg"
+LOSS_FIGURE = "cococ-loss-vs-delta-e.svg"
 
 
 def predictions(cell: CorruptionCell) -> dict[str, float | None]:
@@ -43,81 +50,22 @@ def predictions(cell: CorruptionCell) -> dict[str, float | None]:
             "directional_relative": p.directional_relative}
 
 
-def delta_e_plot(results: CocoCResults) -> bytes:
-    """Chart ΔE00 of each corruption against its severity (PNG bytes)."""
-    from fidelity.report.plots import new_figure, png_bytes
-
-    fig, ax = new_figure(6.5, 4.2)
-    for name, mk in zip(sorted({c.corruption for c in results.cells}), "osD^v", strict=False):
-        cells = sorted((c for c in results.cells if c.corruption == name),
-                       key=lambda c: c.severity)
-        ax.plot([c.severity for c in cells], [c.chart_delta_e for c in cells], mk + "-",
-                label=name)
-    ax.axhline(results.floor_delta_e, color="grey", ls=":", lw=1,
-               label=f"uncorrupted 8-bit chart ({results.floor_delta_e:.2f})")
-    for de, txt in ((3.0, "ΔE 3"), (6.0, "ΔE 6"), (12.0, "ΔE 12")):
-        ax.axhline(de, color="tab:red", lw=0.6, alpha=0.5)
-        ax.text(5.05, de, txt, fontsize=7, color="tab:red", va="center")
-    ax.set_xticks([1, 2, 3, 4, 5])
-    ax.set_xlabel("COCO-C severity")
-    ax.set_ylabel("chart ΔE00 (mean over 24 patches)")
-    ax.set_title("what each COCO-C colour corruption does to the chart", fontsize=9)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    return png_bytes(fig)
-
-
-def loss_plot(results: CocoCResults, preds: Mapping[tuple[str, int], Mapping[str, Any]]
-              ) -> bytes:
-    """Measured ΔmAP (points, ±2 SE) against chart ΔE per corruption and detector, with the
-    classic worst-case curve (size n) and each cell's direction-aware prediction (PNG)."""
-    from fidelity.prediction.table import predict_curve
-    from fidelity.report.plots import axes_plain_ticks, new_figure, png_bytes
-
-    fig, ax = new_figure(8.0, 5.0)
-    xmax = max([c.chart_delta_e for c in results.cells] + [6.0]) * 1.08
-    grid = np.linspace(0, xmax, 400)
-    ax.plot(grid, predict_curve(grid, "dmap_points", size="n"), "k-", lw=1.3,
-            label="classic worst case (coco1000-measured, size n)")
-    colours = {"brightness": "tab:orange", "contrast": "tab:blue", "saturate": "tab:green"}
-    for name in sorted({c.corruption for c in results.cells}):
-        cells = sorted((c for c in results.cells if c.corruption == name),
-                       key=lambda c: c.chart_delta_e)
-        col = colours.get(name, "grey")
-        ax.plot([c.chart_delta_e for c in cells],
-                [preds[(c.corruption, c.severity)]["directional"] for c in cells], "x--",
-                color=col, lw=0.8, label=f"{name}: direction-aware prediction")
-        for model, mk in zip(results.models(), "osD^v", strict=False):
-            pts = [(c.chart_delta_e, m.dmap_points, m.dmap_points_se or 0.0)
-                   for c in cells if (m := c.measured_for(model)) is not None]
-            if pts:
-                x, y, s = (np.array(v) for v in zip(*pts, strict=True))
-                ax.errorbar(x, y, yerr=2 * s, fmt=mk, color=col, ms=5, capsize=2,
-                            label=f"{name}: measured, {model}")
-    ax.set_yscale("symlog", linthresh=1.0)
-    axes_plain_ticks(ax)
-    ax.set_xlim(0, xmax)
-    ax.set_xlabel("chart ΔE00 of the corruption")
-    ax.set_ylabel("ΔmAP (points)")
-    ax.set_title("COCO-C colour corruptions: measured loss against chart ΔE", fontsize=9)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=6, loc="upper left", ncol=2)
-    return png_bytes(fig)
-
-
 def cococ_figures(results: CocoCResults, preds: Mapping[tuple[str, int], Mapping[str, Any]]
                   ) -> dict[str, Figure]:
-    """Every figure by file name."""
-    out = {DELTA_E_PNG: Figure(delta_e_plot(results), DELTA_E_PNG,
-                               "chart ΔE against COCO-C severity",
-                               "Each corruption applied to the calibration chart as an 8-bit "
-                               "image; dotted: the chart's own ΔE before any corruption.")}
+    """Every figure by file name (SVG, :mod:`fidelity.report.cocofigures`)."""
+    from fidelity.report import cocofigures as cf
+
+    out = {DELTA_E_FIGURE: svg_figure(cf.cococ_delta_e_plot(results), DELTA_E_FIGURE,
+                                      "chart ΔE against COCO-C severity",
+                                      "Each corruption applied to the calibration chart as an "
+                                      "8-bit image; dotted: the chart's own ΔE before any "
+                                      "corruption.")}
     if any(c.measured for c in results.cells):
-        out[LOSS_PNG] = Figure(loss_plot(results, preds), LOSS_PNG,
-                               "measured loss against chart ΔE",
-                               "Measured ΔmAP (±2 SE) of each corruption and severity at its "
-                               "chart ΔE, the classic worst-case curve and the direction-aware "
-                               "prediction of each cell.")
+        out[LOSS_FIGURE] = svg_figure(cf.cococ_loss_plot(results, preds), LOSS_FIGURE,
+                                      "measured loss against chart ΔE",
+                                      "Measured ΔmAP (±2 SE) of each corruption and severity at "
+                                      "its chart ΔE, the classic worst-case curve and the "
+                                      "direction-aware prediction of each cell.")
     return out
 
 
@@ -198,7 +146,7 @@ def cococ_document(results: CocoCResults, notes: str | None = None) -> Document:
             table(header, rows, numeric=[False, True, False, True, False, False, True, True]
                   + [True] * len(models))),
         section("Analysis", Text(notes.strip())) if notes else None,
-        section("Figures", *[figs[k] for k in (LOSS_PNG,) if k in figs]),
+        section("Figures", *[figs[k] for k in (LOSS_FIGURE,) if k in figs]),
         section("Method", Text(
             "- Corruptions: `brightness` (HSV V + c), `contrast` (per channel (x − mean)·c + "
             "mean), `saturate` (HSV S·a + b) of the `imagecorruptions` package "
@@ -215,7 +163,7 @@ def cococ_document(results: CocoCResults, notes: str | None = None) -> Document:
         section("What was run", Text("\n".join(f"- {k}: {v}" for k, v in
                                                sorted(results.meta.items())))),
     ]
-    return Document(TITLE, _headline(results, figs.get(DELTA_E_PNG)),
+    return Document(TITLE, _headline(results, figs.get(DELTA_E_FIGURE)),
                     tuple(s for s in sections if s is not None),
                     subtitle="Generated by `fidelity coco-c` (fidelity/coco/corruptions.py); "
                              "every number is computed from stored detections and the chart.")
@@ -240,13 +188,11 @@ def write_cococ_report(results: CocoCResults, out_dir: str | os.PathLike[str],
 
 
 __all__ = [
-    "DELTA_E_PNG",
-    "LOSS_PNG",
+    "DELTA_E_FIGURE",
+    "LOSS_FIGURE",
     "TITLE",
     "cococ_document",
     "cococ_figures",
-    "delta_e_plot",
-    "loss_plot",
     "predictions",
     "write_cococ_report",
 ]

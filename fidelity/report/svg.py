@@ -7,10 +7,10 @@ imported on the ``check``/``audit``/``gate`` path. Everything here is pure strin
 - :class:`Canvas`: an SVG document of a given size (pixels) with rectangles, lines, polylines
   (NaN breaks a line), circles, polygons, arrows (drawn as a line and a filled head, so no
   ``<marker>`` ids can collide between figures inlined in one page), text and raster images;
-- :class:`Scale` (``linear`` or ``symlog``: linear below 1, 1 + log10 above, like matplotlib's
-  ``symlog`` with ``linthresh=1``) and :class:`Axes` (frame, ticks, grid, axis labels, a
+- :class:`Scale` (``linear``, ``log``, or ``symlog``: linear below 1, 1 + log10 above, like
+  matplotlib's ``symlog`` with ``linthresh=1``) and :class:`Axes` (frame, ticks, grid, axis labels, a
   legend);
-- :func:`nice_ticks` / :func:`symlog_ticks`: tick positions; :func:`magma_r`: the reversed
+- :func:`nice_ticks` / :func:`symlog_ticks` / :func:`log_ticks`: tick positions; :func:`magma_r`: the reversed
   *magma* colour map (anchors sampled from matplotlib's); :func:`png_data_uri`: an RGB image as
   a PNG ``data:`` URI (zlib only).
 
@@ -240,6 +240,18 @@ def symlog_ticks(hi: float, lo: float = 0.0) -> list[float]:
     return [-t for t in reversed(side(-lo))] + [0.0] + side(hi)
 
 
+def log_ticks(lo: float, hi: float) -> list[float]:
+    """Ticks of a log axis over [``lo``, ``hi``] (``lo`` > 0): 1, 2, 5 per decade."""
+    if not (lo > 0 and hi > lo):
+        return []
+    out, v = [], 10.0 ** math.floor(math.log10(lo))
+    while v <= hi * (1 + 1e-9):
+        out += [round(m * v, 12) for m in (1.0, 2.0, 5.0) if lo * (1 - 1e-9) <= m * v
+                <= hi * (1 + 1e-9)]
+        v *= 10.0
+    return out
+
+
 def tick_label(v: float) -> str:
     """A tick value as short plain text (0.5, 1, 10, 2.5)."""
     return f"{v:g}" if abs(v) < 1e6 else f"{v:.0e}"
@@ -253,13 +265,18 @@ class Scale:
 
     lo: float
     hi: float
-    kind: Literal["linear", "symlog"] = "linear"
+    kind: Literal["linear", "symlog", "log"] = "linear"
 
     def transform(self, v: float | NDArray[np.float64]) -> NDArray[np.float64]:
-        """The axis coordinate of data value(s) ``v`` (before mapping to pixels)."""
+        """The axis coordinate of data value(s) ``v`` (before mapping to pixels); on a
+        ``log`` axis log10, NaN at or below zero."""
         a = np.asarray(v, np.float64)
         if self.kind == "linear":
             return a
+        if self.kind == "log":
+            with np.errstate(divide="ignore", invalid="ignore"):
+                return np.asarray(np.where(a > 0, np.log10(np.where(a > 0, a, 1.0)), np.nan),
+                                  np.float64)
         mag = np.abs(a)
         with np.errstate(divide="ignore", invalid="ignore"):
             out = np.where(mag <= 1.0, a, np.sign(a) * (1.0 + np.log10(np.maximum(mag, 1.0))))
@@ -274,6 +291,8 @@ class Scale:
         """Tick positions inside the interval."""
         if self.kind == "symlog":
             return [t for t in symlog_ticks(self.hi, min(self.lo, 0.0)) if t >= self.lo]
+        if self.kind == "log":
+            return log_ticks(self.lo, self.hi)
         return nice_ticks(self.lo, self.hi)
 
 
@@ -447,6 +466,13 @@ def legend_entry(c: Canvas, entry: LegendEntry, x0: float, yy: float) -> float:
     return 38 + 6.2 * len(label)
 
 
+def legend_column(c: Canvas, entries: Sequence[LegendEntry], x: float, y: float) -> None:
+    """A legend as a column of ``entries`` from (``x``, ``y``) down, 17 px a row (e.g. to
+    the right of a plot with many lines)."""
+    for i, e in enumerate(entries):
+        legend_entry(c, e, x, y + 17 * i)
+
+
 def legend_row(c: Canvas, entries: Sequence[LegendEntry], y: float) -> int:
     """A legend as a row of ``entries`` centred across the canvas at height ``y`` (e.g. one
     legend for several panels, out of the data's way), wrapped onto further rows 17 px
@@ -475,8 +501,10 @@ __all__ = [
     "Scale",
     "LegendEntry",
     "hex_colour",
+    "legend_column",
     "legend_entry",
     "legend_row",
+    "log_ticks",
     "luminance",
     "magma_r",
     "nice_ticks",
