@@ -268,8 +268,7 @@ BASE_CONVENTIONS: Mapping[str, str] = {
 }
 
 #: Libraries whose versions a report records.
-_LIBRARIES = ("numpy", "scipy", "colour-science", "OpenImageIO", "OpenEXR", "matplotlib",
-              "mitsuba")
+_LIBRARIES = ("numpy", "scipy", "colour-science", "OpenImageIO", "OpenEXR", "mitsuba")
 
 
 @dataclass(frozen=True)

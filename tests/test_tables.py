@@ -614,7 +614,7 @@ def test_worst_case_figure_puts_each_point_where_the_axes_say(store) -> None:
     assert list(zip(step_x, step_y, strict=True)) == [
         (0, 1), (3, 1), (3, 3), (6, 3), (6, 10), (12, 10)]
     panel_w, checked = 380.0, 0
-    for i, (model, rows) in enumerate(tables.worst_case.items()):
+    for i, rows in enumerate(tables.worst_case.values()):
         colour = TAB10[i]
         dots = [(float(c.get("cx")), float(c.get("cy"))) for c in root.iter(ns + "circle")
                 if c.get("fill") == colour and c.get("r") == "3"]
@@ -635,8 +635,11 @@ def test_worst_case_figure_puts_each_point_where_the_axes_say(store) -> None:
         labels = sorted((float(k) for k in ly), key=float)
         a, b = labels[0], labels[-1]
         ya, yb = ly[f"{a:g}"], ly[f"{b:g}"]
+        lx_far = max(lx, key=float)
         for (de, rel), (cx, cy) in zip(positive, logs, strict=True):
             want = ya + (yb - ya) * (math.log10(rel) - math.log10(a)) / (
                 math.log10(b) - math.log10(a))
             assert cy == pytest.approx(want, abs=0.02)
+            assert cx == pytest.approx(lx["0"] + (lx[lx_far] - lx["0"]) * de / float(lx_far),
+                                       abs=0.02)
     assert checked >= 2

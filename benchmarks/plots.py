@@ -1,9 +1,8 @@
-"""The matplotlib helpers of the COCO, validation and benchmark reports (Agg backend, no screen).
+"""The matplotlib helpers of the benchmark reports (Agg backend, no screen): a figure and its
+PNG bytes (:func:`new_figure`, :func:`png_bytes`).
 
-One place sets the backend and turns a figure into PNG bytes (:func:`new_figure`,
-:func:`png_bytes`) and formats log axes (:func:`axes_plain_ticks`). The chart report's figures
-(``check``, ``audit``, ``gate``, ``compare``) do not use matplotlib: they are SVG drawn from the
-numbers by :mod:`fidelity.report.chartfigures`, so those commands never import it.
+The tool's own reports draw their figures as SVG from the numbers (:mod:`fidelity.report.svg`),
+so matplotlib is a benchmark and test requirement only (the ``test`` extra).
 """
 
 from __future__ import annotations
@@ -12,7 +11,6 @@ import io
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
 #: Resolution of every PNG.
@@ -50,24 +48,8 @@ def png_bytes(fig: Figure, dpi: int = DPI) -> bytes:
     return out.getvalue()
 
 
-def axes_plain_ticks(ax: Axes) -> None:
-    """Tick labels as plain numbers on the log and symlog axes of ``ax`` (0.5, 1, 10 rather
-    than 10^0); a symlog axis (linear below 1) gets ticks at 1, 2 and 5 per decade. Linear
-    axes are left as they are."""
-    from matplotlib.ticker import FuncFormatter, SymmetricalLogLocator
-
-    for axis in (ax.xaxis, ax.yaxis):
-        scale = axis.get_scale()
-        if scale == "symlog":
-            axis.set_major_locator(SymmetricalLogLocator(base=10, linthresh=1.0,
-                                                         subs=[1.0, 2.0, 5.0]))
-        if scale in ("log", "symlog"):
-            axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
-
-
 __all__ = [
     "DPI",
-    "axes_plain_ticks",
     "new_figure",
     "png_bytes",
 ]
