@@ -151,6 +151,37 @@ def test_coco_c_report_only_rebuilds(tmp_path):
     assert (tmp_path / "cococ-chart-delta-e.svg").is_file()
 
 
+def test_reports_are_drawn_without_matplotlib(tmp_path):
+    """matplotlib is no requirement of the tool: the COCO-C and validation reports (their
+    figures included) are written with it made unimportable."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    (tmp_path / "cococ.json").write_text((root / "reports/cococ/cococ.json").read_text())
+    code = (
+        "import sys, json, pathlib\n"
+        "sys.modules['matplotlib'] = None\n"
+        "from fidelity.cli import main\n"
+        f"out = pathlib.Path({str(tmp_path)!r})\n"
+        "try:\n"
+        "    main(['coco-c', '--out', str(out), '--report-only', '-q'])\n"
+        "except SystemExit as e:\n"
+        "    assert not e.code, e.code\n"
+        "from fidelity.coco.validate import ValidationResults\n"
+        "from fidelity.report.validation import write_validation_document\n"
+        f"rep = pathlib.Path({str(root / 'reports' / 'validation')!r})\n"
+        "doc = json.loads((rep / 'validation.json').read_text())\n"
+        "doc['directional'] = json.loads((rep / 'directional.json').read_text())\n"
+        "write_validation_document(ValidationResults.from_json(doc), out / 'v')\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       cwd=tmp_path, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert (tmp_path / "cococ-loss-vs-delta-e.svg").is_file()
+    assert (tmp_path / "v" / "classic-vs-directional.svg").is_file()
+
+
 def test_shipped_measurements_come_from_this_versions_detectors():
     """Every measured COCO-C loss that `predict --coco-c` reads was measured with this
     version's detector preprocessing and states this version's SE rule (issue 32)."""
