@@ -98,6 +98,11 @@ def test_export_import_resume_reports_as_one_uninterrupted_run(data, tmp_path):
     from_store = json.loads((tmp_path / "rep" / "tables.json").read_text())["tables"]
     assert {k: v for k, v in from_file.items() if k != "meta"} == \
         {k: v for k, v in from_store.items() if k != "meta"}
+    # again into the same report folder: the report is written anew (the folder is no
+    # output file to refuse)
+    r = CliRunner().invoke(main, ["tables", str(scores), "--out", str(tmp_path / "from-file"),
+                                  "--annotations", str(ann), "--no-progress"])
+    assert r.exit_code == 0, r.output
     for bad, words in ((["--explain", "fake:contrast-inc:3"], ("--explain", "detections")),
                        ([], ("give --out",)),
                        (["--out", str(tmp_path / "x"), "--prediction", str(scores)],

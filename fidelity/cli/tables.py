@@ -85,9 +85,12 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
     with contextlib.ExitStack() as stack:
         if Path(store_dir).is_file() and is_scores_file(store_dir):
             from fidelity.fileio import check_outputs
+            from fidelity.report.coco import WORST_CASE_FIGURE
 
-            check_outputs({"--prediction": prediction, "--directional": directional,
-                           "--out": out}, {"STORE_DIR": store_dir})
+            reports = ("report.md", "report.html", "tables.json", WORST_CASE_FIGURE)
+            check_outputs({"--prediction": prediction, "--directional": directional}
+                          | {f"--out ({n})": Path(out) / n for n in reports if out},
+                          {"STORE_DIR": store_dir})
             store_dir = _store_of_scores(stack, store_dir, out, explain)
         _tables(store_dir, out, prediction, name, directional, earlier, annotations,
                 standard_errors, explain, rare_boxes, images, top, json_path, progress)
