@@ -7,7 +7,8 @@ the same way from the repository. Commands (``--set``): ``startup``, ``fidelity 
 PHOTO.jpg --json F`` of ``bench_startup``'s 12-megapixel photo and ``fidelity check`` with its
 default HTML + JSON report; ``validate``, a quick look with ``fidelity validate --limit 8`` (three
 cameras of ``cameras/``, YOLOX-nano; the shared data of ``$FIDELITY_SHARED``, default
-``../shared``), each run from an empty store. Each is run ``--repeats`` times per side, the sides alternating; the result is the
+``../shared``), each run from an empty store; ``reports``, the COCO pipeline's three reports
+from committed data (:func:`report_commands`). Each is run ``--repeats`` times per side, the sides alternating; the result is the
 median and best wall time, the median max RSS and the ratio of medians (this / anchor), with
 the machine and its load average.
 
@@ -15,6 +16,8 @@ the machine and its load average.
     # -> reports/benchmarks/versions.json
     python -m benchmarks.bench_versions --anchor 82d4032 --set validate --repeats 5 \
         --out reports/benchmarks/versions_validate.json
+    python -m benchmarks.bench_versions --anchor 7049c14 --set reports --repeats 5 \
+        --out reports/benchmarks/versions_reports.json
 """
 
 from __future__ import annotations
@@ -50,6 +53,8 @@ def commands(photo: Path, out: Path, which: str = "startup",
              shared: Path | None = None) -> dict[str, list[str]]:
     """Name -> command line of the set ``which`` (module docstring); ``out``: a scratch folder."""
     py = [sys.executable, "-m", "fidelity"]
+    if which == "reports":
+        return report_commands(out)
     if which == "validate":
         s = shared or Path(os.environ.get("FIDELITY_SHARED") or REPO.parent / "shared")
         cams = out / "cameras"
@@ -69,16 +74,48 @@ def commands(photo: Path, out: Path, which: str = "startup",
             [*py, "check", "-q", "--out", str(out / "check")]}
 
 
+def report_commands(out: Path) -> dict[str, list[str]]:
+    """The ``reports`` set: the COCO pipeline's three reports from committed data, no detector
+    run: ``tables`` of the YOLOv8n re-sweep's scores file (no standard errors: those come
+    from stored detections), ``validate --report-only`` of a store imported once from the
+    validation's scores file, ``coco-c --report-only`` of the committed ``cococ.json``."""
+    import shutil
+
+    py = [sys.executable, "-m", "fidelity"]
+    store = out / "vstore"
+    if not store.exists():
+        subprocess.run([*py, "validate", "--import-scores",
+                        str(REPO / "reports/validation/validation.scores.json.gz"),
+                        "--store", str(store), "-q"], check=True, cwd=REPO)
+    (out / "cococ").mkdir(exist_ok=True)
+    shutil.copyfile(REPO / "reports/cococ/cococ.json", out / "cococ" / "cococ.json")
+    return {
+        "fidelity tables SCORES --out DIR (YOLOv8n, 1000 images)": [
+            *py, "tables", str(REPO / "reports/coco/resweep/yolov8n-int8dyn.scores.json.gz"),
+            "--no-standard-errors", "--out", str(out / "tables"), "--no-progress", "-q"],
+        "fidelity validate --report-only (30 cameras, 2 detectors)": [
+            *py, "validate", "--cameras", str(REPO / "cameras"), "--store", str(store),
+            "--report-only", "--notes", str(REPO / "reports/validation/analysis.md"),
+            "--out", str(out / "validation"), "-q"],
+        "fidelity coco-c --report-only": [*py, "coco-c", "--report-only", "--out",
+                                          str(out / "cococ"), "-q"],
+    }
+
+
 def run(argv: list[str], source: Path) -> tuple[float, float]:
-    """Wall seconds and max RSS (MB) of ``argv`` with the package of ``source`` (a ``--store``
-    in ``argv`` is removed first: every run starts from an empty store)."""
+    """Wall seconds and max RSS (MB) of ``argv`` with the package of ``source``; every run
+    starts afresh: a ``--store`` in ``argv`` is removed first (not one a ``--report-only``
+    reads), and so is the report folder of ``tables`` (an earlier version refuses an existing
+    one when reading a scores file)."""
     import shutil
 
     from benchmarks.bench_memory import run_process
     from benchmarks.bench_startup import user_environment
 
-    if "--store" in argv:
+    if "--store" in argv and "--report-only" not in argv:
         shutil.rmtree(argv[argv.index("--store") + 1], ignore_errors=True)
+    if "tables" in argv:
+        shutil.rmtree(argv[argv.index("--out") + 1], ignore_errors=True)
     env = dict(user_environment(), PYTHONPATH=str(source))
     row = run_process(argv, env=env, cwd=source)  # python -m puts the working folder first
     if row["exit"] not in (0, 1):
@@ -90,7 +127,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--anchor", required=True, help="commit to compare this checkout with")
     ap.add_argument("--repeats", type=int, default=15)
-    ap.add_argument("--set", dest="which", choices=("startup", "validate"), default="startup",
+    ap.add_argument("--set", dest="which", choices=("startup", "validate", "reports"),
+                    default="startup",
                     help="the commands to time (module docstring)")
     ap.add_argument("--out", type=Path, default=REPO / "reports" / "benchmarks" / "versions.json")
     args = ap.parse_args(argv)
