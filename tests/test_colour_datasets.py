@@ -31,6 +31,21 @@ def test_shipped_datasets_are_colour_sciences() -> None:
     _close(shipped, ds.colour_science_datasets(), "$")
 
 
+def test_shipped_training_reflectances_are_colour_sciences() -> None:
+    import gzip
+    import json
+
+    with gzip.open(ds.data_path().parent / ds.TRAINING_FILE, "rt", encoding="utf-8") as f:
+        shipped = json.load(f)
+    reference = ds.colour_science_training()
+    assert list(shipped["sets"]) == list(reference["sets"])
+    for label, items in reference["sets"].items():
+        assert [i["name"] for i in shipped["sets"][label]] == [i["name"] for i in items]
+        for a, b in zip(shipped["sets"][label], items, strict=True):
+            for key in ("wavelengths", "values"):
+                _close(a[key], b[key], f"$.{label}.{b['name']}.{key}")
+
+
 def test_the_loaders_give_the_shipped_numbers() -> None:
     import colour
 

@@ -56,6 +56,40 @@ def test_fit_root_polynomial_recovers_a_known_mapping() -> None:
     np.testing.assert_allclose(fit_root_polynomial(x, y), m, atol=1e-9)
 
 
+def test_fit_root_polynomial_equals_colour_sciences() -> None:
+    """The fit equals colour-science's ``matrix_colour_correction`` ("Finlayson 2015", degree
+    2, root-polynomial), the function it replaces on the COCO pipeline's path."""
+    import colour
+
+    rng = np.random.default_rng(5)
+    x = rng.normal(0.3, 0.4, (150, 3))
+    y = x @ rng.normal(0, 0.5, (3, 3)) + rng.normal(0, 0.02, (150, 3))
+    ref = colour.characterisation.matrix_colour_correction(
+        x, y, method="Finlayson 2015", degree=2, root_polynomial_expansion=True)
+    np.testing.assert_allclose(fit_root_polynomial(x, y), ref, rtol=1e-13, atol=1e-13)
+
+
+def test_shipped_training_reflectances_are_colour_sciences() -> None:
+    """The training set read from the shipped file equals the one built from colour-science
+    itself (the code it replaces: its datasets, resampled to the grid), to the last bit."""
+    import colour
+
+    from fidelity.coco.emulation import _msds_rows
+
+    got = training_reflectances("colour-science")
+    rows = list(got.reflectance[:24])
+    t = colour.characterisation.read_training_data_rawtoaces_v1()
+    rows += list(_msds_rows(t.wavelengths, t.values))
+    for group in (colour.quality.SDS_TCS, colour.quality.SDS_VS):
+        rows += [_msds_rows(sd.wavelengths, sd.values[:, None])[0]
+                 for sds in group.values() for sd in sds.values()]
+    for name in ("ColorChecker N Ohta", "ISO 17321-1", "PMC"):
+        rows += [_msds_rows(sd.wavelengths, sd.values[:, None])[0]
+                 for sd in colour.SDS_COLOURCHECKERS[name].values()]
+    np.testing.assert_array_equal(got.reflectance, np.clip(np.vstack(rows), 0.0, None))
+    assert got.names[24] == f"rawtoaces v1 training data: {t.labels[0]}"
+
+
 def test_training_set_holds_chart_and_colour_science_data() -> None:
     s = training_reflectances("colour-science")
     chart = training_reflectances("chart")

@@ -120,7 +120,9 @@ def _msds_rows(wavelengths: ArrayLike, values: ArrayLike) -> FloatArray:
 
 @lru_cache(maxsize=4)
 def _colour_science_reflectances(chart_spectra: str) -> ReflectanceSet:
-    import colour
+    """The chart's patches, then colour-science's reflectances as shipped
+    (:func:`fidelity.colour.datasets.training_reflectances`), resampled to the grid."""
+    from fidelity.colour.datasets import training_reflectances as shipped
 
     names: list[str] = []
     rows: list[FloatArray] = []
@@ -134,20 +136,8 @@ def _colour_science_reflectances(chart_spectra: str) -> ReflectanceSet:
 
     chart = load_patch_spectra(chart_spectra)
     add(f"chart ({chart.name})", list(zip(chart.patch_names, chart.on_grid(), strict=True)))
-    t = colour.characterisation.read_training_data_rawtoaces_v1()
-    vals = _msds_rows(t.wavelengths, t.values)
-    add("rawtoaces v1 training data", list(zip(map(str, t.labels), vals, strict=True)))
-    for label, group in (("CIE TCS", colour.quality.SDS_TCS), ("NIST CQS VS", colour.quality.SDS_VS)):
-        items = []
-        for set_name, sds in group.items():
-            for k, sd in sds.items():
-                items.append((f"{set_name} {k}", _msds_rows(sd.wavelengths, sd.values[:, None])[0]))
-        add(label, items)
-    items = []
-    for set_name in ("ColorChecker N Ohta", "ISO 17321-1", "PMC"):
-        for k, sd in colour.SDS_COLOURCHECKERS[set_name].items():
-            items.append((f"{set_name} {k}", _msds_rows(sd.wavelengths, sd.values[:, None])[0]))
-    add("ColourChecker sets", items)
+    for label, items in shipped().items():
+        add(label, [(n, _msds_rows(w, v[:, None])[0]) for n, w, v in items])
     refl = np.clip(np.vstack(rows), 0.0, None)
     refl.setflags(write=False)
     return ReflectanceSet("colour-science", tuple(names), refl, sources)
@@ -281,18 +271,16 @@ def root_polynomial_terms(rgb: ArrayLike) -> FloatArray:
 def fit_root_polynomial(source: ArrayLike, target: ArrayLike) -> FloatArray:
     """Least-squares root-polynomial matrix (3, 6) mapping ``source`` (K, 3) to ``target``.
 
-    Uses ``colour.characterisation.matrix_colour_correction`` (method "Finlayson 2015",
-    degree 2, root-polynomial expansion). K must be >= 6.
+    Finlayson, Mackiewicz & Hurlbert 2015, degree 2: ``target.T @ pinv(terms(source).T)``
+    with :func:`root_polynomial_terms`, the Moore-Penrose solution, as
+    ``colour.characterisation.matrix_colour_correction(method="Finlayson 2015", degree=2,
+    root_polynomial_expansion=True)`` computes it (tested equal). K must be >= 6.
     """
-    import colour
-
     s, t = np.asarray(source, float), np.asarray(target, float)
     if s.ndim != 2 or s.shape[1] != 3 or s.shape != t.shape or s.shape[0] < 6:
         raise InvalidValueError(f"root-polynomial fit needs matching (K >= 6, 3) arrays, got "
                                 f"{s.shape} and {t.shape}")
-    m = colour.characterisation.matrix_colour_correction(
-        s, t, method="Finlayson 2015", degree=ROOT_POLYNOMIAL_DEGREE,
-        root_polynomial_expansion=True)
+    m = np.dot(np.transpose(t), np.linalg.pinv(np.transpose(root_polynomial_terms(s))))
     return np.asarray(m, dtype=np.float64).reshape(3, 6)
 
 

@@ -12,6 +12,12 @@ Sources (as colour-science gives them): CIE 018:2019 / CIE 15:2018 (observer, il
 D50, A, FL2, FL11, LED-B4); NPL camera sensitivities (Darrodi et al. 2015); Lam 1985 (Bradford),
 CIECAM02 (CAT02), CAM16 (CAT16), Hunt-Pointer-Estevez (Von Kries), XYZ Scaling; the colourspace
 specifications (IEC 61966-2-1, ITU-R BT.709/BT.2020, SMPTE EG 432-1, ACES S-2014-004 ...).
+
+The validation's camera emulation fits on a few hundred reflectances, shipped the same way in
+their own file (``training-reflectances.json.gz``, read only by the COCO pipeline): the
+rawtoaces v1 training data (AMPAS), the CIE test colour samples (CIE 13.3-1995, CIE 224:2017),
+the NIST CQS samples (Davis & Ohno 2010) and three ColourChecker sets (N Ohta, ISO 17321-1,
+PMC), as colour-science tabulates them.
 """
 
 from __future__ import annotations
@@ -40,6 +46,15 @@ COLOURSPACES: tuple[str, ...] = ("sRGB", "ITU-R BT.709", "ITU-R BT.2020", "Displ
                                  "DCI-P3", "ACEScg", "ACES2065-1", "Adobe RGB (1998)")
 
 FloatArray = NDArray[np.float64]
+
+#: The file the training reflectances of the validation's emulation ship in (package data;
+#: gzip, read only by :func:`training_reflectances`).
+TRAINING_FILE = "training-reflectances.json.gz"
+#: ColourChecker reflectance sets among the training reflectances (``SDS_COLOURCHECKERS``).
+TRAINING_CHECKERS: tuple[str, ...] = ("ColorChecker N Ohta", "ISO 17321-1", "PMC")
+
+#: One training reflectance: name, wavelengths (N,) nm and reflectance (N,), as tabulated.
+Reflectance = tuple[str, FloatArray, FloatArray]
 
 
 def data_path() -> Path:
@@ -98,6 +113,52 @@ def colourspace(name: str) -> tuple[FloatArray, FloatArray, FloatArray] | None:
             np.asarray(item["matrix_RGB_to_XYZ"], dtype=np.float64))
 
 
+def training_reflectances() -> dict[str, list[Reflectance]]:
+    """The training reflectances of the validation's emulation
+    (:func:`fidelity.coco.emulation.training_reflectances`) by source, in colour-science's
+    order, as tabulated (not resampled): ``rawtoaces v1 training data`` (190 samples), ``CIE
+    TCS`` (CIE 13.3 / CIE 224 test colour samples), ``NIST CQS VS`` (the NIST colour quality
+    scale's samples), ``ColourChecker sets`` (:data:`TRAINING_CHECKERS`)."""
+    return {label: [(n, np.asarray(w, np.float64), np.asarray(v, np.float64))
+                    for n, w, v in items] for label, items in _training().items()}
+
+
+@lru_cache(maxsize=1)
+def _training() -> dict[str, list[tuple[str, list[float], list[float]]]]:
+    import gzip
+
+    from fidelity.resources import resource_dir
+
+    with gzip.open(resource_dir("data") / TRAINING_FILE, "rt", encoding="utf-8") as f:
+        doc: dict[str, Any] = json.load(f)
+    return {label: [(i["name"], i["wavelengths"], i["values"]) for i in items]
+            for label, items in doc["sets"].items()}
+
+
+def colour_science_training() -> dict[str, Any]:
+    """The training reflectances as colour-science holds them now (imports ``colour``): the
+    shipped file's content."""
+    import colour
+
+    def item(name: str, wavelengths: Any, values: Any) -> dict[str, Any]:
+        return {"name": name, "wavelengths": np.asarray(wavelengths, np.float64).tolist(),
+                "values": np.asarray(values, np.float64).tolist()}
+
+    t = colour.characterisation.read_training_data_rawtoaces_v1()
+    values = np.asarray(t.values, np.float64)
+    sets: dict[str, list[dict[str, Any]]] = {
+        "rawtoaces v1 training data": [item(str(n), t.wavelengths, values[:, k])
+                                       for k, n in enumerate(t.labels)]}
+    for label, group in (("CIE TCS", colour.quality.SDS_TCS),
+                         ("NIST CQS VS", colour.quality.SDS_VS)):
+        sets[label] = [item(f"{set_name} {k}", sd.wavelengths, sd.values)
+                       for set_name, sds in group.items() for k, sd in sds.items()]
+    sets["ColourChecker sets"] = [item(f"{set_name} {k}", sd.wavelengths, sd.values)
+                                  for set_name in TRAINING_CHECKERS
+                                  for k, sd in colour.SDS_COLOURCHECKERS[set_name].items()]
+    return {"source": f"colour-science {colour.__version__}", "sets": sets}
+
+
 def colour_science_datasets() -> dict[str, Any]:
     """The datasets as colour-science holds them now (imports ``colour``)."""
     import colour
@@ -125,12 +186,18 @@ def colour_science_datasets() -> dict[str, Any]:
 
 
 def write_datasets(path: str | os.PathLike[str] | None = None) -> Path:
-    """Write :func:`colour_science_datasets` to ``path`` (default: the shipped file),
-    atomically."""
-    from fidelity.fileio import write_text_atomic
+    """Write :func:`colour_science_datasets` to ``path`` (default: the shipped file), and
+    :func:`colour_science_training` beside it (:data:`TRAINING_FILE`), atomically."""
+    import gzip
 
-    return write_text_atomic(path or data_path(),
-                             json.dumps(colour_science_datasets(), separators=(",", ":")) + "\n")
+    from fidelity.fileio import write_bytes_atomic, write_text_atomic
+
+    out = write_text_atomic(path or data_path(),
+                            json.dumps(colour_science_datasets(), separators=(",", ":")) + "\n")
+    text = json.dumps(colour_science_training(), separators=(",", ":")) + "\n"
+    write_bytes_atomic(out.parent / TRAINING_FILE,
+                       gzip.compress(text.encode("utf-8"), compresslevel=9, mtime=0))
+    return out
 
 
 __all__ = [
@@ -140,13 +207,18 @@ __all__ = [
     "COLOURSPACES",
     "DATA_FILE",
     "ILLUMINANTS",
+    "TRAINING_CHECKERS",
+    "TRAINING_FILE",
+    "Reflectance",
     "adaptation_matrix",
     "camera_sensitivities",
     "cmfs_1931",
     "colour_science_datasets",
+    "colour_science_training",
     "colourspace",
     "data_path",
     "illuminant",
+    "training_reflectances",
     "write_datasets",
 ]
 
