@@ -83,10 +83,15 @@ def _arrays(pts: Sequence[tuple[float, float, float]]) -> Points:
     return a[:, 0], a[:, 1], a[:, 2]
 
 
-def _identity_panel(ax: Axes, series: Mapping[str, Points], style: Mapping[str, tuple[str, str]],
-                    xlabel: str, ylabel: str, title: str) -> None:
-    """Measured (±2 SE) against predicted per model, the identity line and the region below
-    it where the bound holds; both axes symlog over the same range."""
+def _identity_panel(c: Canvas, corner: tuple[float, float], series: Mapping[str, Points],
+                    style: Mapping[str, tuple[str, str]], xlabel: str, ylabel: str,
+                    title: str) -> Axes:
+    """A panel at ``corner``: measured (±2 SE) against predicted per model, the identity line
+    and the region below it where the bound holds; both axes symlog over one range covering
+    every point and bar."""
+    lo, hi = _range([a for pa, ya, sa in series.values() for a in (pa, ya - 2 * sa,
+                                                                     ya + 2 * sa)])
+    ax = Axes(c, *corner, PANEL_W, PANEL_H, Scale(lo, hi, "symlog"), Scale(lo, hi, "symlog"))
     ax.frame(xlabel, ylabel)
     lo, hi = ax.xs.lo, ax.xs.hi
     diag = np.linspace(lo, hi, 200)
@@ -96,6 +101,7 @@ def _identity_panel(ax: Axes, series: Mapping[str, Points], style: Mapping[str, 
         colour, shape = style[m]
         ax.errorbar(pa, ya, 2 * sa, colour, shape, 4.0, m)
     ax.c.text(ax.x + ax.w / 2, ax.y - 8, title, 13, "middle")
+    return ax
 
 
 def scatter_plot(rows: Sequence[ValidationRow], table_name: str) -> str:
@@ -116,12 +122,8 @@ def scatter_plot(rows: Sequence[ValidationRow], table_name: str) -> str:
                    and (mv := r.measured.get(col)) is not None]
             if pts:
                 series[m] = _arrays(pts)
-        lo, hi = _range([a for pa, ya, sa in series.values() for a in (pa, ya - 2 * sa,
-                                                                         ya + 2 * sa)])
-        ax = Axes(c, x, y, PANEL_W, PANEL_H, Scale(lo, hi, "symlog"), Scale(lo, hi, "symlog"))
-        axes.append(ax)
-        _identity_panel(ax, series, style, "predicted loss (points)", "measured loss (points)",
-                        title)
+        axes.append(_identity_panel(c, (x, y), series, style, "predicted loss (points)",
+                                    "measured loss (points)", title))
     _legend(c, axes)
     return c.render()
 
@@ -193,12 +195,8 @@ def bounds_plot(results: ValidationResults) -> str:
                    if (p := getattr(c_, key)) is not None and c_.measured is not None]
             if pts:
                 series[m] = _arrays(pts)
-        lo, hi = _range([a for pa, ya, sa in series.values() for a in (pa, ya - 2 * sa,
-                                                                         ya + 2 * sa)])
-        ax = Axes(c, x, y, PANEL_W, PANEL_H, Scale(lo, hi, "symlog"), Scale(lo, hi, "symlog"))
-        axes.append(ax)
-        _identity_panel(ax, series, style, "predicted ΔmAP (points)", "measured ΔmAP (points)",
-                        title)
+        axes.append(_identity_panel(c, (x, y), series, style, "predicted ΔmAP (points)",
+                                    "measured ΔmAP (points)", title))
     _legend(c, axes)
     return c.render()
 
