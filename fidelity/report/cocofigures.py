@@ -58,22 +58,6 @@ def _legend_right(c: Canvas, entries: Sequence[LegendEntry], x: float, y: float)
         c.width = x + max(38 + 6.2 * len(e[1]) for e in entries) + 12
 
 
-def _bars(ax: Axes, x: _F, y: _F, lower: _F, upper: _F, colour: str) -> None:
-    """Vertical error bars from ``y - lower`` to ``y + upper`` (finite ones), capped."""
-    top, bottom = ax.y, ax.y + ax.h
-    for xi, yi, lo, hi in zip(x, y, lower, upper, strict=True):
-        if not all(np.isfinite(v) for v in (xi, yi, lo, hi)):
-            continue
-        px = float(ax.px(xi))
-        y0, y1 = (float(np.clip(ax.py(v), top, bottom)) for v in (yi - lo, yi + hi))
-        if not (np.isfinite(y0) and np.isfinite(y1)):
-            continue
-        ax.c.line(px, y0, px, y1, colour, 0.9)
-        for yy in (y0, y1):
-            if top < yy < bottom:
-                ax.c.line(px - 2.5, yy, px + 2.5, yy, colour, 0.9)
-
-
 def _line_points(ax: Axes, x: _F, y: _F, colour: str, size: float = 3.0,
                  label: str | None = None, shape: str = "o", dash: str | None = None) -> None:
     """A line through the points with a marker on each (finite ones)."""
@@ -131,13 +115,13 @@ def worst_case_plot(tables: Tables) -> str:
         ax.plot(step_x, step_y, "#000", 1.0, "5 3", "SAFE-COLOR bound (" + " / ".join(
             f"{b:g}" for b in step_y[::2]) + " %)" if ax is left else None)
     for m, colour, x, y, se2, partial in series:
-        _bars(left, x, y, se2, se2, colour)
+        left.bars(x, y, se2, se2, colour, 0.9)
         _line_points(left, x, y, colour, 3.0, m)
         for xi, yi in zip(x[partial], y[partial], strict=True):
             if np.isfinite(yi):
                 c.circle(float(left.px(xi)), float(left.py(yi)), 7.0, "#fff", colour, 1.4)
         pos = np.isfinite(y) & (y > 0)
-        _bars(right, x[pos], y[pos], np.minimum(se2[pos], 0.95 * y[pos]), se2[pos], colour)
+        right.bars(x[pos], y[pos], np.minimum(se2[pos], 0.95 * y[pos]), se2[pos], colour, 0.9)
         _line_points(right, x[pos], y[pos], colour, 3.0)
     c.text(left.x + left.w / 2, left.y - 8, "linear", 13, "middle")
     c.text(right.x + right.w / 2, right.y - 8, "log scale", 13, "middle")

@@ -384,22 +384,37 @@ class Axes:
                  ys: Sequence[float] | NDArray[np.float64],
                  yerr: Sequence[float] | NDArray[np.float64], colour: str, shape: str = "o",
                  size: float = 4.0, label: str | None = None) -> None:
-        """Points with vertical error bars from ``y - yerr`` to ``y + yerr`` (capped, clipped
-        to the plot area); non-finite points are left out."""
-        top, bottom = self.y, self.y + self.h
-        for x, y, e in zip(xs, ys, yerr, strict=True):
-            if not (math.isfinite(x) and math.isfinite(y)):
-                continue
-            px = float(self.px(x))
-            if math.isfinite(e) and e > 0:
-                y0, y1 = (min(max(float(self.py(v)), top), bottom) for v in (y - e, y + e))
-                self.c.line(px, y0, px, y1, colour, 1.0)
-                for yy in (y0, y1):
-                    if top < yy < bottom:
-                        self.c.line(px - 2.5, yy, px + 2.5, yy, colour, 1.0)
-            shape_at(self.c, shape, px, float(self.py(y)), size, colour, "#000", 0.6)
+        """Points with vertical error bars from ``y - yerr`` to ``y + yerr`` (:meth:`bars`);
+        non-finite points are left out."""
+        self.bars(xs, ys, yerr, yerr, colour, 1.0)
+        for x, y in zip(xs, ys, strict=True):
+            if math.isfinite(x) and math.isfinite(y):
+                shape_at(self.c, shape, float(self.px(x)), float(self.py(y)), size, colour,
+                         "#000", 0.6)
         if label:
             self.legend_entries.append((shape, label, colour, None, size))
+
+    def bars(self, xs: Sequence[float] | NDArray[np.float64],
+             ys: Sequence[float] | NDArray[np.float64],
+             lower: Sequence[float] | NDArray[np.float64],
+             upper: Sequence[float] | NDArray[np.float64], colour: str,
+             width: float = 1.0) -> None:
+        """Vertical error bars from ``y - lower`` to ``y + upper``, capped, clipped to the
+        plot area (a cap at the area's edge is left off); bars of zero length and non-finite
+        ends (e.g. at or below zero on a log axis) are left out."""
+        top, bottom = self.y, self.y + self.h
+        for x, y, lo, hi in zip(xs, ys, lower, upper, strict=True):
+            if not all(math.isfinite(float(v)) for v in (x, y, lo, hi)) or lo + hi <= 0:
+                continue
+            ends = [float(self.py(v)) for v in (y - lo, y + hi)]
+            if not all(math.isfinite(e) for e in ends):
+                continue
+            px = float(self.px(x))
+            y0, y1 = (min(max(e, top), bottom) for e in ends)
+            self.c.line(px, y0, px, y1, colour, width)
+            for yy in (y0, y1):
+                if top < yy < bottom:
+                    self.c.line(px - 2.5, yy, px + 2.5, yy, colour, width)
 
     def region(self, xs: Sequence[float] | NDArray[np.float64],
                ys: Sequence[float] | NDArray[np.float64], colour: str, opacity: float,
