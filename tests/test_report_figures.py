@@ -240,3 +240,28 @@ def test_log_ticks_and_scale():
     np.testing.assert_allclose(s.fraction(np.array([0.1, 1.0, 10.0, 100.0])),
                                [0, 1 / 3, 2 / 3, 1])
     assert np.isnan(s.transform(0.0)) and np.isnan(s.transform(-1.0))
+
+
+def test_error_bars_are_clipped_and_never_nan():
+    """Axes.bars: a bar spans y - lower .. y + upper in pixels; one beyond the plot area is
+    clipped to it without a cap there; zero-length bars, NaN values and (on a log axis) ends
+    at or below zero are left out, so no coordinate is ever NaN."""
+    from fidelity.report.svg import Axes, Canvas
+
+    c = Canvas(200, 200)
+    ax = Axes(c, 20, 10, 160, 100, Scale(0.0, 10.0), Scale(0.0, 10.0))
+    ax.bars([5.0, 6.0, 7.0, np.nan], [4.0, 5.0, 9.0, 1.0], [1.0, 0.0, 1.0, 1.0],
+            [2.0, 0.0, 5.0, 1.0], "#123456")
+    lines = [ln for ln in ET.fromstring(c.render()).iter(SVG + "line")]
+    assert len(lines) == 3 + 2  # bar + 2 caps; clipped bar + 1 cap; zero and NaN: none
+    bar = lines[0]
+    assert float(bar.get("x1")) == float(ax.px(5.0))
+    assert sorted(float(bar.get(k)) for k in ("y1", "y2")) == [float(ax.py(6.0)),
+                                                              float(ax.py(3.0))]
+    assert min(float(lines[3].get(k)) for k in ("y1", "y2")) == ax.y  # clipped at the top
+    log = Canvas(200, 200)
+    lax = Axes(log, 20, 10, 160, 100, Scale(0.0, 10.0), Scale(0.1, 100.0, "log"))
+    lax.bars([1.0, 2.0], [1.0, 2.0], [1.0, 0.5], [1.0, 1.0], "#000")
+    svg = log.render()
+    assert "nan" not in svg.lower()
+    assert len(list(ET.fromstring(svg).iter(SVG + "line"))) == 3  # only the bar from 1.5 to 3
