@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from jsondiff import differences
 
 from fidelity.cli import main
 from fidelity.coco import corruptions as cc
@@ -184,7 +185,8 @@ def test_reports_are_made_without_matplotlib_or_colour_science(tmp_path):
     assert (tmp_path / "v" / "classic-vs-directional.svg").is_file()
     shipped = json.loads((root / "reports/validation/validation.json").read_text())
     made = json.loads((tmp_path / "v" / "validation.json").read_text())
-    assert made["cameras"] == shipped["cameras"]  # the emulations' accuracy, fitted again
+    # the emulations' accuracy, fitted again (to another CPU's last bits: jsondiff)
+    assert not differences(shipped["cameras"], made["cameras"], "cameras")
 
 
 def test_shipped_measurements_come_from_this_versions_detectors():

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from jsondiff import differences
 
 import fidelity
 from fidelity.cli import main
@@ -385,11 +386,13 @@ def test_committed_validation_scores_rebuild_the_shipped_report(tmp_path):
     rebuilt = results.to_json()
     shipped = json.loads((REPO / "reports" / "validation" / "validation.json").read_text())
     for part in ("rows", "summary", "models", "cameras", "baselines"):
-        assert _without_timings(rebuilt[part]) == _without_timings(shipped[part]), part
+        # numbers to another CPU's last bits (jsondiff): the emulations are fitted again
+        assert not differences(_without_timings(shipped[part]), _without_timings(rebuilt[part]),
+                               part)
     domain = json.loads((Path(fidelity.__file__).parent / "data" / "validation-domain.json"
                          ).read_text())
     domain.pop("source")
-    assert validated_cameras(results, cases).to_json() == domain
+    assert not differences(domain, validated_cameras(results, cases).to_json())
 
 
 def test_every_shipped_table_names_its_detectors():
