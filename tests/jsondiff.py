@@ -1,8 +1,8 @@
 """Compare JSON documents the way their numbers can be reproduced on another machine.
 
 A number recomputed from the same inputs by the same code differs between CPUs in its last
-bits (the BLAS and LAPACK kernels a CPU gets sum in another order: a Moore-Penrose fit moves
-by ~1e-13 relative, a ΔE of 1e-13 becomes 1.1e-12) and an iterative solution by its own
+bits (OpenBLAS picks its kernels by the instruction set, and they sum in another order: on an
+AVX-512 processor a Moore-Penrose fit moves by ~1e-13 relative, a ΔE of 1e-13 becomes 1.1e-12) and an iterative solution by its own
 tolerance (Brent's bounded minimisation stops within sqrt(eps) ≈ 1.5e-8 relative of the
 minimum). :data:`REL_TOL` and :data:`ABS_TOL` lie above both and far below any printed digit.
 """
