@@ -18,7 +18,8 @@ that one commit carries the tables and everything computed from them:
 
 Only files that already exist in the report folders are replaced. What stays by hand: the
 ``AWAITING_RESWEEP`` set in ``tests/test_evidence.py`` and the prose (``reports/coco/
-preprocessing_change.md``, ``reports/validation/analysis.md``, README, docs).
+preprocessing_change.md``, ``reports/validation/analysis.md``, README, docs), whose numbers
+it prints (:func:`prose_numbers`).
 
     python -m benchmarks.after_resweep --validation-store ~/.cache/fidelity/validation-v3
 
@@ -33,6 +34,7 @@ import json
 import os
 import re
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -225,6 +227,51 @@ def requote(root: Path = REPO) -> list[str]:
     return changed
 
 
+def prose_numbers(root: Path = REPO) -> list[str]:
+    """The numbers the hand-written prose of a merge quotes (``reports/coco/
+    preprocessing_change.md``, ``reports/validation/analysis.md``): per re-measured detector of
+    ``preprocessing_change_cells.json`` the median and largest change of a cell, the cells
+    beyond one and two after-SE, the baseline and the largest change of the worst case per ΔE
+    (over ΔE >= 2 in units of its SE, and whether its transform stayed); then the validation's
+    cells over the classic bound (by how much, in SE) and the bound lines of the validation and
+    COCO-C reports."""
+    out = []
+    models = json.loads((root / "reports" / "coco" / "preprocessing_change_cells.json")
+                        .read_text("utf-8"))["models"]
+    for model, d in models.items():
+        cells = d["cells"]
+        big = max(cells, key=lambda c: abs(c["change"]))
+        beyond = [sum(abs(c["change"]) > k * c["se_after"] for c in cells) for k in (1, 2)]
+        out.append(f"{model}: {len(cells)} cells, median |change| "
+                   f"{statistics.median(abs(c['change']) for c in cells):.3f}, largest "
+                   f"{big['change']:+.3f} ({big['transform']} ΔE {big['delta_e']:g}: "
+                   f"{big['before']:.3f} -> {big['after']:.3f}), beyond 1 SE {beyond[0]}, "
+                   f"beyond 2 SE {beyond[1]}; baseline mAP {d['baseline_map_before']:.4f} -> "
+                   f"{d['baseline_map_after']:.4f}")
+        wc = d["worst_case"]
+        w = max(wc, key=lambda r: abs(r["change"]))
+        up = [r for r in wc if r["delta_e"] >= 2]
+        moved = [f"ΔE {r['delta_e']:g} {r['before_transform']} -> {r['after_transform']}"
+                 for r in wc if r["before_transform"] != r["after_transform"]]
+        out.append(f"  worst case: largest |change| {abs(w['change']):.3f} (ΔE {w['delta_e']:g}: "
+                   f"{w['before_transform']} {w['before']:.3f} -> {w['after_transform']} "
+                   f"{w['after']:.3f}); ΔE >= 2: {min(r['change'] for r in up):+.2f}.."
+                   f"{max(r['change'] for r in up):+.2f}, at most "
+                   f"{max(abs(r['change']) / r['se_after'] for r in up):.2f} SE; worst "
+                   f"transform changed: {', '.join(moved) or 'nowhere'}")
+    rows = json.loads((root / "reports" / "validation" / "validation.json")
+                      .read_text("utf-8"))["rows"]
+    over = [(r["camera"], r["model"], r["bound"]["all"]["excess"],
+             r["bound"]["all"]["excess"] / r["bound"]["all"]["se"])
+            for r in rows if not r["bound"]["all"]["within"]]
+    out.append(f"validation: {len(over)} of {len(rows)} cells over the classic bound"
+               + "".join(f"; {c} ({m}) by {e:.3f} points, {k:.2f} SE" for c, m, e, k in over))
+    for report in ("validation/validation.md", "cococ/cococ.md"):
+        out += [line for line in (root / "reports" / report).read_text("utf-8").splitlines()
+                if line.startswith(("> - mAP@", "> - Classic", "> - Direction-aware"))]
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--validation-store", type=Path, required=True)
@@ -242,6 +289,7 @@ def main(argv: list[str] | None = None) -> int:
           "tests/test_json_outputs.py"], env={**os.environ, "FIDELITY_RECORD_JSON": "1"})
     print("quoted tables:", requote())
     _run(["git", "status", "--short"])
+    print("\n".join(["numbers for the prose:", *prose_numbers()]))
     print("by hand: AWAITING_RESWEEP in tests/test_evidence.py; the prose of "
           "reports/coco/preprocessing_change.md, reports/validation/analysis.md, README, docs")
     return 0

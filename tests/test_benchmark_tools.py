@@ -180,3 +180,50 @@ def test_after_resweep_requotes_from_the_table_the_page_quotes(tmp_path):
     assert after_resweep.requote(tmp_path) == ["reports/coco/README.md"]
     assert (tmp_path / "reports" / "coco" / "README.md").read_text() == page.replace(
         "| m1 | 3.65 |", "| m1 | 3.38 |")
+
+
+def test_prose_numbers_are_computed_from_the_compared_cells_and_the_reports(tmp_path):
+    """after_resweep.prose_numbers: a detector's median and largest change, the cells beyond
+    one and two SE, the worst case's largest change and the transform it changed to, the
+    validation cells over the classic bound in points and SE, and the reports' bound lines."""
+    def cell(t, de, before, after, se):
+        return {"transform": t, "delta_e": de, "before": before, "after": after,
+                "change": after - before, "se_after": se}
+
+    def worst(de, tb, b, ta, a, se):
+        return {"delta_e": de, "before_transform": tb, "before": b, "after_transform": ta,
+                "after": a, "change": a - b, "se_after": se}
+
+    cells = [cell("hue", 1.0, 0.5, 0.4, 0.2),        # change -0.1, within 1 SE
+             cell("gamma-inc", 2.0, 1.0, 1.5, 0.3),  # +0.5: beyond 1 SE, not 2
+             cell("contrast-inc", 3.0, 2.0, 2.7, 0.3)]  # +0.7: beyond 2 SE
+    doc = {"models": {"m": {"cells": cells, "baseline_map_before": 0.38, "baseline_map_after":
+                            0.3812, "worst_case": [
+                                worst(1.0, "hue", 0.5, "pull_mean", 0.55, 0.2),
+                                worst(2.0, "gamma-inc", 1.0, "gamma-inc", 1.5, 0.25),
+                                worst(3.0, "contrast-inc", 2.0, "contrast-inc", 2.7, 1.4)]}}}
+    (tmp_path / "reports" / "coco").mkdir(parents=True)
+    (tmp_path / "reports" / "coco" / "preprocessing_change_cells.json").write_text(json.dumps(doc))
+    (tmp_path / "reports" / "validation").mkdir()
+    rows = [{"camera": "a", "model": "m", "bound": {"all": {"within": True, "excess": -1.0,
+                                                             "se": 0.5}}},
+            {"camera": "b", "model": "m", "bound": {"all": {"within": False, "excess": 0.25,
+                                                             "se": 0.5}}}]
+    (tmp_path / "reports" / "validation" / "validation.json").write_text(json.dumps(
+        {"rows": rows}))
+    (tmp_path / "reports" / "validation" / "validation.md").write_text(
+        "# v\n> - mAP@[.50:.95] (all classes): within the bound in **1 of 2** cells\nprose\n")
+    (tmp_path / "reports" / "cococ").mkdir()
+    (tmp_path / "reports" / "cococ" / "cococ.md").write_text(
+        "> - Classic bound: **3 of 3**\n> - Direction-aware bound: **2 of 3**\n> - other\n")
+    lines = after_resweep.prose_numbers(tmp_path)
+    assert lines[0] == ("m: 3 cells, median |change| 0.500, largest +0.700 (contrast-inc ΔE 3: "
+                        "2.000 -> 2.700), beyond 1 SE 2, beyond 2 SE 1; baseline mAP 0.3800 -> "
+                        "0.3812")
+    assert lines[1] == ("  worst case: largest |change| 0.700 (ΔE 3: contrast-inc 2.000 -> "
+                        "contrast-inc 2.700); ΔE >= 2: +0.50..+0.70, at most 2.00 SE; worst "
+                        "transform changed: ΔE 1 hue -> pull_mean")
+    assert lines[2] == ("validation: 1 of 2 cells over the classic bound; b (m) by 0.250 "
+                        "points, 0.50 SE")
+    assert lines[3:] == ["> - mAP@[.50:.95] (all classes): within the bound in **1 of 2** cells",
+                         "> - Classic bound: **3 of 3**", "> - Direction-aware bound: **2 of 3**"]
