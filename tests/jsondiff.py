@@ -2,9 +2,9 @@
 
 A number recomputed from the same inputs by the same code differs between CPUs in its last
 bits (OpenBLAS picks its kernels by the instruction set, and they sum in another order: on an
-AVX-512 processor a Moore-Penrose fit moves by ~1e-13 relative, a ΔE of 1e-13 becomes 1.1e-12) and an iterative solution by its own
-tolerance (Brent's bounded minimisation stops within sqrt(eps) ≈ 1.5e-8 relative of the
-minimum). :data:`REL_TOL` and :data:`ABS_TOL` lie above both and far below any printed digit.
+AVX-512 processor a Moore-Penrose fit moves by ~1e-13 relative, a ΔE of 1e-13 becomes
+1.1e-12) and an iterative solution by its own tolerance (Brent's bounded minimisation stops
+within sqrt(eps) ≈ 1.5e-8 relative of the minimum). :data:`REL_TOL` and :data:`ABS_TOL` lie above both and far below any printed digit.
 """
 
 from __future__ import annotations
@@ -22,7 +22,8 @@ ABS_TOL = 1e-9
 def differences(a: Any, b: Any, where: str = "$", *, rel_tol: float = REL_TOL,
                 abs_tol: float = ABS_TOL) -> list[str]:
     """Where the JSON values ``a`` (recorded) and ``b`` (now) differ: keys, lengths, strings
-    and booleans exactly, numbers to ``rel_tol`` relative or ``abs_tol`` absolute (NaN equals NaN)."""
+    and booleans exactly, numbers to ``rel_tol`` relative or ``abs_tol`` absolute (NaN equals
+    NaN)."""
     if isinstance(a, dict) and isinstance(b, dict):
         out = [f"{where}.{k}: only in the recorded document" for k in a.keys() - b.keys()]
         out += [f"{where}.{k}: not in the recorded document" for k in b.keys() - a.keys()]

@@ -385,14 +385,15 @@ def test_committed_validation_scores_rebuild_the_shipped_report(tmp_path):
     results = collect_results(store, suite=cases)
     rebuilt = results.to_json()
     shipped = json.loads((REPO / "reports" / "validation" / "validation.json").read_text())
-    for part in ("rows", "summary", "models", "cameras", "baselines"):
-        # numbers to another CPU's last bits (jsondiff): the emulations are fitted again
-        assert not differences(_without_timings(shipped[part]), _without_timings(rebuilt[part]),
-                               part)
+    for part in ("rows", "summary", "models", "baselines"):  # from the stored scores: exact
+        assert _without_timings(rebuilt[part]) == _without_timings(shipped[part]), part
+    # the emulations are fitted again: to another CPU's last bits (jsondiff)
+    assert not differences(_without_timings(shipped["cameras"]),
+                           _without_timings(rebuilt["cameras"]), "cameras")
     domain = json.loads((Path(fidelity.__file__).parent / "data" / "validation-domain.json"
                          ).read_text())
     domain.pop("source")
-    assert not differences(domain, validated_cameras(results, cases).to_json())
+    assert validated_cameras(results, cases).to_json() == domain
 
 
 def test_every_shipped_table_names_its_detectors():

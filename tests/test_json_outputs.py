@@ -4,9 +4,10 @@ Each case runs one command in-process and compares its JSON with the file record
 ``tests/data/json_outputs/`` before the records moved below the report layer. What is not the
 command's answer is normalised away: creation times, the machine (platform, library versions),
 and the folders of this run (the test's temporary folder becomes ``<tmp>``, the checkout
-``<repo>``). Numbers compare as :mod:`jsondiff` says (1e-6 relative, 1e-9 absolute), so a change
-in the order of a sum or another CPU's last bits is not a difference; a changed field, a lost field or a moved number is (the fields :data:`ADDED` since
-are new keys beside the recorded ones).
+``<repo>``). Numbers compare as :mod:`jsondiff` says (1e-6 relative, 1e-9 absolute), so a
+change in the order of a sum or another CPU's last bits is not a difference; a changed field, a
+lost field or a moved number is (the fields :data:`ADDED` since are new keys beside the
+recorded ones).
 
 Record the files again, only when an output is meant to change, with
 ``FIDELITY_RECORD_JSON=1 python -m pytest tests/test_json_outputs.py`` and say why in the commit.
