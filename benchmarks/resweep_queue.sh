@@ -5,15 +5,15 @@
 # into reports/coco and the shipped prediction tables when it is done. Resumable: rerun the same
 # line; a detector whose store is complete only merges again (the same tables), then the next
 # one starts, so the machine never waits between two detectors for someone to start the next.
-#   PROCESSES=2 benchmarks/resweep_queue.sh           # default: YOLOv10n, then YOLOX-nano
-#       and YOLO11n again (measured with this preprocessing on machines that are gone: their
-#       scores files, so that every shipped row can be rebuilt without a store); YOLOv8n's
-#       re-sweep is merged (2026-11-28) and its scores file committed
+#   PROCESSES=2 benchmarks/resweep_queue.sh           # default: YOLOX-nano and YOLO11n
+#       again (measured with this preprocessing on machines that are gone: their scores files,
+#       so that every shipped row can be rebuilt without a store); YOLOv8n's and YOLOv10n's
+#       re-sweeps are merged (2026-11-28, 2026-11-29) and their scores files committed
 #   RESWEEP_MODELS="yolox_nano yolo11n-int8dyn" benchmarks/resweep_queue.sh
 # After each merge: python -m benchmarks.after_resweep (see benchmarks/after_resweep.py).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 stores=${RESWEEP_STORES:-$HOME/.cache/fidelity}
-for model in ${RESWEEP_MODELS:-yolov10n-int8dyn yolox_nano yolo11n-int8dyn}; do
+for model in ${RESWEEP_MODELS:-yolox_nano yolo11n-int8dyn}; do
   benchmarks/resweep_model.sh "$stores/resweep-${model%-int8dyn}" "$model.onnx"
 done

@@ -276,7 +276,7 @@ def test_validity_domain_states_whether_the_table_has_this_versions_preprocessin
 #: issue 24 and are awaiting their re-sweep (a full sweep of one int8 model is 3.5-6.5 hours on
 #: 2 cores; `fidelity tables STORE --earlier` merges each as it lands). A detector listed here
 #: whose rows carry this version's preprocessing fails (strict xfail): take it off the list.
-AWAITING_RESWEEP = frozenset({"yolov10n-int8dyn"})
+AWAITING_RESWEEP: frozenset[str] = frozenset()
 
 
 def _shipped_table_models() -> list[tuple[str, str]]:
