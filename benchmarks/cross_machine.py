@@ -16,6 +16,12 @@ Usage:
       --stores: where both stores are at hand, also how far apart the detections that are not
       bit for bit the same are (boxes in pixels, scores), cell by cell
 
+  python -m benchmarks.cross_machine rows A_TABLES.json B_TABLES.json --model M
+      [--out reports/coco/cross_machine_rows_M]
+      one detector's rows of two ``tables.json`` (every cell's mAP and ΔmAP with its SE, the
+      baseline and the worst case per ΔE): a whole grid measured twice, where the stores are
+      gone or too large to digest (A: e.g. ``git show REV:reports/coco/tables.json``)
+
 benchmarks/reproduction_sample.sh runs the same sample cells on any machine.
 """
 
@@ -236,6 +242,84 @@ def markdown(a: dict[str, Any], b: dict[str, Any], result: dict[str, Any]) -> st
     return "\n".join(lines) + "\n"
 
 
+def compare_rows(a: dict[str, Any], b: dict[str, Any], model: str) -> dict[str, Any]:
+    """One detector's rows of two ``tables.json`` documents (``{"tables": ...}``): per cell
+    done in both, mAP and ΔmAP (points) of each and B − A, also in units of B's standard
+    error; the baseline; per ΔE the worst case of each (value and transform)."""
+    ta, tb = a["tables"], b["tables"]
+
+    def cells(t: dict[str, Any]) -> dict[str, dict[str, Any]]:
+        return {f"{c['transform']}:{c['delta_e']:g}": c for c in t["cells"].get(model, ())
+                if c.get("status") == "done" and c.get("dmap_points") is not None}
+
+    ca, cb = cells(ta), cells(tb)
+    rows: list[dict[str, Any]] = []
+    for key in sorted(set(ca) & set(cb)):
+        x, y = ca[key], cb[key]
+        se = y.get("dmap_points_se")
+        diff = y["dmap_points"] - x["dmap_points"]
+        rows.append({"cell": key, "map_a": 100 * x["map"], "map_b": 100 * y["map"],
+                     "loss_a": x["dmap_points"], "loss_b": y["dmap_points"], "difference": diff,
+                     "se_b": se, "in_se": abs(diff) / se if se else None})
+    wa = {w["delta_e"]: w for w in ta["worst_case"].get(model, ()) if w["delta_e"] > 0}
+    wb = {w["delta_e"]: w for w in tb["worst_case"].get(model, ()) if w["delta_e"] > 0}
+    worst = [{"delta_e": g, "transform_a": wa[g]["worst_transform"],
+              "transform_b": wb[g]["worst_transform"], "loss_a": wa[g]["dmap_points"],
+              "loss_b": wb[g]["dmap_points"],
+              "difference": wb[g]["dmap_points"] - wa[g]["dmap_points"]}
+             for g in sorted(set(wa) & set(wb))]
+    diffs = [float(r["difference"]) for r in rows]
+    in_se = [float(r["in_se"]) for r in rows if r["in_se"] is not None]
+    ba, bb = ta["models"][model]["baseline_map"], tb["models"][model]["baseline_map"]
+    summary = {
+        "baseline_map_a": 100 * ba, "baseline_map_b": 100 * bb,
+        "cells": len(rows), "cells_equal": sum(d == 0 for d in diffs),
+        "loss_difference_mean": statistics.mean(diffs) if diffs else None,
+        "loss_difference_sd": statistics.stdev(diffs) if len(diffs) > 1 else None,
+        "loss_difference_max_abs": max(map(abs, diffs)) if diffs else None,
+        "loss_difference_max_in_se": max(in_se) if in_se else None,
+        "worst_transform_changed": sum(w["transform_a"] != w["transform_b"] for w in worst),
+        "worst_difference_max_abs": max((abs(w["difference"]) for w in worst), default=None),
+    }
+    return {"model": model, "summary": summary, "losses": rows, "worst_case": worst}
+
+
+def rows_markdown(result: dict[str, Any], a_name: str, b_name: str) -> str:
+    s = result["summary"]
+    worst_changed = [w for w in result["worst_case"] if w["transform_a"] != w["transform_b"]]
+    lines = [
+        f"# One detector's rows measured twice: {result['model']}",
+        "",
+        "Written by `python -m benchmarks.cross_machine rows A B --model "
+        f"{result['model']}` from two `tables.json`.",
+        "",
+        f"- A: {a_name}",
+        f"- B: {b_name}",
+        "",
+        f"Baseline mAP: A {s['baseline_map_a']:.4f}, B {s['baseline_map_b']:.4f} "
+        f"(B − A {s['baseline_map_b'] - s['baseline_map_a']:+.5f} points).",
+        "",
+        f"ΔmAP over {s['cells']} cells ({s['cells_equal']} equal): B − A mean "
+        f"{s['loss_difference_mean']:+.4f} points, SD {s['loss_difference_sd']:.4f}, largest "
+        f"|B − A| {s['loss_difference_max_abs']:.4f} ({s['loss_difference_max_in_se']:.3f} of "
+        "the cell's SE at most).",
+        "",
+        f"Worst case per ΔE: largest |B − A| {s['worst_difference_max_abs']:.4f} points; the "
+        f"worst transform differs at {s['worst_transform_changed']} of "
+        f"{len(result['worst_case'])} ΔE"
+        + (": " + ", ".join(f"ΔE {w['delta_e']:g} {w['transform_a']} → {w['transform_b']}"
+                            for w in worst_changed) if worst_changed else "") + ".",
+        "",
+        "| cell | mAP A | mAP B | ΔmAP A | ΔmAP B | B − A | SE B |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    lines += [f"| {r['cell']} | {r['map_a']:.4f} | {r['map_b']:.4f} | {r['loss_a']:+.4f} | "
+              f"{r['loss_b']:+.4f} | {r['difference']:+.4f} | "
+              + (f"{r['se_b']:.2f}" if r["se_b"] is not None else "–") + " |"
+              for r in result["losses"]]
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="verb", required=True)
@@ -249,7 +333,20 @@ def main(argv: list[str] | None = None) -> None:
     c.add_argument("b")
     c.add_argument("--out", default="reports/coco/cross_machine")
     c.add_argument("--stores", nargs=2, metavar=("STORE_A", "STORE_B"))
+    r = sub.add_parser("rows")
+    r.add_argument("a")
+    r.add_argument("b")
+    r.add_argument("--model", required=True)
+    r.add_argument("--a-name", help="how the report names A (default: its path)")
+    r.add_argument("--b-name", help="how the report names B (default: its path)")
+    r.add_argument("--out")
     args = ap.parse_args(argv)
+    if args.verb == "rows":
+        doc_a, doc_b = (json.loads(Path(p).read_text(encoding="utf-8")) for p in (args.a, args.b))
+        rows = compare_rows(doc_a, doc_b, args.model)
+        write_report(args.out or f"reports/coco/cross_machine_rows_{args.model}", rows,
+                     rows_markdown(rows, args.a_name or args.a, args.b_name or args.b))
+        return
     if args.verb == "digest":
         from fidelity.fileio import write_text_atomic
 

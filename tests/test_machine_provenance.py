@@ -110,6 +110,49 @@ def test_cross_machine_comparison_counts_images_and_differences_of_losses() -> N
     assert empty["identical_fraction"] is None and empty["loss_difference_mean"] is None
 
 
+def _tables_doc(baseline: float, cells: dict[str, tuple[float, float, float | None]],
+                worst: dict[float, tuple[str, float]]) -> dict:
+    """A minimal tables.json of detector "m": cells "transform:ΔE" -> (mAP, ΔmAP, SE)."""
+    rows = [{"transform": k.split(":")[0], "delta_e": float(k.split(":")[1]), "status": "done",
+             "map": m, "dmap_points": d, "dmap_points_se": se}
+            for k, (m, d, se) in cells.items()]
+    rows.append({"transform": "hue", "delta_e": 24.0, "status": "unreachable", "map": None,
+                 "dmap_points": None})
+    wc = [{"delta_e": 0.0, "worst_transform": None, "dmap_points": 0.0}]
+    wc += [{"delta_e": g, "worst_transform": t, "dmap_points": d} for g, (t, d) in worst.items()]
+    return {"tables": {"models": {"m": {"baseline_map": baseline}}, "cells": {"m": rows},
+                       "worst_case": {"m": wc}}}
+
+
+def test_cross_machine_rows_compare_a_detectors_whole_grid_of_two_tables() -> None:
+    from benchmarks.cross_machine import compare_rows, rows_markdown
+
+    a = _tables_doc(0.30, {"hue:1": (0.299, 0.1, 0.5), "gamma-inc:1": (0.298, 0.2, 0.4),
+                           "hue:3": (0.29, 1.0, 0.8)},
+                    {1.0: ("gamma-inc", 0.2), 3.0: ("hue", 1.0)})
+    b = _tables_doc(0.30, {"hue:1": (0.2988, 0.12, 0.5), "gamma-inc:1": (0.298, 0.2, 0.4),
+                           "hue:3": (0.29, 1.0, None), "hue:6": (0.28, 2.0, 1.0)},
+                    {1.0: ("gamma-inc", 0.2), 3.0: ("hue", 1.0), 6.0: ("hue", 2.0)})
+    b["tables"]["cells"]["m"][0]["dmap_points"] = 0.25  # hue:1 moves by 0.15 points
+    b["tables"]["worst_case"]["m"][1] = {"delta_e": 1.0, "worst_transform": "hue",
+                                         "dmap_points": 0.25}
+    r = compare_rows(a, b, "m")
+    s = r["summary"]
+    assert s["cells"] == 3 and s["cells_equal"] == 2  # hue:6 only in b, hue:24 unreachable
+    by = {row["cell"]: row for row in r["losses"]}
+    assert by["hue:1"]["difference"] == pytest.approx(0.15)
+    assert by["hue:1"]["in_se"] == pytest.approx(0.3)  # 0.15 of b's SE 0.5
+    assert by["hue:3"]["in_se"] is None  # b states no SE there
+    assert s["loss_difference_mean"] == pytest.approx(0.05)
+    assert s["loss_difference_max_abs"] == pytest.approx(0.15)
+    assert s["loss_difference_max_in_se"] == pytest.approx(0.3)
+    assert s["worst_transform_changed"] == 1 and s["worst_difference_max_abs"] == pytest.approx(
+        0.05)
+    assert [w["delta_e"] for w in r["worst_case"]] == [1.0, 3.0]  # ΔE 0 and b's ΔE 6 left out
+    text = rows_markdown(r, "first", "second")
+    assert "ΔE 1 gamma-inc → hue" in text and "| hue:3 |" in text and "| – |" in text
+
+
 def test_detection_differences_pair_each_detection_with_the_nearest_of_its_class() -> None:
     import numpy as np
 
