@@ -226,3 +226,54 @@ def test_prose_numbers_are_computed_from_the_compared_cells_and_the_reports(tmp_
                         "points, 0.50 SE")
     assert lines[3:] == ["> - mAP@[.50:.95] (all classes): within the bound in **1 of 2** cells",
                          "> - Classic bound: **3 of 3**", "> - Direction-aware bound: **2 of 3**"]
+
+
+def test_kept_provenance_walks_the_merge_chain_back_to_the_run_of_each_model(tmp_path):
+    """benchmarks.kept_provenance: tables merged twice by an older version, whose record
+    named one run for every kept model; each model is recovered with the run that measured it
+    (the file, checked by SHA-256 against the commit its name gives, and that file's own meta),
+    and the files it passed through since."""
+    import hashlib
+    import subprocess
+
+    from benchmarks.kept_provenance import recovered_runs
+
+    repo = tmp_path / "repo"
+    (repo / "reports" / "coco").mkdir(parents=True)
+
+    def git(*args: str) -> str:
+        return subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", *args],
+                              cwd=repo, capture_output=True, text=True, check=True).stdout
+
+    def commit(tables: dict) -> tuple[str, str]:
+        path = repo / "reports" / "coco" / "tables.json"
+        path.write_text(json.dumps({"tables": tables}))
+        git("add", "-A")
+        git("commit", "-q", "-m", "x")
+        sha = hashlib.sha256(path.read_bytes()).hexdigest()
+        return git("rev-parse", "--short", "HEAD").strip(), sha
+
+    git("init", "-q")
+    first_run = {"file": "tables.json", "sha256": "0" * 64, "models": ["b"],
+                 "machine": {"cpu": "M0"}}
+    c1, s1 = commit({"models": {"a": {}, "b": {}},
+                     "meta": {"machine": {"cpu": "M1"}, "versions": {"v": 1},
+                              "earlier": first_run}})
+    c2, s2 = commit({"models": {"a": {}, "b": {}, "c": {}},
+                     "meta": {"machine": {"cpu": "M2"}, "imported": [{"file": "c.scores"}],
+                              "earlier": {"file": f"reports-coco-tables-at-{c1}.json",
+                                          "sha256": s1, "models": ["a", "b"],
+                                          "machine": {"cpu": "M1"}}}})
+    runs = recovered_runs({"file": f"/tmp/x/reports-coco-tables-at-{c2}.json", "sha256": s2},
+                          ["c", "a", "b"], repo=repo)
+    by = {m: r for r in runs for m in r["models"]}
+    assert by["c"]["machine"] == {"cpu": "M2"} and by["c"]["imported"] == [{"file": "c.scores"}]
+    assert by["c"]["file"] == f"reports-coco-tables-at-{c2}.json" and "via" not in by["c"]
+    assert by["a"]["machine"] == {"cpu": "M1"} and by["a"]["versions"] == {"v": 1}
+    assert [v["file"] for v in by["a"]["via"]] == [f"reports-coco-tables-at-{c2}.json"]
+    assert by["b"]["machine"] == {"cpu": "M0"} and by["b"]["file"] == "tables.json"
+    assert [v["file"] for v in by["b"]["via"]] == [f"reports-coco-tables-at-{c1}.json",
+                                                   f"reports-coco-tables-at-{c2}.json"]
+    with pytest.raises(ValueError, match="not the recorded file"):
+        recovered_runs({"file": f"reports-coco-tables-at-{c2}.json", "sha256": s1}, ["c"],
+                       repo=repo)

@@ -506,7 +506,9 @@ def test_merge_keeps_the_earlier_models_the_store_does_not_hold(store, tmp_path)
     assert (new.cells_done, new.cells_unreachable) == (8, 1)
     assert (merged.cells_done, merged.cells_unreachable) == (12, 1)
     assert merged.meta["earlier"]["models"] == ["yolox_nano"]
-    assert merged.meta["earlier"]["versions"] == {"fidelity": "0.0.9"}
+    (run,) = merged.meta["earlier"]["runs"]
+    assert run["models"] == ["yolox_nano"] and run["versions"] == {"fidelity": "0.0.9"}
+    assert run["file"] == "tables.json" and run["sha256"] == "ab" * 32  # the file by name
     doc = prediction_table(merged)
     parse_prediction_table(doc)
     prov = doc["provenance"]
@@ -516,12 +518,50 @@ def test_merge_keeps_the_earlier_models_the_store_does_not_hold(store, tmp_path)
     # merged again into a re-measured store (the same one here): the kept rows keep the record
     # of where they were measured, and name the file they passed through
     twice = merge_tables(new, merged, {"file": "mid/tables.json", "sha256": "cd" * 32})
-    assert twice.meta["earlier"]["file"] == "tables.json"  # by name (paths were recorded once)
-    assert twice.meta["earlier"]["versions"] == {"fidelity": "0.0.9"}
-    assert twice.meta["earlier"]["via"] == {"file": "mid/tables.json", "sha256": "cd" * 32}
+    (run,) = twice.meta["earlier"]["runs"]
+    assert run["file"] == "tables.json" and run["versions"] == {"fidelity": "0.0.9"}
+    assert run["via"] == [{"file": "tables.json", "sha256": "cd" * 32}]  # mid/, by name
     assert twice.worst_case == merged.worst_case
     # nothing to keep: the store's tables as they are
     assert merge_tables(new, build_tables(store), {"file": "x"}) == new
+
+
+def test_a_model_kept_through_several_merges_keeps_the_machine_that_measured_it(
+        store, tmp_path) -> None:
+    """Three runs on three machines, merged twice: each kept model is named with its own run's
+    machine and versions, not those of the tables it was last kept in."""
+    from dataclasses import replace
+
+    from fidelity.coco.tables import merge_tables
+
+    def run(t, models, machine):
+        return replace(t, models={m: t.models[m] for m in models},
+                       cells={m: t.cells[m] for m in models if m in t.cells},
+                       worst_case={m: t.worst_case[m] for m in models if m in t.worst_case},
+                       aligned={m: t.aligned[m] for m in models if m in t.aligned},
+                       meta=t.meta | {"machine": {"cpu": machine},
+                                      "versions": {"fidelity": machine}})
+
+    new = build_tables(store)
+    first = run(build_tables(_earlier_store(tmp_path / "earlier")), ["yolox_nano"], "M1")
+    second = merge_tables(run(new, ["yolo11n"], "M2"), first, {"file": "a/t1.json",
+                                                                "sha256": "1" * 64})
+    third = merge_tables(run(new, ["yolov8n"], "M3"), second, {"file": "b/t2.json",
+                                                                "sha256": "2" * 64})
+    kept = third.meta["earlier"]
+    assert (kept["file"], kept["models"]) == ("b/t2.json", ["yolo11n", "yolox_nano"])
+    by_model = {m: r for r in kept["runs"] for m in r["models"]}
+    assert by_model["yolo11n"]["machine"] == {"cpu": "M2"}
+    assert by_model["yolo11n"]["file"] == "t2.json" and "via" not in by_model["yolo11n"]
+    assert by_model["yolox_nano"]["machine"] == {"cpu": "M1"}  # not M2, where it was kept
+    assert by_model["yolox_nano"]["versions"] == {"fidelity": "M1"}
+    assert by_model["yolox_nano"]["file"] == "t1.json"
+    assert by_model["yolox_nano"]["via"] == [{"file": "t2.json", "sha256": "2" * 64}]
+    # the report's Run section names each run's machine
+    from fidelity.report.coco import _run_section
+
+    text = str(_run_section(third))
+    assert "M1" in text and "M2" in text
 
 
 def test_merge_refuses_tables_of_other_images(store, tmp_path) -> None:
@@ -564,7 +604,9 @@ def test_tables_earlier_command(store, tmp_path) -> None:
     # merged again from tables an older version wrote (the first record named a path on its
     # machine): the kept record names the first file by name, and the file it passed through
     first = json.loads((out / "tables.json").read_text())
-    first["tables"]["meta"]["earlier"]["file"] = str(tmp_path / "X1" / "reports-coco-tables-at-abc.json")
+    older = first["tables"]["meta"]["earlier"]  # the record as versions before "runs" wrote it
+    older |= {"file": str(tmp_path / "X1" / "reports-coco-tables-at-abc.json")} | {
+        k: v for k, v in older.pop("runs")[0].items() if k not in ("file", "sha256")}
     (tmp_path / "twice.json").write_text(json.dumps(first))
     res = CliRunner().invoke(main, ["tables", str(store.path.parent), "--no-standard-errors",
                                     "--earlier", str(tmp_path / "twice.json"), "--out",
@@ -572,8 +614,10 @@ def test_tables_earlier_command(store, tmp_path) -> None:
     assert res.exit_code == 0, res.output
     kept = json.loads((tmp_path / "again" / "tables.json").read_text())["tables"]["meta"][
         "earlier"]
-    assert kept["file"] == "reports-coco-tables-at-abc.json"
-    assert kept["via"]["file"] == "twice.json" and kept["models"] == ["yolox_nano"]
+    assert kept["file"] == "twice.json" and kept["models"] == ["yolox_nano"]
+    (run,) = kept["runs"]  # where yolox_nano was measured: the first file, by name
+    assert run["file"] == "reports-coco-tables-at-abc.json" and run["models"] == ["yolox_nano"]
+    assert [v["file"] for v in run["via"]] == ["twice.json"] and "versions" in run
     assert str(tmp_path / "X1") not in (tmp_path / "again" / "tables.json").read_text()
     # writing the merged tables over the earlier ones is refused before any work
     res = CliRunner().invoke(main, ["tables", str(store.path.parent), "--no-standard-errors",

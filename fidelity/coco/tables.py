@@ -951,20 +951,50 @@ def build_tables(store: SweepStore, coco: Any = None, *, method: str = "auto",
     )
 
 
+#: What a kept model's measurement record holds of the tables' meta that measured it.
+_RUN_KEYS = ("versions", "machine", "machines", "scorers", "imported")
+
+
+def _by_name(record: Mapping[str, Any]) -> dict[str, Any]:
+    """A file record (``file``, ``sha256``) with its file by name alone: tables of older
+    versions recorded a path on their machine, which names the machine, not the data."""
+    return dict(record) | ({"file": Path(str(record["file"])).name} if record.get("file") else {})
+
+
+def _earlier_runs(prev: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """The measurement records an earlier merge kept (``runs``); a record of an older version,
+    one for all its kept models with at most one ``via``, as one run."""
+    if not prev:
+        return []
+    if "runs" in prev:
+        return [dict(r) for r in prev["runs"]]
+    via = prev.get("via")
+    run = {k: v for k, v in _by_name(prev).items() if k != "via"}
+    return [run | ({"via": [_by_name(via)]} if via else {})]
+
+
 def _kept_provenance(kept: Sequence[str], earlier: Tables, source: Mapping[str, Any]
                      ) -> dict[str, Any]:
-    """Where the kept models were measured: ``source`` with the earlier run's versions; when
-    the earlier tables had kept every one of them from tables before (a second merge), that
-    first record (its file by name alone, as tables of older versions recorded a path on
-    their machine), with ``via`` naming the file they passed through."""
-    prev = earlier.meta.get("earlier") or {}
-    if kept and set(kept) <= set(prev.get("models") or ()):
-        first = dict(prev) | ({"file": Path(str(prev["file"])).name} if prev.get("file") else {})
-        return first | {"models": list(kept), "via": dict(source)}
-    return dict(source) | {
-        "models": list(kept), "versions": earlier.meta.get("versions"),
-        "machine": earlier.meta.get("machine"), "machines": earlier.meta.get("machines"),
-        "scorers": earlier.meta.get("scorers")}
+    """Where the kept models were measured: ``source`` (the earlier tables' file and SHA-256)
+    and the kept models, with ``runs``, one record per run that measured some of them: the
+    earlier tables' own store for the models it measured (the file by name, with that store's
+    versions, machine(s), scorers and imported scores files), and for the models it had kept
+    itself the records it carried, each with ``via`` naming the files it has passed through
+    since. So a model kept through several merges is still named with the machine and
+    versions that measured it."""
+    carried = _earlier_runs(earlier.meta.get("earlier") or {})
+    carried_models = {m for r in carried for m in r.get("models") or ()}
+    runs: list[dict[str, Any]] = []
+    own = [m for m in kept if m not in carried_models]
+    if own:
+        runs.append(_by_name(source) | {"models": own} | {
+            k: earlier.meta[k] for k in _RUN_KEYS if earlier.meta.get(k) is not None})
+    for run in carried:
+        models = [m for m in kept if m in (run.get("models") or ())]
+        if models:
+            runs.append(run | {"models": models,
+                               "via": [*(run.get("via") or []), _by_name(source)]})
+    return dict(source) | {"models": list(kept), "runs": runs}
 
 
 def merge_tables(tables: Tables, earlier: Tables, source: Mapping[str, Any]) -> Tables:
@@ -975,8 +1005,9 @@ def merge_tables(tables: Tables, earlier: Tables, source: Mapping[str, Any]) -> 
     cells, image alignment and registration (hence their recorded preprocessing and settings,
     which the prediction table's provenance carries per model). The size classes are the
     worst case over the merged models again. ``meta["earlier"]`` names what was kept and where
-    it came from: ``source`` (e.g. the file's name and SHA-256) with the earlier run's
-    ``versions``, ``machine`` and ``scorers``.
+    it came from: ``source`` (e.g. the file's name and SHA-256) and, per run that measured
+    some of the kept models (``runs``), that run's ``versions``, ``machine(s)``, ``scorers``
+    and imported scores files, through any number of merges.
 
     Both must be measured on the same images (``meta["data"]``: image count and the file names
     of the image folder and annotations) and, where both have one, with the same rare-class

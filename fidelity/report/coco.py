@@ -199,8 +199,19 @@ def _run_section(tables: Tables) -> Section:
     if earlier:
         facts.append(("kept from earlier tables",
                       f"{', '.join(earlier.get('models') or [])} from {earlier.get('file')} "
-                      f"(SHA-256 {str(earlier.get('sha256'))[:12]}…; measured with "
-                      f"{words(earlier.get('versions'))}): not re-measured in this store"))
+                      f"(SHA-256 {str(earlier.get('sha256'))[:12]}…): not re-measured in "
+                      "this store"))
+        # tables of older versions hold one record for every kept model, at the top level
+        for run in earlier.get("runs") or [earlier]:
+            vias = run.get("via") or []
+            via = " via " + ", ".join(str(v.get("file")) for v in (
+                [vias] if isinstance(vias, dict) else vias)) if vias else ""
+            ran = run.get("machines") or []
+            where = (f"{len(ran)} machines: " + "; ".join(words(m) for m in ran)
+                     if len(ran) > 1 else f"machine {words(run.get('machine'))}")
+            facts.append((f"measured: {', '.join(run.get('models') or [])}",
+                          f"in {run.get('file')}{via}; versions {words(run.get('versions'))}; "
+                          f"{where}"))
     facts.append(("preprocessing", "; ".join(
         f"{m}: {(info.settings.get('conventions') or {}).get('preprocess') or number(None)}"
         for m, info in tables.models.items())))
