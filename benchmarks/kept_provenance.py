@@ -27,9 +27,10 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
+from fidelity.coco.tables import RUN_KEYS, record_by_name
+
 REPO = Path(__file__).resolve().parent.parent
 _COMMIT = re.compile(r"reports-coco-tables-at-([0-9a-f]{7,40})\.json$")
-_RUN_KEYS = ("versions", "machine", "machines", "scorers", "imported")
 
 
 def committed_tables(commit: str, sha256: str, repo: Path = REPO) -> dict[str, Any]:
@@ -62,9 +63,9 @@ def recovered_runs(record: dict[str, Any], wanted: list[str],
     meta = tables["meta"]
     earlier = meta.get("earlier") or {}
     carried = set(earlier.get("models") or ())
-    here = {"file": Path(str(record["file"])).name, "sha256": record["sha256"]}
+    here = record_by_name({"file": record["file"], "sha256": record["sha256"]})
     own = [m for m in wanted if m not in carried]
-    runs = [here | {"models": own} | {k: meta[k] for k in _RUN_KEYS if meta.get(k) is not None}
+    runs = [here | {"models": own} | {k: meta[k] for k in RUN_KEYS if meta.get(k) is not None}
             | ({"via": via} if via else {})] if own else []
     rest = [m for m in wanted if m in carried]
     if rest:

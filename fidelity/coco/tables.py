@@ -952,10 +952,10 @@ def build_tables(store: SweepStore, coco: Any = None, *, method: str = "auto",
 
 
 #: What a kept model's measurement record holds of the tables' meta that measured it.
-_RUN_KEYS = ("versions", "machine", "machines", "scorers", "imported")
+RUN_KEYS = ("versions", "machine", "machines", "scorers", "imported")
 
 
-def _by_name(record: Mapping[str, Any]) -> dict[str, Any]:
+def record_by_name(record: Mapping[str, Any]) -> dict[str, Any]:
     """A file record (``file``, ``sha256``) with its file by name alone: tables of older
     versions recorded a path on their machine, which names the machine, not the data."""
     return dict(record) | ({"file": Path(str(record["file"])).name} if record.get("file") else {})
@@ -969,8 +969,8 @@ def _earlier_runs(prev: Mapping[str, Any]) -> list[dict[str, Any]]:
     if "runs" in prev:
         return [dict(r) for r in prev["runs"]]
     via = prev.get("via")
-    run = {k: v for k, v in _by_name(prev).items() if k != "via"}
-    return [run | ({"via": [_by_name(via)]} if via else {})]
+    run = {k: v for k, v in record_by_name(prev).items() if k != "via"}
+    return [run | ({"via": [record_by_name(via)]} if via else {})]
 
 
 def _kept_provenance(kept: Sequence[str], earlier: Tables, source: Mapping[str, Any]
@@ -987,13 +987,13 @@ def _kept_provenance(kept: Sequence[str], earlier: Tables, source: Mapping[str, 
     runs: list[dict[str, Any]] = []
     own = [m for m in kept if m not in carried_models]
     if own:
-        runs.append(_by_name(source) | {"models": own} | {
-            k: earlier.meta[k] for k in _RUN_KEYS if earlier.meta.get(k) is not None})
+        runs.append(record_by_name(source) | {"models": own} | {
+            k: earlier.meta[k] for k in RUN_KEYS if earlier.meta.get(k) is not None})
     for run in carried:
         models = [m for m in kept if m in (run.get("models") or ())]
         if models:
             runs.append(run | {"models": models,
-                               "via": [*(run.get("via") or []), _by_name(source)]})
+                               "via": [*(run.get("via") or []), record_by_name(source)]})
     return dict(source) | {"models": list(kept), "runs": runs}
 
 
