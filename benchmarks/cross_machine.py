@@ -128,6 +128,13 @@ def _cell_maps(a: dict[str, Any], b: dict[str, Any]) -> tuple[dict[str, float],
     return {k: ma[k][1] for k in both}, {k: mb[k][1] for k in both}
 
 
+def _difference_stats(diffs: list[float]) -> dict[str, float | None]:
+    """Mean, SD and largest magnitude of the B − A differences of ΔmAP (points)."""
+    return {"loss_difference_mean": statistics.mean(diffs) if diffs else None,
+            "loss_difference_sd": statistics.stdev(diffs) if len(diffs) > 1 else None,
+            "loss_difference_max_abs": max(map(abs, diffs)) if diffs else None}
+
+
 def compare(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
     """Image- and cell-level agreement of two digest documents of the same model."""
     cells = []
@@ -154,10 +161,7 @@ def compare(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
         "identical_fraction": same / total if total else None,
         "baseline_map_a": 100 * ma[base] if base in ma else None,
         "baseline_map_b": 100 * mb[base] if base in mb else None,
-        "loss_cells": len(rows),
-        "loss_difference_mean": statistics.mean(diffs) if diffs else None,
-        "loss_difference_sd": statistics.stdev(diffs) if len(diffs) > 1 else None,
-        "loss_difference_max_abs": max(map(abs, diffs)) if diffs else None,
+        "loss_cells": len(rows), **_difference_stats(diffs),
     }
     return {"summary": summary, "images": cells, "losses": rows}
 
@@ -274,9 +278,7 @@ def compare_rows(a: dict[str, Any], b: dict[str, Any], model: str) -> dict[str, 
     summary = {
         "baseline_map_a": 100 * ba, "baseline_map_b": 100 * bb,
         "cells": len(rows), "cells_equal": sum(d == 0 for d in diffs),
-        "loss_difference_mean": statistics.mean(diffs) if diffs else None,
-        "loss_difference_sd": statistics.stdev(diffs) if len(diffs) > 1 else None,
-        "loss_difference_max_abs": max(map(abs, diffs)) if diffs else None,
+        **_difference_stats(diffs),
         "loss_difference_max_in_se": max(in_se) if in_se else None,
         "worst_transform_changed": sum(w["transform_a"] != w["transform_b"] for w in worst),
         "worst_difference_max_abs": max((abs(w["difference"]) for w in worst), default=None),
