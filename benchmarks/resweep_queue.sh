@@ -7,8 +7,9 @@
 # one starts, so the machine never waits between two detectors for someone to start the next.
 #   PROCESSES=2 benchmarks/resweep_queue.sh           # default: YOLOX-nano and YOLO11n
 #       again (measured with this preprocessing on machines that are gone: their scores files,
-#       so that every shipped row can be rebuilt without a store); YOLOv8n's and YOLOv10n's
-#       re-sweeps are merged (2026-11-28, 2026-11-29) and their scores files committed
+#       so that every shipped row can be rebuilt without a store; both done and merged
+#       2026-11-29: rerun, it only merges again); YOLOv8n's and YOLOv10n's re-sweeps are merged
+#       (2026-11-28, 2026-11-29) and every scores file is committed
 #   RESWEEP_MODELS="yolox_nano yolo11n-int8dyn" benchmarks/resweep_queue.sh
 # After each merge: python -m benchmarks.after_resweep (see benchmarks/after_resweep.py).
 set -euo pipefail
