@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -72,19 +73,21 @@ def test_resweep_queue_runs_each_detector_after_the_other_into_its_own_store(tmp
     stub = bench / "resweep_model.sh"  # stands in for the hours-long sweep: logs its call
     stub.write_text(f'#!/usr/bin/env bash\necho "$*" >> {log}\n[ "$2" != fail.onnx ]\n')
     stub.chmod(0o755)
-    env = {"PATH": "/usr/bin:/bin", "RESWEEP_STORES": "/s"}
+    stores = tmp_path / "stores"
+    env = {"PATH": os.environ["PATH"], "RESWEEP_STORES": str(stores)}
     r = subprocess.run(["bash", str(bench / "resweep_queue.sh")], env=env, capture_output=True,
                        text=True)
     assert r.returncode == 0, r.stderr
     assert log.read_text().splitlines() == [
-        "/s/resweep-yolox_nano yolox_nano.onnx", "/s/resweep-yolo11n yolo11n-int8dyn.onnx"]
+        f"{stores}/resweep-yolox_nano yolox_nano.onnx",
+        f"{stores}/resweep-yolo11n yolo11n-int8dyn.onnx"]
     log.unlink()
     r = subprocess.run(["bash", str(bench / "resweep_queue.sh")],
                        env={**env, "RESWEEP_MODELS": "yolox_nano fail yolo11n-int8dyn"},
                        capture_output=True, text=True)
     assert r.returncode != 0
-    assert log.read_text().splitlines() == ["/s/resweep-yolox_nano yolox_nano.onnx",
-                                            "/s/resweep-fail fail.onnx"]
+    assert log.read_text().splitlines() == [f"{stores}/resweep-yolox_nano yolox_nano.onnx",
+                                            f"{stores}/resweep-fail fail.onnx"]
 
 
 def test_reproduction_sample_runs_the_same_cells_of_each_detector_and_copies_the_stores(
@@ -116,7 +119,7 @@ db.commit()
     out, stores = tmp_path / "out", tmp_path / "stores"
     r = subprocess.run(["bash", str(REPO / "benchmarks" / "reproduction_sample.sh"), "data",
                         str(out), str(py)], capture_output=True, text=True, cwd=tmp_path,
-                       env={"PATH": "/usr/bin:/bin", "PROCESSES": "3",
+                       env={"PATH": os.environ["PATH"], "PROCESSES": "3",
                             "STORES": str(stores)})
     assert r.returncode == 0, r.stderr
     calls = log.read_text().splitlines()
@@ -264,8 +267,8 @@ def test_kept_provenance_walks_the_merge_chain_back_to_the_run_of_each_model(tmp
                               "earlier": {"file": f"reports-coco-tables-at-{c1}.json",
                                           "sha256": s1, "models": ["a", "b"],
                                           "machine": {"cpu": "M1"}}}})
-    runs = recovered_runs({"file": f"/tmp/x/reports-coco-tables-at-{c2}.json", "sha256": s2},
-                          ["c", "a", "b"], repo=repo)
+    copy = tmp_path / "copy" / f"reports-coco-tables-at-{c2}.json"  # the merge read a copy
+    runs = recovered_runs({"file": str(copy), "sha256": s2}, ["c", "a", "b"], repo=repo)
     by = {m: r for r in runs for m in r["models"]}
     assert by["c"]["machine"] == {"cpu": "M2"} and by["c"]["imported"] == [{"file": "c.scores"}]
     assert by["c"]["file"] == f"reports-coco-tables-at-{c2}.json" and "via" not in by["c"]
