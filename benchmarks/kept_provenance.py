@@ -27,7 +27,7 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-from fidelity.coco.tables import RUN_KEYS, record_by_name
+from fidelity.coco.tables import RUN_KEYS, earlier_runs, record_by_name, runs_passed_on
 
 REPO = Path(__file__).resolve().parent.parent
 _COMMIT = re.compile(r"reports-coco-tables-at-([0-9a-f]{7,40})\.json$")
@@ -50,15 +50,9 @@ def recovered_runs(record: dict[str, Any], wanted: list[str],
     record each, with ``via``: the files they passed through since (newest last). A record
     that names no commit, or one that already holds ``runs``, is taken as it is."""
     via = via or []
-    if "runs" in record:
-        return [r | {"models": [m for m in wanted if m in r["models"]],
-                     "via": [*(r.get("via") or []), *via]}
-                for r in record["runs"] if set(wanted) & set(r["models"])]
     match = _COMMIT.search(str(record.get("file")))
-    if match is None:  # the first full run's record: as it was written
-        return [{k: v for k, v in record.items() if k != "via"}
-                | {"models": [m for m in wanted if m in record.get("models", ())]}
-                | ({"via": via} if via else {})]
+    if "runs" in record or match is None:  # this version's runs, or the first full run's
+        return runs_passed_on(earlier_runs(record), wanted, via)
     tables = committed_tables(match.group(1), str(record["sha256"]), repo)
     meta = tables["meta"]
     earlier = meta.get("earlier") or {}

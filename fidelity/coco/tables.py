@@ -961,7 +961,7 @@ def record_by_name(record: Mapping[str, Any]) -> dict[str, Any]:
     return dict(record) | ({"file": Path(str(record["file"])).name} if record.get("file") else {})
 
 
-def _earlier_runs(prev: Mapping[str, Any]) -> list[dict[str, Any]]:
+def earlier_runs(prev: Mapping[str, Any]) -> list[dict[str, Any]]:
     """The measurement records an earlier merge kept (``runs``); a record of an older version,
     one for all its kept models with at most one ``via``, as one run."""
     if not prev:
@@ -973,6 +973,19 @@ def _earlier_runs(prev: Mapping[str, Any]) -> list[dict[str, Any]]:
     return [run | ({"via": [record_by_name(via)]} if via else {})]
 
 
+def runs_passed_on(runs: Sequence[Mapping[str, Any]], models: Sequence[str],
+                   via: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """The ``runs`` that measured some of ``models``, each narrowed to those, with ``via``
+    (files passed through since, newest last) extended."""
+    passed = []
+    for run in runs:
+        mine = [m for m in models if m in (run.get("models") or ())]
+        if mine:
+            through = [*(run.get("via") or []), *via]
+            passed.append(dict(run) | {"models": mine} | ({"via": through} if through else {}))
+    return passed
+
+
 def _kept_provenance(kept: Sequence[str], earlier: Tables, source: Mapping[str, Any]
                      ) -> dict[str, Any]:
     """Where the kept models were measured: ``source`` (the earlier tables' file and SHA-256)
@@ -982,18 +995,14 @@ def _kept_provenance(kept: Sequence[str], earlier: Tables, source: Mapping[str, 
     itself the records it carried, each with ``via`` naming the files it has passed through
     since. So a model kept through several merges is still named with the machine and
     versions that measured it."""
-    carried = _earlier_runs(earlier.meta.get("earlier") or {})
+    carried = earlier_runs(earlier.meta.get("earlier") or {})
     carried_models = {m for r in carried for m in r.get("models") or ()}
     runs: list[dict[str, Any]] = []
     own = [m for m in kept if m not in carried_models]
     if own:
         runs.append(record_by_name(source) | {"models": own} | {
             k: earlier.meta[k] for k in RUN_KEYS if earlier.meta.get(k) is not None})
-    for run in carried:
-        models = [m for m in kept if m in (run.get("models") or ())]
-        if models:
-            runs.append(run | {"models": models,
-                               "via": [*(run.get("via") or []), record_by_name(source)]})
+    runs += runs_passed_on(carried, kept, [record_by_name(source)])
     return dict(source) | {"models": list(kept), "runs": runs}
 
 

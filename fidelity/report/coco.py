@@ -180,6 +180,8 @@ def headline(tables: Tables, figure: Figure | None = None) -> Headline:
 
 
 def _run_section(tables: Tables) -> Section:
+    from fidelity.coco.tables import earlier_runs
+
     meta = tables.meta
     d = meta.get("data") or {}
     facts = [("cells finished", f"{tables.cells_done} done, {tables.cells_unreachable} "
@@ -201,11 +203,9 @@ def _run_section(tables: Tables) -> Section:
                       f"{', '.join(earlier.get('models') or [])} from {earlier.get('file')} "
                       f"(SHA-256 {str(earlier.get('sha256'))[:12]}…): not re-measured in "
                       "this store"))
-        # tables of older versions hold one record for every kept model, at the top level
-        for run in earlier.get("runs") or [earlier]:
-            vias = run.get("via") or []
-            via = " via " + ", ".join(str(v.get("file")) for v in (
-                [vias] if isinstance(vias, dict) else vias)) if vias else ""
+        for run in earlier_runs(earlier):  # an older version's one record: one run
+            via = " via " + ", ".join(str(v.get("file")) for v in run["via"]) \
+                if run.get("via") else ""
             ran = run.get("machines") or []
             where = (f"{len(ran)} machines: " + "; ".join(words(m) for m in ran)
                      if len(ran) > 1 else f"machine {words(run.get('machine'))}")
