@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 from benchmarks.machine import machine_info
-from fidelity.fileio import write_json_atomic
+from fidelity.core.fileio import write_json_atomic
 from fidelity.prediction.calibration import calibration_table
 
 

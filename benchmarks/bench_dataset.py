@@ -74,8 +74,8 @@ def dataset_run(source: Path, images: Path, out: Path, target: str, workers: int
 
 def main() -> int:
     from benchmarks.machine import machine_info
-    from fidelity.environment import available_cpus
-    from fidelity.fileio import write_json_atomic
+    from fidelity.core.fileio import write_json_atomic
+    from fidelity.pipeline.environment import available_cpus
 
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--coco", type=Path, default=None, help="Folder of COCO JPEGs.")

@@ -14,7 +14,7 @@ import numpy as np
 
 from benchmarks.machine import best_time, machine_info
 from fidelity.colour.colorimetry import delta_e_2000
-from fidelity.fileio import write_json_atomic
+from fidelity.core.fileio import write_json_atomic
 
 
 def main() -> None:

@@ -28,9 +28,9 @@ import numpy as np
 
 from benchmarks.machine import best_time, machine_info
 from fidelity.chart.find import find_chart
-from fidelity.chart.measure import measure_pixels
 from fidelity.colour import colorimetry as cm
-from fidelity.fileio import write_json_atomic
+from fidelity.core.fileio import write_json_atomic
+from fidelity.measure.pixels import measure_pixels
 from fidelity.prediction.transforms import apply_transform
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "tests"))

@@ -134,7 +134,7 @@ def main() -> int:
     import onnxruntime
 
     from fidelity.coco.scoring import load_annotations
-    from fidelity.resources import shared_dir
+    from fidelity.core.resources import shared_dir
 
     shared = shared_dir()
     if shared is None:
@@ -171,7 +171,7 @@ def main() -> int:
            "machine": machine_info() | {"onnxruntime": onnxruntime.__version__,
                                         "note": args.note}}
     if args.json:
-        from fidelity.fileio import write_json_atomic
+        from fidelity.core.fileio import write_json_atomic
 
         write_json_atomic(args.json, res)
         print(f"wrote {args.json}")

@@ -23,8 +23,8 @@ import fidelity.chart.find as find
 from benchmarks import bench_find_chart as bench
 from benchmarks.chart_scenes import decode_jpeg
 from benchmarks.machine import machine_info
-from fidelity.fileio import write_json_atomic, write_text_atomic
-from fidelity.qualify import FINDER_SCENES, synthetic_photo
+from fidelity.core.fileio import write_json_atomic, write_text_atomic
+from fidelity.pipeline.qualify import FINDER_SCENES, synthetic_photo
 
 CORRECTED = find.perspective_bias
 
@@ -59,7 +59,7 @@ def _summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def main() -> None:
-    from fidelity.resources import shared_dir
+    from fidelity.core.resources import shared_dir
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="every fifth photo")

@@ -55,7 +55,7 @@ import numpy as np
 from benchmarks.chart_scenes import corners_correct, decode_jpeg, make_scene
 from benchmarks.machine import machine_info
 from fidelity.colour import colorimetry as cm
-from fidelity.fileio import write_bytes_atomic, write_json_atomic, write_text_atomic
+from fidelity.core.fileio import write_bytes_atomic, write_json_atomic, write_text_atomic
 
 #: Images per kind (the full benchmark).
 COUNTS = {"classic": 60, "mini": 25, "passport": 20, "sg": 6, "none": 20}
@@ -139,7 +139,7 @@ def _float_srgb(rgb8: np.ndarray) -> np.ndarray:
 
 def find_fidelity(pixels: np.ndarray) -> np.ndarray | None:
     from fidelity.chart.find import find_chart
-    from fidelity.errors import FidelityError
+    from fidelity.core.errors import FidelityError
 
     try:
         return find_chart(pixels, encoding="srgb").corners
@@ -306,7 +306,7 @@ def table(summary: dict[str, Any], finders: list[str]) -> str:
 
 
 def main() -> None:
-    from fidelity.resources import shared_dir
+    from fidelity.core.resources import shared_dir
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="every fifth image")

@@ -37,13 +37,13 @@ from benchmarks.chart_scenes import corners_correct
 from benchmarks.hard_scenes import HAZARDS, hard_scene
 from benchmarks.machine import machine_info
 from fidelity.colour import colorimetry as cm
-from fidelity.fileio import write_json_atomic, write_text_atomic
+from fidelity.core.fileio import write_json_atomic, write_text_atomic
 
 
 def _fidelity(pixels: np.ndarray) -> tuple[np.ndarray | None, tuple[int, ...],
                                             tuple[int, ...], str]:
     from fidelity.chart.find import find_chart
-    from fidelity.errors import FidelityError
+    from fidelity.core.errors import FidelityError
 
     try:
         found = find_chart(pixels, encoding="srgb")
@@ -158,7 +158,7 @@ def table(summary: dict[str, Any]) -> str:
 
 
 def main() -> None:
-    from fidelity.resources import shared_dir
+    from fidelity.core.resources import shared_dir
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--per-hazard", type=int, default=20)

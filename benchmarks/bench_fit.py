@@ -12,7 +12,7 @@ how fast a fit is.
    model that expresses it: the cube sizes tried and, for each, the largest and 99th-percentile
    ΔE00 between the .cube through OpenColorIO and the model over the chart and a 41^3 lattice.
 3. **Speed** (requirement 5): two 12 MP chart images (4000 x 3000, 8-bit PNG, corners given).
-   In process, :func:`fidelity.fit.fit_and_verify`'s own timers (wall and CPU): reading,
+   In process, :func:`fidelity.pipeline.fit.fit_and_verify`'s own timers (wall and CPU): reading,
    fitting (fit and cross-validation) and verifying (baking the .cube, checking it through
    OpenColorIO over the chart and 68921 lattice points, the config, the SIM's patch windows
    through the cube by OpenColorIO and their measurement), side by side with the anchor, the
@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.machine import machine_info
-from fidelity.fileio import write_json_atomic
+from fidelity.core.fileio import write_json_atomic
 
 ROOT = Path(__file__).parents[1]
 #: (simulated camera, real camera) pairs of the suite.
@@ -114,7 +114,7 @@ def lut_accuracy() -> list[dict[str, Any]]:
     from fidelity.camera.render import render_chart
     from fidelity.chart.image import write_exr, write_png
     from fidelity.colour.colorimetry import linearize_srgb
-    from fidelity.fit import fit_and_verify
+    from fidelity.pipeline.fit import fit_and_verify
 
     exact = {"name": "exact", "sensitivities": {"source": "ideal"},
              "exposure": {"mode": "gain", "gain": 1.0},
@@ -178,7 +178,7 @@ def _big_pair(folder: Path) -> tuple[Path, Path, str]:
 
 def speed(repeats: int, model: str, folder: Path, pair: tuple[Path, Path, str]
           ) -> dict[str, Any]:
-    from fidelity.fit import fit_and_verify
+    from fidelity.pipeline.fit import fit_and_verify
 
     sim, real, corners = pair
     out: dict[str, Any] = {"width": 4000, "height": 3000, "model": model, "repeats": repeats}

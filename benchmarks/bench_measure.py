@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.machine import best_time, machine_info
-from fidelity.fileio import write_json_atomic
+from fidelity.core.fileio import write_json_atomic
 
 
 def bench_corruptions(images: list[np.ndarray], repeats: int) -> list[dict[str, Any]]:
@@ -71,8 +71,8 @@ def bench_directional(repeats: int) -> dict[str, Any]:
 
 
 def bench_measure(n: int) -> dict[str, Any]:
-    from fidelity.check import check_camera
     from fidelity.coco.measure import MeasureRequest, measure_mapping, resolve_coco_inputs
+    from fidelity.pipeline.check import check_camera
 
     inputs = resolve_coco_inputs()
     with tempfile.TemporaryDirectory() as store:
@@ -106,7 +106,7 @@ def main() -> None:
                     default=Path(__file__).parents[1] / "reports/benchmarks/measure.json")
     args = ap.parse_args()
     from fidelity.coco.jpeg import read_jpeg
-    from fidelity.resources import shared_dir
+    from fidelity.core.resources import shared_dir
 
     shared = shared_dir()
     if shared is None:

@@ -202,7 +202,7 @@ def table(rows: list[dict[str, Any]]) -> str:
 
 def main() -> int:
     from benchmarks.machine import machine_info
-    from fidelity.fileio import write_json_atomic
+    from fidelity.core.fileio import write_json_atomic
 
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--sizes", default="1,8,24,108",

@@ -101,9 +101,9 @@ def main() -> int:
     from fidelity.coco.detectors import Detector
     from fidelity.coco.jpeg import decode_jpeg, encode_jpeg
     from fidelity.coco.scoring import evaluate_detections, load_annotations, resolve_scorer
+    from fidelity.core.resources import shared_dir
     from fidelity.prediction.calibration import calibrate_transform
     from fidelity.prediction.transforms import TRANSFORMS
-    from fidelity.resources import shared_dir
 
     shared = shared_dir()
     if shared is None:
@@ -250,7 +250,7 @@ def main() -> int:
     res["requirement"]["pull_mean_ratio_to_floor_wall"] = used["wall_ratio_to_floor"]
     res["requirement"]["pull_mean_ratio_to_floor_cpu"] = used["cpu_ratio_to_floor"]
     if args.json:
-        from fidelity.fileio import write_json_atomic
+        from fidelity.core.fileio import write_json_atomic
 
         write_json_atomic(args.json, res)
     return 0

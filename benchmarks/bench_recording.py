@@ -177,7 +177,7 @@ def pairs(bag_args: list[str], png_args: list[str], repeat: int) -> dict[str, An
 def main() -> int:
     from benchmarks.machine import machine_info
     from fidelity.chart.image import write_png
-    from fidelity.fileio import write_json_atomic
+    from fidelity.core.fileio import write_json_atomic
 
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--gigabytes", type=float, default=1.0, help="Size of each recording.")

@@ -36,7 +36,7 @@ import numpy as np
 from fidelity.camera.model import Noise, load_camera
 from fidelity.camera.render import render_chart
 from fidelity.colour.colorimetry import delta_e_2000
-from fidelity.fileio import write_json_atomic
+from fidelity.core.fileio import write_json_atomic
 
 if TYPE_CHECKING:
     from fidelity.report.document import Document

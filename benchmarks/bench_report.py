@@ -74,7 +74,7 @@ def in_process(repeats: int, png: Path) -> dict[str, float]:
     HTML document (every figure drawn), of writing it as HTML, and of the whole HTML report
     of an audit of ``png`` (the image read again for the sampling windows, every figure, the
     HTML)."""
-    from fidelity.check import audit_image, check_camera
+    from fidelity.pipeline.check import audit_image, check_camera
     from fidelity.report.chart import chart_document, source_pixels
     from fidelity.report.html import render_html
 

@@ -137,7 +137,7 @@ def main() -> int:
                     help="only time the stages of a work item on one core (stages.json)")
     args = ap.parse_args()
 
-    from fidelity.resources import shared_dir
+    from fidelity.core.resources import shared_dir
 
     shared = shared_dir()
     if shared is None:

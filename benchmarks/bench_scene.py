@@ -9,7 +9,7 @@
    environment) of the .glb and the .usda, and of a .glb written with the sRGB-encoded values
    as linear factors (the common mistake); Mitsuba 3 (``scalar_spectral``) of the XML under
    D65 and A. Render seconds of each.
-3. Measurements: ``fidelity.check.audit_image`` (the library under ``fidelity gate``) with the
+3. Measurements: ``fidelity.pipeline.check.audit_image`` (the library under ``fidelity gate``) with the
    manifest's corners and exposure against the reference (RGB renders); the linear patch means
    at the manifest's centres against the albedos (RGB) or the closed form of the same spectra
    (Mitsuba), ΔE00.
@@ -37,9 +37,9 @@ sys.path.insert(0, str(ROOT))
 
 from benchmarks.machine import machine_info  # noqa: E402
 from fidelity.chart.image import read_image, write_png  # noqa: E402
-from fidelity.chart.measure import ReadOptions  # noqa: E402
-from fidelity.check import audit_image  # noqa: E402
+from fidelity.chart.read import ReadOptions  # noqa: E402
 from fidelity.colour.colorimetry import delinearize_srgb  # noqa: E402
+from fidelity.pipeline.check import audit_image  # noqa: E402
 from fidelity.scene.export import export_scene, wrongly_encoded  # noqa: E402
 from fidelity.scene.gltf import write_gltf  # noqa: E402
 from fidelity.scene.model import ChartScene, build_scene  # noqa: E402
@@ -121,7 +121,7 @@ def readme(r: dict[str, Any]) -> str:
         "with `mitsuba.load_file`; the USD one importing `pxr`.", "",
         f"## Renders ({w} x {h})", "",
         "RGB renders: Blender Cycles (CPU, View Transform Standard, box filter) of the exported "
-        "file, measured with `fidelity.check.audit_image` (the library under `fidelity gate`) at "
+        "file, measured with `fidelity.pipeline.check.audit_image` (the library under `fidelity gate`) at "
         "the manifest's corners with exposure 0, against the scene reference (BabelColor under "
         "D65); and the linear patch means at the manifest's centres against the albedos. The "
         f"floor is the clipping of the out-of-gamut cyan albedo: mean {floor['mean']:.4f}, "

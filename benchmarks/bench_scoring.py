@@ -60,7 +60,7 @@ def main() -> int:
 
     from fidelity.coco.scoring import evaluate_detections, load_annotations
     from fidelity.coco.sweep import SweepStore
-    from fidelity.fileio import write_json_atomic
+    from fidelity.core.fileio import write_json_atomic
 
     store = SweepStore(args.store, create=False)
     scorer_of = store.scorer_of

@@ -15,7 +15,7 @@ import numpy as np
 
 from benchmarks.colour_reference import reference_transform
 from benchmarks.machine import best_time, machine_info
-from fidelity.fileio import write_json_atomic
+from fidelity.core.fileio import write_json_atomic
 from fidelity.prediction.calibration import load_calibration_table
 from fidelity.prediction.transforms import TRANSFORMS
 

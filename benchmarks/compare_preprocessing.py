@@ -58,7 +58,7 @@ def main() -> int:
     from fidelity.coco.jpeg import read_jpeg, roundtrip_jpeg
     from fidelity.coco.scoring import evaluate_detections, load_annotations
     from fidelity.coco.sweep import SweepStore
-    from fidelity.resources import shared_dir
+    from fidelity.core.resources import shared_dir
 
     shared = shared_dir()
     if shared is None:

@@ -350,7 +350,7 @@ def main(argv: list[str] | None = None) -> None:
                      rows_markdown(rows, args.a_name or args.a, args.b_name or args.b))
         return
     if args.verb == "digest":
-        from fidelity.fileio import write_text_atomic
+        from fidelity.core.fileio import write_text_atomic
 
         doc = digest_store(args.store, args.model)
         if args.cpu_here:

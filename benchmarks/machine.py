@@ -60,7 +60,7 @@ def write_report(out: str | os.PathLike[str], doc: dict[str, Any], markdown: str
     import json
     from pathlib import Path
 
-    from fidelity.fileio import write_text_atomic
+    from fidelity.core.fileio import write_text_atomic
 
     path = Path(out)
     write_text_atomic(path.with_suffix(".json"), json.dumps(doc, indent=1) + "\n")

@@ -1,7 +1,7 @@
 """Is the stated uncertainty of the chart ΔE right? And what does it cost? (issue 32)
 
 Coverage: one camera rendered with ``--trials`` noise seeds; each render states its chart ΔE and
-its standard uncertainty ``u`` (k = 1, :mod:`fidelity.chart.uncertainty`). The ΔE values spread
+its standard uncertainty ``u`` (k = 1, :mod:`fidelity.measure.uncertainty`). The ΔE values spread
 around their mean; a right ``u`` has about 68 % of them within ``±u`` and 95 % within ``±2u``
 (normal distribution). Three studies:
 
@@ -18,7 +18,7 @@ around their mean; a right ``u`` has about 68 % of them within ``±u`` and 95 % 
   :func:`photo_study`) captured again and again: its own sensor noise each time, cropped by up
   to a tenth of each side, stored as PNG or as JPEG of quality 90 and 75, audited from the
   file as a user would. JPEG correlates neighbouring pixels (its 8 x 8 and 16 x 16 blocks):
-  the pixel-noise component's design effect (:func:`fidelity.chart.uncertainty.
+  the pixel-noise component's design effect (:func:`fidelity.measure.uncertainty.
   block_design_effect`) is what this study checks.
 
 The spread is the sample standard deviation over the trials; the mean ΔE over the trials stands
@@ -28,7 +28,7 @@ about sqrt(p (1 - p) / N) (6.6 % at 68 % and N = 50).
 Cost, measured two ways:
 
 - the share: ``fidelity audit IMAGE --json`` as a whole process of this checkout, with the
-  time spent in the uncertainty budget (:func:`fidelity.chart.measure.image_uncertainty`)
+  time spent in the uncertainty budget (:func:`fidelity.measure.pixels.image_uncertainty`)
   timed inside it; the cost on top of an audit is that time over the rest of the process
   (median over ``--repeats`` runs), for the small render and for the 12-megapixel photo of
   ``bench_startup`` (where the placement draws pass over the most pixels);
@@ -109,7 +109,7 @@ def render_study(camera: Any, trials: int) -> dict[str, Any]:
 
 def audit_study(camera: Any, trials: int) -> dict[str, Any]:
     from fidelity.camera.render import render_chart
-    from fidelity.chart.measure import measure_pixels
+    from fidelity.measure.pixels import measure_pixels
 
     measured = []
     for seed in range(trials):
@@ -184,7 +184,7 @@ def _run(cmd: list[str], pythonpath: str, cwd: str) -> tuple[float, float, float
 #: seconds spent in ``image_uncertainty`` go to the file named by the first argument.
 TIMED_AUDIT = """
 import sys, time
-import fidelity.chart.measure as measure
+import fidelity.measure.pixels as measure
 spent = []
 budget = measure.image_uncertainty
 def timed(*args, **kwargs):
@@ -338,7 +338,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="measure the coverage again, keep the cost of coverage.json (the "
                          "cost wants a quiet machine, the coverage does not)")
     args = ap.parse_args(argv)
-    from fidelity.fileio import write_text_atomic
+    from fidelity.core.fileio import write_text_atomic
 
     result: dict[str, Any] = {"machine": machine_info(), "coverage": {}}
     if args.only_cost:
@@ -350,7 +350,7 @@ def main(argv: list[str] | None = None) -> int:
             noisy_camera(fixed_white_balance=True), args.audit_trials)
         coco = args.coco
         if coco is None:
-            from fidelity.resources import shared_dir
+            from fidelity.core.resources import shared_dir
 
             shared = shared_dir()
             coco = shared / "coco" / "val2017" if shared is not None else None

@@ -6,7 +6,7 @@ detection loss.
 
 Two pipelines, one folder each:
 
-- the camera check (:mod:`fidelity.check`): :mod:`fidelity.colour` (colorimetry, spectra, chart
+- the camera check (:mod:`fidelity.pipeline.check`): :mod:`fidelity.colour` (colorimetry, spectra, chart
   data) → :mod:`fidelity.camera` (camera model, closed-form and Mitsuba renderers) →
   :mod:`fidelity.chart` (image reading, chart finding, measurement) → :mod:`fidelity.prediction`
   (transforms, calibration, ΔE → ΔmAP tables, verdicts) → :mod:`fidelity.report` (JSON, HTML,
@@ -27,20 +27,20 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from fidelity.version import __version__
+from fidelity.core.version import __version__
 
 #: Public name -> the module that defines it.
 _API: dict[str, str] = {
     # the camera-check pipeline
-    "check_camera": "fidelity.check",
-    "audit_image": "fidelity.check",
-    "audit_images": "fidelity.check",
-    "gate": "fidelity.check",
-    "compare_charts": "fidelity.compare",
-    "ComparisonReport": "fidelity.records",
-    "fit_correction": "fidelity.fit",
-    "Correction": "fidelity.fit",
-    "FitReport": "fidelity.fit",
+    "check_camera": "fidelity.pipeline.check",
+    "audit_image": "fidelity.pipeline.check",
+    "audit_images": "fidelity.pipeline.check",
+    "gate": "fidelity.pipeline.check",
+    "compare_charts": "fidelity.pipeline.compare",
+    "ComparisonReport": "fidelity.pipeline.records",
+    "fit_correction": "fidelity.pipeline.fit",
+    "Correction": "fidelity.pipeline.fit",
+    "FitReport": "fidelity.pipeline.fit",
     # stages
     "delta_e_2000": "fidelity.colour.colorimetry",
     "load_chart": "fidelity.colour.charts",
@@ -52,19 +52,19 @@ _API: dict[str, str] = {
     "read_image": "fidelity.chart.image",
     "find_chart": "fidelity.chart.find",
     "FoundChart": "fidelity.chart.find",
-    "measure_chart": "fidelity.chart.measure",
-    "measure_image": "fidelity.chart.measure",
-    "ChartMeasurement": "fidelity.chart.measure",
-    "ImageMeasurement": "fidelity.chart.measure",
-    "ReadOptions": "fidelity.chart.measure",
+    "measure_chart": "fidelity.measure.colour",
+    "measure_image": "fidelity.measure.pixels",
+    "ChartMeasurement": "fidelity.measure.colour",
+    "ImageMeasurement": "fidelity.measure.pixels",
+    "ReadOptions": "fidelity.chart.read",
     "apply_transform": "fidelity.prediction.transforms",
     "calibrate_transform": "fidelity.prediction.calibration",
     "predict": "fidelity.prediction.table",
     "predict_directional": "fidelity.prediction.directional",
     "DirectionalPrediction": "fidelity.prediction.directional",
     "error_parts": "fidelity.prediction.directional",
-    "chart_blind_spots": "fidelity.chart.blindspots",
-    "BlindSpot": "fidelity.chart.blindspots",
+    "chart_blind_spots": "fidelity.measure.blindspots",
+    "BlindSpot": "fidelity.measure.blindspots",
     "measure_mapping": "fidelity.coco.measure",
     "MeasuredLoss": "fidelity.coco.measure",
     "corrupt": "fidelity.coco.corruptions",
@@ -74,36 +74,33 @@ _API: dict[str, str] = {
     "Verdict": "fidelity.prediction.verdict",
     "evaluate": "fidelity.prediction.verdict",
     # records
-    "ChartReport": "fidelity.records",
-    "GateResult": "fidelity.records",
+    "ChartReport": "fidelity.pipeline.records",
+    "GateResult": "fidelity.pipeline.records",
     # reports
     "write_chart_report": "fidelity.report.chart",
     "write_comparison_report": "fidelity.report.compare",
     # errors
-    "FidelityError": "fidelity.errors",
+    "FidelityError": "fidelity.core.errors",
 }
 
 if TYPE_CHECKING:
     from fidelity.camera.model import CameraModel, load_camera
     from fidelity.camera.render import ChartRender, render_chart
-    from fidelity.chart.blindspots import BlindSpot, chart_blind_spots
     from fidelity.chart.find import FoundChart, find_chart
     from fidelity.chart.image import read_image
-    from fidelity.chart.measure import (
-        ChartMeasurement,
-        ImageMeasurement,
-        ReadOptions,
-        measure_chart,
-        measure_image,
-    )
-    from fidelity.check import audit_image, audit_images, check_camera, gate
+    from fidelity.chart.read import ReadOptions
     from fidelity.coco.corruptions import corrupt
     from fidelity.coco.measure import MeasuredLoss, measure_mapping
     from fidelity.colour.charts import Chart, load_chart
     from fidelity.colour.colorimetry import delta_e_2000
-    from fidelity.compare import compare_charts
-    from fidelity.errors import FidelityError
-    from fidelity.fit import Correction, FitReport, fit_correction
+    from fidelity.core.errors import FidelityError
+    from fidelity.measure.blindspots import BlindSpot, chart_blind_spots
+    from fidelity.measure.colour import ChartMeasurement, measure_chart
+    from fidelity.measure.pixels import ImageMeasurement, measure_image
+    from fidelity.pipeline.check import audit_image, audit_images, check_camera, gate
+    from fidelity.pipeline.compare import compare_charts
+    from fidelity.pipeline.fit import Correction, FitReport, fit_correction
+    from fidelity.pipeline.records import ChartReport, ComparisonReport, GateResult
     from fidelity.prediction.calibration import calibrate_transform
     from fidelity.prediction.directional import (
         DirectionalPrediction,
@@ -113,7 +110,6 @@ if TYPE_CHECKING:
     from fidelity.prediction.table import Prediction, delta_e_limit, predict
     from fidelity.prediction.transforms import apply_transform
     from fidelity.prediction.verdict import Criterion, Verdict, evaluate
-    from fidelity.records import ChartReport, ComparisonReport, GateResult
     from fidelity.report.chart import write_chart_report
     from fidelity.report.compare import write_comparison_report
 

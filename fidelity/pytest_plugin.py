@@ -10,7 +10,7 @@ Installed with camera-fidelity (entry point ``pytest11``), it gives every test s
 
 The fixture measures the chart in an image (found, or given by ``corners=``) with
 :func:`fidelity.audit_image` and returns a :class:`ColourFidelity`: a float (the mean ΔE00) that
-also carries the whole :class:`~fidelity.records.ChartReport` (``.report``). The measured
+also carries the whole :class:`~fidelity.pipeline.records.ChartReport` (``.report``). The measured
 values are recorded as JUnit properties, so a CI shows them: properties of the test case under
 ``junit_family`` ``legacy`` or ``xunit1``, and under ``xunit2`` (pytest's default, whose schema
 allows properties only on the suite) properties of the test suite named after the test
@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 import pytest
 
 if TYPE_CHECKING:
-    from fidelity.records import ChartReport
+    from fidelity.pipeline.records import ChartReport
 
 
 class ColourFidelity(float):
@@ -81,8 +81,8 @@ def colour_fidelity(request: pytest.FixtureRequest) -> Callable[..., ColourFidel
     def measure(image: str | os.PathLike[str], **options: Any) -> ColourFidelity:
         from dataclasses import fields
 
-        from fidelity.chart.measure import ReadOptions
-        from fidelity.check import audit_image
+        from fidelity.chart.read import ReadOptions
+        from fidelity.pipeline.check import audit_image
 
         kwargs = {**defaults, **options}
         reading = {f.name for f in fields(ReadOptions)} & kwargs.keys()

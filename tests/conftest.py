@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from fidelity.resources import shared_dir
+from fidelity.core.resources import shared_dir
 
 pytest_plugins = ["pytester"]
 

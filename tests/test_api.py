@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import fidelity
-from fidelity.records import ChartReport
+from fidelity.pipeline.records import ChartReport
 from fidelity.report.jsonform import chart_report_json
 
 
@@ -28,11 +28,11 @@ def test_import_fidelity_is_light():
 
 
 def test_the_version_is_the_installed_distributions():
-    """fidelity.version is the one place of the version; the build reads it from there."""
+    """fidelity.core.version is the one place of the version; the build reads it from there."""
     from importlib.metadata import version
 
     assert fidelity.__version__ == version("camera-fidelity")
-    code = ("import sys, fidelity.version as v; a = 'importlib.metadata' in sys.modules; "
+    code = ("import sys, fidelity.core.version as v; a = 'importlib.metadata' in sys.modules; "
             "n = v.installed_version('numpy'); print(a, 'importlib.metadata' in sys.modules, n)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "False", version("numpy")]
@@ -43,7 +43,7 @@ def test_installed_versions_equal_importlib_metadatas():
     parser of the whole file is the second method, over every installed distribution."""
     from importlib.metadata import distributions, version
 
-    from fidelity.version import installed_version
+    from fidelity.core.version import installed_version
 
     names = {d.metadata["Name"] for d in distributions()}
     assert len(names) > 20
@@ -57,7 +57,7 @@ def test_installed_version_reads_odd_metadata_folders_as_importlib_does(tmp_path
     first wins): the same answers as ``importlib.metadata.version`` on the same path."""
     from importlib.metadata import PackageNotFoundError, version
 
-    from fidelity import version as module
+    from fidelity.core import version as module
 
     first, second = tmp_path / "first", tmp_path / "second"
     for folder, text in [
@@ -128,7 +128,7 @@ def test_chart_report_json_round_trip_is_exact_and_schema_valid(tmp_path):
 
 def test_from_json_refuses_a_document_that_is_not_a_report():
     pytest.importorskip("jsonschema")
-    from fidelity.errors import InvalidValueError
+    from fidelity.core.errors import InvalidValueError
 
     doc = chart_report_json(fidelity.check_camera("ideal"))
     doc["mean_delta_e"] = -1.0

@@ -4,15 +4,17 @@ Every ``import`` and ``from ... import`` of ``fidelity/`` is read from the sourc
 inside functions and under ``TYPE_CHECKING`` alike: an import hidden in a function still ties
 two modules together). The layers, lowest first, are the ones docs/development.md names:
 
-0. support: ``errors``, ``version``, ``resources``, ``fileio``, ``schema``
-1. ``colour``
-2. ``camera``, ``chart``, ``correction``
-3. ``prediction``, ``scene`` (the chart scene for simulators: colour + camera data)
-4. ``coco``
-5. the chart pipeline: ``records``, ``check``, ``compare``, ``fit``, ``qualify``
-6. ``report``
-7. the edges: ``config``, ``environment``, ``cli``, ``pytest_plugin``, ``__main__`` and the
-   package itself (its lazy public API)
+0. ``core``: errors, version, resources, file I/O, schemas, settings
+1. ``colour``: colorimetry, spectral data, the reference charts
+2. ``chart``: reading images and recordings, finding and locating the chart
+3. ``measure``: one module per camera property measured on a located chart
+4. ``camera`` (camera models and the chart's render), ``correction`` (colour corrections)
+5. ``prediction``, ``scene`` (the chart scene for simulators: colour + camera data)
+6. ``coco``: the COCO benchmark behind the prediction tables
+7. ``pipeline``: check, audit and gate, compare, fit, qualify and their records
+8. ``report``: renders records (terminal, HTML, JSON, evidence formats)
+9. the edges: ``cli``, ``pytest_plugin``, ``__main__`` and the package itself (its lazy
+   public API)
 
 A module may import its own layer and the ones below; a cycle is an error at any layer.
 """
@@ -28,17 +30,16 @@ import pytest
 PACKAGE = Path(__file__).resolve().parent.parent / "fidelity"
 
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("fidelity.errors", "fidelity.version", "fidelity.resources", "fidelity.fileio",
-     "fidelity.schema"),
+    ("fidelity.core",),
     ("fidelity.colour",),
-    ("fidelity.camera", "fidelity.chart", "fidelity.correction"),
+    ("fidelity.chart",),
+    ("fidelity.measure",),
+    ("fidelity.camera", "fidelity.correction"),
     ("fidelity.prediction", "fidelity.scene"),
     ("fidelity.coco",),
-    ("fidelity.records", "fidelity.check", "fidelity.compare", "fidelity.fit",
-     "fidelity.qualify"),
+    ("fidelity.pipeline",),
     ("fidelity.report",),
-    ("fidelity.config", "fidelity.environment", "fidelity.cli", "fidelity.pytest_plugin",
-     "fidelity.__main__", "fidelity"),
+    ("fidelity.cli", "fidelity.pytest_plugin", "fidelity.__main__", "fidelity"),
 )
 
 
@@ -159,13 +160,15 @@ def test_the_checks_find_what_they_look_for(tmp_path) -> None:
     cycle finder finds a two-module cycle: the checks above can fail."""
     pkg = tmp_path / "fidelity"
     (pkg / "colour").mkdir(parents=True)
+    (pkg / "core").mkdir()
     (pkg / "__init__.py").write_text("")
     (pkg / "colour" / "__init__.py").write_text("")
-    (pkg / "errors.py").write_text("def f():\n    from fidelity.colour.a import _hidden\n")
-    (pkg / "colour" / "a.py").write_text("from ..errors import f\n_hidden = 1\n")
+    (pkg / "core" / "__init__.py").write_text("")
+    (pkg / "core" / "errors.py").write_text("def f():\n    from fidelity.colour.a import _hidden\n")
+    (pkg / "colour" / "a.py").write_text("from ..core.errors import f\n_hidden = 1\n")
     g, private = imports(pkg)
-    assert g["fidelity.errors"] == {"fidelity.colour.a"}
-    assert g["fidelity.colour.a"] == {"fidelity.errors"}
-    assert private == [("fidelity.errors", "fidelity.colour.a", "_hidden")]
-    assert cycles(g) == [["fidelity.colour.a", "fidelity.errors"]]
-    assert layer("fidelity.errors") < layer("fidelity.colour.a")
+    assert g["fidelity.core.errors"] == {"fidelity.colour.a"}
+    assert g["fidelity.colour.a"] == {"fidelity.core.errors"}
+    assert private == [("fidelity.core.errors", "fidelity.colour.a", "_hidden")]
+    assert cycles(g) == [["fidelity.colour.a", "fidelity.core.errors"]]
+    assert layer("fidelity.core.errors") < layer("fidelity.colour.a")

@@ -17,10 +17,11 @@ import OpenEXR
 import pytest
 from PIL import Image as PILImage
 
-from fidelity.chart import measure as _measure
-from fidelity.chart.measure import ReadOptions, exposure_from_neutrals
+from fidelity.chart.read import ReadOptions
 from fidelity.colour.charts import load_chart
-from fidelity.errors import FidelityError, InvalidValueError, UnknownNameError
+from fidelity.core.errors import FidelityError, InvalidValueError, UnknownNameError
+from fidelity.measure import pixels as _measure
+from fidelity.measure.pixels import exposure_from_neutrals
 from fidelity.prediction.transforms import apply_transform
 
 

@@ -16,9 +16,9 @@ import pytest
 
 from benchmarks.bench_memory import photo, run_process, true_corners, write_image
 from fidelity.chart import find, image, locate
-from fidelity.chart.blindspots import effective_bits
 from fidelity.chart.image import as_float32, read_image
-from fidelity.chart.measure import measure_pixels
+from fidelity.measure.blindspots import effective_bits
+from fidelity.measure.pixels import measure_pixels
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -126,7 +126,7 @@ def _steps_reference(codes: np.ndarray, code_range: int) -> tuple[float | None, 
 
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.int32])
 def test_steps_counted_by_blocks_equal_the_whole_image_count(monkeypatch, dtype):
-    from fidelity.chart import blindspots
+    from fidelity.measure import blindspots
 
     rng = np.random.default_rng(4)
     top = 255 if dtype == np.uint8 else 65535

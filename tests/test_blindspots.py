@@ -10,7 +10,9 @@ import pytest
 from click.testing import CliRunner
 
 from fidelity.camera.render import render_chart
-from fidelity.chart.blindspots import (
+from fidelity.chart.image import write_png
+from fidelity.cli import main
+from fidelity.measure.blindspots import (
     banding,
     bit_depth,
     chart_blind_spots,
@@ -18,8 +20,6 @@ from fidelity.chart.blindspots import (
     shadow_tone,
     warnings,
 )
-from fidelity.chart.image import write_png
-from fidelity.cli import main
 
 CAMERAS = Path(__file__).resolve().parents[1] / "cameras"
 
@@ -44,9 +44,9 @@ def test_warnings_on_the_suite(camera, expected):
 
 def test_shadow_slope_is_the_local_gamma_of_the_neutrals():
     """A chart whose neutral luminances follow Y_ref^g (scaled by any exposure) reads g."""
-    from fidelity.chart.measure import measure_chart
     from fidelity.colour.charts import load_reference
     from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
+    from fidelity.measure.colour import measure_chart
 
     ref = load_reference("scene")
     lin = np.clip(linearize_srgb(np.clip(ref.srgb, 0, 1)), 0, 1)
@@ -87,7 +87,7 @@ def test_check_and_audit_report_the_warnings(tmp_path):
     assert (depth["value"], depth["threshold"]) == (5.0, 6.0)
     html = (tmp_path / "report.html").read_text()
     assert "Blind spots of the chart ΔE" in html and "<strong>warning</strong>" in html
-    from fidelity.records import ChartReport, report_schema
+    from fidelity.pipeline.records import ChartReport, report_schema
 
     jsonschema = pytest.importorskip("jsonschema")
     jsonschema.validate(doc, report_schema())

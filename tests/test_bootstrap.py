@@ -10,7 +10,7 @@ import pytest
 
 from fidelity.coco.bootstrap import bootstrap_weights, match_records, weighted_scores
 from fidelity.coco.scoring import coco_from_dict, evaluate_detections
-from fidelity.errors import InvalidValueError
+from fidelity.core.errors import InvalidValueError
 
 CATS = [{"id": 1, "name": "person"}, {"id": 2, "name": "bicycle"}, {"id": 3, "name": "car"},
         {"id": 4, "name": "motorcycle"}]

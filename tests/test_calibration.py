@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fidelity.colour.charts import load_chart
-from fidelity.errors import InvalidValueError, UnreachableTargetError
+from fidelity.core.errors import InvalidValueError, UnreachableTargetError
 from fidelity.prediction.calibration import (
     DEFAULT_TARGETS,
     TOLERANCE,

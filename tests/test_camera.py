@@ -34,7 +34,7 @@ from fidelity.colour.spectral import (
     scene_reference,
     tristimulus,
 )
-from fidelity.errors import InputFileError, UnknownNameError
+from fidelity.core.errors import InputFileError, UnknownNameError
 
 
 def _patches_under(ill: str = "D65"):

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fidelity.chart.measure import chart_delta_e, measure_chart
 from fidelity.colour.charts import available_charts, load_chart
-from fidelity.errors import InputFileError, InvalidValueError, UnknownNameError
+from fidelity.core.errors import InputFileError, InvalidValueError, UnknownNameError
+from fidelity.measure.colour import chart_delta_e, measure_chart
 
 
 def test_safecolor_chart_matches_the_paper_table() -> None:

@@ -92,7 +92,7 @@ def test_readme_example_is_what_check_prints(default_check, page):
 
 def test_report_numbers_agree_with_colour_science(default_check):
     jsonschema = pytest.importorskip("jsonschema")
-    from fidelity.records import report_schema
+    from fidelity.pipeline.records import report_schema
 
     folder, _ = default_check
     doc = json.loads((folder / "fidelity-report" / "report.json").read_text())

@@ -19,7 +19,7 @@ import yaml
 from click.testing import CliRunner
 
 from fidelity.cli import main
-from fidelity.resources import resource_dir
+from fidelity.core.resources import resource_dir
 
 REPO = Path(__file__).resolve().parents[1]
 JUNIT_XSD = resource_dir("data") / "schemas" / "junit.xsd"

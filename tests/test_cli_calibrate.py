@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from fidelity.chart.measure import chart_delta_e
 from fidelity.cli import main
 from fidelity.colour.charts import load_chart
+from fidelity.measure.colour import chart_delta_e
 
 
 def test_calibrate_writes_json_and_csv(tmp_path: Path) -> None:

@@ -18,7 +18,7 @@ from fidelity.coco.scoring import (
     evaluate_detections,
     load_annotations,
 )
-from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.core.errors import InputFileError, InvalidValueError
 
 
 def _gt(boxes: dict[int, list[tuple[int, list[float]]]]) -> object:
@@ -123,7 +123,7 @@ def test_load_annotated_images_names_what_is_missing(tmp_path) -> None:
     import json as _json
 
     from fidelity.coco.scoring import load_annotated_images
-    from fidelity.errors import InputFileError
+    from fidelity.core.errors import InputFileError
 
     doc = {"images": [{"id": 2, "file_name": "b.jpg", "width": 4, "height": 4},
                       {"id": 1, "file_name": "a.jpg", "width": 4, "height": 4}],
@@ -214,7 +214,7 @@ def test_faster_coco_eval_agrees_on_real_detector_output(shared) -> None:
 
 def test_scorer_names() -> None:
     from fidelity.coco.scoring import resolve_scorer
-    from fidelity.errors import UnknownNameError
+    from fidelity.core.errors import UnknownNameError
 
     assert resolve_scorer("auto") in COCO_SCORERS
     assert resolve_scorer("pycocotools") == "pycocotools"

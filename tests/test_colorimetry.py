@@ -20,8 +20,8 @@ from fidelity.colour.colorimetry import (
     srgb_to_lab,
     xyz_to_lab,
 )
-from fidelity.errors import InvalidValueError, UnknownNameError
-from fidelity.qualify import sharma_pairs
+from fidelity.core.errors import InvalidValueError, UnknownNameError
+from fidelity.pipeline.qualify import sharma_pairs
 
 SHARMA = sharma_pairs()
 D65_XY = np.array([0.3127, 0.3290])

@@ -14,8 +14,8 @@ from fidelity.chart.image import write_png
 from fidelity.cli import main
 from fidelity.colour.charts import load_reference
 from fidelity.colour.colorimetry import delinearize_srgb, delta_e_2000, linearize_srgb, srgb_to_lab
-from fidelity.compare import compare_charts
-from fidelity.records import ComparisonReport
+from fidelity.pipeline.compare import compare_charts
+from fidelity.pipeline.records import ComparisonReport
 from fidelity.report.jsonform import comparison_json
 
 PATCH, GAP = 40, 10
@@ -164,7 +164,7 @@ def test_compare_is_in_the_public_api():
 def test_the_html_summary_states_the_uncertainty_and_the_interval(charts):
     """The summary table of the comparison page gives the sim-to-real ΔE with its standard
     uncertainty and the classic prediction with its interval, as the terminal does."""
-    from fidelity.chart.uncertainty import uncertain_text
+    from fidelity.measure.uncertainty import uncertain_text
     from fidelity.report.compare import comparison_document
     from fidelity.report.document import Facts
 

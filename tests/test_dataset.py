@@ -22,7 +22,7 @@ from fidelity.coco.dataset import (
     write_transformed_dataset,
 )
 from fidelity.coco.jpeg import decode_jpeg, encode_jpeg, read_jpeg
-from fidelity.errors import InputFileError, UnreachableTargetError
+from fidelity.core.errors import InputFileError, UnreachableTargetError
 from fidelity.prediction.calibration import calibrate_transform
 from fidelity.prediction.transforms import TRANSFORMS
 
@@ -319,7 +319,7 @@ def test_pull_mean_workspace_repeats_the_colorimetry(kernel: str) -> None:
 
 def test_pull_mean_kernels_agree_and_are_named() -> None:
     from fidelity.coco.dataset import PullMeanWorkspace, pull_mean_kernel, pull_mean_uint8
-    from fidelity.errors import UnknownNameError
+    from fidelity.core.errors import UnknownNameError
 
     imgs = [natural_image(120, 160, seed=s) for s in range(3)]
     imgs.append(np.zeros((0, 3), np.uint8))

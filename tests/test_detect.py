@@ -21,11 +21,11 @@ from test_audit import GRID_CORNERS, draw_chart, expected_delta_e, map_points, w
 
 from fidelity.chart.find import colour_order, find_chart
 from fidelity.chart.locate import homography_from_points
-from fidelity.chart.measure import measure_pixels
 from fidelity.cli import main
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import load_chart
-from fidelity.errors import InvalidValueError, UnknownNameError
+from fidelity.core.errors import InvalidValueError, UnknownNameError
+from fidelity.measure.pixels import measure_pixels
 from fidelity.prediction.transforms import apply_transform
 
 CHART = load_chart("safecolor")
@@ -188,7 +188,7 @@ def test_homography_least_squares_from_many_points():
 def test_missing_opencv_is_a_clear_error_that_suggests_corners(monkeypatch):
     import sys
 
-    from fidelity.errors import FidelityError
+    from fidelity.core.errors import FidelityError
 
     monkeypatch.setitem(sys.modules, "cv2", None)  # import fails
     h, size = CASES["frontal"]

@@ -30,7 +30,7 @@ from fidelity.coco.detectors import (
     recognise_layout,
     torchvision_batched_nms,
 )
-from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.core.errors import InputFileError, InvalidValueError
 
 IMG = [("images", [1, 3, 640, 640])]
 ULTRA = recognise_layout(IMG, [("output0", [1, 84, 8400])])

@@ -11,9 +11,9 @@ import pytest
 
 from fidelity.colour.charts import load_chart
 from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
+from fidelity.pipeline.qualify import sharma_pairs
 from fidelity.prediction import directional as dr
 from fidelity.prediction.transforms import TRANSFORMS
-from fidelity.qualify import sharma_pairs
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARMA = sharma_pairs()
@@ -72,7 +72,7 @@ def test_shipped_table_is_rebuilt_from_tables_json():
     and its classic curves are the measured table's."""
     from fidelity.coco.directional import directional_table
     from fidelity.coco.tables import TablesResult
-    from fidelity.fileio import json_ready
+    from fidelity.core.fileio import json_ready
     from fidelity.prediction.table import prediction_dir
 
     result = TablesResult.from_json(json.loads((ROOT / "reports/coco/tables.json").read_text()))
@@ -189,9 +189,9 @@ def test_validation_directional_bound_holds_for_yolo11n():
 
 
 def test_directional_verdict_and_json_round_trip():
-    from fidelity.check import check_camera
+    from fidelity.pipeline.check import check_camera
+    from fidelity.pipeline.records import ChartReport
     from fidelity.prediction.verdict import Criterion
-    from fidelity.records import ChartReport
     from fidelity.report.jsonform import chart_report_json
 
     crit = Criterion("max-dmap", 5.0)

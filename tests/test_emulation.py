@@ -17,7 +17,7 @@ from fidelity.coco.emulation import (
     training_reflectances,
 )
 from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
-from fidelity.errors import UnknownNameError
+from fidelity.core.errors import UnknownNameError
 
 #: Rotation of linear RGB by -30 degrees about the grey axis (cameras/bad-hue-rotation.toml).
 HUE_MATRIX = np.array([[0.91068, 0.33333, -0.24402], [-0.24402, 0.91068, 0.33333],
@@ -208,7 +208,7 @@ def test_a_table_of_some_colours_checks_its_codes() -> None:
     """Codes must be sorted and distinct with one (r, g, b) row each; an empty table refuses
     every image; the 24-bit code is (r << 16) | (g << 8) | b."""
     from fidelity.coco.dataset import PixelMap, colour_codes
-    from fidelity.errors import InvalidValueError
+    from fidelity.core.errors import InvalidValueError
 
     assert colour_codes(np.array([[[1, 2, 3], [255, 255, 255]]], np.uint8)).tolist() == [
         [66051, (1 << 24) - 1]]

@@ -376,7 +376,7 @@ def test_committed_validation_scores_rebuild_the_shipped_report(tmp_path):
         load_suite,
         validated_cameras,
     )
-    from fidelity.resources import resource_dir
+    from fidelity.core.resources import resource_dir
 
     path = REPO / "reports" / "validation" / "validation.scores.json.gz"
     store = ValidationStore(tmp_path / "store")
@@ -406,8 +406,8 @@ def test_every_shipped_table_names_its_detectors():
 def test_the_html_summary_states_the_uncertainty_and_the_interval():
     """The summary table of a check's page gives the chart ΔE with its standard uncertainty
     and the predicted ΔmAP with its interval, the numbers of the record."""
-    from fidelity.chart.uncertainty import uncertain_text
-    from fidelity.check import check_camera
+    from fidelity.measure.uncertainty import uncertain_text
+    from fidelity.pipeline.check import check_camera
     from fidelity.report.chart import summary_facts
 
     r = check_camera("nikon-5100")

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from fidelity.errors import InputFileError
-from fidelity.fileio import (
+from fidelity.core.errors import InputFileError
+from fidelity.core.fileio import (
     atomic_output,
     check_outputs,
     json_ready,
@@ -121,7 +121,7 @@ def test_number_formatter() -> None:
 def test_check_outputs_protects_input_folders_and_stores(tmp_path: Path) -> None:
     """An output inside an input folder (existing or not: a rerun answers as the first run), or
     directly in a results store's folder, is refused; store subfolders are not."""
-    from fidelity.fileio import check_output_folders
+    from fidelity.core.fileio import check_output_folders
 
     images = tmp_path / "images"
     images.mkdir()
@@ -177,7 +177,7 @@ def test_write_errors_leave_no_partial_file(tmp_path: Path, monkeypatch) -> None
 
 
 def test_undecodable_file_names_print() -> None:
-    from fidelity.fileio import display_path, printable
+    from fidelity.core.fileio import display_path, printable
 
     assert display_path(b"chart\xff.png") == "chart\\xff.png"
     assert printable("chart\udcff.png") == "chart\\xff.png"
@@ -186,7 +186,7 @@ def test_undecodable_file_names_print() -> None:
 
 
 def test_a_cached_reader_reads_a_file_again_only_when_it_changes(tmp_path, monkeypatch):
-    from fidelity.fileio import cached_while_unchanged
+    from fidelity.core.fileio import cached_while_unchanged
 
     reads = []
 

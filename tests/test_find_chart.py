@@ -30,11 +30,12 @@ from fidelity.chart.find import (
     perspective_bias,
     placement_scores,
 )
-from fidelity.chart.measure import ReadOptions, measure_image, measure_pixels
+from fidelity.chart.read import ReadOptions
 from fidelity.cli import main
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import load_chart
-from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.measure.pixels import measure_image, measure_pixels
 
 CHART = load_chart("safecolor")
 LINEAR = cm.linearize_srgb(CHART.srgb)

@@ -30,11 +30,12 @@ from fidelity.chart.find import (
     sample_cells,
 )
 from fidelity.chart.locate import homography_from_points
-from fidelity.chart.measure import ReadOptions, measure_image, measure_pixels
+from fidelity.chart.read import ReadOptions
 from fidelity.cli import main
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import load_chart
-from fidelity.errors import InvalidValueError
+from fidelity.core.errors import InvalidValueError
+from fidelity.measure.pixels import measure_image, measure_pixels
 
 LINEAR = cm.linearize_srgb(load_chart("safecolor").srgb)
 

@@ -18,6 +18,7 @@ from fidelity.camera.render import render_chart
 from fidelity.chart.image import write_exr, write_png
 from fidelity.cli import main
 from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
+from fidelity.core.errors import InvalidValueError
 from fidelity.correction.models import (
     CONDITION_LIMIT,
     CURVE_KNOTS,
@@ -28,7 +29,6 @@ from fidelity.correction.models import (
     patch_delta_e,
     usable_patches,
 )
-from fidelity.errors import InvalidValueError
 
 ocio = pytest.importorskip("PyOpenColorIO", reason="fidelity fit needs opencolorio ([fit])")
 
@@ -292,7 +292,7 @@ def test_fit_and_verify_through_opencolorio(images, tmp_path, sim_key):
     again, is within 0.5 ΔE00 of REAL; the .cube is within 0.1 ΔE00 of the model over the
     chart and a dense lattice; the OCIO config loads and gives the cube's result."""
     from fidelity.correction.lut import apply_processor, config_processor, cube_processor
-    from fidelity.fit import fit_and_verify
+    from fidelity.pipeline.fit import fit_and_verify
 
     rep = fit_and_verify(images[sim_key], images["real"], tmp_path, sim_corners=CORNERS,
                          real_corners=CORNERS)
@@ -315,7 +315,7 @@ def test_fit_and_verify_through_opencolorio(images, tmp_path, sim_key):
 
 
 def test_a_nearly_grey_real_chart_is_refused(images, tmp_path):
-    from fidelity.fit import fit_correction
+    from fidelity.pipeline.fit import fit_correction
 
     with pytest.raises(InvalidValueError, match="nearly grey"):
         fit_correction(images["hue"], images["grey"], sim_corners=CORNERS, real_corners=CORNERS)
@@ -350,18 +350,11 @@ def test_cli_fit_bad_input_is_one_line_exit_2(images, tmp_path):
 
 
 def test_a_missing_opencolorio_names_the_extra(monkeypatch):
-    import builtins
+    import sys
 
     from fidelity.correction import lut
 
-    real_import = builtins.__import__
-
-    def no_ocio(name, *args, **kwargs):
-        if name == "PyOpenColorIO":
-            raise ImportError(name)
-        return real_import(name, *args, **kwargs)
-
-    monkeypatch.setattr(builtins, "__import__", no_ocio)
+    monkeypatch.setitem(sys.modules, "PyOpenColorIO", None)  # import raises ImportError
     with pytest.raises(InvalidValueError, match=r"camera-fidelity\[fit\]"):
         lut.ocio()
 
@@ -395,7 +388,7 @@ def test_the_normalisation_is_left_out_of_the_correction(images, exact, tmp_path
     """``exposure`` (default) keeps the simulator's exposure: a SIM one stop darker than REAL
     and otherwise equal gets a correction that changes nothing; ``none`` corrects the
     exposure too (linear values doubled)."""
-    from fidelity.fit import fit_correction
+    from fidelity.pipeline.fit import fit_correction
 
     dark = np.asarray(delinearize_srgb(np.asarray(linearize_srgb(np.clip(exact[1], 0, 1)))
                                        * 0.5))
@@ -419,7 +412,7 @@ def test_a_bending_model_meets_the_lut_tolerance_with_65(images, tmp_path, sim_k
     lattice even in the sRGB encoding, with scene-linear output, is within 0.1 ΔE00 of the
     model over the chart and the 41^3 lattice at 65^3 (33^3 tried first and refused: about
     0.3 over the lattice)."""
-    from fidelity.fit import fit_and_verify
+    from fidelity.pipeline.fit import fit_and_verify
 
     rep = fit_and_verify(images[sim_key], images["real"], tmp_path, model=model,
                          sim_corners=CORNERS, real_corners=CORNERS)
@@ -436,7 +429,7 @@ def test_the_windows_alone_measure_what_the_whole_corrected_image_measures(image
     fit_and_verify with the corrected image written reports the same after-ΔE00."""
     from fidelity.chart.image import read_image
     from fidelity.correction.lut import apply_processor, config_processor
-    from fidelity.fit import fit_and_verify, remeasure
+    from fidelity.pipeline.fit import fit_and_verify, remeasure
 
     for key in ("hue", "hue_exr"):
         fast = fit_and_verify(images[key], images["real"], tmp_path / key / "fast",
@@ -453,7 +446,7 @@ def test_the_windows_alone_measure_what_the_whole_corrected_image_measures(image
         assert np.allclose(fast.after.delta_e, whole.after.delta_e, atol=2e-3)
         assert fast.after.mean_delta_e < 0.5
         # remeasure itself, both ways, on the audit of the SIM image
-        from fidelity.chart.measure import measure_pixels
+        from fidelity.measure.pixels import measure_pixels
 
         img = read_image(images[key])
         audit = measure_pixels(img.pixels, CORNERS, encoding=img.encoding)
@@ -507,7 +500,7 @@ def test_one_matrix_over_two_illuminants_is_recovered(illuminant_pairs, tmp_path
     """The shared matrix is the inverse hue rotation, the gains under A undo the white-balance
     error (relative to D65's, which are fixed at 1) and each illuminant's corrected ΔE00 is
     measured through its own cube."""
-    from fidelity.fit import fit_pairs_and_verify
+    from fidelity.pipeline.fit import fit_pairs_and_verify
 
     shared = fit_pairs_and_verify(illuminant_pairs, tmp_path, sim_corners=CORNERS,
                                   real_corners=CORNERS)
@@ -537,7 +530,7 @@ def test_one_matrix_over_two_illuminants_is_recovered(illuminant_pairs, tmp_path
 def test_a_single_matrix_fit_over_both_is_worse_without_the_gains(illuminant_pairs, tmp_path):
     """Without per-illuminant gains the A pair's white-balance error is left over: one plain
     matrix fitted to the A pair alone (reference) does what the shared fit does for it."""
-    from fidelity.fit import fit_and_verify, fit_pairs_and_verify
+    from fidelity.pipeline.fit import fit_and_verify, fit_pairs_and_verify
 
     shared = fit_pairs_and_verify(illuminant_pairs, tmp_path / "s", sim_corners=CORNERS,
                                   real_corners=CORNERS)
@@ -584,7 +577,7 @@ def test_fit_camera_writes_a_corrected_camera_that_check_confirms(images, tmp_pa
     import tomli_w
 
     from fidelity.chart.image import read_image
-    from fidelity.chart.measure import measure_pixels
+    from fidelity.measure.pixels import measure_pixels
 
     d = copy.deepcopy(EXACT)
     d["ccm"] = {"method": "matrix", "matrix": HUE.tolist()}
@@ -639,7 +632,7 @@ def test_measure_gives_the_coco_loss_before_and_after(images, shared, tmp_path):
     identity correction) both losses are exactly 0; for the hue-rotated SIM both are
     measured on the same images, and the report carries them."""
     from fidelity.coco.measure import MeasureRequest, resolve_coco_inputs
-    from fidelity.fit import fit_and_verify
+    from fidelity.pipeline.fit import fit_and_verify
     from fidelity.report.jsonform import fit_json
 
     req = MeasureRequest(resolve_coco_inputs(), limit=3, store=str(tmp_path / "store"))

@@ -19,7 +19,7 @@ from test_audit import corners_of, draw_chart, expected_delta_e, write_exr, writ
 
 from fidelity.cli import main
 from fidelity.colour.charts import load_chart
-from fidelity.errors import InvalidValueError
+from fidelity.core.errors import InvalidValueError
 from fidelity.prediction.table import DEFAULT_TABLE, predict
 from fidelity.prediction.transforms import apply_transform
 from fidelity.prediction.verdict import Criterion, evaluate
@@ -191,7 +191,7 @@ def test_gate_camera(tmp_path):
 
 def test_report_json_matches_the_schema(png, tmp_path):
     jsonschema = pytest.importorskip("jsonschema")
-    from fidelity.records import report_schema
+    from fidelity.pipeline.records import report_schema
 
     path, _ = png
     r = run("audit", path, "--corners", corners_of(), "--json", tmp_path / "a.json")
@@ -381,7 +381,7 @@ def test_usage_errors_exit_2(png):
 
 
 def test_an_internal_error_exits_3_with_the_traceback_in_a_log(png, monkeypatch, tmp_path):
-    import fidelity.check as check_mod
+    import fidelity.pipeline.check as check_mod
 
     def boom(*a, **k):
         raise RuntimeError("disk on fire\nsecond line")
@@ -491,7 +491,7 @@ def test_negative_values_are_kept_by_default_and_said_so(tmp_path):
 def test_the_overview_links_a_report_named_with_spaces_and_shows_names_as_written():
     """Report names come from image names: a space in the link, and Markdown's own characters
     in a name or an error, show as written."""
-    from fidelity.records import GateResult
+    from fidelity.pipeline.records import GateResult
     from fidelity.report.gate import gate_overview_document
     from fidelity.report.html import render_html
 

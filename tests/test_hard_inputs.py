@@ -64,7 +64,7 @@ def test_degenerate_exr_chromaticities_are_an_input_error(render, tmp_path):
 
 def test_collinear_primaries_are_refused_by_the_matrix_itself():
     from fidelity.colour.colorimetry import matrix_rgb_to_linear_srgb
-    from fidelity.errors import InvalidValueError
+    from fidelity.core.errors import InvalidValueError
 
     with pytest.raises(InvalidValueError, match="chromaticities"):
         matrix_rgb_to_linear_srgb([0.1, 0.1, 0.2, 0.2, 0.3, 0.3, 0.3127, 0.329])

@@ -15,8 +15,8 @@ import pytest
 from PIL import Image as PILImage
 
 from fidelity.chart.image import read_image
-from fidelity.errors import InputFileError
-from fidelity.fileio import file_sha256
+from fidelity.core.errors import InputFileError
+from fidelity.core.fileio import file_sha256
 
 RNG = np.random.default_rng(4)
 RGB = RNG.uniform(0.0, 4.0, size=(12, 17, 3)).astype(np.float32)
@@ -174,7 +174,7 @@ def test_pixel_limit_is_checked_before_decoding(tmp_path, monkeypatch):
     """More pixels than the limit: refused from the header (--max-pixels, then
     FIDELITY_MAX_PIXELS, then the default); RGBA and odd channel orders read only R, G, B."""
     from fidelity.chart.image import DEFAULT_MAX_PIXELS, pixel_limit
-    from fidelity.errors import InvalidValueError
+    from fidelity.core.errors import InvalidValueError
 
     rgba = np.concatenate([RGB, np.ones(RGB.shape[:2] + (1,), np.float32)], axis=2)
     p = oiio_write(tmp_path / "a.tif", rgba, "float")

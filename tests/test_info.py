@@ -11,7 +11,7 @@ from pathlib import Path
 from click.testing import CliRunner
 
 from fidelity.cli import main
-from fidelity.resources import shared_dir
+from fidelity.core.resources import shared_dir
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -26,7 +26,7 @@ def test_info_reports_every_declared_dependency_and_the_setup(tmp_path: Path) ->
         return {re.split(r"[<>=!~;\[ ]", d, maxsplit=1)[0].lower() for d in requirements}
 
     assert {k.lower() for k in env["dependencies"]} == names(project["dependencies"])
-    from fidelity.environment import RUNTIME_EXTRAS
+    from fidelity.pipeline.environment import RUNTIME_EXTRAS
 
     extras = project["optional-dependencies"]
     assert set(RUNTIME_EXTRAS) == set(extras) - {"all", "test", "docs"}  # every runtime extra
@@ -53,8 +53,8 @@ def test_info_reports_every_declared_dependency_and_the_setup(tmp_path: Path) ->
 
 def test_info_says_which_mitsuba_variant_renders() -> None:
     from fidelity.camera.mitsuba import probe_variant
-    from fidelity.environment import describe_environment
-    from fidelity.errors import FidelityError
+    from fidelity.core.errors import FidelityError
+    from fidelity.pipeline.environment import describe_environment
 
     m = describe_environment(probe=True)["mitsuba"]
     try:

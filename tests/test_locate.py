@@ -16,7 +16,7 @@ from fidelity.chart.locate import (
     parse_corners,
     window_pixels,
 )
-from fidelity.errors import InvalidValueError
+from fidelity.core.errors import InvalidValueError
 
 GRID_CORNERS = np.array([[0, 0], [5, 0], [5, 3], [0, 3]], dtype=float)
 

@@ -25,7 +25,7 @@ from fidelity.cli import main
 from fidelity.coco.store import Owner
 from fidelity.coco.sweep import ModelSpec, SweepStore
 from fidelity.coco.validate import ValidationStore
-from fidelity.errors import InputFileError
+from fidelity.core.errors import InputFileError
 
 # among the longest files of the suite: started first, so that a parallel run does not end on it
 pytestmark = pytest.mark.early

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fidelity.coco.emulation import PatchEmulation, fit_emulation
-from fidelity.errors import InvalidValueError
+from fidelity.core.errors import InvalidValueError
 
 
 def test_inputs_come_from_options_or_the_shared_folder(monkeypatch, tmp_path):
@@ -29,7 +29,7 @@ def test_inputs_come_from_options_or_the_shared_folder(monkeypatch, tmp_path):
 
 def test_a_patch_fit_of_a_chart_on_itself_is_the_identity():
     from fidelity.camera.render import render_chart
-    from fidelity.chart.measure import neutral_patches
+    from fidelity.measure.colour import neutral_patches
 
     m = render_chart("ideal").measurement
     emu = PatchEmulation.fit(m.reference_srgb, m.reference_srgb, neutral_patches(m))
@@ -42,8 +42,8 @@ def test_a_patch_fit_agrees_with_the_camera_model_fit():
     """From 24 patches alone, the mapping of the default camera lands within 0.5 ΔE00 (mean
     over 351 training colours) of the one fitted on the camera's spectral model."""
     from fidelity.camera.render import render_chart
-    from fidelity.chart.measure import neutral_patches
     from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
+    from fidelity.measure.colour import neutral_patches
 
     m = render_chart("nikon-5100").measurement
     emu = PatchEmulation.fit(m.reference_srgb, m.srgb, neutral_patches(m))
@@ -56,8 +56,8 @@ def test_a_patch_fit_agrees_with_the_camera_model_fit():
 def test_the_identity_camera_costs_nothing_and_the_baseline_is_cached(shared, tmp_path):
     """Emulating the ideal camera changes no 8-bit image: ΔmAP 0 exactly; a second run
     infers nothing (baseline and mapping come from the store)."""
-    from fidelity.check import check_camera
     from fidelity.coco.measure import MeasureRequest, resolve_coco_inputs
+    from fidelity.pipeline.check import check_camera
 
     req = MeasureRequest(resolve_coco_inputs(), limit=30, store=str(tmp_path / "store"))
     first = check_camera("ideal", measure=req).measured[0]
@@ -73,8 +73,8 @@ def test_the_identity_camera_costs_nothing_and_the_baseline_is_cached(shared, tm
 def test_audit_measure_of_an_ideal_render_is_zero_within_se(shared, tmp_path):
     from fidelity.camera.render import render_chart
     from fidelity.chart.image import write_png
-    from fidelity.check import audit_image
     from fidelity.coco.measure import MeasureRequest, resolve_coco_inputs
+    from fidelity.pipeline.check import audit_image
 
     write_png(tmp_path / "ideal.png", render_chart("ideal").display_image, 16)
     req = MeasureRequest(resolve_coco_inputs(), limit=50, store=str(tmp_path / "store"))

@@ -10,7 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 from fidelity.cli import environment_error, main
-from fidelity.environment import DISTRIBUTION, IMPORT_NAMES, RUNTIME_EXTRAS, missing_extra
+from fidelity.pipeline.environment import DISTRIBUTION, IMPORT_NAMES, RUNTIME_EXTRAS, missing_extra
 
 
 def test_every_runtime_requirement_has_its_import_name():

@@ -154,8 +154,8 @@ def test_oblique_path_traced_render_is_found_and_audited_like_the_frontal_closed
     corners and measures what it measures on the frontal closed form (same spectra, ideal
     camera, so scene-linear sRGB with the cyan's red below zero)."""
     from fidelity.camera.model import ideal_sensitivities
-    from fidelity.chart.measure import measure_pixels
     from fidelity.colour.spectral import cie_1931_cmfs
+    from fidelity.measure.pixels import measure_pixels
 
     probe = mr.probe_variant()
     mi_ = mr._activate(probe.variant)

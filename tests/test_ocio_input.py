@@ -13,9 +13,10 @@ import pytest
 from click.testing import CliRunner
 
 from fidelity.chart.image import write_exr, write_png
-from fidelity.chart.measure import ReadOptions, measure_image
+from fidelity.chart.read import ReadOptions
 from fidelity.cli import main
-from fidelity.errors import FidelityError
+from fidelity.core.errors import FidelityError
+from fidelity.measure.pixels import measure_image
 
 pytest.importorskip("PyOpenColorIO", reason="OpenColorIO converts the pixels "
                     "(pip install 'camera-fidelity[ocio]')")
@@ -157,7 +158,7 @@ def test_settings_name_the_colourspace_and_the_config(charts, tmp_path, monkeypa
 def test_a_report_reads_the_image_again_converted_as_the_audit_read_it(charts):
     """The HTML report's picture of the sampling windows shows the converted pixels (the
     image read again with the same conversion), not the file's encoded values."""
-    from fidelity.chart.measure import read_again
+    from fidelity.chart.read import read_again
 
     got = measure_image(charts["acescct"], read=ReadOptions(ocio_colourspace="ACEScct"))
     assert got.image is not None

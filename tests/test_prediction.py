@@ -10,9 +10,9 @@ import shutil
 import numpy as np
 import pytest
 
-from fidelity.errors import FidelityError, InputFileError, UnknownNameError
+from fidelity.core.errors import FidelityError, InputFileError, UnknownNameError
+from fidelity.core.resources import shared_dir
 from fidelity.prediction import table as pr
-from fidelity.resources import shared_dir
 
 #: The published-bounds table, named explicitly (the statements below are the paper's).
 SC = "safecolor-2025"
@@ -279,8 +279,8 @@ def test_transform_parameters_match_the_published_calibration():
 
 
 def test_transform_parameters_between_targets_reach_that_delta_e():
-    from fidelity.chart.measure import chart_delta_e
     from fidelity.colour.charts import load_chart
+    from fidelity.measure.colour import chart_delta_e
     from fidelity.prediction.transforms import apply_transform
 
     chart = load_chart("safecolor")

@@ -16,7 +16,7 @@ from click.testing import CliRunner
 import fidelity.chart.find as find
 import fidelity.colour.colorimetry as cm
 from fidelity.cli import main
-from fidelity.qualify import (
+from fidelity.pipeline.qualify import (
     FAIL,
     NOT_RUN,
     PASS,
@@ -89,7 +89,7 @@ def test_the_finder_check_fails_with_centroids_as_patch_centres(monkeypatch) -> 
 
 
 def test_a_check_whose_computation_raises_fails_and_names_the_error(monkeypatch) -> None:  # type: ignore[no-untyped-def]
-    from fidelity.errors import InputFileError
+    from fidelity.core.errors import InputFileError
 
     def lost(*args, **kwargs):  # type: ignore[no-untyped-def]
         raise InputFileError("no chart found")
@@ -141,7 +141,7 @@ def test_the_ocio_check_fails_on_a_wrong_conversion_and_needs_opencolorio(monkey
 def test_the_acescct_curve_of_the_check_is_the_specifications() -> None:
     """Against colour-science's ACEScct, a second implementation of S-2016-001."""
     colour = pytest.importorskip("colour", reason="colour-science (the test extra)")
-    from fidelity.qualify import acescct_encode
+    from fidelity.pipeline.qualify import acescct_encode
 
     lin = np.array([0.0, 1e-4, 0.001, 0.0078125, 0.0078126, 0.02, 0.18, 1.0, 16.0, 222.0])
     with np.errstate(divide="ignore"):  # colour-science takes log2(0) on the linear segment

@@ -34,10 +34,11 @@ from rosbags.typesys import Stores, get_typestore  # noqa: E402
 
 from fidelity.camera.render import render_chart  # noqa: E402
 from fidelity.chart.image import write_png  # noqa: E402
-from fidelity.chart.measure import ReadOptions, measure_image  # noqa: E402
+from fidelity.chart.read import ReadOptions
 from fidelity.chart.recording import message_pixels, supported_encodings  # noqa: E402
 from fidelity.cli import main  # noqa: E402
-from fidelity.errors import FidelityError, InputFileError  # noqa: E402
+from fidelity.core.errors import FidelityError, InputFileError  # noqa: E402
+from fidelity.measure.pixels import measure_image
 
 ROOT = Path(__file__).resolve().parents[1]
 T0 = 1_700_000_000_000_000_000  # ns

@@ -17,7 +17,7 @@ from fidelity.camera.render import ChartLayout, patch_means, render_chart
 from fidelity.cli import main
 from fidelity.colour.charts import load_chart
 from fidelity.colour.colorimetry import WHITEPOINT_D65_XYZ, delta_e_2000
-from fidelity.errors import UnknownNameError
+from fidelity.core.errors import UnknownNameError
 
 SRGB_D65_XY = np.array([0.3127, 0.3290])
 

@@ -12,7 +12,9 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from fidelity.chart.measure import (
+from fidelity.colour import colorimetry as cm
+from fidelity.colour.charts import load_reference
+from fidelity.measure.colour import (
     NOISE_FLOOR,
     chart_statistics,
     fit_tone,
@@ -20,8 +22,6 @@ from fidelity.chart.measure import (
     neutral_patches,
     patch_snr_db,
 )
-from fidelity.colour import colorimetry as cm
-from fidelity.colour.charts import load_reference
 from fidelity.report import chartfigures as cf
 from fidelity.report.svg import Scale, magma_r, nice_ticks, png_data_uri, symlog_ticks
 

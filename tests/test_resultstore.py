@@ -10,7 +10,7 @@ import pytest
 from fidelity.coco.store import RegisteredModel, pack_detections, unpack_detections
 from fidelity.coco.sweep import SweepStore
 from fidelity.coco.validate import ValidationStore
-from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.core.errors import InputFileError, InvalidValueError
 
 
 def test_detections_round_trip_as_float32() -> None:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq, minimize_scalar
 
-from fidelity.errors import InvalidValueError
+from fidelity.core.errors import InvalidValueError
 from fidelity.prediction.scalar import RTOL, bounded_minimum, brent_root
 
 ROOTS = [

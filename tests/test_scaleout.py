@@ -331,7 +331,7 @@ def test_ray_cluster_evaluate_and_validate_equal_local(cluster, coco, tmp_path) 
     """evaluate and validate with --executor ray on the two-node cluster give the local
     scores (and, for validate, the same detections)."""
     from fidelity.coco.validate import ValidationStore, load_suite
-    from fidelity.resources import resource_dir
+    from fidelity.core.resources import resource_dir
 
     head, _, _ = cluster
     images, ann, model = coco

@@ -173,7 +173,7 @@ def test_mitsuba_xml_loads(d65, tmp_path):
 def test_manifest_follows_its_schema(fmt, tmp_path):
     jsonschema = pytest.importorskip("jsonschema")
     pytest.importorskip({"gltf": "pygltflib", "usd": "pxr", "mitsuba": "json"}[fmt])
-    from fidelity.resources import resource_dir
+    from fidelity.core.resources import resource_dir
 
     schema = json.loads((resource_dir("data") / "schemas" / "scene-manifest.schema.json")
                         .read_text(encoding="utf-8"))
@@ -259,7 +259,7 @@ def test_a_failing_writer_leaves_nothing_and_keeps_the_earlier_export(d65, tmp_p
     import errno
 
     import fidelity.scene.gltf as gltf
-    from fidelity.errors import InputFileError
+    from fidelity.core.errors import InputFileError
 
     pytest.importorskip("pygltflib")
     out = tmp_path / "scene"
@@ -358,8 +358,8 @@ def test_blender_render_under_illuminant_a(tmp_path):
     white-balanced camera sees); gated against the scene reference under A."""
     pytest.importorskip("pygltflib")
     _probe_bpy()
-    from fidelity.chart.measure import ReadOptions
-    from fidelity.check import audit_image
+    from fidelity.chart.read import ReadOptions
+    from fidelity.pipeline.check import audit_image
 
     scene = build_scene("A", resolution=SIZE)
     done = export_scene(scene, "gltf", tmp_path / "a")
@@ -373,8 +373,8 @@ def test_blender_render_under_illuminant_a(tmp_path):
 
 
 def _audit(image: Path, manifest: dict) -> float:
-    from fidelity.chart.measure import ReadOptions
-    from fidelity.check import audit_image
+    from fidelity.chart.read import ReadOptions
+    from fidelity.pipeline.check import audit_image
 
     return float(audit_image(image, manifest["corners"], read=ReadOptions(exposure=0.0),
                              illuminant=manifest["illuminant"]).measurement.mean_delta_e)

@@ -1,4 +1,4 @@
-"""The declarative schemas (fidelity.schema) and the input-file rules built on them."""
+"""The declarative schemas (fidelity.core.schema) and the input-file rules built on them."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from fidelity import schema as sc
-from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.core import schema as sc
+from fidelity.core.errors import InputFileError, InvalidValueError
 
 SCHEMA = sc.Table(fields=(
     sc.Field("name", sc.String(nonempty=True), required=True),

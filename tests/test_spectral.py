@@ -23,7 +23,7 @@ from fidelity.colour.spectral import (
     tristimulus,
     wavelength_grid,
 )
-from fidelity.errors import FidelityError, InputFileError, InvalidValueError, UnknownNameError
+from fidelity.core.errors import FidelityError, InputFileError, InvalidValueError, UnknownNameError
 
 SRGB_D65_XY = np.array([0.3127, 0.3290])
 

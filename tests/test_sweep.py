@@ -24,7 +24,7 @@ from fidelity.coco.sweep import (
     plan_phases,
     unpack_detections,
 )
-from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.core.errors import InputFileError, InvalidValueError
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 
 from fidelity.cli import main
 from fidelity.coco.sweep import ModelSpec, SweepStore
-from fidelity.errors import InputFileError
+from fidelity.core.errors import InputFileError
 from tests.test_sweep import FakeDetector, one_line_error, synthetic_coco
 
 GRID = (["contrast-inc", "contrast-dec"], [0, 3, 6])

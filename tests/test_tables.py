@@ -324,7 +324,7 @@ def test_class_breakdown_by_hand(tmp_path) -> None:
     """One bicycle box ranked below a false positive: bicycle AP 1 -> 1/2, ΔmAP = 50/2 points."""
     from fidelity.coco.scoring import evaluate_detections
     from fidelity.coco.tables import class_breakdown, explain_cell
-    from fidelity.errors import InvalidValueError
+    from fidelity.core.errors import InvalidValueError
 
     s, coco, base, cell = _explain_store(tmp_path)
     rows = class_breakdown(coco, base, cell, [1, 2, 3, 4])
@@ -412,7 +412,7 @@ def test_model_conventions_are_said_in_words():
 
 def test_image_caps_are_parsed_and_bad_ones_named() -> None:
     from fidelity.coco.tables import parse_image_caps
-    from fidelity.errors import InvalidValueError
+    from fidelity.core.errors import InvalidValueError
 
     models = ["a", "b-int8"]
     assert parse_image_caps(None, models) == {}
@@ -566,7 +566,7 @@ def test_a_model_kept_through_several_merges_keeps_the_machine_that_measured_it(
 
 def test_merge_refuses_tables_of_other_images(store, tmp_path) -> None:
     from fidelity.coco.tables import merge_tables
-    from fidelity.errors import InvalidValueError
+    from fidelity.core.errors import InvalidValueError
 
     other = _earlier_store(tmp_path / "earlier")
     other.set_meta("data", {"images": "/a/coco/val2017", "annotations": "/a/ann.json",

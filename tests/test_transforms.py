@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from benchmarks.colour_reference import reference_transform
-from fidelity.errors import InvalidValueError, UnknownNameError
+from fidelity.core.errors import InvalidValueError, UnknownNameError
 from fidelity.prediction.transforms import (
     TRANSFORMS,
     apply_transform,

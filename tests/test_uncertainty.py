@@ -1,4 +1,4 @@
-"""The uncertainty budget of the chart ΔE (fidelity.chart.uncertainty): each component against an
+"""The uncertainty budget of the chart ΔE (fidelity.measure.uncertainty): each component against an
 independent computation, the hard cases, and the stated k = 1 uncertainty against the spread of
 repeated renders with other noise seeds."""
 
@@ -14,8 +14,6 @@ from scipy.stats import mstats
 
 from fidelity.camera.model import Noise, load_camera
 from fidelity.camera.render import render_chart
-from fidelity.chart import uncertainty as unc
-from fidelity.chart.measure import measure_pixels
 from fidelity.colour.charts import load_reference
 from fidelity.colour.colorimetry import (
     delinearize_srgb,
@@ -23,6 +21,8 @@ from fidelity.colour.colorimetry import (
     linearize_srgb,
     srgb_to_lab,
 )
+from fidelity.measure import uncertainty as unc
+from fidelity.measure.pixels import measure_pixels
 
 
 def test_mean_covariance_plain_is_the_sample_covariance_over_n():
@@ -171,8 +171,8 @@ def test_render_budget_covers_the_spread_over_noise_seeds():
 def test_placement_remeasure_equals_locating_the_jittered_corners_again():
     """The placement component's fast re-measurement (candidate pixels mapped through the
     jittered homography) gives the patch means of a full audit at the jittered corners."""
-    from fidelity.chart.measure import _window_remeasurer
     from fidelity.colour.colorimetry import linearize_srgb as lin
+    from fidelity.measure.pixels import _window_remeasurer
 
     ref = load_reference("scene")
     img = _draw_chart(np.clip(np.asarray(ref.srgb), 0, 1), 0.02, 7)
@@ -196,8 +196,8 @@ def test_placement_remeasure_equals_locating_again_under_perspective(sigma):
     """The same with a chart in strong perspective (one side 40 % shorter) and jitters up to
     the 4-sigma reach: only the pixels near the windows' edges are re-mapped, the rest counted
     once, and the means are still those of locating again."""
-    from fidelity.chart.measure import _window_remeasurer
     from fidelity.colour.colorimetry import linearize_srgb as lin
+    from fidelity.measure.pixels import _window_remeasurer
 
     ref = load_reference("scene")
     img = _draw_chart(np.clip(np.asarray(ref.srgb), 0, 1), 0.05, 9)

@@ -26,7 +26,7 @@ from fidelity.coco.validate import (
     collect_results,
     load_suite,
 )
-from fidelity.errors import InputFileError
+from fidelity.core.errors import InputFileError
 from fidelity.report.document import Table
 from fidelity.report.validation import validation_document, write_validation_report
 
@@ -114,9 +114,9 @@ def test_bad_folders(tmp_path: Path) -> None:
 
 def test_error_profile_of_a_pure_lightness_shift() -> None:
     """A pure L* shift: CIEDE2000's ΔL' is exactly the shift, ΔC' = ΔH' = 0 (Sharma 2005)."""
-    from fidelity.chart.measure import measure_chart
     from fidelity.colour.charts import load_chart
     from fidelity.colour.colorimetry import lab_to_srgb
+    from fidelity.measure.colour import measure_chart
 
     chart = load_chart()
     lab = chart.lab + np.array([3.0, 0.0, 0.0])
@@ -129,9 +129,9 @@ def test_error_profile_of_a_pure_lightness_shift() -> None:
 
 
 def test_error_profile_of_a_chroma_scaling() -> None:
-    from fidelity.chart.measure import measure_chart
     from fidelity.colour.charts import load_chart
     from fidelity.colour.colorimetry import lab_to_srgb
+    from fidelity.measure.colour import measure_chart
 
     chart = load_chart()
     lab = chart.lab * np.array([1.0, 0.6, 0.6])  # less chroma, same hue and lightness

@@ -93,8 +93,8 @@ def test_a_conservative_answer_says_its_status() -> None:
 def test_a_zero_baseline_measured_loss_renders_as_undefined() -> None:
     """A detector with baseline mAP 0 has no relative loss (fidelity.coco.loss): the report
     says so instead of failing on None."""
-    from fidelity.check import check_camera
     from fidelity.coco.measure import MeasuredLoss
+    from fidelity.pipeline.check import check_camera
     from fidelity.report.chart import measured_section
     from fidelity.report.document import Table
 

@@ -36,11 +36,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fidelity import schema as sc
 from fidelity.colour.spectral import GRID_END_NM, GRID_START_NM, GRID_STEP_NM, cie_1931_cmfs
-from fidelity.errors import FidelityError, InvalidValueError, unknown_name
-from fidelity.fileio import display_path
-from fidelity.resources import resource_dir
+from fidelity.core import schema as sc
+from fidelity.core.errors import FidelityError, InvalidValueError, unknown_name
+from fidelity.core.fileio import display_path
+from fidelity.core.resources import resource_dir
 
 FloatArray = NDArray[np.float64]
 

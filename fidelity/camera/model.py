@@ -62,7 +62,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fidelity import schema as sc
 from fidelity.colour.spectral import (
     GRID_STEP_NM,
     Illuminant,
@@ -74,9 +73,10 @@ from fidelity.colour.spectral import (
     scene_reference,
     wavelength_grid,
 )
-from fidelity.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
-from fidelity.fileio import require_file
-from fidelity.resources import resource_dir
+from fidelity.core import schema as sc
+from fidelity.core.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
+from fidelity.core.fileio import require_file
+from fidelity.core.resources import resource_dir
 
 FloatArray = NDArray[np.float64]
 
@@ -487,7 +487,7 @@ MAX_LUT_POINTS = 65536
 
 def _illuminant_problem(name: str) -> str | None:
     """Why ``name`` is not an illuminant (None: it is one)."""
-    from fidelity.errors import FidelityError
+    from fidelity.core.errors import FidelityError
 
     try:
         load_illuminant(name)
@@ -620,7 +620,7 @@ def camera_from_dict(data: Any, origin: str = "<dict>", base_dir: Path | None = 
     (sensitivity CSV, LUT file). Raises :class:`InputFileError` naming the file, the field and
     the problem (``camera file <origin>: [section].field: problem``).
     """
-    from fidelity.errors import FidelityError
+    from fidelity.core.errors import FidelityError
 
     where = f"camera file {origin}"
     v = sc.validate(data, CAMERA_SCHEMA, where, sections=True)
@@ -693,7 +693,7 @@ def camera_from_dict(data: Any, origin: str = "<dict>", base_dir: Path | None = 
 def camera_files(name_or_path: str | os.PathLike[str]) -> list[Path]:
     """The files reading a camera touches: the camera file and the sensitivity CSV and tone
     LUT file it names (none for a built-in camera name; only the camera file itself when it
-    cannot be parsed). For the overwrite check of commands (:func:`fidelity.fileio.check_outputs`)."""
+    cannot be parsed). For the overwrite check of commands (:func:`fidelity.core.fileio.check_outputs`)."""
     p = Path(name_or_path)
     if str(name_or_path) in available_cameras() or not p.is_file():
         return []
@@ -712,7 +712,7 @@ def camera_files(name_or_path: str | os.PathLike[str]) -> list[Path]:
 
 def read_camera_file(path: str | Path) -> CameraModel:
     """Parse and validate a TOML (``.toml``) or YAML (``.yaml``/``.yml``) camera file."""
-    from fidelity.fileio import display_path
+    from fidelity.core.fileio import display_path
 
     p = require_file(path, "camera file")
     suffix = p.suffix.lower()

@@ -40,15 +40,15 @@ from fidelity.camera.model import (
     load_camera,
     vignetting_gain,
 )
-from fidelity.chart.measure import ChartMeasurement, measure_chart
-from fidelity.chart.uncertainty import UncertaintyBudget
 from fidelity.colour.spectral import (
     GRID_STEP_NM,
     load_illuminant,
     load_patch_spectra,
     scene_reference,
 )
-from fidelity.errors import FidelityError, InvalidValueError, unknown_name
+from fidelity.core.errors import FidelityError, InvalidValueError, unknown_name
+from fidelity.measure.colour import ChartMeasurement, measure_chart
+from fidelity.measure.uncertainty import UncertaintyBudget
 
 FloatArray = NDArray[np.float64]
 
@@ -205,7 +205,7 @@ def check_render_settings(*, step: float = GRID_STEP_NM, pixels_per_patch: int |
                           spp: int | None = None, seed: int | None = None) -> None:
     """Refuse render settings outside their domain (:data:`STEP_RANGE_NM`,
     :data:`MAX_PIXELS_PER_PATCH`, :data:`MAX_SPP`, :data:`MAX_SEED`) with an
-    :class:`~fidelity.errors.InvalidValueError` naming the option."""
+    :class:`~fidelity.core.errors.InvalidValueError` naming the option."""
     lo, hi = STEP_RANGE_NM
     if not (isinstance(step, int | float) and math.isfinite(step) and lo <= step <= hi):
         raise InvalidValueError(f"--step {step!r}: the spectral step must be between {lo:g} "
@@ -410,14 +410,14 @@ def render_uncertainty(raw_image: ArrayLike, srgb_image: ArrayLike, layout: Char
                        reference_lab: FloatArray, value: float, bits: int | None,
                        patch_names: tuple[str, ...] | list[str], camera: CameraModel,
                        developed: Any) -> UncertaintyBudget:
-    """The uncertainty budget of a render's chart ΔE (:mod:`fidelity.chart.uncertainty`):
+    """The uncertainty budget of a render's chart ΔE (:mod:`fidelity.measure.uncertainty`):
     the pixel noise of each developed window's trimmed mean; the camera's white balance when
     the camera estimates it on the noisy chart (``white-patch``, ``grey-world``): its gains
     drawn from the raw patch means' standard errors and the windows' pixels developed with
     them (``developed``: pixels, raw means -> developed pixels), :data:`WHITE_BALANCE_DRAWS`
     draws; the rounding of the output codes (a ``bits``-bit camera). The windows are the
     layout's own (no placement uncertainty) and a render has no exposure normalisation."""
-    from fidelity.chart import uncertainty as unc
+    from fidelity.measure import uncertainty as unc
 
     def windows(image: ArrayLike) -> list[FloatArray]:
         img = np.asarray(image, np.float64)

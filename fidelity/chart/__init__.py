@@ -1,6 +1,8 @@
-"""Charts in images: reading, finding, locating and measuring: stage 2 of the camera check.
+"""Charts in images: reading images and recordings, finding and locating the chart.
 
-Modules: :mod:`~fidelity.chart.image` (EXR, HDR, TIFF, PNG, JPEG), :mod:`~fidelity.chart.find`
-(find the chart), :mod:`~fidelity.chart.locate` (patch windows from corner centres),
-:mod:`~fidelity.chart.measure` (ΔE00 per patch).
+Modules: :mod:`~fidelity.chart.image` (EXR, HDR, TIFF, PNG, JPEG, raw mosaics),
+:mod:`~fidelity.chart.recording` (ROS bags, MCAP), :mod:`~fidelity.chart.ocio` (OpenColorIO
+colourspaces), :mod:`~fidelity.chart.read` (one image or frame as :class:`~fidelity.chart.read.ReadOptions` say),
+:mod:`~fidelity.chart.find` (find the chart), :mod:`~fidelity.chart.locate` (patch windows from
+corner centres). What is measured on the located chart lives in :mod:`fidelity.measure`.
 """

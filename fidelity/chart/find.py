@@ -57,7 +57,7 @@ one layout, whose physical sizes one photo cannot tell apart). Other patch grids
 the chart (a Passport's other page) are counted in ``other_charts`` and not measured. A chart
 whose 24 patches continue into a larger grid of patches (a ColorChecker SG or a digital
 target), or a large patch grid with no 24-patch chart, is refused with
-:class:`~fidelity.errors.InvalidValueError` rather than measured wrongly.
+:class:`~fidelity.core.errors.InvalidValueError` rather than measured wrongly.
 
 Input: ``(H, W, 3)`` linear or sRGB-encoded RGB of any scale (HDR welcome). NaN, Inf and
 negative values count as black for finding the chart only.
@@ -82,7 +82,7 @@ from fidelity.chart.locate import (
     homography_from_points,
 )
 from fidelity.colour import colorimetry as cm
-from fidelity.errors import FidelityError, InvalidValueError, unknown_name
+from fidelity.core.errors import FidelityError, InvalidValueError, unknown_name
 
 F64 = NDArray[np.float64]
 

@@ -22,7 +22,7 @@ colour-accurate audit). Without ``bayer`` a one-channel image is an error that n
 (:class:`OneChannelError`; an audit then tries the four patterns itself:
 :func:`fidelity.chart.find.bayer_pattern`).
 
-Errors (all :class:`fidelity.errors.InputFileError`, naming the file): missing, not an image,
+Errors (all :class:`fidelity.core.errors.InputFileError`, naming the file): missing, not an image,
 truncated or corrupt, one colour channel only (greyscale), channels that are not R, G, B,
 an unknown layer or an ambiguous choice of layers.
 """
@@ -40,8 +40,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fidelity.errors import InputFileError, InvalidValueError
-from fidelity.fileio import atomic_output, display_path, require_file
+from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.core.fileio import atomic_output, display_path, require_file
 
 if TYPE_CHECKING:
     from fidelity.chart.ocio import OcioConversion
@@ -461,7 +461,7 @@ def demosaic(mosaic: np.ndarray, pattern: str) -> np.ndarray:
 def pixel_limit(max_pixels: int | None = None) -> int:
     """The pixel limit in force: ``max_pixels`` when given, else the environment variable
     :data:`MAX_PIXELS_ENV`, else :data:`DEFAULT_MAX_PIXELS`. Raises
-    :class:`~fidelity.errors.InvalidValueError` for a limit that is not a positive whole number
+    :class:`~fidelity.core.errors.InvalidValueError` for a limit that is not a positive whole number
     (``2e8`` is read as 200000000)."""
     if max_pixels is not None:
         what, value = "--max-pixels", str(max_pixels)
@@ -514,7 +514,7 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None,
         file (a name that is not valid UTF-8 is read through a link of a plain name).
     """
 
-    from fidelity.errors import unknown_name
+    from fidelity.core.errors import unknown_name
 
     if bayer is not None and bayer.upper() not in BAYER_PATTERNS:
         raise unknown_name("--bayer pattern", bayer, BAYER_PATTERNS)
@@ -753,14 +753,14 @@ def _plain_name(path: Path) -> Iterator[str]:
 
 def _finish(out: Any, written: bool, path: str | os.PathLike[str], kind: str) -> None:
     """Close an OpenImageIO writer; a failed write or close (a full disk) is an error naming
-    the output, so that :func:`fidelity.fileio.atomic_output` removes the partial file."""
+    the output, so that :func:`fidelity.core.fileio.atomic_output` removes the partial file."""
     import OpenImageIO as oiio
 
     closed = out.close()
     if not (written and closed is not False):
         import errno
 
-        from fidelity.fileio import write_error
+        from fidelity.core.fileio import write_error
 
         reason = _one_line(out.geterror() or oiio.geterror()) or "write failed"
         raise write_error(path, OSError(errno.EIO, f"{kind} writer: {reason}"))

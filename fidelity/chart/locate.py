@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fidelity.errors import InvalidValueError
+from fidelity.core.errors import InvalidValueError
 
 #: Names of the corner patches, in the order the corners are given.
 CORNER_PATCHES: tuple[str, str, str, str] = ("dark skin", "bluish green", "black", "white")

@@ -25,7 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from fidelity.errors import InvalidValueError
+from fidelity.core.errors import InvalidValueError
+from fidelity.core.extras import optional_module
 
 #: The config used when neither ``--ocio-config`` nor ``$OCIO`` names one.
 DEFAULT_CONFIG = "ocio://default"
@@ -59,9 +60,8 @@ class OcioConversion:
 
 
 def _module() -> Any:
-    from fidelity.correction.lut import ocio
-
-    return ocio("--ocio-colourspace converts with OpenColorIO", OCIO_EXTRA)
+    return optional_module("PyOpenColorIO", "--ocio-colourspace converts with OpenColorIO",
+                           OCIO_EXTRA)
 
 
 def config_source(config: str | os.PathLike[str] | None) -> str:

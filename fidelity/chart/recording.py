@@ -28,7 +28,7 @@ Messages (:func:`message_pixels`):
   would be (:func:`fidelity.chart.image.read_image`); a ``bayer_*`` format names the pattern
   of a PNG-compressed mosaic.
 
-Errors (:class:`fidelity.errors.InputFileError`, one line naming the recording): not a
+Errors (:class:`fidelity.core.errors.InputFileError`, one line naming the recording): not a
 recording, unreadable or damaged, no such topic (the image topics are listed), a topic that is
 not an image, a frame or time outside the topic, an encoding not listed here, a Bayer mosaic
 of odd size, a message shorter than its size says, more pixels than the limit.
@@ -58,8 +58,8 @@ from fidelity.chart.image import (
     pixel_limit,
     utc_text,
 )
-from fidelity.errors import InputFileError, InvalidValueError
-from fidelity.fileio import display_path
+from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.core.fileio import display_path
 
 #: The extra that installs the recording reader.
 EXTRA = "ros"
@@ -449,7 +449,7 @@ def read_frame(path: str | os.PathLike[str], choice: Choice = Choice(), *,
     serialised bytes. ``bayer``: the CFA pattern of a one-channel mosaic (a ``bayer_*``
     encoding names its own); ``max_pixels``: the pixel limit
     (:func:`fidelity.chart.image.pixel_limit`). Errors: module docstring."""
-    from fidelity.errors import unknown_name
+    from fidelity.core.errors import unknown_name
 
     if bayer is not None and bayer.upper() not in BAYER_PATTERNS:
         raise unknown_name("--bayer pattern", bayer, BAYER_PATTERNS)

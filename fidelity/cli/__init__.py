@@ -8,7 +8,7 @@ One error boundary (:meth:`LazyGroup.invoke`) turns every failure into an exit c
 
 - 0: done (a gate passed); 1: a gate failed; 4: a gate undecided (``--decision guarded``:
   the value within its expanded uncertainty of the limit; ``--strict`` makes it 1);
-- 2: the input is wrong (:class:`fidelity.errors.FidelityError`, or a usage error of click's
+- 2: the input is wrong (:class:`fidelity.core.errors.FidelityError`, or a usage error of click's
   such as an unknown option or a bad value): one line ``fidelity: error: <input>: <problem>``;
 - 3: anything else is a bug: one line on screen, the traceback in a log file
   (:func:`internal_error_log`); ``fidelity -v`` shows it on screen too.
@@ -31,8 +31,8 @@ from typing import Any
 
 import click
 
-from fidelity.errors import FidelityError
-from fidelity.version import __version__
+from fidelity.core.errors import FidelityError
+from fidelity.core.version import __version__
 
 #: Exit code of an internal error (a bug), after 0 pass, 1 fail, 2 input error.
 EXIT_INTERNAL = 3
@@ -91,7 +91,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
 def error_line(message: str) -> None:
     """Print ``fidelity: error: <message>`` as one line on stderr (undecodable bytes of file
     names shown as ``\\xNN``)."""
-    from fidelity.fileio import printable
+    from fidelity.core.fileio import printable
 
     click.echo("fidelity: error: " + printable(" ".join(str(message).split())), err=True)
 
@@ -113,10 +113,10 @@ def environment_error(exc: BaseException) -> str | None:
     """The one-line message for an exception caused by the machine rather than by fidelity
     (:data:`ENVIRONMENT_ERRNOS`, :data:`SQLITE_DISK_ERRORS`, a module of an extra that is not
     installed), else None."""
-    from fidelity.fileio import display_path
+    from fidelity.core.fileio import display_path
 
     if isinstance(exc, ModuleNotFoundError):
-        from fidelity.environment import DISTRIBUTION, missing_extra
+        from fidelity.pipeline.environment import DISTRIBUTION, missing_extra
 
         found = missing_extra(exc.name)
         if found is not None:
@@ -211,7 +211,7 @@ class LazyGroup(click.Group):
             if message is not None:  # a full disk, a read-only folder: not a bug
                 error_line(message)
                 sys.exit(2)
-            from fidelity.fileio import printable
+            from fidelity.core.fileio import printable
 
             text = printable(traceback.format_exc())
             try:
@@ -269,7 +269,7 @@ def main(ctx: click.Context, verbose: bool, config_path: str | None, no_config: 
     ctx.obj = {**(ctx.obj or {}), "verbose": verbose}
     if no_config:
         return
-    from fidelity.config import find_config, read_config
+    from fidelity.core.config import find_config, read_config
 
     found = config_path or find_config()
     if found is not None:

@@ -30,12 +30,12 @@ from fidelity.cli.options import (
     write_evidence_files,
     write_subject_reports,
 )
-from fidelity.fileio import display_path
+from fidelity.core.fileio import display_path
 from fidelity.prediction.table import SIZES
 from fidelity.prediction.verdict import EXIT_ERROR
 
 if TYPE_CHECKING:
-    from fidelity.chart.measure import ReadOptions
+    from fidelity.chart.read import ReadOptions
     from fidelity.chart.recording import FrameSelection
 
 
@@ -95,10 +95,10 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
     """
     from dataclasses import replace
 
-    from fidelity.check import audit_image, audit_images
     from fidelity.cli import error_line
-    from fidelity.fileio import check_outputs
-    from fidelity.records import GateResult, ImageSource
+    from fidelity.core.fileio import check_outputs
+    from fidelity.pipeline.check import audit_image, audit_images
+    from fidelity.pipeline.records import GateResult, ImageSource
     from fidelity.report.terminal import summary_lines
 
     if frames is not None and (read.frame is not None or read.time is not None):

@@ -84,7 +84,7 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
     fidelity check --camera my.toml --measure       # + the loss measured on COCO
     """
     from fidelity.camera.model import DEFAULT_CAMERA, camera_files
-    from fidelity.fileio import check_outputs
+    from fidelity.core.fileio import check_outputs
     from fidelity.prediction.verdict import Criterion
 
     if cameras and camera is not None and not from_settings("camera"):
@@ -138,9 +138,9 @@ def _check_one(cam: str, html: Path | None, json_file: Path | None, *, to_stdout
                measure: Any = None, decision: Any = None, reports: list[Any] | None = None
                ) -> int:
     """Check one camera, write its reports, print its verdict; its exit code."""
-    from fidelity.check import check_camera
+    from fidelity.pipeline.check import check_camera
+    from fidelity.pipeline.records import RenderSource
     from fidelity.prediction.verdict import SIMPLE
-    from fidelity.records import RenderSource
     from fidelity.report.chart import write_chart_report
     from fidelity.report.terminal import summary_lines
 
@@ -163,7 +163,7 @@ def _check_one(cam: str, html: Path | None, json_file: Path | None, *, to_stdout
     for line in summary_lines(report):
         click.echo("  " + line)
     if html is not None:
-        from fidelity.fileio import display_path
+        from fidelity.core.fileio import display_path
 
         click.echo(f"  report: {display_path(html)}"
                    + (f" (JSON: {display_path(json_file)})" if json_file else ""))

@@ -72,7 +72,7 @@ def cococ(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
 
     from fidelity.coco.corruptions import CocoCResults, run_coco_c, with_predictions
     from fidelity.coco.measure import stderr_log
-    from fidelity.fileio import check_outputs
+    from fidelity.core.fileio import check_outputs
     from fidelity.report.cococ import DELTA_E_FIGURE, LOSS_FIGURE, write_cococ_report
 
     out_dir = Path(out)
@@ -84,7 +84,7 @@ def cococ(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
                   stores={"--store": store})
     text = Path(notes).read_text(encoding="utf-8") if notes else None
     if report_only:
-        from fidelity.errors import InputFileError
+        from fidelity.core.errors import InputFileError
 
         src = out_dir / "cococ.json"
         try:

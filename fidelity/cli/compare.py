@@ -32,7 +32,7 @@ from fidelity.prediction.table import CLASS_COLUMNS, SIZES
 from fidelity.prediction.verdict import EXIT_ERROR
 
 if TYPE_CHECKING:
-    from fidelity.chart.measure import ReadOptions
+    from fidelity.chart.read import ReadOptions
 
 
 @click.command()
@@ -91,10 +91,10 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
     REAL (or SIM) may be a robot recording (ROS 1 bag, ROS 2 bag, MCAP file): --topic,
     --frame and --time then choose its message.
     """
-    from fidelity.compare import compare_charts
-    from fidelity.errors import FidelityError
-    from fidelity.fileio import check_outputs, display_path
-    from fidelity.records import GateResult
+    from fidelity.core.errors import FidelityError
+    from fidelity.core.fileio import check_outputs, display_path
+    from fidelity.pipeline.compare import compare_charts
+    from fidelity.pipeline.records import GateResult
     from fidelity.report.compare import comparison_lines, write_comparison_report
     from fidelity.report.junit import write_junit
 

@@ -32,12 +32,12 @@ from fidelity.cli.options import (
 def dataset(images: str, out: str, transforms: list[str] | None, targets: list[float] | None,
             param: float | None, workers: int | None, progress: bool | None) -> None:
     """Write transformed JPEGs (original quantization tables and subsampling); reruns resume."""
-    from fidelity.environment import available_cpus
+    from fidelity.pipeline.environment import available_cpus
 
     if workers is None:
         workers = available_cpus()
     from fidelity.coco.dataset import list_images, write_grid, write_transformed_dataset
-    from fidelity.errors import InvalidValueError
+    from fidelity.core.errors import InvalidValueError
 
     if transforms is None or targets is None:
         raise InvalidValueError("give --transforms and --targets (e.g. --transforms "
@@ -48,7 +48,7 @@ def dataset(images: str, out: str, transforms: list[str] | None, targets: list[f
     from pathlib import Path
 
     from fidelity.coco.dataset import subset_name
-    from fidelity.fileio import check_output_folders
+    from fidelity.core.fileio import check_output_folders
 
     check_output_folders({f"--out ({subset_name(t, e)})": Path(out) / subset_name(t, e)
                           for t in names for e in values}, {"--images": images})

@@ -62,7 +62,7 @@ def evaluate(model: tuple[ModelSpec, ...], images: str, annotations: str, limit:
     interrupted evaluation started again runs only the images it had not finished.
     """
     from fidelity.coco.evaluate import evaluate_model
-    from fidelity.fileio import check_outputs, remove_stale_temporaries
+    from fidelity.core.fileio import check_outputs, remove_stale_temporaries
 
     if len(model) != 1:
         raise click.UsageError("evaluate takes one model in --models (sweep takes several)")

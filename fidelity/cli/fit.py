@@ -22,9 +22,9 @@ from fidelity.cli.options import (
 from fidelity.prediction.table import SIZES
 
 if TYPE_CHECKING:
-    from fidelity.chart.measure import ReadOptions
+    from fidelity.chart.read import ReadOptions
     from fidelity.coco.measure import MeasureRequest
-    from fidelity.fit import FitReport
+    from fidelity.pipeline.fit import FitReport
 
 
 @click.command()
@@ -91,8 +91,8 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
     fidelity fit sim.png photo.jpg --out c/ --write-corrected
     fidelity fit --pair sim_d65.exr real_d65.jpg --pair sim_a.exr real_a.jpg --out c/
     """
-    from fidelity.fileio import check_outputs, display_path
-    from fidelity.fit import fit_and_verify, sim_ocio_refused
+    from fidelity.core.fileio import check_outputs, display_path
+    from fidelity.pipeline.fit import fit_and_verify, sim_ocio_refused
     from fidelity.report.fit import fit_lines, write_fit_report
 
     if sim_ocio_colourspace is not None:
@@ -157,8 +157,8 @@ def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str
                real_corners: str | None, normalise_mode: str, size: str, table: str | None,
                reference: str, illuminant: str, read: ReadOptions,
                real_ocio_colourspace: str | None, corrected: bool) -> None:
-    from fidelity.fileio import check_outputs, display_path
-    from fidelity.fit import fit_pairs_and_verify
+    from fidelity.core.fileio import check_outputs, display_path
+    from fidelity.pipeline.fit import fit_pairs_and_verify
     from fidelity.report.fit import shared_fit_lines, write_shared_fit_report
 
     inputs: dict[str, Path | str | None] = {"--table": table, "--reference": reference,
@@ -188,8 +188,8 @@ def _fit_camera(camera: Path, real: Path, out: Path, model: str, objective: str 
                 reference: str, illuminant: str, read: ReadOptions,
                 real_ocio_colourspace: str | None, corrected: bool,
                 request: MeasureRequest | None, evidence_paths: tuple[Path, ...]) -> None:
-    from fidelity.fileio import check_outputs, display_path
-    from fidelity.fit import fit_camera_and_verify
+    from fidelity.core.fileio import check_outputs, display_path
+    from fidelity.pipeline.fit import fit_camera_and_verify
     from fidelity.report.fit import fit_lines, write_fit_report
 
     names = ("correction.cube", "correction.ocio", "correction.json", "report.json",

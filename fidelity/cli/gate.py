@@ -2,7 +2,7 @@
 
 Exit codes: 0 pass, 1 fail, 2 error (one line on stderr, no traceback; with ``--junit`` the
 error is also written as a JUnit ``<error>``), 4 undecided (``--decision guarded``: the value
-within its expanded uncertainty of the limit; ``--strict`` makes it a fail). The work is :func:`fidelity.check.gate`; the
+within its expanded uncertainty of the limit; ``--strict`` makes it a fail). The work is :func:`fidelity.pipeline.check.gate`; the
 image options, the criterion and the report paths are :mod:`fidelity.cli.options`', shared with
 ``fidelity audit`` and ``fidelity compare``.
 """
@@ -39,15 +39,15 @@ from fidelity.cli.options import (
     write_evidence_files,
     write_subject_reports,
 )
-from fidelity.errors import FidelityError
-from fidelity.fileio import display_path
+from fidelity.core.errors import FidelityError
+from fidelity.core.fileio import display_path
 from fidelity.prediction.table import CLASS_COLUMNS, SIZES
 from fidelity.prediction.verdict import EXIT_ERROR, EXIT_UNDECIDED
 
 if TYPE_CHECKING:
-    from fidelity.chart.measure import ReadOptions
+    from fidelity.chart.read import ReadOptions
     from fidelity.chart.recording import FrameSelection
-    from fidelity.records import GateResult
+    from fidelity.pipeline.records import GateResult
 
 
 def _error_line(message: str) -> None:
@@ -152,8 +152,8 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
                                "to an IMAGE")
     from dataclasses import replace
 
-    from fidelity.check import gate as gate_subjects
-    from fidelity.records import GateResult, gate_exit_code
+    from fidelity.pipeline.check import gate as gate_subjects
+    from fidelity.pipeline.records import GateResult, gate_exit_code
     from fidelity.report.terminal import summary_lines
 
     try:
@@ -168,7 +168,7 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         json_path = None
     frame_of: list[int] | None = None
     try:
-        from fidelity.fileio import check_outputs
+        from fidelity.core.fileio import check_outputs
 
         if frames is not None:  # each selected frame of each recording is a subject
             images, frame_of = frame_subjects(images, frames, read.topic)

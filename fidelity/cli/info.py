@@ -14,8 +14,8 @@ from fidelity.cli.options import common_options, json_option, write_json_output
 @common_options
 def info(probe: bool, json_path: str | None) -> None:
     """Versions, Mitsuba variant, ONNX providers, chart detection, shared data found."""
-    from fidelity.environment import describe_environment
-    from fidelity.fileio import check_outputs
+    from fidelity.core.fileio import check_outputs
+    from fidelity.pipeline.environment import describe_environment
 
     check_outputs({"--json": json_path})
     env = describe_environment(probe=probe)

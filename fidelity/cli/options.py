@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
-from fidelity.errors import FidelityError, InvalidValueError
+from fidelity.core.errors import FidelityError, InvalidValueError
 
 if TYPE_CHECKING:
     from typing import TypeAlias
@@ -51,8 +51,8 @@ if TYPE_CHECKING:
     from fidelity.coco.scores import ScoresTransfer
     from fidelity.coco.store import ResultsStore
     from fidelity.coco.sweep import ModelSpec
+    from fidelity.pipeline.records import GateResult
     from fidelity.prediction.verdict import Criterion
-    from fidelity.records import GateResult
 
     # click >= 8.2 types ParamType by its value; the project supports click 8.1 too
     ParamTypeBase: TypeAlias = click.ParamType[Any]
@@ -183,8 +183,8 @@ def expand_folders(paths: Sequence[Path]) -> tuple[Path, ...]:
     replaced by the images in it, in natural order (:func:`fidelity.chart.image.folder_images`;
     ``audit`` and ``gate``); a folder with none is an input error."""
     from fidelity.chart.image import folder_images, image_suffixes
-    from fidelity.errors import InputFileError
-    from fidelity.fileio import display_path
+    from fidelity.core.errors import InputFileError
+    from fidelity.core.fileio import display_path
 
     out: list[Path] = []
     for p in paths:
@@ -211,7 +211,7 @@ def frame_subjects(images: Sequence[Path], frames: FrameSelection, topic: str | 
     """Each recording once per frame ``frames`` selects on its topic (from its index), and
     those frames (``gate --frames``, ``audit --frames``)."""
     from fidelity.chart.recording import topic_frames
-    from fidelity.fileio import display_path
+    from fidelity.core.fileio import display_path
 
     paths: list[Path] = []
     frame_of: list[int] = []
@@ -235,7 +235,7 @@ def frames_summary(cases: Sequence[GateResult], images: Sequence[Path],
     recording."""
     from statistics import median
 
-    from fidelity.fileio import display_path
+    from fidelity.core.fileio import display_path
 
     by: dict[Path, list[tuple[float, int]]] = {}
     for case, path, k in zip(cases, images, frame_of, strict=True):
@@ -283,7 +283,7 @@ class NameList(ParamTypeBase):
                 ctx: click.Context | None) -> list[str]:
         if not isinstance(value, str):
             return list(value)
-        from fidelity.errors import unknown_name
+        from fidelity.core.errors import unknown_name
 
         known = self.known()
         items = [t.strip() for t in value.split(",") if t.strip()]
@@ -393,7 +393,7 @@ def cap_models(models: Sequence[ModelSpec], limit: int | None) -> tuple[ModelSpe
 
 
 def model_inputs(models: Sequence[ModelSpec] | None) -> dict[str, Path]:
-    """What ``--models`` reads, for :func:`fidelity.fileio.check_outputs`: each model file."""
+    """What ``--models`` reads, for :func:`fidelity.core.fileio.check_outputs`: each model file."""
     return {f"--models ({s.path})": s.path for s in models or ()}
 
 
@@ -452,7 +452,7 @@ def transfer_scores(store_type: type[ResultsStore], folder: str, option: str,
     kind ``store_type`` in ``folder`` (named by ``option`` in errors); whether either was
     given (the command then has nothing else to do)."""
     from fidelity.coco import scores
-    from fidelity.fileio import check_outputs, file_sha256, require_file
+    from fidelity.core.fileio import check_outputs, file_sha256, require_file
 
     if export_to and import_from:
         raise click.UsageError("--export-scores and --import-scores: one at a time")
@@ -565,12 +565,12 @@ def image_read_options(f: F) -> F:
     ``--ocio-colourspace``, ``--ocio-config``, ``--negatives`` and, for a recording,
     ``--topic``, ``--frame``, ``--time``: how an image's pixels are read (audit, gate, compare,
     ...). The command receives them as one argument
-    ``read``, a :class:`fidelity.chart.measure.ReadOptions` (``max_pixels`` left at None:
+    ``read``, a :class:`fidelity.chart.read.ReadOptions` (``max_pixels`` left at None:
     :func:`max_pixels_option` gives it separately)."""
 
     @functools.wraps(f)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        from fidelity.chart.measure import ReadOptions
+        from fidelity.chart.read import ReadOptions
 
         values = {name: kwargs.pop(name) for name in READ_OPTION_NAMES}
         if values["frame"] is not None and values["time"] is not None:
@@ -830,7 +830,7 @@ def evidence_option(f: F) -> F:
 
 
 def evidence_outputs(paths: Sequence[Path]) -> dict[str, Path]:
-    """The ``--evidence`` files as :func:`fidelity.fileio.check_outputs` labels them."""
+    """The ``--evidence`` files as :func:`fidelity.core.fileio.check_outputs` labels them."""
     return {("--evidence" if len(paths) == 1 else f"--evidence ({p.name})"): p for p in paths}
 
 
@@ -841,7 +841,7 @@ def write_evidence_files(paths: Sequence[Path], write: Callable[..., list[Path]]
     (:func:`fidelity.report.evidence.write_evidence` or ``write_fit_evidence``), ``results``
     being the files the run wrote that exist, ``invocation`` the command line
     (:func:`invocation`), and print each."""
-    from fidelity.fileio import display_path
+    from fidelity.core.fileio import display_path
 
     if not paths:
         return
@@ -889,7 +889,7 @@ def measure_options(f: F) -> F:
 
 def measure_inputs(images: str | None, annotations: str | None, models: str | None
                    ) -> dict[str, Any]:
-    """What ``--measure`` reads, for :func:`fidelity.fileio.check_outputs`: the image folder,
+    """What ``--measure`` reads, for :func:`fidelity.core.fileio.check_outputs`: the image folder,
     the annotations and each model file (``models`` read as :class:`ModelList` reads it)."""
     specs = None if models is None else parse_models(models)
     return {"--images": images, "--annotations": annotations} | model_inputs(specs)
@@ -924,7 +924,7 @@ def real_stdout() -> Any:
 
 def write_json_output(path: str | os.PathLike[str], obj: Any) -> str:
     """Write JSON to ``path`` atomically, or to standard output for ``-``; returns where."""
-    from fidelity.fileio import json_ready, write_json_atomic
+    from fidelity.core.fileio import json_ready, write_json_atomic
 
     if str(path) == STDOUT:
         out = real_stdout()

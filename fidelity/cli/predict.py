@@ -82,7 +82,7 @@ def predict_cmd(delta_e: float | None, delta_e_uncertainty: float, cls: str, siz
         return
     if sum(v is not None for v in (delta_e, max_dmap, coco_c)) != 1:
         raise click.UsageError("give --delta-e X or --max-dmap P (or --coco-c CORRUPTION:SEVERITY)")
-    from fidelity.fileio import check_outputs
+    from fidelity.core.fileio import check_outputs
 
     check_outputs({"--json": json_path}, {"--table": table})
     if delta_e is None and delta_e_uncertainty != 0:
@@ -94,7 +94,7 @@ def predict_cmd(delta_e: float | None, delta_e_uncertainty: float, cls: str, siz
         _print_limit(max_dmap, cls, unit, size, table, method, json_path)
         return
     assert delta_e is not None  # one of the two was given
-    from fidelity.errors import InvalidValueError
+    from fidelity.core.errors import InvalidValueError
 
     for flag, value in (("--delta-e", delta_e), ("--delta-e-uncertainty", delta_e_uncertainty)):
         if not (math.isfinite(value) and value >= 0):
@@ -128,7 +128,7 @@ def predict_cmd(delta_e: float | None, delta_e_uncertainty: float, cls: str, siz
     families = (_print_families(delta_e, size, table, direction) if p.kind.measured
                 else None)
     if json_path is not None:
-        from fidelity.check import prediction_domain
+        from fidelity.pipeline.check import prediction_domain
         from fidelity.report.jsonform import predict_json
 
         doc = predict_json(p, families, interval, prediction_domain(p))

@@ -10,8 +10,8 @@ from fidelity.cli.options import common_options, json_option, write_json_output
 
 
 def _names(text: str | None) -> list[str] | None:
-    from fidelity.errors import UnknownNameError
-    from fidelity.qualify import QUALIFICATION_CHECKS
+    from fidelity.core.errors import UnknownNameError
+    from fidelity.pipeline.qualify import QUALIFICATION_CHECKS
 
     if text is None:
         return None
@@ -40,8 +40,8 @@ def qualify(names: str | None, json_path: str | None) -> None:
     reference, the tolerance and what was measured. Exit 0: every check that ran passed; 1: one
     failed. A check that cannot run here (no Mitsuba, an editable install) is named, not failed.
     """
-    from fidelity.fileio import check_outputs
-    from fidelity.qualify import qualify as run
+    from fidelity.core.fileio import check_outputs
+    from fidelity.pipeline.qualify import qualify as run
     from fidelity.report.qualify import qualification_lines, qualification_record
 
     check_outputs({"--json": json_path})

@@ -86,7 +86,7 @@ def render(camera: str, illuminant: str, renderer: str, spp: int | None,
         for name in available_cameras():
             click.echo(f"{name:<18} {load_camera(name).description}")
         return
-    from fidelity.fileio import check_outputs
+    from fidelity.core.fileio import check_outputs
 
     files = {} if out_dir is None else {f"--out ({name})": out_dir / name for name in
                                         (RAW_FILE, DEVELOPED_FILE)}
@@ -110,7 +110,7 @@ def render(camera: str, illuminant: str, renderer: str, spp: int | None,
         write_json_output(json_path, report)
     click.echo(format_report(result))
     if out_dir is not None:
-        from fidelity.fileio import display_path
+        from fidelity.core.fileio import display_path
 
         click.echo(f"wrote {display_path(png)} (the developed sRGB image: audit this one)")
         click.echo(f"wrote {display_path(exr)} (raw camera RGB before white balance and colour "

@@ -119,11 +119,11 @@ def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
         click.echo(f"rescored {n} cells in {out}")
         return
     if not models or not images:
-        from fidelity.errors import InvalidValueError
+        from fidelity.core.errors import InvalidValueError
 
         raise InvalidValueError("--models and --images are needed (except with --rescore)")
     specs = list(models)
-    from fidelity.fileio import check_outputs
+    from fidelity.core.fileio import check_outputs
 
     check_outputs({"--out (sweep.sqlite)": Path(out) / SweepStore.store_name},
                   {"--annotations": annotations, **model_inputs(specs)})
@@ -147,7 +147,7 @@ def _print_status(store: SweepStore, shown: str | None = None) -> None:
 
     from fidelity.coco.store import process_gone
     from fidelity.coco.sweep import sweep_status
-    from fidelity.fileio import display_path
+    from fidelity.core.fileio import display_path
 
     rows = sweep_status(store)
     now = time.time()

@@ -78,13 +78,13 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
     from fidelity.coco.scores import is_scores_file
 
     if not Path(store_dir).exists():
-        from fidelity.errors import InputFileError
+        from fidelity.core.errors import InputFileError
 
         raise InputFileError(f"{store_dir}: no such sweep store folder, scores file or "
                              "tables.json")
     with contextlib.ExitStack() as stack:
         if Path(store_dir).is_file() and is_scores_file(store_dir):
-            from fidelity.fileio import check_outputs
+            from fidelity.core.fileio import check_outputs
             from fidelity.report.coco import WORST_CASE_FIGURE
 
             reports = ("report.md", "report.html", "tables.json", WORST_CASE_FIGURE)
@@ -102,7 +102,7 @@ def _store_of_scores(stack: contextlib.ExitStack, path: str, out: str | None,
     ``stack`` closes); its report goes to ``--out``, which is then needed."""
     from fidelity.coco.scores import scores_store_folder
     from fidelity.coco.sweep import SweepStore
-    from fidelity.errors import InvalidValueError
+    from fidelity.core.errors import InvalidValueError
 
     if explain:
         raise InvalidValueError(f"{path}: --explain needs the cell's detections, which a "
@@ -120,13 +120,13 @@ def _tables(store_dir: str, out: str | None, prediction: str | None, name: str,
 
     from fidelity.coco.sweep import SweepStore
     from fidelity.coco.tables import parse_image_caps, tables_result
-    from fidelity.fileio import check_outputs
+    from fidelity.core.fileio import check_outputs
     from fidelity.report.coco import write_tables_report
 
     report = Path(out or Path(store_dir) / "report")
     if Path(store_dir).is_file():
         if earlier is not None:
-            from fidelity.errors import InvalidValueError
+            from fidelity.core.errors import InvalidValueError
 
             raise InvalidValueError("--earlier merges with a sweep store: STORE_DIR is a "
                                     "tables.json here")
@@ -150,7 +150,7 @@ def _tables(store_dir: str, out: str | None, prediction: str | None, name: str,
         _explain(store, explain, annotations, rare_boxes, caps, top, json_path)
         return
     if caps and not standard_errors:
-        from fidelity.errors import InvalidValueError
+        from fidelity.core.errors import InvalidValueError
 
         raise InvalidValueError("--limit re-scores cells from the annotations: it cannot be "
                                 "combined with --no-standard-errors")
@@ -180,7 +180,7 @@ def _read_tables_json(path: Any) -> Any:
     import json
 
     from fidelity.coco.tables import TablesResult
-    from fidelity.errors import InputFileError
+    from fidelity.core.errors import InputFileError
 
     try:
         return TablesResult.from_json(json.loads(path.read_text(encoding="utf-8")))
@@ -192,7 +192,7 @@ def _read_earlier(path: Any) -> tuple[Any, dict[str, Any]]:
     """``--earlier``: its tables and where they came from (file name and SHA-256)."""
     from pathlib import Path
 
-    from fidelity.fileio import file_sha256
+    from fidelity.core.fileio import file_sha256
 
     tables_ = _read_tables_json(path).tables
     # the file's name, not where it lay on this machine: provenance names the data
@@ -201,7 +201,7 @@ def _read_earlier(path: Any) -> tuple[Any, dict[str, Any]]:
 
 def _write_directional(tables_: Any, path: str) -> Any:
     from fidelity.coco.directional import directional_table
-    from fidelity.fileio import json_ready, write_json_atomic
+    from fidelity.core.fileio import json_ready, write_json_atomic
 
     return write_json_atomic(path, json_ready(directional_table(tables_)))
 
@@ -210,8 +210,8 @@ def _tables_from_json(path: Any, prediction: str | None, name: str,
                       directional: str | None) -> None:
     """The prediction tables of a ``tables.json`` (no store, no report)."""
     from fidelity.coco.tables import prediction_table
-    from fidelity.errors import InvalidValueError
-    from fidelity.fileio import json_ready, write_json_atomic
+    from fidelity.core.errors import InvalidValueError
+    from fidelity.core.fileio import json_ready, write_json_atomic
 
     if prediction is None and directional is None:
         raise InvalidValueError(f"{path}: from a tables.json, give --prediction FILE and/or "
@@ -230,7 +230,7 @@ def _explain(store: SweepStore, spec: str, annotations: str | None, rare_boxes: 
 
     from fidelity.coco.scoring import load_annotations
     from fidelity.coco.tables import explain_cell
-    from fidelity.errors import InvalidValueError
+    from fidelity.core.errors import InvalidValueError
 
     parts = spec.rsplit(":", 2)
     try:

@@ -94,8 +94,8 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
         run_validation,
         validated_cameras,
     )
-    from fidelity.errors import InvalidValueError, unknown_name
-    from fidelity.fileio import check_outputs
+    from fidelity.core.errors import InvalidValueError, unknown_name
+    from fidelity.core.fileio import check_outputs
 
     if transfer_scores(ValidationStore, store or str(default_store()), "--store",
                        export_scores, import_scores, annotations):
@@ -119,7 +119,7 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
     if training not in TRAINING_SETS:
         raise unknown_name("training set", training, TRAINING_SETS)
     if cameras is None:
-        from fidelity.resources import resource_dir
+        from fidelity.core.resources import resource_dir
 
         cameras = str(resource_dir("cameras"))
     cases = load_suite(cameras)
@@ -152,7 +152,7 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
     results = collect_results(st, bound_table=bound_table, suite=cases)
     paths = write_validation_report(
         results, out, notes=Path(notes).read_text(encoding="utf-8") if notes else None)
-    from fidelity.fileio import write_json_atomic
+    from fidelity.core.fileio import write_json_atomic
 
     paths.append(write_json_atomic(Path(out) / DOMAIN_FILE, {
         "source": "fidelity validate: the cameras validated, their illuminants and the kinds "

@@ -102,8 +102,8 @@ def _configured(argv: Sequence[str], settings: str | None) -> set[str]:
     """The parameters of the recorded command that the settings file ``settings`` sets (None,
     or a file that cannot be read now: none; the repeat reports the latter)."""
     from fidelity.cli import COMMANDS
-    from fidelity.config import read_config
-    from fidelity.errors import FidelityError
+    from fidelity.core.config import read_config
+    from fidelity.core.errors import FidelityError
 
     if settings is None:
         return set()
@@ -119,10 +119,10 @@ def rerun(doc: Mapping[str, Any]) -> tuple[dict[str, Any] | None, int, str]:
     """Run the record's command line again (:func:`rerun_argv`) in the folder it ran in, as a
     process of this Python; returns the new record (None if none was written), the exit code
     and the last line of its errors."""
-    from fidelity.errors import InputFileError
-    from fidelity.fileio import display_path
+    from fidelity.core.errors import InputFileError
+    from fidelity.core.fileio import display_path
+    from fidelity.core.schema import SchemaError
     from fidelity.report.verify import read_record
-    from fidelity.schema import SchemaError
 
     invocation = doc.get("invocation")
     if not invocation:
@@ -176,7 +176,7 @@ def verify(record: Path, inputs_dir: Path | None, run_again: bool,
     RECORD is not a readable credibility record. A different code or environment is reported,
     not failed: the record stays a true account of its own run.
     """
-    from fidelity.fileio import check_outputs
+    from fidelity.core.fileio import check_outputs
     from fidelity.report.verify import (
         read_record,
         rerun_finding,

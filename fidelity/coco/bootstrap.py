@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from fidelity.errors import InvalidValueError
+from fidelity.core.errors import InvalidValueError
 
 __all__ = ["BOOTSTRAP_RESAMPLES", "BOOTSTRAP_SEED", "CategoryMatches", "Draws", "MatchRecords",
            "bootstrap_weights", "draw_scores", "match_records", "weighted_scores"]

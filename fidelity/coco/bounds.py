@@ -7,7 +7,7 @@ camera's measured ΔmAP ± SE per detector and the classic prediction; built fro
 (:class:`CameraChart`), renders its chart in closed form under the test case's illuminant
 (when the camera file is given; else it reads the chart stored with the results),
 predicts its loss with the direction-aware table (:mod:`fidelity.prediction.directional`,
-detector size ``n``) and runs the blind-spot checks (:mod:`fidelity.chart.blindspots`). Per
+detector size ``n``) and runs the blind-spot checks (:mod:`fidelity.measure.blindspots`). Per
 (camera, detector) cell and class it compares both bounds with the measured loss:
 
 - *within*: measured <= predicted; *within 2 SE*: measured − 2 SE <= predicted;
@@ -31,7 +31,7 @@ import numpy as np
 from fidelity.coco.loss import LOSS_COLUMNS, Losses
 
 if TYPE_CHECKING:
-    from fidelity.chart.blindspots import BlindSpot
+    from fidelity.measure.blindspots import BlindSpot
     from fidelity.prediction.directional import DirectionalPrediction
 
 
@@ -154,7 +154,7 @@ class CameraBounds:
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> CameraBounds:
         """Inverse of :meth:`to_json`."""
-        from fidelity.chart.blindspots import BlindSpot
+        from fidelity.measure.blindspots import BlindSpot
         from fidelity.prediction.directional import DirectionalPrediction
 
         return cls(str(d["camera"]), float(d["chart_delta_e"]),
@@ -290,7 +290,7 @@ def compare_bounds(cells: Sequence[MeasuredCell], charts: Mapping[str, CameraCha
         The direction-aware table's name or path (None:
         :data:`fidelity.prediction.directional.DEFAULT_DIRECTIONAL_TABLE`).
     """
-    from fidelity.chart.blindspots import chart_blind_spots
+    from fidelity.measure.blindspots import chart_blind_spots
     from fidelity.prediction.directional import (
         DEFAULT_DIRECTIONAL_TABLE,
         load_directional_table,
@@ -309,7 +309,7 @@ def compare_bounds(cells: Sequence[MeasuredCell], charts: Mapping[str, CameraCha
             spots = chart_blind_spots(m, bits=render.camera.quantisation_bits)
             rendered = True
         else:
-            from fidelity.chart.measure import measure_chart
+            from fidelity.measure.colour import measure_chart
 
             lab = np.array([p["lab"] for p in chart.patches], dtype=np.float64)
             ref = np.array([p["reference_lab"] for p in chart.patches], dtype=np.float64)

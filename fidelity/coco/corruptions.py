@@ -47,11 +47,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fidelity.errors import InvalidValueError, unknown_name
+from fidelity.core.errors import InvalidValueError, unknown_name
 
 if TYPE_CHECKING:
-    from fidelity.chart.measure import ChartMeasurement
     from fidelity.coco.bounds import BoundCell, ClassBounds
+    from fidelity.measure.colour import ChartMeasurement
 
 U8 = NDArray[np.uint8]
 F64 = NDArray[np.float64]
@@ -266,11 +266,11 @@ def patch_colours(image: U8, rows: int = 4, cols: int = 6, patch_px: int = PATCH
 
 
 def corruption_chart(name: str, severity: int, chart: str | None = None) -> Any:
-    """The :class:`~fidelity.chart.measure.ChartMeasurement` of the calibration chart's 8-bit
+    """The :class:`~fidelity.measure.colour.ChartMeasurement` of the calibration chart's 8-bit
     image after the corruption (module docstring): its ``mean_delta_e`` is the corruption's
     chart ΔE."""
-    from fidelity.chart.measure import measure_chart
     from fidelity.colour.charts import DEFAULT_CHART, load_chart
+    from fidelity.measure.colour import measure_chart
 
     _check(name, severity)
     ch = load_chart(chart or DEFAULT_CHART)
@@ -431,7 +431,7 @@ class CocoCResults:
 
     def to_json(self) -> dict[str, Any]:
         """``{"chart", "floor_delta_e", "cells", "meta"}``."""
-        from fidelity.fileio import json_ready
+        from fidelity.core.fileio import json_ready
 
         out: dict[str, Any] = json_ready({"chart": self.chart,
                                           "floor_delta_e": self.floor_delta_e,
@@ -506,7 +506,7 @@ def run_coco_c(inputs: Any, corruptions: Sequence[str] = CORRUPTIONS,
 
     from fidelity.coco.measure import measure_mapping
     from fidelity.colour.charts import DEFAULT_CHART
-    from fidelity.version import __version__
+    from fidelity.core.version import __version__
 
     cells = []
     for cell in chart_cells(corruptions, severities):
@@ -537,8 +537,8 @@ def load_coco_c(path: str | os.PathLike[str] | None = None) -> CocoCResults:
     """The COCO-C table: ``path`` or the shipped ``fidelity/data/coco-c.json``."""
     import json
 
-    from fidelity.errors import InputFileError
-    from fidelity.resources import resource_dir
+    from fidelity.core.errors import InputFileError
+    from fidelity.core.resources import resource_dir
 
     p = Path(path) if path is not None else resource_dir("data") / DATA_FILE
     try:
@@ -586,9 +586,9 @@ def coco_c_answer(spec: str, *, size: str = "any", table: str | None = None,
     """The chart ΔE, the predicted and the measured loss of a COCO-C corruption
     (``"contrast:3"``): the chart side computed now (:func:`corruption_chart`), the measured
     loss from the COCO-C table (:func:`load_coco_c`)."""
+    from fidelity.core.resources import resource_dir
     from fidelity.prediction.directional import predict_chart
     from fidelity.prediction.table import predict
-    from fidelity.resources import resource_dir
 
     name, severity = parse_corruption(spec)
     m = corruption_chart(name, severity)

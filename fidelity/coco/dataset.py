@@ -44,7 +44,7 @@ from fidelity.colour.colorimetry import (
     MATRIX_XYZ_TO_LINEAR_SRGB,
     WHITEPOINT_D65_XYZ,
 )
-from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.core.errors import InputFileError, InvalidValueError
 
 #: Transforms that act on each channel separately with the same 1-D function.
 CHANNELWISE: frozenset[str] = frozenset({
@@ -143,7 +143,7 @@ class PixelMap:
         from fidelity.prediction.transforms import TRANSFORMS, apply_transform
 
         if name not in TRANSFORMS:
-            from fidelity.errors import unknown_name
+            from fidelity.core.errors import unknown_name
 
             raise unknown_name("transform", name, list(TRANSFORMS) + [BASELINE])
         if param is None or not np.isfinite(param):
@@ -228,7 +228,7 @@ def pull_mean_kernel(kernel: str = "auto") -> str:
     if kernel == "auto":
         return "numba" if _numba_kernels() is not None else "numpy"
     if kernel not in PULL_MEAN_KERNELS:
-        from fidelity.errors import unknown_name
+        from fidelity.core.errors import unknown_name
 
         raise unknown_name("pull_mean kernel", kernel, [*PULL_MEAN_KERNELS, "auto"])
     if kernel == "numba" and _numba_kernels() is None:
@@ -753,7 +753,7 @@ _WORKER_MAP: dict[tuple[str, float | None, str], PixelMap] = {}
 
 def _write_one(args: tuple[str, str, str, float | None, str]) -> str:
     from fidelity.coco.jpeg import encode_jpeg, read_jpeg
-    from fidelity.fileio import write_bytes_atomic
+    from fidelity.core.fileio import write_bytes_atomic
 
     src, dst, name, param, kernel = args
     key = (name, param, kernel)
@@ -786,11 +786,11 @@ def write_transformed_dataset(images: Sequence[Path], out_dir: str | os.PathLike
     elif param is None:
         param, reason = calibrated_param(transform, target)
         if param is None:
-            from fidelity.errors import UnreachableTargetError
+            from fidelity.core.errors import UnreachableTargetError
 
             raise UnreachableTargetError(reason or f"{transform} at ΔE {target:g} unreachable")
     sub = out / subset_name(transform, target)
-    from fidelity.fileio import remove_stale_temporaries
+    from fidelity.core.fileio import remove_stale_temporaries
 
     remove_stale_temporaries(sub)  # a killed run's temporary files do not survive the resume
     srcs = {p.resolve() for p in images}
@@ -881,7 +881,7 @@ def write_grid(images: Sequence[Path], out_dir: str | os.PathLike[str],
                progress: bool = True,
                on_skip: Callable[[str, float, str], None] | None = None) -> list[dict[str, Any]]:
     """Write every (transform, target) subset; unreachable cells are reported, not written."""
-    from fidelity.errors import UnreachableTargetError
+    from fidelity.core.errors import UnreachableTargetError
 
     results = []
     done_baseline = False

@@ -81,7 +81,7 @@ from fidelity.colour.spectral import (
     tristimulus,
     wavelength_grid,
 )
-from fidelity.errors import InvalidValueError, unknown_name
+from fidelity.core.errors import InvalidValueError, unknown_name
 
 FloatArray = NDArray[np.float64]
 
@@ -677,8 +677,8 @@ class PatchEmulation(EightBitTable):
             neutral: tuple[int, ...]) -> PatchEmulation:
         """Fit the mapping from ``source_srgb`` to ``target_srgb`` (n >= 6 patches; the
         ``neutral`` indices carry the tone curve)."""
-        from fidelity.chart.measure import luminance_linear_srgb
         from fidelity.colour.colorimetry import linearize_srgb
+        from fidelity.measure.pixels import luminance_linear_srgb
 
         t0 = time.perf_counter()
         src = np.clip(np.asarray(source_srgb, float), 0.0, 1.0)
@@ -735,7 +735,7 @@ class PatchEmulation(EightBitTable):
 
 def _tone_rgb(linear: FloatArray, knots: tuple[FloatArray, FloatArray]) -> FloatArray:
     """Scale linear RGB (..., 3) so that its luminance follows the tone curve."""
-    from fidelity.chart.measure import luminance_linear_srgb
+    from fidelity.measure.pixels import luminance_linear_srgb
 
     lin = np.asarray(linear, float)
     y = np.asarray(luminance_linear_srgb(lin), float)

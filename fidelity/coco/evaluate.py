@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fidelity.coco.scoring import CocoScore, UltralyticsScore
-from fidelity.errors import InputFileError
+from fidelity.core.errors import InputFileError
 
 if TYPE_CHECKING:
     from fidelity.coco.executor import ExecutorOptions
@@ -66,7 +66,7 @@ def evaluate_model(model: str | os.PathLike[str], images: str | os.PathLike[str]
     evaluation started again runs only the images it had not finished. ``metrics``: names from
     :data:`METRICS`; COCO AP is always computed (boxes clipped to the image), Ultralytics' from
     the same detections unclipped. Missing images are an
-    :class:`~fidelity.errors.InputFileError` before any inference.
+    :class:`~fidelity.core.errors.InputFileError` before any inference.
     """
     from fidelity.coco.detectors import clip_boxes
     from fidelity.coco.executor import ExecutorOptions, ModelFile, detect_images
@@ -77,7 +77,7 @@ def evaluate_model(model: str | os.PathLike[str], images: str | os.PathLike[str]
         ultralytics_ap,
     )
     from fidelity.coco.store import ImageSet
-    from fidelity.errors import unknown_name
+    from fidelity.core.errors import unknown_name
 
     for m in metrics:
         if m not in METRICS:

@@ -44,7 +44,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from fidelity.errors import FidelityError, InputFileError, InvalidValueError
+from fidelity.core.errors import FidelityError, InputFileError, InvalidValueError
 
 if TYPE_CHECKING:
     from fidelity.coco.dataset import PixelMap
@@ -87,7 +87,7 @@ class ExecutorOptions:
 
     def __post_init__(self) -> None:
         if self.kind not in EXECUTORS:
-            from fidelity.errors import unknown_name
+            from fidelity.core.errors import unknown_name
 
             raise unknown_name("executor", self.kind, EXECUTORS)
         if self.workers is not None and self.workers < 1:
@@ -114,7 +114,7 @@ class ModelFile:
     @classmethod
     def from_path(cls, path: str | os.PathLike[str]) -> ModelFile:
         """A model file, hashed; a missing file is an input error."""
-        from fidelity.fileio import file_sha256
+        from fidelity.core.fileio import file_sha256
 
         p = Path(path)
         if not p.is_file():
@@ -942,7 +942,7 @@ def detect_images(model: ModelFile | str | os.PathLike[str], images: ImageSet,
     started again computes only the images it had not stored, and a repeated one none.
     """
     from fidelity.coco.store import EvaluationStore, evaluation_store_dir, preprocessing_of
-    from fidelity.fileio import remove_stale_temporaries
+    from fidelity.core.fileio import remove_stale_temporaries
 
     m = model if isinstance(model, ModelFile) else ModelFile.from_path(model)
     ex = make_executor(images, options)

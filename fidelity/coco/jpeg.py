@@ -21,7 +21,7 @@ Documented rules for the awkward cases of COCO val2017:
   pull_mean's chroma stays at the mean's, ~0), so no colour is lost; if a transform does give
   R != G != B, the output takes ITU-R BT.601 luma (Pillow's ``"L"`` conversion) and
   :attr:`JpegSettings.mode` tells the caller the image was grayscale.
-* CMYK or other modes raise :class:`~fidelity.errors.InputFileError`.
+* CMYK or other modes raise :class:`~fidelity.core.errors.InputFileError`.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.core.errors import InputFileError, InvalidValueError
 
 #: Pillow ``subsampling`` codes -> names.
 SUBSAMPLING_NAMES: dict[int, str] = {0: "4:4:4", 1: "4:2:2", 2: "4:2:0", -1: "unknown"}

@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
-from fidelity.errors import InvalidValueError
+from fidelity.core.errors import InvalidValueError
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import ModelSpec
@@ -86,13 +86,13 @@ def resolve_coco_inputs(images: str | os.PathLike[str] | None = None,
                         models: str | Sequence[str] | None = None, *,
                         what: str = "--measure") -> CocoInputs:
     """The images, annotations and detectors of a measurement: as given, else from the shared
-    data folder (:func:`fidelity.resources.shared_dir`); an
-    :class:`~fidelity.errors.InvalidValueError` naming what to pass when neither has them.
+    data folder (:func:`fidelity.core.resources.shared_dir`); an
+    :class:`~fidelity.core.errors.InvalidValueError` naming what to pass when neither has them.
 
     ``models``: ``"a.onnx,b.onnx@250"`` or a sequence of such items.
     """
     from fidelity.coco.sweep import ModelSpec
-    from fidelity.resources import shared_dir
+    from fidelity.core.resources import shared_dir
 
     shared = shared_dir()
     missing = []
@@ -119,7 +119,7 @@ def resolve_coco_inputs(images: str | os.PathLike[str] | None = None,
     specs = tuple(ModelSpec.parse(m) for m in items)
     for s in specs:
         if not s.path.is_file():
-            from fidelity.errors import InputFileError
+            from fidelity.core.errors import InputFileError
 
             raise InputFileError(f"{s.path}: model file does not exist")
     return CocoInputs(img, ann, specs)
@@ -187,7 +187,7 @@ class MeasureStore(ResultsStore):
 def dataset_key(images: str | os.PathLike[str], annotations: str | os.PathLike[str]) -> str:
     """The identity of an image set: the image folder (resolved) and the annotation file's
     sha256, hashed."""
-    from fidelity.fileio import file_sha256
+    from fidelity.core.fileio import file_sha256
 
     text = f"{Path(images).resolve()}|{file_sha256(annotations)}"
     return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
@@ -369,7 +369,7 @@ def measure_mapping(mapping: Mapping8, key: str, inputs: CocoInputs, *,
         score_folds,
     )
     from fidelity.coco.sweep import ImageCache
-    from fidelity.fileio import file_sha256
+    from fidelity.core.fileio import file_sha256
 
     if key == BASELINE_KEY:
         raise InvalidValueError(f"mapping key {key!r} is reserved for the baseline")

@@ -47,8 +47,8 @@ from pathlib import Path
 from typing import Any
 
 from fidelity.coco.store import ResultsStore, cell_key, unpack_detections
-from fidelity.errors import InputFileError
-from fidelity.fileio import atomic_output, display_path, file_sha256
+from fidelity.core.errors import InputFileError
+from fidelity.core.fileio import atomic_output, display_path, file_sha256
 
 #: The ``format`` of a scores file and the newest ``version`` this code reads and writes.
 SCORES_FORMAT = "fidelity-scores"
@@ -157,7 +157,7 @@ def export_scores(store: ResultsStore, coco: Any, path: str | os.PathLike[str],
 
 
 def _version() -> str:
-    from fidelity.version import __version__
+    from fidelity.core.version import __version__
 
     return __version__
 
@@ -181,7 +181,7 @@ def read_scores(path: str | os.PathLike[str], store_type: type[ResultsStore]
                 ) -> dict[str, Any]:
     """A scores file's content, checked against the kind of store it is for: its format,
     version and kind, and every table one of the store's with its columns and rows as long.
-    Raises :class:`~fidelity.errors.InputFileError` naming the file and the problem."""
+    Raises :class:`~fidelity.core.errors.InputFileError` naming the file and the problem."""
     p = Path(path)
     where = display_path(p)
     try:

@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from fidelity import schema as sc
 from fidelity.coco.detectors import COCO80_CATEGORY_IDS
-from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.core import schema as sc
+from fidelity.core.errors import InputFileError, InvalidValueError
 
 
 @dataclass(frozen=True)
@@ -99,7 +99,7 @@ COCO_SCHEMA = sc.Table(fields=(
 
 
 def check_annotations(data: Any, origin: str) -> None:
-    """Raise :class:`~fidelity.schema.SchemaError` ``<origin>: <field>: <problem>`` unless
+    """Raise :class:`~fidelity.core.schema.SchemaError` ``<origin>: <field>: <problem>`` unless
     ``data`` is a COCO instances document scoring can use (:data:`COCO_SCHEMA`)."""
     sc.validate(data, COCO_SCHEMA, origin)
 
@@ -107,7 +107,7 @@ def check_annotations(data: Any, origin: str) -> None:
 def load_annotations(path: str | os.PathLike[str]) -> Any:
     """Load a COCO annotation file, checked against :data:`COCO_SCHEMA`, into a quiet
     ``pycocotools.coco.COCO`` object."""
-    from fidelity.fileio import display_path
+    from fidelity.core.fileio import display_path
 
     p = Path(path)
     if not p.is_file():
@@ -123,7 +123,7 @@ def load_annotated_images(
     """The image folder, its COCO annotations and the image ids (ascending) of a run.
 
     Every annotated image must be present in ``images``; a missing folder or image is an
-    :class:`~fidelity.errors.InputFileError` naming it.
+    :class:`~fidelity.core.errors.InputFileError` naming it.
     """
     img_dir = Path(images)
     if not img_dir.is_dir():
@@ -256,7 +256,7 @@ def scorer_available(method: str) -> bool:
 
     module = {"pycocotools": "pycocotools", "faster-coco-eval": "faster_coco_eval"}.get(method)
     if module is None:
-        from fidelity.errors import unknown_name
+        from fidelity.core.errors import unknown_name
 
         raise unknown_name("COCO scorer", method, list(COCO_SCORERS) + ["auto"])
     return importlib.util.find_spec(module) is not None
@@ -585,7 +585,7 @@ def ultralytics_ap(coco_gt: Any, detections: Mapping[int, np.ndarray],
     ``compute_ap``), ``engine/validator.py`` (``match_predictions``).
     """
     if version not in ULTRALYTICS_RULES:
-        from fidelity.errors import unknown_name
+        from fidelity.core.errors import unknown_name
 
         raise unknown_name("Ultralytics metric version", version, list(ULTRALYTICS_RULES))
     rules = ULTRALYTICS_RULES[version]

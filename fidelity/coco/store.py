@@ -13,7 +13,7 @@ Long runs (issue 23):
   the header says), the format version (``PRAGMA user_version``, :attr:`ResultsStore.format`;
   a store written by a newer fidelity is refused) and every table's columns against the
   schema; a damaged page met later is reported the same way. Each is an
-  :class:`~fidelity.errors.InputFileError` naming the store, never a traceback.
+  :class:`~fidelity.core.errors.InputFileError` naming the store, never a traceback.
 * **Inputs.** ``images`` records each image a run used (file name, size, SHA-256 of the bytes)
   and ``meta["inputs"]`` the annotation file's SHA-256: a resume over other images or other
   annotations is refused, naming what differs (:meth:`ResultsStore.check_images`,
@@ -45,7 +45,7 @@ from typing import Any, ClassVar, Generic, TypeVar
 
 import numpy as np
 
-from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.core.errors import InputFileError, InvalidValueError
 
 S = TypeVar("S", bound="ResultsStore")
 
@@ -637,7 +637,7 @@ class ResultsStore:
         images it will use (per model the first ``limit`` of ``images.ids``, all for None) and
         its annotations checked against the store's record (:meth:`check_images`,
         :meth:`check_annotations`; a new store records them); ``meta["data"]`` written."""
-        from fidelity.fileio import file_sha256, remove_stale_temporaries
+        from fidelity.core.fileio import file_sha256, remove_stale_temporaries
 
         remove_stale_temporaries(self.folder)
         ids = images.ids

@@ -45,9 +45,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
-from fidelity.errors import InvalidValueError
-from fidelity.fileio import file_sha256
-from fidelity.version import __version__, installed_version
+from fidelity.core.errors import InvalidValueError
+from fidelity.core.fileio import file_sha256
+from fidelity.core.version import __version__, installed_version
 
 if TYPE_CHECKING:
     from fidelity.coco.bootstrap import Draws

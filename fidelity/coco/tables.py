@@ -32,12 +32,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fidelity import schema as sc
 from fidelity.coco.bootstrap import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
 from fidelity.coco.loss import loss_estimate
 from fidelity.coco.store import RegisteredModel
-from fidelity.errors import InputFileError
-from fidelity.fileio import json_ready, portable_paths
+from fidelity.core import schema as sc
+from fidelity.core.errors import InputFileError
+from fidelity.core.fileio import json_ready, portable_paths
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import SweepCell, SweepStore
@@ -593,10 +593,10 @@ def cell_deltas(cells: Sequence[SweepCell]) -> dict[str, list[CellDelta]]:
 def parse_image_caps(spec: str | None, models: Sequence[str]) -> dict[str, int]:
     """``"500"`` (every model) or ``"yolov8n-int8dyn=500,yolov10n-int8dyn=500"`` -> model -> N.
 
-    Raises :class:`fidelity.errors.InvalidValueError` naming the entry for a count that is not
+    Raises :class:`fidelity.core.errors.InvalidValueError` naming the entry for a count that is not
     a positive integer or a model the store does not hold.
     """
-    from fidelity.errors import InvalidValueError
+    from fidelity.core.errors import InvalidValueError
 
     caps: dict[str, int] = {}
     for entry in (spec or "").split(","):
@@ -811,10 +811,10 @@ def explain_cell(store: SweepStore, coco: Any, model: str, transform: str, targe
     the model's limit is raised uses the model's common count: pass it to compare). ``rare``
     and ``common`` split the classes at ``rare_boxes`` ground-truth boxes: how many classes,
     their mean ΔAP and the points of ΔmAP they account for. Raises
-    :class:`~fidelity.errors.InvalidValueError` naming the cell when it or the baseline is not
+    :class:`~fidelity.core.errors.InvalidValueError` naming the cell when it or the baseline is not
     a finished cell of the store.
     """
-    from fidelity.errors import InvalidValueError
+    from fidelity.core.errors import InvalidValueError
 
     found: dict[str, SweepCell] = {}
     for t, e in ((transform, float(target)), ("baseline", 0.0)):
@@ -908,7 +908,7 @@ def build_tables(store: SweepStore, coco: Any = None, *, method: str = "auto",
     models = store.models()
     aligned: dict[str, AlignedCount] = {}
     if images and coco is None:
-        from fidelity.errors import InvalidValueError
+        from fidelity.core.errors import InvalidValueError
 
         raise InvalidValueError("--images needs the COCO annotations, to re-score cells on "
                                 "fewer images: pass --annotations")
@@ -1020,12 +1020,12 @@ def merge_tables(tables: Tables, earlier: Tables, source: Mapping[str, Any]) -> 
 
     Both must be measured on the same images (``meta["data"]``: image count and the file names
     of the image folder and annotations) and, where both have one, with the same rare-class
-    threshold, else :class:`~fidelity.errors.InvalidValueError`. Standard errors count only
+    threshold, else :class:`~fidelity.core.errors.InvalidValueError`. Standard errors count only
     where both have them.
     """
     from pathlib import PurePath
 
-    from fidelity.errors import InvalidValueError
+    from fidelity.core.errors import InvalidValueError
 
     def data_key(meta: Mapping[str, Any]) -> tuple[Any, ...]:
         d = meta.get("data") or {}
@@ -1486,7 +1486,7 @@ SWEEP_META_SCHEMA = sc.Table(fields=(
 def check_store_meta(db: Any, path: str, schema: sc.Node = SWEEP_META_SCHEMA) -> None:
     """Check a results store's provenance (its ``meta`` table, read through the open SQLite
     connection ``db``; nothing is written) against ``schema``: every value JSON, the keys the
-    reports read of the right shape. Raises :class:`~fidelity.schema.SchemaError`
+    reports read of the right shape. Raises :class:`~fidelity.core.schema.SchemaError`
     ``<store> (provenance): <key>: <problem>``."""
     import sqlite3
 

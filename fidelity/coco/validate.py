@@ -54,12 +54,11 @@ from fidelity.coco.store import (
     pack_detections,
     unpack_detections,
 )
-from fidelity.errors import InputFileError, InvalidValueError
-from fidelity.fileio import file_sha256, json_ready, portable_paths
-from fidelity.version import __version__
+from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.core.fileio import file_sha256, json_ready, portable_paths
+from fidelity.core.version import __version__
 
 if TYPE_CHECKING:
-    from fidelity.chart.measure import ChartMeasurement
     from fidelity.coco.bootstrap import Draws
     from fidelity.coco.dataset import PixelMap
     from fidelity.coco.emulation import AccuracySummary, Emulation
@@ -67,6 +66,7 @@ if TYPE_CHECKING:
     from fidelity.coco.scoring import CocoScore, FoldScore
     from fidelity.coco.store import ThreadStores
     from fidelity.coco.sweep import ImageCache, ModelSpec
+    from fidelity.measure.colour import ChartMeasurement
     from fidelity.prediction.interval import ValidatedCameras
 
 STORE_NAME = "validation.sqlite"
@@ -988,7 +988,7 @@ class ValidationCells:
 
 def _colour_version() -> str | None:
     """colour-science's version, read from its metadata (the record needs no import of it)."""
-    from fidelity.version import installed_version
+    from fidelity.core.version import installed_version
 
     return installed_version("colour-science")
 

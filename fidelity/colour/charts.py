@@ -18,11 +18,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fidelity import schema as sc
 from fidelity.colour.colorimetry import lab_to_srgb
-from fidelity.errors import FidelityError, InputFileError, unknown_name
-from fidelity.fileio import cached_while_unchanged, display_path
-from fidelity.resources import resource_dir
+from fidelity.core import schema as sc
+from fidelity.core.errors import FidelityError, InputFileError, unknown_name
+from fidelity.core.fileio import cached_while_unchanged, display_path
+from fidelity.core.resources import resource_dir
 
 __all__ = [
     "CHART_SCHEMA",

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fidelity.errors import InvalidValueError, unknown_name
+from fidelity.core.errors import InvalidValueError, unknown_name
 
 __all__ = [
     "CIE_EPSILON",

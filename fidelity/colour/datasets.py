@@ -59,7 +59,7 @@ Reflectance = tuple[str, FloatArray, FloatArray]
 
 def data_path() -> Path:
     """Where the shipped datasets are."""
-    from fidelity.resources import resource_dir
+    from fidelity.core.resources import resource_dir
 
     return resource_dir("data") / DATA_FILE
 
@@ -127,7 +127,7 @@ def training_reflectances() -> dict[str, list[Reflectance]]:
 def _training() -> dict[str, list[tuple[str, list[float], list[float]]]]:
     import gzip
 
-    from fidelity.resources import resource_dir
+    from fidelity.core.resources import resource_dir
 
     with gzip.open(resource_dir("data") / TRAINING_FILE, "rt", encoding="utf-8") as f:
         doc: dict[str, Any] = json.load(f)
@@ -190,7 +190,7 @@ def write_datasets(path: str | os.PathLike[str] | None = None) -> Path:
     :func:`colour_science_training` beside it (:data:`TRAINING_FILE`), atomically."""
     import gzip
 
-    from fidelity.fileio import write_bytes_atomic, write_text_atomic
+    from fidelity.core.fileio import write_bytes_atomic, write_text_atomic
 
     out = write_text_atomic(path or data_path(),
                             json.dumps(colour_science_datasets(), separators=(",", ":")) + "\n")

@@ -38,9 +38,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fidelity.colour.colorimetry import matrix_chromatic_adaptation
-from fidelity.errors import InputFileError, InvalidValueError, unknown_name
-from fidelity.fileio import require_file
-from fidelity.resources import resource_dir
+from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
+from fidelity.core.fileio import require_file
+from fidelity.core.resources import resource_dir
 
 FloatArray = NDArray[np.float64]
 

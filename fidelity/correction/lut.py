@@ -43,11 +43,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fidelity.errors import InvalidValueError
+from fidelity.core.errors import InvalidValueError
+from fidelity.core.extras import optional_module
 
 F64 = NDArray[np.float64]
 
-#: Cube sizes tried, smallest first (:func:`fidelity.fit` keeps the first within the limit).
+#: Cube sizes tried, smallest first (:func:`fidelity.pipeline.fit` keeps the first within the limit).
 CUBE_SIZES: tuple[int, ...] = (33, 65)
 #: Samples of the 1D shaper of a scene-linear cube.
 SHAPER_SIZE = 4096
@@ -59,11 +60,7 @@ def ocio(needed_for: str = "the .cube is written and checked by OpenColorIO",
          extra: str = OCIO_EXTRA) -> Any:
     """The ``PyOpenColorIO`` module, or one clear error: what needs it (``needed_for``), and
     the ``extra`` that installs it."""
-    try:
-        import PyOpenColorIO
-    except ImportError:
-        raise InvalidValueError(f"{needed_for}, which is not installed: {extra}") from None
-    return PyOpenColorIO
+    return optional_module("PyOpenColorIO", needed_for, extra)
 
 
 #: How the 3D lattice is spaced (module docstring).

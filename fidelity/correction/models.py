@@ -38,7 +38,7 @@ condition number above :data:`CONDITION_LIMIT` (a chart whose colours span too l
 nearly grey, or patches lost to clipping) regularises the fit towards the identity (Tikhonov,
 with the smallest weight that brings the condition number to the limit) and says so; fewer
 patches than coefficients + 2, or coefficients beyond :data:`MAX_COEFFICIENT` even so, are
-refused (:class:`~fidelity.errors.InvalidValueError`). :func:`cross_validate` predicts each
+refused (:class:`~fidelity.core.errors.InvalidValueError`). :func:`cross_validate` predicts each
 patch from a fit that did not see it (leave-k-patches-out, rotating through the chart).
 """
 
@@ -59,7 +59,7 @@ from fidelity.colour.colorimetry import (
     linearize_srgb,
     xyz_to_lab,
 )
-from fidelity.errors import InvalidValueError, unknown_name
+from fidelity.core.errors import InvalidValueError, unknown_name
 
 F64 = NDArray[np.float64]
 
@@ -303,7 +303,7 @@ def fit_model(sim: ArrayLike, real: ArrayLike, model: str = "matrix", *,
     Returns
     -------
     The fitted :class:`ColourModel` and its :class:`Conditioning`. Raises
-    :class:`~fidelity.errors.InvalidValueError` for too few patches or an unstable fit.
+    :class:`~fidelity.core.errors.InvalidValueError` for too few patches or an unstable fit.
     """
     family = model_family(model)
     objective = DEFAULT_OBJECTIVE if objective is None else objective
@@ -481,7 +481,7 @@ def fit_shared_matrix(sims: Sequence[ArrayLike], reals: Sequence[ArrayLike], *,
 
     Returns the matrix as a ``matrix`` :class:`ColourModel`, the gains ``(3,)`` per pair and
     the matrix step's :class:`Conditioning`. Gains beyond :data:`MAX_COEFFICIENT` or not
-    positive are refused (:class:`~fidelity.errors.InvalidValueError`)."""
+    positive are refused (:class:`~fidelity.core.errors.InvalidValueError`)."""
     if len(sims) != len(reals) or not sims:
         raise InvalidValueError("fit_shared_matrix needs as many sim charts as real ones, "
                                 "at least one")

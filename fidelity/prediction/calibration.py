@@ -34,10 +34,10 @@ from numpy.typing import NDArray
 
 from fidelity.colour.charts import DEFAULT_CHART, Chart, load_chart
 from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
-from fidelity.errors import InputFileError, InvalidValueError, UnreachableTargetError
+from fidelity.core.errors import InputFileError, InvalidValueError, UnreachableTargetError
+from fidelity.core.resources import resource_dir
 from fidelity.prediction.scalar import brent_root
 from fidelity.prediction.transforms import TRANSFORMS, TransformSpec, get_transform
-from fidelity.resources import resource_dir
 
 __all__ = [
     "DEFAULT_TARGETS",
@@ -267,7 +267,7 @@ def calibrate_transform(
 
     ``target`` > 0. Returns an unreachable entry (``param=None``, ``delta_e`` = the largest ΔE
     the transform reaches) when the target is out of reach, or raises
-    :class:`~fidelity.errors.UnreachableTargetError` if ``strict``.
+    :class:`~fidelity.core.errors.UnreachableTargetError` if ``strict``.
     """
     t = float(target)
     if not np.isfinite(t) or t <= 0:

@@ -66,14 +66,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fidelity.errors import InvalidValueError, unknown_name
-from fidelity.fileio import cached_while_unchanged
+from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.core.fileio import cached_while_unchanged
 from fidelity.prediction.scalar import bounded_minimum
 
 if TYPE_CHECKING:
     from pathlib import Path
 
-    from fidelity.chart.measure import ChartMeasurement
+    from fidelity.measure.colour import ChartMeasurement
     from fidelity.prediction.table import PredictionTable
     from fidelity.prediction.verdict import Criterion, DecisionRule, Verdict
 
@@ -425,7 +425,7 @@ def _directional_file(path: Path) -> DirectionalTable:
 
 def _directional_of(classic: PredictionTable) -> DirectionalTable:
     """:func:`load_directional_table` of a loaded table."""
-    from fidelity.errors import InputFileError
+    from fidelity.core.errors import InputFileError
     from fidelity.prediction.table import TableKind, parse_prediction_table
 
     fams = classic.raw.get("families")

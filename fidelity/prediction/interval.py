@@ -10,7 +10,7 @@ combined as uncorrelated (JCGM 100 5.1.2):
   which)
   (:class:`~fidelity.prediction.table.SamplingError`;
   measured tables, ``dmap_points`` only; None otherwise);
-- the chart ΔE's own standard uncertainty ``u(ΔE)`` (:mod:`fidelity.chart.uncertainty`)
+- the chart ΔE's own standard uncertainty ``u(ΔE)`` (:mod:`fidelity.measure.uncertainty`)
   propagated through the table: ``|c| u(ΔE)`` with the sensitivity ``c`` the slope of the
   table's answer, by central differences over ``±h`` (``h`` = max(u(ΔE), 0.01), one-sided at
   ΔE < h).
@@ -298,7 +298,7 @@ def load_validated_cameras() -> ValidatedCameras | None:
     package ships none."""
     import json
 
-    from fidelity.resources import resource_dir
+    from fidelity.core.resources import resource_dir
 
     path = resource_dir("data") / VALIDATED_CAMERAS_FILE
     if not path.is_file():

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, NamedTuple
 
-from fidelity.errors import unknown_name
+from fidelity.core.errors import unknown_name
 from fidelity.prediction.table import Prediction, PredictionTable, TableKind
 from fidelity.prediction.verdict import SIMPLE, Criterion, DecisionRule, Verdict
 
 if TYPE_CHECKING:
-    from fidelity.chart.measure import ChartMeasurement
+    from fidelity.measure.colour import ChartMeasurement
     from fidelity.prediction.directional import DirectionalPrediction
 
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-from fidelity.errors import InvalidValueError
+from fidelity.core.errors import InvalidValueError
 
 _EPS = 2.220446049250313e-16  # float64 machine epsilon
 #: SciPy's default relative tolerance of brentq: four machine epsilons.

@@ -47,10 +47,10 @@ from typing import Any
 
 import numpy as np
 
-from fidelity import schema as sc
-from fidelity.errors import InputFileError, InvalidValueError, unknown_name
-from fidelity.fileio import cached_while_unchanged, display_path
-from fidelity.resources import resource_dir
+from fidelity.core import schema as sc
+from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
+from fidelity.core.fileio import cached_while_unchanged, display_path
+from fidelity.core.resources import resource_dir
 
 #: The table used when none is named: the project's measured table (the COCO sweep, issue 5).
 DEFAULT_TABLE = "coco1000-measured"
@@ -269,7 +269,7 @@ def _column(points: Sequence[Mapping[str, Any]], key: str) -> np.ndarray:
 
 def parse_prediction_table(obj: dict[str, Any], origin: str = "<table>") -> PredictionTable:
     """Validate a prediction-table JSON object (:data:`PREDICTION_TABLE_SCHEMA`) and build a
-    :class:`PredictionTable`. Raises :class:`~fidelity.schema.SchemaError` (an
+    :class:`PredictionTable`. Raises :class:`~fidelity.core.schema.SchemaError` (an
     :class:`InputFileError`) as ``<origin>: <field>: <problem>``."""
     v = sc.validate(obj, PREDICTION_TABLE_SCHEMA, origin)
     curves = []

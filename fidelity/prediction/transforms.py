@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fidelity.colour.colorimetry import delinearize_srgb, lab_to_srgb, linearize_srgb, srgb_to_lab
-from fidelity.errors import InvalidValueError, unknown_name
+from fidelity.core.errors import InvalidValueError, unknown_name
 
 __all__ = [
     "TRANSFORMS",
@@ -254,7 +254,7 @@ def apply_transform(rgb: ArrayLike, name: str, param: float) -> FloatArray:
     """Apply the registered transform ``name`` with parameter ``param`` to sRGB in [0, 1].
 
     Checks the input (shape, NaN/Inf, [0, 1] range) and the parameter (finite, inside the
-    transform's range) and raises :class:`~fidelity.errors.InvalidValueError` otherwise.
+    transform's range) and raises :class:`~fidelity.core.errors.InvalidValueError` otherwise.
     """
     spec = get_transform(name)
     a = validate_rgb(rgb)

@@ -1,4 +1,4 @@
-"""The chart report as a document: a :class:`~fidelity.records.ChartReport` turned into HTML.
+"""The chart report as a document: a :class:`~fidelity.pipeline.records.ChartReport` turned into HTML.
 
 The HTML report (:func:`chart_document`, written by :mod:`fidelity.report.html`) puts the
 verdict and the chart first, then the figures a colour scientist expects (ΔE heat map on the
@@ -17,8 +17,8 @@ from typing import Any
 
 from numpy.typing import NDArray
 
-from fidelity.fileio import JSONObject, json_ready
-from fidelity.records import ChartReport, ImageSource, RenderSource
+from fidelity.core.fileio import JSONObject, json_ready
+from fidelity.pipeline.records import ChartReport, ImageSource, RenderSource
 from fidelity.report.document import (
     Code,
     Document,
@@ -56,7 +56,7 @@ def headline(report: ChartReport) -> Headline:
 
 
 def summary_facts(report: ChartReport) -> Facts:
-    from fidelity.chart.measure import chart_statistics
+    from fidelity.measure.colour import chart_statistics
 
     u = report.uncertainty
     items = [("mean ΔE00 (chart ΔE)", _num(report.mean_delta_e) if u is None else
@@ -118,7 +118,7 @@ def summary_facts(report: ChartReport) -> Facts:
 def noise_facts(report: ChartReport) -> list[tuple[str, str]]:
     """The noise rows of the summary: the neutral patches' SNR and the worst patch of the
     chart, or "no noise" for a noise-free measurement (none when the noise is unknown)."""
-    from fidelity.chart.measure import NOISE_FLOOR, chart_statistics
+    from fidelity.measure.colour import NOISE_FLOOR, chart_statistics
 
     stats = chart_statistics(report.measurement)
     label = "noise: signal-to-noise of the neutral patches (encoded sRGB)"
@@ -136,8 +136,8 @@ def noise_facts(report: ChartReport) -> list[tuple[str, str]]:
 
 def tone_facts(report: ChartReport) -> list[tuple[str, str]]:
     """The tone row of the summary: gamma and exposure fitted to the neutral patches
-    (:func:`fidelity.chart.measure.fit_tone`)."""
-    from fidelity.chart.measure import fit_tone
+    (:func:`fidelity.measure.colour.fit_tone`)."""
+    from fidelity.measure.colour import fit_tone
 
     fit = fit_tone(report.measurement)
     if fit is None:
@@ -202,7 +202,7 @@ def blind_spot_section(report: ChartReport) -> Section | None:
     rows = [(b.kind, {True: "**at risk**", False: "no", None: "not judged"}[b.at_risk],
              _num(b.value, 3), b.reason) for b in report.blind_spots]
     return section("Blind spots of the chart ΔE", Text(
-        "What a mean over 24 flat patches cannot see (`fidelity.chart.blindspots`): the tone "
+        "What a mean over 24 flat patches cannot see (`fidelity.measure.blindspots`): the tone "
         "of the deep shadows below the black patch, and posterisation (banding) of smooth "
         "gradients."), table(("check", "at risk", "value", "reason"), rows,
                              numeric=(False, False, True, False)))
@@ -281,8 +281,8 @@ def patch_section(report: ChartReport) -> Section:
     """Every patch: number and name, ΔE00 and its components, ΔE*ab and ΔE94 (extra
     columns; the verdict is on ΔE00), measured and reference Lab, and the SNR where the noise
     is known."""
-    from fidelity.chart.measure import patch_snr_db
     from fidelity.colour.colorimetry import delta_e_1976, delta_e_1994
+    from fidelity.measure.colour import patch_snr_db
 
     m = report.measurement
     de76 = delta_e_1976(m.reference_lab, m.lab)
@@ -340,7 +340,7 @@ def chart_document(report: ChartReport, pixels: NDArray[Any] | None = None) -> D
     chart first, then where the patches were sampled (an image, given its ``pixels``), the ΔE
     heat map, a*b* arrows, the neutral tone curve and ΔE per patch, the prediction; the patch
     table, transforms and provenance folded away."""
-    from fidelity.chart.measure import fit_tone, neutral_patches
+    from fidelity.measure.colour import fit_tone, neutral_patches
     from fidelity.report import chartfigures
 
     m = report.measurement
@@ -394,7 +394,7 @@ def chart_document(report: ChartReport, pixels: NDArray[Any] | None = None) -> D
 def source_pixels(report: ChartReport) -> NDArray[Any] | None:
     """The pixels of an image report's image, read again as the audit read it (None for a
     render): the HTML shows where the patches were sampled."""
-    from fidelity.chart.measure import read_again
+    from fidelity.chart.read import read_again
 
     src = report.source
     if not isinstance(src, ImageSource):
@@ -410,7 +410,7 @@ def write_report_files(json_document: Callable[[], JSONObject],
     """Write a report's JSON and/or HTML atomically, refusing to write over any path in
     ``protect`` (the inputs); each document is made only when its file is asked for. Returns
     the paths written."""
-    from fidelity.fileio import check_outputs, write_json_atomic
+    from fidelity.core.fileio import check_outputs, write_json_atomic
 
     inputs = {f"input {i + 1}": p for i, p in enumerate(protect) if p}
     written: list[Path] = []

@@ -2,7 +2,7 @@
 
 Every figure of the ``check``/``audit``/``gate``/``compare`` HTML report, as SVG text: no
 plotting library is imported, so the whole report costs milliseconds. Chart figures take a
-:class:`~fidelity.chart.measure.ChartMeasurement` (patches in row-major order); patches are
+:class:`~fidelity.measure.colour.ChartMeasurement` (patches in row-major order); patches are
 numbered 1..n in chart order in every figure:
 
 - :func:`swatches`: the chart, each patch split into reference and measured colour;
@@ -11,7 +11,7 @@ numbered 1..n in chart order in every figure:
 - :func:`ab_arrows`: the a*b* plane, an arrow from each reference to its measurement, each
   point numbered; small errors are drawn magnified (the factor is in the title);
 - :func:`tone_curve`: measured against reference L* of the neutral patches, with a fitted
-  tone curve (gamma and exposure, :func:`fidelity.chart.measure.fit_tone`) where given;
+  tone curve (gamma and exposure, :func:`fidelity.measure.colour.fit_tone`) where given;
 - :func:`chart_location` / :func:`chart_pair`: where each patch was sampled in an image;
 - :func:`prediction_curve` / :func:`family_curves`: the table's ΔE → loss curves with this
   chart's point and the limits.
@@ -30,7 +30,7 @@ from fidelity.report.svg import COLOURS, Axes, Canvas, Scale, hex_colour, lumina
 
 if TYPE_CHECKING:
     from fidelity.chart.locate import ChartLocation
-    from fidelity.chart.measure import ChartMeasurement, ToneFit
+    from fidelity.measure.colour import ChartMeasurement, ToneFit
     from fidelity.prediction.directional import DirectionalPrediction
     from fidelity.prediction.table import Prediction
 
@@ -203,7 +203,7 @@ def tone_curve(m: ChartMeasurement, neutral_indices: Sequence[int],
                fit: ToneFit | None = None) -> str:
     """Measured against reference L* of the neutral patches (the grey-scale tone curve),
     with the identity and, given ``fit``, the fitted power law
-    (:class:`~fidelity.chart.measure.ToneFit`) drawn through them."""
+    (:class:`~fidelity.measure.colour.ToneFit`) drawn through them."""
     from fidelity.colour import colorimetry as cm
 
     idx = list(neutral_indices)

@@ -450,7 +450,7 @@ def write_tables_report(result: TablesResult, out_dir: str | os.PathLike[str],
     """Write the report (:func:`write_tables_document`), ``tables.json`` and (optionally) the
     measured prediction table, atomically. Returns the paths by name."""
     from fidelity.coco.tables import prediction_table
-    from fidelity.fileio import json_ready, write_json_atomic
+    from fidelity.core.fileio import json_ready, write_json_atomic
 
     out = Path(out_dir)
     written = write_tables_document(result, out)

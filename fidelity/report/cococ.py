@@ -175,7 +175,7 @@ def write_cococ_report(results: CocoCResults, out_dir: str | os.PathLike[str],
     """Write ``cococ.html``, ``cococ.md`` (with its figures) and ``cococ.json`` into
     ``out_dir``, and the shipped data file ``data`` when given (its input paths cut to their
     names: :meth:`~fidelity.coco.corruptions.CocoCResults.without_locations`); atomically."""
-    from fidelity.fileio import write_json_atomic
+    from fidelity.core.fileio import write_json_atomic
     from fidelity.report.html import write_document
 
     out = Path(out_dir)

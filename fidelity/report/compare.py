@@ -1,6 +1,6 @@
 """The sim-to-real comparison as terminal lines, an HTML document and report files.
 
-Renders a :class:`~fidelity.records.ComparisonReport` (:func:`fidelity.compare.compare_charts`):
+Renders a :class:`~fidelity.pipeline.records.ComparisonReport` (:func:`fidelity.pipeline.compare.compare_charts`):
 :func:`comparison_lines` for the terminal, :func:`comparison_document` for the HTML report (the
 chart report's section builders, :mod:`fidelity.report.chart`, for the parts the two share) and
 :func:`write_comparison_report` for the files.
@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fidelity.fileio import json_ready
-from fidelity.records import ComparisonReport, ImageSource
+from fidelity.core.fileio import json_ready
+from fidelity.pipeline.records import ComparisonReport, ImageSource
 from fidelity.report.chart import (
     blind_spot_section,
     directional_section,

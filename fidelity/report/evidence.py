@@ -27,7 +27,7 @@ by which rule pass/fail was decided. Its layout is the JSON Schema
 The same record is written in the SSP Traceability formats, SRMD and STMD
 (:mod:`fidelity.report.ssp`), by the suffix of the file (:data:`EVIDENCE_FORMATS`).
 
-The report layer renders the result records here (:mod:`fidelity.records`); nothing is
+The report layer renders the result records here (:mod:`fidelity.pipeline.records`); nothing is
 measured again.
 """
 
@@ -41,11 +41,17 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from fidelity.fileio import JSONObject, json_ready
-from fidelity.records import ChartReport, ComparisonReport, ImageSource, RenderSource, utc_now
+from fidelity.core.fileio import JSONObject, json_ready
+from fidelity.pipeline.records import (
+    ChartReport,
+    ComparisonReport,
+    ImageSource,
+    RenderSource,
+    utc_now,
+)
 
 if TYPE_CHECKING:
-    from fidelity.fit import FitReport
+    from fidelity.pipeline.fit import FitReport
 
 #: Layout version of the credibility record.
 EVIDENCE_SCHEMA_VERSION = "1.1"
@@ -72,7 +78,7 @@ PathArg = str | os.PathLike[str]
 
 def evidence_schema_path() -> Path:
     """Path of the JSON Schema of the credibility record."""
-    from fidelity.resources import resource_dir
+    from fidelity.core.resources import resource_dir
 
     return resource_dir("data") / "schemas" / "evidence.schema.json"
 
@@ -118,7 +124,7 @@ def git_commit(folder: Path | None = None) -> tuple[str | None, bool | None]:
 
 def tool_record() -> dict[str, Any]:
     """``tool``: name, version, commit, dirty, code_sha256."""
-    from fidelity.version import __version__
+    from fidelity.core.version import __version__
 
     commit, dirty = git_commit()
     return {"name": "fidelity", "distribution": "camera-fidelity", "version": __version__,
@@ -127,8 +133,8 @@ def tool_record() -> dict[str, Any]:
 
 def environment_record() -> dict[str, Any]:
     """``environment``: Python, platform, machine and the versions of the libraries a report
-    records (:meth:`fidelity.records.Provenance.collect`)."""
-    from fidelity.records import Provenance
+    records (:meth:`fidelity.pipeline.records.Provenance.collect`)."""
+    from fidelity.pipeline.records import Provenance
 
     libraries = Provenance.collect(None, None, {}).libraries
     return {"python": platform.python_version(), "implementation":
@@ -140,7 +146,7 @@ def invocation_record(argv: Sequence[str], settings: PathArg | None = None,
                       cwd: PathArg | None = None) -> dict[str, Any]:
     """``invocation``: the command line ``argv`` (after ``fidelity``), the folder it ran in
     (default: the current one) and the settings file read (path and SHA-256; None)."""
-    from fidelity.fileio import file_sha256
+    from fidelity.core.fileio import file_sha256
 
     folder = os.fsdecode(cwd) if cwd is not None else os.getcwd()
     read = None
@@ -156,7 +162,7 @@ def invocation_record(argv: Sequence[str], settings: PathArg | None = None,
 
 def _file_input(role: str, path: str | os.PathLike[str], sha256: str | None = None,
                 provenance: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    from fidelity.fileio import file_sha256
+    from fidelity.core.fileio import file_sha256
 
     digest = sha256
     if digest is None:
@@ -185,7 +191,7 @@ def _inputs(report: ChartReport) -> list[dict[str, Any]]:
         return inputs
     assert isinstance(src, RenderSource)
     from fidelity.camera.model import available_cameras, camera_files
-    from fidelity.resources import resource_dir
+    from fidelity.core.resources import resource_dir
 
     out = []
     source = str(src.camera_settings.get("source", src.camera))
@@ -298,7 +304,7 @@ def fit_evidence_record(report: FitReport, exit_code: int = 0,
     (:func:`fidelity.report.jsonform.fit_json`: before/after, fitted and cross-validated ΔE00,
     the ``.cube``'s check, the model) and the SHA-256 of every file written. A fit has no
     verdict; its validity domain is the prediction table's."""
-    from fidelity.fileio import file_sha256
+    from fidelity.core.fileio import file_sha256
     from fidelity.prediction.interval import validity_domain
     from fidelity.report.jsonform import fit_json
 
@@ -363,8 +369,8 @@ def evidence_format(path: PathArg) -> str:
     naming the file."""
     import importlib.util
 
-    from fidelity.errors import InvalidValueError
-    from fidelity.fileio import display_path
+    from fidelity.core.errors import InvalidValueError
+    from fidelity.core.fileio import display_path
 
     suffix = Path(path).suffix.lower()
     if suffix not in EVIDENCE_FORMATS:
@@ -379,7 +385,7 @@ def evidence_format(path: PathArg) -> str:
 
 
 def _write_json(path: PathArg, record: JSONObject, results: Sequence[PathArg]) -> Path:
-    from fidelity.fileio import write_json_atomic
+    from fidelity.core.fileio import write_json_atomic
 
     return write_json_atomic(path, record)
 

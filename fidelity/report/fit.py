@@ -1,6 +1,6 @@
 """The fit of a correction (``fidelity fit``) as terminal lines, an HTML document and files.
 
-Renders a :class:`~fidelity.fit.FitReport`: :func:`fit_lines` for the terminal,
+Renders a :class:`~fidelity.pipeline.fit.FitReport`: :func:`fit_lines` for the terminal,
 :func:`fit_document` for the HTML report (before/after swatches and ΔE maps, the per-patch
 table, the ``.cube``'s check, the correction) and :func:`write_fit_report` for the files.
 """
@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fidelity.fileio import json_ready
-from fidelity.fit import EXPRESSED_DELTA_E, FitReport, SharedFit
+from fidelity.core.fileio import json_ready
+from fidelity.pipeline.fit import EXPRESSED_DELTA_E, FitReport, SharedFit
 from fidelity.report.chart import write_report_files
 from fidelity.report.document import (
     Code,

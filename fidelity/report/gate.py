@@ -16,7 +16,7 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from fidelity.records import GateResult
+from fidelity.pipeline.records import GateResult
 from fidelity.report.document import (
     Document,
     Figure,

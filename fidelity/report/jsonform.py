@@ -11,15 +11,15 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
-from fidelity.fileio import JSONObject, json_ready
+from fidelity.core.fileio import JSONObject, json_ready
+from fidelity.pipeline.records import ChartReport, ComparisonReport
 from fidelity.prediction.table import Prediction
 from fidelity.prediction.verdict import Verdict
-from fidelity.records import ChartReport, ComparisonReport
 from fidelity.report.words import column_note, prediction_notes, verdict_message
 
 if TYPE_CHECKING:
     from fidelity.coco.corruptions import CocoCAnswer
-    from fidelity.fit import FitReport, SharedFit
+    from fidelity.pipeline.fit import FitReport, SharedFit
     from fidelity.prediction.interval import PredictionInterval, ValidityDomain
 
 
@@ -42,7 +42,7 @@ def predict_json(prediction: Prediction, families: Mapping[str, float | None] | 
                  interval: PredictionInterval | None, validity: ValidityDomain) -> JSONObject:
     """The JSON report of ``fidelity predict --delta-e``: :func:`prediction_json`, with the
     predicted ΔmAP's ``prediction_interval`` (None where there is nothing to state) and the
-    answer's ``validity`` domain (:func:`fidelity.check.prediction_domain`)."""
+    answer's ``validity`` domain (:func:`fidelity.pipeline.check.prediction_domain`)."""
     out: JSONObject = json_ready(prediction_json(prediction, families) | {
         "prediction_interval": interval.to_json() if interval is not None else None,
         "validity": validity.to_json()})
@@ -62,7 +62,7 @@ def verdict_json(verdict: Verdict, delta_e_name: str = "mean ΔE00") -> dict[str
 
 def chart_report_json(report: ChartReport) -> JSONObject:
     """The JSON report of a chart (``check``, ``audit``, ``gate``; the module docstring of
-    :mod:`fidelity.records` lists its keys), strict JSON values."""
+    :mod:`fidelity.pipeline.records` lists its keys), strict JSON values."""
     r = report
     m = r.measurement.to_json()
     patches = m["patches"]
@@ -125,7 +125,7 @@ def fit_json(report: FitReport) -> JSONObject:
     """The JSON report of ``fidelity fit``: the sim-to-real ΔE00 before and after (the SIM
     image through the ``.cube`` by OpenColorIO, audited again) with their predictions, the
     fitted and cross-validated ΔE00, the ``.cube``'s check against the model, the correction
-    (:meth:`fidelity.fit.Correction.to_json`), the files written and the seconds spent."""
+    (:meth:`fidelity.pipeline.fit.Correction.to_json`), the files written and the seconds spent."""
     r, c = report, report.correction
 
     def side(m: Any, p: Prediction) -> dict[str, Any]:

@@ -19,7 +19,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from fidelity.records import GateResult
+from fidelity.pipeline.records import GateResult
 from fidelity.report.words import verdict_message
 
 
@@ -123,7 +123,7 @@ def junit_xml(cases: Sequence[GateResult], *, timestamp: str | None = None,
 
 def write_junit(path: str | os.PathLike[str], cases: Sequence[GateResult]) -> Path:
     """Write JUnit XML atomically (see :func:`junit_xml`)."""
-    from fidelity.fileio import write_text_atomic
+    from fidelity.core.fileio import write_text_atomic
 
     return write_text_atomic(path, junit_xml(cases))
 

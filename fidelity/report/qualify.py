@@ -1,4 +1,4 @@
-"""The qualification record of an installation (:mod:`fidelity.qualify`): terminal lines and
+"""The qualification record of an installation (:mod:`fidelity.pipeline.qualify`): terminal lines and
 the JSON document ``fidelity qualify --json`` writes.
 
 The JSON holds the tool and environment as a credibility record states them
@@ -11,8 +11,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from fidelity.qualify import NOT_RUN, Qualification, QualificationCheck
-from fidelity.records import utc_now
+from fidelity.pipeline.qualify import NOT_RUN, Qualification, QualificationCheck
+from fidelity.pipeline.records import utc_now
 
 #: Layout version of the qualification record.
 QUALIFICATION_LAYOUT = "1.0"

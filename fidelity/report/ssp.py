@@ -47,7 +47,7 @@ from urllib.parse import quote
 
 from lxml import etree
 
-from fidelity.fileio import JSONObject, file_sha3_256, printable, write_bytes_atomic
+from fidelity.core.fileio import JSONObject, file_sha3_256, printable, write_bytes_atomic
 
 #: The SSP Traceability version the documents follow (``version`` of SRMD and STMD).
 SSP_TRACEABILITY_VERSION = "1.0.0-rc.2"
@@ -105,7 +105,7 @@ class TracedFile:
 def ssp_schema_path(name: str) -> Path:
     """The shipped XML Schema ``name`` (``"SRMD.xsd"``, ``"STMD.xsd"``, ``"STC.xsd"``) of SSP
     Traceability 1.0-rc.2, with what it imports beside it."""
-    from fidelity.resources import resource_dir
+    from fidelity.core.resources import resource_dir
 
     return resource_dir("data") / "schemas" / "ssp-traceability" / name
 
@@ -121,7 +121,7 @@ _NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ufffe\uffff]")
 
 def xml_safe(text: str) -> str:
     """``text`` that XML 1.0 can hold: undecodable bytes of file names as ``\\xNN``
-    (:func:`fidelity.fileio.printable`), control characters as ``\\xNN`` too."""
+    (:func:`fidelity.core.fileio.printable`), control characters as ``\\xNN`` too."""
     return _NOT_XML.sub(lambda m: f"\\x{ord(m.group()):02x}" if ord(m.group()) < 256
                         else f"\\u{ord(m.group()):04x}", printable(text))
 

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+from fidelity.pipeline.records import ChartReport, ImageSource
 from fidelity.prediction.table import TableKind
-from fidelity.records import ChartReport, ImageSource
 from fidelity.report.words import verdict_message
 
 

@@ -349,7 +349,7 @@ def _blind_spot_sections(results: ValidationResults) -> list[Section]:
             lines.append(f"- **{c.camera}** (chart ΔE {c.chart_delta_e:.2f}): {w.reason}. "
                          f"ΔmAP {got}.")
     text = (f"{len(warned)} of {len(dv.cameras)} cameras get a warning "
-            "(`fidelity.chart.blindspots`: shadow tone of the neutral patches, the camera's "
+            "(`fidelity.measure.blindspots`: shadow tone of the neutral patches, the camera's "
             "bit depth):\n\n" + "\n".join(lines)) if warned else \
         f"None of the {len(dv.cameras)} cameras gets a warning."
     rows = [[c.camera, b.kind, {True: "**at risk**", False: "no", None: "not judged"}[b.at_risk],
@@ -476,7 +476,7 @@ def _baselines_section(results: ValidationResults) -> Section:
 
 
 def _run_section(results: ValidationResults) -> Section:
-    from fidelity.fileio import portable_paths
+    from fidelity.core.fileio import portable_paths
 
     meta, summ, cams = results.meta, results.summary, results.cameras
     data = portable_paths(meta.get("data", {}))
@@ -571,7 +571,7 @@ def write_validation_report(results: ValidationResults, out_dir: str | os.PathLi
     the results carry both bounds (:mod:`fidelity.coco.bounds`), ``directional.json``
     (derived from ``validation.json``, the camera files and the shipped tables, so kept
     apart); atomically; returns the paths written."""
-    from fidelity.fileio import write_json_atomic
+    from fidelity.core.fileio import write_json_atomic
 
     written = write_validation_document(results, out_dir, notes)
     doc = results.to_json()

@@ -38,8 +38,8 @@ from dataclasses import dataclass
 from pathlib import Path, PurePath
 from typing import Any
 
-from fidelity import schema as sc
-from fidelity.fileio import JSONObject, display_path
+from fidelity.core import schema as sc
+from fidelity.core.fileio import JSONObject, display_path
 
 #: Each status a :class:`Finding` can have, and whether it fails the verification.
 STATUSES: Mapping[str, bool] = {
@@ -187,7 +187,7 @@ class Verification:
 
 def read_record(path: str | os.PathLike[str]) -> dict[str, Any]:
     """The credibility record at ``path`` (JSON), the parts verifying reads validated
-    (:data:`RECORD_SCHEMA`); raises :class:`~fidelity.schema.SchemaError` naming the file and
+    (:data:`RECORD_SCHEMA`); raises :class:`~fidelity.core.schema.SchemaError` naming the file and
     the field."""
     where = display_path(path)
     if Path(path).suffix.lower() != ".json":
@@ -218,7 +218,7 @@ def _is_file(path: Path) -> bool:
 def _shipped_copy(recorded: str) -> Path | None:
     """This installation's copy of a file of the package's shipped data named by another
     installation's path (``.../fidelity/data/<rest>``), if it has one."""
-    from fidelity.resources import resource_dir
+    from fidelity.core.resources import resource_dir
 
     parts = PurePath(recorded).parts
     for i in range(len(parts) - 2, -1, -1):
@@ -247,7 +247,7 @@ def locate(recorded: str, cwd: str | None, record_dir: Path,
 
 def _file_finding(kind: str, name: str, recorded: str | None, sha256: str | None,
                   cwd: str | None, record_dir: Path, inputs: Path | None) -> Finding:
-    from fidelity.fileio import file_sha256
+    from fidelity.core.fileio import file_sha256
 
     if recorded is None:
         return Finding(kind, name, "not hashed", "the record names no file", None)
@@ -268,8 +268,8 @@ def _file_finding(kind: str, name: str, recorded: str | None, sha256: str | None
 
 
 def _code_finding(tool: Mapping[str, Any]) -> Finding:
+    from fidelity.core.version import __version__
     from fidelity.report.evidence import code_sha256, git_commit
-    from fidelity.version import __version__
 
     def named(version: str, commit: str | None, dirty: bool | None) -> str:
         return f"fidelity {version}" + (

@@ -35,7 +35,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from fidelity.fileio import JSONObject, write_bytes_atomic
+from fidelity.core.fileio import JSONObject, write_bytes_atomic
 from fidelity.report.ssp import xml_safe, xml_value
 
 #: Rule UIDs (QC Framework rule UID schema): emanating entity, standard, definition setting

@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from fidelity.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
-from fidelity.fileio import WRITE_ERRNOS, display_path, json_ready, write_error
+from fidelity.core.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
+from fidelity.core.fileio import WRITE_ERRNOS, display_path, json_ready, write_error
 from fidelity.scene.model import LUMENS_PER_WATT, ChartScene
 
 #: glTF base colour encodings (:data:`fidelity.scene.gltf.BASE_COLOURS`, without importing it).
@@ -316,8 +316,8 @@ def export_scene(scene: ChartScene, fmt: str, out: str | os.PathLike[str], *,
     ``check`` loads the Mitsuba XML back with ``mitsuba.load_file`` when Mitsuba is installed.
     ``base_colour`` (glTF and USD): ``factor`` (linear factors) or ``texture`` (an 8-bit
     sRGB-encoded texture; the manifest's albedos are then the quantised ones it decodes to).
-    Raises :class:`~fidelity.errors.UnknownNameError` (format), :class:`MissingExtraError`,
-    :class:`~fidelity.errors.InputFileError` (a destination that cannot be written or holds
+    Raises :class:`~fidelity.core.errors.UnknownNameError` (format), :class:`MissingExtraError`,
+    :class:`~fidelity.core.errors.InputFileError` (a destination that cannot be written or holds
     something else).
     """
     t0 = time.perf_counter()

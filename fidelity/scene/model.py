@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fidelity.colour.spectral import GRID_START_NM, scene_reference
-from fidelity.errors import InvalidValueError, unknown_name
+from fidelity.core.errors import InvalidValueError, unknown_name
 
 FloatArray = NDArray[np.float64]
 

@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fidelity.errors import FidelityError
-from fidelity.resources import resource_dir
+from fidelity.core.errors import FidelityError
+from fidelity.core.resources import resource_dir
 
 FloatArray = NDArray[np.float64]
 

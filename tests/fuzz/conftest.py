@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from fidelity.resources import resource_dir
+from fidelity.core.resources import resource_dir
 
 
 @pytest.fixture(scope="session")

@@ -82,7 +82,7 @@ def fingerprint(paths: Iterable[Path]) -> dict[str, str]:
 
 
 def leftovers(folders: Iterable[Path]) -> list[Path]:
-    """Temporary files of :func:`fidelity.fileio.atomic_output` (``.NAME.XXXX.tmp...``) under
+    """Temporary files of :func:`fidelity.core.fileio.atomic_output` (``.NAME.XXXX.tmp...``) under
     ``folders``."""
     found: list[Path] = []
     for d in folders:

@@ -183,7 +183,7 @@ def srgb_chart_function(reference_lab: F64) -> ChartFunction:
 
 def exposure_of_means(linear: F64, reference_lab: F64, neutral: Sequence[int]) -> F64:
     """The auto exposure (EV) of linear sRGB patch means ``(..., n, 3)``, vectorised
-    (:func:`fidelity.chart.measure.exposure_from_neutrals` over the leading axes; a draw without
+    (:func:`fidelity.measure.pixels.exposure_from_neutrals` over the leading axes; a draw without
     light on any neutral patch gets EV 0)."""
     idx = np.asarray(list(neutral), dtype=int)
     y = np.asarray(linear, np.float64)[..., idx, :] @ cm.MATRIX_LINEAR_SRGB_TO_XYZ[1]

@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from fidelity.chart.measure import ChartMeasurement
+    from fidelity.measure.colour import ChartMeasurement
 
 #: Largest difference of the shadow end's local gamma from 1 that is not a warning (5 % more or less
 #: shadow contrast; the 30 cameras of the validation suite without a tone error stay within
@@ -100,8 +100,8 @@ def _y_of_l(lightness: float) -> float:
 def shadow_tone(measurement: ChartMeasurement,
                 tolerance: float = SHADOW_SLOPE_TOLERANCE) -> BlindSpot:
     """The dark end of the neutral patches' tone curve (module docstring)."""
-    from fidelity.chart.measure import neutral_patches
     from fidelity.colour.colorimetry import lab_to_xyz
+    from fidelity.measure.colour import neutral_patches
 
     idx = list(neutral_patches(measurement))
     if len(idx) < 2:

@@ -1,7 +1,7 @@
 """Sim against real: the same chart photographed by the real camera and rendered by its model.
 
 A simulator camera is credible when it behaves like the real camera it stands for.
-:func:`compare_charts` audits both images (:func:`fidelity.check.audit_image`: any format,
+:func:`compare_charts` audits both images (:func:`fidelity.pipeline.check.audit_image`: any format,
 the chart found or given by its corners), then compares the two charts patch by patch:
 
 1. **Normalisation** (:data:`NORMALISATIONS`, stated in the report), applied to the simulated
@@ -34,11 +34,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fidelity.chart.measure import DEFAULT_READ, ReadOptions
-from fidelity.chart.uncertainty import UncertaintyBudget
-from fidelity.errors import InvalidValueError, unknown_name
+from fidelity.chart.read import DEFAULT_READ, ReadOptions
+from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.measure.uncertainty import UncertaintyBudget
+from fidelity.pipeline.records import ComparisonReport, Normalisation, Provenance, utc_now
 from fidelity.prediction.verdict import SIMPLE, DecisionRule
-from fidelity.records import ComparisonReport, Normalisation, Provenance, utc_now
 
 if TYPE_CHECKING:
     from fidelity.coco.measure import MeasuredLoss, MeasureRequest
@@ -52,8 +52,8 @@ def normalise(sim_srgb: NDArray[np.float64], real_srgb: NDArray[np.float64],
     """Match simulated patch colours (n, 3 encoded sRGB) to the real ones on the ``neutral``
     patches (module docstring); returns the normalised encoded sRGB (clipped to [0, 1]) and
     what was done."""
-    from fidelity.chart.measure import luminance_linear_srgb
     from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
+    from fidelity.measure.pixels import luminance_linear_srgb
 
     if mode not in NORMALISATIONS:
         raise unknown_name("normalisation", mode, NORMALISATIONS)
@@ -114,7 +114,7 @@ def compare_charts(
         photographed by the real camera; either may be a robot recording (ROS 1 bag, ROS 2
         bag, MCAP file) of which ``read`` names the message.
     sim_corners, real_corners
-        Each image's corner patch centres (see :func:`fidelity.check.audit_image`); None: found.
+        Each image's corner patch centres (see :func:`fidelity.pipeline.check.audit_image`); None: found.
     normalise_mode
         ``exposure`` (default), ``exposure+wb`` or ``none`` (:data:`NORMALISATIONS`).
     reference, illuminant
@@ -125,7 +125,7 @@ def compare_charts(
         ``max-delta-e`` on the sim-to-real chart ΔE, or ``max-dmap`` on its predicted loss
         (decided by ``bound``: ``classic`` or ``directional``); None: no verdict.
     read
-        How both images are read (:class:`~fidelity.chart.measure.ReadOptions`, as
+        How both images are read (:class:`~fidelity.chart.read.ReadOptions`, as
         ``audit``); its ``topic``, ``frame`` and ``time`` apply to the input that is a robot
         recording (:mod:`fidelity.chart.recording`).
     measure
@@ -137,14 +137,15 @@ def compare_charts(
         One image's own OpenColorIO colourspace (a render in ACEScct against a photo in
         sRGB): it replaces ``read``'s for that image, whose shared ``encoding`` and
         ``colourspace`` then describe the other
-        (:func:`fidelity.chart.measure.reads_with_own_ocio`).
+        (:func:`fidelity.chart.read.reads_with_own_ocio`).
 
     Returns
     -------
     ComparisonReport
     """
-    from fidelity.chart.measure import measure_chart, neutral_patches, reads_with_own_ocio
-    from fidelity.check import audit_image
+    from fidelity.chart.read import reads_with_own_ocio
+    from fidelity.measure.colour import measure_chart, neutral_patches
+    from fidelity.pipeline.check import audit_image
     from fidelity.prediction.judge import judge
 
     if normalise_mode not in NORMALISATIONS:
@@ -182,7 +183,7 @@ def compare_charts(
                               "ΔE with the same tables as a chart's own ΔE"}
     prov = Provenance.collect(sim_report.provenance.input_sha256, prediction,
                               {**dict(sim_report.provenance.conventions), **conventions})
-    from fidelity.check import evidence_of
+    from fidelity.pipeline.check import evidence_of
 
     interval, validity = evidence_of(prediction, budget, reference, decision.k)
     return ComparisonReport(utc_now(), sim_report, real_report, norm, m, prediction,
@@ -197,7 +198,7 @@ def sim_to_real_uncertainty(value: float, sim: UncertaintyBudget | None,
     squares. An approximation: the sim-to-real ΔE compares the two charts' colours, each known
     to the uncertainty its audit found, with a sensitivity taken as that of a chart's ΔE to its
     own colours (1). None when either audit has no budget."""
-    from fidelity.chart.uncertainty import UncertaintyComponent
+    from fidelity.measure.uncertainty import UncertaintyComponent
 
     if sim is None or real is None:
         return None

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from fidelity.errors import InputFileError
+from fidelity.core.errors import InputFileError
 
-_PACKAGE = Path(__file__).resolve().parent
+_PACKAGE = Path(__file__).resolve().parent.parent
 
 
 def resource_dir(kind: str) -> Path:

@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from fidelity.errors import InputFileError, InvalidValueError
+from fidelity.core.errors import InputFileError, InvalidValueError
 
 #: Deepest nesting of lists and tables accepted in any input document (the deepest schema,
 #: COCO annotations' segmentation polygons, needs 5).
@@ -46,8 +46,8 @@ MAX_DEPTH = 32
 
 class SchemaError(InputFileError, InvalidValueError):
     """An input file whose content does not fit its schema: the message is
-    ``<file>: <field>: <problem>``. Both an :class:`~fidelity.errors.InputFileError` (the file is
-    wrong) and an :class:`~fidelity.errors.InvalidValueError` (a value is out of its domain)."""
+    ``<file>: <field>: <problem>``. Both an :class:`~fidelity.core.errors.InputFileError` (the file is
+    wrong) and an :class:`~fidelity.core.errors.InvalidValueError` (a value is out of its domain)."""
 
 
 #: A location inside a document: table keys and list indices from the top.
@@ -458,7 +458,7 @@ def load_document(path: str | os.PathLike[str], origin: str | None = None, *,
     file before reading it. Raises :class:`SchemaError` for a missing or unreadable file, a
     file over ``max_bytes``, text that is not UTF-8, a parse error or too deep a nesting.
     """
-    from fidelity.fileio import display_path
+    from fidelity.core.fileio import display_path
 
     p = Path(path)
     where = origin or display_path(p)

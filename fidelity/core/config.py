@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fidelity.errors import InputFileError
+from fidelity.core.errors import InputFileError
 
 #: The file names looked for, nearest folder first.
 CONFIG_FILES = ("fidelity.toml", "pyproject.toml")

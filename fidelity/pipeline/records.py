@@ -1,5 +1,5 @@
 """The result records of the chart pipeline: what ``check``, ``audit``, ``gate`` and ``compare``
-return (:mod:`fidelity.check`, :mod:`fidelity.compare`), with their JSON forms.
+return (:mod:`fidelity.pipeline.check`, :mod:`fidelity.pipeline.compare`), with their JSON forms.
 
 :class:`ChartReport` is one chart measured (an image audit or a camera render), the detection loss
 predicted from its chart ΔE and the verdict of a gate. Its JSON form (``schema_version``
@@ -23,7 +23,7 @@ predicted from its chart ΔE and the verdict of a gate. Its JSON form (``schema_
 - ``validity``: whether the answer lies inside its evidence's domain (table ΔE range, detector
   sizes, table kind, reference chart: :class:`fidelity.prediction.interval.ValidityDomain`);
 - ``uncertainty``: the standard uncertainty budget of the mean ΔE00
-  (:class:`fidelity.chart.uncertainty.UncertaintyBudget`: each component, its value, type and
+  (:class:`fidelity.measure.uncertainty.UncertaintyBudget`: each component, its value, type and
   method; the combined ``standard_uncertainty`` with ``k`` = 1);
 - ``provenance``: tool version, Python and libraries, input sha256, tables (name, path,
   sha256), conventions.
@@ -51,12 +51,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fidelity.chart.blindspots import BlindSpot
 from fidelity.chart.image import ImageInfo
 from fidelity.chart.locate import ChartLocation
-from fidelity.chart.measure import BadPixels, ChartMeasurement
-from fidelity.chart.uncertainty import UncertaintyBudget
-from fidelity.fileio import JSONObject
+from fidelity.core.fileio import JSONObject
+from fidelity.measure.blindspots import BlindSpot
+from fidelity.measure.colour import ChartMeasurement
+from fidelity.measure.pixels import BadPixels
+from fidelity.measure.uncertainty import UncertaintyBudget
 from fidelity.prediction.directional import DirectionalPrediction
 from fidelity.prediction.interval import PredictionInterval, ValidityDomain
 from fidelity.prediction.table import Prediction
@@ -74,7 +75,7 @@ COMMANDS = ("audit", "check", "compare", "gate")
 
 def report_schema_path() -> Path:
     """Path of the JSON Schema of the report."""
-    from fidelity.resources import resource_dir
+    from fidelity.core.resources import resource_dir
 
     return resource_dir("data") / "schemas" / "report.schema.json"
 
@@ -247,7 +248,7 @@ class TableRef:
     def of_file(cls, name: str, path: str | os.PathLike[str] | None,
                 kind: str | None = None) -> TableRef:
         """The reference of a table file (its sha256 read now; None when unreadable)."""
-        from fidelity.fileio import file_sha256
+        from fidelity.core.fileio import file_sha256
 
         digest = None
         if path:
@@ -305,8 +306,8 @@ class Provenance:
     def collect(cls, input_sha256: str | None, prediction: Prediction | None,
                 conventions: Mapping[str, Any]) -> Provenance:
         """The provenance of a report made now, on this machine."""
-        from fidelity.resources import resource_dir
-        from fidelity.version import __version__, installed_version
+        from fidelity.core.resources import resource_dir
+        from fidelity.core.version import __version__, installed_version
 
         libraries: dict[str, str] = {}
         for name in _LIBRARIES:
@@ -343,11 +344,11 @@ class ChartReport:
     directional: DirectionalPrediction | None = None
     #: which prediction decided a max-dmap verdict: ``classic`` or ``directional``
     bound: str = "classic"
-    #: the blind-spot checks (:mod:`fidelity.chart.blindspots`)
+    #: the blind-spot checks (:mod:`fidelity.measure.blindspots`)
     blind_spots: tuple[BlindSpot, ...] = ()
     #: losses measured on COCO (``--measure``; :class:`fidelity.coco.measure.MeasuredLoss`)
     measured: tuple[MeasuredLoss, ...] = ()
-    #: the standard uncertainty of the chart ΔE (:mod:`fidelity.chart.uncertainty`)
+    #: the standard uncertainty of the chart ΔE (:mod:`fidelity.measure.uncertainty`)
     uncertainty: UncertaintyBudget | None = None
     #: the predicted ΔmAP with its uncertainty (:mod:`fidelity.prediction.interval`)
     interval: PredictionInterval | None = None
@@ -425,10 +426,10 @@ def _measured_from_json(items: Sequence[Mapping[str, Any]]) -> tuple[MeasuredLos
 
 def validate_report(data: Mapping[str, Any]) -> None:
     """Check a JSON report against :func:`report_schema`; raises
-    :class:`~fidelity.errors.InvalidValueError` naming the first violation."""
+    :class:`~fidelity.core.errors.InvalidValueError` naming the first violation."""
     import jsonschema
 
-    from fidelity.errors import InvalidValueError
+    from fidelity.core.errors import InvalidValueError
 
     try:
         jsonschema.validate(dict(data), report_schema())
@@ -503,7 +504,7 @@ class ComparisonReport:
     emulation: Mapping[str, Any] | None = None
     command: str = "compare"
     schema_version: str = COMPARE_SCHEMA_VERSION
-    #: the sim-to-real ΔE's uncertainty (:func:`fidelity.compare.sim_to_real_uncertainty`)
+    #: the sim-to-real ΔE's uncertainty (:func:`fidelity.pipeline.compare.sim_to_real_uncertainty`)
     uncertainty: UncertaintyBudget | None = None
     interval: PredictionInterval | None = None
     validity: ValidityDomain | None = None
@@ -548,8 +549,8 @@ class ComparisonReport:
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> ComparisonReport:
         """Inverse of :meth:`to_json`."""
-        from fidelity.chart.measure import ChartMeasurement
         from fidelity.coco.measure import MeasuredLoss
+        from fidelity.measure.colour import ChartMeasurement
 
         s2r = d["sim_to_real"]
         return cls(
@@ -575,8 +576,8 @@ class ComparisonReport:
 
 @dataclass(frozen=True)
 class GateResult:
-    """One subject of a gate (:func:`fidelity.check.gate`) or of an audit of several images
-    (:func:`fidelity.check.audit_images`, no ``criterion``): its ``subject`` (image path,
+    """One subject of a gate (:func:`fidelity.pipeline.check.gate`) or of an audit of several images
+    (:func:`fidelity.pipeline.check.audit_images`, no ``criterion``): its ``subject`` (image path,
     ``IMAGE frame N`` or camera), the ``criterion``, the ``report`` (None on error), the
     ``error`` message (exit code 2) and the ``seconds`` it took."""
 

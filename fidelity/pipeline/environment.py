@@ -75,7 +75,7 @@ def dependency_versions(distribution: str = DISTRIBUTION,
                         extras: tuple[str, ...] = ()) -> dict[str, str | None]:
     """Installed version of each requirement ``distribution`` declares: the core, and those of
     ``extras``; None for a requirement that is not installed."""
-    from fidelity.version import installed_version
+    from fidelity.core.version import installed_version
 
     try:
         requires = metadata.requires(distribution) or []
@@ -97,7 +97,7 @@ def _mitsuba(probe: bool) -> dict[str, Any]:
     if not probe:
         return {"probed": False}
     from fidelity.camera.mitsuba import probe_variant
-    from fidelity.errors import FidelityError
+    from fidelity.core.errors import FidelityError
 
     try:
         p = probe_variant()
@@ -120,7 +120,7 @@ def _onnxruntime() -> dict[str, Any]:
 def _coco_scorer() -> str | None:
     """The COCO scorer ``auto`` picks; None without the [coco] extra."""
     from fidelity.coco.scoring import resolve_scorer
-    from fidelity.errors import FidelityError
+    from fidelity.core.errors import FidelityError
 
     try:
         return resolve_scorer("auto")
@@ -141,7 +141,7 @@ def _chart_detection() -> dict[str, Any]:
 
 
 def _shared() -> dict[str, Any]:
-    from fidelity.resources import shared_dir
+    from fidelity.core.resources import shared_dir
 
     folder = shared_dir()
     if folder is None:
@@ -159,8 +159,8 @@ def describe_environment(probe: bool = True) -> dict[str, Any]:
     """The installation's capabilities (module docstring); ``probe``: run the Mitsuba probe
     (a few seconds, subprocesses)."""
     from fidelity.coco.machine import cpu_description
+    from fidelity.core.version import __version__
     from fidelity.prediction.table import DEFAULT_TABLE, available_tables
-    from fidelity.version import __version__
 
     core = dependency_versions()
 

@@ -1,6 +1,6 @@
 """The camera check: chart → camera model → render → measure → predict → verdict → report.
 
-Three jobs, each one function that returns typed records (:mod:`fidelity.records`); the
+Three jobs, each one function that returns typed records (:mod:`fidelity.pipeline.records`); the
 command line only parses options, calls one of them and prints (:mod:`fidelity.report` renders
 the records):
 
@@ -8,9 +8,9 @@ the records):
   :mod:`fidelity.camera.render`), measure ΔE00, predict the detection loss
   (:mod:`fidelity.prediction.table`) and apply a criterion (:mod:`fidelity.prediction.verdict`);
 - :func:`audit_image`: the same for a chart in any render or photo (EXR, HDR, TIFF, PNG, JPEG;
-  found or given by its corners, :mod:`fidelity.chart.measure`);
+  found or given by its corners, :mod:`fidelity.measure.pixels`);
 - :func:`gate`: :func:`audit_image` over several images (or :func:`check_camera` for one
-  camera) for CI, each gated into a :class:`~fidelity.records.GateResult`; an input error of
+  camera) for CI, each gated into a :class:`~fidelity.pipeline.records.GateResult`; an input error of
   one image becomes that result's error, not the end of the run.
 """
 
@@ -24,10 +24,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fidelity.chart.measure import DEFAULT_READ, ReadOptions, reads_for
-from fidelity.prediction.judge import judge
-from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, SIMPLE, Criterion, DecisionRule
-from fidelity.records import (
+from fidelity.chart.read import DEFAULT_READ, ReadOptions, reads_for
+from fidelity.pipeline.records import (
     ChartReport,
     GateResult,
     ImageSource,
@@ -35,12 +33,14 @@ from fidelity.records import (
     RenderSource,
     utc_now,
 )
+from fidelity.prediction.judge import judge
+from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, SIMPLE, Criterion, DecisionRule
 
 if TYPE_CHECKING:
     from fidelity.camera.model import CameraModel
-    from fidelity.chart.measure import ChartMeasurement
-    from fidelity.chart.uncertainty import UncertaintyBudget
     from fidelity.coco.measure import MeasuredLoss, MeasureRequest
+    from fidelity.measure.colour import ChartMeasurement
+    from fidelity.measure.uncertainty import UncertaintyBudget
     from fidelity.prediction.interval import DomainCheck, PredictionInterval, ValidityDomain
     from fidelity.prediction.table import Prediction, PredictionTable
 
@@ -176,7 +176,7 @@ def check_camera(
         the camera's colour rendering emulated on the images, as ``fidelity validate`` does).
     decision
         The decision rule of the verdict (:class:`~fidelity.prediction.verdict.DecisionRule`;
-        guarded: with the chart ΔE's uncertainty, :mod:`fidelity.chart.uncertainty`).
+        guarded: with the chart ΔE's uncertainty, :mod:`fidelity.measure.uncertainty`).
 
     Returns
     -------
@@ -202,7 +202,7 @@ def check_camera(
         delta_e_uncertainty=u.combined if u else None)
     interval, validity = evidence_of(prediction, u, reference, decision.k,
                                      (render.camera.stage_kinds(), illuminant))
-    from fidelity.chart.blindspots import chart_blind_spots
+    from fidelity.measure.blindspots import chart_blind_spots
 
     spots = chart_blind_spots(m, bits=render.camera.quantisation_bits)
     measured: tuple[MeasuredLoss, ...] = ()
@@ -254,7 +254,7 @@ def audit_image(
         ``"X1,Y1,...,X4,Y4"`` or (4, 2); None: the chart is found
         (:func:`fidelity.chart.find.find_chart`).
     read
-        How to read the pixels (:class:`~fidelity.chart.measure.ReadOptions`): EXR layer,
+        How to read the pixels (:class:`~fidelity.chart.read.ReadOptions`): EXR layer,
         ``linear``/``srgb`` (default from the file), ``auto`` or a fixed EV, what to do with
         negative values, the RGB primaries, the Bayer pattern of a raw mosaic, the pixel
         limit.
@@ -274,7 +274,7 @@ def audit_image(
         With ``exposure_ev``, ``bad_pixels`` and the image source (corners, how they were
         found, where each patch was sampled).
     """
-    from fidelity.chart.measure import measure_image
+    from fidelity.measure.pixels import measure_image
 
     banding: list[Any] = []
     result = measure_image(image, corners if corners is None or len(corners) else None,
@@ -318,7 +318,7 @@ def _image_blind_spots(measurement: ChartMeasurement, info: Any, read: ReadOptio
                        ) -> tuple[Any, ...]:
     """The blind-spot checks of an audited image's chart: its shadow tones (the image's
     banding: :func:`_image_banding`)."""
-    from fidelity.chart.blindspots import chart_blind_spots
+    from fidelity.measure.blindspots import chart_blind_spots
 
     return chart_blind_spots(measurement)
 
@@ -326,7 +326,7 @@ def _image_blind_spots(measurement: ChartMeasurement, info: Any, read: ReadOptio
 def _image_banding(image: Any) -> Any:
     """The banding check of an image read for its audit
     (:class:`fidelity.chart.image.Image`): judged when its pixels are integer codes."""
-    from fidelity.chart.blindspots import banding
+    from fidelity.measure.blindspots import banding
 
     if str(image.pixel_type).lower() in ("uint8", "uint16", "int8", "int16"):
         return banding(image.pixels, image.pixel_type)
@@ -336,9 +336,9 @@ def _image_banding(image: Any) -> Any:
 def chart_emulation(measurement: ChartMeasurement) -> Any:
     """The colour mapping from a chart's reference to its measured colours, fitted on its
     patches (:class:`fidelity.coco.emulation.PatchEmulation`)."""
-    from fidelity.chart.measure import neutral_patches
     from fidelity.coco.emulation import PatchEmulation
     from fidelity.colour.colorimetry import lab_to_srgb
+    from fidelity.measure.colour import neutral_patches
 
     ref = (measurement.reference_srgb if measurement.reference_srgb is not None
            else np.asarray(lab_to_srgb(measurement.reference_lab), np.float64))
@@ -366,9 +366,9 @@ def gate(
     ``frames``: one frame index per image (a recording named once per frame it is gated
     on): the subject is then ``IMAGE frame N``.
 
-    ``reference`` defaults to ``scene``. Returns one :class:`~fidelity.records.GateResult`
+    ``reference`` defaults to ``scene``. Returns one :class:`~fidelity.pipeline.records.GateResult`
     per subject (its report, or its error, and the time it took);
-    :func:`fidelity.records.gate_exit_code` turns them into the exit code and
+    :func:`fidelity.pipeline.records.gate_exit_code` turns them into the exit code and
     :func:`fidelity.report.write_chart_report` writes each report.
     """
     if not images:
@@ -397,7 +397,7 @@ def audit_images(
 ) -> list[GateResult]:
     """:func:`audit_image` of ``images`` one by one (a renderer's frames, say), as
     :func:`gate` measures them but without a criterion: one
-    :class:`~fidelity.records.GateResult` per subject, an input error of one subject its
+    :class:`~fidelity.pipeline.records.GateResult` per subject, an input error of one subject its
     ``error`` while the others are still measured; ``frames`` as for :func:`gate`."""
     return _audit_subjects(images, corners, read, frames, None, command="audit",
                            reference=reference, illuminant=illuminant, size=size, table=table,
@@ -427,7 +427,7 @@ def _subject_result(subject: str, run: Callable[[], ChartReport],
                     criterion: Criterion | None) -> GateResult:
     """``run()`` (the subject's check or audit) as its result; an input error (or an
     unreadable file) its ``error``."""
-    from fidelity.errors import FidelityError
+    from fidelity.core.errors import FidelityError
 
     t0 = time.perf_counter()
     try:

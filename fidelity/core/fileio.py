@@ -19,7 +19,7 @@ from functools import lru_cache, wraps
 from pathlib import Path
 from typing import Any, Protocol, TypeVar, runtime_checkable
 
-from fidelity.errors import InputFileError
+from fidelity.core.errors import InputFileError
 
 #: errno values that mean "the output cannot be written here" (a full disk, a quota, a
 #: read-only file system or folder, a file too large for the system's limit), not a bug.

@@ -2,13 +2,13 @@
 
 :func:`fit_correction` reads the same chart rendered by the simulator (SIM) and photographed by
 the real camera (REAL), exactly as ``fidelity compare`` does (the same
-:class:`~fidelity.chart.measure.ReadOptions`, corners and normalisation), and fits a colour
+:class:`~fidelity.chart.read.ReadOptions`, corners and normalisation), and fits a colour
 correction from the simulated patch colours onto the real ones
 (:mod:`fidelity.correction.models`):
 
-1. Both charts are audited (:func:`fidelity.chart.measure.measure_pixels`); the *fit space* is
+1. Both charts are audited (:func:`fidelity.measure.pixels.measure_pixels`); the *fit space* is
    each chart's linear sRGB as audited (auto exposure for linear pixels), the simulated chart
-   scaled by the normalisation (:func:`fidelity.compare.normalise`: ``exposure`` default,
+   scaled by the normalisation (:func:`fidelity.pipeline.compare.normalise`: ``exposure`` default,
    ``exposure+wb``, ``none``). What the normalisation matches is left out of the correction
    (the correction is conjugated by it): with ``exposure`` the correction keeps the
    simulator's exposure; with ``none`` it corrects the exposure too.
@@ -44,11 +44,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fidelity.chart.measure import DEFAULT_READ, ChartMeasurement, ImageMeasurement, ReadOptions
+from fidelity.chart.read import DEFAULT_READ, ReadOptions
+from fidelity.core.errors import InvalidValueError
 from fidelity.correction.models import ColourModel, Conditioning
-from fidelity.errors import InvalidValueError
+from fidelity.measure.colour import ChartMeasurement
+from fidelity.measure.pixels import ImageMeasurement
+from fidelity.pipeline.records import Normalisation, utc_now
 from fidelity.prediction.table import Prediction
-from fidelity.records import Normalisation, utc_now
 
 if TYPE_CHECKING:
     from fidelity.coco.measure import MeasuredLoss, MeasureRequest
@@ -179,8 +181,8 @@ class Correction:
     def to_cube(self, path: str | os.PathLike[str], size: int = 33) -> Path:
         """Write the ``.cube`` (OpenColorIO's Baker, :func:`fidelity.correction.lut.bake_cube`)
         of :meth:`apply_linear` atomically; returns the path."""
+        from fidelity.core.fileio import write_text_atomic
         from fidelity.correction.lut import bake_cube
-        from fidelity.fileio import write_text_atomic
 
         return write_text_atomic(path, bake_cube(self.apply_linear, size, self.encoding,
                                                  self.domain_max, self.cube_comments(size),
@@ -235,8 +237,9 @@ def sim_ocio_refused(flag: str, name: str) -> InvalidValueError:
 
 def _read(path: str | os.PathLike[str], corners: str | Sequence[float] | None,
           read: ReadOptions, reference: str, illuminant: str, *, sim: bool) -> _Chart:
-    from fidelity.chart.measure import measure_pixels, read_input
-    from fidelity.errors import FidelityError
+    from fidelity.chart.read import read_input
+    from fidelity.core.errors import FidelityError
+    from fidelity.measure.pixels import measure_pixels
 
     if sim and read.ocio_colourspace is not None:
         raise sim_ocio_refused("--ocio-colourspace", read.ocio_colourspace)
@@ -282,10 +285,10 @@ class _Prepared:
 
 def _prepare(sim: _Chart, real: _Chart, normalise_mode: str,
              weights: ArrayLike | None) -> _Prepared:
-    from fidelity.chart.measure import neutral_patches
     from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
-    from fidelity.compare import normalise
     from fidelity.correction.models import linear_to_lab, usable_patches
+    from fidelity.measure.colour import neutral_patches
+    from fidelity.pipeline.compare import normalise
 
     sm, rm = sim.audit.measurement, real.audit.measurement
     if sm.patch_names != rm.patch_names:
@@ -378,7 +381,7 @@ def fit_correction(
         ``linear`` or ``ciede2000``; None: the measured better one
         (:data:`fidelity.correction.models.DEFAULT_OBJECTIVE`).
     sim_corners, real_corners, normalise_mode, read, real_ocio_colourspace, reference, illuminant
-        As :func:`fidelity.compare.compare_charts` (``sim`` has no OpenColorIO colourspace:
+        As :func:`fidelity.pipeline.compare.compare_charts` (``sim`` has no OpenColorIO colourspace:
         the correction maps its own pixel values).
     weights
         ``(24,)`` patch weights (default 1; excluded patches get 0 whatever their weight).
@@ -387,7 +390,7 @@ def fit_correction(
     -------
     Correction
     """
-    from fidelity.chart.measure import reads_with_own_ocio
+    from fidelity.chart.read import reads_with_own_ocio
 
     sim_read, real_read = reads_with_own_ocio((sim, real), read,
                                               (None, real_ocio_colourspace))
@@ -525,7 +528,7 @@ def fit_and_verify(
 
     ocio()
     c0, t0 = time.process_time(), time.perf_counter()
-    from fidelity.chart.measure import reads_with_own_ocio
+    from fidelity.chart.read import reads_with_own_ocio
 
     sim_read, real_read = reads_with_own_ocio((sim, real), read,
                                               (None, real_ocio_colourspace))
@@ -544,8 +547,7 @@ def _verify(s: _Chart, r: _Chart, corr: Correction, folder: Path, *, normalise_m
             cpu: tuple[float, float], measure: MeasureRequest | None = None) -> FitReport:
     """Write the cube, the config and ``correction.json`` of ``corr`` into ``folder`` and
     verify them on the SIM chart ``s`` against the REAL chart ``r`` (module docstring)."""
-    from fidelity.chart.measure import measure_chart, neutral_patches
-    from fidelity.compare import normalise
+    from fidelity.core.fileio import write_json_atomic, write_text_atomic
     from fidelity.correction.lut import (
         CUBE_SIZES,
         apply_processor,
@@ -553,7 +555,8 @@ def _verify(s: _Chart, r: _Chart, corr: Correction, folder: Path, *, normalise_m
         cube_processor,
         ocio_config,
     )
-    from fidelity.fileio import write_json_atomic, write_text_atomic
+    from fidelity.measure.colour import measure_chart, neutral_patches
+    from fidelity.pipeline.compare import normalise
     from fidelity.prediction.judge import judge
 
     c2, t2 = time.process_time(), time.perf_counter()
@@ -662,7 +665,7 @@ def fit_pairs_and_verify(
     correction ``matrix @ diag(gains)`` as :func:`fit_and_verify` does, into
     ``out/pair-<k>`` (k from 1). The fit is weighted least squares in linear RGB over the
     patches usable in each pair; corners and the other options apply to every pair."""
-    from fidelity.chart.measure import reads_with_own_ocio
+    from fidelity.chart.read import reads_with_own_ocio
     from fidelity.correction.lut import ocio
     from fidelity.correction.models import ColourModel, cross_validate_shared, fit_shared_matrix
 
@@ -749,8 +752,8 @@ def fit_camera_and_verify(
     from fidelity.camera.render import ChartLayout, render_chart
     from fidelity.chart.image import write_exr, write_png
     from fidelity.colour.spectral import load_illuminant
-    from fidelity.fileio import write_text_atomic
-    from fidelity.schema import load_document
+    from fidelity.core.fileio import write_text_atomic
+    from fidelity.core.schema import load_document
 
     path = Path(camera)
     cam = read_camera_file(path)
@@ -827,8 +830,8 @@ def remeasure(pixels: NDArray[Any], audit: ImageMeasurement,
     image through ``transform`` measured in the same windows (``tests/test_fit.py`` checks
     both ways), at the cost of the windows, not of the image."""
     from fidelity.chart.locate import window_pixels
-    from fidelity.chart.measure import exposure_from_neutrals
     from fidelity.colour.colorimetry import delinearize_srgb
+    from fidelity.measure.pixels import exposure_from_neutrals
 
     p = _colourspace_matrix(audit)
     windows = [np.asarray(v, np.float32).reshape(-1, 3)  # float32 like the pixels: 2x faster

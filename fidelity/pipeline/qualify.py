@@ -55,8 +55,8 @@ from typing import Any
 
 import numpy as np
 
-from fidelity.errors import FidelityError, UnknownNameError
-from fidelity.resources import resource_dir
+from fidelity.core.errors import FidelityError, UnknownNameError
+from fidelity.core.resources import resource_dir
 
 #: Status of a check that ran and met its tolerance / did not / could not run here.
 PASS, FAIL, NOT_RUN = "pass", "fail", "not run"
@@ -202,8 +202,8 @@ def _calibration() -> tuple[float, int, str]:
 
 
 def _chart_baseline() -> tuple[float, int, str]:
-    from fidelity.chart.measure import chart_delta_e
     from fidelity.colour.charts import load_chart
+    from fidelity.measure.colour import chart_delta_e
 
     chart = load_chart("safecolor")
     value = chart_delta_e(chart.srgb, chart.lab)
@@ -279,10 +279,10 @@ def _audit_scenes() -> list[tuple[float, float, float]]:
     colours' mean ΔE00). Run once for both checks that read them in one :func:`qualify`."""
     if not _AUDITS:
         from fidelity.chart.image import write_png
-        from fidelity.chart.measure import chart_delta_e
-        from fidelity.check import audit_image
         from fidelity.colour.charts import load_chart
-        from fidelity.records import ImageSource
+        from fidelity.measure.colour import chart_delta_e
+        from fidelity.pipeline.check import audit_image
+        from fidelity.pipeline.records import ImageSource
 
         lab = load_chart("safecolor").lab
         with tempfile.TemporaryDirectory(prefix="fidelity-qualify-") as tmp:
@@ -402,7 +402,7 @@ def _coco_scoring() -> tuple[float, int, str]:
 
 def _record_digest(path: Path) -> str:
     """A file's SHA-256 as a wheel's RECORD writes it (URL-safe base64, no padding)."""
-    from fidelity.fileio import file_sha256
+    from fidelity.core.fileio import file_sha256
 
     digest = bytes.fromhex(file_sha256(path))
     return base64.urlsafe_b64encode(digest).rstrip(b"=").decode()
