@@ -21,10 +21,10 @@ import numpy as np
 
 import fidelity.chart.find as find
 from benchmarks import bench_find_chart as bench
-from benchmarks.chart_scenes import decode_jpeg
 from benchmarks.machine import machine_info
 from fidelity.core.fileio import write_json_atomic, write_text_atomic
 from fidelity.pipeline.qualify import FINDER_SCENES, synthetic_photo
+from tests.fixtures.chart_scenes import decode_jpeg
 
 CORRECTED = find.perspective_bias
 

@@ -52,10 +52,10 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.chart_scenes import corners_correct, decode_jpeg, make_scene
 from benchmarks.machine import machine_info
 from fidelity.colour import colorimetry as cm
 from fidelity.core.fileio import write_bytes_atomic, write_json_atomic, write_text_atomic
+from tests.fixtures.chart_scenes import corners_correct, decode_jpeg, make_scene
 
 #: Images per kind (the full benchmark).
 COUNTS = {"classic": 60, "mini": 25, "passport": 20, "sg": 6, "none": 20}

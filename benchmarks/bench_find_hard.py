@@ -33,11 +33,11 @@ from typing import Any
 import numpy as np
 
 from benchmarks.bench_find_chart import _opencv_version, find_mcc
-from benchmarks.chart_scenes import corners_correct
-from benchmarks.hard_scenes import HAZARDS, hard_scene
 from benchmarks.machine import machine_info
 from fidelity.colour import colorimetry as cm
 from fidelity.core.fileio import write_json_atomic, write_text_atomic
+from tests.fixtures.chart_scenes import corners_correct
+from tests.fixtures.hard_scenes import HAZARDS, hard_scene
 
 
 def _fidelity(pixels: np.ndarray) -> tuple[np.ndarray | None, tuple[int, ...],

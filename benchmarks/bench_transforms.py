@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.colour_reference import reference_transform
 from benchmarks.machine import best_time, machine_info
 from fidelity.core.fileio import write_json_atomic
 from fidelity.prediction.calibration import load_calibration_table
 from fidelity.prediction.transforms import TRANSFORMS
+from tests.fixtures.colour_reference import reference_transform
 
 
 def main() -> None:

@@ -136,9 +136,9 @@ def photo_study(coco: Path, trials: int, noise: float, seed: int = 7, quality: i
     import cv2
 
     import fidelity
-    from benchmarks.chart_scenes import make_scene
     from fidelity.colour.charts import DEFAULT_CHART, load_chart
     from fidelity.colour.colorimetry import linearize_srgb
+    from tests.fixtures.chart_scenes import make_scene
 
     background = sorted(coco.glob("*.jpg"))[0]
     patches = linearize_srgb(np.clip(load_chart(DEFAULT_CHART).srgb, 0.0, 1.0))

@@ -14,11 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.bench_memory import photo, run_process, true_corners, write_image
 from fidelity.chart import find, image, locate
 from fidelity.chart.image import as_float32, read_image
 from fidelity.measure.blindspots import effective_bits
 from fidelity.measure.pixels import measure_pixels
+from tests.fixtures.photos import photo, true_corners, write_image
+from tests.fixtures.processes import run_process
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -273,7 +273,7 @@ def workspace(tmp_path_factory, plugin_inputs) -> Path:
         rendered = render_chart(camera)
         write_png(ws / name, rendered.display_image, rendered.camera.quantisation_bits or 16)
     if (SHARED / "coco" / "val2017").is_dir():  # docs/find_chart.md's example: the benchmark's
-        from benchmarks.bench_find_chart import generate, scene_specs  # image 0, made here
+        from tests.fixtures.chart_photos import generate, scene_specs  # image 0, made here
 
         made = generate(scene_specs(False)[:1], SHARED / "coco" / "val2017", ws / "scenes", 19)
         shutil.copy(made[0]["path"], ws / "scene_000.jpg")

@@ -1,7 +1,7 @@
 """The chart finder's cascade: verification against the 24-patch layout, chart variants, raw
 Bayer frames and the trust checks of the audit.
 
-Scenes come from :mod:`benchmarks.chart_scenes` (a chart texture composited through a
+Scenes come from :mod:`tests.fixtures.chart_scenes` (a chart texture composited through a
 homography built in closed form from a tilt, a turn and a pinhole projection, so the true
 corner-patch centres are known independently of fidelity.chart), on a synthetic table, small
 enough to keep these tests fast. The Bayer test mosaics an RGB image by the CFA definition
@@ -19,7 +19,6 @@ import pytest
 from click.testing import CliRunner
 from test_audit import GRID_CORNERS, draw_chart, map_points, write_exr
 
-from benchmarks.chart_scenes import corners_correct, make_scene
 from fidelity.chart.find import (
     MIN_CONFIDENCE,
     Quads,
@@ -36,6 +35,7 @@ from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import load_chart
 from fidelity.core.errors import InputFileError, InvalidValueError
 from fidelity.measure.pixels import measure_image, measure_pixels
+from tests.fixtures.chart_scenes import corners_correct, make_scene
 
 CHART = load_chart("safecolor")
 LINEAR = cm.linearize_srgb(CHART.srgb)

@@ -2,7 +2,7 @@
 patch-like objects, a chart partly covered (a leaf, a hand), a frame after a camera ISP, and a
 one-channel raw mosaic given without its CFA pattern.
 
-Scenes come from :mod:`benchmarks.hard_scenes` (closed-form homography: the true corner patch
+Scenes come from :mod:`tests.fixtures.hard_scenes` (closed-form homography: the true corner patch
 centres, and which patches an occluder covers, are known independently of fidelity.chart) on a
 synthetic table, small enough to keep these tests fast. The covered chart is also drawn here
 directly (a leaf polygon over the white and neutral 8 patches) and audited through the CLI.
@@ -19,7 +19,6 @@ from click.testing import CliRunner
 from test_audit import GRID_CORNERS, draw_chart, map_points, write_exr
 from test_find_chart import _mosaic, _write_mosaic_png16
 
-from benchmarks.hard_scenes import hard_scene
 from fidelity.chart import find as finder
 from fidelity.chart.find import (
     BAYER_MARGIN,
@@ -36,6 +35,7 @@ from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import load_chart
 from fidelity.core.errors import InvalidValueError
 from fidelity.measure.pixels import measure_image, measure_pixels
+from tests.fixtures.hard_scenes import hard_scene
 
 LINEAR = cm.linearize_srgb(load_chart("safecolor").srgb)
 

@@ -6,7 +6,6 @@ import colour
 import numpy as np
 import pytest
 
-from benchmarks.colour_reference import reference_transform
 from fidelity.core.errors import InvalidValueError, UnknownNameError
 from fidelity.prediction.transforms import (
     TRANSFORMS,
@@ -14,6 +13,7 @@ from fidelity.prediction.transforms import (
     hsv_to_rgb,
     rgb_to_hsv,
 )
+from tests.fixtures.colour_reference import reference_transform
 
 
 def _ref(name: str, rgb: np.ndarray, p: float) -> np.ndarray:
