@@ -155,7 +155,39 @@ def patch_means(
 
 @dataclass(frozen=True)
 class ChartRender:
-    """A rendered and measured chart (see :func:`render_chart`)."""
+    """A rendered and measured chart (see :func:`render_chart`).
+
+    Attributes
+    ----------
+    measurement
+        The chart's ΔE00 per patch against the reference (:class:`ChartMeasurement`).
+    linear_image
+        The raw camera image after exposure, vignetting and noise, float32, shape (H, W, 3),
+        in camera raw units (the ideal camera gives linear sRGB, Y(perfect white) = 1).
+    display_image
+        The developed image as encoded sRGB clipped to [0, 1], float32, shape (H, W, 3).
+    renderer
+        The renderer used, one of :data:`RENDERERS`.
+    variant
+        The Mitsuba variant rendered with; None for the closed form.
+    seconds
+        Wall-clock seconds of the whole :func:`render_chart` call, >= 0.
+    conventions
+        JSON-ready description of the reference, spectral grid, units, exposure gain,
+        white-balance gains, CCM, encoding, clipping, patch sampling and layout.
+    camera
+        The camera model rendered.
+    camera_rgb
+        Raw patch means (trimmed, central window), shape (24, 3), camera raw units.
+    camera_noise
+        Standard deviation of each raw patch window, shape (24, 3), camera raw units.
+    settings
+        Illuminant, reflectance set, reference, seed, renderer, pixels per patch, image size
+        ``[H, W]`` and Mitsuba samples per pixel (None for the closed form).
+    uncertainty
+        The standard uncertainty budget of the chart ΔE (:func:`render_uncertainty`); None
+        when not computed.
+    """
 
     measurement: ChartMeasurement
     linear_image: NDArray[np.float32]
@@ -268,6 +300,60 @@ def render_chart(
     chromatic adaptation of the scene reference; ``step`` the spectral grid step (nm);
     ``variant`` forces a Mitsuba variant (else probed); ``sampler`` a Mitsuba sampler (default
     from the scene template). ``seconds`` covers the whole call.
+
+    Parameters
+    ----------
+    camera
+        A camera model, or a built-in camera name or camera file
+        (:func:`fidelity.camera.model.load_camera`).
+    illuminant
+        Scene illuminant: a name (``D65``, ``D50``, ``A``, ``F2``, ``F11``, ``LED``, or a
+        ``colour.SDS_ILLUMINANTS`` key) or an SPD file
+        (:func:`fidelity.colour.spectral.load_illuminant`).
+    renderer
+        ``closed-form`` (default) or ``mitsuba`` (:data:`RENDERERS`).
+    spp
+        Mitsuba samples per pixel, in [1, :data:`MAX_SPP`]; None:
+        :data:`fidelity.camera.mitsuba.DEFAULT_SPP` (144). Only Mitsuba reads it.
+    reference
+        ``scene`` (default: the chart's spectra under ``illuminant``, adapted to D65) or
+        ``safecolor`` (the paper's Lab table) (:data:`REFERENCES`).
+    spectra
+        The patch reflectance set: ``BabelColor Average`` (default), ``ColorChecker N Ohta``
+        or a JSON file (:func:`fidelity.colour.spectral.load_patch_spectra`).
+    seed
+        Seed of the sensor noise, in [0, :data:`MAX_SEED`], overriding the camera's own;
+        Mitsuba's sampler uses it too (None: 0).
+    pixels_per_patch
+        Patch side in pixels, in [2, :data:`MAX_PIXELS_PER_PATCH`]; None:
+        :data:`CLOSED_FORM_PIXELS_PER_PATCH` (closed form) or
+        :data:`fidelity.camera.mitsuba.DEFAULT_PIXELS_PER_PATCH` (Mitsuba), 32 each.
+    cat
+        Chromatic adaptation transform of the scene reference to D65 (``Bradford``, or another
+        of :data:`fidelity.colour.colorimetry.CHROMATIC_ADAPTATION_METHODS`).
+    step
+        Spectral grid step in nm, in :data:`STEP_RANGE_NM` ([0.1, 20]), dividing 400 nm.
+    variant
+        Mitsuba variant to use; None: probed. Only Mitsuba reads it.
+    sampler
+        Mitsuba sampler plugin; None: the scene template's. Only Mitsuba reads it.
+
+    Returns
+    -------
+    ChartRender
+        The raw and display images, the chart measurement (ΔE00 per patch), the raw patch
+        means, the settings and conventions, and the ΔE's uncertainty budget.
+
+    Raises
+    ------
+    UnknownNameError
+        An unknown renderer, reference, camera, illuminant, reflectance set or adaptation
+        transform. Exit code 2.
+    InvalidValueError
+        A setting outside its domain (``step``, ``pixels_per_patch``, ``spp``, ``seed``), or a
+        camera whose stages give non-finite values; the message names the camera. Exit code 2.
+    InputFileError
+        A camera, illuminant or spectra file that is missing or invalid. Exit code 2.
     """
     t0 = time.perf_counter()
     if renderer not in RENDERERS:

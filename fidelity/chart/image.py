@@ -484,6 +484,9 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None,
                native: bool = False) -> Image:
     """Read an image as ``(H, W, 3)`` float32 R, G, B.
 
+    Only the channels that hold R, G and B (or the mosaic) are decoded, as float32 (or at
+    their native depth), so the pixels of an RGB image are held once.
+
     Parameters
     ----------
     path
@@ -503,15 +506,26 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None,
         float32; :func:`as_float32` of any part of them is what ``native=False`` gives.
         Bayer mosaics are demosaiced to float32 either way.
 
-    Only the channels that hold R, G and B (or the mosaic) are decoded, as float32 (or at
-    their native depth), so the pixels of an RGB image are held once.
+    Returns
+    -------
+    Image
+        ``pixels`` of shape (H, W, 3), float32 (``native``: the file's own 8/16-bit codes or
+        half floats): integer formats normalised to [0, 1] by ``v / (2**bits - 1)``,
+        floating-point formats as stored (NaN, Inf and negative values kept); with the file's format, pixel type, channels, layer, likely ``encoding``
+        (``linear`` for floating-point pixels, ``srgb`` otherwise) and EXR chromaticities.
 
     Raises
     ------
     InputFileError
         Missing, unreadable, truncated or corrupt file; one-channel image; channels that are not
         R, G, B; unknown or ambiguous layer; more pixels than the limit. The message names the
-        file (a name that is not valid UTF-8 is read through a link of a plain name).
+        file (a name that is not valid UTF-8 is read through a link of a plain name). Exit
+        code 2.
+    UnknownNameError
+        A ``bayer`` pattern not in :data:`BAYER_PATTERNS`. Exit code 2.
+    InvalidValueError
+        A pixel limit (``max_pixels`` or :data:`MAX_PIXELS_ENV`) that is not a positive whole
+        number. Exit code 2.
     """
 
     from fidelity.core.errors import unknown_name

@@ -51,6 +51,31 @@ class Chart:
 
     ``lab`` is (rows*cols, 3) CIELAB relative to ``whitepoint`` (D65 for every shipped chart),
     patches in row-major order with the top-left patch (as seen) first.
+
+    Attributes
+    ----------
+    name
+        The chart's name (``safecolor`` for the shipped chart; a file's ``name`` field, else
+        the file's stem).
+    title
+        Its human-readable title ("" when the file gives none).
+    patch_names
+        One name per patch, rows*cols of them, in the order of ``lab``.
+    lab
+        Reference CIELAB of the patches, shape (rows*cols, 3), read-only float64: L* in
+        [0, 100], a*, b* within +-:data:`LAB_LIMIT`; relative to ``whitepoint``.
+    rows, cols
+        The grid layout, >= 1 each (4 x 6 for a Macbeth ColorChecker).
+    whitepoint
+        White point of ``lab``; ``D65`` (the only one a chart file may give).
+    observer
+        The colorimetric observer of ``lab`` (``CIE 1931 2 degree``).
+    provenance
+        Where the reference values come from (free text; "" when unknown).
+    source
+        The file it was loaded from, as printable text ("" for one built in code).
+    extra
+        The chart file's fields beyond :data:`CHART_SCHEMA`'s, kept as read; not compared.
     """
 
     name: str
@@ -178,7 +203,33 @@ def _chart_from_document(doc: Any, source: str) -> Chart:
 
 
 def load_chart(name_or_path: str | Path = DEFAULT_CHART) -> Chart:
-    """Load a chart by built-in name (see :func:`available_charts`) or from a JSON file path."""
+    """Load a chart by built-in name (see :func:`available_charts`) or from a JSON file path.
+
+    The file (``charts/README.md``) is validated against :data:`CHART_SCHEMA` and read once
+    a process while it is unchanged.
+
+    Parameters
+    ----------
+    name_or_path
+        A shipped chart's name (:func:`available_charts`; default :data:`DEFAULT_CHART`,
+        ``safecolor``), or the path of a chart JSON file (at most :data:`MAX_CHART_BYTES`
+        bytes, :data:`MAX_CHART_PATCHES` patches).
+
+    Returns
+    -------
+    Chart
+        The chart: frozen, its ``lab`` read-only.
+
+    Raises
+    ------
+    InputFileError
+        A path (a name with ``/`` or a suffix) that does not exist; an unreadable file, or
+        one that is not JSON or does not fit the schema (``SchemaError``, also an
+        :class:`InvalidValueError`: a layout whose rows x cols differs from the number of
+        patches, L* outside [0, 100], a white point other than D65). Exit code 2.
+    UnknownNameError
+        A plain name that is neither a shipped chart nor an existing file. Exit code 2.
+    """
     text_name = str(name_or_path)
     builtin = resource_dir("charts") / f"{text_name}.json"
     path = Path(name_or_path)

@@ -422,10 +422,32 @@ def delta_e_2000(lab1: ArrayLike, lab2: ArrayLike) -> FloatArray:
     CIE 142-2001; implementation notes and test data: G. Sharma, W. Wu, E. N. Dalal, Color
     Res. Appl. 30(1), 2005 (all 34 test pairs reproduced to 1e-4).
 
-    ``lab1``, ``lab2``: (..., 3) broadcastable CIELAB arrays (L* in [0, 100], a*, b* real).
-    Returns (...,) ΔE00 >= 0, symmetric in its arguments. Computed in float64; float32 inputs
-    give a float32 result.
-    Hues exactly 180° apart take the ``|Δh'| <= 180°`` branch deterministically (see source).
+    Computed in float64; float32 inputs give a float32 result. Hues exactly 180° apart take
+    the ``|Δh'| <= 180°`` branch deterministically (see source).
+
+    Parameters
+    ----------
+    lab1, lab2
+        CIELAB colours, shape (..., 3), broadcastable against each other: L* in [0, 100]
+        (domain scale 100), a*, b* real.
+
+    Returns
+    -------
+    numpy.ndarray
+        ΔE00 >= 0, shape (...,) (the broadcast shape less the last axis); symmetric in its
+        arguments; float32 when both inputs are float32, else float64.
+
+    Raises
+    ------
+    InvalidValueError
+        An input whose last axis is not of length 3 (a :class:`FidelityError`: exit code 2 on
+        the command line).
+
+    References
+    ----------
+    CIE 142-2001, *Improvement to industrial colour-difference evaluation*; G. Sharma, W. Wu,
+    E. N. Dalal, *The CIEDE2000 color-difference formula: implementation notes, supplementary
+    test data, and mathematical observations*, Color Res. Appl. 30(1), 21-30, 2005.
     """
     return _ciede2000(lab1, lab2, components=False)[0]
 

@@ -9,7 +9,23 @@ from __future__ import annotations
 
 
 class FidelityError(Exception):
-    """An error caused by the user's input, with a message that names the input and the problem."""
+    """An error caused by the user's input, with a message that names the input and the problem.
+
+    The base of the typed errors: :class:`InputFileError`, :class:`InvalidValueError`,
+    :class:`UnknownNameError`, :class:`UnreachableTargetError`.
+
+    Parameters
+    ----------
+    *args
+        As :class:`Exception`'s: the message, one line that names the input first
+        (``<file or value>: <problem>``).
+
+    Attributes
+    ----------
+    exit_code
+        The command line's exit status for this error: 2 (a usage or input error); the CLI
+        prints the message on stderr without a traceback.
+    """
 
     exit_code: int = 2
 

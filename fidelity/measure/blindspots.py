@@ -58,7 +58,26 @@ KINDS: tuple[str, ...] = ("shadow-tone", "bit-depth", "banding")
 class BlindSpot:
     """One blind-spot check: its ``kind`` (:data:`KINDS`), whether the camera is ``at_risk``
     (None: could not be judged), the ``value`` measured and its ``threshold`` (units in
-    ``reason``), and a one-line ``reason``."""
+    ``reason``), and a one-line ``reason``.
+
+    Attributes
+    ----------
+    kind
+        ``shadow-tone``, ``bit-depth`` or ``banding`` (:data:`KINDS`).
+    at_risk
+        True: the camera is at risk of an error the chart ΔE cannot see; False: not; None:
+        could not be judged.
+    value
+        What was measured: the local gamma of the shadow end (1 is right), the camera's
+        quantisation bits, or the image's effective bits; None when not measured (float
+        output, not judged).
+    threshold
+        The limit ``value`` is judged against: the shadow slope's tolerance (±, default
+        :data:`SHADOW_SLOPE_TOLERANCE`) or the bit depth at or below which banding is a risk
+        (:data:`MIN_BITS`).
+    reason
+        One line saying what was found, for the report.
+    """
 
     kind: str
     at_risk: bool | None
@@ -257,7 +276,28 @@ def chart_blind_spots(measurement: ChartMeasurement, *, bits: int | None | bool 
                       ) -> tuple[BlindSpot, ...]:
     """Every check that applies: the shadow tone of the chart; the bit depth of a camera
     model (``bits``: its quantisation bits, None for float output; False: not a camera
-    model); the banding of an image (``pixels`` and ``pixel_type``)."""
+    model); the banding of an image (``pixels`` and ``pixel_type``).
+
+    Parameters
+    ----------
+    measurement
+        The chart measured; its neutral patches' tone curve is read (:func:`shadow_tone`).
+    bits
+        The camera model's quantisation bits (an int, :func:`bit_depth`); None: a camera with
+        float output; False (default): not a camera model, no bit-depth check.
+    pixels
+        The image's pixels, shape (H, W, 3), as read (integer codes scaled to [0, 1], or the
+        8/16-bit codes themselves); None: no banding check.
+    pixel_type
+        The file's pixel type (``uint8``, ``uint16``, ``half``, ...); banding is checked only
+        when both ``pixels`` and ``pixel_type`` are given, and judged only for integer types.
+
+    Returns
+    -------
+    tuple of BlindSpot
+        The shadow-tone check, then the bit-depth check (when ``bits`` is not False), then
+        the banding check (when ``pixels`` and ``pixel_type`` are given), in that order.
+    """
     out = [shadow_tone(measurement)]
     if bits is not False:
         out.append(bit_depth(None if bits is None or bits is True else int(bits)))

@@ -53,6 +53,30 @@ class ChartMeasurement:
     ``excluded`` names the patches left out of the chart's statistics (mean, max, worst
     patch), with why (a patch the chart finder judged covered: a leaf, a hand); they keep
     their own measurement.
+
+    Attributes
+    ----------
+    patch_names
+        The n patch names, in chart order (the order of every array below).
+    srgb
+        Measured encoded sRGB of each patch, shape (n, 3), finite (values outside [0, 1]
+        kept as measured).
+    lab
+        CIELAB (D65) of ``srgb``, shape (n, 3).
+    reference_lab
+        Reference CIELAB (D65) of each patch, shape (n, 3).
+    delta_e
+        CIEDE2000 ΔE00 of each patch, >= 0, shape (n,).
+    delta_l, delta_c, delta_h
+        Unweighted CIEDE2000 differences ΔL', ΔC', ΔH' of the measured colour relative to
+        the reference, shape (n,) each, signed.
+    reference_srgb
+        Encoded sRGB of the reference, shape (n, 3); None when not given.
+    noise
+        Standard deviation of each patch's sampled pixels (encoded sRGB), shape (n, 3);
+        None when unknown.
+    excluded
+        Patch name -> why it is left out of the statistics; empty: every patch counts.
     """
 
     patch_names: tuple[str, ...]
@@ -164,6 +188,36 @@ def measure_chart(
 
     Raises :class:`~fidelity.core.errors.InvalidValueError` for wrong shapes or NaN/Inf values,
     naming the patches concerned.
+
+    Parameters
+    ----------
+    srgb
+        Measured encoded sRGB of the patches, shape (n, 3), finite (nominally in [0, 1];
+        values outside are converted as they are).
+    reference_lab
+        Reference CIELAB (D65) of the patches, shape (n, 3), finite.
+    patch_names
+        The n patch names, in the order of the rows of ``srgb``.
+    reference_srgb
+        Encoded sRGB of the reference, shape (n, 3), finite; kept for the report only.
+    noise
+        Standard deviation of each patch's pixels (encoded sRGB), shape (n, 3); kept as given.
+    excluded
+        Patch name -> why it is left out of the mean, max and worst patch; the names must be
+        patches of the chart and at least one patch must be left.
+
+    Returns
+    -------
+    ChartMeasurement
+        Per patch the measured Lab, ΔE00 (>= 0) and ΔL', ΔC', ΔH' against the reference;
+        ``mean_delta_e`` is the SAFE-COLOR chart ΔE.
+
+    Raises
+    ------
+    InvalidValueError
+        ``srgb``, ``reference_lab`` or ``reference_srgb`` not of shape (n, 3) or with NaN/Inf
+        values (the message names the patches); ``excluded`` names that are not patches, or
+        every patch excluded. Exit code 2.
     """
     names = tuple(str(n) for n in patch_names)
     n = len(names)

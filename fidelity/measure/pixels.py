@@ -169,7 +169,45 @@ class BadPixels:
 
 @dataclass(frozen=True)
 class ImageMeasurement:
-    """An audited chart: the :class:`ChartMeasurement` plus how it was obtained."""
+    """An audited chart: the :class:`ChartMeasurement` plus how it was obtained.
+
+    Attributes
+    ----------
+    measurement
+        The chart's colour: per patch the exposed, clipped encoded sRGB, its CIELAB and ΔE00
+        against the reference.
+    exposure_ev
+        The exposure correction applied to the linear patch means, in EV (scale ``2**EV``),
+        within +-:data:`fidelity.measure.colour.MAX_EXPOSURE_EV`.
+    exposure_mode
+        ``auto`` (fitted on the neutral patches) or ``fixed``.
+    encoding
+        How the pixels were read: ``linear`` or ``srgb`` (:data:`ENCODINGS`).
+    bad_pixels
+        NaN, Inf and negative pixel counts in the sampling windows (total and per patch) and
+        over the whole image, with the rule applied.
+    valid_pixels
+        Pixels averaged in each patch's window, in chart order.
+    clipped_patches
+        Names of the patches whose encoded sRGB was clipped to [0, 1].
+    location
+        Where the patches lie: the corners, homography and sampling windows.
+    reference
+        The reference chart the patches are compared with.
+    image
+        The image file as the report states it (path, format, pixel type, sha256...); None
+        for an array measured without one.
+    detection
+        What the chart finder found (None: corners given).
+    colourspace
+        RGB primaries the pixels were taken in: a colour-science name or
+        ``chromaticities x,y,...``.
+    corner_checks
+        How well the measured patches match the reference layout (None for a chart other
+        than 4 x 6 given by its corners).
+    uncertainty
+        The standard uncertainty budget of the chart ΔE (None: not evaluated).
+    """
 
     measurement: ChartMeasurement
     exposure_ev: float
@@ -703,7 +741,55 @@ def measure_image(
     :class:`ReadOptions`; an image file at its native depth) and audit its chart
     (:func:`measure_pixels`). Errors name the file. ``inspect_image`` is called with the image
     read once its chart is measured, so that a caller can look at more of it without reading it
-    again (the audit's banding check)."""
+    again (the audit's banding check).
+
+    Parameters
+    ----------
+    path
+        An image file (EXR, HDR, TIFF, PNG, JPEG, camera raw mosaic, ...) or a robot
+        recording (ROS 1/2 bag, MCAP) whose message ``read`` names.
+    corners
+        Centres of the dark skin, bluish green, black and white patches: ``(4, 2)`` image
+        ``(x, y)`` in pixels or ``"X1,Y1,...,X4,Y4"``; None: find the chart
+        (:func:`fidelity.chart.find.find_chart` with ``detection``).
+    read
+        How the pixels are read: layer, encoding, exposure, negatives rule, colourspace,
+        Bayer pattern, pixel limit, OpenColorIO colourspace, recording message
+        (:class:`ReadOptions`; default: the file's own encoding and primaries, auto exposure
+        for linear pixels).
+    reference
+        The reference colours: ``scene`` (default: the chart's spectra under ``illuminant``),
+        ``safecolor`` or a chart name/path, or a loaded :class:`Reference`.
+    illuminant
+        Scene illuminant of the ``scene`` reference (``D65``, ``D50``, ``A``, ``F2``,
+        ``F11``, ``LED`` or an SPD file).
+    window
+        Side of each patch's central sampling square, in patch pitches, in (0, 1]
+        (default 0.5).
+    detection
+        Chart-finding method when ``corners`` is None: ``cascade`` (default), ``mcc`` or
+        ``segmentation`` (:data:`fidelity.chart.find.CHART_FINDERS`).
+    inspect_image
+        Called with the :class:`Image` read once its chart is measured; None: not called.
+
+    Returns
+    -------
+    ImageMeasurement
+        The chart's ΔE00 per patch, exposure, bad-pixel counts, location, detection, the
+        image file's description and the ΔE's uncertainty budget.
+
+    Raises
+    ------
+    InputFileError
+        A missing, unreadable or corrupt image or recording. Exit code 2.
+    InvalidValueError
+        No chart found (or found with low confidence, or of another kind), corners outside
+        the image or degenerate, a window outside (0, 1], too few valid pixels in a patch, an
+        exposure out of range or that overflows. The message names the file. Exit code 2.
+    UnknownNameError
+        An unknown encoding, negatives rule, colourspace, reference, illuminant or detection
+        method. Exit code 2.
+    """
     img, sha256 = read_input(path, read, native=True)
     enc = read.encoding or img.encoding
     info = img.info(sha256=sha256, encoding=enc)

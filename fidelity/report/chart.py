@@ -430,7 +430,33 @@ def write_chart_report(report: ChartReport, *, json_path: str | os.PathLike[str]
                        protect: Sequence[str | os.PathLike[str]] = ()) -> list[Path]:
     """Write the JSON and/or HTML report, atomically, refusing to write over any path in
     ``protect`` (the inputs). The HTML of an image report reads the image again to show where
-    the patches were sampled. Returns the paths written."""
+    the patches were sampled. Returns the paths written.
+
+    Parameters
+    ----------
+    report
+        The result of a check or an audit (:func:`fidelity.pipeline.check.check_camera`,
+        :func:`fidelity.pipeline.check.audit_image`).
+    json_path
+        Where to write the JSON report (:func:`fidelity.report.jsonform.chart_report_json`);
+        None: no JSON.
+    html_path
+        Where to write the self-contained HTML report; None: no HTML.
+    protect
+        Paths that must not be written over (the command's inputs: images, camera files,
+        tables); empty entries are skipped.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The files written, JSON first; empty when neither path is given.
+
+    Raises
+    ------
+    InputFileError
+        An output path that is an input or inside an input folder, or an existing folder
+        (each output is checked just before it is written). Exit code 2.
+    """
     return write_report_files(lambda: chart_report_json(report),
                               lambda: chart_document(report, source_pixels(report)),
                               json_path=json_path, html_path=html_path, protect=protect)

@@ -173,7 +173,34 @@ def write_comparison_report(report: ComparisonReport, *,
                             json_path: str | os.PathLike[str] | None = None,
                             html_path: str | os.PathLike[str] | None = None,
                             protect: Sequence[str | os.PathLike[str]] = ()) -> list[Path]:
-    """Write the JSON and/or HTML comparison report atomically, never over an input."""
+    """Write the JSON and/or HTML comparison report atomically, never over an input.
+
+    The HTML reads both images again to show where their patches were sampled.
+
+    Parameters
+    ----------
+    report
+        The comparison of a simulated and a real chart
+        (:func:`fidelity.pipeline.compare.compare_charts`).
+    json_path
+        Where to write the JSON report; None: no JSON.
+    html_path
+        Where to write the self-contained HTML report; None: no HTML.
+    protect
+        Paths that must not be written over (the command's inputs: both images, tables);
+        empty entries are skipped.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The files written, JSON first; empty when neither path is given.
+
+    Raises
+    ------
+    InputFileError
+        An output path that is an input or inside an input folder, or an existing folder
+        (each output is checked just before it is written). Exit code 2.
+    """
     return write_report_files(
         lambda: comparison_json(report),
         lambda: comparison_document(report, source_pixels(report.sim),
