@@ -202,7 +202,7 @@ def choose_default(result: dict[str, Any], min_pixels: int = 1) -> dict[str, Any
 
 def plot(result: dict[str, Any]) -> bytes:
     """Time against error, one line per (variant, sampler, pixels per patch) along spp (PNG)."""
-    from benchmarks.plots import new_figure, png_bytes
+    from benchmarks.tools.plots import new_figure, png_bytes
 
     fig, ax = new_figure(9, 6)
     rows = [r for r in result["rows"] if r["camera"] == "ideal"]

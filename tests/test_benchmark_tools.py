@@ -1,5 +1,5 @@
 """The tools that rebuild the committed COCO reports after a re-sweep (``benchmarks.
-compare_tables``, ``benchmarks.after_resweep``), on the committed tables and small files."""
+compare_tables``, ``benchmarks.tools.after_resweep``), on the committed tables and small files."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks import after_resweep, compare_tables
+from benchmarks.tools import after_resweep, compare_tables
 from fidelity.coco.tables import TablesResult
 
 REPO = Path(__file__).resolve().parent.parent
@@ -61,14 +61,14 @@ def test_after_resweep_finds_every_prediction_to_recompute():
 
 
 def test_resweep_queue_runs_each_detector_after_the_other_into_its_own_store(tmp_path):
-    """benchmarks/resweep_queue.sh: resweep_model.sh once per detector, in order, each with
+    """benchmarks/tools/resweep_queue.sh: resweep_model.sh once per detector, in order, each with
     its own store; a detector's failure stops the queue (the next would merge on top of it)."""
     import shutil
     import subprocess
 
-    bench = tmp_path / "benchmarks"
-    bench.mkdir()
-    shutil.copy(REPO / "benchmarks" / "resweep_queue.sh", bench)
+    bench = tmp_path / "benchmarks" / "tools"
+    bench.mkdir(parents=True)
+    shutil.copy(REPO / "benchmarks" / "tools" / "resweep_queue.sh", bench)
     log = tmp_path / "calls"
     stub = bench / "resweep_model.sh"  # stands in for the hours-long sweep: logs its call
     stub.write_text(f'#!/usr/bin/env bash\necho "$*" >> {log}\n[ "$2" != fail.onnx ]\n')
@@ -92,7 +92,7 @@ def test_resweep_queue_runs_each_detector_after_the_other_into_its_own_store(tmp
 
 def test_reproduction_sample_runs_the_same_cells_of_each_detector_and_copies_the_stores(
         tmp_path):
-    """benchmarks/reproduction_sample.sh: PROCESSES sweep processes per detector on one store
+    """benchmarks/tools/reproduction_sample.sh: PROCESSES sweep processes per detector on one store
     (the grid of the sample, CPU provider), one --provider cuda try, and a copy of each
     store in OUT (what comes back from a lent machine)."""
     import sqlite3
@@ -117,7 +117,7 @@ db.commit()
 """)
     py.chmod(0o755)
     out, stores = tmp_path / "out", tmp_path / "stores"
-    r = subprocess.run(["bash", str(REPO / "benchmarks" / "reproduction_sample.sh"), "data",
+    r = subprocess.run(["bash", str(REPO / "benchmarks" / "tools" / "reproduction_sample.sh"), "data",
                         str(out), str(py)], capture_output=True, text=True, cwd=tmp_path,
                        env={"PATH": os.environ["PATH"], "PROCESSES": "3",
                             "STORES": str(stores)})
@@ -232,14 +232,14 @@ def test_prose_numbers_are_computed_from_the_compared_cells_and_the_reports(tmp_
 
 
 def test_kept_provenance_walks_the_merge_chain_back_to_the_run_of_each_model(tmp_path):
-    """benchmarks.kept_provenance: tables merged twice by an older version, whose record
+    """benchmarks.tools.kept_provenance: tables merged twice by an older version, whose record
     named one run for every kept model; each model is recovered with the run that measured it
     (the file, checked by SHA-256 against the commit its name gives, and that file's own meta),
     and the files it passed through since."""
     import hashlib
     import subprocess
 
-    from benchmarks.kept_provenance import recovered_runs
+    from benchmarks.tools.kept_provenance import recovered_runs
 
     repo = tmp_path / "repo"
     (repo / "reports" / "coco").mkdir(parents=True)

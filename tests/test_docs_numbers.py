@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.after_resweep import SEPARATOR, cococ_readme_row, quoted_blocks, quoting_pages
+from benchmarks.tools.after_resweep import SEPARATOR, cococ_readme_row, quoted_blocks, quoting_pages
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -64,7 +64,7 @@ def test_quoted_tables_need_their_report_to_hold_the_row():
 
 def test_the_coco_c_readme_table_is_the_reports_json():
     """``reports/cococ/README.md`` restates each cell of ``cococ.json`` (rebuilt with the
-    prediction tables by ``benchmarks/after_resweep.py``): the same rows, in its order."""
+    prediction tables by ``benchmarks/tools/after_resweep.py``): the same rows, in its order."""
     import json
 
     cells = json.loads((REPO / "reports/cococ/cococ.json").read_text())["cells"]

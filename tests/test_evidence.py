@@ -312,7 +312,7 @@ def test_shipped_measured_table_states_this_versions_standard_errors(model):
     assert prov["standard_errors"][model] == STANDARD_ERROR_WORDS["larger"]
 
 
-#: The scores files of the re-sweeps (``benchmarks/resweep_model.sh``: ``fidelity sweep
+#: The scores files of the re-sweeps (``benchmarks/tools/resweep_model.sh``: ``fidelity sweep
 #: --export-scores``), one per detector, named ``<detector>.scores.json.gz``.
 RESWEEP_SCORES = sorted((REPO / "reports" / "coco" / "resweep").glob("*.scores.json.gz"))
 
@@ -345,7 +345,7 @@ def test_committed_scores_file_rebuilds_the_shipped_rows(path, shared, tmp_path)
     shipped = json.loads((REPO / "reports" / "coco" / "tables.json").read_text())["tables"]
     found, rows = len(rebuilt["cells"].get(model, [])), len(shipped["cells"][model])
     if found < rows and model not in AWAITING_RESWEEP:
-        # a detector measured again for its scores file (benchmarks/resweep_queue.sh), its
+        # a detector measured again for its scores file (benchmarks/tools/resweep_queue.sh), its
         # shipped rows already this version's: the file is checked once the re-sweep is done
         pytest.skip(f"{model}: its re-sweep is under way ({found} of {rows} cells)")
     assert set(rebuilt["models"]) == {model}

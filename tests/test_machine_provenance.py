@@ -78,7 +78,7 @@ def _doc(maps: dict[str, float], digests: dict[str, dict[str, str]]) -> dict[str
 
 
 def test_cross_machine_comparison_counts_images_and_differences_of_losses() -> None:
-    from benchmarks.cross_machine import compare, markdown, version_differences
+    from benchmarks.tools.cross_machine import compare, markdown, version_differences
 
     a = _doc({"baseline:0": 0.40, "hue:1": 0.39, "hue:3": 0.38},
              {"baseline:0": {"1": "a", "2": "b", "3": "c"}, "hue:1": {"1": "d", "2": "e"}})
@@ -125,7 +125,7 @@ def _tables_doc(baseline: float, cells: dict[str, tuple[float, float, float | No
 
 
 def test_cross_machine_rows_compare_a_detectors_whole_grid_of_two_tables() -> None:
-    from benchmarks.cross_machine import compare_rows, rows_markdown
+    from benchmarks.tools.cross_machine import compare_rows, rows_markdown
 
     a = _tables_doc(0.30, {"hue:1": (0.299, 0.1, 0.5), "gamma-inc:1": (0.298, 0.2, 0.4),
                            "hue:3": (0.29, 1.0, 0.8)},
@@ -156,7 +156,7 @@ def test_cross_machine_rows_compare_a_detectors_whole_grid_of_two_tables() -> No
 def test_detection_differences_pair_each_detection_with_the_nearest_of_its_class() -> None:
     import numpy as np
 
-    from benchmarks.cross_machine import detection_differences
+    from benchmarks.tools.cross_machine import detection_differences
 
     d = np.array([[10, 10, 50, 50, 0.90, 0], [12, 11, 52, 49, 0.90, 0],
                   [0, 0, 5, 5, 0.30, 2]], np.float32)

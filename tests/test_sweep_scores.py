@@ -321,9 +321,9 @@ def test_a_cell_finished_during_the_export_waits_for_the_next(data, tmp_path, mo
 
 
 def test_cross_machine_digest_reads_a_store_folder_or_its_sqlite_file(data, tmp_path):
-    """benchmarks.cross_machine digest: per cell, one digest per image of its detections; the
+    """benchmarks.tools.cross_machine digest: per cell, one digest per image of its detections; the
     store's folder and its sqlite file (a copy brought back from a lent machine) read alike."""
-    from benchmarks.cross_machine import digest_store
+    from benchmarks.tools.cross_machine import digest_store
 
     store = sweep(data, tmp_path / "s", ["contrast-inc"], [0, 3])
     images = store.db.execute("SELECT COUNT(*) FROM images").fetchone()[0]

@@ -215,7 +215,7 @@ def validity_domain(prediction: Prediction, column: str = "dmap_points") -> Vali
 STAGES = ("exposure", "white balance", "colour correction", "tone curve", "bit depth")
 
 #: The shipped record of the validated cameras (written by ``fidelity validate`` as
-#: ``domain.json`` beside its report; copied here by ``benchmarks.after_resweep``).
+#: ``domain.json`` beside its report; copied here by ``benchmarks.tools.after_resweep``).
 VALIDATED_CAMERAS_FILE = "validation-domain.json"
 
 

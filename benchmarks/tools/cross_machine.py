@@ -5,24 +5,24 @@ against each machine's own baseline). onnxruntime picks its kernels by the proce
 instruction set, so an int8 detector may compute differently on another processor.
 
 Usage:
-  python -m benchmarks.cross_machine digest STORE OUT.json [--model M] [--cpu-here]
+  python -m benchmarks.tools.cross_machine digest STORE OUT.json [--model M] [--cpu-here]
       (STORE: a sweep store's folder or its sqlite file)
       per-image digests (SHA-256 of the detections, 16 hex digits), the finished cells' mAP and
       the store's provenance; small enough to carry off a lent machine. --cpu-here: add this
       machine's processor and instructions to a store made here by a version that did not
       record them
-  python -m benchmarks.cross_machine compare A.json B.json [--out reports/coco/cross_machine]
+  python -m benchmarks.tools.cross_machine compare A.json B.json [--out reports/coco/cross_machine]
       [--stores STORE_A STORE_B]
       --stores: where both stores are at hand, also how far apart the detections that are not
       bit for bit the same are (boxes in pixels, scores), cell by cell
 
-  python -m benchmarks.cross_machine rows A_TABLES.json B_TABLES.json --model M
+  python -m benchmarks.tools.cross_machine rows A_TABLES.json B_TABLES.json --model M
       [--out reports/coco/cross_machine_rows_M]
       one detector's rows of two ``tables.json`` (every cell's mAP and ΔmAP with its SE, the
       baseline and the worst case per ΔE): a whole grid measured twice, where the stores are
       gone or too large to digest (A: e.g. ``git show REV:reports/coco/tables.json``)
 
-benchmarks/reproduction_sample.sh runs the same sample cells on any machine.
+benchmarks/tools/reproduction_sample.sh runs the same sample cells on any machine.
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ from benchmarks.machine import write_report
 
 def _open(store: str | Path) -> sqlite3.Connection:
     """A sweep store, read only: its folder, or its ``sweep.sqlite`` (or a copy of it, as
-    benchmarks/reproduction_sample.sh brings back)."""
+    benchmarks/tools/reproduction_sample.sh brings back)."""
     path = Path(store)
     return sqlite3.connect(f"file:{path if path.is_file() else path / 'sweep.sqlite'}?mode=ro",
                            uri=True)
@@ -199,8 +199,8 @@ def markdown(a: dict[str, Any], b: dict[str, Any], result: dict[str, Any]) -> st
     lines = [
         f"# Same sweep cells in two runs: {a['model']}",
         "",
-        "Written by `python -m benchmarks.cross_machine compare A.json B.json` from the "
-        "per-image digests `python -m benchmarks.cross_machine digest STORE` made of each "
+        "Written by `python -m benchmarks.tools.cross_machine compare A.json B.json` from the "
+        "per-image digests `python -m benchmarks.tools.cross_machine digest STORE` made of each "
         f"run's store (same code, images and detector file; {_versions_words(a, b)}).",
         "",
         f"- A: {_machine_words(a)}; versions {json.dumps(a.get('versions'))}",
@@ -292,7 +292,7 @@ def rows_markdown(result: dict[str, Any], a_name: str, b_name: str) -> str:
     lines = [
         f"# One detector's rows measured twice: {result['model']}",
         "",
-        "Written by `python -m benchmarks.cross_machine rows A B --model "
+        "Written by `python -m benchmarks.tools.cross_machine rows A B --model "
         f"{result['model']}` from two `tables.json`.",
         "",
         f"- A: {a_name}",

@@ -31,13 +31,13 @@ Cost, measured two ways:
   time spent in the uncertainty budget (:func:`fidelity.measure.pixels.image_uncertainty`)
   timed inside it; the cost on top of an audit is that time over the rest of the process
   (median over ``--repeats`` runs), for the small render and for the 12-megapixel photo of
-  ``bench_startup`` (where the placement draws pass over the most pixels);
+  ``benchmarks.speed.startup`` (where the placement draws pass over the most pixels);
 - against the anchor: ``fidelity audit IMAGE --json`` and ``fidelity check --json`` as whole
   processes, this checkout against the code before the uncertainty (``--anchor`` commit,
   exported with ``git archive``), interleaved; median wall time and max RSS. Everything else
   that changed since the anchor is in this difference too.
 
-    python -m benchmarks.uncertainty_coverage --trials 100 --repeats 7
+    python -m benchmarks.studies.uncertainty_coverage --trials 100 --repeats 7
     # -> reports/uncertainty/coverage.json and reports/uncertainty/coverage.md
 """
 
@@ -57,10 +57,10 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.bench_versions import export
 from benchmarks.machine import machine_info
+from benchmarks.speed.versions import export
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 OUT = REPO / "reports" / "uncertainty"
 
 
@@ -120,14 +120,14 @@ def audit_study(camera: Any, trials: int) -> dict[str, Any]:
     return summary(measured)
 
 
-#: Sensor noise of the photo studies (:func:`benchmarks.chart_scenes.make_scene`'s scale: the
+#: Sensor noise of the photo studies (:func:`tests.fixtures.chart_scenes.make_scene`'s scale: the
 #: top of the range its photos are drawn from).
 PHOTO_NOISE = 0.02
 
 
 def photo_study(coco: Path, trials: int, noise: float, seed: int = 7, quality: int | None = 90,
                 crop: bool = True) -> dict[str, Any]:
-    """One synthetic photo (:func:`benchmarks.chart_scenes.make_scene`: the chart under a
+    """One synthetic photo (:func:`tests.fixtures.chart_scenes.make_scene`: the chart under a
     homography in a COCO photo, 1600 px) captured ``trials`` times: each capture its own sensor
     noise, cropped by up to a tenth of each side (the chart kept inside, so the finder sees it
     elsewhere in another context and the JPEG's 8 x 8 blocks fall elsewhere on it), encoded as
@@ -230,7 +230,7 @@ def cost_study(anchor: str, repeats: int) -> dict[str, Any]:
                         "--out", str(image_dir)], check=True, capture_output=True,
                        env=dict(os.environ, PYTHONPATH=str(REPO)))
         image = str(image_dir / "developed.png")
-        from benchmarks.bench_startup import make_photo
+        from benchmarks.speed.startup import make_photo
 
         photo = Path(tmp) / "photo.jpg"
         make_photo(photo)
@@ -267,7 +267,7 @@ def cost_study(anchor: str, repeats: int) -> dict[str, Any]:
 
 def markdown(result: dict[str, Any]) -> str:
     lines = ["# Uncertainty of the chart ΔE: coverage and cost (issue 32)", "",
-             "Written by `python -m benchmarks.uncertainty_coverage`; numbers from "
+             "Written by `python -m benchmarks.studies.uncertainty_coverage`; numbers from "
              "`coverage.json`.", "",
              "| study | trials | mean ΔE00 | observed sd | RMS stated u | sd / u | within ±u | "
              "within ±2u |", "|---|---|---|---|---|---|---|---|"]

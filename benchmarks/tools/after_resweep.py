@@ -1,10 +1,10 @@
-"""Rebuild what reads the shipped COCO tables, after ``benchmarks/resweep_model.sh`` has merged
+"""Rebuild what reads the shipped COCO tables, after ``benchmarks/tools/resweep_model.sh`` has merged
 re-measured detectors into ``reports/coco`` and ``fidelity/data/prediction`` (issue 32), so
 that one commit carries the tables and everything computed from them:
 
 1. the per-cell before/after of every re-measured detector against the tables of
    :data:`OLD_PREPROCESSING_REV` (the last measured wholly with the earlier preprocessing):
-   ``reports/coco/preprocessing_change_cells.{md,json}`` (``benchmarks.compare_tables``);
+   ``reports/coco/preprocessing_change_cells.{md,json}`` (``benchmarks.tools.compare_tables``);
 2. the validation report from its store (``fidelity validate --report-only``: the measured
    cells as stored, the predictions from the new tables) into ``reports/validation``, and its
    validated cameras (``domain.json``) into ``fidelity/data/validation-domain.json``;
@@ -21,7 +21,7 @@ Only files that already exist in the report folders are replaced. What stays by 
 preprocessing_change.md``, ``reports/validation/analysis.md``, README, docs), whose numbers
 it prints (:func:`prose_numbers`).
 
-    python -m benchmarks.after_resweep --validation-store ~/.cache/fidelity/validation-v3
+    python -m benchmarks.tools.after_resweep --validation-store ~/.cache/fidelity/validation-v3
 
 On a machine without that store, the validation's committed scores file
 (:data:`VALIDATION_SCORES`, ``fidelity validate --export-scores``) is imported into it first.
@@ -40,7 +40,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 #: The validation store's cells without their detections (``fidelity validate
 #: --export-scores``), committed so that a new machine can report the validation again.
 VALIDATION_SCORES = REPO / "reports" / "validation" / "validation.scores.json.gz"
@@ -72,7 +72,7 @@ def before_after() -> None:
         ["git", "show", f"{OLD_PREPROCESSING_REV}:reports/coco/tables.json"], cwd=REPO,
         check=True, capture_output=True).stdout)
     try:
-        _run([sys.executable, "-m", "benchmarks.compare_tables", name,
+        _run([sys.executable, "-m", "benchmarks.tools.compare_tables", name,
               "reports/coco/tables.json", "--out", "reports/coco/preprocessing_change_cells"])
     finally:
         before.unlink()

@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # The reproduction sample: the same sweep cells, on the same images, run on two machines, to
-# compare their detections and scores (python -m benchmarks.cross_machine digest, then
+# compare their detections and scores (python -m benchmarks.tools.cross_machine digest, then
 # compare --stores). Run it on each machine from the repository root:
 #
-#   benchmarks/reproduction_sample.sh DATA OUT [PYTHON]
+#   benchmarks/tools/reproduction_sample.sh DATA OUT [PYTHON]
 #
 # DATA holds val2017/ (the images that annotations.json annotates) and models/MODEL.onnx for
 # each of MODELS (default "yolov8n-int8dyn yolox_nano"); OUT gets machine.txt, one log and one

@@ -12,10 +12,10 @@
 #      take the pair ~3.2 h (one after the other on two threads: ~3.7 h). The model that
 #      finishes first then works through the other's cells from the far end.
 # `fidelity tables OUT` reports a store caught mid-phase on each model's common image count.
-# Usage: benchmarks/run_coco_sweep.sh [OUT]   (shared data: $FIDELITY_SHARED, default ../shared)
-# Long: run it detached, e.g. setsid nohup benchmarks/run_coco_sweep.sh >> sweep.log 2>&1 &
+# Usage: benchmarks/tools/run_coco_sweep.sh [OUT]   (shared data: $FIDELITY_SHARED, default ../shared)
+# Long: run it detached, e.g. setsid nohup benchmarks/tools/run_coco_sweep.sh >> sweep.log 2>&1 &
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 S=$(cd "${FIDELITY_SHARED:-../shared}" && pwd)  # absolute: the store records the paths
 OUT=${1:-$HOME/.cache/fidelity/sweep-coco1000}
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1

@@ -5,14 +5,14 @@ models, that run's versions, machine(s), scorers and imported scores files
 (``meta["earlier"]["runs"]``). Versions before that wrote one record for every kept model, the
 meta of the tables they were last kept in, so a model kept through two merges was named with
 the machine of a run that did not measure it. The merges of the re-sweeps
-(``benchmarks/resweep_model.sh``) read a copy of the committed tables named
+(``benchmarks/tools/resweep_model.sh``) read a copy of the committed tables named
 ``reports-coco-tables-at-<commit>.json``: each such record names a commit whose
 ``reports/coco/tables.json`` has the recorded SHA-256, and that file's own meta is the run
 that measured the models it did not keep. This walks that chain back for every kept model
 (checking each SHA-256) and writes the tables, their report and the prediction tables with
 the recovered ``runs``; nothing else changes.
 
-Usage: python -m benchmarks.kept_provenance TABLES_JSON --out DIR [--prediction FILE]
+Usage: python -m benchmarks.tools.kept_provenance TABLES_JSON --out DIR [--prediction FILE]
            [--directional FILE]
        (TABLES_JSON: a copy, as the merge reads one; DIR/tables.json must not be it)
 """
@@ -29,7 +29,7 @@ from typing import Any
 
 from fidelity.coco.tables import RUN_KEYS, earlier_runs, record_by_name, runs_passed_on
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 _COMMIT = re.compile(r"reports-coco-tables-at-([0-9a-f]{7,40})\.json$")
 
 

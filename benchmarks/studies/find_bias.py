@@ -1,29 +1,27 @@
 """The chart finder's corner error with and without the perspective-bias correction of its last
 fit (``fidelity.chart.find.perspective_bias``), side by side on the same images in one run.
 
-Images: the photos of ``benchmarks.bench_find_chart`` (seed 19, every chart image; generated
-into its cache when missing) and the three synthetic photos of ``fidelity qualify``'s
-chart-finder check. "Before" is the same code with the correction set to zero. The error is
+Images: the photos of ``benchmarks.speed.find_chart`` (:mod:`tests.fixtures.chart_photos`,
+seed 19, every chart image; generated into its cache when missing) and the three synthetic
+photos of ``fidelity qualify``'s chart-finder check. "Before" is the same code with the correction set to zero. The error is
 the largest distance of the four corner-patch centres from the truth, in patch pitches.
 
-    python -m benchmarks.bench_find_bias [--quick] [--out reports/find_chart]
+    python -m benchmarks.studies.find_bias [--quick] [--out reports/find_chart]
 """
 
 from __future__ import annotations
 
 import argparse
-import hashlib
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 import fidelity.chart.find as find
-from benchmarks import bench_find_chart as bench
 from benchmarks.machine import machine_info
 from fidelity.core.fileio import write_json_atomic, write_text_atomic
 from fidelity.pipeline.qualify import FINDER_SCENES, synthetic_photo
+from tests.fixtures.chart_photos import cache_folder, generate, scene_specs
 from tests.fixtures.chart_scenes import decode_jpeg
 
 CORRECTED = find.perspective_bias
@@ -66,17 +64,14 @@ def main() -> None:
     shared = shared_dir()
     ap.add_argument("--coco", type=Path, default=(shared / "coco/val2017") if shared
                     else Path("../shared/coco/val2017"))
-    ap.add_argument("--out", type=Path, default=Path(__file__).parents[1] / "reports/find_chart")
+    ap.add_argument("--out", type=Path, default=Path(__file__).parents[2] / "reports/find_chart")
     args = ap.parse_args()
-    key = hashlib.sha256(f"{bench.SCENES_VERSION}-19".encode()).hexdigest()[:10]
-    cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "fidelity" / \
-        "find_chart" / key
-    records = bench.generate(bench.scene_specs(args.quick), args.coco, cache, 19)
+    records = generate(scene_specs(args.quick), args.coco, cache_folder(19), 19)
     photos = []
     for rec in records:
         if rec["corners"] is None or rec["kind"] == "sg":
             continue
-        pixels = bench._float_srgb(decode_jpeg(Path(rec["path"]).read_bytes()))
+        pixels = decode_jpeg(Path(rec["path"]).read_bytes()).astype(np.float32) / np.float32(255.0)
         photos.append({"index": rec["index"], "kind": rec["kind"],
                        **_error(pixels, np.asarray(rec["corners"]), rec["pitch_px"])})
     synthetic = []
@@ -94,17 +89,17 @@ def main() -> None:
     s = doc["photos"]["summary"]
     m = doc["machine"]
     lines = ["# The chart finder's perspective-bias correction: before and after", "",
-             "`python -m benchmarks.bench_find_bias` (one run, both sides on the same images; "
+             "`python -m benchmarks.studies.find_bias` (one run, both sides on the same images; "
              f"{m.get('cpu', '?')}, {m.get('cores', '?')} cores). Largest distance of the four "
              "corner-patch centres from the truth, in % of the patch pitch. Before: the last "
              "fit to the patch outlines' centroids; after: refitted to the centroids less the "
              "perspective bias the first fit predicts (`fidelity.chart.find.perspective_bias`)."
-             " Photos: every chart image of `benchmarks.bench_find_chart` (seed 19) that both "
+             " Photos: every chart image of `benchmarks.speed.find_chart` (seed 19) that both "
              "find; synthetic scenes: those of `fidelity qualify`'s chart-finder check.", "",
              "| images | corner error (% of a pitch) | median | mean | 90th percentile | max |",
              "|---|---|---|---|---|---|"]
     for k in ("before", "after"):
-        lines.append(f"| {s['found_by_both']} photos (bench_find_chart, seed 19) | {k} | "
+        lines.append(f"| {s['found_by_both']} photos (find_chart, seed 19) | {k} | "
                      f"{100 * s[k]['median']:.2f} | {100 * s[k]['mean']:.2f} | "
                      f"{100 * s[k]['p90']:.2f} | {100 * s[k]['max']:.2f} |")
     for r in synthetic:

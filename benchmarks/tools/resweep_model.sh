@@ -2,8 +2,8 @@
 # Re-measure detectors of the shipped COCO tables with this version's code, one store per run,
 # and merge them into reports/coco and the shipped prediction tables, keeping the detectors not
 # re-measured as they were (fidelity tables --earlier). Resumable: rerun the same line.
-#   benchmarks/resweep_model.sh STORE MODEL.onnx[@N] [MODEL.onnx[@N] ...]
-# e.g. PROCESSES=2 benchmarks/resweep_model.sh ~/.cache/fidelity/resweep-yolo11n yolo11n-int8dyn.onnx
+#   benchmarks/tools/resweep_model.sh STORE MODEL.onnx[@N] [MODEL.onnx[@N] ...]
+# e.g. PROCESSES=2 benchmarks/tools/resweep_model.sh ~/.cache/fidelity/resweep-yolo11n yolo11n-int8dyn.onnx
 # Time on 2 cores, all 1000 images (131 cells a model): YOLOX-nano ~1.5 h with one thread beside
 # other work, YOLO11n ~3.5 h, YOLOv8n/YOLOv10n ~9.5 h each (two processes of one thread).
 # Shared data: $FIDELITY_SHARED (default ../shared). The store stays outside the repository.
@@ -14,7 +14,7 @@
 # store first and resumes from there.
 # Commit reports/coco and fidelity/data/prediction when the merge has run.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 S=$(cd "${FIDELITY_SHARED:-../shared}" && pwd)
 STORE=$1; shift
 models=""

@@ -8,7 +8,7 @@ is not the input size (the others give the same input, which is checked on a few
 all. Both sets are scored with COCO AP on the same images; per cell the ΔmAP against the
 baseline in points and relative, old and new.
 
-Usage: python -m benchmarks.compare_preprocessing STORE MODEL.onnx
+Usage: python -m benchmarks.tools.compare_preprocessing STORE MODEL.onnx
        --cells baseline:0,contrast-inc:6,saturation-inc:10 [--images 1000]
        [--old-rev 68f87e1] [--json out.json]      (needs ../shared or $FIDELITY_SHARED)
 """
@@ -31,7 +31,7 @@ import numpy as np
 
 def old_detectors(rev: str) -> ModuleType:
     """``fidelity/coco/detectors.py`` at git revision ``rev``, imported as a module."""
-    repo = Path(__file__).resolve().parent.parent
+    repo = Path(__file__).resolve().parents[2]
     src = subprocess.run(["git", "show", f"{rev}:fidelity/coco/detectors.py"], cwd=repo,
                          check=True, capture_output=True, text=True).stdout
     path = Path(tempfile.mkdtemp()) / "old_detectors.py"
