@@ -209,6 +209,48 @@ class MeasuredLoss:
     ``seconds``: wall time of the measurement; ``inferred``: images run through the detector
     in it (the rest came from the store); ``baseline_cached``: whether the baseline was
     already stored for every image.
+
+    Attributes
+    ----------
+    model
+        The detector's name (``yolox_nano``, ...).
+    model_file
+        The ONNX model file's name.
+    model_sha256
+        The model file's sha256 (hex).
+    mapping
+        The mapping's key in the store.
+    images
+        COCO images measured, >= 1 (the first N by id).
+    baseline_map
+        mAP@[.50:.95] of the ΔE = 0 baseline (JPEG round trip only), a fraction in [0, 1].
+    map
+        mAP@[.50:.95] through the mapping and the same round trip, a fraction in [0, 1].
+    dmap_points
+        ΔmAP = 100 (baseline_map - map), percentage points (positive: a loss).
+    dmap_points_se
+        Its standard error, percentage points; None with too few draws and folds.
+    dmap_relative
+        The loss in percent of the baseline mAP; None when the baseline mAP is 0.
+    dmap_relative_se
+        Its standard error, percent; None when not estimable.
+    dap_person_points, dap_bicycle_points
+        ΔAP of the person and bicycle classes, percentage points; None when the class's AP is
+        undefined on the images.
+    dap_person_points_se, dap_bicycle_points_se
+        Their standard errors, percentage points; None when not estimable.
+    seconds
+        Wall-clock seconds of the measurement, >= 0.
+    inferred
+        Images run through the detector in it (baseline and mapping; the rest came from the
+        store), >= 0.
+    baseline_cached
+        Whether the baseline was already stored for every image.
+    scorer
+        The COCO scorer used: ``faster-coco-eval`` or ``pycocotools``.
+    settings
+        onnxruntime threads and providers, preprocessing, folds, the standard error's method,
+        the JPEG round trip, the dataset key, image folder and annotation file.
     """
 
     model: str
@@ -347,16 +389,42 @@ def measure_mapping(mapping: Mapping8, key: str, inputs: CocoInputs, *,
         The mapping's identity in the store (equal keys must mean equal mappings).
     inputs
         Images, annotations and detectors (:func:`resolve_coco_inputs`).
+    description
+        JSON-ready description of the mapping, stored with its key; None:
+        ``{"mapping": key}``.
     limit
         At most the first N images by id for every detector (a model's own ``@N`` also
         applies).
     store
         The store (folder or object); None: :func:`default_store`.
+    threads
+        onnxruntime intra-op threads per detector (>= 1; None: onnxruntime's default).
+    provider
+        onnxruntime execution provider: ``auto`` (CUDA if present, else CPU), ``cpu`` or
+        ``cuda``.
+    scorer
+        COCO scorer: ``auto`` (``faster-coco-eval`` when installed, else ``pycocotools``),
+        ``faster-coco-eval`` or ``pycocotools``.
+    batch_commit
+        Images' detections written to the store per transaction, >= 1.
+    progress
+        Show progress bars on stderr.
+    log
+        Called with one line per detector measured (its :meth:`MeasuredLoss.summary`); None:
+        no log.
 
     Returns
     -------
     list of MeasuredLoss
         One per detector, in the order of ``inputs.models``.
+
+    Raises
+    ------
+    InvalidValueError
+        ``key`` is the reserved ``baseline`` key, or the scorer asked for is not installed.
+        Exit code 2.
+    InputFileError
+        Missing or unreadable images, annotation file or model file. Exit code 2.
     """
     from fidelity.coco.bootstrap import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, draw_scores
     from fidelity.coco.detectors import Detector

@@ -327,7 +327,53 @@ class Provenance:
 @dataclass(frozen=True)
 class ChartReport:
     """One chart measured (an image audit or a camera render), the detection loss predicted
-    from its chart ΔE and the verdict of a gate (see the module docstring)."""
+    from its chart ΔE and the verdict of a gate (see the module docstring).
+
+    Attributes
+    ----------
+    command
+        The command that made it: ``audit``, ``check``, ``compare`` or ``gate``
+        (:data:`COMMANDS`).
+    created
+        When it was made, UTC, ``YYYY-MM-DDThh:mm:ssZ`` (:func:`utc_now`).
+    measurement
+        The chart's ΔE00 per patch (CIEDE2000, Lab D65); ``mean_delta_e`` is the chart ΔE.
+    source
+        The image (:class:`ImageSource`) or the camera render (:class:`RenderSource`).
+    provenance
+        Tool and library versions, the input's sha256, the tables used and the conventions.
+    prediction
+        The worst-case detection loss (ΔmAP) predicted from the chart ΔE; None when not
+        predicted.
+    verdict
+        Pass/fail of the criterion; None without a criterion.
+    exposure_ev
+        The exposure correction applied to an image, in EV; None for a render.
+    bad_pixels
+        NaN, Inf and negative pixel counts of an image; None for a render.
+    valid_pixels
+        Pixels averaged per patch, in chart order; None for a render.
+    schema_version
+        Version of the JSON report layout (:data:`SCHEMA_VERSION`).
+    directional
+        The direction-aware prediction (:mod:`fidelity.prediction.directional`); None when
+        not made.
+    bound
+        Which prediction decided a ``max-dmap`` verdict: ``classic`` or ``directional``.
+    blind_spots
+        The blind-spot checks (:mod:`fidelity.measure.blindspots`), in report order.
+    measured
+        Losses measured on COCO (``--measure``; :class:`fidelity.coco.measure.MeasuredLoss`),
+        one per detector; empty when not measured.
+    uncertainty
+        The standard uncertainty budget of the chart ΔE (k = 1); None when not evaluated.
+    interval
+        The predicted ΔmAP with its standard uncertainty
+        (:class:`fidelity.prediction.interval.PredictionInterval`); None when not evaluated.
+    validity
+        Whether the answer lies inside its evidence's domain
+        (:class:`fidelity.prediction.interval.ValidityDomain`); None when not judged.
+    """
 
     command: str
     created: str
@@ -488,7 +534,49 @@ class ComparisonReport:
     ``measurement`` (the normalised simulated chart against the real chart as reference), the
     classic ``prediction`` and the ``directional`` one at the sim-to-real ΔE, the
     ``verdict``, which ``bound`` decided it, the losses ``measured`` on COCO, the mapping's
-    description (``emulation``), when and with what it was made."""
+    description (``emulation``), when and with what it was made.
+
+    Attributes
+    ----------
+    created
+        When it was made, UTC, ``YYYY-MM-DDThh:mm:ssZ`` (:func:`utc_now`).
+    sim, real
+        The audits of the simulated and the real image (each a :class:`ChartReport` against
+        the chart's reference).
+    normalisation
+        What was matched before comparing: the mode (``none``, ``exposure`` or
+        ``exposure+wb``), the simulated chart's exposure change in EV and per-channel gains.
+    measurement
+        The normalised simulated chart against the real chart as reference: ΔE00 per patch;
+        ``mean_delta_e`` is the sim-to-real chart ΔE.
+    prediction
+        The classic worst-case ΔmAP predicted at the sim-to-real ΔE.
+    directional
+        The direction-aware prediction at the sim-to-real ΔE; None when not made.
+    verdict
+        Pass/fail of the criterion; None without a criterion.
+    provenance
+        Tool and library versions, the inputs' sha256, the tables used and the conventions.
+    bound
+        Which prediction decided a ``max-dmap`` verdict: ``classic`` or ``directional``.
+    measured
+        Losses of the sim-to-real mapping measured on COCO (``--measure``), one per detector;
+        empty when not measured.
+    emulation
+        Description of the sim-to-real colour mapping measured on COCO (JSON-ready); None
+        when not measured.
+    command
+        The command that made it (``compare``).
+    schema_version
+        Version of the comparison's JSON layout (:data:`COMPARE_SCHEMA_VERSION`).
+    uncertainty
+        The standard uncertainty budget of the sim-to-real ΔE
+        (:func:`fidelity.pipeline.compare.sim_to_real_uncertainty`); None when not evaluated.
+    interval
+        The predicted ΔmAP with its standard uncertainty; None when not evaluated.
+    validity
+        Whether the answer lies inside its evidence's domain; None when not judged.
+    """
 
     created: str
     sim: ChartReport
@@ -579,7 +667,23 @@ class GateResult:
     """One subject of a gate (:func:`fidelity.pipeline.check.gate`) or of an audit of several images
     (:func:`fidelity.pipeline.check.audit_images`, no ``criterion``): its ``subject`` (image path,
     ``IMAGE frame N`` or camera), the ``criterion``, the ``report`` (None on error), the
-    ``error`` message (exit code 2) and the ``seconds`` it took."""
+    ``error`` message (exit code 2) and the ``seconds`` it took.
+
+    Attributes
+    ----------
+    subject
+        What was gated: the image path, ``IMAGE frame N`` for a frame of a recording, or the
+        camera.
+    criterion
+        The gate's criterion; None for an audit of several images.
+    report
+        The subject's report; None when it could not be measured.
+    error
+        The input error's message (a :class:`~fidelity.core.errors.FidelityError`: exit code
+        2); None when measured.
+    seconds
+        Wall-clock seconds the subject took, >= 0.
+    """
 
     subject: str
     criterion: Criterion | None = None

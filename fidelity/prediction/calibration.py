@@ -268,6 +268,46 @@ def calibrate_transform(
     ``target`` > 0. Returns an unreachable entry (``param=None``, ``delta_e`` = the largest ΔE
     the transform reaches) when the target is out of reach, or raises
     :class:`~fidelity.core.errors.UnreachableTargetError` if ``strict``.
+
+    Parameters
+    ----------
+    transform
+        A transform of :data:`fidelity.prediction.transforms.TRANSFORMS` (``gamma-inc``,
+        ``hue``, ...).
+    target
+        The chart ΔE to reach: mean ΔE00 over the patches against the reference Lab, > 0 and
+        finite (absolute: the untransformed chart's own ΔE, about 0.29, is the baseline).
+    chart
+        The chart whose clipped sRGB image is transformed: a :class:`Chart`, a chart name or
+        file (:func:`fidelity.colour.charts.load_chart`); None: :data:`DEFAULT_CHART`
+        (``safecolor``).
+    strict
+        Raise for a target out of reach instead of returning an unreachable entry.
+
+    Returns
+    -------
+    CalibrationEntry
+        ``param``: the transform's parameter nearest the identity along its scan whose chart
+        ΔE is within :data:`TOLERANCE` (1e-4 ΔE00) of ``target``, and ``delta_e`` the ΔE
+        reached; for an unreachable target ``param`` is None, ``reachable`` False and
+        ``delta_e`` the largest ΔE the transform reaches in its range.
+
+    Raises
+    ------
+    InvalidValueError
+        ``target`` not a positive finite number. Exit code 2.
+    UnknownNameError
+        An unknown transform or chart name. Exit code 2.
+    InputFileError
+        A chart file that is missing or does not fit the chart schema. Exit code 2.
+    UnreachableTargetError
+        ``strict`` and the target is out of the transform's reach. Exit code 2.
+
+    References
+    ----------
+    Damschen, Avula, Mohamad, SAFE-COLOR, IEEE IV 2025 ("Calibration" in
+    ``shared/reference/safecolor.md``); Brent's method, R. P. Brent, *Algorithms for
+    Minimization without Derivatives*, 1973.
     """
     t = float(target)
     if not np.isfinite(t) or t <= 0:

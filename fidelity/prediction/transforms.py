@@ -255,6 +255,40 @@ def apply_transform(rgb: ArrayLike, name: str, param: float) -> FloatArray:
 
     Checks the input (shape, NaN/Inf, [0, 1] range) and the parameter (finite, inside the
     transform's range) and raises :class:`~fidelity.core.errors.InvalidValueError` otherwise.
+
+    Parameters
+    ----------
+    rgb
+        sRGB-encoded values in [0, 1], shape (..., 3), finite (an image, or the chart's
+        patches).
+    name
+        A transform of :data:`TRANSFORMS`: ``brightness-dec``, ``brightness-inc``,
+        ``contrast-dec``, ``contrast-inc``, ``gamma-dec``, ``gamma-inc``, ``hue``,
+        ``pull_mean``, ``saturation-dec``, ``saturation-inc``.
+    param
+        The transform's parameter, a finite number inside its ``param_range`` (either end
+        included): β in [-1, 0] or [0, 1]; c in [0, 1] or [1, 50]; γ in [0.01, 1] or
+        [1, 10]; hue degrees in [-180, 180]; α in [0, 1]; s in [0, 1] or [1, 50]. The
+        transform's ``identity`` (0 or 1) leaves the input unchanged (up to rounding).
+
+    Returns
+    -------
+    numpy.ndarray
+        The transformed sRGB-encoded values in [0, 1], the shape of ``rgb``; float32 for
+        float32 input, else float64. The input is not modified.
+
+    Raises
+    ------
+    UnknownNameError
+        ``name`` not in :data:`TRANSFORMS`. Exit code 2.
+    InvalidValueError
+        ``rgb`` not of shape (..., 3), with NaN/Inf or values outside [0, 1]; ``param``
+        not finite or outside the transform's range. Exit code 2.
+
+    References
+    ----------
+    Damschen, Avula, Mohamad, SAFE-COLOR, IEEE IV 2025, Table I (``shared/reference/
+    safecolor.md``, "The single-parameter transforms").
     """
     spec = get_transform(name)
     a = validate_rgb(rgb)
