@@ -286,8 +286,14 @@ def locate_chart(
         white patches (or the ``"X1,Y1,...,X4,Y4"`` string).
     image_shape
         ``(H, W, ...)`` of the image.
+    rows, cols
+        The chart's layout (4 x 6 for a Macbeth ColorChecker).
     window
         Side of the central sampling square in patch pitches, in (0, 1].
+    min_pixels
+        Fewest pixels a sampling window may hold (default :data:`MIN_WINDOW_PIXELS`).
+    patch_names
+        The rows*cols patch names, row-major; None: ``patch 1``, ``patch 2``, ...
 
     Raises
     ------

@@ -292,6 +292,9 @@ def fit_model(sim: ArrayLike, real: ArrayLike, model: str = "matrix", *,
     ----------
     sim, real
         ``(n, 3)`` linear sRGB of the patches used (fit space, module docstring).
+    model
+        The model family: ``gains``, ``matrix`` (default), ``matrix+curve`` or
+        ``root-polynomial`` (:data:`MODELS`).
     weights
         ``(n,)`` non-negative weights of the patches (default 1).
     objective
