@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from benchmarks.tools import after_resweep, compare_tables
-from fidelity.coco.tables import TablesResult
+from fidelity.coco.tables.colour import TablesResult
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from fidelity.cli import main
-from fidelity.prediction.table import DEFAULT_TABLE, prediction_dir
+from fidelity.prediction.tablefile import DEFAULT_TABLE, prediction_dir
 
 
 def run(*args):

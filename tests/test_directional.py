@@ -70,10 +70,10 @@ def test_a_transformed_chart_is_explained_by_its_own_family(name, param):
 def test_shipped_table_is_rebuilt_from_tables_json():
     """coco1000-directional.json is what directional_table makes of reports/coco/tables.json,
     and its classic curves are the measured table's."""
-    from fidelity.coco.directional import directional_table
-    from fidelity.coco.tables import TablesResult
+    from fidelity.coco.tables.colour import TablesResult
+    from fidelity.coco.tables.directional import directional_table
     from fidelity.core.fileio import json_ready
-    from fidelity.prediction.table import prediction_dir
+    from fidelity.prediction.tablefile import prediction_dir
 
     result = TablesResult.from_json(json.loads((ROOT / "reports/coco/tables.json").read_text()))
     built = json_ready(directional_table(result.tables))
@@ -101,7 +101,7 @@ def test_family_membership_matches_what_each_transform_moves():
 
 
 def _sweep_worst(transform: str, target: float) -> float:
-    from fidelity.coco.tables import TablesResult
+    from fidelity.coco.tables.colour import TablesResult
 
     result = TablesResult.from_json(json.loads((ROOT / "reports/coco/tables.json").read_text()))
     return max(c.dmap_points for cs in result.tables.cells.values() for c in cs
@@ -153,7 +153,7 @@ def test_directional_never_exceeds_classic_and_weights_add_up():
 
 
 def _directional_validation(model: str):  # type: ignore[no-untyped-def]
-    from fidelity.coco.validate import ValidationResults, directional_validation
+    from fidelity.coco.validate.colour import ValidationResults, directional_validation
 
     doc = json.loads((ROOT / "reports/validation/validation.json").read_text())
     doc.pop("directional", None)  # recomputed here, not read back

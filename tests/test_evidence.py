@@ -19,7 +19,8 @@ from jsondiff import differences
 import fidelity
 from fidelity.cli import main
 from fidelity.prediction.interval import prediction_interval, validity_domain
-from fidelity.prediction.table import load_prediction_table, predict
+from fidelity.prediction.table import predict
+from fidelity.prediction.tablefile import load_prediction_table
 from fidelity.prediction.verdict import (
     EXIT_ERROR,
     EXIT_FAIL,
@@ -305,7 +306,7 @@ def test_shipped_measured_tables_carry_this_versions_preprocessing(table, model)
 def test_shipped_measured_table_states_this_versions_standard_errors(model):
     """The SE an interval and a validation use is this version's (the larger of bootstrap and
     jackknife) for every detector measured by it (the table's provenance names the method)."""
-    from fidelity.coco.tables import STANDARD_ERROR_WORDS
+    from fidelity.coco.tables.provenance import STANDARD_ERROR_WORDS
 
     folder = Path(fidelity.__file__).parent / "data" / "prediction"
     prov = json.loads((folder / "coco1000-measured.json").read_text())["provenance"]
@@ -335,7 +336,7 @@ def test_committed_scores_file_rebuilds_the_shipped_rows(path, shared, tmp_path)
     from fidelity.coco.scores import import_scores, read_scores
     from fidelity.coco.scoring import load_annotations
     from fidelity.coco.sweep import SweepStore
-    from fidelity.coco.tables import tables_result
+    from fidelity.coco.tables.colour import tables_result
 
     model = _scores_detector(path)
     store = SweepStore(tmp_path / "store")
@@ -370,12 +371,9 @@ def test_committed_validation_scores_rebuild_the_shipped_report(tmp_path):
     committed validation scores file and the shipped prediction tables: every row (measured
     and predicted), the summary, the cameras and baselines (less the times they took)."""
     from fidelity.coco.scores import import_scores, read_scores
-    from fidelity.coco.validate import (
-        ValidationStore,
-        collect_results,
-        load_suite,
-        validated_cameras,
-    )
+    from fidelity.coco.validate.colour import collect_results, validated_cameras
+    from fidelity.coco.validate.store import ValidationStore
+    from fidelity.coco.validate.suite import load_suite
     from fidelity.core.resources import resource_dir
 
     path = REPO / "reports" / "validation" / "validation.scores.json.gz"

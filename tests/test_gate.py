@@ -20,7 +20,8 @@ from test_audit import corners_of, draw_chart, expected_delta_e, write_exr, writ
 from fidelity.cli import main
 from fidelity.colour.charts import load_chart
 from fidelity.core.errors import InvalidValueError
-from fidelity.prediction.table import DEFAULT_TABLE, predict
+from fidelity.prediction.table import predict
+from fidelity.prediction.tablefile import DEFAULT_TABLE
 from fidelity.prediction.transforms import apply_transform
 from fidelity.prediction.verdict import Criterion, evaluate
 

@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 from fidelity.cli import main
 from fidelity.coco.store import Owner
 from fidelity.coco.sweep import ModelSpec, SweepStore
-from fidelity.coco.validate import ValidationStore
+from fidelity.coco.validate.store import ValidationStore
 from fidelity.core.errors import InputFileError
 
 # among the longest files of the suite: started first, so that a parallel run does not end on it

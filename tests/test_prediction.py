@@ -12,7 +12,10 @@ import pytest
 
 from fidelity.core.errors import FidelityError, InputFileError, UnknownNameError
 from fidelity.core.resources import shared_dir
+from fidelity.prediction import colour as pc
+from fidelity.prediction import interpolate as ip
 from fidelity.prediction import table as pr
+from fidelity.prediction import tablefile as tf
 
 #: The published-bounds table, named explicitly (the statements below are the paper's).
 SC = "safecolor-2025"
@@ -22,8 +25,8 @@ def test_default_table_is_the_measured_sweep_covering_its_plan():
     """The default is the project's measured table, complete: every model at every sweep ΔE."""
     from fidelity.coco.sweep import SWEEP_TARGETS
 
-    table = pr.load_prediction_table()
-    assert pr.DEFAULT_TABLE == "coco1000-measured" == table.name and table.kind == "measured"
+    table = tf.load_prediction_table()
+    assert tf.DEFAULT_TABLE == "coco1000-measured" == table.name and table.kind == "measured"
     prov = table.provenance
     assert prov["omitted_partial_points"] == []
     models = prov["models"]
@@ -35,7 +38,7 @@ def test_default_table_is_the_measured_sweep_covering_its_plan():
         assert list(curve.delta_e) == [float(t) for t in SWEEP_TARGETS], curve.model
         assert not np.isnan(curve.values["dmap_points"]).any(), curve.model
     # the published bounds stay available by name
-    assert pr.load_prediction_table("safecolor-2025").kind == "published-bounds"
+    assert tf.load_prediction_table("safecolor-2025").kind == "published-bounds"
 
 
 @pytest.mark.parametrize("delta_e,column,bound", [
@@ -67,7 +70,7 @@ def test_every_point_cites_a_statement_of_the_paper():
         pytest.skip("../shared/reference/safecolor.md not available")
     text = (shared / "reference" / "safecolor.md").read_text(encoding="utf-8")
     norm = " ".join(text.split())
-    table = pr.load_prediction_table("safecolor-2025")
+    table = tf.load_prediction_table("safecolor-2025")
     for curve in table.curves:
         for src in curve.sources:
             quotes = re.findall(r"'([^']+)'", src)
@@ -79,22 +82,22 @@ def test_every_point_cites_a_statement_of_the_paper():
 
 def test_predictions_are_monotone_and_conservative_beyond_range():
     grid = np.linspace(0, 40, 401)
-    for col in pr.COLUMNS:
-        v = pr.predict_curve(grid, col, table=SC)
+    for col in tf.COLUMNS:
+        v = ip.predict_curve(grid, col, table=SC)
         assert np.all(np.diff(v) >= -1e-12), col
     far = pr.predict(30.0, table=SC, transforms=False)
     assert far.out_of_range
     assert far.columns["dmap_points"].status == "above-range"
     assert far.dmap_points == 100.0 and far.dmap_relative == 100.0
-    assert {c.status for c in far.columns.values()} == {pr.ColumnStatus.ABOVE_RANGE}
+    assert {c.status for c in far.columns.values()} == {ip.ColumnStatus.ABOVE_RANGE}
     assert far.columns["dmap_points"].delta_e_range == (0.0, 24.0)
 
 
-@pytest.mark.parametrize("name", pr.available_tables())
+@pytest.mark.parametrize("name", tf.available_tables())
 def test_every_shipped_table_predicts_monotone_losses(name):
     grid = np.linspace(0, 40, 161)
-    for col in pr.COLUMNS:
-        v = pr.predict_curve(grid, col, table=name)
+    for col in tf.COLUMNS:
+        v = ip.predict_curve(grid, col, table=name)
         assert np.all(np.isfinite(v)) and np.all(np.diff(v) >= -1e-12), (name, col)
 
 
@@ -106,7 +109,7 @@ def test_points_vs_relative_with_a_baseline():
     assert p.columns["dmap_relative"].raised_from == pytest.approx(3.0)  # the table's value
     plain = pr.predict(6.0, table=SC, transforms=False)
     assert plain.dmap_relative == pytest.approx(3.0)
-    assert plain.upper_bound and plain.kind is pr.TableKind.PUBLISHED_BOUNDS
+    assert plain.upper_bound and plain.kind is tf.TableKind.PUBLISHED_BOUNDS
     assert plain.columns["dmap_relative"].raised_from is None and plain.baseline_map is None
     assert plain.dmap_points_se is None and plain.dmap_points_interval is None
     with pytest.raises(FidelityError, match="baseline mAP"):
@@ -131,21 +134,21 @@ def _measured_table() -> dict:
 
 def test_measured_table_reports_the_sampling_error_of_its_points():
     doc = _measured_table()
-    plain = pr.predict(3.0, size="n", table=pr.parse_prediction_table(doc), transforms=False)
-    assert plain.kind is pr.TableKind.MEASURED and not plain.upper_bound
+    plain = pr.predict(3.0, size="n", table=tf.parse_prediction_table(doc), transforms=False)
+    assert plain.kind is tf.TableKind.MEASURED and not plain.upper_bound
     assert plain.dmap_points_se is None  # no SEs in the file: none reported
     for curve, ses in zip(doc["curves"][:2], ([0.1, 0.3, 0.2, 0.5], [0.15, 0.25, 0.4, 0.6]),
                           strict=True):
         for point, se in zip(curve["points"], ses, strict=True):
             point["dmap_points_se"] = se
-    table = pr.parse_prediction_table(doc)
+    table = tf.parse_prediction_table(doc)
     # model b answers (worst) at ΔE 3 exactly: its point's SE
     at3 = pr.predict(3.0, size="n", table=table, transforms=False)
-    assert at3.dmap_points_se == pr.SamplingError(0.25, 0.25)
+    assert at3.dmap_points_se == ip.SamplingError(0.25, 0.25)
     assert at3.dmap_points_interval == pytest.approx((0.9 - 0.25, 0.9 + 0.25))
     # between ΔE 3 and 6: the SEs of model b's two bracketing points
     at4 = pr.predict(4.0, size="n", table=table, transforms=False)
-    assert at4.dmap_points_se == pr.SamplingError(0.25, 0.40)
+    assert at4.dmap_points_se == ip.SamplingError(0.25, 0.40)
     lo, hi = at4.dmap_points_interval
     assert hi - lo == pytest.approx(0.8) and (lo + hi) / 2 == pytest.approx(at4.dmap_points)
     # the JSON form carries them, and reads them back
@@ -155,13 +158,13 @@ def test_measured_table_reports_the_sampling_error_of_its_points():
 
 
 def test_measured_table_worst_model_pchip_running_max():
-    table = pr.parse_prediction_table(_measured_table())
+    table = tf.parse_prediction_table(_measured_table())
     assert table.interpolation == "pchip"
     p = pr.predict(3.0, size="n", table=table, transforms=False)
     assert p.dmap_points == pytest.approx(0.9)  # worst of the two n models
     # model a dips at ΔE 6 (0.4 < 0.5): its running maximum keeps it at 0.5; model b's 1.5 wins
     assert pr.predict(6.0, size="n", table=table, transforms=False).dmap_points == pytest.approx(1.5)
-    v = pr.predict_curve(np.linspace(1, 12, 111), size="n", table=table)
+    v = ip.predict_curve(np.linspace(1, 12, 111), size="n", table=table)
     assert np.all(np.diff(v) >= -1e-12)
     # PCHIP passes through the points and stays inside each interval's values
     assert pr.predict(12.0, size="n", table=table, transforms=False).dmap_points == pytest.approx(4.0)
@@ -188,7 +191,7 @@ def test_a_sizes_aggregate_curve_answers_before_its_per_model_curves():
          "dap_bicycle_points": None, "worst_transform": None, "source": "test"}
         for de, v in [(0, 0.0), (1, 0.3)]]}
     doc["curves"] = [*doc["curves"], worst, narrow]
-    table = pr.parse_prediction_table(doc)
+    table = tf.parse_prediction_table(doc)
     p = pr.predict(4.5, size="n", table=table, transforms=False)
     assert p.columns["dmap_points"].status == "interpolated"
     assert p.dmap_points == pytest.approx(1.2)
@@ -209,24 +212,24 @@ def test_total_loss_beyond_the_range_is_the_baseline_in_points():
         {"size": "n", "model": "b", "baseline_map": 0.38, "baseline_ap": {"person": 0.45,
                                                                           "bicycle": None},
          "points": pts([(0, 0.0), (12, 8.0)])}]}
-    table = pr.parse_prediction_table(doc)
+    table = tf.parse_prediction_table(doc)
     far = pr.predict(20.0, size="n", table=table, transforms=False)
     assert far.dmap_points == pytest.approx(38.0)  # largest baseline mAP of the size's models
     assert far.dap_person_points == pytest.approx(50.0)  # largest person baseline AP
     assert far.dap_bicycle_points == 100.0  # no bicycle baseline known: 100 points
     assert far.dmap_relative == 100.0
     assert {c.delta_e_range for c in far.columns.values()} == {(0.0, 12.0)}
-    assert {c.status for c in far.columns.values()} == {pr.ColumnStatus.ABOVE_RANGE}
+    assert {c.status for c in far.columns.values()} == {ip.ColumnStatus.ABOVE_RANGE}
     # the caller's detector baseline bounds an aggregate curve's mAP loss
     assert pr.predict(20.0, size="n", table=table, transforms=False,
                       baseline_map=25.0).dmap_points == pytest.approx(25.0)
-    assert pr.predict_curve([20.0], "dap_person_points", size="n", table=table)[0] == 50.0
+    assert ip.predict_curve([20.0], "dap_person_points", size="n", table=table)[0] == 50.0
     with pytest.raises(InputFileError, match=r"curves\[0\]\.baseline_ap: expected an object"):
-        pr.parse_prediction_table({**doc, "curves": [{**doc["curves"][1], "baseline_ap": [1]}]})
+        tf.parse_prediction_table({**doc, "curves": [{**doc["curves"][1], "baseline_ap": [1]}]})
 
 
 def test_measured_table_ranges_and_sizes():
-    table = pr.parse_prediction_table(_measured_table())
+    table = tf.parse_prediction_table(_measured_table())
     below = pr.predict(1.0, size="x", table=table, transforms=False)
     assert below.columns["dmap_points"].status == "below-range"
     assert below.dmap_points == pytest.approx(0.05)  # the first point: loss grows with ΔE
@@ -244,28 +247,28 @@ def test_measured_table_ranges_and_sizes():
 
 
 def test_registry_picks_up_files(tmp_path, monkeypatch):
-    shutil.copy(pr.prediction_dir() / "safecolor-2025.json", tmp_path)
+    shutil.copy(tf.prediction_dir() / "safecolor-2025.json", tmp_path)
     (tmp_path / "measured-test.json").write_text(json.dumps(_measured_table()))
-    monkeypatch.setattr(pr, "prediction_dir", lambda: tmp_path)
-    assert pr.available_tables() == ["measured-test", "safecolor-2025"]
-    table = pr.load_prediction_table("measured-test")
+    monkeypatch.setattr(tf, "prediction_dir", lambda: tmp_path)
+    assert tf.available_tables() == ["measured-test", "safecolor-2025"]
+    table = tf.load_prediction_table("measured-test")
     assert table.kind == "measured"
     # read once a process while the file is unchanged, and again when it changes
-    assert pr.load_prediction_table(tmp_path / "measured-test.json") is table
+    assert tf.load_prediction_table(tmp_path / "measured-test.json") is table
     changed = _measured_table()
     changed["title"] = "changed on disk"
     (tmp_path / "measured-test.json").write_text(json.dumps(changed, indent=1))
-    assert pr.load_prediction_table("measured-test").title == "changed on disk"
+    assert tf.load_prediction_table("measured-test").title == "changed on disk"
     assert pr.predict(3.0, size="n", table="measured-test", transforms=False).dmap_points == pytest.approx(0.9)
     with pytest.raises(UnknownNameError, match=r"^nope: unknown prediction table; known: measured-test, safecolor-2025$"):
-        pr.load_prediction_table("nope")
+        tf.load_prediction_table("nope")
     (tmp_path / "broken.json").write_text("{not json")
     with pytest.raises(InputFileError, match="broken.json"):
-        pr.load_prediction_table("broken")
+        tf.load_prediction_table("broken")
     bad = _measured_table()
     bad["kind"] = "guess"
     with pytest.raises(InputFileError, match="kind"):
-        pr.parse_prediction_table(bad)
+        tf.parse_prediction_table(bad)
 
 
 def test_transform_parameters_match_the_published_calibration():
@@ -273,7 +276,7 @@ def test_transform_parameters_match_the_published_calibration():
     # pull_mean at 6 = 0.7263 (4 decimals)
     for de, name, want in [(1, "contrast-dec", 0.9535), (12, "gamma-inc", 1.5509),
                            (3, "hue", 5.3371), (6, "pull_mean", 0.7263)]:
-        rows = {r.transform: r for r in pr.transform_parameters(de)}
+        rows = {r.transform: r for r in pc.transform_parameters(de)}
         assert rows[name].param == pytest.approx(want, abs=2e-3)
         assert rows[name].method == "calibrated"
 
@@ -284,7 +287,7 @@ def test_transform_parameters_between_targets_reach_that_delta_e():
     from fidelity.prediction.transforms import apply_transform
 
     chart = load_chart("safecolor")
-    rows = pr.transform_parameters(2.5)
+    rows = pc.transform_parameters(2.5)
     assert len(rows) == 10
     for r in rows:
         assert r.reachable and r.method == "solved" and r.param is not None
@@ -292,10 +295,10 @@ def test_transform_parameters_between_targets_reach_that_delta_e():
         lo, hi = sorted(q for _, q in r.bracket)
         assert lo <= r.param <= hi
         assert chart_delta_e(apply_transform(chart.srgb, r.transform, r.param), chart.lab) == pytest.approx(2.5, rel=3e-3)
-    interp = {r.transform: r for r in pr.transform_parameters(2.5, solve=False)}
+    interp = {r.transform: r for r in pc.transform_parameters(2.5, solve=False)}
     assert interp["hue"].method == "interpolated"
-    assert all(not r.reachable for r in pr.transform_parameters(0.1))
-    far = {r.transform: r for r in pr.transform_parameters(30.0)}
+    assert all(not r.reachable for r in pc.transform_parameters(0.1))
+    far = {r.transform: r for r in pc.transform_parameters(30.0)}
     assert far["contrast-dec"].param is None and not far["contrast-dec"].reachable
     # the reach of the transform is only in the method's words (TransformParameter has no field)
     assert "at most" in str(far["contrast-dec"].method)
@@ -311,7 +314,7 @@ def test_prediction_dict_keys():
 
 
 def _one_curve(points, interpolation="linear"):
-    return pr.parse_prediction_table({
+    return tf.parse_prediction_table({
         "name": "limit-test", "kind": "measured", "interpolation": interpolation, "curves": [
             {"size": "n", "model": "m", "points": [
                 {"delta_e": de, "dmap_points": v, "dmap_relative": 10 * v,
@@ -346,10 +349,10 @@ def _measured_table_bicycle():
             {"delta_e": de, "dmap_points": v, "dmap_relative": v, "dap_person_points": v,
              "dap_bicycle_points": v, "worst_transform": None, "source": "t"}
             for de, v in [(1, 2.0), (6, 3.0)]]}]}
-    return pr.parse_prediction_table(doc)
+    return tf.parse_prediction_table(doc)
 
 
-@pytest.mark.parametrize("name", pr.available_tables())
+@pytest.mark.parametrize("name", tf.available_tables())
 @pytest.mark.parametrize("column", ["dmap_points", "dmap_relative", "dap_person_points"])
 def test_delta_e_limit_agrees_with_a_root_finder_on_shipped_tables(name, column):
     """Second method: scipy's brentq on predict_curve - budget, where the loss crosses it."""
@@ -360,7 +363,7 @@ def test_delta_e_limit_agrees_with_a_root_finder_on_shipped_tables(name, column)
         if lim.status != "inside":
             continue
         def g(x: float, budget: float = budget) -> float:
-            return pr.predict_curve([x], column, table=name)[0] - budget
+            return ip.predict_curve([x], column, table=name)[0] - budget
 
         root = brentq(g, lim.delta_e_range[0], lim.delta_e_range[1], xtol=1e-9)
         # the crossing is unique unless the curve is flat at the budget (then brentq may land

@@ -9,7 +9,7 @@ import pytest
 
 from fidelity.coco.store import RegisteredModel, pack_detections, unpack_detections
 from fidelity.coco.sweep import SweepStore
-from fidelity.coco.validate import ValidationStore
+from fidelity.coco.validate.store import ValidationStore
 from fidelity.core.errors import InputFileError, InvalidValueError
 
 

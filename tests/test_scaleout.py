@@ -330,7 +330,8 @@ def test_ray_client_sweep_equals_local(cluster, coco, local_sweep, tmp_path) -> 
 def test_ray_cluster_evaluate_and_validate_equal_local(cluster, coco, tmp_path) -> None:
     """evaluate and validate with --executor ray on the two-node cluster give the local
     scores (and, for validate, the same detections)."""
-    from fidelity.coco.validate import ValidationStore, load_suite
+    from fidelity.coco.validate.store import ValidationStore
+    from fidelity.coco.validate.suite import load_suite
     from fidelity.core.resources import resource_dir
 
     head, _, _ = cluster

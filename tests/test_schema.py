@@ -169,7 +169,7 @@ def test_coco_annotations_schema(tmp_path: Path) -> None:
 def test_store_provenance_schema(tmp_path: Path) -> None:
     import sqlite3
 
-    from fidelity.coco.tables import check_store_meta
+    from fidelity.coco.tables.provenance import check_store_meta
 
     db = sqlite3.connect(tmp_path / "s.sqlite")
     db.execute("CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL)")

@@ -448,7 +448,7 @@ def test_raising_and_lowering_a_model_limit(coco, tmp_path) -> None:
     """model@3 then model@6: only the 3 new images are run; @2 re-scores without inference."""
     from fidelity.coco.scoring import evaluate_detections, load_annotations
     from fidelity.coco.sweep import run_sweep
-    from fidelity.coco.tables import cell_deltas
+    from fidelity.coco.tables.grid import cell_deltas
 
     images, ann, model = coco
     quiet = {"threads": 1, "log": lambda s: None}
@@ -491,7 +491,9 @@ def test_tables_of_a_store_caught_mid_extension(coco, tmp_path) -> None:
     """Baseline extended to 6 images, the cell still on 3: both are reported on the first 3."""
     from fidelity.coco.scoring import evaluate_detections, load_annotations
     from fidelity.coco.sweep import run_sweep
-    from fidelity.coco.tables import AlignedCount, TablesResult, build_tables
+    from fidelity.coco.tables.build import build_tables
+    from fidelity.coco.tables.colour import TablesResult
+    from fidelity.coco.tables.grid import AlignedCount
     from fidelity.report.coco import tables_document
     from fidelity.report.html import render_markdown
 
@@ -551,7 +553,7 @@ def test_standard_errors_in_tables(coco, tmp_path) -> None:
     from fidelity.coco.bootstrap import BOOTSTRAP_SEED, bootstrap_weights
     from fidelity.coco.scoring import coco_from_dict, evaluate_detections, load_annotations
     from fidelity.coco.sweep import run_sweep
-    from fidelity.coco.tables import build_tables
+    from fidelity.coco.tables.build import build_tables
 
     images, ann, model = coco
     store = run_sweep([ModelSpec(model, 12)], images, ann, tmp_path, ["contrast-inc"], [0, 12],

@@ -39,7 +39,7 @@ def sweep(data, out: Path, transforms: list[str], targets: list[float]) -> Sweep
 
 def tables_json(store: SweepStore, ann: Path) -> dict:
     from fidelity.coco.scoring import load_annotations
-    from fidelity.coco.tables import build_tables
+    from fidelity.coco.tables.build import build_tables
 
     t = build_tables(store, load_annotations(ann)).to_json()
     return {k: v for k, v in t.items() if k != "meta"}
@@ -79,7 +79,7 @@ def test_export_import_resume_reports_as_one_uninterrupted_run(data, tmp_path):
     r = CliRunner().invoke(main, ["tables", str(moved), "--out", str(tmp_path / "rep"),
                                   "--prediction", str(tmp_path / "p.json"), "--no-progress"])
     assert r.exit_code == 0, r.output
-    from fidelity.prediction.table import load_prediction_table
+    from fidelity.prediction.tablefile import load_prediction_table
 
     table = load_prediction_table(tmp_path / "p.json")
     imported = json.loads((tmp_path / "p.json").read_text())["provenance"]["imported"]

@@ -9,16 +9,12 @@ from types import SimpleNamespace
 import pytest
 
 from fidelity.coco.sweep import SweepStore
-from fidelity.coco.tables import (
-    TablesResult,
-    WorstCaseRow,
-    build_tables,
-    compare_with_paper,
-    model_size,
-    prediction_table,
-    tables_result,
-)
-from fidelity.prediction.table import parse_prediction_table
+from fidelity.coco.tables.build import build_tables
+from fidelity.coco.tables.colour import TablesResult, compare_with_paper, tables_result
+from fidelity.coco.tables.grid import model_size
+from fidelity.coco.tables.prediction import prediction_table
+from fidelity.coco.tables.worst import WorstCaseRow
+from fidelity.prediction.tablefile import parse_prediction_table
 from fidelity.report.coco import tables_document, write_tables_report
 from fidelity.report.document import Document, Table
 
@@ -158,7 +154,7 @@ def test_prediction_table_follows_schema(store) -> None:
 def test_delta_e_limits_by_hand(store) -> None:
     """yolo11n's curve: ΔE 0 -> 0, ΔE 3 -> 5 points = 10 % (linear between): 1 point at ΔE
     0.6, 3 points at 1.8; 1 % at 0.3, 3 % at 0.9; 10 % and 10 points hold to the end (ΔE 3)."""
-    from fidelity.coco.tables import delta_e_limits
+    from fidelity.coco.tables.colour import delta_e_limits
 
     tables = build_tables(store)
     limits = {(r.size, r.model): r.limits for r in delta_e_limits(tables)}
@@ -323,7 +319,7 @@ def _explain_store(tmp_path):  # type: ignore[no-untyped-def]
 def test_class_breakdown_by_hand(tmp_path) -> None:
     """One bicycle box ranked below a false positive: bicycle AP 1 -> 1/2, ΔmAP = 50/2 points."""
     from fidelity.coco.scoring import evaluate_detections
-    from fidelity.coco.tables import class_breakdown, explain_cell
+    from fidelity.coco.tables.classes import class_breakdown, explain_cell
     from fidelity.core.errors import InvalidValueError
 
     s, coco, base, cell = _explain_store(tmp_path)
@@ -411,7 +407,7 @@ def test_model_conventions_are_said_in_words():
 
 
 def test_image_caps_are_parsed_and_bad_ones_named() -> None:
-    from fidelity.coco.tables import parse_image_caps
+    from fidelity.coco.tables.grid import parse_image_caps
     from fidelity.core.errors import InvalidValueError
 
     models = ["a", "b-int8"]
@@ -442,7 +438,7 @@ def test_tables_images_without_annotations_is_one_line_exit_2(store, tmp_path) -
 
 def test_threshold_verdicts_by_hand() -> None:
     """Both readings of the paper's "%", each exceedance set against 2 standard errors."""
-    from fidelity.coco.tables import _threshold_verdict
+    from fidelity.coco.tables.colour import _threshold_verdict
 
     def row(pts: float, rel: float, se_pts: float | None = None,
             se_rel: float | None = None) -> WorstCaseRow:
@@ -489,7 +485,7 @@ def test_merge_keeps_the_earlier_models_the_store_does_not_hold(store, tmp_path)
     """The store's models replace their namesakes; the others come with their own rows,
     registration and preprocessing; the size class is the worst over the merged models."""
     from fidelity.coco.detectors import stale_preprocessing
-    from fidelity.coco.tables import merge_tables
+    from fidelity.coco.tables.build import merge_tables
 
     new = build_tables(store)
     earlier = build_tables(_earlier_store(tmp_path / "earlier"))
@@ -532,7 +528,7 @@ def test_a_model_kept_through_several_merges_keeps_the_machine_that_measured_it(
     machine and versions, not those of the tables it was last kept in."""
     from dataclasses import replace
 
-    from fidelity.coco.tables import merge_tables
+    from fidelity.coco.tables.build import merge_tables
 
     def run(t, models, machine):
         return replace(t, models={m: t.models[m] for m in models},
@@ -565,7 +561,7 @@ def test_a_model_kept_through_several_merges_keeps_the_machine_that_measured_it(
 
 
 def test_merge_refuses_tables_of_other_images(store, tmp_path) -> None:
-    from fidelity.coco.tables import merge_tables
+    from fidelity.coco.tables.build import merge_tables
     from fidelity.core.errors import InvalidValueError
 
     other = _earlier_store(tmp_path / "earlier")

@@ -12,20 +12,17 @@ import pytest
 from click.testing import CliRunner
 
 from fidelity.coco.emulation import AccuracySummary
-from fidelity.coco.scoring import FoldScore
-from fidelity.coco.validate import (
-    BASELINE,
-    FOLDS,
+from fidelity.coco.scoring import FOLDS, FoldScore
+from fidelity.coco.validate.camera import (
     CameraRecord,
     EmulationRecord,
     ErrorProfile,
     ImageDeltaE,
-    ValidationResults,
-    ValidationStore,
     chart_error_profile,
-    collect_results,
-    load_suite,
 )
+from fidelity.coco.validate.colour import ValidationResults, collect_results
+from fidelity.coco.validate.store import ValidationStore
+from fidelity.coco.validate.suite import BASELINE, load_suite
 from fidelity.core.errors import InputFileError
 from fidelity.report.document import Table
 from fidelity.report.validation import validation_document, write_validation_report
@@ -214,7 +211,7 @@ def test_collect_results_losses_standard_errors_and_bound(one_camera_store, tmp_
     assert bound["se"] == pytest.approx(row.se.dmap_points)
     assert bound["excess"] / bound["se"] < 2 and bound["within_2se"] is True
     # a stored camera that is not in the suite given (renamed or removed) is left out, and said
-    from fidelity.coco.validate import CameraCase
+    from fidelity.coco.validate.suite import CameraCase
 
     other = CameraCase("other", tmp_path / "other.toml", "D65", "0" * 64)
     res = collect_results(st, tables=["safecolor-2025"], bound_table="safecolor-2025",
@@ -476,7 +473,7 @@ def test_a_run_on_a_few_images_tables_their_colours_only(monkeypatch) -> None:
     2^24-entry table is never built) and maps them as the full table does; above: the full
     table. Tables are kept one camera at a time; the images' colours are found once."""
     import fidelity.coco.executor as executor
-    import fidelity.coco.validate as validate
+    import fidelity.coco.validate.colour as validate
     from fidelity.coco.dataset import PixelMap
 
     rng = np.random.default_rng(5)

@@ -13,7 +13,8 @@ from click.testing import CliRunner
 
 import fidelity
 from fidelity.cli import main
-from fidelity.coco.validate import ValidationResults, load_suite, validated_cameras
+from fidelity.coco.validate.colour import ValidationResults, validated_cameras
+from fidelity.coco.validate.suite import load_suite
 from fidelity.prediction.interval import STAGES, ValidatedCameras, load_validated_cameras
 
 REPO = Path(__file__).resolve().parent.parent

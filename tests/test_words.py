@@ -9,7 +9,9 @@ import dataclasses
 import pytest
 from test_prediction import SC, _measured_table
 
+from fidelity.prediction import interpolate as ip
 from fidelity.prediction import table as pr
+from fidelity.prediction import tablefile as tf
 from fidelity.prediction.verdict import Criterion, VerdictReason, evaluate, judge_value
 from fidelity.report.words import (
     ceiling_words,
@@ -25,12 +27,12 @@ def test_the_sampling_error_note_gives_the_two_bracketing_ses() -> None:
                           strict=True):
         for point, se in zip(curve["points"], ses, strict=True):
             point["dmap_points_se"] = se
-    p = pr.predict(4.0, size="n", table=pr.parse_prediction_table(doc), transforms=False)
+    p = pr.predict(4.0, size="n", table=tf.parse_prediction_table(doc), transforms=False)
     notes = prediction_notes(p)
     assert sum("0.25-0.40" in n for n in notes) == 1
-    p3 = pr.predict(3.0, size="n", table=pr.parse_prediction_table(doc), transforms=False)
+    p3 = pr.predict(3.0, size="n", table=tf.parse_prediction_table(doc), transforms=False)
     assert sum(" 0.25 points" in n for n in prediction_notes(p3)) == 1
-    plain = pr.predict(3.0, size="n", table=pr.parse_prediction_table(_measured_table()),
+    plain = pr.predict(3.0, size="n", table=tf.parse_prediction_table(_measured_table()),
                        transforms=False)
     assert len(prediction_notes(plain)) == len(notes) - 1  # no SE: no SE sentence
 
@@ -53,7 +55,7 @@ def test_ceilings_in_words_carry_the_baseline() -> None:
 
 
 def test_every_size_fallback_says_which_sizes_answered() -> None:
-    table = pr.parse_prediction_table(_measured_table())
+    table = tf.parse_prediction_table(_measured_table())
     m = pr.predict(5.0, size="m", table=table, transforms=False)
     assert sum("'m'" in n and "sizes n, x" in n for n in prediction_notes(m)) == 1
     n = pr.predict(5.0, size="n", table=table, transforms=False)
@@ -86,7 +88,7 @@ def test_the_verdict_on_the_chart_delta_e_and_the_comparisons_name_for_it() -> N
 def test_a_conservative_answer_says_its_status() -> None:
     p = pr.predict(30.0, table=SC, transforms=False)
     v = evaluate(30.0, p, Criterion("max-dmap", 200.0))
-    assert v.passed and v.conservative and v.status is pr.ColumnStatus.ABOVE_RANGE
+    assert v.passed and v.conservative and v.status is ip.ColumnStatus.ABOVE_RANGE
     assert v.upper_bound and "above-range" in verdict_message(v)
 
 

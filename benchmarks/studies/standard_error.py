@@ -37,7 +37,8 @@ from fidelity.coco.loss import (
     paired_standard_error,
 )
 from fidelity.coco.scoring import FOLDS, coco_from_dict, evaluate_detections, load_annotations
-from fidelity.coco.validate import BASELINE, ValidationStore
+from fidelity.coco.validate.store import ValidationStore
+from fidelity.coco.validate.suite import BASELINE
 
 QUARTERS = 4
 #: The SEs compared: the paired fold SE, the leave-one-fold-out jackknife, the image bootstrap.

@@ -21,7 +21,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from fidelity.coco.tables import CellDelta, Tables, TablesResult
+from fidelity.coco.tables.build import Tables
+from fidelity.coco.tables.colour import TablesResult
+from fidelity.coco.tables.grid import CellDelta
 
 
 def _tables(path: Path) -> Tables:
@@ -46,7 +48,7 @@ def _se_methods(rows: list[CellDelta]) -> list[str]:
 
 
 def _se_words(methods: list[str]) -> str:
-    from fidelity.coco.tables import STANDARD_ERROR_WORDS
+    from fidelity.coco.tables.provenance import STANDARD_ERROR_WORDS
 
     return " / ".join(STANDARD_ERROR_WORDS.get(m, m) for m in methods) or "none"
 

@@ -27,7 +27,7 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-from fidelity.coco.tables import RUN_KEYS, earlier_runs, record_by_name, runs_passed_on
+from fidelity.coco.tables.provenance import RUN_KEYS, earlier_runs, record_by_name, runs_passed_on
 
 REPO = Path(__file__).resolve().parents[2]
 _COMMIT = re.compile(r"reports-coco-tables-at-([0-9a-f]{7,40})\.json$")
@@ -77,7 +77,7 @@ def main(argv: list[str] | None = None) -> None:
     from dataclasses import replace
 
     from fidelity.cli.tables import _write_directional
-    from fidelity.coco.tables import TablesResult
+    from fidelity.coco.tables.colour import TablesResult
     from fidelity.report.coco import write_tables_report
 
     source = Path(args.tables)

@@ -31,7 +31,7 @@ from fidelity.cli.options import (
     write_subject_reports,
 )
 from fidelity.core.fileio import display_path
-from fidelity.prediction.table import SIZES
+from fidelity.prediction.tablefile import SIZES
 from fidelity.prediction.verdict import EXIT_ERROR
 
 if TYPE_CHECKING:

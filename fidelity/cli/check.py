@@ -24,7 +24,7 @@ from fidelity.cli.options import (
     write_evidence_files,
     write_json_output,
 )
-from fidelity.prediction.table import SIZES
+from fidelity.prediction.tablefile import SIZES
 from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion
 
 #: Where ``fidelity check`` writes its report unless told otherwise.

@@ -28,7 +28,7 @@ from fidelity.cli.options import (
     write_evidence_files,
     write_json_output,
 )
-from fidelity.prediction.table import CLASS_COLUMNS, SIZES
+from fidelity.prediction.tablefile import CLASS_COLUMNS, SIZES
 from fidelity.prediction.verdict import EXIT_ERROR
 
 if TYPE_CHECKING:

@@ -19,7 +19,7 @@ from fidelity.cli.options import (
     measure_request,
     write_evidence_files,
 )
-from fidelity.prediction.table import SIZES
+from fidelity.prediction.tablefile import SIZES
 
 if TYPE_CHECKING:
     from fidelity.chart.read import ReadOptions

@@ -41,7 +41,7 @@ from fidelity.cli.options import (
 )
 from fidelity.core.errors import FidelityError
 from fidelity.core.fileio import display_path
-from fidelity.prediction.table import CLASS_COLUMNS, SIZES
+from fidelity.prediction.tablefile import CLASS_COLUMNS, SIZES
 from fidelity.prediction.verdict import EXIT_ERROR, EXIT_UNDECIDED
 
 if TYPE_CHECKING:

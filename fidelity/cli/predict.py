@@ -8,13 +8,9 @@ from typing import TYPE_CHECKING
 import click
 
 from fidelity.cli.options import common_options, json_option, write_json_output
-from fidelity.prediction.table import (
-    CLASS_COLUMNS,
-    INTERPOLATIONS,
-    SIZES,
-    available_tables,
-    predict,
-)
+from fidelity.prediction.interpolate import INTERPOLATIONS
+from fidelity.prediction.table import predict
+from fidelity.prediction.tablefile import CLASS_COLUMNS, SIZES, available_tables
 from fidelity.report.words import prediction_notes
 
 if TYPE_CHECKING:
@@ -73,7 +69,7 @@ def predict_cmd(delta_e: float | None, delta_e_uncertainty: float, cls: str, siz
     fidelity predict --coco-c contrast:3               # a COCO-C corruption on the ΔE scale
     """
     if list_tables:
-        from fidelity.prediction.table import DEFAULT_TABLE, load_prediction_table
+        from fidelity.prediction.tablefile import DEFAULT_TABLE, load_prediction_table
 
         for name in available_tables():
             t = load_prediction_table(name)

@@ -102,7 +102,7 @@ def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
                                  + (": give it to --import-scores, or to --status"
                                     if carried else "."), param_hint="'--out'")
     if status:
-        from fidelity.coco.tables import check_store_meta
+        from fidelity.coco.tables.provenance import check_store_meta
 
         store = SweepStore(out, create=False)
         check_store_meta(store.db, str(store.path))

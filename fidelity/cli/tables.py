@@ -14,7 +14,7 @@ from fidelity.cli.options import (
     show_progress,
     write_json_output,
 )
-from fidelity.coco.tables import RARE_BOXES
+from fidelity.coco.tables.classes import RARE_BOXES
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import SweepStore
@@ -119,7 +119,8 @@ def _tables(store_dir: str, out: str | None, prediction: str | None, name: str,
     from pathlib import Path
 
     from fidelity.coco.sweep import SweepStore
-    from fidelity.coco.tables import parse_image_caps, tables_result
+    from fidelity.coco.tables.colour import tables_result
+    from fidelity.coco.tables.grid import parse_image_caps
     from fidelity.core.fileio import check_outputs
     from fidelity.report.coco import write_tables_report
 
@@ -141,7 +142,7 @@ def _tables(store_dir: str, out: str | None, prediction: str | None, name: str,
                   {"--annotations": annotations, "--earlier": earlier},
                   stores={"STORE_DIR": store_dir})
     store = SweepStore(store_dir, create=False)
-    from fidelity.coco.tables import check_store_meta
+    from fidelity.coco.tables.provenance import check_store_meta
 
     check_store_meta(store.db, str(store.path))
     coco = None
@@ -179,7 +180,7 @@ def _read_tables_json(path: Any) -> Any:
     """The :class:`~fidelity.coco.tables.TablesResult` of a ``tables.json`` (one-line errors)."""
     import json
 
-    from fidelity.coco.tables import TablesResult
+    from fidelity.coco.tables.colour import TablesResult
     from fidelity.core.errors import InputFileError
 
     try:
@@ -200,7 +201,7 @@ def _read_earlier(path: Any) -> tuple[Any, dict[str, Any]]:
 
 
 def _write_directional(tables_: Any, path: str) -> Any:
-    from fidelity.coco.directional import directional_table
+    from fidelity.coco.tables.directional import directional_table
     from fidelity.core.fileio import json_ready, write_json_atomic
 
     return write_json_atomic(path, json_ready(directional_table(tables_)))
@@ -209,7 +210,7 @@ def _write_directional(tables_: Any, path: str) -> Any:
 def _tables_from_json(path: Any, prediction: str | None, name: str,
                       directional: str | None) -> None:
     """The prediction tables of a ``tables.json`` (no store, no report)."""
-    from fidelity.coco.tables import prediction_table
+    from fidelity.coco.tables.prediction import prediction_table
     from fidelity.core.errors import InvalidValueError
     from fidelity.core.fileio import json_ready, write_json_atomic
 
@@ -229,7 +230,7 @@ def _explain(store: SweepStore, spec: str, annotations: str | None, rare_boxes: 
     from pathlib import Path
 
     from fidelity.coco.scoring import load_annotations
-    from fidelity.coco.tables import explain_cell
+    from fidelity.coco.tables.classes import explain_cell
     from fidelity.core.errors import InvalidValueError
 
     parts = spec.rsplit(":", 2)

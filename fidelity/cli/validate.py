@@ -86,14 +86,9 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
 
     from fidelity.camera.model import camera_files
     from fidelity.coco.emulation import EMULATION_METHODS, TRAINING_SETS
-    from fidelity.coco.validate import (
-        ValidationStore,
-        collect_results,
-        default_store,
-        load_suite,
-        run_validation,
-        validated_cameras,
-    )
+    from fidelity.coco.validate.colour import collect_results, run_validation, validated_cameras
+    from fidelity.coco.validate.store import ValidationStore, default_store
+    from fidelity.coco.validate.suite import load_suite
     from fidelity.core.errors import InvalidValueError, unknown_name
     from fidelity.core.fileio import check_outputs
 

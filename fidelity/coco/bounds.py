@@ -2,8 +2,8 @@
 
 :func:`compare_bounds` takes the validation's measured cells (:class:`MeasuredCell`: each
 camera's measured ΔmAP ± SE per detector and the classic prediction; built from
-:class:`fidelity.coco.validate.ValidationResults` by
-:func:`fidelity.coco.validate.directional_validation`) and, for every camera
+:class:`fidelity.coco.validate.colour.ValidationResults` by
+:func:`fidelity.coco.validate.colour.directional_validation`) and, for every camera
 (:class:`CameraChart`), renders its chart in closed form under the test case's illuminant
 (when the camera file is given; else it reads the chart stored with the results),
 predicts its loss with the direction-aware table (:mod:`fidelity.prediction.directional`,

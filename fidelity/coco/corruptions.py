@@ -608,7 +608,7 @@ def _directional_name(table: str | None) -> str | None:
     """``table`` when it is a direction-aware table, else None (the default one)."""
     if table is None:
         return None
-    from fidelity.prediction.table import load_prediction_table
+    from fidelity.prediction.tablefile import load_prediction_table
 
     return table if load_prediction_table(table).kind == "directional" else None
 

@@ -17,7 +17,7 @@ steps, in the order a run takes them:
 and leaving the ``with`` block retires the leases and closes the executor and the per-thread
 connections. What differs between the sweep and the validation (the cells, their scoring and
 log lines, their own provenance) stays with :func:`fidelity.coco.sweep.run_sweep` and
-:func:`fidelity.coco.validate.run_validation`.
+:func:`fidelity.coco.validate.colour.run_validation`.
 """
 
 from __future__ import annotations

@@ -54,7 +54,7 @@ from typing import Any, Protocol
 import numpy as np
 
 #: Loss columns compared by class (``all`` = mAP@[.50:.95] over the 80 COCO classes) ->
-#: prediction-table column names (:data:`fidelity.prediction.table.COLUMNS`).
+#: prediction-table column names (:data:`fidelity.prediction.tablefile.COLUMNS`).
 LOSS_COLUMNS: dict[str, str] = {
     "all": "dmap_points",
     "all-relative": "dmap_relative",

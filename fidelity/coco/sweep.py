@@ -27,7 +27,7 @@ A rerun skips finished cells and the images already stored in unfinished ones. A
 model's image limit raised (``model.onnx@N``) extends its finished cells: only the new images
 are run, the stored ones are kept, and each cell is re-scored on the first N images (baseline
 first). A store caught mid-extension holds cells on two image counts; its report scores every
-cell of a model on the smaller one (:func:`fidelity.coco.tables.align_image_counts`).
+cell of a model on the smaller one (:func:`fidelity.coco.tables.grid.align_image_counts`).
 """
 
 from __future__ import annotations
@@ -244,7 +244,7 @@ class SweepCell:
     ``map50``, ``map75`` and ``ap`` (per class name; fractions in [0, 1], None without ground
     truth), ``seconds`` and ``finished`` (UTC, ISO 8601). ``rescored_from`` is not stored: a
     report that re-scores a cell on fewer images sets it to the stored count
-    (:func:`fidelity.coco.tables.align_image_counts`).
+    (:func:`fidelity.coco.tables.grid.align_image_counts`).
     """
 
     model: str

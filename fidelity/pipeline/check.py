@@ -42,7 +42,8 @@ if TYPE_CHECKING:
     from fidelity.measure.colour import ChartMeasurement
     from fidelity.measure.uncertainty import UncertaintyBudget
     from fidelity.prediction.interval import DomainCheck, PredictionInterval, ValidityDomain
-    from fidelity.prediction.table import Prediction, PredictionTable
+    from fidelity.prediction.table import Prediction
+    from fidelity.prediction.tablefile import PredictionTable
 
 #: The gate of ``fidelity check`` unless told otherwise: mean ΔE00 <= 3 (SAFE-COLOR).
 DEFAULT_CRITERION = Criterion("max-delta-e", DEFAULT_MAX_DELTA_E)

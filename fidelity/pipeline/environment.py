@@ -160,7 +160,7 @@ def describe_environment(probe: bool = True) -> dict[str, Any]:
     (a few seconds, subprocesses)."""
     from fidelity.coco.machine import cpu_description
     from fidelity.core.version import __version__
-    from fidelity.prediction.table import DEFAULT_TABLE, available_tables
+    from fidelity.prediction.tablefile import DEFAULT_TABLE, available_tables
 
     core = dependency_versions()
 

@@ -27,7 +27,7 @@ family          transforms                              moves (lightness / chrom
 
 Each family has a worst-case curve per detector size (and model): at each ΔE the largest loss
 of its transforms (and models), from the sweep's cells
-(:func:`fidelity.coco.directional.directional_table`, written to
+(:func:`fidelity.coco.tables.directional.directional_table`, written to
 ``fidelity/data/prediction/coco1000-directional.json``).
 
 **What explains a chart** (:func:`fit_families`). Each one-parameter family of the transforms
@@ -74,7 +74,7 @@ if TYPE_CHECKING:
     from pathlib import Path
 
     from fidelity.measure.colour import ChartMeasurement
-    from fidelity.prediction.table import PredictionTable
+    from fidelity.prediction.tablefile import PredictionTable
     from fidelity.prediction.verdict import Criterion, DecisionRule, Verdict
 
 F64 = NDArray[np.float64]
@@ -85,7 +85,7 @@ DEFAULT_DIRECTIONAL_TABLE = "coco1000-directional"
 DIRECTIONS: tuple[str, ...] = ("lightness", "chroma", "hue")
 #: Which bound decides a verdict: the classic worst case (default) or the direction-aware one.
 BOUNDS: tuple[str, ...] = ("classic", "directional")
-#: Loss columns (as in :data:`fidelity.prediction.table.COLUMNS`).
+#: Loss columns (as in :data:`fidelity.prediction.tablefile.COLUMNS`).
 COLUMNS: tuple[str, ...] = ("dmap_points", "dmap_relative", "dap_person_points",
                             "dap_bicycle_points")
 #: Share of the chart error a fit must remove to count as an explanation (below: noise).
@@ -381,7 +381,7 @@ def family_shares(calibration: Any = None, chart: str | None = None
 class DirectionalTable:
     """A direction-aware prediction table: the ``classic`` table it extends (the same file's
     curves: the worst case over every transform) and one table of worst-case curves per
-    family (``families``, each a :class:`~fidelity.prediction.table.PredictionTable` of kind
+    family (``families``, each a :class:`~fidelity.prediction.tablefile.PredictionTable` of kind
     ``measured``)."""
 
     name: str
@@ -406,7 +406,7 @@ def load_directional_table(name_or_path: str | None = None) -> DirectionalTable:
     """Load a direction-aware table (registry name or JSON path; None:
     :data:`DEFAULT_DIRECTIONAL_TABLE`). A prediction table without ``families`` is an error
     naming it."""
-    from fidelity.prediction.table import load_prediction_table
+    from fidelity.prediction.tablefile import load_prediction_table
 
     classic = load_prediction_table(name_or_path or DEFAULT_DIRECTIONAL_TABLE)
     if classic.path is None:
@@ -418,7 +418,7 @@ def load_directional_table(name_or_path: str | None = None) -> DirectionalTable:
 def _directional_file(path: Path) -> DirectionalTable:
     """The direction-aware table in ``path``, built once a process while the file is
     unchanged."""
-    from fidelity.prediction.table import load_prediction_table
+    from fidelity.prediction.tablefile import load_prediction_table
 
     return _directional_of(load_prediction_table(path))
 
@@ -426,7 +426,7 @@ def _directional_file(path: Path) -> DirectionalTable:
 def _directional_of(classic: PredictionTable) -> DirectionalTable:
     """:func:`load_directional_table` of a loaded table."""
     from fidelity.core.errors import InputFileError
-    from fidelity.prediction.table import TableKind, parse_prediction_table
+    from fidelity.prediction.tablefile import TableKind, parse_prediction_table
 
     fams = classic.raw.get("families")
     if classic.kind is not TableKind.DIRECTIONAL or not isinstance(fams, dict):
@@ -518,7 +518,7 @@ class DirectionalPrediction:
 
     def value(self, cls: str = "all", unit: str = "points") -> float | None:
         """The loss of ``cls`` (``all``, ``person``, ``bicycle``) in ``unit``."""
-        from fidelity.prediction.table import CLASS_COLUMNS
+        from fidelity.prediction.tablefile import CLASS_COLUMNS
 
         if unit == "relative":
             if cls != "all":
@@ -565,7 +565,8 @@ def _family_value(table: DirectionalTable, family: str, column: str, delta_e: fl
                   size: str) -> tuple[float | None, str]:
     """A family curve's loss at ``delta_e``; beyond the family's measured range the classic
     curve's (the classic table's rules, e.g. its total-loss ceiling)."""
-    from fidelity.prediction.table import predict, predict_curve
+    from fidelity.prediction.interpolate import predict_curve
+    from fidelity.prediction.table import predict
 
     ftab = table.families[family]
     curves, _ = ftab.select(size)

@@ -8,7 +8,7 @@ combined as uncorrelated (JCGM 100 5.1.2):
   recorded at the two table points around the ΔE (the larger of the paired image bootstrap
   and the jackknife, or what tables measured before it recorded: the table's provenance says
   which)
-  (:class:`~fidelity.prediction.table.SamplingError`;
+  (:class:`~fidelity.prediction.interpolate.SamplingError`;
   measured tables, ``dmap_points`` only; None otherwise);
 - the chart ΔE's own standard uncertainty ``u(ΔE)`` (:mod:`fidelity.measure.uncertainty`)
   propagated through the table: ``|c| u(ΔE)`` with the sensitivity ``c`` the slope of the
@@ -33,7 +33,8 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
-from fidelity.prediction.table import ColumnStatus, Prediction, predict
+from fidelity.prediction.interpolate import ColumnStatus
+from fidelity.prediction.table import Prediction, predict
 
 #: Smallest ΔE step of the slope's central difference.
 MIN_STEP = 0.01

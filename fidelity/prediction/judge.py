@@ -11,7 +11,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, NamedTuple
 
 from fidelity.core.errors import unknown_name
-from fidelity.prediction.table import Prediction, PredictionTable, TableKind
+from fidelity.prediction.table import Prediction
+from fidelity.prediction.tablefile import PredictionTable, TableKind
 from fidelity.prediction.verdict import SIMPLE, Criterion, DecisionRule, Verdict
 
 if TYPE_CHECKING:
@@ -32,7 +33,7 @@ def directional_table_name(table: PredictionTable | str | None) -> str | None:
     """The name (or path) of ``table`` when it is a direction-aware table
     (:attr:`TableKind.DIRECTIONAL`), else None (the default direction-aware table answers)."""
     if isinstance(table, str):
-        from fidelity.prediction.table import load_prediction_table
+        from fidelity.prediction.tablefile import load_prediction_table
 
         return table if load_prediction_table(table).kind is TableKind.DIRECTIONAL else None
     if table is not None and table.kind is TableKind.DIRECTIONAL and table.path is not None:

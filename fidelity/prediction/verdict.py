@@ -30,7 +30,9 @@ from enum import StrEnum
 from typing import Any
 
 from fidelity.core.errors import InvalidValueError, unknown_name
-from fidelity.prediction.table import CLASS_COLUMNS, ColumnStatus, Prediction
+from fidelity.prediction.interpolate import ColumnStatus
+from fidelity.prediction.table import Prediction
+from fidelity.prediction.tablefile import CLASS_COLUMNS
 
 #: SAFE-COLOR: "ΔE ≤ 3 keeps ΔmAP below 1 %" (with a safety margin).
 DEFAULT_MAX_DELTA_E = 3.0

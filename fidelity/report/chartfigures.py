@@ -358,7 +358,7 @@ def prediction_curve(prediction: Prediction, limit_dmap: float | None = None,
                      limit_delta_e: float | None = None) -> str:
     """The table's ΔE → loss curves with this chart's point on each; a ΔmAP limit as a
     horizontal line, a ΔE limit as a vertical one (symlog loss axis: linear below 1)."""
-    from fidelity.prediction.table import predict_curve
+    from fidelity.prediction.interpolate import predict_curve
 
     de = prediction.delta_e
     xmax = max(30.0, de * 1.2, (limit_delta_e or 0.0) * 1.2)
@@ -407,7 +407,7 @@ def family_curves(directional: DirectionalPrediction, classic: Prediction | None
     width growing with its weight) and the classic curve (worst over every transform), with
     this chart's classic and direction-aware predictions at its ΔE."""
     from fidelity.prediction.directional import load_directional_table
-    from fidelity.prediction.table import predict_curve
+    from fidelity.prediction.interpolate import predict_curve
 
     tab = load_directional_table(directional.table.get("path") or directional.table["name"])
     de = directional.delta_e

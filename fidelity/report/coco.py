@@ -1,7 +1,7 @@
 """The COCO benchmark report: worst-case tables, paper comparison and plots of a sweep.
 
 Built as one :class:`~fidelity.report.document.Document` from a
-:class:`~fidelity.coco.tables.TablesResult` (:func:`tables_document`) and written as
+:class:`~fidelity.coco.tables.colour.TablesResult` (:func:`tables_document`) and written as
 ``report.html`` and ``report.md`` (:func:`write_tables_report`, with ``tables.json`` and the
 measured prediction table). Reading order: the headline (the worst case of every model at
 SAFE-COLOR's thresholds, with the worst-case plot), the paper comparison and the ΔE limits, the
@@ -33,14 +33,9 @@ from fidelity.report.document import (
 from fidelity.report.format import listing, number, words
 
 if TYPE_CHECKING:
-    from fidelity.coco.tables import (
-        CurveLimits,
-        ModelSummary,
-        PaperFinding,
-        Tables,
-        TablesResult,
-        WorstCaseRow,
-    )
+    from fidelity.coco.tables.build import ModelSummary, Tables
+    from fidelity.coco.tables.colour import CurveLimits, PaperFinding, TablesResult
+    from fidelity.coco.tables.worst import WorstCaseRow
 
 #: Title of the COCO benchmark report.
 TITLE = "COCO benchmark: measured cost of colour error"
@@ -159,7 +154,7 @@ def _limit_cell(status: str, delta_e: float | None) -> str:
 
 def headline(tables: Tables, figure: Figure | None = None) -> Headline:
     """The main finding: every model's worst relative ΔmAP at SAFE-COLOR's thresholds."""
-    from fidelity.coco.tables import PAPER_THRESHOLDS
+    from fidelity.coco.tables.colour import PAPER_THRESHOLDS
 
     lines = ["**Worst-case mAP loss (% of the baseline) at SAFE-COLOR's thresholds** (the "
              "paper: " + ", ".join(f"< {b:g} % up to ΔE {lim}" for lim, b in PAPER_THRESHOLDS)
@@ -180,7 +175,7 @@ def headline(tables: Tables, figure: Figure | None = None) -> Headline:
 
 
 def _run_section(tables: Tables) -> Section:
-    from fidelity.coco.tables import earlier_runs
+    from fidelity.coco.tables.provenance import earlier_runs
 
     meta = tables.meta
     d = meta.get("data") or {}
@@ -258,7 +253,7 @@ def _targets(tables: Tables, grid: Mapping[str, Any]) -> list[float]:
 
 
 def _limits_section(limits: Sequence[CurveLimits]) -> Section | None:
-    from fidelity.coco.tables import LIMIT_BUDGETS
+    from fidelity.coco.tables.colour import LIMIT_BUDGETS
 
     if not limits:
         return None
@@ -329,7 +324,7 @@ def _models_section(tables: Tables) -> Section:
 
 
 def _method_section(tables: Tables) -> Section:
-    from fidelity.coco.tables import scorer_words
+    from fidelity.coco.tables.provenance import scorer_words
 
     runs = "\n".join(_model_run_line(m, info, bool(
         tables.aligned[m].capped if m in tables.aligned else False))
@@ -359,7 +354,8 @@ def _standard_error_text(tables: Tables) -> Text | None:
                if r.errors is not None and r.errors.dmap_points is not None]
            for m, rows in tables.cells.items()}
     medians = ", ".join(f"{m} {float(np.median(s)):.2f}" for m, s in ses.items() if s)
-    from fidelity.coco.tables import STANDARD_ERROR_WORDS, standard_error_methods
+    from fidelity.coco.tables.prediction import standard_error_methods
+    from fidelity.coco.tables.provenance import STANDARD_ERROR_WORDS
 
     methods = standard_error_methods(tables)
     how = "; ".join(f"{m}: {STANDARD_ERROR_WORDS[k]}" for m, k in methods.items())
@@ -449,7 +445,7 @@ def write_tables_report(result: TablesResult, out_dir: str | os.PathLike[str],
                         name: str = "coco1000-measured") -> dict[str, Path]:
     """Write the report (:func:`write_tables_document`), ``tables.json`` and (optionally) the
     measured prediction table, atomically. Returns the paths by name."""
-    from fidelity.coco.tables import prediction_table
+    from fidelity.coco.tables.prediction import prediction_table
     from fidelity.core.fileio import json_ready, write_json_atomic
 
     out = Path(out_dir)

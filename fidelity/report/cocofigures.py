@@ -30,7 +30,7 @@ from fidelity.report.svg import (
 
 if TYPE_CHECKING:
     from fidelity.coco.corruptions import CocoCResults
-    from fidelity.coco.tables import Tables
+    from fidelity.coco.tables.build import Tables
 
 #: matplotlib's tab10 colours, one per line in order.
 TAB10 = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
@@ -69,8 +69,9 @@ def _line_points(ax: Axes, x: _F, y: _F, colour: str, size: float = 3.0,
 
 def paper_step() -> tuple[_F, _F]:
     """SAFE-COLOR's bound on the relative ΔmAP (%) as a step through its thresholds
-    (:data:`fidelity.coco.tables.PAPER_THRESHOLDS`: 1 % up to ΔE 3, 3 % to 6, 10 % to 12)."""
-    from fidelity.coco.tables import PAPER_THRESHOLDS
+    (:data:`fidelity.coco.tables.colour.PAPER_THRESHOLDS`: 1 % up to ΔE 3, 3 % to 6, 10 % to
+    12)."""
+    from fidelity.coco.tables.colour import PAPER_THRESHOLDS
 
     x, y, start = [], [], 0.0
     for limit, bound in PAPER_THRESHOLDS:
@@ -190,7 +191,7 @@ def cococ_loss_plot(results: CocoCResults,
     """Measured ΔmAP (points, ±2 SE) of each corruption and severity at its chart ΔE, per
     detector (marker shape), with the classic worst-case curve (coco1000-measured, size n)
     and each cell's direction-aware prediction (dashed, crosses); symlog loss axis."""
-    from fidelity.prediction.table import predict_curve
+    from fidelity.prediction.interpolate import predict_curve
 
     xmax = max([x.chart_delta_e for x in results.cells] + [6.0]) * 1.08
     grid = np.linspace(0.0, xmax, 400)

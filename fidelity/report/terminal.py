@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from fidelity.pipeline.records import ChartReport, ImageSource
-from fidelity.prediction.table import TableKind
+from fidelity.prediction.tablefile import TableKind
 from fidelity.report.words import verdict_message
 
 

@@ -1,8 +1,8 @@
 """The validation report: predicted against measured detection loss for a suite of cameras.
 
 Built as one :class:`~fidelity.report.document.Document` from
-:class:`~fidelity.coco.validate.ValidationResults` (:func:`validation_document`) and written as
-``validation.html`` and ``validation.md`` with ``validation.json`` and the SVG figures
+:class:`~fidelity.coco.validate.colour.ValidationResults` (:func:`validation_document`) and
+written as ``validation.html`` and ``validation.md`` with ``validation.json`` and the SVG figures
 (:func:`write_validation_report`). Reading order: the headline (does the worst-case table
 bound the measured loss, with the predicted-against-measured plot), the bound per class, the
 written analysis, the plots, every failure with its data-derived reason, then the per-camera
@@ -34,12 +34,9 @@ from fidelity.report.format import number, words
 from fidelity.report.validationfigures import PLOTTED
 
 if TYPE_CHECKING:
-    from fidelity.coco.validate import (
-        CameraRecord,
-        ValidationResults,
-        ValidationRow,
-        ValidationSummary,
-    )
+    from fidelity.coco.validate.camera import CameraRecord
+    from fidelity.coco.validate.checks import ValidationRow, ValidationSummary
+    from fidelity.coco.validate.colour import ValidationResults
 
 #: Title of the validation report.
 TITLE = "Validation: predicted against measured detection loss for realistic camera models"
@@ -509,7 +506,7 @@ def _run_section(results: ValidationResults) -> Section:
                  "baseline_map=...)` with tables "
                  f"{', '.join(f'`{t}`' for t in summ.tables)}; the bound tested is "
                  f"`{summ.bound_table}`.")
-    from fidelity.coco.tables import STANDARD_ERROR_WORDS
+    from fidelity.coco.tables.provenance import STANDARD_ERROR_WORDS
 
     lines.append(f"- Standard errors: {STANDARD_ERROR_WORDS[summ.standard_error]}"
                  + (" (rebuild with `--annotations` to score the bootstrap's draws)"

@@ -25,7 +25,9 @@ from numpy.typing import NDArray
 from fidelity.report.svg import COLOURS, MARKERS, Axes, Canvas, LegendEntry, Scale, legend_row
 
 if TYPE_CHECKING:
-    from fidelity.coco.validate import CameraRecord, ValidationResults, ValidationRow
+    from fidelity.coco.validate.camera import CameraRecord
+    from fidelity.coco.validate.checks import ValidationRow
+    from fidelity.coco.validate.colour import ValidationResults
 
 #: The classes plotted, by :data:`fidelity.coco.loss.LOSS_COLUMNS` key, with their titles.
 PLOTTED: dict[str, str] = {"all": "mAP@[.50:.95] (all classes)", "person": "AP person",
@@ -132,7 +134,7 @@ def vs_delta_e_plot(rows: Sequence[ValidationRow], tables: Sequence[str]) -> str
     """Measured loss (points, ±2 SE) against the camera's chart ΔE00 per class, with each of
     ``tables``' worst-case curve for detector size n (a table without the class is left out)."""
     from fidelity.coco.loss import LOSS_COLUMNS
-    from fidelity.prediction.table import predict_curve
+    from fidelity.prediction.interpolate import predict_curve
 
     style = _style(list({r.model for r in rows}))
     xmax = max([r.chart_delta_e for r in rows] + [6.0]) * 1.05

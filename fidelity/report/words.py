@@ -9,7 +9,9 @@ JSON report (:mod:`fidelity.report.jsonform`).
 
 from __future__ import annotations
 
-from fidelity.prediction.table import CEILING, ColumnStatus, Prediction
+from fidelity.prediction.interpolate import ColumnStatus
+from fidelity.prediction.table import Prediction
+from fidelity.prediction.tablefile import CEILING
 from fidelity.prediction.verdict import Verdict, VerdictReason
 
 #: How the notes name each loss column.

@@ -40,7 +40,7 @@ def safecolor_chart() -> dict[str, Any]:
 @pytest.fixture(scope="session")
 def published_table() -> dict[str, Any]:
     """The shipped safecolor-2025 prediction table's content."""
-    from fidelity.prediction.table import prediction_dir
+    from fidelity.prediction.tablefile import prediction_dir
 
     doc: dict[str, Any] = json.loads((prediction_dir() / "safecolor-2025.json").read_text())
     return doc

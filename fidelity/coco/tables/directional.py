@@ -3,7 +3,7 @@
 Per transform family (:data:`fidelity.prediction.directional.FAMILIES`) and detector size
 class (and per model), the worst case at each ΔE over the family's transforms: the curves that
 :func:`fidelity.prediction.directional.predict_directional` reads (module docstring there).
-Built from :class:`fidelity.coco.tables.Tables` (e.g. ``reports/coco/tables.json``) and
+Built from :class:`fidelity.coco.tables.build.Tables` (e.g. ``reports/coco/tables.json``) and
 written to ``fidelity/data/prediction/coco1000-directional.json`` by ``fidelity tables
 --directional``.
 """
@@ -13,7 +13,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from fidelity.coco.tables import Tables, prediction_table
+from fidelity.coco.tables.build import Tables
+from fidelity.coco.tables.prediction import prediction_table
 from fidelity.prediction.directional import COLUMNS, DEFAULT_DIRECTIONAL_TABLE, FAMILIES
 
 
@@ -34,15 +35,16 @@ def _family_point(cells: Sequence[Any], columns: Sequence[str]) -> dict[str, Any
 def directional_table(tables: Tables, name: str = DEFAULT_DIRECTIONAL_TABLE,
                       classic_name: str = "coco1000-measured") -> dict[str, Any]:
     """The direction-aware prediction table (JSON) from a sweep's tables
-    (:class:`fidelity.coco.tables.Tables`, e.g. read from ``reports/coco/tables.json``).
+    (:class:`fidelity.coco.tables.build.Tables`, e.g. read from ``reports/coco/tables.json``).
 
-    Its ``curves`` are the classic measured table's (:func:`fidelity.coco.tables.prediction_table`),
-    so the file also answers as a classic table; ``families`` holds, per family, one curve per
-    size class (worst over its transforms and the class's models) and per model (worst over
-    its transforms). A family's point at a ΔE is kept only when every transform of the family
-    that reaches that ΔE on the chart was measured for every model of the curve (a partial
-    point could understate the worst case); transforms that cannot reach it are left out, and
-    where none reaches it the family's curve ends.
+    Its ``curves`` are the classic measured table's
+    (:func:`fidelity.coco.tables.prediction.prediction_table`), so the file also answers as a
+    classic table; ``families`` holds, per family, one curve per size class (worst over its
+    transforms and the class's models) and per model (worst over its transforms). A family's
+    point at a ΔE is kept only when every transform of the family that reaches that ΔE on the
+    chart was measured for every model of the curve (a partial point could understate the
+    worst case); transforms that cannot reach it are left out, and where none reaches it the
+    family's curve ends.
     """
     base = prediction_table(tables, classic_name)
     columns = COLUMNS
