@@ -1,12 +1,26 @@
-"""Shared benchmark helpers: the machine a benchmark ran on, and best-of-N timing."""
+"""Shared benchmark helpers: the machine a benchmark ran on (:func:`machine_info`), the versions
+of what it ran (:func:`versions`), the commit (:func:`commit_info`), and best-of-N timing."""
 
 from __future__ import annotations
 
 import os
 import platform
+import subprocess
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
+
+#: The repository root.
+REPO = Path(__file__).resolve().parents[1]
+
+#: The distributions whose versions a benchmark record states, where installed (the package's
+#: own, its libraries and the anchors' libraries).
+DISTRIBUTIONS = ("camera-fidelity", "numpy", "scipy", "colour-science",
+                 "opencv-contrib-python-headless", "OpenImageIO", "Pillow", "onnxruntime",
+                 "onnxruntime-gpu", "pycocotools", "faster-coco-eval", "numba", "mitsuba",
+                 "drjit", "rosbags", "opencolorio", "ray", "imagecorruptions",
+                 "colour-checker-detection", "matplotlib")
 
 
 def machine_info() -> dict[str, Any]:
@@ -36,6 +50,36 @@ def machine_info() -> dict[str, Any]:
     except ImportError:  # pragma: no cover
         pass
     return info
+
+
+def versions() -> dict[str, str]:
+    """Python's version and that of each installed distribution of :data:`DISTRIBUTIONS`
+    (``camera-fidelity``: the version of the source the benchmark imports)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    from fidelity.core.version import __version__
+
+    out = {"python": platform.python_version(), "camera-fidelity": __version__}
+    for name in DISTRIBUTIONS[1:]:
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            continue
+    return out
+
+
+def commit_info(repo: Path = REPO) -> dict[str, Any] | None:
+    """``{"id": short commit, "dirty": uncommitted changes under fidelity/ or benchmarks/}`` of
+    the checkout the benchmark ran from; None outside a git checkout."""
+    try:
+        head = subprocess.run(["git", "-C", str(repo), "rev-parse", "--short", "HEAD"],
+                              check=True, capture_output=True, text=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(repo), "status", "--porcelain", "fidelity",
+                                "benchmarks"], check=True, capture_output=True,
+                               text=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return {"id": head, "dirty": bool(dirty)}
 
 
 def best_time(fn: Callable[[], object], repeats: int) -> float:

@@ -1,9 +1,8 @@
-"""Export the chart scene in every format, render it with third-party renderers, measure it.
-
-    PYTHONPATH=. python3 benchmarks/bench_scene.py [--out reports/scene] [--size 640x480]
+"""Export the chart scene in every format, as whole processes against the command line's start,
+render it with third-party renderers, measure it.
 
 1. Export time as whole processes (``python -m fidelity scene --format F``: wall time and max
-   RSS, best of ``--repeats``), beside the anchor ``python -m fidelity --help`` (the CLI's start)
+   RSS, best of ``repeats``), beside the anchor ``python -m fidelity --help`` (the CLI's start)
    in the same run, as ratios; and the ``export_scene`` call alone, in one process.
 2. Renders: Blender Cycles (``scenes/blender_render.py``, the bpy wheel in its own
    environment) of the .glb and the .usda, and of a .glb written with the sRGB-encoded values
@@ -13,16 +12,12 @@
    manifest's corners and exposure against the reference (RGB renders); the linear patch means
    at the manifest's centres against the albedos (RGB) or the closed form of the same spectra
    (Mitsuba), ΔE00.
-4. A PNG of each render (encoded sRGB, clipped) and results.json + README.md in ``--out``.
+4. A PNG of each render (encoded sRGB, clipped) and README.md in reports/scene.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
-import resource
-import subprocess
 import sys
 import tempfile
 import time
@@ -32,39 +27,45 @@ from typing import Any
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+from benchmarks.machine import REPO as ROOT
+from benchmarks.speed.record import Case, case, figures
+from benchmarks.speed.runner import Context, Parameter
+from fidelity.chart.image import read_image, write_png
+from fidelity.chart.read import ReadOptions
+from fidelity.colour.colorimetry import delinearize_srgb
+from fidelity.pipeline.check import audit_image
+from fidelity.scene.export import export_scene, wrongly_encoded
+from fidelity.scene.gltf import write_gltf
+from fidelity.scene.model import ChartScene, build_scene
+from fidelity.scene.verify import delta_e_linear, patch_linear_means, render_with_blender
 
-from benchmarks.machine import machine_info  # noqa: E402
-from fidelity.chart.image import read_image, write_png  # noqa: E402
-from fidelity.chart.read import ReadOptions  # noqa: E402
-from fidelity.colour.colorimetry import delinearize_srgb  # noqa: E402
-from fidelity.pipeline.check import audit_image  # noqa: E402
-from fidelity.scene.export import export_scene, wrongly_encoded  # noqa: E402
-from fidelity.scene.gltf import write_gltf  # noqa: E402
-from fidelity.scene.model import ChartScene, build_scene  # noqa: E402
-from fidelity.scene.verify import (  # noqa: E402
-    delta_e_linear,
-    patch_linear_means,
-    render_with_blender,
-)
+ANCHOR = "python -m fidelity --help (the command line's start), whole processes in the same run"
+PARAMETERS = {"size": Parameter("640x480", "render size"),
+              "samples": Parameter(16, "Blender Cycles samples"),
+              "spp": Parameter(64, "Mitsuba samples per pixel"),
+              "repeats": Parameter(3, "best of N export processes")}
+QUICK = {"size": "160x120", "samples": 4, "spp": 4, "repeats": 1}
+NEEDS = ("blender", "mitsuba")
+ARTEFACTS = "reports/scene"
 
 
 def process(cmd: list[str]) -> tuple[float, float]:
-    """Wall seconds and max RSS (MiB) of one child process."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    t0 = time.perf_counter()
-    subprocess.run(cmd, check=True, capture_output=True, env=env)
-    wall = time.perf_counter() - t0
-    rss = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    return wall, max(rss, before) / 1024
+    """Wall seconds and max RSS (MiB, the process's own: :func:`run_process`) of one child
+    process; it must exit 0."""
+    from benchmarks.speed.timing import run_process
+
+    row = run_process(cmd, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    if row["exit"] != 0:
+        raise RuntimeError(f"{cmd}: exit {row['exit']}: {row['stderr']}")
+    return float(row["seconds"]), row["max_rss_mb"] * 1e6 / 2**20
 
 
 def export_times(tmp: Path, repeats: int) -> dict[str, Any]:
-    anchor = min(process([sys.executable, "-m", "fidelity", "--help"])[0]
-                 for _ in range(repeats))
-    out: dict[str, Any] = {"anchor": "python -m fidelity --help", "anchor_seconds": anchor}
+    anchors = [process([sys.executable, "-m", "fidelity", "--help"]) for _ in range(repeats)]
+    anchor = min(r[0] for r in anchors)
+    out: dict[str, Any] = {"anchor": "python -m fidelity --help", "anchor_seconds": anchor,
+                           "anchor_max_rss_mib": max(r[1] for r in anchors),
+                           "rss_of": "each process's own (os.wait4), the largest of the runs"}
     for fmt in ("gltf", "usd", "mitsuba"):
         runs = [process([sys.executable, "-m", "fidelity", "scene", "--format", fmt, "--out",
                          str(tmp / f"proc-{fmt}")]) for _ in range(repeats)]
@@ -104,7 +105,7 @@ def readme(r: dict[str, Any]) -> str:
     floor = r["albedo_clipping_delta_e"]
     lines = [
         "# Chart scene exports rendered by third-party renderers (issue 28)", "",
-        f"Generated by `PYTHONPATH=. python3 benchmarks/bench_scene.py` on {r['date']}; "
+        f"Generated by `python -m benchmarks.speed scene` on {r['date']}; "
         f"machine: {m['cpu']}, {m['cores']} cores, load average at start "
         f"{', '.join(f'{v:.2f}' for v in r['load_average'])} (shared with other jobs).", "",
         "## Export time", "",
@@ -153,31 +154,19 @@ def readme(r: dict[str, Any]) -> str:
     for name in ("blender-gltf", "blender-usd", "blender-gltf-texture",
                  "blender-gltf-srgb-as-linear", "mitsuba-D65", "mitsuba-A"):
         lines += [f"**{name}**", "", f"![{name}]({name}.png)", ""]
-    lines += ["Raw numbers: `results.json`.", ""]
+    lines += ["Raw numbers: `reports/benchmarks/scene.json`.", ""]
     return "\n".join(lines)
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", default=str(ROOT / "reports" / "scene"))
-    p.add_argument("--size", default="640x480")
-    p.add_argument("--samples", type=int, default=16)
-    p.add_argument("--spp", type=int, default=64)
-    p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--readme-only", action="store_true",
-                   help="rewrite README.md from the results.json in --out")
-    a = p.parse_args()
-    if a.readme_only:
-        res = json.loads((Path(a.out) / "results.json").read_text(encoding="utf-8"))
-        (Path(a.out) / "README.md").write_text(readme(res), encoding="utf-8")
-        return 0
+def measure(ctx: Context) -> dict[str, Any]:
+    from types import SimpleNamespace
+
+    a = SimpleNamespace(**ctx.params)
     width, height = (int(v) for v in a.size.lower().split("x"))
-    out = Path(a.out)
+    out = ctx.artefacts
     out.mkdir(parents=True, exist_ok=True)
-    results: dict[str, Any] = {
-        "machine": machine_info(), "size": [width, height], "repeats": a.repeats,
-        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-        "load_average": list(os.getloadavg())}
+    results: dict[str, Any] = {"size": [width, height], "repeats": a.repeats,
+                               "load_average": list(os.getloadavg())}
     with tempfile.TemporaryDirectory() as tmpdir:
         tmp = Path(tmpdir)
         results["export"] = export_times(tmp, a.repeats)
@@ -234,11 +223,25 @@ def main() -> int:
                 "closed_form_mean_delta_e": float(de.mean()),
                 "closed_form_max_delta_e": float(de.max())}
         results["renders"] = renders
-    (out / "results.json").write_text(json.dumps(results, indent=1) + "\n", encoding="utf-8")
-    (out / "README.md").write_text(readme(results), encoding="utf-8")
-    print(json.dumps(results, indent=1))
-    return 0
+    return results
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+def cases(details: dict[str, Any]) -> list[Case]:
+    e = details["export"]
+    own = "rss_of" in e  # earlier runs recorded the largest RSS of any child so far: left out
+    mib = 2**20 / 1e6
+    anchor = figures(e["anchor"], e["anchor_seconds"],
+                     max_rss_mb=e["anchor_max_rss_mib"] * mib if own else None)
+    return [case(f"python -m fidelity scene --format {fmt}",
+                 figures(f"fidelity scene --format {fmt}", e[fmt]["process_seconds"],
+                         max_rss_mb=e[fmt]["process_max_rss_mib"] * mib if own else None),
+                 anchor, per="process", statistic=f"best of {details['repeats']}",
+                 process=True,
+                 note=f"the export_scene call alone {e[fmt]['export_call_seconds']:.3f} s")
+            for fmt in ("gltf", "usd", "mitsuba")]
+
+
+def report(result: dict[str, Any], folder: Path) -> None:
+    """README.md from the result (the PNGs are written by the run)."""
+    doc = {**result["details"], "machine": result["machine"], "date": result["date"]}
+    (folder / "README.md").write_text(readme(doc), encoding="utf-8")

@@ -8,8 +8,8 @@ orders of summation); the check is on the printed scores and on the number of de
 Dynamically quantised (int8 ``ConvInteger``) models have no CUDA kernel for that operator in
 onnxruntime (microsoft/onnxruntime#5127): those nodes run on the CPU inside a CUDA session.
 
-    python -m benchmarks.bench_providers --models M1.onnx,M2.onnx --images DIR \\
-        --annotations A.json --json reports/coco/providers.json
+    python -m benchmarks.speed providers -p models=M1.onnx,M2.onnx -p images=DIR \\
+        -p annotations=A.json
 
 Run where a CUDA device and ``onnxruntime-gpu`` are present (the device machine of the
 workplace); on a machine without CUDA the ``cuda`` rows fail with the tool's own error.
@@ -17,15 +17,22 @@ workplace); on a machine without CUDA the ``cuda`` rows fail with the tool's own
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import Any
+
+from benchmarks.speed.record import Case, case, figures
+from benchmarks.speed.runner import Context, Parameter
+
+ANCHOR = "fidelity evaluate of the same detectors on the same images with --provider cpu"
+PARAMETERS = {"models": Parameter("", "comma-separated ONNX files (default: the shared models)"),
+              "images": Parameter(None, "COCO images (default: the shared val2017)"),
+              "annotations": Parameter(None, "COCO annotations (default: the shared subset)")}
+NEEDS = ("shared", "cuda")
 
 PROVIDERS = ("cpu", "cuda")
 
@@ -37,13 +44,13 @@ def evaluate(model: Path, images: Path, annotations: Path, provider: str, out: P
             str(images), "--annotations", str(annotations), "--provider", provider,
             "--no-progress", "-q", "--json", str(out)]
     env = dict(os.environ, FIDELITY_CACHE=str(out.parent / f"cache-{out.stem}"))  # no reuse
-    t0 = time.perf_counter()
-    res = subprocess.run(argv, capture_output=True, text=True, check=False, env=env)
-    wall = time.perf_counter() - t0
-    row: dict[str, Any] = {"model": model.name, "provider": provider, "exit": res.returncode,
-                           "wall_s": round(wall, 2)}
-    if res.returncode:
-        row["stderr"] = res.stderr.strip()[-2000:]
+    from benchmarks.speed.timing import run_process
+
+    res = run_process(argv, env=env)
+    row: dict[str, Any] = {"model": model.name, "provider": provider, "exit": res["exit"],
+                           "wall_s": round(res["seconds"], 2), "max_rss_mb": res["max_rss_mb"]}
+    if res["exit"]:
+        row["stderr"] = res["stderr"]
         return row
     doc = json.loads(out.read_text(encoding="utf-8"))
     row.update(map=doc["map"], map50=doc["map50"], map75=doc["map75"], images=doc["images"],
@@ -77,49 +84,68 @@ def compare(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--models", required=True, help="comma-separated ONNX files")
-    ap.add_argument("--images", type=Path, required=True)
-    ap.add_argument("--annotations", type=Path, required=True)
-    ap.add_argument("--json", type=Path, default=Path("reports/coco/providers.json"))
-    args = ap.parse_args(argv)
+def measure(ctx: Context) -> dict[str, Any]:
+    from fidelity.core.resources import shared_dir
+
+    shared = shared_dir()
+    assert shared is not None
+    models = ([Path(m) for m in ctx["models"].split(",") if m]
+              or sorted((shared / "models").glob("*.onnx")))
+    images = Path(ctx["images"] or shared / "coco" / "val2017")
+    annotations = Path(ctx["annotations"] or
+                       shared / "coco" / "annotations" / "instances_val2017_subset.json")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for model in (Path(m) for m in args.models.split(",")):
+        for model in models:
             for provider in PROVIDERS:
-                row = evaluate(model, args.images, args.annotations, provider,
+                row = evaluate(model, images, annotations, provider,
                                Path(tmp) / f"{model.stem}-{provider}.json")
                 rows.append(row)
-                print(f"{row['model']:<24} {provider:<5} exit {row['exit']}  "
-                      + (f"mAP {row['map']:.4f}  mAP50 {row['map50']:.4f}  "
-                         f"{row['detections']} detections  detect {row['detect_s']} s  "
-                         f"wall {row['wall_s']} s  sessions {row['sessions']}"
-                         if not row["exit"] else row.get("stderr", "")), flush=True)
-    import platform
-
-    machine = {"platform": platform.platform(), "python": platform.python_version(),
-               "cpu_count": os.cpu_count()}
+                ctx.log(f"{row['model']:<24} {provider:<5} exit {row['exit']}  "
+                        + (f"mAP {row['map']:.4f}  {row['detections']} detections  detect "
+                           f"{row['detect_s']} s  wall {row['wall_s']} s"
+                           if not row["exit"] else row.get("stderr", "")))
+    out: dict[str, Any] = {"benchmark": "providers", "images": str(images), "rows": rows,
+                           "comparison": compare(rows)}
     try:
         import onnxruntime
 
-        machine["onnxruntime"] = onnxruntime.__version__
-        machine["providers_available"] = onnxruntime.get_available_providers()
+        out["providers_available"] = onnxruntime.get_available_providers()
     except ImportError:
         pass
     gpu = subprocess.run(["nvidia-smi", "--query-gpu=name,driver_version", "--format=csv,noheader"],
                          capture_output=True, text=True, check=False) if _has("nvidia-smi") else None
     if gpu is not None and gpu.returncode == 0:
-        machine["gpu"] = gpu.stdout.strip()
-    result = {"benchmark": "providers", "date": time.strftime("%Y-%m-%d %H:%M"),
-              "machine": machine, "images": str(args.images), "rows": rows,
-              "comparison": compare(rows)}
-    for c in result["comparison"]:
-        print(json.dumps(c))
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
-    print(f"wrote {args.json}")
-    return 0
+        out["gpu"] = gpu.stdout.strip()
+    return out
+
+
+def _run_cases(run: dict[str, Any], tag: str) -> list[Case]:
+    out = []
+    for model in dict.fromkeys(r["model"] for r in run["rows"]):
+        by = {r["provider"]: r for r in run["rows"] if r["model"] == model}
+        cpu, cuda = by.get("cpu"), by.get("cuda")
+        if not cpu or not cuda or cpu["exit"] or cuda["exit"]:
+            continue
+        comparison = next((c for c in run.get("comparison", ()) if c["model"] == model), {})
+        note = (f"mAP {cuda['map']:.4f} against {cpu['map']:.4f}, {cuda['detections']} "
+                f"detections against {cpu['detections']}; equal to the printed digits: "
+                f"{comparison.get('equal_to_printed_digits')}")
+        for what, key in (("the whole process", "wall_s"), ("the detection loop", "detect_s")):
+            out.append(case(f"{model}{tag}: {what}",
+                            figures("--provider cuda", cuda[key],
+                                    max_rss_mb=cuda.get("max_rss_mb") if key == "wall_s" else None),
+                            figures("--provider cpu", cpu[key],
+                                    max_rss_mb=cpu.get("max_rss_mb") if key == "wall_s" else None),
+                            per="run", statistic="one run each, one after the other",
+                            process=key == "wall_s", note=note))
+    return out
+
+
+def cases(details: dict[str, Any]) -> list[Case]:
+    if "runs" in details:  # several runs recorded together (e.g. CUDA settings)
+        return [c for tag, run in details["runs"].items() for c in _run_cases(run, f" ({tag})")]
+    return _run_cases(details, "")
 
 
 def _has(cmd: str) -> bool:
@@ -127,6 +153,3 @@ def _has(cmd: str) -> bool:
 
     return which(cmd) is not None
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,29 +1,34 @@
-"""Start-up time of the command line against the Python interpreter's own (``python -c pass``).
+"""Start-up of the command line against the Python interpreter's own (``python -c pass``), and
+``fidelity audit`` of a 12-megapixel photo against OpenCV's mcc detector as a whole process.
 
-Each command is run as a fresh process, ``--repeats`` times, interleaved (so a busy moment of
-the machine hits every command alike); the result is the median wall time, the time above the
-interpreter's and the median max RSS of the process (through ``bench_memory``'s launcher).
-Targets: ``fidelity --help`` under 0.5 s, ``fidelity predict --delta-e 3`` under 1 s (issue
-22); ``fidelity check`` with its default HTML + JSON report under 1.0 s and ``fidelity audit
-PHOTO.jpg --json F`` of a 12-megapixel chart photo under 0.9 s, the anchor there being OpenCV's
-mcc detector as a whole Python process on the same photo (issue 30).
-
-    python -m benchmarks.bench_startup --repeats 15     # -> reports/benchmarks/startup.json
+Each command is run as a fresh process, ``repeats`` times, interleaved (so a busy moment of the
+machine hits every command alike), after one warm-up round; the figures are the median wall
+time, the fastest run and the median max RSS of the process (each child's own, through
+:func:`tests.fixtures.processes.run_process`'s launcher). Targets: ``fidelity --help`` under
+0.5 s, ``fidelity predict --delta-e 3`` under 1 s (issue 22); ``fidelity check`` with its default
+HTML + JSON report under 1.0 s and ``fidelity audit PHOTO.jpg --json F`` of a 12-megapixel
+chart photo under 0.9 s, its anchor OpenCV's mcc detector as a whole Python process on the same
+photo (issue 30). The processes run from compiled ``.pyc`` files, as after ``pip install``.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
-import os
 import shutil
 import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
+from typing import Any
 
-from benchmarks.machine import machine_info
+from benchmarks.speed.record import Case, case, figures
+from benchmarks.speed.runner import Context, Parameter
+from benchmarks.speed.timing import run_process, user_environment
+
+ANCHOR = ("python -c pass (the interpreter's start-up); OpenCV's mcc detector as a whole "
+          "Python process for the audit of the 12 MP photo")
+PARAMETERS = {"repeats": Parameter(15, "interleaved rounds of every command")}
+QUICK = {"repeats": 2}
+NEEDS = ("fidelity-command",)
 
 #: A whole Python process that finds the chart with OpenCV's mcc detector (the anchor of the
 #: audit): read the photo, detect one Classic chart, print its centre count.
@@ -32,6 +37,8 @@ MCC = ("import sys, cv2\n"
        "d = cv2.mcc.CCheckerDetector_create()\n"
        "ok = d.process(img, cv2.mcc.MCC24, 1)\n"
        "print(len(d.getListColorChecker()) if ok else 0)\n")
+#: The anchor of start-up.
+PYTHON = "python -c pass"
 
 
 def commands(photo: Path, out: Path) -> dict[str, list[str]]:
@@ -39,7 +46,7 @@ def commands(photo: Path, out: Path) -> dict[str, list[str]]:
     the anchor of the audit."""
     fidelity = shutil.which("fidelity") or "fidelity"
     return {
-        "python -c pass": [sys.executable, "-c", "pass"],
+        PYTHON: [sys.executable, "-c", "pass"],
         "python -c 'import fidelity'": [sys.executable, "-c", "import fidelity"],
         "fidelity --help": [fidelity, "--help"],
         "fidelity predict --delta-e 3": [fidelity, "predict", "--delta-e", "3"],
@@ -62,18 +69,8 @@ ANCHORS = {"fidelity audit PHOTO.jpg --json F (12 MP)":
            "OpenCV mcc on the 12 MP photo (python process)"}
 
 
-def user_environment() -> dict[str, str]:
-    """The environment of the runs: this one without ``PYTHONDONTWRITEBYTECODE``, so that the
-    modules run from their compiled ``.pyc`` files, as after ``pip install`` (which compiles
-    them) or any earlier run; with the variable set, every process compiles fidelity's modules
-    from source again (about 0.4 s of each ``check``)."""
-    return {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
-
-
 def run_once(argv: list[str], cwd: str) -> tuple[float, float]:
     """Wall seconds and max RSS (MB) of one run of ``argv`` (it must exit 0 or 1)."""
-    from benchmarks.bench_memory import run_process
-
     row = run_process(argv, env=user_environment(), cwd=Path(cwd))
     if row["exit"] not in (0, 1):
         raise RuntimeError(f"{argv}: exit {row['exit']}: {row['stderr']}")
@@ -81,21 +78,15 @@ def run_once(argv: list[str], cwd: str) -> tuple[float, float]:
 
 
 def make_photo(path: Path) -> None:
-    """A 4000 x 3000 JPEG: a COCO-like scene with the chart on it (bench_memory's photo)."""
-    from benchmarks.bench_memory import photo, write_image
+    """A 4000 x 3000 JPEG: a COCO-like scene with the chart on it
+    (:func:`tests.fixtures.photos.photo`)."""
+    from tests.fixtures.photos import photo, write_image
 
     write_image(path, photo(4000, 3000, seed=3))
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeats", type=int, default=15)
-    ap.add_argument("--out", type=Path, default=Path("reports/benchmarks/startup.json"))
-    args = ap.parse_args(argv)
-    if shutil.which("fidelity") is None:
-        print("the fidelity command is not on PATH (pip install -e .)", file=sys.stderr)
-        return 2
-    load = os.getloadavg()[0]
+def measure(ctx: Context) -> dict[str, Any]:
+    repeats = ctx["repeats"]
     with tempfile.TemporaryDirectory() as cwd:  # no settings file is found from here
         photo = Path(cwd) / "photo.jpg"
         make_photo(photo)
@@ -104,13 +95,13 @@ def main(argv: list[str] | None = None) -> int:
         rss: dict[str, list[float]] = {name: [] for name in cmds}
         for cmd in cmds.values():  # warm the file cache (and write the .pyc files) once
             run_once(cmd, cwd)
-        for _ in range(args.repeats):
+        for _ in range(repeats):
             for name, cmd in cmds.items():
                 t, m = run_once(cmd, cwd)
                 times[name].append(t)
                 rss[name].append(m)
     medians = {name: statistics.median(ts) for name, ts in times.items()}
-    anchor = medians["python -c pass"]
+    anchor = medians[PYTHON]
     rows = []
     for name, ts in times.items():
         median = medians[name]
@@ -118,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
             "command": name, "median_s": round(median, 4), "min_s": round(min(ts), 4),
             "above_python_s": round(median - anchor, 4),
             "ratio_to_python": round(median / anchor, 2),
-            "max_rss_mb": round(statistics.median(rss[name]), 1)}
+            "max_rss_mb": round(statistics.median(rss[name]), 1), "runs_s": ts}
         other = ANCHORS.get(name)
         if other:
             row["anchor"] = other
@@ -127,21 +118,18 @@ def main(argv: list[str] | None = None) -> int:
             row["target_s"] = TARGETS[name]
             row["meets_target"] = median < TARGETS[name]
         rows.append(row)
-        ratio = (f"{median / medians[other]:5.2f}x mcc" if other else
-                 f"{median / anchor:5.2f}x python -c pass")
-        print(f"{name:<48} median {median * 1000:7.1f} ms  min {min(ts) * 1000:7.1f} ms  "
-              f"{ratio}  max RSS {row['max_rss_mb']} MB"
-              + (f"  (target {TARGETS[name]:g} s: {'met' if median < TARGETS[name] else 'MISSED'})"
-                 if name in TARGETS else ""))
-    result = {"benchmark": "startup", "repeats": args.repeats, "rows": rows,
-              "load_average_at_start": round(load, 2), "machine": machine_info(),
-              "bytecode": "compiled .pyc files (PYTHONDONTWRITEBYTECODE unset), as installed",
-              "date": time.strftime("%Y-%m-%d")}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
-    print(f"wrote {args.out}")
-    return 0
+    return {"benchmark": "startup", "repeats": repeats, "rows": rows,
+            "bytecode": "compiled .pyc files (PYTHONDONTWRITEBYTECODE unset), as installed"}
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+def _figures(row: dict[str, Any]) -> Any:
+    return figures(row["command"], row["median_s"], best_s=row["min_s"],
+                   max_rss_mb=row["max_rss_mb"], runs_s=row.get("runs_s"))
+
+
+def cases(details: dict[str, Any]) -> list[Case]:
+    rows = {r["command"]: r for r in details["rows"]}
+    stat = f"median of {details['repeats']} interleaved processes"
+    return [case(name, _figures(r), _figures(rows[r.get("anchor", PYTHON)]), per="process",
+                 statistic=stat, process=True, target_s=r.get("target_s"))
+            for name, r in rows.items() if name != PYTHON]

@@ -1,4 +1,4 @@
-"""Benchmark: the pieces of a measured loss (--measure, fidelity coco-c), against anchors.
+"""The pieces of a measured loss (``check --measure``, ``fidelity coco-c``), against anchors.
 
 1. COCO-C corruptions on COCO images: ``fidelity.coco.corruptions.CorruptionMap`` (a 2^24
    colour table, or per-image 256-entry tables for contrast) against the anchor
@@ -6,28 +6,34 @@
    the outputs are checked equal.
 2. The direction-aware prediction of a chart (the six transform fits) against the classic
    prediction (anchor: ``fidelity.prediction.table.predict``) of the same chart.
-3. Optionally (``--measure N``) one ``check --measure`` of a camera on N COCO images with the
+3. Optionally (``measure``: N images) one ``check --measure`` of a camera on N COCO images with the
    baseline already cached (wall time: emulation fit, 2^24 table, inference, scoring) against
    the baseline inference of those images alone (anchor), both with YOLOX-nano.
 
-Writes reports/benchmarks/measure.json with the machine. Run:
-``python -m benchmarks.bench_measure [--measure 1000]`` (needs ../shared or $FIDELITY_SHARED
-for the images and, for 1 and 3, the [coco-c] and [coco] extras).
+Needs ../shared or $FIDELITY_SHARED for the images, imagecorruptions for 1 and the coco extra
+for 3.
 """
 
 from __future__ import annotations
 
-import argparse
 import os
 import tempfile
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from benchmarks.machine import best_time, machine_info
-from fidelity.core.fileio import write_json_atomic
+from benchmarks.speed.record import Case, case, figures
+from benchmarks.speed.runner import Context, Parameter
+from benchmarks.speed.timing import best_time
+
+ANCHOR = ("imagecorruptions.corrupt (the package COCO-C uses) per COCO image; the classic "
+          "prediction; one plain detector pass over the images")
+PARAMETERS = {"repeats": Parameter(3, "best of N"),
+              "images": Parameter(8, "COCO images for the corruptions"),
+              "measure": Parameter(0, "also time check --measure on N images (0: not)")}
+QUICK = {"repeats": 1, "images": 2}
+NEEDS = ("shared", "imagecorruptions")
 
 
 def bench_corruptions(images: list[np.ndarray], repeats: int) -> list[dict[str, Any]]:
@@ -97,32 +103,49 @@ def bench_measure(n: int) -> dict[str, Any]:
             "measured": m.to_json()}
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--images", type=int, default=8, help="COCO images for the corruptions")
-    ap.add_argument("--measure", type=int, default=0, help="also time check --measure on N")
-    ap.add_argument("--out", type=Path,
-                    default=Path(__file__).parents[1] / "reports/benchmarks/measure.json")
-    args = ap.parse_args()
+def measure(ctx: Context) -> dict[str, Any]:
     from fidelity.coco.jpeg import read_jpeg
     from fidelity.core.resources import shared_dir
 
     shared = shared_dir()
     if shared is None:
         raise SystemExit("needs ../shared or FIDELITY_SHARED (COCO images)")
-    files = sorted((shared / "coco" / "val2017").glob("*.jpg"))[: args.images]
+    repeats = ctx["repeats"]
+    files = sorted((shared / "coco" / "val2017").glob("*.jpg"))[: ctx["images"]]
     images = [read_jpeg(f)[0] for f in files]
-    print(f"COCO-C severity 3 on {len(images)} COCO images (best of {args.repeats}):")
-    out: dict[str, Any] = {"benchmark": "measured loss pieces", "machine": machine_info(),
+    ctx.log(f"COCO-C severity 3 on {len(images)} COCO images (best of {repeats}):")
+    out: dict[str, Any] = {"benchmark": "measured loss pieces", "repeats": repeats,
                            "load_average": os.getloadavg(),
-                           "corruptions": bench_corruptions(images, args.repeats),
-                           "directional": bench_directional(max(args.repeats, 5))}
-    if args.measure:
-        out["measure"] = bench_measure(args.measure)
-    write_json_atomic(args.out, out)
-    print(f"wrote {args.out}")
+                           "corruptions": bench_corruptions(images, repeats),
+                           "directional": bench_directional(max(repeats, 5))}
+    if ctx["measure"]:
+        out["measure"] = bench_measure(ctx["measure"])
+    return out
 
 
-if __name__ == "__main__":
-    main()
+def cases(details: dict[str, Any]) -> list[Case]:
+    repeats = details.get("repeats")
+    best = f"best of {repeats}" if repeats else "best of N (N not recorded)"
+    out = [case(f"{r['corruption']} severity {r['severity']}",
+                figures("fidelity.coco.corruptions.CorruptionMap",
+                        r["ms_per_image_fidelity"] / 1000),
+                figures("imagecorruptions.corrupt", r["ms_per_image_imagecorruptions"] / 1000),
+                per="image", statistic=f"{best} passes over {r['images']} COCO images",
+                note=(f"outputs equal: {r['equal']}; the table built once in "
+                      f"{r['table_build_seconds']:.1f} s"))
+           for r in details["corruptions"]]
+    d = details["directional"]
+    out.append(case("prediction of a chart (nikon-5100)",
+                    figures("direction-aware predict_chart", d["seconds_directional"]),
+                    figures("classic predict", d["seconds_classic"]), per="call",
+                    statistic=f"best of {max(repeats, 5)}" if repeats
+                    else "best of N (N not recorded)"))
+    m = details.get("measure")
+    if m:
+        out.append(case(f"check --measure on {m['images']} images, the baseline cached",
+                        figures("check_camera(..., measure=...)",
+                                m["seconds_check_measure_cached_baseline"]),
+                        figures("one plain detector pass over the images",
+                                m["seconds_one_detector_pass"]),
+                        per="run", statistic="one run"))
+    return out

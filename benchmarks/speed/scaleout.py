@@ -1,9 +1,9 @@
 """Scale-out of the COCO sweep: local executor against Ray with 1 and 2 workers, same plan.
 
-One plan (YOLOX-nano, ``--images`` images, transforms contrast-inc and gamma-dec at chart
+One plan (YOLOX-nano, ``images`` images, transforms contrast-inc and gamma-dec at chart
 ΔE 3 and 6 plus the baseline: 5 cells), run by ``fidelity.coco.sweep.run_sweep`` into a fresh
 store per run with ``--executor local``, ``ray --workers 1`` and ``ray --workers 2`` (Ray
-started once in this process, ``num_cpus`` = 2), interleaved, ``--repeats`` times each.
+started once in this process, ``num_cpus`` = 2), interleaved, ``repeats`` times each.
 
 Measured per run (from the store's ``meta["last_run"]``, written by the driver):
 
@@ -16,30 +16,36 @@ Measured per run (from the store's ``meta["last_run"]``, written by the driver):
   worker is not computing per item (scheduling, transfers, the driver's latency).
 
 Other people's work on the machine distorts timings: before each run the benchmark waits (at
-most ``--max-wait`` s) for the 1-minute load average to fall below ``--max-load`` and records
+most ``max_wait`` s) for the 1-minute load average to fall below ``max_load`` and records
 the load it started at. Best of the repeats is reported.
 
-``--stages`` only times the stages of a work item on one core (decode, transforms, JPEG round
-trip, detector), for the cluster estimate in docs/scaleout.md.
-
-Usage: python benchmarks/bench_scaleout.py [--images 40] [--repeats 3] [--stages]
-       [--out reports/scaleout]   (needs ../shared and the [ray] extra)
+``stages`` only times the stages of a work item on one core (decode, transforms, JPEG round
+trip, detector), for the cluster estimate in docs/scaleout.md (``--out
+reports/benchmarks/scaleout_stages.json``). Both write reports/scaleout/README.md.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import secrets
-import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from machine import machine_info  # noqa: E402
+from benchmarks.speed.record import Case, case, figures
+from benchmarks.speed.runner import RESULTS, Context, Parameter
+
+ANCHOR = "the local executor (one worker process) on the same plan; Ray's 1-worker run"
+PARAMETERS = {"images": Parameter(40, "COCO images of the plan"),
+              "repeats": Parameter(3, "runs of each executor, interleaved (the best kept)"),
+              "max_load": Parameter(0.7, "wait for the 1-minute load average to fall below"),
+              "max_wait": Parameter(600.0, "longest wait for it, seconds"),
+              "stages": Parameter(False, "only the stages of a work item on one core")}
+QUICK = {"images": 8, "repeats": 1, "max_wait": 0.0}
+NEEDS = ("shared", "ray", "onnxruntime")
+ARTEFACTS = "reports/scaleout"
 
 GRID = (["contrast-inc", "gamma-dec"], [0, 3, 6])
 CONFIGS: list[tuple[str, str, int]] = [("local", "local", 1), ("ray-1", "ray", 1),
@@ -126,33 +132,17 @@ def _timed(fn: Any) -> float:
     return time.perf_counter() - t0
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--images", type=int, default=40)
-    ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--max-load", type=float, default=0.7)
-    ap.add_argument("--max-wait", type=float, default=600.0)
-    ap.add_argument("--out", type=Path, default=Path("reports/scaleout"))
-    ap.add_argument("--stages", action="store_true",
-                    help="only time the stages of a work item on one core (stages.json)")
-    args = ap.parse_args()
+def measure(ctx: Context) -> dict[str, Any]:
+    from types import SimpleNamespace
 
     from fidelity.core.resources import shared_dir
 
+    args = SimpleNamespace(**ctx.params)
     shared = shared_dir()
-    if shared is None:
-        print("../shared (COCO images, models) not found", file=sys.stderr)
-        return 2
+    assert shared is not None
     if args.stages:
         load = wait_for_quiet(args.max_load, args.max_wait)
-        stages = stage_costs(shared) | {"load1_before": load}
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "stages.json").write_text(json.dumps(
-            {"machine": machine_info(), "stages": stages}, indent=2) + "\n")
-        if (args.out / "bench_scaleout.json").is_file():
-            write_readme(args.out)
-        print(json.dumps(stages, indent=2))
-        return 0
+        return {"stages": stage_costs(shared) | {"load1_before": load}}
     work = Path(tempfile.mkdtemp(prefix="bench-scaleout-"))
     token = work / "auth_token"  # a private token: nothing written to ~/.ray
     token.write_text(secrets.token_hex(32))
@@ -219,24 +209,52 @@ def main() -> int:
     summary["cpu_bound_img_s_2_workers"] = 1e3 * cores / (cpu["ray-2"] + d2)
     summary["fraction_of_cpu_bound_2_workers"] = (thr["ray-2"]
                                                   / summary["cpu_bound_img_s_2_workers"])
-    result = {"plan": {"model": "yolox_nano.onnx", "images": args.images,
-                       "transforms": GRID[0], "targets": GRID[1], "cells": 5},
-              "machine": machine_info(), "summary": summary, "runs": runs,
-              "settings": {"repeats": args.repeats, "max_load": args.max_load,
-                           "max_wait": args.max_wait}}
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "bench_scaleout.json").write_text(json.dumps(result, indent=2) + "\n")
-    write_readme(args.out)
-    print(json.dumps(summary, indent=2))
-    return 0
+    return {"plan": {"model": "yolox_nano.onnx", "images": args.images,
+                     "transforms": GRID[0], "targets": GRID[1], "cells": 5},
+            "summary": summary, "runs": runs,
+            "settings": {"repeats": args.repeats, "max_load": args.max_load,
+                         "max_wait": args.max_wait}}
 
 
-def write_readme(out: Path) -> None:
-    """reports/scaleout/README.md from bench_scaleout.json (and stages.json, if there)."""
-    result = json.loads((out / "bench_scaleout.json").read_text())
-    text = readme(result)
-    if (out / "stages.json").is_file():
-        st = json.loads((out / "stages.json").read_text())["stages"]
+def cases(details: dict[str, Any]) -> list[Case]:
+    if "stages" in details:
+        return [case(f"stage {k.removesuffix('_ms').replace('_', ' ')} (one core)",
+                     figures(k.removesuffix("_ms"), v / 1000), None, per="image",
+                     statistic="best of 3 passes over 20 images")
+                for k, v in details["stages"].items() if k.endswith("_ms")]
+    s = details["summary"]
+    thr, cpu = s["throughput_img_s"], s["worker_cpu_ms_per_image"]
+    n = details["settings"]["repeats"]
+    local = figures("local executor, 1 worker", 1 / thr["local"], cpu_s=cpu["local"] / 1000)
+    return [case(f"Ray, {workers} worker{'s' if workers > 1 else ''}, against the local executor",
+                 figures(f"ray executor, {workers} worker(s)", 1 / thr[name],
+                         cpu_s=cpu[name] / 1000),
+                 local, per="image",
+                 statistic=(f"best of {n} runs (seconds per image over the driver loop; CPU: "
+                            "the workers' own, the least of the runs)"),
+                 note=(f"scaling efficiency at 2 workers {s['efficiency_2_workers_vs_ray_1']:.2f}"
+                       f" against Ray with 1 worker" if workers == 2 else None))
+            for name, workers in (("ray-1", 1), ("ray-2", 2))]
+
+
+def report(result: dict[str, Any], folder: Path) -> None:
+    """reports/scaleout/README.md from the results of both kinds (the runs, the stages)."""
+    runs, stages = RESULTS / "scaleout.json", RESULTS / "scaleout_stages.json"
+    docs = {}
+    for path in (runs, stages):
+        if path.is_file():
+            doc = json.loads(path.read_text(encoding="utf-8"))
+            docs["stages" if "stages" in doc["details"] else "runs"] = doc
+    docs["stages" if "stages" in result["details"] else "runs"] = result
+    if "runs" in docs:
+        write_readme(folder, docs["runs"], docs.get("stages"))
+
+
+def write_readme(out: Path, runs: dict[str, Any], stages: dict[str, Any] | None) -> None:
+    """README.md in ``out`` from the result of the runs (and of the stages, if given)."""
+    text = readme({**runs["details"], "machine": runs["machine"]})
+    if stages is not None:
+        st = stages["details"]["stages"]
         text += "\n".join([
             "Stages of a work item on one core (`--stages`, ms per image, best of 3 over 20 "
             f"images, load {st['load1_before']:.2f}): "
@@ -259,7 +277,7 @@ def readme(result: dict[str, Any]) -> str:
                     f"{best['start_s']:.1f} | {1e3 * best['idle_per_item_s']:.0f} | "
                     f"{best['load1_before']:.2f} |")
     return "\n".join([
-        "# Scale-out of the COCO sweep (benchmarks/bench_scaleout.py)",
+        "# Scale-out of the COCO sweep (benchmarks/speed/scaleout.py)",
         "",
         f"Plan: {plan['model']}, {plan['images']} images, transforms "
         f"{', '.join(plan['transforms'])} at ΔE {', '.join(str(t) for t in plan['targets'])} "
@@ -303,6 +321,3 @@ def readme(result: dict[str, Any]) -> str:
         "",
     ])
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

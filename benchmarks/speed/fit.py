@@ -1,5 +1,5 @@
-"""Benchmark: ``fidelity fit``: which objective generalises better, how exact the .cube is, and
-how fast a fit is.
+"""``fidelity fit``: how fast a fit is against its anchors, which objective generalises better,
+and how exact the .cube is.
 
 1. **Objective** (issue 29, requirement 6): for pairs of the suite's cameras (``cameras/``,
    closed-form renders under D65: the "simulated" camera's chart fitted onto the "real"
@@ -18,15 +18,12 @@ how fast a fit is.
    through the cube by OpenColorIO and their measurement), side by side with the anchor, the
    same verification with the whole 12 MP SIM image through OpenColorIO and written
    (``corrected=True``, the path before the windows-only verification). As whole processes
-   (wall, CPU, max RSS): ``python -m fidelity fit`` of this checkout and of ``--source`` (the
-   anchor; default /work/main when it exists). Best of N; the ratios are to the anchors.
-
-Writes reports/benchmarks/fit.json. Run:  python -m benchmarks.bench_fit [--source DIR]
+   (wall, CPU, max RSS): ``python -m fidelity fit`` of this checkout and of ``source`` (the
+   anchor: another checkout). Best of ``repeats``; the ratios are to the anchors.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
@@ -36,10 +33,17 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.machine import machine_info
-from fidelity.core.fileio import write_json_atomic
+from benchmarks.machine import REPO as ROOT
+from benchmarks.speed.record import Case, case, figures
+from benchmarks.speed.runner import RESULTS, Context, Parameter
 
-ROOT = Path(__file__).parents[1]
+ANCHOR = ("the verification with the whole 12 MP SIM image through OpenColorIO (the path before "
+          "the windows-only verification); fidelity fit of another checkout, whole processes")
+PARAMETERS = {"repeats": Parameter(3, "best of N"),
+              "source": Parameter(None, "the anchor checkout of the whole-process runs"),
+              "skip_objective": Parameter(False, "keep the objective study of the last result")}
+QUICK = {"repeats": 1, "skip_objective": True}
+NEEDS = ("opencolorio",)
 #: (simulated camera, real camera) pairs of the suite.
 PAIRS: tuple[tuple[str, str], ...] = (
     ("ideal-srgb8", "nikon5100-cheung-d65"),
@@ -207,7 +211,7 @@ def speed(repeats: int, model: str, folder: Path, pair: tuple[Path, Path, str]
 
 def processes(repeats: int, folder: Path, pair: tuple[Path, Path, str],
               sources: dict[str, Path]) -> dict[str, Any]:
-    from benchmarks.bench_memory import run_process
+    from benchmarks.speed.timing import run_process
 
     sim, real, corners = pair
     out: dict[str, Any] = {}
@@ -235,34 +239,58 @@ def processes(repeats: int, folder: Path, pair: tuple[Path, Path, str],
     return out
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--source", type=Path,
-                    default=Path("/work/main") if Path("/work/main/fidelity").is_dir() else None,
-                    help="The anchor checkout of the whole-process runs.")
-    ap.add_argument("--skip-objective", action="store_true")
-    ap.add_argument("--out", type=Path, default=ROOT / "reports/benchmarks/fit.json")
-    args = ap.parse_args()
-    result: dict[str, Any] = {"machine": machine_info(),
-                              "load_average_at_start": list(os.getloadavg())}
-    if not args.skip_objective:
+def measure(ctx: Context) -> dict[str, Any]:
+    repeats = ctx["repeats"]
+    result: dict[str, Any] = {"repeats": repeats}
+    last = RESULTS / "fit.json"
+    if not ctx["skip_objective"]:
         result["objective"] = objectives()
-    elif args.out.is_file():
-        result["objective"] = json.loads(args.out.read_text(encoding="utf-8")).get("objective")
+    elif last.is_file():
+        result["objective"] = json.loads(last.read_text(encoding="utf-8"))["details"].get(
+            "objective")
     result["lut"] = lut_accuracy()
     sources = {"checkout": ROOT}
-    if args.source is not None:
-        sources["anchor"] = args.source.resolve()
+    if ctx["source"]:
+        sources["anchor"] = Path(ctx["source"]).resolve()
     with tempfile.TemporaryDirectory() as d:
         pair = _big_pair(Path(d))
-        result["speed"] = {m: speed(args.repeats, m, Path(d), pair)
+        result["speed"] = {m: speed(repeats, m, Path(d), pair)
                            for m in ("matrix", "root-polynomial")}
-        result["processes"] = processes(args.repeats, Path(d), pair, sources)
+        result["processes"] = processes(repeats, Path(d), pair, sources)
     result["load_average_at_end"] = list(os.getloadavg())
-    write_json_atomic(args.out, result)
-    print(f"wrote {args.out}")
+    return result
 
 
-if __name__ == "__main__":
-    main()
+def cases(details: dict[str, Any]) -> list[Case]:
+    out = []
+    for model, sp in details["speed"].items():
+        ours, anchor = sp["windows"], sp["whole image (anchor)"]
+        n = len(ours["runs"])
+        for step in ("verify", "fit"):
+            out.append(case(
+                f"{model}: {step} of two 12 MP images (in process)",
+                figures(f"fit_and_verify, {step}, the patch windows through the cube",
+                        ours["best"]["wall"][step], cpu_s=ours["best"]["cpu"][step]),
+                figures(f"fit_and_verify(corrected=True), {step}, the whole image through the "
+                        "cube", anchor["best"]["wall"][step], cpu_s=anchor["best"]["cpu"][step]),
+                per="fit", statistic=f"best of {n} (fit_and_verify's own timers)"))
+    procs = details["processes"]
+    if "anchor" in procs:
+        b, a = procs["checkout"]["best"], procs["anchor"]["best"]
+        out.append(case(
+            "python -m fidelity fit of two 12 MP images",
+            figures("this checkout", b["seconds"], cpu_s=b["cpu_seconds"],
+                    max_rss_mb=b["max_rss_mb"]),
+            figures(f"the anchor checkout ({procs['anchor']['source']})", a["seconds"],
+                    cpu_s=a["cpu_seconds"], max_rss_mb=a["max_rss_mb"]),
+            per="process", statistic=f"best of {len(procs['checkout']['runs'])} (each figure)",
+            process=True))
+    else:
+        b = procs["checkout"]["best"]
+        out.append(case("python -m fidelity fit of two 12 MP images",
+                        figures("this checkout", b["seconds"], cpu_s=b["cpu_seconds"],
+                                max_rss_mb=b["max_rss_mb"]),
+                        None, per="process",
+                        statistic=f"best of {len(procs['checkout']['runs'])} (each figure)",
+                        process=True, note="no anchor checkout given (source)"))
+    return out

@@ -1,12 +1,11 @@
-"""Benchmark: auditing one frame of a 1 GB robot recording, against auditing the same frame as a
-PNG file.
+"""Auditing one frame of a 1 GB robot recording, against auditing the same frame as a PNG file.
 
-A recording of about 1 GB (``--gigabytes``) is written in /tmp (not in the repository) with
+A recording of about 1 GB (``gigabytes``) is written in /tmp (not in the repository) with
 rosbags' writers for each kind: a ROS 1 bag, a ROS 2 bag with sqlite3 storage and a ROS 2 bag
 with MCAP storage; its one topic holds 640 x 480 rgb8 sensor_msgs/Image frames of a chart
 photo (the frames differ by a little noise), 30 per second. Each measurement is a whole
 process, ``python -m fidelity audit RECORDING --topic /camera/image_raw --frame N`` (the chart
-found, measured, predicted), run right after the anchor's process (``--repeat`` pairs; medians),
+found, measured, predicted), run right after the anchor's process (``repeat`` pairs; medians),
 timed from start to exit (wall seconds), with its peak resident
 memory (``ru_maxrss`` of that child, from ``os.wait4``) and the bytes it read through read()
 calls (``rchar`` of /proc/self/io at exit: page-cache hits included, so it counts what the
@@ -17,14 +16,10 @@ about the whole bag; using its index, every frame costs about the same and reads
 beyond what the PNG audit reads (Python, numpy and the libraries themselves). The frame read
 alone (``fidelity.chart.recording.read_frame`` in a warm process: index and message, median of
 5) is timed too, with the bytes it reads.
-
-Writes reports/benchmarks/recording.json (or ``--out``).
-Run:  python -m benchmarks.bench_recording [--gigabytes 1] [--repeat 3]
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import shutil
@@ -34,11 +29,21 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+from benchmarks.machine import REPO as ROOT
+from benchmarks.speed.record import Case, case, figures
+from benchmarks.speed.runner import Context, Parameter
+
+ANCHOR = "auditing the same frame stored as a PNG file, whole processes in pairs"
+PARAMETERS = {"gigabytes": Parameter(1.0, "size of each recording"),
+              "kinds": Parameter("ros1,sqlite3,mcap", "kinds of recording"),
+              "repeat": Parameter(3, "pairs of runs per measurement (medians)")}
+QUICK = {"gigabytes": 0.02, "repeat": 1}
+NEEDS = ("rosbags",)
 TOPIC = "/camera/image_raw"
 WIDTH, HEIGHT = 640, 480
 T0 = 1_700_000_000_000_000_000
@@ -95,7 +100,7 @@ def read_only(path: Path, picks: dict[str, int], repeat: int) -> dict[str, Any]:
 
 def frames(n: int) -> list[np.ndarray]:
     """``n`` distinct 640 x 480 photos of the chart (the same chart, different noise)."""
-    from benchmarks.bench_memory import photo
+    from tests.fixtures.photos import photo
 
     base = photo(WIDTH, HEIGHT).astype(np.int16)
     rng = np.random.default_rng(0)
@@ -138,22 +143,19 @@ def size_of(path: Path) -> int:
 
 
 def run(args: list[str]) -> dict[str, float]:
-    """One whole ``fidelity`` process: wall seconds, peak RSS (MB), bytes read (MB)."""
+    """One whole ``fidelity`` process: wall seconds, peak RSS (MB, its own:
+    :func:`run_process`'s launcher), bytes read (MB)."""
+    from benchmarks.speed.timing import run_process
+
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    t = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-c", _CHILD, *args], env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    assert proc.stderr is not None
-    err = proc.stderr.read()
-    _, status, usage = os.wait4(proc.pid, 0)
-    wall = time.perf_counter() - t
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    if proc.returncode:
-        raise RuntimeError(f"{args}: exit {proc.returncode}: {err[-2000:]}")
-    line = next(ln for ln in err.splitlines() if ln.startswith("BENCH "))
+    row = run_process([sys.executable, "-c", _CHILD, *args], env=env, digits=4)
+    if row["exit"]:
+        raise RuntimeError(f"{args}: exit {row['exit']}: {row['stderr']}")
+    line = row["stderr"]  # the child's last line: its bytes read, written at exit
+    if not line.startswith("BENCH "):
+        raise RuntimeError(f"{args}: no BENCH line at the end of stderr: {line!r}")
     rchar = json.loads(line[6:])["rchar"]
-    return {"wall_s": wall, "max_rss_mb": usage.ru_maxrss * 1024 / 1e6,
-            "read_mb": rchar / 1e6}
+    return {"wall_s": row["seconds"], "max_rss_mb": row["max_rss_mb"], "read_mb": rchar / 1e6}
 
 
 def pairs(bag_args: list[str], png_args: list[str], repeat: int) -> dict[str, Any]:
@@ -174,17 +176,10 @@ def pairs(bag_args: list[str], png_args: list[str], repeat: int) -> dict[str, An
             "png_wall_s_runs": [round(r["wall_s"], 3) for r in png]}
 
 
-def main() -> int:
-    from benchmarks.machine import machine_info
+def measure(ctx: Context) -> dict[str, Any]:
     from fidelity.chart.image import write_png
-    from fidelity.core.fileio import write_json_atomic
 
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--gigabytes", type=float, default=1.0, help="Size of each recording.")
-    ap.add_argument("--kinds", default="ros1,sqlite3,mcap")
-    ap.add_argument("--repeat", type=int, default=3, help="Runs per measurement (median).")
-    ap.add_argument("--out", type=Path, default=ROOT / "reports/benchmarks/recording.json")
-    args = ap.parse_args()
+    args = SimpleNamespace(**ctx.params)
     frame_bytes = WIDTH * HEIGHT * 3
     count = int(args.gigabytes * 1e9 // frame_bytes)
     images = frames(8)
@@ -196,9 +191,6 @@ def main() -> int:
         for name, k in picks.items():
             pngs[name] = folder / f"frame-{name}.png"
             write_png(pngs[name], images[k % len(images)] / 255.0, 8)
-        print(f"{'recording':>10s} {'GB':>5s} {'frame':>6s} {'wall s':>7s} {'png s':>6s} "
-              f"{'ratio':>6s} {'RSS MB':>7s} {'png MB':>7s} {'read MB':>8s} {'png MB':>7s} "
-              f"{'frame s':>8s} {'frame MB':>8s}")
         for kind in [k.strip() for k in args.kinds.split(",") if k.strip()]:
             t = time.perf_counter()
             path = write(folder / (f"drive-{kind}.bag" if kind == "ros1" else f"drive-{kind}"),
@@ -229,27 +221,33 @@ def main() -> int:
                     "read_frame_mb": round(alone[name]["read_bytes"] / 1e6, 3),
                 }
                 rows.append(row)
-                print(f"{kind:>10s} {size / 1e9:5.2f} {k:6d} {row['wall_s']:7.2f} "
-                      f"{row['png_wall_s']:6.2f} {row['wall_ratio']:6.2f} "
-                      f"{row['max_rss_mb']:7.0f} {row['png_max_rss_mb']:7.0f} "
-                      f"{row['read_mb']:8.1f} {row['png_read_mb']:7.1f} "
-                      f"{row['read_frame_s']:8.3f} {row['read_frame_mb']:8.2f}")
             shutil.rmtree(path) if path.is_dir() else path.unlink()
-    doc = {"method": (__doc__ or "").split("\n\n")[1].replace("\n", " "),
-           "date": time.strftime("%Y-%m-%d"), "rows": rows,
-           "summary": {
-               "median_wall_ratio": statistics.median(r["wall_ratio"] for r in rows),
-               "max_wall_ratio": max(r["wall_ratio"] for r in rows),
-               "max_rss_ratio": max(r["rss_ratio"] for r in rows),
-               "max_read_beyond_png_mb": max(r["read_beyond_png_mb"] for r in rows),
-               "max_read_frame_s": max(r["read_frame_s"] for r in rows),
-               "max_read_frame_mb": max(r["read_frame_mb"] for r in rows),
-               "median_wall_s": statistics.median(r["wall_s"] for r in rows)},
-           "machine": machine_info()}
-    write_json_atomic(args.out, doc)
-    print(f"wrote {args.out}")
-    return 0
+    return {"repeat": args.repeat, "rows": rows,
+            "summary": {
+                "median_wall_ratio": statistics.median(r["wall_ratio"] for r in rows),
+                "max_wall_ratio": max(r["wall_ratio"] for r in rows),
+                "max_rss_ratio": max(r["rss_ratio"] for r in rows),
+                "max_read_beyond_png_mb": max(r["read_beyond_png_mb"] for r in rows),
+                "max_read_frame_s": max(r["read_frame_s"] for r in rows),
+                "max_read_frame_mb": max(r["read_frame_mb"] for r in rows),
+                "median_wall_s": statistics.median(r["wall_s"] for r in rows)}}
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+def cases(details: dict[str, Any]) -> list[Case]:
+    out = []
+    for r in details["rows"]:
+        n = len(r["wall_s_runs"])
+        out.append(case(
+            f"{r['recording']}, {r['position']} frame ({r['frame']} of {r['frames']}, "
+            f"{r['gigabytes']:g} GB)",
+            figures(f"fidelity audit {r['recording']} recording --frame {r['frame']}",
+                    r["wall_s"], max_rss_mb=r["max_rss_mb"], read_mb=r["read_mb"],
+                    runs_s=r["wall_s_runs"]),
+            figures("fidelity audit of the frame as a PNG", r["png_wall_s"],
+                    max_rss_mb=r["png_max_rss_mb"], read_mb=r["png_read_mb"],
+                    runs_s=r["png_wall_s_runs"]),
+            per="process", statistic=f"median of {n} processes, each right after the anchor's",
+            process=True, wall=r["wall_ratio"], of="median of the pairs' wall-time ratios",
+            note=(f"the frame read alone (warm process): {r['read_frame_s']} s, "
+                  f"{r['read_frame_mb']} MB")))
+    return out

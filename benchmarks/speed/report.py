@@ -1,27 +1,21 @@
-"""Cost of the HTML report of ``check`` and ``audit``: whole processes, wall time and max RSS.
+"""Cost of the HTML report of ``check`` and ``audit``: whole processes against the same
+commands without their report, and the report alone in process against its target.
 
 Each command runs as a fresh process (``sys.executable -m fidelity`` with this checkout on
-``PYTHONPATH``), ``--repeats`` times, interleaved with its anchors so a busy moment of the
+``PYTHONPATH``), ``repeats`` times, interleaved with its anchors so a busy moment of the
 machine hits every command alike. The anchors are ``python -c pass`` (start-up) and the same
 command without its report (``check --no-report``, ``audit`` without ``--html``): the report's
 cost is the difference in median wall time and in max RSS (``os.wait4``'s ``ru_maxrss`` of the
-process). Target (issue 30): the report's plots cost at most 0.2 s in total. On a busy machine
+process, its own: :func:`tests.fixtures.processes.run_process`). Target (issue 30): the report's plots cost at most 0.2 s in total. On a busy machine
 the difference of two whole-process medians swings by a few hundred milliseconds, so the
-target is judged in process (best of ``--repeats`` after a warm-up): the default check's HTML
+target is judged in process (best of ``repeats`` after a warm-up): the default check's HTML
 document with every figure plus its rendering, and an audit's whole HTML report (the image
-read again, every figure, the HTML).
-
-    python -m benchmarks.bench_report --repeats 7     # -> reports/benchmarks/report.json
-    python -m benchmarks.bench_report --source /path/to/older/checkout   # + its rows, "before"
-
-With ``--source``, the report commands of an older checkout run interleaved with this one's
-(same processes, same moment), rows marked ``[source]``.
+read again, every figure, the HTML). With ``source`` (an older checkout) its report commands
+run interleaved with this one's, rows marked ``[source]``.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import statistics
 import subprocess
@@ -29,24 +23,30 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
-from benchmarks.machine import machine_info
+from benchmarks.machine import REPO
+from benchmarks.speed.record import Case, case, figures
+from benchmarks.speed.runner import Context, Parameter
+from benchmarks.speed.timing import run_process
+
+ANCHOR = ("the same command without its report (check --no-report, audit without --html) and "
+          "python -c pass, fresh processes interleaved; in process: the 0.2 s target")
+PARAMETERS = {"repeats": Parameter(7, "interleaved rounds of every command"),
+              "source": Parameter(None, "an older checkout whose report commands run beside")}
+QUICK = {"repeats": 1}
 
 #: The report's plots may cost this much wall time in total (issue 30), seconds.
 TARGET_REPORT_S = 0.2
 
 
 def run_once(argv: list[str], cwd: str, env: dict[str, str]) -> tuple[float, float]:
-    """(wall seconds, max RSS in MB) of one run of ``argv``; it must exit 0."""
-    t0 = time.perf_counter()
-    proc = subprocess.Popen(argv, cwd=cwd, env=env, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
-    _, status, usage = os.wait4(proc.pid, 0)
-    wall = time.perf_counter() - t0
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    if proc.returncode != 0:
-        raise RuntimeError(f"{argv} exited {proc.returncode}")
-    return wall, usage.ru_maxrss / 1024.0
+    """(wall seconds, max RSS in MB) of one run of ``argv``, the process's own
+    (:func:`run_process`'s launcher); it must exit 0."""
+    row = run_process(argv, env=env, cwd=Path(cwd), digits=4)
+    if row["exit"] != 0:
+        raise RuntimeError(f"{argv} exited {row['exit']}: {row['stderr']}")
+    return float(row["seconds"]), float(row["max_rss_mb"])
 
 
 def commands(work: Path) -> dict[str, list[str]]:
@@ -98,19 +98,12 @@ def in_process(repeats: int, png: Path) -> dict[str, float]:
             "audit_html_report_s": round(min(audit_s), 4)}
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeats", type=int, default=7)
-    ap.add_argument("--out", type=Path, default=Path("reports/benchmarks/report.json"))
-    ap.add_argument("--source", type=Path, default=None,
-                    help="an older checkout whose report commands run beside this one's")
-    args = ap.parse_args(argv)
-    root = Path(__file__).resolve().parent.parent
-    env = dict(os.environ, PYTHONPATH=str(root))
+def measure(ctx: Context) -> dict[str, Any]:
+    repeats, source = ctx["repeats"], ctx["source"]
+    env = dict(os.environ, PYTHONPATH=str(REPO))
     envs = {"": env}
-    if args.source is not None:
-        envs[" [source]"] = dict(os.environ, PYTHONPATH=str(args.source.resolve()))
-    load = os.getloadavg()[0]
+    if source is not None:
+        envs[" [source]"] = dict(os.environ, PYTHONPATH=str(Path(source).resolve()))
     with tempfile.TemporaryDirectory() as tmp:  # no settings file is found from here
         work = Path(tmp)
         subprocess.run([sys.executable, "-m", "fidelity", "render", "--out",
@@ -122,13 +115,12 @@ def main(argv: list[str] | None = None) -> int:
             run_once(cmd, tmp, e)
         walls: dict[str, list[float]] = {name: [] for name in cmds}
         rss: dict[str, list[float]] = {name: [] for name in cmds}
-        for _ in range(args.repeats):
+        for _ in range(repeats):
             for name, (cmd, e) in cmds.items():
                 w, m = run_once(cmd, tmp, e)
                 walls[name].append(w)
                 rss[name].append(m)
-        sys.path.insert(0, str(root))
-        inner = in_process(args.repeats, work / "render" / "developed.png")
+        inner = in_process(repeats, work / "render" / "developed.png")
     anchor = statistics.median(walls["python -c pass"])
     rows = []
     for name in cmds:
@@ -136,43 +128,48 @@ def main(argv: list[str] | None = None) -> int:
         row: dict[str, object] = {"command": name, "median_s": round(med, 4),
                                   "min_s": round(min(walls[name]), 4),
                                   "max_rss_mb": round(mem, 1),
-                                  "ratio_to_python": round(med / anchor, 2)}
-        line = (f"{name:<37} median {med * 1000:7.1f} ms  min {min(walls[name]) * 1000:7.1f} ms"
-                f"  max RSS {mem:6.1f} MB  {med / anchor:5.2f}x python -c pass")
+                                  "ratio_to_python": round(med / anchor, 2),
+                                  "runs_s": walls[name]}
         plain = name.removesuffix(" [source]")
         if plain in PAIRS:
             base = PAIRS[plain] + name[len(plain):]
             extra = med - statistics.median(walls[base])
-            extra_min = min(walls[name]) - min(walls[base])
             row |= {"anchor": base, "report_s": round(extra, 4),
-                    "report_min_s": round(extra_min, 4),
+                    "report_min_s": round(min(walls[name]) - min(walls[base]), 4),
                     "report_rss_mb": round(mem - max(rss[base]), 1),
                     "ratio_to_anchor": round(med / statistics.median(walls[base]), 2),
                     "target_report_s": TARGET_REPORT_S,
                     "within_target_whole_process": extra <= TARGET_REPORT_S}
-            line += (f"\n{'':<37} report costs {extra * 1000:6.1f} ms (medians; "
-                     f"{extra_min * 1000:.1f} ms between the minima) and "
-                     f"{mem - max(rss[base]):+.1f} MB over '{base}' (target "
-                     f"{TARGET_REPORT_S:g} s; the difference of two noisy medians)")
         rows.append(row)
-        print(line)
-    print(f"in process, best of {args.repeats}: the check report's document with every figure "
-          f"{inner['document_with_figures_s'] * 1000:.1f} ms, its HTML "
-          f"{inner['render_html_s'] * 1000:.1f} ms; the audit's whole HTML report "
-          f"{inner['audit_html_report_s'] * 1000:.1f} ms")
     total = inner["document_with_figures_s"] + inner["render_html_s"]
     meets = max(total, inner["audit_html_report_s"]) <= TARGET_REPORT_S
-    print(f"target {TARGET_REPORT_S:g} s for the report in process: "
-          f"{'met' if meets else 'MISSED'}")
-    result = {"benchmark": "report", "repeats": args.repeats, "rows": rows,
-              "in_process": inner, "target_report_s": TARGET_REPORT_S, "meets_target": meets, "source": str(args.source) if args.source else None,
-              "load_average_at_start": round(load, 2), "machine": machine_info(),
-              "date": time.strftime("%Y-%m-%d")}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
-    print(f"-> {args.out}")
-    return 0
+    return {"benchmark": "report", "repeats": repeats, "rows": rows, "in_process": inner,
+            "target_report_s": TARGET_REPORT_S, "meets_target": meets,
+            "source": str(source) if source else None}
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+def cases(details: dict[str, Any]) -> list[Case]:
+    rows = {r["command"]: r for r in details["rows"]}
+    stat = (f"median of {details['repeats']} interleaved processes; max RSS: the largest of "
+            "the runs")
+
+    def fig(r: dict[str, Any]) -> Any:
+        return figures(r["command"], r["median_s"], best_s=r["min_s"],
+                       max_rss_mb=r["max_rss_mb"], runs_s=r.get("runs_s"))
+
+    out = [case(name, fig(r), fig(rows[r.get("anchor", "python -c pass")]), per="process",
+                statistic=stat, process=True)
+           for name, r in rows.items() if name != "python -c pass"]
+    inner = details["in_process"]
+    target = details["target_report_s"]
+    out.append(case("the check's HTML document with every figure, and its HTML (in process)",
+                    figures("chart_document + render_html",
+                            inner["document_with_figures_s"] + inner["render_html_s"]),
+                    None, per="report", statistic=f"best of {details['repeats']}",
+                    target_s=target))
+    out.append(case("an audit's whole HTML report, the image read again (in process)",
+                    figures("chart_document(audit, source_pixels) + render_html",
+                            inner["audit_html_report_s"]),
+                    None, per="report", statistic=f"best of {details['repeats']}",
+                    target_s=target))
+    return out

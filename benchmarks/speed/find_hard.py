@@ -1,8 +1,8 @@
-"""Benchmark: the chart finder on the hard kinds of photo, fidelity against OpenCV's mcc detector.
+"""The chart finder on the hard kinds of photo, fidelity against OpenCV's mcc detector.
 
-Images (:mod:`benchmarks.hard_scenes`, seeded, made in memory, never committed): real COCO
+Images (:mod:`tests.fixtures.hard_scenes`, seeded, made in memory, never committed): real COCO
 val2017 photos as backgrounds with a 24-patch chart composited in perspective and one hazard
-each (``--per-hazard`` images of each): ``distractors`` (tiles on the chart's own grid or not,
+each (``per_hazard`` images of each): ``distractors`` (tiles on the chart's own grid or not,
 a checkerboard, a grey card beside it), ``occluder`` (a leaf or hand with the photo's texture
 over two neighbouring patches; more when it reaches over) and ``isp`` (CLAHE local tone mapping
 and unsharp-mask halos on a 1920 x 1080 frame). JPEG quality 85.
@@ -13,18 +13,14 @@ corner error in patch pitches of the answers; for fidelity also the covered patc
 against the truth (a patch whose central half-pitch window is more than a tenth covered):
 left out, missed (of them, flagged: far from what the other patches predict but flat, so
 measured and named in a note, ``FoundChart.flat_off_fit``), and clear patches left out. Time: wall time of each finder on the
-same decoded pixels, as in :mod:`benchmarks.bench_find_chart`.
+same decoded pixels, as in :mod:`benchmarks.speed.find_chart`.
 
-Writes ``reports/find_chart/hard-results.json`` (per image and summary, with the machine) and
-``reports/find_chart/hard-table.md``.
-Run:  python -m benchmarks.bench_find_hard [--per-hazard 20] [--seed 23]
+Also writes ``hard-table.md`` under ``reports/find_chart``.
 """
 
 from __future__ import annotations
 
-import argparse
 import glob
-import os
 import sys
 import time
 from pathlib import Path
@@ -32,12 +28,21 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.bench_find_chart import _opencv_version, find_mcc
-from benchmarks.machine import machine_info
+from benchmarks.speed.find_chart import _opencv_version, find_mcc
+from benchmarks.speed.record import Case, case, figures
+from benchmarks.speed.runner import Context, Parameter
 from fidelity.colour import colorimetry as cm
-from fidelity.core.fileio import write_json_atomic, write_text_atomic
+from fidelity.core.fileio import write_text_atomic
 from tests.fixtures.chart_scenes import corners_correct
 from tests.fixtures.hard_scenes import HAZARDS, hard_scene
+
+ANCHOR = "OpenCV's mcc detector (cv2.mcc, MCC24) on the same decoded photos"
+PARAMETERS = {"per_hazard": Parameter(20, "photos of each hazard"),
+              "seed": Parameter(23, "the photos' seed"),
+              "coco": Parameter(None, "folder of COCO JPEGs (default: the shared val2017)")}
+QUICK = {"per_hazard": 2}
+NEEDS = ("shared",)
+ARTEFACTS = "reports/find_chart"
 
 
 def _fidelity(pixels: np.ndarray) -> tuple[np.ndarray | None, tuple[int, ...],
@@ -57,7 +62,7 @@ def run(per_hazard: int, seed: int, coco: Path) -> list[dict[str, Any]]:
 
     files = sorted(glob.glob(str(coco / "*.jpg")))
     if len(files) < 50:
-        sys.exit(f"bench_find_hard: need COCO photos in {coco} (found {len(files)})")
+        sys.exit(f"find_hard: need COCO photos in {coco} (found {len(files)})")
     renders = [cm.linearize_srgb(np.clip(render_chart(c, i).measurement.srgb, 0.0, 1.0))
                for c, i in (("ideal", "D65"), ("nikon-5100", "D65"), ("nikon-5100", "A"),
                             ("sigma-sdmerrill", "F11"))]
@@ -157,32 +162,35 @@ def table(summary: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
+def measure(ctx: Context) -> dict[str, Any]:
     from fidelity.core.resources import shared_dir
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--per-hazard", type=int, default=20)
-    ap.add_argument("--seed", type=int, default=23)
     shared = shared_dir()
-    ap.add_argument("--coco", type=Path,
-                    default=(shared / "coco/val2017") if shared else Path("../shared/coco/val2017"))
-    ap.add_argument("--out", type=Path,
-                    default=Path(__file__).parents[1] / "reports/find_chart")
-    args = ap.parse_args()
+    coco = Path(ctx["coco"]) if ctx["coco"] else (
+        shared / "coco/val2017" if shared else Path("../shared/coco/val2017"))
     find_mcc(np.zeros((64, 64, 3), np.uint8) + 128)  # warm up OpenCV's first call
-    rows = run(args.per_hazard, args.seed, args.coco)
+    rows = run(ctx["per_hazard"], ctx["seed"], coco)
     summary = summarise(rows)
-    text = table(summary)
-    print(text)
-    args.out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(args.out / "hard-results.json", {
-        "benchmark": "chart finding on hard photos (distractors, occluders, ISP look)",
-        "per_hazard": args.per_hazard, "seed": args.seed, "summary": summary, "images": rows,
-        "machine": {**machine_info(), "opencv": _opencv_version()},
-        "load_average": os.getloadavg()})
-    write_text_atomic(args.out / "hard-table.md", text)
-    print(f"wrote {args.out / 'hard-results.json'}")
+    ctx.log(table(summary))
+    return {"benchmark": "chart finding on hard photos (distractors, occluders, ISP look)",
+            "per_hazard": ctx["per_hazard"], "seed": ctx["seed"], "opencv": _opencv_version(),
+            "summary": summary, "images": rows}
 
 
-if __name__ == "__main__":
-    main()
+def cases(details: dict[str, Any]) -> list[Case]:
+    out = []
+    for hazard, per in details["summary"].items():
+        ours, mcc = per["fidelity"], per["mcc"]
+        out.append(case(
+            hazard, figures("fidelity find_chart", ours["median_seconds"]),
+            figures("OpenCV mcc", mcc["median_seconds"]), per="image",
+            statistic=f"median over {ours['images']} photos, one run each",
+            note=(f"found correctly: fidelity {ours['found_correct']}/{ours['images']} "
+                  f"({ours['answered_wrongly']} wrong), mcc {mcc['found_correct']}/"
+                  f"{mcc['images']} ({mcc['answered_wrongly']} wrong)")))
+    return out
+
+
+def report(result: dict[str, Any], folder: Path) -> None:
+    """``hard-table.md``: each hazard's scores and times."""
+    write_text_atomic(folder / "hard-table.md", table(result["details"]["summary"]))

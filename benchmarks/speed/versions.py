@@ -1,29 +1,24 @@
-"""This checkout against an earlier commit of it, as whole processes: the speed-up (or cost) of a
-change, measured side by side so that a busy moment of the machine hits both alike.
+"""This checkout against an earlier commit of it, as whole processes: the speed-up (or cost) of
+a change, measured side by side so that a busy moment of the machine hits both alike.
 
-The anchor is the package of ``--anchor`` (exported with ``git archive``: ``fidelity`` and the
-data folders it reads), run with ``python -m fidelity`` from that folder; this checkout is run
-the same way from the repository. Commands (``--set``): ``startup``, ``fidelity audit
-PHOTO.jpg --json F`` of ``bench_startup``'s 12-megapixel photo and ``fidelity check`` with its
-default HTML + JSON report; ``validate``, a quick look with ``fidelity validate --limit 8`` (three
-cameras of ``cameras/``, YOLOX-nano; the shared data of ``$FIDELITY_SHARED``, default
-``../shared``), each run from an empty store; ``reports``, the COCO pipeline's three reports
-from committed data (:func:`report_commands`). Each is run ``--repeats`` times per side, the sides alternating; the result is the
-median and best wall time, the median max RSS and the ratio of medians (this / anchor), with
-the machine and its load average.
+The anchor is the package of the commit ``anchor`` (exported with ``git archive``: ``fidelity``
+and the data folders it reads), run with ``python -m fidelity`` from that folder; this checkout
+is run the same way from the repository. Command sets (``set``): ``startup``, ``fidelity audit
+PHOTO.jpg --json F`` of :func:`benchmarks.speed.startup.make_photo`'s 12-megapixel photo and
+``fidelity check`` with its default HTML + JSON report; ``validate``, a quick look with
+``fidelity validate --limit 8`` (three cameras of ``cameras/``, YOLOX-nano; the shared data of
+``$FIDELITY_SHARED``, default ``../shared``), each run from an empty store; ``reports``, the COCO
+pipeline's three reports from committed data (:func:`report_commands`). Each is run
+``repeats`` times per side, the sides alternating, after a warm-up run of each; the figures
+are the median and best wall time and the median max RSS, the ratio that of the medians.
 
-    python -m benchmarks.bench_versions --anchor 8913577 --repeats 15
-    # -> reports/benchmarks/versions.json
-    python -m benchmarks.bench_versions --anchor 82d4032 --set validate --repeats 5 \
+    python -m benchmarks.speed versions -p anchor=8913577 -p repeats=15
+    python -m benchmarks.speed versions -p anchor=82d4032 -p set=validate -p repeats=5 \
         --out reports/benchmarks/versions_validate.json
-    python -m benchmarks.bench_versions --anchor 7049c14 --set reports --repeats 5 \
-        --out reports/benchmarks/versions_reports.json
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import statistics
 import subprocess
@@ -32,9 +27,16 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from benchmarks.machine import machine_info
+from benchmarks.machine import REPO
+from benchmarks.speed.record import Case, case, figures
+from benchmarks.speed.runner import Context, Parameter
 
-REPO = Path(__file__).resolve().parent.parent
+ANCHOR = "the same commands with the package of an earlier commit (git archive), sides alternating"
+PARAMETERS = {"anchor": Parameter(None, "the commit to compare this checkout with (required)"),
+              "repeats": Parameter(15, "runs per side, alternating"),
+              "set": Parameter("startup", "the commands: startup, validate or reports")}
+QUICK = {"repeats": 1}
+NEEDS = ("git",)
 
 
 def export(rev: str, into: Path,
@@ -109,8 +111,7 @@ def run(argv: list[str], source: Path) -> tuple[float, float]:
     one when reading a scores file)."""
     import shutil
 
-    from benchmarks.bench_memory import run_process
-    from benchmarks.bench_startup import user_environment
+    from benchmarks.speed.timing import run_process, user_environment
 
     if "--store" in argv and "--report-only" not in argv:
         shutil.rmtree(argv[argv.index("--store") + 1], ignore_errors=True)
@@ -123,38 +124,34 @@ def run(argv: list[str], source: Path) -> tuple[float, float]:
     return float(row["seconds"]), float(row["max_rss_mb"])
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--anchor", required=True, help="commit to compare this checkout with")
-    ap.add_argument("--repeats", type=int, default=15)
-    ap.add_argument("--set", dest="which", choices=("startup", "validate", "reports"),
-                    default="startup",
-                    help="the commands to time (module docstring)")
-    ap.add_argument("--out", type=Path, default=REPO / "reports" / "benchmarks" / "versions.json")
-    args = ap.parse_args(argv)
-    from benchmarks.bench_startup import make_photo
+def measure(ctx: Context) -> dict[str, Any]:
+    from benchmarks.speed.startup import make_photo
 
-    anchor = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", args.anchor],
+    which, repeats = ctx["set"], ctx["repeats"]
+    if not ctx["anchor"]:
+        raise SystemExit("versions: give the commit to compare with, -p anchor=REV")
+    if which not in ("startup", "validate", "reports"):
+        raise SystemExit(f"versions: set {which!r}: startup, validate or reports")
+    anchor = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", ctx["anchor"]],
                             check=True, capture_output=True, text=True).stdout.strip()
     head = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"],
                           check=True, capture_output=True, text=True).stdout.strip()
     dirty = bool(subprocess.run(["git", "-C", str(REPO), "status", "--porcelain", "fidelity"],
                                 check=True, capture_output=True, text=True).stdout.strip())
-    load = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         base = Path(tmp) / "anchor"
         base.mkdir()
         export(anchor, base)
         photo = Path(tmp) / "photo.jpg"
         make_photo(photo)
-        cmds = commands(photo, Path(tmp), args.which)
+        cmds = commands(photo, Path(tmp), which)
         sides = {"anchor": base, "this": REPO}
         times: dict[str, dict[str, list[tuple[float, float]]]] = {
             n: {s: [] for s in sides} for n in cmds}
         for cmd in cmds.values():  # warm the file cache and write the .pyc files once
             for src in sides.values():
                 run(cmd, src)
-        for _ in range(args.repeats):
+        for _ in range(repeats):
             for name, cmd in cmds.items():
                 for side, src in sides.items():
                     times[name][side].append(run(cmd, src))
@@ -165,23 +162,26 @@ def main(argv: list[str] | None = None) -> int:
             walls = [w for w, _ in t[side]]
             row[side] = {"median_s": round(statistics.median(walls), 3),
                          "min_s": round(min(walls), 3),
-                         "max_rss_mb": round(statistics.median(m for _, m in t[side]), 1)}
+                         "max_rss_mb": round(statistics.median(m for _, m in t[side]), 1),
+                         "runs_s": walls}
         row["ratio_of_medians"] = round(row["this"]["median_s"] / row["anchor"]["median_s"], 3)
         row["ratio_of_best"] = round(row["this"]["min_s"] / row["anchor"]["min_s"], 3)
         rows.append(row)
-    result = {"benchmark": "versions", "set": args.which, "anchor": anchor,
-              "this": head + (" with uncommitted changes" if dirty else ""),
-              "repeats": args.repeats, "rows": rows, "load_average_at_start": round(load, 2),
-              "machine": machine_info(),
-              "bytecode": "compiled .pyc files (PYTHONDONTWRITEBYTECODE unset)"}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
-    for r in rows:
-        print(f"{r['command']}: this {r['this']['median_s']:.2f} s, anchor "
-              f"{r['anchor']['median_s']:.2f} s (median; ratio {r['ratio_of_medians']:.2f}; "
-              f"best {r['this']['min_s']:.2f} / {r['anchor']['min_s']:.2f})")
-    return 0
+    return {"benchmark": "versions", "set": which, "anchor": anchor,
+            "this": head + (" with uncommitted changes" if dirty else ""),
+            "repeats": repeats, "rows": rows,
+            "bytecode": "compiled .pyc files (PYTHONDONTWRITEBYTECODE unset)"}
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+def cases(details: dict[str, Any]) -> list[Case]:
+    stat = f"median of {details['repeats']} processes per side, alternating"
+    out = []
+    for r in details["rows"]:
+        sides = {side: figures(f"{r['command']} ({label})", r[side]["median_s"],
+                               best_s=r[side]["min_s"], max_rss_mb=r[side]["max_rss_mb"],
+                               runs_s=r[side].get("runs_s"))
+                 for side, label in (("this", details["this"]),
+                                     ("anchor", f"commit {details['anchor']}"))}
+        out.append(case(r["command"], sides["this"], sides["anchor"], per="process",
+                        statistic=stat, process=True))
+    return out

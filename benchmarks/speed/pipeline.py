@@ -1,9 +1,9 @@
-"""Images per second for each stage of the COCO pipeline, with the anchors side by side.
+"""Each stage of the COCO pipeline per image, with the anchors side by side.
 
 Stages (per image, in memory): decode JPEG -> transform (8-bit fast path) -> encode JPEG with
 the original tables -> decode again -> detector inference (+ decode/NMS) -> COCO scoring (the
 sweep's scorer, faster-coco-eval, and the pycocotools reference, both timed). Every timing is the
-best of ``--repeats``.
+best of ``repeats``.
 
 Anchors timed in the same run:
 * "plain": a plain Pillow + colour-science implementation of the same transforms (float
@@ -14,28 +14,36 @@ Anchors timed in the same run:
 Requirement (issue 5): transform stage >= 5x faster than "plain" and within 2x of "floor";
 (issue 24) pull_mean within 1.5x of "floor" (timed per kernel: numpy, and numba when installed,
 in wall time and in the thread's CPU time).
-
-Usage: python benchmarks/bench_pipeline.py [--images N] [--model yolox_nano.onnx]
-       [--json reports/bench_pipeline.json]   (needs ../shared or $FIDELITY_SHARED)
 """
 
 from __future__ import annotations
 
-import argparse
 import io
 import os
-import sys
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
+# one BLAS thread, as the sweep's workers run: set before NumPy is imported (each benchmark
+# runs in a process of its own)
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from machine import machine_info  # noqa: E402
+from benchmarks.speed.record import Case, case, figures  # noqa: E402
+from benchmarks.speed.runner import Context, Parameter  # noqa: E402
+
+ANCHOR = ("plain Pillow + colour-science transforms; the decode + re-encode floor (Pillow); "
+          "pycocotools for the scoring")
+PARAMETERS = {"images": Parameter(30, "shared COCO images"),
+              "model": Parameter("yolox_nano.onnx", "the detector (a file of the shared models)"),
+              "threads": Parameter(1, "onnxruntime intra-op threads"),
+              "target": Parameter(6.0, "the ΔE of the transforms' parameters"),
+              "repeats": Parameter(3, "best of N for every timing"),
+              "note": Parameter("", "conditions to record with the machine")}
+QUICK = {"images": 3, "repeats": 1}
+NEEDS = ("shared", "onnxruntime")
 
 if TYPE_CHECKING:
     from PIL import Image
@@ -83,18 +91,9 @@ def timed(fn: Callable[[], object], reps: int = 1) -> tuple[float, object]:
     return best, out
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--images", type=int, default=30)
-    ap.add_argument("--model", default="yolox_nano.onnx")
-    ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--target", type=float, default=6.0)
-    ap.add_argument("--repeats", type=int, default=3, help="best of N for every timing")
-    ap.add_argument("--json", default=None)
-    ap.add_argument("--note", default="", help="conditions to record with the machine")
-    args = ap.parse_args()
+def measure(ctx: Context) -> dict[str, Any]:
+    from types import SimpleNamespace
 
-    import onnxruntime
     from PIL import Image
 
     from fidelity.coco.dataset import PixelMap, reference_transform
@@ -105,10 +104,10 @@ def main() -> int:
     from fidelity.prediction.calibration import calibrate_transform
     from fidelity.prediction.transforms import TRANSFORMS
 
+    args = SimpleNamespace(**ctx.params)
     shared = shared_dir()
     if shared is None:
-        print("skipped: ../shared (COCO images, models) not present", file=sys.stderr)
-        return 0
+        raise SystemExit("pipeline: ../shared (COCO images, models) not present")
     coco = load_annotations(shared / "coco/annotations/instances_val2017_subset.json")
     ids = sorted(coco.getImgIds())[: args.images]
     raw = {i: (shared / "coco/val2017" / coco.imgs[i]["file_name"]).read_bytes() for i in ids}
@@ -210,9 +209,7 @@ def main() -> int:
     res["model"] = args.model
     res["threads"] = args.threads
     res["repeats"] = R
-    res["machine"] = machine_info() | {
-        "onnxruntime": onnxruntime.__version__,
-        "note": args.note}
+    res["note"] = args.note
 
     print(f"{n} images, {args.model}, {args.threads} thread(s); ms per image (images/s)")
     for k in ("decode_ms", "transform_mean_ms", "encode_ms", "decode_again_ms", "inference_ms",
@@ -249,12 +246,38 @@ def main() -> int:
     used = res["pull_mean_kernels"][pull_mean_kernel()]
     res["requirement"]["pull_mean_ratio_to_floor_wall"] = used["wall_ratio_to_floor"]
     res["requirement"]["pull_mean_ratio_to_floor_cpu"] = used["cpu_ratio_to_floor"]
-    if args.json:
-        from fidelity.core.fileio import write_json_atomic
-
-        write_json_atomic(args.json, res)
-    return 0
+    return res
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+def cases(details: dict[str, Any]) -> list[Case]:
+    n, r = details["images"], details["repeats"]
+    best = f"best of {r} passes over {n} COCO images"
+    floor = figures("decode + re-encode (Pillow, the original tables)",
+                    details["floor_decode_reencode_ms"] / 1000)
+    out = []
+    for name, t in details["transform"].items():
+        out.append(case(f"transform {name}: against Pillow + colour-science",
+                        figures(f"PixelMap {name} (8-bit fast path)", t["fast_ms"] / 1000),
+                        figures(f"Pillow + colour-science {name}, float64", t["plain_ms"] / 1000),
+                        per="image", statistic=f"{best} (the anchor: {min(n, 8)} images)"))
+        out.append(case(f"transform {name}: against the decode + re-encode floor",
+                        figures(f"PixelMap {name} (8-bit fast path)", t["fast_ms"] / 1000),
+                        floor, per="image", statistic=best))
+    kernels = details["pull_mean_kernels"]
+    floor_k = figures("decode + re-encode (Pillow)", kernels["floor"]["wall_ms"] / 1000,
+                      cpu_s=kernels["floor"]["cpu_ms"] / 1000)
+    for k, v in kernels.items():
+        if k == "floor":
+            continue
+        out.append(case(f"pull_mean, {k} kernel: against the floor",
+                        figures(f"pull_mean_uint8, {k}", v["wall_ms"] / 1000,
+                                cpu_s=v["cpu_ms"] / 1000),
+                        floor_k, per="image",
+                        statistic=f"best of {max(r, 5)} interleaved passes over {n} images "
+                                  "(CPU: the thread's)"))
+    out.append(case(f"COCO scoring ({details['scorer']})",
+                    figures(details["scorer"], details["scoring_ms"] / 1000),
+                    figures("pycocotools", details["scoring_pycocotools_ms"] / 1000),
+                    per="image", statistic=best,
+                    note=f"mAP difference {details['scoring_map_difference']:.1e}"))
+    return out

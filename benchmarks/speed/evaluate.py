@@ -1,6 +1,6 @@
 """`fidelity evaluate`'s detection loop against the bare onnxruntime floor, per model and stage.
 
-For each model, on the same N shared COCO images, timed in one run (best of ``--repeats``,
+For each model, on the same N shared COCO images, timed in one run (best of ``repeats``,
 the floor and the loops interleaved so that they see the same machine load):
 
 * floor: ``session.run`` alone on model inputs prepared beforehand (the network, nothing else);
@@ -18,17 +18,11 @@ the worker the loop runs at max(main, worker) / floor ("idle" ratio); the wall r
 this machine gave as loaded by whatever else ran (best of N, interleaved).
 
 Requirement (issue 24): stream <= 1.2x the floor for every model.
-
-Usage: python -m benchmarks.bench_evaluate [--images 60] [--repeats 5] [--threads 1]
-       [--models yolox_nano,yolo11n-int8dyn] [--json reports/coco/bench_evaluate.json]
-       (needs ../shared or $FIDELITY_SHARED)
 """
 
 from __future__ import annotations
 
-import argparse
 import os
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -36,8 +30,17 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from machine import machine_info  # noqa: E402
+from benchmarks.speed.record import Case, case, figures
+from benchmarks.speed.runner import Context, Parameter
+
+ANCHOR = "the bare onnxruntime session.run on model inputs prepared beforehand (the floor)"
+PARAMETERS = {"images": Parameter(60, "shared COCO images"),
+              "repeats": Parameter(5, "best of N, the floor and the loops interleaved"),
+              "threads": Parameter(1, "onnxruntime intra-op threads"),
+              "models": Parameter("", "comma-separated model stems (default: all shared)"),
+              "note": Parameter("", "conditions to record with the machine")}
+QUICK = {"images": 4, "repeats": 1, "models": "yolox_nano"}
+NEEDS = ("shared", "onnxruntime")
 
 REQUIREMENT = 1.2
 
@@ -120,63 +123,48 @@ def bench_model(path: Path, files: list[Path], threads: int, repeats: int,
     }
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
-    ap.add_argument("--images", type=int, default=60)
-    ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--threads", type=int, default=1, help="onnxruntime intra-op threads")
-    ap.add_argument("--models", default="", help="comma-separated model stems (default: all)")
-    ap.add_argument("--json", default=None)
-    ap.add_argument("--note", default="", help="conditions to record with the machine")
-    args = ap.parse_args()
+def measure(ctx: Context) -> dict[str, Any]:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-
-    import onnxruntime
 
     from fidelity.coco.scoring import load_annotations
     from fidelity.core.resources import shared_dir
 
     shared = shared_dir()
     if shared is None:
-        print("skipped: ../shared (COCO images, models) not present", file=sys.stderr)
-        return 0
+        raise SystemExit("evaluate: ../shared (COCO images, models) not present")
     coco = load_annotations(shared / "coco/annotations/instances_val2017_subset.json")
-    ids = sorted(coco.getImgIds())[: args.images]
+    ids = sorted(coco.getImgIds())[: ctx["images"]]
     files = [shared / "coco/val2017" / coco.imgs[i]["file_name"] for i in ids]
-    wanted = [m for m in args.models.split(",") if m]
+    wanted = [m for m in ctx["models"].split(",") if m]
     models = [p for p in sorted((shared / "models").glob("*.onnx"))
               if not wanted or p.stem in wanted]
-    rows = []
-    print(f"{len(ids)} images, {args.threads} onnxruntime thread(s), best of {args.repeats}; "
-          "ms per image (CPU: process time)")
-    print(f"  {'model':<18} {'floor':>7} {'stream':>7} {'serial':>7} {'wall x':>7} "
-          f"{'main':>7} {'worker':>7} {'idle x':>7} {'serialx':>7} "
-          f"{'decode':>7} {'prep':>6} {'post':>6} {'score':>6}")
-    for path in models:
-        r = bench_model(path, files, args.threads, args.repeats, coco, ids)
-        rows.append(r)
-        s, w = r["stages_cpu_ms"], r["wall_ms"]
-        print(f"  {r['model']:<18} {w['floor']:7.2f} {w['stream']:7.2f} {w['serial']:7.2f} "
-              f"{r['wall_ratio']:7.3f} {r['stream_main_thread_cpu_ms']:7.2f} "
-              f"{r['stream_worker_cpu_ms']:7.2f} {r['idle_machine_ratio']:7.3f} "
-              f"{r['serial_cpu_ratio']:7.3f} {s['decode']:7.2f} {s['preprocess']:6.2f} "
-              f"{s['postprocess']:6.2f} {s['scoring']:6.2f}")
-    print("wall x: streamed loop / bare session.run, wall clock (this machine, as loaded); "
-          "idle x: max(main-thread CPU, worker CPU) / session.run CPU, the loop's speed with "
-          "a core free for the worker; serialx: the four steps on one thread, CPU")
-    res = {"models": rows, "images": len(ids), "threads": args.threads,
-           "repeats": args.repeats, "requirement_ratio": REQUIREMENT,
-           "all_ok_wall": all(r["ok_wall"] for r in rows),
-           "all_ok_idle_machine": all(r["ok_idle_machine"] for r in rows),
-           "machine": machine_info() | {"onnxruntime": onnxruntime.__version__,
-                                        "note": args.note}}
-    if args.json:
-        from fidelity.core.fileio import write_json_atomic
-
-        write_json_atomic(args.json, res)
-        print(f"wrote {args.json}")
-    return 0
+    if not models:
+        raise SystemExit(f"evaluate: no model {wanted} in {shared / 'models'}")
+    rows = [bench_model(path, files, ctx["threads"], ctx["repeats"], coco, ids)
+            for path in models]
+    return {"models": rows, "images": len(ids), "threads": ctx["threads"],
+            "repeats": ctx["repeats"], "requirement_ratio": REQUIREMENT,
+            "all_ok_wall": all(r["ok_wall"] for r in rows),
+            "all_ok_idle_machine": all(r["ok_idle_machine"] for r in rows),
+            "note": ctx["note"]}
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+def cases(details: dict[str, Any]) -> list[Case]:
+    stat = (f"best of {details['repeats']}, interleaved, over {details['images']} images; "
+            f"{details['threads']} onnxruntime thread(s)")
+    out = []
+    for r in details["models"]:
+        w, c = r["wall_ms"], r["cpu_ms"]
+        floor = figures("session.run alone", w["floor"] / 1000, cpu_s=c["floor"] / 1000)
+        out.append(case(f"{r['model']}: the streamed loop (fidelity evaluate)",
+                        figures("Detector.detect_stream from the JPEG files", w["stream"] / 1000,
+                                cpu_s=c["stream"] / 1000),
+                        floor, per="image", statistic=stat, target_s=None,
+                        note=(f"requirement: at most {details['requirement_ratio']}x the floor; "
+                              f"on a machine with a core free for the worker "
+                              f"{r['idle_machine_ratio']:.3f}x")))
+        out.append(case(f"{r['model']}: the same steps on one thread",
+                        figures("read, preprocess, network, NMS one after the other",
+                                w["serial"] / 1000, cpu_s=c["serial"] / 1000),
+                        floor, per="image", statistic=stat))
+    return out

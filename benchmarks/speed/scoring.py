@@ -7,25 +7,31 @@ Two things, on real data (a sweep store, ``fidelity sweep --out DIR``):
   scored with pycocotools (``SweepStore.scorer_of``), with a fresh pycocotools run for the
   others. The largest absolute difference over mAP, AP50, AP75 and every class AP is reported. The issue's
   rule: faster-coco-eval may be the fast path only if it agrees to 1e-4.
-* Speed: on a sample of cells, both scorers timed side by side (best of ``--repeats``) on the
-  same detections; the ratio is printed.
-
-Usage: python benchmarks/bench_scoring.py STORE_DIR --annotations instances.json
-       [--sample 6] [--repeats 2] [--check N] [--json reports/coco/bench_scoring.json]
+* Speed: on a sample of cells, both scorers timed side by side (best of ``repeats``) on the
+  same detections.
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from machine import best_time, machine_info  # noqa: E402
+from benchmarks.speed.record import Case, case, figures
+from benchmarks.speed.runner import Context, Parameter
+from benchmarks.speed.timing import best_time
+
+ANCHOR = "pycocotools (the reference scorer) on the same stored detections"
+PARAMETERS = {"store": Parameter(None, "a sweep store (fidelity sweep --out DIR; required)"),
+              "annotations": Parameter(None, "the COCO annotations (default: the shared subset)"),
+              "sample": Parameter(6, "cells timed with both scorers"),
+              "check": Parameter(0, "compare only this many cells, drawn at random (0: all)"),
+              "repeats": Parameter(2, "best of N")}
+QUICK = {"sample": 2, "check": 2, "repeats": 1}
+NEEDS = ("onnxruntime",)
 
 if TYPE_CHECKING:
     from fidelity.coco.scoring import CocoScore
@@ -46,21 +52,23 @@ def _max_difference(ref: SweepCell | CocoScore, score: CocoScore) -> float:
     return float(max(diffs))
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("store", type=Path)
-    ap.add_argument("--annotations", type=Path, required=True)
-    ap.add_argument("--sample", type=int, default=6, help="cells timed with both scorers")
-    ap.add_argument("--check", type=int, default=None,
-                    help="compare only this many cells, drawn at random (seed 1); default every "
-                         "finished cell (on a 1000-image store about 20 s per cell on 2 cores)")
-    ap.add_argument("--repeats", type=int, default=2)
-    ap.add_argument("--json", type=Path, default=None)
-    args = ap.parse_args()
+def measure(ctx: Context) -> dict[str, Any]:
+    from types import SimpleNamespace
 
     from fidelity.coco.scoring import evaluate_detections, load_annotations
     from fidelity.coco.sweep import SweepStore
-    from fidelity.core.fileio import write_json_atomic
+    from fidelity.core.resources import shared_dir
+
+    if not ctx["store"]:
+        raise SystemExit("scoring: give the sweep store, -p store=DIR")
+    shared = shared_dir()
+    annotations = ctx["annotations"] or (
+        shared / "coco/annotations/instances_val2017_subset.json" if shared else None)
+    if annotations is None:
+        raise SystemExit("scoring: give the annotations, -p annotations=FILE")
+    args = SimpleNamespace(store=Path(ctx["store"]), annotations=Path(annotations),
+                           sample=ctx["sample"], check=ctx["check"] or None,
+                           repeats=ctx["repeats"])
 
     store = SweepStore(args.store, create=False)
     scorer_of = store.scorer_of
@@ -121,17 +129,21 @@ def main() -> int:
         "median_speedup": float(np.median([t["ratio"] for t in timing])) if timing else None,
         "versions": {"pycocotools": version("pycocotools"),
                      "faster-coco-eval": version("faster-coco-eval")},
-        "machine": machine_info(),
+        "repeats": args.repeats,
         "note": ("every finished cell compared" if n == len(cells) else
                  f"{n} of {len(cells)} finished cells compared, drawn at random (--check)"),
     }
-    print(f"{n} cells: largest |Δ| over stats and class AP {worst:.2e} ({worst_cell}); "
-          f"agrees to 1e-4: {result['agrees']}; median speed-up {result['median_speedup']:.1f}x")
-    if args.json:
-        write_json_atomic(args.json, result)
-        print(f"wrote {args.json}")
-    return 0 if result["agrees"] else 1
+    return result
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+def cases(details: dict[str, Any]) -> list[Case]:
+    repeats = details.get("repeats")
+    stat = f"best of {repeats}" if repeats else "best of N (N not recorded)"
+    note = (f"largest difference over mAP, AP50, AP75 and class AP "
+            f"{details['largest_difference']:.1e} over {details['cells_compared']} cells "
+            f"(agrees to {details['tolerance']:g}: {details['agrees']})")
+    return [case(f"{t['cell']} ({t['images']} images)",
+                 figures("faster-coco-eval", t["faster_coco_eval_s"] / t["images"]),
+                 figures("pycocotools", t["pycocotools_s"] / t["images"]), per="image",
+                 statistic=stat, note=note)
+            for t in details["timing"]]

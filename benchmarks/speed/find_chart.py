@@ -1,15 +1,15 @@
-"""Benchmark: finding the chart in photos, fidelity's cascade against OpenCV's mcc detector and
+"""Finding the chart in photos: fidelity's cascade against OpenCV's mcc detector and
 colour-checker-detection's segmentation, side by side on the same images.
 
-Images (:mod:`benchmarks.chart_scenes`, seeded, generated into a cache folder, never committed):
-real COCO val2017 photos as backgrounds (``--coco``; default ``$FIDELITY_SHARED/coco/val2017``
+Images (:mod:`tests.fixtures.chart_photos`, seeded, generated into a cache folder, never
+committed): real COCO val2017 photos as backgrounds (``coco``; default ``$FIDELITY_SHARED/coco/val2017``
 or ``../shared``), resized to 640, 1600 or 4000 px on the long side (4000 x 3000 = 12 MP), with
 a rendered chart (patch colours from :func:`fidelity.camera.render.render_chart` for several
 cameras and illuminants) composited in perspective at many sizes, turns and tilts, under
 coloured light, with exposure from dark to clipped, shading, blur, noise, partial occlusion and
 JPEG compression: 60 classic charts, 25 minis (smaller), 20 Passports (two charts side by side,
 one 24-patch), 6 SG-like 140-patch charts that must be refused, and 20 images with no chart.
-``--quick`` takes every fifth image.
+``quick`` takes every fifth image.
 
 Scoring: a chart is found correctly when the four corner patch centres (dark skin, bluish
 green, black, white, in that order) lie within half a patch pitch of the truth; any chart
@@ -31,18 +31,11 @@ Finders:
   opencv-python, so fidelity does not depend on it: ``pip install --no-deps
   colour-checker-detection``).
 
-Writes ``reports/find_chart/results.json`` (per image and summary, with the machine) and
-``reports/find_chart/table.md``.
-Run:  python -m benchmarks.bench_find_chart [--quick] [--cache DIR]
+Also writes ``table.md`` (``table-quick.md``) under ``reports/find_chart``.
 """
 
 from __future__ import annotations
 
-import argparse
-import glob
-import hashlib
-import json
-import os
 import sys
 import time
 import warnings
@@ -52,81 +45,27 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.machine import machine_info
+from benchmarks.speed.record import Case, case, figures
+from benchmarks.speed.runner import Context, Parameter
 from fidelity.colour import colorimetry as cm
-from fidelity.core.fileio import write_bytes_atomic, write_json_atomic, write_text_atomic
-from tests.fixtures.chart_scenes import corners_correct, decode_jpeg, make_scene
+from fidelity.core.fileio import write_text_atomic
+from tests.fixtures.chart_photos import COUNTS, SCENES_VERSION, cache_folder, generate, scene_specs
+from tests.fixtures.chart_scenes import corners_correct, decode_jpeg
 
-#: Images per kind (the full benchmark).
-COUNTS = {"classic": 60, "mini": 25, "passport": 20, "sg": 6, "none": 20}
-#: Long sides, cycled per kind: one in five at 4000 px (12 MP).
-LONG_SIDES = (1600, 640, 1600, 4000, 1600)
-#: Patch colours: (camera, illuminant) renders, cycled.
-RENDERS = (("ideal", "D65"), ("nikon-5100", "D65"), ("nikon-5100", "A"),
-           ("sigma-sdmerrill", "F11"), ("nikon-5100", "F11"))
+ANCHOR = ("OpenCV's mcc detector (cv2.mcc, MCC24) and colour-checker-detection's segmentation "
+          "when installed, on the same decoded photos")
+PARAMETERS = {"quick": Parameter(False, "every fifth image"),
+              "seed": Parameter(19, "the photo set's seed"),
+              "coco": Parameter(None, "folder of COCO JPEGs (default: the shared val2017)"),
+              "cache": Parameter(None, "folder of the generated images (default under ~/.cache)"),
+              "finders": Parameter("fidelity,mcc,colour-checker-detection", "finders to run")}
+QUICK = {"quick": True}
+NEEDS = ("shared",)
+ARTEFACTS = "reports/find_chart"
+
 #: Aspect ratios of a chart that colour-checker-detection accepts: fidelity's former setting
 #: (its default, 1.35-1.65, loses almost every chart seen in perspective).
 CCD_ASPECT_RATIO = (1.1, 2.0)
-#: Bumped when the scenes change (the cache key).
-SCENES_VERSION = 2
-
-
-def scene_specs(quick: bool) -> list[tuple[int, str, int]]:
-    """``(index, kind, long side)`` of every image, in a fixed order."""
-    specs = []
-    n = 0
-    for kind, count in COUNTS.items():
-        for k in range(count):
-            # sizes cycle so that every fifth image (--quick) has each size too
-            specs.append((n, kind, LONG_SIDES[(k + k // 5) % len(LONG_SIDES)]))
-            n += 1
-    return specs[::5] if quick else specs
-
-
-def _patch_colours() -> list[np.ndarray]:
-    from fidelity.camera.render import render_chart
-
-    out = []
-    for camera, illuminant in RENDERS:
-        srgb = render_chart(camera, illuminant).measurement.srgb
-        out.append(cm.linearize_srgb(np.clip(srgb, 0.0, 1.0)))
-    return out
-
-
-def generate(specs: list[tuple[int, str, int]], coco: Path, cache: Path, seed: int
-             ) -> list[dict[str, Any]]:
-    """Make (or load from ``cache``) every image; returns records with the JPEG path and truth."""
-    cache.mkdir(parents=True, exist_ok=True)
-    files = sorted(glob.glob(str(coco / "*.jpg")))
-    if len(files) < 50:
-        sys.exit(f"bench_find_chart: need COCO photos in {coco} (found {len(files)})")
-    order = np.random.default_rng(seed).permutation(len(files))
-    colours: list[np.ndarray] | None = None
-    records = []
-    for index, kind, side in specs:
-        jpg = cache / f"scene_{index:03d}.jpg"
-        meta = cache / f"scene_{index:03d}.json"
-        if not (jpg.exists() and meta.exists()):
-            if colours is None:
-                colours = _patch_colours()
-            scene = make_scene(kind, files[order[index % len(files)]],
-                               colours[index % len(colours)], seed=(seed, index),
-                               long_side=side)
-            assert scene.jpeg is not None
-            write_json_atomic(meta, {
-                "index": index, "kind": kind, "background": Path(files[order[index]]).name,
-                "render": list(RENDERS[index % len(RENDERS)]),
-                "corners": None if scene.corners is None else scene.corners.tolist(),
-                "pitch_px": None if np.isnan(scene.pitch_px) else scene.pitch_px,
-                "conditions": scene.conditions})
-            write_bytes_atomic(jpg, scene.jpeg)
-            if sys.stderr.isatty():
-                print(f"\rgenerated {index + 1} images", end="", file=sys.stderr)
-        records.append({**json.loads(meta.read_text()), "path": str(jpg)})
-    if sys.stderr.isatty():
-        print(file=sys.stderr)
-    return records
-
 
 # --------------------------------------------------------------------------------------------
 # Finders: (prepare, find): prepare turns (H, W, 3) uint8 sRGB into the finder's own input (as
@@ -305,52 +244,68 @@ def table(summary: dict[str, Any], finders: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
+def measure(ctx: Context) -> dict[str, Any]:
     from fidelity.core.resources import shared_dir
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--quick", action="store_true", help="every fifth image")
-    ap.add_argument("--seed", type=int, default=19)
     shared = shared_dir()
-    ap.add_argument("--coco", type=Path,
-                    default=(shared / "coco/val2017") if shared else Path("../shared/coco/val2017"))
-    ap.add_argument("--cache", type=Path, default=None,
-                    help="folder for the generated images (default: ~/.cache/fidelity/find_chart)")
-    ap.add_argument("--out", type=Path,
-                    default=Path(__file__).parents[1] / "reports/find_chart")
-    ap.add_argument("--finders", default="fidelity,mcc,colour-checker-detection")
-    args = ap.parse_args()
-    key = hashlib.sha256(f"{SCENES_VERSION}-{args.seed}".encode()).hexdigest()[:10]
-    cache = args.cache or Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / \
-        "fidelity" / "find_chart" / key
-    records = generate(scene_specs(args.quick), args.coco, cache, args.seed)
+    coco = Path(ctx["coco"]) if ctx["coco"] else (
+        shared / "coco/val2017" if shared else Path("../shared/coco/val2017"))
+    seed, quick = ctx["seed"], ctx["quick"]
+    cache = Path(ctx["cache"]) if ctx["cache"] else cache_folder(seed)
+    records = generate(scene_specs(quick), coco, cache, seed)
     available: dict[str, Finder] = {"fidelity": (_float_srgb, find_fidelity),
                                     "mcc": (_bgr8, find_mcc)}
     if _ccd_available():
         available["colour-checker-detection"] = (_linear, find_ccd)
-    finders = {k: available[k] for k in args.finders.split(",") if k in available}
+    finders = {k: available[k] for k in ctx["finders"].split(",") if k in available}
     # warm up imports and OpenCV's first call, so the first image's time is the finder's own
     for prepare, finder in finders.values():
         finder(prepare(np.zeros((64, 64, 3), np.uint8) + 128))
     rows = run(records, finders)
     summary = summarise(rows, list(finders))
-    text = table(summary, list(finders))
-    print(text)
-    if "median_time_ratio_fidelity_over_mcc" in summary:
-        print(f"median time ratio fidelity / mcc per image: "
-              f"{summary['median_time_ratio_fidelity_over_mcc']:.2f}")
-    args.out.mkdir(parents=True, exist_ok=True)
-    name = "results-quick" if args.quick else "results"
-    write_json_atomic(args.out / f"{name}.json", {
-        "benchmark": "chart finding on COCO photos with composited charts",
-        "quick": args.quick, "seed": args.seed, "scenes_version": SCENES_VERSION,
-        "counts": {k: sum(r["kind"] == k for r in rows) for k in COUNTS},
-        "summary": summary, "images": rows,
-        "machine": {**machine_info(), "opencv": _opencv_version()},
-        "load_average": os.getloadavg()})
-    write_text_atomic(args.out / f"{name.replace('results', 'table')}.md", text)
-    print(f"wrote {args.out / (name + '.json')}")
+    ctx.log(table(summary, list(finders)))
+    return {"benchmark": "chart finding on COCO photos with composited charts",
+            "quick": quick, "seed": seed, "scenes_version": SCENES_VERSION,
+            "counts": {k: sum(r["kind"] == k for r in rows) for k in COUNTS},
+            "opencv": _opencv_version(), "summary": summary, "images": rows}
 
 
-if __name__ == "__main__":
-    main()
+def cases(details: dict[str, Any]) -> list[Case]:
+    s = details["summary"]
+    finders = [k for k in s if isinstance(s[k], dict)]
+    n = len(details["images"])
+    big = sum(r["conditions"]["width"] * r["conditions"]["height"] >= 10e6
+              for r in details["images"])
+    out = []
+    for anchor in (f for f in finders if f != "fidelity"):
+        ours, other = s["fidelity"], s[anchor]
+
+        def words(x: dict[str, Any]) -> str:
+            return (f"{x['found_correct']}/{x['charts']} found correctly, "
+                    f"{x['answered_wrongly']} wrong, {x['false_positives']}/"
+                    f"{x['no_chart_images']} false positives")
+
+        note = f"fidelity {words(ours)}; {anchor} {words(other)}"
+        given = ({"wall": s["median_time_ratio_fidelity_over_mcc"],
+                  "of": "median of the per-image ratios"}
+                 if anchor == "mcc" and "median_time_ratio_fidelity_over_mcc" in s else {})
+        out.append(case(f"every photo, against {anchor}",
+                        figures("fidelity find_chart", ours["median_seconds"]),
+                        figures(anchor, other["median_seconds"]), per="image",
+                        statistic=f"median over {n} photos, one run each", note=note, **given))
+        if ours["median_seconds_12mp"] is not None and other["median_seconds_12mp"] is not None:
+            out.append(case(f"12 MP photos, against {anchor}",
+                            figures("fidelity find_chart", ours["median_seconds_12mp"],
+                                    cpu_s=ours["median_cpu_seconds_12mp"]),
+                            figures(anchor, other["median_seconds_12mp"],
+                                    cpu_s=other["median_cpu_seconds_12mp"]), per="image",
+                            statistic=f"median over the {big} photos of 12 MP, one run each"))
+    return out
+
+
+def report(result: dict[str, Any], folder: Path) -> None:
+    """``table.md`` (``table-quick.md`` of a quick run): each finder's scores and times."""
+    d = result["details"]
+    finders = [k for k in d["summary"] if isinstance(d["summary"][k], dict)]
+    name = "table-quick.md" if d["quick"] else "table.md"
+    write_text_atomic(folder / name, table(d["summary"], finders))
