@@ -65,7 +65,8 @@ def bench_corruptions(images: list[np.ndarray], repeats: int) -> list[dict[str, 
 def bench_directional(repeats: int) -> dict[str, Any]:
     from fidelity.camera.render import render_chart
     from fidelity.prediction.directional import load_directional_table, predict_chart
-    from fidelity.prediction.table import load_prediction_table, predict
+    from fidelity.prediction.table import predict
+    from fidelity.prediction.tablefile import load_prediction_table
 
     m = render_chart("nikon-5100").measurement
     dtab, ctab = load_directional_table(), load_prediction_table()
