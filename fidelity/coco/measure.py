@@ -234,11 +234,16 @@ class MeasuredLoss:
         The loss in percent of the baseline mAP; None when the baseline mAP is 0.
     dmap_relative_se
         Its standard error, percent; None when not estimable.
-    dap_person_points, dap_bicycle_points
-        ΔAP of the person and bicycle classes, percentage points; None when the class's AP is
-        undefined on the images.
-    dap_person_points_se, dap_bicycle_points_se
-        Their standard errors, percentage points; None when not estimable.
+    dap_person_points
+        ΔAP of the person class, percentage points; None when its AP is undefined on the
+        images.
+    dap_person_points_se
+        Its standard error, percentage points; None when not estimable.
+    dap_bicycle_points
+        ΔAP of the bicycle class, percentage points; None when its AP is undefined on the
+        images.
+    dap_bicycle_points_se
+        Its standard error, percentage points; None when not estimable.
     seconds
         Wall-clock seconds of the measurement, >= 0.
     inferred

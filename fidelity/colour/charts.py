@@ -64,8 +64,10 @@ class Chart:
     lab
         Reference CIELAB of the patches, shape (rows*cols, 3), read-only float64: L* in
         [0, 100], a*, b* within +-:data:`LAB_LIMIT`; relative to ``whitepoint``.
-    rows, cols
-        The grid layout, >= 1 each (4 x 6 for a Macbeth ColorChecker).
+    rows
+        Rows of the grid, >= 1 (4 for a Macbeth ColorChecker).
+    cols
+        Columns of the grid, >= 1 (6 for a Macbeth ColorChecker).
     whitepoint
         White point of ``lab``; ``D65`` (the only one a chart file may give).
     observer

@@ -67,9 +67,14 @@ class ChartMeasurement:
         Reference CIELAB (D65) of each patch, shape (n, 3).
     delta_e
         CIEDE2000 ΔE00 of each patch, >= 0, shape (n,).
-    delta_l, delta_c, delta_h
-        Unweighted CIEDE2000 differences ΔL', ΔC', ΔH' of the measured colour relative to
-        the reference, shape (n,) each, signed.
+    delta_l
+        Unweighted CIEDE2000 lightness difference ΔL' of the measured colour relative to the
+        reference, shape (n,), signed (positive: lighter).
+    delta_c
+        Unweighted CIEDE2000 chroma difference ΔC', shape (n,), signed (positive: more
+        chromatic).
+    delta_h
+        Unweighted CIEDE2000 hue difference ΔH', shape (n,), signed.
     reference_srgb
         Encoded sRGB of the reference, shape (n, 3); None when not given.
     noise
