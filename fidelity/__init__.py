@@ -50,8 +50,8 @@ _API: dict[str, str] = {
     "render_chart": "fidelity.camera.render",
     "ChartRender": "fidelity.camera.render",
     "read_image": "fidelity.chart.image",
-    "find_chart": "fidelity.chart.find",
-    "FoundChart": "fidelity.chart.find",
+    "find_chart": "fidelity.chart.find.cascade",
+    "FoundChart": "fidelity.chart.find.result",
     "measure_chart": "fidelity.measure.colour",
     "measure_image": "fidelity.measure.pixels",
     "ChartMeasurement": "fidelity.measure.colour",
@@ -86,7 +86,8 @@ _API: dict[str, str] = {
 if TYPE_CHECKING:
     from fidelity.camera.model import CameraModel, load_camera
     from fidelity.camera.render import ChartRender, render_chart
-    from fidelity.chart.find import FoundChart, find_chart
+    from fidelity.chart.find.cascade import find_chart
+    from fidelity.chart.find.result import FoundChart
     from fidelity.chart.image import read_image
     from fidelity.chart.read import ReadOptions
     from fidelity.coco.corruptions import corrupt

@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fidelity.chart import find, image, locate
+from fidelity.chart import image, locate
+from fidelity.chart.find import view
 from fidelity.chart.image import as_float32, read_image
 from fidelity.measure.blindspots import effective_bits
 from fidelity.measure.pixels import measure_pixels
@@ -67,14 +68,14 @@ def test_pyramid_of_codes_equals_halving_the_float_image(monkeypatch):
 
     rng = np.random.default_rng(2)
     codes = rng.integers(0, 256, (203, 157, 3)).astype(np.uint8)
-    monkeypatch.setattr(find, "PYRAMID_BAND_PIXELS", 7 * 157)
-    pyramid = find.Pyramid(codes)
+    monkeypatch.setattr(view, "PYRAMID_BAND_PIXELS", 7 * 157)
+    pyramid = view.Pyramid(codes)
     level = as_float32(codes)
     for factor in (2, 4, 8):
         h, w = level.shape[0] // 2, level.shape[1] // 2
         level = cv2.resize(level[:2 * h, :2 * w], (w, h), interpolation=cv2.INTER_AREA)
         assert np.array_equal(pyramid.level(factor), level)
-    assert np.array_equal(find.Pyramid(codes).level(8), level)  # straight from the image
+    assert np.array_equal(view.Pyramid(codes).level(8), level)  # straight from the image
 
 
 def test_windows_are_the_pixels_whose_centres_map_into_them():

@@ -249,7 +249,7 @@ def test_perspective_bias_moves_outline_centroids_onto_the_patch_centres() -> No
                                             (179.8, "turned 180 degrees")])
 def test_orientation_never_reads_minus_zero(degrees, shown) -> None:
     """A chart turned by a fraction of a degree either way reads "turned 0 degrees"."""
-    from fidelity.chart.find import _orientation
+    from fidelity.chart.find.cascade import _orientation
 
     a = np.radians(degrees)
     rot = np.array([[np.cos(a), -np.sin(a), 100.0], [np.sin(a), np.cos(a), 50.0], [0, 0, 1]])

@@ -19,12 +19,12 @@ from click.testing import CliRunner
 from test_audit import GRID_CORNERS, draw_chart, map_points, write_exr
 from test_find_chart import _mosaic, _write_mosaic_png16
 
-from fidelity.chart import find as finder
+from fidelity.chart import bayer
+from fidelity.chart.bayer import BAYER_MARGIN, bayer_pattern
 from fidelity.chart.find import (
-    BAYER_MARGIN,
     FoundChart,
-    bayer_pattern,
     find_chart,
+    make_view,
     occluded_patches,
     sample_cells,
 )
@@ -153,7 +153,7 @@ def test_a_camera_colour_error_is_not_taken_for_an_occluder():
     patches[14] = patches[14][[1, 0, 2]]  # green rendered red-ish: a real camera error
     img = draw_chart(patches, h=h, size=(300, 420), background=0.03)
     grid = np.stack(np.meshgrid(np.arange(6), np.arange(4)), -1).reshape(-1, 2).astype(float)
-    view, _ = finder.make_view(img, (0, 0, 420, 300), 1000, "linear")
+    view, _ = make_view(img, (0, 0, 420, 300), 1000, "linear")
     means, spread = sample_cells(view, homography_from_points(GRID_CORNERS, map_points(
         h, GRID_CORNERS)), grid)
     assert not occluded_patches(means, spread).any()
@@ -214,7 +214,7 @@ def test_a_grey_mosaic_and_an_ambiguous_fit_keep_the_clear_error(tmp_path, monke
         return FoundChart(corners=np.zeros((4, 2)), method="x", candidates=1, swatches=0,
                           residual_px=float("nan"), confidence=c)
 
-    monkeypatch.setattr(finder, "find_chart", fake)
+    monkeypatch.setattr(bayer, "find_chart", fake)
     fit = bayer_pattern(mosaic)
     assert fit.pattern is None and fit.margin == pytest.approx(BAYER_MARGIN / 2)
     scores = iter([0.0, 0.95, 0.95 - 1.5 * BAYER_MARGIN, 0.0])

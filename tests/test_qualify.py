@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import fidelity.chart.find as find
+import fidelity.chart.find.cascade as find
 import fidelity.colour.colorimetry as cm
 from fidelity.cli import main
 from fidelity.pipeline.qualify import (

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-import fidelity.chart.find as find
+import fidelity.chart.find.cascade as find
 from benchmarks.machine import machine_info
 from fidelity.core.fileio import write_json_atomic, write_text_atomic
 from fidelity.pipeline.qualify import FINDER_SCENES, synthetic_photo

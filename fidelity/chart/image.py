@@ -20,7 +20,7 @@ colour-demosaicing implements it (``demosaicing_CFA_Bayer_Malvar2004``). Its val
 linear (sensor data; black level already subtracted; camera RGB: give ``--colourspace`` for a
 colour-accurate audit). Without ``bayer`` a one-channel image is an error that names the option
 (:class:`OneChannelError`; an audit then tries the four patterns itself:
-:func:`fidelity.chart.find.bayer_pattern`).
+:func:`fidelity.chart.bayer.bayer_pattern`).
 
 Errors (all :class:`fidelity.core.errors.InputFileError`, naming the file): missing, not an image,
 truncated or corrupt, one colour channel only (greyscale), channels that are not R, G, B,

@@ -202,11 +202,11 @@ MIN_MOSAIC_SIDE = 24
 def _read_mosaic(path: str | os.PathLike[str], read: ReadOptions, error: OneChannelError
                  ) -> Image:
     """A one-channel image read without ``--bayer``: the CFA pattern the chart in it fits
-    unambiguously (:func:`fidelity.chart.find.bayer_pattern`), or ``error`` (the reader's
+    unambiguously (:func:`fidelity.chart.bayer.bayer_pattern`), or ``error`` (the reader's
     message that names ``--bayer``) with how the four patterns fit."""
     from dataclasses import replace
 
-    from fidelity.chart.find import BAYER_MARGIN, bayer_pattern
+    from fidelity.chart.bayer import BAYER_MARGIN, bayer_pattern
     from fidelity.chart.image import read_image
 
     # the demosaiced image keeps every sample of the mosaic at its site: take them back

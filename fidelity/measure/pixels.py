@@ -6,7 +6,7 @@ reading), step by step (each a pure function of arrays):
 
 1. Locate the 24 patches from the four corner-patch centres (:mod:`fidelity.chart.locate`) and take
    the pixels of each patch's central sampling window. Without given corners the chart is
-   found first (:func:`fidelity.chart.find.find_chart`); everything after that is the same.
+   found first (:func:`fidelity.chart.find.cascade.find_chart`); everything after that is the same.
 2. Exclude bad pixels: a pixel with NaN or +-Inf in any channel. They are counted (per kind,
    per patch, and over the whole image). Pixels with a negative channel are counted too and by
    default kept (:data:`NEGATIVE_RULES`: scene-linear renders of out-of-gamut colours have
@@ -67,7 +67,7 @@ from fidelity.measure.uncertainty import (
 )
 
 if TYPE_CHECKING:  # the finder is imported where a chart is found (not by check)
-    from fidelity.chart.find import ChartChecks, FoundChart
+    from fidelity.chart.find.result import ChartChecks, FoundChart
 
 F64 = NDArray[np.float64]
 
@@ -403,10 +403,10 @@ def measure_pixels(
     corners
         Centres of the dark skin, bluish green, black and white patches, ``(4, 2)`` image
         ``(x, y)`` or ``"X1,Y1,...,X4,Y4"``; ``None``: find the chart
-        (:func:`fidelity.chart.find.find_chart` with ``detection``; a chart found with low
+        (:func:`fidelity.chart.find.cascade.find_chart` with ``detection``; a chart found with low
         confidence, or of another kind, is an error). Given corners are measured as given;
         how well their patches match the reference layout is reported
-        (``corner_checks``, :func:`fidelity.chart.find.check_corners`).
+        (``corner_checks``, :func:`fidelity.chart.find.cascade.check_corners`).
     encoding
         ``linear`` (default) or ``srgb`` (:data:`ENCODINGS`): how the values are decoded
         before the linear patch means.
@@ -464,7 +464,7 @@ def measure_pixels(
     found = None
     checks = None
     if corners is None:
-        from fidelity.chart.find import find_chart
+        from fidelity.chart.find.cascade import find_chart
 
         found = find_chart(arr, encoding=encoding, method=detection, rows=ref.rows,
                              cols=ref.cols)
@@ -473,7 +473,7 @@ def measure_pixels(
     loc = locate_chart(corners, arr.shape, rows=ref.rows, cols=ref.cols, window=window,
                        patch_names=ref.patch_names)
     if found is None and (ref.rows, ref.cols) == (4, 6):
-        from fidelity.chart.find import check_corners
+        from fidelity.chart.find.cascade import check_corners
 
         checks = check_corners(arr, loc.corners, encoding=encoding)
     # patches the finder judged covered (a leaf, a hand) are measured but left out of the
@@ -769,7 +769,7 @@ def measure_image(
     corners
         Centres of the dark skin, bluish green, black and white patches: ``(4, 2)`` image
         ``(x, y)`` in pixels or ``"X1,Y1,...,X4,Y4"``; None: find the chart
-        (:func:`fidelity.chart.find.find_chart` with ``detection``).
+        (:func:`fidelity.chart.find.cascade.find_chart` with ``detection``).
     read
         How the pixels are read: layer, encoding, exposure, negatives rule, colourspace,
         Bayer pattern, pixel limit, OpenColorIO colourspace, recording message
@@ -786,7 +786,7 @@ def measure_image(
         (default 0.5).
     detection
         Chart-finding method when ``corners`` is None: ``cascade`` (default), ``mcc`` or
-        ``segmentation`` (:data:`fidelity.chart.find.CHART_FINDERS`).
+        ``segmentation`` (:data:`fidelity.chart.find.cascade.CHART_FINDERS`).
     inspect_image
         Called with the :class:`Image` read once its chart is measured; None: not called.
 

@@ -253,7 +253,7 @@ def audit_image(
     corners
         Image centres (x, y) of the dark skin, bluish green, black and white patches, as
         ``"X1,Y1,...,X4,Y4"`` or (4, 2); None: the chart is found
-        (:func:`fidelity.chart.find.find_chart`).
+        (:func:`fidelity.chart.find.cascade.find_chart`).
     read
         How to read the pixels (:class:`~fidelity.chart.read.ReadOptions`): EXR layer,
         ``linear``/``srgb`` (default from the file), ``auto`` or a fixed EV, what to do with

@@ -64,7 +64,7 @@ from fidelity.prediction.table import Prediction
 from fidelity.prediction.verdict import EXIT_ERROR, Criterion, Verdict, worst_exit_code
 
 if TYPE_CHECKING:
-    from fidelity.chart.find import ChartChecks, FoundChart
+    from fidelity.chart.find.result import ChartChecks, FoundChart
     from fidelity.coco.measure import MeasuredLoss
 
 #: Version of the JSON report layout (bump on incompatible change).
@@ -133,7 +133,7 @@ class ImageSource:
         location = locate_chart(corners, (info.height, info.width), rows=rows_cols[0],
                                 cols=rows_cols[1], window=float(loc["window_pitch_fraction"]),
                                 min_pixels=1)
-        from fidelity.chart.find import ChartChecks, FoundChart
+        from fidelity.chart.find.result import ChartChecks, FoundChart
 
         found = source.get("corners_found")
         checks = source.get("corner_checks")

@@ -1,0 +1,209 @@
+"""Views of an image for the chart finder: part of it, shrunk, in the detectors' domain.
+
+A :class:`Pyramid` holds the image and its 2 x 2 area-average reductions; :func:`make_view`
+cuts a region from the right level, shrinks it to a given long side, scales its brightest
+channel's 99th percentile to 1 and gives it both as linear float32 and as the 8-bit sRGB that
+OpenCV's detectors read (:class:`View`). :func:`opencv` imports OpenCV or says what to install.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fidelity.chart.image import as_float32, is_coded
+from fidelity.colour import colorimetry as cm
+from fidelity.core.errors import FidelityError, InvalidValueError
+
+F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class View:
+    """Part of the image as the detectors see it.
+
+    ``linear`` ``(h, w, 3)`` float32 linear RGB scaled to [0, 1]; ``bgr8`` the same,
+    sRGB-encoded, 8-bit, in OpenCV's B, G, R order; ``to_image`` the 3 x 3 map of view
+    ``(x, y)`` to image ``(x, y)`` (pixel centres at integers in both).
+    """
+
+    linear: np.ndarray
+    bgr8: np.ndarray
+    to_image: F64
+
+    @property
+    def scale(self) -> float:
+        """View pixels per image pixel (along x)."""
+        return float(1.0 / self.to_image[0, 0])
+
+
+def opencv() -> Any:
+    """The OpenCV module, or an error that says what to install (or to give --corners)."""
+    try:
+        import cv2
+    except ImportError as exc:  # OpenCV missing: say so rather than a bare ImportError
+        raise FidelityError(f"chart detection needs OpenCV with its contrib modules "
+                            f"(opencv-contrib-python-headless; {exc}); install it or give "
+                            f"--corners") from None
+    return cv2
+
+
+_ENCODE_LUT = np.clip(np.rint(cm.delinearize_srgb(np.linspace(0.0, 1.0, 4096)) * 255), 0,
+                      255).astype(np.uint8)
+_DECODE_LUT = cm.linearize_srgb(np.linspace(0.0, 1.0, 65536)).astype(np.float32)
+
+
+class Pyramid:
+    """An image and its reductions by 2 x 2 area averages (computed when first asked for), so
+    that views of any part at any reduced size cost one pass over the full image at most.
+
+    The image is kept as given (8/16-bit codes, half or single floats: whatever
+    :func:`fidelity.chart.image.read_image` decoded); a reduction is computed from it a band of
+    rows at a time (:data:`PYRAMID_BAND_PIXELS`), each band converted to float32
+    (:func:`fidelity.chart.image.as_float32`) and halved repeatedly, so that no full-size float
+    copy is made. The result equals halving the whole float32 image level by level."""
+
+    def __init__(self, pixels: np.ndarray) -> None:
+        self.levels: dict[int, np.ndarray] = {1: np.asarray(pixels)}
+        self.height, self.width = self.levels[1].shape[:2]
+
+    def level(self, factor: int) -> np.ndarray:
+        """The image averaged over ``factor`` x ``factor`` blocks (``factor`` a power of 2):
+        float32 for ``factor`` > 1, the image as given for 1."""
+        if factor not in self.levels:
+            finer = max((f for f in self.levels if 1 < f < factor), default=1)
+            source = self.levels[finer]
+            step = factor // finer
+            out_h, out_w = source.shape[0] // step, source.shape[1] // step
+            band = max(1, PYRAMID_BAND_PIXELS // max(source.shape[1] * step, 1)) * step
+            out = np.empty((out_h, out_w) + source.shape[2:], np.float32)
+            for y in range(0, out_h * step, band):
+                block = source[y:min(y + band, out_h * step), :out_w * step]
+                out[y // step:(y + block.shape[0]) // step] = _halvings(
+                    block, step, finer == 1 and not is_coded(block))
+            self.levels[factor] = out
+        return self.levels[factor]
+
+
+#: Pixels of the image converted to float at a time when a :class:`Pyramid` level is computed.
+PYRAMID_BAND_PIXELS = 1 << 20
+
+
+def _halvings(block: np.ndarray, step: int, first: bool) -> np.ndarray:
+    """``block`` (rows and columns multiples of ``step``) as float32, halved by 2 x 2 area
+    averages until ``step`` x ``step`` blocks are averaged; ``first``: the block is of the
+    image itself, whose NaN and Inf spread over their 2 x 2 block only and count as black (8-
+    and 16-bit codes have none)."""
+
+    cv2 = opencv()
+    arr = np.ascontiguousarray(as_float32(block))
+    while step > 1:
+        h, w = arr.shape[0] // 2, arr.shape[1] // 2
+        arr = cv2.resize(arr, (w, h), interpolation=cv2.INTER_AREA)
+        if first:
+            arr = np.nan_to_num(arr, nan=0.0, posinf=0.0, neginf=0.0)
+            first = False
+        step //= 2
+    if arr.ndim < block.ndim:  # OpenCV drops a last axis of length 1
+        arr = arr[..., None]
+    return arr
+
+
+def _prepare(pyramid: Pyramid, region: tuple[int, int, int, int], max_side: int, encoding: str
+             ) -> tuple[np.ndarray, F64]:
+    """The region shrunk (area average) to ``max_side``, finite, non-negative, linear; with the
+    3 x 3 map of its pixel coordinates to the image's."""
+    cv2 = opencv()
+    x0, y0, x1, y1 = region
+    s = min(1.0, max_side / max(x1 - x0, y1 - y0))
+    factor = 1
+    while factor * 2 * s <= 1.0 and min(pyramid.height, pyramid.width) // (factor * 2) >= 8:
+        factor *= 2
+    level = pyramid.level(factor)
+    lx0, ly0 = x0 // factor, y0 // factor
+    lx1 = min(-(-x1 // factor), level.shape[1])
+    ly1 = min(-(-y1 // factor), level.shape[0])
+    arr = np.ascontiguousarray(level[ly0:ly1, lx0:lx1])
+    finite = factor > 1 or is_coded(arr)  # levels and 8/16-bit codes hold no NaN or Inf
+    if factor == 1:
+        arr = np.ascontiguousarray(as_float32(arr))
+    height, width = arr.shape[:2]
+    target = (max(1, round((x1 - x0) * s)), max(1, round((y1 - y0) * s)))
+    if target[0] < width or target[1] < height:
+        arr = cv2.resize(arr, (min(target[0], width), min(target[1], height)),
+                         interpolation=cv2.INTER_AREA)
+    sx, sy = arr.shape[1] / width, arr.shape[0] / height
+    if not finite:
+        arr = np.nan_to_num(arr, nan=0.0, posinf=0.0, neginf=0.0)
+    if encoding == "srgb":  # codes in [0, 1] -> the nearest of 65536 steps -> linear
+        arr = _DECODE_LUT[_codes(arr, 65535)]
+    else:
+        np.maximum(arr, 0.0, out=arr)
+    # view -> level crop (OpenCV's pixel-centre convention) -> level -> image
+    to_level = np.array([[1.0 / sx, 0.0, lx0 + 0.5 / sx - 0.5],
+                         [0.0, 1.0 / sy, ly0 + 0.5 / sy - 0.5], [0.0, 0.0, 1.0]])
+    level_to_image = np.array([[factor, 0.0, (factor - 1) / 2.0],
+                               [0.0, factor, (factor - 1) / 2.0], [0.0, 0.0, 1.0]])
+    return arr, level_to_image @ to_level
+
+
+def make_view(pixels: np.ndarray | Pyramid, region: tuple[int, int, int, int], max_side: int,
+              encoding: str, peak: float | None = None) -> tuple[View, float]:
+    """A :class:`View` of ``pixels[y0:y1, x0:x1]`` at most ``max_side`` pixels on its long side.
+
+    The values are divided by ``peak`` (default: the 99th percentile of the view's brightest
+    channel) and clipped to [0, 1]. Returns the view and the peak used.
+    """
+    pyramid = pixels if isinstance(pixels, Pyramid) else Pyramid(pixels)
+    arr, to_image = _prepare(pyramid, region, max_side, encoding)
+    if peak is None:
+        step = max(1, int(math.sqrt(arr.shape[0] * arr.shape[1] / 250_000)))
+        sample = arr[::step, ::step]
+        brightest = np.maximum(np.maximum(sample[..., 0], sample[..., 1]), sample[..., 2])
+        peak = float(np.percentile(brightest, 99.0))
+    if not peak > 0.0:
+        raise InvalidValueError("no colour chart found: the image is black")
+    with np.errstate(over="ignore"):
+        scale = np.float32(1.0 / peak)
+    if np.isfinite(scale):
+        linear = np.multiply(arr, scale)
+        np.clip(linear, 0.0, 1.0, out=linear)
+    else:  # a denormal peak (values ~1e-40): 1/peak overflows single precision
+        linear = np.clip(arr.astype(np.float64) / peak, 0.0, 1.0).astype(np.float32)
+    steps = np.multiply(linear, np.float32(4095))  # linear in [0, 1] -> 4096 steps, rounded
+    steps += np.float32(0.5)
+    bgr8 = np.ascontiguousarray(_ENCODE_LUT[steps.astype(np.uint16)][..., ::-1])
+    return View(linear=linear, bgr8=bgr8, to_image=to_image), peak
+
+
+def _codes(values: np.ndarray, top: int) -> np.ndarray:
+    """``rint(clip(values, 0, 1) * top)`` (``values`` NaN-free, ``top`` < 65536) as
+    ``uint16`` indices into a lookup table, with one float temporary."""
+    scaled: np.ndarray = np.clip(values, 0.0, 1.0)
+    scaled *= np.float32(top)
+    np.rint(scaled, out=scaled)
+    codes: np.ndarray = scaled.astype(np.uint16)
+    return codes
+
+
+def detection_image(pixels: np.ndarray, encoding: str = "linear") -> np.ndarray:
+    """The float32 linear image in [0, 1] that the detectors see, at full size."""
+    arr = np.asarray(pixels)
+    if arr.ndim != 3 or arr.shape[2] != 3:
+        raise InvalidValueError(f"image must be (H, W, 3), got shape {arr.shape}")
+    view, _ = make_view(arr, (0, 0, arr.shape[1], arr.shape[0]), max(arr.shape[:2]), encoding)
+    return view.linear
+
+
+__all__ = [
+    "PYRAMID_BAND_PIXELS",
+    "Pyramid",
+    "View",
+    "detection_image",
+    "make_view",
+    "opencv",
+]
