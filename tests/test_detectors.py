@@ -598,7 +598,7 @@ def test_cuda_asked_for_is_never_a_silent_cpu_run(shared, monkeypatch) -> None:
 def test_a_dynamically_quantised_model_runs_on_the_cpu_where_cuda_is_offered(shared,
                                                                              monkeypatch) -> None:
     """ConvInteger has no CUDA kernel in onnxruntime: a CUDA session runs those nodes on the
-    CPU and its detections differ from a CPU session's (benchmarks/bench_providers.py on an
+    CPU and its detections differ from a CPU session's (benchmarks/speed/providers.py on an
     H100). With CUDA offered, ``auto`` keeps such a model on the CPU and says why, and
     ``cuda`` is refused; a float model is not affected."""
     import onnxruntime as ort
