@@ -57,6 +57,7 @@ _API: dict[str, str] = {
     "ChartMeasurement": "fidelity.measure.colour",
     "ImageMeasurement": "fidelity.measure.pixels",
     "ReadOptions": "fidelity.chart.read",
+    "JudgeOptions": "fidelity.prediction.judge",
     "apply_transform": "fidelity.prediction.transforms",
     "calibrate_transform": "fidelity.prediction.calibration",
     "predict": "fidelity.prediction.table",
@@ -108,6 +109,7 @@ if TYPE_CHECKING:
         error_parts,
         predict_directional,
     )
+    from fidelity.prediction.judge import JudgeOptions
     from fidelity.prediction.table import Prediction, delta_e_limit, predict
     from fidelity.prediction.transforms import apply_transform
     from fidelity.prediction.verdict import Criterion, Verdict, evaluate
@@ -146,6 +148,7 @@ __all__ = [
     "FoundChart",
     "GateResult",
     "ImageMeasurement",
+    "JudgeOptions",
     "MeasuredLoss",
     "Prediction",
     "ReadOptions",

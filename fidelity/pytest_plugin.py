@@ -83,11 +83,15 @@ def colour_fidelity(request: pytest.FixtureRequest) -> Callable[..., ColourFidel
 
         from fidelity.chart.read import ReadOptions
         from fidelity.pipeline.check import audit_image
+        from fidelity.prediction.judge import JudgeOptions
 
         kwargs = {**defaults, **options}
-        reading = {f.name for f in fields(ReadOptions)} & kwargs.keys()
-        if reading:  # the image-reading options may be given one by one (layer="beauty")
-            kwargs["read"] = ReadOptions(**{k: kwargs.pop(k) for k in sorted(reading)})
+        # the image-reading and judging options may be given one by one (layer="beauty",
+        # size="n"), or as their records (read=, judge=)
+        for record, name in ((ReadOptions, "read"), (JudgeOptions, "judge")):
+            given = {f.name for f in fields(record)} & kwargs.keys()
+            if given:
+                kwargs[name] = record(**{k: kwargs.pop(k) for k in sorted(given)})
         report = audit_image(image, **kwargs)
         name = os.fspath(image)
         record_property(f"{name}:mean_delta_e", f"{report.mean_delta_e:.4f}")

@@ -13,6 +13,7 @@ from fidelity.colour.charts import load_chart
 from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
 from fidelity.pipeline.qualify import sharma_pairs
 from fidelity.prediction import directional as dr
+from fidelity.prediction.judge import JudgeOptions
 from fidelity.prediction.transforms import TRANSFORMS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -197,7 +198,7 @@ def test_directional_verdict_and_json_round_trip():
     crit = Criterion("max-dmap", 5.0)
     cam = ROOT / "cameras" / "bad-hue-rotation.toml"
     classic = check_camera(cam, criterion=crit)
-    directional = check_camera(cam, criterion=crit, bound="directional")
+    directional = check_camera(cam, criterion=crit, judge=JudgeOptions(bound="directional"))
     assert not classic.verdict.passed and directional.verdict.passed
     assert directional.verdict.value == pytest.approx(directional.directional.dmap_points)
     doc = chart_report_json(directional)

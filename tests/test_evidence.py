@@ -265,7 +265,7 @@ def test_validity_domain_states_whether_the_table_has_this_versions_preprocessin
     old.write_text(json.dumps(src))
 
     def check(table):
-        doc = fidelity.check_camera("nikon-5100", table=str(table))
+        doc = fidelity.check_camera("nikon-5100", judge=fidelity.JudgeOptions(table=str(table)))
         return {c.name: c for c in doc.validity.checks}["detector preprocessing"]
 
     assert check(good).inside

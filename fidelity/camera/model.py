@@ -175,7 +175,44 @@ class Noise:
 
 @dataclass(frozen=True)
 class CameraModel:
-    """A simulated camera: sensitivities plus the optional ISP stages (module docstring)."""
+    """A simulated camera: sensitivities plus the optional ISP stages (module docstring).
+
+    Attributes
+    ----------
+    name
+        The camera's name (a camera file's ``name``, else the file's stem).
+    sensitivities
+        Spectral sensitivities r, g, b (stage 1): ``wavelengths`` (N,) in nm, ``values``
+        (N, 3).
+    description
+        Free text from the camera file ("" when none).
+    exposure
+        Exposure stage (stage 2): ``mode`` in :data:`EXPOSURE_MODES`, linear ``gain`` > 0,
+        ``target`` in (0, 1] for ``auto``.
+    white_balance
+        White-balance stage (stage 5): ``method`` in :data:`WHITE_BALANCE_METHODS`.
+    ccm
+        Colour-correction stage (stage 6): ``method`` in :data:`CCM_METHODS`.
+    tone
+        Tone curve (stage 7): ``curve`` in :data:`TONE_CURVES`.
+    noise
+        Sensor noise (stage 4): ``full_well`` electrons at raw 1 (None: no noise),
+        ``read_noise`` electrons rms, ``seed``.
+    quantisation_bits
+        Output bit depth in [1, 16] (stage 8); None: not quantised.
+    vignetting_fov_deg
+        Diagonal field of view in degrees, in (0, 179], of the cos^4 fall-off (stage 3);
+        None: no vignetting.
+    source
+        Where it was read from: ``built-in <name>``, the camera file's path, or
+        ``built-in`` (default, one built in code).
+    named
+        What it was loaded by: a built-in name or the camera file's path as given ("" when
+        built in code); not compared.
+    files
+        The files it was read from: the camera file and the sensitivity CSV and tone LUT file
+        it names (empty for a built-in camera); not compared.
+    """
 
     name: str
     sensitivities: Sensitivities
@@ -188,6 +225,18 @@ class CameraModel:
     quantisation_bits: int | None = None
     vignetting_fov_deg: float | None = None
     source: str = "built-in"
+    #: What it was loaded by: a built-in name or the camera file's path as given ("" when
+    #: built in code); :attr:`subject`.
+    named: str = field(default="", compare=False)
+    #: The files it was read from: the camera file, and the sensitivity CSV and tone LUT file
+    #: it names (none for a built-in camera), for the overwrite check of outputs
+    #: (:func:`fidelity.core.fileio.check_outputs`).
+    files: tuple[Path, ...] = field(default=(), compare=False)
+
+    @property
+    def subject(self) -> str:
+        """How a command names this camera: what it was loaded by, else its name."""
+        return self.named or self.name
 
     @property
     def output_encoding(self) -> str:
@@ -693,20 +742,26 @@ def camera_from_dict(data: Any, origin: str = "<dict>", base_dir: Path | None = 
 def camera_files(name_or_path: str | os.PathLike[str]) -> list[Path]:
     """The files reading a camera touches: the camera file and the sensitivity CSV and tone
     LUT file it names (none for a built-in camera name; only the camera file itself when it
-    cannot be parsed). For the overwrite check of commands (:func:`fidelity.core.fileio.check_outputs`)."""
+    cannot be parsed). For the overwrite check of a command whose camera could not be loaded;
+    a loaded camera knows its :attr:`CameraModel.files`."""
     p = Path(name_or_path)
     if str(name_or_path) in available_cameras() or not p.is_file():
         return []
-    files = [p]
     try:
         data = sc.load_document(p, max_bytes=MAX_CAMERA_FILE_BYTES)
     except FidelityError:
-        return files
+        return [p]
+    return [p, *_named_files(data, p)]
+
+
+def _named_files(data: Any, path: Path) -> list[Path]:
+    """The sensitivity CSV and tone LUT file a parsed camera file at ``path`` names."""
+    files = []
     for section, key in (("sensitivities", "path"), ("tone", "lut")):
         table = data.get(section) if isinstance(data, dict) else None
         spec = table.get(key) if isinstance(table, dict) else None
         if isinstance(spec, str) and spec:
-            files.append(Path(spec) if Path(spec).is_absolute() else p.parent / spec)
+            files.append(Path(spec) if Path(spec).is_absolute() else path.parent / spec)
     return files
 
 
@@ -721,7 +776,8 @@ def read_camera_file(path: str | Path) -> CameraModel:
                              ".yml file")
     data = sc.load_document(p, f"camera file {display_path(p)}",
                             max_bytes=MAX_CAMERA_FILE_BYTES, what="camera file")
-    return camera_from_dict(data, display_path(p), p.parent)
+    return replace(camera_from_dict(data, display_path(p), p.parent), named=str(path),
+                   files=(p, *_named_files(data, p)))
 
 
 def _builtin_dir() -> Path:
@@ -736,11 +792,35 @@ def available_cameras() -> list[str]:
 @lru_cache(maxsize=16)
 def _load_builtin(name: str) -> CameraModel:
     cam = read_camera_file(_builtin_dir() / f"{name}.toml")
-    return replace(cam, source=f"built-in {name}")
+    return replace(cam, source=f"built-in {name}", named=name, files=())
 
 
 def load_camera(name_or_path: str | Path) -> CameraModel:
-    """A built-in camera by name (:func:`available_cameras`) or a TOML/YAML camera file."""
+    """A built-in camera by name (:func:`available_cameras`) or a TOML/YAML camera file.
+
+    A camera file is validated against :data:`CAMERA_SCHEMA` (:func:`camera_from_dict`;
+    relative sensitivity-CSV and LUT paths are relative to the file's folder).
+
+    Parameters
+    ----------
+    name_or_path
+        A built-in camera's name (``nikon-5100``, ...), or the path of a ``.toml``,
+        ``.yaml`` or ``.yml`` camera file (at most :data:`MAX_CAMERA_FILE_BYTES` bytes).
+
+    Returns
+    -------
+    CameraModel
+        The camera, frozen (a built-in one is read once a process).
+
+    Raises
+    ------
+    InputFileError
+        A camera file that is missing, of another suffix, unreadable, or whose content does
+        not fit the schema (the message names the file, the ``[section].field`` and the
+        problem). Exit code 2.
+    UnknownNameError
+        Neither a built-in name nor a camera file path. Exit code 2.
+    """
     s = str(name_or_path)
     if s in available_cameras():
         return _load_builtin(s)

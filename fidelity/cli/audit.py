@@ -2,41 +2,41 @@
 
 from __future__ import annotations
 
-import os
 import sys
+from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import click
 
+from fidelity.chart.read import ReadOptions
+from fidelity.chart.recording import FrameSelection
+from fidelity.cli import error_line
+from fidelity.cli.context import STDOUT, write_json_output
 from fidelity.cli.options import (
     IMAGE_PATH,
-    STDOUT,
     FrameRange,
-    bound_option,
     common_options,
     evidence_option,
-    evidence_outputs,
-    expand_folders,
-    frame_report_names,
-    frame_subjects,
-    frames_summary,
     image_read_options,
+    judge_options,
     max_pixels_option,
-    measure_inputs,
     measure_options,
-    measure_request,
-    report_paths,
-    write_evidence_files,
-    write_subject_reports,
 )
-from fidelity.core.fileio import display_path
-from fidelity.prediction.tablefile import SIZES
+from fidelity.cli.subjects import (
+    evidence_outputs,
+    frames_summary,
+    plan_subjects,
+    write_evidence_files,
+)
+from fidelity.cli.values import measure_inputs, measure_request
+from fidelity.core.fileio import check_outputs, display_path
+from fidelity.pipeline.check import audit_image, audit_images
+from fidelity.pipeline.records import GateResult, ImageSource
+from fidelity.prediction.judge import JudgeOptions
 from fidelity.prediction.verdict import EXIT_ERROR
-
-if TYPE_CHECKING:
-    from fidelity.chart.read import ReadOptions
-    from fidelity.chart.recording import FrameSelection
+from fidelity.report.evidence import write_evidence
+from fidelity.report.jsonform import chart_report_json
+from fidelity.report.terminal import summary_lines
 
 
 @click.command()
@@ -52,9 +52,7 @@ if TYPE_CHECKING:
                    "check use), safecolor (the paper's Lab table) or a chart JSON.")
 @click.option("--illuminant", default="D65", show_default=True,
               help="Illuminant of the scene reference.")
-@click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
-              help="Detector size class for the predicted loss.")
-@click.option("--table", default=None, help="Prediction table (name or JSON path).")
+@judge_options(decision=False)
 @click.option("--json", "json_path", type=click.Path(),
               help="Write the JSON report here (a folder, existing or written with a "
                    "trailing /: IMAGE-NAME.json in it; '-': standard output).")
@@ -66,14 +64,13 @@ if TYPE_CHECKING:
                    "START:STOP[:STEP] (0:300:30; negative from the end: -10:), each its own "
                    "report; instead of --frame and --time.")
 @max_pixels_option
-@bound_option
 @evidence_option
 @measure_options
 @common_options
 def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
-          reference: str, illuminant: str, size: str, table: str | None,
+          reference: str, illuminant: str,
           json_path: str | None, html_path: str | None, frames: FrameSelection | None,
-          max_pixels: int | None, bound: str, measure: bool, images: str | None,
+          max_pixels: int | None, judge: JudgeOptions, measure: bool, images: str | None,
           annotations: str | None, models: str | None, limit: int | None,
           evidence_paths: tuple[Path, ...]) -> None:
     """Measure the chart in IMAGE: ΔE00 per patch, mean and max, exposure, bad pixels.
@@ -93,74 +90,38 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
     get IMAGE-NAME.json / .html, and index.html, an overview); one that cannot be measured is
     an error line and the others are still audited; the exit code is then 2.
     """
-    from dataclasses import replace
-
-    from fidelity.cli import error_line
-    from fidelity.core.fileio import check_outputs
-    from fidelity.pipeline.check import audit_image, audit_images
-    from fidelity.pipeline.records import GateResult, ImageSource
-    from fidelity.report.terminal import summary_lines
-
     if frames is not None and (read.frame is not None or read.time is not None):
         raise click.UsageError("give --frames, or --frame N or --time T, not both")
     read = replace(read, max_pixels=max_pixels)
-    image = expand_folders(image)
-    reports_of = image  # what each subject's report is named after
-    frame_of: list[int] | None = None
-    if frames is not None:  # each selected frame of each recording is a subject
-        image, frame_of = frame_subjects(image, frames, read.topic)
-        reports_of = frame_report_names(image, frame_of)
-    names = ([display_path(img) for img in image] if frame_of is None else
-             [f"{display_path(img)} frame {k}" for img, k in zip(image, frame_of, strict=True)])
-    many = len(image) > 1
-    # an existing folder, or one written with a trailing separator, gets IMAGE-NAME.json /
-    # .html, as in `fidelity gate`; several images always do
-    to_stdout = json_path is not None and str(json_path) == STDOUT
-    if to_stdout and many:
-        raise click.UsageError("--json - (standard output) takes one IMAGE; give a folder")
-    json_files = report_paths(reports_of, None if to_stdout or json_path is None
-                              else Path(json_path), ".json", folder=many or _folder(json_path))
-    html_files = report_paths(reports_of, None if html_path is None else Path(html_path),
-                              ".html", folder=many or _folder(html_path))
-    outputs: dict[str, Path | None] = dict(evidence_outputs(evidence_paths))
-    for name, jf, hf in zip(names, json_files, html_files, strict=True):
-        outputs[f"--json ({name})" if many else "--json"] = jf
-        outputs[f"--html ({name})" if many else "--html"] = hf
-    # several images' HTML reports get an overview page beside them, as a gate's do
-    overview = None
-    if many and html_path is not None:
-        from fidelity.report.gate import OVERVIEW_NAME
-
-        overview = outputs["--html (overview)"] = Path(html_path) / OVERVIEW_NAME
-    check_outputs(outputs, {"--table": table, "--reference": reference,
-                            "--illuminant": illuminant}
-                  | {(f"IMAGE {img}" if many else "IMAGE"): img for img in image}
-                  | measure_inputs(images, annotations, models))
+    plan = plan_subjects(image, frames, read.topic, json_path, html_path)
+    check_outputs({**evidence_outputs(evidence_paths), **plan.outputs()},
+                  {"--table": judge.table_input, "--reference": reference,
+                   "--illuminant": illuminant}
+                  | plan.inputs() | measure_inputs(images, annotations, models))
     request = measure_request(measure, images, annotations, models, limit)
-    options = {"reference": reference, "illuminant": illuminant, "size": size, "table": table,
-               "bound": bound, "measure": request}
-    if many:  # an input error of one subject is its result's; the others are still audited
-        cases = audit_images(image, corners, read=read, frames=frame_of, **options)
+    if plan.many:  # an input error of one subject is its result's; the others are still audited
+        cases = audit_images(plan.images, corners, read=read, frames=plan.frames,
+                             reference=reference, illuminant=illuminant, judge=judge,
+                             measure=request)
     else:  # an input error is the command's (one line, exit 2)
+        frame_of = plan.frames
         only = replace(read, frame=frame_of[0], time=None) if frame_of else read
-        subject = f"{image[0]} frame {frame_of[0]}" if frame_of else str(image[0])
-        cases = [GateResult(subject, report=audit_image(image[0], corners, read=only,
-                                                        **options))]
-    done = [write_subject_reports(case, jf, hf, image)
-            for case, jf, hf in zip(cases, json_files, html_files, strict=True)]
+        subject = (f"{plan.images[0]} frame {frame_of[0]}" if frame_of
+                   else str(plan.images[0]))
+        cases = [GateResult(subject, report=audit_image(
+            plan.images[0], corners, read=only, reference=reference, illuminant=illuminant,
+            judge=judge, measure=request))]
+    done = plan.write_reports(cases)
     cases = [case for case, _ in done]
-    indent = "  " if many else ""
-    for (case, written), name in zip(done, names, strict=True):
+    indent = "  " if plan.many else ""
+    for (case, written), name in zip(done, plan.names, strict=True):
         report = case.report
         if report is None:
-            if many:
+            if plan.many:
                 click.echo(f"{name}: error")
             error_line(case.error or "not measured")
             continue
-        if to_stdout:
-            from fidelity.cli.options import write_json_output
-            from fidelity.report.jsonform import chart_report_json
-
+        if plan.to_stdout:
             write_json_output(STDOUT, chart_report_json(report))
         src = report.source
         assert isinstance(src, ImageSource)
@@ -172,33 +133,19 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
             click.echo(f"{indent}wrote {display_path(p)}")
     written_all = [p for _, written in done for p in written]
     failed = sum(case.report is None for case in cases)
+    overview = plan.write_overview(cases, audit=True)
     if overview is not None:
-        from fidelity.report.gate import write_gate_overview
-
-        write_gate_overview(overview, cases,
-                            [hf if case.report is not None else None
-                             for case, hf in zip(cases, html_files, strict=True)],
-                            frame_of, None if frame_of is None else
-                            [display_path(img) for img in image], audit=True)
         written_all.append(overview)
         click.echo(f"wrote {display_path(overview)}")
-    if frame_of is not None:
-        for line in frames_summary(cases, image, frame_of):
+    if plan.frames is not None:
+        for line in frames_summary(cases, plan.images, plan.frames):
             click.echo(line)
-    if evidence_paths:
-        from fidelity.report.evidence import write_evidence
-
-        write_evidence_files(evidence_paths, write_evidence, "audit",
-                             [(c.subject, c.report, c.error) for c in cases],
-                             EXIT_ERROR if failed else 0, results=written_all)
-    if many:
-        what = "images" if frame_of is None else "frames"
+    write_evidence_files(evidence_paths, write_evidence, "audit",
+                         [(c.subject, c.report, c.error) for c in cases],
+                         EXIT_ERROR if failed else 0, results=written_all)
+    if plan.many:
+        what = "images" if plan.frames is None else "frames"
         click.echo(f"audit: {len(cases) - failed} of {len(cases)} {what} measured"
                    + (f", {failed} could not be" if failed else ""))
     if failed:
         sys.exit(EXIT_ERROR)
-
-
-def _folder(value: str | None) -> bool:
-    """Whether an output option names a folder by its trailing separator (``out/``)."""
-    return value is not None and value.endswith(("/", os.sep))

@@ -7,13 +7,8 @@ from pathlib import Path
 
 import click
 
-from fidelity.cli.options import (
-    Targets,
-    TransformNames,
-    common_options,
-    json_option,
-    write_json_output,
-)
+from fidelity.cli.context import write_json_output
+from fidelity.cli.options import Targets, TransformNames, common_options, json_option
 from fidelity.colour.charts import DEFAULT_CHART, load_chart
 from fidelity.core.fileio import write_text_atomic
 from fidelity.prediction.calibration import (

@@ -4,28 +4,30 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Any
 
 import click
 
+from fidelity.camera.model import DEFAULT_CAMERA, CameraModel, load_camera
+from fidelity.cli.context import STDOUT, from_settings, write_json_output
 from fidelity.cli.options import (
-    STDOUT,
-    bound_option,
     common_options,
-    decision_options,
-    decision_rule,
     evidence_option,
-    evidence_outputs,
-    from_settings,
     json_option,
-    measure_inputs,
+    judge_options,
     measure_options,
-    measure_request,
-    write_evidence_files,
-    write_json_output,
 )
-from fidelity.prediction.tablefile import SIZES
-from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion
+from fidelity.cli.subjects import evidence_outputs, write_evidence_files
+from fidelity.cli.values import measure_inputs, measure_request
+from fidelity.coco.measure import MeasureRequest
+from fidelity.core.fileio import check_outputs, display_path
+from fidelity.pipeline.check import check_camera
+from fidelity.pipeline.records import ChartReport, RenderSource
+from fidelity.prediction.judge import JudgeOptions
+from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion, worst_exit_code
+from fidelity.report.chart import write_chart_report
+from fidelity.report.evidence import write_evidence
+from fidelity.report.jsonform import chart_report_json
+from fidelity.report.terminal import summary_lines
 
 #: Where ``fidelity check`` writes its report unless told otherwise.
 DEFAULT_OUTPUT_DIR = "fidelity-report"
@@ -44,9 +46,7 @@ DEFAULT_OUTPUT_DIR = "fidelity-report"
 @click.option("--max-delta-e", type=float, default=DEFAULT_MAX_DELTA_E, show_default=True,
               help="Pass when the mean ΔE00 <= X (default: SAFE-COLOR's published threshold; "
                    "fidelity predict --delta-e X gives the loss measured at X).")
-@click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
-              help="Detector size class for the predicted loss.")
-@click.option("--table", default=None, help="Prediction table (name or JSON path).")
+@judge_options()
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               default=DEFAULT_OUTPUT_DIR, show_default=True,
               help="Folder for report.html and report.json (several cameras: a subfolder "
@@ -58,17 +58,14 @@ DEFAULT_OUTPUT_DIR = "fidelity-report"
 @click.option("--report/--no-report", default=True, show_default=True,
               help="Write the HTML and JSON reports (--no-report: the verdict only, e.g. in a "
                    "pre-commit hook).")
-@bound_option
-@decision_options
 @evidence_option
 @measure_options
 @common_options
 def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, renderer: str,
-          reference: str, max_delta_e: float, size: str, table: str | None, out_dir: Path,
-          json_path: str | None, html_path: Path | None, report: bool, bound: str,
+          reference: str, max_delta_e: float, judge: JudgeOptions, out_dir: Path,
+          json_path: str | None, html_path: Path | None, report: bool,
           measure: bool, images: str | None, annotations: str | None, models: str | None,
-          limit: int | None, decision: str, coverage_factor: float, strict: bool,
-          evidence_paths: tuple[Path, ...]) -> None:
+          limit: int | None, evidence_paths: tuple[Path, ...]) -> None:
     """Is this camera model's colour good enough for perception testing?
 
     Renders the spectral colour chart through the camera, measures ΔE00, predicts the detection
@@ -83,10 +80,6 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
     fidelity check cameras/*.toml --no-report       # each, verdicts only
     fidelity check --camera my.toml --measure       # + the loss measured on COCO
     """
-    from fidelity.camera.model import DEFAULT_CAMERA, camera_files
-    from fidelity.core.fileio import check_outputs
-    from fidelity.prediction.verdict import Criterion
-
     if cameras and camera is not None and not from_settings("camera"):
         raise click.UsageError("give CAMERAS or --camera, not both")
     subjects = list(cameras) or [camera or DEFAULT_CAMERA]
@@ -104,27 +97,23 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
     outputs: dict[str, Path | None] = {f"{k} ({cam})" if many else k: v
                                        for cam, html, js in plans
                                        for k, v in (("--html", html), ("--json", js))}
+    # each camera file is parsed once, here, and passed down as its CameraModel
+    models_of = {cam: load_camera(cam) for cam in subjects}
     check_outputs({**outputs, **evidence_outputs(evidence_paths)},
-                  {"--table": table, "--illuminant": illuminant}
+                  {"--table": judge.table_input, "--illuminant": illuminant}
                   | {f"CAMERA {cam}": cam for cam in subjects}
                   | {f"CAMERA {cam} ({f.name})": f for cam in subjects
-                     for f in camera_files(cam)}
+                     for f in models_of[cam].files}
                   | measure_inputs(images, annotations, models))
     criterion = Criterion("max-delta-e", max_delta_e)
-    rule = decision_rule(decision, coverage_factor, strict)
     request = measure_request(measure, images, annotations, models, limit)
-    reports: list[Any] = []
-    codes = [_check_one(cam, html, js, to_stdout=to_stdout, many=many, criterion=criterion,
-                        illuminant=illuminant, renderer=renderer, reference=reference,
-                        size=size, table=table, bound=bound, measure=request, decision=rule,
-                        reports=reports)
+    reports: list[ChartReport] = []
+    codes = [_check_one(cam, models_of[cam], html, js, to_stdout=to_stdout, many=many,
+                        criterion=criterion, illuminant=illuminant, renderer=renderer,
+                        reference=reference, judge=judge, measure=request, reports=reports)
              for cam, html, js in plans]
-    from fidelity.prediction.verdict import worst_exit_code
-
     code = worst_exit_code(codes)
     if evidence_paths:
-        from fidelity.report.evidence import write_evidence
-
         write_evidence_files(
             evidence_paths, write_evidence, "check",
             [(cam, r, None) for (cam, _, _), r in zip(plans, reports, strict=True)], code,
@@ -132,27 +121,18 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
     sys.exit(code)
 
 
-def _check_one(cam: str, html: Path | None, json_file: Path | None, *, to_stdout: bool,
-               many: bool, criterion: Criterion, illuminant: str, renderer: str,
-               reference: str, size: str, table: str | None, bound: str = "classic",
-               measure: Any = None, decision: Any = None, reports: list[Any] | None = None
-               ) -> int:
-    """Check one camera, write its reports, print its verdict; its exit code."""
-    from fidelity.pipeline.check import check_camera
-    from fidelity.pipeline.records import RenderSource
-    from fidelity.prediction.verdict import SIMPLE
-    from fidelity.report.chart import write_chart_report
-    from fidelity.report.terminal import summary_lines
-
-    report = check_camera(cam, illuminant=illuminant, renderer=renderer, reference=reference,
-                          size=size, table=table, criterion=criterion, bound=bound,
-                          measure=measure, decision=decision or SIMPLE)
-    if reports is not None:
-        reports.append(report)
+def _check_one(cam: str, model: CameraModel, html: Path | None, json_file: Path | None, *,
+               to_stdout: bool, many: bool, criterion: Criterion, illuminant: str,
+               renderer: str, reference: str, judge: JudgeOptions,
+               measure: MeasureRequest | None, reports: list[ChartReport]) -> int:
+    """Check one camera (named ``cam`` on the command line), write its reports, print its
+    verdict; its exit code."""
+    report = check_camera(model, illuminant=illuminant, renderer=renderer,
+                          reference=reference, criterion=criterion, judge=judge,
+                          measure=measure)
+    reports.append(report)
     write_chart_report(report, json_path=json_file, html_path=html)
     if to_stdout:
-        from fidelity.report.jsonform import chart_report_json
-
         write_json_output(STDOUT, chart_report_json(report))
     src = report.source
     assert isinstance(src, RenderSource)
@@ -163,8 +143,6 @@ def _check_one(cam: str, html: Path | None, json_file: Path | None, *, to_stdout
     for line in summary_lines(report):
         click.echo("  " + line)
     if html is not None:
-        from fidelity.core.fileio import display_path
-
         click.echo(f"  report: {display_path(html)}"
                    + (f" (JSON: {display_path(json_file)})" if json_file else ""))
     return report.exit_code

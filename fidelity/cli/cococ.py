@@ -6,17 +6,16 @@ from typing import TYPE_CHECKING
 
 import click
 
+from fidelity.cli.context import show_progress
 from fidelity.cli.options import (
     CorruptionNames,
     ModelList,
     Severities,
-    coco_inputs,
     common_options,
     limit_option,
-    model_inputs,
     progress_option,
-    show_progress,
 )
+from fidelity.cli.values import coco_inputs, model_inputs
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import ModelSpec

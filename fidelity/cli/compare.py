@@ -8,31 +8,26 @@ from typing import TYPE_CHECKING
 
 import click
 
+from fidelity.cli.context import STDOUT, write_json_output
 from fidelity.cli.options import (
     IMAGE_PATH,
     PATH,
-    STDOUT,
-    bound_option,
     chart_pair_options,
     common_options,
-    decision_options,
-    decision_rule,
     evidence_option,
-    evidence_outputs,
     image_read_options,
     json_option,
-    make_criterion,
-    measure_inputs,
+    judge_options,
     measure_options,
-    measure_request,
-    write_evidence_files,
-    write_json_output,
 )
-from fidelity.prediction.tablefile import CLASS_COLUMNS, SIZES
+from fidelity.cli.subjects import evidence_outputs, write_evidence_files
+from fidelity.cli.values import make_criterion, measure_inputs, measure_request
+from fidelity.prediction.tablefile import CLASS_COLUMNS
 from fidelity.prediction.verdict import EXIT_ERROR
 
 if TYPE_CHECKING:
     from fidelity.chart.read import ReadOptions
+    from fidelity.prediction.judge import JudgeOptions
 
 
 @click.command()
@@ -47,10 +42,7 @@ if TYPE_CHECKING:
               help="Class of --max-dmap: all (mAP, default), person, bicycle.")
 @click.option("--unit", type=click.Choice(["points", "relative"]), default="points",
               show_default=True, help="Unit of --max-dmap.")
-@bound_option
-@click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
-              help="Detector size class of the prediction.")
-@click.option("--table", default=None, help="Prediction table (name or JSON path).")
+@judge_options()
 @click.option("--reference", default="scene", show_default=True,
               help="What each chart's own ΔE is measured against: scene, safecolor or a chart "
                    "JSON.")
@@ -60,19 +52,18 @@ if TYPE_CHECKING:
 @click.option("--junit", type=PATH, help="Write JUnit XML (one test case).")
 @json_option("Write the comparison as JSON")
 @click.option("--html", "html_path", type=PATH, default=None, help="Write the HTML report.")
-@decision_options
 @evidence_option
 @measure_options
 @common_options
 def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | None,
             sim_ocio_colourspace: str | None, real_ocio_colourspace: str | None,
             normalise_mode: str, max_delta_e: float | None, max_dmap: float | None,
-            cls: str | None, unit: str, bound: str, size: str, table: str | None,
+            cls: str | None, unit: str, judge: JudgeOptions,
             reference: str, illuminant: str, read: ReadOptions,
             junit: Path | None,
             json_path: str | None, html_path: Path | None, measure: bool, images: str | None,
-            annotations: str | None, models: str | None, limit: int | None, decision: str,
-            coverage_factor: float, strict: bool, evidence_paths: tuple[Path, ...]) -> None:
+            annotations: str | None, models: str | None, limit: int | None,
+            evidence_paths: tuple[Path, ...]) -> None:
     """Compare a simulated chart with the real camera's: sim-to-real ΔE00 and its cost.
 
     SIM is the simulator's render of the chart scene, REAL a photo of the same chart taken
@@ -101,23 +92,22 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
     to_stdout = json_path == STDOUT
     check_outputs({"--json": None if to_stdout else json_path, "--html": html_path,
                    "--junit": junit, **evidence_outputs(evidence_paths)},
-                  {"SIM": sim, "REAL": real, "--table": table, "--reference": reference,
+                  {"SIM": sim, "REAL": real, "--table": judge.table_input, "--reference": reference,
                    "--illuminant": illuminant} | measure_inputs(images, annotations, models))
     criterion = None
     if max_delta_e is not None or max_dmap is not None:
         criterion = make_criterion(max_delta_e, max_dmap, cls, unit)
     elif cls is not None:
         raise click.UsageError("--class goes with --max-dmap")
-    rule = decision_rule(decision, coverage_factor, strict)
     request = measure_request(measure, images, annotations, models, limit)
     subject = f"{sim} against {real}"
     try:
         report = compare_charts(
             sim, real, sim_corners=sim_corners, real_corners=real_corners,
             normalise_mode=normalise_mode, reference=reference, illuminant=illuminant,
-            size=size, table=table, criterion=criterion, bound=bound,
-            read=read, sim_ocio_colourspace=sim_ocio_colourspace,
-            real_ocio_colourspace=real_ocio_colourspace, measure=request, decision=rule)
+            criterion=criterion, judge=judge, read=read,
+            sim_ocio_colourspace=sim_ocio_colourspace,
+            real_ocio_colourspace=real_ocio_colourspace, measure=request)
     except FidelityError as exc:
         if junit is not None:
             write_junit(junit, [GateResult(subject, criterion, error=str(exc))])

@@ -4,13 +4,8 @@ from __future__ import annotations
 
 import click
 
-from fidelity.cli.options import (
-    Targets,
-    TransformNames,
-    common_options,
-    progress_option,
-    show_progress,
-)
+from fidelity.cli.context import show_progress
+from fidelity.cli.options import Targets, TransformNames, common_options, progress_option
 
 
 @click.command()

@@ -7,19 +7,17 @@ from typing import TYPE_CHECKING
 
 import click
 
+from fidelity.cli.context import show_progress, write_json_output
 from fidelity.cli.options import (
     ModelList,
-    cap_models,
     common_options,
-    executor_from,
     executor_options,
     json_option,
     limit_option,
     progress_option,
     scorer_option,
-    show_progress,
-    write_json_output,
 )
+from fidelity.cli.values import cap_models, executor_from
 from fidelity.coco.evaluate import METRICS
 
 if TYPE_CHECKING:

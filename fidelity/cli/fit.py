@@ -12,19 +12,18 @@ from fidelity.cli.options import (
     chart_pair_options,
     common_options,
     evidence_option,
-    evidence_outputs,
     image_read_options,
-    measure_inputs,
+    judge_options,
     measure_options,
-    measure_request,
-    write_evidence_files,
 )
-from fidelity.prediction.tablefile import SIZES
+from fidelity.cli.subjects import evidence_outputs, write_evidence_files
+from fidelity.cli.values import measure_inputs, measure_request
 
 if TYPE_CHECKING:
     from fidelity.chart.read import ReadOptions
     from fidelity.coco.measure import MeasureRequest
     from fidelity.pipeline.fit import FitReport
+    from fidelity.prediction.judge import JudgeOptions
 
 
 @click.command()
@@ -57,9 +56,7 @@ if TYPE_CHECKING:
                    "SIM); without it only the patch windows the verification measures are "
                    "transformed.")
 @chart_pair_options
-@click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
-              help="Detector size class of the predicted ΔmAP.")
-@click.option("--table", default=None, help="Prediction table (name or JSON path).")
+@judge_options(bound=False, decision=False)
 @click.option("--reference", default="scene", show_default=True,
               help="What each chart is audited against: scene, safecolor or a chart JSON.")
 @click.option("--illuminant", default="D65", show_default=True,
@@ -72,8 +69,8 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
         camera: Path | None, out: Path,
         model: str, objective: str | None, corrected: bool,
         sim_corners: str | None, real_corners: str | None, sim_ocio_colourspace: str | None,
-        real_ocio_colourspace: str | None, normalise_mode: str, size: str,
-        table: str | None, reference: str, illuminant: str, measure: bool, images: str | None,
+        real_ocio_colourspace: str | None, normalise_mode: str,
+        judge: JudgeOptions, reference: str, illuminant: str, measure: bool, images: str | None,
         annotations: str | None, models: str | None, limit: int | None,
         read: ReadOptions, evidence_paths: tuple[Path, ...]) -> None:
     """Fit the correction from the simulator's chart onto the real camera's, as a 3D LUT.
@@ -110,15 +107,15 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
         if model != "matrix":
             raise click.UsageError("--pair fits one matrix with per-illuminant gains: "
                                    "--correction matrix only")
-        _fit_pairs(pairs, out, sim_corners, real_corners, normalise_mode, size, table,
+        _fit_pairs(pairs, out, sim_corners, real_corners, normalise_mode, judge,
                    reference, illuminant, read, real_ocio_colourspace, corrected)
         return
     if camera is not None:
         if sim is None or real is not None:
             raise click.UsageError("with --camera give REAL alone: fidelity fit --camera "
                                    "sim.toml REAL --out DIR")
-        _fit_camera(camera, sim, out, model, objective, real_corners, normalise_mode, size,
-                    table, reference, illuminant, read, real_ocio_colourspace, corrected,
+        _fit_camera(camera, sim, out, model, objective, real_corners, normalise_mode,
+                    judge, reference, illuminant, read, real_ocio_colourspace, corrected,
                     request, evidence_paths)
         return
     if sim is None or real is None:
@@ -129,12 +126,13 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
     if corrected:
         names += ("corrected.png", "corrected.exr")
     check_outputs({**{n: out / n for n in names}, **evidence_outputs(evidence_paths)},
-                  {"SIM": sim, "REAL": real, "--table": table, "--reference": reference,
+                  {"SIM": sim, "REAL": real, "--table": judge.table_input,
+                   "--reference": reference,
                    "--illuminant": illuminant} | measure_inputs(images, annotations, models))
     report = fit_and_verify(
         sim, real, out, model=model, objective=objective, sim_corners=sim_corners,
         real_corners=real_corners, normalise_mode=normalise_mode, reference=reference,
-        illuminant=illuminant, size=size, table=table, read=read,
+        illuminant=illuminant, judge=judge, read=read,
         real_ocio_colourspace=real_ocio_colourspace, corrected=corrected, measure=request)
     write_fit_report(report, json_path=out / "report.json", html_path=out / "report.html",
                      protect=(sim, real))
@@ -154,14 +152,15 @@ def _evidence(paths: tuple[Path, ...], report: FitReport, written: list[Path]) -
 
 
 def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str | None,
-               real_corners: str | None, normalise_mode: str, size: str, table: str | None,
+               real_corners: str | None, normalise_mode: str, judge: JudgeOptions,
                reference: str, illuminant: str, read: ReadOptions,
                real_ocio_colourspace: str | None, corrected: bool) -> None:
     from fidelity.core.fileio import check_outputs, display_path
     from fidelity.pipeline.fit import fit_pairs_and_verify
     from fidelity.report.fit import shared_fit_lines, write_shared_fit_report
 
-    inputs: dict[str, Path | str | None] = {"--table": table, "--reference": reference,
+    inputs: dict[str, Path | str | None] = {"--table": judge.table_input,
+                                            "--reference": reference,
                                             "--illuminant": illuminant}
     for k, (s, r) in enumerate(pairs):
         inputs[f"--pair {k + 1} SIM"] = s
@@ -171,7 +170,7 @@ def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str
                   inputs)
     shared = fit_pairs_and_verify(pairs, out, sim_corners=sim_corners, real_corners=real_corners,
                                   normalise_mode=normalise_mode, reference=reference,
-                                  illuminant=illuminant, size=size, table=table, read=read,
+                                  illuminant=illuminant, judge=judge, read=read,
                                   real_ocio_colourspace=real_ocio_colourspace,
                                   corrected=corrected)
     write_shared_fit_report(shared, json_path=out / "report.json",
@@ -184,7 +183,7 @@ def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str
 
 
 def _fit_camera(camera: Path, real: Path, out: Path, model: str, objective: str | None,
-                real_corners: str | None, normalise_mode: str, size: str, table: str | None,
+                real_corners: str | None, normalise_mode: str, judge: JudgeOptions,
                 reference: str, illuminant: str, read: ReadOptions,
                 real_ocio_colourspace: str | None, corrected: bool,
                 request: MeasureRequest | None, evidence_paths: tuple[Path, ...]) -> None:
@@ -195,12 +194,12 @@ def _fit_camera(camera: Path, real: Path, out: Path, model: str, objective: str 
     names = ("correction.cube", "correction.ocio", "correction.json", "report.json",
              "report.html", "corrected.toml", "sim_render.png", "sim_render.exr")
     check_outputs({**{n: out / n for n in names}, **evidence_outputs(evidence_paths)},
-                  {"--camera": camera, "REAL": real, "--table": table,
+                  {"--camera": camera, "REAL": real, "--table": judge.table_input,
                    "--reference": reference, "--illuminant": illuminant})
     report, toml = fit_camera_and_verify(
         camera, real, out, model=model, objective=objective, real_corners=real_corners,
-        normalise_mode=normalise_mode, reference=reference, illuminant=illuminant, size=size,
-        table=table, read=read, real_ocio_colourspace=real_ocio_colourspace,
+        normalise_mode=normalise_mode, reference=reference, illuminant=illuminant,
+        judge=judge, read=read, real_ocio_colourspace=real_ocio_colourspace,
         corrected=corrected, measure=request)
     write_fit_report(report, json_path=out / "report.json", html_path=out / "report.html",
                      protect=(camera, real))

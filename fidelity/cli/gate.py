@@ -11,43 +11,43 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import click
 
+from fidelity.camera.model import CameraModel, camera_files, load_camera
+from fidelity.chart.read import ReadOptions
+from fidelity.chart.recording import FrameSelection
+from fidelity.cli.context import STDOUT, from_settings, write_json_output
 from fidelity.cli.options import (
     IMAGE_PATH,
     PATH,
-    STDOUT,
     FrameRange,
-    bound_option,
     common_options,
-    decision_options,
-    decision_rule,
     evidence_option,
-    evidence_outputs,
-    expand_folders,
-    frame_report_names,
-    frame_subjects,
-    frames_summary,
-    from_settings,
     image_read_options,
-    make_criterion,
+    judge_options,
     max_pixels_option,
-    report_paths,
-    write_evidence_files,
-    write_subject_reports,
 )
+from fidelity.cli.subjects import (
+    evidence_outputs,
+    frames_summary,
+    plan_subjects,
+    write_evidence_files,
+)
+from fidelity.cli.values import make_criterion
 from fidelity.core.errors import FidelityError
-from fidelity.core.fileio import display_path
-from fidelity.prediction.tablefile import CLASS_COLUMNS, SIZES
+from fidelity.core.fileio import check_outputs, display_path
+from fidelity.pipeline.check import gate as gate_subjects
+from fidelity.pipeline.records import GateResult, gate_exit_code
+from fidelity.prediction.judge import JudgeOptions
+from fidelity.prediction.tablefile import CLASS_COLUMNS
 from fidelity.prediction.verdict import EXIT_ERROR, EXIT_UNDECIDED
-
-if TYPE_CHECKING:
-    from fidelity.chart.read import ReadOptions
-    from fidelity.chart.recording import FrameSelection
-    from fidelity.pipeline.records import GateResult
+from fidelity.report.evidence import write_evidence
+from fidelity.report.jsonform import chart_report_json
+from fidelity.report.junit import write_junit
+from fidelity.report.terminal import summary_lines
 
 
 def _error_line(message: str) -> None:
@@ -56,8 +56,6 @@ def _error_line(message: str) -> None:
 
 def _write_junit(junit: Path, cases: Sequence[GateResult]) -> None:
     """Write the JUnit file; a failure to write it is an error (exit 2)."""
-    from fidelity.report.junit import write_junit
-
     try:
         write_junit(junit, cases)
     except (FidelityError, OSError) as exc:
@@ -77,9 +75,7 @@ def _write_junit(junit: Path, cases: Sequence[GateResult]) -> None:
               help="Class of --max-dmap: all (mAP, default), person, bicycle.")
 @click.option("--unit", type=click.Choice(["points", "relative"]), default="points",
               show_default=True, help="Unit of --max-dmap: percentage points or % of baseline.")
-@click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
-              help="Detector size class of the prediction.")
-@click.option("--table", default=None, help="Prediction table (name or JSON path).")
+@judge_options()
 @image_read_options
 @click.option("--reference", default="scene", show_default=True,
               help="scene (the chart's spectra under --illuminant), safecolor (the paper's Lab "
@@ -99,17 +95,15 @@ def _write_junit(junit: Path, cases: Sequence[GateResult]) -> None:
                    "START:STOP[:STEP] (0:300:30; negative from the end: -10:), each its own "
                    "subject (JUnit test case, report); instead of --frame and --time.")
 @max_pixels_option
-@bound_option
-@decision_options
 @evidence_option
 @common_options
 def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
          max_delta_e: float | None, max_dmap: float | None, cls: str | None, unit: str,
-         size: str, table: str | None, read: ReadOptions,
+         judge: JudgeOptions, read: ReadOptions,
          reference: str, illuminant: str, renderer: str, junit: Path | None,
          json_path: Path | None, html_path: Path | None,
-         frames: FrameSelection | None, max_pixels: int | None, bound: str, decision: str,
-         coverage_factor: float, strict: bool, evidence_paths: tuple[Path, ...]) -> None:
+         frames: FrameSelection | None, max_pixels: int | None,
+         evidence_paths: tuple[Path, ...]) -> None:
     """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 input error, 3 bug, 4
     undecided (--decision guarded).
 
@@ -150,72 +144,51 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
     if images and renderer != "closed-form" and not from_settings("renderer"):
         raise click.UsageError("--renderer applies to --camera (a camera model rendered), not "
                                "to an IMAGE")
-    from dataclasses import replace
-
-    from fidelity.pipeline.check import gate as gate_subjects
-    from fidelity.pipeline.records import GateResult, gate_exit_code
-    from fidelity.report.terminal import summary_lines
-
     try:
-        images = expand_folders(images)  # a folder of frames: its images
-    except FidelityError as exc:
-        _error_line(str(exc))
-        sys.exit(EXIT_ERROR)
-    to_stdout = json_path is not None and str(json_path) == STDOUT
-    if to_stdout and (len(images) > 1 or frames is not None):
-        raise click.UsageError("--json - (standard output) takes one IMAGE; give a folder")
-    if to_stdout:
-        json_path = None
-    frame_of: list[int] | None = None
-    try:
-        from fidelity.core.fileio import check_outputs
-
-        if frames is not None:  # each selected frame of each recording is a subject
-            images, frame_of = frame_subjects(images, frames, read.topic)
-        many = len(images) > 1
-        # a folder (always so with several subjects) gets one report per image (or camera)
-        subjects = ((images or (Path(camera or ""),)) if frame_of is None else
-                    frame_report_names(images, frame_of))
-        json_paths = report_paths(subjects, json_path, ".json", folder=many)
-        html_paths = report_paths(subjects, html_path, ".html", folder=many)
-        outputs: dict[str, Path | None] = {"--junit": junit, **evidence_outputs(evidence_paths)}
-        for img, jp, hp in zip(subjects, json_paths, html_paths, strict=True):
-            outputs[f"--json ({img})" if many else "--json"] = jp
-            outputs[f"--html ({img})" if many else "--html"] = hp
-        # several subjects' HTML reports in a folder get an overview page beside them
-        overview = None
-        if many and html_path is not None:
-            from fidelity.report.gate import OVERVIEW_NAME
-
-            overview = html_path / OVERVIEW_NAME
-        outputs["--html (overview)"] = overview
-        from fidelity.camera.model import camera_files
-
-        check_outputs(outputs, {"--camera": camera, "--table": table, "--reference": reference,
-                                "--illuminant": illuminant}
-                      | {f"--camera ({f.name})": f for f in camera_files(camera or "")}
-                      | {(f"IMAGE {img}" if many else "IMAGE"): img for img in images})
+        # a camera is the one subject, its reports named after it
+        plan = plan_subjects(images or (Path(camera or ""),), frames, read.topic, json_path,
+                             html_path)
+        # the camera file is parsed once, here; a camera that cannot be read is its subject's
+        # error (a JUnit <error> too), as an image that cannot be read is
+        model: CameraModel | None = None
+        camera_error: FidelityError | None = None
+        if camera is not None:
+            try:
+                model = load_camera(camera)
+            except FidelityError as exc:
+                camera_error = exc
+        camera_inputs = (model.files if model is not None else
+                         camera_files(camera) if camera is not None else ())
+        inputs: dict[str, str | Path | None] = {
+            "--camera": camera, "--table": judge.table_input, "--reference": reference,
+            "--illuminant": illuminant, **{f"--camera ({f.name})": f for f in camera_inputs}}
+        if camera is None:
+            inputs |= plan.inputs()
+        check_outputs({"--junit": junit, **evidence_outputs(evidence_paths), **plan.outputs()},
+                      inputs)
     except FidelityError as exc:  # no JUnit file either: it may be the input named
         _error_line(str(exc))
         sys.exit(EXIT_ERROR)
+    images = plan.images if camera is None else ()
 
     try:
         criterion = make_criterion(max_delta_e, max_dmap, cls, unit)
-        rule = decision_rule(decision, coverage_factor, strict)
     except FidelityError as exc:
         if junit is not None:
             subject = ", ".join(map(str, images)) if images else str(camera)
             _write_junit(junit, [GateResult(subject, error=str(exc))])
         _error_line(str(exc))
         sys.exit(EXIT_ERROR)
-    cases = gate_subjects(
-        criterion, images, camera=camera, corners=corners,
-        read=replace(read, max_pixels=max_pixels),
-        reference=reference, illuminant=illuminant, renderer=renderer, size=size, table=table,
-        bound=bound, decision=rule, frames=frame_of)
-    done = [write_subject_reports(case, jp, hp, images)
-            for case, jp, hp in zip(cases, json_paths, html_paths, strict=True)]
+    if camera_error is not None:
+        cases = [GateResult(str(camera), criterion, error=str(camera_error))]
+    else:
+        cases = gate_subjects(
+            criterion, images, camera=model, corners=corners,
+            read=replace(read, max_pixels=max_pixels), reference=reference,
+            illuminant=illuminant, renderer=renderer, judge=judge, frames=plan.frames)
+    done = plan.write_reports(cases)
     cases = [case for case, _ in done]
+    many = plan.many
     for case, written in done:
         if many:
             subject = display_path(case.subject)
@@ -230,36 +203,24 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
             click.echo(("  " if many else "") + line)
         for path in written:
             click.echo(("  " if many else "") + f"wrote {display_path(path)}")
+    try:
+        overview = plan.write_overview(cases, audit=False)
+    except (FidelityError, OSError) as exc:  # as a JUnit file that cannot be written
+        _error_line(f"{plan.overview}: cannot write the overview: {exc}")
+        sys.exit(EXIT_ERROR)
     if overview is not None:
-        from fidelity.report.gate import write_gate_overview
-
-        try:
-            write_gate_overview(overview, cases,
-                                [hp if c.report is not None else None
-                                 for c, hp in zip(cases, html_paths, strict=True)],
-                                frame_of, None if frame_of is None else
-                                [display_path(img) for img in images])
-        except (FidelityError, OSError) as exc:  # as a JUnit file that cannot be written
-            _error_line(f"{overview}: cannot write the overview: {exc}")
-            sys.exit(EXIT_ERROR)
         click.echo(f"wrote {display_path(overview)}")
     if junit is not None:
         _write_junit(junit, cases)
         click.echo(f"wrote {display_path(junit)}")
-    if to_stdout and cases[0].report is not None:
-        from fidelity.cli.options import write_json_output
-        from fidelity.report.jsonform import chart_report_json
-
+    if plan.to_stdout and cases[0].report is not None:
         write_json_output(STDOUT, chart_report_json(cases[0].report))
-    if evidence_paths:
-        from fidelity.report.evidence import write_evidence
-
-        write_evidence_files(evidence_paths, write_evidence, "gate",
-                             [(c.subject, c.report, c.error) for c in cases],
-                             gate_exit_code(cases),
-                             results=[*(p for _, w in done for p in w), junit])
-    if frame_of is not None:
-        for line in frames_summary(cases, images, frame_of):
+    write_evidence_files(evidence_paths, write_evidence, "gate",
+                         [(c.subject, c.report, c.error) for c in cases],
+                         gate_exit_code(cases),
+                         results=[*(p for _, w in done for p in w), junit])
+    if plan.frames is not None:
+        for line in frames_summary(cases, images, plan.frames):
             click.echo(line)
     if many:
         codes = [c.exit_code for c in cases]

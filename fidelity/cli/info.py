@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import click
 
-from fidelity.cli.options import common_options, json_option, write_json_output
+from fidelity.cli.context import write_json_output
+from fidelity.cli.options import common_options, json_option
 
 
 @click.command()

@@ -29,30 +29,27 @@ from __future__ import annotations
 import contextlib
 import functools
 import io
-import json
 import os
 import re
 import sys
 from collections.abc import Callable, Sequence
-from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
-from fidelity.core.errors import FidelityError, InvalidValueError
+from fidelity.cli.context import STDOUT, command_state, settings_line
+from fidelity.cli.values import decision_rule, parse_models
+from fidelity.core.errors import InvalidValueError
+from fidelity.prediction.directional import BOUNDS
+from fidelity.prediction.judge import JudgeOptions
+from fidelity.prediction.tablefile import SIZES
+from fidelity.prediction.verdict import SIMPLE
 
 if TYPE_CHECKING:
     from typing import TypeAlias
 
-    from fidelity.chart.recording import FrameSelection
-    from fidelity.coco.executor import ExecutorOptions
-    from fidelity.coco.measure import CocoInputs
-    from fidelity.coco.scores import ScoresTransfer
-    from fidelity.coco.store import ResultsStore
     from fidelity.coco.sweep import ModelSpec
-    from fidelity.pipeline.records import GateResult
-    from fidelity.prediction.verdict import Criterion
 
     # click >= 8.2 types ParamType by its value; the project supports click 8.1 too
     ParamTypeBase: TypeAlias = click.ParamType[Any]
@@ -60,9 +57,6 @@ else:
     ParamTypeBase = click.ParamType
 
 F = TypeVar("F", bound=Callable[..., Any])
-
-#: The ``--json`` value that means standard output.
-STDOUT = "-"
 
 #: A file argument or option (a path, not a folder).
 PATH = click.Path(dir_okay=False, path_type=Path)
@@ -178,96 +172,6 @@ class FrameRange(ParamTypeBase):
         return parse_frames(str(value))
 
 
-def expand_folders(paths: Sequence[Path]) -> tuple[Path, ...]:
-    """Each IMAGE as given, a folder of images (one without a ROS 2 bag's ``metadata.yaml``)
-    replaced by the images in it, in natural order (:func:`fidelity.chart.image.folder_images`;
-    ``audit`` and ``gate``); a folder with none is an input error."""
-    from fidelity.chart.image import folder_images, image_suffixes
-    from fidelity.core.errors import InputFileError
-    from fidelity.core.fileio import display_path
-
-    out: list[Path] = []
-    for p in paths:
-        if not p.is_dir() or (p / "metadata.yaml").is_file():
-            out.append(p)
-            continue
-        try:
-            found = folder_images(p)
-        except OSError as exc:
-            raise InputFileError(f"{display_path(p)}: cannot list the folder "
-                                 f"({exc.strerror or exc})") from None
-        if not found:
-            common = [x for x in (".exr", ".png", ".jpg", ".tif", ".hdr") if x in
-                      image_suffixes()]
-            raise InputFileError(f"{display_path(p)}: a folder with no image in it "
-                                 f"({', '.join(common)}, ...) and no metadata.yaml of a ROS 2 "
-                                 "bag")
-        out.extend(found)
-    return tuple(out)
-
-
-def frame_subjects(images: Sequence[Path], frames: FrameSelection, topic: str | None
-                    ) -> tuple[tuple[Path, ...], list[int]]:
-    """Each recording once per frame ``frames`` selects on its topic (from its index), and
-    those frames (``gate --frames``, ``audit --frames``)."""
-    from fidelity.chart.recording import topic_frames
-    from fidelity.core.fileio import display_path
-
-    paths: list[Path] = []
-    frame_of: list[int] = []
-    for img in images:
-        chosen, count = topic_frames(img, topic)
-        for k in frames.resolve(count, display_path(img), chosen):
-            paths.append(img)
-            frame_of.append(k)
-    return tuple(paths), frame_of
-
-
-def frame_report_names(images: Sequence[Path], frame_of: Sequence[int]) -> tuple[Path, ...]:
-    """What each frame's report is named after: ``RECORDING.frameK`` (its reports are
-    ``RECORDING.frameK.json`` / ``.html`` in the --json / --html folder)."""
-    return tuple(Path(f"{img}.frame{k}") for img, k in zip(images, frame_of, strict=True))
-
-
-def frames_summary(cases: Sequence[GateResult], images: Sequence[Path],
-                    frame_of: Sequence[int]) -> list[str]:
-    """How the chart ΔE varies over the frames gated or audited (the measured ones), per
-    recording."""
-    from statistics import median
-
-    from fidelity.core.fileio import display_path
-
-    by: dict[Path, list[tuple[float, int]]] = {}
-    for case, path, k in zip(cases, images, frame_of, strict=True):
-        if case.report is not None:
-            by.setdefault(path, []).append((case.report.mean_delta_e, k))
-    lines = []
-    for path, values in by.items():
-        lo, hi = min(values), max(values)
-        many = "s" if len(values) > 1 else ""
-        lines.append(f"{display_path(path)}: mean ΔE00 over {len(values)} measured frame{many}: "
-                     f"min {lo[0]:.2f} (frame {lo[1]}), median "
-                     f"{median(v for v, _ in values):.2f}, max {hi[0]:.2f} (frame {hi[1]})")
-    return lines
-
-
-def write_subject_reports(result: GateResult, json_path: Path | None, html_path: Path | None,
-                          inputs: Sequence[Path]) -> tuple[GateResult, list[Path]]:
-    """Write a gated or audited subject's JSON and HTML reports (never over an ``inputs``
-    file); a failure to write them becomes the subject's error, as an input error does.
-    Returns the result and the files written."""
-    from fidelity.report.chart import write_chart_report
-
-    if result.report is None:
-        return result, []
-    try:
-        written = write_chart_report(result.report, json_path=json_path, html_path=html_path,
-                                     protect=list(inputs))
-    except (FidelityError, OSError) as exc:
-        return replace(result, report=None, error=str(exc)), []
-    return result, written
-
-
 class NameList(ParamTypeBase):
     """``all`` or comma-separated names from a known set -> a list of names."""
 
@@ -347,16 +251,6 @@ class Severities(ParamTypeBase):
         return sorted(set(out))
 
 
-def parse_models(text: str, what: str = "--models") -> tuple[ModelSpec, ...]:
-    """``A.onnx,B.onnx@250`` -> :class:`fidelity.coco.sweep.ModelSpec` each (at least one)."""
-    from fidelity.coco.sweep import ModelSpec
-
-    specs = tuple(ModelSpec.parse(m.strip()) for m in text.split(",") if m.strip())
-    if not specs:
-        raise InvalidValueError(f"{what} {text!r}: names no ONNX file")
-    return specs
-
-
 class ModelList(ParamTypeBase):
     """``--models A.onnx,B.onnx@250``: ONNX detectors, each optionally ``@N`` (at most the first
     N annotated images by id) -> a tuple of :class:`fidelity.coco.sweep.ModelSpec`
@@ -383,29 +277,6 @@ def limit_option(prefix: str = "") -> Callable[[F], F]:
     """``--limit N`` (:data:`LIMIT_HELP`; ``prefix``: e.g. "With --measure: ")."""
     return click.option("--limit", type=click.IntRange(min=1), default=None,
                         help=prefix + LIMIT_HELP)
-
-
-def cap_models(models: Sequence[ModelSpec], limit: int | None) -> tuple[ModelSpec, ...]:
-    """Each model with ``--limit`` applied: its own ``@N`` or ``limit``, the smaller."""
-    if limit is None:
-        return tuple(models)
-    return tuple(replace(s, limit=min(s.limit or limit, limit)) for s in models)
-
-
-def model_inputs(models: Sequence[ModelSpec] | None) -> dict[str, Path]:
-    """What ``--models`` reads, for :func:`fidelity.core.fileio.check_outputs`: each model file."""
-    return {f"--models ({s.path})": s.path for s in models or ()}
-
-
-def coco_inputs(images: str | None, annotations: str | None,
-                models: Sequence[ModelSpec] | None, *, what: str = "--measure") -> CocoInputs:
-    """:func:`fidelity.coco.measure.resolve_coco_inputs` of the options' values (those not
-    given from the shared data folder)."""
-    from fidelity.coco.measure import resolve_coco_inputs
-
-    items = None if models is None else [f"{s.path}@{s.limit}" if s.limit else str(s.path)
-                                         for s in models]
-    return resolve_coco_inputs(images, annotations, items, what=what)
 
 
 # --------------------------------------------------------------------------------------------
@@ -445,54 +316,6 @@ def scores_options(store: str) -> Callable[[F], F]:
     return deco
 
 
-def transfer_scores(store_type: type[ResultsStore], folder: str, option: str,
-                    export_to: str | None, import_from: str | None, annotations: str | None,
-                    scorer: str = "auto") -> bool:
-    """Do ``--export-scores`` / ``--import-scores`` (:func:`scores_options`) on the store of
-    kind ``store_type`` in ``folder`` (named by ``option`` in errors); whether either was
-    given (the command then has nothing else to do)."""
-    from fidelity.coco import scores
-    from fidelity.core.fileio import check_outputs, file_sha256, require_file
-
-    if export_to and import_from:
-        raise click.UsageError("--export-scores and --import-scores: one at a time")
-    if import_from:
-        require_file(import_from, "--import-scores")
-        doc = scores.read_scores(import_from, store_type)  # before a store is made
-        store = store_type(folder)
-        sha = file_sha256(import_from)
-        if any(s.get("sha256") == sha for s in store.meta().get("imported") or []):
-            click.echo(f"{import_from} is already imported into {store.path}; nothing to do")
-            return True
-        t = scores.import_scores(store, import_from, doc)
-        if not t.cells:
-            click.echo(f"{store.path} holds every cell of {import_from}; nothing to do")
-            return True
-        click.echo(f"{_moved(t)} imported into {store.path}; rerun the command line with "
-                   f"{option} {folder} to resume")
-        return True
-    if export_to:
-        if not annotations:
-            raise click.UsageError("--export-scores needs --annotations (the fold and bootstrap "
-                                   "scores are computed against them)")
-        from fidelity.coco.scoring import load_annotations
-
-        store = store_type(folder, create=False)
-        check_outputs({"--export-scores": export_to},
-                      {"--annotations": annotations, f"{option} ({store.store_name})": store.path,
-                       option: Path(folder)})
-        t = scores.export_scores(store, load_annotations(annotations), export_to, method=scorer)
-        click.echo(f"{_moved(t)} exported to {t.path} (sha256 {t.sha256[:12]})")
-        return True
-    return False
-
-
-def _moved(t: ScoresTransfer) -> str:
-    per = ", ".join(f"{m} {n}" for m, n in sorted(t.models.items()))
-    unreachable = f", {t.unreachable} of them unreachable" if t.unreachable else ""
-    return f"{t.cells} cells of a {t.kind} store ({per}{unreachable})"
-
-
 def executor_options(func: F) -> F:
     """``--executor``, ``--address``, ``--workers``: where the COCO commands run their
     detectors (sweep, validate, evaluate)."""
@@ -510,14 +333,6 @@ def executor_options(func: F) -> F:
              "cluster run it (pip install 'camera-fidelity[ray]'); the store and the results "
              "are the same.")(func)
     return func
-
-
-def executor_from(executor: str, address: str | None, workers: int | None,
-                  threads: int | None, provider: str) -> ExecutorOptions:
-    """The :class:`fidelity.coco.executor.ExecutorOptions` of the command-line values."""
-    from fidelity.coco.executor import ExecutorOptions
-
-    return ExecutorOptions(executor, address, workers, threads, provider)
 
 
 # --------------------------------------------------------------------------------------------
@@ -641,46 +456,8 @@ def max_pixels_option(f: F) -> F:
              "byte per pixel (4 for an 8-bit photo; 60 for --bayer).")(f)
 
 
-def make_criterion(max_delta_e: float | None, max_dmap: float | None, cls: str | None,
-                   unit: str) -> Criterion:
-    """The criterion of ``--max-delta-e`` / ``--max-dmap`` (exactly one), ``--class`` and
-    ``--unit`` (gate, compare)."""
-    from fidelity.prediction.verdict import Criterion
-
-    if (max_delta_e is None) == (max_dmap is None):
-        raise click.UsageError("give exactly one of --max-delta-e X or --max-dmap P")
-    if max_delta_e is not None:
-        if cls is not None:
-            raise click.UsageError("--class goes with --max-dmap, not --max-delta-e")
-        return Criterion("max-delta-e", float(max_delta_e))
-    return Criterion("max-dmap", float(max_dmap), cls or "all", unit)  # type: ignore[arg-type]
-
-
-def report_paths(images: tuple[Path, ...], path: Path | None, suffix: str, *,
-                 folder: bool = False) -> list[Path | None]:
-    """Where each image's report goes: ``path`` itself, or, when ``path`` is a folder
-    (``folder``, or an existing directory), the image's file name + ``suffix`` in it."""
-    if path is None:
-        return [None] * len(images)
-    if not (folder or path.is_dir()):
-        return [path] * len(images)
-    names = [img.name for img in images]
-    twice = sorted({n for n in names if names.count(n) > 1})
-    if twice:
-        raise FidelityError(f"several images are named {', '.join(twice)}: their reports in "
-                            f"{path} would collide; gate them in separate runs")
-    return [path / f"{n}{suffix}" for n in names]
-
-
 # --------------------------------------------------------------------------------------------
 # Output and the options every command shares
-
-
-def _state() -> dict[str, Any]:
-    ctx = click.get_current_context()
-    root = ctx.find_root()
-    obj: dict[str, Any] = root.ensure_object(dict)
-    return obj
 
 
 def common_options(f: F) -> F:
@@ -692,7 +469,7 @@ def common_options(f: F) -> F:
 
     @functools.wraps(f)
     def wrapper(*args: Any, quiet: bool, verbose: bool, **kwargs: Any) -> Any:
-        state = _state()
+        state = command_state()
         state["verbose"] = bool(state.get("verbose")) or verbose
         state["stdout"] = sys.stdout
         to_stdout = str(kwargs.get("json_path") or "") == STDOUT
@@ -715,40 +492,10 @@ def common_options(f: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
-def settings_line() -> str | None:
-    """What the running command took from a settings file: ``fidelity: settings FILE: key,
-    ...`` (the options whose value came from it, by their flags), or that none of its keys
-    applies; None when no settings file was read (none found, or ``--no-config``)."""
-    from click.core import ParameterSource
-
-    config = _state().get("config")
-    if config is None:
-        return None
-    ctx = click.get_current_context()
-    used = [max(p.opts, key=len) for p in ctx.command.params
-            if p.name and ctx.get_parameter_source(p.name) == ParameterSource.DEFAULT_MAP]
-    what = ", ".join(used) if used else "no setting applies to this command"
-    return f"fidelity: settings {config.path}: {what}"
-
-
-def from_settings(name: str) -> bool:
-    """Whether option ``name`` of the running command has its value from the settings file."""
-    from click.core import ParameterSource
-
-    return click.get_current_context().get_parameter_source(name) == ParameterSource.DEFAULT_MAP
-
-
 def progress_option(f: F) -> F:
     """``--progress/--no-progress`` (default: show progress when stderr is a terminal)."""
     return click.option("--progress/--no-progress", default=None,
                         help="Progress bars (default: when stderr is a terminal).")(f)
-
-
-def show_progress(progress: bool | None) -> bool:
-    """Whether to draw progress bars: as asked, else only when stderr is a terminal."""
-    if progress is not None:
-        return progress
-    return sys.stderr.isatty()
 
 
 def json_option(help_text: str) -> Callable[[F], F]:
@@ -757,46 +504,58 @@ def json_option(help_text: str) -> Callable[[F], F]:
                         help=f"{help_text} ('-': standard output).")
 
 
-def bound_option(f: F) -> F:
-    """``--bound classic|directional``: which prediction decides a ``--max-dmap`` verdict (both
-    are reported)."""
-    return click.option(
-        "--bound", type=click.Choice(["classic", "directional"]), default="classic",
-        show_default=True,
-        help="Prediction that decides a verdict on the predicted loss (--max-dmap of gate and "
-             "compare): the classic worst case over every transform, or the direction-aware one "
-             "(both are reported).")(f)
+#: The command-line names of the judging options, as :class:`JudgeOptions` names them.
+JUDGE_OPTION_NAMES = ("size", "table", "bound")
 
 
-def decision_options(f: F) -> F:
-    """``--decision simple|guarded``, ``--coverage-factor K`` and ``--strict``: how a verdict
-    compares a value that has an uncertainty with its limit
-    (:class:`fidelity.prediction.verdict.DecisionRule`; :func:`decision_rule`)."""
-    f = click.option(
-        "--strict", is_flag=True, default=False,
-        help="With --decision guarded: a value within U of the limit fails (exit 1) instead "
-             "of being undecided (exit 4).")(f)
-    f = click.option(
-        "--coverage-factor", type=click.FloatRange(min=0, min_open=True), default=2.0,
-        show_default=True,
-        help="k of the expanded uncertainty U = k u a guarded decision uses (2: about 95 % "
-             "for a normal distribution).")(f)
-    return click.option(
-        "--decision", type=click.Choice(["simple", "guarded"]), default="simple",
-        show_default=True,
-        help="Decision rule: simple (pass when value <= limit) or guarded (ILAC-G8: pass when "
-             "value + U <= limit, fail when value - U > limit, undecided in between: exit 4, "
-             "or a fail with --strict).")(f)
+def judge_options(*, bound: bool = True, decision: bool = True) -> Callable[[F], F]:
+    """``--size``, ``--table`` and, unless told otherwise, ``--bound``, ``--decision``,
+    ``--coverage-factor`` and ``--strict``: how a measured chart is judged (check, audit,
+    gate, compare, fit). The command receives them as one argument ``judge``, a
+    :class:`fidelity.prediction.judge.JudgeOptions`."""
 
+    def deco(f: F) -> F:
+        @functools.wraps(f)
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            values = {name: kwargs.pop(name) for name in JUDGE_OPTION_NAMES if name in kwargs}
+            rule = (decision_rule(kwargs.pop("decision"), kwargs.pop("coverage_factor"),
+                                  kwargs.pop("strict")) if decision else SIMPLE)
+            return f(*args, judge=JudgeOptions(**values, decision=rule), **kwargs)
 
-def decision_rule(decision: str, coverage_factor: float, strict: bool) -> Any:
-    """The :class:`~fidelity.prediction.verdict.DecisionRule` of the options of
-    :func:`decision_options`."""
-    from fidelity.prediction.verdict import DecisionRule
+        opts = [
+            click.option("--size", type=click.Choice(list(SIZES)), default="any",
+                         show_default=True, help="Detector size class of the predicted loss."),
+            click.option("--table", default=None, help="Prediction table (name or JSON path)."),
+        ]
+        if bound:
+            opts.append(click.option(
+                "--bound", type=click.Choice(list(BOUNDS)), default="classic", show_default=True,
+                help="Prediction that decides a verdict on the predicted loss (--max-dmap of "
+                     "gate and compare): the classic worst case over every transform, or the "
+                     "direction-aware one (both are reported)."))
+        if decision:
+            opts += [
+                click.option(
+                    "--decision", type=click.Choice(["simple", "guarded"]), default="simple",
+                    show_default=True,
+                    help="Decision rule: simple (pass when value <= limit) or guarded "
+                         "(ILAC-G8: pass when value + U <= limit, fail when value - U > "
+                         "limit, undecided in between: exit 4, or a fail with --strict)."),
+                click.option(
+                    "--coverage-factor", type=click.FloatRange(min=0, min_open=True),
+                    default=2.0, show_default=True,
+                    help="k of the expanded uncertainty U = k u a guarded decision uses (2: "
+                         "about 95 % for a normal distribution)."),
+                click.option(
+                    "--strict", is_flag=True, default=False,
+                    help="With --decision guarded: a value within U of the limit fails (exit "
+                         "1) instead of being undecided (exit 4)."),
+            ]
+        for opt in reversed(opts):
+            wrapper = opt(wrapper)
+        return wrapper  # type: ignore[return-value]
 
-    if strict and decision != "guarded":
-        raise click.UsageError("--strict goes with --decision guarded")
-    return DecisionRule(decision, float(coverage_factor), bool(strict))
+    return deco
 
 
 class EvidencePath(ParamTypeBase):
@@ -829,41 +588,6 @@ def evidence_option(f: F) -> F:
              "failed verdicts as issues).")(f)
 
 
-def evidence_outputs(paths: Sequence[Path]) -> dict[str, Path]:
-    """The ``--evidence`` files as :func:`fidelity.core.fileio.check_outputs` labels them."""
-    return {("--evidence" if len(paths) == 1 else f"--evidence ({p.name})"): p for p in paths}
-
-
-def write_evidence_files(paths: Sequence[Path], write: Callable[..., list[Path]],
-                         *args: Any, results: Sequence[Path | None] = (),
-                         indent: str = "") -> None:
-    """Write the evidence files with ``write(paths, *args, results=..., invocation=...)``
-    (:func:`fidelity.report.evidence.write_evidence` or ``write_fit_evidence``), ``results``
-    being the files the run wrote that exist, ``invocation`` the command line
-    (:func:`invocation`), and print each."""
-    from fidelity.core.fileio import display_path
-
-    if not paths:
-        return
-    wrote = [p for p in results if p is not None and p.is_file()]
-    for path in write(paths, *args, results=wrote, invocation=invocation()):
-        click.echo(f"{indent}wrote {display_path(path)}")
-
-
-def invocation() -> dict[str, Any] | None:
-    """The running command line as a credibility record's ``invocation``
-    (:func:`fidelity.report.evidence.invocation_record`): the arguments the group was given,
-    the current folder and the settings file read; None outside a ``fidelity`` command."""
-    from fidelity.report.evidence import invocation_record
-
-    ctx = click.get_current_context(silent=True)
-    obj = ctx.find_root().obj if ctx is not None else None
-    if not isinstance(obj, dict) or "argv" not in obj:
-        return None
-    config = obj.get("config")
-    return invocation_record(obj["argv"], config.path if config is not None else None)
-
-
 def measure_options(f: F) -> F:
     """``--measure`` and what it runs on: ``--images DIR``, ``--annotations FILE``,
     ``--models A.onnx[@N]``, ``--limit N`` (default: the shared data folder's COCO subset and
@@ -887,88 +611,27 @@ def measure_options(f: F) -> F:
     return f
 
 
-def measure_inputs(images: str | None, annotations: str | None, models: str | None
-                   ) -> dict[str, Any]:
-    """What ``--measure`` reads, for :func:`fidelity.core.fileio.check_outputs`: the image folder,
-    the annotations and each model file (``models`` read as :class:`ModelList` reads it)."""
-    specs = None if models is None else parse_models(models)
-    return {"--images": images, "--annotations": annotations} | model_inputs(specs)
-
-
-def measure_request(measure: bool, images: str | None, annotations: str | None,
-                    models: str | None, limit: int | None) -> Any:
-    """The :class:`fidelity.coco.measure.MeasureRequest` of the ``--measure`` options (None
-    without ``--measure``; the other options then must not be given)."""
-    if not measure:
-        if any(v is not None for v in (images, annotations, models, limit)) and not all(
-                from_settings(n) for n, v in (("images", images), ("annotations", annotations),
-                                              ("models", models), ("limit", limit))
-                if v is not None):
-            raise click.UsageError("--images, --annotations, --models and --limit go with "
-                                   "--measure")
-        return None
-    from fidelity.coco.measure import MeasureRequest, resolve_coco_inputs
-
-    return MeasureRequest(resolve_coco_inputs(images, annotations, models), limit=limit,
-                          progress=show_progress(None))
-
-
-def real_stdout() -> Any:
-    """The standard output of the command line (also under ``--quiet``)."""
-    with contextlib.suppress(RuntimeError):
-        out = _state().get("stdout")
-        if out is not None:
-            return out
-    return sys.stdout
-
-
-def write_json_output(path: str | os.PathLike[str], obj: Any) -> str:
-    """Write JSON to ``path`` atomically, or to standard output for ``-``; returns where."""
-    from fidelity.core.fileio import json_ready, write_json_atomic
-
-    if str(path) == STDOUT:
-        out = real_stdout()
-        out.write(json.dumps(json_ready(obj), indent=2, allow_nan=False) + "\n")
-        out.flush()
-        return "standard output"
-    return str(write_json_atomic(path, obj))
-
-
 __all__ = [
     "IMAGE_PATH",
     "LIMIT_HELP",
     "PATH",
     "READ_OPTION_NAMES",
     "Resolution",
-    "STDOUT",
     "CorruptionNames",
     "ModelList",
     "NameList",
     "Severities",
     "Targets",
     "TransformNames",
-    "bound_option",
-    "cap_models",
-    "coco_inputs",
+    "JUDGE_OPTION_NAMES",
+    "judge_options",
     "common_options",
-    "executor_from",
     "executor_options",
-    "from_settings",
-    "settings_line",
     "image_read_options",
     "json_option",
     "limit_option",
-    "make_criterion",
     "max_pixels_option",
-    "measure_inputs",
     "measure_options",
-    "measure_request",
-    "model_inputs",
-    "parse_models",
     "progress_option",
-    "real_stdout",
-    "report_paths",
     "scorer_option",
-    "show_progress",
-    "write_json_output",
 ]

@@ -7,7 +7,8 @@ from typing import TYPE_CHECKING
 
 import click
 
-from fidelity.cli.options import common_options, json_option, write_json_output
+from fidelity.cli.context import write_json_output
+from fidelity.cli.options import common_options, json_option
 from fidelity.prediction.interpolate import INTERPOLATIONS
 from fidelity.prediction.table import predict
 from fidelity.prediction.tablefile import CLASS_COLUMNS, SIZES, available_tables
@@ -29,7 +30,7 @@ if TYPE_CHECKING:
 @click.option("--size", type=click.Choice(list(SIZES)), default="any", show_default=True,
               help="Detector size class: n, s, m, l, x or any.")
 @click.option("--table", default=None, help="Prediction table name or JSON path "
-              "(default: the fidelity.prediction.table.DEFAULT_TABLE).")
+              "(default: the fidelity.prediction.tablefile.DEFAULT_TABLE).")
 @click.option("--method", type=click.Choice(list(INTERPOLATIONS)), default=None,
               help="Interpolation (default: the table's own).")
 @click.option("--baseline-map", type=float, default=None,

@@ -6,7 +6,8 @@ import sys
 
 import click
 
-from fidelity.cli.options import common_options, json_option, write_json_output
+from fidelity.cli.context import write_json_output
+from fidelity.cli.options import common_options, json_option
 
 
 def _names(text: str | None) -> list[str] | None:

@@ -8,7 +8,8 @@ import click
 
 from fidelity.camera.model import DEFAULT_CAMERA
 from fidelity.camera.render import REFERENCES, RENDERERS, ChartRender, render_chart
-from fidelity.cli.options import common_options, json_option, write_json_output
+from fidelity.cli.context import write_json_output
+from fidelity.cli.options import common_options, json_option
 from fidelity.colour.colorimetry import CHROMATIC_ADAPTATION_METHODS
 from fidelity.colour.spectral import GRID_STEP_NM, SPECTRA_SETS
 

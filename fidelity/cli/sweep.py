@@ -6,22 +6,19 @@ from typing import TYPE_CHECKING
 
 import click
 
+from fidelity.cli.context import show_progress
 from fidelity.cli.options import (
     ModelList,
     Targets,
     TransformNames,
-    cap_models,
     common_options,
-    executor_from,
     executor_options,
     limit_option,
-    model_inputs,
     progress_option,
     scorer_option,
     scores_options,
-    show_progress,
-    transfer_scores,
 )
+from fidelity.cli.values import cap_models, executor_from, model_inputs, transfer_scores
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import ModelSpec, SweepStore

@@ -7,13 +7,8 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from fidelity.cli.options import (
-    common_options,
-    json_option,
-    progress_option,
-    show_progress,
-    write_json_output,
-)
+from fidelity.cli.context import show_progress, write_json_output
+from fidelity.cli.options import common_options, json_option, progress_option
 from fidelity.coco.tables.classes import RARE_BOXES
 
 if TYPE_CHECKING:
@@ -177,7 +172,7 @@ def _tables(store_dir: str, out: str | None, prediction: str | None, name: str,
 
 
 def _read_tables_json(path: Any) -> Any:
-    """The :class:`~fidelity.coco.tables.TablesResult` of a ``tables.json`` (one-line errors)."""
+    """The :class:`~fidelity.coco.tables.colour.TablesResult` of a ``tables.json`` (one-line errors)."""
     import json
 
     from fidelity.coco.tables.colour import TablesResult

@@ -6,24 +6,21 @@ from typing import TYPE_CHECKING
 
 import click
 
+from fidelity.cli.context import show_progress
 from fidelity.cli.options import (
     ModelList,
-    cap_models,
     common_options,
-    executor_from,
     executor_options,
     limit_option,
-    model_inputs,
     progress_option,
     scores_options,
-    show_progress,
-    transfer_scores,
 )
+from fidelity.cli.values import cap_models, executor_from, model_inputs, transfer_scores
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import ModelSpec
 
-#: The validated cameras (:func:`fidelity.coco.validate.validated_cameras`), beside the report.
+#: The validated cameras (:func:`fidelity.coco.validate.colour.validated_cameras`), beside the report.
 DOMAIN_FILE = "domain.json"
 
 

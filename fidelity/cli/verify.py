@@ -15,7 +15,8 @@ from typing import Any
 
 import click
 
-from fidelity.cli.options import common_options, json_option, write_json_output
+from fidelity.cli.context import write_json_output
+from fidelity.cli.options import common_options, json_option
 
 #: The commands whose records can be run again.
 RERUNNABLE = ("check", "audit", "gate", "compare", "fit")

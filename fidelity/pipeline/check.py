@@ -19,6 +19,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from functools import partial
 from typing import TYPE_CHECKING, Any
 
@@ -33,8 +34,8 @@ from fidelity.pipeline.records import (
     RenderSource,
     utc_now,
 )
-from fidelity.prediction.judge import judge
-from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, SIMPLE, Criterion, DecisionRule
+from fidelity.prediction.judge import DEFAULT_JUDGE, JudgeOptions, judge_chart
+from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion
 
 if TYPE_CHECKING:
     from fidelity.camera.model import CameraModel
@@ -137,14 +138,11 @@ def check_camera(
     illuminant: str = "D65",
     renderer: str = "closed-form",
     reference: str = "scene",
-    size: str = "any",
-    table: PredictionTable | str | None = None,
     criterion: Criterion | None = DEFAULT_CRITERION,
+    judge: JudgeOptions = DEFAULT_JUDGE,
     seed: int | None = None,
     command: str = "check",
-    bound: str = "classic",
     measure: MeasureRequest | None = None,
-    decision: DecisionRule = SIMPLE,
 ) -> ChartReport:
     """Render ``camera``'s chart, measure it, predict its detection loss, apply ``criterion``.
 
@@ -161,23 +159,23 @@ def check_camera(
     reference
         ``scene`` (the chart's spectra under the illuminant, adapted to D65) or ``safecolor``
         (the paper's Lab table).
-    size, table
-        The detector size class (``n`` ... ``x``, ``any``) and prediction table (name, path or
-        table; None: the default table).
     criterion
         The gate (default: mean ΔE00 <= 3, SAFE-COLOR's threshold); None: no verdict.
+    judge
+        How to judge (:class:`~fidelity.prediction.judge.JudgeOptions`): the detector size
+        class (``n`` ... ``x``, ``any``), the prediction table (name, path or table; None: the
+        default), which prediction decides a ``max-dmap`` verdict (``classic``, the table's
+        worst case over every transform, or ``directional``,
+        :mod:`fidelity.prediction.directional`; the report holds both) and the decision rule
+        (:class:`~fidelity.prediction.verdict.DecisionRule`; guarded: with the chart ΔE's
+        uncertainty, :mod:`fidelity.measure.uncertainty`).
     seed
         Seed of the camera noise (default: the camera file's).
-    bound
-        Which prediction decides a ``max-dmap`` verdict: ``classic`` (the table's worst case
-        over every transform) or ``directional``
-        (:mod:`fidelity.prediction.directional`); the report holds both.
+    command
+        The command named in the report (``check``, ``gate``).
     measure
         Also measure the camera's loss on COCO (:class:`fidelity.coco.measure.MeasureRequest`:
         the camera's colour rendering emulated on the images, as ``fidelity validate`` does).
-    decision
-        The decision rule of the verdict (:class:`~fidelity.prediction.verdict.DecisionRule`;
-        guarded: with the chart ΔE's uncertainty, :mod:`fidelity.measure.uncertainty`).
 
     Returns
     -------
@@ -198,10 +196,9 @@ def check_camera(
                           renderer, reference=reference, seed=seed)
     m = render.measurement
     u = render.uncertainty
-    prediction, verdict, directional = judge(
-        m.mean_delta_e, size, table, criterion, m, bound, decision=decision,
-        delta_e_uncertainty=u.combined if u else None)
-    interval, validity = evidence_of(prediction, u, reference, decision.k,
+    prediction, verdict, directional = judge_chart(
+        m.mean_delta_e, judge, criterion, m, delta_e_uncertainty=u.combined if u else None)
+    interval, validity = evidence_of(prediction, u, reference, judge.decision.k,
                                      (render.camera.stage_kinds(), illuminant))
     from fidelity.measure.blindspots import chart_blind_spots
 
@@ -223,7 +220,7 @@ def check_camera(
         command=command, created=utc_now(), measurement=m, source=source,
         provenance=Provenance.collect(None, prediction,
                                       {"render": rd.get("conventions", {})}),
-        prediction=prediction, verdict=verdict, directional=directional, bound=bound,
+        prediction=prediction, verdict=verdict, directional=directional, bound=judge.bound,
         blind_spots=spots, measured=measured, uncertainty=u, interval=interval,
         validity=validity,
     )
@@ -236,13 +233,10 @@ def audit_image(
     read: ReadOptions = DEFAULT_READ,
     reference: str = "scene",
     illuminant: str = "D65",
-    size: str = "any",
-    table: PredictionTable | str | None = None,
     criterion: Criterion | None = None,
+    judge: JudgeOptions = DEFAULT_JUDGE,
     command: str = "audit",
-    bound: str = "classic",
     measure: MeasureRequest | None = None,
-    decision: DecisionRule = SIMPLE,
 ) -> ChartReport:
     """Measure the chart in ``image``, predict the detection loss, apply ``criterion``.
 
@@ -262,7 +256,7 @@ def audit_image(
     reference, illuminant
         ``scene`` (the chart's spectra under ``illuminant``, adapted to D65, as
         :func:`check_camera` uses), ``safecolor`` (the paper's Lab values) or a chart JSON.
-    size, table, criterion, bound, decision
+    criterion, judge, command
         As for :func:`check_camera`; ``criterion`` None: no verdict.
     measure
         Also measure on COCO what this chart's colour rendering costs a detector: a mapping
@@ -282,10 +276,10 @@ def audit_image(
                            read=read, reference=reference, illuminant=illuminant,
                            inspect_image=lambda img: banding.append(_image_banding(img)))
     u = result.uncertainty
-    prediction, verdict, directional = judge(
-        result.mean_delta_e, size, table, criterion, result.measurement, bound,
-        decision=decision, delta_e_uncertainty=u.combined if u else None)
-    interval, validity = evidence_of(prediction, u, reference, decision.k)
+    prediction, verdict, directional = judge_chart(
+        result.mean_delta_e, judge, criterion, result.measurement,
+        delta_e_uncertainty=u.combined if u else None)
+    interval, validity = evidence_of(prediction, u, reference, judge.decision.k)
     info = result.image
     assert info is not None  # measure_image always describes the file
     source = ImageSource(
@@ -309,7 +303,7 @@ def audit_image(
                                       conventions),
         prediction=prediction, verdict=verdict,
         exposure_ev=result.exposure_ev, bad_pixels=result.bad_pixels,
-        valid_pixels=result.valid_pixels, directional=directional, bound=bound,
+        valid_pixels=result.valid_pixels, directional=directional, bound=judge.bound,
         blind_spots=spots, measured=measured, uncertainty=u, interval=interval,
         validity=validity,
     )
@@ -350,16 +344,13 @@ def gate(
     criterion: Criterion,
     images: Sequence[str | os.PathLike[str]] = (),
     *,
-    camera: str | None = None,
+    camera: CameraModel | str | None = None,
     corners: str | None = None,
     read: ReadOptions = DEFAULT_READ,
     reference: str | None = None,
     illuminant: str = "D65",
     renderer: str = "closed-form",
-    size: str = "any",
-    table: str | None = None,
-    bound: str = "classic",
-    decision: DecisionRule = SIMPLE,
+    judge: JudgeOptions = DEFAULT_JUDGE,
     frames: Sequence[int] | None = None,
 ) -> list[GateResult]:
     """Gate ``images`` one by one (or ``camera``) against ``criterion``. An input error of
@@ -373,14 +364,14 @@ def gate(
     :func:`fidelity.report.write_chart_report` writes each report.
     """
     if not images:
-        paths = [camera] if camera else []
-        return [_subject_result(path, partial(
-            check_camera, path, illuminant=illuminant, renderer=renderer,
-            reference=reference or "scene", size=size, table=table, criterion=criterion,
-            command="gate", bound=bound, decision=decision), criterion) for path in paths]
-    return _audit_subjects(images, corners, read, frames, criterion, command="gate",
-                           reference=reference or "scene", illuminant=illuminant, size=size,
-                           table=table, bound=bound, decision=decision)
+        cameras = [camera] if camera else []
+        return [_subject_result(_camera_subject(cam), partial(
+            check_camera, cam, illuminant=illuminant, renderer=renderer,
+            reference=reference or "scene", criterion=criterion, judge=judge,
+            command="gate"), criterion) for cam in cameras]
+    return _audit_subjects(images, corners, read, frames, partial(
+        audit_image, criterion=criterion, command="gate", reference=reference or "scene",
+        illuminant=illuminant, judge=judge), criterion)
 
 
 def audit_images(
@@ -390,9 +381,7 @@ def audit_images(
     read: ReadOptions = DEFAULT_READ,
     reference: str = "scene",
     illuminant: str = "D65",
-    size: str = "any",
-    table: str | None = None,
-    bound: str = "classic",
+    judge: JudgeOptions = DEFAULT_JUDGE,
     measure: MeasureRequest | None = None,
     frames: Sequence[int] | None = None,
 ) -> list[GateResult]:
@@ -400,17 +389,22 @@ def audit_images(
     :func:`gate` measures them but without a criterion: one
     :class:`~fidelity.pipeline.records.GateResult` per subject, an input error of one subject its
     ``error`` while the others are still measured; ``frames`` as for :func:`gate`."""
-    return _audit_subjects(images, corners, read, frames, None, command="audit",
-                           reference=reference, illuminant=illuminant, size=size, table=table,
-                           bound=bound, measure=measure)
+    return _audit_subjects(images, corners, read, frames, partial(
+        audit_image, command="audit", reference=reference, illuminant=illuminant, judge=judge,
+        measure=measure), None)
+
+
+def _camera_subject(camera: CameraModel | str) -> str:
+    """How a gated camera is named: its file or built-in name."""
+    return camera if isinstance(camera, str) else camera.subject
 
 
 def _audit_subjects(images: Sequence[str | os.PathLike[str]], corners: str | None,
                     read: ReadOptions, frames: Sequence[int] | None,
-                    criterion: Criterion | None, **options: Any) -> list[GateResult]:
-    """:func:`audit_image` of each image (or frame) with ``options``, as results."""
-    from dataclasses import replace
-
+                    audit: Callable[..., ChartReport], criterion: Criterion | None
+                    ) -> list[GateResult]:
+    """``audit(path, corners, read=...)`` (:func:`audit_image` with the command's options) of
+    each image (or frame), as results."""
     paths = [os.fspath(i) for i in images]
     reads = reads_for(paths, read)
     subjects = list(paths)
@@ -419,8 +413,7 @@ def _audit_subjects(images: Sequence[str | os.PathLike[str]], corners: str | Non
             raise ValueError(f"{len(frames)} frames for {len(paths)} images")
         reads = [replace(r, frame=k, time=None) for r, k in zip(reads, frames, strict=True)]
         subjects = [f"{p} frame {k}" for p, k in zip(paths, frames, strict=True)]
-    return [_subject_result(subject, partial(audit_image, path, corners, read=r,
-                                             criterion=criterion, **options), criterion)
+    return [_subject_result(subject, partial(audit, path, corners, read=r), criterion)
             for subject, path, r in zip(subjects, paths, reads, strict=True)]
 
 

@@ -38,7 +38,7 @@ from fidelity.chart.read import DEFAULT_READ, ReadOptions
 from fidelity.core.errors import InvalidValueError, unknown_name
 from fidelity.measure.uncertainty import UncertaintyBudget
 from fidelity.pipeline.records import ComparisonReport, Normalisation, Provenance, utc_now
-from fidelity.prediction.verdict import SIMPLE, DecisionRule
+from fidelity.prediction.judge import DEFAULT_JUDGE, JudgeOptions, judge_chart
 
 if TYPE_CHECKING:
     from fidelity.coco.measure import MeasuredLoss, MeasureRequest
@@ -94,13 +94,10 @@ def compare_charts(
     normalise_mode: str = "exposure",
     reference: str = "scene",
     illuminant: str = "D65",
-    size: str = "any",
-    table: str | None = None,
     criterion: Criterion | None = None,
-    bound: str = "classic",
+    judge: JudgeOptions = DEFAULT_JUDGE,
     read: ReadOptions = DEFAULT_READ,
     measure: MeasureRequest | None = None,
-    decision: DecisionRule = SIMPLE,
     sim_ocio_colourspace: str | None = None,
     real_ocio_colourspace: str | None = None,
 ) -> ComparisonReport:
@@ -119,20 +116,20 @@ def compare_charts(
         ``exposure`` (default), ``exposure+wb`` or ``none`` (:data:`NORMALISATIONS`).
     reference, illuminant
         The reference each chart's own ΔE is measured against.
-    size, table
-        Detector size class and prediction table of the predicted loss.
     criterion
         ``max-delta-e`` on the sim-to-real chart ΔE, or ``max-dmap`` on its predicted loss
-        (decided by ``bound``: ``classic`` or ``directional``); None: no verdict.
+        (decided by ``judge.bound``: ``classic`` or ``directional``); None: no verdict.
+    judge
+        How to judge (:class:`~fidelity.prediction.judge.JudgeOptions`): the detector size
+        class and prediction table of the predicted loss (each chart's own audit uses them
+        too), the bound that decides a ``max-dmap`` verdict and the verdict's decision rule;
+        the sim-to-real ΔE's uncertainty is :func:`sim_to_real_uncertainty`.
     read
         How both images are read (:class:`~fidelity.chart.read.ReadOptions`, as
         ``audit``); its ``topic``, ``frame`` and ``time`` apply to the input that is a robot
         recording (:mod:`fidelity.chart.recording`).
     measure
         Also measure the difference's cost on COCO (:class:`fidelity.coco.measure.MeasureRequest`).
-    decision
-        The verdict's decision rule (:class:`~fidelity.prediction.verdict.DecisionRule`); the
-        sim-to-real ΔE's uncertainty is :func:`sim_to_real_uncertainty`.
     sim_ocio_colourspace, real_ocio_colourspace
         One image's own OpenColorIO colourspace (a render in ACEScct against a photo in
         sRGB): it replaces ``read``'s for that image, whose shared ``encoding`` and
@@ -146,12 +143,10 @@ def compare_charts(
     from fidelity.chart.read import reads_with_own_ocio
     from fidelity.measure.colour import measure_chart, neutral_patches
     from fidelity.pipeline.check import audit_image
-    from fidelity.prediction.judge import judge
-
     if normalise_mode not in NORMALISATIONS:
         raise unknown_name("normalisation", normalise_mode, NORMALISATIONS)
     kw: dict[str, Any] = {"reference": reference, "illuminant": illuminant,
-                          "size": size, "table": table}
+                          "judge": JudgeOptions(judge.size, judge.table)}
     sim_read, real_read = reads_with_own_ocio((sim, real), read,
                                               (sim_ocio_colourspace, real_ocio_colourspace))
     sim_report = audit_image(sim, sim_corners, command="compare", read=sim_read, **kw)
@@ -163,8 +158,8 @@ def compare_charts(
     m = measure_chart(srgb, rm.lab, rm.patch_names, reference_srgb=np.clip(rm.srgb, 0, 1))
     budget = sim_to_real_uncertainty(m.mean_delta_e, sim_report.uncertainty,
                                      real_report.uncertainty)
-    prediction, verdict, directional = judge(
-        m.mean_delta_e, size, table, criterion, m, bound, decision=decision,
+    prediction, verdict, directional = judge_chart(
+        m.mean_delta_e, judge, criterion, m,
         delta_e_uncertainty=budget.combined if budget else None)
     measured: tuple[MeasuredLoss, ...] = ()
     emulation = None
@@ -185,9 +180,9 @@ def compare_charts(
                               {**dict(sim_report.provenance.conventions), **conventions})
     from fidelity.pipeline.check import evidence_of
 
-    interval, validity = evidence_of(prediction, budget, reference, decision.k)
+    interval, validity = evidence_of(prediction, budget, reference, judge.decision.k)
     return ComparisonReport(utc_now(), sim_report, real_report, norm, m, prediction,
-                            directional, verdict, prov, bound, measured, emulation,
+                            directional, verdict, prov, judge.bound, measured, emulation,
                             uncertainty=budget, interval=interval, validity=validity)
 
 

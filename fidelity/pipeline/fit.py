@@ -50,6 +50,7 @@ from fidelity.correction.models import ColourModel, Conditioning
 from fidelity.measure.colour import ChartMeasurement
 from fidelity.measure.pixels import ImageMeasurement
 from fidelity.pipeline.records import Normalisation, utc_now
+from fidelity.prediction.judge import DEFAULT_JUDGE, JudgeOptions, judge_chart
 from fidelity.prediction.table import Prediction
 
 if TYPE_CHECKING:
@@ -510,8 +511,7 @@ def fit_and_verify(
     real_ocio_colourspace: str | None = None,
     reference: str = "scene",
     illuminant: str = "D65",
-    size: str = "any",
-    table: str | None = None,
+    judge: JudgeOptions = DEFAULT_JUDGE,
     corrected: bool = False,
     measure: MeasureRequest | None = None,
 ) -> FitReport:
@@ -537,13 +537,13 @@ def fit_and_verify(
     c1, t1 = time.process_time(), time.perf_counter()
     corr = _fit_charts(s, r, model, objective, normalise_mode, None)
     c2, t2 = time.process_time(), time.perf_counter()
-    return _verify(s, r, corr, Path(out), normalise_mode=normalise_mode, size=size,
-                   table=table, corrected=corrected, seconds=(t1 - t0, t2 - t1),
+    return _verify(s, r, corr, Path(out), normalise_mode=normalise_mode, judge=judge,
+                   corrected=corrected, seconds=(t1 - t0, t2 - t1),
                    cpu=(c1 - c0, c2 - c1), measure=measure)
 
 
 def _verify(s: _Chart, r: _Chart, corr: Correction, folder: Path, *, normalise_mode: str,
-            size: str, table: str | None, corrected: bool, seconds: tuple[float, float],
+            judge: JudgeOptions, corrected: bool, seconds: tuple[float, float],
             cpu: tuple[float, float], measure: MeasureRequest | None = None) -> FitReport:
     """Write the cube, the config and ``correction.json`` of ``corr`` into ``folder`` and
     verify them on the SIM chart ``s`` against the REAL chart ``r`` (module docstring)."""
@@ -557,7 +557,6 @@ def _verify(s: _Chart, r: _Chart, corr: Correction, folder: Path, *, normalise_m
     )
     from fidelity.measure.colour import measure_chart, neutral_patches
     from fidelity.pipeline.compare import normalise
-    from fidelity.prediction.judge import judge
 
     c2, t2 = time.process_time(), time.perf_counter()
     folder.mkdir(parents=True, exist_ok=True)
@@ -593,8 +592,8 @@ def _verify(s: _Chart, r: _Chart, corr: Correction, folder: Path, *, normalise_m
     before = measure_chart(before_srgb, rm.lab, rm.patch_names, reference_srgb=ref_srgb)
     after = measure_chart(after_srgb, rm.lab, rm.patch_names, reference_srgb=ref_srgb)
     c3, t3 = time.process_time(), time.perf_counter()
-    pb = judge(before.mean_delta_e, size, table)[0]
-    pa = judge(after.mean_delta_e, size, table)[0]
+    pb = judge_chart(before.mean_delta_e, judge).prediction
+    pa = judge_chart(after.mean_delta_e, judge).prediction
     write_json_atomic(folder / "correction.json", corr.to_json())
     measured: list[tuple[MeasuredLoss, ...]] = [(), ()]
     if measure is not None:
@@ -656,8 +655,7 @@ def fit_pairs_and_verify(
     real_ocio_colourspace: str | None = None,
     reference: str = "scene",
     illuminant: str = "D65",
-    size: str = "any",
-    table: str | None = None,
+    judge: JudgeOptions = DEFAULT_JUDGE,
     corrected: bool = False,
 ) -> SharedFit:
     """Fit one matrix and per-pair gains over ``pairs`` of (SIM, REAL) charts, the same
@@ -693,7 +691,7 @@ def fit_pairs_and_verify(
         model = ColourModel("matrix", np.asarray((matrix.matrix @ np.diag(g)).T, np.float64))
         reports.append(_verify(s, r, _correction(pp, model, "linear", cond, cv),
                                Path(out) / f"pair-{k + 1}", normalise_mode=normalise_mode,
-                               size=size, table=table, corrected=corrected,
+                               judge=judge, corrected=corrected,
                                seconds=(0.0, 0.0), cpu=(0.0, 0.0)))
     t3 = time.perf_counter()
     return SharedFit(utc_now(), matrix, gains, cond, tuple(reports),
@@ -730,8 +728,7 @@ def fit_camera_and_verify(
     real_ocio_colourspace: str | None = None,
     reference: str = "scene",
     illuminant: str = "D65",
-    size: str = "any",
-    table: str | None = None,
+    judge: JudgeOptions = DEFAULT_JUDGE,
     corrected: bool = False,
     measure: MeasureRequest | None = None,
 ) -> tuple[FitReport, Path]:
@@ -782,7 +779,7 @@ def fit_camera_and_verify(
                          real_corners=real_corners,
                          normalise_mode=normalise_mode, read=read,
                          real_ocio_colourspace=real_ocio_colourspace, reference=reference,
-                         illuminant=illuminant, size=size, table=table, corrected=corrected,
+                         illuminant=illuminant, judge=judge, corrected=corrected,
                          measure=measure)
     c = rep.correction
     t = c.to_fit

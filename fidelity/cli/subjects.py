@@ -1,0 +1,264 @@
+"""The subjects of ``audit`` and ``gate``: folders of frames expanded, a recording's frames
+selected, where each subject's reports go, and writing them, the evidence files and the
+frames' summary. One plan for both commands: read, locate, measure, judge, write."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import click
+
+from fidelity.chart.image import folder_images, image_suffixes
+from fidelity.chart.recording import FrameSelection, topic_frames
+from fidelity.cli.context import STDOUT, invocation
+from fidelity.core.errors import FidelityError, InputFileError
+from fidelity.core.fileio import display_path
+from fidelity.pipeline.records import GateResult
+from fidelity.report.chart import write_chart_report
+from fidelity.report.gate import OVERVIEW_NAME, write_gate_overview
+
+
+def expand_folders(paths: Sequence[Path]) -> tuple[Path, ...]:
+    """Each IMAGE as given, a folder of images (one without a ROS 2 bag's ``metadata.yaml``)
+    replaced by the images in it, in natural order (:func:`fidelity.chart.image.folder_images`;
+    ``audit`` and ``gate``); a folder with none is an input error."""
+    out: list[Path] = []
+    for p in paths:
+        if not p.is_dir() or (p / "metadata.yaml").is_file():
+            out.append(p)
+            continue
+        try:
+            found = folder_images(p)
+        except OSError as exc:
+            raise InputFileError(f"{display_path(p)}: cannot list the folder "
+                                 f"({exc.strerror or exc})") from None
+        if not found:
+            common = [x for x in (".exr", ".png", ".jpg", ".tif", ".hdr") if x in
+                      image_suffixes()]
+            raise InputFileError(f"{display_path(p)}: a folder with no image in it "
+                                 f"({', '.join(common)}, ...) and no metadata.yaml of a ROS 2 "
+                                 "bag")
+        out.extend(found)
+    return tuple(out)
+
+
+def frame_subjects(images: Sequence[Path], frames: FrameSelection, topic: str | None
+                    ) -> tuple[tuple[Path, ...], list[int]]:
+    """Each recording once per frame ``frames`` selects on its topic (from its index), and
+    those frames (``gate --frames``, ``audit --frames``)."""
+
+    paths: list[Path] = []
+    frame_of: list[int] = []
+    for img in images:
+        chosen, count = topic_frames(img, topic)
+        for k in frames.resolve(count, display_path(img), chosen):
+            paths.append(img)
+            frame_of.append(k)
+    return tuple(paths), frame_of
+
+
+def frame_report_names(images: Sequence[Path], frame_of: Sequence[int]) -> tuple[Path, ...]:
+    """What each frame's report is named after: ``RECORDING.frameK`` (its reports are
+    ``RECORDING.frameK.json`` / ``.html`` in the --json / --html folder)."""
+    return tuple(Path(f"{img}.frame{k}") for img, k in zip(images, frame_of, strict=True))
+
+
+def frames_summary(cases: Sequence[GateResult], images: Sequence[Path],
+                    frame_of: Sequence[int]) -> list[str]:
+    """How the chart ΔE varies over the frames gated or audited (the measured ones), per
+    recording."""
+    from statistics import median
+
+
+    by: dict[Path, list[tuple[float, int]]] = {}
+    for case, path, k in zip(cases, images, frame_of, strict=True):
+        if case.report is not None:
+            by.setdefault(path, []).append((case.report.mean_delta_e, k))
+    lines = []
+    for path, values in by.items():
+        lo, hi = min(values), max(values)
+        many = "s" if len(values) > 1 else ""
+        lines.append(f"{display_path(path)}: mean ΔE00 over {len(values)} measured frame{many}: "
+                     f"min {lo[0]:.2f} (frame {lo[1]}), median "
+                     f"{median(v for v, _ in values):.2f}, max {hi[0]:.2f} (frame {hi[1]})")
+    return lines
+
+
+def write_subject_reports(result: GateResult, json_path: Path | None, html_path: Path | None,
+                          inputs: Sequence[Path]) -> tuple[GateResult, list[Path]]:
+    """Write a gated or audited subject's JSON and HTML reports (never over an ``inputs``
+    file); a failure to write them becomes the subject's error, as an input error does.
+    Returns the result and the files written."""
+
+    if result.report is None:
+        return result, []
+    try:
+        written = write_chart_report(result.report, json_path=json_path, html_path=html_path,
+                                     protect=list(inputs))
+    except (FidelityError, OSError) as exc:
+        return replace(result, report=None, error=str(exc)), []
+    return result, written
+
+
+def report_paths(images: tuple[Path, ...], path: Path | None, suffix: str, *,
+                 folder: bool = False) -> list[Path | None]:
+    """Where each image's report goes: ``path`` itself, or, when ``path`` is a folder
+    (``folder``, or an existing directory), the image's file name + ``suffix`` in it."""
+    if path is None:
+        return [None] * len(images)
+    if not (folder or path.is_dir()):
+        return [path] * len(images)
+    names = [img.name for img in images]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise FidelityError(f"several images are named {', '.join(twice)}: their reports in "
+                            f"{path} would collide; gate them in separate runs")
+    return [path / f"{n}{suffix}" for n in names]
+
+
+def evidence_outputs(paths: Sequence[Path]) -> dict[str, Path]:
+    """The ``--evidence`` files as :func:`fidelity.core.fileio.check_outputs` labels them."""
+    return {("--evidence" if len(paths) == 1 else f"--evidence ({p.name})"): p for p in paths}
+
+
+def write_evidence_files(paths: Sequence[Path], write: Callable[..., list[Path]],
+                         *args: Any, results: Sequence[Path | None] = (),
+                         indent: str = "") -> None:
+    """Write the evidence files with ``write(paths, *args, results=..., invocation=...)``
+    (:func:`fidelity.report.evidence.write_evidence` or ``write_fit_evidence``), ``results``
+    being the files the run wrote that exist, ``invocation`` the command line
+    (:func:`invocation`), and print each."""
+
+    if not paths:
+        return
+    wrote = [p for p in results if p is not None and p.is_file()]
+    for path in write(paths, *args, results=wrote, invocation=invocation()):
+        click.echo(f"{indent}wrote {display_path(path)}")
+
+
+
+@dataclass(frozen=True)
+class SubjectPlan:
+    """The subjects of an ``audit`` or ``gate`` run and where their reports go: one plan for
+    both commands (read, locate, measure, judge, write).
+
+    Attributes
+    ----------
+    images
+        One image per subject: each IMAGE as given, a folder replaced by its images, a
+        recording once per frame of ``frames``.
+    frames
+        The frame of each subject (``--frames``); None: the images as they are.
+    json_paths, html_paths
+        Where each subject's JSON and HTML report goes (None: not written).
+    overview
+        The overview page of several subjects' HTML reports (``index.html`` in the
+        ``--html`` folder); None for one subject or without ``--html``.
+    to_stdout
+        The one subject's JSON report goes to standard output (``--json -``).
+    """
+
+    images: tuple[Path, ...]
+    frames: list[int] | None
+    json_paths: list[Path | None]
+    html_paths: list[Path | None]
+    overview: Path | None
+    to_stdout: bool
+
+    @property
+    def many(self) -> bool:
+        """Whether there are several subjects (their reports then go into folders)."""
+        return len(self.images) > 1
+
+    @property
+    def names(self) -> list[str]:
+        """Each subject as printed: the image, or ``RECORDING frame K``."""
+        if self.frames is None:
+            return [display_path(img) for img in self.images]
+        return [f"{display_path(img)} frame {k}"
+                for img, k in zip(self.images, self.frames, strict=True)]
+
+    @property
+    def recordings(self) -> list[str] | None:
+        """Each subject's recording as printed (None without ``--frames``)."""
+        return None if self.frames is None else [display_path(img) for img in self.images]
+
+    def outputs(self) -> dict[str, Path | None]:
+        """The reports' files as :func:`fidelity.core.fileio.check_outputs` labels them."""
+        out: dict[str, Path | None] = {}
+        for name, jp, hp in zip(self.names, self.json_paths, self.html_paths, strict=True):
+            out[f"--json ({name})" if self.many else "--json"] = jp
+            out[f"--html ({name})" if self.many else "--html"] = hp
+        out["--html (overview)"] = self.overview
+        return out
+
+    def inputs(self) -> dict[str, Path]:
+        """The images as :func:`fidelity.core.fileio.check_outputs` labels its inputs."""
+        return {(f"IMAGE {img}" if self.many else "IMAGE"): img for img in self.images}
+
+    def write_reports(self, cases: Sequence[GateResult]
+                      ) -> list[tuple[GateResult, list[Path]]]:
+        """Write each subject's JSON and HTML report (:func:`write_subject_reports`); each
+        result (a report that could not be written is its error) with the files written."""
+        return [write_subject_reports(case, jp, hp, self.images)
+                for case, jp, hp in zip(cases, self.json_paths, self.html_paths, strict=True)]
+
+    def write_overview(self, cases: Sequence[GateResult], *, audit: bool) -> Path | None:
+        """Write the overview page of the subjects' HTML reports, if there is one."""
+        if self.overview is None:
+            return None
+        return write_gate_overview(
+            self.overview, cases, [hp if c.report is not None else None
+                                   for c, hp in zip(cases, self.html_paths, strict=True)],
+            self.frames, self.recordings, audit=audit)
+
+
+def output_folder(value: str | os.PathLike[str] | None) -> bool:
+    """Whether an output option names a folder by its trailing separator (``out/``)."""
+    return value is not None and str(value).endswith(("/", os.sep))
+
+
+def plan_subjects(images: Sequence[Path], frames: FrameSelection | None, topic: str | None,
+                  json_path: str | os.PathLike[str] | None,
+                  html_path: str | os.PathLike[str] | None) -> SubjectPlan:
+    """The :class:`SubjectPlan` of ``audit`` and ``gate``: folders expanded
+    (:func:`expand_folders`), each recording once per frame ``frames`` selects on ``topic``
+    (:func:`frame_subjects`), and each subject's report paths: ``--json`` / ``--html``
+    themselves for one subject, IMAGE-NAME.json / .html in them for several (or for a folder
+    that exists or is written with a trailing separator), the overview page beside several
+    HTML reports. ``--json -`` (standard output) takes one subject."""
+    paths = expand_folders(images)
+    frame_of: list[int] | None = None
+    reports_of = paths  # what each subject's report is named after
+    if frames is not None:
+        paths, frame_of = frame_subjects(paths, frames, topic)
+        reports_of = frame_report_names(paths, frame_of)
+    many = len(paths) > 1
+    to_stdout = json_path is not None and str(json_path) == STDOUT
+    if to_stdout and many:
+        raise click.UsageError("--json - (standard output) takes one IMAGE; give a folder")
+    json_paths = report_paths(reports_of, None if to_stdout or json_path is None
+                              else Path(json_path), ".json",
+                              folder=many or output_folder(json_path))
+    html_paths = report_paths(reports_of, None if html_path is None else Path(html_path),
+                              ".html", folder=many or output_folder(html_path))
+    overview = Path(html_path) / OVERVIEW_NAME if many and html_path is not None else None
+    return SubjectPlan(paths, frame_of, json_paths, html_paths, overview, to_stdout)
+
+__all__ = [
+    "SubjectPlan",
+    "output_folder",
+    "plan_subjects",
+    "evidence_outputs",
+    "expand_folders",
+    "frame_report_names",
+    "frame_subjects",
+    "frames_summary",
+    "report_paths",
+    "write_evidence_files",
+    "write_subject_reports",
+]
