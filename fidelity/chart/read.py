@@ -47,16 +47,21 @@ class ReadOptions:
     max_pixels
         Refuse a larger image (width x height) before decoding it; None:
         :func:`fidelity.chart.image.pixel_limit`.
-    ocio_colourspace, ocio_config
-        The pixels are in this colourspace of an OpenColorIO config (a file or an ``ocio://``
-        URI; None: ``$OCIO``, else OpenColorIO's built-in default config): OpenColorIO converts
-        them to linear or display sRGB (:mod:`fidelity.chart.ocio`); instead of ``encoding``
-        and ``colourspace``.
-    topic, frame, time
+    ocio_colourspace
+        The pixels are in this colourspace of an OpenColorIO config (``ocio_config``):
+        OpenColorIO converts them to linear or display sRGB (:mod:`fidelity.chart.ocio`);
+        instead of ``encoding`` and ``colourspace``.
+    ocio_config
+        The OpenColorIO config of ``ocio_colourspace``: a file or an ``ocio://`` URI; None:
+        ``$OCIO``, else OpenColorIO's built-in default config.
+    topic
         The input is a robot recording (ROS 1 bag, ROS 2 bag, MCAP file:
-        :mod:`fidelity.chart.recording`): the image ``topic`` (None: its only image topic),
-        the message's index on it (``frame``, negative from the end) or the time nearest to
-        ``time`` seconds after the recording's first message; neither: the first message.
+        :mod:`fidelity.chart.recording`): the image topic (None: its only image topic).
+    frame
+        The message's index on ``topic`` (negative from the end); with neither ``frame``
+        nor ``time``: the first message.
+    time
+        The message nearest to ``time`` seconds after the recording's first message.
     """
 
     layer: str | None = None

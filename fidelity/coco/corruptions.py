@@ -175,7 +175,37 @@ def contrast_means(rgb8: U8) -> F64:
 
 def corrupt(rgb8: U8, name: str, severity: int) -> U8:
     """Apply a COCO-C colour corruption to an (H, W, 3) uint8 sRGB image (module docstring):
-    the same numbers as ``imagecorruptions.corrupt(rgb8, severity, name)``."""
+    the same numbers as ``imagecorruptions.corrupt(rgb8, severity, name)``.
+
+    Parameters
+    ----------
+    rgb8
+        The image: uint8 sRGB codes in [0, 255], shape (H, W, 3).
+    name
+        The corruption: ``brightness``, ``contrast`` or ``saturate`` (:data:`CORRUPTIONS`).
+    severity
+        COCO-C severity, an integer 1-5 (parameters :data:`BRIGHTNESS`, :data:`CONTRAST`,
+        :data:`SATURATE`).
+
+    Returns
+    -------
+    numpy.ndarray
+        The corrupted image, uint8, shape (H, W, 3): ``clip(x, 0, 1) * 255`` truncated.
+
+    Raises
+    ------
+    UnknownNameError
+        ``name`` not a colour corruption. Exit code 2.
+    InvalidValueError
+        ``severity`` not 1-5, or an image that is not (H, W, 3) uint8. Exit code 2.
+
+    References
+    ----------
+    C. Michaelis et al., *Benchmarking Robustness in Object Detection: Autonomous Driving
+    when Winter is Coming*, 2019 (COCO-C); D. Hendrycks, T. Dietterich, *Benchmarking Neural
+    Network Robustness to Common Corruptions and Perturbations*, ICLR 2019;
+    ``imagecorruptions`` 1.1.2.
+    """
     _check(name, severity)
     a = np.asarray(rgb8)
     if a.dtype != np.uint8 or a.ndim != 3 or a.shape[2] != 3:

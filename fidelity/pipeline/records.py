@@ -540,9 +540,11 @@ class ComparisonReport:
     ----------
     created
         When it was made, UTC, ``YYYY-MM-DDThh:mm:ssZ`` (:func:`utc_now`).
-    sim, real
-        The audits of the simulated and the real image (each a :class:`ChartReport` against
-        the chart's reference).
+    sim
+        The audit of the simulated image (a :class:`ChartReport` against the chart's
+        reference).
+    real
+        The audit of the real image (a :class:`ChartReport` against the chart's reference).
     normalisation
         What was matched before comparing: the mode (``none``, ``exposure`` or
         ``exposure+wb``), the simulated chart's exposure change in EV and per-channel gains.

@@ -233,7 +233,26 @@ class ErrorParts:
 
 def error_parts(reference_lab: ArrayLike, lab: ArrayLike) -> ErrorParts:
     """Split the chart error of ``lab`` (n, 3) against ``reference_lab`` (n, 3) into its
-    lightness, chroma and hue parts (module docstring; their sum is the mean ΔE00)."""
+    lightness, chroma and hue parts (module docstring; their sum is the mean ΔE00).
+
+    Parameters
+    ----------
+    reference_lab
+        The chart's reference CIELAB (D65), shape (n, 3): L* in [0, 100], a*, b* real.
+    lab
+        The measured CIELAB (D65) of the same patches, shape (n, 3).
+
+    Returns
+    -------
+    ErrorParts
+        The lightness, chroma and hue parts, each >= 0 in ΔE00 units; they add up to the mean
+        ΔE00 of ``lab`` against ``reference_lab``.
+
+    References
+    ----------
+    G. Sharma, W. Wu, E. N. Dalal, Color Res. Appl. 30(1), 21-30, 2005 (the CIEDE2000
+    terms, eq. 1-22).
+    """
     from fidelity.colour.colorimetry import delta_e_2000
 
     ref, meas = np.asarray(reference_lab, np.float64), np.asarray(lab, np.float64)
@@ -483,7 +502,35 @@ class DirectionalPrediction:
     ΔE, its :class:`ErrorParts`, the best :class:`FamilyFit` (None when none explains
     :data:`MIN_EXPLAINED` of the error), the parts the fit leaves (``residual_parts``), the
     :class:`FamilyTerm` terms and the resulting loss per column (``columns``), the detector
-    size asked and answered, and the table (its summary)."""
+    size asked and answered, and the table (its summary).
+
+    Attributes
+    ----------
+    delta_e
+        The chart ΔE (mean ΔE00) the curves were read at, >= 0.
+    parts
+        The chart error split into lightness, chroma and hue parts (ΔE00 units).
+    fit
+        The transform fit that explains most of the error; None when none explains
+        :data:`MIN_EXPLAINED` of it.
+    residual_parts
+        The parts the fit leaves (the parts of the whole error without a fit).
+    terms
+        The family terms, largest weight first; the weights are in [0, 1] and add up to 1.
+    columns
+        The predicted loss per column: ``dmap_points``, ``dap_person_points``,
+        ``dap_bicycle_points`` in percentage points, ``dmap_relative`` in percent of the
+        baseline mAP; None where a curve has no data.
+    size
+        The detector size class asked (``n``, ``s``, ``m``, ``l``, ``x`` or ``any``).
+    size_used
+        The size class whose curves answered.
+    table
+        The direction-aware table's summary (name, path, sha256, ...).
+    notes
+        Notes on the answer, in words (what it is; where a part was charged the classic
+        curve).
+    """
 
     delta_e: float
     parts: ErrorParts
@@ -596,6 +643,23 @@ def predict_directional(reference_lab: ArrayLike, lab: ArrayLike, *,
     table
         A :class:`DirectionalTable`, its name or path (None:
         :data:`DEFAULT_DIRECTIONAL_TABLE`).
+
+    Returns
+    -------
+    DirectionalPrediction
+        The weighted sum of family curves at the chart ΔE, per loss column (percentage
+        points; ``dmap_relative`` in percent of baseline), with the error's parts, the best
+        fit and the terms; never above the classic prediction.
+
+    Raises
+    ------
+    InvalidValueError
+        ``delta_e`` not a finite number >= 0. Exit code 2.
+    InputFileError
+        A table that is missing, unreadable, or not a direction-aware table (no
+        ``families``). Exit code 2.
+    UnknownNameError
+        An unknown table name or size class. Exit code 2.
     """
     tab = table if isinstance(table, DirectionalTable) else load_directional_table(table)
     ref = np.asarray(reference_lab, np.float64)

@@ -98,6 +98,43 @@ def delta_e_limit(max_loss: float, column: str = "dmap_points", *, size: str = "
     budget form one interval from 0; its upper end is found by bisection to ``tol``. Searched
     inside the range of the table's curves for ``size``; ``max_loss`` in the column's unit
     (points, or percent of baseline for ``dmap_relative``).
+
+    Parameters
+    ----------
+    max_loss
+        The loss budget, a finite number >= 0, in the column's unit: percentage points, or
+        percent of the baseline mAP for ``dmap_relative``.
+    column
+        The loss column: ``dmap_points`` (default), ``dmap_relative``,
+        ``dap_person_points`` or ``dap_bicycle_points``.
+    size
+        Detector size class ``n``, ``s``, ``m``, ``l``, ``x`` or ``any`` (default).
+    table
+        Table name, path or object; None:
+        :data:`~fidelity.prediction.tablefile.DEFAULT_TABLE`.
+    method
+        Interpolation (``pchip``, ``linear``, ``step``); None: the table's own.
+    tol
+        Width in ΔE00 at which the bisection stops, > 0; the limit found is at most ``tol``
+        below the exact one.
+
+    Returns
+    -------
+    DeltaELimit
+        ``delta_e``: the largest chart ΔE (mean ΔE00) whose predicted loss is <= ``max_loss``
+        (None when even the table's first point predicts more), its ``status``
+        (``inside``, ``whole-range`` or ``none``), the loss there, the table, the size that
+        answered and the ΔE range searched.
+
+    Raises
+    ------
+    UnknownNameError
+        An unknown column, size class, table name or interpolation. Exit code 2.
+    InvalidValueError
+        ``max_loss`` not a finite number >= 0, or a table without data of the column for the
+        size. Exit code 2.
+    InputFileError
+        A table file that is missing or invalid. Exit code 2.
     """
     tab = table if isinstance(table, PredictionTable) else load_prediction_table(table)
     if column not in COLUMNS:
@@ -139,6 +176,33 @@ class Prediction:
     measured table around ``delta_e`` (None for published bounds, a table without SEs, or a
     ΔE beyond the table's range, answered by the total loss).
     What the numbers mean in words is written by :mod:`fidelity.report.words`.
+
+    Attributes
+    ----------
+    delta_e
+        The chart ΔE (mean ΔE00) predicted at, >= 0.
+    size
+        The detector size class asked: ``n``, ``s``, ``m``, ``l``, ``x`` or ``any``.
+    size_used
+        The size class whose curves answered.
+    columns
+        Per loss column (``dmap_points``, ``dmap_relative``, ``dap_person_points``,
+        ``dap_bicycle_points``) its value (percentage points; ``dmap_relative`` in percent of
+        the baseline mAP), status and the ΔE range of its curve.
+    table
+        The prediction table that answered (after :meth:`from_json`: its summary, without
+        curves).
+    method
+        The interpolation used: ``pchip``, ``linear`` or ``step``.
+    baseline_map
+        The detector's baseline mAP@[.50:.95] in percent, (0, 100], when given; else None.
+    transforms
+        The SAFE-COLOR transform parameters that put the chart at ``delta_e`` (empty when
+        not asked for).
+    dmap_points_se
+        The sampling error of a measured table's ``dmap_points`` at the table points next to
+        ``delta_e``, percentage points; None for published bounds, a table without SEs, or a
+        ΔE beyond the table's range.
     """
 
     delta_e: float
@@ -267,7 +331,8 @@ def predict(
     size
         Detector size class ``n, s, m, l, x`` or ``any``.
     table
-        Table name, path or object; ``None`` is :data:`DEFAULT_TABLE`.
+        Table name, path or object; ``None`` is
+        :data:`~fidelity.prediction.tablefile.DEFAULT_TABLE`.
     method
         Interpolation (``pchip``, ``linear``, ``step``); default the table's own.
     baseline_map
@@ -278,6 +343,29 @@ def predict(
     transforms
         Also list the SAFE-COLOR transform parameters that produce ``delta_e`` on the chart
         (from the shipped calibration table).
+
+    Returns
+    -------
+    Prediction
+        Per loss column the worst-case loss at ``delta_e`` (``dmap_points``,
+        ``dap_person_points``, ``dap_bicycle_points`` in percentage points of mAP@[.50:.95]
+        or AP; ``dmap_relative`` in percent of the baseline mAP), how each was answered
+        (interpolated; below the range: the first point's value; above it: the ceiling, total
+        loss; no data), and the sampling error of a measured table.
+
+    Raises
+    ------
+    InvalidValueError
+        ``delta_e`` not a finite number >= 0, or ``baseline_map`` outside (0, 100].
+        Exit code 2.
+    UnknownNameError
+        An unknown size class, table name or interpolation. Exit code 2.
+    InputFileError
+        A table file that is missing or invalid. Exit code 2.
+
+    References
+    ----------
+    Damschen, Avula, Mohamad, SAFE-COLOR, IEEE IV 2025 (the ΔE -> ΔmAP tables).
     """
     de = float(delta_e)
     if not math.isfinite(de) or de < 0:

@@ -96,7 +96,31 @@ SIMPLE = DecisionRule()
 @dataclass(frozen=True)
 class Criterion:
     """What a gate checks: ``kind`` in :data:`CRITERIA`, ``limit`` >= 0, and for ``max-dmap``
-    the class (``all``, ``person``, ``bicycle``) and unit (``points``, ``relative``)."""
+    the class (``all``, ``person``, ``bicycle``) and unit (``points``, ``relative``).
+
+    Attributes
+    ----------
+    kind
+        ``max-delta-e`` (the chart's mean ΔE00 against the limit) or ``max-dmap`` (the
+        predicted loss against it) (:data:`CRITERIA`).
+    limit
+        The limit, a finite number >= 0: ΔE00 for ``max-delta-e``; for ``max-dmap`` in
+        ``unit``: percentage points, or percent of the baseline mAP.
+    cls
+        The detection class of a ``max-dmap`` limit: ``all`` (ΔmAP, default), ``person`` or
+        ``bicycle`` (ΔAP).
+    unit
+        ``points`` (percentage points, default) or ``relative`` (percent of the baseline mAP;
+        only with ``cls`` ``all``) (:data:`UNITS`).
+
+    Raises
+    ------
+    UnknownNameError
+        An unknown kind, class or unit. Exit code 2.
+    InvalidValueError
+        A limit that is not a finite number >= 0, or a relative limit of a single class.
+        Exit code 2.
+    """
 
     kind: str
     limit: float
@@ -166,6 +190,40 @@ class Verdict:
     the value is a published ``upper_bound``, the prediction ``table``'s name, and whether it
     is a ``conservative`` answer (outside the table's range, or no prediction). The sentence a
     report prints is :func:`fidelity.report.words.verdict_message`.
+
+    Attributes
+    ----------
+    passed
+        True when the gate passed (False for a fail and for an undecided guarded verdict).
+    criterion
+        The criterion applied.
+    value
+        The value compared with the limit: the chart's mean ΔE00 (``max-delta-e``), or the
+        predicted loss in the criterion's unit (percentage points or percent of baseline);
+        None without a prediction (a fail).
+    reason
+        ``within-limit``, ``over-limit``, ``no-prediction`` or ``undecided``
+        (:class:`VerdictReason`).
+    delta_e
+        The chart ΔE (mean ΔE00) the verdict was made at; NaN when a report read back does
+        not record it.
+    conservative
+        True when the answer is conservative: outside the table's range, or no prediction.
+    bound
+        Which prediction decided a ``max-dmap`` verdict: ``classic`` (default) or
+        ``directional``.
+    status
+        The answering column's status (interpolated, below or above the table's range, no
+        data); None for ``max-delta-e``.
+    upper_bound
+        True when ``value`` is a published upper bound, not a measured worst case.
+    table
+        The prediction table's name; None for ``max-delta-e``.
+    decision
+        The decision rule applied (:class:`DecisionRule`: simple, or guarded by the expanded
+        uncertainty).
+    uncertainty
+        The standard uncertainty (k = 1) of ``value``, in its unit; None: not known.
     """
 
     passed: bool
@@ -293,7 +351,45 @@ def evaluate(mean_delta_e: float, prediction: Prediction | None, criterion: Crit
              loss_uncertainty: float | None = None) -> Verdict:
     """Apply ``criterion`` to a chart's mean ΔE00 and (for ``max-dmap``) its prediction by the
     ``decision`` rule; ``delta_e_uncertainty`` and ``loss_uncertainty`` are the standard
-    uncertainties of the ΔE and of the criterion's predicted loss."""
+    uncertainties of the ΔE and of the criterion's predicted loss.
+
+    Parameters
+    ----------
+    mean_delta_e
+        The chart ΔE: mean ΔE00 over the patches, >= 0.
+    prediction
+        The predicted loss at the chart ΔE (:func:`fidelity.prediction.table.predict`); may
+        be None for a ``max-delta-e`` criterion.
+    criterion
+        The criterion: ``max-delta-e`` or ``max-dmap`` with its limit, class and unit.
+    decision
+        ``simple`` (pass when value <= limit, default) or ``guarded`` (ILAC-G8: pass when
+        value + U <= limit, fail when value - U > limit, undecided between, U = k u;
+        ``strict``: fail between).
+    delta_e_uncertainty
+        Standard uncertainty (k = 1) of ``mean_delta_e``, ΔE00, >= 0; None: unknown (U = 0).
+        Used by a guarded ``max-delta-e`` verdict.
+    loss_uncertainty
+        Standard uncertainty (k = 1) of the criterion's predicted loss, in its unit, >= 0;
+        None: unknown (U = 0). Used by a guarded ``max-dmap`` verdict.
+
+    Returns
+    -------
+    Verdict
+        Passed or not, why, the value compared and, for ``max-dmap``, the answering column's
+        status, whether it is conservative or a published upper bound, and the table's name.
+        A ``max-dmap`` criterion whose column has no prediction fails (``no-prediction``).
+
+    Raises
+    ------
+    InvalidValueError
+        A ``max-dmap`` criterion without a prediction. Exit code 2.
+
+    References
+    ----------
+    ILAC-G8:09/2019, *Guidelines on Decision Rules and Statements of Conformity* (the guarded
+    rule).
+    """
     if criterion.kind == "max-delta-e":
         return judge_value(criterion, float(mean_delta_e), float(mean_delta_e),
                            decision=decision, uncertainty=delta_e_uncertainty)
