@@ -347,21 +347,35 @@ def find_chart(
     ----------
     pixels
         Linear or sRGB-encoded RGB (``encoding``), any scale; NaN/Inf/negative count as black.
+        Shape (H, W, 3), at least :data:`MIN_IMAGE_SIDE` pixels on the short side.
+    encoding
+        ``linear`` (default) or ``srgb``: how the pixel values are encoded.
     method
-        A key of :data:`CHART_FINDERS`.
+        A key of :data:`CHART_FINDERS`: ``cascade`` (default: both detectors), ``mcc`` or
+        ``segmentation`` (one detector alone, the same verification and refinement).
     rows, cols
         The chart's layout; only the 4 x 6 ColorChecker is known.
     refine
         Refine the fit at full size (default); ``False`` keeps the search's fit.
+
+    Returns
+    -------
+    FoundChart
+        The corner-patch centres (4, 2) in image pixels ``(x, y)``, the detector that won,
+        the verification's confidence and checks, the refinement's residual, the covered
+        patches, notes and the time taken.
 
     Raises
     ------
     InvalidValueError
         No chart found, a chart that does not match the 24-patch layout clearly (the message
         gives the corners of the best guess, to check and pass as ``--corners``), a chart of
-        another kind (SG, digital target), or a black image.
+        another kind (SG, digital target), or a black image; a layout other than 4 x 6, an
+        image not of shape (H, W, 3) or too small; too many patches covered. Exit code 2.
+    UnknownNameError
+        An unknown ``method`` or ``encoding``. Exit code 2.
     FidelityError
-        OpenCV without its contrib modules.
+        OpenCV without its contrib modules. Exit code 2.
     """
     if method not in CHART_FINDERS:
         raise unknown_name("chart detection method", method, CHART_FINDERS)

@@ -64,6 +64,46 @@ class FoundChart:
     (:func:`~fidelity.chart.find.reference.off_the_camera_fit`) whose window is flat: the
     camera's own error or a flat cover, measured and named in a note, never left out (a
     camera's error is not hidden).
+
+    Attributes
+    ----------
+    corners
+        Image ``(x, y)`` of the dark skin, bluish green, black and white patch centres, in
+        pixels, shape (4, 2) (:data:`~fidelity.chart.locate.CORNER_PATCHES`).
+    method
+        The detector whose candidate won: ``mcc`` or ``segmentation``.
+    candidates
+        Candidates verified, >= 1.
+    swatches
+        Patch outlines that refined the fit at full size, >= 0 (0: the search's fit).
+    residual_px
+        RMS distance in image pixels between the outlines' centres and the fitted grid,
+        >= 0; NaN without refinement.
+    orientation
+        How the chart lies in the image: its top edge's turn from the image's x axis, and
+        whether it is seen mirrored (``as found`` when not stated).
+    region
+        The ``(x0, y0, x1, y1)`` pixel part of the image the final fit was made in; None when
+        not stated.
+    confidence
+        The verification's rank correlation of measured and reference colours, in [0, 1];
+        NaN when not stated.
+    checks
+        How well the patches found match the reference layout; None when not checked.
+    chart
+        The chart type found (``24-patch ColorChecker``, noting a Passport's other page).
+    other_charts
+        Patch charts found beside it that are not the 24-patch layout, >= 0 (not measured).
+    seconds
+        Wall-clock seconds the search took; NaN when not stated.
+    notes
+        What a report should say about the find (other charts, covered or far-off patches).
+    occluded
+        0-based chart-order indices of the patches judged covered, left out of the checks and
+        of the audit's statistics.
+    flat_off_fit
+        0-based chart-order indices of flat patches far from what the others predict:
+        measured and named in a note, never left out.
     """
 
     corners: np.ndarray
