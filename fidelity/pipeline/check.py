@@ -183,6 +183,16 @@ def check_camera(
         ``mean_delta_e`` (ΔE00, >= 0), the per-patch measurement, ``prediction`` (ΔmAP in
         percentage points and % of baseline, class ΔAP) and ``verdict``.
 
+    Raises
+    ------
+    UnknownNameError
+        An unknown camera, illuminant, renderer, reference, table or size class. Exit code 2.
+    InputFileError
+        A camera, illuminant or table file that is missing or invalid. Exit code 2.
+    InvalidValueError
+        A camera whose stages give non-finite values, a seed out of range, or a ``max-dmap``
+        criterion without a prediction. Exit code 2.
+
     Examples
     --------
     >>> report = check_camera("nikon-5100")          # doctest: +SKIP
@@ -268,6 +278,17 @@ def audit_image(
     ChartReport
         With ``exposure_ev``, ``bad_pixels`` and the image source (corners, how they were
         found, where each patch was sampled).
+
+    Raises
+    ------
+    InputFileError
+        A missing, unreadable or corrupt image or recording. Exit code 2.
+    InvalidValueError
+        No chart found, corners outside the image or degenerate, a patch with too few valid
+        pixels, an exposure out of range; the message names the file. Exit code 2.
+    UnknownNameError
+        An unknown reference, illuminant, table, size class or read option (encoding,
+        colourspace, Bayer pattern). Exit code 2.
     """
     from fidelity.measure.pixels import measure_image
 
@@ -362,6 +383,47 @@ def gate(
     per subject (its report, or its error, and the time it took);
     :func:`fidelity.pipeline.records.gate_exit_code` turns them into the exit code and
     :func:`fidelity.report.write_chart_report` writes each report.
+
+    Parameters
+    ----------
+    criterion
+        The gate: ``max-delta-e`` (mean ΔE00 <= limit) or ``max-dmap`` (predicted ΔmAP or
+        class ΔAP <= limit, in percentage points or % of baseline).
+    images
+        Image files or recordings to audit, one subject each; empty: gate ``camera``.
+    camera
+        The camera to render and check when no ``images`` are given (a built-in name, a
+        camera file or a :class:`~fidelity.camera.model.CameraModel`); None with no images:
+        nothing is gated.
+    corners
+        Corner-patch centres ``"X1,Y1,...,X4,Y4"`` in image pixels, the same for every image;
+        None: each chart is found.
+    read
+        How each image's pixels are read (:class:`~fidelity.chart.read.ReadOptions`; its
+        recording options go to the inputs that are recordings).
+    reference
+        ``scene`` (None, the default), ``safecolor`` or a chart JSON.
+    illuminant
+        The scene illuminant (``D65``, ...) of the ``scene`` reference and of the render.
+    renderer
+        ``closed-form`` (default) or ``mitsuba``: how ``camera`` is rendered.
+    judge
+        How to judge (:class:`~fidelity.prediction.judge.JudgeOptions`: size class, table,
+        bound, decision rule), as for :func:`check_camera`.
+    frames
+        One frame index per image (negative from the end), for a recording gated on several
+        frames; None: ``read``'s frame.
+
+    Returns
+    -------
+    list of GateResult
+        One per subject, in order: its report or its input error's message, and the seconds
+        it took; empty without images and camera.
+
+    Raises
+    ------
+    ValueError
+        ``frames`` not one per image.
     """
     if not images:
         cameras = [camera] if camera else []
@@ -388,7 +450,42 @@ def audit_images(
     """:func:`audit_image` of ``images`` one by one (a renderer's frames, say), as
     :func:`gate` measures them but without a criterion: one
     :class:`~fidelity.pipeline.records.GateResult` per subject, an input error of one subject its
-    ``error`` while the others are still measured; ``frames`` as for :func:`gate`."""
+    ``error`` while the others are still measured; ``frames`` as for :func:`gate`.
+
+    Parameters
+    ----------
+    images
+        Image files or recordings to audit, one subject each.
+    corners
+        Corner-patch centres ``"X1,Y1,...,X4,Y4"`` in image pixels, the same for every image;
+        None: each chart is found.
+    read
+        How each image's pixels are read (:class:`~fidelity.chart.read.ReadOptions`; its
+        recording options go to the inputs that are recordings).
+    reference, illuminant
+        ``scene`` (default: the chart's spectra under ``illuminant``, ``D65`` by default),
+        ``safecolor`` or a chart JSON.
+    judge
+        How to judge (:class:`~fidelity.prediction.judge.JudgeOptions`), as for
+        :func:`check_camera`; no verdict is made.
+    measure
+        Also measure each chart's colour rendering on COCO, as :func:`audit_image` does;
+        None: not measured.
+    frames
+        One frame index per image, for a recording audited on several frames; None:
+        ``read``'s frame.
+
+    Returns
+    -------
+    list of GateResult
+        One per subject, in order, without a criterion: its report or its input error's
+        message (exit code 2), and the seconds it took.
+
+    Raises
+    ------
+    ValueError
+        ``frames`` not one per image.
+    """
     return _audit_subjects(images, corners, read, frames, partial(
         audit_image, command="audit", reference=reference, illuminant=illuminant, judge=judge,
         measure=measure), None)
