@@ -62,7 +62,7 @@ def audit(source: Path, image: Path, out: Path, corners: np.ndarray | None = Non
         args += ["--corners", ",".join(f"{v:.1f}" for v in corners.ravel())]
     if out.exists():
         out.unlink()
-    row = run_process(args, env, cwd=source)  # python -m puts the working folder first
+    row = run_process(args, env, cwd=source, digits=3)  # python -m puts the working folder first
     if row["exit"] == 0:
         row["mean_delta_e"] = json.loads(out.read_text(encoding="utf-8"))["mean_delta_e"]
     return row

@@ -54,7 +54,7 @@ def process(cmd: list[str]) -> tuple[float, float]:
     process; it must exit 0."""
     from benchmarks.speed.timing import run_process
 
-    row = run_process(cmd, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    row = run_process(cmd, env=dict(os.environ, PYTHONPATH=str(ROOT)), digits=4)
     if row["exit"] != 0:
         raise RuntimeError(f"{cmd}: exit {row['exit']}: {row['stderr']}")
     return float(row["seconds"]), row["max_rss_mb"] * 1e6 / 2**20

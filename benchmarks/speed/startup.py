@@ -71,7 +71,7 @@ ANCHORS = {"fidelity audit PHOTO.jpg --json F (12 MP)":
 
 def run_once(argv: list[str], cwd: str) -> tuple[float, float]:
     """Wall seconds and max RSS (MB) of one run of ``argv`` (it must exit 0 or 1)."""
-    row = run_process(argv, env=user_environment(), cwd=Path(cwd))
+    row = run_process(argv, env=user_environment(), cwd=Path(cwd), digits=4)
     if row["exit"] not in (0, 1):
         raise RuntimeError(f"{argv}: exit {row['exit']}: {row['stderr']}")
     return float(row["seconds"]), float(row["max_rss_mb"])

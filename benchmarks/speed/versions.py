@@ -118,7 +118,7 @@ def run(argv: list[str], source: Path) -> tuple[float, float]:
     if "tables" in argv:
         shutil.rmtree(argv[argv.index("--out") + 1], ignore_errors=True)
     env = dict(user_environment(), PYTHONPATH=str(source))
-    row = run_process(argv, env=env, cwd=source)  # python -m puts the working folder first
+    row = run_process(argv, env=env, cwd=source, digits=4)  # python -m puts the working folder first
     if row["exit"] not in (0, 1):
         raise RuntimeError(f"{argv} ({source}): exit {row['exit']}: {row['stderr']}")
     return float(row["seconds"]), float(row["max_rss_mb"])
