@@ -8,7 +8,7 @@ the spectral integral ``int L(l) S_c(l) dl`` that ``specfilm`` estimates by Mont
 wavelengths. Multiplying by pi / sum(E ybar dl) gives the units of
 :func:`fidelity.camera.model.camera_response`. Path tracing would add nothing but cost; what remains
 is the wavelength-sampling noise of the Monte Carlo estimate, which the benchmark
-(``benchmarks/bench_render.py``) measures against the closed form.
+(``benchmarks/speed/render.py``) measures against the closed form.
 
 ``specfilm`` needs non-negative channel sensitivities, so a channel with negative lobes (the
 ideal camera's) is rendered as two channels, S+ = max(S, 0) and S- = max(-S, 0), and recombined
@@ -47,7 +47,7 @@ FloatArray = NDArray[np.float64]
 #: Variants in order of preference (the first that passes the probe runs).
 PREFERRED_VARIANTS: tuple[str, ...] = ("llvm_ad_spectral", "scalar_spectral")
 
-#: Defaults from benchmarks/bench_render.py (reports/render/): the cheapest samples per pixel
+#: Defaults from benchmarks/speed/render.py (reports/render/): the cheapest samples per pixel
 #: that keep every benchmarked camera within 0.02 mean ΔE00 of the closed form on both variants
 #: (worst of 3 seeds: 0.012; 0.55 s on llvm_ad_spectral, 5.7 s on scalar_spectral, 2 cores),
 #: at the closed form's layout of 32 px per patch (so seeded camera noise falls on the same

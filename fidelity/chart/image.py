@@ -64,7 +64,7 @@ FLOAT_PIXEL_TYPES = frozenset({"half", "float", "double"})
 #: checked from the file's header before any pixel is decoded. An audit holds the image at its
 #: decoded depth (3 bytes per pixel for an 8-bit photo, 6 for 16-bit or half, 12 for float)
 #: plus about one byte per pixel for the chart finder's reduced copies: measured for 8-bit
-#: JPEGs (``benchmarks/bench_memory.py``), 3.1 MB per megapixel above the program's 170 MB
+#: JPEGs (``benchmarks/speed/memory.py``), 3.1 MB per megapixel above the program's 170 MB
 #: between 24 and 108 megapixels (630 MB at 108). A Bayer mosaic is demosaiced in float64
 #: (about 60 bytes per pixel). 150 megapixels (a 14142 x 10607 photo, more than any camera
 #: sold) then take under 1 GB as an 8-bit photo, about 2 GB as float.

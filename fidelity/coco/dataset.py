@@ -238,9 +238,9 @@ def pull_mean_kernel(kernel: str = "auto") -> str:
 
 #: Fewest images a run writes with pull_mean for the numba kernel to pay for itself. Importing
 #: numba and loading its kernels from the disk cache add 1.5-2 s to a run (then inherited by
-#: forked workers; ``benchmarks/bench_dataset.py``: 8 COCO photos in 2.67 s with numba forced,
+#: forked workers; ``benchmarks/speed/dataset.py``: 8 COCO photos in 2.67 s with numba forced,
 #: 1.17 s without, default workers); the kernel saves about 1.5 ms of CPU per 640x480 photo
-#: (``benchmarks/bench_pipeline.py`` on a quiet machine: 2.75 against 4.28 ms; bench_dataset's
+#: (``benchmarks/speed/pipeline.py`` on a quiet machine: 2.75 against 4.28 ms; the dataset benchmark's
 #: marginal CPU per photo 18.0-18.5 against 19.5-21.2 ms), so about 1000 photos break even.
 #: Both kernels give the same bits.
 NUMBA_MIN_IMAGES = 1000
@@ -299,7 +299,7 @@ class PullMeanWorkspace:
     ``code / 255`` and :func:`to_uint8` of :func:`fidelity.colour.colorimetry.lab_to_srgb`, but on
     channel planes (3, n), ``chunk`` colours at a time, in buffers kept between calls: fresh
     multi-MiB temporaries cost more in page faults and cache misses than the arithmetic does
-    (benchmarks/bench_pipeline.py times ``pull_mean``). The piecewise branches (the linear
+    (benchmarks/speed/pipeline.py times ``pull_mean``). The piecewise branches (the linear
     segments near black) are evaluated only where they apply. The 3x3 products run as
     (3, 3) @ (3, n) instead of the reference's (n, 3) @ (3, 3); with OpenBLAS both give the
     same bits (tests/test_dataset.py checks the codes, exact, and the Lab values, to 1e-12).

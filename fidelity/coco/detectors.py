@@ -728,7 +728,7 @@ def postprocess(output: np.ndarray, layout: ModelLayout, box: Letterbox,
 
 #: Options of onnxruntime's CUDA provider: full float32 arithmetic (no TF32 tensor-core
 #: rounding, which onnxruntime turns on by default on Ampere and later GPUs and which moved
-#: COCO mAP50 by up to a point against the CPU in benchmarks/bench_providers.py).
+#: COCO mAP50 by up to a point against the CPU in benchmarks/speed/providers.py).
 CUDA_OPTIONS: dict[str, str] = {"use_tf32": "0"}
 
 
@@ -819,7 +819,7 @@ class Detector:
                     f"--provider cuda: {p.name} is dynamically quantised (ConvInteger), which "
                     f"onnxruntime's CUDA provider does not run: its nodes would run on the CPU "
                     f"inside a CUDA session, whose detections differ from a CPU session's "
-                    f"(benchmarks/bench_providers.py); use --provider cpu")
+                    f"(benchmarks/speed/providers.py); use --provider cpu")
         else:
             raise InvalidValueError(f"provider {provider!r}: expected auto, cpu or cuda")
         try:

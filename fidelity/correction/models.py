@@ -429,7 +429,7 @@ def cross_validate(sim: ArrayLike, real: ArrayLike, model: str = "matrix", *,
 
 
 #: The objective :func:`fit_model` uses by default: the one with the lower cross-validated
-#: ΔE00 on the suite's cameras (measured by ``benchmarks/bench_fit.py``, ``docs/fit.md``).
+#: ΔE00 on the suite's cameras (measured by ``benchmarks/speed/fit.py``, ``docs/fit.md``).
 DEFAULT_OBJECTIVE = "ciede2000"
 
 
