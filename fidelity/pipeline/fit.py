@@ -92,7 +92,49 @@ class Correction:
     its interpolation cannot follow: whoever stores the corrected image clips it); ``domain_max`` is the largest
     linear pixel value a ``.cube`` covers (the perfect white's). The rest is the fit's
     evidence: per patch (chart order) the fit-space colours, the excluded patches with their
-    reason, the in-sample and cross-validated ΔE00."""
+    reason, the in-sample and cross-validated ΔE00.
+
+    Attributes
+    ----------
+    model
+        The fitted colour model (``gains``, ``matrix``, ``matrix+curve`` or
+        ``root-polynomial``), acting on fit-space linear sRGB.
+    objective
+        What the fit minimised: ``linear`` (least squares in linear light) or ``ciede2000``.
+    conditioning
+        How well the chart determines the fit: the condition number, its limit, the Tikhonov
+        weight used (0: none) and why.
+    encoding
+        The simulator's pixel encoding: ``srgb`` (encoded values in [0, 1]) or ``linear``
+        (scene-linear).
+    to_fit
+        3 x 3 matrix taking the simulator's linear pixel values to the fit space (its
+        colourspace -> linear sRGB, its audit exposure, the normalisation).
+    domain_max
+        The largest linear pixel value a ``.cube`` covers (the perfect white's; 1 for sRGB
+        pixels), > 0.
+    normalisation
+        What was matched before the fit (``exposure``, ``exposure+wb`` or ``none``) and by how
+        much.
+    patch_names
+        The patch names, chart order (the order of every per-patch array).
+    excluded
+        Patch name -> why it was left out of the fit (clipped or saturated in either chart).
+    sim_fit
+        The simulated patches in the fit space, linear sRGB, shape (n, 3).
+    real_fit
+        The real patches in the fit space, linear sRGB, shape (n, 3).
+    before_delta_e
+        ΔE00 of each simulated patch against the real one before the correction, shape (n,).
+    fitted_delta_e
+        ΔE00 of each corrected simulated patch against the real one (in-sample), shape (n,).
+    cv_delta_e
+        Cross-validated ΔE00 of each patch (leave-3-patches-out), shape (n,); NaN for
+        excluded patches.
+    sim_pixels
+        The simulated patches as the simulator's pixel values (its encoding and
+        colourspace), shape (n, 3); empty (0, 3) when not known.
+    """
 
     model: ColourModel
     objective: str
@@ -390,6 +432,19 @@ def fit_correction(
     Returns
     -------
     Correction
+        The fitted correction of the simulator's pixel values, with its conditioning, the
+        excluded patches and the per-patch ΔE00 before, after (in-sample) and
+        cross-validated.
+
+    Raises
+    ------
+    InputFileError
+        A missing, unreadable or corrupt image. Exit code 2.
+    InvalidValueError
+        No chart found in either image, a nearly grey real chart, too few usable patches or
+        an unstable fit, an OpenColorIO colourspace given for ``sim``. Exit code 2.
+    UnknownNameError
+        An unknown model, objective, normalisation, reference or illuminant. Exit code 2.
     """
     from fidelity.chart.read import reads_with_own_ocio
 
@@ -474,7 +529,44 @@ class FitReport:
     spent (``seconds``: ``read``, ``fit``, ``verify``; ``cpu_seconds`` the same in this
     process's CPU time); with ``measure``, the loss measured on COCO of the simulator's
     colours before and after the correction (``measured_before``, ``measured_after``: the
-    emulation of each on the images, as ``fidelity compare --measure`` makes it)."""
+    emulation of each on the images, as ``fidelity compare --measure`` makes it).
+
+    Attributes
+    ----------
+    created
+        When it was made, UTC, ``YYYY-MM-DDThh:mm:ssZ``.
+    sim
+        The simulated image's path, as given.
+    real
+        The real image's path, as given.
+    correction
+        The fitted correction.
+    before
+        The sim-to-real measurement before the correction (the normalised SIM chart against
+        the REAL chart as reference).
+    after
+        The same after it: the SIM pixels through the ``.cube`` by OpenColorIO, measured
+        again in the audit's windows.
+    prediction_before
+        The predicted detection loss at the sim-to-real ΔE before the correction.
+    prediction_after
+        The predicted detection loss at the sim-to-real ΔE after it.
+    lut_checks
+        The ``.cube``'s checks against the model, one per cube size tried (the last: the
+        cube written).
+    files
+        The files written: ``cube``, ``ocio``, ``json`` and, with ``corrected``, the
+        ``corrected`` image, each a path.
+    seconds
+        Wall-clock seconds of ``read``, ``fit`` and ``verify``.
+    cpu_seconds
+        This process's CPU seconds of the same steps.
+    measured_before
+        With ``measure``: the loss measured on COCO of the simulator's colours before the
+        correction, one per detector; else empty.
+    measured_after
+        The same after the correction.
+    """
 
     created: str
     sim: str
