@@ -139,6 +139,21 @@ def compare_charts(
     Returns
     -------
     ComparisonReport
+        Both charts' audits, the normalisation, the sim-to-real measurement (ΔE00 per patch
+        with the real chart as reference; ``mean_delta_e`` the sim-to-real chart ΔE), its
+        classic and direction-aware predicted loss (percentage points, % of baseline), the
+        verdict and the ΔE's uncertainty.
+
+    Raises
+    ------
+    InputFileError
+        A missing, unreadable or corrupt image or recording. Exit code 2.
+    InvalidValueError
+        No chart found in an image, corners outside it, charts with different patches, a
+        ``max-dmap`` criterion without a prediction; the message names the file. Exit code 2.
+    UnknownNameError
+        An unknown normalisation, reference, illuminant, table, size class or OpenColorIO
+        colourspace. Exit code 2.
     """
     from fidelity.chart.read import reads_with_own_ocio
     from fidelity.measure.colour import measure_chart, neutral_patches
