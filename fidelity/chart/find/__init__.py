@@ -47,8 +47,8 @@ The finder is a cascade (:func:`~fidelity.chart.find.cascade.find_chart`, method
    :data:`~fidelity.chart.find.cascade.MIN_MARGIN` lower and its patches are flat (median
    relative spread at most :data:`~fidelity.chart.find.cascade.MAX_UNIFORMITY`); so a chart
    found one row or column off is corrected, never measured. The thresholds were chosen on a
-   tuning set of the benchmark (``benchmarks/bench_find_chart.py --seed 7``) and checked on
-   another (seed 19).
+   tuning set of the benchmark (``python -m benchmarks.speed find_chart -p seed=7``) and
+   checked on another (seed 19).
 4. **Refinement at full size**: the chart's surroundings (corners plus 2 pitches) are cut from
    the full-size image (shrunk only if still larger than
    :data:`~fidelity.chart.find.cascade.REFINE_SIDE`), segmented again, each patch outline

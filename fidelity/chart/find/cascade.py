@@ -127,7 +127,7 @@ def _refine(view: View, h_view: np.ndarray) -> tuple[F64, int, float, Quads]:
     outlines. The threshold blocks are a quarter and half the patch pitch. The grid is fitted
     twice: to the outlines' centroids, then to the centroids less their perspective bias under
     that fit (:func:`~fidelity.chart.find.lattice.perspective_bias`; on an oblique chart the corner patches moved by up to
-    3 % of a pitch, the median error over the photos of ``benchmarks.bench_find_chart`` fell
+    3 % of a pitch, the median error over the photos of ``benchmarks.speed.find_chart`` fell
     from 1.7 % to 0.9 % of a pitch)."""
     corners = corner_centres(h_view)
     pitch = chart_pitch(corners)
