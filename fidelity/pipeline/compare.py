@@ -150,10 +150,10 @@ def compare_charts(
         A missing, unreadable or corrupt image or recording. Exit code 2.
     InvalidValueError
         No chart found in an image, corners outside it, charts with different patches, a
-        ``max-dmap`` criterion without a prediction; the message names the file. Exit code 2.
+        ``max-dmap`` criterion without a prediction, an OpenColorIO colourspace or config
+        that is not one; the message names the file. Exit code 2.
     UnknownNameError
-        An unknown normalisation, reference, illuminant, table, size class or OpenColorIO
-        colourspace. Exit code 2.
+        An unknown normalisation, reference, illuminant, table or size class. Exit code 2.
     """
     from fidelity.chart.read import reads_with_own_ocio
     from fidelity.measure.colour import measure_chart, neutral_patches
