@@ -340,6 +340,10 @@ def main(argv: list[str] | None = None) -> int:
     for name, module in modules.items():
         out = args.out or folder / f"{name}.json"
         if args.report_only:
+            if not out.is_file():
+                print(f"{name}: no result {out} to form again", file=sys.stderr)
+                failed += 1
+                continue
             doc = rewrite(name, module, out)
             print(f"{name}: {out} formed again from its details")
             continue
