@@ -67,7 +67,7 @@ the problem and whose ``reason`` is one of :data:`REFUSALS`:
     Not a 2-D array (one channel; :func:`esfr_rgb` for RGB).
 ``too-short``
     Fewer than :data:`MIN_EDGE_PX` pixels along the edge or :data:`MIN_ACROSS_PX` across it.
-    ISO 12233:2017 sets no fixed minimum in pixels; these are this package's floor. An edge
+    These two numbers are this package's floor, not the standard's. An edge
     too short or too little slanted for one whole phase cycle (``rows * tan(angle) < 1``) is
     refused the same way.
 ``flat``
@@ -117,7 +117,7 @@ Orientation = Literal["auto", "vertical", "horizontal"]
 
 #: ESF bins per pixel (ISO 12233: 4x oversampling).
 OVERSAMPLING = 4
-#: Fewest pixels along the edge (this package's floor; ISO 12233:2017 gives no number).
+#: Fewest pixels along the edge (this package's floor, not a number of ISO 12233:2017).
 MIN_EDGE_PX = 20
 #: Fewest pixels across the edge.
 MIN_ACROSS_PX = 16
@@ -587,12 +587,12 @@ def esfr(roi: ArrayLike, *, orientation: Orientation = "auto", degree: int = 1,
     black
         The encoding's minimum, tested the same way (None: the dtype's minimum for integer
         arrays, no test for floats).
-    draws
-        Bootstrap draws of the MTF50 uncertainty (0: none, ``u_mtf50`` None).
     refine
         True: the two binning corrections of the module docstring (each bin at its pixels'
         mean distance; the bin's box response divided out). False: ISO 12233:2017 as it
         stands.
+    draws
+        Bootstrap draws of the MTF50 uncertainty (0: none, ``u_mtf50`` None).
     seed
         Seed of the bootstrap's generator.
 
