@@ -61,7 +61,8 @@ class ReadOptions:
         The message's index on ``topic`` (negative from the end); with neither ``frame``
         nor ``time``: the first message.
     time
-        The message nearest to ``time`` seconds after the recording's first message.
+        The message nearest to ``time``: seconds after the recording's first message, or an
+        absolute time as text (:func:`fidelity.chart.recording.absolute_time_ns`).
     """
 
     layer: str | None = None
