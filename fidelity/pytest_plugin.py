@@ -26,9 +26,14 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
+from dataclasses import fields
 from typing import TYPE_CHECKING, Any
 
 import pytest
+
+from fidelity.chart.read import ReadOptions
+from fidelity.pipeline.check import audit_image
+from fidelity.prediction.judge import JudgeOptions
 
 if TYPE_CHECKING:
     from fidelity.pipeline.records import ChartReport
@@ -79,12 +84,6 @@ def colour_fidelity(request: pytest.FixtureRequest) -> Callable[..., ColourFidel
     defaults: dict[str, Any] = dict(marker.kwargs) if marker else {}
 
     def measure(image: str | os.PathLike[str], **options: Any) -> ColourFidelity:
-        from dataclasses import fields
-
-        from fidelity.chart.read import ReadOptions
-        from fidelity.pipeline.check import audit_image
-        from fidelity.prediction.judge import JudgeOptions
-
         kwargs = {**defaults, **options}
         # the image-reading and judging options may be given one by one (layer="beauty",
         # size="n"), or as their records (read=, judge=)

@@ -172,3 +172,50 @@ def test_the_checks_find_what_they_look_for(tmp_path) -> None:
     assert private == [("fidelity.core.errors", "fidelity.colour.a", "_hidden")]
     assert cycles(g) == [["fidelity.colour.a", "fidelity.core.errors"]]
     assert layer("fidelity.core.errors") < layer("fidelity.colour.a")
+
+
+#: The package's own modules a module may import inside a function (``# noqa: PLC0415``), and
+#: the folder whose modules import them at module level: the COCO benchmark, which a check or
+#: an audit loads only with ``--measure``, the chart finder, which only an image whose chart is
+#: found or checked loads, and the evidence formats that need an extra. The
+#: third-party modules imported at the call are ruff's ``banned-module-level-imports``
+#: (pyproject.toml); everything else is imported at module level (ruff's PLC0415).
+DEFERRED = {"fidelity.coco": "fidelity.coco", "fidelity.chart.find": "fidelity.chart.find",
+            "fidelity.report.ssp": "fidelity.report.ssp",
+            "fidelity.report.xqar": "fidelity.report.xqar",
+            "fidelity.camera.mitsuba": "fidelity.camera.mitsuba"}
+
+
+def deferred_imports(root: Path = PACKAGE) -> list[tuple[str, int, str]]:
+    """(module, line, imported module) of every import marked ``noqa: PLC0415``."""
+    found = []
+    for name, path in modules(root).items():
+        lines = path.read_text(encoding="utf-8").splitlines()
+        for node in ast.walk(ast.parse("\n".join(lines))):
+            if isinstance(node, ast.Import | ast.ImportFrom) and "noqa: PLC0415" in lines[
+                    node.end_lineno - 1]:
+                target = node.module if isinstance(node, ast.ImportFrom) else node.names[0].name
+                found.append((name, node.lineno, target or ""))
+    return found
+
+
+def test_only_the_listed_modules_are_imported_inside_functions() -> None:
+    """An import kept in a function by ``noqa: PLC0415`` names one of :data:`DEFERRED`, from
+    outside the folder that owns it."""
+    wrong = [f"{m}:{line} imports {t} inside a function"
+             for m, line, t in deferred_imports()
+             if not any((t == k or t.startswith(k + ".")) and not m.startswith(owner)
+                        for k, owner in DEFERRED.items())]
+    assert wrong == []
+
+
+def test_the_deferred_import_check_can_fail(tmp_path) -> None:
+    pkg = tmp_path / "fidelity"
+    (pkg / "pipeline").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "pipeline" / "__init__.py").write_text("")
+    (pkg / "pipeline" / "a.py").write_text(
+        "def f():\n    from fidelity.coco.emulation import x  # noqa: PLC0415\n"
+        "    from fidelity.measure.colour import y  # noqa: PLC0415\n")
+    assert deferred_imports(pkg) == [("fidelity.pipeline.a", 2, "fidelity.coco.emulation"),
+                                     ("fidelity.pipeline.a", 3, "fidelity.measure.colour")]

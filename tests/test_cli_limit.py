@@ -45,6 +45,11 @@ def small_coco(shared: Path, tmp_path: Path) -> tuple[Path, Path, Path]:
 @pytest.fixture
 def scored(monkeypatch: pytest.MonkeyPatch) -> Callable[[list[str]], set[int]]:
     """Run a command line; the image ids its COCO scores were computed on."""
+    import importlib
+    import pkgutil
+    import sys
+
+    import fidelity
     import fidelity.coco.scoring as scoring
 
     seen: set[int] = set()
@@ -54,7 +59,15 @@ def scored(monkeypatch: pytest.MonkeyPatch) -> Callable[[list[str]], set[int]]:
         seen.update(int(i) for i in ids)
         return original(coco, detections, ids, *args, **kwargs)
 
-    monkeypatch.setattr(scoring, "evaluate_detections", spy)
+    # every module that binds the scorer (imports are at module level): patched where it is
+    # looked up, the modules of the commands imported first
+    for info in pkgutil.walk_packages(fidelity.__path__, "fidelity."):
+        if info.name.startswith(("fidelity.coco", "fidelity.cli", "fidelity.pipeline")):
+            importlib.import_module(info.name)
+    for module in list(sys.modules.values()):
+        if (getattr(module, "__name__", "").startswith("fidelity")
+                and getattr(module, "evaluate_detections", None) is original):
+            monkeypatch.setattr(module, "evaluate_detections", spy)
 
     def run(argv: list[str]) -> set[int]:
         seen.clear()

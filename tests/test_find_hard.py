@@ -19,10 +19,10 @@ from click.testing import CliRunner
 from test_audit import GRID_CORNERS, draw_chart, map_points, write_exr
 from test_find_chart import _mosaic, _write_mosaic_png16
 
-from fidelity.chart import bayer
 from fidelity.chart.bayer import BAYER_MARGIN, bayer_pattern
 from fidelity.chart.find import (
     FoundChart,
+    cascade,
     find_chart,
     make_view,
     occluded_patches,
@@ -214,7 +214,7 @@ def test_a_grey_mosaic_and_an_ambiguous_fit_keep_the_clear_error(tmp_path, monke
         return FoundChart(corners=np.zeros((4, 2)), method="x", candidates=1, swatches=0,
                           residual_px=float("nan"), confidence=c)
 
-    monkeypatch.setattr(bayer, "find_chart", fake)
+    monkeypatch.setattr(cascade, "find_chart", fake)
     fit = bayer_pattern(mosaic)
     assert fit.pattern is None and fit.margin == pytest.approx(BAYER_MARGIN / 2)
     scores = iter([0.0, 0.95, 0.95 - 1.5 * BAYER_MARGIN, 0.0])

@@ -149,11 +149,11 @@ def _quiet(**kw):
 
 
 def test_resume_over_other_images_or_annotations_is_refused(tmp_path, monkeypatch) -> None:
-    from fidelity.coco import detectors
+    from fidelity.coco import executor
     from fidelity.coco.sweep import run_sweep
     from tests.test_sweep import FakeDetector, synthetic_coco
 
-    monkeypatch.setattr(detectors, "Detector", FakeDetector)
+    monkeypatch.setattr(executor, "Detector", FakeDetector)  # where the runner makes one
     images, ann, model = synthetic_coco(tmp_path / "data")
     grid = (["contrast-inc"], [0, 3])
     run_sweep([ModelSpec(model, 3)], images, ann, tmp_path / "out", *grid, **_quiet())

@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-import fidelity.coco.machine as machine
+import fidelity.coco.driver as driver
 from fidelity.coco.driver import StoreRun
 from fidelity.coco.machine import KERNEL_INSTRUCTIONS, cpu_description
 from fidelity.coco.store import ResultsStore
@@ -56,13 +56,13 @@ def test_a_store_keeps_every_machine_that_ran_in_it(tmp_path: Path,
     store = ResultsStore(tmp_path)
     run: StoreRun[Any] = StoreRun(store, lambda: ResultsStore(tmp_path, create=False),
                                   None, None)  # type: ignore[arg-type]
-    monkeypatch.setattr(machine, "cpu_description", lambda: cpu_description(AMD))
+    monkeypatch.setattr(driver, "cpu_description", lambda: cpu_description(AMD))
     run.record_machine({"threads": 2})
     run.record_machine({"threads": 1})  # same machine, other settings: still one machine
     meta = store.meta()
     assert meta["machine"]["cpu"] == "AMD EPYC 7B13" and meta["machine"]["threads"] == 1
     assert len(meta["machines"]) == 1
-    monkeypatch.setattr(machine, "cpu_description", lambda: cpu_description(INTEL))
+    monkeypatch.setattr(driver, "cpu_description", lambda: cpu_description(INTEL))
     run.record_machine({"threads": 2})  # resumed on another processor
     machines = store.meta()["machines"]
     assert [m["cpu"] for m in machines] == ["AMD EPYC 7B13", "Intel(R) Xeon(R) Processor"]

@@ -258,7 +258,7 @@ def test_a_failing_writer_leaves_nothing_and_keeps_the_earlier_export(d65, tmp_p
                                                                       monkeypatch):
     import errno
 
-    import fidelity.scene.gltf as gltf
+    import fidelity.scene.export as export
     from fidelity.core.errors import InputFileError
 
     pytest.importorskip("pygltflib")
@@ -269,7 +269,7 @@ def test_a_failing_writer_leaves_nothing_and_keeps_the_earlier_export(d65, tmp_p
     def full_disk(*args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(gltf, "write_gltf", full_disk)
+    monkeypatch.setattr(export, "write_gltf", full_disk)  # the writer the export calls
     with pytest.raises(InputFileError, match="No space left"):
         export_scene(build_scene("A", resolution=SIZE), "gltf", out)
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before

@@ -293,10 +293,10 @@ def test_two_sweeps_share_one_models_cells_fast(tmp_path, monkeypatch) -> None:
     stand-in detector, synthetic images) fill one store with every cell once, as one run does."""
     import threading
 
-    from fidelity.coco import detectors
+    from fidelity.coco import executor
     from fidelity.coco.sweep import run_sweep
 
-    monkeypatch.setattr(detectors, "Detector", FakeDetector)
+    monkeypatch.setattr(executor, "Detector", FakeDetector)  # where the runner makes one
     images, ann, model = synthetic_coco(tmp_path / "data")
     grid = (["contrast-inc", "contrast-dec"], [0, 3, 6])  # 8-bit tables: quick to build
     logs: dict[str, list[str]] = {"priority": [], "reverse": []}

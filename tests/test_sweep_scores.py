@@ -23,9 +23,9 @@ GRID = (["contrast-inc", "contrast-dec"], [0, 3, 6])
 
 @pytest.fixture
 def data(tmp_path, monkeypatch):
-    from fidelity.coco import detectors
+    from fidelity.coco import executor
 
-    monkeypatch.setattr(detectors, "Detector", FakeDetector)
+    monkeypatch.setattr(executor, "Detector", FakeDetector)  # where the runner makes one
     return synthetic_coco(tmp_path / "data", n=6)
 
 

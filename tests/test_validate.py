@@ -472,7 +472,6 @@ def test_a_run_on_a_few_images_tables_their_colours_only(monkeypatch) -> None:
     """Up to DIRECT_IMAGES images: the camera's table holds the images' own colours (the
     2^24-entry table is never built) and maps them as the full table does; above: the full
     table. Tables are kept one camera at a time; the images' colours are found once."""
-    import fidelity.coco.executor as executor
     import fidelity.coco.validate.colour as validate
     from fidelity.coco.dataset import PixelMap
 
@@ -516,7 +515,7 @@ def test_a_run_on_a_few_images_tables_their_colours_only(monkeypatch) -> None:
             np.testing.assert_array_equal(table(img), mapping(img))
     assert small.get(cases[1]) is table and list(small.built) == ["cam-b"]
     assert not cubes and sorted(decoded) == [1, 2, 3, 4] and len(lines) == 2
-    monkeypatch.setattr(executor, "DIRECT_IMAGES", 3)
+    monkeypatch.setattr(validate, "DIRECT_IMAGES", 3)  # the executor's, as validate reads it
     full = validate.EmulationTables(None, "root-polynomial", "chart", Cache(), [1, 2, 3, 4],
                                     lines.append).get(cases[0])
     assert full.kind == "cube" and cubes == ["cam-a"]

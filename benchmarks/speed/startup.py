@@ -24,9 +24,15 @@ from benchmarks.speed.record import Case, case, figures
 from benchmarks.speed.runner import Context, Parameter
 from benchmarks.speed.timing import run_process, user_environment
 
+#: The repository this benchmark runs from.
+REPO = Path(__file__).resolve().parents[2]
+
 ANCHOR = ("python -c pass (the interpreter's start-up); OpenCV's mcc detector as a whole "
           "Python process for the audit of the 12 MP photo")
-PARAMETERS = {"repeats": Parameter(15, "interleaved rounds of every command")}
+PARAMETERS = {"repeats": Parameter(15, "interleaved rounds of every command"),
+              "before": Parameter(None, "a checkout of an earlier commit (git worktree add DIR "
+                                        "COMMIT): its start-up beside this one's, both as "
+                                        "python -m fidelity from their source trees")}
 QUICK = {"repeats": 2}
 NEEDS = ("fidelity-command",)
 
@@ -39,6 +45,27 @@ MCC = ("import sys, cv2\n"
        "print(len(d.getListColorChecker()) if ok else 0)\n")
 #: The anchor of start-up.
 PYTHON = "python -c pass"
+
+
+#: The commands compared with an earlier commit (``before``), as ``python -m fidelity``.
+BEFORE_COMMANDS = {"--help": ["--help"], "check (closed form, no report)": ["check", "--no-report", "-q"]}
+
+
+def tree_commands(tree: Path, label: str) -> dict[str, tuple[list[str], dict[str, str]]]:
+    """:data:`BEFORE_COMMANDS` run from the source tree ``tree`` (``PYTHONPATH``), named
+    ``python -m fidelity COMMAND (label)``."""
+    env = user_environment() | {"PYTHONPATH": str(tree)}
+    return {f"python -m fidelity {name} ({label})": ([sys.executable, "-m", "fidelity", *args], env)
+            for name, args in BEFORE_COMMANDS.items()}
+
+
+def commit_of(tree: Path) -> str:
+    """The commit a checkout is at (short id), or its folder's name."""
+    import subprocess
+
+    r = subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"],
+                       capture_output=True, text=True, check=False)
+    return r.stdout.strip() or tree.name
 
 
 def commands(photo: Path, out: Path) -> dict[str, list[str]]:
@@ -69,9 +96,10 @@ ANCHORS = {"fidelity audit PHOTO.jpg --json F (12 MP)":
            "OpenCV mcc on the 12 MP photo (python process)"}
 
 
-def run_once(argv: list[str], cwd: str) -> tuple[float, float]:
+def run_once(argv: list[str], cwd: str, env: dict[str, str] | None = None
+             ) -> tuple[float, float]:
     """Wall seconds and max RSS (MB) of one run of ``argv`` (it must exit 0 or 1)."""
-    row = run_process(argv, env=user_environment(), cwd=Path(cwd), digits=4)
+    row = run_process(argv, env=env or user_environment(), cwd=Path(cwd), digits=4)
     if row["exit"] not in (0, 1):
         raise RuntimeError(f"{argv}: exit {row['exit']}: {row['stderr']}")
     return float(row["seconds"]), float(row["max_rss_mb"])
@@ -90,14 +118,23 @@ def measure(ctx: Context) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as cwd:  # no settings file is found from here
         photo = Path(cwd) / "photo.jpg"
         make_photo(photo)
-        cmds = commands(photo, Path(cwd))
+        cmds: dict[str, tuple[list[str], dict[str, str] | None]] = {
+            name: (cmd, None) for name, cmd in commands(photo, Path(cwd)).items()}
+        before = ctx["before"]
+        anchors = dict(ANCHORS)
+        if before:
+            label = f"before: {commit_of(Path(before))}"
+            ours = tree_commands(REPO, "this commit")
+            theirs = tree_commands(Path(before).resolve(), label)
+            cmds |= ours | theirs
+            anchors |= dict(zip(ours, theirs, strict=True))
         times: dict[str, list[float]] = {name: [] for name in cmds}
         rss: dict[str, list[float]] = {name: [] for name in cmds}
-        for cmd in cmds.values():  # warm the file cache (and write the .pyc files) once
-            run_once(cmd, cwd)
+        for cmd, env in cmds.values():  # warm the file cache (and write the .pyc files) once
+            run_once(cmd, cwd, env)
         for _ in range(repeats):
-            for name, cmd in cmds.items():
-                t, m = run_once(cmd, cwd)
+            for name, (cmd, env) in cmds.items():
+                t, m = run_once(cmd, cwd, env)
                 times[name].append(t)
                 rss[name].append(m)
     medians = {name: statistics.median(ts) for name, ts in times.items()}
@@ -110,7 +147,7 @@ def measure(ctx: Context) -> dict[str, Any]:
             "above_python_s": round(median - anchor, 4),
             "ratio_to_python": round(median / anchor, 2),
             "max_rss_mb": round(statistics.median(rss[name]), 1), "runs_s": ts}
-        other = ANCHORS.get(name)
+        other = anchors.get(name)
         if other:
             row["anchor"] = other
             row["ratio_to_anchor"] = round(median / medians[other], 2)

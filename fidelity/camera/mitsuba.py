@@ -28,6 +28,7 @@ import os
 import re
 import subprocess
 import sys
+import time
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -366,8 +367,6 @@ def render_raw(
     ``variant`` None probes (:func:`probe_variant`); ``seed`` seeds the sampler; ``sampler``
     a Mitsuba sampler plugin (default :data:`DEFAULT_SAMPLER`, from the template).
     """
-    import time
-
     if spp < 1:
         raise InvalidValueError(f"spp must be >= 1, got {spp}")
     probe = probe_variant() if variant is None else probe_variant((variant,))

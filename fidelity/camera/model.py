@@ -62,6 +62,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fidelity.colour.colorimetry import MATRIX_XYZ_TO_LINEAR_SRGB, delinearize_srgb
+from fidelity.colour.datasets import camera_sensitivities
 from fidelity.colour.spectral import (
     GRID_STEP_NM,
     Illuminant,
@@ -75,7 +77,7 @@ from fidelity.colour.spectral import (
 )
 from fidelity.core import schema as sc
 from fidelity.core.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
-from fidelity.core.fileio import require_file
+from fidelity.core.fileio import display_path, require_file
 from fidelity.core.resources import resource_dir
 
 FloatArray = NDArray[np.float64]
@@ -289,16 +291,12 @@ def ideal_sensitivities() -> Sensitivities:
 
     With these, camera RGB = M @ XYZ exactly, so the camera reproduces sRGB colorimetrically.
     """
-    from fidelity.colour.colorimetry import MATRIX_XYZ_TO_LINEAR_SRGB
-
     values = cie_1931_cmfs() @ np.asarray(MATRIX_XYZ_TO_LINEAR_SRGB).T
     return Sensitivities("ideal (M_XYZ->sRGB @ CIE 1931 2 degree CMFs)", wavelength_grid(), values)
 
 
 def colour_camera_sensitivities(name: str) -> Sensitivities:
     """Sensitivities of a camera in ``colour.MSDS_CAMERA_SENSITIVITIES`` (peak-normalised)."""
-    from fidelity.colour.datasets import camera_sensitivities
-
     key = COLOUR_CAMERAS.get(name)
     if key is None:
         raise unknown_name("camera sensitivities", name, ["ideal", "file", *COLOUR_CAMERAS])
@@ -462,8 +460,6 @@ def colour_correction_matrix(
 
 def apply_tone_curve(linear: ArrayLike, tone: ToneCurve) -> FloatArray:
     """Linear -> output values. Display curves clip to [0, 1] first; ``linear`` is identity."""
-    from fidelity.colour.colorimetry import delinearize_srgb
-
     x = np.asarray(linear, dtype=np.float64)
     if tone.curve == "linear":
         return x.copy()
@@ -508,8 +504,6 @@ def develop(
     ``raw_patches`` (24, 3) are the patch values measured on the raw image (white-patch and
     grey-world balance use them). Returns the output image and its encoded sRGB view.
     """
-    from fidelity.colour.colorimetry import delinearize_srgb
-
     img = np.asarray(raw_image, dtype=np.float64)
     gains = white_balance_gains(camera.white_balance, raw_patches, camera.sensitivities,
                                 scene_illuminant, step)
@@ -536,8 +530,6 @@ MAX_LUT_POINTS = 65536
 
 def _illuminant_problem(name: str) -> str | None:
     """Why ``name`` is not an illuminant (None: it is one)."""
-    from fidelity.core.errors import FidelityError
-
     try:
         load_illuminant(name)
     except FidelityError as exc:
@@ -669,8 +661,6 @@ def camera_from_dict(data: Any, origin: str = "<dict>", base_dir: Path | None = 
     (sensitivity CSV, LUT file). Raises :class:`InputFileError` naming the file, the field and
     the problem (``camera file <origin>: [section].field: problem``).
     """
-    from fidelity.core.errors import FidelityError
-
     where = f"camera file {origin}"
     v = sc.validate(data, CAMERA_SCHEMA, where, sections=True)
     base = base_dir or Path.cwd()
@@ -767,8 +757,6 @@ def _named_files(data: Any, path: Path) -> list[Path]:
 
 def read_camera_file(path: str | Path) -> CameraModel:
     """Parse and validate a TOML (``.toml``) or YAML (``.yaml``/``.yml``) camera file."""
-    from fidelity.core.fileio import display_path
-
     p = require_file(path, "camera file")
     suffix = p.suffix.lower()
     if suffix not in (".toml", ".yaml", ".yml"):

@@ -39,7 +39,9 @@ from fidelity.camera.model import (
     exposure_gain,
     load_camera,
     vignetting_gain,
+    white_balance_gains,
 )
+from fidelity.colour.charts import load_chart
 from fidelity.colour.spectral import (
     GRID_STEP_NM,
     load_illuminant,
@@ -47,6 +49,7 @@ from fidelity.colour.spectral import (
     scene_reference,
 )
 from fidelity.core.errors import FidelityError, InvalidValueError, unknown_name
+from fidelity.measure import uncertainty as unc
 from fidelity.measure.colour import ChartMeasurement, measure_chart
 from fidelity.measure.uncertainty import UncertaintyBudget
 
@@ -378,7 +381,7 @@ def render_chart(
         raw = layout.paint(closed)
         used_variant = None
     else:
-        from fidelity.camera import mitsuba as mr
+        import fidelity.camera.mitsuba as mr  # noqa: PLC0415 (the renderer of an extra)
 
         ppp = pixels_per_patch or mr.DEFAULT_PIXELS_PER_PATCH
         layout = ChartLayout.for_patch_size(ppp)
@@ -409,8 +412,6 @@ def render_chart(
         ref = scene_reference(ill, spectra, cat=cat, step=step)
         ref_lab, ref_srgb, ref_conv = ref.lab, ref.srgb, ref.conventions
     else:
-        from fidelity.colour.charts import load_chart
-
         chart = load_chart("safecolor")
         ref_lab, ref_srgb = chart.lab, chart.srgb_unclipped
         ref_conv = {"reference": "SAFE-COLOR Lab table (D50-era chart data, not scene-consistent)",
@@ -463,8 +464,6 @@ def _white_balance_developer(cam: CameraModel, illuminant: Any, ccm: FloatArray,
     ``(B, N, 3)`` developed by the camera with its white balance estimated on each draw's
     patch means (its CCM as rendered): one :func:`develop` of the pixels scaled by each draw's
     gains over the rendered ones."""
-    from fidelity.camera.model import white_balance_gains
-
     def gains(means: FloatArray) -> FloatArray:
         return white_balance_gains(cam.white_balance, means, cam.sensitivities, illuminant, step)
 
@@ -503,8 +502,6 @@ def render_uncertainty(raw_image: ArrayLike, srgb_image: ArrayLike, layout: Char
     them (``developed``: pixels, raw means -> developed pixels), :data:`WHITE_BALANCE_DRAWS`
     draws; the rounding of the output codes (a ``bits``-bit camera). The windows are the
     layout's own (no placement uncertainty) and a render has no exposure normalisation."""
-    from fidelity.measure import uncertainty as unc
-
     def windows(image: ArrayLike) -> list[FloatArray]:
         img = np.asarray(image, np.float64)
         out = []

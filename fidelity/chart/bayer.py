@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fidelity.chart.find.cascade import find_chart
 from fidelity.chart.image import BAYER_PATTERNS
 from fidelity.core.errors import InvalidValueError, unknown_name
 
@@ -64,6 +63,8 @@ def bayer_pattern(mosaic: np.ndarray) -> BayerFit:
     pattern swaps red with blue (the chart's colours out of order) or takes green from the red
     and blue sites (greys for colours), so a chart tells them apart; a mosaic with no chart,
     or one in which two patterns fit nearly as well, gives ``pattern`` None."""
+    from fidelity.chart.find.cascade import find_chart  # noqa: PLC0415 (the finder)
+
     arr = np.asarray(mosaic)
     if arr.ndim != 2:
         raise InvalidValueError(f"a mosaic must be (H, W), got shape {arr.shape}")

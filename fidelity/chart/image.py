@@ -30,18 +30,23 @@ an unknown layer or an ambiguous choice of layers.
 from __future__ import annotations
 
 import contextlib
+import datetime
+import errno
 import math
 import os
+import re
 import tempfile
+import warnings
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fidelity.core.errors import InputFileError, InvalidValueError
-from fidelity.core.fileio import atomic_output, display_path, require_file
+from fidelity.chart.ocio import OcioConversion
+from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
+from fidelity.core.fileio import atomic_output, display_path, require_file, write_error
 
 if TYPE_CHECKING:
     from fidelity.chart.ocio import OcioConversion
@@ -110,8 +115,6 @@ _ALPHA_NAMES = {"a", "alpha"}
 def utc_text(time_ns: int) -> str:
     """Nanoseconds since the UNIX epoch as ISO 8601 UTC text to the nanosecond
     (``2023-11-14T22:13:20.250000000Z``)."""
-    import datetime
-
     utc = datetime.datetime.fromtimestamp(time_ns // 10**9, datetime.UTC)
     return utc.strftime("%Y-%m-%dT%H:%M:%S") + f".{time_ns % 10**9:09d}Z"
 
@@ -296,7 +299,6 @@ class ImageInfo:
 def _ocio_from_json(data: Mapping[str, Any] | None) -> OcioConversion | None:
     if not data:
         return None
-    from fidelity.chart.ocio import OcioConversion
 
     return OcioConversion(**{k: str(v) for k, v in data.items()})
 
@@ -448,8 +450,6 @@ def demosaic(mosaic: np.ndarray, pattern: str) -> np.ndarray:
 
     ``pattern`` names the colours of the top-left 2 x 2 pixels (:data:`BAYER_PATTERNS`).
     """
-    import warnings
-
     with warnings.catch_warnings():  # it imports scipy.ndimage.filters, deprecated in SciPy
         warnings.simplefilter("ignore", DeprecationWarning)
         from colour_demosaicing import demosaicing_CFA_Bayer_Malvar2004
@@ -528,8 +528,6 @@ def read_image(path: str | os.PathLike[str], layer: str | None = None,
         number. Exit code 2.
     """
 
-    from fidelity.core.errors import unknown_name
-
     if bayer is not None and bayer.upper() not in BAYER_PATTERNS:
         raise unknown_name("--bayer pattern", bayer, BAYER_PATTERNS)
     bayer = bayer.upper() if bayer is not None else None
@@ -550,8 +548,6 @@ def _read_through_link(p: Path, shown: str, layer: str | None, bayer: str | None
     """:func:`_read` of a file whose name is not valid UTF-8 (OpenImageIO takes names as UTF-8
     text): through a symbolic link of a plain name in a temporary folder, the image's path and
     the messages naming the file itself."""
-    from dataclasses import replace
-
     suffix = "".join(c for c in p.suffix if c.isascii() and (c.isalnum() or c == "."))
     with tempfile.TemporaryDirectory(prefix="fidelity-") as folder:
         link = Path(folder) / f"image{suffix}"
@@ -582,8 +578,6 @@ def image_suffixes() -> frozenset[str]:
 
 def _natural_key(name: str) -> tuple[tuple[int, int | str], ...]:
     """``frame_2`` before ``frame_10``: runs of digits compare as numbers."""
-    import re
-
     return tuple((0, int(part)) if part.isdigit() else (1, part)
                  for part in re.split(r"(\d+)", name) if part)
 
@@ -772,10 +766,6 @@ def _finish(out: Any, written: bool, path: str | os.PathLike[str], kind: str) ->
 
     closed = out.close()
     if not (written and closed is not False):
-        import errno
-
-        from fidelity.core.fileio import write_error
-
         reason = _one_line(out.geterror() or oiio.geterror()) or "write failed"
         raise write_error(path, OSError(errno.EIO, f"{kind} writer: {reason}"))
 

@@ -10,13 +10,18 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
-from fidelity.chart.image import Image, ImageInfo, OneChannelError, as_float32
+from fidelity.chart import recording
+from fidelity.chart.bayer import BAYER_MARGIN, bayer_pattern
+from fidelity.chart.image import Image, ImageInfo, OneChannelError, as_float32, read_image
+from fidelity.chart.ocio import convert
+from fidelity.chart.recording import is_recording_path
 from fidelity.core.errors import FidelityError, InvalidValueError
+from fidelity.core.fileio import file_sha256
 
 F64 = NDArray[np.float64]
 
@@ -117,10 +122,6 @@ def reads_for(paths: Sequence[str | os.PathLike[str]], read: ReadOptions
     ``.mcap`` or ``.db3`` file: :func:`fidelity.chart.recording.is_recording_path`), the other
     options to all; when none looks like a recording, all get them (and the reader says which
     input is not one)."""
-    from dataclasses import replace
-
-    from fidelity.chart.recording import is_recording_path
-
     if not read.names_message():
         return [read for _ in paths]
     plain = replace(read, topic=None, frame=None, time=None)
@@ -136,8 +137,6 @@ def reads_with_own_ocio(paths: Sequence[str | os.PathLike[str]], read: ReadOptio
     (``--sim-ocio-colourspace``, ``--real-ocio-colourspace``) read in it: it replaces the
     shared ``ocio_colourspace``, and the shared ``encoding`` and ``colourspace`` (which then
     describe the other inputs) are left out for it."""
-    from dataclasses import replace
-
     return [r if own is None else replace(r, ocio_colourspace=own, encoding=None,
                                           colourspace=None)
             for r, own in zip(reads_for(paths, read), ocio_colourspaces, strict=True)]
@@ -145,8 +144,6 @@ def reads_with_own_ocio(paths: Sequence[str | os.PathLike[str]], read: ReadOptio
 
 def _read_input(path: str | os.PathLike[str], read: ReadOptions, *, digest: bool,
                 native: bool = False) -> tuple[Image, str | None]:
-    from fidelity.chart import recording
-
     _check_ocio_options(read)
     if read.names_message() or recording.is_recording_path(path):
         if read.layer is not None:
@@ -155,8 +152,6 @@ def _read_input(path: str | os.PathLike[str], read: ReadOptions, *, digest: bool
             path, recording.Choice(read.topic, read.frame, read.time), bayer=read.bayer,
             max_pixels=read.max_pixels)
         return _ocio_converted(img, read), sha
-    from fidelity.chart.image import read_image
-    from fidelity.core.fileio import file_sha256
 
     try:
         img = read_image(path, layer=read.layer, bayer=read.bayer, max_pixels=read.max_pixels,
@@ -188,9 +183,6 @@ def _ocio_converted(img: Image, read: ReadOptions) -> Image:
     (:func:`fidelity.chart.ocio.convert`), or as it is when none is given."""
     if read.ocio_colourspace is None:
         return img
-    from dataclasses import replace
-
-    from fidelity.chart.ocio import convert
 
     try:
         # the image is this function's own: converted in place (as_float32 copies codes)
@@ -210,11 +202,6 @@ def _read_mosaic(path: str | os.PathLike[str], read: ReadOptions, error: OneChan
     """A one-channel image read without ``--bayer``: the CFA pattern the chart in it fits
     unambiguously (:func:`fidelity.chart.bayer.bayer_pattern`), or ``error`` (the reader's
     message that names ``--bayer``) with how the four patterns fit."""
-    from dataclasses import replace
-
-    from fidelity.chart.bayer import BAYER_MARGIN, bayer_pattern
-    from fidelity.chart.image import read_image
-
     # the demosaiced image keeps every sample of the mosaic at its site: take them back
     try:
         first = read_image(path, layer=read.layer, bayer="RGGB", max_pixels=read.max_pixels)
@@ -242,8 +229,6 @@ def read_again(info: ImageInfo, max_pixels: int | None = None) -> Image:
     """The image an audit described by ``info`` read again as it was read (the same file, layer
     and Bayer pattern, or the same message of the same recording; converted by OpenColorIO as
     it was), for a report that shows or checks its pixels."""
-    from dataclasses import replace
-
     rec = info.recording
     if rec is not None:
         again = ReadOptions(bayer=info.bayer, max_pixels=max_pixels, topic=rec.topic,

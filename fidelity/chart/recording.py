@@ -38,13 +38,16 @@ from __future__ import annotations
 
 import bisect
 import contextlib
+import datetime as dt
 import hashlib
 import math
 import os
+import re
 import struct
 import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
+from decimal import Decimal, InvalidOperation
 from pathlib import Path
 from typing import Any
 
@@ -56,9 +59,10 @@ from fidelity.chart.image import (
     Recording,
     demosaic,
     pixel_limit,
+    read_image,
     utc_text,
 )
-from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
 from fidelity.core.fileio import display_path
 
 #: The extra that installs the recording reader.
@@ -178,9 +182,6 @@ def absolute_time_ns(text: str) -> int:
     date and time with its UTC offset (``2023-11-14T22:13:20.25Z``, ``...+01:00``), to
     nanoseconds since the epoch. A time without an offset is refused: a recording's clock is
     UTC and a local reading would shift it."""
-    import datetime as dt
-    from decimal import Decimal, InvalidOperation
-
     t = text.strip()
     if t.startswith("@"):
         try:
@@ -191,7 +192,6 @@ def absolute_time_ns(text: str) -> int:
         if not seconds.is_finite() or seconds < 0:
             raise InvalidValueError(f"--time {text!r}: expected @SECONDS since the epoch")
         return int(seconds * 10**9)
-    import re
 
     # the fraction of a second read here, to the nanosecond (datetime keeps microseconds)
     m = re.fullmatch(r"(.+?[T ]\d\d:\d\d:\d\d)(?:[.,](\d+))?(.*)", t)
@@ -449,8 +449,6 @@ def read_frame(path: str | os.PathLike[str], choice: Choice = Choice(), *,
     serialised bytes. ``bayer``: the CFA pattern of a one-channel mosaic (a ``bayer_*``
     encoding names its own); ``max_pixels``: the pixel limit
     (:func:`fidelity.chart.image.pixel_limit`). Errors: module docstring."""
-    from fidelity.core.errors import unknown_name
-
     if bayer is not None and bayer.upper() not in BAYER_PATTERNS:
         raise unknown_name("--bayer pattern", bayer, BAYER_PATTERNS)
     limit = pixel_limit(max_pixels)
@@ -690,8 +688,6 @@ def _yuv420sp(height: int, width: int, encoding: str, step: int, data: np.ndarra
 
 def _decompress(data: bytes, fmt: str, bayer: str | None, limit: int, where: str) -> Image:
     """A ``sensor_msgs/CompressedImage``'s JPEG or PNG bytes, read as the file would be."""
-    from fidelity.chart.image import read_image
-
     if data.startswith(b"\x89PNG\r\n\x1a\n"):
         suffix = ".png"
     elif data.startswith(b"\xff\xd8"):

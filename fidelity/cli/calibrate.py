@@ -10,7 +10,7 @@ import click
 from fidelity.cli.context import write_json_output
 from fidelity.cli.options import Targets, TransformNames, common_options, json_option
 from fidelity.colour.charts import DEFAULT_CHART, load_chart
-from fidelity.core.fileio import write_text_atomic
+from fidelity.core.fileio import check_outputs, write_text_atomic
 from fidelity.prediction.calibration import (
     DEFAULT_TARGETS,
     calibration_table,
@@ -42,8 +42,6 @@ def calibrate(chart: str, targets: list[float] | None, transform_names: list[str
     For each transform and target ΔE, the parameter that puts the chart at that mean CIEDE2000
     from its reference (Brent's method to |ΔE - target| <= 1e-4). Unreachable targets show '-'.
     """
-    from fidelity.core.fileio import check_outputs
-
     check_outputs({"--json": json_path, "--csv": csv_path, "--markdown": md_path},
                   {"--chart": chart})
     c = load_chart(chart)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
@@ -18,7 +19,6 @@ from fidelity.cli.options import (
 )
 from fidelity.cli.subjects import evidence_outputs, write_evidence_files
 from fidelity.cli.values import measure_inputs, measure_request
-from fidelity.coco.measure import MeasureRequest
 from fidelity.core.fileio import check_outputs, display_path
 from fidelity.pipeline.check import check_camera
 from fidelity.pipeline.records import ChartReport, RenderSource
@@ -28,6 +28,9 @@ from fidelity.report.chart import write_chart_report
 from fidelity.report.evidence import write_evidence
 from fidelity.report.jsonform import chart_report_json
 from fidelity.report.terminal import summary_lines
+
+if TYPE_CHECKING:
+    from fidelity.coco.measure import MeasureRequest
 
 #: Where ``fidelity check`` writes its report unless told otherwise.
 DEFAULT_OUTPUT_DIR = "fidelity-report"

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
@@ -16,6 +18,11 @@ from fidelity.cli.options import (
     progress_option,
 )
 from fidelity.cli.values import coco_inputs, model_inputs
+from fidelity.coco.corruptions import CocoCResults, run_coco_c, with_predictions
+from fidelity.coco.measure import stderr_log
+from fidelity.core.errors import InputFileError
+from fidelity.core.fileio import check_outputs
+from fidelity.report.cococ import DELTA_E_FIGURE, LOSS_FIGURE, write_cococ_report
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import ModelSpec
@@ -66,14 +73,6 @@ def cococ(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
     fidelity coco-c --models yolox_nano.onnx,yolo11n-int8dyn.onnx@250 --out reports/cococ \\
         --data fidelity/data/coco-c.json
     """
-    import json
-    from pathlib import Path
-
-    from fidelity.coco.corruptions import CocoCResults, run_coco_c, with_predictions
-    from fidelity.coco.measure import stderr_log
-    from fidelity.core.fileio import check_outputs
-    from fidelity.report.cococ import DELTA_E_FIGURE, LOSS_FIGURE, write_cococ_report
-
     out_dir = Path(out)
     check_outputs({f"--out ({n})": out_dir / n
                    for n in ("cococ.json", "cococ.html", "cococ.md", DELTA_E_FIGURE,
@@ -83,8 +82,6 @@ def cococ(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
                   stores={"--store": store})
     text = Path(notes).read_text(encoding="utf-8") if notes else None
     if report_only:
-        from fidelity.core.errors import InputFileError
-
         src = out_dir / "cococ.json"
         try:
             results = with_predictions(

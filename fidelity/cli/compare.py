@@ -22,8 +22,16 @@ from fidelity.cli.options import (
 )
 from fidelity.cli.subjects import evidence_outputs, write_evidence_files
 from fidelity.cli.values import make_criterion, measure_inputs, measure_request
+from fidelity.core.errors import FidelityError
+from fidelity.core.fileio import check_outputs, display_path
+from fidelity.pipeline.compare import compare_charts
+from fidelity.pipeline.records import GateResult
 from fidelity.prediction.tablefile import CLASS_COLUMNS
 from fidelity.prediction.verdict import EXIT_ERROR
+from fidelity.report.compare import comparison_lines, write_comparison_report
+from fidelity.report.evidence import write_evidence
+from fidelity.report.jsonform import comparison_json
+from fidelity.report.junit import write_junit
 
 if TYPE_CHECKING:
     from fidelity.chart.read import ReadOptions
@@ -82,13 +90,6 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
     REAL (or SIM) may be a robot recording (ROS 1 bag, ROS 2 bag, MCAP file): --topic,
     --frame and --time then choose its message.
     """
-    from fidelity.core.errors import FidelityError
-    from fidelity.core.fileio import check_outputs, display_path
-    from fidelity.pipeline.compare import compare_charts
-    from fidelity.pipeline.records import GateResult
-    from fidelity.report.compare import comparison_lines, write_comparison_report
-    from fidelity.report.junit import write_junit
-
     to_stdout = json_path == STDOUT
     check_outputs({"--json": None if to_stdout else json_path, "--html": html_path,
                    "--junit": junit, **evidence_outputs(evidence_paths)},
@@ -123,16 +124,12 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
             click.echo(f"fidelity: error: {junit}: cannot write JUnit XML: {exc}", err=True)
             sys.exit(EXIT_ERROR)
     if json_path is not None:
-        from fidelity.report.jsonform import comparison_json
-
         where = write_json_output(json_path, comparison_json(report))
         if not to_stdout:
             click.echo(f"wrote {display_path(where)}")
     if html_path is not None:
         click.echo(f"wrote {display_path(html_path)}")
     if evidence_paths:
-        from fidelity.report.evidence import write_evidence
-
         write_evidence_files(
             evidence_paths, write_evidence, "compare", [(subject, report, None)],
             report.exit_code, results=[None if to_stdout or json_path is None

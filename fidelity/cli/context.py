@@ -10,6 +10,10 @@ import sys
 from typing import TYPE_CHECKING, Any
 
 import click
+from click.core import ParameterSource
+
+from fidelity.core.fileio import json_ready, write_json_atomic
+from fidelity.report.evidence import invocation_record
 
 if TYPE_CHECKING:
     from typing import TypeAlias
@@ -38,8 +42,6 @@ def settings_line() -> str | None:
     """What the running command took from a settings file: ``fidelity: settings FILE: key,
     ...`` (the options whose value came from it, by their flags), or that none of its keys
     applies; None when no settings file was read (none found, or ``--no-config``)."""
-    from click.core import ParameterSource
-
     config = command_state().get("config")
     if config is None:
         return None
@@ -52,8 +54,6 @@ def settings_line() -> str | None:
 
 def from_settings(name: str) -> bool:
     """Whether option ``name`` of the running command has its value from the settings file."""
-    from click.core import ParameterSource
-
     return click.get_current_context().get_parameter_source(name) == ParameterSource.DEFAULT_MAP
 
 
@@ -68,8 +68,6 @@ def invocation() -> dict[str, Any] | None:
     """The running command line as a credibility record's ``invocation``
     (:func:`fidelity.report.evidence.invocation_record`): the arguments the group was given,
     the current folder and the settings file read; None outside a ``fidelity`` command."""
-    from fidelity.report.evidence import invocation_record
-
     ctx = click.get_current_context(silent=True)
     obj = ctx.find_root().obj if ctx is not None else None
     if not isinstance(obj, dict) or "argv" not in obj:
@@ -89,8 +87,6 @@ def real_stdout() -> Any:
 
 def write_json_output(path: str | os.PathLike[str], obj: Any) -> str:
     """Write JSON to ``path`` atomically, or to standard output for ``-``; returns where."""
-    from fidelity.core.fileio import json_ready, write_json_atomic
-
     if str(path) == STDOUT:
         out = real_stdout()
         out.write(json.dumps(json_ready(obj), indent=2, allow_nan=False) + "\n")

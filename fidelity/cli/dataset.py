@@ -2,10 +2,16 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 
 from fidelity.cli.context import show_progress
 from fidelity.cli.options import Targets, TransformNames, common_options, progress_option
+from fidelity.coco.dataset import list_images, subset_name, write_grid, write_transformed_dataset
+from fidelity.core.errors import InvalidValueError
+from fidelity.core.fileio import check_output_folders
+from fidelity.pipeline.environment import available_cpus
 
 
 @click.command()
@@ -27,12 +33,8 @@ from fidelity.cli.options import Targets, TransformNames, common_options, progre
 def dataset(images: str, out: str, transforms: list[str] | None, targets: list[float] | None,
             param: float | None, workers: int | None, progress: bool | None) -> None:
     """Write transformed JPEGs (original quantization tables and subsampling); reruns resume."""
-    from fidelity.pipeline.environment import available_cpus
-
     if workers is None:
         workers = available_cpus()
-    from fidelity.coco.dataset import list_images, write_grid, write_transformed_dataset
-    from fidelity.core.errors import InvalidValueError
 
     if transforms is None or targets is None:
         raise InvalidValueError("give --transforms and --targets (e.g. --transforms "
@@ -40,10 +42,6 @@ def dataset(images: str, out: str, transforms: list[str] | None, targets: list[f
                                 "0,1,2,3)")
     files = list_images(images)
     names, values = transforms, targets
-    from pathlib import Path
-
-    from fidelity.coco.dataset import subset_name
-    from fidelity.core.fileio import check_output_folders
 
     check_output_folders({f"--out ({subset_name(t, e)})": Path(out) / subset_name(t, e)
                           for t in names for e in values}, {"--images": images})

@@ -18,7 +18,8 @@ from fidelity.cli.options import (
     scorer_option,
 )
 from fidelity.cli.values import cap_models, executor_from
-from fidelity.coco.evaluate import METRICS
+from fidelity.coco.evaluate import METRICS, evaluate_model
+from fidelity.core.fileio import check_outputs, remove_stale_temporaries
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import ModelSpec
@@ -59,9 +60,6 @@ def evaluate(model: tuple[ModelSpec, ...], images: str, annotations: str, limit:
     Detections are kept per image in a store in the cache ($FIDELITY_CACHE/evaluate), so an
     interrupted evaluation started again runs only the images it had not finished.
     """
-    from fidelity.coco.evaluate import evaluate_model
-    from fidelity.core.fileio import check_outputs, remove_stale_temporaries
-
     if len(model) != 1:
         raise click.UsageError("evaluate takes one model in --models (sweep takes several)")
     (spec,) = cap_models(model, limit)

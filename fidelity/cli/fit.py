@@ -18,6 +18,20 @@ from fidelity.cli.options import (
 )
 from fidelity.cli.subjects import evidence_outputs, write_evidence_files
 from fidelity.cli.values import measure_inputs, measure_request
+from fidelity.core.fileio import check_outputs, display_path
+from fidelity.pipeline.fit import (
+    fit_and_verify,
+    fit_camera_and_verify,
+    fit_pairs_and_verify,
+    sim_ocio_refused,
+)
+from fidelity.report.evidence import write_fit_evidence
+from fidelity.report.fit import (
+    fit_lines,
+    shared_fit_lines,
+    write_fit_report,
+    write_shared_fit_report,
+)
 
 if TYPE_CHECKING:
     from fidelity.chart.read import ReadOptions
@@ -88,10 +102,6 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
     fidelity fit sim.png photo.jpg --out c/ --write-corrected
     fidelity fit --pair sim_d65.exr real_d65.jpg --pair sim_a.exr real_a.jpg --out c/
     """
-    from fidelity.core.fileio import check_outputs, display_path
-    from fidelity.pipeline.fit import fit_and_verify, sim_ocio_refused
-    from fidelity.report.fit import fit_lines, write_fit_report
-
     if sim_ocio_colourspace is not None:
         raise sim_ocio_refused("--sim-ocio-colourspace", sim_ocio_colourspace)
     request = measure_request(measure, images, annotations, models, limit)
@@ -146,8 +156,6 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
 
 
 def _evidence(paths: tuple[Path, ...], report: FitReport, written: list[Path]) -> None:
-    from fidelity.report.evidence import write_fit_evidence
-
     write_evidence_files(paths, write_fit_evidence, report, 0, results=written)
 
 
@@ -155,10 +163,6 @@ def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str
                real_corners: str | None, normalise_mode: str, judge: JudgeOptions,
                reference: str, illuminant: str, read: ReadOptions,
                real_ocio_colourspace: str | None, corrected: bool) -> None:
-    from fidelity.core.fileio import check_outputs, display_path
-    from fidelity.pipeline.fit import fit_pairs_and_verify
-    from fidelity.report.fit import shared_fit_lines, write_shared_fit_report
-
     inputs: dict[str, Path | str | None] = {"--table": judge.table_input,
                                             "--reference": reference,
                                             "--illuminant": illuminant}
@@ -187,10 +191,6 @@ def _fit_camera(camera: Path, real: Path, out: Path, model: str, objective: str 
                 reference: str, illuminant: str, read: ReadOptions,
                 real_ocio_colourspace: str | None, corrected: bool,
                 request: MeasureRequest | None, evidence_paths: tuple[Path, ...]) -> None:
-    from fidelity.core.fileio import check_outputs, display_path
-    from fidelity.pipeline.fit import fit_camera_and_verify
-    from fidelity.report.fit import fit_lines, write_fit_report
-
     names = ("correction.cube", "correction.ocio", "correction.json", "report.json",
              "report.html", "corrected.toml", "sim_render.png", "sim_render.exr")
     check_outputs({**{n: out / n for n in names}, **evidence_outputs(evidence_paths)},

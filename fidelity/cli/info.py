@@ -6,6 +6,8 @@ import click
 
 from fidelity.cli.context import write_json_output
 from fidelity.cli.options import common_options, json_option
+from fidelity.core.fileio import check_outputs
+from fidelity.pipeline.environment import describe_environment
 
 
 @click.command()
@@ -15,9 +17,6 @@ from fidelity.cli.options import common_options, json_option
 @common_options
 def info(probe: bool, json_path: str | None) -> None:
     """Versions, Mitsuba variant, ONNX providers, chart detection, shared data found."""
-    from fidelity.core.fileio import check_outputs
-    from fidelity.pipeline.environment import describe_environment
-
     check_outputs({"--json": json_path})
     env = describe_environment(probe=probe)
     click.echo(f"fidelity {env['fidelity']}, Python {env['python']}, {env['platform']}, "

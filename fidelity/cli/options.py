@@ -29,6 +29,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import io
+import math
 import os
 import re
 import sys
@@ -38,13 +39,18 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
+from fidelity.chart.read import ReadOptions
+from fidelity.chart.recording import FrameSelection, absolute_time_ns, parse_frames
 from fidelity.cli.context import STDOUT, command_state, settings_line
 from fidelity.cli.values import decision_rule, parse_models
-from fidelity.core.errors import InvalidValueError
+from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.prediction.calibration import MAX_TARGETS
 from fidelity.prediction.directional import BOUNDS
 from fidelity.prediction.judge import JudgeOptions
 from fidelity.prediction.tablefile import SIZES
+from fidelity.prediction.transforms import TRANSFORMS
 from fidelity.prediction.verdict import SIMPLE
+from fidelity.report.evidence import evidence_format
 
 if TYPE_CHECKING:
     from typing import TypeAlias
@@ -88,10 +94,6 @@ class Targets(ParamTypeBase):
 
     def parse(self, text: str, what: str) -> list[float]:
         """The targets of ``text``; errors name ``what`` (the option)."""
-        import math
-
-        from fidelity.prediction.calibration import MAX_TARGETS
-
         values: list[float] = []
         for part in (p.strip() for p in text.split(",")):
             if not part:
@@ -151,7 +153,6 @@ class RecordingTime(ParamTypeBase):
             return float(text)
         except ValueError:
             pass
-        from fidelity.chart.recording import absolute_time_ns
 
         absolute_time_ns(text)  # a bad time is the one-line error here, before any reading
         return text
@@ -165,8 +166,6 @@ class FrameRange(ParamTypeBase):
 
     def convert(self, value: Any, param: click.Parameter | None,
                 ctx: click.Context | None) -> Any:
-        from fidelity.chart.recording import FrameSelection, parse_frames
-
         if isinstance(value, FrameSelection):
             return value
         return parse_frames(str(value))
@@ -187,7 +186,6 @@ class NameList(ParamTypeBase):
                 ctx: click.Context | None) -> list[str]:
         if not isinstance(value, str):
             return list(value)
-        from fidelity.core.errors import unknown_name
 
         known = self.known()
         items = [t.strip() for t in value.split(",") if t.strip()]
@@ -210,8 +208,6 @@ class TransformNames(NameList):
     what = "transform"
 
     def known(self) -> Sequence[str]:
-        from fidelity.prediction.transforms import TRANSFORMS
-
         return list(TRANSFORMS)
 
 
@@ -223,7 +219,7 @@ class CorruptionNames(NameList):
     what = "corruption"
 
     def known(self) -> Sequence[str]:
-        from fidelity.coco.corruptions import CORRUPTIONS
+        from fidelity.coco.corruptions import CORRUPTIONS  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
 
         return CORRUPTIONS
 
@@ -285,7 +281,7 @@ def limit_option(prefix: str = "") -> Callable[[F], F]:
 
 def scorer_option(f: F) -> F:
     """``--scorer``: the COCO AP implementation (evaluate, sweep)."""
-    from fidelity.coco.scoring import COCO_SCORERS
+    from fidelity.coco.scoring import COCO_SCORERS  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
 
     return click.option(
         "--scorer", type=click.Choice(["auto", *COCO_SCORERS]), default="auto",
@@ -385,8 +381,6 @@ def image_read_options(f: F) -> F:
 
     @functools.wraps(f)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        from fidelity.chart.read import ReadOptions
-
         values = {name: kwargs.pop(name) for name in READ_OPTION_NAMES}
         if values["frame"] is not None and values["time"] is not None:
             raise click.UsageError("give --frame N or --time T, not both")
@@ -566,8 +560,6 @@ class EvidencePath(ParamTypeBase):
 
     def convert(self, value: Any, param: click.Parameter | None,
                 ctx: click.Context | None) -> Path:
-        from fidelity.report.evidence import evidence_format
-
         path = Path(os.fsdecode(PATH.convert(value, param, ctx)))
         evidence_format(path)
         return path

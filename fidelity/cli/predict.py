@@ -9,9 +9,23 @@ import click
 
 from fidelity.cli.context import write_json_output
 from fidelity.cli.options import common_options, json_option
+from fidelity.core.errors import InvalidValueError
+from fidelity.core.fileio import check_outputs
+from fidelity.pipeline.check import prediction_domain
+from fidelity.prediction.directional import DEFAULT_DIRECTIONAL_TABLE, family_losses
 from fidelity.prediction.interpolate import INTERPOLATIONS
-from fidelity.prediction.table import predict
-from fidelity.prediction.tablefile import CLASS_COLUMNS, SIZES, available_tables
+from fidelity.prediction.interval import prediction_interval
+from fidelity.prediction.judge import directional_table_name
+from fidelity.prediction.table import delta_e_limit, predict
+from fidelity.prediction.tablefile import (
+    CLASS_COLUMNS,
+    DEFAULT_TABLE,
+    SIZES,
+    available_tables,
+    load_prediction_table,
+)
+from fidelity.prediction.verdict import Criterion
+from fidelity.report.jsonform import coco_c_answer_json, predict_json
 from fidelity.report.words import prediction_notes
 
 if TYPE_CHECKING:
@@ -70,8 +84,6 @@ def predict_cmd(delta_e: float | None, delta_e_uncertainty: float, cls: str, siz
     fidelity predict --coco-c contrast:3               # a COCO-C corruption on the ΔE scale
     """
     if list_tables:
-        from fidelity.prediction.tablefile import DEFAULT_TABLE, load_prediction_table
-
         for name in available_tables():
             t = load_prediction_table(name)
             mark = " (default)" if name == DEFAULT_TABLE else ""
@@ -79,7 +91,6 @@ def predict_cmd(delta_e: float | None, delta_e_uncertainty: float, cls: str, siz
         return
     if sum(v is not None for v in (delta_e, max_dmap, coco_c)) != 1:
         raise click.UsageError("give --delta-e X or --max-dmap P (or --coco-c CORRUPTION:SEVERITY)")
-    from fidelity.core.fileio import check_outputs
 
     check_outputs({"--json": json_path}, {"--table": table})
     if delta_e is None and delta_e_uncertainty != 0:
@@ -91,7 +102,6 @@ def predict_cmd(delta_e: float | None, delta_e_uncertainty: float, cls: str, siz
         _print_limit(max_dmap, cls, unit, size, table, method, json_path)
         return
     assert delta_e is not None  # one of the two was given
-    from fidelity.core.errors import InvalidValueError
 
     for flag, value in (("--delta-e", delta_e), ("--delta-e-uncertainty", delta_e_uncertainty)):
         if not (math.isfinite(value) and value >= 0):
@@ -125,9 +135,6 @@ def predict_cmd(delta_e: float | None, delta_e_uncertainty: float, cls: str, siz
     families = (_print_families(delta_e, size, table, direction) if p.kind.measured
                 else None)
     if json_path is not None:
-        from fidelity.pipeline.check import prediction_domain
-        from fidelity.report.jsonform import predict_json
-
         doc = predict_json(p, families, interval, prediction_domain(p))
         click.echo(f"wrote {write_json_output(json_path, doc)}")
 
@@ -135,8 +142,6 @@ def predict_cmd(delta_e: float | None, delta_e_uncertainty: float, cls: str, siz
 def _interval(p: Prediction, delta_e_uncertainty: float) -> PredictionInterval | None:
     """The predicted ΔmAP's interval; None where there is nothing to state: no value, or a
     table of published bounds (no sampling error) answering an exact ΔE."""
-    from fidelity.prediction.interval import prediction_interval
-
     interval = prediction_interval(p, delta_e_uncertainty)
     if interval is None or (interval.table_se is None and delta_e_uncertainty == 0):
         return None
@@ -146,9 +151,6 @@ def _interval(p: Prediction, delta_e_uncertainty: float) -> PredictionInterval |
 def _print_families(delta_e: float, size: str, table: str | None,
                     direction: str | None) -> dict[str, float | None]:
     """The direction-aware loss of an error entirely of each family (or one)."""
-    from fidelity.prediction.directional import DEFAULT_DIRECTIONAL_TABLE, family_losses
-    from fidelity.prediction.judge import directional_table_name
-
     dtab = directional_table_name(table)
     got = family_losses(delta_e, size=size, table=dtab)
     if direction is not None:
@@ -164,7 +166,7 @@ def _print_families(delta_e: float, size: str, table: str | None,
 
 
 def _print_coco_c(spec: str, size: str, table: str | None, json_path: str | None) -> None:
-    from fidelity.coco.corruptions import coco_c_answer
+    from fidelity.coco.corruptions import coco_c_answer  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
 
     a = coco_c_answer(spec, size=size, table=table)
     p, d = a.prediction, a.directional
@@ -188,16 +190,11 @@ def _print_coco_c(spec: str, size: str, table: str | None, json_path: str | None
                    f"of baseline mAP {100 * m.baseline_map:.2f} ({m.model}, {m.images} COCO "
                    "images; COCO-C table)")
     if json_path is not None:
-        from fidelity.report.jsonform import coco_c_answer_json
-
         click.echo(f"wrote {write_json_output(json_path, coco_c_answer_json(a))}")
 
 
 def _print_limit(max_dmap: float, cls: str, unit: str, size: str, table: str | None,
                  method: str | None, json_path: str | None) -> None:
-    from fidelity.prediction.table import delta_e_limit
-    from fidelity.prediction.verdict import Criterion
-
     criterion = Criterion("max-dmap", max_dmap, cls, unit)  # checks the class and unit
     lim = delta_e_limit(max_dmap, criterion.column, size=size, table=table, method=method)
     budget = criterion.describe().removeprefix("predicted ")

@@ -8,12 +8,14 @@ import click
 
 from fidelity.cli.context import write_json_output
 from fidelity.cli.options import common_options, json_option
+from fidelity.core.errors import UnknownNameError
+from fidelity.core.fileio import check_outputs
+from fidelity.pipeline.qualify import QUALIFICATION_CHECKS
+from fidelity.pipeline.qualify import qualify as run
+from fidelity.report.qualify import qualification_lines, qualification_record
 
 
 def _names(text: str | None) -> list[str] | None:
-    from fidelity.core.errors import UnknownNameError
-    from fidelity.pipeline.qualify import QUALIFICATION_CHECKS
-
     if text is None:
         return None
     names = list(dict.fromkeys(n.strip() for n in text.split(",") if n.strip()))  # each once
@@ -41,10 +43,6 @@ def qualify(names: str | None, json_path: str | None) -> None:
     reference, the tolerance and what was measured. Exit 0: every check that ran passed; 1: one
     failed. A check that cannot run here (no Mitsuba, an editable install) is named, not failed.
     """
-    from fidelity.core.fileio import check_outputs
-    from fidelity.pipeline.qualify import qualify as run
-    from fidelity.report.qualify import qualification_lines, qualification_record
-
     check_outputs({"--json": json_path})
     result = run(_names(names))
     record = qualification_record(result)

@@ -6,12 +6,14 @@ from pathlib import Path
 
 import click
 
-from fidelity.camera.model import DEFAULT_CAMERA
+from fidelity.camera.model import DEFAULT_CAMERA, available_cameras, camera_files, load_camera
 from fidelity.camera.render import REFERENCES, RENDERERS, ChartRender, render_chart
+from fidelity.chart.image import write_exr, write_png
 from fidelity.cli.context import write_json_output
 from fidelity.cli.options import common_options, json_option
 from fidelity.colour.colorimetry import CHROMATIC_ADAPTATION_METHODS
 from fidelity.colour.spectral import GRID_STEP_NM, SPECTRA_SETS
+from fidelity.core.fileio import check_outputs, display_path
 
 
 def format_report(r: ChartRender) -> str:
@@ -81,17 +83,13 @@ def render(camera: str, illuminant: str, renderer: str, spp: int | None,
     is found, else scalar_spectral). Both go through the camera's ISP and are measured against
     the scene-consistent reference (or --reference safecolor).
     """
-    from fidelity.camera.model import available_cameras, load_camera
-
     if list_cameras:
         for name in available_cameras():
             click.echo(f"{name:<18} {load_camera(name).description}")
         return
-    from fidelity.core.fileio import check_outputs
 
     files = {} if out_dir is None else {f"--out ({name})": out_dir / name for name in
                                         (RAW_FILE, DEVELOPED_FILE)}
-    from fidelity.camera.model import camera_files
 
     check_outputs({**files, "--json": json_path},
                   {"--camera": camera, "--illuminant": illuminant}
@@ -101,8 +99,6 @@ def render(camera: str, illuminant: str, renderer: str, spp: int | None,
                           cat=cat, step=step, variant=variant)
     report = result.to_json()
     if out_dir is not None:
-        from fidelity.chart.image import write_exr, write_png
-
         exr = write_exr(out_dir / RAW_FILE, result.linear_image)
         bits = result.camera.quantisation_bits or 16
         png = write_png(out_dir / DEVELOPED_FILE, result.display_image, bits)
@@ -111,8 +107,6 @@ def render(camera: str, illuminant: str, renderer: str, spp: int | None,
         write_json_output(json_path, report)
     click.echo(format_report(result))
     if out_dir is not None:
-        from fidelity.core.fileio import display_path
-
         click.echo(f"wrote {display_path(png)} (the developed sRGB image: audit this one)")
         click.echo(f"wrote {display_path(exr)} (raw camera RGB before white balance and colour "
                    "correction)")

@@ -67,12 +67,18 @@ def frame_report_names(images: Sequence[Path], frame_of: Sequence[int]) -> tuple
     return tuple(Path(f"{img}.frame{k}") for img, k in zip(images, frame_of, strict=True))
 
 
+def _median(values: Sequence[float]) -> float:
+    """The median of ``values`` (the middle one, or the mean of the two middle ones), as
+    :func:`statistics.median` gives it, without importing :mod:`statistics` at start-up."""
+    ordered = sorted(values)
+    mid = len(ordered) // 2
+    return ordered[mid] if len(ordered) % 2 else (ordered[mid - 1] + ordered[mid]) / 2
+
+
 def frames_summary(cases: Sequence[GateResult], images: Sequence[Path],
                     frame_of: Sequence[int]) -> list[str]:
     """How the chart ΔE varies over the frames gated or audited (the measured ones), per
     recording."""
-    from statistics import median
-
 
     by: dict[Path, list[tuple[float, int]]] = {}
     for case, path, k in zip(cases, images, frame_of, strict=True):
@@ -84,7 +90,7 @@ def frames_summary(cases: Sequence[GateResult], images: Sequence[Path],
         many = "s" if len(values) > 1 else ""
         lines.append(f"{display_path(path)}: mean ΔE00 over {len(values)} measured frame{many}: "
                      f"min {lo[0]:.2f} (frame {lo[1]}), median "
-                     f"{median(v for v, _ in values):.2f}, max {hi[0]:.2f} (frame {hi[1]})")
+                     f"{_median([v for v, _ in values]):.2f}, max {hi[0]:.2f} (frame {hi[1]})")
     return lines
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
@@ -19,6 +21,13 @@ from fidelity.cli.options import (
     scores_options,
 )
 from fidelity.cli.values import cap_models, executor_from, model_inputs, transfer_scores
+from fidelity.coco.scores import is_scores_file, scores_store_folder
+from fidelity.coco.store import process_gone
+from fidelity.coco.sweep import SweepStore, run_summary, run_sweep, sweep_status
+from fidelity.coco.sweep import rescore as do_rescore
+from fidelity.coco.tables.provenance import check_store_meta
+from fidelity.core.errors import InvalidValueError
+from fidelity.core.fileio import check_outputs, display_path
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import ModelSpec, SweepStore
@@ -77,16 +86,8 @@ def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
       fidelity sweep --import-scores run.scores.json.gz --out NEWDIR   (then resume there)
       fidelity sweep ... --executor ray --address auto --workers 8   (a Ray cluster)
     """
-    from pathlib import Path
-
-    from fidelity.coco.scores import is_scores_file
-    from fidelity.coco.sweep import SweepStore, run_sweep
-    from fidelity.coco.sweep import rescore as do_rescore
-
     carried = Path(out).is_file() and is_scores_file(out)  # a store carried as its scores
     if status and carried:
-        from fidelity.coco.scores import scores_store_folder
-
         with scores_store_folder(out, SweepStore) as folder:
             store = SweepStore(folder, create=False)
             try:
@@ -99,8 +100,6 @@ def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
                                  + (": give it to --import-scores, or to --status"
                                     if carried else "."), param_hint="'--out'")
     if status:
-        from fidelity.coco.tables.provenance import check_store_meta
-
         store = SweepStore(out, create=False)
         check_store_meta(store.db, str(store.path))
         _print_status(store)
@@ -116,11 +115,8 @@ def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
         click.echo(f"rescored {n} cells in {out}")
         return
     if not models or not images:
-        from fidelity.core.errors import InvalidValueError
-
         raise InvalidValueError("--models and --images are needed (except with --rescore)")
     specs = list(models)
-    from fidelity.core.fileio import check_outputs
 
     check_outputs({"--out (sweep.sqlite)": Path(out) / SweepStore.store_name},
                   {"--annotations": annotations, **model_inputs(specs)})
@@ -128,7 +124,6 @@ def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
     options = executor_from(executor, address, workers, threads, provider)
     store = run_sweep(specs, images, annotations, out, transforms, targets, threads=threads,
                       provider=provider, order=order, scorer=scorer, executor=options, progress=show_progress(progress))
-    from fidelity.coco.sweep import run_summary
 
     last = store.meta().get("last_run") or {}
     if last.get("items"):
@@ -140,12 +135,6 @@ def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
 
 def _print_status(store: SweepStore, shown: str | None = None) -> None:
     """Where ``store`` stands; ``shown``: the scores file it was made from, if it was."""
-    import time
-
-    from fidelity.coco.store import process_gone
-    from fidelity.coco.sweep import sweep_status
-    from fidelity.core.fileio import display_path
-
     rows = sweep_status(store)
     now = time.time()
     click.echo(f"store {store.path}" if shown is None else

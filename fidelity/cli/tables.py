@@ -3,13 +3,26 @@
 from __future__ import annotations
 
 import contextlib
+import json
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import click
 
 from fidelity.cli.context import show_progress, write_json_output
 from fidelity.cli.options import common_options, json_option, progress_option
-from fidelity.coco.tables.classes import RARE_BOXES
+from fidelity.coco.scores import is_scores_file, scores_store_folder
+from fidelity.coco.scoring import load_annotations
+from fidelity.coco.sweep import SweepStore
+from fidelity.coco.tables.classes import RARE_BOXES, explain_cell
+from fidelity.coco.tables.colour import TablesResult, tables_result
+from fidelity.coco.tables.directional import directional_table
+from fidelity.coco.tables.grid import parse_image_caps
+from fidelity.coco.tables.prediction import prediction_table
+from fidelity.coco.tables.provenance import check_store_meta
+from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.core.fileio import check_outputs, file_sha256, json_ready, write_json_atomic
+from fidelity.report.coco import WORST_CASE_FIGURE, write_tables_report
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import SweepStore
@@ -68,20 +81,11 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
     and --directional are written, from it. It may be a sweep's scores file (sweep
     --export-scores): then the report (--out) is built from its cells.
     """
-    from pathlib import Path
-
-    from fidelity.coco.scores import is_scores_file
-
     if not Path(store_dir).exists():
-        from fidelity.core.errors import InputFileError
-
         raise InputFileError(f"{store_dir}: no such sweep store folder, scores file or "
                              "tables.json")
     with contextlib.ExitStack() as stack:
         if Path(store_dir).is_file() and is_scores_file(store_dir):
-            from fidelity.core.fileio import check_outputs
-            from fidelity.report.coco import WORST_CASE_FIGURE
-
             reports = ("report.md", "report.html", "tables.json", WORST_CASE_FIGURE)
             check_outputs({"--prediction": prediction, "--directional": directional}
                           | {f"--out ({n})": Path(out) / n for n in reports if out},
@@ -95,10 +99,6 @@ def _store_of_scores(stack: contextlib.ExitStack, path: str, out: str | None,
                      explain: str | None) -> str:
     """A temporary sweep store holding the cells of the scores file ``path`` (removed when
     ``stack`` closes); its report goes to ``--out``, which is then needed."""
-    from fidelity.coco.scores import scores_store_folder
-    from fidelity.coco.sweep import SweepStore
-    from fidelity.core.errors import InvalidValueError
-
     if explain:
         raise InvalidValueError(f"{path}: --explain needs the cell's detections, which a "
                                 "scores file does not hold: give the sweep store")
@@ -111,19 +111,9 @@ def _tables(store_dir: str, out: str | None, prediction: str | None, name: str,
             directional: str | None, earlier: str | None, annotations: str | None,
             standard_errors: bool, explain: str | None, rare_boxes: int, images: str | None,
             top: int, json_path: str | None, progress: bool | None) -> None:
-    from pathlib import Path
-
-    from fidelity.coco.sweep import SweepStore
-    from fidelity.coco.tables.colour import tables_result
-    from fidelity.coco.tables.grid import parse_image_caps
-    from fidelity.core.fileio import check_outputs
-    from fidelity.report.coco import write_tables_report
-
     report = Path(out or Path(store_dir) / "report")
     if Path(store_dir).is_file():
         if earlier is not None:
-            from fidelity.core.errors import InvalidValueError
-
             raise InvalidValueError("--earlier merges with a sweep store: STORE_DIR is a "
                                     "tables.json here")
         check_outputs({"--prediction": prediction, "--directional": directional},
@@ -137,7 +127,6 @@ def _tables(store_dir: str, out: str | None, prediction: str | None, name: str,
                   {"--annotations": annotations, "--earlier": earlier},
                   stores={"STORE_DIR": store_dir})
     store = SweepStore(store_dir, create=False)
-    from fidelity.coco.tables.provenance import check_store_meta
 
     check_store_meta(store.db, str(store.path))
     coco = None
@@ -146,13 +135,9 @@ def _tables(store_dir: str, out: str | None, prediction: str | None, name: str,
         _explain(store, explain, annotations, rare_boxes, caps, top, json_path)
         return
     if caps and not standard_errors:
-        from fidelity.core.errors import InvalidValueError
-
         raise InvalidValueError("--limit re-scores cells from the annotations: it cannot be "
                                 "combined with --no-standard-errors")
     if standard_errors:
-        from fidelity.coco.scoring import load_annotations
-
         recorded = (store.meta().get("data") or {}).get("annotations")
         if annotations:  # given: it must load (a missing file is an error naming it)
             coco = load_annotations(annotations)
@@ -173,11 +158,6 @@ def _tables(store_dir: str, out: str | None, prediction: str | None, name: str,
 
 def _read_tables_json(path: Any) -> Any:
     """The :class:`~fidelity.coco.tables.colour.TablesResult` of a ``tables.json`` (one-line errors)."""
-    import json
-
-    from fidelity.coco.tables.colour import TablesResult
-    from fidelity.core.errors import InputFileError
-
     try:
         return TablesResult.from_json(json.loads(path.read_text(encoding="utf-8")))
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
@@ -186,29 +166,18 @@ def _read_tables_json(path: Any) -> Any:
 
 def _read_earlier(path: Any) -> tuple[Any, dict[str, Any]]:
     """``--earlier``: its tables and where they came from (file name and SHA-256)."""
-    from pathlib import Path
-
-    from fidelity.core.fileio import file_sha256
-
     tables_ = _read_tables_json(path).tables
     # the file's name, not where it lay on this machine: provenance names the data
     return tables_, {"file": Path(path).name, "sha256": file_sha256(path)}
 
 
 def _write_directional(tables_: Any, path: str) -> Any:
-    from fidelity.coco.tables.directional import directional_table
-    from fidelity.core.fileio import json_ready, write_json_atomic
-
     return write_json_atomic(path, json_ready(directional_table(tables_)))
 
 
 def _tables_from_json(path: Any, prediction: str | None, name: str,
                       directional: str | None) -> None:
     """The prediction tables of a ``tables.json`` (no store, no report)."""
-    from fidelity.coco.tables.prediction import prediction_table
-    from fidelity.core.errors import InvalidValueError
-    from fidelity.core.fileio import json_ready, write_json_atomic
-
     if prediction is None and directional is None:
         raise InvalidValueError(f"{path}: from a tables.json, give --prediction FILE and/or "
                                 "--directional FILE")
@@ -222,12 +191,6 @@ def _tables_from_json(path: Any, prediction: str | None, name: str,
 
 def _explain(store: SweepStore, spec: str, annotations: str | None, rare_boxes: int,
              caps: dict[str, int], top: int, json_path: str | None) -> None:
-    from pathlib import Path
-
-    from fidelity.coco.scoring import load_annotations
-    from fidelity.coco.tables.classes import explain_cell
-    from fidelity.core.errors import InvalidValueError
-
     parts = spec.rsplit(":", 2)
     try:
         model, transform, target = parts[0], parts[1], float(parts[2])

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
 
+from fidelity.camera.model import camera_files
 from fidelity.cli.context import show_progress
 from fidelity.cli.options import (
     ModelList,
@@ -16,6 +18,16 @@ from fidelity.cli.options import (
     scores_options,
 )
 from fidelity.cli.values import cap_models, executor_from, model_inputs, transfer_scores
+from fidelity.coco.emulation import EMULATION_METHODS, TRAINING_SETS
+from fidelity.coco.scoring import load_annotations
+from fidelity.coco.sweep import run_summary
+from fidelity.coco.validate.colour import collect_results, run_validation, validated_cameras
+from fidelity.coco.validate.store import ValidationStore, default_store
+from fidelity.coco.validate.suite import load_suite
+from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.core.fileio import check_outputs, write_json_atomic
+from fidelity.core.resources import resource_dir
+from fidelity.report.validation import write_validation_report
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import ModelSpec
@@ -79,16 +91,6 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
       fidelity validate --export-scores v.scores.json.gz --annotations instances.json
       fidelity validate --import-scores v.scores.json.gz --store NEWDIR   (another machine)
     """
-    from pathlib import Path
-
-    from fidelity.camera.model import camera_files
-    from fidelity.coco.emulation import EMULATION_METHODS, TRAINING_SETS
-    from fidelity.coco.validate.colour import collect_results, run_validation, validated_cameras
-    from fidelity.coco.validate.store import ValidationStore, default_store
-    from fidelity.coco.validate.suite import load_suite
-    from fidelity.core.errors import InvalidValueError, unknown_name
-    from fidelity.core.fileio import check_outputs
-
     if transfer_scores(ValidationStore, store or str(default_store()), "--store",
                        export_scores, import_scores, annotations):
         return
@@ -111,15 +113,12 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
     if training not in TRAINING_SETS:
         raise unknown_name("training set", training, TRAINING_SETS)
     if cameras is None:
-        from fidelity.core.resources import resource_dir
-
         cameras = str(resource_dir("cameras"))
     cases = load_suite(cameras)
     store_dir = store or str(default_store())
     if report_only:
         st = ValidationStore(store_dir, create=False)
         if annotations:  # cells stored without rest-of-run scores or bootstrap draws
-            from fidelity.coco.scoring import load_annotations
 
             coco = load_annotations(annotations)
             st.rescore_folds(coco, lambda m: click.echo(m, err=True))
@@ -134,17 +133,14 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
         st = run_validation(cases, specs, images, annotations, store_dir, method=method,
                             training=training, threads=threads, provider=provider,
                             progress=show_progress(progress), executor=options)
-        from fidelity.coco.sweep import run_summary
 
         last = st.meta().get("last_run") or {}
         if last.get("items"):
             click.echo(run_summary(last), err=True)
-    from fidelity.report.validation import write_validation_report
 
     results = collect_results(st, bound_table=bound_table, suite=cases)
     paths = write_validation_report(
         results, out, notes=Path(notes).read_text(encoding="utf-8") if notes else None)
-    from fidelity.core.fileio import write_json_atomic
 
     paths.append(write_json_atomic(Path(out) / DOMAIN_FILE, {
         "source": "fidelity validate: the cameras validated, their illuminants and the kinds "

@@ -12,6 +12,7 @@ import click
 
 from fidelity.cli.context import from_settings, show_progress
 from fidelity.core.errors import InvalidValueError
+from fidelity.core.fileio import check_outputs, file_sha256, require_file
 from fidelity.prediction.verdict import Criterion, DecisionRule
 
 if TYPE_CHECKING:
@@ -32,7 +33,7 @@ else:
 
 def parse_models(text: str, what: str = "--models") -> tuple[ModelSpec, ...]:
     """``A.onnx,B.onnx@250`` -> :class:`fidelity.coco.sweep.ModelSpec` each (at least one)."""
-    from fidelity.coco.sweep import ModelSpec
+    from fidelity.coco.sweep import ModelSpec  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
 
     specs = tuple(ModelSpec.parse(m.strip()) for m in text.split(",") if m.strip())
     if not specs:
@@ -56,7 +57,7 @@ def coco_inputs(images: str | None, annotations: str | None,
                 models: Sequence[ModelSpec] | None, *, what: str = "--measure") -> CocoInputs:
     """:func:`fidelity.coco.measure.resolve_coco_inputs` of the options' values (those not
     given from the shared data folder)."""
-    from fidelity.coco.measure import resolve_coco_inputs
+    from fidelity.coco.measure import resolve_coco_inputs  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
 
     items = None if models is None else [f"{s.path}@{s.limit}" if s.limit else str(s.path)
                                          for s in models]
@@ -69,8 +70,7 @@ def transfer_scores(store_type: type[ResultsStore], folder: str, option: str,
     """Do ``--export-scores`` / ``--import-scores`` (:func:`scores_options`) on the store of
     kind ``store_type`` in ``folder`` (named by ``option`` in errors); whether either was
     given (the command then has nothing else to do)."""
-    from fidelity.coco import scores
-    from fidelity.core.fileio import check_outputs, file_sha256, require_file
+    from fidelity.coco import scores  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
 
     if export_to and import_from:
         raise click.UsageError("--export-scores and --import-scores: one at a time")
@@ -93,7 +93,7 @@ def transfer_scores(store_type: type[ResultsStore], folder: str, option: str,
         if not annotations:
             raise click.UsageError("--export-scores needs --annotations (the fold and bootstrap "
                                    "scores are computed against them)")
-        from fidelity.coco.scoring import load_annotations
+        from fidelity.coco.scoring import load_annotations  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
 
         store = store_type(folder, create=False)
         check_outputs({"--export-scores": export_to},
@@ -114,7 +114,7 @@ def _moved(t: ScoresTransfer) -> str:
 def executor_from(executor: str, address: str | None, workers: int | None,
                   threads: int | None, provider: str) -> ExecutorOptions:
     """The :class:`fidelity.coco.executor.ExecutorOptions` of the command-line values."""
-    from fidelity.coco.executor import ExecutorOptions
+    from fidelity.coco.executor import ExecutorOptions  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
 
     return ExecutorOptions(executor, address, workers, threads, provider)
 
@@ -160,7 +160,7 @@ def measure_request(measure: bool, images: str | None, annotations: str | None,
             raise click.UsageError("--images, --annotations, --models and --limit go with "
                                    "--measure")
         return None
-    from fidelity.coco.measure import MeasureRequest, resolve_coco_inputs
+    from fidelity.coco.measure import MeasureRequest, resolve_coco_inputs  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
 
     return MeasureRequest(resolve_coco_inputs(images, annotations, models), limit=limit,
                           progress=show_progress(None))

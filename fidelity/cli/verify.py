@@ -15,8 +15,14 @@ from typing import Any
 
 import click
 
+from fidelity.cli import COMMANDS, main
 from fidelity.cli.context import write_json_output
 from fidelity.cli.options import common_options, json_option
+from fidelity.core.config import read_config
+from fidelity.core.errors import FidelityError, InputFileError
+from fidelity.core.fileio import check_outputs, display_path
+from fidelity.core.schema import SchemaError
+from fidelity.report.verify import read_record, rerun_finding, verification_lines, verify_document
 
 #: The commands whose records can be run again.
 RERUNNABLE = ("check", "audit", "gate", "compare", "fit")
@@ -51,8 +57,6 @@ def rerun_argv(argv: Sequence[str], folder: Path, settings: str | None = None,
     settings file is the recorded one: ``settings`` (its path) named with ``--config``, or
     ``--no-config`` when none was read, unless the command line says which. Raises
     :class:`click.UsageError` for a command not in :data:`RERUNNABLE`."""
-    from fidelity.cli import COMMANDS, main
-
     values = _takes_value(main)  # the group's own options, before the command
     head: list[str] = []
     i = 0
@@ -102,10 +106,6 @@ def rerun_argv(argv: Sequence[str], folder: Path, settings: str | None = None,
 def _configured(argv: Sequence[str], settings: str | None) -> set[str]:
     """The parameters of the recorded command that the settings file ``settings`` sets (None,
     or a file that cannot be read now: none; the repeat reports the latter)."""
-    from fidelity.cli import COMMANDS
-    from fidelity.core.config import read_config
-    from fidelity.core.errors import FidelityError
-
     if settings is None:
         return set()
     try:
@@ -120,11 +120,6 @@ def rerun(doc: Mapping[str, Any]) -> tuple[dict[str, Any] | None, int, str]:
     """Run the record's command line again (:func:`rerun_argv`) in the folder it ran in, as a
     process of this Python; returns the new record (None if none was written), the exit code
     and the last line of its errors."""
-    from fidelity.core.errors import InputFileError
-    from fidelity.core.fileio import display_path
-    from fidelity.core.schema import SchemaError
-    from fidelity.report.verify import read_record
-
     invocation = doc.get("invocation")
     if not invocation:
         raise InputFileError("the record holds no command line (made through the API, or by a "
@@ -177,14 +172,6 @@ def verify(record: Path, inputs_dir: Path | None, run_again: bool,
     RECORD is not a readable credibility record. A different code or environment is reported,
     not failed: the record stays a true account of its own run.
     """
-    from fidelity.core.fileio import check_outputs
-    from fidelity.report.verify import (
-        read_record,
-        rerun_finding,
-        verification_lines,
-        verify_document,
-    )
-
     check_outputs({"--json": json_path}, {"RECORD": record})
     doc = read_record(record)
     result = verify_document(doc, record, inputs=inputs_dir)

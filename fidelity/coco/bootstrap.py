@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from fidelity.coco.scoring import coco_results, evaluated_pycocotools
 from fidelity.core.errors import InvalidValueError
 
 __all__ = ["BOOTSTRAP_RESAMPLES", "BOOTSTRAP_SEED", "CategoryMatches", "Draws", "MatchRecords",
@@ -85,8 +86,6 @@ def match_records(coco_gt: Any, detections: Mapping[int, np.ndarray],
 
     ``detections``: per image id (K, 6) ``x1, y1, x2, y2, score, class-index`` (as stored).
     """
-    from fidelity.coco.scoring import coco_results, evaluated_pycocotools
-
     ids = sorted(int(i) for i in image_ids)
     if not ids:
         raise InvalidValueError("no images to evaluate")

@@ -28,7 +28,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fidelity.camera.render import render_chart
 from fidelity.coco.loss import LOSS_COLUMNS, Losses
+from fidelity.measure.blindspots import BlindSpot, chart_blind_spots
+from fidelity.measure.colour import measure_chart
+from fidelity.prediction.directional import (
+    DEFAULT_DIRECTIONAL_TABLE,
+    DirectionalPrediction,
+    load_directional_table,
+    predict_directional,
+)
 
 if TYPE_CHECKING:
     from fidelity.measure.blindspots import BlindSpot
@@ -154,9 +163,6 @@ class CameraBounds:
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> CameraBounds:
         """Inverse of :meth:`to_json`."""
-        from fidelity.measure.blindspots import BlindSpot
-        from fidelity.prediction.directional import DirectionalPrediction
-
         return cls(str(d["camera"]), float(d["chart_delta_e"]),
                    DirectionalPrediction.from_json(d["prediction"]),
                    tuple(BlindSpot.from_json(b) for b in d.get("blind_spots") or ()),
@@ -290,27 +296,16 @@ def compare_bounds(cells: Sequence[MeasuredCell], charts: Mapping[str, CameraCha
         The direction-aware table's name or path (None:
         :data:`fidelity.prediction.directional.DEFAULT_DIRECTIONAL_TABLE`).
     """
-    from fidelity.measure.blindspots import chart_blind_spots
-    from fidelity.prediction.directional import (
-        DEFAULT_DIRECTIONAL_TABLE,
-        load_directional_table,
-        predict_directional,
-    )
-
     tab = load_directional_table(table)
     cameras: dict[str, CameraBounds] = {}
     for name, chart in sorted(charts.items()):
         if chart.path is not None and chart.illuminant is not None:
-            from fidelity.camera.render import render_chart
-
             render = render_chart(str(chart.path), chart.illuminant)
             m = render.measurement
             ref, lab, de = m.reference_lab, m.lab, m.mean_delta_e
             spots = chart_blind_spots(m, bits=render.camera.quantisation_bits)
             rendered = True
         else:
-            from fidelity.measure.colour import measure_chart
-
             lab = np.array([p["lab"] for p in chart.patches], dtype=np.float64)
             ref = np.array([p["reference_lab"] for p in chart.patches], dtype=np.float64)
             srgb = np.array([p["srgb"] for p in chart.patches], dtype=np.float64)

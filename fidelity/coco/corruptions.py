@@ -37,7 +37,9 @@ in CIEDE2000.
 
 from __future__ import annotations
 
+import json
 import os
+import platform
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -47,7 +49,19 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.coco.bounds import BoundCell, summarise_cells
+from fidelity.coco.dataset import all_triples, colour_codes, to_uint8
+from fidelity.coco.measure import MeasuredLoss, measure_mapping
+from fidelity.colour.charts import DEFAULT_CHART, load_chart
+from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
+from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
+from fidelity.core.fileio import json_ready
+from fidelity.core.resources import resource_dir
+from fidelity.core.version import __version__
+from fidelity.measure.colour import measure_chart
+from fidelity.prediction.directional import error_parts, predict_chart
+from fidelity.prediction.table import predict
+from fidelity.prediction.tablefile import load_prediction_table
 
 if TYPE_CHECKING:
     from fidelity.coco.bounds import BoundCell, ClassBounds
@@ -238,8 +252,6 @@ class CorruptionMap:
         if self.name == "contrast":
             raise InvalidValueError("contrast depends on the image mean: it has no colour table")
         if self._cube is None:
-            from fidelity.coco.dataset import all_triples
-
             t0 = time.perf_counter()
             table = np.empty((1 << 24, 3), dtype=np.uint8)
             for s in range(0, 1 << 24, chunk):
@@ -263,7 +275,6 @@ class CorruptionMap:
                 lut = _truncate((levels - means[ch]) * c + means[ch])
                 out[..., ch] = lut[a[..., ch]]
             return out
-        from fidelity.coco.dataset import colour_codes
 
         result: U8 = self.cube()[colour_codes(a)]
         return result
@@ -282,8 +293,6 @@ class CorruptionMap:
 def chart_image(srgb: F64, rows: int = 4, cols: int = 6, patch_px: int = PATCH_PX) -> U8:
     """An 8-bit image of flat patches (rows x cols, ``patch_px`` square, row-major order) of
     encoded sRGB colours (n, 3) in [0, 1], rounded to code values."""
-    from fidelity.coco.dataset import to_uint8
-
     codes = to_uint8(np.asarray(srgb, dtype=np.float64)).reshape(rows, cols, 3)
     return np.ascontiguousarray(np.repeat(np.repeat(codes, patch_px, axis=0), patch_px, axis=1))
 
@@ -299,9 +308,6 @@ def corruption_chart(name: str, severity: int, chart: str | None = None) -> Any:
     """The :class:`~fidelity.measure.colour.ChartMeasurement` of the calibration chart's 8-bit
     image after the corruption (module docstring): its ``mean_delta_e`` is the corruption's
     chart ΔE."""
-    from fidelity.colour.charts import DEFAULT_CHART, load_chart
-    from fidelity.measure.colour import measure_chart
-
     _check(name, severity)
     ch = load_chart(chart or DEFAULT_CHART)
     image = corrupt(chart_image(ch.srgb, ch.rows, ch.cols), name, severity)
@@ -312,9 +318,6 @@ def corruption_chart(name: str, severity: int, chart: str | None = None) -> Any:
 def uncorrupted_chart_delta_e(chart: str | None = None) -> float:
     """The chart ΔE of the 8-bit chart image itself (gamut clipping and 8-bit rounding): the
     floor every corruption's chart ΔE starts from."""
-    from fidelity.colour.charts import DEFAULT_CHART, load_chart
-    from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
-
     ch = load_chart(chart or DEFAULT_CHART)
     img = chart_image(ch.srgb, ch.rows, ch.cols)
     return float(delta_e_2000(srgb_to_lab(patch_colours(img, ch.rows, ch.cols)), ch.lab).mean())
@@ -358,9 +361,6 @@ class CellPrediction:
 def predict_cell(measurement: ChartMeasurement, size: str = PREDICTION_SIZE) -> CellPrediction:
     """The classic and the direction-aware predicted ΔmAP of a corrupted chart (detector size
     ``size``), from the shipped tables."""
-    from fidelity.prediction.directional import predict_chart
-    from fidelity.prediction.table import predict
-
     classic = predict(measurement.mean_delta_e, size=size, transforms=False)
     d = predict_chart(measurement, size=size)
     return CellPrediction(classic.dmap_points, d.dmap_points, classic.dmap_relative,
@@ -396,8 +396,6 @@ class CorruptionCell:
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> CorruptionCell:
         """Inverse of :meth:`to_json`."""
-        from fidelity.coco.measure import MeasuredLoss
-
         param = d["parameter"]
         return cls(str(d["corruption"]), int(d["severity"]),
                    tuple(param) if isinstance(param, list) else param,
@@ -440,8 +438,6 @@ class CocoCResults:
         """(cell, detector, its :class:`~fidelity.coco.bounds.BoundCell`) for every detector
         measured in a cell: the measured ΔmAP (points) and its SE beside the cell's recorded
         classic and direction-aware predictions (None when it has none)."""
-        from fidelity.coco.bounds import BoundCell
-
         out = []
         for c in self.cells:
             p = c.prediction
@@ -455,14 +451,10 @@ class CocoCResults:
         """How often the classic and the direction-aware prediction bound the measured loss
         (plainly and within 2 SE) and their median over-prediction, over every (cell,
         detector) measured (:func:`fidelity.coco.bounds.summarise_cells`)."""
-        from fidelity.coco.bounds import summarise_cells
-
         return summarise_cells([b for _, _, b in self.bound_cells()])
 
     def to_json(self) -> dict[str, Any]:
         """``{"chart", "floor_delta_e", "cells", "meta"}``."""
-        from fidelity.core.fileio import json_ready
-
         out: dict[str, Any] = json_ready({"chart": self.chart,
                                           "floor_delta_e": self.floor_delta_e,
                                           "cells": [c.to_json() for c in self.cells],
@@ -474,8 +466,6 @@ class CocoCResults:
         shipped as ``fidelity/data/coco-c.json``, which names its inputs (and the dataset by
         its fingerprint, ``settings["dataset"]``) but not where they lay on the machine that
         measured them."""
-        from dataclasses import replace
-
         def named(m: Any) -> Any:
             settings = {k: Path(v).name if k in ("images_folder", "annotations") else v
                         for k, v in m.settings.items()}
@@ -503,8 +493,6 @@ def chart_cells(corruptions: Sequence[str] = CORRUPTIONS,
                 severities: Sequence[int] = SEVERITIES) -> list[CorruptionCell]:
     """The chart side of every (corruption, severity): chart ΔE, direction parts and the loss
     predicted from them, no COCO."""
-    from fidelity.prediction.directional import error_parts
-
     out = []
     for name in corruptions:
         for sev in severities:
@@ -532,12 +520,6 @@ def run_coco_c(inputs: Any, corruptions: Sequence[str] = CORRUPTIONS,
     """Measure every (corruption, severity) on COCO with every detector of ``inputs``
     (:func:`fidelity.coco.measure.measure_mapping`; resumable through its store) and put each
     next to its chart ΔE."""
-    import platform
-
-    from fidelity.coco.measure import measure_mapping
-    from fidelity.colour.charts import DEFAULT_CHART
-    from fidelity.core.version import __version__
-
     cells = []
     for cell in chart_cells(corruptions, severities):
         fn = CorruptionMap(cell.corruption, cell.severity)
@@ -565,11 +547,6 @@ DATA_FILE = "coco-c.json"
 
 def load_coco_c(path: str | os.PathLike[str] | None = None) -> CocoCResults:
     """The COCO-C table: ``path`` or the shipped ``fidelity/data/coco-c.json``."""
-    import json
-
-    from fidelity.core.errors import InputFileError
-    from fidelity.core.resources import resource_dir
-
     p = Path(path) if path is not None else resource_dir("data") / DATA_FILE
     try:
         return CocoCResults.from_json(json.loads(p.read_text(encoding="utf-8")))
@@ -616,10 +593,6 @@ def coco_c_answer(spec: str, *, size: str = "any", table: str | None = None,
     """The chart ΔE, the predicted and the measured loss of a COCO-C corruption
     (``"contrast:3"``): the chart side computed now (:func:`corruption_chart`), the measured
     loss from the COCO-C table (:func:`load_coco_c`)."""
-    from fidelity.core.resources import resource_dir
-    from fidelity.prediction.directional import predict_chart
-    from fidelity.prediction.table import predict
-
     name, severity = parse_corruption(spec)
     m = corruption_chart(name, severity)
     prediction = predict(m.mean_delta_e, size=size, table=table)
@@ -638,7 +611,6 @@ def _directional_name(table: str | None) -> str | None:
     """``table`` when it is a direction-aware table, else None (the default one)."""
     if table is None:
         return None
-    from fidelity.prediction.tablefile import load_prediction_table
 
     return table if load_prediction_table(table).kind == "directional" else None
 

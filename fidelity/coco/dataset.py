@@ -25,26 +25,37 @@ Rounding rule: ``uint8 = rint(clip(x, 0, 1) * 255)`` (round half to even).
 from __future__ import annotations
 
 import functools
+import importlib
 import multiprocessing
 import os
 import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import Executor, ProcessPoolExecutor
+from concurrent.futures import Executor, ProcessPoolExecutor  # noqa: TID253 (the pool of the dataset)
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from fidelity.coco.jpeg import encode_jpeg, read_jpeg
 from fidelity.colour.colorimetry import (
     CIE_EPSILON,
     CIE_KAPPA,
     MATRIX_LINEAR_SRGB_TO_XYZ,
     MATRIX_XYZ_TO_LINEAR_SRGB,
     WHITEPOINT_D65_XYZ,
+    linearize_srgb,
 )
-from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.core.errors import (
+    InputFileError,
+    InvalidValueError,
+    UnreachableTargetError,
+    unknown_name,
+)
+from fidelity.core.fileio import remove_stale_temporaries, write_bytes_atomic
+from fidelity.prediction.calibration import calibrate_transform, load_calibration_table
+from fidelity.prediction.transforms import TRANSFORMS, apply_transform
 
 #: Transforms that act on each channel separately with the same 1-D function.
 CHANNELWISE: frozenset[str] = frozenset({
@@ -64,8 +75,6 @@ def to_uint8(x: np.ndarray) -> np.ndarray:
 
 def reference_transform(rgb8: np.ndarray, name: str, param: float) -> np.ndarray:
     """The slow reference: float64 ``apply_transform(rgb8 / 255, name, param)`` rounded to 8 bit."""
-    from fidelity.prediction.transforms import apply_transform
-
     x = np.asarray(rgb8, dtype=np.float64) / 255.0
     return to_uint8(apply_transform(x, name, param))
 
@@ -140,11 +149,8 @@ class PixelMap:
         t0 = time.perf_counter()
         if name == BASELINE:
             return cls(name, None, "identity")
-        from fidelity.prediction.transforms import TRANSFORMS, apply_transform
 
         if name not in TRANSFORMS:
-            from fidelity.core.errors import unknown_name
-
             raise unknown_name("transform", name, list(TRANSFORMS) + [BASELINE])
         if param is None or not np.isfinite(param):
             raise InvalidValueError(f"transform {name}: parameter {param!r} is not a number")
@@ -200,8 +206,6 @@ class PixelMap:
             return np.take(self.lut, pos, axis=0)
         assert self.param is not None
         if self.kind == "direct":
-            from fidelity.prediction.transforms import apply_transform
-
             codes, inverse = np.unique(colour_codes(a).ravel(), return_inverse=True)
             mapped = to_uint8(apply_transform(code_triples(codes), self.name, self.param))
             out: np.ndarray = mapped[inverse].reshape(a.shape)
@@ -228,8 +232,6 @@ def pull_mean_kernel(kernel: str = "auto") -> str:
     if kernel == "auto":
         return "numba" if _numba_kernels() is not None else "numpy"
     if kernel not in PULL_MEAN_KERNELS:
-        from fidelity.core.errors import unknown_name
-
         raise unknown_name("pull_mean kernel", kernel, [*PULL_MEAN_KERNELS, "auto"])
     if kernel == "numba" and _numba_kernels() is None:
         raise InvalidValueError("pull_mean kernel 'numba' needs numba (pip install numba)")
@@ -569,8 +571,6 @@ def _numba_kernels() -> _NumbaKernels | None:
     ``power`` stay the numpy calls of the reference. tests/test_dataset.py checks that both
     kernels give the same bits.
     """
-    import importlib
-
     try:
         numba = importlib.import_module("numba")
     except ImportError:
@@ -690,8 +690,6 @@ _WHITE = np.asarray(WHITEPOINT_D65_XYZ, dtype=np.float64)
 @functools.cache
 def _srgb_linear_table() -> np.ndarray:
     """Linear values of the 256 sRGB code values (:func:`fidelity.colour.colorimetry.linearize_srgb`)."""
-    from fidelity.colour.colorimetry import linearize_srgb
-
     table = linearize_srgb(np.arange(256, dtype=np.float64) / 255.0)
     table.flags.writeable = False
     return table
@@ -709,7 +707,6 @@ def calibrated_param(transform: str, target: float) -> tuple[float | None, str |
     """
     if target == 0:
         return None, None
-    from fidelity.prediction.calibration import calibrate_transform, load_calibration_table
 
     try:
         table = load_calibration_table()
@@ -752,9 +749,6 @@ _WORKER_MAP: dict[tuple[str, float | None, str], PixelMap] = {}
 
 
 def _write_one(args: tuple[str, str, str, float | None, str]) -> str:
-    from fidelity.coco.jpeg import encode_jpeg, read_jpeg
-    from fidelity.core.fileio import write_bytes_atomic
-
     src, dst, name, param, kernel = args
     key = (name, param, kernel)
     pm = _WORKER_MAP.get(key)
@@ -786,11 +780,8 @@ def write_transformed_dataset(images: Sequence[Path], out_dir: str | os.PathLike
     elif param is None:
         param, reason = calibrated_param(transform, target)
         if param is None:
-            from fidelity.core.errors import UnreachableTargetError
-
             raise UnreachableTargetError(reason or f"{transform} at ΔE {target:g} unreachable")
     sub = out / subset_name(transform, target)
-    from fidelity.core.fileio import remove_stale_temporaries
 
     remove_stale_temporaries(sub)  # a killed run's temporary files do not survive the resume
     srcs = {p.resolve() for p in images}
@@ -881,8 +872,6 @@ def write_grid(images: Sequence[Path], out_dir: str | os.PathLike[str],
                progress: bool = True,
                on_skip: Callable[[str, float, str], None] | None = None) -> list[dict[str, Any]]:
     """Write every (transform, target) subset; unreachable cells are reported, not written."""
-    from fidelity.core.errors import UnreachableTargetError
-
     results = []
     done_baseline = False
     names, values = list(transforms), list(targets)

@@ -47,6 +47,7 @@ preprocessing on a small thread pool ahead of the network and decoding behind it
 
 from __future__ import annotations
 
+import ast
 import math
 import os
 from collections import deque
@@ -151,8 +152,6 @@ def _names_from_metadata(meta: dict[str, str], num_classes: int) -> tuple[str, .
     raw = meta.get("names")
     if raw:
         try:
-            import ast
-
             parsed = ast.literal_eval(raw)
             if isinstance(parsed, dict):
                 names = tuple(str(parsed[k]) for k in sorted(parsed))
@@ -941,11 +940,11 @@ class Detector:
         so it may use state that is not thread-safe. An exception from ``load`` is raised here,
         at its item. The generator may be abandoned early; queued work is cancelled.
         """
-        from concurrent.futures import ThreadPoolExecutor
-
         if prefetch < 1 or workers < 1:
             raise InvalidValueError(f"prefetch and workers must be >= 1, got {prefetch}, "
                                     f"{workers}")
+        from concurrent.futures import ThreadPoolExecutor
+
         source = iter(items)
         pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="fidelity-detect")
         ahead: deque[tuple[K, Future[PreparedImage]]] = deque()

@@ -28,6 +28,8 @@ from collections.abc import Callable, Mapping, Sequence
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
+from fidelity.coco.executor import make_executor, run_cells
+from fidelity.coco.machine import cpu_description
 from fidelity.coco.store import LEASE_STALE_S, ImageSet, LeaseKeeper, ResultsStore, ThreadStores
 
 if TYPE_CHECKING:
@@ -77,8 +79,6 @@ class StoreRun(Generic[S]):
         return self._executor
 
     def __enter__(self) -> StoreRun[S]:
-        from fidelity.coco.executor import make_executor
-
         self._executor = make_executor(self.images, self.options)
         try:
             self.where = self._executor.describe()
@@ -106,8 +106,6 @@ class StoreRun(Generic[S]):
         CPUs, processor, instructions) that has run in this store, first to last, since a run
         resumed elsewhere may compute differently (int8 kernels differ with the instruction
         set)."""
-        from fidelity.coco.machine import cpu_description
-
         here = {"platform": platform.platform(), "cpus": os.cpu_count()} | cpu_description()
         self.store.set_meta("machine", here | dict(settings) | self.where)
         seen = self.store.meta().get("machines") or []
@@ -131,8 +129,6 @@ class StoreRun(Generic[S]):
             progress: bool, say: Callable[[str], None]) -> RunCounts:
         """Run the cells (:func:`fidelity.coco.executor.run_cells`; ``batch_commit`` images per
         work item of the local executor, the others' own) and record ``meta["last_run"]``."""
-        from fidelity.coco.executor import run_cells
-
         chunk = batch_commit if self.options.kind == "local" else None
         counts = run_cells(work, self.executor, cells, lease=self.lease, chunk_images=chunk,
                            progress=progress, say=say)

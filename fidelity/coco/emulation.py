@@ -52,6 +52,8 @@ same table; the result is compared patch by patch with the camera's rendered cha
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import time
 from collections.abc import Callable, Mapping
@@ -72,16 +74,28 @@ from fidelity.camera.model import (
     load_camera,
     quantise,
 )
-from fidelity.colour.colorimetry import matrix_chromatic_adaptation
+from fidelity.camera.render import render_chart
+from fidelity.coco.dataset import all_triples, code_triples, colour_codes, to_uint8
+from fidelity.colour import colorimetry as cm
+from fidelity.colour.colorimetry import (
+    delinearize_srgb,
+    delta_e_2000,
+    linearize_srgb,
+    matrix_chromatic_adaptation,
+    srgb_to_lab,
+)
+from fidelity.colour.datasets import training_reflectances as shipped
 from fidelity.colour.spectral import (
     GRID_STEP_NM,
     load_illuminant,
     load_patch_spectra,
     resample,
+    scene_reference,
     tristimulus,
     wavelength_grid,
 )
 from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.measure.pixels import luminance_linear_srgb
 
 FloatArray = NDArray[np.float64]
 
@@ -122,8 +136,6 @@ def _msds_rows(wavelengths: ArrayLike, values: ArrayLike) -> FloatArray:
 def _colour_science_reflectances(chart_spectra: str) -> ReflectanceSet:
     """The chart's patches, then colour-science's reflectances as shipped
     (:func:`fidelity.colour.datasets.training_reflectances`), resampled to the grid."""
-    from fidelity.colour.datasets import training_reflectances as shipped
-
     names: list[str] = []
     rows: list[FloatArray] = []
     sources: dict[str, int] = {}
@@ -185,8 +197,6 @@ def reference_linear_srgb(reflectance: ArrayLike, illuminant: str = "D65",
     Same convention as :func:`fidelity.colour.spectral.scene_reference`: XYZ under the illuminant
     (Y_white = 1), adapted by ``cat`` to the sRGB D65 white, IEC 61966-2-1 matrix; unclipped.
     """
-    from fidelity.colour import colorimetry as cm
-
     ill = load_illuminant(illuminant)
     xyz, white = tristimulus(reflectance, ill.on_grid())
     m = matrix_chromatic_adaptation(white, cm.WHITEPOINT_D65_XYZ, cat)
@@ -219,8 +229,6 @@ def camera_samples(camera: CameraModel, illuminant: str, reflectances: Reflectan
     chart exactly as :func:`fidelity.camera.render.render_chart` does; vignetting and noise (spatial
     and random effects, not colour rendering) are left out.
     """
-    from fidelity.colour.colorimetry import delinearize_srgb
-
     ill = load_illuminant(illuminant)
     e, sens = ill.on_grid(), camera.sensitivities.on_grid()
     chart_raw = camera_response(load_patch_spectra(chart_spectra).on_grid(), e, sens, GRID_STEP_NM)
@@ -236,8 +244,6 @@ def camera_samples(camera: CameraModel, illuminant: str, reflectances: Reflectan
 def camera_output_srgb(camera: CameraModel, linear: ArrayLike) -> FloatArray:
     """The camera's output stage on its linear signal: tone curve, quantisation, then encoded
     sRGB clipped to [0, 1] (a linear-output camera is encoded with the sRGB curve)."""
-    from fidelity.colour.colorimetry import delinearize_srgb
-
     out = apply_tone_curve(linear, camera.tone)
     if camera.quantisation_bits is not None:
         out = quantise(out, camera.quantisation_bits)
@@ -304,8 +310,6 @@ class EightBitTable:
     def cube(self, chunk: int = 1 << 20) -> NDArray[np.uint8]:
         """The (2^24, 3) uint8 table of :meth:`apply` on every 8-bit triple (built once)."""
         if self._cube is None:
-            from fidelity.coco.dataset import all_triples, to_uint8
-
             table = np.empty((1 << 24, 3), dtype=np.uint8)
             for s in range(0, 1 << 24, chunk):
                 e = min(s + chunk, 1 << 24)
@@ -325,7 +329,6 @@ class EightBitTable:
         a = np.asarray(rgb8)
         if a.dtype != np.uint8 or a.shape[-1] != 3:
             raise InvalidValueError(f"image must be (..., 3) uint8, got {a.shape} {a.dtype}")
-        from fidelity.coco.dataset import colour_codes
 
         idx = colour_codes(a)
         if self._cube is None and self._direct_colours < CUBE_AFTER_COLOURS:
@@ -339,8 +342,6 @@ class EightBitTable:
     def map_codes(self, codes: ArrayLike) -> NDArray[np.uint8]:
         """(N, 3) uint8: :meth:`apply` on the 24-bit codes ``codes`` ((N,) ``(r << 16) |
         (g << 8) | b``), rounded as :meth:`cube` rounds: the rows the table holds for them."""
-        from fidelity.coco.dataset import code_triples, to_uint8
-
         mapped: NDArray[np.uint8] = to_uint8(self.apply(code_triples(np.asarray(codes))))
         return mapped
 
@@ -369,8 +370,6 @@ class Emulation(EightBitTable):
     # float path -------------------------------------------------------------------------------
     def _root_poly(self, srgb: FloatArray) -> FloatArray:
         """Root-polynomial part + camera output stage, without quantisation for the LUT."""
-        from fidelity.colour.colorimetry import linearize_srgb
-
         lin = linearize_srgb(np.clip(srgb, 0.0, 1.0))
         return root_polynomial_terms(lin) @ self.matrix.T
 
@@ -382,10 +381,7 @@ class Emulation(EightBitTable):
         with the same operations as :meth:`apply` (so the same bits), the 3 x 6 matrix and the
         output stage then run on the chunk as :meth:`apply` runs them."""
         if self.method != "root-polynomial":
-            from fidelity.coco.dataset import all_triples
-
             return self.apply(all_triples(start, stop))
-        from fidelity.colour.colorimetry import linearize_srgb
 
         lin = linearize_srgb(np.clip(np.arange(256, dtype=np.float64) / 255.0, 0.0, 1.0))
         pair = lin[:, None] * lin[None, :]
@@ -560,11 +556,6 @@ class AccuracySummary:
 def emulation_accuracy(emu: Emulation, chart_spectra: str = "BabelColor Average"
                        ) -> EmulationAccuracy:
     """Check the emulation against the camera's own rendered chart (module docstring)."""
-    from fidelity.camera.render import render_chart
-    from fidelity.coco.dataset import to_uint8
-    from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
-    from fidelity.colour.spectral import scene_reference
-
     render = render_chart(emu.camera, emu.illuminant, spectra=chart_spectra)
     cam_srgb = np.clip(render.measurement.srgb, 0.0, 1.0)
     ref = scene_reference(emu.illuminant, chart_spectra)
@@ -677,9 +668,6 @@ class PatchEmulation(EightBitTable):
             neutral: tuple[int, ...]) -> PatchEmulation:
         """Fit the mapping from ``source_srgb`` to ``target_srgb`` (n >= 6 patches; the
         ``neutral`` indices carry the tone curve)."""
-        from fidelity.colour.colorimetry import linearize_srgb
-        from fidelity.measure.pixels import luminance_linear_srgb
-
         t0 = time.perf_counter()
         src = np.clip(np.asarray(source_srgb, float), 0.0, 1.0)
         dst = np.clip(np.asarray(target_srgb, float), 0.0, 1.0)
@@ -697,8 +685,6 @@ class PatchEmulation(EightBitTable):
 
     def apply(self, srgb: ArrayLike) -> FloatArray:
         """Map encoded sRGB (..., 3) in [0, 1] to the target's encoded sRGB, clipped."""
-        from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
-
         x = np.clip(np.asarray(srgb, dtype=np.float64), 0.0, 1.0)
         lin = _tone_rgb(np.asarray(linearize_srgb(x), np.float64), self.knots)
         out = root_polynomial_terms(lin) @ self.matrix.T
@@ -706,15 +692,11 @@ class PatchEmulation(EightBitTable):
 
     def patch_delta_e(self) -> FloatArray:
         """ΔE00 per patch between the mapped source and the target (the in-sample fit error)."""
-        from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
-
         return np.asarray(delta_e_2000(srgb_to_lab(self.apply(self.source_srgb)),
                                        srgb_to_lab(self.target_srgb)), np.float64)
 
     def key(self) -> str:
         """A key that changes with the mapping (for the measurement store)."""
-        import hashlib
-
         h = hashlib.sha256()
         for a in (self.matrix, self.knots[0], self.knots[1]):
             h.update(np.ascontiguousarray(np.round(a, 12)).tobytes())
@@ -735,8 +717,6 @@ class PatchEmulation(EightBitTable):
 
 def _tone_rgb(linear: FloatArray, knots: tuple[FloatArray, FloatArray]) -> FloatArray:
     """Scale linear RGB (..., 3) so that its luminance follows the tone curve."""
-    from fidelity.measure.pixels import luminance_linear_srgb
-
     lin = np.asarray(linear, float)
     y = np.asarray(luminance_linear_srgb(lin), float)
     ty = apply_log_tone(np.clip(y, 0.0, None), knots)
@@ -749,9 +729,6 @@ def emulation_key(emu: Emulation) -> str:
     """A key that changes with a camera emulation's mapping (for the measurement store): the
     fitted matrix, LUT, output stage (tone, quantisation, encoding) and
     :data:`EMULATION_VERSION`."""
-    import hashlib
-    import json
-
     cam = emu.camera
     h = hashlib.sha256()
     h.update(np.ascontiguousarray(np.round(emu.matrix, 12)).tobytes())

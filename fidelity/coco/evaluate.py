@@ -19,8 +19,18 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fidelity.coco.scoring import CocoScore, UltralyticsScore
-from fidelity.core.errors import InputFileError
+from fidelity.coco.detectors import clip_boxes
+from fidelity.coco.executor import ExecutorOptions, ModelFile, detect_images
+from fidelity.coco.scoring import (
+    CocoScore,
+    UltralyticsScore,
+    evaluate_detections,
+    load_annotations,
+    resolve_scorer,
+    ultralytics_ap,
+)
+from fidelity.coco.store import ImageSet
+from fidelity.core.errors import InputFileError, unknown_name
 
 if TYPE_CHECKING:
     from fidelity.coco.executor import ExecutorOptions
@@ -68,17 +78,6 @@ def evaluate_model(model: str | os.PathLike[str], images: str | os.PathLike[str]
     the same detections unclipped. Missing images are an
     :class:`~fidelity.core.errors.InputFileError` before any inference.
     """
-    from fidelity.coco.detectors import clip_boxes
-    from fidelity.coco.executor import ExecutorOptions, ModelFile, detect_images
-    from fidelity.coco.scoring import (
-        evaluate_detections,
-        load_annotations,
-        resolve_scorer,
-        ultralytics_ap,
-    )
-    from fidelity.coco.store import ImageSet
-    from fidelity.core.errors import unknown_name
-
     for m in metrics:
         if m not in METRICS:
             raise unknown_name("metric", m, list(METRICS))

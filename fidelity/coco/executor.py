@@ -32,7 +32,9 @@ therefore every score, are identical whichever executor and however many workers
 from __future__ import annotations
 
 import collections
+import concurrent.futures  # noqa: TID253 (the executor's scoring thread)
 import contextlib
+import logging
 import os
 import sys
 import tempfile
@@ -44,7 +46,12 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from fidelity.core.errors import FidelityError, InputFileError, InvalidValueError
+from fidelity.coco.dataset import PixelMap
+from fidelity.coco.detectors import Detector
+from fidelity.coco.jpeg import decode_jpeg, roundtrip_jpeg
+from fidelity.coco.store import EvaluationStore, evaluation_store_dir, preprocessing_of
+from fidelity.core.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
+from fidelity.core.fileio import file_sha256, remove_stale_temporaries
 
 if TYPE_CHECKING:
     from fidelity.coco.dataset import PixelMap
@@ -87,8 +94,6 @@ class ExecutorOptions:
 
     def __post_init__(self) -> None:
         if self.kind not in EXECUTORS:
-            from fidelity.core.errors import unknown_name
-
             raise unknown_name("executor", self.kind, EXECUTORS)
         if self.workers is not None and self.workers < 1:
             raise InvalidValueError(f"--workers {self.workers}: need at least 1")
@@ -114,8 +119,6 @@ class ModelFile:
     @classmethod
     def from_path(cls, path: str | os.PathLike[str]) -> ModelFile:
         """A model file, hashed; a missing file is an input error."""
-        from fidelity.core.fileio import file_sha256
-
         p = Path(path)
         if not p.is_file():
             raise InputFileError(f"{p}: model file does not exist")
@@ -156,7 +159,6 @@ class PixelTransform:
             return self.table
         if self.name == IDENTITY:
             return None
-        from fidelity.coco.dataset import PixelMap
 
         return PixelMap.build(self.name, self.param, direct=self.direct)
 
@@ -221,8 +223,6 @@ class ChunkRunner:
                  ) -> Any:
         """The session of ``model`` (made from the file ``path()`` gives when it changes)."""
         if self._model != model:
-            from fidelity.coco.detectors import Detector
-
             self._detector = None
             with path() as p:
                 self._detector = Detector(p, threads=self.threads, provider=self.provider)
@@ -241,8 +241,6 @@ class ChunkRunner:
 
     def image(self, image_id: int, data: Callable[[int], bytes], name: str) -> tuple[np.ndarray, Any]:
         """Decoded pixels and JPEG settings of an image (cached)."""
-        from fidelity.coco.jpeg import decode_jpeg
-
         hit = self._images.get(image_id)
         if hit is not None:
             self._images.move_to_end(image_id)
@@ -265,8 +263,6 @@ class ChunkRunner:
             data: Callable[[int], bytes], names: Mapping[int, str] | None = None,
             worker: str = "local") -> ChunkResult:
         """Detect every image of ``item``; ``data(image_id)`` gives an image's JPEG bytes."""
-        from fidelity.coco.jpeg import roundtrip_jpeg
-
         t0, c0 = time.perf_counter(), time.process_time()
         det = self.detector(item.model, model_path)
         fn = self.transform(item.transform, build)
@@ -502,7 +498,6 @@ class RayExecutor:
             kwargs |= {"include_dashboard": False,
                        "num_cpus": (options.workers or os.cpu_count() or 1)
                        * (options.threads or 1)}
-        import logging
 
         quiet = logging.getLogger("ray._private.authentication_token_setup")
         level = quiet.level
@@ -698,8 +693,6 @@ class CellRun:
                  progress: bool = False, poll_s: float = 2.0,
                  say: Callable[[str], None] | None = None,
                  background: bool | None = None) -> None:
-        import concurrent.futures
-
         from tqdm import tqdm
 
         self.cells = cells
@@ -941,9 +934,6 @@ def detect_images(model: ModelFile | str | os.PathLike[str], images: ImageSet,
     (:func:`fidelity.coco.store.evaluation_store_dir` under ``store_base``), so a killed run
     started again computes only the images it had not stored, and a repeated one none.
     """
-    from fidelity.coco.store import EvaluationStore, evaluation_store_dir, preprocessing_of
-    from fidelity.core.fileio import remove_stale_temporaries
-
     m = model if isinstance(model, ModelFile) else ModelFile.from_path(model)
     ex = make_executor(images, options)
     try:

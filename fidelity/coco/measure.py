@@ -39,8 +39,22 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fidelity.coco.bootstrap import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, draw_scores
+from fidelity.coco.detectors import Detector
+from fidelity.coco.jpeg import roundtrip_jpeg
+from fidelity.coco.loss import score_loss
+from fidelity.coco.scoring import (
+    FOLDS,
+    evaluate_detections,
+    load_annotated_images,
+    resolve_scorer,
+    score_folds,
+)
 from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
-from fidelity.core.errors import InvalidValueError
+from fidelity.coco.sweep import ImageCache, ModelSpec
+from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.core.fileio import file_sha256
+from fidelity.core.resources import shared_dir
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import ModelSpec
@@ -91,9 +105,6 @@ def resolve_coco_inputs(images: str | os.PathLike[str] | None = None,
 
     ``models``: ``"a.onnx,b.onnx@250"`` or a sequence of such items.
     """
-    from fidelity.coco.sweep import ModelSpec
-    from fidelity.core.resources import shared_dir
-
     shared = shared_dir()
     missing = []
     img = Path(images) if images else (shared / SHARED_IMAGES if shared else None)
@@ -119,8 +130,6 @@ def resolve_coco_inputs(images: str | os.PathLike[str] | None = None,
     specs = tuple(ModelSpec.parse(m) for m in items)
     for s in specs:
         if not s.path.is_file():
-            from fidelity.core.errors import InputFileError
-
             raise InputFileError(f"{s.path}: model file does not exist")
     return CocoInputs(img, ann, specs)
 
@@ -187,8 +196,6 @@ class MeasureStore(ResultsStore):
 def dataset_key(images: str | os.PathLike[str], annotations: str | os.PathLike[str]) -> str:
     """The identity of an image set: the image folder (resolved) and the annotation file's
     sha256, hashed."""
-    from fidelity.core.fileio import file_sha256
-
     text = f"{Path(images).resolve()}|{file_sha256(annotations)}"
     return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
 
@@ -357,8 +364,6 @@ def _run_images(store: MeasureStore, det: Any, model: str, dataset: str, mapping
     """Run the detector on the images of ``ids`` not yet stored; returns how many ran."""
     from tqdm import tqdm
 
-    from fidelity.coco.jpeg import roundtrip_jpeg
-
     have = store.stored_images(model, dataset, mapping)
     todo = [i for i in ids if i not in have]
     batch: list[tuple[int, np.ndarray]] = []
@@ -431,19 +436,6 @@ def measure_mapping(mapping: Mapping8, key: str, inputs: CocoInputs, *,
     InputFileError
         Missing or unreadable images, annotation file or model file. Exit code 2.
     """
-    from fidelity.coco.bootstrap import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, draw_scores
-    from fidelity.coco.detectors import Detector
-    from fidelity.coco.loss import score_loss
-    from fidelity.coco.scoring import (
-        FOLDS,
-        evaluate_detections,
-        load_annotated_images,
-        resolve_scorer,
-        score_folds,
-    )
-    from fidelity.coco.sweep import ImageCache
-    from fidelity.core.fileio import file_sha256
-
     if key == BASELINE_KEY:
         raise InvalidValueError(f"mapping key {key!r} is reserved for the baseline")
     say = log or (lambda s: None)

@@ -40,15 +40,27 @@ import gzip
 import hashlib
 import json
 import os
+import re
+import tempfile
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fidelity.coco.store import ResultsStore, cell_key, unpack_detections
+import numpy as np
+
+from fidelity.coco.store import (
+    ImageEntry,
+    RegisteredModel,
+    ResultsStore,
+    cell_key,
+    preprocessing_of,
+    unpack_detections,
+)
 from fidelity.core.errors import InputFileError
 from fidelity.core.fileio import atomic_output, display_path, file_sha256
+from fidelity.core.version import __version__
 
 #: The ``format`` of a scores file and the newest ``version`` this code reads and writes.
 SCORES_FORMAT = "fidelity-scores"
@@ -78,8 +90,6 @@ def detections_digest(store: ResultsStore, key: tuple[Any, ...]) -> str:
     """SHA-256 of a cell's stored detections (``key``: its :attr:`cell_columns` values): per
     image in ascending id, its id and count as two little-endian int64 and its ``(n, 6)``
     float32 detections' bytes. An imported cell's is the one its file recorded."""
-    import numpy as np
-
     source = store.imported().get(cell_key(key))
     if source is not None and "detections_sha256" in source:
         return str(source["detections_sha256"])
@@ -157,16 +167,12 @@ def export_scores(store: ResultsStore, coco: Any, path: str | os.PathLike[str],
 
 
 def _version() -> str:
-    from fidelity.core.version import __version__
-
     return __version__
 
 
 def is_scores_file(path: str | os.PathLike[str]) -> bool:
     """Whether ``path`` begins as a scores file does (``{"format": "fidelity-scores"``,
     gzip-compressed or not); False for what cannot be read."""
-    import re
-
     try:
         with open(path, "rb") as f:
             head = f.read(2)
@@ -245,8 +251,6 @@ def _check_joinable(store: ResultsStore, tables: dict[str, Any], meta: dict[str,
     on the same things: a model of the same name from another file (or, in a validation,
     image limit), other preprocessing, other images for the same ids, other annotations, or
     another COCO scorer (``tables``: the file's; ``meta``: its provenance, parsed)."""
-    from fidelity.coco.store import ImageEntry, RegisteredModel, preprocessing_of
-
     mine = store.models()
     for row in tables.get("models", {}).get("rows", []):
         name, theirs = str(row[0]), RegisteredModel(row[1], row[2], row[3],
@@ -357,8 +361,6 @@ def scores_store_folder(path: str | os.PathLike[str], store_type: type[ResultsSt
     """A temporary store folder holding the cells of the scores file ``path``
     (:func:`import_scores` into a new ``store_type``), removed when the block ends: what
     ``fidelity tables FILE`` and ``fidelity sweep --status --out FILE`` read."""
-    import tempfile
-
     doc = read_scores(path, store_type)
     with tempfile.TemporaryDirectory(prefix="fidelity-scores-") as folder:
         store = store_type(folder)

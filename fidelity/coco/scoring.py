@@ -13,7 +13,9 @@ Source: Lin et al., "Microsoft COCO: Common Objects in Context", ECCV 2014, and 
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import io
+import logging
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -24,7 +26,8 @@ import numpy as np
 
 from fidelity.coco.detectors import COCO80_CATEGORY_IDS
 from fidelity.core import schema as sc
-from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
+from fidelity.core.fileio import display_path
 
 
 @dataclass(frozen=True)
@@ -107,8 +110,6 @@ def check_annotations(data: Any, origin: str) -> None:
 def load_annotations(path: str | os.PathLike[str]) -> Any:
     """Load a COCO annotation file, checked against :data:`COCO_SCHEMA`, into a quiet
     ``pycocotools.coco.COCO`` object."""
-    from fidelity.core.fileio import display_path
-
     p = Path(path)
     if not p.is_file():
         raise InputFileError(f"{display_path(p)}: annotation file does not exist")
@@ -219,8 +220,6 @@ def _accumulate_faster_coco_eval(coco_gt: Any, results: list[dict[str, Any]],
     The ground truth is rebuilt from ``coco_gt.dataset`` (a pycocotools ``COCO``), so both
     methods score exactly the same annotations.
     """
-    import logging
-
     from faster_coco_eval import COCO as FasterCOCO
     from faster_coco_eval import COCOeval_faster
 
@@ -252,12 +251,8 @@ COCO_SCORERS: dict[str, Callable[[Any, list[dict[str, Any]], Sequence[int]],
 
 def scorer_available(method: str) -> bool:
     """Whether the package behind scorer ``method`` can be imported."""
-    import importlib.util
-
     module = {"pycocotools": "pycocotools", "faster-coco-eval": "faster_coco_eval"}.get(method)
     if module is None:
-        from fidelity.core.errors import unknown_name
-
         raise unknown_name("COCO scorer", method, list(COCO_SCORERS) + ["auto"])
     return importlib.util.find_spec(module) is not None
 
@@ -585,8 +580,6 @@ def ultralytics_ap(coco_gt: Any, detections: Mapping[int, np.ndarray],
     ``compute_ap``), ``engine/validator.py`` (``match_predictions``).
     """
     if version not in ULTRALYTICS_RULES:
-        from fidelity.core.errors import unknown_name
-
         raise unknown_name("Ultralytics metric version", version, list(ULTRALYTICS_RULES))
     rules = ULTRALYTICS_RULES[version]
     ids = sorted(int(i) for i in (image_ids if image_ids is not None else detections))

@@ -46,6 +46,7 @@ from typing import Any, ClassVar, Generic, TypeVar
 import numpy as np
 
 from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.core.fileio import file_sha256, remove_stale_temporaries
 
 S = TypeVar("S", bound="ResultsStore")
 
@@ -637,8 +638,6 @@ class ResultsStore:
         images it will use (per model the first ``limit`` of ``images.ids``, all for None) and
         its annotations checked against the store's record (:meth:`check_images`,
         :meth:`check_annotations`; a new store records them); ``meta["data"]`` written."""
-        from fidelity.core.fileio import file_sha256, remove_stale_temporaries
-
         remove_stale_temporaries(self.folder)
         ids = images.ids
         used = sorted({i for n in limits for i in (ids[:n] if n else ids)})

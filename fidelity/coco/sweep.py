@@ -32,8 +32,10 @@ cell of a model on the smaller one (:func:`fidelity.coco.tables.grid.align_image
 
 from __future__ import annotations
 
+import datetime
 import json
 import os
+import platform
 import sqlite3
 import sys
 import time
@@ -44,7 +46,20 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
+from fidelity.coco.bootstrap import Draws, draw_scores
+from fidelity.coco.dataset import BASELINE, calibrated_param
+from fidelity.coco.driver import StoreRun
+from fidelity.coco.executor import CellWork, ExecutorOptions, ModelFile, PixelTransform
+from fidelity.coco.jpeg import read_jpeg
+from fidelity.coco.scoring import (
+    FoldScore,
+    evaluate_detections,
+    load_annotated_images,
+    load_annotations,
+    resolve_scorer,
+    score_folds,
+)
+from fidelity.coco.store import ImageSet, ResultsStore, pack_detections, unpack_detections
 from fidelity.core.errors import InvalidValueError
 from fidelity.core.fileio import file_sha256
 from fidelity.core.version import __version__, installed_version
@@ -170,8 +185,6 @@ class SweepStore(ResultsStore):
         """Per-fold scores of a cell on ``image_ids`` with the scores of the rest of the run
         without each fold (:func:`fidelity.coco.scoring.score_folds`; cached in the ``folds``
         table)."""
-        from fidelity.coco.scoring import FoldScore, score_folds
-
         row = self.db.execute("SELECT images, folds FROM folds WHERE model=? AND transform=? "
                               "AND target=?", (model, transform, float(target))).fetchone()
         if row and row[0] == len(image_ids):
@@ -191,8 +204,6 @@ class SweepStore(ResultsStore):
         """A cell's scores on the image bootstrap's draws of ``image_ids``
         (:func:`fidelity.coco.bootstrap.draw_scores` with its default draws and seed; cached in
         the ``draws`` table, computed again when the images, draws or seed differ)."""
-        from fidelity.coco.bootstrap import Draws, draw_scores
-
         row = self.db.execute("SELECT images, draws FROM draws WHERE model=? AND transform=? "
                               "AND target=?", (model, transform, float(target))).fetchone()
         if row and row[0] == len(image_ids):
@@ -354,8 +365,6 @@ class ImageCache:
 
     def get(self, image_id: int) -> tuple[np.ndarray, Any]:
         """(rgb, settings) of an image id."""
-        from fidelity.coco.jpeg import read_jpeg
-
         hit = self._cache.get(image_id)
         if hit is None:
             hit = read_jpeg(self.folder / self.coco.imgs[image_id]["file_name"])
@@ -384,15 +393,7 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
     the cells; ``lease_s`` overrides the seconds after which a silent run's claims are taken
     over. Inputs are checked against the store's record (images, annotations, models).
     """
-    import platform
-
     import onnxruntime
-
-    from fidelity.coco.dataset import BASELINE, calibrated_param
-    from fidelity.coco.driver import StoreRun
-    from fidelity.coco.executor import CellWork, ExecutorOptions, ModelFile, PixelTransform
-    from fidelity.coco.scoring import load_annotated_images, resolve_scorer
-    from fidelity.coco.store import ImageSet
 
     opts = executor or ExecutorOptions(threads=threads, provider=provider)
     say = log or (lambda s: print(s, file=sys.stderr, flush=True))
@@ -497,8 +498,6 @@ class SweepCells:
 
     def finish(self, cell: CellWork, seconds: float, new: int) -> None:
         """Score the cell on its images, record it and log it."""
-        from fidelity.coco.scoring import evaluate_detections
-
         model, transform, target = cell.key
         ids = list(cell.image_ids)
         own = self.stores.get()  # run_cells may score on a thread of its own
@@ -563,8 +562,6 @@ def sweep_status(store: SweepStore, pace_cells: int = 10) -> list[SweepProgress]
     One :class:`SweepProgress` per model; the pace is :func:`cell_pace` of its last
     ``pace_cells`` finished cells. Safe while a sweep writes.
     """
-    import datetime
-
     meta = store.meta()
     grid = meta.get("grid") or {}
     planned = plan_cells(grid.get("transforms") or [], grid.get("targets") or [])
@@ -624,8 +621,6 @@ def rescore(store: SweepStore, annotations: str | os.PathLike[str], method: str 
     """Recompute every done cell's scores from the stored detections (no inference); the
     annotations become the store's recorded ones. A store holding cells imported from a scores
     file is an input error (their detections are elsewhere); nothing is re-scored."""
-    from fidelity.coco.scoring import evaluate_detections, load_annotations, resolve_scorer
-
     for key in store.imported():  # checked first: no cell is re-scored if one cannot be
         store.check_detections(tuple(json.loads(key)))
     method = resolve_scorer(method)

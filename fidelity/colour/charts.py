@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fidelity.colour.colorimetry import lab_to_srgb
+from fidelity.colour.spectral import scene_reference
 from fidelity.core import schema as sc
 from fidelity.core.errors import FidelityError, InputFileError, unknown_name
 from fidelity.core.fileio import cached_while_unchanged, display_path
@@ -278,8 +279,6 @@ def load_reference(reference: str = DEFAULT_REFERENCE, illuminant: str = "D65") 
     adapted to D65, :func:`fidelity.colour.spectral.scene_reference`), or a chart name/path
     (``"safecolor"``: the paper's Lab values, :func:`fidelity.colour.charts.load_chart`)."""
     if reference == SCENE_REFERENCE:
-        from fidelity.colour.spectral import scene_reference
-
         chart = load_chart("safecolor")
         sr = scene_reference(illuminant)
         lab = np.asarray(sr.lab, dtype=np.float64)

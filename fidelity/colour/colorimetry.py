@@ -23,6 +23,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fidelity.colour import datasets
+from fidelity.colour.datasets import adaptation_matrix
 from fidelity.core.errors import InvalidValueError, unknown_name
 
 __all__ = [
@@ -537,8 +539,6 @@ def matrix_chromatic_adaptation(
     M = A^-1 diag(A w_t / A w_s) A, A the cone-response matrix of ``method``
     (Fairchild, Color Appearance Models, 3rd ed., ch. 9). Whites are XYZ (Y > 0).
     """
-    from fidelity.colour.datasets import adaptation_matrix
-
     key = next((k for k in CHROMATIC_ADAPTATION_METHODS if k.lower() == method.lower()), None)
     a = adaptation_matrix(key) if key is not None else None
     if a is None:
@@ -581,8 +581,6 @@ def matrix_rgb_to_linear_srgb(
     other colour-science names are looked up there. Linear values only: a transfer function
     is not part of the matrix.
     """
-    from fidelity.colour import datasets
-
     if isinstance(colourspace, str):
         if colourspace.strip().lower() == "srgb":
             return np.eye(3)

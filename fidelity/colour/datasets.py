@@ -22,6 +22,7 @@ PMC), as colour-science tabulates them.
 
 from __future__ import annotations
 
+import gzip
 import json
 import os
 from functools import lru_cache
@@ -30,6 +31,9 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
+from fidelity.core.fileio import write_bytes_atomic, write_text_atomic
+from fidelity.core.resources import resource_dir
 
 #: The file the datasets ship in (package data).
 DATA_FILE = "colour-datasets.json"
@@ -59,8 +63,6 @@ Reflectance = tuple[str, FloatArray, FloatArray]
 
 def data_path() -> Path:
     """Where the shipped datasets are."""
-    from fidelity.core.resources import resource_dir
-
     return resource_dir("data") / DATA_FILE
 
 
@@ -125,10 +127,6 @@ def training_reflectances() -> dict[str, list[Reflectance]]:
 
 @lru_cache(maxsize=1)
 def _training() -> dict[str, list[tuple[str, list[float], list[float]]]]:
-    import gzip
-
-    from fidelity.core.resources import resource_dir
-
     with gzip.open(resource_dir("data") / TRAINING_FILE, "rt", encoding="utf-8") as f:
         doc: dict[str, Any] = json.load(f)
     return {label: [(i["name"], i["wavelengths"], i["values"]) for i in items]
@@ -188,10 +186,6 @@ def colour_science_datasets() -> dict[str, Any]:
 def write_datasets(path: str | os.PathLike[str] | None = None) -> Path:
     """Write :func:`colour_science_datasets` to ``path`` (default: the shipped file), and
     :func:`colour_science_training` beside it (:data:`TRAINING_FILE`), atomically."""
-    import gzip
-
-    from fidelity.core.fileio import write_bytes_atomic, write_text_atomic
-
     out = write_text_atomic(path or data_path(),
                             json.dumps(colour_science_datasets(), separators=(",", ":")) + "\n")
     text = json.dumps(colour_science_training(), separators=(",", ":")) + "\n"

@@ -37,7 +37,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fidelity.colour import colorimetry as cm
+from fidelity.colour import datasets
 from fidelity.colour.colorimetry import matrix_chromatic_adaptation
+from fidelity.colour.datasets import cmfs_1931
 from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
 from fidelity.core.fileio import require_file
 from fidelity.core.resources import resource_dir
@@ -208,8 +211,6 @@ def load_illuminant(name_or_path: str) -> Illuminant:
     least 2 rows, strictly increasing wavelengths, finite non-negative power that is not all
     zero, and cover 400-700 nm; light outside its range is taken as zero.
     """
-    from fidelity.colour import datasets
-
     key = _match_name(name_or_path, ILLUMINANTS)
     shipped = datasets.illuminant(ILLUMINANTS[key]) if key is not None else None
     if key is not None and shipped is not None:
@@ -301,8 +302,6 @@ def cie_1931_cmfs(step: float = GRID_STEP_NM) -> FloatArray:
 
 @lru_cache(maxsize=8)
 def _cmfs(step: float) -> FloatArray:
-    from fidelity.colour.datasets import cmfs_1931
-
     wavelengths, values = cmfs_1931()
     return resample(wavelengths, values, wavelength_grid(step), extrapolation="zero")
 
@@ -370,8 +369,6 @@ def scene_reference(
     Under D65 the adaptation only corrects the 1e-4 difference between the tabulated D65
     white and the sRGB white point, so the white patch lands on a* = b* = 0.
     """
-    from fidelity.colour import colorimetry as cm
-
     ill = illuminant if isinstance(illuminant, Illuminant) else load_illuminant(illuminant)
     ps = load_patch_spectra(spectra)
     xyz_scene, white = tristimulus(ps.on_grid(step), ill.on_grid(step), step)

@@ -13,6 +13,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import tempfile
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from functools import lru_cache, wraps
@@ -129,8 +130,6 @@ def remove_stale_temporaries(folder: str | os.PathLike[str]) -> list[Path]:
     process was killed (``.<name>.<pid>.<random>.tmp<suffix>`` whose process has ended);
     those of live processes (another run writing there now) are kept. Returns the removed
     paths. A resume calls it, so temporary files never survive a resume."""
-    import re
-
     d = Path(folder)
     removed: list[Path] = []
     if not d.is_dir():

@@ -7,6 +7,7 @@ cameras) lives in ``fidelity/data/``.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from fidelity.core.errors import InputFileError
@@ -26,8 +27,6 @@ def resource_dir(kind: str) -> Path:
 
 def shared_dir() -> Path | None:
     """The project's shared data folder: ``$FIDELITY_SHARED`` or ``../shared`` beside the repo."""
-    import os
-
     env = os.environ.get("FIDELITY_SHARED")
     if env:
         return Path(env) if Path(env).is_dir() else None

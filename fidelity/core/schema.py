@@ -32,12 +32,15 @@ from __future__ import annotations
 import json
 import math
 import os
+import sys
+import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.core.fileio import display_path
 
 #: Deepest nesting of lists and tables accepted in any input document (the deepest schema,
 #: COCO annotations' segmentation polygons, needs 5).
@@ -419,8 +422,6 @@ def parse_text(text: str, fmt: str, origin: str) -> Any:
 
     JSON is read strictly: ``NaN``, ``Infinity`` and numbers beyond the floating-point range
     (which Python's reader would turn into ``nan`` and ``inf``) are errors."""
-    import sys
-
     try:
         if fmt == "json":
             try:
@@ -428,8 +429,6 @@ def parse_text(text: str, fmt: str, origin: str) -> Any:
             except ValueError as exc:  # JSONDecodeError, or an integer of > 4300 digits
                 raise SchemaError(f"{origin}: not valid JSON ({exc})") from None
         if fmt == "toml":
-            import tomllib
-
             try:
                 return tomllib.loads(text)
             except ValueError as exc:  # TOMLDecodeError, or an integer of > 4300 digits
@@ -458,8 +457,6 @@ def load_document(path: str | os.PathLike[str], origin: str | None = None, *,
     file before reading it. Raises :class:`SchemaError` for a missing or unreadable file, a
     file over ``max_bytes``, text that is not UTF-8, a parse error or too deep a nesting.
     """
-    from fidelity.core.fileio import display_path
-
     p = Path(path)
     where = origin or display_path(p)
     fmt = fmt or FORMATS.get(p.suffix.lower())

@@ -10,6 +10,10 @@ distribution's metadata carries the same string, and no command pays for
 
 from __future__ import annotations
 
+import os
+import re
+import sys
+
 __version__ = "0.1.0"
 
 
@@ -21,10 +25,6 @@ def installed_version(distribution: str) -> str | None:
     e-mail package cost 30-40 ms of every report's provenance; it answers only where this
     cannot: metadata without a version header, or ``sys.path`` holding an archive (a zipped
     egg), which it searches and this does not."""
-    import os
-    import re
-    import sys
-
     folders = _metadata_folders(tuple(sys.path)).get(_normalised(distribution))
     if folders:
         folder = folders[0]
@@ -53,8 +53,6 @@ def installed_version(distribution: str) -> str | None:
 def _normalised(name: str) -> str:
     """A distribution name as its metadata folder spells it: runs of ``-``, ``_`` and ``.``
     as one ``_``, lower case (the packaging specification's normalisation)."""
-    import re
-
     return re.sub(r"[-_.]+", "_", name).lower()
 
 
@@ -65,8 +63,6 @@ def _metadata_folders(path: tuple[str, ...]) -> dict[str, tuple[str, ...]]:
     """Normalised distribution name -> its ``.dist-info`` and ``.egg-info`` folders in the
     folders of ``path`` (``sys.path``), in that order: one listing of each folder, kept for
     the process (per ``path``)."""
-    import os
-
     if path not in _FOLDERS:
         found: dict[str, list[str]] = {}
         for entry in path:

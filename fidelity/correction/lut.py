@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
 from fidelity.core.errors import InvalidValueError
 from fidelity.core.extras import optional_module
 
@@ -104,8 +105,6 @@ def lattice_inputs(size: int, encoding: str, domain_max: float,
                    lattice: str = "encoded") -> F64:
     """The pixel values at the 3D lattice's nodes, ``(size, size, size, 3)`` indexed
     ``[r, g, b]``: the shaper's inverse of the evenly spaced nodes in [0, 1]."""
-    from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
-
     _check_lattice(encoding, lattice)
     t = np.linspace(0.0, 1.0, size)
     grid = np.stack(np.meshgrid(t, t, t, indexing="ij"), axis=-1)

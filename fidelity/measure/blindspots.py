@@ -35,6 +35,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fidelity.colour.colorimetry import lab_to_xyz, xyz_to_lab
+from fidelity.measure.colour import neutral_patches
+
 if TYPE_CHECKING:
     from fidelity.measure.colour import ChartMeasurement
 
@@ -105,23 +108,16 @@ class BlindSpot:
 
 
 def _lab_l(y: float) -> float:
-    from fidelity.colour.colorimetry import xyz_to_lab
-
     return float(xyz_to_lab(np.array([y * 0.95047, y, y * 1.08883]))[0])
 
 
 def _y_of_l(lightness: float) -> float:
-    from fidelity.colour.colorimetry import lab_to_xyz
-
     return float(lab_to_xyz(np.array([lightness, 0.0, 0.0]))[1])
 
 
 def shadow_tone(measurement: ChartMeasurement,
                 tolerance: float = SHADOW_SLOPE_TOLERANCE) -> BlindSpot:
     """The dark end of the neutral patches' tone curve (module docstring)."""
-    from fidelity.colour.colorimetry import lab_to_xyz
-    from fidelity.measure.colour import neutral_patches
-
     idx = list(neutral_patches(measurement))
     if len(idx) < 2:
         return BlindSpot("shadow-tone", None, None, tolerance,

@@ -48,11 +48,20 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fidelity.chart.image import Image, ImageInfo, as_float32, is_coded
-from fidelity.chart.locate import DEFAULT_WINDOW, ChartLocation, PatchWindow, locate_chart
+from fidelity.chart.locate import (
+    DEFAULT_WINDOW,
+    ChartLocation,
+    PatchWindow,
+    apply_homography,
+    grid_centres,
+    homography_from_points,
+    locate_chart,
+)
 from fidelity.chart.read import DEFAULT_READ, ReadOptions, read_input
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import DEFAULT_REFERENCE, Reference, load_reference
 from fidelity.core.errors import FidelityError, InvalidValueError, unknown_name
+from fidelity.measure import uncertainty as unc
 from fidelity.measure.colour import (
     MAX_EXPOSURE_EV,
     OCCLUDED_REASON,
@@ -461,11 +470,12 @@ def measure_pixels(
             raise InvalidValueError(f"--exposure {exposure!r}: must be a finite number of EV "
                                     f"within +-{MAX_EXPOSURE_EV:g}")
         mode = "fixed"
+    # the finder: loaded where a chart is found or its given corners are checked, not by check
+    from fidelity.chart.find.cascade import check_corners, find_chart  # noqa: PLC0415 (the finder)
+
     found = None
     checks = None
     if corners is None:
-        from fidelity.chart.find.cascade import find_chart
-
         found = find_chart(arr, encoding=encoding, method=detection, rows=ref.rows,
                              cols=ref.cols)
         corners = found.corners
@@ -473,8 +483,6 @@ def measure_pixels(
     loc = locate_chart(corners, arr.shape, rows=ref.rows, cols=ref.cols, window=window,
                        patch_names=ref.patch_names)
     if found is None and (ref.rows, ref.cols) == (4, 6):
-        from fidelity.chart.find.cascade import check_corners
-
         checks = check_corners(arr, loc.corners, encoding=encoding)
     # patches the finder judged covered (a leaf, a hand) are measured but left out of the
     # exposure fit and the chart's statistics, and named
@@ -585,8 +593,6 @@ def _window_remeasurer(pixels: np.ndarray, location: ChartLocation, sigma: float
     empty. The candidate pixels (each window's box grown by ``4 sigma + 2`` px), without the
     bad ones (``negatives`` rule), are read and converted to linear sRGB (``linear``) once; a
     draw maps them through its homography."""
-    from fidelity.chart.locate import apply_homography, grid_centres, homography_from_points
-
     rows, cols = location.rows, location.cols
     height, width = pixels.shape[:2]
     grow = int(math.ceil(4.0 * sigma)) + 2
@@ -678,8 +684,6 @@ def image_uncertainty(
     pixel noise and rounding of integer codes (of ``step``, None for float pixels) from each
     window's :class:`~fidelity.measure.uncertainty.PatchSpread`, placement of the corners and
     the exposure normalisation (``exposure_ev`` None: auto, fitted at ``fitted_ev``)."""
-    from fidelity.measure import uncertainty as unc
-
     ref_lab = np.asarray(reference.lab, np.float64)
     # the patches left out of the measurement (covered ones) are left out here too: of the
     # mean ΔE and of the exposure's neutrals, as measure_pixels leaves them out

@@ -25,7 +25,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fidelity.camera.model import DEFAULT_CAMERA
+from fidelity.camera.render import render_chart
 from fidelity.chart.read import DEFAULT_READ, ReadOptions, reads_for
+from fidelity.coco.detectors import stale_preprocessing
+from fidelity.colour.colorimetry import lab_to_srgb
+from fidelity.core.errors import FidelityError
+from fidelity.measure.blindspots import banding, chart_blind_spots
+from fidelity.measure.colour import neutral_patches
+from fidelity.measure.pixels import measure_image
 from fidelity.pipeline.records import (
     ChartReport,
     GateResult,
@@ -33,6 +41,12 @@ from fidelity.pipeline.records import (
     Provenance,
     RenderSource,
     utc_now,
+)
+from fidelity.prediction.interval import (
+    DomainCheck,
+    load_validated_cameras,
+    prediction_interval,
+    validity_domain,
 )
 from fidelity.prediction.judge import DEFAULT_JUDGE, JudgeOptions, judge_chart
 from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion
@@ -65,8 +79,6 @@ def prediction_domain(prediction: Prediction, *checks: DomainCheck) -> ValidityD
     """The validity domain of ``prediction``'s answer: its table's checks
     (:func:`fidelity.prediction.interval.validity_domain`), then ``checks``, then the
     detector preprocessing of a measured table (:func:`preprocessing_check`)."""
-    from fidelity.prediction.interval import validity_domain
-
     domain = validity_domain(prediction)
     preprocessing = preprocessing_check(prediction.table)
     for check in (*checks, *([preprocessing] if preprocessing is not None else [])):
@@ -80,9 +92,6 @@ def preprocessing_check(table: PredictionTable) -> DomainCheck | None:
     None for a table of published bounds."""
     if not table.kind.measured:
         return None
-    from fidelity.coco.detectors import stale_preprocessing
-    from fidelity.prediction.interval import DomainCheck
-
     stale = stale_preprocessing(table.provenance)
     return DomainCheck(
         "detector preprocessing", not stale,
@@ -104,7 +113,6 @@ def evidence_of(prediction: Prediction | None, budget: UncertaintyBudget | None,
     camera_checks`)."""
     if prediction is None:
         return None, None
-    from fidelity.prediction.interval import DomainCheck, prediction_interval
 
     interval = prediction_interval(prediction, budget.combined if budget else 0.0,
                                    "dmap_points", k)
@@ -115,8 +123,6 @@ def evidence_of(prediction: Prediction | None, budget: UncertaintyBudget | None,
         if inside else f"reference {reference}: not the 24-patch ColorChecker the tables "
                        f"were calibrated on; the prediction does not apply to its ΔE"))
     if camera is not None:
-        from fidelity.prediction.interval import load_validated_cameras
-
         validated = load_validated_cameras()
         if validated is not None:
             for check in validated.camera_checks(*camera):
@@ -199,9 +205,6 @@ def check_camera(
     >>> round(report.mean_delta_e, 2), report.verdict.passed  # doctest: +SKIP
     (1.02, True)
     """
-    from fidelity.camera.model import DEFAULT_CAMERA
-    from fidelity.camera.render import render_chart
-
     render = render_chart(camera if camera is not None else DEFAULT_CAMERA, illuminant,
                           renderer, reference=reference, seed=seed)
     m = render.measurement
@@ -210,12 +213,11 @@ def check_camera(
         m.mean_delta_e, judge, criterion, m, delta_e_uncertainty=u.combined if u else None)
     interval, validity = evidence_of(prediction, u, reference, judge.decision.k,
                                      (render.camera.stage_kinds(), illuminant))
-    from fidelity.measure.blindspots import chart_blind_spots
 
     spots = chart_blind_spots(m, bits=render.camera.quantisation_bits)
     measured: tuple[MeasuredLoss, ...] = ()
     if measure is not None:
-        from fidelity.coco.emulation import emulation_key, fit_emulation
+        from fidelity.coco.emulation import emulation_key, fit_emulation  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
 
         emu = fit_emulation(render.camera, illuminant)
         measured = _measure(measure, emu.apply_uint8, emulation_key(emu),
@@ -290,8 +292,6 @@ def audit_image(
         An unknown reference, illuminant, table, size class or read option (encoding,
         colourspace, Bayer pattern). Exit code 2.
     """
-    from fidelity.measure.pixels import measure_image
-
     banding: list[Any] = []
     result = measure_image(image, corners if corners is None or len(corners) else None,
                            read=read, reference=reference, illuminant=illuminant,
@@ -334,16 +334,12 @@ def _image_blind_spots(measurement: ChartMeasurement, info: Any, read: ReadOptio
                        ) -> tuple[Any, ...]:
     """The blind-spot checks of an audited image's chart: its shadow tones (the image's
     banding: :func:`_image_banding`)."""
-    from fidelity.measure.blindspots import chart_blind_spots
-
     return chart_blind_spots(measurement)
 
 
 def _image_banding(image: Any) -> Any:
     """The banding check of an image read for its audit
     (:class:`fidelity.chart.image.Image`): judged when its pixels are integer codes."""
-    from fidelity.measure.blindspots import banding
-
     if str(image.pixel_type).lower() in ("uint8", "uint16", "int8", "int16"):
         return banding(image.pixels, image.pixel_type)
     return banding(np.zeros((1, 1, 3)), image.pixel_type)
@@ -352,9 +348,7 @@ def _image_banding(image: Any) -> Any:
 def chart_emulation(measurement: ChartMeasurement) -> Any:
     """The colour mapping from a chart's reference to its measured colours, fitted on its
     patches (:class:`fidelity.coco.emulation.PatchEmulation`)."""
-    from fidelity.coco.emulation import PatchEmulation
-    from fidelity.colour.colorimetry import lab_to_srgb
-    from fidelity.measure.colour import neutral_patches
+    from fidelity.coco.emulation import PatchEmulation  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
 
     ref = (measurement.reference_srgb if measurement.reference_srgb is not None
            else np.asarray(lab_to_srgb(measurement.reference_lab), np.float64))
@@ -518,8 +512,6 @@ def _subject_result(subject: str, run: Callable[[], ChartReport],
                     criterion: Criterion | None) -> GateResult:
     """``run()`` (the subject's check or audit) as its result; an input error (or an
     unreadable file) its ``error``."""
-    from fidelity.core.errors import FidelityError
-
     t0 = time.perf_counter()
     try:
         report = run()

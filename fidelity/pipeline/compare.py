@@ -34,9 +34,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fidelity.chart.read import DEFAULT_READ, ReadOptions
+from fidelity.chart.read import DEFAULT_READ, ReadOptions, reads_with_own_ocio
+from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
 from fidelity.core.errors import InvalidValueError, unknown_name
-from fidelity.measure.uncertainty import UncertaintyBudget
+from fidelity.measure.colour import measure_chart, neutral_patches
+from fidelity.measure.pixels import luminance_linear_srgb
+from fidelity.measure.uncertainty import UncertaintyBudget, UncertaintyComponent
+from fidelity.pipeline.check import audit_image, evidence_of
 from fidelity.pipeline.records import ComparisonReport, Normalisation, Provenance, utc_now
 from fidelity.prediction.judge import DEFAULT_JUDGE, JudgeOptions, judge_chart
 
@@ -52,9 +56,6 @@ def normalise(sim_srgb: NDArray[np.float64], real_srgb: NDArray[np.float64],
     """Match simulated patch colours (n, 3 encoded sRGB) to the real ones on the ``neutral``
     patches (module docstring); returns the normalised encoded sRGB (clipped to [0, 1]) and
     what was done."""
-    from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
-    from fidelity.measure.pixels import luminance_linear_srgb
-
     if mode not in NORMALISATIONS:
         raise unknown_name("normalisation", mode, NORMALISATIONS)
     sim = np.asarray(linearize_srgb(np.clip(sim_srgb, 0.0, 1.0)), np.float64)
@@ -155,9 +156,6 @@ def compare_charts(
     UnknownNameError
         An unknown normalisation, reference, illuminant, table or size class. Exit code 2.
     """
-    from fidelity.chart.read import reads_with_own_ocio
-    from fidelity.measure.colour import measure_chart, neutral_patches
-    from fidelity.pipeline.check import audit_image
     if normalise_mode not in NORMALISATIONS:
         raise unknown_name("normalisation", normalise_mode, NORMALISATIONS)
     kw: dict[str, Any] = {"reference": reference, "illuminant": illuminant,
@@ -179,7 +177,7 @@ def compare_charts(
     measured: tuple[MeasuredLoss, ...] = ()
     emulation = None
     if measure is not None:
-        from fidelity.coco.emulation import PatchEmulation
+        from fidelity.coco.emulation import PatchEmulation  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
 
         emu = PatchEmulation.fit(np.clip(rm.srgb, 0, 1), srgb, neutral_patches(rm))
         emulation = emu.describe()
@@ -193,7 +191,6 @@ def compare_charts(
                               "ΔE with the same tables as a chart's own ΔE"}
     prov = Provenance.collect(sim_report.provenance.input_sha256, prediction,
                               {**dict(sim_report.provenance.conventions), **conventions})
-    from fidelity.pipeline.check import evidence_of
 
     interval, validity = evidence_of(prediction, budget, reference, judge.decision.k)
     return ComparisonReport(utc_now(), sim_report, real_report, norm, m, prediction,
@@ -208,8 +205,6 @@ def sim_to_real_uncertainty(value: float, sim: UncertaintyBudget | None,
     squares. An approximation: the sim-to-real ΔE compares the two charts' colours, each known
     to the uncertainty its audit found, with a sensitivity taken as that of a chart's ΔE to its
     own colours (1). None when either audit has no budget."""
-    from fidelity.measure.uncertainty import UncertaintyComponent
-
     if sim is None or real is None:
         return None
     how = ("the combined standard uncertainty of the {} image's audited chart ΔE (its own "

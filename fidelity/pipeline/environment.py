@@ -17,8 +17,17 @@ from __future__ import annotations
 import os
 import platform
 import re
-from importlib import metadata
+from importlib import metadata  # noqa: TID253 (a command's own module, not on every start-up)
 from typing import Any
+
+from fidelity.camera.mitsuba import probe_variant
+from fidelity.coco.detectors import default_providers
+from fidelity.coco.machine import cpu_description
+from fidelity.coco.scoring import resolve_scorer
+from fidelity.core.errors import FidelityError
+from fidelity.core.resources import shared_dir
+from fidelity.core.version import __version__, installed_version
+from fidelity.prediction.tablefile import DEFAULT_TABLE, available_tables
 
 __all__ = ["IMPORT_NAMES", "available_cpus", "describe_environment", "dependency_versions",
            "missing_extra"]
@@ -75,8 +84,6 @@ def dependency_versions(distribution: str = DISTRIBUTION,
                         extras: tuple[str, ...] = ()) -> dict[str, str | None]:
     """Installed version of each requirement ``distribution`` declares: the core, and those of
     ``extras``; None for a requirement that is not installed."""
-    from fidelity.core.version import installed_version
-
     try:
         requires = metadata.requires(distribution) or []
     except metadata.PackageNotFoundError:
@@ -96,8 +103,6 @@ def dependency_versions(distribution: str = DISTRIBUTION,
 def _mitsuba(probe: bool) -> dict[str, Any]:
     if not probe:
         return {"probed": False}
-    from fidelity.camera.mitsuba import probe_variant
-    from fidelity.core.errors import FidelityError
 
     try:
         p = probe_variant()
@@ -111,7 +116,6 @@ def _onnxruntime() -> dict[str, Any]:
         import onnxruntime as ort
     except ImportError as exc:  # the [coco] extra is not installed
         return {"error": str(exc), "available": [], "used": []}
-    from fidelity.coco.detectors import default_providers
 
     return {"available": list(ort.get_available_providers()), "used": default_providers(),
             "device": ort.get_device()}
@@ -119,9 +123,6 @@ def _onnxruntime() -> dict[str, Any]:
 
 def _coco_scorer() -> str | None:
     """The COCO scorer ``auto`` picks; None without the [coco] extra."""
-    from fidelity.coco.scoring import resolve_scorer
-    from fidelity.core.errors import FidelityError
-
     try:
         return resolve_scorer("auto")
     except (FidelityError, ImportError):
@@ -141,8 +142,6 @@ def _chart_detection() -> dict[str, Any]:
 
 
 def _shared() -> dict[str, Any]:
-    from fidelity.core.resources import shared_dir
-
     folder = shared_dir()
     if folder is None:
         return {"folder": None, "looked_in": os.environ.get("FIDELITY_SHARED") or "../shared "
@@ -158,10 +157,6 @@ def _shared() -> dict[str, Any]:
 def describe_environment(probe: bool = True) -> dict[str, Any]:
     """The installation's capabilities (module docstring); ``probe``: run the Mitsuba probe
     (a few seconds, subprocesses)."""
-    from fidelity.coco.machine import cpu_description
-    from fidelity.core.version import __version__
-    from fidelity.prediction.tablefile import DEFAULT_TABLE, available_tables
-
     core = dependency_versions()
 
     return {

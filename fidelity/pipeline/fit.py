@@ -44,11 +44,46 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fidelity.chart.read import DEFAULT_READ, ReadOptions
-from fidelity.core.errors import InvalidValueError
-from fidelity.correction.models import ColourModel, Conditioning
-from fidelity.measure.colour import ChartMeasurement
-from fidelity.measure.pixels import ImageMeasurement
+from fidelity.camera.model import colour_correction_matrix, read_camera_file
+from fidelity.camera.render import ChartLayout, render_chart
+from fidelity.chart.image import write_exr, write_png
+from fidelity.chart.locate import window_pixels
+from fidelity.chart.read import DEFAULT_READ, ReadOptions, read_input, reads_with_own_ocio
+from fidelity.colour.colorimetry import (
+    delinearize_srgb,
+    delta_e_2000,
+    linearize_srgb,
+    matrix_rgb_to_linear_srgb,
+)
+from fidelity.colour.spectral import load_illuminant
+from fidelity.core.errors import FidelityError, InvalidValueError
+from fidelity.core.fileio import write_json_atomic, write_text_atomic
+from fidelity.core.schema import load_document
+from fidelity.correction.lut import (
+    CUBE_SIZES,
+    apply_processor,
+    bake_cube,
+    config_processor,
+    cube_processor,
+    lattice_inputs,
+    ocio,
+    ocio_config,
+)
+from fidelity.correction.models import (
+    DEFAULT_OBJECTIVE,
+    ColourModel,
+    Conditioning,
+    cross_validate,
+    cross_validate_shared,
+    fit_model,
+    fit_shared_matrix,
+    linear_to_lab,
+    patch_delta_e,
+    usable_patches,
+)
+from fidelity.measure.colour import ChartMeasurement, measure_chart, neutral_patches
+from fidelity.measure.pixels import ImageMeasurement, exposure_from_neutrals, measure_pixels
+from fidelity.pipeline.compare import normalise
 from fidelity.pipeline.records import Normalisation, utc_now
 from fidelity.prediction.judge import DEFAULT_JUDGE, JudgeOptions, judge_chart
 from fidelity.prediction.table import Prediction
@@ -76,8 +111,6 @@ CHECK_GRID = 41
 
 
 def _to_linear(pixels: NDArray[Any], encoding: str) -> NDArray[Any]:
-    from fidelity.colour.colorimetry import linearize_srgb
-
     return np.asarray(linearize_srgb(pixels)) if encoding == "srgb" else pixels
 
 
@@ -154,8 +187,6 @@ class Correction:
 
     def apply(self, pixels: ArrayLike) -> F64:
         """Corrected pixel values of the simulator's pixel values ``(..., 3)`` (same encoding)."""
-        from fidelity.colour.colorimetry import delinearize_srgb
-
         out = self.apply_linear(pixels)
         if self.encoding == "srgb":
             return np.asarray(delinearize_srgb(out), np.float64)
@@ -180,8 +211,6 @@ class Correction:
     def display_lab(self, pixels: ArrayLike) -> F64:
         """CIELAB of pixel values as the fit space shows them (sRGB clipped to [0, 1]): what
         a ΔE00 between two outputs of the correction is measured on."""
-        from fidelity.correction.models import linear_to_lab
-
         fit = _to_linear(np.asarray(pixels, np.float64), self.encoding) @ self.to_fit.T
         return linear_to_lab(np.clip(fit, 0.0, 1.0))
 
@@ -224,9 +253,6 @@ class Correction:
     def to_cube(self, path: str | os.PathLike[str], size: int = 33) -> Path:
         """Write the ``.cube`` (OpenColorIO's Baker, :func:`fidelity.correction.lut.bake_cube`)
         of :meth:`apply_linear` atomically; returns the path."""
-        from fidelity.core.fileio import write_text_atomic
-        from fidelity.correction.lut import bake_cube
-
         return write_text_atomic(path, bake_cube(self.apply_linear, size, self.encoding,
                                                  self.domain_max, self.cube_comments(size),
                                                  self.lattice))
@@ -280,10 +306,6 @@ def sim_ocio_refused(flag: str, name: str) -> InvalidValueError:
 
 def _read(path: str | os.PathLike[str], corners: str | Sequence[float] | None,
           read: ReadOptions, reference: str, illuminant: str, *, sim: bool) -> _Chart:
-    from fidelity.chart.read import read_input
-    from fidelity.core.errors import FidelityError
-    from fidelity.measure.pixels import measure_pixels
-
     if sim and read.ocio_colourspace is not None:
         raise sim_ocio_refused("--ocio-colourspace", read.ocio_colourspace)
     img, sha256 = read_input(path, read)
@@ -301,8 +323,6 @@ def _read(path: str | os.PathLike[str], corners: str | Sequence[float] | None,
 
 
 def _colourspace_matrix(audit: ImageMeasurement) -> F64:
-    from fidelity.colour.colorimetry import matrix_rgb_to_linear_srgb
-
     name = audit.colourspace
     if name.startswith("chromaticities "):
         return matrix_rgb_to_linear_srgb([float(v) for v in name.split(" ", 1)[1].split(",")])
@@ -328,11 +348,6 @@ class _Prepared:
 
 def _prepare(sim: _Chart, real: _Chart, normalise_mode: str,
              weights: ArrayLike | None) -> _Prepared:
-    from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
-    from fidelity.correction.models import linear_to_lab, usable_patches
-    from fidelity.measure.colour import neutral_patches
-    from fidelity.pipeline.compare import normalise
-
     sm, rm = sim.audit.measurement, real.audit.measurement
     if sm.patch_names != rm.patch_names:
         raise InvalidValueError(f"{sim.path} and {real.path}: the charts have different patches")
@@ -374,8 +389,6 @@ def _prepare(sim: _Chart, real: _Chart, normalise_mode: str,
 
 def _correction(pp: _Prepared, fitted: ColourModel, objective: str, cond: Conditioning,
                 cv: F64) -> Correction:
-    from fidelity.correction.models import patch_delta_e
-
     return Correction(fitted, objective, cond, pp.encoding, pp.to_fit, pp.domain_max, pp.norm,
                       pp.names, pp.excluded, pp.sim_fit, pp.real_fit,
                       patch_delta_e(pp.sim_fit, pp.real_fit),
@@ -384,8 +397,6 @@ def _correction(pp: _Prepared, fitted: ColourModel, objective: str, cond: Condit
 
 def _fit_charts(sim: _Chart, real: _Chart, model: str, objective: str | None,
                 normalise_mode: str, weights: ArrayLike | None) -> Correction:
-    from fidelity.correction.models import DEFAULT_OBJECTIVE, cross_validate, fit_model
-
     pp = _prepare(sim, real, normalise_mode, weights)
     objective = DEFAULT_OBJECTIVE if objective is None else objective
     fitted, cond = fit_model(pp.sim_fit, pp.real_fit, model, weights=pp.weights,
@@ -446,8 +457,6 @@ def fit_correction(
     UnknownNameError
         An unknown model, objective, normalisation, reference or illuminant. Exit code 2.
     """
-    from fidelity.chart.read import reads_with_own_ocio
-
     sim_read, real_read = reads_with_own_ocio((sim, real), read,
                                               (None, real_ocio_colourspace))
     s = _read(sim, sim_corners, sim_read, reference, illuminant, sim=True)
@@ -492,8 +501,6 @@ def check_points(correction: Correction) -> tuple[tuple[F64, F64], tuple[F64, F6
     :data:`CHECK_GRID`^3 lattice of the input range, most points between the cube's nodes)
     and the model's own output there as CIELAB (:meth:`Correction.display_lab`): what
     :func:`check_cube` compares with, computed once for every cube size tried."""
-    from fidelity.correction.lut import lattice_inputs
-
     grid = lattice_inputs(CHECK_GRID, correction.encoding, correction.domain_max).reshape(-1, 3)
     points = (correction.sim_pixels, grid)
     return points, (correction.display_lab(correction.apply(points[0])),
@@ -505,9 +512,6 @@ def check_cube(correction: Correction, path: str | os.PathLike[str], size: int,
     """Apply the ``.cube`` at ``path`` (and the output encoding) with OpenColorIO's processor
     and compare it with :meth:`Correction.apply` on the chart's patches and on a dense lattice
     (:class:`LutCheck`); ``points``: :func:`check_points` of ``correction``, if computed."""
-    from fidelity.colour.colorimetry import delta_e_2000
-    from fidelity.correction.lut import apply_processor, cube_processor
-
     proc = cube_processor(path, correction.encoding)
     (chart, grid), (chart_lab, grid_lab) = points or check_points(correction)
     out = []
@@ -616,11 +620,8 @@ def fit_and_verify(
     (:func:`corrected_name`: a 16-bit PNG for sRGB-encoded SIM, clipped as a camera stores it;
     a float EXR for scene-linear SIM), measuring the whole corrected image instead (the same
     patch means; it costs the whole image's transform and writing)."""
-    from fidelity.correction.lut import ocio
-
     ocio()
     c0, t0 = time.process_time(), time.perf_counter()
-    from fidelity.chart.read import reads_with_own_ocio
 
     sim_read, real_read = reads_with_own_ocio((sim, real), read,
                                               (None, real_ocio_colourspace))
@@ -639,17 +640,6 @@ def _verify(s: _Chart, r: _Chart, corr: Correction, folder: Path, *, normalise_m
             cpu: tuple[float, float], measure: MeasureRequest | None = None) -> FitReport:
     """Write the cube, the config and ``correction.json`` of ``corr`` into ``folder`` and
     verify them on the SIM chart ``s`` against the REAL chart ``r`` (module docstring)."""
-    from fidelity.core.fileio import write_json_atomic, write_text_atomic
-    from fidelity.correction.lut import (
-        CUBE_SIZES,
-        apply_processor,
-        config_processor,
-        cube_processor,
-        ocio_config,
-    )
-    from fidelity.measure.colour import measure_chart, neutral_patches
-    from fidelity.pipeline.compare import normalise
-
     c2, t2 = time.process_time(), time.perf_counter()
     folder.mkdir(parents=True, exist_ok=True)
     cube = folder / "correction.cube"
@@ -689,7 +679,7 @@ def _verify(s: _Chart, r: _Chart, corr: Correction, folder: Path, *, normalise_m
     write_json_atomic(folder / "correction.json", corr.to_json())
     measured: list[tuple[MeasuredLoss, ...]] = [(), ()]
     if measure is not None:
-        from fidelity.coco.emulation import PatchEmulation
+        from fidelity.coco.emulation import PatchEmulation  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
 
         # as compare --measure: the real camera's colours -> the simulator's, on COCO photos
         for k, (side, colours) in enumerate((("before", before_srgb), ("after", after_srgb))):
@@ -755,10 +745,6 @@ def fit_pairs_and_verify(
     correction ``matrix @ diag(gains)`` as :func:`fit_and_verify` does, into
     ``out/pair-<k>`` (k from 1). The fit is weighted least squares in linear RGB over the
     patches usable in each pair; corners and the other options apply to every pair."""
-    from fidelity.chart.read import reads_with_own_ocio
-    from fidelity.correction.lut import ocio
-    from fidelity.correction.models import ColourModel, cross_validate_shared, fit_shared_matrix
-
     ocio()
     if len(pairs) < 2:
         raise InvalidValueError("a fit over illuminants needs at least two pairs (--pair SIM "
@@ -837,13 +823,6 @@ def fit_camera_and_verify(
     ``corrected.toml``."""
     import tomli_w
 
-    from fidelity.camera.model import colour_correction_matrix, read_camera_file
-    from fidelity.camera.render import ChartLayout, render_chart
-    from fidelity.chart.image import write_exr, write_png
-    from fidelity.colour.spectral import load_illuminant
-    from fidelity.core.fileio import write_text_atomic
-    from fidelity.core.schema import load_document
-
     path = Path(camera)
     cam = read_camera_file(path)
     if model not in AFFINE_MODELS:
@@ -896,8 +875,6 @@ def corrected_name(encoding: str) -> str:
 
 
 def _write_corrected(folder: Path, pixels: NDArray[Any], encoding: str) -> Path:
-    from fidelity.chart.image import write_exr, write_png
-
     path = folder / corrected_name(encoding)
     if encoding == "srgb":
         return write_png(path, pixels, 16)
@@ -918,10 +895,6 @@ def remeasure(pixels: NDArray[Any], audit: ImageMeasurement,
     Only the windows' pixels are read and transformed: the patch means are those of the whole
     image through ``transform`` measured in the same windows (``tests/test_fit.py`` checks
     both ways), at the cost of the windows, not of the image."""
-    from fidelity.chart.locate import window_pixels
-    from fidelity.colour.colorimetry import delinearize_srgb
-    from fidelity.measure.pixels import exposure_from_neutrals
-
     p = _colourspace_matrix(audit)
     windows = [np.asarray(v, np.float32).reshape(-1, 3)  # float32 like the pixels: 2x faster
                for v in window_pixels(pixels, audit.location)]

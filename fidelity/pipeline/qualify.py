@@ -45,18 +45,37 @@ Science only: the command line (``fidelity qualify``) and the record's JSON are
 from __future__ import annotations
 
 import base64
+import json
 import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from importlib import metadata
+from importlib import metadata  # noqa: TID253 (a command's own module, not on every start-up)
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from fidelity.camera import render
+from fidelity.camera.mitsuba import MitsubaUnavailableError
+from fidelity.camera.render import ChartLayout
+from fidelity.chart import ocio
+from fidelity.chart.image import write_png
+from fidelity.chart.ocio import DEFAULT_CONFIG
+
+# the implementations under qualification are looked up in their modules at each check, so
+# that a check tests what the module holds when it runs
+from fidelity.colour import colorimetry as cm
+from fidelity.colour.charts import load_chart
+from fidelity.colour.colorimetry import matrix_chromatic_adaptation, normalised_primary_matrix
+from fidelity.colour.spectral import WAVELENGTHS_NM, load_illuminant, tristimulus
 from fidelity.core.errors import FidelityError, UnknownNameError
+from fidelity.core.fileio import file_sha256
 from fidelity.core.resources import resource_dir
+from fidelity.measure.colour import chart_delta_e
+from fidelity.pipeline.check import audit_image
+from fidelity.pipeline.records import ImageSource
+from fidelity.prediction.calibration import calibrate_transform, transform_delta_e
 
 #: Status of a check that ran and met its tolerance / did not / could not run here.
 PASS, FAIL, NOT_RUN = "pass", "fail", "not run"
@@ -157,26 +176,20 @@ def sharma_pairs() -> np.ndarray:
 
 
 def _ciede2000() -> tuple[float, int, str]:
-    from fidelity.colour.colorimetry import delta_e_2000
-
     pairs = sharma_pairs()
     lab1, lab2, published = pairs[:, :3], pairs[:, 3:6], pairs[:, 6]
-    dev = np.maximum(np.abs(delta_e_2000(lab1, lab2) - published),
-                     np.abs(delta_e_2000(lab2, lab1) - published))
+    dev = np.maximum(np.abs(cm.delta_e_2000(lab1, lab2) - published),
+                     np.abs(cm.delta_e_2000(lab2, lab1) - published))
     worst = int(np.argmax(dev))
     return float(dev[worst]), 2 * len(pairs), f"largest at pair {worst + 1}"
 
 
 def _srgb_matrix() -> tuple[float, int, str]:
-    from fidelity.colour.colorimetry import MATRIX_LINEAR_SRGB_TO_XYZ
-
-    dev = np.abs(np.asarray(MATRIX_LINEAR_SRGB_TO_XYZ) - np.asarray(IEC_61966_2_1_MATRIX))
+    dev = np.abs(np.asarray(cm.MATRIX_LINEAR_SRGB_TO_XYZ) - np.asarray(IEC_61966_2_1_MATRIX))
     return float(dev.max()), dev.size, "derived from the sRGB primaries and D65's chromaticity"
 
 
 def _illuminant_white() -> tuple[float, int, str]:
-    from fidelity.colour.spectral import WAVELENGTHS_NM, load_illuminant, tristimulus
-
     worst, where = 0.0, ""
     for name, published in CIE_15_WHITES.items():
         _, white = tristimulus(np.ones(WAVELENGTHS_NM.size), load_illuminant(name).on_grid())
@@ -187,8 +200,6 @@ def _illuminant_white() -> tuple[float, int, str]:
 
 
 def _calibration() -> tuple[float, int, str]:
-    from fidelity.prediction.calibration import calibrate_transform, transform_delta_e
-
     worst, where, reached = 0.0, "", 0.0
     for transform, target, paper in PAPER_PARAMETERS:
         ours = calibrate_transform(transform, target).param
@@ -202,32 +213,23 @@ def _calibration() -> tuple[float, int, str]:
 
 
 def _chart_baseline() -> tuple[float, int, str]:
-    from fidelity.colour.charts import load_chart
-    from fidelity.measure.colour import chart_delta_e
-
     chart = load_chart("safecolor")
     value = chart_delta_e(chart.srgb, chart.lab)
     return abs(value - PAPER_BASELINE_DELTA_E), 1, f"measured {value:.4f}"
 
 
 def _ideal_camera() -> tuple[float, int, str]:
-    from fidelity.camera.render import render_chart
-
-    r = render_chart("ideal", "D65")
+    r = render.render_chart("ideal", "D65")
     return r.measurement.mean_delta_e, 24, f"largest patch {r.measurement.max_delta_e:.4f}"
 
 
 def _renderer() -> tuple[float, int, str]:
-    from fidelity.camera.mitsuba import MitsubaUnavailableError
-    from fidelity.camera.render import render_chart
-    from fidelity.colour.colorimetry import delta_e_2000
-
-    closed = render_chart("ideal", "D65")
+    closed = render.render_chart("ideal", "D65")
     try:
-        mits = render_chart("ideal", "D65", renderer="mitsuba", spp=64, pixels_per_patch=16)
+        mits = render.render_chart("ideal", "D65", renderer="mitsuba", spp=64, pixels_per_patch=16)
     except (ImportError, MitsubaUnavailableError) as exc:
         raise CheckNotRunError(f"Mitsuba 3 does not render here ({exc})") from None
-    d = delta_e_2000(closed.measurement.lab, mits.measurement.lab)
+    d = cm.delta_e_2000(closed.measurement.lab, mits.measurement.lab)
     return float(np.mean(d)), int(d.size), (f"Mitsuba {mits.variant}, 64 samples per pixel; "
                                             f"largest patch {float(np.max(d)):.4f}")
 
@@ -241,9 +243,6 @@ def synthetic_photo(corners: Sequence[Sequence[float]], patch_px: int = 64, seed
     pixel centres at integer coordinates), and the painted codes ``(24, 3)`` / 255.
     ``corners``: where the chart's outer corners go (clockwise from dark skin's)."""
     import cv2
-
-    from fidelity.camera.render import ChartLayout
-    from fidelity.colour.charts import load_chart
 
     chart = load_chart("safecolor")
     layout = ChartLayout.for_patch_size(patch_px)
@@ -278,12 +277,6 @@ def _audit_scenes() -> list[tuple[float, float, float]]:
     ``safecolor``): (corner error in % of the patch pitch, measured mean ΔE00, the painted
     colours' mean ΔE00). Run once for both checks that read them in one :func:`qualify`."""
     if not _AUDITS:
-        from fidelity.chart.image import write_png
-        from fidelity.colour.charts import load_chart
-        from fidelity.measure.colour import chart_delta_e
-        from fidelity.pipeline.check import audit_image
-        from fidelity.pipeline.records import ImageSource
-
         lab = load_chart("safecolor").lab
         with tempfile.TemporaryDirectory(prefix="fidelity-qualify-") as tmp:
             for k, corners in enumerate(FINDER_SCENES):
@@ -352,8 +345,6 @@ def _ocio_input() -> tuple[float, int, str]:
         import PyOpenColorIO  # noqa: F401
     except ImportError:
         raise CheckNotRunError("OpenColorIO is not installed (the ocio extra)") from None
-    from fidelity.chart.ocio import DEFAULT_CONFIG, convert
-    from fidelity.colour.colorimetry import matrix_chromatic_adaptation, normalised_primary_matrix
 
     def white(xy: tuple[float, float]) -> np.ndarray:
         return np.array([xy[0] / xy[1], 1.0, (1.0 - xy[0] - xy[1]) / xy[1]])
@@ -364,7 +355,7 @@ def _ocio_input() -> tuple[float, int, str]:
     greys = (0.001, 0.005, 0.0078125, 0.02, 0.18, 0.5, 1.0, 4.0)  # the toe, its end, the log
     linear = np.array([(g, g, g) for g in greys] + [(0.18, 0.05, 0.02), (0.02, 0.18, 0.05),
                                                      (0.05, 0.02, 0.18), (0.6, 0.3, 0.1)])
-    got, how = convert(acescct_encode(linear)[None].astype(np.float32), "ACEScct",
+    got, how = ocio.convert(acescct_encode(linear)[None].astype(np.float32), "ACEScct",
                        DEFAULT_CONFIG)
     want = linear @ matrix.T
     rel = np.abs(got[0] - want) / np.maximum(np.abs(want).max(axis=-1, keepdims=True), 1e-3)
@@ -374,8 +365,8 @@ def _ocio_input() -> tuple[float, int, str]:
 
 def _coco_scoring() -> tuple[float, int, str]:
     try:
-        from fidelity.coco.detectors import COCO80_CATEGORY_IDS, COCO80_NAMES
-        from fidelity.coco.scoring import coco_from_dict, evaluate_detections, scorer_available
+        from fidelity.coco.detectors import COCO80_CATEGORY_IDS, COCO80_NAMES  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
+        from fidelity.coco.scoring import coco_from_dict, evaluate_detections, scorer_available  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
     except ImportError as exc:
         raise CheckNotRunError(f"the coco extra is not installed ({exc})") from None
     methods = [m for m in ("pycocotools", "faster-coco-eval") if scorer_available(m)]
@@ -402,8 +393,6 @@ def _coco_scoring() -> tuple[float, int, str]:
 
 def _record_digest(path: Path) -> str:
     """A file's SHA-256 as a wheel's RECORD writes it (URL-safe base64, no padding)."""
-    from fidelity.core.fileio import file_sha256
-
     digest = bytes.fromhex(file_sha256(path))
     return base64.urlsafe_b64encode(digest).rstrip(b"=").decode()
 
@@ -414,8 +403,6 @@ def installed_files(dist: metadata.Distribution) -> tuple[int, list[str]]:
     written outside the package for the interpreter at hand, are not checked): how many were
     checked, and each one changed or missing (``"path: changed"``). Raises :class:`CheckNotRunError` for an editable install
     or a distribution without a ``RECORD``."""
-    import json
-
     direct = dist.read_text("direct_url.json")
     if direct and json.loads(direct).get("dir_info", {}).get("editable"):
         raise CheckNotRunError("an editable install: the package is its source checkout, "

@@ -44,16 +44,20 @@ import os
 import platform
 import sys
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from fidelity.chart.find.result import ChartChecks, FoundChart
 from fidelity.chart.image import ImageInfo
-from fidelity.chart.locate import ChartLocation
-from fidelity.core.fileio import JSONObject
+from fidelity.chart.locate import ChartLocation, locate_chart
+from fidelity.core.errors import InvalidValueError
+from fidelity.core.fileio import JSONObject, file_sha256
+from fidelity.core.resources import resource_dir
+from fidelity.core.version import __version__, installed_version
 from fidelity.measure.blindspots import BlindSpot
 from fidelity.measure.colour import ChartMeasurement
 from fidelity.measure.pixels import BadPixels
@@ -75,8 +79,6 @@ COMMANDS = ("audit", "check", "compare", "gate")
 
 def report_schema_path() -> Path:
     """Path of the JSON Schema of the report."""
-    from fidelity.core.resources import resource_dir
-
     return resource_dir("data") / "schemas" / "report.schema.json"
 
 
@@ -124,8 +126,6 @@ class ImageSource:
     def from_json(cls, source: Mapping[str, Any], details: Mapping[str, Any]) -> ImageSource:
         """The source of a report's ``source`` and ``details``; the sampling windows are
         located again from the corners (:func:`fidelity.chart.locate.locate_chart`)."""
-        from fidelity.chart.locate import locate_chart
-
         info = ImageInfo.from_json(source)
         corners = np.asarray(source["corners"], dtype=np.float64)
         loc = details["location"]
@@ -133,7 +133,6 @@ class ImageSource:
         location = locate_chart(corners, (info.height, info.width), rows=rows_cols[0],
                                 cols=rows_cols[1], window=float(loc["window_pitch_fraction"]),
                                 min_pixels=1)
-        from fidelity.chart.find.result import ChartChecks, FoundChart
 
         found = source.get("corners_found")
         checks = source.get("corner_checks")
@@ -248,8 +247,6 @@ class TableRef:
     def of_file(cls, name: str, path: str | os.PathLike[str] | None,
                 kind: str | None = None) -> TableRef:
         """The reference of a table file (its sha256 read now; None when unreadable)."""
-        from fidelity.core.fileio import file_sha256
-
         digest = None
         if path:
             try:
@@ -306,9 +303,6 @@ class Provenance:
     def collect(cls, input_sha256: str | None, prediction: Prediction | None,
                 conventions: Mapping[str, Any]) -> Provenance:
         """The provenance of a report made now, on this machine."""
-        from fidelity.core.resources import resource_dir
-        from fidelity.core.version import __version__, installed_version
-
         libraries: dict[str, str] = {}
         for name in _LIBRARIES:
             found = installed_version(name)
@@ -465,7 +459,7 @@ class ChartReport:
 def _measured_from_json(items: Sequence[Mapping[str, Any]]) -> tuple[MeasuredLoss, ...]:
     if not items:
         return ()
-    from fidelity.coco.measure import MeasuredLoss
+    from fidelity.coco.measure import MeasuredLoss  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
 
     return tuple(MeasuredLoss.from_json(m) for m in items)
 
@@ -474,8 +468,6 @@ def validate_report(data: Mapping[str, Any]) -> None:
     """Check a JSON report against :func:`report_schema`; raises
     :class:`~fidelity.core.errors.InvalidValueError` naming the first violation."""
     import jsonschema
-
-    from fidelity.core.errors import InvalidValueError
 
     try:
         jsonschema.validate(dict(data), report_schema())
@@ -622,8 +614,6 @@ class ComparisonReport:
     def as_chart_report(self) -> ChartReport:
         """The sim-to-real result as a :class:`ChartReport` of the
         simulated image whose reference is the real chart (for JUnit and the verdict line)."""
-        from dataclasses import replace
-
 
         src = self.sim.source
         assert isinstance(src, ImageSource)
@@ -639,8 +629,7 @@ class ComparisonReport:
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> ComparisonReport:
         """Inverse of :meth:`to_json`."""
-        from fidelity.coco.measure import MeasuredLoss
-        from fidelity.measure.colour import ChartMeasurement
+        from fidelity.coco.measure import MeasuredLoss  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
 
         s2r = d["sim_to_real"]
         return cls(

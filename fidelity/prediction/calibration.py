@@ -23,6 +23,7 @@ the largest ΔE the transform reaches in its range.
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass
@@ -348,8 +349,6 @@ def calibration_table(
 
 def load_calibration_table(path: str | Path | None = None) -> CalibrationTable:
     """The shipped SAFE-COLOR calibration table (package data), or a table from a JSON file."""
-    import json
-
     p = Path(path) if path is not None else resource_dir("data") / DEFAULT_TABLE_FILE
     try:
         doc = json.loads(p.read_text(encoding="utf-8"))

@@ -13,6 +13,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from fidelity.prediction.calibration import calibrate_transform, load_calibration_table
+from fidelity.prediction.transforms import TRANSFORMS
+
 
 @dataclass(frozen=True)
 class TransformParameter:
@@ -63,10 +66,7 @@ def transform_parameters(delta_e: float, calibration: Any = None, *,
     reported as unreachable (``param: null``), not as a number.
     """
     if calibration is None:
-        from fidelity.prediction.calibration import load_calibration_table
-
         calibration = load_calibration_table()
-    from fidelity.prediction.transforms import TRANSFORMS
 
     baseline = float(calibration.baseline_delta_e)
     by_transform: dict[str, list[Any]] = {}
@@ -99,8 +99,6 @@ def transform_parameters(delta_e: float, calibration: Any = None, *,
         elif delta_e <= baseline:
             row.update(method=f"unreachable: at or below the chart's baseline ΔE {baseline:.4g}")
         elif solve:
-            from fidelity.prediction.calibration import calibrate_transform
-
             entry = calibrate_transform(name, delta_e)
             if entry.reachable and entry.param is not None:
                 row.update(param=float(entry.param), reachable=True, method="solved")

@@ -66,9 +66,23 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.colour.charts import DEFAULT_CHART, load_chart
+from fidelity.colour.colorimetry import delta_e_2000, lab_to_srgb, srgb_to_lab
+from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
 from fidelity.core.fileio import cached_while_unchanged
+from fidelity.prediction import transforms as tr
+from fidelity.prediction.calibration import load_calibration_table
+from fidelity.prediction.interpolate import predict_curve
 from fidelity.prediction.scalar import bounded_minimum
+from fidelity.prediction.table import predict
+from fidelity.prediction.tablefile import (
+    CLASS_COLUMNS,
+    TableKind,
+    load_prediction_table,
+    parse_prediction_table,
+)
+from fidelity.prediction.transforms import TRANSFORMS
+from fidelity.prediction.verdict import SIMPLE, evaluate, judge_value
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -137,8 +151,6 @@ class FitSpec:
 
 
 def _fit_specs() -> dict[str, FitSpec]:
-    from fidelity.prediction import transforms as tr
-
     return {s.name: s for s in (
         FitSpec("brightness", "tone", tr.brightness, -1.0, 1.0, 0.0),
         FitSpec("gamma", "tone", tr.gamma, 0.01, 10.0, 1.0, "log"),
@@ -253,8 +265,6 @@ def error_parts(reference_lab: ArrayLike, lab: ArrayLike) -> ErrorParts:
     G. Sharma, W. Wu, E. N. Dalal, Color Res. Appl. 30(1), 21-30, 2005 (the CIEDE2000
     terms, eq. 1-22).
     """
-    from fidelity.colour.colorimetry import delta_e_2000
-
     ref, meas = np.asarray(reference_lab, np.float64), np.asarray(lab, np.float64)
     lt, c, h, _ = delta_e_2000_terms(ref, meas)
     de = np.asarray(delta_e_2000(meas, ref), np.float64)
@@ -303,8 +313,6 @@ class FamilyFit:
 
 
 def _reference_srgb(reference_lab: F64) -> F64:
-    from fidelity.colour.colorimetry import lab_to_srgb
-
     return np.clip(np.asarray(lab_to_srgb(reference_lab), np.float64), 0.0, 1.0)
 
 
@@ -317,8 +325,6 @@ def fit_family(reference_lab: ArrayLike, lab: ArrayLike, fit: str,
     a bounded Brent minimisation around the best one
     (:func:`fidelity.prediction.scalar.bounded_minimum`, the algorithm of SciPy's
     ``minimize_scalar(method="bounded")``)."""
-    from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
-
     specs = _fit_specs()
     if fit not in specs:
         raise unknown_name("fitted transform", fit, specs)
@@ -363,8 +369,6 @@ def fit_families(reference_lab: ArrayLike, lab: ArrayLike) -> list[FamilyFit]:
 
 def fitted_lab(reference_lab: ArrayLike, fit: FamilyFit) -> F64:
     """The reference chart through a fitted transform, as Lab (n, 3)."""
-    from fidelity.colour.colorimetry import srgb_to_lab
-
     spec = _fit_specs()[fit.fit]
     src = _reference_srgb(np.asarray(reference_lab, np.float64))
     return np.asarray(srgb_to_lab(spec.function(src, fit.param)), np.float64)
@@ -374,11 +378,6 @@ def family_shares(calibration: Any = None, chart: str | None = None
                   ) -> dict[str, dict[str, float]]:
     """What each SAFE-COLOR transform moves on the calibration chart: the mean lightness,
     chroma and hue shares of its chart error over its calibrated targets (by transform)."""
-    from fidelity.colour.charts import DEFAULT_CHART, load_chart
-    from fidelity.colour.colorimetry import srgb_to_lab
-    from fidelity.prediction.calibration import load_calibration_table
-    from fidelity.prediction.transforms import TRANSFORMS
-
     cal = calibration if calibration is not None else load_calibration_table()
     ch = load_chart(chart or DEFAULT_CHART)
     acc: dict[str, list[dict[str, float]]] = {}
@@ -425,8 +424,6 @@ def load_directional_table(name_or_path: str | None = None) -> DirectionalTable:
     """Load a direction-aware table (registry name or JSON path; None:
     :data:`DEFAULT_DIRECTIONAL_TABLE`). A prediction table without ``families`` is an error
     naming it."""
-    from fidelity.prediction.tablefile import load_prediction_table
-
     classic = load_prediction_table(name_or_path or DEFAULT_DIRECTIONAL_TABLE)
     if classic.path is None:
         return _directional_of(classic)
@@ -437,16 +434,11 @@ def load_directional_table(name_or_path: str | None = None) -> DirectionalTable:
 def _directional_file(path: Path) -> DirectionalTable:
     """The direction-aware table in ``path``, built once a process while the file is
     unchanged."""
-    from fidelity.prediction.tablefile import load_prediction_table
-
     return _directional_of(load_prediction_table(path))
 
 
 def _directional_of(classic: PredictionTable) -> DirectionalTable:
     """:func:`load_directional_table` of a loaded table."""
-    from fidelity.core.errors import InputFileError
-    from fidelity.prediction.tablefile import TableKind, parse_prediction_table
-
     fams = classic.raw.get("families")
     if classic.kind is not TableKind.DIRECTIONAL or not isinstance(fams, dict):
         raise InputFileError(f"{classic.path or classic.name}: not a direction-aware table "
@@ -565,8 +557,6 @@ class DirectionalPrediction:
 
     def value(self, cls: str = "all", unit: str = "points") -> float | None:
         """The loss of ``cls`` (``all``, ``person``, ``bicycle``) in ``unit``."""
-        from fidelity.prediction.tablefile import CLASS_COLUMNS
-
         if unit == "relative":
             if cls != "all":
                 raise InvalidValueError(f"--class {cls}: only 'all' has a relative ΔmAP")
@@ -612,9 +602,6 @@ def _family_value(table: DirectionalTable, family: str, column: str, delta_e: fl
                   size: str) -> tuple[float | None, str]:
     """A family curve's loss at ``delta_e``; beyond the family's measured range the classic
     curve's (the classic table's rules, e.g. its total-loss ceiling)."""
-    from fidelity.prediction.interpolate import predict_curve
-    from fidelity.prediction.table import predict
-
     ftab = table.families[family]
     curves, _ = ftab.select(size)
     ends = [float(c.delta_e[~np.isnan(c.values[column])][-1]) for c in curves
@@ -744,8 +731,6 @@ def evaluate_directional(mean_delta_e: float, prediction: DirectionalPrediction,
     criterion does not depend on the bound: :func:`fidelity.prediction.verdict.evaluate`) by
     the ``decision`` rule (default simple; the direction-aware prediction states no
     uncertainty, so a guarded rule takes U = 0)."""
-    from fidelity.prediction.verdict import SIMPLE, evaluate, judge_value
-
     rule = decision or SIMPLE
     if criterion.kind != "max-dmap":
         return evaluate(mean_delta_e, None, criterion, decision=rule,

@@ -27,12 +27,14 @@ and :meth:`ValidatedCameras.camera_checks`: whether a camera model lies among th
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
+from fidelity.core.resources import resource_dir
 from fidelity.prediction.interpolate import ColumnStatus
 from fidelity.prediction.table import Prediction, predict
 
@@ -297,10 +299,6 @@ def _kind_validated(stage: str, kind: str, validated: tuple[str, ...]) -> bool:
 def load_validated_cameras() -> ValidatedCameras | None:
     """The shipped :class:`ValidatedCameras` (:data:`VALIDATED_CAMERAS_FILE`); None when the
     package ships none."""
-    import json
-
-    from fidelity.core.resources import resource_dir
-
     path = resource_dir("data") / VALIDATED_CAMERAS_FILE
     if not path.is_file():
         return None

@@ -17,8 +17,18 @@ from typing import Any
 
 from numpy.typing import NDArray
 
-from fidelity.core.fileio import JSONObject, json_ready
+from fidelity.chart.read import read_again
+from fidelity.colour.colorimetry import delta_e_1976, delta_e_1994
+from fidelity.core.fileio import JSONObject, check_outputs, json_ready, write_json_atomic
+from fidelity.measure.colour import (
+    NOISE_FLOOR,
+    chart_statistics,
+    fit_tone,
+    neutral_patches,
+    patch_snr_db,
+)
 from fidelity.pipeline.records import ChartReport, ImageSource, RenderSource
+from fidelity.report import chartfigures
 from fidelity.report.document import (
     Code,
     Document,
@@ -30,6 +40,7 @@ from fidelity.report.document import (
     svg_figure,
     table,
 )
+from fidelity.report.html import write_document
 from fidelity.report.jsonform import chart_report_json
 from fidelity.report.words import column_note, prediction_notes, verdict_message
 
@@ -40,8 +51,6 @@ def _num(v: float | None, nd: int = 2) -> str:
 
 
 def headline(report: ChartReport) -> Headline:
-    from fidelity.report import chartfigures
-
     figure = svg_figure(chartfigures.swatches(report.measurement), "swatches.svg",
                         "the chart: reference against measured",
                         "Each patch: reference colour (left half) and measured colour (right "
@@ -56,8 +65,6 @@ def headline(report: ChartReport) -> Headline:
 
 
 def summary_facts(report: ChartReport) -> Facts:
-    from fidelity.measure.colour import chart_statistics
-
     u = report.uncertainty
     items = [("mean ΔE00 (chart ΔE)", _num(report.mean_delta_e) if u is None else
               u.value_text()),
@@ -118,8 +125,6 @@ def summary_facts(report: ChartReport) -> Facts:
 def noise_facts(report: ChartReport) -> list[tuple[str, str]]:
     """The noise rows of the summary: the neutral patches' SNR and the worst patch of the
     chart, or "no noise" for a noise-free measurement (none when the noise is unknown)."""
-    from fidelity.measure.colour import NOISE_FLOOR, chart_statistics
-
     stats = chart_statistics(report.measurement)
     label = "noise: signal-to-noise of the neutral patches (encoded sRGB)"
     if stats.noise_free:
@@ -137,8 +142,6 @@ def noise_facts(report: ChartReport) -> list[tuple[str, str]]:
 def tone_facts(report: ChartReport) -> list[tuple[str, str]]:
     """The tone row of the summary: gamma and exposure fitted to the neutral patches
     (:func:`fidelity.measure.colour.fit_tone`)."""
-    from fidelity.measure.colour import fit_tone
-
     fit = fit_tone(report.measurement)
     if fit is None:
         return []
@@ -158,8 +161,6 @@ def bound_words(report: ChartReport) -> str:
 
 
 def directional_section(report: ChartReport) -> Section | None:
-    from fidelity.report import chartfigures
-
     d = report.directional
     if d is None:
         return None
@@ -281,9 +282,6 @@ def patch_section(report: ChartReport) -> Section:
     """Every patch: number and name, ΔE00 and its components, ΔE*ab and ΔE94 (extra
     columns; the verdict is on ΔE00), measured and reference Lab, and the SNR where the noise
     is known."""
-    from fidelity.colour.colorimetry import delta_e_1976, delta_e_1994
-    from fidelity.measure.colour import patch_snr_db
-
     m = report.measurement
     de76 = delta_e_1976(m.reference_lab, m.lab)
     de94 = delta_e_1994(m.reference_lab, m.lab)
@@ -313,8 +311,6 @@ def patch_section(report: ChartReport) -> Section:
 
 def prediction_sections(report: ChartReport, limit_de: float | None,
                          limit_dmap: float | None) -> list[Section]:
-    from fidelity.report import chartfigures
-
     p = report.prediction
     if p is None:
         return []
@@ -340,9 +336,6 @@ def chart_document(report: ChartReport, pixels: NDArray[Any] | None = None) -> D
     chart first, then where the patches were sampled (an image, given its ``pixels``), the ΔE
     heat map, a*b* arrows, the neutral tone curve and ΔE per patch, the prediction; the patch
     table, transforms and provenance folded away."""
-    from fidelity.measure.colour import fit_tone, neutral_patches
-    from fidelity.report import chartfigures
-
     m = report.measurement
     limit_de, limit_dmap = verdict_limits(report)
     sections = [section("Summary", summary_facts(report))]
@@ -394,8 +387,6 @@ def chart_document(report: ChartReport, pixels: NDArray[Any] | None = None) -> D
 def source_pixels(report: ChartReport) -> NDArray[Any] | None:
     """The pixels of an image report's image, read again as the audit read it (None for a
     render): the HTML shows where the patches were sampled."""
-    from fidelity.chart.read import read_again
-
     src = report.source
     if not isinstance(src, ImageSource):
         return None
@@ -410,16 +401,12 @@ def write_report_files(json_document: Callable[[], JSONObject],
     """Write a report's JSON and/or HTML atomically, refusing to write over any path in
     ``protect`` (the inputs); each document is made only when its file is asked for. Returns
     the paths written."""
-    from fidelity.core.fileio import check_outputs, write_json_atomic
-
     inputs = {f"input {i + 1}": p for i, p in enumerate(protect) if p}
     written: list[Path] = []
     if json_path is not None:
         check_outputs({"report": json_path}, inputs)
         written.append(write_json_atomic(json_path, json_document()))
     if html_path is not None:
-        from fidelity.report.html import write_document
-
         check_outputs({"report": html_path}, inputs)
         written += write_document(html_document(), html=html_path)
     return written

@@ -26,7 +26,20 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fidelity.report.svg import COLOURS, Axes, Canvas, Scale, hex_colour, luminance, magma_r
+from fidelity.chart.locate import CORNER_PATCHES, apply_homography
+from fidelity.colour import colorimetry as cm
+from fidelity.prediction.directional import load_directional_table
+from fidelity.prediction.interpolate import predict_curve
+from fidelity.report.svg import (
+    COLOURS,
+    Axes,
+    Canvas,
+    Scale,
+    hex_colour,
+    luminance,
+    magma_r,
+    png_data_uri,
+)
 
 if TYPE_CHECKING:
     from fidelity.chart.locate import ChartLocation
@@ -204,8 +217,6 @@ def tone_curve(m: ChartMeasurement, neutral_indices: Sequence[int],
     """Measured against reference L* of the neutral patches (the grey-scale tone curve),
     with the identity and, given ``fit``, the fitted power law
     (:class:`~fidelity.measure.colour.ToneFit`) drawn through them."""
-    from fidelity.colour import colorimetry as cm
-
     idx = list(neutral_indices)
     size = 440.0
     c = Canvas(size, size + 10, "tone curve of the neutral patches")
@@ -241,8 +252,6 @@ def _display(pixels: NDArray[Any], encoding: str, exposure_ev: float
              ) -> tuple[NDArray[np.float64], float]:
     """The image box-averaged to at most :data:`IMAGE_PX` on its long side, shown as sRGB
     (linear pixels at ``2**exposure_ev``, NaN/Inf black); and the scale factor used."""
-    from fidelity.colour import colorimetry as cm
-
     arr = np.asarray(pixels)
     if arr.ndim == 2:
         arr = arr[:, :, None]
@@ -265,8 +274,6 @@ def _display(pixels: NDArray[Any], encoding: str, exposure_ev: float
 def _windows(c: Canvas, location: ChartLocation, scale: float, dx: float, dy: float,
              numbers: bool) -> None:
     """Outline every sampling window (white and dashed black) and number it."""
-    from fidelity.chart.locate import apply_homography
-
     half = location.window / 2.0
     square = np.array([[-half, -half], [half, -half], [half, half], [-half, half]])
     for k in range(location.rows * location.cols):
@@ -286,9 +293,6 @@ def chart_location(pixels: NDArray[Any], location: ChartLocation, *, encoding: s
     """The image with every patch's sampling window outlined and numbered; the corner patches
     are named, so a wrong orientation or a grid off the patches is seen at once. Linear pixels
     are shown at the audit's exposure (``2**exposure_ev``), sRGB-encoded; NaN/Inf as black."""
-    from fidelity.chart.locate import CORNER_PATCHES
-    from fidelity.report.svg import png_data_uri
-
     img, scale = _display(pixels, encoding, exposure_ev)
     h, w = img.shape[:2]
     # shown at IMAGE_PX wide at most; small images are enlarged to at least 480 px
@@ -311,9 +315,6 @@ def chart_pair(left: tuple[NDArray[Any], ChartLocation, str, float],
                titles: tuple[str, str] = ("simulation", "real camera")) -> str:
     """Two charts side by side, each cropped to its chart with the sampling windows drawn:
     ``(pixels, location, encoding, exposure_ev)`` for each."""
-    from fidelity.chart.locate import apply_homography
-    from fidelity.report.svg import png_data_uri
-
     panel, gap, top = 440.0, 20.0, 30.0
     c = Canvas(2 * panel + gap, panel * 0.75 + top, "the two charts")
     for i, ((pixels, loc, encoding, ev), title) in enumerate(zip((left, right), titles,
@@ -358,8 +359,6 @@ def prediction_curve(prediction: Prediction, limit_dmap: float | None = None,
                      limit_delta_e: float | None = None) -> str:
     """The table's ΔE → loss curves with this chart's point on each; a ΔmAP limit as a
     horizontal line, a ΔE limit as a vertical one (symlog loss axis: linear below 1)."""
-    from fidelity.prediction.interpolate import predict_curve
-
     de = prediction.delta_e
     xmax = max(30.0, de * 1.2, (limit_delta_e or 0.0) * 1.2)
     grid = np.linspace(0.0, xmax, 301)
@@ -406,9 +405,6 @@ def family_curves(directional: DirectionalPrediction, classic: Prediction | None
     """The direction-aware table's family curves (worst case of each transform family, line
     width growing with its weight) and the classic curve (worst over every transform), with
     this chart's classic and direction-aware predictions at its ΔE."""
-    from fidelity.prediction.directional import load_directional_table
-    from fidelity.prediction.interpolate import predict_curve
-
     tab = load_directional_table(directional.table.get("path") or directional.table["name"])
     de = directional.delta_e
     xmax = max(24.0, de * 1.2)

@@ -18,6 +18,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fidelity.coco.tables.colour import LIMIT_BUDGETS, PAPER_THRESHOLDS
+from fidelity.coco.tables.prediction import prediction_table, standard_error_methods
+from fidelity.coco.tables.provenance import STANDARD_ERROR_WORDS, earlier_runs, scorer_words
+from fidelity.core.fileio import json_ready, write_json_atomic
+from fidelity.prediction.table import limit_rounded_down
+from fidelity.report import cocofigures as cf
 from fidelity.report.document import (
     Block,
     Document,
@@ -31,6 +37,7 @@ from fidelity.report.document import (
     table,
 )
 from fidelity.report.format import listing, number, words
+from fidelity.report.html import write_document
 
 if TYPE_CHECKING:
     from fidelity.coco.tables.build import ModelSummary, Tables
@@ -57,8 +64,6 @@ def map_vs_delta_e_figure(model: str) -> str:
 def tables_figures(tables: Tables) -> dict[str, Figure]:
     """Every figure of the report by file name: the worst case, then mAP against ΔE per model
     (SVG, :mod:`fidelity.report.cocofigures`)."""
-    from fidelity.report import cocofigures as cf
-
     out = {WORST_CASE_FIGURE: svg_figure(
         cf.worst_case_plot(tables), WORST_CASE_FIGURE,
         "worst-case ΔmAP against chart ΔE per model",
@@ -140,8 +145,6 @@ def _loss(value: float | None, se: float | None = None) -> str:
 
 
 def _limit_cell(status: str, delta_e: float | None) -> str:
-    from fidelity.prediction.table import limit_rounded_down
-
     if status == "none" or delta_e is None:
         return "none"
     return f"{limit_rounded_down(delta_e):.2f}" + ("+" if status == "whole-range" else "")
@@ -154,8 +157,6 @@ def _limit_cell(status: str, delta_e: float | None) -> str:
 
 def headline(tables: Tables, figure: Figure | None = None) -> Headline:
     """The main finding: every model's worst relative ΔmAP at SAFE-COLOR's thresholds."""
-    from fidelity.coco.tables.colour import PAPER_THRESHOLDS
-
     lines = ["**Worst-case mAP loss (% of the baseline) at SAFE-COLOR's thresholds** (the "
              "paper: " + ", ".join(f"< {b:g} % up to ΔE {lim}" for lim, b in PAPER_THRESHOLDS)
              + "):", ""]
@@ -175,8 +176,6 @@ def headline(tables: Tables, figure: Figure | None = None) -> Headline:
 
 
 def _run_section(tables: Tables) -> Section:
-    from fidelity.coco.tables.provenance import earlier_runs
-
     meta = tables.meta
     d = meta.get("data") or {}
     facts = [("cells finished", f"{tables.cells_done} done, {tables.cells_unreachable} "
@@ -253,8 +252,6 @@ def _targets(tables: Tables, grid: Mapping[str, Any]) -> list[float]:
 
 
 def _limits_section(limits: Sequence[CurveLimits]) -> Section | None:
-    from fidelity.coco.tables.colour import LIMIT_BUDGETS
-
     if not limits:
         return None
     head = [f"≤ {b:g} %" if c == "dmap_relative" else f"≤ {b:g} pts" for c, b in LIMIT_BUDGETS]
@@ -324,8 +321,6 @@ def _models_section(tables: Tables) -> Section:
 
 
 def _method_section(tables: Tables) -> Section:
-    from fidelity.coco.tables.provenance import scorer_words
-
     runs = "\n".join(_model_run_line(m, info, bool(
         tables.aligned[m].capped if m in tables.aligned else False))
         for m, info in tables.models.items())
@@ -354,8 +349,6 @@ def _standard_error_text(tables: Tables) -> Text | None:
                if r.errors is not None and r.errors.dmap_points is not None]
            for m, rows in tables.cells.items()}
     medians = ", ".join(f"{m} {float(np.median(s)):.2f}" for m, s in ses.items() if s)
-    from fidelity.coco.tables.prediction import standard_error_methods
-    from fidelity.coco.tables.provenance import STANDARD_ERROR_WORDS
 
     methods = standard_error_methods(tables)
     how = "; ".join(f"{m}: {STANDARD_ERROR_WORDS[k]}" for m, k in methods.items())
@@ -433,8 +426,6 @@ def write_tables_document(result: TablesResult, out_dir: str | os.PathLike[str]
                           ) -> dict[str, Path]:
     """Write ``report.html`` and ``report.md`` with its SVG figures (atomically); the report
     alone, e.g. rebuilt from a ``tables.json`` (:meth:`TablesResult.from_json`)."""
-    from fidelity.report.html import write_document
-
     out = Path(out_dir)
     return {p.name: p for p in write_document(tables_document(result), html=out / "report.html",
                                               markdown=out / "report.md")}
@@ -445,9 +436,6 @@ def write_tables_report(result: TablesResult, out_dir: str | os.PathLike[str],
                         name: str = "coco1000-measured") -> dict[str, Path]:
     """Write the report (:func:`write_tables_document`), ``tables.json`` and (optionally) the
     measured prediction table, atomically. Returns the paths by name."""
-    from fidelity.coco.tables.prediction import prediction_table
-    from fidelity.core.fileio import json_ready, write_json_atomic
-
     out = Path(out_dir)
     written = write_tables_document(result, out)
     written["tables.json"] = write_json_atomic(out / "tables.json", result.to_json())

@@ -16,6 +16,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from fidelity.core.fileio import write_json_atomic
+from fidelity.report import cocofigures as cf
 from fidelity.report.document import (
     Document,
     Figure,
@@ -27,6 +29,7 @@ from fidelity.report.document import (
     table,
 )
 from fidelity.report.format import number
+from fidelity.report.html import write_document
 
 if TYPE_CHECKING:
     from fidelity.coco.corruptions import CocoCResults, CorruptionCell
@@ -53,8 +56,6 @@ def predictions(cell: CorruptionCell) -> dict[str, float | None]:
 def cococ_figures(results: CocoCResults, preds: Mapping[tuple[str, int], Mapping[str, Any]]
                   ) -> dict[str, Figure]:
     """Every figure by file name (SVG, :mod:`fidelity.report.cocofigures`)."""
-    from fidelity.report import cocofigures as cf
-
     out = {DELTA_E_FIGURE: svg_figure(cf.cococ_delta_e_plot(results), DELTA_E_FIGURE,
                                       "chart ΔE against COCO-C severity",
                                       "Each corruption applied to the calibration chart as an "
@@ -175,9 +176,6 @@ def write_cococ_report(results: CocoCResults, out_dir: str | os.PathLike[str],
     """Write ``cococ.html``, ``cococ.md`` (with its figures) and ``cococ.json`` into
     ``out_dir``, and the shipped data file ``data`` when given (its input paths cut to their
     names: :meth:`~fidelity.coco.corruptions.CocoCResults.without_locations`); atomically."""
-    from fidelity.core.fileio import write_json_atomic
-    from fidelity.report.html import write_document
-
     out = Path(out_dir)
     written = write_document(cococ_document(results, notes), html=out / "cococ.html",
                              markdown=out / "cococ.md")

@@ -17,6 +17,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fidelity.coco.tables.colour import PAPER_THRESHOLDS
+from fidelity.prediction.interpolate import predict_curve
 from fidelity.report.svg import (
     COLOURS,
     MARKERS,
@@ -71,8 +73,6 @@ def paper_step() -> tuple[_F, _F]:
     """SAFE-COLOR's bound on the relative ΔmAP (%) as a step through its thresholds
     (:data:`fidelity.coco.tables.colour.PAPER_THRESHOLDS`: 1 % up to ΔE 3, 3 % to 6, 10 % to
     12)."""
-    from fidelity.coco.tables.colour import PAPER_THRESHOLDS
-
     x, y, start = [], [], 0.0
     for limit, bound in PAPER_THRESHOLDS:
         x += [start, float(limit)]
@@ -191,8 +191,6 @@ def cococ_loss_plot(results: CocoCResults,
     """Measured ΔmAP (points, ±2 SE) of each corruption and severity at its chart ΔE, per
     detector (marker shape), with the classic worst-case curve (coco1000-measured, size n)
     and each cell's direction-aware prediction (dashed, crosses); symlog loss axis."""
-    from fidelity.prediction.interpolate import predict_curve
-
     xmax = max([x.chart_delta_e for x in results.cells] + [6.0]) * 1.08
     grid = np.linspace(0.0, xmax, 400)
     classic = predict_curve(grid, "dmap_points", size="n")

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from fidelity.core.fileio import json_ready
 from fidelity.pipeline.records import ComparisonReport, ImageSource
+from fidelity.report import chartfigures
 from fidelity.report.chart import (
     blind_spot_section,
     directional_section,
@@ -83,7 +84,6 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
     then the two charts side by side, the sim-to-real ΔE map, the a*b* arrows from the
     simulated to the real colours, the direction of each difference, the predictions, each
     chart's own audit and the provenance."""
-    from fidelity.report import chartfigures
     m = report.measurement
     v = report.verdict
     swatch = svg_figure(chartfigures.swatches(m, ("real camera", "simulation")),

@@ -34,6 +34,8 @@ measured again.
 from __future__ import annotations
 
 import hashlib
+import importlib.util
+import json
 import os
 import platform
 import subprocess
@@ -41,14 +43,27 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from fidelity.core.fileio import JSONObject, json_ready
+from fidelity.camera.model import available_cameras, camera_files
+from fidelity.core.errors import InvalidValueError
+from fidelity.core.fileio import (
+    JSONObject,
+    display_path,
+    file_sha256,
+    json_ready,
+    write_json_atomic,
+)
+from fidelity.core.resources import resource_dir
+from fidelity.core.version import __version__
 from fidelity.pipeline.records import (
     ChartReport,
     ComparisonReport,
     ImageSource,
+    Provenance,
     RenderSource,
     utc_now,
 )
+from fidelity.prediction.interval import validity_domain
+from fidelity.report.jsonform import fit_json, verdict_json
 
 if TYPE_CHECKING:
     from fidelity.pipeline.fit import FitReport
@@ -78,15 +93,11 @@ PathArg = str | os.PathLike[str]
 
 def evidence_schema_path() -> Path:
     """Path of the JSON Schema of the credibility record."""
-    from fidelity.core.resources import resource_dir
-
     return resource_dir("data") / "schemas" / "evidence.schema.json"
 
 
 def evidence_schema() -> JSONObject:
     """The JSON Schema (draft 2020-12) of the credibility record."""
-    import json
-
     schema: JSONObject = json.loads(evidence_schema_path().read_text(encoding="utf-8"))
     return schema
 
@@ -124,8 +135,6 @@ def git_commit(folder: Path | None = None) -> tuple[str | None, bool | None]:
 
 def tool_record() -> dict[str, Any]:
     """``tool``: name, version, commit, dirty, code_sha256."""
-    from fidelity.core.version import __version__
-
     commit, dirty = git_commit()
     return {"name": "fidelity", "distribution": "camera-fidelity", "version": __version__,
             "commit": commit, "dirty": dirty, "code_sha256": code_sha256()}
@@ -134,8 +143,6 @@ def tool_record() -> dict[str, Any]:
 def environment_record() -> dict[str, Any]:
     """``environment``: Python, platform, machine and the versions of the libraries a report
     records (:meth:`fidelity.pipeline.records.Provenance.collect`)."""
-    from fidelity.pipeline.records import Provenance
-
     libraries = Provenance.collect(None, None, {}).libraries
     return {"python": platform.python_version(), "implementation":
             platform.python_implementation(), "platform": platform.platform(),
@@ -146,8 +153,6 @@ def invocation_record(argv: Sequence[str], settings: PathArg | None = None,
                       cwd: PathArg | None = None) -> dict[str, Any]:
     """``invocation``: the command line ``argv`` (after ``fidelity``), the folder it ran in
     (default: the current one) and the settings file read (path and SHA-256; None)."""
-    from fidelity.core.fileio import file_sha256
-
     folder = os.fsdecode(cwd) if cwd is not None else os.getcwd()
     read = None
     if settings is not None:
@@ -162,8 +167,6 @@ def invocation_record(argv: Sequence[str], settings: PathArg | None = None,
 
 def _file_input(role: str, path: str | os.PathLike[str], sha256: str | None = None,
                 provenance: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    from fidelity.core.fileio import file_sha256
-
     digest = sha256
     if digest is None:
         try:
@@ -190,8 +193,6 @@ def _inputs(report: ChartReport) -> list[dict[str, Any]]:
                 "name": info.ocio.config_name, "cache_id": info.ocio.config_id}))
         return inputs
     assert isinstance(src, RenderSource)
-    from fidelity.camera.model import available_cameras, camera_files
-    from fidelity.core.resources import resource_dir
 
     out = []
     source = str(src.camera_settings.get("source", src.camera))
@@ -223,8 +224,6 @@ def _table(report: ChartReport) -> dict[str, Any] | None:
 
 
 def _subject(subject: str, report: ChartReport | None, error: str | None) -> dict[str, Any]:
-    from fidelity.report.jsonform import verdict_json
-
     if report is None:
         return {"subject": subject, "error": error or "no report", "inputs": [],
                 "reference": None, "prediction_table": None, "measurement": None,
@@ -304,10 +303,6 @@ def fit_evidence_record(report: FitReport, exit_code: int = 0,
     (:func:`fidelity.report.jsonform.fit_json`: before/after, fitted and cross-validated ΔE00,
     the ``.cube``'s check, the model) and the SHA-256 of every file written. A fit has no
     verdict; its validity domain is the prediction table's."""
-    from fidelity.core.fileio import file_sha256
-    from fidelity.prediction.interval import validity_domain
-    from fidelity.report.jsonform import fit_json
-
     p = report.prediction_after
     validity = validity_domain(p)
     files: dict[str, dict[str, str | None]] = {}
@@ -367,11 +362,6 @@ def evidence_format(path: PathArg) -> str:
     (``.json``, ``.srmd``, ``.stmd``, ``.xqar``, any case). An unknown suffix, or a format whose
     library is missing (the ``ssp`` or ``qc`` extra), is an :class:`InvalidValueError`
     naming the file."""
-    import importlib.util
-
-    from fidelity.core.errors import InvalidValueError
-    from fidelity.core.fileio import display_path
-
     suffix = Path(path).suffix.lower()
     if suffix not in EVIDENCE_FORMATS:
         raise InvalidValueError(
@@ -385,25 +375,23 @@ def evidence_format(path: PathArg) -> str:
 
 
 def _write_json(path: PathArg, record: JSONObject, results: Sequence[PathArg]) -> Path:
-    from fidelity.core.fileio import write_json_atomic
-
     return write_json_atomic(path, record)
 
 
 def _write_srmd(path: PathArg, record: JSONObject, results: Sequence[PathArg]) -> Path:
-    from fidelity.report.ssp import write_srmd
+    from fidelity.report.ssp import write_srmd  # noqa: PLC0415 (needs the [ssp] extra)
 
     return write_srmd(path, record, results)
 
 
 def _write_stmd(path: PathArg, record: JSONObject, results: Sequence[PathArg]) -> Path:
-    from fidelity.report.ssp import write_stmd
+    from fidelity.report.ssp import write_stmd  # noqa: PLC0415 (needs the [ssp] extra)
 
     return write_stmd(path, record, results)
 
 
 def _write_xqar(path: PathArg, record: JSONObject, results: Sequence[PathArg]) -> Path:
-    from fidelity.report.xqar import write_xqar
+    from fidelity.report.xqar import write_xqar  # noqa: PLC0415 (needs the [qc] extra)
 
     return write_xqar(path, record, results)
 

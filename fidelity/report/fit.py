@@ -16,6 +16,7 @@ import numpy as np
 
 from fidelity.core.fileio import json_ready
 from fidelity.pipeline.fit import EXPRESSED_DELTA_E, FitReport, SharedFit
+from fidelity.report import chartfigures
 from fidelity.report.chart import write_report_files
 from fidelity.report.document import (
     Code,
@@ -86,8 +87,6 @@ def fit_lines(report: FitReport) -> list[str]:
 
 def fit_document(report: FitReport) -> Document:
     """The fit as a :class:`~fidelity.report.document.Document`."""
-    from fidelity.report import chartfigures
-
     c, b, a, lut = report.correction, report.before, report.after, report.lut
     after_fig = svg_figure(chartfigures.swatches(a, ("real camera", "corrected simulation")),
                            "after.svg", "real camera (left half) against the corrected simulation "
@@ -173,8 +172,6 @@ def shared_fit_lines(shared: SharedFit) -> list[str]:
 def shared_fit_document(shared: SharedFit) -> Document:
     """A fit over illuminants as a :class:`~fidelity.report.document.Document`: the matrix,
     a table of the pairs, and each pair's before/after swatches."""
-    from fidelity.report import chartfigures
-
     worst = max(shared.reports, key=lambda r: r.after.mean_delta_e)
     head = Headline(f"one matrix over {len(shared.reports)} illuminants: sim-to-real ΔE00 after "
                     f"at most **{worst.after.mean_delta_e:.2f}** (mean over the chart, "

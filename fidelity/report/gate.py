@@ -27,6 +27,7 @@ from fidelity.report.document import (
     svg_figure,
     table,
 )
+from fidelity.report.html import write_document
 from fidelity.report.svg import COLOURS, Axes, Canvas, Scale, nice_ticks
 
 #: The overview page's name, in the folder of the subjects' HTML reports.
@@ -178,8 +179,6 @@ def write_gate_overview(path: str | os.PathLike[str], cases: Sequence[GateResult
     """Write the overview page to ``path`` (atomically), linking each subject's report in
     ``reports`` relative to it; ``audit``: the page of an audit
     (:func:`audit_overview_document`), else a gate's (:func:`gate_overview_document`)."""
-    from fidelity.report.html import write_document
-
     where = Path(path)
     links = [None if p is None else os.path.relpath(p, where.parent) for p in reports]
     doc = (audit_overview_document(cases, links, frames, recordings) if audit

@@ -15,6 +15,8 @@ from functools import lru_cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from fidelity.core.fileio import write_bytes_atomic, write_text_atomic
+from fidelity.core.version import __version__
 from fidelity.report.document import Code, Document, Facts, Figure, Table, Text
 
 if TYPE_CHECKING:
@@ -108,8 +110,6 @@ def _bytecode_cache() -> Any:
 
 def render_html(doc: Document) -> str:
     """The self-contained HTML page of ``doc``."""
-    from fidelity.core.version import __version__
-
     return environment().get_template(TEMPLATE).render(doc=doc, version=__version__)
 
 
@@ -158,8 +158,6 @@ def write_document(doc: Document, *, html: str | os.PathLike[str] | None = None,
                    markdown: str | os.PathLike[str] | None = None) -> list[Path]:
     """Write ``doc`` as HTML and/or Markdown, atomically; with Markdown, every figure is
     written as a PNG or SVG file next to it (under its ``name``). Returns the paths written."""
-    from fidelity.core.fileio import write_bytes_atomic, write_text_atomic
-
     written: list[Path] = []
     if markdown is not None:
         md_path = Path(markdown)

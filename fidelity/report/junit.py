@@ -19,7 +19,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
+from fidelity.core.fileio import write_text_atomic
 from fidelity.pipeline.records import GateResult
+from fidelity.report.terminal import summary_lines
 from fidelity.report.words import verdict_message
 
 
@@ -78,8 +80,6 @@ def junit_xml(cases: Sequence[GateResult], *, timestamp: str | None = None,
               hostname: str | None = None) -> str:
     """JUnit XML of ``cases`` (see the module docstring); ``timestamp`` (ISO 8601, UTC) and
     ``hostname`` default to now and this machine."""
-    from fidelity.report.terminal import summary_lines
-
     stamp = timestamp or _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%S")
     host = hostname or socket.gethostname()
     total = sum(c.seconds for c in cases)
@@ -123,8 +123,6 @@ def junit_xml(cases: Sequence[GateResult], *, timestamp: str | None = None,
 
 def write_junit(path: str | os.PathLike[str], cases: Sequence[GateResult]) -> Path:
     """Write JUnit XML atomically (see :func:`junit_xml`)."""
-    from fidelity.core.fileio import write_text_atomic
-
     return write_text_atomic(path, junit_xml(cases))
 
 

@@ -13,6 +13,7 @@ from typing import Any
 
 from fidelity.pipeline.qualify import NOT_RUN, Qualification, QualificationCheck
 from fidelity.pipeline.records import utc_now
+from fidelity.report.evidence import environment_record, tool_record
 
 #: Layout version of the qualification record.
 QUALIFICATION_LAYOUT = "1.0"
@@ -20,8 +21,6 @@ QUALIFICATION_LAYOUT = "1.0"
 
 def qualification_record(result: Qualification) -> dict[str, Any]:
     """The JSON document: layout, created, tool, environment, qualified, seconds, checks."""
-    from fidelity.report.evidence import environment_record, tool_record
-
     return {"kind": "fidelity qualification", "layout": QUALIFICATION_LAYOUT,
             "created": utc_now(), "tool": tool_record(), "environment": environment_record(),
             "qualified": result.qualified, "seconds": result.seconds,

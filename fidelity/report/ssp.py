@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import os
 import re
+import shlex
 import uuid
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -45,9 +46,11 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import quote
 
-from lxml import etree
+from lxml import etree  # noqa: TID253 (this module writes the [ssp] extra's formats; loaded at the call)
 
 from fidelity.core.fileio import JSONObject, file_sha3_256, printable, write_bytes_atomic
+from fidelity.core.resources import resource_dir
+from fidelity.report.recordfiles import record_files
 
 #: The SSP Traceability version the documents follow (``version`` of SRMD and STMD).
 SSP_TRACEABILITY_VERSION = "1.0.0-rc.2"
@@ -105,8 +108,6 @@ class TracedFile:
 def ssp_schema_path(name: str) -> Path:
     """The shipped XML Schema ``name`` (``"SRMD.xsd"``, ``"STMD.xsd"``, ``"STC.xsd"``) of SSP
     Traceability 1.0-rc.2, with what it imports beside it."""
-    from fidelity.core.resources import resource_dir
-
     return resource_dir("data") / "schemas" / "ssp-traceability" / name
 
 
@@ -141,8 +142,6 @@ def traced_files(record: JSONObject, results: Sequence[str | os.PathLike[str]]
     prediction and calibration tables and the settings file read, then a fit's correction
     files, as results), then ``results`` (the files the run wrote), each once, with its
     SHA3-256 read now."""
-    from fidelity.report.recordfiles import record_files
-
     seen: set[Path] = set()
     out: list[TracedFile] = []
 
@@ -230,8 +229,6 @@ def _tool_entries(record: JSONObject) -> list[tuple[str, Any]]:
 
 
 def _run_entries(record: JSONObject) -> list[tuple[str, Any]]:
-    import shlex
-
     run, rule = record["record"], record.get("decision_rule") or {}
     invocation = record.get("invocation") or {}
     argv = invocation.get("argv")

@@ -18,6 +18,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fidelity.coco.loss import LOSS_COLUMNS
+from fidelity.coco.tables.provenance import STANDARD_ERROR_WORDS
+from fidelity.core.fileio import portable_paths, write_json_atomic
+from fidelity.report import validationfigures as vf
+from fidelity.report.coco import conventions_words
 from fidelity.report.document import (
     Block,
     Document,
@@ -31,6 +36,7 @@ from fidelity.report.document import (
     table,
 )
 from fidelity.report.format import number, words
+from fidelity.report.html import write_document
 from fidelity.report.validationfigures import PLOTTED
 
 if TYPE_CHECKING:
@@ -64,8 +70,6 @@ def validation_figures(results: ValidationResults) -> dict[str, Figure]:
     """Every figure by file name: predicted against measured per table (the bound table
     first), measured loss against chart ΔE, both bounds, emulation accuracy (SVG,
     :mod:`fidelity.report.validationfigures`)."""
-    from fidelity.report import validationfigures as vf
-
     rows, summ = results.rows, results.summary
     out: dict[str, Figure] = {}
     if rows:
@@ -150,8 +154,6 @@ def failure_reason(row: ValidationRow, cls: str, camera: CameraRecord) -> str:
 
 
 def _conventions_words(conv: Mapping[str, Any]) -> str:
-    from fidelity.report.coco import conventions_words
-
     extra = [str(conv[k]) for k in ("source", "preprocess") if conv.get(k)]
     return "; ".join([conventions_words(conv), *extra])
 
@@ -204,8 +206,6 @@ def headline(results: ValidationResults, figure: Figure | None = None) -> Headli
 
 
 def _bound_section(results: ValidationResults) -> Section:
-    from fidelity.coco.loss import LOSS_COLUMNS
-
     rows, summ, cams = results.rows, results.summary, results.cameras
     body = []
     for cls in LOSS_COLUMNS:
@@ -473,8 +473,6 @@ def _baselines_section(results: ValidationResults) -> Section:
 
 
 def _run_section(results: ValidationResults) -> Section:
-    from fidelity.core.fileio import portable_paths
-
     meta, summ, cams = results.meta, results.summary, results.cameras
     data = portable_paths(meta.get("data", {}))
     lines = [f"- Images: COCO val2017 subset at `{data.get('images')}` "
@@ -506,7 +504,6 @@ def _run_section(results: ValidationResults) -> Section:
                  "baseline_map=...)` with tables "
                  f"{', '.join(f'`{t}`' for t in summ.tables)}; the bound tested is "
                  f"`{summ.bound_table}`.")
-    from fidelity.coco.tables.provenance import STANDARD_ERROR_WORDS
 
     lines.append(f"- Standard errors: {STANDARD_ERROR_WORDS[summ.standard_error]}"
                  + (" (rebuild with `--annotations` to score the bootstrap's draws)"
@@ -555,8 +552,6 @@ def write_validation_document(results: ValidationResults, out_dir: str | os.Path
     bicycle), one per prediction table; measured loss against chart ΔE with the tables'
     worst-case curves; emulation accuracy per camera.
     """
-    from fidelity.report.html import write_document
-
     out = Path(out_dir)
     return write_document(validation_document(results, notes), html=out / "validation.html",
                           markdown=out / "validation.md")
@@ -568,8 +563,6 @@ def write_validation_report(results: ValidationResults, out_dir: str | os.PathLi
     the results carry both bounds (:mod:`fidelity.coco.bounds`), ``directional.json``
     (derived from ``validation.json``, the camera files and the shipped tables, so kept
     apart); atomically; returns the paths written."""
-    from fidelity.core.fileio import write_json_atomic
-
     written = write_validation_document(results, out_dir, notes)
     doc = results.to_json()
     directional = doc.pop("directional", None)

@@ -22,6 +22,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from fidelity.coco.loss import LOSS_COLUMNS
+from fidelity.prediction.interpolate import predict_curve
 from fidelity.report.svg import COLOURS, MARKERS, Axes, Canvas, LegendEntry, Scale, legend_row
 
 if TYPE_CHECKING:
@@ -109,8 +111,6 @@ def _identity_panel(c: Canvas, corner: tuple[float, float], series: Mapping[str,
 def scatter_plot(rows: Sequence[ValidationRow], table_name: str) -> str:
     """Measured against predicted loss (points, ±2 SE) per class, with the identity line (the
     bound holds below it), for the prediction table ``table_name``."""
-    from fidelity.coco.loss import LOSS_COLUMNS
-
     style = _style(list({r.model for r in rows}))
     c, corners = _panels(len(PLOTTED), f"predicted against measured loss, {table_name}",
                          f"Measured loss (bars: ±2 SE) against the loss table {table_name} predicts")
@@ -133,9 +133,6 @@ def scatter_plot(rows: Sequence[ValidationRow], table_name: str) -> str:
 def vs_delta_e_plot(rows: Sequence[ValidationRow], tables: Sequence[str]) -> str:
     """Measured loss (points, ±2 SE) against the camera's chart ΔE00 per class, with each of
     ``tables``' worst-case curve for detector size n (a table without the class is left out)."""
-    from fidelity.coco.loss import LOSS_COLUMNS
-    from fidelity.prediction.interpolate import predict_curve
-
     style = _style(list({r.model for r in rows}))
     xmax = max([r.chart_delta_e for r in rows] + [6.0]) * 1.05
     grid = np.linspace(0.0, xmax, 300)

@@ -39,7 +39,11 @@ from pathlib import Path, PurePath
 from typing import Any
 
 from fidelity.core import schema as sc
-from fidelity.core.fileio import JSONObject, display_path
+from fidelity.core.fileio import JSONObject, display_path, file_sha256
+from fidelity.core.resources import resource_dir
+from fidelity.core.version import __version__
+from fidelity.report.evidence import code_sha256, environment_record, git_commit
+from fidelity.report.recordfiles import record_files
 
 #: Each status a :class:`Finding` can have, and whether it fails the verification.
 STATUSES: Mapping[str, bool] = {
@@ -218,8 +222,6 @@ def _is_file(path: Path) -> bool:
 def _shipped_copy(recorded: str) -> Path | None:
     """This installation's copy of a file of the package's shipped data named by another
     installation's path (``.../fidelity/data/<rest>``), if it has one."""
-    from fidelity.core.resources import resource_dir
-
     parts = PurePath(recorded).parts
     for i in range(len(parts) - 2, -1, -1):
         if parts[i] == "fidelity" and parts[i + 1] == "data":
@@ -247,8 +249,6 @@ def locate(recorded: str, cwd: str | None, record_dir: Path,
 
 def _file_finding(kind: str, name: str, recorded: str | None, sha256: str | None,
                   cwd: str | None, record_dir: Path, inputs: Path | None) -> Finding:
-    from fidelity.core.fileio import file_sha256
-
     if recorded is None:
         return Finding(kind, name, "not hashed", "the record names no file", None)
     found = locate(recorded, cwd, record_dir, inputs)
@@ -268,9 +268,6 @@ def _file_finding(kind: str, name: str, recorded: str | None, sha256: str | None
 
 
 def _code_finding(tool: Mapping[str, Any]) -> Finding:
-    from fidelity.core.version import __version__
-    from fidelity.report.evidence import code_sha256, git_commit
-
     def named(version: str, commit: str | None, dirty: bool | None) -> str:
         return f"fidelity {version}" + (
             f" ({commit[:7]}{' with uncommitted changes' if dirty else ''})" if commit else "")
@@ -287,8 +284,6 @@ def _code_finding(tool: Mapping[str, Any]) -> Finding:
 
 
 def _environment_finding(env: Mapping[str, Any]) -> Finding:
-    from fidelity.report.evidence import environment_record
-
     here = environment_record()
     moved = []
     if env["python"] != here["python"]:
@@ -331,8 +326,6 @@ def verify_document(doc: Mapping[str, Any], path: str | os.PathLike[str], *,
         seen.add(key)
         findings.append(_file_finding(kind, name, file.get("path"), file.get("sha256"), cwd,
                                       record_dir, where))
-
-    from fidelity.report.recordfiles import record_files
 
     for kind, name, file in record_files(doc):
         add(kind, name, file)

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import os
 import re
+import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -183,8 +184,6 @@ def write_xqar(path: str | os.PathLike[str], record: JSONObject,
                results: Sequence[str | os.PathLike[str]] = ()) -> Path:
     """Write the XQAR result of ``record`` to ``path`` atomically (``results`` are not listed:
     XQAR has no place for a run's output files; the SSP formats list them)."""
-    import tempfile
-
     out = Path(path)
     with tempfile.TemporaryDirectory(prefix=".fidelity-xqar-") as tmp:
         scratch = Path(tmp) / "result.xqar"  # qc_baselib writes to a path of its own choosing

@@ -29,7 +29,11 @@ import numpy as np
 
 from fidelity.core.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
 from fidelity.core.fileio import WRITE_ERRNOS, display_path, json_ready, write_error
+from fidelity.scene.gltf import texture_albedo, write_gltf
+from fidelity.scene.mitsuba import DEFAULT_SPP, check_loads, irradiance_scale, write_mitsuba
 from fidelity.scene.model import LUMENS_PER_WATT, ChartScene
+from fidelity.scene.usd import write_usd
+from fidelity.scene.verify import delta_e_linear
 
 #: glTF base colour encodings (:data:`fidelity.scene.gltf.BASE_COLOURS`, without importing it).
 BASE_COLOURS: tuple[str, ...] = ("factor", "texture")
@@ -125,8 +129,6 @@ def manifest(scene: ChartScene, fmt: str, scene_file: str) -> dict[str, Any]:
         expected = ("pixel = albedo x white_level: the white patch lands at "
                     f"{[round(v * scene.white_level, 6) for v in scene.albedo[18]]}")
     else:
-        from fidelity.scene.mitsuba import DEFAULT_SPP, irradiance_scale
-
         light = {"type": "directional", "direction": [0.0, 0.0, -1.0],
                  "spectrum": f"{scene.illuminant} relative SPD x {irradiance_scale(scene):.6g}",
                  "note": "a perfect white reflector renders at Y = white_level"}
@@ -281,14 +283,9 @@ def readme(scene: ChartScene, fmt: str, doc: dict[str, Any]) -> str:
 
 def _writer(fmt: str, base_colour: str = "factor") -> Callable[[ChartScene, Path], None]:
     if fmt == "gltf":
-        from fidelity.scene.gltf import write_gltf
-
         return lambda scene, path: write_gltf(scene, path, base_colour=base_colour)
     if fmt == "usd":
-        from fidelity.scene.usd import write_usd
-
         return lambda scene, path: write_usd(scene, path, base_colour=base_colour)
-    from fidelity.scene.mitsuba import write_mitsuba
 
     return write_mitsuba
 
@@ -329,7 +326,6 @@ def export_scene(scene: ChartScene, fmt: str, out: str | os.PathLike[str], *,
             raise InvalidValueError(f"--base-colour {base_colour}: the gltf and usd formats "
                                     "have textures (Mitsuba reads spectra); give --base-colour "
                                     "factor")
-        from fidelity.scene.gltf import texture_albedo
 
         quantised = texture_albedo(scene.albedo)
         scene = replace(scene, albedo=quantised, conventions={
@@ -354,8 +350,6 @@ def export_scene(scene: ChartScene, fmt: str, out: str | os.PathLike[str], *,
         scene_path = tmp / name
         _writer(fmt, base_colour)(scene, scene_path)
         if fmt == "mitsuba" and check and importlib.util.find_spec("mitsuba") is not None:
-            from fidelity.scene.mitsuba import check_loads
-
             check_loads(scene_path)
         doc = manifest(scene, fmt, name)
         doc["base_colour"] = base_colour if fmt in ("gltf", "usd") else "factor"
@@ -399,8 +393,6 @@ def _checked_with(fmt: str, check: bool) -> str | None:
 
 
 def _max_de(a: np.ndarray, b: np.ndarray) -> float:
-    from fidelity.scene.verify import delta_e_linear
-
     return float(np.max(delta_e_linear(a, b)))
 
 

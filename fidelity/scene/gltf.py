@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from fidelity.chart.image import write_png
+from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
 from fidelity.scene.model import FRAME_REFLECTANCE, ChartScene
 
 #: The extra that provides this writer.
@@ -43,22 +45,16 @@ def _quad(cx: float, cy: float, hw: float, hh: float, z: float) -> np.ndarray:
 
 def texture_texels(albedo: np.ndarray) -> np.ndarray:
     """The 8-bit sRGB-encoded texels (n, 3) of linear ``albedo`` (n, 3) in [0, 1]."""
-    from fidelity.colour.colorimetry import delinearize_srgb
-
     return np.asarray(np.round(np.clip(delinearize_srgb(albedo), 0, 1) * 255), dtype=np.uint8)
 
 
 def texture_albedo(albedo: np.ndarray) -> np.ndarray:
     """The linear albedo a renderer decodes from :func:`texture_texels` (8-bit quantised)."""
-    from fidelity.colour.colorimetry import linearize_srgb
-
     return np.asarray(linearize_srgb(texture_texels(albedo) / 255.0), dtype=np.float64)
 
 
 def write_texture_png(texels: np.ndarray, path: Path) -> None:
     """The texels (n, 3) uint8 as a one-row 8-bit PNG of n pixels (texel k: patch k)."""
-    from fidelity.chart.image import write_png
-
     write_png(path, texels[None, :, :] / 255.0, 8)
 
 

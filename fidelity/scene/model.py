@@ -40,7 +40,22 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fidelity.colour.spectral import GRID_START_NM, scene_reference
+from fidelity.camera.model import camera_response, ideal_sensitivities
+from fidelity.colour.charts import load_chart
+from fidelity.colour.colorimetry import (
+    delinearize_srgb,
+    delta_e_2000,
+    lab_to_srgb,
+    linearize_srgb,
+    srgb_to_lab,
+)
+from fidelity.colour.spectral import (
+    GRID_START_NM,
+    load_illuminant,
+    load_patch_spectra,
+    scene_reference,
+    wavelength_grid,
+)
 from fidelity.core.errors import InvalidValueError, unknown_name
 
 FloatArray = NDArray[np.float64]
@@ -259,10 +274,6 @@ def build_scene(
     ``white_level`` the linear value a perfect white reflector renders at (the white patch
     lands at its albedo times this).
     """
-    from fidelity.camera.model import camera_response, ideal_sensitivities
-    from fidelity.colour.colorimetry import lab_to_srgb, linearize_srgb, srgb_to_lab
-    from fidelity.colour.spectral import load_illuminant, load_patch_spectra, wavelength_grid
-
     if chart not in CHARTS:
         raise unknown_name("chart", chart, CHARTS)
     if reference not in REFERENCES:
@@ -280,8 +291,6 @@ def build_scene(
         lab, linear, srgb = ref.lab, ref.linear_srgb, ref.srgb
         conv: dict[str, Any] = dict(ref.conventions)
     else:
-        from fidelity.colour.charts import load_chart
-
         table = load_chart("safecolor")
         lab = np.asarray(table.lab, np.float64)
         srgb = np.asarray(lab_to_srgb(lab), np.float64)
@@ -299,8 +308,6 @@ def build_scene(
                                       ideal_sensitivities().values, 1.0) * white_level
     clip_de = None
     if clipped.any():
-        from fidelity.colour.colorimetry import delta_e_2000
-
         clip_de = delta_e_2000(srgb_to_lab(_encode(albedo)), lab)
     conv.update({
         "rgb_materials": "linear sRGB (Rec. 709 primaries, D65 white) albedo = the reference's "
@@ -319,8 +326,6 @@ def build_scene(
 
 
 def _encode(linear: FloatArray) -> FloatArray:
-    from fidelity.colour.colorimetry import delinearize_srgb
-
     return np.asarray(delinearize_srgb(linear), np.float64)
 
 

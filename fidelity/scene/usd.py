@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fidelity.scene.gltf import texture_texels, write_texture_png
 from fidelity.scene.model import FRAME_REFLECTANCE, ChartScene
 
 EXTRA = "scene"
@@ -45,8 +46,6 @@ def write_usd(scene: ChartScene, path: Path, *, linear_factors: np.ndarray | Non
     textured = base_colour == "texture"
     n_tex = len(scene.patch_names)
     if textured:
-        from fidelity.scene.gltf import texture_texels, write_texture_png
-
         texels = texture_texels(scene.albedo) if texels is None else texels
         write_texture_png(np.asarray(texels, np.uint8), path.parent / TEXTURE_FILE)
     stage = Usd.Stage.CreateNew(str(path))

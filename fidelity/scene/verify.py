@@ -9,6 +9,7 @@ e.g. a virtual environment with ``pip install bpy``) or as the ``blender`` progr
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import shutil
@@ -22,6 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fidelity.colour.colorimetry import delta_e_2000, linear_srgb_to_xyz, xyz_to_lab
 from fidelity.core.errors import FidelityError
 from fidelity.core.resources import resource_dir
 
@@ -56,8 +58,6 @@ def patch_linear_means(pixels: ArrayLike, centres: ArrayLike, side_px: float,
 
 def delta_e_linear(measured: ArrayLike, expected: ArrayLike) -> FloatArray:
     """CIEDE2000 (n,) between two sets of linear sRGB colours (both to CIELAB D65)."""
-    from fidelity.colour.colorimetry import delta_e_2000, linear_srgb_to_xyz, xyz_to_lab
-
     a = xyz_to_lab(linear_srgb_to_xyz(np.asarray(measured, np.float64)))
     b = xyz_to_lab(linear_srgb_to_xyz(np.asarray(expected, np.float64)))
     return np.asarray(delta_e_2000(a, b), np.float64)
@@ -79,7 +79,6 @@ def blender_command() -> list[str]:
     blender = os.environ.get("FIDELITY_BLENDER") or shutil.which("blender")
     if blender:
         return [blender, "-b", "--factory-startup", "--python", script, "--"]
-    import importlib.util
 
     if importlib.util.find_spec("bpy") is not None:
         return [sys.executable, script]

@@ -83,47 +83,103 @@ Modules, lowest first: :mod:`~fidelity.chart.find.view` (the image as the detect
 :func:`~fidelity.chart.find.cascade.check_corners`). The CFA pattern of a raw mosaic, read
 from the chart in it, is :mod:`fidelity.chart.bayer`'s.
 
-This package re-exports the names used outside it; each is defined, and looked up at run time,
-in its submodule: a test or benchmark that replaces one (``monkeypatch.setattr``) replaces it
+This package re-exports the names used outside it, each imported from its submodule on first use;
+each is defined, and looked up at run time, in its submodule: a test or benchmark that replaces one (``monkeypatch.setattr``) replaces it
 in the submodule that uses it.
 """
 
 from __future__ import annotations
 
-from fidelity.chart.find.candidates import DETECTORS, mcc_charts
-from fidelity.chart.find.cascade import (
-    CHART_FINDERS,
-    MAX_UNIFORMITY,
-    MIN_CONFIDENCE,
-    MIN_IMAGE_SIDE,
-    MIN_MARGIN,
-    MIN_NEUTRAL_ORDER,
-    REFINE_SIDE,
-    SEARCH_SIDE,
-    SURE_CONFIDENCE,
-    check_corners,
-    find_chart,
-)
-from fidelity.chart.find.lattice import (
-    ASSIGN_TOLERANCE,
-    Lattice,
-    patch_lattices,
-    patch_side,
-    perspective_bias,
-    robust_homography,
-)
-from fidelity.chart.find.outlines import Quads, patch_quads
-from fidelity.chart.find.placement import (
-    MAX_OCCLUDED,
-    ORIENTATIONS,
-    Placement,
-    placement_scores,
-    sample_cells,
-)
-from fidelity.chart.find.reference import colour_order, neutral_order, occluded_patches
-from fidelity.chart.find.result import ChartChecks, FoundChart
-from fidelity.chart.find.surroundings import chart_pitch, other_charts
-from fidelity.chart.find.view import Pyramid, View, detection_image, make_view
+import importlib
+from typing import TYPE_CHECKING, Any
+
+#: Public name -> the submodule that defines it (imported on first use, PEP 562: importing
+#: one submodule, such as the records' :mod:`~fidelity.chart.find.result`, loads no other).
+_NAMES: dict[str, str] = {
+    "DETECTORS": "fidelity.chart.find.candidates",
+    "mcc_charts": "fidelity.chart.find.candidates",
+    "CHART_FINDERS": "fidelity.chart.find.cascade",
+    "MAX_UNIFORMITY": "fidelity.chart.find.cascade",
+    "MIN_CONFIDENCE": "fidelity.chart.find.cascade",
+    "MIN_IMAGE_SIDE": "fidelity.chart.find.cascade",
+    "MIN_MARGIN": "fidelity.chart.find.cascade",
+    "MIN_NEUTRAL_ORDER": "fidelity.chart.find.cascade",
+    "REFINE_SIDE": "fidelity.chart.find.cascade",
+    "SEARCH_SIDE": "fidelity.chart.find.cascade",
+    "SURE_CONFIDENCE": "fidelity.chart.find.cascade",
+    "check_corners": "fidelity.chart.find.cascade",
+    "find_chart": "fidelity.chart.find.cascade",
+    "ASSIGN_TOLERANCE": "fidelity.chart.find.lattice",
+    "Lattice": "fidelity.chart.find.lattice",
+    "patch_lattices": "fidelity.chart.find.lattice",
+    "patch_side": "fidelity.chart.find.lattice",
+    "perspective_bias": "fidelity.chart.find.lattice",
+    "robust_homography": "fidelity.chart.find.lattice",
+    "Quads": "fidelity.chart.find.outlines",
+    "patch_quads": "fidelity.chart.find.outlines",
+    "MAX_OCCLUDED": "fidelity.chart.find.placement",
+    "ORIENTATIONS": "fidelity.chart.find.placement",
+    "Placement": "fidelity.chart.find.placement",
+    "placement_scores": "fidelity.chart.find.placement",
+    "sample_cells": "fidelity.chart.find.placement",
+    "colour_order": "fidelity.chart.find.reference",
+    "neutral_order": "fidelity.chart.find.reference",
+    "occluded_patches": "fidelity.chart.find.reference",
+    "ChartChecks": "fidelity.chart.find.result",
+    "FoundChart": "fidelity.chart.find.result",
+    "chart_pitch": "fidelity.chart.find.surroundings",
+    "other_charts": "fidelity.chart.find.surroundings",
+    "Pyramid": "fidelity.chart.find.view",
+    "View": "fidelity.chart.find.view",
+    "detection_image": "fidelity.chart.find.view",
+    "make_view": "fidelity.chart.find.view",
+}
+
+if TYPE_CHECKING:
+    from fidelity.chart.find.candidates import DETECTORS, mcc_charts
+    from fidelity.chart.find.cascade import (
+        CHART_FINDERS,
+        MAX_UNIFORMITY,
+        MIN_CONFIDENCE,
+        MIN_IMAGE_SIDE,
+        MIN_MARGIN,
+        MIN_NEUTRAL_ORDER,
+        REFINE_SIDE,
+        SEARCH_SIDE,
+        SURE_CONFIDENCE,
+        check_corners,
+        find_chart,
+    )
+    from fidelity.chart.find.lattice import (
+        ASSIGN_TOLERANCE,
+        Lattice,
+        patch_lattices,
+        patch_side,
+        perspective_bias,
+        robust_homography,
+    )
+    from fidelity.chart.find.outlines import Quads, patch_quads
+    from fidelity.chart.find.placement import (
+        MAX_OCCLUDED,
+        ORIENTATIONS,
+        Placement,
+        placement_scores,
+        sample_cells,
+    )
+    from fidelity.chart.find.reference import colour_order, neutral_order, occluded_patches
+    from fidelity.chart.find.result import ChartChecks, FoundChart
+    from fidelity.chart.find.surroundings import chart_pitch, other_charts
+    from fidelity.chart.find.view import Pyramid, View, detection_image, make_view
+
+
+def __getattr__(name: str) -> Any:
+    """Import a public name's submodule on first use (PEP 562)."""
+    module = _NAMES.get(name)
+    if module is None:
+        raise AttributeError(f"module 'fidelity.chart.find' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
 
 __all__ = [
     "ASSIGN_TOLERANCE",

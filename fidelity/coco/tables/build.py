@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import PurePath
 from typing import TYPE_CHECKING, Any
 
 from fidelity.coco.store import RegisteredModel
@@ -36,7 +37,8 @@ from fidelity.coco.tables.provenance import (
     runs_passed_on,
 )
 from fidelity.coco.tables.worst import SizeClassRow, WorstCaseRow, size_class_rows, worst_case_rows
-from fidelity.core.errors import InputFileError
+from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.prediction.transforms import TRANSFORMS
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import SweepStore
@@ -151,8 +153,6 @@ def build_tables(store: SweepStore, coco: Any = None, *, method: str = "auto",
     models = store.models()
     aligned: dict[str, AlignedCount] = {}
     if images and coco is None:
-        from fidelity.core.errors import InvalidValueError
-
         raise InvalidValueError("--images needs the COCO annotations, to re-score cells on "
                                 "fewer images: pass --annotations")
     if coco is not None:
@@ -165,8 +165,6 @@ def build_tables(store: SweepStore, coco: Any = None, *, method: str = "auto",
     grid = meta.get("grid") or {}
     planned = grid.get("transforms")
     if not planned:
-        from fidelity.prediction.transforms import TRANSFORMS
-
         planned = list(TRANSFORMS)
     seen = {c.transform for c in cells if c.transform != "baseline"}
     transforms = sorted(set(planned) | seen)
@@ -231,10 +229,6 @@ def merge_tables(tables: Tables, earlier: Tables, source: Mapping[str, Any]) -> 
     threshold, else :class:`~fidelity.core.errors.InvalidValueError`. Standard errors count only
     where both have them.
     """
-    from pathlib import PurePath
-
-    from fidelity.core.errors import InvalidValueError
-
     def data_key(meta: Mapping[str, Any]) -> tuple[Any, ...]:
         d = meta.get("data") or {}
         return (d.get("image_count"), PurePath(str(d.get("images") or "")).name,

@@ -9,13 +9,16 @@ the points of their ΔmAP that come from classes with at most :data:`RARE_BOXES`
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fidelity.coco.scoring import evaluate_detections
 from fidelity.coco.tables.worst import RareShare, WorstCaseRow
+from fidelity.core.errors import InvalidValueError
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import SweepCell, SweepStore
@@ -94,8 +97,6 @@ def class_breakdown(coco: Any, baseline: Mapping[int, np.ndarray], cell: Mapping
     with ground truth, sorted by share, largest loss first. The shares sum to the ΔmAP in
     points.
     """
-    from fidelity.coco.scoring import evaluate_detections
-
     ids = sorted(int(i) for i in image_ids)
     b = evaluate_detections(coco, baseline, ids, method=method)
     c = evaluate_detections(coco, cell, ids, method=method)
@@ -104,8 +105,6 @@ def class_breakdown(coco: Any, baseline: Mapping[int, np.ndarray], cell: Mapping
 
 def box_counts(coco: Any, image_ids: Sequence[int]) -> dict[str, int]:
     """Non-crowd ground-truth boxes per class name in the images ``image_ids``."""
-    from collections import Counter
-
     return dict(Counter(coco.cats[a["category_id"]]["name"]
                         for a in coco.loadAnns(coco.getAnnIds(imgIds=list(image_ids)))
                         if not a.get("iscrowd")))
@@ -163,8 +162,6 @@ def explain_cell(store: SweepStore, coco: Any, model: str, transform: str, targe
     :class:`~fidelity.core.errors.InvalidValueError` naming the cell when it or the baseline is not
     a finished cell of the store.
     """
-    from fidelity.core.errors import InvalidValueError
-
     found: dict[str, SweepCell] = {}
     for t, e in ((transform, float(target)), ("baseline", 0.0)):
         rec = store.cell(model, t, e)

@@ -21,6 +21,8 @@ from fidelity.coco.tables.grid import SAFETY_CLASSES, CellDelta
 from fidelity.coco.tables.prediction import prediction_table
 from fidelity.coco.tables.worst import WorstCaseRow
 from fidelity.core.fileio import json_ready
+from fidelity.prediction.table import delta_e_limit
+from fidelity.prediction.tablefile import parse_prediction_table
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import SweepStore
@@ -342,9 +344,6 @@ def delta_e_limits(tables: Tables) -> list[CurveLimits]:
     :data:`LIMIT_BUDGETS` (:func:`fidelity.prediction.table.delta_e_limit`: the curves as
     ``fidelity predict`` uses them, running maximum, linear between the measured ΔE).
     """
-    from fidelity.prediction.table import delta_e_limit
-    from fidelity.prediction.tablefile import parse_prediction_table
-
     table = parse_prediction_table(json_ready(prediction_table(tables)))
     out = []
     for curve in table.curves:

@@ -18,7 +18,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
-from fidelity.coco.loss import loss_estimate
+from fidelity.coco.bootstrap import Draws
+from fidelity.coco.loss import loss_estimate, score_loss
+from fidelity.coco.scoring import FoldScore, evaluate_detections, resolve_scorer
+from fidelity.core.errors import InvalidValueError
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import SweepCell, SweepStore
@@ -210,8 +213,6 @@ def parse_image_caps(spec: str | None, models: Sequence[str]) -> dict[str, int]:
     Raises :class:`fidelity.core.errors.InvalidValueError` naming the entry for a count that is not
     a positive integer or a model the store does not hold.
     """
-    from fidelity.core.errors import InvalidValueError
-
     caps: dict[str, int] = {}
     for entry in (spec or "").split(","):
         entry = entry.strip()
@@ -252,8 +253,6 @@ def align_image_counts(store: SweepStore, coco: Any, cells: Sequence[SweepCell],
     """
     from tqdm import tqdm
 
-    from fidelity.coco.scoring import evaluate_detections, resolve_scorer
-
     method = resolve_scorer(method)
     ids_all = sorted(coco.getImgIds())
     counts: dict[str, set[int]] = {}
@@ -293,10 +292,6 @@ def add_standard_errors(store: SweepStore, coco: Any, deltas: Mapping[str, Seque
     the COCO scorer of the fold scores (the bootstrap's one evaluation is pycocotools').
     """
     from tqdm import tqdm
-
-    from fidelity.coco.bootstrap import Draws
-    from fidelity.coco.loss import score_loss
-    from fidelity.coco.scoring import FoldScore
 
     ids_all = sorted(coco.getImgIds())
     todo = [(m, r) for m, rows in deltas.items() for r in rows if r.done]

@@ -10,6 +10,7 @@ a kept model (:func:`earlier_runs`, :func:`runs_passed_on`) follow it through me
 
 from __future__ import annotations
 
+import sqlite3
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -121,8 +122,6 @@ def check_store_meta(db: Any, path: str, schema: sc.Node = SWEEP_META_SCHEMA) ->
     connection ``db``; nothing is written) against ``schema``: every value JSON, the keys the
     reports read of the right shape. Raises :class:`~fidelity.core.schema.SchemaError`
     ``<store> (provenance): <key>: <problem>``."""
-    import sqlite3
-
     origin = f"{path} (provenance)"
     try:
         rows = list(db.execute("SELECT key, value FROM meta"))

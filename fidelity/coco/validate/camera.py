@@ -17,6 +17,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fidelity.coco.emulation import AccuracySummary
+from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
+
 if TYPE_CHECKING:
     from fidelity.coco.emulation import AccuracySummary, Emulation
     from fidelity.measure.colour import ChartMeasurement
@@ -115,8 +118,6 @@ class EmulationRecord:
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> EmulationRecord:
         """Inverse of :meth:`to_json`."""
-        from fidelity.coco.emulation import AccuracySummary
-
         hold = d.get("holdout")
         return cls({k: v for k, v in d.items()
                     if k not in ("accuracy", "other_methods", "holdout")},
@@ -208,8 +209,6 @@ def chart_error_profile(measurement: ChartMeasurement) -> ErrorProfile:
 def image_delta_e(emu: Emulation, images: Sequence[np.ndarray]) -> ImageDeltaE:
     """Mean and 95th-percentile CIEDE2000 between images and their emulations (every
     ``IMAGE_DE_SAMPLE[1]``-th pixel in both directions): how far the camera moves real photos."""
-    from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
-
     step = IMAGE_DE_SAMPLE[1]
     vals = []
     for img in images:

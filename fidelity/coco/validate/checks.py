@@ -16,8 +16,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from fidelity.coco.loss import LOSS_COLUMNS, Losses
+from fidelity.coco.loss import LOSS_COLUMNS, Losses, score_loss
 from fidelity.coco.validate.store import ValidationCell
+from fidelity.prediction.table import predict
 
 #: Classes compared (``all`` = mAP@[.50:.95] over the 80 COCO classes).
 CLASSES: tuple[str, ...] = ("all", "person", "bicycle")
@@ -184,8 +185,6 @@ class ValidationSummary:
 def predictions_for(delta_e: float, baseline_map_percent: float | None,
                     tables: Sequence[str], size: str = "n") -> dict[str, TablePrediction]:
     """What every prediction table predicts at chart ``delta_e``: table -> prediction."""
-    from fidelity.prediction.table import predict
-
     out = {}
     for t in tables:
         p = predict(delta_e, size=size, table=t, baseline_map=baseline_map_percent,
@@ -214,8 +213,6 @@ def validation_row(camera: str, illuminant: str, chart_delta_e: float, b: Valida
     measured loss of one cell ``c`` against its baseline ``b``
     (:func:`fidelity.coco.loss.score_loss`), judged by the ``bound`` table, and how the mAP
     loss's SE was computed (``se_method``; None: no SE)."""
-    from fidelity.coco.loss import score_loss
-
     base: dict[str, float | None] = {"map": b.map, **b.ap}
     cell: dict[str, float | None] = {"map": c.map, **c.ap}
     loss, person, bicycle = (score_loss(k, base, cell, b.folds, c.folds, b.draws, c.draws)

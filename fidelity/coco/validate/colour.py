@@ -26,6 +26,7 @@ checks per camera (:func:`directional_validation`) and the validity domain
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import platform
@@ -37,10 +38,29 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fidelity.camera.model import read_camera_file
+from fidelity.camera.render import render_chart
 from fidelity.coco.bounds import CameraChart, DirectionalValidation, MeasuredCell, compare_bounds
+from fidelity.coco.dataset import PixelMap, colour_codes
+from fidelity.coco.driver import StoreRun
+from fidelity.coco.emulation import (
+    EMULATION_METHODS,
+    EMULATION_VERSION,
+    emulation_accuracy,
+    fit_emulation,
+)
+from fidelity.coco.executor import (
+    DIRECT_IMAGES,
+    IDENTITY,
+    CellWork,
+    ExecutorOptions,
+    ModelFile,
+    PixelTransform,
+)
 from fidelity.coco.loss import LOSS_COLUMNS
-from fidelity.coco.scoring import FOLDS
-from fidelity.coco.store import RegisteredModel
+from fidelity.coco.scoring import FOLDS, load_annotated_images
+from fidelity.coco.store import ImageSet, RegisteredModel
+from fidelity.coco.sweep import ImageCache
 from fidelity.coco.validate.camera import (
     IMAGE_DE_SAMPLE,
     CameraRecord,
@@ -58,7 +78,14 @@ from fidelity.coco.validate.store import ValidationCell, ValidationCells, Valida
 from fidelity.coco.validate.suite import BASELINE, CameraCase
 from fidelity.core.errors import InputFileError, InvalidValueError
 from fidelity.core.fileio import json_ready, portable_paths
-from fidelity.core.version import __version__
+from fidelity.core.version import __version__, installed_version
+from fidelity.prediction.interval import STAGES, ValidatedCameras
+from fidelity.prediction.tablefile import (
+    DEFAULT_TABLE,
+    TableKind,
+    available_tables,
+    load_prediction_table,
+)
 
 if TYPE_CHECKING:
     from fidelity.coco.dataset import PixelMap
@@ -72,14 +99,6 @@ def prepare_case(case: CameraCase, store: ValidationStore, method: str, training
                  cache: ImageCache, image_ids: Sequence[int]
                  ) -> tuple[Emulation, CameraRecord]:
     """Render, measure, fit the emulation and check it; the record is stored (resumable)."""
-    from fidelity.camera.render import render_chart
-    from fidelity.coco.emulation import (
-        EMULATION_METHODS,
-        EMULATION_VERSION,
-        emulation_accuracy,
-        fit_emulation,
-    )
-
     key = json.dumps({"sha256": case.sha256, "illuminant": case.illuminant, "method": method,
                       "training": training, "emulation_version": EMULATION_VERSION})
     have = store.case(case.name)
@@ -133,21 +152,7 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     its cells claimed so that several runs share them (``lease_s``: see
     :func:`fidelity.coco.sweep.run_sweep`). Inputs are checked against the store's record.
     """
-    import functools
-
     import onnxruntime
-
-    from fidelity.coco.driver import StoreRun
-    from fidelity.coco.executor import (
-        IDENTITY,
-        CellWork,
-        ExecutorOptions,
-        ModelFile,
-        PixelTransform,
-    )
-    from fidelity.coco.scoring import load_annotated_images
-    from fidelity.coco.store import ImageSet
-    from fidelity.coco.sweep import ImageCache
 
     opts = executor or ExecutorOptions(threads=threads, provider=provider)
     say = log or (lambda s: print(s, file=sys.stderr, flush=True))
@@ -224,9 +229,6 @@ class EmulationTables:
     def get(self, case: CameraCase) -> PixelMap:
         """The camera's 8-bit table (:meth:`fidelity.coco.emulation.Emulation.cube`, or
         :meth:`~fidelity.coco.emulation.Emulation.map_codes` on the images' colours)."""
-        from fidelity.coco.dataset import PixelMap, colour_codes
-        from fidelity.coco.executor import DIRECT_IMAGES
-
         if case.name not in self.built:
             self.built.clear()  # one camera's table at a time
             emu, info = prepare_case(case, self.store, self.method, self.training, self.cache,
@@ -249,8 +251,6 @@ class EmulationTables:
 
 def _colour_version() -> str | None:
     """colour-science's version, read from its metadata (the record needs no import of it)."""
-    from fidelity.core.version import installed_version
-
     return installed_version("colour-science")
 
 
@@ -259,8 +259,6 @@ def holdout_accuracy(cases: Sequence[CameraCase], method: str = "root-polynomial
     """Out-of-sample emulation accuracy per camera: the mapping fitted on the colour-science
     reflectances *without* the 24 chart patches, checked on the chart
     (:func:`fidelity.coco.emulation.emulation_accuracy`)."""
-    from fidelity.coco.emulation import emulation_accuracy, fit_emulation
-
     return {c.name: emulation_accuracy(fit_emulation(c.path, c.illuminant, method,
                                                      "colour-science-no-chart")).summary()
             for c in cases}
@@ -327,13 +325,6 @@ def collect_results(store: ValidationStore, tables: Sequence[str] | None = None,
     stored cameras that are not in the suite (renamed or removed camera files) are left out of
     the results and listed in ``summary.not_in_suite``.
     """
-    from fidelity.prediction.tablefile import (
-        DEFAULT_TABLE,
-        TableKind,
-        available_tables,
-        load_prediction_table,
-    )
-
     tabs = list(tables) if tables else [
         t for t in available_tables() if load_prediction_table(t).kind != TableKind.DIRECTIONAL]
     bound = bound_table or DEFAULT_TABLE
@@ -404,9 +395,6 @@ def validated_cameras(results: ValidationResults, suite: Sequence[CameraCase]
     :class:`InputFileError`), its illuminant and the kinds of its stages
     (:meth:`~fidelity.camera.model.CameraModel.stage_kinds`); the counts of the mean-mAP
     class (``all``) of the summary."""
-    from fidelity.camera.model import read_camera_file
-    from fidelity.prediction.interval import STAGES, ValidatedCameras
-
     cases = {c.name: c for c in suite}
     illuminants: set[str] = set()
     sensitivities: set[str] = set()

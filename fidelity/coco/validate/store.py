@@ -22,7 +22,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fidelity.coco.scoring import FOLDS  # interleaved image folds for standard errors
+from fidelity.coco.bootstrap import Draws, draw_scores
+from fidelity.coco.scoring import (
+    FOLDS,  # interleaved image folds for standard errors
+    FoldScore,
+    evaluate_detections,
+    score_folds,
+)
 from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
 from fidelity.coco.validate.camera import CameraRecord
 
@@ -72,9 +78,6 @@ class ValidationCell:
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> ValidationCell:
         """Inverse of :meth:`to_json`."""
-        from fidelity.coco.bootstrap import Draws
-        from fidelity.coco.scoring import FoldScore
-
         return cls(d["model"], d["camera"], int(d["images"]), d["map"], d["map50"],
                    dict(d.get("ap") or {}), tuple(FoldScore.from_json(f) for f in d["folds"]),
                    d["seconds"], d["finished"],
@@ -178,8 +181,6 @@ class ValidationStore(ResultsStore):
         """Score again, from the stored detections (no inference), the folds of every cell
         whose fold scores lack the rest-of-run scores the jackknife SE needs (cells stored
         before they were; :func:`fidelity.coco.scoring.score_folds`). Returns how many."""
-        from fidelity.coco.scoring import score_folds
-
         n = 0
         for c in self.cells():
             if all(f.has_rest for f in c.folds):  # (no folds: fewer than 2 images)
@@ -198,8 +199,6 @@ class ValidationStore(ResultsStore):
         """Score every cell on the image bootstrap's draws (:func:`fidelity.coco.bootstrap.
         draw_scores`, its default draws and seed) from the stored detections, where they are
         not stored for the cell's images, draws and seed yet. Returns how many were scored."""
-        from fidelity.coco.bootstrap import draw_scores
-
         n = 0
         for c in self.cells():
             if c.draws is not None and c.draws.current:
@@ -253,8 +252,6 @@ class ValidationCells:
 
     def finish(self, cell: CellWork, seconds: float, new: int) -> None:
         """Score the cell and its folds, record it and log it."""
-        from fidelity.coco.scoring import evaluate_detections, score_folds
-
         model, camera = cell.key
         ids = list(cell.image_ids)
         own = self.stores.get()  # run_cells may score on a thread of its own

@@ -13,6 +13,8 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+from fidelity.camera.model import read_camera_file
+from fidelity.colour.spectral import load_illuminant
 from fidelity.core.errors import InputFileError
 from fidelity.core.fileio import file_sha256
 
@@ -38,9 +40,6 @@ def load_suite(folder: str | os.PathLike[str]) -> list[CameraCase]:
     Raises :class:`InputFileError` for a missing folder, no camera files, an invalid camera
     file, a malformed ``suite.toml`` or one naming a camera that is not there.
     """
-    from fidelity.camera.model import read_camera_file
-    from fidelity.colour.spectral import load_illuminant
-
     d = Path(folder)
     if not d.is_dir():
         raise InputFileError(f"{d}: camera folder does not exist")
