@@ -207,7 +207,7 @@ def doc_commands() -> list[tuple[str, str]]:
 DOC_COMMANDS = doc_commands()
 
 #: Commands that run detectors over COCO for minutes (their own tests run them on a few
-#: images: tests/test_sweep.py, test_evaluate.py, test_validate.py, ...).
+#: images: tests/coco/test_sweep.py, test_evaluate.py, test_validate.py, ...).
 LONG_COMMANDS = {"sweep", "evaluate", "dataset", "coco-c", "validate"}
 #: Placeholders a documented line uses for "your own" values.
 PLACEHOLDERS = ("...", "DIR", "STORE", "HEAD", "[")
@@ -424,7 +424,7 @@ def test_documented_python_snippet_runs(page, k, code, workspace, tmp_path):
             pytest.skip(f"{name} is a placeholder for the user's own sweep store")
         if name.endswith((".bag", ".mcap", ".db3")):
             pytest.skip(f"{name} stands for the user's own recording (recordings are read in "
-                        "tests/test_recordings.py)")
+                        "tests/chart/test_recording.py)")
     # the report snippets rewrite the recorded results of the checkout: run on copies
     for rel in re.findall(r'Path\("([^"]+)"\)', code):
         src = REPO / rel

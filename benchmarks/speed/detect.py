@@ -1,7 +1,7 @@
 """The accuracy and cost of the chart's corners (fidelity.chart.find): the fit refined at full
 size against the search's fit alone, on synthetic scenes with known geometry.
 
-The scenes are the test suite's (``tests/test_detect.py``: frontal, tilted with perspective,
+The scenes are the test suite's (``tests/coco/test_detect.py``: frontal, tilted with perspective,
 upside down, a quarter turn in a portrait image, mirrored) and a small chart in a large frame,
 each with three cameras: the reference colours, a contrast-inc camera and a desaturating one
 (ΔE of several units). For each, the corner error (largest distance of a corner-patch centre

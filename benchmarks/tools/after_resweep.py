@@ -17,7 +17,7 @@ that one commit carries the tables and everything computed from them:
    checks both).
 
 Only files that already exist in the report folders are replaced. What stays by hand: the
-``AWAITING_RESWEEP`` set in ``tests/test_evidence.py`` and the prose (``reports/coco/
+``AWAITING_RESWEEP`` set in ``tests/report/test_evidence.py`` and the prose (``reports/coco/
 preprocessing_change.md``, ``reports/validation/analysis.md``, README, docs), whose numbers
 it prints (:func:`prose_numbers`).
 
@@ -286,11 +286,11 @@ def main(argv: list[str] | None = None) -> int:
     print("validation:", validation(store, a.shared.resolve()))
     print("COCO-C:", coco_c())
     _run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-          "tests/test_json_outputs.py"], env={**os.environ, "FIDELITY_RECORD_JSON": "1"})
+          "tests/cli/test_json_outputs.py"], env={**os.environ, "FIDELITY_RECORD_JSON": "1"})
     print("quoted tables:", requote())
     _run(["git", "status", "--short"])
     print("\n".join(["numbers for the prose:", *prose_numbers()]))
-    print("by hand: AWAITING_RESWEEP in tests/test_evidence.py; the prose of "
+    print("by hand: AWAITING_RESWEEP in tests/report/test_evidence.py; the prose of "
           "reports/coco/preprocessing_change.md, reports/validation/analysis.md, README, docs")
     return 0
 

@@ -265,7 +265,7 @@ def pull_mean_uint8(rgb8: np.ndarray, alpha: float,
     Same arithmetic per colour as :func:`fidelity.prediction.transforms.pull_mean` on
     ``rgb8 / 255`` in float64 (sRGB decoding through a 256-entry table of the same function's
     values), on the distinct colours only (a natural 640x480 image has 40k-180k of ~300k
-    pixels); the output codes are equal to the reference's (tests/test_dataset.py).
+    pixels); the output codes are equal to the reference's (tests/coco/test_dataset.py).
 
     The pixels, packed into 24-bit keys, are sorted to find the distinct colours and their
     counts; the mean Lab is the count-weighted sum over distinct colours divided by the pixel
@@ -304,7 +304,7 @@ class PullMeanWorkspace:
     (benchmarks/speed/pipeline.py times ``pull_mean``). The piecewise branches (the linear
     segments near black) are evaluated only where they apply. The 3x3 products run as
     (3, 3) @ (3, n) instead of the reference's (n, 3) @ (3, 3); with OpenBLAS both give the
-    same bits (tests/test_dataset.py checks the codes, exact, and the Lab values, to 1e-12).
+    same bits (tests/coco/test_dataset.py checks the codes, exact, and the Lab values, to 1e-12).
     Not thread-safe: one workspace per thread or process.
     """
 
@@ -568,7 +568,7 @@ def _numba_kernels() -> _NumbaKernels | None:
     and ``_codes_chunk`` fused into one loop per step, over contiguous channel rows: the same IEEE
     operations in the same order (numba compiles without fast-math: no reassociation, no FMA
     contraction, ``x / 116.0`` stays a division), while the 3x3 products, ``cbrt`` and
-    ``power`` stay the numpy calls of the reference. tests/test_dataset.py checks that both
+    ``power`` stay the numpy calls of the reference. tests/coco/test_dataset.py checks that both
     kernels give the same bits.
     """
     try:

@@ -241,7 +241,7 @@ def _accumulate_faster_coco_eval(coco_gt: Any, results: list[dict[str, Any]],
 
 #: COCO box scorers, by ``method=`` name. ``pycocotools`` is the reference; ``faster-coco-eval``
 #: (same algorithm in C++) is the fast path, used only because
-#: ``tests/test_cocoeval.py`` shows it agrees with pycocotools to 1e-4 on our data.
+#: ``tests/coco/test_scoring.py`` shows it agrees with pycocotools to 1e-4 on our data.
 COCO_SCORERS: dict[str, Callable[[Any, list[dict[str, Any]], Sequence[int]],
                                  tuple[np.ndarray, list[int], np.ndarray]]] = {
     "pycocotools": _accumulate_pycocotools,

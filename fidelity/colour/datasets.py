@@ -3,7 +3,7 @@
 ``import colour`` (colour-science 0.4.7) imports ``colour.plotting`` and with it matplotlib and
 scipy.interpolate: about a second of every command that touched it. The tables the default
 paths read are copied here from colour-science, unchanged (``fidelity/data/colour-datasets.json``,
-written by :func:`write_datasets`; ``tests/test_colour_datasets.py`` checks every number against
+written by :func:`write_datasets`; ``tests/colour/test_datasets.py`` checks every number against
 colour-science): the CIE 1931 2° observer, the built-in illuminants, the cameras of the built-in
 camera models, the chromatic adaptation matrices and the primaries and whites of the RGB
 colourspaces the command line names. Anything else is still read from colour-science, on demand.

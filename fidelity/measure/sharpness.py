@@ -37,7 +37,7 @@ ISO 12233:2017 leaves in; ``refine=False`` is the standard's computation as it s
   width ``d`` is a box filter).
 
 On pixel-integrated Gaussian edges (64 rows by 128 columns, 2-10 degrees, sigma 0.3-4 px,
-tests/test_sharpness.py) the refined MTF50 is within 1 % of the closed form, the standard's
+tests/measure/test_sharpness.py) the refined MTF50 is within 1 % of the closed form, the standard's
 within 2.5 % (up to 1.3 % low on average at sigma 0.3 px, from the bin's box, and up to 1 %
 either way with the phase of so few rows).
 

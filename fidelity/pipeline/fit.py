@@ -893,7 +893,7 @@ def remeasure(pixels: NDArray[Any], audit: ImageMeasurement,
     its output encoding), averaged as they are instead of decoded from the audit's encoding.
 
     Only the windows' pixels are read and transformed: the patch means are those of the whole
-    image through ``transform`` measured in the same windows (``tests/test_fit.py`` checks
+    image through ``transform`` measured in the same windows (``tests/pipeline/test_fit.py`` checks
     both ways), at the cost of the windows, not of the image."""
     p = _colourspace_matrix(audit)
     windows = [np.asarray(v, np.float32).reshape(-1, 3)  # float32 like the pixels: 2x faster

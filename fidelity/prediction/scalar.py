@@ -13,7 +13,7 @@ solvers, which are short:
   ``scipy.optimize.minimize_scalar(method="bounded")`` (``fminbound``), with its tolerance
   ``xatol``.
 
-Both are tested against SciPy's implementations (``tests/test_scalar.py``).
+Both are tested against SciPy's implementations (``tests/prediction/test_scalar.py``).
 """
 
 from __future__ import annotations

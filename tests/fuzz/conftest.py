@@ -15,10 +15,10 @@ from fidelity.core.resources import resource_dir
 def chart_images(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """A rendered chart (the built-in camera) as PNG, JPEG and EXR."""
     import numpy as np
-    from fuzzkit import write_image
 
     from fidelity.camera.render import render_chart
     from fidelity.chart.image import write_exr, write_png
+    from tests.fuzz.fuzzkit import write_image
 
     folder = tmp_path_factory.mktemp("charts")
     r = render_chart("nikon-5100", pixels_per_patch=16)
@@ -52,7 +52,7 @@ def coco(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     pytest.importorskip("onnxruntime")
     pytest.importorskip("onnx")
     pytest.importorskip("pycocotools")
-    from fuzzkit import coco_set, onnx_model, ultralytics_output
+    from tests.fuzz.fuzzkit import coco_set, onnx_model, ultralytics_output
 
     folder = tmp_path_factory.mktemp("coco")
     images, ann, doc = coco_set(folder)

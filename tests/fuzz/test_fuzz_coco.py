@@ -10,7 +10,10 @@ from typing import Any
 
 import numpy as np
 import pytest
-from fuzzkit import (
+from hypothesis import given
+from hypothesis import strategies as st
+
+from tests.fuzz.fuzzkit import (
     FAST,
     LONG,
     assert_promise,
@@ -24,8 +27,6 @@ from fuzzkit import (
     ultralytics_output,
     yolox_cells,
 )
-from hypothesis import given
-from hypothesis import strategies as st
 
 EXAMPLES = [FAST, pytest.param(LONG, marks=pytest.mark.fuzz)]
 

@@ -18,7 +18,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from fuzzkit import fingerprint, leftovers, run
+
+from tests.fuzz.fuzzkit import fingerprint, leftovers, run
 
 pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="tmpfs and RLIMIT_FSIZE: Linux")
 

@@ -10,7 +10,10 @@ from typing import Any
 
 import pytest
 import yaml
-from fuzzkit import (
+from hypothesis import given
+from hypothesis import strategies as st
+
+from tests.fuzz.fuzzkit import (
     CAMERA,
     FAST,
     LONG,
@@ -23,8 +26,6 @@ from fuzzkit import (
     run,
     toml_text,
 )
-from hypothesis import given
-from hypothesis import strategies as st
 
 EXAMPLES = [FAST, pytest.param(LONG, marks=pytest.mark.fuzz)]
 
@@ -182,9 +183,9 @@ def _chart_promise(doc: Any, command: str, image: Path | None = None) -> None:
 
 def _flat_chart(folder: Path) -> Path:
     import numpy as np
-    from fuzzkit import write_image
 
     from fidelity.colour.charts import load_chart
+    from tests.fuzz.fuzzkit import write_image
 
     img = np.zeros((84, 124, 3), dtype=np.uint8)
     srgb = np.round(load_chart().srgb * 255).astype(np.uint8)
@@ -233,7 +234,7 @@ def test_settings_files(examples: int) -> None:
             from fidelity.cli import main
 
             r = CliRunner().invoke(main, ["--config", str(path), "predict", "--delta-e", "3"])
-            from fuzzkit import Outcome
+            from tests.fuzz.fuzzkit import Outcome
 
             outcome = Outcome(("--config", str(path), "predict"), r.exit_code, r.stdout,
                               r.stderr, r.exception)

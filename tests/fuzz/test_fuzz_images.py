@@ -8,7 +8,10 @@ import tempfile
 from pathlib import Path
 
 import pytest
-from fuzzkit import (
+from hypothesis import given
+from hypothesis import strategies as st
+
+from tests.fuzz.fuzzkit import (
     FAST,
     LONG,
     assert_promise,
@@ -20,8 +23,6 @@ from fuzzkit import (
     run,
     write_image,
 )
-from hypothesis import given
-from hypothesis import strategies as st
 
 EXAMPLES = [FAST, pytest.param(LONG, marks=pytest.mark.fuzz)]
 

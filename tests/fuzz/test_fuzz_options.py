@@ -10,9 +10,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from fuzzkit import FAST, LONG, assert_promise, budget, fingerprint, run
 from hypothesis import given
 from hypothesis import strategies as st
+
+from tests.fuzz.fuzzkit import FAST, LONG, assert_promise, budget, fingerprint, run
 
 EXAMPLES = [FAST, pytest.param(LONG, marks=pytest.mark.fuzz)]
 

@@ -11,7 +11,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from fuzzkit import CAMERA, assert_promise, fingerprint, run, toml_text
+
+from tests.fuzz.fuzzkit import CAMERA, assert_promise, fingerprint, run, toml_text
 
 
 @pytest.fixture

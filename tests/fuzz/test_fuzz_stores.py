@@ -14,9 +14,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from fuzzkit import FAST, LONG, assert_promise, budget, damaged_bytes, fingerprint, run
 from hypothesis import given
 from hypothesis import strategies as st
+
+from tests.fuzz.fuzzkit import FAST, LONG, assert_promise, budget, damaged_bytes, fingerprint, run
 
 EXAMPLES = [FAST, pytest.param(LONG, marks=pytest.mark.fuzz)]
 

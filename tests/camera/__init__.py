@@ -1,0 +1,1 @@
+"""Tests of fidelity.camera: camera models and renders."""

@@ -1,0 +1,1 @@
+"""Tests of fidelity.chart: reading images and finding the chart."""

@@ -1,0 +1,1 @@
+"""Tests of fidelity.cli: the command line."""

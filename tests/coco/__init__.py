@@ -1,0 +1,1 @@
+"""Tests of fidelity.coco: the COCO benchmark."""

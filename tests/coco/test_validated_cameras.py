@@ -1,0 +1,127 @@
+"""The validity domain's validated cameras (issue 32): the illuminants and the kinds of
+processing stages the prediction was validated on, shipped from the validation report, and a
+camera check's answer inside or outside them."""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+import fidelity
+from fidelity.cli import main
+from fidelity.coco.validate.colour import ValidationResults, validated_cameras
+from fidelity.coco.validate.suite import load_suite
+from fidelity.prediction.interval import STAGES, ValidatedCameras, load_validated_cameras
+
+REPO = Path(__file__).resolve().parents[2]
+SHIPPED = REPO / "fidelity" / "data" / "validation-domain.json"
+
+
+def without_source(doc: dict) -> dict:
+    return {k: v for k, v in doc.items() if k != "source"}
+
+
+def test_shipped_validated_cameras_are_the_validation_reports():
+    """The shipped file equals the report's domain.json, and both what this code derives from
+    the committed validation.json and the camera files (the shipped data from the shipped
+    code); checked against the files read directly too."""
+    report = json.loads((REPO / "reports" / "validation" / "validation.json").read_text())
+    derived = validated_cameras(ValidationResults.from_json(report),
+                                load_suite(REPO / "cameras")).to_json()
+    shipped = json.loads(SHIPPED.read_text(encoding="utf-8"))
+    beside = json.loads((REPO / "reports" / "validation" / "domain.json").read_text())
+    assert without_source(shipped) == derived == without_source(beside)
+    # independently: suite.toml's illuminants, the summary's counts, the models run
+    suite = tomllib.loads((REPO / "cameras" / "suite.toml").read_text(encoding="utf-8"))
+    names = set(report["cameras"])
+    lights = {suite["illuminant"].get(n, suite["default_illuminant"]) for n in names}
+    assert shipped["illuminants"] == sorted(lights)
+    assert shipped["cameras"] == len(names) == 30
+    assert (shipped["cells"], shipped["within"], shipped["within_2se"]) == tuple(
+        report["summary"]["all"][k] for k in ("cells", "within", "within_2se"))
+    assert sorted(shipped["models"]) == sorted(report["models"])
+    bits = set()
+    for n in names:
+        camera = tomllib.loads((REPO / "cameras" / f"{n}.toml").read_text(encoding="utf-8"))
+        bits.add(str(camera.get("quantisation", {}).get("bits", "float")))
+    assert set(shipped["stages"]["bit depth"]) == bits
+    assert load_validated_cameras() == ValidatedCameras.from_json(shipped)
+
+
+VALIDATED = ValidatedCameras(
+    cameras=3, illuminants=("A", "D65"),
+    stages={"exposure": ("auto",), "white balance": ("grey-world", "white-patch"),
+            "colour correction": ("fit",), "tone curve": ("gamma", "srgb"),
+            "bit depth": ("8", "12")},
+    sensitivities=("Nikon",), models=("yolox_nano",), cells=3, within=2, within_2se=3)
+
+
+def kinds(**changes: str) -> dict[str, str]:
+    base = {"exposure": "auto", "white balance": "white-patch", "colour correction": "fit",
+            "tone curve": "srgb", "bit depth": "12"}
+    return {**base, **{k.replace("_", " "): v for k, v in changes.items()}}
+
+
+def test_a_camera_like_those_validated_is_inside():
+    light, kind = VALIDATED.camera_checks(kinds(), "D65")
+    assert light.inside and kind.inside
+    assert "2 of 3 (camera, detector) cells within the measured bound" in kind.detail
+    assert set(STAGES) == set(kinds())
+
+
+@pytest.mark.parametrize(("changes", "illuminant", "outside"), [
+    ({}, "D50", "validated illuminant"),
+    ({"bit_depth": "10"}, "A", None),          # within the validated 8..12
+    ({"bit_depth": "16"}, "A", "bit depth 16 (validated: 8, 12)"),
+    ({"bit_depth": "float"}, "A", "bit depth float (validated: 8, 12)"),
+    ({"tone_curve": "linear"}, "A", "tone curve linear (validated: gamma, srgb)"),
+    ({"white_balance": "none"}, "A", "white balance none"),
+])
+def test_what_lies_outside_is_named(changes, illuminant, outside):
+    light, kind = VALIDATED.camera_checks(kinds(**changes), illuminant)
+    if outside is None:
+        assert light.inside and kind.inside
+    elif outside == "validated illuminant":
+        assert not light.inside and kind.inside
+        assert light.detail.startswith("illuminant D50: not among those the validation "
+                                       "rendered (A, D65)")
+    else:
+        assert light.inside and not kind.inside and outside in kind.detail
+
+
+def test_check_states_its_camera_against_the_validated_ones(tmp_path):
+    report = fidelity.check_camera("nikon-5100")
+    checks = {c.name: c for c in report.validity.checks}
+    assert checks["validated illuminant"].inside and checks["validated camera kind"].inside
+    # D50 is no illuminant of the validation: the answer says so, on the terminal too
+    r = CliRunner().invoke(main, ["--no-config", "check", "--illuminant", "D50",
+                                  "--no-report"])
+    assert r.exit_code == 0, r.output
+    assert "outside the evidence: illuminant D50: not among those the validation rendered" \
+        in r.output
+    d50 = fidelity.check_camera("nikon-5100", illuminant="D50").validity
+    names = {c.name: c.inside for c in d50.checks}
+    assert names["validated illuminant"] is False and not d50.inside
+    # a float (linear, unquantised) camera: no validated camera had such an output
+    linear = tmp_path / "linear.toml"
+    text = (REPO / "fidelity" / "data" / "cameras" / "nikon-5100.toml").read_text()
+    linear.write_text(text.replace('curve = "srgb"', 'curve = "linear"')
+                      .replace("bits = 12", "# no quantisation"), encoding="utf-8")
+    kind = {c.name: c for c in fidelity.check_camera(str(linear)).validity.checks}[
+        "validated camera kind"]
+    assert not kind.inside
+    assert "tone curve linear" in kind.detail and "bit depth float" in kind.detail
+
+
+def test_an_image_audit_states_no_camera_kind(tmp_path):
+    """An image's camera and light are not known to the tool: no such check is claimed."""
+    r = CliRunner().invoke(main, ["--no-config", "render", "--camera", "nikon-5100", "--out",
+                                  str(tmp_path / "r"), "-q"])
+    assert r.exit_code == 0, r.output
+    report = fidelity.audit_image(tmp_path / "r" / "developed.png")
+    names = {c.name for c in report.validity.checks}
+    assert not names & {"validated illuminant", "validated camera kind"}

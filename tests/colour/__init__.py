@@ -1,0 +1,1 @@
+"""Tests of fidelity.colour: colour science."""

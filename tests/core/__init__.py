@@ -1,0 +1,1 @@
+"""Tests of fidelity.core: the shared core."""

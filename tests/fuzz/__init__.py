@@ -1,0 +1,1 @@
+"""The long fuzz run (pytest -m fuzz)."""

@@ -1,0 +1,1 @@
+"""Tests of fidelity.measure: the measurements on a located chart."""

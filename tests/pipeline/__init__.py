@@ -1,0 +1,1 @@
+"""Tests of fidelity.pipeline: the pipelines of the commands."""

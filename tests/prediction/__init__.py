@@ -1,0 +1,1 @@
+"""Tests of fidelity.prediction: prediction tables and verdicts."""

@@ -1,0 +1,1 @@
+"""Tests of fidelity.report: reports and records."""

@@ -1,0 +1,1 @@
+"""Tests of fidelity.scene: the chart scenes for simulators."""
