@@ -654,6 +654,7 @@ CAMERA_SCHEMA = sc.Table(fields=(
                                                nullable=True)),)), default={}),
 ))
 
+
 def camera_from_dict(data: Any, origin: str = "<dict>", base_dir: Path | None = None) -> CameraModel:
     """Build and validate a :class:`CameraModel` from a parsed camera file (module docstring).
 

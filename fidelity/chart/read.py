@@ -25,6 +25,7 @@ from fidelity.core.fileio import file_sha256
 
 F64 = NDArray[np.float64]
 
+
 @dataclass(frozen=True)
 class ReadOptions:
     """How an image's pixels are read for measuring its chart (``audit``, ``gate``,

@@ -63,6 +63,58 @@ def _write_junit(junit: Path, cases: Sequence[GateResult]) -> None:
         sys.exit(EXIT_ERROR)
 
 
+def _settled(images: tuple[Path, ...], camera: str | None, max_delta_e: float | None,
+             max_dmap: float | None) -> tuple[str | None, float | None, float | None]:
+    """``--camera``, ``--max-delta-e`` and ``--max-dmap`` once the settings file's values have
+    yielded to what the command line names."""
+    if images and camera is not None and from_settings("camera"):
+        camera = None
+    if max_dmap is not None and max_delta_e is not None and from_settings("max_delta_e"):
+        max_delta_e = None
+    if max_delta_e is not None and max_dmap is not None and from_settings("max_dmap"):
+        max_dmap = None
+    return camera, max_delta_e, max_dmap
+
+
+def _check_usage(images: tuple[Path, ...], camera: str | None, corners: str | None,
+                 read: ReadOptions, frames: FrameSelection | None, renderer: str) -> None:
+    """The options that do not go together (a usage error, exit 2)."""
+    if images and camera is not None:
+        raise click.UsageError("give IMAGE(s) or --camera, not both")
+    if not images and camera is None:
+        raise click.UsageError("give one or more IMAGEs, or --camera")
+    if camera is not None and (corners is not None or read.given()):
+        raise click.UsageError("--corners, --encoding, --exposure, --layer, --bayer, "
+                               "--colourspace, --topic, --frame and --time apply to an IMAGE, "
+                               "not to --camera")
+    if frames is not None and not images:
+        raise click.UsageError("--frames applies to recordings given as IMAGEs")
+    if frames is not None and (read.frame is not None or read.time is not None):
+        raise click.UsageError("give --frames, or --frame N or --time T, not both")
+    if images and renderer != "closed-form" and not from_settings("renderer"):
+        raise click.UsageError("--renderer applies to --camera (a camera model rendered), not "
+                               "to an IMAGE")
+
+
+def _print_case(case: GateResult, written: Sequence[Path], *, many: bool, camera: bool,
+                setting: str) -> None:
+    """One subject's lines: its name (several subjects), the camera (a camera's gate), the
+    summary and the files written; an error as one line on stderr."""
+    if many:
+        subject = display_path(case.subject)
+        click.echo(f"{subject}:" if case.error is None else f"{subject}: error")
+    if case.error is not None or case.report is None:
+        _error_line(case.error or "no report")
+        return
+    if camera:
+        click.echo(f"camera {case.report.source.title}, {setting}")
+    indent = "  " if many else ""
+    for line in summary_lines(case.report):
+        click.echo(indent + line)
+    for path in written:
+        click.echo(f"{indent}wrote {display_path(path)}")
+
+
 @click.command()
 @click.argument("images", nargs=-1, type=IMAGE_PATH)
 @click.option("--corners", help="X1,Y1,...,X4,Y4: centres of the dark skin, bluish green, black "
@@ -122,28 +174,8 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
     exit code is 2 if any image could not be measured, else 1 if any failed, else 4 if any
     was undecided, else 0.
     """
-    # settings-file values yield to what the command line names
-    if images and camera is not None and from_settings("camera"):
-        camera = None
-    if max_dmap is not None and max_delta_e is not None and from_settings("max_delta_e"):
-        max_delta_e = None
-    if max_delta_e is not None and max_dmap is not None and from_settings("max_dmap"):
-        max_dmap = None
-    if images and camera is not None:
-        raise click.UsageError("give IMAGE(s) or --camera, not both")
-    if not images and camera is None:
-        raise click.UsageError("give one or more IMAGEs, or --camera")
-    if camera is not None and (corners is not None or read.given()):
-        raise click.UsageError("--corners, --encoding, --exposure, --layer, --bayer, "
-                               "--colourspace, --topic, --frame and --time apply to an IMAGE, "
-                               "not to --camera")
-    if frames is not None and not images:
-        raise click.UsageError("--frames applies to recordings given as IMAGEs")
-    if frames is not None and (read.frame is not None or read.time is not None):
-        raise click.UsageError("give --frames, or --frame N or --time T, not both")
-    if images and renderer != "closed-form" and not from_settings("renderer"):
-        raise click.UsageError("--renderer applies to --camera (a camera model rendered), not "
-                               "to an IMAGE")
+    camera, max_delta_e, max_dmap = _settled(images, camera, max_delta_e, max_dmap)
+    _check_usage(images, camera, corners, read, frames, renderer)
     try:
         # a camera is the one subject, its reports named after it
         plan = plan_subjects(images or (Path(camera or ""),), frames, read.topic, json_path,
@@ -190,19 +222,8 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
     cases = [case for case, _ in done]
     many = plan.many
     for case, written in done:
-        if many:
-            subject = display_path(case.subject)
-            click.echo(f"{subject}:" if case.error is None else f"{subject}: error")
-        if case.error is not None or case.report is None:
-            _error_line(case.error or "no report")
-            continue
-        if camera is not None:
-            src = case.report.source
-            click.echo(f"camera {src.title}, illuminant {illuminant}, {renderer} renderer")
-        for line in summary_lines(case.report):
-            click.echo(("  " if many else "") + line)
-        for path in written:
-            click.echo(("  " if many else "") + f"wrote {display_path(path)}")
+        _print_case(case, written, many=many, camera=camera is not None,
+                    setting=f"illuminant {illuminant}, {renderer} renderer")
     try:
         overview = plan.write_overview(cases, audit=False)
     except (FidelityError, OSError) as exc:  # as a JUnit file that cannot be written

@@ -334,6 +334,7 @@ def tristimulus(
 # Chromatic adaptation and the scene-consistent reference
 # --------------------------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class SceneReference:
     """Reference colours of the 24 patches for a rendered scene.

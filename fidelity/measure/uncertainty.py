@@ -169,6 +169,7 @@ def uncertain_text(value: float, u: float) -> str:
 
 # ------------------------------------------------------------------------ the chart function
 
+
 def srgb_chart_function(reference_lab: F64) -> ChartFunction:
     """``f``: encoded sRGB patch means ``(..., n, 3)`` -> mean ΔE00 against ``reference_lab``
     (a render's measurement: no exposure step, no clipping)."""
@@ -227,6 +228,7 @@ def _spread(values: F64) -> float:
 
 
 # ------------------------------------------------------------------------ the components
+
 
 def mean_covariance(pixels: F64, trim: float = 0.0) -> F64:
     """Covariance ``(3, 3)`` of the mean of ``(n, 3)`` pixels: ``cov / n`` (``trim`` 0), or the

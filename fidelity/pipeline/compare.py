@@ -4,7 +4,7 @@ A simulator camera is credible when it behaves like the real camera it stands fo
 :func:`compare_charts` audits both images (:func:`fidelity.pipeline.check.audit_image`: any format,
 the chart found or given by its corners), then compares the two charts patch by patch:
 
-1. **Normalisation** (:data:`NORMALISATIONS`, stated in the report), applied to the simulated
+1. **Normalisation** (:data:`fidelity.correction.normalise.NORMALISATIONS`, stated in the report), applied to the simulated
    chart's linear patch colours so that it matches the real one on the neutral patches:
    ``exposure`` (default) scales it by the geometric-mean luminance ratio of the neutral
    patches (the exposure difference, in EV); ``exposure+wb`` also applies per-channel gains
@@ -32,59 +32,19 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from fidelity.chart.read import DEFAULT_READ, ReadOptions, reads_with_own_ocio
-from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
 from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.correction.normalise import NORMALISATIONS, normalise
 from fidelity.measure.colour import measure_chart, neutral_patches
-from fidelity.measure.pixels import luminance_linear_srgb
 from fidelity.measure.uncertainty import UncertaintyBudget, UncertaintyComponent
 from fidelity.pipeline.check import audit_image, evidence_of
-from fidelity.pipeline.records import ComparisonReport, Normalisation, Provenance, utc_now
+from fidelity.pipeline.records import ComparisonReport, Provenance, utc_now
 from fidelity.prediction.judge import DEFAULT_JUDGE, JudgeOptions, judge_chart
 
 if TYPE_CHECKING:
     from fidelity.coco.measure import MeasuredLoss, MeasureRequest
     from fidelity.prediction.verdict import Criterion
-
-#: How the simulated chart is matched to the real one before comparing (module docstring).
-NORMALISATIONS: tuple[str, ...] = ("exposure", "exposure+wb", "none")
-def normalise(sim_srgb: NDArray[np.float64], real_srgb: NDArray[np.float64],
-              neutral: Sequence[int], mode: str = "exposure"
-              ) -> tuple[NDArray[np.float64], Normalisation]:
-    """Match simulated patch colours (n, 3 encoded sRGB) to the real ones on the ``neutral``
-    patches (module docstring); returns the normalised encoded sRGB (clipped to [0, 1]) and
-    what was done."""
-    if mode not in NORMALISATIONS:
-        raise unknown_name("normalisation", mode, NORMALISATIONS)
-    sim = np.asarray(linearize_srgb(np.clip(sim_srgb, 0.0, 1.0)), np.float64)
-    real = np.asarray(linearize_srgb(np.clip(real_srgb, 0.0, 1.0)), np.float64)
-    idx = list(neutral)
-    if mode == "none" or not idx:
-        if mode != "none":
-            raise InvalidValueError("the chart has no neutral patches to normalise on; use "
-                                    "--normalise none")
-        return np.clip(np.asarray(sim_srgb, np.float64), 0.0, 1.0), Normalisation("none", 0.0)
-    ys, yr = luminance_linear_srgb(sim[idx]), luminance_linear_srgb(real[idx])
-    ok = (ys > 0) & (yr > 0)
-    if not np.any(ok):
-        raise InvalidValueError("cannot normalise the exposure: the neutral patches are black "
-                                "in one of the charts; use --normalise none")
-    ev = float(np.mean(np.log2(yr[ok] / ys[ok])))
-    sim = sim * 2.0 ** ev
-    gains = None
-    if mode == "exposure+wb":
-        s, r = sim[idx].sum(axis=0), real[idx].sum(axis=0)
-        if np.any(s <= 0):
-            raise InvalidValueError("cannot normalise the white balance: a channel of the "
-                                    "simulated neutral patches is black")
-        g = r / s
-        sim = sim * g
-        gains = (float(g[0] * 2.0 ** ev), float(g[1] * 2.0 ** ev), float(g[2] * 2.0 ** ev))
-    out = np.clip(np.asarray(delinearize_srgb(np.clip(sim, 0.0, None)), np.float64), 0.0, 1.0)
-    return out, Normalisation(mode, ev, gains)
-
 
 def compare_charts(
     sim: str | os.PathLike[str],
@@ -114,7 +74,7 @@ def compare_charts(
     sim_corners, real_corners
         Each image's corner patch centres (see :func:`fidelity.pipeline.check.audit_image`); None: found.
     normalise_mode
-        ``exposure`` (default), ``exposure+wb`` or ``none`` (:data:`NORMALISATIONS`).
+        ``exposure`` (default), ``exposure+wb`` or ``none`` (:data:`fidelity.correction.normalise.NORMALISATIONS`).
     reference, illuminant
         The reference each chart's own ΔE is measured against.
     criterion
@@ -216,4 +176,4 @@ def sim_to_real_uncertainty(value: float, sim: UncertaintyBudget | None,
         quantity="sim-to-real mean ΔE00")
 
 
-__all__ = ["NORMALISATIONS", "compare_charts", "normalise", "sim_to_real_uncertainty"]
+__all__ = ["compare_charts", "sim_to_real_uncertainty"]

@@ -8,7 +8,7 @@ correction from the simulated patch colours onto the real ones
 
 1. Both charts are audited (:func:`fidelity.measure.pixels.measure_pixels`); the *fit space* is
    each chart's linear sRGB as audited (auto exposure for linear pixels), the simulated chart
-   scaled by the normalisation (:func:`fidelity.pipeline.compare.normalise`: ``exposure`` default,
+   scaled by the normalisation (:func:`fidelity.correction.normalise.normalise`: ``exposure`` default,
    ``exposure+wb``, ``none``). What the normalisation matches is left out of the correction
    (the correction is conjugated by it): with ``exposure`` the correction keeps the
    simulator's exposure; with ``none`` it corrects the exposure too.
@@ -81,10 +81,10 @@ from fidelity.correction.models import (
     patch_delta_e,
     usable_patches,
 )
+from fidelity.correction.normalise import Normalisation, normalise
 from fidelity.measure.colour import ChartMeasurement, measure_chart, neutral_patches
 from fidelity.measure.pixels import ImageMeasurement, exposure_from_neutrals, measure_pixels
-from fidelity.pipeline.compare import normalise
-from fidelity.pipeline.records import Normalisation, utc_now
+from fidelity.pipeline.records import utc_now
 from fidelity.prediction.judge import DEFAULT_JUDGE, JudgeOptions, judge_chart
 from fidelity.prediction.table import Prediction
 

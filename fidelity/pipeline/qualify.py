@@ -333,6 +333,8 @@ AP1_XY = ((0.713, 0.293), (0.165, 0.830), (0.128, 0.044))
 ACES_WHITE_XY = (0.32168, 0.33767)
 BT709_XY = ((0.640, 0.330), (0.300, 0.600), (0.150, 0.060))
 D65_XY = (0.3127, 0.3290)
+
+
 def acescct_encode(linear: np.ndarray) -> np.ndarray:
     """ACEScct code values of linear AP1 values (ACES S-2016-001, section 4.4)."""
     lin = np.asarray(linear, np.float64)

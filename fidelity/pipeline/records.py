@@ -58,6 +58,7 @@ from fidelity.core.errors import InvalidValueError
 from fidelity.core.fileio import JSONObject, file_sha256
 from fidelity.core.resources import resource_dir
 from fidelity.core.version import __version__, installed_version
+from fidelity.correction.normalise import Normalisation
 from fidelity.measure.blindspots import BlindSpot
 from fidelity.measure.colour import ChartMeasurement
 from fidelity.measure.pixels import BadPixels
@@ -486,40 +487,6 @@ COMPARE_SCHEMA_VERSION = "1.0"
 
 
 @dataclass(frozen=True)
-class Normalisation:
-    """What was matched: the ``mode``, the exposure change applied to the simulated chart
-    (``exposure_ev``, EV; 0 for ``none``) and the per-channel ``gains`` (``exposure+wb``:
-    R, G, B, including the exposure; None otherwise)."""
-
-    mode: str
-    exposure_ev: float
-    gains: tuple[float, float, float] | None = None
-
-    def describe(self) -> str:
-        """In words, for reports."""
-        if self.mode == "none":
-            return "none: the charts compared as audited"
-        text = f"exposure of the simulation {self.exposure_ev:+z.3f} EV (neutral patches)"
-        if self.gains is not None:
-            g = ", ".join(f"{v:.4f}" for v in self.gains)
-            text += f"; white balance gains R, G, B {g} (neutral patches, incl. exposure)"
-        return text
-
-    def to_json(self) -> dict[str, Any]:
-        """``{"mode", "exposure_ev", "gains", "description"}``."""
-        return {"mode": self.mode, "exposure_ev": self.exposure_ev,
-                "gains": list(self.gains) if self.gains is not None else None,
-                "description": self.describe()}
-
-    @classmethod
-    def from_json(cls, d: Mapping[str, Any]) -> Normalisation:
-        """Inverse of :meth:`to_json`."""
-        g = d.get("gains")
-        return cls(str(d["mode"]), float(d["exposure_ev"]),
-                   (float(g[0]), float(g[1]), float(g[2])) if g else None)
-
-
-@dataclass(frozen=True)
 class ComparisonReport:
     """A sim-to-real comparison (module docstring): the two audits (``sim``, ``real``:
     :class:`ChartReport`), the :class:`Normalisation`, the sim-to-real
@@ -706,7 +673,6 @@ __all__ = [
     "ComparisonReport",
     "GateResult",
     "ImageSource",
-    "Normalisation",
     "Provenance",
     "RenderSource",
     "Source",

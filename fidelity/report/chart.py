@@ -46,6 +46,7 @@ from fidelity.report.words import column_note, prediction_notes, verdict_message
 
 # ---------------------------------------------------------------------- the HTML document
 
+
 def _num(v: float | None, nd: int = 2) -> str:
     return "–" if v is None else f"{v:.{nd}f}"
 
