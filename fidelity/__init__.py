@@ -24,9 +24,9 @@ fast::
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
+from fidelity.core.lazy import lazy_attributes
 from fidelity.core.version import __version__
 
 #: Public name -> the module that defines it.
@@ -117,14 +117,8 @@ if TYPE_CHECKING:
     from fidelity.report.compare import write_comparison_report
 
 
-def __getattr__(name: str) -> Any:
-    """Import a public name's module on first use (PEP 562)."""
-    module = _API.get(name)
-    if module is None:
-        raise AttributeError(f"module 'fidelity' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
+#: Import a public name's module on first use (PEP 562).
+__getattr__ = lazy_attributes("fidelity", _API, globals())
 
 
 def __dir__() -> list[str]:

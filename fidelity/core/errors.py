@@ -38,6 +38,27 @@ class InvalidValueError(FidelityError):
     """A value is out of its domain (NaN, out of range, wrong shape)."""
 
 
+class RefusedMeasurement(InvalidValueError):
+    """A measurement refused for a stated reason (exit code 2).
+
+    Parameters
+    ----------
+    reason
+        A short machine-readable code of why (each measurement lists its codes).
+    message
+        The one-line message (``<input>: <problem>``).
+
+    Attributes
+    ----------
+    reason
+        The code given.
+    """
+
+    def __init__(self, reason: str, message: str) -> None:
+        super().__init__(message)
+        self.reason = reason
+
+
 class UnknownNameError(FidelityError):
     """A name (method, transform, chart, camera, table) is not in its registry."""
 

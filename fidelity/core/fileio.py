@@ -181,6 +181,21 @@ class SupportsJson(Protocol):
         ...
 
 
+def finite_or_none(x: float | None) -> float | None:
+    """A finite number as a float; None, NaN and +-Inf as None (JSON has none of them).
+
+    Parameters
+    ----------
+    x
+        A number or None.
+
+    Returns
+    -------
+    float or None
+    """
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
 def json_ready(obj: Any) -> Any:
     """``obj`` as strict JSON values: records with a ``to_json`` method are written by it,
     numpy scalars and arrays become Python numbers and lists, tuples lists, paths strings,

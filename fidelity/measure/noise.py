@@ -50,7 +50,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fidelity.core.errors import InvalidValueError
+from fidelity.core.errors import InvalidValueError, RefusedMeasurement
+from fidelity.core.fileio import finite_or_none
 
 F64 = NDArray[np.float64]
 
@@ -83,7 +84,7 @@ FRAME_METHOD = ("EMVA 1288 Release 4.0: temporal variance from the frames' diffe
                 "sigma^2_temp / L, with its column, row and pixel parts")
 
 
-class RefusedFit(InvalidValueError):
+class RefusedFit(RefusedMeasurement):
     """Input the noise measurement cannot use: the message names the problem.
 
     Parameters
@@ -99,14 +100,6 @@ class RefusedFit(InvalidValueError):
         One of :data:`REFUSALS`.
     """
 
-    def __init__(self, reason: str, message: str) -> None:
-        super().__init__(message)
-        self.reason = reason
-
-
-def _json_float(x: float | None) -> float | None:
-    """A finite float as it is; None, NaN and +-inf as None (JSON has none of them)."""
-    return None if x is None or not math.isfinite(x) else float(x)
 
 
 def _snr(mean: float, sigma: float) -> float:
@@ -209,7 +202,7 @@ class ChannelNoise:
         """Field names as keys; non-finite SNRs as None."""
         return {"channel": self.channel, "mean": self.mean, "variance": self.variance,
                 "u_variance": self.u_variance, "sigma": self.sigma,
-                "snr": _json_float(self.snr), "snr_db": _json_float(self.snr_db)}
+                "snr": finite_or_none(self.snr), "snr_db": finite_or_none(self.snr_db)}
 
 
 @dataclass(frozen=True)
@@ -269,8 +262,8 @@ class PatchNoise:
     def to_json(self) -> dict[str, Any]:
         """Field names as keys, ``channels`` as a list of :meth:`ChannelNoise.to_json`."""
         return {"channels": [c.to_json() for c in self.channels],
-                "chroma_r": _json_float(self.chroma_r), "chroma_b": _json_float(self.chroma_b),
-                "chroma": _json_float(self.chroma), "n": self.n,
+                "chroma_r": finite_or_none(self.chroma_r), "chroma_b": finite_or_none(self.chroma_b),
+                "chroma": finite_or_none(self.chroma), "n": self.n,
                 "design_effect": self.design_effect, "method": self.method}
 
 
@@ -442,7 +435,7 @@ class PhotonTransfer:
             if key == "covariance":
                 out[key] = [list(row) for row in value]
             elif isinstance(value, float):
-                out[key] = _json_float(value)
+                out[key] = finite_or_none(value)
             else:
                 out[key] = value
         return out

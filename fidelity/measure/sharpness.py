@@ -110,7 +110,8 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fidelity.core.errors import InvalidValueError
+from fidelity.core.errors import InvalidValueError, RefusedMeasurement
+from fidelity.core.fileio import finite_or_none
 
 F64 = NDArray[np.float64]
 Orientation = Literal["auto", "vertical", "horizontal"]
@@ -158,7 +159,7 @@ EDGE_FIT_METHOD = ("erf edge fit: a Gaussian PSF (sigma) integrated over the pix
                    "least squares over the ROI; MTF = exp(-2 pi^2 sigma^2 f^2) |sinc(f)|")
 
 
-class RefusedEdge(InvalidValueError):
+class RefusedEdge(RefusedMeasurement):
     """An ROI the e-SFR (or the edge fit) cannot measure: the message names the problem.
 
     Parameters
@@ -174,13 +175,6 @@ class RefusedEdge(InvalidValueError):
         One of :data:`REFUSALS`.
     """
 
-    def __init__(self, reason: str, message: str) -> None:
-        super().__init__(message)
-        self.reason = reason
-
-
-def _finite_or_none(x: float | None) -> float | None:
-    return None if x is None or not math.isfinite(x) else float(x)
 
 
 @dataclass(frozen=True)
@@ -252,13 +246,13 @@ class EdgeSFR:
     def to_json(self) -> dict[str, Any]:
         """Field names as keys; non-finite numbers (a noiseless ROI's SNR) as None."""
         return {"frequencies": list(self.frequencies), "mtf": list(self.mtf),
-                "mtf50": self.mtf50, "u_mtf50": _finite_or_none(self.u_mtf50),
-                "mtf10": _finite_or_none(self.mtf10), "mtf_half_nyquist": self.mtf_half_nyquist,
+                "mtf50": self.mtf50, "u_mtf50": finite_or_none(self.u_mtf50),
+                "mtf10": finite_or_none(self.mtf10), "mtf_half_nyquist": self.mtf_half_nyquist,
                 "angle": self.angle, "orientation": self.orientation,
                 "polarity": self.polarity, "refined": self.refined, "rows": self.rows,
                 "degree": self.degree,
                 "contrast": self.contrast, "noise": self.noise,
-                "snr": _finite_or_none(self.snr), "draws": self.draws, "method": self.method}
+                "snr": finite_or_none(self.snr), "draws": self.draws, "method": self.method}
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> EdgeSFR:
@@ -325,8 +319,8 @@ class EdgeFit:
 
     def to_json(self) -> dict[str, Any]:
         """Field names as keys; a non-finite uncertainty as None."""
-        return {"sigma": self.sigma, "u_sigma": _finite_or_none(self.u_sigma),
-                "mtf50": self.mtf50, "u_mtf50": _finite_or_none(self.u_mtf50),
+        return {"sigma": self.sigma, "u_sigma": finite_or_none(self.u_sigma),
+                "mtf50": self.mtf50, "u_mtf50": finite_or_none(self.u_mtf50),
                 "mtf50_optics": self.mtf50_optics, "angle": self.angle,
                 "orientation": self.orientation, "polarity": self.polarity, "rows": self.rows,
                 "contrast": self.contrast, "noise": self.noise, "method": self.method}

@@ -90,8 +90,9 @@ in the submodule that uses it.
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from fidelity.core.lazy import lazy_attributes
 
 #: Public name -> the submodule that defines it (imported on first use, PEP 562: importing
 #: one submodule, such as the records' :mod:`~fidelity.chart.find.result`, loads no other).
@@ -172,14 +173,8 @@ if TYPE_CHECKING:
     from fidelity.chart.find.view import Pyramid, View, detection_image, make_view
 
 
-def __getattr__(name: str) -> Any:
-    """Import a public name's submodule on first use (PEP 562)."""
-    module = _NAMES.get(name)
-    if module is None:
-        raise AttributeError(f"module 'fidelity.chart.find' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
+#: Import a public name's submodule on first use (PEP 562).
+__getattr__ = lazy_attributes("fidelity.chart.find", _NAMES, globals())
 
 __all__ = [
     "ASSIGN_TOLERANCE",
