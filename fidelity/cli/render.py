@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from fidelity.camera.model import DEFAULT_CAMERA, available_cameras, camera_files, load_camera
+from fidelity.camera.model import DEFAULT_CAMERA, available_cameras, load_camera
 from fidelity.camera.render import REFERENCES, RENDERERS, ChartRender, render_chart
 from fidelity.chart.image import write_exr, write_png
 from fidelity.cli.context import write_json_output
@@ -91,10 +91,11 @@ def render(camera: str, illuminant: str, renderer: str, spp: int | None,
     files = {} if out_dir is None else {f"--out ({name})": out_dir / name for name in
                                         (RAW_FILE, DEVELOPED_FILE)}
 
+    model = load_camera(camera)  # parsed once, passed down
     check_outputs({**files, "--json": json_path},
                   {"--camera": camera, "--illuminant": illuminant}
-                  | {f"--camera ({f.name})": f for f in camera_files(camera)})
-    result = render_chart(camera, illuminant, renderer, spp=spp, reference=reference,
+                  | {f"--camera ({f.name})": f for f in model.files})
+    result = render_chart(model, illuminant, renderer, spp=spp, reference=reference,
                           spectra=spectra, seed=seed, pixels_per_patch=pixels_per_patch,
                           cat=cat, step=step, variant=variant)
     report = result.to_json()
