@@ -62,12 +62,15 @@ from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import DEFAULT_REFERENCE, Reference, load_reference
 from fidelity.core.errors import FidelityError, InvalidValueError, unknown_name
 from fidelity.measure import uncertainty as unc
+from fidelity.measure.chartnoise import ChartNoise, chart_noise, grey_index
+from fidelity.measure.chartsharpness import ChartSharpness, chart_sharpness
 from fidelity.measure.colour import (
     MAX_EXPOSURE_EV,
     OCCLUDED_REASON,
     ChartMeasurement,
     measure_chart,
 )
+from fidelity.measure.noise import RefusedFit
 from fidelity.measure.uncertainty import (
     PatchSpread,
     UncertaintyBudget,
@@ -216,6 +219,12 @@ class ImageMeasurement:
         than 4 x 6 given by its corners).
     uncertainty
         The standard uncertainty budget of the chart ΔE (None: not evaluated).
+    noise
+        The neutral patches' noise, photon transfer and SNR at the 18 % grey, in linear light
+        (:func:`fidelity.measure.chartnoise.chart_noise`; None: not measured).
+    sharpness
+        The MTF of the chart's vertical and horizontal patch edges per channel
+        (:func:`fidelity.measure.chartsharpness.chart_sharpness`; None: not measured).
     """
 
     measurement: ChartMeasurement
@@ -233,6 +242,10 @@ class ImageMeasurement:
     corner_checks: ChartChecks | None = None
     #: the standard uncertainty of the chart ΔE (:mod:`fidelity.measure.uncertainty`)
     uncertainty: UncertaintyBudget | None = None
+    #: the neutral patches' noise and photon transfer (:mod:`fidelity.measure.chartnoise`)
+    noise: ChartNoise | None = None
+    #: the MTF of the chart's patch edges (:mod:`fidelity.measure.chartsharpness`)
+    sharpness: ChartSharpness | None = None
 
     @property
     def mean_delta_e(self) -> float:
@@ -248,7 +261,8 @@ class ImageMeasurement:
         """JSON form: the measurement (:meth:`ChartMeasurement.to_json`, each patch with its
         ``valid_pixels`` and ``bad_pixels``), ``exposure_ev``, ``exposure_mode``, ``encoding``,
         ``bad_pixels``, ``clipped_patches``, ``reference``, ``location``, ``detection``,
-        ``corner_checks``, ``colourspace`` and ``image``."""
+        ``corner_checks``, ``colourspace``, ``image``, ``uncertainty``, ``noise`` and
+        ``sharpness``."""
         d = self.measurement.to_json()
         for patch, n in zip(d["patches"], self.valid_pixels, strict=True):
             patch["valid_pixels"] = int(n)
@@ -266,6 +280,8 @@ class ImageMeasurement:
             colourspace=self.colourspace,
             image=self.image.to_json() if self.image else None,
             uncertainty=self.uncertainty.to_json() if self.uncertainty else None,
+            noise=self.noise.to_json() if self.noise else None,
+            sharpness=self.sharpness.to_json() if self.sharpness else None,
         )
         return d
 
@@ -400,6 +416,7 @@ def measure_pixels(
     negatives: str = "keep",
     colourspace: str | Sequence[float] = "sRGB",
     uncertainty: bool = True,
+    texture: bool = True,
 ) -> ImageMeasurement:
     """Audit a chart in an ``(H, W, 3)`` image array (see the module docstring).
 
@@ -444,6 +461,9 @@ def measure_pixels(
         :func:`fidelity.colour.colorimetry.matrix_rgb_to_linear_srgb`).
     uncertainty
         Also evaluate the standard uncertainty of the chart ΔE (:func:`image_uncertainty`).
+    texture
+        Also measure the chart's noise and sharpness in linear light
+        (:func:`noise_and_sharpness`).
     """
     to_srgb = cm.matrix_rgb_to_linear_srgb(colourspace)
     if encoding not in ENCODINGS:
@@ -566,13 +586,89 @@ def measure_pixels(
             exposure_ev=None if mode == "auto" else ev, fitted_ev=ev, encoding=encoding,
             negatives=negatives, to_srgb=to_srgb, found=found, step=step,
             excluded=tuple(excluded))
+    chart_noise_, sharpness = (noise_and_sharpness(arr, loc, means, ref, encoding=encoding,
+                                                   negatives=negatives, to_srgb=to_srgb)
+                               if texture else (None, None))
     return ImageMeasurement(
         measurement=measurement, exposure_ev=ev, exposure_mode=mode, encoding=encoding,
         bad_pixels=bad_pixels, valid_pixels=tuple(valid_counts), clipped_patches=clipped,
         location=loc, reference=ref, image=image, detection=found,
         colourspace=_colourspace_name(colourspace), corner_checks=checks,
-        uncertainty=budget,
+        uncertainty=budget, noise=chart_noise_, sharpness=sharpness,
     )
+
+
+def noise_and_sharpness(pixels: np.ndarray, location: ChartLocation, means: np.ndarray,
+                        reference: Reference, *, encoding: str, negatives: str,
+                        to_srgb: np.ndarray) -> tuple[ChartNoise | None, ChartSharpness | None]:
+    """The chart's noise and sharpness in LINEAR light (before any exposure correction).
+
+    Linear input as it is, sRGB-encoded input decoded with the IEC 61966-2-1 transfer function
+    (integer codes as ``code / (2**bits - 1)``), other primaries converted to linear sRGB, as
+    the patch means are; the record names the linearisation.
+
+    Parameters
+    ----------
+    pixels
+        The ``(H, W, 3)`` image as stored.
+    location
+        The chart's location.
+    means
+        The patches' linear means ``(n, 3)`` (linear sRGB), chart order.
+    reference
+        The reference chart (patch names, neutral patches).
+    encoding
+        ``linear`` or ``srgb``.
+    negatives
+        The rule for negative values (:data:`NEGATIVE_RULES`).
+    to_srgb
+        The ``3 x 3`` matrix from the pixels' primaries to linear sRGB.
+
+    Returns
+    -------
+    tuple
+        ``(ChartNoise or None, ChartSharpness or None)``: None where the noise could not be
+        measured (a neutral patch with fewer than 2 valid pixels) or the chart is not 4 x 6.
+    """
+    identity = bool(np.array_equal(to_srgb, np.eye(3)))
+    how = ("none (linear input)" if encoding == "linear"
+           else "sRGB transfer function decoded (IEC 61966-2-1)")
+    if is_coded(pixels):
+        how += f", {pixels.dtype} codes / {np.iinfo(pixels.dtype).max}"
+    if not identity:
+        how += ", primaries converted to linear sRGB"
+    bounded = identity and (is_coded(pixels) or encoding == "srgb")
+    saturation, black = (1.0, 0.0) if bounded else (None, None)
+
+    def linearise(v: np.ndarray) -> np.ndarray:
+        a = np.asarray(v)
+        if is_coded(a):
+            lin = _code_linear(a.dtype.str, encoding)[a]
+        else:
+            f = a.astype(np.float64)
+            lin = f if encoding == "linear" else cm.linearize_srgb(f)
+        out: np.ndarray = lin if identity else lin @ to_srgb.T
+        return out
+
+    names = reference.patch_names
+    neutral = list(reference.neutral_indices)
+    noise: ChartNoise | None = None
+    if neutral:
+        ref_y = cm.lab_to_xyz(np.asarray(reference.lab, np.float64))[:, 1]
+        grey = names[grey_index(names, neutral, ref_y)]
+        samples = [_patch_linear(location.windows[k].values(pixels), encoding, negatives,
+                                 to_srgb, identity)[0] for k in neutral]
+        try:
+            noise = chart_noise(samples, [names[k] for k in neutral], grey, linearisation=how,
+                                saturation=saturation)
+        except RefusedFit:
+            noise = None
+    sharpness: ChartSharpness | None = None
+    if (location.rows, location.cols) == (reference.rows, reference.cols):
+        sharpness = chart_sharpness(pixels, location, luminance_linear_srgb(means), names,
+                                    linearise=linearise, linearisation=how,
+                                    saturation=saturation, black=black)
+    return noise, sharpness
 
 
 #: Code steps of integer pixel types (pixels read as [0, 1]).
@@ -838,6 +934,7 @@ __all__ = [
     "ImageMeasurement",
     "exposure_from_neutrals",
     "luminance_linear_srgb",
+    "noise_and_sharpness",
     "measure_image",
     "measure_pixels",
     "image_uncertainty",

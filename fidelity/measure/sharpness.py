@@ -738,24 +738,93 @@ def gaussian_mtf50(sigma: float) -> float:
     ----------
     ISO 12233:2017 (MTF50); the pixel aperture's MTF is ``|sinc(f)|``.
     """
-    from scipy.optimize import brentq
-
     if not (math.isfinite(sigma) and sigma >= 0):
         raise InvalidValueError(f"{sigma}: sigma must be finite and >= 0")
 
     def g(f: float) -> float:
-        return float(math.exp(-2.0 * math.pi ** 2 * sigma ** 2 * f * f) * np.sinc(f)) - 0.5
+        sinc = math.sin(math.pi * f) / (math.pi * f)
+        return math.exp(-2.0 * math.pi ** 2 * sigma ** 2 * f * f) * sinc - 0.5
 
-    return float(brentq(g, 1e-9, 0.99, xtol=1e-12))
+    # bisection (g falls from 0.5 to below 0 on (0, 0.99)): no scipy to import
+    lo, hi = 1e-9, 0.99
+    while hi - lo > 1e-12:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if g(mid) > 0 else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+#: Coefficients of the complementary error function's rational approximation (W. J. Cody's
+#: Chebyshev fit as Numerical Recipes' ``erfcc``: fractional error below 1.2e-7 everywhere).
+_ERFC = (-1.26551223, 1.00002368, 0.37409196, 0.09678418, -0.18628806, 0.27886807,
+         -1.13520398, 1.48851587, -0.82215223, 0.17087277)
+
+
+def _ndtr(z: F64) -> F64:
+    """The standard normal CDF ``Phi(z)`` (numpy only: ``erfc`` to 1.2e-7 relative)."""
+    x = np.abs(z) / math.sqrt(2.0)
+    t = 1.0 / (1.0 + 0.5 * x)
+    poly = np.zeros_like(t)
+    for c in reversed(_ERFC):
+        poly = poly * t + c
+    erfc = t * np.exp(-x * x + poly)
+    return np.asarray(np.where(z >= 0, 1.0 - 0.5 * erfc, 0.5 * erfc), dtype=np.float64)
+
+
+def _least_squares(residuals: Any, p0: F64, lower: F64, upper: F64,
+                   iterations: int = 40, analytic: Any = None) -> tuple[F64, F64, F64]:
+    """Levenberg-Marquardt within bounds (each step clipped to them), the Jacobian
+    ``analytic(p)`` or by forward differences: ``(p, residuals, jacobian)`` at the solution."""
+    def jacobian(p: F64, r: F64) -> F64:
+        if analytic is not None:
+            out: F64 = analytic(p)
+            return out
+        cols = []
+        for k in range(p.size):
+            h = 1e-7 * max(abs(float(p[k])), 1e-3)
+            q = p.copy()
+            q[k] = q[k] + h if q[k] + h <= upper[k] else q[k] - h
+            cols.append((residuals(q) - r) / (q[k] - p[k]))
+        return np.stack(cols, axis=1)
+
+    p = np.clip(np.asarray(p0, np.float64), lower, upper)
+    r = residuals(p)
+    cost = float(r @ r)
+    lam = 1e-3
+    jac = jacobian(p, r)
+    for _ in range(iterations):
+        a = jac.T @ jac
+        g = jac.T @ r
+        improved = done = False
+        for _ in range(12):
+            try:
+                step = np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-30), -g)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            q = np.clip(p + step, lower, upper)
+            rq = residuals(q)
+            cq = float(rq @ rq)
+            if cq <= cost:
+                improved = True
+                done = cost - cq <= 1e-7 * cost or bool(np.all(
+                    np.abs(q - p) <= 1e-8 * (np.abs(p) + 1e-8)))
+                p, r, cost = q, rq, cq
+                lam = max(lam / 10.0, 1e-12)
+                break
+            lam *= 10.0
+        if not improved:
+            break
+        jac = jacobian(p, r)
+        if done:
+            break
+    return p, r, jac
 
 
 def _pixel_phi(t: F64, sigma: float, width: float) -> F64:
     """Mean of the normal CDF ``Phi(u / sigma)`` over ``u`` in ``[t - width/2, t + width/2]``
     (the pixel aperture along the normal), closed form by ``G(z) = z Phi(z) + phi(z)``."""
-    from scipy.special import ndtr
-
     def g(z: F64) -> F64:
-        return np.asarray(z * ndtr(z) + np.exp(-0.5 * z * z) / math.sqrt(2.0 * math.pi),
+        return np.asarray(z * _ndtr(z) + np.exp(-0.5 * z * z) / math.sqrt(2.0 * math.pi),
                           dtype=np.float64)
 
     hi = (t + 0.5 * width) / sigma
@@ -772,7 +841,8 @@ def edge_fit(roi: ArrayLike, *, orientation: Orientation = "auto",
     CDF ``Phi(s / sigma)`` averaged over the pixel's aperture along the edge normal (closed
     form), ``s = (col - x0 - slope * row) cos(atan(slope))`` its distance from the edge.
     Least squares over every pixel of the ROI in the five parameters ``lo, hi, x0, slope,
-    sigma`` (scipy's trust-region reflective solver, ``sigma`` bounded to [0.01, cols]); the
+    sigma`` (Levenberg-Marquardt, steps clipped to the bounds, ``sigma`` bounded to
+    [0.01, cols]; numpy only, so that an audit imports no scipy); the
     standard uncertainties from the covariance ``s^2 (J^T J)^-1``.
 
     Parameters
@@ -805,8 +875,6 @@ def edge_fit(roi: ArrayLike, *, orientation: Orientation = "auto",
     ISO 12233:2017 (MTF50); the erf edge model: the edge spread function of a Gaussian PSF
     is ``Phi(x / sigma)``.
     """
-    from scipy.optimize import least_squares
-
     a, orient = _check_roi(roi, saturation, black, orientation)
     sign = _polarity(a)
     rows, cols = a.shape
@@ -826,15 +894,34 @@ def edge_fit(roi: ArrayLike, *, orientation: Orientation = "auto",
     def residuals(p: F64) -> F64:
         return (model(p) - a).ravel()
 
+    def jacobian(p: F64) -> F64:
+        # P = sigma (G(z+) - G(z-)) / w, z+- = (s +- w/2) / sigma, G' = Phi, G - z Phi = phi
+        lo, hi, x0, slope, sigma = p
+        cos = 1.0 / math.sqrt(1.0 + slope * slope)
+        w = cos
+        d = c - x0 - slope * r
+        s = sign * d * cos
+        zp, zm = (s + 0.5 * w) / sigma, (s - 0.5 * w) / sigma
+        cp, cm = _ndtr(zp), _ndtr(zm)
+        gp = zp * cp + np.exp(-0.5 * zp * zp) / math.sqrt(2.0 * math.pi)
+        gm = zm * cm + np.exp(-0.5 * zm * zm) / math.sqrt(2.0 * math.pi)
+        big_p = sigma * (gp - gm) / w
+        dp_ds = (cp - cm) / w
+        dp_dsigma = ((gp - zp * cp) - (gm - zm * cm)) / w
+        dp_dw = -big_p / w + (cp + cm) / (2.0 * w)
+        dcos = -slope * cos ** 3
+        ds_dslope = sign * (-r * cos + d * dcos)
+        k = hi - lo
+        cols = [1.0 - big_p, big_p, k * dp_ds * (-sign * cos),
+                k * (dp_ds * ds_dslope + dp_dw * dcos), k * dp_dsigma]
+        return np.stack([np.broadcast_to(col, a.shape).ravel() for col in cols], axis=1)
+
     p0 = np.array([lo0, hi0, float(line[0]), float(line[1]), 1.0])
     lower = np.array([-np.inf, -np.inf, -cols, -1.0, 0.01])
     upper = np.array([np.inf, np.inf, 2.0 * cols, 1.0, float(cols)])
-    sol = least_squares(residuals, p0, bounds=(lower, upper), x_scale="jac")
-    p = np.asarray(sol.x, dtype=np.float64)
-    res = np.asarray(sol.fun, dtype=np.float64)
+    p, res, jac = _least_squares(residuals, p0, lower, upper, analytic=jacobian)
     dof = max(1, res.size - p.size)
     s2 = float(res @ res) / dof
-    jac = np.asarray(sol.jac, dtype=np.float64)
     cov = np.linalg.pinv(jac.T @ jac) * s2
     sigma = float(p[4])
     u_sigma = float(math.sqrt(max(0.0, float(cov[4, 4]))))

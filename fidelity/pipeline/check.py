@@ -326,7 +326,7 @@ def audit_image(
         exposure_ev=result.exposure_ev, bad_pixels=result.bad_pixels,
         valid_pixels=result.valid_pixels, directional=directional, bound=judge.bound,
         blind_spots=spots, measured=measured, uncertainty=u, interval=interval,
-        validity=validity,
+        validity=validity, noise=result.noise, sharpness=result.sharpness,
     )
 
 

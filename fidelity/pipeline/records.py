@@ -60,6 +60,8 @@ from fidelity.core.resources import resource_dir
 from fidelity.core.version import __version__, installed_version
 from fidelity.correction.normalise import Normalisation
 from fidelity.measure.blindspots import BlindSpot
+from fidelity.measure.chartnoise import ChartNoise
+from fidelity.measure.chartsharpness import ChartSharpness
 from fidelity.measure.colour import ChartMeasurement
 from fidelity.measure.pixels import BadPixels
 from fidelity.measure.uncertainty import UncertaintyBudget
@@ -368,6 +370,12 @@ class ChartReport:
     validity
         Whether the answer lies inside its evidence's domain
         (:class:`fidelity.prediction.interval.ValidityDomain`); None when not judged.
+    noise
+        The chart's neutral-patch noise, photon transfer and SNR at the 18 % grey
+        (:class:`fidelity.measure.chartnoise.ChartNoise`); None when not measured (a render).
+    sharpness
+        The MTF of the chart's patch edges (:class:`fidelity.measure.chartsharpness.
+        ChartSharpness`); None when not measured.
     """
 
     command: str
@@ -395,6 +403,10 @@ class ChartReport:
     interval: PredictionInterval | None = None
     #: whether the answer lies inside its evidence's domain
     validity: ValidityDomain | None = None
+    #: the neutral patches' noise (:mod:`fidelity.measure.chartnoise`)
+    noise: ChartNoise | None = None
+    #: the MTF of the patch edges (:mod:`fidelity.measure.chartsharpness`)
+    sharpness: ChartSharpness | None = None
 
     @property
     def warnings(self) -> list[BlindSpot]:
@@ -454,6 +466,9 @@ class ChartReport:
                       if data.get("prediction_interval") else None),
             validity=(ValidityDomain.from_json(data["validity"])
                       if data.get("validity") else None),
+            noise=ChartNoise.from_json(data["noise"]) if data.get("noise") else None,
+            sharpness=(ChartSharpness.from_json(data["sharpness"])
+                       if data.get("sharpness") else None),
         )
 
 

@@ -92,6 +92,8 @@ def chart_report_json(report: ChartReport) -> JSONObject:
         "uncertainty": r.uncertainty.to_json() if r.uncertainty else None,
         "prediction_interval": r.interval.to_json() if r.interval else None,
         "validity": r.validity.to_json() if r.validity else None,
+        "noise": r.noise.to_json() if r.noise else None,
+        "sharpness": r.sharpness.to_json() if r.sharpness else None,
     })
     return out
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from fidelity.pipeline.records import ChartReport, ImageSource
 from fidelity.prediction.tablefile import TableKind
 from fidelity.report.words import verdict_message
@@ -56,6 +58,7 @@ def summary_lines(report: ChartReport) -> list[str]:
         if isinstance(src, ImageSource) and src.clipped_patches:
             lines.append("outside [0, 1] in sRGB, clipped like a stored image: "
                          + ", ".join(src.clipped_patches))
+    lines += texture_lines(report)
     p = report.prediction
     if p is not None:
         bound = p.table.kind.upper_bound
@@ -98,6 +101,55 @@ def uncertainty_line(report: ChartReport) -> str:
     return f"{u.text()}{largest}{notes}"
 
 
+def plus_minus(value: float, u: float | None) -> str:
+    """``value ± u`` to the uncertainty's second significant digit (``value`` to 3 digits
+    without one); scientific notation for small numbers."""
+    if u is None or not (math.isfinite(u) and u > 0):
+        return f"{value:.3g}"
+    digits = max(0, 1 - math.floor(math.log10(u)))
+    if abs(value) < 0.01 and digits > 4:
+        return f"{value:.2e} ± {u:.1e}"
+    digits = min(digits, 4)
+    if u < 0.5 * 10.0 ** -digits:
+        return f"{value:.{digits}f} ± <{10.0 ** -digits:.{digits}f}"
+    return f"{value:.{digits}f} ± {u:.{digits}f}"
+
+
+def texture_lines(report: ChartReport) -> list[str]:
+    """The chart's noise (SNR at the 18 % grey, the photon transfer's read noise and gain, or
+    why it was refused) and sharpness (luminance MTF50 per direction and the method), one line
+    each; none when not measured."""
+    lines = []
+    n = report.noise
+    if n is not None:
+        snr = ("noiseless" if not math.isfinite(n.grey_snr_db)
+               else f"SNR {n.grey_snr_db:.1f} dB")
+        t = n.transfer
+        if t is not None:
+            how = (f"read noise {plus_minus(t.read_noise, t.u_read_noise)}, gain "
+                   f"{plus_minus(t.gain, t.u_gain)} per electron, G channel, linear units")
+        else:
+            assert n.refusal is not None
+            how = f"photon transfer refused, {n.refusal[0]}: {n.refusal[1]}"
+        lines.append(f"noise: {snr} at the 18 % grey ({n.grey_patch}; {how})")
+    s = report.sharpness
+    if s is not None and s.edges:
+        parts, methods = [], []
+        for k, e in enumerate(s.edges):
+            y = e.channel("Y")
+            unit = " cy/px" if k == 0 else ""
+            if e.refusal is not None or y is None or y.mtf50 is None:
+                reason = e.refusal or (y.refusal if y is not None else None)
+                parts.append(f"{e.direction} refused ({reason[0] if reason else 'not measured'})")
+            else:
+                parts.append(f"{plus_minus(y.mtf50, y.u_mtf50)}{unit} {e.direction}")
+            if e.method is not None and e.method not in methods:
+                methods.append(e.method)
+        how = ", ".join([*methods, "luminance"])
+        lines.append(f"sharpness: MTF50 {', '.join(parts)} ({how})")
+    return lines
+
+
 def directional_lines(report: ChartReport) -> list[str]:
     """The direction-aware prediction in one line, and which bound a ``max-dmap`` verdict
     used."""
@@ -116,4 +168,5 @@ def directional_lines(report: ChartReport) -> list[str]:
             f"baseline ({d.explanation()}){used}"]
 
 
-__all__ = ["directional_lines", "summary_lines", "uncertainty_line"]
+__all__ = ["directional_lines", "plus_minus", "summary_lines", "texture_lines",
+           "uncertainty_line"]
