@@ -38,6 +38,12 @@ cameras live in ``fidelity/data/cameras/<name>.toml``. Every stage is optional:
 8. **Quantisation** (``[quantisation] bits``): round(v (2^N - 1)) / (2^N - 1) after clipping
    to [0, 1].
 
+**Optics** (``[optics] kind``, :mod:`fidelity.camera.optics`): the lens's point-spread function
+(``none``; ``gaussian`` with ``sigma_px``; ``defocus`` with ``radius_px``; ``diffraction`` with
+``f_number``, ``wavelength_nm``, ``pixel_pitch_um``; ``mtf`` with an inline ``mtf = [[f, v],
+...]`` table or ``mtf_file``; ``psf`` with ``psf_file``), convolved with the linear raw image
+after exposure and vignetting and before noise (so before white balance and the tone curve).
+
 Clipping rule: a display-referred output (tone curve other than ``linear``) or a quantised
 output is clipped to [0, 1], as a real encoded image is. A camera with a ``linear`` tone curve
 and no quantisation outputs unclipped float linear sRGB (an EXR-like output); it is measured as
@@ -62,6 +68,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fidelity.camera.optics import (
+    OPTICS_KINDS,
+    Optics,
+    mtf_table_problem,
+    psf_problem,
+    read_psf_file,
+)
 from fidelity.colour.colorimetry import MATRIX_XYZ_TO_LINEAR_SRGB, delinearize_srgb
 from fidelity.colour.datasets import camera_sensitivities
 from fidelity.colour.spectral import (
@@ -208,6 +221,9 @@ class CameraModel:
     source
         Where it was read from: ``built-in <name>``, the camera file's path, or
         ``built-in`` (default, one built in code).
+    optics
+        The lens's point-spread function (:class:`fidelity.camera.optics.Optics`), applied to
+        the linear raw image before noise; kind ``none`` (the default) changes nothing.
     named
         What it was loaded by: a built-in name or the camera file's path as given ("" when
         built in code); not compared.
@@ -227,6 +243,7 @@ class CameraModel:
     quantisation_bits: int | None = None
     vignetting_fov_deg: float | None = None
     source: str = "built-in"
+    optics: Optics = field(default_factory=Optics)
     #: What it was loaded by: a built-in name or the camera file's path as given ("" when
     #: built in code); :attr:`subject`.
     named: str = field(default="", compare=False)
@@ -254,7 +271,10 @@ class CameraModel:
         """The kind of each processing stage, the terms a validation domain is stated in
         (:class:`fidelity.prediction.interval.ValidatedCameras`): ``exposure`` (mode), ``white
         balance`` and ``colour correction`` (method), ``tone curve`` and ``bit depth`` (the
-        quantisation bits, ``"float"`` without quantisation)."""
+        quantisation bits, ``"float"`` without quantisation). The optics is not a stage
+        kind here: the validated cameras' record (``validation-domain.json``) and
+        :func:`fidelity.coco.validate.colour.validated_cameras` know only these five stages,
+        and the validation emulates colour alone (the optics is in :attr:`optics`)."""
         return {"exposure": self.exposure.mode, "white balance": self.white_balance.method,
                 "colour correction": self.ccm.method, "tone curve": self.tone.curve,
                 "bit depth": ("float" if self.quantisation_bits is None
@@ -278,7 +298,42 @@ class CameraModel:
             "output_encoding": self.output_encoding,
             "clipped": self.clips,
         }
+        if self.optics.kind != "none":  # absent without optics: the records stay as they were
+            d["optics"] = optics_json(self.optics)
         return d
+
+
+def optics_json(optics: Optics) -> dict[str, Any]:
+    """JSON-ready description of an :class:`~fidelity.camera.optics.Optics`: its kind and the
+    parameters that kind reads (an MTF table's and a PSF image's size, not their values).
+
+    Parameters
+    ----------
+    optics
+        The optics.
+
+    Returns
+    -------
+    dict
+        ``kind`` and, by kind: ``sigma_px``; ``radius_px``; ``f_number``, ``wavelength_nm``,
+        ``pixel_pitch_um``, ``cutoff_cy_per_px``; ``mtf_points``; ``psf_size`` ``[h, w]``;
+        with ``source`` (the file read) for a measured MTF or PSF.
+    """
+    d: dict[str, Any] = {"kind": optics.kind}
+    if optics.kind == "gaussian":
+        d["sigma_px"] = optics.sigma_px
+    elif optics.kind == "defocus":
+        d["radius_px"] = optics.radius_px
+    elif optics.kind == "diffraction":
+        d.update(f_number=optics.f_number, wavelength_nm=optics.wavelength_nm,
+                 pixel_pitch_um=optics.pixel_pitch_um, cutoff_cy_per_px=optics.cutoff)
+    elif optics.kind == "mtf":
+        d["mtf_points"] = len(optics.mtf_table or ())
+    elif optics.kind == "psf":
+        d["psf_size"] = [len(optics.psf or ()), len((optics.psf or ((),))[0])]
+    if optics.source:
+        d["source"] = optics.source
+    return d
 
 
 # --------------------------------------------------------------------------------------------
@@ -526,6 +581,12 @@ def develop(
 MAX_CAMERA_FILE_BYTES = 1 << 20
 #: Most points of a tone-curve LUT.
 MAX_LUT_POINTS = 65536
+#: Most points of an optics MTF table.
+MAX_MTF_POINTS = 4096
+#: Largest Gaussian sigma or defocus radius, pixels.
+MAX_BLUR_PX = 256.0
+#: Largest side of a PSF image, pixels.
+MAX_PSF_PX = 1025
 
 
 def _illuminant_problem(name: str) -> str | None:
@@ -593,6 +654,20 @@ def _noise_needs_full_well(t: Mapping[str, Any]) -> tuple[str, str] | None:
     return None
 
 
+def _inline_mtf(t: Mapping[str, Any]) -> tuple[str, str] | None:
+    table = t.get("mtf")
+    if not isinstance(table, list):
+        return None
+    problem = mtf_table_problem(np.asarray(table, dtype=np.float64).reshape(-1, 2))
+    return None if problem is None else ("mtf", problem)
+
+
+def _mtf_given(t: Mapping[str, Any]) -> tuple[str, str] | None:
+    if t.get("kind") == "mtf" and t.get("mtf") is None and t.get("mtf_file") is None:
+        return "mtf", "required when kind = 'mtf' (or mtf_file)"
+    return None
+
+
 def _finite_row(n: int) -> sc.ListOf:
     return sc.ListOf(sc.Number(), min_items=n, max_items=n)
 
@@ -652,6 +727,28 @@ CAMERA_SCHEMA = sc.Table(fields=(
     sc.Field("vignetting", sc.Table(fields=(
         sc.Field("diagonal_fov_deg", sc.Number(lo=0.0, hi=179.0, lo_open=True,
                                                nullable=True)),)), default={}),
+    sc.Field("optics", sc.Table(fields=(
+        sc.Field("kind", sc.String(choices=OPTICS_KINDS, lower=True), default="none"),
+        sc.Field("sigma_px", sc.Number(lo=0.0, hi=MAX_BLUR_PX), when=("kind", ("gaussian",))),
+        sc.Field("radius_px", sc.Number(lo=0.0, hi=MAX_BLUR_PX), when=("kind", ("defocus",))),
+        sc.Field("f_number", sc.Number(lo=0.0, hi=1000.0, lo_open=True),
+                 when=("kind", ("diffraction",))),
+        sc.Field("wavelength_nm", sc.Number(lo=100.0, hi=20000.0), default=550.0),
+        sc.Field("pixel_pitch_um", sc.Number(lo=0.0, hi=1000.0, lo_open=True),
+                 when=("kind", ("diffraction",))),
+        sc.Field("mtf", sc.ListOf(_finite_row(2), max_items=MAX_MTF_POINTS,
+                                  describe=f"[[frequency cy/px, MTF], ...] of finite numbers "
+                                           f"(at most {MAX_MTF_POINTS} points)"),
+                 when=("kind", ("mtf",))),
+        sc.Field("mtf_file", sc.String(nonempty=True), when=("kind", ("mtf",))),
+        sc.Field("psf_file", sc.String(nonempty=True), when=("kind", ("psf",))),
+    ), rules=(sc.RequiredWhen("sigma_px", "kind", ("gaussian",)),
+              sc.RequiredWhen("radius_px", "kind", ("defocus",)),
+              sc.RequiredWhen("f_number", "kind", ("diffraction",)),
+              sc.RequiredWhen("pixel_pitch_um", "kind", ("diffraction",)),
+              sc.RequiredWhen("psf_file", "kind", ("psf",)),
+              sc.Exclusive("mtf", "mtf_file"), sc.Check(_mtf_given), sc.Check(_inline_mtf))),
+        default={}),
 ))
 
 
@@ -726,8 +823,58 @@ def camera_from_dict(data: Any, origin: str = "<dict>", base_dir: Path | None = 
     noise = Noise(nv.get("full_well"), float(nv["read_noise"]), int(nv["seed"]))
     bits = v["quantisation"].get("bits")
     fov = v["vignetting"].get("diagonal_fov_deg")
+    optics = _optics(v["optics"], lambda key, spec: file_in("optics", key, spec),
+                     lambda key, problem: error("optics", key, problem))
     return CameraModel(name, sens, v["description"], exposure, wb, ccm, tone, noise, bits, fov,
-                       origin)
+                       origin, optics)
+
+
+def _optics(ov: Mapping[str, Any], file_in: Callable[[str, str], Path],
+            error: Callable[[str, str], InputFileError]) -> Optics:
+    """The :class:`Optics` of a validated ``[optics]`` section (its files read here)."""
+    kind = ov["kind"]
+    wavelength = float(ov["wavelength_nm"])
+    if kind == "gaussian":
+        return Optics(kind, sigma_px=float(ov["sigma_px"]), wavelength_nm=wavelength)
+    if kind == "defocus":
+        return Optics(kind, radius_px=float(ov["radius_px"]), wavelength_nm=wavelength)
+    if kind == "diffraction":
+        return Optics(kind, f_number=float(ov["f_number"]), wavelength_nm=wavelength,
+                      pixel_pitch_um=float(ov["pixel_pitch_um"]))
+    if kind == "mtf":
+        source = ""
+        if ov.get("mtf_file") is not None:
+            p = file_in("mtf_file", ov["mtf_file"])
+            try:
+                freq, vals = read_spectral_csv(p, columns=1, what="MTF table file")
+            except FidelityError as exc:
+                raise error("mtf_file", str(exc)) from None
+            table = np.column_stack([freq, vals[:, 0]])
+            problem = mtf_table_problem(table)
+            if problem:
+                raise error("mtf_file", f"{display_path(p)}: {problem}")
+            source = display_path(p)
+        else:
+            table = np.asarray(ov["mtf"], dtype=np.float64).reshape(-1, 2)
+        return Optics(kind, wavelength_nm=wavelength, source=source,
+                      mtf_table=tuple((float(a), float(b)) for a, b in table))
+    if kind == "psf":
+        p = file_in("psf_file", ov["psf_file"])
+        if not p.is_file():
+            raise error("psf_file", f"{display_path(p)}: no such file")
+        try:
+            psf = read_psf_file(str(p))
+        except FidelityError as exc:
+            raise error("psf_file", str(exc)) from None
+        problem = psf_problem(psf)
+        if problem is None and max(psf.shape) > MAX_PSF_PX:
+            problem = f"at most {MAX_PSF_PX} x {MAX_PSF_PX} pixels, got {psf.shape[0]} x " \
+                      f"{psf.shape[1]}"
+        if problem:
+            raise error("psf_file", f"{display_path(p)}: {problem}")
+        return Optics(kind, wavelength_nm=wavelength, source=display_path(p),
+                      psf=tuple(tuple(float(x) for x in row) for row in psf / psf.sum()))
+    return Optics()
 
 
 def camera_files(name_or_path: str | os.PathLike[str]) -> list[Path]:
@@ -748,7 +895,8 @@ def camera_files(name_or_path: str | os.PathLike[str]) -> list[Path]:
 def _named_files(data: Any, path: Path) -> list[Path]:
     """The sensitivity CSV and tone LUT file a parsed camera file at ``path`` names."""
     files = []
-    for section, key in (("sensitivities", "path"), ("tone", "lut")):
+    for section, key in (("sensitivities", "path"), ("tone", "lut"), ("optics", "mtf_file"),
+                         ("optics", "psf_file")):
         table = data.get(section) if isinstance(data, dict) else None
         spec = table.get(key) if isinstance(table, dict) else None
         if isinstance(spec, str) and spec:
@@ -849,6 +997,7 @@ __all__ = [
     "fit_colour_correction",
     "ideal_sensitivities",
     "load_camera",
+    "optics_json",
     "quantise",
     "read_camera_file",
     "vignetting_gain",

@@ -8,8 +8,9 @@ Two renderers give one result (:data:`RENDERERS`):
 - ``"mitsuba"``: Mitsuba 3 renders the same chart spectrally
   (:mod:`fidelity.camera.mitsuba`), in the same units.
 
-Both images then go through the same camera pipeline in numpy (exposure, vignetting, noise,
-white balance, CCM, tone curve, quantisation; :mod:`fidelity.camera.model`) and the same patch
+Both images then go through the same camera pipeline in numpy (exposure, vignetting, the
+lens's point-spread function (:mod:`fidelity.camera.optics`, in linear light), noise, white
+balance, CCM, tone curve, quantisation; :mod:`fidelity.camera.model`) and the same patch
 sampling (:func:`patch_means`): the central window (half the patch side) of each patch,
 averaged with a 10 % trimmed mean per channel (robust to hot pixels and Monte Carlo
 fireflies), with the per-patch standard deviation of the window reported as noise.
@@ -165,8 +166,8 @@ class ChartRender:
     measurement
         The chart's ΔE00 per patch against the reference (:class:`ChartMeasurement`).
     linear_image
-        The raw camera image after exposure, vignetting and noise, float32, shape (H, W, 3),
-        in camera raw units (the ideal camera gives linear sRGB, Y(perfect white) = 1).
+        The raw camera image after exposure, vignetting, optics and noise, float32, shape
+        (H, W, 3), in camera raw units (the ideal camera gives linear sRGB, Y(perfect white) = 1).
     display_image
         The developed image as encoded sRGB clipped to [0, 1], float32, shape (H, W, 3).
     renderer
@@ -400,8 +401,10 @@ def render_chart(
         raw = raw * gain
         if cam.vignetting_fov_deg is not None:
             raw = raw * vignetting_gain(layout.height, layout.width, cam.vignetting_fov_deg)[..., None]
+        if cam.optics.kind != "none":  # the lens's PSF, in linear light, before the noise
+            raw = cam.optics.apply(raw)
         raw = add_sensor_noise(raw, cam.noise, seed)
-        _require_finite(raw, "the raw image (exposure, vignetting, noise)")
+        _require_finite(raw, "the raw image (exposure, vignetting, optics, noise)")
         cam_rgb, cam_std = patch_means(raw, layout)
         dev = develop(cam, raw, cam_rgb, ill, spectra=spectra, step=step)
         _require_finite(dev.srgb, "the developed image (white balance, colour correction, tone "
