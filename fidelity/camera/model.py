@@ -878,8 +878,8 @@ def _optics(ov: Mapping[str, Any], file_in: Callable[[str, str], Path],
 
 
 def camera_files(name_or_path: str | os.PathLike[str]) -> list[Path]:
-    """The files reading a camera touches: the camera file and the sensitivity CSV and tone
-    LUT file it names (none for a built-in camera name; only the camera file itself when it
+    """The files reading a camera touches: the camera file and the sensitivity CSV, tone
+    LUT file and optics MTF or PSF file it names (none for a built-in camera name; only the camera file itself when it
     cannot be parsed). For the overwrite check of a command whose camera could not be loaded;
     a loaded camera knows its :attr:`CameraModel.files`."""
     p = Path(name_or_path)
@@ -893,7 +893,8 @@ def camera_files(name_or_path: str | os.PathLike[str]) -> list[Path]:
 
 
 def _named_files(data: Any, path: Path) -> list[Path]:
-    """The sensitivity CSV and tone LUT file a parsed camera file at ``path`` names."""
+    """The sensitivity CSV, tone LUT file and optics MTF or PSF file a parsed camera file at
+    ``path`` names."""
     files = []
     for section, key in (("sensitivities", "path"), ("tone", "lut"), ("optics", "mtf_file"),
                          ("optics", "psf_file")):
