@@ -107,6 +107,8 @@ def plus_minus(value: float, u: float | None) -> str:
     if u is None or not (math.isfinite(u) and u > 0):
         return f"{value:.3g}"
     digits = max(0, 1 - math.floor(math.log10(u)))
+    if value == 0 and digits > 4:
+        return f"0 ± {u:.1e}"
     if abs(value) < 0.01 and digits > 4:
         return f"{value:.2e} ± {u:.1e}"
     digits = min(digits, 4)

@@ -69,6 +69,8 @@ ADDED = (
     # issue 30: whether each patch counts in the chart's statistics (covered ones do not)
     (re.compile(r".*\.patches\[\d+\]$"), {"used", "excluded_because"}),
     (re.compile(r".*\.corners_found$"), {"occluded"}),
+    # "Beyond colour, part 1": an audited image's noise and sharpness
+    (re.compile(r"(\$|.*\.sim|.*\.real|.*\.reports\[\d+\])$"), {"noise", "sharpness"}),
 )
 
 
