@@ -73,6 +73,7 @@ from fidelity.camera.optics import (
     Optics,
     mtf_table_problem,
     psf_problem,
+    read_mtf_file,
     read_psf_file,
 )
 from fidelity.colour.colorimetry import MATRIX_XYZ_TO_LINEAR_SRGB, delinearize_srgb
@@ -845,11 +846,12 @@ def _optics(ov: Mapping[str, Any], file_in: Callable[[str, str], Path],
         source = ""
         if ov.get("mtf_file") is not None:
             p = file_in("mtf_file", ov["mtf_file"])
+            if not p.is_file():
+                raise error("mtf_file", f"{display_path(p)}: no such file")
             try:
-                freq, vals = read_spectral_csv(p, columns=1, what="MTF table file")
+                table = read_mtf_file(str(p))
             except FidelityError as exc:
                 raise error("mtf_file", str(exc)) from None
-            table = np.column_stack([freq, vals[:, 0]])
             problem = mtf_table_problem(table)
             if problem:
                 raise error("mtf_file", f"{display_path(p)}: {problem}")

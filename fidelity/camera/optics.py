@@ -434,6 +434,49 @@ def optics_problem(optics: Optics) -> str | None:
     return None
 
 
+def read_mtf_file(path: str) -> FloatArray:
+    """Read an MTF table file: lines of ``frequency (cy/px), MTF`` separated by a comma,
+    semicolon, tab or spaces; an optional header line; ``#`` comments.
+
+    Parameters
+    ----------
+    path
+        The file's path.
+
+    Returns
+    -------
+    numpy.ndarray
+        The ``(K, 2)`` table as read (not yet checked: :func:`mtf_table_problem`).
+
+    Raises
+    ------
+    InvalidValueError
+        A file that cannot be read, a line that is not 2 numbers, or a value not finite.
+    """
+    rows: list[list[float]] = []
+    try:
+        with open(path, encoding="utf-8") as fh:
+            lines = fh.read().splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InvalidValueError(f"{path}: cannot read the MTF table ({exc})") from None
+    for lineno, line in enumerate(lines, start=1):
+        s = line.split("#", 1)[0].replace(",", " ").replace(";", " ").strip()
+        if not s:
+            continue
+        try:
+            nums = [float(v) for v in s.split()]
+        except ValueError:
+            if not rows:  # a header
+                continue
+            raise InvalidValueError(f"{path}: line {lineno}: not numbers: {line.strip()!r}"
+                                    ) from None
+        if len(nums) != 2 or not all(math.isfinite(v) for v in nums):
+            raise InvalidValueError(f"{path}: line {lineno}: expected 2 finite numbers "
+                                    f"(frequency cy/px, MTF), got {line.strip()!r}")
+        rows.append(nums)
+    return np.asarray(rows, dtype=np.float64).reshape(-1, 2)
+
+
 def read_psf_file(path: str) -> FloatArray:
     """Read a PSF image: a ``.npy`` array, or a text grid (``.csv``/``.txt``: rows of numbers
     separated by commas, semicolons, tabs or spaces; ``#`` comments).
@@ -479,5 +522,6 @@ __all__ = [
     "mtf_table_problem",
     "optics_problem",
     "psf_problem",
+    "read_mtf_file",
     "read_psf_file",
 ]

@@ -207,6 +207,8 @@ BAD = [
     ('[optics]\nkind = "diffraction"\nf_number = 4\n', "[optics].pixel_pitch_um", "required"),
     ('[optics]\nkind = "mtf"\n', "[optics].mtf", "required"),
     ('[optics]\nkind = "psf"\npsf_file = "missing.csv"\n', "[optics].psf_file", "no such file"),
+    ('[optics]\nkind = "mtf"\nmtf_file = "missing.csv"\n', "[optics].mtf_file", "missing.csv"),
+    ('[optics]\nkind = "mtf"\nmtf_file = "mtf.csv"\n', "[optics].mtf_file", "monotone"),
 ]
 
 
@@ -216,6 +218,7 @@ def test_bad_optics_one_line_exit_2(tmp_path: Path, body: str, field: str,
                                     problem: str) -> None:
     bad = tmp_path / "bad.toml"
     bad.write_text('name = "bad"\n' + body, encoding="utf-8")
+    (tmp_path / "mtf.csv").write_text("0,1\n0.3,0.5\n0.2,0.1\n", encoding="utf-8")
     res = CliRunner().invoke(main, ["check", "--camera", str(bad), "--no-report"])
     assert res.exit_code == 2, res.output
     lines = [ln for ln in res.output.splitlines() if ln.strip()]
