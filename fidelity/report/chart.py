@@ -42,6 +42,7 @@ from fidelity.report.document import (
 )
 from fidelity.report.html import write_document
 from fidelity.report.jsonform import chart_report_json
+from fidelity.report.terminal import plus_minus, texture_lines
 from fidelity.report.words import column_note, prediction_notes, verdict_message
 
 # ---------------------------------------------------------------------- the HTML document
@@ -210,6 +211,38 @@ def blind_spot_section(report: ChartReport) -> Section | None:
                              numeric=(False, False, True, False)))
 
 
+def texture_section(report: ChartReport) -> Section | None:
+    """The chart's noise and sharpness (:mod:`fidelity.measure.chartnoise`,
+    :mod:`fidelity.measure.chartsharpness`): the terminal's two lines, then per edge and
+    channel MTF50, MTF10 and the MTF at half Nyquist, or why refused."""
+    lines = texture_lines(report)
+    if not lines:
+        return None
+    blocks: list[Any] = [Text("\n\n".join(lines))]
+    s = report.sharpness
+    if s is not None and s.edges:
+        def pm(v: float | None, u: float | None) -> str:
+            return "–" if v is None else plus_minus(v, u)
+        rows = []
+        for e in s.edges:
+            if e.refusal is not None:
+                rows.append((e.direction, e.method or "–", "–", "–", "–",
+                             f"refused, {e.refusal[0]}: {e.refusal[1]}"))
+                continue
+            for c in e.channels:
+                rows.append((e.direction, e.method or "–", c.channel,
+                             pm(c.mtf50, c.u_mtf50), pm(c.mtf10, c.u_mtf10),
+                             pm(c.mtf_half_nyquist, c.u_mtf_half_nyquist)
+                             if c.refusal is None else f"refused, {c.refusal[0]}"))
+        blocks.append(table(("direction", "method", "channel", "MTF50, cy/px", "MTF10, cy/px",
+                             "MTF at 0.25 cy/px"), rows,
+                            caption="; ".join([*(f"{e.direction}: the edge of {e.patches[0]} "
+                                                 f"facing {e.patches[1]}" for e in s.edges),
+                                               f"linearisation: {s.linearisation}"]),
+                            numeric=(False, False, False, True, True, True)))
+    return section("Noise and sharpness", *blocks)
+
+
 def measured_section(report: ChartReport) -> Section | None:
     if not report.measured:
         return None
@@ -365,8 +398,9 @@ def chart_document(report: ChartReport, pixels: NDArray[Any] | None = None) -> D
     budget = uncertainty_section(report)
     if budget is not None:
         sections.append(budget)
-    sections += [x for x in (directional_section(report), measured_section(report),
-                             blind_spot_section(report)) if x is not None]
+    sections += [x for x in (texture_section(report), directional_section(report),
+                             measured_section(report), blind_spot_section(report))
+                 if x is not None]
     sections.append(patch_section(report))
     prov = report.provenance
     sections.append(section("Provenance", Facts((
@@ -457,6 +491,7 @@ __all__ = [
     "directional_section",
     "headline",
     "measured_section",
+    "texture_section",
     "noise_facts",
     "patch_section",
     "prediction_sections",

@@ -122,10 +122,14 @@ def test_the_audit_report_carries_noise_and_sharpness(noisy, tmp_path):
     write_exr(path, img.astype(np.float32))
     out = tmp_path / "a.json"
     text = ",".join(f"{v:.4f}" for v in corners(h).ravel())
+    html = tmp_path / "a.html"
     r = CliRunner().invoke(main, ["--no-config", "audit", str(path), "--corners", text,
-                                  "--json", str(out)], catch_exceptions=False)
+                                  "--json", str(out), "--html", str(html)],
+                           catch_exceptions=False)
     assert r.exit_code in (0, 1), r.output
     assert "noise: SNR " in r.output and "sharpness: MTF50 " in r.output
+    page = html.read_text(encoding="utf-8")
+    assert "Noise and sharpness" in page and "MTF50, cy/px" in page
     data = json.loads(out.read_text())
     assert data["noise"]["photon_transfer"]["gain"] > 0
     assert {e["direction"] for e in data["sharpness"]["edges"]} == {"horizontal", "vertical"}
