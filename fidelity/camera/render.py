@@ -42,7 +42,6 @@ from fidelity.camera.model import (
     vignetting_gain,
     white_balance_gains,
 )
-from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import load_chart
 from fidelity.colour.spectral import (
     GRID_STEP_NM,
@@ -52,16 +51,7 @@ from fidelity.colour.spectral import (
 )
 from fidelity.core.errors import FidelityError, InvalidValueError, unknown_name
 from fidelity.measure import uncertainty as unc
-from fidelity.measure.chartnoise import ChartNoise, chart_noise, grey_index
-from fidelity.measure.chartsharpness import (
-    DIRECTIONS,
-    ChartSharpness,
-    edge_pairs,
-    edge_sharpness,
-)
-from fidelity.measure.colour import ChartMeasurement, measure_chart, neutral_patches
-from fidelity.measure.noise import RefusedFit
-from fidelity.measure.sharpness import MIN_ACROSS_PX, MIN_EDGE_PX
+from fidelity.measure.colour import ChartMeasurement, measure_chart
 from fidelity.measure.uncertainty import UncertaintyBudget
 
 FloatArray = NDArray[np.float64]
@@ -201,9 +191,6 @@ class ChartRender:
     uncertainty
         The standard uncertainty budget of the chart ΔE (:func:`render_uncertainty`); None
         when not computed.
-    layout
-        The chart's pixel layout (patch boxes and windows); None: the default layout of
-        ``settings["pixels_per_patch"]`` (:meth:`ChartLayout.for_patch_size`).
     """
 
     measurement: ChartMeasurement
@@ -219,8 +206,6 @@ class ChartRender:
     settings: dict[str, Any] = field(default_factory=dict)
     #: the standard uncertainty of the chart ΔE (:func:`render_uncertainty`)
     uncertainty: UncertaintyBudget | None = None
-    #: the chart's pixel layout
-    layout: ChartLayout | None = None
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready result: ΔE summary, renderer, variant, seconds, conventions, patches."""
@@ -473,112 +458,7 @@ def render_chart(
         camera_noise=cam_std,
         settings=settings,
         uncertainty=budget,
-        layout=layout,
     )
-
-
-#: How :func:`render_texture` linearises the pixels it measures: not at all, the raw image is
-#: linear (kept in the noise and sharpness records).
-TEXTURE_LINEARISATION = (
-    "none: the raw linear camera image (camera raw RGB after exposure, vignetting, optics "
-    "and noise; before white balance, CCM, tone curve and quantisation)")
-
-
-#: How the check's edge ROIs are placed (kept in the sharpness record).
-TEXTURE_SHARPNESS_METHOD = (
-    "the highest-contrast neighbouring patches per direction (their raw luminance means); "
-    "the ROI from the chart's known layout: across the bright patch's edge facing the other, "
-    "from the middle of the gap (half the gap, so the neighbour's blurred edge stays out) "
-    "back into the patch (16 px across in all, at most half the patch), along the middle of "
-    "the edge (20 px, at least half the patch side, away from the corners); the edge lies on "
-    "pixel boundaries at 0 degrees, so the erf edge fit (not the e-SFR)")
-
-
-def layout_edge_roi(layout: ChartLayout, bright: int, other: int) -> tuple[int, int, int, int]:
-    """``(x0, y0, width, height)`` of the edge ROI of patch ``bright`` facing its neighbour
-    ``other`` (:data:`TEXTURE_SHARPNESS_METHOD`), from the layout's patch boxes."""
-    y0, y1, x0, x1 = layout.patch_box(bright)
-    half_gap = layout.gap_px // 2
-    inside = min(layout.patch_px // 2, max(half_gap, MIN_ACROSS_PX - half_gap))
-    along = min(layout.patch_px, max(MIN_EDGE_PX, layout.patch_px // 2))
-    start = (layout.patch_px - along) // 2
-    forward = other > bright
-    if other - bright in (1, -1):  # across a vertical edge
-        ex = x1 if forward else x0
-        rx = ex - inside if forward else ex - half_gap
-        return rx, y0 + start, inside + half_gap, along
-    ey = y1 if forward else y0
-    ry = ey - inside if forward else ey - half_gap
-    return x0 + start, ry, along, inside + half_gap
-
-
-def render_texture(render: ChartRender) -> tuple[ChartNoise | None, ChartSharpness | None]:
-    """The rendered chart's noise and sharpness, measured on its raw LINEAR image.
-
-    The functions an audit uses (:func:`fidelity.measure.pixels.noise_and_sharpness`), on
-    :attr:`ChartRender.linear_image` (:data:`TEXTURE_LINEARISATION`: before white balance,
-    CCM and the tone curve, so no curve is to be undone) with the chart's known layout
-    (:func:`layout_edge_roi`):
-
-    - noise (:func:`fidelity.measure.chartnoise.chart_noise`): the pixels of the neutral
-      patches' windows (the render's own, :meth:`ChartLayout.window`, those of the chart
-      ΔE), the 18 % grey patch by :func:`fidelity.measure.chartnoise.grey_index`; the
-      saturation is raw 1 (the camera's full well) for a camera with noise;
-    - sharpness (:func:`fidelity.measure.chartsharpness.chart_sharpness`): the highest-
-      contrast vertical and horizontal patch edges, each in an ROI placed by the layout
-      (:data:`TEXTURE_SHARPNESS_METHOD`; the audit's rule refuses a 32 px chart). A render is axis-aligned (its edges lie
-      on pixel boundaries, at 0 degrees), so the erf edge fit is the method, not the e-SFR.
-      The raw image is not clipped: no saturation or black level is given.
-
-    Parameters
-    ----------
-    render
-        A rendered chart (:func:`render_chart`).
-
-    Returns
-    -------
-    tuple
-        ``(ChartNoise or None, ChartSharpness or None)``: None for the noise where it could
-        not be measured (a neutral patch with fewer than 2 pixels: a tiny chart) or the chart
-        has no neutral patch, for the sharpness where the chart is not 4 x 6.
-    """
-    layout = render.layout or ChartLayout.for_patch_size(
-        int(render.settings["pixels_per_patch"]))
-    m = render.measurement
-    names = tuple(m.patch_names)
-    image = np.asarray(render.linear_image)
-    noise: ChartNoise | None = None
-    neutral = neutral_patches(m)
-    if neutral:
-        ref_y = cm.lab_to_xyz(np.asarray(m.reference_lab, np.float64))[:, 1]
-        grey = names[grey_index(names, neutral, ref_y)]
-        samples = []
-        for k in neutral:
-            y0, y1, x0, x1 = layout.window(k)
-            samples.append(image[y0:y1, x0:x1].reshape(-1, image.shape[-1]).astype(np.float64))
-        saturation = 1.0 if render.camera.noise.enabled else None
-        try:
-            noise = chart_noise(samples, [names[k] for k in neutral], grey,
-                                linearisation=TEXTURE_LINEARISATION, saturation=saturation)
-        except RefusedFit:
-            noise = None
-    sharpness: ChartSharpness | None = None
-    if len(names) == layout.rows * layout.cols:
-        pitch = float(layout.patch_px + layout.gap_px)
-        grid_to_image = np.array([[pitch, 0.0, 0.0], [0.0, pitch, 0.0], [0.0, 0.0, 1.0]])
-        luminance = np.asarray(render.camera_rgb, np.float64) @ cm.MATRIX_LINEAR_SRGB_TO_XYZ[1]
-        pairs = edge_pairs(grid_to_image, layout.rows, layout.cols, luminance)
-        sharpness = ChartSharpness(tuple(
-            edge_sharpness(image, layout_edge_roi(layout, *pairs[d]), d,
-                           (names[pairs[d][0]], names[pairs[d][1]]), linearise=_as_float64)
-            for d in DIRECTIONS if d in pairs), TEXTURE_LINEARISATION, TEXTURE_SHARPNESS_METHOD)
-    return noise, sharpness
-
-
-def _as_float64(values: np.ndarray) -> FloatArray:
-    """The raw linear values as float64 (the identity linearisation)."""
-    out: FloatArray = np.asarray(values, dtype=np.float64)
-    return out
 
 
 def _white_balance_developer(cam: CameraModel, illuminant: Any, ccm: FloatArray, spectra: str,
@@ -688,17 +568,13 @@ __all__ = [
     "MAX_SEED",
     "MAX_SPP",
     "STEP_RANGE_NM",
-    "TEXTURE_LINEARISATION",
     "camera_context",
     "check_render_settings",
     "REFERENCES",
     "RENDERERS",
     "ChartLayout",
     "ChartRender",
-    "TEXTURE_SHARPNESS_METHOD",
-    "layout_edge_roi",
     "render_chart",
-    "render_texture",
     "patch_means",
     "render_uncertainty",
     "trimmed_mean",

@@ -346,43 +346,8 @@ def _measure_edge(pixels: np.ndarray, linearise: Linearise, loc: ChartLocation,
     if x0 < 0 or y0 < 0 or x0 + 2 * hx > width or y0 + 2 * hy > height:
         return EdgeSharpness(direction, pair, None, angle, None, (), (
             "outside", f"{pair[0]} / {pair[1]}: the edge ROI reaches outside the image"))
-    return edge_sharpness(pixels, (x0, y0, 2 * hx, 2 * hy), direction, pair,
-                          linearise=linearise, angle=angle, saturation=saturation, black=black)
-
-
-def edge_sharpness(pixels: np.ndarray, roi_box: tuple[int, int, int, int], direction: str,
-                   patches: tuple[str, str], *, linearise: Linearise, angle: float = 0.0,
-                   saturation: float | None = None,
-                   black: float | None = None) -> EdgeSharpness:
-    """The MTF of one patch edge in a given region of interest (steps 3 and 4 of the module
-    docstring): the e-SFR for an edge turned at least :data:`ESFR_MIN_ANGLE_DEG` from the
-    grid, else the erf edge fit, per channel R, G, B and Y.
-
-    Parameters
-    ----------
-    pixels
-        The ``(H, W, 3)`` image as stored; only the ROI is read and linearised.
-    roi_box
-        ``(x0, y0, width, height)`` of the ROI in pixels, inside the image, one edge across it.
-    direction
-        ``horizontal`` (across a vertical edge) or ``vertical`` (:data:`DIRECTIONS`).
-    patches
-        The names of the edge's bright patch and of its neighbour.
-    linearise
-        ``(..., 3)`` stored values -> float64 LINEAR R, G, B of the same shape.
-    angle
-        The edge's angle to the pixel grid, degrees.
-    saturation, black
-        As :func:`chart_sharpness`.
-
-    Returns
-    -------
-    EdgeSharpness
-        The edge's method and per-channel MTF, or each channel's refusal.
-    """
-    x0, y0, width, height = roi_box
-    roi = linearise(np.asarray(pixels)[y0:y0 + height, x0:x0 + width])
-    vertical_edge = direction == "horizontal"
+    roi_box = (x0, y0, 2 * hx, 2 * hy)
+    roi = linearise(np.asarray(pixels)[y0:y0 + 2 * hy, x0:x0 + 2 * hx])
     chans = {"R": roi[..., 0], "G": roi[..., 1], "B": roi[..., 2], "Y": _luminance(roi)}
     orientation: Orientation = "vertical" if vertical_edge else "horizontal"
     use_esfr = angle >= ESFR_MIN_ANGLE_DEG
@@ -416,10 +381,8 @@ def edge_sharpness(pixels: np.ndarray, roi_box: tuple[int, int, int, int], direc
             except RefusedEdge as e:
                 out.append(ChannelMTF(name, None, None, None, None, None, None, None,
                                       (e.reason, f"{name} channel {e}")))
-    return EdgeSharpness(direction, patches, "e-SFR" if use_esfr else "edge fit", angle,
-                         roi_box, tuple(out))
-
-
+    return EdgeSharpness(direction, pair, "e-SFR" if use_esfr else "edge fit", angle, roi_box,
+                         tuple(out))
 
 
 def chart_sharpness(pixels: np.ndarray, location: ChartLocation,
@@ -454,32 +417,8 @@ def chart_sharpness(pixels: np.ndarray, location: ChartLocation,
         One :class:`EdgeSharpness` per direction, each channel's MTF50, MTF10 and MTF at half
         Nyquist with their uncertainties, or the refusal with its reason.
     """
-    best = edge_pairs(location.homography, location.rows, location.cols, luminance)
-    edges = tuple(_measure_edge(pixels, linearise, location, names, best[d][0], best[d][1], d,
-                                saturation, black) for d in DIRECTIONS if d in best)
-    return ChartSharpness(edges, linearisation)
-
-
-def edge_pairs(homography: np.ndarray, rows: int, cols: int,
-               luminance: Sequence[float] | np.ndarray) -> dict[str, tuple[int, int]]:
-    """The neighbouring patches of largest luminance contrast per direction (step 1's pairs).
-
-    Parameters
-    ----------
-    homography
-        The chart's grid ``(u, v)`` -> image ``(x, y)`` map (a pair's direction: along which
-        image axis its centres lie further apart).
-    rows, cols
-        The chart's layout.
-    luminance
-        Each patch's linear luminance, row-major.
-
-    Returns
-    -------
-    dict
-        ``direction`` (:data:`DIRECTIONS`) -> ``(bright, other)`` patch indices, the brighter
-        first.
-    """
+    h = location.homography
+    rows, cols = location.rows, location.cols
     y = np.asarray(luminance, dtype=np.float64)
     best: dict[str, tuple[float, int, int]] = {}
     for k in range(rows * cols):
@@ -487,14 +426,16 @@ def edge_pairs(homography: np.ndarray, rows: int, cols: int,
         for j in ((k + 1) if c + 1 < cols else None, (k + cols) if r + 1 < rows else None):
             if j is None:
                 continue
-            d = apply_homography(homography, grid_point(j, cols)[None, :])[0] - \
-                apply_homography(homography, grid_point(k, cols)[None, :])[0]
+            d = apply_homography(h, grid_point(j, cols)[None, :])[0] - \
+                apply_homography(h, grid_point(k, cols)[None, :])[0]
             direction = "horizontal" if abs(d[0]) >= abs(d[1]) else "vertical"
             contrast = abs(float(y[k] - y[j]))
             if direction not in best or contrast > best[direction][0]:
                 bright, other = (k, j) if y[k] >= y[j] else (j, k)
                 best[direction] = (contrast, bright, other)
-    return {d: (b, o) for d, (_, b, o) in best.items()}
+    edges = tuple(_measure_edge(pixels, linearise, location, names, best[d][1], best[d][2], d,
+                                saturation, black) for d in DIRECTIONS if d in best)
+    return ChartSharpness(edges, linearisation)
 
 
 def grid_point(k: int, cols: int) -> np.ndarray:
@@ -504,5 +445,4 @@ def grid_point(k: int, cols: int) -> np.ndarray:
 
 __all__ = ["ACROSS_FRACTION", "ALONG_FRACTION", "CHANNELS", "DIRECTIONS", "DRAWS",
            "ESFR_MIN_ANGLE_DEG", "HALF_ACROSS_PX", "HALF_ALONG_PX", "METHOD", "MIN_GAP", "ChannelMTF",
-           "ChartSharpness", "EdgeSharpness", "chart_sharpness", "edge_pairs", "edge_sharpness",
-           "grid_point"]
+           "ChartSharpness", "EdgeSharpness", "chart_sharpness", "grid_point"]

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fidelity.camera.model import DEFAULT_CAMERA
-from fidelity.camera.render import render_chart, render_texture
+from fidelity.camera.render import render_chart
 from fidelity.chart.read import DEFAULT_READ, ReadOptions, reads_for
 from fidelity.coco.detectors import stale_preprocessing
 from fidelity.colour.colorimetry import lab_to_srgb
@@ -209,7 +209,6 @@ def check_camera(
                           renderer, reference=reference, seed=seed)
     m = render.measurement
     u = render.uncertainty
-    noise, sharpness = render_texture(render)  # on the raw linear image, the known layout
     prediction, verdict, directional = judge_chart(
         m.mean_delta_e, judge, criterion, m, delta_e_uncertainty=u.combined if u else None)
     interval, validity = evidence_of(prediction, u, reference, judge.decision.k,
@@ -235,7 +234,7 @@ def check_camera(
                                       {"render": rd.get("conventions", {})}),
         prediction=prediction, verdict=verdict, directional=directional, bound=judge.bound,
         blind_spots=spots, measured=measured, uncertainty=u, interval=interval,
-        validity=validity, noise=noise, sharpness=sharpness,
+        validity=validity,
     )
 
 
