@@ -11,7 +11,7 @@ import click
 from fidelity.chart.read import ReadOptions
 from fidelity.chart.recording import FrameSelection
 from fidelity.cli import error_line
-from fidelity.cli.context import STDOUT, write_json_output
+from fidelity.cli.context import STDOUT, evidence_outputs, write_evidence_files, write_json_output
 from fidelity.cli.options import (
     IMAGE_PATH,
     FrameRange,
@@ -22,12 +22,7 @@ from fidelity.cli.options import (
     max_pixels_option,
     measure_options,
 )
-from fidelity.cli.subjects import (
-    evidence_outputs,
-    frames_summary,
-    plan_subjects,
-    write_evidence_files,
-)
+from fidelity.cli.subjects import frames_summary, plan_subjects
 from fidelity.cli.values import measure_inputs, measure_request
 from fidelity.core.fileio import check_outputs, display_path
 from fidelity.pipeline.check import audit_image, audit_images

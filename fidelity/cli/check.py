@@ -9,7 +9,13 @@ from typing import TYPE_CHECKING
 import click
 
 from fidelity.camera.model import DEFAULT_CAMERA, CameraModel, load_camera
-from fidelity.cli.context import STDOUT, from_settings, write_json_output
+from fidelity.cli.context import (
+    STDOUT,
+    evidence_outputs,
+    from_settings,
+    write_evidence_files,
+    write_json_output,
+)
 from fidelity.cli.options import (
     common_options,
     evidence_option,
@@ -17,7 +23,6 @@ from fidelity.cli.options import (
     judge_options,
     measure_options,
 )
-from fidelity.cli.subjects import evidence_outputs, write_evidence_files
 from fidelity.cli.values import measure_inputs, measure_request
 from fidelity.core.fileio import check_outputs, display_path
 from fidelity.pipeline.check import check_camera

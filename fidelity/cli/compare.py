@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from fidelity.cli.context import STDOUT, write_json_output
+from fidelity.cli.context import STDOUT, evidence_outputs, write_evidence_files, write_json_output
 from fidelity.cli.options import (
     IMAGE_PATH,
     PATH,
@@ -20,7 +20,6 @@ from fidelity.cli.options import (
     judge_options,
     measure_options,
 )
-from fidelity.cli.subjects import evidence_outputs, write_evidence_files
 from fidelity.cli.values import make_criterion, measure_inputs, measure_request
 from fidelity.core.errors import FidelityError
 from fidelity.core.fileio import check_outputs, display_path

@@ -1,5 +1,6 @@
 """The running command's context: its settings file, its standard output (under ``-q`` and
-``--json -``), its progress bars and its command line, as every command reads them."""
+``--json -``), its progress bars, its command line and the evidence files that record it, as
+every command reads them."""
 
 from __future__ import annotations
 
@@ -7,12 +8,14 @@ import contextlib
 import json
 import os
 import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import click
 from click.core import ParameterSource
 
-from fidelity.core.fileio import json_ready, write_json_atomic
+from fidelity.core.fileio import display_path, json_ready, write_json_atomic
 from fidelity.report.evidence import invocation_record
 
 if TYPE_CHECKING:
@@ -95,7 +98,28 @@ def write_json_output(path: str | os.PathLike[str], obj: Any) -> str:
     return str(write_json_atomic(path, obj))
 
 
+
+def evidence_outputs(paths: Sequence[Path]) -> dict[str, Path]:
+    """The ``--evidence`` files as :func:`fidelity.core.fileio.check_outputs` labels them."""
+    return {("--evidence" if len(paths) == 1 else f"--evidence ({p.name})"): p for p in paths}
+
+
+def write_evidence_files(paths: Sequence[Path], write: Callable[..., list[Path]],
+                         *args: Any, results: Sequence[Path | None] = (),
+                         indent: str = "") -> None:
+    """Write the evidence files with ``write(paths, *args, results=..., invocation=...)``
+    (:func:`fidelity.report.evidence.write_evidence` or ``write_fit_evidence``), ``results``
+    being the files the run wrote that exist, ``invocation`` the command line
+    (:func:`invocation`), and print each."""
+    if not paths:
+        return
+    wrote = [p for p in results if p is not None and p.is_file()]
+    for path in write(paths, *args, results=wrote, invocation=invocation()):
+        click.echo(f"{indent}wrote {display_path(path)}")
+
 __all__ = [
+    "evidence_outputs",
+    "write_evidence_files",
     "STDOUT",
     "command_state",
     "from_settings",

@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 
 import click
 
+from fidelity.cli.context import evidence_outputs, write_evidence_files
 from fidelity.cli.options import (
     IMAGE_PATH,
     chart_pair_options,
@@ -16,7 +17,6 @@ from fidelity.cli.options import (
     judge_options,
     measure_options,
 )
-from fidelity.cli.subjects import evidence_outputs, write_evidence_files
 from fidelity.cli.values import measure_inputs, measure_request
 from fidelity.core.fileio import check_outputs, display_path
 from fidelity.pipeline.fit import (

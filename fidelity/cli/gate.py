@@ -19,7 +19,13 @@ import click
 from fidelity.camera.model import CameraModel, camera_files, load_camera
 from fidelity.chart.read import ReadOptions
 from fidelity.chart.recording import FrameSelection
-from fidelity.cli.context import STDOUT, from_settings, write_json_output
+from fidelity.cli.context import (
+    STDOUT,
+    evidence_outputs,
+    from_settings,
+    write_evidence_files,
+    write_json_output,
+)
 from fidelity.cli.options import (
     IMAGE_PATH,
     PATH,
@@ -30,12 +36,7 @@ from fidelity.cli.options import (
     judge_options,
     max_pixels_option,
 )
-from fidelity.cli.subjects import (
-    evidence_outputs,
-    frames_summary,
-    plan_subjects,
-    write_evidence_files,
-)
+from fidelity.cli.subjects import frames_summary, plan_subjects
 from fidelity.cli.values import make_criterion
 from fidelity.core.errors import FidelityError
 from fidelity.core.fileio import check_outputs, display_path

@@ -1,20 +1,20 @@
 """The subjects of ``audit`` and ``gate``: folders of frames expanded, a recording's frames
-selected, where each subject's reports go, and writing them, the evidence files and the
+selected, where each subject's reports go, and writing them and the
 frames' summary. One plan for both commands: read, locate, measure, judge, write."""
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from statistics import median
 
 import click
 
 from fidelity.chart.image import folder_images, image_suffixes
 from fidelity.chart.recording import FrameSelection, topic_frames
-from fidelity.cli.context import STDOUT, invocation
+from fidelity.cli.context import STDOUT
 from fidelity.core.errors import FidelityError, InputFileError
 from fidelity.core.fileio import display_path
 from fidelity.pipeline.records import GateResult
@@ -67,14 +67,6 @@ def frame_report_names(images: Sequence[Path], frame_of: Sequence[int]) -> tuple
     return tuple(Path(f"{img}.frame{k}") for img, k in zip(images, frame_of, strict=True))
 
 
-def _median(values: Sequence[float]) -> float:
-    """The median of ``values`` (the middle one, or the mean of the two middle ones), as
-    :func:`statistics.median` gives it, without importing :mod:`statistics` at start-up."""
-    ordered = sorted(values)
-    mid = len(ordered) // 2
-    return ordered[mid] if len(ordered) % 2 else (ordered[mid - 1] + ordered[mid]) / 2
-
-
 def frames_summary(cases: Sequence[GateResult], images: Sequence[Path],
                     frame_of: Sequence[int]) -> list[str]:
     """How the chart ΔE varies over the frames gated or audited (the measured ones), per
@@ -90,7 +82,7 @@ def frames_summary(cases: Sequence[GateResult], images: Sequence[Path],
         many = "s" if len(values) > 1 else ""
         lines.append(f"{display_path(path)}: mean ΔE00 over {len(values)} measured frame{many}: "
                      f"min {lo[0]:.2f} (frame {lo[1]}), median "
-                     f"{_median([v for v, _ in values]):.2f}, max {hi[0]:.2f} (frame {hi[1]})")
+                     f"{median(v for v, _ in values):.2f}, max {hi[0]:.2f} (frame {hi[1]})")
     return lines
 
 
@@ -124,27 +116,6 @@ def report_paths(images: tuple[Path, ...], path: Path | None, suffix: str, *,
         raise FidelityError(f"several images are named {', '.join(twice)}: their reports in "
                             f"{path} would collide; gate them in separate runs")
     return [path / f"{n}{suffix}" for n in names]
-
-
-def evidence_outputs(paths: Sequence[Path]) -> dict[str, Path]:
-    """The ``--evidence`` files as :func:`fidelity.core.fileio.check_outputs` labels them."""
-    return {("--evidence" if len(paths) == 1 else f"--evidence ({p.name})"): p for p in paths}
-
-
-def write_evidence_files(paths: Sequence[Path], write: Callable[..., list[Path]],
-                         *args: Any, results: Sequence[Path | None] = (),
-                         indent: str = "") -> None:
-    """Write the evidence files with ``write(paths, *args, results=..., invocation=...)``
-    (:func:`fidelity.report.evidence.write_evidence` or ``write_fit_evidence``), ``results``
-    being the files the run wrote that exist, ``invocation`` the command line
-    (:func:`invocation`), and print each."""
-
-    if not paths:
-        return
-    wrote = [p for p in results if p is not None and p.is_file()]
-    for path in write(paths, *args, results=wrote, invocation=invocation()):
-        click.echo(f"{indent}wrote {display_path(path)}")
-
 
 
 @dataclass(frozen=True)
@@ -259,12 +230,10 @@ __all__ = [
     "SubjectPlan",
     "output_folder",
     "plan_subjects",
-    "evidence_outputs",
     "expand_folders",
     "frame_report_names",
     "frame_subjects",
     "frames_summary",
     "report_paths",
-    "write_evidence_files",
     "write_subject_reports",
 ]

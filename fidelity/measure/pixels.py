@@ -333,21 +333,29 @@ def _code_linear(dtype: str, encoding: str) -> np.ndarray:
     return table
 
 
+def _to_linear(values: np.ndarray, encoding: str, to_srgb: np.ndarray, identity: bool
+               ) -> np.ndarray:
+    """Pixel values ``(..., 3)`` (any dtype: integer codes are looked up in
+    :func:`_code_linear`) in linear sRGB, float64."""
+    if is_coded(values):
+        lin = _code_linear(values.dtype.str, encoding)[values]
+    else:
+        f = np.asarray(values, np.float64)
+        lin = f if encoding == "linear" else cm.linearize_srgb(f)
+    out: np.ndarray = lin if identity else lin @ to_srgb.T
+    return out
+
+
 def _patch_linear(vals: np.ndarray, encoding: str, negatives: str, to_srgb: np.ndarray,
                   identity: bool) -> tuple[np.ndarray, dict[str, int]]:
-    """The valid pixels of one window's values ``(n, 3)`` (any dtype: integer codes are
-    looked up in :func:`_code_linear`) in linear sRGB, float64, and the bad-pixel counts."""
+    """The valid pixels of one window's values ``(n, 3)`` in linear sRGB, float64
+    (:func:`_to_linear`), and the bad-pixel counts."""
     if is_coded(vals):  # integer codes: never NaN, Inf or negative
-        lin = _code_linear(vals.dtype.str, encoding)[vals]
-        counts = {"nan": 0, "inf": 0, "negative": 0, "total": 0}
-    else:
-        vals64 = vals.astype(np.float64)
-        bad, counts = _bad_counts(vals64, negatives)
-        good = vals64[~bad] if counts["total"] else vals64
-        lin = good if encoding == "linear" else cm.linearize_srgb(good)
-    if not identity:
-        lin = lin @ to_srgb.T
-    return lin, counts
+        return _to_linear(vals, encoding, to_srgb, identity), dict(_NO_BAD)
+    vals64 = vals.astype(np.float64)
+    bad, counts = _bad_counts(vals64, negatives)
+    return _to_linear(vals64[~bad] if counts["total"] else vals64, encoding, to_srgb,
+                      identity), counts
 
 
 _NO_BAD = {"nan": 0, "inf": 0, "negative": 0, "total": 0}
@@ -517,6 +525,8 @@ def measure_pixels(
     coded = is_coded(arr) and identity
     histograms: list[np.ndarray] = []
     spreads: list[PatchSpread] = []
+    neutral_lin: dict[int, np.ndarray] = {}  # the neutral windows' linear pixels, for the noise
+    neutral_set = set(ref.neutral_indices) if texture else set()
     step = _CODE_STEPS.get(str(image.pixel_type if image is not None else arr.dtype).lower())
     for k, win in enumerate(loc.windows):
         vals = win.values(arr)
@@ -526,6 +536,8 @@ def measure_pixels(
         else:
             lin, counts = _patch_linear(vals, encoding, negatives, to_srgb, identity)
             valid = len(lin)
+            if k in neutral_set:
+                neutral_lin[k] = lin
         if uncertainty:  # one window's spread at a time: never every window's pixels at once
             spreads.append(_window_spread(vals, lin if not coded else None, encoding,
                                           negatives, to_srgb, identity, step, win,
@@ -587,7 +599,8 @@ def measure_pixels(
             negatives=negatives, to_srgb=to_srgb, found=found, step=step,
             excluded=tuple(excluded))
     chart_noise_, sharpness = (noise_and_sharpness(arr, loc, means, ref, encoding=encoding,
-                                                   negatives=negatives, to_srgb=to_srgb)
+                                                   negatives=negatives, to_srgb=to_srgb,
+                                                   neutral_samples=neutral_lin)
                                if texture else (None, None))
     return ImageMeasurement(
         measurement=measurement, exposure_ev=ev, exposure_mode=mode, encoding=encoding,
@@ -600,7 +613,9 @@ def measure_pixels(
 
 def noise_and_sharpness(pixels: np.ndarray, location: ChartLocation, means: np.ndarray,
                         reference: Reference, *, encoding: str, negatives: str,
-                        to_srgb: np.ndarray) -> tuple[ChartNoise | None, ChartSharpness | None]:
+                        to_srgb: np.ndarray,
+                        neutral_samples: Mapping[int, np.ndarray] | None = None
+                        ) -> tuple[ChartNoise | None, ChartSharpness | None]:
     """The chart's noise and sharpness in LINEAR light (before any exposure correction).
 
     Linear input as it is, sRGB-encoded input decoded with the IEC 61966-2-1 transfer function
@@ -623,6 +638,9 @@ def noise_and_sharpness(pixels: np.ndarray, location: ChartLocation, means: np.n
         The rule for negative values (:data:`NEGATIVE_RULES`).
     to_srgb
         The ``3 x 3`` matrix from the pixels' primaries to linear sRGB.
+    neutral_samples
+        Patch index -> its window's valid pixels in linear sRGB ``(n, 3)``, where the caller
+        has them already (:func:`measure_pixels`); the others are read from ``pixels``.
 
     Returns
     -------
@@ -641,14 +659,7 @@ def noise_and_sharpness(pixels: np.ndarray, location: ChartLocation, means: np.n
     saturation, black = (1.0, 0.0) if bounded else (None, None)
 
     def linearise(v: np.ndarray) -> np.ndarray:
-        a = np.asarray(v)
-        if is_coded(a):
-            lin = _code_linear(a.dtype.str, encoding)[a]
-        else:
-            f = a.astype(np.float64)
-            lin = f if encoding == "linear" else cm.linearize_srgb(f)
-        out: np.ndarray = lin if identity else lin @ to_srgb.T
-        return out
+        return _to_linear(np.asarray(v), encoding, to_srgb, identity)
 
     names = reference.patch_names
     neutral = list(reference.neutral_indices)
@@ -656,8 +667,9 @@ def noise_and_sharpness(pixels: np.ndarray, location: ChartLocation, means: np.n
     if neutral:
         ref_y = cm.lab_to_xyz(np.asarray(reference.lab, np.float64))[:, 1]
         grey = names[grey_index(names, neutral, ref_y)]
-        samples = [_patch_linear(location.windows[k].values(pixels), encoding, negatives,
-                                 to_srgb, identity)[0] for k in neutral]
+        samples = [neutral_samples[k] if neutral_samples is not None and k in neutral_samples
+                   else _patch_linear(location.windows[k].values(pixels), encoding, negatives,
+                                      to_srgb, identity)[0] for k in neutral]
         try:
             noise = chart_noise(samples, [names[k] for k in neutral], grey, linearisation=how,
                                 saturation=saturation)
