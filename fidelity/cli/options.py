@@ -177,6 +177,12 @@ class NameList(ParamTypeBase):
     name = "names"
     #: What one name is, in errors ("transform").
     what = "name"
+    #: Whether ``none`` (no names) is accepted.
+    none = False
+
+    def __init__(self, *, none: bool | None = None) -> None:
+        if none is not None:
+            self.none = none
 
     def known(self) -> Sequence[str]:
         """The names accepted, in their canonical order (``all``: every one)."""
@@ -191,6 +197,8 @@ class NameList(ParamTypeBase):
         items = [t.strip() for t in value.split(",") if t.strip()]
         if items == ["all"]:
             return list(known)
+        if items == ["none"] and self.none:
+            return []
         if not items:
             raise InvalidValueError(f"{_flag(param, '--' + self.name)} {value!r}: names no "
                                     f"{self.what}")
@@ -209,6 +217,20 @@ class TransformNames(NameList):
 
     def known(self) -> Sequence[str]:
         return list(TRANSFORMS)
+
+
+class DegradationNames(NameList):
+    """``--degradations``: blur and noise families
+    (:data:`fidelity.coco.degradations.DEGRADATIONS`)."""
+
+    name = "degradations"
+    what = "degradation"
+    none = True
+
+    def known(self) -> Sequence[str]:
+        from fidelity.coco.degradations import DEGRADATIONS  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
+
+        return list(DEGRADATIONS)
 
 
 class CorruptionNames(NameList):

@@ -10,6 +10,7 @@ import click
 
 from fidelity.cli.context import show_progress
 from fidelity.cli.options import (
+    DegradationNames,
     ModelList,
     Targets,
     TransformNames,
@@ -21,6 +22,7 @@ from fidelity.cli.options import (
     scores_options,
 )
 from fidelity.cli.values import cap_models, executor_from, model_inputs, transfer_scores
+from fidelity.coco.degradations import DEGRADATIONS
 from fidelity.coco.scores import is_scores_file, scores_store_folder
 from fidelity.coco.store import process_gone
 from fidelity.coco.sweep import SweepStore, run_summary, run_sweep, sweep_status
@@ -41,8 +43,12 @@ if TYPE_CHECKING:
 @click.option("--annotations", type=click.Path(dir_okay=False),
               help="COCO annotations of the images (needed except with --status and "
                    "--import-scores).")
-@click.option("--transforms", type=TransformNames(), default="all", show_default=True,
-              help="'all' or comma-separated transform names.")
+@click.option("--transforms", type=TransformNames(none=True), default="all", show_default=True,
+              help="'all', 'none' or comma-separated transform names.")
+@click.option("--degradations", type=DegradationNames(), default=None,
+              help="Blur and noise families swept at their own levels besides the colour "
+                   "transforms ('all' or comma-separated: "
+                   + ", ".join(DEGRADATIONS) + "); with --transforms none, only these.")
 @click.option("--targets", type=Targets(baseline=True),
               default="0,1,2,3,4,5,6,8,10,12,15,18,21,24", show_default=True,
               help="Chart ΔE targets or ranges a-b; 0 is the baseline (decode + re-encode "
@@ -71,7 +77,7 @@ if TYPE_CHECKING:
 @executor_options
 @common_options
 def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations: str | None,
-          transforms: list[str], targets: list[float], out: str, threads: int, provider: str,
+          transforms: list[str], degradations: list[str] | None, targets: list[float], out: str, threads: int, provider: str,
           order: str, scorer: str, rescore: bool, export_scores: str | None,
           import_scores: str | None, status: bool, limit: int | None,
           progress: bool | None, executor: str, address: str | None, workers: int | None) -> None:
@@ -123,7 +129,8 @@ def sweep(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
     specs = list(cap_models(specs, limit))
     options = executor_from(executor, address, workers, threads, provider)
     store = run_sweep(specs, images, annotations, out, transforms, targets, threads=threads,
-                      provider=provider, order=order, scorer=scorer, executor=options, progress=show_progress(progress))
+                      provider=provider, order=order, scorer=scorer, executor=options,
+                      progress=show_progress(progress), degradations=degradations or ())
 
     last = store.meta().get("last_run") or {}
     if last.get("items"):

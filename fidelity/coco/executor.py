@@ -47,6 +47,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from fidelity.coco.dataset import PixelMap
+from fidelity.coco.degradations import DEGRADATIONS, Degradation
 from fidelity.coco.detectors import Detector
 from fidelity.coco.jpeg import decode_jpeg, roundtrip_jpeg
 from fidelity.coco.store import EvaluationStore, evaluation_store_dir, preprocessing_of
@@ -148,7 +149,8 @@ class PixelTransform:
            images: int | None = None) -> PixelTransform:
         """The transform ``name`` at ``param`` (its key says both) for a cell of ``images``
         images (at most :data:`DIRECT_IMAGES`: ``direct``)."""
-        direct = images is not None and images <= DIRECT_IMAGES and name != IDENTITY
+        direct = (images is not None and images <= DIRECT_IMAGES and name != IDENTITY
+                  and name not in DEGRADATIONS)
         key = f"{name}@{param!r}" + ("~direct" if direct else "") if name != IDENTITY \
             else IDENTITY
         return cls(key, name, param, roundtrip, direct=direct)
@@ -159,7 +161,10 @@ class PixelTransform:
             return self.table
         if self.name == IDENTITY:
             return None
-
+        if self.name in DEGRADATIONS:  # blur and noise: spatial, not a table of colours
+            if self.param is None:
+                raise InvalidValueError(f"{self.name}: no level given")
+            return Degradation(self.name, self.param)
         return PixelMap.build(self.name, self.param, direct=self.direct)
 
     def bare(self) -> PixelTransform:

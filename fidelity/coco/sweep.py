@@ -48,6 +48,7 @@ import numpy as np
 
 from fidelity.coco.bootstrap import Draws, draw_scores
 from fidelity.coco.dataset import BASELINE, calibrated_param
+from fidelity.coco.degradations import DEGRADATIONS
 from fidelity.coco.driver import StoreRun
 from fidelity.coco.executor import CellWork, ExecutorOptions, ModelFile, PixelTransform
 from fidelity.coco.jpeg import read_jpeg
@@ -317,42 +318,65 @@ class ModelSpec:
 PRIORITY_TARGETS: tuple[float, ...] = (1, 3, 6, 12, 24)
 
 
-def plan_cells(transforms: Sequence[str], targets: Sequence[float]) -> list[tuple[str, float]]:
-    """Cell order within a model: baseline first, then ascending ΔE, transforms in given order."""
+def cell_label(transform: str, target: float) -> str:
+    """A cell's name in log lines: ``contrast-inc ΔE 3``, ``gaussian-blur sigma 1.5 px``."""
+    fam = DEGRADATIONS.get(transform)
+    if fam is None:
+        return f"{transform} ΔE {target:g}"
+    return f"{transform} {fam.parameter} {target:g} {fam.unit}"
+
+
+def plan_cells(transforms: Sequence[str], targets: Sequence[float],
+               degradations: Sequence[str] = (), *, half: int | None = None
+               ) -> list[tuple[str, float]]:
+    """Cell order within a model: baseline first, then ascending ΔE, transforms in given order,
+    then each blur and noise family's levels (:data:`fidelity.coco.degradations.DEGRADATIONS`),
+    mildest first, level by level across the families. ``half``: 0 for the families'
+    even-numbered levels only, 1 for the odd-numbered ones (the priority order's two phases),
+    None for all."""
     cells: list[tuple[str, float]] = []
     if 0 in targets:
         cells.append(("baseline", 0.0))
     for e in sorted(t for t in targets if t != 0):
         for t in transforms:
             cells.append((t, float(e)))
+    levels = {d: DEGRADATIONS[d].levels for d in degradations}
+    for k in range(max((len(v) for v in levels.values()), default=0)):
+        if half is not None and k % 2 != half:
+            continue
+        cells += [(d, float(v[k])) for d, v in levels.items() if k < len(v)]
     return cells
 
 
 def plan_phases(n_models: int, transforms: Sequence[str], targets: Sequence[float],
-                order: str = "priority") -> list[tuple[int, list[tuple[str, float]]]]:
+                order: str = "priority", degradations: Sequence[str] = ()
+                ) -> list[tuple[int, list[tuple[str, float]]]]:
     """The run order as (model index, cells) phases.
 
     ``"ascending"``: each model in turn, all its cells (:func:`plan_cells`). ``"priority"``:
     first every model's baseline and :data:`PRIORITY_TARGETS` cells, then every model's rest,
-    so that a partial run already covers the paper's thresholds for all models. ``"reverse"``:
+    (and every other level of each blur and noise family in ``degradations``), then every
+    model's rest, so that a partial run already covers the paper's thresholds for all models.
+    ``"reverse"``:
     the priority order backwards, for a second process that shares a model's cells with one
     running in priority order (they meet in the middle; at most the cell they meet on is
     computed twice, with identical detections).
     """
     if order == "ascending":
-        return [(m, plan_cells(transforms, targets)) for m in range(n_models)]
+        return [(m, plan_cells(transforms, targets, degradations)) for m in range(n_models)]
     if order == "reverse":
         return [(m, cells[::-1]) for m, cells in
-                plan_phases(n_models, transforms, targets, "priority")[::-1]]
+                plan_phases(n_models, transforms, targets, "priority", degradations)[::-1]]
     if order != "priority":
         raise InvalidValueError(
             f"order {order!r}: expected 'priority', 'ascending' or 'reverse'")
     first = [t for t in targets if t == 0 or t in PRIORITY_TARGETS]
     rest = [t for t in targets if t not in first]
-    phases = [(m, plan_cells(transforms, first)) for m in range(n_models)]
-    if rest:
-        phases += [(m, plan_cells(transforms, rest)) for m in range(n_models)]
-    return phases
+    phases = [(m, plan_cells(transforms, first, degradations, half=0)) for m in range(n_models)]
+    if rest or degradations:
+        phases += [(m, plan_cells(transforms, rest, degradations, half=1))
+                   for m in range(n_models)]
+    return [(m, cells) for m, cells in phases if cells]
 
 
 class ImageCache:
@@ -378,8 +402,12 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
               provider: str = "auto", batch_commit: int = 25, order: str = "priority",
               scorer: str = "auto", log: Callable[[str], None] | None = None,
               progress: bool = False, executor: ExecutorOptions | None = None,
-              lease_s: float | None = None) -> SweepStore:
+              lease_s: float | None = None, degradations: Sequence[str] = ()) -> SweepStore:
     """Run (or resume) every cell of the grid for each model in order; returns the store.
+
+    ``degradations``: blur and noise families (:data:`fidelity.coco.degradations.DEGRADATIONS`)
+    swept at their levels besides the colour ``transforms`` at ``targets``; their cells are
+    keyed ``(model, family, level)``.
 
     ``scorer``: COCO AP implementation (:data:`fidelity.coco.scoring.COCO_SCORERS` or ``"auto"``);
     it is recorded in the store's ``meta`` and in each cell's log line. ``log`` receives one
@@ -421,9 +449,10 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
         store.set_meta("versions_seen", [*seen, versions])
     store.record_scorer(method)
     store.set_meta("grid", {"transforms": list(transforms), "targets": list(targets),
+                            **({"degradations": list(degradations)} if degradations else {}),
                             "models": [f"{m.path.name}@{m.limit or len(all_ids)}"
                                        for m in models]})
-    plan = plan_phases(len(models), transforms, targets, order)
+    plan = plan_phases(len(models), transforms, targets, order, degradations)
     total = sum(len(grid) for _, grid in plan)
     params: dict[tuple[str, float], tuple[float | None, str | None]] = {}
     with StoreRun(store, lambda: SweepStore(store.folder, create=False), image_set,
@@ -444,6 +473,8 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
                 continue
             if transform == BASELINE:
                 param: float | None = None
+            elif transform in DEGRADATIONS:  # the level is the parameter
+                param = float(target)
             else:
                 if (transform, target) not in params:
                     params[(transform, target)] = calibrated_param(transform, target)
@@ -453,7 +484,7 @@ def run_sweep(models: Sequence[ModelSpec], images: str | os.PathLike[str],
                     say(f"[{k}/{total}] {f.name} {transform} ΔE {target:g}: unreachable "
                         f"({reason})")
                     continue
-            work.append(CellWork(key, f"{f.name} {transform} ΔE {target:g}", f,
+            work.append(CellWork(key, f"{f.name} {cell_label(transform, target)}", f,
                                  PixelTransform.of(transform, param, images=len(ids)),
                                  tuple(ids)))
         run.run(work, SweepCells(store, run.stores, coco, method, number, total, say),
@@ -507,7 +538,7 @@ class SweepCells:
         own.finish_cell(model, transform, target, param=param, status="done",
                         images=len(ids), score=score, seconds=seconds)
         self.say(f"{time.strftime('%H:%M:%S')} [{self.number[cell.key]}/{self.total}] {model} "
-                 f"{transform} ΔE {target:g} param={param} mAP={score.map:.4f} "
+                 f"{cell_label(transform, target)} param={param} mAP={score.map:.4f} "
                  f"AP50={score.map50:.4f} person={score.ap.get('person')} "
                  f"images={len(ids)} new={new} {seconds:.1f}s "
                  f"({new / seconds if seconds else 0:.1f} img/s)")
