@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -11,11 +12,13 @@ import click
 
 from fidelity.cli.context import show_progress, write_json_output
 from fidelity.cli.options import common_options, json_option, progress_option
+from fidelity.coco.degradations import DEGRADATIONS
 from fidelity.coco.scores import is_scores_file, scores_store_folder
 from fidelity.coco.scoring import load_annotations
 from fidelity.coco.sweep import SweepStore
 from fidelity.coco.tables.classes import RARE_BOXES, explain_cell
 from fidelity.coco.tables.colour import TablesResult, tables_result
+from fidelity.coco.tables.degradation import property_tables
 from fidelity.coco.tables.directional import directional_table
 from fidelity.coco.tables.grid import parse_image_caps
 from fidelity.coco.tables.prediction import prediction_table
@@ -40,6 +43,13 @@ if TYPE_CHECKING:
               help="Also write the direction-aware prediction table (per transform family; "
                    "fidelity.prediction.directional) to this file. STORE_DIR may be a "
                    "tables.json: then only the tables are written, from it.")
+@click.option("--sharpness", default=None, type=click.Path(dir_okay=False),
+              help="Also write the sharpness table (loss against the chart's MTF50, from the "
+                   "store's blur cells: fidelity sweep --degradations) to this file; its name "
+                   "is the file's stem.")
+@click.option("--noise", default=None, type=click.Path(dir_okay=False),
+              help="Also write the noise table (loss against the chart's SNR at 18 % grey, "
+                   "from the store's noise cells) to this file.")
 @click.option("--earlier", default=None, type=click.Path(dir_okay=False),
               metavar="TABLES_JSON",
               help="Keep the models of an earlier tables.json that STORE_DIR does not hold, as "
@@ -71,7 +81,8 @@ if TYPE_CHECKING:
 @progress_option
 @common_options
 def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
-           directional: str | None, earlier: str | None, annotations: str | None,
+           directional: str | None, sharpness: str | None, noise: str | None,
+           earlier: str | None, annotations: str | None,
            standard_errors: bool, explain: str | None, rare_boxes: int, images: str | None,
            top: int, json_path: str | None, progress: bool | None) -> None:
     """Worst case per model and size class, paper comparison, plots, Markdown/HTML report.
@@ -92,7 +103,8 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
                           {"STORE_DIR": store_dir})
             store_dir = _store_of_scores(stack, store_dir, out, explain)
         _tables(store_dir, out, prediction, name, directional, earlier, annotations,
-                standard_errors, explain, rare_boxes, images, top, json_path, progress)
+                standard_errors, explain, rare_boxes, images, top, json_path, progress,
+                {"sharpness": sharpness, "noise": noise})
 
 
 def _store_of_scores(stack: contextlib.ExitStack, path: str, out: str | None,
@@ -110,8 +122,10 @@ def _store_of_scores(stack: contextlib.ExitStack, path: str, out: str | None,
 def _tables(store_dir: str, out: str | None, prediction: str | None, name: str,
             directional: str | None, earlier: str | None, annotations: str | None,
             standard_errors: bool, explain: str | None, rare_boxes: int, images: str | None,
-            top: int, json_path: str | None, progress: bool | None) -> None:
+            top: int, json_path: str | None, progress: bool | None,
+            properties: dict[str, str | None] | None = None) -> None:
     report = Path(out or Path(store_dir) / "report")
+    wanted = {k: v for k, v in (properties or {}).items() if v}
     if Path(store_dir).is_file():
         if earlier is not None:
             raise InvalidValueError("--earlier merges with a sweep store: STORE_DIR is a "
@@ -121,7 +135,7 @@ def _tables(store_dir: str, out: str | None, prediction: str | None, name: str,
         _tables_from_json(Path(store_dir), prediction, name, directional)
         return
     check_outputs({"--prediction": prediction, "--json": json_path,
-                   "--directional": directional}
+                   "--directional": directional} | {f"--{k}": v for k, v in wanted.items()}
                   | ({} if explain else {f"--out ({n})": report / n
                                          for n in ("report.html", "report.md", "tables.json")}),
                   {"--annotations": annotations, "--earlier": earlier},
@@ -146,6 +160,17 @@ def _tables(store_dir: str, out: str | None, prediction: str | None, name: str,
         else:
             click.echo(f"no annotations ({recorded or 'none recorded'}): report without "
                        "standard errors (pass --annotations)", err=True)
+    if wanted:
+        built = property_tables(store, coco, name=name.removesuffix("-measured"),
+                                progress=show_progress(progress),
+                                say=lambda line: click.echo(line, err=True))
+        for prop, path in wanted.items():
+            if prop not in built:
+                raise InputFileError(f"{store_dir}: no finished {prop} cells for --{prop}")
+            table = replace(built[prop], name=Path(path).stem)
+            click.echo(f"{prop:<14} {write_json_atomic(path, json_ready(table.to_json()))}")
+        if not _has_colour_cells(store):
+            return
     kept = _read_earlier(Path(earlier)) if earlier is not None else None
     result = tables_result(store, coco, progress=show_progress(progress), images=caps,
                            earlier=kept)
@@ -154,6 +179,12 @@ def _tables(store_dir: str, out: str | None, prediction: str | None, name: str,
         written["directional"] = _write_directional(result.tables, directional)
     for k, p in written.items():
         click.echo(f"{k:<14} {p}")
+
+
+def _has_colour_cells(store: SweepStore) -> bool:
+    """Whether the store holds cells of the colour transforms (not only blur and noise)."""
+    return any(c.transform != "baseline" and c.transform not in DEGRADATIONS
+               for c in store.cells())
 
 
 def _read_tables_json(path: Any) -> Any:

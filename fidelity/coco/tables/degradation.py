@@ -1,0 +1,218 @@
+"""Sharpness and noise tables from a sweep's blur and noise cells, calibrated on the chart.
+
+SAFE-COLOR puts each colour cell on the chart-ΔE axis by the ΔE that its transform gives the
+chart. A blur or noise cell goes on its property's axis the same way (issue 56, requirement 1):
+the calibration chart (:func:`calibration_chart`: the SAFE-COLOR reference chart as an 8-bit
+sRGB image of COCO's size, 640 x 480 pixels, turned 5 degrees so that its patch edges get the
+ISO 12233 e-SFR) is degraded by the cell's own callable
+(:class:`fidelity.coco.degradations.Degradation`, the sweep's) and measured by the audit's own
+measurement (:func:`fidelity.measure.pixels.measure_pixels` at the known corners): the softer
+edge's luminance MTF50, or the 18 % grey patch's SNR
+(:func:`fidelity.prediction.properties.chart_mtf50`, :func:`~.chart_snr`). A table's axis is
+then what an audit prints (at the detector's input). The chart is 4x supersampled and
+box-averaged (the pixel aperture), so its undegraded MTF50 is that of a sharp camera.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fidelity.coco.degradations import DEGRADATIONS, Degradation, encode_srgb8
+from fidelity.coco.tables.grid import CellDelta, add_standard_errors, cell_deltas, model_size
+from fidelity.colour import colorimetry as cm
+from fidelity.colour.charts import load_reference
+from fidelity.core.errors import InputFileError
+from fidelity.measure.pixels import measure_pixels
+from fidelity.prediction.properties import (
+    LOSS_COLUMNS,
+    PropertyCell,
+    PropertyTable,
+    chart_mtf50,
+    chart_snr,
+)
+
+__all__ = ["CALIBRATION_CHART", "LevelValue", "calibrate_level", "calibration_chart",
+           "chart_value", "property_tables"]
+
+#: The calibration chart (module docstring): image size (H, W), turn (degrees), patch pitch
+#: (px), patch side (pitch fraction), frame (linear), supersampling.
+CALIBRATION_CHART: Mapping[str, Any] = {
+    "reference": "safecolor", "size": (480, 640), "angle_deg": 5.0, "pitch_px": 90.0,
+    "patch_fraction": 0.84, "frame_linear": 0.03, "supersample": 4}
+
+
+def _homography(angle_deg: float, pitch: float, centre: tuple[float, float]) -> np.ndarray:
+    a = math.radians(angle_deg)
+    c, s = math.cos(a), math.sin(a)
+    rot = np.array([[c * pitch, -s * pitch], [s * pitch, c * pitch]])
+    t = np.asarray(centre) - rot @ np.array([2.5, 1.5])
+    return np.array([[rot[0, 0], rot[0, 1], t[0]], [rot[1, 0], rot[1, 1], t[1]], [0, 0, 1.0]])
+
+
+def calibration_chart() -> tuple[np.ndarray, np.ndarray]:
+    """The calibration chart (:data:`CALIBRATION_CHART`): ``(image, corners)``, the image
+    ``(480, 640, 3)`` uint8 sRGB, the corners the ``(4, 2)`` centres of the dark skin, bluish
+    green, black and white patches."""
+    spec = CALIBRATION_CHART
+    height, width = spec["size"]
+    n = int(spec["supersample"])
+    h = _homography(float(spec["angle_deg"]), float(spec["pitch_px"]),
+                    ((width - 1) / 2, (height - 1) / 2))
+    ys = (np.arange(height * n) + 0.5) / n - 0.5
+    xs = (np.arange(width * n) + 0.5) / n - 0.5
+    xx, yy = np.meshgrid(xs, ys)
+    hi = np.linalg.inv(h)
+    u = hi[0, 0] * xx + hi[0, 1] * yy + hi[0, 2]
+    v = hi[1, 0] * xx + hi[1, 1] * yy + hi[1, 2]
+    col, row = np.rint(u), np.rint(v)
+    half = float(spec["patch_fraction"]) / 2
+    inside = ((np.abs(u - col) <= half) & (np.abs(v - row) <= half)
+              & (col >= 0) & (col <= 5) & (row >= 0) & (row <= 3))
+    idx = np.where(inside, row * 6 + col, 0).astype(int)
+    rgb = np.asarray(cm.linearize_srgb(load_reference(str(spec["reference"])).srgb), np.float64)
+    fine = np.where(inside[..., None], rgb[idx], float(spec["frame_linear"]))
+    img = fine.reshape(height, n, width, n, 3).mean(axis=(1, 3))
+    uv = np.array([[0, 0], [5, 0], [5, 3], [0, 3]], float)
+    p = np.c_[uv, np.ones(4)] @ h.T
+    return encode_srgb8(img), p[:, :2] / p[:, 2:]
+
+
+@dataclass(frozen=True)
+class LevelValue:
+    """A level's value on its property's axis: ``x`` and its standard uncertainty ``u``
+    (None: not stated), or None with the ``reason`` where the chart could not be measured."""
+
+    family: str
+    level: float
+    x: float | None
+    u: float | None
+    reason: str | None = None
+
+
+def chart_value(image: np.ndarray, corners: np.ndarray, prop: str
+                ) -> tuple[float, float | None] | None:
+    """The ``prop`` (``sharpness``/``noise``) value of a chart image as an audit measures it."""
+    m = measure_pixels(image, corners, encoding="srgb", reference="safecolor",
+                       uncertainty=False)
+    return chart_mtf50(m.sharpness) if prop == "sharpness" else chart_snr(m.noise)
+
+
+def calibrate_level(name: str, level: float,
+                    chart: tuple[np.ndarray, np.ndarray] | None = None) -> LevelValue:
+    """The axis value of family ``name`` at ``level`` (module docstring)."""
+    image, corners = chart if chart is not None else calibration_chart()
+    prop = DEGRADATIONS[name].property
+    got = chart_value(Degradation(name, level)(image), corners, prop)
+    if got is None:
+        return LevelValue(name, level, None, None,
+                          f"the chart's {prop} could not be measured at this level")
+    return LevelValue(name, level, got[0], got[1])
+
+
+def _cell(row: CellDelta, x: float) -> PropertyCell:
+    e = row.errors
+    losses = {"dmap_points": row.dmap_points, "dmap_relative": row.dmap_relative,
+              "dap_person_points": row.dap_person_points,
+              "dap_bicycle_points": row.dap_bicycle_points}
+    se: dict[str, float | None] = {c: None for c in LOSS_COLUMNS}
+    if e is not None:
+        se = {"dmap_points": e.dmap_points, "dmap_relative": e.dmap_relative,
+              "dap_person_points": e.dap_person_points, "dap_bicycle_points": e.dap_bicycle_points}
+    return PropertyCell(row.transform, row.delta_e, x, losses, se)
+
+
+def property_tables(store: Any, coco: Any = None, *, name: str = "coco1000", method: str = "auto",
+                    progress: bool = False, say: Callable[[str], None] | None = None
+                    ) -> dict[str, PropertyTable]:
+    """The sharpness and noise tables of a sweep store's blur and noise cells.
+
+    Parameters
+    ----------
+    store
+        A :class:`fidelity.coco.sweep.SweepStore` with cells of
+        :data:`fidelity.coco.degradations.DEGRADATIONS` and baselines.
+    coco
+        Its annotations (pycocotools ``COCO``), for the standard errors (None: without).
+    name
+        The tables' name stem (``<name>-sharpness``, ``<name>-noise``).
+    method
+        The COCO scorer of the fold scores.
+    progress
+        Show progress bars.
+    say
+        Receives one line per level the chart could not be measured at (left out).
+
+    Returns
+    -------
+    dict
+        Property -> its :class:`PropertyTable`, for each property with cells.
+    """
+    cells = [c for c in store.cells() if c.transform == "baseline" or c.transform in DEGRADATIONS]
+    if not any(c.transform in DEGRADATIONS and c.done for c in cells):
+        raise InputFileError(f"{store.path}: the sweep store has no finished blur or noise "
+                             "cells (fidelity sweep --degradations)")
+    deltas = cell_deltas(cells)
+    baselines = {c.model: c for c in cells if c.transform == "baseline" and c.done}
+    if coco is not None:
+        deltas = add_standard_errors(store, coco, deltas, baselines, method, progress)
+    chart = calibration_chart()
+    values: dict[tuple[str, float], LevelValue] = {}
+    for rows in deltas.values():
+        for r in rows:
+            if r.done and (r.transform, r.delta_e) not in values:
+                level = calibrate_level(r.transform, r.delta_e, chart)
+                values[(r.transform, r.delta_e)] = level
+                if level.x is None and say is not None:
+                    say(f"{r.transform} {r.delta_e:g}: left out: {level.reason}")
+    base_sharp = chart_value(*chart, "sharpness")
+    meta = store.meta()
+    out: dict[str, PropertyTable] = {}
+    for prop in ("sharpness", "noise"):
+        per: dict[str, tuple[PropertyCell, ...]] = {}
+        for m, rows in deltas.items():
+            got = []
+            for r in rows:
+                v = values.get((r.transform, r.delta_e))
+                if (r.done and DEGRADATIONS[r.transform].property == prop and v is not None
+                        and v.x is not None):
+                    got.append(_cell(r, v.x))
+            if got:
+                per[m] = tuple(sorted(got, key=lambda c: (c.family, c.level)))
+        if not per:
+            continue
+        baseline = math.inf if prop == "noise" else (base_sharp[0] if base_sharp else math.inf)
+        calibration = {"chart": {k: list(v) if isinstance(v, tuple) else v
+                                 for k, v in CALIBRATION_CHART.items()},
+                       "baseline_x": None if math.isinf(baseline) else baseline,
+                       "levels": [{"family": v.family, "level": v.level, "x": v.x,
+                                   "reason": v.reason} for v in values.values()
+                                  if DEGRADATIONS[v.family].property == prop]}
+        out[prop] = PropertyTable(
+            f"{name}-{prop}", prop, baseline, {m: model_size(m) for m in per}, per,
+            {m: int(baselines[m].images or 0) for m in per},
+            {"calibration": calibration,
+             "baseline_map": {m: baselines[m].map for m in per},
+             "families": {f: {"property": d.property, "parameter": d.parameter,
+                              "unit": d.unit, "linear": d.linear}
+                          for f, d in DEGRADATIONS.items() if d.property == prop},
+             "standard_errors": coco is not None,
+             "store": {k: meta.get(k) for k in ("versions", "machine", "grid", "data")}})
+    return out
+
+
+def rows_by_family(table: PropertyTable, model: str) -> dict[str, list[PropertyCell]]:
+    """A detector's cells of ``table`` grouped by family, mildest level first."""
+    out: dict[str, list[PropertyCell]] = {}
+    for c in table.cells.get(model, ()):
+        out.setdefault(c.family, []).append(c)
+    return {f: sorted(v, key=lambda c: -c.x) for f, v in out.items()}
+
+
+def levels_of(families: Sequence[str]) -> list[tuple[str, float]]:
+    """Every (family, level) of ``families``."""
+    return [(f, lv) for f in families for lv in DEGRADATIONS[f].levels]

@@ -1,0 +1,494 @@
+"""What sharpness and noise cost a detector: measured worst-case tables, the SAFE-COLOR way.
+
+SAFE-COLOR maps the chart ΔE to a worst-case loss of COCO mAP through tables measured with
+single-parameter colour transforms calibrated on the chart. This module does the same for the
+chart's other properties (issue 56):
+
+- **sharpness**: the chart's MTF50 (cycles per pixel at the detector's input, luminance, the
+  softer of the two edge directions; :func:`chart_mtf50`), from blur families;
+- **noise**: the chart's SNR at its 18 % grey patch (luminance ``mu / sigma`` at the
+  detector's input; :func:`chart_snr`), from noise families.
+
+A table (:class:`PropertyTable`, ``fidelity/data/properties/<name>.json``, built by
+``fidelity tables`` from a sweep store with ``--degradations``) holds, per detector, every
+measured cell: the family (:mod:`fidelity.coco.degradations`), its level, the level's x value
+(what the chart measurement reads on the chart degraded the same way) and the cell's losses
+with their standard errors. The prediction at a measured x (:func:`predict_property`):
+
+1. every family's loss is interpolated linearly in ``1 / x`` (the blur width for MTF50, the
+   noise-to-signal ratio for SNR) between its cells and the undegraded chart (loss 0 at
+   ``1 / x_baseline``; 0 for the noise table, whose undegraded chart is noiseless), through
+   the running maximum of its losses from the mildest level to the harshest (a worst case
+   that never falls as the property worsens; a measured gain counts as no loss);
+2. the worst case is the largest over families and detectors of the size class (families whose
+   harshest level stops short of x give their harshest loss, a lower bound of theirs there);
+3. an x at least as good as the undegraded chart predicts 0; an x worse than every family's
+   harshest level gets the table's ceiling (its largest loss), flagged ``beyond``.
+
+The losses of the three properties combine by :data:`COMBINATION` (module ``combine``): the
+sum, which bounds ``1 - prod(1 - l_i)`` and any sub-additive joint loss.
+"""
+
+from __future__ import annotations
+
+import builtins
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from fidelity.core import schema as sc
+from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
+from fidelity.core.fileio import display_path
+from fidelity.core.resources import resource_dir
+
+__all__ = [
+    "AXES",
+    "COMBINATION",
+    "LOSS_COLUMNS",
+    "PROPERTY_TABLES",
+    "Combined",
+    "PropertyCell",
+    "PropertyPrediction",
+    "PropertyTable",
+    "chart_mtf50",
+    "chart_snr",
+    "combine",
+    "detector_scale",
+    "load_property_table",
+    "parse_property_table",
+    "predict_property",
+    "property_threshold",
+]
+
+#: Property -> (axis name, unit). Both axes: a lower value is worse.
+AXES: Mapping[str, tuple[str, str]] = {
+    "sharpness": ("mtf50", "cy/px"),
+    "noise": ("snr", "ratio"),
+}
+#: The loss columns a table may carry (those of the colour tables).
+LOSS_COLUMNS: tuple[str, ...] = ("dmap_points", "dmap_relative", "dap_person_points",
+                                 "dap_bicycle_points")
+#: The shipped table of each property.
+PROPERTY_TABLES: Mapping[str, str] = {"sharpness": "coco1000-sharpness",
+                                      "noise": "coco1000-noise"}
+#: How the properties' losses combine (module docstring).
+COMBINATION = "sum"
+#: The detector's input side: a detector sees the image letterboxed to this many pixels.
+DETECTOR_SIDE = 640
+MAX_TABLE_BYTES = 8 << 20
+
+
+@dataclass(frozen=True)
+class PropertyCell:
+    """One measured cell: ``family`` at ``level`` (its unit), whose chart reads ``x`` on the
+    property's axis, and its ``losses`` and their standard errors ``se`` by column (None:
+    not measured)."""
+
+    family: str
+    level: float
+    x: float
+    losses: Mapping[str, float | None]
+    se: Mapping[str, float | None] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        """Field names as keys; losses as ``<column>`` and ``<column>_se``."""
+        d: dict[str, Any] = {"family": self.family, "level": self.level, "x": self.x}
+        for c in LOSS_COLUMNS:
+            if c in self.losses:
+                d[c] = self.losses[c]
+                d[c + "_se"] = self.se.get(c)
+        return d
+
+
+@dataclass(frozen=True)
+class PropertyTable:
+    """A measured worst-case table of one property (module docstring).
+
+    Attributes
+    ----------
+    name
+        The table's name (``coco1000-sharpness``).
+    property
+        ``sharpness`` or ``noise`` (:data:`AXES`).
+    baseline_x
+        The undegraded chart's x (inf: noiseless).
+    models
+        Detector -> its size class (``n`` ... ``x``).
+    cells
+        Detector -> its cells.
+    images
+        Detector -> images each cell was scored on.
+    provenance
+        Where the cells and the calibration came from (free-form JSON).
+    path
+        The file it was read from (None: built in memory).
+    """
+
+    name: str
+    property: str
+    baseline_x: float
+    models: Mapping[str, str]
+    cells: Mapping[str, tuple[PropertyCell, ...]]
+    images: Mapping[str, int]
+    provenance: Mapping[str, Any] = field(default_factory=dict)
+    path: Path | None = None
+
+    @builtins.property
+    def axis(self) -> str:
+        """The axis's name (``mtf50``, ``snr``)."""
+        return AXES[self.property][0]
+
+    @builtins.property
+    def unit(self) -> str:
+        """The axis's unit."""
+        return AXES[self.property][1]
+
+    def detectors(self, size: str = "any") -> list[str]:
+        """The detectors of size class ``size`` (``any``: all)."""
+        return [m for m, s in self.models.items() if size in ("any", s)]
+
+    def to_json(self) -> dict[str, Any]:
+        """The table's file (:func:`parse_property_table` reads it back)."""
+        return {"kind": "property-table", "name": self.name, "property": self.property,
+                "axis": self.axis, "unit": self.unit,
+                "baseline_x": None if math.isinf(self.baseline_x) else self.baseline_x,
+                "combination": COMBINATION,
+                "models": {m: {"size": s, "images": self.images.get(m),
+                               "cells": [c.to_json() for c in self.cells.get(m, ())]}
+                           for m, s in self.models.items()},
+                "provenance": dict(self.provenance)}
+
+
+def parse_property_table(obj: Any, where: str) -> PropertyTable:
+    """A :class:`PropertyTable` from its JSON form; a malformed one is an
+    :class:`InputFileError` naming ``where`` and the field."""
+    def bad(what: str) -> InputFileError:
+        return InputFileError(f"{where}: {what}")
+
+    if not isinstance(obj, Mapping) or obj.get("kind") != "property-table":
+        raise bad("not a property table (kind 'property-table')")
+    prop = obj.get("property")
+    if prop not in AXES:
+        raise bad(f"property {prop!r}: expected one of {', '.join(AXES)}")
+    base = obj.get("baseline_x")
+    baseline = math.inf if base is None else float(base)
+    if not baseline > 0:
+        raise bad(f"baseline_x {base!r}: must be > 0 (or null: noiseless)")
+    models: dict[str, str] = {}
+    cells: dict[str, tuple[PropertyCell, ...]] = {}
+    images: dict[str, int] = {}
+    for m, d in (obj.get("models") or {}).items():
+        models[m] = str(d.get("size", "any"))
+        if d.get("images") is not None:
+            images[m] = int(d["images"])
+        rows = []
+        for i, c in enumerate(d.get("cells") or ()):
+            try:
+                x = float(c["x"])
+                row = PropertyCell(str(c["family"]), float(c["level"]), x,
+                                   {k: _opt(c.get(k)) for k in LOSS_COLUMNS if k in c},
+                                   {k: _opt(c.get(k + "_se")) for k in LOSS_COLUMNS if k in c})
+            except (KeyError, TypeError, ValueError) as exc:
+                raise bad(f"models.{m}.cells[{i}]: {exc}") from None
+            if not (math.isfinite(x) and x > 0):
+                raise bad(f"models.{m}.cells[{i}].x {c.get('x')!r}: must be finite and > 0")
+            rows.append(row)
+        cells[m] = tuple(rows)
+    if not models:
+        raise bad("models: no detector")
+    return PropertyTable(str(obj.get("name", "")), str(prop), baseline, models, cells, images,
+                         dict(obj.get("provenance") or {}))
+
+
+def _opt(v: Any) -> float | None:
+    return None if v is None else float(v)
+
+
+def load_property_table(property_or_path: str) -> PropertyTable:
+    """The shipped table of a property (``sharpness``, ``noise``), a shipped table's name or
+    a JSON file's path."""
+    name = PROPERTY_TABLES.get(property_or_path, property_or_path)
+    path = Path(name)
+    if not (path.suffix == ".json" or "/" in name):
+        path = resource_dir("data") / "properties" / f"{name}.json"
+        if not path.is_file():
+            shipped = sorted(p.stem for p in path.parent.glob("*.json"))
+            raise unknown_name("property table", name, [*PROPERTY_TABLES, *shipped])
+    return _load(path.resolve())
+
+
+@lru_cache(maxsize=8)
+def _load(path: Path) -> PropertyTable:
+    if not path.is_file():
+        raise InputFileError(f"{display_path(path)}: property table does not exist")
+    obj = sc.load_document(path, fmt="json", max_bytes=MAX_TABLE_BYTES, what="property table")
+    table = parse_property_table(obj, display_path(path))
+    return PropertyTable(**{**table.__dict__, "path": path})
+
+
+# --------------------------------------------------------------------------------------------
+# The worst case
+
+
+def _inv(x: float) -> float:
+    return 0.0 if math.isinf(x) else 1.0 / x
+
+
+def _family_loss(points: Sequence[tuple[float, float, float | None]], u: float, u0: float
+                 ) -> tuple[float, float | None, bool] | None:
+    """One family's (loss, se, covered) at ``u = 1/x``: linear in u between its points and
+    (u0, 0, 0); beyond its harshest point its harshest loss (covered False)."""
+    pts = sorted(points)
+    if not pts:
+        return None
+    chain: list[tuple[float, float, float | None]] = [(u0, 0.0, 0.0)]
+    for p in pts:  # the worst case never falls as the property worsens: the running maximum
+        if p[0] > u0:
+            chain.append(p if p[1] >= chain[-1][1] else (p[0], chain[-1][1], chain[-1][2]))
+    if len(chain) == 1:
+        return 0.0, 0.0, True
+    if u >= chain[-1][0]:
+        return chain[-1][1], chain[-1][2], u == chain[-1][0]
+    for (ua, la, sa), (ub, lb, sb) in zip(chain, chain[1:], strict=False):
+        if ua <= u <= ub:
+            t = 0.0 if ub == ua else (u - ua) / (ub - ua)
+            se = None if sa is None or sb is None else (1 - t) * sa + t * sb
+            return la + t * (lb - la), se, True
+    return 0.0, 0.0, True
+
+
+@dataclass(frozen=True)
+class PropertyPrediction:
+    """The worst-case loss predicted for one measured property (:func:`predict_property`).
+
+    Attributes
+    ----------
+    property, axis, unit
+        ``sharpness``/``mtf50``/``cy/px`` or ``noise``/``snr``/``ratio``.
+    x, u_x
+        The value at the detector's input and its standard uncertainty (None: unknown).
+    column
+        The loss column (``dmap_points``, ...).
+    loss, u_loss
+        The predicted worst-case loss and its standard uncertainty (table SE and the slope
+        times ``u_x``; None: unknown).
+    status
+        ``in-range``, ``baseline`` (as good as the undegraded chart: 0) or ``beyond`` (worse
+        than every measured level: the table's ceiling).
+    family, detector
+        The family and detector that give the worst case (None at the baseline).
+    table
+        The table's name.
+    scale
+        The factor applied to the native value (the detector's input over the image's size;
+        1 when the image is at the detector's size).
+    native_x
+        The value measured at the image's own resolution.
+    """
+
+    property: str
+    axis: str
+    unit: str
+    x: float
+    u_x: float | None
+    column: str
+    loss: float
+    u_loss: float | None
+    status: str
+    family: str | None
+    detector: str | None
+    table: str
+    scale: float = 1.0
+    native_x: float | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """Field names as keys; non-finite numbers as None."""
+        def fin(v: float | None) -> float | None:
+            return None if v is None or not math.isfinite(v) else v
+        return {"property": self.property, "axis": self.axis, "unit": self.unit,
+                "x": fin(self.x), "u_x": fin(self.u_x), "native_x": fin(self.native_x),
+                "scale": self.scale, "column": self.column, "loss": fin(self.loss),
+                "u_loss": fin(self.u_loss), "status": self.status, "family": self.family,
+                "detector": self.detector, "table": self.table}
+
+
+def _worst_at(table: PropertyTable, x: float, size: str, column: str
+              ) -> tuple[float, float | None, bool, str | None, str | None]:
+    u, u0 = _inv(x), _inv(table.baseline_x)
+    best: tuple[float, float | None, bool, str | None, str | None] = (0.0, 0.0, True, None, None)
+    covered_any = False
+    for m in table.detectors(size):
+        fams: dict[str, list[tuple[float, float, float | None]]] = {}
+        for c in table.cells.get(m, ()):
+            loss = c.losses.get(column)
+            if loss is not None:
+                fams.setdefault(c.family, []).append((_inv(c.x), max(loss, 0.0),
+                                                       c.se.get(column)))
+        for fam, pts in fams.items():
+            got = _family_loss(pts, u, u0)
+            if got is None:
+                continue
+            loss, se, covered = got
+            covered_any |= covered
+            if loss > best[0]:
+                best = (loss, se, covered, fam, m)
+    return best[0], best[1], covered_any, best[3], best[4]
+
+
+def predict_property(table: PropertyTable, x: float, *, u_x: float | None = None,
+                     size: str = "any", column: str = "dmap_points", scale: float = 1.0,
+                     native_x: float | None = None) -> PropertyPrediction:
+    """The worst-case loss of a chart whose property reads ``x`` at the detector's input.
+
+    Parameters
+    ----------
+    table
+        The property's table (:func:`load_property_table`).
+    x
+        MTF50 (cy/px) or SNR at the detector's input (:func:`detector_scale`), > 0; inf:
+        noiseless.
+    u_x
+        Its standard uncertainty (None: unknown).
+    size
+        Detector size class (``n`` ... ``x``, ``any``).
+    column
+        The loss column (:data:`LOSS_COLUMNS`).
+    scale, native_x
+        Recorded with the prediction: the factor from the native value and the native value.
+
+    Returns
+    -------
+    PropertyPrediction
+        The loss, its uncertainty and the status (module docstring).
+
+    Raises
+    ------
+    InvalidValueError
+        A value that is NaN or not > 0, an unknown column or a size class with no detector.
+    """
+    if column not in LOSS_COLUMNS:
+        raise unknown_name("loss column", column, LOSS_COLUMNS)
+    if math.isnan(x) or not x > 0:
+        raise InvalidValueError(f"{table.axis} {x!r}: must be a number > 0")
+    if not table.detectors(size):
+        raise InvalidValueError(f"{table.name}: no detector of size class {size!r} "
+                                f"(has {', '.join(sorted(set(table.models.values())))})")
+    axis, unit = AXES[table.property]
+    if x >= table.baseline_x:
+        return PropertyPrediction(table.property, axis, unit, x, u_x, column, 0.0, 0.0,
+                                  "baseline", None, None, table.name, scale, native_x)
+    loss, se, covered, fam, det = _worst_at(table, x, size, column)
+    if not covered:  # worse than every family's harshest level: the ceiling
+        ceiling = max((c.losses.get(column) or 0.0) for m in table.detectors(size)
+                      for c in table.cells.get(m, ()))
+        return PropertyPrediction(table.property, axis, unit, x, u_x, column, ceiling, None,
+                                  "beyond", fam, det, table.name, scale, native_x)
+    u_loss = se
+    if u_x is not None and math.isfinite(u_x) and u_x > 0:
+        lo = _worst_at(table, x + u_x, size, column)[0] if x + u_x < table.baseline_x else 0.0
+        hi = _worst_at(table, max(x - u_x, x / 2), size, column)[0]
+        slope_u = abs(hi - lo) / 2
+        u_loss = math.hypot(se or 0.0, slope_u) if se is not None else slope_u
+    return PropertyPrediction(table.property, axis, unit, x, u_x, column, loss, u_loss,
+                              "in-range", fam, det, table.name, scale, native_x)
+
+
+def property_threshold(table: PropertyTable, loss: float, *, size: str = "any",
+                       column: str = "dmap_points") -> float | None:
+    """The axis value at which the worst-case loss reaches ``loss`` (bisection on the
+    monotone worst case, in ``1/x``); None where the table never reaches it."""
+    u0 = _inv(table.baseline_x)
+    us = [_inv(c.x) for m in table.detectors(size) for c in table.cells.get(m, ())]
+    if not us:
+        return None
+    lo, hi = u0, max(us)
+    if _worst_at(table, 1.0 / hi, size, column)[0] < loss:
+        return None
+    for _ in range(60):
+        mid = (lo + hi) / 2
+        if mid > 0 and _worst_at(table, 1.0 / mid, size, column)[0] >= loss:
+            hi = mid
+        else:
+            lo = mid
+    return 1.0 / hi
+
+
+# --------------------------------------------------------------------------------------------
+# The chart's values
+
+
+def detector_scale(width: int, height: int, side: int = DETECTOR_SIDE) -> float:
+    """The letterbox factor from an image of ``width`` x ``height`` pixels to the detector's
+    input (``side / max(width, height)``)."""
+    if width <= 0 or height <= 0:
+        raise InvalidValueError(f"image size {width} x {height}: must be positive")
+    return side / max(width, height)
+
+
+def chart_mtf50(sharpness: Any) -> tuple[float, float | None] | None:
+    """The chart's MTF50 at its own resolution: the luminance MTF50 of the softer of its
+    measured edges, with that edge's uncertainty; None where no edge's luminance was measured
+    (``sharpness``: a :class:`fidelity.measure.chartsharpness.ChartSharpness` or None)."""
+    if sharpness is None:
+        return None
+    found: list[tuple[float, float | None]] = []
+    for e in sharpness.edges:
+        y = e.channel("Y") if e.refusal is None else None
+        if y is not None and y.refusal is None and y.mtf50 is not None and y.mtf50 > 0:
+            found.append((float(y.mtf50), y.u_mtf50))
+    return min(found, key=lambda t: t[0]) if found else None
+
+
+def chart_snr(noise: Any) -> tuple[float, float | None] | None:
+    """The chart's SNR at its 18 % grey patch at its own resolution and its standard
+    uncertainty (``sqrt((1 + SNR^2 / 2) / n)`` for n effective pixels, the patch's pixels over
+    their design effect: the sampling error of mu / sigma of a normal sample); None where not
+    measured (``noise``: a
+    :class:`fidelity.measure.chartnoise.ChartNoise` or None)."""
+    if noise is None:
+        return None
+    snr = float(noise.grey_snr)
+    if math.isnan(snr) or not snr > 0:
+        return None
+    n = None
+    for name, p in zip(noise.patches, noise.noise, strict=False):
+        if name == noise.grey_patch and p.n > 0:
+            n = p.n / max(float(p.design_effect), 1.0)
+    if n is None or math.isinf(snr):
+        return snr, None
+    return snr, math.sqrt((1.0 + snr * snr / 2.0) / float(n))
+
+
+@dataclass(frozen=True)
+class Combined:
+    """The properties' losses combined (:func:`combine`): ``loss`` and ``u_loss`` (the
+    uncertainties in quadrature), the ``dominant`` property (largest loss), the properties
+    not judged (``missing``: not measured) and the rule."""
+
+    loss: float
+    u_loss: float | None
+    dominant: str
+    parts: Mapping[str, float]
+    missing: tuple[str, ...] = ()
+    rule: str = COMBINATION
+
+    def to_json(self) -> dict[str, Any]:
+        """Field names as keys."""
+        return {"loss": self.loss, "u_loss": self.u_loss, "dominant": self.dominant,
+                "parts": dict(self.parts), "missing": list(self.missing), "rule": self.rule}
+
+
+def combine(parts: Mapping[str, tuple[float, float | None] | None]) -> Combined:
+    """Combine per-property ``(loss, u)`` (None: not measured) by :data:`COMBINATION`."""
+    have = {k: v for k, v in parts.items() if v is not None}
+    missing = tuple(k for k, v in parts.items() if v is None)
+    if not have:
+        raise InvalidValueError("no property measured: nothing to combine")
+    loss = sum(v[0] for v in have.values())
+    us = [v[1] for v in have.values()]
+    u = None if any(x is None for x in us) else math.sqrt(sum(x * x for x in us if x is not None))
+    dominant = max(have, key=lambda k: have[k][0])
+    return Combined(loss, u, dominant, {k: v[0] for k, v in have.items()}, missing)
