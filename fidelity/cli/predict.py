@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -16,6 +16,12 @@ from fidelity.prediction.directional import DEFAULT_DIRECTIONAL_TABLE, family_lo
 from fidelity.prediction.interpolate import INTERPOLATIONS
 from fidelity.prediction.interval import prediction_interval
 from fidelity.prediction.judge import directional_table_name
+from fidelity.prediction.properties import (
+    combine,
+    load_property_table,
+    predict_property,
+    property_threshold,
+)
 from fidelity.prediction.table import delta_e_limit, predict
 from fidelity.prediction.tablefile import (
     CLASS_COLUMNS,
@@ -26,7 +32,7 @@ from fidelity.prediction.tablefile import (
 )
 from fidelity.prediction.verdict import Criterion
 from fidelity.report.jsonform import coco_c_answer_json, predict_json
-from fidelity.report.words import prediction_notes
+from fidelity.report.words import COLUMN_LABELS, prediction_notes
 
 if TYPE_CHECKING:
     from fidelity.prediction.interval import PredictionInterval
@@ -63,13 +69,21 @@ if TYPE_CHECKING:
 @click.option("--coco-c", "coco_c", default=None, metavar="CORRUPTION:SEVERITY",
               help="Instead of --delta-e: a COCO-C colour corruption (brightness, contrast, "
                    "saturate; severity 1-5): its chart ΔE, predicted and measured loss.")
+@click.option("--mtf50", type=float, default=None, metavar="X",
+              help="Instead of (or with) --delta-e: the chart's MTF50 in cy/px at the "
+                   "detector's 640 px input: its predicted loss from the sharpness table.")
+@click.option("--snr", type=float, default=None, metavar="Y",
+              help="Instead of (or with) --delta-e: the chart's SNR at 18 % grey at the "
+                   "detector's input: its predicted loss from the noise table. With several "
+                   "of --delta-e, --mtf50 and --snr: each and their sum.")
 @json_option("Write the prediction (or the ΔE limit) as JSON")
 @click.option("--list-tables", is_flag=True, help="List the prediction tables and exit.")
 @common_options
 def predict_cmd(delta_e: float | None, delta_e_uncertainty: float, cls: str, size: str,
                 table: str | None, method: str | None, baseline_map: float | None,
                 max_dmap: float | None, unit: str, direction: str | None, coco_c: str | None,
-                json_path: str | None, list_tables: bool) -> None:
+                mtf50: float | None, snr: float | None, json_path: str | None,
+                list_tables: bool) -> None:
     """Predict what a chart ΔE costs detectors, or the ΔE limit of a loss budget.
 
     With --delta-e: ΔmAP (points and % of baseline) with its standard uncertainty (the
@@ -82,12 +96,19 @@ def predict_cmd(delta_e: float | None, delta_e_uncertainty: float, cls: str, siz
     fidelity predict --delta-e 4.2 --class person --json predict.json
     fidelity predict --max-dmap 1 --unit relative      # ΔE limit for <= 1 % of baseline mAP
     fidelity predict --coco-c contrast:3               # a COCO-C corruption on the ΔE scale
+    fidelity predict --mtf50 0.15 --snr 12 --delta-e 2 # sharpness, noise, colour and the sum
     """
     if list_tables:
         for name in available_tables():
             t = load_prediction_table(name)
             mark = " (default)" if name == DEFAULT_TABLE else ""
             click.echo(f"{name}{mark}: {t.kind}, sizes {', '.join(t.sizes())} - {t.title}")
+        return
+    if mtf50 is not None or snr is not None:
+        if max_dmap is not None or coco_c is not None:
+            raise click.UsageError("--mtf50/--snr go alone or with --delta-e")
+        check_outputs({"--json": json_path}, {"--table": table})
+        _print_properties(delta_e, mtf50, snr, cls, size, table, json_path)
         return
     if sum(v is not None for v in (delta_e, max_dmap, coco_c)) != 1:
         raise click.UsageError("give --delta-e X or --max-dmap P (or --coco-c CORRUPTION:SEVERITY)")
@@ -137,6 +158,58 @@ def predict_cmd(delta_e: float | None, delta_e_uncertainty: float, cls: str, siz
     if json_path is not None:
         doc = predict_json(p, families, interval, prediction_domain(p))
         click.echo(f"wrote {write_json_output(json_path, doc)}")
+
+
+def _print_properties(delta_e: float | None, mtf50: float | None, snr: float | None,
+                      cls: str, size: str, table: str | None, json_path: str | None) -> None:
+    """``--mtf50`` / ``--snr`` (and ``--delta-e``): each property's worst-case loss of
+    ``cls`` and their sum."""
+    column = {"all": "dmap_points", "person": "dap_person_points",
+              "bicycle": "dap_bicycle_points"}[cls]
+    label = COLUMN_LABELS.get(column, column)
+    parts: dict[str, tuple[float, float | None] | None] = {}
+    out: dict[str, Any] = {"column": column, "size": size}
+    if delta_e is not None:
+        if not (math.isfinite(delta_e) and delta_e >= 0):
+            raise InvalidValueError(f"--delta-e {delta_e!r}: must be a finite number >= 0")
+        p = predict(delta_e, size=size, table=table)
+        col = p.columns.get(column)
+        value = None if col is None else col.value
+        parts["colour"] = None if value is None else (max(value, 0.0), None)
+        shown = "n/a" if value is None else f"{value:.2f} points"
+        click.echo(f"colour: ΔE00 {delta_e:g} -> predicted {label} {shown} "
+                   f"(table {p.table.name})")
+        out["colour"] = {"delta_e": delta_e, "loss": value, "table": p.table.name}
+    for prop, x, flag in (("sharpness", mtf50, "--mtf50"), ("noise", snr, "--snr")):
+        if x is None:
+            continue
+        if math.isnan(x) or not x > 0:
+            raise InvalidValueError(f"{flag} {x!r}: must be a number > 0")
+        t = load_property_table(prop)
+        pp = predict_property(t, x, size=size, column=column)
+        parts[prop] = (pp.loss, pp.u_loss)
+        limit = property_threshold(t, _loss_at_3(column, size, table), size=size, column=column)
+        pm = "" if pp.u_loss is None else f" ± {pp.u_loss:.2f}"
+        note = {"baseline": "; as good as the undegraded chart",
+                "beyond": "; beyond the table: its ceiling (conservative)"}.get(pp.status, "")
+        axis = "MTF50" if prop == "sharpness" else "SNR"
+        worst = f", worst case {pp.family} on {pp.detector}" if pp.family else ""
+        click.echo(f"{prop}: {axis} {x:g} -> predicted {label} {pp.loss:.2f}{pm} points "
+                   f"(table {t.name}{worst}{note})")
+        if limit is not None:
+            click.echo(f"  the loss of ΔE00 3 is reached at {axis} {limit:.3g}")
+        out[prop] = pp.to_json() | {"limit_at_delta_e_3": limit}
+    if len([v for v in parts.values() if v is not None]) > 1:
+        c = combine(parts)
+        click.echo(f"combined ({c.rule}): {label} {c.loss:.2f} points; {c.dominant} dominates")
+        out["combined"] = c.to_json()
+    if json_path:
+        write_json_output(json_path, out)
+
+
+def _loss_at_3(column: str, size: str, table: str | None) -> float:
+    col = predict(3.0, size=size, table=table).columns.get(column)
+    return 0.0 if col is None or col.value is None else float(col.value)
 
 
 def _interval(p: Prediction, delta_e_uncertainty: float) -> PredictionInterval | None:

@@ -155,10 +155,11 @@ def degrade_linear(linear: NDArray[Any], name: str, level: float, seed: int = 0)
         psf = _psf(name, level)
         if psf.kind == "gaussian":
             g = psf.kernel_1d()
-            out: F64 = cv2.sepFilter2D(img, cv2.CV_64F, g, g, borderType=cv2.BORDER_REFLECT)
+            out = cv2.sepFilter2D(img, cv2.CV_64F, g, g, borderType=cv2.BORDER_REFLECT)
         else:
             out = cv2.filter2D(img, cv2.CV_64F, psf.kernel(), borderType=cv2.BORDER_REFLECT)
-        return out.reshape(img.shape)
+        blurred: F64 = np.asarray(out, dtype=np.float64).reshape(img.shape)
+        return blurred
     noise = Noise(full_well=level, read_noise=READ_NOISE_E, seed=seed)
     return add_sensor_noise(img, noise, seed=seed)
 

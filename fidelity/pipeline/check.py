@@ -49,6 +49,7 @@ from fidelity.prediction.interval import (
     validity_domain,
 )
 from fidelity.prediction.judge import DEFAULT_JUDGE, JudgeOptions, judge_chart
+from fidelity.prediction.properties import detector_scale
 from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion
 
 if TYPE_CHECKING:
@@ -209,8 +210,9 @@ def check_camera(
                           renderer, reference=reference, seed=seed)
     m = render.measurement
     u = render.uncertainty
-    prediction, verdict, directional = judge_chart(
-        m.mean_delta_e, judge, criterion, m, delta_e_uncertainty=u.combined if u else None)
+    prediction, verdict, directional, judged = judge_chart(
+        m.mean_delta_e, judge, criterion, m, delta_e_uncertainty=u.combined if u else None,
+        properties=True)
     interval, validity = evidence_of(prediction, u, reference, judge.decision.k,
                                      (render.camera.stage_kinds(), illuminant))
 
@@ -234,7 +236,7 @@ def check_camera(
                                       {"render": rd.get("conventions", {})}),
         prediction=prediction, verdict=verdict, directional=directional, bound=judge.bound,
         blind_spots=spots, measured=measured, uncertainty=u, interval=interval,
-        validity=validity,
+        validity=validity, properties=judged,
     )
 
 
@@ -297,12 +299,14 @@ def audit_image(
                            read=read, reference=reference, illuminant=illuminant,
                            inspect_image=lambda img: banding.append(_image_banding(img)))
     u = result.uncertainty
-    prediction, verdict, directional = judge_chart(
-        result.mean_delta_e, judge, criterion, result.measurement,
-        delta_e_uncertainty=u.combined if u else None)
-    interval, validity = evidence_of(prediction, u, reference, judge.decision.k)
     info = result.image
     assert info is not None  # measure_image always describes the file
+    prediction, verdict, directional, judged = judge_chart(
+        result.mean_delta_e, judge, criterion, result.measurement,
+        delta_e_uncertainty=u.combined if u else None, properties=True,
+        sharpness=result.sharpness, noise=result.noise,
+        scale=detector_scale(info.width, info.height))
+    interval, validity = evidence_of(prediction, u, reference, judge.decision.k)
     source = ImageSource(
         image=info, corners=result.location.corners, location=result.location,
         colourspace=result.colourspace, exposure_mode=result.exposure_mode,
@@ -327,6 +331,7 @@ def audit_image(
         valid_pixels=result.valid_pixels, directional=directional, bound=judge.bound,
         blind_spots=spots, measured=measured, uncertainty=u, interval=interval,
         validity=validity, noise=result.noise, sharpness=result.sharpness,
+        properties=judged,
     )
 
 

@@ -131,7 +131,7 @@ def compare_charts(
     m = measure_chart(srgb, rm.lab, rm.patch_names, reference_srgb=np.clip(rm.srgb, 0, 1))
     budget = sim_to_real_uncertainty(m.mean_delta_e, sim_report.uncertainty,
                                      real_report.uncertainty)
-    prediction, verdict, directional = judge_chart(
+    prediction, verdict, directional, _ = judge_chart(
         m.mean_delta_e, judge, criterion, m,
         delta_e_uncertainty=budget.combined if budget else None)
     measured: tuple[MeasuredLoss, ...] = ()

@@ -67,6 +67,7 @@ from fidelity.measure.pixels import BadPixels
 from fidelity.measure.uncertainty import UncertaintyBudget
 from fidelity.prediction.directional import DirectionalPrediction
 from fidelity.prediction.interval import PredictionInterval, ValidityDomain
+from fidelity.prediction.properties import PropertyJudgement
 from fidelity.prediction.table import Prediction
 from fidelity.prediction.verdict import EXIT_ERROR, Criterion, Verdict, worst_exit_code
 
@@ -407,6 +408,9 @@ class ChartReport:
     noise: ChartNoise | None = None
     #: the MTF of the patch edges (:mod:`fidelity.measure.chartsharpness`)
     sharpness: ChartSharpness | None = None
+    #: colour, sharpness and noise judged together
+    #: (:class:`fidelity.prediction.properties.PropertyJudgement`)
+    properties: PropertyJudgement | None = None
 
     @property
     def warnings(self) -> list[BlindSpot]:
@@ -469,6 +473,8 @@ class ChartReport:
             noise=ChartNoise.from_json(data["noise"]) if data.get("noise") else None,
             sharpness=(ChartSharpness.from_json(data["sharpness"])
                        if data.get("sharpness") else None),
+            properties=(PropertyJudgement.from_json(data["properties"])
+                        if data.get("properties") else None),
         )
 
 

@@ -12,10 +12,11 @@ public API (``check_camera(..., judge=JudgeOptions(size="n"))``) to :func:`judge
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, NamedTuple
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any, NamedTuple
 
-from fidelity.core.errors import unknown_name
+from fidelity.core.errors import FidelityError, unknown_name
 from fidelity.prediction.directional import (
     BOUNDS,
     DirectionalPrediction,
@@ -23,9 +24,27 @@ from fidelity.prediction.directional import (
     predict_chart,
 )
 from fidelity.prediction.interval import prediction_interval
+from fidelity.prediction.properties import (
+    PropertyJudgement,
+    PropertyPrediction,
+    chart_mtf50,
+    chart_snr,
+    combine,
+    load_property_table,
+    predict_property,
+    property_threshold,
+)
 from fidelity.prediction.table import Prediction, predict
 from fidelity.prediction.tablefile import PredictionTable, TableKind, load_prediction_table
-from fidelity.prediction.verdict import SIMPLE, Criterion, DecisionRule, Verdict, evaluate
+from fidelity.prediction.verdict import (
+    SIMPLE,
+    Criterion,
+    DecisionRule,
+    Verdict,
+    VerdictReason,
+    evaluate,
+    judge_value,
+)
 
 if TYPE_CHECKING:
     from fidelity.measure.colour import ChartMeasurement
@@ -75,12 +94,131 @@ DEFAULT_JUDGE = JudgeOptions()
 
 
 class Judgement(NamedTuple):
-    """The ``prediction`` (classic), the ``verdict`` (None without a criterion) and the
-    ``directional`` prediction (None without a measurement)."""
+    """The ``prediction`` (classic), the ``verdict`` (None without a criterion), the
+    ``directional`` prediction (None without a measurement) and the ``properties``' judgement
+    (sharpness and noise besides colour; None where not asked for)."""
 
     prediction: Prediction
     verdict: Verdict | None
     directional: DirectionalPrediction | None
+    properties: PropertyJudgement | None = None
+
+
+#: The properties a verdict judges besides colour, in report order.
+JUDGED_PROPERTIES: tuple[str, ...] = ("sharpness", "noise")
+
+
+def _native_value(prop: str, measured: Any) -> tuple[tuple[float, float | None] | None, str]:
+    if measured is None:
+        return None, "not measured"
+    got = chart_mtf50(measured) if prop == "sharpness" else chart_snr(measured)
+    if got is None:
+        why = ("no edge's luminance MTF50 was measured" if prop == "sharpness"
+               else "the grey patch's SNR was not measured")
+        codes = sorted({e.refusal[0] for e in getattr(measured, "edges", ()) if e.refusal}
+                       | {c.refusal[0] for e in getattr(measured, "edges", ())
+                          for c in e.channels if c.channel == "Y" and c.refusal})
+        return None, why + (f" (refused: {', '.join(codes)})" if codes else "")
+    return got, ""
+
+
+def judge_properties(verdict: Verdict | None, prediction: Prediction, criterion: Criterion | None,
+                     *, size: str = "any", sharpness: Any = None, noise: Any = None,
+                     scale: float = 1.0, tables: Mapping[str, Any] | None = None
+                     ) -> tuple[PropertyJudgement, Verdict | None]:
+    """Judge sharpness and noise beside colour, and the verdict they make together.
+
+    Parameters
+    ----------
+    verdict
+        The colour verdict (:func:`judge_chart`); None without a criterion.
+    prediction
+        The classic colour prediction.
+    criterion
+        The gate (None: no verdict).
+    size
+        Detector size class.
+    sharpness, noise
+        The chart's :class:`~fidelity.measure.chartsharpness.ChartSharpness` and
+        :class:`~fidelity.measure.chartnoise.ChartNoise` at the image's resolution (None: not
+        measured: the property is not judged, and the verdict says so).
+    scale
+        The detector's input over the image's size
+        (:func:`fidelity.prediction.properties.detector_scale`): MTF50 is divided by it, the
+        SNR by ``min(scale, 1)`` (downscaling averages ``1 / scale^2`` pixels of white noise).
+    tables
+        Property -> its table (None: the shipped ones).
+
+    Returns
+    -------
+    tuple
+        The :class:`PropertyJudgement` and the verdict: for ``max-dmap``, the combined loss
+        against the limit; for ``max-delta-e`` with limit L, the colour verdict failed also by
+        any property whose worst-case loss exceeds the colour table's at ΔE L.
+    """
+    column = criterion.column if criterion is not None and criterion.kind == "max-dmap" \
+        else "dmap_points"
+    limit_de = criterion.limit if criterion is not None and criterion.kind == "max-delta-e" \
+        else 3.0
+    col = prediction.columns.get(column)
+    limit_loss = None
+    try:
+        from fidelity.prediction.table import predict  # noqa: PLC0415 (same layer; cheap)
+
+        limit_col = predict(limit_de, size=size, table=prediction.table).columns.get(column)
+        limit_loss = None if limit_col is None else limit_col.value
+    except FidelityError:
+        limit_loss = None
+    colour = col.value if col is not None else None
+    u_colour = None
+    if verdict is not None and verdict.criterion.kind == "max-dmap":
+        colour, u_colour = verdict.value, verdict.uncertainty
+    preds: list[PropertyPrediction] = []
+    skipped: list[tuple[str, str]] = []
+    limits: dict[str, float | None] = {}
+    for prop, measured in (("sharpness", sharpness), ("noise", noise)):
+        try:
+            table = (tables or {}).get(prop) or load_property_table(prop)
+        except FidelityError as exc:
+            skipped.append((prop, f"no table: {exc}"))
+            continue
+        limits[prop] = (property_threshold(table, limit_loss, size=size, column=column)
+                        if limit_loss is not None else None)
+        got, why = _native_value(prop, measured)
+        if got is None:
+            skipped.append((prop, why))
+            continue
+        factor = scale if prop == "sharpness" else min(scale, 1.0)
+        x, u = got[0] / factor, (None if got[1] is None else got[1] / factor)
+        try:
+            preds.append(predict_property(table, x, u_x=u, size=size, column=column,
+                                          scale=factor, native_x=got[0]))
+        except FidelityError as exc:
+            skipped.append((prop, str(exc)))
+    parts: dict[str, tuple[float, float | None] | None] = {
+        "colour": None if colour is None else (max(colour, 0.0), u_colour)}
+    parts |= {p.property: (p.loss, p.u_loss) for p in preds}
+    combined = combine(parts) if any(v is not None for v in parts.values()) else None
+    failed: tuple[str, ...] = ()
+    if criterion is not None and verdict is not None:
+        if criterion.kind == "max-dmap" and combined is not None and preds:
+            verdict = judge_value(criterion, combined.loss, verdict.delta_e,
+                                  decision=verdict.decision, uncertainty=combined.u_loss,
+                                  bound=verdict.bound, status=verdict.status,
+                                  upper_bound=verdict.upper_bound, table=verdict.table,
+                                  conservative=verdict.conservative
+                                  or any(p.status == "beyond" for p in preds))
+            if not verdict.passed:
+                failed = (combined.dominant,)
+        elif criterion.kind == "max-delta-e" and limit_loss is not None:
+            failed = tuple(p.property for p in preds if p.loss > limit_loss)
+            if failed and verdict.passed:
+                verdict = replace(verdict, passed=False, reason=VerdictReason.OVER_LIMIT)
+    judgement = PropertyJudgement(column, colour, u_colour, tuple(preds), tuple(skipped),
+                                  combined, limits, float(limit_de), limit_loss, failed)
+    if verdict is not None:
+        verdict = replace(verdict, properties=judgement)
+    return judgement, verdict
 
 
 def directional_table_name(table: PredictionTable | str | None) -> str | None:
@@ -113,7 +251,8 @@ def directional_prediction(measurement: ChartMeasurement, size: str = "any",
 
 def judge_chart(mean_delta_e: float, judge: JudgeOptions = DEFAULT_JUDGE,
                 criterion: Criterion | None = None, measurement: ChartMeasurement | None = None,
-                *, delta_e_uncertainty: float | None = None) -> Judgement:
+                *, delta_e_uncertainty: float | None = None, properties: bool = False,
+                sharpness: Any = None, noise: Any = None, scale: float = 1.0) -> Judgement:
     """Predict the loss of a chart ΔE and apply ``criterion``.
 
     Parameters
@@ -133,12 +272,23 @@ def judge_chart(mean_delta_e: float, judge: JudgeOptions = DEFAULT_JUDGE,
         uses the predicted loss's uncertainty
         (:func:`fidelity.prediction.interval.prediction_interval`); a direction-aware one has
         none.
+    properties
+        Judge sharpness and noise too (:func:`judge_properties` with ``sharpness``, ``noise``
+        and ``scale``; a property not measured is named as not judged).
+    sharpness
+        The chart's :class:`~fidelity.measure.chartsharpness.ChartSharpness` (None: not
+        measured).
+    noise
+        The chart's :class:`~fidelity.measure.chartnoise.ChartNoise` (None: not measured).
+    scale
+        The detector's input over the image's size.
 
     Returns
     -------
     Judgement
-        The classic prediction, the verdict (None without ``criterion``) and the
-        direction-aware prediction (None without ``measurement``).
+        The classic prediction, the verdict (None without ``criterion``), the
+        direction-aware prediction (None without ``measurement``) and the properties'
+        judgement (None unless ``properties``).
     """
     size, table, bound, decision = judge.size, judge.table, judge.bound, judge.decision
     prediction = predict(mean_delta_e, size=size, table=table)
@@ -160,8 +310,13 @@ def judge_chart(mean_delta_e: float, judge: JudgeOptions = DEFAULT_JUDGE,
                     loss_u = interval.standard_uncertainty
             verdict = evaluate(mean_delta_e, prediction, criterion, decision=decision,
                                delta_e_uncertainty=delta_e_uncertainty, loss_uncertainty=loss_u)
-    return Judgement(prediction, verdict, directional)
+    judged = None
+    if properties:
+        judged, verdict = judge_properties(verdict, prediction, criterion, size=size,
+                                           sharpness=sharpness, noise=noise, scale=scale)
+    return Judgement(prediction, verdict, directional, judged)
 
 
-__all__ = ["BOUNDS", "DEFAULT_JUDGE", "JudgeOptions", "Judgement", "directional_prediction",
-           "directional_table_name", "judge_chart"]
+__all__ = ["BOUNDS", "DEFAULT_JUDGE", "JUDGED_PROPERTIES", "JudgeOptions", "Judgement",
+           "PropertyJudgement", "directional_prediction", "directional_table_name",
+           "judge_chart", "judge_properties"]

@@ -51,6 +51,7 @@ __all__ = [
     "PROPERTY_TABLES",
     "Combined",
     "PropertyCell",
+    "PropertyJudgement",
     "PropertyPrediction",
     "PropertyTable",
     "chart_mtf50",
@@ -314,6 +315,15 @@ class PropertyPrediction:
                 "u_loss": fin(self.u_loss), "status": self.status, "family": self.family,
                 "detector": self.detector, "table": self.table}
 
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> PropertyPrediction:
+        """Inverse of :meth:`to_json` (a value written as None reads back as inf)."""
+        return cls(str(d["property"]), str(d["axis"]), str(d["unit"]),
+                   math.inf if d.get("x") is None else float(d["x"]), _opt(d.get("u_x")),
+                   str(d["column"]), math.inf if d.get("loss") is None else float(d["loss"]),
+                   _opt(d.get("u_loss")), str(d["status"]), d.get("family"), d.get("detector"),
+                   str(d["table"]), float(d.get("scale", 1.0)), _opt(d.get("native_x")))
+
 
 def _worst_at(table: PropertyTable, x: float, size: str, column: str
               ) -> tuple[float, float | None, bool, str | None, str | None]:
@@ -480,6 +490,13 @@ class Combined:
         return {"loss": self.loss, "u_loss": self.u_loss, "dominant": self.dominant,
                 "parts": dict(self.parts), "missing": list(self.missing), "rule": self.rule}
 
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> Combined:
+        """Inverse of :meth:`to_json`."""
+        return cls(float(d["loss"]), _opt(d.get("u_loss")), str(d["dominant"]),
+                   {str(k): float(v) for k, v in d["parts"].items()},
+                   tuple(str(k) for k in d.get("missing") or ()), str(d.get("rule", "sum")))
+
 
 def combine(parts: Mapping[str, tuple[float, float | None] | None]) -> Combined:
     """Combine per-property ``(loss, u)`` (None: not measured) by :data:`COMBINATION`."""
@@ -492,3 +509,76 @@ def combine(parts: Mapping[str, tuple[float, float | None] | None]) -> Combined:
     u = None if any(x is None for x in us) else math.sqrt(sum(x * x for x in us if x is not None))
     dominant = max(have, key=lambda k: have[k][0])
     return Combined(loss, u, dominant, {k: v[0] for k, v in have.items()}, missing)
+
+
+@dataclass(frozen=True)
+class PropertyJudgement:
+    """Colour, sharpness and noise judged together (:func:`judge_properties`).
+
+    Attributes
+    ----------
+    column
+        The loss column (``dmap_points`` ...).
+    colour, u_colour
+        The colour loss that decides a ``max-dmap`` verdict (classic or direction-aware) and
+        its standard uncertainty.
+    predictions
+        The sharpness and noise predictions made (:class:`PropertyPrediction`).
+    not_judged
+        ``(property, reason)`` for each property not measured or without a table.
+    combined
+        The losses combined (:data:`fidelity.prediction.properties.COMBINATION`).
+    limits
+        Property -> the axis value whose worst-case loss equals the colour table's loss at
+        ``limit_delta_e`` (None: the table never reaches it), and ``limit_loss`` that loss:
+        the default thresholds of a ``max-delta-e`` verdict.
+    limit_delta_e, limit_loss
+        The ΔE and its predicted loss the limits are equivalent to.
+    failed
+        The properties over their limit (``max-delta-e``) or the dominant one of a failed
+        ``max-dmap`` verdict.
+    """
+
+    column: str
+    colour: float | None
+    u_colour: float | None
+    predictions: tuple[PropertyPrediction, ...]
+    not_judged: tuple[tuple[str, str], ...]
+    combined: Combined | None
+    limits: Mapping[str, float | None]
+    limit_delta_e: float
+    limit_loss: float | None
+    failed: tuple[str, ...] = ()
+
+    def prediction(self, prop: str) -> PropertyPrediction | None:
+        """The prediction of ``prop``; None if not judged."""
+        return next((p for p in self.predictions if p.property == prop), None)
+
+    @property
+    def complete(self) -> bool:
+        """Whether every property was judged."""
+        return not self.not_judged
+
+    def to_json(self) -> dict[str, Any]:
+        """Field names as keys."""
+        return {"column": self.column, "colour": self.colour, "u_colour": self.u_colour,
+                "predictions": {p.property: p.to_json() for p in self.predictions},
+                "not_judged": {k: why for k, why in self.not_judged},
+                "combined": self.combined.to_json() if self.combined else None,
+                "combination": COMBINATION,
+                "limits": dict(self.limits), "limit_delta_e": self.limit_delta_e,
+                "limit_loss": self.limit_loss, "failed": list(self.failed)}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> PropertyJudgement:
+        """Inverse of :meth:`to_json`."""
+        def opt(v: Any) -> float | None:
+            return None if v is None else float(v)
+        return cls(str(d["column"]), opt(d.get("colour")), opt(d.get("u_colour")),
+                   tuple(PropertyPrediction.from_json(p)
+                         for p in (d.get("predictions") or {}).values()),
+                   tuple((str(k), str(v)) for k, v in (d.get("not_judged") or {}).items()),
+                   Combined.from_json(d["combined"]) if d.get("combined") else None,
+                   {str(k): opt(v) for k, v in (d.get("limits") or {}).items()},
+                   float(d["limit_delta_e"]), opt(d.get("limit_loss")),
+                   tuple(str(k) for k in d.get("failed") or ()))

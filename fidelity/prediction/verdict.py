@@ -31,6 +31,7 @@ from typing import Any
 
 from fidelity.core.errors import InvalidValueError, unknown_name
 from fidelity.prediction.interpolate import ColumnStatus
+from fidelity.prediction.properties import PropertyJudgement
 from fidelity.prediction.table import Prediction
 from fidelity.prediction.tablefile import CLASS_COLUMNS
 
@@ -240,6 +241,9 @@ class Verdict:
     decision: DecisionRule = SIMPLE
     #: the standard uncertainty (k = 1) of ``value``, in its unit; None: not known
     uncertainty: float | None = None
+    #: sharpness and noise judged with colour
+    #: (:class:`fidelity.prediction.properties.PropertyJudgement`; None: colour alone)
+    properties: PropertyJudgement | None = None
 
     @property
     def expanded_uncertainty(self) -> float | None:
@@ -287,6 +291,8 @@ class Verdict:
             "decision": self.decision.to_json(),
             "standard_uncertainty": self.uncertainty,
             "expanded_uncertainty": self.expanded_uncertainty,
+            **({"properties": self.properties.to_json()} if self.properties is not None
+               else {}),
         }
 
     @classmethod
@@ -308,7 +314,16 @@ class Verdict:
                    bool(data.get("upper_bound", False)), data.get("table"),
                    DecisionRule.from_json(data["decision"]) if data.get("decision") else SIMPLE,
                    (None if data.get("standard_uncertainty") is None
-                    else float(data["standard_uncertainty"])))
+                    else float(data["standard_uncertainty"])),
+                   _properties_from_json(data.get("properties")))
+
+
+def _properties_from_json(d: Any) -> Any:
+    """The verdict's :class:`fidelity.prediction.properties.PropertyJudgement` (None: colour
+    alone)."""
+    if not d:
+        return None
+    return PropertyJudgement.from_json(d)
 
 
 def worst_exit_code(codes: Iterable[int]) -> int:

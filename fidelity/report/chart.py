@@ -10,6 +10,7 @@ public: the sim-to-real report (:mod:`fidelity.report.compare`) uses them too.
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -43,7 +44,13 @@ from fidelity.report.document import (
 from fidelity.report.html import write_document
 from fidelity.report.jsonform import chart_report_json
 from fidelity.report.terminal import plus_minus, texture_lines
-from fidelity.report.words import column_note, prediction_notes, verdict_message
+from fidelity.report.words import (
+    COLUMN_LABELS,
+    column_note,
+    prediction_notes,
+    property_lines,
+    verdict_message,
+)
 
 # ---------------------------------------------------------------------- the HTML document
 
@@ -209,6 +216,38 @@ def blind_spot_section(report: ChartReport) -> Section | None:
         "of the deep shadows below the black patch, and posterisation (banding) of smooth "
         "gradients."), table(("check", "at risk", "value", "reason"), rows,
                              numeric=(False, False, True, False)))
+
+
+def properties_section(report: ChartReport) -> Section | None:
+    """Colour, sharpness and noise judged together
+    (:class:`fidelity.prediction.properties.PropertyJudgement`): per property its value at
+    the detector's input and predicted loss, the properties not judged, the combined loss and
+    the limits equivalent to the ΔE limit."""
+    j = report.properties
+    if j is None:
+        return None
+    rows: list[tuple[str, ...]] = []
+    if j.colour is not None:
+        rows.append(("colour", f"ΔE00 {report.mean_delta_e:.2f}",
+                     plus_minus(max(j.colour, 0.0), j.u_colour), "colour table", "–"))
+    for p in j.predictions:
+        axis = "MTF50" if p.axis == "mtf50" else "SNR"
+        value = "∞" if math.isinf(p.x) else f"{p.x:.3g}"
+        rows.append((p.property, f"{axis} {value}" + (" cy/px" if p.axis == "mtf50" else ""),
+                     plus_minus(p.loss, p.u_loss),
+                     {"baseline": "undegraded chart", "beyond": "beyond: ceiling"}.get(
+                         p.status, f"{p.family}, {p.detector}"), p.table))
+    rows += [(k, "–", "not judged", why, "–") for k, why in j.not_judged]
+    if j.combined is not None:
+        rows.append((f"combined ({j.combined.rule})", "–",
+                     plus_minus(j.combined.loss, j.combined.u_loss),
+                     f"{j.combined.dominant} dominates", "–"))
+    words = [line for line in property_lines(j) if line.startswith("limits ")]
+    return section("Colour, sharpness and noise", table(
+        ("property", "at the detector's input",
+         f"predicted {COLUMN_LABELS.get(j.column, j.column)}", "worst case",
+         "table"), rows, numeric=(False, False, True, False, False),
+        caption=words[0] if words else ""))
 
 
 def texture_section(report: ChartReport) -> Section | None:
@@ -398,7 +437,8 @@ def chart_document(report: ChartReport, pixels: NDArray[Any] | None = None) -> D
     budget = uncertainty_section(report)
     if budget is not None:
         sections.append(budget)
-    sections += [x for x in (texture_section(report), directional_section(report),
+    sections += [x for x in (texture_section(report), properties_section(report),
+                             directional_section(report),
                              measured_section(report), blind_spot_section(report))
                  if x is not None]
     sections.append(patch_section(report))
@@ -491,6 +531,7 @@ __all__ = [
     "directional_section",
     "headline",
     "measured_section",
+    "properties_section",
     "texture_section",
     "noise_facts",
     "patch_section",

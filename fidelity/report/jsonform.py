@@ -94,6 +94,7 @@ def chart_report_json(report: ChartReport) -> JSONObject:
         "validity": r.validity.to_json() if r.validity else None,
         "noise": r.noise.to_json() if r.noise else None,
         "sharpness": r.sharpness.to_json() if r.sharpness else None,
+        "properties": r.properties.to_json() if r.properties else None,
     })
     return out
 

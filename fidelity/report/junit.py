@@ -55,6 +55,14 @@ def _properties(case: GateResult) -> list[tuple[str, str]]:
         values += [("bound", r.bound),
                    ("directional_dmap_points", d.dmap_points if d else None)]
         values += [(f"measured_dmap_points_{m.model}", m.dmap_points) for m in r.measured]
+        j = r.properties
+        if j is not None:
+            values += [(f"{q.property}_{q.axis}", q.x) for q in j.predictions]
+            values += [(f"{q.property}_{j.column}", q.loss) for q in j.predictions]
+            values += [(f"{k}_not_judged", why) for k, why in j.not_judged]
+            if j.combined is not None:
+                values += [(f"combined_{j.column}", j.combined.loss),
+                           ("dominant_property", j.combined.dominant)]
         values += [(f"warning_{w.kind}", w.reason) for w in r.warnings]
         if r.uncertainty is not None:
             values.append(("mean_delta_e_standard_uncertainty", r.uncertainty.combined))

@@ -6,7 +6,7 @@ import math
 
 from fidelity.pipeline.records import ChartReport, ImageSource
 from fidelity.prediction.tablefile import TableKind
-from fidelity.report.words import verdict_message
+from fidelity.report.words import property_lines, verdict_message
 
 
 def summary_lines(report: ChartReport) -> list[str]:
@@ -84,6 +84,7 @@ def summary_lines(report: ChartReport) -> list[str]:
                       if c.name in ("reference chart", "validated illuminant",
                                     "validated camera kind")]
     lines += directional_lines(report)
+    lines += property_lines(report.properties, not_judged=report.verdict is None)
     lines += [f"measured on COCO: {m.summary()}" for m in report.measured]
     lines += [w.warning for w in report.warnings]
     if report.verdict is not None:

@@ -9,6 +9,8 @@ JSON report (:mod:`fidelity.report.jsonform`).
 
 from __future__ import annotations
 
+from typing import Any
+
 from fidelity.prediction.interpolate import ColumnStatus
 from fidelity.prediction.table import Prediction
 from fidelity.prediction.tablefile import CEILING
@@ -106,22 +108,102 @@ def verdict_message(verdict: Verdict, delta_e_name: str = "mean ΔE00") -> str:
     v, c = verdict, verdict.criterion
     if c.kind == "max-delta-e":
         assert v.value is not None
+        j = v.properties
+        if j is not None and j.failed:
+            over = "; ".join(_over_limit(j, k) for k in j.failed)
+            colour_ok = v.value <= c.limit
+            return (f"{v.label}: {delta_e_name} {v.value:.2f} "
+                    f"{'<=' if colour_ok else '>'} {c.limit:g}{_guard(v)}, but {over}"
+                    f"{_not_judged(v)}")
         return (f"{v.label}: {delta_e_name} {v.value:.2f} "
-                f"{_relation(v)} {c.limit:g}{_guard(v)}")
+                f"{_relation(v)} {c.limit:g}{_guard(v)}{_not_judged(v)}")
     what = c.describe().removeprefix("predicted ").split(" <=")[0]
     directional = v.bound == "directional"
     if v.reason is VerdictReason.NO_PREDICTION or v.value is None:
         source = "no direction-aware" if directional else f"table {v.table!r} has no"
         return f"FAIL: {source} {what} prediction (nothing supports a pass)"
     unit = "points" if c.unit == "points" else "%"
+    parts = _combined_words(v)
     if directional:
         qualifier = " (direction-aware bound)"
     else:
         qualifier = " (upper bound)" if v.upper_bound else ""
         if v.conservative and v.status is not None:
             qualifier += f" ({v.status.value}: conservative answer)"
-    return (f"{v.label}: predicted {what} {v.value:.2f} {unit}{qualifier} "
-            f"{_relation(v)} {c.limit:g} at {delta_e_name} {v.delta_e:.2f}{_guard(v)}")
+    return (f"{v.label}: predicted {what} {v.value:.2f} {unit}{parts}{qualifier} "
+            f"{_relation(v)} {c.limit:g} at {delta_e_name} {v.delta_e:.2f}{_guard(v)}"
+            f"{_not_judged(v)}")
+
+
+def _over_limit(j: Any, prop: str) -> str:
+    """``sharpness: MTF50 0.127 cy/px < 0.19 (predicted ΔmAP 3.03 > 1.20, the loss at ΔE00
+    3)``."""
+    p = j.prediction(prop)
+    x = j.limits.get(prop)
+    axis, unit = ("MTF50", " cy/px") if prop == "sharpness" else ("SNR", "")
+    limit = "" if x is None else f" < {x:.3g}{unit}"
+    return (f"{prop}: {axis} {p.x:.3g}{unit}{limit} (predicted loss {p.loss:.2f} > "
+            f"{j.limit_loss:.2f}, the loss at ΔE00 {j.limit_delta_e:g})")
+
+
+def _combined_words(v: Verdict) -> str:
+    """`` (colour 0.62 + sharpness 3.03 + noise 0.00: sharpness dominates)`` for a verdict on
+    the combined loss; nothing for colour alone."""
+    j = v.properties
+    if j is None or j.combined is None or not j.predictions:
+        return ""
+    terms = " + ".join(f"{k} {x:.2f}" for k, x in j.combined.parts.items())
+    return f" ({terms}: {j.combined.dominant} dominates)"
+
+
+def _not_judged(v: Verdict) -> str:
+    """``; not judged: sharpness (not measured)`` where a property was left out."""
+    j = v.properties
+    if j is None or not j.not_judged:
+        return ""
+    if len({why for _, why in j.not_judged}) == 1:
+        return (f"; not judged: {', '.join(k for k, _ in j.not_judged)} "
+                f"({j.not_judged[0][1]})")
+    return "; not judged: " + ", ".join(f"{k} ({why})" for k, why in j.not_judged)
+
+
+def property_lines(judgement: Any, not_judged: bool = True) -> list[str]:
+    """One line per property judged besides colour, e.g. ``sharpness: MTF50 0.127 cy/px at
+    the detector's input -> predicted ΔmAP 3.03 ± 0.21 points (gaussian-blur, yolox_nano;
+    table coco1000-sharpness)``, one per reason properties were not judged (``not_judged``;
+    a verdict's sentence says it otherwise), and the default limits (``judgement``: a
+    :class:`fidelity.prediction.properties.PropertyJudgement` or None)."""
+    if judgement is None:
+        return []
+    label = COLUMN_LABELS.get(judgement.column, judgement.column)
+    lines = []
+    for p in judgement.predictions:
+        axis = "MTF50" if p.axis == "mtf50" else "SNR at 18 % grey"
+        unit = " cy/px" if p.axis == "mtf50" else ""
+        scaled = ("" if p.scale == 1.0 or p.native_x is None else
+                  f" ({p.native_x:.3g}{unit} at the image's resolution, x {1 / p.scale:.3g} "
+                  f"for the detector's 640 px input)")
+        pm = "" if p.u_loss is None else f" ± {p.u_loss:.2f}"
+        pm += " points" if judgement.column.endswith("_points") else " %"
+        where = {"baseline": "as sharp or clean as the undegraded chart",
+                 "beyond": "beyond the table: its ceiling, a conservative answer"}.get(
+            p.status, f"{p.family}, {p.detector}")
+        lines.append(f"{p.property}: {axis} {p.x:.3g}{unit} at the detector's input{scaled} "
+                     f"-> predicted {label} {p.loss:.2f}{pm} ({where}; table {p.table})")
+    reasons: dict[str, list[str]] = {}
+    for k, why in judgement.not_judged if not_judged else ():
+        reasons.setdefault(why, []).append(k)
+    lines += [f"{', '.join(ks)}: not judged ({why})" for why, ks in reasons.items()]
+    if judgement.limit_loss is not None and judgement.predictions:
+        limits = []
+        for k, x in judgement.limits.items():
+            if x is not None:
+                limits.append(f"MTF50 >= {x:.3g} cy/px" if k == "sharpness"
+                              else f"SNR >= {x:.3g}")
+        if limits:
+            lines.append(f"limits equivalent to ΔE00 {judgement.limit_delta_e:g} "
+                         f"({label} {judgement.limit_loss:.2f}): " + ", ".join(limits))
+    return lines
 
 
 def _relation(v: Verdict) -> str:
@@ -142,4 +224,4 @@ def _guard(v: Verdict) -> str:
 
 
 __all__ = ["COLUMN_LABELS", "ceiling_words", "column_note", "prediction_notes",
-           "verdict_message"]
+           "property_lines", "verdict_message"]

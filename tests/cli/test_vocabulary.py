@@ -148,7 +148,11 @@ def test_a_ci_line_shrinks_to_gate_image(tmp_path, monkeypatch):
     failures, props = junit()  # --max-dmap replaces the ΔE gate
     assert failures == "1" and props["criterion"] == "max-dmap"
     assert float(props["limit"]) == 0.01
-    assert float(props["value"]) == pytest.approx(float(props["dmap_points"]))
+    # the verdict's value: the colour, sharpness and noise losses combined (their sum)
+    assert float(props["value"]) == pytest.approx(float(props["combined_dmap_points"]))
+    judged = [float(props[f"{k}_dmap_points"]) for k in ("sharpness", "noise")
+              if f"{k}_not_judged" not in props]
+    assert float(props["value"]) == pytest.approx(float(props["dmap_points"]) + sum(judged))
     assert float(props["value"]) > 0.01
 
 
