@@ -595,7 +595,8 @@ def sweep_status(store: SweepStore, pace_cells: int = 10) -> list[SweepProgress]
     """
     meta = store.meta()
     grid = meta.get("grid") or {}
-    planned = plan_cells(grid.get("transforms") or [], grid.get("targets") or [])
+    planned = plan_cells(grid.get("transforms") or [], grid.get("targets") or [],
+                         [d for d in grid.get("degradations") or () if d in DEGRADATIONS])
     image_count = (meta.get("data") or {}).get("image_count")
     stored: dict[tuple[str, str, float], int] = {
         (m, t, float(e)): n for m, t, e, n in store.db.execute(

@@ -12,8 +12,11 @@ import math
 
 import pytest
 
+from fidelity.chart.image import write_png
+from fidelity.coco.degradations import Degradation
 from fidelity.coco.tables.degradation import calibrate_level, calibration_chart
 from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.pipeline.check import audit_image
 from fidelity.prediction.properties import (
     PropertyCell,
     PropertyTable,
@@ -24,6 +27,7 @@ from fidelity.prediction.properties import (
     predict_property,
     property_threshold,
 )
+from fidelity.prediction.verdict import Criterion
 
 
 def _cell(family: str, x: float, loss: float, se: float = 0.1) -> PropertyCell:
@@ -140,3 +144,23 @@ def test_shipped_tables_axis_is_the_chart_measurement(prop):
     for c in cells[:: max(1, len(cells) // 4)]:
         level = calibrate_level(c.family, c.level, chart)
         assert level.x == pytest.approx(c.x, rel=1e-9), c
+
+
+def test_the_same_camera_at_1280_and_640_px_predicts_the_same_loss(tmp_path):
+    """Issue 56, requirement 2: a blur of sigma 2 px on a 1280 px image is a blur of 1 px at
+    the detector's 640 px input; the audit converts the native MTF50 by the letterbox factor
+    and predicts the same loss as for the 640 px image blurred by 1 px."""
+    results = []
+    for scale, sigma in ((1, 1.0), (2, 2.0)):
+        img, _ = calibration_chart(scale)
+        path = tmp_path / f"chart{scale}.png"
+        write_png(path, Degradation("gaussian-blur", sigma)(img) / 255.0, 8)
+        report = audit_image(path, criterion=Criterion("max-dmap", 100.0))
+        assert report.properties is not None
+        p = report.properties.prediction("sharpness")
+        assert p is not None and p.u_loss is not None
+        results.append(p)
+    small, large = results
+    assert large.scale == pytest.approx(0.5) and small.scale == 1.0
+    assert large.native_x == pytest.approx(small.x / 2, rel=0.05)
+    assert abs(large.loss - small.loss) <= 2 * math.hypot(small.u_loss, large.u_loss) + 0.05

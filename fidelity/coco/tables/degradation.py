@@ -54,14 +54,15 @@ def _homography(angle_deg: float, pitch: float, centre: tuple[float, float]) -> 
     return np.array([[rot[0, 0], rot[0, 1], t[0]], [rot[1, 0], rot[1, 1], t[1]], [0, 0, 1.0]])
 
 
-def calibration_chart() -> tuple[np.ndarray, np.ndarray]:
+def calibration_chart(scale: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """The calibration chart (:data:`CALIBRATION_CHART`): ``(image, corners)``, the image
     ``(480, 640, 3)`` uint8 sRGB, the corners the ``(4, 2)`` centres of the dark skin, bluish
-    green, black and white patches."""
+    green, black and white patches; ``scale``: the same chart at ``scale`` times the size and
+    pitch (the same camera at a higher resolution)."""
     spec = CALIBRATION_CHART
-    height, width = spec["size"]
+    height, width = (int(v) * scale for v in spec["size"])
     n = int(spec["supersample"])
-    h = _homography(float(spec["angle_deg"]), float(spec["pitch_px"]),
+    h = _homography(float(spec["angle_deg"]), float(spec["pitch_px"]) * scale,
                     ((width - 1) / 2, (height - 1) / 2))
     ys = (np.arange(height * n) + 0.5) / n - 0.5
     xs = (np.arange(width * n) + 0.5) / n - 0.5
