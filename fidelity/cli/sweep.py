@@ -25,7 +25,7 @@ from fidelity.cli.values import cap_models, executor_from, model_inputs, transfe
 from fidelity.coco.degradations import DEGRADATIONS
 from fidelity.coco.scores import is_scores_file, scores_store_folder
 from fidelity.coco.store import process_gone
-from fidelity.coco.sweep import SweepStore, run_summary, run_sweep, sweep_status
+from fidelity.coco.sweep import SweepStore, cell_label, run_summary, run_sweep, sweep_status
 from fidelity.coco.sweep import rescore as do_rescore
 from fidelity.coco.tables.provenance import check_store_meta
 from fidelity.core.errors import InvalidValueError
@@ -161,7 +161,7 @@ def _print_status(store: SweepStore, shown: str | None = None) -> None:
                    for c, n in zip(r.claims, r.stored, strict=True)}
         for t, e, n in r.under_way:
             if (t, e) not in claimed:
-                click.echo(f"{'':<18} under way: {t} ΔE {e:g}, {n} of {r.images} images stored"
+                click.echo(f"{'':<18} under way: {cell_label(t, e)}, {n} of {r.images} images stored"
                            " (no run holds it now)")
         for (t, e), (c, n) in claimed.items():
             who = c.owner.info
@@ -171,7 +171,7 @@ def _print_status(store: SweepStore, shown: str | None = None) -> None:
             state = ("its process has ended: the next run takes the cell over"
                      if process_gone(c.owner.host, c.owner.pid)
                      else f"heartbeat {max(0.0, now - c.heartbeat):.0f} s ago")
-            click.echo(f"{'':<18} under way: {t} ΔE {e:g}, {n} of {r.images} images stored; "
+            click.echo(f"{'':<18} under way: {cell_label(t, e)}, {n} of {r.images} images stored; "
                        f"run on {c.owner.host} pid {c.owner.pid} ({what}), {state}")
     if any(r.to_do for r in rows):
         click.echo("pace: wall time per finished cell over a model's last cells (runs side by "

@@ -43,6 +43,23 @@ def test_pack_roundtrip() -> None:
     assert unpack_detections(pack_detections(np.zeros((0, 6)))).shape == (0, 6)
 
 
+def test_plan_with_blur_and_noise_families() -> None:
+    from fidelity.coco.degradations import DEGRADATIONS, Degradation
+    from fidelity.coco.executor import PixelTransform
+
+    blur, noise = DEGRADATIONS["gaussian-blur"].levels, DEGRADATIONS["sensor-noise"].levels
+    cells = plan_cells([], [0], ["gaussian-blur", "sensor-noise"])
+    assert cells[0] == ("baseline", 0.0) and len(cells) == 1 + len(blur) + len(noise)
+    assert cells[1:3] == [("gaussian-blur", blur[0]), ("sensor-noise", noise[0])]
+    phases = plan_phases(1, [], [0], "priority", ["gaussian-blur"])
+    assert [c for _, p in phases for c in p] == [("baseline", 0.0),
+                                                 *[("gaussian-blur", v) for v in blur[::2]],
+                                                 *[("gaussian-blur", v) for v in blur[1::2]]]
+    spec = PixelTransform.of("gaussian-blur", 1.5, images=8)
+    assert not spec.direct and spec.key == "gaussian-blur@1.5"
+    assert spec.build() == Degradation("gaussian-blur", 1.5)
+
+
 def test_plan_and_model_spec() -> None:
     cells = plan_cells(["a", "b"], [3, 0, 1])
     assert cells == [("baseline", 0.0), ("a", 1.0), ("b", 1.0), ("a", 3.0), ("b", 3.0)]

@@ -592,3 +592,57 @@ def test_a_folder_that_cannot_be_listed_is_one_error_line(tmp_path, monkeypatch)
     assert r.exit_code == 2
     assert one_error_line(r) == (f"fidelity: error: {frames}: cannot list the folder "
                                  "(Permission denied)")
+
+
+@pytest.fixture(scope="module")
+def degraded_charts(tmp_path_factory):
+    """The calibration chart sharp, blurred by sigma 1.5 px and noisy at sigma 0.06 (8-bit
+    PNGs): the issue's two examples that passed a 2-point gate on colour alone."""
+    from fidelity.chart.image import write_png
+    from fidelity.coco.degradations import Degradation
+    from fidelity.coco.tables.degradation import calibration_chart
+
+    folder = tmp_path_factory.mktemp("degraded")
+    img, _ = calibration_chart()
+    out = {}
+    for name, fn in (("sharp", None), ("blur", Degradation("gaussian-blur", 1.5)),
+                     ("noise", Degradation("gaussian-noise", 0.06))):
+        out[name] = folder / f"{name}.png"
+        write_png(out[name], (img if fn is None else fn(img)) / 255.0, 8)
+    return out
+
+
+def test_blur_and_noise_fail_a_loss_gate_and_name_the_property(degraded_charts, tmp_path):
+    sharp = run("gate", degraded_charts["sharp"], "--max-dmap", "2")
+    assert sharp.exit_code == 0, sharp.output
+    for name, prop in (("blur", "sharpness"), ("noise", "noise")):
+        report = tmp_path / f"{name}.json"
+        r = run("gate", degraded_charts[name], "--max-dmap", "2", "--json", report)
+        assert r.exit_code == 1, r.output
+        assert f"{prop} dominates" in r.output
+        doc = json.loads(report.read_text())
+        j = doc["properties"]
+        assert j["combined"]["dominant"] == prop and doc["verdict"]["value"] > 2
+        parts = j["combined"]["parts"]
+        assert doc["verdict"]["value"] == pytest.approx(sum(parts.values()))
+        assert parts["colour"] == pytest.approx(doc["prediction"]["dmap_points"], abs=1e-9)
+
+
+def test_a_delta_e_gate_also_fails_a_blurred_chart(degraded_charts):
+    r = run("gate", degraded_charts["blur"], "--max-delta-e", "3")
+    assert r.exit_code == 1, r.output
+    assert "but sharpness: MTF50" in r.output.splitlines()[-1]
+    assert run("gate", degraded_charts["sharp"], "--max-delta-e", "3").exit_code == 0
+
+
+def test_predict_mtf50_and_snr(tmp_path):
+    out = tmp_path / "p.json"
+    r = run("predict", "--mtf50", "0.1", "--snr", "5", "--delta-e", "1", "--json", out)
+    assert r.exit_code == 0, r.output
+    doc = json.loads(out.read_text())
+    total = doc["colour"]["loss"] + doc["sharpness"]["loss"] + doc["noise"]["loss"]
+    assert doc["combined"]["loss"] == pytest.approx(total)
+    assert run("predict", "--mtf50", "1.0").exit_code == 0  # sharper than the chart: 0
+    for bad in (["--snr", "-1"], ["--mtf50", "nan"]):
+        r = run("predict", *bad)
+        assert r.exit_code == 2 and r.output.count("\n") == 1, r.output
