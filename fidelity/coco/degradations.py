@@ -150,7 +150,7 @@ def degrade_linear(linear: NDArray[Any], name: str, level: float, seed: int = 0)
         raise InvalidValueError(f"{name}: works on encoded values, not linear light")
     img = np.asarray(linear, dtype=np.float64)
     if fam.property == "sharpness":
-        import cv2  # noqa: PLC0415 (heavy; loaded when a blur is applied)
+        import cv2
 
         psf = _psf(name, level)
         if psf.kind == "gaussian":

@@ -377,6 +377,10 @@ class ChartReport:
     sharpness
         The MTF of the chart's patch edges (:class:`fidelity.measure.chartsharpness.
         ChartSharpness`); None when not measured.
+    properties
+        Colour, sharpness and noise judged together, each property's predicted loss and
+        which were not judged (:class:`fidelity.prediction.properties.PropertyJudgement`);
+        None when not judged.
     """
 
     command: str

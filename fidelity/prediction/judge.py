@@ -144,15 +144,17 @@ def judge_properties(verdict: Verdict | None, prediction: Prediction, criterion:
         measured: the property is not judged, and the verdict says so).
     scale
         The detector's input over the image's size
-        (:func:`fidelity.prediction.properties.detector_scale`): MTF50 is divided by it, the
-        SNR by ``min(scale, 1)`` (downscaling averages ``1 / scale^2`` pixels of white noise).
+        (:func:`fidelity.prediction.properties.detector_scale`): MTF50 is divided by it (at
+        most the undegraded chart's: a downscaled image is at most as sharp as the
+        detector's pixels), the SNR by ``min(scale, 1)`` (downscaling averages
+        ``1 / scale^2`` pixels of white noise).
     tables
         Property -> its table (None: the shipped ones).
 
     Returns
     -------
     tuple
-        The :class:`PropertyJudgement` and the verdict: for ``max-dmap``, the combined loss
+        The :class:`~fidelity.prediction.properties.PropertyJudgement` and the verdict: for ``max-dmap``, the combined loss
         against the limit; for ``max-delta-e`` with limit L, the colour verdict failed also by
         any property whose worst-case loss exceeds the colour table's at ΔE L.
     """
@@ -163,8 +165,6 @@ def judge_properties(verdict: Verdict | None, prediction: Prediction, criterion:
     col = prediction.columns.get(column)
     limit_loss = None
     try:
-        from fidelity.prediction.table import predict  # noqa: PLC0415 (same layer; cheap)
-
         limit_col = predict(limit_de, size=size, table=prediction.table).columns.get(column)
         limit_loss = None if limit_col is None else limit_col.value
     except FidelityError:
@@ -190,6 +190,9 @@ def judge_properties(verdict: Verdict | None, prediction: Prediction, criterion:
             continue
         factor = scale if prop == "sharpness" else min(scale, 1.0)
         x, u = got[0] / factor, (None if got[1] is None else got[1] / factor)
+        if prop == "sharpness" and x > table.baseline_x:
+            # a downscaled image is at most as sharp as the detector's own pixels
+            x, u = table.baseline_x, None
         try:
             preds.append(predict_property(table, x, u_x=u, size=size, column=column,
                                           scale=factor, native_x=got[0]))
@@ -318,5 +321,5 @@ def judge_chart(mean_delta_e: float, judge: JudgeOptions = DEFAULT_JUDGE,
 
 
 __all__ = ["BOUNDS", "DEFAULT_JUDGE", "JUDGED_PROPERTIES", "JudgeOptions", "Judgement",
-           "PropertyJudgement", "directional_prediction", "directional_table_name",
-           "judge_chart", "judge_properties"]
+           "directional_prediction", "directional_table_name", "judge_chart",
+           "judge_properties"]

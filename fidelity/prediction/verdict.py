@@ -225,6 +225,10 @@ class Verdict:
         uncertainty).
     uncertainty
         The standard uncertainty (k = 1) of ``value``, in its unit; None: not known.
+    properties
+        Sharpness and noise judged with colour
+        (:class:`fidelity.prediction.properties.PropertyJudgement`): a ``max-dmap`` verdict's
+        ``value`` is then the combined loss; None: colour alone.
     """
 
     passed: bool

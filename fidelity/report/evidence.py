@@ -246,7 +246,9 @@ def _subject(subject: str, report: ChartReport | None, error: str | None) -> dic
             "dap_person_points": p.dap_person_points,
             "dap_bicycle_points": p.dap_bicycle_points, "upper_bound": p.upper_bound,
             "interval": report.interval.to_json() if report.interval else None,
-            "directional_dmap_points": d.dmap_points if d else None, "bound": report.bound},
+            "directional_dmap_points": d.dmap_points if d else None, "bound": report.bound,
+            # sharpness and noise judged with colour (the tables, their values, the sum)
+            "properties": report.properties.to_json() if report.properties else None},
         "validity": report.validity.to_json() if report.validity else None,
         "verdict": verdict_json(report.verdict) if report.verdict else None,
     }
