@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from fidelity.chart.read import read_again
 from fidelity.colour.colorimetry import delta_e_1976, delta_e_1994
+from fidelity.core.errors import FidelityError
 from fidelity.core.fileio import JSONObject, check_outputs, json_ready, write_json_atomic
 from fidelity.measure.colour import (
     NOISE_FLOOR,
@@ -29,6 +30,7 @@ from fidelity.measure.colour import (
     patch_snr_db,
 )
 from fidelity.pipeline.records import ChartReport, ImageSource, RenderSource
+from fidelity.prediction.properties import load_property_table
 from fidelity.report import chartfigures
 from fidelity.report.document import (
     Code,
@@ -243,11 +245,27 @@ def properties_section(report: ChartReport) -> Section | None:
                      plus_minus(j.combined.loss, j.combined.u_loss),
                      f"{j.combined.dominant} dominates", "–"))
     words = [line for line in property_lines(j) if line.startswith("limits ")]
+    figures = []
+    for p in j.predictions:
+        t = _table_of(p)
+        if t is not None:
+            figures.append(svg_figure(
+                chartfigures.property_curve(p, t, j.limits.get(p.property)),
+                f"{p.property}_curve.svg", f"worst-case loss against {p.axis}, this chart's "
+                "point and the limit equivalent to the ΔE limit"))
     return section("Colour, sharpness and noise", table(
         ("property", "at the detector's input",
          f"predicted {COLUMN_LABELS.get(j.column, j.column)}", "worst case",
          "table"), rows, numeric=(False, False, True, False, False),
-        caption=words[0] if words else ""))
+        caption=words[0] if words else ""), *figures)
+
+
+def _table_of(p: Any) -> Any:
+    """The shipped table a property prediction came from (None: not found)."""
+    try:
+        return load_property_table(p.table)
+    except FidelityError:
+        return None
 
 
 def texture_section(report: ChartReport) -> Section | None:

@@ -30,6 +30,7 @@ from fidelity.chart.locate import CORNER_PATCHES, apply_homography
 from fidelity.colour import colorimetry as cm
 from fidelity.prediction.directional import load_directional_table
 from fidelity.prediction.interpolate import predict_curve
+from fidelity.prediction.properties import predict_property
 from fidelity.report.svg import (
     COLOURS,
     Axes,
@@ -45,6 +46,7 @@ if TYPE_CHECKING:
     from fidelity.chart.locate import ChartLocation
     from fidelity.measure.colour import ChartMeasurement, ToneFit
     from fidelity.prediction.directional import DirectionalPrediction
+    from fidelity.prediction.properties import PropertyPrediction, PropertyTable
     from fidelity.prediction.table import Prediction
 
 #: Longest side of an image drawn under the sampling windows, px (the image is box-averaged
@@ -391,6 +393,42 @@ def prediction_curve(prediction: Prediction, limit_dmap: float | None = None,
         ax.marker(de, v, colour, 5.5)
     c.text(float(ax.px(de)) + 6, ax.y + ax.h - 8, f"this chart: ΔE {de:.2f}", 12)
     ax.legend("lower right")
+    return c.render()
+
+
+def property_curve(prediction: PropertyPrediction, table: PropertyTable,
+                   limit_x: float | None = None) -> str:
+    """A property's worst-case loss against its axis (MTF50 linear, SNR logarithmic), with
+    this chart's point and the limit equivalent to the ΔE limit as a vertical line."""
+    sharp = prediction.axis == "mtf50"
+    xs_cells = [c.x for m in table.models for c in table.cells[m]]
+    lo = min(xs_cells) * 0.8 if xs_cells else 0.01
+    hi = table.baseline_x * 1.05 if sharp else max(xs_cells) * 1.5 if xs_cells else 100.0
+    grid = (np.linspace(lo, hi, 240) if sharp else np.geomspace(max(lo, 0.5), hi, 240))
+    loss = np.array([predict_property(table, float(x), column=prediction.column).loss
+                     for x in grid])
+    ymax = max(5.0, float(np.nanmax(loss)) * 1.2, prediction.loss * 1.2)
+    c = Canvas(680, 380, f"predicted loss against {prediction.axis}")
+    _title(c, f"table {table.name}: worst case over {len(table.models)} detectors", 680)
+    ax = Axes(c, 64, 32, 596, 290, Scale(lo, hi, "linear" if sharp else "log"),
+              Scale(0.0, ymax, "symlog"))
+    ax.frame("MTF50 (cy/px at the detector's input)" if sharp else
+             "SNR at 18 % grey (at the detector's input)", "predicted worst-case loss (points)",
+             yticks=[v for v in (0, 1, 2, 5, 10, 20, 50, 100) if v <= ymax])
+    ax.plot(grid, loss, COLOURS["blue"], 1.6, None, "worst case (all families)")
+    for fam, colour in zip(sorted({c.family for m in table.models for c in table.cells[m]}),
+                           (COLOURS["orange"], COLOURS["green"], COLOURS["purple"]),
+                           strict=False):
+        pts = sorted((c.x, c.losses.get(prediction.column) or 0.0)
+                     for m in table.models for c in table.cells[m] if c.family == fam)
+        for k, (x, y) in enumerate(pts):
+            ax.marker(x, max(y, 0.0), colour, 3.5,
+                      label=f"{fam} (measured cells)" if k == 0 else None)
+    x = min(max(prediction.x, lo), hi)
+    if limit_x is not None and lo <= limit_x <= hi:
+        ax.vline(limit_x, COLOURS["red"], 1.2, "7 3 2 3", f"limit {limit_x:.3g}")
+    ax.marker(x, prediction.loss, "#000", 6.0, label=f"this chart: {prediction.x:.3g}")
+    ax.legend("upper right")
     return c.render()
 
 
