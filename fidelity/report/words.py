@@ -180,9 +180,11 @@ def property_lines(judgement: Any, not_judged: bool = True) -> list[str]:
     for p in judgement.predictions:
         axis = "MTF50" if p.axis == "mtf50" else "SNR at 18 % grey"
         unit = " cy/px" if p.axis == "mtf50" else ""
+        capped = (p.native_x is not None and p.native_x / p.scale > p.x * (1 + 1e-9))
         scaled = ("" if p.scale == 1.0 or p.native_x is None else
                   f" ({p.native_x:.3g}{unit} at the image's resolution, x {1 / p.scale:.3g} "
-                  f"for the detector's 640 px input)")
+                  f"for the detector's 640 px input"
+                  + (", at most the undegraded chart's" if capped else "") + ")")
         pm = "" if p.u_loss is None else f" ± {p.u_loss:.2f}"
         pm += " points" if judgement.column.endswith("_points") else " %"
         where = {"baseline": "as sharp or clean as the undegraded chart",
