@@ -82,8 +82,9 @@ def test_gate_pass_and_fail_on_delta_e(png, tmp_path):
     assert verdict["value"] == verdict["delta_e"] == report["mean_delta_e"]
     html = (tmp_path / "r.html").read_text()
     # swatches, sampling windows, ΔE map, a*b*, tone curve, ΔE bars, prediction curve, the
-    # direction-aware family curves
-    assert html.count("<svg ") == 8
+    # direction-aware family curves, and one curve per property judged besides colour
+    judged = len(report["properties"]["predictions"])
+    assert html.count("<svg ") == 8 + judged
     assert html.index("FAIL") < html.index('aria-label="sampling windows"')
     assert report["provenance"]["input_sha256"] in html
 
