@@ -683,3 +683,29 @@ def test_worst_case_figure_puts_each_point_where_the_axes_say(store) -> None:
             assert cx == pytest.approx(lx["0"] + (lx[lx_far] - lx["0"]) * de / float(lx_far),
                                        abs=0.02)
     assert checked >= 2
+
+
+def test_the_committed_scores_rebuild_every_shipped_sharpness_and_noise_row(shared, tmp_path):
+    """Issue 56: the blur/noise sweep's scores file (reports/coco/degradations) rebuilds every
+    cell of the shipped sharpness and noise tables, losses and standard errors, exactly."""
+    from fidelity.coco.scores import import_scores, read_scores
+    from fidelity.coco.scoring import load_annotations
+    from fidelity.coco.tables.degradation import property_tables
+    from fidelity.prediction.properties import load_property_table
+
+    root = Path(__file__).resolve().parents[2]
+    path = root / "reports" / "coco" / "degradations" / "degradations.scores.json.gz"
+    store = SweepStore(tmp_path / "store")
+    import_scores(store, path, read_scores(path, SweepStore))
+    coco = load_annotations(shared / "coco" / "annotations" / "instances_val2017_subset.json")
+    rebuilt = property_tables(store, coco)
+    for prop in ("sharpness", "noise"):
+        shipped = load_property_table(prop)
+        for model, cells in shipped.cells.items():
+            got = {(c.family, c.level): c for c in rebuilt[prop].cells[model]}
+            for c in cells:
+                r = got[(c.family, c.level)]
+                assert r.x == pytest.approx(c.x, rel=1e-9)
+                for col in ("dmap_points", "dmap_relative", "dap_person_points"):
+                    assert r.losses[col] == pytest.approx(c.losses[col], abs=1e-9), (prop, c)
+                    assert (r.se[col] or 0) == pytest.approx(c.se[col] or 0, abs=1e-9)
