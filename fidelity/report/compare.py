@@ -9,6 +9,7 @@ chart report's section builders, :mod:`fidelity.report.chart`, for the parts the
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Sequence
 from dataclasses import replace
@@ -69,12 +70,36 @@ def comparison_lines(report: ComparisonReport) -> list[str]:
                  f"{f(p.dmap_relative)} % of baseline (classic, table {p.table.name}, "
                  f"detector size {p.size_used})")
     lines += directional_lines(report.as_chart_report())
+    lines += property_comparison_lines(sim.properties, real.properties)
     lines += [f"measured on COCO (real -> simulated colours): {x.summary()}"
               for x in report.measured]
     for who, r in (("simulation", sim), ("real camera", real)):
         lines += [f"warning ({who}): {w.reason}" for w in r.warnings]
     if report.verdict is not None:
         lines.append(verdict_message(report.verdict, "sim-to-real ΔE00"))
+    return lines
+
+
+def property_comparison_lines(sim: Any, real: Any) -> list[str]:
+    """Sharpness and noise, simulation against real camera, where both were judged
+    (:class:`fidelity.prediction.properties.PropertyJudgement` of each chart): the MTF50
+    ratio and the SNR difference in dB at the detector's input, and each one's predicted
+    loss."""
+    if sim is None or real is None:
+        return []
+    lines = []
+    for prop in ("sharpness", "noise"):
+        a, b = sim.prediction(prop), real.prediction(prop)
+        if a is None or b is None:
+            continue
+        if prop == "sharpness":
+            how = (f"MTF50 {a.x:.3g} against {b.x:.3g} cy/px (ratio {a.x / b.x:.2f})")
+        else:
+            db = ("" if math.isinf(a.x) or math.isinf(b.x)
+                  else f", {20 * math.log10(a.x / b.x):+.1f} dB")
+            how = f"SNR {a.x:.3g} against {b.x:.3g}{db}"
+        lines.append(f"{prop}, simulation against real camera at the detector's input: {how}; "
+                     f"predicted ΔmAP {a.loss:.2f} against {b.loss:.2f} points")
     return lines
 
 
