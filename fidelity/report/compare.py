@@ -96,7 +96,7 @@ def property_comparison_lines(sim: Any, real: Any) -> list[str]:
             how = (f"MTF50 {a.x:.3g} against {b.x:.3g} cy/px (ratio {a.x / b.x:.2f})")
         else:
             db = ("" if math.isinf(a.x) or math.isinf(b.x)
-                  else f", {20 * math.log10(a.x / b.x):+.1f} dB")
+                  else f", {20 * math.log10(a.x / b.x):+z.1f} dB")
             how = f"SNR {a.x:.3g} against {b.x:.3g}{db}"
         lines.append(f"{prop}, simulation against real camera at the detector's input: {how}; "
                      f"predicted ΔmAP {a.loss:.2f} against {b.loss:.2f} points")
