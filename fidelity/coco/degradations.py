@@ -195,7 +195,7 @@ class Degradation:
 
     def __call__(self, rgb8: U8) -> U8:
         fam = DEGRADATIONS[self.name]
-        seed = noise_seed(rgb8, self.name, self.level)
+        seed = noise_seed(rgb8, self.name, self.level) if fam.property == "noise" else 0
         if not fam.linear:  # COCO-C gaussian_noise: clip(x/255 + N(0, c)) x 255, truncated
             rng = np.random.default_rng(seed)
             x = rgb8 / 255.0 + rng.normal(size=rgb8.shape, scale=self.level)

@@ -176,7 +176,7 @@ def judge_properties(verdict: Verdict | None, prediction: Prediction, criterion:
     preds: list[PropertyPrediction] = []
     skipped: list[tuple[str, str]] = []
     limits: dict[str, float | None] = {}
-    for prop, measured in (("sharpness", sharpness), ("noise", noise)):
+    for prop, measured in zip(JUDGED_PROPERTIES, (sharpness, noise), strict=True):
         try:
             table = (tables or {}).get(prop) or load_property_table(prop)
         except FidelityError as exc:

@@ -16,8 +16,9 @@ box-averaged (the pixel aperture), so its undegraded MTF50 is that of a sharp ca
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -115,6 +116,13 @@ def calibrate_level(name: str, level: float,
     return LevelValue(name, level, got[0], got[1])
 
 
+def _data_names(data: Mapping[str, Any]) -> dict[str, Any]:
+    """The store's data record with its file and folder paths as their names only (a shipped
+    table names the data, not where it lay on the machine that measured it)."""
+    return {k: Path(v).name if isinstance(v, str) and ("/" in v or "\\" in v) else v
+            for k, v in data.items()}
+
+
 def _cell(row: CellDelta, x: float) -> PropertyCell:
     e = row.errors
     losses = {"dmap_points": row.dmap_points, "dmap_relative": row.dmap_relative,
@@ -202,18 +210,7 @@ def property_tables(store: Any, coco: Any = None, *, name: str = "coco1000", met
                               "unit": d.unit, "linear": d.linear}
                           for f, d in DEGRADATIONS.items() if d.property == prop},
              "standard_errors": coco is not None,
-             "store": {k: meta.get(k) for k in ("versions", "machine", "grid", "data")}})
+             "store": {k: meta.get(k) for k in ("versions", "machine", "grid")}
+             | {"data": _data_names(meta.get("data") or {})}})
     return out
 
-
-def rows_by_family(table: PropertyTable, model: str) -> dict[str, list[PropertyCell]]:
-    """A detector's cells of ``table`` grouped by family, mildest level first."""
-    out: dict[str, list[PropertyCell]] = {}
-    for c in table.cells.get(model, ()):
-        out.setdefault(c.family, []).append(c)
-    return {f: sorted(v, key=lambda c: -c.x) for f, v in out.items()}
-
-
-def levels_of(families: Sequence[str]) -> list[tuple[str, float]]:
-    """Every (family, level) of ``families``."""
-    return [(f, lv) for f in families for lv in DEGRADATIONS[f].levels]
