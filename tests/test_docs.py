@@ -63,3 +63,41 @@ def test_docs_build_without_warnings(tmp_path):
         cwd=ROOT, capture_output=True, text=True, timeout=300,
     )
     assert r.returncode == 0, r.stderr[-4000:]
+
+
+def _option_defaults() -> dict[str, set[str]]:
+    """Each long option of every command (subcommands included) -> the defaults it has."""
+    import click
+
+    from fidelity.cli import main
+
+    found: dict[str, set[str]] = {}
+    ctx = click.Context(main)
+
+    def walk(cmd: click.Command | None) -> None:
+        assert cmd is not None
+        for param in cmd.params:
+            if isinstance(param, click.Option) and param.default is not None:
+                for opt in param.opts:
+                    found.setdefault(opt, set()).add(str(param.default))
+        if isinstance(cmd, click.Group):
+            for name in cmd.list_commands(ctx):
+                walk(cmd.get_command(ctx, name))
+
+    walk(main)
+    assert "--reference" in found
+    return found
+
+
+def test_defaults_stated_in_the_docs_are_the_commands_defaults():
+    """"`--opt VALUE` (default)" or "`--opt VALUE`, the default" in a page names the default
+    of every command that has the option (issue 57: audit.md named safecolor, the CLI scene)."""
+    defaults = _option_defaults()
+    stated = re.compile(r"`(--[a-z][a-z-]*) ([^`\s]+)`(?: \(default\)|, the default)")
+    claims = [(page.name, m.group(1), m.group(2))
+              for page in sorted(DOCS.glob("*.md")) + [ROOT / "README.md"]
+              for m in stated.finditer(page.read_text(encoding="utf-8"))]
+    assert len(claims) >= 2  # audit.md and check.md state --reference's
+    wrong = [(page, opt, value, sorted(defaults.get(opt, set())))
+             for page, opt, value in claims if defaults.get(opt) != {value}]
+    assert wrong == [], "a page states a default the commands do not have"

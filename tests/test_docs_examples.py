@@ -214,7 +214,7 @@ PLACEHOLDERS = ("...", "DIR", "STORE", "HEAD", "[")
 #: Options whose value is written, not read.
 OUTPUTS = {"--out", "--json", "--html", "--junit", "--csv", "--markdown", "--notes-out",
            "--prediction", "--directional", "--evidence", "--export-scores", "--data",
-           "--write-corrected"}
+           "--write-corrected", "--sharpness", "--noise"}
 
 
 def test_the_docs_have_commands_to_run():
@@ -245,6 +245,16 @@ def _layered_exr(path: Path, layer: str) -> None:
     OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION}, channels).write(str(path))
 
 
+def _scene_render(path: Path) -> None:
+    """What a simulator renders of the default chart scene (``fidelity scene``), in closed
+    form (:func:`tests.fixtures.chart_scenes.closed_form_render`)."""
+    from fidelity.chart.image import write_exr
+    from fidelity.scene.model import build_scene
+    from tests.fixtures.chart_scenes import closed_form_render
+
+    write_exr(path, closed_form_render(build_scene("D65")).astype(np.float32))
+
+
 @pytest.fixture(scope="module")
 def workspace(tmp_path_factory, plugin_inputs) -> Path:
     """A folder holding the files the documented commands read, under the names they use:
@@ -255,10 +265,20 @@ def workspace(tmp_path_factory, plugin_inputs) -> Path:
     ws = tmp_path_factory.mktemp("docs")
     sim, _ = plugin_inputs
     exr = sim / "renders" / "day.exr"
-    for name in ("render.exr", "sim.exr", "day.exr", "dusk.exr", "tunnel.exr",
+    shutil.copy(exr, ws / "sim.exr")
+    # a simulator's renders of the exported chart scene (closed form, the default export's
+    # geometry), with the exports beside them, as the gate's --manifest examples name them
+    scene_render = ws / "render.exr"
+    _scene_render(scene_render)
+    for name in ("day.exr", "dusk.exr", "tunnel.exr",
                  "renders/day.exr", "renders/dusk.exr", "renders/tunnel.exr"):
         (ws / name).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copy(exr, ws / name)
+        shutil.copy(scene_render, ws / name)
+    from fidelity.scene.export import export_scene
+    from fidelity.scene.model import build_scene
+
+    for folder in ("chart", "chart-gltf"):
+        export_scene(build_scene("D65"), "gltf", ws / folder)
     photo = sim / "photos" / "studio.jpg"
     for name in ("photo.jpg", "photos/studio.jpg"):
         (ws / name).parent.mkdir(parents=True, exist_ok=True)
@@ -300,7 +320,7 @@ def _skip_reason(argv: list[str], ws: Path) -> str | None:
         if a.startswith("-") or argv[i - 1] in OUTPUTS:
             continue
         looks_like_file = "/" in a or re.search(r"\.(exr|png|jpg|jpeg|tiff?|json|csv|toml|md|"
-                                                 r"onnx|gz)$", a)
+                                                 r"onnx|gz|mp4|mkv|mov|avi|webm|m4v)$", a)
         if looks_like_file and not (ws / a).exists() and not (REPO / a).exists():
             return f"needs {a}, which the docs mean as the user's own file"
     return None
@@ -422,7 +442,7 @@ def test_documented_python_snippet_runs(page, k, code, workspace, tmp_path):
     for name in names:
         if re.fullmatch(r"[A-Z]{3,}", name):
             pytest.skip(f"{name} is a placeholder for the user's own sweep store")
-        if name.endswith((".bag", ".mcap", ".db3")):
+        if name.endswith((".bag", ".mcap", ".db3", ".mp4", ".mkv", ".mov")):
             pytest.skip(f"{name} stands for the user's own recording (recordings are read in "
                         "tests/chart/test_recording.py)")
     # the report snippets rewrite the recorded results of the checkout: run on copies

@@ -74,3 +74,44 @@ def test_the_coco_c_readme_table_is_the_reports_json():
     assert len(want) == 15
     assert rows == want, "reports/cococ/README.md: its table, as cococ.json gives it now:\n" \
         + "\n".join(want)
+
+
+def _loss_allowed_at_default_limit() -> tuple[str, str]:
+    """What ΔE00 3 allows by the shipped measured table: (% of baseline, points), as the docs
+    round them."""
+    from fidelity.prediction.table import predict
+    from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E
+
+    p = predict(DEFAULT_MAX_DELTA_E)
+    assert p.dmap_relative is not None and p.dmap_points is not None
+    return f"{p.dmap_relative:.2f} %", f"{p.dmap_points:.2f} points"
+
+
+def test_the_default_limit_is_quoted_with_what_it_allows():
+    """docs/check.md, the verdict module and ``check --help`` say what ΔE00 <= 3 allows, and
+    the number is the shipped table's at ΔE 3, not the paper's "below 1 %"."""
+    from click.testing import CliRunner
+
+    from fidelity.cli import main
+
+    relative, points = _loss_allowed_at_default_limit()
+    check_md = (REPO / "docs/check.md").read_text(encoding="utf-8")
+    assert f"up to {relative}" in check_md and f"({points})" in check_md
+    assert "keeps ΔmAP below\n1 %" not in check_md and "keeps ΔmAP below 1 %" not in check_md
+    verdict_py = (REPO / "fidelity/prediction/verdict.py").read_text(encoding="utf-8")
+    assert f"up to {relative} of the baseline mAP ({points})" in verdict_py
+    help_text = " ".join(CliRunner().invoke(main, ["check", "--help"]).output.split())
+    assert f"allows up to {relative} of baseline" in help_text
+
+
+def test_the_allowed_loss_is_the_sweeps_largest_cell_at_the_limit():
+    """A second path to the same number: the largest relative loss of any measured cell (model,
+    transform) at ΔE 3 in the sweep's own cells, ``reports/coco/tables.json``."""
+    import json
+
+    relative, _ = _loss_allowed_at_default_limit()
+    cells = json.loads((REPO / "reports/coco/tables.json").read_text())["tables"]["cells"]
+    at3 = [c["dmap_relative"] for rows in cells.values() for c in rows
+           if c["status"] == "done" and c["delta_e"] == 3.0]
+    assert len(at3) >= 20
+    assert f"{max(at3):.2f} %" == relative

@@ -155,9 +155,9 @@ def lut_accuracy() -> list[dict[str, Any]]:
                                      sim_corners=corners, real_corners=corners)
                 checks = [c.to_json() for c in rep.lut_checks]
                 rows.append({"error": error, "model": model, "sim_encoding": enc,
-                             "lattice": rep.correction.lattice, "size": rep.lut.size,
+                             "cube_output": rep.output, "size": rep.lut.size,
                              "passed": rep.lut.passed, "checks": checks})
-                print(f"  {error:11s} {model:16s} {enc:6s} lattice {rep.correction.lattice:7s} "
+                print(f"  {error:11s} {model:16s} {enc:6s} output {rep.output:7s} "
                       + "; ".join(f"{c['size']}^3 max {c['grid_max_delta_e']:.3f} p99 "
                                   f"{c['grid_p99_delta_e']:.3f} chart "
                                   f"{c['chart_max_delta_e']:.3f}" for c in checks)

@@ -281,6 +281,32 @@ class CameraModel:
                 "bit depth": ("float" if self.quantisation_bits is None
                               else str(self.quantisation_bits))}
 
+    def degradations(self) -> dict[str, tuple[str, dict[str, float]]]:
+        """The kind and numeric parameters of each image degradation, the terms the
+        validity domain states noise, optics and vignetting in
+        (:meth:`fidelity.prediction.interval.ValidatedCameras.camera_checks`).
+
+        Returns
+        -------
+        dict
+            ``noise``: ``("none", {})`` or ``("shot+read", {"full_well": e-, "read_noise":
+            e- rms})``; ``optics``: ``(kind, {...})`` with ``sigma_px`` (gaussian),
+            ``radius_px`` (defocus) or ``f_number`` (diffraction), no numbers for a measured
+            ``mtf`` or ``psf``; ``vignetting``: ``("none", {})`` or ``("cos4",
+            {"diagonal_fov_deg": degrees})``.
+        """
+        n = self.noise
+        noise: tuple[str, dict[str, float]] = (
+            ("shot+read", {"full_well": float(n.full_well), "read_noise": n.read_noise})
+            if n.full_well is not None else ("none", {}))
+        o = self.optics
+        numbers = {"gaussian": {"sigma_px": o.sigma_px}, "defocus": {"radius_px": o.radius_px},
+                   "diffraction": {"f_number": float(o.f_number or 0.0)}}.get(o.kind, {})
+        fov = self.vignetting_fov_deg
+        vignetting: tuple[str, dict[str, float]] = (
+            ("cos4", {"diagonal_fov_deg": float(fov)}) if fov is not None else ("none", {}))
+        return {"noise": noise, "optics": (o.kind, numbers), "vignetting": vignetting}
+
     def to_json(self) -> dict[str, Any]:
         """JSON-ready description of every stage (sensitivity data summarised)."""
         d: dict[str, Any] = {
@@ -626,6 +652,25 @@ def lut_problem(lut: NDArray[np.float64]) -> str | None:
     return None
 
 
+#: What a camera file without its spectral sensitivities is told (it would otherwise be read
+#: as the ideal camera without saying so).
+SENSITIVITIES_REQUIRED = ("required: the camera's spectral sensitivities, source = 'ideal' "
+                          "(the colorimetrically exact camera), 'file' with a CSV path, or "
+                          f"one of {', '.join(COLOUR_CAMERAS)}")
+
+
+def _sensitivities_given(t: Mapping[str, Any]) -> tuple[str, str] | None:
+    """Rule: a camera file names its sensitivities (a file holding only ``name`` is no
+    camera, not silently the ideal one)."""
+    return None if "sensitivities" in t else ("sensitivities", SENSITIVITIES_REQUIRED)
+
+
+def _source_given(t: Mapping[str, Any]) -> tuple[str, str] | None:
+    """Rule: ``[sensitivities]`` says its ``source`` (``"ideal"`` explicitly for the ideal
+    camera)."""
+    return None if t.get("source") is not None else ("source", SENSITIVITIES_REQUIRED)
+
+
 def _sensitivity_source(t: Mapping[str, Any]) -> tuple[str, str] | None:
     src = t.get("source")
     if src is None or src.lower() in ("ideal", "file") or src in COLOUR_CAMERAS:
@@ -682,7 +727,8 @@ CAMERA_SCHEMA = sc.Table(fields=(
     sc.Field("sensitivities", sc.Table(fields=(
         sc.Field("source", sc.String(nullable=True), default="ideal"),
         sc.Field("path", sc.String(nonempty=True), when=("source", ("file",))),
-    ), rules=(sc.Check(_sensitivity_source), sc.RequiredWhen("path", "source", ("file",)))),
+    ), rules=(sc.Check(_source_given), sc.Check(_sensitivity_source),
+              sc.RequiredWhen("path", "source", ("file",)))),
         default={}),
     sc.Field("exposure", sc.Table(fields=(
         sc.Field("mode", sc.String(choices=EXPOSURE_MODES, lower=True), default="none"),
@@ -750,7 +796,7 @@ CAMERA_SCHEMA = sc.Table(fields=(
               sc.RequiredWhen("psf_file", "kind", ("psf",)),
               sc.Exclusive("mtf", "mtf_file"), sc.Check(_mtf_given), sc.Check(_inline_mtf))),
         default={}),
-))
+), rules=(sc.Check(_sensitivities_given),))
 
 
 def camera_from_dict(data: Any, origin: str = "<dict>", base_dir: Path | None = None) -> CameraModel:
@@ -929,6 +975,16 @@ def available_cameras() -> list[str]:
     return sorted(p.stem for p in _builtin_dir().glob("*.toml"))
 
 
+def camera_file(camera: CameraModel) -> Path | None:
+    """The file ``camera`` was read from: its camera file, or the shipped file of a built-in
+    camera (``fidelity/data/cameras/NAME.toml``); None for a camera made in code."""
+    if camera.files:
+        return camera.files[0]
+    if camera.named in available_cameras():
+        return _builtin_dir() / f"{camera.named}.toml"
+    return None
+
+
 @lru_cache(maxsize=16)
 def _load_builtin(name: str) -> CameraModel:
     cam = read_camera_file(_builtin_dir() / f"{name}.toml")
@@ -971,6 +1027,7 @@ def load_camera(name_or_path: str | Path) -> CameraModel:
 
 
 __all__ = [
+    "camera_file",
     "CCM_FIT_METHODS",
     "CCM_METHODS",
     "DEFAULT_CAMERA",

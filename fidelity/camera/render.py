@@ -25,8 +25,8 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-from collections.abc import Iterator
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -42,6 +42,7 @@ from fidelity.camera.model import (
     vignetting_gain,
     white_balance_gains,
 )
+from fidelity.chart.turned import CALIBRATION_GEOMETRY, TurnedChart
 from fidelity.colour.charts import load_chart
 from fidelity.colour.spectral import (
     GRID_STEP_NM,
@@ -57,6 +58,9 @@ from fidelity.measure.uncertainty import UncertaintyBudget
 FloatArray = NDArray[np.float64]
 
 RENDERERS: tuple[str, ...] = ("closed-form", "mitsuba")
+#: Reflectance of the turned chart's frame (:class:`FrameRender`): flat, 3 % (the calibration
+#: chart's frame is linear 0.03).
+FRAME_REFLECTANCE = 0.03
 REFERENCES: tuple[str, ...] = ("scene", "safecolor")
 
 #: Pixels per patch side of the closed-form image (its values are exact at any size).
@@ -158,6 +162,25 @@ def patch_means(
 
 
 @dataclass(frozen=True)
+class FrameRender:
+    """The chart turned on the pixel grid (:class:`fidelity.chart.turned.TurnedChart`) and
+    rendered through the camera, for the sharpness and noise measurements.
+
+    The camera's raw patch values (closed form, whatever the chart's renderer) are painted on
+    ``geometry`` with a flat :data:`FRAME_REFLECTANCE` frame, then go through the same stages
+    as the chart: exposure gain, vignetting, optics, sensor noise, and development with the
+    chart's white-balance gains and colour correction matrix. ``srgb``: ``(H, W, 3)`` encoded
+    sRGB (unclipped for a linear-output camera, as :func:`fidelity.camera.model.develop`
+    gives it); ``corners``: the ``(4, 2)`` image centres of the dark skin, bluish green, black
+    and white patches.
+    """
+
+    srgb: FloatArray
+    corners: FloatArray
+    geometry: TurnedChart
+
+
+@dataclass(frozen=True)
 class ChartRender:
     """A rendered and measured chart (see :func:`render_chart`).
 
@@ -191,6 +214,9 @@ class ChartRender:
     uncertainty
         The standard uncertainty budget of the chart ΔE (:func:`render_uncertainty`); None
         when not computed.
+    frame
+        The chart turned on the pixel grid through the same camera, for sharpness and noise
+        (:class:`FrameRender`); None when not asked for (``render_chart(frame=False)``).
     """
 
     measurement: ChartMeasurement
@@ -206,6 +232,9 @@ class ChartRender:
     settings: dict[str, Any] = field(default_factory=dict)
     #: the standard uncertainty of the chart ΔE (:func:`render_uncertainty`)
     uncertainty: UncertaintyBudget | None = None
+    #: the chart turned on the pixel grid through the same camera, for sharpness and noise
+    #: (:class:`FrameRender`; None when not asked for)
+    frame: FrameRender | None = None
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready result: ΔE summary, renderer, variant, seconds, conventions, patches."""
@@ -294,6 +323,7 @@ def render_chart(
     step: float = GRID_STEP_NM,
     variant: str | None = None,
     sampler: str | None = None,
+    frame: bool = False,
 ) -> ChartRender:
     """Render the spectral chart through ``camera`` under ``illuminant`` and measure ΔE00.
 
@@ -341,6 +371,10 @@ def render_chart(
         Mitsuba variant to use; None: probed. Only Mitsuba reads it.
     sampler
         Mitsuba sampler plugin; None: the scene template's. Only Mitsuba reads it.
+    frame
+        Also render the chart turned on the pixel grid through the same camera
+        (:class:`FrameRender`, :data:`fidelity.chart.turned.CALIBRATION_GEOMETRY`), for the
+        sharpness and noise measurements.
 
     Returns
     -------
@@ -410,6 +444,12 @@ def render_chart(
         _require_finite(dev.srgb, "the developed image (white balance, colour correction, tone "
                                   "curve)")
         srgb, srgb_std = patch_means(dev.srgb, layout)
+        turned = None
+        if frame:
+            flat = np.full((1, refl.shape[-1]), FRAME_REFLECTANCE)
+            turned = _render_frame(cam, closed, camera_response(flat, e, sens, step)[0], gain,
+                                   seed, lambda img: develop(cam, img, cam_rgb, ill, ccm=dev.ccm,
+                                                             spectra=spectra, step=step).srgb)
 
     if reference == "scene":
         ref = scene_reference(ill, spectra, cat=cat, step=step)
@@ -426,6 +466,13 @@ def render_chart(
             raw, dev.srgb, layout, cam_rgb, srgb, ref_lab, measurement.mean_delta_e,
             cam.quantisation_bits, ps.patch_names, cam,
             _white_balance_developer(cam, ill, dev.ccm, spectra, step, cam_rgb))
+    if reference == "scene" and ill.name != "D65" and budget is not None:
+        # the adaptation of the reference to D65 is a method choice: its spread, type B
+        by_cat = {c: measure_chart(srgb, scene_reference(ill, spectra, cat=c, step=step).lab,
+                                   ps.patch_names).mean_delta_e
+                  for c in unc.ADAPTATION_SPREAD}
+        budget = replace(budget, components=(*budget.components,
+                                             unc.adaptation_component(by_cat, cat)))
     conventions = {
         "reference": ref_conv,
         "spectral_grid_nm": f"380-780 step {step:g}",
@@ -458,7 +505,26 @@ def render_chart(
         camera_noise=cam_std,
         settings=settings,
         uncertainty=budget,
+        frame=turned,
     )
+
+
+def _render_frame(cam: CameraModel, patches: FloatArray, flat: FloatArray, gain: float,
+                  seed: int | None, developed: Callable[[FloatArray], FloatArray]
+                  ) -> FrameRender:
+    """The turned chart through ``cam`` (:class:`FrameRender`): raw ``patches`` (24, 3) and the
+    frame's raw ``flat`` (3,) painted, then the chart's own stages."""
+    geometry = CALIBRATION_GEOMETRY
+    raw = geometry.paint(patches, flat) * gain
+    if cam.vignetting_fov_deg is not None:
+        raw = raw * vignetting_gain(*geometry.size, cam.vignetting_fov_deg)[..., None]
+    if cam.optics.kind != "none":
+        raw = cam.optics.apply(raw)
+    raw = add_sensor_noise(raw, cam.noise, seed)
+    _require_finite(raw, "the turned chart's raw image")
+    srgb = developed(raw)
+    _require_finite(srgb, "the turned chart's developed image")
+    return FrameRender(srgb=srgb, corners=geometry.corners(), geometry=geometry)
 
 
 def _white_balance_developer(cam: CameraModel, illuminant: Any, ccm: FloatArray, spectra: str,

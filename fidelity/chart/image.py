@@ -119,6 +119,12 @@ def utc_text(time_ns: int) -> str:
     return utc.strftime("%Y-%m-%dT%H:%M:%S") + f".{time_ns % 10**9:09d}Z"
 
 
+#: Tag names as :meth:`Recording.describe` says them.
+_TAG_WORDS = {"bt601": "BT.601", "bt709": "BT.709", "bt2020": "BT.2020", "srgb": "sRGB",
+              "smpte170m": "BT.601", "bt2020-10": "BT.2020", "bt2020-12": "BT.2020",
+              "bt470bg": "BT.470 B/G", "smpte240m": "SMPTE 240M", "p3-d65": "Display P3"}
+
+
 @dataclass(frozen=True)
 class Recording:
     """Where in a robot recording an image message was read (:mod:`fidelity.chart.recording`):
@@ -140,6 +146,10 @@ class Recording:
     offset_s: float
     stamp_ns: int | None = None
     frame_id: str | None = None
+    #: a video's stream facts (:mod:`fidelity.chart.video`): ``codec``, ``pix_fmt``,
+    #: ``matrix``, ``range``, ``primaries``, ``transfer``, ``bits`` and ``assumed`` (the
+    #: names of the tags assumed, comma-separated); None for a robot recording
+    stream: dict[str, str] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """JSON form (``time_utc``: ``time_ns`` as ISO 8601 UTC text, :func:`utc_text`)."""
@@ -147,19 +157,36 @@ class Recording:
         return {"kind": self.kind, "topic": self.topic, "message_type": self.message_type,
                 "ros_encoding": self.ros_encoding, "frame": self.frame, "frames": self.frames,
                 "time_ns": self.time_ns, "time_utc": text, "offset_s": self.offset_s,
-                "stamp_ns": self.stamp_ns, "frame_id": self.frame_id}
+                "stamp_ns": self.stamp_ns, "frame_id": self.frame_id,
+                **({} if self.stream is None else {"stream": dict(self.stream)})}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> Recording:
         """Inverse of :meth:`to_json`."""
         stamp = data.get("stamp_ns")
+        stream = data.get("stream")
         return cls(str(data["kind"]), str(data["topic"]), str(data["message_type"]),
                    str(data["ros_encoding"]), int(data["frame"]), int(data["frames"]),
                    int(data["time_ns"]), float(data["offset_s"]),
-                   None if stamp is None else int(stamp), data.get("frame_id"))
+                   None if stamp is None else int(stamp), data.get("frame_id"),
+                   None if stream is None else {str(k): str(v) for k, v in stream.items()})
 
     def describe(self) -> str:
-        """One line: topic, frame, time and message (``/cam frame 3 of 40 at 1.234 s ...``)."""
+        """One line: topic, frame, time and message (``/cam frame 3 of 40 at 1.234 s ...``); for
+        a video, frame, time and stream (``frame 0 of 3 at 0.000 s (H.264 yuv420p, BT.709
+        matrix, limited range, BT.709 transfer)``)."""
+        s = self.stream
+        if s is not None:
+            assumed = f" ({s['assumed']} assumed)" if s.get("assumed") else ""
+            matrix = "RGB" if s["matrix"] == "rgb" else \
+                f"{_TAG_WORDS.get(s['matrix'], s['matrix'])} matrix, {s['range']} range"
+            prim = s.get("primaries", "bt709")
+            primaries = ("" if prim in ("bt709", "unspecified") else
+                         f", {_TAG_WORDS.get(prim, prim)} primaries converted to sRGB's")
+            return (f"frame {self.frame} of {self.frames} at {self.offset_s:.3f} s "
+                    f"({s['codec']} {s['pix_fmt']}, {matrix}, "
+                    f"{_TAG_WORDS.get(s['transfer'], s['transfer'])} transfer{primaries}"
+                    f"{assumed})")
         return (f"topic {self.topic} frame {self.frame} of {self.frames} at "
                 f"{self.offset_s:.3f} s ({self.message_type.rsplit('/', 1)[-1]} "
                 f"{self.ros_encoding})")
@@ -200,8 +227,10 @@ class Image:
         """What an error about this image names: the file, and for a recording's message its
         topic and frame (``drive.bag: topic /cam frame 3``)."""
         rec = self.recording
-        return (display_path(self.path) if rec is None
-                else f"{display_path(self.path)}: topic {rec.topic} frame {rec.frame}")
+        if rec is None:
+            return display_path(self.path)
+        topic = "" if rec.stream is not None else f" topic {rec.topic}"
+        return f"{display_path(self.path)}:{topic} frame {rec.frame}"
 
     @property
     def height(self) -> int:

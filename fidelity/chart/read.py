@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from fidelity.chart import recording
+from fidelity.chart import recording, video
 from fidelity.chart.bayer import BAYER_MARGIN, bayer_pattern
 from fidelity.chart.image import Image, ImageInfo, OneChannelError, as_float32, read_image
 from fidelity.chart.ocio import convert
@@ -68,7 +68,13 @@ class ReadOptions:
         nor ``time``: the first message.
     time
         The message nearest to ``time``: seconds after the recording's first message, or an
-        absolute time as text (:func:`fidelity.chart.recording.absolute_time_ns`).
+        absolute time as text (:func:`fidelity.chart.recording.absolute_time_ns`); for a
+        video, seconds after its first frame.
+    video_matrix
+        A video's Y'CbCr matrix (``bt601``, ``bt709``, ``bt2020``) instead of its stream's tag
+        (:mod:`fidelity.chart.video`).
+    video_range
+        A video's Y'CbCr range (``limited``, ``full``) instead of its stream's tag.
     """
 
     layer: str | None = None
@@ -85,18 +91,21 @@ class ReadOptions:
     time: float | str | None = None
     ocio_colourspace: str | None = None
     ocio_config: str | None = None
+    video_matrix: str | None = None
+    video_range: str | None = None
 
     def given(self) -> list[str]:
         """The options set away from their defaults that describe the pixels of an image
         (``layer``, ``encoding``, ``exposure``, ``bayer``, ``colourspace``, ``topic``,
         ``frame``, ``time``, ``ocio_colourspace``, ``ocio_config``), by name."""
         return [name for name in ("layer", "encoding", "exposure", "bayer", "colourspace",
-                                  "topic", "frame", "time", "ocio_colourspace", "ocio_config")
+                                  "topic", "frame", "time", "ocio_colourspace", "ocio_config",
+                                  "video_matrix", "video_range")
                 if getattr(self, name) is not None]
 
     def names_message(self) -> bool:
-        """Whether these options name a message of a recording (``topic``, ``frame`` or
-        ``time`` given)."""
+        """Whether these options name a message of a recording or a frame of a video
+        (``topic``, ``frame`` or ``time`` given)."""
         return any(v is not None for v in (self.topic, self.frame, self.time))
 
 
@@ -126,7 +135,7 @@ def reads_for(paths: Sequence[str | os.PathLike[str]], read: ReadOptions
     if not read.names_message():
         return [read for _ in paths]
     plain = replace(read, topic=None, frame=None, time=None)
-    is_rec = [is_recording_path(p) for p in paths]
+    is_rec = [is_recording_path(p) or video.is_video_path(p) for p in paths]
     if not any(is_rec):
         return [read for _ in paths]
     return [read if r else plain for r in is_rec]
@@ -146,6 +155,11 @@ def reads_with_own_ocio(paths: Sequence[str | os.PathLike[str]], read: ReadOptio
 def _read_input(path: str | os.PathLike[str], read: ReadOptions, *, digest: bool,
                 native: bool = False) -> tuple[Image, str | None]:
     _check_ocio_options(read)
+    if video.is_video_path(path):
+        return _read_video(path, read)
+    if read.video_matrix is not None or read.video_range is not None:
+        raise InvalidValueError(f"{path}: --video-matrix and --video-range describe a video "
+                                f"(a file ending in {', '.join(video.VIDEO_SUFFIXES)})")
     if read.names_message() or recording.is_recording_path(path):
         if read.layer is not None:
             raise InvalidValueError(f"{path}: --layer names an EXR layer; a recording has none")
@@ -162,6 +176,20 @@ def _read_input(path: str | os.PathLike[str], read: ReadOptions, *, digest: bool
             raise
         img = _read_mosaic(path, read, exc)
     return _ocio_converted(img, read), (file_sha256(img.path) if digest else None)
+
+
+def _read_video(path: str | os.PathLike[str], read: ReadOptions) -> tuple[Image, str]:
+    """A video's frame (:func:`fidelity.chart.video.read_frame`) as ``read`` names it."""
+    for name in ("layer", "topic", "bayer"):
+        if getattr(read, name) is not None:
+            raise InvalidValueError(f"{path}: --{name} does not apply to a video")
+    time = read.time
+    if isinstance(time, str):
+        raise InvalidValueError(f"{path}: --time {time}: give seconds after the video's first "
+                                "frame (a number)")
+    img, sha = video.read_frame(path, read.frame, time, read.video_matrix, read.video_range,
+                                max_pixels=read.max_pixels)
+    return _ocio_converted(img, read), sha
 
 
 def _check_ocio_options(read: ReadOptions) -> None:
@@ -231,7 +259,13 @@ def read_again(info: ImageInfo, max_pixels: int | None = None) -> Image:
     and Bayer pattern, or the same message of the same recording; converted by OpenColorIO as
     it was), for a report that shows or checks its pixels."""
     rec = info.recording
-    if rec is not None:
+    if rec is not None and rec.stream is not None:  # a video: the same frame, matrix, range
+        again = ReadOptions(max_pixels=max_pixels, frame=rec.frame,
+                            video_matrix=None if rec.stream["matrix"] == "rgb"
+                            else rec.stream["matrix"],
+                            video_range=None if rec.stream["matrix"] == "rgb"
+                            else rec.stream["range"])
+    elif rec is not None:
         again = ReadOptions(bayer=info.bayer, max_pixels=max_pixels, topic=rec.topic,
                             frame=rec.frame)
     else:

@@ -367,19 +367,23 @@ class FrameSelection:
     stop: int | None = None
     step: int | None = None
 
-    def resolve(self, count: int, shown: str, topic: str) -> list[int]:
+    def resolve(self, count: int, shown: str, topic: str | None) -> list[int]:
         """The frame indices (0 to ``count - 1``, in order, each once) on a topic of ``count``
-        messages; an index past the end or a selection of none is an error naming ``shown``."""
+        messages (``topic`` None: a video of ``count`` frames); an index past the end or a
+        selection of none is an error naming ``shown``."""
+        has = (f"the video has {count} frames" if topic is None
+               else f"topic {topic!r} has {count} messages")
         if self.indices:
             bad = [k for k in self.indices if not -count <= k < count]
             if bad:
-                raise InputFileError(f"{shown}: topic {topic!r} has {count} messages (frames 0 "
-                                     f"to {count - 1}); there is no frame {bad[0]}")
+                raise InputFileError(f"{shown}: {has} (frames 0 to {count - 1}); there is no "
+                                     f"frame {bad[0]}")
             return list(dict.fromkeys(k % count for k in self.indices))
         picked = list(range(count))[self.start:self.stop:self.step]
         if not picked:
-            raise InputFileError(f"{shown}: --frames {self.text} selects none of topic "
-                                 f"{topic!r}'s {count} messages")
+            of = (f"the video's {count} frames" if topic is None
+                  else f"topic {topic!r}'s {count} messages")
+            raise InputFileError(f"{shown}: --frames {self.text} selects none of {of}")
         return picked
 
 

@@ -15,16 +15,24 @@ from fidelity.cli.context import STDOUT, evidence_outputs, write_evidence_files,
 from fidelity.cli.options import (
     IMAGE_PATH,
     FrameRange,
+    cat_option,
     common_options,
     evidence_option,
     image_read_options,
     judge_options,
+    manifest_options,
     max_pixels_option,
     measure_options,
 )
-from fidelity.cli.subjects import frames_summary, plan_subjects
+from fidelity.cli.subjects import (
+    frames_summary,
+    plan_subjects,
+    recordings_noise,
+    write_frames_noise,
+)
 from fidelity.cli.values import measure_inputs, measure_request
 from fidelity.core.fileio import check_outputs, display_path
+from fidelity.measure.chartsharpness import EdgeTargetCorners
 from fidelity.pipeline.check import audit_image, audit_images
 from fidelity.pipeline.records import GateResult, ImageSource
 from fidelity.prediction.judge import JudgeOptions
@@ -55,19 +63,23 @@ from fidelity.report.terminal import summary_lines
               help="Write the HTML report here (a folder, existing or written with a "
                    "trailing /: IMAGE-NAME.html in it).")
 @click.option("--frames", type=FrameRange(), default=None, metavar="FRAMES",
-              help="With recordings: audit each of these frames of --topic, N,M,... or "
-                   "START:STOP[:STEP] (0:300:30; negative from the end: -10:), each its own "
+              help="With recordings and videos: audit each of these frames (of --topic), "
+                   "N,M,... or START:STOP[:STEP] (0:300:30; negative from the end: -10:), "
+                   "each its own "
                    "report; instead of --frame and --time.")
 @max_pixels_option
+@cat_option
 @evidence_option
 @measure_options
 @common_options
+@manifest_options
 def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
           reference: str, illuminant: str,
           json_path: str | None, html_path: str | None, frames: FrameSelection | None,
           max_pixels: int | None, judge: JudgeOptions, measure: bool, images: str | None,
-          annotations: str | None, models: str | None, limit: int | None,
-          evidence_paths: tuple[Path, ...]) -> None:
+          annotations: str | None, models: str | None, limit: int | None, cat: str,
+          evidence_paths: tuple[Path, ...],
+          edge_target: EdgeTargetCorners | None = None) -> None:
     """Measure the chart in IMAGE: ΔE00 per patch, mean and max, exposure, bad pixels.
 
     \b
@@ -97,7 +109,7 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
     if plan.many:  # an input error of one subject is its result's; the others are still audited
         cases = audit_images(plan.images, corners, read=read, frames=plan.frames,
                              reference=reference, illuminant=illuminant, judge=judge,
-                             measure=request)
+                             measure=request, cat=cat, edge_target=edge_target)
     else:  # an input error is the command's (one line, exit 2)
         frame_of = plan.frames
         only = replace(read, frame=frame_of[0], time=None) if frame_of else read
@@ -105,7 +117,7 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
                    else str(plan.images[0]))
         cases = [GateResult(subject, report=audit_image(
             plan.images[0], corners, read=only, reference=reference, illuminant=illuminant,
-            judge=judge, measure=request))]
+            judge=judge, measure=request, cat=cat, edge_target=edge_target))]
     done = plan.write_reports(cases)
     cases = [case for case, _ in done]
     indent = "  " if plan.many else ""
@@ -128,13 +140,20 @@ def audit(image: tuple[Path, ...], corners: str | None, read: ReadOptions,
             click.echo(f"{indent}wrote {display_path(p)}")
     written_all = [p for _, written in done for p in written]
     failed = sum(case.report is None for case in cases)
-    overview = plan.write_overview(cases, audit=True)
+    noise = ([] if plan.frames is None else
+             recordings_noise(cases, plan.images, plan.frames, read, reference, illuminant))
+    overview = plan.write_overview(cases, audit=True, noise=noise)
     if overview is not None:
         written_all.append(overview)
         click.echo(f"wrote {display_path(overview)}")
     if plan.frames is not None:
         for line in frames_summary(cases, plan.images, plan.frames):
             click.echo(line)
+        for n in noise:
+            click.echo(n.summary())
+        for p in write_frames_noise(noise, json_path):
+            written_all.append(p)
+            click.echo(f"wrote {display_path(p)}")
     write_evidence_files(evidence_paths, write_evidence, "audit",
                          [(c.subject, c.report, c.error) for c in cases],
                          EXIT_ERROR if failed else 0, results=written_all)

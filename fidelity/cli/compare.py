@@ -32,6 +32,9 @@ from fidelity.report.evidence import write_evidence
 from fidelity.report.jsonform import comparison_json
 from fidelity.report.junit import write_junit
 
+#: The ``classname`` of compare's JUnit test case.
+JUNIT_CLASS = "fidelity.compare"
+
 if TYPE_CHECKING:
     from fidelity.chart.read import ReadOptions
     from fidelity.prediction.judge import JudgeOptions
@@ -110,7 +113,8 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
             real_ocio_colourspace=real_ocio_colourspace, measure=request)
     except FidelityError as exc:
         if junit is not None:
-            write_junit(junit, [GateResult(subject, criterion, error=str(exc))])
+            write_junit(junit, [GateResult(subject, criterion, error=str(exc))],
+                        classname=JUNIT_CLASS)
         raise
     write_comparison_report(report, json_path=None if to_stdout else json_path,
                             html_path=html_path, protect=(sim, real))
@@ -118,10 +122,12 @@ def compare(sim: Path, real: Path, sim_corners: str | None, real_corners: str | 
         click.echo(line)
     if junit is not None:
         try:
-            write_junit(junit, [GateResult(subject, criterion, report=report.as_chart_report())])
+            write_junit(junit, [GateResult(subject, criterion, report=report.as_chart_report())],
+                        classname=JUNIT_CLASS)
         except (FidelityError, OSError) as exc:
             click.echo(f"fidelity: error: {junit}: cannot write JUnit XML: {exc}", err=True)
             sys.exit(EXIT_ERROR)
+        click.echo(f"wrote {display_path(junit)}")
     if json_path is not None:
         where = write_json_output(json_path, comparison_json(report))
         if not to_stdout:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -10,15 +11,16 @@ import click
 from fidelity.cli.context import evidence_outputs, write_evidence_files
 from fidelity.cli.options import (
     IMAGE_PATH,
-    chart_pair_options,
     common_options,
     evidence_option,
+    fit_pair_options,
     image_read_options,
     judge_options,
     measure_options,
 )
 from fidelity.cli.values import measure_inputs, measure_request
 from fidelity.core.fileio import check_outputs, display_path
+from fidelity.correction.lut import CUBE_OUTPUTS
 from fidelity.pipeline.fit import (
     fit_and_verify,
     fit_camera_and_verify,
@@ -52,7 +54,12 @@ if TYPE_CHECKING:
               default=None,
               help="A camera model file instead of a rendered SIM (then give REAL alone): its "
                    "chart is rendered in closed form, the correction fitted and verified, and "
-                   "OUT/corrected.toml written, the camera with its colour matrix corrected.")
+                   "OUT/corrected.toml written: the camera with its colour matrix corrected, "
+                   "and its optics (a Gaussian PSF) and noise (the full well) fitted so that "
+                   "its turned chart has REAL's MTF50 and SNR at 18 % grey.")
+@click.option("--colour-only", "colour_only", is_flag=True,
+              help="With --camera: correct the colour matrix only; leave the camera file's "
+                   "optics and noise as they are.")
 @click.option("--out", "out", type=click.Path(file_okay=False, path_type=Path), required=True,
               help="Folder for correction.cube, correction.ocio, correction.json, report.json "
                    "and report.html.")
@@ -64,12 +71,22 @@ if TYPE_CHECKING:
 @click.option("--objective", type=click.Choice(["linear", "ciede2000"]), default=None,
               help="What the fit minimises: squared differences in linear RGB, or squared "
                    "CIEDE2000 (default: ciede2000, the lower cross-validated ΔE00).")
+@click.option("--cube-output", "cube_output", type=click.Choice(list(CUBE_OUTPUTS)),
+              default=None,
+              help="What the .cube gives: encoded (sRGB-encoded values) or linear "
+                   "(scene-linear values). Default: the SIM's own encoding (encoded for an "
+                   "8/16-bit PNG or JPEG, linear for an EXR), as ffmpeg lut3d, oiiotool "
+                   "--ociofiletransform and OpenColorIO apply a cube.")
 @click.option("--write-corrected", "corrected", is_flag=True,
               help="Also put the whole SIM image through the .cube by OpenColorIO and write it "
-                   "(OUT/corrected.png for sRGB-encoded SIM, OUT/corrected.exr for scene-linear "
-                   "SIM); without it only the patch windows the verification measures are "
-                   "transformed.")
-@chart_pair_options
+                   "(OUT/corrected.png for sRGB-encoded output, OUT/corrected.exr for "
+                   "scene-linear output); without it only the patch windows the verification "
+                   "measures are transformed.")
+@click.option("--accept-warnings", "accept", is_flag=True,
+              help="Exit 0 even when fit warns (the model does not express the difference, "
+                   "the correction does not lower the ΔE00, or the .cube misses its check); "
+                   "the warnings are printed all the same.")
+@fit_pair_options
 @judge_options(bound=False, decision=False)
 @click.option("--reference", default="scene", show_default=True,
               help="What each chart is audited against: scene, safecolor or a chart JSON.")
@@ -80,8 +97,9 @@ if TYPE_CHECKING:
 @evidence_option
 @common_options
 def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...],
-        camera: Path | None, out: Path,
-        model: str, objective: str | None, corrected: bool,
+        camera: Path | None, colour_only: bool, out: Path,
+        model: str, objective: str | None, cube_output: str | None, corrected: bool,
+        accept: bool,
         sim_corners: str | None, real_corners: str | None, sim_ocio_colourspace: str | None,
         real_ocio_colourspace: str | None, normalise_mode: str,
         judge: JudgeOptions, reference: str, illuminant: str, measure: bool, images: str | None,
@@ -95,6 +113,13 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
     OUT/correction.cube (with OUT/correction.ocio, a config that loads it), checked against
     the model through OpenColorIO's processor, and SIM is put through the cube and compared
     with REAL again: ΔE00 and predicted ΔmAP before and after.
+
+    The cube's output has the SIM's encoding unless --cube-output says otherwise (sRGB in,
+    sRGB out; scene-linear in, scene-linear out, over 0 to the SIM's largest value), with
+    no shaper: ffmpeg's lut3d, oiiotool --ociofiletransform and OpenColorIO read it alike.
+    Exit 0; 1 with a "fidelity: warning:" line where the model does not express the
+    difference, the correction does not lower the ΔE00 or the .cube misses its check
+    (--accept-warnings: 0); 2 for an input error.
 
     \b
     fidelity fit sim.png photo.jpg --out correction/
@@ -118,15 +143,19 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
             raise click.UsageError("--pair fits one matrix with per-illuminant gains: "
                                    "--correction matrix only")
         _fit_pairs(pairs, out, sim_corners, real_corners, normalise_mode, judge,
-                   reference, illuminant, read, real_ocio_colourspace, corrected)
+                   reference, illuminant, read, real_ocio_colourspace, corrected,
+                   cube_output, accept)
         return
+    if colour_only and camera is None:
+        raise click.UsageError("--colour-only goes with --camera (a .cube corrects colour "
+                               "only)")
     if camera is not None:
         if sim is None or real is not None:
             raise click.UsageError("with --camera give REAL alone: fidelity fit --camera "
                                    "sim.toml REAL --out DIR")
         _fit_camera(camera, sim, out, model, objective, real_corners, normalise_mode,
                     judge, reference, illuminant, read, real_ocio_colourspace, corrected,
-                    request, evidence_paths)
+                    request, evidence_paths, cube_output, accept, not colour_only)
         return
     if sim is None or real is None:
         raise click.UsageError("give SIM and REAL, or --pair SIM REAL twice or more")
@@ -143,7 +172,8 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
         sim, real, out, model=model, objective=objective, sim_corners=sim_corners,
         real_corners=real_corners, normalise_mode=normalise_mode, reference=reference,
         illuminant=illuminant, judge=judge, read=read,
-        real_ocio_colourspace=real_ocio_colourspace, corrected=corrected, measure=request)
+        real_ocio_colourspace=real_ocio_colourspace, corrected=corrected, measure=request,
+        cube_output=cube_output)
     write_fit_report(report, json_path=out / "report.json", html_path=out / "report.html",
                      protect=(sim, real))
     for line in fit_lines(report):
@@ -152,17 +182,29 @@ def fit(sim: Path | None, real: Path | None, pairs: tuple[tuple[Path, Path], ...
     if "corrected" in report.files:
         written.append(Path(report.files["corrected"]))
     click.echo(f"wrote {', '.join(display_path(p) for p in written)}")
-    _evidence(evidence_paths, report, written)
+    code = _warn(report.warnings, accept)
+    _evidence(evidence_paths, report, written, code)
+    sys.exit(code)
 
 
-def _evidence(paths: tuple[Path, ...], report: FitReport, written: list[Path]) -> None:
-    write_evidence_files(paths, write_fit_evidence, report, 0, results=written)
+def _warn(warnings: list[str], accept: bool) -> int:
+    """Print each warning as a ``fidelity: warning:`` line (stderr); the exit code: 1 where
+    there is one, unless ``accept``."""
+    for w in warnings:
+        click.echo(f"fidelity: warning: {w}", err=True)
+    return 1 if warnings and not accept else 0
+
+
+def _evidence(paths: tuple[Path, ...], report: FitReport, written: list[Path],
+              code: int) -> None:
+    write_evidence_files(paths, write_fit_evidence, report, code, results=written)
 
 
 def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str | None,
                real_corners: str | None, normalise_mode: str, judge: JudgeOptions,
                reference: str, illuminant: str, read: ReadOptions,
-               real_ocio_colourspace: str | None, corrected: bool) -> None:
+               real_ocio_colourspace: str | None, corrected: bool, cube_output: str | None,
+               accept: bool) -> None:
     inputs: dict[str, Path | str | None] = {"--table": judge.table_input,
                                             "--reference": reference,
                                             "--illuminant": illuminant}
@@ -176,7 +218,7 @@ def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str
                                   normalise_mode=normalise_mode, reference=reference,
                                   illuminant=illuminant, judge=judge, read=read,
                                   real_ocio_colourspace=real_ocio_colourspace,
-                                  corrected=corrected)
+                                  corrected=corrected, cube_output=cube_output)
     write_shared_fit_report(shared, json_path=out / "report.json",
                             html_path=out / "report.html",
                             protect=[p for pair in pairs for p in pair])
@@ -184,13 +226,16 @@ def _fit_pairs(pairs: tuple[tuple[Path, Path], ...], out: Path, sim_corners: str
         click.echo(line)
     click.echo(f"wrote {display_path(out / 'report.json')}, {display_path(out / 'report.html')} "
                f"and the corrections in {', '.join(display_path(out / f'pair-{k + 1}') for k in range(len(pairs)))}")
+    sys.exit(_warn([f"pair {k + 1}: {w}" for k, rep in enumerate(shared.reports)
+                    for w in rep.warnings], accept))
 
 
 def _fit_camera(camera: Path, real: Path, out: Path, model: str, objective: str | None,
                 real_corners: str | None, normalise_mode: str, judge: JudgeOptions,
                 reference: str, illuminant: str, read: ReadOptions,
                 real_ocio_colourspace: str | None, corrected: bool,
-                request: MeasureRequest | None, evidence_paths: tuple[Path, ...]) -> None:
+                request: MeasureRequest | None, evidence_paths: tuple[Path, ...],
+                cube_output: str | None, accept: bool, properties: bool) -> None:
     names = ("correction.cube", "correction.ocio", "correction.json", "report.json",
              "report.html", "corrected.toml", "sim_render.png", "sim_render.exr")
     check_outputs({**{n: out / n for n in names}, **evidence_outputs(evidence_paths)},
@@ -200,10 +245,12 @@ def _fit_camera(camera: Path, real: Path, out: Path, model: str, objective: str 
         camera, real, out, model=model, objective=objective, real_corners=real_corners,
         normalise_mode=normalise_mode, reference=reference, illuminant=illuminant,
         judge=judge, read=read, real_ocio_colourspace=real_ocio_colourspace,
-        corrected=corrected, measure=request)
+        corrected=corrected, measure=request, cube_output=cube_output, properties=properties)
     write_fit_report(report, json_path=out / "report.json", html_path=out / "report.html",
                      protect=(camera, real))
     for line in fit_lines(report):
         click.echo(line)
     click.echo(f"corrected camera: {display_path(toml)} (fidelity check {display_path(toml)})")
-    _evidence(evidence_paths, report, [*(out / n for n in names), Path(toml)])
+    code = _warn(report.warnings, accept)
+    _evidence(evidence_paths, report, [*(out / n for n in names), Path(toml)], code)
+    sys.exit(code)

@@ -30,20 +30,28 @@ from fidelity.cli.options import (
     IMAGE_PATH,
     PATH,
     FrameRange,
+    cat_option,
     common_options,
     evidence_option,
     image_read_options,
     judge_options,
+    loss_limit_options,
+    manifest_options,
     max_pixels_option,
 )
-from fidelity.cli.subjects import frames_summary, plan_subjects
+from fidelity.cli.subjects import (
+    frames_summary,
+    plan_subjects,
+    recordings_noise,
+    write_frames_noise,
+)
 from fidelity.cli.values import make_criterion
 from fidelity.core.errors import FidelityError
 from fidelity.core.fileio import check_outputs, display_path
+from fidelity.measure.chartsharpness import EdgeTargetCorners
 from fidelity.pipeline.check import gate as gate_subjects
 from fidelity.pipeline.records import GateResult, gate_exit_code
 from fidelity.prediction.judge import JudgeOptions
-from fidelity.prediction.tablefile import CLASS_COLUMNS
 from fidelity.prediction.verdict import EXIT_ERROR, EXIT_UNDECIDED
 from fidelity.report.evidence import write_evidence
 from fidelity.report.jsonform import chart_report_json
@@ -85,7 +93,7 @@ def _check_usage(images: tuple[Path, ...], camera: str | None, corners: str | No
     if not images and camera is None:
         raise click.UsageError("give one or more IMAGEs, or --camera")
     if camera is not None and (corners is not None or read.given()):
-        raise click.UsageError("--corners, --encoding, --exposure, --layer, --bayer, "
+        raise click.UsageError("--corners, --manifest, --encoding, --exposure, --layer, --bayer, "
                                "--colourspace, --topic, --frame and --time apply to an IMAGE, "
                                "not to --camera")
     if frames is not None and not images:
@@ -123,11 +131,7 @@ def _print_case(case: GateResult, written: Sequence[Path], *, many: bool, camera
               "for all of them.")
 @click.option("--camera", help="Camera model (built-in name or TOML path) instead of an image.")
 @click.option("--max-delta-e", type=float, help="Pass when the chart's mean ΔE00 <= X.")
-@click.option("--max-dmap", type=float, help="Pass when the predicted ΔmAP (or class ΔAP) <= P.")
-@click.option("--class", "cls", type=click.Choice(list(CLASS_COLUMNS)),
-              help="Class of --max-dmap: all (mAP, default), person, bicycle.")
-@click.option("--unit", type=click.Choice(["points", "relative"]), default="points",
-              show_default=True, help="Unit of --max-dmap: percentage points or % of baseline.")
+@loss_limit_options
 @judge_options()
 @image_read_options
 @click.option("--reference", default="scene", show_default=True,
@@ -144,19 +148,23 @@ def _print_case(case: GateResult, written: Sequence[Path], *, many: bool, camera
               help="Write the HTML report (several images: a folder, one report per image "
                    "and index.html, an overview of them all).")
 @click.option("--frames", type=FrameRange(), default=None, metavar="FRAMES",
-              help="With recordings: gate each of these frames of --topic, N,M,... or "
-                   "START:STOP[:STEP] (0:300:30; negative from the end: -10:), each its own "
+              help="With recordings and videos: gate each of these frames (of --topic), "
+                   "N,M,... or START:STOP[:STEP] (0:300:30; negative from the end: -10:), "
+                   "each its own "
                    "subject (JUnit test case, report); instead of --frame and --time.")
 @max_pixels_option
+@cat_option
 @evidence_option
 @common_options
+@manifest_options
 def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
          max_delta_e: float | None, max_dmap: float | None, cls: str | None, unit: str,
          judge: JudgeOptions, read: ReadOptions,
          reference: str, illuminant: str, renderer: str, junit: Path | None,
          json_path: Path | None, html_path: Path | None,
-         frames: FrameSelection | None, max_pixels: int | None,
-         evidence_paths: tuple[Path, ...]) -> None:
+         frames: FrameSelection | None, max_pixels: int | None, cat: str,
+         evidence_paths: tuple[Path, ...],
+         edge_target: EdgeTargetCorners | None = None) -> None:
     """Gate a camera's colour fidelity: exit 0 pass, 1 fail, 2 input error, 3 bug, 4
     undecided (--decision guarded).
 
@@ -218,15 +226,19 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
         cases = gate_subjects(
             criterion, images, camera=model, corners=corners,
             read=replace(read, max_pixels=max_pixels), reference=reference,
-            illuminant=illuminant, renderer=renderer, judge=judge, frames=plan.frames)
+            illuminant=illuminant, renderer=renderer, judge=judge, frames=plan.frames, cat=cat,
+            edge_target=edge_target)
     done = plan.write_reports(cases)
     cases = [case for case, _ in done]
     many = plan.many
     for case, written in done:
         _print_case(case, written, many=many, camera=camera is not None,
                     setting=f"illuminant {illuminant}, {renderer} renderer")
+    noise = ([] if plan.frames is None else
+             recordings_noise(cases, images, plan.frames, replace(read, max_pixels=max_pixels),
+                              reference, illuminant))
     try:
-        overview = plan.write_overview(cases, audit=False)
+        overview = plan.write_overview(cases, audit=False, noise=noise)
     except (FidelityError, OSError) as exc:  # as a JUnit file that cannot be written
         _error_line(f"{plan.overview}: cannot write the overview: {exc}")
         sys.exit(EXIT_ERROR)
@@ -244,6 +256,10 @@ def gate(images: tuple[Path, ...], corners: str | None, camera: str | None,
     if plan.frames is not None:
         for line in frames_summary(cases, images, plan.frames):
             click.echo(line)
+        for n in noise:
+            click.echo(n.summary())
+        for p in write_frames_noise(noise, json_path):
+            click.echo(f"wrote {display_path(p)}")
     if many:
         codes = [c.exit_code for c in cases]
         undecided = (f", {codes.count(EXIT_UNDECIDED)} undecided"

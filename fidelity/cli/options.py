@@ -13,8 +13,8 @@ The vocabulary (also in the docs' command table):
   (:class:`Severities`);
 - ``--encoding``, ``--exposure``, ``--layer``, ``--bayer``, ``--colourspace``,
   ``--ocio-colourspace``, ``--ocio-config``, ``--negatives``, and for a robot recording
-  ``--topic``, ``--frame``, ``--time``: how an image is read (:func:`image_read_options`, one
-  ``read`` argument);
+  ``--topic``, ``--frame``, ``--time`` (and for a video ``--video-matrix``, ``--video-range``):
+  how an image is read (:func:`image_read_options`, one ``read`` argument);
 - ``--camera``, ``--illuminant``, ``--reference``, ``--table``, ``--size``: as in ``check``;
 - ``--out DIR``: the folder a command writes several files to; ``--json FILE`` (``-`` for
   stdout: then nothing else is printed there), ``--html FILE``, ``--junit FILE``: one report;
@@ -27,6 +27,7 @@ The vocabulary (also in the docs' command table):
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import io
 import math
@@ -43,14 +44,17 @@ from fidelity.chart.read import ReadOptions
 from fidelity.chart.recording import FrameSelection, absolute_time_ns, parse_frames
 from fidelity.cli.context import STDOUT, command_state, settings_line
 from fidelity.cli.values import decision_rule, parse_models
+from fidelity.colour.colorimetry import CHROMATIC_ADAPTATION_METHODS
 from fidelity.core.errors import InvalidValueError, unknown_name
 from fidelity.prediction.calibration import MAX_TARGETS
 from fidelity.prediction.directional import BOUNDS
+from fidelity.prediction.exposure import DEFAULT_MAX_EXPOSURE_ERROR_EV
 from fidelity.prediction.judge import JudgeOptions
-from fidelity.prediction.tablefile import SIZES
+from fidelity.prediction.tablefile import CLASS_COLUMNS, SIZES
 from fidelity.prediction.transforms import TRANSFORMS
 from fidelity.prediction.verdict import SIMPLE
 from fidelity.report.evidence import evidence_format
+from fidelity.scene.manifest import read_manifest
 
 if TYPE_CHECKING:
     from typing import TypeAlias
@@ -362,25 +366,39 @@ IMAGE_PATH = click.Path(path_type=Path)
 
 #: The command-line names of the image-reading options, as :class:`ReadOptions` names them.
 READ_OPTION_NAMES = ("layer", "encoding", "exposure", "negatives", "colourspace", "bayer",
-                     "topic", "frame", "time", "ocio_colourspace", "ocio_config")
+                     "topic", "frame", "time", "ocio_colourspace", "ocio_config",
+                     "video_matrix", "video_range")
 
 
 def chart_pair_options(f: F) -> F:
     """``--sim-corners``, ``--real-corners``, ``--sim-ocio-colourspace``,
     ``--real-ocio-colourspace`` and ``--normalise``: where the two charts of a simulated and a
     real image are, each image's own OpenColorIO colourspace, and how the simulated one is
-    matched to the real one (compare, fit)."""
+    matched to the real one (compare)."""
+    return _chart_pair_options(f, sim_ocio=True)
+
+
+def fit_pair_options(f: F) -> F:
+    """:func:`chart_pair_options` for ``fit``, whose correction maps SIM's own pixel values:
+    ``--sim-ocio-colourspace`` is not offered (hidden, it stays accepted only to be refused
+    with the reason)."""
+    return _chart_pair_options(f, sim_ocio=False)
+
+
+def _chart_pair_options(f: F, *, sim_ocio: bool) -> F:
     opts = [
         click.option("--sim-corners", default=None,
                      help="X1,Y1,...,X4,Y4: centres of the dark skin, bluish green, black and "
                           "white patches in SIM (default: the chart is found)."),
         click.option("--real-corners", default=None, help="The same for REAL."),
         click.option("--sim-ocio-colourspace", default=None, metavar="NAME",
-                     help="SIM's own OpenColorIO colourspace (as --ocio-colourspace, for SIM "
+                     hidden=not sim_ocio, help="SIM's own OpenColorIO colourspace (as --ocio-colourspace, for SIM "
                           "alone; the shared --encoding and --colourspace then describe "
                           "REAL)."),
         click.option("--real-ocio-colourspace", default=None, metavar="NAME",
-                     help="The same for REAL."),
+                     help="The same for REAL." if sim_ocio else
+                          "REAL's own OpenColorIO colourspace (as --ocio-colourspace, for "
+                          "REAL alone; SIM is read as its own pixel values)."),
         click.option("--normalise", "normalise_mode",
                      type=click.Choice(["exposure", "exposure+wb", "none"]),
                      default="exposure", show_default=True,
@@ -450,13 +468,71 @@ def image_read_options(f: F) -> F:
         click.option(
             "--frame", type=int, default=None, metavar="N",
             help="With a recording: the N-th message of --topic (0 the first, the default; "
-                 "-1 the last)."),
+                 "-1 the last); with a video: its N-th frame."),
         click.option(
             "--time", type=RecordingTime(), default=None, metavar="T",
             help="With a recording: the message of --topic nearest to T: seconds after the "
                  "recording's first message (0.5), or an absolute time: @SECONDS since the "
                  "epoch (@1700000000.25) or ISO 8601 with its offset "
-                 "(2023-11-14T22:13:20.25Z)."),
+                 "(2023-11-14T22:13:20.25Z). With a video: the frame nearest to T "
+                 "seconds after its first frame."),
+        click.option(
+            "--video-matrix", type=click.Choice(["bt601", "bt709", "bt2020"]), default=None,
+            help="A video's Y'CbCr matrix, instead of its stream's tag (untagged: bt601 "
+                 "below 720 lines, bt709 from 720)."),
+        click.option(
+            "--video-range", type=click.Choice(["limited", "full"]), default=None,
+            help="A video's Y'CbCr range, instead of its stream's tag (untagged: limited)."),
+    ]
+    for opt in reversed(opts):
+        wrapper = opt(wrapper)
+    return wrapper  # type: ignore[return-value]
+
+
+def manifest_options(f: F) -> F:
+    """``--manifest FILE`` and ``--max-exposure-error EV`` (audit, gate): the chart scene's
+    manifest (:func:`fidelity.scene.manifest.read_manifest`) gives the corners, the expected
+    exposure, the reference and the illuminant where the command line leaves them at their
+    defaults; a fixed exposure (the manifest's or ``--exposure EV``) is judged against the
+    image's (:mod:`fidelity.prediction.exposure`). Below :func:`image_read_options` and
+    :func:`judge_options`: the command's ``read`` and ``judge`` arguments are completed."""
+
+    @functools.wraps(f)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        path, limit = kwargs.pop("manifest"), kwargs.pop("max_exposure_error")
+        read, judge = kwargs["read"], kwargs["judge"]
+        source = "--exposure"
+        kwargs["edge_target"] = None
+        if path is not None:
+            manifest = read_manifest(path)
+            kwargs["edge_target"] = manifest.edge_target
+            ctx = click.get_current_context()
+            if kwargs.get("corners") is None:
+                kwargs["corners"] = manifest.corners
+            if read.exposure is None:
+                read, source = dataclasses.replace(read, exposure=manifest.exposure_ev), "manifest"
+            for name in ("reference", "illuminant"):
+                if ctx.get_parameter_source(name) is click.core.ParameterSource.DEFAULT:
+                    kwargs[name] = getattr(manifest, name)
+        kwargs["read"] = read
+        kwargs["judge"] = dataclasses.replace(judge, max_exposure_error=limit,
+                                              exposure_source=source)
+        return f(*args, **kwargs)
+
+    opts = [
+        click.option(
+            "--manifest", type=click.Path(dir_okay=True, path_type=Path), default=None,
+            metavar="FILE",
+            help="The chart scene's manifest.json (fidelity scene; or its folder): its "
+                 "corners, expected exposure, reference and illuminant, where not given. The "
+                 "exposure is then fixed at the expected one and judged "
+                 "(--max-exposure-error), not normalised away; the sharpness is measured on "
+                 "the scene's slanted-edge target at the manifest's corners."),
+        click.option(
+            "--max-exposure-error", type=click.FloatRange(min=0, min_open=True),
+            default=DEFAULT_MAX_EXPOSURE_ERROR_EV, show_default=True, metavar="EV",
+            help="With a fixed exposure (--manifest or --exposure EV): the largest error of "
+                 "the image's exposure, judged on the neutral patches, that passes (EV)."),
     ]
     for opt in reversed(opts):
         wrapper = opt(wrapper)
@@ -574,6 +650,25 @@ def judge_options(*, bound: bool = True, decision: bool = True) -> Callable[[F],
     return deco
 
 
+def loss_limit_options(f: F) -> F:
+    """``--max-dmap P``, ``--class`` and ``--unit``: a limit on the predicted loss, the same
+    options with the same meaning in ``check`` and ``gate``
+    (:class:`fidelity.prediction.verdict.Criterion` ``max-dmap``)."""
+    opts = [
+        click.option("--max-dmap", type=float,
+                     help="Pass when the predicted ΔmAP (or class ΔAP) <= P, instead of a "
+                          "limit on the mean ΔE00."),
+        click.option("--class", "cls", type=click.Choice(list(CLASS_COLUMNS)),
+                     help="Class of --max-dmap: all (mAP, default), person, bicycle."),
+        click.option("--unit", type=click.Choice(["points", "relative"]), default="points",
+                     show_default=True,
+                     help="Unit of --max-dmap: percentage points or % of baseline."),
+    ]
+    for opt in reversed(opts):
+        f = opt(f)
+    return f
+
+
 class EvidencePath(ParamTypeBase):
     """An ``--evidence`` file: a path whose suffix names its format (``.json``, ``.srmd``,
     ``.stmd``, ``.xqar``; :data:`fidelity.report.evidence.EVIDENCE_FORMATS`)."""
@@ -585,6 +680,19 @@ class EvidencePath(ParamTypeBase):
         path = Path(os.fsdecode(PATH.convert(value, param, ctx)))
         evidence_format(path)
         return path
+
+
+def cat_option(f: F) -> F:
+    """``--cat``: the chromatic adaptation of the scene reference to D65 (the choices of
+    :data:`fidelity.colour.colorimetry.CHROMATIC_ADAPTATION_METHODS`, as ``render --cat``);
+    the spread over the transforms is a type-B component of the ΔE's uncertainty under an
+    illuminant other than D65 (:func:`fidelity.measure.uncertainty.adaptation_component`)."""
+    return click.option(
+        "--cat", type=click.Choice(CHROMATIC_ADAPTATION_METHODS), default="Bradford",
+        show_default=True,
+        help="Chromatic adaptation of the scene reference to D65. Under an illuminant other "
+             "than D65 the spread of the mean ΔE00 over Bradford, CAT02, CAT16 and von Kries "
+             "enters its uncertainty as a type-B component (half the range / √3).")(f)
 
 
 def evidence_option(f: F) -> F:
@@ -639,6 +747,7 @@ __all__ = [
     "TransformNames",
     "JUDGE_OPTION_NAMES",
     "judge_options",
+    "cat_option",
     "common_options",
     "executor_options",
     "image_read_options",

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 
 import click
 
 from fidelity.cli.options import Resolution, common_options
-from fidelity.scene.export import BASE_COLOURS, FORMATS, export_scene
+from fidelity.scene.export import BASE_COLOURS, FORMATS, MANIFEST, export_scene
 from fidelity.scene.model import CHARTS, REFERENCES, build_scene
 
 
@@ -56,7 +57,7 @@ def scene(fmt: str, out_dir: Path, reference: str, illuminant: str, chart: str,
     fidelity scene --format mitsuba --out chart-mitsuba --illuminant A
 
     The manifest holds the patch references, the patch corners in the camera's image (for
-    ``fidelity gate render.exr --corners ...``), the light, the expected exposure and the
+    ``fidelity gate render.exr --manifest OUT/manifest.json``), the light, the expected exposure and the
     renderer settings; README.md names them for CARLA/Unreal, Omniverse and Blender.
     """
     if reference != "scene" and fmt == "mitsuba":
@@ -66,4 +67,5 @@ def scene(fmt: str, out_dir: Path, reference: str, illuminant: str, chart: str,
                         fill=fill, distance=distance, white_level=white_level)
     done = export_scene(model, fmt, out_dir, base_colour=base_colour)
     click.echo(f"wrote {done.scene_file}, manifest.json, README.md ({done.seconds:.2f} s)")
-    click.echo(f"gate the render: {done.manifest['gate_command']}")
+    click.echo("gate the render: " + done.manifest["gate_command"].replace(
+        f"--manifest {MANIFEST}", f"--manifest {shlex.quote(str(done.folder / MANIFEST))}"))

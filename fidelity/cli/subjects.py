@@ -13,10 +13,14 @@ from statistics import median
 import click
 
 from fidelity.chart.image import folder_images, image_suffixes
+from fidelity.chart.read import ReadOptions
 from fidelity.chart.recording import FrameSelection, topic_frames
+from fidelity.chart.video import frame_count, is_video_path
 from fidelity.cli.context import STDOUT
+from fidelity.colour.charts import load_reference
 from fidelity.core.errors import FidelityError, InputFileError
-from fidelity.core.fileio import display_path
+from fidelity.core.fileio import display_path, write_json_atomic
+from fidelity.pipeline.frames import FramesNoise, frames_noise
 from fidelity.pipeline.records import GateResult
 from fidelity.report.chart import write_chart_report
 from fidelity.report.gate import OVERVIEW_NAME, write_gate_overview
@@ -48,13 +52,18 @@ def expand_folders(paths: Sequence[Path]) -> tuple[Path, ...]:
 
 def frame_subjects(images: Sequence[Path], frames: FrameSelection, topic: str | None
                     ) -> tuple[tuple[Path, ...], list[int]]:
-    """Each recording once per frame ``frames`` selects on its topic (from its index), and
+    """Each recording once per frame ``frames`` selects on its topic (from its index), or of
+    its frames for a video (from its header, :func:`fidelity.chart.video.frame_count`), and
     those frames (``gate --frames``, ``audit --frames``)."""
 
     paths: list[Path] = []
     frame_of: list[int] = []
     for img in images:
-        chosen, count = topic_frames(img, topic)
+        chosen: str | None
+        if is_video_path(img):
+            chosen, count = None, frame_count(img)
+        else:
+            chosen, count = topic_frames(img, topic)
         for k in frames.resolve(count, display_path(img), chosen):
             paths.append(img)
             frame_of.append(k)
@@ -84,6 +93,39 @@ def frames_summary(cases: Sequence[GateResult], images: Sequence[Path],
                      f"min {lo[0]:.2f} (frame {lo[1]}), median "
                      f"{median(v for v, _ in values):.2f}, max {hi[0]:.2f} (frame {hi[1]})")
     return lines
+
+
+def recordings_noise(cases: Sequence[GateResult], images: Sequence[Path],
+                     frame_of: Sequence[int], read: ReadOptions, reference: str,
+                     illuminant: str) -> list[FramesNoise]:
+    """Per recording of several frames, their temporal and fixed-pattern noise
+    (:func:`fidelity.pipeline.frames.frames_noise`; ``audit --frames``, ``gate --frames``);
+    recordings with fewer than 2 measured frames are left out."""
+    by: dict[Path, list[tuple[int, GateResult]]] = {}
+    for case, path, k in zip(cases, images, frame_of, strict=True):
+        by.setdefault(path, []).append((k, case))
+    out = []
+    ref = None
+    for path, items in by.items():
+        if sum(c.report is not None for _, c in items) < 2:
+            continue
+        if ref is None:
+            ref = load_reference(reference, illuminant)
+        out.append(frames_noise(path, [k for k, _ in items], [c.report for _, c in items],
+                                read, ref))
+    return out
+
+
+def write_frames_noise(noise: Sequence[FramesNoise], json_path: str | os.PathLike[str] | None
+                       ) -> list[Path]:
+    """Write each recording's :class:`fidelity.pipeline.frames.FramesNoise` as
+    ``RECORDING-NAME.frames.json`` (``{"frames_noise": ...}``) in the ``--json`` folder of
+    several frames' reports; none without ``--json`` or with ``--json -``."""
+    if json_path is None or str(json_path) == STDOUT or not noise:
+        return []
+    folder = Path(json_path)
+    return [write_json_atomic(folder / f"{Path(n.recording).name}.frames.json",
+                              {"frames_noise": n.to_json()}) for n in noise]
 
 
 def write_subject_reports(result: GateResult, json_path: Path | None, html_path: Path | None,
@@ -184,14 +226,16 @@ class SubjectPlan:
         return [write_subject_reports(case, jp, hp, self.images)
                 for case, jp, hp in zip(cases, self.json_paths, self.html_paths, strict=True)]
 
-    def write_overview(self, cases: Sequence[GateResult], *, audit: bool) -> Path | None:
-        """Write the overview page of the subjects' HTML reports, if there is one."""
+    def write_overview(self, cases: Sequence[GateResult], *, audit: bool,
+                       noise: Sequence[FramesNoise] = ()) -> Path | None:
+        """Write the overview page of the subjects' HTML reports, if there is one (``noise``:
+        the frames' temporal and fixed-pattern noise, :func:`recordings_noise`)."""
         if self.overview is None:
             return None
         return write_gate_overview(
             self.overview, cases, [hp if c.report is not None else None
                                    for c, hp in zip(cases, self.html_paths, strict=True)],
-            self.frames, self.recordings, audit=audit)
+            self.frames, self.recordings, audit=audit, noise=noise)
 
 
 def output_folder(value: str | os.PathLike[str] | None) -> bool:
@@ -234,6 +278,8 @@ __all__ = [
     "frame_report_names",
     "frame_subjects",
     "frames_summary",
+    "recordings_noise",
+    "write_frames_noise",
     "report_paths",
     "write_subject_reports",
 ]

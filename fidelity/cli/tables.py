@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -25,6 +26,7 @@ from fidelity.coco.tables.prediction import prediction_table
 from fidelity.coco.tables.provenance import check_store_meta
 from fidelity.core.errors import InputFileError, InvalidValueError
 from fidelity.core.fileio import check_outputs, file_sha256, json_ready, write_json_atomic
+from fidelity.core.resources import source_root
 from fidelity.report.coco import WORST_CASE_FIGURE, write_tables_report
 
 if TYPE_CHECKING:
@@ -32,7 +34,8 @@ if TYPE_CHECKING:
 
 
 @click.command()
-@click.argument("store_dir", type=click.Path())
+@click.argument("store_dirs", nargs=-1, required=True, type=click.Path(),
+                metavar="STORE_DIR...")
 @click.option("--out", default=None, type=click.Path(file_okay=False),
               help="Report folder (default: STORE_DIR/report).")
 @click.option("--prediction", "prediction", default=None, type=click.Path(dir_okay=False),
@@ -80,7 +83,7 @@ if TYPE_CHECKING:
 @json_option("With --explain: also write the breakdown as JSON")
 @progress_option
 @common_options
-def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
+def tables(store_dirs: tuple[str, ...], out: str | None, prediction: str | None, name: str,
            directional: str | None, sharpness: str | None, noise: str | None,
            earlier: str | None, annotations: str | None,
            standard_errors: bool, explain: str | None, rare_boxes: int, images: str | None,
@@ -90,33 +93,45 @@ def tables(store_dir: str, out: str | None, prediction: str | None, name: str,
     With --explain MODEL:TRANSFORM:ΔE: the classes one cell's ΔmAP comes from, instead.
     STORE_DIR may be a tables.json (e.g. reports/coco/tables.json): then only --prediction
     and --directional are written, from it. It may be a sweep's scores file (sweep
-    --export-scores): then the report (--out) is built from its cells.
+    --export-scores), or several (one per detector): then the report (--out) is built from
+    their cells, and the tables name each file by its path in the source checkout and its
+    SHA-256 (provenance.scores_files).
     """
-    if not Path(store_dir).exists():
-        raise InputFileError(f"{store_dir}: no such sweep store folder, scores file or "
-                             "tables.json")
+    for path in store_dirs:
+        if not Path(path).exists():
+            raise InputFileError(f"{path}: no such sweep store folder, scores file or "
+                                 "tables.json")
+    scores = [p for p in store_dirs if Path(p).is_file() and is_scores_file(p)]
+    if len(store_dirs) > 1 and len(scores) < len(store_dirs):
+        other = next(p for p in store_dirs if p not in scores)
+        raise InvalidValueError(f"{other}: not a scores file: several STORE_DIR are scores "
+                                "files (sweep --export-scores), one of each")
+    store_dir = store_dirs[0]
     with contextlib.ExitStack() as stack:
-        if Path(store_dir).is_file() and is_scores_file(store_dir):
+        if scores:
             reports = ("report.md", "report.html", "tables.json", WORST_CASE_FIGURE)
             check_outputs({"--prediction": prediction, "--directional": directional}
                           | {f"--out ({n})": Path(out) / n for n in reports if out},
-                          {"STORE_DIR": store_dir})
-            store_dir = _store_of_scores(stack, store_dir, out, explain)
+                          {f"STORE_DIR ({p})": p for p in scores})
+            store_dir = _store_of_scores(stack, scores, out, explain)
         _tables(store_dir, out, prediction, name, directional, earlier, annotations,
                 standard_errors, explain, rare_boxes, images, top, json_path, progress,
                 {"sharpness": sharpness, "noise": noise})
 
 
-def _store_of_scores(stack: contextlib.ExitStack, path: str, out: str | None,
+def _store_of_scores(stack: contextlib.ExitStack, paths: list[str], out: str | None,
                      explain: str | None) -> str:
-    """A temporary sweep store holding the cells of the scores file ``path`` (removed when
-    ``stack`` closes); its report goes to ``--out``, which is then needed."""
+    """A temporary sweep store holding the cells of the scores files ``paths`` (removed when
+    ``stack`` closes; its provenance names each file by its path in the source checkout and
+    SHA-256); its report goes to ``--out``, which is then needed."""
+    path = ", ".join(paths)
     if explain:
         raise InvalidValueError(f"{path}: --explain needs the cell's detections, which a "
                                 "scores file does not hold: give the sweep store")
     if out is None:
         raise InvalidValueError(f"{path}: a scores file: give --out for the report")
-    return str(stack.enter_context(scores_store_folder(path, SweepStore)))
+    return str(stack.enter_context(scores_store_folder(
+        list[str | os.PathLike[str]](paths), SweepStore, root=source_root())))
 
 
 def _tables(store_dir: str, out: str | None, prediction: str | None, name: str,

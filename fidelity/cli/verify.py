@@ -19,10 +19,12 @@ from fidelity.cli import COMMANDS, main
 from fidelity.cli.context import write_json_output
 from fidelity.cli.options import common_options, json_option
 from fidelity.core.config import read_config
-from fidelity.core.errors import FidelityError, InputFileError
+from fidelity.core.errors import FidelityError, InputFileError, InvalidValueError
 from fidelity.core.fileio import check_outputs, display_path
 from fidelity.core.schema import SchemaError
+from fidelity.report.chain import chain_findings
 from fidelity.report.verify import read_record, rerun_finding, verification_lines, verify_document
+from fidelity.report.verify_ssp import ssp_findings
 
 #: The commands whose records can be run again.
 RERUNNABLE = ("check", "audit", "gate", "compare", "fit")
@@ -157,10 +159,20 @@ def rerun(doc: Mapping[str, Any]) -> tuple[dict[str, Any] | None, int, str]:
               help="Also run the recorded command line again, in the folder it ran in, with "
                    "its outputs sent to a temporary folder, and compare: the same exit code "
                    "and verdicts, each value within the record's standard uncertainty.")
+@click.option("--chain", "chain", is_flag=True,
+              help="Also walk each table the record names to its raw data: the table's "
+                   "SHA-256 as recorded, each scores file it names (in the source checkout) "
+                   "with the SHA-256 the table holds, and the table's rows rebuilt from them, "
+                   "every number the same.")
+@click.option("--annotations", default=None, type=click.Path(dir_okay=False, exists=True,
+                                                             path_type=Path),
+              help="With --chain: the sweep's COCO annotations, to rebuild the standard "
+                   "errors too (default: the shared data's copy of the file the table names; "
+                   "without one, the losses are compared without their standard errors).")
 @json_option("Write the findings as JSON")
 @common_options
-def verify(record: Path, inputs_dir: Path | None, run_again: bool,
-           json_path: str | None) -> None:
+def verify(record: Path, inputs_dir: Path | None, run_again: bool, chain: bool,
+           annotations: Path | None, json_path: str | None) -> None:
     """Check a credibility record against the files it names; --rerun repeats its run.
 
     RECORD is the JSON record of check, audit, gate, compare or fit (--evidence FILE.json).
@@ -168,13 +180,23 @@ def verify(record: Path, inputs_dir: Path | None, run_again: bool,
     Every input, prediction and calibration table, settings file and written correction is
     hashed again (SHA-256) and compared with the record; this installation's code and library
     versions are compared with the record's. Exit 0: every file as recorded (and, with
-    --rerun, the run reproduced); 1: a file changed or missing, or the run not reproduced; 2:
+    --rerun, the run reproduced; with --chain, every link from the record to the rows
+    rebuilt from the scores files); 1: a file changed or missing, the run not reproduced, or
+    a link of the chain broken (named); 2:
     RECORD is not a readable credibility record. A different code or environment is reported,
     not failed: the record stays a true account of its own run.
     """
     check_outputs({"--json": json_path}, {"RECORD": record})
     doc = read_record(record)
     result = verify_document(doc, record, inputs=inputs_dir)
+    result = replace(result, findings=(*result.findings,
+                                       *ssp_findings(doc, record, inputs_dir)))
+    if annotations is not None and not chain:
+        raise InvalidValueError("--annotations: it is for --chain (the rows rebuilt with "
+                                "their standard errors)")
+    if chain:
+        result = replace(result, findings=(*result.findings, *chain_findings(
+            doc, record, annotations=annotations)))
     if run_again:
         new, code, message = rerun(doc)
         result = replace(result, findings=(*result.findings,

@@ -355,22 +355,61 @@ def import_scores(store: ResultsStore, path: str | os.PathLike[str],
     return _transfer(p, sha256, store.kind, {"cells": {"columns": cols, "rows": new_cells}})
 
 
+def scores_models(doc: dict[str, Any]) -> list[str]:
+    """The models whose cells a scores file's content (:func:`read_scores`) holds, in their
+    first cell's order."""
+    t = doc["tables"]["cells"]
+    i = t["columns"].index("model") if "model" in t["columns"] else None
+    return [] if i is None else list(dict.fromkeys(str(r[i]) for r in t["rows"]))
+
+
+def scores_file_entry(path: str | os.PathLike[str], doc: dict[str, Any],
+                      root: str | os.PathLike[str] | None = None) -> dict[str, Any]:
+    """How a table names a scores file it is rebuilt from (``provenance.scores_files``):
+    ``{"path", "sha256", "models"}``. ``path`` is relative to ``root`` (the source checkout,
+    e.g. ``reports/coco/resweep/yolox_nano.scores.json.gz``) when the file lies below it,
+    else the path as given; ``sha256`` of its bytes; ``models`` those with cells in it
+    (:func:`scores_models` of ``doc``, its content)."""
+    p = Path(path)
+    shown = str(p)
+    if root is not None:
+        with contextlib.suppress(ValueError):
+            shown = p.resolve().relative_to(Path(root).resolve()).as_posix()
+    return {"path": shown, "sha256": file_sha256(p), "models": scores_models(doc)}
+
+
+#: The provenance key (of a store's ``meta``, a tables.json's ``meta`` and a table's
+#: ``provenance``) naming the scores files a table is rebuilt from.
+SCORES_FILES_KEY = "scores_files"
+
+
 @contextlib.contextmanager
-def scores_store_folder(path: str | os.PathLike[str], store_type: type[ResultsStore]
-                        ) -> Iterator[Path]:
-    """A temporary store folder holding the cells of the scores file ``path``
-    (:func:`import_scores` into a new ``store_type``), removed when the block ends: what
-    ``fidelity tables FILE`` and ``fidelity sweep --status --out FILE`` read."""
-    doc = read_scores(path, store_type)
+def scores_store_folder(path: str | os.PathLike[str] | list[str | os.PathLike[str]],
+                        store_type: type[ResultsStore],
+                        root: str | os.PathLike[str] | None = None) -> Iterator[Path]:
+    """A temporary store folder holding the cells of the scores file ``path``, or of each of
+    a list of them in turn (:func:`import_scores` into a new ``store_type``), removed when the
+    block ends: what ``fidelity tables FILE...`` and ``fidelity sweep --status --out FILE``
+    read. Its provenance names the files (``meta["scores_files"]``,
+    :func:`scores_file_entry`, paths relative to ``root`` where below it)."""
+    paths = list(path) if isinstance(path, list) else [path]
+    docs = [read_scores(p, store_type) for p in paths]
     with tempfile.TemporaryDirectory(prefix="fidelity-scores-") as folder:
         store = store_type(folder)
         try:
-            import_scores(store, path, doc)
+            for p, doc in zip(paths, docs, strict=True):
+                import_scores(store, p, doc)
+            entries = [scores_file_entry(p, doc, root) for p, doc in zip(paths, docs,
+                                                                         strict=True)]
+            with store.db:
+                store.db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)",
+                                 (SCORES_FILES_KEY, json.dumps(entries)))
         finally:
             store.close()
         yield Path(folder)
 
 
-__all__ = ["JOINED_META", "LEFT_OUT", "SCORES_FORMAT", "SCORES_VERSION", "ScoresTransfer",
-           "detections_digest", "export_scores", "import_scores", "is_scores_file",
-           "read_scores", "scores_store_folder"]
+__all__ = ["JOINED_META", "LEFT_OUT", "SCORES_FILES_KEY", "SCORES_FORMAT", "SCORES_VERSION",
+           "ScoresTransfer", "detections_digest", "export_scores", "import_scores",
+           "is_scores_file", "read_scores", "scores_file_entry", "scores_models",
+           "scores_store_folder"]

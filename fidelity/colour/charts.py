@@ -274,13 +274,15 @@ class Reference:
     conventions: dict[str, Any] = field(default_factory=dict)
 
 
-def load_reference(reference: str = DEFAULT_REFERENCE, illuminant: str = "D65") -> Reference:
+def load_reference(reference: str = DEFAULT_REFERENCE, illuminant: str = "D65",
+                   cat: str = "Bradford") -> Reference:
     """The reference chart: ``"scene"`` (BabelColor Average spectra under ``illuminant``,
-    adapted to D65, :func:`fidelity.colour.spectral.scene_reference`), or a chart name/path
-    (``"safecolor"``: the paper's Lab values, :func:`fidelity.colour.charts.load_chart`)."""
+    adapted to D65 by the chromatic adaptation ``cat``,
+    :func:`fidelity.colour.spectral.scene_reference`), or a chart name/path (``"safecolor"``:
+    the paper's Lab values, :func:`fidelity.colour.charts.load_chart`)."""
     if reference == SCENE_REFERENCE:
         chart = load_chart("safecolor")
-        sr = scene_reference(illuminant)
+        sr = scene_reference(illuminant, cat=cat)
         lab = np.asarray(sr.lab, dtype=np.float64)
         return Reference(
             name=f"scene ({sr.conventions.get('reflectances', '')} under "

@@ -1,8 +1,14 @@
 """Atomic file output and input checks shared by every command.
 
 Outputs are written to a temporary file in the destination folder and renamed into place, so a
-reader never sees a half-written file and an interrupted run leaves no partial output. Inputs are
-never written to: :func:`atomic_output` refuses a destination that is one of the declared inputs.
+reader never sees a half-written file and an interrupted run leaves no partial output. A
+destination that is a symbolic link writes the file it leads to (the temporary file in that
+file's folder; a dangling link creates its target), so a link is never replaced. A special file
+(a FIFO, a terminal or other character device, ``/dev/stdout``) is written as a stream, once
+the output is complete; a path that names one of this process's own file descriptors
+(``/dev/stdout``, ``/dev/fd/N``, ``/proc/self/fd/N``) writes that descriptor, as a shell's
+redirection does. Inputs are never written to: :func:`atomic_output` refuses a destination that
+is one of the declared inputs.
 """
 
 from __future__ import annotations
@@ -14,11 +20,14 @@ import json
 import math
 import os
 import re
+import shutil
+import stat
+import sys
 import tempfile
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from functools import lru_cache, wraps
 from pathlib import Path
-from typing import Any, Protocol, TypeVar, runtime_checkable
+from typing import Any, Literal, NamedTuple, Protocol, TypeVar, runtime_checkable
 
 from fidelity.core.errors import InputFileError
 
@@ -81,48 +90,204 @@ def write_error(path: str | os.PathLike[str], exc: OSError) -> InputFileError:
                           f"{hint.get(exc.errno or 0, '')}")
 
 
+#: The most symbolic links a path may lead through (Linux's limit, ``ELOOP`` beyond).
+MAX_LINKS = 40
+
+#: A path of one of this process's file descriptors, as the links are followed to it
+#: (``/dev/stdout`` -> ``/proc/self/fd/1`` -> ``/proc/<pid>/fd/1``).
+_OWN_FD = re.compile(r"^/proc/(self|thread-self|\d+)/fd/(\d+)$")
+
+
+class Destination(NamedTuple):
+    """Where an output named ``path`` lands (:func:`destination`).
+
+    ``kind`` is ``"file"`` (a regular file, existing or not: written to a temporary file in the
+    folder of ``target``, the path with every link resolved, and renamed onto it),
+    ``"stream"`` (a FIFO, a character or block device, a socket: ``target`` opened and written)
+    or ``"descriptor"`` (one of this process's open file descriptors, ``fd``: written to it).
+    """
+
+    kind: Literal["file", "stream", "descriptor"]
+    target: Path
+    fd: int | None = None
+
+
+def link_chain(path: str | os.PathLike[str]) -> list[str]:
+    """The absolute paths that ``path`` leads through, itself first, one per symbolic link
+    followed (each with its folder's own links resolved), the last one no link (or absent).
+
+    Raises
+    ------
+    InputFileError
+        The links form a loop, or more than :data:`MAX_LINKS` of them.
+    """
+    hops = [os.path.abspath(os.fspath(path))]
+    for _ in range(MAX_LINKS + 1):
+        head, tail = os.path.split(hops[-1])
+        folder = os.path.realpath(head)
+        hops[-1] = os.path.join(folder, tail)
+        try:
+            text = os.readlink(hops[-1])
+        except (OSError, ValueError):  # not a link, or nothing there: the chain ends
+            return hops
+        hops.append(os.path.join(folder, text))  # an absolute text replaces the folder
+    raise InputFileError(f"{display_path(path)}: cannot write: too many levels of symbolic "
+                         "links (a loop?)")
+
+
+def _own_fd(hop: str) -> int | None:
+    m = _OWN_FD.match(hop)
+    if m is None or m.group(1) not in ("self", "thread-self", str(os.getpid())):
+        return None
+    return int(m.group(2))
+
+
+def destination(path: str | os.PathLike[str]) -> Destination:
+    """Where writing ``path`` lands: see :class:`Destination`.
+
+    Parameters
+    ----------
+    path
+        The output as the user named it: a file, a symbolic link (to a file, a link, a path not
+        there yet, a special file), a special file.
+
+    Returns
+    -------
+    Destination
+
+    Raises
+    ------
+    InputFileError
+        The links form a loop.
+    """
+    chain = link_chain(path)
+    for hop in chain:
+        fd = _own_fd(hop)
+        if fd is not None:
+            return Destination("descriptor", Path(path), fd)
+    try:
+        mode = os.stat(chain[-1]).st_mode
+    except OSError:  # not there yet (a dangling link: its target), or not reachable
+        mode = stat.S_IFREG
+    if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+        return Destination("stream", Path(chain[-1]))
+    return Destination("file", Path(chain[-1]))
+
+
+def is_stream(path: str | os.PathLike[str]) -> bool:
+    """True when writing ``path`` streams to a special file or a file descriptor rather than
+    replacing a file (:func:`destination`)."""
+    try:
+        return destination(path).kind != "file"
+    except InputFileError:
+        return False
+
+
+def _protected(dest: Destination, protect: Iterable[str | os.PathLike[str]]) -> bool:
+    """True when the file ``dest`` writes is one of the ``protect`` files (links and relative
+    paths seen through, hard links included)."""
+    if dest.kind != "file" or not dest.target.exists():
+        return False
+    for p in protect:
+        with contextlib.suppress(OSError):
+            if Path(p).exists() and os.path.samefile(dest.target, p):
+                return True
+    return False
+
+
+def _temporary_beside(target: Path, where: Path) -> Path:
+    """A new empty file in ``target``'s folder (created, with its parents, if needed) named
+    after it, with the usual ``0666 & ~umask`` permissions; ``where`` is the output as named,
+    for the error of a folder that is a file."""
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:  # the folder's name is taken by a file
+        raise InputFileError(f"{display_path(where)}: cannot write: "
+                             f"{display_path(target.parent)} is a file, not a folder") from None
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.{os.getpid()}.",
+                               suffix=".tmp" + target.suffix, dir=target.parent)
+    os.close(fd)
+    # mkstemp creates the file private (0600); an output gets the usual 0666 & ~umask.
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
+    return Path(tmp)
+
+
+def _stream(source: Path, dest: Destination, where: Path) -> None:
+    """Copy the finished output ``source`` to the special file or descriptor of ``dest``
+    (``where``: the output as named, for the error of a descriptor not open for writing; a
+    reader that left a pipe is :class:`BrokenPipeError`, as for anything printed)."""
+    for out in (sys.stdout, sys.stderr):  # what this process printed comes first
+        with contextlib.suppress(Exception):
+            out.flush()
+    with open(source, "rb") as src:
+        if dest.fd is not None:
+            try:
+                with open(os.dup(dest.fd), "wb") as fh:
+                    shutil.copyfileobj(src, fh)
+            except OSError as exc:
+                if exc.errno == errno.EBADF:
+                    raise InputFileError(f"{display_path(where)}: cannot write: file "
+                                         f"descriptor {dest.fd} is not open for writing"
+                                         ) from None
+                raise
+            return
+        try:
+            fh = open(dest.target, "wb")  # noqa: SIM115 - closed below
+        except OSError as exc:
+            if exc.errno == errno.ENXIO:  # a socket: nothing to open
+                raise InputFileError(f"{display_path(dest.target)}: cannot write: a socket, "
+                                     "not a file") from None
+            raise
+        with fh:
+            shutil.copyfileobj(src, fh)
+
+
 @contextlib.contextmanager
 def atomic_output(
     path: str | os.PathLike[str], protect: Iterable[str | os.PathLike[str]] = ()
 ) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; rename it to ``path`` when the block succeeds.
+    """Yield a temporary path to write the output to; when the block succeeds, put it at
+    ``path``: renamed onto the file ``path`` names (through its symbolic links: a link is never
+    replaced), or streamed to it when it is a special file or a file descriptor
+    (:func:`destination`).
 
     ``protect`` lists input paths that must never be overwritten; naming one of them as output
-    raises :class:`InputFileError`. When the output cannot be written (a full disk, a
-    read-only folder: an :class:`OSError` with an errno of :data:`WRITE_ERRNOS`, raised while
-    the block writes the temporary file or while it is renamed), the temporary file is removed,
-    an earlier file at ``path`` is left as it was, and :class:`InputFileError` names ``path``.
+    (directly or through links) raises :class:`InputFileError`. When the output cannot be
+    written (a full disk, a read-only folder: an :class:`OSError` with an errno of
+    :data:`WRITE_ERRNOS`, raised while the block writes the temporary file or while it is
+    renamed or streamed), the temporary file is removed, an earlier file at ``path`` is left as
+    it was, and :class:`InputFileError` names ``path``.
     """
-    target = Path(path)
-    for p in protect:
-        if Path(p).exists() and target.exists() and target.resolve() == Path(p).resolve():
-            raise InputFileError(f"{display_path(target)}: refusing to write over an input file")
+    where = Path(path)
+    dest = destination(path)
+    if _protected(dest, protect):
+        raise InputFileError(f"{display_path(where)}: refusing to write over an input file")
     tmp_path: Path | None = None
+    scratch: str | None = None
     try:
-        try:
-            target.parent.mkdir(parents=True, exist_ok=True)
-        except FileExistsError:  # the folder's name is taken by a file
-            raise InputFileError(f"{display_path(target)}: cannot write: "
-                                 f"{display_path(target.parent)} is a file, not a folder"
-                                 ) from None
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.{os.getpid()}.",
-                                   suffix=".tmp" + target.suffix, dir=target.parent)
-        os.close(fd)
-        tmp_path = Path(tmp)
-        # mkstemp creates the file private (0600); an output gets the usual 0666 & ~umask.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp_path, 0o666 & ~umask)
+        if dest.kind == "file":
+            tmp_path = _temporary_beside(dest.target, where)
+        else:
+            scratch = tempfile.mkdtemp(prefix="fidelity-output-")
+            tmp_path = Path(scratch) / f"output{where.suffix}"
+            tmp_path.touch()
         yield tmp_path
-        os.replace(tmp_path, target)
+        if dest.kind == "file":
+            os.replace(tmp_path, dest.target)
+        else:
+            _stream(tmp_path, dest, where)
     except OSError as exc:
         if exc.errno in WRITE_ERRNOS:
-            raise write_error(target, exc) from None
+            raise write_error(where, exc) from None
         raise
     finally:
         if tmp_path is not None:
             with contextlib.suppress(OSError):
                 tmp_path.unlink()
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)
 
 
 def remove_stale_temporaries(folder: str | os.PathLike[str]) -> list[Path]:
@@ -259,7 +424,8 @@ def check_outputs(outputs: Mapping[str, PathLike | None],
     - an output directly inside a store folder, existing or not (the store's database, its
       SQLite companion files, or anything else there; a subfolder such as ``STORE/report`` is
       allowed);
-    - an output that is an existing folder, or the same file as another output.
+    - an output that is an existing folder, or the same file as another output (a special
+      file such as ``/dev/stdout``, which takes each output in turn, may be named twice).
     """
     given = {k: Path(v) for k, v in outputs.items() if v is not None}
     files: dict[str, Path] = {}
@@ -299,6 +465,8 @@ def check_outputs(outputs: Mapping[str, PathLike | None],
                                      "file")
     seen: dict[Path, str] = {}
     for out_label, out in given.items():
+        if is_stream(out):  # a terminal or pipe takes each output in turn
+            continue
         key = out.resolve()
         if key in seen:
             raise InputFileError(f"{display_path(out)}: named by both {seen[key]} and "

@@ -25,6 +25,12 @@ def resource_dir(kind: str) -> Path:
     raise InputFileError(f"resource folder {kind!r} not found next to the fidelity package")
 
 
+def source_root() -> Path:
+    """The folder holding the ``fidelity`` package: in a source checkout, the repository's
+    root, against which the committed evidence files (``reports/coco/...``) are named."""
+    return _PACKAGE.parent
+
+
 def shared_dir() -> Path | None:
     """The project's shared data folder: ``$FIDELITY_SHARED`` or ``../shared`` beside the repo."""
     env = os.environ.get("FIDELITY_SHARED")

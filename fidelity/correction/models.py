@@ -435,19 +435,22 @@ DEFAULT_OBJECTIVE = "ciede2000"
 
 def usable_patches(sim_srgb: ArrayLike, real_srgb: ArrayLike, names: Sequence[str],
                    sim_clipped: Sequence[str] = (), real_clipped: Sequence[str] = (), *,
-                   high: float = 0.99, low: float = 0.0) -> dict[str, str]:
+                   high: float = 0.99, low: float = 0.0,
+                   sim_float: bool = False) -> dict[str, str]:
     """Patches to exclude from a fit, by name, with the reason: clipped by either chart's
     audit (``sim_clipped``, ``real_clipped``: out of the encoded range), or a channel of either
     chart's encoded sRGB ``(n, 3)`` at or beyond ``high`` (saturated) or at or below ``low``
-    (crushed to black)."""
+    (crushed to black). ``sim_float``: the simulated chart is a floating-point scene-linear
+    render, whose values above 1 are light, not clipping (only ``low`` applies to it)."""
     s = np.asarray(sim_srgb, np.float64)
     r = np.asarray(real_srgb, np.float64)
     out: dict[str, str] = {}
     for k, name in enumerate(names):
         for who, v, clipped in (("simulated", s[k], sim_clipped), ("real", r[k], real_clipped)):
+            top = np.inf if sim_float and who == "simulated" else high
             if name in clipped:
                 out[name] = f"clipped in the {who} chart (outside the encoded range)"
-            elif np.any(v >= high):
+            elif np.any(v >= top):
                 out[name] = f"saturated in the {who} chart (a channel >= {high:g})"
             elif np.any(v <= low):
                 out[name] = f"crushed to black in the {who} chart (a channel <= {low:g})"

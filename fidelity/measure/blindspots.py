@@ -18,9 +18,12 @@ The chart ΔE averages 24 patches, 18 of them coloured and none darker than the 
   :func:`banding` estimates the levels an integer-coded image really uses from its smooth
   regions: between neighbouring pixels that differ a little (at most
   :data:`SMOOTH_STEP_FRACTION` of the code range, so not across patch or object edges), the
-  most common non-zero step is the quantisation step ``q``; effective bits =
-  log2(code range / q + 1). An image without enough such pairs (only flat patches and sharp
-  edges, as a closed-form chart render) cannot be judged, and says so.
+  quantisation step ``q`` is the largest step of which nearly all of them
+  (:data:`MULTIPLE_SHARE`) are multiples; effective bits = log2(code range / q + 1). A
+  posterised image steps only by multiples of its level spacing; a clean image's steps take
+  every value, whatever the one most common among them (a noise-free 16-bit render's few
+  antialiased edges), so it keeps its full depth. An image without enough such pairs (only
+  flat patches and sharp edges, as a closed-form chart render) cannot be judged, and says so.
 
 Each check returns a :class:`BlindSpot`: whether the camera is at risk, the value measured, the
 threshold and a one-line reason; :func:`warnings` keeps those at risk.
@@ -51,6 +54,12 @@ SHADOW_PROBE_L = 10.0
 MIN_BITS = 6
 #: Neighbour differences up to this share of the code range count as smooth (not an edge).
 SMOOTH_STEP_FRACTION = 0.08
+#: Share of the smooth neighbour steps that must be multiples of the quantisation step
+#: (the rest: edges and gradients between the levels, JPEG's rounding).
+MULTIPLE_SHARE = 0.9
+#: Smallest most common step (codes) whose levels may lie between codes (see
+#: :func:`quantisation_step`).
+MIN_SPACING = 4
 #: Fewest smooth neighbour pairs (per channel, summed) needed to judge banding.
 MIN_SMOOTH_PAIRS = 2000
 #: Kinds of check, in report order.
@@ -179,6 +188,18 @@ _CODE_RANGE: dict[str, int] = {"uint8": 255, "int8": 127, "uint16": 65535, "int1
 
 #: Pixels of an image whose neighbour steps are counted at a time (bounded memory).
 STEP_BLOCK_PIXELS = 1 << 20
+#: Most pixels whose neighbour steps are counted: a larger image's steps are counted in every
+#: ``s``-th block of :data:`STEP_BLOCK_PIXELS` (whole rows, spread over its height), the least
+#: ``s`` that leaves at most this many (millions of neighbour pairs still: the most common step
+#: is as sure as in the whole image).
+STEP_SAMPLE_PIXELS = 1 << 22
+
+
+def step_stride(shape: tuple[int, ...], limit: int = STEP_SAMPLE_PIXELS) -> int:
+    """Every how many blocks of rows :func:`effective_bits` counts the steps of an image of
+    ``shape`` (1: all of them)."""
+    pixels = int(np.prod(shape[:2]))
+    return max(1, math.ceil(pixels / limit))
 
 
 def _numpy_steps(a: np.ndarray, b: np.ndarray, limit: int) -> np.ndarray:
@@ -206,24 +227,58 @@ def _opencv_steps(a: np.ndarray, b: np.ndarray, limit: int) -> np.ndarray:
 
 def effective_bits(codes: np.ndarray, code_range: int,
                    smooth_fraction: float = SMOOTH_STEP_FRACTION,
-                   min_pairs: int = MIN_SMOOTH_PAIRS) -> tuple[float | None, int, int]:
-    """(effective bits or None, the step ``q``, smooth pairs found) of integer codes (H, W, C)
-    (module docstring). The steps are counted a block of rows at a time, so that memory stays
-    a few MB whatever the image's size."""
+                   min_pairs: int = MIN_SMOOTH_PAIRS) -> tuple[float | None, float, int]:
+    """(effective bits or None, the quantisation step ``q`` in codes
+    (:func:`quantisation_step`; 0 when not judged), smooth pairs found) of integer codes
+    (H, W, C) (module docstring). The steps are counted a block of rows at a time, so that memory stays
+    a few MB whatever the image's size; of an image over :data:`STEP_SAMPLE_PIXELS`, in every
+    :func:`step_stride`-th block only."""
     a = np.asarray(codes)
     limit = max(1, int(round(smooth_fraction * code_range)))
     counts = np.zeros(limit + 1, dtype=np.int64)
     rows = max(1, STEP_BLOCK_PIXELS // max(int(np.prod(a.shape[1:])), 1))
     count = _opencv_steps if a.dtype in (np.uint8, np.uint16) else _numpy_steps
-    for y in range(0, max(a.shape[0], 1), rows):
+    for y in range(0, max(a.shape[0], 1), rows * step_stride(a.shape)):
         block = a[y:y + rows + 1]  # one row of overlap: the steps down
         counts += count(block[:-1], block[1:], limit) if len(block) > 1 else 0
         counts += count(block[:rows, :-1], block[:rows, 1:], limit)
     pairs = int(counts.sum())
     if pairs < min_pairs:
         return None, 0, pairs
-    q = int(np.argmax(counts))
+    q = quantisation_step(counts)
     return float(math.log2(code_range / q + 1.0)), q, pairs
+
+
+def quantisation_step(counts: np.ndarray, share: float = MULTIPLE_SHARE) -> float:
+    """The quantisation step of a histogram of neighbour steps (``counts[d]``: pairs that
+    differ by ``d`` codes, ``d`` >= 1; ``counts[0]`` ignored), in codes (>= 1).
+
+    The levels of a posterised image are ``round(k Δ)``: every step lies within one code of a
+    multiple of the spacing ``Δ``. The most common step ``q`` is a multiple of it: ``Δ`` is the
+    largest divisor of ``q`` of which at least ``share`` of the steps are multiples (levels
+    on whole codes), else the mean of the steps ``q - 1`` to ``q + 1`` when ``share`` of them
+    lie within one code of its multiples (levels between codes: 5 bits in 8 step by 8 and 9;
+    only for a most common step of :data:`MIN_SPACING` codes or more, where one code is a
+    small part of the spacing); else the image is not posterised and the step is 1 code.
+    """
+    c = np.asarray(counts, np.int64).copy()
+    c[0] = 0
+    total = int(c.sum())
+    if total <= 0:
+        return 1.0
+    mode = int(np.argmax(c))
+    for q in range(mode, 1, -1):
+        if mode % q == 0 and int(c[q::q].sum()) >= share * total:
+            return float(q)
+    if mode < MIN_SPACING:
+        return 1.0
+    near = np.arange(mode - 1, min(mode + 2, len(c)))
+    spacing = float(np.average(near, weights=c[near]))
+    steps = np.arange(len(c))
+    multiple = np.maximum(np.rint(steps / spacing), 1.0)
+    if int(c[np.abs(steps - multiple * spacing) < 1.0].sum()) >= share * total:
+        return spacing
+    return 1.0
 
 
 def _codes(pixels: np.ndarray, code_range: int) -> np.ndarray:
@@ -251,18 +306,20 @@ def banding(pixels: np.ndarray, pixel_type: str, *, min_bits: int = MIN_BITS) ->
     else:
         codes = _codes(arr, rng)
     bits, q, pairs = effective_bits(codes, rng)
+    sampled = step_stride(codes.shape)
+    of = f" in every {sampled}th block of rows" if sampled > 1 else ""
     if bits is None:
         return BlindSpot("banding", None, None, float(min_bits),
-                         f"banding not judged: only {pairs} small steps between neighbouring "
+                         f"banding not judged: only {pairs} small steps{of} between neighbouring "
                          "pixels (the image has no smooth gradients, e.g. flat patches only)")
     at_risk = bits <= min_bits + 0.5
     if at_risk:
-        reason = (f"posterisation: smooth regions of the image step by {q} codes of "
-                  f"{rng} ({pairs} neighbour pairs), about {bits:.1f} effective bits (at most "
+        reason = (f"posterisation: smooth regions of the image step by {q:.4g} codes of "
+                  f"{rng} ({pairs} neighbour pairs{of}), about {bits:.1f} effective bits (at most "
                   f"{min_bits} is a risk); gradients band into false contours, which flat "
                   "patches cannot show")
     else:
-        reason = (f"banding: smooth regions step by {q} code(s) of {rng}, about {bits:.1f} "
+        reason = (f"banding: smooth regions step by {q:.4g} code(s) of {rng}, about {bits:.1f} "
                   "effective bits")
     return BlindSpot("banding", at_risk, bits, float(min_bits), reason)
 
@@ -311,6 +368,8 @@ __all__ = [
     "KINDS",
     "MIN_BITS",
     "MIN_SMOOTH_PAIRS",
+    "MIN_SPACING",
+    "MULTIPLE_SHARE",
     "SHADOW_PROBE_L",
     "SHADOW_SLOPE_TOLERANCE",
     "SMOOTH_STEP_FRACTION",
@@ -320,6 +379,7 @@ __all__ = [
     "bit_depth",
     "chart_blind_spots",
     "effective_bits",
+    "quantisation_step",
     "shadow_tone",
     "warnings",
 ]

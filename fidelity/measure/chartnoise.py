@@ -188,7 +188,7 @@ class ChartNoise:
 
 def chart_noise(samples: Sequence[np.ndarray], names: Sequence[str], grey: str, *,
                 linearisation: str, saturation: float | None = None,
-                black_level: float = 0.0) -> ChartNoise:
+                black_level: float = 0.0, method: str = METHOD) -> ChartNoise:
     """The noise of a chart's neutral patches from their window pixels in linear light.
 
     Parameters
@@ -207,6 +207,8 @@ def chart_noise(samples: Sequence[np.ndarray], names: Sequence[str], grey: str, 
         image); None: unknown (scene-linear floats), no dynamic range.
     black_level
         The signal of no light, taken off the means of the photon-transfer fit.
+    method
+        How the samples were taken (kept in the record; default :data:`METHOD`).
 
     Returns
     -------
@@ -238,7 +240,7 @@ def chart_noise(samples: Sequence[np.ndarray], names: Sequence[str], grey: str, 
     except InvalidValueError as e:  # a saturation not above the black level
         refusal = ("shape", str(e))
     return ChartNoise(tuple(names), noise, grey, g.snr, g.snr_db, transfer, refusal,
-                      linearisation)
+                      linearisation, method)
 
 
 __all__ = ["GREY_LUMINANCE", "GREY_PATCH", "METHOD", "PTC_CHANNEL", "ChartNoise", "chart_noise", "grey_index"]

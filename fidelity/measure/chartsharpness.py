@@ -347,7 +347,17 @@ def _measure_edge(pixels: np.ndarray, linearise: Linearise, loc: ChartLocation,
         return EdgeSharpness(direction, pair, None, angle, None, (), (
             "outside", f"{pair[0]} / {pair[1]}: the edge ROI reaches outside the image"))
     roi_box = (x0, y0, 2 * hx, 2 * hy)
-    roi = linearise(np.asarray(pixels)[y0:y0 + 2 * hy, x0:x0 + 2 * hx])
+    method, out = _edge_channels(pixels, linearise, roi_box, vertical_edge, saturation, black,
+                                 angle)
+    return EdgeSharpness(direction, pair, method, angle, roi_box, out)
+
+
+def _edge_channels(pixels: np.ndarray, linearise: Linearise, roi_box: tuple[int, int, int, int],
+                   vertical_edge: bool, saturation: float | None, black: float | None,
+                   angle: float) -> tuple[str, tuple[ChannelMTF, ...]]:
+    """The method and the R, G, B and Y :class:`ChannelMTF` of the edge in ``roi_box``."""
+    x0, y0, w, h = roi_box
+    roi = linearise(np.asarray(pixels)[y0:y0 + h, x0:x0 + w])
     chans = {"R": roi[..., 0], "G": roi[..., 1], "B": roi[..., 2], "Y": _luminance(roi)}
     orientation: Orientation = "vertical" if vertical_edge else "horizontal"
     use_esfr = angle >= ESFR_MIN_ANGLE_DEG
@@ -381,8 +391,7 @@ def _measure_edge(pixels: np.ndarray, linearise: Linearise, loc: ChartLocation,
             except RefusedEdge as e:
                 out.append(ChannelMTF(name, None, None, None, None, None, None, None,
                                       (e.reason, f"{name} channel {e}")))
-    return EdgeSharpness(direction, pair, "e-SFR" if use_esfr else "edge fit", angle, roi_box,
-                         tuple(out))
+    return ("e-SFR" if use_esfr else "edge fit"), tuple(out)
 
 
 def chart_sharpness(pixels: np.ndarray, location: ChartLocation,
@@ -438,6 +447,105 @@ def chart_sharpness(pixels: np.ndarray, location: ChartLocation,
     return ChartSharpness(edges, linearisation)
 
 
+@dataclass(frozen=True)
+class EdgeTargetCorners:
+    """A slanted-edge target's corners in the image (a chart scene's manifest gives them:
+    :func:`fidelity.scene.manifest.read_manifest`).
+
+    Attributes
+    ----------
+    square
+        The dark square's four corners ``(x, y)`` in pixels (pixel (row i, column j) at
+        x = j, y = i): top left, top right, bottom right, bottom left as seen.
+    field
+        The light field's four corners around it, the same order.
+    source
+        Where the corners came from (kept in the record).
+    """
+
+    square: tuple[tuple[float, float], ...]
+    field: tuple[tuple[float, float], ...]
+    source: str = "manifest"
+
+    def __post_init__(self) -> None:
+        for name in ("square", "field"):
+            pts = np.asarray(getattr(self, name), np.float64)
+            if pts.shape != (4, 2) or not np.all(np.isfinite(pts)):
+                raise ValueError(f"edge target {name}: need 4 finite (x, y) corners")
+
+
+#: Share of the square's side an edge ROI may take along the edge (centred, away from its
+#: corners).
+TARGET_ALONG_FRACTION = 0.6
+TARGET_METHOD = ("the slanted-edge target's square (corners given): its right edge for the "
+                 "horizontal MTF and its bottom edge for the vertical, an axis-aligned crop "
+                 "centred on each; e-SFR (ISO 12233:2017) where the edge is turned at least 2 "
+                 "degrees from the grid, else the erf edge fit; u of R, G, B's MTF50 from Y's "
+                 "bootstrap scaled by their noise-to-contrast ratio")
+
+
+def target_sharpness(pixels: np.ndarray, target: EdgeTargetCorners, *, linearise: Linearise,
+                     linearisation: str, saturation: float | None = None,
+                     black: float | None = None) -> ChartSharpness:
+    """The MTF of a slanted-edge target's square, across its right edge (``horizontal``) and
+    its bottom edge (``vertical``), per channel, as :func:`chart_sharpness` measures a chart
+    edge.
+
+    Parameters
+    ----------
+    pixels
+        The ``(H, W, 3)`` image as stored; only the ROIs are read and linearised.
+    target
+        The square's and the field's corners in pixels (:class:`EdgeTargetCorners`).
+    linearise, linearisation, saturation, black
+        As for :func:`chart_sharpness`.
+
+    Returns
+    -------
+    ChartSharpness
+        Two :class:`EdgeSharpness` (``patches`` ``("edge target square", "edge target
+        field")``), or their refusals: an ROI below the e-SFR's minimum size (the target too
+        small in the image) or reaching outside the image. ``method`` :data:`TARGET_METHOD`.
+    """
+    sq = np.asarray(target.square, np.float64)
+    fld = np.asarray(target.field, np.float64)
+    height, width = pixels.shape[:2]
+    pair = ("edge target square", "edge target field")
+    edges = []
+    # the right edge (top right -> bottom right) and the bottom one (bottom right -> left)
+    for direction, (a, b) in (("horizontal", (1, 2)), ("vertical", (2, 3))):
+        vertical_edge = direction == "horizontal"
+        p, q = sq[a], sq[b]
+        mid = (p + q) / 2
+        d = q - p
+        side = float(np.hypot(*d))
+        angle = math.degrees(math.atan2(abs(d[0]), abs(d[1])) if vertical_edge
+                             else math.atan2(abs(d[1]), abs(d[0])))
+        # the light margin from the edge's midpoint to the field's edge beyond it
+        margin = (float(fld[:, 0].max() - mid[0]) if vertical_edge
+                  else float(fld[:, 1].max() - mid[1]))
+        half_across = int(min(HALF_ACROSS_PX, math.floor(ACROSS_FRACTION * min(margin,
+                                                                                side / 2))))
+        half_along = int(min(HALF_ALONG_PX, math.floor(TARGET_ALONG_FRACTION * side / 2)))
+        if 2 * half_across < MIN_ACROSS_PX or 2 * half_along < MIN_EDGE_PX:
+            edges.append(EdgeSharpness(direction, pair, None, angle, None, (), (
+                "too-short", f"edge target: the target is too small in the image for an edge "
+                             f"ROI ({2 * half_across} px across the edge, {2 * half_along} px "
+                             f"along; need {MIN_ACROSS_PX} and {MIN_EDGE_PX})")))
+            continue
+        hx, hy = (half_across, half_along) if vertical_edge else (half_along, half_across)
+        x0, y0 = int(round(mid[0])) - hx, int(round(mid[1])) - hy
+        if x0 < 0 or y0 < 0 or x0 + 2 * hx > width or y0 + 2 * hy > height:
+            edges.append(EdgeSharpness(direction, pair, None, angle, None, (), (
+                "outside", "edge target: the edge ROI reaches outside the image")))
+            continue
+        roi_box = (x0, y0, 2 * hx, 2 * hy)
+        method, channels = _edge_channels(pixels, linearise, roi_box, vertical_edge,
+                                          saturation, black, angle)
+        edges.append(EdgeSharpness(direction, pair, method, angle, roi_box, channels))
+    return ChartSharpness(tuple(edges), linearisation, TARGET_METHOD)
+
+
 def grid_point(k: int, cols: int) -> np.ndarray:
     """Grid ``(u, v)`` of patch ``k`` of a chart ``cols`` wide (row-major)."""
     return np.array([k % cols, k // cols], dtype=np.float64)
@@ -445,4 +553,5 @@ def grid_point(k: int, cols: int) -> np.ndarray:
 
 __all__ = ["ACROSS_FRACTION", "ALONG_FRACTION", "CHANNELS", "DIRECTIONS", "DRAWS",
            "ESFR_MIN_ANGLE_DEG", "HALF_ACROSS_PX", "HALF_ALONG_PX", "METHOD", "MIN_GAP", "ChannelMTF",
-           "ChartSharpness", "EdgeSharpness", "chart_sharpness", "grid_point"]
+           "ChartSharpness", "EdgeSharpness", "EdgeTargetCorners", "TARGET_ALONG_FRACTION", "TARGET_METHOD",
+           "chart_sharpness", "grid_point", "target_sharpness"]

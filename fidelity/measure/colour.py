@@ -369,14 +369,17 @@ def fit_tone(m: ChartMeasurement, neutral_indices: Sequence[int] | None = None
              ) -> ToneFit | None:
     """Least-squares fit of :class:`ToneFit` to the neutral patches (default
     :func:`neutral_patches`) in log2 Y; None when fewer than two of them have light in both
-    the measurement and the reference, or all at one reference level."""
+    the measurement and the reference, or all at one reference level. A patch clipped at
+    white (an encoded channel at 1 or above: the image holds no more light there) is left
+    out, so that an over-exposed chart reads its exposure, not a flatter gamma."""
     idx = list(neutral_patches(m) if neutral_indices is None else neutral_indices)
     if len(idx) < 2:
         return None
     y_ref = cm.lab_to_xyz(np.asarray(m.reference_lab, np.float64)[idx])[:, 1]
     y_meas = cm.lab_to_xyz(np.asarray(m.lab, np.float64)[idx])[:, 1]
     white = float(cm.WHITEPOINT_D65_XYZ[1])
-    ok = (np.isfinite(y_ref) & np.isfinite(y_meas) & (y_ref > 0) & (y_meas > 0))
+    clipped = np.any(np.asarray(m.srgb, np.float64)[idx] >= 1.0, axis=1)
+    ok = (np.isfinite(y_ref) & np.isfinite(y_meas) & (y_ref > 0) & (y_meas > 0) & ~clipped)
     if int(ok.sum()) < 2:
         return None
     x = np.log2(y_ref[ok] / white / 0.18)

@@ -157,8 +157,9 @@ def variance_uncertainty(x: ArrayLike, *, design_effect: float = 1.0) -> tuple[f
     if a.min() == a.max():  # exactly 0, not the rounding of a mean of equal values
         return 0.0, 0.0
     d = a - a.mean()
-    s2 = float(d @ d) / (n - 1)
-    m4 = float(np.mean(d ** 4))
+    d2 = d * d
+    s2 = float(d2.sum()) / (n - 1)
+    m4 = float(d2 @ d2) / n
     var = design_effect * (m4 - (n - 3) / (n - 1) * s2 * s2) / n
     return s2, float(math.sqrt(max(0.0, var)))
 
@@ -627,6 +628,9 @@ class FrameNoise:
         ``s^2_y = s^2_y.measured - sigma^2_y / L``: the variance over pixels of the mean frame
         (``ddof = 1``) less the temporal variance the average keeps (EMVA 1288 4.0); may be
         slightly negative without fixed-pattern noise.
+    u_spatial_variance
+        Its standard uncertainty (normal data): ``s^2_y.measured sqrt(2 / (M N - 1))`` and
+        ``u(sigma^2_y) / L`` combined in quadrature.
     fixed_pattern_noise
         ``sqrt(max(spatial_variance, 0))`` (DSNU in the dark, PRNU times the mean when lit).
     column_variance
@@ -649,6 +653,7 @@ class FrameNoise:
     u_temporal_variance: float
     temporal_noise: float
     spatial_variance: float
+    u_spatial_variance: float
     fixed_pattern_noise: float
     column_variance: float
     row_variance: float
@@ -732,6 +737,8 @@ def temporal_and_fixed_pattern(frames: ArrayLike) -> FrameNoise:
     return FrameNoise(frames=big_l, rows=m, columns=nn, mean=grand, temporal_variance=temporal,
                       u_temporal_variance=u_temporal, temporal_noise=math.sqrt(temporal),
                       spatial_variance=spatial,
+                      u_spatial_variance=math.hypot(measured * math.sqrt(2.0 / (m * nn - 1)),
+                                                    u_temporal / big_l),
                       fixed_pattern_noise=math.sqrt(max(spatial, 0.0)), column_variance=col,
                       row_variance=row, pixel_variance=pix,
                       frame_means=tuple(float(v) for v in frame_means))

@@ -52,7 +52,6 @@ from fidelity.chart.locate import (
     DEFAULT_WINDOW,
     ChartLocation,
     PatchWindow,
-    apply_homography,
     grid_centres,
     homography_from_points,
     locate_chart,
@@ -62,8 +61,14 @@ from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import DEFAULT_REFERENCE, Reference, load_reference
 from fidelity.core.errors import FidelityError, InvalidValueError, unknown_name
 from fidelity.measure import uncertainty as unc
+from fidelity.measure.chartnoise import METHOD as CHART_NOISE_METHOD
 from fidelity.measure.chartnoise import ChartNoise, chart_noise, grey_index
-from fidelity.measure.chartsharpness import ChartSharpness, chart_sharpness
+from fidelity.measure.chartsharpness import (
+    ChartSharpness,
+    EdgeTargetCorners,
+    chart_sharpness,
+    target_sharpness,
+)
 from fidelity.measure.colour import (
     MAX_EXPOSURE_EV,
     OCCLUDED_REASON,
@@ -74,6 +79,7 @@ from fidelity.measure.noise import RefusedFit
 from fidelity.measure.uncertainty import (
     PatchSpread,
     UncertaintyBudget,
+    block_sample,
     image_blocks,
     patch_spread,
 )
@@ -225,6 +231,14 @@ class ImageMeasurement:
     sharpness
         The MTF of the chart's vertical and horizontal patch edges per channel
         (:func:`fidelity.measure.chartsharpness.chart_sharpness`; None: not measured).
+    neutral_ev
+        The exposure correction the neutral patches ask for (:func:`exposure_from_neutrals`),
+        in EV: ``exposure_ev`` itself when auto; with a fixed exposure, how far the image's own
+        exposure is from it (:func:`fidelity.prediction.exposure.judge_exposure`). None where
+        the neutral patches set none (black, or beyond the range).
+    linear_means
+        The patches' mean linear sRGB, shape (n, 3), as read: before the exposure correction
+        and the clipping (what :mod:`fidelity.colour.diagnosis` fits); None: not kept.
     """
 
     measurement: ChartMeasurement
@@ -246,6 +260,10 @@ class ImageMeasurement:
     noise: ChartNoise | None = None
     #: the MTF of the chart's patch edges (:mod:`fidelity.measure.chartsharpness`)
     sharpness: ChartSharpness | None = None
+    #: the exposure correction the neutral patches ask for, in EV (None: they set none)
+    neutral_ev: float | None = None
+    #: the patches' mean linear sRGB as read (before exposure correction and clipping)
+    linear_means: np.ndarray | None = None
 
     @property
     def mean_delta_e(self) -> float:
@@ -259,7 +277,8 @@ class ImageMeasurement:
 
     def to_json(self) -> dict[str, Any]:
         """JSON form: the measurement (:meth:`ChartMeasurement.to_json`, each patch with its
-        ``valid_pixels`` and ``bad_pixels``), ``exposure_ev``, ``exposure_mode``, ``encoding``,
+        ``valid_pixels`` and ``bad_pixels``), ``exposure_ev``, ``exposure_mode``, ``neutral_ev``,
+        ``encoding``,
         ``bad_pixels``, ``clipped_patches``, ``reference``, ``location``, ``detection``,
         ``corner_checks``, ``colourspace``, ``image``, ``uncertainty``, ``noise`` and
         ``sharpness``."""
@@ -270,6 +289,7 @@ class ImageMeasurement:
         d.update(
             exposure_ev=self.exposure_ev,
             exposure_mode=self.exposure_mode,
+            neutral_ev=self.neutral_ev,
             encoding=self.encoding,
             bad_pixels=self.bad_pixels.to_json(),
             clipped_patches=list(self.clipped_patches),
@@ -346,6 +366,35 @@ def _to_linear(values: np.ndarray, encoding: str, to_srgb: np.ndarray, identity:
     return out
 
 
+def window_linear(values: np.ndarray, encoding: str, to_srgb: np.ndarray
+                  ) -> tuple[np.ndarray, str]:
+    """Pixel values ``(..., 3)`` in linear sRGB (float64), as the one-frame noise measurement
+    makes them (:func:`noise_and_sharpness`), and how.
+
+    Parameters
+    ----------
+    values
+        Pixel values as stored: 8/16-bit codes (``code / (2**bits - 1)``) or floats.
+    encoding
+        ``linear`` or ``srgb`` (decoded with the IEC 61966-2-1 transfer function).
+    to_srgb
+        The ``3 x 3`` matrix from the pixels' primaries to linear sRGB.
+
+    Returns
+    -------
+    tuple
+        The linear values (same shape) and the linearisation as the noise record names it.
+    """
+    identity = bool(np.array_equal(to_srgb, np.eye(3)))
+    how = ("none (linear input)" if encoding == "linear"
+           else "sRGB transfer function decoded (IEC 61966-2-1)")
+    if is_coded(values):
+        how += f", {values.dtype} codes / {np.iinfo(values.dtype).max}"
+    if not identity:
+        how += ", primaries converted to linear sRGB"
+    return _to_linear(np.asarray(values), encoding, to_srgb, identity), how
+
+
 def _patch_linear(vals: np.ndarray, encoding: str, negatives: str, to_srgb: np.ndarray,
                   identity: bool) -> tuple[np.ndarray, dict[str, int]]:
     """The valid pixels of one window's values ``(n, 3)`` in linear sRGB, float64
@@ -395,18 +444,32 @@ def _window_spread(vals: np.ndarray, linear: np.ndarray | None, encoding: str, n
     ``(n, 3)``: ``linear`` its valid pixels in linear sRGB when already computed, the code
     values (:func:`as_float32`) when the pixels are integer codes (``step``); the design
     effect of correlated neighbours from the image's blocks the ``window`` touches (an image
-    ``width`` pixels wide), when every pixel of it is valid."""
-    if linear is None:
-        linear, _ = _patch_linear(vals, encoding, negatives, to_srgb, identity)
+    ``width`` pixels wide), when every pixel of it is valid. A window of more than
+    :data:`~fidelity.measure.uncertainty.SPREAD_SAMPLE_PIXELS` pixels: its statistics from a
+    lattice of its whole blocks (:func:`~fidelity.measure.uncertainty.block_sample`), over its
+    own count of valid pixels."""
+    keep = block_sample(window.y0, window.x0, window.mask)
+    # the statistics are the sample's (all of the window without one), the count of valid
+    # pixels the window's (no linear pixels given: integer codes, every pixel valid)
+    valid = len(linear) if linear is not None else len(vals)
+    sub = vals if keep is None else vals[keep]
+    lin = (linear if keep is None and linear is not None
+           else _patch_linear(sub, encoding, negatives, to_srgb, identity)[0])
     codes = None
     if step:
-        v = as_float32(vals).astype(np.float64)
-        codes = v if is_coded(vals) else v[~_bad_counts(v, negatives)[0]]
+        v = as_float32(sub).astype(np.float64)
+        codes = v if is_coded(sub) else v[~_bad_counts(v, negatives)[0]]
     blocks = None
-    if len(linear) == len(vals):
-        rows, cols = window.indices()
+    if valid == len(vals) and len(lin) == len(sub):
+        if keep is None:
+            rows, cols = window.indices()
+        else:  # the kept pixels' indices alone (row-major, as rows[keep], cols[keep])
+            kept = np.zeros(window.mask.shape, bool)
+            kept[window.mask] = keep
+            r, c = np.nonzero(kept)
+            rows, cols = r.astype(np.int64) + window.y0, c.astype(np.int64) + window.x0
         blocks = image_blocks(rows, cols, width)
-    return patch_spread(linear, codes, blocks)
+    return patch_spread(lin, codes, blocks, count=valid)
 
 
 def measure_pixels(
@@ -425,6 +488,9 @@ def measure_pixels(
     colourspace: str | Sequence[float] = "sRGB",
     uncertainty: bool = True,
     texture: bool = True,
+    corner_checks: bool = True,
+    edge_target: EdgeTargetCorners | None = None,
+    levels: Mapping[int, np.ndarray] | None = None,
 ) -> ImageMeasurement:
     """Audit a chart in an ``(H, W, 3)`` image array (see the module docstring).
 
@@ -472,6 +538,18 @@ def measure_pixels(
     texture
         Also measure the chart's noise and sharpness in linear light
         (:func:`noise_and_sharpness`).
+    edge_target
+        A slanted-edge target's corners in the image (a chart scene's manifest gives them):
+        the sharpness is measured on its square's edges instead of the chart's; None: on the
+        chart's.
+    corner_checks
+        Check given ``corners`` against the reference layout
+        (:func:`fidelity.chart.find.cascade.check_corners`); False for corners known exactly
+        (a chart the caller painted), which are then not checked.
+    levels
+        Reductions of the image the finder may use instead of computing them
+        (:func:`fidelity.chart.find.cascade.find_chart`; a large JPEG's quarter-size decode,
+        :func:`measure_image`); None: computed from ``pixels``.
     """
     to_srgb = cm.matrix_rgb_to_linear_srgb(colourspace)
     if encoding not in ENCODINGS:
@@ -505,12 +583,12 @@ def measure_pixels(
     checks = None
     if corners is None:
         found = find_chart(arr, encoding=encoding, method=detection, rows=ref.rows,
-                             cols=ref.cols)
+                           cols=ref.cols, levels=levels)
         corners = found.corners
         checks = found.checks
     loc = locate_chart(corners, arr.shape, rows=ref.rows, cols=ref.cols, window=window,
                        patch_names=ref.patch_names)
-    if found is None and (ref.rows, ref.cols) == (4, 6):
+    if found is None and corner_checks and (ref.rows, ref.cols) == (4, 6):
         checks = check_corners(arr, loc.corners, encoding=encoding)
     # patches the finder judged covered (a leaf, a hand) are measured but left out of the
     # exposure fit and the chart's statistics, and named
@@ -557,12 +635,18 @@ def measure_pixels(
         means[k] = (histograms[-1] @ _code_linear(arr.dtype.str, encoding) / valid if coded
                     else lin.mean(axis=0))
         valid_counts.append(valid)
+    neutrals = [k for k in ref.neutral_indices if ref.patch_names[k] not in excluded]
     if mode == "auto":
-        neutrals = [k for k in ref.neutral_indices if ref.patch_names[k] not in excluded]
         ev = exposure_from_neutrals(means, ref.lab, neutrals or ref.neutral_indices,
                                     ref.patch_names)
+        neutral_ev: float | None = ev
     else:
         ev = float(exposure)
+        try:  # what the neutral patches ask for: the fixed exposure's error
+            neutral_ev = exposure_from_neutrals(means, ref.lab, neutrals or ref.neutral_indices,
+                                                ref.patch_names)
+        except InvalidValueError:  # black neutrals, or beyond the range: no error to judge
+            neutral_ev = None
     scale = 2.0 ** ev
     with np.errstate(over="ignore", invalid="ignore"):
         exposed = means * scale
@@ -600,21 +684,56 @@ def measure_pixels(
             excluded=tuple(excluded))
     chart_noise_, sharpness = (noise_and_sharpness(arr, loc, means, ref, encoding=encoding,
                                                    negatives=negatives, to_srgb=to_srgb,
-                                                   neutral_samples=neutral_lin)
+                                                   neutral_samples=neutral_lin,
+                                                   edge_target=edge_target)
                                if texture else (None, None))
     return ImageMeasurement(
         measurement=measurement, exposure_ev=ev, exposure_mode=mode, encoding=encoding,
         bad_pixels=bad_pixels, valid_pixels=tuple(valid_counts), clipped_patches=clipped,
         location=loc, reference=ref, image=image, detection=found,
         colourspace=_colourspace_name(colourspace), corner_checks=checks,
-        uncertainty=budget, noise=chart_noise_, sharpness=sharpness,
+        uncertainty=budget, noise=chart_noise_, sharpness=sharpness, neutral_ev=neutral_ev,
+        linear_means=means,
     )
+
+
+#: Most pixels of a neutral window its noise statistics are computed from
+#: (:func:`_noise_sample`): a 12 MP photo's windows (about 115 000 pixels) are read whole; a
+#: 108 MP photo's (about a million) from every third pixel down and across, whose variance is
+#: within about ``1 / sqrt(2 n)`` = 0.2 % of the whole window's for white noise and the same
+#: for noise correlated over more than 3 pixels (texture, demosaicing, compression).
+NOISE_SAMPLE_PIXELS = 1 << 17
+#: How a chart's noise is measured where every neutral window is read whole.
+NOISE_METHOD = CHART_NOISE_METHOD
+#: ... and where a window has more than :data:`NOISE_SAMPLE_PIXELS` valid pixels.
+NOISE_SAMPLED_METHOD = (CHART_NOISE_METHOD + f"; a window over {NOISE_SAMPLE_PIXELS} pixels: "
+                        "from every s-th pixel down and across (the least s leaving at most "
+                        "that many), n the sample's")
+
+
+def _noise_sample(y0: int, x0: int, mask: np.ndarray, limit: int = NOISE_SAMPLE_PIXELS
+                  ) -> np.ndarray | None:
+    """Which of a window's pixels (``mask`` ``(h, w)`` over the box from row ``y0``, column
+    ``x0``, row-major as :meth:`PatchWindow.values` lists them) its noise is computed from when
+    it has more than ``limit``: those whose image row and column are multiples of the least
+    stride ``s`` leaving at most about ``limit``, an even lattice over the whole window. None:
+    every pixel."""
+    count = int(np.count_nonzero(mask))
+    if count <= limit:
+        return None
+    stride = math.ceil(math.sqrt(count / limit))
+    h, w = mask.shape
+    down = (np.arange(h) + y0) % stride == 0
+    across = (np.arange(w) + x0) % stride == 0
+    keep: np.ndarray = (mask & down[:, None] & across[None, :])[mask]
+    return keep
 
 
 def noise_and_sharpness(pixels: np.ndarray, location: ChartLocation, means: np.ndarray,
                         reference: Reference, *, encoding: str, negatives: str,
                         to_srgb: np.ndarray,
-                        neutral_samples: Mapping[int, np.ndarray] | None = None
+                        neutral_samples: Mapping[int, np.ndarray] | None = None,
+                        edge_target: EdgeTargetCorners | None = None,
                         ) -> tuple[ChartNoise | None, ChartSharpness | None]:
     """The chart's noise and sharpness in LINEAR light (before any exposure correction).
 
@@ -641,6 +760,10 @@ def noise_and_sharpness(pixels: np.ndarray, location: ChartLocation, means: np.n
     neutral_samples
         Patch index -> its window's valid pixels in linear sRGB ``(n, 3)``, where the caller
         has them already (:func:`measure_pixels`); the others are read from ``pixels``.
+    edge_target
+        A slanted-edge target's corners in the image: the sharpness is measured on its square
+        (:func:`fidelity.measure.chartsharpness.target_sharpness`); None: on the chart's own
+        edges (:func:`fidelity.measure.chartsharpness.chart_sharpness`).
 
     Returns
     -------
@@ -667,16 +790,31 @@ def noise_and_sharpness(pixels: np.ndarray, location: ChartLocation, means: np.n
     if neutral:
         ref_y = cm.lab_to_xyz(np.asarray(reference.lab, np.float64))[:, 1]
         grey = names[grey_index(names, neutral, ref_y)]
-        samples = [neutral_samples[k] if neutral_samples is not None and k in neutral_samples
-                   else _patch_linear(location.windows[k].values(pixels), encoding, negatives,
-                                      to_srgb, identity)[0] for k in neutral]
+        samples = []
+        sampled = False
+        for k in neutral:
+            window = location.windows[k]
+            keep = _noise_sample(window.y0, window.x0, window.mask)
+            if keep is not None:  # a large window: its noise from a lattice of its pixels
+                sampled = True
+                samples.append(_patch_linear(window.values(pixels)[keep], encoding, negatives,
+                                             to_srgb, identity)[0])
+            elif neutral_samples is not None and k in neutral_samples:
+                samples.append(neutral_samples[k])
+            else:
+                samples.append(_patch_linear(window.values(pixels), encoding, negatives,
+                                             to_srgb, identity)[0])
         try:
             noise = chart_noise(samples, [names[k] for k in neutral], grey, linearisation=how,
-                                saturation=saturation)
+                                saturation=saturation,
+                                method=NOISE_SAMPLED_METHOD if sampled else NOISE_METHOD)
         except RefusedFit:
             noise = None
     sharpness: ChartSharpness | None = None
-    if (location.rows, location.cols) == (reference.rows, reference.cols):
+    if edge_target is not None:
+        sharpness = target_sharpness(pixels, edge_target, linearise=linearise,
+                                     linearisation=how, saturation=saturation, black=black)
+    elif (location.rows, location.cols) == (reference.rows, reference.cols):
         sharpness = chart_sharpness(pixels, location, luminance_linear_srgb(means), names,
                                     linearise=linearise, linearisation=how,
                                     saturation=saturation, black=black)
@@ -689,18 +827,20 @@ _CODE_STEPS = {"uint8": 1.0 / 255.0, "int8": 1.0 / 127.0, "uint16": 1.0 / 65535.
 
 
 #: Candidate pixels beyond which the placement component re-measures the windows on a regular
-#: lattice of them (about 110 MB while its draws run).
-PLACEMENT_CANDIDATES = 2_000_000
+#: lattice of them (about 28 MB while its draws run; an 8 MP chart's windows hold about 1.7
+#: million, and their placement term is of the order of 1e-4 ΔE00 either way).
+PLACEMENT_CANDIDATES = 500_000
 
 
 def _window_remeasurer(pixels: np.ndarray, location: ChartLocation, sigma: float,
-                       negatives: str, linear: Any) -> Any:
+                       negatives: str, linear: Any, table: np.ndarray | None = None) -> Any:
     """A function of jittered corners ``(4, 2)`` -> the linear patch means ``(n, 3)`` measured
     with the windows they give (the membership rule of :func:`fidelity.chart.locate.locate_chart`: a pixel
     belongs to a patch's window when its centre maps inside it), or None when a window is
     empty. The candidate pixels (each window's box grown by ``4 sigma + 2`` px), without the
-    bad ones (``negatives`` rule), are read and converted to linear sRGB (``linear``) once; a
-    draw maps them through its homography."""
+    bad ones (``negatives`` rule), are read and converted to linear sRGB (``linear``; integer
+    codes by ``table``, the linear value of each code, when given) once; a draw maps them
+    through its homography."""
     rows, cols = location.rows, location.cols
     height, width = pixels.shape[:2]
     grow = int(math.ceil(4.0 * sigma)) + 2
@@ -715,19 +855,6 @@ def _window_remeasurer(pixels: np.ndarray, location: ChartLocation, sigma: float
     # every candidate pixel costs about 56 bytes while the draws run: above
     # PLACEMENT_CANDIDATES, a regular lattice of them (the same for every draw) stands for all
     stride = max(1, math.ceil(math.sqrt(total / PLACEMENT_CANDIDATES)))
-    xy, values, owner = [], [], []
-    for k, y0, y1, x0, x1 in boxes:
-        gy, gx = np.mgrid[y0:y1 + 1:stride, x0:x1 + 1:stride]
-        v = as_float32(pixels[y0:y1 + 1:stride, x0:x1 + 1:stride]).astype(np.float64)
-        v = v.reshape(-1, 3)
-        keep = ~_bad_counts(v, negatives)[0]
-        xy.append(np.stack([gx.ravel(), gy.ravel()], axis=-1)[keep].astype(np.float64))
-        values.append(linear(v[keep]))
-        owner.append(np.full(int(keep.sum()), k))
-    points = np.concatenate(xy)
-    vals = np.concatenate(values)
-    who = np.concatenate(owner)
-    centre = grid_centres(rows, cols)[who]
     half = location.window / 2.0 + 1e-9
     n = rows * cols
     grid_corners = np.array([[0, 0], [cols - 1, 0], [cols - 1, rows - 1], [0, rows - 1]], float)
@@ -743,19 +870,47 @@ def _window_remeasurer(pixels: np.ndarray, location: ChartLocation, sigma: float
              float(np.linalg.norm(c0[3] - c0[0])) / max(rows - 1, 1),
              float(np.linalg.norm(c0[2] - c0[1])) / max(rows - 1, 1)]
     margin = 1.5 * grow / max(min(sides), 1e-9)
-    uv0 = apply_homography(np.linalg.inv(homography_from_points(grid_corners, c0)), points)
-    reach = np.max(np.abs(uv0 - centre), axis=1)
-    inner = reach <= half - margin
-    band = (reach > half - margin) & (reach <= half + margin)
-    fixed_counts = np.bincount(who[inner], minlength=n).astype(np.float64)
-    fixed_sums = np.stack([np.bincount(who[inner], weights=vals[inner, c], minlength=n)
-                           for c in range(3)], axis=-1)
+    g0 = np.linalg.inv(homography_from_points(grid_corners, c0))
+    centres = grid_centres(rows, cols)
+    fixed_counts = np.zeros(n)
+    fixed_sums = np.zeros((n, 3))
+    # one window's candidates at a time, as columns (no (N, 2) or (N, 3) temporaries over all
+    # of them): the grid position of each (the homography as apply_homography computes it),
+    # its reach from the window's centre; the inner ones summed, the band's kept
+    bx, by, bu, bv, bvals, bwho = [], [], [], [], [], []
+    for k, y0, y1, x0, x1 in boxes:
+        ys = np.arange(y0, y1 + 1, stride, dtype=np.float64)
+        xs = np.arange(x0, x1 + 1, stride, dtype=np.float64)
+        box = pixels[y0:y1 + 1:stride, x0:x1 + 1:stride].reshape(-1, 3)
+        coded = table is not None and is_coded(box)
+        v = box if coded else as_float32(box).astype(np.float64)
+        keep = np.ones(len(v), bool) if coded else ~_bad_counts(v, negatives)[0]
+        gx = np.broadcast_to(xs[None, :], (ys.size, xs.size)).reshape(-1)[keep]
+        gy = np.broadcast_to(ys[:, None], (ys.size, xs.size)).reshape(-1)[keep]
+        w = g0[2, 0] * gx + g0[2, 1] * gy + g0[2, 2]
+        cu0, cv0 = centres[k]
+        reach = np.maximum(np.abs((g0[0, 0] * gx + g0[0, 1] * gy + g0[0, 2]) / w - cu0),
+                           np.abs((g0[1, 0] * gx + g0[1, 1] * gy + g0[1, 2]) / w - cv0))
+        inner = reach <= half - margin
+        band = (reach > half - margin) & (reach <= half + margin)
+        near = v[keep][inner | band]
+        lin = table[near] if coded and table is not None else linear(near)
+        within = inner[inner | band]
+        fixed_counts[k] = float(np.count_nonzero(inner))
+        fixed_sums[k] = lin[within].sum(axis=0)
+        bx.append(gx[band])
+        by.append(gy[band])
+        bu.append(np.full(bx[-1].size, cu0))
+        bv.append(np.full(bx[-1].size, cv0))
+        bvals.append(lin[~within])
+        bwho.append(np.full(bx[-1].size, k))
     # the band's coordinates, centres and colours as contiguous columns: a draw's pass over
     # them is a few vector operations on each (no (N, 3) temporaries)
-    px, py = np.ascontiguousarray(points[band, 0]), np.ascontiguousarray(points[band, 1])
-    cu, cv = np.ascontiguousarray(centre[band, 0]), np.ascontiguousarray(centre[band, 1])
-    channels = [np.ascontiguousarray(vals[band, c]) for c in range(3)]
-    who = who[band]
+    px, py = np.concatenate(bx), np.concatenate(by)
+    cu, cv = np.concatenate(bu), np.concatenate(bv)
+    band_vals = np.concatenate(bvals) if bvals else np.zeros((0, 3))
+    channels = [np.ascontiguousarray(band_vals[:, c]) for c in range(3)]
+    who = np.concatenate(bwho).astype(np.int64)
 
     def remeasure(corners: np.ndarray) -> np.ndarray | None:
         if float(np.max(np.abs(np.asarray(corners, np.float64) - c0))) > grow:
@@ -801,7 +956,8 @@ def image_uncertainty(
     f = unc.linear_chart_function(ref_lab, neutral, exposure_ev, used=used)
     covs, notes = unc.spread_covariances(spreads, patch_names=reference.patch_names)
     noise, _ = unc.noise_component((), linear_means, f, covariances=covs,
-                                   designs=[sp.design for sp in spreads])
+                                   designs=[sp.design for sp in spreads],
+                                   sampled=[sp.sampled for sp in spreads])
     identity = np.array_equal(to_srgb, np.eye(3))
 
     def to_linear(v: np.ndarray) -> np.ndarray:
@@ -836,7 +992,9 @@ def image_uncertainty(
         sigma, how = 1.0, "found without refinement: one pixel assumed"
     else:
         sigma, how = unc.UNREFINED_PLACEMENT_PX, "corners given: a rectangular half pixel"
-    remeasure = _window_remeasurer(pixels, location, sigma, negatives, to_linear)
+    table = (_code_linear(pixels.dtype.str, encoding) if is_coded(pixels) and identity
+             else None)  # the linear value of each code, as to_linear gives it
+    remeasure = _window_remeasurer(pixels, location, sigma, negatives, to_linear, table)
     placement = unc.placement_component(remeasure, location.corners, sigma, how, f)
     if exposure_ev is None:
         exposure = unc.exposure_component(
@@ -866,6 +1024,7 @@ def measure_image(
     window: float = DEFAULT_WINDOW,
     detection: str = "cascade",
     inspect_image: Callable[[Image], object] | None = None,
+    edge_target: EdgeTargetCorners | None = None,
 ) -> ImageMeasurement:
     """Read an image (:func:`fidelity.chart.image.read_image`, as ``read`` says:
     :class:`ReadOptions`; an image file at its native depth) and audit its chart
@@ -901,6 +1060,9 @@ def measure_image(
         ``segmentation`` (:data:`fidelity.chart.find.cascade.CHART_FINDERS`).
     inspect_image
         Called with the :class:`Image` read once its chart is measured; None: not called.
+    edge_target
+        A slanted-edge target's corners in the image (:func:`measure_pixels`); None: the
+        sharpness is measured on the chart's edges.
 
     Returns
     -------
@@ -925,15 +1087,35 @@ def measure_image(
     info = img.info(sha256=sha256, encoding=enc)
     try:
         result = measure_pixels(img.pixels, corners, encoding=enc, exposure=read.exposure,
+                                levels=_decoded_levels(img) if corners is None else None,
                                 reference=reference, illuminant=illuminant, window=window,
                                 image=info, detection=detection, negatives=read.negatives,
                                 colourspace=(read.colourspace if read.colourspace is not None
-                                             else img.chromaticities or "sRGB"))
+                                             else img.chromaticities or "sRGB"),
+                                edge_target=edge_target)
     except FidelityError as exc:
         raise type(exc)(f"{img.where}: {exc}") from None
     if inspect_image is not None:
         inspect_image(img)
     return result
+
+
+def _decoded_levels(img: Image) -> dict[int, np.ndarray] | None:
+    """The finder's quarter-size level of a large JPEG, decoded by libjpeg's DCT scaling
+    (:func:`fidelity.chart.find.view.jpeg_level`: 0.1 s instead of a second of block means
+    over a 108 MP image), where ``img`` is that file's own 8-bit pixels (no recording, Bayer
+    mosaic or OpenColorIO conversion) over
+    :data:`~fidelity.chart.find.view.JPEG_LEVEL_PIXELS`; else None. Only the finder reads it:
+    the windows are read from the full image."""
+    from fidelity.chart.find import view  # noqa: PLC0415 (the finder, loaded where a chart is found)
+
+    px = img.pixels
+    if (img.file_format.lower() not in ("jpeg", "jpg") or img.recording is not None
+            or img.bayer is not None or img.ocio is not None or px.dtype != np.uint8
+            or px.shape[0] * px.shape[1] <= view.JPEG_LEVEL_PIXELS):
+        return None
+    level = view.jpeg_level(img.path, px)
+    return None if level is None else {view.JPEG_LEVEL_FACTOR: level}
 
 
 __all__ = [
@@ -948,6 +1130,7 @@ __all__ = [
     "luminance_linear_srgb",
     "noise_and_sharpness",
     "measure_image",
+    "window_linear",
     "measure_pixels",
     "image_uncertainty",
 ]

@@ -69,6 +69,14 @@ MIN_NOISE_PIXELS = 3
 BLOCK_PX = 16
 #: Fewest blocks a window must touch for their means to estimate its design effect.
 MIN_BLOCKS = 6
+#: Most pixels of a window its spread, design effect and code statistics are computed from
+#: (:func:`block_sample`): 128 whole :data:`BLOCK_PX`-square blocks, a design effect within
+#: about ``sqrt(2 / 127)`` = 13 % (relative standard error of the variance of the block means),
+#: a window's noise within 6 % and the chart's (the mean over 24 windows) within about 1.5 %:
+#: below the 3.5 % of the :data:`DRAWS` Monte Carlo draws themselves (``1 / sqrt(2 DRAWS)``).
+#: A larger window's statistics come from a regular lattice of its whole blocks, its mean from
+#: every pixel.
+SPREAD_SAMPLE_PIXELS = 128 * BLOCK_PX * BLOCK_PX
 #: Placement standard uncertainty per axis of a corner not refined by the finder (px): a
 #: rectangular distribution over one pixel (1/√12).
 UNREFINED_PLACEMENT_PX = 1.0 / math.sqrt(12.0)
@@ -257,7 +265,9 @@ class PatchSpread:
     deviation of the integer codes' values (``code / (2**bits - 1)``), None for float pixels;
     ``design`` ``(3,)``: per channel, the factor by which correlation between neighbouring
     pixels raises the variance of the mean over ``covariance / count``
-    (:func:`block_design_effect`; ones when not estimated).
+    (:func:`block_design_effect`; ones when not estimated); ``sampled``: the pixels these
+    statistics were computed from when fewer than ``count`` (a lattice of whole blocks,
+    :func:`block_sample`), None when from all of them.
     """
 
     count: int
@@ -266,6 +276,7 @@ class PatchSpread:
     code_mean: F64 | None = None
     code_std: F64 | None = None
     design: F64 | None = None
+    sampled: int | None = None
 
 
 def block_design_effect(values: F64, blocks: NDArray[np.int64],
@@ -286,13 +297,18 @@ def block_design_effect(values: F64, blocks: NDArray[np.int64],
     pixels the factor is 1 on average."""
     x = np.asarray(values, np.float64).reshape(-1, 3)
     n = x.shape[0]
-    ids, inverse, sizes = np.unique(np.asarray(blocks).reshape(-1), return_inverse=True,
-                                    return_counts=True)
-    count = ids.size
-    if count < min_blocks or n < 2:
+    b = np.asarray(blocks, np.int64).reshape(-1)
+    if n < 2 or b.size != n:
         return None
-    sums = np.zeros((count, 3))
-    np.add.at(sums, inverse, x)
+    b = b - b.min()  # a window's blocks span a few rows of the image's: a short count
+    every = np.bincount(b)
+    touched = every > 0
+    count = int(np.count_nonzero(touched))
+    if count < min_blocks:
+        return None
+    sizes = every[touched]
+    sums = np.stack([np.bincount(b, weights=x[:, c], minlength=every.size)[touched]
+                     for c in range(3)], axis=-1)
     mean = x.mean(axis=0)
     dev = sums / sizes[:, None] - mean
     cluster = count / (count - 1) * (((sizes / n)[:, None] * dev) ** 2).sum(axis=0)
@@ -314,24 +330,51 @@ def image_blocks(rows: NDArray[np.int64], cols: NDArray[np.int64], width: int
     return out
 
 
+def block_sample(y0: int, x0: int, mask: NDArray[np.bool_],
+                 limit: int | None = None) -> NDArray[np.bool_] | None:
+    """Which of a window's pixels (``mask`` ``(h, w)`` over the box from row ``y0``, column
+    ``x0``; row-major, as :meth:`fidelity.chart.locate.PatchWindow.values` lists them) its
+    statistics are computed from when it has more than ``limit``: those of every ``s``-th
+    image block (:func:`image_blocks`) down and across (block indices multiples of ``s``, the
+    least ``s`` that leaves at most about ``limit`` pixels), whole blocks, so that their means
+    still show the correlation of neighbours (:func:`block_design_effect`) and the lattice
+    spans the window. None: every pixel (``limit`` or fewer; None:
+    :data:`SPREAD_SAMPLE_PIXELS`, read when called)."""
+    limit = SPREAD_SAMPLE_PIXELS if limit is None else int(limit)
+    count = int(np.count_nonzero(mask))
+    if count <= limit:
+        return None
+    stride = math.ceil(math.sqrt(count / limit))
+    h, w = mask.shape
+    down = ((np.arange(h) + y0) // BLOCK_PX) % stride == 0
+    across = ((np.arange(w) + x0) // BLOCK_PX) % stride == 0
+    keep: NDArray[np.bool_] = (mask & down[:, None] & across[None, :])[mask]
+    return keep
+
+
 def patch_spread(linear: F64, codes: F64 | None = None,
-                 blocks: NDArray[np.int64] | None = None) -> PatchSpread:
+                 blocks: NDArray[np.int64] | None = None,
+                 count: int | None = None) -> PatchSpread:
     """The :class:`PatchSpread` of one window: ``linear`` ``(n, 3)`` valid pixels in the fit's
     domain, ``codes`` ``(n, 3)`` the same pixels' code values (integer images only),
     ``blocks`` ``(n,)`` each pixel's image block (:func:`image_blocks`), for the design effect
-    of correlated neighbours (:func:`block_design_effect`; none without)."""
+    of correlated neighbours (:func:`block_design_effect`; none without). ``count``: the
+    window's valid pixels when these are a sample of them (:func:`block_sample`): the
+    statistics are the sample's, the count (the mean's) the window's."""
     x = np.asarray(linear, np.float64).reshape(-1, 3)
     n = x.shape[0]
+    total = n if count is None else int(count)
+    sampled = n if total != n else None
     cov = (np.atleast_2d(np.cov(x, rowvar=False, ddof=1)) if n >= 2 else np.zeros((3, 3)))
     flat = (np.ptp(x, axis=0) == 0) if n else np.ones(3, bool)
     design = (block_design_effect(x, blocks) if blocks is not None and len(blocks) == n
               else None)  # None: not estimated (no blocks given, or too few touched)
     if codes is None:
-        return PatchSpread(n, cov, flat, design=design)
+        return PatchSpread(total, cov, flat, design=design, sampled=sampled)
     c = np.asarray(codes, np.float64).reshape(-1, 3)
     if not len(c):
-        return PatchSpread(n, cov, flat, np.zeros(3), np.zeros(3), design)
-    return PatchSpread(n, cov, flat, c.mean(axis=0), c.std(axis=0), design)
+        return PatchSpread(total, cov, flat, np.zeros(3), np.zeros(3), design, sampled)
+    return PatchSpread(total, cov, flat, c.mean(axis=0), c.std(axis=0), design, sampled)
 
 
 def patch_covariances(samples: Sequence[F64], *, trim: float = 0.0,
@@ -399,12 +442,14 @@ def noise_component(samples: Sequence[F64], means: F64, f: ChartFunction, *,
                     trim: float = 0.0, patch_names: Sequence[str] | None = None,
                     rng: np.random.Generator | None = None, draws: int = DRAWS,
                     covariances: F64 | None = None, designs: Sequence[F64 | None] = (),
+                    sampled: Sequence[int | None] = (),
                     ) -> tuple[UncertaintyComponent, tuple[str, ...]]:
     """The ``pixel noise`` component of ``f`` at ``means`` ``(n, 3)`` from each patch's
     ``samples`` ``(n_k, 3)`` (module docstring; ``covariances``: those of
     :func:`patch_covariances` or :func:`spread_covariances`, computed here when None;
-    ``designs``: the windows' design effects those covariances carry, for the method's
-    words), and the notes on patches too small to estimate their own noise."""
+    ``designs``: the windows' design effects those covariances carry, ``sampled``: the pixels of
+    each window they were computed from when a sample (:func:`block_sample`), both for the
+    method's words), and the notes on patches too small to estimate their own noise."""
     rng = rng if rng is not None else np.random.default_rng(SEED)
     notes: tuple[str, ...] = ()
     if covariances is None:
@@ -428,6 +473,12 @@ def noise_component(samples: Sequence[F64], means: F64, f: ChartFunction, *,
                 f"pixels alike ({BLOCK_PX} x {BLOCK_PX}-pixel blocks as clusters; "
                 f"{len(estimated)} of {len(designs)} windows over {MIN_BLOCKS} blocks or more, "
                 f"largest {top:.3g})")
+    subsets = [s for s in sampled if s is not None]
+    if subsets:
+        how += (f"; in the {len(subsets)} windows over {SPREAD_SAMPLE_PIXELS} pixels the "
+                f"per-pixel covariance and design effect from a lattice of whole "
+                f"{BLOCK_PX} x {BLOCK_PX}-pixel blocks ({min(subsets)} to {max(subsets)} "
+                f"pixels), divided by the window's own count")
     return (UncertaintyComponent(
         "pixel noise", value, "A",
         f"{how}; patch means drawn from the normal distribution with it, {draws} Monte Carlo "
@@ -500,6 +551,44 @@ def rounding_component(samples: Sequence[F64], means: F64, f: ChartFunction, ste
         f"step/√12), rectangular, {draws} Monte Carlo draws")
 
 
+#: The chromatic adaptation transforms whose spread is the ``chromatic adaptation`` component
+#: (:func:`adaptation_component`): the von Kries-type cone-space transforms a colour scientist
+#: would choose between (XYZ Scaling, not a cone space, is left out of the spread).
+ADAPTATION_SPREAD = ("Bradford", "CAT02", "CAT16", "Von Kries")
+
+
+def adaptation_component(mean_delta_e_by_cat: Mapping[str, float], chosen: str
+                         ) -> UncertaintyComponent:
+    """The ``chromatic adaptation`` component (type B) of a chart ΔE against a scene
+    reference adapted from a non-D65 illuminant to D65: which transform adapts the reference
+    is a method choice, not a measurement, and it moves the ΔE (under illuminant A, von Kries
+    2.56 against CAT02 3.53 for one camera, issue 58).
+
+    Parameters
+    ----------
+    mean_delta_e_by_cat
+        The chart's mean ΔE00 against the reference adapted by each transform of
+        :data:`ADAPTATION_SPREAD` (the same measured colours; ΔE00).
+    chosen
+        The transform the reported ΔE used (``--cat``).
+
+    Returns
+    -------
+    UncertaintyComponent
+        Value ``(max - min) / (2 sqrt 3)`` ΔE00: half the range of the transforms' mean ΔE00
+        taken as the half-width of a rectangular distribution (GUM 4.3.7: every transform
+        in the range equally plausible, none outside it); the method names each
+        transform's ΔE.
+    """
+    values = [float(v) for v in mean_delta_e_by_cat.values()]
+    half = (max(values) - min(values)) / 2.0 if values else 0.0
+    each = ", ".join(f"{k} {v:.2f}" for k, v in mean_delta_e_by_cat.items())
+    return UncertaintyComponent(
+        "chromatic adaptation", half / math.sqrt(3.0), "B",
+        f"the reference's adaptation to D65 is a method choice ({chosen} used): mean ΔE00 "
+        f"{each}; half their range as a rectangular half-width, / √3")
+
+
 def exposure_component(linear_means: F64, reference_lab: F64, neutral: Sequence[int],
                        exposure_ev: float, f_ev0: ChartFunction, covariances: F64, *,
                        rng: np.random.Generator | None = None, draws: int = DRAWS,
@@ -564,21 +653,25 @@ def placement_component(remeasure: Callable[[F64], F64 | None], corners: F64,
 
 
 __all__ = [
+    "ADAPTATION_SPREAD",
     "DRAWS",
     "MIN_NOISE_PIXELS",
     "PLACEMENT_DRAWS",
     "SEED",
+    "SPREAD_SAMPLE_PIXELS",
     "UNREFINED_PLACEMENT_PX",
     "ChartFunction",
     "PatchSpread",
     "UncertaintyBudget",
     "UncertaintyComponent",
+    "adaptation_component",
     "exposure_component",
     "exposure_of_means",
     "linear_chart_function",
     "mean_covariance",
     "noise_component",
     "patch_covariances",
+    "block_sample",
     "patch_spread",
     "placement_component",
     "rounding_component",

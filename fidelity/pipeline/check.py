@@ -25,15 +25,30 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fidelity.camera.model import DEFAULT_CAMERA
-from fidelity.camera.render import render_chart
+from fidelity.camera.model import DEFAULT_CAMERA, camera_file
+from fidelity.camera.render import FrameRender, render_chart
 from fidelity.chart.read import DEFAULT_READ, ReadOptions, reads_for
 from fidelity.coco.detectors import stale_preprocessing
-from fidelity.colour.colorimetry import lab_to_srgb
-from fidelity.core.errors import FidelityError
+from fidelity.colour.charts import SCENE_REFERENCE, load_reference
+from fidelity.colour.colorimetry import (
+    delta_e_2000,
+    lab_to_srgb,
+    lab_to_xyz,
+    linear_srgb_to_xyz,
+    linearize_srgb,
+    xyz_to_lab,
+    xyz_to_linear_srgb,
+)
+from fidelity.colour.diagnosis import Diagnosis, diagnose
+from fidelity.colour.spectral import load_illuminant
+from fidelity.core.errors import FidelityError, InvalidValueError
+from fidelity.core.fileio import file_sha256
 from fidelity.measure.blindspots import banding, chart_blind_spots
-from fidelity.measure.colour import neutral_patches
-from fidelity.measure.pixels import measure_image
+from fidelity.measure.chartnoise import ChartNoise
+from fidelity.measure.chartsharpness import ChartSharpness, EdgeTargetCorners
+from fidelity.measure.colour import measure_chart, neutral_patches
+from fidelity.measure.pixels import measure_image, measure_pixels
+from fidelity.measure.uncertainty import ADAPTATION_SPREAD, adaptation_component
 from fidelity.pipeline.records import (
     ChartReport,
     GateResult,
@@ -42,6 +57,7 @@ from fidelity.pipeline.records import (
     RenderSource,
     utc_now,
 )
+from fidelity.prediction.exposure import judge_exposure
 from fidelity.prediction.interval import (
     DomainCheck,
     load_validated_cameras,
@@ -50,12 +66,15 @@ from fidelity.prediction.interval import (
 )
 from fidelity.prediction.judge import DEFAULT_JUDGE, JudgeOptions, judge_chart
 from fidelity.prediction.properties import detector_scale
+from fidelity.prediction.tablefile import COLUMNS
 from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion
 
 if TYPE_CHECKING:
     from fidelity.camera.model import CameraModel
+    from fidelity.chart.find.result import FoundChart
     from fidelity.coco.measure import MeasuredLoss, MeasureRequest
     from fidelity.measure.colour import ChartMeasurement
+    from fidelity.measure.pixels import ImageMeasurement
     from fidelity.measure.uncertainty import UncertaintyBudget
     from fidelity.prediction.interval import DomainCheck, PredictionInterval, ValidityDomain
     from fidelity.prediction.table import Prediction
@@ -105,12 +124,13 @@ def preprocessing_check(table: PredictionTable) -> DomainCheck | None:
 
 def evidence_of(prediction: Prediction | None, budget: UncertaintyBudget | None,
                 reference: str, k: float = 2.0,
-                camera: tuple[Mapping[str, str], str] | None = None
+                camera: tuple[Mapping[str, str], str,
+                              Mapping[str, tuple[str, Mapping[str, float]]]] | None = None
                 ) -> tuple[PredictionInterval | None, ValidityDomain | None]:
     """The predicted ΔmAP's interval (with the chart ΔE's uncertainty ``budget``) and the
     validity domain of the answer (the prediction's checks, the ``reference`` chart and, for
-    a camera model, ``camera``: its stage kinds and illuminant against the cameras the
-    prediction was validated on, :meth:`~fidelity.prediction.interval.ValidatedCameras.
+    a camera model, ``camera``: its stage kinds, illuminant and degradations (noise, optics,
+    vignetting) against the cameras the prediction was validated on, :meth:`~fidelity.prediction.interval.ValidatedCameras.
     camera_checks`)."""
     if prediction is None:
         return None, None
@@ -129,6 +149,35 @@ def evidence_of(prediction: Prediction | None, budget: UncertaintyBudget | None,
             for check in validated.camera_checks(*camera):
                 domain = domain.with_check(check)
     return interval, domain
+
+
+def with_adaptation(budget: UncertaintyBudget, measurement: ChartMeasurement,
+                    illuminant: str, cat: str) -> UncertaintyBudget:
+    """``budget`` with the type-B ``chromatic adaptation`` component of a chart measured
+    against the scene reference under ``illuminant`` (not D65): the chart's mean ΔE00 (its
+    measured sRGB, the same patches left out) against the reference adapted by each
+    transform of :data:`fidelity.measure.uncertainty.ADAPTATION_SPREAD`
+    (:func:`fidelity.measure.uncertainty.adaptation_component`; ``cat`` the one used)."""
+    by_cat = {c: measure_chart(measurement.srgb, load_reference(SCENE_REFERENCE, illuminant,
+                                                                c).lab,
+                               measurement.patch_names, excluded=measurement.excluded or None
+                               ).mean_delta_e
+              for c in ADAPTATION_SPREAD}
+    return replace(budget, components=(*budget.components, adaptation_component(by_cat, cat)))
+
+
+def column_intervals(prediction: Prediction | None, budget: UncertaintyBudget | None,
+                     k: float = 2.0) -> tuple[PredictionInterval, ...]:
+    """Every loss column of ``prediction`` with its own standard uncertainty
+    (:func:`fidelity.prediction.interval.prediction_interval`: that column's table SE and the
+    chart ΔE's uncertainty ``budget`` through that column's slope), in
+    :data:`fidelity.prediction.tablefile.COLUMNS` order; the columns without a value left
+    out; empty without a prediction."""
+    if prediction is None:
+        return ()
+    u = budget.combined if budget else 0.0
+    found = (prediction_interval(prediction, u, column, k) for column in COLUMNS)
+    return tuple(i for i in found if i is not None)
 
 
 def _measure(request: MeasureRequest | None, mapping: Any, key: str,
@@ -150,6 +199,7 @@ def check_camera(
     seed: int | None = None,
     command: str = "check",
     measure: MeasureRequest | None = None,
+    cat: str = "Bradford",
 ) -> ChartReport:
     """Render ``camera``'s chart, measure it, predict its detection loss, apply ``criterion``.
 
@@ -183,6 +233,12 @@ def check_camera(
     measure
         Also measure the camera's loss on COCO (:class:`fidelity.coco.measure.MeasureRequest`:
         the camera's colour rendering emulated on the images, as ``fidelity validate`` does).
+    cat
+        The chromatic adaptation of the ``scene`` reference to D65 (one of
+        :data:`fidelity.colour.colorimetry.CHROMATIC_ADAPTATION_METHODS`); under an
+        illuminant other than D65 the spread of the chart ΔE over the transforms enters its
+        uncertainty budget as the type-B ``chromatic adaptation`` component
+        (:func:`fidelity.measure.uncertainty.adaptation_component`).
 
     Returns
     -------
@@ -207,14 +263,16 @@ def check_camera(
     (1.02, True)
     """
     render = render_chart(camera if camera is not None else DEFAULT_CAMERA, illuminant,
-                          renderer, reference=reference, seed=seed)
+                          renderer, reference=reference, seed=seed, frame=True, cat=cat)
     m = render.measurement
     u = render.uncertainty
+    sharpness, noise = frame_properties(render.frame, reference, illuminant)
     prediction, verdict, directional, judged = judge_chart(
         m.mean_delta_e, judge, criterion, m, delta_e_uncertainty=u.combined if u else None,
-        properties=True)
+        properties=True, sharpness=sharpness, noise=noise, scale=FRAME_SCALE)
     interval, validity = evidence_of(prediction, u, reference, judge.decision.k,
-                                     (render.camera.stage_kinds(), illuminant))
+                                     (render.camera.stage_kinds(), illuminant,
+                                      render.camera.degradations()))
 
     spots = chart_blind_spots(m, bits=render.camera.quantisation_bits)
     measured: tuple[MeasuredLoss, ...] = ()
@@ -232,12 +290,112 @@ def check_camera(
                           camera_settings=rd["camera"], render_settings=rd["settings"])
     return ChartReport(
         command=command, created=utc_now(), measurement=m, source=source,
-        provenance=Provenance.collect(None, prediction,
-                                      {"render": rd.get("conventions", {})}),
+        provenance=Provenance.collect(
+            None if (cf := camera_file(render.camera)) is None else file_sha256(cf), prediction,
+            {"render": rd.get("conventions", {})}),
         prediction=prediction, verdict=verdict, directional=directional, bound=judge.bound,
         blind_spots=spots, measured=measured, uncertainty=u, interval=interval,
-        validity=validity, properties=judged,
+        validity=validity, properties=judged, diagnosis=render_diagnosis(m),
+        intervals=column_intervals(prediction, u, judge.decision.k),
+        sharpness=sharpness, noise=noise,
     )
+
+
+#: The detector's letterbox factor for the turned chart a check renders
+#: (:class:`fidelity.camera.render.FrameRender`): it has COCO's size, 640 x 480, so a camera
+#: model's pixels are taken at the detector's input (its optics in pixels of that image).
+FRAME_SCALE = 1.0
+
+
+def frame_properties(frame: FrameRender | None, reference: str, illuminant: str
+                     ) -> tuple[ChartSharpness | None, ChartNoise | None]:
+    """The sharpness and noise of a check's turned chart (``frame``), measured as an audit
+    measures them (:func:`fidelity.measure.pixels.measure_pixels` at the known corners, the
+    image decoded from sRGB): the e-SFR of its slanted patch edges and the noise of its
+    neutral patches. ``(None, None)`` without a frame."""
+    if frame is None:
+        return None, None
+    got = measure_pixels(frame.srgb, frame.corners, encoding="srgb", reference=reference,
+                         illuminant=illuminant, uncertainty=False, corner_checks=False)
+    return got.sharpness, got.noise
+
+
+#: Largest ΔE00 between a flagged patch and its gamut-clipped reference for its distance from
+#: the other patches to be the clipping (an sRGB render of a reference outside the gamut).
+GAMUT_CLIPPED_DELTA_E = 1.0
+
+
+def reference_linear(reference_lab: np.ndarray) -> np.ndarray:
+    """The reference patches' linear sRGB ``(n, 3)`` (D65, white Y = 1), unclipped: a
+    negative channel is a colour outside the sRGB gamut."""
+    return np.asarray(xyz_to_linear_srgb(lab_to_xyz(np.asarray(reference_lab, np.float64))),
+                      np.float64)
+
+
+def render_diagnosis(measurement: ChartMeasurement) -> Diagnosis | None:
+    """The likely cause of a camera render's chart error (:func:`fidelity.colour.diagnosis.
+    diagnose` of its encoded, clipped sRGB decoded to linear: display-referred, exposure
+    fixed at the reference's); None for a chart of fewer than 4 patches used."""
+    try:
+        return diagnose(linearize_srgb(measurement.srgb), reference_linear(
+            measurement.reference_lab), exposure_fixed=True, display_referred=True,
+            used=measurement.used, patch_names=measurement.patch_names)
+    except InvalidValueError:
+        return None
+
+
+def image_diagnosis(result: ImageMeasurement) -> Diagnosis | None:
+    """The likely cause of an audited image's chart error (:func:`fidelity.colour.diagnosis.
+    diagnose`): its patches' linear means as read, before the exposure correction; a fixed
+    exposure (``--exposure EV``) is the expected one (the image at ``-EV``), the automatic
+    one a free parameter; an sRGB-encoded image display-referred. None without the linear
+    means or with fewer than 4 patches used."""
+    if result.linear_means is None:
+        return None
+    fixed = result.exposure_mode == "fixed"
+    try:
+        return diagnose(result.linear_means, reference_linear(result.reference.lab),
+                        exposure_fixed=fixed, expected_ev=-result.exposure_ev if fixed else 0.0,
+                        display_referred=result.encoding == "srgb",
+                        used=result.measurement.used, patch_names=result.reference.patch_names,
+                        applied_ev=result.exposure_ev)
+    except InvalidValueError:
+        return None
+
+
+def gamut_clipped(result: ImageMeasurement) -> tuple[int, ...]:
+    """The patches (0-based) whose reference lies outside the sRGB gamut and whose measured
+    colour is that reference clipped into the gamut (within :data:`GAMUT_CLIPPED_DELTA_E`):
+    what every sRGB render does, a known limit."""
+    if result.linear_means is None:
+        return ()
+    ref = reference_linear(result.reference.lab)
+    outside = np.flatnonzero(np.any(ref < -1e-6, axis=1))
+    if not outside.size:
+        return ()
+    measured = result.linear_means[outside] * 2.0 ** result.exposure_ev
+    clipped = np.clip(ref[outside], 0.0, None)
+    de = np.asarray(delta_e_2000(xyz_to_lab(linear_srgb_to_xyz(measured)),
+                                 xyz_to_lab(linear_srgb_to_xyz(clipped))), np.float64)
+    return tuple(int(k) for k, d in zip(outside, de, strict=True)
+                 if d <= GAMUT_CLIPPED_DELTA_E)
+
+
+def explained_find(result: ImageMeasurement) -> FoundChart | None:
+    """The chart finder's record of ``result`` with the patches far from the others' fit only
+    because their reference is outside the sRGB gamut (:func:`gamut_clipped`) no longer
+    flagged, but named in a note that says why."""
+    found = result.detection
+    if found is None or not found.flat_off_fit:
+        return found
+    explained = [k for k in gamut_clipped(result) if k in found.flat_off_fit]
+    if not explained:
+        return found
+    names = ", ".join(f"{k + 1} ({result.reference.patch_names[k]})" for k in explained)
+    return found.without_flat_off_fit(explained, (
+        f"patch(es) {names} far from what the other patches predict only because the "
+        f"reference lies outside the sRGB gamut and the image holds it clipped into the gamut, "
+        f"as every sRGB render does: a known limit, not a fault"))
 
 
 def audit_image(
@@ -251,6 +409,8 @@ def audit_image(
     judge: JudgeOptions = DEFAULT_JUDGE,
     command: str = "audit",
     measure: MeasureRequest | None = None,
+    cat: str = "Bradford",
+    edge_target: EdgeTargetCorners | None = None,
 ) -> ChartReport:
     """Measure the chart in ``image``, predict the detection loss, apply ``criterion``.
 
@@ -276,6 +436,14 @@ def audit_image(
         Also measure on COCO what this chart's colour rendering costs a detector: a mapping
         from the reference to the measured colours, fitted on the 24 patches
         (:class:`fidelity.coco.emulation.PatchEmulation`), applied to the images.
+    cat
+        The chromatic adaptation of the ``scene`` reference, as for :func:`check_camera`
+        (under an illuminant other than D65 the spread over the transforms is a type-B
+        component of the chart ΔE's uncertainty budget: :func:`with_adaptation`).
+    edge_target
+        A slanted-edge target's corners in the image (a scene manifest's,
+        :func:`fidelity.scene.manifest.read_manifest`): the sharpness, and so the verdict's,
+        is measured on its square's edges; None: on the chart's own edges.
 
     Returns
     -------
@@ -295,23 +463,32 @@ def audit_image(
         colourspace, Bayer pattern). Exit code 2.
     """
     banding: list[Any] = []
+    scene = reference == SCENE_REFERENCE
     result = measure_image(image, corners if corners is None or len(corners) else None,
-                           read=read, reference=reference, illuminant=illuminant,
-                           inspect_image=lambda img: banding.append(_image_banding(img)))
+                           read=read, reference=(load_reference(reference, illuminant, cat)
+                                                 if scene else reference),
+                           illuminant=illuminant,
+                           inspect_image=lambda img: banding.append(_image_banding(img)),
+                           edge_target=edge_target)
     u = result.uncertainty
+    if scene and u is not None and load_illuminant(illuminant).name != "D65":
+        u = with_adaptation(u, result.measurement, illuminant, cat)
     info = result.image
     assert info is not None  # measure_image always describes the file
+    exposure = (judge_exposure(result.exposure_ev, result.neutral_ev,
+                               judge.max_exposure_error, judge.exposure_source)
+                if read.exposure is not None and result.exposure_mode == "fixed" else None)
     prediction, verdict, directional, judged = judge_chart(
         result.mean_delta_e, judge, criterion, result.measurement,
         delta_e_uncertainty=u.combined if u else None, properties=True,
         sharpness=result.sharpness, noise=result.noise,
-        scale=detector_scale(info.width, info.height))
+        scale=detector_scale(info.width, info.height), exposure=exposure)
     interval, validity = evidence_of(prediction, u, reference, judge.decision.k)
     source = ImageSource(
         image=info, corners=result.location.corners, location=result.location,
         colourspace=result.colourspace, exposure_mode=result.exposure_mode,
         reference=result.reference.name, encoding=result.encoding,
-        clipped_patches=result.clipped_patches, found=result.detection,
+        clipped_patches=result.clipped_patches, found=explained_find(result),
         corner_checks=result.corner_checks)
     conventions = {"reference": result.reference.conventions,
                    "audit": AUDIT_CONVENTION.format(window=result.location.window)}
@@ -331,7 +508,9 @@ def audit_image(
         valid_pixels=result.valid_pixels, directional=directional, bound=judge.bound,
         blind_spots=spots, measured=measured, uncertainty=u, interval=interval,
         validity=validity, noise=result.noise, sharpness=result.sharpness,
-        properties=judged,
+        properties=judged, exposure=exposure, neutral_ev=result.neutral_ev,
+        intervals=column_intervals(prediction, u, judge.decision.k),
+        diagnosis=image_diagnosis(result),
     )
 
 
@@ -372,6 +551,8 @@ def gate(
     renderer: str = "closed-form",
     judge: JudgeOptions = DEFAULT_JUDGE,
     frames: Sequence[int] | None = None,
+    cat: str = "Bradford",
+    edge_target: EdgeTargetCorners | None = None,
 ) -> list[GateResult]:
     """Gate ``images`` one by one (or ``camera``) against ``criterion``. An input error of
     one subject (exit code 2) becomes its result's ``error``; the others are still measured.
@@ -412,6 +593,10 @@ def gate(
     frames
         One frame index per image (negative from the end), for a recording gated on several
         frames; None: ``read``'s frame.
+    cat
+        The chromatic adaptation of the ``scene`` reference (:func:`check_camera`).
+    edge_target
+        A slanted-edge target's corners, the same in every image (:func:`audit_image`).
 
     Returns
     -------
@@ -429,10 +614,10 @@ def gate(
         return [_subject_result(_camera_subject(cam), partial(
             check_camera, cam, illuminant=illuminant, renderer=renderer,
             reference=reference or "scene", criterion=criterion, judge=judge,
-            command="gate"), criterion) for cam in cameras]
+            command="gate", cat=cat), criterion) for cam in cameras]
     return _audit_subjects(images, corners, read, frames, partial(
         audit_image, criterion=criterion, command="gate", reference=reference or "scene",
-        illuminant=illuminant, judge=judge), criterion)
+        illuminant=illuminant, judge=judge, cat=cat, edge_target=edge_target), criterion)
 
 
 def audit_images(
@@ -445,6 +630,8 @@ def audit_images(
     judge: JudgeOptions = DEFAULT_JUDGE,
     measure: MeasureRequest | None = None,
     frames: Sequence[int] | None = None,
+    cat: str = "Bradford",
+    edge_target: EdgeTargetCorners | None = None,
 ) -> list[GateResult]:
     """:func:`audit_image` of ``images`` one by one (a renderer's frames, say), as
     :func:`gate` measures them but without a criterion: one
@@ -473,6 +660,10 @@ def audit_images(
     frames
         One frame index per image, for a recording audited on several frames; None:
         ``read``'s frame.
+    cat
+        The chromatic adaptation of the ``scene`` reference, as for :func:`audit_image`.
+    edge_target
+        A slanted-edge target's corners, the same in every image (:func:`audit_image`).
 
     Returns
     -------
@@ -487,7 +678,8 @@ def audit_images(
     """
     return _audit_subjects(images, corners, read, frames, partial(
         audit_image, command="audit", reference=reference, illuminant=illuminant, judge=judge,
-        measure=measure), None)
+        cat=cat,
+        measure=measure, edge_target=edge_target), None)
 
 
 def _camera_subject(camera: CameraModel | str) -> str:
@@ -526,6 +718,7 @@ def _subject_result(subject: str, run: Callable[[], ChartReport],
     return GateResult(subject, criterion, report=report, seconds=time.perf_counter() - t0)
 
 
-__all__ = ["AUDIT_CONVENTION", "DEFAULT_CRITERION", "TABLE_REFERENCES", "audit_image",
-           "audit_images", "chart_emulation", "check_camera", "evidence_of", "gate",
-           "prediction_domain", "preprocessing_check"]
+__all__ = ["AUDIT_CONVENTION", "DEFAULT_CRITERION", "GAMUT_CLIPPED_DELTA_E", "TABLE_REFERENCES",
+           "audit_image", "audit_images", "chart_emulation", "check_camera", "evidence_of",
+           "explained_find", "gamut_clipped", "gate", "image_diagnosis", "prediction_domain",
+           "preprocessing_check", "reference_linear", "render_diagnosis"]

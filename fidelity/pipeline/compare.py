@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -39,7 +40,11 @@ from fidelity.correction.normalise import NORMALISATIONS, normalise
 from fidelity.measure.colour import measure_chart, neutral_patches
 from fidelity.measure.uncertainty import UncertaintyBudget, UncertaintyComponent
 from fidelity.pipeline.check import audit_image, evidence_of
-from fidelity.pipeline.records import ComparisonReport, Provenance, utc_now
+from fidelity.pipeline.records import (
+    ComparisonReport,
+    Provenance,
+    utc_now,
+)
 from fidelity.prediction.judge import DEFAULT_JUDGE, JudgeOptions, judge_chart
 
 if TYPE_CHECKING:
@@ -128,6 +133,9 @@ def compare_charts(
     if sm.patch_names != rm.patch_names:
         raise InvalidValueError(f"{sim} and {real}: the charts have different patches")
     srgb, norm = normalise(sm.srgb, rm.srgb, neutral_patches(rm), normalise_mode)
+    if sim_report.neutral_ev is not None and real_report.neutral_ev is not None:
+        norm = replace(norm, neutral_ev=(sim_report.neutral_ev, real_report.neutral_ev))
+    norm = replace(norm, audit_auto=(sim_report.exposure_auto, real_report.exposure_auto))
     m = measure_chart(srgb, rm.lab, rm.patch_names, reference_srgb=np.clip(rm.srgb, 0, 1))
     budget = sim_to_real_uncertainty(m.mean_delta_e, sim_report.uncertainty,
                                      real_report.uncertainty)

@@ -43,7 +43,8 @@ def available_cpus() -> int:
 #: The distribution's name on the package index (the import name is ``fidelity``).
 DISTRIBUTION = "camera-fidelity"
 #: Extras whose packages the tool runs with (not the test and docs tools).
-RUNTIME_EXTRAS = ("render", "scene", "coco", "ray", "fast", "ros", "fit", "ocio", "ssp", "qc")
+RUNTIME_EXTRAS = ("render", "scene", "coco", "ray", "fast", "ros", "video", "fit", "ocio", "ssp",
+                  "qc")
 
 
 #: The import name of each package a runtime extra declares (its requirement name where the
@@ -52,7 +53,7 @@ IMPORT_NAMES: dict[str, str] = {
     "mitsuba": "mitsuba", "drjit": "drjit", "pygltflib": "pygltflib", "pxr": "usd-core",
     "onnxruntime": "onnxruntime", "onnx": "onnx", "pycocotools": "pycocotools",
     "faster_coco_eval": "faster-coco-eval", "PIL": "Pillow", "tqdm": "tqdm", "ray": "ray",
-    "numba": "numba", "rosbags": "rosbags", "PyOpenColorIO": "opencolorio",
+    "numba": "numba", "rosbags": "rosbags", "av": "av", "PyOpenColorIO": "opencolorio",
     "tomli_w": "tomli-w", "lxml": "lxml", "qc_baselib": "asam-qc-baselib",
 }
 

@@ -20,12 +20,15 @@ correction from the simulated patch colours onto the real ones
 
 The result is a :class:`Correction` on the simulator's *pixel values* (its encoding and
 colourspace): ``apply(pixels)``, ``to_cube(path)`` (OpenColorIO's Baker,
-:mod:`fidelity.correction.lut`), ``to_json()``.
+:mod:`fidelity.correction.lut`), ``to_json()``. A scene-linear SIM is fitted on its patch values
+as they are, above 1 included (a render exposed brighter than the chart's white is light, not
+clipping), and its ``.cube`` covers its largest value.
 
 :func:`fit_and_verify` checks the correction instead of assuming it: the ``.cube`` through
 OpenColorIO's processor against the model itself, over the chart and a dense lattice
 (:class:`LutCheck`; the smallest cube size of :data:`~fidelity.correction.lut.CUBE_SIZES`
-within :data:`LUT_TOLERANCE` ΔE00), then the SIM pixels in the audit's sampling windows through
+that passes: the chart and 99 % of the lattice within :data:`LUT_TOLERANCE` ΔE00, all of it
+within :data:`LUT_MAX_TOLERANCE`), then the SIM pixels in the audit's sampling windows through
 the cube by OpenColorIO (loaded from ``correction.ocio``), measured again (:func:`remeasure`:
 the patch means of the whole corrected image in the same windows, at the windows' cost) and
 compared with REAL: the sim-to-real ΔE00 and its predicted ΔmAP before and after
@@ -34,19 +37,27 @@ compared with REAL: the sim-to-real ΔE00 and its predicted ΔmAP before and aft
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fidelity.camera.model import colour_correction_matrix, read_camera_file
+from fidelity.camera.model import (
+    MAX_BLUR_PX,
+    CameraModel,
+    Noise,
+    colour_correction_matrix,
+    read_camera_file,
+)
+from fidelity.camera.optics import Optics
 from fidelity.camera.render import ChartLayout, render_chart
-from fidelity.chart.image import write_exr, write_png
+from fidelity.chart.image import FLOAT_PIXEL_TYPES, write_exr, write_png
 from fidelity.chart.locate import window_pixels
 from fidelity.chart.read import DEFAULT_READ, ReadOptions, read_input, reads_with_own_ocio
 from fidelity.colour.colorimetry import (
@@ -63,11 +74,16 @@ from fidelity.correction.lut import (
     CUBE_SIZES,
     apply_processor,
     bake_cube,
+    check_output,
     config_processor,
     cube_processor,
+    default_output,
+    input_domain,
     lattice_inputs,
     ocio,
     ocio_config,
+    output_linear,
+    output_values,
 )
 from fidelity.correction.models import (
     DEFAULT_OBJECTIVE,
@@ -84,8 +100,20 @@ from fidelity.correction.models import (
 from fidelity.correction.normalise import Normalisation, normalise
 from fidelity.measure.colour import ChartMeasurement, measure_chart, neutral_patches
 from fidelity.measure.pixels import ImageMeasurement, exposure_from_neutrals, measure_pixels
+from fidelity.pipeline.check import frame_properties
 from fidelity.pipeline.records import utc_now
-from fidelity.prediction.judge import DEFAULT_JUDGE, JudgeOptions, judge_chart
+from fidelity.prediction.judge import (
+    DEFAULT_JUDGE,
+    JudgeOptions,
+    judge_chart,
+    judge_properties,
+)
+from fidelity.prediction.properties import (
+    PropertyJudgement,
+    chart_mtf50,
+    chart_snr,
+    detector_scale,
+)
 from fidelity.prediction.table import Prediction
 
 if TYPE_CHECKING:
@@ -98,12 +126,20 @@ DEFAULT_MODEL = "matrix"
 #: Mean chroma C*ab of the real chart's colour patches below which it is refused as nearly grey
 #: (the Macbeth chart's colour patches average about 40).
 GREY_CHROMA = 5.0
-#: Largest ΔE00 between the ``.cube`` through OpenColorIO and the model itself (issue 29).
+#: Largest ΔE00 between the ``.cube`` through OpenColorIO and the model itself over the chart,
+#: and the 99th percentile of it over the dense lattice allowed (issue 29).
 LUT_TOLERANCE = 0.1
+#: Largest ΔE00 between the ``.cube`` and the model allowed anywhere on the dense lattice
+#: (issue 57): a cube without a shaper, sRGB in and sRGB out, cannot follow the encoding's toe
+#: between its nodes where an output channel passes 0.0031 while the others are bright (a 20
+#: degree hue matrix: 0.27 at 65^3 on the lattice's most saturated colours, 0.04 at its 99th
+#: percentile); half a ΔE00, well below a just-noticeable difference, bounds that.
+LUT_MAX_TOLERANCE = 0.5
 #: Cross-validated ΔE00 above which the model is said not to express the difference (issue
 #: 29's "corrected ΔE00 below 0.5 where the model family can express the error").
 EXPRESSED_DELTA_E = 0.5
-#: The models affine in light: their ``.cube`` is sampled on a lattice even in light.
+#: The models affine in light: a ``.cube`` even in light interpolates them exactly, and a
+#: camera file's 3x3 colour matrix can hold them.
 AFFINE_MODELS: tuple[str, ...] = ("gains", "matrix")
 #: Points per axis of the dense lattice the ``.cube`` is checked on (not a divisor of the cube
 #: sizes' spacing, so that most points fall between the cube's nodes).
@@ -123,7 +159,8 @@ class Correction:
     ``encoding`` is the simulator's pixel encoding (``srgb``: encoded values in [0, 1];
     ``linear``: scene-linear); the output is not clipped (a clip inside a LUT is a kink that
     its interpolation cannot follow: whoever stores the corrected image clips it); ``domain_max`` is the largest
-    linear pixel value a ``.cube`` covers (the perfect white's). The rest is the fit's
+    linear pixel value a ``.cube`` covers (the perfect white's, or the SIM image's largest
+    value where that is larger). The rest is the fit's
     evidence: per patch (chart order) the fit-space colours, the excluded patches with their
     reason, the in-sample and cross-validated ΔE00.
 
@@ -144,8 +181,9 @@ class Correction:
         3 x 3 matrix taking the simulator's linear pixel values to the fit space (its
         colourspace -> linear sRGB, its audit exposure, the normalisation).
     domain_max
-        The largest linear pixel value a ``.cube`` covers (the perfect white's; 1 for sRGB
-        pixels), > 0.
+        The largest linear pixel value a ``.cube`` of scene-linear pixels covers (the
+        perfect white's, or the SIM image's largest finite value where that is larger,
+        rounded up to 3 significant digits; 1 for sRGB pixels), > 0.
     normalisation
         What was matched before the fit (``exposure``, ``exposure+wb`` or ``none``) and by how
         much.
@@ -201,18 +239,32 @@ class Correction:
         fit = _to_linear(a, self.encoding) @ self.to_fit.T
         return np.asarray(self.model.apply(fit) @ np.linalg.inv(self.to_fit).T, np.float64)
 
-    @property
-    def lattice(self) -> str:
-        """How the ``.cube``'s lattice is spaced (:data:`fidelity.correction.lut.LATTICES`):
-        ``linear`` for the models affine in light (gains, matrix: interpolated exactly),
-        ``encoded`` for those that bend (a tone curve, a root-polynomial)."""
-        return "linear" if self.model.name in AFFINE_MODELS else "encoded"
+    def cube_values(self, pixels: ArrayLike, output: str) -> F64:
+        """What a ``.cube`` with ``output`` (:data:`fidelity.correction.lut.CUBE_OUTPUTS`)
+        holds for the simulator's pixel values ``(..., 3)``: the corrected values
+        sRGB-encoded (unclipped) or scene-linear."""
+        return output_values(self.apply_linear(pixels), output)
 
     def display_lab(self, pixels: ArrayLike) -> F64:
         """CIELAB of pixel values as the fit space shows them (sRGB clipped to [0, 1]): what
         a ΔE00 between two outputs of the correction is measured on."""
         fit = _to_linear(np.asarray(pixels, np.float64), self.encoding) @ self.to_fit.T
         return linear_to_lab(np.clip(fit, 0.0, 1.0))
+
+    def output_lab(self, values: ArrayLike, output: str) -> F64:
+        """:meth:`display_lab` of a ``.cube``'s output values (``output``: their encoding,
+        :meth:`cube_values`)."""
+        fit = output_linear(np.asarray(values, np.float64), output) @ self.to_fit.T
+        return linear_to_lab(np.clip(fit, 0.0, 1.0))
+
+    def cube_convention(self, output: str) -> tuple[str, str]:
+        """What a ``.cube`` with ``output`` takes and gives, in words: the input (encoding and
+        domain) and the output."""
+        check_output(output)
+        inp = ("sRGB-encoded (IEC 61966-2-1) 0 .. 1" if self.encoding == "srgb" else
+               f"scene-linear 0 .. {self.domain_max:.6g} (DOMAIN_MAX; beyond, clamped to it)")
+        out = "sRGB-encoded (IEC 61966-2-1)" if output == "encoded" else "scene-linear"
+        return inp, out
 
     @property
     def used(self) -> tuple[str, ...]:
@@ -230,46 +282,58 @@ class Correction:
         """Mean cross-validated ΔE00 over the used patches."""
         return float(np.nanmean(self.cv_delta_e))
 
-    def cube_comments(self, size: int) -> list[str]:
-        """The header comments of the ``.cube``: what goes in and what comes out."""
-        space = ("sRGB-encoded values (IEC 61966-2-1) in [0, 1]" if self.encoding == "srgb"
-                 else f"scene-linear values 0 .. {self.domain_max:.6g} (values beyond are "
-                 "clamped)")
-        shaper = {("srgb", "encoded"): "the 3D LUT directly",
-                  ("srgb", "linear"): "a 1D shaper (the sRGB decoding) then the 3D LUT",
-                  ("linear", "encoded"): "a 1D shaper (the sRGB encoding of v / max) then the "
-                                         "3D LUT",
-                  ("linear", "linear"): "a 1D shaper (v / max) then the 3D LUT"}
-        post = ("; apply the sRGB encoding (IEC 61966-2-1) after it to get corrected "
-                "sRGB-encoded pixels (correction.ocio does)" if self.encoding == "srgb" else "")
+    def cube_title(self, output: str) -> str:
+        """The ``TITLE`` of the ``.cube``: the model and the convention, in one line."""
+        inp = ("sRGB-encoded 0..1" if self.encoding == "srgb"
+               else f"scene-linear 0..{self.domain_max:.6g}")
+        out = "sRGB-encoded" if check_output(output) == "encoded" else "scene-linear"
+        return f"fidelity fit: {self.model.name} correction; {inp} in, {out} out"
+
+    def cube_comments(self, size: int, output: str | None = None) -> list[str]:
+        """The header comments of the ``.cube``: what goes in and what comes out
+        (``output``: :data:`fidelity.correction.lut.CUBE_OUTPUTS`; None: the input's
+        encoding)."""
+        output = default_output(self.encoding) if output is None else output
+        inp, out = self.cube_convention(output)
+        same = output == default_output(self.encoding)
         return [f"fidelity fit: {self.model.name} correction ({self.objective} objective), "
-                f"{size}^3 lattice even in {'light' if self.lattice == 'linear' else 'sRGB'}",
-                f"input: the simulator's pixels, {space}, through "
-                f"{shaper[(self.encoding, self.lattice)]}",
-                f"output: corrected scene-linear values, the simulator's colourspace and "
-                f"scale, unclipped{post}",
-                "apply with tetrahedral interpolation"]
+                f"{size}^3 lattice even in the input's values, no shaper",
+                f"input: the simulator's pixels, {inp}",
+                f"output: corrected {out} values, the simulator's colourspace and scale, "
+                f"unclipped ({'the input' if same else 'not the input'}'s encoding)",
+                "apply with tetrahedral interpolation (ffmpeg lut3d, oiiotool "
+                "--ociofiletransform, OpenColorIO FileTransform)"]
 
-    def to_cube(self, path: str | os.PathLike[str], size: int = 33) -> Path:
+    def to_cube(self, path: str | os.PathLike[str], size: int = 33,
+                output: str | None = None) -> Path:
         """Write the ``.cube`` (OpenColorIO's Baker, :func:`fidelity.correction.lut.bake_cube`)
-        of :meth:`apply_linear` atomically; returns the path."""
-        return write_text_atomic(path, bake_cube(self.apply_linear, size, self.encoding,
-                                                 self.domain_max, self.cube_comments(size),
-                                                 self.lattice))
+        of :meth:`cube_values` atomically; ``output``: the cube's output convention
+        (:data:`fidelity.correction.lut.CUBE_OUTPUTS`; None: the input's encoding). Returns
+        the path."""
+        output = check_output(default_output(self.encoding) if output is None else output)
+        return write_text_atomic(path, bake_cube(lambda v: self.cube_values(v, output), size,
+                                                 self.encoding, self.domain_max,
+                                                 self.cube_comments(size, output),
+                                                 self.cube_title(output)))
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self, cube_output: str | None = None) -> dict[str, Any]:
         """``model`` (gains, matrix, curve: :meth:`ColourModel.to_json`), ``objective``,
-        ``conditioning``, the pixel ``encoding``, ``to_fit``, ``domain_max``,
-        ``normalisation``, ``excluded`` and per patch the fit-space colours and the ΔE00
-        before, fitted and cross-validated."""
+        ``conditioning``, the pixel ``encoding``, ``to_fit``, ``domain_max``, the ``.cube``'s
+        convention (``cube_input``, ``cube_domain``, ``cube_output``: ``cube_output``, None:
+        the input's encoding), ``normalisation``, ``excluded`` and per patch the fit-space
+        colours and the ΔE00 before, fitted and cross-validated."""
         def f(v: float) -> float | None:
             return None if not np.isfinite(v) else float(v)
 
+        output = default_output(self.encoding) if cube_output is None else cube_output
         return {
             **self.model.to_json(), "objective": self.objective,
             "conditioning": self.conditioning.to_json(), "encoding": self.encoding,
             "to_fit": self.to_fit.tolist(), "domain_max": self.domain_max,
-            "cube_lattice": self.lattice, "cube_output": "scene-linear",
+            "cube_input": "srgb-encoded" if self.encoding == "srgb" else "scene-linear",
+            "cube_domain": [0.0, input_domain(self.encoding, self.domain_max)],
+            "cube_output": "srgb-encoded" if check_output(output) == "encoded"
+                           else "scene-linear",
             "normalisation": self.normalisation.to_json(), "excluded": dict(self.excluded),
             "fitted_mean_delta_e": float(np.mean(self.fitted_delta_e[self._used_mask])),
             "cross_validated_mean_delta_e": f(self.cv_mean),
@@ -304,15 +368,29 @@ def sim_ocio_refused(flag: str, name: str) -> InvalidValueError:
         "own: --real-ocio-colourspace)")
 
 
+def _refuse_sim_ocio(read: ReadOptions) -> None:
+    """SIM's read options with an OpenColorIO colourspace are refused before anything is
+    read (:func:`sim_ocio_refused`)."""
+    if read.ocio_colourspace is not None:
+        raise sim_ocio_refused("--ocio-colourspace", read.ocio_colourspace)
+
+
 def _read(path: str | os.PathLike[str], corners: str | Sequence[float] | None,
-          read: ReadOptions, reference: str, illuminant: str, *, sim: bool) -> _Chart:
+          read: ReadOptions, reference: str, illuminant: str, *, sim: bool,
+          keep_exposure_of: _Chart | None = None) -> _Chart:
+    """Read and audit one chart; ``keep_exposure_of`` (the REAL chart, for ``--normalise
+    none``): a SIM whose exposure would be auto is measured at REAL's exposure correction
+    instead, so that the exposure difference stays for the correction to correct."""
     if sim and read.ocio_colourspace is not None:
         raise sim_ocio_refused("--ocio-colourspace", read.ocio_colourspace)
     img, sha256 = read_input(path, read)
     enc = read.encoding or img.encoding
     info = img.info(sha256=sha256, encoding=enc)
+    exposure = read.exposure
+    if exposure is None and enc == "linear" and keep_exposure_of is not None:
+        exposure = keep_exposure_of.audit.exposure_ev
     try:
-        audit = measure_pixels(img.pixels, corners, encoding=enc, exposure=read.exposure,
+        audit = measure_pixels(img.pixels, corners, encoding=enc, exposure=exposure,
                                reference=reference, illuminant=illuminant, image=info,
                                negatives=read.negatives,
                                colourspace=(read.colourspace if read.colourspace is not None
@@ -346,6 +424,28 @@ class _Prepared:
     sim_pixels: F64
 
 
+def _is_float(chart: _Chart) -> bool:
+    """Whether the chart's image holds floating-point pixels (values above 1 are light)."""
+    info = chart.audit.image
+    return info is None or info.pixel_type in FLOAT_PIXEL_TYPES
+
+
+def _round_up(value: float, digits: int = 3) -> float:
+    """``value`` > 0 rounded up to ``digits`` significant digits (a ``.cube``'s domain)."""
+    step = 10.0 ** (math.floor(math.log10(value)) - digits + 1)
+    return float(f"{math.ceil(value / step - 1e-9) * step:.{digits}g}")
+
+
+def _largest_value(pixels: NDArray[Any]) -> float:
+    """The largest finite value of the R, G, B ``pixels`` (0 where none is)."""
+    px = np.asarray(pixels)[..., :3]
+    top = float(np.max(px)) if px.size else 0.0
+    if not math.isfinite(top):
+        finite = px[np.isfinite(px)]
+        top = float(finite.max()) if finite.size else 0.0
+    return top
+
+
 def _prepare(sim: _Chart, real: _Chart, normalise_mode: str,
              weights: ArrayLike | None) -> _Prepared:
     sm, rm = sim.audit.measurement, real.audit.measurement
@@ -353,10 +453,20 @@ def _prepare(sim: _Chart, real: _Chart, normalise_mode: str,
         raise InvalidValueError(f"{sim.path} and {real.path}: the charts have different patches")
     names = rm.patch_names
     neutral = neutral_patches(rm)
-    _, norm = normalise(sm.srgb, rm.srgb, neutral, normalise_mode)
+    enc = sim.audit.encoding
+    # a scene-linear SIM: its patches as exposed linear sRGB, unclipped (the audit's encoded
+    # colours stop at 1, where a render brighter than the chart's white goes on)
+    sim_lin = (patch_linear(sim.pixels, sim.audit) * 2.0 ** sim.audit.exposure_ev
+               if enc == "linear" else np.asarray(linearize_srgb(sm.srgb), np.float64))
+    _, norm = normalise(sm.srgb, rm.srgb, neutral, normalise_mode,
+                        sim_linear=sim_lin if enc == "linear" else None)
+    if sim.audit.neutral_ev is not None and real.audit.neutral_ev is not None:
+        norm = replace(norm, neutral_ev=(sim.audit.neutral_ev, real.audit.neutral_ev),
+                       audit_auto=(sim.audit.exposure_mode == "auto",
+                                   real.audit.exposure_mode == "auto"))
     d = (np.asarray(norm.gains) if norm.gains is not None
          else np.full(3, 2.0 ** norm.exposure_ev))
-    sim_fit = np.asarray(linearize_srgb(sm.srgb), np.float64) * d
+    sim_fit = sim_lin * d
     real_fit = np.asarray(linearize_srgb(rm.srgb), np.float64)
     colour = [k for k in range(len(names)) if k not in neutral]
     if colour:
@@ -369,20 +479,23 @@ def _prepare(sim: _Chart, real: _Chart, normalise_mode: str,
                 f"{real.path}: the real chart is nearly grey (mean chroma C*ab {chroma:.2f} of "
                 f"its colour patches, the reference's {ref_chroma:.1f}): it cannot determine a "
                 f"colour correction; is it the same chart, lit like the simulated one?")
-    excluded = usable_patches(sm.srgb, rm.srgb, names, sim.audit.clipped_patches,
-                              real.audit.clipped_patches)
+    sim_float = enc == "linear" and _is_float(sim)
+    excluded = usable_patches(
+        np.asarray(delinearize_srgb(sim_lin), np.float64) if enc == "linear" else sm.srgb,
+        rm.srgb, names, () if sim_float else sim.audit.clipped_patches,
+        real.audit.clipped_patches, sim_float=sim_float)
     w = np.array([0.0 if n in excluded else 1.0 for n in names])
     if weights is not None:
         w = w * np.asarray(weights, np.float64)
     p = _colourspace_matrix(sim.audit)
     to_fit = np.diag(d) @ (2.0 ** sim.audit.exposure_ev * p)
-    sim_lin_pixels = np.asarray(linearize_srgb(sm.srgb), np.float64) @ np.linalg.inv(
+    sim_lin_pixels = sim_lin @ np.linalg.inv(
         np.diag(2.0 ** sim.audit.exposure_ev * np.ones(3)) @ p).T
-    enc = sim.audit.encoding
     sim_pixels = (np.asarray(delinearize_srgb(sim_lin_pixels), np.float64) if enc == "srgb"
                   else sim_lin_pixels)
     domain_max = (1.0 if enc == "srgb" else
-                  float(np.max(np.linalg.solve(to_fit, np.ones(3)))))
+                  _round_up(max(float(np.max(np.linalg.solve(to_fit, np.ones(3)))),
+                                _largest_value(sim.pixels))))
     return _Prepared(names, norm, sim_fit, real_fit, w, excluded, enc, to_fit, domain_max,
                      sim_pixels)
 
@@ -459,8 +572,10 @@ def fit_correction(
     """
     sim_read, real_read = reads_with_own_ocio((sim, real), read,
                                               (None, real_ocio_colourspace))
-    s = _read(sim, sim_corners, sim_read, reference, illuminant, sim=True)
+    _refuse_sim_ocio(sim_read)
     r = _read(real, real_corners, real_read, reference, illuminant, sim=False)
+    s = _read(sim, sim_corners, sim_read, reference, illuminant, sim=True,
+              keep_exposure_of=r if normalise_mode == "none" else None)
     return _fit_charts(s, r, model, objective, normalise_mode, weights)
 
 
@@ -470,7 +585,9 @@ class LutCheck:
     largest and mean ΔE00 over the chart's patches (``chart_max``, ``chart_mean``) and over a
     ``grid_points``-point lattice of the input range (``grid_max``, ``grid_mean``, the 99th
     percentile ``grid_p99`` and the ``grid_within`` fraction of points within
-    ``tolerance``), and whether all is within ``tolerance``."""
+    ``tolerance``), and whether it passed (:attr:`passed`: the chart's maximum and the
+    lattice's 99th percentile within ``tolerance``, the lattice's maximum within
+    ``max_tolerance``)."""
 
     size: int
     chart_max: float
@@ -481,11 +598,19 @@ class LutCheck:
     tolerance: float
     grid_p99: float = 0.0
     grid_within: float = 1.0
+    max_tolerance: float = LUT_MAX_TOLERANCE
 
     @property
     def passed(self) -> bool:
-        """Both maxima within the tolerance."""
-        return self.chart_max <= self.tolerance and self.grid_max <= self.tolerance
+        """The chart's maximum and the lattice's 99th percentile within ``tolerance``, the
+        lattice's maximum within ``max_tolerance``."""
+        return (self.chart_max <= self.tolerance and self.grid_p99 <= self.tolerance
+                and self.grid_max <= self.max_tolerance)
+
+    def limit(self) -> str:
+        """The check's limit in words."""
+        return (f"chart max and lattice 99th percentile <= {self.tolerance:g}, lattice max <= "
+                f"{self.max_tolerance:g}")
 
     def to_json(self) -> dict[str, Any]:
         """JSON form."""
@@ -493,7 +618,8 @@ class LutCheck:
                 "chart_mean_delta_e": self.chart_mean, "grid_max_delta_e": self.grid_max,
                 "grid_mean_delta_e": self.grid_mean, "grid_p99_delta_e": self.grid_p99,
                 "grid_fraction_within": self.grid_within, "grid_points": self.grid_points,
-                "tolerance": self.tolerance, "passed": self.passed}
+                "tolerance": self.tolerance, "max_tolerance": self.max_tolerance,
+                "passed": self.passed}
 
 
 def check_points(correction: Correction) -> tuple[tuple[F64, F64], tuple[F64, F64]]:
@@ -501,27 +627,32 @@ def check_points(correction: Correction) -> tuple[tuple[F64, F64], tuple[F64, F6
     :data:`CHECK_GRID`^3 lattice of the input range, most points between the cube's nodes)
     and the model's own output there as CIELAB (:meth:`Correction.display_lab`): what
     :func:`check_cube` compares with, computed once for every cube size tried."""
-    grid = lattice_inputs(CHECK_GRID, correction.encoding, correction.domain_max).reshape(-1, 3)
+    grid = lattice_inputs(CHECK_GRID, correction.encoding, correction.domain_max,
+                          "encoded").reshape(-1, 3)
     points = (correction.sim_pixels, grid)
     return points, (correction.display_lab(correction.apply(points[0])),
                     correction.display_lab(correction.apply(points[1])))
 
 
 def check_cube(correction: Correction, path: str | os.PathLike[str], size: int,
-               points: tuple[tuple[F64, F64], tuple[F64, F64]] | None = None) -> LutCheck:
-    """Apply the ``.cube`` at ``path`` (and the output encoding) with OpenColorIO's processor
-    and compare it with :meth:`Correction.apply` on the chart's patches and on a dense lattice
-    (:class:`LutCheck`); ``points``: :func:`check_points` of ``correction``, if computed."""
-    proc = cube_processor(path, correction.encoding)
+               points: tuple[tuple[F64, F64], tuple[F64, F64]] | None = None,
+               output: str | None = None) -> LutCheck:
+    """Apply the ``.cube`` at ``path`` with OpenColorIO's processor and compare it with
+    :meth:`Correction.apply` on the chart's patches and on a dense lattice
+    (:class:`LutCheck`); ``points``: :func:`check_points` of ``correction``, if computed;
+    ``output``: the cube's output convention (None: the input's encoding)."""
+    output = default_output(correction.encoding) if output is None else output
+    proc = cube_processor(path)
     (chart, grid), (chart_lab, grid_lab) = points or check_points(correction)
     out = []
     for pts, direct in ((chart, chart_lab), (grid, grid_lab)):
         lut = apply_processor(proc, pts).astype(np.float64)
-        out.append(np.asarray(delta_e_2000(correction.display_lab(lut), direct), np.float64))
+        out.append(np.asarray(delta_e_2000(correction.output_lab(lut, output), direct),
+                              np.float64))
     return LutCheck(size, float(out[0].max()), float(out[0].mean()), float(out[1].max()),
                     float(out[1].mean()), len(grid), LUT_TOLERANCE,
                     float(np.percentile(out[1], 99)),
-                    float(np.mean(out[1] <= LUT_TOLERANCE)))
+                    float(np.mean(out[1] <= LUT_TOLERANCE)), LUT_MAX_TOLERANCE)
 
 
 @dataclass(frozen=True)
@@ -570,6 +701,18 @@ class FitReport:
         correction, one per detector; else empty.
     measured_after
         The same after the correction.
+    cube_output
+        The ``.cube``'s output convention (:data:`fidelity.correction.lut.CUBE_OUTPUTS`;
+        empty: the input's encoding, :attr:`output`).
+    sim_properties
+        The SIM chart's sharpness and noise with their predicted losses at the detector's
+        input (:class:`fidelity.prediction.properties.PropertyJudgement`; None: not judged).
+        The ``.cube`` corrects colour only: they stay as they are.
+    real_properties
+        The same of the REAL chart.
+    camera_fits
+        ``fit --camera`` only: the camera file's optics and noise fitted to REAL's sharpness
+        and noise (:class:`PropertyFit`, one per property); empty otherwise.
     """
 
     created: str
@@ -586,11 +729,66 @@ class FitReport:
     cpu_seconds: dict[str, float] = field(default_factory=dict)
     measured_before: tuple[MeasuredLoss, ...] = ()
     measured_after: tuple[MeasuredLoss, ...] = ()
+    cube_output: str = ""
+    sim_properties: PropertyJudgement | None = None
+    real_properties: PropertyJudgement | None = None
+    camera_fits: tuple[PropertyFit, ...] = ()
 
     @property
     def lut(self) -> LutCheck:
         """The check of the ``.cube`` written."""
         return self.lut_checks[-1]
+
+    @property
+    def output(self) -> str:
+        """The ``.cube``'s output convention: ``encoded`` or ``linear``."""
+        return self.cube_output or default_output(self.correction.encoding)
+
+    @property
+    def warnings(self) -> list[str]:
+        """What makes the correction unfit to apply as it is, one sentence each (empty: none):
+        a model that does not express the difference (cross-validated ΔE00 above
+        :data:`EXPRESSED_DELTA_E`, or no lower than before), a correction that does not lower
+        the sim-to-real ΔE00 (or raises it above :data:`EXPRESSED_DELTA_E` where the
+        simulation already matched), a ``.cube`` that misses its check."""
+        c, lut, b, a = self.correction, self.lut, self.before, self.after
+        out = []
+        if not c.expressed:
+            out.append(f"the {c.model.name} model does not express this difference: "
+                       f"{c.cv_mean:.2f} ΔE00 remains on patches held out of the fit (above "
+                       f"{EXPRESSED_DELTA_E:g}); what is left is not a colour mapping of this "
+                       "family (quantisation, noise, a spatial effect, or a model too simple)")
+        if b.mean_delta_e <= EXPRESSED_DELTA_E:  # nothing to lower: near the identity
+            if a.mean_delta_e > EXPRESSED_DELTA_E:
+                out.append(f"the correction raises the sim-to-real ΔE00 above "
+                           f"{EXPRESSED_DELTA_E:g} (mean {b.mean_delta_e:.2f} -> "
+                           f"{a.mean_delta_e:.2f}): do not apply it")
+        elif c.cv_mean > 0 and a.mean_delta_e >= b.mean_delta_e:
+            out.append(f"the correction does not lower the sim-to-real ΔE00 (mean "
+                       f"{b.mean_delta_e:.2f} -> {a.mean_delta_e:.2f}): the {c.model.name} "
+                       "model cannot express this difference")
+        elif np.isfinite(c.cv_mean) and c.cv_mean >= b.mean_delta_e:
+            out.append("the cross-validated ΔE00 is no lower than before: the fit memorises "
+                       "the patches rather than expressing the difference")
+        if not lut.passed:
+            hint = ""
+            if c.encoding == "linear" and self.output == "encoded":
+                hint = ("; sRGB-encoded output of scene-linear input puts the encoding's curve "
+                        "inside a lattice even in light, whose first nodes skip the shadows: "
+                        "--cube-output linear (exact for gains and matrix), then encode")
+            elif c.encoding == "linear" and c.model.name not in AFFINE_MODELS:
+                hint = "; a gains or matrix correction is exact on a lattice even in light"
+            out.append(f"the .cube ({lut.size}^3, the largest tried) misses its check: ΔE00 "
+                       f"against the model max {lut.chart_max:.3f} over the chart, 99th "
+                       f"percentile {lut.grid_p99:.3f} and max {lut.grid_max:.3f} over "
+                       f"{lut.grid_points} lattice points (limit: {lut.limit()}): between its "
+                       f"nodes it is not the model{hint}")
+        for f in self.camera_fits:
+            if f.value is not None and not f.matched():
+                what = "MTF50" if f.property == "sharpness" else "SNR at 18 % grey"
+                out.append(f"the corrected camera's {what} ({f.after}) is not REAL's "
+                           f"({f.real}): {f.note or 'the fit did not converge'}")
+        return out
 
 
 def fit_and_verify(
@@ -610,62 +808,71 @@ def fit_and_verify(
     judge: JudgeOptions = DEFAULT_JUDGE,
     corrected: bool = False,
     measure: MeasureRequest | None = None,
+    cube_output: str | None = None,
 ) -> FitReport:
-    """:func:`fit_correction`, then write ``correction.cube`` (the smallest cube size within
-    :data:`LUT_TOLERANCE`), ``correction.ocio`` and ``correction.json`` into the folder
+    """:func:`fit_correction`, then write ``correction.cube`` (the smallest cube size whose
+    :class:`LutCheck` passes), ``correction.ocio`` and ``correction.json`` into the folder
     ``out`` and verify them (module docstring).
 
-    The verification puts through OpenColorIO only the SIM pixels that the audit measures (its
+    ``cube_output`` is the cube's output convention (:data:`fidelity.correction.lut.CUBE_OUTPUTS`:
+    ``encoded``, sRGB-encoded; ``linear``, scene-linear; None: the SIM's own encoding). The
+    verification puts through OpenColorIO only the SIM pixels that the audit measures (its
     patch windows); ``corrected=True`` puts the whole SIM image through and writes it
-    (:func:`corrected_name`: a 16-bit PNG for sRGB-encoded SIM, clipped as a camera stores it;
-    a float EXR for scene-linear SIM), measuring the whole corrected image instead (the same
-    patch means; it costs the whole image's transform and writing)."""
+    (:func:`corrected_name`: a 16-bit PNG for sRGB-encoded output, clipped as a camera
+    stores it; a float EXR for scene-linear output), measuring the whole corrected image
+    instead (the same patch means; it costs the whole image's transform and writing)."""
     ocio()
     c0, t0 = time.process_time(), time.perf_counter()
 
     sim_read, real_read = reads_with_own_ocio((sim, real), read,
                                               (None, real_ocio_colourspace))
-    s = _read(sim, sim_corners, sim_read, reference, illuminant, sim=True)
+    _refuse_sim_ocio(sim_read)
     r = _read(real, real_corners, real_read, reference, illuminant, sim=False)
+    s = _read(sim, sim_corners, sim_read, reference, illuminant, sim=True,
+              keep_exposure_of=r if normalise_mode == "none" else None)
     c1, t1 = time.process_time(), time.perf_counter()
     corr = _fit_charts(s, r, model, objective, normalise_mode, None)
     c2, t2 = time.process_time(), time.perf_counter()
     return _verify(s, r, corr, Path(out), normalise_mode=normalise_mode, judge=judge,
                    corrected=corrected, seconds=(t1 - t0, t2 - t1),
-                   cpu=(c1 - c0, c2 - c1), measure=measure)
+                   cpu=(c1 - c0, c2 - c1), measure=measure, cube_output=cube_output)
 
 
 def _verify(s: _Chart, r: _Chart, corr: Correction, folder: Path, *, normalise_mode: str,
             judge: JudgeOptions, corrected: bool, seconds: tuple[float, float],
-            cpu: tuple[float, float], measure: MeasureRequest | None = None) -> FitReport:
+            cpu: tuple[float, float], measure: MeasureRequest | None = None,
+            cube_output: str | None = None) -> FitReport:
     """Write the cube, the config and ``correction.json`` of ``corr`` into ``folder`` and
     verify them on the SIM chart ``s`` against the REAL chart ``r`` (module docstring)."""
     c2, t2 = time.process_time(), time.perf_counter()
+    output = check_output(default_output(corr.encoding) if cube_output is None
+                          else cube_output)
+    out_encoding = "srgb" if output == "encoded" else "linear"
     folder.mkdir(parents=True, exist_ok=True)
     cube = folder / "correction.cube"
     checks: list[LutCheck] = []
     points = check_points(corr)
     for n in CUBE_SIZES:
-        corr.to_cube(cube, n)
-        checks.append(check_cube(corr, cube, n, points))
+        corr.to_cube(cube, n, output)
+        checks.append(check_cube(corr, cube, n, points, output))
         if checks[-1].passed:
             break
+    inp, out_words = corr.cube_convention(output)
     config = folder / "correction.ocio"
     write_text_atomic(config, ocio_config(cube, f"fidelity fit: {corr.model.name} correction "
                                                 f"of {Path(s.path).name} towards "
-                                                f"{Path(r.path).name}", corr.encoding))
+                                                f"{Path(r.path).name}; sim: {inp}; sim "
+                                                f"corrected: {out_words}"))
     sa, ra = s.audit, r.audit
     files = {"cube": str(cube), "ocio": str(config), "json": str(folder / "correction.json")}
     if corrected:
         whole = apply_processor(config_processor(config), np.asarray(s.pixels)[..., :3])
-        files["corrected"] = str(_write_corrected(folder, whole, corr.encoding))
-        after_srgb_audit = remeasure(whole, sa)
+        files["corrected"] = str(_write_corrected(folder, whole, out_encoding))
+        after_srgb_audit = remeasure(whole, sa, output_encoding=out_encoding)
     else:
-        # the cube alone through OpenColorIO (scene-linear out): the sRGB encoding that
-        # correction.ocio applies after it would be undone by the measurement at once
         cube_only = cube_processor(cube, reload=False)  # the file check_cube just read
         after_srgb_audit = remeasure(s.pixels, sa, lambda v: apply_processor(cube_only, v),
-                                     linear_output=True)
+                                     output_encoding=out_encoding)
     rm = ra.measurement
     ref_srgb = np.clip(rm.srgb, 0, 1)
     neutral = neutral_patches(rm)
@@ -676,7 +883,7 @@ def _verify(s: _Chart, r: _Chart, corr: Correction, folder: Path, *, normalise_m
     c3, t3 = time.process_time(), time.perf_counter()
     pb = judge_chart(before.mean_delta_e, judge).prediction
     pa = judge_chart(after.mean_delta_e, judge).prediction
-    write_json_atomic(folder / "correction.json", corr.to_json())
+    write_json_atomic(folder / "correction.json", corr.to_json(output))
     measured: list[tuple[MeasuredLoss, ...]] = [(), ()]
     if measure is not None:
         from fidelity.coco.emulation import PatchEmulation  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
@@ -691,7 +898,23 @@ def _verify(s: _Chart, r: _Chart, corr: Correction, folder: Path, *, normalise_m
                      tuple(checks), files,
                      {"read": seconds[0], "fit": seconds[1], "verify": t3 - t2},
                      {"read": cpu[0], "fit": cpu[1], "verify": c3 - c2},
-                     measured[0], measured[1])
+                     measured[0], measured[1], output,
+                     chart_properties(sa, pb, judge), chart_properties(ra, pb, judge))
+
+
+def chart_properties(audit: ImageMeasurement, prediction: Prediction, judge: JudgeOptions
+                     ) -> PropertyJudgement | None:
+    """The sharpness and noise of an audited chart judged at the detector's input, as an
+    audit judges them (:func:`fidelity.prediction.judge.judge_properties`, no verdict;
+    ``prediction`` a colour prediction, for the limits equivalent to ΔE00 3); None for an
+    audit that does not describe its image's size."""
+    info = audit.image
+    if info is None:
+        return None
+    judged, _ = judge_properties(None, prediction, None, size=judge.size,
+                                 sharpness=audit.sharpness, noise=audit.noise,
+                                 scale=detector_scale(info.width, info.height))
+    return judged
 
 
 @dataclass(frozen=True)
@@ -739,12 +962,14 @@ def fit_pairs_and_verify(
     illuminant: str = "D65",
     judge: JudgeOptions = DEFAULT_JUDGE,
     corrected: bool = False,
+    cube_output: str | None = None,
 ) -> SharedFit:
     """Fit one matrix and per-pair gains over ``pairs`` of (SIM, REAL) charts, the same
     cameras under different illuminants (:class:`SharedFit`), and write and verify each pair's
     correction ``matrix @ diag(gains)`` as :func:`fit_and_verify` does, into
     ``out/pair-<k>`` (k from 1). The fit is weighted least squares in linear RGB over the
-    patches usable in each pair; corners and the other options apply to every pair."""
+    patches usable in each pair; corners and the other options (``cube_output`` too) apply
+    to every pair."""
     ocio()
     if len(pairs) < 2:
         raise InvalidValueError("a fit over illuminants needs at least two pairs (--pair SIM "
@@ -754,8 +979,10 @@ def fit_pairs_and_verify(
     for sim, real in pairs:
         sim_read, real_read = reads_with_own_ocio((sim, real), read,
                                                   (None, real_ocio_colourspace))
-        charts.append((_read(sim, sim_corners, sim_read, reference, illuminant, sim=True),
-                       _read(real, real_corners, real_read, reference, illuminant, sim=False)))
+        _refuse_sim_ocio(sim_read)
+        r = _read(real, real_corners, real_read, reference, illuminant, sim=False)
+        charts.append((_read(sim, sim_corners, sim_read, reference, illuminant, sim=True,
+                             keep_exposure_of=r if normalise_mode == "none" else None), r))
     t1 = time.perf_counter()
     prepared = [_prepare(s, r, normalise_mode, None) for s, r in charts]
     xs = [pp.sim_fit for pp in prepared]
@@ -770,7 +997,7 @@ def fit_pairs_and_verify(
         reports.append(_verify(s, r, _correction(pp, model, "linear", cond, cv),
                                Path(out) / f"pair-{k + 1}", normalise_mode=normalise_mode,
                                judge=judge, corrected=corrected,
-                               seconds=(0.0, 0.0), cpu=(0.0, 0.0)))
+                               seconds=(0.0, 0.0), cpu=(0.0, 0.0), cube_output=cube_output))
     t3 = time.perf_counter()
     return SharedFit(utc_now(), matrix, gains, cond, tuple(reports),
                      {"read": t1 - t0, "fit": t2 - t1, "verify": t3 - t2})
@@ -793,6 +1020,223 @@ def _absolute_paths(value: Any, base: Path) -> Any:
     return value
 
 
+#: Most render-and-measure steps of one property's fit (:func:`fit_optics`, :func:`fit_noise`).
+PROPERTY_FIT_STEPS = 8
+#: Relative tolerance of the fitted MTF50 (the e-SFR of a noiseless turned chart repeats
+#: exactly, so this is the search's, not the measurement's).
+MTF50_TOLERANCE = 0.005
+#: Relative tolerance of the fitted SNR at 18 % grey (the noise is seeded, so the measured SNR
+#: is a deterministic function of the full well; 1 % is about the sampling error of the grey
+#: patch's SNR on the turned chart).
+SNR_TOLERANCE = 0.01
+
+
+@dataclass(frozen=True)
+class PropertyFit:
+    """A camera file's optics or noise fitted to REAL's sharpness or noise (``fit --camera``).
+
+    Each value is measured as ``fidelity check`` measures a camera: on its turned chart
+    (:class:`fidelity.camera.render.FrameRender`), at the camera's own pixels, which are taken
+    to be REAL's (a sensor model renders the real sensor's pixel grid).
+
+    Attributes
+    ----------
+    property
+        ``sharpness`` (the luminance MTF50 of the softer edge, cycles per pixel) or ``noise``
+        (the SNR at the 18 % grey patch, a ratio).
+    real
+        REAL's value at its own resolution; None: not measured (then nothing is fitted).
+    u_real
+        Its standard uncertainty (None: unknown).
+    before
+        The camera file's own value; None: not measured (a noiseless camera's SNR is inf).
+    after
+        The corrected camera file's value, measured on its own render; None: not measured.
+    parameter
+        The camera-file field fitted: ``optics.sigma_px`` (a Gaussian PSF's standard
+        deviation, pixels) or ``noise.full_well`` (electrons at raw 1; the read noise is kept).
+    value
+        The fitted value; None: the field was not changed.
+    steps
+        Render-and-measure steps the search took.
+    note
+        Why nothing was fitted, or what the fit could not express ("" when it matched).
+    """
+
+    property: str
+    real: float | None
+    u_real: float | None
+    before: float | None
+    after: float | None
+    parameter: str
+    value: float | None
+    steps: int
+    note: str = ""
+
+    def matched(self) -> bool:
+        """Whether the corrected camera's value is REAL's within the fit's tolerance (twice
+        the search's relative tolerance, or twice REAL's standard uncertainty)."""
+        if self.real is None or self.after is None:
+            return False
+        if math.isinf(self.real) or math.isinf(self.after):
+            return self.real == self.after
+        tol = MTF50_TOLERANCE if self.property == "sharpness" else SNR_TOLERANCE
+        return abs(self.after - self.real) <= max(2 * tol * self.real, 2 * (self.u_real or 0))
+
+    def to_json(self) -> dict[str, Any]:
+        """Field names as keys, with ``matched``; infinities as None."""
+        def fin(v: float | None) -> float | None:
+            return None if v is None or not math.isfinite(v) else v
+        return {"property": self.property, "real": fin(self.real),
+                "u_real": fin(self.u_real), "before": fin(self.before),
+                "after": fin(self.after), "parameter": self.parameter, "value": self.value,
+                "steps": self.steps, "note": self.note, "matched": self.matched()}
+
+
+def turned_chart_values(camera: CameraModel, illuminant: str, reference: str = "scene"
+                        ) -> tuple[float | None, float | None]:
+    """The MTF50 (cycles per pixel, the softer edge's luminance) and the SNR at 18 % grey of
+    ``camera``'s turned chart under ``illuminant``, measured as ``fidelity check`` measures
+    them (:func:`fidelity.pipeline.check.frame_properties`); None where not measured."""
+    frame = render_chart(camera, illuminant, reference=reference, frame=True).frame
+    sharpness, noise = frame_properties(frame, reference, illuminant)
+    mtf, snr = chart_mtf50(sharpness), chart_snr(noise)
+    return (None if mtf is None else mtf[0]), (None if snr is None else snr[0])
+
+
+def _gaussian_sigma(mtf50: float) -> float:
+    """The Gaussian PSF whose MTF times the pixel aperture's is 1/2 at ``mtf50`` cycles per
+    pixel: ``exp(-2 pi^2 sigma^2 f^2) |sinc f| = 1/2`` (the search's first guess)."""
+    f = min(max(mtf50, 1e-3), 0.6)
+    x = math.log(2.0 * abs(math.sin(math.pi * f) / (math.pi * f)))
+    return math.sqrt(x / (2 * math.pi ** 2 * f * f)) if x > 0 else 0.3
+
+
+def fit_optics(camera: CameraModel, real: tuple[float, float | None] | None, illuminant: str,
+               reference: str = "scene") -> tuple[CameraModel, PropertyFit]:
+    """The camera with a Gaussian PSF whose turned chart has REAL's MTF50.
+
+    A secant search on ``sigma`` (pixels) over the noiseless camera's measured MTF50 (the
+    same e-SFR that measured REAL), from the closed form's guess (:func:`_gaussian_sigma`),
+    until the MTF50 is within :data:`MTF50_TOLERANCE` (relative). ``real``: REAL's MTF50 and
+    its standard uncertainty (None: not measured). REAL at least as sharp as the camera
+    without a lens, within twice its uncertainty (or sharper: sharpening, which the model has
+    not), gets no PSF; REAL softer
+    than :data:`fidelity.camera.model.MAX_BLUR_PX` allows gets that limit, and the note says
+    so. Returns the camera (unchanged where nothing is fitted) and the :class:`PropertyFit`
+    (``after`` still None: :func:`fit_camera_and_verify` measures the written file)."""
+    before, _ = turned_chart_values(camera, illuminant, reference)
+    param = "optics.sigma_px"
+    if real is None:
+        return camera, PropertyFit("sharpness", None, None, before, None, param, None, 0,
+                                   "REAL's edges were not measured: optics unchanged")
+    real_mtf50, u_real = real
+    quiet = replace(camera, noise=Noise(None))
+
+    def mtf(sigma: float) -> float | None:
+        optics = Optics("gaussian", sigma_px=sigma) if sigma > 0 else Optics()
+        return turned_chart_values(replace(quiet, optics=optics), illuminant, reference)[0]
+
+    sharpest = mtf(0.0)
+    steps = 1
+    if sharpest is None:
+        return camera, PropertyFit("sharpness", real_mtf50, u_real, before, None, param, None, steps,
+                                   "the camera's own edges were not measured: optics unchanged")
+    if real_mtf50 >= sharpest - max(MTF50_TOLERANCE * sharpest, 2 * (u_real or 0.0)):
+        removed = 0.0 if camera.optics.kind != "none" else None
+        return (replace(camera, optics=Optics()),
+                PropertyFit("sharpness", real_mtf50, u_real, before, None, param, removed, steps,
+                            f"REAL (MTF50 {real_mtf50:.3g} cy/px) is as sharp as the camera "
+                            f"without lens blur ({sharpest:.3g}) within twice its uncertainty, "
+                            "or sharper (sharpening, which the camera model does not "
+                            "express): no PSF"))
+    points: list[tuple[float, float]] = []
+    sigma = _gaussian_sigma(real_mtf50)
+    note = ""
+    while steps < PROPERTY_FIT_STEPS:
+        got = mtf(sigma)
+        steps += 1
+        if got is None:  # too soft to measure: step back towards the sharp side
+            sigma *= 0.7
+            continue
+        points.append((sigma, got / real_mtf50 - 1.0))
+        if abs(points[-1][1]) <= MTF50_TOLERANCE:
+            break
+        if len(points) >= 2 and points[-1][1] != points[-2][1]:
+            (s0, g0), (s1, g1) = points[-2], points[-1]
+            nxt = s1 - g1 * (s1 - s0) / (g1 - g0)
+        else:  # MTF50 falls roughly as 1/sigma: one proportional step
+            nxt = sigma * (1.0 + points[-1][1])
+        sigma = min(max(nxt, 0.05), MAX_BLUR_PX)
+        if sigma == MAX_BLUR_PX and points[-1][1] > 0:
+            note = f"REAL is softer than a {MAX_BLUR_PX:g} px Gaussian, the model's limit"
+            break
+    else:
+        closest = min(points, key=lambda p: abs(p[1])) if points else None
+        note = (f"the search stopped after {steps} steps at MTF50 "
+                f"{real_mtf50 * (1 + closest[1]):.4g} cy/px" if closest else
+                "the blurred camera's edges were not measured")
+    if not points:
+        return camera, PropertyFit("sharpness", real_mtf50, u_real, before, None, param, None, steps,
+                                   note)
+    best = min(points, key=lambda p: abs(p[1]))[0]
+    return (replace(camera, optics=Optics("gaussian", sigma_px=best)),
+            PropertyFit("sharpness", real_mtf50, u_real, before, None, param, best, steps, note))
+
+
+def fit_noise(camera: CameraModel, real: tuple[float, float | None] | None, illuminant: str,
+              reference: str = "scene") -> tuple[CameraModel, PropertyFit]:
+    """The camera with the full well whose turned chart has REAL's SNR at 18 % grey.
+
+    Shot noise dominates at grey, so the SNR grows as the square root of the full well: each
+    step scales it by ``(SNR_real / SNR)^2`` (the read noise in electrons kept), until the SNR
+    is within :data:`SNR_TOLERANCE`. ``real``: REAL's SNR and its standard uncertainty (None:
+    not measured). A noiseless REAL grey (SNR inf) removes the camera's
+    noise. Returns the camera and the :class:`PropertyFit` (``after`` None, as
+    :func:`fit_optics`)."""
+    _, before = turned_chart_values(camera, illuminant, reference)
+    param = "noise.full_well"
+    if real is None:
+        return camera, PropertyFit("noise", None, None, before, None, param, None, 0,
+                                   "REAL's grey patch noise was not measured: noise unchanged")
+    real_snr, u_real = real
+    if math.isinf(real_snr) and not camera.noise.enabled:
+        return camera, PropertyFit("noise", real_snr, u_real, before, None, param, None, 0,
+                                   "REAL's grey patch is noiseless, as the camera's: noise "
+                                   "unchanged")
+    if math.isinf(real_snr):
+        return (replace(camera, noise=Noise(None, 0.0, camera.noise.seed)),
+                PropertyFit("noise", real_snr, u_real, before, None, param, None, 0,
+                            "REAL's grey patch is noiseless: the camera's noise removed"))
+    read_noise, seed = camera.noise.read_noise, camera.noise.seed
+    well = camera.noise.full_well or max(real_snr * real_snr / 0.18, 1.0)
+    steps, best, note = 0, (well, math.inf), ""
+    while steps < PROPERTY_FIT_STEPS:
+        try:
+            _, snr = turned_chart_values(replace(camera, noise=Noise(well, read_noise, seed)),
+                                         illuminant, reference)
+        except InvalidValueError as exc:  # a read noise too large for this well
+            note = str(exc)
+            break
+        steps += 1
+        if snr is None or not math.isfinite(snr) or snr <= 0:
+            note = "the noisy camera's grey patch SNR was not measured"
+            break
+        err = snr / real_snr - 1.0
+        if abs(err) < abs(best[1]):
+            best = (well, err)
+        if abs(err) <= SNR_TOLERANCE:
+            break
+        well = max(well * (real_snr / snr) ** 2, 1.0)
+    else:
+        note = (f"the search stopped after {steps} steps at SNR "
+                f"{real_snr * (1 + best[1]):.4g}")
+    if math.isinf(best[1]):
+        return camera, PropertyFit("noise", real_snr, u_real, before, None, param, None, steps, note)
+    return (replace(camera, noise=Noise(best[0], read_noise, seed)),
+            PropertyFit("noise", real_snr, u_real, before, None, param, best[0], steps, note))
+
+
 def fit_camera_and_verify(
     camera: str | os.PathLike[str],
     real: str | os.PathLike[str],
@@ -809,6 +1253,8 @@ def fit_camera_and_verify(
     judge: JudgeOptions = DEFAULT_JUDGE,
     corrected: bool = False,
     measure: MeasureRequest | None = None,
+    cube_output: str | None = None,
+    properties: bool = True,
 ) -> tuple[FitReport, Path]:
     """Render the chart through the camera model file ``camera`` in closed form (under
     ``illuminant``; ``out/sim_render.png`` or ``.exr``), fit and verify the correction onto
@@ -819,8 +1265,13 @@ def fit_camera_and_verify(
 
     The correction of a camera file is a 3x3 matrix in the camera's linear output (before its
     tone curve): ``model`` ``gains`` or ``matrix``, and the camera's tone curve ``srgb`` or
-    ``linear`` (the encodings the audit reads exactly). Returns the report and the path of
-    ``corrected.toml``."""
+    ``linear`` (the encodings the audit reads exactly).
+
+    With ``properties`` (the default), the camera file's optics and noise are fitted too
+    (:func:`fit_optics`, :func:`fit_noise`): ``corrected.toml`` gets the Gaussian PSF and the
+    full well whose turned chart has REAL's MTF50 and SNR at 18 % grey, and the report's
+    :attr:`FitReport.camera_fits` gives each before, after (measured on the written file)
+    and REAL's. Returns the report and the path of ``corrected.toml``."""
     import tomli_w
 
     path = Path(camera)
@@ -851,7 +1302,7 @@ def fit_camera_and_verify(
                          normalise_mode=normalise_mode, read=read,
                          real_ocio_colourspace=real_ocio_colourspace, reference=reference,
                          illuminant=illuminant, judge=judge, corrected=corrected,
-                         measure=measure)
+                         measure=measure, cube_output=cube_output)
     c = rep.correction
     t = c.to_fit
     ccm = colour_correction_matrix(cam, load_illuminant(illuminant))
@@ -861,16 +1312,43 @@ def fit_camera_and_verify(
     data["description"] = (f"{data.get('description', cam.name)}, corrected by fidelity fit "
                            f"({c.model.name}) towards {Path(real).name}")
     data["ccm"] = {"method": "matrix", "matrix": new.tolist()}
+    fits: list[PropertyFit] = []
+    if properties:
+        rp = rep.real_properties
+
+        def native(prop: str) -> tuple[float, float | None] | None:
+            got = rp.prediction(prop) if rp is not None else None
+            if got is None or got.native_x is None:
+                return None
+            return got.native_x, None if got.u_x is None else got.u_x * got.scale
+
+        fitted, sharp = fit_optics(cam, native("sharpness"), illuminant, reference)
+        fitted, noisy = fit_noise(fitted, native("noise"), illuminant, reference)
+        fits = [sharp, noisy]
+        if fitted.optics != cam.optics:
+            data["optics"] = ({"kind": "gaussian", "sigma_px": round(fitted.optics.sigma_px, 4)}
+                              if fitted.optics.kind == "gaussian" else {"kind": "none"})
+        if fitted.noise != cam.noise:
+            n = fitted.noise
+            if n.full_well is None:
+                data.pop("noise", None)
+            else:
+                data["noise"] = {"full_well": round(n.full_well, 1),
+                                 "read_noise": n.read_noise, "seed": n.seed}
+    what = "the colour matrix" + (", optics and noise" if properties else "")
     toml = folder / "corrected.toml"
-    write_text_atomic(toml, f"# fidelity fit --camera {path.name}: the colour matrix "
-                            f"corrected towards {Path(real).name} (ΔE00 after "
-                            f"{rep.after.mean_delta_e:.3f})\n" + tomli_w.dumps(data))
+    write_text_atomic(toml, f"# fidelity fit --camera {path.name}: {what} corrected towards "
+                            f"{Path(real).name} (ΔE00 after {rep.after.mean_delta_e:.3f})\n"
+                      + tomli_w.dumps(data))
+    if fits:
+        mtf, snr = turned_chart_values(read_camera_file(toml), illuminant, reference)
+        rep = replace(rep, camera_fits=(replace(fits[0], after=mtf), replace(fits[1], after=snr)))
     return rep, toml
 
 
 def corrected_name(encoding: str) -> str:
-    """The file name of the corrected SIM image: ``corrected.png`` (sRGB-encoded) or
-    ``corrected.exr`` (scene-linear)."""
+    """The file name of the corrected SIM image, by the encoding of the ``.cube``'s output:
+    ``corrected.png`` (``srgb``) or ``corrected.exr`` (``linear``)."""
     return "corrected.png" if encoding == "srgb" else "corrected.exr"
 
 
@@ -881,20 +1359,13 @@ def _write_corrected(folder: Path, pixels: NDArray[Any], encoding: str) -> Path:
     return write_exr(path, pixels, "the simulator's linear RGB corrected by fidelity fit")
 
 
-def remeasure(pixels: NDArray[Any], audit: ImageMeasurement,
-              transform: Callable[[NDArray[Any]], NDArray[Any]] | None = None, *,
-              linear_output: bool = False) -> F64:
-    """The encoded sRGB patch colours ``(n, 3)`` of ``pixels`` (an image of the size of the
-    audited one), each pixel first through ``transform`` (``(m, 3)`` -> ``(m, 3)``, e.g. the
-    correction through OpenColorIO's processor), measured as ``audit`` measured its image: the
-    same sampling windows, encoding, colourspace and exposure rule (auto exposure fitted again
-    on the neutral patches, a fixed one kept), pixels with NaN or Inf excluded, clipped to
-    [0, 1]. ``linear_output``: the transform gives scene-linear values (the ``.cube`` without
-    its output encoding), averaged as they are instead of decoded from the audit's encoding.
-
-    Only the windows' pixels are read and transformed: the patch means are those of the whole
-    image through ``transform`` measured in the same windows (``tests/pipeline/test_fit.py`` checks
-    both ways), at the cost of the windows, not of the image."""
+def patch_linear(pixels: NDArray[Any], audit: ImageMeasurement,
+                 transform: Callable[[NDArray[Any]], NDArray[Any]] | None = None,
+                 encoding: str | None = None) -> F64:
+    """The linear sRGB patch means ``(n, 3)`` of ``pixels`` (an image of the size of the
+    audited one) in ``audit``'s sampling windows, before any exposure and unclipped: each
+    pixel first through ``transform`` (``(m, 3)`` -> ``(m, 3)``), decoded from ``encoding``
+    (None: the audit's), in the audit's colourspace, pixels with NaN or Inf excluded."""
     p = _colourspace_matrix(audit)
     windows = [np.asarray(v, np.float32).reshape(-1, 3)  # float32 like the pixels: 2x faster
                for v in window_pixels(pixels, audit.location)]
@@ -902,7 +1373,7 @@ def remeasure(pixels: NDArray[Any], audit: ImageMeasurement,
         counts = np.cumsum([len(v) for v in windows])[:-1]
         joined = np.asarray(transform(np.concatenate(windows)), np.float32)
         windows = np.split(joined, counts)
-    encoding = "linear" if linear_output else audit.encoding
+    encoding = audit.encoding if encoding is None else encoding
     means = []
     for v in windows:
         finite = np.isfinite(v).all(axis=1)
@@ -911,7 +1382,24 @@ def remeasure(pixels: NDArray[Any], audit: ImageMeasurement,
         if len(v) == 0:
             raise InvalidValueError("the corrected image has no finite pixel in a patch window")
         means.append(p @ np.asarray(_to_linear(v, encoding)).mean(axis=0, dtype=np.float64))
-    lin = np.array(means)
+    return np.array(means)
+
+
+def remeasure(pixels: NDArray[Any], audit: ImageMeasurement,
+              transform: Callable[[NDArray[Any]], NDArray[Any]] | None = None, *,
+              output_encoding: str | None = None) -> F64:
+    """The encoded sRGB patch colours ``(n, 3)`` of ``pixels`` (an image of the size of the
+    audited one), each pixel first through ``transform`` (``(m, 3)`` -> ``(m, 3)``, e.g. the
+    correction through OpenColorIO's processor), measured as ``audit`` measured its image: the
+    same sampling windows, colourspace and exposure rule (auto exposure fitted again on the
+    neutral patches, a fixed one kept), pixels with NaN or Inf excluded, clipped to [0, 1].
+    ``output_encoding``: the encoding of what ``transform`` gives (``srgb`` or ``linear``, a
+    ``.cube``'s output; None: the audit's), decoded by it.
+
+    Only the windows' pixels are read and transformed: the patch means are those of the whole
+    image through ``transform`` measured in the same windows (``tests/pipeline/test_fit.py`` checks
+    both ways), at the cost of the windows, not of the image."""
+    lin = patch_linear(pixels, audit, transform, output_encoding)
     ref = audit.reference
     ev = (exposure_from_neutrals(lin, ref.lab, ref.neutral_indices, ref.patch_names)
           if audit.exposure_mode == "auto" else audit.exposure_ev)
@@ -919,6 +1407,7 @@ def remeasure(pixels: NDArray[Any], audit: ImageMeasurement,
 
 
 __all__ = ["AFFINE_MODELS", "CHECK_GRID", "Correction", "DEFAULT_MODEL", "EXPRESSED_DELTA_E",
-           "FitReport", "GREY_CHROMA", "LUT_TOLERANCE", "LutCheck", "check_cube", "check_points",
+           "FitReport", "GREY_CHROMA", "MTF50_TOLERANCE", "PROPERTY_FIT_STEPS", "PropertyFit", "SNR_TOLERANCE",
+           "chart_properties", "fit_noise", "fit_optics", "turned_chart_values", "LUT_MAX_TOLERANCE", "LUT_TOLERANCE", "LutCheck", "check_cube", "check_points",
            "CAMERA_PIXELS_PER_PATCH", "corrected_name", "fit_and_verify", "fit_camera_and_verify", "fit_correction", "fit_pairs_and_verify",
-           "remeasure", "SharedFit"]
+           "patch_linear", "remeasure", "SharedFit"]

@@ -11,6 +11,9 @@ predicted from its chart ΔE and the verdict of a gate. Its JSON form (``schema_
   ``delta_l``, ``delta_c``, ``delta_h``, ``lab``, ``reference_lab``, ``srgb``, ...): the chart
   measurement (CIEDE2000, Lab D65);
 - ``exposure_ev``, ``bad_pixels``: the audit of an image (``null`` for a render);
+- ``exposure``: the image's exposure judged against the expected one, where a fixed exposure
+  was given (scene manifest or ``--exposure``;
+  :class:`fidelity.prediction.exposure.ExposureJudgement`);
 - ``source``: the image (:class:`ImageSource`) or the render (:class:`RenderSource`);
 - ``prediction``: ΔE -> ΔmAP (:meth:`fidelity.prediction.table.Prediction.to_json`, with the
   notes in words);
@@ -22,6 +25,9 @@ predicted from its chart ΔE and the verdict of a gate. Its JSON form (``schema_
   :class:`fidelity.prediction.interval.PredictionInterval`);
 - ``validity``: whether the answer lies inside its evidence's domain (table ΔE range, detector
   sizes, table kind, reference chart: :class:`fidelity.prediction.interval.ValidityDomain`);
+- ``diagnosis``: the likely cause of the chart's error, from a small camera pipeline fitted to
+  the patch means (:class:`fidelity.colour.diagnosis.Diagnosis`: exposure, black offset,
+  white balance, saturation, tone curve, each in words with its values);
 - ``uncertainty``: the standard uncertainty budget of the mean ΔE00
   (:class:`fidelity.measure.uncertainty.UncertaintyBudget`: each component, its value, type and
   method; the combined ``standard_uncertainty`` with ``k`` = 1);
@@ -54,6 +60,7 @@ from numpy.typing import NDArray
 from fidelity.chart.find.result import ChartChecks, FoundChart
 from fidelity.chart.image import ImageInfo
 from fidelity.chart.locate import ChartLocation, locate_chart
+from fidelity.colour.diagnosis import Diagnosis
 from fidelity.core.errors import InvalidValueError
 from fidelity.core.fileio import JSONObject, file_sha256
 from fidelity.core.resources import resource_dir
@@ -66,6 +73,7 @@ from fidelity.measure.colour import ChartMeasurement
 from fidelity.measure.pixels import BadPixels
 from fidelity.measure.uncertainty import UncertaintyBudget
 from fidelity.prediction.directional import DirectionalPrediction
+from fidelity.prediction.exposure import ExposureJudgement
 from fidelity.prediction.interval import PredictionInterval, ValidityDomain
 from fidelity.prediction.properties import PropertyJudgement
 from fidelity.prediction.table import Prediction
@@ -74,6 +82,7 @@ from fidelity.prediction.verdict import EXIT_ERROR, Criterion, Verdict, worst_ex
 if TYPE_CHECKING:
     from fidelity.chart.find.result import ChartChecks, FoundChart
     from fidelity.coco.measure import MeasuredLoss
+    from fidelity.pipeline.context import ContextAssessment
 
 #: Version of the JSON report layout (bump on incompatible change).
 SCHEMA_VERSION = "1.0"
@@ -368,6 +377,11 @@ class ChartReport:
     interval
         The predicted ΔmAP with its standard uncertainty
         (:class:`fidelity.prediction.interval.PredictionInterval`); None when not evaluated.
+    intervals
+        Every loss column's predicted value with its own standard uncertainty (points,
+        relative, person, bicycle: the table's SE of that column and the ΔE's through its
+        slope), in :data:`fidelity.prediction.tablefile.COLUMNS` order; empty when not
+        evaluated.
     validity
         Whether the answer lies inside its evidence's domain
         (:class:`fidelity.prediction.interval.ValidityDomain`); None when not judged.
@@ -381,6 +395,19 @@ class ChartReport:
         Colour, sharpness and noise judged together, each property's predicted loss and
         which were not judged (:class:`fidelity.prediction.properties.PropertyJudgement`);
         None when not judged.
+    exposure
+        The image's exposure judged against the expected one (a fixed exposure from the
+        scene manifest or ``--exposure``;
+        :class:`fidelity.prediction.exposure.ExposureJudgement`); None when not judged.
+    neutral_ev
+        The exposure correction an image's neutral patches ask for, in EV (equal to
+        ``exposure_ev`` when auto); None for a render or black neutral patches.
+    diagnosis
+        The likely cause of the chart's error (:class:`fidelity.colour.diagnosis.Diagnosis`:
+        the causes in words and numbers, or none); None when not made.
+    context
+        The context of use's credibility assessment (``--context``;
+        :class:`fidelity.pipeline.context.ContextAssessment`); None without a context.
     """
 
     command: str
@@ -415,6 +442,23 @@ class ChartReport:
     #: colour, sharpness and noise judged together
     #: (:class:`fidelity.prediction.properties.PropertyJudgement`)
     properties: PropertyJudgement | None = None
+    #: the image's exposure judged (:class:`fidelity.prediction.exposure.ExposureJudgement`)
+    exposure: ExposureJudgement | None = None
+    #: the exposure correction the neutral patches ask for, in EV (an image; None: none)
+    neutral_ev: float | None = None
+    #: the likely cause of the chart's error (:mod:`fidelity.colour.diagnosis`)
+    diagnosis: Diagnosis | None = None
+    #: the context of use's credibility assessment (``--context``;
+    #: :class:`fidelity.pipeline.context.ContextAssessment`)
+    context: ContextAssessment | None = None
+    #: every loss column with its own standard uncertainty (:mod:`fidelity.prediction.interval`)
+    intervals: tuple[PredictionInterval, ...] = ()
+
+    @property
+    def exposure_auto(self) -> bool:
+        """Whether an image's audit normalised its exposure on the neutral patches (auto):
+        the image's own exposure then is neither in the chart ΔE nor judged."""
+        return isinstance(self.source, ImageSource) and self.source.exposure_mode == "auto"
 
     @property
     def warnings(self) -> list[BlindSpot]:
@@ -472,6 +516,8 @@ class ChartReport:
                          if data.get("uncertainty") else None),
             interval=(PredictionInterval.from_json(data["prediction_interval"])
                       if data.get("prediction_interval") else None),
+            intervals=tuple(PredictionInterval.from_json(i)
+                            for i in data.get("prediction_intervals") or ()),
             validity=(ValidityDomain.from_json(data["validity"])
                       if data.get("validity") else None),
             noise=ChartNoise.from_json(data["noise"]) if data.get("noise") else None,
@@ -479,6 +525,11 @@ class ChartReport:
                        if data.get("sharpness") else None),
             properties=(PropertyJudgement.from_json(data["properties"])
                         if data.get("properties") else None),
+            exposure=(ExposureJudgement.from_json(data["exposure"])
+                      if data.get("exposure") else None),
+            neutral_ev=data.get("neutral_ev"),
+            diagnosis=(Diagnosis.from_json(data["diagnosis"])
+                       if data.get("diagnosis") else None),
         )
 
 

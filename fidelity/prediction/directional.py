@@ -35,7 +35,10 @@ of its transforms (and models), from the sweep's cells
 directions) is fitted to the chart: the parameter that brings the transformed reference chart
 closest to the measured one (least mean ΔE00; a scan of the parameter range, then Brent's
 bounded method). The family that removes the largest share ``x`` of the chart's error
-(``x = 1 - residual / error``, in [0, 1]) *explains* that share.
+(``x = 1 - residual / error``, in [0, 1]) *explains* that share, when it removes at least
+:data:`MIN_EXPLAINED` of it and :data:`MIN_EXPLAINED_DELTA_E` of mean ΔE00. These fits
+decide the prediction's weights; the likely *cause* of a chart error in words is
+:mod:`fidelity.colour.diagnosis`'s.
 
 **The prediction** (:func:`predict_directional`) at the chart's ΔE ``E`` is a weighted sum of
 family curves, each read at ``E``::
@@ -104,6 +107,10 @@ COLUMNS: tuple[str, ...] = ("dmap_points", "dmap_relative", "dap_person_points",
                             "dap_bicycle_points")
 #: Share of the chart error a fit must remove to count as an explanation (below: noise).
 MIN_EXPLAINED = 0.02
+#: Least mean ΔE00 a fit must remove to count as an explanation: below it, a parameter at its
+#: identity can still "explain" a share of a tiny error (the ΔE00 is not smooth at the sRGB
+#: gamut's edge: a correct render's cyan), which is no finding.
+MIN_EXPLAINED_DELTA_E = 0.05
 
 
 @dataclass(frozen=True)
@@ -300,6 +307,28 @@ class FamilyFit:
             return 0.0
         return float(min(1.0, max(0.0, 1.0 - self.residual / self.error)))
 
+    @property
+    def explains(self) -> bool:
+        """Whether the fit counts as an explanation: it removes at least
+        :data:`MIN_EXPLAINED` of the error and :data:`MIN_EXPLAINED_DELTA_E` of mean ΔE00."""
+        return (self.explained >= MIN_EXPLAINED
+                and self.error - self.residual >= MIN_EXPLAINED_DELTA_E)
+
+    def describe(self) -> str:
+        """The transform and its parameter with its unit: ``brightness +0.346 (added to the
+        encoded sRGB values, 0..1)``, ``gamma 0.628 (a power on linear light)``, ``contrast
+        ×0.829 about mid grey``, ``saturation ×0.90 (HSV)``, ``hue +3.2° (HSV rotation)``,
+        ``pull to the mean colour 0.80 (1: none)``."""
+        p = self.param
+        return {
+            "brightness": f"brightness {p:+z.3f} (added to the encoded sRGB values, 0..1)",
+            "gamma": f"gamma {p:.3f} (a power on linear light)",
+            "contrast": f"contrast ×{p:.3f} about mid grey (encoded sRGB)",
+            "saturation": f"saturation ×{p:.3f} (HSV)",
+            "hue": f"hue {p:+z.1f}° (HSV rotation)",
+            "pull_mean": f"pull to the mean colour {p:.3f} (1: none)",
+        }.get(self.fit, f"{self.fit} {p:.4g}")
+
     def to_json(self) -> dict[str, Any]:
         """Field names as keys, and ``explained``."""
         return {"fit": self.fit, "family": self.family, "param": self.param,
@@ -491,8 +520,8 @@ class FamilyTerm:
 @dataclass(frozen=True)
 class DirectionalPrediction:
     """The direction-aware prediction of one chart (:func:`predict_directional`): the chart
-    ΔE, its :class:`ErrorParts`, the best :class:`FamilyFit` (None when none explains
-    :data:`MIN_EXPLAINED` of the error), the parts the fit leaves (``residual_parts``), the
+    ΔE, its :class:`ErrorParts`, the best :class:`FamilyFit` (None when none explains the
+    error: :attr:`FamilyFit.explains`), the parts the fit leaves (``residual_parts``), the
     :class:`FamilyTerm` terms and the resulting loss per column (``columns``), the detector
     size asked and answered, and the table (its summary).
 
@@ -503,8 +532,9 @@ class DirectionalPrediction:
     parts
         The chart error split into lightness, chroma and hue parts (ΔE00 units).
     fit
-        The transform fit that explains most of the error; None when none explains
-        :data:`MIN_EXPLAINED` of it.
+        The transform fit that explains most of the error; None when none removes
+        :data:`MIN_EXPLAINED` of it and :data:`MIN_EXPLAINED_DELTA_E` of mean ΔE00
+        (:attr:`FamilyFit.explains`).
     residual_parts
         The parts the fit leaves (the parts of the whole error without a fit).
     terms
@@ -573,7 +603,7 @@ class DirectionalPrediction:
         parts = ", ".join(f"{t.family} {100 * t.weight:.0f} %" for t in self.terms
                           if t.weight >= 0.005)
         if self.fit is not None:
-            return (f"{parts}; {self.fit.fit} {self.fit.param:.4g} explains "
+            return (f"{parts}; as the SAFE-COLOR transform {self.fit.describe()}: "
                     f"{100 * self.fit.explained:.0f} % of the error")
         return f"{parts}; by direction, no transform explains the error"
 
@@ -656,7 +686,7 @@ def predict_directional(reference_lab: ArrayLike, lab: ArrayLike, *,
     if not math.isfinite(de) or de < 0:
         raise InvalidValueError(f"ΔE {delta_e!r} must be a finite number >= 0")
     fits = fit_families(ref, meas)
-    best = fits[0] if fits and fits[0].explained >= MIN_EXPLAINED else None
+    best = fits[0] if fits and fits[0].explains else None
     weights: dict[str, float] = {}
     reasons: dict[str, str] = {}
     residual = parts
@@ -664,8 +694,8 @@ def predict_directional(reference_lab: ArrayLike, lab: ArrayLike, *,
     if best is not None:
         x = best.explained
         weights[best.family] = x
-        reasons[best.family] = (f"{best.fit} {best.param:.4g} explains {100 * x:.1f} % of the "
-                                "chart error")
+        reasons[best.family] = (f"the SAFE-COLOR transform {best.describe()} explains "
+                                f"{100 * x:.1f} % of the chart error")
         residual = error_parts(fitted_lab(ref, best), meas)
         rest = 1.0 - x
     shares = residual.shares()
@@ -726,17 +756,22 @@ def family_losses(delta_e: float, *, size: str = "any",
 
 def evaluate_directional(mean_delta_e: float, prediction: DirectionalPrediction,
                          criterion: Criterion, *, decision: DecisionRule | None = None,
-                         delta_e_uncertainty: float | None = None) -> Verdict:
+                         delta_e_uncertainty: float | None = None,
+                         loss_uncertainty: float | None = None) -> Verdict:
     """Apply a ``max-dmap`` ``criterion`` to the direction-aware prediction (a ``max-delta-e``
     criterion does not depend on the bound: :func:`fidelity.prediction.verdict.evaluate`) by
-    the ``decision`` rule (default simple; the direction-aware prediction states no
-    uncertainty, so a guarded rule takes U = 0)."""
+    the ``decision`` rule (default simple). ``loss_uncertainty``: the standard uncertainty a
+    guarded rule takes for the direction-aware loss (the directional table states no
+    sampling error of its own; :func:`fidelity.prediction.judge.judge_chart` gives the
+    classic column's at the same chart ΔE, the SE of the same sweep's worst cells, whose loss
+    is no smaller); None: U = 0."""
     rule = decision or SIMPLE
     if criterion.kind != "max-dmap":
         return evaluate(mean_delta_e, None, criterion, decision=rule,
                         delta_e_uncertainty=delta_e_uncertainty)
     return judge_value(criterion, prediction.value(criterion.cls, criterion.unit),
-                       prediction.delta_e, bound="directional", decision=rule)
+                       prediction.delta_e, bound="directional", decision=rule,
+                       uncertainty=loss_uncertainty)
 
 
 __all__ = [
@@ -747,6 +782,7 @@ __all__ = [
     "DIRECTION_FAMILY",
     "FAMILIES",
     "MIN_EXPLAINED",
+    "MIN_EXPLAINED_DELTA_E",
     "DirectionalPrediction",
     "DirectionalTable",
     "ErrorParts",

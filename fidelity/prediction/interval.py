@@ -8,8 +8,9 @@ combined as uncorrelated (JCGM 100 5.1.2):
   recorded at the two table points around the ΔE (the larger of the paired image bootstrap
   and the jackknife, or what tables measured before it recorded: the table's provenance says
   which)
-  (:class:`~fidelity.prediction.interpolate.SamplingError`;
-  measured tables, ``dmap_points`` only; None otherwise);
+  (:class:`~fidelity.prediction.interpolate.SamplingError`; measured tables, each column
+  its own: ``dmap_points``, ``dmap_relative`` (% of baseline), ``dap_person_points``,
+  ``dap_bicycle_points``, from the ``<column>_se`` of the table's points; None otherwise);
 - the chart ΔE's own standard uncertainty ``u(ΔE)`` (:mod:`fidelity.measure.uncertainty`)
   propagated through the table: ``|c| u(ΔE)`` with the sensitivity ``c`` the slope of the
   table's answer, by central differences over ``±h`` (``h`` = max(u(ΔE), 0.01), one-sided at
@@ -30,7 +31,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any
 
@@ -65,6 +66,15 @@ class PredictionInterval:
     def standard_uncertainty(self) -> float:
         """Combined standard uncertainty (k = 1)."""
         return math.sqrt((self.table_se or 0.0) ** 2 + self.propagated ** 2)
+
+    @property
+    def swamped(self) -> bool:
+        """True when the standard uncertainty is at least the value itself (``u >= |value|``,
+        ``u > 0``): the table does not resolve the loss from zero (e.g. the bicycle column
+        below ΔE 6, docs/predict.md); a guarded decision at a limit above the value is
+        undecided there unless ``value + k u`` is below the limit."""
+        u = self.standard_uncertainty
+        return u > 0 and u >= abs(self.value)
 
     def plus_minus(self) -> str:
         """``" ± 0.27 (k=1)"``: the standard uncertainty as the reports print it after the
@@ -122,8 +132,8 @@ def prediction_interval(prediction: Prediction, delta_e_uncertainty: float,
 
     a, b = at(lo), at(hi)
     slope = 0.0 if a is None or b is None or hi <= lo else (b - a) / (hi - lo)
-    se = (prediction.dmap_points_se.high if column == "dmap_points"
-          and prediction.dmap_points_se is not None else None)
+    sampling = prediction.se(column)
+    se = None if sampling is None else sampling.high
     return PredictionInterval(column, float(value), se, float(slope), u, k)
 
 
@@ -232,7 +242,11 @@ class ValidatedCameras:
     ("gamma", "lut", "srgb")``); ``sensitivities``: the sensors' spectral sensitivities;
     ``models``: the detectors measured; ``cells``, ``within``, ``within_2se``: the (camera,
     detector) cells, and how many had their measured mAP loss within the measured table's
-    bound, and within it plus two standard errors."""
+    bound, and within it plus two standard errors; ``degradations``: per degradation of
+    :data:`DEGRADATIONS` (noise, optics, vignetting), the ``kinds`` the cameras had
+    (``"none"`` for one without it) and the ``ranges`` ``(lo, hi)`` of each numeric parameter
+    they had (:meth:`~fidelity.camera.model.CameraModel.degradations`); empty when the
+    record predates them (no check is claimed then)."""
 
     cameras: int
     illuminants: tuple[str, ...]
@@ -242,13 +256,15 @@ class ValidatedCameras:
     cells: int
     within: int
     within_2se: int
+    degradations: Mapping[str, ValidatedDegradation] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         """The layout of :data:`VALIDATED_CAMERAS_FILE`."""
         return {"cameras": self.cameras, "illuminants": list(self.illuminants),
                 "stages": {k: list(v) for k, v in self.stages.items()},
                 "sensitivities": list(self.sensitivities), "models": list(self.models),
-                "cells": self.cells, "within": self.within, "within_2se": self.within_2se}
+                "cells": self.cells, "within": self.within, "within_2se": self.within_2se,
+                "degradations": {k: v.to_json() for k, v in self.degradations.items()}}
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> ValidatedCameras:
@@ -256,15 +272,21 @@ class ValidatedCameras:
         return cls(int(d["cameras"]), tuple(d["illuminants"]),
                    {k: tuple(v) for k, v in d["stages"].items()},
                    tuple(d["sensitivities"]), tuple(d["models"]), int(d["cells"]),
-                   int(d["within"]), int(d["within_2se"]))
+                   int(d["within"]), int(d["within_2se"]),
+                   {k: ValidatedDegradation.from_json(v)
+                    for k, v in (d.get("degradations") or {}).items()})
 
-    def camera_checks(self, stage_kinds: Mapping[str, str], illuminant: str
-                      ) -> tuple[DomainCheck, DomainCheck]:
+    def camera_checks(self, stage_kinds: Mapping[str, str], illuminant: str,
+                      degradations: Mapping[str, tuple[str, Mapping[str, float]]] | None = None
+                      ) -> tuple[DomainCheck, ...]:
         """Whether a camera (its :meth:`~fidelity.camera.model.CameraModel.stage_kinds`)
         rendered under ``illuminant`` is like the cameras validated: the ``validated
         illuminant`` check (the illuminant is one they were rendered under) and the
         ``validated camera kind`` check (each stage of a kind some validated camera had; a bit
-        depth inside the range validated, a float output only if one was)."""
+        depth inside the range validated, a float output only if one was); then, given the
+        camera's ``degradations`` (:meth:`~fidelity.camera.model.CameraModel.degradations`),
+        a ``validated noise``, ``validated optics`` and ``validated vignetting`` check for
+        each degradation this record states (:func:`degradation_check`)."""
         held = (f"{self.cameras} cameras, {self.within} of {self.cells} (camera, detector) "
                 f"cells within the measured bound")
         light = illuminant in self.illuminants
@@ -284,7 +306,83 @@ class ValidatedCameras:
             f"a camera like those validated: {like} ({held})" if not off else
             f"not validated: {'; '.join(off)}; the prediction was not validated on such a "
             f"camera")
-        return ill, kind
+        extra = [degradation_check(name, *degradations[name], self.degradations[name])
+                 for name in DEGRADATIONS
+                 if degradations is not None and name in degradations
+                 and name in self.degradations]
+        return (ill, kind, *extra)
+
+
+#: The image degradations the validity domain states besides the colour stages, in the order
+#: its checks name them (:meth:`fidelity.camera.model.CameraModel.degradations`).
+DEGRADATIONS = ("noise", "optics", "vignetting")
+
+#: The unit of each numeric degradation parameter, in the checks' words.
+PARAMETER_UNITS = {"full_well": "e-", "read_noise": "e- rms", "sigma_px": "px",
+                   "radius_px": "px", "f_number": "", "diagonal_fov_deg": "deg"}
+
+
+@dataclass(frozen=True)
+class ValidatedDegradation:
+    """What the validated cameras had of one degradation (noise, optics, vignetting): the
+    ``kinds`` (``"none"``: a camera without it) and, per numeric parameter, the ``ranges``
+    ``(lo, hi)`` of the values they had."""
+
+    kinds: tuple[str, ...]
+    ranges: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"kinds": [...], "ranges": {"full_well": [lo, hi], ...}}``."""
+        return {"kinds": list(self.kinds),
+                "ranges": {k: [lo, hi] for k, (lo, hi) in self.ranges.items()}}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> ValidatedDegradation:
+        """Inverse of :meth:`to_json`."""
+        return cls(tuple(d["kinds"]),
+                   {k: (float(v[0]), float(v[1])) for k, v in (d.get("ranges") or {}).items()})
+
+    def words(self) -> str:
+        """``none only`` or ``shot+read (full_well 1000 to 40000 e-), none``."""
+        if self.kinds == ("none",):
+            return "none only"
+        spans = ", ".join(f"{k} {lo:g} to {hi:g} {PARAMETER_UNITS.get(k, '')}".rstrip()
+                          for k, (lo, hi) in self.ranges.items())
+        return ", ".join(self.kinds) + (f" ({spans})" if spans else "")
+
+
+def validated_degradation(seen: list[tuple[str, Mapping[str, float]]]
+                          ) -> ValidatedDegradation:
+    """The :class:`ValidatedDegradation` of the validated cameras' ``seen`` degradations
+    (each a camera's ``(kind, parameters)``): the kinds in sorted order, each parameter's
+    smallest and largest value."""
+    values: dict[str, list[float]] = {}
+    for _, params in seen:
+        for k, v in params.items():
+            values.setdefault(k, []).append(float(v))
+    return ValidatedDegradation(tuple(sorted({kind for kind, _ in seen})),
+                                {k: (min(v), max(v)) for k, v in sorted(values.items())})
+
+
+def degradation_check(name: str, kind: str, params: Mapping[str, float],
+                      validated: ValidatedDegradation) -> DomainCheck:
+    """Whether a camera's degradation ``name`` (``kind`` and its numeric ``params``) lies
+    among the validated cameras' (``validated``): inside when its kind is one they had and
+    each of its parameters lies within their range (a kind none of them had, or a parameter
+    none of them had a value of, is outside). The detail gives the value and the range."""
+    shown = ", ".join(f"{k} {v:g} {PARAMETER_UNITS.get(k, '')}".rstrip()
+                      for k, v in params.items())
+    this = (f"no {name}" if kind == "none" else f"{name} {kind}") + (
+        f" ({shown})" if shown else "")
+    off = [k for k, v in params.items()
+           if k not in validated.ranges
+           or not validated.ranges[k][0] <= v <= validated.ranges[k][1]]
+    inside = kind in validated.kinds and not off
+    return DomainCheck(
+        f"validated {name}", inside,
+        f"{this}: like the cameras validated ({name}: {validated.words()})" if inside else
+        f"{this}: not validated (the validated cameras' {name}: {validated.words()}); the "
+        f"prediction was not validated on such a camera")
 
 
 def _kind_validated(stage: str, kind: str, validated: tuple[str, ...]) -> bool:
@@ -306,14 +404,19 @@ def load_validated_cameras() -> ValidatedCameras | None:
 
 
 __all__ = [
+    "DEGRADATIONS",
     "MIN_STEP",
+    "PARAMETER_UNITS",
     "STAGES",
     "VALIDATED_CAMERAS_FILE",
     "DomainCheck",
     "PredictionInterval",
     "ValidatedCameras",
+    "ValidatedDegradation",
     "ValidityDomain",
     "load_validated_cameras",
     "prediction_interval",
+    "degradation_check",
+    "validated_degradation",
     "validity_domain",
 ]

@@ -12,16 +12,22 @@ public API (``check_camera(..., judge=JudgeOptions(size="n"))``) to :func:`judge
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, NamedTuple
 
-from fidelity.core.errors import FidelityError, unknown_name
+from fidelity.core.errors import FidelityError, InvalidValueError, unknown_name
 from fidelity.prediction.directional import (
     BOUNDS,
     DirectionalPrediction,
     evaluate_directional,
     predict_chart,
+)
+from fidelity.prediction.exposure import (
+    DEFAULT_MAX_EXPOSURE_ERROR_EV,
+    EXPOSURE_SOURCES,
+    ExposureJudgement,
 )
 from fidelity.prediction.interval import prediction_interval
 from fidelity.prediction.properties import (
@@ -71,16 +77,29 @@ class JudgeOptions:
     decision
         The decision rule of a verdict (:class:`~fidelity.prediction.verdict.DecisionRule`:
         simple, or guarded with the value's expanded uncertainty).
+    max_exposure_error
+        The largest exposure error that passes, in EV, where the exposure is judged (a fixed
+        exposure given, :mod:`fidelity.prediction.exposure`).
+    exposure_source
+        Where a fixed exposure came from: ``--exposure`` or the scene ``manifest``
+        (:data:`~fidelity.prediction.exposure.EXPOSURE_SOURCES`).
     """
 
     size: str = "any"
     table: PredictionTable | str | None = None
     bound: str = "classic"
     decision: DecisionRule = SIMPLE
+    max_exposure_error: float = DEFAULT_MAX_EXPOSURE_ERROR_EV
+    exposure_source: str = "--exposure"
 
     def __post_init__(self) -> None:
         if self.bound not in BOUNDS:
             raise unknown_name("bound", self.bound, BOUNDS)
+        if not (math.isfinite(self.max_exposure_error) and self.max_exposure_error > 0):
+            raise InvalidValueError(f"--max-exposure-error {self.max_exposure_error!r}: must "
+                                    f"be a positive number of EV")
+        if self.exposure_source not in EXPOSURE_SOURCES:
+            raise unknown_name("exposure source", self.exposure_source, EXPOSURE_SOURCES)
 
     @property
     def table_input(self) -> str | None:
@@ -252,10 +271,39 @@ def directional_prediction(measurement: ChartMeasurement, size: str = "any",
     return predict_chart(measurement, size=size, table=directional_table_name(table))
 
 
+def limit_allows(limit_delta_e: float, prediction: Prediction) -> float | None:
+    """What a limit on the mean ΔE00 allows: the predicted worst-case ΔmAP in percent of the
+    baseline mAP at ΔE00 = ``limit_delta_e``, from ``prediction``'s table and size class.
+
+    Parameters
+    ----------
+    limit_delta_e
+        The ``max-delta-e`` limit, ΔE00, >= 0.
+    prediction
+        A prediction whose table (with its curves) and size class answer.
+
+    Returns
+    -------
+    float or None
+        ΔmAP in % of baseline, in [0, 100]; None when the table has no curves (read back from
+        JSON) or no relative column.
+    """
+    if not prediction.table.curves:
+        return None
+    try:
+        at = predict(limit_delta_e, size=prediction.size, table=prediction.table,
+                     method=prediction.method, baseline_map=prediction.baseline_map,
+                     transforms=False)
+    except FidelityError:
+        return None
+    return at.dmap_relative
+
+
 def judge_chart(mean_delta_e: float, judge: JudgeOptions = DEFAULT_JUDGE,
                 criterion: Criterion | None = None, measurement: ChartMeasurement | None = None,
                 *, delta_e_uncertainty: float | None = None, properties: bool = False,
-                sharpness: Any = None, noise: Any = None, scale: float = 1.0) -> Judgement:
+                sharpness: Any = None, noise: Any = None, scale: float = 1.0,
+                exposure: ExposureJudgement | None = None) -> Judgement:
     """Predict the loss of a chart ΔE and apply ``criterion``.
 
     Parameters
@@ -271,10 +319,11 @@ def judge_chart(mean_delta_e: float, judge: JudgeOptions = DEFAULT_JUDGE,
     measurement
         The chart's measurement, for the direction-aware prediction (None: none made).
     delta_e_uncertainty
-        The chart ΔE's standard uncertainty (None: unknown). A classic ``max-dmap`` verdict
-        uses the predicted loss's uncertainty
-        (:func:`fidelity.prediction.interval.prediction_interval`); a direction-aware one has
-        none.
+        The chart ΔE's standard uncertainty (None: unknown). A ``max-dmap`` verdict uses the
+        predicted loss's uncertainty of the criterion's own column (points, relative, person
+        or bicycle: :func:`fidelity.prediction.interval.prediction_interval`); a
+        direction-aware one the classic column's at the same ΔE (its table states none:
+        :func:`fidelity.prediction.directional.evaluate_directional`).
     properties
         Judge sharpness and noise too (:func:`judge_properties` with ``sharpness``, ``noise``
         and ``scale``; a property not measured is named as not judged).
@@ -285,6 +334,9 @@ def judge_chart(mean_delta_e: float, judge: JudgeOptions = DEFAULT_JUDGE,
         The chart's :class:`~fidelity.measure.chartnoise.ChartNoise` (None: not measured).
     scale
         The detector's input over the image's size.
+    exposure
+        The image's exposure judged (:func:`fidelity.prediction.exposure.judge_exposure`;
+        None: not judged): over its limit, it fails the verdict.
 
     Returns
     -------
@@ -299,27 +351,34 @@ def judge_chart(mean_delta_e: float, judge: JudgeOptions = DEFAULT_JUDGE,
                    if measurement is not None else None)
     verdict = None
     if criterion:
+        loss_u = None
+        if criterion.kind == "max-dmap":  # the criterion's own column's uncertainty
+            interval = prediction_interval(prediction, delta_e_uncertainty or 0.0,
+                                           criterion.column, decision.k)
+            if interval is not None and (interval.table_se is not None
+                                         or delta_e_uncertainty is not None):
+                loss_u = interval.standard_uncertainty
         if bound == "directional" and directional is not None:
             verdict = evaluate_directional(mean_delta_e, directional, criterion,
                                            decision=decision,
-                                           delta_e_uncertainty=delta_e_uncertainty)
+                                           delta_e_uncertainty=delta_e_uncertainty,
+                                           loss_uncertainty=loss_u)
         else:
-            loss_u = None
-            if criterion.kind == "max-dmap":
-                interval = prediction_interval(prediction, delta_e_uncertainty or 0.0,
-                                               criterion.column, decision.k)
-                if interval is not None and (interval.table_se is not None
-                                             or delta_e_uncertainty is not None):
-                    loss_u = interval.standard_uncertainty
             verdict = evaluate(mean_delta_e, prediction, criterion, decision=decision,
                                delta_e_uncertainty=delta_e_uncertainty, loss_uncertainty=loss_u)
+    if verdict is not None and criterion is not None and criterion.kind == "max-delta-e":
+        verdict = replace(verdict, limit_loss_relative=limit_allows(criterion.limit, prediction))
     judged = None
     if properties:
         judged, verdict = judge_properties(verdict, prediction, criterion, size=size,
                                            sharpness=sharpness, noise=noise, scale=scale)
+    if verdict is not None and exposure is not None:
+        verdict = replace(verdict, exposure=exposure)
+        if not exposure.passed:
+            verdict = replace(verdict, passed=False, reason=VerdictReason.OVER_LIMIT)
     return Judgement(prediction, verdict, directional, judged)
 
 
 __all__ = ["BOUNDS", "DEFAULT_JUDGE", "JUDGED_PROPERTIES", "JudgeOptions", "Judgement",
            "directional_prediction", "directional_table_name", "judge_chart",
-           "judge_properties"]
+           "judge_properties", "limit_allows"]

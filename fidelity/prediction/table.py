@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -203,6 +203,10 @@ class Prediction:
         The sampling error of a measured table's ``dmap_points`` at the table points next to
         ``delta_e``, percentage points; None for published bounds, a table without SEs, or a
         ΔE beyond the table's range.
+    column_se
+        The same for each other column the table states standard errors of
+        (``dmap_relative`` in percent of the baseline, ``dap_person_points``,
+        ``dap_bicycle_points`` in points), from the curve that answered that column.
     """
 
     delta_e: float
@@ -214,6 +218,14 @@ class Prediction:
     baseline_map: float | None
     transforms: tuple[TransformParameter, ...]
     dmap_points_se: SamplingError | None = None
+    column_se: dict[str, SamplingError] = field(default_factory=dict)
+
+    def se(self, column: str) -> SamplingError | None:
+        """The sampling error of ``column``'s answer (:attr:`dmap_points_se` for
+        ``dmap_points``, else :attr:`column_se`); None where the table has none."""
+        if column == "dmap_points":
+            return self.dmap_points_se
+        return self.column_se.get(column)
 
     @property
     def kind(self) -> TableKind:
@@ -291,6 +303,7 @@ class Prediction:
             "baseline_map": self.baseline_map,
             "dmap_points_se": self.dmap_points_se.to_json() if self.dmap_points_se else None,
             "dmap_points_interval": list(interval) if interval else None,
+            "column_se": {col: se.to_json() for col, se in self.column_se.items()},
             "table": self.table.summary(),
             "transforms": [tp.to_json() for tp in self.transforms],
         }
@@ -310,6 +323,8 @@ class Prediction:
             baseline_map=None if baseline is None else float(baseline),
             transforms=tuple(TransformParameter.from_json(tp) for tp in data["transforms"]),
             dmap_points_se=SamplingError.from_json(se) if se else None,
+            column_se={str(k): SamplingError.from_json(v)
+                       for k, v in (data.get("column_se") or {}).items()},
         )
 
 
@@ -381,6 +396,7 @@ def predict(
     t = np.array([de])
     columns: dict[str, ColumnPrediction] = {}
     answering: Curve | None = None
+    answered: dict[str, Curve] = {}
     for col in COLUMNS:
         best_v, best_s, rng = math.nan, 2, None
         for c in curves:
@@ -388,6 +404,7 @@ def predict(
                                      points_ceiling(c, col, tab.curves, baseline_map))
             if r is not None and (math.isnan(best_v) or v[0] > best_v):
                 best_v, best_s, rng = float(v[0]), int(s[0]), r
+                answered[col] = c
                 if col == "dmap_points":
                     answering = c
         if math.isnan(best_v):
@@ -408,23 +425,35 @@ def predict(
     dmap = columns.get("dmap_points")
     se = (_bracketing_se(answering, de) if tab.kind.measured and dmap is not None
           and dmap.status is ColumnStatus.INTERPOLATED else None)
+    others: dict[str, SamplingError] = {}
+    for col in COLUMNS:
+        answer = columns[col]
+        if col == "dmap_points" or not tab.kind.measured or answer.status is not \
+                ColumnStatus.INTERPOLATED or answer.raised_from is not None:
+            continue
+        got = _bracketing_se(answered.get(col), de, col)
+        if got is not None:
+            others[col] = SamplingError(*got)
     return Prediction(
         delta_e=de, size=size, size_used=size_used, columns=columns, table=tab, method=m,
         baseline_map=float(baseline_map) if baseline_map is not None else None,
         transforms=tuple(transform_parameters(de)) if transforms else (),
         dmap_points_se=SamplingError(*se) if se else None,
+        column_se=others,
     )
 
 
-def _bracketing_se(curve: Curve | None, delta_e: float) -> tuple[float, float] | None:
-    """(min, max) SE of ``dmap_points`` at the table points next to ``delta_e`` (None: unknown)."""
-    if curve is None or curve.dmap_points_se is None:
+def _bracketing_se(curve: Curve | None, delta_e: float, column: str = "dmap_points"
+                   ) -> tuple[float, float] | None:
+    """(min, max) SE of ``column`` at the table points next to ``delta_e`` (None: unknown)."""
+    ses = None if curve is None else curve.se(column)
+    if curve is None or ses is None:
         return None
     x = curve.delta_e
     i = int(np.searchsorted(x, delta_e))  # first point at or above delta_e
     between = 0 < i < len(x) and x[i] != delta_e
     hi = min(i, len(x) - 1)
-    se = curve.dmap_points_se[hi - 1 if between else hi: hi + 1]
+    se = ses[hi - 1 if between else hi: hi + 1]
     se = se[np.isfinite(se)]
     return (float(se.min()), float(se.max())) if se.size else None
 

@@ -109,6 +109,15 @@ class Curve:
     dmap_points_se: np.ndarray | None = None
     #: baseline AP in percent per class column (``dap_person_points`` ...), where known
     baseline_ap: dict[str, float] = field(default_factory=dict)
+    #: per loss column with standard errors (``<column>_se`` in the file), the SE at each
+    #: point (NaN where unknown); ``dmap_points`` is :attr:`dmap_points_se`
+    column_se: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def se(self, column: str) -> np.ndarray | None:
+        """The standard error of ``column`` at each point (None: the table has none)."""
+        if column == "dmap_points":
+            return self.dmap_points_se
+        return self.column_se.get(column)
 
     def baseline_points(self, column: str) -> float | None:
         """The curve's baseline in percent for a points column (None: unknown or relative)."""
@@ -207,7 +216,7 @@ _LOSS = sc.Number(nullable=True)
 POINT_SCHEMA = sc.Table(fields=(
     sc.Field("delta_e", sc.Number(lo=0.0), required=True),
     *(sc.Field(col, _LOSS) for col in COLUMNS),
-    sc.Field("dmap_points_se", sc.Number(lo=0.0, nullable=True)),
+    *(sc.Field(f"{col}_se", sc.Number(lo=0.0, nullable=True)) for col in COLUMNS),
     sc.Field("worst_transform", sc.String(nullable=True)),
     sc.Field("source", sc.AnyValue()),
     sc.Field("partial", sc.Boolean(nullable=True)),
@@ -273,6 +282,8 @@ def parse_prediction_table(obj: dict[str, Any], origin: str = "<table>") -> Pred
             baseline_ap={k: val for k, val in baseline_ap.items() if val is not None},
             dmap_points_se=(_column(pts, "dmap_points_se")
                             if any("dmap_points_se" in p for p in pts) else None),
+            column_se={col: _column(pts, f"{col}_se") for col in COLUMNS
+                       if col != "dmap_points" and any(f"{col}_se" in p for p in pts)},
         ))
     return PredictionTable(
         name=str(v["name"]),

@@ -32,6 +32,7 @@ from fidelity.measure.colour import (
 from fidelity.pipeline.records import ChartReport, ImageSource, RenderSource
 from fidelity.prediction.properties import load_property_table
 from fidelity.report import chartfigures
+from fidelity.report.context import context_section
 from fidelity.report.document import (
     Code,
     Document,
@@ -39,16 +40,18 @@ from fidelity.report.document import (
     Headline,
     Section,
     Text,
+    Tone,
     section,
     svg_figure,
     table,
 )
 from fidelity.report.html import write_document
 from fidelity.report.jsonform import chart_report_json
-from fidelity.report.terminal import plus_minus, texture_lines
+from fidelity.report.terminal import outside_line, plus_minus, texture_lines
 from fidelity.report.words import (
     COLUMN_LABELS,
     column_note,
+    exposure_words,
     prediction_notes,
     property_lines,
     verdict_message,
@@ -68,9 +71,16 @@ def headline(report: ChartReport) -> Headline:
                         "half), numbered in chart order.")
     v = report.verdict
     warn = "".join(f"\n\n**warning**: {w.reason}" for w in report.warnings)
+    validity = report.validity
+    outside = validity is not None and not validity.inside
+    if outside:
+        assert validity is not None
+        warn = f"\n\n**{outside_line(validity)}**{warn}"
     if v is not None:
-        return Headline(f"**{v.label}**: {verdict_message(v).split(': ', 1)[-1]}{warn}",
-                        "pass" if v.passed else "fail", figure)
+        label = f"{v.label} — outside the validity domain" if outside else v.label
+        tone: Tone = "fail" if not v.passed else "outside" if outside else "pass"
+        return Headline(f"**{label}**: {verdict_message(v).split(': ', 1)[-1]}{warn}",
+                        tone, figure)
     return Headline(f"mean ΔE00 {report.mean_delta_e:.2f}, max {report.max_delta_e:.2f} "
                     f"({report.worst_patch}); no gate applied{warn}", "info", figure)
 
@@ -87,10 +97,18 @@ def summary_facts(report: ChartReport) -> Facts:
                f"a\\* {stats.neutral_ab[0]:+z.2f}, b\\* {stats.neutral_ab[1]:+z.2f} "
                f"(ΔC\\*ab {stats.neutral_chroma:.2f})"),
               ("mean ΔL* of the neutral patches", f"{stats.neutral_delta_l:+z.2f}")]
+    items += diagnosis_facts(report)
     items += noise_facts(report)
     items += tone_facts(report)
     if report.exposure_ev is not None:
-        items.append(("exposure correction", f"{report.exposure_ev:+z.3f} EV"))
+        items.append(("exposure correction",
+                      f"{report.exposure_ev:+z.3f} EV"
+                      + (" (auto, on the neutral patches: the image's own exposure is not "
+                         "judged)" if report.exposure_auto else "")))
+    if report.exposure is not None:
+        items.append(("exposure error (image against the expected)",
+                      f"{exposure_words(report.exposure)}: "
+                      f"{'within' if report.exposure.passed else 'over'} the limit"))
     if report.bad_pixels is not None:
         w = report.bad_pixels.window
         items.append(("bad pixels in windows (NaN/Inf/negative)",
@@ -99,12 +117,24 @@ def summary_facts(report: ChartReport) -> Facts:
     if p is not None:
         b = "≤ " if p.table.kind.upper_bound else ""
         pm = "" if report.interval is None else report.interval.plus_minus()
+        by = {i.column: i for i in report.intervals}
+
+        def pm_of(column: str) -> str:
+            i = by.get(column)
+            return "" if i is None else f" ± {i.standard_uncertainty:.2f} (k=1)" + (
+                ", u ≥ the value: mostly noise" if i.swamped else "")
+
         items += [("predicted ΔmAP, percentage points", b + _num(p.dmap_points) + pm),
-                  ("predicted ΔmAP, % of baseline", b + _num(p.dmap_relative)),
-                  ("predicted person ΔAP, points", b + _num(p.dap_person_points)),
-                  ("predicted bicycle ΔAP, points", b + _num(p.dap_bicycle_points)),
+                  ("predicted ΔmAP, % of baseline",
+                   b + _num(p.dmap_relative) + pm_of("dmap_relative")),
+                  ("predicted person ΔAP, points",
+                   b + _num(p.dap_person_points) + pm_of("dap_person_points")),
+                  ("predicted bicycle ΔAP, points",
+                   b + _num(p.dap_bicycle_points) + pm_of("dap_bicycle_points")),
                   ("prediction table", f"{p.table.name} ({p.table.kind}), detector size "
-                                       f"{p.size_used}")]
+                                       f"{p.size_used}"),
+                  ("detectors measured", ", ".join(sorted(
+                      {c.model for c in p.table.curves if c.model is not None})) or "–")]
     d = report.directional
     if d is not None:
         items += [("direction-aware predicted ΔmAP, points", _num(d.dmap_points)),
@@ -131,6 +161,29 @@ def summary_facts(report: ChartReport) -> Facts:
                           f"of its built-in config (OpenColorIO {how.version})"))
     items.append(("reference", src.reference))
     return Facts(tuple(items))
+
+
+def diagnosis_facts(report: ChartReport) -> list[tuple[str, str]]:
+    """The diagnosis rows of the summary (:mod:`fidelity.colour.diagnosis`): the likely cause
+    of the chart's error, each cause with the mean ΔE00 it accounts for, what the fitted model
+    leaves, and the notes (none without a diagnosis)."""
+    d = report.diagnosis
+    if d is None:
+        return []
+    label = "likely cause (a camera pipeline fitted to the patches)"
+    if not d.causes:
+        rows = [(label, d.summary())]
+    else:
+        rows = [(label, f"{c.text} (accounts for mean ΔE00 {c.delta_e_removed:.2f})")
+                for c in d.causes]
+        rows.append(("what the fitted model leaves",
+                     f"mean ΔE00 {d.residual_delta_e:.2f} of {d.delta_e:.2f} (against the "
+                     f"reference clipped to the sRGB gamut; noise scale σ {d.sigma:.2f} in "
+                     f"CIELAB)"))
+        if not d.exposure_fixed:
+            rows.append(("the image's exposure (normalised away)", f"{d.exposure_ev:+z.2f} EV"))
+    rows += [("note", n) for n in d.notes]
+    return rows
 
 
 def noise_facts(report: ChartReport) -> list[tuple[str, str]]:
@@ -181,13 +234,13 @@ def directional_section(report: ChartReport) -> Section | None:
               f"lightness {pr.lightness:.2f} ({100 * sh['lightness']:.0f} %), chroma "
               f"{pr.chroma:.2f} ({100 * sh['chroma']:.0f} %), hue {pr.hue:.2f} "
               f"({100 * sh['hue']:.0f} %)")]
+    label = "best-fitting SAFE-COLOR transform (weights the prediction)"
     if d.fit is not None:
-        facts.append(("best-fitting transform", f"{d.fit.fit} {d.fit.param:.4g}: explains "
-                                                f"{100 * d.fit.explained:.0f} % of the error "
-                                                f"(mean ΔE00 {d.fit.error:.2f} -> "
-                                                f"{d.fit.residual:.2f})"))
+        facts.append((label, f"{d.fit.describe()}: explains {100 * d.fit.explained:.0f} % of "
+                             f"the error (mean ΔE00 {d.fit.error:.2f} -> "
+                             f"{d.fit.residual:.2f})"))
     else:
-        facts.append(("best-fitting transform", "none explains the error"))
+        facts.append((label, "none explains the error"))
     p = report.prediction
     facts.append(("predicted ΔmAP, classic / direction-aware",
                   f"{_num(p.dmap_points if p else None)} / {_num(d.dmap_points)} points"))
@@ -332,6 +385,16 @@ def verdict_limits(report: ChartReport) -> tuple[float | None, float | None]:
     return None, (c.limit if c.cls == "all" and c.unit == "points" else None)
 
 
+def verdict_limits_relative(report: ChartReport) -> float | None:
+    """The ``max-dmap`` limit of the report's verdict in % of baseline (mAP), where it has
+    one."""
+    v = report.verdict
+    if v is None or v.criterion.kind != "max-dmap":
+        return None
+    c = v.criterion
+    return c.limit if c.cls == "all" and c.unit == "relative" else None
+
+
 def uncertainty_section(report: ChartReport) -> Section | None:
     """The uncertainty budget of the chart ΔE (GUM style): each component, its standard
     uncertainty, type and how it was obtained, and the combined standard uncertainty; the
@@ -407,8 +470,14 @@ def prediction_sections(report: ChartReport, limit_de: float | None,
         return []
     blocks: list[Any] = []
     if p.table.curves:
+        relative = verdict_limits_relative(report)
         blocks.append(svg_figure(chartfigures.prediction_curve(p, limit_dmap, limit_de),
-                                 "prediction.svg", "predicted loss against chart ΔE"))
+                                 "prediction.svg",
+                                 "predicted loss in percentage points against chart ΔE"))
+        blocks.append(svg_figure(chartfigures.prediction_curve(p, relative, limit_de,
+                                                               unit="relative"),
+                                 "prediction-relative.svg",
+                                 "predicted ΔmAP in % of baseline against chart ΔE"))
     notes = [f"- {n}" for n in prediction_notes(p)]
     notes += [f"- {col}: {c.status}: {column_note(p, col)}" for col, c in p.columns.items()]
     blocks.append(Text("\n".join(notes)))
@@ -459,11 +528,13 @@ def chart_document(report: ChartReport, pixels: NDArray[Any] | None = None) -> D
                              directional_section(report),
                              measured_section(report), blind_spot_section(report))
                  if x is not None]
+    if report.context is not None:
+        sections.append(context_section(report.context))
     sections.append(patch_section(report))
     prov = report.provenance
     sections.append(section("Provenance", Facts((
         ("tool", f"fidelity {prov.version}"), ("created", report.created),
-        ("input sha256", prov.input_sha256 or "–"), ("python", prov.python),
+        (_input_label(report), prov.input_sha256 or "–"), ("python", prov.python),
         ("platform", prov.platform),
         ("libraries", ", ".join(f"{k} {v}" for k, v in prov.libraries.items())))),
         Code(json.dumps(json_ready(report.source.to_json()), indent=1, ensure_ascii=False)),
@@ -546,6 +617,7 @@ __all__ = [
     "blind_spot_section",
     "bound_words",
     "chart_document",
+    "diagnosis_facts",
     "directional_section",
     "headline",
     "measured_section",
@@ -561,3 +633,8 @@ __all__ = [
     "write_chart_report",
     "write_report_files",
 ]
+
+
+def _input_label(report: ChartReport) -> str:
+    """What the provenance's input hash is of: the image, or a check's camera file."""
+    return "camera file sha256" if isinstance(report.source, RenderSource) else "input sha256"

@@ -357,29 +357,64 @@ def _curve_canvas(label: str, title: str, xmax: float, ymax: float
     return c, ax
 
 
+#: The units :func:`prediction_curve` draws on separate axes: its columns and the axis label.
+_CURVE_UNITS: dict[str, tuple[tuple[str, ...], str]] = {
+    "points": (("dmap_points", "dap_person_points", "dap_bicycle_points"),
+               "predicted loss, percentage points of AP"),
+    "relative": (("dmap_relative",), "predicted ΔmAP, % of the baseline mAP"),
+}
+
+
+def _se_band(prediction: Prediction, column: str, grid: NDArray[np.float64]
+             ) -> NDArray[np.float64] | None:
+    """The table's standard error of ``column`` along ``grid`` (linear between the points of
+    the curve that answers the size class, the size-class curve first); None without SEs."""
+    curves, _ = prediction.table.select(prediction.size)
+    for c in sorted(curves, key=lambda c: c.model is not None):
+        se = c.se(column)
+        if se is not None and np.isfinite(se).any():
+            ok = np.isfinite(se)
+            return np.asarray(np.interp(grid, c.delta_e[ok], se[ok], right=np.nan),
+                              dtype=np.float64)
+    return None
+
+
 def prediction_curve(prediction: Prediction, limit_dmap: float | None = None,
-                     limit_delta_e: float | None = None) -> str:
-    """The table's ΔE → loss curves with this chart's point on each; a ΔmAP limit as a
-    horizontal line, a ΔE limit as a vertical one (symlog loss axis: linear below 1)."""
+                     limit_delta_e: float | None = None, unit: str = "points") -> str:
+    """The table's ΔE → loss curves of one ``unit`` (``points``: ΔmAP, person and bicycle ΔAP
+    in percentage points; ``relative``: ΔmAP in % of the baseline), each with its ± 1 SE band
+    (the table's stated standard error, k = 1) and this chart's point on each; a limit in
+    that unit as a horizontal line, a ΔE limit as a vertical one (symlog loss axis: linear
+    below 1, logarithmic above, labelled with its unit)."""
+    columns, ylabel = _CURVE_UNITS[unit]
     de = prediction.delta_e
     xmax = max(30.0, de * 1.2, (limit_delta_e or 0.0) * 1.2)
     grid = np.linspace(0.0, xmax, 301)
     c, ax = _curve_canvas(
-        "predicted loss against chart ΔE",
+        f"predicted loss against chart ΔE, {'percentage points' if unit == 'points' else '% of baseline'}",
         f"table {prediction.table.name} ({prediction.table.kind}), detector size "
         f"{prediction.size_used}, {prediction.method} interpolation", xmax, 105.0)
     ax.frame("chart ΔE00 (mean over 24 patches)",
-             "predicted loss" + (" (upper bound)" if prediction.table.kind.upper_bound else ""),
-             yticks=[0, 1, 2, 5, 10, 20, 50, 100])
+             ylabel + (" (upper bound)" if prediction.table.kind.upper_bound else "")
+             + " (symlog: linear below 1)", yticks=[0, 1, 2, 5, 10, 20, 50, 100])
     rng = prediction.columns["dmap_points"].delta_e_range
     if rng is not None and rng[1] < xmax:
         ax.span(rng[1], xmax, "#808080", 0.15, "beyond the table (ceiling)")
     points = []
-    for col, (label, colour, dash) in _CURVE_STYLE.items():
+    banded = False
+    for col in columns:
+        label, colour, dash = _CURVE_STYLE[col]
         y = predict_curve(grid, col, size=prediction.size, table=prediction.table,
                           method=prediction.method)
         if np.all(np.isnan(y)):
             continue
+        se = _se_band(prediction, col, grid)
+        if se is not None:
+            ok = np.isfinite(se) & np.isfinite(y)
+            xs, lo, hi = grid[ok], np.maximum(y[ok] - se[ok], 0.0), y[ok] + se[ok]
+            ax.region(np.concatenate([xs, xs[::-1]]), np.concatenate([hi, lo[::-1]]), colour,
+                      0.15, None if banded else "± 1 SE of the table (k=1)")
+            banded = True
         ax.plot(grid, y, colour, 1.6, dash, label)
         v = prediction.columns[col].value
         if v is not None:

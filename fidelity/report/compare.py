@@ -40,7 +40,7 @@ from fidelity.report.document import (
     table,
 )
 from fidelity.report.jsonform import comparison_json
-from fidelity.report.terminal import directional_lines
+from fidelity.report.terminal import directional_lines, outside_line
 from fidelity.report.words import verdict_message
 
 
@@ -54,6 +54,7 @@ def comparison_lines(report: ComparisonReport) -> list[str]:
              f"real camera {real.source.title}: chart ΔE00 {real.mean_delta_e:.2f} against "
              "the reference",
              f"normalisation: {report.normalisation.describe()}",
+             *([f"exposure: {w}"] if (w := report.normalisation.difference_words()) else []),
              f"sim-to-real ΔE00: mean {m.mean_delta_e:.2f}, max {m.max_delta_e:.2f} "
              f"({m.worst_patch}); mean ΔL' {float(np.mean(m.delta_l)):+z.2f}, ΔC' "
              f"{float(np.mean(m.delta_c)):+z.2f}, |ΔH'| {float(np.mean(np.abs(m.delta_h))):.2f} "
@@ -69,6 +70,8 @@ def comparison_lines(report: ComparisonReport) -> list[str]:
     lines.append(f"predicted ΔmAP of the difference: {f(p.dmap_points)}{pm} points, "
                  f"{f(p.dmap_relative)} % of baseline (classic, table {p.table.name}, "
                  f"detector size {p.size_used})")
+    if report.validity is not None and not report.validity.inside:
+        lines.append(outside_line(report.validity))
     lines += directional_lines(report.as_chart_report())
     lines += property_comparison_lines(sim.properties, real.properties)
     lines += [f"measured on COCO (real -> simulated colours): {x.summary()}"
@@ -116,10 +119,15 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
     warn = "".join(f"\n\n**warning** ({who}): {w.reason}"
                    for who, r in (("simulation", report.sim), ("real camera", report.real))
                    for w in r.warnings)
+    validity = report.validity
+    outside = validity is not None and not validity.inside
+    if validity is not None and outside:
+        warn = f"\n\n**{outside_line(validity)}**{warn}"
     if v is not None:
         message = verdict_message(v, "sim-to-real ΔE00").split(": ", 1)[-1]
-        head = Headline(f"**{v.label}**: {message}{warn}",
-                        "pass" if v.passed else "fail", swatch)
+        label = f"{v.label} — outside the validity domain" if outside else v.label
+        head = Headline(f"**{label}**: {message}{warn}",
+                        "fail" if not v.passed else "outside" if outside else "pass", swatch)
     else:
         head = Headline(f"sim-to-real ΔE00 mean {m.mean_delta_e:.2f}, max "
                         f"{m.max_delta_e:.2f} ({m.worst_patch}); no gate applied{warn}",
@@ -138,6 +146,8 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
                         f"{report.real.mean_delta_e:.2f}"),
         ("reference of each chart", report.sim.source.reference_description),
         ("normalisation", report.normalisation.describe()),
+        *([("exposure difference", w)] if (w := report.normalisation.difference_words())
+          else []),
         ("sim-to-real ΔE00", f"mean {mean}, max {m.max_delta_e:.2f} ({m.worst_patch})"),
         ("mean direction (simulation − real)",
          f"ΔL' {float(np.mean(m.delta_l)):+z.2f}, ΔC' {float(np.mean(m.delta_c)):+z.2f}, "

@@ -25,8 +25,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
-#: Look of a headline: a pass, a fail, or information without a verdict.
-Tone = Literal["pass", "fail", "info"]
+#: Look of a headline: a pass, a fail, information without a verdict, or a pass outside the
+#: validity domain of its evidence (amber, not a plain green pass).
+Tone = Literal["pass", "fail", "info", "outside"]
 
 
 @dataclass(frozen=True)

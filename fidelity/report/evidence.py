@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from fidelity.camera.model import available_cameras, camera_files
-from fidelity.core.errors import InvalidValueError
+from fidelity.core.errors import FidelityError, InvalidValueError
 from fidelity.core.fileio import (
     JSONObject,
     display_path,
@@ -62,27 +62,42 @@ from fidelity.pipeline.records import (
     RenderSource,
     utc_now,
 )
-from fidelity.prediction.interval import validity_domain
+from fidelity.prediction.interval import (
+    VALIDATED_CAMERAS_FILE,
+    ValidityDomain,
+    validity_domain,
+)
+from fidelity.prediction.properties import load_property_table
 from fidelity.report.jsonform import fit_json, verdict_json
 
 if TYPE_CHECKING:
+    from fidelity.pipeline.context import ContextAssessment
     from fidelity.pipeline.fit import FitReport
 
-#: Layout version of the credibility record.
-EVIDENCE_SCHEMA_VERSION = "1.1"
+#: Layout version of the credibility record (1.2: ``record.content_sha256``, the validated
+#: cameras' file and the prediction table's scores files with their SHA-256).
+EVIDENCE_SCHEMA_VERSION = "1.2"
+
+#: Where the record's hash of its own content is (``record.content_sha256``).
+CONTENT_HASH_KEY = "content_sha256"
 
 #: Sections of a simulation credibility assessment and the record's keys that answer them.
 CREDIBILITY_SECTIONS: Mapping[str, tuple[str, ...]] = {
+    "context of use": ("context_of_use",),
     "model description": ("subjects[].inputs", "subjects[].reference",
                           "subjects[].prediction_table.provenance"),
-    "verification": ("tool.version", "tool.commit", "tool.code_sha256", "environment"),
-    "validation": ("subjects[].prediction_table", "subjects[].validity"),
-    "uncertainty": ("subjects[].measurement.uncertainty", "subjects[].prediction.interval",
-                    "decision_rule"),
+    "verification": ("tool.version", "tool.commit", "tool.dirty", "tool.code_sha256",
+                     "environment"),
+    "validation": ("subjects[].prediction_table", "subjects[].property_tables",
+                   "subjects[].validity"),
+    "uncertainty": ("subjects[].measurement.uncertainty", "subjects[].prediction.interval"),
     "traceability": ("subjects[].inputs[].sha256", "subjects[].prediction_table.sha256",
+                     "subjects[].prediction_table.scores_files[].sha256",
+                     "subjects[].property_tables[].sha256", "context_of_use.file.sha256",
+                     "subjects[].validity.validated_cameras.sha256", "record.content_sha256",
                      "tool.commit", "tool.code_sha256", "record.created", "invocation.argv",
                      "invocation.settings.sha256"),
-    "decision": ("decision_rule", "subjects[].verdict", "record.exit_code"),
+    "decision": ("decision_rule", "subjects[].verdict", "record.exit_code", "record.outcome"),
 }
 
 #: What an exit code means.
@@ -100,6 +115,46 @@ def evidence_schema() -> JSONObject:
     """The JSON Schema (draft 2020-12) of the credibility record."""
     schema: JSONObject = json.loads(evidence_schema_path().read_text(encoding="utf-8"))
     return schema
+
+
+def canonical_record_bytes(record: Mapping[str, Any]) -> bytes:
+    """The canonical content of a credibility record, over which ``record.content_sha256`` is
+    computed: the record as JSON values without that one field, serialised with its keys
+    sorted at every level, compact separators (``,`` and ``:``, no spaces), every non-ASCII
+    character as its ``\\uXXXX`` escape (so a file name's undecodable byte, held as a lone
+    surrogate, has a form too) and the whole encoded as UTF-8, which is then ASCII (floats as
+    Python writes them: the
+    shortest decimal that reads back to the same number; NaN is not JSON and is refused).
+
+    Parameters
+    ----------
+    record : Mapping
+        The record as written or as read back from its file (``json.load``).
+
+    Returns
+    -------
+    bytes
+        The canonical form; the same for the record in memory and the one read from its
+        file, whatever the file's indentation or key order.
+    """
+    header = dict(record.get("record") or {})
+    header.pop(CONTENT_HASH_KEY, None)
+    doc = {**record, "record": header}
+    return json.dumps(doc, sort_keys=True, separators=(",", ":"), ensure_ascii=True,
+                      allow_nan=False).encode("utf-8")
+
+
+def record_content_sha256(record: Mapping[str, Any]) -> str:
+    """The SHA-256 (hex digest, 64 lower-case digits) of :func:`canonical_record_bytes`."""
+    return hashlib.sha256(canonical_record_bytes(record)).hexdigest()
+
+
+def seal_record(record: JSONObject) -> JSONObject:
+    """``record`` with ``record.content_sha256`` set to the hash of its content now
+    (:func:`record_content_sha256`); sealing again after an edit gives the edited record its
+    own hash. The hash shows an edit made without sealing again: it is not a signature."""
+    record["record"][CONTENT_HASH_KEY] = record_content_sha256(record)
+    return record
 
 
 def _package_dir() -> Path:
@@ -220,7 +275,66 @@ def _table(report: ChartReport) -> dict[str, Any] | None:
     return {"name": p.table.name, "kind": p.table.kind.value,
             "path": ref.path if ref else (str(p.table.path) if p.table.path else None),
             "sha256": ref.sha256 if ref else None, "provenance": dict(p.table.provenance),
+            "scores_files": scores_files(p.table.provenance),
             "calibration": calibration.to_json() if calibration else None}
+
+
+def property_tables(report: ChartReport) -> list[dict[str, Any]]:
+    """The sharpness and noise tables a check's prediction judged with (its
+    ``properties.predictions``), each once: ``{"name", "property", "path", "sha256",
+    "scores_files"}``; path and SHA-256 None for a table not found by its name here."""
+    judged = report.properties
+    out: list[dict[str, Any]] = []
+    seen: set[str] = set()
+    for prediction in (judged.predictions if judged is not None else ()):
+        if prediction.table in seen:
+            continue
+        seen.add(prediction.table)
+        try:
+            table = load_property_table(prediction.table)
+        except FidelityError:
+            out.append({"name": prediction.table, "property": prediction.property,
+                        "path": None, "sha256": None, "scores_files": []})
+            continue
+        entry = _file_entry(table.path) if table.path else {"path": None, "sha256": None}
+        out.append({"name": table.name, "property": table.property, **entry,
+                    "scores_files": scores_files(table.provenance)})
+    return out
+
+
+def scores_files(provenance: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """The scores files a table's rows rebuild from, as its ``provenance.scores_files`` names
+    them: each ``{"path", "sha256", "models"}``, the path relative to the source checkout
+    (``reports/coco/...``; a wheel does not ship them); an empty list for a table that names
+    none (published bounds)."""
+    return [{"path": str(f.get("path")), "sha256": f.get("sha256"),
+             "models": list(f.get("models") or [])}
+            for f in provenance.get("scores_files") or [] if isinstance(f, Mapping)]
+
+
+def validated_cameras_file() -> dict[str, Any]:
+    """``{"path", "sha256"}`` of the shipped validated cameras
+    (:data:`~fidelity.prediction.interval.VALIDATED_CAMERAS_FILE`), which the ``validated
+    illuminant`` and ``validated camera kind`` checks of the validity domain quote."""
+    return _file_entry(resource_dir("data") / VALIDATED_CAMERAS_FILE)
+
+
+def _file_entry(path: Path) -> dict[str, Any]:
+    try:
+        digest: str | None = file_sha256(path)
+    except OSError:
+        digest = None
+    return {"path": str(path), "sha256": digest}
+
+
+def _validity(validity: ValidityDomain | None) -> dict[str, Any] | None:
+    """The validity domain, with the validated cameras' file when a check quotes it."""
+    if validity is None:
+        return None
+    out = validity.to_json()
+    if any(c.name.startswith("validated ") for c in validity.checks):
+        out["validated_cameras"] = validated_cameras_file()
+    return out
 
 
 def _subject(subject: str, report: ChartReport | None, error: str | None) -> dict[str, Any]:
@@ -236,6 +350,7 @@ def _subject(subject: str, report: ChartReport | None, error: str | None) -> dic
                       "description": report.source.reference_description,
                       "conventions": json_ready(dict(report.provenance.conventions))},
         "prediction_table": _table(report),
+        "property_tables": property_tables(report),
         "measurement": {
             "quantity": "mean ΔE00", "value": report.mean_delta_e,
             "max_delta_e": report.max_delta_e, "worst_patch": report.worst_patch,
@@ -249,7 +364,7 @@ def _subject(subject: str, report: ChartReport | None, error: str | None) -> dic
             "directional_dmap_points": d.dmap_points if d else None, "bound": report.bound,
             # sharpness and noise judged with colour (the tables, their values, the sum)
             "properties": report.properties.to_json() if report.properties else None},
-        "validity": report.validity.to_json() if report.validity else None,
+        "validity": _validity(report.validity),
         "verdict": verdict_json(report.verdict) if report.verdict else None,
     }
 
@@ -263,8 +378,11 @@ def evidence_record(command: str, subjects: Sequence[tuple[str, ChartReport | Co
     command line (:func:`invocation_record`), None for a run through the API."""
     items = []
     rule = None
+    context = None
     for name, report, error in subjects:
         chart = report.as_chart_report() if isinstance(report, ComparisonReport) else report
+        if context is None and chart is not None and chart.context is not None:
+            context = context_of_use(chart.context)
         item = _subject(name, chart, error)
         if isinstance(report, ComparisonReport):
             item["inputs"] = (_subject(name, report.sim, None)["inputs"]
@@ -273,14 +391,24 @@ def evidence_record(command: str, subjects: Sequence[tuple[str, ChartReport | Co
         items.append(item)
         if chart is not None and chart.verdict is not None and rule is None:
             rule = chart.verdict.decision.to_json()
-    return _record(command, exit_code, rule, items, invocation)
+    return _record(command, exit_code, rule, items, invocation, context)
+
+
+def context_of_use(assessment: ContextAssessment) -> dict[str, Any]:
+    """The record's ``context_of_use`` (layout 1.2, ``--context``): the context file
+    (``file``: path and SHA-256), the context (detectors, conditions, acceptance criteria,
+    model risk), the credibility factors and levels, what lies outside the validity domain and
+    the acceptance criteria judged per subject (:meth:`ContextAssessment.to_json`)."""
+    return {"file": _file_entry(Path(assessment.context.path)), **assessment.to_json()}
 
 
 def _record(command: str, exit_code: int, rule: Mapping[str, Any] | None,
             subjects: Sequence[Mapping[str, Any]],
-            invocation: Mapping[str, Any] | None = None) -> JSONObject:
+            invocation: Mapping[str, Any] | None = None,
+            context: Mapping[str, Any] | None = None) -> JSONObject:
     """The record around ``subjects``: its header, the command line, the tool, the
-    environment, the decision ``rule`` and the map to the credibility sections."""
+    environment, the decision ``rule``, the ``context`` of use (``--context``; omitted
+    without one) and the map to the credibility sections."""
     out: JSONObject = json_ready({
         "record": {"schema": "fidelity credibility record",
                    "schema_version": EVIDENCE_SCHEMA_VERSION, "created": utc_now(),
@@ -291,9 +419,10 @@ def _record(command: str, exit_code: int, rule: Mapping[str, Any] | None,
         "environment": environment_record(),
         "decision_rule": rule,
         "subjects": list(subjects),
+        **({"context_of_use": dict(context)} if context is not None else {}),
         "credibility_sections": {k: list(v) for k, v in CREDIBILITY_SECTIONS.items()},
     })
-    return out
+    return seal_record(out)
 
 
 def fit_evidence_record(report: FitReport, exit_code: int = 0,
@@ -324,7 +453,9 @@ def fit_evidence_record(report: FitReport, exit_code: int = 0,
         "prediction_table": {"name": p.table.name, "kind": p.table.kind.value,
                              "path": str(p.table.path) if p.table.path else None,
                              "sha256": (file_sha256(p.table.path) if p.table.path else None),
-                             "provenance": dict(p.table.provenance), "calibration": None},
+                             "provenance": dict(p.table.provenance),
+                             "scores_files": scores_files(p.table.provenance),
+                             "calibration": None},
         "measurement": {"quantity": "sim-to-real mean ΔE00 after the correction",
                         "value": report.after.mean_delta_e,
                         "max_delta_e": report.after.max_delta_e,
@@ -336,7 +467,7 @@ def fit_evidence_record(report: FitReport, exit_code: int = 0,
                        "dap_bicycle_points": p.dap_bicycle_points,
                        "upper_bound": p.upper_bound, "interval": None,
                        "directional_dmap_points": None, "bound": "classic"},
-        "validity": validity.to_json(),
+        "validity": _validity(validity),
         "verdict": None,
         "correction": {"report": fit_json(report), "files": files},
     }
@@ -377,7 +508,7 @@ def evidence_format(path: PathArg) -> str:
 
 
 def _write_json(path: PathArg, record: JSONObject, results: Sequence[PathArg]) -> Path:
-    return write_json_atomic(path, record)
+    return write_json_atomic(path, seal_record(record))
 
 
 def _write_srmd(path: PathArg, record: JSONObject, results: Sequence[PathArg]) -> Path:
@@ -439,8 +570,10 @@ def write_fit_evidence(paths: PathArg | Sequence[PathArg], report: FitReport,
     return write_record(paths, fit_evidence_record(report, exit_code, invocation), results)
 
 
-__all__ = ["CREDIBILITY_SECTIONS", "EVIDENCE_FORMATS", "EVIDENCE_SCHEMA_VERSION", "OUTCOMES",
-           "WRITERS", "code_sha256", "environment_record", "evidence_format",
+__all__ = ["CONTENT_HASH_KEY", "CREDIBILITY_SECTIONS", "EVIDENCE_FORMATS",
+           "EVIDENCE_SCHEMA_VERSION", "OUTCOMES", "WRITERS", "canonical_record_bytes",
+           "code_sha256", "record_content_sha256", "scores_files", "seal_record",
+           "validated_cameras_file", "environment_record", "evidence_format",
            "evidence_record", "evidence_schema", "evidence_schema_path",
            "fit_evidence_record", "git_commit", "invocation_record", "tool_record", "write_evidence",
            "write_fit_evidence", "write_record"]

@@ -8,6 +8,7 @@ table, the ``.cube``'s check, the correction) and :func:`write_fit_report` for t
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -15,9 +16,11 @@ from pathlib import Path
 import numpy as np
 
 from fidelity.core.fileio import json_ready
-from fidelity.pipeline.fit import EXPRESSED_DELTA_E, FitReport, SharedFit
+from fidelity.correction.lut import default_output
+from fidelity.pipeline.fit import EXPRESSED_DELTA_E, FitReport, PropertyFit, SharedFit
 from fidelity.report import chartfigures
 from fidelity.report.chart import write_report_files
+from fidelity.report.compare import property_comparison_lines
 from fidelity.report.document import (
     Code,
     Document,
@@ -34,14 +37,32 @@ def _n(v: float | None) -> str:
     return "n/a" if v is None or not np.isfinite(v) else f"{v:.2f}"
 
 
+def cube_line(report: FitReport) -> str:
+    """The ``.cube``'s convention in one line: what it takes, what it gives, and whether that
+    is the SIM's own encoding (as ffmpeg, oiiotool and OpenColorIO apply a cube)."""
+    c = report.correction
+    inp, out = c.cube_convention(report.output)
+    other = "linear" if report.output == "encoded" else "encoded"
+    same = report.output == default_output(c.encoding)
+    return (f".cube convention: input the SIM's pixels, {inp}; output corrected {out} pixels, "
+            + ("the SIM's own encoding (ffmpeg lut3d, oiiotool --ociofiletransform and an "
+               "OpenColorIO FileTransform apply it as it is)" if same else
+               "not the SIM's encoding")
+            + f"; --cube-output {other} for the other convention")
+
+
 def fit_lines(report: FitReport) -> list[str]:
     """The fit on a terminal: the model, the excluded patches, the conditioning, the
     sim-to-real ΔE00 before and after with their predicted ΔmAP, the fitted and
-    cross-validated ΔE00, the ``.cube``'s check and the files."""
+    cross-validated ΔE00, the ``.cube``'s check and convention, and a note where the
+    simulation already matched (its warnings are :attr:`FitReport.warnings`, which the
+    command prints apart)."""
     c, lut = report.correction, report.lut
     b, a = report.before, report.after
     lines = [f"model: {c.model.name} ({c.objective} objective), fitted on {len(c.used)} of "
              f"{len(c.patch_names)} patches; normalisation: {c.normalisation.describe()}"]
+    if (words := c.normalisation.difference_words()) is not None:
+        lines.append(f"exposure: {words}")
     lines += [f"excluded: {name}: {why}" for name, why in c.excluded.items()]
     if c.conditioning.reason:
         lines.append(f"regularised: {c.conditioning.reason}")
@@ -59,29 +80,59 @@ def fit_lines(report: FitReport) -> list[str]:
         f"{lut.chart_max:.3f} over the chart, {lut.grid_max:.3f} over {lut.grid_points} "
         f"lattice points (99th percentile {lut.grid_p99:.3f}, "
         f"{100 * lut.grid_within:.2f} % within {lut.tolerance:g}; limit "
-        f"{'met' if lut.passed else 'NOT met'})",
+        f"{'met' if lut.passed else 'NOT met'}: {lut.limit()})",
+        cube_line(report),
     ]
+    lines += property_lines(report)
     for side, losses in (("before", report.measured_before), ("after", report.measured_after)):
         lines += [f"COCO, the simulator's colours {side} the correction: {m.summary()}"
                   for m in losses]
-    if not c.expressed:
-        lines.append(f"warning: the {c.model.name} model does not express this difference: "
-                     f"{_n(c.cv_mean)} ΔE00 remains on patches held out of the fit (above "
-                     f"{EXPRESSED_DELTA_E:g}); what is left is not a colour mapping of this "
-                     "family (quantisation, noise, a spatial effect, or a model too simple)")
     if b.mean_delta_e <= EXPRESSED_DELTA_E:  # nothing to lower: the fit is near the identity
         lines.append(f"note: the simulation already matches the real camera (sim-to-real ΔE00 "
                      f"mean {b.mean_delta_e:.2f}, at most {EXPRESSED_DELTA_E:g}); the "
                      "correction is close to the identity")
-        if a.mean_delta_e > EXPRESSED_DELTA_E:
-            lines.append(f"warning: the correction raises the sim-to-real ΔE00 above "
-                         f"{EXPRESSED_DELTA_E:g}: do not apply it")
-    elif c.cv_mean > 0 and a.mean_delta_e >= b.mean_delta_e:
-        lines.append("warning: the correction does not lower the sim-to-real ΔE00: the "
-                     f"{c.model.name} model cannot express this difference")
-    elif np.isfinite(c.cv_mean) and c.cv_mean >= b.mean_delta_e:
-        lines.append("warning: the cross-validated ΔE00 is no lower than before: the fit "
-                     "memorises the patches rather than expressing the difference")
+    return lines
+
+
+def _value(v: float | None, u: float | None = None) -> str:
+    if v is None:
+        return "not measured"
+    if math.isinf(v):
+        return "inf (noiseless)"
+    return f"{v:.4g}" + ("" if u is None else f" ± {u:.2g}")
+
+
+def camera_fit_line(fit: PropertyFit) -> str:
+    """One fitted camera-file property on a line: the field and its value, the measured
+    value before, after (the written file's turned chart) and REAL's, or why it was not
+    fitted."""
+    name = "optics" if fit.property == "sharpness" else "noise"
+    if fit.value is None:
+        return f"{name} not fitted: {fit.note}"
+    what = "MTF50 (cy/px)" if fit.property == "sharpness" else "SNR at 18 % grey"
+    values = (f"{what} {_value(fit.before)} -> {_value(fit.after)}, REAL "
+              f"{_value(fit.real, fit.u_real)}")
+    if fit.property == "sharpness":
+        field = (f"Gaussian PSF sigma {fit.value:.4g} px ({fit.parameter})" if fit.value > 0
+                 else "no PSF")
+    else:
+        field = f"full well {fit.value:.5g} e- ({fit.parameter}; read noise kept)"
+    tail = f"; {fit.note}" if fit.note else ""
+    return (f"{name} fitted: {field}: {values} ({'matched' if fit.matched() else 'NOT matched'},"
+            f" {fit.steps} render{'' if fit.steps == 1 else 's'}){tail}")
+
+
+def property_lines(report: FitReport) -> list[str]:
+    """Sharpness and noise of the fit: the two charts compared at the detector's input
+    (:func:`fidelity.report.compare.property_comparison_lines`) and, for ``fit --camera``,
+    each fitted camera-file property (:func:`camera_fit_line`); else a note that the
+    ``.cube`` corrects colour only."""
+    lines = property_comparison_lines(report.sim_properties, report.real_properties)
+    if report.camera_fits:
+        return lines + [camera_fit_line(f) for f in report.camera_fits]
+    if lines:
+        lines.append("the .cube corrects colour only: sharpness and noise stay as they are "
+                     "(fit --camera CAMERA.toml fits a camera file's optics and noise too)")
     return lines
 
 
@@ -96,11 +147,12 @@ def fit_document(report: FitReport) -> Document:
             f"ΔE00 above {EXPRESSED_DELTA_E:g})")
     head = Headline(f"sim-to-real ΔE00 {b.mean_delta_e:.2f} before, **{a.mean_delta_e:.2f}** "
                     f"after the {c.model.name} correction (cross-validated {_n(c.cv_mean)})"
-                    f"{note}", "info" if c.expressed else "fail", after_fig)
+                    f"{note}", "fail" if report.warnings else "info", after_fig)
     facts = Facts((
         ("simulation", f"`{report.sim}`"), ("real camera", f"`{report.real}`"),
         ("model", f"{c.model.name}, {c.objective} objective"),
         ("normalisation", c.normalisation.describe()),
+        *([("exposure difference", w)] if (w := c.normalisation.difference_words()) else []),
         ("patches used", f"{len(c.used)} of {len(c.patch_names)}"),
         ("conditioning", f"condition number {c.conditioning.condition_number:.3g}"
                          + (f"; {c.conditioning.reason}" if c.conditioning.reason else "")),
@@ -114,8 +166,12 @@ def fit_document(report: FitReport) -> Document:
                                ("after", report.measured_after)) for m in losses],
         (".cube check", f"{lut.size}³: max ΔE00 {lut.chart_max:.3f} (chart), "
                         f"{lut.grid_max:.3f} ({lut.grid_points} lattice points, 99th "
-                        f"percentile {lut.grid_p99:.3f}); limit {lut.tolerance:g} "
-                        f"{'met' if lut.passed else 'not met'}"),
+                        f"percentile {lut.grid_p99:.3f}); limit "
+                        f"{'met' if lut.passed else 'not met'} ({lut.limit()})"),
+        (".cube convention", "input {}; output {}".format(*c.cube_convention(report.output))),
+        *[("warning", w) for w in report.warnings],
+        *[(line.split(":", 1)[0], line.split(":", 1)[1].strip())
+          for line in property_lines(report)],
     ))
     rows = [(n, f"{b.delta_e[k]:.2f}", f"{a.delta_e[k]:.2f}", f"{c.fitted_delta_e[k]:.2f}",
              _n(float(c.cv_delta_e[k])), c.excluded.get(n, "used"))

@@ -16,12 +16,15 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
+from fidelity.pipeline.frames import FramesNoise, fixed_pattern_words
 from fidelity.pipeline.records import GateResult
 from fidelity.report.document import (
     Document,
     Figure,
     Headline,
     Section,
+    Table,
+    Text,
     Tone,
     section,
     svg_figure,
@@ -115,12 +118,43 @@ def _recordings_figures(cases: Sequence[GateResult], frames: Sequence[int],
     return figures
 
 
+def noise_section(noise: Sequence[FramesNoise]) -> Section | None:
+    """The "Noise over the frames" section: per recording, the temporal and fixed-pattern noise
+    of each neutral patch (EMVA 1288 4.0), or why its frames were not stacked; None without
+    any."""
+    if not noise:
+        return None
+    blocks: list[Text | Table] = []
+    for n in noise:
+        if not n.stacked:
+            blocks.append(Text(f"{n.recording}: not stacked: {n.reason}"))
+            continue
+        rows = [(p.patch, f"{p.noise.mean:.4f}",
+                 f"{p.noise.temporal_noise:.5f} ± "
+                 f"{p.noise.u_temporal_variance / (2 * p.noise.temporal_noise):.5f}"
+                 if p.noise.temporal_noise > 0 else "0",
+                 fixed_pattern_words(p.noise).removeprefix("fixed-pattern σ "),
+                 "" if p.snr is None else f"{p.snr:.1f}") for p in n.patches]
+        line = (f"photon transfer on the temporal variances: read σ {n.transfer.read_noise:.5f},"
+                f" slope K {n.transfer.gain:.3g} ± {n.transfer.u_gain:.2g}"
+                if n.transfer is not None else
+                f"photon transfer on the temporal variances refused: {n.transfer_refusal}")
+        blocks.append(table(("patch", "mean (linear Y)", "temporal σ ± u", "fixed-pattern σ",
+                             "temporal SNR"), rows,
+                            caption=f"{n.recording}: {len(n.frames)} frames stacked (corners "
+                                    f"within {n.corner_shift:.3f} px); {line}. {n.method}.",
+                            numeric=(False, True, True, True, True)))
+    return section("Noise over the frames", *blocks)
+
+
 def gate_overview_document(cases: Sequence[GateResult], links: Sequence[str | None],
                            frames: Sequence[int] | None = None,
-                           recordings: Sequence[str] | None = None) -> Document:
+                           recordings: Sequence[str] | None = None,
+                           noise: Sequence[FramesNoise] = ()) -> Document:
     """The overview page of a gate over ``cases`` (``links``: each subject's report, relative
     to the page, or None; ``frames`` and ``recordings``: for ``--frames``, each subject's
-    frame and recording)."""
+    frame and recording; ``noise``: their temporal and fixed-pattern noise,
+    :func:`noise_section`)."""
     counts = {name: sum(_outcome(c) == name for c in cases) for name in OUTCOMES.values()}
     n = len(cases)
     message = (f"**{counts['pass']} of {n} passed**, {counts['fail']} failed, "
@@ -128,13 +162,19 @@ def gate_overview_document(cases: Sequence[GateResult], links: Sequence[str | No
     criterion = next((c.criterion for c in cases if c.criterion is not None), None)
     if criterion is not None:
         message += f" (gate: {criterion.describe()})"
-    tone: Tone = "pass" if counts["pass"] == n else "fail"
+    outside = sum(c.report is not None and c.report.validity is not None
+                  and not c.report.validity.inside for c in cases)
+    if outside:
+        message += f"; **{outside} of {n} outside the validity domain**"
+    tone: Tone = ("fail" if counts["pass"] != n else "outside" if outside else "pass")
     sections: list[Section] = []
     if frames is not None and recordings is not None:
         limit = criterion.limit if criterion is not None and \
             criterion.kind == "max-delta-e" else None
         sections.append(section("Over the frames",
                                 *_recordings_figures(cases, frames, recordings, limit)))
+    if (noise_part := noise_section(noise)) is not None:
+        sections.append(noise_part)
     sections.append(section("Subjects", table(
         ("subject", "verdict", "mean ΔE00 ± u (k=1)", "max ΔE00", "predicted ΔmAP ± u (k=1), points",
          "error"), [_row(c, link) for c, link in zip(cases, links, strict=True)],
@@ -144,7 +184,8 @@ def gate_overview_document(cases: Sequence[GateResult], links: Sequence[str | No
 
 def audit_overview_document(cases: Sequence[GateResult], links: Sequence[str | None],
                             frames: Sequence[int] | None = None,
-                            recordings: Sequence[str] | None = None) -> Document:
+                            recordings: Sequence[str] | None = None,
+                            noise: Sequence[FramesNoise] = ()) -> Document:
     """The overview page of an audit of several images or frames (``cases`` without a
     criterion, in the order given; ``links``, ``frames`` and ``recordings`` as for
     :func:`gate_overview_document`): how many were measured, the chart ΔE of each image over
@@ -164,8 +205,10 @@ def audit_overview_document(cases: Sequence[GateResult], links: Sequence[str | N
                                        "(bars: ± 2u)")]
     rows = [(str(k), *_row(c, link, verdict=False))
             for k, c, link in zip(numbers, cases, links, strict=True)]
+    noise_part = noise_section(noise)
     return Document("Colour fidelity audit", Headline(message, "info" if not missing else "fail"),
                     (section(f"Over the {what}", *figures),
+                     *([noise_part] if noise_part is not None else []),
                      section("Subjects", table(
                          ("#", "subject", "mean ΔE00 ± u (k=1)", "max ΔE00",
                           "predicted ΔmAP ± u (k=1), points", "error"), rows,
@@ -174,18 +217,19 @@ def audit_overview_document(cases: Sequence[GateResult], links: Sequence[str | N
 
 def write_gate_overview(path: str | os.PathLike[str], cases: Sequence[GateResult],
                         reports: Sequence[Path | None], frames: Sequence[int] | None = None,
-                        recordings: Sequence[str] | None = None, *, audit: bool = False
-                        ) -> Path:
+                        recordings: Sequence[str] | None = None, *, audit: bool = False,
+                        noise: Sequence[FramesNoise] = ()) -> Path:
     """Write the overview page to ``path`` (atomically), linking each subject's report in
     ``reports`` relative to it; ``audit``: the page of an audit
-    (:func:`audit_overview_document`), else a gate's (:func:`gate_overview_document`)."""
+    (:func:`audit_overview_document`), else a gate's (:func:`gate_overview_document`);
+    ``noise``: the frames' temporal and fixed-pattern noise (:func:`noise_section`)."""
     where = Path(path)
     links = [None if p is None else os.path.relpath(p, where.parent) for p in reports]
-    doc = (audit_overview_document(cases, links, frames, recordings) if audit
-           else gate_overview_document(cases, links, frames, recordings))
+    doc = (audit_overview_document(cases, links, frames, recordings, noise) if audit
+           else gate_overview_document(cases, links, frames, recordings, noise))
     (written,) = write_document(doc, html=where)
     return written
 
 
 __all__ = ["OUTCOMES", "OVERVIEW_NAME", "audit_overview_document", "frames_figure",
-           "gate_overview_document", "write_gate_overview"]
+           "gate_overview_document", "noise_section", "write_gate_overview"]

@@ -91,11 +91,17 @@ def chart_report_json(report: ChartReport) -> JSONObject:
         "measured_loss": [x.to_json() for x in r.measured],
         "uncertainty": r.uncertainty.to_json() if r.uncertainty else None,
         "prediction_interval": r.interval.to_json() if r.interval else None,
+        "prediction_intervals": [i.to_json() for i in r.intervals],
         "validity": r.validity.to_json() if r.validity else None,
         "noise": r.noise.to_json() if r.noise else None,
         "sharpness": r.sharpness.to_json() if r.sharpness else None,
         "properties": r.properties.to_json() if r.properties else None,
+        "exposure": r.exposure.to_json() if r.exposure else None,
+        "neutral_ev": r.neutral_ev,
+        "diagnosis": r.diagnosis.to_json() if r.diagnosis else None,
     })
+    if r.context is not None:
+        out["context"] = json_ready(r.context.to_json())
     return out
 
 
@@ -127,7 +133,9 @@ def comparison_json(report: ComparisonReport) -> JSONObject:
 def fit_json(report: FitReport) -> JSONObject:
     """The JSON report of ``fidelity fit``: the sim-to-real ΔE00 before and after (the SIM
     image through the ``.cube`` by OpenColorIO, audited again) with their predictions, the
-    fitted and cross-validated ΔE00, the ``.cube``'s check against the model, the correction
+    fitted and cross-validated ΔE00, the ``.cube``'s check against the model and its
+    convention (``cube``: input, domain, output, size), the ``warnings``
+    (:attr:`fidelity.pipeline.fit.FitReport.warnings`), the correction
     (:meth:`fidelity.pipeline.fit.Correction.to_json`), the files written and the seconds spent."""
     r, c = report, report.correction
 
@@ -145,9 +153,18 @@ def fit_json(report: FitReport) -> JSONObject:
         "fitted_mean_delta_e": c.to_json()["fitted_mean_delta_e"],
         "cross_validated_mean_delta_e": c.to_json()["cross_validated_mean_delta_e"],
         "lut_check": r.lut.to_json(), "lut_checks": [x.to_json() for x in r.lut_checks],
-        "correction": c.to_json(), "files": dict(r.files), "seconds": dict(r.seconds),
+        "cube": {"input": "srgb-encoded" if c.encoding == "srgb" else "scene-linear",
+                 "domain": [0.0, c.to_json(r.output)["cube_domain"][1]],
+                 "output": "srgb-encoded" if r.output == "encoded" else "scene-linear",
+                 "size": r.lut.size},
+        "warnings": r.warnings,
+        "correction": c.to_json(r.output), "files": dict(r.files), "seconds": dict(r.seconds),
         "measured_before": [m.to_json() for m in r.measured_before],
-        "measured_after": [m.to_json() for m in r.measured_after]})
+        "measured_after": [m.to_json() for m in r.measured_after],
+        "properties": {
+            "sim": r.sim_properties.to_json() if r.sim_properties is not None else None,
+            "real": r.real_properties.to_json() if r.real_properties is not None else None},
+        "camera_fits": [f.to_json() for f in r.camera_fits]})
     return out
 
 

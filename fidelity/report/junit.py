@@ -5,9 +5,10 @@ properties, so changing a threshold keeps a CI's test history. The test suite ca
 ``timestamp`` (UTC) and the ``hostname``. A failed gate is a ``<failure>`` (type ``GateFailure``; an
 undecided one of a guarded decision rule, exit code 4, type ``GateUndecided``), an input error
 (exit code 2) an ``<error>``; the decision rule, its coverage factor and the expanded
-uncertainty it used are properties; the measured values are ``<properties>``: of the test suite when there is
-one case (JUnit's classic place), of each test case when there are several (the form pytest's
-``record_property`` writes, read by Jenkins and GitLab).
+uncertainty it used are properties; the measured values are ``<properties>`` of each test case,
+however many there are (the form pytest's ``record_property`` writes, read by Jenkins and
+GitLab); the suite's own ``<properties>`` describe the run (``fidelity_version``). The test
+cases' ``classname`` names the command (``fidelity.gate``, ``fidelity.compare``).
 """
 
 from __future__ import annotations
@@ -20,9 +21,10 @@ from pathlib import Path
 from xml.etree import ElementTree as ET
 
 from fidelity.core.fileio import write_text_atomic
+from fidelity.core.version import __version__
 from fidelity.pipeline.records import GateResult
 from fidelity.report.terminal import summary_lines
-from fidelity.report.words import verdict_message
+from fidelity.report.words import failure_message
 
 
 def case_name(result: GateResult) -> str:
@@ -85,9 +87,10 @@ def _properties(case: GateResult) -> list[tuple[str, str]]:
 
 
 def junit_xml(cases: Sequence[GateResult], *, timestamp: str | None = None,
-              hostname: str | None = None) -> str:
+              hostname: str | None = None, classname: str = "fidelity.gate") -> str:
     """JUnit XML of ``cases`` (see the module docstring); ``timestamp`` (ISO 8601, UTC) and
-    ``hostname`` default to now and this machine."""
+    ``hostname`` default to now and this machine; ``classname`` is the test cases' (the
+    command that wrote them)."""
     stamp = timestamp or _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%S")
     host = hostname or socket.gethostname()
     total = sum(c.seconds for c in cases)
@@ -95,11 +98,12 @@ def junit_xml(cases: Sequence[GateResult], *, timestamp: str | None = None,
                        errors="0", skipped="0", time=f"{total:.3f}", timestamp=stamp,
                        hostname=host)
     suite_props = ET.SubElement(suite, "properties")  # JUnit: properties precede test cases
+    ET.SubElement(suite_props, "property", name="fidelity_version", value=__version__)
     failures = errors = 0
     for c in cases:
-        case = ET.SubElement(suite, "testcase", classname="fidelity.gate", name=case_name(c),
+        case = ET.SubElement(suite, "testcase", classname=classname, name=case_name(c),
                              time=f"{c.seconds:.3f}")
-        props = suite_props if len(cases) == 1 else ET.SubElement(case, "properties")
+        props = ET.SubElement(case, "properties")
         for key, value in _properties(c):
             ET.SubElement(props, "property", name=key, value=value)
         if c.error is not None or c.report is None:
@@ -110,7 +114,7 @@ def junit_xml(cases: Sequence[GateResult], *, timestamp: str | None = None,
         verdict = c.report.verdict
         if verdict is not None and not verdict.passed:
             failures += 1
-            message = verdict_message(verdict)
+            message = failure_message(verdict, c.report.diagnosis)
             kind = "GateUndecided" if verdict.undecided else "GateFailure"
             ET.SubElement(case, "failure", message=message, type=kind).text = message
         ET.SubElement(case, "system-out").text = "\n".join(summary_lines(c.report))
@@ -120,8 +124,6 @@ def junit_xml(cases: Sequence[GateResult], *, timestamp: str | None = None,
         empty = case.find("properties")
         if empty is not None and not len(empty):
             case.remove(empty)
-    if not len(suite_props):
-        suite.remove(suite_props)
     root = ET.Element("testsuites", name="fidelity", tests=str(len(cases)),
                       failures=str(failures), errors=str(errors), time=f"{total:.3f}")
     root.append(suite)
@@ -129,9 +131,10 @@ def junit_xml(cases: Sequence[GateResult], *, timestamp: str | None = None,
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
-def write_junit(path: str | os.PathLike[str], cases: Sequence[GateResult]) -> Path:
-    """Write JUnit XML atomically (see :func:`junit_xml`)."""
-    return write_text_atomic(path, junit_xml(cases))
+def write_junit(path: str | os.PathLike[str], cases: Sequence[GateResult], *,
+                classname: str = "fidelity.gate") -> Path:
+    """Write JUnit XML atomically (see :func:`junit_xml`; ``classname`` as there)."""
+    return write_text_atomic(path, junit_xml(cases, classname=classname))
 
 
 __all__ = ["case_name", "junit_xml", "write_junit"]

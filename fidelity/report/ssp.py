@@ -85,6 +85,13 @@ INPUT_KINDS: Mapping[str, str] = {
     "camera (built-in)": "model", "camera file": "model", "camera data": "parameter",
     "image": "result", "real image": "document", "simulated image": "result",
     "prediction table": "specification", "calibration table": "parameter",
+    "context file": "requirement",
+}
+
+#: The words of an acceptance criterion of the context of use (``[acceptance]``).
+ACCEPTANCE_WORDS: Mapping[str, str] = {
+    "max_delta_e": "mean chart ΔE00 at most {limit}",
+    "max_dmap": "predicted ΔmAP at most {limit} percentage points",
 }
 
 
@@ -154,7 +161,7 @@ def traced_files(record: JSONObject, results: Sequence[str | os.PathLike[str]]
             out.append(_traced(kind, role, path))
 
     roles = {"prediction table": "prediction table", "calibration table": "calibration table",
-             "settings": "settings file"}
+             "settings": "settings file", "context": "context file"}
     for kind, name, item in record_files(record):
         path = item.get("path")
         if kind == "output":  # a fit's correction files
@@ -344,6 +351,9 @@ def stmd_element(record: JSONObject, files: Sequence[TracedFile],
     root = etree.Element(_q("stmd", "SimulationTaskMetaData"), nsmap=_nsmap("stmd"),
                          version=SSP_TRACEABILITY_VERSION, name=_title(record), GUID=guid)
     _top_level(root, record)
+    context = record.get("context_of_use")
+    if context:
+        root.append(requirements_phase(context, files, where))
     phase = etree.SubElement(root, _q("stmd", "EvaluationPhase"), description=(
         "validation of the camera model's colour rendering against its reference chart "
         "(Credible Simulation Process: the evaluation phase)"))
@@ -381,6 +391,23 @@ def stmd_element(record: JSONObject, files: Sequence[TracedFile],
             or "no verdict")
         result.append(_classification("subject", subject_entries(subject),
                                       str(subject.get("subject"))))
+    if context:
+        accepted = context.get("acceptance") or []
+        met = sum(bool(a.get("passed")) for a in accepted)
+        result = _resource(out, "result", "text/plain",
+                           description="the context of use: acceptance and credibility")
+        etree.SubElement(result, _q("stc", "Content")).text = xml_safe(
+            f"acceptance: {met} of {len(accepted)} criteria met; credibility level "
+            f"{context.get('credibility_level')} of the {context.get('required_level')} the "
+            f"model risk requires ({'sufficient' if context.get('sufficient') else 'not sufficient'})")
+        result.append(_classification("acceptance", [
+            (f"{a.get('subject')}: {a.get('criterion')}",
+             f"{xml_value(a.get('value'))} against {xml_value(a.get('limit'))}: "
+             f"{'met' if a.get('passed') else 'not met'}") for a in accepted]
+            + [("accepted", context.get("accepted")),
+               ("credibility_level", context.get("credibility_level")),
+               ("required_level", context.get("required_level")),
+               ("sufficient", context.get("sufficient"))]))
     rationale = etree.SubElement(verdict, _q("stc", "Rationale"))
     for subject in record.get("subjects", []):
         validity = subject.get("validity") or {}
@@ -392,9 +419,98 @@ def stmd_element(record: JSONObject, files: Sequence[TracedFile],
     return root
 
 
+def _requirement(parent: etree._Element, text: str, description: str, kind: str,
+                 entries: Sequence[tuple[str, Any]]) -> None:
+    element = _resource(parent, "requirement", "text/plain", description=description)
+    etree.SubElement(element, _q("stc", "Content")).text = xml_safe(text)
+    element.append(_classification(kind, entries))
+
+
+def requirements_phase(context: Mapping[str, Any], files: Sequence[TracedFile],
+                       base: Path) -> etree._Element:
+    """The STMD's ``RequirementsPhase`` from the record's context of use
+    (``context_of_use``, ``--context``): ``DefineModelRequirements`` holds the acceptance
+    criteria (``[acceptance]``), ``DefineTestCaseRequirements`` the detectors and operating
+    conditions, ``DefineQualityAssuranceRequirements`` the V&V 40 model risk and the
+    credibility level it requires, with each credibility factor's level and reason as
+    rationale; the context file (with its SHA3-256) is each step's input."""
+    c = context.get("context") or {}
+    phase = etree.Element(_q("stmd", "RequirementsPhase"), description=xml_safe(
+        f"the context of use: {c.get('name') or 'unnamed'}"
+        + (f" ({c.get('question')})" if c.get("question") else "")))
+    given = [f for f in files if f.role == "context file"]
+
+    def step(tag: str, description: str) -> tuple[etree._Element, etree._Element]:
+        element = etree.SubElement(phase, _q("stmd", tag), description=description)
+        if given:
+            source = etree.SubElement(element, _q("stc", "Input"))
+            for f in given:
+                _file_resource(source, f, "requirement", base)
+        return element, etree.SubElement(element, _q("stc", "Output"))
+
+    _, out = step("DefineModelRequirements", "the acceptance criteria the camera model must "
+                  "meet in this context")
+    for key, words in ACCEPTANCE_WORDS.items():
+        limit = c.get(key)
+        if limit is not None:
+            _requirement(out, words.format(limit=xml_value(limit)), f"acceptance criterion: "
+                         f"{key}", "acceptance", [("criterion", key), ("limit", limit)])
+    if not any(c.get(k) is not None for k in ACCEPTANCE_WORDS):
+        _requirement(out, "no acceptance criterion stated: the run's decision rule decides",
+                     "acceptance criterion: none", "acceptance", [])
+    _, out = step("DefineTestCaseRequirements", "the detectors under test and the operating "
+                  "conditions")
+    detectors = ", ".join(str(d) for d in c.get("detectors") or []) or None
+    illuminants = ", ".join(str(i) for i in c.get("illuminants") or [])
+    exposures = ", ".join(xml_value(e) for e in c.get("exposures_ev") or [])
+    _requirement(out, f"detectors: {detectors or 'any'}; illuminants: {illuminants}; "
+                 f"exposure offsets (EV): {exposures or 'none stated'}",
+                 "operating conditions", "conditions",
+                 [("detectors", detectors), ("illuminants", illuminants),
+                  ("exposures_ev", exposures or None)])
+    element, out = step("DefineQualityAssuranceRequirements", "the model risk (ASME V&V "
+                        "40) and the credibility level it requires")
+    _requirement(out, f"model risk level {c.get('risk_level')} (model influence "
+                 f"{c.get('model_influence')}, decision consequence "
+                 f"{c.get('decision_consequence')}): the evidence must reach credibility "
+                 f"level {context.get('required_level')}", "model risk", "risk",
+                 [("model_influence", c.get("model_influence")),
+                  ("decision_consequence", c.get("decision_consequence")),
+                  ("risk_level", c.get("risk_level")),
+                  ("required_level", context.get("required_level"))])
+    rationale = etree.SubElement(element, _q("stc", "Rationale"))
+    for factor in context.get("factors") or []:
+        text = _resource(rationale, "rationale", "text/plain",
+                         description=f"credibility factor: {factor.get('name')}")
+        etree.SubElement(text, _q("stc", "Content")).text = xml_safe(
+            f"level {factor.get('level')}: {factor.get('reason')}")
+    for outside in context.get("outside_domain") or []:
+        text = _resource(rationale, "rationale", "text/plain",
+                         description="outside the validity domain")
+        etree.SubElement(text, _q("stc", "Content")).text = xml_safe(str(outside))
+    return phase
+
+
 def _xml(element: etree._Element) -> bytes:
     return bytes(etree.tostring(element, xml_declaration=True, encoding="UTF-8",
                                 pretty_print=True))
+
+
+def read_ssp_document(raw: bytes) -> etree._Element:
+    """The root element of an SRMD or STMD document's bytes (entities not resolved, nothing
+    fetched); raises ValueError naming the XML problem."""
+    try:
+        parser = etree.XMLParser(resolve_entities=False, no_network=True)
+        return etree.fromstring(raw, parser)
+    except etree.XMLSyntaxError as exc:
+        raise ValueError(str(exc)) from None
+
+
+def srmd_bytes(record: JSONObject, files: Sequence[TracedFile],
+               base: str | os.PathLike[str]) -> bytes:
+    """The SRMD document of a run (:func:`srmd_element`) as the bytes :func:`write_srmd`
+    writes: what ``fidelity verify`` makes again to compare with an SRMD."""
+    return _xml(srmd_element(record, files, base))
 
 
 def write_srmd(path: str | os.PathLike[str], record: JSONObject,
@@ -402,7 +518,7 @@ def write_srmd(path: str | os.PathLike[str], record: JSONObject,
     """Write the run's SRMD atomically (:func:`srmd_element`); ``results`` are the files the
     run wrote."""
     files = traced_files(record, results)
-    return write_bytes_atomic(path, _xml(srmd_element(record, files, Path(path).parent)))
+    return write_bytes_atomic(path, srmd_bytes(record, files, Path(path).parent))
 
 
 def write_stmd(path: str | os.PathLike[str], record: JSONObject,
@@ -413,7 +529,7 @@ def write_stmd(path: str | os.PathLike[str], record: JSONObject,
     return write_bytes_atomic(path, _xml(element))
 
 
-__all__ = ["CHECKSUM_TYPE", "CLASSIFICATION", "INPUT_KINDS", "MIME_TYPES", "NAMESPACES",
+__all__ = ["ACCEPTANCE_WORDS", "CHECKSUM_TYPE", "CLASSIFICATION", "INPUT_KINDS", "MIME_TYPES", "NAMESPACES",
            "SSP_TRACEABILITY_VERSION", "TracedFile", "file_srmd", "file_uri", "mime_type",
-           "srmd_element", "ssp_schema_path", "stmd_element", "subject_entries",
+           "read_ssp_document", "requirements_phase", "srmd_bytes", "srmd_element", "ssp_schema_path", "stmd_element", "subject_entries",
            "traced_files", "write_srmd", "write_stmd", "xml_safe", "xml_value"]

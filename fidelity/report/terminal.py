@@ -5,8 +5,9 @@ from __future__ import annotations
 import math
 
 from fidelity.pipeline.records import ChartReport, ImageSource
+from fidelity.prediction.interval import ValidityDomain
 from fidelity.prediction.tablefile import TableKind
-from fidelity.report.words import property_lines, verdict_message
+from fidelity.report.words import exposure_words, property_lines, verdict_message
 
 
 def summary_lines(report: ChartReport) -> list[str]:
@@ -16,7 +17,9 @@ def summary_lines(report: ChartReport) -> list[str]:
     src = report.source
     if isinstance(src, ImageSource):
         rec = src.image.recording
-        if rec is not None:
+        if rec is not None and rec.stream is not None:
+            lines.append(f"{rec.kind}: {rec.describe()}")
+        elif rec is not None:
             lines.append(f"{rec.kind}: {rec.describe()}, log time "
                          f"{rec.to_json()['time_utc']}")
         found = src.found
@@ -47,8 +50,8 @@ def summary_lines(report: ChartReport) -> list[str]:
         kept = ""
         if bp is not None and bp.window.negative and bp.negatives == "keep":
             kept = f"; pixels with a negative channel kept in the mean: {bp.window.negative}"
-        lines.append(f"exposure correction {report.exposure_ev:+z.2f} EV; bad pixels "
-                     f"excluded: {bp.window.total if bp else 0}{kept}")
+        lines.append(f"{exposure_line(report)}; bad pixels excluded: "
+                     f"{bp.window.total if bp else 0}{kept}")
         if report.measurement.excluded:
             reasons: dict[str, list[str]] = {}
             for name, why in report.measurement.excluded.items():
@@ -58,6 +61,7 @@ def summary_lines(report: ChartReport) -> list[str]:
         if isinstance(src, ImageSource) and src.clipped_patches:
             lines.append("outside [0, 1] in sRGB, clipped like a stored image: "
                          + ", ".join(src.clipped_patches))
+    lines += diagnosis_lines(report)
     lines += texture_lines(report)
     p = report.prediction
     if p is not None:
@@ -72,17 +76,27 @@ def summary_lines(report: ChartReport) -> list[str]:
         pm = ""
         if report.interval is not None:
             pm = report.interval.plus_minus()
+        by = {i.column: i for i in report.intervals}
+
+        def u(column: str) -> str:
+            i = by.get(column)
+            return "" if i is None else f" ± {i.standard_uncertainty:.2f}"
+
+        swamped = [name for name, column in (("% of baseline", "dmap_relative"),
+                                             ("person", "dap_person_points"),
+                                             ("bicycle", "dap_bicycle_points"))
+                   if column in by and by[column].swamped]
+        noise = (f"; {', '.join(swamped)}: u >= the value, mostly noise" if swamped else "")
         lines.append(f"predicted ΔmAP: {f(p.dmap_points)}{pm} percentage points, "
-                     f"{f(p.dmap_relative)} % of baseline ({kind}table "
+                     f"{f(p.dmap_relative)}{u('dmap_relative')} % of baseline ({kind}table "
                      f"{p.table.name}, detector size {p.size_used})")
-        lines.append(f"predicted ΔAP: person {f(p.dap_person_points)} points, bicycle "
-                     f"{f(p.dap_bicycle_points)} points")
+        lines.append(f"predicted ΔAP: person {f(p.dap_person_points)}{u('dap_person_points')} "
+                     f"points, bicycle {f(p.dap_bicycle_points)}{u('dap_bicycle_points')} "
+                     f"points" + (" (k=1" + noise + ")" if by else ""))
         if p.out_of_range:
             lines.append("note: ΔE beyond the table's range; conservative ceiling used")
-        if report.validity is not None:
-            lines += [f"outside the evidence: {c.detail}" for c in report.validity.outside
-                      if c.name in ("reference chart", "validated illuminant",
-                                    "validated camera kind")]
+        if report.validity is not None and not report.validity.inside:
+            lines.append(outside_line(report.validity))
     lines += directional_lines(report)
     lines += property_lines(report.properties, not_judged=report.verdict is None)
     lines += [f"measured on COCO: {m.summary()}" for m in report.measured]
@@ -90,6 +104,23 @@ def summary_lines(report: ChartReport) -> list[str]:
     if report.verdict is not None:
         lines.append(verdict_message(report.verdict))
     return lines
+
+
+def outside_line(validity: ValidityDomain) -> str:
+    """One line naming every check of ``validity`` that is outside (each with the value
+    against the range its evidence covers): ``outside the validity domain: noise shot+read
+    (full_well 500 e-, read_noise 3 e- rms): not validated (...); detector size l ...``."""
+    return "outside the validity domain: " + "; ".join(c.detail for c in validity.outside)
+
+
+def diagnosis_lines(report: ChartReport) -> list[str]:
+    """The likely cause of the chart's error in one line (``diagnosis: exposure +2.00 EV:
+    ...``) when it has a systematic cause; none otherwise (a correct render, or an error no
+    part of the pipeline model explains: the JSON and HTML reports say which)."""
+    d = report.diagnosis
+    if d is None or not d.systematic:
+        return []
+    return [f"diagnosis: {d.summary()}"]
 
 
 def uncertainty_line(report: ChartReport) -> str:
@@ -167,9 +198,33 @@ def directional_lines(report: ChartReport) -> list[str]:
     if report.verdict is not None and report.verdict.criterion.kind == "max-dmap":
         used = ("; the verdict uses this bound" if report.bound == "directional" else
                 "; the verdict uses the classic bound (--bound directional: this one)")
-    return [f"direction-aware ΔmAP: {f(d.dmap_points)} points, {f(d.dmap_relative)} % of "
-            f"baseline ({d.explanation()}){used}"]
+    by = {i.column: i for i in report.intervals}
+
+    def u(column: str) -> str:
+        i = by.get(column)
+        return "" if i is None else f" ± {i.standard_uncertainty:.2f}"
+
+    whose = " (± the classic column's u: the directional table states no SE)" if by else ""
+    return [f"direction-aware ΔmAP: {f(d.dmap_points)}{u('dmap_points')} points, "
+            f"{f(d.dmap_relative)}{u('dmap_relative')} % of baseline{whose} "
+            f"({d.explanation()}){used}"]
 
 
-__all__ = ["directional_lines", "plus_minus", "summary_lines", "texture_lines",
+__all__ = ["diagnosis_lines", "directional_lines", "outside_line", "plus_minus", "summary_lines", "texture_lines",
            "uncertainty_line"]
+
+
+def exposure_line(report: ChartReport) -> str:
+    """The exposure an image was measured at, and how it was judged: ``exposure normalised:
+    -2.00 EV on the neutral patches (auto: the image's own exposure is not judged; --manifest
+    or --exposure judges it)``, or ``exposure correction fixed at -0.27 EV; the image +2.00 EV
+    from the expected exposure (4 x as bright; limit ±0.3 EV, ...): over the limit``."""
+    ev = report.exposure_ev or 0.0
+    if report.exposure_auto:
+        return (f"exposure normalised: {ev:+z.2f} EV on the neutral patches (auto: the "
+                f"image's own exposure is not judged; --manifest or --exposure EV judges it)")
+    e = report.exposure
+    if e is None:
+        return f"exposure correction {ev:+z.2f} EV"
+    return (f"exposure correction fixed at {ev:+z.2f} EV; {exposure_words(e)}: "
+            f"{'within' if e.passed else 'over'} the limit")

@@ -21,6 +21,7 @@ import numpy as np
 from fidelity.coco.loss import LOSS_COLUMNS
 from fidelity.coco.tables.provenance import STANDARD_ERROR_WORDS
 from fidelity.core.fileio import portable_paths, write_json_atomic
+from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E
 from fidelity.report import validationfigures as vf
 from fidelity.report.coco import conventions_words
 from fidelity.report.document import (
@@ -244,6 +245,59 @@ def _bound_section(results: ValidationResults) -> Section:
         table(["class", "cells within bound", "within bound up to 2 SE",
                "cameras within bound (all models)", "share"], body),
         Text("\n".join(notes)) if notes else None)
+
+
+def _analysis_section(results: ValidationResults) -> Section | None:
+    """The written answer of the validation, every number computed from ``results``: where the
+    bound table fails (and how many of those cells a verdict at the default ΔE limit passes),
+    how many measured losses the measurement resolves, and how far the bound over-predicts
+    where it does."""
+    rows, summ = results.rows, results.summary
+    judged = [r for r in rows if r.bound["all"].within is not None]
+    if not judged:
+        return None
+    t = summ.bound_table
+    lines = ["mAP@[.50:.95] losses in points, generated from the cells below.", ""]
+    misses = sorted((r for r in judged if not r.bound["all"].within),
+                    key=lambda r: -(r.bound["all"].excess or 0.0))
+    lines.append(f"- `{t}` bounds the measured loss in **{len(judged) - len(misses)} of "
+                 f"{len(judged)}** cells"
+                 + (f"; it is exceeded in {len(misses)}:" if misses else "."))
+    for r in misses:
+        b = r.bound["all"]
+        z = "" if not b.se else f", {b.excess / b.se:.1f} SE" if b.excess is not None else ""
+        lines.append(f"  - `{r.camera}` / {r.model} ({r.illuminant}, chart ΔE "
+                     f"{r.chart_delta_e:.2f}): measured {b.measured:.2f} ± "
+                     f"{number(b.se)} against {b.predicted:.2f} (excess {b.excess:.2f}{z})")
+    if misses:
+        low = [r for r in misses if r.chart_delta_e <= DEFAULT_MAX_DELTA_E]
+        inside = sum(1 for r in misses if r.bound["all"].within_2se)
+        lines.append(f"- {len(low)} of these {len(misses)} cells have chart ΔE ≤ "
+                     f"{DEFAULT_MAX_DELTA_E:g} (the default `--max-delta-e` of `check` and "
+                     "`gate`), which a verdict on ΔE alone passes; "
+                     f"{inside} of {len(misses)} excesses are within 2 SE of the bound.")
+    resolved = [r for r in judged if r.bound["all"].se and
+                r.bound["all"].measured is not None and
+                r.bound["all"].measured > 2 * r.bound["all"].se]
+    ses = {m: [r.bound["all"].se for r in judged if r.model == m and r.bound["all"].se]
+           for m in sorted({r.model for r in judged})}
+    lines.append(f"- The measurement resolves {len(resolved)} of {len(judged)} losses (more "
+                 "than 2 SE above zero); median SE "
+                 + ", ".join(f"{m} {float(np.median(v)):.2f} points on "
+                             f"{max(r.images for r in judged if r.model == m)} images"
+                             for m, v in ses.items() if v) + ".")
+    ratios = sorted((r.bound["all"].predicted / r.bound["all"].measured, r) for r in resolved
+                    if r.bound["all"].predicted is not None and r.bound["all"].measured)
+    if ratios:
+        worst = ratios[-1][1]
+        lines.append(f"- Where a loss is resolved, `{t}` predicts a median "
+                     f"{float(np.median([x for x, _ in ratios])):.1f}× the measured loss "
+                     f"({ratios[0][0]:.1f}-{ratios[-1][0]:.1f}×); the largest over-prediction "
+                     f"is `{worst.camera}` / {worst.model} (chart ΔE "
+                     f"{worst.chart_delta_e:.2f}): {worst.bound['all'].predicted:.2f} predicted "
+                     f"against {worst.bound['all'].measured:.2f} ± "
+                     f"{number(worst.bound['all'].se)} measured.")
+    return section("Answer", Text("\n".join(lines)))
 
 
 def _points(r: ValidationRow) -> float:
@@ -524,7 +578,8 @@ def validation_document(results: ValidationResults, notes: str | None = None,
     bound_fig = figs.get(scatter_figure(results.summary.bound_table))
     sections: list[Section | None] = [
         _bound_section(results),
-        section("Analysis", Text(notes.strip())) if notes else None,
+        _analysis_section(results),
+        section("Notes", Text(notes.strip())) if notes else None,
         _plots_section(results, figs),
         *_directional_sections(results, figs),
         *_blind_spot_sections(results),

@@ -33,16 +33,21 @@ from __future__ import annotations
 
 import os
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path, PurePath
 from typing import Any
 
 from fidelity.core import schema as sc
 from fidelity.core.fileio import JSONObject, display_path, file_sha256
-from fidelity.core.resources import resource_dir
+from fidelity.core.resources import resource_dir, source_root
 from fidelity.core.version import __version__
-from fidelity.report.evidence import code_sha256, environment_record, git_commit
+from fidelity.report.evidence import (
+    code_sha256,
+    environment_record,
+    git_commit,
+    record_content_sha256,
+)
 from fidelity.report.recordfiles import record_files
 
 #: Each status a :class:`Finding` can have, and whether it fails the verification.
@@ -51,14 +56,29 @@ STATUSES: Mapping[str, bool] = {
     "changed": True,      # the file is there, its SHA-256 is not the recorded one
     "missing": True,      # no file at the recorded path (nor where else it was looked for)
     "not hashed": False,  # the record holds no SHA-256 for it: nothing to compare
-    "same": False,        # code or environment as recorded
+    "not here": False,    # a scores file the table names, not in this installation (a wheel)
+    "intact": False,      # the record's content hash is that of its content
+    "edited": True,       # the record's content hash is not that of its content (or absent)
+    "same": False,        # code, version or environment as recorded
     "differs": False,     # code or environment not as recorded (reported, not failed)
+    "other version": False,  # made by another fidelity version (reported, not failed)
+    "inconsistent": True,  # the recorded code hash is this installation's, the version not
     "reproduced": False,  # run again: the same exit code, verdicts, and values within u
     "not reproduced": True,
+    "linked": False,      # --chain: this link holds (hash as recorded, rows as rebuilt)
+    "broken": True,       # --chain: this link does not hold
+    "not rebuilt": False,  # --chain: a table that names no scores files (published bounds)
+    "not checked": False,  # an SRMD or STMD here, but lxml (the ssp extra) is not installed
 }
 
+#: The kinds of :class:`Finding` that are not a file the record names.
+NOT_FILES = ("content", "version", "code", "environment", "rerun", "chain", "srmd", "stmd")
+
 #: The layout versions of the credibility record this version reads.
-READABLE_VERSIONS = ("1.0", "1.1")
+READABLE_VERSIONS = ("1.0", "1.1", "1.2")
+
+#: The first layout that holds ``record.content_sha256`` (and requires it).
+HASHED_FROM = "1.2"
 
 _HEX64 = re.compile(r"[0-9a-f]{64}")
 
@@ -67,6 +87,13 @@ def _sha256_field(table: Mapping[str, Any]) -> tuple[str, str] | None:
     value = table.get("sha256")
     if value is not None and not _HEX64.fullmatch(value):
         return "sha256", f"must be 64 lower-case hexadecimal digits, got {value!r:.80}"
+    return None
+
+
+def _content_field(table: Mapping[str, Any]) -> tuple[str, str] | None:
+    value = table.get("content_sha256")
+    if value is not None and not _HEX64.fullmatch(value):
+        return "content_sha256", f"must be 64 lower-case hexadecimal digits, got {value!r:.80}"
     return None
 
 
@@ -103,7 +130,8 @@ RECORD_SCHEMA = sc.Table(fields=(
         sc.Field("command", sc.String(), required=True),
         sc.Field("exit_code", sc.Integer(lo=0), required=True),
         sc.Field("outcome", sc.String(), required=True),
-    ), extra=True), required=True),
+        sc.Field("content_sha256", sc.String(nullable=True)),
+    ), extra=True, rules=(sc.Check(_content_field),)), required=True),
     sc.Field("tool", sc.Table(fields=(
         sc.Field("version", sc.String(), required=True),
         sc.Field("commit", sc.String(nullable=True)),
@@ -177,8 +205,8 @@ class Verification:
         """No file the record names has changed or gone missing."""
         return not any(f.failed for f in self.findings)
 
-    def count(self, status: str) -> int:
-        return sum(f.status == status for f in self.findings)
+    def count(self, status: str, among: Sequence[Finding] | None = None) -> int:
+        return sum(f.status == status for f in (self.findings if among is None else among))
 
     def to_json(self) -> JSONObject:
         return {"record": self.path, "command": self.command, "created": self.created,
@@ -236,6 +264,8 @@ def locate(recorded: str, cwd: str | None, record_dir: Path,
     p = Path(recorded)
     candidates = [p] if p.is_absolute() else [
         *([Path(cwd) / p] if cwd else []), record_dir / p, p]
+    if not p.is_absolute():  # a file of the source checkout (reports/coco/...)
+        candidates.append(source_root() / p)
     for c in candidates:
         if _is_file(c):
             return c
@@ -253,6 +283,10 @@ def _file_finding(kind: str, name: str, recorded: str | None, sha256: str | None
         return Finding(kind, name, "not hashed", "the record names no file", None)
     found = locate(recorded, cwd, record_dir, inputs)
     if found is None:
+        if kind == "scores file":  # evidence behind the table, shipped in the source only
+            return Finding(kind, name, "not here", f"{display_path(recorded)[:300]} is not in "
+                           "this installation (the source checkout has it): not compared",
+                           None)
         return Finding(kind, name, "missing", f"{display_path(recorded)[:300]} is not there "
                        "(no such file)", None)
     shown = display_path(found)
@@ -275,12 +309,53 @@ def _code_finding(tool: Mapping[str, Any]) -> Finding:
     here = code_sha256()
     recorded = tool.get("code_sha256")
     where = named(tool["version"], tool.get("commit"), tool.get("dirty"))
+    if recorded == here and tool["version"] != __version__:
+        # the version is in the code (fidelity/core/version.py): one without the other is an
+        # edit
+        return Finding("code", "fidelity", "inconsistent",
+                       f"the recorded code SHA-256 {here[:12]} is this installation's, which "
+                       f"is fidelity {__version__}, but the record names fidelity "
+                       f"{tool['version']}: the record was edited")
     if recorded == here:
         return Finding("code", "fidelity", "same", f"{where}: code SHA-256 {here[:12]}")
     now = named(__version__, *git_commit())
     was = f"code SHA-256 {recorded[:12]}" if recorded else "no code SHA-256 recorded"
     return Finding("code", "fidelity", "differs",
                    f"recorded {where}, {was}; here {now}, code SHA-256 {here[:12]}")
+
+
+def _version_finding(tool: Mapping[str, Any]) -> Finding:
+    """The recorded fidelity version against the installed one: ``same``, or ``other
+    version`` (reported, not failed: verify the files with any version; repeat the run
+    exactly with the recorded one)."""
+    if tool["version"] == __version__:
+        return Finding("version", "fidelity", "same", f"fidelity {__version__}, as installed")
+    return Finding("version", "fidelity", "other version",
+                   f"made by fidelity {tool['version']}, verified with fidelity {__version__}: "
+                   f"install fidelity {tool['version']} to repeat the run exactly")
+
+
+def content_finding(doc: Mapping[str, Any]) -> Finding:
+    """The record's hash of its own content (``record.content_sha256``, layout 1.2) against
+    the hash of its content now (:func:`~fidelity.report.evidence.record_content_sha256`):
+    ``intact``, or ``edited`` (a field changed, or the hash removed, after it was written);
+    ``not hashed`` for a record of layout 1.0 or 1.1, which holds none."""
+    rec = doc["record"]
+    recorded = rec.get("content_sha256")
+    version = rec["schema_version"]
+    if recorded is None:
+        if READABLE_VERSIONS.index(version) < READABLE_VERSIONS.index(HASHED_FROM):
+            return Finding("content", "record", "not hashed",
+                           f"a record of layout {version} holds no content hash")
+        return Finding("content", "record", "edited",
+                       f"the record's content hash is missing, which layout {version} "
+                       "requires: the record was edited")
+    now = record_content_sha256(doc)
+    if now == recorded:
+        return Finding("content", "record", "intact", f"content SHA-256 {now[:12]}")
+    return Finding("content", "record", "edited",
+                   "the record's content hash does not match: the record was edited (content "
+                   f"SHA-256 {now[:12]}, recorded {recorded[:12]})")
 
 
 def _environment_finding(env: Mapping[str, Any]) -> Finding:
@@ -314,7 +389,7 @@ def verify_document(doc: Mapping[str, Any], path: str | os.PathLike[str], *,
     where = Path(inputs) if inputs is not None else None
     invocation = doc.get("invocation") or {}
     cwd = invocation.get("cwd")
-    findings: list[Finding] = []
+    findings: list[Finding] = [content_finding(doc)]
     seen: set[tuple[str, str | None, str | None]] = set()
 
     def add(kind: str, name: str, file: Mapping[str, Any] | None) -> None:
@@ -327,8 +402,9 @@ def verify_document(doc: Mapping[str, Any], path: str | os.PathLike[str], *,
         findings.append(_file_finding(kind, name, file.get("path"), file.get("sha256"), cwd,
                                       record_dir, where))
 
-    for kind, name, file in record_files(doc):
+    for kind, name, file in record_files(doc, evidence=True):
         add(kind, name, file)
+    findings.append(_version_finding(doc["tool"]))
     findings.append(_code_finding(doc["tool"]))
     findings.append(_environment_finding(doc["environment"]))
     rec = doc["record"]
@@ -408,17 +484,32 @@ def verification_lines(v: Verification) -> list[str]:
     out = [f"fidelity verify: {v.path}: {v.command} of {v.created}, fidelity {v.version}"
            f"{commit}, exit {v.exit_code} ({v.outcome})"]
     for f in v.findings:
-        label = f.kind if f.kind in ("code", "environment", "rerun") else f"{f.kind} {f.name}"
+        label = f.kind if f.kind in NOT_FILES and f.kind != "chain" else f"{f.kind} {f.name}"
         at = f" {f.path}" if f.path else ""
         out.append(f"  {label}{at}: {f.status}; {f.detail}")
-    files = [f for f in v.findings if f.kind not in ("code", "environment", "rerun")]
-    bad = [f"{v.count(s)} {s}" for s in ("changed", "missing") if v.count(s)]
-    unhashed = v.count("not hashed")
+    files = [f for f in v.findings if f.kind not in NOT_FILES]
+    bad = [f"{v.count(s, files)} {s}" for s in ("changed", "missing") if v.count(s, files)]
+    unhashed = v.count("not hashed", files)
     summary = (f"{', '.join(bad)} of {len(files)} files" if bad else
                f"{v.count('unchanged')} of {len(files)} files unchanged")
     if unhashed:
         summary += f" ({unhashed} without a recorded SHA-256)"
+    if v.count("not here"):
+        summary += f" ({v.count('not here')} not in this installation)"
+    summary += "".join(f", record {f.status}" for f in v.findings if f.kind == "content")
+    summary += "".join(f", {f.kind.upper()} {f.status}" for f in v.findings
+                       if f.kind in ("srmd", "stmd"))
+    summary += "".join(f", version {f.status}" for f in v.findings
+                       if f.kind == "version" and f.status != "same")
+    summary += "".join(f", code {f.status}" for f in v.findings
+                       if f.kind == "code" and f.status == "inconsistent")
     summary += "".join(f", run again: {f.status}" for f in v.findings if f.kind == "rerun")
+    links = [f for f in v.findings if f.kind == "chain"]
+    broken = [f.name for f in links if f.status == "broken"]
+    if broken:
+        summary += f", chain broken at {'; '.join(broken)}"
+    elif links:
+        summary += f", chain: {v.count('linked', links)} links hold"
     out.append(f"{'VERIFIED' if v.verified else 'NOT VERIFIED'}: {summary}")
     return out
 

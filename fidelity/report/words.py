@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from fidelity.colour.diagnosis import Diagnosis
 from fidelity.prediction.interpolate import ColumnStatus
 from fidelity.prediction.table import Prediction
 from fidelity.prediction.tablefile import CEILING
@@ -106,17 +107,20 @@ def verdict_message(verdict: Verdict, delta_e_name: str = "mean ΔE00") -> str:
     is the sim-to-real ΔE00). A guarded decision rule adds the expanded uncertainty it used,
     ``UNDECIDED: mean ΔE00 2.98 <= 3 + U (guarded: U = 0.06, k = 2)``."""
     v, c = verdict, verdict.criterion
+    exposure = _exposure_over(v)
     if c.kind == "max-delta-e":
         assert v.value is not None
         j = v.properties
-        if j is not None and j.failed:
-            over = "; ".join(_over_limit(j, k) for k in j.failed)
+        overs = [_over_limit(j, k) for k in j.failed] if j is not None else []
+        overs += [exposure] if exposure else []
+        if overs:
             colour_ok = v.value <= c.limit
             return (f"{v.label}: {delta_e_name} {v.value:.2f} "
-                    f"{'<=' if colour_ok else '>'} {c.limit:g}{_guard(v)}, but {over}"
-                    f"{_not_judged(v)}")
+                    f"{'<=' if colour_ok else '>'} {c.limit:g}{_allows(v)}{_guard(v)}, "
+                    f"{'but' if colour_ok else 'and'} "
+                    f"{'; '.join(overs)}{_not_judged(v)}")
         return (f"{v.label}: {delta_e_name} {v.value:.2f} "
-                f"{_relation(v)} {c.limit:g}{_guard(v)}{_not_judged(v)}")
+                f"{_relation(v)} {c.limit:g}{_allows(v)}{_guard(v)}{_not_judged(v)}")
     what = c.describe().removeprefix("predicted ").split(" <=")[0]
     directional = v.bound == "directional"
     if v.reason is VerdictReason.NO_PREDICTION or v.value is None:
@@ -130,9 +134,50 @@ def verdict_message(verdict: Verdict, delta_e_name: str = "mean ΔE00") -> str:
         qualifier = " (upper bound)" if v.upper_bound else ""
         if v.conservative and v.status is not None:
             qualifier += f" ({v.status.value}: conservative answer)"
+    within = v.passed or v.reason is VerdictReason.UNDECIDED or exposure is None
+    relation = _relation(v) if within else ("<=" if v.value <= c.limit else ">")
     return (f"{v.label}: predicted {what} {v.value:.2f} {unit}{parts}{qualifier} "
-            f"{_relation(v)} {c.limit:g} at {delta_e_name} {v.delta_e:.2f}{_guard(v)}"
-            f"{_not_judged(v)}")
+            f"{relation} {c.limit:g} at {delta_e_name} {v.delta_e:.2f}{_guard(v)}"
+            f"{f', {_joiner(v)} {exposure}' if exposure else ''}{_not_judged(v)}")
+
+
+def _allows(v: Verdict) -> str:
+    """`` (up to 2.39 % of baseline for these detectors)``: what a ``max-delta-e`` limit
+    allows by the verdict's table (:attr:`Verdict.limit_loss_relative`); nothing unknown."""
+    x = v.limit_loss_relative
+    return "" if x is None else f" (up to {x:.2f} % of baseline for these detectors)"
+
+
+def _joiner(v: Verdict) -> str:
+    """``but`` after a value within its limit, ``and`` after one over it."""
+    return "and" if v.value is not None and v.value > v.criterion.limit else "but"
+
+
+def exposure_words(e: Any) -> str:
+    """``the image +2.00 EV from the expected exposure (4 x as bright; limit ±0.3 EV, the
+    expected exposure from the scene manifest)`` for an
+    :class:`fidelity.prediction.exposure.ExposureJudgement`."""
+    source = "the scene manifest" if e.source == "manifest" else "--exposure"
+    return (f"the image {e.error_ev:+z.2f} EV from the expected exposure ({e.factor:.3g} x as "
+            f"bright; limit ±{e.limit_ev:g} EV, the expected exposure from {source})")
+
+
+def _exposure_over(v: Verdict) -> str:
+    """The exposure's clause of a verdict it fails (empty otherwise)."""
+    e = v.exposure
+    if e is None or e.passed:
+        return ""
+    return f"exposure {e.error_ev:+z.2f} EV from the expected (|error| > {e.limit_ev:g} EV)"
+
+
+def failure_message(verdict: Verdict, diagnosis: Diagnosis | None = None) -> str:
+    """The verdict in one line (:func:`verdict_message`) and, when the chart's error has a
+    systematic cause, that cause (``FAIL: mean ΔE00 24.52 > 3; likely cause: exposure +2.00
+    EV: ...``): the message of a failed gate's JUnit test case."""
+    message = verdict_message(verdict)
+    if diagnosis is not None and diagnosis.systematic:
+        message += f"; likely cause: {diagnosis.summary()}"
+    return message
 
 
 def _over_limit(j: Any, prop: str) -> str:
@@ -153,6 +198,8 @@ def _combined_words(v: Verdict) -> str:
     if j is None or j.combined is None or not j.predictions:
         return ""
     terms = " + ".join(f"{k} {x:.2f}" for k, x in j.combined.parts.items())
+    if j.combined.interaction > 0:
+        terms += f" + blur-noise interaction {j.combined.interaction:.2f}"
     return f" ({terms}: {j.combined.dominant} dominates)"
 
 
@@ -225,5 +272,5 @@ def _guard(v: Verdict) -> str:
     return f" (guarded: {told}, k = {v.decision.k:g}{strict})"
 
 
-__all__ = ["COLUMN_LABELS", "ceiling_words", "column_note", "prediction_notes",
-           "property_lines", "verdict_message"]
+__all__ = ["COLUMN_LABELS", "ceiling_words", "column_note", "failure_message",
+           "prediction_notes", "property_lines", "verdict_message"]

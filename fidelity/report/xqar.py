@@ -93,7 +93,8 @@ def xqar_result(record: JSONObject) -> Any:
     """The ``qc_baselib.Result`` of a credibility ``record`` (see the module's mapping)."""
     from qc_baselib import IssueSeverity, Result, StatusType
 
-    rec, tool, rule = record["record"], record["tool"], record["decision_rule"]
+    rec, tool = record["record"], record["tool"]
+    rule = record.get("decision_rule") or {}  # an audit without a gate has no rule
     version = str(rec.get("schema_version") or "1.0")
     result = Result()
     result.register_checker_bundle(

@@ -6,7 +6,8 @@ Formats (:data:`FORMATS`): ``gltf`` (``chart.glb``, :mod:`fidelity.scene.gltf`),
 the destination, renamed into place when every file is written (and the Mitsuba XML loaded back
 by Mitsuba when it is installed), so an error leaves nothing half-written. An existing
 destination is replaced only when it is empty or an earlier export (it has this module's
-``manifest.json``).
+``manifest.json``); a destination that is a symbolic link replaces the folder it leads to (the
+link is kept).
 """
 
 from __future__ import annotations
@@ -30,8 +31,9 @@ import numpy as np
 from fidelity.core.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
 from fidelity.core.fileio import WRITE_ERRNOS, display_path, json_ready, write_error
 from fidelity.scene.gltf import texture_albedo, write_gltf
+from fidelity.scene.manifest import MANIFEST_KIND
 from fidelity.scene.mitsuba import DEFAULT_SPP, check_loads, irradiance_scale, write_mitsuba
-from fidelity.scene.model import LUMENS_PER_WATT, ChartScene
+from fidelity.scene.model import EDGE_FIELD_Z, LUMENS_PER_WATT, ChartScene
 from fidelity.scene.usd import write_usd
 from fidelity.scene.verify import delta_e_linear
 
@@ -44,8 +46,8 @@ FORMATS: dict[str, tuple[str, str, str]] = {
     "usd": ("chart.usda", "pxr", "scene"),
     "mitsuba": ("chart.xml", "", ""),
 }
-#: ``kind`` of the manifest, which marks a folder as an export that may be replaced.
-MANIFEST_KIND = "fidelity chart scene"
+#: ``kind`` of the manifest (:data:`fidelity.scene.manifest.MANIFEST_KIND`) marks a folder as an
+#: export that may be replaced.
 MANIFEST = "manifest.json"
 #: Version of the manifest's layout (``fidelity/data/schemas/scene-manifest.schema.json``).
 MANIFEST_SCHEMA_VERSION = "1.0"
@@ -113,13 +115,35 @@ def _patches(scene: ChartScene) -> list[dict[str, Any]]:
             for i, name in enumerate(scene.patch_names)]
 
 
+def edge_target_json(scene: ChartScene) -> dict[str, Any]:
+    """The manifest's ``edge_target``: the slanted-edge target's corners in the camera's image,
+    its reflectances, contrast, turn and size (:class:`fidelity.scene.model.EdgeTarget`)."""
+    t = scene.edge_target
+    return {
+        "standard": "ISO 12233:2017 e-SFR slanted edges: a dark square on a light field",
+        **scene.edge_target_px(),
+        "corners_note": ("square_corners_px: the dark square's corners, top left, top right, "
+                         "bottom right, bottom left as seen (before its turn); "
+                         "field_corners_px: the light field's, same order; pixel (row i, "
+                         "column j) at x=j, y=i; fidelity gate/audit --manifest measures the "
+                         "e-SFR of the square's edges there"),
+        "reflectance": {"square": t.dark, "field": t.light,
+                        "note": "spectrally flat (RGB formats: grey linear albedo)"},
+        "luminance_ratio": t.luminance_ratio,
+        "angle_deg": t.angle_deg,
+        "angle_note": "the square turned counter-clockwise as seen: its edges run this far "
+                      "off the image axes",
+        "square_mm": t.square * 1e3, "field_mm": t.field * 1e3,
+        "centre_m": [t.centre[0], t.centre[1], 0.0], "field_z_m": EDGE_FIELD_Z,
+    }
+
+
 def manifest(scene: ChartScene, fmt: str, scene_file: str) -> dict[str, Any]:
     """The manifest of an export (JSON-ready)."""
     rgb = fmt != "mitsuba"
     corners = scene.corners_option()
     ev = scene.exposure_ev + 0.0 if scene.white_level != 1 else 0.0
-    gate = (f"fidelity gate render.exr --corners {corners} --exposure {ev:g} "
-            f"--illuminant {scene.illuminant} --reference {scene.reference} --max-delta-e 0.5")
+    gate = f"fidelity gate render.exr --manifest {MANIFEST} --max-delta-e 0.5"
     if rgb:
         light = {"type": "directional", "direction": [0.0, 0.0, -1.0], "colour": [1.0, 1.0, 1.0],
                  "irradiance": scene.irradiance,
@@ -127,7 +151,7 @@ def manifest(scene: ChartScene, fmt: str, scene_file: str) -> dict[str, Any]:
                  "illuminance_lux": scene.illuminance_lux,
                  "lux_convention": "683 lm/W (glTF importers' photometric conversion)"}
         expected = ("pixel = albedo x white_level: the white patch lands at "
-                    f"{[round(v * scene.white_level, 6) for v in scene.albedo[18]]}")
+                    f"{[round(float(v * scene.white_level), 6) for v in scene.albedo[18]]}")
     else:
         light = {"type": "directional", "direction": [0.0, 0.0, -1.0],
                  "spectrum": f"{scene.illuminant} relative SPD x {irradiance_scale(scene):.6g}",
@@ -154,6 +178,7 @@ def manifest(scene: ChartScene, fmt: str, scene_file: str) -> dict[str, Any]:
         "corners_note": ("centres (x, y) of the dark skin, bluish green, black and white "
                          "patches in the camera's image; pixel (row i, column j) is at x=j, y=i"),
         "patch_size_px": scene.patch_size_px(),
+        "edge_target": edge_target_json(scene),
         "expected_exposure": {"gate_exposure_ev": ev, "white_level": scene.white_level,
                               "rule": expected,
                               "white_luminance_cd_m2": LUMENS_PER_WATT * scene.white_level,
@@ -180,8 +205,10 @@ _README_COMMON = """
 The chart is measured, not looked at: the image must be the renderer's linear scene values.
 
 - Tone mapping / view transform off (Blender: View Transform *Standard*, Look *None*, Exposure
-  0, Gamma 1; never Filmic or AgX). Auto-exposure, bloom, vignetting, lens flare, chromatic
-  aberration, motion blur, depth of field, film grain: off.
+  0, Gamma 1; never Filmic or AgX for PNG or JPEG output: Blender writes an OpenEXR file
+  without its view transform, so only its PNG and JPEG files are tone-mapped). Auto-exposure,
+  bloom, vignetting, lens flare, chromatic aberration, motion blur, depth of field, film
+  grain: off.
 - No sky, environment or ambient light: only the scene's light (black world/background).
 - Fixed exposure such that a pixel value equals albedo x white level ({white}): the white patch
   lands at {white_rgb}.
@@ -227,7 +254,8 @@ _README_BY_FORMAT = {
     "gltf": """# Chart scene: glTF 2.0 binary (`chart.glb`)
 
 The X-Rite ColorChecker Classic at its physical size (279.4 x 215.9 mm; 24 patches and a black
-frame), metres, +y up, lit by one `KHR_lights_punctual` directional light of {lux:.6g} lux
+frame) and, beside it, an ISO 12233 slanted-edge target (a 0.2 grey square turned 5 degrees on
+a 0.8 grey field; `edge_target` in manifest.json), metres, +y up, lit by one `KHR_lights_punctual` directional light of {lux:.6g} lux
 along -z (every patch gets the same irradiance), seen by the `camera` node ({width} x {height},
 vertical field of view {yfov:.4g} degrees, {distance:.4g} m from the chart).
 
@@ -243,7 +271,8 @@ as sRGB, and the manifest's albedos are the decoded 8-bit values).
     "usd": """# Chart scene: OpenUSD (`chart.usda`)
 
 The X-Rite ColorChecker Classic at its physical size (279.4 x 215.9 mm; 24 patches and a black
-frame), metres (`metersPerUnit` 1), +y up, one `UsdPreviewSurface` per patch (`diffuseColor`
+frame) and, beside it, an ISO 12233 slanted-edge target (a 0.2 grey square turned 5 degrees on
+a 0.8 grey field; `edge_target` in manifest.json), metres (`metersPerUnit` 1), +y up, one `UsdPreviewSurface` per patch (`diffuseColor`
 the **linear** sRGB albedo, metallic 0, roughness 1, ior 1: no specular reflection), a
 `DistantLight` (`/World/Sun`) of intensity {irradiance:.6g} along -z (every patch gets the same
 irradiance), and `/World/Camera` ({width} x {height}, vertical field of view {yfov:.4g} degrees,
@@ -256,7 +285,8 @@ decode it as sRGB, and the manifest's albedos are the decoded 8-bit values).
     "mitsuba": """# Chart scene: Mitsuba 3 (`chart.xml`)
 
 The spectral scene: each patch's measured reflectance spectrum (`regular`, 380-780 nm) on a
-`diffuse` BSDF, the {illuminant} SPD on a `directional` emitter along -z, a `perspective`
+`diffuse` BSDF, the slanted-edge target beside the chart (a 0.2 square turned 5 degrees on a
+0.8 field, flat spectra; `edge_target` in manifest.json), the {illuminant} SPD on a `directional` emitter along -z, a `perspective`
 sensor ({width} x {height}, vertical field of view {yfov:.4g} degrees) with an `hdrfilm` (linear
 sRGB, float32) and a `box` filter, the `direct` integrator. Render with any spectral variant:
 
@@ -337,8 +367,9 @@ def export_scene(scene: ChartScene, fmt: str, out: str | os.PathLike[str], *,
                 "per patch, st at the texel centre) as diffuseColor; albedo = the decoded "
                 "8-bit texel"),
             "albedo_quantisation_delta_e_max": float(_max_de(quantised, scene.albedo))})
-    target = Path(out)
-    where = display_path(target)
+    given = Path(out)
+    where = display_path(given)
+    target = Path(os.path.realpath(given))  # a link to a folder: the folder it names is replaced
     if not _replaceable(target):
         raise InputFileError(f"{where}: --out exists and is not an earlier scene export (no "
                              f"{MANIFEST} of fidelity scene); give a new or empty folder")
@@ -368,12 +399,12 @@ def export_scene(scene: ChartScene, fmt: str, out: str | os.PathLike[str], *,
             shutil.rmtree(old, ignore_errors=True)
     except OSError as exc:
         if exc.errno in WRITE_ERRNOS or exc.errno in (errno.ENOENT, errno.EEXIST):
-            raise write_error(target, exc) from None
+            raise write_error(given, exc) from None
         raise
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
-    return Export(target, target / name, doc, time.perf_counter() - t0)
+    return Export(given, given / name, doc, time.perf_counter() - t0)
 
 
 def _checked_with(fmt: str, check: bool) -> str | None:
@@ -409,4 +440,4 @@ def wrongly_encoded(scene: ChartScene) -> np.ndarray:
 
 
 __all__ = ["BASE_COLOURS", "FORMATS", "MANIFEST", "MANIFEST_KIND", "MANIFEST_SCHEMA_VERSION", "README", "RENDERER_SETTINGS", "Export",
-           "MissingExtraError", "export_scene", "manifest", "readme", "wrongly_encoded"]
+           "MissingExtraError", "edge_target_json", "export_scene", "manifest", "readme", "wrongly_encoded"]

@@ -22,7 +22,7 @@ import numpy as np
 
 from fidelity.chart.image import write_png
 from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
-from fidelity.scene.model import FRAME_REFLECTANCE, ChartScene
+from fidelity.scene.model import EDGE_FIELD_Z, FRAME_REFLECTANCE, ChartScene
 
 #: The extra that provides this writer.
 EXTRA = "scene"
@@ -41,6 +41,21 @@ _UNSIGNED_SHORT = 5123
 def _quad(cx: float, cy: float, hw: float, hh: float, z: float) -> np.ndarray:
     return np.array([[cx - hw, cy - hh, z], [cx + hw, cy - hh, z], [cx + hw, cy + hh, z],
                      [cx - hw, cy + hh, z]], dtype=np.float32)
+
+
+def _polygon(corners: np.ndarray, z: float) -> np.ndarray:
+    """The quad of world (x, y) ``corners`` (top left, top right, bottom right, bottom left as
+    seen) at depth ``z``, in :func:`_quad`'s vertex order (counter-clockwise from +z)."""
+    c = np.asarray(corners, np.float64)[[3, 2, 1, 0]]
+    return np.column_stack([c, np.full(4, z)]).astype(np.float32)
+
+
+def edge_target_quads(scene: ChartScene) -> list[tuple[str, np.ndarray, list[float]]]:
+    """The edge target's light field and dark square as (name, (4, 3) vertices, grey
+    linear factor) quads (:class:`fidelity.scene.model.EdgeTarget`)."""
+    t = scene.edge_target
+    return [("edge_field", _polygon(t.field_corners(), EDGE_FIELD_Z), [t.light] * 3),
+            ("edge_square", _polygon(t.square_corners(), 0.0), [t.dark] * 3)]
 
 
 def texture_texels(albedo: np.ndarray) -> np.ndarray:
@@ -86,6 +101,7 @@ def write_gltf(scene: ChartScene, path: Path, *, linear_factors: np.ndarray | No
                                                          0.0), [float(v) for v in factors[i]]))
     quads.append(("frame", _quad(0.0, 0.0, chart.width / 2, chart.height / 2, -0.0005),
                   [FRAME_REFLECTANCE] * 3))
+    quads += edge_target_quads(scene)
 
     indices = np.array([0, 1, 2, 0, 2, 3], dtype=np.uint16).tobytes()
     normals = np.tile(np.array([0, 0, 1], np.float32), (4, 1)).tobytes()

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from fidelity.colour.spectral import cie_1931_cmfs
-from fidelity.scene.model import FRAME_REFLECTANCE, ChartScene
+from fidelity.scene.model import EDGE_FIELD_Z, FRAME_REFLECTANCE, ChartScene
 
 #: Mitsuba's XYZ normalisation, 1 / MI_CIE_Y_NORMALIZATION (include/mitsuba/core/spectrum.h).
 MITSUBA_CIE_Y_INTEGRAL: float = 106.7502593994140625
@@ -43,10 +43,12 @@ def _spectrum(parent: ET.Element, name: str, values: np.ndarray, start: float,
 
 
 def _rectangle(root: ET.Element, ident: str, cx: float, cy: float, hw: float, hh: float,
-               z: float) -> ET.Element:
+               z: float, angle_deg: float = 0.0) -> ET.Element:
     shape = ET.SubElement(root, "shape", type="rectangle", id=ident)
     t = ET.SubElement(shape, "transform", name="to_world")
     ET.SubElement(t, "scale", x=f"{hw:.9g}", y=f"{hh:.9g}", z="1")
+    if angle_deg:  # counter-clockwise about +z (towards the camera), as seen
+        ET.SubElement(t, "rotate", z="1", angle=f"{angle_deg:.9g}")
     ET.SubElement(t, "translate", x=f"{cx:.9g}", y=f"{cy:.9g}", z=f"{z:.9g}")
     return shape
 
@@ -59,8 +61,13 @@ def irradiance_scale(scene: ChartScene) -> float:
     return math.pi * scene.white_level * MITSUBA_CIE_Y_INTEGRAL / norm
 
 
-def scene_xml(scene: ChartScene, spp: int = DEFAULT_SPP) -> ET.ElementTree:
-    """The Mitsuba 3 scene document of ``scene``."""
+def scene_xml(scene: ChartScene, spp: int = DEFAULT_SPP, *, rfilter: str = "box",
+              stddev: float | None = None) -> ET.ElementTree:
+    """The Mitsuba 3 scene document of ``scene``.
+
+    ``rfilter`` the film's reconstruction filter (``box``, the export's; ``gaussian`` with
+    Mitsuba's ``stddev`` in pixels, None: Mitsuba's default 0.5).
+    """
     root = ET.Element("scene", version="3.0.0")
     ET.SubElement(root, "integrator", type="direct")
     cam = scene.camera
@@ -78,7 +85,9 @@ def scene_xml(scene: ChartScene, spp: int = DEFAULT_SPP) -> ET.ElementTree:
     ET.SubElement(film, "integer", name="height", value=str(cam.height))
     ET.SubElement(film, "string", name="pixel_format", value="rgb")
     ET.SubElement(film, "string", name="component_format", value="float32")
-    ET.SubElement(film, "rfilter", type="box")
+    rf = ET.SubElement(film, "rfilter", type=rfilter)
+    if stddev is not None:
+        ET.SubElement(rf, "float", name="stddev", value=f"{stddev:.9g}")
     emitter = ET.SubElement(root, "emitter", type="directional", id="sun")
     ET.SubElement(emitter, "vector", name="direction", x="0", y="0", z="-1")
     start = float(scene.wavelengths()[0])
@@ -94,6 +103,14 @@ def scene_xml(scene: ChartScene, spp: int = DEFAULT_SPP) -> ET.ElementTree:
     frame = _rectangle(root, "frame", 0.0, 0.0, chart.width / 2, chart.height / 2, -0.0005)
     bsdf = ET.SubElement(frame, "bsdf", type="diffuse")
     ET.SubElement(bsdf, "float", name="reflectance", value=f"{FRAME_REFLECTANCE:g}")
+    target = scene.edge_target  # the slanted-edge target beside the chart
+    for ident, side, z, angle, refl in (
+            ("edge_field", target.field, EDGE_FIELD_Z, 0.0, target.light),
+            ("edge_square", target.square, 0.0, target.angle_deg, target.dark)):
+        shape = _rectangle(root, ident, target.centre[0], target.centre[1], side / 2, side / 2,
+                           z, angle)
+        bsdf = ET.SubElement(shape, "bsdf", type="diffuse")
+        ET.SubElement(bsdf, "float", name="reflectance", value=f"{refl:g}")
     ET.indent(root)
     return ET.ElementTree(root)
 

@@ -13,6 +13,14 @@ Conventions
   colours do not depend on it); the ColorChecker Classic Mini's, 82.55 x 57.15 mm (3.25 x 2.25
   in, X-Rite's product sheet), with the Classic's patch field scaled to its width. The black frame is a rectangle of the chart's size 0.5 mm behind
   the patches (spectrally flat reflectance :data:`FRAME_REFLECTANCE`).
+- Slanted-edge target (:class:`EdgeTarget`, ISO 12233:2017 e-SFR): beside the chart's right
+  edge, a light square field (reflectance :data:`EDGE_LIGHT_REFLECTANCE`, spectrally flat) 0.5 mm
+  behind the chart's plane, and on it a dark square (:data:`EDGE_DARK_REFLECTANCE`) turned
+  :data:`EDGE_ANGLE_DEG` degrees counter-clockwise as seen, so that its four edges run 5 degrees
+  off the pixel grid. The two reflectances make the edges' luminance ratio 0.8 / 0.2 = 4:1
+  (ISO 12233:2017's e-SFR contrast). Sizes are shares of the chart's width (the Classic: a
+  36.3 mm field, a 21.0 mm square, 1.7 mm from the chart), so the target scales with the chart
+  and lands in the margin the default ``fill`` leaves in a 4:3 image.
 - Light: one directional light along -z, so every patch receives the same irradiance (a flat
   chart facing the light has no shadow or inter-reflection). RGB renderers get a white light of
   irradiance ``pi * white_level`` (renderer units; Blender's W/m^2) or ``683 pi white_level``
@@ -70,6 +78,18 @@ FRAME_REFLECTANCE: float = 0.03
 LUMENS_PER_WATT: float = 683.0
 #: Spectral step of the Mitsuba spectra, nm (81 samples over 380-780 nm).
 SPECTRAL_STEP_NM: float = 5.0
+#: Reflectance of the edge target's dark square (spectrally flat).
+EDGE_DARK_REFLECTANCE: float = 0.2
+#: Reflectance of the edge target's light field (spectrally flat): 4:1 against the square.
+EDGE_LIGHT_REFLECTANCE: float = 0.8
+#: The edge target's square is turned this far from the chart's axes (degrees).
+EDGE_ANGLE_DEG: float = 5.0
+#: Side of the light field, the dark square and the gap to the chart, shares of chart width.
+EDGE_FIELD_SHARE: float = 0.13
+EDGE_SQUARE_SHARE: float = 0.075
+EDGE_GAP_SHARE: float = 0.006
+#: Depth of the light field (behind the chart's plane, as the frame), metres.
+EDGE_FIELD_Z: float = -0.0005
 #: Limits of the camera settings.
 MAX_SIDE_PX: int = 16384
 FOV_RANGE_DEG: tuple[float, float] = (1.0, 170.0)
@@ -112,6 +132,59 @@ MINI = ChartGeometry("mini", 0.08255, 0.05715, 0.040 * 0.08255 / 0.2794,
                      0.044 * 0.08255 / 0.2794)
 #: Geometry of each chart in :data:`CHARTS`.
 GEOMETRIES = {"classic": CLASSIC, "mini": MINI}
+
+
+@dataclass(frozen=True)
+class EdgeTarget:
+    """The slanted-edge target beside the chart (module docstring).
+
+    Attributes
+    ----------
+    centre
+        World (x, y) of the field's and the square's centre, metres.
+    field, square
+        The light field's and the dark square's sides, metres.
+    angle_deg
+        The square's turn, degrees counter-clockwise as seen from the camera.
+    dark, light
+        The square's and the field's reflectances (spectrally flat, in (0, 1]).
+    """
+
+    centre: tuple[float, float]
+    field: float
+    square: float
+    angle_deg: float = EDGE_ANGLE_DEG
+    dark: float = EDGE_DARK_REFLECTANCE
+    light: float = EDGE_LIGHT_REFLECTANCE
+
+    def square_corners(self) -> FloatArray:
+        """(4, 2) world (x, y) of the dark square's corners: top left, top right, bottom
+        right, bottom left as seen (before the turn), turned by ``angle_deg``."""
+        return self._corners(self.square, self.angle_deg)
+
+    def field_corners(self) -> FloatArray:
+        """(4, 2) world (x, y) of the light field's corners (not turned), same order."""
+        return self._corners(self.field, 0.0)
+
+    def _corners(self, side: float, angle_deg: float) -> FloatArray:
+        h = side / 2
+        local = np.array([[-h, h], [h, h], [h, -h], [-h, -h]])
+        a = math.radians(angle_deg)
+        rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+        return np.asarray(local @ rot.T + np.asarray(self.centre), np.float64)
+
+    @property
+    def luminance_ratio(self) -> float:
+        """The light field's luminance over the dark square's (both spectrally flat)."""
+        return self.light / self.dark
+
+
+def edge_target(chart: ChartGeometry) -> EdgeTarget:
+    """The edge target beside ``chart``'s right edge, vertically centred (module docstring)."""
+    w = chart.width
+    field_side = EDGE_FIELD_SHARE * w
+    x = w / 2 + EDGE_GAP_SHARE * w + field_side / 2
+    return EdgeTarget((x, 0.0), field_side, EDGE_SQUARE_SHARE * w)
 
 
 @dataclass(frozen=True)
@@ -158,7 +231,8 @@ class ChartScene:
     render is measured against (unclipped); ``reflectance`` (24, N) and ``illuminant_spd`` (N,)
     on the grid from 380 nm in ``step`` nm (Mitsuba); ``spectral_linear`` (24, 3) the closed
     form's linear sRGB of the spectral scene (not adapted to D65) at ``white_level``;
-    ``clipped`` (24,) which patches' albedo was clipped.
+    ``clipped`` (24,) which patches' albedo was clipped; ``edge`` the slanted-edge target
+    beside the chart (None: :func:`edge_target` of the chart, as :attr:`edge_target` gives).
     """
 
     chart: ChartGeometry
@@ -177,6 +251,25 @@ class ChartScene:
     white_level: float
     step: float = SPECTRAL_STEP_NM
     conventions: dict[str, Any] = field(default_factory=dict)
+    edge: EdgeTarget | None = None
+
+    @property
+    def edge_target(self) -> EdgeTarget:
+        """The slanted-edge target beside the chart (:func:`edge_target` of the chart)."""
+        return self.edge if self.edge is not None else edge_target(self.chart)
+
+    def edge_target_px(self) -> dict[str, Any]:
+        """The edge target in the camera's image: ``square_corners_px`` and
+        ``field_corners_px`` (4 x [x, y] each, the order of :meth:`EdgeTarget.square_corners`;
+        pixel (row i, column j) at x = j, y = i) and ``in_image`` (the whole field inside the
+        image)."""
+        t, cam = self.edge_target, self.camera
+        square = np.array([cam.project(x, y, 0.0) for x, y in t.square_corners()])
+        fld = np.array([cam.project(x, y, EDGE_FIELD_Z) for x, y in t.field_corners()])
+        inside = bool(np.all(fld >= -0.5) and np.all(fld[:, 0] <= cam.width - 0.5)
+                      and np.all(fld[:, 1] <= cam.height - 0.5))
+        return {"square_corners_px": square.tolist(), "field_corners_px": fld.tolist(),
+                "in_image": inside}
 
     @property
     def irradiance(self) -> float:
@@ -322,6 +415,7 @@ def build_scene(
         reference_srgb=np.asarray(srgb, np.float64), clipped=clipped, reflectance=refl,
         illuminant_spd=spd, spectral_linear=spectral_linear, illuminant=ill.name,
         reference=reference, white_level=float(white_level), step=step, conventions=conv,
+        edge=edge_target(geometry),
     )
 
 
@@ -332,6 +426,14 @@ def _encode(linear: FloatArray) -> FloatArray:
 __all__ = [
     "CHARTS",
     "CLASSIC",
+    "EDGE_ANGLE_DEG",
+    "EDGE_DARK_REFLECTANCE",
+    "EDGE_FIELD_SHARE",
+    "EDGE_FIELD_Z",
+    "EDGE_GAP_SHARE",
+    "EDGE_LIGHT_REFLECTANCE",
+    "EDGE_SQUARE_SHARE",
+    "EdgeTarget",
     "GEOMETRIES",
     "MINI",
     "FRAME_REFLECTANCE",
@@ -342,5 +444,6 @@ __all__ = [
     "ChartScene",
     "SceneCamera",
     "build_scene",
+    "edge_target",
     "make_camera",
 ]

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from fidelity.scene.gltf import texture_texels, write_texture_png
-from fidelity.scene.model import FRAME_REFLECTANCE, ChartScene
+from fidelity.scene.model import EDGE_FIELD_Z, FRAME_REFLECTANCE, ChartScene
 
 EXTRA = "scene"
 
@@ -58,10 +58,16 @@ def write_usd(scene: ChartScene, path: Path, *, linear_factors: np.ndarray | Non
     chart = scene.chart
 
     def quad(name: str, cx: float, cy: float, hw: float, hh: float, z: float,
-             colour: list[float], texel: int | None = None) -> None:
+             colour: list[float], texel: int | None = None,
+             corners: np.ndarray | None = None) -> None:
         mesh = UsdGeom.Mesh.Define(stage, f"/World/Chart/{name}")
         pts = [Gf.Vec3f(cx - hw, cy - hh, z), Gf.Vec3f(cx + hw, cy - hh, z),
                Gf.Vec3f(cx + hw, cy + hh, z), Gf.Vec3f(cx - hw, cy + hh, z)]
+        if corners is not None:  # top left, top right, bottom right, bottom left as seen
+            pts = [Gf.Vec3f(float(x), float(y), z) for x, y in corners[[3, 2, 1, 0]]]
+            lo, hi = corners.min(axis=0), corners.max(axis=0)
+            cx, cy = float(lo[0] + hi[0]) / 2, float(lo[1] + hi[1]) / 2
+            hw, hh = float(hi[0] - lo[0]) / 2, float(hi[1] - lo[1]) / 2
         mesh.CreatePointsAttr(pts)
         mesh.CreateFaceVertexCountsAttr([4])
         mesh.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
@@ -103,6 +109,11 @@ def write_usd(scene: ChartScene, path: Path, *, linear_factors: np.ndarray | Non
         quad(f"patch_{i + 1:02d}_{_identifier(name)}", cx, cy, chart.patch / 2, chart.patch / 2,
              0.0, [float(v) for v in factors[i]], i if textured else None)
     quad("frame", 0.0, 0.0, chart.width / 2, chart.height / 2, -0.0005, [FRAME_REFLECTANCE] * 3)
+    target = scene.edge_target  # the slanted-edge target beside the chart
+    quad("edge_field", 0.0, 0.0, 0.0, 0.0, EDGE_FIELD_Z, [target.light] * 3,
+         corners=target.field_corners())
+    quad("edge_square", 0.0, 0.0, 0.0, 0.0, 0.0, [target.dark] * 3,
+         corners=target.square_corners())
 
     light = UsdLux.DistantLight.Define(stage, "/World/Sun")
     light.CreateIntensityAttr(float(scene.irradiance))

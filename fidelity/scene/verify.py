@@ -100,12 +100,36 @@ class BlenderRender:
 def render_with_blender(scene_file: str | os.PathLike[str], output: str | os.PathLike[str],
                         width: int, height: int, *, samples: int = 4, threads: int = 0,
                         png: str | os.PathLike[str] | None = None,
-                        timeout: float = 600.0) -> BlenderRender:
-    """Render ``scene_file`` (.glb or .usda) with Blender Cycles to the EXR ``output``."""
+                        timeout: float = 600.0, png_depth: int = 8, view: str = "Standard",
+                        look: str = "None", light_scale: float = 1.0,
+                        world: float = 0.0, pixel_filter: str = "BOX",
+                        filter_width: float = 1.0,
+                        border: tuple[int, int, int, int] | None = None) -> BlenderRender:
+    """Render ``scene_file`` (.glb or .usda) with Blender Cycles to the EXR ``output``.
+
+    ``png``: also write the view-transformed image there, ``png_depth`` (8 or 16) bits per
+    channel, through the view transform ``view`` (``Standard``, ``AgX``, ``Filmic``) and its
+    ``look`` (the EXR is written without them, as Blender does). ``light_scale`` multiplies
+    every light's strength (4: +2 EV) and ``world`` is the strength of a grey world
+    background (0: black): the settings of the known mistakes
+    (``scenes/blender_render.py``). ``pixel_filter`` (``BOX``, ``GAUSSIAN``,
+    ``BLACKMAN_HARRIS``) and ``filter_width`` (pixels) are Cycles' pixel filter (default: the
+    box of one pixel); ``border`` ``(x0, y0, x1, y1)`` pixels (top left origin, x1 and y1
+    exclusive) renders only that part, the EXR cropped to it."""
     cmd = [*blender_command(), str(scene_file), str(output), "--width", str(width),
            "--height", str(height), "--samples", str(samples), "--threads", str(threads)]
     if png is not None:
-        cmd += ["--png", str(png)]
+        cmd += ["--png", str(png), "--png-depth", str(png_depth)]
+    if (view, look) != ("Standard", "None"):
+        cmd += ["--view", view, "--look", look]
+    if light_scale != 1.0:
+        cmd += ["--light-scale", repr(float(light_scale))]
+    if world:
+        cmd += ["--world", repr(float(world))]
+    if (pixel_filter, filter_width) != ("BOX", 1.0):
+        cmd += ["--filter", pixel_filter, "--filter-width", repr(float(filter_width))]
+    if border is not None:
+        cmd += ["--border", ",".join(str(int(v)) for v in border)]
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env,

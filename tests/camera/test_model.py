@@ -6,6 +6,7 @@ from __future__ import annotations
 import colour
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
 from fidelity.camera.model import (
     DEFAULT_CAMERA,
@@ -28,6 +29,7 @@ from fidelity.camera.model import (
     vignetting_gain,
     white_balance_gains,
 )
+from fidelity.cli import main
 from fidelity.colour.spectral import (
     load_illuminant,
     load_patch_spectra,
@@ -203,6 +205,10 @@ def test_user_sensitivity_csv_and_lut_file(tmp_path) -> None:
         ('[white_balance]\nmethod = "illuminant"\nilluminant = "D66"\n',
          "[white_balance].illuminant", "unknown illuminant"),
         ('[vignetting]\ndiagonal_fov_deg = 200\n', "[vignetting].diagonal_fov_deg", "<= 179"),
+        # a file without its sensitivities is no camera, not silently the ideal one
+        ('name = "only"\n', "[sensitivities]", "required: the camera's spectral sensitivities"),
+        ('name = "x"\n[tone]\ncurve = "srgb"\n', "[sensitivities]", "source = 'ideal'"),
+        ('[sensitivities]\n', "[sensitivities].source", "required"),
     ],
 )
 def test_bad_camera_fields_fail_clearly(tmp_path, body: str, field: str, problem: str) -> None:
@@ -232,3 +238,17 @@ def test_lut_outputs_must_be_display_values(tmp_path) -> None:
     path.write_text('[tone]\ncurve = "lut"\nlut = [[0, 0], [1, 1.5]]\n')
     with pytest.raises(InputFileError, match=r"\[tone\]\.lut: outputs must lie in \[0, 1\]"):
         load_camera(path)
+
+
+def test_a_camera_file_of_only_a_name_is_an_input_error(tmp_path) -> None:
+    """``name`` alone: exit 2 in one line naming the file and the missing section; with
+    ``[sensitivities] source = "ideal"`` it is the ideal camera, as said."""
+    only = tmp_path / "cam.toml"
+    only.write_text('name = "only"\n')
+    r = CliRunner().invoke(main, ["--no-config", "check", "--camera", str(only), "--no-report"])
+    assert r.exit_code == 2, r.output
+    lines = r.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("fidelity: error: camera file ")
+    assert "cam.toml: [sensitivities]: required" in lines[0]
+    only.write_text('name = "only"\n[sensitivities]\nsource = "ideal"\n')
+    assert load_camera(only).sensitivities.name == ideal_sensitivities().name

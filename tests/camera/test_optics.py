@@ -20,6 +20,10 @@ REPO = Path(__file__).resolve().parents[2]
 SOFT = REPO / "cameras" / "optics" / "nikon5100-soft-lens.toml"
 BASE = REPO / "cameras" / "nikon5100-cheung-d65.toml"
 
+#: The head of a camera file that says it is the ideal camera (a camera file names its
+#: sensitivities).
+IDEAL_HEAD = 'name = "{}"\n[sensitivities]\nsource = "ideal"\n'
+
 
 def _dtft(kernel: np.ndarray, f: np.ndarray) -> np.ndarray:
     """The DTFT of a centred odd-length 1-D kernel at frequencies f (cycles per sample)."""
@@ -217,7 +221,7 @@ BAD = [
 def test_bad_optics_one_line_exit_2(tmp_path: Path, body: str, field: str,
                                     problem: str) -> None:
     bad = tmp_path / "bad.toml"
-    bad.write_text('name = "bad"\n' + body, encoding="utf-8")
+    bad.write_text(IDEAL_HEAD.format("bad") + body, encoding="utf-8")
     (tmp_path / "mtf.csv").write_text("0,1\n0.3,0.5\n0.2,0.1\n", encoding="utf-8")
     res = CliRunner().invoke(main, ["check", "--camera", str(bad), "--no-report"])
     assert res.exit_code == 2, res.output
@@ -229,8 +233,10 @@ def test_bad_optics_one_line_exit_2(tmp_path: Path, body: str, field: str,
 def test_measured_mtf_and_psf_files(tmp_path: Path) -> None:
     (tmp_path / "mtf.csv").write_text("frequency,mtf\n0,1\n0.25,0.6\n0.5,0.2\n")
     (tmp_path / "psf.csv").write_text("0 1 0\n1 4 1\n0 1 0\n")
-    (tmp_path / "m.toml").write_text('name = "m"\n[optics]\nkind = "mtf"\nmtf_file = "mtf.csv"\n')
-    (tmp_path / "p.toml").write_text('name = "p"\n[optics]\nkind = "psf"\npsf_file = "psf.csv"\n')
+    (tmp_path / "m.toml").write_text(IDEAL_HEAD.format("m") + '[optics]\nkind = "mtf"\n'
+                                        'mtf_file = "mtf.csv"\n')
+    (tmp_path / "p.toml").write_text(IDEAL_HEAD.format("p") + '[optics]\nkind = "psf"\n'
+                                        'psf_file = "psf.csv"\n')
     m, p = read_camera_file(tmp_path / "m.toml"), read_camera_file(tmp_path / "p.toml")
     assert m.optics.mtf_table == ((0.0, 1.0), (0.25, 0.6), (0.5, 0.2))
     assert (tmp_path / "mtf.csv") in m.files and (tmp_path / "psf.csv") in p.files
@@ -239,7 +245,8 @@ def test_measured_mtf_and_psf_files(tmp_path: Path) -> None:
     np.testing.assert_allclose(p.optics.mtf(F), 0.75 + 0.25 * np.cos(2 * np.pi * F), atol=1e-12)
     assert p.to_json()["optics"]["psf_size"] == [3, 3]
     (tmp_path / "even.csv").write_text("1 1\n1 1\n")
-    (tmp_path / "e.toml").write_text('name = "e"\n[optics]\nkind = "psf"\npsf_file = "even.csv"\n')
+    (tmp_path / "e.toml").write_text(IDEAL_HEAD.format("e") + '[optics]\nkind = "psf"\n'
+                                        'psf_file = "even.csv"\n')
     res = CliRunner().invoke(main, ["check", "--camera", str(tmp_path / "e.toml"), "--no-report"])
     assert res.exit_code == 2 and "[optics].psf_file" in res.output and "odd" in res.output
 

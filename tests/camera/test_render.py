@@ -57,7 +57,7 @@ def _colour_expected_error_d65_balanced_under_a() -> float:
 
 def test_camera_balanced_for_d65_under_illuminant_a_shows_the_large_error(tmp_path) -> None:
     cam = tmp_path / "d65-balanced.toml"
-    cam.write_text('[white_balance]\nmethod = "illuminant"\nilluminant = "D65"\n')
+    cam.write_text('[sensitivities]\nsource = "ideal"\n[white_balance]\nmethod = "illuminant"\nilluminant = "D65"\n')
     r = render_chart(str(cam), "A")
     expected = _colour_expected_error_d65_balanced_under_a()
     assert expected > 10
@@ -79,7 +79,7 @@ def test_safecolor_reference_is_offered_but_not_default() -> None:
 def test_clipping_rule_linear_float_vs_display_output(tmp_path) -> None:
     """An sRGB-encoded (clipped) ideal camera loses out-of-gamut cyan; the float one does not."""
     cam = tmp_path / "ideal-srgb.toml"
-    cam.write_text('[white_balance]\nmethod = "illuminant"\n[tone]\ncurve = "srgb"\n')
+    cam.write_text('[sensitivities]\nsource = "ideal"\n[white_balance]\nmethod = "illuminant"\n[tone]\ncurve = "srgb"\n')
     clipped = render_chart(str(cam), "D65")
     float_out = render_chart("ideal", "D65")
     cyan = clipped.measurement.patch_names.index("cyan")
@@ -103,7 +103,7 @@ def test_default_camera_is_realistic_and_noisy() -> None:
 
 def test_vignetting_darkens_corner_patches(tmp_path) -> None:
     cam = tmp_path / "vig.toml"
-    cam.write_text('[white_balance]\nmethod = "illuminant"\n[vignetting]\ndiagonal_fov_deg = 70\n')
+    cam.write_text('[sensitivities]\nsource = "ideal"\n[white_balance]\nmethod = "illuminant"\n[vignetting]\ndiagonal_fov_deg = 70\n')
     r = render_chart(str(cam), "D65")
     base = render_chart("ideal", "D65")
     ratio = r.camera_rgb[:, 1] / base.camera_rgb[:, 1]
@@ -163,7 +163,7 @@ def test_gamma_tone_curve_is_measured_as_srgb(tmp_path) -> None:
     from fidelity.colour.spectral import scene_reference
 
     cam = tmp_path / "gamma.toml"
-    cam.write_text('[white_balance]\nmethod = "illuminant"\n[tone]\ncurve = "gamma"\ngamma = 2.2\n')
+    cam.write_text('[sensitivities]\nsource = "ideal"\n[white_balance]\nmethod = "illuminant"\n[tone]\ncurve = "gamma"\ngamma = 2.2\n')
     r = render_chart(str(cam), "D65")
     ref = scene_reference("D65")
     encoded = np.clip(ref.linear_srgb, 0, 1) ** (1 / 2.2)
@@ -206,3 +206,72 @@ def test_trimmed_mean_refuses_a_proportion_that_cuts_everything() -> None:
 
     with pytest.raises(ValueError, match="outside"):
         trimmed_mean(np.ones((4, 3)), 0.5)
+
+
+def _frame_values(cam):  # type: ignore[no-untyped-def]
+    from fidelity.measure.pixels import measure_pixels
+
+    r = render_chart(cam, "D65", frame=True)
+    assert r.frame is not None and r.frame.srgb.shape == (480, 640, 3)
+    m = measure_pixels(r.frame.srgb, r.frame.corners, encoding="srgb", reference="scene",
+                       uncertainty=False)
+    return r, m
+
+
+def _gauss_pixel_mtf50(sigma: float) -> float:
+    """MTF50 of exp(-2 pi^2 s^2 f^2) |sinc f| (the lens and the 1 px aperture), by bisection."""
+    lo, hi = 1e-4, 0.99
+    for _ in range(80):
+        f = (lo + hi) / 2
+        v = float(np.exp(-2 * np.pi ** 2 * sigma ** 2 * f ** 2) * np.sinc(f))
+        lo, hi = (f, hi) if v > 0.5 else (lo, f)
+    return lo
+
+
+@pytest.mark.parametrize("sigma,tol", [(None, 0.04), (1.0, 0.04), (1.5, 0.04), (2.5, 0.12)])
+def test_the_turned_frame_carries_the_cameras_optics(sigma, tol) -> None:
+    """The check's turned chart goes through the camera's lens: its e-SFR MTF50 (the softer
+    edge's luminance) follows the closed form of the Gaussian PSF times the pixel aperture.
+    It reads a few per cent high as the blur widens: the ROI across a patch edge ends in the
+    14 px gap between patches, which cuts the edge spread's tails (docs/sharpness_noise.md,
+    Limits)."""
+    import dataclasses
+
+    from fidelity.camera.model import load_camera
+    from fidelity.prediction.properties import chart_mtf50
+
+    cam = load_camera("ideal")
+    if sigma is not None:
+        cam = dataclasses.replace(cam, optics=dataclasses.replace(
+            cam.optics, kind="gaussian", sigma_px=sigma))
+    _, m = _frame_values(cam)
+    got = chart_mtf50(m.sharpness)
+    assert got is not None
+    want = _gauss_pixel_mtf50(sigma or 0.0)
+    assert got[0] == pytest.approx(want, rel=tol)
+    assert got[0] >= want  # truncated tails make an edge look sharper, never softer
+
+
+def test_the_turned_frame_carries_the_cameras_noise() -> None:
+    """SNR at grey of the turned chart against the noise model's closed form: an ideal camera
+    (no CCM, linear output) with full well N electrons and read noise r has, per channel, var
+    = mu / N + (r / N)^2 in raw units; the white-balance gain g scales both, and the
+    luminance Y = sum w_c g_c raw_c of independent channels has var sum (w_c g_c)^2 var_c."""
+    import dataclasses
+
+    from fidelity.camera.model import Noise, load_camera
+    from fidelity.prediction.properties import chart_snr
+
+    full_well, read = 400.0, 4.0
+    cam = dataclasses.replace(load_camera("ideal"), noise=Noise(full_well, read, 7))
+    r, m = _frame_values(cam)
+    got = chart_snr(m.noise)
+    assert got is not None and got[1] is not None
+    grey = r.measurement.patch_names.index(m.noise.grey_patch)
+    mu = np.asarray(r.camera_rgb[grey])  # the chart's raw mean of the grey patch
+    g = np.asarray(r.conventions["white_balance_gains"])
+    w = np.array([0.2126, 0.7152, 0.0722])
+    var = mu / full_well + (read / full_well) ** 2
+    want = float(w @ (g * mu) / np.sqrt(np.sum((w * g) ** 2 * var)))
+    assert got[0] == pytest.approx(want, rel=0.05)
+    assert abs(got[0] - want) <= 3 * got[1] + 0.02 * want

@@ -61,8 +61,13 @@ def test_junit_is_valid_with_stable_names_timestamp_hostname_and_threshold(rende
         assert case is not None and case.get("name") == f"colour fidelity of {renders['good']}"
         assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d", suite.get("timestamp", ""))
         assert suite.get("hostname")
-        props = {p.get("name"): p.get("value") for p in suite.iter("property")}
+        # one image's values are its test case's properties, as for several (issue 57); the
+        # suite's own describe the run
+        props = {p.get("name"): p.get("value") for p in case.iter("property")}
         assert props["limit"] == str(float(limit)) and props["criterion"] == "max-delta-e"
+        assert [p.get("name") for p in suite.findall("properties/property")] == [
+            "fidelity_version"]
+        assert case.get("classname") == "fidelity.gate"
     # several images, one of them unreadable: a failure, an error, properties per case
     (tmp_path / "broken.png").write_bytes(b"not a png")
     r = CliRunner().invoke(main, ["gate", str(renders["good"]), str(renders["bad"]),

@@ -74,6 +74,13 @@ ADDED = (
     # "Beyond colour, part 2": colour, sharpness and noise judged together
     (re.compile(r"(\$|.*\.sim|.*\.real|.*\.reports\[\d+\])$"), {"properties"}),
     (re.compile(r".*\.verdict$"), {"properties"}),
+    # issue 57: the exposure judged against the expected one (null unless a fixed exposure is
+    # given), and the neutral patches' exposure correction
+    (re.compile(r"(\$|.*\.sim|.*\.real|.*\.reports\[\d+\])$"), {"exposure", "neutral_ev"}),
+    (re.compile(r".*\.normalisation$"), {"neutral_ev", "audit_auto", "difference_ev",
+                                          "difference"}),
+    # issue 57: the likely cause of the chart's error (fidelity.colour.diagnosis)
+    (re.compile(r"(\$|.*\.sim|.*\.real|.*\.reports\[\d+\])$"), {"diagnosis"}),
 )
 
 #: What "Beyond colour, part 2" adds to a verdict's sentence: the combined loss's parts and

@@ -43,6 +43,16 @@ def test_every_command_speaks_the_one_vocabulary(name):
         assert isinstance(images.type, click.Path) and not images.type.file_okay, name
 
 
+def test_fit_offers_no_sim_colourspace_it_would_refuse():
+    """fit refuses --sim-ocio-colourspace (its cube maps SIM's own pixel values): its help does
+    not list it (issue 57), compare's does; REAL's is offered by both."""
+    helps = {name: CliRunner().invoke(main, [name, "--help"], terminal_width=200).stdout
+             for name in ("fit", "compare")}
+    assert "--sim-ocio-colourspace" not in helps["fit"]
+    assert "--sim-ocio-colourspace" in helps["compare"]
+    assert all("--real-ocio-colourspace" in h for h in helps.values())
+
+
 def test_help_imports_no_command_module():
     code = ("import sys; from fidelity.cli import main\n"
             "try:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"

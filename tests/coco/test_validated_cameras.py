@@ -15,7 +15,14 @@ import fidelity
 from fidelity.cli import main
 from fidelity.coco.validate.colour import ValidationResults, validated_cameras
 from fidelity.coco.validate.suite import load_suite
-from fidelity.prediction.interval import STAGES, ValidatedCameras, load_validated_cameras
+from fidelity.prediction.interval import (
+    STAGES,
+    ValidatedCameras,
+    ValidatedDegradation,
+    degradation_check,
+    load_validated_cameras,
+    validated_degradation,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 SHIPPED = REPO / "fidelity" / "data" / "validation-domain.json"
@@ -101,8 +108,8 @@ def test_check_states_its_camera_against_the_validated_ones(tmp_path):
     r = CliRunner().invoke(main, ["--no-config", "check", "--illuminant", "D50",
                                   "--no-report"])
     assert r.exit_code == 0, r.output
-    assert "outside the evidence: illuminant D50: not among those the validation rendered" \
-        in r.output
+    assert "outside the validity domain: illuminant D50: not among those the validation " \
+        "rendered" in r.output
     d50 = fidelity.check_camera("nikon-5100", illuminant="D50").validity
     names = {c.name: c.inside for c in d50.checks}
     assert names["validated illuminant"] is False and not d50.inside
@@ -125,3 +132,66 @@ def test_an_image_audit_states_no_camera_kind(tmp_path):
     report = fidelity.audit_image(tmp_path / "r" / "developed.png")
     names = {c.name for c in report.validity.checks}
     assert not names & {"validated illuminant", "validated camera kind"}
+
+
+def test_noise_optics_and_vignetting_are_in_the_domain_as_the_validation_spans_them(tmp_path):
+    """The shipped domain states the validated cameras' noise, optics and vignetting (none of
+    the 30 had any: the domain is noise-free, no PSF, no fall-off), read from the camera files
+    independently; a camera with any of them is outside, on the terminal (one line, value
+    against range) and in the HTML (an amber banner, not a plain green PASS)."""
+    shipped = json.loads(SHIPPED.read_text(encoding="utf-8"))
+    suite = tomllib.loads((REPO / "cameras" / "suite.toml").read_text(encoding="utf-8"))
+    files = [tomllib.loads((REPO / "cameras" / f"{n}.toml").read_text(encoding="utf-8"))
+             for n in json.loads((REPO / "reports" / "validation" / "validation.json")
+                                 .read_text())["cameras"]]
+    assert suite and len(files) == 30
+    for section, name in (("noise", "noise"), ("optics", "optics"),
+                          ("vignetting", "vignetting")):
+        had = [f for f in files if f.get(section, {}).get(
+            {"noise": "full_well", "optics": "kind", "vignetting": "diagonal_fov_deg"}[section],
+            "none") not in (None, "none")]
+        assert had == [] and shipped["degradations"][name] == {"kinds": ["none"], "ranges": {}}
+    noisy = tmp_path / "noisy.toml"
+    text = (REPO / "cameras" / "nikon5100-cheung-d65.toml").read_text(encoding="utf-8")
+    noisy.write_text(text + "\n[noise]\nfull_well = 500.0\nread_noise = 3.0\n",
+                     encoding="utf-8")
+    checks = {c.name: c for c in fidelity.check_camera(str(noisy)).validity.checks}
+    assert not checks["validated noise"].inside
+    assert checks["validated optics"].inside and checks["validated vignetting"].inside
+    plain = {c.name: c for c in fidelity.check_camera(
+        str(REPO / "cameras" / "nikon5100-cheung-d65.toml")).validity.checks}
+    assert plain["validated noise"].inside
+    r = CliRunner().invoke(main, ["--no-config", "check", "--camera", str(noisy), "--html",
+                                  str(tmp_path / "r.html"), "--json", str(tmp_path / "r.json")])
+    outside = [ln for ln in r.output.splitlines() if "outside the validity domain" in ln]
+    assert len(outside) == 1, r.output
+    assert "full_well 500 e-" in outside[0] and "read_noise 3 e- rms" in outside[0]
+    assert "the validated cameras' noise: none only" in outside[0]
+    page = (tmp_path / "r.html").read_text(encoding="utf-8")
+    banner = page.split('class="headline tone-', 1)[1]
+    verdict = json.loads((tmp_path / "r.json").read_text())["verdict"]["passed"]
+    assert banner.startswith("outside" if verdict else "fail")
+    if verdict:
+        assert "PASS — outside the validity domain" in banner.split("</div>", 1)[0]
+
+
+@pytest.mark.parametrize(("kind", "params", "validated", "inside"), [
+    ("none", {}, ValidatedDegradation(("none",)), True),
+    ("shot+read", {"full_well": 500.0, "read_noise": 3.0}, ValidatedDegradation(("none",)),
+     False),
+    ("shot+read", {"full_well": 500.0, "read_noise": 3.0},
+     validated_degradation([("shot+read", {"full_well": 1000.0, "read_noise": 2.0}),
+                            ("shot+read", {"full_well": 40000.0, "read_noise": 5.0})]), False),
+    ("shot+read", {"full_well": 2000.0, "read_noise": 3.0},
+     validated_degradation([("shot+read", {"full_well": 1000.0, "read_noise": 2.0}),
+                            ("shot+read", {"full_well": 40000.0, "read_noise": 5.0})]), True),
+    ("gaussian", {"sigma_px": 1.0},
+     validated_degradation([("none", {}), ("gaussian", {"sigma_px": 0.5})]), False),
+    ("none", {}, validated_degradation([("gaussian", {"sigma_px": 0.5})]), False),
+])
+def test_a_degradation_is_inside_within_the_validated_range(kind, params, validated, inside):
+    check = degradation_check("noise", kind, params, validated)
+    assert check.inside is inside
+    if kind != "none":
+        assert all(f"{k} {v:g}" in check.detail for k, v in params.items())
+    assert ValidatedDegradation.from_json(validated.to_json()) == validated

@@ -13,6 +13,7 @@ from fidelity.core.fileio import (
     check_outputs,
     json_ready,
     require_file,
+    write_bytes_atomic,
     write_json_atomic,
     write_text_atomic,
 )
@@ -211,3 +212,181 @@ def test_a_cached_reader_reads_a_file_again_only_when_it_changes(tmp_path, monke
         with pytest.raises(ValueError):
             read(f)
     assert len(reads) == 5
+
+
+# ------------------------------------------------------------------ outputs through links and
+# special files (issue 57: a link was replaced by a regular file, /dev/stdout too)
+
+def _no_temporaries(*folders: Path) -> None:
+    for folder in folders:
+        assert not [p.name for p in folder.iterdir() if p.name.endswith(".tmp") or
+                    ".tmp." in p.name], folder
+
+
+def test_a_link_to_a_file_writes_the_file_and_stays_a_link(tmp_path: Path) -> None:
+    target = tmp_path / "target.json"
+    target.write_text("old")
+    link = tmp_path / "link.json"
+    link.symlink_to("target.json")
+    assert write_text_atomic(link, "new") == link
+    assert link.is_symlink() and os.readlink(link) == "target.json"
+    assert target.read_text() == "new" and not target.is_symlink()
+    _no_temporaries(tmp_path)
+
+
+def test_a_link_to_a_link_writes_the_last_target(tmp_path: Path) -> None:
+    (tmp_path / "c.txt").write_text("old")
+    (tmp_path / "b.txt").symlink_to(tmp_path / "c.txt")  # absolute
+    (tmp_path / "a.txt").symlink_to("b.txt")  # relative
+    write_bytes_atomic(tmp_path / "a.txt", b"new")
+    assert [os.readlink(tmp_path / n) for n in ("a.txt", "b.txt")] == [
+        "b.txt", str(tmp_path / "c.txt")]
+    assert (tmp_path / "c.txt").read_bytes() == b"new"
+    _no_temporaries(tmp_path)
+
+
+def test_a_dangling_link_creates_its_target(tmp_path: Path) -> None:
+    link = tmp_path / "report.json"
+    link.symlink_to(Path("reports") / "day" / "report.json")  # the folders are not there yet
+    write_json_atomic(link, {"a": 1})
+    assert link.is_symlink()
+    made = tmp_path / "reports" / "day" / "report.json"
+    assert made.is_file() and not made.is_symlink() and made.read_text() == '{\n  "a": 1\n}\n'
+
+
+def test_a_relative_link_in_another_folder_writes_atomically_beside_its_target(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The temporary file is made in the target's folder (a rename cannot cross file systems,
+    and the link's folder may be read-only), whatever the working folder is."""
+    (tmp_path / "out").mkdir()
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "r.txt").write_text("old")
+    (tmp_path / "out" / "r.txt").symlink_to(Path("..") / "data" / "r.txt")
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    with atomic_output(Path("..") / "out" / "r.txt") as tmp:
+        assert tmp.parent == (tmp_path / "data").resolve()
+        tmp.write_text("new")
+    assert (tmp_path / "out" / "r.txt").is_symlink()
+    assert (tmp_path / "data" / "r.txt").read_text() == "new"
+    _no_temporaries(tmp_path / "out", tmp_path / "data", tmp_path / "elsewhere")
+
+
+def test_a_link_to_an_input_is_refused_and_a_loop_is_an_input_error(tmp_path: Path) -> None:
+    src = tmp_path / "in.json"
+    src.write_text("{}")
+    link = tmp_path / "link.json"
+    link.symlink_to(src)
+    with pytest.raises(InputFileError, match="link.json: refusing to write over an input"), \
+            atomic_output(link, protect=[src]):
+        pass
+    with pytest.raises(InputFileError, match="refusing"), atomic_output(src, protect=[link]):
+        pass
+    assert src.read_text() == "{}" and link.is_symlink()
+    (tmp_path / "x").symlink_to("y")
+    (tmp_path / "y").symlink_to("x")
+    with pytest.raises(InputFileError, match="x: cannot write: too many levels of symbolic"):
+        write_text_atomic(tmp_path / "x", "z")
+    assert (tmp_path / "x").is_symlink() and (tmp_path / "y").is_symlink()
+
+
+def test_a_fifo_is_written_as_a_stream(tmp_path: Path) -> None:
+    import stat
+    import threading
+
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    link = tmp_path / "link.xml"
+    link.symlink_to(fifo)
+    got: list[bytes] = []
+    for out in (fifo, link):
+        reader = threading.Thread(target=lambda: got.append(fifo.read_bytes()), daemon=True)
+        reader.start()
+        write_text_atomic(out, "<a>ΔE</a>\n")
+        reader.join(timeout=10)
+        assert not reader.is_alive()
+    assert got == ["<a>ΔE</a>\n".encode()] * 2
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode) and link.is_symlink()
+    _no_temporaries(tmp_path)
+
+
+def test_a_character_device_stays_one(tmp_path: Path) -> None:
+    import stat
+
+    from fidelity.core.fileio import destination, is_stream
+
+    assert destination(os.devnull).kind == "stream"  # before anything is written to it
+    link = tmp_path / "null.json"
+    link.symlink_to(os.devnull)
+    assert destination(link) == ("stream", Path(os.devnull), None) and is_stream(link)
+    write_json_atomic(link, {"a": 1})
+    write_text_atomic(os.devnull, "x")
+    assert stat.S_ISCHR(os.lstat(os.devnull).st_mode) and link.is_symlink()
+    # a special file may take two outputs; a regular file may not
+    check_outputs({"--json": os.devnull, "--junit": link})
+    with pytest.raises(InputFileError, match="named by both"):
+        check_outputs({"--json": tmp_path / "r", "--junit": tmp_path / "r"})
+
+
+_WRITE_STDOUT = ("import sys; from fidelity.core.fileio import write_text_atomic; "
+                 "print('printed first'); write_text_atomic(sys.argv[1], 'the output\\n'); "
+                 "print('printed after')")
+
+
+@pytest.mark.parametrize("name", ["/dev/stdout", "/dev/fd/1", "/proc/self/fd/1", "link"])
+def test_dev_stdout_writes_this_process_standard_output(name: str, tmp_path: Path) -> None:
+    """To a pipe, and to a regular file the shell opened (``> out.txt``): the output lands in
+    order between what the process prints, in the file the shell made (never a new file
+    renamed over it)."""
+    import subprocess
+    import sys
+
+    from fidelity.core.fileio import destination
+
+    if not Path(name if name != "link" else "/dev/stdout").exists():
+        pytest.skip(f"{name}: not on this system")
+    if name == "link":
+        (tmp_path / "link").symlink_to("/dev/stdout")
+        name = str(tmp_path / "link")
+    # first, here: a process that replaced /dev/stdout (as root) would break the machine's
+    assert destination(name).kind == "descriptor"
+    piped = subprocess.run([sys.executable, "-c", _WRITE_STDOUT, name], capture_output=True,
+                           text=True, check=True, timeout=60)
+    assert piped.stdout == "printed first\nthe output\nprinted after\n", piped.stderr
+    out = tmp_path / "out.txt"
+    with open(out, "w") as fh:
+        inode = os.fstat(fh.fileno()).st_ino
+        subprocess.run([sys.executable, "-c", _WRITE_STDOUT, name], stdout=fh, check=True,
+                       timeout=60)
+    assert out.read_text() == "printed first\nthe output\nprinted after\n"
+    assert out.stat().st_ino == inode
+
+
+def test_the_cli_writes_through_a_link_and_to_dev_stdout(tmp_path: Path) -> None:
+    """``--json link.json`` (link.json -> reports/target.json): the link stays, the target is
+    the report; ``--json /dev/stdout`` prints it (a process, as a shell runs it)."""
+    import json
+    import subprocess
+    import sys
+
+    from click.testing import CliRunner
+
+    from fidelity.cli import main
+    from fidelity.core.fileio import destination
+
+    (tmp_path / "reports").mkdir()
+    target = tmp_path / "reports" / "target.json"
+    target.write_text("{}")
+    link = tmp_path / "link.json"
+    link.symlink_to(Path("reports") / "target.json")
+    r = CliRunner().invoke(main, ["predict", "--delta-e", "3", "--json", str(link)])
+    assert r.exit_code == 0, r.output
+    assert f"wrote {link}" in r.stdout
+    assert link.is_symlink() and os.readlink(link) == str(Path("reports") / "target.json")
+    assert json.loads(target.read_text())["delta_e"] == 3.0
+    _no_temporaries(tmp_path, tmp_path / "reports")
+    assert destination("/dev/stdout").kind == "descriptor"  # never replaced, even as root
+    p = subprocess.run([sys.executable, "-m", "fidelity", "predict", "--delta-e", "3", "-q",
+                        "--json", "/dev/stdout"], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert json.loads(p.stdout)["delta_e"] == 3.0

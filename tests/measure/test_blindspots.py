@@ -110,3 +110,29 @@ def test_check_and_audit_report_the_warnings(tmp_path):
         # the levels the gradient holds, in bits: those it was posterised to
         assert band["value"] == pytest.approx(bits, abs=0.1), band
         assert (band["value"] <= band["threshold"]) is expect, band
+
+
+def test_the_quantisation_step_is_the_level_spacing_not_the_most_common_step():
+    """Levels round(k Δ): a step of which nine in ten steps are multiples (257: 8 bits in 16),
+    or a spacing between codes (255 / 31: 5 bits in 8 step by 8 and 9); a clean image's
+    steps take every value, whatever the most common one (its 16 bits are kept)."""
+    from fidelity.measure.blindspots import quantisation_step
+
+    def counts(steps: dict[int, int], size: int = 5300) -> np.ndarray:
+        c = np.zeros(size, np.int64)
+        for d, n in steps.items():
+            c[d] = n
+        return c
+
+    def histogram(values: np.ndarray) -> dict[int, int]:
+        d, n = np.unique(values, return_counts=True)
+        return {int(a): int(b) for a, b in zip(d, n, strict=True)}
+
+    assert quantisation_step(counts({257: 40, 514: 50, 771: 30})) == 257
+    levels = np.round(np.arange(32) * 255 / 31)
+    spacing = quantisation_step(counts(histogram(np.diff(levels).astype(int))))
+    assert spacing == pytest.approx(255 / 31, abs=0.05)
+    rng = np.random.default_rng(0)
+    # a noise-free 16-bit render: one edge's step the most common
+    clean = counts(histogram(rng.integers(1, 5000, 8000)) | {1812: 2400})
+    assert quantisation_step(clean) == 1

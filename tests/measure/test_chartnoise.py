@@ -136,3 +136,36 @@ def test_the_audit_report_carries_noise_and_sharpness(noisy, tmp_path):
     report = ChartReport.from_json(data)
     assert report.noise is not None and report.noise.to_json() == data["noise"]
     assert report.sharpness is not None and report.sharpness.to_json() == data["sharpness"]
+
+
+def test_a_large_window_takes_its_noise_from_an_even_pixel_lattice():
+    """Issue 59: a neutral window over NOISE_SAMPLE_PIXELS is read on every s-th pixel down
+    and across (s the least stride leaving at most the limit), spanning the window; its
+    standard deviation is numpy's over the whole window within 4 sampling standard errors
+    (``sigma / sqrt(2 n)``) for white noise and for noise correlated over 8 pixels."""
+    import cv2
+
+    from fidelity.measure.noise import patch_noise
+    from fidelity.measure.pixels import NOISE_SAMPLE_PIXELS, _noise_sample
+
+    rng = np.random.default_rng(3)
+    mask = np.ones((700, 650), bool)
+    mask[:, :20] = False
+    keep = _noise_sample(3, 7, mask)
+    assert keep is not None and keep.shape == (int(mask.sum()),)
+    assert NOISE_SAMPLE_PIXELS / 4 < keep.sum() <= NOISE_SAMPLE_PIXELS
+    rows, cols = np.nonzero(mask)
+    assert set(((rows[keep] + 3) % 2).tolist()) == {0} and set(((cols[keep] + 7) % 2).tolist()) == {0}
+    assert rows[keep].max() > 690 and cols[keep].min() < 25  # spans the window
+    assert _noise_sample(0, 0, np.ones((300, 300), bool)) is None
+    white = rng.normal(0.5, 0.01, (700, 650, 3))
+    blurred = np.stack([cv2.GaussianBlur(white[..., c], (0, 0), 8.0) for c in range(3)], -1)
+    for img in (white, blurred):
+        px = img[mask]
+        full = px.std(axis=0, ddof=1)
+        got = patch_noise(px[keep])
+        n = int(keep.sum())
+        for c, name in enumerate("RGB"):
+            sigma = got.channel(name).sigma
+            assert abs(sigma - full[c]) <= 4 * full[c] / np.sqrt(2 * n), (name, sigma, full[c])
+        assert got.n == n

@@ -122,7 +122,19 @@ def _steps_reference(codes: np.ndarray, code_range: int) -> tuple[float | None, 
     if small.size < 2000:
         return None, 0, int(small.size)
     values, counts = np.unique(small, return_counts=True)
-    q = int(values[np.argmax(counts)])
+    mode = int(values[np.argmax(counts)])
+    # the quantisation step: the largest divisor of the most common step of which 90 % of
+    # the steps are multiples, else (a mode of 4 codes or more) the mean step about the mode
+    # if 90 % lie within a code of its multiples, else 1
+    q = next((float(d) for d in range(mode, 1, -1)
+              if mode % d == 0 and np.mean(small % d == 0) >= 0.9), None)
+    if q is None and mode < 4:
+        q = 1.0
+    if q is None:
+        near = small[np.abs(small - mode) <= 1]
+        spacing = float(near.mean())
+        k = np.maximum(np.rint(small / spacing), 1)
+        q = spacing if spacing > 1 and np.mean(np.abs(small - k * spacing) < 1) >= 0.9 else 1.0
     return math.log2(code_range / q + 1.0), q, int(small.size)
 
 

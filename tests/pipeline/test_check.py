@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+from pathlib import Path
 
 import colour
 import numpy as np
@@ -12,6 +13,8 @@ from click.testing import CliRunner
 
 from fidelity.cli import main
 from fidelity.prediction.tablefile import DEFAULT_TABLE, prediction_dir
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 def run(*args):
@@ -74,7 +77,9 @@ def test_no_arguments_prints_a_verdict_and_writes_the_report(default_check):
     assert v["value"] == v["delta_e"] == doc["mean_delta_e"]
     assert v["passed"] == (doc["mean_delta_e"] <= 3.0) == (r.exit_code == 0)
     assert v["reason"] == ("within-limit" if v["passed"] else "over-limit")
-    assert len(out.strip().splitlines()) <= 8  # short and readable
+    # a line per measurement and per prediction, and one naming what lies outside the validity
+    # domain (the default camera's light noise: the validated cameras were noise-free)
+    assert len(out.strip().splitlines()) <= 14
 
 
 @pytest.mark.parametrize("page", ["README.md", "docs/index.md", "docs/check.md"])
@@ -112,14 +117,30 @@ def test_report_numbers_agree_with_colour_science(default_check):
     # the verdict first, then the chart, the colour-error figures and the prediction curve
     assert html.index("PASS") < html.index('aria-label="the chart: reference against measured"')
     for alt in ("ΔE00 on the chart layout", "a*b* errors", "tone curve of the neutral patches",
-                "ΔE00 per patch", "predicted loss against chart ΔE",
-                "worst case per transform family and the classic curve"):
+                "ΔE00 per patch", "predicted loss in percentage points against chart ΔE",
+                "predicted ΔmAP in % of baseline against chart ΔE",
+                "worst case per transform family and the classic curve",
+                "worst-case loss against mtf50, this chart&#x27;s point and the limit equivalent "
+                "to the ΔE limit",
+                "worst-case loss against snr, this chart&#x27;s point and the limit equivalent "
+                "to the ΔE limit"):
         assert f'role="img" aria-label="{alt}"' in html
     # every figure is inline SVG drawn from the numbers, none a PNG
-    assert html.count("<svg ") == 7 and "data:image/png" not in html
+    assert html.count("<svg ") == 10 and "data:image/png" not in html  # two prediction axes
     assert "<details><summary>Patches</summary>" in html
     for text in ("Provenance", DEFAULT_TABLE, doc["provenance"]["version"]):
         assert text in html
+    # the camera file's hash (the check's input), and the detectors the table measured
+    import hashlib
+
+    from fidelity.camera.model import DEFAULT_CAMERA
+    from fidelity.core.resources import resource_dir
+
+    shipped = resource_dir("data") / "cameras" / f"{DEFAULT_CAMERA}.toml"
+    digest = hashlib.sha256(shipped.read_bytes()).hexdigest()
+    assert doc["provenance"]["input_sha256"] == digest
+    assert f"<th>camera file sha256</th><td>{digest}</td>" in html
+    assert "yolox_nano" in html and "yolo11n-int8dyn" in html
 
 
 def test_ideal_camera_passes_and_a_strict_limit_fails(tmp_path):
@@ -145,3 +166,26 @@ def test_unknown_camera_is_one_line_exit_2(tmp_path):
     assert len(lines) == 1 and lines[0].startswith("fidelity: error: ")
     assert lines[0].startswith("fidelity: error: no-such-camera: unknown camera; known: ")
     assert not (tmp_path / "x").exists()
+
+
+def test_a_soft_lens_fails_the_check_on_sharpness(tmp_path) -> None:
+    """The rendered camera's sharpness and noise are measured on the turned chart and judged:
+    the example camera with a Gaussian lens of 1.5 px (cameras/optics) passes on colour (ΔE00
+    1.01) and fails on sharpness, at the MTF50 the closed form gives (0.1227 cy/px with the
+    pixel aperture; the chart's edges read it 4 % high); the default camera's noise is
+    judged."""
+    from fidelity.pipeline.check import check_camera
+    from fidelity.prediction.verdict import Criterion
+
+    soft = check_camera(str(REPO / "cameras" / "optics" / "nikon5100-soft-lens.toml"),
+                        criterion=Criterion("max-delta-e", 3.0))
+    assert soft.mean_delta_e < 3 and not soft.verdict.passed
+    assert soft.properties is not None
+    (sharp,) = [p for p in soft.properties.predictions if p.property == "sharpness"]
+    assert sharp.x == pytest.approx(0.1227, rel=0.05) and sharp.x > 0.1227
+    assert sharp.loss is not None and sharp.loss > 2
+    default = check_camera(None, criterion=Criterion("max-delta-e", 3.0))
+    assert default.verdict is not None and default.verdict.passed
+    assert default.properties is not None and not default.properties.not_judged
+    assert {p.property for p in default.properties.predictions} == {"sharpness", "noise"}
+    assert default.noise is not None and 20 < default.noise.grey_snr < 200

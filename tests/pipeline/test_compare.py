@@ -107,6 +107,11 @@ def test_compare_cli_gates_writes_junit_json_html(charts, tmp_path):
     assert r.exit_code == 1, r.output
     suite = ET.parse(tmp_path / "j.xml").getroot().find("testsuite")
     assert suite.get("failures") == "1"
+    # compare names itself, and says what it wrote as for every other output (issue 57)
+    assert [c.get("classname") for c in suite.iter("testcase")] == ["fidelity.compare"]
+    assert suite.find("testcase/properties/property[@name='mean_delta_e']") is not None
+    wrote = [ln for ln in r.stdout.splitlines() if ln.startswith("wrote ")]
+    assert wrote == [f"wrote {tmp_path / name}" for name in ("j.xml", "c.json", "c.html")]
     doc = json.loads((tmp_path / "c.json").read_text())
     # the gate judged the sim-to-real ΔE (not either chart's own) against the limit
     s2r = doc["sim_to_real"]

@@ -81,10 +81,11 @@ def test_gate_pass_and_fail_on_delta_e(png, tmp_path):
     assert verdict["limit"] == pytest.approx(float(f"{de - 0.1:.3f}"))
     assert verdict["value"] == verdict["delta_e"] == report["mean_delta_e"]
     html = (tmp_path / "r.html").read_text()
-    # swatches, sampling windows, ΔE map, a*b*, tone curve, ΔE bars, prediction curve, the
-    # direction-aware family curves, and one curve per property judged besides colour
+    # swatches, sampling windows, ΔE map, a*b*, tone curve, ΔE bars, the prediction curves in
+    # points and in % of baseline, the direction-aware family curves, and one curve per
+    # property judged besides colour
     judged = len(report["properties"]["predictions"])
-    assert html.count("<svg ") == 8 + judged
+    assert html.count("<svg ") == 9 + judged
     assert html.index("FAIL") < html.index('aria-label="sampling windows"')
     assert report["provenance"]["input_sha256"] in html
 
@@ -625,7 +626,9 @@ def test_blur_and_noise_fail_a_loss_gate_and_name_the_property(degraded_charts, 
         j = doc["properties"]
         assert j["combined"]["dominant"] == prop and doc["verdict"]["value"] > 2
         parts = j["combined"]["parts"]
-        assert doc["verdict"]["value"] == pytest.approx(sum(parts.values()))
+        interaction = math.sqrt(max(parts.get("sharpness", 0), 0) * max(parts.get("noise", 0), 0))
+        assert j["combined"]["interaction"] == pytest.approx(interaction)
+        assert doc["verdict"]["value"] == pytest.approx(sum(parts.values()) + interaction)
         assert parts["colour"] == pytest.approx(doc["prediction"]["dmap_points"], abs=1e-9)
 
 
@@ -642,6 +645,7 @@ def test_predict_mtf50_and_snr(tmp_path):
     assert r.exit_code == 0, r.output
     doc = json.loads(out.read_text())
     total = doc["colour"]["loss"] + doc["sharpness"]["loss"] + doc["noise"]["loss"]
+    total += math.sqrt(doc["sharpness"]["loss"] * doc["noise"]["loss"])  # their interaction
     assert doc["combined"]["loss"] == pytest.approx(total)
     assert run("predict", "--mtf50", "1.0").exit_code == 0  # sharper than the chart: 0
     for bad in (["--snr", "-1"], ["--mtf50", "nan"]):

@@ -200,7 +200,12 @@ def test_directional_verdict_and_json_round_trip():
     classic = check_camera(cam, criterion=crit)
     directional = check_camera(cam, criterion=crit, judge=JudgeOptions(bound="directional"))
     assert not classic.verdict.passed and directional.verdict.passed
-    assert directional.verdict.value == pytest.approx(directional.directional.dmap_points)
+    # the colour part of the verdict is the direction-aware loss; sharpness and noise add to it
+    props = directional.properties
+    assert props is not None
+    assert props.colour == pytest.approx(directional.directional.dmap_points)
+    assert directional.verdict.value == pytest.approx(
+        props.colour + sum(x.loss or 0.0 for x in props.predictions))
     doc = chart_report_json(directional)
     assert doc["bound"] == "directional"
     back = ChartReport.from_json(doc)

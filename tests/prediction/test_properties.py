@@ -18,6 +18,7 @@ from fidelity.coco.tables.degradation import calibrate_level, calibration_chart
 from fidelity.core.errors import InputFileError, InvalidValueError
 from fidelity.pipeline.check import audit_image
 from fidelity.prediction.properties import (
+    INTERACTION,
     PropertyCell,
     PropertyTable,
     combine,
@@ -127,6 +128,27 @@ def test_combination_is_the_sum_with_the_dominant_property():
     c = combine({"colour": (0.5, 0.1), "sharpness": (3.0, 0.2), "noise": None})
     assert c.loss == pytest.approx(3.5) and c.dominant == "sharpness"
     assert c.u_loss == pytest.approx(math.hypot(0.1, 0.2)) and c.missing == ("noise",)
+
+
+def test_blur_and_noise_add_their_interaction_with_its_uncertainty_propagated():
+    """sum + sqrt(l_s l_n) (INTERACTION 1): 4 + 1 + 2 = 7; the first-order uncertainty
+    equals a central finite-difference propagation (a second method)."""
+    parts = {"colour": (0.5, 0.05), "sharpness": (4.0, 0.3), "noise": (1.0, 0.2)}
+    c = combine(parts)
+    assert INTERACTION == 1.0
+    assert c.loss == pytest.approx(7.5) and c.interaction == pytest.approx(2.0)
+    h, grads = 1e-6, []
+    for k in parts:
+        up = {q: ((v[0] + h, v[1]) if q == k else v) for q, v in parts.items()}
+        dn = {q: ((v[0] - h, v[1]) if q == k else v) for q, v in parts.items()}
+        grads.append((combine(up).loss - combine(dn).loss) / (2 * h) * parts[k][1])
+    assert c.u_loss == pytest.approx(math.sqrt(sum(g * g for g in grads)), rel=1e-6)
+    # a zero part: no interaction, no division by zero; a negative loss counts as none
+    for zero in (0.0, -0.3):
+        z = combine({"sharpness": (zero, 0.1), "noise": (2.0, 0.1)})
+        assert z.interaction == 0.0 and z.loss == pytest.approx(2.0 + zero)
+        assert z.u_loss == pytest.approx(math.hypot(0.1, 0.1))
+    assert combine(parts, interaction=0.0).loss == pytest.approx(5.5)
 
 
 def test_detector_scale():

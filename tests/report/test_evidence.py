@@ -415,3 +415,30 @@ def test_the_html_summary_states_the_uncertainty_and_the_interval():
     assert rows["mean ΔE00 (chart ΔE)"] == f"{uncertain_text(r.mean_delta_e, u.combined)} (k=1)"
     assert rows["predicted ΔmAP, percentage points"] == \
         f"{r.prediction.dmap_points:.2f} ± {r.interval.standard_uncertainty:.2f} (k=1)"
+
+
+def test_the_docs_credibility_map_is_the_records():
+    """docs/evidence.md's table of sections and fields is CREDIBILITY_SECTIONS, the map each
+    record holds (``credibility_sections``)."""
+    import re
+
+    from fidelity.report.evidence import CREDIBILITY_SECTIONS
+
+    text = (REPO / "docs" / "evidence.md").read_text(encoding="utf-8")
+    table = text[text.index("| section | fields |"):]
+    rows = {}
+    for line in table.splitlines()[2:]:
+        if not line.startswith("|"):
+            break
+        section, fields = (c.strip() for c in line.strip("|").split("|")[:2])
+        rows[section] = tuple(re.findall(r"`([^`]+)`", fields))
+    assert rows == dict(CREDIBILITY_SECTIONS)
+
+
+def test_the_xqar_rule_ids_in_the_docs_are_the_records_layout():
+    from fidelity.report.evidence import EVIDENCE_SCHEMA_VERSION
+    from fidelity.report.xqar import rule_uid
+
+    text = (REPO / "docs" / "evidence.md").read_text(encoding="utf-8")
+    uid = rule_uid("max-delta-e", EVIDENCE_SCHEMA_VERSION)
+    assert f"`{uid}`" in text

@@ -16,6 +16,7 @@ from click.testing import CliRunner
 
 from fidelity.cli import main
 from fidelity.cli.verify import rerun_argv
+from fidelity.report.evidence import seal_record
 from fidelity.report.verify import STATUSES, rerun_finding, verify_record
 
 REPO = Path(__file__).resolve().parents[2]
@@ -53,7 +54,7 @@ def test_record_holds_the_command_line_and_settings_file(tmp_path, monkeypatch):
     r = run("check", "-q", "--evidence", "e.json", "--out", "rep")
     assert r.exit_code == 0, r.output
     doc = json.loads((tmp_path / "e.json").read_text())
-    assert doc["record"]["schema_version"] == "1.1"
+    assert doc["record"]["schema_version"] == "1.2"
     inv = doc["invocation"]
     assert inv["argv"] == ["check", "-q", "--evidence", "e.json", "--out", "rep"]
     assert Path(inv["cwd"]) == tmp_path
@@ -84,7 +85,13 @@ def test_verify_finds_every_file_unchanged(checked):
     assert got[("calibration table", "calibration-safecolor")]["status"] == "unchanged"
     assert got[("code", "fidelity")]["status"] == "same"
     assert got[("environment", "Python and libraries")]["status"] == "same"
-    assert r.output.splitlines()[-2] == "VERIFIED: 3 of 3 files unchanged"
+    # the camera, the prediction, calibration, sharpness and noise tables, the validated
+    # cameras, and the five scores files the tables rebuild from (four detectors' colour
+    # sweeps, one blur and noise sweep)
+    for name in ("coco1000-sharpness", "coco1000-noise"):
+        assert got[("property table", name)]["status"] == "unchanged"
+    assert sum(k[0] == "scores file" for k in got) == 5
+    assert r.output.splitlines()[-2] == "VERIFIED: 11 of 11 files unchanged, record intact"
 
 
 def test_verify_fails_on_a_changed_or_missing_file_and_looks_in_inputs(checked, tmp_path):
@@ -95,7 +102,7 @@ def test_verify_fails_on_a_changed_or_missing_file_and_looks_in_inputs(checked, 
     assert r.exit_code == 1, r.output
     assert f"changed; SHA-256 {sha256(camera)[:12]}, recorded " \
            f"{hashlib.sha256(original).hexdigest()[:12]}" in r.output
-    assert r.output.splitlines()[-1] == "NOT VERIFIED: 1 changed of 3 files"
+    assert r.output.splitlines()[-1] == "NOT VERIFIED: 1 changed of 11 files, record intact"
     handed = folder / "handed over"
     handed.mkdir()
     (handed / camera.name).write_bytes(original)
@@ -113,13 +120,13 @@ def test_shipped_data_named_by_another_installation_is_read_from_this_one(checke
     table["path"] = "/elsewhere/lib/python3.12/site-packages/fidelity/data/prediction/" \
                     "coco1000-measured.json"
     moved = folder / "moved.json"
-    moved.write_text(json.dumps(doc), encoding="utf-8")
+    moved.write_text(json.dumps(seal_record(doc)), encoding="utf-8")
     f = next(f for f in verify_record(moved).findings if f.kind == "prediction table")
     assert f.status == "unchanged"
     assert Path(f.path or "").resolve() == (
         REPO / "fidelity" / "data" / "prediction" / "coco1000-measured.json").resolve()
     table["sha256"] = "0" * 64  # the table this installation ships is not the recorded one
-    moved.write_text(json.dumps(doc), encoding="utf-8")
+    moved.write_text(json.dumps(seal_record(doc)), encoding="utf-8")
     assert findings(verify_record(moved))[("prediction table", "coco1000-measured")] == "changed"
 
 
@@ -132,7 +139,7 @@ def test_other_code_and_libraries_are_reported_not_failed(checked):
     deps["numpy"] = "1.0.0"
     deps["no-such-library"] = "9.9"
     other = folder / "other.json"
-    other.write_text(json.dumps(doc), encoding="utf-8")
+    other.write_text(json.dumps(seal_record(doc)), encoding="utf-8")  # another installation's
     r = run("verify", other)
     assert r.exit_code == 0, r.output
     got = {f.kind: f for f in verify_record(other).findings}
@@ -274,3 +281,102 @@ def test_a_path_that_cannot_name_a_file_here_is_missing_not_an_error(checked, pa
         assert r.exit_code == 1 and "rerun: not reproduced; the run ended with exit 2" in r.output
     else:
         assert r.exit_code == 2 and "the folder the run started in is not here" in r.output
+
+
+def _edited(folder: Path, record: Path, edit) -> Path:
+    """A copy of ``record`` with ``edit`` applied to its content and not sealed again."""
+    doc = json.loads(record.read_text())
+    edit(doc)
+    out = folder / "edited.json"
+    out.write_text(json.dumps(doc, indent=2), encoding="utf-8")
+    return out
+
+
+def test_the_record_holds_the_sha256_of_its_canonical_content(checked):
+    """The canonical form computed here by hand: the record without the field, keys sorted,
+    compact separators, non-ASCII as \\u escapes, UTF-8."""
+    _, _, record = checked
+    doc = json.loads(record.read_text())
+    recorded = doc["record"].pop("content_sha256")
+    canonical = json.dumps(doc, sort_keys=True, separators=(",", ":"))
+    assert recorded == hashlib.sha256(canonical.encode("utf-8")).hexdigest()
+    assert findings(verify_record(record))[("content", "record")] == "intact"
+
+
+@pytest.mark.parametrize(("what", "edit"), [
+    ("tool.version", lambda d: d["tool"].update(version="0.2.0")),
+    ("a measured value", lambda d: d["subjects"][0]["measurement"].update(
+        value=d["subjects"][0]["measurement"]["value"] - 0.5)),
+    ("the verdict", lambda d: d["subjects"][0]["verdict"].update(passed=True)),
+    ("the hash removed", lambda d: d["record"].pop("content_sha256")),
+])
+def test_an_edited_record_fails_without_rerun(checked, what, edit):
+    folder, _, record = checked
+    r = run("verify", _edited(folder, record, edit))
+    assert r.exit_code == 1, (what, r.output)
+    line = next(x for x in r.output.splitlines() if x.startswith("  content:"))
+    assert line.startswith("  content: edited; the record's content hash ")
+    assert "the record was edited" in line
+    assert r.output.splitlines()[-1].startswith("NOT VERIFIED: ")
+
+
+def test_an_edited_input_file_fails_and_an_untouched_record_verifies(checked):
+    folder, camera, record = checked
+    assert run("verify", record).exit_code == 0
+    camera.write_bytes(camera.read_bytes().replace(b"=", b" = ", 1))
+    r = run("verify", record)
+    assert r.exit_code == 1 and "input camera file" in r.output and ": changed;" in r.output
+
+
+def test_a_version_edited_and_sealed_again_is_inconsistent_with_its_code(checked):
+    """The version lives in the code the code SHA-256 covers: the same code under another
+    version is an edit even when the content hash was recomputed."""
+    folder, _, record = checked
+    doc = json.loads(record.read_text())
+    doc["tool"]["version"] = "0.2.0"
+    resealed = folder / "resealed.json"
+    resealed.write_text(json.dumps(seal_record(doc)), encoding="utf-8")
+    r = run("verify", resealed)
+    assert r.exit_code == 1, r.output
+    got = {f.kind: f for f in verify_record(resealed).findings}
+    assert got["content"].status == "intact"
+    assert got["code"].status == "inconsistent" and "fidelity 0.2.0" in got["code"].detail
+    assert got["version"].status == "other version"
+
+
+def test_another_versions_record_is_reported_as_such(checked):
+    """Another version with other code: reported (the files are still checked), not failed."""
+    folder, _, record = checked
+    doc = json.loads(record.read_text())
+    doc["tool"].update(version="0.2.0", code_sha256="2" * 64)
+    other = folder / "other-version.json"
+    other.write_text(json.dumps(seal_record(doc)), encoding="utf-8")
+    r = run("verify", other)
+    assert r.exit_code == 0, r.output
+    assert "  version: other version; made by fidelity 0.2.0, verified with fidelity" in r.output
+    assert ", version other version" in r.output.splitlines()[-1]
+
+
+def test_a_layout_1_1_record_without_content_hash_is_not_hashed(checked):
+    folder, _, record = checked
+    doc = json.loads(record.read_text())
+    doc["record"].pop("content_sha256")
+    doc["record"]["schema_version"] = "1.1"
+    old = folder / "old.json"
+    old.write_text(json.dumps(doc), encoding="utf-8")
+    assert findings(verify_record(old))[("content", "record")] == "not hashed"
+
+
+def test_the_validated_cameras_file_is_hashed_and_checked(checked):
+    folder, _, record = checked
+    doc = json.loads(record.read_text())
+    cameras = doc["subjects"][0]["validity"]["validated_cameras"]
+    shipped = REPO / "fidelity" / "data" / "validation-domain.json"
+    assert cameras["sha256"] == sha256(shipped)
+    assert findings(verify_record(record))[("validated cameras", "validation-domain")] == \
+        "unchanged"
+    cameras["sha256"] = "3" * 64
+    edited = folder / "cams.json"
+    edited.write_text(json.dumps(seal_record(doc)), encoding="utf-8")
+    assert findings(verify_record(edited))[("validated cameras", "validation-domain")] == \
+        "changed"

@@ -77,6 +77,17 @@ def test_check_xqar_values_equal_the_json_record(tmp_path):
     assert len(issues) == (0 if subject["validity"]["inside"] else 1)
 
 
+def test_an_audit_without_a_gate_writes_a_record_with_no_rule(tmp_path):
+    """An audit has no decision rule: its XQAR says so by leaving the parameter out."""
+    image, xqar = tmp_path / "developed.png", tmp_path / "audit.xqar"
+    r = run("render", "--out", tmp_path)
+    assert r.exit_code == 0, r.output
+    r = run("audit", image, "--evidence", xqar)
+    assert r.exit_code == 0, r.output
+    top = params(read(xqar))
+    assert top["command"] == "audit" and "decision_rule" not in top
+
+
 def test_failed_and_undecided_verdicts_are_issues(tmp_path):
     from fidelity.report.xqar import BUNDLE, RULES
 

@@ -27,35 +27,17 @@ from fidelity.cli import main
 from fidelity.scene.export import FORMATS, MissingExtraError, export_scene, wrongly_encoded
 from fidelity.scene.model import CLASSIC, build_scene
 from fidelity.scene.verify import (
-    BlenderUnavailableError,
-    blender_command,
     delta_e_linear,
     patch_linear_means,
     render_with_blender,
 )
+from tests.fixtures.blender import require_blender
 
 ROOT = Path(__file__).resolve().parents[2]
 #: Small renders keep the file fast: patches of about 18 pixels.
 SIZE = (160, 120)
 BOUND_RGB = 0.5
 BOUND_MITSUBA = 0.05
-
-
-def _blender() -> list[str]:
-    try:
-        return blender_command()
-    except BlenderUnavailableError as exc:
-        pytest.skip(str(exc))
-
-
-def _probe_bpy() -> None:
-    cmd = _blender()
-    if cmd[-1].endswith("blender_render.py"):
-        probe = subprocess.run([cmd[0], "-c", "import bpy"], capture_output=True, text=True,
-                               check=False)
-        if probe.returncode != 0:
-            pytest.skip(f"bpy does not import in {cmd[0]}: "
-                        f"{(probe.stderr.strip().splitlines() or ['?'])[-1]}")
 
 
 @pytest.fixture(scope="module")
@@ -123,7 +105,7 @@ def test_glb_follows_the_gltf_encoding_rules(d65, tmp_path):
     done = export_scene(d65, "gltf", tmp_path / "g")
     g = pygltflib.GLTF2().load(str(done.scene_file))
     mats = {m.name: m for m in g.materials}
-    assert len(g.materials) == 25
+    assert len(g.materials) == 27  # 24 patches, the frame, the edge target's field and square
     for i, name in enumerate(d65.patch_names):
         m = mats[f"patch_{i + 1:02d}_{name}"]
         # factors are linear: the albedo, not its sRGB encoding
@@ -166,7 +148,7 @@ def test_mitsuba_xml_loads(d65, tmp_path):
     assert done.manifest["checked_with"].startswith("mitsuba")
     mi.set_variant("scalar_spectral")
     scene = mi.load_file(str(done.scene_file))
-    assert len(scene.shapes()) == 25 and len(scene.emitters()) == 1
+    assert len(scene.shapes()) == 27 and len(scene.emitters()) == 1  # + the edge target
 
 
 @pytest.mark.parametrize("fmt", list(FORMATS))
@@ -185,6 +167,37 @@ def test_manifest_follows_its_schema(fmt, tmp_path):
     assert doc["expected_exposure"]["gate_exposure_ev"] == pytest.approx(2.0)
     np.testing.assert_allclose([p["expected_linear_rgb"] for p in doc["patches"]],
                                scene.albedo * 0.25)
+
+
+@pytest.mark.parametrize("fmt", list(FORMATS))
+def test_manifest_and_readme_print_plain_numbers(fmt, tmp_path):
+    """No numpy repr (``np.float64(0.91625)``) in the manifest's text nor the README (issue
+    57: the expected exposure's ``rule``)."""
+    pytest.importorskip({"gltf": "pygltflib", "usd": "pxr", "mitsuba": "json"}[fmt])
+    done = export_scene(build_scene("D65", resolution=SIZE, white_level=0.25), fmt,
+                        tmp_path / fmt, check=False)
+    for name in ("manifest.json", "README.md"):
+        text = (done.folder / name).read_text(encoding="utf-8")
+        assert "np." not in text and "float64" not in text, name
+    rule = json.loads((done.folder / "manifest.json").read_text())["expected_exposure"]["rule"]
+    if fmt != "mitsuba":
+        lands = json.loads(rule.split("lands at ")[1])
+        np.testing.assert_allclose(lands, done.manifest["patches"][18]["expected_linear_rgb"],
+                                   atol=1e-6)
+
+
+def test_an_out_that_is_a_link_exports_into_its_folder_and_stays_a_link(tmp_path):
+    """--out link (-> a folder, there or not yet): the folder it names gets the export and is
+    replaced by a later one; the link is never replaced."""
+    link = tmp_path / "scene"
+    link.symlink_to(Path("exports") / "chart")  # dangling: exports/chart is made
+    for res in ((160, 120), (200, 150)):
+        done = export_scene(build_scene("D65", resolution=res), "mitsuba", link, check=False)
+        assert done.folder == link and link.is_symlink()
+        real = tmp_path / "exports" / "chart"
+        assert json.loads((real / "manifest.json").read_text())["camera"]["width"] == res[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["exports", "scene"]
+    assert [p.name for p in (tmp_path / "exports").iterdir()] == ["chart"]  # no temporaries
 
 
 @pytest.mark.parametrize("fmt", list(FORMATS))
@@ -335,7 +348,7 @@ def test_usd_without_usd_core_names_the_extra(tmp_path):
 @pytest.mark.parametrize("fmt", ["gltf", "usd"])
 def test_blender_cycles_render_passes_the_gate(fmt, d65, tmp_path):
     pytest.importorskip({"gltf": "pygltflib", "usd": "pxr"}[fmt])
-    _probe_bpy()
+    require_blender()
     done = export_scene(d65, fmt, tmp_path / fmt)
     render = render_with_blender(done.scene_file, tmp_path / f"{fmt}.exr", *SIZE, samples=4)
     assert render.info["view_transform"] == "Standard"
@@ -357,7 +370,7 @@ def test_blender_render_under_illuminant_a(tmp_path):
     """The RGB materials under A are the chart's colours under A adapted to D65 (what a
     white-balanced camera sees); gated against the scene reference under A."""
     pytest.importorskip("pygltflib")
-    _probe_bpy()
+    require_blender()
     from fidelity.chart.read import ReadOptions
     from fidelity.pipeline.check import audit_image
 
@@ -385,7 +398,7 @@ def test_blender_decodes_the_srgb_texture(d65, tmp_path):
     the manifest gives, and the render passes the gate (the 8-bit quantisation and the cyan
     clipping are the only error). Texels holding linear values (not encoded) fail by far."""
     pytest.importorskip("pygltflib")
-    _probe_bpy()
+    require_blender()
     from fidelity.chart.image import read_image
     from fidelity.scene.gltf import write_gltf
 
@@ -409,7 +422,7 @@ def test_blender_decodes_the_usd_srgb_texture(d65, tmp_path):
     beside the stage; Blender's USD importer decodes the 8-bit texels to the manifest's
     albedos and the render passes the gate. Linear values in the texture fail by far."""
     pytest.importorskip("pxr")
-    _probe_bpy()
+    require_blender()
     from fidelity.chart.image import read_image
     from fidelity.scene.usd import TEXTURE_FILE, write_usd
 
@@ -432,7 +445,7 @@ def test_blender_decodes_the_usd_srgb_texture(d65, tmp_path):
 
 def test_srgb_values_as_linear_factors_fail_by_far(d65, tmp_path):
     pytest.importorskip("pygltflib")
-    _probe_bpy()
+    require_blender()
     from fidelity.scene.gltf import write_gltf
 
     done = export_scene(d65, "gltf", tmp_path / "g")
@@ -480,7 +493,7 @@ def test_mini_chart_is_the_classic_field_at_the_minis_size():
 
 def test_blender_renders_the_mini_chart_and_it_passes_the_gate(d65, tmp_path):
     pytest.importorskip("pygltflib")
-    _probe_bpy()
+    require_blender()
     scene = build_scene("D65", chart="mini", resolution=SIZE)
     done = export_scene(scene, "gltf", tmp_path / "mini")
     render = render_with_blender(done.scene_file, tmp_path / "mini.exr", *SIZE, samples=4)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,7 +36,7 @@ from fidelity.chart.find.reference import (
     occluded_patches,
     off_the_camera_fit,
 )
-from fidelity.chart.find.result import ChartChecks, FoundChart
+from fidelity.chart.find.result import ChartChecks, FoundChart, flat_off_fit_note
 from fidelity.chart.find.surroundings import (
     LARGER_GRID_RING,
     chart_pitch,
@@ -178,12 +178,12 @@ def _orientation(h_image: np.ndarray) -> str:
     return f"turned {angle:z.0f} degrees" + (", mirrored" if mirrored else "")
 
 
-def _cascade(image: np.ndarray, encoding: str, refine: bool, detectors: tuple[str, ...]
-             ) -> FoundChart:
+def _cascade(image: np.ndarray, encoding: str, refine: bool, detectors: tuple[str, ...],
+             levels: Mapping[int, np.ndarray] | None = None) -> FoundChart:
     t0 = time.perf_counter()
     height, width = image.shape[:2]
     whole = (0, 0, width, height)
-    pyramid = Pyramid(image)
+    pyramid = Pyramid(image, levels)
     view, peak = make_view(pyramid, whole, SEARCH_SIDE, encoding)
     search = _search(view, detectors)
     searches = [search]
@@ -283,9 +283,7 @@ def _cascade(image: np.ndarray, encoding: str, refine: bool, detectors: tuple[st
         notes.append(f"{len(occluded)} patch(es) covered (numbers "
                      f"{', '.join(str(k + 1) for k in occluded)} in chart order), left out")
     if flat_far:
-        notes.append(f"patch(es) {', '.join(str(k + 1) for k in flat_far)} (in chart order) "
-                     f"far from what the other patches predict but flat: the camera's own "
-                     f"error or a flat cover; measured (check the image)")
+        notes.append(flat_off_fit_note(flat_far))
     return FoundChart(corners=corners, method=best.source, candidates=candidates,
                       swatches=swatches, residual_px=residual, orientation=_orientation(h_image),
                       region=region, confidence=float(max(checks.colour_order, 0.0)),
@@ -318,8 +316,9 @@ def check_corners(pixels: np.ndarray, corners: np.ndarray, *, encoding: str = "l
 
 
 def _finder(detectors: tuple[str, ...]) -> Callable[..., FoundChart]:
-    def find(image: np.ndarray, encoding: str = "linear", refine: bool = True) -> FoundChart:
-        return _cascade(image, encoding, refine, detectors)
+    def find(image: np.ndarray, encoding: str = "linear", refine: bool = True,
+             levels: Mapping[int, np.ndarray] | None = None) -> FoundChart:
+        return _cascade(image, encoding, refine, detectors, levels)
     return find
 
 
@@ -340,6 +339,7 @@ def find_chart(
     rows: int = 4,
     cols: int = 6,
     refine: bool = True,
+    levels: Mapping[int, np.ndarray] | None = None,
 ) -> FoundChart:
     """Find the 24-patch chart in an ``(H, W, 3)`` image and return its corner-patch centres.
 
@@ -357,6 +357,11 @@ def find_chart(
         The chart's layout; only the 4 x 6 ColorChecker is known.
     refine
         Refine the fit at full size (default); ``False`` keeps the search's fit.
+    levels
+        Reductions of the image made already (factor -> ``(H // factor, W // factor, 3)``
+        float32, :class:`~fidelity.chart.find.view.Pyramid`): a large JPEG's decoded at a
+        quarter of its size (:func:`~fidelity.chart.find.view.jpeg_level`); None: computed
+        from ``pixels``.
 
     Returns
     -------
@@ -392,7 +397,7 @@ def find_chart(
             f"no colour chart found: the image is {arr.shape[1]}x{arr.shape[0]} pixels, too "
             f"small to hold a measurable 24-patch chart (at least {MIN_IMAGE_SIDE} pixels on "
             f"its short side)")
-    return CHART_FINDERS[method](arr, encoding=encoding, refine=refine)
+    return CHART_FINDERS[method](arr, encoding=encoding, refine=refine, levels=levels)
 
 
 __all__ = [

@@ -5,8 +5,8 @@ the 24-patch reference layout (:class:`ChartChecks`), with their JSON forms for 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -122,6 +122,21 @@ class FoundChart:
     occluded: tuple[int, ...] = ()
     flat_off_fit: tuple[int, ...] = ()
 
+    def without_flat_off_fit(self, explained: Sequence[int], note: str) -> FoundChart:
+        """This find with the ``explained`` patches taken out of :attr:`flat_off_fit` and its
+        note, and ``note`` (why they are far from the others: a reference colour outside the
+        sRGB gamut, clipped as every sRGB render clips it) added."""
+        gone = {int(k) for k in explained} & set(self.flat_off_fit)
+        if not gone:
+            return self
+        rest = tuple(k for k in self.flat_off_fit if k not in gone)
+        old = flat_off_fit_note(self.flat_off_fit)
+        notes = [n for n in self.notes if n != old]
+        if rest:
+            notes.append(flat_off_fit_note(rest))
+        notes.append(note)
+        return replace(self, flat_off_fit=rest, notes=tuple(notes))
+
     def corners_text(self) -> str:
         """The corners as ``--corners`` takes them: ``X1,Y1,...,X4,Y4`` (0.1 px)."""
         return ",".join(f"{v:.1f}" for v in self.corners.ravel())
@@ -177,7 +192,16 @@ class FoundChart:
         )
 
 
+def flat_off_fit_note(patches: Sequence[int]) -> str:
+    """The note of a find whose flat ``patches`` (0-based, chart order) lie far from what the
+    other patches predict (:attr:`FoundChart.flat_off_fit`)."""
+    return (f"patch(es) {', '.join(str(k + 1) for k in patches)} (in chart order) far from "
+            f"what the other patches predict but flat: the camera's own error or a flat "
+            f"cover; measured (check the image)")
+
+
 __all__ = [
     "ChartChecks",
     "FoundChart",
+    "flat_off_fit_note",
 ]

@@ -9,6 +9,8 @@ OpenCV's detectors read (:class:`View`). :func:`opencv` imports OpenCV or says w
 from __future__ import annotations
 
 import math
+import os
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -67,9 +69,16 @@ class Pyramid:
     (:func:`fidelity.chart.image.as_float32`) and halved repeatedly, so that no full-size float
     copy is made. The result equals halving the whole float32 image level by level."""
 
-    def __init__(self, pixels: np.ndarray) -> None:
+    def __init__(self, pixels: np.ndarray, levels: Mapping[int, np.ndarray] | None = None
+                 ) -> None:
         self.levels: dict[int, np.ndarray] = {1: np.asarray(pixels)}
         self.height, self.width = self.levels[1].shape[:2]
+        for factor, level in (levels or {}).items():  # reductions the decoder made
+            if level.shape[:2] != (self.height // factor, self.width // factor):
+                raise InvalidValueError(f"a pyramid level of factor {factor} must be "
+                                        f"{self.height // factor} x {self.width // factor}, "
+                                        f"got {level.shape[:2]}")
+            self.levels[int(factor)] = np.asarray(level, np.float32)
 
     def level(self, factor: int) -> np.ndarray:
         """The image averaged over ``factor`` x ``factor`` blocks (``factor`` a power of 2):
@@ -87,6 +96,60 @@ class Pyramid:
                     block, step, finer == 1 and not is_coded(block))
             self.levels[factor] = out
         return self.levels[factor]
+
+
+#: Pixels of a JPEG above which the finder's reductions come from the decoder
+#: (:func:`jpeg_level`): a 108 MP photo's pyramid costs about a second from the full image, its
+#: quarter-size decode 0.1 s. Below (12 MP and less), the pyramid is the full image's.
+JPEG_LEVEL_PIXELS = 40_000_000
+#: The reduction the decoder makes (1/4 on each side: the search's level at 108 MP).
+JPEG_LEVEL_FACTOR = 4
+#: Largest difference (in code values / 255) between the decoder's reduction and the full
+#: image's block means, per channel over the whole image, for the reduction to be used: the
+#: same pixels (not a file the reader converted otherwise).
+JPEG_LEVEL_TOLERANCE = 2.0 / 255.0
+
+
+def jpeg_level(path: str | os.PathLike[str], pixels: np.ndarray,
+               factor: int = JPEG_LEVEL_FACTOR) -> np.ndarray | None:
+    """The :class:`Pyramid` level ``factor`` of a JPEG's 8-bit ``pixels`` (as read from
+    ``path``, ``(H, W, 3)``) decoded by libjpeg's DCT scaling (OpenCV's
+    ``IMREAD_REDUCED_COLOR_{factor}``, EXIF orientation ignored as the reader ignores it): the
+    image's ``factor`` x ``factor`` block means up to the scaled IDCT's low-pass, float32 in
+    [0, 1], ``(H // factor, W // factor, 3)``.
+
+    Parameters
+    ----------
+    path
+        The JPEG file the pixels were read from.
+    pixels
+        Its ``uint8`` codes ``(H, W, 3)``, R, G, B.
+    factor
+        2, 4 or 8.
+
+    Returns
+    -------
+    numpy.ndarray or None
+        The level; None where OpenCV cannot decode the file so, the size differs, or its
+        channel means differ from the pixels' by more than :data:`JPEG_LEVEL_TOLERANCE` (not
+        the same pixels).
+    """
+    cv2 = opencv()
+    flags = {2: cv2.IMREAD_REDUCED_COLOR_2, 4: cv2.IMREAD_REDUCED_COLOR_4,
+             8: cv2.IMREAD_REDUCED_COLOR_8}.get(int(factor))
+    arr = np.asarray(pixels)
+    if flags is None or arr.dtype != np.uint8 or arr.ndim != 3 or arr.shape[2] != 3:
+        return None
+    reduced = cv2.imread(os.fspath(path), flags | cv2.IMREAD_IGNORE_ORIENTATION)
+    h, w = arr.shape[0] // factor, arr.shape[1] // factor
+    if reduced is None or reduced.shape[0] < h or reduced.shape[1] < w or reduced.ndim != 3:
+        return None
+    level = as_float32(np.ascontiguousarray(reduced[:h, :w, ::-1]))
+    step = max(1, int(math.sqrt(arr.shape[0] * arr.shape[1] / 1_000_000)))
+    full = arr[::step, ::step].reshape(-1, 3).mean(axis=0) / 255.0
+    if np.max(np.abs(level.reshape(-1, 3).mean(axis=0) - full)) > JPEG_LEVEL_TOLERANCE:
+        return None
+    return level
 
 
 #: Pixels of the image converted to float at a time when a :class:`Pyramid` level is computed.

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from fidelity.chart.turned import CALIBRATION_GEOMETRY
 from fidelity.coco.degradations import DEGRADATIONS, Degradation, encode_srgb8
 from fidelity.coco.tables.grid import CellDelta, add_standard_errors, cell_deltas, model_size
 from fidelity.colour import colorimetry as cm
@@ -40,19 +41,10 @@ from fidelity.prediction.properties import (
 __all__ = ["CALIBRATION_CHART", "LevelValue", "calibrate_level", "calibration_chart",
            "chart_value", "property_tables"]
 
-#: The calibration chart (module docstring): image size (H, W), turn (degrees), patch pitch
-#: (px), patch side (pitch fraction), frame (linear), supersampling.
-CALIBRATION_CHART: Mapping[str, Any] = {
-    "reference": "safecolor", "size": (480, 640), "angle_deg": 5.0, "pitch_px": 90.0,
-    "patch_fraction": 0.84, "frame_linear": 0.03, "supersample": 4}
-
-
-def _homography(angle_deg: float, pitch: float, centre: tuple[float, float]) -> np.ndarray:
-    a = math.radians(angle_deg)
-    c, s = math.cos(a), math.sin(a)
-    rot = np.array([[c * pitch, -s * pitch], [s * pitch, c * pitch]])
-    t = np.asarray(centre) - rot @ np.array([2.5, 1.5])
-    return np.array([[rot[0, 0], rot[0, 1], t[0]], [rot[1, 0], rot[1, 1], t[1]], [0, 0, 1.0]])
+#: The calibration chart (module docstring): the reference chart's colours on the turned
+#: chart's geometry (:data:`fidelity.chart.turned.CALIBRATION_GEOMETRY`), the frame a linear
+#: grey of 0.03.
+CALIBRATION_CHART: Mapping[str, Any] = {"reference": "safecolor", "frame_linear": 0.03}
 
 
 def calibration_chart(scale: int = 1) -> tuple[np.ndarray, np.ndarray]:
@@ -60,28 +52,11 @@ def calibration_chart(scale: int = 1) -> tuple[np.ndarray, np.ndarray]:
     ``(480, 640, 3)`` uint8 sRGB, the corners the ``(4, 2)`` centres of the dark skin, bluish
     green, black and white patches; ``scale``: the same chart at ``scale`` times the size and
     pitch (the same camera at a higher resolution)."""
-    spec = CALIBRATION_CHART
-    height, width = (int(v) * scale for v in spec["size"])
-    n = int(spec["supersample"])
-    h = _homography(float(spec["angle_deg"]), float(spec["pitch_px"]) * scale,
-                    ((width - 1) / 2, (height - 1) / 2))
-    ys = (np.arange(height * n) + 0.5) / n - 0.5
-    xs = (np.arange(width * n) + 0.5) / n - 0.5
-    xx, yy = np.meshgrid(xs, ys)
-    hi = np.linalg.inv(h)
-    u = hi[0, 0] * xx + hi[0, 1] * yy + hi[0, 2]
-    v = hi[1, 0] * xx + hi[1, 1] * yy + hi[1, 2]
-    col, row = np.rint(u), np.rint(v)
-    half = float(spec["patch_fraction"]) / 2
-    inside = ((np.abs(u - col) <= half) & (np.abs(v - row) <= half)
-              & (col >= 0) & (col <= 5) & (row >= 0) & (row <= 3))
-    idx = np.where(inside, row * 6 + col, 0).astype(int)
-    rgb = np.asarray(cm.linearize_srgb(load_reference(str(spec["reference"])).srgb), np.float64)
-    fine = np.where(inside[..., None], rgb[idx], float(spec["frame_linear"]))
-    img = fine.reshape(height, n, width, n, 3).mean(axis=(1, 3))
-    uv = np.array([[0, 0], [5, 0], [5, 3], [0, 3]], float)
-    p = np.c_[uv, np.ones(4)] @ h.T
-    return encode_srgb8(img), p[:, :2] / p[:, 2:]
+    geometry = CALIBRATION_GEOMETRY.scaled(scale)
+    rgb = np.asarray(cm.linearize_srgb(load_reference(str(CALIBRATION_CHART["reference"])).srgb),
+                     np.float64)
+    frame = np.full(3, float(CALIBRATION_CHART["frame_linear"]))
+    return encode_srgb8(geometry.paint(rgb, frame)), geometry.corners()
 
 
 @dataclass(frozen=True)
@@ -114,6 +89,16 @@ def calibrate_level(name: str, level: float,
         return LevelValue(name, level, None, None,
                           f"the chart's {prop} could not be measured at this level")
     return LevelValue(name, level, got[0], got[1])
+
+
+def _chart_provenance() -> dict[str, Any]:
+    """The calibration chart as the tables' provenance names it: the reference, the turned
+    chart's geometry (:data:`~fidelity.chart.turned.CALIBRATION_GEOMETRY`) and the frame."""
+    g = CALIBRATION_GEOMETRY
+    return {"reference": CALIBRATION_CHART["reference"], "size": list(g.size),
+            "angle_deg": g.angle_deg, "pitch_px": g.pitch_px,
+            "patch_fraction": g.patch_fraction,
+            "frame_linear": CALIBRATION_CHART["frame_linear"], "supersample": g.supersample}
 
 
 def _data_names(data: Mapping[str, Any]) -> dict[str, Any]:
@@ -195,8 +180,7 @@ def property_tables(store: Any, coco: Any = None, *, name: str = "coco1000", met
         if not per:
             continue
         baseline = math.inf if prop == "noise" else (base_sharp[0] if base_sharp else math.inf)
-        calibration = {"chart": {k: list(v) if isinstance(v, tuple) else v
-                                 for k, v in CALIBRATION_CHART.items()},
+        calibration = {"chart": _chart_provenance(),
                        "baseline_x": None if math.isinf(baseline) else baseline,
                        "levels": [{"family": v.family, "level": v.level, "x": v.x,
                                    "reason": v.reason} for v in values.values()
@@ -211,6 +195,7 @@ def property_tables(store: Any, coco: Any = None, *, name: str = "coco1000", met
                           for f, d in DEGRADATIONS.items() if d.property == prop},
              "standard_errors": coco is not None,
              "store": {k: meta.get(k) for k in ("versions", "machine", "grid")}
-             | {"data": _data_names(meta.get("data") or {})}})
+             | {"data": _data_names(meta.get("data") or {})}}
+            | ({"scores_files": meta["scores_files"]} if meta.get("scores_files") else {}))
     return out
 

@@ -10,13 +10,17 @@ only axis the table format has so far.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import Any
+import math
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 from fidelity.coco.tables.build import ModelSummary, Tables
 from fidelity.coco.tables.provenance import STANDARD_ERROR_WORDS, scorer_words
 from fidelity.coco.tables.worst import SizeClassRow, WorstCaseRow
 from fidelity.core.fileio import portable_paths
+
+if TYPE_CHECKING:
+    from fidelity.coco.tables.grid import CellDelta
 
 
 def prediction_table(tables: Tables, name: str = "coco1000-measured") -> dict[str, Any]:
@@ -34,17 +38,24 @@ def prediction_table(tables: Tables, name: str = "coco1000-measured") -> dict[st
         omitted.extend(f"{label} ΔE {r.delta_e:g}" for r in rows if r.partial)
         return [_point(r, src) for r, src in zip(rows, sources, strict=True) if not r.partial]
 
+    ses = {m: {r.delta_e: row_errors(r, tables.cells.get(m, ())) for r in wrows}
+           for m, wrows in tables.worst_case.items()}
     for size, srows in tables.size_classes.items():
-        curves.append({"size": size, "model": None, "points": complete_points(
-            size, srows, [f"worst over {r.models} model(s) of size {size}: "
-                          f"{', '.join(r.model_names)}" for r in srows])})
+        points = complete_points(size, srows, [f"worst over {r.models} model(s) of size "
+                                               f"{size}: {', '.join(r.model_names)}"
+                                               for r in srows])
+        for point in points:
+            point |= size_class_errors(point, tables.worst_case, ses)
+        curves.append({"size": size, "model": None, "points": points})
     for m, wrows in tables.worst_case.items():
         info = tables.models[m]
+        points = complete_points(m, wrows, [f"{m} worst case over {r.transforms_done} "
+                                            f"transforms" for r in wrows])
+        for point in points:
+            point |= {f"{col}_se": _round(se)
+                      for col, se in ses[m][point["delta_e"]].items() if col != "dmap_points"}
         curves.append({"size": info.size, "model": m, "baseline_map": info.baseline_map,
-                       "baseline_ap": info.baseline_ap or {},
-                       "points": complete_points(m, wrows, [
-                           f"{m} worst case over {r.transforms_done} transforms"
-                           for r in wrows])})
+                       "baseline_ap": info.baseline_ap or {}, "points": points})
     return {
         "name": name,
         "title": "Measured worst-case detection loss on the shared COCO val2017 subset",
@@ -66,6 +77,7 @@ def prediction_table(tables: Tables, name: str = "coco1000-measured") -> dict[st
                                 for m, k in standard_error_methods(tables).items()},
         } | ({"earlier": portable_paths(meta["earlier"])} if meta.get("earlier") else {})
           | ({"imported": meta["imported"]} if meta.get("imported") else {})
+          | ({"scores_files": meta["scores_files"]} if meta.get("scores_files") else {})
           | ({"versions_seen": meta["versions_seen"]}
              if len(meta.get("versions_seen") or ()) > 1 else {}),
         "units": {
@@ -110,11 +122,62 @@ def _point(r: WorstCaseRow | SizeClassRow, source: str) -> dict[str, Any]:
             "partial": bool(r.partial)}
 
 
+#: The loss columns of a table point; each has its standard error beside it (``<column>_se``).
+SE_COLUMNS = ("dmap_points", "dmap_relative", "dap_person_points", "dap_bicycle_points")
+
+
+def row_errors(row: WorstCaseRow, cells: Sequence[CellDelta]) -> dict[str, float | None]:
+    """The standard error of each loss column of one model's worst-case ``row``: the SE of the
+    cell whose value the row took (:func:`~fidelity.coco.tables.worst.worst_case_rows`): the
+    worst transform's cell for ``dmap_points`` and ``dmap_relative``, and for each safety
+    class the cell with its largest ΔAP among the transforms done at that ΔE (None: the cell
+    has no SE; the baseline row has none)."""
+    if row.is_baseline:
+        return {col: None for col in SE_COLUMNS}
+    out: dict[str, float | None] = {"dmap_points": row.dmap_points_se,
+                                    "dmap_relative": row.dmap_relative_se}
+    done = [c for c in cells if c.done and c.delta_e == row.delta_e]
+    for col in ("dap_person_points", "dap_bicycle_points"):
+        have = [c for c in done if _finite(getattr(c, col))]
+        worst = max(have, key=lambda c: getattr(c, col)) if have else None
+        out[col] = (getattr(worst.errors, col) if worst is not None
+                    and worst.errors is not None else None)
+    return out
+
+
+def size_class_errors(point: dict[str, Any], worst: Mapping[str, Sequence[WorstCaseRow]],
+                      ses: Mapping[str, Mapping[float, Mapping[str, float | None]]]
+                      ) -> dict[str, float | None]:
+    """The standard errors of a size-class ``point`` beside ``dmap_points_se`` (the worst
+    model's): per column, the SE of the model whose worst-case row gave the column's value
+    (:func:`~fidelity.coco.tables.worst.size_class_rows` takes each column's own maximum over
+    the models of its source)."""
+    de = point["delta_e"]
+    models = [m for m in worst if m in point["source"]]
+    out: dict[str, float | None] = {}
+    for col in SE_COLUMNS[1:]:
+        best, best_v = None, -math.inf
+        for m in models:
+            row = next((r for r in worst[m] if r.delta_e == de), None)
+            v = None if row is None else getattr(row, col)
+            if v is not None and _finite(v) and v > best_v:
+                best, best_v = m, v
+        out[f"{col}_se"] = _round(ses[best][de][col]) if best is not None else None
+    return out
+
+
+def _finite(v: float | None) -> bool:
+    return v is not None and math.isfinite(v)
+
+
 def _round(v: float | None, nd: int = 4) -> float | None:
     return None if v is None else round(float(v), nd)
 
 
 __all__ = [
+    "SE_COLUMNS",
     "prediction_table",
+    "row_errors",
+    "size_class_errors",
     "standard_error_methods",
 ]

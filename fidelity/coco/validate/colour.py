@@ -79,7 +79,12 @@ from fidelity.coco.validate.suite import BASELINE, CameraCase
 from fidelity.core.errors import InputFileError, InvalidValueError
 from fidelity.core.fileio import json_ready, portable_paths
 from fidelity.core.version import __version__, installed_version
-from fidelity.prediction.interval import STAGES, ValidatedCameras
+from fidelity.prediction.interval import (
+    DEGRADATIONS,
+    STAGES,
+    ValidatedCameras,
+    validated_degradation,
+)
 from fidelity.prediction.tablefile import (
     DEFAULT_TABLE,
     TableKind,
@@ -393,12 +398,14 @@ def validated_cameras(results: ValidationResults, suite: Sequence[CameraCase]
     (:class:`~fidelity.prediction.interval.ValidatedCameras`): each camera of the results read
     from its file in ``suite`` (the same SHA-256 as validated, else an
     :class:`InputFileError`), its illuminant and the kinds of its stages
-    (:meth:`~fidelity.camera.model.CameraModel.stage_kinds`); the counts of the mean-mAP
+    (:meth:`~fidelity.camera.model.CameraModel.stage_kinds`) and of its noise, optics and
+    vignetting (:meth:`~fidelity.camera.model.CameraModel.degradations`); the counts of the mean-mAP
     class (``all``) of the summary."""
     cases = {c.name: c for c in suite}
     illuminants: set[str] = set()
     sensitivities: set[str] = set()
     stages: dict[str, set[str]] = {s: set() for s in STAGES}
+    seen: dict[str, list[tuple[str, Mapping[str, float]]]] = {d: [] for d in DEGRADATIONS}
     for name, record in results.cameras.items():
         case = cases.get(name)
         if case is None or case.sha256 != record.sha256:
@@ -409,6 +416,8 @@ def validated_cameras(results: ValidationResults, suite: Sequence[CameraCase]
         sensitivities.add(cam.sensitivities.name)
         for stage, kind in cam.stage_kinds().items():
             stages[stage].add(kind)
+        for name, degradation in cam.degradations().items():
+            seen[name].append(degradation)
     mean = results.summary.classes["all"]
 
     def order(kinds: set[str]) -> tuple[str, ...]:  # bit depths by number, words by name
@@ -418,7 +427,8 @@ def validated_cameras(results: ValidationResults, suite: Sequence[CameraCase]
     return ValidatedCameras(len(results.cameras), tuple(sorted(illuminants)),
                             {s: order(k) for s, k in stages.items()},
                             tuple(sorted(sensitivities)), tuple(results.models), mean.cells,
-                            mean.within, mean.within_2se)
+                            mean.within, mean.within_2se,
+                            {d: validated_degradation(v) for d, v in seen.items()})
 
 
 __all__ = [

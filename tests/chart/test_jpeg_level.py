@@ -1,0 +1,71 @@
+"""A large JPEG's finder level from libjpeg's DCT-scaled decode (issue 59)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fidelity.chart.find import view
+from fidelity.chart.find.cascade import find_chart
+from fidelity.chart.image import read_image
+from tests.fixtures.photos import photo, true_corners, write_image
+
+
+@pytest.fixture(scope="module")
+def jpeg(tmp_path_factory):
+    path = tmp_path_factory.mktemp("jpeg") / "chart.jpg"
+    write_image(path, photo(2400, 1800, seed=4, fill=0.6))
+    return path
+
+
+def test_decoded_level_is_the_block_means_of_the_pixels(jpeg):
+    """The quarter-size decode against the pyramid's own 4 x 4 block means of the pixels the
+    reader decoded (an independent path: OpenImageIO's full decode, then area averages):
+    within half a code on average and 4 codes (of 255) at 99 % of the pixels; more only at
+    the sharp edges of the patches (the scaled IDCT keeps the blocks' low frequencies)."""
+    img = read_image(jpeg, native=True)
+    level = view.jpeg_level(jpeg, img.pixels)
+    assert level is not None and level.dtype == np.float32
+    means = view.Pyramid(img.pixels).level(4)
+    assert level.shape == means.shape == (450, 600, 3)
+    diff = np.abs(level - means) * 255
+    assert diff.mean() < 0.5 and np.percentile(diff, 99) < 4.0, (diff.mean(), diff.max())
+
+
+def test_finder_on_the_decoded_level_finds_the_same_corners(jpeg):
+    """Given the decoded level, the finder finds the chart's corner patches where it finds
+    them from the full image, within 0.5 px, and both within 1.5 px of the painted ones."""
+    img = read_image(jpeg, native=True)
+    level = view.jpeg_level(jpeg, img.pixels)
+    assert level is not None
+    full = find_chart(img.pixels, encoding="srgb").corners
+    fast = find_chart(img.pixels, encoding="srgb", levels={4: level}).corners
+    assert np.max(np.abs(fast - full)) < 0.5
+    truth = true_corners(2400, 1800, fill=0.6)
+    assert np.max(np.abs(fast - truth)) < 1.5 and np.max(np.abs(full - truth)) < 1.5
+
+
+def test_a_decode_of_other_pixels_is_refused(jpeg):
+    """Pixels that are not the file's (a reader's conversion) get no decoded level; a level
+    of the wrong size is an error of the pyramid."""
+    img = read_image(jpeg, native=True)
+    other = (255 - img.pixels).astype(np.uint8)
+    assert view.jpeg_level(jpeg, other) is None
+    assert view.jpeg_level(jpeg, img.pixels.astype(np.uint16)) is None
+    from fidelity.core.errors import InvalidValueError
+
+    with pytest.raises(InvalidValueError):
+        view.Pyramid(img.pixels, {4: np.zeros((10, 10, 3), np.float32)})
+
+
+def test_the_manual_states_the_thresholds():
+    """docs/audit.md quotes the decoder's threshold and the noise lattice's as the code has
+    them."""
+    from pathlib import Path
+
+    from fidelity.measure.pixels import NOISE_SAMPLE_PIXELS
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "audit.md").read_text("utf-8")
+    assert f"more than {view.JPEG_LEVEL_PIXELS // 1_000_000} megapixels is decoded twice" in text
+    assert f"of more than {NOISE_SAMPLE_PIXELS} pixels gives its noise" in text
+    assert f"REDUCED_COLOR_{view.JPEG_LEVEL_FACTOR}" in text

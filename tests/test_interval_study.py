@@ -1,0 +1,65 @@
+"""The split-conformal interval study (``benchmarks/studies/interval.py``, issue 58): its
+quantile against the closed form, its coverage on exchangeable data against the conformal
+guarantee, and the committed report against the study run again on the committed cells."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks.studies import interval as st
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_conformal_quantile_is_the_order_statistic():
+    scores = np.arange(1.0, 20.0)  # 19 scores: rank ceil(20 * 0.95) = 19, the largest
+    assert st.conformal_quantile(scores, 0.05) == 19.0
+    assert st.conformal_quantile(scores, 0.10) == 18.0  # ceil(20 * 0.9) = 18
+    assert st.conformal_quantile(scores[:10], 0.05) == math.inf  # ceil(11 * .95) = 11 > 10
+
+
+def test_leave_one_camera_out_covers_exchangeable_cells_at_the_promised_rate():
+    """On cells drawn alike (residuals N(0, 1) around a prediction), the additive bound covers
+    a held-out camera's cells with probability >= 1 - alpha (split conformal), and not far
+    above it (the rank is the smallest that guarantees it)."""
+    rng = np.random.default_rng(58)
+    covered = []
+    for _ in range(200):
+        n = 30
+        camera = np.repeat([f"c{i}" for i in range(n)], 2)
+        p = rng.uniform(0, 5, 2 * n)
+        m = p + rng.normal(0, 1, 2 * n)
+        cells = st.Cells(camera, np.tile(["a", "b"], n), m, np.ones(2 * n), p, p)
+        o = st.leave_one_camera_out(cells, "classic", "additive", 0.10)
+        covered.append(o.coverage)
+    assert 0.90 <= float(np.mean(covered)) <= 0.95
+
+
+def test_calibrated_slope_is_least_squares_through_the_origin():
+    p = np.array([1.0, 2.0, 4.0])
+    m = np.array([0.5, 1.1, 1.9])
+    want = (0.5 + 2.2 + 7.6) / (1 + 4 + 16)
+    assert st.slope(m, p) == pytest.approx(want, rel=1e-15)
+
+
+def test_the_committed_report_is_the_study_of_the_committed_cells():
+    doc = json.loads((REPO / "reports/validation/interval.json").read_text())
+    cells = st.read_cells(json.loads(st.VALIDATION.read_text()))
+    again = [o.to_json() for o in st.study(cells)]
+    assert doc["outcomes"] == json.loads(json.dumps(again))
+    assert doc["noise_floor"] == st.noise_floor(cells)
+    by = {(o["prediction"], o["method"]): o for o in doc["outcomes"]}
+    # the table as it is: the validation's own counts (validation.json's summary)
+    summary = json.loads((REPO / "reports/validation/validation.json").read_text())["summary"]
+    assert by[("classic", "table")]["cells_covered"] == summary["all"]["within"] == 56
+    directional = json.loads(st.VALIDATION.read_text())["summary"]["all"]
+    assert by[("directional", "table")]["cells_covered"] == directional["directional_within"]
+    assert by[("classic", "table")]["median_ratio"] == pytest.approx(
+        directional["classic_median_ratio"], rel=1e-12)
+    text = (REPO / "reports/validation/interval.md").read_text(encoding="utf-8")
+    assert text == st.markdown(st.study(cells), st.noise_floor(cells), 60)
