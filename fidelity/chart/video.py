@@ -36,6 +36,8 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -264,26 +266,9 @@ def read_frame(path: str | os.PathLike[str], frame: int | None = None,
     p = Path(path)
     shown = display_path(p)
     av = _av(shown)
-    if not p.is_file():
-        raise InputFileError(f"{shown}: no such file")
-    try:
-        container = av.open(str(p))
-    except Exception as exc:  # PyAV raises its own error types for every kind of bad file
-        raise InputFileError(f"{shown}: not a video ({_reason(exc)})") from None
-    with container:
-        demuxer = str(container.format.name)
-        if demuxer.endswith("_pipe") or demuxer.startswith("image2"):
-            raise InputFileError(f"{shown}: not a video (FFmpeg reads it as an image, "
-                                 f"{demuxer})")
-        if not container.streams.video:
-            raise InputFileError(f"{shown}: not a video (no video stream)")
-        stream = container.streams.video[0]
+    with _open_video(p, shown) as (container, stream, rate):
         cc = stream.codec_context
         codec = str(cc.name)
-        rate = stream.average_rate or stream.guessed_rate
-        if not rate:
-            raise InputFileError(f"{shown}: the video stream has no frame rate")
-        rate = Fraction(rate)
         time_base = Fraction(stream.time_base)
         start = int(stream.start_time or 0)
         frames = _frame_count(container, stream, time_base, rate)
@@ -344,6 +329,16 @@ def frame_count(path: str | os.PathLike[str]) -> int:
     :func:`read_frame`'s: not a video, no video stream, no frame rate."""
     p = Path(path)
     shown = display_path(p)
+    with _open_video(p, shown) as (container, stream, rate):
+        return _frame_count(container, stream, Fraction(stream.time_base), rate)
+
+
+@contextmanager
+def _open_video(p: Path, shown: str) -> Iterator[tuple[Any, Any, Fraction]]:
+    """The open container of the video at ``p`` (``shown`` in messages), its first video
+    stream and that stream's frame rate; closed on leaving. Not a file, not a video (FFmpeg
+    cannot open it, reads it as an image, or finds no video stream) or no frame rate: an
+    :class:`~fidelity.core.errors.InputFileError`."""
     av = _av(shown)
     if not p.is_file():
         raise InputFileError(f"{shown}: no such file")
@@ -352,13 +347,17 @@ def frame_count(path: str | os.PathLike[str]) -> int:
     except Exception as exc:  # PyAV raises its own error types for every kind of bad file
         raise InputFileError(f"{shown}: not a video ({_reason(exc)})") from None
     with container:
+        demuxer = str(container.format.name)
+        if demuxer.endswith("_pipe") or demuxer.startswith("image2"):
+            raise InputFileError(f"{shown}: not a video (FFmpeg reads it as an image, "
+                                 f"{demuxer})")
         if not container.streams.video:
             raise InputFileError(f"{shown}: not a video (no video stream)")
         stream = container.streams.video[0]
         rate = stream.average_rate or stream.guessed_rate
         if not rate:
             raise InputFileError(f"{shown}: the video stream has no frame rate")
-        return _frame_count(container, stream, Fraction(stream.time_base), Fraction(rate))
+        yield container, stream, Fraction(rate)
 
 
 def _frame_count(container: Any, stream: Any, time_base: Fraction, rate: Fraction) -> int:
