@@ -157,7 +157,7 @@ def test_a_large_window_takes_its_noise_from_an_even_pixel_lattice():
     rows, cols = np.nonzero(mask)
     assert set(((rows[keep] + 3) % 2).tolist()) == {0} and set(((cols[keep] + 7) % 2).tolist()) == {0}
     assert rows[keep].max() > 690 and cols[keep].min() < 25  # spans the window
-    assert _noise_sample(0, 0, np.ones((300, 300), bool)) is None
+    assert _noise_sample(0, 0, np.ones((150, 150), bool)) is None
     white = rng.normal(0.5, 0.01, (700, 650, 3))
     blurred = np.stack([cv2.GaussianBlur(white[..., c], (0, 0), 8.0) for c in range(3)], -1)
     for img in (white, blurred):
