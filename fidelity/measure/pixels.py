@@ -699,11 +699,12 @@ def measure_pixels(
 
 #: Most pixels of a neutral window its noise statistics are computed from
 #: (:func:`_noise_sample`): a 12 MP photo's windows (about 115 000 pixels) from every second
-#: pixel down and across, a 108 MP photo's (about a million) from every sixth; the variance of 32 768 pixels is within about ``1 / sqrt(2 n)`` = 0.4 % of
-#: the whole window's for white noise, and its stated u (from ``n``, the sample's) says so; the
-#: same holds for noise correlated over more than the stride (texture, demosaicing,
-#: compression); measured on the audit_speed photos, the sigmas are within 0.41 % (12 MP) and
-#: 0.60 % (108 MP) of the whole windows'. A 12 MP audit: about 7 % faster than from 131 072.
+#: pixel down and across, a 108 MP photo's (about a million) from every sixth. The variance of
+#: 32 768 pixels is within about ``1 / sqrt(2 n)`` = 0.4 % of the whole window's for white
+#: noise, and its stated u (from ``n``, the sample's) says so; the same holds for noise
+#: correlated over more than the stride (texture, demosaicing, compression). On the
+#: audit_speed photos the sigmas are within 0.41 % (12 MP) and 0.60 % (108 MP) of the whole
+#: windows'. A 12 MP audit: about 7 % faster than from 131 072.
 NOISE_SAMPLE_PIXELS = 1 << 15
 #: How a chart's noise is measured where every neutral window is read whole.
 NOISE_METHOD = CHART_NOISE_METHOD
