@@ -1104,21 +1104,28 @@ def measure_image(
 
 
 def _decoded_levels(img: Image) -> dict[int, np.ndarray] | None:
-    """The finder's quarter-size level of a large JPEG, decoded by libjpeg's DCT scaling
-    (:func:`fidelity.chart.find.view.jpeg_level`: 0.1 s instead of a second of block means
-    over a 108 MP image), where ``img`` is that file's own 8-bit pixels (no recording, Bayer
-    mosaic or OpenColorIO conversion) over
-    :data:`~fidelity.chart.find.view.JPEG_LEVEL_PIXELS`; else None. Only the finder reads it:
-    the windows are read from the full image."""
+    """The level of a large JPEG that the finder's search view reads
+    (:func:`fidelity.chart.find.view.level_factor` at
+    :data:`~fidelity.chart.find.cascade.SEARCH_SIDE`: half size at 12 MP, a quarter at 108
+    MP), decoded by libjpeg's DCT scaling (:func:`fidelity.chart.find.view.jpeg_level`)
+    instead of averaged down from the full image, where ``img`` is that file's own 8-bit
+    pixels (no recording, Bayer mosaic or OpenColorIO conversion) and the view reads a
+    reduced level; else None. Only the finder reads it: the windows are read from the full
+    image."""
     from fidelity.chart.find import view  # noqa: PLC0415 (the finder, loaded where a chart is found)
+    from fidelity.chart.find.cascade import SEARCH_SIDE  # noqa: PLC0415 (the same)
 
     px = img.pixels
     if (img.file_format.lower() not in ("jpeg", "jpg") or img.recording is not None
             or img.bayer is not None or img.ocio is not None or px.dtype != np.uint8
-            or px.shape[0] * px.shape[1] <= view.JPEG_LEVEL_PIXELS):
+            or px.ndim != 3):
         return None
-    level = view.jpeg_level(img.path, px)
-    return None if level is None else {view.JPEG_LEVEL_FACTOR: level}
+    height, width = px.shape[:2]
+    factor = view.level_factor(height, width, min(1.0, SEARCH_SIDE / max(height, width)))
+    if factor not in view.JPEG_LEVEL_FACTORS:
+        return None
+    level = view.jpeg_level(img.path, px, factor)
+    return None if level is None else {factor: level}
 
 
 __all__ = [

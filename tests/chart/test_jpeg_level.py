@@ -18,28 +18,31 @@ def jpeg(tmp_path_factory):
     return path
 
 
-def test_decoded_level_is_the_block_means_of_the_pixels(jpeg):
-    """The quarter-size decode against the pyramid's own 4 x 4 block means of the pixels the
-    reader decoded (an independent path: OpenImageIO's full decode, then area averages):
-    within half a code on average and 4 codes (of 255) at 99 % of the pixels; more only at
-    the sharp edges of the patches (the scaled IDCT keeps the blocks' low frequencies)."""
+@pytest.mark.parametrize("factor", [2, 4])
+def test_decoded_level_is_the_block_means_of_the_pixels(jpeg, factor):
+    """The half- and quarter-size decodes against the pyramid's own block means of the
+    pixels the reader decoded (an independent path: OpenImageIO's full decode, then area
+    averages): within half a code on average and 4 codes (of 255) at 99 % of the pixels; more
+    only at the sharp edges of the patches (the scaled IDCT keeps the blocks' low
+    frequencies)."""
     img = read_image(jpeg, native=True)
-    level = view.jpeg_level(jpeg, img.pixels)
+    level = view.jpeg_level(jpeg, img.pixels, factor)
     assert level is not None and level.dtype == np.float32
-    means = view.Pyramid(img.pixels).level(4)
-    assert level.shape == means.shape == (450, 600, 3)
+    means = view.Pyramid(img.pixels).level(factor)
+    assert level.shape == means.shape == (1800 // factor, 2400 // factor, 3)
     diff = np.abs(level - means) * 255
     assert diff.mean() < 0.5 and np.percentile(diff, 99) < 4.0, (diff.mean(), diff.max())
 
 
-def test_finder_on_the_decoded_level_finds_the_same_corners(jpeg):
+@pytest.mark.parametrize("factor", [2, 4])
+def test_finder_on_the_decoded_level_finds_the_same_corners(jpeg, factor):
     """Given the decoded level, the finder finds the chart's corner patches where it finds
     them from the full image, within 0.5 px, and both within 1.5 px of the painted ones."""
     img = read_image(jpeg, native=True)
-    level = view.jpeg_level(jpeg, img.pixels)
+    level = view.jpeg_level(jpeg, img.pixels, factor)
     assert level is not None
     full = find_chart(img.pixels, encoding="srgb").corners
-    fast = find_chart(img.pixels, encoding="srgb", levels={4: level}).corners
+    fast = find_chart(img.pixels, encoding="srgb", levels={factor: level}).corners
     assert np.max(np.abs(fast - full)) < 0.5
     truth = true_corners(2400, 1800, fill=0.6)
     assert np.max(np.abs(fast - truth)) < 1.5 and np.max(np.abs(full - truth)) < 1.5
@@ -50,12 +53,38 @@ def test_a_decode_of_other_pixels_is_refused(jpeg):
     of the wrong size is an error of the pyramid."""
     img = read_image(jpeg, native=True)
     other = (255 - img.pixels).astype(np.uint8)
-    assert view.jpeg_level(jpeg, other) is None
-    assert view.jpeg_level(jpeg, img.pixels.astype(np.uint16)) is None
+    assert view.jpeg_level(jpeg, other, 4) is None
+    assert view.jpeg_level(jpeg, img.pixels.astype(np.uint16), 4) is None
+    assert view.jpeg_level(jpeg, img.pixels, 3) is None  # no such DCT scaling
     from fidelity.core.errors import InvalidValueError
 
     with pytest.raises(InvalidValueError):
         view.Pyramid(img.pixels, {4: np.zeros((10, 10, 3), np.float32)})
+
+
+@pytest.mark.parametrize(("size", "factor"), [((3000, 4000), 2), ((9000, 12000), 4),
+                                             ((1500, 3199), 1), ((1200, 1600), 1)])
+def test_the_audit_decodes_the_level_the_search_view_reads(tmp_path, size, factor):
+    """A JPEG whose long side is at least twice the search view's gets that level from the
+    decoder (12 MP: half size, 108 MP: a quarter), others none; a PNG never."""
+    from fidelity.chart.find.cascade import SEARCH_SIDE
+    from fidelity.measure.pixels import _decoded_levels
+
+    h, w = size
+    assert view.level_factor(h, w, min(1.0, SEARCH_SIDE / max(h, w))) == factor
+    if h * w > 20_000_000:  # the large cases: the rule above, without writing 108 MP files
+        return
+    pixels = np.full((h, w, 3), 128, np.uint8)
+    pixels[: h // 2] = 40
+    for suffix in ("jpg", "png"):
+        path = tmp_path / f"grey.{suffix}"
+        write_image(path, pixels)
+        levels = _decoded_levels(read_image(path, native=True))
+        if suffix == "png" or factor == 1:
+            assert levels is None
+        else:
+            assert levels is not None and list(levels) == [factor]
+            assert levels[factor].shape == (h // factor, w // factor, 3)
 
 
 def test_the_manual_states_the_thresholds():
@@ -63,9 +92,11 @@ def test_the_manual_states_the_thresholds():
     them."""
     from pathlib import Path
 
+    from fidelity.chart.find.cascade import SEARCH_SIDE
     from fidelity.measure.pixels import NOISE_SAMPLE_PIXELS
 
     text = (Path(__file__).resolve().parents[2] / "docs" / "audit.md").read_text("utf-8")
-    assert f"more than {view.JPEG_LEVEL_PIXELS // 1_000_000} megapixels is decoded twice" in text
+    assert f"long side is at least {2 * SEARCH_SIDE} pixels is decoded twice" in text
     assert f"of more than {NOISE_SAMPLE_PIXELS} pixels gives its noise" in text
-    assert f"REDUCED_COLOR_{view.JPEG_LEVEL_FACTOR}" in text
+    for factor in view.JPEG_LEVEL_FACTORS:
+        assert f"REDUCED_COLOR_{factor}" in text

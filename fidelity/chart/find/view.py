@@ -98,20 +98,20 @@ class Pyramid:
         return self.levels[factor]
 
 
-#: Pixels of a JPEG above which the finder's reductions come from the decoder
-#: (:func:`jpeg_level`): a 108 MP photo's pyramid costs about a second from the full image, its
-#: quarter-size decode 0.1 s. Below (12 MP and less), the pyramid is the full image's.
-JPEG_LEVEL_PIXELS = 40_000_000
-#: The reduction the decoder makes (1/4 on each side: the search's level at 108 MP).
-JPEG_LEVEL_FACTOR = 4
+#: Reductions libjpeg's DCT scaling decodes (OpenCV's ``IMREAD_REDUCED_COLOR_{2,4,8}``): a JPEG
+#: whose finder search view reads one of these levels (:func:`level_factor`: a long side of at
+#: least twice the view's) has that level decoded (:func:`jpeg_level`) instead of averaged down
+#: from the full image (a fraction of the time: benchmarks/speed/audit_speed.py; 12 MP reads
+#: the half-size level, 108 MP the quarter-size one).
+JPEG_LEVEL_FACTORS = (2, 4, 8)
 #: Largest difference (in code values / 255) between the decoder's reduction and the full
 #: image's block means, per channel over the whole image, for the reduction to be used: the
 #: same pixels (not a file the reader converted otherwise).
 JPEG_LEVEL_TOLERANCE = 2.0 / 255.0
 
 
-def jpeg_level(path: str | os.PathLike[str], pixels: np.ndarray,
-               factor: int = JPEG_LEVEL_FACTOR) -> np.ndarray | None:
+def jpeg_level(path: str | os.PathLike[str], pixels: np.ndarray, factor: int
+               ) -> np.ndarray | None:
     """The :class:`Pyramid` level ``factor`` of a JPEG's 8-bit ``pixels`` (as read from
     ``path``, ``(H, W, 3)``) decoded by libjpeg's DCT scaling (OpenCV's
     ``IMREAD_REDUCED_COLOR_{factor}``, EXIF orientation ignored as the reader ignores it): the
@@ -144,12 +144,25 @@ def jpeg_level(path: str | os.PathLike[str], pixels: np.ndarray,
     h, w = arr.shape[0] // factor, arr.shape[1] // factor
     if reduced is None or reduced.shape[0] < h or reduced.shape[1] < w or reduced.ndim != 3:
         return None
-    level = as_float32(np.ascontiguousarray(reduced[:h, :w, ::-1]))
-    step = max(1, int(math.sqrt(arr.shape[0] * arr.shape[1] / 1_000_000)))
-    full = arr[::step, ::step].reshape(-1, 3).mean(axis=0) / 255.0
-    if np.max(np.abs(level.reshape(-1, 3).mean(axis=0) - full)) > JPEG_LEVEL_TOLERANCE:
+    reduced = np.ascontiguousarray(reduced[:h, :w])
+    # the channel means of every pixel of both (OpenCV's, a pass over the codes as stored)
+    full = _channel_means(arr) / 255.0
+    if np.max(np.abs(_channel_means(reduced)[::-1] / 255.0 - full)) > JPEG_LEVEL_TOLERANCE:
         return None
-    return level
+    return as_float32(np.ascontiguousarray(reduced[:, :, ::-1]))
+
+
+def _channel_means(codes: np.ndarray) -> F64:
+    """The mean of each channel of ``(H, W, 3)`` codes over every pixel (float64 sums):
+    OpenCV's ``mean`` on the array as stored (its channels reversed where they are a reversed
+    view, as a BGR decode's RGB is), else numpy's."""
+    cv2 = opencv()
+    if codes.flags.c_contiguous:
+        return np.array(cv2.mean(codes)[:3], np.float64)
+    flipped = codes[:, :, ::-1]
+    if flipped.flags.c_contiguous:
+        return np.array(cv2.mean(flipped)[:3], np.float64)[::-1]
+    return np.asarray(codes.reshape(-1, 3).mean(axis=0, dtype=np.float64), np.float64)
 
 
 #: Pixels of the image converted to float at a time when a :class:`Pyramid` level is computed.
@@ -176,6 +189,16 @@ def _halvings(block: np.ndarray, step: int, first: bool) -> np.ndarray:
     return arr
 
 
+def level_factor(height: int, width: int, scale: float) -> int:
+    """The :class:`Pyramid` level a view at ``scale`` (view pixels per image pixel, (0, 1]) of
+    an image ``height`` x ``width`` is shrunk from: the largest power of 2 at most ``1 /
+    scale`` whose level is at least 8 pixels on its short side (1: the image itself)."""
+    factor = 1
+    while factor * 2 * scale <= 1.0 and min(height, width) // (factor * 2) >= 8:
+        factor *= 2
+    return factor
+
+
 def _prepare(pyramid: Pyramid, region: tuple[int, int, int, int], max_side: int, encoding: str
              ) -> tuple[np.ndarray, F64]:
     """The region shrunk (area average) to ``max_side``, finite, non-negative, linear; with the
@@ -183,9 +206,7 @@ def _prepare(pyramid: Pyramid, region: tuple[int, int, int, int], max_side: int,
     cv2 = opencv()
     x0, y0, x1, y1 = region
     s = min(1.0, max_side / max(x1 - x0, y1 - y0))
-    factor = 1
-    while factor * 2 * s <= 1.0 and min(pyramid.height, pyramid.width) // (factor * 2) >= 8:
-        factor *= 2
+    factor = level_factor(pyramid.height, pyramid.width, s)
     level = pyramid.level(factor)
     lx0, ly0 = x0 // factor, y0 // factor
     lx1 = min(-(-x1 // factor), level.shape[1])
@@ -267,6 +288,7 @@ __all__ = [
     "Pyramid",
     "View",
     "detection_image",
+    "level_factor",
     "make_view",
     "opencv",
 ]
