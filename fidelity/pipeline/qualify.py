@@ -50,9 +50,8 @@ import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from importlib import metadata  # noqa: TID253 (a command's own module, not on every start-up)
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -76,6 +75,9 @@ from fidelity.measure.colour import chart_delta_e
 from fidelity.pipeline.check import audit_image
 from fidelity.pipeline.records import ImageSource
 from fidelity.prediction.calibration import calibrate_transform, transform_delta_e
+
+if TYPE_CHECKING:
+    from importlib.metadata import Distribution
 
 #: Status of a check that ran and met its tolerance / did not / could not run here.
 PASS, FAIL, NOT_RUN = "pass", "fail", "not run"
@@ -399,7 +401,7 @@ def _record_digest(path: Path) -> str:
     return base64.urlsafe_b64encode(digest).rstrip(b"=").decode()
 
 
-def installed_files(dist: metadata.Distribution) -> tuple[int, list[str]]:
+def installed_files(dist: Distribution) -> tuple[int, list[str]]:
     """Check every file of the package (:data:`PACKAGES`) that the ``RECORD`` of ``dist``
     lists with a SHA-256 (the wheel installer's record of what it wrote; the console scripts,
     written outside the package for the interpreter at hand, are not checked): how many were
@@ -424,6 +426,8 @@ def installed_files(dist: metadata.Distribution) -> tuple[int, list[str]]:
 
 
 def _installation() -> tuple[float, int, str]:
+    from importlib import metadata  # noqa: PLC0415 (not on every start-up: a check loads this module)
+
     try:
         dist = metadata.distribution("camera-fidelity")
     except metadata.PackageNotFoundError:
