@@ -4,7 +4,9 @@ Each camera is one lens and sensor configuration (:data:`CONFIGS`) on one of two
 renderings (:data:`COLOURS`): ``ideal``, the exact sRGB camera (CIE 1931 sensitivities, no
 colour correction, sRGB tone curve, 12 bits: no colour error but its quantisation), and
 ``nikon``, the Nikon D5100 with auto exposure, white balance to the scene and a CCM fitted
-by Cheung 2004 under D65 (the colour error of a good real camera). The lens's PSF is in pixels
+by Cheung 2004 under D65 (the colour error of a good real camera); four configurations also
+on ``wbd50``, the same camera balanced for D50 in a D65 scene (a larger colour error, as
+``cameras/nikon5100-wb-d50.toml``). The lens's PSF is in pixels
 of the COCO images (640 x 480, the detector's input scale); the full well is electrons at
 raw 1 (white, for the ideal camera, at gain 1; 0.9 of white metered for the Nikon).
 
@@ -70,14 +72,39 @@ curve = "srgb"
 [quantisation]
 bits = 12
 """),
+    "wbd50": ("Nikon D5100, WB set for D50 in a D65 scene (too blue), the CCM of "
+              "nikon5100-cheung-d65, sRGB, 12 bit (a larger colour error, chart dE00 about 6)",
+                 """\
+[sensitivities]
+source = "Nikon 5100 (NPL)"
+
+[exposure]
+{exposure}
+
+[white_balance]
+method = "illuminant"
+illuminant = "D50"
+
+[ccm]
+method = "matrix"
+matrix = [[1.740658, -0.641055, -0.106938], [-0.157521, 1.657109, -0.494886], [0.061209, -0.546386, 1.477222]]
+
+[tone]
+curve = "srgb"
+
+[quantisation]
+bits = 12
+"""),
 }
 
 #: Exposure of each colour rendering at normal light.
 EXPOSURE: Mapping[str, str] = {"ideal": 'mode = "gain"\ngain = 1.0',
-                               "nikon": 'mode = "auto"\ntarget = 0.9'}
+                               "nikon": 'mode = "auto"\ntarget = 0.9',
+                               "wbd50": 'mode = "auto"\ntarget = 0.9'}
 #: Three stops under (``ev3``), not gained up.
 UNDEREXPOSED: Mapping[str, str] = {"ideal": 'mode = "gain"\ngain = 0.125',
-                                   "nikon": 'mode = "auto"\ntarget = 0.1125'}
+                                   "nikon": 'mode = "auto"\ntarget = 0.1125',
+                                   "wbd50": 'mode = "auto"\ntarget = 0.1125'}
 
 
 #: The lens and sensor configurations: name -> (description, optics, noise, underexposed).
@@ -117,6 +144,13 @@ CONFIGS: Mapping[str, tuple[str, dict[str, Any] | None, dict[str, float] | None,
 }
 
 
+#: The configurations of each colour rendering (every one for ``ideal`` and ``nikon``).
+COLOUR_CONFIGS: Mapping[str, tuple[str, ...]] = {
+    "ideal": tuple(CONFIGS), "nikon": tuple(CONFIGS),
+    "wbd50": ("gauss1.5", "fw5k-rn10", "gauss2.0-fw5k", "lowlight-iso8"),
+}
+
+
 def _value(v: Any) -> str:
     return f'"{v}"' if isinstance(v, str) else repr(float(v))
 
@@ -145,8 +179,8 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     n = 0
-    for colour in COLOURS:
-        for config in CONFIGS:
+    for colour, configs in COLOUR_CONFIGS.items():
+        for config in configs:
             name, text = camera_toml(colour, config)
             write_text_atomic(out / name, text)
             n += 1
