@@ -6,7 +6,8 @@ colour correction, sRGB tone curve, 12 bits: no colour error but its quantisatio
 ``nikon``, the Nikon D5100 with auto exposure, white balance to the scene and a CCM fitted
 by Cheung 2004 under D65 (the colour error of a good real camera); four configurations also
 on ``wbd50``, the same camera balanced for D50 in a D65 scene (a larger colour error, as
-``cameras/nikon5100-wb-d50.toml``). The lens's PSF is in pixels
+``cameras/nikon5100-wb-d50.toml``). ``clean`` (no blur, no noise) gives each colour rendering
+alone, the colour validation's own case. The lens's PSF is in pixels
 of the COCO images (640 x 480, the detector's input scale); the full well is electrons at
 raw 1 (white, for the ideal camera, at gain 1; 0.9 of white metered for the Nikon).
 
@@ -109,6 +110,7 @@ UNDEREXPOSED: Mapping[str, str] = {"ideal": 'mode = "gain"\ngain = 0.125',
 
 #: The lens and sensor configurations: name -> (description, optics, noise, underexposed).
 CONFIGS: Mapping[str, tuple[str, dict[str, Any] | None, dict[str, float] | None, bool]] = {
+    "clean": ("no lens blur, no sensor noise (colour alone)", None, None, False),
     "gauss0.5": ("Gaussian lens blur 0.5 px", {"kind": "gaussian", "sigma_px": 0.5}, None, False),
     "gauss1.0": ("Gaussian lens blur 1 px", {"kind": "gaussian", "sigma_px": 1.0}, None, False),
     "gauss1.5": ("Gaussian lens blur 1.5 px", {"kind": "gaussian", "sigma_px": 1.5}, None, False),
@@ -147,7 +149,7 @@ CONFIGS: Mapping[str, tuple[str, dict[str, Any] | None, dict[str, float] | None,
 #: The configurations of each colour rendering (every one for ``ideal`` and ``nikon``).
 COLOUR_CONFIGS: Mapping[str, tuple[str, ...]] = {
     "ideal": tuple(CONFIGS), "nikon": tuple(CONFIGS),
-    "wbd50": ("gauss1.5", "fw5k-rn10", "gauss2.0-fw5k", "lowlight-iso8"),
+    "wbd50": ("clean", "gauss1.5", "fw5k-rn10", "gauss2.0-fw5k", "lowlight-iso8"),
 }
 
 

@@ -200,7 +200,7 @@ def apply_optics(linear: NDArray[Any], optics: Optics) -> F64:
 
 def decode_srgb8(rgb8: NDArray[np.uint8]) -> F64:
     """8-bit sRGB codes -> linear values (IEC 61966-2-1), by a 256-entry lookup."""
-    out: F64 = _DECODE[rgb8]
+    out: F64 = np.asarray(_DECODE[rgb8], dtype=np.float64)
     return out
 
 
