@@ -72,13 +72,13 @@ class CameraImaging:
             raise InvalidValueError(f"{emu.camera.name}: the optics and noise are emulated "
                                     f"with the root-polynomial colour mapping, not {emu.method}")
         gains, ccm = emu.samples.white_balance_gains, emu.samples.ccm
-        if emu.camera.noise.enabled:
-            if gains is None or ccm is None:
-                raise InvalidValueError(f"{emu.camera.name}: the emulation has no white-balance "
-                                        "gains and CCM to reach the raw signal")
+        if gains is not None and ccm is not None:
             object.__setattr__(self, "_raw", (np.asarray(gains, dtype=np.float64),
                                               np.asarray(ccm, dtype=np.float64),
                                               np.linalg.inv(ccm)))
+        elif emu.camera.noise.enabled:
+            raise InvalidValueError(f"{emu.camera.name}: the emulation has no white-balance "
+                                    "gains and CCM to reach the raw signal")
 
     def linear(self, rgb8: U8) -> F64:
         """The camera's linear signal (after white balance and CCM, before the tone curve)
@@ -86,19 +86,42 @@ class CameraImaging:
         img = np.asarray(rgb8)
         if img.dtype != np.uint8 or img.ndim != 3 or img.shape[-1] != 3:
             raise InvalidValueError(f"image must be (H, W, 3) uint8, got {img.shape} {img.dtype}")
+        seed = noise_seed(img, f"{self.name}:{self.emulation.camera.noise.seed}",
+                          float(self.emulation.camera.noise.full_well or 0.0))
+        return self.develop(decode_srgb8(img), seed)
+
+    def scene(self, linear: F64) -> F64:
+        """A linear scene image ``(H, W, 3)`` (1 = white) through the camera's vignetting and
+        lens (step 2 of the module docstring)."""
         cam = self.emulation.camera
-        lin = decode_srgb8(img)
+        lin = np.asarray(linear, dtype=np.float64)
         if cam.vignetting_fov_deg is not None:
-            lin = lin * vignetting_gain(img.shape[0], img.shape[1], cam.vignetting_fov_deg)[..., None]
-        lin = apply_optics(lin, cam.optics)
-        out: F64 = root_polynomial_terms(lin) @ self.emulation.matrix.T
-        if self._raw is not None:
-            gains, ccm, inv = self._raw
-            raw = (out @ inv.T) / gains
-            seed = noise_seed(img, f"{self.name}:{cam.noise.seed}",
-                              float(cam.noise.full_well or 0.0))
-            out = (add_sensor_noise(raw, cam.noise, seed=seed) * gains) @ ccm.T
+            lin = lin * vignetting_gain(lin.shape[0], lin.shape[1],
+                                        cam.vignetting_fov_deg)[..., None]
+        return apply_optics(lin, cam.optics)
+
+    def develop(self, linear: F64, seed: int) -> F64:
+        """The camera's linear signal of a linear scene image ``(H, W, 3)``: :meth:`scene`,
+        the colour mapping and the sensor noise drawn with ``seed`` (steps 2-4)."""
+        out: F64 = root_polynomial_terms(self.scene(linear)) @ self.emulation.matrix.T
+        noise = self.emulation.camera.noise
+        if noise.enabled:
+            gains, ccm = self._stages()[:2]
+            out = (add_sensor_noise(self.raw(out), noise, seed=seed) * gains) @ ccm.T
         return out
+
+    def raw(self, linear_signal: F64) -> F64:
+        """The camera's raw signal of a linear signal :meth:`develop` returns: the chart's
+        CCM and white-balance gains undone, ``(signal @ inv(ccm).T) / gains``."""
+        gains, _, inv = self._stages()
+        out: F64 = (np.asarray(linear_signal, dtype=np.float64) @ inv.T) / gains
+        return out
+
+    def _stages(self) -> tuple[F64, F64, F64]:
+        if self._raw is None:
+            raise InvalidValueError(f"{self.name}: the emulation has no white-balance gains "
+                                    "and CCM to reach the raw signal")
+        return self._raw
 
     def __call__(self, rgb8: U8) -> U8:
         """The image as the camera records it: :meth:`linear`, then its tone curve and
