@@ -181,12 +181,20 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     n = 0
+    lines = ["# Camera suite for `fidelity validate --properties`", "",
+             "Written by `python -m benchmarks.studies.property_cameras` (do not edit by hand); "
+             "what each colour rendering and configuration models is in that script's "
+             "docstring. The lens's PSF is in pixels of the COCO images, the full well in "
+             "electrons at raw 1. Run: see docs/validation.md, \"Sharpness and noise\".", "",
+             "| camera | what it is |", "|---|---|"]
     for colour, configs in COLOUR_CONFIGS.items():
         for config in configs:
             name, text = camera_toml(colour, config)
             write_text_atomic(out / name, text)
+            lines.append(f"| {name[:-5]} | {COLOURS[colour][0]}; {CONFIGS[config][0]} |")
             n += 1
-    print(f"wrote {n} camera files to {out}")
+    write_text_atomic(out / "README.md", "\n".join(lines) + "\n")
+    print(f"wrote {n} camera files and README.md to {out}")
     return 0
 
 
