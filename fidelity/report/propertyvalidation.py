@@ -128,7 +128,8 @@ def _group_section(results: PropertyResults) -> Section:
     for column in LOSS_COLUMNS.values():
         s = results.summary[column]
         for g, gs in [("all", s["all"]), *s["groups"].items()]:
-            cams = len({r.camera for r in results.rows if g == "all" or "+".join(r.group) == g})
+            cams = len({r.camera for r in results.rows
+                        if g == "all" or ("+".join(r.group) or "none") == g})
             body.append([_COLUMN_WORDS[column], g, str(cams), f"{gs['within']}/{gs['cells']}",
                          f"{gs['within_2se']}/{gs['cells']}", _share(gs),
                          f"{_ratio(gs['median_ratio'])} ({gs['cells_above_zero']})",

@@ -187,3 +187,26 @@ def test_a_tiny_real_property_run(shared: Path, tmp_path: Path) -> None:
     r2 = CliRunner().invoke(main, args)
     assert r2.exit_code == 0, r2.output
     assert {c.camera: c.finished for c in st.cells()} == before
+
+
+REPORTS = Path(__file__).resolve().parents[2] / "reports" / "validation"
+
+
+@pytest.mark.slow
+def test_committed_scores_rebuild_the_shipped_property_report(tmp_path: Path) -> None:
+    """reports/validation/properties.json is what this code makes of the committed scores
+    file and the camera files: every row (measured and predicted) and the summary exactly,
+    the cameras' predictions (rendered again) to another CPU's last bits."""
+    from fidelity.coco.scores import import_scores, read_scores
+    from fidelity.coco.validate.properties import collect_property_results
+    from tests.jsondiff import differences
+
+    path = REPORTS / "properties.scores.json.gz"
+    store = ValidationStore(tmp_path / "store")
+    import_scores(store, path, read_scores(path, ValidationStore))
+    rebuilt = collect_property_results(store, load_suite(SUITE)).to_json()
+    shipped = json.loads((REPORTS / "properties.json").read_text())
+    assert not differences(shipped["cameras"], rebuilt["cameras"], "cameras")
+    for part in ("rows", "summary", "baselines"):
+        assert not differences(shipped[part], rebuilt[part], part), part
+    assert len(shipped["rows"]) == 2 * len(shipped["cameras"])
