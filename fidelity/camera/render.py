@@ -52,7 +52,10 @@ from fidelity.colour.spectral import (
 )
 from fidelity.core.errors import FidelityError, InvalidValueError, unknown_name
 from fidelity.measure import uncertainty as unc
+from fidelity.measure.chartnoise import ChartNoise
+from fidelity.measure.chartsharpness import ChartSharpness
 from fidelity.measure.colour import ChartMeasurement, measure_chart
+from fidelity.measure.pixels import measure_pixels
 from fidelity.measure.uncertainty import UncertaintyBudget
 
 FloatArray = NDArray[np.float64]
@@ -628,8 +631,44 @@ def render_uncertainty(raw_image: ArrayLike, srgb_image: ArrayLike, layout: Char
                                  notes=notes)
 
 
+#: The detector's letterbox factor for the turned chart a check renders
+#: (:class:`fidelity.camera.render.FrameRender`): it has COCO's size, 640 x 480, so a camera
+#: model's pixels are taken at the detector's input (its optics in pixels of that image).
+FRAME_SCALE = 1.0
+
+
+def frame_properties(frame: FrameRender | None, reference: str, illuminant: str
+                     ) -> tuple[ChartSharpness | None, ChartNoise | None]:
+    """The sharpness and noise of a check's turned chart (``frame``), measured as an audit
+    measures them (:func:`fidelity.measure.pixels.measure_pixels` at the known corners, the
+    image decoded from sRGB): the e-SFR of its slanted patch edges and the noise of its
+    neutral patches. ``(None, None)`` without a frame.
+
+    Parameters
+    ----------
+    frame
+        The turned chart of :func:`render_chart` (``frame=True``), or None.
+    reference
+        The colour reference of the measurement (:data:`REFERENCES`).
+    illuminant
+        The scene illuminant.
+
+    Returns
+    -------
+    tuple
+        The chart's :class:`~fidelity.measure.chartsharpness.ChartSharpness` and
+        :class:`~fidelity.measure.chartnoise.ChartNoise` (each None where not measured).
+    """
+    if frame is None:
+        return None, None
+    got = measure_pixels(frame.srgb, frame.corners, encoding="srgb", reference=reference,
+                         illuminant=illuminant, uncertainty=False, corner_checks=False)
+    return got.sharpness, got.noise
+
+
 __all__ = [
     "CLOSED_FORM_PIXELS_PER_PATCH",
+    "FRAME_SCALE",
     "MAX_PIXELS_PER_PATCH",
     "MAX_SEED",
     "MAX_SPP",
@@ -640,6 +679,8 @@ __all__ = [
     "RENDERERS",
     "ChartLayout",
     "ChartRender",
+    "FrameRender",
+    "frame_properties",
     "render_chart",
     "patch_means",
     "render_uncertainty",

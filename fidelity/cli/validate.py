@@ -22,11 +22,14 @@ from fidelity.coco.emulation import EMULATION_METHODS, TRAINING_SETS
 from fidelity.coco.scoring import load_annotations
 from fidelity.coco.sweep import run_summary
 from fidelity.coco.validate.colour import collect_results, run_validation, validated_cameras
+from fidelity.coco.validate.properties import collect_property_results
 from fidelity.coco.validate.store import ValidationStore, default_store
 from fidelity.coco.validate.suite import load_suite
 from fidelity.core.errors import InvalidValueError, unknown_name
 from fidelity.core.fileio import check_outputs, write_json_atomic
 from fidelity.core.resources import resource_dir
+from fidelity.report.format import number
+from fidelity.report.propertyvalidation import write_property_report
 from fidelity.report.validation import write_validation_report
 
 if TYPE_CHECKING:
@@ -34,6 +37,8 @@ if TYPE_CHECKING:
 
 #: The validated cameras (:func:`fidelity.coco.validate.colour.validated_cameras`), beside the report.
 DOMAIN_FILE = "domain.json"
+#: The files of the property validation (``--properties``).
+PROPERTY_FILES = ("properties.md", "properties.html", "properties.json")
 
 
 @click.command()
@@ -71,6 +76,10 @@ DOMAIN_FILE = "domain.json"
                    "draws and rest-of-run fold scores of the standard error).")
 @click.option("--notes", default=None, type=click.Path(dir_okay=False, exists=True),
               help="Markdown file with a written analysis, included in the report.")
+@click.option("--properties", is_flag=True,
+              help="Judge the cameras as a verdict does, colour, sharpness and noise combined "
+                   "(their optics and noise emulated on COCO), and write properties.md, .html "
+                   "and .json in place of the colour report.")
 @scores_options("--store")
 @progress_option
 @executor_options
@@ -78,7 +87,8 @@ DOMAIN_FILE = "domain.json"
 def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: str | None, annotations: str | None,
              out: str | None, limit: int | None, store: str | None, method: str,
              training: str, threads: int, provider: str, bound_table: str | None,
-             report_only: bool, notes: str | None, export_scores: str | None,
+             report_only: bool, notes: str | None, properties: bool,
+             export_scores: str | None,
              import_scores: str | None, progress: bool | None, executor: str,
              address: str | None, workers: int | None) -> None:
     """Render every camera's chart, predict its ΔmAP, emulate it on COCO and measure ΔmAP.
@@ -88,6 +98,8 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
       fidelity validate --cameras cameras --models yolox_nano.onnx,yolo11n.onnx@250 \\
           --images coco/val2017 --annotations instances.json --out reports/validation
       (rerun the same line to resume; add --report-only to rebuild the report)
+      fidelity validate --properties --cameras cameras/properties ... --out reports/validation
+      (cameras with lenses and sensors: the verdict's combined loss against the measured)
       fidelity validate --export-scores v.scores.json.gz --annotations instances.json
       fidelity validate --import-scores v.scores.json.gz --store NEWDIR   (another machine)
     """
@@ -102,9 +114,9 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
         camera_inputs = {f"--cameras ({p.name})": f for p in sorted(Path(cameras).iterdir())
                          for f in camera_files(p)
                          if p.suffix.lower() in (".toml", ".yaml", ".yml")}
-    check_outputs({f"--out ({n})": Path(out) / n
-                   for n in ("validation.md", "validation.html", "validation.json",
-                             DOMAIN_FILE)},
+    names = (PROPERTY_FILES if properties else
+             ("validation.md", "validation.html", "validation.json", DOMAIN_FILE))
+    check_outputs({f"--out ({n})": Path(out) / n for n in names},
                   {"--notes": notes, "--annotations": annotations, "--images": images,
                    "--table": bound_table, **camera_inputs, **model_inputs(models)},
                   stores={"--store": store or default_store()})
@@ -138,6 +150,16 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
         if last.get("items"):
             click.echo(run_summary(last), err=True)
 
+    if properties:
+        presults = collect_property_results(st, cases)
+        for p in write_property_report(presults, out):
+            click.echo(f"wrote {p}")
+        a = presults.summary["dmap_points"]["all"] if presults.rows else None
+        click.echo(f"{len(presults.rows)} (camera, model) cells"
+                   + ("" if a is None else
+                      f"; the verdict's combined ΔmAP bounds {a['within']} of {a['cells']}, "
+                      f"median over-prediction {number(a['median_ratio'])}x"))
+        return
     results = collect_results(st, bound_table=bound_table, suite=cases)
     paths = write_validation_report(
         results, out, notes=Path(notes).read_text(encoding="utf-8") if notes else None)

@@ -49,6 +49,8 @@ __all__ = [
     "READ_NOISE_E",
     "Degradation",
     "DegradationFamily",
+    "apply_optics",
+    "decode_srgb8",
     "degrade_linear",
     "encode_srgb8",
     "family",
@@ -150,18 +152,56 @@ def degrade_linear(linear: NDArray[Any], name: str, level: float, seed: int = 0)
         raise InvalidValueError(f"{name}: works on encoded values, not linear light")
     img = np.asarray(linear, dtype=np.float64)
     if fam.property == "sharpness":
-        import cv2
-
         psf = _psf(name, level)
         if psf.kind == "gaussian":
-            g = psf.kernel_1d()
-            out = cv2.sepFilter2D(img, cv2.CV_64F, g, g, borderType=cv2.BORDER_REFLECT)
-        else:
-            out = cv2.filter2D(img, cv2.CV_64F, psf.kernel(), borderType=cv2.BORDER_REFLECT)
+            return apply_optics(img, psf)
+        import cv2
+
+        # the sweep's defocus levels were measured with the disc's sampled kernel (within
+        # 6e-4 of Optics.apply at 2 px): kept so that its tables' cells stay as measured
+        out = cv2.filter2D(img, cv2.CV_64F, psf.kernel(), borderType=cv2.BORDER_REFLECT)
         blurred: F64 = np.asarray(out, dtype=np.float64).reshape(img.shape)
         return blurred
     noise = Noise(full_well=level, read_noise=READ_NOISE_E, seed=seed)
     return add_sensor_noise(img, noise, seed=seed)
+
+
+def apply_optics(linear: NDArray[Any], optics: Optics) -> F64:
+    """A linear image through a lens's point-spread function, as a camera's render applies it.
+
+    The result of :meth:`fidelity.camera.optics.Optics.apply` (what
+    :func:`fidelity.camera.render.render_chart` calls on the camera's raw image), a Gaussian
+    through OpenCV's separable filter with the same kernel
+    (:meth:`~fidelity.camera.optics.Optics.kernel_1d`) and the same reflected edges: equal
+    within 1e-15 and about 6 ms for a 640 x 480 image against 35-90 ms.
+
+    Parameters
+    ----------
+    linear
+        Linear values, shape ``(H, W)`` or ``(H, W, C)``, finite.
+    optics
+        The lens (any kind of :data:`fidelity.camera.optics.OPTICS_KINDS`).
+
+    Returns
+    -------
+    numpy.ndarray
+        float64, the shape of ``linear``; for ``none`` the image unchanged.
+    """
+    img = np.asarray(linear, dtype=np.float64)
+    if optics.kind != "gaussian" or img.ndim not in (2, 3):
+        return optics.apply(img)
+    import cv2
+
+    g = optics.kernel_1d()
+    out = cv2.sepFilter2D(img, cv2.CV_64F, g, g, borderType=cv2.BORDER_REFLECT)
+    blurred: F64 = np.asarray(out, dtype=np.float64).reshape(img.shape)
+    return blurred
+
+
+def decode_srgb8(rgb8: NDArray[np.uint8]) -> F64:
+    """8-bit sRGB codes -> linear values (IEC 61966-2-1), by a 256-entry lookup."""
+    out: F64 = np.asarray(_DECODE[rgb8], dtype=np.float64)
+    return out
 
 
 _DECODE = linearize_srgb(np.arange(256) / 255.0)
@@ -200,4 +240,4 @@ class Degradation:
             rng = np.random.default_rng(seed)
             x = rgb8 / 255.0 + rng.normal(size=rgb8.shape, scale=self.level)
             return (np.clip(x, 0.0, 1.0) * 255.0).astype(np.uint8)
-        return encode_srgb8(degrade_linear(_DECODE[rgb8], self.name, self.level, seed))
+        return encode_srgb8(degrade_linear(decode_srgb8(rgb8), self.name, self.level, seed))

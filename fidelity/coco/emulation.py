@@ -211,7 +211,10 @@ class CameraSamples:
     ``reference_linear`` (K, 3) unclipped linear sRGB (out-of-gamut colours keep components
     < 0 or > 1; the fit uses these, so that an exact camera fits to the identity);
     ``camera_linear`` (K, 3) the camera's linear signal after white balance and CCM, before the
-    tone curve; ``camera_srgb`` (K, 3) the camera's output as encoded sRGB (clipped to [0, 1]).
+    tone curve; ``camera_srgb`` (K, 3) the camera's output as encoded sRGB (clipped to [0, 1]);
+    ``white_balance_gains`` (3,) and ``ccm`` (3, 3): the stages that make ``camera_linear``
+    of the camera's raw signal, ``(raw * gains) @ ccm.T``, as metered and fitted on the chart
+    (None: not recorded).
     """
 
     names: tuple[str, ...]
@@ -219,6 +222,8 @@ class CameraSamples:
     reference_linear: FloatArray
     camera_linear: FloatArray
     camera_srgb: FloatArray
+    white_balance_gains: FloatArray | None = None
+    ccm: FloatArray | None = None
 
 
 def camera_samples(camera: CameraModel, illuminant: str, reflectances: ReflectanceSet,
@@ -238,7 +243,9 @@ def camera_samples(camera: CameraModel, illuminant: str, reflectances: Reflectan
     linear = (raw * dev.white_balance_gains) @ dev.ccm.T
     ref_lin = reference_linear_srgb(reflectances.reflectance, illuminant)
     ref = np.clip(np.asarray(delinearize_srgb(ref_lin), dtype=np.float64), 0.0, 1.0)
-    return CameraSamples(reflectances.names, ref, ref_lin, linear, np.clip(dev.srgb[0], 0.0, 1.0))
+    return CameraSamples(reflectances.names, ref, ref_lin, linear, np.clip(dev.srgb[0], 0.0, 1.0),
+                         np.asarray(dev.white_balance_gains, dtype=np.float64),
+                         np.asarray(dev.ccm, dtype=np.float64))
 
 
 def camera_output_srgb(camera: CameraModel, linear: ArrayLike) -> FloatArray:

@@ -67,6 +67,9 @@ IDENTITY = "baseline"
 #: their images' colours only (a validation's emulation), rather than a 2^24-entry table: a
 #: 640 x 480 photo holds 40k-180k distinct colours, the table takes seconds to build.
 DIRECT_IMAGES = 32
+#: A ready transform of 8-bit images: a colour table (:class:`fidelity.coco.dataset.PixelMap`)
+#: or a camera emulated with its optics and noise (:class:`fidelity.coco.imaging.CameraImaging`).
+ImageMap = Callable[[np.ndarray], np.ndarray]
 #: Images per work item: the local executor commits every 25 images (as before); Ray items
 #: are smaller so that two or more workers share a cell's last images evenly.
 CHUNK_IMAGES: dict[str, int] = {"local": 25, "ray": 8}
@@ -141,7 +144,7 @@ class PixelTransform:
     name: str
     param: float | None = None
     roundtrip: bool = True
-    table: PixelMap | None = field(default=None, compare=False, repr=False)
+    table: ImageMap | None = field(default=None, compare=False, repr=False)
     direct: bool = False
 
     @classmethod
@@ -301,7 +304,7 @@ class Executor(Protocol):
         """The detector's own description (:meth:`fidelity.coco.detectors.Detector.describe`)."""
         ...
 
-    def submit(self, item: WorkItem, table: PixelMap | None = None) -> None:
+    def submit(self, item: WorkItem, table: ImageMap | None = None) -> None:
         """Queue a work item (``table``: the transform's ready table, if it has one)."""
         ...
 
@@ -334,7 +337,7 @@ class LocalExecutor:
         self.images = images
         self.options = options
         self.runner = ChunkRunner(options.threads, options.provider, options.cache_mb)
-        self._queue: collections.deque[tuple[WorkItem, PixelMap | None]] = \
+        self._queue: collections.deque[tuple[WorkItem, ImageMap | None]] = \
             collections.deque()
 
     def describe(self) -> dict[str, Any]:
@@ -348,7 +351,7 @@ class LocalExecutor:
                                                     ).describe()
         return info
 
-    def submit(self, item: WorkItem, table: PixelMap | None = None) -> None:
+    def submit(self, item: WorkItem, table: ImageMap | None = None) -> None:
         """Queue an item; it runs when :meth:`next_result` asks for it."""
         self._queue.append((item, table))
 
@@ -541,7 +544,7 @@ class RayExecutor:
         return dict(self._get(self.actors[0].describe_model.remote(model,
                                                                    [self._model_ref(model)])))
 
-    def _transform_ref(self, spec: PixelTransform, table: PixelMap | None) -> Any:
+    def _transform_ref(self, spec: PixelTransform, table: ImageMap | None) -> Any:
         ref = self._transforms.get(spec.key)
         if ref is None:
             if table is not None:
@@ -559,7 +562,7 @@ class RayExecutor:
             ref = self._images[image_id] = self._ray.put(self.images.read(image_id))
         return ref
 
-    def submit(self, item: WorkItem, table: PixelMap | None = None) -> None:
+    def submit(self, item: WorkItem, table: ImageMap | None = None) -> None:
         """Hand an item to the actor pool (queued by Ray's pool while every actor is busy)."""
         transform = [self._transform_ref(item.transform, table)]
         images = {i: self._image_ref(i) for i in item.image_ids}
@@ -627,7 +630,7 @@ class CellWork:
     model: ModelFile
     transform: PixelTransform
     image_ids: tuple[int, ...]
-    table: Callable[[], PixelMap] | None = None
+    table: Callable[[], ImageMap] | None = None
     clip: bool = True
 
 
@@ -719,7 +722,7 @@ class CellRun:
         self.show()
         self.open_cells: dict[tuple[Any, ...], _Open] = {}
         self.waiting: list[CellWork] = []
-        self.queue: collections.deque[tuple[CellWork, WorkItem, PixelMap | None]] = \
+        self.queue: collections.deque[tuple[CellWork, WorkItem, ImageMap | None]] = \
             collections.deque()
         threaded = executor.workers > 1 if background is None else background
         self.scorer = (concurrent.futures.ThreadPoolExecutor(1, "fidelity-score") if threaded

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fidelity.camera.model import DEFAULT_CAMERA, camera_file
-from fidelity.camera.render import FrameRender, render_chart
+from fidelity.camera.render import FRAME_SCALE, frame_properties, render_chart
 from fidelity.chart.read import DEFAULT_READ, ReadOptions, reads_for
 from fidelity.coco.detectors import stale_preprocessing
 from fidelity.colour.charts import SCENE_REFERENCE, load_reference
@@ -44,10 +44,9 @@ from fidelity.colour.spectral import load_illuminant
 from fidelity.core.errors import FidelityError, InvalidValueError
 from fidelity.core.fileio import file_sha256
 from fidelity.measure.blindspots import banding, chart_blind_spots
-from fidelity.measure.chartnoise import ChartNoise
-from fidelity.measure.chartsharpness import ChartSharpness, EdgeTargetCorners
+from fidelity.measure.chartsharpness import EdgeTargetCorners
 from fidelity.measure.colour import measure_chart, neutral_patches
-from fidelity.measure.pixels import measure_image, measure_pixels
+from fidelity.measure.pixels import measure_image
 from fidelity.measure.uncertainty import ADAPTATION_SPREAD, adaptation_component
 from fidelity.pipeline.records import (
     ChartReport,
@@ -299,25 +298,6 @@ def check_camera(
         intervals=column_intervals(prediction, u, judge.decision.k),
         sharpness=sharpness, noise=noise,
     )
-
-
-#: The detector's letterbox factor for the turned chart a check renders
-#: (:class:`fidelity.camera.render.FrameRender`): it has COCO's size, 640 x 480, so a camera
-#: model's pixels are taken at the detector's input (its optics in pixels of that image).
-FRAME_SCALE = 1.0
-
-
-def frame_properties(frame: FrameRender | None, reference: str, illuminant: str
-                     ) -> tuple[ChartSharpness | None, ChartNoise | None]:
-    """The sharpness and noise of a check's turned chart (``frame``), measured as an audit
-    measures them (:func:`fidelity.measure.pixels.measure_pixels` at the known corners, the
-    image decoded from sRGB): the e-SFR of its slanted patch edges and the noise of its
-    neutral patches. ``(None, None)`` without a frame."""
-    if frame is None:
-        return None, None
-    got = measure_pixels(frame.srgb, frame.corners, encoding="srgb", reference=reference,
-                         illuminant=illuminant, uncertainty=False, corner_checks=False)
-    return got.sharpness, got.noise
 
 
 #: Largest ΔE00 between a flagged patch and its gamut-clipped reference for its distance from

@@ -56,7 +56,7 @@ from fidelity.camera.model import (
     read_camera_file,
 )
 from fidelity.camera.optics import Optics
-from fidelity.camera.render import ChartLayout, render_chart
+from fidelity.camera.render import ChartLayout, frame_properties, render_chart
 from fidelity.chart.image import FLOAT_PIXEL_TYPES, write_exr, write_png
 from fidelity.chart.locate import window_pixels
 from fidelity.chart.read import DEFAULT_READ, ReadOptions, read_input, reads_with_own_ocio
@@ -100,7 +100,6 @@ from fidelity.correction.models import (
 from fidelity.correction.normalise import Normalisation, normalise
 from fidelity.measure.colour import ChartMeasurement, measure_chart, neutral_patches
 from fidelity.measure.pixels import ImageMeasurement, exposure_from_neutrals, measure_pixels
-from fidelity.pipeline.check import frame_properties
 from fidelity.pipeline.records import utc_now
 from fidelity.prediction.judge import (
     DEFAULT_JUDGE,
@@ -1097,7 +1096,7 @@ def turned_chart_values(camera: CameraModel, illuminant: str, reference: str = "
                         ) -> tuple[float | None, float | None]:
     """The MTF50 (cycles per pixel, the softer edge's luminance) and the SNR at 18 % grey of
     ``camera``'s turned chart under ``illuminant``, measured as ``fidelity check`` measures
-    them (:func:`fidelity.pipeline.check.frame_properties`); None where not measured."""
+    them (:func:`fidelity.camera.render.frame_properties`); None where not measured."""
     frame = render_chart(camera, illuminant, reference=reference, frame=True).frame
     sharpness, noise = frame_properties(frame, reference, illuminant)
     mtf, snr = chart_mtf50(sharpness), chart_snr(noise)

@@ -473,6 +473,7 @@ def test_a_run_on_a_few_images_tables_their_colours_only(monkeypatch) -> None:
     2^24-entry table is never built) and maps them as the full table does; above: the full
     table. Tables are kept one camera at a time; the images' colours are found once."""
     import fidelity.coco.validate.colour as validate
+    from fidelity.camera.model import load_camera
     from fidelity.coco.dataset import PixelMap
 
     rng = np.random.default_rng(5)
@@ -490,6 +491,8 @@ def test_a_run_on_a_few_images_tables_their_colours_only(monkeypatch) -> None:
     cubes: list[str] = []
 
     class Emu:
+        camera = load_camera("ideal")  # no optics, noise or vignetting: a colour table
+
         def __init__(self, name: str) -> None:
             self.name = name
 

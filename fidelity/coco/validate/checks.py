@@ -213,12 +213,7 @@ def validation_row(camera: str, illuminant: str, chart_delta_e: float, b: Valida
     measured loss of one cell ``c`` against its baseline ``b``
     (:func:`fidelity.coco.loss.score_loss`), judged by the ``bound`` table, and how the mAP
     loss's SE was computed (``se_method``; None: no SE)."""
-    base: dict[str, float | None] = {"map": b.map, **b.ap}
-    cell: dict[str, float | None] = {"map": c.map, **c.ap}
-    loss, person, bicycle = (score_loss(k, base, cell, b.folds, c.folds, b.draws, c.draws)
-                             for k in ("map", "person", "bicycle"))
-    measured = Losses(loss.points, loss.relative, person.points, bicycle.points)
-    se = Losses(loss.points_se, loss.relative_se, person.points_se, bicycle.points_se)
+    measured, se, se_method = measured_losses(b, c)
     pred = predictions_for(chart_delta_e, 100.0 * b.map, tables)
     checks = {cls: bound_check(pred[bound].losses.get(col), measured.get(col), se.get(col),
                                pred[bound].status[col])
@@ -227,7 +222,20 @@ def validation_row(camera: str, illuminant: str, chart_delta_e: float, b: Valida
                         b.map, c.map, {k: b.ap.get(k) for k in ("person", "bicycle")},
                         {k: c.ap.get(k) for k in ("person", "bicycle")}, measured, se, pred,
                         checks)
-    return row, loss.se_method
+    return row, se_method
+
+
+def measured_losses(b: ValidationCell, c: ValidationCell) -> tuple[Losses, Losses, str | None]:
+    """The losses of cell ``c`` against its baseline ``b`` (ΔmAP in points and relative, ΔAP
+    of person and bicycle; :func:`fidelity.coco.loss.score_loss`), their standard errors and
+    how the mAP loss's SE was computed (None: no SE)."""
+    base: dict[str, float | None] = {"map": b.map, **b.ap}
+    cell: dict[str, float | None] = {"map": c.map, **c.ap}
+    loss, person, bicycle = (score_loss(k, base, cell, b.folds, c.folds, b.draws, c.draws)
+                             for k in ("map", "person", "bicycle"))
+    measured = Losses(loss.points, loss.relative, person.points, bicycle.points)
+    se = Losses(loss.points_se, loss.relative_se, person.points_se, bicycle.points_se)
+    return measured, se, loss.se_method
 
 
 def class_summary(rows: Sequence[ValidationRow], cls: str) -> ClassSummary:
@@ -251,6 +259,7 @@ __all__ = [
     "ValidationSummary",
     "bound_check",
     "class_summary",
+    "measured_losses",
     "predictions_for",
     "validation_row",
 ]

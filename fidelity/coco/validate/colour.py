@@ -54,9 +54,11 @@ from fidelity.coco.executor import (
     IDENTITY,
     CellWork,
     ExecutorOptions,
+    ImageMap,
     ModelFile,
     PixelTransform,
 )
+from fidelity.coco.imaging import camera_imaging
 from fidelity.coco.loss import LOSS_COLUMNS
 from fidelity.coco.scoring import FOLDS, load_annotated_images
 from fidelity.coco.store import ImageSet, RegisteredModel
@@ -199,7 +201,10 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
                 if not store.case(case.name):
                     prepare_case(case, store, method, training, cache, all_ids)
                 continue
-            key = json.dumps([case.name, case.sha256, case.illuminant, method, training])
+            parts: list[Any] = [case.name, case.sha256, case.illuminant, method, training]
+            if _has_imaging(case):  # optics, noise or vignetting, emulated per image
+                parts.append({"imaging": IMAGING_VERSION})
+            key = json.dumps(parts)
             emulated = PixelTransform(key, case.name)
             work += [CellWork((f.name, case.name), f"{case.name} / {f.name}", f, emulated, ids,
                               functools.partial(tables.get, case)) for f, ids in runs]
@@ -208,6 +213,16 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
     store.rescore_folds(coco, say)  # cells an earlier version stored without rest scores
     store.score_draws(coco, say)  # the bootstrap's draws of every cell not scored on them yet
     return store
+
+
+#: Version of the per-image emulation of optics, noise and vignetting
+#: (:mod:`fidelity.coco.imaging`), in the transform key of the cameras that have them.
+IMAGING_VERSION = 1
+
+
+def _has_imaging(case: CameraCase) -> bool:
+    cam = read_camera_file(case.path)
+    return cam.optics.kind != "none" or cam.noise.enabled or cam.vignetting_fov_deg is not None
 
 
 class EmulationTables:
@@ -228,21 +243,28 @@ class EmulationTables:
         self.image_ids = image_ids
         self.say = say
         self.run_ids = image_ids if run_ids is None else run_ids
-        self.built: dict[str, PixelMap] = {}
+        self.built: dict[str, ImageMap] = {}
         self.codes: np.ndarray | None = None  # the distinct colours of a small run's images
 
-    def get(self, case: CameraCase) -> PixelMap:
+    def get(self, case: CameraCase) -> ImageMap:
         """The camera's 8-bit table (:meth:`fidelity.coco.emulation.Emulation.cube`, or
-        :meth:`~fidelity.coco.emulation.Emulation.map_codes` on the images' colours)."""
+        :meth:`~fidelity.coco.emulation.Emulation.map_codes` on the images' colours); for a
+        camera with optics, noise or vignetting its
+        :class:`~fidelity.coco.imaging.CameraImaging` (colour, lens and sensor per image)."""
         if case.name not in self.built:
             self.built.clear()  # one camera's table at a time
             emu, info = prepare_case(case, self.store, self.method, self.training, self.cache,
                                      self.image_ids)
             acc = info.emulation.accuracy
+            imaging = camera_imaging(emu)
             self.say(f"{time.strftime('%H:%M:%S')} {case.name} ({case.illuminant}): chart "
                      f"ΔE {info.chart_delta_e:.2f}, emulation chart ΔE00 mean "
-                     f"{acc.chart_mean_delta_e:.2f} max {acc.chart_max_delta_e:.2f}")
-            if len(self.run_ids) <= DIRECT_IMAGES:
+                     f"{acc.chart_mean_delta_e:.2f} max {acc.chart_max_delta_e:.2f}"
+                     + ("" if imaging is None else "; optics and noise emulated per image"))
+            table: ImageMap
+            if imaging is not None:
+                table = imaging
+            elif len(self.run_ids) <= DIRECT_IMAGES:
                 if self.codes is None:
                     self.codes = np.unique(np.concatenate(
                         [colour_codes(self.cache.get(i)[0]).ravel() for i in self.run_ids]
