@@ -805,10 +805,10 @@ def evaluate_directional(mean_delta_e: float, prediction: DirectionalPrediction,
     """Apply a ``max-dmap`` ``criterion`` to the direction-aware prediction (a ``max-delta-e``
     criterion does not depend on the bound: :func:`fidelity.prediction.verdict.evaluate`) by
     the ``decision`` rule (default simple). ``loss_uncertainty``: the standard uncertainty a
-    guarded rule takes for the direction-aware loss (the directional table states no
-    sampling error of its own; :func:`fidelity.prediction.judge.judge_chart` gives the
-    classic column's at the same chart ΔE, the SE of the same sweep's worst cells, whose loss
-    is no smaller); None: U = 0."""
+    guarded rule takes for the direction-aware loss (:func:`fidelity.prediction.judge.
+    judge_chart` gives :meth:`DirectionalPrediction.uncertainty`: its own SE with the chart
+    ΔE's uncertainty through the classic slope; a table without SEs: the classic column's);
+    None: U = 0."""
     rule = decision or SIMPLE
     if criterion.kind != "max-dmap":
         return evaluate(mean_delta_e, None, criterion, decision=rule,
