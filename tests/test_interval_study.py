@@ -63,3 +63,43 @@ def test_the_committed_report_is_the_study_of_the_committed_cells():
         directional["classic_median_ratio"], rel=1e-12)
     text = (REPO / "reports/validation/interval.md").read_text(encoding="utf-8")
     assert text == st.markdown(st.study(cells), st.noise_floor(cells), 60)
+
+
+def test_jackknife_plus_is_the_order_statistic_of_the_leave_one_out_bounds():
+    """CV+ with one cell per fold is the jackknife+ (Barber et al. 2021): the bound of a new
+    cell is the ceil((n+1)(1-alpha))-th smallest of a_-i p + (m_i - a_-i p_i), written out
+    here with the leave-one-out slopes by hand."""
+    p = np.array([1.0, 2.0, 3.0, 4.0, 5.0])
+    m = np.array([0.3, 0.5, 1.2, 0.9, 1.6])
+    new = np.array([2.5])
+    alpha = 0.2  # rank ceil(6 * 0.8) = 5 of 5: the largest
+    values = []
+    for i in range(5):
+        keep = np.arange(5) != i
+        a = float(np.sum(m[keep] * p[keep]) / np.sum(p[keep] ** 2))
+        values.append(a * 2.5 + (m[i] - a * p[i]))
+    got, constants = st.cv_plus(m, p, new, alpha)
+    assert got[0] == pytest.approx(sorted(values)[4], rel=1e-14)
+    assert constants["a"] == pytest.approx(st.slope(m, p))
+    # a rank beyond n: no finite bound
+    assert math.isinf(st.cv_plus(m, p, new, 0.05)[0][0])
+    # folds by camera: cells of one camera leave together
+    groups = np.array(["x", "x", "y", "y", "z"])
+    got_g, _ = st.cv_plus(m, p, new, 0.2, groups)
+    a_x = st.slope(m[2:], p[2:])
+    assert got_g[0] >= a_x * 2.5 + (m[0] - a_x * p[0]) - 1e-12  # the largest is >= each
+
+
+def test_cv_plus_covers_exchangeable_cameras():
+    """On cells drawn alike (m = 0.3 p + N(0, 1)), the CV+ bound judged leaving each camera
+    out covers at least 1 - 2 alpha (its guarantee), in practice near 1 - alpha."""
+    rng = np.random.default_rng(5858)
+    covered = []
+    for _ in range(100):
+        n = 30
+        camera = np.repeat([f"c{i}" for i in range(n)], 2)
+        p = rng.uniform(0, 5, 2 * n)
+        m = 0.3 * p + rng.normal(0, 1, 2 * n)
+        cells = st.Cells(camera, np.tile(["a", "b"], n), m, np.ones(2 * n), p, p)
+        covered.append(st.leave_one_camera_out(cells, "classic", "calibrated CV+", 0.10).coverage)
+    assert 0.85 <= float(np.mean(covered)) <= 0.97

@@ -114,13 +114,16 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
         max_delta_e = context.max_delta_e
     criterion = check_criterion(max_delta_e, max_dmap, cls, unit)
     suites = [s for s in subjects if is_suite_file(s)]
-    if suites:  # the camera files run under the suite's illuminants
+    if suites:  # the camera files run under the suite's illuminants and transforms (--cat
+        # given: the transform of the cases the suite file gives none of their own)
         if len(suites) > 1:
             raise click.UsageError("give one suite file")
         sys.exit(run_suite_command(
             suites[0], [s for s in subjects if s not in suites], out_dir=out_dir,
             report=report, renderer=renderer, reference=reference,
-            criterion=criterion, judge=judge, context=context))
+            criterion=criterion, judge=judge, context=context,
+            default_cat=None if click.get_current_context().get_parameter_source("cat")
+            == ParameterSource.DEFAULT else cat))
     many = len(subjects) > 1
     if many and (json_path or html_path):
         raise click.UsageError("--json and --html take one camera; several write into --out")

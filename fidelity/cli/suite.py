@@ -1,4 +1,5 @@
-"""``fidelity suite``: check every camera of a suite file under its case's illuminant; and the
+"""``fidelity suite``: check every camera of a suite file under its case's illuminant and
+chromatic adaptation transform; and the
 ``--context`` option of ``check`` and ``suite``."""
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import click
 
 from fidelity.cli.options import common_options, judge_options
+from fidelity.colour.colorimetry import CHROMATIC_ADAPTATION_METHODS
 from fidelity.core.fileio import display_path
 from fidelity.pipeline.context import Context, assess, context_lines, load_context
 from fidelity.pipeline.qualify import qualify
@@ -38,11 +40,13 @@ def context_option(f: F) -> F:
 
 def run_suite_command(suite: str, cameras: Sequence[str], *, out_dir: Path, report: bool,
                       renderer: str, reference: str, criterion: Criterion,
-                      judge: JudgeOptions, context: Context | None) -> int:
+                      judge: JudgeOptions, context: Context | None,
+                      default_cat: str | None = None) -> int:
     """Check the cases, write a record per case (``OUT/CASE/report.json`` and ``.html``) and
     the summary (``OUT/summary.json``, ``OUT/index.html``), print the table; the exit
-    code."""
-    cases = suite_cases(suite, cameras)
+    code. ``default_cat``: the chromatic adaptation transform of the cases the suite file
+    gives none of their own (None: the file's ``default_cat``, else Bradford)."""
+    cases = suite_cases(suite, cameras, default_cat)
     result = run_suite(cases, suite=suite, renderer=renderer, reference=reference,
                        criterion=criterion, judge=judge)
     if context is not None:
@@ -81,6 +85,12 @@ def run_suite_command(suite: str, cameras: Sequence[str], *, out_dir: Path, repo
               help="Pass when the mean ΔE00 <= X (default: the context's max_delta_e, else "
                    f"{DEFAULT_MAX_DELTA_E:g}).")
 @judge_options()
+@click.option("--cat", type=click.Choice(CHROMATIC_ADAPTATION_METHODS, case_sensitive=False),
+              default=None,
+              help="Chromatic adaptation of the scene reference to D65 for the cases the suite "
+                   "file gives none of their own ([cat]); default: its default_cat, else "
+                   "Bradford. Under an illuminant other than D65 the spread over the "
+                   "transforms enters the ΔE's uncertainty as a type-B component.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               default="fidelity-report", show_default=True,
               help="Folder for the summary and a subfolder of reports per case.")
@@ -89,11 +99,13 @@ def run_suite_command(suite: str, cameras: Sequence[str], *, out_dir: Path, repo
 @context_option
 @common_options
 def suite(suite_file: str, renderer: str, reference: str, max_delta_e: float | None,
-          judge: JudgeOptions, out_dir: Path, report: bool, context_path: Path | None) -> None:
-    """Check every camera of a suite file under its own illuminant.
+          judge: JudgeOptions, cat: str | None, out_dir: Path, report: bool,
+          context_path: Path | None) -> None:
+    """Check every camera of a suite file under its own illuminant and chromatic adaptation.
 
-    SUITE is a camera folder's suite.toml (as fidelity validate reads it). Exit 0 when every
-    case passes, 1 when one fails, 2 on bad input.
+    SUITE is a camera folder's suite.toml (as fidelity validate reads it): each case's
+    illuminant (default_illuminant, [illuminant]) and chromatic adaptation transform
+    (default_cat, [cat]). Exit 0 when every case passes, 1 when one fails, 2 on bad input.
 
     \b
     fidelity suite cameras/suite.toml
@@ -106,7 +118,7 @@ def suite(suite_file: str, renderer: str, reference: str, max_delta_e: float | N
     sys.exit(run_suite_command(suite_file, (), out_dir=out_dir, report=report,
                                renderer=renderer, reference=reference,
                                criterion=Criterion("max-delta-e", limit), judge=judge,
-                               context=context))
+                               context=context, default_cat=cat))
 
 
 __all__ = ["context_option", "run_suite_command", "suite"]

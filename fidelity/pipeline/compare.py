@@ -39,7 +39,7 @@ from fidelity.core.errors import InvalidValueError, unknown_name
 from fidelity.correction.normalise import NORMALISATIONS, normalise
 from fidelity.measure.colour import measure_chart, neutral_patches
 from fidelity.measure.uncertainty import UncertaintyBudget, UncertaintyComponent
-from fidelity.pipeline.check import audit_image, evidence_of
+from fidelity.pipeline.check import audit_image, column_intervals, evidence_of
 from fidelity.pipeline.records import (
     ComparisonReport,
     Provenance,
@@ -163,7 +163,8 @@ def compare_charts(
     interval, validity = evidence_of(prediction, budget, reference, judge.decision.k)
     return ComparisonReport(utc_now(), sim_report, real_report, norm, m, prediction,
                             directional, verdict, prov, judge.bound, measured, emulation,
-                            uncertainty=budget, interval=interval, validity=validity)
+                            uncertainty=budget, interval=interval, validity=validity,
+                            intervals=column_intervals(prediction, budget, judge.decision.k))
 
 
 def sim_to_real_uncertainty(value: float, sim: UncertaintyBudget | None,

@@ -633,6 +633,9 @@ class ComparisonReport:
     uncertainty: UncertaintyBudget | None = None
     interval: PredictionInterval | None = None
     validity: ValidityDomain | None = None
+    #: every loss column of the prediction with its own standard uncertainty
+    #: (:func:`fidelity.pipeline.check.column_intervals`)
+    intervals: tuple[PredictionInterval, ...] = ()
 
     @property
     def mean_delta_e(self) -> float:
@@ -667,7 +670,8 @@ class ComparisonReport:
             source=replace(src, reference=f"the real camera's chart ({real_name})"),
             provenance=self.provenance, prediction=self.prediction, verdict=self.verdict,
             directional=self.directional, bound=self.bound, measured=self.measured,
-            uncertainty=self.uncertainty, interval=self.interval, validity=self.validity)
+            uncertainty=self.uncertainty, interval=self.interval, validity=self.validity,
+            intervals=self.intervals)
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> ComparisonReport:
@@ -693,7 +697,9 @@ class ComparisonReport:
                          if s2r.get("uncertainty") else None),
             interval=(PredictionInterval.from_json(d["prediction_interval"])
                       if d.get("prediction_interval") else None),
-            validity=ValidityDomain.from_json(d["validity"]) if d.get("validity") else None)
+            validity=ValidityDomain.from_json(d["validity"]) if d.get("validity") else None,
+            intervals=tuple(PredictionInterval.from_json(i)
+                            for i in d.get("prediction_intervals") or ()))
 
 
 @dataclass(frozen=True)

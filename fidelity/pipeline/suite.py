@@ -1,12 +1,12 @@
 """A suite of camera checks: every camera file of a folder under the illuminant its test case
-names.
+names, its scene reference adapted to D65 by the case's chromatic adaptation transform.
 
 The suite file is the ``suite.toml`` that ``fidelity validate`` reads
 (:func:`fidelity.coco.validate.suite.load_suite`, one reader for one format): camera files
 describe the camera, ``suite.toml`` the light each shoots under. :func:`suite_cases` picks the
 cases of a command line (the suite file, optionally with some of its camera files);
 :func:`run_suite` checks each case (:func:`fidelity.pipeline.check.check_camera` under the
-case's illuminant) and returns a :class:`SuiteResult`.
+case's illuminant and transform) and returns a :class:`SuiteResult`.
 """
 
 from __future__ import annotations
@@ -36,10 +36,12 @@ def is_suite_file(argument: str) -> bool:
     return Path(argument).name == SUITE_FILE
 
 
-def suite_cases(suite: str, cameras: Sequence[str] = ()) -> list[CameraCase]:
+def suite_cases(suite: str, cameras: Sequence[str] = (), default_cat: str | None = None
+                ) -> list[CameraCase]:
     """The cases of the suite file ``suite``: all of them, or those of ``cameras`` (camera
     files of the suite's folder, as a shell glob such as ``cameras/*.toml`` gives them), in
-    the suite's order.
+    the suite's order. ``default_cat``: the chromatic adaptation transform of the cases the
+    suite file gives none of their own (None: the file's ``default_cat``, else Bradford).
 
     Raises
     ------
@@ -47,7 +49,7 @@ def suite_cases(suite: str, cameras: Sequence[str] = ()) -> list[CameraCase]:
         As :func:`~fidelity.coco.validate.suite.load_suite_file`; a camera that is not a
         camera file of the suite's folder.
     """
-    cases = load_suite_file(suite)
+    cases = load_suite_file(suite, default_cat)
     if not cameras:
         return cases
     by_path = {c.path.resolve(): c for c in cases}
@@ -61,8 +63,8 @@ def suite_cases(suite: str, cameras: Sequence[str] = ()) -> list[CameraCase]:
 
 @dataclass(frozen=True)
 class CaseResult:
-    """One case checked: the ``case`` (camera file, illuminant), its ``report`` and the
-    ``seconds`` it took."""
+    """One case checked: the ``case`` (camera file, illuminant, chromatic adaptation
+    transform), its ``report`` and the ``seconds`` it took."""
 
     case: CameraCase
     report: ChartReport
@@ -74,12 +76,16 @@ class CaseResult:
         return self.report.exit_code
 
     def to_json(self) -> dict[str, Any]:
-        """The case, its ΔE, predicted ΔmAP, verdict and exit code (the summary's row)."""
+        """The case (with its illuminant and chromatic adaptation transform ``cat``), its ΔE
+        and the ΔE's standard uncertainty, predicted ΔmAP, verdict and exit code (the
+        summary's row)."""
         r = self.report
         p = r.prediction
         return {"name": self.case.name, "camera_file": str(self.case.path),
                 "sha256": self.case.sha256, "illuminant": self.case.illuminant,
-                "mean_delta_e": float(r.mean_delta_e), "max_delta_e": float(r.max_delta_e),
+                "cat": self.case.cat, "mean_delta_e": float(r.mean_delta_e),
+                "delta_e_uncertainty": (float(r.uncertainty.combined)
+                                        if r.uncertainty is not None else None), "max_delta_e": float(r.max_delta_e),
                 "dmap_points": (float(p.dmap_points) if p is not None
                                 and p.dmap_points is not None else None),
                 "passed": r.verdict.passed if r.verdict is not None else None,
@@ -127,7 +133,8 @@ def run_suite(cases: Sequence[CameraCase], *, suite: str = "", renderer: str = "
               reference: str = "scene", criterion: Criterion | None = DEFAULT_CRITERION,
               judge: JudgeOptions = DEFAULT_JUDGE,
               measure: MeasureRequest | None = None) -> SuiteResult:
-    """Check every case under its own illuminant.
+    """Check every case under its own illuminant, its scene reference adapted to D65 by its
+    own chromatic adaptation transform.
 
     Parameters
     ----------
@@ -153,7 +160,7 @@ def run_suite(cases: Sequence[CameraCase], *, suite: str = "", renderer: str = "
     for case in cases:
         t0 = time.perf_counter()
         report = check_camera(load_camera(str(case.path)), illuminant=case.illuminant,
-                              renderer=renderer, reference=reference, criterion=criterion,
+                              cat=case.cat, renderer=renderer, reference=reference, criterion=criterion,
                               judge=judge, measure=measure)
         out.append(CaseResult(case, report, time.perf_counter() - t0))
     return SuiteResult(suite, tuple(out), criterion)

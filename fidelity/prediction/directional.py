@@ -62,7 +62,7 @@ measured by emulating each camera on COCO.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -552,6 +552,9 @@ class DirectionalPrediction:
     notes
         Notes on the answer, in words (what it is; where a part was charged the classic
         curve).
+    standard_errors
+        The sampling error of each column (:func:`combined_standard_error` of the terms'
+        curve SEs); None where a curve point has none (a table without ``<column>_se``).
     """
 
     delta_e: float
@@ -564,6 +567,14 @@ class DirectionalPrediction:
     size_used: str
     table: Mapping[str, Any]
     notes: tuple[str, ...] = ()
+    standard_errors: Mapping[str, float | None] = field(default_factory=dict)
+
+    def uncertainty(self, column: str, propagated: float = 0.0) -> float | None:
+        """The standard uncertainty (k = 1) of ``column``: its sampling error and
+        ``propagated`` (the chart ΔE's uncertainty through the table's slope) combined as
+        uncorrelated, ``sqrt(se^2 + propagated^2)``; None where the column has no SE."""
+        se = self.standard_errors.get(column)
+        return None if se is None else math.hypot(se, propagated)
 
     @property
     def dmap_points(self) -> float | None:
@@ -615,7 +626,7 @@ class DirectionalPrediction:
                 "residual_parts": self.residual_parts.to_json(),
                 "terms": [t.to_json() for t in self.terms], "size": self.size,
                 "size_used": self.size_used, "table": dict(self.table),
-                "notes": list(self.notes)}
+                "notes": list(self.notes), "standard_errors": dict(self.standard_errors)}
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> DirectionalPrediction:
@@ -625,7 +636,8 @@ class DirectionalPrediction:
                    ErrorParts.from_json(d["residual_parts"]),
                    tuple(FamilyTerm.from_json(t) for t in d["terms"]),
                    {c: d.get(c) for c in COLUMNS}, str(d["size"]), str(d["size_used"]),
-                   dict(d["table"]), tuple(str(n) for n in d.get("notes") or ()))
+                   dict(d["table"]), tuple(str(n) for n in d.get("notes") or ()),
+                   dict(d.get("standard_errors") or {}))
 
 
 def _family_value(table: DirectionalTable, family: str, column: str, delta_e: float,
@@ -641,6 +653,34 @@ def _family_value(table: DirectionalTable, family: str, column: str, delta_e: fl
         return (None if math.isnan(v) else v), "family"
     classic = predict(delta_e, size=size, table=table.classic, transforms=False)
     return classic.columns[column].value, "classic"
+
+
+def _family_se(table: DirectionalTable, family: str, column: str, delta_e: float,
+               size: str, source: str) -> float | None:
+    """The sampling error of a family curve's loss at ``delta_e`` (the larger SE of the
+    curve points around it, as the classic table's,
+    :class:`~fidelity.prediction.interpolate.SamplingError`); the classic curve's where
+    ``source`` is ``classic``; None where the points state none."""
+    tab = table.families[family] if source == "family" else table.classic
+    got = predict(delta_e, size=size, table=tab, transforms=False).se(column)
+    return None if got is None else got.high
+
+
+def combined_standard_error(weights: Sequence[float], ses: Sequence[float | None]
+                            ) -> float | None:
+    """The sampling error of ``sum_f w_f L_f``, a weighted sum of family curve values whose
+    SEs are ``ses``: ``sum_f w_f se_f``. The family cells are scored on the same images, so
+    they are taken as fully correlated (correlation 1, the largest the sum can have; the
+    uncorrelated ``sqrt(sum w_f^2 se_f^2)`` is never larger). None when a term of positive
+    weight has no SE."""
+    total = 0.0
+    for w, se in zip(weights, ses, strict=True):
+        if w <= 0:
+            continue
+        if se is None:
+            return None
+        total += w * se
+    return total
 
 
 def predict_directional(reference_lab: ArrayLike, lab: ArrayLike, *,
@@ -709,6 +749,7 @@ def predict_directional(reference_lab: ArrayLike, lab: ArrayLike, *,
         reasons[fam] = f"{reasons[fam]}; {why}" if fam in reasons else why
     terms = []
     columns: dict[str, float | None] = dict.fromkeys(COLUMNS, 0.0)
+    term_ses: dict[str, list[float | None]] = {c: [] for c in COLUMNS}
     classic_used = set()
     for fam, w in weights.items():
         values: dict[str, float | None] = {}
@@ -716,6 +757,7 @@ def predict_directional(reference_lab: ArrayLike, lab: ArrayLike, *,
         for col in COLUMNS:
             v, src = _family_value(tab, fam, col, de, size)
             values[col], sources[col] = v, src
+            term_ses[col].append(_family_se(tab, fam, col, de, size, src))
             if src == "classic" and w > 0:
                 classic_used.add(fam)
             cur = columns[col]
@@ -730,8 +772,10 @@ def predict_directional(reference_lab: ArrayLike, lab: ArrayLike, *,
         notes.append(f"ΔE {de:.2f} is beyond the range measured for "
                      f"{', '.join(sorted(classic_used))}: that part is charged the classic "
                      "curve")
+    ws = list(weights.values())
+    ses = {c: combined_standard_error(ws, term_ses[c]) for c in COLUMNS}
     return DirectionalPrediction(de, parts, best, residual, tuple(terms), columns, size,
-                                 size_used, tab.summary(), tuple(notes))
+                                 size_used, tab.summary(), tuple(notes), ses)
 
 
 def predict_chart(measurement: ChartMeasurement, *, size: str = "any",
@@ -761,10 +805,10 @@ def evaluate_directional(mean_delta_e: float, prediction: DirectionalPrediction,
     """Apply a ``max-dmap`` ``criterion`` to the direction-aware prediction (a ``max-delta-e``
     criterion does not depend on the bound: :func:`fidelity.prediction.verdict.evaluate`) by
     the ``decision`` rule (default simple). ``loss_uncertainty``: the standard uncertainty a
-    guarded rule takes for the direction-aware loss (the directional table states no
-    sampling error of its own; :func:`fidelity.prediction.judge.judge_chart` gives the
-    classic column's at the same chart ΔE, the SE of the same sweep's worst cells, whose loss
-    is no smaller); None: U = 0."""
+    guarded rule takes for the direction-aware loss (:func:`fidelity.prediction.judge.
+    judge_chart` gives :meth:`DirectionalPrediction.uncertainty`: its own SE with the chart
+    ΔE's uncertainty through the classic slope; a table without SEs: the classic column's);
+    None: U = 0."""
     rule = decision or SIMPLE
     if criterion.kind != "max-dmap":
         return evaluate(mean_delta_e, None, criterion, decision=rule,
@@ -790,6 +834,7 @@ __all__ = [
     "FamilyFit",
     "FamilyTerm",
     "FitSpec",
+    "combined_standard_error",
     "delta_e_2000_terms",
     "error_parts",
     "evaluate_directional",

@@ -322,8 +322,10 @@ def judge_chart(mean_delta_e: float, judge: JudgeOptions = DEFAULT_JUDGE,
         The chart ΔE's standard uncertainty (None: unknown). A ``max-dmap`` verdict uses the
         predicted loss's uncertainty of the criterion's own column (points, relative, person
         or bicycle: :func:`fidelity.prediction.interval.prediction_interval`); a
-        direction-aware one the classic column's at the same ΔE (its table states none:
-        :func:`fidelity.prediction.directional.evaluate_directional`).
+        direction-aware one its own column's SE
+        (:attr:`~fidelity.prediction.directional.DirectionalPrediction.standard_errors`) with
+        the ΔE's uncertainty through the classic column's slope (a table without SEs: the
+        classic column's uncertainty, :func:`fidelity.prediction.directional.evaluate_directional`).
     properties
         Judge sharpness and noise too (:func:`judge_properties` with ``sharpness``, ``noise``
         and ``scale``; a property not measured is named as not judged).
@@ -358,6 +360,11 @@ def judge_chart(mean_delta_e: float, judge: JudgeOptions = DEFAULT_JUDGE,
             if interval is not None and (interval.table_se is not None
                                          or delta_e_uncertainty is not None):
                 loss_u = interval.standard_uncertainty
+            if bound == "directional" and directional is not None:
+                # its own SE, with u(ΔE) through the classic column's slope
+                own = directional.uncertainty(
+                    criterion.column, interval.propagated if interval is not None else 0.0)
+                loss_u = own if own is not None else loss_u
         if bound == "directional" and directional is not None:
             verdict = evaluate_directional(mean_delta_e, directional, criterion,
                                            decision=decision,

@@ -42,12 +42,14 @@ SHOWN_DIFFERENCES = 3
 
 def chain_tables(doc: Mapping[str, Any]) -> list[dict[str, Any]]:
     """The tables a record's chain starts from, each once: every subject's prediction table
-    and the property tables it names (``subjects[].property_tables``), as the record holds
+    and the property tables it names (``subjects[].property_tables``) and its direction-aware
+    table (``subjects[].directional_table``), as the record holds
     them (``name``, ``path``, ``sha256``)."""
     out: list[dict[str, Any]] = []
     seen: set[tuple[Any, Any]] = set()
     for subject in doc.get("subjects") or []:
-        for table in [subject.get("prediction_table"), *(subject.get("property_tables") or [])]:
+        for table in [subject.get("prediction_table"), *(subject.get("property_tables") or []),
+                      subject.get("directional_table")]:
             if not isinstance(table, Mapping) or not table.get("name"):
                 continue
             key = (table.get("path"), table.get("sha256"))

@@ -68,8 +68,12 @@ def comparison_lines(report: ComparisonReport) -> list[str]:
 
     pm = report.interval.plus_minus() if report.interval is not None else ""
     lines.append(f"predicted ΔmAP of the difference: {f(p.dmap_points)}{pm} points, "
-                 f"{f(p.dmap_relative)} % of baseline (classic, table {p.table.name}, "
-                 f"detector size {p.size_used})")
+                 f"{f(p.dmap_relative)}{column_pm(report, 'dmap_relative')} % of baseline "
+                 f"(classic, table {p.table.name}, detector size {p.size_used})")
+    lines.append(f"predicted ΔAP of the difference: person {f(p.dap_person_points)}"
+                 f"{column_pm(report, 'dap_person_points')} points, bicycle "
+                 f"{f(p.dap_bicycle_points)}{column_pm(report, 'dap_bicycle_points')} points"
+                 + swamped_note(report))
     if report.validity is not None and not report.validity.inside:
         lines.append(outside_line(report.validity))
     lines += directional_lines(report.as_chart_report())
@@ -81,6 +85,30 @@ def comparison_lines(report: ComparisonReport) -> list[str]:
     if report.verdict is not None:
         lines.append(verdict_message(report.verdict, "sim-to-real ΔE00"))
     return lines
+
+
+def column_pm(report: ComparisonReport, column: str) -> str:
+    """``" ± 0.69"``: the standard uncertainty (k = 1) of one loss column of a comparison's
+    prediction (its own table SE and the sim-to-real ΔE's uncertainty through that column's
+    slope, :func:`fidelity.pipeline.check.column_intervals`); empty without one."""
+    i = next((i for i in report.intervals if i.column == column), None)
+    return "" if i is None else f" ± {i.standard_uncertainty:.2f}"
+
+
+#: The loss columns besides the ΔmAP in points, by the name the reports give them.
+OTHER_COLUMNS = (("% of baseline", "dmap_relative"), ("person", "dap_person_points"),
+                 ("bicycle", "dap_bicycle_points"))
+
+
+def swamped_note(report: ComparisonReport) -> str:
+    """`` (k=1; bicycle: u >= the value, mostly noise)``: the coverage factor of the ± and
+    the columns whose uncertainty swamps their value; empty without intervals."""
+    if not report.intervals:
+        return ""
+    swamped = [name for name, column in OTHER_COLUMNS
+               if any(i.column == column and i.swamped for i in report.intervals)]
+    return " (k=1" + (f"; {', '.join(swamped)}: u >= the value, mostly noise"
+                      if swamped else "") + ")"
 
 
 def property_comparison_lines(sim: Any, real: Any) -> list[str]:
@@ -152,8 +180,14 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
         ("mean direction (simulation − real)",
          f"ΔL' {float(np.mean(m.delta_l)):+z.2f}, ΔC' {float(np.mean(m.delta_c)):+z.2f}, "
          f"|ΔH'| {float(np.mean(np.abs(m.delta_h))):.2f}"),
-        ("predicted ΔmAP of the difference, classic", f"{n2(p.dmap_points)}{pm} points "
-                                                      f"({p.table.name})"),
+        ("predicted ΔmAP of the difference, classic", f"{n2(p.dmap_points)}{pm} points, "
+                                                      f"{n2(p.dmap_relative)}"
+                                                      f"{column_pm(report, 'dmap_relative')} "
+                                                      f"% of baseline ({p.table.name})"),
+        ("predicted ΔAP of the difference, classic",
+         f"person {n2(p.dap_person_points)}{column_pm(report, 'dap_person_points')} points, "
+         f"bicycle {n2(p.dap_bicycle_points)}{column_pm(report, 'dap_bicycle_points')} points"
+         + swamped_note(report)),
         ("predicted ΔmAP of the difference, direction-aware",
          f"{n2(d.dmap_points if d else None)} points"),
         *((f"measured ΔmAP on COCO, {x.model}", x.summary().removeprefix("measured ΔmAP "))

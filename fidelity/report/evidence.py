@@ -62,6 +62,7 @@ from fidelity.pipeline.records import (
     RenderSource,
     utc_now,
 )
+from fidelity.prediction.directional import load_directional_table
 from fidelity.prediction.interval import (
     VALIDATED_CAMERAS_FILE,
     ValidityDomain,
@@ -89,11 +90,12 @@ CREDIBILITY_SECTIONS: Mapping[str, tuple[str, ...]] = {
     "verification": ("tool.version", "tool.commit", "tool.dirty", "tool.code_sha256",
                      "environment"),
     "validation": ("subjects[].prediction_table", "subjects[].property_tables",
-                   "subjects[].validity"),
+                   "subjects[].directional_table", "subjects[].validity"),
     "uncertainty": ("subjects[].measurement.uncertainty", "subjects[].prediction.interval"),
     "traceability": ("subjects[].inputs[].sha256", "subjects[].prediction_table.sha256",
                      "subjects[].prediction_table.scores_files[].sha256",
-                     "subjects[].property_tables[].sha256", "context_of_use.file.sha256",
+                     "subjects[].property_tables[].sha256",
+                     "subjects[].directional_table.sha256", "context_of_use.file.sha256",
                      "subjects[].validity.validated_cameras.sha256", "record.content_sha256",
                      "tool.commit", "tool.code_sha256", "record.created", "invocation.argv",
                      "invocation.settings.sha256"),
@@ -302,6 +304,24 @@ def property_tables(report: ChartReport) -> list[dict[str, Any]]:
     return out
 
 
+def directional_table(report: ChartReport) -> dict[str, Any] | None:
+    """The direction-aware table the report's direction-aware prediction read (its loss and
+    its SE): ``{"name", "path", "sha256", "scores_files"}``; None without that prediction,
+    path and SHA-256 None for a table not found here."""
+    d = report.directional
+    if d is None:
+        return None
+    name = str(d.table.get("name"))
+    path = d.table.get("path")
+    try:
+        table = load_directional_table(str(path) if path else name)
+    except FidelityError:
+        return {"name": name, "path": None, "sha256": None, "scores_files": []}
+    entry = (_file_entry(Path(table.path)) if table.path
+             else {"path": None, "sha256": None})
+    return {"name": table.name, **entry, "scores_files": scores_files(table.provenance)}
+
+
 def scores_files(provenance: Mapping[str, Any]) -> list[dict[str, Any]]:
     """The scores files a table's rows rebuild from, as its ``provenance.scores_files`` names
     them: each ``{"path", "sha256", "models"}``, the path relative to the source checkout
@@ -351,6 +371,7 @@ def _subject(subject: str, report: ChartReport | None, error: str | None) -> dic
                       "conventions": json_ready(dict(report.provenance.conventions))},
         "prediction_table": _table(report),
         "property_tables": property_tables(report),
+        "directional_table": directional_table(report),
         "measurement": {
             "quantity": "mean ΔE00", "value": report.mean_delta_e,
             "max_delta_e": report.max_delta_e, "worst_patch": report.worst_patch,

@@ -124,6 +124,7 @@ def comparison_json(report: ComparisonReport) -> JSONObject:
         "measured_loss": [x.to_json() for x in r.measured],
         "emulation": dict(r.emulation) if r.emulation else None,
         "prediction_interval": r.interval.to_json() if r.interval else None,
+        "prediction_intervals": [i.to_json() for i in r.intervals],
         "validity": r.validity.to_json() if r.validity else None,
         "sim": chart_report_json(r.sim), "real": chart_report_json(r.real),
         "provenance": r.provenance.to_json()})

@@ -21,25 +21,31 @@ def _verdict(passed: bool | None, code: int) -> str:
 
 
 def suite_rows(result: SuiteResult) -> list[list[str]]:
-    """One row per case: case, illuminant, mean ΔE00, max ΔE00, predicted ΔmAP, verdict."""
+    """One row per case: case, illuminant, chromatic adaptation transform, mean ΔE00 with its
+    standard uncertainty (k = 1, the transforms' spread a type-B part under an illuminant
+    other than D65), max ΔE00, predicted ΔmAP, verdict."""
     rows = []
     for c in result.cases:
         j = c.to_json()
-        dm = j["dmap_points"]
-        rows.append([c.case.name, c.case.illuminant, f"{j['mean_delta_e']:.2f}",
+        dm, u = j["dmap_points"], j["delta_e_uncertainty"]
+        rows.append([c.case.name, c.case.illuminant, c.case.cat,
+                     f"{j['mean_delta_e']:.2f}" + ("" if u is None else f" ± {u:.2f}"),
                      f"{j['max_delta_e']:.2f}", "-" if dm is None else f"{dm:.2f}",
                      _verdict(j["passed"], c.exit_code)])
     return rows
 
 
-HEADER = ("case", "illuminant", "mean ΔE00", "max ΔE00", "ΔmAP (points)", "verdict")
+HEADER = ("case", "illuminant", "CAT", "mean ΔE00 (± u, k=1)", "max ΔE00", "ΔmAP (points)",
+          "verdict")
+#: Which columns of :data:`HEADER` are numbers (right-aligned).
+NUMERIC = (False, False, False, True, True, True, False)
 
 
 def suite_lines(result: SuiteResult) -> list[str]:
     """The terminal table of the cases and the count of those that failed."""
     rows = [list(HEADER), *suite_rows(result)]
     widths = [max(len(r[i]) for r in rows) for i in range(len(HEADER))]
-    lines = ["  ".join(cell.ljust(w) if i < 2 or i == 5 else cell.rjust(w)
+    lines = ["  ".join(cell.rjust(w) if NUMERIC[i] else cell.ljust(w)
                        for i, (cell, w) in enumerate(zip(r, widths, strict=True))).rstrip()
              for r in rows]
     n, failed = len(result.cases), len(result.failed)
@@ -59,8 +65,7 @@ def suite_document(result: SuiteResult, links: dict[str, str] | None = None) -> 
     headline = Headline(f"{n - failed} of {n} cases passed"
                         + (f"; failed: {', '.join(c.case.name for c in result.failed)}"
                            if failed else ""), tone)
-    sections = [section("Cases", table(HEADER, rows, numeric=(False, False, True, True, True,
-                                                               False)))]
+    sections = [section("Cases", table(HEADER, rows, numeric=NUMERIC))]
     if result.assessment is not None:
         sections.append(context_section(result.assessment))
     return Document(f"fidelity suite: {result.suite}", headline, tuple(sections))
@@ -76,5 +81,5 @@ def write_suite_summary(result: SuiteResult, out_dir: str | os.PathLike[str], *,
     return written
 
 
-__all__ = ["HEADER", "suite_document", "suite_lines",
+__all__ = ["HEADER", "NUMERIC", "suite_document", "suite_lines",
            "suite_rows", "write_suite_summary"]

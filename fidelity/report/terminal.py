@@ -199,12 +199,18 @@ def directional_lines(report: ChartReport) -> list[str]:
         used = ("; the verdict uses this bound" if report.bound == "directional" else
                 "; the verdict uses the classic bound (--bound directional: this one)")
     by = {i.column: i for i in report.intervals}
+    own = {c: d.uncertainty(c, by[c].propagated if c in by else 0.0)
+           for c in ("dmap_points", "dmap_relative")}
+    mine = all(v is not None for v in own.values())
 
     def u(column: str) -> str:
+        if mine:
+            return f" ± {own[column]:.2f}"
         i = by.get(column)
         return "" if i is None else f" ± {i.standard_uncertainty:.2f}"
 
-    whose = " (± the classic column's u: the directional table states no SE)" if by else ""
+    whose = (" (k=1: its own table SE and u(ΔE) through the classic slope)" if mine else
+             " (± the classic column's u: the directional table states no SE)" if by else "")
     return [f"direction-aware ΔmAP: {f(d.dmap_points)}{u('dmap_points')} points, "
             f"{f(d.dmap_relative)}{u('dmap_relative')} % of baseline{whose} "
             f"({d.explanation()}){used}"]

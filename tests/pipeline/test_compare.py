@@ -16,6 +16,8 @@ from fidelity.colour.charts import load_reference
 from fidelity.colour.colorimetry import delinearize_srgb, delta_e_2000, linearize_srgb, srgb_to_lab
 from fidelity.pipeline.compare import compare_charts
 from fidelity.pipeline.records import ComparisonReport
+from fidelity.prediction.interval import prediction_interval
+from fidelity.report.compare import comparison_lines
 from fidelity.report.jsonform import comparison_json
 
 PATCH, GAP = 40, 10
@@ -185,3 +187,33 @@ def test_the_html_summary_states_the_uncertainty_and_the_interval(charts):
     assert rows["sim-to-real ΔE00"].startswith(f"mean {uncertain_text(r.mean_delta_e, u)} (k=1)")
     assert f"± {r.interval.standard_uncertainty:.2f} (k=1) points" in \
         rows["predicted ΔmAP of the difference, classic"]
+
+
+def test_compare_states_each_loss_column_with_its_own_uncertainty(charts, tmp_path):
+    """Every loss column of the comparison's prediction has its own ± (k = 1): that column's
+    table SE and the sim-to-real ΔE's uncertainty through that column's slope, the same
+    numbers prediction_interval gives for the column, printed beside each value."""
+    paths, _, _ = charts
+    r = compare_charts(paths["sim"], paths["real"], sim_corners=CORNERS, real_corners=CORNERS,
+                       normalise_mode="none")
+    by = {i.column: i for i in r.intervals}
+    assert set(by) == {"dmap_points", "dmap_relative", "dap_person_points",
+                       "dap_bicycle_points"}
+    u = r.uncertainty.combined
+    for column, i in by.items():
+        direct = prediction_interval(r.prediction, u, column, 2.0)
+        assert i.standard_uncertainty == pytest.approx(direct.standard_uncertainty, rel=1e-12)
+        assert i.table_se is not None and i.table_se > 0  # the column's own SE, not none
+    # the relative column's SE is its own, not the points column's
+    assert by["dmap_relative"].table_se != by["dmap_points"].table_se
+    text = "\n".join(comparison_lines(r))
+    p = r.prediction
+    assert (f"{p.dmap_relative:.2f} ± {by['dmap_relative'].standard_uncertainty:.2f} "
+            "% of baseline") in text
+    assert (f"person {p.dap_person_points:.2f} ± "
+            f"{by['dap_person_points'].standard_uncertainty:.2f} points") in text
+    assert (f"bicycle {p.dap_bicycle_points:.2f} ± "
+            f"{by['dap_bicycle_points'].standard_uncertainty:.2f} points") in text
+    # the record keeps them
+    back = ComparisonReport.from_json(comparison_json(r))
+    assert [i.to_json() for i in back.intervals] == [i.to_json() for i in r.intervals]

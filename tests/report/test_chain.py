@@ -22,6 +22,7 @@ from fidelity.report.chain import chain_tables, table_chain
 REPO = Path(__file__).resolve().parents[2]
 DATA = REPO / "fidelity" / "data"
 MEASURED = DATA / "prediction" / "coco1000-measured.json"
+DIRECTIONAL = DATA / "prediction" / "coco1000-directional.json"
 
 
 def sha256(path: Path) -> str:
@@ -65,7 +66,8 @@ def test_a_check_record_names_every_table_and_the_chain_holds(tmp_path, monkeypa
     assert r.exit_code == 0, r.output
     doc = json.loads((tmp_path / "r.json").read_text())
     tables = {t["name"]: t for t in chain_tables(doc)}
-    assert set(tables) == {"coco1000-measured", "coco1000-sharpness", "coco1000-noise"}
+    assert set(tables) == {"coco1000-measured", "coco1000-sharpness", "coco1000-noise",
+                           "coco1000-directional"}
     for t in tables.values():
         assert t["sha256"] == sha256(Path(t["path"]))
     props = {p["name"]: p for p in doc["subjects"][0]["property_tables"]}
@@ -76,8 +78,10 @@ def test_a_check_record_names_every_table_and_the_chain_holds(tmp_path, monkeypa
     chain = [f for f in json.loads((tmp_path / "v.json").read_text())["findings"]
              if f["kind"] == "chain"]
     assert {f["status"] for f in chain} == {"linked"}
-    assert len(chain) == 3 + 4 + 1 + 1 + 1 + 1 + 1  # tables, scores files, rows
-    assert "chain: 12 links hold" in r.output
+    # measured: table, 4 scores files, rows; sharpness and noise: table, scores file, rows;
+    # directional: table, the same 4 scores files, rows
+    assert len(chain) == 6 + 3 + 3 + 6
+    assert "chain: 18 links hold" in r.output
 
 
 def _entry(path: Path) -> dict[str, str]:
@@ -211,3 +215,18 @@ def test_several_store_arguments_must_all_be_scores_files(tmp_path):
                                   str(tmp_path / "r")])
     assert r.exit_code == 2
     assert f"{tmp_path}: not a scores file" in r.output
+
+
+def test_an_edited_directional_standard_error_breaks_the_rows_link(tmp_path, shared):
+    """The direction-aware table's per-column SEs are rebuilt from the committed scores files
+    (with the COCO annotations): one forged SE breaks the rows link, naming the row."""
+    doc = json.loads(DIRECTIONAL.read_text())
+    curve = next(c for c in doc["families"]["hue"]["curves"] if c["model"] == "yolox_nano")
+    point = next(p for p in curve["points"] if p["delta_e"] == 3.0)
+    point["dap_person_points_se"] = round(point["dap_person_points_se"] / 2, 4)  # forged
+    copy = tmp_path / "edited.json"
+    copy.write_text(json.dumps(doc), encoding="utf-8")
+    entry = {"name": "coco1000-directional", "path": str(copy), "sha256": sha256(copy)}
+    found = table_chain(entry, None, tmp_path)
+    assert [f.status for f in found] == ["linked"] * 5 + ["broken"]
+    assert "family hue yolox_nano ΔE 3: dap_person_points_se" in found[-1].detail

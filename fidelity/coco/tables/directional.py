@@ -29,6 +29,13 @@ def _family_point(cells: Sequence[Any], columns: Sequence[str]) -> dict[str, Any
         point[col] = round(float(max(vals)), 4) if vals else None
     se = worst.errors.dmap_points if worst.errors is not None else None
     point["dmap_points_se"] = None if se is None else round(float(se), 4)
+    # each other column's SE: that of the cell whose value the column took (as the classic
+    # table's, fidelity.coco.tables.prediction.row_errors)
+    for col in columns[1:]:
+        have = [c for c in cells if getattr(c, col) is not None]
+        top = max(have, key=lambda c: getattr(c, col)) if have else None
+        v = getattr(top.errors, col) if top is not None and top.errors is not None else None
+        point[f"{col}_se"] = None if v is None else round(float(v), 4)
     return point
 
 
@@ -75,7 +82,8 @@ def directional_table(tables: Tables, name: str = DEFAULT_DIRECTIONAL_TABLE,
             sizes.setdefault(tables.models[model].size, []).append(model)
         for size, models in sorted(sizes.items()):
             targets = sorted({e for m in models for e in by_model[m]})
-            points = [{"delta_e": 0.0, **dict.fromkeys(columns, 0.0), "dmap_points_se": None,
+            points = [{"delta_e": 0.0, **dict.fromkeys(columns, 0.0),
+                       **dict.fromkeys((f"{k}_se" for k in columns), None),
                        "worst_transform": None, "source": "ΔE 0: no transform"}]
             for e in targets:
                 if not all(complete[m].get(e, False) for m in models):
@@ -84,7 +92,7 @@ def directional_table(tables: Tables, name: str = DEFAULT_DIRECTIONAL_TABLE,
                 if p is None:
                     break
                 points.append({"delta_e": e, **{k: p[k] for k in columns},
-                               "dmap_points_se": p["dmap_points_se"],
+                               **{f"{k}_se": p[f"{k}_se"] for k in columns},
                                "worst_transform": p["worst_transform"],
                                "source": f"worst over {', '.join(fam.transforms)} and "
                                          f"{len(models)} model(s): {p['worst_model']}"})
@@ -92,7 +100,8 @@ def directional_table(tables: Tables, name: str = DEFAULT_DIRECTIONAL_TABLE,
             for m in models:
                 info = tables.models[m]
                 mpoints = [{"delta_e": 0.0, **dict.fromkeys(columns, 0.0),
-                            "dmap_points_se": None, "worst_transform": None,
+                            **dict.fromkeys((f"{k}_se" for k in columns), None),
+                            "worst_transform": None,
                             "source": "ΔE 0: no transform"}]
                 for e in sorted(by_model[m]):
                     if not complete[m].get(e, False):
@@ -101,7 +110,7 @@ def directional_table(tables: Tables, name: str = DEFAULT_DIRECTIONAL_TABLE,
                     if p is None:
                         break
                     mpoints.append({"delta_e": e, **{k: p[k] for k in columns},
-                                    "dmap_points_se": p["dmap_points_se"],
+                                    **{f"{k}_se": p[f"{k}_se"] for k in columns},
                                     "worst_transform": p["worst_transform"],
                                     "source": f"{m}: worst over {', '.join(fam.transforms)}"})
                 curves.append({"size": size, "model": m, "baseline_map": info.baseline_map,
