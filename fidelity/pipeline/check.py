@@ -45,7 +45,11 @@ from fidelity.core.errors import FidelityError, InvalidValueError
 from fidelity.core.fileio import file_sha256
 from fidelity.measure.blindspots import banding, chart_blind_spots
 from fidelity.measure.chartnoise import ChartNoise
-from fidelity.measure.chartsharpness import ChartSharpness, EdgeTargetCorners
+from fidelity.measure.chartsharpness import (
+    ChartSharpness,
+    EdgeTargetCorners,
+    painted_target_sharpness,
+)
 from fidelity.measure.colour import measure_chart, neutral_patches
 from fidelity.measure.pixels import measure_image, measure_pixels
 from fidelity.measure.uncertainty import ADAPTATION_SPREAD, adaptation_component
@@ -65,7 +69,7 @@ from fidelity.prediction.interval import (
     validity_domain,
 )
 from fidelity.prediction.judge import DEFAULT_JUDGE, JudgeOptions, judge_chart
-from fidelity.prediction.properties import detector_scale
+from fidelity.prediction.properties import chart_mtf50, detector_scale
 from fidelity.prediction.tablefile import COLUMNS
 from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion
 
@@ -309,15 +313,31 @@ FRAME_SCALE = 1.0
 
 def frame_properties(frame: FrameRender | None, reference: str, illuminant: str
                      ) -> tuple[ChartSharpness | None, ChartNoise | None]:
-    """The sharpness and noise of a check's turned chart (``frame``), measured as an audit
-    measures them (:func:`fidelity.measure.pixels.measure_pixels` at the known corners, the
-    image decoded from sRGB): the e-SFR of its slanted patch edges and the noise of its
-    neutral patches. ``(None, None)`` without a frame."""
+    """The sharpness and noise of a check's render (``frame``), measured as an audit
+    measures them (the images decoded from sRGB): the noise of the turned chart's neutral
+    patches (:func:`fidelity.measure.pixels.measure_pixels` at the known corners) and the
+    e-SFR of the slanted-edge target rendered beside it
+    (:func:`fidelity.measure.chartsharpness.painted_target_sharpness`; the turned chart's
+    patch edges where the frame has no target, or where no edge of the target gave a
+    luminance MTF50 and a patch edge did: a target clipped by an over-exposed camera).
+    ``(None, None)`` without a frame."""
     if frame is None:
         return None, None
     got = measure_pixels(frame.srgb, frame.corners, encoding="srgb", reference=reference,
                          illuminant=illuminant, uncertainty=False, corner_checks=False)
-    return got.sharpness, got.noise
+    if frame.target_srgb is None or frame.target is None:
+        return got.sharpness, got.noise
+    sharpness = painted_target_sharpness(
+        frame.target_srgb, frame.target, linearise=_decode_srgb,
+        linearisation="sRGB transfer function decoded (IEC 61966-2-1)", saturation=1.0,
+        black=0.0, source=f"the check's edge target ({frame.target_renderer})")
+    if chart_mtf50(sharpness) is None and chart_mtf50(got.sharpness) is not None:
+        return got.sharpness, got.noise  # the target refused (clipped, say): the patch edges
+    return sharpness, got.noise
+
+
+def _decode_srgb(v: np.ndarray) -> np.ndarray:
+    return np.asarray(linearize_srgb(v), np.float64)
 
 
 #: Largest ΔE00 between a flagged patch and its gamut-clipped reference for its distance from
