@@ -367,6 +367,95 @@ def render_raw(
     ``variant`` None probes (:func:`probe_variant`); ``seed`` seeds the sampler; ``sampler``
     a Mitsuba sampler plugin (default :data:`DEFAULT_SAMPLER`, from the template).
     """
+    def scene(channels: FloatArray, template: dict[str, Any]) -> dict[str, Any]:
+        return build_scene_dict(reflectance, illuminant, channels, layout, spp, step, template)
+
+    return _render(scene, (layout.height, layout.width), illuminant, sensitivities, spp=spp,
+                   step=step, variant=variant, seed=seed, sampler=sampler)
+
+
+def build_target_dict(target: Any, illuminant: ArrayLike, film_channels: ArrayLike, spp: int,
+                      step: float = GRID_STEP_NM, template: dict[str, Any] | None = None
+                      ) -> dict[str, Any]:
+    """The template filled with a slanted-edge target
+    (:class:`fidelity.chart.turned.PaintedEdgeTarget`, 1 world unit = 1 pixel): a light
+    rectangle over the whole film half a pixel behind a dark square of ``target.side_px``
+    turned ``target.angle_deg`` (counter-clockwise in the image, y down: clockwise in world
+    coordinates, y up), both spectrally flat at ``target.light`` and ``target.dark``."""
+    import mitsuba as mi
+
+    h, w = target.size
+    n = np.asarray(illuminant).size
+    square: dict[str, Any] = {"type": "rectangle", "bsdf": {"type": "diffuse"}}
+    layout = _TargetFrame(h, w)
+    t = build_scene_dict(np.zeros((0, n)), illuminant, film_channels, layout, spp,
+                         step, template)
+    # pixel (row i, column j) centre at world (j + 1/2, h - i - 1/2): the target's centre,
+    # image ((w - 1) / 2, (h - 1) / 2), is world (w / 2, h / 2)
+    field = copy.deepcopy(square)
+    field["to_world"] = mi.ScalarTransform4f().translate([w / 2, h / 2, -0.5]) @ (
+        mi.ScalarTransform4f().scale([w, h, 1.0]))
+    field["bsdf"]["reflectance"] = _regular(np.full(n, float(target.light)), step)
+    dark = copy.deepcopy(square)
+    half = float(target.side_px) / 2
+    dark["to_world"] = (mi.ScalarTransform4f().translate([w / 2, h / 2, 0.0])
+                        @ mi.ScalarTransform4f().rotate([0.0, 0.0, 1.0], -float(target.angle_deg))
+                        @ mi.ScalarTransform4f().scale([half, half, 1.0]))
+    dark["bsdf"]["reflectance"] = _regular(np.full(n, float(target.dark)), step)
+    t["edge_field"], t["edge_square"] = field, dark
+    return t
+
+
+@dataclass(frozen=True)
+class _TargetFrame:
+    """The film of a target render, as :func:`build_scene_dict` reads a layout (no patches)."""
+
+    height: int
+    width: int
+
+
+def render_target_raw(
+    target: Any,
+    illuminant: ArrayLike,
+    sensitivities: ArrayLike,
+    *,
+    spp: int = DEFAULT_SPP,
+    step: float = GRID_STEP_NM,
+    variant: str | None = None,
+    seed: int = 0,
+    sampler: str | None = None,
+) -> MitsubaImage:
+    """Render a slanted-edge target (:func:`build_target_dict`) and return camera raw RGB in
+    :func:`fidelity.camera.model.camera_response` units, as :func:`render_raw` does for the
+    chart (the template's box pixel filter: each pixel the average over its area).
+
+    Parameters
+    ----------
+    target
+        A :class:`fidelity.chart.turned.PaintedEdgeTarget` (its size, square, turn and
+        reflectances).
+    illuminant, sensitivities
+        The illuminant's SPD ``(N,)`` and the camera's sensitivities ``(N, 3)`` on the grid.
+    spp, step, variant, seed, sampler
+        As for :func:`render_raw`.
+
+    Returns
+    -------
+    MitsubaImage
+        The raw image ``target.size + (3,)``.
+    """
+    def scene(channels: FloatArray, template: dict[str, Any]) -> dict[str, Any]:
+        return build_target_dict(target, illuminant, channels, spp, step, template)
+
+    return _render(scene, tuple(target.size), illuminant, sensitivities, spp=spp, step=step,
+                   variant=variant, seed=seed, sampler=sampler)
+
+
+def _render(scene_dict: Any, size: tuple[int, int], illuminant: ArrayLike,
+            sensitivities: ArrayLike, *, spp: int, step: float, variant: str | None,
+            seed: int, sampler: str | None) -> MitsubaImage:
+    """Activate a variant, fill the template by ``scene_dict(film channels, template)``,
+    render ``size`` (H, W) and recombine the film's channels to camera raw units."""
     if spp < 1:
         raise InvalidValueError(f"spp must be >= 1, got {spp}")
     probe = probe_variant() if variant is None else probe_variant((variant,))
@@ -387,14 +476,14 @@ def render_raw(
             raise unknown_name("Mitsuba sampler", sampler, SAMPLERS)
         template["sensor"]["sampler"]["type"] = sampler
     used_sampler = template["sensor"]["sampler"]["type"]
-    scene = mi.load_dict(build_scene_dict(reflectance, e, channels, layout, spp, step, template))
+    scene = mi.load_dict(scene_dict(channels, template))
     # some samplers round the sample count (multijitter: to a w x h grid); report what ran
     effective_spp = int(scene.sensors()[0].sampler().sample_count())
     t0 = time.perf_counter()
     img = np.asarray(mi.render(scene, seed=int(seed), spp=effective_spp), dtype=np.float64)
     seconds = time.perf_counter() - t0
     norm = float(e @ cie_1931_cmfs(step)[:, 1]) * step
-    raw = (img.reshape(layout.height, layout.width, -1) @ recombine.T) * (np.pi / norm)
+    raw = (img.reshape(size[0], size[1], -1) @ recombine.T) * (np.pi / norm)
     return MitsubaImage(raw, probe.variant, probe.libllvm, effective_spp, used_sampler, seconds,
                         probe.notes)
 
@@ -411,10 +500,12 @@ __all__ = [
     "MitsubaUnavailableError",
     "VariantProbe",
     "build_scene_dict",
+    "build_target_dict",
     "find_libllvm",
     "libllvm_candidates",
     "load_template",
     "probe_variant",
     "render_raw",
+    "render_target_raw",
     "split_channels",
 ]

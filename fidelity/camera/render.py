@@ -42,8 +42,14 @@ from fidelity.camera.model import (
     vignetting_gain,
     white_balance_gains,
 )
-from fidelity.chart.turned import CALIBRATION_GEOMETRY, TurnedChart
+from fidelity.chart.turned import (
+    CALIBRATION_GEOMETRY,
+    CHECK_EDGE_TARGET,
+    PaintedEdgeTarget,
+    TurnedChart,
+)
 from fidelity.colour.charts import load_chart
+from fidelity.colour.colorimetry import linearize_srgb
 from fidelity.colour.spectral import (
     GRID_STEP_NM,
     load_illuminant,
@@ -53,7 +59,7 @@ from fidelity.colour.spectral import (
 from fidelity.core.errors import FidelityError, InvalidValueError, unknown_name
 from fidelity.measure import uncertainty as unc
 from fidelity.measure.chartnoise import ChartNoise
-from fidelity.measure.chartsharpness import ChartSharpness
+from fidelity.measure.chartsharpness import ChartSharpness, painted_target_sharpness
 from fidelity.measure.colour import ChartMeasurement, measure_chart
 from fidelity.measure.pixels import measure_pixels
 from fidelity.measure.uncertainty import UncertaintyBudget
@@ -176,11 +182,20 @@ class FrameRender:
     sRGB (unclipped for a linear-output camera, as :func:`fidelity.camera.model.develop`
     gives it); ``corners``: the ``(4, 2)`` image centres of the dark skin, bluish green, black
     and white patches.
+
+    Beside it, the ISO 12233 slanted-edge target (``target``,
+    :data:`fidelity.chart.turned.CHECK_EDGE_TARGET`: a 0.2 square turned 5 degrees on a 0.8
+    field, spectrally flat) through the same stages: ``target_srgb`` ``(H, W, 3)`` encoded
+    sRGB, painted in closed form (``target_renderer`` ``closed-form``) or rendered by Mitsuba
+    where the chart was (``mitsuba``); None where not rendered.
     """
 
     srgb: FloatArray
     corners: FloatArray
     geometry: TurnedChart
+    target_srgb: FloatArray | None = None
+    target: PaintedEdgeTarget | None = None
+    target_renderer: str = "closed-form"
 
 
 @dataclass(frozen=True)
@@ -413,6 +428,7 @@ def render_chart(
     settings: dict[str, Any] = {"illuminant": ill.name, "spectra": ps.name,
                                 "reference": reference, "seed": seed}
     mitsuba_info: dict[str, Any] = {}
+    target_raw: FloatArray | None = None
     if renderer == "closed-form":
         ppp = pixels_per_patch or CLOSED_FORM_PIXELS_PER_PATCH
         layout = ChartLayout.for_patch_size(ppp)
@@ -428,6 +444,11 @@ def render_chart(
                              seed=0 if seed is None else seed, sampler=sampler)
         raw = mimg.image
         used_variant = mimg.variant
+        if frame:  # the edge target through the same renderer
+            target_raw = mr.render_target_raw(CHECK_EDGE_TARGET, e, sens, spp=spp, step=step,
+                                              variant=mimg.variant,
+                                              seed=0 if seed is None else seed,
+                                              sampler=sampler).image
         mitsuba_info = {"spp": mimg.spp, "sampler": mimg.sampler, "variant": mimg.variant, "libllvm": mimg.libllvm,
                         "render_seconds": mimg.seconds_render, "probe": list(mimg.probe_notes)}
     settings.update(renderer=renderer, pixels_per_patch=layout.patch_px,
@@ -450,9 +471,11 @@ def render_chart(
         turned = None
         if frame:
             flat = np.full((1, refl.shape[-1]), FRAME_REFLECTANCE)
+            white = camera_response(np.ones((1, refl.shape[-1])), e, sens, step)[0]
             turned = _render_frame(cam, closed, camera_response(flat, e, sens, step)[0], gain,
                                    seed, lambda img: develop(cam, img, cam_rgb, ill, ccm=dev.ccm,
-                                                             spectra=spectra, step=step).srgb)
+                                                             spectra=spectra, step=step).srgb,
+                                   white, target_raw)
 
     if reference == "scene":
         ref = scene_reference(ill, spectra, cat=cat, step=step)
@@ -513,21 +536,36 @@ def render_chart(
 
 
 def _render_frame(cam: CameraModel, patches: FloatArray, flat: FloatArray, gain: float,
-                  seed: int | None, developed: Callable[[FloatArray], FloatArray]
-                  ) -> FrameRender:
+                  seed: int | None, developed: Callable[[FloatArray], FloatArray],
+                  white: FloatArray, target_raw: FloatArray | None = None) -> FrameRender:
     """The turned chart through ``cam`` (:class:`FrameRender`): raw ``patches`` (24, 3) and the
-    frame's raw ``flat`` (3,) painted, then the chart's own stages."""
+    frame's raw ``flat`` (3,) painted, then the chart's own stages; and the edge target
+    (:data:`~fidelity.chart.turned.CHECK_EDGE_TARGET`) painted from the raw response to a
+    perfect white ``white`` (3,), or ``target_raw`` where a renderer gave it (before the
+    exposure gain), through the same stages."""
     geometry = CALIBRATION_GEOMETRY
-    raw = geometry.paint(patches, flat) * gain
+    srgb = developed(_camera_stages(cam, geometry.paint(patches, flat) * gain, seed,
+                                    "the turned chart"))
+    _require_finite(srgb, "the turned chart's developed image")
+    target = CHECK_EDGE_TARGET
+    painted = target.paint(white) if target_raw is None else target_raw
+    target_srgb = developed(_camera_stages(cam, painted * gain, seed, "the edge target"))
+    _require_finite(target_srgb, "the edge target's developed image")
+    return FrameRender(srgb=srgb, corners=geometry.corners(), geometry=geometry,
+                       target_srgb=target_srgb, target=target,
+                       target_renderer="closed-form" if target_raw is None else "mitsuba")
+
+
+def _camera_stages(cam: CameraModel, raw: FloatArray, seed: int | None, what: str
+                   ) -> FloatArray:
+    """``raw`` (exposed) through ``cam``'s vignetting, optics and sensor noise."""
     if cam.vignetting_fov_deg is not None:
-        raw = raw * vignetting_gain(*geometry.size, cam.vignetting_fov_deg)[..., None]
+        raw = raw * vignetting_gain(raw.shape[0], raw.shape[1], cam.vignetting_fov_deg)[..., None]
     if cam.optics.kind != "none":
         raw = cam.optics.apply(raw)
     raw = add_sensor_noise(raw, cam.noise, seed)
-    _require_finite(raw, "the turned chart's raw image")
-    srgb = developed(raw)
-    _require_finite(srgb, "the turned chart's developed image")
-    return FrameRender(srgb=srgb, corners=geometry.corners(), geometry=geometry)
+    _require_finite(raw, f"{what}'s raw image")
+    return raw
 
 
 def _white_balance_developer(cam: CameraModel, illuminant: Any, ccm: FloatArray, spectra: str,
@@ -639,10 +677,13 @@ FRAME_SCALE = 1.0
 
 def frame_properties(frame: FrameRender | None, reference: str, illuminant: str
                      ) -> tuple[ChartSharpness | None, ChartNoise | None]:
-    """The sharpness and noise of a check's turned chart (``frame``), measured as an audit
-    measures them (:func:`fidelity.measure.pixels.measure_pixels` at the known corners, the
-    image decoded from sRGB): the e-SFR of its slanted patch edges and the noise of its
-    neutral patches. ``(None, None)`` without a frame.
+    """The sharpness and noise of a check's render (``frame``), measured as an audit
+    measures them (the images decoded from sRGB): the noise of the turned chart's neutral
+    patches (:func:`fidelity.measure.pixels.measure_pixels` at the known corners) and the
+    e-SFR of the slanted-edge target rendered beside it
+    (:func:`fidelity.measure.chartsharpness.painted_target_sharpness`; the turned chart's
+    patch edges where the frame has no target, or where no edge of the target gave a
+    luminance MTF50 and a patch edge did: a target clipped by an over-exposed camera).
 
     Parameters
     ----------
@@ -656,14 +697,38 @@ def frame_properties(frame: FrameRender | None, reference: str, illuminant: str
     Returns
     -------
     tuple
-        The chart's :class:`~fidelity.measure.chartsharpness.ChartSharpness` and
-        :class:`~fidelity.measure.chartnoise.ChartNoise` (each None where not measured).
+        The :class:`~fidelity.measure.chartsharpness.ChartSharpness` and
+        :class:`~fidelity.measure.chartnoise.ChartNoise` (each None where not measured;
+        both None without a frame).
     """
     if frame is None:
         return None, None
     got = measure_pixels(frame.srgb, frame.corners, encoding="srgb", reference=reference,
                          illuminant=illuminant, uncertainty=False, corner_checks=False)
-    return got.sharpness, got.noise
+    if frame.target_srgb is None or frame.target is None:
+        return got.sharpness, got.noise
+    sharpness = painted_target_sharpness(
+        frame.target_srgb, frame.target, linearise=_decode_srgb,
+        linearisation="sRGB transfer function decoded (IEC 61966-2-1)", saturation=1.0,
+        black=0.0, source=f"the check's edge target ({frame.target_renderer})")
+    if not _luminance_measured(sharpness) and _luminance_measured(got.sharpness):
+        return got.sharpness, got.noise  # the target refused (clipped, say): the patch edges
+    return sharpness, got.noise
+
+
+def _luminance_measured(sharpness: ChartSharpness | None) -> bool:
+    """Whether some edge of ``sharpness`` gave a luminance MTF50 above 0."""
+    if sharpness is None:
+        return False
+    for edge in sharpness.edges:
+        y = edge.channel("Y") if edge.refusal is None else None
+        if y is not None and y.refusal is None and y.mtf50 is not None and y.mtf50 > 0:
+            return True
+    return False
+
+
+def _decode_srgb(v: np.ndarray) -> np.ndarray:
+    return np.asarray(linearize_srgb(v), np.float64)
 
 
 __all__ = [

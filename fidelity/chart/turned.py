@@ -17,6 +17,12 @@ tables' axes.
 
 Lattice coordinates: ``(u, v)`` = (column, row) of a patch centre, ``u`` in 0..5, ``v`` in
 0..3, row-major patch index ``6 v + u`` (dark skin first, black last).
+
+Beside the chart, ``fidelity check`` renders an ISO 12233:2017 slanted-edge target
+(:class:`PaintedEdgeTarget`, :data:`CHECK_EDGE_TARGET`: a 176 px square of reflectance 0.2
+turned 5 degrees on a 0.8 field, 4:1) and measures the sharpness on its wide edges; the
+patch edges between the chart's narrow gaps remain the tables' axis, onto which
+:class:`fidelity.prediction.properties.TargetAxis` maps the target's MTF50.
 """
 
 from __future__ import annotations
@@ -32,8 +38,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from fidelity.core.fileio import write_bytes_atomic
 
-__all__ = ["CALIBRATION_GEOMETRY", "COVERAGE_FILE", "TurnedChart", "coverage_file_bytes",
-           "write_coverage_file"]
+__all__ = ["CALIBRATION_GEOMETRY", "CHECK_EDGE_TARGET", "COVERAGE_FILE", "PaintedEdgeTarget",
+           "TurnedChart", "coverage_file_bytes", "write_coverage_file"]
 
 #: Columns and rows of the lattice.
 _COLS, _ROWS = 6, 4
@@ -238,3 +244,112 @@ def _label(chart: TurnedChart, hi: NDArray[np.float64], x: NDArray[np.float64],
 #: The calibration chart's geometry: COCO's image size (640 x 480), turned 5 degrees, 90 px
 #: pitch, patches 0.84 of it, 4 x 4 samples per pixel.
 CALIBRATION_GEOMETRY = TurnedChart()
+
+
+@dataclass(frozen=True)
+class PaintedEdgeTarget:
+    """An ISO 12233:2017 slanted-edge target painted on the pixel grid: a dark square of
+    ``side_px`` pixels turned ``angle_deg`` (counter-clockwise in image ``(x, y)``, y down, as
+    :class:`TurnedChart`), centred on a light field that fills an image of ``size`` (H, W).
+    The square's coverage of each pixel is area-sampled on ``supersample`` x ``supersample``
+    points (only where its boundary may cross the pixel), so its edges are the ideal sampled
+    steps of a sharp camera (the pixel aperture's ``|sinc|``).
+
+    Attributes
+    ----------
+    size
+        Image ``(height, width)`` in pixels; the square must fit in it.
+    side_px
+        The square's side, pixels (> 0).
+    angle_deg
+        The square's turn from the pixel grid, degrees.
+    dark, light
+        The square's and the field's reflectances (spectrally flat, in (0, 1]; 0.2 and 0.8:
+        ISO 12233:2017's 4:1 e-SFR contrast, as :mod:`fidelity.scene.model`'s target).
+    supersample
+        Sampling points per pixel along each axis at the boundary, >= 1.
+    """
+
+    size: tuple[int, int] = (320, 320)
+    side_px: float = 176.0
+    angle_deg: float = 5.0
+    dark: float = 0.2
+    light: float = 0.8
+    supersample: int = 16
+
+    def __post_init__(self) -> None:
+        h, w = self.size
+        reach = self.side_px * (abs(math.cos(math.radians(self.angle_deg)))
+                                + abs(math.sin(math.radians(self.angle_deg)))) / 2
+        if not (self.side_px > 0 and 2 * reach < min(h, w) and 0 < self.dark <= 1
+                and 0 < self.light <= 1 and self.supersample >= 1):
+            raise ValueError(f"edge target geometry out of its domain: {self}")
+
+    @property
+    def centre(self) -> tuple[float, float]:
+        """Image ``(x, y)`` of the square's centre (the image's)."""
+        h, w = self.size
+        return (w - 1) / 2, (h - 1) / 2
+
+    def square_corners(self) -> NDArray[np.float64]:
+        """Image ``(x, y)`` of the square's corners ``(4, 2)``: top left, top right, bottom
+        right, bottom left as seen (the order of
+        :class:`fidelity.measure.chartsharpness.EdgeTargetCorners`)."""
+        s = self.side_px / 2
+        local = np.array([[-s, -s], [s, -s], [s, s], [-s, s]])
+        a = math.radians(self.angle_deg)
+        rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+        return np.asarray(local @ rot.T + np.asarray(self.centre), np.float64)
+
+    def field_corners(self) -> NDArray[np.float64]:
+        """Image ``(x, y)`` of the light field's corners ``(4, 2)``: the image's outer edges,
+        the same order."""
+        h, w = self.size
+        return np.array([[-0.5, -0.5], [w - 0.5, -0.5], [w - 0.5, h - 0.5], [-0.5, h - 0.5]])
+
+    def coverage(self) -> NDArray[np.float64]:
+        """The share of each pixel's area ``(H, W)`` inside the square, in [0, 1]."""
+        return _target_coverage(self)
+
+    def paint(self, white: ArrayLike) -> NDArray[np.float64]:
+        """The target image ``(H, W, C)`` in linear values: ``white`` ``(C,)`` (the response
+        to a perfect white reflector) times :attr:`light` on the field and :attr:`dark` on the
+        square, mixed by :meth:`coverage` (the box average is only meaningful in linear
+        light)."""
+        wv = np.asarray(white, dtype=np.float64).reshape(-1)
+        cov = self.coverage()[..., None]
+        out: NDArray[np.float64] = wv * (self.light + (self.dark - self.light) * cov)
+        return out
+
+
+@lru_cache(maxsize=4)
+def _target_coverage(target: PaintedEdgeTarget) -> NDArray[np.float64]:
+    h, w = target.size
+    cx, cy = target.centre
+    a = math.radians(target.angle_deg)
+    c, s = math.cos(a), math.sin(a)
+    half = target.side_px / 2
+
+    def reach(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
+        # the square's own (u, v) coordinates: its inside is max(|u|, |v|) < half
+        dx, dy = x - cx, y - cy
+        out: NDArray[np.float64] = np.maximum(np.abs(c * dx + s * dy), np.abs(-s * dx + c * dy))
+        return out
+
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    r = reach(xs, ys)
+    cov = (r < half).astype(np.float64)
+    mixed = np.abs(r - half) <= math.sqrt(0.5)  # the boundary may cross the pixel
+    n = target.supersample
+    off = (np.arange(n) + 0.5) / n - 0.5
+    oy, ox = np.meshgrid(off, off, indexing="ij")
+    inside = reach(xs[mixed][:, None] + ox.ravel()[None, :],
+                   ys[mixed][:, None] + oy.ravel()[None, :]) < half
+    cov[mixed] = inside.mean(axis=1)
+    cov.setflags(write=False)
+    return cov
+
+
+#: The slanted-edge target ``fidelity check`` renders beside its turned chart: a 176 px square
+#: of reflectance 0.2 turned 5 degrees on a 0.8 field, 320 x 320 pixels.
+CHECK_EDGE_TARGET = PaintedEdgeTarget()

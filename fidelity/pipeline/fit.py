@@ -98,6 +98,7 @@ from fidelity.correction.models import (
     usable_patches,
 )
 from fidelity.correction.normalise import Normalisation, normalise
+from fidelity.measure.chartsharpness import TARGET_METHOD
 from fidelity.measure.colour import ChartMeasurement, measure_chart, neutral_patches
 from fidelity.measure.pixels import ImageMeasurement, exposure_from_neutrals, measure_pixels
 from fidelity.pipeline.records import utc_now
@@ -112,6 +113,7 @@ from fidelity.prediction.properties import (
     chart_mtf50,
     chart_snr,
     detector_scale,
+    target_on_table_axis,
 )
 from fidelity.prediction.table import Prediction
 
@@ -1095,11 +1097,16 @@ class PropertyFit:
 def turned_chart_values(camera: CameraModel, illuminant: str, reference: str = "scene"
                         ) -> tuple[float | None, float | None]:
     """The MTF50 (cycles per pixel, the softer edge's luminance) and the SNR at 18 % grey of
-    ``camera``'s turned chart under ``illuminant``, measured as ``fidelity check`` measures
-    them (:func:`fidelity.camera.render.frame_properties`); None where not measured."""
+    ``camera``'s render under ``illuminant``, measured as ``fidelity check`` measures
+    them (:func:`fidelity.camera.render.frame_properties`), the MTF50 on the tables' axis as
+    a verdict judges it (a slanted-edge target's through
+    :func:`fidelity.prediction.properties.target_on_table_axis`: the axis REAL's is on);
+    None where not measured."""
     frame = render_chart(camera, illuminant, reference=reference, frame=True).frame
     sharpness, noise = frame_properties(frame, reference, illuminant)
     mtf, snr = chart_mtf50(sharpness), chart_snr(noise)
+    if mtf is not None and sharpness is not None and sharpness.method == TARGET_METHOD:
+        mtf = target_on_table_axis(*mtf)
     return (None if mtf is None else mtf[0]), (None if snr is None else snr[0])
 
 

@@ -18,6 +18,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 from fidelity.core.errors import FidelityError, InvalidValueError, unknown_name
+from fidelity.measure.chartsharpness import TARGET_METHOD
 from fidelity.prediction.directional import (
     BOUNDS,
     DirectionalPrediction,
@@ -39,6 +40,7 @@ from fidelity.prediction.properties import (
     load_property_table,
     predict_property,
     property_threshold,
+    target_on_table_axis,
 )
 from fidelity.prediction.table import Prediction, predict
 from fidelity.prediction.tablefile import PredictionTable, TableKind, load_prediction_table
@@ -160,7 +162,11 @@ def judge_properties(verdict: Verdict | None, prediction: Prediction, criterion:
     sharpness, noise
         The chart's :class:`~fidelity.measure.chartsharpness.ChartSharpness` and
         :class:`~fidelity.measure.chartnoise.ChartNoise` at the image's resolution (None: not
-        measured: the property is not judged, and the verdict says so).
+        measured: the property is not judged, and the verdict says so). Sharpness measured on
+        a slanted-edge target (``method``
+        :data:`~fidelity.measure.chartsharpness.TARGET_METHOD`) is put on the tables'
+        patch-edge axis first
+        (:func:`~fidelity.prediction.properties.target_on_table_axis`).
     scale
         The detector's input over the image's size
         (:func:`fidelity.prediction.properties.detector_scale`): MTF50 is divided by it (at
@@ -207,6 +213,11 @@ def judge_properties(verdict: Verdict | None, prediction: Prediction, criterion:
         if got is None:
             skipped.append((prop, why))
             continue
+        target_x = None
+        if prop == "sharpness" and getattr(measured, "method", None) == TARGET_METHOD:
+            # a slanted-edge target's MTF50 on the tables' patch-edge axis
+            target_x = got[0]
+            got = target_on_table_axis(*got)
         factor = scale if prop == "sharpness" else min(scale, 1.0)
         x, u = got[0] / factor, (None if got[1] is None else got[1] / factor)
         if prop == "sharpness" and x > table.baseline_x:
@@ -214,7 +225,8 @@ def judge_properties(verdict: Verdict | None, prediction: Prediction, criterion:
             x, u = table.baseline_x, None
         try:
             preds.append(predict_property(table, x, u_x=u, size=size, column=column,
-                                          scale=factor, native_x=got[0]))
+                                          scale=factor, native_x=got[0],
+                                          target_x=target_x))
         except FidelityError as exc:
             skipped.append((prop, str(exc)))
     parts: dict[str, tuple[float, float | None] | None] = {

@@ -64,14 +64,19 @@ __all__ = [
     "PropertyJudgement",
     "PropertyPrediction",
     "PropertyTable",
+    "TARGET_AXIS_FILE",
+    "TargetAxis",
     "chart_mtf50",
     "chart_snr",
     "combine",
     "detector_scale",
     "load_property_table",
+    "load_target_axis",
     "parse_property_table",
+    "parse_target_axis",
     "predict_property",
     "property_threshold",
+    "target_on_table_axis",
 ]
 
 #: Property -> (axis name, unit). Both axes: a lower value is worse.
@@ -303,7 +308,11 @@ class PropertyPrediction:
         The factor applied to the native value (the detector's input over the image's size;
         1 when the image is at the detector's size).
     native_x
-        The value measured at the image's own resolution.
+        The value measured at the image's own resolution, on the tables' axis.
+    target_x
+        Sharpness measured on a slanted-edge target: its MTF50 at the image's resolution
+        before :func:`target_on_table_axis` put it on the tables' patch-edge axis
+        (``native_x``); None: measured on the chart's own edges, as the tables.
     """
 
     property: str
@@ -320,6 +329,7 @@ class PropertyPrediction:
     table: str
     scale: float = 1.0
     native_x: float | None = None
+    target_x: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         """Field names as keys; non-finite numbers as None."""
@@ -327,7 +337,7 @@ class PropertyPrediction:
             return None if v is None or not math.isfinite(v) else v
         return {"property": self.property, "axis": self.axis, "unit": self.unit,
                 "x": fin(self.x), "u_x": fin(self.u_x), "native_x": fin(self.native_x),
-                "scale": self.scale, "column": self.column, "loss": fin(self.loss),
+                "target_x": fin(self.target_x), "scale": self.scale, "column": self.column, "loss": fin(self.loss),
                 "u_loss": fin(self.u_loss), "status": self.status, "family": self.family,
                 "detector": self.detector, "table": self.table}
 
@@ -338,7 +348,8 @@ class PropertyPrediction:
                    math.inf if d.get("x") is None else float(d["x"]), _opt(d.get("u_x")),
                    str(d["column"]), math.inf if d.get("loss") is None else float(d["loss"]),
                    _opt(d.get("u_loss")), str(d["status"]), d.get("family"), d.get("detector"),
-                   str(d["table"]), float(d.get("scale", 1.0)), _opt(d.get("native_x")))
+                   str(d["table"]), float(d.get("scale", 1.0)), _opt(d.get("native_x")),
+                   _opt(d.get("target_x")))
 
 
 def _worst_at(table: PropertyTable, x: float, size: str, column: str
@@ -366,7 +377,8 @@ def _worst_at(table: PropertyTable, x: float, size: str, column: str
 
 def predict_property(table: PropertyTable, x: float, *, u_x: float | None = None,
                      size: str = "any", column: str = "dmap_points", scale: float = 1.0,
-                     native_x: float | None = None) -> PropertyPrediction:
+                     native_x: float | None = None, target_x: float | None = None
+                     ) -> PropertyPrediction:
     """The worst-case loss of a chart whose property reads ``x`` at the detector's input.
 
     Parameters
@@ -382,8 +394,9 @@ def predict_property(table: PropertyTable, x: float, *, u_x: float | None = None
         Detector size class (``n`` ... ``x``, ``any``).
     column
         The loss column (:data:`LOSS_COLUMNS`).
-    scale, native_x
-        Recorded with the prediction: the factor from the native value and the native value.
+    scale, native_x, target_x
+        Recorded with the prediction: the factor from the native value, the native value and
+        the edge target's MTF50 it was mapped from (:attr:`PropertyPrediction.target_x`).
 
     Returns
     -------
@@ -405,13 +418,13 @@ def predict_property(table: PropertyTable, x: float, *, u_x: float | None = None
     axis, unit = AXES[table.property]
     if x >= table.baseline_x:
         return PropertyPrediction(table.property, axis, unit, x, u_x, column, 0.0, 0.0,
-                                  "baseline", None, None, table.name, scale, native_x)
+                                  "baseline", None, None, table.name, scale, native_x, target_x)
     loss, se, covered, fam, det = _worst_at(table, x, size, column)
     if not covered:  # worse than every family's harshest level: the ceiling
         ceiling = max((c.losses.get(column) or 0.0) for m in table.detectors(size)
                       for c in table.cells.get(m, ()))
         return PropertyPrediction(table.property, axis, unit, x, u_x, column, ceiling, None,
-                                  "beyond", fam, det, table.name, scale, native_x)
+                                  "beyond", fam, det, table.name, scale, native_x, target_x)
     u_loss = se
     if u_x is not None and math.isfinite(u_x) and u_x > 0:
         lo = _worst_at(table, x + u_x, size, column)[0] if x + u_x < table.baseline_x else 0.0
@@ -419,7 +432,7 @@ def predict_property(table: PropertyTable, x: float, *, u_x: float | None = None
         slope_u = abs(hi - lo) / 2
         u_loss = math.hypot(se or 0.0, slope_u) if se is not None else slope_u
     return PropertyPrediction(table.property, axis, unit, x, u_x, column, loss, u_loss,
-                              "in-range", fam, det, table.name, scale, native_x)
+                              "in-range", fam, det, table.name, scale, native_x, target_x)
 
 
 def property_threshold(table: PropertyTable, loss: float, *, size: str = "any",
@@ -440,6 +453,95 @@ def property_threshold(table: PropertyTable, loss: float, *, size: str = "any",
         else:
             lo = mid
     return 1.0 / hi
+
+
+# --------------------------------------------------------------------------------------------
+# The edge target on the tables' axis
+
+#: The painted edge target's MTF50 against the tables' axis at the same Gaussian blurs
+#: (:class:`TargetAxis`; computed by :func:`fidelity.coco.tables.degradation.target_axis`).
+TARGET_AXIS_FILE = resource_dir("data") / "turned" / "target-axis.json"
+
+
+@dataclass(frozen=True)
+class TargetAxis:
+    """Where a slanted-edge target's MTF50 lies on the tables' axis.
+
+    The tables' axis is the calibration chart's patch-edge MTF50
+    (:mod:`fidelity.coco.tables.degradation`): narrow ROIs between patches, whose Hamming
+    window widens the measured MTF as the blur grows. The target's wide ROIs measure the
+    blur's own MTF50 (within 1.4 % of the closed form up to sigma = 4 px). ``points`` holds,
+    per Gaussian blur of ``sigma`` px, the target's MTF50 and the calibration chart's, both
+    measured by the audit's own code on the blurred images; :meth:`on_table_axis` interpolates
+    between them linearly in 1 / MTF50 (the blur width) and keeps the end points' ratio
+    beyond them.
+
+    Attributes
+    ----------
+    points
+        ``(sigma px, target MTF50 cy/px, table-axis MTF50 cy/px)``, sigma rising.
+    method
+        How the points were computed, in words.
+    """
+
+    points: tuple[tuple[float, float, float], ...]
+    method: str = ""
+
+    def on_table_axis(self, mtf50: float) -> float:
+        """The tables'-axis MTF50 (cy/px) of a target MTF50 ``mtf50`` (cy/px, > 0)."""
+        if not mtf50 > 0 or not math.isfinite(mtf50):
+            raise InvalidValueError(f"target MTF50 {mtf50!r}: must be a finite number > 0")
+        u = 1.0 / mtf50
+        us = [1.0 / t for _, t, _ in self.points]
+        vs = [1.0 / a for _, _, a in self.points]
+        if u <= us[0]:
+            return mtf50 * us[0] / vs[0]
+        if u >= us[-1]:
+            return mtf50 * us[-1] / vs[-1]
+        k = next(i for i in range(1, len(us)) if us[i] >= u)
+        w = (u - us[k - 1]) / (us[k] - us[k - 1])
+        return 1.0 / (vs[k - 1] + w * (vs[k] - vs[k - 1]))
+
+    def to_json(self) -> dict[str, Any]:
+        """``points`` as ``{sigma_px, target_mtf50, table_mtf50}`` and ``method``."""
+        return {"points": [{"sigma_px": a, "target_mtf50": b, "table_mtf50": c}
+                           for a, b, c in self.points], "method": self.method}
+
+
+def parse_target_axis(obj: Any, where: str) -> TargetAxis:
+    """A :class:`TargetAxis` from its JSON form (:meth:`TargetAxis.to_json`); ``where``
+    names the document in errors."""
+    bad = InputFileError(f"{where}: not a target axis file: need points of "
+                         f"{{sigma_px, target_mtf50, table_mtf50}}, MTF50s > 0 falling with "
+                         f"sigma")
+    try:
+        pts = tuple((float(p["sigma_px"]), float(p["target_mtf50"]), float(p["table_mtf50"]))
+                    for p in obj["points"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise bad from exc
+    ok = len(pts) >= 2 and all(math.isfinite(v) for p in pts for v in p) and all(
+        p[1] > 0 and p[2] > 0 for p in pts) and all(
+        b[0] > a[0] and b[1] < a[1] and b[2] < a[2] for a, b in zip(pts, pts[1:], strict=False))
+    if not ok:
+        raise bad
+    return TargetAxis(pts, str(obj.get("method", "")))
+
+
+@lru_cache(maxsize=1)
+def load_target_axis() -> TargetAxis:
+    """The shipped :class:`TargetAxis` (:data:`TARGET_AXIS_FILE`)."""
+    obj = sc.load_document(TARGET_AXIS_FILE, fmt="json", max_bytes=MAX_TABLE_BYTES,
+                           what="target axis")
+    return parse_target_axis(obj, display_path(TARGET_AXIS_FILE))
+
+
+def target_on_table_axis(mtf50: float, u: float | None = None
+                         ) -> tuple[float, float | None]:
+    """A slanted-edge target's MTF50 (cy/px) and its standard uncertainty on the tables'
+    axis (:meth:`TargetAxis.on_table_axis` of the shipped :func:`load_target_axis`; ``u``
+    scaled by the same ratio)."""
+    x = load_target_axis().on_table_axis(mtf50)
+    return x, None if u is None else u * x / mtf50
 
 
 # --------------------------------------------------------------------------------------------

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+from fidelity.measure.chartsharpness import TARGET_METHOD
 from fidelity.pipeline.records import ChartReport, ImageSource
 from fidelity.prediction.interval import ValidityDomain
 from fidelity.prediction.tablefile import TableKind
@@ -179,7 +180,8 @@ def texture_lines(report: ChartReport) -> list[str]:
                 parts.append(f"{plus_minus(y.mtf50, y.u_mtf50)}{unit} {e.direction}")
             if e.method is not None and e.method not in methods:
                 methods.append(e.method)
-        how = ", ".join([*methods, "luminance"])
+        where = ["edge target"] if s.method == TARGET_METHOD else []
+        how = ", ".join([*methods, "luminance", *where])
         lines.append(f"sharpness: MTF50 {', '.join(parts)} ({how})")
     return lines
 

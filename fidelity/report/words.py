@@ -237,6 +237,9 @@ def property_lines(judgement: Any, not_judged: bool = True) -> list[str]:
         where = {"baseline": "as sharp or clean as the undegraded chart",
                  "beyond": "beyond the table: its ceiling, a conservative answer"}.get(
             p.status, f"{p.family}, {p.detector}")
+        if p.target_x is not None and p.native_x is not None:
+            scaled += (f" (edge target {p.target_x:.3g} x {p.native_x / p.target_x:.3f} to "
+                       f"the tables' axis)")
         lines.append(f"{p.property}: {axis} {p.x:.3g}{unit} at the detector's input{scaled} "
                      f"-> predicted {label} {p.loss:.2f}{pm} ({where}; table {p.table})")
     reasons: dict[str, list[str]] = {}

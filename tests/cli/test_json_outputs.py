@@ -81,6 +81,8 @@ ADDED = (
                                           "difference"}),
     # issue 57: the likely cause of the chart's error (fidelity.colour.diagnosis)
     (re.compile(r"(\$|.*\.sim|.*\.real|.*\.reports\[\d+\])$"), {"diagnosis"}),
+    # issue 55: sharpness measured on a slanted-edge target keeps the target's own MTF50
+    (re.compile(r".*\.predictions\.\w+$"), {"target_x"}),
 )
 
 #: What "Beyond colour, part 2" adds to a verdict's sentence: the combined loss's parts and

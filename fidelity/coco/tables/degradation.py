@@ -15,6 +15,7 @@ box-averaged (the pixel aperture), so its undegraded MTF50 is that of a sharp ca
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -23,23 +24,29 @@ from typing import Any
 
 import numpy as np
 
-from fidelity.chart.turned import CALIBRATION_GEOMETRY
+from fidelity.camera.optics import Optics
+from fidelity.chart.turned import CALIBRATION_GEOMETRY, CHECK_EDGE_TARGET
 from fidelity.coco.degradations import DEGRADATIONS, Degradation, encode_srgb8
 from fidelity.coco.tables.grid import CellDelta, add_standard_errors, cell_deltas, model_size
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import load_reference
-from fidelity.core.errors import InputFileError
+from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.core.fileio import write_bytes_atomic
+from fidelity.measure.chartsharpness import painted_target_sharpness
 from fidelity.measure.pixels import measure_pixels
 from fidelity.prediction.properties import (
     LOSS_COLUMNS,
+    TARGET_AXIS_FILE,
     PropertyCell,
     PropertyTable,
+    TargetAxis,
     chart_mtf50,
     chart_snr,
 )
 
-__all__ = ["CALIBRATION_CHART", "LevelValue", "calibrate_level", "calibration_chart",
-           "chart_value", "property_tables"]
+__all__ = ["CALIBRATION_CHART", "TARGET_AXIS_METHOD", "TARGET_AXIS_SIGMAS", "LevelValue",
+           "calibrate_level", "calibration_chart", "chart_value", "property_tables",
+           "target_axis", "target_axis_bytes", "write_target_axis_file"]
 
 #: The calibration chart (module docstring): the reference chart's colours on the turned
 #: chart's geometry (:data:`fidelity.chart.turned.CALIBRATION_GEOMETRY`), the frame a linear
@@ -199,3 +206,73 @@ def property_tables(store: Any, coco: Any = None, *, name: str = "coco1000", met
             | ({"scores_files": meta["scores_files"]} if meta.get("scores_files") else {}))
     return out
 
+
+
+#: The Gaussian blurs (sigma, px) at which :func:`target_axis` compares the painted edge
+#: target with the calibration chart: the sharp camera and the tables' ``gaussian-blur``
+#: levels, and one beyond them.
+TARGET_AXIS_SIGMAS: tuple[float, ...] = (0.0, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0,
+                                         5.0, 6.0)
+TARGET_AXIS_METHOD = ("per Gaussian blur sigma (the camera's gaussian PSF kernel): MTF50 of "
+                      "the painted edge target (CHECK_EDGE_TARGET, linear float, luminance, "
+                      "the softer edge) and of the calibration chart degraded by the "
+                      "gaussian-blur family (8-bit sRGB, the softer patch edge), both by the "
+                      "audit's own measurement")
+
+
+def target_axis(sigmas: tuple[float, ...] = TARGET_AXIS_SIGMAS) -> TargetAxis:
+    """The painted edge target's MTF50 against the tables' axis
+    (:class:`fidelity.prediction.properties.TargetAxis`), computed.
+
+    Parameters
+    ----------
+    sigmas
+        Gaussian blurs (px, >= 0, rising) at which both are measured.
+
+    Returns
+    -------
+    TargetAxis
+        Per sigma: the target's luminance MTF50 (the softer edge,
+        :func:`fidelity.measure.chartsharpness.painted_target_sharpness` of
+        :data:`fidelity.chart.turned.CHECK_EDGE_TARGET` blurred in linear light by
+        :class:`fidelity.camera.optics.Optics`' gaussian kernel) and the calibration chart's
+        degraded by ``gaussian-blur`` (:func:`chart_value`, as :func:`calibrate_level`
+        measures the table levels; the sharp chart at sigma 0), both cy/px.
+
+    Raises
+    ------
+    InvalidValueError
+        A level where either could not be measured.
+    """
+    target = CHECK_EDGE_TARGET
+    painted = target.paint(np.ones(3))
+    chart = calibration_chart()
+    points = []
+    for sigma in sigmas:
+        img = Optics("gaussian", sigma_px=sigma).apply(painted) if sigma > 0 else painted
+        got = chart_mtf50(painted_target_sharpness(img, target, linearise=_as_float,
+                                                   linearisation="none (linear input)"))
+        table = (chart_value(chart[0], chart[1], "sharpness") if sigma == 0
+                 else chart_value(Degradation("gaussian-blur", sigma)(chart[0]), chart[1],
+                                  "sharpness"))
+        if got is None or table is None:
+            raise InvalidValueError(f"target axis at sigma {sigma:g} px: the "
+                                    f"{'target' if got is None else 'chart'} was not measured")
+        points.append((float(sigma), got[0], table[0]))
+    return TargetAxis(tuple(points), TARGET_AXIS_METHOD)
+
+
+def target_axis_bytes(axis: TargetAxis | None = None) -> bytes:
+    """The content of :data:`fidelity.prediction.properties.TARGET_AXIS_FILE`
+    (:func:`target_axis` computed unless given), JSON."""
+    doc = (axis if axis is not None else target_axis()).to_json()
+    return (json.dumps(doc, indent=1) + "\n").encode()
+
+
+def write_target_axis_file(path: Path = TARGET_AXIS_FILE) -> Path:
+    """Write :func:`target_axis_bytes` to ``path`` atomically; returns it."""
+    return write_bytes_atomic(path, target_axis_bytes())
+
+
+def _as_float(v: np.ndarray) -> np.ndarray:
+    return np.asarray(v, np.float64)
