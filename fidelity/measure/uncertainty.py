@@ -9,9 +9,11 @@ Components, each evaluated with the others held at their measured values:
 
 ``pixel noise`` (Type A)
     Each patch mean's covariance from its own window: the sample covariance of the pixels over
-    ``n`` (a plain mean: the audit of an image, in linear light; each channel's variance
-    raised by its design effect, :func:`block_design_effect`, where neighbouring pixels'
-    errors are alike: JPEG blocks, demosaicing, denoising), or the Tukey-McLaughlin
+    ``n`` (a plain mean: the audit of an image, in linear light; where a window spans
+    enough of the image's blocks, the mean's covariance from its block means instead,
+    :func:`block_mean_covariance`, as neighbouring pixels' errors are alike: JPEG blocks,
+    demosaicing, denoising; their channels' correlation is the block means', not the
+    pixels'), or the Tukey-McLaughlin
     winsorised covariance over ``(1 - 2 g)^2 n`` (a ``g``-trimmed mean: a camera render's
     patch sampling). Means drawn from the normal distribution with that covariance (the
     analytic standard error, propagated by Monte Carlo). An auto exposure is refitted on every
