@@ -9,9 +9,11 @@ Components, each evaluated with the others held at their measured values:
 
 ``pixel noise`` (Type A)
     Each patch mean's covariance from its own window: the sample covariance of the pixels over
-    ``n`` (a plain mean: the audit of an image, in linear light; each channel's variance
-    raised by its design effect, :func:`block_design_effect`, where neighbouring pixels'
-    errors are alike: JPEG blocks, demosaicing, denoising), or the Tukey-McLaughlin
+    ``n`` (a plain mean: the audit of an image, in linear light; where a window spans
+    enough of the image's blocks, the mean's covariance from its block means instead,
+    :func:`block_mean_covariance`, as neighbouring pixels' errors are alike: JPEG blocks,
+    demosaicing, denoising; their channels' correlation is the block means', not the
+    pixels'), or the Tukey-McLaughlin
     winsorised covariance over ``(1 - 2 g)^2 n`` (a ``g``-trimmed mean: a camera render's
     patch sampling). Means drawn from the normal distribution with that covariance (the
     analytic standard error, propagated by Monte Carlo). An auto exposure is refitted on every
@@ -267,7 +269,12 @@ class PatchSpread:
     pixels raises the variance of the mean over ``covariance / count``
     (:func:`block_design_effect`; ones when not estimated); ``sampled``: the pixels these
     statistics were computed from when fewer than ``count`` (a lattice of whole blocks,
-    :func:`block_sample`), None when from all of them.
+    :func:`block_sample`), None when from all of them; ``clustered`` ``(3, 3)``: the
+    covariance of the mean from the block means (:func:`block_mean_covariance`) times the
+    pixels it was computed from, so that over ``count`` it is the window mean's covariance
+    with the channels' correlation of the block means (JPEG's chroma noise is smoothed away
+    at the pixel scale, where the channels correlate by about 0.85, but not in the block
+    means, where they barely correlate), None when not estimated.
     """
 
     count: int
@@ -277,6 +284,7 @@ class PatchSpread:
     code_std: F64 | None = None
     design: F64 | None = None
     sampled: int | None = None
+    clustered: F64 | None = None
 
 
 def block_design_effect(values: F64, blocks: NDArray[np.int64],
@@ -316,6 +324,39 @@ def block_design_effect(values: F64, blocks: NDArray[np.int64],
     out = np.ones(3)
     positive = plain > 0
     out[positive] = np.maximum(1.0, cluster[positive] / plain[positive])
+    return out
+
+
+def block_mean_covariance(values: F64, blocks: NDArray[np.int64],
+                          min_blocks: int = MIN_BLOCKS) -> F64 | None:
+    """The covariance ``(3, 3)`` of the mean of ``values`` ``(n, 3)`` from the means of the
+    blocks (``blocks`` ``(n,)``) as clusters: the matrix form of the ultimate-cluster
+    estimator of :func:`block_design_effect` (Kish 6.3), ``B / (B - 1) sum_b (n_b / n)^2
+    d_b d_b^T`` with ``d_b = m_b - m``; each channel's variance at least the
+    independent-pixel ``var / n`` (its row and column scaled up to it). None for fewer than
+    ``min_blocks`` blocks."""
+    x = np.asarray(values, np.float64).reshape(-1, 3)
+    n = x.shape[0]
+    b = np.asarray(blocks, np.int64).reshape(-1)
+    if n < 2 or b.size != n:
+        return None
+    b = b - b.min()
+    every = np.bincount(b)
+    touched = every > 0
+    count = int(np.count_nonzero(touched))
+    if count < min_blocks:
+        return None
+    sizes = every[touched]
+    sums = np.stack([np.bincount(b, weights=x[:, c], minlength=every.size)[touched]
+                     for c in range(3)], axis=-1)
+    dev = (sizes / n)[:, None] * (sums / sizes[:, None] - x.mean(axis=0))
+    cov: F64 = count / (count - 1) * (dev.T @ dev)
+    plain = x.var(axis=0, ddof=1) / n
+    diag = np.diag(cov).copy()
+    scale = np.ones(3)
+    low = (diag > 0) & (diag < plain)
+    scale[low] = np.sqrt(plain[low] / diag[low])
+    out: F64 = cov * scale[:, None] * scale[None, :]
     return out
 
 
@@ -369,12 +410,18 @@ def patch_spread(linear: F64, codes: F64 | None = None,
     flat = (np.ptp(x, axis=0) == 0) if n else np.ones(3, bool)
     design = (block_design_effect(x, blocks) if blocks is not None and len(blocks) == n
               else None)  # None: not estimated (no blocks given, or too few touched)
+    mc = (block_mean_covariance(x, blocks) if blocks is not None and len(blocks) == n
+          else None)
+    clustered = None if mc is None else mc * n
     if codes is None:
-        return PatchSpread(total, cov, flat, design=design, sampled=sampled)
+        return PatchSpread(total, cov, flat, design=design, sampled=sampled,
+                           clustered=clustered)
     c = np.asarray(codes, np.float64).reshape(-1, 3)
     if not len(c):
-        return PatchSpread(total, cov, flat, np.zeros(3), np.zeros(3), design, sampled)
-    return PatchSpread(total, cov, flat, c.mean(axis=0), c.std(axis=0), design, sampled)
+        return PatchSpread(total, cov, flat, np.zeros(3), np.zeros(3), design, sampled,
+                           clustered)
+    return PatchSpread(total, cov, flat, c.mean(axis=0), c.std(axis=0), design, sampled,
+                       clustered)
 
 
 def patch_covariances(samples: Sequence[F64], *, trim: float = 0.0,
@@ -417,7 +464,11 @@ def spread_covariances(spreads: Sequence[PatchSpread], *,
         per_pixel[k][sp.flat, :] = 0.0
         per_pixel[k][:, sp.flat] = 0.0
         covs[k] = per_pixel[k] / sp.count
-        if sp.design is not None:  # each channel's variance raised by its design effect
+        if sp.clustered is not None:  # the block means' covariance, channels' correlation kept
+            covs[k] = np.asarray(sp.clustered, np.float64) / sp.count
+            covs[k][sp.flat, :] = 0.0
+            covs[k][:, sp.flat] = 0.0
+        elif sp.design is not None:  # each channel's variance raised by its design effect
             root = np.sqrt(sp.design)
             covs[k] = covs[k] * root[:, None] * root[None, :]
     notes: list[str] = []
@@ -671,6 +722,7 @@ __all__ = [
     "mean_covariance",
     "noise_component",
     "patch_covariances",
+    "block_mean_covariance",
     "block_sample",
     "patch_spread",
     "placement_component",
