@@ -426,7 +426,7 @@ def installed_files(dist: Distribution) -> tuple[int, list[str]]:
 
 
 def _installation() -> tuple[float, int, str]:
-    from importlib import metadata  # noqa: PLC0415 (not on every start-up: a check loads this module)
+    from importlib import metadata  # not at module level: a check loads this module
 
     try:
         dist = metadata.distribution("camera-fidelity")
