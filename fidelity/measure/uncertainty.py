@@ -287,6 +287,31 @@ class PatchSpread:
     clustered: F64 | None = None
 
 
+def _block_deviations(values: F64, blocks: NDArray[np.int64], min_blocks: int
+                      ) -> tuple[F64, int, F64] | None:
+    """The weighted deviations ``(n_b / n) (m_b - m)`` ``(B, 3)`` of the block means of
+    ``values`` ``(n, 3)`` from their mean, the number of blocks ``B`` and the
+    independent-pixel variance of the mean ``var / n`` ``(3,)``; None for fewer than 2 values
+    or ``min_blocks`` blocks."""
+    x = np.asarray(values, np.float64).reshape(-1, 3)
+    n = x.shape[0]
+    b = np.asarray(blocks, np.int64).reshape(-1)
+    if n < 2 or b.size != n:
+        return None
+    b = b - b.min()  # a window's blocks span a few rows of the image's: a short count
+    every = np.bincount(b)
+    touched = every > 0
+    count = int(np.count_nonzero(touched))
+    if count < min_blocks:
+        return None
+    sizes = every[touched]
+    sums = np.stack([np.bincount(b, weights=x[:, c], minlength=every.size)[touched]
+                     for c in range(3)], axis=-1)
+    dev: F64 = (sizes / n)[:, None] * (sums / sizes[:, None] - x.mean(axis=0))
+    plain: F64 = x.var(axis=0, ddof=1) / n
+    return dev, count, plain
+
+
 def block_design_effect(values: F64, blocks: NDArray[np.int64],
                         min_blocks: int = MIN_BLOCKS) -> F64 | None:
     """Per channel, how much correlation between neighbouring pixels raises the variance of
@@ -303,24 +328,11 @@ def block_design_effect(values: F64, blocks: NDArray[np.int64],
     ``min_blocks`` blocks (too few to estimate it). JPEG's block-wise quantisation (its DC terms above
     all), demosaicing, denoising and sharpening correlate neighbouring pixels; for independent
     pixels the factor is 1 on average."""
-    x = np.asarray(values, np.float64).reshape(-1, 3)
-    n = x.shape[0]
-    b = np.asarray(blocks, np.int64).reshape(-1)
-    if n < 2 or b.size != n:
+    got = _block_deviations(values, blocks, min_blocks)
+    if got is None:
         return None
-    b = b - b.min()  # a window's blocks span a few rows of the image's: a short count
-    every = np.bincount(b)
-    touched = every > 0
-    count = int(np.count_nonzero(touched))
-    if count < min_blocks:
-        return None
-    sizes = every[touched]
-    sums = np.stack([np.bincount(b, weights=x[:, c], minlength=every.size)[touched]
-                     for c in range(3)], axis=-1)
-    mean = x.mean(axis=0)
-    dev = sums / sizes[:, None] - mean
-    cluster = count / (count - 1) * (((sizes / n)[:, None] * dev) ** 2).sum(axis=0)
-    plain = x.var(axis=0, ddof=1) / n
+    dev, count, plain = got
+    cluster = count / (count - 1) * (dev ** 2).sum(axis=0)
     out = np.ones(3)
     positive = plain > 0
     out[positive] = np.maximum(1.0, cluster[positive] / plain[positive])
@@ -335,23 +347,11 @@ def block_mean_covariance(values: F64, blocks: NDArray[np.int64],
     d_b d_b^T`` with ``d_b = m_b - m``; each channel's variance at least the
     independent-pixel ``var / n`` (its row and column scaled up to it). None for fewer than
     ``min_blocks`` blocks."""
-    x = np.asarray(values, np.float64).reshape(-1, 3)
-    n = x.shape[0]
-    b = np.asarray(blocks, np.int64).reshape(-1)
-    if n < 2 or b.size != n:
+    got = _block_deviations(values, blocks, min_blocks)
+    if got is None:
         return None
-    b = b - b.min()
-    every = np.bincount(b)
-    touched = every > 0
-    count = int(np.count_nonzero(touched))
-    if count < min_blocks:
-        return None
-    sizes = every[touched]
-    sums = np.stack([np.bincount(b, weights=x[:, c], minlength=every.size)[touched]
-                     for c in range(3)], axis=-1)
-    dev = (sizes / n)[:, None] * (sums / sizes[:, None] - x.mean(axis=0))
+    dev, count, plain = got
     cov: F64 = count / (count - 1) * (dev.T @ dev)
-    plain = x.var(axis=0, ddof=1) / n
     diag = np.diag(cov).copy()
     scale = np.ones(3)
     low = (diag > 0) & (diag < plain)
