@@ -75,7 +75,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
               "Export the chart scene for a simulator: glTF, OpenUSD or Mitsuba 3, with a "
               "manifest."),
     "suite": ("fidelity.cli.suite:suite",
-              "Check every camera of a suite file under its own illuminant."),
+              "Check every camera of a suite file under its own illuminant and chromatic "
+              "adaptation."),
     "sweep": ("fidelity.cli.sweep:sweep",
               "Run (or resume) the COCO sweep; one line per finished cell on stderr ([k/N] "
               "cells)."),

@@ -613,6 +613,9 @@ class ComparisonReport:
         The predicted ΔmAP with its standard uncertainty; None when not evaluated.
     validity
         Whether the answer lies inside its evidence's domain; None when not judged.
+    intervals
+        Every loss column of the prediction with its own standard uncertainty
+        (:func:`fidelity.pipeline.check.column_intervals`); empty when not evaluated.
     """
 
     created: str
