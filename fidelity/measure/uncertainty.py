@@ -332,10 +332,15 @@ def block_design_effect(values: F64, blocks: NDArray[np.int64],
     if got is None:
         return None
     dev, count, plain = got
-    cluster = count / (count - 1) * (dev ** 2).sum(axis=0)
+    return _design_effect(count / (count - 1) * (dev ** 2).sum(axis=0), plain)
+
+
+def _design_effect(variance: F64, plain: F64) -> F64:
+    """Per channel ``max(1, variance / plain)`` of a mean's variance over its
+    independent-pixel value ``plain`` ``(3,)``; 1 for a channel without variance."""
     out = np.ones(3)
     positive = plain > 0
-    out[positive] = np.maximum(1.0, cluster[positive] / plain[positive])
+    out[positive] = np.maximum(1.0, variance[positive] / plain[positive])
     return out
 
 
@@ -408,10 +413,11 @@ def patch_spread(linear: F64, codes: F64 | None = None,
     sampled = n if total != n else None
     cov = (np.atleast_2d(np.cov(x, rowvar=False, ddof=1)) if n >= 2 else np.zeros((3, 3)))
     flat = (np.ptp(x, axis=0) == 0) if n else np.ones(3, bool)
-    design = (block_design_effect(x, blocks) if blocks is not None and len(blocks) == n
-              else None)  # None: not estimated (no blocks given, or too few touched)
     mc = (block_mean_covariance(x, blocks) if blocks is not None and len(blocks) == n
-          else None)
+          else None)  # None: not estimated (no blocks given, or too few touched)
+    # the design effect from the same block means (block_design_effect's value: the
+    # covariance's diagonal is the clustered variance, raised to at least var / n)
+    design = None if mc is None else _design_effect(np.diag(mc), np.diag(cov) / n)
     clustered = None if mc is None else mc * n
     if codes is None:
         return PatchSpread(total, cov, flat, design=design, sampled=sampled,

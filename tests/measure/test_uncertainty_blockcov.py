@@ -34,3 +34,22 @@ def test_block_mean_covariance_matches_monte_carlo_of_the_mean() -> None:
     np.testing.assert_allclose(covs[0], stated, rtol=1e-9)
     pixel_corr = np.corrcoef(x, rowvar=False)[0, 1]
     assert pixel_corr > 0.9
+
+
+def test_patch_spread_design_effect_is_block_design_effects():
+    """patch_spread derives each channel's design effect from the block-mean covariance it
+    computes: the value block_design_effect gives on the same pixels and blocks."""
+    rng = np.random.default_rng(7)
+    side, nb = 16, 12
+    block_means = rng.normal(0, 0.02, (nb * nb, 3))
+    rows, cols = np.divmod(np.arange((side * nb) ** 2), side * nb)
+    blocks = unc.image_blocks(rows, cols, side * nb)
+    for flat_channel in (None, 2):
+        pixels = block_means[blocks] + rng.normal(0, 0.05, (blocks.size, 3))
+        if flat_channel is not None:
+            pixels[:, flat_channel] = 0.5
+        spread = unc.patch_spread(pixels, blocks=blocks)
+        assert spread.design is not None
+        np.testing.assert_allclose(spread.design, unc.block_design_effect(pixels, blocks),
+                                   rtol=1e-12)
+        assert spread.design.max() > 1.5
