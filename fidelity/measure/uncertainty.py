@@ -263,7 +263,7 @@ class PatchSpread:
 
     ``count`` pixels; ``covariance`` ``(3, 3)``: their sample covariance (ddof 1) in the fit's
     linear domain, zero for fewer than two pixels; ``flat`` ``(3,)``: channels whose pixels are
-    all equal (exactly no noise); ``code_mean`` / ``code_std`` ``(3,)``: mean and standard
+    all equal to within round-off (:func:`flat_channels`: no noise); ``code_mean`` / ``code_std`` ``(3,)``: mean and standard
     deviation of the integer codes' values (``code / (2**bits - 1)``), None for float pixels;
     ``design`` ``(3,)``: per channel, the factor by which correlation between neighbouring
     pixels raises the variance of the mean over ``covariance / count``
@@ -285,6 +285,25 @@ class PatchSpread:
     design: F64 | None = None
     sampled: int | None = None
     clustered: F64 | None = None
+
+
+#: A channel whose pixels spread by no more than this many units in the last place of its
+#: largest magnitude is flat: equal codes decoded by vectorised float arithmetic can differ
+#: by round-off (numpy's SIMD loops and their scalar tails round differently).
+ROUNDOFF_ULPS = 64
+
+
+def flat_channels(values: F64) -> NDArray[np.bool_]:
+    """Per channel of ``values`` ``(n, 3)``, whether its pixels are all equal to within
+    :data:`ROUNDOFF_ULPS` units in the last place of its largest magnitude (exactly no noise:
+    round-off is not a spread); all True for no pixels."""
+    x = np.asarray(values, np.float64).reshape(-1, 3)
+    if not x.shape[0]:
+        return np.ones(3, bool)
+    out: NDArray[np.bool_] = (np.ptp(x, axis=0)
+                             <= ROUNDOFF_ULPS * np.finfo(np.float64).eps
+                             * np.max(np.abs(x), axis=0))
+    return out
 
 
 def _block_deviations(values: F64, blocks: NDArray[np.int64], min_blocks: int
@@ -412,12 +431,14 @@ def patch_spread(linear: F64, codes: F64 | None = None,
     total = n if count is None else int(count)
     sampled = n if total != n else None
     cov = (np.atleast_2d(np.cov(x, rowvar=False, ddof=1)) if n >= 2 else np.zeros((3, 3)))
-    flat = (np.ptp(x, axis=0) == 0) if n else np.ones(3, bool)
+    flat = flat_channels(x)
     mc = (block_mean_covariance(x, blocks) if blocks is not None and len(blocks) == n
           else None)  # None: not estimated (no blocks given, or too few touched)
     # the design effect from the same block means (block_design_effect's value: the
     # covariance's diagonal is the clustered variance, raised to at least var / n)
     design = None if mc is None else _design_effect(np.diag(mc), np.diag(cov) / n)
+    if design is not None:
+        design[flat] = 1.0  # a flat channel's round-off spread is not noise to scale
     clustered = None if mc is None else mc * n
     if codes is None:
         return PatchSpread(total, cov, flat, design=design, sampled=sampled,
@@ -444,7 +465,7 @@ def patch_covariances(samples: Sequence[F64], *, trim: float = 0.0,
         if s.shape[0] < MIN_NOISE_PIXELS:
             per_pixel.append(PatchSpread(s.shape[0], np.zeros((3, 3)), np.ones(3, bool)))
             continue
-        flat = np.ptp(s, axis=0) == 0
+        flat = flat_channels(s)
         per_pixel.append(PatchSpread(s.shape[0], mean_covariance(s, trim) * s.shape[0], flat))
     return spread_covariances(per_pixel, patch_names=patch_names)
 
@@ -526,10 +547,11 @@ def noise_component(samples: Sequence[F64], means: F64, f: ChartFunction, *,
     estimated = [d for d in designs if d is not None]
     if estimated:
         top = max(float(np.max(d)) for d in estimated)
-        how += (f", each channel's variance raised by its design effect for neighbouring "
-                f"pixels alike ({BLOCK_PX} x {BLOCK_PX}-pixel blocks as clusters; "
-                f"{len(estimated)} of {len(designs)} windows over {MIN_BLOCKS} blocks or more, "
-                f"largest {top:.3g})")
+        how += (f", the covariance of each window's mean from its {BLOCK_PX} x {BLOCK_PX}-pixel "
+                f"blocks' means as clusters where neighbouring pixels are alike (Kish's "
+                f"ultimate-cluster estimator, the channels' correlation kept, each channel's "
+                f"variance at least var / n; {len(estimated)} of {len(designs)} windows over "
+                f"{MIN_BLOCKS} blocks or more, largest design effect {top:.3g})")
     subsets = [s for s in sampled if s is not None]
     if subsets:
         how += (f"; in the {len(subsets)} windows over {SPREAD_SAMPLE_PIXELS} pixels the "
@@ -730,6 +752,7 @@ __all__ = [
     "patch_covariances",
     "block_mean_covariance",
     "block_sample",
+    "flat_channels",
     "patch_spread",
     "placement_component",
     "rounding_component",

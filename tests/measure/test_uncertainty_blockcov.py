@@ -53,3 +53,28 @@ def test_patch_spread_design_effect_is_block_design_effects():
         np.testing.assert_allclose(spread.design, unc.block_design_effect(pixels, blocks),
                                    rtol=1e-12)
         assert spread.design.max() > 1.5
+
+
+def test_equal_codes_decoded_with_round_off_are_flat_with_no_design_effect():
+    """A noise-free 8-bit patch: every pixel the same code, decoded to linear values that
+    differ by round-off alone (as numpy's SIMD loops and their scalar tails leave them). The
+    channel is flat, its design effect 1, not the ratio of two round-off spreads (a recorded
+    gate once stated "largest 3.25e+05")."""
+    rng = np.random.default_rng(3)
+    side, nb = 16, 6
+    rows, cols = np.divmod(np.arange((side * nb) ** 2), side * nb)
+    blocks = unc.image_blocks(rows, cols, side * nb)
+    base = np.array([0.0578054, 0.2140411, 0.5])
+    ulp = np.spacing(base)
+    pixels = base + rng.integers(-2, 3, (blocks.size, 3)) * ulp  # a few ulps apart
+    pixels[:, 1] = base[1] + (blocks % 2) * 4 * ulp[1]  # whole blocks apart: a "cluster"
+    spread = unc.patch_spread(pixels, blocks=blocks)
+    assert spread.flat.all()
+    assert spread.design is not None
+    np.testing.assert_array_equal(spread.design, np.ones(3))
+    covs, _ = unc.spread_covariances([spread])
+    np.testing.assert_array_equal(covs[0], np.zeros((3, 3)))
+    # real noise, however small against the value, is not flat
+    noisy = base + rng.normal(0.0, 1e-9, (blocks.size, 3))
+    assert not unc.flat_channels(noisy).any()
+    assert unc.flat_channels(np.zeros((0, 3))).all()
