@@ -47,6 +47,9 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
 from fidelity.core import schema as sc
 from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
 from fidelity.core.fileio import display_path
@@ -77,6 +80,7 @@ __all__ = [
     "predict_property",
     "property_threshold",
     "target_on_table_axis",
+    "worst_case_losses",
 ]
 
 #: Property -> (axis name, unit). Both axes: a lower value is worse.
@@ -433,6 +437,69 @@ def predict_property(table: PropertyTable, x: float, *, u_x: float | None = None
         u_loss = math.hypot(se or 0.0, slope_u) if se is not None else slope_u
     return PropertyPrediction(table.property, axis, unit, x, u_x, column, loss, u_loss,
                               "in-range", fam, det, table.name, scale, native_x, target_x)
+
+
+def worst_case_losses(table: PropertyTable, xs: ArrayLike, *, size: str = "any",
+                      column: str = "dmap_points") -> NDArray[np.float64]:
+    """The worst-case loss :func:`predict_property` gives at each of ``xs`` (its ``loss``),
+    for a whole curve at once: each family's running-maximum chain built once and read by
+    linear interpolation in ``1/x``, the largest over families and detectors; 0 at or above
+    the table's baseline, the table's ceiling beyond every family's harshest level.
+
+    Parameters
+    ----------
+    table
+        The property's table (:func:`load_property_table`).
+    xs
+        Axis values ``(n,)`` at the detector's input, each > 0 (inf: noiseless).
+    size, column
+        As :func:`predict_property`.
+
+    Returns
+    -------
+    ndarray
+        ``(n,)`` losses in the column's unit.
+
+    Raises
+    ------
+    InvalidValueError
+        An unknown column, a value that is NaN or not > 0, or a size class with no detector.
+    """
+    if column not in LOSS_COLUMNS:
+        raise unknown_name("loss column", column, LOSS_COLUMNS)
+    x = np.asarray(xs, np.float64).reshape(-1)
+    if np.isnan(x).any() or (x <= 0).any():
+        raise InvalidValueError(f"{table.axis}: every value must be a number > 0")
+    detectors = table.detectors(size)
+    if not detectors:
+        raise InvalidValueError(f"{table.name}: no detector of size class {size!r}")
+    with np.errstate(divide="ignore"):
+        u = np.where(np.isinf(x), 0.0, 1.0 / x)
+    u0 = _inv(table.baseline_x)
+    worst = np.zeros_like(u)
+    covered = np.zeros(u.shape, bool)
+    for m in detectors:
+        fams: dict[str, list[tuple[float, float]]] = {}
+        for c in table.cells.get(m, ()):
+            loss = c.losses.get(column)
+            if loss is not None:
+                fams.setdefault(c.family, []).append((_inv(c.x), max(loss, 0.0)))
+        for pts in fams.values():
+            chain = [(u0, 0.0)]
+            for p in sorted(pts):  # as _family_loss: the running maximum
+                if p[0] > u0:
+                    chain.append((p[0], max(p[1], chain[-1][1])))
+            if len(chain) == 1:
+                covered |= True
+                continue
+            cu, cl = np.array(chain).T
+            worst = np.maximum(worst, np.interp(u, cu, cl))
+            covered |= u <= cu[-1]
+    ceiling = max(((c.losses.get(column) or 0.0) for m in detectors
+                   for c in table.cells.get(m, ())), default=0.0)
+    out: NDArray[np.float64] = np.where(covered, worst, ceiling)
+    out[x >= table.baseline_x] = 0.0
+    return out
 
 
 def property_threshold(table: PropertyTable, loss: float, *, size: str = "any",

@@ -30,7 +30,7 @@ from fidelity.chart.locate import CORNER_PATCHES, apply_homography
 from fidelity.colour import colorimetry as cm
 from fidelity.prediction.directional import load_directional_table
 from fidelity.prediction.interpolate import predict_curve
-from fidelity.prediction.properties import predict_property
+from fidelity.prediction.properties import worst_case_losses
 from fidelity.report.svg import (
     COLOURS,
     Axes,
@@ -440,8 +440,7 @@ def property_curve(prediction: PropertyPrediction, table: PropertyTable,
     lo = min(xs_cells) * 0.8 if xs_cells else 0.01
     hi = table.baseline_x * 1.05 if sharp else max(xs_cells) * 1.5 if xs_cells else 100.0
     grid = (np.linspace(lo, hi, 240) if sharp else np.geomspace(max(lo, 0.5), hi, 240))
-    loss = np.array([predict_property(table, float(x), column=prediction.column).loss
-                     for x in grid])
+    loss = worst_case_losses(table, grid, column=prediction.column)
     ymax = max(5.0, float(np.nanmax(loss)) * 1.2, prediction.loss * 1.2)
     c = Canvas(680, 380, f"predicted loss against {prediction.axis}")
     _title(c, f"table {table.name}: worst case over {len(table.models)} detectors", 680)

@@ -15,7 +15,7 @@ import pytest
 from fidelity.chart.image import write_png
 from fidelity.coco.degradations import Degradation
 from fidelity.coco.tables.degradation import calibrate_level, calibration_chart
-from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.core.errors import InputFileError, InvalidValueError, UnknownNameError
 from fidelity.pipeline.check import audit_image
 from fidelity.prediction.properties import (
     INTERACTION,
@@ -27,6 +27,7 @@ from fidelity.prediction.properties import (
     parse_property_table,
     predict_property,
     property_threshold,
+    worst_case_losses,
 )
 from fidelity.prediction.verdict import Criterion
 
@@ -78,6 +79,31 @@ def test_running_maximum_never_lets_the_loss_fall():
     t = PropertyTable("t", "sharpness", 0.6, {"m": "n"}, cells, {"m": 1})
     assert predict_property(t, 0.2).loss == pytest.approx(3.0)
     assert predict_property(t, 0.25).loss == pytest.approx(3.0)
+
+
+@pytest.mark.parametrize("name", ["sharpness", "noise", "small"])
+def test_a_whole_curve_at_once_is_the_prediction_point_by_point(name):
+    """worst_case_losses (the report's curve) equals predict_property's loss at every x: the
+    shipped tables (every column) and a small one, below, inside and beyond the cells."""
+    tables = ([load_property_table(name)] if name != "small" else
+              [_table(), PropertyTable("r", "sharpness", 0.6, {"m": "n"}, {"m": (
+                  _cell("f", 0.3, 3.0), _cell("f", 0.2, 1.0), _cell("f", 0.1, 5.0))},
+                  {"m": 1})])
+    for t in tables:
+        xs = [c.x for m in t.models for c in t.cells[m]]
+        top = t.baseline_x * 1.2 if math.isfinite(t.baseline_x) else max(xs) * 3
+        grid = [min(xs) / 3, *xs, *[min(xs) + k * (top - min(xs)) / 97 for k in range(98)]]
+        if not math.isfinite(t.baseline_x):
+            grid.append(math.inf)
+        for column in sorted({k for m in t.models for c in t.cells[m] for k in c.losses}):
+            for size in ("any", *sorted(set(t.models.values()))):
+                point = [predict_property(t, x, column=column, size=size).loss for x in grid]
+                curve = worst_case_losses(t, grid, column=column, size=size)
+                assert curve == pytest.approx(point, abs=1e-12), (t.name, column, size)
+    with pytest.raises(InvalidValueError):
+        worst_case_losses(_table(), [0.2, float("nan")])
+    with pytest.raises(UnknownNameError):
+        worst_case_losses(_table(), [0.2], column="nope")
 
 
 def test_noise_table_baseline_is_noiseless():
