@@ -52,6 +52,7 @@ from fidelity.measure.sharpness import (
     LUMINANCE_WEIGHTS,
     MIN_ACROSS_PX,
     MIN_EDGE_PX,
+    NYQUIST,
     EdgeFit,
     EdgeSFR,
     Orientation,
@@ -123,6 +124,13 @@ class ChannelMTF:
     u_mtf_half_nyquist: float | None
     snr: float | None
     refusal: tuple[str, str] | None = None
+
+    @property
+    def above_nyquist(self) -> bool:
+        """Whether ``mtf50`` is above the Nyquist frequency (0.5 cy/px,
+        :data:`fidelity.measure.sharpness.NYQUIST`): measured (the pre-sampling MTF), but
+        aliased in the sampled image."""
+        return self.mtf50 is not None and self.mtf50 > NYQUIST
 
     def to_json(self) -> dict[str, Any]:
         """Field names as keys; ``refusal`` as ``{reason, message}`` or None."""

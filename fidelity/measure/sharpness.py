@@ -41,6 +41,14 @@ tests/measure/test_sharpness.py) the refined MTF50 is within 1 % of the closed f
 within 2.5 % (up to 1.3 % low on average at sigma 0.3 px, from the bin's box, and up to 1 %
 either way with the phase of so few rows).
 
+Above the Nyquist frequency: the 4x oversampled ESF measures the MTF of the optics and the
+pixel aperture before sampling up to :data:`MAX_FREQUENCY`, so a very sharp edge's MTF50 above
+:data:`NYQUIST` (0.5 cy/px; a Gaussian PSF with ``sigma`` below about 0.22 px) is measured, not
+refused: at sigma 0.15-0.2 px the refined MTF50 is within 0.5 % of the closed form
+(tests/measure/test_sharpness.py). It is stated as such (:attr:`EdgeSFR.above_nyquist`; the
+terminal and the chart report say so): in the sampled image the detail between the Nyquist
+frequency and MTF50 is aliased, folded back below 0.5 cy/px, not resolved.
+
 From the curve: MTF50 and MTF10 (the first frequency where the curve falls to 0.5 and 0.1,
 linear interpolation between the two samples around it) and the MTF at half Nyquist (0.25
 cy/px).
@@ -135,6 +143,9 @@ MIN_SNR = 3.0
 MIN_MTF50 = 0.02
 #: The reported curve ends here (cy/px; twice Nyquist, as sfrmat reports).
 MAX_FREQUENCY = 1.0
+#: The Nyquist frequency of the pixel grid (cy/px): an MTF50 above it is stated as aliased
+#: (:attr:`EdgeSFR.above_nyquist`).
+NYQUIST = 0.5
 #: Half the Nyquist frequency (cy/px), where ``mtf_half_nyquist`` is read.
 HALF_NYQUIST = 0.25
 #: Pixels of the measured ESF kept beyond its 2 % and 98 % points in the bootstrap's model.
@@ -243,6 +254,12 @@ class EdgeSFR:
     draws: int
     method: str = ESFR_METHOD
 
+    @property
+    def above_nyquist(self) -> bool:
+        """Whether ``mtf50`` is above :data:`NYQUIST`: the pre-sampling MTF is measured
+        there, but the sampled image aliases the detail between 0.5 cy/px and MTF50."""
+        return self.mtf50 > NYQUIST
+
     def to_json(self) -> dict[str, Any]:
         """Field names as keys; non-finite numbers (a noiseless ROI's SNR) as None."""
         return {"frequencies": list(self.frequencies), "mtf": list(self.mtf),
@@ -316,6 +333,11 @@ class EdgeFit:
     contrast: float
     noise: float
     method: str = EDGE_FIT_METHOD
+
+    @property
+    def above_nyquist(self) -> bool:
+        """Whether ``mtf50`` is above :data:`NYQUIST` (as :attr:`EdgeSFR.above_nyquist`)."""
+        return self.mtf50 > NYQUIST
 
     def to_json(self) -> dict[str, Any]:
         """Field names as keys; a non-finite uncertainty as None."""

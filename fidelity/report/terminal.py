@@ -152,8 +152,9 @@ def plus_minus(value: float, u: float | None) -> str:
 
 def texture_lines(report: ChartReport) -> list[str]:
     """The chart's noise (SNR at the 18 % grey, the photon transfer's read noise and gain, or
-    why it was refused) and sharpness (luminance MTF50 per direction and the method), one line
-    each; none when not measured."""
+    why it was refused) and sharpness (luminance MTF50 per direction and the method; an MTF50
+    above the Nyquist frequency said to be aliased; a refused direction by its reason code,
+    the message in the chart report's table), one line each; none when not measured."""
     lines = []
     n = report.noise
     if n is not None:
@@ -177,7 +178,9 @@ def texture_lines(report: ChartReport) -> list[str]:
                 reason = e.refusal or (y.refusal if y is not None else None)
                 parts.append(f"{e.direction} refused ({reason[0] if reason else 'not measured'})")
             else:
-                parts.append(f"{plus_minus(y.mtf50, y.u_mtf50)}{unit} {e.direction}")
+                alias = (" (above the 0.5 cy/px Nyquist frequency: aliased in the image)"
+                         if y.above_nyquist else "")
+                parts.append(f"{plus_minus(y.mtf50, y.u_mtf50)}{unit} {e.direction}{alias}")
             if e.method is not None and e.method not in methods:
                 methods.append(e.method)
         where = ["edge target"] if s.method == TARGET_METHOD else []

@@ -109,3 +109,36 @@ def test_a_camera_that_renders_every_patch_black_is_judged(tmp_path):
     doc = json.loads((tmp_path / "o" / "report.json").read_text())  # strict JSON: no NaN
     assert doc["verdict"]["reason"] == "over-limit" and doc["mean_delta_e"] > 40
     assert all(np.isfinite(p["delta_e"]) for p in doc["patches"])
+
+
+def test_scene_linear_exr_highlights_above_one_are_measured_as_the_unscaled_chart(tmp_path):
+    """A blurred, noisy chart (sigma 1 px, Poisson-Gaussian noise; tests/measure/chartimage.py)
+    as a float EXR and the same x4 (white about 4: scene-linear highlights above 1): the audit
+    measures both, refusing neither as clipped (a float image has no encoding's maximum), and
+    the sharpness (each channel's MTF50, its u and SNR) and the SNR at the grey are the same;
+    the photon transfer's read noise and gain in linear units are 4 x, in electrons the same.
+    x4 is exact in binary floating point, so the numbers agree to rounding."""
+    from tests.measure.chartimage import render as chart  # noqa: PLC0415 (this test only)
+
+    img, _h = chart(angle_deg=5.0, sigma=1.0, pitch=70.0, size=(320, 460), read_noise=0.002,
+                    gain=0.0005, seed=3)
+    out = {}
+    for k in (1.0, 4.0):
+        path = _exr(tmp_path / f"x{k:g}.exr", img * k)
+        assert _run(["audit", str(path), "--json", str(path.with_suffix(".json")), "-q"]
+                    ).exit_code == 0
+        out[k] = json.loads(path.with_suffix(".json").read_text())
+    one, four = out[1.0], out[4.0]
+    assert float(np.max(img * 4.0)) > 3.9
+    for a, b in zip(one["sharpness"]["edges"], four["sharpness"]["edges"], strict=True):
+        assert a["refusal"] is None and b["refusal"] is None and b["method"] == "e-SFR"
+        for ca, cb in zip(a["channels"], b["channels"], strict=True):
+            assert ca["refusal"] is None and cb["refusal"] is None, cb
+            for key in ("mtf50", "u_mtf50", "snr"):
+                assert cb[key] == pytest.approx(ca[key], rel=1e-6), (ca["channel"], key)
+    assert four["noise"]["grey_snr_db"] == pytest.approx(one["noise"]["grey_snr_db"], abs=1e-6)
+    ta, tb = one["noise"]["photon_transfer"], four["noise"]["photon_transfer"]
+    assert tb["saturation"] is None and four["noise"]["refusal"] is None
+    assert tb["read_noise"] == pytest.approx(4.0 * ta["read_noise"], rel=1e-6)
+    assert tb["gain"] == pytest.approx(4.0 * ta["gain"], rel=1e-6)
+    assert tb["read_noise_electrons"] == pytest.approx(ta["read_noise_electrons"], rel=1e-6)
