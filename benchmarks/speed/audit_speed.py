@@ -13,6 +13,9 @@ also writes the ``.pyc`` files: the processes run compiled, as after ``pip insta
   one Classic chart): the anchor of the 12 MP audit;
 - ``python -m fidelity audit PHOTO -q --json F`` of the 12 MP and the 108 MP JPEG, this
   checkout and ``before``;
+- the 12 MP audit of this checkout with its sharpness and noise measurements left out
+  (:data:`NO_TEXTURE`: ``noise_and_sharpness`` replaced by one that measures nothing): what
+  those measurements add to a whole audit process (issue 55: at most 50 ms);
 - ``cv2.imread`` of the 108 MP JPEG as a whole Python process: the decoder, the floor of the
   108 MP audit;
 - the 108 MP audit of this checkout once more with the seconds it spent in the uncertainty
@@ -51,6 +54,10 @@ QUICK = {"repeats": 1}
 IMPORTS = "python -c 'import numpy, cv2'"
 #: cv2.imread of a file as a whole process.
 DECODE = "import sys, cv2\nprint(cv2.imread(sys.argv[1]).shape)\n"
+#: ``fidelity`` as a whole process with the chart's sharpness and noise left out of the audit.
+NO_TEXTURE = ("import sys\nimport fidelity.measure.pixels as p\n"
+              "p.noise_and_sharpness = lambda *a, **k: (None, None)\n"
+              "from fidelity.cli import main\nmain(sys.argv[1:], prog_name='fidelity')\n")
 #: An audit that writes the seconds it spent in the uncertainty budget to argv[1].
 TIMED = (REPO / "tests" / "measure" / "test_uncertainty.py")
 
@@ -97,6 +104,9 @@ def measure(ctx: Context) -> dict[str, Any]:
                 cmds[f"fidelity audit {size} ({label})"] = (
                     [py, "-m", "fidelity", "audit", str(images[size]), "-q", "--json",
                      str(out / "a.json")], env(tree))
+        cmds[WITHOUT_TEXTURE] = (
+            [py, "-c", NO_TEXTURE, "audit", str(images["12 MP"]), "-q", "--json",
+             str(out / "n.json")], env(REPO))
         cmds["cv2.imread process, 108 MP"] = ([py, "-c", DECODE, str(images["108 MP"])],
                                               user_environment())
         spent = out / "spent.txt"
@@ -123,6 +133,11 @@ def measure(ctx: Context) -> dict[str, Any]:
                                         "runs": [round(s, 4) for s in shares]},
             "environment": {"PYTHONDONTWRITEBYTECODE": "unset", "cores": os.cpu_count()}}
 
+
+#: The 12 MP audit of this checkout without its sharpness and noise measurements.
+WITHOUT_TEXTURE = "fidelity audit 12 MP without sharpness and noise (this commit)"
+#: Most seconds the sharpness and noise measurements may add to the 12 MP audit (issue 55).
+TEXTURE_LIMIT_S = 0.050
 
 #: Each command's anchor.
 ANCHORS = {"fidelity check (this commit)": IMPORTS, "fidelity check (before)": IMPORTS,
@@ -151,6 +166,14 @@ def cases(details: dict[str, Any]) -> list[Case]:
             out.append(case(f"{name[:-len(' (this commit)')]}: this commit / before",
                             _figures(rows[name]), _figures(other), per="process",
                             statistic=stat, process=True))
+    if WITHOUT_TEXTURE in rows:
+        full, bare = rows["fidelity audit 12 MP (this commit)"], rows[WITHOUT_TEXTURE]
+        added = full["median_s"] - bare["median_s"]
+        out.append(case("fidelity audit 12 MP: with / without sharpness and noise",
+                        _figures(full), _figures(bare), per="process", statistic=stat,
+                        process=True,
+                        note=f"the measurements add {added * 1000:+.0f} ms (median against "
+                             f"median; limit +{TEXTURE_LIMIT_S * 1000:.0f} ms)"))
     share = details["uncertainty_share_108mp"]
     out.append(case("uncertainty budget's share of the 108 MP audit (this commit)",
                     figures("uncertainty share", None), None, per="process",
