@@ -197,11 +197,11 @@ def texture_section(report: ComparisonReport) -> Section | None:
     return section(TEXTURE_TITLE, Text("\n\n".join(texture_lines(t))), *blocks)
 
 
-def texture_facts(report: ComparisonReport) -> list[tuple[str, str]]:
+def texture_facts(report: ComparisonReport, drawn: Section | None) -> list[tuple[str, str]]:
     """The summary row that says why sharpness and noise were not compared at all (none
-    where :func:`texture_section` draws them)."""
+    where :func:`texture_section` drew them, ``drawn``)."""
     t = report.texture
-    if t is None or texture_section(report) is not None:
+    if t is None or drawn is not None:
         return []
     return [(TEXTURE_TITLE.lower(), "; ".join(texture_lines(t)))]
 
@@ -239,6 +239,7 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
         return "–" if x is None else f"{x:.2f}"
 
     u = report.uncertainty
+    ts = texture_section(report)
     mean = f"{m.mean_delta_e:.2f}" if u is None else u.value_text()
     pm = report.interval.plus_minus() if report.interval is not None else ""
     facts = Facts((
@@ -265,7 +266,7 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
          f"{n2(d.dmap_points if d else None)} points"),
         *((f"measured ΔmAP on COCO, {x.model}", x.summary().removeprefix("measured ΔmAP "))
           for x in report.measured),
-        *texture_facts(report)))
+        *texture_facts(report, ts)))
     sections = [section("Summary", facts)]
     ss, rs = report.sim.source, report.real.source
     if (sim_pixels is not None and real_pixels is not None and isinstance(ss, ImageSource)
@@ -291,7 +292,6 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
                    "ab_arrows.svg", "a*b*: arrows from the simulated colour to the real one"),
         table(("patch", "sim-to-real ΔE00", "ΔL'", "ΔC'", "ΔH'", "sim ΔE00 to reference",
                "real ΔE00 to reference"), rows)))
-    ts = texture_section(report)
     if ts is not None:
         sections.append(ts)
     chart_view = report.as_chart_report()
