@@ -50,6 +50,7 @@ from fidelity.chart.turned import PaintedEdgeTarget
 from fidelity.measure.sharpness import (
     HALF_NYQUIST,
     LUMINANCE_WEIGHTS,
+    MAX_FREQUENCY,
     MIN_ACROSS_PX,
     MIN_EDGE_PX,
     NYQUIST,
@@ -77,6 +78,8 @@ ESFR_MIN_ANGLE_DEG = 2.0
 DRAWS = 20
 #: Channels measured, in order.
 CHANNELS = ("R", "G", "B", "Y")
+#: Frequencies (0 to MAX_FREQUENCY) at which an edge fit's luminance MTF curve is kept.
+FIT_CURVE_POINTS = 51
 #: The two directions of measurement (across a vertical edge, across a horizontal one).
 DIRECTIONS = ("horizontal", "vertical")
 METHOD = ("the brightest-contrast neighbouring patches' edge per direction, an axis-aligned "
@@ -113,6 +116,11 @@ class ChannelMTF:
         The edge's contrast over its per-pixel noise (None: noiseless).
     refusal
         ``(reason, message)`` where the channel was refused (the numbers then None).
+    curve
+        The luminance channel's MTF curve, ``(frequencies, mtf)`` (cy/px, unitless), 0 to
+        :data:`fidelity.measure.sharpness.MAX_FREQUENCY`: the e-SFR itself, or with an edge
+        fit the fitted Gaussian's MTF on :data:`FIT_CURVE_POINTS` evenly spaced frequencies;
+        None for R, G and B and where refused.
     """
 
     channel: str
@@ -124,6 +132,7 @@ class ChannelMTF:
     u_mtf_half_nyquist: float | None
     snr: float | None
     refusal: tuple[str, str] | None = None
+    curve: tuple[tuple[float, ...], tuple[float, ...]] | None = None
 
     @property
     def above_nyquist(self) -> bool:
@@ -133,13 +142,17 @@ class ChannelMTF:
         return self.mtf50 is not None and self.mtf50 > NYQUIST
 
     def to_json(self) -> dict[str, Any]:
-        """Field names as keys; ``refusal`` as ``{reason, message}`` or None."""
+        """Field names as keys; ``refusal`` as ``{reason, message}`` or None; ``curve`` as
+        ``{frequencies, mtf}``, present only where there is one."""
         d: dict[str, Any] = {k: _fin(getattr(self, k)) for k in (
             "mtf50", "u_mtf50", "mtf10", "u_mtf10", "mtf_half_nyquist", "u_mtf_half_nyquist",
             "snr")}
-        return {"channel": self.channel, **d,
-                "refusal": ({"reason": self.refusal[0], "message": self.refusal[1]}
-                            if self.refusal else None)}
+        out = {"channel": self.channel, **d,
+               "refusal": ({"reason": self.refusal[0], "message": self.refusal[1]}
+                           if self.refusal else None)}
+        if self.curve is not None:
+            out["curve"] = {"frequencies": list(self.curve[0]), "mtf": list(self.curve[1])}
+        return out
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> ChannelMTF:
@@ -149,7 +162,9 @@ class ChannelMTF:
                    _opt(d.get("mtf10")), _opt(d.get("u_mtf10")),
                    _opt(d.get("mtf_half_nyquist")), _opt(d.get("u_mtf_half_nyquist")),
                    _opt(d.get("snr")),
-                   (str(ref["reason"]), str(ref["message"])) if ref else None)
+                   (str(ref["reason"]), str(ref["message"])) if ref else None,
+                   ((tuple(float(f) for f in c["frequencies"]), tuple(float(m) for m in c["mtf"]))
+                    if (c := d.get("curve")) else None))
 
 
 @dataclass(frozen=True)
@@ -276,12 +291,18 @@ def _from_fit(name: str, fit: EdgeFit) -> ChannelMTF:
     d_half = (_gauss_mtf(s + h, HALF_NYQUIST) - _gauss_mtf(max(s - h, 0.0), HALF_NYQUIST)) / (
         s + h - max(s - h, 0.0))
     snr = fit.contrast / fit.noise if fit.noise > 0 else math.inf
-    return ChannelMTF(name, fit.mtf50, fit.u_mtf50, m10, u10, half, abs(d_half) * u, _fin(snr))
+    curve = None
+    if name == "Y":
+        fs = tuple(float(f) for f in np.linspace(0.0, MAX_FREQUENCY, FIT_CURVE_POINTS))
+        curve = (fs, tuple(_gauss_mtf(s, f) for f in fs))
+    return ChannelMTF(name, fit.mtf50, fit.u_mtf50, m10, u10, half, abs(d_half) * u, _fin(snr),
+                      curve=curve)
 
 
 def _from_sfr(name: str, sfr: EdgeSFR, u: float | None) -> ChannelMTF:
     return ChannelMTF(name, sfr.mtf50, u, sfr.mtf10, None, sfr.mtf_half_nyquist, None,
-                      _fin(sfr.snr))
+                      _fin(sfr.snr),
+                      curve=(tuple(sfr.frequencies), tuple(sfr.mtf)) if name == "Y" else None)
 
 
 def _luminance(rgb: np.ndarray) -> np.ndarray:
@@ -606,7 +627,7 @@ def grid_point(k: int, cols: int) -> np.ndarray:
     return np.array([k % cols, k // cols], dtype=np.float64)
 
 
-__all__ = ["ACROSS_FRACTION", "ALONG_FRACTION", "CHANNELS", "DIRECTIONS", "DRAWS",
+__all__ = ["ACROSS_FRACTION", "ALONG_FRACTION", "CHANNELS", "DIRECTIONS", "DRAWS", "FIT_CURVE_POINTS",
            "ESFR_MIN_ANGLE_DEG", "HALF_ACROSS_PX", "HALF_ALONG_PX", "METHOD", "MIN_GAP",
            "PAINTED_HALF_ACROSS_PX", "PAINTED_HALF_ALONG_PX", "ChannelMTF",
            "ChartSharpness", "EdgeSharpness", "EdgeTargetCorners", "TARGET_ALONG_FRACTION", "TARGET_METHOD",

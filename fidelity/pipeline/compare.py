@@ -22,7 +22,9 @@ the chart found or given by its corners), then compares the two charts patch by 
 4. **Verdict** of a criterion: ``max-delta-e`` on the sim-to-real chart ΔE, or ``max-dmap``
    on its predicted loss; exit codes and JUnit as ``fidelity gate``.
 
-Each chart's own ΔE against the reference (its audit) is reported too.
+Each chart's own ΔE against the reference (its audit) is reported too, and the two charts'
+sharpness and noise side by side (:func:`fidelity.pipeline.simreal.texture_comparison`: each
+one's luminance MTF curve and neutral-patch noise, the MTF50 ratio and the SNR difference).
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ from fidelity.pipeline.records import (
     Provenance,
     utc_now,
 )
+from fidelity.pipeline.simreal import texture_comparison
 from fidelity.prediction.judge import DEFAULT_JUDGE, JudgeOptions, judge_chart
 
 if TYPE_CHECKING:
@@ -164,7 +167,8 @@ def compare_charts(
     return ComparisonReport(utc_now(), sim_report, real_report, norm, m, prediction,
                             directional, verdict, prov, judge.bound, measured, emulation,
                             uncertainty=budget, interval=interval, validity=validity,
-                            intervals=column_intervals(prediction, budget, judge.decision.k))
+                            intervals=column_intervals(prediction, budget, judge.decision.k),
+                            texture=texture_comparison(sim_report, real_report))
 
 
 def sim_to_real_uncertainty(value: float, sim: UncertaintyBudget | None,

@@ -72,6 +72,7 @@ from fidelity.measure.chartsharpness import ChartSharpness
 from fidelity.measure.colour import ChartMeasurement
 from fidelity.measure.pixels import BadPixels
 from fidelity.measure.uncertainty import UncertaintyBudget
+from fidelity.pipeline.simreal import TextureComparison
 from fidelity.prediction.directional import DirectionalPrediction
 from fidelity.prediction.exposure import ExposureJudgement
 from fidelity.prediction.interval import PredictionInterval, ValidityDomain
@@ -616,6 +617,10 @@ class ComparisonReport:
     intervals
         Every loss column of the prediction with its own standard uncertainty
         (:func:`fidelity.pipeline.check.column_intervals`); empty when not evaluated.
+    texture
+        Sharpness and noise, simulation against real camera: each side's luminance MTF curve
+        and neutral-patch noise points, the MTF50 ratio and the SNR difference
+        (:class:`fidelity.pipeline.simreal.TextureComparison`); None when not made.
     """
 
     created: str
@@ -639,6 +644,8 @@ class ComparisonReport:
     #: every loss column of the prediction with its own standard uncertainty
     #: (:func:`fidelity.pipeline.check.column_intervals`)
     intervals: tuple[PredictionInterval, ...] = ()
+    #: sharpness and noise side by side (:func:`fidelity.pipeline.simreal.texture_comparison`)
+    texture: TextureComparison | None = None
 
     @property
     def mean_delta_e(self) -> float:
@@ -702,7 +709,9 @@ class ComparisonReport:
                       if d.get("prediction_interval") else None),
             validity=ValidityDomain.from_json(d["validity"]) if d.get("validity") else None,
             intervals=tuple(PredictionInterval.from_json(i)
-                            for i in d.get("prediction_intervals") or ()))
+                            for i in d.get("prediction_intervals") or ()),
+            texture=(TextureComparison.from_json(d["sharpness_noise"])
+                     if d.get("sharpness_noise") else None))
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,9 @@ numbered 1..n in chart order in every figure:
   tone curve (gamma and exposure, :func:`fidelity.measure.colour.fit_tone`) where given;
 - :func:`chart_location` / :func:`chart_pair`: where each patch was sampled in an image;
 - :func:`prediction_curve` / :func:`family_curves`: the table's ΔE → loss curves with this
-  chart's point and the limits.
+  chart's point and the limits;
+- :func:`mtf_curves` / :func:`noise_curves`: luminance MTF curves with their MTF50, and the
+  neutral patches' noise against signal with the photon-transfer line, one series per chart.
 """
 
 from __future__ import annotations
@@ -512,8 +514,72 @@ def family_curves(directional: DirectionalPrediction, classic: Prediction | None
     return c.render()
 
 
+#: One chart's MTF curve for :func:`mtf_curves`: its label, frequencies (cy/px), MTF and MTF50
+#: (cy/px; None: not reached).
+MTFSeries = tuple[str, Sequence[float], Sequence[float], float | None]
+#: One chart's noise for :func:`noise_curves`: its label, each neutral patch's mean and
+#: standard deviation, and the photon-transfer line ``(read_variance, gain)`` (None: refused).
+NoiseSeries = tuple[str, Sequence[float], Sequence[float], tuple[float, float] | None]
+#: Colour and marker of the first, second, ... series of :func:`mtf_curves` and
+#: :func:`noise_curves`.
+_SERIES_STYLE = ((COLOURS["blue"], "o"), (COLOURS["orange"], "s"), (COLOURS["green"], "D"))
+
+
+def mtf_curves(series: Sequence[MTFSeries], xmax: float = 0.5) -> str:
+    """Luminance MTF curves on one plot (frequency 0 to ``xmax`` cy/px, MTF 0 to 1.05), each
+    chart's MTF50 marked on its curve at 0.5 with a dotted vertical line, the MTF = 0.5 level
+    as a grey line; the legend gives each curve's MTF50."""
+    c = Canvas(680, 380, "luminance MTF against spatial frequency")
+    _title(c, "luminance MTF of each chart's softer edge", 680)
+    ax = Axes(c, 64, 32, 596, 290, Scale(0.0, xmax), Scale(0.0, 1.05))
+    ax.frame("spatial frequency (cy/px)", "MTF", yticks=[0, 0.2, 0.4, 0.5, 0.6, 0.8, 1.0])
+    ax.hline(0.5, "#808080", 1.0, "2 3")
+    for k, (label, fs, mtf, mtf50) in enumerate(series):
+        colour, shape = _SERIES_STYLE[k % len(_SERIES_STYLE)]
+        f = np.asarray(fs, np.float64)
+        keep = f <= xmax
+        ax.plot(f[keep], np.asarray(mtf, np.float64)[keep], colour, 1.8,
+                None if k == 0 else "6 3", label)
+        if mtf50 is not None and 0.0 <= mtf50 <= xmax:
+            ax.vline(mtf50, colour, 1.0, "1 3")
+            ax.marker(mtf50, 0.5, colour, 5.5, shape, f"{label}: MTF50 {mtf50:.3g} cy/px")
+    ax.legend("upper right")
+    return c.render()
+
+
+def noise_curves(series: Sequence[NoiseSeries]) -> str:
+    """Noise against signal of the neutral patches: each chart's standard deviation against
+    its mean (points) and its photon-transfer line ``sigma = sqrt(read_variance + gain mu)``
+    where fitted (the legend says where refused)."""
+    c = Canvas(680, 380, "noise against signal of the neutral patches")
+    _title(c, "neutral patches: standard deviation against mean (photon transfer)", 680)
+    mus = [float(v) for _, mu, _, _ in series for v in mu if math.isfinite(float(v))]
+    sig = [float(v) for _, _, sg, _ in series for v in sg if math.isfinite(float(v))]
+    xmax = max(max(mus, default=1.0) * 1.08, 1e-9)
+    ymax = max(max(sig, default=0.0) * 1.2, 1e-9)
+    ax = Axes(c, 72, 32, 588, 290, Scale(0.0, xmax), Scale(0.0, ymax))
+    ax.frame("mean signal μ (linear, black level off)", "standard deviation σ")
+    grid = np.linspace(0.0, xmax, 121)
+    for k, (label, mu, sg, fit) in enumerate(series):
+        colour, shape = _SERIES_STYLE[k % len(_SERIES_STYLE)]
+        for j, (x, y) in enumerate(zip(mu, sg, strict=True)):
+            ax.marker(float(x), float(y), colour, 4.5, shape,
+                      (label if fit is not None else f"{label} (photon transfer refused)")
+                      if j == 0 else None)
+        if fit is not None:
+            read_var, gain = fit
+            ax.plot(grid, np.sqrt(np.maximum(read_var + gain * grid, 0.0)), colour, 1.4,
+                    None if k == 0 else "6 3", f"{label}: σ² = {read_var:.3g} + {gain:.3g} μ")
+    ax.legend("lower right")
+    return c.render()
+
+
 __all__ = [
     "IMAGE_PX",
+    "MTFSeries",
+    "NoiseSeries",
+    "mtf_curves",
+    "noise_curves",
     "ab_arrows",
     "chart_location",
     "chart_pair",

@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from fidelity.core.fileio import json_ready
 from fidelity.pipeline.records import ComparisonReport, ImageSource
+from fidelity.pipeline.simreal import TextureComparison
 from fidelity.report import chartfigures
 from fidelity.report.chart import (
     blind_spot_section,
@@ -34,6 +35,7 @@ from fidelity.report.document import (
     Document,
     Facts,
     Headline,
+    Section,
     Text,
     section,
     svg_figure,
@@ -134,11 +136,82 @@ def property_comparison_lines(sim: Any, real: Any) -> list[str]:
     return lines
 
 
+#: Title of the comparison's sharpness and noise section (:func:`texture_section`).
+TEXTURE_TITLE = "Sharpness and noise, simulation against real camera"
+
+
+def texture_lines(t: TextureComparison) -> list[str]:
+    """The MTF50 ratio and the SNR difference of a
+    :class:`~fidelity.pipeline.simreal.TextureComparison` in words, or why each was not
+    compared."""
+    lines = []
+    a, b = t.sim, t.real
+    if t.mtf50_ratio is not None and a.mtf50 is not None and b.mtf50 is not None:
+        lines.append(f"sharpness: luminance MTF50 {a.mtf50:.3g} cy/px (simulation, "
+                     f"{a.direction} edge, {a.method}) against {b.mtf50:.3g} cy/px (real "
+                     f"camera, {b.direction} edge, {b.method}): ratio {t.mtf50_ratio:.2f} "
+                     "(each chart's softer edge at its own resolution)")
+    if t.snr_difference_db is not None and a.grey_snr_db is not None \
+            and b.grey_snr_db is not None:
+        lines.append(f"noise: SNR at the 18 % grey {a.grey_snr_db:.1f} dB (simulation) "
+                     f"against {b.grey_snr_db:.1f} dB (real camera): "
+                     f"{t.snr_difference_db:+z.1f} dB")
+    lines += [f"{prop} not compared: {why}" for prop, why in t.not_compared]
+    return lines
+
+
+def texture_section(report: ComparisonReport) -> Section | None:
+    """Sharpness and noise, simulation against real camera (:data:`TEXTURE_TITLE`): the two
+    luminance MTF curves with each one's MTF50 where both were measured, the two charts'
+    neutral-patch noise against signal with each one's photon-transfer line where both were
+    measured, and :func:`texture_lines`; None where neither could be drawn (the reason is
+    then a line of the summary, :func:`texture_facts`)."""
+    t = report.texture
+    if t is None:
+        return None
+    a, b = t.sim, t.real
+    blocks: list[Any] = []
+    if a.mtf50 is not None and b.mtf50 is not None and a.frequencies and b.frequencies:
+        xmax = 0.5 if max(a.mtf50, b.mtf50) <= 0.45 else 1.0
+        blocks.append(svg_figure(chartfigures.mtf_curves(
+            (("simulation", a.frequencies, a.mtf, a.mtf50),
+             ("real camera", b.frequencies, b.mtf, b.mtf50)), xmax),
+            "mtf_curves.svg", "luminance MTF of each chart's softer edge, MTF50 marked"))
+    if a.noise_missing is None and b.noise_missing is None and a.mu and b.mu:
+        def fit(s: Any) -> tuple[float, float] | None:
+            return None if s.read_variance is None else (s.read_variance, s.gain)
+        blocks.append(svg_figure(chartfigures.noise_curves(
+            (("simulation", a.mu, a.sigma, fit(a)), ("real camera", b.mu, b.sigma, fit(b)))),
+            "noise_curves.svg", "neutral patches: σ against μ with each photon-transfer fit"))
+        rows = [(who, name, f"{mu:.4g}", f"{sg:.3g}",
+                 "∞" if sg == 0 else f"{mu / sg:.1f}")
+                for who, s in (("simulation", a), ("real camera", b))
+                for name, mu, sg in zip(s.patches, s.mu, s.sigma, strict=True)]
+        refused = "; ".join(f"{who}: photon transfer refused, {s.fit_refusal}"
+                            for who, s in (("simulation", a), ("real camera", b))
+                            if s.fit_refusal)
+        blocks.append(table(("chart", "patch", "μ", "σ", "SNR μ/σ"), rows,
+                            numeric=(False, False, True, True, True), caption=refused))
+    if not blocks:
+        return None
+    return section(TEXTURE_TITLE, Text("\n\n".join(texture_lines(t))), *blocks)
+
+
+def texture_facts(report: ComparisonReport, drawn: Section | None) -> list[tuple[str, str]]:
+    """The summary row that says why sharpness and noise were not compared at all (none
+    where :func:`texture_section` drew them, ``drawn``)."""
+    t = report.texture
+    if t is None or drawn is not None:
+        return []
+    return [(TEXTURE_TITLE.lower(), "; ".join(texture_lines(t)))]
+
+
 def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | None = None,
                         real_pixels: NDArray[Any] | None = None) -> Document:
     """The comparison as a :class:`~fidelity.report.document.Document`: the verdict first,
     then the two charts side by side, the sim-to-real ΔE map, the a*b* arrows from the
-    simulated to the real colours, the direction of each difference, the predictions, each
+    simulated to the real colours, the two charts' sharpness and noise
+    (:func:`texture_section`), the direction of each difference, the predictions, each
     chart's own audit and the provenance."""
     m = report.measurement
     v = report.verdict
@@ -166,6 +239,7 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
         return "–" if x is None else f"{x:.2f}"
 
     u = report.uncertainty
+    ts = texture_section(report)
     mean = f"{m.mean_delta_e:.2f}" if u is None else u.value_text()
     pm = report.interval.plus_minus() if report.interval is not None else ""
     facts = Facts((
@@ -191,7 +265,8 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
         ("predicted ΔmAP of the difference, direction-aware",
          f"{n2(d.dmap_points if d else None)} points"),
         *((f"measured ΔmAP on COCO, {x.model}", x.summary().removeprefix("measured ΔmAP "))
-          for x in report.measured)))
+          for x in report.measured),
+        *texture_facts(report, ts)))
     sections = [section("Summary", facts)]
     ss, rs = report.sim.source, report.real.source
     if (sim_pixels is not None and real_pixels is not None and isinstance(ss, ImageSource)
@@ -217,6 +292,8 @@ def comparison_document(report: ComparisonReport, sim_pixels: NDArray[Any] | Non
                    "ab_arrows.svg", "a*b*: arrows from the simulated colour to the real one"),
         table(("patch", "sim-to-real ΔE00", "ΔL'", "ΔC'", "ΔH'", "sim ΔE00 to reference",
                "real ΔE00 to reference"), rows)))
+    if ts is not None:
+        sections.append(ts)
     chart_view = report.as_chart_report()
     sections += [s for s in (directional_section(chart_view), measured_section(chart_view))
                  if s is not None]
@@ -277,4 +354,5 @@ def write_comparison_report(report: ComparisonReport, *,
         json_path=json_path, html_path=html_path, protect=protect)
 
 
-__all__ = ["comparison_document", "comparison_lines", "write_comparison_report"]
+__all__ = ["TEXTURE_TITLE", "comparison_document", "comparison_lines", "texture_facts",
+           "texture_lines", "texture_section", "write_comparison_report"]

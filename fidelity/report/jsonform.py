@@ -107,7 +107,9 @@ def chart_report_json(report: ChartReport) -> JSONObject:
 
 def comparison_json(report: ComparisonReport) -> JSONObject:
     """The JSON report of a sim-to-real comparison (``compare``): the sim-to-real summary and
-    patches first, then the two audits as :func:`chart_report_json` writes them."""
+    patches first, the two charts' sharpness and noise side by side (``sharpness_noise``:
+    :meth:`fidelity.pipeline.simreal.TextureComparison.to_json`), then the two audits as
+    :func:`chart_report_json` writes them."""
     r = report
     m = r.measurement.to_json()
     out: JSONObject = json_ready({
@@ -126,6 +128,7 @@ def comparison_json(report: ComparisonReport) -> JSONObject:
         "prediction_interval": r.interval.to_json() if r.interval else None,
         "prediction_intervals": [i.to_json() for i in r.intervals],
         "validity": r.validity.to_json() if r.validity else None,
+        "sharpness_noise": r.texture.to_json() if r.texture else None,
         "sim": chart_report_json(r.sim), "real": chart_report_json(r.real),
         "provenance": r.provenance.to_json()})
     return out
