@@ -30,6 +30,7 @@ from fidelity.measure.colour import (
     patch_snr_db,
 )
 from fidelity.pipeline.records import ChartReport, ImageSource, RenderSource
+from fidelity.pipeline.simreal import texture_side
 from fidelity.prediction.properties import load_property_table
 from fidelity.report import chartfigures
 from fidelity.report.context import context_section
@@ -350,7 +351,30 @@ def texture_section(report: ChartReport) -> Section | None:
                                                  f"facing {e.patches[1]}" for e in s.edges),
                                                f"linearisation: {s.linearisation}"]),
                             numeric=(False, False, False, True, True, True)))
+    blocks += texture_figures(report)
     return section("Noise and sharpness", *blocks)
+
+
+def texture_figures(report: ChartReport) -> list[Any]:
+    """The chart's luminance MTF curve with its MTF50 (of the softer edge, the one the
+    prediction reads) and its neutral patches' noise against signal with the photon-transfer
+    line, where measured (:func:`fidelity.pipeline.simreal.texture_side`)."""
+    side = texture_side(report)
+    out: list[Any] = []
+    if side.mtf50 is not None and side.frequencies:
+        out.append(svg_figure(chartfigures.mtf_curves(
+            (("this chart", side.frequencies, side.mtf, side.mtf50),),
+            0.5 if side.mtf50 <= 0.45 else 1.0), "mtf_curve.svg",
+            f"luminance MTF of the softer edge ({side.direction}, {side.method}), MTF50 "
+            "marked"))
+    if side.noise_missing is None and side.mu:
+        fit = (None if side.read_variance is None or side.gain is None
+               else (side.read_variance, side.gain))
+        out.append(svg_figure(chartfigures.noise_curves(
+            (("this chart", side.mu, side.sigma, fit),)), "noise_curve.svg",
+            "neutral patches: σ against μ with the photon-transfer fit"
+            + (f" (refused: {side.fit_refusal})" if side.fit_refusal else "")))
+    return out
 
 
 def measured_section(report: ChartReport) -> Section | None:

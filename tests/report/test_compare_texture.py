@@ -180,3 +180,24 @@ def test_section_absent_with_a_reason_line_when_nothing_can_be_drawn(too_small):
     assert TEXTURE_TITLE not in [s.title for s in doc.sections]
     html = render_html(doc)
     assert "noise not compared: simulation: noise not measured" in html
+
+
+def test_a_single_chart_report_draws_its_mtf_and_noise_curves(sharp_and_blurred, too_small):
+    """The audit's own HTML (fidelity.report.chart): the softer edge's luminance MTF with its
+    MTF50 and the neutral patches' σ against μ with the photon-transfer line, from the same
+    record the comparison reads; neither where the chart's edges were refused and it is
+    noiseless."""
+    from fidelity.report.chart import chart_document, texture_figures
+
+    real = sharp_and_blurred.real
+    html = render_html(chart_document(real))
+    assert 'aria-label="luminance MTF of the softer edge' in html
+    assert 'aria-label="neutral patches: σ against μ with the photon-transfer fit' in html
+    side = sharp_and_blurred.texture.real
+    figs = texture_figures(real)
+    assert len(figs) == 2
+    texts = "".join(x.text or "" for x in ET.fromstring(figs[0].svg).iter(f"{SVG}text"))
+    assert f"this chart: MTF50 {side.mtf50:.3g} cy/px" in texts
+    texts = "".join(x.text or "" for x in ET.fromstring(figs[1].svg).iter(f"{SVG}text"))
+    assert f"σ² = {side.read_variance:.3g} + {side.gain:.3g} μ" in texts
+    assert not any("MTF" in f.alt for f in texture_figures(too_small.sim))
