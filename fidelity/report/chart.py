@@ -355,6 +355,16 @@ def texture_section(report: ChartReport) -> Section | None:
     return section("Noise and sharpness", *blocks)
 
 
+def edge_regions(report: ChartReport) -> list[tuple[str, tuple[int, int, int, int]]]:
+    """Each edge's label (``edge horizontal``, with ``refused`` where it was) and its region
+    ``(x0, y0, width, height)``, for the image's figure; none without a sharpness record."""
+    s = report.sharpness
+    if s is None:
+        return []
+    return [(f"edge {e.direction}" + (" (refused)" if e.refusal is not None else ""), e.roi)
+            for e in s.edges if e.roi is not None]
+
+
 def texture_figures(report: ChartReport) -> list[Any]:
     """The chart's luminance MTF curve with its MTF50 (of the softer edge, the one the
     prediction reads) and its neutral patches' noise against signal with the photon-transfer
@@ -528,7 +538,8 @@ def chart_document(report: ChartReport, pixels: NDArray[Any] | None = None) -> D
         sections.append(section("Where the patches were sampled", svg_figure(
             chartfigures.chart_location(pixels, src.location, encoding=src.encoding,
                                         exposure_ev=report.exposure_ev or 0.0,
-                                        found=src.found is not None),
+                                        found=src.found is not None,
+                                        edges=edge_regions(report)),
             "location.svg", "sampling windows")))
     neutral = neutral_patches(m)
     figures: list[Any] = [

@@ -293,10 +293,13 @@ def _windows(c: Canvas, location: ChartLocation, scale: float, dx: float, dy: fl
 
 
 def chart_location(pixels: NDArray[Any], location: ChartLocation, *, encoding: str = "linear",
-                   exposure_ev: float = 0.0, found: bool = False) -> str:
+                   exposure_ev: float = 0.0, found: bool = False,
+                   edges: Sequence[tuple[str, tuple[int, int, int, int]]] = ()) -> str:
     """The image with every patch's sampling window outlined and numbered; the corner patches
     are named, so a wrong orientation or a grid off the patches is seen at once. Linear pixels
-    are shown at the audit's exposure (``2**exposure_ev``), sRGB-encoded; NaN/Inf as black."""
+    are shown at the audit's exposure (``2**exposure_ev``), sRGB-encoded; NaN/Inf as black.
+    ``edges``: each measured edge's label and region ``(x0, y0, width, height)`` in pixels
+    (:attr:`fidelity.measure.chartsharpness.EdgeSharpness.roi`), outlined in cyan."""
     img, scale = _display(pixels, encoding, exposure_ev)
     h, w = img.shape[:2]
     # shown at IMAGE_PX wide at most; small images are enlarged to at least 480 px
@@ -311,6 +314,9 @@ def chart_location(pixels: NDArray[Any], location: ChartLocation, *, encoding: s
     for name, (x, y) in zip(CORNER_PATCHES, location.corners, strict=True):
         c.text(float(x) / s, float(y + location.pitch_px * 0.3) / s + top + 10, name, 11,
                "middle", "#ffeb3b", halo="#000")
+    for label, (x0, y0, ew, eh) in edges:
+        c.rect(x0 / s, y0 / s + top, ew / s, eh / s, stroke="#00e5ff", width=1.6)
+        c.text(x0 / s, y0 / s + top - 3, label, 11, "start", "#00e5ff", halo="#000")
     return c.render()
 
 

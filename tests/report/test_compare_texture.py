@@ -201,3 +201,27 @@ def test_a_single_chart_report_draws_its_mtf_and_noise_curves(sharp_and_blurred,
     texts = "".join(x.text or "" for x in ET.fromstring(figs[1].svg).iter(f"{SVG}text"))
     assert f"σ² = {side.read_variance:.3g} + {side.gain:.3g} μ" in texts
     assert not any("MTF" in f.alt for f in texture_figures(too_small.sim))
+
+
+def test_the_image_figure_outlines_each_edge_region(sharp_and_blurred):
+    """The image's figure draws each measured edge's region where the record puts it (its
+    ROI over the image's display scale), labelled by direction."""
+    from fidelity.report.chart import edge_regions
+
+    real = sharp_and_blurred.real
+    regions = edge_regions(real)
+    assert regions and all(r == e.roi for r, e in zip(
+        (r for _, r in regions), (e for e in real.sharpness.edges if e.roi), strict=True))
+    pixels = np.asarray(read_image(Path(real.source.image.path)).pixels)
+    svg = cf.chart_location(pixels, real.source.location, encoding=real.source.encoding,
+                            edges=regions)
+    root = ET.fromstring(svg)
+    boxes = [r for r in root.iter(f"{SVG}rect") if r.get("stroke") == "#00e5ff"]
+    assert len(boxes) == len(regions)
+    h, w = pixels.shape[:2]
+    zoom = min(cf.IMAGE_PX / w, max(1.0, 480.0 / w))
+    for box, (label, (x0, y0, ew, eh)) in zip(boxes, regions, strict=True):
+        assert float(box.get("x")) == pytest.approx(x0 * zoom, abs=0.01)
+        assert float(box.get("width")) == pytest.approx(ew * zoom, abs=0.01)
+    texts = [t.text for t in root.iter(f"{SVG}text")]
+    assert all(label in texts for label, _ in regions)
