@@ -220,8 +220,10 @@ def test_the_image_figure_outlines_each_edge_region(sharp_and_blurred):
     assert len(boxes) == len(regions)
     h, w = pixels.shape[:2]
     zoom = min(cf.IMAGE_PX / w, max(1.0, 480.0 / w))
-    for box, (label, (x0, y0, ew, eh)) in zip(boxes, regions, strict=True):
+    for box, (_, (x0, y0, ew, eh)) in zip(boxes, regions, strict=True):
         assert float(box.get("x")) == pytest.approx(x0 * zoom, abs=0.01)
+        assert float(box.get("y")) == pytest.approx(y0 * zoom + 30.0, abs=0.01)  # the title
         assert float(box.get("width")) == pytest.approx(ew * zoom, abs=0.01)
+        assert float(box.get("height")) == pytest.approx(eh * zoom, abs=0.01)
     texts = [t.text for t in root.iter(f"{SVG}text")]
     assert all(label in texts for label, _ in regions)
