@@ -164,16 +164,20 @@ class CameraRecord:
     cat: str = DEFAULT_CAT
 
     def to_json(self) -> dict[str, Any]:
-        """The record as the store and ``validation.json`` hold it."""
+        """The record as the store and ``validation.json`` hold it (``cat`` only where it is
+        not :data:`~fidelity.coco.validate.suite.DEFAULT_CAT`, so that the records of
+        Bradford's cases read as they did before the transform was recorded)."""
         d: dict[str, Any] = {
             "camera": self.camera, "file": self.file, "sha256": self.sha256,
             "description": self.description, "illuminant": self.illuminant,
-            "cat": self.cat, "chart_delta_e": self.chart_delta_e, "chart_max_delta_e": self.chart_max_delta_e,
+            "chart_delta_e": self.chart_delta_e, "chart_max_delta_e": self.chart_max_delta_e,
             "profile": self.profile.to_json(), "render": self.render,
             "patches": list(self.patches), "emulation": self.emulation.to_json()}
         if self.image_delta_e is not None:
             d["image_delta_e"] = self.image_delta_e.to_json()
         d["seconds"] = self.seconds
+        if self.cat != DEFAULT_CAT:  # absent: Bradford, as every record written before it
+            d["cat"] = self.cat
         return d
 
     @classmethod
