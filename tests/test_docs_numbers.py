@@ -173,3 +173,23 @@ def test_the_blur_noise_over_prediction_quoted_is_the_tables():
     assert len(ratios) == 2, ratios
     quoted = " ".join(text.split())
     assert f"for the blur-noise pairs ({min(ratios):.2f}-{max(ratios):.2f}x" in quoted
+
+
+def test_the_coco_c_readme_names_the_standard_error_its_cells_carry():
+    """Issue 58 (stale words): ``reports/cococ/README.md`` says which standard error its ±
+    are, as every measurement of ``cococ.json`` records it (it said "the paired standard
+    error of 5 image folds", the rule before the bootstrap, under cells measured with the
+    larger of the bootstrap and the jackknife)."""
+    import json
+
+    cells = json.loads((REPO / "reports/cococ/cococ.json").read_text())["cells"]
+    methods = {m["settings"]["standard_error"]["method"] for c in cells for m in c["measured"]}
+    folds = {m["settings"]["folds"] for c in cells for m in c["measured"]}
+    words = {"larger": "the larger of the paired image bootstrap and the leave-one-fold-out "
+                       "jackknife over {folds} image folds, every cell's"}
+    assert len(methods) == 1 and len(folds) == 1, (methods, folds)
+    method, = methods
+    text = " ".join((REPO / "reports/cococ/README.md").read_text(encoding="utf-8").split())
+    assert method in words, f"say in reports/cococ/README.md what the SE {method!r} is"
+    assert "± one standard error (" + words[method].format(folds=folds.pop()) + ")" in text
+    assert "paired standard error of 5 image folds" not in text
