@@ -115,3 +115,81 @@ def test_the_allowed_loss_is_the_sweeps_largest_cell_at_the_limit():
            if c["status"] == "done" and c["delta_e"] == 3.0]
     assert len(at3) >= 20
     assert f"{max(at3):.2f} %" == relative
+
+
+def _threshold_words(comparison: list[dict[str, str]]) -> str:
+    """The "Thresholds" sentence of ``reports/coco/README.md`` as the sweep's comparison rows
+    (``fidelity tables``' verdict on each of SAFE-COLOR's ΔE budgets) make it: the budgets that
+    hold in points, the ones exceeded in points within or beyond 2 SE, and whether every one
+    is exceeded as a share of the baseline."""
+    rows = [c for c in comparison if re.match(r"ΔE ≤ \d+ keeps", c["claim"])]
+    assert len(rows) == 3, [c["claim"] for c in comparison]
+
+    def de(c: dict[str, str]) -> str:
+        return "ΔE " + re.findall(r"ΔE ≤ (\d+)", c["claim"])[0]
+
+    def joined(names: list[str]) -> str:
+        return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+
+    hold = [de(c) for c in rows if c["verdict"].startswith("agrees if read as points")]
+    within = [de(c) for c in rows if "exceeded in points (within 2 SE)" in c["verdict"]]
+    beyond = [de(c) for c in rows if "exceeded in points (beyond 2 SE)" in c["verdict"]]
+    assert len(hold) + len(within) + len(beyond) == len(rows), [c["verdict"] for c in rows]
+    parts = [f"the paper's {joined(hold)} budgets hold for every model"] if hold else []
+    parts += [f"{joined(within)}'s is exceeded, within 2 SE"] if within else []
+    parts += [f"{joined(beyond)}'s is exceeded beyond 2 SE"] if beyond else []
+    share = all("as a share of baseline" in c["verdict"] for c in rows)
+    return ("Read as points of mAP, " + " and ".join(parts) + "; read as a share of the "
+            "baseline mAP, the paper's own unit, "
+            + ("every threshold is exceeded." if share else "not every threshold is exceeded."))
+
+
+def test_the_coco_readme_threshold_words_follow_the_sweeps_verdicts():
+    """Issue 58 (stale words): the README's reading of SAFE-COLOR's thresholds is what the
+    comparison rows of ``reports/coco/tables.json`` say (ΔE 12 was "at the edge" where its row
+    says exceeded in points within 2 SE); a changed verdict changes the sentence wanted."""
+    import json
+
+    comparison = json.loads((REPO / "reports/coco/tables.json").read_text())["comparison"]
+    readme = " ".join((REPO / "reports/coco/README.md").read_text(encoding="utf-8").split())
+    want = _threshold_words(comparison)
+    assert want in readme, f"reports/coco/README.md should read: {want}"
+    moved = [dict(c) for c in comparison]
+    for c in moved:
+        if c["claim"].startswith("ΔE ≤ 12"):
+            c["verdict"] = "agrees if read as points; exceeded as a share of baseline"
+    assert "the paper's ΔE 3, ΔE 6 and ΔE 12 budgets hold for every model;" in \
+        _threshold_words(moved)
+
+
+def test_the_blur_noise_over_prediction_quoted_is_the_tables():
+    """Issue 58 (stale words): docs/validation.md's over-prediction "for the blur-noise pairs"
+    is the range of the quoted table's median over-prediction (ΔmAP in points) over the groups
+    with both sharpness and noise (it said 2.5-2.6x where the rows read 2.64x and 2.56x)."""
+    text = (REPO / "docs/validation.md").read_text(encoding="utf-8")
+    ratios = [float(m.group(1)) for m in re.finditer(
+        r"^\| ΔmAP \(points\) \| [a-z+]*sharpness\+noise \| (?:[^|]*\|){4} ([\d.]+)× ", text,
+        flags=re.M)]
+    assert len(ratios) == 2, ratios
+    quoted = " ".join(text.split())
+    assert f"for the blur-noise pairs ({min(ratios):.2f}-{max(ratios):.2f}x" in quoted
+
+
+def test_the_coco_c_readme_names_the_standard_error_its_cells_carry():
+    """Issue 58 (stale words): ``reports/cococ/README.md`` says which standard error its ±
+    are, as every measurement of ``cococ.json`` records it (it said "the paired standard
+    error of 5 image folds", the rule before the bootstrap, under cells measured with the
+    larger of the bootstrap and the jackknife)."""
+    import json
+
+    cells = json.loads((REPO / "reports/cococ/cococ.json").read_text())["cells"]
+    methods = {m["settings"]["standard_error"]["method"] for c in cells for m in c["measured"]}
+    folds = {m["settings"]["folds"] for c in cells for m in c["measured"]}
+    words = {"larger": "the larger of the paired image bootstrap and the leave-one-fold-out "
+                       "jackknife over {folds} image folds, every cell's"}
+    assert len(methods) == 1 and len(folds) == 1, (methods, folds)
+    method, = methods
+    text = " ".join((REPO / "reports/cococ/README.md").read_text(encoding="utf-8").split())
+    assert method in words, f"say in reports/cococ/README.md what the SE {method!r} is"
+    assert "± one standard error (" + words[method].format(folds=folds.pop()) + ")" in text
+    assert "paired standard error of 5 image folds" not in text

@@ -695,6 +695,19 @@ def cat_option(f: F) -> F:
              "enters its uncertainty as a type-B component (half the range / √3).")(f)
 
 
+def suite_cat_option(more: str = "") -> Callable[[F], F]:
+    """``--cat`` of the commands that read a suite file (``suite``, ``validate``): the
+    chromatic adaptation of the scene reference to D65 for the cases the suite file gives no
+    ``[cat]`` of their own (None: its ``default_cat``, else Bradford; any case), the same idea
+    as :func:`cat_option`'s; ``more``: what the command adds to its help."""
+    return click.option(
+        "--cat", type=click.Choice(CHROMATIC_ADAPTATION_METHODS, case_sensitive=False),
+        default=None,
+        help="Chromatic adaptation of the scene reference to D65 for the cases the suite "
+             "file gives none of their own ([cat]); default: its default_cat, else "
+             "Bradford." + (f" {more}" if more else ""))
+
+
 def evidence_option(f: F) -> F:
     """``--evidence FILE`` (repeatable): the credibility record of the run in the format of
     each file's suffix (:mod:`fidelity.report.evidence`, :mod:`fidelity.report.ssp`)."""
@@ -757,4 +770,5 @@ __all__ = [
     "measure_options",
     "progress_option",
     "scorer_option",
+    "suite_cat_option",
 ]

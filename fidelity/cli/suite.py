@@ -12,8 +12,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
-from fidelity.cli.options import common_options, judge_options
-from fidelity.colour.colorimetry import CHROMATIC_ADAPTATION_METHODS
+from fidelity.cli.options import common_options, judge_options, suite_cat_option
 from fidelity.core.fileio import display_path
 from fidelity.pipeline.context import Context, assess, context_lines, load_context
 from fidelity.pipeline.qualify import qualify
@@ -85,12 +84,8 @@ def run_suite_command(suite: str, cameras: Sequence[str], *, out_dir: Path, repo
               help="Pass when the mean ΔE00 <= X (default: the context's max_delta_e, else "
                    f"{DEFAULT_MAX_DELTA_E:g}).")
 @judge_options()
-@click.option("--cat", type=click.Choice(CHROMATIC_ADAPTATION_METHODS, case_sensitive=False),
-              default=None,
-              help="Chromatic adaptation of the scene reference to D65 for the cases the suite "
-                   "file gives none of their own ([cat]); default: its default_cat, else "
-                   "Bradford. Under an illuminant other than D65 the spread over the "
-                   "transforms enters the ΔE's uncertainty as a type-B component.")
+@suite_cat_option("Under an illuminant other than D65 the spread over the transforms enters "
+                  "the ΔE's uncertainty as a type-B component.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               default="fidelity-report", show_default=True,
               help="Folder for the summary and a subfolder of reports per case.")

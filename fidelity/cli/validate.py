@@ -16,6 +16,7 @@ from fidelity.cli.options import (
     limit_option,
     progress_option,
     scores_options,
+    suite_cat_option,
 )
 from fidelity.cli.values import cap_models, executor_from, model_inputs, transfer_scores
 from fidelity.coco.emulation import EMULATION_METHODS, TRAINING_SETS
@@ -43,8 +44,11 @@ PROPERTY_FILES = ("properties.md", "properties.html", "properties.json")
 
 @click.command()
 @click.option("--cameras", default=None, type=click.Path(file_okay=False),
-              help="Folder of camera files (+ optional suite.toml with scene illuminants); "
-                   "default: the 30-camera suite that ships with fidelity.")
+              help="Folder of camera files (+ optional suite.toml with scene illuminants and "
+                   "chromatic adaptation transforms); default: the 30-camera suite that ships "
+                   "with fidelity.")
+@suite_cat_option("It adapts the reference each camera's chart ΔE is measured against (the "
+                  "emulation's training reference stays Bradford).")
 @click.option("--models", type=ModelList(), default=None,
               help="Comma-separated ONNX files, each optionally PATH@N (at most the first N "
                    "images by id).")
@@ -85,7 +89,8 @@ PROPERTY_FILES = ("properties.md", "properties.html", "properties.json")
 @executor_options
 @common_options
 def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: str | None, annotations: str | None,
-             out: str | None, limit: int | None, store: str | None, method: str,
+             out: str | None, cat: str | None, limit: int | None, store: str | None,
+             method: str,
              training: str, threads: int, provider: str, bound_table: str | None,
              report_only: bool, notes: str | None, properties: bool,
              export_scores: str | None,
@@ -126,7 +131,7 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
         raise unknown_name("training set", training, TRAINING_SETS)
     if cameras is None:
         cameras = str(resource_dir("cameras"))
-    cases = load_suite(cameras)
+    cases = load_suite(cameras, cat)
     store_dir = store or str(default_store())
     if report_only:
         st = ValidationStore(store_dir, create=False)

@@ -63,13 +63,14 @@ class CameraChart:
     """A camera's chart as stored with the validation: its mean ΔE00 ``chart_delta_e`` and
     ``patches`` (per patch ``name``, ``lab``, ``reference_lab``, ``srgb``); with the camera
     file (``path``) and the scene ``illuminant`` the chart is rendered again in closed form
-    (and its bit depth read) instead."""
+    (and its bit depth read) instead, its reference adapted to D65 with ``cat``."""
 
     camera: str
     chart_delta_e: float
     patches: tuple[Mapping[str, Any], ...]
     path: Path | None = None
     illuminant: str | None = None
+    cat: str = "Bradford"
 
 
 @dataclass(frozen=True)
@@ -300,7 +301,7 @@ def compare_bounds(cells: Sequence[MeasuredCell], charts: Mapping[str, CameraCha
     cameras: dict[str, CameraBounds] = {}
     for name, chart in sorted(charts.items()):
         if chart.path is not None and chart.illuminant is not None:
-            render = render_chart(str(chart.path), chart.illuminant)
+            render = render_chart(str(chart.path), chart.illuminant, cat=chart.cat)
             m = render.measurement
             ref, lab, de = m.reference_lab, m.lab, m.mean_delta_e
             spots = chart_blind_spots(m, bits=render.camera.quantisation_bits)

@@ -58,6 +58,9 @@ from fidelity.core.resources import resource_dir
 __all__ = [
     "AXES",
     "COMBINATION",
+    "DOMINANCE_ATOL",
+    "DOMINANCE_ORDER",
+    "DOMINANCE_RTOL",
     "INTERACTING",
     "INTERACTION",
     "LOSS_COLUMNS",
@@ -73,6 +76,7 @@ __all__ = [
     "chart_snr",
     "combine",
     "detector_scale",
+    "dominant_property",
     "load_property_table",
     "load_target_axis",
     "parse_property_table",
@@ -102,6 +106,13 @@ COMBINATION = "sum + sharpness-noise interaction"
 INTERACTION = 1.0
 #: The properties whose losses interact.
 INTERACTING = ("sharpness", "noise")
+#: The order a tie for the dominant property is broken in (:func:`dominant_property`): the
+#: first of the tied properties in this order wins (any other property after these, by name).
+DOMINANCE_ORDER = ("colour", "sharpness", "noise")
+#: Losses this close to the largest (relative, absolute) tie with it for the dominant
+#: property: the tolerance the recorded JSON outputs compare numbers with, so that another
+#: processor's last bits in a fit (or a sum taken in another order) cannot change the name.
+DOMINANCE_RTOL, DOMINANCE_ATOL = 1e-6, 1e-9
 #: The detector's input side: a detector sees the image letterboxed to this many pixels.
 DETECTOR_SIDE = 640
 MAX_TABLE_BYTES = 8 << 20
@@ -660,9 +671,10 @@ def chart_snr(noise: Any) -> tuple[float, float | None] | None:
 @dataclass(frozen=True)
 class Combined:
     """The properties' losses combined (:func:`combine`): ``loss`` and ``u_loss`` (the parts'
-    uncertainties propagated to first order), the ``dominant`` property (largest loss), the
-    parts, the blur-noise ``interaction`` term included in ``loss``, the properties not judged
-    (``missing``: not measured) and the rule."""
+    uncertainties propagated to first order), the ``dominant`` property (largest loss, a tie
+    broken by :func:`dominant_property`), the parts, the blur-noise ``interaction`` term
+    included in ``loss``, the properties not judged (``missing``: not measured) and the
+    rule."""
 
     loss: float
     u_loss: float | None
@@ -685,6 +697,24 @@ class Combined:
                    {str(k): float(v) for k, v in d["parts"].items()},
                    tuple(str(k) for k in d.get("missing") or ()), str(d.get("rule", "sum")),
                    float(d.get("interaction", 0.0)))
+
+
+def dominant_property(losses: Mapping[str, float]) -> str:
+    """The property with the largest loss; a tie (losses within :data:`DOMINANCE_RTOL`
+    relative or :data:`DOMINANCE_ATOL` absolute of the largest, e.g. two properties both at
+    their baseline's 0) goes to the first of the tied ones in :data:`DOMINANCE_ORDER`, whatever
+    the mapping's order, so the verdict's ``... dominates`` clause is the same on every run and
+    machine."""
+    if not losses:
+        raise InvalidValueError("no property measured: nothing dominates")
+    top = max(losses.values())
+    tied = [k for k, x in losses.items()
+            if math.isclose(x, top, rel_tol=DOMINANCE_RTOL, abs_tol=DOMINANCE_ATOL)]
+
+    def rank(k: str) -> tuple[int, str]:
+        return (DOMINANCE_ORDER.index(k) if k in DOMINANCE_ORDER else len(DOMINANCE_ORDER), k)
+
+    return min(tied, key=rank)
 
 
 def combine(parts: Mapping[str, tuple[float, float | None] | None],
@@ -712,7 +742,7 @@ def combine(parts: Mapping[str, tuple[float, float | None] | None],
     us = [(grad[k], v[1]) for k, v in have.items()]
     u = (None if any(x is None for _, x in us)
          else math.sqrt(sum((g * x) ** 2 for g, x in us if x is not None)))
-    dominant = max(have, key=lambda k: have[k][0])
+    dominant = dominant_property({k: v[0] for k, v in have.items()})
     return Combined(loss, u, dominant, {k: v[0] for k, v in have.items()}, missing,
                     interaction=term)
 

@@ -12,6 +12,7 @@ tables (folded), emulation accuracy, cameras, baselines and what was run.
 from __future__ import annotations
 
 import os
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -513,9 +514,22 @@ def _emulation_sections(results: ValidationResults, figures: Mapping[str, Figure
 def _cameras_section(results: ValidationResults) -> Section:
     cams = results.cameras
     return section("Cameras", table(
-        ["camera", "illuminant", "description"],
-        [[n, cams[n].illuminant, cams[n].description] for n in sorted(cams)],
-        numeric=[False, False, False]), folded=True)
+        ["camera", "illuminant", "chromatic adaptation", "description"],
+        [[n, cams[n].illuminant, cams[n].cat, cams[n].description] for n in sorted(cams)],
+        numeric=[False, False, False, False]), folded=True)
+
+
+def adaptation_words(results: ValidationResults) -> str:
+    """``the scene reference adapted to D65 with Bradford (28 cameras) and CAT02 (2)``: the
+    chromatic adaptation transforms of the cameras' chart ΔE, counted from their records."""
+    counts = sorted(Counter(c.cat for c in results.cameras.values()).items(),
+                    key=lambda kv: (-kv[1], kv[0]))
+    if not counts:
+        return "no camera recorded"
+    parts = [f"{cat} ({n})" for cat, n in counts]
+    parts[0] = f"{counts[0][0]} ({counts[0][1]} camera{'s' if counts[0][1] != 1 else ''})"
+    listed = parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
+    return f"the scene reference adapted to D65 with {listed}"
 
 
 def _baselines_section(results: ValidationResults) -> Section:
@@ -543,8 +557,10 @@ def _run_section(results: ValidationResults) -> Section:
             + f", conventions {_conventions_words(st.get('conventions') or {})}, threads "
             f"{st.get('threads')}.")
     lines.append(f"- Cameras: {len(cams)} camera files from `cameras/` (listed below with "
-                 "their scene illuminants); chart rendered in closed form; ΔE = mean CIEDE2000 "
-                 "over the 24 patches against the scene-consistent reference.")
+                 "their scene illuminants and chromatic adaptation transforms); chart rendered "
+                 "in closed form; ΔE = mean CIEDE2000 over the 24 patches against the "
+                 f"scene-consistent reference ({adaptation_words(results)}"
+                 "; the emulation's training reference: Bradford).")
     if summ.not_in_suite:
         lines.append(f"- Left out: {len(summ.not_in_suite)} camera(s) in the store but not in "
                      "the suite given (renamed or removed camera files): "
@@ -633,6 +649,7 @@ __all__ = [
     "EMULATION_FIGURE",
     "TITLE",
     "VS_DELTA_E_FIGURE",
+    "adaptation_words",
     "failure_reason",
     "headline",
     "scatter_figure",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -18,6 +19,7 @@ from fidelity.coco.validate.camera import (
     EmulationRecord,
     ErrorProfile,
     ImageDeltaE,
+    case_chart,
     chart_error_profile,
 )
 from fidelity.coco.validate.colour import ValidationResults, collect_results
@@ -104,6 +106,53 @@ def test_bad_folders(tmp_path: Path) -> None:
     (d / "b.toml").write_text('name = "b"\n[tone]\ncurve = "sigmoid"\n')
     with pytest.raises(InputFileError, match="b.toml"):
         load_suite(d)
+
+
+def test_validate_measures_each_chart_with_its_cases_chromatic_adaptation(tmp_path: Path) -> None:
+    """Under illuminant A a camera whose suite file sets ``[cat]`` = "cat02" gets its chart ΔE
+    with CAT02, not the default: another ΔE than von Kries' (and Bradford's), each equal to the
+    render that ``fidelity suite`` makes with that transform; ``--cat`` sets the cases without a
+    ``[cat]`` of their own."""
+    from fidelity.camera.render import render_chart
+
+    d = tmp_path / "s"
+    d.mkdir()
+    for n in ("c", "v", "b"):
+        shutil.copy(CAMERAS / "nikon5100-a-awb.toml", d / f"{n}.toml")
+    (d / "suite.toml").write_text('default_illuminant = "A"\n[cat]\nc = "cat02"\n'
+                                  'v = "von kries"\n')
+    cases = {c.name: c for c in load_suite(d)}
+    assert {k: c.cat for k, c in cases.items()} == {"b": "Bradford", "c": "CAT02",
+                                                    "v": "Von Kries"}
+    de = {k: float(case_chart(c).measurement.mean_delta_e) for k, c in cases.items()}
+    assert abs(de["c"] - de["v"]) > 0.05 and abs(de["c"] - de["b"]) > 0.05
+    for k, c in cases.items():
+        ref = render_chart(str(c.path), "A", cat=c.cat).measurement.mean_delta_e
+        assert de[k] == pytest.approx(float(ref), rel=1e-12)
+    assert de["b"] == pytest.approx(
+        float(render_chart(str(cases["b"].path), "A").measurement.mean_delta_e), rel=1e-12)
+    assert {c.name: c.cat for c in load_suite(d, "cat16")} == {"b": "CAT16", "c": "CAT02",
+                                                               "v": "Von Kries"}
+
+
+def test_validate_accepts_cat_and_records_it(tmp_path: Path) -> None:
+    """``validate --cat`` is parsed as ``suite --cat`` (any case; an unknown name is refused
+    naming the option); a camera record keeps its transform (Bradford where a store written
+    before it has none), and the report lists it beside the illuminant and counts it."""
+    from fidelity.cli import main
+
+    d = make_suite(tmp_path / "s", ["a"])
+    r = CliRunner().invoke(main, ["validate", "--cameras", str(d), "--cat", "cat02",
+                                  "--out", str(tmp_path / "o"), "--store",
+                                  str(tmp_path / "none"), "--report-only"])
+    one_line_error(r, str(tmp_path / "none"))
+    r = CliRunner().invoke(main, ["validate", "--cameras", str(d), "--cat", "sunset",
+                                  "--out", str(tmp_path / "o"), "--report-only"])
+    assert r.exit_code == 2 and "--cat" in r.output
+    rec = replace(_camera("cam", 2.0), cat="CAT02")
+    assert rec.to_json()["cat"] == "CAT02" and CameraRecord.from_json(rec.to_json()) == rec
+    bradford = _camera("cam", 2.0).to_json()  # written as before the transform was recorded
+    assert "cat" not in bradford and CameraRecord.from_json(bradford).cat == "Bradford"
 
 
 # --------------------------------------------------------------------------------- profile
@@ -351,6 +400,10 @@ def test_validation_report_structure(one_camera_store) -> None:
                     assert "| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" in md
                     assert all(str(markdown_inline(c)) in html for c in row)
     assert not re.search(r"\{'|': ", md) and "{&#39;" not in html
+    # the chart's chromatic adaptation, per camera and counted in "What was run"
+    assert "| camera | illuminant | chromatic adaptation | description |" in md
+    assert "| cam | D65 | Bradford | test |" in md
+    assert "the scene reference adapted to D65 with Bradford (1 camera);" in md
     # the detector's settings, as validation.json carries them for the report
     assert res.to_json()["models"]["det"]["settings"]["conventions"] == {"conf": 0.001}
 

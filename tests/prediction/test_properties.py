@@ -18,11 +18,13 @@ from fidelity.coco.tables.degradation import calibrate_level, calibration_chart
 from fidelity.core.errors import InputFileError, InvalidValueError, UnknownNameError
 from fidelity.pipeline.check import audit_image
 from fidelity.prediction.properties import (
+    DOMINANCE_ORDER,
     INTERACTION,
     PropertyCell,
     PropertyTable,
     combine,
     detector_scale,
+    dominant_property,
     load_property_table,
     parse_property_table,
     predict_property,
@@ -154,6 +156,21 @@ def test_combination_is_the_sum_with_the_dominant_property():
     c = combine({"colour": (0.5, 0.1), "sharpness": (3.0, 0.2), "noise": None})
     assert c.loss == pytest.approx(3.5) and c.dominant == "sharpness"
     assert c.u_loss == pytest.approx(math.hypot(0.1, 0.2)) and c.missing == ("noise",)
+
+
+def test_a_tie_for_the_dominant_property_is_broken_in_a_fixed_order():
+    """Equal losses (both at the baseline's 0, or apart by a processor's last bits) name the
+    first of DOMINANCE_ORDER whatever the parts' order; a loss larger beyond the tolerance
+    wins."""
+    assert DOMINANCE_ORDER == ("colour", "sharpness", "noise")
+    for order in (("noise", "sharpness", "colour"), ("sharpness", "colour", "noise")):
+        zeros = {k: (0.0, 0.1) for k in order}
+        assert combine(zeros).dominant == "colour"
+        near = {k: (0.45 * (1 + 1e-12 * i), 0.1) for i, k in enumerate(order)}
+        assert combine(near).dominant == "colour"
+    assert dominant_property({"noise": 0.3, "sharpness": 0.3}) == "sharpness"
+    assert dominant_property({"colour": 0.45, "noise": 0.45 * (1 + 1e-4)}) == "noise"
+    assert dominant_property({"zeta": 1.0, "alpha": 1.0}) == "alpha"
 
 
 def test_blur_and_noise_add_their_interaction_with_its_uncertainty_propagated():

@@ -17,11 +17,17 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fidelity.camera.model import read_camera_file
+from fidelity.camera.render import render_chart
 from fidelity.coco.emulation import AccuracySummary
+from fidelity.coco.validate.suite import DEFAULT_CAT
 from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
 
 if TYPE_CHECKING:
+    from fidelity.camera.model import CameraModel
+    from fidelity.camera.render import ChartRender
     from fidelity.coco.emulation import AccuracySummary, Emulation
+    from fidelity.coco.validate.suite import CameraCase
     from fidelity.measure.colour import ChartMeasurement
 
 
@@ -133,7 +139,9 @@ class CameraRecord:
     (:func:`~fidelity.coco.validate.colour.prepare_case`).
 
     ``chart_delta_e``/``chart_max_delta_e``: mean and largest CIEDE2000 over the 24 patches
-    of the closed-form render under the case's illuminant; ``profile``: its
+    of the closed-form render under the case's illuminant, against the scene reference adapted
+    to D65 with the case's transform ``cat`` (:func:`case_chart`; Bradford in stores written
+    before it was recorded, as they were); ``profile``: its
     :class:`ErrorProfile`; ``render`` and ``patches``: the render's conventions and per-patch
     values (provenance, JSON); ``emulation``: :class:`EmulationRecord`; ``image_delta_e``:
     :class:`ImageDeltaE` (None in stores written before it was recorded); ``seconds``: the time
@@ -153,9 +161,12 @@ class CameraRecord:
     emulation: EmulationRecord
     image_delta_e: ImageDeltaE | None
     seconds: float
+    cat: str = DEFAULT_CAT
 
     def to_json(self) -> dict[str, Any]:
-        """The record as the store and ``validation.json`` hold it."""
+        """The record as the store and ``validation.json`` hold it (``cat`` only where it is
+        not :data:`~fidelity.coco.validate.suite.DEFAULT_CAT`, so that the records of
+        Bradford's cases read as they did before the transform was recorded)."""
         d: dict[str, Any] = {
             "camera": self.camera, "file": self.file, "sha256": self.sha256,
             "description": self.description, "illuminant": self.illuminant,
@@ -165,6 +176,8 @@ class CameraRecord:
         if self.image_delta_e is not None:
             d["image_delta_e"] = self.image_delta_e.to_json()
         d["seconds"] = self.seconds
+        if self.cat != DEFAULT_CAT:  # absent: Bradford, as every record written before it
+            d["cat"] = self.cat
         return d
 
     @classmethod
@@ -175,7 +188,19 @@ class CameraRecord:
                    d["chart_delta_e"], d["chart_max_delta_e"],
                    ErrorProfile.from_json(d["profile"]), dict(d.get("render") or {}),
                    tuple(d.get("patches") or ()), EmulationRecord.from_json(d["emulation"]),
-                   ImageDeltaE.from_json(ide) if ide else None, d.get("seconds", 0.0))
+                   ImageDeltaE.from_json(ide) if ide else None, d.get("seconds", 0.0),
+                   str(d.get("cat", DEFAULT_CAT)))
+
+
+def case_chart(case: CameraCase, camera: CameraModel | None = None, *,
+               frame: bool = False) -> ChartRender:
+    """The validation's chart of a test case: the closed-form render of ``camera`` (None: the
+    case's camera file) under the case's illuminant, measured against the scene reference
+    adapted to D65 with the case's chromatic adaptation transform (``case.cat``: the suite
+    file's ``[cat]`` or ``default_cat``, or ``--cat``), as ``fidelity suite`` and ``check`` of
+    the suite measure it; ``frame``: also the turned chart the properties are measured on."""
+    cam = camera if camera is not None else read_camera_file(case.path)
+    return render_chart(cam, case.illuminant, cat=case.cat, frame=frame)
 
 
 def chart_error_profile(measurement: ChartMeasurement) -> ErrorProfile:
@@ -226,6 +251,7 @@ __all__ = [
     "EmulationRecord",
     "ErrorProfile",
     "ImageDeltaE",
+    "case_chart",
     "chart_error_profile",
     "image_delta_e",
 ]

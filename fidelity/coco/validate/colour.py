@@ -2,8 +2,9 @@
 
 For every camera of a suite (:mod:`fidelity.coco.validate.suite`):
 
-1. **Predict.** Render the chart (:func:`fidelity.camera.render.render_chart`, closed form)
-   under the test case's illuminant, take the chart ΔE (mean CIEDE2000 over the 24 patches)
+1. **Predict.** Render the chart (:func:`fidelity.coco.validate.camera.case_chart`, closed
+   form) under the test case's illuminant, take the chart ΔE (mean CIEDE2000 over the 24
+   patches, against the scene reference adapted to D65 with the case's transform ``cat``)
    and predict the detection loss with every prediction table
    (:func:`fidelity.prediction.table.predict`, detector size ``n``; the baseline mAP of the
    detector resolves the paper's points-vs-relative ambiguity conservatively).
@@ -39,7 +40,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fidelity.camera.model import read_camera_file
-from fidelity.camera.render import render_chart
 from fidelity.coco.bounds import CameraChart, DirectionalValidation, MeasuredCell, compare_bounds
 from fidelity.coco.dataset import PixelMap, colour_codes
 from fidelity.coco.driver import StoreRun
@@ -67,6 +67,7 @@ from fidelity.coco.validate.camera import (
     IMAGE_DE_SAMPLE,
     CameraRecord,
     EmulationRecord,
+    case_chart,
     chart_error_profile,
     image_delta_e,
 )
@@ -77,7 +78,7 @@ from fidelity.coco.validate.checks import (
     validation_row,
 )
 from fidelity.coco.validate.store import ValidationCell, ValidationCells, ValidationStore
-from fidelity.coco.validate.suite import BASELINE, CameraCase
+from fidelity.coco.validate.suite import BASELINE, DEFAULT_CAT, CameraCase
 from fidelity.core.errors import InputFileError, InvalidValueError
 from fidelity.core.fileio import json_ready, portable_paths
 from fidelity.core.version import __version__, installed_version
@@ -105,18 +106,28 @@ if TYPE_CHECKING:
 def prepare_case(case: CameraCase, store: ValidationStore, method: str, training: str,
                  cache: ImageCache, image_ids: Sequence[int]
                  ) -> tuple[Emulation, CameraRecord]:
-    """Render, measure, fit the emulation and check it; the record is stored (resumable)."""
-    key = json.dumps({"sha256": case.sha256, "illuminant": case.illuminant, "method": method,
-                      "training": training, "emulation_version": EMULATION_VERSION})
+    """Render, measure, fit the emulation and check it; the record is stored (resumable).
+
+    The chart is :func:`~fidelity.coco.validate.camera.case_chart`'s (the case's illuminant
+    and chromatic adaptation transform); the record's key names the transform where it is not
+    :data:`~fidelity.coco.validate.suite.DEFAULT_CAT`, so that stores recorded before (all
+    Bradford) keep their keys and a camera recorded under another transform is not reused."""
+    fields: dict[str, Any] = {"sha256": case.sha256, "illuminant": case.illuminant,
+                              "method": method, "training": training,
+                              "emulation_version": EMULATION_VERSION}
+    if case.cat != DEFAULT_CAT:
+        fields["cat"] = case.cat
+    key = json.dumps(fields)
     have = store.case(case.name)
     if have and have[0] != key:
         raise InvalidValueError(f"store {store.path}: camera {case.name!r} was run with another "
-                                f"file, illuminant or emulation method; use a new --store")
+                                f"file, illuminant, chromatic adaptation or emulation method; "
+                                f"use a new --store")
     emu = fit_emulation(case.path, case.illuminant, method=method, training=training)
     if have:
         return emu, have[1]
     t0 = time.perf_counter()
-    render = render_chart(emu.camera, case.illuminant)
+    render = case_chart(case, emu.camera)
     m = render.measurement
     acc = emulation_accuracy(emu)
     sample = [cache.get(i)[0] for i in image_ids[: IMAGE_DE_SAMPLE[0]]]
@@ -137,6 +148,7 @@ def prepare_case(case: CameraCase, store: ValidationStore, method: str, training
              for k in EMULATION_METHODS if k != method}),
         image_delta_e=image_delta_e(emu, sample),
         seconds=time.perf_counter() - t0,
+        cat=case.cat,
     )
     store.set_case(case.name, key, info)
     return emu, info
@@ -181,7 +193,7 @@ def run_validation(cases: Sequence[CameraCase], models: Sequence[ModelSpec],
                                 "jpeg": "original quantisation tables and subsampling "
                                         "(fidelity.coco.jpeg.roundtrip_jpeg), as the COCO sweep"})
     store.set_meta("cameras", [{"camera": c.name, "file": c.path.name,
-                                "illuminant": c.illuminant} for c in cases])
+                                "illuminant": c.illuminant, "cat": c.cat} for c in cases])
     cache = ImageCache(img_dir, coco)
     with StoreRun(store, lambda: ValidationStore(store.folder, create=False), image_set,
                   opts) as run:
@@ -406,7 +418,8 @@ def directional_validation(results: ValidationResults,
     by_name = {c.name: c for c in suite or ()}
     charts = {name: CameraChart(name, rec.chart_delta_e, rec.patches,
                                 by_name[name].path if name in by_name else None,
-                                by_name[name].illuminant if name in by_name else None)
+                                by_name[name].illuminant if name in by_name else None,
+                                rec.cat)
               for name, rec in results.cameras.items()}
     bound = results.summary.bound_table
     cells = [MeasuredCell(r.camera, r.model, r.chart_delta_e, r.measured, r.se,

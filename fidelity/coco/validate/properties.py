@@ -7,7 +7,8 @@ colour, optics and noise (:mod:`fidelity.coco.imaging`), and measured against th
 set beside what a user is told for that camera:
 
 1. **Predict** (:func:`camera_prediction`): the camera's chart rendered in closed form with
-   its turned frame (:func:`fidelity.camera.render.render_chart`, ``frame=True``), its
+   its turned frame (:func:`fidelity.coco.validate.camera.case_chart`, ``frame=True``: the
+   case's illuminant and chromatic adaptation transform), its
    sharpness and noise measured as ``check`` measures them
    (:func:`fidelity.camera.render.frame_properties`), and judged as ``check`` judges them
    (:func:`fidelity.prediction.judge.judge_properties`, detector size ``n``): the colour loss
@@ -35,8 +36,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from fidelity.camera.model import read_camera_file
-from fidelity.camera.render import FRAME_SCALE, frame_properties, render_chart
+from fidelity.camera.render import FRAME_SCALE, frame_properties
 from fidelity.coco.loss import LOSS_COLUMNS
+from fidelity.coco.validate.camera import case_chart
 from fidelity.coco.validate.checks import BoundCheck, bound_check, measured_losses
 from fidelity.coco.validate.store import ValidationCell, ValidationStore
 from fidelity.coco.validate.suite import BASELINE, CameraCase
@@ -162,7 +164,8 @@ def camera_prediction(case: CameraCase) -> CameraPrediction:
     Parameters
     ----------
     case
-        The camera file and its scene illuminant.
+        The camera file, its scene illuminant and its chromatic adaptation transform
+        (:func:`fidelity.coco.validate.camera.case_chart`).
 
     Returns
     -------
@@ -170,7 +173,7 @@ def camera_prediction(case: CameraCase) -> CameraPrediction:
         Its chart values, the per-property and combined losses of every column and its group.
     """
     cam = read_camera_file(case.path)
-    render = render_chart(cam, case.illuminant, frame=True)
+    render = case_chart(case, cam, frame=True)
     m = render.measurement
     sharpness, noise = frame_properties(render.frame, "scene", case.illuminant)
     prediction = predict(m.mean_delta_e, size=SIZE)

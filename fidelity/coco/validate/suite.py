@@ -6,8 +6,8 @@ giving each camera's scene illuminant (``default_illuminant = "D65"``; ``[illumi
 with (``default_cat = "Bradford"``; ``[cat]`` table ``stem = "CAT02"``; one of
 :data:`fidelity.colour.colorimetry.CHROMATIC_ADAPTATION_METHODS`, any case); a camera file
 describes the camera, the light and the reference's adaptation are part of the test case
-(:func:`load_suite`). ``fidelity validate`` reads the illuminants; ``fidelity suite`` (and
-``check`` of a suite file) also the transforms.
+(:func:`load_suite`). ``fidelity suite``, ``check`` of a suite file and ``fidelity validate``
+(each camera's chart ΔE: :func:`fidelity.coco.validate.camera.case_chart`) read both.
 """
 
 from __future__ import annotations
