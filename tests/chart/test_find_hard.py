@@ -250,3 +250,37 @@ def test_a_tiny_one_channel_image_without_bayer_is_one_clear_error(size, tmp_pat
     r = CliRunner().invoke(main, ["audit", str(path), "--corners", "8,8,80,8,80,56,8,56"])
     assert r.exit_code == 2, r.output
     assert "--bayer" in r.output and len(r.output.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize(("sigma", "seed"), [(0.08, 0), (0.08, 1), (0.10, 2)])
+def test_a_chart_under_heavy_noise_is_found_where_it_was_drawn(sigma, seed):
+    """Issue 55: Gaussian noise of sigma 0.08 (and 0.10) of full scale on the 8-bit codes of a
+    640 px chart was refused as "uniformity 0.18". The uniformity check looks for a grid off
+    the patches, so it discounts white noise (structured_spread): the chart is found with its
+    corners within a tenth of a pitch."""
+    h = np.array([[96.0, 3.0, 60.0], [-2.0, 95.0, 50.0], [0.0, 0.0, 1.0]])
+    linear = draw_chart(LINEAR * 0.85, h=h, size=(434, 640), background=0.04)
+    codes = cm.delinearize_srgb(np.clip(linear, 0.0, 1.0))
+    noisy = np.clip(codes + np.random.default_rng(seed).normal(0.0, sigma, codes.shape), 0, 1)
+    img = np.round(noisy * 255).astype(np.uint8).astype(np.float32) / 255.0
+    found = find_chart(img, encoding="srgb")
+    truth = map_points(h, np.array(GRID_CORNERS, np.float64))
+    assert np.abs(found.corners - truth).max() < 0.1 * 96
+    assert found.checks.uniformity <= cascade.MAX_UNIFORMITY
+
+
+def test_the_uniformity_discounts_white_noise_not_a_window_across_a_patch_edge():
+    """structured_spread: a flat window under independent noise has (about) none left; a
+    window straddling an edge keeps its step's standard deviation, noisy or not."""
+    from fidelity.chart.find.placement import structured_spread
+
+    rng = np.random.default_rng(5)
+    k = 5
+    flat = 0.4 + rng.normal(0.0, 0.08, (2000, k, k, 1))
+    assert float(np.median(structured_spread(flat))) < 0.4 * 0.08  # was all of it, 0.08
+    step = np.where(np.arange(k) < k // 2, 0.2, 0.6)[None, None, :, None]  # across the window
+    edge = np.broadcast_to(step, (1, k, k, 1))
+    expected = float(np.std(edge))
+    np.testing.assert_allclose(structured_spread(edge), expected, rtol=1e-12)
+    noisy_edge = edge + rng.normal(0.0, 0.08, (2000, k, k, 1))
+    assert abs(float(np.median(structured_spread(noisy_edge))) - expected) < 0.25 * expected

@@ -47,10 +47,11 @@ ORIENTATIONS = tuple(np.array(m, dtype=float) for m in (
 
 
 def sample_cells(view: View, homography: np.ndarray, cells: np.ndarray,
-                 window: float = VERIFY_WINDOW) -> tuple[F64, F64]:
+                 window: float = VERIFY_WINDOW, structured: bool = False) -> tuple[F64, ...]:
     """Mean and relative spread of the linear view in a ``window``-pitch square about each
-    lattice cell (``VERIFY_SAMPLES``\\ :sup:`2` points, bilinear). Cells whose window leaves the
-    view get NaN."""
+    lattice cell (``VERIFY_SAMPLES``\\ :sup:`2` points, bilinear); ``structured``: also the
+    relative spread beyond white noise (:func:`structured_spread`), a third array. Cells whose
+    window leaves the view get NaN."""
     k = VERIFY_SAMPLES
     offs = (np.arange(k) + 0.5) / k - 0.5
     oy, ox = np.meshgrid(offs * window, offs * window, indexing="ij")
@@ -67,10 +68,32 @@ def sample_cells(view: View, homography: np.ndarray, cells: np.ndarray,
     vals = (img[y0, x0] * (1 - fx) * (1 - fy) + img[y0, x0 + 1] * fx * (1 - fy)
             + img[y0 + 1, x0] * (1 - fx) * fy + img[y0 + 1, x0 + 1] * fx * fy)
     mean = vals.mean(axis=1)
-    spread = vals.std(axis=1).mean(axis=-1) / (mean.mean(axis=-1) + 0.02)
+    scale = mean.mean(axis=-1) + 0.02
+    spread = vals.std(axis=1).mean(axis=-1) / scale
     mean[~inside] = np.nan
     spread[~inside] = np.nan
-    return mean.astype(np.float64), spread.astype(np.float64)
+    if not structured:
+        return mean.astype(np.float64), spread.astype(np.float64)
+    beyond_noise = structured_spread(vals.reshape(len(cells), k, k, -1)).mean(axis=-1) / scale
+    beyond_noise[~inside] = np.nan
+    return mean.astype(np.float64), spread.astype(np.float64), beyond_noise.astype(np.float64)
+
+
+def structured_spread(samples: F64) -> F64:
+    """Per window and channel, the standard deviation of a ``(n, k, k, c)`` grid of samples
+    with its white noise taken out: ``sqrt(max(0, s^2 - d^2 / 2))``, ``d^2`` the smaller of the
+    mean squared differences between neighbouring samples across and down (von Neumann's
+    successive-difference estimator of the noise variance: ``2 sigma^2`` for independent
+    noise). A window that straddles a patch edge keeps its spread (the differences along the
+    edge are small), a flat patch under noise loses it, so heavy noise (sigma 0.08 of full
+    scale) does not pass for a grid off the patches. ``(n, c)``."""
+    x = np.asarray(samples, np.float64)
+    n, k = x.shape[0], x.shape[1]
+    var = x.reshape(n, k * k, -1).var(axis=1)
+    across = np.mean(np.diff(x, axis=2) ** 2, axis=(1, 2))
+    down = np.mean(np.diff(x, axis=1) ** 2, axis=(1, 2))
+    out: F64 = np.sqrt(np.maximum(var - np.minimum(across, down) / 2.0, 0.0))
+    return out
 
 
 @dataclass(frozen=True)
@@ -127,9 +150,11 @@ def placement_scores(view: View, lattice_h: np.ndarray, occupied: np.ndarray, so
         return None
     placements = list(cells_all)
     uniq, inverse = np.unique(cells_all.reshape(-1, 2), axis=0, return_inverse=True)
-    means, spread = sample_cells(view, lattice_h, uniq.astype(float))
+    means, spread, beyond_noise = sample_cells(view, lattice_h, uniq.astype(float),
+                                               structured=True)
     pm = means[inverse.ravel()].reshape(len(placements), ROWS * COLS, 3)
     ps = spread[inverse.ravel()].reshape(len(placements), ROWS * COLS)
+    pu = beyond_noise[inverse.ravel()].reshape(len(placements), ROWS * COLS)
     valid = np.all(np.isfinite(pm), axis=(1, 2))
     if not valid.any():
         return None
@@ -163,7 +188,7 @@ def placement_scores(view: View, lattice_h: np.ndarray, occupied: np.ndarray, so
     checks = ChartChecks(colour_order=score,
                          neutral_order=float(neutral_order(pm[best], kept_neutrals)),
                          margin=score - second,
-                         uniformity=float(np.median(ps[best][clear])))
+                         uniformity=float(np.median(pu[best][clear])))
     return Placement(homography=h, checks=checks, cells=cells, source=source,
                      ring_patches=ring_patches,
                      occluded=tuple(int(k) for k in np.flatnonzero(flagged)))

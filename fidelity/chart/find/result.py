@@ -23,7 +23,9 @@ class ChartChecks:
     pairs of neutral patches in order of lightness; ``margin`` the lead of ``colour_order``
     over the next-best placement (another row, column or orientation) of the same candidate;
     ``uniformity`` the median over the patches of the standard deviation of the sampled
-    linear values relative to their mean (0: flat patches).
+    linear values beyond their white noise
+    (:func:`~fidelity.chart.find.placement.structured_spread`) relative to their mean (0:
+    flat patches, however noisy).
     """
 
     colour_order: float
