@@ -45,7 +45,7 @@ The finder is a cascade (:func:`~fidelity.chart.find.cascade.find_chart`, method
    lightness (at least :data:`~fidelity.chart.find.cascade.MIN_NEUTRAL_ORDER` of the 15
    pairs), the next-best placement of the same candidate scores at least
    :data:`~fidelity.chart.find.cascade.MIN_MARGIN` lower and its patches are flat (median
-   relative spread at most :data:`~fidelity.chart.find.cascade.MAX_UNIFORMITY`); so a chart
+   relative spread beyond white noise at most :data:`~fidelity.chart.find.cascade.MAX_UNIFORMITY`); so a chart
    found one row or column off is corrected, never measured. The thresholds were chosen on a
    tuning set of the benchmark (``python -m benchmarks.speed find_chart -p seed=7``) and
    checked on another (seed 19).

@@ -67,8 +67,9 @@ NO_CHART_CONFIDENCE = 0.5
 MIN_NEUTRAL_ORDER = 0.8
 #: Smallest lead of the best placement of a candidate over its next-best placement.
 MIN_MARGIN = 0.15
-#: Largest median spread of the sampled values within a patch (relative to their mean): a
-#: placement whose windows straddle patch edges is not the chart.
+#: Largest median spread of the sampled values within a patch beyond their white noise
+#: (relative to their mean; :func:`~fidelity.chart.find.placement.structured_spread`): a
+#: placement whose windows straddle patch edges is not the chart, a noisy chart still is.
 MAX_UNIFORMITY = 0.15
 #: Side of the audit's sampling window, in patch pitches, in which covered patches are looked
 #: for again once the chart is found (:data:`fidelity.chart.locate.DEFAULT_WINDOW`).
