@@ -126,7 +126,8 @@ def test_report_numbers_agree_with_colour_science(default_check):
                 "to the ΔE limit"):
         assert f'role="img" aria-label="{alt}"' in html
     # every figure is inline SVG drawn from the numbers, none a PNG
-    assert html.count("<svg ") == 10 and "data:image/png" not in html  # two prediction axes
+    # two prediction axes; the edge target's MTF curve and the noise curve
+    assert html.count("<svg ") == 12 and "data:image/png" not in html
     assert "<details><summary>Patches</summary>" in html
     for text in ("Provenance", DEFAULT_TABLE, doc["provenance"]["version"]):
         assert text in html

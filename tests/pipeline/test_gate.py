@@ -83,9 +83,12 @@ def test_gate_pass_and_fail_on_delta_e(png, tmp_path):
     html = (tmp_path / "r.html").read_text()
     # swatches, sampling windows, ΔE map, a*b*, tone curve, ΔE bars, the prediction curves in
     # points and in % of baseline, the direction-aware family curves, and one curve per
-    # property judged besides colour
+    # property judged besides colour, and the chart's own MTF and noise curves where measured
     judged = len(report["properties"]["predictions"])
-    assert html.count("<svg ") == 9 + judged
+    texture = (report["sharpness"] is not None and any(
+        c["channel"] == "Y" and c.get("curve") for e in report["sharpness"]["edges"]
+        for c in e["channels"])) + (report["noise"] is not None)
+    assert html.count("<svg ") == 9 + judged + texture
     assert html.index("FAIL") < html.index('aria-label="sampling windows"')
     assert report["provenance"]["input_sha256"] in html
 
