@@ -178,7 +178,7 @@ def texture_lines(report: ChartReport) -> list[str]:
                 reason = e.refusal or (y.refusal if y is not None else None)
                 parts.append(f"{e.direction} refused ({reason[0] if reason else 'not measured'})")
             else:
-                alias = (" (above the 0.5 cy/px Nyquist frequency: aliased in the image)"
+                alias = (" (above Nyquist)"
                          if y.above_nyquist else "")
                 parts.append(f"{plus_minus(y.mtf50, y.u_mtf50)}{unit} {e.direction}{alias}")
             if e.method is not None and e.method not in methods:
