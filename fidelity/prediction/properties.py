@@ -274,17 +274,36 @@ def _inv(x: float) -> float:
     return 0.0 if math.isinf(x) else 1.0 / x
 
 
+def _chain(points: Sequence[tuple[float, float, float | None]], u0: float
+           ) -> list[tuple[float, float, float | None]]:
+    """One family's ``(u, loss, se)`` points beyond ``u0`` in order of ``u``, from ``(u0, 0,
+    0)``, as the running maximum of the loss (the worst case never falls as the property
+    worsens; a point below it takes the previous loss and se)."""
+    chain: list[tuple[float, float, float | None]] = [(u0, 0.0, 0.0)]
+    for p in sorted(points):
+        if p[0] > u0:
+            chain.append(p if p[1] >= chain[-1][1] else (p[0], chain[-1][1], chain[-1][2]))
+    return chain
+
+
+def _families(table: PropertyTable, model: str, column: str
+              ) -> dict[str, list[tuple[float, float, float | None]]]:
+    """A detector's cells of ``column`` by family, as ``(1/x, max(loss, 0), se)``."""
+    fams: dict[str, list[tuple[float, float, float | None]]] = {}
+    for c in table.cells.get(model, ()):
+        loss = c.losses.get(column)
+        if loss is not None:
+            fams.setdefault(c.family, []).append((_inv(c.x), max(loss, 0.0), c.se.get(column)))
+    return fams
+
+
 def _family_loss(points: Sequence[tuple[float, float, float | None]], u: float, u0: float
                  ) -> tuple[float, float | None, bool] | None:
     """One family's (loss, se, covered) at ``u = 1/x``: linear in u between its points and
     (u0, 0, 0); beyond its harshest point its harshest loss (covered False)."""
-    pts = sorted(points)
-    if not pts:
+    if not points:
         return None
-    chain: list[tuple[float, float, float | None]] = [(u0, 0.0, 0.0)]
-    for p in pts:  # the worst case never falls as the property worsens: the running maximum
-        if p[0] > u0:
-            chain.append(p if p[1] >= chain[-1][1] else (p[0], chain[-1][1], chain[-1][2]))
+    chain = _chain(points, u0)
     if len(chain) == 1:
         return 0.0, 0.0, True
     if u >= chain[-1][0]:
@@ -373,13 +392,7 @@ def _worst_at(table: PropertyTable, x: float, size: str, column: str
     best: tuple[float, float | None, bool, str | None, str | None] = (0.0, 0.0, True, None, None)
     covered_any = False
     for m in table.detectors(size):
-        fams: dict[str, list[tuple[float, float, float | None]]] = {}
-        for c in table.cells.get(m, ()):
-            loss = c.losses.get(column)
-            if loss is not None:
-                fams.setdefault(c.family, []).append((_inv(c.x), max(loss, 0.0),
-                                                       c.se.get(column)))
-        for fam, pts in fams.items():
+        for fam, pts in _families(table, m, column).items():
             got = _family_loss(pts, u, u0)
             if got is None:
                 continue
@@ -490,20 +503,13 @@ def worst_case_losses(table: PropertyTable, xs: ArrayLike, *, size: str = "any",
     worst = np.zeros_like(u)
     covered = np.zeros(u.shape, bool)
     for m in detectors:
-        fams: dict[str, list[tuple[float, float]]] = {}
-        for c in table.cells.get(m, ()):
-            loss = c.losses.get(column)
-            if loss is not None:
-                fams.setdefault(c.family, []).append((_inv(c.x), max(loss, 0.0)))
-        for pts in fams.values():
-            chain = [(u0, 0.0)]
-            for p in sorted(pts):  # as _family_loss: the running maximum
-                if p[0] > u0:
-                    chain.append((p[0], max(p[1], chain[-1][1])))
+        for pts in _families(table, m, column).values():
+            chain = _chain(pts, u0)
             if len(chain) == 1:
                 covered |= True
                 continue
-            cu, cl = np.array(chain).T
+            cu = np.array([p[0] for p in chain])
+            cl = np.array([p[1] for p in chain])
             worst = np.maximum(worst, np.interp(u, cu, cl))
             covered |= u <= cu[-1]
     ceiling = max(((c.losses.get(column) or 0.0) for m in detectors
