@@ -341,8 +341,9 @@ def texture_section(report: ChartReport) -> Section | None:
                              f"refused, {e.refusal[0]}: {e.refusal[1]}"))
                 continue
             for c in e.channels:
+                mtf50 = pm(c.mtf50, c.u_mtf50) + (" (above Nyquist)" if c.above_nyquist else "")
                 rows.append((e.direction, e.method or "–", c.channel,
-                             pm(c.mtf50, c.u_mtf50), pm(c.mtf10, c.u_mtf10),
+                             mtf50, pm(c.mtf10, c.u_mtf10),
                              pm(c.mtf_half_nyquist, c.u_mtf_half_nyquist)
                              if c.refusal is None else f"refused, {c.refusal[0]}"))
         blocks.append(table(("direction", "method", "channel", "MTF50, cy/px", "MTF10, cy/px",

@@ -107,3 +107,25 @@ def test_a_gate_overview_of_passes_outside_the_domain_is_amber():
     assert doc.headline.tone == "outside"
     assert "1 of 2 outside the validity domain" in doc.headline.message
     assert gate_overview_document(cases[1:], [None]).headline.tone == "pass"
+
+
+@pytest.mark.parametrize("camera", [None, "ideal-gauss0.5.toml"])
+def test_each_mtf50_cell_above_nyquist_says_so(tmp_path, camera):
+    """The per-edge, per-channel table marks exactly the MTF50 cells whose value is above the
+    0.5 cy/px Nyquist frequency, as the terminal's line does: the default camera's edge
+    target (MTF50 0.58-0.62 cy/px) all eight, a 0.5 px Gaussian lens (0.37 cy/px) none."""
+    extra = [] if camera is None else ["--camera", str(REPO / "cameras" / "properties" / camera)]
+    r = CliRunner().invoke(main, ["--no-config", "check", "--html", str(tmp_path / "r.html"),
+                                  "--json", str(tmp_path / "r.json"), *extra])
+    assert r.exit_code in (0, 1), r.output
+    html = (tmp_path / "r.html").read_text(encoding="utf-8")
+    record = json.loads((tmp_path / "r.json").read_text(encoding="utf-8"))
+    cells = re.findall(r'<tr><td>(horizontal|vertical)</td><td>[^<]*</td><td>([RGBY])</td>'
+                       r'<td class="num">([^<]*)</td>', html)
+    channels = [(e["direction"], c["channel"], c["mtf50"])
+                for e in record["sharpness"]["edges"] for c in e["channels"]]
+    assert len(cells) == len(channels) == 8
+    for (direction, channel, text), (d, ch, mtf50) in zip(cells, channels, strict=True):
+        assert (direction, channel) == (d, ch)
+        assert text.endswith(" (above Nyquist)") == (mtf50 > 0.5), (text, mtf50)
+    assert sum(t.endswith(" (above Nyquist)") for *_, t in cells) == (8 if camera is None else 0)
