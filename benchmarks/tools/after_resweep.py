@@ -7,7 +7,8 @@ that one commit carries the tables and everything computed from them:
    ``reports/coco/preprocessing_change_cells.{md,json}`` (``benchmarks.tools.compare_tables``);
 2. the validation report from its store (``fidelity validate --report-only``: the measured
    cells as stored, the predictions from the new tables) into ``reports/validation``, and its
-   validated cameras (``domain.json``) into ``fidelity/data/validation-domain.json``;
+   validated cameras (``domain.json``, with the sharpness and noise validation's
+   ``properties-domain.json`` as its ``properties``) into ``fidelity/data/validation-domain.json``;
 3. the COCO-C report (``fidelity coco-c --report-only``, its predictions recomputed from the
    new tables) into ``reports/cococ`` and the shipped ``fidelity/data/coco-c.json``;
 4. the recorded JSON outputs of the test suite (``FIDELITY_RECORD_JSON=1``);
@@ -39,6 +40,8 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+from fidelity.prediction.interval import shipped_domain
 
 REPO = Path(__file__).resolve().parents[2]
 #: The validation store's cells without their detections (``fidelity validate
@@ -88,9 +91,13 @@ def validation(store: Path, shared: Path) -> list[str]:
         changed = _replace_existing(Path(out), REPO / "reports" / "validation")
         # the validated cameras, shipped for the validity domain of a check's prediction
         shipped = REPO / "fidelity" / "data" / "validation-domain.json"
-        domain = Path(out) / "domain.json"
-        if domain.read_bytes() != shipped.read_bytes():
-            shutil.copyfile(domain, shipped)
+        properties = REPO / "reports" / "validation" / "properties-domain.json"
+        doc = shipped_domain(json.loads((Path(out) / "domain.json").read_text("utf-8")),
+                             json.loads(properties.read_text("utf-8"))
+                             if properties.is_file() else None)
+        text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
+        if text != shipped.read_text("utf-8"):
+            shipped.write_text(text, "utf-8")
             changed.append("fidelity/data/validation-domain.json")
         return changed
 

@@ -23,7 +23,7 @@ from fidelity.coco.emulation import EMULATION_METHODS, TRAINING_SETS
 from fidelity.coco.scoring import load_annotations
 from fidelity.coco.sweep import run_summary
 from fidelity.coco.validate.colour import collect_results, run_validation, validated_cameras
-from fidelity.coco.validate.properties import collect_property_results
+from fidelity.coco.validate.properties import collect_property_results, validated_properties
 from fidelity.coco.validate.store import ValidationStore, default_store
 from fidelity.coco.validate.suite import load_suite
 from fidelity.core.errors import InvalidValueError, unknown_name
@@ -38,6 +38,9 @@ if TYPE_CHECKING:
 
 #: The validated cameras (:func:`fidelity.coco.validate.colour.validated_cameras`), beside the report.
 DOMAIN_FILE = "domain.json"
+#: What ``validate --properties`` writes beside its report: the cameras of the sharpness and
+#: noise validation (:func:`fidelity.coco.validate.properties.validated_properties`).
+PROPERTIES_DOMAIN_FILE = "properties-domain.json"
 #: The files of the property validation (``--properties``).
 PROPERTY_FILES = ("properties.md", "properties.html", "properties.json")
 
@@ -157,7 +160,14 @@ def validate(cameras: str | None, models: tuple[ModelSpec, ...] | None, images: 
 
     if properties:
         presults = collect_property_results(st, cases)
-        for p in write_property_report(presults, out):
+        written = write_property_report(presults, out)
+        written.append(write_json_atomic(Path(out) / PROPERTIES_DOMAIN_FILE, {
+            "source": "fidelity validate --properties: the cameras the sharpness and noise "
+                      "verdict was validated on and their noise, optics and vignetting (the "
+                      "validity domain's 'properties', shipped in "
+                      "fidelity/data/validation-domain.json)",
+            **validated_properties(presults, cases).to_json()}))
+        for p in written:
             click.echo(f"wrote {p}")
         a = presults.summary["dmap_points"]["all"] if presults.rows else None
         click.echo(f"{len(presults.rows)} (camera, model) cells"

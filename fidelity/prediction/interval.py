@@ -257,14 +257,19 @@ class ValidatedCameras:
     within: int
     within_2se: int
     degradations: Mapping[str, ValidatedDegradation] = field(default_factory=dict)
+    properties: ValidatedProperties | None = None
 
     def to_json(self) -> dict[str, Any]:
-        """The layout of :data:`VALIDATED_CAMERAS_FILE`."""
-        return {"cameras": self.cameras, "illuminants": list(self.illuminants),
-                "stages": {k: list(v) for k, v in self.stages.items()},
-                "sensitivities": list(self.sensitivities), "models": list(self.models),
-                "cells": self.cells, "within": self.within, "within_2se": self.within_2se,
-                "degradations": {k: v.to_json() for k, v in self.degradations.items()}}
+        """The layout of :data:`VALIDATED_CAMERAS_FILE` (``properties`` only when stated)."""
+        out: dict[str, Any] = {
+            "cameras": self.cameras, "illuminants": list(self.illuminants),
+            "stages": {k: list(v) for k, v in self.stages.items()},
+            "sensitivities": list(self.sensitivities), "models": list(self.models),
+            "cells": self.cells, "within": self.within, "within_2se": self.within_2se,
+            "degradations": {k: v.to_json() for k, v in self.degradations.items()}}
+        if self.properties is not None:
+            out["properties"] = self.properties.to_json()
+        return out
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> ValidatedCameras:
@@ -274,7 +279,9 @@ class ValidatedCameras:
                    tuple(d["sensitivities"]), tuple(d["models"]), int(d["cells"]),
                    int(d["within"]), int(d["within_2se"]),
                    {k: ValidatedDegradation.from_json(v)
-                    for k, v in (d.get("degradations") or {}).items()})
+                    for k, v in (d.get("degradations") or {}).items()},
+                   ValidatedProperties.from_json(d["properties"]) if d.get("properties")
+                   else None)
 
     def camera_checks(self, stage_kinds: Mapping[str, str], illuminant: str,
                       degradations: Mapping[str, tuple[str, Mapping[str, float]]] | None = None
@@ -286,7 +293,9 @@ class ValidatedCameras:
         depth inside the range validated, a float output only if one was); then, given the
         camera's ``degradations`` (:meth:`~fidelity.camera.model.CameraModel.degradations`),
         a ``validated noise``, ``validated optics`` and ``validated vignetting`` check for
-        each degradation this record states (:func:`degradation_check`)."""
+        each degradation this record states (:func:`degradation_check`), against what the
+        colour validation's cameras and, where stated, the sharpness and noise validation's
+        (:attr:`properties`) had."""
         held = (f"{self.cameras} cameras, {self.within} of {self.cells} (camera, detector) "
                 f"cells within the measured bound")
         light = illuminant in self.illuminants
@@ -306,11 +315,22 @@ class ValidatedCameras:
             f"a camera like those validated: {like} ({held})" if not off else
             f"not validated: {'; '.join(off)}; the prediction was not validated on such a "
             f"camera")
-        extra = [degradation_check(name, *degradations[name], self.degradations[name])
+        extra = [degradation_check(name, *degradations[name], *self.degradation(name))
                  for name in DEGRADATIONS
                  if degradations is not None and name in degradations
                  and name in self.degradations]
         return (ill, kind, *extra)
+
+    def degradation(self, name: str) -> tuple[ValidatedDegradation, str | None]:
+        """What the validated cameras had of degradation ``name``: the colour validation's
+        (:attr:`degradations`) joined with the sharpness and noise validation's
+        (:func:`joined_degradation`), and the words naming that second validation (None when
+        this record states none)."""
+        own = self.degradations[name]
+        p = self.properties
+        if p is None or name not in p.degradations:
+            return own, None
+        return joined_degradation(own, p.degradations[name]), p.words()
 
 
 #: The image degradations the validity domain states besides the colour stages, in the order
@@ -351,6 +371,52 @@ class ValidatedDegradation:
         return ", ".join(self.kinds) + (f" ({spans})" if spans else "")
 
 
+@dataclass(frozen=True)
+class ValidatedProperties:
+    """The camera models the sharpness and noise verdict was validated on (``fidelity validate
+    --properties``, ``reports/validation/properties.md``): ``cameras``, the ``models`` measured,
+    the (camera, detector) ``cells``, how many had their measured ΔmAP within the verdict's
+    combined loss (``within``) and within it plus two standard errors (``within_2se``), and per
+    degradation of :data:`DEGRADATIONS` what those cameras had (``degradations``)."""
+
+    cameras: int
+    models: tuple[str, ...]
+    cells: int
+    within: int
+    within_2se: int
+    degradations: Mapping[str, ValidatedDegradation]
+
+    def to_json(self) -> dict[str, Any]:
+        """Field names as keys."""
+        return {"cameras": self.cameras, "models": list(self.models), "cells": self.cells,
+                "within": self.within, "within_2se": self.within_2se,
+                "degradations": {k: v.to_json() for k, v in self.degradations.items()}}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> ValidatedProperties:
+        """Inverse of :meth:`to_json`."""
+        return cls(int(d["cameras"]), tuple(d["models"]), int(d["cells"]), int(d["within"]),
+                   int(d["within_2se"]),
+                   {k: ValidatedDegradation.from_json(v)
+                    for k, v in (d.get("degradations") or {}).items()})
+
+    def words(self) -> str:
+        """``the sharpness and noise validation: 39 cameras, 73 of 78 (camera, detector)
+        cells within the combined loss``."""
+        return (f"the sharpness and noise validation: {self.cameras} cameras, {self.within} of "
+                f"{self.cells} (camera, detector) cells within the combined loss")
+
+
+def joined_degradation(a: ValidatedDegradation, b: ValidatedDegradation
+                       ) -> ValidatedDegradation:
+    """What two validations' cameras had of one degradation together: the union of their
+    kinds (sorted), and per parameter the smallest and largest value either had."""
+    ranges = dict(a.ranges)
+    for k, (lo, hi) in b.ranges.items():
+        ranges[k] = (min(lo, ranges[k][0]), max(hi, ranges[k][1])) if k in ranges else (lo, hi)
+    return ValidatedDegradation(tuple(sorted({*a.kinds, *b.kinds})), dict(sorted(ranges.items())))
+
+
 def validated_degradation(seen: list[tuple[str, Mapping[str, float]]]
                           ) -> ValidatedDegradation:
     """The :class:`ValidatedDegradation` of the validated cameras' ``seen`` degradations
@@ -365,11 +431,13 @@ def validated_degradation(seen: list[tuple[str, Mapping[str, float]]]
 
 
 def degradation_check(name: str, kind: str, params: Mapping[str, float],
-                      validated: ValidatedDegradation) -> DomainCheck:
+                      validated: ValidatedDegradation, source: str | None = None
+                      ) -> DomainCheck:
     """Whether a camera's degradation ``name`` (``kind`` and its numeric ``params``) lies
     among the validated cameras' (``validated``): inside when its kind is one they had and
     each of its parameters lies within their range (a kind none of them had, or a parameter
-    none of them had a value of, is outside). The detail gives the value and the range."""
+    none of them had a value of, is outside). The detail gives the value and the range, and
+    ``source``, the validation the range comes from, where given."""
     shown = ", ".join(f"{k} {v:g} {PARAMETER_UNITS.get(k, '')}".rstrip()
                       for k, v in params.items())
     this = (f"no {name}" if kind == "none" else f"{name} {kind}") + (
@@ -378,11 +446,12 @@ def degradation_check(name: str, kind: str, params: Mapping[str, float],
            if k not in validated.ranges
            or not validated.ranges[k][0] <= v <= validated.ranges[k][1]]
     inside = kind in validated.kinds and not off
+    of = f"{name}: {validated.words()}" + ("" if source is None else f"; {source}")
     return DomainCheck(
         f"validated {name}", inside,
-        f"{this}: like the cameras validated ({name}: {validated.words()})" if inside else
-        f"{this}: not validated (the validated cameras' {name}: {validated.words()}); the "
-        f"prediction was not validated on such a camera")
+        f"{this}: like the cameras validated ({of})" if inside else
+        f"{this}: not validated (the validated cameras' {of}); the prediction was not "
+        f"validated on such a camera")
 
 
 def _kind_validated(stage: str, kind: str, validated: tuple[str, ...]) -> bool:
@@ -391,6 +460,18 @@ def _kind_validated(stage: str, kind: str, validated: tuple[str, ...]) -> bool:
         return kind in validated
     depths = [int(v) for v in validated if v.isdigit()]
     return bool(depths) and min(depths) <= int(kind) <= max(depths)
+
+
+def shipped_domain(colour: Mapping[str, Any], properties: Mapping[str, Any] | None
+                   ) -> dict[str, Any]:
+    """The shipped :data:`VALIDATED_CAMERAS_FILE` from what the two validations write beside
+    their reports: the colour validation's ``domain.json`` (``colour``) with the sharpness and
+    noise validation's ``properties-domain.json`` (``properties``, its ``source`` left out) as
+    its ``properties``."""
+    out = dict(colour)
+    if properties is not None:
+        out["properties"] = {k: v for k, v in properties.items() if k != "source"}
+    return out
 
 
 @lru_cache(maxsize=1)
@@ -413,10 +494,13 @@ __all__ = [
     "PredictionInterval",
     "ValidatedCameras",
     "ValidatedDegradation",
+    "ValidatedProperties",
     "ValidityDomain",
     "load_validated_cameras",
     "prediction_interval",
+    "shipped_domain",
     "degradation_check",
+    "joined_degradation",
     "validated_degradation",
     "validity_domain",
 ]

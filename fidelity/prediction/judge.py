@@ -145,7 +145,8 @@ def _native_value(prop: str, measured: Any) -> tuple[tuple[float, float | None] 
 
 def judge_properties(verdict: Verdict | None, prediction: Prediction, criterion: Criterion | None,
                      *, size: str = "any", sharpness: Any = None, noise: Any = None,
-                     scale: float = 1.0, tables: Mapping[str, Any] | None = None
+                     scale: float = 1.0, tables: Mapping[str, Any] | None = None,
+                     delta_e_uncertainty: float | None = None
                      ) -> tuple[PropertyJudgement, Verdict | None]:
     """Judge sharpness and noise beside colour, and the verdict they make together.
 
@@ -175,6 +176,11 @@ def judge_properties(verdict: Verdict | None, prediction: Prediction, criterion:
         ``1 / scale^2`` pixels of white noise).
     tables
         Property -> its table (None: the shipped ones).
+    delta_e_uncertainty
+        The chart ΔE's standard uncertainty (ΔE00), which enters the colour loss's
+        uncertainty through the table's slope
+        (:func:`~fidelity.prediction.interval.prediction_interval`) with the table's SE
+        (None: the SE alone).
 
     Returns
     -------
@@ -198,6 +204,12 @@ def judge_properties(verdict: Verdict | None, prediction: Prediction, criterion:
     u_colour = None
     if verdict is not None and verdict.criterion.kind == "max-dmap":
         colour, u_colour = verdict.value, verdict.uncertainty
+    if u_colour is None and colour is not None:
+        # the colour loss's own standard uncertainty: the table's SE and u(ΔE) through its slope
+        interval = prediction_interval(prediction, delta_e_uncertainty or 0.0, column)
+        if interval is not None and (interval.table_se is not None
+                                     or delta_e_uncertainty is not None):
+            u_colour = interval.standard_uncertainty
     preds: list[PropertyPrediction] = []
     skipped: list[tuple[str, str]] = []
     limits: dict[str, float | None] = {}
@@ -390,7 +402,8 @@ def judge_chart(mean_delta_e: float, judge: JudgeOptions = DEFAULT_JUDGE,
     judged = None
     if properties:
         judged, verdict = judge_properties(verdict, prediction, criterion, size=size,
-                                           sharpness=sharpness, noise=noise, scale=scale)
+                                           sharpness=sharpness, noise=noise, scale=scale,
+                                           delta_e_uncertainty=delta_e_uncertainty)
     if verdict is not None and exposure is not None:
         verdict = replace(verdict, exposure=exposure)
         if not exposure.passed:

@@ -217,8 +217,9 @@ def _not_judged(v: Verdict) -> str:
 def property_lines(judgement: Any, not_judged: bool = True) -> list[str]:
     """One line per property judged besides colour, e.g. ``sharpness: MTF50 0.127 cy/px at
     the detector's input -> predicted ΔmAP 3.03 ± 0.21 points (gaussian-blur, yolox_nano;
-    table coco1000-sharpness)``, one per reason properties were not judged (``not_judged``;
-    a verdict's sentence says it otherwise), and the default limits (``judgement``: a
+    table coco1000-sharpness)``, the combined loss with its rule and dominant property, one
+    per reason properties were not judged (``not_judged``; a verdict's sentence says it
+    otherwise), and the default limits (``judgement``: a
     :class:`fidelity.prediction.properties.PropertyJudgement` or None)."""
     if judgement is None:
         return []
@@ -242,6 +243,12 @@ def property_lines(judgement: Any, not_judged: bool = True) -> list[str]:
                        f"the tables' axis)")
         lines.append(f"{p.property}: {axis} {p.x:.3g}{unit} at the detector's input{scaled} "
                      f"-> predicted {label} {p.loss:.2f}{pm} ({where}; table {p.table})")
+    c = judgement.combined
+    if c is not None and judgement.predictions:
+        pm = "" if c.u_loss is None else f" ± {c.u_loss:.2f}"
+        pm += " points" if judgement.column.endswith("_points") else " %"
+        lines.append(f"combined: predicted {label} {c.loss:.2f}{pm} ({c.rule} of "
+                     + ", ".join(c.parts) + f"; {c.dominant} dominates)")
     reasons: dict[str, list[str]] = {}
     for k, why in judgement.not_judged if not_judged else ():
         reasons.setdefault(why, []).append(k)

@@ -183,6 +183,12 @@ def test_a_tiny_real_property_run(shared: Path, tmp_path: Path) -> None:
     assert "nikon-gauss2.0-fw5k" in md and "Combination rules" in md
     assert (tmp_path / "rep" / "properties.html").is_file()
     assert not (tmp_path / "rep" / "validation.json").exists()
+    domain = json.loads((tmp_path / "rep" / "properties-domain.json").read_text())
+    assert (domain["cameras"], domain["cells"]) == (2, 2)
+    assert domain["degradations"]["noise"] == {"kinds": ["none", "shot+read"],
+                                               "ranges": {"full_well": [5000.0, 5000.0],
+                                                          "read_noise": [10.0, 10.0]}}
+    assert domain["degradations"]["optics"]["ranges"] == {"sigma_px": [2.0, 3.0]}
     before = {k: c.finished for k, c in cells.items()}
     r2 = CliRunner().invoke(main, args)
     assert r2.exit_code == 0, r2.output

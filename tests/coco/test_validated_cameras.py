@@ -14,18 +14,23 @@ from click.testing import CliRunner
 import fidelity
 from fidelity.cli import main
 from fidelity.coco.validate.colour import ValidationResults, validated_cameras
+from fidelity.coco.validate.properties import PropertyResults, validated_properties
 from fidelity.coco.validate.suite import load_suite
 from fidelity.prediction.interval import (
     STAGES,
     ValidatedCameras,
     ValidatedDegradation,
+    ValidatedProperties,
     degradation_check,
+    joined_degradation,
     load_validated_cameras,
+    shipped_domain,
     validated_degradation,
 )
 
 REPO = Path(__file__).resolve().parents[2]
 SHIPPED = REPO / "fidelity" / "data" / "validation-domain.json"
+PROPERTIES_DOMAIN = REPO / "reports" / "validation" / "properties-domain.json"
 
 
 def without_source(doc: dict) -> dict:
@@ -41,7 +46,10 @@ def test_shipped_validated_cameras_are_the_validation_reports():
                                 load_suite(REPO / "cameras")).to_json()
     shipped = json.loads(SHIPPED.read_text(encoding="utf-8"))
     beside = json.loads((REPO / "reports" / "validation" / "domain.json").read_text())
-    assert without_source(shipped) == derived == without_source(beside)
+    colour = {k: v for k, v in without_source(shipped).items() if k != "properties"}
+    assert colour == derived == without_source(beside)
+    properties = json.loads(PROPERTIES_DOMAIN.read_text(encoding="utf-8"))
+    assert shipped == shipped_domain(beside, properties)
     # independently: suite.toml's illuminants, the summary's counts, the models run
     suite = tomllib.loads((REPO / "cameras" / "suite.toml").read_text(encoding="utf-8"))
     names = set(report["cameras"])
@@ -135,10 +143,11 @@ def test_an_image_audit_states_no_camera_kind(tmp_path):
 
 
 def test_noise_optics_and_vignetting_are_in_the_domain_as_the_validation_spans_them(tmp_path):
-    """The shipped domain states the validated cameras' noise, optics and vignetting (none of
-    the 30 had any: the domain is noise-free, no PSF, no fall-off), read from the camera files
-    independently; a camera with any of them is outside, on the terminal (one line, value
-    against range) and in the HTML (an amber banner, not a plain green PASS)."""
+    """The shipped domain states the colour validation's cameras' noise, optics and
+    vignetting (none of the 30 had any), read from the camera files independently, and the
+    sharpness and noise validation's (below); a camera whose noise lies outside both (a full
+    well of 500 e-, under the 625 e- of the lowest validated) is outside, on the terminal (one
+    line, value against range) and in the HTML (an amber banner, not a plain green PASS)."""
     shipped = json.loads(SHIPPED.read_text(encoding="utf-8"))
     suite = tomllib.loads((REPO / "cameras" / "suite.toml").read_text(encoding="utf-8"))
     files = [tomllib.loads((REPO / "cameras" / f"{n}.toml").read_text(encoding="utf-8"))
@@ -166,7 +175,9 @@ def test_noise_optics_and_vignetting_are_in_the_domain_as_the_validation_spans_t
     outside = [ln for ln in r.output.splitlines() if "outside the validity domain" in ln]
     assert len(outside) == 1, r.output
     assert "full_well 500 e-" in outside[0] and "read_noise 3 e- rms" in outside[0]
-    assert "the validated cameras' noise: none only" in outside[0]
+    assert ("the validated cameras' noise: none, shot+read (full_well 625 to 30000 e-, "
+            "read_noise 2 to 10 e- rms); the sharpness and noise validation: 39 cameras, 73 of "
+            "78 (camera, detector) cells within the combined loss") in outside[0]
     page = (tmp_path / "r.html").read_text(encoding="utf-8")
     banner = page.split('class="headline tone-', 1)[1]
     verdict = json.loads((tmp_path / "r.json").read_text())["verdict"]["passed"]
@@ -195,3 +206,58 @@ def test_a_degradation_is_inside_within_the_validated_range(kind, params, valida
     if kind != "none":
         assert all(f"{k} {v:g}" in check.detail for k, v in params.items())
     assert ValidatedDegradation.from_json(validated.to_json()) == validated
+
+
+def test_the_property_validations_cameras_are_its_reports():
+    """The domain's ``properties`` is what this code derives from the committed
+    properties.json and the camera files of cameras/properties, and the camera files read
+    directly give the same ranges: full well 625 (the ISO 32 low-light sensor's, 20000 e- / 32)
+    to 30000 e-, read noise 2-10 e-, Gaussian sigma 0.5-3 px, defocus radius 1.5-3 px."""
+    report = json.loads((REPO / "reports" / "validation" / "properties.json").read_text())
+    derived = validated_properties(PropertyResults.from_json(report),
+                                   load_suite(REPO / "cameras" / "properties")).to_json()
+    beside = json.loads(PROPERTIES_DOMAIN.read_text(encoding="utf-8"))
+    assert without_source(beside) == derived
+    a = report["summary"]["dmap_points"]["all"]
+    assert (derived["cameras"], derived["cells"], derived["within"], derived["within_2se"]) == (
+        len(report["cameras"]), a["cells"], a["within"], a["within_2se"])
+    wells, reads, sigmas, radii = [], [], [], []
+    for name in report["cameras"]:
+        f = tomllib.loads((REPO / "cameras" / "properties" / f"{name}.toml").read_text("utf-8"))
+        if "full_well" in f.get("noise", {}):
+            wells.append(f["noise"]["full_well"])
+            reads.append(f["noise"]["read_noise"])
+        optics = f.get("optics", {})
+        (sigmas if optics.get("kind") == "gaussian" else radii).extend(
+            [optics[k] for k in ("sigma_px", "radius_px") if k in optics])
+    ranges = derived["degradations"]
+    assert ranges["noise"]["ranges"]["read_noise"] == [min(reads), max(reads)] == [2.0, 10.0]
+    assert ranges["optics"]["ranges"] == {"radius_px": [min(radii), max(radii)],
+                                          "sigma_px": [min(sigmas), max(sigmas)]}
+    assert ranges["noise"]["ranges"]["full_well"] == [min(wells), max(wells)] == [625.0, 3e4]
+    assert load_validated_cameras().properties == ValidatedProperties.from_json(derived)
+
+
+def test_the_default_camera_is_inside_the_validated_noise():
+    """The default camera (Nikon D5100 model, full well 20000 e-, read noise 3 e-): its noise
+    lies inside the sharpness and noise validation's cameras, so the check is inside the
+    domain and its terminal says nothing of it."""
+    checks = {c.name: c for c in fidelity.check_camera("nikon-5100").validity.checks}
+    assert checks["validated noise"].inside
+    assert "39 cameras, 73 of 78" in checks["validated noise"].detail
+    r = CliRunner().invoke(main, ["--no-config", "check", "--no-report"])
+    assert r.exit_code == 0 and "outside the validity domain" not in r.output, r.output
+
+
+@pytest.mark.parametrize(("a", "b", "joined"), [
+    (ValidatedDegradation(("none",)), ValidatedDegradation(("none", "shot+read"),
+                                                           {"full_well": (625.0, 3e4)}),
+     ValidatedDegradation(("none", "shot+read"), {"full_well": (625.0, 3e4)})),
+    (ValidatedDegradation(("gaussian",), {"sigma_px": (1.0, 2.0)}),
+     ValidatedDegradation(("defocus", "gaussian"), {"radius_px": (1.5, 3.0),
+                                                    "sigma_px": (0.5, 1.5)}),
+     ValidatedDegradation(("defocus", "gaussian"), {"radius_px": (1.5, 3.0),
+                                                    "sigma_px": (0.5, 2.0)})),
+])
+def test_two_validations_join_kinds_and_widen_ranges(a, b, joined):
+    assert joined_degradation(a, b) == joined == joined_degradation(b, a)

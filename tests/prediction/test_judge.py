@@ -44,3 +44,22 @@ def test_a_loss_verdict_has_no_delta_e_allowance():
     j = judge_chart(1.0, criterion=Criterion("max-dmap", 1.0, unit="relative"))
     assert j.verdict is not None and j.verdict.limit_loss_relative is None
     assert not j.verdict.passed  # 1.20 % of baseline at ΔE 1 > 1 %
+
+
+@pytest.mark.parametrize("u", [None, 0.0, 0.5])
+def test_the_colour_loss_of_a_delta_e_verdict_carries_its_uncertainty(u):
+    """Under the default ΔE criterion, the properties' colour part and the combined loss
+    carry the colour loss's standard uncertainty: the table's SE at the ΔE with u(ΔE) through
+    the table's slope (a central difference over ± u), by hand from the table here."""
+    j = judge_chart(1.0, criterion=Criterion("max-delta-e", 3.0), delta_e_uncertainty=u,
+                    properties=True)
+    judged = j.properties
+    assert judged is not None and judged.colour == pytest.approx(predict(1.0).columns[
+        "dmap_points"].value)
+    se = predict(1.0).se("dmap_points").high
+    du = 0.0 if u is None else u
+    slope = ((predict(1.5).columns["dmap_points"].value
+              - predict(0.5).columns["dmap_points"].value) / 1.0) if du else 0.0
+    assert judged.u_colour == pytest.approx((se ** 2 + (slope * du) ** 2) ** 0.5, rel=1e-9)
+    assert judged.combined is not None and judged.combined.u_loss == pytest.approx(
+        judged.u_colour)

@@ -8,6 +8,7 @@ import dataclasses
 
 import pytest
 
+from fidelity import check_camera
 from fidelity.prediction import interpolate as ip
 from fidelity.prediction import table as pr
 from fidelity.prediction import tablefile as tf
@@ -16,6 +17,7 @@ from fidelity.report.words import (
     ceiling_words,
     column_note,
     prediction_notes,
+    property_lines,
     verdict_message,
 )
 from tests.prediction.test_table import SC, _measured_table
@@ -136,3 +138,18 @@ def test_no_signed_number_prints_as_minus_zero() -> None:
     offenders = {str(p.relative_to(package)): found for p in sorted(package.rglob("*.py"))
                  if (found := _signed_fixed_formats_without_z(p.read_text(encoding="utf-8")))}
     assert offenders == {}
+
+
+def test_the_combined_loss_is_a_line_with_its_uncertainty_rule_and_dominant() -> None:
+    """The default check's property lines end with the combined loss (its value and ± u as
+    the judgement holds them, the rule, the parts and the dominant property), before the
+    limits."""
+    j = check_camera("nikon-5100").properties
+    assert j is not None and j.combined is not None and j.combined.u_loss is not None
+    lines = property_lines(j)
+    c = j.combined
+    assert lines[-2] == (f"combined: predicted ΔmAP {c.loss:.2f} ± {c.u_loss:.2f} points "
+                         f"({c.rule} of colour, sharpness, noise; {c.dominant} dominates)")
+    assert lines[-1].startswith("limits equivalent to ΔE00 3")
+    parts = c.parts
+    assert c.loss == pytest.approx(sum(parts.values()) + c.interaction)

@@ -42,7 +42,13 @@ from fidelity.coco.validate.camera import case_chart
 from fidelity.coco.validate.checks import BoundCheck, bound_check, measured_losses
 from fidelity.coco.validate.store import ValidationCell, ValidationStore
 from fidelity.coco.validate.suite import BASELINE, CameraCase
+from fidelity.core.errors import InputFileError
 from fidelity.core.fileio import json_ready
+from fidelity.prediction.interval import (
+    DEGRADATIONS,
+    ValidatedProperties,
+    validated_degradation,
+)
 from fidelity.prediction.judge import judge_properties
 from fidelity.prediction.properties import COMBINATION, INTERACTING, INTERACTION
 from fidelity.prediction.table import predict
@@ -61,6 +67,7 @@ __all__ = [
     "combine_rule",
     "property_rows",
     "property_summary",
+    "validated_properties",
 ]
 
 #: A camera degrades colour when its chart ΔE00 is at least this (the exact sRGB camera of the
@@ -376,3 +383,26 @@ def collect_property_results(store: ValidationStore, suite: Sequence[CameraCase]
     meta = {k: v for k, v in store.meta().items()
             if k in ("versions", "settings", "models_run", "last_run")}
     return PropertyResults(cameras, tuple(rows), property_summary(rows), baselines, meta)
+
+
+def validated_properties(results: PropertyResults, suite: Sequence[CameraCase]
+                         ) -> ValidatedProperties:
+    """The cameras ``results`` validated, as the validity domain states them
+    (:class:`~fidelity.prediction.interval.ValidatedProperties`): each camera read from its
+    file in ``suite`` (the same SHA-256 as validated, else an :class:`InputFileError`) and its
+    noise, optics and vignetting (:meth:`~fidelity.camera.model.CameraModel.degradations`);
+    the counts of the ΔmAP (points) cells of the summary; the models of the rows."""
+    cases = {c.name: c for c in suite}
+    seen: dict[str, list[tuple[str, Mapping[str, float]]]] = {d: [] for d in DEGRADATIONS}
+    for name, record in results.cameras.items():
+        case = cases.get(name)
+        if case is None or case.sha256 != record.sha256:
+            raise InputFileError(f"{name}: the camera file validated is not in the suite "
+                                 "(missing, or changed since: its SHA-256 differs)")
+        for kind, degradation in read_camera_file(case.path).degradations().items():
+            seen[kind].append(degradation)
+    a = results.summary["dmap_points"]["all"]
+    models = tuple(dict.fromkeys(r.model for r in results.rows))
+    return ValidatedProperties(len(results.cameras), models, int(a["cells"]), int(a["within"]),
+                               int(a["within_2se"]),
+                               {d: validated_degradation(v) for d, v in seen.items()})
