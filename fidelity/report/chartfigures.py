@@ -400,11 +400,13 @@ def prediction_curve(prediction: Prediction, limit_dmap: float | None = None,
     grid = np.linspace(0.0, xmax, 301)
     c, ax = _curve_canvas(
         f"predicted loss against chart ΔE, {'percentage points' if unit == 'points' else '% of baseline'}",
-        f"table {prediction.table.name} ({prediction.table.kind}), detector size "
-        f"{prediction.size_used}, {prediction.method} interpolation", xmax, 105.0)
-    ax.frame("chart ΔE00 (mean over 24 patches)",
-             ylabel + (" (upper bound)" if prediction.table.kind.upper_bound else "")
-             + " (symlog: linear below 1)", yticks=[0, 1, 2, 5, 10, 20, 50, 100])
+        f"table {prediction.table.name} ({prediction.table.kind}"
+        + (", upper bound" if prediction.table.kind.upper_bound else "")
+        + f"), size {prediction.size_used}, {prediction.method}; y linear below 1, log above",
+        xmax, 105.0)
+    # the unit alone on the axis: a longer label outgrows the plot's height
+    ax.frame("chart ΔE00 (mean over 24 patches)", ylabel,
+             yticks=[0, 1, 2, 5, 10, 20, 50, 100])
     rng = prediction.columns["dmap_points"].delta_e_range
     if rng is not None and rng[1] < xmax:
         ax.span(rng[1], xmax, "#808080", 0.15, "beyond the table (ceiling)")

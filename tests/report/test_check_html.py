@@ -85,20 +85,29 @@ def test_detectors_table_hash_and_every_columns_u_are_shown(page):
     assert f"{doc['prediction']['dmap_relative']:.2f} ± {u['dmap_relative']:.2f} (k=1)" in flat
 
 
-def test_a_pass_outside_the_domain_is_amber(page):
-    """The default camera's light noise lies outside the (noise-free) validated cameras."""
-    html, doc = page
+def test_a_pass_outside_the_domain_is_amber(page, tmp_path):
+    """A scene under an illuminant the validation did not render (D50) passes outside the
+    validity domain: an amber banner naming it, not a plain green pass; the default camera
+    under D65 is inside."""
+    _, inside = page
+    assert inside["validity"]["inside"]
+    r = CliRunner().invoke(main, ["--no-config", "check", "--illuminant", "D50",
+                                  "--html", str(tmp_path / "r.html"),
+                                  "--json", str(tmp_path / "r.json")])
+    assert r.exit_code == 0, r.output
+    html = (tmp_path / "r.html").read_text(encoding="utf-8")
+    doc = json.loads((tmp_path / "r.json").read_text(encoding="utf-8"))
     assert doc["verdict"]["passed"] and not doc["validity"]["inside"]
     banner = re.search(r'class="headline tone-(\w+)">(.*?)</div>', html, re.S)
     assert banner and banner.group(1) == "outside"
     assert "PASS — outside the validity domain" in banner.group(2)
-    assert "full_well 20000 e-" in banner.group(2)
+    assert "illuminant D50: not among those the validation rendered" in banner.group(2)
     assert ".tone-outside{" in html
 
 
 def test_a_gate_overview_of_passes_outside_the_domain_is_amber():
     """All subjects pass, one outside: the overview says how many and is not plain green."""
-    noisy = check_camera("nikon-5100")
+    noisy = check_camera("nikon-5100", illuminant="D50")
     clean = check_camera(str(REPO / "cameras" / "nikon5100-cheung-d65.toml"))
     assert clean.validity.inside and not noisy.validity.inside
     cases = [GateResult(n, DEFAULT_CRITERION, report=r)
