@@ -66,6 +66,7 @@ from fidelity.prediction.interval import (
 from fidelity.prediction.judge import DEFAULT_JUDGE, JudgeOptions, judge_chart
 from fidelity.prediction.properties import detector_scale
 from fidelity.prediction.tablefile import COLUMNS
+from fidelity.prediction.validated import validated_upper
 from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion
 
 if TYPE_CHECKING:
@@ -136,6 +137,9 @@ def evidence_of(prediction: Prediction | None, budget: UncertaintyBudget | None,
 
     interval = prediction_interval(prediction, budget.combined if budget else 0.0,
                                    "dmap_points", k)
+    upper = validated_upper(prediction, "dmap_points")
+    if interval is not None and upper is not None:
+        interval = replace(interval, validated_upper=upper[0], validated_method=upper[1].words())
     inside = reference in TABLE_REFERENCES
     domain = prediction_domain(prediction, DomainCheck(
         "reference chart", inside,

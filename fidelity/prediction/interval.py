@@ -48,7 +48,10 @@ class PredictionInterval:
     """A predicted loss ``value`` of ``column`` (percentage points, or % for
     ``dmap_relative``) with its uncertainty: the table's sampling error ``table_se`` (None:
     unknown), the ``slope`` of the table (loss per ΔE00) and the chart ΔE's standard uncertainty
-    ``delta_e_uncertainty``. ``k`` is the coverage factor of the stated ``interval``."""
+    ``delta_e_uncertainty``. ``k`` is the coverage factor of the stated ``interval``.
+    ``validated_upper``: the validated bound with the model's own error
+    (:mod:`fidelity.prediction.validated`), and ``validated_method`` its words; None where
+    none applies."""
 
     column: str
     value: float
@@ -56,6 +59,8 @@ class PredictionInterval:
     slope: float
     delta_e_uncertainty: float
     k: float = 2.0
+    validated_upper: float | None = None
+    validated_method: str | None = None
 
     @property
     def propagated(self) -> float:
@@ -97,14 +102,19 @@ class PredictionInterval:
                 "standard_uncertainty": self.standard_uncertainty, "k": self.k,
                 "interval": [lo, hi],
                 "method": ("sqrt(table_se^2 + (slope u(ΔE))^2); table_se the larger SE of "
-                           "the table points around ΔE; slope by central differences")}
+                           "the table points around ΔE; slope by central differences"),
+                **({} if self.validated_upper is None else
+                   {"validated_upper": self.validated_upper,
+                    "validated_method": self.validated_method})}
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> PredictionInterval:
         """Inverse of :meth:`to_json`."""
         se = d.get("table_se")
+        upper = d.get("validated_upper")
         return cls(str(d["column"]), float(d["value"]), None if se is None else float(se),
-                   float(d["slope"]), float(d["delta_e_uncertainty"]), float(d.get("k", 2.0)))
+                   float(d["slope"]), float(d["delta_e_uncertainty"]), float(d.get("k", 2.0)),
+                   None if upper is None else float(upper), d.get("validated_method"))
 
 
 def _column_value(p: Prediction, column: str) -> float | None:

@@ -132,6 +132,10 @@ def summary_facts(report: ChartReport) -> Facts:
                    b + _num(p.dap_person_points) + pm_of("dap_person_points")),
                   ("predicted bicycle ΔAP, points",
                    b + _num(p.dap_bicycle_points) + pm_of("dap_bicycle_points")),
+                  *([] if report.interval is None or report.interval.validated_upper is None
+                    else [("validated bound of ΔmAP, with the model's own error",
+                           f"≤ {report.interval.validated_upper:.2f} points "
+                           f"({report.interval.validated_method})")]),
                   ("prediction table", f"{p.table.name} ({p.table.kind}), detector size "
                                        f"{p.size_used}"),
                   ("detectors measured", ", ".join(sorted(

@@ -94,6 +94,10 @@ def summary_lines(report: ChartReport) -> list[str]:
         lines.append(f"predicted ΔAP: person {f(p.dap_person_points)}{u('dap_person_points')} "
                      f"points, bicycle {f(p.dap_bicycle_points)}{u('dap_bicycle_points')} "
                      f"points" + (" (k=1" + noise + ")" if by else ""))
+        i = report.interval
+        if i is not None and i.validated_upper is not None:
+            lines.append(f"validated bound: ΔmAP <= {i.validated_upper:.2f} points with the "
+                         f"model's own error ({i.validated_method})")
         if p.out_of_range:
             lines.append("note: ΔE beyond the table's range; conservative ceiling used")
         if report.validity is not None and not report.validity.inside:

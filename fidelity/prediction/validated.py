@@ -1,0 +1,132 @@
+"""The validated bound: the predicted ΔmAP's upper bound with the model's own error in it,
+fitted on the validation's residuals (issue 58).
+
+The interval of :mod:`fidelity.prediction.interval` is the table's sampling error with the
+chart ΔE's uncertainty; it leaves out how far the worst-case prediction itself is from the loss
+measured on realistic cameras (docs/validation.md). The validated bound puts that model-form
+error in, from the validation's (camera, detector) cells (``m`` measured, ``p`` the classic
+prediction, ΔmAP in percentage points):
+
+``U = a max(p, 0) + q``
+
+with ``a`` the least-squares slope through the origin of ``m`` on ``p`` and ``q`` the
+split-conformal quantile of the residuals ``m - a p``: the ``ceil((n + 1)(1 - alpha))``-th
+smallest of the ``n`` cells' (Vovk, Gammerman & Shafer 2005; Lei et al. 2018, "Distribution-free
+predictive inference for regression", JASA 113), which bounds an exchangeable new cell with
+probability >= 1 - alpha. ``python -m benchmarks.studies.interval --data`` fits it on the
+committed validation cells (``reports/validation/directional.json``) and ships it as
+:data:`VALIDATED_BOUND_FILE`, with the coverage it had leaving each camera out (its constants
+fitted on the other cameras' cells) and its median over-prediction ``U / m``.
+
+It applies to the table and detector size it was validated with (``coco1000-measured``,
+size ``n``; elsewhere none is stated), and holds for cameras like those validated: the
+validity domain's checks (:meth:`fidelity.prediction.interval.ValidatedCameras.camera_checks`)
+say when a camera is not.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any
+
+from fidelity.core.resources import resource_dir
+from fidelity.prediction.table import Prediction
+
+__all__ = ["VALIDATED_BOUND_FILE", "ValidatedBound", "load_validated_bound", "validated_upper"]
+
+#: The shipped bound (``fidelity/data/``), written by the interval study.
+VALIDATED_BOUND_FILE = "validated-bound.json"
+
+
+@dataclass(frozen=True)
+class ValidatedBound:
+    """The fitted bound (module docstring) and how it held on the validation.
+
+    ``method``, ``prediction`` (``classic``), ``column`` (``dmap_points``), the ``table`` and
+    detector ``size`` validated; ``alpha`` (miscoverage); ``a`` (unitless) and ``q``
+    (percentage points); ``cells`` and ``cameras`` fitted on; leaving each camera out,
+    ``cells_covered`` and ``cameras_covered`` (both of its cells); ``median_ratio``, the
+    median ``U / m`` over the cells measured above 0, and ``median_ratio_significant`` over
+    the ``significant_cells`` measured more than 2 SE above 0; ``source``, the validation
+    file's path in the repository and its ``source_sha256``."""
+
+    method: str
+    prediction: str
+    column: str
+    table: str
+    size: str
+    alpha: float
+    a: float
+    q: float
+    cells: int
+    cameras: int
+    cells_covered: int
+    cameras_covered: int
+    median_ratio: float
+    median_ratio_significant: float | None
+    significant_cells: int
+    source: str
+    source_sha256: str
+
+    def upper(self, p: float) -> float:
+        """``U = a max(p, 0) + q`` (percentage points) for a classic prediction ``p``."""
+        return self.a * max(p, 0.0) + self.q
+
+    def applies(self, prediction: Prediction) -> bool:
+        """Whether ``prediction`` was made with the table and detector size validated."""
+        return (prediction.table.name == self.table and prediction.size_used == self.size)
+
+    def words(self) -> str:
+        """``0.141 p + 1.44, calibrated split-conformal at 95 % on the validation's 60 cells;
+        leaving each camera out it held 58 of 60``."""
+        return (f"{self.a:.3g} p + {self.q:.3g}, {self.method} at {100 * (1 - self.alpha):.0f} % on the "
+                f"validation's {self.cells} cells; leaving each camera out it held "
+                f"{self.cells_covered} of {self.cells}")
+
+    def to_json(self) -> dict[str, Any]:
+        """Field names as keys, with ``kind`` ``validated-bound``."""
+        return {"kind": "validated-bound", "method": self.method,
+                "prediction": self.prediction, "column": self.column, "table": self.table,
+                "size": self.size, "alpha": self.alpha, "a": self.a, "q": self.q,
+                "cells": self.cells, "cameras": self.cameras,
+                "cells_covered": self.cells_covered, "cameras_covered": self.cameras_covered,
+                "median_ratio": self.median_ratio,
+                "median_ratio_significant": self.median_ratio_significant,
+                "significant_cells": self.significant_cells, "source": self.source,
+                "source_sha256": self.source_sha256}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> ValidatedBound:
+        """Inverse of :meth:`to_json`."""
+        sig = d.get("median_ratio_significant")
+        return cls(str(d["method"]), str(d["prediction"]), str(d["column"]), str(d["table"]),
+                   str(d["size"]), float(d["alpha"]), float(d["a"]), float(d["q"]),
+                   int(d["cells"]), int(d["cameras"]), int(d["cells_covered"]),
+                   int(d["cameras_covered"]), float(d["median_ratio"]),
+                   None if sig is None else float(sig), int(d["significant_cells"]),
+                   str(d["source"]), str(d["source_sha256"]))
+
+
+@lru_cache(maxsize=1)
+def load_validated_bound() -> ValidatedBound | None:
+    """The shipped :class:`ValidatedBound`; None when the package ships none."""
+    path = resource_dir("data") / VALIDATED_BOUND_FILE
+    if not path.is_file():
+        return None
+    return ValidatedBound.from_json(json.loads(path.read_text(encoding="utf-8")))
+
+
+def validated_upper(prediction: Prediction, column: str = "dmap_points"
+                    ) -> tuple[float, ValidatedBound] | None:
+    """The validated bound of ``prediction``'s ``column`` and the bound it came from; None
+    where none applies (another column, table or detector size, or no value)."""
+    bound = load_validated_bound()
+    if bound is None or column != bound.column or not bound.applies(prediction):
+        return None
+    c = prediction.columns.get(column)
+    if c is None or c.value is None:
+        return None
+    return bound.upper(c.value), bound
