@@ -69,6 +69,7 @@ from fidelity.prediction.interval import (
     validity_domain,
 )
 from fidelity.prediction.properties import load_property_table
+from fidelity.prediction.validated import VALIDATED_BOUND_FILE
 from fidelity.report.jsonform import fit_json, verdict_json
 
 if TYPE_CHECKING:
@@ -339,6 +340,15 @@ def validated_cameras_file() -> dict[str, Any]:
     return _file_entry(resource_dir("data") / VALIDATED_CAMERAS_FILE)
 
 
+def validated_bound_file(report: ChartReport) -> dict[str, Any] | None:
+    """``{"path", "sha256"}`` of the shipped validated bound
+    (:data:`~fidelity.prediction.validated.VALIDATED_BOUND_FILE`) where the report's interval
+    states it; None otherwise."""
+    if report.interval is None or report.interval.validated_upper is None:
+        return None
+    return _file_entry(resource_dir("data") / VALIDATED_BOUND_FILE)
+
+
 def _file_entry(path: Path) -> dict[str, Any]:
     try:
         digest: str | None = file_sha256(path)
@@ -372,6 +382,7 @@ def _subject(subject: str, report: ChartReport | None, error: str | None) -> dic
         "prediction_table": _table(report),
         "property_tables": property_tables(report),
         "directional_table": directional_table(report),
+        "validated_bound": validated_bound_file(report),
         "measurement": {
             "quantity": "mean ΔE00", "value": report.mean_delta_e,
             "max_delta_e": report.max_delta_e, "worst_patch": report.worst_patch,
@@ -594,7 +605,7 @@ def write_fit_evidence(paths: PathArg | Sequence[PathArg], report: FitReport,
 __all__ = ["CONTENT_HASH_KEY", "CREDIBILITY_SECTIONS", "EVIDENCE_FORMATS",
            "EVIDENCE_SCHEMA_VERSION", "OUTCOMES", "WRITERS", "canonical_record_bytes",
            "code_sha256", "record_content_sha256", "scores_files", "seal_record",
-           "validated_cameras_file", "environment_record", "evidence_format",
+           "validated_bound_file", "validated_cameras_file", "environment_record", "evidence_format",
            "evidence_record", "evidence_schema", "evidence_schema_path",
            "fit_evidence_record", "git_commit", "invocation_record", "tool_record", "write_evidence",
            "write_fit_evidence", "write_record"]

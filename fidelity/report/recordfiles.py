@@ -20,7 +20,8 @@ def record_files(record: Mapping[str, Any], *, evidence: bool = False
     the table's ``scores file`` entries (the committed files its rows rebuild from), then
     each ``property table`` (sharpness, noise) the prediction judged with and its scores
     files, and the ``directional table`` the direction-aware prediction read (its scores
-    files are the prediction table's). Then the ``settings`` ``file`` and the ``context`` ``file`` (``--context``) read.
+    files are the prediction table's) and the ``validated bound`` the interval states (the
+    model-form error's bound, :mod:`fidelity.prediction.validated`). Then the ``settings`` ``file`` and the ``context`` ``file`` (``--context``) read.
     Inputs without a path (render settings) are no file. A file several subjects name comes once per
     subject: the callers decide what counts as the same."""
     subjects = record.get("subjects") or []
@@ -45,6 +46,9 @@ def record_files(record: Mapping[str, Any], *, evidence: bool = False
             yield "property table", prop.get("name") or "property", prop
             for scores in prop.get("scores_files") or []:
                 yield "scores file", ", ".join(scores.get("models") or []) or "scores", scores
+        bound = subject.get("validated_bound")
+        if bound:
+            yield "validated bound", "validated-bound", bound
         directional = subject.get("directional_table")
         if directional and directional.get("path"):
             yield "directional table", directional.get("name") or "directional", directional
