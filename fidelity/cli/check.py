@@ -29,10 +29,10 @@ from fidelity.cli.options import (
     measure_options,
 )
 from fidelity.cli.values import make_criterion, measure_inputs, measure_request
+from fidelity.coco.validate.suite import is_suite_file
 from fidelity.core.fileio import check_outputs, display_path
 from fidelity.pipeline.check import check_camera
 from fidelity.pipeline.records import ChartReport, RenderSource
-from fidelity.pipeline.suite import is_suite_file
 from fidelity.prediction.judge import JudgeOptions
 from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion, worst_exit_code
 from fidelity.report.chart import write_chart_report

@@ -145,10 +145,14 @@ def delinearize_srgb(v: ArrayLike) -> FloatArray:
     """
     x = _as_float(v)
     dtype = x.dtype.type
-    power = dtype(1.055) * np.power(np.maximum(x, dtype(0.0031308)), dtype(1.0 / 2.4)) - dtype(
-        0.055
-    )
-    return np.where(x <= dtype(0.0031308), x * dtype(12.92), power)
+    # in place, the linear segment written over the power (np.where's result, one array less)
+    out = np.maximum(x, dtype(0.0031308), out=np.empty_like(x))
+    np.power(out, dtype(1.0 / 2.4), out=out)
+    out *= dtype(1.055)
+    out -= dtype(0.055)
+    linear = x <= dtype(0.0031308)
+    np.copyto(out, x * dtype(12.92), where=linear)
+    return out
 
 
 # --------------------------------------------------------------------------------------------
