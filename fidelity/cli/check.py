@@ -41,6 +41,7 @@ from fidelity.report.terminal import summary_lines
 
 if TYPE_CHECKING:
     from fidelity.coco.measure import MeasureRequest
+    from fidelity.pipeline.context import Context
 
 #: Where ``fidelity check`` writes its report unless told otherwise.
 DEFAULT_OUTPUT_DIR = "fidelity-report"
@@ -105,13 +106,14 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
         raise click.UsageError("give CAMERAS or --camera, not both")
     subjects = list(cameras) or [camera or DEFAULT_CAMERA]
     # the context of use, a suite file and the evidence files are options of check whose
-    # machinery (the qualification run, the suite runner, the record writers) is imported
-    # only when the option is given, so that a plain check does not load it
-    context = None
+    # machinery (the qualification run, the suite runner: fidelity.cli.suite; the record
+    # writers: fidelity.report.evidence) is imported only when the option is given, so that a
+    # plain check does not load it
+    context: Context | None = None
     if context_path is not None:
-        from fidelity.pipeline.context import load_context  # noqa: PLC0415 (only for --context)
+        from fidelity.cli.suite import read_context  # noqa: PLC0415 (only for --context)
 
-        context = load_context(context_path)
+        context = read_context(context_path)
     if context is not None and context.max_delta_e is not None and \
             click.get_current_context().get_parameter_source("max_delta_e") \
             == ParameterSource.DEFAULT:
@@ -160,15 +162,14 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
                         cat=cat)
              for cam, html, js in plans]
     if context is not None:
-        from fidelity.pipeline.context import assess, context_lines  # noqa: PLC0415 (--context)
-        from fidelity.pipeline.qualify import qualify  # noqa: PLC0415 (the same)
+        from fidelity.cli.suite import assess_context  # noqa: PLC0415 (only for --context)
 
-        assessment = assess(context, [(cam, r) for (cam, _, _), r in
-                                      zip(plans, reports, strict=True)], run=qualify)
+        assessment, lines = assess_context(context, [(cam, r) for (cam, _, _), r in
+                                                     zip(plans, reports, strict=True)])
         reports = [replace(r, context=assessment) for r in reports]
         for (_, html, js), r in zip(plans, reports, strict=True):
             write_chart_report(r, json_path=js, html_path=html)
-        for line in context_lines(assessment):
+        for line in lines:
             click.echo(line)
         codes.append(assessment.exit_code)
     code = worst_exit_code(codes)

@@ -1,5 +1,8 @@
 """``fidelity suite``: check every camera of a suite file under its case's illuminant and
-chromatic adaptation transform; and ``check`` given a suite file (:func:`run_suite_command`)."""
+chromatic adaptation transform; and for ``check``, the suite file given as a camera
+(:func:`run_suite_command`) and ``--context`` (:func:`read_context`,
+:func:`assess_context`). ``check`` imports this module only for those: a plain check loads
+neither the suite runner nor the qualification run."""
 
 from __future__ import annotations
 
@@ -22,7 +25,22 @@ from fidelity.report.suite import suite_lines, write_suite_summary
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
+    from fidelity.pipeline.context import ContextAssessment
+    from fidelity.pipeline.records import ChartReport
     from fidelity.prediction.judge import JudgeOptions
+
+
+def read_context(path: Path) -> Context:
+    """The context of use of ``--context FILE``."""
+    return load_context(path)
+
+
+def assess_context(context: Context, reports: Sequence[tuple[str, ChartReport]]
+                   ) -> tuple[ContextAssessment, list[str]]:
+    """The credibility of the evidence of ``reports`` (camera name, report) for ``context``,
+    with the qualification run, and the lines that state it."""
+    assessment = assess(context, list(reports), run=qualify)
+    return assessment, list(context_lines(assessment))
 
 
 def run_suite_command(suite: str, cameras: Sequence[str], *, out_dir: Path, report: bool,
@@ -104,4 +122,4 @@ def suite(suite_file: str, renderer: str, reference: str, max_delta_e: float | N
                                context=context, default_cat=cat))
 
 
-__all__ = ["run_suite_command", "suite"]
+__all__ = ["assess_context", "read_context", "run_suite_command", "suite"]

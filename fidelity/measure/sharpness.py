@@ -545,16 +545,32 @@ def _core(a: F64, degree: int, check: bool, strict: bool = True,
     w = _lsf_window(n, peak) if window else np.ones(n)
     nfft = 1 << max(1, math.ceil(math.log2(2 * n)))
     spectrum = np.abs(np.fft.rfft(lsf * w, nfft))
-    freq = np.fft.rfftfreq(nfft, d=step)
     if not spectrum[0] > 0:
         raise RefusedEdge("flat", "roi: no edge: the line spread function sums to zero")
-    keep = freq <= MAX_FREQUENCY + 1e-12
-    freq = freq[keep]
-    mtf = spectrum[keep] / spectrum[0] / np.sinc(2.0 * freq * step)
+    freq, keep, derivative, box = _frequency_grid(nfft)
+    mtf = spectrum[keep] / spectrum[0] / derivative
     if not strict:
-        mtf = mtf / np.sinc(freq * step)
-    return _Core(np.asarray(freq, dtype=np.float64), np.asarray(mtf, dtype=np.float64), slope,
-                 rows, start, coef, pos, esf, contrast, noise)
+        mtf = mtf / box
+    return _Core(freq, np.asarray(mtf, dtype=np.float64), slope, rows, start, coef, pos, esf,
+                 contrast, noise)
+
+
+@lru_cache(maxsize=16)
+def _frequency_grid(nfft: int) -> tuple[F64, NDArray[np.bool_], F64, F64]:
+    """The frequencies (cy/px) of an ``nfft``-point spectrum of the oversampled LSF up to
+    :data:`MAX_FREQUENCY`, which of the spectrum's bins they are, and the two responses
+    :func:`_core` divides out at them: the central difference's (sinc of twice the bin
+    width) and the bin's box (sinc of the bin width). Read-only; made once per ``nfft`` (the
+    bootstrap's draws share it)."""
+    step = 1.0 / OVERSAMPLING
+    every = np.fft.rfftfreq(nfft, d=step)
+    keep: NDArray[np.bool_] = every <= MAX_FREQUENCY + 1e-12
+    freq: F64 = np.asarray(every[keep], dtype=np.float64)
+    derivative: F64 = np.asarray(np.sinc(2.0 * freq * step), dtype=np.float64)
+    box: F64 = np.asarray(np.sinc(freq * step), dtype=np.float64)
+    for a in (freq, keep, derivative, box):
+        a.flags.writeable = False
+    return freq, keep, derivative, box
 
 
 def _crossing(freq: F64, mtf: F64, level: float) -> float | None:
