@@ -34,6 +34,7 @@ from fidelity.core.errors import InputFileError
 #: JSON's string encoder with ``ensure_ascii`` (the C one where there is one), as
 #: :func:`json.dumps` uses it.
 _encode_string: Callable[[str], str] = json.encoder.encode_basestring_ascii
+_LISTS = (list, tuple)
 
 #: errno values that mean "the output cannot be written here" (a full disk, a quota, a
 #: read-only file system or folder, a file too large for the system's limit), not a bug.
@@ -394,11 +395,11 @@ class _NotPlain(Exception):
 
 def _plain_json(obj: Any, out: list[str], newline: str) -> None:
     """Append ``obj`` to ``out`` as ``json.dumps(..., indent=2)`` writes it at the nesting
-    whose line break (and indentation) is ``newline``; raise :class:`_NotPlain` at anything
-    but exactly a str, int, float, bool, None, list, tuple or dict with str keys, and at a
-    non-finite float."""
-    kind = type(obj)
-    if kind is str:
+    whose line break (and indentation) is ``newline``: the types tested in the order of
+    :mod:`json.encoder`'s ``_iterencode`` (a ``str`` enum is its string, an ``int`` enum its
+    number); raise :class:`_NotPlain` at a non-finite float, a key that is not a string and
+    a value of no JSON type."""
+    if isinstance(obj, str):
         out.append(_encode_string(obj))
     elif obj is None:
         out.append("null")
@@ -406,29 +407,13 @@ def _plain_json(obj: Any, out: list[str], newline: str) -> None:
         out.append("true")
     elif obj is False:
         out.append("false")
-    elif kind is int:
+    elif isinstance(obj, int):
         out.append(int.__repr__(obj))
-    elif kind is float:
+    elif isinstance(obj, float):
         if not math.isfinite(obj):
             raise _NotPlain
         out.append(float.__repr__(obj))
-    elif kind is dict:
-        if not obj:
-            out.append("{}")
-            return
-        inner = newline + "  "
-        out.append("{")
-        sep = inner
-        for key, value in obj.items():
-            if type(key) is not str:
-                raise _NotPlain
-            out.append(sep)
-            out.append(_encode_string(key))
-            out.append(": ")
-            _plain_json(value, out, inner)
-            sep = "," + inner
-        out.append(newline + "}")
-    elif kind is list or kind is tuple:
+    elif isinstance(obj, _LISTS):
         if not obj:
             out.append("[]")
             return
@@ -440,15 +425,31 @@ def _plain_json(obj: Any, out: list[str], newline: str) -> None:
             _plain_json(value, out, inner)
             sep = "," + inner
         out.append(newline + "]")
+    elif isinstance(obj, dict):
+        if not obj:
+            out.append("{}")
+            return
+        inner = newline + "  "
+        out.append("{")
+        sep = inner
+        for key, value in obj.items():
+            if not isinstance(key, str):
+                raise _NotPlain
+            out.append(sep)
+            out.append(_encode_string(key))
+            out.append(": ")
+            _plain_json(value, out, inner)
+            sep = "," + inner
+        out.append(newline + "}")
     else:
         raise _NotPlain
 
 
 def indented_json(obj: Any) -> str:
     """``json.dumps(obj, indent=2, allow_nan=False)``, the same text, some ten times faster
-    for plain JSON values (the standard library's indenting encoder is written in Python, a
-    generator per container); anything else (a subclass, a non-string key, NaN, a cycle) goes
-    to :func:`json.dumps`, with its errors."""
+    for JSON values (the standard library's indenting encoder is written in Python, a
+    generator per container); anything else (a key that is not a string, NaN, a value of no
+    JSON type, a cycle) goes to :func:`json.dumps`, with its errors."""
     out: list[str] = []
     try:
         _plain_json(obj, out, "\n")

@@ -66,15 +66,20 @@ class _Level(enum.IntEnum):
     HIGH = 3
 
 
+class _Kind(enum.StrEnum):
+    MEASURED = "measured"
+
+
 class _Float(float):
     pass
 
 
 @pytest.mark.parametrize("value", [
     {2: "int key", None: "none key", 2.5: "float key", False: "bool key"},  # keys json converts
-    [_Level.HIGH, _Float(1.5)], OrderedDict(a=1), {"nested": [{"x": _Float(2.0)}]},
+    [_Level.HIGH, _Float(1.5), _Kind.MEASURED], OrderedDict(a=1), {_Kind.MEASURED: 1},
+    {"nested": [{"x": _Float(2.0)}]}, [True, False, 1, 0, 1.0],
 ])
-def test_other_values_go_to_the_standard_library(value: object) -> None:
+def test_subclasses_and_other_keys_are_written_alike(value: object) -> None:
     assert indented_json(value) == _stdlib(value)
 
 
