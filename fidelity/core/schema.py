@@ -77,6 +77,9 @@ def _show(value: Any, limit: int = 60) -> str:
 _NUMBERS = (int, float)
 _LISTS = (list, tuple)
 _CONTAINERS = (dict, list, tuple)
+#: Types that are no container (of a value from JSON, TOML or YAML): a list of them is not
+#: walked further, by :func:`check_depth`, item by item.
+_SCALARS = frozenset({float, int, str, bool, type(None)})
 
 
 def _kind(value: Any) -> str:
@@ -405,8 +408,11 @@ def check_depth(document: Any, origin: str, max_depth: int = MAX_DEPTH) -> None:
         if depth >= max_depth:
             raise SchemaError(f"{origin}: nested more than {max_depth} levels deep")
         seen.add(id(node))
+        children = node.values() if isinstance(node, dict) else node
+        if _SCALARS.issuperset(map(type, children)):  # numbers and strings only: no walk
+            continue
         below = depth + 1
-        for child in (node.values() if isinstance(node, dict) else node):
+        for child in children:
             if isinstance(child, _CONTAINERS):
                 push((child, below))
 
