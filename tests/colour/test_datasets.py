@@ -92,7 +92,8 @@ def test_check_and_audit_import_neither_colour_science_nor_matplotlib(argv, tmp_
     # writers (--evidence), the suite runners (a suite file), the qualification run
     # (--context), nor the chart finder (the render knows where its chart is)
     not_check = (("fidelity.report.evidence", "fidelity.cli.suite", "fidelity.pipeline.suite",
-                  "fidelity.pipeline.qualify", "fidelity.chart.find.cascade")
+                  "fidelity.pipeline.qualify", "fidelity.pipeline.context",
+                  "fidelity.chart.find.cascade")
                  if argv[0] == "check" else ())
     args = [a.format(png=png, json=tmp_path / "a.json", out=tmp_path / "out",
                      html=tmp_path / "a.html") for a in argv]
