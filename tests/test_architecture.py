@@ -177,13 +177,18 @@ def test_the_checks_find_what_they_look_for(tmp_path) -> None:
 #: The package's own modules a module may import inside a function (``# noqa: PLC0415``), and
 #: the folder whose modules import them at module level: the COCO benchmark, which a check or
 #: an audit loads only with ``--measure``, the chart finder, which only an image whose chart is
-#: found or checked loads, and the evidence formats that need an extra. The
+#: found or checked loads, the evidence formats that need an extra, and what ``check`` loads
+#: only for an option (issue 59): the suite runner and the qualification run
+#: (``fidelity.cli.suite``: a suite file, ``--context``), the record writers
+#: (``fidelity.report.evidence``: ``--evidence``). The
 #: third-party modules imported at the call are ruff's ``banned-module-level-imports``
 #: (pyproject.toml); everything else is imported at module level (ruff's PLC0415).
 DEFERRED = {"fidelity.coco": "fidelity.coco", "fidelity.chart.find": "fidelity.chart.find",
             "fidelity.report.ssp": "fidelity.report.ssp",
             "fidelity.report.xqar": "fidelity.report.xqar",
-            "fidelity.camera.mitsuba": "fidelity.camera.mitsuba"}
+            "fidelity.camera.mitsuba": "fidelity.camera.mitsuba",
+            "fidelity.cli.suite": "fidelity.cli.suite",
+            "fidelity.report.evidence": "fidelity.report.evidence"}
 
 
 def deferred_imports(root: Path = PACKAGE) -> list[tuple[str, int, str]]:

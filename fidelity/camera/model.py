@@ -448,7 +448,10 @@ def add_sensor_noise(image: ArrayLike, noise: Noise, seed: int | None = None) ->
     fw = float(noise.full_well)  # type: ignore[arg-type]
     with np.errstate(over="ignore", invalid="ignore"):
         sigma = np.sqrt(np.maximum(img, 0.0) / fw + np.square(noise.read_noise / fw))
-        noisy: FloatArray = img + sigma * rng.standard_normal(img.shape)
+        # img + sigma * z, in place in z's array (the same values, two arrays less)
+        noisy: FloatArray = rng.standard_normal(img.shape)
+        noisy *= sigma
+        noisy += img
     if not np.all(np.isfinite(noisy)):
         raise InvalidValueError(f"[noise]: read_noise {noise.read_noise:g} e- on a full well of "
                                 f"{fw:g} e- makes the noise beyond the floating-point range")

@@ -21,29 +21,27 @@ from fidelity.cli.context import (
 from fidelity.cli.options import (
     cat_option,
     common_options,
+    context_option,
     evidence_option,
     json_option,
     judge_options,
     loss_limit_options,
     measure_options,
 )
-from fidelity.cli.suite import context_option, run_suite_command
 from fidelity.cli.values import make_criterion, measure_inputs, measure_request
+from fidelity.coco.validate.suite import is_suite_file
 from fidelity.core.fileio import check_outputs, display_path
 from fidelity.pipeline.check import check_camera
-from fidelity.pipeline.context import assess, context_lines, load_context
-from fidelity.pipeline.qualify import qualify
 from fidelity.pipeline.records import ChartReport, RenderSource
-from fidelity.pipeline.suite import is_suite_file
 from fidelity.prediction.judge import JudgeOptions
 from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion, worst_exit_code
 from fidelity.report.chart import write_chart_report
-from fidelity.report.evidence import write_evidence
 from fidelity.report.jsonform import chart_report_json
 from fidelity.report.terminal import summary_lines
 
 if TYPE_CHECKING:
     from fidelity.coco.measure import MeasureRequest
+    from fidelity.pipeline.context import Context
 
 #: Where ``fidelity check`` writes its report unless told otherwise.
 DEFAULT_OUTPUT_DIR = "fidelity-report"
@@ -107,7 +105,15 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
     if cameras and camera is not None and not from_settings("camera"):
         raise click.UsageError("give CAMERAS or --camera, not both")
     subjects = list(cameras) or [camera or DEFAULT_CAMERA]
-    context = load_context(context_path) if context_path is not None else None
+    # the context of use, a suite file and the evidence files are options of check whose
+    # machinery (the qualification run, the suite runner: fidelity.cli.suite; the record
+    # writers: fidelity.report.evidence) is imported only when the option is given, so that a
+    # plain check does not load it
+    context: Context | None = None
+    if context_path is not None:
+        from fidelity.cli.suite import read_context  # noqa: PLC0415 (only for --context)
+
+        context = read_context(context_path)
     if context is not None and context.max_delta_e is not None and \
             click.get_current_context().get_parameter_source("max_delta_e") \
             == ParameterSource.DEFAULT:
@@ -118,6 +124,8 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
         # given: the transform of the cases the suite file gives none of their own)
         if len(suites) > 1:
             raise click.UsageError("give one suite file")
+        from fidelity.cli.suite import run_suite_command  # noqa: PLC0415 (only for a suite)
+
         sys.exit(run_suite_command(
             suites[0], [s for s in subjects if s not in suites], out_dir=out_dir,
             report=report, renderer=renderer, reference=reference,
@@ -154,16 +162,20 @@ def check(cameras: tuple[str, ...], camera: str | None, illuminant: str, rendere
                         cat=cat)
              for cam, html, js in plans]
     if context is not None:
-        assessment = assess(context, [(cam, r) for (cam, _, _), r in
-                                      zip(plans, reports, strict=True)], run=qualify)
+        from fidelity.cli.suite import assess_context  # noqa: PLC0415 (only for --context)
+
+        assessment, lines = assess_context(context, [(cam, r) for (cam, _, _), r in
+                                                     zip(plans, reports, strict=True)])
         reports = [replace(r, context=assessment) for r in reports]
         for (_, html, js), r in zip(plans, reports, strict=True):
             write_chart_report(r, json_path=js, html_path=html)
-        for line in context_lines(assessment):
+        for line in lines:
             click.echo(line)
         codes.append(assessment.exit_code)
     code = worst_exit_code(codes)
     if evidence_paths:
+        from fidelity.report.evidence import write_evidence  # noqa: PLC0415 (only for --evidence)
+
         write_evidence_files(
             evidence_paths, write_evidence, "check",
             [(cam, r, None) for (cam, _, _), r in zip(plans, reports, strict=True)], code,

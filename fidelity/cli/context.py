@@ -16,7 +16,7 @@ import click
 from click.core import ParameterSource
 
 from fidelity.core.fileio import display_path, json_ready, write_json_atomic
-from fidelity.report.evidence import invocation_record
+from fidelity.report.evidencefile import invocation_record
 
 if TYPE_CHECKING:
     from typing import TypeAlias
@@ -69,7 +69,7 @@ def show_progress(progress: bool | None) -> bool:
 
 def invocation() -> dict[str, Any] | None:
     """The running command line as a credibility record's ``invocation``
-    (:func:`fidelity.report.evidence.invocation_record`): the arguments the group was given,
+    (:func:`fidelity.report.evidencefile.invocation_record`): the arguments the group was given,
     the current folder and the settings file read; None outside a ``fidelity`` command."""
     ctx = click.get_current_context(silent=True)
     obj = ctx.find_root().obj if ctx is not None else None

@@ -53,7 +53,7 @@ from fidelity.prediction.judge import JudgeOptions
 from fidelity.prediction.tablefile import CLASS_COLUMNS, SIZES
 from fidelity.prediction.transforms import TRANSFORMS
 from fidelity.prediction.verdict import SIMPLE
-from fidelity.report.evidence import evidence_format
+from fidelity.report.evidencefile import evidence_format
 from fidelity.scene.manifest import read_manifest
 
 if TYPE_CHECKING:
@@ -723,6 +723,15 @@ def evidence_option(f: F) -> F:
              "failed verdicts as issues).")(f)
 
 
+def context_option(f: F) -> F:
+    """The ``--context FILE`` option (the context of use) of ``check`` and ``suite``."""
+    return click.option(
+        "--context", "context_path", type=click.Path(dir_okay=False, path_type=Path),
+        default=None,
+        help="Context of use (TOML): detectors, conditions, acceptance criteria, model risk; "
+             "scores the credibility of the evidence for it (docs/context.md).")(f)
+
+
 def measure_options(f: F) -> F:
     """``--measure`` and what it runs on: ``--images DIR``, ``--annotations FILE``,
     ``--models A.onnx[@N]``, ``--limit N`` (default: the shared data folder's COCO subset and
@@ -747,6 +756,7 @@ def measure_options(f: F) -> F:
 
 
 __all__ = [
+    "context_option",
     "IMAGE_PATH",
     "LIMIT_HELP",
     "PATH",

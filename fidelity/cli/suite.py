@@ -1,18 +1,19 @@
 """``fidelity suite``: check every camera of a suite file under its case's illuminant and
-chromatic adaptation transform; and the
-``--context`` option of ``check`` and ``suite``."""
+chromatic adaptation transform; and for ``check``, the suite file given as a camera
+(:func:`run_suite_command`) and ``--context`` (:func:`read_context`,
+:func:`assess_context`). ``check`` imports this module only for those: a plain check loads
+neither the suite runner nor the qualification run."""
 
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING
 
 import click
 
-from fidelity.cli.options import common_options, judge_options, suite_cat_option
+from fidelity.cli.options import common_options, context_option, judge_options, suite_cat_option
 from fidelity.core.fileio import display_path
 from fidelity.pipeline.context import Context, assess, context_lines, load_context
 from fidelity.pipeline.qualify import qualify
@@ -21,20 +22,25 @@ from fidelity.prediction.verdict import DEFAULT_MAX_DELTA_E, Criterion
 from fidelity.report.chart import write_chart_report
 from fidelity.report.suite import suite_lines, write_suite_summary
 
-F = TypeVar("F", bound=Callable[..., Any])
-
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
+    from fidelity.pipeline.context import ContextAssessment
+    from fidelity.pipeline.records import ChartReport
     from fidelity.prediction.judge import JudgeOptions
 
-def context_option(f: F) -> F:
-    """The ``--context FILE`` option (the context of use) of ``check`` and ``suite``."""
-    return click.option(
-        "--context", "context_path", type=click.Path(dir_okay=False, path_type=Path),
-        default=None,
-        help="Context of use (TOML): detectors, conditions, acceptance criteria, model risk; "
-             "scores the credibility of the evidence for it (docs/context.md).")(f)
+
+def read_context(path: Path) -> Context:
+    """The context of use of ``--context FILE``."""
+    return load_context(path)
+
+
+def assess_context(context: Context, reports: Sequence[tuple[str, ChartReport]]
+                   ) -> tuple[ContextAssessment, list[str]]:
+    """The credibility of the evidence of ``reports`` (camera name, report) for ``context``,
+    with the qualification run, and the lines that state it."""
+    assessment = assess(context, list(reports), run=qualify)
+    return assessment, list(context_lines(assessment))
 
 
 def run_suite_command(suite: str, cameras: Sequence[str], *, out_dir: Path, report: bool,
@@ -116,4 +122,4 @@ def suite(suite_file: str, renderer: str, reference: str, max_delta_e: float | N
                                context=context, default_cat=cat))
 
 
-__all__ = ["context_option", "run_suite_command", "suite"]
+__all__ = ["assess_context", "read_context", "run_suite_command", "suite"]

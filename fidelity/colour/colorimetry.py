@@ -145,10 +145,14 @@ def delinearize_srgb(v: ArrayLike) -> FloatArray:
     """
     x = _as_float(v)
     dtype = x.dtype.type
-    power = dtype(1.055) * np.power(np.maximum(x, dtype(0.0031308)), dtype(1.0 / 2.4)) - dtype(
-        0.055
-    )
-    return np.where(x <= dtype(0.0031308), x * dtype(12.92), power)
+    # in place, the linear segment written over the power (np.where's result, one array less)
+    out = np.maximum(x, dtype(0.0031308), out=np.empty_like(x))
+    np.power(out, dtype(1.0 / 2.4), out=out)
+    out *= dtype(1.055)
+    out -= dtype(0.055)
+    linear = x <= dtype(0.0031308)
+    np.copyto(out, x * dtype(12.92), where=linear)
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -200,10 +204,11 @@ def xyz_to_lab(xyz: ArrayLike, white: ArrayLike = WHITEPOINT_D65_XYZ) -> FloatAr
         (dtype(CIE_KAPPA) * t + dtype(16.0)) / dtype(116.0),
     )
     fx, fy, fz = f[..., 0], f[..., 1], f[..., 2]
-    return np.stack(
-        [dtype(116.0) * fy - dtype(16.0), dtype(500.0) * (fx - fy), dtype(200.0) * (fy - fz)],
-        axis=-1,
-    )
+    lab = np.empty(f.shape, f.dtype)  # np.stack's array (C order), filled in place: faster
+    lab[..., 0] = dtype(116.0) * fy - dtype(16.0)
+    lab[..., 1] = dtype(500.0) * (fx - fy)
+    lab[..., 2] = dtype(200.0) * (fy - fz)
+    return lab
 
 
 def lab_to_xyz(lab: ArrayLike, white: ArrayLike = WHITEPOINT_D65_XYZ) -> FloatArray:

@@ -72,6 +72,16 @@ def _show(value: Any, limit: int = 60) -> str:
     return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
+#: The types of the hot ``isinstance`` tests, as tuples: ``int | float`` written in a test
+#: makes a new union at every call, and a union's test is slower than a tuple's.
+_NUMBERS = (int, float)
+_LISTS = (list, tuple)
+_CONTAINERS = (dict, list, tuple)
+#: Types that are no container (of a value from JSON, TOML or YAML): a list of them is not
+#: walked further, by :func:`check_depth`, item by item.
+_SCALARS = frozenset({float, int, str, bool, type(None)})
+
+
 def _kind(value: Any) -> str:
     """The JSON/TOML word for a Python value's type."""
     if value is None:
@@ -130,7 +140,7 @@ class Number(Node):
     hi_open: bool = False
 
     def _check(self, value: Any, at: Location) -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
+        if isinstance(value, bool) or not isinstance(value, _NUMBERS):
             raise _Invalid(at, f"must be a finite number, got {_show(value)}")
         try:
             v = float(value)
@@ -209,7 +219,7 @@ class ListOf(Node):
     max_items: int | None = None
 
     def _check(self, value: Any, at: Location) -> list[Any]:
-        if not isinstance(value, list | tuple):
+        if not isinstance(value, _LISTS):
             raise _Invalid(at, f"must be a list, got {_kind(value)}")
         n = len(value)
         if n < self.min_items or (self.max_items is not None and n > self.max_items):
@@ -390,16 +400,21 @@ def check_depth(document: Any, origin: str, max_depth: int = MAX_DEPTH) -> None:
     without recursion; a node shared by YAML aliases is walked once)."""
     stack: list[tuple[Any, int]] = [(document, 0)]
     seen: set[int] = set()
+    push = stack.append
     while stack:
         node, depth = stack.pop()
-        if not isinstance(node, dict | list | tuple) or id(node) in seen:
+        if not isinstance(node, _CONTAINERS) or id(node) in seen:
             continue
         if depth >= max_depth:
             raise SchemaError(f"{origin}: nested more than {max_depth} levels deep")
         seen.add(id(node))
         children = node.values() if isinstance(node, dict) else node
-        stack.extend((child, depth + 1) for child in children
-                     if isinstance(child, dict | list | tuple))
+        if _SCALARS.issuperset(map(type, children)):  # numbers and strings only: no walk
+            continue
+        below = depth + 1
+        for child in children:
+            if isinstance(child, _CONTAINERS):
+                push((child, below))
 
 
 #: Document formats by file suffix.

@@ -576,12 +576,12 @@ def measure_pixels(
             raise InvalidValueError(f"--exposure {exposure!r}: must be a finite number of EV "
                                     f"within +-{MAX_EXPOSURE_EV:g}")
         mode = "fixed"
-    # the finder: loaded where a chart is found or its given corners are checked, not by check
-    from fidelity.chart.find.cascade import check_corners, find_chart  # noqa: PLC0415 (the finder)
-
     found = None
     checks = None
+    # the finder: loaded where a chart is found or its given corners are checked, not by check
     if corners is None:
+        from fidelity.chart.find.cascade import find_chart  # noqa: PLC0415 (the finder)
+
         found = find_chart(arr, encoding=encoding, method=detection, rows=ref.rows,
                            cols=ref.cols, levels=levels)
         corners = found.corners
@@ -589,6 +589,8 @@ def measure_pixels(
     loc = locate_chart(corners, arr.shape, rows=ref.rows, cols=ref.cols, window=window,
                        patch_names=ref.patch_names)
     if found is None and corner_checks and (ref.rows, ref.cols) == (4, 6):
+        from fidelity.chart.find.cascade import check_corners  # noqa: PLC0415 (the same)
+
         checks = check_corners(arr, loc.corners, encoding=encoding)
     # patches the finder judged covered (a leaf, a hand) are measured but left out of the
     # exposure fit and the chart's statistics, and named

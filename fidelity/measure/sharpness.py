@@ -113,6 +113,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any, Literal
 
 import numpy as np
@@ -413,6 +414,26 @@ def _hamming(x: F64, centre: F64) -> F64:
     return np.asarray(w, dtype=np.float64)
 
 
+@lru_cache(maxsize=64)
+def _middle_window(rows: int, cols: int) -> F64:
+    """The :func:`_hamming` windows of the first pass of :func:`_edge_locations` (every row
+    centred on the middle of its ``cols - 1`` differences), read-only: made once per ROI shape
+    (the bootstrap's draws share it)."""
+    x = np.arange(cols - 1, dtype=np.float64) + 0.5
+    w = _hamming(x, np.full(rows, 0.5 * (x[0] + x[-1])))
+    w.flags.writeable = False
+    return w
+
+
+@lru_cache(maxsize=64)
+def _lsf_window(n: int, peak: int) -> F64:
+    """The :func:`_hamming` window of an ``n``-bin LSF centred on bin ``peak``, read-only
+    (the bootstrap's draws mostly share it)."""
+    w: F64 = _hamming(np.arange(n, dtype=np.float64), np.array([float(peak)]))[0]
+    w.flags.writeable = False
+    return w
+
+
 def _edge_locations(a: F64, sign: float, degree: int) -> tuple[F64, F64, F64]:
     """Per-row edge locations (column coordinate, NaN where a row has no edge), the
     ``degree`` fit and the first-order fit (polynomial coefficients, lowest first, of the
@@ -422,8 +443,8 @@ def _edge_locations(a: F64, sign: float, degree: int) -> tuple[F64, F64, F64]:
     x = np.arange(cols - 1, dtype=np.float64) + 0.5
     r = np.arange(rows, dtype=np.float64)
 
-    def centroids(centre: F64) -> F64:
-        wd = _hamming(x, centre) * d
+    def centroids(window: F64) -> F64:
+        wd = window * d
         total = wd.sum(axis=1)
         with np.errstate(invalid="ignore", divide="ignore"):
             loc = (wd * x).sum(axis=1) / total
@@ -438,10 +459,11 @@ def _edge_locations(a: F64, sign: float, degree: int) -> tuple[F64, F64, F64]:
         return np.asarray(np.polynomial.polynomial.polyfit(r[ok], loc[ok], deg),
                           dtype=np.float64)
 
-    loc = centroids(np.full(rows, 0.5 * (x[0] + x[-1])))
+    loc = centroids(_middle_window(rows, cols))
     coef = fit(loc, degree)
-    loc = centroids(np.clip(np.polynomial.polynomial.polyval(r, coef), x[0], x[-1]))
-    return loc, fit(loc, degree), fit(loc, 1)
+    loc = centroids(_hamming(x, np.clip(np.polynomial.polynomial.polyval(r, coef), x[0], x[-1])))
+    coef = fit(loc, degree)
+    return loc, coef, coef if degree == 1 else fit(loc, 1)  # degree 1: the same fit
 
 
 @dataclass(frozen=True)
@@ -520,20 +542,35 @@ def _core(a: F64, degree: int, check: bool, strict: bool = True,
     lsf *= sign
     n = lsf.size
     peak = -kmin  # the bin of distance 0: the fitted edge
-    w = (_hamming(np.arange(n, dtype=np.float64), np.array([float(peak)]))[0] if window
-         else np.ones(n))
+    w = _lsf_window(n, peak) if window else np.ones(n)
     nfft = 1 << max(1, math.ceil(math.log2(2 * n)))
     spectrum = np.abs(np.fft.rfft(lsf * w, nfft))
-    freq = np.fft.rfftfreq(nfft, d=step)
     if not spectrum[0] > 0:
         raise RefusedEdge("flat", "roi: no edge: the line spread function sums to zero")
-    keep = freq <= MAX_FREQUENCY + 1e-12
-    freq = freq[keep]
-    mtf = spectrum[keep] / spectrum[0] / np.sinc(2.0 * freq * step)
+    freq, keep, derivative, box = _frequency_grid(nfft)
+    mtf = spectrum[keep] / spectrum[0] / derivative
     if not strict:
-        mtf = mtf / np.sinc(freq * step)
-    return _Core(np.asarray(freq, dtype=np.float64), np.asarray(mtf, dtype=np.float64), slope,
-                 rows, start, coef, pos, esf, contrast, noise)
+        mtf = mtf / box
+    return _Core(freq, np.asarray(mtf, dtype=np.float64), slope, rows, start, coef, pos, esf,
+                 contrast, noise)
+
+
+@lru_cache(maxsize=16)
+def _frequency_grid(nfft: int) -> tuple[F64, NDArray[np.bool_], F64, F64]:
+    """The frequencies (cy/px) of an ``nfft``-point spectrum of the oversampled LSF up to
+    :data:`MAX_FREQUENCY`, which of the spectrum's bins they are, and the two responses
+    :func:`_core` divides out at them: the central difference's (sinc of twice the bin
+    width) and the bin's box (sinc of the bin width). Read-only; made once per ``nfft`` (the
+    bootstrap's draws share it)."""
+    step = 1.0 / OVERSAMPLING
+    every = np.fft.rfftfreq(nfft, d=step)
+    keep: NDArray[np.bool_] = every <= MAX_FREQUENCY + 1e-12
+    freq: F64 = np.asarray(every[keep], dtype=np.float64)
+    derivative: F64 = np.asarray(np.sinc(2.0 * freq * step), dtype=np.float64)
+    box: F64 = np.asarray(np.sinc(freq * step), dtype=np.float64)
+    for a in (freq, keep, derivative, box):
+        a.flags.writeable = False
+    return freq, keep, derivative, box
 
 
 def _crossing(freq: F64, mtf: F64, level: float) -> float | None:

@@ -54,6 +54,7 @@ from fidelity.pipeline.records import (
     ImageSource,
     Provenance,
     RenderSource,
+    start_platform_lookup,
     utc_now,
 )
 from fidelity.prediction.exposure import judge_exposure
@@ -265,6 +266,7 @@ def check_camera(
     >>> round(report.mean_delta_e, 2), report.verdict.passed  # doctest: +SKIP
     (1.02, True)
     """
+    start_platform_lookup()  # the report's provenance, found while the chart is measured
     render = render_chart(camera if camera is not None else DEFAULT_CAMERA, illuminant,
                           renderer, reference=reference, seed=seed, frame=True, cat=cat)
     m = render.measurement

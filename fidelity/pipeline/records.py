@@ -49,6 +49,7 @@ import json
 import os
 import platform
 import sys
+import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -328,7 +329,7 @@ class Provenance:
             tables["prediction"] = TableRef.of_file(t.name, t.path, t.kind)
             tables["calibration"] = TableRef.of_file(
                 "calibration-safecolor", resource_dir("data") / "calibration-safecolor.json")
-        return cls(__version__, sys.version.split()[0], platform.platform(), libraries,
+        return cls(__version__, sys.version.split()[0], machine_platform(), libraries,
                    input_sha256, tables, {**BASE_CONVENTIONS, **conventions})
 
 
@@ -554,6 +555,28 @@ def validate_report(data: Mapping[str, Any]) -> None:
         raise InvalidValueError(f"not a fidelity report: {where}: {exc.message}") from None
 
 
+#: The background thread of :func:`start_platform_lookup`, once started.
+_platform_lookup: list[threading.Thread] = []
+
+
+def start_platform_lookup() -> None:
+    """Start :func:`platform.platform` in a background thread, so that a report's
+    :meth:`Provenance.collect` finds it done: on Linux its first call runs ``uname -p`` (a
+    subprocess, some 20 ms), which then overlaps the measurement. The answer is the same
+    (:func:`platform.platform` caches it); a second call starts nothing."""
+    if not _platform_lookup:
+        thread = threading.Thread(target=platform.platform, name="platform", daemon=True)
+        _platform_lookup.append(thread)
+        thread.start()
+
+
+def machine_platform() -> str:
+    """:func:`platform.platform`, after the lookup :func:`start_platform_lookup` started."""
+    for thread in _platform_lookup:
+        thread.join()
+    return platform.platform()
+
+
 def utc_now() -> str:
     """The current UTC time as the report writes it (``YYYY-MM-DDThh:mm:ssZ``)."""
     return _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
@@ -772,8 +795,10 @@ __all__ = [
     "Source",
     "TableRef",
     "gate_exit_code",
+    "machine_platform",
     "report_schema",
     "report_schema_path",
+    "start_platform_lookup",
     "utc_now",
     "validate_report",
 ]

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from fidelity.camera.model import load_camera
-from fidelity.coco.validate.suite import SUITE_FILE, CameraCase, load_suite_file
+from fidelity.coco.validate.suite import CameraCase, is_suite_file, load_suite_file
 from fidelity.core.errors import InputFileError
 from fidelity.pipeline.check import DEFAULT_CRITERION, check_camera
 from fidelity.prediction.judge import DEFAULT_JUDGE, JudgeOptions
@@ -29,11 +29,6 @@ if TYPE_CHECKING:
     from fidelity.pipeline.context import ContextAssessment
     from fidelity.pipeline.records import ChartReport
     from fidelity.prediction.verdict import Criterion
-
-
-def is_suite_file(argument: str) -> bool:
-    """Whether a command-line camera argument is a suite file (named ``suite.toml``)."""
-    return Path(argument).name == SUITE_FILE
 
 
 def suite_cases(suite: str, cameras: Sequence[str] = (), default_cat: str | None = None

@@ -3,8 +3,12 @@
 
 from __future__ import annotations
 
-from fidelity.pipeline.context import ContextAssessment
+from typing import TYPE_CHECKING
+
 from fidelity.report.document import Section, section, table
+
+if TYPE_CHECKING:  # a report without a context of use loads none of its machinery
+    from fidelity.pipeline.context import ContextAssessment
 
 
 def context_section(a: ContextAssessment) -> Section:

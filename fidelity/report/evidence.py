@@ -34,7 +34,6 @@ measured again.
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import json
 import os
 import platform
@@ -44,10 +43,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from fidelity.camera.model import available_cameras, camera_files
-from fidelity.core.errors import FidelityError, InvalidValueError
+from fidelity.core.errors import FidelityError
 from fidelity.core.fileio import (
     JSONObject,
-    display_path,
     file_sha256,
     json_ready,
     write_json_atomic,
@@ -70,6 +68,7 @@ from fidelity.prediction.interval import (
 )
 from fidelity.prediction.properties import load_property_table
 from fidelity.prediction.validated import VALIDATED_BOUND_FILE
+from fidelity.report.evidencefile import EVIDENCE_FORMATS, evidence_format, invocation_record
 from fidelity.report.jsonform import fit_json, verdict_json
 
 if TYPE_CHECKING:
@@ -97,7 +96,8 @@ CREDIBILITY_SECTIONS: Mapping[str, tuple[str, ...]] = {
                      "subjects[].prediction_table.scores_files[].sha256",
                      "subjects[].property_tables[].sha256",
                      "subjects[].directional_table.sha256", "context_of_use.file.sha256",
-                     "subjects[].validity.validated_cameras.sha256", "record.content_sha256",
+                     "subjects[].validity.validated_cameras.sha256",
+                     "subjects[].validated_bound.sha256", "record.content_sha256",
                      "tool.commit", "tool.code_sha256", "record.created", "invocation.argv",
                      "invocation.settings.sha256"),
     "decision": ("decision_rule", "subjects[].verdict", "record.exit_code", "record.outcome"),
@@ -205,22 +205,6 @@ def environment_record() -> dict[str, Any]:
     return {"python": platform.python_version(), "implementation":
             platform.python_implementation(), "platform": platform.platform(),
             "machine": platform.machine(), "dependencies": dict(libraries)}
-
-
-def invocation_record(argv: Sequence[str], settings: PathArg | None = None,
-                      cwd: PathArg | None = None) -> dict[str, Any]:
-    """``invocation``: the command line ``argv`` (after ``fidelity``), the folder it ran in
-    (default: the current one) and the settings file read (path and SHA-256; None)."""
-    folder = os.fsdecode(cwd) if cwd is not None else os.getcwd()
-    read = None
-    if settings is not None:
-        path = os.path.abspath(os.path.join(folder, os.fsdecode(settings)))
-        try:
-            digest: str | None = file_sha256(path)
-        except OSError:
-            digest = None
-        read = {"path": path, "sha256": digest}
-    return {"argv": [os.fsdecode(a) for a in argv], "cwd": folder, "settings": read}
 
 
 def _file_input(role: str, path: str | os.PathLike[str], sha256: str | None = None,
@@ -504,39 +488,6 @@ def fit_evidence_record(report: FitReport, exit_code: int = 0,
         "correction": {"report": fit_json(report), "files": files},
     }
     return _record("fit", exit_code, None, [subject], invocation)
-
-
-#: The formats of ``--evidence FILE``, chosen by the file's suffix, and what each holds.
-EVIDENCE_FORMATS: Mapping[str, str] = {
-    ".json": "the credibility record (JSON, schema evidence.schema.json)",
-    ".srmd": "SSP Traceability Simulation Resource Meta Data: the run as a resource, every "
-             "input and result with its SHA3-256, the verdicts, ΔE00, predictions, validity",
-    ".stmd": "SSP Traceability Simulation Task Meta Data: the evaluation (validation) phase "
-             "of a Credible Simulation Process",
-    ".xqar": "ASAM Quality Checker result: a checker per subject, failed or undecided "
-             "verdicts and answers outside the validity domain as issues",
-}
-
-#: The Python module each format's writer needs, and the extra that installs it.
-_NEEDS = {".srmd": ("lxml", "ssp"), ".stmd": ("lxml", "ssp"), ".xqar": ("qc_baselib", "qc")}
-
-
-
-def evidence_format(path: PathArg) -> str:
-    """The format of an ``--evidence`` file: its suffix in :data:`EVIDENCE_FORMATS`
-    (``.json``, ``.srmd``, ``.stmd``, ``.xqar``, any case). An unknown suffix, or a format whose
-    library is missing (the ``ssp`` or ``qc`` extra), is an :class:`InvalidValueError`
-    naming the file."""
-    suffix = Path(path).suffix.lower()
-    if suffix not in EVIDENCE_FORMATS:
-        raise InvalidValueError(
-            f"{display_path(path)}: --evidence writes {', '.join(EVIDENCE_FORMATS)} (by the "
-            f"file's suffix), not {repr(suffix) if suffix else 'a file without one'}")
-    need, extra = _NEEDS.get(suffix, (None, None))
-    if need is not None and importlib.util.find_spec(need) is None:
-        raise InvalidValueError(f"{display_path(path)}: writing {suffix} needs {need}: pip "
-                                f"install 'camera-fidelity[{extra}]'")
-    return suffix
 
 
 def _write_json(path: PathArg, record: JSONObject, results: Sequence[PathArg]) -> Path:

@@ -51,11 +51,23 @@ def markdown_to_html(text: str) -> Markup:
     return Markup(_markdown().render(text))
 
 
+#: The characters markdown-it's inline rules of the CommonMark preset start at (a backslash
+#: escape, code, emphasis, a link or image, an autolink or raw HTML, an entity, a line break;
+#: ``~`` of strikethrough, off there, kept to be safe) and those its normalisation changes
+#: (CR, NUL). A line with none of them is plain text: :func:`markdown_inline` HTML-escapes it
+#: as markdown-it would, without its parser (most of a report's table cells; a test checks
+#: the two agree).
+INLINE_SYNTAX = frozenset("\\`*_[]!<&~\n\r\0")
+
+
 def markdown_inline(text: str) -> Markup:
     """Markdown of one line (emphasis, code, links) as safe HTML, without a paragraph."""
     from markupsafe import Markup
 
-    return Markup(_markdown().renderInline(str(text)))
+    line = str(text)
+    if INLINE_SYNTAX.isdisjoint(line):  # plain text: markdown-it's escapeHtml of it
+        return Markup(line.replace(">", "&gt;").replace('"', "&quot;"))
+    return Markup(_markdown().renderInline(line))
 
 
 @lru_cache(maxsize=1)
@@ -170,6 +182,7 @@ def write_document(doc: Document, *, html: str | os.PathLike[str] | None = None,
 
 
 __all__ = [
+    "INLINE_SYNTAX",
     "TEMPLATE",
     "environment",
     "markdown_inline",

@@ -174,6 +174,11 @@ def load_suite_file(path: str | os.PathLike[str], default_cat: str | None = None
     return load_suite(p.parent, default_cat)
 
 
+def is_suite_file(argument: str) -> bool:
+    """Whether a command-line camera argument is a suite file (named :data:`SUITE_FILE`)."""
+    return Path(argument).name == SUITE_FILE
+
+
 __all__ = [
     "BASELINE",
     "DEFAULT_CAT",
@@ -181,6 +186,7 @@ __all__ = [
     "SUITE_FILE",
     "CameraCase",
     "SuiteSettings",
+    "is_suite_file",
     "load_suite",
     "load_suite_file",
     "read_suite_file",
