@@ -174,7 +174,7 @@ def test_the_checks_find_what_they_look_for(tmp_path) -> None:
     assert layer("fidelity.core.errors") < layer("fidelity.colour.a")
 
 
-#: The package's own modules a module may import inside a function (``# noqa: PLC0415``), and
+#: The package's own modules a module may import inside a function (marked ``noqa: PLC0415``), and
 #: the folder whose modules import them at module level: the COCO benchmark, which a check or
 #: an audit loads only with ``--measure``, the chart finder, which only an image whose chart is
 #: found or checked loads, the evidence formats that need an extra, and what ``check`` loads
