@@ -300,18 +300,72 @@ def flat_channels(values: F64) -> NDArray[np.bool_]:
     x = np.asarray(values, np.float64).reshape(-1, 3)
     if not x.shape[0]:
         return np.ones(3, bool)
-    out: NDArray[np.bool_] = (np.ptp(x, axis=0)
-                             <= ROUNDOFF_ULPS * np.finfo(np.float64).eps
-                             * np.max(np.abs(x), axis=0))
+    rows = np.ascontiguousarray(x.T)  # a channel's values in a row: reductions along it are fast
+    return _flat(rows.max(axis=1), rows.min(axis=1))
+
+
+def _flat(top: F64, bottom: F64) -> NDArray[np.bool_]:
+    """:func:`flat_channels` from each channel's largest and smallest value: its spread
+    (``np.ptp``) against its largest magnitude (the larger of theirs)."""
+    out: NDArray[np.bool_] = ((top - bottom) <= ROUNDOFF_ULPS * np.finfo(np.float64).eps
+                              * np.maximum(np.abs(top), np.abs(bottom)))
     return out
 
 
-def _block_deviations(values: F64, blocks: NDArray[np.int64], min_blocks: int
-                      ) -> tuple[F64, int, F64] | None:
+@dataclass(frozen=True)
+class _Columns:
+    """The column statistics of ``(n, k)`` float64 values (``n`` >= 1) that a window's spread
+    needs, each bit for bit what numpy's own reductions over the rows give: ``mean``
+    (``x.mean(axis=0)``), ``squares`` (the sums of squared deviations that ``x.var(axis=0)``
+    divides), ``top`` and ``bottom`` (``x.max(axis=0)``, ``x.min(axis=0)``) and ``rows`` (the
+    values transposed, ``(k, n)`` contiguous). numpy sums over axis 0 a row at a time in
+    order, each row's ``k`` columns side by side: the same sums for all the columns at once
+    (a window's linear values beside its codes) cost about what those of three do, whose
+    per-row loop overhead dominates; the element-wise steps and the extremes (exact in any
+    order) run along the transposed rows."""
+
+    n: int
+    mean: F64
+    squares: F64
+    top: F64
+    bottom: F64
+    rows: F64
+    deviations: F64
+
+    @classmethod
+    def of(cls, values: F64) -> _Columns:
+        """The statistics of ``values`` ``(n, k)``, ``n`` >= 1."""
+        x = np.ascontiguousarray(values, np.float64)
+        n = x.shape[0]
+        mean: F64 = x.sum(axis=0) / n
+        rows = np.ascontiguousarray(x.T)
+        deviations = rows - mean[:, None]
+        squared = np.ascontiguousarray((deviations * deviations).T)
+        return cls(n, mean, squared.sum(axis=0), rows.max(axis=1), rows.min(axis=1), rows,
+                   deviations)
+
+    def variance(self, ddof: int = 0) -> F64:
+        """``x.var(axis=0, ddof=ddof)``."""
+        out: F64 = self.squares / max(self.n - ddof, 0)
+        return out
+
+    def covariance(self, first: int = 0) -> F64:
+        """``np.cov(x[:, first:first + 3], rowvar=False, ddof=1)`` (``n`` >= 2): the
+        deviations laid out as numpy's ``cov`` lays them out for its ``dot``."""
+        centred = np.ascontiguousarray(self.deviations[first:first + 3].T)
+        across = centred.T
+        c: F64 = np.dot(across, across.T.conj())
+        c *= np.true_divide(1, self.n - 1)
+        return np.atleast_2d(c.squeeze())
+
+
+def _block_deviations(values: F64, blocks: NDArray[np.int64], min_blocks: int,
+                      columns: _Columns | None = None) -> tuple[F64, int, F64] | None:
     """The weighted deviations ``(n_b / n) (m_b - m)`` ``(B, 3)`` of the block means of
     ``values`` ``(n, 3)`` from their mean, the number of blocks ``B`` and the
     independent-pixel variance of the mean ``var / n`` ``(3,)``; None for fewer than 2 values
-    or ``min_blocks`` blocks."""
+    or ``min_blocks`` blocks. ``columns``: the values' :class:`_Columns` (its first three
+    columns theirs), when computed already."""
     x = np.asarray(values, np.float64).reshape(-1, 3)
     n = x.shape[0]
     b = np.asarray(blocks, np.int64).reshape(-1)
@@ -323,11 +377,12 @@ def _block_deviations(values: F64, blocks: NDArray[np.int64], min_blocks: int
     count = int(np.count_nonzero(touched))
     if count < min_blocks:
         return None
+    cols = columns if columns is not None else _Columns.of(x)
     sizes = every[touched]
-    sums = np.stack([np.bincount(b, weights=x[:, c], minlength=every.size)[touched]
+    sums = np.stack([np.bincount(b, weights=cols.rows[c], minlength=every.size)[touched]
                      for c in range(3)], axis=-1)
-    dev: F64 = (sizes / n)[:, None] * (sums / sizes[:, None] - x.mean(axis=0))
-    plain: F64 = x.var(axis=0, ddof=1) / n
+    dev: F64 = (sizes / n)[:, None] * (sums / sizes[:, None] - cols.mean[:3])
+    plain: F64 = cols.variance(ddof=1)[:3] / n
     return dev, count, plain
 
 
@@ -364,14 +419,15 @@ def _design_effect(variance: F64, plain: F64) -> F64:
 
 
 def block_mean_covariance(values: F64, blocks: NDArray[np.int64],
-                          min_blocks: int = MIN_BLOCKS) -> F64 | None:
+                          min_blocks: int = MIN_BLOCKS, *, columns: _Columns | None = None
+                          ) -> F64 | None:
     """The covariance ``(3, 3)`` of the mean of ``values`` ``(n, 3)`` from the means of the
     blocks (``blocks`` ``(n,)``) as clusters: the matrix form of the ultimate-cluster
     estimator of :func:`block_design_effect` (Kish 6.3), ``B / (B - 1) sum_b (n_b / n)^2
     d_b d_b^T`` with ``d_b = m_b - m``; each channel's variance at least the
     independent-pixel ``var / n`` (its row and column scaled up to it). None for fewer than
-    ``min_blocks`` blocks."""
-    got = _block_deviations(values, blocks, min_blocks)
+    ``min_blocks`` blocks. ``columns``: the values' :class:`_Columns`, when computed already."""
+    got = _block_deviations(values, blocks, min_blocks, columns)
     if got is None:
         return None
     dev, count, plain = got
@@ -430,9 +486,16 @@ def patch_spread(linear: F64, codes: F64 | None = None,
     n = x.shape[0]
     total = n if count is None else int(count)
     sampled = n if total != n else None
-    cov = (np.atleast_2d(np.cov(x, rowvar=False, ddof=1)) if n >= 2 else np.zeros((3, 3)))
-    flat = flat_channels(x)
-    mc = (block_mean_covariance(x, blocks) if blocks is not None and len(blocks) == n
+    c = None if codes is None else np.asarray(codes, np.float64).reshape(-1, 3)
+    # one pass of column statistics over the pixels beside their codes (bit for bit numpy's
+    # cov, var, mean, std, ptp and max of each)
+    both = c is not None and len(c) == n
+    cols = (_Columns.of(np.concatenate([x, c], axis=1) if both and c is not None else x)
+            if n else None)
+    cov = cols.covariance() if cols is not None and n >= 2 else np.zeros((3, 3))
+    flat = _flat(cols.top[:3], cols.bottom[:3]) if cols is not None else np.ones(3, bool)
+    mc = (block_mean_covariance(x, blocks, columns=cols)
+          if blocks is not None and len(blocks) == n
           else None)  # None: not estimated (no blocks given, or too few touched)
     # the design effect from the same block means (block_design_effect's value: the
     # covariance's diagonal is the clustered variance, raised to at least var / n)
@@ -440,15 +503,17 @@ def patch_spread(linear: F64, codes: F64 | None = None,
     if design is not None:
         design[flat] = 1.0  # a flat channel's round-off spread is not noise to scale
     clustered = None if mc is None else mc * n
-    if codes is None:
+    if c is None:
         return PatchSpread(total, cov, flat, design=design, sampled=sampled,
                            clustered=clustered)
-    c = np.asarray(codes, np.float64).reshape(-1, 3)
     if not len(c):
         return PatchSpread(total, cov, flat, np.zeros(3), np.zeros(3), design, sampled,
                            clustered)
-    return PatchSpread(total, cov, flat, c.mean(axis=0), c.std(axis=0), design, sampled,
-                       clustered)
+    if both and cols is not None:
+        code_mean, code_std = cols.mean[3:], np.sqrt(cols.variance()[3:])
+    else:
+        code_mean, code_std = c.mean(axis=0), c.std(axis=0)
+    return PatchSpread(total, cov, flat, code_mean, code_std, design, sampled, clustered)
 
 
 def patch_covariances(samples: Sequence[F64], *, trim: float = 0.0,
