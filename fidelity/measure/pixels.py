@@ -859,8 +859,7 @@ def noise_and_sharpness(pixels: np.ndarray, location: ChartLocation, means: np.n
             if keep is not None:  # a large window: its noise from a lattice of its pixels
                 sampled = True
                 samples.append(_patch_linear(_rows(window.values(pixels), keep), encoding,
-                                             negatives,
-                                             to_srgb, identity)[0])
+                                             negatives, to_srgb, identity)[0])
             elif neutral_samples is not None and k in neutral_samples:
                 samples.append(neutral_samples[k])
             else:
