@@ -109,3 +109,38 @@ def test_patch_spread_statistics_are_numpys_bit_for_bit():
             assert _bits(cols.mean) == _bits(lin.mean(axis=0))
             if n >= 2:
                 assert _bits(cols.variance(ddof=1)) == _bits(lin.var(axis=0, ddof=1))
+
+
+def test_a_coded_window_spread_is_the_general_one_bit_for_bit():
+    """An integer window's spread (issue 59: its lattice sample picked whole pixels at a time
+    and gathered beside its code values, pixels._coded_window_spread) is, bit for bit, the
+    spread of the same sample picked, linearised and located the general way."""
+    from fidelity.chart.image import as_float32
+    from fidelity.chart.locate import locate_chart
+    from fidelity.measure import pixels
+
+    rng = np.random.default_rng(4)
+    for dtype, encoding in ((np.uint8, "srgb"), (np.uint16, "linear")):
+        top = np.iinfo(dtype).max
+        img = rng.integers(0, top + 1, (1500, 2000, 3)).astype(dtype)
+        corners = np.array([[300.0, 280.0], [1700.0, 310.0], [1680.0, 1220.0], [320.0, 1190.0]])
+        loc = locate_chart(corners, img.shape, rows=4, cols=6, window=0.9,
+                           patch_names=[str(k) for k in range(24)])
+        assert any(unc.block_sample(w.y0, w.x0, w.mask) is not None for w in loc.windows[:6])
+        for win in loc.windows[:6]:
+            vals = win.values(img)
+            got = pixels._window_spread(vals, None, encoding, "keep", np.eye(3), True,
+                                        1.0 / top, win, img.shape[1])
+            keep = unc.block_sample(win.y0, win.x0, win.mask)
+            sub = vals if keep is None else vals[keep]
+            lin = pixels._code_linear(np.dtype(dtype).str, encoding)[sub]
+            codes = as_float32(sub).astype(np.float64)
+            rows, cols = win.indices()
+            if keep is not None:
+                rows, cols = rows[keep], cols[keep]
+            want = unc.patch_spread(lin, codes, unc.image_blocks(rows, cols, img.shape[1]),
+                                    count=len(vals))
+            for field in ("covariance", "flat", "code_mean", "code_std", "design",
+                          "clustered"):
+                assert _bits(getattr(got, field)) == _bits(getattr(want, field)), field
+            assert (got.count, got.sampled) == (want.count, want.sampled)
