@@ -159,7 +159,10 @@ def variance_uncertainty(x: ArrayLike, *, design_effect: float = 1.0) -> tuple[f
     d = a - a.mean()
     d2 = d * d
     s2 = float(d2.sum()) / (n - 1)
-    m4 = float(d2 @ d2) / n
+    # the fourth moment by numpy's own summation, not a BLAS dot product: OpenBLAS splits a
+    # long dot product over its threads (its last digits then depend on the machine's core
+    # count) and waking them costs more than the sum on a busy machine (issue 59)
+    m4 = float((d2 * d2).sum()) / n
     var = design_effect * (m4 - (n - 3) / (n - 1) * s2 * s2) / n
     return s2, float(math.sqrt(max(0.0, var)))
 

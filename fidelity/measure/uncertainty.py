@@ -300,20 +300,77 @@ def flat_channels(values: F64) -> NDArray[np.bool_]:
     x = np.asarray(values, np.float64).reshape(-1, 3)
     if not x.shape[0]:
         return np.ones(3, bool)
-    out: NDArray[np.bool_] = (np.ptp(x, axis=0)
-                             <= ROUNDOFF_ULPS * np.finfo(np.float64).eps
-                             * np.max(np.abs(x), axis=0))
+    rows = np.ascontiguousarray(x.T)  # a channel's values in a row: reductions along it are fast
+    return _flat(rows.max(axis=1), rows.min(axis=1))
+
+
+def _flat(top: F64, bottom: F64) -> NDArray[np.bool_]:
+    """:func:`flat_channels` from each channel's largest and smallest value: its spread
+    (``np.ptp``) against its largest magnitude (the larger of theirs)."""
+    out: NDArray[np.bool_] = ((top - bottom) <= ROUNDOFF_ULPS * np.finfo(np.float64).eps
+                              * np.maximum(np.abs(top), np.abs(bottom)))
     return out
 
 
-def _block_deviations(values: F64, blocks: NDArray[np.int64], min_blocks: int
-                      ) -> tuple[F64, int, F64] | None:
+@dataclass(frozen=True)
+class _Columns:
+    """The column statistics of ``(n, k)`` float64 values (``n`` >= 1) that a window's spread
+    needs, each bit for bit what numpy's own reductions over the rows give: ``mean``
+    (``x.mean(axis=0)``), ``squares`` (the sums of squared deviations that ``x.var(axis=0)``
+    divides), ``top`` and ``bottom`` (``x.max(axis=0)``, ``x.min(axis=0)``), ``rows`` (the
+    values transposed, ``(k, n)`` contiguous) and ``deviations`` (``rows`` less their means);
+    the ``linear`` columns are the pixels', the ``codes`` ones (if any) their code values'.
+    numpy sums over axis 0 a row at a time in order, each row's ``k`` columns side by side:
+    the same sums for all the columns at once (a window's linear values beside its codes)
+    cost about what those of three do, whose per-row loop overhead dominates; the
+    element-wise steps and the extremes (exact in any order) run along the transposed rows."""
+
+    n: int
+    mean: F64
+    squares: F64
+    top: F64
+    bottom: F64
+    rows: F64
+    deviations: F64
+    linear: tuple[int, int, int] = (0, 1, 2)
+    codes: tuple[int, int, int] | None = None
+
+    @classmethod
+    def of(cls, values: F64, linear: tuple[int, int, int] = (0, 1, 2),
+           codes: tuple[int, int, int] | None = None) -> _Columns:
+        """The statistics of ``values`` ``(n, k)``, ``n`` >= 1."""
+        x = np.ascontiguousarray(values, np.float64)
+        n = x.shape[0]
+        mean: F64 = x.sum(axis=0) / n
+        rows = np.ascontiguousarray(x.T)
+        deviations = rows - mean[:, None]
+        squared = np.ascontiguousarray((deviations * deviations).T)
+        return cls(n, mean, squared.sum(axis=0), rows.max(axis=1), rows.min(axis=1), rows,
+                   deviations, linear, codes)
+
+    def variance(self, ddof: int = 0) -> F64:
+        """``x.var(axis=0, ddof=ddof)``."""
+        out: F64 = self.squares / max(self.n - ddof, 0)
+        return out
+
+    def covariance(self) -> F64:
+        """``np.cov`` of the linear columns (``rowvar=False, ddof=1``; ``n`` >= 2): their
+        deviations laid out as numpy's ``cov`` lays them out for its ``dot``."""
+        centred = np.ascontiguousarray(self.deviations[list(self.linear)].T)
+        across = centred.T
+        c: F64 = np.dot(across, across.T.conj())
+        c *= np.true_divide(1, self.n - 1)
+        return np.atleast_2d(c.squeeze())
+
+
+def _block_deviations(values: F64, blocks: NDArray[np.int64], min_blocks: int,
+                      columns: _Columns | None = None) -> tuple[F64, int, F64] | None:
     """The weighted deviations ``(n_b / n) (m_b - m)`` ``(B, 3)`` of the block means of
     ``values`` ``(n, 3)`` from their mean, the number of blocks ``B`` and the
     independent-pixel variance of the mean ``var / n`` ``(3,)``; None for fewer than 2 values
-    or ``min_blocks`` blocks."""
-    x = np.asarray(values, np.float64).reshape(-1, 3)
-    n = x.shape[0]
+    or ``min_blocks`` blocks. ``columns``: the values' :class:`_Columns` (their linear
+    columns the values), when computed already (``values`` is then not read)."""
+    n = columns.n if columns is not None else np.asarray(values).reshape(-1, 3).shape[0]
     b = np.asarray(blocks, np.int64).reshape(-1)
     if n < 2 or b.size != n:
         return None
@@ -323,11 +380,14 @@ def _block_deviations(values: F64, blocks: NDArray[np.int64], min_blocks: int
     count = int(np.count_nonzero(touched))
     if count < min_blocks:
         return None
+    cols = (columns if columns is not None
+            else _Columns.of(np.asarray(values, np.float64).reshape(-1, 3)))
+    linear = list(cols.linear)
     sizes = every[touched]
-    sums = np.stack([np.bincount(b, weights=x[:, c], minlength=every.size)[touched]
-                     for c in range(3)], axis=-1)
-    dev: F64 = (sizes / n)[:, None] * (sums / sizes[:, None] - x.mean(axis=0))
-    plain: F64 = x.var(axis=0, ddof=1) / n
+    sums = np.stack([np.bincount(b, weights=cols.rows[c], minlength=every.size)[touched]
+                     for c in linear], axis=-1)
+    dev: F64 = (sizes / n)[:, None] * (sums / sizes[:, None] - cols.mean[linear])
+    plain: F64 = cols.variance(ddof=1)[linear] / n
     return dev, count, plain
 
 
@@ -364,14 +424,15 @@ def _design_effect(variance: F64, plain: F64) -> F64:
 
 
 def block_mean_covariance(values: F64, blocks: NDArray[np.int64],
-                          min_blocks: int = MIN_BLOCKS) -> F64 | None:
+                          min_blocks: int = MIN_BLOCKS, *, columns: _Columns | None = None
+                          ) -> F64 | None:
     """The covariance ``(3, 3)`` of the mean of ``values`` ``(n, 3)`` from the means of the
     blocks (``blocks`` ``(n,)``) as clusters: the matrix form of the ultimate-cluster
     estimator of :func:`block_design_effect` (Kish 6.3), ``B / (B - 1) sum_b (n_b / n)^2
     d_b d_b^T`` with ``d_b = m_b - m``; each channel's variance at least the
     independent-pixel ``var / n`` (its row and column scaled up to it). None for fewer than
-    ``min_blocks`` blocks."""
-    got = _block_deviations(values, blocks, min_blocks)
+    ``min_blocks`` blocks. ``columns``: the values' :class:`_Columns`, when computed already."""
+    got = _block_deviations(values, blocks, min_blocks, columns)
     if got is None:
         return None
     dev, count, plain = got
@@ -405,6 +466,19 @@ def block_sample(y0: int, x0: int, mask: NDArray[np.bool_],
     still show the correlation of neighbours (:func:`block_design_effect`) and the lattice
     spans the window. None: every pixel (``limit`` or fewer; None:
     :data:`SPREAD_SAMPLE_PIXELS`, read when called)."""
+    lattice = block_lattice(y0, x0, mask, limit)
+    if lattice is None:
+        return None
+    down, across = lattice
+    keep: NDArray[np.bool_] = (mask & down[:, None] & across[None, :])[mask]
+    return keep
+
+
+def block_lattice(y0: int, x0: int, mask: NDArray[np.bool_], limit: int | None = None
+                  ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]] | None:
+    """The rows ``(h,)`` and columns ``(w,)`` of a window's box whose pixels
+    :func:`block_sample` keeps (those of the window at both), or None where it keeps every
+    pixel."""
     limit = SPREAD_SAMPLE_PIXELS if limit is None else int(limit)
     count = int(np.count_nonzero(mask))
     if count <= limit:
@@ -413,8 +487,7 @@ def block_sample(y0: int, x0: int, mask: NDArray[np.bool_],
     h, w = mask.shape
     down = ((np.arange(h) + y0) // BLOCK_PX) % stride == 0
     across = ((np.arange(w) + x0) // BLOCK_PX) % stride == 0
-    keep: NDArray[np.bool_] = (mask & down[:, None] & across[None, :])[mask]
-    return keep
+    return down, across
 
 
 def patch_spread(linear: F64, codes: F64 | None = None,
@@ -428,11 +501,47 @@ def patch_spread(linear: F64, codes: F64 | None = None,
     statistics are the sample's, the count (the mean's) the window's."""
     x = np.asarray(linear, np.float64).reshape(-1, 3)
     n = x.shape[0]
+    c = None if codes is None else np.asarray(codes, np.float64).reshape(-1, 3)
+    # one pass of column statistics over the pixels beside their codes (bit for bit numpy's
+    # cov, var, mean, std, ptp and max of each)
+    both = c is not None and len(c) == n
+    cols = None
+    if n:
+        cols = (_Columns.of(np.concatenate([x, c], axis=1), codes=(3, 4, 5))
+                if both and c is not None else _Columns.of(x))
+    return _window_statistics(cols, n, c, blocks, count)
+
+
+def coded_patch_spread(codes: NDArray[Any], table: F64,
+                       blocks: NDArray[np.int64] | None = None,
+                       count: int | None = None) -> PatchSpread:
+    """:func:`patch_spread` of integer pixel codes ``(n, 3)`` with ``table`` ``(levels, 2)``
+    each code's linear value and its code value: ``patch_spread(table[codes, 0],
+    table[codes, 1], blocks, count)``, bit for bit, the pixels beside their codes gathered
+    from the table at once."""
+    k = np.asarray(codes).reshape(-1, 3)
+    n = k.shape[0]
+    if not n:
+        return patch_spread(np.zeros((0, 3)), np.zeros((0, 3)), blocks, count)
+    # R, its code, G, its code, B, its code: whole rows of the table at a time
+    both = np.asarray(table, np.float64).take(k, axis=0).reshape(n, 6)
+    return _window_statistics(_Columns.of(both, linear=(0, 2, 4), codes=(1, 3, 5)), n, both,
+                              blocks, count)
+
+
+def _window_statistics(cols: _Columns | None, n: int, codes: F64 | None,
+                       blocks: NDArray[np.int64] | None, count: int | None) -> PatchSpread:
+    """:func:`patch_spread` from the :class:`_Columns` of ``n`` pixels (their codes' too
+    when ``cols.codes``; None for no pixels); ``codes`` the code values when given (read
+    only where ``cols`` has none of them)."""
     total = n if count is None else int(count)
     sampled = n if total != n else None
-    cov = (np.atleast_2d(np.cov(x, rowvar=False, ddof=1)) if n >= 2 else np.zeros((3, 3)))
-    flat = flat_channels(x)
-    mc = (block_mean_covariance(x, blocks) if blocks is not None and len(blocks) == n
+    linear = list(cols.linear) if cols is not None else []
+    cov = cols.covariance() if cols is not None and n >= 2 else np.zeros((3, 3))
+    flat = (_flat(cols.top[linear], cols.bottom[linear]) if cols is not None
+            else np.ones(3, bool))
+    mc = (block_mean_covariance(np.zeros((0, 3)), blocks, columns=cols)
+          if blocks is not None and len(blocks) == n and cols is not None
           else None)  # None: not estimated (no blocks given, or too few touched)
     # the design effect from the same block means (block_design_effect's value: the
     # covariance's diagonal is the clustered variance, raised to at least var / n)
@@ -443,12 +552,16 @@ def patch_spread(linear: F64, codes: F64 | None = None,
     if codes is None:
         return PatchSpread(total, cov, flat, design=design, sampled=sampled,
                            clustered=clustered)
-    c = np.asarray(codes, np.float64).reshape(-1, 3)
-    if not len(c):
+    if not len(codes):
         return PatchSpread(total, cov, flat, np.zeros(3), np.zeros(3), design, sampled,
                            clustered)
-    return PatchSpread(total, cov, flat, c.mean(axis=0), c.std(axis=0), design, sampled,
-                       clustered)
+    if cols is not None and cols.codes is not None:
+        code_mean = cols.mean[list(cols.codes)]
+        code_std = np.sqrt(cols.variance()[list(cols.codes)])
+    else:
+        c = np.asarray(codes, np.float64).reshape(-1, 3)
+        code_mean, code_std = c.mean(axis=0), c.std(axis=0)
+    return PatchSpread(total, cov, flat, code_mean, code_std, design, sampled, clustered)
 
 
 def patch_covariances(samples: Sequence[F64], *, trim: float = 0.0,
@@ -750,9 +863,11 @@ __all__ = [
     "mean_covariance",
     "noise_component",
     "patch_covariances",
+    "block_lattice",
     "block_mean_covariance",
     "block_sample",
     "flat_channels",
+    "coded_patch_spread",
     "patch_spread",
     "placement_component",
     "rounding_component",

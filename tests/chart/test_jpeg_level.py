@@ -100,3 +100,20 @@ def test_the_manual_states_the_thresholds():
     assert f"of more than {NOISE_SAMPLE_PIXELS} pixels gives its noise" in text
     for factor in view.JPEG_LEVEL_FACTORS:
         assert f"REDUCED_COLOR_{factor}" in text
+
+
+def test_an_srgb_view_is_the_decoded_scaled_encoded_region_bit_for_bit():
+    """An sRGB view (issue 59: its later steps applied to the decoding table and looked up
+    once) holds, value for value, the region's decoded codes scaled by the peak and clipped,
+    and their 8-bit encoding in B, G, R order."""
+    rng = np.random.default_rng(7)
+    img = rng.integers(0, 256, (600, 800, 3)).astype(np.uint8)
+    for region, side in (((0, 0, 800, 600), 300), ((40, 30, 500, 420), 1000)):
+        got, peak = view.make_view(img, region, side, "srgb")
+        codes, _ = view._prepare(view.Pyramid(img), region, side, "srgb", steps=True)
+        linear = view._DECODE_LUT[codes] * np.float32(1.0 / peak)
+        np.clip(linear, 0.0, 1.0, out=linear)
+        steps = linear * np.float32(4095) + np.float32(0.5)
+        bgr8 = np.ascontiguousarray(view._ENCODE_LUT[steps.astype(np.uint16)][..., ::-1])
+        assert got.linear.dtype == np.float32 and got.linear.tobytes() == linear.tobytes()
+        assert got.bgr8.shape == bgr8.shape and got.bgr8.tobytes() == bgr8.tobytes()

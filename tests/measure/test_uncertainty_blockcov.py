@@ -78,3 +78,69 @@ def test_equal_codes_decoded_with_round_off_are_flat_with_no_design_effect():
     noisy = base + rng.normal(0.0, 1e-9, (blocks.size, 3))
     assert not unc.flat_channels(noisy).any()
     assert unc.flat_channels(np.zeros((0, 3))).all()
+
+
+def _bits(a: object) -> bytes:
+    return np.ascontiguousarray(np.asarray(a)).tobytes()
+
+
+def test_patch_spread_statistics_are_numpys_bit_for_bit():
+    """patch_spread computes its statistics in one pass over the pixels beside their codes
+    (issue 59: the audit's 24 windows): each is bit for bit what numpy's own cov, mean, var,
+    std, ptp and max give, so that an audit's JSON does not move in its last digits."""
+    rng = np.random.default_rng(11)
+    for n in (1, 2, 3, 7, 100, 4097, 32768):
+        codes8 = rng.integers(0, 256, (n, 3)).astype(np.uint8)
+        codes = (codes8.astype(np.float32) * np.float32(1 / 255)).astype(np.float64)
+        for lin in ((codes8 / 255.0) ** 2.2, rng.normal(0.0, 1.0, (n, 3)),
+                    np.full((n, 3), 0.2) + rng.normal(0.0, 1e-17, (n, 3))):
+            rows = np.sort(rng.integers(0, 3000, n))
+            blocks = unc.image_blocks(rows, rng.integers(0, 300, n), 4000)
+            sp = unc.patch_spread(lin, codes, blocks)
+            if n >= 2:
+                assert _bits(sp.covariance) == _bits(np.cov(lin, rowvar=False, ddof=1))
+            flat = np.ptp(lin, axis=0) <= (unc.ROUNDOFF_ULPS * np.finfo(np.float64).eps
+                                           * np.max(np.abs(lin), axis=0))
+            assert _bits(sp.flat) == _bits(flat)
+            assert _bits(sp.code_mean) == _bits(codes.mean(axis=0))
+            assert _bits(sp.code_std) == _bits(codes.std(axis=0))
+            assert _bits(unc.flat_channels(lin)) == _bits(flat)
+            cols = unc._Columns.of(lin)
+            assert _bits(cols.mean) == _bits(lin.mean(axis=0))
+            if n >= 2:
+                assert _bits(cols.variance(ddof=1)) == _bits(lin.var(axis=0, ddof=1))
+
+
+def test_a_coded_window_spread_is_the_general_one_bit_for_bit():
+    """An integer window's spread (issue 59: its lattice sample picked whole pixels at a time
+    and gathered beside its code values, pixels._coded_window_spread) is, bit for bit, the
+    spread of the same sample picked, linearised and located the general way."""
+    from fidelity.chart.image import as_float32
+    from fidelity.chart.locate import locate_chart
+    from fidelity.measure import pixels
+
+    rng = np.random.default_rng(4)
+    for dtype, encoding in ((np.uint8, "srgb"), (np.uint16, "linear")):
+        top = np.iinfo(dtype).max
+        img = rng.integers(0, top + 1, (1500, 2000, 3)).astype(dtype)
+        corners = np.array([[300.0, 280.0], [1700.0, 310.0], [1680.0, 1220.0], [320.0, 1190.0]])
+        loc = locate_chart(corners, img.shape, rows=4, cols=6, window=0.9,
+                           patch_names=[str(k) for k in range(24)])
+        assert any(unc.block_sample(w.y0, w.x0, w.mask) is not None for w in loc.windows[:6])
+        for win in loc.windows[:6]:
+            vals = win.values(img)
+            got = pixels._window_spread(vals, None, encoding, "keep", np.eye(3), True,
+                                        1.0 / top, win, img.shape[1])
+            keep = unc.block_sample(win.y0, win.x0, win.mask)
+            sub = vals if keep is None else vals[keep]
+            lin = pixels._code_linear(np.dtype(dtype).str, encoding)[sub]
+            codes = as_float32(sub).astype(np.float64)
+            rows, cols = win.indices()
+            if keep is not None:
+                rows, cols = rows[keep], cols[keep]
+            want = unc.patch_spread(lin, codes, unc.image_blocks(rows, cols, img.shape[1]),
+                                    count=len(vals))
+            for field in ("covariance", "flat", "code_mean", "code_std", "design",
+                          "clustered"):
+                assert _bits(getattr(got, field)) == _bits(getattr(want, field)), field
+            assert (got.count, got.sampled) == (want.count, want.sampled)

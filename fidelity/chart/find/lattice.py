@@ -64,6 +64,8 @@ def patch_lattices(quads: Quads, min_patches: int = 4) -> list[Lattice]:
     if n < min_patches:
         return []
     axes = [_axes(q) for q in quads.corners]
+    # each outline's edge lengths, once (the pairs below read them many times)
+    lengths = [(np.linalg.norm(a), np.linalg.norm(b)) for a, b in axes]
     sides = np.sqrt(quads.areas)
     near_to = PointIndex(quads.centres)
     # neighbour steps in each outline's own frame: (j, step along a, step along b)
@@ -86,8 +88,8 @@ def patch_lattices(quads: Quads, min_patches: int = 4) -> list[Lattice]:
                 continue
             aj, bj = axes[j]
             # edges nearly parallel: one of j's edges along each of i's
-            cos_a = abs(a @ aj) / (np.linalg.norm(a) * np.linalg.norm(aj) + 1e-12)
-            cos_b = abs(a @ bj) / (np.linalg.norm(a) * np.linalg.norm(bj) + 1e-12)
+            cos_a = abs(a @ aj) / (lengths[i][0] * lengths[j][0] + 1e-12)
+            cos_b = abs(a @ bj) / (lengths[i][0] * lengths[j][1] + 1e-12)
             if max(cos_a, cos_b) < 0.85:
                 continue
             steps[i].append((j, *step))
@@ -112,8 +114,8 @@ def patch_lattices(quads: Quads, min_patches: int = 4) -> list[Lattice]:
                 q = np.zeros((2, 2))
                 for col, e in enumerate((a_j, b_j)):
                     ca, cb = e @ a_i, e @ b_i
-                    na = ca / (np.linalg.norm(a_i) ** 2)
-                    nb = cb / (np.linalg.norm(b_i) ** 2)
+                    na = ca / (lengths[i][0] ** 2)
+                    nb = cb / (lengths[i][1] ** 2)
                     if abs(na) >= abs(nb):
                         q[0, col] = np.sign(na)
                     else:

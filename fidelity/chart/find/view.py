@@ -144,12 +144,15 @@ def jpeg_level(path: str | os.PathLike[str], pixels: np.ndarray, factor: int
     h, w = arr.shape[0] // factor, arr.shape[1] // factor
     if reduced is None or reduced.shape[0] < h or reduced.shape[1] < w or reduced.ndim != 3:
         return None
-    reduced = np.ascontiguousarray(reduced[:h, :w])
+    if reduced.shape[:2] != (h, w):
+        reduced = np.ascontiguousarray(reduced[:h, :w])
     # the channel means of every pixel of both (OpenCV's, a pass over the codes as stored)
     full = _channel_means(arr) / 255.0
     if np.max(np.abs(_channel_means(reduced)[::-1] / 255.0 - full)) > JPEG_LEVEL_TOLERANCE:
         return None
-    return as_float32(np.ascontiguousarray(reduced[:, :, ::-1]))
+    # B, G, R -> R, G, B by OpenCV (numpy's copy of a reversed channel axis is several times
+    # slower), then the codes' float32 values
+    return as_float32(cv2.cvtColor(reduced, cv2.COLOR_BGR2RGB))
 
 
 def _channel_means(codes: np.ndarray) -> F64:
@@ -199,10 +202,11 @@ def level_factor(height: int, width: int, scale: float) -> int:
     return factor
 
 
-def _prepare(pyramid: Pyramid, region: tuple[int, int, int, int], max_side: int, encoding: str
-             ) -> tuple[np.ndarray, F64]:
+def _prepare(pyramid: Pyramid, region: tuple[int, int, int, int], max_side: int, encoding: str,
+             steps: bool = False) -> tuple[np.ndarray, F64]:
     """The region shrunk (area average) to ``max_side``, finite, non-negative, linear; with the
-    3 x 3 map of its pixel coordinates to the image's."""
+    3 x 3 map of its pixel coordinates to the image's. ``steps`` (sRGB only): the region's
+    indices into :data:`_DECODE_LUT` (``uint16``) instead of their linear values."""
     cv2 = opencv()
     x0, y0, x1, y1 = region
     s = min(1.0, max_side / max(x1 - x0, y1 - y0))
@@ -224,7 +228,7 @@ def _prepare(pyramid: Pyramid, region: tuple[int, int, int, int], max_side: int,
     if not finite:
         arr = np.nan_to_num(arr, nan=0.0, posinf=0.0, neginf=0.0)
     if encoding == "srgb":  # codes in [0, 1] -> the nearest of 65536 steps -> linear
-        arr = _DECODE_LUT[_codes(arr, 65535)]
+        arr = _codes(arr, 65535) if steps else _DECODE_LUT[_codes(arr, 65535)]
     else:
         np.maximum(arr, 0.0, out=arr)
     # view -> level crop (OpenCV's pixel-centre convention) -> level -> image
@@ -243,24 +247,34 @@ def make_view(pixels: np.ndarray | Pyramid, region: tuple[int, int, int, int], m
     channel) and clipped to [0, 1]. Returns the view and the peak used.
     """
     pyramid = pixels if isinstance(pixels, Pyramid) else Pyramid(pixels)
-    arr, to_image = _prepare(pyramid, region, max_side, encoding)
+    srgb = encoding == "srgb"
+    # sRGB: the view's indices into the decoding table; every later step is a function of the
+    # index alone, so it is applied to the table's 65536 entries, then looked up once for the
+    # linear view and once for the 8-bit one (the same values, element for element)
+    arr, to_image = _prepare(pyramid, region, max_side, encoding, steps=srgb)
     if peak is None:
         step = max(1, int(math.sqrt(arr.shape[0] * arr.shape[1] / 250_000)))
-        sample = arr[::step, ::step]
+        sample = _DECODE_LUT[arr[::step, ::step]] if srgb else arr[::step, ::step]
         brightest = np.maximum(np.maximum(sample[..., 0], sample[..., 1]), sample[..., 2])
         peak = float(np.percentile(brightest, 99.0))
     if not peak > 0.0:
         raise InvalidValueError("no colour chart found: the image is black")
+    values = _DECODE_LUT if srgb else arr
     with np.errstate(over="ignore"):
         scale = np.float32(1.0 / peak)
     if np.isfinite(scale):
-        linear = np.multiply(arr, scale)
+        linear = np.multiply(values, scale)
         np.clip(linear, 0.0, 1.0, out=linear)
     else:  # a denormal peak (values ~1e-40): 1/peak overflows single precision
-        linear = np.clip(arr.astype(np.float64) / peak, 0.0, 1.0).astype(np.float32)
+        linear = np.clip(values.astype(np.float64) / peak, 0.0, 1.0).astype(np.float32)
     steps = np.multiply(linear, np.float32(4095))  # linear in [0, 1] -> 4096 steps, rounded
     steps += np.float32(0.5)
-    bgr8 = np.ascontiguousarray(_ENCODE_LUT[steps.astype(np.uint16)][..., ::-1])
+    rgb8 = _ENCODE_LUT[steps.astype(np.uint16)]
+    if srgb:
+        linear, rgb8 = linear[arr], rgb8[arr]
+    # R, G, B -> B, G, R by OpenCV (numpy's copy of a reversed channel axis is several times
+    # slower; the same bytes)
+    bgr8 = opencv().cvtColor(rgb8, opencv().COLOR_RGB2BGR)
     return View(linear=linear, bgr8=bgr8, to_image=to_image), peak
 
 
