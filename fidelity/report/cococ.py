@@ -40,7 +40,7 @@ if TYPE_CHECKING:
     from fidelity.coco.corruptions import CocoCResults, CorruptionCell, SpatialCell
 
 #: Title of the report.
-TITLE = "COCO-C colour corruptions on the chart ΔE scale"
+TITLE = "COCO-C corruptions on the chart ΔE, MTF50 and SNR scales"
 #: Figure file names.
 DELTA_E_FIGURE = "cococ-chart-delta-e.svg"
 LOSS_FIGURE = "cococ-loss-vs-delta-e.svg"
@@ -110,10 +110,10 @@ def _headline(results: CocoCResults, figure: Figure | None) -> Headline:
 
 
 def axis_text(cell: SpatialCell, digits: int | None = None) -> str:
-    """``MTF50 0.0755 ± 0.0047`` / ``SNR 3.68 ± 0.01``: the cell's chart value (4 significant
-    digits' worth for MTF50, 2 decimals for SNR, unless ``digits``)."""
+    """``MTF50 0.0755 ± 0.0047`` / ``SNR 3.743 ± 0.019``: the cell's chart value (4 decimals
+    for MTF50 in cy/px, 3 for SNR, unless ``digits``)."""
     name = AXIS_LABELS[cell.property][0]
-    d = digits if digits is not None else (4 if cell.property == "sharpness" else 2)
+    d = digits if digits is not None else (4 if cell.property == "sharpness" else 3)
     if cell.axis.x is None:
         return f"{name} not measured"
     u = "" if cell.axis.u is None else f" ± {cell.axis.u:.{d}f}"
@@ -162,9 +162,11 @@ def _bound_word(cell: SpatialCell, model: str) -> str:
 
 
 def spatial_table(results: CocoCResults) -> Table:
-    """The noise and blur table of the report (:data:`SPATIAL_SECTION`)."""
+    """The noise and blur table of the report (:data:`SPATIAL_SECTION`), one row per cell
+    named ``corruption:severity`` (what ``fidelity predict --coco-c`` takes)."""
     models = results.spatial_models()
-    header = ["corruption", "severity", "parameter", "chart value", "predicted ΔmAP"]
+    header = ["corruption:severity", "parameter", "chart value (MTF50 cy/px, SNR)",
+              "predicted ΔmAP"]
     header += [f"measured ΔmAP, {m}" for m in models] + [f"bounded, {m}" for m in models]
     rows = []
     for c in results.spatial:
@@ -174,15 +176,28 @@ def spatial_table(results: CocoCResults) -> Table:
         else:
             pm = "" if p.u_loss is None else f" ± {p.u_loss:.2f}"
             pred = f"{p.loss:.2f}{pm}" + (" (beyond the table)" if p.status == "beyond" else "")
-        row = [c.corruption, str(c.severity), str(c.parameter), axis_text(c), pred]
+        row = [f"{c.corruption}:{c.severity}", str(c.parameter), axis_text(c), pred]
         for m in models:
             x = c.measured_for(m)
             row.append("–" if x is None else f"{x.dmap_points:.2f} ± "
                                              f"{number(x.dmap_points_se)} ({x.images})")
         row += [_bound_word(c, m) for m in models]
         rows.append(row)
-    return table(header, rows, numeric=[False, True, False, False, True]
+    return table(header, rows, numeric=[False, False, False, True]
                  + [True] * len(models) + [False] * len(models))
+
+
+def _meta_lines(meta: Mapping[str, Any]) -> str:
+    """The provenance as a Markdown list, the noise and blur run's (``spatial_run``) as a
+    nested list."""
+    lines = []
+    for k, v in sorted(meta.items()):
+        if k == "spatial_run" and isinstance(v, Mapping):
+            lines.append(f"- {k}:")
+            lines += [f"  - {kk}: {vv}" for kk, vv in sorted(v.items())]
+        else:
+            lines.append(f"- {k}: {v}")
+    return "\n".join(lines)
 
 
 def _spatial_method(results: CocoCResults) -> str:
@@ -287,8 +302,7 @@ def cococ_document(results: CocoCResults, notes: str | None = None) -> Document:
             "- Loss: every COCO image corrupted, then the JPEG round trip of the sweep "
             "(original quantisation tables and subsampling), the detector run; the baseline "
             "is the round trip alone (`fidelity.coco.measure`).")),
-        section("What was run", Text("\n".join(f"- {k}: {v}" for k, v in
-                                               sorted(results.meta.items())))),
+        section("What was run", Text(_meta_lines(results.meta))),
     ]
     return Document(TITLE, _headline(results, figs.get(DELTA_E_FIGURE)),
                     tuple(s for s in sections if s is not None),

@@ -128,7 +128,7 @@ def test_gaussian_blur_mtf50_agrees_with_the_closed_form(axis_values):
     Gaussian edge blurred on the encoded values: the chart's sharpest edge pair is its white
     patch against the frame (linear 0.03; the measurement picks the largest contrast), decoded
     to linear light before the e-SFR. The decoding sharpens the edge's luminance (at sigma 1
-    the linear-light Gaussian alone gives 0.180 cy/px, the measured is 13 % above); the
+    the linear-light Gaussian alone gives 0.180 cy/px, more than 10 % below the measured); the
     encoded closed form agrees within 3 % at sigma 1 and 6 % at sigma 2. At sigma >= 3 px the
     measurement reads above it (its region of interest across the edge is at most a fraction of
     the patch gap: the edge spread no longer fits), as for the tables' own gaussian-blur
@@ -141,6 +141,8 @@ def test_gaussian_blur_mtf50_agrees_with_the_closed_form(axis_values):
     # the linear closed form at sigma 1: exp(-2 pi^2 f^2) sinc(f) = 0.5 at f = 0.180
     assert _encoded_gaussian_edge_mtf50(1.0, frame + 1e-3, frame) == pytest.approx(0.180,
                                                                                 abs=1e-3)
+    # the linear-light Gaussian alone is more than 10 % low at sigma 1 (the decoding)
+    assert axis_values[("gaussian_blur", 1)].x > 1.10 * 0.180
     for sev, sigma, rel in ((1, 1.0, 0.03), (2, 2.0, 0.06)):
         want = _encoded_gaussian_edge_mtf50(sigma, white, frame)
         got = axis_values[("gaussian_blur", sev)].x
@@ -240,7 +242,7 @@ def test_the_report_has_the_noise_and_blur_table(tmp_path):
     assert SPATIAL_SECTION in md
     p = cell.prediction
     assert p is not None
-    row = [line for line in md.split("\n") if line.startswith("| gaussian_blur | 3 |")]
+    row = [line for line in md.split("\n") if line.startswith("| gaussian_blur:3 |")]
     assert len(row) == 1 and "MTF50 0.0800 ± 0.0040" in row[0]
     assert f"{p.loss:.2f} ± {p.u_loss:.2f}" in row[0]
     written = write_cococ_report(res, tmp_path)
