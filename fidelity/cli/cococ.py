@@ -98,9 +98,10 @@ def cococ(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
         raise click.UsageError("--update adds measured cells: not with --report-only")
     src = out_dir / "cococ.json"
     if report_only:
-        results = with_predictions(_read_results(src))
+        results = with_predictions(_read_results(src, "no results to rebuild the report from"))
     else:
-        base = with_predictions(_read_results(src)) if update else None
+        base = (with_predictions(_read_results(src, "no results to update (run without "
+                                                    "--update first)")) if update else None)
         inputs = coco_inputs(images, annotations, models, what="fidelity coco-c")
         results = run_coco_c(inputs, corruptions, severities, limit=limit, store=store,
                              threads=threads, provider=provider,
@@ -111,11 +112,12 @@ def cococ(models: tuple[ModelSpec, ...] | None, images: str | None, annotations:
         click.echo(f"wrote {p}")
 
 
-def _read_results(src: Path) -> CocoCResults:
-    """The results of an earlier run (``OUT/cococ.json``)."""
+def _read_results(src: Path, missing: str) -> CocoCResults:
+    """The results of an earlier run (``OUT/cococ.json``); ``missing``: the error's words
+    when there is none."""
     try:
         return CocoCResults.from_json(json.loads(src.read_text(encoding="utf-8")))
     except FileNotFoundError:
-        raise InputFileError(f"{src}: no results to rebuild the report from") from None
+        raise InputFileError(f"{src}: {missing}") from None
     except (ValueError, KeyError, TypeError) as exc:
         raise InputFileError(f"{src}: not a COCO-C results file ({exc})") from None

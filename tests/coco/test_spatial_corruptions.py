@@ -186,6 +186,38 @@ def test_gaussian_noise_snr_agrees_with_the_closed_form(axis_values):
         assert v.x == pytest.approx(want, rel=0.02), (sev, v.x, want)
 
 
+def _shot_noise_snr(codes: np.ndarray, c: float) -> float:
+    """The closed-form luminance SNR of a flat patch of 8-bit ``codes`` under
+    imagecorruptions' shot_noise of ``c``: n ~ Poisson(c codes/255), code floor(255 clip(n /
+    c, 0, 1)), decoded; channels independent."""
+    from scipy.stats import poisson
+
+    means, variances = [], []
+    for code in codes:
+        lam = code / 255.0 * c
+        n = np.arange(0, int(lam + 20 * np.sqrt(lam) + 50))
+        p = poisson.pmf(n, lam)
+        g = np.asarray(cm.linearize_srgb(np.floor(np.clip(n / float(c), 0, 1) * 255) / 255.0))
+        m = float((p * g).sum())
+        means.append(m)
+        variances.append(float((p * g * g).sum()) - m * m)
+    return float(WEIGHTS @ np.array(means)) / float(np.sqrt((WEIGHTS ** 2) @ np.array(variances)))
+
+
+def test_shot_noise_snr_agrees_with_the_closed_form(axis_values):
+    """As for gaussian_noise, with the Poisson distribution: within 2 % at every severity."""
+    from fidelity.coco.degradations import encode_srgb8
+    from fidelity.colour.charts import load_reference
+
+    ref = load_reference("safecolor")
+    grey = np.asarray(cm.linearize_srgb(ref.srgb))[list(ref.patch_names).index("neutral 5")]
+    codes = encode_srgb8(grey[None, :])[0].astype(float)
+    for sev, c in zip(sp.SEVERITIES, sp.PARAMETERS["shot_noise"], strict=True):
+        want = _shot_noise_snr(codes, float(c))
+        v = axis_values[("shot_noise", sev)]
+        assert v.x == pytest.approx(want, rel=0.02), (sev, v.x, want)
+
+
 # --------------------------------------------------------------------------------------------
 # The results table and the CLI
 # --------------------------------------------------------------------------------------------
@@ -298,8 +330,28 @@ def test_shipped_noise_and_blur_cells_are_what_the_code_computes(ic):
     shipped = cc.load_coco_c()
     report = _results()
     assert shipped.to_json() == report.without_locations().to_json()
+    assert len(shipped.spatial) == len(sp.SPATIAL_CORRUPTIONS) * len(sp.SEVERITIES)
     for c in shipped.spatial:
         now = sp.chart_axis_value(c.corruption, c.severity)
         assert c.axis.x == pytest.approx(now.x, rel=1e-9)
         assert c.prediction == cc.predict_spatial(c.axis)
         assert c.measured, (c.corruption, c.severity)
+
+
+def test_shipped_noise_and_blur_measurements_state_this_versions_detectors():
+    """Every shipped noise or blur loss was measured with this version's detector
+    preprocessing, its SE rule and the seeded corruption's store key."""
+    from fidelity.coco.bootstrap import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
+    from fidelity.coco.detectors import PREPROCESSING
+
+    res = cc.load_coco_c()
+    current = {p.describe() for p in PREPROCESSING.values()}
+    assert len(res.spatial) == len(sp.SPATIAL_CORRUPTIONS) * len(sp.SEVERITIES)
+    for c in res.spatial:
+        assert c.measured, (c.corruption, c.severity)
+        for m in c.measured:
+            assert m.mapping == sp.SpatialCorruption(c.corruption, c.severity).key
+            assert m.settings.get("preprocess") in current, (m.model, m.mapping)
+            assert m.settings.get("standard_error") == {
+                "method": "larger", "draws": BOOTSTRAP_RESAMPLES, "seed": BOOTSTRAP_SEED}
+            assert m.settings.get("threads") == 1
