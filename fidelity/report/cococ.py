@@ -19,8 +19,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from fidelity.coco.corruptions import PREDICTION_SIZE
 from fidelity.coco.spatial import AXIS_LABELS
 from fidelity.core.fileio import write_json_atomic
+from fidelity.prediction.properties import PROPERTY_TABLES
 from fidelity.report import cocofigures as cf
 from fidelity.report.document import (
     Document,
@@ -81,11 +83,12 @@ def cococ_figures(results: CocoCResults, preds: Mapping[tuple[str, int], Mapping
     for prop, name, axis in (("sharpness", MTF50_FIGURE, "MTF50"), ("noise", SNR_FIGURE, "SNR")):
         if any(c.measured for c in results.spatial if c.property == prop):
             out[name] = svg_figure(
-                cf.cococ_property_plot(results, prop), name,
+                cf.cococ_property_plot(results, prop, PREDICTION_SIZE), name,
                 f"measured loss against chart {axis}",
                 f"Measured ΔmAP (±2 SE) of each {'blur' if prop == 'sharpness' else 'noise'} "
                 f"corruption and severity at its chart {axis} (log axis), and the worst case "
-                "of the property table (detector size n) the predictions read.")
+                f"of the property table (detector size {PREDICTION_SIZE}) the predictions "
+                "read.")
     return out
 
 
@@ -142,9 +145,11 @@ def _spatial_headline(results: CocoCResults) -> list[str]:
                          + ", ".join(f"{g.dmap_points:.1f}" for g in got if g is not None))
         lines.append(text + ".")
     s = results.spatial_bounds()
+    tables = ", ".join(f"`{t}`" for t in dict.fromkeys(
+        c.prediction.table for c in results.spatial if c.prediction is not None))
     if s.cells:
         lines.append(
-            f"- Property-table bound (`coco1000-sharpness`, `coco1000-noise`): the measured "
+            f"- Property-table bound ({tables}): the measured "
             f"loss within it in **{s.classic_within} of {s.cells}** (detector, corruption, "
             f"severity) cells ({s.classic_within_2se} within 2 SE); median over-prediction "
             f"{number(s.classic_median_ratio, 1)}×.")
@@ -219,7 +224,8 @@ def _spatial_text(results: CocoCResults) -> str:
         "softer patch edge's luminance e-SFR; ± its measurement's uncertainty) for the blurs, "
         "the 18 % grey patch's luminance SNR in linear light for the noises (the mean over "
         f"{draws} seeded draws, ± its standard error). Predicted: the worst case of "
-        "`coco1000-sharpness` or `coco1000-noise` at that value for detector size n, the "
+        f"`{PROPERTY_TABLES['sharpness']}` or `{PROPERTY_TABLES['noise']}` at that value for "
+        f"detector size {PREDICTION_SIZE}, the "
         "value's uncertainty propagated (what `fidelity predict --mtf50 X` / `--snr Y` "
         "prints; 'beyond the table': worse than every measured level, the table's ceiling). "
         "Measured: ΔmAP in percentage points ± one SE (the larger of the paired image "
