@@ -237,7 +237,9 @@ def _spatial_cell(name: str = "gaussian_blur", sev: int = 3, loss: float = 5.0) 
 
 
 def test_spatial_cells_round_trip_and_merge_keeps_the_colour_rows():
-    base = _results()
+    shipped = _results()
+    base = replace(shipped, spatial=(), meta={k: v for k, v in shipped.meta.items()
+                                              if k != "spatial_run"})
     new = cc.CocoCResults((), base.chart, base.floor_delta_e,
                           {"spatial_run": {"models": ["x.onnx"], "images": "/a/val2017"}},
                           (_spatial_cell(),))
@@ -251,6 +253,11 @@ def test_spatial_cells_round_trip_and_merge_keeps_the_colour_rows():
     assert merged.without_locations().meta["spatial_run"]["images"] == "val2017"
     # without spatial cells the JSON has no spatial key (the colour table as it was)
     assert "spatial_cells" not in base.to_json()
+    # merged into the shipped table, one cell replaces its own and keeps the others
+    both = cc.merge_results(shipped, new)
+    assert len(both.spatial) == len(shipped.spatial)
+    assert both.spatial_cell("gaussian_blur", 3) == new.spatial[0]
+    assert both.spatial_cell("gaussian_blur", 2) == shipped.spatial_cell("gaussian_blur", 2)
 
 
 def test_the_prediction_is_the_property_tables_and_bounds_are_counted():
