@@ -316,6 +316,12 @@ def _skip_reason(argv: list[str], ws: Path) -> str | None:
             import mitsuba  # noqa: F401
         except ImportError:
             return "Mitsuba is not installed"
+    if any(a.split(":")[0] in ("gaussian_noise", "shot_noise", "defocus_blur", "gaussian_blur")
+           for a in argv):
+        try:
+            import imagecorruptions  # noqa: F401
+        except ImportError:
+            return "imagecorruptions is not installed (the noise and blur corruptions)"
     for i, a in enumerate(argv[2:], start=2):
         if a.startswith("-") or argv[i - 1] in OUTPUTS:
             continue

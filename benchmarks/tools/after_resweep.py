@@ -197,9 +197,9 @@ COCOC_ROW = re.compile(r"\| [a-z]+ \| \d \|")
 
 def quoting_pages(root: Path = REPO) -> list[Path]:
     """The pages whose quoted tables (:func:`quoted_blocks`) are the reports' own lines:
-    README.md, docs/*.md and the COCO report's hand-written guide."""
+    README.md, docs/*.md and the COCO and COCO-C reports' hand-written guides."""
     return [root / "README.md", *sorted((root / "docs").glob("*.md")),
-            root / "reports" / "coco" / "README.md"]
+            root / "reports" / "coco" / "README.md", root / "reports" / "cococ" / "README.md"]
 
 
 def requote(root: Path = REPO) -> list[str]:

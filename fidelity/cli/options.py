@@ -238,16 +238,16 @@ class DegradationNames(NameList):
 
 
 class CorruptionNames(NameList):
-    """``--corruptions``: COCO-C colour corruptions
-    (:data:`fidelity.coco.corruptions.CORRUPTIONS`)."""
+    """``--corruptions``: COCO-C corruptions, colour and noise or blur
+    (:data:`fidelity.coco.corruptions.ALL_CORRUPTIONS`)."""
 
     name = "corruptions"
     what = "corruption"
 
     def known(self) -> Sequence[str]:
-        from fidelity.coco.corruptions import CORRUPTIONS  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
+        from fidelity.coco.corruptions import ALL_CORRUPTIONS  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
 
-        return CORRUPTIONS
+        return ALL_CORRUPTIONS
 
 
 class Severities(ParamTypeBase):

@@ -67,8 +67,10 @@ if TYPE_CHECKING:
               help="With --delta-e: the direction-aware loss of an error entirely of this "
                    "transform family (default: every family's is listed).")
 @click.option("--coco-c", "coco_c", default=None, metavar="CORRUPTION:SEVERITY",
-              help="Instead of --delta-e: a COCO-C colour corruption (brightness, contrast, "
-                   "saturate; severity 1-5): its chart ΔE, predicted and measured loss.")
+              help="Instead of --delta-e: a COCO-C corruption, severity 1-5: a colour one "
+                   "(brightness, contrast, saturate) with its chart ΔE, a noise or blur one "
+                   "(gaussian_noise, shot_noise, defocus_blur, gaussian_blur) with its chart "
+                   "SNR or MTF50; its predicted and measured loss.")
 @click.option("--mtf50", type=float, default=None, metavar="X",
               help="Instead of (or with) --delta-e: the chart's MTF50 in cy/px at the "
                    "detector's 640 px input: its predicted loss from the sharpness table.")
@@ -96,6 +98,7 @@ def predict_cmd(delta_e: float | None, delta_e_uncertainty: float, cls: str, siz
     fidelity predict --delta-e 4.2 --class person --json predict.json
     fidelity predict --max-dmap 1 --unit relative      # ΔE limit for <= 1 % of baseline mAP
     fidelity predict --coco-c contrast:3               # a COCO-C corruption on the ΔE scale
+    fidelity predict --coco-c gaussian_blur:3          # ... or on the MTF50 / SNR scale
     fidelity predict --mtf50 0.15 --snr 12 --delta-e 2 # sharpness, noise, colour and the sum
     """
     if list_tables:
@@ -239,8 +242,18 @@ def _print_families(delta_e: float, size: str, table: str | None,
 
 
 def _print_coco_c(spec: str, size: str, table: str | None, json_path: str | None) -> None:
-    from fidelity.coco.corruptions import coco_c_answer  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
+    from fidelity.coco.corruptions import (  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
+        coco_c_answer,
+        parse_corruption,
+    )
+    from fidelity.coco.spatial import SPATIAL_CORRUPTIONS  # noqa: PLC0415 (as above)
 
+    if parse_corruption(spec)[0] in SPATIAL_CORRUPTIONS:
+        if table is not None:
+            raise click.UsageError("--table names a colour table: not with a noise or blur "
+                                   "corruption (its prediction is the property table's)")
+        _print_spatial(spec, size, json_path)
+        return
     a = coco_c_answer(spec, size=size, table=table)
     p, d = a.prediction, a.directional
 
@@ -264,6 +277,52 @@ def _print_coco_c(spec: str, size: str, table: str | None, json_path: str | None
                    "images; COCO-C table)")
     if json_path is not None:
         click.echo(f"wrote {write_json_output(json_path, coco_c_answer_json(a))}")
+
+
+def _print_spatial(spec: str, size: str, json_path: str | None) -> None:
+    """``--coco-c`` of a noise or blur corruption: its chart SNR or MTF50, the property
+    table's predicted and the measured loss."""
+    from fidelity.coco.corruptions import spatial_answer  # noqa: PLC0415 (the COCO benchmark, loaded at the call)
+    from fidelity.coco.spatial import AXIS_LABELS  # noqa: PLC0415 (as above)
+
+    a = spatial_answer(spec, size=size)
+    name, unit = AXIS_LABELS[a.property]
+    ax = a.axis
+    d = 4 if a.property == "sharpness" else 2
+    if ax.x is None:
+        value = f"chart {name}: not measured"
+    else:
+        u = "" if ax.u is None else f" ± {ax.u:.{d}f}"
+        how = ("the softer edge's luminance MTF50" if a.property == "sharpness" else
+               f"18 % grey, mean of {len(ax.draws)} seeded draws, one draw's spread "
+               f"{ax.spread:.{d}f}" if ax.spread is not None else "18 % grey")
+        value = f"chart {name} {ax.x:.{d}f}{u} {unit} ({how})"
+    click.echo(f"COCO-C {a.corruption} severity {a.severity} (parameter {a.parameter}): "
+               f"{value}")
+    p = a.prediction
+    if p is not None:
+        pm = "" if p.u_loss is None else f" ± {p.u_loss:.2f}"
+        note = {"baseline": "; as good as the undegraded chart",
+                "beyond": "; beyond the table: its ceiling (conservative)"}.get(p.status, "")
+        worst = f", worst case {p.family} on {p.detector}" if p.family else ""
+        click.echo(f"  predicted ΔmAP: {p.loss:.2f}{pm} points (table {p.table}, detector "
+                   f"size {size}{worst}{note})")
+    if not a.measured:
+        click.echo(f"  measured: not in the COCO-C table {a.table_path}")
+    for m in a.measured:
+        se = "" if m.dmap_points_se is None else f" ± {m.dmap_points_se:.2f}"
+        rel = "undefined" if m.dmap_relative is None else f"{m.dmap_relative:.2f}"
+        bounded = ""
+        if p is not None:
+            lo = m.dmap_points - 2 * (m.dmap_points_se or 0.0)
+            bounded = ("; within the prediction" if m.dmap_points <= p.loss else
+                       "; within 2 SE of the prediction" if lo <= p.loss else
+                       "; above the prediction")
+        click.echo(f"  measured ΔmAP: {m.dmap_points:.2f}{se} points, {rel} % "
+                   f"of baseline mAP {100 * m.baseline_map:.2f} ({m.model}, {m.images} COCO "
+                   f"images; COCO-C table{bounded})")
+    if json_path is not None:
+        click.echo(f"wrote {write_json_output(json_path, a.to_json())}")
 
 
 def _print_limit(max_dmap: float, cls: str, unit: str, size: str, table: str | None,

@@ -52,6 +52,18 @@ from numpy.typing import NDArray
 from fidelity.coco.bounds import BoundCell, summarise_cells
 from fidelity.coco.dataset import all_triples, colour_codes, to_uint8
 from fidelity.coco.measure import MeasuredLoss, measure_mapping
+from fidelity.coco.spatial import (
+    AXIS_LABELS,
+    CHART_DRAWS,
+    PARAMETERS,
+    PROPERTY,
+    SPATIAL_CORRUPTIONS,
+    AxisValue,
+    SpatialCorruption,
+    chart_axis_value,
+    check_spatial,
+    split_names,
+)
 from fidelity.colour.charts import DEFAULT_CHART, load_chart
 from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
 from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
@@ -60,6 +72,11 @@ from fidelity.core.resources import resource_dir
 from fidelity.core.version import __version__
 from fidelity.measure.colour import measure_chart
 from fidelity.prediction.directional import error_parts, predict_chart
+from fidelity.prediction.properties import (
+    PropertyPrediction,
+    load_property_table,
+    predict_property,
+)
 from fidelity.prediction.table import predict
 from fidelity.prediction.tablefile import load_prediction_table
 
@@ -77,6 +94,10 @@ SATURATE: tuple[tuple[float, float], ...] = ((0.3, 0.0), (0.1, 0.0), (2.0, 0.0),
                                              (20.0, 0.2))
 #: The colour corruptions of COCO-C, in the package's order.
 CORRUPTIONS: tuple[str, ...] = ("brightness", "contrast", "saturate")
+#: Every corruption ``fidelity coco-c`` and ``predict --coco-c`` take: the colour ones on the
+#: chart ΔE scale, the noise and blur ones (:mod:`fidelity.coco.spatial`) on the SNR and MTF50
+#: scales.
+ALL_CORRUPTIONS: tuple[str, ...] = CORRUPTIONS + SPATIAL_CORRUPTIONS
 #: Severities of COCO-C.
 SEVERITIES: tuple[int, ...] = (1, 2, 3, 4, 5)
 #: Version of the package whose definitions :func:`corrupt` implements.
@@ -92,16 +113,27 @@ def _check(name: str, severity: int) -> None:
         raise InvalidValueError(f"{name}: severity {severity!r} must be an integer 1-5")
 
 
+def check_any(name: str, severity: int) -> None:
+    """An error unless ``name`` is one of :data:`ALL_CORRUPTIONS` and ``severity`` 1-5."""
+    if name in SPATIAL_CORRUPTIONS:
+        check_spatial(name, severity)
+    elif name in CORRUPTIONS:
+        _check(name, severity)
+    else:
+        raise unknown_name("COCO-C corruption", name, ALL_CORRUPTIONS)
+
+
 def parse_corruption(spec: str) -> tuple[str, int]:
-    """``"contrast:3"`` -> ``("contrast", 3)``; errors name the text."""
+    """``"contrast:3"`` -> ``("contrast", 3)`` (any of :data:`ALL_CORRUPTIONS`); errors name
+    the text."""
     name, _, sev = str(spec).partition(":")
     try:
         severity = int(sev)
     except ValueError:
         raise InvalidValueError(f"--coco-c {spec!r}: expected CORRUPTION:SEVERITY, e.g. "
-                                f"contrast:3 (corruptions: {', '.join(CORRUPTIONS)}; "
+                                f"contrast:3 (corruptions: {', '.join(ALL_CORRUPTIONS)}; "
                                 "severities 1-5)") from None
-    _check(name.strip(), severity)
+    check_any(name.strip(), severity)
     return name.strip(), severity
 
 
@@ -410,14 +442,96 @@ class CorruptionCell:
 
 
 @dataclass(frozen=True)
+class SpatialCell:
+    """One noise or blur (corruption, severity) (:mod:`fidelity.coco.spatial`): its value on
+    the property's axis (:class:`~fidelity.coco.spatial.AxisValue`: the chart's MTF50 or SNR
+    and its uncertainty), the worst-case loss the property table predicts there (detector
+    size :data:`PREDICTION_SIZE`, :class:`~fidelity.prediction.properties.PropertyPrediction`;
+    None until computed: :func:`with_predictions`) and the measured loss per detector."""
+
+    corruption: str
+    severity: int
+    parameter: Any
+    axis: AxisValue
+    measured: tuple[Any, ...] = ()
+    prediction: PropertyPrediction | None = None
+
+    @property
+    def property(self) -> str:
+        """``sharpness`` or ``noise``."""
+        return PROPERTY[self.corruption]
+
+    def to_json(self) -> dict[str, Any]:
+        """Field names as keys (``axis``, ``measured``, ``prediction``: their JSON)."""
+        return {"corruption": self.corruption, "severity": self.severity,
+                "parameter": self.parameter, "property": self.property,
+                "axis": self.axis.to_json(), "measured": [m.to_json() for m in self.measured],
+                "prediction": self.prediction.to_json() if self.prediction else None}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> SpatialCell:
+        """Inverse of :meth:`to_json`."""
+        param = d["parameter"]
+        return cls(str(d["corruption"]), int(d["severity"]),
+                   tuple(param) if isinstance(param, list) else param,
+                   AxisValue.from_json(d["axis"]),
+                   tuple(MeasuredLoss.from_json(m) for m in d.get("measured") or ()),
+                   PropertyPrediction.from_json(d["prediction"]) if d.get("prediction")
+                   else None)
+
+    def measured_for(self, model: str) -> Any:
+        """The :class:`~fidelity.coco.measure.MeasuredLoss` of ``model`` (None if absent)."""
+        return next((m for m in self.measured if m.model == model), None)
+
+    def bound(self, model: str) -> BoundCell | None:
+        """The measured loss of ``model`` beside the predicted one
+        (:class:`~fidelity.coco.bounds.BoundCell`, the prediction as its ``classic``); None
+        when ``model`` was not measured here."""
+        m = self.measured_for(model)
+        if m is None:
+            return None
+        p = self.prediction
+        return BoundCell(m.dmap_points, m.dmap_points_se, p.loss if p else None, None)
+
+
+def predict_spatial(axis: AxisValue, size: str = PREDICTION_SIZE) -> PropertyPrediction | None:
+    """The worst-case ΔmAP (points) the property table predicts at a corruption's axis value
+    for detector size ``size``, x's uncertainty propagated
+    (:func:`fidelity.prediction.properties.predict_property`); None where x is unknown."""
+    if axis.x is None:
+        return None
+    return predict_property(load_property_table(axis.property), axis.x, u_x=axis.u, size=size)
+
+
+def spatial_chart_cells(corruptions: Sequence[str] = SPATIAL_CORRUPTIONS,
+                        severities: Sequence[int] = SEVERITIES,
+                        draws: int = CHART_DRAWS) -> list[SpatialCell]:
+    """The chart side of every noise or blur (corruption, severity): its axis value and the
+    loss predicted there, no COCO."""
+    from fidelity.coco.tables.degradation import calibration_chart  # noqa: PLC0415 (the chart measurement, loaded at the call)
+
+    chart = calibration_chart()
+    out = []
+    for name in corruptions:
+        for sev in severities:
+            axis = chart_axis_value(name, sev, draws, chart)
+            out.append(SpatialCell(name, sev, PARAMETERS[name][sev - 1], axis,
+                                   prediction=predict_spatial(axis)))
+    return out
+
+
+@dataclass(frozen=True)
 class CocoCResults:
-    """The COCO-C table (:func:`run_coco_c`): one :class:`CorruptionCell` per (corruption,
-    severity), the chart used, its own 8-bit ΔE (``floor_delta_e``), provenance."""
+    """The COCO-C table (:func:`run_coco_c`): one :class:`CorruptionCell` per colour
+    (corruption, severity), the chart used, its own 8-bit ΔE (``floor_delta_e``), provenance
+    (``meta``; the noise and blur run's under ``meta["spatial_run"]``), and one
+    :class:`SpatialCell` per noise or blur (corruption, severity) (``spatial``)."""
 
     cells: tuple[CorruptionCell, ...]
     chart: str
     floor_delta_e: float
     meta: Mapping[str, Any]
+    spatial: tuple[SpatialCell, ...] = ()
 
     def cell(self, corruption: str, severity: int) -> CorruptionCell:
         """The cell of (corruption, severity); an error when it is not in the table."""
@@ -425,6 +539,29 @@ class CocoCResults:
             if c.corruption == corruption and c.severity == severity:
                 return c
         raise InvalidValueError(f"{corruption}:{severity} is not in the COCO-C table")
+
+    def spatial_cell(self, corruption: str, severity: int) -> SpatialCell:
+        """The noise or blur cell of (corruption, severity); an error when it is not in the
+        table."""
+        for c in self.spatial:
+            if c.corruption == corruption and c.severity == severity:
+                return c
+        raise InvalidValueError(f"{corruption}:{severity} is not in the COCO-C table")
+
+    def spatial_models(self) -> list[str]:
+        """Detectors measured in some noise or blur cell, in first-seen order."""
+        seen: dict[str, None] = {}
+        for c in self.spatial:
+            for m in c.measured:
+                seen.setdefault(m.model, None)
+        return list(seen)
+
+    def spatial_bounds(self) -> ClassBounds:
+        """How often the property tables' prediction bounds the measured loss of the noise
+        and blur cells (plainly and within 2 SE; :func:`fidelity.coco.bounds.summarise_cells`,
+        the prediction in its ``classic`` place)."""
+        return summarise_cells([b for c in self.spatial for m in c.measured
+                                if (b := c.bound(str(m.model))) is not None])
 
     def models(self) -> list[str]:
         """Detectors measured in some cell, in first-seen order."""
@@ -454,11 +591,14 @@ class CocoCResults:
         return summarise_cells([b for _, _, b in self.bound_cells()])
 
     def to_json(self) -> dict[str, Any]:
-        """``{"chart", "floor_delta_e", "cells", "meta"}``."""
-        out: dict[str, Any] = json_ready({"chart": self.chart,
-                                          "floor_delta_e": self.floor_delta_e,
-                                          "cells": [c.to_json() for c in self.cells],
-                                          "meta": dict(self.meta)})
+        """``{"chart", "floor_delta_e", "cells", "meta"}``, and ``"spatial_cells"`` when
+        there are noise or blur cells."""
+        doc: dict[str, Any] = {"chart": self.chart, "floor_delta_e": self.floor_delta_e,
+                               "cells": [c.to_json() for c in self.cells],
+                               "meta": dict(self.meta)}
+        if self.spatial:
+            doc["spatial_cells"] = [c.to_json() for c in self.spatial]
+        out: dict[str, Any] = json_ready(doc)
         return out
 
     def without_locations(self) -> CocoCResults:
@@ -471,17 +611,23 @@ class CocoCResults:
                         for k, v in m.settings.items()}
             return replace(m, settings=settings)
 
-        meta = {k: Path(v).name if k in ("images", "annotations") and v else v
-                for k, v in self.meta.items()}
-        return replace(self, meta=meta,
+        def names(meta: Mapping[str, Any]) -> dict[str, Any]:
+            return {k: Path(v).name if k in ("images", "annotations") and v
+                    else names(v) if k == "spatial_run" and isinstance(v, Mapping) else v
+                    for k, v in meta.items()}
+
+        return replace(self, meta=names(self.meta),
                        cells=tuple(replace(c, measured=tuple(named(m) for m in c.measured))
-                                   for c in self.cells))
+                                   for c in self.cells),
+                       spatial=tuple(replace(c, measured=tuple(named(m) for m in c.measured))
+                                     for c in self.spatial))
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> CocoCResults:
         """Inverse of :meth:`to_json`."""
         return cls(tuple(CorruptionCell.from_json(c) for c in d["cells"]), str(d["chart"]),
-                   float(d["floor_delta_e"]), dict(d.get("meta") or {}))
+                   float(d["floor_delta_e"]), dict(d.get("meta") or {}),
+                   tuple(SpatialCell.from_json(c) for c in d.get("spatial_cells") or ()))
 
 
 def _parameter(name: str, severity: int) -> Any:
@@ -505,12 +651,33 @@ def chart_cells(corruptions: Sequence[str] = CORRUPTIONS,
 
 
 def with_predictions(results: CocoCResults) -> CocoCResults:
-    """``results`` with each cell's predicted loss (:func:`predict_cell`) where it has none
-    (a table written before the predictions were recorded)."""
+    """``results`` with each cell's predicted loss (:func:`predict_cell`,
+    :func:`predict_spatial`) where it has none (a table written before the predictions were
+    recorded, or with them taken out to be recomputed from new tables)."""
     return replace(results, cells=tuple(
         c if c.prediction is not None else
         replace(c, prediction=predict_cell(corruption_chart(c.corruption, c.severity)))
-        for c in results.cells))
+        for c in results.cells), spatial=tuple(
+        c if c.prediction is not None else replace(c, prediction=predict_spatial(c.axis))
+        for c in results.spatial))
+
+
+def _run_meta(inputs: Any, limit: int | None, threads: int | None, definitions: str
+              ) -> dict[str, Any]:
+    return {"fidelity": __version__, "python": platform.python_version(),
+            "machine": {"platform": platform.platform(), "threads": threads},
+            "images": str(inputs.images), "annotations": str(inputs.annotations),
+            "models": [f"{m.path.name}" + (f"@{m.limit}" if m.limit else "")
+                       for m in inputs.models], "limit": limit, "definitions": definitions}
+
+
+#: How the noise and blur corruptions are applied and seeded, as the results record it.
+SPATIAL_DEFINITIONS = (f"imagecorruptions {IMAGECORRUPTIONS_VERSION} (gaussian_noise, "
+                       "shot_noise, defocus_blur, gaussian_blur), called from "
+                       "fidelity.coco.spatial (gaussian_blur with channel_axis=-1 where the "
+                       "package's multichannel=True fails); numpy's global generator seeded "
+                       "per image with sha256('imagecorruptions:<name>:<severity>:<image "
+                       "id>')[:4]")
 
 
 def run_coco_c(inputs: Any, corruptions: Sequence[str] = CORRUPTIONS,
@@ -519,9 +686,13 @@ def run_coco_c(inputs: Any, corruptions: Sequence[str] = CORRUPTIONS,
                progress: bool = False, log: Any = None) -> CocoCResults:
     """Measure every (corruption, severity) on COCO with every detector of ``inputs``
     (:func:`fidelity.coco.measure.measure_mapping`; resumable through its store) and put each
-    next to its chart ΔE."""
+    next to its chart value: a colour corruption's chart ΔE, a noise or blur corruption's
+    chart SNR or MTF50 (:mod:`fidelity.coco.spatial`; ``corruptions`` may mix both)."""
+    colour, spatial = split_names(corruptions)
+    for name in colour:
+        _check(name, 1)
     cells = []
-    for cell in chart_cells(corruptions, severities):
+    for cell in chart_cells(colour, severities):
         fn = CorruptionMap(cell.corruption, cell.severity)
         measured = measure_mapping(
             fn, fn.key, inputs, limit=limit, store=store, threads=threads, provider=provider,
@@ -530,15 +701,48 @@ def run_coco_c(inputs: Any, corruptions: Sequence[str] = CORRUPTIONS,
                          "parameter": cell.parameter,
                          "definition": f"imagecorruptions {IMAGECORRUPTIONS_VERSION}"})
         cells.append(replace(cell, measured=tuple(measured)))
-    meta = {"fidelity": __version__, "python": platform.python_version(),
-            "machine": {"platform": platform.platform(), "threads": threads},
-            "images": str(inputs.images), "annotations": str(inputs.annotations),
-            "models": [f"{m.path.name}" + (f"@{m.limit}" if m.limit else "")
-                       for m in inputs.models], "limit": limit,
-            "definitions": f"imagecorruptions {IMAGECORRUPTIONS_VERSION} (brightness, contrast, "
-                           "saturate), reimplemented in fidelity.coco.corruptions and checked "
-                           "equal bit for bit"}
-    return CocoCResults(tuple(cells), DEFAULT_CHART, uncorrupted_chart_delta_e(), meta)
+    spatial_cells = []
+    for sc in spatial_chart_cells(spatial, severities):
+        sfn = SpatialCorruption(sc.corruption, sc.severity)
+        measured = measure_mapping(
+            sfn, sfn.key, inputs, limit=limit, store=store, threads=threads,
+            provider=provider, progress=progress, log=log,
+            description={"corruption": sc.corruption, "severity": sc.severity,
+                         "parameter": sc.parameter, "definition": SPATIAL_DEFINITIONS})
+        spatial_cells.append(replace(sc, measured=tuple(measured)))
+    meta: dict[str, Any] = {}
+    if colour:
+        meta = _run_meta(inputs, limit, threads,
+                         f"imagecorruptions {IMAGECORRUPTIONS_VERSION} (brightness, contrast, "
+                         "saturate), reimplemented in fidelity.coco.corruptions and checked "
+                         "equal bit for bit")
+    if spatial:
+        meta["spatial_run"] = _run_meta(inputs, limit, threads, SPATIAL_DEFINITIONS) | {
+            "date": time.strftime("%Y-%m-%d", time.gmtime()), "chart_draws": CHART_DRAWS}
+    return CocoCResults(tuple(cells), DEFAULT_CHART, uncorrupted_chart_delta_e(), meta,
+                        tuple(spatial_cells))
+
+
+def merge_results(base: CocoCResults, new: CocoCResults) -> CocoCResults:
+    """``new`` with the cells of ``base`` it does not measure kept (``fidelity coco-c
+    --update``): each (corruption, severity) of ``new`` replaces that of ``base``; the colour
+    run's provenance is ``new``'s when it has colour cells, else ``base``'s, and
+    ``meta["spatial_run"]`` likewise for the noise and blur cells."""
+    def keyed(cells: Sequence[Any], order: Sequence[str]) -> tuple[Any, ...]:
+        return tuple(sorted(cells, key=lambda c: (order.index(c.corruption), c.severity)))
+
+    have = {(c.corruption, c.severity) for c in new.cells}
+    have_s = {(c.corruption, c.severity) for c in new.spatial}
+    cells = keyed([c for c in base.cells if (c.corruption, c.severity) not in have]
+                  + list(new.cells), CORRUPTIONS)
+    spatial = keyed([c for c in base.spatial if (c.corruption, c.severity) not in have_s]
+                    + list(new.spatial), SPATIAL_CORRUPTIONS)
+    src = new if new.cells else base
+    meta = {k: v for k, v in src.meta.items() if k != "spatial_run"}
+    run = (new if new.spatial else base).meta.get("spatial_run")
+    if run is not None:
+        meta["spatial_run"] = run
+    return CocoCResults(cells, src.chart, src.floor_delta_e, meta, spatial)
 
 
 #: The shipped COCO-C table (package data), written by ``fidelity coco-c --data``.
@@ -594,6 +798,7 @@ def coco_c_answer(spec: str, *, size: str = "any", table: str | None = None,
     (``"contrast:3"``): the chart side computed now (:func:`corruption_chart`), the measured
     loss from the COCO-C table (:func:`load_coco_c`)."""
     name, severity = parse_corruption(spec)
+    _check(name, severity)
     m = corruption_chart(name, severity)
     prediction = predict(m.mean_delta_e, size=size, table=table)
     directional = predict_chart(m, size=size, table=_directional_name(table))
@@ -607,6 +812,58 @@ def coco_c_answer(spec: str, *, size: str = "any", table: str | None = None,
                        tuple(measured), path)
 
 
+@dataclass(frozen=True)
+class SpatialAnswer:
+    """What ``fidelity predict --coco-c NAME:SEVERITY`` answers for a noise or blur
+    corruption: its value on the property's axis (the chart's MTF50 or SNR, computed now), the
+    property table's worst-case prediction there and the losses measured on COCO (from the
+    shipped table)."""
+
+    corruption: str
+    severity: int
+    parameter: Any
+    axis: AxisValue
+    prediction: PropertyPrediction | None
+    measured: tuple[Any, ...]
+    table_path: str
+
+    @property
+    def property(self) -> str:
+        """``sharpness`` or ``noise``."""
+        return PROPERTY[self.corruption]
+
+    def to_json(self) -> dict[str, Any]:
+        """The answer as JSON."""
+        name, unit = AXIS_LABELS[self.property]
+        out: dict[str, Any] = json_ready({
+            "corruption": self.corruption, "severity": self.severity,
+            "parameter": self.parameter, "property": self.property, "axis_name": name,
+            "unit": unit, "axis": self.axis.to_json(),
+            "prediction": self.prediction.to_json() if self.prediction else None,
+            "measured": [m.to_json() for m in self.measured], "table": self.table_path})
+        return out
+
+
+def spatial_answer(spec: str, *, size: str = "any",
+                   data: str | os.PathLike[str] | None = None) -> SpatialAnswer:
+    """The chart value, the predicted and the measured loss of a noise or blur corruption
+    (``"gaussian_blur:3"``): the chart side computed now (:func:`chart_axis_value`,
+    :func:`predict_spatial` for detector size ``size``), the measured loss from the COCO-C
+    table (:func:`load_coco_c`)."""
+    name, severity = parse_corruption(spec)
+    check_spatial(name, severity)
+    axis = chart_axis_value(name, severity)
+    prediction = predict_spatial(axis, size)
+    results = load_coco_c(data)
+    try:
+        measured = results.spatial_cell(name, severity).measured
+    except InvalidValueError:
+        measured = ()
+    path = str(data) if data is not None else str(resource_dir("data") / DATA_FILE)
+    return SpatialAnswer(name, severity, PARAMETERS[name][severity - 1], axis, prediction,
+                         tuple(measured), path)
+
+
 def _directional_name(table: str | None) -> str | None:
     """``table`` when it is a direction-aware table, else None (the default one)."""
     if table is None:
@@ -616,6 +873,7 @@ def _directional_name(table: str | None) -> str | None:
 
 
 __all__ = [
+    "ALL_CORRUPTIONS",
     "BRIGHTNESS",
     "CONTRAST",
     "CORRUPTIONS",
@@ -624,7 +882,15 @@ __all__ = [
     "PREDICTION_SIZE",
     "SATURATE",
     "SEVERITIES",
+    "SPATIAL_DEFINITIONS",
     "DATA_FILE",
+    "SpatialAnswer",
+    "SpatialCell",
+    "check_any",
+    "merge_results",
+    "predict_spatial",
+    "spatial_answer",
+    "spatial_chart_cells",
     "CocoCAnswer",
     "CocoCResults",
     "CellPrediction",

@@ -367,10 +367,12 @@ def _run_images(store: MeasureStore, det: Any, model: str, dataset: str, mapping
     have = store.stored_images(model, dataset, mapping)
     todo = [i for i in ids if i not in have]
     batch: list[tuple[int, np.ndarray]] = []
+    per_image = getattr(fn, "for_image", None)
     for i in tqdm(todo, desc=label, unit="img", disable=not progress, leave=False,
                   mininterval=2):
         rgb, settings = cache.get(i)
-        batch.append((i, det(roundtrip_jpeg(fn(rgb), settings))))
+        mapped = per_image(i)(rgb) if per_image is not None else fn(rgb)
+        batch.append((i, det(roundtrip_jpeg(mapped, settings))))
         if len(batch) >= batch_commit:
             store.add_detections(model, dataset, mapping, batch)
             batch = []
@@ -394,7 +396,10 @@ def measure_mapping(mapping: Mapping8, key: str, inputs: CocoInputs, *,
     Parameters
     ----------
     mapping
-        (H, W, 3) uint8 sRGB -> (H, W, 3) uint8 sRGB, applied before the JPEG round trip.
+        (H, W, 3) uint8 sRGB -> (H, W, 3) uint8 sRGB, applied before the JPEG round trip. A
+        mapping with a ``for_image(image_id)`` method (a seeded random corruption,
+        :class:`fidelity.coco.spatial.SpatialCorruption`) is asked for each image's own
+        mapping by the COCO image id.
     key
         The mapping's identity in the store (equal keys must mean equal mappings).
     inputs

@@ -1,12 +1,15 @@
-"""The COCO-C report: COCO-C's colour corruptions on the chart ΔE scale.
+"""The COCO-C report: COCO-C's colour corruptions on the chart ΔE scale, its noise and blur
+corruptions on the chart SNR and MTF50 scales.
 
 Built as one :class:`~fidelity.report.document.Document` from
 :class:`fidelity.coco.corruptions.CocoCResults` (:func:`cococ_document`) and written as
 ``cococ.html`` and ``cococ.md`` with ``cococ.json`` and the SVG figures
 (:func:`write_cococ_report`). Reading order: the headline (each corruption's chart ΔE over
 severities 1-5 and what it costs), the table (chart ΔE, its direction, the classic and the
-direction-aware predicted ΔmAP, the measured ΔmAP ± SE per detector), the figures, the method
-and what was run.
+direction-aware predicted ΔmAP, the measured ΔmAP ± SE per detector), the noise and blur
+table (:data:`SPATIAL_SECTION`: the chart SNR or MTF50 ± u, the property table's predicted
+ΔmAP ± u, the measured ΔmAP ± SE per detector and whether the prediction bounds it), the
+figures, the method and what was run.
 """
 
 from __future__ import annotations
@@ -16,13 +19,17 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from fidelity.coco.corruptions import PREDICTION_SIZE
+from fidelity.coco.spatial import AXIS_LABELS
 from fidelity.core.fileio import write_json_atomic
+from fidelity.prediction.properties import PROPERTY_TABLES
 from fidelity.report import cocofigures as cf
 from fidelity.report.document import (
     Document,
     Figure,
     Headline,
     Section,
+    Table,
     Text,
     section,
     svg_figure,
@@ -32,13 +39,19 @@ from fidelity.report.format import number
 from fidelity.report.html import write_document
 
 if TYPE_CHECKING:
-    from fidelity.coco.corruptions import CocoCResults, CorruptionCell
+    from fidelity.coco.corruptions import CocoCResults, CorruptionCell, SpatialCell
 
 #: Title of the report.
-TITLE = "COCO-C colour corruptions on the chart ΔE scale"
+TITLE = "COCO-C corruptions on the chart ΔE, MTF50 and SNR scales"
 #: Figure file names.
 DELTA_E_FIGURE = "cococ-chart-delta-e.svg"
 LOSS_FIGURE = "cococ-loss-vs-delta-e.svg"
+MTF50_FIGURE = "cococ-loss-vs-mtf50.svg"
+SNR_FIGURE = "cococ-loss-vs-snr.svg"
+#: Every figure the report may write.
+FIGURES = (DELTA_E_FIGURE, LOSS_FIGURE, MTF50_FIGURE, SNR_FIGURE)
+#: Title of the noise and blur section.
+SPATIAL_SECTION = "Blur and noise corruptions on the MTF50 / SNR scale"
 
 
 def predictions(cell: CorruptionCell) -> dict[str, float | None]:
@@ -67,6 +80,15 @@ def cococ_figures(results: CocoCResults, preds: Mapping[tuple[str, int], Mapping
                                       "Measured ΔmAP (±2 SE) of each corruption and severity at "
                                       "its chart ΔE, the classic worst-case curve and the "
                                       "direction-aware prediction of each cell.")
+    for prop, name, axis in (("sharpness", MTF50_FIGURE, "MTF50"), ("noise", SNR_FIGURE, "SNR")):
+        if any(c.measured for c in results.spatial if c.property == prop):
+            out[name] = svg_figure(
+                cf.cococ_property_plot(results, prop, PREDICTION_SIZE), name,
+                f"measured loss against chart {axis}",
+                f"Measured ΔmAP (±2 SE) of each {'blur' if prop == 'sharpness' else 'noise'} "
+                f"corruption and severity at its chart {axis} (log axis), and the worst case "
+                f"of the property table (detector size {PREDICTION_SIZE}) the predictions "
+                "read.")
     return out
 
 
@@ -86,7 +108,129 @@ def _headline(results: CocoCResults, figure: Figure | None) -> Headline:
                          + ", ".join(f"{g.dmap_points:.1f}" for g in got if g is not None))
         lines.append(text + ".")
     lines += _bound_lines(results)
+    lines += _spatial_headline(results)
     return Headline("\n".join(lines), "info", figure)
+
+
+def axis_text(cell: SpatialCell, digits: int | None = None) -> str:
+    """``MTF50 0.0755 ± 0.0047`` / ``SNR 3.743 ± 0.019``: the cell's chart value (4 decimals
+    for MTF50 in cy/px, 3 for SNR, unless ``digits``)."""
+    name = AXIS_LABELS[cell.property][0]
+    d = digits if digits is not None else (4 if cell.property == "sharpness" else 3)
+    if cell.axis.x is None:
+        return f"{name} not measured"
+    u = "" if cell.axis.u is None else f" ± {cell.axis.u:.{d}f}"
+    return f"{name} {cell.axis.x:.{d}f}{u}"
+
+
+def _spatial_headline(results: CocoCResults) -> list[str]:
+    """The headline's lines on the noise and blur cells: each corruption's chart values over
+    severities and how often the property tables' prediction bounds the measured loss."""
+    if not results.spatial:
+        return []
+    lines = ["", "**COCO-C's noise and blur corruptions on the chart SNR and MTF50 scales:**",
+             ""]
+    models = results.spatial_models()
+    for name in dict.fromkeys(c.corruption for c in results.spatial):
+        cells = sorted((c for c in results.spatial if c.corruption == name),
+                       key=lambda c: c.severity)
+        label = AXIS_LABELS[cells[0].property][0]
+        d = 3 if cells[0].property == "sharpness" else 2
+        vals = ", ".join(number(c.axis.x, d) for c in cells)
+        text = f"- {name}: chart {label} {vals}"
+        if models:
+            got = [c.measured_for(models[0]) for c in cells]
+            if all(g is not None for g in got):
+                text += (f"; measured ΔmAP ({models[0]}) "
+                         + ", ".join(f"{g.dmap_points:.1f}" for g in got if g is not None))
+        lines.append(text + ".")
+    s = results.spatial_bounds()
+    tables = ", ".join(f"`{t}`" for t in dict.fromkeys(
+        c.prediction.table for c in results.spatial if c.prediction is not None))
+    if s.cells:
+        lines.append(
+            f"- Property-table bound ({tables}): the measured "
+            f"loss within it in **{s.classic_within} of {s.cells}** (detector, corruption, "
+            f"severity) cells ({s.classic_within_2se} within 2 SE); median over-prediction "
+            f"{number(s.classic_median_ratio, 1)}×.")
+    return lines
+
+
+def _bound_word(cell: SpatialCell, model: str) -> str:
+    """``yes`` (measured <= predicted), ``within 2 SE``, ``no`` or ``–``."""
+    b = cell.bound(model)
+    if b is None or b.classic_within is None:
+        return "–"
+    if b.classic_within:
+        return "yes"
+    return "within 2 SE" if b.classic_within_2se else "no"
+
+
+def spatial_table(results: CocoCResults) -> Table:
+    """The noise and blur table of the report (:data:`SPATIAL_SECTION`), one row per cell
+    named ``corruption:severity`` (what ``fidelity predict --coco-c`` takes)."""
+    models = results.spatial_models()
+    header = ["corruption:severity", "parameter", "chart value (MTF50 cy/px, SNR)",
+              "predicted ΔmAP"]
+    header += [f"measured ΔmAP, {m}" for m in models] + [f"bounded, {m}" for m in models]
+    rows = []
+    for c in results.spatial:
+        p = c.prediction
+        if p is None:
+            pred = "–"
+        else:
+            pm = "" if p.u_loss is None else f" ± {p.u_loss:.2f}"
+            pred = f"{p.loss:.2f}{pm}" + (" (beyond the table)" if p.status == "beyond" else "")
+        row = [f"{c.corruption}:{c.severity}", str(c.parameter), axis_text(c), pred]
+        for m in models:
+            x = c.measured_for(m)
+            row.append("–" if x is None else f"{x.dmap_points:.2f} ± "
+                                             f"{number(x.dmap_points_se)} ({x.images})")
+        row += [_bound_word(c, m) for m in models]
+        rows.append(row)
+    return table(header, rows, numeric=[False, False, False, True]
+                 + [True] * len(models) + [False] * len(models))
+
+
+def _meta_lines(meta: Mapping[str, Any]) -> str:
+    """The provenance as a Markdown list, the noise and blur run's (``spatial_run``) as a
+    nested list."""
+    lines = []
+    for k, v in sorted(meta.items()):
+        if k == "spatial_run" and isinstance(v, Mapping):
+            lines.append(f"- {k}:")
+            lines += [f"  - {kk}: {vv}" for kk, vv in sorted(v.items())]
+        else:
+            lines.append(f"- {k}: {v}")
+    return "\n".join(lines)
+
+
+def _spatial_method(results: CocoCResults) -> str:
+    """The method's clause on the noise and blur corruptions (empty without them)."""
+    run = results.meta.get("spatial_run")
+    if not results.spatial or not isinstance(run, Mapping):
+        return ""
+    return ("; four of those, the noise and blur corruptions `gaussian_noise`, `shot_noise`, "
+            "`defocus_blur` and `gaussian_blur`, go on the chart SNR and MTF50 scales instead "
+            f"({run.get('definitions', '')}; `fidelity.coco.spatial`)")
+
+
+def _spatial_text(results: CocoCResults) -> str:
+    run = results.meta.get("spatial_run") or {}
+    draws = run.get("chart_draws", "several")
+    return (
+        "Chart value: the calibration chart (640 × 480, turned 5°, the sharpness and noise "
+        "tables' own) corrupted and measured as an audit measures it: MTF50 in cy/px (the "
+        "softer patch edge's luminance e-SFR; ± its measurement's uncertainty) for the blurs, "
+        "the 18 % grey patch's luminance SNR in linear light for the noises (the mean over "
+        f"{draws} seeded draws, ± its standard error). Predicted: the worst case of "
+        f"`{PROPERTY_TABLES['sharpness']}` or `{PROPERTY_TABLES['noise']}` at that value for "
+        f"detector size {PREDICTION_SIZE}, the "
+        "value's uncertainty propagated (what `fidelity predict --mtf50 X` / `--snr Y` "
+        "prints; 'beyond the table': worse than every measured level, the table's ceiling). "
+        "Measured: ΔmAP in percentage points ± one SE (the larger of the paired image "
+        "bootstrap and the 5-fold jackknife), image count in brackets. Bounded: measured ≤ "
+        "predicted (yes), measured − 2 SE ≤ predicted (within 2 SE), else no.")
 
 
 def _bound_lines(results: CocoCResults) -> list[str]:
@@ -146,14 +290,17 @@ def cococ_document(results: CocoCResults, notes: str | None = None) -> Document:
             "(`fidelity.prediction.directional.error_parts`)."),
             table(header, rows, numeric=[False, True, False, True, False, False, True, True]
                   + [True] * len(models))),
+        section(SPATIAL_SECTION, Text(_spatial_text(results)), spatial_table(results))
+        if results.spatial else None,
         section("Analysis", Text(notes.strip())) if notes else None,
-        section("Figures", *[figs[k] for k in (LOSS_FIGURE,) if k in figs]),
+        section("Figures", *[figs[k] for k in (LOSS_FIGURE, MTF50_FIGURE, SNR_FIGURE)
+                             if k in figs]),
         section("Method", Text(
             "- Corruptions: `brightness` (HSV V + c), `contrast` (per channel (x − mean)·c + "
             "mean), `saturate` (HSV S·a + b) of the `imagecorruptions` package "
             f"({results.meta.get('definitions', '')}); the other corruptions change spatial "
             "detail or overlay random textures, which a flat chart's mean cannot measure "
-            "(`fidelity.coco.corruptions`).\n"
+            f"(`fidelity.coco.corruptions`){_spatial_method(results)}.\n"
             f"- Chart ΔE: the calibration chart `{results.chart}` (reference Lab → sRGB clipped, "
             "the chart the SAFE-COLOR transforms were calibrated on) as an 8-bit image of 24 "
             "flat 32-pixel patches and nothing else, corrupted, each patch read back, CIEDE2000 "
@@ -161,8 +308,7 @@ def cococ_document(results: CocoCResults, notes: str | None = None) -> Document:
             "- Loss: every COCO image corrupted, then the JPEG round trip of the sweep "
             "(original quantisation tables and subsampling), the detector run; the baseline "
             "is the round trip alone (`fidelity.coco.measure`).")),
-        section("What was run", Text("\n".join(f"- {k}: {v}" for k, v in
-                                               sorted(results.meta.items())))),
+        section("What was run", Text(_meta_lines(results.meta))),
     ]
     return Document(TITLE, _headline(results, figs.get(DELTA_E_FIGURE)),
                     tuple(s for s in sections if s is not None),
@@ -187,10 +333,16 @@ def write_cococ_report(results: CocoCResults, out_dir: str | os.PathLike[str],
 
 __all__ = [
     "DELTA_E_FIGURE",
+    "FIGURES",
     "LOSS_FIGURE",
+    "MTF50_FIGURE",
+    "SNR_FIGURE",
+    "SPATIAL_SECTION",
+    "axis_text",
     "TITLE",
     "cococ_document",
     "cococ_figures",
     "predictions",
+    "spatial_table",
     "write_cococ_report",
 ]

@@ -6,7 +6,9 @@
 - :func:`map_vs_delta_e_plot`: one model's mAP@[.50:.95] against chart ΔE00 per transform;
 - :func:`cococ_delta_e_plot`: the chart ΔE00 of each COCO-C colour corruption per severity;
 - :func:`cococ_loss_plot`: measured ΔmAP (±2 SE) of each corruption cell at its chart ΔE, the
-  classic worst-case curve and each cell's direction-aware prediction.
+  classic worst-case curve and each cell's direction-aware prediction;
+- :func:`cococ_property_plot`: measured ΔmAP (±2 SE) of each noise or blur corruption cell at
+  its chart SNR or MTF50, with the property table's worst-case curve.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from numpy.typing import NDArray
 
 from fidelity.coco.tables.colour import PAPER_THRESHOLDS
 from fidelity.prediction.interpolate import predict_curve
+from fidelity.prediction.properties import load_property_table, worst_case_losses
 from fidelity.report.svg import (
     COLOURS,
     MARKERS,
@@ -40,7 +43,12 @@ TAB10 = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e37
 
 #: Colours of the COCO-C corruptions.
 CORRUPTION_COLOURS = {"brightness": COLOURS["orange"], "contrast": COLOURS["blue"],
-                      "saturate": COLOURS["green"]}
+                      "saturate": COLOURS["green"], "gaussian_noise": COLOURS["blue"],
+                      "shot_noise": COLOURS["orange"], "defocus_blur": COLOURS["green"],
+                      "gaussian_blur": COLOURS["red"]}
+#: What each property's figure is drawn against: (axis label, table curve's range).
+PROPERTY_AXES = {"sharpness": ("chart MTF50 (cy/px, softer edge, luminance)", (0.03, 0.7)),
+                 "noise": ("chart SNR at 18 % grey (luminance, linear light)", (1.0, 100.0))}
 
 _F = NDArray[np.float64]
 
@@ -239,11 +247,60 @@ def cococ_loss_plot(results: CocoCResults,
     return c.render()
 
 
+def cococ_property_plot(results: CocoCResults, prop: str, size: str = "n") -> str:
+    """Measured ΔmAP (points, ±2 SE) of each noise (``prop`` ``noise``) or blur
+    (``sharpness``) corruption cell at its chart SNR or MTF50, per detector (marker shape),
+    with the worst case of the property's shipped table for detector size ``size``
+    (:func:`fidelity.prediction.properties.worst_case_losses`); log value axis, symlog loss
+    axis."""
+    table = load_property_table(prop)
+    label, (lo_x, hi_x) = PROPERTY_AXES[prop]
+    cells = [x for x in results.spatial if x.property == prop and x.axis.x is not None]
+    xs = [float(x.axis.x) for x in cells if x.axis.x is not None]
+    lo_x = min([lo_x, *xs]) / 1.1
+    hi_x = max([hi_x, *xs]) * 1.1
+    grid = np.geomspace(lo_x, hi_x, 400)
+    curve = worst_case_losses(table, grid, size=size)
+    entries: list[LegendEntry] = [("line", f"worst case ({table.name}, size {size})", "#000",
+                                   None, 1.3)]
+    values = [curve]
+    drawn = []
+    for name in sorted({x.corruption for x in cells}):
+        colour = CORRUPTION_COLOURS.get(name, "#808080")
+        own = sorted((x for x in cells if x.corruption == name), key=lambda x: x.severity)
+        for model, shape in zip(results.spatial_models(), MARKERS, strict=False):
+            pts = [(float(x.axis.x or 0.0), m.dmap_points, m.dmap_points_se or 0.0)
+                   for x in own if (m := x.measured_for(model)) is not None]
+            if pts:
+                a = np.array(pts, np.float64)
+                drawn.append((name, model, colour, shape, a))
+                values += [a[:, 1] - 2 * a[:, 2], a[:, 1] + 2 * a[:, 2]]
+    finite = [v[np.isfinite(v)] for v in values]
+    lo = min([0.0, *(float(v.min()) for v in finite if v.size)])
+    hi = max([1.0, *(float(v.max()) for v in finite if v.size)]) * 1.05
+    axis = "MTF50" if prop == "sharpness" else "SNR"
+    c, (x0, y0, w, h) = _single(f"measured loss against chart {axis}",
+                                f"COCO-C {'blur' if prop == 'sharpness' else 'noise'} "
+                                f"corruptions: measured loss against chart {axis}",
+                                width=1000.0)
+    ax = Axes(c, x0, y0, w, h, Scale(lo_x, hi_x, "log"), Scale(lo * 1.05, hi, "symlog"))
+    ax.frame(label, "ΔmAP (points)")
+    ax.plot(grid, curve, "#000", 1.3)
+    for name, model, colour, shape, a in drawn:
+        ax.plot(a[:, 0], a[:, 1], colour, 0.8, "4 3")
+        ax.errorbar(a[:, 0], a[:, 1], 2 * a[:, 2], colour, shape, 4.0)
+        entries.append((shape, f"{name}: measured, {model}", colour, None, 4.0))
+    _legend_right(c, entries, x0 + w + 20, y0 + 10)
+    return c.render()
+
+
 __all__ = [
     "CORRUPTION_COLOURS",
+    "PROPERTY_AXES",
     "TAB10",
     "cococ_delta_e_plot",
     "cococ_loss_plot",
+    "cococ_property_plot",
     "map_vs_delta_e_plot",
     "paper_step",
     "worst_case_plot",

@@ -106,7 +106,7 @@ def test_predict_coco_c_prints_equivalent_delta_e_and_losses(tmp_path):
     r = CliRunner().invoke(main, ["predict", "--coco-c", "fog:3"])
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert r.exit_code == 2 and len(lines) == 1 and lines[0].startswith("fidelity: error: ")
-    assert "fog: unknown colour corruption; known: " in lines[0]
+    assert "fog: unknown COCO-C corruption; known: " in lines[0]
     r = CliRunner().invoke(main, ["predict", "--coco-c", "contrast:9"])
     assert r.exit_code == 2
 
