@@ -267,16 +267,28 @@ def _print_coco_c(spec: str, size: str, table: str | None, json_path: str | None
     click.echo(f"  predicted ΔmAP: classic {f(p.dmap_points)} points, {f(p.dmap_relative)} % "
                f"(table {p.table.name}, detector size {p.size_used}); direction-aware "
                f"{f(d.dmap_points)} points, {f(d.dmap_relative)} % ({d.explanation()})")
-    if not a.measured:
-        click.echo(f"  measured: not in the COCO-C table {a.table_path}")
-    for m in a.measured:
-        se = "" if m.dmap_points_se is None else f" ± {m.dmap_points_se:.2f}"
-        rel = "undefined" if m.dmap_relative is None else f"{m.dmap_relative:.2f}"
-        click.echo(f"  measured ΔmAP: {m.dmap_points:.2f}{se} points, {rel} % "
-                   f"of baseline mAP {100 * m.baseline_map:.2f} ({m.model}, {m.images} COCO "
-                   "images; COCO-C table)")
+    _print_measured(a.measured, a.table_path, None)
     if json_path is not None:
         click.echo(f"wrote {write_json_output(json_path, coco_c_answer_json(a))}")
+
+
+def _print_measured(measured: Any, table_path: Any, predicted: float | None) -> None:
+    """A COCO-C answer's measured losses, one line per detector (with ``predicted``, a
+    property table's loss: whether each lies within it, or within 2 SE of it)."""
+    if not measured:
+        click.echo(f"  measured: not in the COCO-C table {table_path}")
+    for m in measured:
+        se = "" if m.dmap_points_se is None else f" ± {m.dmap_points_se:.2f}"
+        rel = "undefined" if m.dmap_relative is None else f"{m.dmap_relative:.2f}"
+        bounded = ""
+        if predicted is not None:
+            lo = m.dmap_points - 2 * (m.dmap_points_se or 0.0)
+            bounded = ("; within the prediction" if m.dmap_points <= predicted else
+                       "; within 2 SE of the prediction" if lo <= predicted else
+                       "; above the prediction")
+        click.echo(f"  measured ΔmAP: {m.dmap_points:.2f}{se} points, {rel} % "
+                   f"of baseline mAP {100 * m.baseline_map:.2f} ({m.model}, {m.images} COCO "
+                   f"images; COCO-C table{bounded})")
 
 
 def _print_spatial(spec: str, size: str, json_path: str | None) -> None:
@@ -307,20 +319,7 @@ def _print_spatial(spec: str, size: str, json_path: str | None) -> None:
         worst = f", worst case {p.family} on {p.detector}" if p.family else ""
         click.echo(f"  predicted ΔmAP: {p.loss:.2f}{pm} points (table {p.table}, detector "
                    f"size {size}{worst}{note})")
-    if not a.measured:
-        click.echo(f"  measured: not in the COCO-C table {a.table_path}")
-    for m in a.measured:
-        se = "" if m.dmap_points_se is None else f" ± {m.dmap_points_se:.2f}"
-        rel = "undefined" if m.dmap_relative is None else f"{m.dmap_relative:.2f}"
-        bounded = ""
-        if p is not None:
-            lo = m.dmap_points - 2 * (m.dmap_points_se or 0.0)
-            bounded = ("; within the prediction" if m.dmap_points <= p.loss else
-                       "; within 2 SE of the prediction" if lo <= p.loss else
-                       "; above the prediction")
-        click.echo(f"  measured ΔmAP: {m.dmap_points:.2f}{se} points, {rel} % "
-                   f"of baseline mAP {100 * m.baseline_map:.2f} ({m.model}, {m.images} COCO "
-                   f"images; COCO-C table{bounded})")
+    _print_measured(a.measured, a.table_path, None if p is None else p.loss)
     if json_path is not None:
         click.echo(f"wrote {write_json_output(json_path, a.to_json())}")
 

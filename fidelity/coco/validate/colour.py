@@ -78,8 +78,8 @@ from fidelity.coco.validate.checks import (
     validation_row,
 )
 from fidelity.coco.validate.store import ValidationCell, ValidationCells, ValidationStore
-from fidelity.coco.validate.suite import BASELINE, DEFAULT_CAT, CameraCase
-from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.coco.validate.suite import BASELINE, DEFAULT_CAT, CameraCase, validated_case
+from fidelity.core.errors import InvalidValueError
 from fidelity.core.fileio import json_ready, portable_paths
 from fidelity.core.version import __version__, installed_version
 from fidelity.prediction.interval import (
@@ -442,10 +442,7 @@ def validated_cameras(results: ValidationResults, suite: Sequence[CameraCase]
     stages: dict[str, set[str]] = {s: set() for s in STAGES}
     seen: dict[str, list[tuple[str, Mapping[str, float]]]] = {d: [] for d in DEGRADATIONS}
     for name, record in results.cameras.items():
-        case = cases.get(name)
-        if case is None or case.sha256 != record.sha256:
-            raise InputFileError(f"{name}: the camera file validated is not in the suite "
-                                 "(missing, or changed since: its SHA-256 differs)")
+        case = validated_case(cases, name, record.sha256)
         cam = read_camera_file(case.path)
         illuminants.add(case.illuminant)
         sensitivities.add(cam.sensitivities.name)

@@ -41,8 +41,7 @@ from fidelity.coco.loss import LOSS_COLUMNS
 from fidelity.coco.validate.camera import case_chart
 from fidelity.coco.validate.checks import BoundCheck, bound_check, measured_losses
 from fidelity.coco.validate.store import ValidationCell, ValidationStore
-from fidelity.coco.validate.suite import BASELINE, CameraCase
-from fidelity.core.errors import InputFileError
+from fidelity.coco.validate.suite import BASELINE, CameraCase, validated_case
 from fidelity.core.fileio import json_ready
 from fidelity.prediction.interval import (
     DEGRADATIONS,
@@ -395,10 +394,7 @@ def validated_properties(results: PropertyResults, suite: Sequence[CameraCase]
     cases = {c.name: c for c in suite}
     seen: dict[str, list[tuple[str, Mapping[str, float]]]] = {d: [] for d in DEGRADATIONS}
     for name, record in results.cameras.items():
-        case = cases.get(name)
-        if case is None or case.sha256 != record.sha256:
-            raise InputFileError(f"{name}: the camera file validated is not in the suite "
-                                 "(missing, or changed since: its SHA-256 differs)")
+        case = validated_case(cases, name, record.sha256)
         for kind, degradation in read_camera_file(case.path).degradations().items():
             seen[kind].append(degradation)
     a = results.summary["dmap_points"]["all"]

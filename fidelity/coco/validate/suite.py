@@ -179,6 +179,16 @@ def is_suite_file(argument: str) -> bool:
     return Path(argument).name == SUITE_FILE
 
 
+def validated_case(cases: Mapping[str, CameraCase], name: str, sha256: str) -> CameraCase:
+    """The case ``name`` of ``cases`` whose camera file a validation measured (its SHA-256
+    ``sha256``); an :class:`InputFileError` when the suite lacks it or its file has changed."""
+    case = cases.get(name)
+    if case is None or case.sha256 != sha256:
+        raise InputFileError(f"{name}: the camera file validated is not in the suite "
+                             "(missing, or changed since: its SHA-256 differs)")
+    return case
+
+
 __all__ = [
     "BASELINE",
     "DEFAULT_CAT",
@@ -190,4 +200,5 @@ __all__ = [
     "load_suite",
     "load_suite_file",
     "read_suite_file",
+    "validated_case",
 ]
