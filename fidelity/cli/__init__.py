@@ -46,7 +46,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "check": ("fidelity.cli.check:check",
               "Is this camera model's colour good enough for perception testing?"),
     "coco-c": ("fidelity.cli.cococ:cococ",
-               "Measure COCO-C's colour corruptions: chart ΔE and ΔmAP per severity."),
+               "Measure COCO-C's corruptions: chart value and ΔmAP per severity."),
     "compare": ("fidelity.cli.compare:compare",
                 "Compare a simulated chart with the real camera's: sim-to-real ΔE00 and its "
                 "cost."),

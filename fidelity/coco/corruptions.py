@@ -64,6 +64,7 @@ from fidelity.coco.spatial import (
     check_spatial,
     split_names,
 )
+from fidelity.coco.tables.degradation import calibration_chart
 from fidelity.colour.charts import DEFAULT_CHART, load_chart
 from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
 from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
@@ -508,8 +509,6 @@ def spatial_chart_cells(corruptions: Sequence[str] = SPATIAL_CORRUPTIONS,
                         draws: int = CHART_DRAWS) -> list[SpatialCell]:
     """The chart side of every noise or blur (corruption, severity): its axis value and the
     loss predicted there, no COCO."""
-    from fidelity.coco.tables.degradation import calibration_chart  # noqa: PLC0415 (the chart measurement, loaded at the call)
-
     chart = calibration_chart()
     out = []
     for name in corruptions:

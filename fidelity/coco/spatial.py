@@ -54,6 +54,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fidelity.coco.tables.degradation import calibration_chart, chart_value
 from fidelity.core.errors import InvalidValueError, unknown_name
 
 __all__ = [
@@ -124,7 +125,7 @@ def seeded(seed: int) -> Iterator[None]:
 
 def _package() -> Any:
     try:
-        import imagecorruptions  # noqa: PLC0415 (optional extra)
+        import imagecorruptions
     except ImportError:
         raise InvalidValueError(
             "imagecorruptions: not installed; the noise and blur corruptions need it "
@@ -136,7 +137,7 @@ def _package() -> Any:
 def _gaussian_blur(rgb8: U8, sigma: float) -> U8:
     """imagecorruptions' ``gaussian_blur`` with ``channel_axis=-1`` for the removed
     ``multichannel=True`` (module docstring)."""
-    from skimage import filters  # noqa: PLC0415 (optional extra)
+    from skimage import filters
 
     gaussian: Callable[..., Any] = filters.gaussian
     y = np.asarray(gaussian(np.asarray(rgb8) / 255.0, sigma=sigma, channel_axis=-1))
@@ -301,11 +302,6 @@ def chart_axis_value(name: str, severity: int, draws: int = CHART_DRAWS,
     AxisValue
         x (MTF50 in cy/px or SNR), its uncertainty and the draws.
     """
-    from fidelity.coco.tables.degradation import (  # noqa: PLC0415 (the chart measurement, loaded at the call)
-        calibration_chart,
-        chart_value,
-    )
-
     check_spatial(name, severity)
     if draws < 1:
         raise InvalidValueError(f"draws {draws!r}: must be >= 1")
