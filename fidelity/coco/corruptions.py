@@ -458,8 +458,8 @@ class SpatialCell:
     prediction: PropertyPrediction | None = None
 
     @property
-    def property(self) -> str:
-        """``sharpness`` or ``noise``."""
+    def property(self) -> str:  # sharpness or noise (no docstring: no second API target of
+        # that name, which the tables' "property" attributes would refer to ambiguously)
         return PROPERTY[self.corruption]
 
     def to_json(self) -> dict[str, Any]:
@@ -827,8 +827,8 @@ class SpatialAnswer:
     table_path: str
 
     @property
-    def property(self) -> str:
-        """``sharpness`` or ``noise``."""
+    def property(self) -> str:  # sharpness or noise (no docstring: no second API target of
+        # that name, which the tables' "property" attributes would refer to ambiguously)
         return PROPERTY[self.corruption]
 
     def to_json(self) -> dict[str, Any]:

@@ -232,8 +232,8 @@ class SpatialCorruption:
         return PARAMETERS[self.name][self.severity - 1]
 
     @property
-    def property(self) -> str:
-        """``noise`` or ``sharpness``."""
+    def property(self) -> str:  # noise or sharpness (no docstring: no second API target of
+        # that name, which the tables' "property" attributes would refer to ambiguously)
         return PROPERTY[self.name]
 
 
