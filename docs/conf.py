@@ -60,8 +60,6 @@ autodoc_type_aliases = {
     "ArrayLike": "numpy.typing.ArrayLike",
     "NDArray": "numpy.typing.NDArray",
     "FloatArray": "numpy.typing.NDArray",
-    # the report documents' table (fidelity.core.schema.Table is only ever named in full)
-    "Table": "fidelity.report.document.Table",
 }
 autodoc_typehints_format = "short"
 autodoc_preserve_defaults = True

@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -125,7 +126,10 @@ def seeded(seed: int) -> Iterator[None]:
 
 def _package() -> Any:
     try:
-        import imagecorruptions
+        with warnings.catch_warnings():
+            # its scipy.ndimage.interpolation import is deprecated in SciPy, not ours to fix
+            warnings.simplefilter("ignore", DeprecationWarning)
+            import imagecorruptions
     except ImportError:
         raise InvalidValueError(
             "imagecorruptions: not installed; the noise and blur corruptions need it "

@@ -24,12 +24,12 @@ from fidelity.coco.spatial import AXIS_LABELS
 from fidelity.core.fileio import write_json_atomic
 from fidelity.prediction.properties import PROPERTY_TABLES
 from fidelity.report import cocofigures as cf
+from fidelity.report import document
 from fidelity.report.document import (
     Document,
     Figure,
     Headline,
     Section,
-    Table,
     Text,
     section,
     svg_figure,
@@ -166,7 +166,7 @@ def _bound_word(cell: SpatialCell, model: str) -> str:
     return "within 2 SE" if b.classic_within_2se else "no"
 
 
-def spatial_table(results: CocoCResults) -> Table:
+def spatial_table(results: CocoCResults) -> document.Table:
     """The noise and blur table of the report (:data:`SPATIAL_SECTION`), one row per cell
     named ``corruption:severity`` (what ``fidelity predict --coco-c`` takes)."""
     models = results.spatial_models()
