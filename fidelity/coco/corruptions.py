@@ -57,10 +57,12 @@ from fidelity.coco.spatial import (
     CHART_DRAWS,
     PARAMETERS,
     PROPERTY,
+    SEVERITIES,
     SPATIAL_CORRUPTIONS,
     AxisValue,
     SpatialCorruption,
     chart_axis_value,
+    check_severity,
     check_spatial,
     split_names,
 )
@@ -99,8 +101,6 @@ CORRUPTIONS: tuple[str, ...] = ("brightness", "contrast", "saturate")
 #: chart ΔE scale, the noise and blur ones (:mod:`fidelity.coco.spatial`) on the SNR and MTF50
 #: scales.
 ALL_CORRUPTIONS: tuple[str, ...] = CORRUPTIONS + SPATIAL_CORRUPTIONS
-#: Severities of COCO-C.
-SEVERITIES: tuple[int, ...] = (1, 2, 3, 4, 5)
 #: Version of the package whose definitions :func:`corrupt` implements.
 IMAGECORRUPTIONS_VERSION = "1.1.2"
 #: Side of a patch of the chart image, pixels.
@@ -110,8 +110,7 @@ PATCH_PX = 32
 def _check(name: str, severity: int) -> None:
     if name not in CORRUPTIONS:
         raise unknown_name("colour corruption", name, CORRUPTIONS)
-    if severity not in SEVERITIES:
-        raise InvalidValueError(f"{name}: severity {severity!r} must be an integer 1-5")
+    check_severity(name, severity)
 
 
 def check_any(name: str, severity: int) -> None:
@@ -439,7 +438,7 @@ class CorruptionCell:
 
     def measured_for(self, model: str) -> Any:
         """The :class:`~fidelity.coco.measure.MeasuredLoss` of ``model`` (None if absent)."""
-        return next((m for m in self.measured if m.model == model), None)
+        return _measured_for(self.measured, model)
 
 
 @dataclass(frozen=True)
@@ -482,7 +481,7 @@ class SpatialCell:
 
     def measured_for(self, model: str) -> Any:
         """The :class:`~fidelity.coco.measure.MeasuredLoss` of ``model`` (None if absent)."""
-        return next((m for m in self.measured if m.model == model), None)
+        return _measured_for(self.measured, model)
 
     def bound(self, model: str) -> BoundCell | None:
         """The measured loss of ``model`` beside the predicted one
@@ -519,6 +518,24 @@ def spatial_chart_cells(corruptions: Sequence[str] = SPATIAL_CORRUPTIONS,
     return out
 
 
+def _measured_for(measured: Sequence[Any], model: str) -> Any:
+    """The measured loss of ``model`` among a cell's ``measured`` (None if absent)."""
+    return next((m for m in measured if m.model == model), None)
+
+
+def _cell_of(cells: Sequence[Any], corruption: str, severity: int) -> Any:
+    """The cell of (corruption, severity) among ``cells``; an error when it is not there."""
+    for c in cells:
+        if c.corruption == corruption and c.severity == severity:
+            return c
+    raise InvalidValueError(f"{corruption}:{severity} is not in the COCO-C table")
+
+
+def _models_of(cells: Sequence[Any]) -> list[str]:
+    """Detectors measured in some of ``cells``, in first-seen order."""
+    return list(dict.fromkeys(m.model for c in cells for m in c.measured))
+
+
 @dataclass(frozen=True)
 class CocoCResults:
     """The COCO-C table (:func:`run_coco_c`): one :class:`CorruptionCell` per colour
@@ -534,26 +551,18 @@ class CocoCResults:
 
     def cell(self, corruption: str, severity: int) -> CorruptionCell:
         """The cell of (corruption, severity); an error when it is not in the table."""
-        for c in self.cells:
-            if c.corruption == corruption and c.severity == severity:
-                return c
-        raise InvalidValueError(f"{corruption}:{severity} is not in the COCO-C table")
+        cell: CorruptionCell = _cell_of(self.cells, corruption, severity)
+        return cell
 
     def spatial_cell(self, corruption: str, severity: int) -> SpatialCell:
         """The noise or blur cell of (corruption, severity); an error when it is not in the
         table."""
-        for c in self.spatial:
-            if c.corruption == corruption and c.severity == severity:
-                return c
-        raise InvalidValueError(f"{corruption}:{severity} is not in the COCO-C table")
+        cell: SpatialCell = _cell_of(self.spatial, corruption, severity)
+        return cell
 
     def spatial_models(self) -> list[str]:
         """Detectors measured in some noise or blur cell, in first-seen order."""
-        seen: dict[str, None] = {}
-        for c in self.spatial:
-            for m in c.measured:
-                seen.setdefault(m.model, None)
-        return list(seen)
+        return _models_of(self.spatial)
 
     def spatial_bounds(self) -> ClassBounds:
         """How often the property tables' prediction bounds the measured loss of the noise
@@ -564,11 +573,7 @@ class CocoCResults:
 
     def models(self) -> list[str]:
         """Detectors measured in some cell, in first-seen order."""
-        seen: dict[str, None] = {}
-        for c in self.cells:
-            for m in c.measured:
-                seen.setdefault(m.model, None)
-        return list(seen)
+        return _models_of(self.cells)
 
     def bound_cells(self) -> list[tuple[CorruptionCell, str, BoundCell]]:
         """(cell, detector, its :class:`~fidelity.coco.bounds.BoundCell`) for every detector

@@ -68,6 +68,8 @@ __all__ = [
     "SpatialCorruption",
     "apply_corruption",
     "chart_axis_value",
+    "check_severity",
+    "check_spatial",
     "corruption_seed",
     "seeded",
 ]
@@ -98,12 +100,17 @@ SEVERITIES: tuple[int, ...] = (1, 2, 3, 4, 5)
 IMAGECORRUPTIONS_VERSION = "1.1.2"
 
 
+def check_severity(name: str, severity: int) -> None:
+    """An error unless ``severity`` is a COCO-C severity (:data:`SEVERITIES`, 1-5)."""
+    if severity not in SEVERITIES:
+        raise InvalidValueError(f"{name}: severity {severity!r} must be an integer 1-5")
+
+
 def check_spatial(name: str, severity: int) -> None:
     """An error unless ``name`` is a spatial corruption and ``severity`` 1-5."""
     if name not in SPATIAL_CORRUPTIONS:
         raise unknown_name("noise or blur corruption", name, SPATIAL_CORRUPTIONS)
-    if severity not in SEVERITIES:
-        raise InvalidValueError(f"{name}: severity {severity!r} must be an integer 1-5")
+    check_severity(name, severity)
 
 
 def corruption_seed(name: str, severity: int, image: int | str) -> int:
@@ -187,15 +194,12 @@ def apply_corruption(rgb8: U8, name: str, severity: int, seed: int | None = None
 
 
 def _apply(ic: Any, a: U8, name: str, severity: int) -> U8:
-    if name == "gaussian_blur":
-        try:
-            out: U8 = np.asarray(ic.corrupt(a, severity=severity, corruption_name=name))
-        except TypeError as exc:
-            if "multichannel" not in str(exc):
-                raise
-            return _gaussian_blur(a, float(PARAMETERS[name][severity - 1]))
-        return out
-    got: U8 = np.asarray(ic.corrupt(a, severity=severity, corruption_name=name))
+    try:
+        got: U8 = np.asarray(ic.corrupt(a, severity=severity, corruption_name=name))
+    except TypeError as exc:
+        if name != "gaussian_blur" or "multichannel" not in str(exc):
+            raise
+        return _gaussian_blur(a, float(PARAMETERS[name][severity - 1]))
     return got
 
 

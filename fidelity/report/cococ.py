@@ -15,7 +15,7 @@ figures, the method and what was run.
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -94,22 +94,29 @@ def cococ_figures(results: CocoCResults, preds: Mapping[tuple[str, int], Mapping
 
 def _headline(results: CocoCResults, figure: Figure | None) -> Headline:
     lines = ["**COCO-C's colour corruptions, severities 1-5, on the chart ΔE scale:**", ""]
-    models = results.models()
-    for name in sorted({c.corruption for c in results.cells}):
-        cells = sorted((c for c in results.cells if c.corruption == name),
-                       key=lambda c: c.severity)
-        de = ", ".join(f"{c.chart_delta_e:.1f}" for c in cells)
-        text = f"- {name}: chart ΔE {de}"
-        if models:
-            m0 = models[0]
-            got = [c.measured_for(m0) for c in cells]
-            if all(g is not None for g in got):
-                text += (f"; measured ΔmAP ({m0}) "
-                         + ", ".join(f"{g.dmap_points:.1f}" for g in got if g is not None))
-        lines.append(text + ".")
+    lines += _severity_lines(
+        results.cells, sorted({c.corruption for c in results.cells}), results.models(),
+        lambda cells: "chart ΔE " + ", ".join(f"{c.chart_delta_e:.1f}" for c in cells))
     lines += _bound_lines(results)
     lines += _spatial_headline(results)
     return Headline("\n".join(lines), "info", figure)
+
+
+def _severity_lines(cells: Sequence[Any], names: Sequence[str], models: Sequence[str],
+                    chart: Callable[[list[Any]], str]) -> list[str]:
+    """One headline line per corruption of ``names``: its ``chart`` values (of its cells in
+    severity order) and, where every severity has it, the first model's measured ΔmAP."""
+    lines = []
+    for name in names:
+        ordered = sorted((c for c in cells if c.corruption == name), key=lambda c: c.severity)
+        text = f"- {name}: {chart(ordered)}"
+        if models:
+            got = [c.measured_for(models[0]) for c in ordered]
+            if all(g is not None for g in got):
+                text += (f"; measured ΔmAP ({models[0]}) "
+                         + ", ".join(f"{g.dmap_points:.1f}" for g in got if g is not None))
+        lines.append(text + ".")
+    return lines
 
 
 def axis_text(cell: SpatialCell, digits: int | None = None) -> str:
@@ -130,20 +137,14 @@ def _spatial_headline(results: CocoCResults) -> list[str]:
         return []
     lines = ["", "**COCO-C's noise and blur corruptions on the chart SNR and MTF50 scales:**",
              ""]
-    models = results.spatial_models()
-    for name in dict.fromkeys(c.corruption for c in results.spatial):
-        cells = sorted((c for c in results.spatial if c.corruption == name),
-                       key=lambda c: c.severity)
-        label = AXIS_LABELS[cells[0].property][0]
+    def chart(cells: list[Any]) -> str:
         d = 3 if cells[0].property == "sharpness" else 2
-        vals = ", ".join(number(c.axis.x, d) for c in cells)
-        text = f"- {name}: chart {label} {vals}"
-        if models:
-            got = [c.measured_for(models[0]) for c in cells]
-            if all(g is not None for g in got):
-                text += (f"; measured ΔmAP ({models[0]}) "
-                         + ", ".join(f"{g.dmap_points:.1f}" for g in got if g is not None))
-        lines.append(text + ".")
+        return (f"chart {AXIS_LABELS[cells[0].property][0]} "
+                + ", ".join(number(c.axis.x, d) for c in cells))
+
+    lines += _severity_lines(results.spatial,
+                             list(dict.fromkeys(c.corruption for c in results.spatial)),
+                             results.spatial_models(), chart)
     s = results.spatial_bounds()
     tables = ", ".join(f"`{t}`" for t in dict.fromkeys(
         c.prediction.table for c in results.spatial if c.prediction is not None))
