@@ -31,11 +31,6 @@ from typing import Any, Literal, NamedTuple, Protocol, TypeVar, runtime_checkabl
 
 from fidelity.core.errors import InputFileError
 
-#: JSON's string encoder with ``ensure_ascii`` (the C one where there is one), as
-#: :func:`json.dumps` uses it.
-_encode_string: Callable[[str], str] = json.encoder.encode_basestring_ascii
-_LISTS = (list, tuple)
-
 #: errno values that mean "the output cannot be written here" (a full disk, a quota, a
 #: read-only file system or folder, a file too large for the system's limit), not a bug.
 WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM,
@@ -389,78 +384,9 @@ def json_ready(obj: Any) -> Any:
     return obj
 
 
-class _NotPlain(Exception):
-    """A value :func:`indented_json` leaves to :func:`json.dumps`."""
-
-
-def _plain_json(obj: Any, out: list[str], newline: str) -> None:
-    """Append ``obj`` to ``out`` as ``json.dumps(..., indent=2)`` writes it at the nesting
-    whose line break (and indentation) is ``newline``: the types tested in the order of
-    :mod:`json.encoder`'s ``_iterencode`` (a ``str`` enum is its string, an ``int`` enum its
-    number); raise :class:`_NotPlain` at a non-finite float, a key that is not a string and
-    a value of no JSON type."""
-    if isinstance(obj, str):
-        out.append(_encode_string(obj))
-    elif obj is None:
-        out.append("null")
-    elif obj is True:
-        out.append("true")
-    elif obj is False:
-        out.append("false")
-    elif isinstance(obj, int):
-        out.append(int.__repr__(obj))
-    elif isinstance(obj, float):
-        if not math.isfinite(obj):
-            raise _NotPlain
-        out.append(float.__repr__(obj))
-    elif isinstance(obj, _LISTS):
-        if not obj:
-            out.append("[]")
-            return
-        inner = newline + "  "
-        out.append("[")
-        sep = inner
-        for value in obj:
-            out.append(sep)
-            _plain_json(value, out, inner)
-            sep = "," + inner
-        out.append(newline + "]")
-    elif isinstance(obj, dict):
-        if not obj:
-            out.append("{}")
-            return
-        inner = newline + "  "
-        out.append("{")
-        sep = inner
-        for key, value in obj.items():
-            if not isinstance(key, str):
-                raise _NotPlain
-            out.append(sep)
-            out.append(_encode_string(key))
-            out.append(": ")
-            _plain_json(value, out, inner)
-            sep = "," + inner
-        out.append(newline + "}")
-    else:
-        raise _NotPlain
-
-
-def indented_json(obj: Any) -> str:
-    """``json.dumps(obj, indent=2, allow_nan=False)``, the same text, some ten times faster
-    for JSON values (the standard library's indenting encoder is written in Python, a
-    generator per container); anything else (a key that is not a string, NaN, a value of no
-    JSON type, a cycle) goes to :func:`json.dumps`, with its errors."""
-    out: list[str] = []
-    try:
-        _plain_json(obj, out, "\n")
-    except (_NotPlain, RecursionError):
-        return json.dumps(obj, indent=2, allow_nan=False)
-    return "".join(out)
-
-
 def write_json_atomic(path: str | os.PathLike[str], obj: Any) -> Path:
     """Write ``obj`` as indented JSON (NaN is rejected: not valid JSON) atomically."""
-    return write_text_atomic(path, indented_json(obj) + "\n")
+    return write_text_atomic(path, json.dumps(obj, indent=2, allow_nan=False) + "\n")
 
 
 PathLike = str | os.PathLike[str]
