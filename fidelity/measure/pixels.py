@@ -426,10 +426,8 @@ def _code_histogram(vals: np.ndarray) -> np.ndarray:
     ``bincount`` of a channel's strided codes), numpy's beyond."""
     levels = np.iinfo(vals.dtype).max + 1
     if 0 < len(vals) < 1 << 24:
-        try:
-            import cv2
-        except ImportError:  # pragma: no cover - OpenCV is a dependency
-            return np.stack([np.bincount(vals[:, c], minlength=levels) for c in range(3)])
+        import cv2
+
         image = np.ascontiguousarray(vals).reshape(-1, 1, 3)
         return np.stack([np.rint(cv2.calcHist([image], [c], None, [levels], [0, levels])
                                  .ravel()).astype(np.int64) for c in range(3)])
