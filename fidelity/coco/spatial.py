@@ -57,6 +57,7 @@ from numpy.typing import NDArray
 
 from fidelity.coco.tables.degradation import calibration_chart, chart_value
 from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.core.fileio import optional_float
 
 __all__ = [
     "AXIS_LABELS",
@@ -282,13 +283,10 @@ class AxisValue:
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> AxisValue:
         """Inverse of :meth:`to_json`."""
-        return cls(str(d["property"]), _opt(d.get("x")), _opt(d.get("u")),
-                   _opt(d.get("spread")), tuple(float(v) for v in d.get("draws") or ()),
+        return cls(str(d["property"]), optional_float(d.get("x")), optional_float(d.get("u")),
+                   optional_float(d.get("spread")), tuple(float(v) for v in d.get("draws") or ()),
                    tuple(int(s) for s in d.get("seeds") or ()))
 
-
-def _opt(v: Any) -> float | None:
-    return None if v is None else float(v)
 
 
 def chart_axis_value(name: str, severity: int, draws: int = CHART_DRAWS,

@@ -361,6 +361,11 @@ def finite_or_none(x: float | None) -> float | None:
     return None if x is None or not math.isfinite(x) else float(x)
 
 
+def optional_float(x: Any) -> float | None:
+    """``x`` as a float, None as None (a record's optional number read back from JSON)."""
+    return None if x is None else float(x)
+
+
 def json_ready(obj: Any) -> Any:
     """``obj`` as strict JSON values: records with a ``to_json`` method are written by it,
     numpy scalars and arrays become Python numbers and lists, tuples lists, paths strings,

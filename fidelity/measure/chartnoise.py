@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from fidelity.core.errors import InvalidValueError
+from fidelity.core.fileio import optional_float
 from fidelity.measure.noise import (
     ChannelNoise,
     PatchNoise,
@@ -83,16 +84,13 @@ def _num(x: Any) -> float:
     return math.nan if x is None else float(x)
 
 
-def _opt(x: Any) -> float | None:
-    return None if x is None else float(x)
-
 
 def _patch_from_json(d: Mapping[str, Any]) -> PatchNoise:
     chans = tuple(ChannelNoise(str(c["channel"]), float(c["mean"]), float(c["variance"]),
                                float(c["u_variance"]), float(c["sigma"]), _num(c["snr"]),
                                _num(c["snr_db"])) for c in d["channels"])
-    return PatchNoise(chans, _opt(d.get("chroma_r")), _opt(d.get("chroma_b")),
-                      _opt(d.get("chroma")), int(d["n"]), float(d["design_effect"]),
+    return PatchNoise(chans, optional_float(d.get("chroma_r")), optional_float(d.get("chroma_b")),
+                      optional_float(d.get("chroma")), int(d["n"]), float(d["design_effect"]),
                       str(d["method"]))
 
 
@@ -109,7 +107,7 @@ def _transfer_from_json(d: Mapping[str, Any]) -> PhotonTransfer:
         elif key == "method":
             kw[key] = str(value)
         elif key in optional:
-            kw[key] = _opt(value)
+            kw[key] = optional_float(value)
         else:
             kw[key] = _num(value)
     return PhotonTransfer(**kw)

@@ -47,6 +47,7 @@ import numpy as np
 
 from fidelity.chart.locate import ChartLocation, apply_homography
 from fidelity.chart.turned import PaintedEdgeTarget
+from fidelity.core.fileio import finite_or_none, optional_float
 from fidelity.measure.sharpness import (
     HALF_NYQUIST,
     LUMINANCE_WEIGHTS,
@@ -89,13 +90,6 @@ METHOD = ("the brightest-contrast neighbouring patches' edge per direction, an a
 
 Linearise = Callable[[np.ndarray], np.ndarray]
 
-
-def _fin(x: float | None) -> float | None:
-    return None if x is None or not math.isfinite(x) else float(x)
-
-
-def _opt(x: Any) -> float | None:
-    return None if x is None else float(x)
 
 
 @dataclass(frozen=True)
@@ -144,7 +138,7 @@ class ChannelMTF:
     def to_json(self) -> dict[str, Any]:
         """Field names as keys; ``refusal`` as ``{reason, message}`` or None; ``curve`` as
         ``{frequencies, mtf}``, present only where there is one."""
-        d: dict[str, Any] = {k: _fin(getattr(self, k)) for k in (
+        d: dict[str, Any] = {k: finite_or_none(getattr(self, k)) for k in (
             "mtf50", "u_mtf50", "mtf10", "u_mtf10", "mtf_half_nyquist", "u_mtf_half_nyquist",
             "snr")}
         out = {"channel": self.channel, **d,
@@ -158,10 +152,10 @@ class ChannelMTF:
     def from_json(cls, d: Mapping[str, Any]) -> ChannelMTF:
         """Inverse of :meth:`to_json`."""
         ref = d.get("refusal")
-        return cls(str(d["channel"]), _opt(d.get("mtf50")), _opt(d.get("u_mtf50")),
-                   _opt(d.get("mtf10")), _opt(d.get("u_mtf10")),
-                   _opt(d.get("mtf_half_nyquist")), _opt(d.get("u_mtf_half_nyquist")),
-                   _opt(d.get("snr")),
+        return cls(str(d["channel"]), optional_float(d.get("mtf50")), optional_float(d.get("u_mtf50")),
+                   optional_float(d.get("mtf10")), optional_float(d.get("u_mtf10")),
+                   optional_float(d.get("mtf_half_nyquist")), optional_float(d.get("u_mtf_half_nyquist")),
+                   optional_float(d.get("snr")),
                    (str(ref["reason"]), str(ref["message"])) if ref else None,
                    ((tuple(float(f) for f in c["frequencies"]), tuple(float(m) for m in c["mtf"]))
                     if (c := d.get("curve")) else None))
@@ -205,7 +199,7 @@ class EdgeSharpness:
     def to_json(self) -> dict[str, Any]:
         """Field names as keys."""
         return {"direction": self.direction, "patches": list(self.patches),
-                "method": self.method, "angle": _fin(self.angle),
+                "method": self.method, "angle": finite_or_none(self.angle),
                 "roi": list(self.roi) if self.roi else None,
                 "channels": [c.to_json() for c in self.channels],
                 "refusal": ({"reason": self.refusal[0], "message": self.refusal[1]}
@@ -295,13 +289,13 @@ def _from_fit(name: str, fit: EdgeFit) -> ChannelMTF:
     if name == "Y":
         fs = tuple(float(f) for f in np.linspace(0.0, MAX_FREQUENCY, FIT_CURVE_POINTS))
         curve = (fs, tuple(_gauss_mtf(s, f) for f in fs))
-    return ChannelMTF(name, fit.mtf50, fit.u_mtf50, m10, u10, half, abs(d_half) * u, _fin(snr),
+    return ChannelMTF(name, fit.mtf50, fit.u_mtf50, m10, u10, half, abs(d_half) * u, finite_or_none(snr),
                       curve=curve)
 
 
 def _from_sfr(name: str, sfr: EdgeSFR, u: float | None) -> ChannelMTF:
     return ChannelMTF(name, sfr.mtf50, u, sfr.mtf10, None, sfr.mtf_half_nyquist, None,
-                      _fin(sfr.snr),
+                      finite_or_none(sfr.snr),
                       curve=(tuple(sfr.frequencies), tuple(sfr.mtf)) if name == "Y" else None)
 
 

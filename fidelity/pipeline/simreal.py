@@ -18,6 +18,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from fidelity.core.fileio import finite_or_none, optional_float
 from fidelity.measure.chartnoise import PTC_CHANNEL
 from fidelity.prediction.properties import chart_mtf50
 
@@ -72,7 +73,7 @@ class TextureSide:
         """``mtf50``, ``direction``, ``method``, ``curve`` ``{frequencies, mtf}``, ``noise``
         ``{patches, mu, sigma}``, ``photon_transfer`` ``{read_variance, gain}`` or None,
         ``fit_refusal``, ``grey_snr``, ``grey_snr_db`` and the two ``missing`` reasons."""
-        fin = _fin
+        fin = finite_or_none
         return {"mtf50": fin(self.mtf50), "direction": self.direction, "method": self.method,
                 "curve": {"frequencies": list(self.frequencies), "mtf": list(self.mtf)},
                 "noise": {"patches": list(self.patches), "mu": list(self.mu),
@@ -89,13 +90,13 @@ class TextureSide:
     def from_json(cls, d: Mapping[str, Any]) -> TextureSide:
         """Inverse of :meth:`to_json` (an infinite SNR, written as None, reads back None)."""
         c, n, pt = d["curve"], d["noise"], d.get("photon_transfer")
-        return cls(_opt(d.get("mtf50")), d.get("direction"), d.get("method"),
+        return cls(optional_float(d.get("mtf50")), d.get("direction"), d.get("method"),
                    tuple(float(v) for v in c["frequencies"]), tuple(float(v) for v in c["mtf"]),
                    tuple(str(v) for v in n["patches"]), tuple(float(v) for v in n["mu"]),
                    tuple(float(v) for v in n["sigma"]),
                    None if pt is None else float(pt["read_variance"]),
                    None if pt is None else float(pt["gain"]), d.get("fit_refusal"),
-                   _opt(d.get("grey_snr")), _opt(d.get("grey_snr_db")),
+                   optional_float(d.get("grey_snr")), optional_float(d.get("grey_snr_db")),
                    d.get("sharpness_missing"), d.get("noise_missing"))
 
 
@@ -126,25 +127,18 @@ class TextureComparison:
         """``sim``, ``real``, ``mtf50_ratio``, ``snr_difference_db``, ``not_compared`` as
         ``[{property, reason}]``."""
         return {"sim": self.sim.to_json(), "real": self.real.to_json(),
-                "mtf50_ratio": _fin(self.mtf50_ratio),
-                "snr_difference_db": _fin(self.snr_difference_db),
+                "mtf50_ratio": finite_or_none(self.mtf50_ratio),
+                "snr_difference_db": finite_or_none(self.snr_difference_db),
                 "not_compared": [{"property": p, "reason": r} for p, r in self.not_compared]}
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> TextureComparison:
         """Inverse of :meth:`to_json`."""
         return cls(TextureSide.from_json(d["sim"]), TextureSide.from_json(d["real"]),
-                   _opt(d.get("mtf50_ratio")), _opt(d.get("snr_difference_db")),
+                   optional_float(d.get("mtf50_ratio")), optional_float(d.get("snr_difference_db")),
                    tuple((str(x["property"]), str(x["reason"]))
                          for x in d.get("not_compared") or ()))
 
-
-def _fin(x: float | None) -> float | None:
-    return None if x is None or not math.isfinite(x) else float(x)
-
-
-def _opt(x: Any) -> float | None:
-    return None if x is None else float(x)
 
 
 def texture_side(report: Any) -> TextureSide:

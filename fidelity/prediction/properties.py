@@ -52,7 +52,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fidelity.core import schema as sc
 from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
-from fidelity.core.fileio import display_path
+from fidelity.core.fileio import display_path, optional_float
 from fidelity.core.resources import resource_dir
 
 __all__ = [
@@ -226,8 +226,8 @@ def parse_property_table(obj: Any, where: str) -> PropertyTable:
             try:
                 x = float(c["x"])
                 row = PropertyCell(str(c["family"]), float(c["level"]), x,
-                                   {k: _opt(c.get(k)) for k in LOSS_COLUMNS if k in c},
-                                   {k: _opt(c.get(k + "_se")) for k in LOSS_COLUMNS if k in c})
+                                   {k: optional_float(c.get(k)) for k in LOSS_COLUMNS if k in c},
+                                   {k: optional_float(c.get(k + "_se")) for k in LOSS_COLUMNS if k in c})
             except (KeyError, TypeError, ValueError) as exc:
                 raise bad(f"models.{m}.cells[{i}]: {exc}") from None
             if not (math.isfinite(x) and x > 0):
@@ -239,9 +239,6 @@ def parse_property_table(obj: Any, where: str) -> PropertyTable:
     return PropertyTable(str(obj.get("name", "")), str(prop), baseline, models, cells, images,
                          dict(obj.get("provenance") or {}))
 
-
-def _opt(v: Any) -> float | None:
-    return None if v is None else float(v)
 
 
 def load_property_table(property_or_path: str) -> PropertyTable:
@@ -379,11 +376,11 @@ class PropertyPrediction:
     def from_json(cls, d: Mapping[str, Any]) -> PropertyPrediction:
         """Inverse of :meth:`to_json` (a value written as None reads back as inf)."""
         return cls(str(d["property"]), str(d["axis"]), str(d["unit"]),
-                   math.inf if d.get("x") is None else float(d["x"]), _opt(d.get("u_x")),
+                   math.inf if d.get("x") is None else float(d["x"]), optional_float(d.get("u_x")),
                    str(d["column"]), math.inf if d.get("loss") is None else float(d["loss"]),
-                   _opt(d.get("u_loss")), str(d["status"]), d.get("family"), d.get("detector"),
-                   str(d["table"]), float(d.get("scale", 1.0)), _opt(d.get("native_x")),
-                   _opt(d.get("target_x")))
+                   optional_float(d.get("u_loss")), str(d["status"]), d.get("family"), d.get("detector"),
+                   str(d["table"]), float(d.get("scale", 1.0)), optional_float(d.get("native_x")),
+                   optional_float(d.get("target_x")))
 
 
 def _worst_at(table: PropertyTable, x: float, size: str, column: str
@@ -699,7 +696,7 @@ class Combined:
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> Combined:
         """Inverse of :meth:`to_json`."""
-        return cls(float(d["loss"]), _opt(d.get("u_loss")), str(d["dominant"]),
+        return cls(float(d["loss"]), optional_float(d.get("u_loss")), str(d["dominant"]),
                    {str(k): float(v) for k, v in d["parts"].items()},
                    tuple(str(k) for k in d.get("missing") or ()), str(d.get("rule", "sum")),
                    float(d.get("interaction", 0.0)))
