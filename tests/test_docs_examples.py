@@ -6,6 +6,7 @@ settings file it read."""
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 import shlex
@@ -318,9 +319,7 @@ def _skip_reason(argv: list[str], ws: Path) -> str | None:
             return "Mitsuba is not installed"
     if any(a.split(":")[0] in ("gaussian_noise", "shot_noise", "defocus_blur", "gaussian_blur")
            for a in argv):
-        try:
-            import imagecorruptions  # noqa: F401
-        except ImportError:
+        if importlib.util.find_spec("imagecorruptions") is None:  # found, not imported
             return "imagecorruptions is not installed (the noise and blur corruptions)"
     for i, a in enumerate(argv[2:], start=2):
         if a.startswith("-") or argv[i - 1] in OUTPUTS:
