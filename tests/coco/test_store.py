@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fidelity.coco.scoring import CocoScore
 from fidelity.coco.store import RegisteredModel, pack_detections, unpack_detections
 from fidelity.coco.sweep import SweepStore
 from fidelity.coco.validate.store import ValidationStore
@@ -68,10 +69,36 @@ def test_detections_of_other_preprocessing_are_not_mixed(tmp_path: Path,
 
 
 def test_a_validation_keeps_one_image_set_per_model(tmp_path: Path) -> None:
+    """Narrowing a model's image set would compare cameras on two sets: refused."""
     s = ValidationStore(tmp_path)
     s.register_model("m", "m.onnx", "aa" * 32, 100, {})
     with pytest.raises(InvalidValueError, match="image limit"):
-        s.register_model("m", "m.onnx", "aa" * 32, 250, {})
+        s.register_model("m", "m.onnx", "aa" * 32, 50, {})
+    s.register_model("u", "u.onnx", "bb" * 32, None, {})
+    with pytest.raises(InvalidValueError, match="image limit"):
+        s.register_model("u", "u.onnx", "bb" * 32, 100, {})
+
+
+@pytest.mark.parametrize("limit", [250, None])
+def test_a_validation_extended_to_more_images_keeps_its_detections(tmp_path: Path,
+                                                                   limit: int | None) -> None:
+    """The first 100 images by id are a prefix of the first 250 (or of all): their detections
+    stay, the model's scored cells go (to be scored over the larger set), the other model's
+    cells stay, and the replaced limit is kept in the provenance."""
+    s = ValidationStore(tmp_path)
+    score = CocoScore(0.3, 0.5, 0.3, {"person": 0.4}, 100, 7)
+    for model in ("m", "other"):
+        s.register_model(model, f"{model}.onnx", model[0] * 64, 100, {})
+        s.add_detections(model, "cam", [(1, np.zeros((0, 6), np.float32))])
+        s.finish_cell(model, "cam", score, [], 1.0)
+    s.register_model("m", "m.onnx", "m" * 64, limit, {})
+    assert s.cell("m", "cam") is None
+    assert s.stored_images("m", "cam") == {1}
+    assert s.cell("other", "cam") is not None
+    assert s.models()["m"].limit_images == limit
+    assert s.models()["m"].settings["earlier"] == [{"limit_images": 100}]
+    s.register_model("m", "m.onnx", "m" * 64, limit, {})  # a resume at the new limit
+    assert s.stored_images("m", "cam") == {1}
 
 
 def _open_together(folder: str, barrier: object, results: object) -> None:

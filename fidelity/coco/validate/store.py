@@ -99,6 +99,12 @@ CREATE TABLE IF NOT EXISTS imported (cell TEXT PRIMARY KEY, source TEXT NOT NULL
 """
 
 
+def extends_limit(stored: int | None, limit: int | None) -> bool:
+    """Whether image limit ``limit`` (None: every image) covers a run made at ``stored``:
+    the first ``stored`` images by id are then a prefix of the new run's."""
+    return stored is not None and (limit is None or limit > stored)
+
+
 class ValidationStore(ResultsStore):
     """The crash-safe SQLite store of a validation run (module docstring)."""
 
@@ -110,10 +116,27 @@ class ValidationStore(ResultsStore):
 
     def _model_conflict(self, stored_sha256: str, stored_limit: int | None, sha256: str,
                         limit: int | None) -> str | None:
-        """A validation compares cameras on one image set: the image limit must match too."""
-        if stored_sha256 != sha256 or stored_limit != limit:
+        """A validation compares cameras on one image set: the image limit must match, or
+        grow (:func:`extends_limit`: the first N images by id are a prefix of the larger
+        set, so the stored detections stay valid and :meth:`register_model` drops the
+        model's scored cells to be scored again over the larger set)."""
+        if stored_sha256 != sha256 or (stored_limit != limit
+                                        and not extends_limit(stored_limit, limit)):
             return "was run from another file or image limit; use a new --store"
         return None
+
+    def register_model(self, model: str, file: str, sha256: str, limit: int | None,
+                       settings: dict[str, Any]) -> None:
+        """Record a model (:meth:`ResultsStore.register_model`); one registered again with a
+        larger image limit keeps its detections and loses its scored cells and draws, which
+        the run then scores again over the larger image set."""
+        row = self.db.execute("SELECT sha256, limit_images FROM models WHERE model=?",
+                              (model,)).fetchone()
+        super().register_model(model, file, sha256, limit, settings)
+        if row and row[0] == sha256 and row[1] != limit and extends_limit(row[1], limit):
+            with self.db:
+                self.db.execute("DELETE FROM cells WHERE model=?", (model,))
+                self.db.execute("DELETE FROM draws WHERE model=?", (model,))
 
     def case(self, camera: str) -> tuple[str, CameraRecord] | None:
         """(key, record) of a camera's chart/prediction/emulation record, or None."""
@@ -266,6 +289,7 @@ class ValidationCells:
 
 __all__ = [
     "STORE_NAME",
+    "extends_limit",
     "ValidationCell",
     "ValidationCells",
     "ValidationStore",
