@@ -411,7 +411,7 @@ class ValidatedProperties:
                     for k, v in (d.get("degradations") or {}).items()})
 
     def words(self) -> str:
-        """``the sharpness and noise validation: 39 cameras, 73 of 78 (camera, detector)
+        """``the sharpness and noise validation: 39 cameras, 74 of 78 (camera, detector)
         cells within the combined loss``."""
         return (f"the sharpness and noise validation: {self.cameras} cameras, {self.within} of "
                 f"{self.cells} (camera, detector) cells within the combined loss")
