@@ -62,7 +62,26 @@ def test_the_committed_report_is_the_study_of_the_committed_cells():
     assert by[("classic", "table")]["median_ratio"] == pytest.approx(
         directional["classic_median_ratio"], rel=1e-12)
     text = (REPO / "reports/validation/interval.md").read_text(encoding="utf-8")
-    assert text == st.markdown(st.study(cells), st.noise_floor(cells), 60)
+    assert text == st.markdown(st.study(cells), st.noise_floor(cells), 60,
+                               st.per_detector(cells))
+
+
+def test_each_detector_alone_is_its_own_cells_study():
+    """The per-detector rows are the shipped method on that detector's 30 cells (one per
+    camera), not the pooled constants; the committed report holds them."""
+    cells = st.read_cells(json.loads(st.VALIDATION.read_text()))
+    rows = st.per_detector(cells)
+    assert [model for model, *_ in rows] == sorted(set(cells.model.tolist()))
+    doc = json.loads((REPO / "reports/validation/interval.json").read_text())
+    for (model, o, m, se), saved in zip(rows, doc["per_detector"], strict=True):
+        k = cells.model == model
+        assert o.cells == o.cameras == int(k.sum()) == 30
+        assert m == float(np.median(cells.measured[k])) and se == float(np.median(cells.se[k]))
+        assert saved == json.loads(json.dumps({"model": model, "median_measured": m,
+                                               "median_se": se, **o.to_json()}))
+    pooled = next(o for o in st.study(cells)
+                  if (o.method, o.prediction) == ("calibrated", "classic"))
+    assert {o.constants["a"] for _, o, _, _ in rows} != {pooled.constants["a"]}
 
 
 def test_jackknife_plus_is_the_order_statistic_of_the_leave_one_out_bounds():
