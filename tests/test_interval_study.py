@@ -122,3 +122,26 @@ def test_cv_plus_covers_exchangeable_cameras():
         cells = st.Cells(camera, np.tile(["a", "b"], n), m, np.ones(2 * n), p, p)
         covered.append(st.leave_one_camera_out(cells, "classic", "calibrated CV+", 0.10).coverage)
     assert 0.85 <= float(np.mean(covered)) <= 0.97
+
+
+def test_the_property_margins_are_the_study_of_the_property_report():
+    """reports/validation/properties-interval.{json,md} are the methods on the committed
+    sharpness and noise validation; its ``table`` row is that report's own summary (the
+    verdict's combined loss as it is), and a margin fitted leaving each camera out covers
+    what the report's misses need (issue 56)."""
+    report = json.loads(st.PROPERTIES.read_text())
+    cells = st.read_property_cells(report)
+    outcomes = st.property_study(cells)
+    doc = json.loads((REPO / "reports/validation/properties-interval.json").read_text())
+    assert doc["outcomes"] == json.loads(json.dumps([o.to_json() for o in outcomes]))
+    text = (REPO / "reports/validation/properties-interval.md").read_text(encoding="utf-8")
+    assert text == st.property_markdown(outcomes, "reports/validation/properties.json")
+    by = {o.method: o for o in outcomes}
+    summary = report["summary"]["dmap_points"]["all"]
+    assert by["table"].cells == summary["cells"] and by["table"].cells_covered == summary["within"]
+    assert by["table"].median_ratio == pytest.approx(summary["median_ratio"], rel=1e-12)
+    assert {(c, d) for c, d, _, _ in by["table"].misses} == {
+        (m["camera"], m["model"]) for m in summary["misses"]}
+    # an additive margin never lowers a bound: it covers at least the table's cells
+    assert by["additive"].constants["q"] >= 0 and (
+        by["additive"].cells_covered >= by["table"].cells_covered)

@@ -34,6 +34,10 @@ The target (issue 58): coverage >= 95 % with a median over-prediction <= 2x.
 
 Usage: python -m benchmarks.studies.interval [--validation reports/validation/directional.json]
        [--out reports/validation/interval] [--data [fidelity/data/validated-bound.json]]
+       python -m benchmarks.studies.interval --properties [reports/validation/properties.json]
+
+``--properties``: the same methods on the sharpness and noise validation's cells (the
+verdict's combined loss), written to ``properties-interval.md|json`` (issue 56).
 
 ``--data`` also writes the shipped validated bound (:mod:`fidelity.prediction.validated`): the
 calibrated bound of the classic prediction fitted on all cells, with its leave-one-camera-out
@@ -88,6 +92,55 @@ def read_cells(doc: Mapping[str, Any], column: str = "all") -> Cells:
     return Cells(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
                  *(np.array([float(r[2][k]) for r in rows])
                    for k in ("measured", "se", "classic", "directional")))
+
+
+#: The sharpness and noise validation's report (``fidelity validate --properties``).
+PROPERTIES = REPO / "reports" / "validation" / "properties.json"
+#: The combination rule of the verdict, as the property report names it.
+PROPERTY_RULE = "sum+interaction"
+
+
+def read_property_cells(doc: Mapping[str, Any], column: str = "dmap_points",
+                        rule: str = PROPERTY_RULE) -> Cells:
+    """The cells of a ``properties.json`` document (its ``rows``): the verdict's combined loss
+    (``rule``) as both predictions, loss column ``column`` (ΔmAP in points)."""
+    rows = doc["rows"]
+    combined = np.array([float(r["predicted"][rule][column]) for r in rows])
+    return Cells(np.array([r["camera"] for r in rows]), np.array([r["model"] for r in rows]),
+                 np.array([float(r["measured"][column]) for r in rows]),
+                 np.array([float(r["se"][column]) for r in rows]), combined, combined.copy())
+
+
+def property_study(cells: Cells, alpha: float = ALPHA) -> list[Outcome]:
+    """Every method (:data:`METHODS`) on the combined loss of the property cells."""
+    return [leave_one_camera_out(cells, "classic", method, alpha) for method in METHODS]
+
+
+def property_markdown(outcomes: Sequence[Outcome], source: str) -> str:
+    """The property study's report (every number from :func:`property_study`)."""
+    lines = [
+        "# A margin for the sharpness and noise verdict: split-conformal bounds on its cells",
+        "",
+        f"Made by `python -m benchmarks.studies.interval --properties` from `{source}` (the "
+        "verdict's combined loss, sum + sqrt(l_sharpness l_noise), against the measured "
+        f"ΔmAP in points): {outcomes[0].cells} cells, {outcomes[0].cameras} cameras. Each "
+        "bound is judged leaving its camera out, as for colour (`interval.md`). Target: "
+        f"coverage >= {TARGET_COVERAGE:.0%} with a median over-prediction <= "
+        f"{TARGET_RATIO:g}x. The verdict uses the combined loss as it is (`table`).",
+        "",
+        "| method | cells covered | cameras covered | median U / measured | same, cells > 2 SE "
+        "| fitted on all cells | meets target | misses |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for o in outcomes:
+        constants = ", ".join(f"{k} = {v:.3g}" for k, v in o.constants.items()) or "–"
+        misses = "; ".join(f"{c} / {d} ({mv:.2f} > {u:.2f})" for c, d, mv, u in o.misses)
+        lines.append(
+            f"| {o.method} | {o.cells_covered} of {o.cells} ({o.coverage:.1%}) | "
+            f"{o.cameras_covered} of {o.cameras} | {_fmt(o.median_ratio)} | "
+            f"{_fmt(o.median_ratio_significant)} ({o.significant_cells} cells) | {constants} | "
+            f"{'yes' if o.meets_target else 'no'} | {misses or '–'} |")
+    return "\n".join(lines) + "\n"
 
 
 def conformal_quantile(scores: np.ndarray, alpha: float = ALPHA) -> float:
@@ -413,7 +466,23 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--out", type=Path, default=REPO / "reports" / "validation" / "interval")
     ap.add_argument("--data", type=Path, nargs="?", const=DATA, default=None,
                     help=f"also write the shipped validated bound (default {DATA.name})")
+    ap.add_argument("--properties", type=Path, nargs="?", const=PROPERTIES, default=None,
+                    help="instead: the methods on the sharpness and noise validation's "
+                         f"combined loss (default {PROPERTIES.name}), written to "
+                         "properties-interval.md|json beside --out")
     args = ap.parse_args(argv)
+    if args.properties is not None:
+        source = (str(args.properties.relative_to(REPO))
+                  if args.properties.is_relative_to(REPO) else str(args.properties))
+        outcomes = property_study(read_property_cells(
+            json.loads(args.properties.read_text(encoding="utf-8"))))
+        out = args.out.with_name("properties-interval")
+        print(write_json_atomic(out.with_suffix(".json"), {
+            "source": source, "alpha": ALPHA, "rule": PROPERTY_RULE, "column": "dmap_points",
+            "target": {"coverage": TARGET_COVERAGE, "median_ratio": TARGET_RATIO},
+            "outcomes": [o.to_json() for o in outcomes]}))
+        print(write_text_atomic(out.with_suffix(".md"), property_markdown(outcomes, source)))
+        return
     cells = read_cells(json.loads(args.validation.read_text(encoding="utf-8")))
     outcomes = study(cells)
     floor = noise_floor(cells)
