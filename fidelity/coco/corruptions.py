@@ -428,12 +428,9 @@ class CorruptionCell:
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> CorruptionCell:
         """Inverse of :meth:`to_json`."""
-        param = d["parameter"]
-        return cls(str(d["corruption"]), int(d["severity"]),
-                   tuple(param) if isinstance(param, list) else param,
+        return cls(str(d["corruption"]), int(d["severity"]), _parameter_of(d),
                    float(d["chart_delta_e"]), float(d["chart_max_delta_e"]),
-                   str(d["worst_patch"]), dict(d.get("parts") or {}),
-                   tuple(MeasuredLoss.from_json(m) for m in d.get("measured") or ()),
+                   str(d["worst_patch"]), dict(d.get("parts") or {}), _measured_of(d),
                    CellPrediction.from_json(d["prediction"]) if d.get("prediction") else None)
 
     def measured_for(self, model: str) -> Any:
@@ -471,11 +468,8 @@ class SpatialCell:
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> SpatialCell:
         """Inverse of :meth:`to_json`."""
-        param = d["parameter"]
-        return cls(str(d["corruption"]), int(d["severity"]),
-                   tuple(param) if isinstance(param, list) else param,
-                   AxisValue.from_json(d["axis"]),
-                   tuple(MeasuredLoss.from_json(m) for m in d.get("measured") or ()),
+        return cls(str(d["corruption"]), int(d["severity"]), _parameter_of(d),
+                   AxisValue.from_json(d["axis"]), _measured_of(d),
                    PropertyPrediction.from_json(d["prediction"]) if d.get("prediction")
                    else None)
 
@@ -516,6 +510,17 @@ def spatial_chart_cells(corruptions: Sequence[str] = SPATIAL_CORRUPTIONS,
             out.append(SpatialCell(name, sev, PARAMETERS[name][sev - 1], axis,
                                    prediction=predict_spatial(axis)))
     return out
+
+
+def _parameter_of(d: Mapping[str, Any]) -> Any:
+    """A cell's ``parameter`` read back from JSON (a list was a tuple)."""
+    param = d["parameter"]
+    return tuple(param) if isinstance(param, list) else param
+
+
+def _measured_of(d: Mapping[str, Any]) -> tuple[MeasuredLoss, ...]:
+    """A cell's ``measured`` losses read back from JSON."""
+    return tuple(MeasuredLoss.from_json(m) for m in d.get("measured") or ())
 
 
 def _measured_for(measured: Sequence[Any], model: str) -> Any:
@@ -732,15 +737,14 @@ def merge_results(base: CocoCResults, new: CocoCResults) -> CocoCResults:
     --update``): each (corruption, severity) of ``new`` replaces that of ``base``; the colour
     run's provenance is ``new``'s when it has colour cells, else ``base``'s, and
     ``meta["spatial_run"]`` likewise for the noise and blur cells."""
-    def keyed(cells: Sequence[Any], order: Sequence[str]) -> tuple[Any, ...]:
-        return tuple(sorted(cells, key=lambda c: (order.index(c.corruption), c.severity)))
+    def merged(old: Sequence[Any], fresh: Sequence[Any], order: Sequence[str]
+               ) -> tuple[Any, ...]:
+        have = {(c.corruption, c.severity) for c in fresh}
+        kept = [c for c in old if (c.corruption, c.severity) not in have] + list(fresh)
+        return tuple(sorted(kept, key=lambda c: (order.index(c.corruption), c.severity)))
 
-    have = {(c.corruption, c.severity) for c in new.cells}
-    have_s = {(c.corruption, c.severity) for c in new.spatial}
-    cells = keyed([c for c in base.cells if (c.corruption, c.severity) not in have]
-                  + list(new.cells), CORRUPTIONS)
-    spatial = keyed([c for c in base.spatial if (c.corruption, c.severity) not in have_s]
-                    + list(new.spatial), SPATIAL_CORRUPTIONS)
+    cells = merged(base.cells, new.cells, CORRUPTIONS)
+    spatial = merged(base.spatial, new.spatial, SPATIAL_CORRUPTIONS)
     src = new if new.cells else base
     meta = {k: v for k, v in src.meta.items() if k != "spatial_run"}
     run = (new if new.spatial else base).meta.get("spatial_run")
