@@ -51,7 +51,7 @@ import hashlib
 import json
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -83,6 +83,10 @@ class Cells:
     se: np.ndarray
     classic: np.ndarray
     directional: np.ndarray
+
+    def where(self, mask: np.ndarray) -> Cells:
+        """The cells where ``mask`` (boolean, one per cell) is true."""
+        return Cells(*(getattr(self, f.name)[mask] for f in fields(self)))
 
 
 def read_cells(doc: Mapping[str, Any], column: str = "all") -> Cells:
@@ -133,13 +137,9 @@ def property_markdown(outcomes: Sequence[Outcome], source: str) -> str:
         "|---|---|---|---|---|---|---|---|",
     ]
     for o in outcomes:
-        constants = ", ".join(f"{k} = {v:.3g}" for k, v in o.constants.items()) or "–"
         misses = "; ".join(f"{c} / {d} ({mv:.2f} > {u:.2f})" for c, d, mv, u in o.misses)
-        lines.append(
-            f"| {o.method} | {o.cells_covered} of {o.cells} ({o.coverage:.1%}) | "
-            f"{o.cameras_covered} of {o.cameras} | {_fmt(o.median_ratio)} | "
-            f"{_fmt(o.median_ratio_significant)} ({o.significant_cells} cells) | {constants} | "
-            f"{'yes' if o.meets_target else 'no'} | {misses or '–'} |")
+        lines.append(f"| {o.method} | {o.coverage_cells()} | {o.constants_words()} | "
+                     f"{'yes' if o.meets_target else 'no'} | {misses or '–'} |")
     return "\n".join(lines) + "\n"
 
 
@@ -251,6 +251,17 @@ class Outcome:
     def meets_target(self) -> bool:
         return self.coverage >= TARGET_COVERAGE and self.median_ratio <= TARGET_RATIO
 
+    def coverage_cells(self) -> str:
+        """The report's table cells of coverage and over-prediction: cells covered, cameras
+        covered, the median over-prediction and the same over the significant cells."""
+        return (f"{self.cells_covered} of {self.cells} ({self.coverage:.1%}) | "
+                f"{self.cameras_covered} of {self.cameras} | {_fmt(self.median_ratio)} | "
+                f"{_fmt(self.median_ratio_significant)} ({self.significant_cells} cells)")
+
+    def constants_words(self) -> str:
+        """The constants fitted on all cells, ``a = 0.141, q = 1.44`` (– when none)."""
+        return ", ".join(f"{k} = {v:.3g}" for k, v in self.constants.items()) or "–"
+
     def to_json(self) -> dict[str, Any]:
         return {"method": self.method, "prediction": self.prediction, "cells": self.cells,
                 "cells_covered": self.cells_covered, "coverage": self.coverage,
@@ -309,8 +320,7 @@ def per_detector(cells: Cells, alpha: float = ALPHA) -> list[tuple[str, Outcome,
     out = []
     for model in sorted(set(cells.model.tolist())):
         k = cells.model == model
-        own = Cells(*(getattr(cells, f)[k] for f in ("camera", "model", "measured", "se",
-                                                      "classic", "directional")))
+        own = cells.where(k)
         out.append((model, leave_one_camera_out(own, SHIPPED["prediction"], SHIPPED["method"],
                                                 alpha),
                     float(np.median(own.measured)), float(np.median(own.se))))
@@ -391,13 +401,9 @@ def markdown(outcomes: Sequence[Outcome], floor: Mapping[str, float], cells: int
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for o in outcomes:
-        constants = ", ".join(f"{k} = {v:.3g}" for k, v in o.constants.items()) or "–"
-        lines.append(
-            f"| {o.prediction} | {o.method} | {o.cells_covered} of {o.cells} "
-            f"({o.coverage:.1%}) | {o.cameras_covered} of {o.cameras} | "
-            f"{_fmt(o.median_ratio)} | {_fmt(o.median_ratio_significant)} "
-            f"({o.significant_cells} cells) | {_fmt(o.median_bound)} | {constants} | "
-            f"{'yes' if o.meets_target else 'no'} |")
+        lines.append(f"| {o.prediction} | {o.method} | {o.coverage_cells()} | "
+                     f"{_fmt(o.median_bound)} | {o.constants_words()} | "
+                     f"{'yes' if o.meets_target else 'no'} |")
     lines += [
         "",
         f"**Result.** {'The target is met by ' + ', '.join(f'{o.prediction} {o.method}' for o in met) if met else 'No method meets the target'}. "
