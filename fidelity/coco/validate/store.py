@@ -130,10 +130,10 @@ class ValidationStore(ResultsStore):
         """Record a model (:meth:`ResultsStore.register_model`); one registered again with a
         larger image limit keeps its detections and loses its scored cells and draws, which
         the run then scores again over the larger image set."""
-        row = self.db.execute("SELECT sha256, limit_images FROM models WHERE model=?",
+        row = self.db.execute("SELECT limit_images FROM models WHERE model=?",
                               (model,)).fetchone()
         super().register_model(model, file, sha256, limit, settings)
-        if row and row[0] == sha256 and row[1] != limit and extends_limit(row[1], limit):
+        if row and row[0] != limit:  # registered: the limit grew (_model_conflict)
             with self.db:
                 self.db.execute("DELETE FROM cells WHERE model=?", (model,))
                 self.db.execute("DELETE FROM draws WHERE model=?", (model,))
