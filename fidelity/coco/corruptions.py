@@ -55,6 +55,7 @@ from fidelity.coco.measure import MeasuredLoss, measure_mapping
 from fidelity.coco.spatial import (
     AXIS_LABELS,
     CHART_DRAWS,
+    IMAGECORRUPTIONS_VERSION,
     PARAMETERS,
     PROPERTY,
     SEVERITIES,
@@ -101,8 +102,6 @@ CORRUPTIONS: tuple[str, ...] = ("brightness", "contrast", "saturate")
 #: chart ΔE scale, the noise and blur ones (:mod:`fidelity.coco.spatial`) on the SNR and MTF50
 #: scales.
 ALL_CORRUPTIONS: tuple[str, ...] = CORRUPTIONS + SPATIAL_CORRUPTIONS
-#: Version of the package whose definitions :func:`corrupt` implements.
-IMAGECORRUPTIONS_VERSION = "1.1.2"
 #: Side of a patch of the chart image, pixels.
 PATCH_PX = 32
 
@@ -885,7 +884,6 @@ __all__ = [
     "BRIGHTNESS",
     "CONTRAST",
     "CORRUPTIONS",
-    "IMAGECORRUPTIONS_VERSION",
     "PATCH_PX",
     "PREDICTION_SIZE",
     "SATURATE",

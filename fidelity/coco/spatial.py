@@ -97,7 +97,8 @@ PARAMETERS: Mapping[str, tuple[Any, ...]] = {
 CHART_DRAWS = 8
 #: Severities of COCO-C.
 SEVERITIES: tuple[int, ...] = (1, 2, 3, 4, 5)
-#: Version of the package the corruptions come from.
+#: Version of the package the corruptions come from: the noise and blur ones called here, the
+#: colour ones that :func:`fidelity.coco.corruptions.corrupt` implements.
 IMAGECORRUPTIONS_VERSION = "1.1.2"
 
 
