@@ -37,7 +37,11 @@ Usage: python -m benchmarks.studies.interval [--validation reports/validation/di
        python -m benchmarks.studies.interval --properties [reports/validation/properties.json]
 
 ``--properties``: the same methods on the sharpness and noise validation's cells (the
-verdict's combined loss), written to ``properties-interval.md|json`` (issue 56).
+verdict's combined loss), written to ``properties-interval.md|json`` (issue 56); with
+``--data`` it also writes the shipped margin of the combined loss
+(:class:`fidelity.prediction.validated.PropertyMargin`, ``fidelity/data/property-margin.json``):
+the log-ratio bound of every loss column, fitted on all cells, with its leave-one-camera-out
+coverage and over-prediction.
 
 ``--data`` also writes the shipped validated bound (:mod:`fidelity.prediction.validated`): the
 calibrated bound of the classic prediction fitted on all cells, with its leave-one-camera-out
@@ -58,7 +62,15 @@ from typing import Any
 import numpy as np
 
 from fidelity.core.fileio import write_json_atomic, write_text_atomic
-from fidelity.prediction.validated import VALIDATED_BOUND_FILE, ValidatedBound
+from fidelity.prediction.properties import COMBINATION, LOSS_COLUMNS, PROPERTY_TABLES
+from fidelity.prediction.tablefile import DEFAULT_TABLE
+from fidelity.prediction.validated import (
+    PROPERTY_MARGIN_FILE,
+    VALIDATED_BOUND_FILE,
+    ColumnMargin,
+    PropertyMargin,
+    ValidatedBound,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 #: The validation cells with both predictions (``fidelity validate``'s directional part).
@@ -130,7 +142,8 @@ def property_markdown(outcomes: Sequence[Outcome], source: str) -> str:
         f"ΔmAP in points): {outcomes[0].cells} cells, {outcomes[0].cameras} cameras. Each "
         "bound is judged leaving its camera out, as for colour (`interval.md`). Target: "
         f"coverage >= {TARGET_COVERAGE:.0%} with a median over-prediction <= "
-        f"{TARGET_RATIO:g}x. The verdict uses the combined loss as it is (`table`).",
+        f"{TARGET_RATIO:g}x. The verdict adds the `{MARGIN_METHOD}` margin to the combined "
+        "loss (`fidelity/data/property-margin.json`, fitted on all cells).",
         "",
         "| method | cells covered | cameras covered | median U / measured | same, cells > 2 SE "
         "| fitted on all cells | meets target | misses |",
@@ -466,12 +479,41 @@ def shipped_bound(outcomes: Sequence[Outcome], validation: Path) -> ValidatedBou
         hashlib.sha256(validation.read_bytes()).hexdigest())
 
 
+#: The method of the shipped margin of the combined property loss.
+MARGIN_METHOD = "log-ratio"
+#: Where it ships.
+MARGIN_DATA = REPO / "fidelity" / "data" / PROPERTY_MARGIN_FILE
+
+
+def shipped_margin(doc: Mapping[str, Any], validation: Path) -> PropertyMargin:
+    """The :class:`~fidelity.prediction.validated.PropertyMargin` of the property validation
+    ``doc`` (``properties.json``, read from ``validation``): the :data:`MARGIN_METHOD` bound
+    of each loss column's combined loss, its ``q`` fitted on all cells, its
+    leave-one-camera-out figures (:func:`leave_one_camera_out`)."""
+    columns = {}
+    for column in LOSS_COLUMNS:
+        o = leave_one_camera_out(read_property_cells(doc, column), "classic", MARGIN_METHOD)
+        columns[column] = ColumnMargin(float(o.constants["q"]), o.cells, o.cameras,
+                                       o.cells_covered, o.cameras_covered, o.median_ratio,
+                                       o.median_ratio_significant, o.significant_cells)
+    source = (str(validation.relative_to(REPO)) if validation.is_relative_to(REPO)
+              else str(validation))
+    if doc.get("combination") != COMBINATION:
+        raise ValueError(f"{source}: combination {doc.get('combination')!r}, the verdict's "
+                         f"is {COMBINATION!r}")
+    return PropertyMargin(
+        "log-ratio split-conformal", COMBINATION,
+        {"colour": DEFAULT_TABLE, **PROPERTY_TABLES}, str(doc["size"]), ALPHA, LOG_OFFSET,
+        columns, source, hashlib.sha256(validation.read_bytes()).hexdigest())
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--validation", type=Path, default=VALIDATION)
     ap.add_argument("--out", type=Path, default=REPO / "reports" / "validation" / "interval")
     ap.add_argument("--data", type=Path, nargs="?", const=DATA, default=None,
-                    help=f"also write the shipped validated bound (default {DATA.name})")
+                    help=f"also write the shipped validated bound (default {DATA.name}; with "
+                         f"--properties the margin, default {MARGIN_DATA.name})")
     ap.add_argument("--properties", type=Path, nargs="?", const=PROPERTIES, default=None,
                     help="instead: the methods on the sharpness and noise validation's "
                          f"combined loss (default {PROPERTIES.name}), written to "
@@ -480,14 +522,17 @@ def main(argv: list[str] | None = None) -> None:
     if args.properties is not None:
         source = (str(args.properties.relative_to(REPO))
                   if args.properties.is_relative_to(REPO) else str(args.properties))
-        outcomes = property_study(read_property_cells(
-            json.loads(args.properties.read_text(encoding="utf-8"))))
+        pdoc = json.loads(args.properties.read_text(encoding="utf-8"))
+        outcomes = property_study(read_property_cells(pdoc))
         out = args.out.with_name("properties-interval")
         print(write_json_atomic(out.with_suffix(".json"), {
             "source": source, "alpha": ALPHA, "rule": PROPERTY_RULE, "column": "dmap_points",
             "target": {"coverage": TARGET_COVERAGE, "median_ratio": TARGET_RATIO},
             "outcomes": [o.to_json() for o in outcomes]}))
         print(write_text_atomic(out.with_suffix(".md"), property_markdown(outcomes, source)))
+        if args.data is not None:
+            target = MARGIN_DATA if args.data == DATA else args.data
+            print(write_json_atomic(target, shipped_margin(pdoc, args.properties).to_json()))
         return
     cells = read_cells(json.loads(args.validation.read_text(encoding="utf-8")))
     outcomes = study(cells)

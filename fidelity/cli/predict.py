@@ -17,6 +17,7 @@ from fidelity.prediction.interpolate import INTERPOLATIONS
 from fidelity.prediction.interval import prediction_interval
 from fidelity.prediction.judge import directional_table_name
 from fidelity.prediction.properties import (
+    PropertyTable,
     combine,
     load_property_table,
     predict_property,
@@ -30,9 +31,10 @@ from fidelity.prediction.tablefile import (
     available_tables,
     load_prediction_table,
 )
+from fidelity.prediction.validated import with_margin
 from fidelity.prediction.verdict import Criterion
 from fidelity.report.jsonform import coco_c_answer_json, predict_json
-from fidelity.report.words import COLUMN_LABELS, prediction_notes
+from fidelity.report.words import COLUMN_LABELS, combined_rule_words, prediction_notes
 
 if TYPE_CHECKING:
     from fidelity.prediction.interval import PredictionInterval
@@ -171,6 +173,7 @@ def _print_properties(delta_e: float | None, mtf50: float | None, snr: float | N
               "bicycle": "dap_bicycle_points"}[cls]
     label = COLUMN_LABELS.get(column, column)
     parts: dict[str, tuple[float, float | None] | None] = {}
+    used: dict[str, PropertyTable] = {}
     out: dict[str, Any] = {"column": column, "size": size}
     if delta_e is not None:
         if not (math.isfinite(delta_e) and delta_e >= 0):
@@ -189,6 +192,7 @@ def _print_properties(delta_e: float | None, mtf50: float | None, snr: float | N
         if math.isnan(x) or not x > 0:
             raise InvalidValueError(f"{flag} {x!r}: must be a number > 0")
         t = load_property_table(prop)
+        used[prop] = t
         pp = predict_property(t, x, size=size, column=column)
         parts[prop] = (pp.loss, pp.u_loss)
         limit = property_threshold(t, _loss_at_3(column, size, table), size=size, column=column)
@@ -203,8 +207,9 @@ def _print_properties(delta_e: float | None, mtf50: float | None, snr: float | N
             click.echo(f"  the loss of ΔE00 3 is reached at {axis} {limit:.3g}")
         out[prop] = pp.to_json() | {"limit_at_delta_e_3": limit}
     if len([v for v in parts.values() if v is not None]) > 1:
-        c = combine(parts)
-        click.echo(f"combined ({c.rule}): {label} {c.loss:.2f} points; {c.dominant} dominates")
+        c = with_margin(combine(parts), column, used, size)
+        click.echo(f"combined ({combined_rule_words(c)}): {label} {c.loss:.2f} points; "
+                   f"{c.dominant} dominates")
         out["combined"] = c.to_json()
     if json_path:
         write_json_output(json_path, out)

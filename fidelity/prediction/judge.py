@@ -34,6 +34,7 @@ from fidelity.prediction.interval import prediction_interval
 from fidelity.prediction.properties import (
     PropertyJudgement,
     PropertyPrediction,
+    PropertyTable,
     chart_mtf50,
     chart_snr,
     combine,
@@ -44,6 +45,7 @@ from fidelity.prediction.properties import (
 )
 from fidelity.prediction.table import Prediction, predict
 from fidelity.prediction.tablefile import PredictionTable, TableKind, load_prediction_table
+from fidelity.prediction.validated import with_margin
 from fidelity.prediction.verdict import (
     SIMPLE,
     Criterion,
@@ -213,12 +215,14 @@ def judge_properties(verdict: Verdict | None, prediction: Prediction, criterion:
     preds: list[PropertyPrediction] = []
     skipped: list[tuple[str, str]] = []
     limits: dict[str, float | None] = {}
+    used: dict[str, PropertyTable] = {}
     for prop, measured in zip(JUDGED_PROPERTIES, (sharpness, noise), strict=True):
         try:
             table = (tables or {}).get(prop) or load_property_table(prop)
         except FidelityError as exc:
             skipped.append((prop, f"no table: {exc}"))
             continue
+        used[prop] = table
         limits[prop] = (property_threshold(table, limit_loss, size=size, column=column)
                         if limit_loss is not None else None)
         got, why = _native_value(prop, measured)
@@ -244,7 +248,8 @@ def judge_properties(verdict: Verdict | None, prediction: Prediction, criterion:
     parts: dict[str, tuple[float, float | None] | None] = {
         "colour": None if colour is None else (max(colour, 0.0), u_colour)}
     parts |= {p.property: (p.loss, p.u_loss) for p in preds}
-    combined = combine(parts) if any(v is not None for v in parts.values()) else None
+    combined = (with_margin(combine(parts), column, used, size)
+                if any(v is not None for v in parts.values()) else None)
     failed: tuple[str, ...] = ()
     if criterion is not None and verdict is not None:
         if criterion.kind == "max-dmap" and combined is not None and preds:

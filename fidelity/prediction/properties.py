@@ -676,8 +676,9 @@ class Combined:
     """The properties' losses combined (:func:`combine`): ``loss`` and ``u_loss`` (the parts'
     uncertainties propagated to first order), the ``dominant`` property (largest loss, a tie
     broken by :func:`dominant_property`), the parts, the blur-noise ``interaction`` term
-    included in ``loss``, the properties not judged (``missing``: not measured) and the
-    rule."""
+    included in ``loss``, the properties not judged (``missing``: not measured), the rule,
+    and the validated ``margin`` included in ``loss``
+    (:func:`fidelity.prediction.validated.with_margin`; 0: none applied)."""
 
     loss: float
     u_loss: float | None
@@ -686,12 +687,18 @@ class Combined:
     missing: tuple[str, ...] = ()
     rule: str = COMBINATION
     interaction: float = 0.0
+    margin: float = 0.0
+
+    @builtins.property
+    def rule_loss(self) -> float:
+        """The rule's loss before the validated margin (``loss - margin``)."""
+        return self.loss - self.margin if self.margin else self.loss
 
     def to_json(self) -> dict[str, Any]:
         """Field names as keys."""
         return {"loss": self.loss, "u_loss": self.u_loss, "dominant": self.dominant,
                 "parts": dict(self.parts), "interaction": self.interaction,
-                "missing": list(self.missing), "rule": self.rule}
+                "margin": self.margin, "missing": list(self.missing), "rule": self.rule}
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> Combined:
@@ -699,7 +706,7 @@ class Combined:
         return cls(float(d["loss"]), optional_float(d.get("u_loss")), str(d["dominant"]),
                    {str(k): float(v) for k, v in d["parts"].items()},
                    tuple(str(k) for k in d.get("missing") or ()), str(d.get("rule", "sum")),
-                   float(d.get("interaction", 0.0)))
+                   float(d.get("interaction", 0.0)), float(d.get("margin", 0.0)))
 
 
 def dominant_property(losses: Mapping[str, float]) -> str:

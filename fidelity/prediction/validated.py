@@ -27,18 +27,25 @@ say when a camera is not.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from typing import Any
 
 from fidelity.core.resources import resource_dir
+from fidelity.prediction.properties import INTERACTING, Combined, PropertyTable
 from fidelity.prediction.table import Prediction
 
-__all__ = ["VALIDATED_BOUND_FILE", "ValidatedBound", "load_validated_bound", "validated_upper"]
+__all__ = ["PROPERTY_MARGIN_FILE", "VALIDATED_BOUND_FILE", "ColumnMargin", "PropertyMargin",
+           "ValidatedBound", "load_property_margin", "load_validated_bound", "validated_upper",
+           "with_margin"]
 
 #: The shipped bound (``fidelity/data/``), written by the interval study.
 VALIDATED_BOUND_FILE = "validated-bound.json"
+#: The shipped margin of the combined property loss (``fidelity/data/``), written by
+#: ``python -m benchmarks.studies.interval --properties --data``.
+PROPERTY_MARGIN_FILE = "property-margin.json"
 
 
 @dataclass(frozen=True)
@@ -130,3 +137,182 @@ def validated_upper(prediction: Prediction, column: str = "dmap_points"
     if c is None or c.value is None:
         return None
     return bound.upper(c.value), bound
+
+
+# --------------------------------------------------------------------------------------------
+# The margin of the combined property loss (issue 56)
+
+
+@dataclass(frozen=True)
+class ColumnMargin:
+    """The margin of one loss column and how it held on the sharpness and noise validation.
+
+    ``q``: the split-conformal quantile of ``log((m + c) / (L + c))`` over the validation's
+    cells (``m`` measured, ``L`` the combination rule's loss), fitted on all of them;
+    ``cells``, ``cameras``; leaving each camera out (``q`` fitted on the other cameras'
+    cells), ``cells_covered`` and ``cameras_covered`` (both of its cells), ``median_ratio``
+    (median bound / measured over the cells measured above 0) and
+    ``median_ratio_significant`` over the ``significant_cells`` measured more than 2 SE above
+    0."""
+
+    q: float
+    cells: int
+    cameras: int
+    cells_covered: int
+    cameras_covered: int
+    median_ratio: float
+    median_ratio_significant: float | None
+    significant_cells: int
+
+    def to_json(self) -> dict[str, Any]:
+        """Field names as keys."""
+        return {"q": self.q, "cells": self.cells, "cameras": self.cameras,
+                "cells_covered": self.cells_covered, "cameras_covered": self.cameras_covered,
+                "median_ratio": self.median_ratio,
+                "median_ratio_significant": self.median_ratio_significant,
+                "significant_cells": self.significant_cells}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> ColumnMargin:
+        """Inverse of :meth:`to_json`."""
+        sig = d.get("median_ratio_significant")
+        return cls(float(d["q"]), int(d["cells"]), int(d["cameras"]), int(d["cells_covered"]),
+                   int(d["cameras_covered"]), float(d["median_ratio"]),
+                   None if sig is None else float(sig), int(d["significant_cells"]))
+
+
+@dataclass(frozen=True)
+class PropertyMargin:
+    """The validated margin of the combined colour, sharpness and noise loss.
+
+    The combination rule (:data:`fidelity.prediction.properties.COMBINATION`) bounds the
+    validation's measured joint loss in most cells, but a cell measured on the very images a
+    table was measured on can sit a few hundredths of a point above its prediction. The margin
+    is the split-conformal log-ratio bound of that rule's loss ``L`` (Lei et al. 2018, JASA
+    113; ``benchmarks.studies.interval``, ``reports/validation/properties-interval.md``):
+
+    ``U = (L + c) exp(max(q, 0)) - c``
+
+    with ``c`` = :attr:`offset` (in the column's unit) and ``q`` the column's
+    :class:`ColumnMargin`. It never lowers the rule's loss (``q`` below 0 counts as 0). It
+    applies where it was validated: sharpness and noise both judged, from the ``tables``
+    validated, with the detectors of the validated size class (module :func:`applies`).
+
+    Attributes
+    ----------
+    method
+        ``log-ratio split-conformal``.
+    rule
+        The combination rule it was fitted on.
+    tables
+        Property -> the table the validation predicted with (``colour``, ``sharpness``,
+        ``noise``).
+    size
+        The detector size class validated.
+    alpha
+        Miscoverage (0.05).
+    offset
+        ``c`` (column units; 0.5).
+    columns
+        Loss column -> its :class:`ColumnMargin`.
+    source, source_sha256
+        The validation file's path in the repository and its SHA-256.
+    """
+
+    method: str
+    rule: str
+    tables: Mapping[str, str]
+    size: str
+    alpha: float
+    offset: float
+    columns: Mapping[str, ColumnMargin]
+    source: str
+    source_sha256: str
+
+    def upper(self, loss: float, column: str = "dmap_points") -> float:
+        """``(max(L, 0) + c) exp(max(q, 0)) - c`` for the rule's loss ``loss`` of
+        ``column`` (its unit); the loss itself for a column without a margin."""
+        m = self.columns.get(column)
+        if m is None:
+            return loss
+        return (max(loss, 0.0) + self.offset) * math.exp(max(m.q, 0.0)) - self.offset
+
+    def factor(self, column: str = "dmap_points") -> float:
+        """``d U / d L``: ``exp(max(q, 0))`` (1 for a column without a margin)."""
+        m = self.columns.get(column)
+        return 1.0 if m is None else math.exp(max(m.q, 0.0))
+
+    def words(self, column: str = "dmap_points") -> str:
+        """``log-ratio split-conformal at 95 % on the validation's 78 cells; leaving each
+        camera out it held 75 of 78``."""
+        m = self.columns[column]
+        return (f"{self.method} at {100 * (1 - self.alpha):.0f} % on the validation's "
+                f"{m.cells} cells; leaving each camera out it held {m.cells_covered} of "
+                f"{m.cells}")
+
+    def to_json(self) -> dict[str, Any]:
+        """Field names as keys, with ``kind`` ``property-margin``."""
+        return {"kind": "property-margin", "method": self.method, "rule": self.rule,
+                "tables": dict(self.tables), "size": self.size, "alpha": self.alpha,
+                "offset": self.offset,
+                "columns": {k: v.to_json() for k, v in self.columns.items()},
+                "source": self.source, "source_sha256": self.source_sha256}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> PropertyMargin:
+        """Inverse of :meth:`to_json`."""
+        return cls(str(d["method"]), str(d["rule"]),
+                   {str(k): str(v) for k, v in d["tables"].items()}, str(d["size"]),
+                   float(d["alpha"]), float(d["offset"]),
+                   {str(k): ColumnMargin.from_json(v) for k, v in d["columns"].items()},
+                   str(d["source"]), str(d["source_sha256"]))
+
+
+@lru_cache(maxsize=1)
+def load_property_margin() -> PropertyMargin | None:
+    """The shipped :class:`PropertyMargin`; None when the package ships none."""
+    path = resource_dir("data") / PROPERTY_MARGIN_FILE
+    if not path.is_file():
+        return None
+    return PropertyMargin.from_json(json.loads(path.read_text(encoding="utf-8")))
+
+
+def with_margin(combined: Combined, column: str, tables: Mapping[str, PropertyTable],
+                size: str, margin: PropertyMargin | None = None) -> Combined:
+    """``combined`` with the validated margin in its loss where the margin applies; as it is
+    elsewhere.
+
+    Parameters
+    ----------
+    combined
+        The rule's combination (:func:`fidelity.prediction.properties.combine`).
+    column
+        Its loss column (:data:`fidelity.prediction.properties.LOSS_COLUMNS`).
+    tables
+        Property -> the table its loss was predicted from.
+    size
+        The detector size class of the predictions.
+    margin
+        The margin (None: the shipped :func:`load_property_margin`).
+
+    Returns
+    -------
+    Combined
+        ``loss`` = :meth:`PropertyMargin.upper` of the rule's loss, ``u_loss`` times
+        :meth:`PropertyMargin.factor`, ``margin`` the difference, where: the column has a
+        margin; sharpness and noise were both judged (the validation's cells always judged
+        both); each from the table validated, whose detectors at ``size`` are those of the
+        validated size class. Elsewhere ``combined`` itself (``margin`` 0).
+    """
+    margin = load_property_margin() if margin is None else margin
+    if margin is None or column not in margin.columns or combined.margin:
+        return combined
+    for prop in INTERACTING:
+        table = tables.get(prop)
+        if (prop not in combined.parts or table is None
+                or table.name != margin.tables.get(prop)
+                or table.detectors(size) != table.detectors(margin.size)):
+            return combined
+    upper = margin.upper(combined.loss, column)
+    u = None if combined.u_loss is None else combined.u_loss * margin.factor(column)
+    return replace(combined, loss=upper, u_loss=u, margin=upper - combined.loss)

@@ -52,6 +52,7 @@ from fidelity.report.terminal import outside_line, plus_minus, texture_lines
 from fidelity.report.words import (
     COLUMN_LABELS,
     column_note,
+    combined_rule_words,
     exposure_words,
     prediction_notes,
     property_lines,
@@ -299,7 +300,7 @@ def properties_section(report: ChartReport) -> Section | None:
                          p.status, f"{p.family}, {p.detector}"), p.table))
     rows += [(k, "–", "not judged", why, "–") for k, why in j.not_judged]
     if j.combined is not None:
-        rows.append((f"combined ({j.combined.rule})", "–",
+        rows.append((f"combined ({combined_rule_words(j.combined)})", "–",
                      plus_minus(j.combined.loss, j.combined.u_loss),
                      f"{j.combined.dominant} dominates", "–"))
     words = [line for line in property_lines(j) if line.startswith("limits ")]

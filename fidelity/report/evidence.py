@@ -67,7 +67,7 @@ from fidelity.prediction.interval import (
     validity_domain,
 )
 from fidelity.prediction.properties import load_property_table
-from fidelity.prediction.validated import VALIDATED_BOUND_FILE
+from fidelity.prediction.validated import PROPERTY_MARGIN_FILE, VALIDATED_BOUND_FILE
 from fidelity.report.evidencefile import EVIDENCE_FORMATS, evidence_format, invocation_record
 from fidelity.report.jsonform import fit_json, verdict_json
 
@@ -97,7 +97,8 @@ CREDIBILITY_SECTIONS: Mapping[str, tuple[str, ...]] = {
                      "subjects[].property_tables[].sha256",
                      "subjects[].directional_table.sha256", "context_of_use.file.sha256",
                      "subjects[].validity.validated_cameras.sha256",
-                     "subjects[].validated_bound.sha256", "record.content_sha256",
+                     "subjects[].validated_bound.sha256",
+                     "subjects[].property_margin.sha256", "record.content_sha256",
                      "tool.commit", "tool.code_sha256", "record.created", "invocation.argv",
                      "invocation.settings.sha256"),
     "decision": ("decision_rule", "subjects[].verdict", "record.exit_code", "record.outcome"),
@@ -333,6 +334,16 @@ def validated_bound_file(report: ChartReport) -> dict[str, Any] | None:
     return _file_entry(resource_dir("data") / VALIDATED_BOUND_FILE)
 
 
+def property_margin_file(report: ChartReport) -> dict[str, Any] | None:
+    """``{"path", "sha256"}`` of the shipped margin of the combined property loss
+    (:data:`~fidelity.prediction.validated.PROPERTY_MARGIN_FILE`) where the report's combined
+    loss includes it; None otherwise."""
+    j = report.properties
+    if j is None or j.combined is None or not j.combined.margin:
+        return None
+    return _file_entry(resource_dir("data") / PROPERTY_MARGIN_FILE)
+
+
 def _file_entry(path: Path) -> dict[str, Any]:
     try:
         digest: str | None = file_sha256(path)
@@ -367,6 +378,7 @@ def _subject(subject: str, report: ChartReport | None, error: str | None) -> dic
         "property_tables": property_tables(report),
         "directional_table": directional_table(report),
         "validated_bound": validated_bound_file(report),
+        "property_margin": property_margin_file(report),
         "measurement": {
             "quantity": "mean ΔE00", "value": report.mean_delta_e,
             "max_delta_e": report.max_delta_e, "worst_patch": report.worst_patch,
@@ -556,7 +568,7 @@ def write_fit_evidence(paths: PathArg | Sequence[PathArg], report: FitReport,
 __all__ = ["CONTENT_HASH_KEY", "CREDIBILITY_SECTIONS", "EVIDENCE_FORMATS",
            "EVIDENCE_SCHEMA_VERSION", "OUTCOMES", "WRITERS", "canonical_record_bytes",
            "code_sha256", "record_content_sha256", "scores_files", "seal_record",
-           "validated_bound_file", "validated_cameras_file", "environment_record", "evidence_format",
+           "validated_bound_file", "property_margin_file", "validated_cameras_file", "environment_record", "evidence_format",
            "evidence_record", "evidence_schema", "evidence_schema_path",
            "fit_evidence_record", "git_commit", "invocation_record", "tool_record", "write_evidence",
            "write_fit_evidence", "write_record"]

@@ -49,6 +49,9 @@ def record_files(record: Mapping[str, Any], *, evidence: bool = False
         bound = subject.get("validated_bound")
         if bound:
             yield "validated bound", "validated-bound", bound
+        margin = subject.get("property_margin")
+        if margin:
+            yield "property margin", "property-margin", margin
         directional = subject.get("directional_table")
         if directional and directional.get("path"):
             yield "directional table", directional.get("name") or "directional", directional

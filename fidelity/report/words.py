@@ -200,7 +200,22 @@ def _combined_words(v: Verdict) -> str:
     terms = " + ".join(f"{k} {x:.2f}" for k, x in j.combined.parts.items())
     if j.combined.interaction > 0:
         terms += f" + blur-noise interaction {j.combined.interaction:.2f}"
+    if j.combined.margin > 0:
+        terms += f" + validated margin {j.combined.margin:.2f}"
     return f" ({terms}: {j.combined.dominant} dominates)"
+
+
+def _margin_words(c: Any) -> str:
+    """``, + 0.03 validated margin`` where the combined loss ``c`` (a
+    :class:`fidelity.prediction.properties.Combined`) has one; nothing otherwise."""
+    return f", + {c.margin:.2f} validated margin" if c.margin > 0 else ""
+
+
+def combined_rule_words(c: Any) -> str:
+    """``sum + sharpness-noise interaction, + 0.03 validated margin``: the rule of a combined
+    loss ``c`` (a :class:`fidelity.prediction.properties.Combined`) and its validated margin
+    where it has one."""
+    return str(c.rule) + _margin_words(c)
 
 
 def _not_judged(v: Verdict) -> str:
@@ -248,7 +263,7 @@ def property_lines(judgement: Any, not_judged: bool = True) -> list[str]:
         pm = "" if c.u_loss is None else f" ± {c.u_loss:.2f}"
         pm += " points" if judgement.column.endswith("_points") else " %"
         lines.append(f"combined: predicted {label} {c.loss:.2f}{pm} ({c.rule} of "
-                     + ", ".join(c.parts) + f"; {c.dominant} dominates)")
+                     + ", ".join(c.parts) + _margin_words(c) + f"; {c.dominant} dominates)")
     reasons: dict[str, list[str]] = {}
     for k, why in judgement.not_judged if not_judged else ():
         reasons.setdefault(why, []).append(k)
@@ -282,5 +297,6 @@ def _guard(v: Verdict) -> str:
     return f" (guarded: {told}, k = {v.decision.k:g}{strict})"
 
 
-__all__ = ["COLUMN_LABELS", "ceiling_words", "column_note", "failure_message",
+__all__ = ["COLUMN_LABELS", "ceiling_words", "column_note", "combined_rule_words",
+           "failure_message",
            "prediction_notes", "property_lines", "verdict_message"]

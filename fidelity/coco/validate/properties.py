@@ -202,7 +202,9 @@ def camera_prediction(case: CameraCase) -> CameraPrediction:
                 snr = pred.x
         not_judged |= dict(judged.not_judged)
         parts[column] = p
-        combined[column] = judged.combined.loss if judged.combined is not None else p["colour"]
+        # the rule's loss: the validated margin is fitted on it (benchmarks.studies.interval)
+        combined[column] = (judged.combined.rule_loss if judged.combined is not None
+                            else p["colour"])
         if column == "dmap_points" and judged.combined is not None:
             dominant = judged.combined.dominant
     group = tuple(k for k, has in (("colour", m.mean_delta_e >= COLOUR_ERROR_DELTA_E),
