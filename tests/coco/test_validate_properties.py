@@ -82,7 +82,9 @@ def test_camera_prediction_is_the_check_verdicts() -> None:
     j = report.properties
     assert j is not None and j.combined is not None
     assert got.chart_delta_e == pytest.approx(report.mean_delta_e, rel=1e-12)
-    assert got.combined["dmap_points"] == pytest.approx(j.combined.loss, rel=1e-12)
+    # the rule's loss: the validated margin is fitted on it, and check adds it
+    assert got.combined["dmap_points"] == pytest.approx(j.combined.rule_loss, rel=1e-12)
+    assert j.combined.margin > 0
     assert got.parts["dmap_points"] == pytest.approx(dict(j.combined.parts), rel=1e-12)
     sharp, noise = j.prediction("sharpness"), j.prediction("noise")
     assert sharp is not None and noise is not None

@@ -19,6 +19,7 @@ from PIL import Image as PILImage
 from fidelity.cli import main
 from fidelity.colour.charts import load_chart
 from fidelity.core.errors import InvalidValueError
+from fidelity.core.resources import resource_dir
 from fidelity.prediction.table import predict
 from fidelity.prediction.tablefile import DEFAULT_TABLE
 from fidelity.prediction.transforms import apply_transform
@@ -631,7 +632,9 @@ def test_blur_and_noise_fail_a_loss_gate_and_name_the_property(degraded_charts, 
         parts = j["combined"]["parts"]
         interaction = math.sqrt(max(parts.get("sharpness", 0), 0) * max(parts.get("noise", 0), 0))
         assert j["combined"]["interaction"] == pytest.approx(interaction)
-        assert doc["verdict"]["value"] == pytest.approx(sum(parts.values()) + interaction)
+        rule = sum(parts.values()) + interaction
+        assert doc["verdict"]["value"] == pytest.approx(rule + j["combined"]["margin"])
+        assert 0 < j["combined"]["margin"] < 0.01 * rule + 0.01
         assert parts["colour"] == pytest.approx(doc["prediction"]["dmap_points"], abs=1e-9)
 
 
@@ -649,7 +652,11 @@ def test_predict_mtf50_and_snr(tmp_path):
     doc = json.loads(out.read_text())
     total = doc["colour"]["loss"] + doc["sharpness"]["loss"] + doc["noise"]["loss"]
     total += math.sqrt(doc["sharpness"]["loss"] * doc["noise"]["loss"])  # their interaction
-    assert doc["combined"]["loss"] == pytest.approx(total)
+    # and the validated margin: (L + c) exp(q) - c
+    margin = json.loads((resource_dir("data") / "property-margin.json").read_text())
+    q, c = margin["columns"]["dmap_points"]["q"], margin["offset"]
+    assert doc["combined"]["loss"] == pytest.approx((total + c) * math.exp(q) - c)
+    assert doc["combined"]["margin"] == pytest.approx((total + c) * math.expm1(q))
     assert run("predict", "--mtf50", "1.0").exit_code == 0  # sharper than the chart: 0
     for bad in (["--snr", "-1"], ["--mtf50", "nan"]):
         r = run("predict", *bad)

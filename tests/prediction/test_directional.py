@@ -204,8 +204,9 @@ def test_directional_verdict_and_json_round_trip():
     props = directional.properties
     assert props is not None
     assert props.colour == pytest.approx(directional.directional.dmap_points)
+    assert props.combined is not None
     assert directional.verdict.value == pytest.approx(
-        props.colour + sum(x.loss or 0.0 for x in props.predictions))
+        props.colour + sum(x.loss or 0.0 for x in props.predictions) + props.combined.margin)
     doc = chart_report_json(directional)
     assert doc["bound"] == "directional"
     back = ChartReport.from_json(doc)

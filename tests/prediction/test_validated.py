@@ -225,3 +225,14 @@ def test_check_and_gate_judge_the_loss_with_its_margin(tmp_path):
     assert g.exit_code == 1, g.output
     verdict = json.loads((tmp_path / "g.json").read_text(encoding="utf-8"))["verdict"]
     assert verdict["value"] == pytest.approx(c.loss, rel=1e-9)
+
+
+def test_the_docs_quote_the_shipped_margin():
+    margin = load_property_margin()
+    assert margin is not None
+    got = margin.columns["dmap_points"]
+    page = " ".join((REPO / "docs" / "validation.md").read_text(encoding="utf-8").split())
+    share = 100 * got.cells_covered / got.cells
+    assert (f"{got.cells_covered} of {got.cells} cells ({share:.1f} %) leaving each camera out, "
+            f"at a median over-prediction of {got.median_ratio:.2f}x") in page
+    assert f"`q` = {got.q:.3g} for ΔmAP in points" in page

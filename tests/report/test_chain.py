@@ -189,6 +189,21 @@ def test_row_differences_names_each_row_and_can_leave_out_the_standard_errors():
     assert row_differences(doc, other, standard_errors=False)[1] == []
 
 
+def test_row_differences_allow_another_processors_last_bits_only():
+    """A chart calibration measured again on another CPU differs in its last bits (seen:
+    0.11865259369943015 against ...014): the same number; a change in the 11th digit is not."""
+    doc = json.loads(MEASURED.read_text())
+    other = json.loads(MEASURED.read_text())
+    point = other["curves"][0]["points"][2]
+    value = point["dmap_points"]
+    assert isinstance(value, float) and value != 0
+    point["dmap_points"] = value * (1 + 4e-16)
+    assert row_differences(doc, other)[1] == []
+    point["dmap_points"] = value * (1 + 1e-10)
+    differ = row_differences(doc, other)[1]
+    assert len(differ) == 1 and "dmap_points" in differ[0]
+
+
 @pytest.mark.shared
 def test_fidelity_tables_of_the_committed_scores_files_writes_the_shipped_tables(shared,
                                                                                  tmp_path):

@@ -86,13 +86,15 @@ def test_verify_finds_every_file_unchanged(checked):
     assert got[("code", "fidelity")]["status"] == "same"
     assert got[("environment", "Python and libraries")]["status"] == "same"
     # the camera, the prediction, calibration, sharpness and noise tables, the validated
-    # cameras, the validated bound, and the five scores files the tables rebuild from (four
-    # detectors' colour sweeps, one blur and noise sweep)
+    # cameras, the validated bound, the validated margin of the combined loss, and the five
+    # scores files the tables rebuild from (four detectors' colour sweeps, one blur and noise
+    # sweep)
     for name in ("coco1000-sharpness", "coco1000-noise"):
         assert got[("property table", name)]["status"] == "unchanged"
     assert got[("validated bound", "validated-bound")]["status"] == "unchanged"
+    assert got[("property margin", "property-margin")]["status"] == "unchanged"
     assert sum(k[0] == "scores file" for k in got) == 5
-    assert r.output.splitlines()[-2] == "VERIFIED: 13 of 13 files unchanged, record intact"
+    assert r.output.splitlines()[-2] == "VERIFIED: 14 of 14 files unchanged, record intact"
 
 
 def test_verify_fails_on_a_changed_or_missing_file_and_looks_in_inputs(checked, tmp_path):
@@ -103,7 +105,7 @@ def test_verify_fails_on_a_changed_or_missing_file_and_looks_in_inputs(checked, 
     assert r.exit_code == 1, r.output
     assert f"changed; SHA-256 {sha256(camera)[:12]}, recorded " \
            f"{hashlib.sha256(original).hexdigest()[:12]}" in r.output
-    assert r.output.splitlines()[-1] == "NOT VERIFIED: 1 changed of 13 files, record intact"
+    assert r.output.splitlines()[-1] == "NOT VERIFIED: 1 changed of 14 files, record intact"
     handed = folder / "handed over"
     handed.mkdir()
     (handed / camera.name).write_bytes(original)

@@ -148,8 +148,10 @@ def test_the_combined_loss_is_a_line_with_its_uncertainty_rule_and_dominant() ->
     assert j is not None and j.combined is not None and j.combined.u_loss is not None
     lines = property_lines(j)
     c = j.combined
+    assert c.margin > 0
     assert lines[-2] == (f"combined: predicted ΔmAP {c.loss:.2f} ± {c.u_loss:.2f} points "
-                         f"({c.rule} of colour, sharpness, noise; {c.dominant} dominates)")
+                         f"({c.rule} of colour, sharpness, noise, + {c.margin:.2f} validated "
+                         f"margin; {c.dominant} dominates)")
     assert lines[-1].startswith("limits equivalent to ΔE00 3")
     parts = c.parts
-    assert c.loss == pytest.approx(sum(parts.values()) + c.interaction)
+    assert c.loss == pytest.approx(sum(parts.values()) + c.interaction + c.margin)

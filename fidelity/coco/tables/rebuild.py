@@ -21,6 +21,7 @@ computed again and are left out of it (:func:`row_differences` ``standard_errors
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 from collections.abc import Mapping, Sequence
@@ -81,12 +82,26 @@ def row_name(key: RowKey) -> str:
     return f"{head}{where} " + ("baseline" if at == "baseline" else f"ΔE {at:g}")
 
 
+#: Two numbers of a row agree to this relative difference (:func:`row_differences`): far
+#: below any digit a table is read with, far above a processor's last bits (1e-16).
+ROW_RTOL = 1e-12
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Equal, or two floats within :data:`ROW_RTOL` of each other."""
+    if isinstance(a, float) and isinstance(b, float):
+        return math.isclose(a, b, rel_tol=ROW_RTOL, abs_tol=0.0)
+    return bool(a == b)
+
+
 def row_differences(shipped: Mapping[str, Any], rebuilt: Mapping[str, Any], *,
                     standard_errors: bool = True) -> tuple[int, list[str]]:
     """Compare the rows of two table documents (:func:`table_rows`): the number of rows
     compared and one line per row that differs (``<row>: <column> <shipped> in the table,
-    <rebuilt> rebuilt``, or a row only one of them has). ``standard_errors`` False: the
-    ``*_se`` columns are left out (a rebuild without the COCO annotations has none)."""
+    <rebuilt> rebuilt``, or a row only one of them has). Numbers are the same when they
+    agree to :data:`ROW_RTOL` relative: a chart calibration measured again on another
+    processor differs in its last bits. ``standard_errors`` False: the ``*_se`` columns are
+    left out (a rebuild without the COCO annotations has none)."""
     a, b = table_rows(shipped), table_rows(rebuilt)
     out: list[str] = []
     for key in a:
@@ -96,7 +111,7 @@ def row_differences(shipped: Mapping[str, Any], rebuilt: Mapping[str, Any], *,
         for column in sorted(set(a[key]) | set(b[key])):
             if not standard_errors and column.endswith("_se"):
                 continue
-            if a[key].get(column) != b[key].get(column):
+            if not _same(a[key].get(column), b[key].get(column)):
                 out.append(f"{row_name(key)}: {column} {a[key].get(column)!r} in the table, "
                            f"{b[key].get(column)!r} rebuilt")
     out += [f"{row_name(key)}: rebuilt, not in the table" for key in b if key not in a]
@@ -176,5 +191,5 @@ def _property_doc(built: Mapping[str, Any], doc: Mapping[str, Any]) -> dict[str,
     return rebuilt
 
 
-__all__ = ["WORDS", "rebuild_table", "row_differences", "row_name", "table_kind",
+__all__ = ["ROW_RTOL", "WORDS", "rebuild_table", "row_differences", "row_name", "table_kind",
            "table_rows"]
