@@ -209,7 +209,8 @@ def test_check_and_gate_judge_the_loss_with_its_margin(tmp_path):
     max-dmap gate compares with its limit."""
     camera = REPO / "cameras" / "properties" / "nikon-gauss2.0-fw5k.toml"
     r = CliRunner().invoke(main, ["--no-config", "check", "--camera", str(camera), "--size", "n",
-                                  "--json", str(tmp_path / "r.json")])
+                                  "--json", str(tmp_path / "r.json"),
+                                  "--html", str(tmp_path / "r.html")])
     assert r.exit_code == 1, r.output
     doc = json.loads((tmp_path / "r.json").read_text(encoding="utf-8"))
     c = Combined.from_json(doc["properties"]["combined"])
@@ -218,6 +219,8 @@ def test_check_and_gate_judge_the_loss_with_its_margin(tmp_path):
     assert c.loss == pytest.approx(margin.upper(c.rule_loss), rel=1e-12)
     line = next(ln.strip() for ln in r.output.splitlines() if ln.strip().startswith("combined"))
     assert f"{c.loss:.2f}" in line and f"+ {c.margin:.2f} validated margin" in line
+    html = (tmp_path / "r.html").read_text(encoding="utf-8")
+    assert f"<td>combined ({c.rule}, + {c.margin:.2f} validated margin)</td>" in html
     limit = c.rule_loss + c.margin / 2  # the rule alone passes it, the margin fails it
     g = CliRunner().invoke(main, ["--no-config", "check", "--camera", str(camera), "--size", "n",
                                   "--max-dmap", f"{limit:.6f}", "--json",
@@ -236,3 +239,6 @@ def test_the_docs_quote_the_shipped_margin():
     assert (f"{got.cells_covered} of {got.cells} cells ({share:.1f} %) leaving each camera out, "
             f"at a median over-prediction of {got.median_ratio:.2f}x") in page
     assert f"`q` = {got.q:.3g} for ΔmAP in points" in page
+    sharp = " ".join((REPO / "docs" / "sharpness_noise.md").read_text(encoding="utf-8").split())
+    assert (f"bounds the measured loss of {got.cells_covered} of the {got.cells} validation "
+            "cells judged camera left out") in sharp
