@@ -117,13 +117,20 @@ class ValidatedBound:
                    str(d["source"]), str(d["source_sha256"]))
 
 
+def _shipped(name: str) -> dict[str, Any] | None:
+    """The JSON document ``fidelity/data/<name>``; None when the package ships none."""
+    path = resource_dir("data") / name
+    if not path.is_file():
+        return None
+    doc: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
+    return doc
+
+
 @lru_cache(maxsize=1)
 def load_validated_bound() -> ValidatedBound | None:
     """The shipped :class:`ValidatedBound`; None when the package ships none."""
-    path = resource_dir("data") / VALIDATED_BOUND_FILE
-    if not path.is_file():
-        return None
-    return ValidatedBound.from_json(json.loads(path.read_text(encoding="utf-8")))
+    doc = _shipped(VALIDATED_BOUND_FILE)
+    return None if doc is None else ValidatedBound.from_json(doc)
 
 
 def validated_upper(prediction: Prediction, column: str = "dmap_points"
@@ -271,10 +278,8 @@ class PropertyMargin:
 @lru_cache(maxsize=1)
 def load_property_margin() -> PropertyMargin | None:
     """The shipped :class:`PropertyMargin`; None when the package ships none."""
-    path = resource_dir("data") / PROPERTY_MARGIN_FILE
-    if not path.is_file():
-        return None
-    return PropertyMargin.from_json(json.loads(path.read_text(encoding="utf-8")))
+    doc = _shipped(PROPERTY_MARGIN_FILE)
+    return None if doc is None else PropertyMargin.from_json(doc)
 
 
 def with_margin(combined: Combined, column: str, tables: Mapping[str, PropertyTable],
