@@ -412,9 +412,10 @@ class ValidatedProperties:
 
     def words(self) -> str:
         """``the sharpness and noise validation: 39 cameras, 74 of 78 (camera, detector)
-        cells within the combined loss``."""
+        cells within the combination rule's loss, before the validated margin``."""
         return (f"the sharpness and noise validation: {self.cameras} cameras, {self.within} of "
-                f"{self.cells} (camera, detector) cells within the combined loss")
+                f"{self.cells} (camera, detector) cells within the combination rule's loss, "
+                f"before the validated margin")
 
 
 def joined_degradation(a: ValidatedDegradation, b: ValidatedDegradation

@@ -177,7 +177,7 @@ def test_noise_optics_and_vignetting_are_in_the_domain_as_the_validation_spans_t
     assert "full_well 500 e-" in outside[0] and "read_noise 3 e- rms" in outside[0]
     assert ("the validated cameras' noise: none, shot+read (full_well 625 to 30000 e-, "
             "read_noise 2 to 10 e- rms); the sharpness and noise validation: 39 cameras, 74 of "
-            "78 (camera, detector) cells within the combined loss") in outside[0]
+            "78 (camera, detector) cells within the combination rule's loss, before the validated margin") in outside[0]
     page = (tmp_path / "r.html").read_text(encoding="utf-8")
     banner = page.split('class="headline tone-', 1)[1]
     verdict = json.loads((tmp_path / "r.json").read_text())["verdict"]["passed"]
