@@ -254,7 +254,7 @@ def make_view(pixels: np.ndarray | Pyramid, region: tuple[int, int, int, int], m
     arr, to_image = _prepare(pyramid, region, max_side, encoding, steps=srgb)
     if peak is None:
         step = max(1, int(math.sqrt(arr.shape[0] * arr.shape[1] / 250_000)))
-        sample = _DECODE_LUT[arr[::step, ::step]] if srgb else arr[::step, ::step]
+        sample = np.take(_DECODE_LUT, arr[::step, ::step]) if srgb else arr[::step, ::step]
         brightest = np.maximum(np.maximum(sample[..., 0], sample[..., 1]), sample[..., 2])
         peak = float(np.percentile(brightest, 99.0))
     if not peak > 0.0:
@@ -270,8 +270,8 @@ def make_view(pixels: np.ndarray | Pyramid, region: tuple[int, int, int, int], m
     steps = np.multiply(linear, np.float32(4095))  # linear in [0, 1] -> 4096 steps, rounded
     steps += np.float32(0.5)
     rgb8 = _ENCODE_LUT[steps.astype(np.uint16)]
-    if srgb:
-        linear, rgb8 = linear[arr], rgb8[arr]
+    if srgb:  # numpy.take: the same elements as ``linear[arr]``, in a fraction of the time
+        linear, rgb8 = np.take(linear, arr), np.take(rgb8, arr)
     # R, G, B -> B, G, R by OpenCV (numpy's copy of a reversed channel axis is several times
     # slower; the same bytes)
     bgr8 = opencv().cvtColor(rgb8, opencv().COLOR_RGB2BGR)
