@@ -1090,8 +1090,9 @@ def measure_image(
     """Read an image (:func:`fidelity.chart.image.read_image`, as ``read`` says:
     :class:`ReadOptions`; an image file at its native depth) and audit its chart
     (:func:`measure_pixels`). Errors name the file. ``inspect_image`` is called with the image
-    read once its chart is measured, so that a caller can look at more of it without reading it
-    again (the audit's banding check).
+    once it is read, before its chart is measured, so that a caller can look at more of it
+    without reading it again, meanwhile if it likes (the audit's banding check, in a thread
+    beside the chart's measurement); it must not change the pixels.
 
     Parameters
     ----------
@@ -1146,6 +1147,8 @@ def measure_image(
     img, sha256 = read_input(path, read, native=True)
     enc = read.encoding or img.encoding
     info = img.info(sha256=sha256, encoding=enc)
+    if inspect_image is not None:
+        inspect_image(img)
     try:
         result = measure_pixels(img.pixels, corners, encoding=enc, exposure=read.exposure,
                                 levels=_decoded_levels(img) if corners is None else None,
@@ -1156,8 +1159,6 @@ def measure_image(
                                 edge_target=edge_target)
     except FidelityError as exc:
         raise type(exc)(f"{img.where}: {exc}") from None
-    if inspect_image is not None:
-        inspect_image(img)
     return result
 
 

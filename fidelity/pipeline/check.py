@@ -448,14 +448,21 @@ def audit_image(
         An unknown reference, illuminant, table, size class or read option (encoding,
         colourspace, Bayer pattern). Exit code 2.
     """
-    banding: list[Any] = []
+    from concurrent.futures import Future, ThreadPoolExecutor  # noqa: PLC0415 (6 ms, the audit's only)
+
     scene = reference == SCENE_REFERENCE
-    result = measure_image(image, corners if corners is None or len(corners) else None,
-                           read=read, reference=(load_reference(reference, illuminant, cat)
-                                                 if scene else reference),
-                           illuminant=illuminant,
-                           inspect_image=lambda img: banding.append(_image_banding(img)),
-                           edge_target=edge_target)
+    # the image's banding check runs in a thread while its chart is found and measured (both
+    # spend their time in NumPy and OpenCV, which release the GIL): its result is the same
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        checks: list[Future[Any]] = []
+        result = measure_image(image, corners if corners is None or len(corners) else None,
+                               read=read, reference=(load_reference(reference, illuminant, cat)
+                                                     if scene else reference),
+                               illuminant=illuminant,
+                               inspect_image=lambda img: checks.append(
+                                   pool.submit(_image_banding, img)),
+                               edge_target=edge_target)
+        banding = [check.result() for check in checks]
     u = result.uncertainty
     if scene and u is not None and load_illuminant(illuminant).name != "D65":
         u = with_adaptation(u, result.measurement, illuminant, cat)
