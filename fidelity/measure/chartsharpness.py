@@ -48,6 +48,7 @@ import numpy as np
 from fidelity.chart.locate import ChartLocation, apply_homography
 from fidelity.chart.turned import PaintedEdgeTarget
 from fidelity.core.fileio import finite_or_none, optional_float
+from fidelity.core.numeric import median
 from fidelity.measure.sharpness import (
     HALF_NYQUIST,
     LUMINANCE_WEIGHTS,
@@ -334,7 +335,7 @@ def _measure_edge(pixels: np.ndarray, linearise: Linearise, loc: ChartLocation,
     samples = max(16, int(math.ceil(loc.pitch_px)) + 1)
     prof = _profile(pixels, linearise, h, ua, ub, samples)
     t = np.linspace(0.0, 1.0, samples)
-    level = float(np.median(prof[t <= 0.2]))
+    level = median(prof[t <= 0.2])
     low = float(prof[(t > 0.2) & (t < 0.9)].min())
     mid = 0.5 * (level + low)
     below = np.flatnonzero((prof < mid) & (t > 0.2))

@@ -52,6 +52,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fidelity.core.errors import InvalidValueError, RefusedMeasurement
 from fidelity.core.fileio import finite_or_none
+from fidelity.core.numeric import median
 
 F64 = NDArray[np.float64]
 
@@ -531,14 +532,14 @@ def photon_transfer(means: ArrayLike, variances: ArrayLike, counts: ArrayLike, *
                                     "needs at least 2 patches of at least 2 pixels")
     if np.any(var < 0):
         raise RefusedFit("shape", "variances: negative values")
-    if np.unique(mu).size < 2:
+    if not np.any(mu != mu[0]):  # one level (finite, k >= 2); np.unique imports np.ma
         raise RefusedFit("singular", f"means: all {k} patches at one level ({mu[0]:g}); the "
                                      "line needs at least 2 distinct means")
     if not np.any(var > ZERO_VARIANCE * float(np.max(mu * mu))):
         raise RefusedFit("zero-variance", "variances: all zero (a noiseless or posterised "
                                           "chart has no photon transfer to fit)")
     x = np.stack([np.ones(k), mu], axis=1)
-    floor = WEIGHT_FLOOR * float(np.median(var[var > 0]))  # some var > 0: checked above
+    floor = WEIGHT_FLOOR * median(var[var > 0])  # some var > 0: checked above
     pred = np.ones(k)  # the first pass unweighted (a posterised patch's 0 is no weight)
     beta: F64 = np.zeros(2)
     for _ in range(PTC_ITERATIONS):

@@ -121,6 +121,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fidelity.core.errors import InvalidValueError, RefusedMeasurement
 from fidelity.core.fileio import finite_or_none
+from fidelity.core.numeric import median
 
 F64 = NDArray[np.float64]
 Orientation = Literal["auto", "vertical", "horizontal"]
@@ -528,7 +529,7 @@ def _core(a: F64, degree: int, check: bool, strict: bool = True,
     dof = max(1, resid.size - int(filled.sum()))
     noise = float(math.sqrt(float(np.sum(resid * resid)) / dof))
     tail = max(2, esf.size // 10)
-    lo, hi = float(np.median(esf[:tail])), float(np.median(esf[-tail:]))
+    lo, hi = median(esf[:tail]), median(esf[-tail:])
     contrast = abs(hi - lo)
     if check:
         snr = contrast / noise if noise > 0 else math.inf
@@ -600,7 +601,7 @@ def _smooth_esf(esf: F64) -> F64:
     its plateau's median. The bootstrap's model: a noisy model would carry the measurement's
     own ripple into every draw."""
     tail = max(2, esf.size // 10)
-    lo, hi = float(np.median(esf[:tail])), float(np.median(esf[-tail:]))
+    lo, hi = median(esf[:tail]), median(esf[-tail:])
     if hi == lo:
         return esf
     en = (esf - lo) / (hi - lo)
