@@ -2,7 +2,7 @@
 
 Every report of the project (a chart check, the COCO benchmark tables, the validation of the
 camera suite, the render benchmark) is built as one :class:`Document` from its data and then
-written both ways by :mod:`fidelity.report.html`: HTML for people (one Jinja2 template, plots
+written both ways by :mod:`fidelity.report.html`: HTML for people (one page layout, plots
 embedded, the headline and the verdict first, details folded away) and Markdown from the same
 document. A document is a title, a :class:`Headline` (the verdict or the main finding, with an
 optional headline figure) and :class:`Section` objects holding blocks:

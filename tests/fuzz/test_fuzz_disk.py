@@ -108,14 +108,10 @@ def _check(outcome: Any, out: Path, earlier: Path, before: dict[str, str]) -> No
 @pytest.fixture(autouse=True)
 def fresh_cache(tmp_path_factory: pytest.TempPathFactory,
                 monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
-    """An empty ``$FIDELITY_CACHE``, as on a fresh machine: the caches fidelity fills (compiled
-    report templates) are written under the same limits as the outputs."""
-    from fidelity.report import html
-
+    """An empty ``$FIDELITY_CACHE``, as on a fresh machine: the caches fidelity fills are
+    written under the same limits as the outputs."""
     monkeypatch.setenv("FIDELITY_CACHE", str(tmp_path_factory.mktemp("cache")))
-    html.environment.cache_clear()
     yield
-    html.environment.cache_clear()
 
 
 @pytest.fixture
