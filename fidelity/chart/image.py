@@ -588,6 +588,28 @@ def _read_through_link(p: Path, shown: str, layer: str | None, bayer: str | None
     return replace(image, path=p)
 
 
+def stored_size(path: str | os.PathLike[str]) -> tuple[int, int] | None:
+    """``(height, width)`` of the first part of the image file at ``path`` as stored (EXIF
+    orientation ignored, as :func:`read_image` ignores it), from its header alone
+    (OpenImageIO); None where the file cannot be opened or its name is not valid UTF-8. No
+    error is raised: :func:`read_image` reports the file's problems."""
+    import OpenImageIO as oiio
+
+    p = Path(path)
+    if display_path(p) != str(p) or not p.is_file():
+        return None
+    with _quiet_stderr():
+        inp = oiio.ImageInput.open(str(p))
+        if inp is None:
+            oiio.geterror()  # clear it: the read reports the file's problem
+            return None
+        try:
+            spec = inp.spec()
+            return int(spec.height), int(spec.width)
+        finally:
+            inp.close()
+
+
 #: OpenImageIO's pseudo-formats, never a frame on disk: their names are not image suffixes.
 _PSEUDO_FORMATS = ("null", "term")
 

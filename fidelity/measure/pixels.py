@@ -42,12 +42,13 @@ import math
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from fidelity.chart.image import Image, ImageInfo, as_float32, is_coded
+from fidelity.chart.image import Image, ImageInfo, as_float32, is_coded, stored_size
 from fidelity.chart.locate import (
     DEFAULT_WINDOW,
     ChartLocation,
@@ -1144,14 +1145,22 @@ def measure_image(
         An unknown encoding, negatives rule, colourspace, reference, illuminant or detection
         method. Exit code 2.
     """
-    img, sha256 = read_input(path, read, native=True)
+    from concurrent.futures import ThreadPoolExecutor  # noqa: PLC0415 (6 ms, where an image is measured)
+
+    # a large JPEG's search level is decoded in a thread while the full image is read
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        early = _search_level(path) if corners is None else None
+        pending = pool.submit(_decode_search_level, path, early) if early is not None else None
+        img, sha256 = read_input(path, read, native=True)
+        levels = (_decoded_levels(img, early, pending.result() if pending else None)
+                  if corners is None else None)
     enc = read.encoding or img.encoding
     info = img.info(sha256=sha256, encoding=enc)
     if inspect_image is not None:
         inspect_image(img)
     try:
         result = measure_pixels(img.pixels, corners, encoding=enc, exposure=read.exposure,
-                                levels=_decoded_levels(img) if corners is None else None,
+                                levels=levels,
                                 reference=reference, illuminant=illuminant, window=window,
                                 image=info, detection=detection, negatives=read.negatives,
                                 colourspace=(read.colourspace if read.colourspace is not None
@@ -1162,7 +1171,33 @@ def measure_image(
     return result
 
 
-def _decoded_levels(img: Image) -> dict[int, np.ndarray] | None:
+def _search_level(path: str | os.PathLike[str]) -> int | None:
+    """The level factor the finder's search view reads of the JPEG at ``path``
+    (:func:`fidelity.chart.find.view.level_factor` at
+    :data:`~fidelity.chart.find.cascade.SEARCH_SIDE`, from the file's header), where libjpeg
+    decodes it (:data:`~fidelity.chart.find.view.JPEG_LEVEL_FACTORS`); None for other files."""
+    from fidelity.chart.find import view  # noqa: PLC0415 (the finder, loaded where a chart is found)
+    from fidelity.chart.find.cascade import SEARCH_SIDE  # noqa: PLC0415 (the same)
+
+    if Path(path).suffix.lower() not in (".jpg", ".jpeg"):
+        return None
+    size = stored_size(path)
+    if size is None:
+        return None
+    height, width = size
+    factor = view.level_factor(height, width, min(1.0, SEARCH_SIDE / max(height, width)))
+    return factor if factor in view.JPEG_LEVEL_FACTORS else None
+
+
+def _decode_search_level(path: str | os.PathLike[str], factor: int) -> np.ndarray | None:
+    """:func:`fidelity.chart.find.view.decode_jpeg_level` (run in a thread beside the read)."""
+    from fidelity.chart.find import view  # noqa: PLC0415 (the finder, loaded where a chart is found)
+
+    return view.decode_jpeg_level(path, factor)
+
+
+def _decoded_levels(img: Image, early: int | None = None,
+                    decoded: np.ndarray | None = None) -> dict[int, np.ndarray] | None:
     """The level of a large JPEG that the finder's search view reads
     (:func:`fidelity.chart.find.view.level_factor` at
     :data:`~fidelity.chart.find.cascade.SEARCH_SIDE`: half size at 12 MP, a quarter at 108
@@ -1170,7 +1205,8 @@ def _decoded_levels(img: Image) -> dict[int, np.ndarray] | None:
     instead of averaged down from the full image, where ``img`` is that file's own 8-bit
     pixels (no recording, Bayer mosaic or OpenColorIO conversion) and the view reads a
     reduced level; else None. Only the finder reads it: the windows are read from the full
-    image."""
+    image. ``decoded``: :func:`_decode_search_level`'s level ``early`` of the same file, decoded
+    meanwhile (:func:`measure_image`); used where ``early`` is the level the view reads."""
     from fidelity.chart.find import view  # noqa: PLC0415 (the finder, loaded where a chart is found)
     from fidelity.chart.find.cascade import SEARCH_SIDE  # noqa: PLC0415 (the same)
 
@@ -1183,7 +1219,7 @@ def _decoded_levels(img: Image) -> dict[int, np.ndarray] | None:
     factor = view.level_factor(height, width, min(1.0, SEARCH_SIDE / max(height, width)))
     if factor not in view.JPEG_LEVEL_FACTORS:
         return None
-    level = view.jpeg_level(img.path, px, factor)
+    level = view.jpeg_level(img.path, px, factor, decoded if factor == early else None)
     return None if level is None else {factor: level}
 
 

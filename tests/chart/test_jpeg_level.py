@@ -87,6 +87,36 @@ def test_the_audit_decodes_the_level_the_search_view_reads(tmp_path, size, facto
             assert levels[factor].shape == (h // factor, w // factor, 3)
 
 
+def test_the_level_decoded_beside_the_read_is_the_same(tmp_path):
+    """measure_image decodes the search level in a thread while it reads the file: the level
+    :func:`_search_level` names from the header is the one the pixels' size gives, and the
+    level made from the early decode equals the one decoded after the read, bit for bit; a PNG,
+    a small JPEG, a missing file and a file that is no image get no early decode."""
+    from fidelity.chart.image import stored_size
+    from fidelity.measure.pixels import _decode_search_level, _decoded_levels, _search_level
+
+    pixels = np.full((3000, 4000, 3), 128, np.uint8)
+    pixels[:1500] = 40
+    path = tmp_path / "grey.jpg"
+    write_image(path, pixels)
+    assert stored_size(path) == (3000, 4000)
+    early = _search_level(path)
+    assert early == 2
+    img = read_image(path, native=True)
+    after = _decoded_levels(img)
+    beside = _decoded_levels(img, early, _decode_search_level(path, early))
+    assert after is not None and beside is not None
+    assert np.array_equal(after[2], beside[2])
+    small = tmp_path / "small.jpg"
+    write_image(small, pixels[:1200, :1600])
+    png = tmp_path / "grey.png"
+    write_image(png, pixels)
+    junk = tmp_path / "junk.jpg"
+    junk.write_bytes(b"not a jpeg")
+    assert [_search_level(p) for p in (small, png, junk, tmp_path / "missing.jpg")] == [None] * 4
+    assert stored_size(junk) is None and stored_size(tmp_path / "missing.jpg") is None
+
+
 def test_the_manual_states_the_thresholds():
     """docs/audit.md quotes the decoder's threshold and the noise lattice's as the code has
     them."""

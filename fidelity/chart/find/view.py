@@ -110,8 +110,24 @@ JPEG_LEVEL_FACTORS = (2, 4, 8)
 JPEG_LEVEL_TOLERANCE = 2.0 / 255.0
 
 
-def jpeg_level(path: str | os.PathLike[str], pixels: np.ndarray, factor: int
-               ) -> np.ndarray | None:
+def decode_jpeg_level(path: str | os.PathLike[str], factor: int) -> np.ndarray | None:
+    """The JPEG at ``path`` decoded at ``1 / factor`` of its size by libjpeg's DCT scaling
+    (OpenCV's ``IMREAD_REDUCED_COLOR_{factor}``, EXIF orientation ignored): ``uint8`` B, G, R
+    ``(ceil(H / factor), ceil(W / factor), 3)``; None where OpenCV cannot decode it so or
+    ``factor`` is not in :data:`JPEG_LEVEL_FACTORS`. It releases the GIL while it decodes, so
+    that it can run in a thread beside the full-size read (:func:`jpeg_level` checks that the
+    two are the same pixels)."""
+    cv2 = opencv()
+    flags = {2: cv2.IMREAD_REDUCED_COLOR_2, 4: cv2.IMREAD_REDUCED_COLOR_4,
+             8: cv2.IMREAD_REDUCED_COLOR_8}.get(int(factor))
+    if flags is None:
+        return None
+    reduced: np.ndarray | None = cv2.imread(os.fspath(path), flags | cv2.IMREAD_IGNORE_ORIENTATION)
+    return reduced
+
+
+def jpeg_level(path: str | os.PathLike[str], pixels: np.ndarray, factor: int,
+               decoded: np.ndarray | None = None) -> np.ndarray | None:
     """The :class:`Pyramid` level ``factor`` of a JPEG's 8-bit ``pixels`` (as read from
     ``path``, ``(H, W, 3)``) decoded by libjpeg's DCT scaling (OpenCV's
     ``IMREAD_REDUCED_COLOR_{factor}``, EXIF orientation ignored as the reader ignores it): the
@@ -126,6 +142,9 @@ def jpeg_level(path: str | os.PathLike[str], pixels: np.ndarray, factor: int
         Its ``uint8`` codes ``(H, W, 3)``, R, G, B.
     factor
         2, 4 or 8.
+    decoded
+        :func:`decode_jpeg_level`'s result for ``path`` and ``factor``, decoded meanwhile;
+        None: decoded here.
 
     Returns
     -------
@@ -135,12 +154,11 @@ def jpeg_level(path: str | os.PathLike[str], pixels: np.ndarray, factor: int
         the same pixels).
     """
     cv2 = opencv()
-    flags = {2: cv2.IMREAD_REDUCED_COLOR_2, 4: cv2.IMREAD_REDUCED_COLOR_4,
-             8: cv2.IMREAD_REDUCED_COLOR_8}.get(int(factor))
     arr = np.asarray(pixels)
-    if flags is None or arr.dtype != np.uint8 or arr.ndim != 3 or arr.shape[2] != 3:
+    if (int(factor) not in JPEG_LEVEL_FACTORS or arr.dtype != np.uint8 or arr.ndim != 3
+            or arr.shape[2] != 3):
         return None
-    reduced = cv2.imread(os.fspath(path), flags | cv2.IMREAD_IGNORE_ORIENTATION)
+    reduced = decoded if decoded is not None else decode_jpeg_level(path, factor)
     h, w = arr.shape[0] // factor, arr.shape[1] // factor
     if reduced is None or reduced.shape[0] < h or reduced.shape[1] < w or reduced.ndim != 3:
         return None
@@ -301,7 +319,9 @@ __all__ = [
     "PYRAMID_BAND_PIXELS",
     "Pyramid",
     "View",
+    "decode_jpeg_level",
     "detection_image",
+    "jpeg_level",
     "level_factor",
     "make_view",
     "opencv",
