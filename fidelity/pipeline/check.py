@@ -448,7 +448,7 @@ def audit_image(
         An unknown reference, illuminant, table, size class or read option (encoding,
         colourspace, Bayer pattern). Exit code 2.
     """
-    from concurrent.futures import Future, ThreadPoolExecutor  # noqa: PLC0415 (6 ms, the audit's only)
+    from concurrent.futures import Future, ThreadPoolExecutor  # 6 ms, the audit's only
 
     scene = reference == SCENE_REFERENCE
     # the image's banding check runs in a thread while its chart is found and measured (both
