@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from fidelity.chart.find.outlines import PointIndex, Quads, quad_areas_centroids
 from fidelity.chart.locate import apply_homography, homography_from_points
 from fidelity.core.errors import InvalidValueError
+from fidelity.core.numeric import median
 
 F64 = NDArray[np.float64]
 
@@ -150,7 +151,7 @@ def _fit_lattice(quads: Quads, members: np.ndarray, cells: np.ndarray) -> Lattic
     if fit is None:
         return None
     h, keep = fit
-    area = float(np.median(quads.areas[members[keep]]))
+    area = median(quads.areas[members[keep]])
     for _ in range(2):
         uv = apply_homography(np.linalg.inv(h), quads.centres)
         near = np.rint(uv)
@@ -192,7 +193,7 @@ def robust_homography(src: np.ndarray, dst: np.ndarray) -> tuple[F64, np.ndarray
         except InvalidValueError:
             return None
         dist = np.linalg.norm(apply_homography(h, src) - dst, axis=-1)
-        limit = max(OUTLIER_FACTOR * float(np.median(dist[keep])), 0.5)
+        limit = max(OUTLIER_FACTOR * median(dist[keep]), 0.5)
         new = keep & (dist <= limit)
         if new.sum() == keep.sum() or new.sum() < max(4, MIN_REFINE_SWATCHES // 2):
             break
@@ -225,7 +226,7 @@ def patch_side(homography: np.ndarray, quads: Quads, members: np.ndarray) -> flo
     corners = apply_homography(np.linalg.inv(homography),
                                np.asarray(quads.corners[members], np.float64).reshape(-1, 2))
     area = np.abs(quad_areas_centroids(corners.reshape(-1, 4, 2))[0])
-    return float(np.clip(np.sqrt(np.median(area)), 0.3, 1.0)) if len(area) else 0.8
+    return float(np.clip(np.sqrt(median(area)), 0.3, 1.0)) if len(area) else 0.8
 
 
 __all__ = [

@@ -26,6 +26,7 @@ from fidelity.chart.find.reference import (
 from fidelity.chart.find.result import ChartChecks
 from fidelity.chart.find.view import View
 from fidelity.chart.locate import apply_homography
+from fidelity.core.numeric import median
 
 F64 = NDArray[np.float64]
 
@@ -188,7 +189,7 @@ def placement_scores(view: View, lattice_h: np.ndarray, occupied: np.ndarray, so
     checks = ChartChecks(colour_order=score,
                          neutral_order=float(neutral_order(pm[best], kept_neutrals)),
                          margin=score - second,
-                         uniformity=float(np.median(pu[best][clear])))
+                         uniformity=median(pu[best][clear]))
     return Placement(homography=h, checks=checks, cells=cells, source=source,
                      ring_patches=ring_patches,
                      occluded=tuple(int(k) for k in np.flatnonzero(flagged)))

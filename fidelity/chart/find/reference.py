@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 from fidelity.chart.locate import apply_homography
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import load_chart
+from fidelity.core.numeric import median
 
 F64 = NDArray[np.float64]
 
@@ -143,7 +144,7 @@ def off_the_camera_fit(measured: np.ndarray) -> np.ndarray:
         residual = (np.linalg.norm(m - pred, axis=-1)
                     / (np.linalg.norm(pred, axis=-1) + 0.05 * white + 1e-6))
         keep = residual <= np.sort(residual)[len(m) - 1 - 6]
-    return np.asarray(residual > OCCLUDED_RESIDUAL * max(float(np.median(residual)), 1e-3))
+    return np.asarray(residual > OCCLUDED_RESIDUAL * max(median(residual), 1e-3))
 
 
 def occluded_patches(measured: np.ndarray, spread: np.ndarray, strict: bool = False
@@ -173,8 +174,8 @@ def occluded_patches(measured: np.ndarray, spread: np.ndarray, strict: bool = Fa
     # is not texture
     level = m.mean(axis=-1)
     texture = sp * (level + 0.02) / (level + 0.1 * float(m[NEUTRALS[0]].mean()) + 0.02)
-    textured = texture >= max(OCCLUDED_SPREAD, 5.0 * float(np.median(texture)))
-    disordered = ranks >= max(OCCLUDED_RANKS, 3.0 * float(np.median(ranks)))
+    textured = texture >= max(OCCLUDED_SPREAD, 5.0 * median(texture))
+    disordered = ranks >= max(OCCLUDED_RANKS, 3.0 * median(ranks))
     if strict:  # both: far off the camera's fit and textured
         return np.asarray(far & textured, dtype=bool)
     # a flat window is never judged covered: a camera's own error can put one patch far off

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 from fidelity.chart.image import as_float32, is_coded
 from fidelity.colour import colorimetry as cm
 from fidelity.core.errors import FidelityError, InvalidValueError
+from fidelity.core.numeric import percentile
 
 F64 = NDArray[np.float64]
 
@@ -274,7 +275,7 @@ def make_view(pixels: np.ndarray | Pyramid, region: tuple[int, int, int, int], m
         step = max(1, int(math.sqrt(arr.shape[0] * arr.shape[1] / 250_000)))
         sample = np.take(_DECODE_LUT, arr[::step, ::step]) if srgb else arr[::step, ::step]
         brightest = np.maximum(np.maximum(sample[..., 0], sample[..., 1]), sample[..., 2])
-        peak = float(np.percentile(brightest, 99.0))
+        peak = percentile(brightest, 99.0)  # np.percentile's number, without numpy.ma
     if not peak > 0.0:
         raise InvalidValueError("no colour chart found: the image is black")
     values = _DECODE_LUT if srgb else arr
