@@ -703,17 +703,20 @@ def frame_properties(frame: FrameRender | None, reference: str, illuminant: str
     """
     if frame is None:
         return None, None
+    target = None
+    if frame.target_srgb is not None and frame.target is not None:
+        target = painted_target_sharpness(
+            frame.target_srgb, frame.target, linearise=_decode_srgb,
+            linearisation="sRGB transfer function decoded (IEC 61966-2-1)", saturation=1.0,
+            black=0.0, source=f"the check's edge target ({frame.target_renderer})")
+    measured = _luminance_measured(target)
+    # the patch edges only where the target gave no luminance MTF50 (none, or clipped)
     got = measure_pixels(frame.srgb, frame.corners, encoding="srgb", reference=reference,
-                         illuminant=illuminant, uncertainty=False, corner_checks=False)
-    if frame.target_srgb is None or frame.target is None:
-        return got.sharpness, got.noise
-    sharpness = painted_target_sharpness(
-        frame.target_srgb, frame.target, linearise=_decode_srgb,
-        linearisation="sRGB transfer function decoded (IEC 61966-2-1)", saturation=1.0,
-        black=0.0, source=f"the check's edge target ({frame.target_renderer})")
-    if not _luminance_measured(sharpness) and _luminance_measured(got.sharpness):
-        return got.sharpness, got.noise  # the target refused (clipped, say): the patch edges
-    return sharpness, got.noise
+                         illuminant=illuminant, uncertainty=False, corner_checks=False,
+                         sharpness=not measured)
+    if measured or not _luminance_measured(got.sharpness):
+        return (target if target is not None else got.sharpness), got.noise
+    return got.sharpness, got.noise  # the target refused (clipped, say): the patch edges
 
 
 def _luminance_measured(sharpness: ChartSharpness | None) -> bool:

@@ -545,6 +545,7 @@ def measure_pixels(
     colourspace: str | Sequence[float] = "sRGB",
     uncertainty: bool = True,
     texture: bool = True,
+    sharpness: bool = True,
     corner_checks: bool = True,
     edge_target: EdgeTargetCorners | None = None,
     levels: Mapping[int, np.ndarray] | None = None,
@@ -595,6 +596,9 @@ def measure_pixels(
     texture
         Also measure the chart's noise and sharpness in linear light
         (:func:`noise_and_sharpness`).
+    sharpness
+        With ``texture``, also measure the sharpness; False: the noise only (a caller that
+        measures the sharpness elsewhere, :func:`fidelity.camera.render.frame_properties`).
     edge_target
         A slanted-edge target's corners in the image (a chart scene's manifest gives them):
         the sharpness is measured on its square's edges instead of the chart's; None: on the
@@ -744,7 +748,8 @@ def measure_pixels(
     chart_noise_, sharpness = (noise_and_sharpness(arr, loc, means, ref, encoding=encoding,
                                                    negatives=negatives, to_srgb=to_srgb,
                                                    neutral_samples=neutral_lin,
-                                                   edge_target=edge_target)
+                                                   edge_target=edge_target,
+                                                   sharpness=sharpness)
                                if texture else (None, None))
     return ImageMeasurement(
         measurement=measurement, exposure_ev=ev, exposure_mode=mode, encoding=encoding,
@@ -796,6 +801,7 @@ def noise_and_sharpness(pixels: np.ndarray, location: ChartLocation, means: np.n
                         to_srgb: np.ndarray,
                         neutral_samples: Mapping[int, np.ndarray] | None = None,
                         edge_target: EdgeTargetCorners | None = None,
+                        sharpness: bool = True,
                         ) -> tuple[ChartNoise | None, ChartSharpness | None]:
     """The chart's noise and sharpness in LINEAR light (before any exposure correction).
 
@@ -826,6 +832,8 @@ def noise_and_sharpness(pixels: np.ndarray, location: ChartLocation, means: np.n
         A slanted-edge target's corners in the image: the sharpness is measured on its square
         (:func:`fidelity.measure.chartsharpness.target_sharpness`); None: on the chart's own
         edges (:func:`fidelity.measure.chartsharpness.chart_sharpness`).
+    sharpness
+        False: the noise only (the sharpness None).
 
     Returns
     -------
@@ -872,15 +880,17 @@ def noise_and_sharpness(pixels: np.ndarray, location: ChartLocation, means: np.n
                                 method=NOISE_SAMPLED_METHOD if sampled else NOISE_METHOD)
         except RefusedFit:
             noise = None
-    sharpness: ChartSharpness | None = None
-    if edge_target is not None:
-        sharpness = target_sharpness(pixels, edge_target, linearise=linearise,
+    edges: ChartSharpness | None = None
+    if not sharpness:
+        pass
+    elif edge_target is not None:
+        edges = target_sharpness(pixels, edge_target, linearise=linearise,
                                      linearisation=how, saturation=saturation, black=black)
     elif (location.rows, location.cols) == (reference.rows, reference.cols):
-        sharpness = chart_sharpness(pixels, location, luminance_linear_srgb(means), names,
-                                    linearise=linearise, linearisation=how,
-                                    saturation=saturation, black=black)
-    return noise, sharpness
+        edges = chart_sharpness(pixels, location, luminance_linear_srgb(means), names,
+                                linearise=linearise, linearisation=how,
+                                saturation=saturation, black=black)
+    return noise, edges
 
 
 #: Code steps of integer pixel types (pixels read as [0, 1]).

@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -34,6 +35,8 @@ from fidelity.prediction.properties import (
     parse_target_axis,
 )
 from tests import jsondiff
+
+CAMERAS = Path(__file__).resolve().parents[2] / "cameras"
 
 
 def closed_form_mtf50(sigma: float) -> float:
@@ -150,3 +153,25 @@ def test_mitsuba_renders_the_check_target_as_the_closed_form():
         ya, yb = ea.channel("Y"), eb.channel("Y")
         assert abs(ya.mtf50 / ref - 1) < 0.03, ya.mtf50
         assert abs(ya.mtf50 / yb.mtf50 - 1) < 0.03
+
+
+def test_the_frame_reads_its_patch_edges_only_where_the_target_refuses():
+    """A measured target spares the patch edges (their sharpness is not computed, the noise is
+    the same); a camera whose target clips (over-exposed) is read on the patch edges."""
+    from fidelity.camera.render import frame_properties, render_chart
+    from fidelity.measure.pixels import measure_pixels
+
+    frame = render_chart(load_camera("nikon-5100"), frame=True).frame
+    assert frame is not None
+    sharpness, noise = frame_properties(frame, "scene", "D65")
+    assert sharpness is not None and sharpness.method.startswith("the slanted-edge target")
+    kw = dict(encoding="srgb", reference="scene", illuminant="D65", uncertainty=False,
+              corner_checks=False)
+    full = measure_pixels(frame.srgb, frame.corners, **kw)
+    bare = measure_pixels(frame.srgb, frame.corners, sharpness=False, **kw)
+    assert full.sharpness is not None and bare.sharpness is None
+    assert bare.noise == full.noise == noise
+    over = render_chart(load_camera(str(CAMERAS / "nikon5100-overexposed.toml")), frame=True).frame
+    assert over is not None
+    edges = frame_properties(over, "scene", "D65")[0]
+    assert edges is not None and edges.method.startswith("the brightest-contrast")
