@@ -11,7 +11,8 @@ solvers, which are short:
 - :func:`bounded_minimum`: Brent's minimiser on an interval (golden section plus parabolic
   interpolation, Brent 1973 ch. 5, procedure ``localmin``), the algorithm of
   ``scipy.optimize.minimize_scalar(method="bounded")`` (``fminbound``), with its tolerance
-  ``xatol``.
+  ``xatol``; :func:`bounded_minima` runs several such searches in lockstep, so that their
+  function values come from one vectorised call per round.
 
 Both are tested against SciPy's implementations (``tests/prediction/test_scalar.py``).
 """
@@ -19,7 +20,7 @@ Both are tested against SciPy's implementations (``tests/prediction/test_scalar.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Generator, Sequence
 
 from fidelity.core.errors import InvalidValueError
 
@@ -107,13 +108,49 @@ def bounded_minimum(f: Callable[[float], float], a: float, b: float, *, xatol: f
                     maxiter: int = 500) -> tuple[float, float]:
     """``(x, f(x))``: a local minimum of ``f`` on ``[a, b]`` (``a < b``), ``x`` to within
     about ``xatol`` (Brent's ``localmin`` as ``scipy.optimize.fminbound``)."""
+    search = _localmin(a, b, xatol, maxiter)
+    x = next(search)
+    while True:
+        try:
+            x = search.send(float(f(x)))
+        except StopIteration as done:
+            return done.value  # type: ignore[no-any-return]
+
+
+def bounded_minima(f: Callable[[list[int], list[float]], Sequence[float]],
+                   bounds: Sequence[tuple[float, float]], *, xatol: Sequence[float],
+                   maxiter: int = 500) -> list[tuple[float, float]]:
+    """:func:`bounded_minimum` of several functions at once, in lockstep: each round asks
+    ``f(indices, xs)`` for the values of the functions ``indices`` (into ``bounds``) at
+    ``xs``, one point per search still running, so that a caller evaluates them in one
+    vectorised call. Every search takes the steps it takes alone: the same ``(x, f(x))``
+    as :func:`bounded_minimum` of ``lambda x: f([i], [x])[0]`` on ``bounds[i]``."""
+    searches = [_localmin(a, b, t, maxiter) for (a, b), t in zip(bounds, xatol, strict=True)]
+    pending = {i: next(s) for i, s in enumerate(searches)}
+    found: dict[int, tuple[float, float]] = {}
+    while pending:
+        order = list(pending)
+        values = f(order, [pending[i] for i in order])
+        pending = {}
+        for i, v in zip(order, values, strict=True):
+            try:
+                pending[i] = searches[i].send(float(v))
+            except StopIteration as done:
+                found[i] = done.value
+    return [found[i] for i in range(len(searches))]
+
+
+def _localmin(a: float, b: float, xatol: float, maxiter: int
+              ) -> Generator[float, float, tuple[float, float]]:
+    """Brent's ``localmin`` as a coroutine: yields each point to evaluate, is sent its value,
+    returns ``(x, f(x))``."""
     if not (math.isfinite(a) and math.isfinite(b)) or not a < b:
         raise InvalidValueError(f"bounds [{a}, {b}] must be finite with a < b")
     golden = 0.5 * (3.0 - math.sqrt(5.0))
     sqrt_eps = math.sqrt(_EPS)
     lo, hi = a, b
     x = w = v = lo + golden * (hi - lo)
-    fx = fw = fv = float(f(x))
+    fx = fw = fv = yield x
     d = e = 0.0
     for _ in range(maxiter):
         xm = 0.5 * (lo + hi)
@@ -141,7 +178,7 @@ def bounded_minimum(f: Callable[[float], float], a: float, b: float, *, xatol: f
             e = (hi - x) if x < xm else (lo - x)
             d = golden * e
         u = x + (d if abs(d) >= tol1 else (tol1 if d >= 0 else -tol1))
-        fu = float(f(u))
+        fu = yield u
         if fu <= fx:
             if u >= x:
                 lo = x
@@ -160,4 +197,4 @@ def bounded_minimum(f: Callable[[float], float], a: float, b: float, *, xatol: f
     return x, fx
 
 
-__all__ = ["RTOL", "bounded_minimum", "brent_root"]
+__all__ = ["RTOL", "bounded_minima", "bounded_minimum", "brent_root"]

@@ -211,3 +211,14 @@ def test_directional_verdict_and_json_round_trip():
     assert doc["bound"] == "directional"
     back = ChartReport.from_json(doc)
     assert chart_report_json(back) == doc
+
+
+def test_the_families_fitted_together_are_each_fitted_alone():
+    """fit_families runs the six Brent searches in lockstep; each fit is fit_family's."""
+    ch = load_chart()
+    lab = srgb_to_lab(TRANSFORMS["gamma-inc"](ch.srgb, 1.3)) + np.array([0.5, -1.0, 2.0])
+    together = {f.fit: f for f in dr.fit_families(ch.lab, lab)}
+    assert set(together) == {"brightness", "gamma", "contrast", "saturation", "hue",
+                             "pull_mean"}
+    for name, fit in together.items():
+        assert fit == dr.fit_family(ch.lab, lab, name)

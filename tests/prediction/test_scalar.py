@@ -10,7 +10,7 @@ import pytest
 from scipy.optimize import brentq, minimize_scalar
 
 from fidelity.core.errors import InvalidValueError
-from fidelity.prediction.scalar import RTOL, bounded_minimum, brent_root
+from fidelity.prediction.scalar import RTOL, bounded_minima, bounded_minimum, brent_root
 
 ROOTS = [
     (lambda x: x**3 - 2 * x - 5, 2.0, 3.0),                 # Wallis' cubic
@@ -61,6 +61,23 @@ def test_bounded_minimum_equals_scipy_minimize_scalar(k):
     assert fx == pytest.approx(float(res.fun), abs=1e-15)
 
 
+def test_bounded_minima_in_lockstep_take_each_search_s_own_steps():
+    """Several searches at once give what each gives alone, bit for bit, and every call asks
+    only for the searches still running."""
+    xatol = [1e-10 * max(1.0, abs(b - a)) for _, a, b in MINIMA]
+    asked: list[list[int]] = []
+
+    def batch(ks, xs):
+        asked.append(list(ks))
+        return [MINIMA[k][0](x) for k, x in zip(ks, xs, strict=True)]
+
+    together = bounded_minima(batch, [(a, b) for _, a, b in MINIMA], xatol=xatol)
+    alone = [bounded_minimum(f, a, b, xatol=t) for (f, a, b), t in zip(MINIMA, xatol, strict=True)]
+    assert together == alone
+    assert asked[0] == list(range(len(MINIMA))) and len(asked[-1]) < len(MINIMA)
+    assert all(len(set(ks)) == len(ks) for ks in asked)
+
+
 def test_bounded_minimum_refuses_empty_bounds():
     with pytest.raises(InvalidValueError):
         bounded_minimum(lambda x: x, 1.0, 1.0)
@@ -76,9 +93,13 @@ def test_calibration_and_family_fits_equal_the_scipy_answers():
         return float(brentq(f, a, b, xtol=kw.get("xtol", 2e-12), rtol=RTOL,
                             maxiter=kw.get("maxiter", 100)))
 
-    def scipy_min(f, a, b, xatol=1e-5):
-        r = minimize_scalar(f, bounds=(a, b), method="bounded", options={"xatol": xatol})
-        return float(r.x), float(r.fun)
+    def scipy_minima(f, bounds, xatol):
+        out = []
+        for i, ((a, b), t) in enumerate(zip(bounds, xatol, strict=True)):
+            r = minimize_scalar(lambda x, i=i: f([i], [x])[0], bounds=(a, b), method="bounded",
+                                options={"xatol": t})
+            out.append((float(r.x), float(r.fun)))
+        return out
 
     for name in ("hue", "gamma-inc", "saturation-dec", "contrast-inc"):
         for target in (1.0, 3.0, 12.0):
@@ -96,10 +117,10 @@ def test_calibration_and_family_fits_equal_the_scipy_answers():
     lab = ref + np.array([1.5, -2.0, 3.0])
     for fit in ("gamma", "hue", "saturation"):
         ours = directional.fit_family(ref, lab, fit)
-        orig = directional.bounded_minimum
-        directional.bounded_minimum = scipy_min
+        orig = directional.bounded_minima
+        directional.bounded_minima = scipy_minima
         try:
             theirs = directional.fit_family(ref, lab, fit)
         finally:
-            directional.bounded_minimum = orig
+            directional.bounded_minima = orig
         assert ours.param == pytest.approx(theirs.param, rel=1e-9, abs=1e-12)
