@@ -120,7 +120,8 @@ class ToneCurve:
         True: it acts on the reflectances, before the light (an encoding mistake of the
         albedos); False: on the scene-linear values, after exposure and offset.
     function
-        ``f(x, theta)``: linear values (..., 3) and the shape parameters -> linear values.
+        ``f(x, theta)``: linear values (..., 3) and the shape parameters -> linear values;
+        ``theta`` (params,), or (k, params) for a stack ``x`` (k, n, 3), one row per chart.
     """
 
     name: str
@@ -175,13 +176,20 @@ def _srgb_decoded(x: F64, theta: F64) -> F64:
     return np.asarray(cm.linearize_srgb(np.clip(x, 0.0, None)), np.float64)
 
 
+def _shape(theta: F64, j: int) -> Any:
+    """Shape parameter ``j`` of ``theta`` (params,) (a number) or (k, params) (k, 1, 1): one
+    per chart of a (k, n, 3) stack."""
+    v = theta[..., j]
+    return v[..., None, None] if np.ndim(v) else v
+
+
 def _gamma(x: F64, theta: F64) -> F64:
-    return np.asarray(np.power(np.clip(x, 0.0, None), np.exp(theta[0])), np.float64)
+    return np.asarray(np.power(np.clip(x, 0.0, None), np.exp(_shape(theta, 0))), np.float64)
 
 
 def _display_gamma(x: F64, theta: F64) -> F64:
     """Encoded with a pure power ``1 / γ`` (``γ = 2.2 exp(theta[0])``), decoded as sRGB."""
-    gamma = 2.2 * np.exp(theta[0])
+    gamma = 2.2 * np.exp(_shape(theta, 0))
     encoded = np.power(np.clip(x, 0.0, None), 1.0 / gamma)
     return np.asarray(cm.linearize_srgb(encoded), np.float64)
 
@@ -190,8 +198,8 @@ def _generic(x: F64, theta: F64) -> F64:
     """Contrast ``c = exp(theta[0])`` about mid grey and a shoulder ``K = theta[1]^2``:
     ``0.18 (1 + K) u / (1 + K u)``, ``u = (x / 0.18)^c`` (Naka-Rushton; white level
     0.18 (1 + K) / K; K = 0: a power law about mid grey)."""
-    u = np.power(np.clip(x, 0.0, None) / MID_GREY, np.exp(theta[0]))
-    k = theta[1] * theta[1]
+    u = np.power(np.clip(x, 0.0, None) / MID_GREY, np.exp(_shape(theta, 0)))
+    k = _shape(theta, 1) * _shape(theta, 1)
     return np.asarray(MID_GREY * (1.0 + k) * u / (1.0 + k * u), np.float64)
 
 
@@ -310,29 +318,66 @@ def hue_rotation(degrees: float) -> F64:
     (Rodrigues' formula; +120° takes red to green, as the hue angle turns)."""
     t = math.radians(degrees)
     n = np.full(3, 1.0 / math.sqrt(3.0))
-    cross = np.array([[0.0, -n[2], n[1]], [n[2], 0.0, -n[0]], [-n[1], n[0], 0.0]])
-    return np.asarray(math.cos(t) * np.eye(3) + math.sin(t) * cross
+    return np.asarray(math.cos(t) * np.eye(3) + math.sin(t) * _CROSS
                       + (1.0 - math.cos(t)) * np.outer(n, n), np.float64)
+
+
+#: The cross-product matrix of the grey axis (1, 1, 1) / sqrt(3).
+_CROSS: F64 = np.array([[0.0, -1.0, 1.0], [1.0, 0.0, -1.0], [-1.0, 1.0, 0.0]]) / math.sqrt(3.0)
+
+
+def _hue_rotations(degrees: F64) -> F64:
+    """:func:`hue_rotation` of each of ``degrees`` (k,): (k, 3, 3)."""
+    t = np.radians(degrees)[:, None, None]
+    n = np.full(3, 1.0 / math.sqrt(3.0))
+    return np.asarray(np.cos(t) * np.eye(3) + np.sin(t) * _CROSS
+                      + (1.0 - np.cos(t)) * np.outer(n, n), np.float64)
 
 
 def _predict(spec: _Spec, theta: F64, reference: F64, expected_ev: float,
              display: bool) -> F64:
-    p = _unpack(spec, theta, expected_ev)
-    x = reference
+    """The model ``spec`` at parameters ``theta`` (p,) -> the chart (n, 3); at a stack of
+    parameters (k, p) -> the charts (k, n, 3), one evaluation for all (a Jacobian's
+    columns). The parameters of one chart are numbers, of a stack (k, 1, 1) columns."""
+    t = np.asarray(theta, np.float64)
+    single = t.ndim == 1
+
+    def column(j: int) -> Any:
+        return float(t[j]) if single else t[:, j, None, None]
+
+    def exp(v: Any) -> Any:
+        return math.exp(v) if single else np.exp(v)
+
+    x: F64 = reference if single else np.broadcast_to(reference, (len(t), *reference.shape))
+    i = 0
+    ev: Any = expected_ev
+    offset: Any = 0.0
+    if spec.exposure:
+        ev, i = column(i), i + 1
+    if spec.offset:
+        offset, i = column(i), i + 1
     tone = spec.tone
+    shape = t[..., spec.size - tone.params:] if tone is not None else t[..., :0]
     if tone is not None and tone.reflectance:
-        x = tone(x, p["tone"])
+        x = tone(x, shape)
     if spec.balance:
-        g = np.array([p["gains"][0], 1.0, p["gains"][1]])
-        x = x * (g / float(g @ LUMINANCE))
+        if single:
+            g = np.array([exp(column(i)), 1.0, exp(column(i + 1))])
+        else:
+            g = np.stack([np.exp(t[:, i]), np.ones(len(t)), np.exp(t[:, i + 1])], axis=-1)
+        x = x * (g / (g @ LUMINANCE)[..., None])[..., None, :]
+        i += 2
     if spec.hue:
-        x = x @ hue_rotation(p["hue"]).T
+        x = x @ (hue_rotation(column(i)).T if single
+                 else np.swapaxes(_hue_rotations(t[:, i]), 1, 2))
+        i += 1
     if spec.saturation:
         y = (x @ LUMINANCE)[..., None]
-        x = y + p["saturation"] * (x - y)
-    x = x * 2.0 ** p["ev"] + p["offset"]
+        x = y + exp(column(i)) * (x - y)
+        i += 1
+    x = x * 2.0 ** ev + offset
     if tone is not None and not tone.reflectance:
-        x = tone(x, p["tone"])
+        x = tone(x, shape)
     return np.clip(x, 0.0, 1.0 if display else None)
 
 
@@ -368,8 +413,10 @@ class _Problem:
         return 3 * int(self.used.sum())
 
     def residual(self, spec: _Spec, theta: F64) -> F64:
+        """The used patches' Lab residuals (3 m,) at ``theta`` (p,); (k, 3 m) at (k, p)."""
         pred = _predict(spec, theta, self.reference, self.expected_ev, self.display)
-        return np.asarray((_lab(pred) - self.target_lab)[self.used].ravel(), np.float64)
+        d = (_lab(pred) - self.target_lab)[..., self.used, :]
+        return np.asarray(d.reshape(*d.shape[:-2], -1), np.float64)
 
     def start(self, spec: _Spec, ev: float | None = None) -> F64:
         """Every parameter of ``spec`` at its identity, the exposure at ``ev`` (default: the
@@ -388,7 +435,7 @@ class _Problem:
         def residual(t: F64) -> F64:
             return self.residual(spec, t)
 
-        theta, rss = least_squares(residual, theta0, lo, hi)
+        theta, rss = least_squares(residual, theta0, lo, hi, vectorised=True)
         return _Fit(spec, theta, rss)
 
     def best_ev(self, spec: _Spec) -> tuple[float, float]:
@@ -414,24 +461,30 @@ class _Problem:
 
 
 def least_squares(residual: Callable[[F64], F64], start: F64, lo: F64, hi: F64, *,
-                  iterations: int = 100, tolerance: float = 1e-10) -> tuple[F64, float]:
+                  iterations: int = 100, tolerance: float = 1e-10,
+                  vectorised: bool = False) -> tuple[F64, float]:
     """Minimise ``sum(residual(theta)**2)`` over ``lo <= theta <= hi`` by Levenberg-Marquardt
     (Marquardt's scaling of the damping by the diagonal of JᵀJ), with a forward-difference
     Jacobian and the steps clipped to the bounds; stops when the sum of squares falls by less
     than ``tolerance`` relatively, or no damped step lowers it. Returns the parameters and the
-    sum of squares. (SciPy's solvers are not imported by an audit: their import alone takes
-    longer than the fit.)"""
+    sum of squares. ``vectorised``: ``residual`` also takes a stack of parameter vectors
+    (k, p) and returns their residuals (k, n), so that the Jacobian's columns come from one
+    call. (SciPy's solvers are not imported by an audit: their import alone takes longer than
+    the fit.)"""
     x = np.clip(np.asarray(start, np.float64), lo, hi)
     r = residual(x)
     cost = float(r @ r)
     damping = 1e-3
     for _ in range(iterations):
         h = 1e-6 * np.maximum(1.0, np.abs(x))
-        jac = np.empty((r.size, x.size))
-        for i in range(x.size):
-            dx = x.copy()
-            dx[i] = x[i] + h[i] if x[i] + h[i] <= hi[i] else x[i] - h[i]
-            jac[:, i] = (residual(dx) - r) / (dx[i] - x[i])
+        step_to = np.where(x + h <= hi, x + h, x - h)
+        shifted = np.repeat(x[None], x.size, axis=0)  # row i: x with its i-th part moved
+        shifted[np.arange(x.size), np.arange(x.size)] = step_to
+        if vectorised:
+            moved = residual(shifted)
+        else:
+            moved = np.stack([residual(row) for row in shifted])
+        jac = ((moved - r) / (step_to - x)[:, None]).T
         a, g = jac.T @ jac, jac.T @ r
         scale = np.diag(a) + 1e-12
         for _ in range(12):

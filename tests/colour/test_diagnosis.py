@@ -271,3 +271,35 @@ def test_view_transforms_are_blenders():
         expected = srgb_decode(out.astype(np.float64))
         got = curves[entry["name"]](grey.astype(np.float64), np.zeros(0))
         np.testing.assert_allclose(got, expected, rtol=2e-3, atol=1e-5, err_msg=entry["name"])
+
+
+@pytest.mark.parametrize("tone", [None, "gamma", "display gamma", "tone curve", "AgX"])
+def test_a_stack_of_parameters_predicts_each_chart_as_alone(tone):
+    """The Jacobian's columns come from one call on a (k, p) stack: each row is the chart of
+    its own parameters (to rounding), and the vectorised fit is the column-by-column one."""
+    from fidelity.colour import diagnosis as dg
+
+    curve = next((c for c in dg.tone_curves() if c.name == tone), None)
+    spec = dg._Spec(exposure=True, offset=True, balance=True, hue=True, saturation=True,
+                    tone=curve)
+    ref = np.linspace(0.02, 0.9, 72).reshape(24, 3)
+    rng = np.random.default_rng(4)
+    stack = rng.normal(0.0, 0.2, (7, spec.size))
+    together = dg._predict(spec, stack, ref, 0.5, True)
+    alone = np.stack([dg._predict(spec, row, ref, 0.5, True) for row in stack])
+    assert together.shape == (7, 24, 3)
+    np.testing.assert_allclose(together, alone, rtol=1e-13, atol=1e-15)
+    target = dg._predict(spec, stack[0], ref, 0.5, False) * 0.9 + 0.01
+    lo, hi = dg._bounds(spec)
+
+    def residual(theta):
+        return (dg._predict(spec, theta, ref, 0.5, False) - target).reshape(
+            *np.shape(theta)[:-1], -1)
+
+    start = np.zeros(spec.size)
+    a = dg.least_squares(residual, start, lo, hi, vectorised=True)
+    b = dg.least_squares(residual, start, lo, hi)
+    # the same fit (its parameters trade off along the model's flat directions: its charts)
+    assert a[1] == pytest.approx(b[1], rel=1e-6, abs=1e-14)
+    np.testing.assert_allclose(dg._predict(spec, a[0], ref, 0.5, False),
+                               dg._predict(spec, b[0], ref, 0.5, False), atol=1e-6)
