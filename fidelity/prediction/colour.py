@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from fidelity.prediction.calibration import calibrate_transform, load_calibration_table
+from fidelity.prediction.calibration import calibrate_transforms, load_calibration_table
 from fidelity.prediction.transforms import TRANSFORMS
 
 
@@ -59,7 +59,8 @@ def transform_parameters(delta_e: float, calibration: Any = None, *,
     From the shipped calibration table (``fidelity.prediction.calibration.load_calibration_table()``): at
     a calibrated target, the table's parameter (``method: "calibrated"``). Between targets the
     table's two bracketing entries are given (``bracket``) and the parameter is solved on the
-    chart for this exact ΔE (``fidelity.prediction.calibration.calibrate_transform``, ``method: "solved"``),
+    chart for this exact ΔE (``fidelity.prediction.calibration.calibrate_transforms``, every
+    transform at once; ``method: "solved"``),
     or, with ``solve=False``, interpolated linearly in ΔE between the bracket
     (``method: "interpolated"``; below the first target the identity at the chart's baseline ΔE
     is the lower end). A ΔE below the chart's baseline or beyond a transform's reach is
@@ -72,9 +73,15 @@ def transform_parameters(delta_e: float, calibration: Any = None, *,
     by_transform: dict[str, list[Any]] = {}
     for e in calibration.entries:
         by_transform.setdefault(e.transform, []).append(e)
+    for name in by_transform:
+        by_transform[name].sort(key=lambda e: float(e.target))
+    calibrated = {name: _calibrated(entries, delta_e) for name, entries in by_transform.items()}
+    solved: dict[str, Any] = {}
+    if solve and delta_e > baseline:  # the transforms to solve, at once (in lockstep)
+        ask = [name for name, entry in calibrated.items() if entry is None]
+        solved = dict(zip(ask, calibrate_transforms(ask, delta_e), strict=True))
     out: list[TransformParameter] = []
     for name, entries in by_transform.items():
-        entries = sorted(entries, key=lambda e: float(e.target))
         spec = TRANSFORMS.get(name)
         nodes: list[tuple[float, float]] = []
         if spec is not None:
@@ -87,19 +94,18 @@ def transform_parameters(delta_e: float, calibration: Any = None, *,
                 unreachable_from = float(e.target)
         row: dict[str, Any] = {"transform": name, "delta_e": delta_e, "param": None,
                                "reachable": False, "method": None, "bracket": None}
-        exact = [e for e in entries if abs(float(e.target) - delta_e) < 1e-9]
         below = [n for n in nodes if n[0] <= delta_e]
         above = [n for n in nodes if n[0] >= delta_e]
         if below and above:
             row["bracket"] = [{"delta_e": below[-1][0], "param": below[-1][1]},
                               {"delta_e": above[0][0], "param": above[0][1]}]
-        if exact and exact[0].reachable and exact[0].param is not None:
-            row.update(param=float(exact[0].param), reachable=True, method="calibrated",
+        if (exact := calibrated[name]) is not None:
+            row.update(param=float(exact.param), reachable=True, method="calibrated",
                        bracket=None)
         elif delta_e <= baseline:
             row.update(method=f"unreachable: at or below the chart's baseline ΔE {baseline:.4g}")
         elif solve:
-            entry = calibrate_transform(name, delta_e)
+            entry = solved[name]
             if entry.reachable and entry.param is not None:
                 row.update(param=float(entry.param), reachable=True, method="solved")
             else:
@@ -117,6 +123,15 @@ def transform_parameters(delta_e: float, calibration: Any = None, *,
                 (float(row["bracket"][0]["delta_e"]), float(row["bracket"][0]["param"])),
                 (float(row["bracket"][1]["delta_e"]), float(row["bracket"][1]["param"])))))
     return out
+
+
+def _calibrated(entries: list[Any], delta_e: float) -> Any:
+    """The reachable entry of ``entries`` (sorted by target) calibrated at ``delta_e`` itself
+    (the first at that target), or None."""
+    exact = [e for e in entries if abs(float(e.target) - delta_e) < 1e-9]
+    if exact and exact[0].reachable and exact[0].param is not None:
+        return exact[0]
+    return None
 
 
 __all__ = [

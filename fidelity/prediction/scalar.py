@@ -51,9 +51,26 @@ def brent_root(f: Callable[[float], float], a: float, b: float, *, xtol: float =
         ``f(a)`` and ``f(b)`` of the same sign, a non-finite bracket or function value, or no
         convergence in ``maxiter`` iterations.
     """
+    search = brent_search(a, b, xtol=xtol, rtol=rtol, maxiter=maxiter)
+    x = next(search)
+    while True:
+        try:
+            x = search.send(float(f(x)))
+        except StopIteration as done:
+            return done.value  # type: ignore[no-any-return]
+
+
+def brent_search(a: float, b: float, *, xtol: float = 2e-12, rtol: float = RTOL,
+                 maxiter: int = 100) -> Generator[float, float, float]:
+    """:func:`brent_root` as a coroutine: yields each point whose function value it needs
+    (``a``, ``b``, then the iterates), is sent the value, returns the root; the same points
+    and root, so that a caller can run several searches in lockstep and evaluate their
+    functions in one vectorised call per round
+    (:func:`fidelity.prediction.calibration.calibrate_transforms`)."""
     if not (math.isfinite(a) and math.isfinite(b)):
         raise InvalidValueError(f"bracket [{a}, {b}] is not finite")
-    fa, fb = float(f(a)), float(f(b))
+    fa = yield a
+    fb = yield b
     if not (math.isfinite(fa) and math.isfinite(fb)):
         raise InvalidValueError(f"f is not finite at the bracket [{a}, {b}]")
     if fa == 0.0:
@@ -98,7 +115,7 @@ def brent_root(f: Callable[[float], float], a: float, b: float, *, xtol: float =
             xcur += scur
         else:
             xcur += delta if sbis > 0 else -delta
-        fcur = float(f(xcur))
+        fcur = yield xcur
         if not math.isfinite(fcur):
             raise InvalidValueError(f"f is not finite at {xcur}")
     raise InvalidValueError(f"no root found in [{a}, {b}] within {maxiter} iterations")
@@ -197,4 +214,4 @@ def _localmin(a: float, b: float, xatol: float, maxiter: int
     return x, fx
 
 
-__all__ = ["RTOL", "bounded_minima", "bounded_minimum", "brent_root"]
+__all__ = ["RTOL", "bounded_minima", "bounded_minimum", "brent_root", "brent_search"]

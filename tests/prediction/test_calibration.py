@@ -12,6 +12,7 @@ from fidelity.prediction.calibration import (
     DEFAULT_TARGETS,
     TOLERANCE,
     calibrate_transform,
+    calibrate_transforms,
     calibration_table,
     delta_e_curve,
     load_calibration_table,
@@ -127,6 +128,9 @@ def test_one_target_solved_alone_equals_the_whole_scan() -> None:
     whole = calibration_table(targets=targets)
     alone = [calibrate_transform(name, t) for name in TRANSFORMS for t in targets]
     assert list(whole.entries) == alone
+    # every transform at once, their searches in lockstep: the same entries again
+    together = [calibrate_transforms(list(TRANSFORMS), t) for t in targets]
+    assert [row[k] for k in range(len(TRANSFORMS)) for row in together] == alone
     assert any(not e.reachable for e in alone) and any(e.reachable for e in alone)
 
 

@@ -89,9 +89,24 @@ def test_calibration_and_family_fits_equal_the_scipy_answers():
     from fidelity.colour.charts import load_reference
     from fidelity.prediction import calibration, directional
 
-    def scipy_root(f, a, b, **kw):
-        return float(brentq(f, a, b, xtol=kw.get("xtol", 2e-12), rtol=RTOL,
-                            maxiter=kw.get("maxiter", 100)))
+    def scipy_calibrated(name, target):
+        """The parameter nearest the identity reaching ``target``: the first bracket of the
+        transform's scanned ΔE curve, solved by SciPy's brentq."""
+        for params, des in calibration.delta_e_curve(name):
+            first = calibration._first_crossing(des, target)
+            if first is None:
+                continue
+            i, on_grid = first
+
+            def f(x):
+                return float(calibration.transform_delta_e(name, x)) - target
+
+            a, b = sorted((float(params[i]), float(params[min(i + 1, len(params) - 1)])))
+            x = float(params[i]) if on_grid else float(
+                brentq(f, a, b, xtol=1e-14, rtol=RTOL, maxiter=200))
+            if abs(f(x)) <= calibration.TOLERANCE:
+                return x
+        return None
 
     def scipy_minima(f, bounds, xatol):
         out = []
@@ -101,18 +116,15 @@ def test_calibration_and_family_fits_equal_the_scipy_answers():
             out.append((float(r.x), float(r.fun)))
         return out
 
-    for name in ("hue", "gamma-inc", "saturation-dec", "contrast-inc"):
-        for target in (1.0, 3.0, 12.0):
-            ours = calibration.calibrate_transform(name, target)
-            orig = calibration.brent_root
-            calibration.brent_root = scipy_root
-            try:
-                theirs = calibration.calibrate_transform(name, target)
-            finally:
-                calibration.brent_root = orig
-            assert ours.reachable == theirs.reachable
+    names = ("hue", "gamma-inc", "saturation-dec", "contrast-inc")
+    for target in (1.0, 3.0, 12.0):
+        together = calibration.calibrate_transforms(names, target)
+        for name, ours in zip(names, together, strict=True):
+            assert ours == calibration.calibrate_transform(name, target)  # lockstep: the same
+            theirs = scipy_calibrated(name, target)
+            assert ours.reachable == (theirs is not None)
             if ours.reachable:
-                assert ours.param == pytest.approx(theirs.param, rel=1e-12, abs=1e-13)
+                assert ours.param == pytest.approx(theirs, rel=1e-12, abs=1e-13)
     ref = np.asarray(load_reference("scene", "D65").lab)
     lab = ref + np.array([1.5, -2.0, 3.0])
     for fit in ("gamma", "hue", "saturation"):
