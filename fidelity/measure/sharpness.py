@@ -435,36 +435,91 @@ def _lsf_window(n: int, peak: int) -> F64:
     return w
 
 
-def _edge_locations(a: F64, sign: float, degree: int) -> tuple[F64, F64, F64]:
-    """Per-row edge locations (column coordinate, NaN where a row has no edge), the
-    ``degree`` fit and the first-order fit (polynomial coefficients, lowest first, of the
-    column against the row index)."""
-    rows, cols = a.shape
-    d = np.diff(a, axis=1) * sign
+def _fit_rows(r: F64, loc: F64, deg: int) -> F64:
+    """Least-squares polynomials of degree ``deg`` (coefficients lowest first) of each row of
+    ``loc`` (d, rows) against ``r`` (rows,), over its finite entries (the others are left
+    out): (d, deg + 1). Normal equations in ``u = (r - m) / s`` (m the centre, s the
+    half-range of ``r``: a well-conditioned basis for deg <= 2), mapped back to powers of r;
+    the same polynomial as NumPy's ``polyfit`` of the finite points, to rounding (a test).
+    A row with fewer than ``deg + 1`` distinct points gives NaN."""
+    m = 0.5 * (float(r[0]) + float(r[-1]))
+    s = max(0.5 * abs(float(r[-1]) - float(r[0])), 1.0)
+    u = (r - m) / s
+    powers = u[:, None] ** np.arange(deg + 1)  # (rows, deg + 1)
+    ok = np.isfinite(loc)
+    w = ok.astype(np.float64)
+    y = np.where(ok, loc, 0.0)
+    normal = np.einsum("dr,rk,rj->dkj", w, powers, powers)
+    rhs = np.einsum("dr,rk->dk", w * y, powers)
+    coef_u = np.full(rhs.shape, np.nan)
+    solvable = np.abs(np.linalg.det(normal)) > 1e-12 * np.maximum(
+        1.0, np.prod(np.diagonal(normal, axis1=1, axis2=2), axis=1))
+    if solvable.any():
+        coef_u[solvable] = np.linalg.solve(normal[solvable], rhs[solvable][..., None])[..., 0]
+    # p(r) = sum_k b_k ((r - m) / s)^k: the coefficients of powers of r
+    basis = np.zeros((deg + 1, deg + 1))
+    for k in range(deg + 1):
+        term = np.polynomial.polynomial.polypow([-m / s, 1.0 / s], k)
+        basis[k, :term.size] = term
+    return np.asarray(coef_u @ basis, dtype=np.float64)
+
+
+def _poly_rows(r: F64, coef: F64) -> F64:
+    """Each polynomial of ``coef`` (d, deg + 1), lowest first, at ``r`` (rows,): (d, rows)."""
+    out = np.zeros((coef.shape[0], r.size))
+    for c in coef.T[::-1]:  # Horner
+        out = out * r + c[:, None]
+    return out
+
+
+def _edge_stack(a: F64, sign: F64, degree: int) -> tuple[F64, F64, F64, NDArray[np.int64]]:
+    """:func:`_edge_locations` of each ROI of a stack ``a`` (d, rows, cols) with polarities
+    ``sign`` (d,) at once: the locations (d, rows), the ``degree`` and first-order fits (d,
+    deg + 1), (d, 2), and per ROI the rows without an edge in the pass whose fit it lacked
+    points for (-1: fitted)."""
+    d_, rows, cols = a.shape
+    d = np.diff(a, axis=-1) * sign[:, None, None]
     x = np.arange(cols - 1, dtype=np.float64) + 0.5
     r = np.arange(rows, dtype=np.float64)
+    need = max(degree + 2, MIN_EDGE_PX // 2)
+    missing = np.full(d_, -1, dtype=np.int64)
 
     def centroids(window: F64) -> F64:
         wd = window * d
-        total = wd.sum(axis=1)
+        total = wd.sum(axis=-1)
         with np.errstate(invalid="ignore", divide="ignore"):
-            loc = (wd * x).sum(axis=1) / total
+            loc = (wd * x).sum(axis=-1) / total
         ok = (total > 0) & np.isfinite(loc) & (loc >= x[0]) & (loc <= x[-1])
         return np.where(ok, loc, np.nan)
 
     def fit(loc: F64, deg: int) -> F64:
-        ok = np.isfinite(loc)
-        if np.sum(ok) < max(deg + 2, MIN_EDGE_PX // 2):
-            raise RefusedEdge("flat", f"roi: no edge found in {int(np.sum(~ok))} of {rows} "
-                                      "rows")
-        return np.asarray(np.polynomial.polynomial.polyfit(r[ok], loc[ok], deg),
-                          dtype=np.float64)
+        found = np.isfinite(loc).sum(axis=-1)
+        short = (found < need) & (missing < 0)
+        missing[short] = rows - found[short]
+        return _fit_rows(r, loc, deg)
 
     loc = centroids(_middle_window(rows, cols))
     coef = fit(loc, degree)
-    loc = centroids(_hamming(x, np.clip(np.polynomial.polynomial.polyval(r, coef), x[0], x[-1])))
+    centre = np.clip(_poly_rows(r, np.nan_to_num(coef)), x[0], x[-1])  # (d, rows)
+    half = np.maximum(np.maximum(centre - x[0], x[-1] - centre), 1e-9)[..., None]
+    window = 0.54 + 0.46 * np.cos(np.pi * (x - centre[..., None]) / half)  # _hamming's
+    loc = centroids(window)
     coef = fit(loc, degree)
-    return loc, coef, coef if degree == 1 else fit(loc, 1)  # degree 1: the same fit
+    line = coef if degree == 1 else fit(loc, 1)  # degree 1: the same fit
+    missing[(missing < 0) & ~np.all(np.isfinite(line), axis=-1)] = rows
+    return loc, coef, line, missing
+
+
+def _edge_locations(a: F64, sign: float, degree: int) -> tuple[F64, F64, F64]:
+    """Per-row edge locations (column coordinate, NaN where a row has no edge), the
+    ``degree`` fit and the first-order fit (polynomial coefficients, lowest first, of the
+    column against the row index): two centroid passes, the second with each row's Hamming
+    window centred on the first fit (sfrmat)."""
+    loc, coef, line, missing = _edge_stack(a[None], np.array([sign]), degree)
+    if missing[0] >= 0:
+        raise RefusedEdge("flat", f"roi: no edge found in {int(missing[0])} of {a.shape[0]} "
+                                  "rows")
+    return loc[0], coef[0], line[0]
 
 
 @dataclass(frozen=True)
@@ -486,8 +541,14 @@ def _core(a: F64, degree: int, check: bool, strict: bool = True,
     """The e-SFR of a vertical-ish edge (steps 2-8); ``check`` raises the refusals that need
     the fit (angle, phase cycles, SNR)."""
     sign = _polarity(a)
-    rows_all, cols = a.shape
     _loc, coef, line = _edge_locations(a, sign, degree)
+    return _core_fitted(a, sign, coef, line, check, strict, window)
+
+
+def _core_fitted(a: F64, sign: float, coef: F64, line: F64, check: bool, strict: bool,
+                 window: bool) -> _Core:
+    """:func:`_core` from the edge's fits (:func:`_edge_locations`): steps 3-8."""
+    rows_all, cols = a.shape
     slope = float(line[1])
     angle = math.degrees(math.atan(abs(slope)))
     if check and not MIN_ANGLE_DEG <= angle <= MAX_ANGLE_DEG:
@@ -615,6 +676,39 @@ def _smooth_esf(esf: F64) -> F64:
     return out
 
 
+#: Most pixel values of bootstrap draws whose edges are fitted together
+#: (:func:`_bootstrap_mtf50`): 2 million, 16 MB a stack.
+BOOTSTRAP_STACK_VALUES = 2_000_000
+
+
+def _bootstrap_mtf50(model: F64, noise: float, rng: np.random.Generator, draws: int,
+                     degree: int, strict: bool) -> list[float]:
+    """The MTF50 of ``draws`` noisy copies of ``model`` (Gaussian, σ ``noise``, drawn from
+    ``rng`` one copy after another), each measured as :func:`_core` measures (a draw it
+    refuses, or without a crossing, left out): their edges fitted in stacks of up to
+    :data:`BOOTSTRAP_STACK_VALUES` values (:func:`_edge_stack`), the rest per draw."""
+    rows, cols = model.shape
+    per = max(1, BOOTSTRAP_STACK_VALUES // model.size)
+    k = max(2, cols // 10)
+    found: list[float] = []
+    for first in range(0, draws, per):
+        stack = np.stack([model + rng.normal(0.0, noise, model.shape)
+                          for _ in range(min(per, draws - first))])
+        signs = np.where(stack[:, :, -k:].mean(axis=(1, 2)) >= stack[:, :, :k].mean(axis=(1, 2)),
+                         1.0, -1.0)  # _polarity of each
+        _loc, coef, line, missing = _edge_stack(stack, signs, degree)
+        for i in np.flatnonzero(missing < 0):
+            try:
+                c = _core_fitted(stack[i], float(signs[i]), coef[i], line[i], check=False,
+                                 strict=strict, window=True)
+            except RefusedEdge:
+                continue
+            m = _crossing(c.frequencies, c.mtf, 0.5)
+            if m is not None:
+                found.append(m)
+    return found
+
+
 def esfr(roi: ArrayLike, *, orientation: Orientation = "auto", degree: int = 1,
          saturation: float | None = None, black: float | None = None, refine: bool = True,
          draws: int = DRAWS, seed: int = SEED) -> EdgeSFR:
@@ -687,16 +781,7 @@ def esfr(roi: ArrayLike, *, orientation: Orientation = "auto", degree: int = 1,
     if draws > 0:
         rng = np.random.default_rng(seed)
         model = _model(a, core)
-        found = []
-        for _ in range(draws):
-            noisy = model + rng.normal(0.0, core.noise, model.shape)
-            try:
-                c = _core(noisy, degree, check=False, strict=not refine)
-            except RefusedEdge:
-                continue
-            m = _crossing(c.frequencies, c.mtf, 0.5)
-            if m is not None:
-                found.append(m)
+        found = _bootstrap_mtf50(model, core.noise, rng, draws, degree, not refine)
         done = len(found)
         if done >= max(2, draws // 2):
             # the draws' spread; their mean's offset from the noiseless model's MTF50 (the

@@ -371,3 +371,43 @@ def test_gaussian_mtf50():
         assert gaussian_mtf50(sigma) == pytest.approx(crossing(sigma, 0.5), rel=1e-8)
     with pytest.raises(InvalidValueError):
         gaussian_mtf50(-1.0)
+
+
+@pytest.mark.parametrize("deg", [1, 2])
+def test_the_row_fits_are_numpy_polyfit_of_the_finite_points(deg):
+    """The edge fits (normal equations in a centred basis, every ROI of a stack at once) give
+    NumPy's polyfit of each row's finite points; a row with too few gives NaN."""
+    from fidelity.measure.sharpness import _fit_rows
+
+    rng = np.random.default_rng(3)
+    r = np.arange(120, dtype=np.float64)
+    loc = 30.0 + 0.08 * r + 4e-4 * r * r + rng.normal(0, 0.2, (5, r.size))
+    loc[1, ::3] = np.nan
+    loc[2, 40:] = np.nan
+    loc[3, :] = np.nan
+    loc[3, 7] = 2.0
+    got = _fit_rows(r, loc, deg)
+    for i in (0, 1, 2, 4):
+        ok = np.isfinite(loc[i])
+        want = np.polynomial.polynomial.polyfit(r[ok], loc[i, ok], deg)
+        np.testing.assert_allclose(got[i], want, rtol=1e-9, atol=1e-11)
+    assert np.all(np.isnan(got[3]))
+
+
+def test_the_bootstrap_in_stacks_is_each_draw_measured_alone(monkeypatch):
+    """The bootstrap fits its draws' edges a stack at a time: the MTF50 of each draw is what
+    _core gives that draw alone, whatever the stack size (here 1 draw, 3, all)."""
+    from fidelity.measure import sharpness as sh
+
+    rng = np.random.default_rng(9)
+    model = render(5.0, 1.2) + rng.normal(0.0, 0.01, (ROWS, COLS))
+    alone = []
+    g = np.random.default_rng(11)
+    for _ in range(12):
+        noisy = model + g.normal(0.0, 0.01, model.shape)
+        c = sh._core(noisy, 1, check=False, strict=False)
+        alone.append(sh._crossing(c.frequencies, c.mtf, 0.5))
+    for per in (1, 3, 12):
+        monkeypatch.setattr(sh, "BOOTSTRAP_STACK_VALUES", per * model.size)
+        got = sh._bootstrap_mtf50(model, 0.01, np.random.default_rng(11), 12, 1, False)
+        np.testing.assert_allclose(got, alone, rtol=1e-12)
