@@ -745,18 +745,17 @@ def measure_pixels(
             exposure_ev=None if mode == "auto" else ev, fitted_ev=ev, encoding=encoding,
             negatives=negatives, to_srgb=to_srgb, found=found, step=step,
             excluded=tuple(excluded))
-    chart_noise_, sharpness = (noise_and_sharpness(arr, loc, means, ref, encoding=encoding,
-                                                   negatives=negatives, to_srgb=to_srgb,
-                                                   neutral_samples=neutral_lin,
-                                                   edge_target=edge_target,
-                                                   sharpness=sharpness)
-                               if texture else (None, None))
+    chart_noise_, chart_sharpness = (
+        noise_and_sharpness(arr, loc, means, ref, encoding=encoding, negatives=negatives,
+                            to_srgb=to_srgb, neutral_samples=neutral_lin,
+                            edge_target=edge_target, sharpness=sharpness)
+        if texture else (None, None))
     return ImageMeasurement(
         measurement=measurement, exposure_ev=ev, exposure_mode=mode, encoding=encoding,
         bad_pixels=bad_pixels, valid_pixels=tuple(valid_counts), clipped_patches=clipped,
         location=loc, reference=ref, image=image, detection=found,
         colourspace=_colourspace_name(colourspace), corner_checks=checks,
-        uncertainty=budget, noise=chart_noise_, sharpness=sharpness, neutral_ev=neutral_ev,
+        uncertainty=budget, noise=chart_noise_, sharpness=chart_sharpness, neutral_ev=neutral_ev,
         linear_means=means,
     )
 
