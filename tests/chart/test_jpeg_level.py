@@ -166,3 +166,33 @@ def test_the_level_is_compared_over_bands_of_rows(height, factor):
     assert np.allclose(full, codes[image_rows].reshape(-1, 3).mean(axis=0), rtol=0, atol=1e-9)
     assert np.allclose(level, reduced[rows].reshape(-1, 3).mean(axis=0), rtol=0, atol=1e-9)
     assert len(rows) == (h if h <= band else pytest.approx(h / stride, abs=band))
+
+
+@pytest.mark.parametrize("shape", [(0, 4, 3), (7, 5, 3), (300, 500, 3)])
+def test_the_view_lookup_is_numpy_indexing(shape):
+    """_take (a band of indices converted at a time, for every table) gives numpy's
+    ``table[index]`` for each table, the band edges and the tables' last entries included."""
+    rng = np.random.default_rng(11)
+    index = rng.integers(0, 65536, shape).astype(np.uint16)
+    if index.size:
+        index.reshape(-1)[[0, -1, view.TAKE_BAND - 1 if index.size > view.TAKE_BAND else 0]] \
+            = 65535
+    floats = rng.random(65536).astype(np.float32)
+    codes = rng.integers(0, 256, 65536).astype(np.uint8)
+    got_f, got_c = view._take(index, floats, codes)
+    assert got_f.dtype == np.float32 and got_c.dtype == np.uint8
+    assert got_f.shape == got_c.shape == shape
+    assert np.array_equal(got_f, floats[index]) and np.array_equal(got_c, codes[index])
+
+
+@pytest.mark.parametrize(("shape", "dtype"), [((600, 700, 3), np.float32), ((5, 7, 3), np.float64),
+                                              ((0, 3, 3), np.float32)])
+def test_the_view_codes_are_the_whole_array_formula(shape, dtype):
+    """_codes (a band at a time in one small temporary) gives ``rint(clip(v, 0, 1) * top)``
+    of the whole array as uint16, below 0, above 1 and a reversed (strided) view included."""
+    rng = np.random.default_rng(5)
+    values = (rng.random(shape) * 1.4 - 0.2).astype(dtype)
+    for v in (values, values[:, ::-1]):
+        ref = np.rint(np.clip(v, 0.0, 1.0) * np.float32(65535)).astype(np.uint16)
+        got = view._codes(v, 65535)
+        assert got.dtype == np.uint16 and np.array_equal(got, ref)

@@ -275,7 +275,7 @@ def _prepare(pyramid: Pyramid, region: tuple[int, int, int, int], max_side: int,
     if not finite:
         arr = np.nan_to_num(arr, nan=0.0, posinf=0.0, neginf=0.0)
     if encoding == "srgb":  # codes in [0, 1] -> the nearest of 65536 steps -> linear
-        arr = _codes(arr, 65535) if steps else _DECODE_LUT[_codes(arr, 65535)]
+        arr = _codes(arr, 65535) if steps else _take(_codes(arr, 65535), _DECODE_LUT)[0]
     else:
         np.maximum(arr, 0.0, out=arr)
     # view -> level crop (OpenCV's pixel-centre convention) -> level -> image
@@ -317,21 +317,50 @@ def make_view(pixels: np.ndarray | Pyramid, region: tuple[int, int, int, int], m
     steps = np.multiply(linear, np.float32(4095))  # linear in [0, 1] -> 4096 steps, rounded
     steps += np.float32(0.5)
     rgb8 = _ENCODE_LUT[steps.astype(np.uint16)]
-    if srgb:  # numpy.take: the same elements as ``linear[arr]``, in a fraction of the time
-        linear, rgb8 = np.take(linear, arr), np.take(rgb8, arr)
+    if srgb:  # the same elements as ``linear[arr]`` and ``rgb8[arr]``
+        linear, rgb8 = _take(arr, linear, rgb8)
     # R, G, B -> B, G, R by OpenCV (numpy's copy of a reversed channel axis is several times
     # slower; the same bytes)
     bgr8 = opencv().cvtColor(rgb8, opencv().COLOR_RGB2BGR)
     return View(linear=linear, bgr8=bgr8, to_image=to_image), peak
 
 
+#: Indices :func:`_take` converts to numpy's index type at a time (the conversion of a whole
+#: view's indices, a fresh 8-byte array for each table, took most of a lookup's time).
+TAKE_BAND = 1 << 16
+
+
+def _take(index: np.ndarray, *tables: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``table[index]`` for each 1-D table of ``tables`` (``index``: unsigned integers below
+    every table's length, any shape; each result of its shape and its table's dtype), looked
+    up a band of :data:`TAKE_BAND` indices at a time, each band's indices converted once for
+    all tables."""
+    flat = np.ascontiguousarray(index).reshape(-1)
+    outs = tuple(np.empty(index.shape, t.dtype) for t in tables)
+    flats = [o.reshape(-1) for o in outs]
+    for start in range(0, flat.size, TAKE_BAND):
+        band = flat[start:start + TAKE_BAND].astype(np.intp)
+        for table, out in zip(tables, flats, strict=True):
+            np.take(table, band, out=out[start:start + TAKE_BAND], mode="clip")
+    return outs
+
+
 def _codes(values: np.ndarray, top: int) -> np.ndarray:
-    """``rint(clip(values, 0, 1) * top)`` (``values`` NaN-free, ``top`` < 65536) as
-    ``uint16`` indices into a lookup table, with one float temporary."""
-    scaled: np.ndarray = np.clip(values, 0.0, 1.0)
-    scaled *= np.float32(top)
-    np.rint(scaled, out=scaled)
-    codes: np.ndarray = scaled.astype(np.uint16)
+    """``rint(clip(values, 0, 1) * top)`` (``values`` floats, NaN-free, ``top`` < 65536) as
+    ``uint16`` indices into a lookup table, computed a band of :data:`TAKE_BAND` values at a
+    time in one float temporary of the band's size (a whole view's fresh temporary took most
+    of the time)."""
+    flat = np.ascontiguousarray(values).reshape(-1)
+    codes = np.empty(values.shape, np.uint16)
+    out = codes.reshape(-1)
+    scaled = np.empty(min(TAKE_BAND, flat.size), flat.dtype)
+    for start in range(0, flat.size, TAKE_BAND):
+        band = flat[start:start + TAKE_BAND]
+        tmp = scaled[:len(band)]
+        np.clip(band, 0.0, 1.0, out=tmp)
+        tmp *= np.float32(top)
+        np.rint(tmp, out=tmp)
+        out[start:start + len(band)] = tmp
     return codes
 
 
