@@ -301,7 +301,7 @@ def make_view(pixels: np.ndarray | Pyramid, region: tuple[int, int, int, int], m
     arr, to_image = _prepare(pyramid, region, max_side, encoding, steps=srgb)
     if peak is None:
         step = max(1, int(math.sqrt(arr.shape[0] * arr.shape[1] / 250_000)))
-        sample = np.take(_DECODE_LUT, arr[::step, ::step]) if srgb else arr[::step, ::step]
+        sample = _take(arr[::step, ::step], _DECODE_LUT)[0] if srgb else arr[::step, ::step]
         brightest = np.maximum(np.maximum(sample[..., 0], sample[..., 1]), sample[..., 2])
         peak = percentile(brightest, 99.0)  # np.percentile's number, without numpy.ma
     if not peak > 0.0:
