@@ -29,7 +29,6 @@ import re
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -41,6 +40,7 @@ from fidelity.colour.spectral import GRID_END_NM, GRID_START_NM, GRID_STEP_NM, c
 from fidelity.core import schema as sc
 from fidelity.core.errors import FidelityError, InvalidValueError, unknown_name
 from fidelity.core.fileio import display_path
+from fidelity.core.record import record
 from fidelity.core.resources import resource_dir
 
 FloatArray = NDArray[np.float64]
@@ -145,7 +145,7 @@ print("probe-ok", float(mi.TensorXf(img).numpy().mean()) >= 0)
 """
 
 
-@dataclass(frozen=True)
+@record
 class VariantProbe:
     """Outcome of :func:`probe_variant`: the chosen ``variant``, the libLLVM used, and why."""
 
@@ -335,7 +335,7 @@ def build_scene_dict(
     return t
 
 
-@dataclass(frozen=True)
+@record
 class MitsubaImage:
     """A Mitsuba render in camera raw units (H, W, 3), with the variant, the samples per pixel
     that ran (a sampler may round the request), the sampler and the render time."""
@@ -406,7 +406,7 @@ def build_target_dict(target: Any, illuminant: ArrayLike, film_channels: ArrayLi
     return t
 
 
-@dataclass(frozen=True)
+@record
 class _TargetFrame:
     """The film of a target render, as :func:`build_scene_dict` reads a layout (no patches)."""
 

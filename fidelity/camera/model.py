@@ -60,7 +60,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, field, replace
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -92,6 +92,7 @@ from fidelity.colour.spectral import (
 from fidelity.core import schema as sc
 from fidelity.core.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
 from fidelity.core.fileio import display_path, require_file
+from fidelity.core.record import record
 from fidelity.core.resources import resource_dir
 
 FloatArray = NDArray[np.float64]
@@ -125,7 +126,7 @@ TONE_CURVES = ("linear", "srgb", "gamma", "lut")
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@record
 class Sensitivities:
     """Camera spectral sensitivities: ``wavelengths`` (N,) nm, ``values`` (N, 3) r, g, b."""
 
@@ -138,7 +139,7 @@ class Sensitivities:
         return resample(self.wavelengths, self.values, wavelength_grid(step), extrapolation="zero")
 
 
-@dataclass(frozen=True)
+@record
 class Exposure:
     """Exposure stage: ``mode`` in :data:`EXPOSURE_MODES`; ``gain``; ``target`` for auto."""
 
@@ -147,7 +148,7 @@ class Exposure:
     target: float = 0.9
 
 
-@dataclass(frozen=True)
+@record
 class WhiteBalance:
     """White balance: ``method`` in :data:`WHITE_BALANCE_METHODS`; ``gains``; ``illuminant``."""
 
@@ -156,7 +157,7 @@ class WhiteBalance:
     illuminant: str = "scene"
 
 
-@dataclass(frozen=True)
+@record
 class ColourCorrection:
     """3x3 CCM: ``method`` in :data:`CCM_METHODS`; ``matrix`` (given); ``fit_method``."""
 
@@ -166,7 +167,7 @@ class ColourCorrection:
     fit_illuminant: str = "D65"
 
 
-@dataclass(frozen=True)
+@record
 class ToneCurve:
     """Tone curve: ``curve`` in :data:`TONE_CURVES`; ``gamma``; ``lut`` (K, 2) pairs."""
 
@@ -175,7 +176,7 @@ class ToneCurve:
     lut: tuple[tuple[float, float], ...] | None = None
 
 
-@dataclass(frozen=True)
+@record
 class Noise:
     """Sensor noise: ``full_well`` electrons at raw 1, ``read_noise`` e- rms, ``seed``."""
 
@@ -189,7 +190,7 @@ class Noise:
         return self.full_well is not None
 
 
-@dataclass(frozen=True)
+@record
 class CameraModel:
     """A simulated camera: sensitivities plus the optional ISP stages (module docstring).
 
@@ -563,7 +564,7 @@ def quantise(values: ArrayLike, bits: int) -> FloatArray:
     return np.round(np.clip(np.asarray(values, dtype=np.float64), 0.0, 1.0) * levels) / levels
 
 
-@dataclass(frozen=True)
+@record
 class Developed:
     """Result of :func:`develop`: output image (H, W, 3), the encoded-sRGB view used for
     measurement (unclipped for linear outputs), and the stage parameters that were used."""

@@ -54,12 +54,12 @@ micrometres only enters the diffraction cutoff).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fidelity.core.errors import InvalidValueError
+from fidelity.core.record import record
 
 FloatArray = NDArray[np.float64]
 
@@ -72,7 +72,7 @@ GAUSSIAN_RADIUS_SIGMAS: float = 4.0
 J1_FIRST_ZERO: float = 3.831705970207512
 
 
-@dataclass(frozen=True)
+@record
 class Optics:
     """The lens's point-spread function (module docstring).
 

@@ -26,7 +26,7 @@ import contextlib
 import math
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import field, replace
 from typing import Any
 
 import numpy as np
@@ -57,6 +57,7 @@ from fidelity.colour.spectral import (
     scene_reference,
 )
 from fidelity.core.errors import FidelityError, InvalidValueError, unknown_name
+from fidelity.core.record import record
 from fidelity.measure import uncertainty as unc
 from fidelity.measure.chartnoise import ChartNoise
 from fidelity.measure.chartsharpness import ChartSharpness, painted_target_sharpness
@@ -80,7 +81,7 @@ WINDOW_FRACTION: float = 0.5
 TRIM_PROPORTION: float = 0.1
 
 
-@dataclass(frozen=True)
+@record
 class ChartLayout:
     """Pixel layout of a rows x cols chart: square patches of ``patch_px`` separated and
     framed by ``gap_px`` of black background. Patch i is row-major (i = row * cols + col)."""
@@ -170,7 +171,7 @@ def patch_means(
     return means, stds
 
 
-@dataclass(frozen=True)
+@record
 class FrameRender:
     """The chart turned on the pixel grid (:class:`fidelity.chart.turned.TurnedChart`) and
     rendered through the camera, for the sharpness and noise measurements.
@@ -198,7 +199,7 @@ class FrameRender:
     target_renderer: str = "closed-form"
 
 
-@dataclass(frozen=True)
+@record
 class ChartRender:
     """A rendered and measured chart (see :func:`render_chart`).
 

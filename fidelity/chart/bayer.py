@@ -9,19 +9,19 @@ finds the chart clearly better than in any other is taken (:func:`bayer_pattern`
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
 
 import numpy as np
 
 from fidelity.chart.image import BAYER_PATTERNS
 from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.core.record import record
 
 #: Least lead in confidence of the best-fitting CFA pattern over the next one (a pattern the
 #: finder refuses counts as 0) for a one-channel mosaic's pattern to be taken as found.
 BAYER_MARGIN = 0.15
 
 
-@dataclass(frozen=True)
+@record
 class BayerFit:
     """How each CFA pattern fits a one-channel mosaic: ``confidence`` per pattern (the
     chart finder's, 0 where it found no chart), the ``pattern`` taken (None: none fits

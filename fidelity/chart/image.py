@@ -38,7 +38,7 @@ import re
 import tempfile
 import warnings
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -47,6 +47,7 @@ import numpy as np
 from fidelity.chart.ocio import OcioConversion
 from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
 from fidelity.core.fileio import atomic_output, display_path, require_file, write_error
+from fidelity.core.record import record
 
 if TYPE_CHECKING:
     from fidelity.chart.ocio import OcioConversion
@@ -125,7 +126,7 @@ _TAG_WORDS = {"bt601": "BT.601", "bt709": "BT.709", "bt2020": "BT.2020", "srgb":
               "bt470bg": "BT.470 B/G", "smpte240m": "SMPTE 240M", "p3-d65": "Display P3"}
 
 
-@dataclass(frozen=True)
+@record
 class Recording:
     """Where in a robot recording an image message was read (:mod:`fidelity.chart.recording`):
     the recording's ``kind`` (``ROS 1 bag``, ``ROS 2 bag (sqlite3)``, ``ROS 2 bag (MCAP)``,
@@ -192,7 +193,7 @@ class Recording:
                 f"{self.ros_encoding})")
 
 
-@dataclass(frozen=True)
+@record
 class Image:
     """An image read from disk.
 
@@ -255,7 +256,7 @@ class Image:
         )
 
 
-@dataclass(frozen=True)
+@record
 class ImageInfo:
     """An image file as a report states it: ``path``, file ``format``, ``pixel_type``, size,
     the three ``channels`` used, ``layer``, the likely encoding (``encoding_guess``), OpenImageIO's
@@ -370,7 +371,7 @@ def _split_channel(name: str) -> tuple[str | None, str]:
     return None, name
 
 
-@dataclass(frozen=True)
+@record
 class _Part:
     index: int
     name: str | None

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fidelity.core.errors import InvalidValueError
+from fidelity.core.record import record
 
 #: Names of the corner patches, in the order the corners are given.
 CORNER_PATCHES: tuple[str, str, str, str] = ("dark skin", "bluish green", "black", "white")
@@ -232,7 +233,7 @@ def _window_mask(h_inv: np.ndarray, box: tuple[int, int, int, int], centre: tupl
     return mask
 
 
-@dataclass(frozen=True)
+@record
 class ChartLocation:
     """Where the chart's patches lie in an image.
 

@@ -20,13 +20,13 @@ colourspace (``isData``: normals, masks) holds no colours and is refused.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from fidelity.core.errors import InvalidValueError
 from fidelity.core.extras import optional_module
+from fidelity.core.record import record
 
 #: The config used when neither ``--ocio-config`` nor ``$OCIO`` names one.
 DEFAULT_CONFIG = "ocio://default"
@@ -37,7 +37,7 @@ DISPLAY_TARGET = "sRGB - Display"
 OCIO_EXTRA = "pip install 'camera-fidelity[ocio]'"
 
 
-@dataclass(frozen=True)
+@record
 class OcioConversion:
     """How an image's pixels were converted: the source ``colourspace`` of the ``config``
     (its name, where it came from, and OpenColorIO's cache ID: a digest of its content), the

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,11 +22,12 @@ from fidelity.chart.ocio import convert
 from fidelity.chart.recording import is_recording_path
 from fidelity.core.errors import FidelityError, InvalidValueError
 from fidelity.core.fileio import file_sha256
+from fidelity.core.record import record
 
 F64 = NDArray[np.float64]
 
 
-@dataclass(frozen=True)
+@record
 class ReadOptions:
     """How an image's pixels are read for measuring its chart (``audit``, ``gate``,
     ``compare`` and their library functions take one as ``read=``).

@@ -46,7 +46,7 @@ import re
 import struct
 import tempfile
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
 from typing import Any
@@ -64,6 +64,7 @@ from fidelity.chart.image import (
 )
 from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
 from fidelity.core.fileio import display_path
+from fidelity.core.record import record
 
 #: The extra that installs the recording reader.
 EXTRA = "ros"
@@ -164,7 +165,7 @@ def _rosbags() -> Any:
     return highlevel, typesys
 
 
-@dataclass(frozen=True)
+@record
 class Choice:
     """Which message of a topic to read: ``frame`` (an index; negative from the end) or
     ``time`` (the nearest message to: a number of seconds after the recording's first
@@ -355,7 +356,7 @@ def _choose_frame(times: Sequence[int], start_ns: int, end_ns: int, choice: Choi
     return k % n
 
 
-@dataclass(frozen=True)
+@record
 class FrameSelection:
     """Several messages of a topic (``gate --frames``): the ``indices`` listed, or the slice
     ``start:stop:step`` in Python's sense (negative indices from the end, ``stop`` left out),

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import io
 import math
-from dataclasses import astuple, dataclass
+from dataclasses import astuple
 from functools import lru_cache
 from pathlib import Path
 
@@ -37,6 +37,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fidelity.core.fileio import write_bytes_atomic
+from fidelity.core.record import record
 
 __all__ = ["CALIBRATION_GEOMETRY", "CHECK_EDGE_TARGET", "COVERAGE_FILE", "PaintedEdgeTarget",
            "TurnedChart", "coverage_file_bytes", "write_coverage_file"]
@@ -45,7 +46,7 @@ __all__ = ["CALIBRATION_GEOMETRY", "CHECK_EDGE_TARGET", "COVERAGE_FILE", "Painte
 _COLS, _ROWS = 6, 4
 
 
-@dataclass(frozen=True)
+@record
 class TurnedChart:
     """The geometry of a turned chart (module docstring).
 
@@ -246,7 +247,7 @@ def _label(chart: TurnedChart, hi: NDArray[np.float64], x: NDArray[np.float64],
 CALIBRATION_GEOMETRY = TurnedChart()
 
 
-@dataclass(frozen=True)
+@record
 class PaintedEdgeTarget:
     """An ISO 12233:2017 slanted-edge target painted on the pixel grid: a dark square of
     ``side_px`` pixels turned ``angle_deg`` (counter-clockwise in image ``(x, y)``, y down, as

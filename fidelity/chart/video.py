@@ -38,7 +38,6 @@ import math
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
 from typing import Any
@@ -49,6 +48,7 @@ from fidelity.chart.image import Image, Recording, pixel_limit
 from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
 from fidelity.core.extras import optional_module
 from fidelity.core.fileio import display_path
+from fidelity.core.record import record
 
 #: The extra that installs the video reader.
 EXTRA = "video"
@@ -101,7 +101,7 @@ def is_video_path(path: str | os.PathLike[str]) -> bool:
     return Path(path).suffix.lower() in VIDEO_SUFFIXES
 
 
-@dataclass(frozen=True)
+@record
 class Planes:
     """A decoded frame's pixel planes at their native depth: ``kind`` ``ycbcr`` (``planes`` Y',
     Cb, Cr, chroma possibly subsampled) or ``rgb`` (``planes`` R, G, B), integer codes of

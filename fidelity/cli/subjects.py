@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from statistics import median
 
@@ -20,6 +20,7 @@ from fidelity.cli.context import STDOUT
 from fidelity.colour.charts import load_reference
 from fidelity.core.errors import FidelityError, InputFileError
 from fidelity.core.fileio import display_path, write_json_atomic
+from fidelity.core.record import record
 from fidelity.pipeline.frames import FramesNoise, frames_noise
 from fidelity.pipeline.records import GateResult
 from fidelity.report.chart import write_chart_report
@@ -160,7 +161,7 @@ def report_paths(images: tuple[Path, ...], path: Path | None, suffix: str, *,
     return [path / f"{n}{suffix}" for n in names]
 
 
-@dataclass(frozen=True)
+@record
 class SubjectPlan:
     """The subjects of an ``audit`` or ``gate`` run and where their reports go: one plan for
     both commands (read, locate, measure, judge, write).

@@ -27,13 +27,13 @@ mAP@[.50:.95], the number the tables use).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from fidelity.coco.scoring import coco_results, evaluated_pycocotools
 from fidelity.core.errors import InvalidValueError
+from fidelity.core.record import record
 
 __all__ = ["BOOTSTRAP_RESAMPLES", "BOOTSTRAP_SEED", "CategoryMatches", "Draws", "MatchRecords",
            "bootstrap_weights", "draw_scores", "match_records", "weighted_scores"]
@@ -48,7 +48,7 @@ _RECALL = np.linspace(0.0, 1.00, 101)
 _IOU = np.linspace(0.5, 0.95, 10)
 
 
-@dataclass(frozen=True)
+@record
 class CategoryMatches:
     """One category's matches over a run, in COCO's order (score descending, stable).
 
@@ -64,7 +64,7 @@ class CategoryMatches:
     gt: np.ndarray
 
 
-@dataclass(frozen=True)
+@record
 class MatchRecords:
     """Per-category matches of one run over ``image_ids`` (:func:`match_records`)."""
 
@@ -269,7 +269,7 @@ def _finite(x: np.ndarray) -> tuple[float | None, ...]:
     return tuple(float(v) if np.isfinite(v) else None for v in x)
 
 
-@dataclass(frozen=True)
+@record
 class Draws:
     """One run's scores on the image bootstrap's draws (:func:`draw_scores`), as the stores
     keep them for standard errors: ``map``, ``person``, ``bicycle`` per draw (fractions; None

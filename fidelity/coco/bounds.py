@@ -22,7 +22,6 @@ Its record (:class:`DirectionalValidation`) goes into ``validation.json`` under
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -30,6 +29,7 @@ import numpy as np
 
 from fidelity.camera.render import render_chart
 from fidelity.coco.loss import LOSS_COLUMNS, Losses
+from fidelity.core.record import record
 from fidelity.measure.blindspots import BlindSpot, chart_blind_spots
 from fidelity.measure.colour import measure_chart
 from fidelity.prediction.directional import (
@@ -44,7 +44,7 @@ if TYPE_CHECKING:
     from fidelity.prediction.directional import DirectionalPrediction
 
 
-@dataclass(frozen=True)
+@record
 class MeasuredCell:
     """One (camera, detector) cell of the validation as the bounds read it: the camera's chart
     ΔE, the ``measured`` losses and their ``se`` (points, relative in %), and the ``classic``
@@ -58,7 +58,7 @@ class MeasuredCell:
     classic: Losses
 
 
-@dataclass(frozen=True)
+@record
 class CameraChart:
     """A camera's chart as stored with the validation: its mean ΔE00 ``chart_delta_e`` and
     ``patches`` (per patch ``name``, ``lab``, ``reference_lab``, ``srgb``); with the camera
@@ -73,7 +73,7 @@ class CameraChart:
     cat: str = "Bradford"
 
 
-@dataclass(frozen=True)
+@record
 class BoundCell:
     """One class of one (camera, detector) cell: measured loss and SE, both predictions, and
     for each whether it holds (``*_within``, ``*_within_2se``) and its over-prediction ratio
@@ -138,7 +138,7 @@ class BoundCell:
         return cls(d.get("measured"), d.get("se"), d.get("classic"), d.get("directional"))
 
 
-@dataclass(frozen=True)
+@record
 class CameraBounds:
     """A camera's direction-aware prediction (detector size n), its blind-spot checks and
     whether its chart was rendered now (``rendered``) or read from the results."""
@@ -170,7 +170,7 @@ class CameraBounds:
                    bool(d.get("rendered", False)))
 
 
-@dataclass(frozen=True)
+@record
 class RowBounds:
     """Both bounds of one (camera, detector) cell, per class of
     :data:`fidelity.coco.loss.LOSS_COLUMNS`."""
@@ -193,7 +193,7 @@ class RowBounds:
                    {k: BoundCell.from_json(c) for k, c in d["cells"].items()})
 
 
-@dataclass(frozen=True)
+@record
 class ClassBounds:
     """One class over every cell: how often each bound holds (plainly and within 2 SE) and
     the median over-prediction ratio (over the cells measured above 0, and over those
@@ -228,7 +228,7 @@ class ClassBounds:
                    ratio("directional_median_ratio_significant"), int(d["significant_cells"]))
 
 
-@dataclass(frozen=True)
+@record
 class DirectionalValidation:
     """Both bounds on the validation's cells (module docstring): the direction-aware
     ``table``, per camera its :class:`CameraBounds`, per cell its :class:`RowBounds` and per

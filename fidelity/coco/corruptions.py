@@ -72,6 +72,7 @@ from fidelity.colour.charts import DEFAULT_CHART, load_chart
 from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
 from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
 from fidelity.core.fileio import json_ready
+from fidelity.core.record import record
 from fidelity.core.resources import resource_dir
 from fidelity.core.version import __version__
 from fidelity.measure.colour import measure_chart
@@ -363,7 +364,7 @@ def uncorrupted_chart_delta_e(chart: str | None = None) -> float:
 PREDICTION_SIZE = "n"
 
 
-@dataclass(frozen=True)
+@record
 class CellPrediction:
     """The predicted ΔmAP of a COCO-C cell's chart error for detector size ``size``, from the
     shipped tables: classic (worst case over the SAFE-COLOR transforms at the chart ΔE) and
@@ -398,7 +399,7 @@ def predict_cell(measurement: ChartMeasurement, size: str = PREDICTION_SIZE) -> 
                           d.dmap_relative, size)
 
 
-@dataclass(frozen=True)
+@record
 class CorruptionCell:
     """One (corruption, severity): its chart ΔE (mean, max, worst patch), the direction parts
     of the chart error (:class:`fidelity.prediction.directional.ErrorParts`, as JSON), the
@@ -437,7 +438,7 @@ class CorruptionCell:
         return _measured_for(self.measured, model)
 
 
-@dataclass(frozen=True)
+@record
 class SpatialCell:
     """One noise or blur (corruption, severity) (:mod:`fidelity.coco.spatial`): its value on
     the property's axis (:class:`~fidelity.coco.spatial.AxisValue`: the chart's MTF50 or SNR
@@ -540,7 +541,7 @@ def _models_of(cells: Sequence[Any]) -> list[str]:
     return list(dict.fromkeys(m.model for c in cells for m in c.measured))
 
 
-@dataclass(frozen=True)
+@record
 class CocoCResults:
     """The COCO-C table (:func:`run_coco_c`): one :class:`CorruptionCell` per colour
     (corruption, severity), the chart used, its own 8-bit ΔE (``floor_delta_e``), provenance
@@ -767,7 +768,7 @@ def load_coco_c(path: str | os.PathLike[str] | None = None) -> CocoCResults:
         raise InputFileError(f"{p}: not a COCO-C table ({exc})") from None
 
 
-@dataclass(frozen=True)
+@record
 class CocoCAnswer:
     """What ``fidelity predict --coco-c NAME:SEVERITY`` answers: the corruption's chart
     measurement (its chart ΔE), the classic and the direction-aware predictions at that ΔE,
@@ -819,7 +820,7 @@ def coco_c_answer(spec: str, *, size: str = "any", table: str | None = None,
                        tuple(measured), path)
 
 
-@dataclass(frozen=True)
+@record
 class SpatialAnswer:
     """What ``fidelity predict --coco-c NAME:SEVERITY`` answers for a noise or blur
     corruption: its value on the property's axis (the chart's MTF50 or SNR, computed now), the

@@ -54,6 +54,7 @@ from fidelity.core.errors import (
     unknown_name,
 )
 from fidelity.core.fileio import remove_stale_temporaries, write_bytes_atomic
+from fidelity.core.record import record
 from fidelity.prediction.calibration import calibrate_transform, load_calibration_table
 from fidelity.prediction.transforms import TRANSFORMS, apply_transform
 
@@ -541,7 +542,7 @@ class PullMeanWorkspace:
         np.copyto(out, p, casting="unsafe")
 
 
-@dataclass(frozen=True)
+@record
 class _NumbaKernels:
     """The compiled element-wise passes of the numba pull_mean kernel (:func:`_numba_kernels`)."""
 

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import zlib
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -42,6 +41,7 @@ from fidelity.camera.model import Noise, add_sensor_noise
 from fidelity.camera.optics import Optics
 from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
 from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.core.record import record
 
 __all__ = [
     "DEGRADATIONS",
@@ -67,7 +67,7 @@ READ_NOISE_E = 5.0
 PROPERTIES: tuple[str, ...] = ("sharpness", "noise")
 
 
-@dataclass(frozen=True)
+@record
 class DegradationFamily:
     """One family of the sweep: its camera ``property`` (:data:`PROPERTIES`), the
     ``parameter`` and its ``unit``, and the sweep's ``levels`` (mildest first)."""
@@ -222,7 +222,7 @@ def encode_srgb8(linear: NDArray[Any]) -> U8:
     return out
 
 
-@dataclass(frozen=True)
+@record
 class Degradation:
     """The callable a sweep cell applies: family ``name`` at ``level`` on an (H, W, 3) uint8
     sRGB image, returning uint8 (module docstring)."""

@@ -52,13 +52,14 @@ import math
 import os
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
 from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.core.record import record
 
 if TYPE_CHECKING:
     from concurrent.futures import Future
@@ -111,7 +112,7 @@ CONVENTIONS: dict[str, dict[str, Any]] = {
 DETECTION_COLUMNS: tuple[str, ...] = ("x1", "y1", "x2", "y2", "score", "class")
 
 
-@dataclass(frozen=True)
+@record
 class ModelLayout:
     """What :func:`recognise_layout` found out about a model.
 
@@ -252,7 +253,7 @@ def check_raw_output(output: np.ndarray, layout: ModelLayout, path: str) -> None
 # Preprocessing
 
 
-@dataclass(frozen=True)
+@record
 class Letterbox:
     """Where an image sits in the model input: ``input = image * gain + pad``, per axis.
 
@@ -279,7 +280,7 @@ class Letterbox:
         return b
 
 
-@dataclass(frozen=True)
+@record
 class Placement:
     """A resized uint8 image and where it goes on the model-input canvas (``top``, ``left``)."""
 
@@ -351,7 +352,7 @@ def letterbox_yolox(rgb: np.ndarray, size: tuple[int, int]) -> Placement:
     return Placement(img, 0, 0, Letterbox(r, r, 0.0, 0.0))
 
 
-@dataclass(frozen=True)
+@record
 class Preprocessing:
     """One detector family's preprocessing: resize + placement, channel order, value scale."""
 
@@ -758,7 +759,7 @@ def default_providers() -> list[str]:
     return chosen + ["CPUExecutionProvider"]
 
 
-@dataclass(frozen=True)
+@record
 class PreparedImage:
     """One image ready for the network: its (3, H, W) input, placement and original size."""
 

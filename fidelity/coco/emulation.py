@@ -95,6 +95,7 @@ from fidelity.colour.spectral import (
     wavelength_grid,
 )
 from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.core.record import record
 from fidelity.measure.pixels import luminance_linear_srgb
 
 FloatArray = NDArray[np.float64]
@@ -116,7 +117,7 @@ ROOT_POLYNOMIAL_DEGREE: int = 2
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@record
 class ReflectanceSet:
     """Reflectances (K, N) on :func:`fidelity.colour.spectral.wavelength_grid` with names and sources."""
 
@@ -203,7 +204,7 @@ def reference_linear_srgb(reflectance: ArrayLike, illuminant: str = "D65",
     return np.asarray(cm.xyz_to_linear_srgb(xyz @ m.T), dtype=np.float64)
 
 
-@dataclass(frozen=True)
+@record
 class CameraSamples:
     """Reference and camera colours of a reflectance set under one illuminant.
 
@@ -485,7 +486,7 @@ def fit_emulation(camera: CameraModel | str | Path, illuminant: str = "D65",
     return emu
 
 
-@dataclass(frozen=True)
+@record
 class EmulationAccuracy:
     """How well an emulation reproduces the camera (CIEDE2000, see :func:`emulation_accuracy`).
 
@@ -522,7 +523,7 @@ class EmulationAccuracy:
         return self.summary().to_json()
 
 
-@dataclass(frozen=True)
+@record
 class AccuracySummary:
     """The accuracy of an emulation as the validation stores it (ΔE00, see
     :class:`EmulationAccuracy`): chart mean, maximum and worst patch (emulated against the

@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -31,6 +31,7 @@ from fidelity.coco.scoring import (
 )
 from fidelity.coco.store import ImageSet
 from fidelity.core.errors import InputFileError, unknown_name
+from fidelity.core.record import record
 
 if TYPE_CHECKING:
     from fidelity.coco.executor import ExecutorOptions
@@ -39,7 +40,7 @@ if TYPE_CHECKING:
 METRICS: dict[str, str | None] = {"coco": None, "ultralytics": "8.4", "ultralytics-8.3": "8.3"}
 
 
-@dataclass(frozen=True)
+@record
 class Evaluation:
     """Scores of one detector on one image set, with what ran and how long it took."""
 

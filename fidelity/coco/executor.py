@@ -53,6 +53,7 @@ from fidelity.coco.jpeg import decode_jpeg, roundtrip_jpeg
 from fidelity.coco.store import EvaluationStore, evaluation_store_dir, preprocessing_of
 from fidelity.core.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
 from fidelity.core.fileio import file_sha256, remove_stale_temporaries
+from fidelity.core.record import record
 
 if TYPE_CHECKING:
     from fidelity.coco.dataset import PixelMap
@@ -81,7 +82,7 @@ CACHE_MB = 4096
 WORKER_START_S = 300.0
 
 
-@dataclass(frozen=True)
+@record
 class ExecutorOptions:
     """How to run the work: ``kind`` (:data:`EXECUTORS`), Ray's ``address`` (None: start Ray
     on this machine; ``"auto"``: the running cluster; ``"ray://HOST:10001"``: Ray Client),
@@ -108,7 +109,7 @@ class ExecutorOptions:
                                     "worker; use --executor ray for more")
 
 
-@dataclass(frozen=True)
+@record
 class ModelFile:
     """An ONNX detector as the executors see it: its file, name (the file stem) and SHA-256."""
 
@@ -129,7 +130,7 @@ class ModelFile:
         return cls(p, file_sha256(p))
 
 
-@dataclass(frozen=True)
+@record
 class PixelTransform:
     """The 8-bit colour change of a cell: transform ``name`` at ``param``
     (:class:`fidelity.coco.dataset.PixelMap`), or a ready one (``table``: a validation's
@@ -175,7 +176,7 @@ class PixelTransform:
         return replace(self, table=None) if self.table is not None else self
 
 
-@dataclass(frozen=True)
+@record
 class WorkItem:
     """A chunk of one cell: detect ``image_ids`` with ``model`` after ``transform``. ``cell``
     is the store's key of the cell (e.g. ``(model, transform, target)``); ``clip``: boxes
@@ -188,7 +189,7 @@ class WorkItem:
     clip: bool = True
 
 
-@dataclass(frozen=True)
+@record
 class ChunkResult:
     """What a worker hands back: the item, (image id, (n, 6) float32 detections) pairs in the
     item's order, the worker's seconds on it, which worker ran it (``node:pid``) and the CPU
@@ -619,7 +620,7 @@ def make_executor(images: ImageSet, options: ExecutorOptions) -> Executor:
 # Driver
 
 
-@dataclass(frozen=True)
+@record
 class CellWork:
     """A cell for :func:`run_cells`: its store ``key``, a ``label`` for messages, the model,
     the transform (``table``: a callable giving its ready table, called only when the cell has
@@ -915,7 +916,7 @@ class EvaluationCells:
         """Nothing to score."""
 
 
-@dataclass(frozen=True)
+@record
 class Detections:
     """What :func:`detect_images` found: detections by image id, the detector's description,
     the images computed now (``new``; the others came from the store of an earlier run), the

@@ -32,7 +32,7 @@ is the colour table (:func:`camera_imaging` returns None).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import field
 from typing import Any
 
 import numpy as np
@@ -43,6 +43,7 @@ from fidelity.coco.dataset import to_uint8
 from fidelity.coco.degradations import apply_optics, decode_srgb8, noise_seed
 from fidelity.coco.emulation import Emulation, camera_output_srgb, root_polynomial_terms
 from fidelity.core.errors import InvalidValueError
+from fidelity.core.record import record
 
 __all__ = ["CameraImaging", "camera_imaging"]
 
@@ -50,7 +51,7 @@ F64 = NDArray[np.float64]
 U8 = NDArray[np.uint8]
 
 
-@dataclass(frozen=True)
+@record
 class CameraImaging:
     """A camera's colour, lens and sensor on 8-bit sRGB images (module docstring).
 

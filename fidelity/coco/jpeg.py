@@ -28,19 +28,19 @@ from __future__ import annotations
 
 import io
 import os
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.core.record import record
 
 #: Pillow ``subsampling`` codes -> names.
 SUBSAMPLING_NAMES: dict[int, str] = {0: "4:4:4", 1: "4:2:2", 2: "4:2:0", -1: "unknown"}
 
 
-@dataclass(frozen=True)
+@record
 class JpegSettings:
     """Encoder settings of an original JPEG, reused when writing its transformed copy."""
 

@@ -48,10 +48,11 @@ their leave-one-out scores are :func:`fidelity.coco.scoring.score_folds`.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
+
+from fidelity.core.record import record
 
 #: Loss columns compared by class (``all`` = mAP@[.50:.95] over the 80 COCO classes) ->
 #: prediction-table column names (:data:`fidelity.prediction.tablefile.COLUMNS`).
@@ -154,7 +155,7 @@ def bootstrap_standard_error(base_draws: Sequence[float | None],
     return float(np.std(np.asarray(d), ddof=1))
 
 
-@dataclass(frozen=True)
+@record
 class LossEstimate:
     """A loss and its paired fold standard errors (:func:`loss_estimate`).
 
@@ -284,7 +285,7 @@ def score_loss(key: str, base: Mapping[str, float | None], value: Mapping[str, f
                          draws.value(key) if paired and draws else ())
 
 
-@dataclass(frozen=True)
+@record
 class Losses:
     """Losses by prediction-table column (:data:`LOSS_COLUMNS`): ΔmAP in points and relative
     (% of baseline), ΔAP of person and bicycle in points; None where not defined."""

@@ -33,7 +33,6 @@ import os
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -54,6 +53,7 @@ from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
 from fidelity.coco.sweep import ImageCache, ModelSpec
 from fidelity.core.errors import InputFileError, InvalidValueError
 from fidelity.core.fileio import file_sha256
+from fidelity.core.record import record
 from fidelity.core.resources import shared_dir
 
 if TYPE_CHECKING:
@@ -84,7 +84,7 @@ def default_store() -> Path:
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@record
 class CocoInputs:
     """What a measurement runs on: the image folder, the COCO annotation file and the
     detectors (:class:`fidelity.coco.sweep.ModelSpec`, each optionally limited to its first
@@ -205,7 +205,7 @@ def dataset_key(images: str | os.PathLike[str], annotations: str | os.PathLike[s
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@record
 class MeasuredLoss:
     """What a mapping cost one detector on ``images`` COCO images (:func:`measure_mapping`).
 
@@ -332,7 +332,7 @@ class MeasuredLoss:
                    str(d.get("scorer", "")), dict(d.get("settings") or {}))
 
 
-@dataclass(frozen=True)
+@record
 class MeasureRequest:
     """A measurement asked for by ``check --measure``, ``audit --measure`` or ``compare
     --measure``: what to run on (:class:`CocoInputs`), at most ``limit`` images, the store

@@ -44,7 +44,6 @@ import re
 import tempfile
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -60,6 +59,7 @@ from fidelity.coco.store import (
 )
 from fidelity.core.errors import InputFileError
 from fidelity.core.fileio import atomic_output, display_path, file_sha256
+from fidelity.core.record import record
 from fidelity.core.version import __version__
 
 #: The ``format`` of a scores file and the newest ``version`` this code reads and writes.
@@ -69,7 +69,7 @@ SCORES_VERSION = 1
 LEFT_OUT = ("detections", "owners", "leases")
 
 
-@dataclass(frozen=True)
+@record
 class ScoresTransfer:
     """What an export or import moved: the file, its SHA-256, the store's kind, per model
     its cells and how many of them are unreachable (a sweep's)."""

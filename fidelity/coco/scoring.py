@@ -18,7 +18,7 @@ import io
 import logging
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import field
 from pathlib import Path
 from typing import Any
 
@@ -28,9 +28,10 @@ from fidelity.coco.detectors import COCO80_CATEGORY_IDS
 from fidelity.core import schema as sc
 from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
 from fidelity.core.fileio import display_path
+from fidelity.core.record import record
 
 
-@dataclass(frozen=True)
+@record
 class CocoScore:
     """COCO box metrics of one detector run (fractions in [0, 1])."""
 
@@ -310,7 +311,7 @@ def _score_results(coco_gt: Any, results: list[dict[str, Any]], ids: list[int],
 FOLDS: int = 5
 
 
-@dataclass(frozen=True)
+@record
 class FoldScore:
     """COCO scores of one image fold (fractions in [0, 1]; None: no ground truth of the class
     in the fold), as the stores keep them for standard errors (:func:`score_folds`).
@@ -405,7 +406,7 @@ _AP_RECALL = np.linspace(0.0, 1.0, 101)
 _trapezoid: Callable[..., Any] = getattr(np, "trapezoid", None) or getattr(np, "trapz")  # noqa: B009
 
 
-@dataclass(frozen=True)
+@record
 class UltralyticsScore:
     """Ultralytics box metrics of one detector run (fractions in [0, 1]).
 
@@ -515,7 +516,7 @@ def average_precision_101(recall: np.ndarray, precision: np.ndarray, drop_to_zer
     return float(_trapezoid(np.interp(_AP_RECALL, mrec, mpre), _AP_RECALL))
 
 
-@dataclass(frozen=True)
+@record
 class UltralyticsRules:
     """What changed between Ultralytics versions in the detection metric."""
 

@@ -49,7 +49,6 @@ import math
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -58,6 +57,7 @@ from numpy.typing import NDArray
 from fidelity.coco.tables.degradation import calibration_chart, chart_value
 from fidelity.core.errors import InvalidValueError, unknown_name
 from fidelity.core.fileio import optional_float
+from fidelity.core.record import record
 
 __all__ = [
     "AXIS_LABELS",
@@ -205,7 +205,7 @@ def _apply(ic: Any, a: U8, name: str, severity: int) -> U8:
     return got
 
 
-@dataclass(frozen=True)
+@record
 class SpatialCorruption:
     """One (corruption, severity) as a measurement's mapping
     (:func:`fidelity.coco.measure.measure_mapping`): :meth:`for_image` gives the image's own
@@ -247,7 +247,7 @@ class SpatialCorruption:
         return PROPERTY[self.name]
 
 
-@dataclass(frozen=True)
+@record
 class AxisValue:
     """A corruption's value on its property's axis (:func:`chart_axis_value`).
 

@@ -39,7 +39,7 @@ import uuid
 import zlib
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import field
 from pathlib import Path
 from typing import Any, ClassVar, Generic, TypeVar
 
@@ -47,6 +47,7 @@ import numpy as np
 
 from fidelity.core.errors import InputFileError, InvalidValueError
 from fidelity.core.fileio import file_sha256, remove_stale_temporaries
+from fidelity.core.record import record
 
 S = TypeVar("S", bound="ResultsStore")
 
@@ -84,7 +85,7 @@ def unpack_detections(blob: bytes) -> np.ndarray:
     return np.frombuffer(zlib.decompress(blob), dtype=np.float32).reshape(-1, 6)
 
 
-@dataclass(frozen=True)
+@record
 class RegisteredModel:
     """A model as a store registered it: its ONNX ``file`` name and ``sha256``, the image
     limit of its run (``limit_images``; None = every image) and the detector's ``settings``
@@ -300,7 +301,7 @@ def _schema_columns(schema: str) -> dict[str, list[str]]:
         mem.close()
 
 
-@dataclass(frozen=True)
+@record
 class Owner:
     """A run that works on a store: a unique ``id``, its ``host``, process id, start time
     (seconds since the epoch) and what it is (``info``: executor, workers; JSON)."""
@@ -318,7 +319,7 @@ class Owner:
                    dict(info or {}))
 
 
-@dataclass(frozen=True)
+@record
 class Claim:
     """A cell claimed by a run: the cell's key (as the store's ``cells`` key, a tuple), its
     :class:`Owner`, when it was claimed and the owner's last heartbeat (seconds since the
@@ -349,7 +350,7 @@ def cell_key(cell: Sequence[Any]) -> str:
                        else v for v in cell])
 
 
-@dataclass(frozen=True)
+@record
 class ImageEntry:
     """An input image as a run used it: COCO ``image_id``, ``file_name``, ``size`` in bytes
     and the SHA-256 of its bytes (no time stamps: a copy of the same file matches)."""

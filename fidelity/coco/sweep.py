@@ -40,7 +40,6 @@ import sqlite3
 import sys
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -63,6 +62,7 @@ from fidelity.coco.scoring import (
 from fidelity.coco.store import ImageSet, ResultsStore, pack_detections, unpack_detections
 from fidelity.core.errors import InvalidValueError
 from fidelity.core.fileio import file_sha256
+from fidelity.core.record import record
 from fidelity.core.version import __version__, installed_version
 
 if TYPE_CHECKING:
@@ -246,7 +246,7 @@ class SweepStore(ResultsStore):
                  time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())))
 
 
-@dataclass(frozen=True)
+@record
 class SweepCell:
     """A finished cell of the sweep store (one row of its ``cells`` table).
 
@@ -290,7 +290,7 @@ class SweepCell:
                    finished=d["finished"])
 
 
-@dataclass(frozen=True)
+@record
 class ModelSpec:
     """A model to sweep: its ONNX file and how many images (first N by image id; None = all)."""
 
@@ -559,7 +559,7 @@ def run_summary(last_run: Mapping[str, Any]) -> str:
             "here" + (f", {waited} by another run" if waited else ""))
 
 
-@dataclass(frozen=True)
+@record
 class SweepProgress:
     """Where a sweep stands for one registered model (:func:`sweep_status`).
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import field
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -23,6 +23,7 @@ from fidelity.colour.spectral import scene_reference
 from fidelity.core import schema as sc
 from fidelity.core.errors import FidelityError, InputFileError, unknown_name
 from fidelity.core.fileio import cached_while_unchanged, display_path
+from fidelity.core.record import record
 from fidelity.core.resources import resource_dir
 
 __all__ = [
@@ -46,7 +47,7 @@ def _read_only(a: NDArray[np.float64]) -> NDArray[np.float64]:
     return a
 
 
-@dataclass(frozen=True)
+@record
 class Chart:
     """A colour chart: named patches with reference CIELAB values on a rows x cols grid.
 
@@ -260,7 +261,7 @@ SCENE_REFERENCE = "scene"
 DEFAULT_REFERENCE = "scene"
 
 
-@dataclass(frozen=True)
+@record
 class Reference:
     """Reference colours of the chart patches: names, CIELAB D65, clipped sRGB, neutral indices."""
 

@@ -54,7 +54,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import field, replace
 from functools import cache
 from typing import Any
 
@@ -63,6 +63,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fidelity.colour import colorimetry as cm
 from fidelity.core.errors import InvalidValueError
+from fidelity.core.record import record
 from fidelity.core.resources import resource_dir
 
 F64 = NDArray[np.float64]
@@ -98,7 +99,7 @@ MID_GREY = 0.18
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@record
 class ToneCurve:
     """A tone curve of the cause model.
 
@@ -230,7 +231,7 @@ PARTS: tuple[tuple[str, str, int], ...] = (
     ("balance", "white-balance", 2), ("hue", "hue", 1), ("saturation", "saturation", 1))
 
 
-@dataclass(frozen=True)
+@record
 class _Spec:
     """Which parts a model has: exposure free, offset, white balance, hue rotation,
     saturation, and its tone curve."""
@@ -385,7 +386,7 @@ def _lab(linear: F64) -> F64:
     return np.asarray(cm.xyz_to_lab(cm.linear_srgb_to_xyz(linear)), np.float64)
 
 
-@dataclass(frozen=True)
+@record
 class _Fit:
     spec: _Spec
     theta: F64
@@ -396,7 +397,7 @@ class _Fit:
                         problem.display)
 
 
-@dataclass(frozen=True)
+@record
 class _Problem:
     reference: F64
     target_lab: F64
@@ -538,7 +539,7 @@ def _bounds(spec: _Spec) -> tuple[F64, F64]:
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@record
 class Cause:
     """One cause of a chart error (a part of the fitted model).
 
@@ -578,7 +579,7 @@ class Cause:
                    None if d.get("tone_curve") is None else str(d["tone_curve"]))
 
 
-@dataclass(frozen=True)
+@record
 class Diagnosis:
     """What most likely made a chart's error (:func:`diagnose`).
 

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import json
 import re
-from dataclasses import dataclass, field
+from dataclasses import field
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -43,6 +43,7 @@ from fidelity.colour.colorimetry import matrix_chromatic_adaptation
 from fidelity.colour.datasets import cmfs_1931
 from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
 from fidelity.core.fileio import require_file
+from fidelity.core.record import record
 from fidelity.core.resources import resource_dir
 
 FloatArray = NDArray[np.float64]
@@ -108,7 +109,7 @@ SPECTRA_SETS: dict[str, str] = {
 }
 
 
-@dataclass(frozen=True)
+@record
 class PatchSpectra:
     """Measured reflectance spectra of the 24 chart patches (row-major, 4 x 6).
 
@@ -189,7 +190,7 @@ ILLUMINANTS: dict[str, str] = {
 }
 
 
-@dataclass(frozen=True)
+@record
 class Illuminant:
     """A relative spectral power distribution: ``wavelengths`` (N,) nm, ``values`` (N,) >= 0."""
 
@@ -335,7 +336,7 @@ def tristimulus(
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@record
 class SceneReference:
     """Reference colours of the 24 patches for a rendered scene.
 

@@ -24,17 +24,17 @@ from __future__ import annotations
 import os
 import tomllib
 from collections.abc import Collection, Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from fidelity.core.errors import InputFileError
+from fidelity.core.record import record
 
 #: The file names looked for, nearest folder first.
 CONFIG_FILES = ("fidelity.toml", "pyproject.toml")
 
 
-@dataclass(frozen=True)
+@record
 class Setting:
     """One settings key: its value ``kind`` (``str``, ``float``, ``int``, ``bool``), the
     parameter name of the commands' option it sets, and whether it is a path (made absolute
@@ -85,7 +85,7 @@ SETTINGS: Mapping[str, Setting] = {
 }
 
 
-@dataclass(frozen=True)
+@record
 class Config:
     """Settings read from ``path``: ``shared`` for every command, ``commands`` per command
     (parameter name -> value)."""

@@ -35,12 +35,13 @@ import os
 import sys
 import tomllib
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import field
 from pathlib import Path
 from typing import Any
 
 from fidelity.core.errors import InputFileError, InvalidValueError
 from fidelity.core.fileio import display_path
+from fidelity.core.record import record
 
 #: Deepest nesting of lists and tables accepted in any input document (the deepest schema,
 #: COCO annotations' segmentation polygons, needs 5).
@@ -99,7 +100,7 @@ def _kind(value: Any) -> str:
     return type(value).__name__
 
 
-@dataclass(frozen=True)
+@record
 class Node:
     """Base of the schema nodes: ``nullable`` accepts ``null``/``None``; ``describe`` replaces
     the message of any problem inside the node by ``expected <describe>, got <value>``."""
@@ -122,7 +123,7 @@ class Node:
         raise NotImplementedError
 
 
-@dataclass(frozen=True)
+@record
 class AnyValue(Node):
     """Any value (free-form provenance and comments)."""
 
@@ -130,7 +131,7 @@ class AnyValue(Node):
         return value
 
 
-@dataclass(frozen=True)
+@record
 class Number(Node):
     """A finite number (not a boolean) in ``[lo, hi]`` (``lo_open``/``hi_open``: excluded)."""
 
@@ -157,7 +158,7 @@ class Number(Node):
         return v
 
 
-@dataclass(frozen=True)
+@record
 class Integer(Node):
     """An integer (not a boolean, not a float) in ``[lo, hi]``."""
 
@@ -174,7 +175,7 @@ class Integer(Node):
         return int(value)
 
 
-@dataclass(frozen=True)
+@record
 class String(Node):
     """A string; with ``choices``, one of them (``ignore_case``: compared in lower case;
     ``lower``: returned in lower case); ``nonempty``: not ``""``."""
@@ -200,7 +201,7 @@ class String(Node):
         return value.lower() if self.lower else value
 
 
-@dataclass(frozen=True)
+@record
 class Boolean(Node):
     """``true`` or ``false``."""
 
@@ -210,7 +211,7 @@ class Boolean(Node):
         return value
 
 
-@dataclass(frozen=True)
+@record
 class ListOf(Node):
     """A list whose items fit ``item``, with ``min_items`` to ``max_items`` of them."""
 
@@ -231,7 +232,7 @@ class ListOf(Node):
         return [self.item.check(v, (*at, i)) for i, v in enumerate(value)]
 
 
-@dataclass(frozen=True)
+@record
 class MapOf(Node):
     """A table with free (string) keys whose values fit ``value``."""
 
@@ -248,7 +249,7 @@ class MapOf(Node):
         return out
 
 
-@dataclass(frozen=True)
+@record
 class Field:
     """A field of a :class:`Table`: ``name``, its ``schema``, ``required``, and the ``default``
     filled in when it is absent (``...``: none, the field stays absent; a section's default,
@@ -270,7 +271,7 @@ class Field:
         return isinstance(v, str) and v.lower() in self.when[1]
 
 
-@dataclass(frozen=True)
+@record
 class RequiredWhen:
     """``field`` is required when ``when`` (a string field) is one of ``values`` (any case)."""
 
@@ -284,7 +285,7 @@ class RequiredWhen:
             raise _Invalid((*at, self.field), f"required when {self.when} = {v.lower()!r}")
 
 
-@dataclass(frozen=True)
+@record
 class Exclusive:
     """Give either ``first`` or ``second``, not both."""
 
@@ -297,7 +298,7 @@ class Exclusive:
                                                "not both")
 
 
-@dataclass(frozen=True)
+@record
 class Check:
     """A rule in code: ``test(table)`` returns None or ``(field, problem)`` (field ``""``: the
     table itself). Runs after the fields are valid; ``table`` holds the validated values."""
@@ -314,7 +315,7 @@ class Check:
 Rule = RequiredWhen | Exclusive | Check
 
 
-@dataclass(frozen=True)
+@record
 class Table(Node):
     """A table (JSON object, TOML table, YAML mapping) of :class:`Field` s. Unknown fields are
     an error unless ``extra``; ``rules`` run after the fields (in order)."""
@@ -353,7 +354,7 @@ class Table(Node):
         return out
 
 
-@dataclass(frozen=True)
+@record
 class OneOf(Node):
     """The first of ``options`` that fits; otherwise ``expected <describe>``."""
 

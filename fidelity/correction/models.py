@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -60,6 +59,7 @@ from fidelity.colour.colorimetry import (
     xyz_to_lab,
 )
 from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.core.record import record
 
 F64 = NDArray[np.float64]
 
@@ -89,7 +89,7 @@ def expand_root_polynomial(rgb: F64) -> F64:
     return np.concatenate([rgb, np.stack(roots, axis=-1)], axis=-1)
 
 
-@dataclass(frozen=True)
+@record
 class ModelFamily:
     """A registered model: its terms, whether the matrix is diagonal, whether a tone curve
     comes first, and the coefficients of the identity."""
@@ -146,7 +146,7 @@ def tone_curve(values: F64, curve: F64) -> F64:
     return np.sign(values) * np.asarray(linearize_srgb(out), np.float64)
 
 
-@dataclass(frozen=True)
+@record
 class ColourModel:
     """A fitted correction in the fit space (module docstring).
 
@@ -193,7 +193,7 @@ class ColourModel:
                     "knots_encoded": list(CURVE_KNOTS), "values_encoded": self.curve.tolist()}}
 
 
-@dataclass(frozen=True)
+@record
 class Conditioning:
     """How well the chart determines the fit: the weighted design's ``condition_number``, the
     ``limit`` it is held to, the Tikhonov weight ``ridge`` used (0: none) and the ``reason``

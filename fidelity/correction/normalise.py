@@ -5,7 +5,6 @@ exposure, and optionally its white balance (``fidelity compare`` and ``fidelity 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -13,10 +12,11 @@ from numpy.typing import NDArray
 
 from fidelity.colour.colorimetry import delinearize_srgb, linearize_srgb
 from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.core.record import record
 from fidelity.measure.pixels import luminance_linear_srgb
 
 
-@dataclass(frozen=True)
+@record
 class Normalisation:
     """What was matched: the ``mode``, the exposure change applied to the simulated chart
     (``exposure_ev``, EV; 0 for ``none``) and the per-channel ``gains`` (``exposure+wb``:

@@ -33,12 +33,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from fidelity.colour.colorimetry import lab_to_xyz, xyz_to_lab
+from fidelity.core.record import record
 from fidelity.measure.colour import neutral_patches
 
 if TYPE_CHECKING:
@@ -66,7 +66,7 @@ MIN_SMOOTH_PAIRS = 2000
 KINDS: tuple[str, ...] = ("shadow-tone", "bit-depth", "banding")
 
 
-@dataclass(frozen=True)
+@record
 class BlindSpot:
     """One blind-spot check: its ``kind`` (:data:`KINDS`), whether the camera is ``at_risk``
     (None: could not be judged), the ``value`` measured and its ``threshold`` (units in

@@ -24,13 +24,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from fidelity.core.errors import InvalidValueError
 from fidelity.core.fileio import optional_float
+from fidelity.core.record import record
 from fidelity.measure.noise import (
     ChannelNoise,
     PatchNoise,
@@ -113,7 +113,7 @@ def _transfer_from_json(d: Mapping[str, Any]) -> PhotonTransfer:
     return PhotonTransfer(**kw)
 
 
-@dataclass(frozen=True)
+@record
 class ChartNoise:
     """The noise of a chart's neutral patches (:func:`chart_noise`).
 

@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -49,6 +48,7 @@ from fidelity.chart.locate import ChartLocation, apply_homography
 from fidelity.chart.turned import PaintedEdgeTarget
 from fidelity.core.fileio import finite_or_none, optional_float
 from fidelity.core.numeric import median
+from fidelity.core.record import record
 from fidelity.measure.sharpness import (
     HALF_NYQUIST,
     LUMINANCE_WEIGHTS,
@@ -93,7 +93,7 @@ Linearise = Callable[[np.ndarray], np.ndarray]
 
 
 
-@dataclass(frozen=True)
+@record
 class ChannelMTF:
     """One channel's MTF figures at one edge.
 
@@ -162,7 +162,7 @@ class ChannelMTF:
                     if (c := d.get("curve")) else None))
 
 
-@dataclass(frozen=True)
+@record
 class EdgeSharpness:
     """The MTF of one chart edge (:func:`chart_sharpness`).
 
@@ -219,7 +219,7 @@ class EdgeSharpness:
                    (str(ref["reason"]), str(ref["message"])) if ref else None)
 
 
-@dataclass(frozen=True)
+@record
 class ChartSharpness:
     """The sharpness of a chart (:func:`chart_sharpness`).
 
@@ -472,7 +472,7 @@ def chart_sharpness(pixels: np.ndarray, location: ChartLocation,
     return ChartSharpness(edges, linearisation)
 
 
-@dataclass(frozen=True)
+@record
 class EdgeTargetCorners:
     """A slanted-edge target's corners in the image (a chart scene's manifest gives them:
     :func:`fidelity.scene.manifest.read_manifest`).

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import field
 from typing import Any
 
 import numpy as np
@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.colorimetry import delta_e_2000, delta_e_2000_components, srgb_to_lab
 from fidelity.core.errors import InvalidValueError
+from fidelity.core.record import record
 
 F64 = NDArray[np.float64]
 
@@ -43,7 +44,7 @@ def chart_delta_e(srgb: ArrayLike, reference_lab: ArrayLike) -> float:
     return float(np.mean(delta_e_2000(srgb_to_lab(srgb), reference_lab)))
 
 
-@dataclass(frozen=True)
+@record
 class ChartMeasurement:
     """Measured chart colours and their CIEDE2000 differences from the reference.
 
@@ -274,7 +275,7 @@ def neutral_patches(m: ChartMeasurement) -> tuple[int, ...]:
     return tuple(int(i) for i in np.flatnonzero(chroma < NEUTRAL_CHROMA))
 
 
-@dataclass(frozen=True)
+@record
 class ChartStatistics:
     """What a chart says beyond ΔE, as Imatest's Colorcheck reports it.
 
@@ -338,7 +339,7 @@ def patch_snr_db(m: ChartMeasurement) -> F64 | None:
     return out
 
 
-@dataclass(frozen=True)
+@record
 class ToneFit:
     """The neutral patches' tone curve fitted with a power law about mid grey.
 

@@ -44,7 +44,6 @@ a patch).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -53,6 +52,7 @@ from numpy.typing import ArrayLike, NDArray
 from fidelity.core.errors import InvalidValueError, RefusedMeasurement
 from fidelity.core.fileio import finite_or_none
 from fidelity.core.numeric import median
+from fidelity.core.record import record
 
 F64 = NDArray[np.float64]
 
@@ -173,7 +173,7 @@ def _check_deff(design_effect: float) -> None:
         raise InvalidValueError(f"{design_effect}: design effect must be finite and >= 1")
 
 
-@dataclass(frozen=True)
+@record
 class ChannelNoise:
     """One channel's noise in a patch (:func:`patch_noise`).
 
@@ -210,7 +210,7 @@ class ChannelNoise:
                 "snr": finite_or_none(self.snr), "snr_db": finite_or_none(self.snr_db)}
 
 
-@dataclass(frozen=True)
+@record
 class PatchNoise:
     """The noise of one patch in linear light (:func:`patch_noise`).
 
@@ -345,7 +345,7 @@ def patch_noise(samples: ArrayLike, *, design_effect: float = 1.0) -> PatchNoise
 # photon transfer
 
 
-@dataclass(frozen=True)
+@record
 class PhotonTransfer:
     """The one-frame photon-transfer estimate (:func:`photon_transfer`).
 
@@ -606,7 +606,7 @@ def photon_transfer(means: ArrayLike, variances: ArrayLike, counts: ArrayLike, *
 # several frames
 
 
-@dataclass(frozen=True)
+@record
 class FrameNoise:
     """Temporal and fixed-pattern noise of a stack of frames (:func:`temporal_and_fixed_pattern`).
 

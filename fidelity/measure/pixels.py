@@ -41,7 +41,6 @@ import functools
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -61,6 +60,7 @@ from fidelity.chart.read import DEFAULT_READ, ReadOptions, read_input
 from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import DEFAULT_REFERENCE, Reference, load_reference
 from fidelity.core.errors import FidelityError, InvalidValueError, unknown_name
+from fidelity.core.record import record
 from fidelity.measure import uncertainty as unc
 from fidelity.measure.chartnoise import METHOD as CHART_NOISE_METHOD
 from fidelity.measure.chartnoise import ChartNoise, chart_noise, grey_index
@@ -142,7 +142,7 @@ def exposure_from_neutrals(
     return ev
 
 
-@dataclass(frozen=True)
+@record
 class PixelCounts:
     """Pixels with a NaN, a +-Inf or a negative channel, and how many were ``excluded``
     (``total``)."""
@@ -162,7 +162,7 @@ class PixelCounts:
         return cls(int(data["nan"]), int(data["inf"]), int(data["negative"]), int(data["total"]))
 
 
-@dataclass(frozen=True)
+@record
 class BadPixels:
     """Bad pixels of an audited image: ``window`` counts over the sampling windows,
     ``per_patch`` the excluded pixels of each patch that has any, ``image`` the counts over the
@@ -188,7 +188,7 @@ class BadPixels:
                    str(data.get("rule", "")))
 
 
-@dataclass(frozen=True)
+@record
 class ImageMeasurement:
     """An audited chart: the :class:`ChartMeasurement` plus how it was obtained.
 

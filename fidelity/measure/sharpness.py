@@ -112,7 +112,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any, Literal
 
@@ -122,6 +121,7 @@ from numpy.typing import ArrayLike, NDArray
 from fidelity.core.errors import InvalidValueError, RefusedMeasurement
 from fidelity.core.fileio import finite_or_none
 from fidelity.core.numeric import median
+from fidelity.core.record import record
 
 F64 = NDArray[np.float64]
 Orientation = Literal["auto", "vertical", "horizontal"]
@@ -190,7 +190,7 @@ class RefusedEdge(RefusedMeasurement):
 
 
 
-@dataclass(frozen=True)
+@record
 class EdgeSFR:
     """The e-SFR of one slanted edge (:func:`esfr`).
 
@@ -289,7 +289,7 @@ class EdgeSFR:
                    str(d.get("method", ESFR_METHOD)))
 
 
-@dataclass(frozen=True)
+@record
 class EdgeFit:
     """The parametric edge fit of a nearly grid-aligned edge (:func:`edge_fit`).
 
@@ -522,7 +522,7 @@ def _edge_locations(a: F64, sign: float, degree: int) -> tuple[F64, F64, F64]:
     return loc[0], coef[0], line[0]
 
 
-@dataclass(frozen=True)
+@record
 class _Core:
     frequencies: F64
     mtf: F64

@@ -47,13 +47,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fidelity.colour import colorimetry as cm
+from fidelity.core.record import record
 
 F64 = NDArray[np.float64]
 
@@ -87,7 +87,7 @@ UNREFINED_PLACEMENT_PX = 1.0 / math.sqrt(12.0)
 ChartFunction = Callable[[F64], F64]
 
 
-@dataclass(frozen=True)
+@record
 class UncertaintyComponent:
     """One line of a budget: the ``name`` of the source, its standard uncertainty ``value``
     (ΔE00, k = 1), the GUM ``type`` (``A``: statistics of the data; ``B``: other knowledge)
@@ -109,7 +109,7 @@ class UncertaintyComponent:
         return cls(str(d["name"]), float(d["value"]), str(d["type"]), str(d["method"]))
 
 
-@dataclass(frozen=True)
+@record
 class UncertaintyBudget:
     """The uncertainty budget of a chart ΔE (module docstring): the measured ``value`` (mean
     ΔE00), its ``components``, the Monte Carlo ``draws`` and ``seed``, and ``notes`` (patches
@@ -256,7 +256,7 @@ def mean_covariance(pixels: F64, trim: float = 0.0) -> F64:
     return cov / (1.0 - 2.0 * trim) ** 2 if trim > 0 else cov
 
 
-@dataclass(frozen=True)
+@record
 class PatchSpread:
     """What the noise and rounding components need of one patch window's valid pixels,
     without the pixels (so that an audit never holds every window at once).
@@ -312,7 +312,7 @@ def _flat(top: F64, bottom: F64) -> NDArray[np.bool_]:
     return out
 
 
-@dataclass(frozen=True)
+@record
 class _Columns:
     """The column statistics of ``(n, k)`` float64 values (``n`` >= 1) that a window's spread
     needs, each bit for bit what numpy's own reductions over the rows give: ``mean``

@@ -52,12 +52,12 @@ import math
 import os
 import tomllib
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 from fidelity.colour.spectral import load_illuminant
 from fidelity.core.errors import FidelityError, InputFileError
+from fidelity.core.record import record
 from fidelity.prediction.interval import ValidatedCameras, load_validated_cameras
 
 if TYPE_CHECKING:
@@ -99,7 +99,7 @@ SCHEMA: dict[str, dict[str, str]] = {
 }
 
 
-@dataclass(frozen=True)
+@record
 class Context:
     """A context of use (module docstring): ``path`` the file it was read from; ``detectors``
     the detectors under test; ``illuminants`` and ``exposures_ev`` the operating conditions
@@ -212,7 +212,7 @@ def load_context(path: str | os.PathLike[str]) -> Context:
         decision_consequence=values["risk"]["decision_consequence"])
 
 
-@dataclass(frozen=True)
+@record
 class Factor:
     """One credibility factor: its ``name``, ``level`` (1 to 5), the share ``score`` (0 to 1)
     the level is computed from, and the ``reason`` (the facts, in words)."""
@@ -228,7 +228,7 @@ class Factor:
                 "reason": self.reason}
 
 
-@dataclass(frozen=True)
+@record
 class Acceptance:
     """One acceptance criterion judged on one subject: ``criterion`` (``max_delta_e``,
     ``max_dmap``), its ``limit``, the subject's ``value`` (None: no prediction) and whether it
@@ -246,7 +246,7 @@ class Acceptance:
                 "value": self.value, "passed": self.passed}
 
 
-@dataclass(frozen=True)
+@record
 class ContextAssessment:
     """A context's credibility assessment (:func:`assess`): the ``context``, the credibility
     ``factors``, the conditions ``outside`` the validity domain (in words) and the

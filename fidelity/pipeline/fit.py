@@ -41,7 +41,7 @@ import math
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -69,6 +69,7 @@ from fidelity.colour.colorimetry import (
 from fidelity.colour.spectral import load_illuminant
 from fidelity.core.errors import FidelityError, InvalidValueError
 from fidelity.core.fileio import write_json_atomic, write_text_atomic
+from fidelity.core.record import record
 from fidelity.core.schema import load_document
 from fidelity.correction.lut import (
     CUBE_SIZES,
@@ -151,7 +152,7 @@ def _to_linear(pixels: NDArray[Any], encoding: str) -> NDArray[Any]:
     return np.asarray(linearize_srgb(pixels)) if encoding == "srgb" else pixels
 
 
-@dataclass(frozen=True)
+@record
 class Correction:
     """A fitted correction of the simulator's pixel values (module docstring).
 
@@ -353,7 +354,7 @@ class Correction:
         return np.array([n not in self.excluded for n in self.patch_names])
 
 
-@dataclass(frozen=True)
+@record
 class _Chart:
     path: str
     pixels: NDArray[Any]
@@ -408,7 +409,7 @@ def _colourspace_matrix(audit: ImageMeasurement) -> F64:
     return matrix_rgb_to_linear_srgb(name)
 
 
-@dataclass(frozen=True)
+@record
 class _Prepared:
     """One pair of charts ready to fit: the fit-space colours, the weights, what was
     excluded and what turns the simulator's pixels into the fit space."""
@@ -580,7 +581,7 @@ def fit_correction(
     return _fit_charts(s, r, model, objective, normalise_mode, weights)
 
 
-@dataclass(frozen=True)
+@record
 class LutCheck:
     """The ``.cube`` through OpenColorIO against the model itself: the cube ``size``, the
     largest and mean ΔE00 over the chart's patches (``chart_max``, ``chart_mean``) and over a
@@ -656,7 +657,7 @@ def check_cube(correction: Correction, path: str | os.PathLike[str], size: int,
                     float(np.mean(out[1] <= LUT_TOLERANCE)), LUT_MAX_TOLERANCE)
 
 
-@dataclass(frozen=True)
+@record
 class FitReport:
     """A fit and its verification: the inputs, the :class:`Correction`, the sim-to-real
     measurement before (``before``) and after, the latter of the SIM image through the
@@ -918,7 +919,7 @@ def chart_properties(audit: ImageMeasurement, prediction: Prediction, judge: Jud
     return judged
 
 
-@dataclass(frozen=True)
+@record
 class SharedFit:
     """One colour matrix fitted over several pairs of charts (the same cameras under several
     illuminants) with per-pair gains (:func:`fidelity.correction.models.fit_shared_matrix`):
@@ -1032,7 +1033,7 @@ MTF50_TOLERANCE = 0.005
 SNR_TOLERANCE = 0.01
 
 
-@dataclass(frozen=True)
+@record
 class PropertyFit:
     """A camera file's optics or noise fitted to REAL's sharpness or noise (``fit --camera``).
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -31,6 +31,7 @@ from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import Reference
 from fidelity.core.errors import FidelityError
 from fidelity.core.fileio import display_path, finite_or_none
+from fidelity.core.record import record
 from fidelity.measure.chartnoise import grey_index
 from fidelity.measure.noise import (
     LUMINANCE_WEIGHTS,
@@ -53,7 +54,7 @@ METHOD = ("EMVA 1288 4.0: temporal variance = mean over pixels of each pixel's v
           "rectangle of the first frame's window, luminance Y of linear sRGB")
 
 
-@dataclass(frozen=True)
+@record
 class PatchFramesNoise:
     """One neutral patch's noise over the frames.
 
@@ -79,7 +80,7 @@ class PatchFramesNoise:
         return out
 
 
-@dataclass(frozen=True)
+@record
 class FramesNoise:
     """The temporal and fixed-pattern noise of one recording's frames (:func:`frames_noise`).
 

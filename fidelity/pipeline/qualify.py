@@ -49,7 +49,6 @@ import json
 import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -70,6 +69,7 @@ from fidelity.colour.colorimetry import matrix_chromatic_adaptation, normalised_
 from fidelity.colour.spectral import WAVELENGTHS_NM, load_illuminant, tristimulus
 from fidelity.core.errors import FidelityError, UnknownNameError
 from fidelity.core.fileio import file_sha256
+from fidelity.core.record import record
 from fidelity.core.resources import resource_dir
 from fidelity.measure.colour import chart_delta_e
 from fidelity.pipeline.check import audit_image
@@ -106,7 +106,7 @@ FINDER_SCENES: tuple[tuple[tuple[float, float], ...], ...] = (
 )
 
 
-@dataclass(frozen=True)
+@record
 class QualificationCheck:
     """One check of the installed tool against an independent reference.
 
@@ -135,7 +135,7 @@ class QualificationCheck:
                 "cases": self.cases, "detail": self.detail, "seconds": self.seconds}
 
 
-@dataclass(frozen=True)
+@record
 class Qualification:
     """The checks run on this installation (:func:`qualify`)."""
 
@@ -158,7 +158,7 @@ class Qualification:
         return not self.failed and len(self.not_run) < len(self.checks)
 
 
-@dataclass(frozen=True)
+@record
 class _Spec:
     subject: str
     reference: str

@@ -51,7 +51,7 @@ import platform
 import sys
 import threading
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -64,6 +64,7 @@ from fidelity.chart.locate import ChartLocation, locate_chart
 from fidelity.colour.diagnosis import Diagnosis
 from fidelity.core.errors import InvalidValueError
 from fidelity.core.fileio import JSONObject, file_sha256
+from fidelity.core.record import record
 from fidelity.core.resources import resource_dir
 from fidelity.core.version import __version__, installed_version
 from fidelity.correction.normalise import Normalisation
@@ -103,7 +104,7 @@ def report_schema() -> JSONObject:
     return schema
 
 
-@dataclass(frozen=True)
+@record
 class ImageSource:
     """An image whose chart was measured: the file (:class:`~fidelity.chart.image.ImageInfo`),
     the corner patch centres used (``corners``, (4, 2) image x, y), how the chart was found
@@ -181,7 +182,7 @@ class ImageSource:
         return self.reference
 
 
-@dataclass(frozen=True)
+@record
 class RenderSource:
     """A camera model's render of the spectral chart: the ``camera`` name, ``illuminant``,
     ``renderer`` and Mitsuba ``variant`` (None for the closed form), the render's wall time
@@ -236,7 +237,7 @@ class RenderSource:
 Source = ImageSource | RenderSource
 
 
-@dataclass(frozen=True)
+@record
 class TableRef:
     """A data table a result depends on: ``name``, ``kind`` (prediction tables), ``path`` and
     the file's ``sha256``."""
@@ -284,7 +285,7 @@ BASE_CONVENTIONS: Mapping[str, str] = {
 _LIBRARIES = ("numpy", "scipy", "colour-science", "OpenImageIO", "OpenEXR", "mitsuba")
 
 
-@dataclass(frozen=True)
+@record
 class Provenance:
     """Where a report's numbers come from: the tool ``version``, ``python``, ``platform``,
     library versions, the input's sha256, the tables used and the conventions."""
@@ -333,7 +334,7 @@ class Provenance:
                    input_sha256, tables, {**BASE_CONVENTIONS, **conventions})
 
 
-@dataclass(frozen=True)
+@record
 class ChartReport:
     """One chart measured (an image audit or a camera render), the detection loss predicted
     from its chart ΔE and the verdict of a gate (see the module docstring).
@@ -586,7 +587,7 @@ def utc_now() -> str:
 COMPARE_SCHEMA_VERSION = "1.0"
 
 
-@dataclass(frozen=True)
+@record
 class ComparisonReport:
     """A sim-to-real comparison (module docstring): the two audits (``sim``, ``real``:
     :class:`ChartReport`), the :class:`Normalisation`, the sim-to-real
@@ -737,7 +738,7 @@ class ComparisonReport:
                      if d.get("sharpness_noise") else None))
 
 
-@dataclass(frozen=True)
+@record
 class GateResult:
     """One subject of a gate (:func:`fidelity.pipeline.check.gate`) or of an audit of several images
     (:func:`fidelity.pipeline.check.audit_images`, no ``criterion``): its ``subject`` (image path,

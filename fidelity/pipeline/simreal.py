@@ -15,15 +15,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Any
 
 from fidelity.core.fileio import finite_or_none, optional_float
+from fidelity.core.record import record
 from fidelity.measure.chartnoise import PTC_CHANNEL
 from fidelity.prediction.properties import chart_mtf50
 
 
-@dataclass(frozen=True)
+@record
 class TextureSide:
     """One chart's sharpness and noise curves.
 
@@ -100,7 +100,7 @@ class TextureSide:
                    d.get("sharpness_missing"), d.get("noise_missing"))
 
 
-@dataclass(frozen=True)
+@record
 class TextureComparison:
     """The simulated chart's sharpness and noise against the real chart's (module docstring).
 

@@ -13,13 +13,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from fidelity.camera.model import load_camera
 from fidelity.coco.validate.suite import CameraCase, is_suite_file, load_suite_file
 from fidelity.core.errors import InputFileError
+from fidelity.core.record import record
 from fidelity.pipeline.check import DEFAULT_CRITERION, check_camera
 from fidelity.prediction.judge import DEFAULT_JUDGE, JudgeOptions
 from fidelity.prediction.verdict import worst_exit_code
@@ -56,7 +56,7 @@ def suite_cases(suite: str, cameras: Sequence[str] = (), default_cat: str | None
     return [c for c in cases if c.path.resolve() in wanted]
 
 
-@dataclass(frozen=True)
+@record
 class CaseResult:
     """One case checked: the ``case`` (camera file, illuminant, chromatic adaptation
     transform), its ``report`` and the ``seconds`` it took."""
@@ -87,7 +87,7 @@ class CaseResult:
                 "exit_code": self.exit_code, "seconds": self.seconds}
 
 
-@dataclass(frozen=True)
+@record
 class SuiteResult:
     """Every case of a suite checked (:func:`run_suite`): ``suite`` the suite file, ``cases``
     in order, the ``criterion`` each was judged by and, with a context of use, its

@@ -26,7 +26,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Generator, Iterable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from fidelity.colour.charts import DEFAULT_CHART, Chart, load_chart
 from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
 from fidelity.core.errors import InputFileError, InvalidValueError, UnreachableTargetError
+from fidelity.core.record import record
 from fidelity.core.resources import resource_dir
 from fidelity.prediction.scalar import brent_search
 from fidelity.prediction.transforms import TRANSFORMS, TransformSpec, get_transform
@@ -68,7 +69,7 @@ DEFAULT_TABLE_FILE = "calibration-safecolor.json"
 _SCAN_POINTS = 401
 
 
-@dataclass(frozen=True)
+@record
 class CalibrationEntry:
     """The calibrated parameter of one (transform, target); ``param`` is None when unreachable.
 
@@ -86,7 +87,7 @@ class CalibrationEntry:
         return asdict(self)
 
 
-@dataclass(frozen=True)
+@record
 class CalibrationTable:
     """A calibration table for one chart: one entry per (transform, target)."""
 

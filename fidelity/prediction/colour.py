@@ -10,14 +10,14 @@ parameters from a sibling module.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Any
 
+from fidelity.core.record import record
 from fidelity.prediction.calibration import calibrate_transforms, load_calibration_table
 from fidelity.prediction.transforms import TRANSFORMS
 
 
-@dataclass(frozen=True)
+@record
 class TransformParameter:
     """The parameter of one SAFE-COLOR transform that gives chart ΔE ``delta_e``.
 

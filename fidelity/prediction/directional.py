@@ -63,7 +63,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -73,6 +73,7 @@ from fidelity.colour.charts import DEFAULT_CHART, load_chart
 from fidelity.colour.colorimetry import delta_e_2000, lab_to_srgb, srgb_to_lab
 from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
 from fidelity.core.fileio import cached_while_unchanged
+from fidelity.core.record import record
 from fidelity.prediction import transforms as tr
 from fidelity.prediction.calibration import load_calibration_table
 from fidelity.prediction.interpolate import predict_curve
@@ -113,7 +114,7 @@ MIN_EXPLAINED = 0.02
 MIN_EXPLAINED_DELTA_E = 0.05
 
 
-@dataclass(frozen=True)
+@record
 class Family:
     """A family of SAFE-COLOR transforms: its ``transforms`` (sweep names), the one-parameter
     ``fits`` that stand for it and the ``direction`` it charges (None: a mixed family, used
@@ -143,7 +144,7 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
 DIRECTION_FAMILY: dict[str, str] = {"lightness": "tone", "chroma": "chroma", "hue": "hue"}
 
 
-@dataclass(frozen=True)
+@record
 class FitSpec:
     """A one-parameter transform fitted to charts: the function (encoded sRGB in [0, 1]),
     its parameter range (both directions), the identity and the scan scale."""
@@ -211,7 +212,7 @@ def delta_e_2000_terms(lab1: ArrayLike, lab2: ArrayLike) -> tuple[F64, F64, F64,
     return dL / sl, dC / sc, dH / sh, rt
 
 
-@dataclass(frozen=True)
+@record
 class ErrorParts:
     """A chart error split by direction (module docstring): ``lightness + chroma + hue`` =
     ``delta_e``, the mean ΔE00 over the patches; all >= 0, in ΔE00 units."""
@@ -287,7 +288,7 @@ def error_parts(reference_lab: ArrayLike, lab: ArrayLike) -> ErrorParts:
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@record
 class FamilyFit:
     """The best parameter of one fitted transform (:func:`fit_families`): ``param``, the mean
     ΔE00 left between the transformed reference and the chart (``residual``), the chart's
@@ -441,7 +442,7 @@ def family_shares(calibration: Any = None, chart: str | None = None
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@record
 class DirectionalTable:
     """A direction-aware prediction table: the ``classic`` table it extends (the same file's
     curves: the worst case over every transform) and one table of worst-case curves per
@@ -509,7 +510,7 @@ def _directional_of(classic: PredictionTable) -> DirectionalTable:
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@record
 class FamilyTerm:
     """One term of a direction-aware prediction: the ``family``, its ``weight`` (in [0, 1];
     the weights add up to 1), why it is there (``reason``), and per column its curve value at
@@ -534,7 +535,7 @@ class FamilyTerm:
                    dict(d["values"]), dict(d["sources"]))
 
 
-@dataclass(frozen=True)
+@record
 class DirectionalPrediction:
     """The direction-aware prediction of one chart (:func:`predict_directional`): the chart
     ΔE, its :class:`ErrorParts`, the best :class:`FamilyFit` (None when none explains the

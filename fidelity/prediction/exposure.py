@@ -20,10 +20,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Any
 
 from fidelity.core.errors import InvalidValueError
+from fidelity.core.record import record
 
 __all__ = ["DEFAULT_MAX_EXPOSURE_ERROR_EV", "EXPOSURE_SOURCES", "ExposureJudgement",
            "judge_exposure"]
@@ -35,7 +35,7 @@ DEFAULT_MAX_EXPOSURE_ERROR_EV = 0.3
 EXPOSURE_SOURCES: tuple[str, ...] = ("manifest", "--exposure")
 
 
-@dataclass(frozen=True)
+@record
 class ExposureJudgement:
     """An image's exposure judged against the expected one.
 

@@ -23,13 +23,13 @@ are read at any value of it.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
 
 import numpy as np
 
 from fidelity.core.errors import unknown_name
+from fidelity.core.record import record
 from fidelity.prediction.tablefile import (
     CEILING,
     COLUMNS,
@@ -73,7 +73,7 @@ class ColumnStatus(StrEnum):
     NO_DATA = "no-data"
 
 
-@dataclass(frozen=True)
+@record
 class ColumnPrediction:
     """One column's answer: ``value`` and how it was obtained.
 
@@ -108,7 +108,7 @@ class ColumnPrediction:
                    None if raised is None else float(raised))
 
 
-@dataclass(frozen=True)
+@record
 class SamplingError:
     """The standard error of a measured table's ΔmAP (percentage points) at the table points
     next to a chart ΔE: the smaller (``low``) and the larger (``high``) of the two (equal at a

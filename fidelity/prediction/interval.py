@@ -31,10 +31,11 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import field
 from functools import lru_cache
 from typing import Any
 
+from fidelity.core.record import record
 from fidelity.core.resources import resource_dir
 from fidelity.prediction.interpolate import ColumnStatus
 from fidelity.prediction.table import Prediction, predict
@@ -43,7 +44,7 @@ from fidelity.prediction.table import Prediction, predict
 MIN_STEP = 0.01
 
 
-@dataclass(frozen=True)
+@record
 class PredictionInterval:
     """A predicted loss ``value`` of ``column`` (percentage points, or % for
     ``dmap_relative``) with its uncertainty: the table's sampling error ``table_se`` (None:
@@ -147,7 +148,7 @@ def prediction_interval(prediction: Prediction, delta_e_uncertainty: float,
     return PredictionInterval(column, float(value), se, float(slope), u, k)
 
 
-@dataclass(frozen=True)
+@record
 class DomainCheck:
     """One check of the validity domain: ``name``, whether the answer is ``inside`` and the
     ``detail`` in words."""
@@ -166,7 +167,7 @@ class DomainCheck:
         return cls(str(d["name"]), bool(d["inside"]), str(d["detail"]))
 
 
-@dataclass(frozen=True)
+@record
 class ValidityDomain:
     """The checks of an answer against the domain its evidence covers; ``inside`` when all
     are."""
@@ -242,7 +243,7 @@ STAGES = ("exposure", "white balance", "colour correction", "tone curve", "bit d
 VALIDATED_CAMERAS_FILE = "validation-domain.json"
 
 
-@dataclass(frozen=True)
+@record
 class ValidatedCameras:
     """The camera models the prediction was validated on (``fidelity validate``, the
     validation report) and how it held on them.
@@ -352,7 +353,7 @@ PARAMETER_UNITS = {"full_well": "e-", "read_noise": "e- rms", "sigma_px": "px",
                    "radius_px": "px", "f_number": "", "diagonal_fov_deg": "deg"}
 
 
-@dataclass(frozen=True)
+@record
 class ValidatedDegradation:
     """What the validated cameras had of one degradation (noise, optics, vignetting): the
     ``kinds`` (``"none"``: a camera without it) and, per numeric parameter, the ``ranges``
@@ -381,7 +382,7 @@ class ValidatedDegradation:
         return ", ".join(self.kinds) + (f" ({spans})" if spans else "")
 
 
-@dataclass(frozen=True)
+@record
 class ValidatedProperties:
     """The camera models the sharpness and noise verdict was validated on (``fidelity validate
     --properties``, ``reports/validation/properties.md``): ``cameras``, the ``models`` measured,

@@ -14,10 +14,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 from fidelity.core.errors import FidelityError, InvalidValueError, unknown_name
+from fidelity.core.record import record
 from fidelity.measure.chartsharpness import TARGET_METHOD
 from fidelity.prediction.directional import (
     BOUNDS,
@@ -60,7 +61,7 @@ if TYPE_CHECKING:
     from fidelity.measure.colour import ChartMeasurement
 
 
-@dataclass(frozen=True)
+@record
 class JudgeOptions:
     """How a measured chart is judged: which loss is predicted and how a verdict decides
     (``check``, ``audit``, ``gate``, ``compare`` and ``fit`` and their library functions take

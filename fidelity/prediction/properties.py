@@ -42,7 +42,7 @@ from __future__ import annotations
 import builtins
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import field
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -53,6 +53,7 @@ from numpy.typing import ArrayLike, NDArray
 from fidelity.core import schema as sc
 from fidelity.core.errors import InputFileError, InvalidValueError, unknown_name
 from fidelity.core.fileio import display_path, optional_float
+from fidelity.core.record import record
 from fidelity.core.resources import resource_dir
 
 __all__ = [
@@ -118,7 +119,7 @@ DETECTOR_SIDE = 640
 MAX_TABLE_BYTES = 8 << 20
 
 
-@dataclass(frozen=True)
+@record
 class PropertyCell:
     """One measured cell: ``family`` at ``level`` (its unit), whose chart reads ``x`` on the
     property's axis, and its ``losses`` and their standard errors ``se`` by column (None:
@@ -140,7 +141,7 @@ class PropertyCell:
         return d
 
 
-@dataclass(frozen=True)
+@record
 class PropertyTable:
     """A measured worst-case table of one property (module docstring).
 
@@ -313,7 +314,7 @@ def _family_loss(points: Sequence[tuple[float, float, float | None]], u: float, 
     return 0.0, 0.0, True
 
 
-@dataclass(frozen=True)
+@record
 class PropertyPrediction:
     """The worst-case loss predicted for one measured property (:func:`predict_property`).
 
@@ -544,7 +545,7 @@ def property_threshold(table: PropertyTable, loss: float, *, size: str = "any",
 TARGET_AXIS_FILE = resource_dir("data") / "turned" / "target-axis.json"
 
 
-@dataclass(frozen=True)
+@record
 class TargetAxis:
     """Where a slanted-edge target's MTF50 lies on the tables' axis.
 
@@ -671,7 +672,7 @@ def chart_snr(noise: Any) -> tuple[float, float | None] | None:
     return snr, math.sqrt((1.0 + snr * snr / 2.0) / float(n))
 
 
-@dataclass(frozen=True)
+@record
 class Combined:
     """The properties' losses combined (:func:`combine`): ``loss`` and ``u_loss`` (the parts'
     uncertainties propagated to first order), the ``dominant`` property (largest loss, a tie
@@ -757,7 +758,7 @@ def combine(parts: Mapping[str, tuple[float, float | None] | None],
                     interaction=term)
 
 
-@dataclass(frozen=True)
+@record
 class PropertyJudgement:
     """Colour, sharpness and noise judged together (:func:`judge_properties`).
 

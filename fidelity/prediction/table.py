@@ -21,12 +21,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import field
 from typing import Any
 
 import numpy as np
 
 from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.core.record import record
 from fidelity.prediction.colour import TransformParameter, transform_parameters
 from fidelity.prediction.interpolate import (
     INTERPOLATIONS,
@@ -48,7 +49,7 @@ from fidelity.prediction.tablefile import (
 )
 
 
-@dataclass(frozen=True)
+@record
 class DeltaELimit:
     """The largest chart ΔE whose predicted loss stays within a limit (:func:`delta_e_limit`).
 
@@ -166,7 +167,7 @@ def delta_e_limit(max_loss: float, column: str = "dmap_points", *, size: str = "
     return result(a, "inside")
 
 
-@dataclass(frozen=True)
+@record
 class Prediction:
     """The predicted detection loss for one chart ΔE (see :func:`predict`).
 

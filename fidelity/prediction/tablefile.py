@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import field
 from enum import StrEnum
 from pathlib import Path
 from typing import Any
@@ -35,6 +35,7 @@ import numpy as np
 from fidelity.core import schema as sc
 from fidelity.core.errors import InputFileError, unknown_name
 from fidelity.core.fileio import cached_while_unchanged, display_path
+from fidelity.core.record import record
 from fidelity.core.resources import resource_dir
 
 #: The table used when none is named: the project's measured table (the COCO sweep, issue 5).
@@ -93,7 +94,7 @@ def available_tables() -> list[str]:
     return sorted(p.stem for p in folder.glob("*.json")) if folder.is_dir() else []
 
 
-@dataclass(frozen=True)
+@record
 class Curve:
     """One worst-case curve of a table: ``delta_e`` (n,) and each column's (n,) values
     (NaN where the table has null), for a detector ``size`` and optional ``model``."""
@@ -126,7 +127,7 @@ class Curve:
         return self.baseline_ap.get(column)
 
 
-@dataclass(frozen=True)
+@record
 class PredictionTable:
     """A prediction table read from JSON (see the module docstring and CORE_API.md)."""
 

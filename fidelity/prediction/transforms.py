@@ -28,7 +28,6 @@ input gives float32 output. ``param`` may be a scalar or an array broadcastable 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -36,6 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fidelity.colour.colorimetry import delinearize_srgb, lab_to_srgb, linearize_srgb, srgb_to_lab
 from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.core.record import record
 
 __all__ = [
     "TRANSFORMS",
@@ -193,7 +193,7 @@ def pull_mean(rgb: ArrayLike, alpha: ArrayLike) -> FloatArray:
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@record
 class TransformSpec:
     """One directional SAFE-COLOR transform.
 

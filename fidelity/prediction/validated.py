@@ -29,10 +29,11 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from functools import lru_cache
 from typing import Any
 
+from fidelity.core.record import record
 from fidelity.core.resources import resource_dir
 from fidelity.prediction.properties import INTERACTING, Combined, PropertyTable
 from fidelity.prediction.table import Prediction
@@ -48,7 +49,7 @@ VALIDATED_BOUND_FILE = "validated-bound.json"
 PROPERTY_MARGIN_FILE = "property-margin.json"
 
 
-@dataclass(frozen=True)
+@record
 class ValidatedBound:
     """The fitted bound (module docstring) and how it held on the validation.
 
@@ -150,7 +151,7 @@ def validated_upper(prediction: Prediction, column: str = "dmap_points"
 # The margin of the combined property loss (issue 56)
 
 
-@dataclass(frozen=True)
+@record
 class ColumnMargin:
     """The margin of one loss column and how it held on the sharpness and noise validation.
 
@@ -188,7 +189,7 @@ class ColumnMargin:
                    None if sig is None else float(sig), int(d["significant_cells"]))
 
 
-@dataclass(frozen=True)
+@record
 class PropertyMargin:
     """The validated margin of the combined colour, sharpness and noise loss.
 

@@ -29,11 +29,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from enum import StrEnum
 from typing import Any
 
 from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.core.record import record
 from fidelity.prediction.exposure import ExposureJudgement
 from fidelity.prediction.interpolate import ColumnStatus
 from fidelity.prediction.properties import PropertyJudgement
@@ -59,7 +60,7 @@ DECISION_RULES = ("simple", "guarded")
 DEFAULT_COVERAGE_FACTOR = 2.0
 
 
-@dataclass(frozen=True)
+@record
 class DecisionRule:
     """How a value with an uncertainty is compared with a limit (module docstring): ``rule``
     (``simple`` or ``guarded``), the coverage factor ``k`` of the expanded uncertainty a
@@ -100,7 +101,7 @@ class DecisionRule:
 SIMPLE = DecisionRule()
 
 
-@dataclass(frozen=True)
+@record
 class Criterion:
     """What a gate checks: ``kind`` in :data:`CRITERIA`, ``limit`` >= 0, and for ``max-dmap``
     the class (``all``, ``person``, ``bicycle``) and unit (``points``, ``relative``).
@@ -186,7 +187,7 @@ class VerdictReason(StrEnum):
     UNDECIDED = "undecided"
 
 
-@dataclass(frozen=True)
+@record
 class Verdict:
     """The outcome of a gate.
 

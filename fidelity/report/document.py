@@ -22,22 +22,23 @@ from __future__ import annotations
 import html
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Literal
+
+from fidelity.core.record import record
 
 #: Look of a headline: a pass, a fail, information without a verdict, or a pass outside the
 #: validity domain of its evidence (amber, not a plain green pass).
 Tone = Literal["pass", "fail", "info", "outside"]
 
 
-@dataclass(frozen=True)
+@record
 class Text:
     """Markdown prose (one or more paragraphs, lists allowed)."""
 
     markdown: str
 
 
-@dataclass(frozen=True)
+@record
 class Table:
     """A table of formatted cells: ``header`` (n,, plain text) and ``rows`` (m, n; Markdown);
     ``numeric`` marks the columns to right-align (default: every column but the first)."""
@@ -54,7 +55,7 @@ class Table:
         return tuple(i > 0 for i in range(len(self.header)))
 
 
-@dataclass(frozen=True)
+@record
 class Figure:
     """A figure: ``png`` bytes or ``svg`` text (an ``<svg>`` element, inlined in HTML), its
     ``name`` (its file name when written next to Markdown), ``alt`` text and a ``caption``."""
@@ -82,14 +83,14 @@ def svg_figure(svg: str, name: str, alt: str, caption: str = "") -> Figure:
     return Figure(b"", name, alt, caption, svg=svg)
 
 
-@dataclass(frozen=True)
+@record
 class Facts:
     """Label/value pairs shown as a two-column summary (labels plain text, values Markdown)."""
 
     items: tuple[tuple[str, str], ...]
 
 
-@dataclass(frozen=True)
+@record
 class Code:
     """Preformatted text (JSON, a command line), shown as it is."""
 
@@ -100,7 +101,7 @@ class Code:
 Block = Text | Table | Figure | Facts | Code
 
 
-@dataclass(frozen=True)
+@record
 class Section:
     """A titled part of a report; ``folded`` sections are collapsed in HTML; a ``gallery``
     shows its figures side by side where the page is wide enough."""
@@ -112,7 +113,7 @@ class Section:
     gallery: bool = False
 
 
-@dataclass(frozen=True)
+@record
 class Headline:
     """What a reader must see first: ``message`` (Markdown), its ``tone`` and an optional
     headline ``figure``."""
@@ -122,7 +123,7 @@ class Headline:
     figure: Figure | None = None
 
 
-@dataclass(frozen=True)
+@record
 class Document:
     """A whole report: ``title``, an optional ``subtitle`` (Markdown), the :class:`Headline`,
     its :class:`Section` objects in reading order and a ``footer`` (Markdown)."""

@@ -41,7 +41,6 @@ import re
 import shlex
 import uuid
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 from urllib.parse import quote
@@ -49,6 +48,7 @@ from urllib.parse import quote
 from lxml import etree  # noqa: TID253 (this module writes the [ssp] extra's formats; loaded at the call)
 
 from fidelity.core.fileio import JSONObject, file_sha3_256, printable, write_bytes_atomic
+from fidelity.core.record import record
 from fidelity.core.resources import resource_dir
 from fidelity.report.recordfiles import record_files
 
@@ -95,7 +95,7 @@ ACCEPTANCE_WORDS: Mapping[str, str] = {
 }
 
 
-@dataclass(frozen=True)
+@record
 class TracedFile:
     """One file of a run as the SSP Traceability documents name it.
 

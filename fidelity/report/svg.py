@@ -26,11 +26,12 @@ import math
 import struct
 import zlib
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
+
+from fidelity.core.record import record
 
 #: The font stack of every figure (the page's own).
 FONT = 'system-ui,-apple-system,"Segoe UI",Helvetica,Arial,sans-serif'
@@ -257,7 +258,7 @@ def tick_label(v: float) -> str:
     return f"{v:g}" if abs(v) < 1e6 else f"{v:.0e}"
 
 
-@dataclass(frozen=True)
+@record
 class Scale:
     """A data interval [``lo``, ``hi``] of a ``linear`` or ``symlog`` axis (symlog: linear
     below 1 in magnitude, 1 + log10 above: continuous with slope 1 at 1, like matplotlib's

@@ -34,12 +34,12 @@ from __future__ import annotations
 import os
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path, PurePath
 from typing import Any
 
 from fidelity.core import schema as sc
 from fidelity.core.fileio import JSONObject, display_path, file_sha256
+from fidelity.core.record import record
 from fidelity.core.resources import resource_dir, source_root
 from fidelity.core.version import __version__
 from fidelity.report.evidence import (
@@ -161,7 +161,7 @@ RECORD_SCHEMA = sc.Table(fields=(
 MAX_RECORD_BYTES = 64 * 2**20
 
 
-@dataclass(frozen=True)
+@record
 class Finding:
     """One comparison of the record with what is here.
 
@@ -185,7 +185,7 @@ class Finding:
                 "failed": self.failed, "detail": self.detail, "path": self.path}
 
 
-@dataclass(frozen=True)
+@record
 class Verification:
     """The outcome of :func:`verify_record`: the record's ``path``, what the record says of its
     run (``command``, ``created``, ``exit_code``, ``outcome``, the tool's ``version`` and

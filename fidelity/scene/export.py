@@ -22,7 +22,7 @@ import shutil
 import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +30,7 @@ import numpy as np
 
 from fidelity.core.errors import FidelityError, InputFileError, InvalidValueError, unknown_name
 from fidelity.core.fileio import WRITE_ERRNOS, display_path, json_ready, write_error
+from fidelity.core.record import record
 from fidelity.scene.gltf import texture_albedo, write_gltf
 from fidelity.scene.manifest import MANIFEST_KIND
 from fidelity.scene.mitsuba import DEFAULT_SPP, check_loads, irradiance_scale, write_mitsuba
@@ -58,7 +59,7 @@ class MissingExtraError(FidelityError):
     """The format's writer needs an optional package that is not installed."""
 
 
-@dataclass(frozen=True)
+@record
 class Export:
     """What :func:`export_scene` wrote: the ``folder``, the ``scene_file`` in it, the manifest
     (as written) and the seconds the export took."""

@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from fidelity.core.errors import InputFileError
 from fidelity.core.fileio import display_path
+from fidelity.core.record import record
 from fidelity.measure.chartsharpness import EdgeTargetCorners
 
 __all__ = ["MANIFEST_KIND", "ChartManifest", "read_manifest"]
@@ -26,7 +26,7 @@ __all__ = ["MANIFEST_KIND", "ChartManifest", "read_manifest"]
 MANIFEST_KIND = "fidelity chart scene"
 
 
-@dataclass(frozen=True)
+@record
 class ChartManifest:
     """What a chart scene's manifest says a render is judged with.
 

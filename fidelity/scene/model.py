@@ -42,7 +42,7 @@ Conventions
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import field
 from typing import Any
 
 import numpy as np
@@ -65,6 +65,7 @@ from fidelity.colour.spectral import (
     wavelength_grid,
 )
 from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.core.record import record
 
 FloatArray = NDArray[np.float64]
 
@@ -95,7 +96,7 @@ MAX_SIDE_PX: int = 16384
 FOV_RANGE_DEG: tuple[float, float] = (1.0, 170.0)
 
 
-@dataclass(frozen=True)
+@record
 class ChartGeometry:
     """Physical layout of a rows x cols chart, metres: outer ``width`` x ``height``, square
     patches of side ``patch`` on a ``pitch`` grid centred on the chart."""
@@ -134,7 +135,7 @@ MINI = ChartGeometry("mini", 0.08255, 0.05715, 0.040 * 0.08255 / 0.2794,
 GEOMETRIES = {"classic": CLASSIC, "mini": MINI}
 
 
-@dataclass(frozen=True)
+@record
 class EdgeTarget:
     """The slanted-edge target beside the chart (module docstring).
 
@@ -187,7 +188,7 @@ def edge_target(chart: ChartGeometry) -> EdgeTarget:
     return EdgeTarget((x, 0.0), field_side, EDGE_SQUARE_SHARE * w)
 
 
-@dataclass(frozen=True)
+@record
 class SceneCamera:
     """A pinhole camera at (0, 0, ``distance``) looking along -z with +y up."""
 
@@ -222,7 +223,7 @@ class SceneCamera:
                 "up": [0.0, 1.0, 0.0], "projection": "pinhole, no distortion"}
 
 
-@dataclass(frozen=True)
+@record
 class ChartScene:
     """Everything a writer needs (see the module docstring for the conventions).
 

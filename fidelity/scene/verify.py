@@ -16,7 +16,6 @@ import shutil
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fidelity.colour.colorimetry import delta_e_2000, linear_srgb_to_xyz, xyz_to_lab
 from fidelity.core.errors import FidelityError
+from fidelity.core.record import record
 from fidelity.core.resources import resource_dir
 
 FloatArray = NDArray[np.float64]
@@ -88,7 +88,7 @@ def blender_command() -> list[str]:
         ".venv-blender/bin/pip install bpy==5.0.1) or FIDELITY_BLENDER to a blender program")
 
 
-@dataclass(frozen=True)
+@record
 class BlenderRender:
     """What :func:`render_with_blender` did: the EXR, Blender's JSON line, the wall time."""
 

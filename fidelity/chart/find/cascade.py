@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,6 +47,7 @@ from fidelity.chart.find.surroundings import (
 from fidelity.chart.find.view import Pyramid, View, make_view
 from fidelity.chart.locate import DEFAULT_WINDOW, apply_homography, homography_from_points
 from fidelity.core.errors import InvalidValueError, unknown_name
+from fidelity.core.record import record
 
 F64 = NDArray[np.float64]
 
@@ -87,7 +87,7 @@ def _accepted(p: Placement) -> bool:
             and c.margin >= MIN_MARGIN and c.uniformity <= MAX_UNIFORMITY)
 
 
-@dataclass(frozen=True)
+@record
 class _Search:
     best: Placement | None
     view: View

@@ -9,8 +9,6 @@ outlines' centroids for perspective before the last fit.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from numpy.typing import NDArray
 
@@ -18,6 +16,7 @@ from fidelity.chart.find.outlines import PointIndex, Quads, quad_areas_centroids
 from fidelity.chart.locate import apply_homography, homography_from_points
 from fidelity.core.errors import InvalidValueError
 from fidelity.core.numeric import median
+from fidelity.core.record import record
 
 F64 = NDArray[np.float64]
 
@@ -31,7 +30,7 @@ MIN_REFINE_SWATCHES = 6
 OUTLIER_FACTOR = 3.0
 
 
-@dataclass(frozen=True)
+@record
 class Lattice:
     """Patch outlines on one grid: ``homography`` lattice ``(i, j)`` -> view ``(x, y)`` (one
     unit = one patch pitch), ``cells`` ``(n, 2)`` integer lattice cells occupied, ``quads``

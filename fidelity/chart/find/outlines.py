@@ -8,12 +8,12 @@ is found by :func:`fidelity.chart.find.lattice.patch_lattices`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from fidelity.chart.find.view import opencv
+from fidelity.core.record import record
 
 F64 = NDArray[np.float64]
 
@@ -25,7 +25,7 @@ THRESHOLD_OFFSETS = (2.0,)
 MIN_QUAD_AREA = 25.0
 
 
-@dataclass(frozen=True)
+@record
 class Quads:
     """Convex four-sided patch outlines: ``corners`` ``(n, 4, 2)``, ``centres`` ``(n, 2)``
     (contour centroids), ``areas`` ``(n,)`` pixels."""

@@ -9,8 +9,6 @@ detector's answer one row or column off, turned or mirrored is corrected, never 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from numpy.typing import NDArray
 
@@ -27,6 +25,7 @@ from fidelity.chart.find.result import ChartChecks
 from fidelity.chart.find.view import View
 from fidelity.chart.locate import apply_homography
 from fidelity.core.numeric import median
+from fidelity.core.record import record
 
 F64 = NDArray[np.float64]
 
@@ -97,7 +96,7 @@ def structured_spread(samples: F64) -> F64:
     return out
 
 
-@dataclass(frozen=True)
+@record
 class Placement:
     """The best placement of the 4 x 6 chart on a candidate lattice.
 

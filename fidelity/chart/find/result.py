@@ -6,15 +6,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import field, replace
 from typing import Any
 
 import numpy as np
 
 from fidelity.chart.locate import CORNER_PATCHES
+from fidelity.core.record import record
 
 
-@dataclass(frozen=True)
+@record
 class ChartChecks:
     """How well the chart found matches the 24-patch reference layout.
 
@@ -45,7 +46,7 @@ class ChartChecks:
                    uniformity=float(data["uniformity"]))
 
 
-@dataclass(frozen=True)
+@record
 class FoundChart:
     """A chart found in an image.
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -21,11 +20,12 @@ from fidelity.chart.image import as_float32, is_coded
 from fidelity.colour import colorimetry as cm
 from fidelity.core.errors import FidelityError, InvalidValueError
 from fidelity.core.numeric import percentile
+from fidelity.core.record import record
 
 F64 = NDArray[np.float64]
 
 
-@dataclass(frozen=True)
+@record
 class View:
     """Part of the image as the detectors see it.
 

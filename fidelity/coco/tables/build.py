@@ -14,7 +14,6 @@ The transforms of a store whose grid names none are SAFE-COLOR's
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import PurePath
 from typing import TYPE_CHECKING, Any
 
@@ -38,13 +37,14 @@ from fidelity.coco.tables.provenance import (
 )
 from fidelity.coco.tables.worst import SizeClassRow, WorstCaseRow, size_class_rows, worst_case_rows
 from fidelity.core.errors import InputFileError, InvalidValueError
+from fidelity.core.record import record
 from fidelity.prediction.transforms import TRANSFORMS
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import SweepStore
 
 
-@dataclass(frozen=True)
+@record
 class ModelSummary:
     """A swept model in the tables: its store registration (None if it was never registered),
     size class, baseline scores (fractions) and the image count its cells are reported on."""
@@ -76,7 +76,7 @@ class ModelSummary:
                    dict(d.get("baseline_ap") or {}), int(d["images"]))
 
 
-@dataclass(frozen=True)
+@record
 class Tables:
     """Everything the report needs from a sweep store (:func:`build_tables`).
 

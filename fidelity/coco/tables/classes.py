@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -19,6 +19,7 @@ import numpy as np
 from fidelity.coco.scoring import evaluate_detections
 from fidelity.coco.tables.worst import RareShare, WorstCaseRow
 from fidelity.core.errors import InvalidValueError
+from fidelity.core.record import record
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import SweepCell, SweepStore
@@ -28,7 +29,7 @@ if TYPE_CHECKING:
 RARE_BOXES = 5
 
 
-@dataclass(frozen=True)
+@record
 class ClassShare:
     """One class's part of a cell's ΔmAP (:func:`class_breakdown`): its non-crowd ground-truth
     ``boxes``, AP of the baseline and of the cell (fractions), ``dap_points`` = 100 (AP₀ − AP)
@@ -47,7 +48,7 @@ class ClassShare:
                 "ap": self.ap, "dap_points": self.dap_points, "share_points": self.share_points}
 
 
-@dataclass(frozen=True)
+@record
 class ShareGroup:
     """A group of classes (rare or common) in :class:`CellExplanation`: how many, their mean
     ΔAP (points; None for none) and the points of ΔmAP they account for."""
@@ -62,7 +63,7 @@ class ShareGroup:
                 "share_points": self.share_points}
 
 
-@dataclass(frozen=True)
+@record
 class CellExplanation:
     """Which classes one stored cell's ΔmAP comes from (:func:`explain_cell`)."""
 

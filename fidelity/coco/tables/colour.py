@@ -11,7 +11,7 @@ safety classes) and the chart ΔE limits the measured worst cases imply
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -21,6 +21,7 @@ from fidelity.coco.tables.grid import SAFETY_CLASSES, CellDelta
 from fidelity.coco.tables.prediction import prediction_table
 from fidelity.coco.tables.worst import WorstCaseRow
 from fidelity.core.fileio import json_ready
+from fidelity.core.record import record
 from fidelity.prediction.table import delta_e_limit
 from fidelity.prediction.tablefile import parse_prediction_table
 
@@ -28,7 +29,7 @@ if TYPE_CHECKING:
     from fidelity.coco.sweep import SweepStore
 
 
-@dataclass(frozen=True)
+@record
 class PaperFinding:
     """One SAFE-COLOR finding checked against our measurements (:func:`compare_with_paper`):
     the ``claim``, our ``verdict`` ("agrees", "disagrees", "not enough data", qualified) and
@@ -48,7 +49,7 @@ class PaperFinding:
         return cls(d["claim"], d["verdict"], d["evidence"])
 
 
-@dataclass(frozen=True)
+@record
 class BudgetLimit:
     """The largest chart ΔE (None: none) whose predicted loss in ``column`` stays within
     ``budget``; ``status`` as :class:`fidelity.prediction.table.DeltaELimit` says it."""
@@ -69,7 +70,7 @@ class BudgetLimit:
         return cls(d["column"], float(d["budget"]), d.get("delta_e"), d["status"])
 
 
-@dataclass(frozen=True)
+@record
 class CurveLimits:
     """The ΔE limits of one curve of the measured table (:func:`delta_e_limits`): a size
     class's worst case (``model`` None) or one model's."""
@@ -90,7 +91,7 @@ class CurveLimits:
                    tuple(BudgetLimit.from_json(x) for x in d["limits"]))
 
 
-@dataclass(frozen=True)
+@record
 class TablesResult:
     """What ``fidelity tables`` computes: the :class:`~fidelity.coco.tables.build.Tables`, the
     paper comparison and the ΔE limits; :meth:`to_json` is ``tables.json``."""

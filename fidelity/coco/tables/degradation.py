@@ -18,7 +18,6 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +31,7 @@ from fidelity.colour import colorimetry as cm
 from fidelity.colour.charts import load_reference
 from fidelity.core.errors import InputFileError, InvalidValueError
 from fidelity.core.fileio import write_bytes_atomic
+from fidelity.core.record import record
 from fidelity.measure.chartsharpness import painted_target_sharpness
 from fidelity.measure.pixels import measure_pixels
 from fidelity.prediction.properties import (
@@ -66,7 +66,7 @@ def calibration_chart(scale: int = 1) -> tuple[np.ndarray, np.ndarray]:
     return encode_srgb8(geometry.paint(rgb, frame)), geometry.corners()
 
 
-@dataclass(frozen=True)
+@record
 class LevelValue:
     """A level's value on its property's axis: ``x`` and its standard uncertainty ``u``
     (None: not stated), or None with the ``reason`` where the chart could not be measured."""

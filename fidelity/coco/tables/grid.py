@@ -15,13 +15,14 @@ from __future__ import annotations
 
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from fidelity.coco.bootstrap import Draws
 from fidelity.coco.loss import loss_estimate, score_loss
 from fidelity.coco.scoring import FoldScore, evaluate_detections, resolve_scorer
 from fidelity.core.errors import InvalidValueError
+from fidelity.core.record import record
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import SweepCell, SweepStore
@@ -31,7 +32,7 @@ if TYPE_CHECKING:
 SAFETY_CLASSES: tuple[str, ...] = ("person", "bicycle")
 
 
-@dataclass(frozen=True)
+@record
 class CellErrors:
     """Standard errors of a cell's losses (:func:`add_standard_errors`): ΔmAP in points and
     relative (% of baseline), ΔAP of person and bicycle in points; None with fewer than 2
@@ -48,7 +49,7 @@ class CellErrors:
     method: str | None = "folds"
 
 
-@dataclass(frozen=True)
+@record
 class CellDelta:
     """One transformed cell of a model against its baseline (:func:`cell_deltas`).
 
@@ -128,7 +129,7 @@ class CellDelta:
                    d.get("dap_bicycle_relative"), errors)
 
 
-@dataclass(frozen=True)
+@record
 class AlignedCount:
     """The image count a model's cells are reported on (:func:`align_image_counts`):
     ``images``; the counts its cells were ``stored`` on; how many cells were ``rescored`` from

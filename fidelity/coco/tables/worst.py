@@ -16,16 +16,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from fidelity.coco.tables.grid import CellDelta, finished_value, model_size
+from fidelity.core.record import record
 
 if TYPE_CHECKING:
     from fidelity.coco.sweep import SweepCell
 
 
-@dataclass(frozen=True)
+@record
 class RareShare:
     """How much of a worst-case ΔmAP comes from rare classes
     (:func:`~fidelity.coco.tables.classes.rare_class_shares`): ``dmap_points_rare`` (points),
@@ -36,7 +36,7 @@ class RareShare:
     classes: int
 
 
-@dataclass(frozen=True)
+@record
 class WorstCaseRow:
     """The worst case over transforms at one ΔE for one model (:func:`worst_case_rows`).
 
@@ -111,7 +111,7 @@ class WorstCaseRow:
                    bool(d["partial"]), d.get("dmap_points_se"), d.get("dmap_relative_se"), rare)
 
 
-@dataclass(frozen=True)
+@record
 class SizeClassRow:
     """The worst case over the models of one size class at one ΔE (:func:`size_class_rows`).
 

@@ -12,7 +12,6 @@ beside these.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -22,6 +21,7 @@ from fidelity.camera.render import render_chart
 from fidelity.coco.emulation import AccuracySummary
 from fidelity.coco.validate.suite import DEFAULT_CAT
 from fidelity.colour.colorimetry import delta_e_2000, srgb_to_lab
+from fidelity.core.record import record
 
 if TYPE_CHECKING:
     from fidelity.camera.model import CameraModel
@@ -35,7 +35,7 @@ if TYPE_CHECKING:
 IMAGE_DE_SAMPLE: tuple[int, int] = (50, 4)
 
 
-@dataclass(frozen=True)
+@record
 class ErrorProfile:
     """The direction of a chart measurement's error (:func:`chart_error_profile`).
 
@@ -79,7 +79,7 @@ class ErrorProfile:
                    d["worst_patch_delta_e"])
 
 
-@dataclass(frozen=True)
+@record
 class ImageDeltaE:
     """How far an emulation moves real photos (:func:`image_delta_e`): mean and 95th
     percentile CIEDE2000 over every ``pixel_stride``-th pixel of ``images`` images."""
@@ -100,7 +100,7 @@ class ImageDeltaE:
         return cls(d["mean"], d["p95"], int(d["images"]), int(d["pixel_stride"]))
 
 
-@dataclass(frozen=True)
+@record
 class EmulationRecord:
     """A camera's fitted emulation: its ``description`` (provenance as
     :meth:`fidelity.coco.emulation.Emulation.describe` gives it: method, training set, matrix,
@@ -133,7 +133,7 @@ class EmulationRecord:
                    AccuracySummary.from_json(hold) if hold else None)
 
 
-@dataclass(frozen=True)
+@record
 class CameraRecord:
     """A camera's chart, prediction inputs and emulation, as the store keeps it
     (:func:`~fidelity.coco.validate.colour.prepare_case`).

@@ -13,11 +13,11 @@ axis, as the prediction tables' is.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 from fidelity.coco.loss import LOSS_COLUMNS, Losses, score_loss
 from fidelity.coco.validate.store import ValidationCell
+from fidelity.core.record import record
 from fidelity.prediction.table import predict
 
 #: Classes compared (``all`` = mAP@[.50:.95] over the 80 COCO classes).
@@ -28,7 +28,7 @@ CLASSES: tuple[str, ...] = ("all", "person", "bicycle")
 _SE_KEYS = ("dmap_points", "dap_person_points", "dap_bicycle_points", "dmap_relative")
 
 
-@dataclass(frozen=True)
+@record
 class TablePrediction:
     """What one prediction table predicts for a camera (:func:`predictions_for`): the
     ``losses`` (points; relative in %), each column's ``status`` and the table's ``kind``."""
@@ -47,7 +47,7 @@ class TablePrediction:
         return cls(Losses.from_json(d), dict(d.get("status") or {}), d["kind"])
 
 
-@dataclass(frozen=True)
+@record
 class BoundCheck:
     """Whether a measured loss is within the worst-case prediction for one class.
 
@@ -80,7 +80,7 @@ class BoundCheck:
                    d.get("excess"), d.get("within_2se"), d.get("status"))
 
 
-@dataclass(frozen=True)
+@record
 class ValidationRow:
     """Predicted against measured loss of one (camera, model) cell (:func:`validation_row`).
 
@@ -124,7 +124,7 @@ class ValidationRow:
                    {c: BoundCheck.from_json(b) for c, b in d["bound"].items()})
 
 
-@dataclass(frozen=True)
+@record
 class ClassSummary:
     """How often the bound holds for one class: judged ``cells``, ``within`` and
     ``within_2se`` of them; ``cameras`` judged and ``cameras_within`` (every model within),
@@ -153,7 +153,7 @@ class ClassSummary:
                    tuple((str(c), str(m)) for c, m in d.get("failures") or ()))
 
 
-@dataclass(frozen=True)
+@record
 class ValidationSummary:
     """The bound ``bound_table`` tested, the ``tables`` evaluated, stored cameras left out
     (``not_in_suite``) and per class of :data:`fidelity.coco.loss.LOSS_COLUMNS` its

@@ -34,7 +34,7 @@ import platform
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -81,6 +81,7 @@ from fidelity.coco.validate.store import ValidationCell, ValidationCells, Valida
 from fidelity.coco.validate.suite import BASELINE, DEFAULT_CAT, CameraCase, validated_case
 from fidelity.core.errors import InvalidValueError
 from fidelity.core.fileio import json_ready, portable_paths
+from fidelity.core.record import record
 from fidelity.core.version import __version__, installed_version
 from fidelity.prediction.interval import (
     DEGRADATIONS,
@@ -303,7 +304,7 @@ def holdout_accuracy(cases: Sequence[CameraCase], method: str = "root-polynomial
             for c in cases}
 
 
-@dataclass(frozen=True)
+@record
 class ValidationResults:
     """Everything the validation report shows (:func:`collect_results`); :meth:`to_json` is
     ``validation.json``. ``models``: the registered detectors; ``baselines``: each model's
@@ -441,8 +442,8 @@ def validated_cameras(results: ValidationResults, suite: Sequence[CameraCase]
     sensitivities: set[str] = set()
     stages: dict[str, set[str]] = {s: set() for s in STAGES}
     seen: dict[str, list[tuple[str, Mapping[str, float]]]] = {d: [] for d in DEGRADATIONS}
-    for name, record in results.cameras.items():
-        case = validated_case(cases, name, record.sha256)
+    for name, camera_result in results.cameras.items():
+        case = validated_case(cases, name, camera_result.sha256)
         cam = read_camera_file(case.path)
         illuminants.add(case.illuminant)
         sensitivities.add(cam.sensitivities.name)

@@ -32,7 +32,6 @@ from __future__ import annotations
 import math
 import statistics
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 from fidelity.camera.model import read_camera_file
@@ -43,6 +42,7 @@ from fidelity.coco.validate.checks import BoundCheck, bound_check, measured_loss
 from fidelity.coco.validate.store import ValidationCell, ValidationStore
 from fidelity.coco.validate.suite import BASELINE, CameraCase, validated_case
 from fidelity.core.fileio import json_ready
+from fidelity.core.record import record
 from fidelity.prediction.interval import (
     DEGRADATIONS,
     ValidatedProperties,
@@ -112,7 +112,7 @@ def combine_rule(rule: str, parts: Mapping[str, float]) -> float:
     raise ValueError(f"unknown combination rule {rule!r}")
 
 
-@dataclass(frozen=True)
+@record
 class CameraPrediction:
     """What ``check`` tells a user about one camera of the suite (:func:`camera_prediction`).
 
@@ -215,7 +215,7 @@ def camera_prediction(case: CameraCase) -> CameraPrediction:
                             dominant, not_judged)
 
 
-@dataclass(frozen=True)
+@record
 class PropertyRow:
     """One (camera, detector) cell: the measured losses and SEs by column, the predicted
     loss of every rule of :data:`RULES` by column (``predicted[rule][column]``) and the
@@ -340,7 +340,7 @@ def property_summary(rows: Sequence[PropertyRow]) -> dict[str, Any]:
     return out
 
 
-@dataclass(frozen=True)
+@record
 class PropertyResults:
     """Everything ``properties.json`` holds (:func:`collect_property_results`)."""
 
@@ -395,8 +395,8 @@ def validated_properties(results: PropertyResults, suite: Sequence[CameraCase]
     the counts of the ΔmAP (points) cells of the summary; the models of the rows."""
     cases = {c.name: c for c in suite}
     seen: dict[str, list[tuple[str, Mapping[str, float]]]] = {d: [] for d in DEGRADATIONS}
-    for name, record in results.cameras.items():
-        case = validated_case(cases, name, record.sha256)
+    for name, camera_result in results.cameras.items():
+        case = validated_case(cases, name, camera_result.sha256)
         for kind, degradation in read_camera_file(case.path).degradations().items():
             seen[kind].append(degradation)
     a = results.summary["dmap_points"]["all"]

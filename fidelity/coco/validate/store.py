@@ -16,7 +16,6 @@ import json
 import os
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -31,6 +30,7 @@ from fidelity.coco.scoring import (
 )
 from fidelity.coco.store import ResultsStore, pack_detections, unpack_detections
 from fidelity.coco.validate.camera import CameraRecord
+from fidelity.core.record import record
 
 if TYPE_CHECKING:
     from fidelity.coco.bootstrap import Draws
@@ -48,7 +48,7 @@ def default_store() -> Path:
     return (Path(base) if base else Path.home() / ".cache" / "fidelity") / "validation"
 
 
-@dataclass(frozen=True)
+@record
 class ValidationCell:
     """A finished (model, camera) cell of the validation store: COCO scores on ``images``
     images (fractions; ``ap`` per class name, None without ground truth), per-fold scores and

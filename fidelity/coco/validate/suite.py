@@ -15,7 +15,7 @@ from __future__ import annotations
 import os
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import field, replace
 from pathlib import Path
 
 from fidelity.camera.model import read_camera_file
@@ -23,6 +23,7 @@ from fidelity.colour.colorimetry import CHROMATIC_ADAPTATION_METHODS
 from fidelity.colour.spectral import load_illuminant
 from fidelity.core.errors import InputFileError
 from fidelity.core.fileio import file_sha256
+from fidelity.core.record import record
 
 SUITE_FILE = "suite.toml"
 
@@ -33,7 +34,7 @@ BASELINE = "baseline"
 DEFAULT_CAT = "Bradford"
 
 
-@dataclass(frozen=True)
+@record
 class CameraCase:
     """One test case: a camera file, the illuminant of the scene it shoots and the chromatic
     adaptation transform (``cat``) of its scene reference to D65."""
@@ -45,7 +46,7 @@ class CameraCase:
     cat: str = DEFAULT_CAT
 
 
-@dataclass(frozen=True)
+@record
 class SuiteSettings:
     """What a ``suite.toml`` sets (module docstring): the ``default_illuminant`` and the
     per-camera ``illuminants`` (camera stem -> illuminant), the ``default_cat`` and the
