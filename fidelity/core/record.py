@@ -50,9 +50,8 @@ def _hash(self: Any) -> int:
 @reprlib.recursive_repr()
 def _repr(self: Any) -> str:
     """The generated ``__repr__``: ``Name(field=value!r, ...)`` of the fields shown."""
-    values = self.__class__.__record_shown__(self)
-    inner = ", ".join(f"{name}={value!r}" for name, value
-                      in zip(self.__class__.__record_shown_names__, values, strict=True))
+    inner = ", ".join(f"{name}={getattr(self, name)!r}"
+                      for name in self.__class__.__record_shown__)
     return f"{self.__class__.__qualname__}({inner})"
 
 
@@ -80,8 +79,7 @@ def record(cls: type[T]) -> type[T]:
     shown = tuple(f.name for f in fields if f.repr)
     made.__record_compared__ = staticmethod(_getter(compared))
     made.__record_hashed__ = staticmethod(_getter(hashed))
-    made.__record_shown__ = staticmethod(_getter(shown))
-    made.__record_shown_names__ = shown
+    made.__record_shown__ = shown
     if "__eq__" not in own:
         made.__eq__ = _eq
     # as a frozen dataclass: a hash of its own kept, else the fields' (a class that defines
